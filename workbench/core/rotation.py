@@ -7,8 +7,9 @@ Conventions (DESIGN.md):
   frame *a*: ``v_a = quat_rotate(q_a_b, v_b) = quat_to_dcm(q_a_b) @ v_b``.
 * Attitude error is a 3-vector small angle expressed in the **body** frame (right/local
   perturbation): ``q_true = q_est ⊗ exp(δθ)``.  ``attitude_error(q_est, q_true)`` returns δθ.
-* JPL/Shuster quaternions (scalar-last, *left-handed* product, ``q_jpl`` of frame *a* relative to
-  *b* rotates *a*→... ) are converted only at the I/O edge with :func:`quat_from_jpl`.
+* JPL/Shuster quaternions (scalar-last, *left-handed* product; ``q̄`` of frame *b* relative to
+  *a* has ``C(q̄) = C_b_a``, mapping *a*-vectors into *b*) are converted only at the I/O edge with
+  :func:`quat_from_jpl`, which returns the Hamilton ``q_b_a`` (same DCM; the conjugate numbers).
 * Euler angles "1-2-3" are the aerospace sequence used by REDLand (Fig. 11): successive body-fixed
   rotations about x, then the new y, then the new z: ``C_N_B = Rx(φ) Ry(θ) Rz(ψ)``.
 
@@ -57,9 +58,7 @@ def skew(v: np.ndarray) -> np.ndarray:
     v = np.asarray(v, dtype=float)
     z = np.zeros(v.shape[:-1])
     x, y, w = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack(
-        [np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2
-    )
+    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
 
 
 def quat_identity(shape: tuple[int, ...] = ()) -> np.ndarray:
@@ -157,25 +156,45 @@ def dcm_to_quat(C: np.ndarray) -> np.ndarray:
     m = k == 3
     s = np.sqrt(1.0 + tr[m]) * 2.0
     q[m] = np.stack(
-        [(C[m, 2, 1] - C[m, 1, 2]) / s, (C[m, 0, 2] - C[m, 2, 0]) / s, (C[m, 1, 0] - C[m, 0, 1]) / s, 0.25 * s],
+        [
+            (C[m, 2, 1] - C[m, 1, 2]) / s,
+            (C[m, 0, 2] - C[m, 2, 0]) / s,
+            (C[m, 1, 0] - C[m, 0, 1]) / s,
+            0.25 * s,
+        ],
         -1,
     )
     m = k == 0
     s = np.sqrt(1.0 + C[m, 0, 0] - C[m, 1, 1] - C[m, 2, 2]) * 2.0
     q[m] = np.stack(
-        [0.25 * s, (C[m, 0, 1] + C[m, 1, 0]) / s, (C[m, 0, 2] + C[m, 2, 0]) / s, (C[m, 2, 1] - C[m, 1, 2]) / s],
+        [
+            0.25 * s,
+            (C[m, 0, 1] + C[m, 1, 0]) / s,
+            (C[m, 0, 2] + C[m, 2, 0]) / s,
+            (C[m, 2, 1] - C[m, 1, 2]) / s,
+        ],
         -1,
     )
     m = k == 1
     s = np.sqrt(1.0 + C[m, 1, 1] - C[m, 0, 0] - C[m, 2, 2]) * 2.0
     q[m] = np.stack(
-        [(C[m, 0, 1] + C[m, 1, 0]) / s, 0.25 * s, (C[m, 1, 2] + C[m, 2, 1]) / s, (C[m, 0, 2] - C[m, 2, 0]) / s],
+        [
+            (C[m, 0, 1] + C[m, 1, 0]) / s,
+            0.25 * s,
+            (C[m, 1, 2] + C[m, 2, 1]) / s,
+            (C[m, 0, 2] - C[m, 2, 0]) / s,
+        ],
         -1,
     )
     m = k == 2
     s = np.sqrt(1.0 + C[m, 2, 2] - C[m, 0, 0] - C[m, 1, 1]) * 2.0
     q[m] = np.stack(
-        [(C[m, 0, 2] + C[m, 2, 0]) / s, (C[m, 1, 2] + C[m, 2, 1]) / s, 0.25 * s, (C[m, 1, 0] - C[m, 0, 1]) / s],
+        [
+            (C[m, 0, 2] + C[m, 2, 0]) / s,
+            (C[m, 1, 2] + C[m, 2, 1]) / s,
+            0.25 * s,
+            (C[m, 1, 0] - C[m, 0, 1]) / s,
+        ],
         -1,
     )
     q = quat_positive(quat_normalize(q))
@@ -219,7 +238,7 @@ def attitude_error(q_est: np.ndarray, q_true: np.ndarray) -> np.ndarray:
 
 
 def quat_boxplus(q: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
-    """Apply a body-frame attitude correction: ``q ⊗ exp(δθ)``, renormalised; q (..., 4), δθ (..., 3) [rad]."""
+    """Apply a body-frame attitude correction ``q ⊗ exp(δθ)``, renormalised; q (..., 4), δθ (..., 3) [rad]."""
     return quat_normalize(quat_multiply(q, quat_from_rotvec(dtheta)))
 
 
@@ -276,36 +295,40 @@ def euler123_from_quat(q: np.ndarray) -> np.ndarray:
 
 
 def quat_from_jpl(q_jpl: np.ndarray) -> np.ndarray:
-    """Convert a JPL/Shuster quaternion to our Hamilton ``q_a_b``.
+    """Convert a JPL/Shuster quaternion to the Hamilton quaternion with the same DCM.
 
-    A JPL quaternion ``q̄`` (scalar-last, ``q̄ = [e sin(θ/2), cos(θ/2)]``, product ``⊗_JPL``) of
-    frame *b* with respect to *a* has ``C(q̄) = C_b_a`` (it maps *a*-vectors into *b*, a passive
-    rotation). Its Hamilton counterpart for ``C_a_b`` is therefore the conjugate:
-    ``q_a_b = [-e sin(θ/2), cos(θ/2)]`` (Sola 2017, "Quaternion kinematics for the error-state
-    Kalman filter", Sect. 3.5).  Shape (..., 4) -> (..., 4).
+    A JPL quaternion ``q̄ = [e sin(θ/2), cos(θ/2)]`` (scalar-last, product ``⊗_JPL``) of frame *b*
+    with respect to *a* has ``C(q̄) = (2q4² − 1) I − 2 q4 [q×] + 2 q qᵀ = C_b_a`` (it maps
+    *a*-vectors into *b*, a passive rotation by θ; Trawny & Roumeliotis 2005, Eq. 62).  The
+    Hamilton quaternion with that DCM is the conjugate ``[-e sin(θ/2), cos(θ/2)]``, i.e. our
+    ``q_b_a`` (Sola 2017, "Quaternion kinematics for the error-state Kalman filter", Sect. 3.5).
+    Composition is preserved: ``quat_from_jpl(p̄ ⊗_JPL q̄) = quat_from_jpl(p̄) ⊗ quat_from_jpl(q̄)``.
+
+    Example (AMELIA): the JPL quaternion "from MMED to GNC" gives ``q_G_M``; the body-to-inertial
+    ``q_M_G`` is its conjugate (numerically the raw JPL components).  Shape (..., 4) -> (..., 4).
     """
     return quat_conjugate(np.asarray(q_jpl, dtype=float))
 
 
 def quat_to_jpl(q: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`quat_from_jpl` (Hamilton ``q_a_b`` -> JPL quaternion of *b* w.r.t. *a*)."""
+    """Inverse of :func:`quat_from_jpl`: Hamilton ``q_b_a`` -> JPL quaternion of *b* w.r.t. *a* (same DCM)."""
     return quat_conjugate(np.asarray(q, dtype=float))
 
 
-def triad(
-    u_B: np.ndarray, v_B: np.ndarray, u_N: np.ndarray, v_N: np.ndarray
-) -> np.ndarray:
+def triad(u_B: np.ndarray, v_B: np.ndarray, u_N: np.ndarray, v_N: np.ndarray) -> np.ndarray:
     """Algebraic (TRIAD) attitude ``q_N_B`` from two non-parallel vector pairs.
 
     ``u`` is the more accurate vector (e.g. gravity), ``v`` the secondary one (magnetic field);
     ``*_B`` are measured in the body frame, ``*_N`` known in the reference frame (any length,
     shape (..., 3)).  Wertz Sect. 12.2.2; Markley & Crassidis Eq. (5.45).
     """
+
     def frame(a, b):
         t1 = a / np.linalg.norm(a, axis=-1, keepdims=True)
         t2 = np.cross(a, b)
         n2 = np.linalg.norm(t2, axis=-1, keepdims=True)
-        if np.any(n2 < 1e-9 * np.linalg.norm(a, axis=-1, keepdims=True) * np.linalg.norm(b, axis=-1, keepdims=True)):
+        scale = np.linalg.norm(a, axis=-1, keepdims=True) * np.linalg.norm(b, axis=-1, keepdims=True)
+        if np.any(n2 < 1e-9 * scale):
             raise ValueError("TRIAD: the two reference vectors are (nearly) parallel")
         t2 = t2 / n2
         t3 = np.cross(t1, t2)
@@ -317,9 +340,7 @@ def triad(
     return dcm_to_quat(C_N_B)
 
 
-def triad_covariance(
-    u_B: np.ndarray, v_B: np.ndarray, sigma_u: float, sigma_v: float
-) -> np.ndarray:
+def triad_covariance(u_B: np.ndarray, v_B: np.ndarray, sigma_u: float, sigma_v: float) -> np.ndarray:
     """Covariance (3, 3) [rad²] of the TRIAD attitude error δθ (body frame, convention above).
 
     Measured unit-vector errors are modelled as isotropic small tilts of 1σ ``sigma_u`` and
@@ -339,7 +360,12 @@ def triad_covariance(
     c = np.cross(b1, b2)
     s2 = float(c @ c)
     d = float(b1 @ b2)
-    P = sigma_u**2 * np.eye(3) + (
-        (sigma_v**2 - sigma_u**2) * np.outer(b1, b1) + sigma_u**2 * d * (np.outer(b1, b2) + np.outer(b2, b1))
-    ) / s2
+    P = (
+        sigma_u**2 * np.eye(3)
+        + (
+            (sigma_v**2 - sigma_u**2) * np.outer(b1, b1)
+            + sigma_u**2 * d * (np.outer(b1, b2) + np.outer(b2, b1))
+        )
+        / s2
+    )
     return 0.5 * (P + P.T)

@@ -1,0 +1,69 @@
+"""Tests of workbench.core.gravity against GM/r², a finite-difference gradient of the J2 potential
+and published surface gravities (Mars 3.71 m/s², NSSDC/Horizons; Titan 1.354 m/s², FACTS.md)."""
+
+import numpy as np
+import pytest
+
+from workbench.core import gravity
+from workbench.core.bodies import MARS, TITAN
+
+
+def test_point_mass_magnitude_and_direction():
+    rng = np.random.default_rng(0)
+    r = rng.normal(scale=4e6, size=(4, 5, 3))
+    a = gravity.gravity_point_mass(r, MARS.gm)
+    rn = np.linalg.norm(r, axis=-1)
+    np.testing.assert_allclose(np.linalg.norm(a, axis=-1), 42828.37362069909e9 / rn**2, rtol=1e-13)
+    np.testing.assert_allclose(
+        np.einsum("...i,...i->...", a, r), -np.linalg.norm(a, axis=-1) * rn, rtol=1e-13
+    )
+
+
+def _j2_potential(r, gm, j2, re):
+    """U = GM/r [1 − J2 (Re/r)² P2(z/r)], written independently of the module."""
+    rn = np.linalg.norm(r, axis=-1)
+    s = r[..., 2] / rn
+    return gm / rn * (1.0 - j2 * (re / rn) ** 2 * 0.5 * (3.0 * s * s - 1.0))
+
+
+def test_j2_is_gradient_of_potential():
+    rng = np.random.default_rng(1)
+    r = rng.normal(size=(20, 3))
+    r = r / np.linalg.norm(r, axis=-1, keepdims=True) * rng.uniform(3.4e6, 2e7, (20, 1))
+    a = gravity.gravity_j2(r, MARS)
+    h = 1.0  # m; fourth-order central differences
+    grad = np.zeros_like(r)
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = h
+        U = lambda x: _j2_potential(x, MARS.gm, MARS.j2, MARS.equatorial_radius)  # noqa: E731
+        grad[:, k] = (-U(r + 2 * e) + 8 * U(r + e) - 8 * U(r - e) + U(r - 2 * e)) / (12 * h)
+    np.testing.assert_allclose(a, grad, rtol=0, atol=1e-8 * np.abs(a).max())
+    # and the J2 part is really there (not just the point mass)
+    assert np.abs(a - gravity.gravity_point_mass(r, MARS.gm)).max() > 1e-4
+
+
+def test_j2_equator_and_pole_closed_form():
+    R = MARS.equatorial_radius
+    g_eq = gravity.gravity_j2(np.array([R, 0, 0]), MARS)
+    g_pole = gravity.gravity_j2(np.array([0, 0, R]), MARS)
+    g0 = MARS.gm / R**2
+    np.testing.assert_allclose(g_eq, [-g0 * (1 + 1.5 * 1960.45e-6), 0, 0], rtol=1e-13)
+    np.testing.assert_allclose(g_pole, [0, 0, -g0 * (1 - 3 * 1960.45e-6)], rtol=1e-13)
+
+
+def test_mars_and_titan_surface_gravity():
+    assert MARS.surface_gravity == pytest.approx(3.71, abs=0.01)
+    g_eq = np.linalg.norm(gravity.gravity_j2(np.array([0, MARS.equatorial_radius, 0]), MARS))
+    assert g_eq == pytest.approx(3.71, abs=0.02)
+    assert TITAN.surface_gravity == pytest.approx(1.354, abs=0.002)
+
+
+def test_uniform_gravity():
+    np.testing.assert_allclose(gravity.gravity_uniform(), [0, 0, -9.80665])
+    assert gravity.G0 == 9.80665
+    a = gravity.gravity_uniform(3.71, up=[0, 0, 2.0], r=np.zeros((7, 3)))
+    assert a.shape == (7, 3)
+    np.testing.assert_allclose(a, np.tile([0, 0, -3.71], (7, 1)))
+    with pytest.raises(ValueError):
+        gravity.gravity_uniform(up=[0, 0, 0])

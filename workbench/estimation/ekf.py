@@ -1,0 +1,682 @@
+"""Error-state extended Kalman filter: layout of the error state, predict, update, forward driver.
+
+The filter is written as plain functions over numpy arrays (pyins 1.0 style) and every
+intermediate of a step is exposed under the filterpy names ``x_prior``, ``P_prior``, ``y``
+(innovation), ``S`` (innovation covariance), ``K`` (gain), ``x_post``, ``P_post``.
+
+State and error state
+---------------------
+The full state ``x`` (n_x,) may contain unit quaternions; the covariance ``P`` (n_e, n_e)
+always lives in the *error state* ``e`` (n_e,), where each quaternion is represented by a 3-vector
+small angle.  :class:`ErrorStateLayout` says where.  Attitude-error convention (DESIGN.md, the
+same as :mod:`workbench.core.rotation`): the error is a **body-frame** small angle δθ [rad] with
+``q_true = q_est ⊗ exp(δθ)`` (right / local perturbation, "PSI-free" multiplicative error).
+``x ⊞ e`` applies additive corrections to the additive entries and ``q ⊗ exp(δθ)`` to each
+quaternion; ``x ⊟ x_ref`` is its inverse (``x_ref ⊞ (x ⊟ x_ref) == x``).
+
+Algorithm
+---------
+The step follows Sect. 3.1.1 of the POST2 reconstruction thesis (Huygens at Titan): predict the
+state with the nonlinear model, propagate ``P`` with the state-transition (sensitivity) matrix
+plus process noise ``Q``, compute the residual ``y = O − G`` (observed minus computed), the gain
+``K = P Hᵀ (H P Hᵀ + R)⁻¹`` with ``R`` the inverse of the observation weights, correct the
+state, and update the covariance in **Joseph form** ``(I − KH) P (I − KH)ᵀ + K R Kᵀ`` (Eq. 3.1
+ff.; Gelb 1974).  Sensitivities that are not supplied are computed, as in POST2, by perturbing
+the (error) state — here with central differences of size ``eps`` per error-state entry.
+Process noise can be raised on the fly (REDLand drop-test filter: "the process noise is
+increased when rapid changes of acceleration are observed") with the ``adapt_q`` hook of
+:func:`run_filter`.
+
+Quaternion reset: after ``x_post = x ⊞ K y`` the error state is reset to zero.  With a
+body-frame error the exact reset Jacobian is ``G = I − ½[δθ×] + O(δθ²)``; we keep ``P_post``
+unchanged (``G ≈ I``), the standard MEKF practice (Markley & Crassidis 2014, Sect. 6.2.4), since
+δθ after a healthy update is small and the neglected term is below the linearisation error.
+
+Iterated EKF: Bell & Cathey, "The iterated Kalman filter update as a Gauss-Newton method",
+IEEE TAC 38(2), 1993, written with ⊞/⊟.
+
+References: [1] Gelb, *Applied Optimal Estimation*, 1974 (Joseph form); [2] POST2 EKF thesis,
+Ch. 3.1 (in ``/work/shared/references``); [3] Solà, "Quaternion kinematics for the error-state
+Kalman filter", 2017 (error-state / reset); [4] Bell & Cathey 1993.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+from scipy.linalg import lapack
+from scipy.stats import chi2
+
+from workbench.core.rotation import attitude_error, quat_boxplus, quat_normalize
+
+__all__ = [
+    "ErrorStateLayout",
+    "Prediction",
+    "UpdateResult",
+    "Measurement",
+    "InnovationHistory",
+    "ForwardPass",
+    "numeric_transition_jacobian",
+    "numeric_measurement_jacobian",
+    "predict",
+    "update",
+    "run_filter",
+]
+
+_potrf = lapack.dpotrf
+_potrs = lapack.dpotrs
+
+
+# ---------------------------------------------------------------------------------------------
+# single-quaternion fast paths (the filter recursion calls ⊞ once per measurement; the
+# vectorised helpers of core.rotation cost ~20 µs for one quaternion, these ~2 µs).  They are
+# tested equal to rotation.quat_boxplus / rotation.attitude_error.
+# ---------------------------------------------------------------------------------------------
+
+
+def _quat_boxplus_single(q: np.ndarray, d: np.ndarray) -> list[float]:
+    """``q ⊗ exp(d)`` renormalised, for one quaternion (4,) and one body small angle (3,) [rad]."""
+    qx, qy, qz, qw = q.tolist()
+    dx, dy, dz = d.tolist()
+    a = math.sqrt(dx * dx + dy * dy + dz * dz)
+    k = 0.5 - a * a / 48.0 if a < 1e-6 else math.sin(0.5 * a) / a
+    px, py, pz, pw = dx * k, dy * k, dz * k, math.cos(0.5 * a)
+    rx = qw * px + qx * pw + qy * pz - qz * py
+    ry = qw * py - qx * pz + qy * pw + qz * px
+    rz = qw * pz + qx * py - qy * px + qz * pw
+    rw = qw * pw - qx * px - qy * py - qz * pz
+    n = math.sqrt(rx * rx + ry * ry + rz * rz + rw * rw)
+    return [rx / n, ry / n, rz / n, rw / n]
+
+
+def _quat_error_single(q_ref: np.ndarray, q: np.ndarray) -> list[float]:
+    """Body small angle δθ (3,) [rad] with ``q = q_ref ⊗ exp(δθ)``, for single quaternions."""
+    ax, ay, az, aw = q_ref.tolist()
+    bx, by, bz, bw = q.tolist()
+    # conj(a) ⊗ b
+    rx = aw * bx - ax * bw - ay * bz + az * by
+    ry = aw * by + ax * bz - ay * bw - az * bx
+    rz = aw * bz - ax * by + ay * bx - az * bw
+    rw = aw * bw + ax * bx + ay * by + az * bz
+    if rw < 0.0:
+        rx, ry, rz, rw = -rx, -ry, -rz, -rw
+    s = math.sqrt(rx * rx + ry * ry + rz * rz)
+    k = 2.0 / max(rw, 1e-300) if s < 1e-8 else 2.0 * math.atan2(s, rw) / s
+    return [rx * k, ry * k, rz * k]
+
+
+# ---------------------------------------------------------------------------------------------
+# layout
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ErrorStateLayout:
+    """Where the unit quaternions sit in the full state and in the error state.
+
+    ``n_x``: length of the full state ``x``.  ``quat_blocks``: pairs ``(i_x, i_e)``; each says that
+    ``x[i_x:i_x+4]`` is a unit quaternion ``q_ref_body`` (scalar-last ``[x, y, z, w]``, Hamilton)
+    whose error is ``e[i_e:i_e+3]``, a **body-frame** small angle δθ [rad] with
+    ``q_true = q ⊗ exp(δθ)``.  All other entries are additive and map one-to-one, in increasing
+    order, onto the remaining error-state entries (with the usual layout, the error index of an
+    additive entry is its x index minus one per quaternion before it).  ``n_e = n_x − #quats``.
+
+    Example (position, velocity, attitude, gyro bias): ``ErrorStateLayout(13, ((6, 6),))`` —
+    ``x = [p(3), v(3), q(4), b(3)]``, ``e = [δp(3), δv(3), δθ(3), δb(3)]``.
+    """
+
+    n_x: int
+    quat_blocks: tuple[tuple[int, int], ...] = ()
+    _add_runs: tuple[tuple[slice, slice], ...] = field(init=False, repr=False, compare=False)
+    _eye: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        blocks = tuple((int(a), int(b)) for a, b in self.quat_blocks)
+        n_x = int(self.n_x)
+        n_e = n_x - len(blocks)
+        x_used = np.zeros(n_x, dtype=bool)
+        e_used = np.zeros(max(n_e, 0), dtype=bool)
+        for i_x, i_e in blocks:
+            if i_x < 0 or i_x + 4 > n_x or x_used[i_x : i_x + 4].any():
+                raise ValueError(f"quaternion block x[{i_x}:{i_x + 4}] is out of range or overlaps")
+            if i_e < 0 or i_e + 3 > n_e or e_used[i_e : i_e + 3].any():
+                raise ValueError(f"quaternion error block e[{i_e}:{i_e + 3}] is out of range or overlaps")
+            x_used[i_x : i_x + 4] = True
+            e_used[i_e : i_e + 3] = True
+        xa = np.flatnonzero(~x_used)
+        ea = np.flatnonzero(~e_used)
+        if xa.size != ea.size:  # pragma: no cover - impossible by construction
+            raise ValueError("inconsistent layout")
+        runs: list[tuple[slice, slice]] = []
+        i = 0
+        while i < xa.size:
+            j = i
+            while j + 1 < xa.size and xa[j + 1] == xa[j] + 1 and ea[j + 1] == ea[j] + 1:
+                j += 1
+            runs.append((slice(int(xa[i]), int(xa[j]) + 1), slice(int(ea[i]), int(ea[j]) + 1)))
+            i = j + 1
+        object.__setattr__(self, "n_x", n_x)
+        object.__setattr__(self, "quat_blocks", blocks)
+        object.__setattr__(self, "_add_runs", tuple(runs))
+        eye = np.eye(n_e)
+        eye.flags.writeable = False
+        object.__setattr__(self, "_eye", eye)
+
+    @property
+    def n_e(self) -> int:
+        """Length of the error state (n_x minus one per quaternion)."""
+        return self.n_x - len(self.quat_blocks)
+
+    def boxplus(self, x: np.ndarray, dx: np.ndarray) -> np.ndarray:
+        """``x ⊞ dx``: x (..., n_x), dx (..., n_e) -> (..., n_x), broadcasting over leading dims.
+
+        Additive entries: ``x + dx``; quaternions: ``q ⊗ exp(δθ)`` (body-frame δθ [rad]),
+        renormalised.
+        """
+        x = np.asarray(x, dtype=float)
+        dx = np.asarray(dx, dtype=float)
+        if x.shape[-1] != self.n_x or dx.shape[-1] != self.n_e:
+            raise ValueError(f"boxplus: expected x (..., {self.n_x}) and dx (..., {self.n_e}), "
+                             f"got {x.shape} and {dx.shape}")
+        if x.ndim == 1 and dx.ndim == 1:
+            out = x.copy()
+            for xs, es in self._add_runs:
+                out[xs] += dx[es]
+            for i_x, i_e in self.quat_blocks:
+                out[i_x : i_x + 4] = _quat_boxplus_single(x[i_x : i_x + 4], dx[i_e : i_e + 3])
+            return out
+        shape = np.broadcast_shapes(x.shape[:-1], dx.shape[:-1])
+        out = np.array(np.broadcast_to(x, (*shape, self.n_x)), dtype=float)
+        for xs, es in self._add_runs:
+            out[..., xs] += dx[..., es]
+        for i_x, i_e in self.quat_blocks:
+            out[..., i_x : i_x + 4] = quat_boxplus(x[..., i_x : i_x + 4], dx[..., i_e : i_e + 3])
+        return out
+
+    def boxminus(self, x: np.ndarray, x_ref: np.ndarray) -> np.ndarray:
+        """``x ⊟ x_ref`` (..., n_e) such that ``x_ref ⊞ (x ⊟ x_ref) == x``; broadcasting.
+
+        Additive entries: ``x − x_ref``; quaternions: ``attitude_error(q_ref, q)``, the body-frame
+        small angle δθ [rad] with ``q = q_ref ⊗ exp(δθ)`` (shortest rotation, |δθ| ≤ π).
+        """
+        x = np.asarray(x, dtype=float)
+        x_ref = np.asarray(x_ref, dtype=float)
+        if x.shape[-1] != self.n_x or x_ref.shape[-1] != self.n_x:
+            raise ValueError(f"boxminus: expected (..., {self.n_x}) arrays, got {x.shape} and {x_ref.shape}")
+        if x.ndim == 1 and x_ref.ndim == 1:
+            out = np.empty(self.n_e)
+            for xs, es in self._add_runs:
+                out[es] = x[xs] - x_ref[xs]
+            for i_x, i_e in self.quat_blocks:
+                out[i_e : i_e + 3] = _quat_error_single(x_ref[i_x : i_x + 4], x[i_x : i_x + 4])
+            return out
+        shape = np.broadcast_shapes(x.shape[:-1], x_ref.shape[:-1])
+        out = np.empty((*shape, self.n_e))
+        for xs, es in self._add_runs:
+            out[..., es] = x[..., xs] - x_ref[..., xs]
+        for i_x, i_e in self.quat_blocks:
+            out[..., i_e : i_e + 3] = attitude_error(x_ref[..., i_x : i_x + 4], x[..., i_x : i_x + 4])
+        return out
+
+    def normalize(self, x: np.ndarray) -> np.ndarray:
+        """Copy of x (..., n_x) with every quaternion block scaled to unit norm."""
+        out = np.array(x, dtype=float)
+        for i_x, _ in self.quat_blocks:
+            out[..., i_x : i_x + 4] = quat_normalize(out[..., i_x : i_x + 4])
+        return out
+
+
+# ---------------------------------------------------------------------------------------------
+# stage results
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Result of :func:`predict`: ``x_prior`` (n_x,), ``P_prior`` (n_e, n_e), error-state ``F`` (n_e, n_e)."""
+
+    x_prior: np.ndarray
+    P_prior: np.ndarray
+    F: np.ndarray
+
+
+@dataclass(frozen=True)
+class UpdateResult:
+    """Result of :func:`update` (one measurement of size m).
+
+    ``x_post`` (n_x,), ``P_post`` (n_e, n_e); ``y`` (m,) innovation ``residual(z, h(x_prior))``;
+    ``S`` (m, m) its covariance ``H P Hᵀ + R``; ``K`` (n_e, m) gain; ``H`` (m, n_e) Jacobian w.r.t.
+    the error state; ``nis = yᵀ S⁻¹ y`` (dimensionless); ``accepted`` False when the χ² gate
+    rejected the measurement (then ``x_post is x`` and ``P_post is P``).  For an iterated update
+    ``y``, ``S``, ``nis`` belong to the prior linearisation (the gate statistic), ``H`` and ``K``
+    to the last iterate (the ones used in the Joseph covariance).
+    """
+
+    x_post: np.ndarray
+    P_post: np.ndarray
+    y: np.ndarray
+    S: np.ndarray
+    K: np.ndarray
+    H: np.ndarray
+    nis: float
+    accepted: bool
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One measurement offered to :func:`run_filter` at a step.
+
+    ``name``: key of its :class:`InnovationHistory` (one size m per name); ``z`` (m,) observed
+    value in SI units; ``R`` (m, m) noise covariance (the inverse of POST2's observation weight);
+    ``h(x) -> z_pred`` (m,); ``H`` (m, n_e) array, callable ``H(x)``, or None for central
+    differences; ``residual(z, z_pred) -> y`` (default ``z − z_pred``, give one for angles);
+    ``gate_probability`` e.g. 0.9973 for a χ² gate, None for no gate; ``iterations`` > 1 for an
+    iterated update; ``eps`` perturbation of the numeric H (scalar or (n_e,), error-state units).
+    """
+
+    name: str
+    z: np.ndarray
+    R: np.ndarray
+    h: Callable[[np.ndarray], np.ndarray]
+    H: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None
+    residual: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    gate_probability: float | None = None
+    iterations: int = 1
+    eps: float | np.ndarray = 1e-6
+
+
+@dataclass(frozen=True)
+class InnovationHistory:
+    """Innovations of one named measurement over a forward pass of n steps (m = its size).
+
+    ``y`` (n, m) and ``S`` (n, m, m): NaN where the measurement is absent; ``nis`` (n,) NaN where
+    absent; ``accepted`` (n,) bool (False where absent or gated out); ``present`` (n,) bool;
+    ``K`` (n, n_e, m) gains (NaN where absent) only if the pass was run with ``keep_gains=True``,
+    else None.
+    """
+
+    y: np.ndarray
+    S: np.ndarray
+    nis: np.ndarray
+    accepted: np.ndarray
+    present: np.ndarray
+    K: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ForwardPass:
+    """Every step of a forward (filter) pass over n times; the input of :func:`rts_smooth`.
+
+    ``t`` (n,) [s]; ``x_prior``, ``x_post`` (n, n_x); ``P_prior``, ``P_post`` (n, n_e, n_e)
+    (forward-pass covariances, error state); ``F`` (n, n_e, n_e) with ``F[k]`` the error-state
+    transition from step k−1 to k (``F[0] = I``); ``Q`` (n, n_e, n_e) the process noise added in
+    that transition (``Q[0] = 0``); ``innovations``: name -> :class:`InnovationHistory`.
+    """
+
+    t: np.ndarray
+    x_prior: np.ndarray
+    P_prior: np.ndarray
+    x_post: np.ndarray
+    P_post: np.ndarray
+    F: np.ndarray
+    Q: np.ndarray
+    innovations: dict[str, InnovationHistory]
+
+
+# ---------------------------------------------------------------------------------------------
+# Jacobians by central differences in the error state
+# ---------------------------------------------------------------------------------------------
+
+
+def _eps_vector(eps: float | np.ndarray, n_e: int) -> np.ndarray:
+    e = np.broadcast_to(np.asarray(eps, dtype=float), (n_e,))
+    if np.any(e <= 0.0):
+        raise ValueError("eps must be positive")
+    return e
+
+
+def numeric_transition_jacobian(
+    f: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    layout: ErrorStateLayout,
+    eps: float | np.ndarray = 1e-6,
+    fx: np.ndarray | None = None,
+) -> np.ndarray:
+    """Error-state Jacobian F (n_e, n_e) of ``f: x (n_x,) -> x_next (n_x,)`` by central differences.
+
+    ``F[:, j] = [(f(x ⊞ ε e_j) ⊟ f(x)) − (f(x ⊞ −ε e_j) ⊟ f(x))] / (2 ε_j)``: both perturbed images
+    are taken relative to the nominal image ``f(x)`` (pass it as ``fx`` to save a call), so the
+    quaternion columns are body-frame small angles at ``f(x)``; for additive entries this is the
+    plain ``(f₊ − f₋)/(2ε)``.  ``eps`` is a scalar or (n_e,) perturbation in error-state units
+    (choose it per state for badly scaled states, like POST2's perturbation sizes).  Costs 2·n_e
+    calls of ``f``.
+    """
+    x = np.asarray(x, dtype=float)
+    n_e = layout.n_e
+    e = _eps_vector(eps, n_e)
+    fx = np.asarray(f(x), dtype=float) if fx is None else np.asarray(fx, dtype=float)
+    D = np.diag(e)
+    Xp = layout.boxplus(x, D)
+    Xm = layout.boxplus(x, -D)
+    Fp = np.array([np.asarray(f(xi), dtype=float) for xi in Xp])
+    Fm = np.array([np.asarray(f(xi), dtype=float) for xi in Xm])
+    cols = (layout.boxminus(Fp, fx) - layout.boxminus(Fm, fx)) / (2.0 * e)[:, None]
+    return np.ascontiguousarray(cols.T)
+
+
+def numeric_measurement_jacobian(
+    h: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    layout: ErrorStateLayout,
+    residual: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    eps: float | np.ndarray = 1e-6,
+    hx: np.ndarray | None = None,
+) -> np.ndarray:
+    """Jacobian H (m, n_e) of ``h: x -> z_pred (m,)`` w.r.t. the error state, by central differences.
+
+    ``H[:, j] = [r(h(x ⊞ ε e_j), h(x)) − r(h(x ⊞ −ε e_j), h(x))] / (2 ε_j)`` with ``r`` the
+    measurement's residual function (default subtraction, so angle wrapping in a custom residual
+    is respected).  ``eps`` scalar or (n_e,), error-state units.  Costs 2·n_e calls of ``h``.
+    """
+    x = np.asarray(x, dtype=float)
+    n_e = layout.n_e
+    e = _eps_vector(eps, n_e)
+    D = np.diag(e)
+    Xp = layout.boxplus(x, D)
+    Xm = layout.boxplus(x, -D)
+    Zp = [np.atleast_1d(np.asarray(h(xi), dtype=float)) for xi in Xp]
+    Zm = [np.atleast_1d(np.asarray(h(xi), dtype=float)) for xi in Xm]
+    if residual is None:
+        cols = np.array(Zp) - np.array(Zm)
+    else:
+        h0 = np.atleast_1d(np.asarray(h(x), dtype=float)) if hx is None else hx
+        cols = np.array(
+            [
+                np.atleast_1d(residual(a, h0)) - np.atleast_1d(residual(b, h0))
+                for a, b in zip(Zp, Zm, strict=True)
+            ]
+        )
+    cols = cols / (2.0 * e)[:, None]
+    return np.ascontiguousarray(cols.T)
+
+
+# ---------------------------------------------------------------------------------------------
+# predict / update
+# ---------------------------------------------------------------------------------------------
+
+
+def predict(
+    x: np.ndarray,
+    P: np.ndarray,
+    f: Callable[[np.ndarray], np.ndarray],
+    Q: np.ndarray,
+    layout: ErrorStateLayout,
+    F: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
+    eps: float | np.ndarray = 1e-6,
+) -> Prediction:
+    """Propagate state and error covariance one step.
+
+    x (n_x,), P (n_e, n_e), ``f(x) -> x_next`` (n_x,), Q (n_e, n_e) discrete process noise of the
+    step (error-state units, e.g. rad² for a body-frame attitude error).  ``F`` (n_e, n_e), a
+    callable ``F(x)``, or None for :func:`numeric_transition_jacobian` (body-frame attitude
+    error, see module docstring).  ``P_prior = F P Fᵀ + Q``, symmetrised.
+    """
+    x = np.asarray(x, dtype=float)
+    x_prior = np.asarray(f(x), dtype=float)
+    if F is None:
+        Fm = numeric_transition_jacobian(f, x, layout, eps, fx=x_prior)
+    elif callable(F):
+        Fm = np.asarray(F(x), dtype=float)
+    else:
+        Fm = np.asarray(F, dtype=float)
+    A = Fm @ P @ Fm.T + Q
+    return Prediction(x_prior, 0.5 * (A + A.T), Fm)
+
+
+@lru_cache(maxsize=256)
+def _chi2_threshold(probability: float, dof: int) -> float:
+    return float(chi2.ppf(probability, dof))
+
+
+def _update(x, P, z, h, R, layout, H, residual, gate_probability, iterations, eps):
+    """Core of :func:`update`; returns a tuple (x_post, P_post, y, S, K, H, nis, accepted)."""
+    z = np.asarray(z, dtype=float)
+    if z.ndim == 0:
+        z = z.reshape(1)
+    zp = np.asarray(h(x), dtype=float)
+    if zp.ndim == 0:
+        zp = zp.reshape(1)
+    y = z - zp if residual is None else np.atleast_1d(np.asarray(residual(z, zp), dtype=float))
+    if H is None:
+        Hk = numeric_measurement_jacobian(h, x, layout, residual, eps, hx=zp)
+    elif callable(H):
+        Hk = np.asarray(H(x), dtype=float)
+    else:
+        Hk = H
+    if Hk.ndim == 1:
+        Hk = Hk.reshape(1, -1)
+    R = np.asarray(R, dtype=float)
+    if R.ndim < 2:
+        R = R.reshape(1, 1)
+    PHt = P @ Hk.T
+    S = Hk @ PHt + R
+    c, info = _potrf(S, lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"innovation covariance S is not positive definite (potrf info={info})")
+    w, _ = _potrs(c, y, lower=1)
+    nis = float(y @ w)
+    if not math.isfinite(nis):
+        raise ValueError("non-finite innovation (check z, h(x) and R)")
+    Kt, _ = _potrs(c, PHt.T, lower=1)
+    K = Kt.T
+    if gate_probability is not None and nis > _chi2_threshold(float(gate_probability), y.shape[0]):
+        return x, P, y, S, K, Hk, nis, False
+    dx = K @ y
+    x_new = layout.boxplus(x, dx)
+    for _ in range(1, iterations):
+        # Gauss-Newton step about the current iterate x_i (Bell & Cathey 1993):
+        # x_{i+1} = x ⊞ K_i [ r(z, h(x_i)) − H_i (x ⊟ x_i) ]
+        x_i = x_new
+        zp_i = np.asarray(h(x_i), dtype=float)
+        if zp_i.ndim == 0:
+            zp_i = zp_i.reshape(1)
+        r_i = z - zp_i if residual is None else np.atleast_1d(np.asarray(residual(z, zp_i), dtype=float))
+        if H is None:
+            Hk = numeric_measurement_jacobian(h, x_i, layout, residual, eps, hx=zp_i)
+        elif callable(H):
+            Hk = np.asarray(H(x_i), dtype=float)
+            if Hk.ndim == 1:
+                Hk = Hk.reshape(1, -1)
+        PHt = P @ Hk.T
+        S_i = Hk @ PHt + R
+        c, info = _potrf(S_i, lower=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(
+                f"iterated update: H P Hᵀ + R not positive definite (potrf info={info})"
+            )
+        Kt, _ = _potrs(c, PHt.T, lower=1)
+        K = Kt.T
+        dx_new = K @ (r_i - Hk @ layout.boxminus(x, x_i))
+        x_new = layout.boxplus(x, dx_new)
+        if np.max(np.abs(dx_new - dx)) <= 1e-13 * (1.0 + np.max(np.abs(dx_new))):
+            break
+        dx = dx_new
+    IKH = layout._eye - K @ Hk
+    A = IKH @ P @ IKH.T + K @ R @ K.T
+    return x_new, 0.5 * (A + A.T), y, S, K, Hk, nis, True
+
+
+def update(
+    x: np.ndarray,
+    P: np.ndarray,
+    z: np.ndarray,
+    h: Callable[[np.ndarray], np.ndarray],
+    R: np.ndarray,
+    layout: ErrorStateLayout,
+    H: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
+    residual: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    gate_probability: float | None = None,
+    iterations: int = 1,
+    eps: float | np.ndarray = 1e-6,
+) -> UpdateResult:
+    """Measurement update of an error-state EKF with Joseph-form covariance.
+
+    x (n_x,) and P (n_e, n_e) prior; z (m,) measurement (SI units); ``h(x) -> z_pred`` (m,);
+    R (m, m) measurement noise covariance.  ``H`` (m, n_e) w.r.t. the error state (body-frame
+    attitude error δθ, ``q_true = q ⊗ exp(δθ)``), a callable ``H(x)``, or None for
+    :func:`numeric_measurement_jacobian`.  ``residual(z, z_pred)`` defaults to ``z − z_pred``.
+
+    ``y = residual(z, h(x))``, ``S = H P Hᵀ + R``, ``K = P Hᵀ S⁻¹`` (Cholesky solve),
+    ``x_post = x ⊞ K y``, ``P_post = (I − KH) P (I − KH)ᵀ + K R Kᵀ`` symmetrised, ``nis = yᵀ S⁻¹ y``.
+    The quaternion reset keeps ``P_post`` as is (reset Jacobian ``I − ½[δθ×] ≈ I``, see module
+    docstring).
+
+    ``gate_probability``: if given and ``nis > chi2.ppf(gate_probability, m)`` the update is
+    rejected: ``x_post = x``, ``P_post = P``, ``accepted = False``; y, S, K, nis still returned.
+    ``iterations > 1``: iterated EKF (Gauss-Newton on the MAP cost, Bell & Cathey 1993)
+    ``x_{i+1} = x ⊞ K_i [r(z, h(x_i)) − H_i (x ⊟ x_i)]``, stopping early when the step no longer
+    changes; the covariance is the Joseph form with the last ``H_i``, ``K_i``.  The gate uses the
+    prior innovation.  ``eps``: numeric-Jacobian perturbation (scalar or (n_e,)).
+    """
+    x = np.asarray(x, dtype=float)
+    P = np.asarray(P, dtype=float)
+    if H is not None and not callable(H):
+        H = np.asarray(H, dtype=float)
+    if iterations < 1:
+        raise ValueError("iterations must be >= 1")
+    return UpdateResult(*_update(x, P, z, h, R, layout, H, residual, gate_probability, int(iterations), eps))
+
+
+# ---------------------------------------------------------------------------------------------
+# forward driver
+# ---------------------------------------------------------------------------------------------
+
+
+class _InnovationBuffer:
+    __slots__ = ("m", "y", "S", "nis", "accepted", "present", "K")
+
+    def __init__(self, n: int, m: int, n_e: int, keep_gains: bool) -> None:
+        self.m = m
+        self.y = np.full((n, m), np.nan)
+        self.S = np.full((n, m, m), np.nan)
+        self.nis = np.full(n, np.nan)
+        self.accepted = np.zeros(n, dtype=bool)
+        self.present = np.zeros(n, dtype=bool)
+        self.K = np.full((n, n_e, m), np.nan) if keep_gains else None
+
+    def freeze(self) -> InnovationHistory:
+        return InnovationHistory(self.y, self.S, self.nis, self.accepted, self.present, self.K)
+
+
+def run_filter(
+    x0: np.ndarray,
+    P0: np.ndarray,
+    t: np.ndarray,
+    transition: Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray | None]],
+    process_noise: Callable[[np.ndarray, float, float], np.ndarray],
+    measurements_at: Callable[[int, float, np.ndarray], Sequence[Measurement]],
+    layout: ErrorStateLayout,
+    adapt_q: Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None,
+    keep_gains: bool = False,
+    eps: float | np.ndarray = 1e-6,
+) -> ForwardPass:
+    """Run the error-state EKF over the times ``t`` (n,) [s] and record every step.
+
+    x0 (n_x,), P0 (n_e, n_e): state and covariance at ``t[0]``; step 0 gets only updates
+    (``x_prior[0] = x0``).  For k ≥ 1:
+
+    * ``transition(x, t[k-1], t[k]) -> (x_next, F or None)``; F (n_e, n_e) error-state
+      transition (None: central differences of ``transition`` with perturbation ``eps``);
+    * ``Q = process_noise(x, t[k-1], t[k])`` (n_e, n_e), then ``Q = adapt_q(k, x, P, Q)`` if given
+      — the hook for raising process noise on rapid acceleration changes (REDLand); x, P are the
+      posterior of step k−1;
+    * ``P_prior = F P Fᵀ + Q`` (symmetrised).
+
+    Then ``measurements_at(k, t[k], x_prior)`` returns a list of :class:`Measurement`, processed
+    sequentially (each its own :func:`update`, in list order).  A name may appear at most once per
+    step and must keep its size m.  Gains are kept (``InnovationHistory.K``) only with
+    ``keep_gains=True``.  Attitude errors follow the body-frame convention of the module.
+    Errors in an update are re-raised with the step, time and measurement name.
+    """
+    t = np.asarray(t, dtype=float)
+    n = t.shape[0]
+    n_x, n_e = layout.n_x, layout.n_e
+    x = np.array(x0, dtype=float)
+    P = np.array(P0, dtype=float)
+    if x.shape != (n_x,) or P.shape != (n_e, n_e):
+        raise ValueError(f"x0 must be ({n_x},) and P0 ({n_e}, {n_e}); got {x.shape}, {P.shape}")
+    x_prior = np.empty((n, n_x))
+    x_post = np.empty((n, n_x))
+    P_prior = np.empty((n, n_e, n_e))
+    P_post = np.empty((n, n_e, n_e))
+    F_hist = np.empty((n, n_e, n_e))
+    Q_hist = np.empty((n, n_e, n_e))
+    if n:
+        F_hist[0] = np.eye(n_e)
+        Q_hist[0] = 0.0
+    buffers: dict[str, _InnovationBuffer] = {}
+    tl = t.tolist()
+    for k in range(n):
+        tk = tl[k]
+        if k:
+            t0 = tl[k - 1]
+            x_next, Fk = transition(x, t0, tk)
+            Qk = process_noise(x, t0, tk)
+            if adapt_q is not None:
+                Qk = adapt_q(k, x, P, Qk)
+            x_next = np.asarray(x_next, dtype=float)
+            if Fk is None:
+                Fk = numeric_transition_jacobian(
+                    lambda xx, t0=t0, t1=tk: transition(xx, t0, t1)[0], x, layout, eps, fx=x_next
+                )
+            A = Fk @ P @ Fk.T
+            A += Qk
+            P = 0.5 * (A + A.T)
+            F_hist[k] = Fk
+            Q_hist[k] = Qk
+            x = x_next
+        x_prior[k] = x
+        P_prior[k] = P
+        for meas in measurements_at(k, tk, x):
+            H = meas.H
+            if H is not None and not callable(H):
+                H = np.asarray(H, dtype=float)
+            try:
+                xn, Pn, y, S, K, _, nis, ok = _update(
+                    x, P, meas.z, meas.h, meas.R, layout, H, meas.residual,
+                    meas.gate_probability, meas.iterations, meas.eps,
+                )
+            except (np.linalg.LinAlgError, ValueError) as err:
+                raise type(err)(f"step {k} (t={tk} s), measurement {meas.name!r}: {err}") from err
+            buf = buffers.get(meas.name)
+            if buf is None:
+                buf = buffers[meas.name] = _InnovationBuffer(n, y.shape[0], n_e, keep_gains)
+            elif buf.present[k] or buf.m != y.shape[0]:
+                raise ValueError(
+                    f"step {k}: measurement {meas.name!r} repeated at one step or changed size "
+                    f"({buf.m} -> {y.shape[0]})"
+                )
+            buf.y[k] = y
+            buf.S[k] = S
+            buf.nis[k] = nis
+            buf.accepted[k] = ok
+            buf.present[k] = True
+            if keep_gains:
+                buf.K[k] = K
+            x, P = xn, Pn
+        x_post[k] = x
+        P_post[k] = P
+    return ForwardPass(
+        t=t,
+        x_prior=x_prior,
+        P_prior=P_prior,
+        x_post=x_post,
+        P_post=P_post,
+        F=F_hist,
+        Q=Q_hist,
+        innovations={name: b.freeze() for name, b in buffers.items()},
+    )

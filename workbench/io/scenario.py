@@ -1,0 +1,307 @@
+"""Scenario files (TOML): what to reconstruct, from which telemetry, with which settings.
+
+A scenario is one TOML file with a ``[scenario]`` table (``name``, ``kind``, optional
+``description`` and ``epoch_utc``) and free-form tables read by the pipeline of that kind:
+``[vehicle]``, ``[sensors.*]``, ``[telemetry]`` (logical stream name → CSV path relative to the
+scenario file), ``[synthetic]`` (truth-simulator settings and ``seed``; its presence makes the
+scenario synthetic), ``[filter]``, ``[output]``.  FORMATS.md describes it for users.
+
+Keys are addressed by dotted paths (``"sensors.imu.rate_hz"``) and type-checked on access by
+:meth:`Scenario.get`; every error names the file and the dotted key.  Values are whatever the
+file says: unit conventions are the scenario author's, and key names carry their unit
+(``height_m``, ``tilt_deg``) so the pipeline converts at the edge.
+"""
+
+from __future__ import annotations
+
+import copy
+import datetime as _dt
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "SCENARIO_KINDS",
+    "Scenario",
+    "ScenarioError",
+    "find_scenarios",
+    "load_scenario",
+    "resolve_scenario",
+]
+
+#: The reconstruction problems a scenario may describe (DESIGN.md).
+SCENARIO_KINDS: tuple[str, ...] = ("droptest", "entry", "parameters", "airdata")
+
+_VALUE_KINDS = ("float", "int", "str", "bool", "vec3", "list", "table")
+
+
+class _Missing:
+    def __repr__(self) -> str:
+        return "<missing>"
+
+
+_MISSING: Any = _Missing()
+
+
+class ScenarioError(ValueError):
+    """A problem in a scenario file.  Attributes ``file`` (str) and ``key`` (dotted, or None)."""
+
+    def __init__(self, file, key: str | None, reason: str):
+        self.file = str(file)
+        self.key = key
+        self.reason = reason
+        where = f"{self.file}, key '{key}'" if key else self.file
+        super().__init__(f"{where}: {reason}")
+
+    def __reduce__(self):
+        return (type(self), (self.file, self.key, self.reason))
+
+
+def _type_name(v: Any) -> str:
+    if isinstance(v, bool):
+        return "bool"
+    if isinstance(v, dict):
+        return "table"
+    if isinstance(v, list):
+        return f"list of {len(v)}"
+    if isinstance(v, str):
+        return "str"
+    return type(v).__name__
+
+
+@dataclass(frozen=True, eq=False)
+class Scenario:
+    """A loaded scenario.  ``data`` is the whole parsed TOML document (including ``[scenario]``).
+
+    Treat ``data`` as read-only: use :meth:`with_overrides` to derive a changed scenario.
+    """
+
+    path: Path
+    name: str
+    kind: str
+    description: str
+    data: dict
+
+    # -- access ------------------------------------------------------------------------------
+
+    def _lookup(self, dotted_key: str) -> Any:
+        node: Any = self.data
+        for part in dotted_key.split("."):
+            if not isinstance(node, dict) or part not in node:
+                return _MISSING
+            node = node[part]
+        return node
+
+    def has(self, dotted_key: str) -> bool:
+        """True if ``dotted_key`` (e.g. ``"synthetic.seed"``) is present."""
+        return self._lookup(dotted_key) is not _MISSING
+
+    def get(self, dotted_key: str, default: Any = _MISSING, *, kind: str | None = None) -> Any:
+        """Value at ``dotted_key``, type-checked when ``kind`` is given.
+
+        ``kind``: ``"float"`` (int accepted, returned as float), ``"int"``, ``"str"``, ``"bool"``,
+        ``"vec3"`` (list of 3 numbers → float array ``(3,)``), ``"list"``, ``"table"`` (dict).
+        A missing key returns ``default`` if given, else raises :class:`ScenarioError`; a present
+        key of the wrong type always raises.  Lists and tables are returned as copies.
+        """
+        if kind is not None and kind not in _VALUE_KINDS:
+            raise ValueError(f"kind must be one of {', '.join(_VALUE_KINDS)}, got {kind!r}")
+        v = self._lookup(dotted_key)
+        if v is _MISSING:
+            if default is not _MISSING:
+                return default
+            parent, _, _ = dotted_key.rpartition(".")
+            known = self._lookup(parent) if parent else self.data
+            hint = f"; keys here: {', '.join(known)}" if isinstance(known, dict) and known else ""
+            raise ScenarioError(self.path, dotted_key, f"missing{' ' + kind if kind else ''} value{hint}")
+        if kind is None:
+            return copy.deepcopy(v) if isinstance(v, dict | list) else v
+        return _check(self.path, dotted_key, v, kind)
+
+    def path_of(self, dotted_key: str, *, must_exist: bool = True) -> Path:
+        """The path string at ``dotted_key`` resolved against the scenario's directory.
+
+        Raises :class:`ScenarioError` naming the key if it is missing, not a string, or (with
+        ``must_exist``) points at nothing.
+        """
+        p = self.resolve(self.get(dotted_key, kind="str"))
+        if must_exist and not p.exists():
+            raise ScenarioError(self.path, dotted_key, f"file not found: {p}")
+        return p
+
+    def resolve(self, rel_path: str | os.PathLike) -> Path:
+        """``rel_path`` relative to the directory of the scenario file (absolute paths pass)."""
+        p = Path(rel_path).expanduser()
+        return p if p.is_absolute() else (self.path.parent / p)
+
+    @property
+    def is_synthetic(self) -> bool:
+        """True if the scenario has a ``[synthetic]`` table (telemetry is simulated)."""
+        return isinstance(self.data.get("synthetic"), dict)
+
+    def with_overrides(self, dotted: dict[str, Any]) -> Scenario:
+        """A new scenario with ``{dotted_key: value}`` set (tables created as needed).
+
+        The result is validated like a loaded file; setting a key under a non-table value
+        raises :class:`ScenarioError`.
+        """
+        data = copy.deepcopy(self.data)
+        for key, value in dotted.items():
+            parts = key.split(".")
+            if not all(parts):
+                raise ScenarioError(self.path, key, "override key has an empty part")
+            node = data
+            for i, part in enumerate(parts[:-1]):
+                nxt = node.setdefault(part, {})
+                if not isinstance(nxt, dict):
+                    raise ScenarioError(
+                        self.path,
+                        ".".join(parts[: i + 1]),
+                        f"is a {_type_name(nxt)}, cannot set '{key}' under it",
+                    )
+                node = nxt
+            node[parts[-1]] = value
+        return _from_data(self.path, data)
+
+
+def _check(path: Path, key: str, v: Any, kind: str) -> Any:
+    def fail(expected: str) -> ScenarioError:
+        return ScenarioError(path, key, f"expected {expected}, got {_type_name(v)} {v!r}"[:300])
+
+    number = isinstance(v, int | float) and not isinstance(v, bool)
+    if kind == "float":
+        if not number:
+            raise fail("a number")
+        return float(v)
+    if kind == "int":
+        if not isinstance(v, int) or isinstance(v, bool):
+            raise fail("an integer")
+        return v
+    if kind == "str":
+        if not isinstance(v, str):
+            raise fail("a string")
+        return v
+    if kind == "bool":
+        if not isinstance(v, bool):
+            raise fail("true or false")
+        return v
+    if kind == "vec3":
+        if not (
+            isinstance(v, list)
+            and len(v) == 3
+            and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+        ):
+            raise fail("a list of 3 numbers")
+        return np.array(v, dtype=np.float64)
+    if kind == "list":
+        if not isinstance(v, list):
+            raise fail("a list")
+        return copy.deepcopy(v)
+    if not isinstance(v, dict):
+        raise fail("a table")
+    return copy.deepcopy(v)
+
+
+def _from_data(path: Path, data: dict) -> Scenario:
+    sc = data.get("scenario", _MISSING)
+    if sc is _MISSING:
+        raise ScenarioError(path, "scenario", "missing [scenario] table (with name and kind)")
+    if not isinstance(sc, dict):
+        raise ScenarioError(path, "scenario", f"expected a table, got {_type_name(sc)}")
+    name = sc.get("name")
+    if not isinstance(name, str) or not name.strip():
+        raise ScenarioError(path, "scenario.name", f"expected a non-empty string, got {name!r}")
+    kind = sc.get("kind")
+    if kind not in SCENARIO_KINDS:
+        raise ScenarioError(
+            path, "scenario.kind", f"expected one of {', '.join(SCENARIO_KINDS)}, got {kind!r}"
+        )
+    desc = sc.get("description", "")
+    if not isinstance(desc, str):
+        raise ScenarioError(path, "scenario.description", f"expected a string, got {_type_name(desc)}")
+    epoch = sc.get("epoch_utc")
+    if isinstance(epoch, _dt.datetime | _dt.date):
+        sc["epoch_utc"] = epoch.isoformat()
+    elif epoch is not None and not isinstance(epoch, str):
+        raise ScenarioError(path, "scenario.epoch_utc", f"expected a UTC date-time, got {_type_name(epoch)}")
+    for table in ("telemetry", "synthetic"):
+        if table in data and not isinstance(data[table], dict):
+            raise ScenarioError(path, table, f"expected a table, got {_type_name(data[table])}")
+    for stream, rel in data.get("telemetry", {}).items():
+        if not isinstance(rel, str):
+            raise ScenarioError(
+                path, f"telemetry.{stream}", f"expected a CSV path string, got {_type_name(rel)}"
+            )
+    seed = data.get("synthetic", {}).get("seed", 0)
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise ScenarioError(path, "synthetic.seed", f"expected a non-negative integer, got {seed!r}")
+    return Scenario(path=path, name=name.strip(), kind=kind, description=desc.strip(), data=data)
+
+
+def load_scenario(path: str | os.PathLike) -> Scenario:
+    """Load and validate a scenario TOML file; :class:`ScenarioError` names file and key/line."""
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise ScenarioError(path, None, "file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(path, None, f"not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(path, None, f"not valid UTF-8: {exc}") from None
+    except OSError as exc:
+        raise ScenarioError(path, None, f"cannot read file: {exc.strerror or exc}") from None
+    return _from_data(path, data)
+
+
+def find_scenarios(assets_dir: str | os.PathLike) -> dict[str, Path]:
+    """Shipped scenarios: ``{name: path}`` for every ``*.toml`` under ``assets_dir/scenarios/``
+    (recursively) that has a ``[scenario]`` table; sorted by name.
+
+    TOML files without a ``[scenario]`` table are skipped; an invalid TOML file or two files
+    with the same scenario name raise :class:`ScenarioError`.
+    """
+    root = Path(assets_dir) / "scenarios"
+    found: dict[str, Path] = {}
+    if not root.is_dir():
+        return found
+    for p in sorted(root.rglob("*.toml")):
+        try:
+            with p.open("rb") as f:
+                data = tomllib.load(f)
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ScenarioError(p, None, f"not valid TOML: {exc}") from None
+        if "scenario" not in data:
+            continue
+        sc = _from_data(p, data)
+        if sc.name in found:
+            raise ScenarioError(p, "scenario.name", f"name {sc.name!r} is also used by {found[sc.name]}")
+        found[sc.name] = p
+    return dict(sorted(found.items()))
+
+
+def resolve_scenario(name_or_path: str | os.PathLike, assets_dir: str | os.PathLike) -> Scenario:
+    """Load a scenario given a path to a ``.toml`` file or the name of a shipped scenario.
+
+    A shipped scenario matches by its ``[scenario] name`` or its file stem.  An unknown name
+    raises :class:`ScenarioError` listing the shipped names.
+    """
+    s = str(name_or_path)
+    p = Path(s)
+    if s.endswith(".toml") or p.is_file():
+        return load_scenario(p)
+    shipped = find_scenarios(assets_dir)
+    if s in shipped:
+        return load_scenario(shipped[s])
+    by_stem = {q.stem: q for q in shipped.values()}
+    if s in by_stem:
+        return load_scenario(by_stem[s])
+    names = ", ".join(shipped) or "(none found)"
+    raise ScenarioError(
+        Path(assets_dir) / "scenarios", None, f"no scenario named {s!r}; shipped scenarios: {names}"
+    )

@@ -1,0 +1,95 @@
+"""Default Viewer layouts (``rerun.blueprint``) embedded in workbench recordings.
+
+:func:`standard_blueprint` builds the layout every pipeline starts from (DESIGN.md: a 3D view,
+the key time series, residuals, the report): the 3D scene on the left (60 %), and on the right a
+tab strip of time-series views, a tab strip of residual views (if any), the markdown report and
+the event log. Pipelines pass their own lists of ``(tab name, entity origin)``; the builder knows
+nothing about any one problem. A blueprint applies to recordings with the same application id
+(``layout.APPLICATION_ID``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import rerun.blueprint as rrb
+
+from workbench.recording import layout
+
+__all__ = ["standard_blueprint", "save_blueprint"]
+
+
+def standard_blueprint(
+    *,
+    scene_origin: str = layout.WORLD,
+    scene_exclude: Sequence[str] = (),
+    plots: Sequence[tuple[str, str]] = (),
+    residuals: Sequence[tuple[str, str]] = (),
+    extra_views: Sequence[Any] = (),
+    time_window_s: float | None = None,
+) -> rrb.Blueprint:
+    """The standard layout: 3D scene left, plots / residuals / report / events right.
+
+    Parameters
+    ----------
+    scene_origin : origin of the 3D view (its subtree is shown).
+    scene_exclude : entity paths hidden from the 3D view together with their subtrees
+        (e.g. ``/world/truth`` for a clean scene).
+    plots : ``(tab name, origin)`` pairs, one ``TimeSeriesView`` tab each, e.g.
+        ``("altitude", layout.plot_path("altitude"))`` shows value, ±3σ and truth together.
+    residuals : ``(tab name, origin)`` pairs for a second tab strip of residual views.
+    extra_views : further blueprint views/containers, added as tabs next to the 3D view.
+    time_window_s : if given, time-series views show only the trailing window
+        ``[cursor − time_window_s, cursor]`` [s] of the ``time`` timeline; otherwise everything.
+
+    The time panel starts expanded on the ``time`` timeline; the selection panel collapsed.
+    """
+    contents = ["+ $origin/**"] + [f"- {p.rstrip('/')}/**" for p in scene_exclude]
+    scene: Any = rrb.Spatial3DView(name="Scene", origin=scene_origin, contents=contents)
+    if extra_views:
+        scene = rrb.Tabs(scene, *extra_views, active_tab=0)
+
+    ts_kwargs: dict[str, Any] = {}
+    if time_window_s is not None:
+        if time_window_s <= 0:
+            raise ValueError("time_window_s must be > 0")
+        ts_kwargs["time_ranges"] = rrb.VisibleTimeRange(
+            layout.TIME,
+            start=rrb.TimeRangeBoundary.cursor_relative(seconds=-float(time_window_s)),
+            end=rrb.TimeRangeBoundary.cursor_relative(),
+        )
+
+    right: list[Any] = []
+    shares: list[float] = []
+    if plots:
+        right.append(
+            rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o, **ts_kwargs) for n, o in plots], active_tab=0)
+        )
+        shares.append(3.0)
+    if residuals:
+        right.append(
+            rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o, **ts_kwargs) for n, o in residuals], active_tab=0)
+        )
+        shares.append(2.0)
+    right.append(rrb.TextDocumentView(name="Report", origin=layout.REPORT))
+    right.append(rrb.TextLogView(name="Events", origin=layout.EVENTS))
+    shares += [1.5, 1.0]
+
+    return rrb.Blueprint(
+        rrb.Horizontal(scene, rrb.Vertical(*right, row_shares=shares), column_shares=[3, 2]),
+        rrb.TimePanel(state="expanded", timeline=layout.TIME),
+        rrb.SelectionPanel(state="collapsed"),
+    )
+
+
+def save_blueprint(
+    bp: rrb.Blueprint, path: str | os.PathLike[str], application_id: str = layout.APPLICATION_ID
+) -> Path:
+    """Write ``bp`` as a standalone ``.rbl`` file (``rerun run.rrd layout.rbl``); returns the path."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    bp.save(application_id, str(p))
+    return p

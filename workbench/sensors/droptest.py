@@ -1,0 +1,137 @@
+"""Measurement models and error models of the drop-test instruments (REDLand paper, "Test article").
+
+* Four ENDEVCO accelerometer triads on the base petal (BP, PYBP, PXBP, MXBP): range ±2000 g,
+  accuracy ~0.2 g. A triad at lever arm ``r_B`` from the CM senses the specific force
+  ``f_B = C_B_I a_ng_I + α_B × r_B + ω_B × (ω_B × r_B)`` (REDLand Eq. 3 and 7).
+* A CFX triaxial rate gyro, ±1000 °/s, ±3 % accuracy (taken as 3σ scale-factor error).
+* The IDDAS acquisition: anti-alias low-pass at 500 Hz (modelled as a 4th-order Butterworth
+  applied at the simulation rate) and sampling at ``sample_rate_hz``; saturation at the range.
+* A Microstrain 3DM (gravity + magnetic unit vectors) read while the lander hangs, for the
+  initial attitude by the algebraic method.
+* Optional range aiding (the paper's future work): a bungee-sheave odometer measuring the rope
+  length from the sheave to the attachment until the cut, and radar guns at fixed chamber points
+  measuring range and range rate to a reflector on the lander.
+
+Functions here produce *measurements from truth* (synthetic scenarios) and the matching
+*predictions from a state* (the estimator's h(x)); the two share only the geometry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import butter, lfilter, lfilter_zi
+
+from workbench.core.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_rotate
+
+G0 = 9.80665
+
+__all__ = [
+    "ImuErrorModel",
+    "specific_force_at",
+    "acquisition_filter",
+    "acquisition_group_delay",
+    "apply_errors",
+    "tilt_unit_vectors",
+    "GUN_DEFAULTS",
+]
+
+
+@dataclass(frozen=True)
+class ImuErrorModel:
+    """Error budget of one sensor axis family (1σ values, SI).
+
+    ``noise`` white noise per sample [m/s² or rad/s]; ``bias`` constant per axis; ``scale``
+    scale-factor error (fraction); ``misalignment`` small-angle axis misalignment [rad];
+    ``full_scale`` saturation limit [SI]. Draws are per axis and per run.
+    """
+
+    noise: float
+    bias: float
+    scale: float
+    misalignment: float
+    full_scale: float
+
+
+def specific_force_at(
+    r_B: np.ndarray, a_ng_I: np.ndarray, q_I_B: np.ndarray, w_B: np.ndarray, alpha_B: np.ndarray
+) -> np.ndarray:
+    """Specific force [m/s², body] (n,3) sensed at lever arm ``r_B`` (3,) [m] (REDLand Eq. 3, 7).
+
+    a_ng_I (n,3) non-gravitational CM acceleration in SPF; q_I_B (n,4); w_B, alpha_B (n,3) body.
+    """
+    a_B = quat_rotate(quat_conjugate(q_I_B), a_ng_I)
+    return a_B + np.cross(alpha_B, r_B) + np.cross(w_B, np.cross(w_B, r_B))
+
+
+def acquisition_filter(x: np.ndarray, fs_hz: float, cutoff_hz: float = 500.0, order: int = 4) -> np.ndarray:
+    """Causal Butterworth low-pass (the IDDAS 500 Hz filter) along axis 0, started at rest on x[0]."""
+    b, a = butter(order, cutoff_hz / (0.5 * fs_hz))
+    zi = lfilter_zi(b, a)
+    x = np.asarray(x, float)
+    out = np.empty_like(x)
+    flat = x.reshape(x.shape[0], -1)
+    o = out.reshape(x.shape[0], -1)
+    for j in range(flat.shape[1]):
+        o[:, j], _ = lfilter(b, a, flat[:, j], zi=zi * flat[0, j])
+    return out
+
+
+def acquisition_group_delay(cutoff_hz: float = 500.0, order: int = 4) -> float:
+    """Low-frequency group delay [s] of the Butterworth acquisition filter.
+
+    Evaluated with ``scipy.signal.group_delay`` on the same design at a sample rate 200× the
+    cutoff (close to the analogue filter): ≈ 0.83 ms for the 4th-order 500 Hz IDDAS filter.
+    The reconstruction shifts the telemetry time tags back by this delay.
+    """
+    from scipy.signal import group_delay
+
+    fs = 200.0 * cutoff_hz
+    b, a = butter(order, cutoff_hz / (0.5 * fs))
+    _, gd = group_delay((b, a), w=[1e-3], fs=fs)
+    return float(gd[0] / fs)
+
+
+def apply_errors(
+    x_true: np.ndarray, model: ImuErrorModel, rng: np.random.Generator
+) -> tuple[np.ndarray, dict]:
+    """Apply per-run scale, misalignment and bias, per-sample noise and saturation to (n,3) truth.
+
+    Returns (measured (n,3), drawn-errors dict). Saturated samples are clipped at ±full_scale,
+    as a real channel would be.
+    """
+    S = np.diag(rng.normal(0.0, model.scale, 3))
+    M = np.array([[0, -1, 1], [1, 0, -1], [-1, 1, 0]]) * rng.normal(0.0, model.misalignment, (3, 3))
+    b = rng.normal(0.0, model.bias, 3)
+    y = x_true @ (np.eye(3) + S + M).T + b + rng.normal(0.0, model.noise, x_true.shape)
+    y = np.clip(y, -model.full_scale, model.full_scale)
+    return y, {"scale": np.diag(S), "bias": b}
+
+
+def tilt_unit_vectors(
+    u: np.ndarray, sigma: float, rng: np.random.Generator, n: int | None = None
+) -> np.ndarray:
+    """Rotate the unit vector ``u`` (3,) by random small tilts ⟂ u of 1σ ``sigma`` [rad] per axis.
+
+    Returns (3,) if ``n`` is None, else (n,3).
+    """
+    u = np.asarray(u, float) / np.linalg.norm(u)
+    k = 1 if n is None else n
+    d = rng.normal(0.0, sigma, (k, 3))
+    d -= (d @ u)[:, None] * u
+    out = quat_rotate(quat_from_rotvec(d), u)
+    return out[0] if n is None else out
+
+
+def body_rate_increment(q: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
+    """``q ⊗ exp(ω dt)`` for (n,4), (n,3); helper for tests of the gyro model."""
+    return quat_multiply(q, quat_from_rotvec(w * dt))
+
+
+#: Radar guns: fixed SPF positions [m] (on the chamber floor and wall, looking at the ramp)
+GUN_DEFAULTS = {
+    "G1": [-8.0, -6.0, -7.0],
+    "G2": [8.0, -6.0, -7.0],
+    "G3": [0.0, -12.0, 4.0],
+}
