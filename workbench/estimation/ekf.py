@@ -10,7 +10,7 @@ The full state ``x`` (n_x,) may contain unit quaternions; the covariance ``P`` (
 always lives in the *error state* ``e`` (n_e,), where each quaternion is represented by a 3-vector
 small angle.  :class:`ErrorStateLayout` says where.  Attitude-error convention (DESIGN.md, the
 same as :mod:`workbench.core.rotation`): the error is a **body-frame** small angle δθ [rad] with
-``q_true = q_est ⊗ exp(δθ)`` (right / local perturbation, "PSI-free" multiplicative error).
+``q_true = q_est ⊗ exp(δθ)`` (right / local, multiplicative perturbation).
 ``x ⊞ e`` applies additive corrections to the additive entries and ``q ⊗ exp(δθ)`` to each
 quaternion; ``x ⊟ x_ref`` is its inverse (``x_ref ⊞ (x ⊟ x_ref) == x``).
 
@@ -505,9 +505,14 @@ def _update(x, P, z, h, R, layout, H, residual, gate_probability, iterations, ep
         if np.max(np.abs(dx_new - dx)) <= 1e-13 * (1.0 + np.max(np.abs(dx_new))):
             break
         dx = dx_new
-    IKH = layout._eye - K @ Hk
-    A = IKH @ P @ IKH.T + K @ R @ K.T
-    return x_new, 0.5 * (A + A.T), y, S, K, Hk, nis, True
+    # Joseph form (I − KH) P (I − KH)ᵀ + K R Kᵀ, associated as M = (I − KH) P = P − K (P Hᵀ)ᵀ,
+    # P_post = M − (M Hᵀ − K R) Kᵀ: the same products without forming n_e × n_e temporaries
+    # beyond M (O(n_e² m) instead of O(n_e³)); no optimal-gain identity is used.
+    M = P - K @ PHt.T
+    A = M - (M @ Hk.T - K @ R) @ K.T
+    A += A.T
+    A *= 0.5
+    return x_new, A, y, S, K, Hk, nis, True
 
 
 def update(
@@ -635,7 +640,9 @@ def run_filter(
                 )
             A = Fk @ P @ Fk.T
             A += Qk
-            P = 0.5 * (A + A.T)
+            A += A.T
+            A *= 0.5
+            P = A
             F_hist[k] = Fk
             Q_hist[k] = Qk
             x = x_next

@@ -1,0 +1,745 @@
+"""Airbag drop-test reconstruction (REDLand): telemetry files -> pose, stroke and its 1σ.
+
+Stages, each yielded as a frozen dataclass so that the recorder (or a test) can observe them:
+
+1. :class:`DropTelemetry` — the files read and validated; IMU samples averaged to the filter rate,
+   time tags corrected for the acquisition filter's group delay; saturated samples, dead
+   channels and gaps found and turned into *visible* degradations (never silently integrated).
+2. :class:`InitialState` — algebraic (TRIAD) attitude from the 3DM gravity/magnetic pair with its
+   covariance mapped from the vector uncertainties; position from the surveyed hanging point.
+3. :class:`FilterStage` ``forward`` — the REDLand 19-state EKF (kinematic or dynamic mode), the
+   four triads through their lever arms, the gyro, zero-velocity updates while hanging, optional
+   odometer / radar-gun ranges; process noise raised on rapid acceleration changes.
+4. :class:`FilterStage` ``smoothed`` — RTS smoother over the forward pass.
+5. :class:`StrokeStage` — at every step the distance from the ramp to the closest point of the
+   lander mesh with its linearised 1σ (checked by sampling the posterior at max stroke), the
+   maximum-stroke event, full-stroke flags, and the coefficient of restitution with its 1σ.
+6. :class:`DropResult` — all of it plus the summary numbers.
+
+The reconstruction reads only the scenario and telemetry files; truth never enters here.
+
+References: REDLand paper (``redland-mer-airbag-droptest.txt``), Eq. 3–19 and "Results";
+Wertz (1978) Sect. 12.2 for the algebraic attitude.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.rotation import quat_conjugate, quat_normalize, quat_rotate, triad, triad_covariance
+from workbench.estimation import redland as rl
+from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
+from workbench.estimation.smoother import SmoothedPass, rts_smooth
+from workbench.geometry.lander import LanderModel, load_lander
+from workbench.geometry.stroke import (
+    MaxStroke,
+    StrokeHistory,
+    max_stroke,
+    restitution,
+    sampled_stroke_sigma,
+    stroke_history,
+)
+from workbench.geometry.surface import Surface, ramp_surface
+from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.telemetry import Telemetry, read_events, read_telemetry
+from workbench.sensors.droptest import G0, acquisition_group_delay
+
+__all__ = [
+    "DropTelemetry",
+    "InitialState",
+    "FilterStage",
+    "StrokeStage",
+    "DropResult",
+    "telemetry_paths",
+    "reconstruct",
+    "run_droptest",
+]
+
+GRAVITY = np.array([0.0, 0.0, -G0])
+LAYOUT = ErrorStateLayout(rl.N_X, rl.QUAT_BLOCKS)
+
+
+# ---------------------------------------------------------------------------------------------
+# stage results
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DropTelemetry:
+    """Validated telemetry on the filter's time grid.
+
+    ``t`` (n,) [s from release], already shifted back by ``group_delay_s``; ``f_B`` (n, 4, 3)
+    triad specific forces [m/s², body] in the order of ``triads``; ``f_valid`` (n, 4) bool;
+    ``w_B`` (n, 3) gyro rates [rad/s, body]; ``w_valid`` (n,) bool; ``hanging`` (n,) bool (before
+    the release event); ``events`` name -> time [s]; ``degradations`` human-readable list of
+    what was dropped or bridged and why; ``raw`` the files as read (for ``/sensors``).
+    """
+
+    t: np.ndarray
+    f_B: np.ndarray
+    f_valid: np.ndarray
+    w_B: np.ndarray
+    w_valid: np.ndarray
+    hanging: np.ndarray
+    triads: tuple[str, ...]
+    lever_arms_B: np.ndarray
+    events: dict[str, float]
+    setup: dict
+    group_delay_s: float
+    degradations: tuple[tuple[float, str, str], ...]
+    imu: Telemetry
+    attitude: Telemetry
+    ranging: Telemetry | None
+    jerk: np.ndarray
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Filter start: x0 (N_X,), P0 (N_E, N_E); the 3DM mean unit vectors ``up_B``, ``mag_B`` (body);
+    the TRIAD attitude ``q0`` (q_SPF_B) and its small-angle covariance ``P_theta`` (3,3) [rad²]."""
+
+    x0: np.ndarray
+    P0: np.ndarray
+    q0: np.ndarray
+    P_theta: np.ndarray
+    up_B: np.ndarray
+    mag_B: np.ndarray
+
+
+@dataclass(frozen=True)
+class FilterStage:
+    """One pass: ``name`` "forward" or "smoothed"; ``t`` (n,); ``x`` (n, N_X); ``P`` (n, N_E, N_E)
+    error covariance; ``forward`` the full :class:`ForwardPass` (priors, innovations) on the
+    forward stage; ``smoothed`` the :class:`SmoothedPass` on the smoothed stage; ``q_accel`` and
+    ``q_angular`` (n,) the process-noise PSDs used at each step."""
+
+    name: str
+    t: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    forward: ForwardPass | None = None
+    smoothed: SmoothedPass | None = None
+    q_accel: np.ndarray | None = None
+    q_angular: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class StrokeStage:
+    """Stroke of the smoothed (and forward) pose against the ramp.
+
+    ``smoothed``/``forward`` :class:`StrokeHistory` (n steps); ``max`` the maximum-stroke event;
+    ``sampled_sigma`` 1σ at max stroke from 4000 posterior samples (check of the linearisation);
+    ``restitution`` (e, σ_e) from the ramp-normal CM velocity before/after the impact;
+    ``contact`` (i_start, i_end) filter indices of the airbag contact detected from the estimated
+    non-gravitational acceleration; ``surface`` the ramp; ``lander`` the model.
+    """
+
+    smoothed: StrokeHistory
+    forward: StrokeHistory
+    max: MaxStroke
+    sampled_sigma: float
+    sampled_mean: float
+    restitution: tuple[float, float]
+    contact: tuple[int, int]
+    surface: Surface = field(repr=False)
+    lander: LanderModel = field(repr=False)
+
+
+@dataclass(frozen=True)
+class DropResult:
+    """Everything the reconstruction produced, and ``summary`` (JSON-ready numbers)."""
+
+    telemetry: DropTelemetry
+    initial: InitialState
+    forward: FilterStage
+    smoothed: FilterStage
+    stroke: StrokeStage
+    summary: dict
+
+
+# ---------------------------------------------------------------------------------------------
+# reading
+# ---------------------------------------------------------------------------------------------
+
+
+def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
+    """Telemetry files named by the scenario's ``[telemetry]`` table (relative to the file)."""
+    paths = {}
+    for key in ("imu", "attitude_3dm", "events", "setup"):
+        paths[key] = scenario.path_of(f"telemetry.{key}")
+    if scenario.has("telemetry.ranging"):
+        paths["ranging"] = scenario.path_of("telemetry.ranging")
+    return paths
+
+
+def _read_setup(path: Path) -> dict:
+    try:
+        with open(path, "rb") as f:
+            d = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise ScenarioError(f"{path}: cannot read the setup file: {err}") from err
+    for key in ("hanging.position_m", "hanging.position_sigma_m"):
+        a, b = key.split(".")
+        if b not in d.get(a, {}):
+            raise ScenarioError(f"{path}: missing key '{key}'")
+    return d
+
+
+def _degrade(log: list, t: float, level: str, text: str) -> None:
+    log.append((float(t), level, text))
+
+
+def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: LanderModel) -> DropTelemetry:
+    """Read and validate the drop-test telemetry; resample to the filter rate (see DropTelemetry)."""
+    g = scenario.get
+    triads = tuple(g("sensors.accelerometer.triads", ["BP", "PYBP", "PXBP", "MXBP"], kind="list"))
+    fs_acc = g("sensors.accelerometer.full_scale_g", 2000.0, kind="float") * G0
+    fs_gyr = np.radians(g("sensors.gyro.full_scale_dps", 1000.0, kind="float"))
+    required = {f"{n}.{a}": "acceleration" for n in triads for a in "xyz"}
+    required.update({f"gyro.{a}": "angular_rate" for a in "xyz"})
+    sat = {k: (0.999 * fs_acc if k.split(".")[0] != "gyro" else 0.999 * fs_gyr) for k in required}
+    imu = read_telemetry(paths["imu"], required=required, saturation=sat)
+    att = read_telemetry(
+        paths["attitude_3dm"], required={f"{v}.{a}": "dimensionless" for v in ("up", "mag") for a in "xyz"}
+    )
+    ev_list = read_events(paths["events"])
+    events = {}
+    for t_e, name in ev_list:
+        events.setdefault(name, t_e)
+    if "release" not in events:
+        raise ScenarioError(
+            f"{paths['events']}: no 'release' event: the reconstruction needs the release time"
+        )
+    setup = _read_setup(paths["setup"])
+    ranging = None
+    if "ranging" in paths:
+        ranging = read_telemetry(paths["ranging"])
+    missing = [n for n in triads if n not in lander.instruments]
+    if missing:
+        raise ScenarioError(f"{scenario.path}: triads {missing} have no lever arm in the lander asset")
+
+    log: list[tuple[float, str, str]] = []
+    n_raw = len(imu)
+    f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
+    w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])
+    f_ok = np.ones((n_raw, len(triads)), bool)
+    for j, n in enumerate(triads):
+        s = np.zeros(n_raw, bool)
+        for a in "xyz":
+            s |= imu.saturated[f"{n}.{a}"]
+        if s.any():
+            f_ok[s, j] = False
+            _degrade(
+                log,
+                imu.time[np.argmax(s)],
+                "WARN",
+                f"triad {n}: {int(s.sum())} saturated samples (±{fs_acc / G0:g} g) dropped from the filter",
+            )
+    w_ok = np.ones(n_raw, bool)
+    for a in "xyz":
+        s = imu.saturated[f"gyro.{a}"]
+        if s.any():
+            w_ok &= ~s
+            _degrade(
+                log,
+                imu.time[np.argmax(s)],
+                "WARN",
+                f"gyro.{a}: {int(s.sum())} saturated samples (±{np.degrees(fs_gyr):g} °/s); gyro dropped there, "
+                "rate carried by the triads' lever arms",
+            )
+    # dead channels: a channel that does not move while the others see the impact
+    moving = imu.time >= events["release"]
+    if moving.sum() > 10:
+        spread = np.ptp(f_raw[moving], axis=0)  # (4,3)
+        ref = np.median(spread)
+        for j, n in enumerate(triads):
+            dead_axes = [a for i, a in enumerate("xyz") if spread[j, i] < 1e-3 * max(ref, 1.0)]
+            if dead_axes:
+                f_ok[:, j] = False
+                _degrade(
+                    log,
+                    events["release"],
+                    "ERROR",
+                    f"triad {n}: channel(s) {', '.join(dead_axes)} dead (no variation after release): "
+                    "triad excluded from the reconstruction",
+                )
+        if not f_ok.any():
+            raise ScenarioError(f"{paths['imu']}: no usable accelerometer triad")
+    for gap in imu.gaps:
+        _degrade(
+            log,
+            gap.start_s,
+            "WARN",
+            f"IMU gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row}): "
+            "bridged by propagation, covariance grows",
+        )
+
+    # average down to the filter rate (boxcar of k samples, grouped on the uniform sample grid)
+    rate = g("filter.rate_hz", 1000.0, kind="float")
+    dt_raw = float(np.median(np.diff(imu.time)))
+    k = max(1, int(round(1.0 / (rate * dt_raw))))
+    slot = np.floor((imu.time - imu.time[0]) / (k * dt_raw) + 1e-6).astype(int)
+    starts = np.flatnonzero(np.r_[True, np.diff(slot) != 0])
+    counts = np.diff(np.r_[starts, n_raw])
+
+    def avg(x, ok):
+        okf = ok.astype(float)
+        num = np.add.reduceat(x * okf[..., None], starts, axis=0)
+        den = np.add.reduceat(okf, starts, axis=0)
+        return num / np.maximum(den, 1.0)[..., None], den
+
+    t = np.add.reduceat(imu.time, starts) / counts
+    f_B, f_cnt = avg(f_raw, f_ok)
+    w_B, w_cnt = avg(w_raw, w_ok)
+    cutoff = g("sensors.acquisition.filter_cutoff_hz", 500.0, kind="float")
+    order = g("sensors.acquisition.filter_order", 4, kind="int")
+    delay = acquisition_group_delay(cutoff, order)
+    t = t - delay
+    hanging = t < events["release"]
+
+    # measured jerk indicator (centred difference of 10 ms means of the mean triad force)
+    fbar = np.where(f_cnt[..., None] > 0, f_B, np.nan)
+    fbar = np.nanmean(fbar, axis=1)
+    L = max(1, int(round(0.010 * rate)))
+    ker = np.ones(L) / L
+    sm = np.stack([np.convolve(np.nan_to_num(fbar[:, i]), ker, mode="same") for i in range(3)], 1)
+    jerk = np.zeros(t.size)
+    if t.size > 2 * L:
+        d = np.zeros_like(sm)
+        d[L:-L] = (sm[2 * L :] - sm[: -2 * L]) / (2 * L / rate)
+        jerk = np.linalg.norm(d, axis=1)
+    return DropTelemetry(
+        t=t,
+        f_B=f_B,
+        f_valid=f_cnt > 0,
+        w_B=w_B,
+        w_valid=w_cnt > 0,
+        hanging=hanging,
+        triads=triads,
+        lever_arms_B=np.array([lander.instruments[n] for n in triads]),
+        events=events,
+        setup=setup,
+        group_delay_s=delay,
+        degradations=tuple(sorted(log)),
+        imu=imu,
+        attitude=att,
+        ranging=ranging,
+        jerk=jerk,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# initial state
+# ---------------------------------------------------------------------------------------------
+
+
+def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
+    """Initial state and covariance at the first filter time (lander hanging at rest)."""
+    g = scenario.get
+    att = tel.attitude
+    up_B = att.stack(["up.x", "up.y", "up.z"]).mean(0)
+    mag_B = att.stack(["mag.x", "mag.y", "mag.z"]).mean(0)
+    up_B /= np.linalg.norm(up_B)
+    mag_B /= np.linalg.norm(mag_B)
+    mag_I = g("chamber.magnetic_field_spf", kind="vec3")
+    q0 = triad(up_B, mag_B, np.array([0.0, 0.0, 1.0]), mag_I)
+    sg = np.radians(g("sensors.attitude_3dm.gravity_sigma_deg", 0.2, kind="float"))
+    sm = np.radians(g("sensors.attitude_3dm.magnetic_sigma_deg", 1.0, kind="float"))
+    P_theta = triad_covariance(up_B, mag_B, sg, sm)
+    hang = tel.setup["hanging"]
+    p0 = np.asarray(hang["position_m"], float)
+    sp = float(hang["position_sigma_m"])
+    x0 = np.zeros(rl.N_X)
+    x0[rl.SP] = p0
+    x0[rl.SQ] = quat_normalize(q0)
+    x0[rl.SA] = quat_rotate(quat_conjugate(x0[rl.SQ]), -GRAVITY)  # hanging: a_ng = -g, in body axes
+    P0 = np.zeros((rl.N_E, rl.N_E))
+    P0[rl.EP, rl.EP] = sp**2 * np.eye(3)
+    P0[rl.EV, rl.EV] = g("filter.velocity_sigma_mps", 0.01, kind="float") ** 2 * np.eye(3)
+    P0[rl.EA, rl.EA] = g("filter.accel_sigma_mps2", 0.5, kind="float") ** 2 * np.eye(3)
+    P0[rl.ETH, rl.ETH] = P_theta
+    P0[rl.EW, rl.EW] = np.radians(g("filter.rate_sigma_dps", 0.5, kind="float")) ** 2 * np.eye(3)
+    P0[rl.EAL, rl.EAL] = g("filter.angular_accel_sigma", 2.0, kind="float") ** 2 * np.eye(3)
+    P0[rl.ES, rl.ES] = g("sensors.gyro.scale", 0.01, kind="float") ** 2 * np.eye(3)  # datasheet 1σ
+    return InitialState(x0=x0, P0=P0, q0=x0[rl.SQ].copy(), P_theta=P_theta, up_B=up_B, mag_B=mag_B)
+
+
+# ---------------------------------------------------------------------------------------------
+# filter
+# ---------------------------------------------------------------------------------------------
+
+
+class _Memo:
+    """Evaluate a model returning (z, H) once per state object (h and H share the work)."""
+
+    def __init__(self, fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]):
+        self.fn = fn
+        self.key = None
+        self.val = None
+
+    def _get(self, x):
+        if self.key is not x:
+            self.key, self.val = x, self.fn(x)
+        return self.val
+
+    def h(self, x):
+        return self._get(x)[0]
+
+    def H(self, x):
+        return self._get(x)[1]
+
+
+def _bungee(setup: dict) -> rl.BungeeModel | None:
+    b = setup.get("bungee")
+    if not b:
+        return None
+    return rl.BungeeModel(
+        anchor_I=np.asarray(b["anchor_m"], float),
+        rest_length=float(b["rest_length_m"]),
+        coeffs=tuple(float(c) for c in b["coefficients"]),
+        count=float(b["count"]),
+        mass=float(b["mass_kg"]),
+        attach_B=np.asarray(b["attach_body_m"], float),
+    )
+
+
+def forward_pass(
+    scenario: Scenario, tel: DropTelemetry, init: InitialState, lander: LanderModel
+) -> FilterStage:
+    """Run the REDLand EKF over the telemetry (see module docstring)."""
+    g = scenario.get
+    mode = g("filter.mode", "kinematic", kind="str")
+    if mode not in ("kinematic", "dynamic"):
+        raise ScenarioError(f"{scenario.path}: filter.mode must be 'kinematic' or 'dynamic', got {mode!r}")
+    bungee = _bungee(tel.setup) if mode == "dynamic" else None
+    if mode == "dynamic" and bungee is None:
+        raise ScenarioError(
+            f"{scenario.path}: filter.mode = 'dynamic' needs a [bungee] table in the setup file"
+        )
+    t_rel = tel.events["release"]
+    t_cut = tel.events.get("bungee_cut", np.inf)
+
+    rate = g("filter.rate_hz", 1000.0, kind="float")
+    dt_raw = float(np.median(np.diff(tel.imu.time)))
+    n_avg = max(1, int(round(1.0 / (rate * dt_raw))))
+    r_acc = (g("sensors.accelerometer.noise_g", 0.2, kind="float") * G0) ** 2 / n_avg * np.eye(3)
+    r_gyr = np.radians(g("sensors.gyro.noise_dps", 0.4, kind="float")) ** 2 / n_avg * np.eye(3)
+    r_zupt = g("filter.hang_zupt_sigma_mps", 0.005, kind="float") ** 2 * np.eye(3)
+
+    # process noise schedule: floor + gain * (measured jerk)^2 * dt (REDLand: raised on rapid
+    # acceleration changes); angular jerk scaled by m r / J (forces at ~1 m lever arm)
+    q_a0 = g("filter.q_accel", 5.0, kind="float")
+    q_w0 = g("filter.q_angular", 20.0, kind="float")
+    gain = g("filter.adaptive_gain", 4.0, kind="float")
+    dt_nom = 1.0 / rate
+    s = gain * tel.jerk**2 * dt_nom
+    ratio = lander.mass * 1.0 / float(np.min(np.linalg.eigvalsh(lander.inertia_B)))
+    q_accel = q_a0 + s
+    q_angular = q_w0 + ratio**2 * s
+
+    def transition(x, t0, t1):
+        dt = t1 - t0
+        active = bungee is not None and t_rel <= t0 and t1 <= t_cut
+        xn, F = rl.propagate(x, dt, GRAVITY, bungee if active else None)
+        if bungee is not None:
+            to_body = quat_conjugate(xn[rl.SQ])
+            if t0 < t_rel <= t1:  # the release rope lets go: a jumps from -g to the bungee pull
+                xn[rl.SA] += quat_rotate(to_body, bungee.accel(xn[rl.SP], xn[rl.SQ])[0] + GRAVITY)
+            if t0 < t_cut <= t1:  # the hammer hits the nail: the bungee pull vanishes
+                xn[rl.SA] -= quat_rotate(to_body, bungee.accel(xn[rl.SP], xn[rl.SQ])[0])
+        return xn, F
+
+    def process_noise(x, t0, t1):
+        return np.zeros((rl.N_E, rl.N_E))  # set per step in adapt_q
+
+    def adapt_q(k, x, P, Q):
+        return rl.process_noise(tel.t[k] - tel.t[k - 1], q_accel[k], q_angular[k])
+
+    triad_memos = [_Memo(lambda x, r=r: rl.triad_model(x, r)) for r in tel.lever_arms_B]
+    gyro_memo = _Memo(rl.gyro_model)
+    H_zupt = np.zeros((3, rl.N_E))
+    H_zupt[:, rl.EV] = np.eye(3)
+
+    ranging = _ranging_measurements(scenario, tel) if tel.ranging is not None else {}
+
+    def measurements_at(k, tk, x_prior):
+        out = []
+        for j, name in enumerate(tel.triads):
+            if tel.f_valid[k, j]:
+                m = triad_memos[j]
+                out.append(Measurement(name, tel.f_B[k, j], r_acc, m.h, m.H))
+        if tel.w_valid[k]:
+            out.append(Measurement("gyro", tel.w_B[k], r_gyr, gyro_memo.h, gyro_memo.H))
+        if tel.hanging[k]:
+            out.append(Measurement("zupt", np.zeros(3), r_zupt, lambda x: x[rl.SV], H_zupt))
+        for meas in ranging.get(k, ()):
+            out.append(meas)
+        return out
+
+    fp = run_filter(
+        init.x0, init.P0, tel.t, transition, process_noise, measurements_at, LAYOUT, adapt_q=adapt_q
+    )
+    return FilterStage(
+        "forward", fp.t, fp.x_post, fp.P_post, forward=fp, q_accel=q_accel, q_angular=q_angular
+    )
+
+
+def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, list[Measurement]]:
+    """Range aiding mapped onto the nearest filter step (within half a step): odometer rope length
+    to the attachment point until the cut, radar-gun range and range rate to the reflector."""
+    g = scenario.get
+    rt = tel.ranging
+    out: dict[int, list[Measurement]] = {}
+    t_meas = rt.time - tel.group_delay_s * 0.0  # the ranging system has no IDDAS filter
+    idx = np.searchsorted(tel.t, t_meas)
+    idx = np.clip(idx, 1, tel.t.size - 1)
+    left = np.abs(tel.t[idx - 1] - t_meas) < np.abs(tel.t[idx] - t_meas)
+    idx = np.where(left, idx - 1, idx)
+    dt_f = float(np.median(np.diff(tel.t)))
+    near = np.abs(tel.t[idx] - t_meas) <= 0.5 * dt_f + 1e-9
+    b = tel.setup.get("bungee", {})
+    if "odometer" in rt.channels:
+        if not b:
+            raise ScenarioError(
+                "ranging.csv has an odometer channel but the setup file has no [bungee] table"
+            )
+        anchor = np.asarray(b["anchor_m"], float)
+        attach = np.asarray(b["attach_body_m"], float)
+        s = g("sensors.ranging.odometer_sigma_m", 0.01, kind="float")
+        tt, vals = rt.samples("odometer")
+        for ti, zi in zip(tt, vals, strict=True):
+            i = int(np.searchsorted(t_meas, ti))
+            if i < t_meas.size and near[i]:
+                m = _Memo(lambda x: rl.range_model(x, anchor, attach))
+                out.setdefault(int(idx[i]), []).append(
+                    Measurement("odometer", np.array([zi]), np.array([[s * s]]), m.h, m.H)
+                )
+    guns = g("sensors.ranging.radar_guns", {}, kind="table")
+    r_ref = np.asarray(g("sensors.ranging.reflector_body_m", [0.0, 0.0, 0.0], kind="vec3"))
+    s_r = g("sensors.ranging.radar_range_sigma_m", 0.02, kind="float")
+    s_rr = g("sensors.ranging.radar_rate_sigma_mps", 0.05, kind="float")
+    for name, pos in guns.items():
+        G = np.asarray(pos, float)
+        if f"{name}.range" not in rt.channels:
+            raise ScenarioError(f"{rt.path}: radar gun {name} configured but no column '{name}.range'")
+        zr = rt.channel(f"{name}.range")
+        zrr = rt.channel(f"{name}.rate")
+        for i in np.flatnonzero(near):
+            mr = _Memo(lambda x, G=G: rl.range_model(x, G, r_ref))
+            mrr = _Memo(lambda x, G=G: rl.range_rate_model(x, G, r_ref))
+            lst = out.setdefault(int(idx[i]), [])
+            lst.append(
+                Measurement(
+                    f"{name}.range",
+                    np.array([zr[i]]),
+                    np.array([[s_r**2]]),
+                    mr.h,
+                    mr.H,
+                    gate_probability=0.9999,
+                )
+            )
+            lst.append(
+                Measurement(
+                    f"{name}.rate",
+                    np.array([zrr[i]]),
+                    np.array([[s_rr**2]]),
+                    mrr.h,
+                    mrr.H,
+                    gate_probability=0.9999,
+                )
+            )
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# stroke
+# ---------------------------------------------------------------------------------------------
+
+
+def _contact_interval(
+    t: np.ndarray, a: np.ndarray, after: float, threshold: float = 1.0 * G0, merge_s: float = 0.05
+) -> tuple[int, int]:
+    """Airbag contact: first interval after ``after`` where |a_ng| > ``threshold`` (the bags push),
+    with dips shorter than ``merge_s`` merged (lobes take over from one another)."""
+    busy = (np.linalg.norm(a, axis=1) > threshold) & (t > after)
+    if not busy.any():
+        return -1, -1
+    idx = np.flatnonzero(busy)
+    i0 = int(idx[0])
+    i1 = i0
+    for j in idx[1:]:
+        if t[j] - t[i1] > merge_s:
+            break
+        i1 = int(j)
+    return i0, i1
+
+
+def stroke_stage(
+    fwd: FilterStage,
+    smo: FilterStage,
+    lander: LanderModel,
+    surface: Surface,
+    events: dict[str, float],
+    rng: np.random.Generator,
+) -> StrokeStage:
+    """Stroke histories, max-stroke event (with a sampled-σ check) and restitution."""
+    verts = np.asarray(lander.body.vertices, float)
+    faces = np.asarray(lander.body.faces)
+    hist = stroke_history(
+        verts, smo.x[:, rl.SP], smo.x[:, rl.SQ], rl.pose_covariance(smo.P), surface, faces_B=faces
+    )
+    hist_f = stroke_history(
+        verts, fwd.x[:, rl.SP], fwd.x[:, rl.SQ], rl.pose_covariance(fwd.P), surface, faces_B=faces
+    )
+    after = events.get("bungee_cut", events["release"])
+    i0, i1 = _contact_interval(smo.t, smo.x[:, rl.SA], after)
+    mask = smo.t >= events["release"]  # the closest approach after release is the max stroke
+    sub = _subset(hist, mask)
+    ms = max_stroke(smo.t[mask], sub, lander.body)
+    k = int(np.flatnonzero(mask)[ms.index])
+    ms = _reindex(ms, k)
+    mean, std = sampled_stroke_sigma(
+        verts,
+        smo.x[k : k + 1, rl.SP],
+        smo.x[k : k + 1, rl.SQ],
+        rl.pose_covariance(smo.P[k : k + 1]),
+        surface,
+        4000,
+        rng,
+        faces_B=faces,
+    )
+    e = (np.nan, np.nan)
+    if i0 > 0 and i1 > i0:
+        a, b = i0 - 1, min(i1 + 1, smo.t.size - 1)
+        P_cross = _smoothed_cross_cov(smo, a, b)
+        P_v = smo.P[:, rl.EV, rl.EV]
+        e = restitution(smo.t, smo.x[:, rl.SV], P_v, surface.normal, a, b, P_cross=P_cross[rl.EV, rl.EV])
+    return StrokeStage(
+        smoothed=hist,
+        forward=hist_f,
+        max=ms,
+        sampled_sigma=float(std[0]),
+        sampled_mean=float(mean[0]),
+        restitution=(float(e[0]), float(e[1])),
+        contact=(i0, i1),
+        surface=surface,
+        lander=lander,
+    )
+
+
+def _subset(h: StrokeHistory, m: np.ndarray) -> StrokeHistory:
+    return StrokeHistory(**{f: getattr(h, f)[m] for f in h.__dataclass_fields__})
+
+
+def _reindex(ms: MaxStroke, k: int) -> MaxStroke:
+    d = {f: getattr(ms, f) for f in ms.__dataclass_fields__}
+    d["index"] = k
+    return MaxStroke(**d)
+
+
+def _smoothed_cross_cov(smo: FilterStage, a: int, b: int) -> np.ndarray:
+    """Smoothed cross-covariance E[δx_a δx_bᵀ] (N_E, N_E) for a < b: G_a G_{a+1} … G_{b-1} P_s[b]."""
+    G = smo.smoothed.G
+    M = smo.P[b]
+    for k in range(b - 1, a - 1, -1):
+        M = G[k] @ M
+    return M
+
+
+# ---------------------------------------------------------------------------------------------
+# the pipeline
+# ---------------------------------------------------------------------------------------------
+
+
+def reconstruct(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> Iterator[object]:
+    """Run the drop-test reconstruction; yields the stages in order, the last a :class:`DropResult`.
+
+    ``paths`` maps imu, attitude_3dm, events, setup (and optionally ranging) to files.
+    ``seed`` drives only the posterior sampling of the stroke-σ check.
+    """
+    lander = load_lander(scenario.path_of("vehicle.lander"))
+    surface = ramp_surface(
+        angle_deg=scenario.get("chamber.ramp_angle_deg", 60.0, kind="float"),
+        nail_depth=scenario.get("chamber.nail_depth_m", 0.3, kind="float"),
+    )
+    tel = load_drop_telemetry(scenario, paths, lander)
+    yield tel
+    init = initial_state(scenario, tel)
+    yield init
+    fwd = forward_pass(scenario, tel, init, lander)
+    yield fwd
+    sp = rts_smooth(fwd.forward, LAYOUT)
+    smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
+    yield smo
+    st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))
+    yield st
+    yield DropResult(tel, init, fwd, smo, st, summarize(scenario, tel, fwd, smo, st))
+
+
+def run_droptest(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> DropResult:
+    """Run :func:`reconstruct` to the end without observers and return the :class:`DropResult`."""
+    result = None
+    for stage in reconstruct(scenario, paths, seed):
+        result = stage
+    assert isinstance(result, DropResult)
+    return result
+
+
+def summarize(
+    scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: FilterStage, st: StrokeStage
+) -> dict:
+    """Key numbers of the reconstruction (SI units; no truth involved)."""
+    ms = st.max
+    fp = fwd.forward
+    innov = {}
+    for name, ih in fp.innovations.items():
+        m = ih.present
+        if not m.any():
+            continue
+        dof = ih.y.shape[1]
+        nis = ih.nis[m]
+        sig = np.sqrt(np.einsum("nii->ni", ih.S[m]))
+        inside = np.mean(np.abs(ih.y[m]) <= 3.0 * sig)
+        innov[name] = {
+            "count": int(m.sum()),
+            "dof": dof,
+            "mean_nis": float(np.mean(nis)),
+            "fraction_inside_3sigma": float(inside),
+            "rejected": int((~ih.accepted[m]).sum()),
+        }
+    P = smo.P
+    eig_min = float(np.min(np.linalg.eigvalsh(P)))
+    sym = float(np.max(np.abs(P - np.swapaxes(P, 1, 2))))
+    return {
+        "scenario": scenario.name,
+        "mode": scenario.get("filter.mode", "kinematic", kind="str"),
+        "steps": int(tel.t.size),
+        "filter_rate_hz": float(1.0 / np.median(np.diff(tel.t))),
+        "group_delay_s": tel.group_delay_s,
+        "events": tel.events,
+        "max_stroke": {
+            "time_s": float(ms.time),
+            "distance_m": float(ms.distance),
+            "sigma_m": float(ms.sigma),
+            "sampled_sigma_m": st.sampled_sigma,
+            "sampled_mean_m": st.sampled_mean,
+            "vertex": int(ms.vertex),
+            "faces": [int(f) for f in ms.faces],
+            "point_spf_m": ms.point_I,
+            "full_stroke": bool(ms.full_stroke),
+            "possible_full_stroke": bool(ms.possible_full_stroke),
+        },
+        "restitution": {"e": st.restitution[0], "sigma": st.restitution[1]},
+        "contact": {
+            "start_s": float(smo.t[st.contact[0]]) if st.contact[0] >= 0 else None,
+            "end_s": float(smo.t[st.contact[1]]) if st.contact[1] >= 0 else None,
+        },
+        "innovations": innov,
+        "covariance": {"min_eigenvalue": eig_min, "max_asymmetry": sym, "positive_definite": eig_min > 0},
+        "degradations": [{"time_s": t, "level": lvl, "text": txt} for t, lvl, txt in tel.degradations],
+    }
