@@ -1,0 +1,225 @@
+"""Command line: ``workbench list | run | inspect``.
+
+Exit codes (scripts can rely on them):
+  0  success
+  2  usage error (unknown command or option)
+  3  bad input: scenario, telemetry or asset file rejected (the message names file, column, row)
+  4  the reconstruction failed numerically (e.g. a covariance lost positive definiteness)
+  5  a requested scenario kind is not implemented
+  130 interrupted (Ctrl-C); no half-written recording is left behind
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_NUMERIC, EXIT_KIND, EXIT_INTERRUPT = 0, 2, 3, 4, 5, 130
+ASSETS = Path(__file__).resolve().parent.parent / "assets"
+
+
+def _assets_dir() -> Path:
+    """The shipped ``assets/`` folder (next to the package in a source checkout)."""
+    return ASSETS
+
+
+def _progress(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    """Print the shipped scenarios (name, kind, description)."""
+    from workbench.io.scenario import find_scenarios, load_scenario
+
+    found = find_scenarios(_assets_dir())
+    for name, path in sorted(found.items()):
+        sc = load_scenario(path)
+        kind = sc.kind + (" (synthetic)" if sc.is_synthetic else "")
+        print(f"{name:22s} {kind:22s} {sc.description}")
+    return EXIT_OK
+
+
+def run_scenario(
+    name_or_path: str, out_dir: Path, seed: int | None = None, export: bool = False, quiet: bool = False
+) -> dict:
+    """Run one scenario end to end: (synthesize) -> reconstruct -> record -> summary.
+
+    Writes ``<out>/<name>.rrd`` (atomically), ``<out>/<name>.summary.json`` and, for synthetic
+    scenarios, the telemetry it generated under ``<out>/<name>/telemetry/``. Returns the summary.
+    """
+    from workbench.io.results import export_csv, write_summary
+    from workbench.io.scenario import resolve_scenario
+
+    say = (lambda m: None) if quiet else _progress
+    t_start = time.perf_counter()
+    sc = resolve_scenario(name_or_path, _assets_dir())
+    if sc.kind != "droptest":
+        raise NotImplementedError(
+            f"scenario kind {sc.kind!r} ({sc.path}) is not implemented yet; implemented: droptest"
+        )
+    from workbench.pipelines import droptest as dt
+    from workbench.pipelines.droptest_synthetic import load_truth, synthesize_droptest
+    from workbench.recording.droptest import DropTestRecorder, droptest_blueprint
+    from workbench.recording.writer import open_recording
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    truth = None
+    seed_used = int(sc.get("synthetic.seed", 0, kind="int") if seed is None else seed)
+    if sc.is_synthetic:
+        say(f"[{sc.name}] simulating the drop (truth) and writing telemetry ...")
+        syn = synthesize_droptest(sc, out_dir / sc.name / "telemetry", seed=seed_used)
+        paths = syn.telemetry
+        truth = load_truth(syn.truth_path)
+    else:
+        paths = dt.telemetry_paths(sc)
+    residual_names = list(sc.get("sensors.accelerometer.triads", ["BP", "PYBP", "PXBP", "MXBP"], kind="list"))
+    residual_names += ["gyro", "zupt"]
+    if sc.has("sensors.ranging"):
+        if sc.get("sensors.ranging.odometer", False, kind="bool"):
+            residual_names.append("odometer")
+        for gname in sc.get("sensors.ranging.radar_guns", {}, kind="table"):
+            residual_names += [f"{gname}.range", f"{gname}.rate"]
+    rrd = out_dir / f"{sc.name}.rrd"
+    with open_recording(
+        rrd,
+        sc.name,
+        blueprint=droptest_blueprint(residual_names),
+        properties={"run": {"scenario": str(sc.path), "kind": sc.kind, "seed": seed_used}},
+    ) as rec:
+        drawer = DropTestRecorder(rec, truth)
+        result = None
+        t0 = time.perf_counter()
+        for stage in dt.reconstruct(sc, paths, seed=seed_used):
+            say(f"[{sc.name}] {type(stage).__name__:14s} {time.perf_counter() - t0:6.2f} s")
+            drawer.handle(stage)
+            result = stage
+        summary = dict(result.summary)
+        if truth is not None:
+            summary["truth"] = dt.score(result, truth)
+        summary["seed"] = seed_used
+        summary["wall_time_s"] = time.perf_counter() - t_start
+        rec.report(dt.scorecard_markdown(summary))
+    summary["recording"] = str(rrd)
+    summary["recording_bytes"] = rrd.stat().st_size
+    write_summary(out_dir / f"{sc.name}.summary.json", summary)
+    if export:
+        res = result
+        x = res.smoothed.x
+        sd = np.sqrt(np.einsum("nii->ni", res.smoothed.P))
+        cols = {}
+        for i, a in enumerate("xyz"):
+            cols[f"p.{a}"] = (x[:, i], "m")
+            cols[f"sigma_p.{a}"] = (sd[:, i], "m")
+            cols[f"v.{a}"] = (x[:, 3 + i], "m/s")
+        for i, a in enumerate("xyzw"):
+            cols[f"q_spf_body.{a}"] = (x[:, 9 + i], "1")
+        cols["stroke"] = (res.stroke.smoothed.distance, "m")
+        cols["sigma_stroke"] = (res.stroke.smoothed.sigma, "m")
+        export_csv(
+            out_dir / f"{sc.name}.reconstruction.csv",
+            res.smoothed.t,
+            cols,
+            meta={"source": f"workbench run {sc.name}", "frame": "SPF chamber frame"},
+        )
+    ms = summary["max_stroke"]
+    say(
+        f"[{sc.name}] max stroke {ms['distance_m']:.3f} ± {ms['sigma_m']:.3f} m (1σ) at t = {ms['time_s']:.3f} s"
+        + (f"; truth {summary['truth']['max_stroke_truth_m']:.3f} m" if truth is not None else "")
+        + f"; wrote {rrd} ({summary['recording_bytes'] / 1e6:.1f} MB) in {summary['wall_time_s']:.1f} s"
+    )
+    return summary
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """Run scenarios by name or path (``all`` = every shipped scenario)."""
+    from workbench.io.scenario import find_scenarios
+
+    names = list(args.scenario)
+    if names == ["all"]:
+        names = sorted(find_scenarios(_assets_dir()))
+    out = Path(args.out)
+    for name in names:
+        run_scenario(name, out, seed=args.seed, export=args.export)
+    return EXIT_OK
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    """Print what a recording holds: entities, timelines, time range, row counts, scorecard."""
+    from workbench.recording.reader import read_recording
+
+    data = read_recording(args.recording)
+    s = data.summary()
+    if args.json:
+        print(json.dumps(s, indent=2, default=str))
+        return EXIT_OK
+    print(
+        f"recording {args.recording}: name {data.recording_name!r}, app {data.application_id!r}, "
+        f"{data.file_size / 1e6:.2f} MB"
+    )
+    for tl in data.timelines():
+        lo, hi = data.time_range(tl)
+        print(f"timeline {tl}: {lo} .. {hi}")
+    print(f"{len(data.entities())} entities:")
+    for e in data.entities():
+        rows = data.row_count(e, "time") if "time" in data.timelines() else 0
+        print(f"  {e:60s} {rows:7d} rows")
+    try:
+        print("\n" + data.text_document("/report"))
+    except (KeyError, ValueError):
+        print("(no /report scorecard in this recording)")
+    return EXIT_OK
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser (sub-commands list, run, inspect)."""
+    p = argparse.ArgumentParser(prog="workbench", description="EDL reconstruction workbench")
+    sub = p.add_subparsers(dest="command", required=True)
+    sp = sub.add_parser("list", help="list the shipped scenarios")
+    sp.set_defaults(func=cmd_list)
+    sp = sub.add_parser("run", help="run scenarios (names, paths to .toml, or 'all')")
+    sp.add_argument("scenario", nargs="+")
+    sp.add_argument("--out", default="recordings", help="output folder (default: recordings)")
+    sp.add_argument("--seed", type=int, default=None, help="random seed of the synthetic sensors")
+    sp.add_argument("--export", action="store_true", help="also write the reconstructed histories as CSV")
+    sp.set_defaults(func=cmd_run)
+    sp = sub.add_parser("inspect", help="summarise a .rrd recording and print its scorecard")
+    sp.add_argument("recording")
+    sp.add_argument("--json", action="store_true", help="machine-readable summary")
+    sp.set_defaults(func=cmd_inspect)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``workbench`` console script; returns the exit code."""
+    from workbench.io.scenario import ScenarioError
+    from workbench.io.telemetry import TelemetryError
+    from workbench.io.units import UnitError
+
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:
+        return EXIT_USAGE if e.code else EXIT_OK
+    try:
+        return args.func(args)
+    except (TelemetryError, ScenarioError, UnitError, FileNotFoundError) as err:
+        print(f"workbench: input error: {err}", file=sys.stderr)
+        return EXIT_INPUT
+    except NotImplementedError as err:
+        print(f"workbench: {err}", file=sys.stderr)
+        return EXIT_KIND
+    except np.linalg.LinAlgError as err:
+        print(f"workbench: numerical failure: {err}", file=sys.stderr)
+        return EXIT_NUMERIC
+    except KeyboardInterrupt:
+        print("workbench: interrupted; no partial recording was kept", file=sys.stderr)
+        return EXIT_INTERRUPT
+
+
+if __name__ == "__main__":
+    sys.exit(main())
