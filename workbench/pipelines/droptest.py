@@ -843,7 +843,8 @@ def scorecard_markdown(summary: dict) -> str:
         f"# Drop test `{summary['scenario']}` — scorecard",
         "",
         f"Filter: REDLand EKF ({summary['mode']} mode) + RTS smoother, {summary['steps']} steps at "
-        f"{summary['filter_rate_hz']:.0f} Hz; acquisition-filter delay {summary['group_delay_s'] * 1e3:.2f} ms removed.",
+        f"{summary['filter_rate_hz']:.0f} Hz; acquisition-filter delay "
+        f"{summary['group_delay_s'] * 1e3:.2f} ms removed.",
         "",
         "| quantity | value |",
         "|---|---|",
@@ -865,9 +866,11 @@ def scorecard_markdown(summary: dict) -> str:
             "| quantity | value |",
             "|---|---|",
             f"| truth max stroke | {tr['max_stroke_truth_m']:.3f} m at t = {tr['max_stroke_truth_time_s']:.3f} s |",
-            f"| max-stroke error | {tr['max_stroke_error_m'] * 100:+.1f} cm = {tr['max_stroke_error_over_sigma']:+.2f} σ "
+            f"| max-stroke error | {tr['max_stroke_error_m'] * 100:+.1f} cm = "
+            f"{tr['max_stroke_error_over_sigma']:+.2f} σ "
             f"({'inside' if tr['max_stroke_inside_3sigma'] else '**outside**'} 3σ) |",
-            f"| max position error | {tr['position_error_max_m']:.3f} m (max {tr['position_error_over_sigma_max']:.1f} σ per axis) |",
+            f"| max position error | {tr['position_error_max_m']:.3f} m "
+            f"(max {tr['position_error_over_sigma_max']:.1f} σ per axis) |",
             f"| max attitude error | {tr['attitude_error_max_deg']:.2f} deg |",
             f"| smoothed pose NEES (6 dof, mean over run) | {tr['nees_pose_mean']:.2f} |",
             f"| restitution truth / error | {tr['restitution_truth']:.3f} / {tr['restitution_error']:+.3f} |",
