@@ -64,7 +64,7 @@ def run_scenario(
         )
     from workbench.pipelines import droptest as dt
     from workbench.pipelines.droptest_synthetic import load_truth, synthesize_droptest
-    from workbench.recording.droptest import DropTestRecorder, droptest_blueprint
+    from workbench.recording.droptest import DropTestRecorder, droptest_blueprint, impact_view
     from workbench.recording.writer import open_recording
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -104,6 +104,10 @@ def run_scenario(
         summary["seed"] = seed_used
         summary["wall_time_s"] = time.perf_counter() - t_start
         rec.report(dt.scorecard_markdown(summary))
+        # the layout that needs the result (camera at the impact, stroke zoom) becomes the default
+        rec.stream.send_blueprint(
+            droptest_blueprint(residual_names, impact_view(result)), make_active=True, make_default=True
+        )
     summary["recording"] = str(rrd)
     summary["recording_bytes"] = rrd.stat().st_size
     write_summary(out_dir / f"{sc.name}.summary.json", summary)

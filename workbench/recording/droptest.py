@@ -25,7 +25,7 @@ from workbench.geometry.surface import ramp_mesh
 from workbench.recording import layout
 from workbench.recording.writer import Recorder
 
-__all__ = ["DropTestRecorder", "droptest_blueprint"]
+__all__ = ["DropTestRecorder", "droptest_blueprint", "impact_view"]
 
 G0 = 9.80665
 EST = (31, 119, 180, 255)
@@ -35,32 +35,93 @@ XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
 XYZW = XYZ + [(120, 120, 120, 255)]
 
 
-def droptest_blueprint(residual_names: list[str]) -> rrb.Blueprint:
-    """Default layout for stroke inspection: big 3D scene, stroke first among the plots."""
-    plots = [
-        ("stroke", "/plots/stroke"),
-        ("stroke 1σ", "/plots/stroke_sigma"),
-        ("position", "/plots/position"),
-        ("velocity", "/plots/velocity"),
-        ("accel body", "/plots/accel_body"),
-        ("accel SPF", "/plots/accel_spf"),
-        ("rate", "/plots/rate"),
-        ("ang. accel", "/plots/angular_accel"),
-        ("quaternion", "/plots/quaternion"),
-        ("Euler 1-2-3", "/plots/euler123"),
-        ("1σ states", "/plots/sigma"),
-        ("gyro scale", "/plots/gyro_scale"),
-        ("triads", "/plots/triads"),
-        ("process noise", "/plots/process_noise"),
-    ]
-    residuals = [(name, f"/residuals/{name}") for name in residual_names]
-    return _blueprint(plots, residuals)
+_PLOTS = [
+    ("stroke (all)", "/plots/stroke"),
+    ("stroke 1σ", "/plots/stroke_sigma"),
+    ("position", "/plots/position"),
+    ("velocity", "/plots/velocity"),
+    ("accel body", "/plots/accel_body"),
+    ("accel SPF", "/plots/accel_spf"),
+    ("rate", "/plots/rate"),
+    ("ang. accel", "/plots/angular_accel"),
+    ("quaternion", "/plots/quaternion"),
+    ("Euler 1-2-3", "/plots/euler123"),
+    ("1σ states", "/plots/sigma"),
+    ("gyro scale", "/plots/gyro_scale"),
+    ("triads", "/plots/triads"),
+    ("NIS", "/plots/nis"),
+    ("process noise", "/plots/process_noise"),
+]
 
 
-def _blueprint(plots, residuals):
-    from workbench.recording.blueprint import standard_blueprint
+def droptest_blueprint(residual_names: list[str], impact: dict | None = None) -> rrb.Blueprint:
+    """Default layout for stroke inspection.
 
-    return standard_blueprint(scene_origin=layout.WORLD, plots=plots, residuals=residuals)
+    Left: the 3D scene as two tabs — "Impact", a camera beside the impact point that follows the
+    lander, and "Chamber", the whole drop. Right: the stroke zoomed on the impact first, then the
+    other plots; residual tabs; the scorecard and the events log.
+    ``impact`` (known only after the reconstruction): ``point`` (3,) [m, SPF] CM at max stroke,
+    ``normal`` (3,) ramp normal, ``t0``/``t1`` [s] window of the impact, ``stroke_lo``/``stroke_hi``
+    [m] y-range of the zoomed stroke plot. Without it a generic layout is returned.
+    """
+    scene_kw = {}
+    stroke_kw = {}
+    if impact is not None:
+        pt = np.asarray(impact["point"], float)
+        n = np.asarray(impact["normal"], float)
+        # three-quarter view from the free side of the ramp: 8 m out along the normal, 7 m across
+        eye = pt + 8.0 * n + np.array([7.0, 0.0, 0.0])
+        scene_kw["eye_controls"] = rrb.EyeControls3D(position=eye, look_target=pt, eye_up=[0.0, 0.0, 1.0])
+        stroke_kw["axis_y"] = rrb.ScalarAxis(range=(impact["stroke_lo"], impact["stroke_hi"]))
+        stroke_kw["time_ranges"] = rrb.VisibleTimeRange(
+            layout.TIME,
+            start=rrb.TimeRangeBoundary.absolute(seconds=impact["t0"]),
+            end=rrb.TimeRangeBoundary.absolute(seconds=impact["t1"]),
+        )
+    scenes = rrb.Tabs(
+        rrb.Spatial3DView(name="Impact", origin=layout.WORLD, **scene_kw),
+        rrb.Spatial3DView(name="Chamber", origin=layout.WORLD),
+        active_tab=0,
+    )
+    plots = [rrb.TimeSeriesView(name="stroke (impact)", origin="/plots/stroke", **stroke_kw)]
+    plots += [rrb.TimeSeriesView(name=nm, origin=o) for nm, o in _PLOTS]
+    residuals = [rrb.TimeSeriesView(name=nm, origin=f"/residuals/{nm}") for nm in residual_names]
+    right = rrb.Vertical(
+        rrb.Tabs(*plots, active_tab=0),
+        rrb.Tabs(*residuals, active_tab=0),
+        rrb.Horizontal(
+            rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
+            rrb.TextLogView(name="Events", origin=layout.EVENTS),
+            column_shares=[3, 2],
+        ),
+        row_shares=[3, 2, 2],
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(scenes, right, column_shares=[3, 2]),
+        rrb.TimePanel(state="expanded", timeline=layout.TIME),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+    )
+
+
+def impact_view(result) -> dict:
+    """Camera and zoom settings of :func:`droptest_blueprint` from a ``DropResult``."""
+    st = result.stroke
+    smo = result.smoothed
+    i0, i1 = st.contact
+    if i0 < 0:
+        i0 = i1 = int(st.max.index)
+    h = st.smoothed
+    lo = float(min(0.0, st.max.distance - 3.5 * st.max.sigma)) - 0.05
+    hi = float(max(1.0, h.distance[i0] + 0.2))
+    return {
+        "point": smo.x[int(st.max.index), rl.SP],
+        "normal": st.surface.normal,
+        "t0": float(smo.t[i0]) - 0.15,
+        "t1": float(smo.t[i1]) + 0.25,
+        "stroke_lo": lo,
+        "stroke_hi": hi,
+    }
 
 
 class DropTestRecorder:
@@ -107,9 +168,7 @@ class DropTestRecorder:
             for ch in tel.ranging.names:
                 tt, vv = tel.ranging.samples(ch)
                 if tt.size:
-                    r.scatter(
-                        f"/sensors/ranging/{ch}", tt, vv, names=ch, colors=[(148, 103, 189, 255)], size=1.5
-                    )
+                    r.scatter(f"/sensors/ranging/{ch}", tt, vv, names=ch, colors=[(148, 103, 189, 255)], size=1.5)
         entries = [(t_e, f"{name} (from the events file)", "INFO") for name, t_e in tel.events.items()]
         entries += [(t_d, txt, lvl) for t_d, lvl, txt in tel.degradations]
         r.events(sorted(entries))
@@ -218,9 +277,7 @@ class DropTestRecorder:
         # 3σ position ellipsoid, expressed in the body frame so it can live under the vehicle
         C = quat_to_dcm(q)
         P_B = np.swapaxes(C, 1, 2) @ P[:, rl.EP, rl.EP] @ C
-        r.ellipsoids(
-            layout.UNCERTAINTY, t, np.zeros((t.size, 3)), P_B, nsigma=3.0, color=(31, 119, 180, 90), step=step
-        )
+        r.ellipsoids(layout.UNCERTAINTY, t, np.zeros((t.size, 3)), P_B, nsigma=3.0, color=(31, 119, 180, 90), step=step)
         aI = rl.accel_inertial(x)
         series = [
             ("/plots/position", p, sd[:, rl.EP], None if tg is None else tg["p_I"], ["x", "y", "z"], 1.0),
@@ -270,9 +327,7 @@ class DropTestRecorder:
                     step=step,
                     color=[XYZ[i]],
                 )
-        r.scalars(
-            "/plots/accel_spf/value", t, aI / G0, step=step, names=["ax [g]", "ay [g]", "az [g]"], colors=XYZ
-        )
+        r.scalars("/plots/accel_spf/value", t, aI / G0, step=step, names=["ax [g]", "ay [g]", "az [g]"], colors=XYZ)
         if tg is not None:
             r.scalars(
                 "/plots/accel_spf/truth",
@@ -285,9 +340,7 @@ class DropTestRecorder:
             )
         r.scalars("/plots/quaternion/value", t, q, step=step, names=["qx", "qy", "qz", "qw"], colors=XYZW)
         eul = np.degrees(np.unwrap(euler123_from_quat(q), axis=0))
-        r.scalars(
-            "/plots/euler123/value", t, eul, step=step, names=["φ [deg]", "θ [deg]", "ψ [deg]"], colors=XYZ
-        )
+        r.scalars("/plots/euler123/value", t, eul, step=step, names=["φ [deg]", "θ [deg]", "ψ [deg]"], colors=XYZ)
         if tg is not None:
             qt = tg["q_I_B"] * np.sign(np.sum(tg["q_I_B"] * q, axis=1))[:, None]
             r.scalars(
@@ -351,7 +404,7 @@ class DropTestRecorder:
             color=(170, 150, 130, 255),
         )
         r.mesh(layout.VEHICLE_BODY, lander.body, color=(200, 200, 210, 255))
-        r.mesh(layout.AIRBAGS, airbag_mesh(lander, subdivisions=2), color=(255, 200, 60, 70))
+        r.mesh(layout.AIRBAGS, airbag_mesh(lander, subdivisions=2), color=(255, 200, 60, 45))
         r.points(
             f"{layout.VEHICLE}/triads",
             np.array([lander.instruments[n] for n in self.tel.triads]),
@@ -362,9 +415,7 @@ class DropTestRecorder:
         seg = np.stack([h.closest_point_I, h.surface_point_I], axis=1)[:, None]
         frac = np.clip(h.distance / max(1e-3, float(np.max(h.distance[t >= 0]))), 0.0, 1.0)
         cols = np.stack([255 * (1 - frac), 200 * frac, 40 * np.ones_like(frac), 255 * np.ones_like(frac)], 1)
-        r.line_strips_series(
-            layout.STROKE, t, seg, colors=cols.astype(np.uint8)[:, None], radii=0.02, step=step
-        )
+        r.line_strips_series(layout.STROKE, t, seg, colors=cols.astype(np.uint8)[:, None], radii=0.02, step=step)
         r.text_labels_series(
             f"{layout.STROKE}/label",
             t,
@@ -434,7 +485,19 @@ class DropTestRecorder:
                 radius=0.01,
             )
         ms = st.max
-        r.points("/world/max_stroke", ms.point_I[None], colors=(255, 0, 0, 255), radii=0.05)
+        # static snapshot of the lander at the max-stroke pose (visible whatever the time cursor)
+        k = int(ms.index)
+        snap = "/world/max_stroke"
+        r.static_transform(snap, translation=self._smoothed_x[k, rl.SP], quaternion_xyzw=self._smoothed_x[k, rl.SQ])
+        r.mesh(f"{snap}/body", lander.body, color=(230, 60, 60, 200))
+        r.mesh(f"{snap}/airbags", airbag_mesh(lander, subdivisions=2), color=(255, 140, 60, 35))
+        r.line_strip(
+            f"{snap}_segment",
+            np.stack([h.closest_point_I[k], h.surface_point_I[k]]),
+            color=(255, 0, 0, 255),
+            radius=0.03,
+        )
+        r.points(f"{snap}_point", ms.point_I[None], colors=(255, 0, 0, 255), radii=0.05)
         ev = [
             (
                 float(ms.time),
@@ -455,8 +518,7 @@ class DropTestRecorder:
             ev.append(
                 (
                     float(t[i1]),
-                    f"rebound (contact ends); restitution e = {st.restitution[0]:.3f} ± "
-                    f"{st.restitution[1]:.3f}",
+                    f"rebound (contact ends); restitution e = {st.restitution[0]:.3f} ± {st.restitution[1]:.3f}",
                     "INFO",
                 )
             )
