@@ -154,6 +154,8 @@ class _Model:
         self.verts_B = np.asarray(lander.body.vertices, float)
         self.n = np.asarray(surface.normal, float)
         self.P0 = np.asarray(surface.point, float)
+        self.rock_c = np.asarray(surface.rock_centers, float).reshape(-1, 3)
+        self.rock_r = np.asarray(surface.rock_radii, float).reshape(-1)
         self.rig = rig
         self.p0 = pressure_pa
         self.p_amb = lander.ambient_pressure_pa
@@ -208,9 +210,16 @@ class _Model:
             F += f_l.sum(0)
             T_I += np.cross(rc, f_l).sum(0)
             fn_total = float(fn.sum())
+        if self.rock_r.size:
+            F_r, T_r, fn_r, vcap_r, bpen_r = self._rocks(p, v, C, w_I, r_I, pg)
+            F += F_r
+            T_I += T_r
+            fn_total += fn_r
+        else:
+            bpen_r = 0.0
         rv = self.verts_B @ C.T
         dv = (p - self.P0) @ n + rv @ n
-        bpen = float(max(0.0, -dv.min()))
+        bpen = float(max(0.0, -dv.min(), bpen_r))
         if bpen > 0.0:
             b = dv < 0
             vv = v + np.cross(w_I, rv[b])
@@ -223,6 +232,54 @@ class _Model:
             F += Fb
             T_I += np.cross(x_att - p, Fb)
         return F, C.T @ T_I, fn_total, pg, pen_all, bpen
+
+    def _rocks(self, p, v, C, w_I, r_I, pg):
+        """Lobe-on-rock and body-on-rock contact (rocks are rigid spheres on the ramp).
+
+        A lobe of radius R pressed by δ onto a rock of radius r wraps it like a sphere of the
+        effective radius R_e = R r / (R + r): footprint area π(2 R_e δ − δ²), force pg × area
+        along the centre line, plus damping and friction as on the ramp. The gas volume these
+        caps displace is small next to the ramp caps and is neglected. A body vertex inside a
+        rock gets the same stiff penalty as on the ramp. Returns (F, T_I, total normal force,
+        0.0, deepest body penetration into a rock [m]).
+        """
+        F = np.zeros(3)
+        T_I = np.zeros(3)
+        x = p + r_I
+        d = x[:, None, :] - self.rock_c[None, :, :]
+        dist = np.linalg.norm(d, axis=-1)
+        pen = self.R + self.rock_r[None, :] - dist
+        fn_total = 0.0
+        li, ri = np.nonzero(pen > 0.0)
+        if li.size:
+            u = d[li, ri] / dist[li, ri, None]
+            Re = self.R * self.rock_r[ri] / (self.R + self.rock_r[ri])
+            pe = np.minimum(pen[li, ri], Re)
+            area = np.pi * (2.0 * Re * pe - pe * pe)
+            rc = self.rock_c[ri] + u * self.rock_r[ri, None] - p
+            vc = v + np.cross(w_I, rc)
+            vn = np.sum(vc * u, axis=1)
+            fn = np.clip(pg * area - self.damp * area * vn, 0.0, None)
+            vt = vc - vn[:, None] * u
+            vtn = np.linalg.norm(vt, axis=1)
+            ft = -self.mu * (fn * np.tanh(vtn / _V_SLIP) / np.maximum(vtn, 1e-9))[:, None] * vt
+            f = fn[:, None] * u + ft
+            F += f.sum(0)
+            T_I += np.cross(rc, f).sum(0)
+            fn_total = float(fn.sum())
+        rv = self.verts_B @ C.T
+        dvr = np.linalg.norm(p + rv[:, None, :] - self.rock_c[None], axis=-1) - self.rock_r[None]
+        vi, rj = np.nonzero(dvr < 0.0)
+        bpen = 0.0
+        if vi.size:
+            u = p + rv[vi] - self.rock_c[rj]
+            u /= np.linalg.norm(u, axis=1, keepdims=True)
+            vv = v + np.cross(w_I, rv[vi])
+            fb = np.clip(-self.k_body * dvr[vi, rj] - self.c_body * np.sum(vv * u, axis=1), 0.0, None)
+            F += (fb[:, None] * u).sum(0)
+            T_I += np.cross(rv[vi], fb[:, None] * u).sum(0)
+            bpen = float(-dvr[vi, rj].min())
+        return F, T_I, fn_total, 0.0, bpen
 
     def rhs(self, t, y):
         """State derivative for solve_ivp: y = [p, v, q_I_B, ω_B] (13,)."""

@@ -208,13 +208,24 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
         paths["attitude_3dm"], required={f"{v}.{a}": "dimensionless" for v in ("up", "mag") for a in "xyz"}
     )
     ev_list = read_events(paths["events"])
+    att_log: list[tuple[float, str, str]] = []
+    for v in ("up", "mag"):
+        norms = np.linalg.norm(att.stack([f"{v}.x", f"{v}.y", f"{v}.z"]), axis=1)
+        if np.any(np.abs(norms - 1.0) > 0.05):
+            k = int(np.argmax(np.abs(norms - 1.0)))
+            att_log.append(
+                (
+                    float(att.time[k]),
+                    "WARN",
+                    f"{paths['attitude_3dm']}: '{v}' vectors are not unit (|v| = {norms.min():.3f}–"
+                    f"{norms.max():.3f}, worst at row {k + 1}); only their directions are used",
+                )
+            )
     events = {}
     for t_e, name in ev_list:
         events.setdefault(name, t_e)
     if "release" not in events:
-        raise ScenarioError(
-            f"{paths['events']}: no 'release' event: the reconstruction needs the release time"
-        )
+        raise ScenarioError(f"{paths['events']}: no 'release' event: the reconstruction needs the release time")
     setup = _read_setup(paths["setup"])
     ranging = None
     if "ranging" in paths:
@@ -223,7 +234,7 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
     if missing:
         raise ScenarioError(f"{scenario.path}: triads {missing} have no lever arm in the lander asset")
 
-    log: list[tuple[float, str, str]] = []
+    log: list[tuple[float, str, str]] = list(att_log)
     n_raw = len(imu)
     f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
     w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])
@@ -408,9 +419,7 @@ def _bungee(setup: dict) -> rl.BungeeModel | None:
     )
 
 
-def forward_pass(
-    scenario: Scenario, tel: DropTelemetry, init: InitialState, lander: LanderModel
-) -> FilterStage:
+def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lander: LanderModel) -> FilterStage:
     """Run the REDLand EKF over the telemetry (see module docstring)."""
     g = scenario.get
     mode = g("filter.mode", "kinematic", kind="str")
@@ -418,9 +427,7 @@ def forward_pass(
         raise ScenarioError(f"{scenario.path}: filter.mode must be 'kinematic' or 'dynamic', got {mode!r}")
     bungee = _bungee(tel.setup) if mode == "dynamic" else None
     if mode == "dynamic" and bungee is None:
-        raise ScenarioError(
-            f"{scenario.path}: filter.mode = 'dynamic' needs a [bungee] table in the setup file"
-        )
+        raise ScenarioError(f"{scenario.path}: filter.mode = 'dynamic' needs a [bungee] table in the setup file")
     t_rel = tel.events["release"]
     t_cut = tel.events.get("bungee_cut", np.inf)
 
@@ -481,76 +488,75 @@ def forward_pass(
             out.append(meas)
         return out
 
-    fp = run_filter(
-        init.x0, init.P0, tel.t, transition, process_noise, measurements_at, LAYOUT, adapt_q=adapt_q
-    )
-    return FilterStage(
-        "forward", fp.t, fp.x_post, fp.P_post, forward=fp, q_accel=q_accel, q_angular=q_angular
-    )
+    fp = run_filter(init.x0, init.P0, tel.t, transition, process_noise, measurements_at, LAYOUT, adapt_q=adapt_q)
+    return FilterStage("forward", fp.t, fp.x_post, fp.P_post, forward=fp, q_accel=q_accel, q_angular=q_angular)
+
+
+def _at_time(model: Callable, dt: float) -> Callable:
+    """Wrap a (z, H) model so that it is evaluated at ``dt`` [s] after the filter step: the state is
+    propagated by the kinematic model (exact to second order over a sub-millisecond offset) and
+    the Jacobian chained through that propagation, ``H = H_model(x(t+dt)) F(dt)``."""
+    if dt == 0.0:
+        return model
+
+    def fn(x):
+        xp, F = rl.propagate(x, dt, GRAVITY)
+        z, H = model(xp)
+        return z, H @ F
+
+    return fn
 
 
 def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, list[Measurement]]:
-    """Range aiding mapped onto the nearest filter step (within half a step): odometer rope length
-    to the attachment point until the cut, radar-gun range and range rate to the reflector."""
+    """Range aiding attached to the nearest filter step and evaluated at its own time tag: the
+    odometer (rope length from the sheave to the attachment point, until the cut) and radar-gun
+    range / range rate to the reflector. Ranging has no IDDAS filter, so its tags are not shifted."""
     g = scenario.get
     rt = tel.ranging
     out: dict[int, list[Measurement]] = {}
-    t_meas = rt.time - tel.group_delay_s * 0.0  # the ranging system has no IDDAS filter
-    idx = np.searchsorted(tel.t, t_meas)
-    idx = np.clip(idx, 1, tel.t.size - 1)
+    t_meas = rt.time
+    idx = np.clip(np.searchsorted(tel.t, t_meas), 1, tel.t.size - 1)
     left = np.abs(tel.t[idx - 1] - t_meas) < np.abs(tel.t[idx] - t_meas)
     idx = np.where(left, idx - 1, idx)
     dt_f = float(np.median(np.diff(tel.t)))
-    near = np.abs(tel.t[idx] - t_meas) <= 0.5 * dt_f + 1e-9
+    off = t_meas - tel.t[idx]
+    near = np.abs(off) <= dt_f  # outside the IMU record (or in a long gap): not used
     b = tel.setup.get("bungee", {})
     if "odometer" in rt.channels:
         if not b:
-            raise ScenarioError(
-                "ranging.csv has an odometer channel but the setup file has no [bungee] table"
-            )
+            raise ScenarioError(f"{rt.path}: an odometer channel needs a [bungee] table in the setup file")
         anchor = np.asarray(b["anchor_m"], float)
         attach = np.asarray(b["attach_body_m"], float)
         s = g("sensors.ranging.odometer_sigma_m", 0.01, kind="float")
-        tt, vals = rt.samples("odometer")
-        for ti, zi in zip(tt, vals, strict=True):
-            i = int(np.searchsorted(t_meas, ti))
-            if i < t_meas.size and near[i]:
-                m = _Memo(lambda x: rl.range_model(x, anchor, attach))
-                out.setdefault(int(idx[i]), []).append(
-                    Measurement("odometer", np.array([zi]), np.array([[s * s]]), m.h, m.H)
-                )
+        vals = rt.channel("odometer")
+        for i in np.flatnonzero(near & np.isfinite(vals)):
+            m = _Memo(_at_time(lambda x: rl.range_model(x, anchor, attach), float(off[i])))
+            out.setdefault(int(idx[i]), []).append(
+                Measurement("odometer", np.array([vals[i]]), np.array([[s * s]]), m.h, m.H, gate_probability=0.9999)
+            )
     guns = g("sensors.ranging.radar_guns", {}, kind="table")
     r_ref = np.asarray(g("sensors.ranging.reflector_body_m", [0.0, 0.0, 0.0], kind="vec3"))
     s_r = g("sensors.ranging.radar_range_sigma_m", 0.02, kind="float")
     s_rr = g("sensors.ranging.radar_rate_sigma_mps", 0.05, kind="float")
     for name, pos in guns.items():
         G = np.asarray(pos, float)
-        if f"{name}.range" not in rt.channels:
-            raise ScenarioError(f"{rt.path}: radar gun {name} configured but no column '{name}.range'")
+        if f"{name}.range" not in rt.channels or f"{name}.rate" not in rt.channels:
+            raise ScenarioError(f"{rt.path}: radar gun {name} configured but no columns '{name}.range', '{name}.rate'")
         zr = rt.channel(f"{name}.range")
         zrr = rt.channel(f"{name}.rate")
         for i in np.flatnonzero(near):
-            mr = _Memo(lambda x, G=G: rl.range_model(x, G, r_ref))
-            mrr = _Memo(lambda x, G=G: rl.range_rate_model(x, G, r_ref))
+            dt_i = float(off[i])
+            mr = _Memo(_at_time(lambda x, G=G: rl.range_model(x, G, r_ref), dt_i))
+            mrr = _Memo(_at_time(lambda x, G=G: rl.range_rate_model(x, G, r_ref), dt_i))
             lst = out.setdefault(int(idx[i]), [])
             lst.append(
                 Measurement(
-                    f"{name}.range",
-                    np.array([zr[i]]),
-                    np.array([[s_r**2]]),
-                    mr.h,
-                    mr.H,
-                    gate_probability=0.9999,
+                    f"{name}.range", np.array([zr[i]]), np.array([[s_r**2]]), mr.h, mr.H, gate_probability=0.9999
                 )
             )
             lst.append(
                 Measurement(
-                    f"{name}.rate",
-                    np.array([zrr[i]]),
-                    np.array([[s_rr**2]]),
-                    mrr.h,
-                    mrr.H,
-                    gate_probability=0.9999,
+                    f"{name}.rate", np.array([zrr[i]]), np.array([[s_rr**2]]), mrr.h, mrr.H, gate_probability=0.9999
                 )
             )
     return out
@@ -591,12 +597,8 @@ def stroke_stage(
     """Stroke histories, max-stroke event (with a sampled-σ check) and restitution."""
     verts = np.asarray(lander.body.vertices, float)
     faces = np.asarray(lander.body.faces)
-    hist = stroke_history(
-        verts, smo.x[:, rl.SP], smo.x[:, rl.SQ], rl.pose_covariance(smo.P), surface, faces_B=faces
-    )
-    hist_f = stroke_history(
-        verts, fwd.x[:, rl.SP], fwd.x[:, rl.SQ], rl.pose_covariance(fwd.P), surface, faces_B=faces
-    )
+    hist = stroke_history(verts, smo.x[:, rl.SP], smo.x[:, rl.SQ], rl.pose_covariance(smo.P), surface, faces_B=faces)
+    hist_f = stroke_history(verts, fwd.x[:, rl.SP], fwd.x[:, rl.SQ], rl.pose_covariance(fwd.P), surface, faces_B=faces)
     after = events.get("bungee_cut", events["release"])
     i0, i1 = _contact_interval(smo.t, smo.x[:, rl.SA], after)
     mask = smo.t >= events["release"]  # the closest approach after release is the max stroke
@@ -620,6 +622,8 @@ def stroke_stage(
         P_cross = _smoothed_cross_cov(smo, a, b)
         P_v = smo.P[:, rl.EV, rl.EV]
         e = restitution(smo.t, smo.x[:, rl.SV], P_v, surface.normal, a, b, P_cross=P_cross[rl.EV, rl.EV])
+        if not smo.x[b, rl.SV] @ surface.normal > 0.0:  # still moving into the ramp: no rebound
+            e = (np.nan, np.nan)
     return StrokeStage(
         smoothed=hist,
         forward=hist_f,
@@ -664,11 +668,15 @@ def reconstruct(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> It
     ``seed`` drives only the posterior sampling of the stroke-σ check.
     """
     lander = load_lander(scenario.path_of("vehicle.lander"))
+    tel = load_drop_telemetry(scenario, paths, lander)
+    rocks = tel.setup.get("rocks")
     surface = ramp_surface(
         angle_deg=scenario.get("chamber.ramp_angle_deg", 60.0, kind="float"),
         nail_depth=scenario.get("chamber.nail_depth_m", 0.3, kind="float"),
+        rocks=None
+        if not rocks
+        else (np.asarray(rocks["centers_m"], float).reshape(-1, 3), np.asarray(rocks["radii_m"], float).reshape(-1)),
     )
-    tel = load_drop_telemetry(scenario, paths, lander)
     yield tel
     init = initial_state(scenario, tel)
     yield init
@@ -691,9 +699,7 @@ def run_droptest(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> D
     return result
 
 
-def summarize(
-    scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: FilterStage, st: StrokeStage
-) -> dict:
+def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: FilterStage, st: StrokeStage) -> dict:
     """Key numbers of the reconstruction (SI units; no truth involved)."""
     ms = st.max
     fp = fwd.forward
@@ -815,7 +821,7 @@ def score(result: DropResult, truth: dict) -> dict:
     if "first_contact" in ev and "rebound" in ev:
         vb = np.interp(ev["first_contact"], truth["t"], truth["v_I"] @ n)
         va = np.interp(ev["rebound"], truth["t"], truth["v_I"] @ n)
-        e_true = float(-va / vb)
+        e_true = float(-va / vb) if va > 0.0 else np.nan  # no rebound: undefined
     sig_p = np.sqrt(np.einsum("nii->ni", smo.P[:, rl.EP, rl.EP]))
     return {
         "max_stroke_truth_m": d_true,
@@ -853,7 +859,12 @@ def scorecard_markdown(summary: dict) -> str:
         f"| closest vertex / faces | {ms['vertex']} / {ms['faces']} |",
         f"| full stroke | {'**YES**' if ms['full_stroke'] else 'no'}"
         f"{' (within 3σ: possible)' if ms['possible_full_stroke'] and not ms['full_stroke'] else ''} |",
-        f"| coefficient of restitution | {e['e']:.3f} ± {e['sigma']:.3f} (1σ) |",
+        "| coefficient of restitution | "
+        + (
+            f"{e['e']:.3f} ± {e['sigma']:.3f} (1σ) |"
+            if np.isfinite(e["e"])
+            else "undefined (no rebound off the ramp) |"
+        ),
         f"| covariance | symmetric (max asym {summary['covariance']['max_asymmetry']:.1e}), "
         f"min eigenvalue {summary['covariance']['min_eigenvalue']:.2e} |",
     ]

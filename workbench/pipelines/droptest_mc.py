@@ -47,9 +47,7 @@ __all__ = ["McResult", "SeedResult", "run_seed", "monte_carlo", "summarize_mc", 
 
 #: Names of the columns of ``z_at_max``: position [SPF], velocity [SPF], attitude δθ [body],
 #: body rate ω [body], gyro scale factors.
-Z_NAMES: tuple[str, ...] = tuple(
-    f"{blk}.{a}" for blk in ("p", "v", "theta", "w", "scale") for a in "xyz"
-)
+Z_NAMES: tuple[str, ...] = tuple(f"{blk}.{a}" for blk in ("p", "v", "theta", "w", "scale") for a in "xyz")
 #: Error-state indices (redland layout) of the ``z_at_max`` columns.
 _Z_INDEX = np.r_[0:6, 9:15, 18:21]
 

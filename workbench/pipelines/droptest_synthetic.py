@@ -18,14 +18,13 @@ reconstruction (``pipelines.droptest``) reads the telemetry files and never this
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
 from workbench.core.rotation import quat_conjugate, quat_rotate, quat_to_dcm
 from workbench.geometry.lander import LanderModel, load_lander
-from workbench.geometry.surface import Surface, ramp_surface
+from workbench.geometry.surface import Surface, ramp_surface, rock_field
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import atomic_write_text, write_events, write_telemetry
 from workbench.physics.droptest import DropTestConfig, DropTruth, simulate_drop
@@ -57,11 +56,22 @@ def lander_for(scenario: Scenario) -> LanderModel:
 
 
 def surface_for(scenario: Scenario) -> Surface:
-    """The ramp of ``[chamber]`` (angle [deg], nail depth [m]) in the SPF frame."""
-    return ramp_surface(
+    """The ramp of ``[chamber]`` (angle [deg], nail depth [m]) in the SPF frame, with the rock
+    field of ``[chamber.rocks]`` if present (seed, extent_m = [[u0, u1], [v0, v1]] in the ramp
+    plane: u across, v up-slope, from the foot of the nail; REDLand: 0.2–0.5 m rocks ~1 m apart)."""
+    surf = ramp_surface(
         angle_deg=scenario.get("chamber.ramp_angle_deg", 60.0, kind="float"),
         nail_depth=scenario.get("chamber.nail_depth_m", 0.3, kind="float"),
     )
+    if scenario.has("chamber.rocks"):
+        ext = scenario.get("chamber.rocks.extent_m", [[-4.0, 4.0], [-7.0, 3.0]], kind="list")
+        surf = rock_field(
+            surf,
+            np.random.default_rng(scenario.get("chamber.rocks.seed", 0, kind="int")),
+            extent=((float(ext[0][0]), float(ext[0][1])), (float(ext[1][0]), float(ext[1][1]))),
+            spacing=scenario.get("chamber.rocks.spacing_m", 1.0, kind="float"),
+        )
+    return surf
 
 
 def _config(scenario: Scenario) -> DropTestConfig:
@@ -78,23 +88,29 @@ def _config(scenario: Scenario) -> DropTestConfig:
     )
 
 
-@lru_cache(maxsize=8)
-def _truth_cached(
-    lander_path: str, angle: float, depth: float, cfg: DropTestConfig
-) -> tuple[DropTruth, LanderModel]:
-    lander = load_lander(lander_path)
-    return simulate_drop(cfg, lander, ramp_surface(angle, depth)), lander
+_TRUTH_CACHE: dict[tuple, tuple[DropTruth, LanderModel]] = {}
 
 
 def truth_for(scenario: Scenario) -> tuple[DropTruth, LanderModel, Surface]:
-    """Truth simulation of the scenario's ``[synthetic]`` drop (deterministic; cached per process)."""
+    """Truth simulation of the scenario's ``[synthetic]`` drop (deterministic; cached per process,
+    keyed by lander file, drop configuration and surface including rocks)."""
     surf = surface_for(scenario)
-    truth, lander = _truth_cached(
-        str(scenario.path_of("vehicle.lander")),
-        scenario.get("chamber.ramp_angle_deg", 60.0, kind="float"),
-        scenario.get("chamber.nail_depth_m", 0.3, kind="float"),
-        _config(scenario),
+    lander_path = str(scenario.path_of("vehicle.lander"))
+    cfg = _config(scenario)
+    key = (
+        lander_path,
+        cfg,
+        surf.point.tobytes(),
+        surf.normal.tobytes(),
+        surf.rock_centers.tobytes(),
+        surf.rock_radii.tobytes(),
     )
+    if key not in _TRUTH_CACHE:
+        lander = load_lander(lander_path)
+        if len(_TRUTH_CACHE) >= 8:
+            _TRUTH_CACHE.pop(next(iter(_TRUTH_CACHE)))
+        _TRUTH_CACHE[key] = (simulate_drop(cfg, lander, surf), lander)
+    truth, lander = _TRUTH_CACHE[key]
     return truth, lander, surf
 
 
@@ -218,6 +234,10 @@ def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | Non
         f"attach_body_m = {fmt(rig.attach_B)}\n"
         f"mass_kg = {lander.mass}\n"
     )
+    if surf.n_rocks:  # the surveyed rock field (rigid spheres: centre in SPF, radius)
+        setup += "[rocks]\n# surveyed rock field on the ramp: sphere centres (SPF) and radii\n"
+        setup += "centers_m = [" + ", ".join(fmt(c) for c in surf.rock_centers) + "]\n"
+        setup += f"radii_m = {fmt(surf.rock_radii)}\n"
     paths["setup"] = atomic_write_text(out / "setup.toml", setup)
 
     if scenario.has("sensors.ranging"):

@@ -21,7 +21,7 @@ import rerun.blueprint as rrb
 from workbench.core.rotation import euler123_from_quat, quat_conjugate, quat_rotate, quat_to_dcm
 from workbench.estimation import redland as rl
 from workbench.geometry.lander import airbag_mesh
-from workbench.geometry.surface import ramp_mesh
+from workbench.geometry.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
 from workbench.recording.writer import Recorder
 
@@ -403,6 +403,8 @@ class DropTestRecorder:
             ramp_mesh(surf, width=12.0, length_down=8.0, length_up=10.0),
             color=(170, 150, 130, 255),
         )
+        if surf.n_rocks:
+            r.mesh(f"{layout.SURFACE}/rocks", rock_meshes(surf), color=(90, 80, 75, 255))
         r.mesh(layout.VEHICLE_BODY, lander.body, color=(200, 200, 210, 255))
         r.mesh(layout.AIRBAGS, airbag_mesh(lander, subdivisions=2), color=(255, 200, 60, 45))
         r.points(
