@@ -200,16 +200,9 @@ class _Model:
             a2 = 2.0 * self.R * pe - pe * pe  # footprint radius² of each flattened lobe
             area = np.pi * a2 - 0.5 * _lens_overlap(rc, np.sqrt(a2)).sum(1)
             area = np.clip(area, 0.0, None)
-            vc = v + np.cross(w_I, rc)
-            vn = vc @ n
-            fn = np.clip(pg * area - self.damp * area * vn, 0.0, None)
-            vt = vc - vn[:, None] * n
-            vtn = np.linalg.norm(vt, axis=1)
-            ft = -self.mu * (fn * np.tanh(vtn / _V_SLIP) / np.maximum(vtn, 1e-9))[:, None] * vt
-            f_l = fn[:, None] * n + ft
+            f_l, fn_total = self._membrane(pg, area, rc, np.broadcast_to(n, rc.shape), v, w_I)
             F += f_l.sum(0)
             T_I += np.cross(rc, f_l).sum(0)
-            fn_total = float(fn.sum())
         if self.rock_r.size:
             F_r, T_r, fn_r, vcap_r, bpen_r = self._rocks(p, v, C, w_I, r_I, pg)
             F += F_r
@@ -232,6 +225,20 @@ class _Model:
             F += Fb
             T_I += np.cross(x_att - p, Fb)
         return F, C.T @ T_I, fn_total, pg, pen_all, bpen
+
+    def _membrane(self, pg, area, rc, normals, v, w_I):
+        """Contact force of pressurised fabric on a rigid surface, per contact (k,3), and its sum of
+        normal components [N]: gauge pressure × footprint area, minus damping × area × normal
+        closing speed (never pulling), plus regularised Coulomb friction against the contact
+        point's sliding velocity. ``rc`` (k,3) contact points rel. CM; ``normals`` (k,3) unit,
+        pointing away from the surface; v [m/s] and w_I [rad/s] in SPF."""
+        vc = v + np.cross(w_I, rc)
+        vn = np.sum(vc * normals, axis=1)
+        fn = np.clip(pg * area - self.damp * area * vn, 0.0, None)
+        vt = vc - vn[:, None] * normals
+        vtn = np.linalg.norm(vt, axis=1)
+        ft = -self.mu * (fn * np.tanh(vtn / _V_SLIP) / np.maximum(vtn, 1e-9))[:, None] * vt
+        return fn[:, None] * normals + ft, float(fn.sum())
 
     def _rocks(self, p, v, C, w_I, r_I, pg):
         """Lobe-on-rock and body-on-rock contact (rocks are rigid spheres on the ramp).
@@ -257,16 +264,9 @@ class _Model:
             pe = np.minimum(pen[li, ri], Re)
             area = np.pi * (2.0 * Re * pe - pe * pe)
             rc = self.rock_c[ri] + u * self.rock_r[ri, None] - p
-            vc = v + np.cross(w_I, rc)
-            vn = np.sum(vc * u, axis=1)
-            fn = np.clip(pg * area - self.damp * area * vn, 0.0, None)
-            vt = vc - vn[:, None] * u
-            vtn = np.linalg.norm(vt, axis=1)
-            ft = -self.mu * (fn * np.tanh(vtn / _V_SLIP) / np.maximum(vtn, 1e-9))[:, None] * vt
-            f = fn[:, None] * u + ft
+            f, fn_total = self._membrane(pg, area, rc, u, v, w_I)
             F += f.sum(0)
             T_I += np.cross(rc, f).sum(0)
-            fn_total = float(fn.sum())
         rv = self.verts_B @ C.T
         dvr = np.linalg.norm(p + rv[:, None, :] - self.rock_c[None], axis=-1) - self.rock_r[None]
         vi, rj = np.nonzero(dvr < 0.0)
@@ -314,8 +314,7 @@ def _lens_overlap(c: np.ndarray, a: np.ndarray) -> np.ndarray:
         lens = (
             r1**2 * np.arccos(c1)
             + r2**2 * np.arccos(c2)
-            - 0.5
-            * np.sqrt(np.clip((-dd + r1 + r2) * (dd + r1 - r2) * (dd - r1 + r2) * (dd + r1 + r2), 0, None))
+            - 0.5 * np.sqrt(np.clip((-dd + r1 + r2) * (dd + r1 - r2) * (dd - r1 + r2) * (dd + r1 + r2), 0, None))
         )
         out = np.where(part, lens, out)
     np.fill_diagonal(out, 0.0)
@@ -345,9 +344,7 @@ def _contact_height(lander: LanderModel, surface: Surface, q_I_B: np.ndarray) ->
     return float(lander.lobe_radius - np.min(r))
 
 
-def _nominal_rig(
-    cfg: DropTestConfig, lander: LanderModel, surface: Surface, count: float, anchor_dir: np.ndarray
-):
+def _nominal_rig(cfg: DropTestConfig, lander: LanderModel, surface: Surface, count: float, anchor_dir: np.ndarray):
     attach_B = np.array([0.0, 0.0, float(np.min(lander.body.vertices[:, 2]))])
     return BungeeRig(
         anchor_I=np.asarray(surface.point) - cfg.bungee_anchor_distance * anchor_dir,
@@ -359,9 +356,7 @@ def _nominal_rig(
     )
 
 
-def design_release(
-    cfg: DropTestConfig, lander: LanderModel, surface: Surface
-) -> tuple[np.ndarray, BungeeRig, float]:
+def design_release(cfg: DropTestConfig, lander: LanderModel, surface: Surface) -> tuple[np.ndarray, BungeeRig, float]:
     """Find the release point and bungee count that give the target impact velocity.
 
     Point-mass design (as the test engineer's energy calculation): gravity + the test-plan
@@ -417,9 +412,7 @@ def design_release(
     def resid(params):
         p, v, t, _ = fly(params)
         along = np.cross(n, np.array([1.0, 0.0, 0.0]))
-        return np.concatenate(
-            [(v - v_target)[1:], [(p - p_contact) @ along, 10.0 * (t - cfg.release_to_contact_s)]]
-        )
+        return np.concatenate([(v - v_target)[1:], [(p - p_contact) @ along, 10.0 * (t - cfg.release_to_contact_s)]])
 
     guess_dist = 0.5 * np.linalg.norm(v_target) * cfg.release_to_contact_s
     beta0 = np.arctan2(u[1], -u[2])

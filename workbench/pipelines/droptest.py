@@ -47,7 +47,7 @@ from workbench.geometry.stroke import (
 from workbench.geometry.surface import Surface, ramp_surface
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.io.telemetry import Telemetry, read_events, read_telemetry
-from workbench.sensors.droptest import G0, acquisition_group_delay
+from workbench.sensors.droptest import G0, RangingSpec, acquisition_group_delay
 
 __all__ = [
     "DropTelemetry",
@@ -511,7 +511,7 @@ def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, l
     """Range aiding attached to the nearest filter step and evaluated at its own time tag: the
     odometer (rope length from the sheave to the attachment point, until the cut) and radar-gun
     range / range rate to the reflector. Ranging has no IDDAS filter, so its tags are not shifted."""
-    g = scenario.get
+    spec = RangingSpec.from_scenario(scenario)
     rt = tel.ranging
     out: dict[int, list[Measurement]] = {}
     t_meas = rt.time
@@ -527,19 +527,15 @@ def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, l
             raise ScenarioError(f"{rt.path}: an odometer channel needs a [bungee] table in the setup file")
         anchor = np.asarray(b["anchor_m"], float)
         attach = np.asarray(b["attach_body_m"], float)
-        s = g("sensors.ranging.odometer_sigma_m", 0.01, kind="float")
+        s2 = np.array([[spec.odometer_sigma**2]])
         vals = rt.channel("odometer")
         for i in np.flatnonzero(near & np.isfinite(vals)):
             m = _Memo(_at_time(lambda x: rl.range_model(x, anchor, attach), float(off[i])))
             out.setdefault(int(idx[i]), []).append(
-                Measurement("odometer", np.array([vals[i]]), np.array([[s * s]]), m.h, m.H, gate_probability=0.9999)
+                Measurement("odometer", np.array([vals[i]]), s2, m.h, m.H, gate_probability=0.9999)
             )
-    guns = g("sensors.ranging.radar_guns", {}, kind="table")
-    r_ref = np.asarray(g("sensors.ranging.reflector_body_m", [0.0, 0.0, 0.0], kind="vec3"))
-    s_r = g("sensors.ranging.radar_range_sigma_m", 0.02, kind="float")
-    s_rr = g("sensors.ranging.radar_rate_sigma_mps", 0.05, kind="float")
-    for name, pos in guns.items():
-        G = np.asarray(pos, float)
+    r_ref = spec.reflector_B
+    for name, G in spec.guns.items():
         if f"{name}.range" not in rt.channels or f"{name}.rate" not in rt.channels:
             raise ScenarioError(f"{rt.path}: radar gun {name} configured but no columns '{name}.range', '{name}.rate'")
         zr = rt.channel(f"{name}.range")
@@ -551,12 +547,22 @@ def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, l
             lst = out.setdefault(int(idx[i]), [])
             lst.append(
                 Measurement(
-                    f"{name}.range", np.array([zr[i]]), np.array([[s_r**2]]), mr.h, mr.H, gate_probability=0.9999
+                    f"{name}.range",
+                    np.array([zr[i]]),
+                    np.array([[spec.range_sigma**2]]),
+                    mr.h,
+                    mr.H,
+                    gate_probability=0.9999,
                 )
             )
             lst.append(
                 Measurement(
-                    f"{name}.rate", np.array([zrr[i]]), np.array([[s_rr**2]]), mrr.h, mrr.H, gate_probability=0.9999
+                    f"{name}.rate",
+                    np.array([zrr[i]]),
+                    np.array([[spec.rate_sigma**2]]),
+                    mrr.h,
+                    mrr.H,
+                    gate_probability=0.9999,
                 )
             )
     return out

@@ -31,6 +31,7 @@ from workbench.physics.droptest import DropTestConfig, DropTruth, simulate_drop
 from workbench.sensors.droptest import (
     G0,
     ImuErrorModel,
+    RangingSpec,
     acquisition_filter,
     apply_errors,
     specific_force_at,
@@ -267,42 +268,34 @@ def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | Non
 
 
 def _write_ranging(scenario: Scenario, truth: DropTruth, out: Path, rng: np.random.Generator) -> Path:
-    g = scenario.get
-    rate = g("sensors.ranging.rate_hz", 200.0, kind="float")
-    step = int(round(truth.config.output_rate_hz / rate))
+    spec = RangingSpec.from_scenario(scenario)
+    step = int(round(truth.config.output_rate_hz / spec.rate_hz))
     idx = np.arange(0, truth.t.size, step)
     t = truth.t[idx]
     p, v, q, w = truth.p_I[idx], truth.v_I[idx], truth.q_I_B[idx], truth.w_B[idx]
     C = quat_to_dcm(q)
     ch: dict[str, tuple[np.ndarray, str]] = {}
     sparse = []
-    if g("sensors.ranging.odometer", False, kind="bool"):
-        sig = g("sensors.ranging.odometer_sigma_m", 0.01, kind="float")
+    if spec.odometer:
         x_att = p + C @ truth.rig.attach_B
-        rho = np.linalg.norm(truth.rig.anchor_I - x_att, axis=1) + rng.normal(0.0, sig, t.size)
+        rho = np.linalg.norm(truth.rig.anchor_I - x_att, axis=1) + rng.normal(0.0, spec.odometer_sigma, t.size)
         cut = truth.events.get("bungee_cut", np.inf)
         rho = np.where((t >= 0.0) & (t < cut), rho, np.nan)  # the sheave turns only while towing
         ch["odometer"] = (rho, "m")
         sparse.append("odometer")
-    guns = g("sensors.ranging.radar_guns", {}, kind="table")
-    r_ref = np.asarray(g("sensors.ranging.reflector_body_m", [0.0, 0.0, 0.0], kind="vec3"))
-    s_r = g("sensors.ranging.radar_range_sigma_m", 0.02, kind="float")
-    s_rr = g("sensors.ranging.radar_rate_sigma_mps", 0.05, kind="float")
-    for name, pos in guns.items():
-        G = np.asarray(pos, float)
-        x = p + C @ r_ref
-        d = x - G
+    for name, G in spec.guns.items():
+        d = p + C @ spec.reflector_B - G
         rho = np.linalg.norm(d, axis=1)
         u = d / rho[:, None]
-        vr = v + np.einsum("nij,nj->ni", C, np.cross(w, r_ref))
-        ch[f"{name}.range"] = (rho + rng.normal(0.0, s_r, t.size), "m")
-        ch[f"{name}.rate"] = (np.sum(u * vr, axis=1) + rng.normal(0.0, s_rr, t.size), "m/s")
+        vr = v + np.einsum("nij,nj->ni", C, np.cross(w, spec.reflector_B))
+        ch[f"{name}.range"] = (rho + rng.normal(0.0, spec.range_sigma, t.size), "m")
+        ch[f"{name}.rate"] = (np.sum(u * vr, axis=1) + rng.normal(0.0, spec.rate_sigma, t.size), "m/s")
     return write_telemetry(
         out / "ranging.csv",
         t,
         ch,
         sparse=tuple(sparse),
-        meta={"sensor": "bungee-sheave odometer and radar guns", "rate_hz": rate},
+        meta={"sensor": "bungee-sheave odometer and radar guns", "rate_hz": spec.rate_hz},
     )
 
 

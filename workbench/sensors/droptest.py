@@ -34,7 +34,7 @@ __all__ = [
     "acquisition_group_delay",
     "apply_errors",
     "tilt_unit_vectors",
-    "GUN_DEFAULTS",
+    "RangingSpec",
 ]
 
 
@@ -93,9 +93,7 @@ def acquisition_group_delay(cutoff_hz: float = 500.0, order: int = 4) -> float:
     return float(gd[0] / fs)
 
 
-def apply_errors(
-    x_true: np.ndarray, model: ImuErrorModel, rng: np.random.Generator
-) -> tuple[np.ndarray, dict]:
+def apply_errors(x_true: np.ndarray, model: ImuErrorModel, rng: np.random.Generator) -> tuple[np.ndarray, dict]:
     """Apply per-run scale, misalignment and bias, per-sample noise and saturation to (n,3) truth.
 
     Returns (measured (n,3), drawn-errors dict). Saturated samples are clipped at ±full_scale,
@@ -109,9 +107,7 @@ def apply_errors(
     return y, {"scale": np.diag(S), "bias": b}
 
 
-def tilt_unit_vectors(
-    u: np.ndarray, sigma: float, rng: np.random.Generator, n: int | None = None
-) -> np.ndarray:
+def tilt_unit_vectors(u: np.ndarray, sigma: float, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
     """Rotate the unit vector ``u`` (3,) by random small tilts ⟂ u of 1σ ``sigma`` [rad] per axis.
 
     Returns (3,) if ``n`` is None, else (n,3).
@@ -129,9 +125,36 @@ def body_rate_increment(q: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
     return quat_multiply(q, quat_from_rotvec(w * dt))
 
 
-#: Radar guns: fixed SPF positions [m] (on the chamber floor and wall, looking at the ramp)
-GUN_DEFAULTS = {
-    "G1": [-8.0, -6.0, -7.0],
-    "G2": [8.0, -6.0, -7.0],
-    "G3": [0.0, -12.0, 4.0],
-}
+@dataclass(frozen=True)
+class RangingSpec:
+    """Range-aiding instruments of a scenario's ``[sensors.ranging]`` table (SI units).
+
+    ``odometer``: a bungee-sheave odometer measures the rope length from the sheave (the bungee
+    anchor of the setup file) to the attachment point until the cut, 1σ ``odometer_sigma`` [m];
+    ``guns``: radar-gun name -> fixed SPF position [m], measuring range (1σ ``range_sigma`` [m])
+    and range rate (1σ ``rate_sigma`` [m/s]) to a reflector at ``reflector_B`` [m, body];
+    ``rate_hz`` sampling rate of the ranging file.
+    """
+
+    odometer: bool
+    odometer_sigma: float
+    guns: dict[str, np.ndarray]
+    reflector_B: np.ndarray
+    range_sigma: float
+    rate_sigma: float
+    rate_hz: float
+
+    @classmethod
+    def from_scenario(cls, scenario) -> RangingSpec:
+        """Read ``[sensors.ranging]`` of a :class:`workbench.io.scenario.Scenario`."""
+        g = scenario.get
+        guns = g("sensors.ranging.radar_guns", {}, kind="table")
+        return cls(
+            odometer=g("sensors.ranging.odometer", False, kind="bool"),
+            odometer_sigma=g("sensors.ranging.odometer_sigma_m", 0.01, kind="float"),
+            guns={str(k): np.asarray(v, float) for k, v in guns.items()},
+            reflector_B=np.asarray(g("sensors.ranging.reflector_body_m", [0.0, 0.0, 0.0], kind="vec3")),
+            range_sigma=g("sensors.ranging.radar_range_sigma_m", 0.02, kind="float"),
+            rate_sigma=g("sensors.ranging.radar_rate_sigma_mps", 0.05, kind="float"),
+            rate_hz=g("sensors.ranging.rate_hz", 200.0, kind="float"),
+        )
