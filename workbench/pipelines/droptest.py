@@ -33,6 +33,7 @@ import numpy as np
 
 from workbench.core.rotation import quat_conjugate, quat_normalize, quat_rotate, triad, triad_covariance
 from workbench.estimation import redland as rl
+from workbench.estimation.consistency import whiteness
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.geometry.lander import LanderModel, load_lander
@@ -718,7 +719,18 @@ def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: Fil
         nis = ih.nis[m]
         sig = np.sqrt(np.einsum("nii->ni", ih.S[m]))
         inside = np.mean(np.abs(ih.y[m]) <= 3.0 * sig)
+        # whiteness of the normalised innovations y/√S (S varies by orders of magnitude at impact)
+        yn = ih.y[m] / sig
+        white = {}
+        if yn.shape[0] > 40:
+            acf, band, frac = whiteness(yn, 20)
+            white = {
+                "whiteness_fraction_outside_95": frac,
+                "acf_lag1_max": float(np.max(np.abs(acf[1]))),
+                "whiteness_band": band,
+            }
         innov[name] = {
+            **white,
             "count": int(m.sum()),
             "dof": dof,
             "mean_nis": float(np.mean(nis)),
@@ -897,13 +909,16 @@ def scorecard_markdown(summary: dict) -> str:
         "",
         "## Innovations (forward pass)",
         "",
-        "| sensor | samples | mean NIS (dof) | inside ±3σ | gated |",
-        "|---|---|---|---|---|",
+        "| sensor | samples | mean NIS (dof) | inside ±3σ | gated | whiteness: ACF lags 1–20 outside 95 % band"
+        " (white ≈ 5 %) | max lag-1 ACF |",
+        "|---|---|---|---|---|---|---|",
     ]
     for name, d in summary["innovations"].items():
+        wf = d.get("whiteness_fraction_outside_95")
         lines.append(
             f"| {name} | {d['count']} | {d['mean_nis']:.2f} ({d['dof']}) | "
-            f"{100 * d['fraction_inside_3sigma']:.1f} % | {d['rejected']} |"
+            f"{100 * d['fraction_inside_3sigma']:.1f} % | {d['rejected']} | "
+            + (f"{100 * wf:.0f} % | {d['acf_lag1_max']:.2f} |" if wf is not None else "– | – |")
         )
     if summary["degradations"]:
         lines += ["", "## Degradations", ""]
