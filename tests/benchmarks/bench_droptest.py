@@ -267,6 +267,15 @@ def markdown(mc: dict, sp: dict) -> str:
     return "\n".join(lines)
 
 
+def _git_state() -> dict:
+    """HEAD commit and the modified tracked files (the numbers belong to that working tree)."""
+    def git(*a: str) -> str:
+        r = subprocess.run(["git", *a], cwd=ROOT, capture_output=True, text=True)
+        return r.stdout.strip() if r.returncode == 0 else ""
+
+    return {"head": git("rev-parse", "HEAD"), "modified": git("diff", "--name-only", "HEAD").splitlines()}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=100, help="Monte Carlo runs per configuration (default 100)")
@@ -284,6 +293,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = {
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "cpu_count": os.cpu_count(),
+        "git": _git_state(),
         "args": vars(a),
         "speed": sp,
         "monte_carlo": mc,

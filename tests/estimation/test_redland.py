@@ -16,7 +16,7 @@ def _boxplus(x, dx):
 
 
 def _boxminus(x1, x0):
-    d = np.empty(rl.N_E)
+    d = np.empty(x1.size - 1)
     d[0:9] = x1[0:9] - x0[0:9]
     d[9:12] = attitude_error(x0[9:13], x1[9:13])
     d[12:] = x1[13:] - x0[13:]
@@ -40,8 +40,8 @@ def x():
 def _numeric(fun, x, eps=1e-6):
     z0 = fun(x)
     cols = []
-    for j in range(rl.N_E):
-        e = np.zeros(rl.N_E)
+    for j in range(x.size - 1):
+        e = np.zeros(x.size - 1)
         e[j] = eps
         cols.append((fun(_boxplus(x, e)) - fun(_boxplus(x, -e))) / (2 * eps))
     return np.stack(cols, -1), z0
@@ -109,3 +109,19 @@ def test_transition_jacobian_dynamic_mode(x):
     # the increment's attitude dependence is neglected (documented): compare v, a, ω, α columns
     cols = np.r_[3:9, 12:21]
     np.testing.assert_allclose(F[:, cols], F_num[:, cols], atol=1e-4)
+
+
+def test_triad_jacobian_with_bias_states(x):
+    """Triad j's bias enters additively with H = I on its own block, and nothing else changes."""
+    rng = np.random.default_rng(5)
+    xb = np.concatenate([x, rng.normal(0, 0.05, 12)])
+    r = np.array([0.0, 0.37, -0.34])
+    z0, H0 = rl.triad_model(x, r)
+    z, H = rl.triad_model(xb, r, 2)
+    H_num, _ = _numeric(lambda s: rl.triad_model(s, r, 2)[0], xb)
+    np.testing.assert_allclose(H, H_num, atol=1e-5)
+    np.testing.assert_allclose(z - z0, xb[rl.bias_slices(2)[0]])
+    np.testing.assert_allclose(H[:, : rl.N_E], H0)
+    xn, F = rl.propagate(xb, 1e-3, np.array([0, 0, -rl.G0]))
+    np.testing.assert_array_equal(xn[rl.N_X :], xb[rl.N_X :])  # biases are random constants
+    np.testing.assert_array_equal(F[rl.N_E :, rl.N_E :], np.eye(12))

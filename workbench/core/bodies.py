@@ -83,15 +83,8 @@ class Body:
     def __post_init__(self) -> None:
         for kind, *_ in self.periodic_terms:
             if kind not in PERIODIC_KINDS:
-                raise ValueError(
-                    f"{self.name}: unknown periodic-term kind {kind!r}; use one of {PERIODIC_KINDS}"
-                )
-        if (
-            self.gm <= 0
-            or self.equatorial_radius <= 0
-            or self.polar_radius <= 0
-            or self.reference_radius <= 0
-        ):
+                raise ValueError(f"{self.name}: unknown periodic-term kind {kind!r}; use one of {PERIODIC_KINDS}")
+        if self.gm <= 0 or self.equatorial_radius <= 0 or self.polar_radius <= 0 or self.reference_radius <= 0:
             raise ValueError(f"{self.name}: GM and radii must be positive")
 
     @property

@@ -111,9 +111,7 @@ def _periodic_arg_rad(term: tuple[str, float, float, float], T: np.ndarray) -> n
     return np.deg2rad(phase0_deg + rate_deg_per_century * T)
 
 
-def iau_pole_and_meridian(
-    body: Body, jd_tdb: np.ndarray | float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def iau_pole_and_meridian(body: Body, jd_tdb: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """IAU pole right ascension α0, declination δ0 and prime meridian W [rad] at ``jd_tdb``.
 
     ``jd_tdb`` is a Julian date (TDB) of any shape; the three outputs have that shape.  α0, δ0
@@ -153,8 +151,7 @@ def meridian_rate(body: Body, jd_tdb: np.ndarray | float) -> np.ndarray:
             amp, rate_c = term[1], term[3]
             # d/dd [A sin(φ0 + ν T)] with T = d/36525 and the argument in degrees
             rate_deg_per_day = (
-                rate_deg_per_day
-                + amp * np.cos(_periodic_arg_rad(term, T)) * np.deg2rad(rate_c) / DAYS_PER_CENTURY
+                rate_deg_per_day + amp * np.cos(_periodic_arg_rad(term, T)) * np.deg2rad(rate_c) / DAYS_PER_CENTURY
             )
     return np.deg2rad(rate_deg_per_day) / SECONDS_PER_DAY
 
@@ -196,9 +193,7 @@ def inertial_to_bodyfixed(
     r_F = np.einsum("...ij,...j->...i", C, np.asarray(r_I, dtype=float))
     if v_I is None:
         return r_F
-    v_F = np.einsum("...ij,...j->...i", C, np.asarray(v_I, dtype=float)) - np.cross(
-        _omega_F(body, jd_tdb), r_F
-    )
+    v_F = np.einsum("...ij,...j->...i", C, np.asarray(v_I, dtype=float)) - np.cross(_omega_F(body, jd_tdb), r_F)
     return r_F, v_F
 
 

@@ -362,10 +362,6 @@ def triad_covariance(u_B: np.ndarray, v_B: np.ndarray, sigma_u: float, sigma_v: 
     d = float(b1 @ b2)
     P = (
         sigma_u**2 * np.eye(3)
-        + (
-            (sigma_v**2 - sigma_u**2) * np.outer(b1, b1)
-            + sigma_u**2 * d * (np.outer(b1, b2) + np.outer(b2, b1))
-        )
-        / s2
+        + ((sigma_v**2 - sigma_u**2) * np.outer(b1, b1) + sigma_u**2 * d * (np.outer(b1, b2) + np.outer(b2, b1))) / s2
     )
     return 0.5 * (P + P.T)

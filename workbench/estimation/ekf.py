@@ -180,8 +180,9 @@ class ErrorStateLayout:
         x = np.asarray(x, dtype=float)
         dx = np.asarray(dx, dtype=float)
         if x.shape[-1] != self.n_x or dx.shape[-1] != self.n_e:
-            raise ValueError(f"boxplus: expected x (..., {self.n_x}) and dx (..., {self.n_e}), "
-                             f"got {x.shape} and {dx.shape}")
+            raise ValueError(
+                f"boxplus: expected x (..., {self.n_x}) and dx (..., {self.n_e}), got {x.shape} and {dx.shape}"
+            )
         if x.ndim == 1 and dx.ndim == 1:
             out = x.copy()
             for xs, es in self._add_runs:
@@ -395,10 +396,7 @@ def numeric_measurement_jacobian(
     else:
         h0 = np.atleast_1d(np.asarray(h(x), dtype=float)) if hx is None else hx
         cols = np.array(
-            [
-                np.atleast_1d(residual(a, h0)) - np.atleast_1d(residual(b, h0))
-                for a, b in zip(Zp, Zm, strict=True)
-            ]
+            [np.atleast_1d(residual(a, h0)) - np.atleast_1d(residual(b, h0)) for a, b in zip(Zp, Zm, strict=True)]
         )
     cols = cols / (2.0 * e)[:, None]
     return np.ascontiguousarray(cols.T)
@@ -495,9 +493,7 @@ def _update(x, P, z, h, R, layout, H, residual, gate_probability, iterations, ep
         S_i = Hk @ PHt + R
         c, info = _potrf(S_i, lower=1)
         if info != 0:
-            raise np.linalg.LinAlgError(
-                f"iterated update: H P Hᵀ + R not positive definite (potrf info={info})"
-            )
+            raise np.linalg.LinAlgError(f"iterated update: H P Hᵀ + R not positive definite (potrf info={info})")
         Kt, _ = _potrs(c, PHt.T, lower=1)
         K = Kt.T
         dx_new = K @ (r_i - Hk @ layout.boxminus(x, x_i))
@@ -654,8 +650,17 @@ def run_filter(
                 H = np.asarray(H, dtype=float)
             try:
                 xn, Pn, y, S, K, _, nis, ok = _update(
-                    x, P, meas.z, meas.h, meas.R, layout, H, meas.residual,
-                    meas.gate_probability, meas.iterations, meas.eps,
+                    x,
+                    P,
+                    meas.z,
+                    meas.h,
+                    meas.R,
+                    layout,
+                    H,
+                    meas.residual,
+                    meas.gate_probability,
+                    meas.iterations,
+                    meas.eps,
                 )
             except (np.linalg.LinAlgError, ValueError) as err:
                 raise type(err)(f"step {k} (t={tk} s), measurement {meas.name!r}: {err}") from err

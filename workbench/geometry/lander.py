@@ -157,9 +157,7 @@ def airbag_lobes(
     in face order.  Only ``lobes_per_bag == 6`` (the MER rack) is supported.
     """
     if int(lobes_per_bag) != 6:
-        raise ValueError(
-            f"airbag_lobes: only the 3-2-1 rack (6 lobes per bag) is supported, got {lobes_per_bag}"
-        )
+        raise ValueError(f"airbag_lobes: only the 3-2-1 rack (6 lobes per bag) is supported, got {lobes_per_bag}")
     V = np.asarray(body.vertices, dtype=float)
     F = np.asarray(body.faces, dtype=int)
     offsets = _rack_offsets(lobe_spacing)

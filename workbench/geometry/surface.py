@@ -182,10 +182,7 @@ def rock_field(
     radii = 0.5 * rng.uniform(size_range[0], size_range[1], m)
     t1, t2 = surface.tangent_basis()
     centers = (
-        surface.point
-        + U[:, None] * t1
-        + V[:, None] * t2
-        + (float(center_height) * radii)[:, None] * surface.normal
+        surface.point + U[:, None] * t1 + V[:, None] * t2 + (float(center_height) * radii)[:, None] * surface.normal
     )
     return dataclasses.replace(
         surface,

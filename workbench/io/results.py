@@ -73,9 +73,7 @@ def to_jsonable(obj: Any, _where: str = "summary") -> Any:
     if isinstance(obj, _dt.datetime | _dt.date | _dt.time):
         return obj.isoformat()
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {
-            f.name: to_jsonable(getattr(obj, f.name), f"{_where}.{f.name}") for f in dataclasses.fields(obj)
-        }
+        return {f.name: to_jsonable(getattr(obj, f.name), f"{_where}.{f.name}") for f in dataclasses.fields(obj)}
     if isinstance(obj, Mapping):
         return {str(k): to_jsonable(v, f"{_where}[{k!r}]") for k, v in obj.items()}
     if isinstance(obj, list | tuple):

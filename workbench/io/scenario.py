@@ -217,9 +217,7 @@ def _from_data(path: Path, data: dict) -> Scenario:
         raise ScenarioError(path, "scenario.name", f"expected a non-empty string, got {name!r}")
     kind = sc.get("kind")
     if kind not in SCENARIO_KINDS:
-        raise ScenarioError(
-            path, "scenario.kind", f"expected one of {', '.join(SCENARIO_KINDS)}, got {kind!r}"
-        )
+        raise ScenarioError(path, "scenario.kind", f"expected one of {', '.join(SCENARIO_KINDS)}, got {kind!r}")
     desc = sc.get("description", "")
     if not isinstance(desc, str):
         raise ScenarioError(path, "scenario.description", f"expected a string, got {_type_name(desc)}")
@@ -233,9 +231,7 @@ def _from_data(path: Path, data: dict) -> Scenario:
             raise ScenarioError(path, table, f"expected a table, got {_type_name(data[table])}")
     for stream, rel in data.get("telemetry", {}).items():
         if not isinstance(rel, str):
-            raise ScenarioError(
-                path, f"telemetry.{stream}", f"expected a CSV path string, got {_type_name(rel)}"
-            )
+            raise ScenarioError(path, f"telemetry.{stream}", f"expected a CSV path string, got {_type_name(rel)}")
     seed = data.get("synthetic", {}).get("seed", 0)
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         raise ScenarioError(path, "synthetic.seed", f"expected a non-negative integer, got {seed!r}")
@@ -302,6 +298,4 @@ def resolve_scenario(name_or_path: str | os.PathLike, assets_dir: str | os.PathL
     if s in by_stem:
         return load_scenario(by_stem[s])
     names = ", ".join(shipped) or "(none found)"
-    raise ScenarioError(
-        Path(assets_dir) / "scenarios", None, f"no scenario named {s!r}; shipped scenarios: {names}"
-    )
+    raise ScenarioError(Path(assets_dir) / "scenarios", None, f"no scenario named {s!r}; shipped scenarios: {names}")

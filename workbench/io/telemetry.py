@@ -153,9 +153,7 @@ class _Collector:
         self.total += rows0.size
         for k in range(min(rows0.size, MAX_PROBLEMS)):
             r = int(rows0[k])
-            self.items.append(
-                (first_line + r, order, Problem(self.file, column, r + 1, first_line + r, reason_of(k)))
-            )
+            self.items.append((first_line + r, order, Problem(self.file, column, r + 1, first_line + r, reason_of(k))))
 
     def raise_if_any(self) -> None:
         if self.total:
@@ -218,9 +216,7 @@ class Telemetry:
         try:
             return self.channels[name]
         except KeyError:
-            raise KeyError(
-                f"{self.path.name}: no channel {name!r}; channels: {', '.join(self.channels)}"
-            ) from None
+            raise KeyError(f"{self.path.name}: no channel {name!r}; channels: {', '.join(self.channels)}") from None
 
     def stack(self, names: Iterable[str]) -> np.ndarray:
         """Channels side by side: ``(n, k)`` SI array, columns in the order of ``names``."""
@@ -359,9 +355,7 @@ def read_telemetry(
     saturation = dict(saturation or {})
     for name, kind in required.items():
         if kind not in KINDS:
-            raise ValueError(
-                f"required[{name!r}] = {kind!r} is not a quantity kind; kinds: {', '.join(KINDS)}"
-            )
+            raise ValueError(f"required[{name!r}] = {kind!r} is not a quantity kind; kinds: {', '.join(KINDS)}")
     for name, lh in limits.items():
         lo, hi = lh
         if not lo <= hi:
@@ -413,11 +407,7 @@ def read_telemetry(
             cu = canonical_unit(unit_raw)
         except UnitError:
             want = required.get(name) or ("time" if j == 0 else None)
-            hint = (
-                f"expected {want}: {', '.join(known_units(want))}"
-                if want
-                else f"known units: {', '.join(UNITS)}"
-            )
+            hint = f"expected {want}: {', '.join(known_units(want))}" if want else f"known units: {', '.join(UNITS)}"
             col.add(f"has unknown unit {unit_raw!r} ({hint})", column=cell, line=header_line, order=j)
             units.append(None)
             kinds_l.append(None)
@@ -450,9 +440,7 @@ def read_telemetry(
             continue
         j = index.get(name)
         if j is None:
-            col.add(
-                f"missing column {name!r} ({kind}); columns present: {present}", line=header_line, order=k
-            )
+            col.add(f"missing column {name!r} ({kind}); columns present: {present}", line=header_line, order=k)
         elif kinds_l[j] is not None and kinds_l[j] != kind:
             col.add(f"has unit of {kinds_l[j]}, expected {kind}", column=cells[j], line=header_line, order=j)
 
@@ -482,9 +470,7 @@ def read_telemetry(
                 raise ValueError
             rate_dt = 1.0 / rate
         except ValueError:
-            col.add(
-                f"metadata rate_hz {meta['rate_hz']!r} is not a positive number", line=meta_lines["rate_hz"]
-            )
+            col.add(f"metadata rate_hz {meta['rate_hz']!r} is not a positive number", line=meta_lines["rate_hz"])
 
     # ---- rows ------------------------------------------------------------------------------
     data = lines[h + 1 :]
@@ -874,9 +860,7 @@ def write_events(
         if t < prev:
             raise ValueError(f"cannot write {path}: event {i} ({label!r}) at {t!r} s is before {prev!r} s")
         if not isinstance(label, str) or not label.strip() or "\n" in label or "\r" in label:
-            raise ValueError(
-                f"cannot write {path}: event {i} label {label!r} must be a non-empty single line"
-            )
+            raise ValueError(f"cannot write {path}: event {i} label {label!r} must be a non-empty single line")
         short = f"{t:.9g}"
         w.writerow([short if float(short) == t else repr(t), label.strip()])
         prev = t

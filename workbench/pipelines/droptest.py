@@ -62,7 +62,11 @@ __all__ = [
 ]
 
 GRAVITY = np.array([0.0, 0.0, -G0])
-LAYOUT = ErrorStateLayout(rl.N_X, rl.QUAT_BLOCKS)
+
+
+def layout_for(n_triads: int) -> ErrorStateLayout:
+    """Error-state layout of the REDLand filter with ``n_triads`` accelerometer bias blocks."""
+    return ErrorStateLayout(rl.sizes(n_triads)[0], rl.QUAT_BLOCKS)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -366,11 +370,12 @@ def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
     hang = tel.setup["hanging"]
     p0 = np.asarray(hang["position_m"], float)
     sp = float(hang["position_sigma_m"])
-    x0 = np.zeros(rl.N_X)
+    n_x, n_e = rl.sizes(len(tel.triads))
+    x0 = np.zeros(n_x)
     x0[rl.SP] = p0
     x0[rl.SQ] = quat_normalize(q0)
     x0[rl.SA] = quat_rotate(quat_conjugate(x0[rl.SQ]), -GRAVITY)  # hanging: a_ng = -g, in body axes
-    P0 = np.zeros((rl.N_E, rl.N_E))
+    P0 = np.zeros((n_e, n_e))
     P0[rl.EP, rl.EP] = sp**2 * np.eye(3)
     P0[rl.EV, rl.EV] = g("filter.velocity_sigma_mps", 0.01, kind="float") ** 2 * np.eye(3)
     P0[rl.EA, rl.EA] = g("filter.accel_sigma_mps2", 0.5, kind="float") ** 2 * np.eye(3)
@@ -378,6 +383,9 @@ def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
     P0[rl.EW, rl.EW] = np.radians(g("filter.rate_sigma_dps", 0.5, kind="float")) ** 2 * np.eye(3)
     P0[rl.EAL, rl.EAL] = g("filter.angular_accel_sigma", 2.0, kind="float") ** 2 * np.eye(3)
     P0[rl.ES, rl.ES] = g("sensors.gyro.scale", 0.01, kind="float") ** 2 * np.eye(3)  # datasheet 1σ
+    sb = g("sensors.accelerometer.bias_g", 0.005, kind="float") * G0  # residual after zeroing, 1σ
+    for j in range(len(tel.triads)):
+        P0[rl.bias_slices(j)[1], rl.bias_slices(j)[1]] = sb**2 * np.eye(3)
     return InitialState(x0=x0, P0=P0, q0=x0[rl.SQ].copy(), P_theta=P_theta, up_B=up_B, mag_B=mag_B)
 
 
@@ -463,14 +471,15 @@ def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lan
         return xn, F
 
     def process_noise(x, t0, t1):
-        return np.zeros((rl.N_E, rl.N_E))  # set per step in adapt_q
+        return None  # set per step in adapt_q
 
     def adapt_q(k, x, P, Q):
-        return rl.process_noise(tel.t[k] - tel.t[k - 1], q_accel[k], q_angular[k])
+        return rl.process_noise(tel.t[k] - tel.t[k - 1], q_accel[k], q_angular[k], n_e)
 
-    triad_memos = [_Memo(lambda x, r=r: rl.triad_model(x, r)) for r in tel.lever_arms_B]
+    triad_memos = [_Memo(lambda x, r=r, j=j: rl.triad_model(x, r, j)) for j, r in enumerate(tel.lever_arms_B)]
     gyro_memo = _Memo(rl.gyro_model)
-    H_zupt = np.zeros((3, rl.N_E))
+    n_e = init.P0.shape[0]
+    H_zupt = np.zeros((3, n_e))
     H_zupt[:, rl.EV] = np.eye(3)
 
     ranging = _ranging_measurements(scenario, tel) if tel.ranging is not None else {}
@@ -489,7 +498,16 @@ def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lan
             out.append(meas)
         return out
 
-    fp = run_filter(init.x0, init.P0, tel.t, transition, process_noise, measurements_at, LAYOUT, adapt_q=adapt_q)
+    fp = run_filter(
+        init.x0,
+        init.P0,
+        tel.t,
+        transition,
+        process_noise,
+        measurements_at,
+        layout_for(len(tel.triads)),
+        adapt_q=adapt_q,
+    )
     return FilterStage("forward", fp.t, fp.x_post, fp.P_post, forward=fp, q_accel=q_accel, q_angular=q_angular)
 
 
@@ -689,7 +707,7 @@ def reconstruct(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> It
     yield init
     fwd = forward_pass(scenario, tel, init, lander)
     yield fwd
-    sp = rts_smooth(fwd.forward, LAYOUT)
+    sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
     yield smo
     st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))

@@ -65,14 +65,10 @@ def standard_blueprint(
     right: list[Any] = []
     shares: list[float] = []
     if plots:
-        right.append(
-            rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o, **ts_kwargs) for n, o in plots], active_tab=0)
-        )
+        right.append(rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o, **ts_kwargs) for n, o in plots], active_tab=0))
         shares.append(3.0)
     if residuals:
-        right.append(
-            rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o, **ts_kwargs) for n, o in residuals], active_tab=0)
-        )
+        right.append(rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o, **ts_kwargs) for n, o in residuals], active_tab=0))
         shares.append(2.0)
     right.append(rrb.TextDocumentView(name="Report", origin=layout.REPORT))
     right.append(rrb.TextLogView(name="Events", origin=layout.EVENTS))

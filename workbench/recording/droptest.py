@@ -233,7 +233,7 @@ class DropTestRecorder:
         tel = self.tel
         for j, name in enumerate(tel.triads):
             ok = tel.f_valid[:, j]
-            pred = np.array([rl.triad_model(x, tel.lever_arms_B[j])[0] for x in fp.x_prior[ok]])
+            pred = np.array([rl.triad_model(x, tel.lever_arms_B[j], j)[0] for x in fp.x_prior[ok]])
             r.scalars(
                 f"/plots/triads/{name}/measured",
                 t[ok],

@@ -66,9 +66,7 @@ def read_recording(path: str | os.PathLike[str]) -> RecordingData:
         except (RuntimeError, ValueError) as e:
             raise RecordingError(f"{p} has no RRD footer (incomplete recording): {e}") from e
         try:
-            chunks = [
-                (c.entity_path, c.is_static, c.to_record_batch()) for c in reader.stream(store=stores[0])
-            ]
+            chunks = [(c.entity_path, c.is_static, c.to_record_batch()) for c in reader.stream(store=stores[0])]
         except (RuntimeError, ValueError) as e:
             raise RecordingError(f"cannot decode {p}: {e}") from e
     return RecordingData(
@@ -216,9 +214,7 @@ class RecordingData:
         arr = pa.concat_arrays(cells) if len(cells) > 1 else cells[0]
         return t[order], arr.take(pa.array(order))
 
-    def times(
-        self, entity: str, component: str, timeline: str = layout.TIME, *, raw: bool = False
-    ) -> np.ndarray:
+    def times(self, entity: str, component: str, timeline: str = layout.TIME, *, raw: bool = False) -> np.ndarray:
         """Sorted times (n,) of the rows of ``component`` on ``entity``: seconds/ints, or raw int64 (ns)."""
         t, _ = self._gather(entity, component, timeline)
         return t if raw else self._to_time(t, timeline)
@@ -246,9 +242,7 @@ class RecordingData:
                     if _kind(f) == "data":
                         key = f.name.split(":")[-1]
                         val = col[len(col) - 1].as_py()
-                        out.setdefault(name, {})[key] = (
-                            val[0] if isinstance(val, list) and len(val) == 1 else val
-                        )
+                        out.setdefault(name, {})[key] = val[0] if isinstance(val, list) and len(val) == 1 else val
         return out
 
     # ------------------------------------------------------------------ typed accessors
@@ -257,9 +251,7 @@ class RecordingData:
         t, cells = self._gather(entity, "Scalars:scalars", timeline)
         return self._to_time(t, timeline), _fixed_rows(cells, entity)
 
-    def transforms(
-        self, entity: str, timeline: str = layout.TIME
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def transforms(self, entity: str, timeline: str = layout.TIME) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``Transform3D`` rows: times (n,), translation (n, 3) [m], quaternion xyzw (n, 4)."""
         t, tr = self._gather(entity, "Transform3D:translation", timeline)
         t2, q = self._gather(entity, "Transform3D:quaternion", timeline)
@@ -281,9 +273,7 @@ class RecordingData:
             _vec_rows(q, 4, entity),
         )
 
-    def line_strips(
-        self, entity: str, timeline: str = layout.TIME
-    ) -> tuple[np.ndarray, list[list[np.ndarray]]]:
+    def line_strips(self, entity: str, timeline: str = layout.TIME) -> tuple[np.ndarray, list[list[np.ndarray]]]:
         """``LineStrips3D`` rows: times (n,) and, per row, a list of strips, each an (m, 3) array [m]."""
         t, cells = self._gather(entity, "LineStrips3D:strips", timeline)
         row_len = pc.list_value_length(cells).to_numpy(zero_copy_only=False)
@@ -301,9 +291,7 @@ class RecordingData:
         pts = _fsl_to_numpy(pc.list_flatten(cells), 3)
         return self._to_time(t, timeline), np.split(pts, np.cumsum(row_len)[:-1]) if len(row_len) else []
 
-    def text_log(
-        self, entity: str = layout.EVENTS, timeline: str = layout.TIME
-    ) -> list[tuple[Any, str, str | None]]:
+    def text_log(self, entity: str = layout.EVENTS, timeline: str = layout.TIME) -> list[tuple[Any, str, str | None]]:
         """``TextLog`` rows sorted by time: [(t, text, level)] (level None if not logged)."""
         t, text = self._gather(entity, "TextLog:text", timeline)
         try:
@@ -332,11 +320,7 @@ class RecordingData:
         for name in self.timelines():
             typ = self._timeline_types[name]
             kind = (
-                "duration"
-                if pa.types.is_duration(typ)
-                else "timestamp"
-                if pa.types.is_timestamp(typ)
-                else "sequence"
+                "duration" if pa.types.is_duration(typ) else "timestamp" if pa.types.is_timestamp(typ) else "sequence"
             )
             timelines[name] = {"type": kind, "range": list(self.time_range(name))}
         entities = {}

@@ -167,9 +167,7 @@ def _one_row(columns: rr.ComponentColumnList) -> list[rr.ComponentColumn]:
     return [c.partition([len(c.component_batch.as_arrow_array())]) for c in columns]
 
 
-def _split(
-    value: Any, n: int, counts: np.ndarray, item_ndim: int, what: str
-) -> tuple[str, np.ndarray] | None:
+def _split(value: Any, n: int, counts: np.ndarray, item_ndim: int, what: str) -> tuple[str, np.ndarray] | None:
     """Classify per-instance styling as static or per-step.
 
     ``item_ndim`` is 1 for colours (each item is RGB/RGBA), 0 for radii. Returns
@@ -271,9 +269,7 @@ class Recorder:
         if translation is not None:
             kwargs["translation"] = np.asarray(translation, dtype=np.float64).reshape(3)
         if quaternion_xyzw is not None:
-            kwargs["quaternion"] = rr.Quaternion(
-                xyzw=np.asarray(quaternion_xyzw, dtype=np.float64).reshape(4)
-            )
+            kwargs["quaternion"] = rr.Quaternion(xyzw=np.asarray(quaternion_xyzw, dtype=np.float64).reshape(4))
         if mat3x3 is not None:
             kwargs["mat3x3"] = np.asarray(mat3x3, dtype=np.float64).reshape(3, 3)
         self._log_static(entity, rr.Transform3D(**kwargs))
@@ -293,9 +289,7 @@ class Recorder:
         p = np.asarray(translation, dtype=np.float64)
         q = np.asarray(quaternion_xyzw, dtype=np.float64)
         if p.shape != (n, 3) or q.shape != (n, 4):
-            raise ValueError(
-                f"poses: need translation ({n}, 3) and quaternion ({n}, 4), got {p.shape}, {q.shape}"
-            )
+            raise ValueError(f"poses: need translation ({n}, 3) and quaternion ({n}, 4), got {p.shape}, {q.shape}")
         self._send(entity, idx, rr.Transform3D.columns(translation=p, quaternion=q))
 
     # ------------------------------------------------------------------ time series
@@ -486,9 +480,7 @@ class Recorder:
         c = np.asarray(centers, dtype=np.float64)
         half_sizes, quats = covariance_ellipsoids(covariances, nsigma)
         if c.shape[-1] != 3 or c.ndim not in (2, 3) or half_sizes.shape != c.shape or c.shape[0] != n:
-            raise ValueError(
-                f"ellipsoids: centers {c.shape} / covariances {np.shape(covariances)} for {n} times"
-            )
+            raise ValueError(f"ellipsoids: centers {c.shape} / covariances {np.shape(covariances)} for {n} times")
         if c.ndim == 2:
             cols = rr.Ellipsoids3D.columns(centers=c, half_sizes=half_sizes, quaternions=quats)
         else:
@@ -529,9 +521,7 @@ class Recorder:
             kwargs["colors"] = _tile(_as_colors(color), len(strips), 1)
         if radius is not None:
             kwargs["radii"] = _tile(np.asarray(radius, dtype=np.float32), len(strips), 0)
-        self._log_row(
-            entity, lambda: rr.LineStrips3D(**kwargs), lambda: rr.LineStrips3D.columns(**kwargs), static, t
-        )
+        self._log_row(entity, lambda: rr.LineStrips3D(**kwargs), lambda: rr.LineStrips3D.columns(**kwargs), static, t)
 
     def line_strips_series(
         self,
@@ -640,9 +630,7 @@ class Recorder:
             self._log_static(entity, rr.Points3D.from_fields(show_labels=True))
         else:
             self._send(entity, idx, rr.Points3D.columns(positions=p.reshape(-1, 3)).partition(counts))
-            self._log_static(
-                entity, rr.Points3D.from_fields(labels=lab.reshape(-1).tolist(), show_labels=True)
-            )
+            self._log_static(entity, rr.Points3D.from_fields(labels=lab.reshape(-1).tolist(), show_labels=True))
 
     def mesh(self, entity: str, mesh: Any, *, color: Any = (200, 200, 200, 255), static: bool = True) -> None:
         """A ``trimesh.Trimesh`` as a static ``Mesh3D`` (vertices [m] in ``entity``'s frame, vertex normals).
