@@ -61,8 +61,15 @@ CONFIGS = (
 # ---------------------------------------------------------------------------------------------
 
 
-def baseline_filter(tel: dt.DropTelemetry, init: dt.InitialState, q_accel: np.ndarray, q_angular: np.ndarray,
-                    r_acc: np.ndarray, r_gyr: np.ndarray, r_zupt: np.ndarray) -> tuple[np.ndarray, float]:
+def baseline_filter(
+    tel: dt.DropTelemetry,
+    init: dt.InitialState,
+    q_accel: np.ndarray,
+    q_angular: np.ndarray,
+    r_acc: np.ndarray,
+    r_gyr: np.ndarray,
+    r_zupt: np.ndarray,
+) -> tuple[np.ndarray, float]:
     """Minimal kinematic-mode EKF loop (IMU only): returns (positions (n, 3) [m], wall time [s]).
 
     Predict: ``redland.propagate`` and ``P = F P Fᵀ + Q`` (``redland.process_noise``). Update: the
@@ -201,8 +208,11 @@ def run_mc(n_seeds: int, n_dyn: int, scheduler: str | None, workers: int, work: 
         res: McResult = monte_carlo(sc, range(1, n + 1), work, scheduler=scheduler, workers=workers)
         s = summarize_mc(res)
         print(f"[bench] {label}: {s['total_wall_s']:.0f} s", file=sys.stderr, flush=True)
-        per = {f.name: np.asarray(getattr(res, f.name)).tolist() for f in fields(res)
-               if isinstance(getattr(res, f.name), np.ndarray)}
+        per = {
+            f.name: np.asarray(getattr(res, f.name)).tolist()
+            for f in fields(res)
+            if isinstance(getattr(res, f.name), np.ndarray)
+        }
         out[label] = {"summary": s, "per_seed": per}
     return out
 
@@ -220,30 +230,52 @@ def markdown(mc: dict, sp: dict) -> str:
         ("truth inside reported 3σ", lambda s: f"{100 * s['fraction_inside_3sigma']:.1f} %"),
         ("median reported 3σ [m]", lambda s: f"{s['median_3sigma_m']:.4f}"),
         ("error mean / median [m]", lambda s: f"{s['error_mean_m']:+.4f} / {s['error_median_m']:+.4f}"),
-        ("|error| median / p95 / max [m]",
-         lambda s: f"{s['abs_error_median_m']:.4f} / {s['abs_error_p95_m']:.4f} / {s['abs_error_max_m']:.4f}"),
+        (
+            "|error| median / p95 / max [m]",
+            lambda s: f"{s['abs_error_median_m']:.4f} / {s['abs_error_p95_m']:.4f} / {s['abs_error_max_m']:.4f}",
+        ),
         ("MER: |err| ≤ 0.10 m and 3σ ≤ 0.10 m", lambda s: f"{100 * s['fraction_mer_requirement']:.1f} %"),
-        ("pose ANEES, time avg (6 dof; indicative)",
-         lambda s: f"{s['anees_pose_time_avg']:.2f} {_fmt_band(s['anees_pose_band'])}"),
-        ("pose ANEES at max stroke (6 dof)",
-         lambda s: f"{s['anees_pose_at_max']:.2f} {_fmt_band(s['anees_pose_band'])}"
-         + ("" if s["anees_pose_at_max_inside"] else " **out**")),
-        ("max-stroke ANEES (1 dof)",
-         lambda s: f"{s['anees_stroke']:.2f} {_fmt_band(s['anees_stroke_band'])}"
-         + ("" if s["anees_stroke_inside"] else " **out**")),
-        ("restitution |err| median / p95",
-         lambda s: f"{s['restitution_abs_error_median']:.4f} / {s['restitution_abs_error_p95']:.4f}"),
-        ("time-avg NEES p / v / θ / ω (3 dof)",
-         lambda s: " / ".join(f"{v:.1f}" for v in s["nees_blocks_time_avg"].values())),
-        ("task wall median / reconstruct median [s]",
-         lambda s: f"{s['task_wall_median_s']:.2f} / {s['reconstruct_median_s']:.2f}"),
+        (
+            "pose ANEES, time avg (6 dof; indicative)",
+            lambda s: f"{s['anees_pose_time_avg']:.2f} {_fmt_band(s['anees_pose_band'])}",
+        ),
+        (
+            "pose ANEES at max stroke (6 dof)",
+            lambda s: (
+                f"{s['anees_pose_at_max']:.2f} {_fmt_band(s['anees_pose_band'])}"
+                + ("" if s["anees_pose_at_max_inside"] else " **out**")
+            ),
+        ),
+        (
+            "max-stroke ANEES (1 dof)",
+            lambda s: (
+                f"{s['anees_stroke']:.2f} {_fmt_band(s['anees_stroke_band'])}"
+                + ("" if s["anees_stroke_inside"] else " **out**")
+            ),
+        ),
+        (
+            "restitution |err| median / p95",
+            lambda s: f"{s['restitution_abs_error_median']:.4f} / {s['restitution_abs_error_p95']:.4f}",
+        ),
+        (
+            "time-avg NEES p / v / θ / ω (3 dof)",
+            lambda s: " / ".join(f"{v:.1f}" for v in s["nees_blocks_time_avg"].values()),
+        ),
+        (
+            "task wall median / reconstruct median [s]",
+            lambda s: f"{s['task_wall_median_s']:.2f} / {s['reconstruct_median_s']:.2f}",
+        ),
         ("MC wall time [s]", lambda s: f"{s['total_wall_s']:.0f}"),
     ]
     lines = ["| quantity | " + " | ".join(labels) + " |", "|---|" + "---|" * len(labels)]
     for name, f in rows:
         lines.append(f"| {name} | " + " | ".join(f(s) for s in S) + " |")
-    lines += ["", "Mean (δ/σ)² at the max-stroke step per state (1 if consistent; band "
-              f"{_fmt_band(S[0]['z2_band'])} for {S[0]['n_runs']} runs):", ""]
+    lines += [
+        "",
+        "Mean (δ/σ)² at the max-stroke step per state (1 if consistent; band "
+        f"{_fmt_band(S[0]['z2_band'])} for {S[0]['n_runs']} runs):",
+        "",
+    ]
     names = list(S[0]["z2_at_max_mean"])
     lines.append("| state | " + " | ".join(labels) + " |")
     lines.append("|---|" + "---|" * len(labels))
@@ -269,6 +301,7 @@ def markdown(mc: dict, sp: dict) -> str:
 
 def _git_state() -> dict:
     """HEAD commit and the modified tracked files (the numbers belong to that working tree)."""
+
     def git(*a: str) -> str:
         r = subprocess.run(["git", *a], cwd=ROOT, capture_output=True, text=True)
         return r.stdout.strip() if r.returncode == 0 else ""
@@ -305,11 +338,29 @@ def main(argv: list[str] | None = None) -> int:
     if sp:
         print(markdown(mc, sp))
     else:
-        print(markdown(mc, {"stage_s": {}, **{k: float("nan") for k in (
-            "cli_run_wall_s", "cli_run_maxrss_MB", "synthesize_first_s", "filter_smoother_stroke_s", "steps",
-            "filter_steps_per_s_production", "filter_steps_per_s_baseline",
-            "filter_speed_ratio_production_over_baseline", "baseline_vs_production_max_position_diff_m",
-            "reconstruct_peak_tracemalloc_MB")}}))
+        print(
+            markdown(
+                mc,
+                {
+                    "stage_s": {},
+                    **{
+                        k: float("nan")
+                        for k in (
+                            "cli_run_wall_s",
+                            "cli_run_maxrss_MB",
+                            "synthesize_first_s",
+                            "filter_smoother_stroke_s",
+                            "steps",
+                            "filter_steps_per_s_production",
+                            "filter_steps_per_s_baseline",
+                            "filter_speed_ratio_production_over_baseline",
+                            "baseline_vs_production_max_position_diff_m",
+                            "reconstruct_peak_tracemalloc_MB",
+                        )
+                    },
+                },
+            )
+        )
     print(f"\nwrote {out} (benchmark {doc['bench_wall_s']:.0f} s)")
     return 0
 

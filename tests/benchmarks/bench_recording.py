@@ -43,9 +43,7 @@ def run(path: Path, n: int = 5000, n_series: int = 30) -> dict[str, float]:
         rec.ellipsoids(layout.UNCERTAINTY, t, pos, cov, step=step)
         t4 = time.perf_counter()
         for i in range(10):
-            rec.series_with_bounds(
-                layout.plot_path(f"b{i}"), t, values[i], sigma[i], truth=values[i], step=step
-            )
+            rec.series_with_bounds(layout.plot_path(f"b{i}"), t, values[i], sigma[i], truth=values[i], step=step)
         t5 = time.perf_counter()
     t6 = time.perf_counter()
     times.update(

@@ -28,6 +28,4 @@ def test_published_constants():
 
 def test_bad_periodic_kind_rejected():
     with pytest.raises(ValueError):
-        bodies.Body(
-            "X", 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0, 0, 90, 0, 0, 1, periodic_terms=(("ra", 1.0, 0.0, 0.0),)
-        )
+        bodies.Body("X", 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0, 0, 90, 0, 0, 1, periodic_terms=(("ra", 1.0, 0.0, 0.0),))

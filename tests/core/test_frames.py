@@ -17,9 +17,7 @@ J2000 = 2451545.0
 # ------------------------------------------------------------------------------------------ time
 def test_julian_date_known_epochs():
     # 2017-01-01T00:00:00 UTC is JD 2457754.5 (UTC); TDB ≈ UTC + 69.184 s
-    assert frames.julian_date_from_utc("2017-01-01T00:00:00Z") == pytest.approx(
-        2457754.5 + 69.184 / 86400.0, abs=2e-9
-    )
+    assert frames.julian_date_from_utc("2017-01-01T00:00:00Z") == pytest.approx(2457754.5 + 69.184 / 86400.0, abs=2e-9)
     # J2000.0 = 2000-01-01T12:00:00 TT -> UTC string 69.184 s earlier under our constant offset
     assert frames.julian_date_from_utc("2000-01-01T11:58:50.816Z") == pytest.approx(J2000, abs=2e-9)
     # fractional seconds of any length, a leap second, no 'Z'
@@ -133,9 +131,7 @@ def test_planetocentric_known_points_and_round_trip():
 
 def test_altitude_above_sphere():
     r = np.array([[3396.0e3 + 125e3, 0, 0], [0, 0, 3396.0e3 - 1440.0]])
-    np.testing.assert_allclose(
-        frames.altitude_above_sphere(r, MARS.reference_radius), [125e3, -1440.0], atol=1e-8
-    )
+    np.testing.assert_allclose(frames.altitude_above_sphere(r, MARS.reference_radius), [125e3, -1440.0], atol=1e-8)
 
 
 def test_ned_at_equator_prime_meridian():
@@ -172,9 +168,7 @@ def test_spf_ramp_normal_maps_to_mars_up():
     n_spf = np.array([0.0, -s60, c60])
     np.testing.assert_allclose(frames.C_mars_spf() @ n_spf, [0, 0, 1], atol=1e-15)
     np.testing.assert_allclose(frames.SPF_LAB.to_planet(n_spf), [0, 0, 1], atol=1e-15)
-    np.testing.assert_allclose(
-        frames.C_mars_spf(), Rotation.from_euler("x", -60, degrees=True).as_matrix(), atol=1e-15
-    )
+    np.testing.assert_allclose(frames.C_mars_spf(), Rotation.from_euler("x", -60, degrees=True).as_matrix(), atol=1e-15)
     # X axis is the rotation axis
     np.testing.assert_allclose(frames.SPF_LAB.to_planet([1.0, 0, 0]), [1, 0, 0], atol=1e-15)
 
@@ -186,8 +180,6 @@ def test_lab_frame_round_trips_and_points():
     np.testing.assert_allclose(lab.from_planet(lab.to_planet(v)), v, atol=1e-14)
     np.testing.assert_allclose(lab.point_to_planet(np.zeros(3)), [1.0, 2.0, 3.0])
     np.testing.assert_allclose(lab.point_from_planet(lab.point_to_planet(v)), v, atol=1e-14)
-    np.testing.assert_allclose(
-        Rotation.from_quat(lab.q_planet_lab).as_matrix(), frames.C_mars_spf(), atol=1e-14
-    )
+    np.testing.assert_allclose(Rotation.from_quat(lab.q_planet_lab).as_matrix(), frames.C_mars_spf(), atol=1e-14)
     with pytest.raises(ValueError):
         frames.LabFrame("bad", np.diag([1.0, 1.0, -1.0]))

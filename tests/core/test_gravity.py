@@ -14,9 +14,7 @@ def test_point_mass_magnitude_and_direction():
     a = gravity.gravity_point_mass(r, MARS.gm)
     rn = np.linalg.norm(r, axis=-1)
     np.testing.assert_allclose(np.linalg.norm(a, axis=-1), 42828.37362069909e9 / rn**2, rtol=1e-13)
-    np.testing.assert_allclose(
-        np.einsum("...i,...i->...", a, r), -np.linalg.norm(a, axis=-1) * rn, rtol=1e-13
-    )
+    np.testing.assert_allclose(np.einsum("...i,...i->...", a, r), -np.linalg.norm(a, axis=-1) * rn, rtol=1e-13)
 
 
 def _j2_potential(r, gm, j2, re):

@@ -114,8 +114,7 @@ def _filter_cv(z, q_scale=1.0):
             return []
         return [Measurement("pos", z[k : k + 1], R_CV, lambda s: H_CV @ s, H_CV)]
 
-    fp = run_filter(M0, P0_CV, DT * np.arange(z.size), lambda x, a, b: (F_CV @ x, F_CV),
-                    lambda x, a, b: Qf, meas, lay)
+    fp = run_filter(M0, P0_CV, DT * np.arange(z.size), lambda x, a, b: (F_CV @ x, F_CV), lambda x, a, b: Qf, meas, lay)
     return fp, rts_smooth(fp, lay)
 
 

@@ -362,8 +362,15 @@ def test_joseph_form_keeps_P_symmetric_pd_with_badly_scaled_R():
 def test_non_pd_innovation_covariance_raises():
     lay = ErrorStateLayout(2)
     with pytest.raises(np.linalg.LinAlgError):
-        update(np.zeros(2), np.zeros((2, 2)), np.zeros(1), lambda x: x[:1], np.array([[-1.0]]), lay,
-               H=np.array([[1.0, 0.0]]))
+        update(
+            np.zeros(2),
+            np.zeros((2, 2)),
+            np.zeros(1),
+            lambda x: x[:1],
+            np.array([[-1.0]]),
+            lay,
+            H=np.array([[1.0, 0.0]]),
+        )
 
 
 # --------------------------------------------------------------------------- driver
@@ -394,16 +401,16 @@ def test_run_filter_bookkeeping_gating_and_gains():
     def meas(k, tk, x):
         if k % 3 == 2:
             return []
-        out = [Measurement("pos", np.array([z[k]]), np.array([[1.0]]), lambda s: H @ s, H,
-                           gate_probability=0.999)]
+        out = [Measurement("pos", np.array([z[k]]), np.array([[1.0]]), lambda s: H @ s, H, gate_probability=0.999)]
         if k % 5 == 0:
             out.append(Measurement("vel", np.array([0.3]), np.array([[0.04]]), lambda s: s[1:], None))
         return out
 
     x0 = np.zeros(2)
     P0 = np.diag([10.0, 1.0])
-    fp = run_filter(x0, P0, t, lambda x, a, b: (F @ x, F), lambda x, a, b: Q, meas, lay,
-                    adapt_q=adapt_q, keep_gains=True)
+    fp = run_filter(
+        x0, P0, t, lambda x, a, b: (F @ x, F), lambda x, a, b: Q, meas, lay, adapt_q=adapt_q, keep_gains=True
+    )
     assert calls == list(range(1, n))
     np.testing.assert_array_equal(fp.x_prior[0], x0)
     np.testing.assert_array_equal(fp.P_prior[0], P0)
@@ -444,8 +451,16 @@ def test_run_filter_numeric_transition_matches_analytic():
     t = 0.5 * np.arange(20)
 
     def meas(k, tk, x):
-        return [Measurement("rb", _range_bearing(np.array([1.0 + k, 2.0, 0, 0])), np.diag([0.25, 1e-4]),
-                            _range_bearing, _range_bearing_H, residual=_wrap_residual)]
+        return [
+            Measurement(
+                "rb",
+                _range_bearing(np.array([1.0 + k, 2.0, 0, 0])),
+                np.diag([0.25, 1e-4]),
+                _range_bearing,
+                _range_bearing_H,
+                residual=_wrap_residual,
+            )
+        ]
 
     Q = np.diag([0.01, 0.01, 0.1, 0.001])
     x0 = np.array([1.0, 2.0, 2.0, 0.1])
@@ -464,8 +479,9 @@ def test_run_filter_rejects_repeated_name_and_reports_step():
         return [m, m] if k == 2 else [m]
 
     with pytest.raises(ValueError, match="step 2"):
-        run_filter(np.zeros(1), np.eye(1), np.arange(4.0), lambda x, a, b: (x, np.eye(1)),
-                   lambda *_: np.eye(1), meas, lay)
+        run_filter(
+            np.zeros(1), np.eye(1), np.arange(4.0), lambda x, a, b: (x, np.eye(1)), lambda *_: np.eye(1), meas, lay
+        )
 
     def bad(k, tk, x):
         if k != 1:
@@ -473,5 +489,6 @@ def test_run_filter_rejects_repeated_name_and_reports_step():
         return [Measurement("b", np.array([0.0]), np.array([[-5.0]]), lambda s: s, np.eye(1))]
 
     with pytest.raises(np.linalg.LinAlgError, match="step 1.*'b'"):
-        run_filter(np.zeros(1), np.eye(1), np.arange(4.0), lambda x, a, b: (x, np.eye(1)),
-                   lambda *_: np.eye(1), bad, lay)
+        run_filter(
+            np.zeros(1), np.eye(1), np.arange(4.0), lambda x, a, b: (x, np.eye(1)), lambda *_: np.eye(1), bad, lay
+        )

@@ -76,8 +76,7 @@ def _run(Fs, us, Qs, meas, m0, P0):
 
     def measurements_at(k, tk, x):
         return [
-            Measurement(f"m{i}_{z.size}", z, R, lambda s, H=H: H @ s, H)
-            for i, (H, R, z) in enumerate(meas.get(k, []))
+            Measurement(f"m{i}_{z.size}", z, R, lambda s, H=H: H @ s, H) for i, (H, R, z) in enumerate(meas.get(k, []))
         ]
 
     fp = run_filter(m0, P0, t, transition, process_noise, measurements_at, lay)
@@ -103,8 +102,9 @@ def test_time_varying_F_index_matters():
     """Guard against filterpy #278: using F[k] instead of F[k+1] gives a different (wrong) answer."""
     Fs, us, Qs, meas, m0, P0 = _ltv_problem(0)
     fp, sp = _run(Fs, us, Qs, meas, m0, P0)
-    shifted = ForwardPass(fp.t, fp.x_prior, fp.P_prior, fp.x_post, fp.P_post,
-                          np.concatenate([fp.F[1:], fp.F[-1:]]), fp.Q, fp.innovations)
+    shifted = ForwardPass(
+        fp.t, fp.x_prior, fp.P_prior, fp.x_post, fp.P_post, np.concatenate([fp.F[1:], fp.F[-1:]]), fp.Q, fp.innovations
+    )
     try:
         wrong = rts_smooth(shifted, ErrorStateLayout(3))
     except ValueError:  # here the mis-indexed gain even drives P_s indefinite
@@ -120,7 +120,8 @@ def test_non_pd_smoothed_covariance_raises_naming_step():
     P_post = np.ones((n, 1, 1))
     P_post[2:] = 1e-3
     P_prior = np.ones((n, 1, 1))
-    fp = ForwardPass(np.arange(n, dtype=float), np.zeros((n, 1)), P_prior, np.zeros((n, 1)), P_post, F,
-                     np.zeros((n, 1, 1)), {})
+    fp = ForwardPass(
+        np.arange(n, dtype=float), np.zeros((n, 1)), P_prior, np.zeros((n, 1)), P_post, F, np.zeros((n, 1, 1)), {}
+    )
     with pytest.raises(ValueError, match="step 1"):
         rts_smooth(fp, lay)

@@ -75,9 +75,7 @@ def test_export_reads_back_with_read_telemetry(tmp_path):
     t = np.linspace(0.0, 2.0, 21)
     alt = 1000.0 - 40.0 * t
     sig = np.full_like(t, 0.125)
-    p = export_csv(
-        tmp_path / "export.csv", t, {"alt": (alt, "km"), "sigma_alt": (sig, "m")}, meta={"pass": "smoothed"}
-    )
+    p = export_csv(tmp_path / "export.csv", t, {"alt": (alt, "km"), "sigma_alt": (sig, "m")}, meta={"pass": "smoothed"})
     tel = read_telemetry(p, required={"alt": "length"})
     np.testing.assert_allclose(tel.channel("alt"), alt, rtol=1e-12)
     np.testing.assert_allclose(tel.channel("sigma_alt"), sig)

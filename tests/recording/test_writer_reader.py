@@ -55,34 +55,22 @@ def recorded(tmp_path_factory):
         path, "drop-test-42", blueprint=bp, properties={"solver": {"name": "EKF", "dt_s": 0.01}}
     ) as rec:
         rec.view_coordinates()
-        rec.scalars(
-            "/plots/xyz", t, inp["xyz"], step=step, names=["x", "y", "z"], colors=(255, 0, 0), widths=1.0
-        )
+        rec.scalars("/plots/xyz", t, inp["xyz"], step=step, names=["x", "y", "z"], colors=(255, 0, 0), widths=1.0)
         rec.scalars(layout.sensor_path("imu", "ax_raw"), t, inp["meas"])
-        rec.scatter(
-            layout.sensor_path("imu", "ax"), t, inp["meas"], names="ax", colors=(214, 39, 40), marker="cross"
-        )
-        rec.series_with_bounds(
-            layout.plot_path("altitude"), t, inp["alt"], inp["sig"], truth=inp["truth"], step=step
-        )
+        rec.scatter(layout.sensor_path("imu", "ax"), t, inp["meas"], names="ax", colors=(214, 39, 40), marker="cross")
+        rec.series_with_bounds(layout.plot_path("altitude"), t, inp["alt"], inp["sig"], truth=inp["truth"], step=step)
         rec.poses(layout.VEHICLE, t, inp["pos"], inp["quat"], step=step)
-        rec.static_transform(
-            layout.SURFACE, translation=[0, 0, -1], quaternion_xyzw=[0, 0, 0.7071068, 0.7071068]
-        )
+        rec.static_transform(layout.SURFACE, translation=[0, 0, -1], quaternion_xyzw=[0, 0, 0.7071068, 0.7071068])
         rec.axes(layout.VEHICLE, 0.5)
         inp["hs"], inp["q"] = rec.ellipsoids(layout.UNCERTAINTY, t, inp["centers"], inp["cov"], step=step)
         rec.line_strip(layout.ESTIMATE_SMOOTHED, inp["track"], color=(0, 128, 255), radius=0.01)
         rec.line_strip(layout.STROKE, inp["track"][:2], color=(255, 0, 0), radius=0.02, static=False, t=0.73)
-        rec.line_strips_series(
-            layout.RADAR, t, inp["beams"], colors=inp["beam_colors"], radii=0.005, step=step
-        )
+        rec.line_strips_series(layout.RADAR, t, inp["beams"], colors=inp["beam_colors"], radii=0.005, step=step)
         rec.line_strips_series("/world/ragged", t, inp["ragged"], colors=(255, 128, 0))
         rec.points_series(layout.DISPERSION, t, inp["cloud"], colors=(0, 200, 0, 255), radii=0.02)
         rec.points_series("/world/ragged_pts", t, inp["ragged_pts"])
         rec.points("/world/landmarks", inp["track"][:5], colors=(1, 2, 3), radii=0.1)
-        rec.mesh(
-            layout.VEHICLE_BODY, trimesh.creation.box(extents=[0.4, 0.2, 0.1]), color=(80, 160, 255, 255)
-        )
+        rec.mesh(layout.VEHICLE_BODY, trimesh.creation.box(extents=[0.4, 0.2, 0.1]), color=(80, 160, 255, 255))
         rec.text_labels_series("/world/labels", t, inp["pos"], ["vehicle"])
         rec.events(inp["events"])
         rec.report(inp["report"])
@@ -104,9 +92,7 @@ def test_metadata_and_structure(recorded):
     assert d.recording_name == "drop-test-42"
     assert d.properties()["solver"] == {"name": "EKF", "dt_s": 0.01}
     assert d.timelines() == [layout.STEP, layout.TIME]
-    assert {layout.VEHICLE, layout.UNCERTAINTY, layout.EVENTS, layout.REPORT, layout.WORLD} <= set(
-        d.entities()
-    )
+    assert {layout.VEHICLE, layout.UNCERTAINTY, layout.EVENTS, layout.REPORT, layout.WORLD} <= set(d.entities())
     assert d.row_count(layout.VEHICLE) == 200 and d.row_count(layout.VEHICLE, "step") == 200
     assert d.row_count(layout.VEHICLE_BODY) == 0
     assert "Mesh3D:vertex_positions" in d.components(layout.VEHICLE_BODY)

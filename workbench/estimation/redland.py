@@ -11,8 +11,10 @@ full   error       quantity                                                 fram
 9:13   9:12        q_I_B — attitude quaternion (scalar last) / δθ [rad]     body
 13:16  12:15       ω — angular rate [rad/s]                                 body
 16:19  15:18       α — angular acceleration [rad/s²]                        body
-19:22  18:21       s — gyro scale-factor errors [-] (random constants)      gyro axes
-22+3j  21+3j       b_j — bias of accelerometer triad j [m/s²] (constants)  body
+19:28  18:27       E — gyro error matrix [-], row-major (constants):        gyro axes
+                   diagonal = scale factors, off-diagonal = misalignment
+28:31  27:30       b_g — gyro bias [rad/s] (constant)                       gyro axes
+31+3j  30+3j       b_j — bias of accelerometer triad j [m/s²] (constants)  body
 =====  ==========  ======================================================  =========
 
 The accelerometer biases are the second augmentation. Per-triad biases of the datasheet's size
@@ -22,10 +24,12 @@ still (zero-velocity updates, known gravity) the triad-to-triad differences and 
 common mode are observable; the horizontal common mode trades off against tilt, a correlation
 the filter now carries.
 
-The first 19 are REDLand's. The three gyro scale factors are our augmentation: the CFX gyro is
-specified to ±3 %, and over ~900 °/s of tumbling at impact an unmodelled 1 % scale error tilts
-the attitude by ~1° (measured: 8σ over the filter's claimed tilt σ). The triads' centripetal
-terms ω × (ω × r) make the scale factors observable during the impact.
+The first 19 are REDLand's. The gyro error matrix is our augmentation: the CFX gyro is specified
+to ±3 %, and over ~900 °/s of tumbling at impact an unmodelled 1 % scale error tilts the attitude
+by ~1° (measured: 8σ over the filter's claimed tilt σ); a 0.05° axis misalignment couples
+~0.7 °/s across axes at those rates, which left the rate estimate over-confident (rate NEES ~11
+for 3 dof over 16 seeds) with scale factors alone. The triads' centripetal terms ω × (ω × r)
+and lever-arm differences make E observable during the impact.
 
 Attitude error convention: body-frame small angle, ``q_true = q_est ⊗ exp(δθ)``.
 
@@ -56,11 +60,13 @@ import numpy as np
 from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normalize, quat_to_dcm, skew
 
 G0 = 9.80665
-N_X = 22  # core state (without accelerometer biases)
-N_E = 21
+N_X = 31  # core state (without accelerometer biases)
+N_E = 30
 SP, SV, SA, SQ, SW, SAL = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 13), slice(13, 16), slice(16, 19)
 EP, EV, EA, ETH, EW, EAL = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15), slice(15, 18)
-SS, ES = slice(19, 22), slice(18, 21)  # gyro scale-factor errors (augmentation, see module docstring)
+SS, ES = slice(19, 28), slice(18, 27)  # gyro error matrix E, row-major (augmentation, see docstring)
+GYRO_SCALE_X, GYRO_SCALE_E = np.array([19, 23, 27]), np.array([18, 22, 26])  # diagonal of E: scale factors
+SBG, EBG = slice(28, 31), slice(27, 30)  # gyro bias [rad/s]
 
 
 def bias_slices(j: int) -> tuple[slice, slice]:
@@ -223,12 +229,15 @@ def triad_model(x: np.ndarray, r_B: np.ndarray, j: int | None = None) -> tuple[n
 
 
 def gyro_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Predicted gyro rate ``(1 + s) ∘ ω`` (3,) [rad/s, body] and H (3, N_E)."""
+    """Predicted gyro rate ``(I + E) ω + b_g`` (3,) [rad/s, gyro axes = body] and H (3, n_e)."""
     H = np.zeros((3, x.size - 1))
-    w, sc = x[SW], x[SS]
-    H[:, EW] = np.diag(1.0 + sc)
-    H[:, ES] = np.diag(w)
-    return (1.0 + sc) * w, H
+    w = x[SW]
+    E = x[SS].reshape(3, 3)
+    H[:, EW] = np.eye(3) + E
+    for i in range(3):
+        H[i, ES.start + 3 * i : ES.start + 3 * i + 3] = w
+    H[:, EBG] = np.eye(3)
+    return w + E @ w + x[SBG], H
 
 
 def range_model(x: np.ndarray, point_I: np.ndarray, r_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

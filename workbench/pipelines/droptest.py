@@ -382,7 +382,11 @@ def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
     P0[rl.ETH, rl.ETH] = P_theta
     P0[rl.EW, rl.EW] = np.radians(g("filter.rate_sigma_dps", 0.5, kind="float")) ** 2 * np.eye(3)
     P0[rl.EAL, rl.EAL] = g("filter.angular_accel_sigma", 2.0, kind="float") ** 2 * np.eye(3)
-    P0[rl.ES, rl.ES] = g("sensors.gyro.scale", 0.01, kind="float") ** 2 * np.eye(3)  # datasheet 1σ
+    # gyro error matrix: scale factors on the diagonal, misalignment [rad] off it (datasheet 1σ)
+    s_sc = g("sensors.gyro.scale", 0.01, kind="float")
+    s_mis = np.radians(g("sensors.gyro.misalignment_deg", 0.05, kind="float"))
+    P0[rl.ES, rl.ES] = np.diag(np.where(np.eye(3).ravel() > 0, s_sc, s_mis) ** 2)
+    P0[rl.EBG, rl.EBG] = np.radians(g("sensors.gyro.bias_dps", 0.05, kind="float")) ** 2 * np.eye(3)
     sb = g("sensors.accelerometer.bias_g", 0.005, kind="float") * G0  # residual after zeroing, 1σ
     for j in range(len(tel.triads)):
         P0[rl.bias_slices(j)[1], rl.bias_slices(j)[1]] = sb**2 * np.eye(3)

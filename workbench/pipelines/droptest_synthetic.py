@@ -262,6 +262,7 @@ def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | Non
         accel_bias=np.array([drawn[n]["bias"] for n in TRIADS]),
         gyro_bias=drawn["gyro"]["bias"],
         gyro_scale=drawn["gyro"]["scale"],
+        gyro_error_matrix=drawn["gyro"]["matrix"],
         seed=seed,
     )
     return SyntheticDrop(telemetry=paths, truth_path=truth_path)

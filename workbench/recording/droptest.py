@@ -308,8 +308,8 @@ class DropTestRecorder:
             ("/plots/angular_accel", x[:, rl.SAL], sd[:, rl.EAL], None, ["αx", "αy", "αz"], 1.0),
             (
                 "/plots/gyro_scale",
-                100 * x[:, rl.SS],
-                100 * sd[:, rl.ES],
+                100 * x[:, rl.GYRO_SCALE_X],
+                100 * sd[:, rl.GYRO_SCALE_E],
                 None if self.truth is None else np.broadcast_to(100 * self.truth["gyro_scale"], (t.size, 3)),
                 ["sx [%]", "sy [%]", "sz [%]"],
                 1.0,

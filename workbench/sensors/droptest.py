@@ -104,7 +104,7 @@ def apply_errors(x_true: np.ndarray, model: ImuErrorModel, rng: np.random.Genera
     b = rng.normal(0.0, model.bias, 3)
     y = x_true @ (np.eye(3) + S + M).T + b + rng.normal(0.0, model.noise, x_true.shape)
     y = np.clip(y, -model.full_scale, model.full_scale)
-    return y, {"scale": np.diag(S), "bias": b}
+    return y, {"scale": np.diag(S), "bias": b, "matrix": S + M}
 
 
 def tilt_unit_vectors(u: np.ndarray, sigma: float, rng: np.random.Generator, n: int | None = None) -> np.ndarray:
