@@ -79,8 +79,10 @@ def baseline_filter(
     n = tel.t.size
     x = init.x0.copy()
     P = init.P0.copy()
-    eye = np.eye(rl.N_E)
-    H_z = np.zeros((3, rl.N_E))
+    n_e = init.P0.shape[0]  # core states + accelerometer bias blocks
+    layout = dt.layout_for(len(tel.triads))
+    eye = np.eye(n_e)
+    H_z = np.zeros((3, n_e))
     H_z[:, rl.EV] = np.eye(3)
     out = np.empty((n, 3))
     g = dt.GRAVITY
@@ -89,11 +91,11 @@ def baseline_filter(
         if k:
             dtk = tel.t[k] - tel.t[k - 1]
             x, F = rl.propagate(x, dtk, g)
-            P = F @ P @ F.T + rl.process_noise(dtk, q_accel[k], q_angular[k])
+            P = F @ P @ F.T + rl.process_noise(dtk, q_accel[k], q_angular[k], n_e)
         zs, hs, Hs, Rs = [], [], [], []
         for j, r in enumerate(tel.lever_arms_B):
             if tel.f_valid[k, j]:
-                h, H = rl.triad_model(x, r)
+                h, H = rl.triad_model(x, r, j)
                 zs.append(tel.f_B[k, j])
                 hs.append(h)
                 Hs.append(H)
@@ -118,7 +120,7 @@ def baseline_filter(
             HP = H @ P
             S = HP @ H.T + R
             K = np.linalg.solve(S, HP).T
-            x = dt.LAYOUT.boxplus(x, K @ y)
+            x = layout.boxplus(x, K @ y)
             P = (eye - K @ H) @ P
         out[k] = x[rl.SP]
     return out, time.perf_counter() - t0

@@ -218,7 +218,12 @@ def monte_carlo(
     t0 = time.perf_counter()
     if scheduler is None and workers <= 1:
         executor = "loop"
-        out = [run_seed(scenario, s, work) for s in seeds]
+        from threadpoolctl import threadpool_limits
+
+        # the same single BLAS thread as the pool workers: BLAS reductions are only bitwise
+        # reproducible for a fixed thread count, and results must not depend on the executor
+        with threadpool_limits(limits=1):
+            out = [run_seed(scenario, s, work) for s in seeds]
     elif scheduler is None:
         executor = f"process pool ({workers} workers)"
         ctx = mp.get_context()
