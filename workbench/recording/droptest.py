@@ -423,6 +423,7 @@ class DropTestRecorder:
             t,
             h.closest_point_I[:, None],
             [[f"stroke {d:.3f} ± {s:.3f} m (1σ)"] for d, s in zip(h.distance, h.sigma, strict=True)],
+            step=step,
         )
         # stroke plot with ±1σ and ±3σ, forward pass and truth
         r.scalars(

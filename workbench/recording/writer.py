@@ -608,12 +608,12 @@ class Recorder:
         if static_style:
             self._log_static(entity, rr.Points3D.from_fields(**static_style))
 
-    def text_labels_series(self, entity: str, t: Any, positions: Any, labels: Any) -> None:
+    def text_labels_series(self, entity: str, t: Any, positions: Any, labels: Any, *, step: Any = None) -> None:
         """Labelled points per step: positions (n, 3) or (n, k, 3) [m]; labels k strings (static) or (n, k).
 
         The labels are drawn next to the points in the 3D view (``show_labels`` on).
         """
-        idx, n = self._index(t, step=None)
+        idx, n = self._index(t, step)
         p = np.asarray(positions, dtype=np.float64)
         if p.ndim == 2:
             p = p[:, None, :]
