@@ -1,4 +1,4 @@
-"""Command line: ``workbench list | run | inspect``.
+"""Command line: ``workbench list | run | mc | inspect``.
 
 Exit codes (scripts can rely on them):
   0  success
@@ -152,6 +152,31 @@ def cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_mc(args: argparse.Namespace) -> int:
+    """Monte Carlo of a synthetic drop-test scenario: consistency statistics + a recording."""
+    from workbench.io.results import write_summary
+    from workbench.io.scenario import resolve_scenario
+    from workbench.pipelines.droptest_mc import monte_carlo, summarize_mc
+    from workbench.recording.montecarlo import record_monte_carlo
+
+    sc = resolve_scenario(args.scenario, _assets_dir())
+    if sc.kind != "droptest" or not sc.is_synthetic:
+        raise NotImplementedError(f"{sc.path}: Monte Carlo needs a synthetic droptest scenario")
+    out = Path(args.out)
+    seeds = list(range(args.first_seed, args.first_seed + args.seeds))
+    _progress(f"[{sc.name}] Monte Carlo: {len(seeds)} runs ({args.scheduler or f'{args.workers} local worker(s)'}) ...")
+    res = monte_carlo(sc, seeds, out / f"{sc.name}_mc_work", scheduler=args.scheduler, workers=args.workers)
+    summary = summarize_mc(res)
+    rrd = record_monte_carlo(out / f"{sc.name}_mc.rrd", f"{sc.name} Monte Carlo", res, summary)
+    write_summary(out / f"{sc.name}.mc.json", summary)
+    _progress(
+        f"[{sc.name}] truth inside 3σ in {100 * summary['fraction_inside_3sigma']:.0f} % of runs, "
+        f"median 3σ {100 * summary['median_3sigma_m']:.1f} cm, max-stroke ANEES "
+        f"{summary['anees_stroke']:.2f}; wrote {rrd} in {res.total_wall_s:.0f} s"
+    )
+    return EXIT_OK
+
+
 def cmd_inspect(args: argparse.Namespace) -> int:
     """Print what a recording holds: entities, timelines, time range, row counts, scorecard."""
     from workbench.recording.reader import read_recording
@@ -168,10 +193,11 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     for tl in data.timelines():
         lo, hi = data.time_range(tl)
         print(f"timeline {tl}: {lo} .. {hi}")
-    print(f"{len(data.entities())} entities:")
+    tls = data.timelines()
+    print(f"{len(data.entities())} entities (rows per timeline: {', '.join(tls) or 'static only'}):")
     for e in data.entities():
-        rows = data.row_count(e, "time") if "time" in data.timelines() else 0
-        print(f"  {e:60s} {rows:7d} rows")
+        rows = " ".join(f"{data.row_count(e, tl):7d}" for tl in tls)
+        print(f"  {e:60s} {rows}")
     try:
         print("\n" + data.text_document("/report"))
     except (KeyError, ValueError):
@@ -191,6 +217,14 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--seed", type=int, default=None, help="random seed of the synthetic sensors")
     sp.add_argument("--export", action="store_true", help="also write the reconstructed histories as CSV")
     sp.set_defaults(func=cmd_run)
+    sp = sub.add_parser("mc", help="Monte Carlo consistency of a synthetic drop-test scenario")
+    sp.add_argument("scenario")
+    sp.add_argument("--seeds", type=int, default=20, help="number of runs (default 20)")
+    sp.add_argument("--first-seed", type=int, default=1)
+    sp.add_argument("--workers", type=int, default=2, help="local worker processes without --scheduler")
+    sp.add_argument("--scheduler", default=None, help="dask: 'local' (LocalCluster) or 'tcp://host:8786'")
+    sp.add_argument("--out", default="recordings")
+    sp.set_defaults(func=cmd_mc)
     sp = sub.add_parser("inspect", help="summarise a .rrd recording and print its scorecard")
     sp.add_argument("recording")
     sp.add_argument("--json", action="store_true", help="machine-readable summary")

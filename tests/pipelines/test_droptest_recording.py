@@ -182,11 +182,11 @@ def test_inspect_prints_entities_and_scorecard(droptest_run, rec, capsys):
     out = capsys.readouterr().out
     assert code == 0
     n = droptest_run.summary["steps"]
-    assert f"{len(rec.entities())} entities:" in out
+    assert f"{len(rec.entities())} entities (rows per timeline: step, time):" in out
     for e in (layout.VEHICLE, layout.UNCERTAINTY, "/plots/stroke/value", layout.REPORT):
         assert e in out
     vehicle_line = next(ln for ln in out.splitlines() if ln.split()[:1] == [layout.VEHICLE])
-    assert vehicle_line.split()[1] == str(n)
+    assert vehicle_line.split()[1:] == [str(n), str(n)]  # one pose row per step on both timelines
     assert "scorecard" in out and "max stroke" in out
 
 
@@ -234,3 +234,23 @@ def test_user_telemetry_same_code_path(droptest_run, tmp_path):
     assert abs(s["max_stroke"]["distance_m"] - ref["distance_m"]) <= 1e-9
     assert s["max_stroke"]["time_s"] == ref["time_s"]
     assert s["max_stroke"]["sigma_m"] == pytest.approx(ref["sigma_m"], rel=1e-12)
+
+
+def test_monte_carlo_command_writes_a_recording(tmp_path, capsys):
+    """`workbench mc` runs the members, writes the summary JSON and one row per member on `sample`."""
+    from workbench.recording.reader import read_recording, verify
+
+    code = main(["mc", "droptest", "--seeds", "2", "--out", str(tmp_path)])
+    assert code == 0
+    data = read_recording(tmp_path / "droptest_mc.rrd")
+    assert verify(tmp_path / "droptest_mc.rrd")[0]
+    assert data.timelines() == ["sample"]
+    assert data.row_count("/plots/mc/stroke/error", "sample") == 2
+    t, err = data.scalars("/plots/mc/stroke/error", timeline="sample")
+    _, plus = data.scalars("/plots/mc/stroke/plus_3sigma", timeline="sample")
+    summary = json.loads((tmp_path / "droptest.mc.json").read_text())
+    assert summary["n_runs"] == 2
+    # the logged ±3σ band is the reported 3σ of each member (median matches the summary)
+    assert np.isclose(np.median(plus), summary["median_3sigma_m"])
+    assert np.all(np.isfinite(err)) and list(t) == [1, 2]
+    assert "Monte Carlo" in data.text_document("/report")
