@@ -246,3 +246,61 @@ def test_non_unit_3dm_vectors_are_normalised(droptest_run, tmp_path):
         np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=0, atol=1e-8)
     np.testing.assert_allclose(b.q0 * np.sign(b.q0 @ a.q0), a.q0, rtol=0, atol=1e-8)
     np.testing.assert_allclose(b.P_theta, a.P_theta, rtol=1e-6)
+
+
+# ------------------------------------------------------------------------------ setup / events files
+
+
+def test_missing_release_event_is_a_located_input_error(droptest_run, tmp_path):
+    from workbench.io.scenario import ScenarioError
+
+    paths = _copy_telemetry(droptest_run, tmp_path)
+    paths["events"].write_text("time [s],event\n1.2,bungee_cut\n")
+    with pytest.raises(ScenarioError) as ei:
+        _load(droptest_run, paths)
+    assert ei.value.file == str(paths["events"]) and "release" in str(ei.value)
+
+
+def test_incomplete_setup_names_the_missing_key(droptest_run, tmp_path):
+    from workbench.io.scenario import ScenarioError
+
+    paths = _copy_telemetry(droptest_run, tmp_path)
+    text = paths["setup"].read_text()
+    paths["setup"].write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith("count")) + "\n")
+    with pytest.raises(ScenarioError) as ei:
+        _load(droptest_run, paths)
+    assert ei.value.key == "bungee.count" and str(paths["setup"]) in str(ei.value)
+
+
+def test_bad_filter_mode_through_the_cli_is_exit_code_3(droptest_run, tmp_path, capsys):
+    """A user scenario with a wrong key value: the CLI prints the located error, exit code 3."""
+    from workbench.cli import main
+
+    paths = _copy_telemetry(droptest_run, tmp_path / "tel")
+    src = droptest_run.scenario.path.read_text()
+    body = src.split("[synthetic]")[0].replace('mode = "kinematic"', 'mode = "kinematc"')
+    body = body.replace(
+        'lander = "../landers/mer_drop_lander.toml"', f'lander = "{droptest_run.scenario.path_of("vehicle.lander")}"'
+    )
+    tel = "\n".join(f'{k} = "{v}"' for k, v in paths.items())
+    user = tmp_path / "user.toml"
+    user.write_text(body.replace('name = "droptest"', 'name = "user_drop"') + "\n[telemetry]\n" + tel + "\n")
+    assert main(["run", str(user), "--out", str(tmp_path / "out")]) == 3
+    err = capsys.readouterr().err
+    assert "filter.mode" in err and "kinematc" in err and str(user) in err
+    assert not list((tmp_path / "out").glob("*.rrd"))  # nothing half-written
+
+
+def test_3dm_is_averaged_only_while_hanging(droptest_run, tmp_path):
+    """3DM rows after release (the lander tumbling) must not enter the initial attitude."""
+    paths = _copy_telemetry(droptest_run, tmp_path)
+    tel0 = _load(droptest_run, paths)
+    init0 = dt.initial_state(droptest_run.scenario, tel0)
+
+    def add_tumbling_rows(header, rows):
+        extra = [[f"{0.1 + 0.01 * i:.3f}", "1", "0", "0", "0", "1", "0"] for i in range(50)]
+        return header, rows + extra
+
+    _edit_csv(paths["attitude_3dm"], add_tumbling_rows)
+    init1 = dt.initial_state(droptest_run.scenario, _load(droptest_run, paths))
+    np.testing.assert_allclose(init1.q0, init0.q0, atol=1e-12)

@@ -1,4 +1,5 @@
-"""The REDLand 19-state drop-test filter model: state, transition, Jacobians, measurement models.
+"""The REDLand drop-test filter model (19 states of the paper + augmentations): state, transition,
+Jacobians, measurement models.
 
 State (19, full) and error state (18), after the REDLand paper ("Algorithm", Eq. 9–19):
 
@@ -182,7 +183,7 @@ def propagate(
 
 
 def accel_inertial(x: np.ndarray) -> np.ndarray:
-    """Non-gravitational CM acceleration in SPF [m/s²] (..., 3) from full states (..., 19)."""
+    """Non-gravitational CM acceleration in SPF [m/s²] (..., 3) from full states (..., n_x)."""
     C = quat_to_dcm(x[..., SQ])
     return np.einsum("...ij,...j->...i", C, x[..., SA])
 
@@ -241,7 +242,7 @@ def gyro_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def range_model(x: np.ndarray, point_I: np.ndarray, r_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Range [m] (1,) from a fixed SPF point to the lander point at lever arm r_B, and H (1, N_E)."""
+    """Range [m] (1,) from a fixed SPF point to the lander point at lever arm r_B, and H (1, n_e)."""
     C = quat_to_dcm(x[SQ])
     d = x[SP] + C @ r_B - point_I
     rho = float(np.linalg.norm(d))
@@ -253,7 +254,7 @@ def range_model(x: np.ndarray, point_I: np.ndarray, r_B: np.ndarray) -> tuple[np
 
 
 def range_rate_model(x: np.ndarray, point_I: np.ndarray, r_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Range rate [m/s] (1,) of the lander point r_B seen from a fixed SPF point, and H (1, N_E)."""
+    """Range rate [m/s] (1,) of the lander point r_B seen from a fixed SPF point, and H (1, n_e)."""
     C = quat_to_dcm(x[SQ])
     d = x[SP] + C @ r_B - point_I
     rho = float(np.linalg.norm(d))

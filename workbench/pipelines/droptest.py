@@ -7,7 +7,8 @@ Stages, each yielded as a frozen dataclass so that the recorder (or a test) can 
    channels and gaps found and turned into *visible* degradations (never silently integrated).
 2. :class:`InitialState` — algebraic (TRIAD) attitude from the 3DM gravity/magnetic pair with its
    covariance mapped from the vector uncertainties; position from the surveyed hanging point.
-3. :class:`FilterStage` ``forward`` — the REDLand 19-state EKF (kinematic or dynamic mode), the
+3. :class:`FilterStage` ``forward`` — the REDLand EKF (19 states of the paper + gyro error matrix and
+   bias + per-triad accelerometer biases; kinematic or dynamic mode), the
    four triads through their lever arms, the gyro, zero-velocity updates while hanging, optional
    odometer / radar-gun ranges; process noise raised on rapid acceleration changes.
 4. :class:`FilterStage` ``smoothed`` — RTS smoother over the forward pass.
@@ -78,11 +79,14 @@ def layout_for(n_triads: int) -> ErrorStateLayout:
 class DropTelemetry:
     """Validated telemetry on the filter's time grid.
 
-    ``t`` (n,) [s from release], already shifted back by ``group_delay_s``; ``f_B`` (n, 4, 3)
-    triad specific forces [m/s², body] in the order of ``triads``; ``f_valid`` (n, 4) bool;
+    ``t`` (n,) [s from release], already shifted back by ``group_delay_s``; ``f_B`` (n, n_triads, 3)
+    triad specific forces [m/s², body] in the order of ``triads``; ``f_valid`` (n, n_triads) bool;
     ``w_B`` (n, 3) gyro rates [rad/s, body]; ``w_valid`` (n,) bool; ``hanging`` (n,) bool (before
     the release event); ``events`` name -> time [s]; ``degradations`` human-readable list of
     what was dropped or bridged and why; ``raw`` the files as read (for ``/sensors``).
+    ``jerk`` (n,) measured jerk indicator [m/s³] that raises the process noise; ``counts`` the IMU
+    samples averaged into each step, per triad (n, n_triads) and for the gyro (n,); ``rate_hz`` the
+    filter rate actually used (a whole number of IMU samples per step).
     """
 
     t: np.ndarray
@@ -101,6 +105,8 @@ class DropTelemetry:
     attitude: Telemetry
     ranging: Telemetry | None
     jerk: np.ndarray
+    counts: tuple[np.ndarray, np.ndarray]
+    rate_hz: float
 
 
 @dataclass(frozen=True)
@@ -187,11 +193,16 @@ def _read_setup(path: Path) -> dict:
         with open(path, "rb") as f:
             d = tomllib.load(f)
     except (OSError, tomllib.TOMLDecodeError) as err:
-        raise ScenarioError(f"{path}: cannot read the setup file: {err}") from err
-    for key in ("hanging.position_m", "hanging.position_sigma_m"):
+        raise ScenarioError(path, None, f"cannot read the setup file: {err}") from err
+    required = ["hanging.position_m", "hanging.position_sigma_m"]
+    if "bungee" in d:  # the test plan is optional, but complete when given (dynamic mode, odometer)
+        required += [
+            f"bungee.{k}" for k in ("anchor_m", "rest_length_m", "coefficients", "count", "attach_body_m", "mass_kg")
+        ]
+    for key in required:
         a, b = key.split(".")
-        if b not in d.get(a, {}):
-            raise ScenarioError(f"{path}: missing key '{key}'")
+        if not isinstance(d.get(a), dict) or b not in d[a]:
+            raise ScenarioError(path, key, "missing")
     return d
 
 
@@ -226,20 +237,39 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
                     f"{norms.max():.3f}, worst at row {k + 1}); only their directions are used",
                 )
             )
-    events = {}
+    events: dict[str, float] = {}
+    dup_log: list[tuple[float, str, str]] = []
     for t_e, name in ev_list:
-        events.setdefault(name, t_e)
+        if name in events:
+            dup_log.append(
+                (
+                    float(t_e),
+                    "WARN",
+                    f"{paths['events']}: event '{name}' repeated at {t_e:.4f} s; "
+                    f"the first, at {events[name]:.4f} s, is used",
+                )
+            )
+            continue
+        events[name] = t_e
     if "release" not in events:
-        raise ScenarioError(f"{paths['events']}: no 'release' event: the reconstruction needs the release time")
+        raise ScenarioError(paths["events"], None, "no 'release' event: the reconstruction needs the release time")
     setup = _read_setup(paths["setup"])
     ranging = None
     if "ranging" in paths:
-        ranging = read_telemetry(paths["ranging"])
+        spec = RangingSpec.from_scenario(scenario)
+        req = {"odometer": "length"} if spec.odometer else {}
+        for gun in spec.guns:
+            req.update({f"{gun}.range": "length", f"{gun}.rate": "velocity"})
+        ranging = read_telemetry(paths["ranging"], required=req, sparse=[k for k in req])
     missing = [n for n in triads if n not in lander.instruments]
     if missing:
-        raise ScenarioError(f"{scenario.path}: triads {missing} have no lever arm in the lander asset")
+        raise ScenarioError(
+            scenario.path,
+            "sensors.accelerometer.triads",
+            f"triads {missing} have no lever arm in the lander asset's [instruments]",
+        )
 
-    log: list[tuple[float, str, str]] = list(att_log)
+    log: list[tuple[float, str, str]] = list(att_log) + dup_log
     n_raw = len(imu)
     f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
     w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])
@@ -285,7 +315,7 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
                     "triad excluded from the reconstruction",
                 )
         if not f_ok.any():
-            raise ScenarioError(f"{paths['imu']}: no usable accelerometer triad")
+            raise ScenarioError(paths["imu"], None, "no usable accelerometer triad (all dead)")
     for gap in imu.gaps:
         _degrade(
             log,
@@ -296,9 +326,10 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
         )
 
     # average down to the filter rate (boxcar of k samples, grouped on the uniform sample grid)
-    rate = g("filter.rate_hz", 1000.0, kind="float")
+    rate_req = g("filter.rate_hz", 1000.0, kind="float")
     dt_raw = float(np.median(np.diff(imu.time)))
-    k = max(1, int(round(1.0 / (rate * dt_raw))))
+    k = max(1, int(round(1.0 / (rate_req * dt_raw))))
+    rate = 1.0 / (k * dt_raw)  # the grid actually used: a whole number k of IMU samples per step
     slot = np.floor((imu.time - imu.time[0]) / (k * dt_raw) + 1e-6).astype(int)
     starts = np.flatnonzero(np.r_[True, np.diff(slot) != 0])
     counts = np.diff(np.r_[starts, n_raw])
@@ -320,7 +351,12 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
 
     # measured jerk indicator (centred difference of 10 ms means of the mean triad force)
     fbar = np.where(f_cnt[..., None] > 0, f_B, np.nan)
-    fbar = np.nanmean(fbar, axis=1)
+    with np.errstate(invalid="ignore"):
+        fbar = np.nanmean(fbar, axis=1)
+    ok_rows = np.flatnonzero(np.all(np.isfinite(fbar), axis=1))
+    if ok_rows.size:  # slots with no valid triad: hold the last valid mean (no artificial jerk spike)
+        fill = ok_rows[np.clip(np.searchsorted(ok_rows, np.arange(fbar.shape[0]), side="right") - 1, 0, None)]
+        fbar = fbar[fill]
     L = max(1, int(round(0.010 * rate)))
     ker = np.ones(L) / L
     sm = np.stack([np.convolve(np.nan_to_num(fbar[:, i]), ker, mode="same") for i in range(3)], 1)
@@ -346,6 +382,8 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
         attitude=att,
         ranging=ranging,
         jerk=jerk,
+        counts=(f_cnt.astype(int), w_cnt.astype(int)),
+        rate_hz=rate,
     )
 
 
@@ -355,11 +393,21 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
 
 
 def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
-    """Initial state and covariance at the first filter time (lander hanging at rest)."""
+    """Initial state and covariance at the first filter time (lander hanging at rest).
+
+    The 3DM unit vectors are averaged over the samples before the release event only.
+    """
     g = scenario.get
     att = tel.attitude
-    up_B = att.stack(["up.x", "up.y", "up.z"]).mean(0)
-    mag_B = att.stack(["mag.x", "mag.y", "mag.z"]).mean(0)
+    hang = att.time < tel.events["release"]  # the 3DM reading is only valid while the lander hangs still
+    if not hang.any():
+        raise ScenarioError(
+            att.path,
+            None,
+            "no 3DM sample before the release event: the initial attitude needs the lander hanging still",
+        )
+    up_B = att.stack(["up.x", "up.y", "up.z"])[hang].mean(0)
+    mag_B = att.stack(["mag.x", "mag.y", "mag.z"])[hang].mean(0)
     up_B /= np.linalg.norm(up_B)
     mag_B /= np.linalg.norm(mag_B)
     mag_I = g("chamber.magnetic_field_spf", kind="vec3")
@@ -437,18 +485,19 @@ def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lan
     g = scenario.get
     mode = g("filter.mode", "kinematic", kind="str")
     if mode not in ("kinematic", "dynamic"):
-        raise ScenarioError(f"{scenario.path}: filter.mode must be 'kinematic' or 'dynamic', got {mode!r}")
+        raise ScenarioError(scenario.path, "filter.mode", f"must be 'kinematic' or 'dynamic', got {mode!r}")
     bungee = _bungee(tel.setup) if mode == "dynamic" else None
     if mode == "dynamic" and bungee is None:
-        raise ScenarioError(f"{scenario.path}: filter.mode = 'dynamic' needs a [bungee] table in the setup file")
+        raise ScenarioError(scenario.path, "filter.mode", "'dynamic' needs a [bungee] table in the setup file")
     t_rel = tel.events["release"]
     t_cut = tel.events.get("bungee_cut", np.inf)
 
-    rate = g("filter.rate_hz", 1000.0, kind="float")
-    dt_raw = float(np.median(np.diff(tel.imu.time)))
-    n_avg = max(1, int(round(1.0 / (rate * dt_raw))))
-    r_acc = (g("sensors.accelerometer.noise_g", 0.2, kind="float") * G0) ** 2 / n_avg * np.eye(3)
-    r_gyr = np.radians(g("sensors.gyro.noise_dps", 0.4, kind="float")) ** 2 / n_avg * np.eye(3)
+    rate = tel.rate_hz
+    # per-sample noise divided by the number of samples actually averaged into each step
+    v_acc = (g("sensors.accelerometer.noise_g", 0.2, kind="float") * G0) ** 2
+    v_gyr = np.radians(g("sensors.gyro.noise_dps", 0.4, kind="float")) ** 2
+    n_f, n_w = tel.counts
+    eye3 = np.eye(3)
     r_zupt = g("filter.hang_zupt_sigma_mps", 0.005, kind="float") ** 2 * np.eye(3)
 
     # process noise schedule: floor + gain * (measured jerk)^2 * dt (REDLand: raised on rapid
@@ -493,9 +542,9 @@ def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lan
         for j, name in enumerate(tel.triads):
             if tel.f_valid[k, j]:
                 m = triad_memos[j]
-                out.append(Measurement(name, tel.f_B[k, j], r_acc, m.h, m.H))
+                out.append(Measurement(name, tel.f_B[k, j], v_acc / n_f[k, j] * eye3, m.h, m.H))
         if tel.w_valid[k]:
-            out.append(Measurement("gyro", tel.w_B[k], r_gyr, gyro_memo.h, gyro_memo.H))
+            out.append(Measurement("gyro", tel.w_B[k], v_gyr / n_w[k] * eye3, gyro_memo.h, gyro_memo.H))
         if tel.hanging[k]:
             out.append(Measurement("zupt", np.zeros(3), r_zupt, lambda x: x[rl.SV], H_zupt))
         for meas in ranging.get(k, ()):
@@ -547,7 +596,7 @@ def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, l
     b = tel.setup.get("bungee", {})
     if "odometer" in rt.channels:
         if not b:
-            raise ScenarioError(f"{rt.path}: an odometer channel needs a [bungee] table in the setup file")
+            raise ScenarioError(rt.path, None, "an odometer channel needs a [bungee] table in the setup file")
         anchor = np.asarray(b["anchor_m"], float)
         attach = np.asarray(b["attach_body_m"], float)
         s2 = np.array([[spec.odometer_sigma**2]])
@@ -560,34 +609,22 @@ def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, l
     r_ref = spec.reflector_B
     for name, G in spec.guns.items():
         if f"{name}.range" not in rt.channels or f"{name}.rate" not in rt.channels:
-            raise ScenarioError(f"{rt.path}: radar gun {name} configured but no columns '{name}.range', '{name}.rate'")
+            raise ScenarioError(
+                rt.path, None, f"radar gun {name} configured but no columns '{name}.range', '{name}.rate'"
+            )
         zr = rt.channel(f"{name}.range")
         zrr = rt.channel(f"{name}.rate")
-        for i in np.flatnonzero(near):
+        for i in np.flatnonzero(near & (np.isfinite(zr) | np.isfinite(zrr))):  # sparse columns: empty = NaN
             dt_i = float(off[i])
             mr = _Memo(_at_time(lambda x, G=G: rl.range_model(x, G, r_ref), dt_i))
             mrr = _Memo(_at_time(lambda x, G=G: rl.range_rate_model(x, G, r_ref), dt_i))
             lst = out.setdefault(int(idx[i]), [])
-            lst.append(
-                Measurement(
-                    f"{name}.range",
-                    np.array([zr[i]]),
-                    np.array([[spec.range_sigma**2]]),
-                    mr.h,
-                    mr.H,
-                    gate_probability=0.9999,
-                )
-            )
-            lst.append(
-                Measurement(
-                    f"{name}.rate",
-                    np.array([zrr[i]]),
-                    np.array([[spec.rate_sigma**2]]),
-                    mrr.h,
-                    mrr.H,
-                    gate_probability=0.9999,
-                )
-            )
+            if np.isfinite(zr[i]):
+                R_r = np.array([[spec.range_sigma**2]])
+                lst.append(Measurement(f"{name}.range", np.array([zr[i]]), R_r, mr.h, mr.H, gate_probability=0.9999))
+            if np.isfinite(zrr[i]):
+                R_rr = np.array([[spec.rate_sigma**2]])
+                lst.append(Measurement(f"{name}.rate", np.array([zrr[i]]), R_rr, mrr.h, mrr.H, gate_probability=0.9999))
     return out
 
 
@@ -650,9 +687,10 @@ def stroke_stage(
         a, b = i0 - 1, min(i1 + 1, smo.t.size - 1)
         P_cross = _smoothed_cross_cov(smo, a, b)
         P_v = smo.P[:, rl.EV, rl.EV]
-        e = restitution(smo.t, smo.x[:, rl.SV], P_v, surface.normal, a, b, P_cross=P_cross[rl.EV, rl.EV])
-        if not smo.x[b, rl.SV] @ surface.normal > 0.0:  # still moving into the ramp: no rebound
-            e = (np.nan, np.nan)
+        v_in, v_out = smo.x[a, rl.SV] @ surface.normal, smo.x[b, rl.SV] @ surface.normal
+        if v_in < 0.0 < v_out:  # approaching before, leaving after: a rebound to measure
+            e = restitution(smo.t, smo.x[:, rl.SV], P_v, surface.normal, a, b, P_cross=P_cross[rl.EV, rl.EV])
+        # otherwise undefined (no rebound, or the detected interval is not an impact): NaN
     return StrokeStage(
         smoothed=hist,
         forward=hist_f,

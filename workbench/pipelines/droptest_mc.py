@@ -235,7 +235,12 @@ def monte_carlo(
             futs = [pool.submit(run_seed, scenario, s, work) for s in seeds]
             out = [f.result() for f in futs]
     else:
-        from distributed import Client, LocalCluster
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError as err:
+            raise NotImplementedError(
+                "a dask scheduler needs the optional dask extra: .venv/bin/pip install -e '.[dask]'"
+            ) from err
 
         if scheduler == "local":
             executor = "dask LocalCluster (2 workers x 1 thread, processes)"

@@ -184,7 +184,7 @@ def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | Non
     }
 
     # 3DM while hanging: gravity (accelerometer set measures -g => "up") and magnetic field
-    m_spf = scenario.get("chamber.magnetic_field_spf", [0.12, 0.33, -0.936], kind="vec3")
+    m_spf = scenario.get("chamber.magnetic_field_spf", kind="vec3")  # required, as in the reconstruction
     m_spf = m_spf / np.linalg.norm(m_spf)
     sg = np.radians(scenario.get("sensors.attitude_3dm.gravity_sigma_deg", 0.2, kind="float"))
     sm = np.radians(scenario.get("sensors.attitude_3dm.magnetic_sigma_deg", 1.0, kind="float"))
