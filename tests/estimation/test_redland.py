@@ -26,7 +26,7 @@ def _boxminus(x1, x0):
 @pytest.fixture
 def x():
     rng = np.random.default_rng(3)
-    x = np.empty(rl.N_X)
+    x = np.zeros(rl.N_X)  # every entry set below: np.empty once left new states as garbage
     x[0:3] = [0.5, -3.0, 6.0]
     x[3:6] = rng.normal(0, 5, 3)
     x[6:9] = rng.normal(0, 30, 3)
@@ -34,6 +34,7 @@ def x():
     x[13:16] = rng.normal(0, 3, 3)
     x[16:19] = rng.normal(0, 50, 3)
     x[rl.SS] = rng.normal(0, 0.01, 9)
+    x[rl.SBG] = rng.normal(0, 1e-3, 3)
     return x
 
 

@@ -56,6 +56,9 @@ __all__ = [
 def skew(v: np.ndarray) -> np.ndarray:
     """Cross-product matrix ``[v×]`` so that ``skew(a) @ b == cross(a, b)``; shape (..., 3) -> (..., 3, 3)."""
     v = np.asarray(v, dtype=float)
+    if v.ndim == 1:  # single vector: the filter's hot path (np.stack costs ~10x more here)
+        x, y, w = v
+        return np.array([[0.0, -w, y], [w, 0.0, -x], [-y, x, 0.0]])
     z = np.zeros(v.shape[:-1])
     x, y, w = v[..., 0], v[..., 1], v[..., 2]
     return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)

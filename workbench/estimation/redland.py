@@ -216,16 +216,17 @@ def triad_model(x: np.ndarray, r_B: np.ndarray, j: int | None = None) -> tuple[n
     ``b_j`` is the triad's bias state when ``j`` is given and the state carries bias blocks.
     """
     aB, w, al = x[SA], x[SW], x[SAL]
-    wr = np.cross(w, r_B)
-    z = aB + np.cross(al, r_B) + np.cross(w, wr)
+    Sw, Sr = skew(w), skew(r_B)
+    wr = Sw @ r_B
+    z = aB - Sr @ al + Sw @ wr  # a_B + α × r + ω × (ω × r), with α × r = −[r×] α
     H = np.zeros((3, x.size - 1))
     if j is not None and x.size >= N_X + 3 * (j + 1):
         sx, se = bias_slices(j)
         z = z + x[sx]
         H[:, se] = np.eye(3)
     H[:, EA] = np.eye(3)
-    H[:, EW] = -skew(wr) - skew(w) @ skew(r_B)
-    H[:, EAL] = -skew(r_B)
+    H[:, EW] = -skew(wr) - Sw @ Sr
+    H[:, EAL] = -Sr
     return z, H
 
 
