@@ -43,6 +43,8 @@ __all__ = [
     "iau_pole_and_meridian",
     "meridian_rate",
     "C_bodyfixed_inertial",
+    "C_mmed_icrf",
+    "C_bodyfixed_mmed",
     "inertial_to_bodyfixed",
     "bodyfixed_to_inertial",
     "planetocentric_from_cartesian",
@@ -172,6 +174,27 @@ def C_bodyfixed_inertial(body: Body, jd_tdb: np.ndarray | float) -> np.ndarray:
     """
     alpha, delta, W = iau_pole_and_meridian(body, jd_tdb)
     return _frame_rot(2, W) @ _frame_rot(0, 0.5 * np.pi - delta) @ _frame_rot(2, 0.5 * np.pi + alpha)
+
+
+def C_mmed_icrf(body: Body) -> np.ndarray:
+    """Constant DCM ``C_M_ICRF`` (3, 3) from ICRF axes to the body's mean-equator frame of J2000 ("MMED").
+
+    MMED (SPICE name for Mars: "Mars Mean Equator and IAU vector of J2000", used by AMELIA):
+    +Z is the IAU pole at J2000, +X the ascending node of the body equator on the ICRF equator
+    at J2000 (the "IAU vector").  ``C_M_ICRF = Rx(90° − δ0) Rz(90° + α0)`` at J2000.0, i.e.
+    :func:`C_bodyfixed_inertial` without the spin ``Rz(W)``.
+    """
+    alpha, delta, _ = iau_pole_and_meridian(body, J2000_JD)
+    return _frame_rot(0, 0.5 * np.pi - delta) @ _frame_rot(2, 0.5 * np.pi + alpha)
+
+
+def C_bodyfixed_mmed(body: Body, jd_tdb: np.ndarray | float) -> np.ndarray:
+    """DCM ``C_F_M`` (..., 3, 3) from the MMED frame (:func:`C_mmed_icrf`) to the IAU body-fixed frame.
+
+    ``C_F_M = C_F_ICRF(jd) C_M_ICRFᵀ``.  For Mars over a few years this is ``Rz(W')`` to within
+    the pole drift (~0.002°/yr); vectorised over ``jd_tdb`` (Julian date, TDB).
+    """
+    return C_bodyfixed_inertial(body, jd_tdb) @ C_mmed_icrf(body).T
 
 
 def _omega_F(body: Body, jd_tdb) -> np.ndarray:

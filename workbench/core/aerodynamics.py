@@ -1,0 +1,389 @@
+"""Aerodynamic database of an entry vehicle: capsule / descent-module tables, parachute, mass properties.
+
+The Schiaparelli AErodynamic DataBase (AEDB) tabulates the axial and normal coefficients of the
+descent module and of the parachute against Knudsen number, Mach number and angle of attack
+(AMELIA Sect. 9).  This module holds such tables (:class:`AeroTable`, :class:`ParachuteTable`),
+the vehicle that carries them (:class:`EntryVehicle`) and the TOML loader (:func:`load_vehicle`,
+e.g. ``assets/vehicles/schiaparelli.toml``).
+
+Conventions (GNC body frame G, origin at the CoG, +Z along the symmetry axis towards the back
+shell; during entry the air-relative velocity is along −Z_G):
+
+* Total angle of attack ``α`` [rad] = angle between −Z_G and the air-relative velocity of the
+  vehicle ``v_rel_G``: ``cos α = −v_rel_G[2] / |v_rel_G|``.
+* Axial force ``F_Z = +CA q S`` along +Z_G (drag of the heat shield gives +Z specific force).
+* Normal force ``F_⊥ = −CN q S e_⊥`` with ``e_⊥`` the unit lateral part ``(vx, vy, 0)/|·|`` of
+  ``v_rel_G``: CN > 0 pushes against the lateral velocity (standard body-axis convention,
+  N along −z_b for α > 0).  A 70° sphere-cone has small positive CN, hence negative lift.
+* Pitching moment about the CoG ``M = Cm q S L k̂`` with ``k̂ = unit(v̂_rel × (−Z_G))``, the axis
+  about which a positive rotation *increases* α: Cm < 0 is restoring (statically stable).
+* Pitch damping ``M_q = Cmq q S L² / (2V) ω_⊥`` with ``ω_⊥ = (ωx, ωy, 0)``; Cmq < 0 damps.
+* ``q = ½ ρ V²`` [Pa] with V = |v_rel|, S = ``ref_area`` [m²], L = ``ref_length`` [m].
+* Knudsen number ``Kn = λ / L`` on the vehicle diameter (``Atmosphere.knudsen``).
+
+Tables interpolate trilinearly in (Mach, log10 Kn, α) and clamp outside the grid (the end-node
+values hold), so the database is always defined.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["AeroTable", "ParachuteTable", "EntryVehicle", "load_vehicle", "knudsen_bridge"]
+
+
+def _locate(grid: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lower node index (..,) and clamped weight in [0, 1] of x on a strictly increasing grid (n ≥ 2)."""
+    i = np.clip(np.searchsorted(grid, x, side="right") - 1, 0, grid.size - 2)
+    w = np.clip((x - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0)
+    return i, w
+
+
+def _locate_scalar(grid: list[float], x: float) -> tuple[int, float]:
+    n = len(grid)
+    i = min(max(bisect.bisect_right(grid, x) - 1, 0), n - 2)
+    g0, g1 = grid[i], grid[i + 1]
+    w = (x - g0) / (g1 - g0)
+    return i, (0.0 if w < 0.0 else 1.0 if w > 1.0 else w)
+
+
+def knudsen_bridge(kn: np.ndarray, kn_continuum: float = 1e-3, kn_free_molecular: float = 10.0) -> np.ndarray:
+    """Bridging weight in [0, 1] between continuum (0) and free-molecular (1) coefficients.
+
+    ``B = sin²(π/2 · (log10 Kn − log10 Kn_c) / (log10 Kn_fm − log10 Kn_c))`` clamped outside
+    ``[Kn_c, Kn_fm]``; with the defaults 1e-3 and 10 it is the classic Mars Pathfinder / Viking
+    bridging ``sin²(π/8 (3 + log10 Kn))`` (Wilmoth et al., "Rarefied transitional bridging of
+    blunt body aerodynamics", 1998).  ``kn`` any shape [-].
+    """
+    x = (np.log10(np.asarray(kn, dtype=float)) - math.log10(kn_continuum)) / (
+        math.log10(kn_free_molecular) - math.log10(kn_continuum)
+    )
+    return np.sin(0.5 * np.pi * np.clip(x, 0.0, 1.0)) ** 2
+
+
+@dataclass(frozen=True, eq=False)
+class AeroTable:
+    """Coefficients of one aerodynamic configuration vs (Mach, log10 Kn, total AoA).
+
+    Attributes:
+        name: configuration name ("capsule", "descent_module").
+        mach: Mach nodes (n_mach,), strictly increasing.
+        log10_kn: log10 Knudsen nodes (n_kn,), strictly increasing (Kn on ``ref_length``).
+        alpha: total angle-of-attack nodes (n_alpha,) [rad], strictly increasing.
+        ca, cn, cm: axial, normal and pitching-moment (about the CoG) coefficients, each
+            (n_mach, n_kn, n_alpha) [-]; sign conventions in the module docstring.
+        cmq: pitch-damping derivative [-] (per ``ω L / (2V)``), < 0 damps.
+        ref_area: reference area S [m²]; ref_length: reference length L [m] (diameter).
+
+    Every axis needs ≥ 2 nodes (repeat a value to make a coefficient independent of an axis).
+    ``eq=False``: equality is identity (array fields).
+    """
+
+    name: str
+    mach: np.ndarray
+    log10_kn: np.ndarray
+    alpha: np.ndarray
+    ca: np.ndarray
+    cn: np.ndarray
+    cm: np.ndarray
+    cmq: float
+    ref_area: float
+    ref_length: float
+
+    def __post_init__(self) -> None:
+        axes = {}
+        for nm in ("mach", "log10_kn", "alpha"):
+            a = np.array(getattr(self, nm), dtype=float)
+            if a.ndim != 1 or a.size < 2 or np.any(np.diff(a) <= 0) or not np.all(np.isfinite(a)):
+                raise ValueError(f"AeroTable {self.name!r}: {nm} must be 1-D, strictly increasing, >= 2 nodes")
+            a.flags.writeable = False
+            object.__setattr__(self, nm, a)
+            axes[nm] = a.size
+        shape = (axes["mach"], axes["log10_kn"], axes["alpha"])
+        for nm in ("ca", "cn", "cm"):
+            a = np.array(getattr(self, nm), dtype=float)
+            if a.shape != shape or not np.all(np.isfinite(a)):
+                raise ValueError(f"AeroTable {self.name!r}: {nm} must be finite with shape {shape}, got {a.shape}")
+            a.flags.writeable = False
+            object.__setattr__(self, nm, a)
+        if not (self.ref_area > 0 and self.ref_length > 0):
+            raise ValueError(f"AeroTable {self.name!r}: ref_area and ref_length must be > 0")
+        object.__setattr__(self, "cmq", float(self.cmq))
+        # plain-Python copies for the scalar fast path used inside integrator loops
+        object.__setattr__(self, "_grids", (self.mach.tolist(), self.log10_kn.tolist(), self.alpha.tolist()))
+        object.__setattr__(self, "_stack", np.stack([self.ca, self.cn, self.cm], axis=-1))
+
+    def coefficients(self, mach, kn, alpha) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(CA, CN, Cm)`` at Mach ``mach`` [-], Knudsen ``kn`` [-] (not log) and total AoA ``alpha`` [rad].
+
+        Inputs broadcast against each other (any shape); clamped trilinear interpolation in
+        (Mach, log10 Kn, α).  Returns three arrays of the broadcast shape.
+        """
+        m, k, a = np.broadcast_arrays(
+            np.asarray(mach, float), np.log10(np.maximum(np.asarray(kn, float), 1e-300)), np.asarray(alpha, float)
+        )
+        i, wi = _locate(self.mach, m)
+        j, wj = _locate(self.log10_kn, k)
+        l, wl = _locate(self.alpha, a)
+        T = self._stack
+        out = 0.0
+        for di, fi in ((0, 1.0 - wi), (1, wi)):
+            for dj, fj in ((0, 1.0 - wj), (1, wj)):
+                for dl, fl in ((0, 1.0 - wl), (1, wl)):
+                    out = out + (fi * fj * fl)[..., None] * T[i + di, j + dj, l + dl]
+        out = np.asarray(out)
+        return out[..., 0], out[..., 1], out[..., 2]
+
+    def coefficients_scalar(self, mach: float, kn: float, alpha: float) -> tuple[float, float, float]:
+        """Scalar fast path of :meth:`coefficients` (same interpolation) for integrator loops; floats."""
+        gm, gk, ga = self._grids
+        i, wi = _locate_scalar(gm, mach)
+        j, wj = _locate_scalar(gk, math.log10(kn) if kn > 0.0 else -300.0)
+        l, wl = _locate_scalar(ga, alpha)
+        c = self._stack[i : i + 2, j : j + 2, l : l + 2]  # (2, 2, 2, 3)
+        # collapse axis by axis (3 small numpy ops)
+        c = c[0] + wi * (c[1] - c[0])
+        c = c[0] + wj * (c[1] - c[0])
+        c = c[0] + wl * (c[1] - c[0])
+        return float(c[0]), float(c[1]), float(c[2])
+
+
+@dataclass(frozen=True, eq=False)
+class ParachuteTable:
+    """Parachute drag coefficient vs Mach (referred to ``ref_area``, the nominal canopy area).
+
+    Attributes: ``name``; ``mach`` (n,) strictly increasing; ``cd`` (n,) [-]; ``ref_area`` [m²]
+    (π D0²/4 of the nominal diameter D0); ``mass`` [kg] (canopy + lines + riser).
+    """
+
+    name: str
+    mach: np.ndarray
+    cd: np.ndarray
+    ref_area: float
+    mass: float
+
+    def __post_init__(self) -> None:
+        m = np.array(self.mach, dtype=float)
+        c = np.array(self.cd, dtype=float)
+        if m.ndim != 1 or m.size < 2 or np.any(np.diff(m) <= 0) or c.shape != m.shape or np.any(c <= 0):
+            raise ValueError(f"ParachuteTable {self.name!r}: mach strictly increasing (>= 2), cd positive, same size")
+        if not (self.ref_area > 0 and self.mass > 0):
+            raise ValueError(f"ParachuteTable {self.name!r}: ref_area and mass must be > 0")
+        m.flags.writeable = False
+        c.flags.writeable = False
+        object.__setattr__(self, "mach", m)
+        object.__setattr__(self, "cd", c)
+        object.__setattr__(self, "_lists", (m.tolist(), c.tolist()))
+
+    def cd_at(self, mach) -> np.ndarray:
+        """Drag coefficient [-] at Mach ``mach`` (any shape), linear interpolation, clamped at the ends."""
+        return np.interp(np.asarray(mach, dtype=float), self.mach, self.cd)
+
+    def cd_scalar(self, mach: float) -> float:
+        """Scalar fast path of :meth:`cd_at` (float in, float out)."""
+        gm, gc = self._lists
+        i, w = _locate_scalar(gm, mach)
+        return gc[i] + w * (gc[i + 1] - gc[i])
+
+
+@dataclass(frozen=True, eq=False)
+class EntryVehicle:
+    """An entry capsule with its parachute, loaded from a TOML asset by :func:`load_vehicle`.
+
+    Attributes (SI, GNC body frame G, origin at the CoG):
+        name: display name.
+        mass_entry: total mass at entry incl. parachute [kg].
+        mass_front_shield: front shield mass released at FSR [kg].
+        mass_back_shell: back shell mass released at BSR (end of data) [kg].
+        inertia_G: inertia tensor about the CoG at entry (3, 3) [kg m²].
+        diameter: maximum diameter [m] (Knudsen reference length); nose_radius [m].
+        capsule: :class:`AeroTable` of the entry configuration (front shield + back shell + DM).
+        descent_module: :class:`AeroTable` after FSR (back shell + DM under the parachute).
+        parachute: :class:`ParachuteTable`.
+        attach_point_G: riser attachment on the back shell apex (3,) [m].
+        riser_length: unstretched riser + suspension-line length [m] (attach point to canopy);
+        riser_stiffness [N/m]; riser_damping [N s/m] (spring-damper, slack when shorter).
+    """
+
+    name: str
+    mass_entry: float
+    mass_front_shield: float
+    mass_back_shell: float
+    inertia_G: np.ndarray
+    diameter: float
+    nose_radius: float
+    capsule: AeroTable
+    descent_module: AeroTable
+    parachute: ParachuteTable
+    attach_point_G: np.ndarray
+    riser_length: float
+    riser_stiffness: float
+    riser_damping: float
+
+    def mass_at(self, phase) -> np.ndarray:
+        """Mass [kg] of the module body (the part the IMU rides on) per phase, any shape.
+
+        phase 0 (entry): ``mass_entry`` (parachute packed inside); phase 1 (PDD..FSR):
+        ``mass_entry − parachute.mass`` (the canopy is a separate body: add ``parachute.mass``
+        for the joint drag equation, AMELIA Eq. 5); phase 2 (FSR..BSR): also minus
+        ``mass_front_shield``.  Ablation mass loss is neglected.
+        """
+        ph = np.asarray(phase)
+        m1 = self.mass_entry - self.parachute.mass
+        return np.where(ph <= 0, self.mass_entry, np.where(ph == 1, m1, m1 - self.mass_front_shield)).astype(float)
+
+    def aero_at(self, phase: int) -> AeroTable:
+        """The :class:`AeroTable` of a phase: ``capsule`` for 0 and 1, ``descent_module`` for 2."""
+        return self.descent_module if int(phase) >= 2 else self.capsule
+
+
+# ------------------------------------------------------------------------------------- loading
+
+
+def _get(table: dict, dotted: str, path: Path):
+    cur = table
+    for part in dotted.split("."):
+        if not isinstance(cur, dict) or part not in cur:
+            raise ValueError(f"{path}: missing key '{dotted}'")
+        cur = cur[part]
+    return cur
+
+
+def _num(table: dict, dotted: str, path: Path, positive: bool = True, default=None) -> float:
+    try:
+        v = _get(table, dotted, path)
+    except ValueError:
+        if default is not None:
+            return float(default)
+        raise
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ValueError(f"{path}: key '{dotted}' must be a number, got {v!r}")
+    v = float(v)
+    if positive and not v > 0.0:
+        raise ValueError(f"{path}: key '{dotted}' must be > 0, got {v}")
+    return v
+
+
+def _arr(table: dict, dotted: str, path: Path, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    v = _get(table, dotted, path)
+    try:
+        a = np.array(v, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: key '{dotted}' must be a (nested) array of numbers") from exc
+    if shape is not None and a.shape != shape:
+        raise ValueError(f"{path}: key '{dotted}' must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{path}: key '{dotted}' must be finite")
+    return a
+
+
+def _aero_table(data: dict, key: str, path: Path, diameter: float) -> AeroTable:
+    """Build a 3-D AeroTable from the compact AEDB form of ``[aero.<key>]`` (see the asset file)."""
+    pre = f"aero.{key}"
+    mach = _arr(data, f"{pre}.mach", path)
+    alpha_deg = _arr(data, f"{pre}.alpha_deg", path)
+    nm, na = mach.size, alpha_deg.size
+    cont = {c: _arr(data, f"{pre}.{c}", path, (nm, na)) for c in ("ca", "cn", "cm")}
+    tab = _get(data, pre, path)
+    if "ca_fm" in tab:  # free-molecular limit + bridging in log Kn
+        fm = {c: _arr(data, f"{pre}.{c}_fm", path, (na,)) for c in ("ca", "cn", "cm")}
+        kn_c = _num(data, f"{pre}.kn_continuum", path)
+        kn_fm = _num(data, f"{pre}.kn_free_molecular", path)
+        if not kn_fm > kn_c:
+            raise ValueError(f"{path}: key '{pre}.kn_free_molecular' must exceed 'kn_continuum'")
+        log_kn = _arr(data, f"{pre}.log10_kn", path)
+        B = knudsen_bridge(10.0**log_kn, kn_c, kn_fm)[None, :, None]
+        coef = {c: cont[c][:, None, :] + (fm[c][None, None, :] - cont[c][:, None, :]) * B for c in cont}
+    else:  # continuum only: independent of Kn
+        log_kn = np.array([-8.0, 4.0])
+        coef = {c: np.repeat(cont[c][:, None, :], 2, axis=1) for c in cont}
+    try:
+        return AeroTable(
+            name=str(tab.get("name", key)),
+            mach=mach,
+            log10_kn=log_kn,
+            alpha=np.deg2rad(alpha_deg),
+            ca=coef["ca"],
+            cn=coef["cn"],
+            cm=coef["cm"],
+            cmq=_num(data, f"{pre}.cmq", path, positive=False),
+            ref_area=_num(data, f"{pre}.ref_area_m2", path, default=0.25 * math.pi * diameter**2),
+            ref_length=_num(data, f"{pre}.ref_length_m", path, default=diameter),
+        )
+    except ValueError as exc:
+        raise ValueError(f"{path}: [{pre}]: {exc}") from exc
+
+
+def load_vehicle(path: str | Path) -> EntryVehicle:
+    """Read an entry-vehicle asset (TOML, SI) into an :class:`EntryVehicle`.
+
+    Tables/keys (see ``assets/vehicles/schiaparelli.toml``): ``[vehicle]`` name, diameter_m,
+    nose_radius_m, mass_entry_kg, mass_front_shield_kg, mass_back_shell_kg, inertia_kgm2 (3x3
+    SPD), attach_point_m [x, y, z], riser_length_m, riser_stiffness_n_per_m,
+    riser_damping_n_s_per_m; ``[aero.capsule]`` and ``[aero.descent_module]`` with mach,
+    alpha_deg, continuum ca/cn/cm (n_mach x n_alpha), cmq, optional ref_area_m2/ref_length_m
+    (default: π d²/4 and d) and, for the bridged table, ca_fm/cn_fm/cm_fm (n_alpha),
+    kn_continuum, kn_free_molecular, log10_kn (nodes); ``[aero.parachute]`` name, mach, cd,
+    nominal_diameter_m, mass_kg.
+
+    The 3-D capsule table is ``C(M, Kn, α) = C_cont(M, α) + (C_fm(α) − C_cont(M, α)) B(Kn)`` with
+    :func:`knudsen_bridge` ``B``, sampled at the ``log10_kn`` nodes.
+
+    Raises ``FileNotFoundError`` if the file is missing and ``ValueError`` naming the file and key
+    for malformed TOML, missing keys or bad values.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"vehicle asset not found: {path}")
+    try:
+        with path.open("rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: invalid TOML: {exc}") from exc
+
+    d = _num(data, "vehicle.diameter_m", path)
+    inertia = _arr(data, "vehicle.inertia_kgm2", path, (3, 3))
+    if not np.allclose(inertia, inertia.T) or np.any(np.linalg.eigvalsh(inertia) <= 0.0):
+        raise ValueError(f"{path}: key 'vehicle.inertia_kgm2' must be symmetric positive definite")
+    attach = _arr(data, "vehicle.attach_point_m", path, (3,))
+    pm = _arr(data, "aero.parachute.mach", path)
+    pcd = _arr(data, "aero.parachute.cd", path, pm.shape)
+    try:
+        chute = ParachuteTable(
+            name=str(_get(data, "aero.parachute.name", path)),
+            mach=pm,
+            cd=pcd,
+            ref_area=0.25 * math.pi * _num(data, "aero.parachute.nominal_diameter_m", path) ** 2,
+            mass=_num(data, "aero.parachute.mass_kg", path),
+        )
+    except ValueError as exc:
+        raise ValueError(f"{path}: [aero.parachute]: {exc}") from exc
+    m_entry = _num(data, "vehicle.mass_entry_kg", path)
+    m_fs = _num(data, "vehicle.mass_front_shield_kg", path)
+    m_bs = _num(data, "vehicle.mass_back_shell_kg", path)
+    if not m_entry > chute.mass + m_fs + m_bs:
+        raise ValueError(f"{path}: key 'vehicle.mass_entry_kg' must exceed parachute + front shield + back shell")
+    for a in (inertia, attach):
+        a.flags.writeable = False
+    return EntryVehicle(
+        name=str(_get(data, "vehicle.name", path)),
+        mass_entry=m_entry,
+        mass_front_shield=m_fs,
+        mass_back_shell=m_bs,
+        inertia_G=inertia,
+        diameter=d,
+        nose_radius=_num(data, "vehicle.nose_radius_m", path),
+        capsule=_aero_table(data, "capsule", path, d),
+        descent_module=_aero_table(data, "descent_module", path, d),
+        parachute=chute,
+        attach_point_G=attach,
+        riser_length=_num(data, "vehicle.riser_length_m", path),
+        riser_stiffness=_num(data, "vehicle.riser_stiffness_n_per_m", path),
+        riser_damping=_num(data, "vehicle.riser_damping_n_s_per_m", path, positive=False),
+    )
