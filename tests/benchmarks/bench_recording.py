@@ -90,5 +90,7 @@ if __name__ == "__main__":
             print(f"run {rep}: " + "  ".join(f"{k}={v:.3f}" for k, v in r.items()))
         per_series_cols = r["scalars_30x5000"] / 30
         per_series_loop = baseline_log_loop(Path(d) / "baseline.rrd")
-        print(f"5000-row scalar series: Recorder.scalars (send_columns) {per_series_cols * 1e3:.2f} ms, "
-              f"baseline rr.log loop {per_series_loop * 1e3:.0f} ms: ratio {per_series_loop / per_series_cols:.0f}x")
+        print(
+            f"5000-row scalar series: Recorder.scalars (send_columns) {per_series_cols * 1e3:.2f} ms, "
+            f"baseline rr.log loop {per_series_loop * 1e3:.0f} ms: ratio {per_series_loop / per_series_cols:.0f}x"
+        )
