@@ -948,8 +948,7 @@ def prepare_validation(
 ) -> ValidationInputs:
     """The reconstruction stages up to the dispersion (AMELIA Sects. 4-6), configured as
     :func:`workbench.pipelines.entry.reconstruct` configures them: read the telemetry ``paths``,
-    preprocess, the nominal initial state (``paths["initial_state"]``; for a synthetic run without
-    one, the on-board nominal stored by the synthesizer in ``paths["truth"]``), and the dispersion
+    preprocess, the nominal initial state (``paths["initial_state"]``, required), and the dispersion
     with the scenario's ``[dispersion]`` settings (incl. ``refine_rounds`` if given; ``members``
     overrides the member count; ``scheduler`` runs it on Dask).  Radar time tags are the valid packets'."""
     from workbench.core.atmosphere import MarsEngineeringAtmosphere
@@ -963,16 +962,13 @@ def prepare_validation(
 
     tm = read_entry_telemetry({k: v for k, v in paths.items() if k not in ("truth", "initial_state")})
     imu = preprocess(tm, sc)
-    if "initial_state" in paths and Path(paths["initial_state"]).exists():
-        from workbench.pipelines.entry import read_nominal_state
-
-        nom = read_nominal_state(paths["initial_state"])
-        v0, q0, p0 = nom.v_M, nom.q_M_G, nom.p_M
-    elif "truth" in paths:
-        with np.load(paths["truth"]) as z:
-            v0, q0, p0 = (np.array(z[k], float) for k in ("nominal_v0", "nominal_q0", "nominal_p0"))
-    else:
+    if "initial_state" not in paths or not Path(paths["initial_state"]).exists():
+        # the estimator never reads truth.npz, not even for the nominal state
         raise FileNotFoundError("prepare_validation: no initial_state file among the telemetry paths")
+    from workbench.pipelines.entry import read_nominal_state
+
+    nom = read_nominal_state(paths["initial_state"])
+    v0, q0, p0 = nom.v_M, nom.q_M_G, nom.p_M
     r_ground = MARS.reference_radius + cfg("site.terrain_m", -1440.0)
     bridge_mode = cfg("reconstruction.bridge_mode", "relative", "str")
     rules_t = sc.get("dispersion.rules", {}, kind="table")

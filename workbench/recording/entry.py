@@ -87,7 +87,13 @@ def entry_blueprint(
             contents=["/world/**", "- /world/dispersion/**"],
             eye_controls=rrb.EyeControls3D(position=[-30.0, -48.0, 14.0], look_target=[0.0, 0.0, 8.0]),
         ),
-        rrb.Spatial3DView(name="Entry (site frame, km scale)", origin=layout.WORLD),
+        rrb.Spatial3DView(
+            name="Entry (site frame, km scale)",
+            origin=layout.WORLD,
+            eye_controls=rrb.EyeControls3D(
+                position=[-200e3, -330e3, 160e3], look_target=[-280e3, 0.0, 20e3], eye_up=[0.0, 0.0, 1.0]
+            ),
+        ),
         active_tab=scene_tab,
     )
     profiles = rrb.Tabs(
@@ -166,7 +172,7 @@ class EntryRecorder:
     def _static_scene(self) -> None:
         rec, site = self.rec, self.site
         rec.view_coordinates()
-        rec.mesh(layout.SURFACE, terrain_patch(site, (-750e3, 150e3), (-200e3, 200e3), 70), color=(190, 150, 120, 255))
+        rec.mesh(layout.SURFACE, terrain_patch(site, (-700e3, 60e3), (-120e3, 120e3), 80), color=(190, 150, 120, 255))
         rec.axes(layout.join(layout.WORLD, "site_axes"), 2000.0)
         m = capsule_meshes(self.vehicle.diameter, self.vehicle.nose_radius)
         rec.mesh(layout.join(layout.VEHICLE_BODY, "back_shell"), m["back_shell"], color=(220, 220, 225, 255))
@@ -304,7 +310,7 @@ class EntryRecorder:
         rec.poses(layout.VEHICLE, t, p_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)), step=np.arange(len(t)))
         rec.poses(layout.VEHICLE_BODY, t, np.zeros((len(t), 3)), q_L, step=np.arange(len(t)))
         P_L = site.covariances(t, sm.P[:, 6:9, 6:9])
-        rec.ellipsoids(layout.UNCERTAINTY, t, np.zeros((len(t), 3)), P_L, nsigma=3.0, color=(31, 119, 180, 70))
+        rec.ellipsoids(layout.UNCERTAINTY, t, np.zeros((len(t), 3)), P_L, nsigma=3.0, color=(31, 119, 180, 140))
         rec.line_strip(layout.ESTIMATE_SMOOTHED, p_L, color=[EST], radius=-2.0)
         rec.line_strip(layout.ESTIMATE_FORWARD, self._L(fw.t, fw.p_M), color=[FWD], radius=-1.5)
         g = site.ground_point_L(p_L)
