@@ -102,7 +102,14 @@ def _run_entry(sc, out_dir: Path, seed, export: bool, quiet: bool, scheduler, me
     ) as rec:
         from workbench.core.bodies import MARS
 
-        drawer = EntryRecorder(rec, vehicle, truth, r_ground=r_ground, jd_tdb0=en._jd0(sc), body=MARS)
+        drawer = EntryRecorder(
+            rec,
+            vehicle,
+            truth,
+            r_ground=r_ground,
+            jd_tdb0=en._jd0(sc) if sc.has("scenario.epoch_utc") else None,
+            body=MARS,
+        )
         result = None
         t0 = time.perf_counter()
         for stage in en.reconstruct(sc, paths, scheduler=scheduler, members=members):

@@ -100,6 +100,9 @@ def test_row_counts_are_consistent(rec, run):
     assert np.max(np.abs(tr)) < 1.0e6
     beams = [rec.row_count(layout.radar_beam_path(b)) for b in range(4)]
     assert beams[0] > 300 and len(set(beams)) == 1
+    # the same rows on the `step` timeline as on `time` (scrubbing by filter step shows everything)
+    assert rec.row_count(layout.UNCERTAINTY, layout.STEP) == n
+    assert [rec.row_count(layout.radar_beam_path(b), layout.STEP) for b in range(4)] == beams
     # one row per member on the `sample` timeline, split into accepted + rejected
     acc = rec.row_count("/plots/dispersion/h_pdd/accepted", layout.SAMPLE)
     rej = rec.row_count("/plots/dispersion/h_pdd/rejected", layout.SAMPLE)
@@ -113,7 +116,8 @@ def test_scorecard_and_event_table(rec, run):
     md = rec.text_document(layout.REPORT)
     assert "Table 5" in md and "PDD" in md and "FSR" in md
     names = [r["event"] for r in summary["event_table"]]
-    assert names[0] == "First data" and names[-1] == "Last data" and "PDD" in names
+    assert names[0] == "First data" and names[-1] == "Last data"
+    assert {"EIP", "PDD", "FSR", "BSR"} <= set(names)
     log = " ".join(text for _, text, _ in rec.text_log())
     assert "gap" in log and "saturated" in log and "plane fit" in log
 
@@ -177,3 +181,56 @@ def test_bad_nominal_state_is_a_located_input_error(tmp_path, run):
 
 def test_cli_exit_code_for_unknown_scenario():
     assert main(["run", "no_such_scenario", "--out", "/tmp/none"]) == 3
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured 25.5 %: the truth's warm layer near 42 km lies inside the 57 s blackout, where no "
+    "measurement sees it; the hydrostatic fill (default-model temperature shape) cannot know it",
+)
+def test_filled_blackout_density_within_20_percent(run):
+    _, s = run
+    assert s["truth"]["atmosphere"]["entry_filled_blackout"]["max_abs_rel_error"] < 0.20
+
+
+@pytest.mark.parametrize(
+    "key, value, match",
+    [
+        ("reconstruction.bridge_mode", "exact", "bridge_mode"),
+        ("winds.method", "drag", "winds.method"),
+        ("radar.azimuths_deg", [0.0, 120.0], "azimuths_deg"),
+        ("dispersion.rules.mach_pd", [2.0, 0.2], "mach_pd"),
+        ("dispersion.rules.h_pdd_m", 10000.0, "h_pdd_m"),
+        ("dispersion.members", 0, "members"),
+    ],
+)
+def test_bad_entry_configuration_is_a_located_error(key, value, match):
+    base = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    with pytest.raises(ScenarioError, match=match):
+        en.check_config(base.with_overrides({key: value}))
+
+
+def test_initial_state_at_the_wrong_time_is_rejected(run, tmp_path):
+    out, _ = run
+    tel = tmp_path / "tel"
+    shutil.copytree(out / "schiaparelli" / "telemetry", tel)
+    f = tel / "initial_state.toml"
+    f.write_text(f.read_text().replace("t0_s = -15.000000", "t0_s = 5.0"))
+    paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in en.TELEMETRY_FILES}
+    sc = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    with pytest.raises(ScenarioError, match="t0_s"):
+        for _ in en.reconstruct(sc, paths, members=200):
+            pass
+
+
+def test_missing_pdd_event_is_a_located_error(run, tmp_path):
+    out, _ = run
+    tel = tmp_path / "tel"
+    shutil.copytree(out / "schiaparelli" / "telemetry", tel)
+    ev = tel / "events.csv"
+    ev.write_text("\n".join(line for line in ev.read_text().splitlines() if not line.endswith(",PDD")) + "\n")
+    paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in en.TELEMETRY_FILES}
+    sc = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    with pytest.raises(ScenarioError, match="PDD"):
+        for _ in en.reconstruct(sc, paths, members=200):
+            pass

@@ -16,7 +16,9 @@ Stages, each yielded as a frozen dataclass so the recorder (or a test) can obser
    the radar models B.3–B.6 and constrained update directions, RTS backward pass.
 6. :class:`~workbench.estimation.entry_atmosphere.AtmosphereResult` — Sect. 9: density from drag with the
    drag coefficient iterated from the tables, blackout fill, hydrostatic pressure, temperature, 1σ.
-7. :class:`~workbench.estimation.entry_winds.WindResult` — Sect. 10 (attitude-based, see the module).
+7. :class:`~workbench.estimation.entry_winds.WindResult` — Sect. 10: by default from the direction of the
+   measured specific force (the air-relative velocity of the parachute–module system); the attitude
+   method is computed as a cross-check (``[winds] method``).
 8. :class:`EntryResult` — all of it plus the summary numbers.
 
 The reconstruction reads only the scenario, the telemetry files and the nominal initial state
@@ -53,6 +55,8 @@ __all__ = [
     "score",
     "scorecard_markdown",
     "event_table",
+    "check_config",
+    "epoch_utc",
 ]
 
 R_MOLA = MARS.reference_radius
@@ -170,6 +174,55 @@ def _cfg(sc: Scenario, key: str, default, kind: str = "float"):
     return sc.get(key, default, kind=kind)
 
 
+_CHOICES = {
+    "reconstruction.bridge_mode": ("relative", "paper"),
+    "reconstruction.initial": ("fused", "dispersion", "nominal"),
+    "winds.method": ("specific_force", "attitude"),
+    "atmosphere.fill_method": ("hydrostatic", "exponential"),
+}
+_RULES = ("mach_pdd", "h_pdd_m", "h_fsr_m", "h_end_m", "time_to_impact_s")
+
+
+def check_config(sc: Scenario) -> None:
+    """Validate the entry keys of a scenario up front; raise :class:`ScenarioError` naming the key.
+
+    Choices (``bridge_mode``, ``initial``, ``winds.method``, ``fill_method``), the dispersion rules
+    (known names, each ``[centre, half-width]`` with half-width > 0), the radar azimuths (3 numbers)
+    and the positive counts/sigmas.
+    """
+    for key, choices in _CHOICES.items():
+        v = sc.get(key, choices[0], kind="str")
+        if v not in choices:
+            raise ScenarioError(sc.path, key, f"{v!r}: use one of {', '.join(choices)}")
+    rules = sc.get("dispersion.rules", {}, kind="table")
+    for k, v in rules.items():
+        if k not in _RULES:
+            raise ScenarioError(sc.path, f"dispersion.rules.{k}", f"unknown rule; rules: {', '.join(_RULES)}")
+        if not (isinstance(v, list) and len(v) == 2 and all(isinstance(x, int | float) for x in v) and v[1] > 0):
+            raise ScenarioError(sc.path, f"dispersion.rules.{k}", "need [centre, half-width] with half-width > 0")
+    az = sc.get("radar.azimuths_deg", [0.0, 120.0, 240.0], kind="list")
+    if len(az) != 3 or not all(isinstance(x, int | float) for x in az):
+        raise ScenarioError(sc.path, "radar.azimuths_deg", "need 3 numbers (beams B1..B3)")
+    for key, default, kind in (
+        ("dispersion.members", 10000, "int"),
+        ("dispersion.chunk_size", 1000, "int"),
+        ("reconstruction.velocity_mps", 10.0, "float"),
+        ("reconstruction.attitude_deg", 1.0, "float"),
+        ("reconstruction.position_m", 2000.0, "float"),
+        ("radar.slant_range_sigma_m", 100.0, "float"),
+        ("radar.slant_out_sigma_m", 100.0, "float"),
+        ("radar.velocity_out_sigma_mps", 25.0, "float"),
+        ("atmosphere.max_iterations", 10, "int"),
+        ("atmosphere.tolerance", 0.01, "float"),
+    ):
+        if sc.get(key, default, kind=kind) <= 0:
+            raise ScenarioError(sc.path, key, "must be > 0")
+    try:
+        julian_date_from_utc(sc.get("scenario.epoch_utc", "2016-10-19T14:42:22.132Z", kind="str"))
+    except ValueError as e:
+        raise ScenarioError(sc.path, "scenario.epoch_utc", str(e)) from None
+
+
 def _sigmas_P0(sc: Scenario) -> np.ndarray:
     """Reconstruction initial covariance from Table 3 ("Reconstruction" column), (9, 9)."""
     s_v = _cfg(sc, "reconstruction.velocity_mps", 10.0)
@@ -273,13 +326,30 @@ def reconstruct(
     from workbench.sensors.radar import beam_directions_G
 
     sc = scenario
+    check_config(sc)
     vehicle = vehicle_for(sc)
     r_ground = R_MOLA + _cfg(sc, "site.terrain_m", -1440.0)
     tm = read_entry_telemetry(paths, sc)
+    for ev in ("PDD", "FSR"):
+        if ev not in tm.events:
+            raise ScenarioError(Path(paths["events"]), ev, "event missing (needed for the dispersion rules and phases)")
+        if not (tm.t_gnc[0] <= tm.events[ev] <= tm.t_gnc[-1]):
+            raise ScenarioError(
+                Path(paths["events"]),
+                ev,
+                f"at {tm.events[ev]:.3f} s, outside the GNC data {tm.t_gnc[0]:.3f}–{tm.t_gnc[-1]:.3f} s",
+            )
     yield tm
     imu = preprocess(tm, sc)
     yield imu
     nom = read_nominal_state(paths["initial_state"])
+    if abs(nom.t0 - float(imu.t[0])) > 0.05:
+        raise ScenarioError(
+            Path(paths["initial_state"]),
+            "initial_state.t0_s",
+            f"{nom.t0:.3f} s, but the IMU data start at {float(imu.t[0]):.3f} s: the state must be given at the first "
+            "sample with an acceleration",
+        )
     bridge_mode = _cfg(sc, "reconstruction.bridge_mode", "relative", "str")
     P0 = _sigmas_P0(sc)
     nomi = _nominal_integration(imu, nom, tm, P0, bridge_mode)
@@ -370,6 +440,10 @@ def reconstruct(
             "accel": _cfg(sc, "reconstruction.accel_mps2", 0.001),
         },
         events=tm.events,
+        molar_mass=_cfg(sc, "atmosphere.molar_mass_g_per_mol", 43.41) / 1e3,
+        tolerance=_cfg(sc, "atmosphere.tolerance", 0.01),
+        max_iterations=_cfg(sc, "atmosphere.max_iterations", 10, "int"),
+        fill_method=sc.get("atmosphere.fill_method", "hydrostatic", kind="str"),
     )
     yield atm
     wind_method = sc.get("winds.method", "specific_force", kind="str")
@@ -405,25 +479,36 @@ def reconstruct(
 
 
 # ----------------------------------------------------------------------------------------- summary
-def _jd0(sc: Scenario) -> float:
-    return julian_date_from_utc(sc.get("scenario.epoch_utc", "2016-10-19T14:42:22.132Z", kind="str"))
+def epoch_utc(sc: Scenario, tm=None) -> str:
+    """UTC of t = 0 (EIP): ``[scenario] epoch_utc``, else the telemetry's ``# epoch_utc:`` line."""
+    if sc.has("scenario.epoch_utc"):
+        return sc.get("scenario.epoch_utc", kind="str")
+    if tm is not None and getattr(tm, "epoch_utc", ""):
+        return str(tm.epoch_utc)
+    raise ScenarioError(sc.path, "scenario.epoch_utc", "missing, and the telemetry has no '# epoch_utc:' line")
 
 
-def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_ground: float) -> list[dict]:
+def _jd0(sc: Scenario, tm=None) -> float:
+    return julian_date_from_utc(epoch_utc(sc, tm))
+
+
+def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_ground: float, tm=None) -> list[dict]:
     """AMELIA Table 5 analogue: event, t [s], UTC, east longitude / latitude [deg], altitude AMR [km]."""
     import datetime as dt
 
     from workbench.core.frames import C_bodyfixed_mmed, planetocentric_from_cartesian
 
-    jd0 = _jd0(sc)
-    epoch = dt.datetime.fromisoformat(sc.get("scenario.epoch_utc", "2016-10-19T14:42:22.132Z", kind="str"))
+    jd0 = _jd0(sc, tm)
+    epoch = dt.datetime.fromisoformat(epoch_utc(sc, tm).replace("Z", "+00:00"))
     rows = []
     names = [("First data", float(t[0]))] + sorted(events.items(), key=lambda kv: kv[1]) + [("Last data", float(t[-1]))]
     for name, te in names:
-        if not (t[0] - 1e-9 <= te <= t[-1] + 1e-9):
+        step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        if not (t[0] - 1e-9 <= te <= t[-1] + step + 1e-9):  # an event up to one sample after the end (BSR)
             continue
-        p = np.array([np.interp(te, t, p_M[:, i]) for i in range(3)])
-        rF = C_bodyfixed_mmed(MARS, jd0 + te / 86400.0) @ p
+        te_pos = min(te, float(t[-1]))
+        p = np.array([np.interp(te_pos, t, p_M[:, i]) for i in range(3)])
+        rF = C_bodyfixed_mmed(MARS, jd0 + te_pos / 86400.0) @ p
         lat, lon, r = planetocentric_from_cartesian(rF)
         rows.append(
             {
@@ -450,10 +535,11 @@ def _summary(sc, tm, imu, nomi, disp, filt, atm, winds, r_ground) -> dict:
         "r_ground_m": float(r_ground),
         "samples": int(sm.t.size),
         "events": dict(tm.events),
-        "event_table": event_table(sc, tm.events, sm.t, sm.p_M, r_ground),
+        "event_table": event_table(sc, tm.events, sm.t, sm.p_M, r_ground, tm),
         "telemetry_problems": list(tm.problems),
         "gaps_s": [float(g.t_b - g.t_a) for g in imu.gaps],
-        "saturated_samples": int(np.sum(imu.saturated)),
+        "saturated_samples": int(np.sum(np.asarray(imu.saturated, bool) & ~np.asarray(imu.resampled, bool))),
+        "saturation_window_samples": int(np.sum(imu.saturated)),
         "nominal_integration": nomi.summary,
         "dispersion": {
             "members": int(disp.n),

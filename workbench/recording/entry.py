@@ -176,7 +176,7 @@ class EntryRecorder:
         rec.axes(layout.join(layout.WORLD, "site_axes"), 2000.0)
         m = capsule_meshes(self.vehicle.diameter, self.vehicle.nose_radius)
         rec.mesh(layout.join(layout.VEHICLE_BODY, "back_shell"), m["back_shell"], color=(220, 220, 225, 255))
-        rec.mesh(layout.join(layout.VEHICLE_BODY, "front_shield"), m["front_shield"], color=(90, 60, 40, 255))
+        self._front_shield = m["front_shield"]  # logged on the timeline (from the first sample to FSR)
         rec.axes(layout.join(layout.VEHICLE_BODY, "axes"), 3.0)
 
     # ------------------------------------------------------------------ stages
@@ -186,7 +186,12 @@ class EntryRecorder:
         # landing-site frame: ground point below the on-board position at PDD (before it drifts)
         t_site = self.events.get("PDD", float(tm.t_nav[len(tm.t_nav) // 2]))
         p_site = _interp_rows(np.array([t_site]), tm.t_nav, tm.p_M_nav)[0]
+        if self.jd0 is None:  # user data without [scenario] epoch_utc: the telemetry's epoch line
+            from workbench.core.frames import julian_date_from_utc
+
+            self.jd0 = julian_date_from_utc(tm.epoch_utc)
         self.site = site_frame_below(self.body, p_site, t_site, self.r_ground, self.jd0)
+        self.t_first = float(tm.t_gnc[0])
         self._static_scene()
         rec.scalars("/sensors/gnc/rate", tm.t_gnc, np.degrees(tm.w_G), names=["x", "y", "z"], colors=XYZ)
         ok = tm.a_valid
@@ -243,7 +248,15 @@ class EntryRecorder:
             for g in imu.gaps
         ]
         if sat.any():
-            ev.append((float(imu.t[sat][0]), f"X-gyro saturated for {sat.sum()} samples: rate rebuilt", "WARN"))
+            n_tm = int(np.sum(sat & ~res))
+            ev.append(
+                (
+                    float(imu.t[sat][0]),
+                    f"gyro saturated in {n_tm} telemetry samples: rate rebuilt from the Y acceleration "
+                    f"({int(sat.sum())} samples of the 100 Hz window flagged)",
+                    "WARN",
+                )
+            )
         rec.events(ev)
 
     def _NominalIntegration(self, nom) -> None:
@@ -310,7 +323,15 @@ class EntryRecorder:
         rec.poses(layout.VEHICLE, t, p_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)), step=np.arange(len(t)))
         rec.poses(layout.VEHICLE_BODY, t, np.zeros((len(t), 3)), q_L, step=np.arange(len(t)))
         P_L = site.covariances(t, sm.P[:, 6:9, 6:9])
-        rec.ellipsoids(layout.UNCERTAINTY, t, np.zeros((len(t), 3)), P_L, nsigma=3.0, color=(31, 119, 180, 140))
+        rec.ellipsoids(
+            layout.UNCERTAINTY,
+            t,
+            np.zeros((len(t), 3)),
+            P_L,
+            nsigma=3.0,
+            color=(31, 119, 180, 140),
+            step=np.arange(len(t)),
+        )
         rec.line_strip(layout.ESTIMATE_SMOOTHED, p_L, color=[EST], radius=-2.0)
         rec.line_strip(layout.ESTIMATE_FORWARD, self._L(fw.t, fw.p_M), color=[FWD], radius=-1.5)
         g = site.ground_point_L(p_L)
@@ -340,6 +361,17 @@ class EntryRecorder:
                 layout.join(layout.VEHICLE_BODY, "risers"),
                 rr.LineStrips3D([[a, r] for r in rim], colors=[[120, 120, 120]], radii=[0.05]),
             )
+        fsm = self._front_shield
+        rr.set_time(layout.TIME, duration=float(t[0]), recording=s)
+        s.log(
+            layout.join(layout.VEHICLE_BODY, "front_shield"),
+            rr.Mesh3D(
+                vertex_positions=fsm.vertices.astype(np.float32),
+                triangle_indices=fsm.faces.astype(np.uint32),
+                vertex_normals=fsm.vertex_normals.astype(np.float32),
+                albedo_factor=[90, 60, 40, 255],
+            ),
+        )
         if "FSR" in self.events:
             rr.set_time(layout.TIME, duration=self.events["FSR"], recording=s)
             s.log(layout.join(layout.VEHICLE_BODY, "front_shield"), rr.Clear(recursive=False))
@@ -357,7 +389,9 @@ class EntryRecorder:
                 end = site.ray_to_ground(p_L[on], d) - p_L[on]
                 strips = [np.stack([np.zeros(3), e]) for e in end]
                 cols = self._residual_colours(nsig[:, b])
-                rec.line_strips_series(layout.radar_beam_path(b), t[on], strips, colors=cols, radii=-1.5)
+                rec.line_strips_series(
+                    layout.radar_beam_path(b), t[on], strips, colors=cols, radii=-1.5, step=np.flatnonzero(on)
+                )
         # plots: altitude AGL, AMR, velocity, tilt with ±3σ and truth
         self._trajectory_plots(fr)
         self._residual_plots(fr)
@@ -623,10 +657,8 @@ class EntryRecorder:
                         [np.column_stack([x[ok], -hk_i[ok] * sc["density"]])], colors=[[255, 200, 0]], radii=[0.1]
                     ),
                 )
-            s.log(
-                "/plots/atmosphere/max_rel_change",
-                rr.Scalars(float(it.max_rel_change) if np.isfinite(it.max_rel_change) else 0.0),
-            )
+            if np.isfinite(it.max_rel_change):  # undefined for the first iteration
+                s.log("/plots/atmosphere/max_rel_change", rr.Scalars(float(it.max_rel_change)))
         s.reset_time()
         # time series too (for scrubbing against the trajectory)
         t = np.asarray(fin.t, float)
