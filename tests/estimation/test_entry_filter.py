@@ -346,3 +346,20 @@ def test_smoothed_nees_over_seeded_runs():
     lo, hi = anees_bounds(9, n_runs)
     print(f"smoothed ANEES (9 dof, {n_runs} runs) = {anees:.3f}, 95% band [{lo:.2f}, {hi:.2f}]")
     assert lo <= anees <= hi
+
+
+def test_relinearised_iterations(one_run):
+    """Iterations relinearise about the previous smoothed trajectory (Gauss-Newton): the forward
+    pass and its innovations stay the causal EKF's, the changes shrink, and in this nearly linear
+    scenario the answer moves by far less than its σ."""
+    imu, radar, tr, init, res3 = one_run
+    res1 = run_entry_smoother(imu, radar, *init, sigmas=EntryFilterSigmas(**{**SIG.__dict__, "iterations": 1}))
+    assert res1.info["iterations"] == 1 and res1.info["relinearisation_max_attitude_change_rad"] == []
+    assert res3.info["iterations"] == 3
+    steps = res3.info["relinearisation_max_attitude_change_rad"]
+    assert len(steps) == 2 and steps[1] < steps[0]
+    assert np.array_equal(res1.forward.p_M, res3.forward.p_M) and np.array_equal(res1.forward.P, res3.forward.P)
+    for c in ("slant_range", "slant_out", "velocity_out"):
+        assert np.array_equal(res1.innovations[c].y, res3.innovations[c].y, equal_nan=True)
+    dh = np.abs(h_agl(res1.smoothed.p_M) - h_agl(res3.smoothed.p_M))
+    assert dh.max() < 0.2 * np.sqrt(res3.smoothed.P[:, 6:9, 6:9].trace(axis1=1, axis2=2)).min()
