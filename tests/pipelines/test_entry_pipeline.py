@@ -61,6 +61,7 @@ def test_every_stage_is_in_the_recording(rec):
         "/world/onboard/track",
         "/world/truth/track",
         "/world/dispersion/at_PDD_accepted",
+        "/world/estimate/forward_vehicle/uncertainty",
         "/world/dispersion/at_PDD_rejected",
         *[layout.radar_beam_path(b) for b in range(4)],
         "/plots/imu/f_G",
@@ -109,6 +110,26 @@ def test_row_counts_are_consistent(rec, run):
     assert acc + rej == MEMBERS
     assert acc == round(summary["dispersion"]["accepted_fraction"] * MEMBERS)
     assert rec.row_count("/profiles/density/iteration", layout.ITERATION) == summary["atmosphere"]["iterations"]
+
+
+def test_forward_uncertainty_grows_through_the_blackout_and_shrinks_at_the_radar_fix(rec, run):
+    _, summary = run
+    t, _, h, _ = rec.ellipsoids("/world/estimate/forward_vehicle/uncertainty")
+    h = h[:, 0, :]  # (n, 3) 3σ semi-axes [m]
+    dt = np.diff(t)
+    k = int(np.argmax(dt))  # the 57 s blackout
+    assert dt[k] > 50.0
+    # bridged with the on-board Δv/Δp/ΔC plus their uncertainty: the ellipsoid grows (major axis +20 %)
+    assert h[k + 1].max() > 1.1 * h[k].max()
+    # at the radar fix the vertical (smallest) axis collapses from kilometres to about a hundred metres
+    t_fix = summary["events"].get("RDA_ON", 222.65)
+    before = h[(t < t_fix) & (t > t_fix - 2.0)].min(axis=1).max()
+    after = h[t > t_fix + 5.0].min(axis=1).max()
+    assert before > 1000.0 and after < 0.1 * before
+    # the altitude 3σ plot of the forward pass shows the same collapse
+    ts, h3 = rec.scalars("/plots/sigma_position/altitude_3sigma_forward")
+    h3 = np.asarray(h3).reshape(len(ts), -1)[:, 0]
+    assert h3[np.asarray(ts) > t_fix + 5.0].max() < 0.1 * h3[(np.asarray(ts) < t_fix)].max()
 
 
 def test_scorecard_and_event_table(rec, run):

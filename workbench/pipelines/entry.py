@@ -623,6 +623,16 @@ def score(result: EntryResult, truth: dict) -> dict:
             "median_3sigma_m": float(np.median(3 * sd_h[m])),
         }
     lo, hi = chi2_interval(9)
+    from workbench.pipelines.entry_mc import _errors_sigmas
+
+    _, e_c, _, _ = _errors_sigmas(sm, vT, qT, pT)
+    ne_c = nees(e_c, sm.P)
+    out["nees_smoothed_curvilinear"] = {
+        "mean": float(np.mean(ne_c)),
+        "median": float(np.median(ne_c)),
+        "note": "position error as horizontal + altitude about the estimate (no |δp_h|²/2r curvature term); "
+        "one run: see `workbench mc` for the ANEES over many",
+    }
     out["nees_smoothed"] = {
         "mean": float(np.mean(ne)),
         "median": float(np.median(ne)),

@@ -52,7 +52,9 @@ _PLOTS = [
     ("altitude AMR", "/plots/altitude_amr"),
     ("velocity NED", "/plots/velocity_ned"),
     ("tilt (off-vertical)", "/plots/tilt"),
-    ("1σ pos/vel/att", "/plots/sigma"),
+    ("σ position (3σ altitude fwd/smoothed)", "/plots/sigma_position"),
+    ("σ velocity", "/plots/sigma_velocity"),
+    ("σ attitude", "/plots/sigma_attitude"),
     ("error vs truth", "/plots/error"),
     ("strapdown (nominal)", "/plots/strapdown"),
     ("on-board vs recon", "/plots/onboard"),
@@ -84,7 +86,7 @@ def entry_blueprint(
         rrb.Spatial3DView(
             name="Descent (at the vehicle)",
             origin=layout.VEHICLE,
-            contents=["/world/**", "- /world/dispersion/**"],
+            contents=["/world/**", "- /world/dispersion/**", "- /world/estimate/forward_vehicle/**"],
             eye_controls=rrb.EyeControls3D(position=[-30.0, -48.0, 14.0], look_target=[0.0, 0.0, 8.0]),
         ),
         rrb.Spatial3DView(
@@ -333,7 +335,31 @@ class EntryRecorder:
             step=np.arange(len(t)),
         )
         rec.line_strip(layout.ESTIMATE_SMOOTHED, p_L, color=[EST], radius=-2.0)
-        rec.line_strip(layout.ESTIMATE_FORWARD, self._L(fw.t, fw.p_M), color=[FWD], radius=-1.5)
+        fw_L = self._L(fw.t, fw.p_M)
+        rec.line_strip(layout.ESTIMATE_FORWARD, fw_L, color=[FWD], radius=-1.5)
+        # the forward (filter) pass's own 3σ: it grows through the blackout and collapses vertically at
+        # the radar fix (the smoothed one above already knows the fix from the start)
+        fwd_vehicle = layout.join(layout.ESTIMATE, "forward_vehicle")
+        steps_f = np.arange(len(fw.t))
+        rec.poses(fwd_vehicle, fw.t, fw_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(fw.t), 1)), step=steps_f)
+        rec.ellipsoids(
+            layout.join(fwd_vehicle, "uncertainty"),
+            fw.t,
+            np.zeros((len(fw.t), 3)),
+            site.covariances(fw.t, fw.P[:, 6:9, 6:9]),
+            nsigma=3.0,
+            color=(255, 127, 14, 110),
+            step=steps_f,
+        )
+        u_f = fw.p_M / np.linalg.norm(fw.p_M, axis=1, keepdims=True)
+        sd_hf = np.sqrt(np.einsum("ni,nij,nj->n", u_f, fw.P[:, 6:9, 6:9], u_f))
+        rec.scalars(
+            "/plots/sigma_position/altitude_3sigma_forward",
+            fw.t,
+            3.0 * sd_hf,
+            names="3σ altitude, forward [m]",
+            colors=[FWD],
+        )
         g = site.ground_point_L(p_L)
         rec.line_strip(layout.join(layout.ESTIMATE, "ground_track"), g + [0, 0, 20.0], color=[EST], radius=-2.5)
         # front shield leaves at FSR; the parachute appears at PDD (temporal logs, not static)
@@ -520,9 +546,16 @@ class EntryRecorder:
         )
         sd_p = np.sqrt(np.einsum("nii->ni", sm.P[:, 6:9, 6:9]))
         sd_v = np.sqrt(np.einsum("nii->ni", sm.P[:, 0:3, 0:3]))
-        rec.scalars("/plots/sigma/position", t, np.linalg.norm(sd_p, axis=1), names="|σ_p| [m]", colors=EST)
-        rec.scalars("/plots/sigma/velocity", t, np.linalg.norm(sd_v, axis=1), names="|σ_v| [m/s]", colors=FWD)
-        rec.scalars("/plots/sigma/attitude", t, np.linalg.norm(sd_att, axis=1), names="|σ_θ| [deg]", colors=TRUTH)
+        rec.scalars("/plots/sigma_position/norm", t, np.linalg.norm(sd_p, axis=1), names="|σ_p| [m]", colors=EST)
+        rec.scalars(
+            "/plots/sigma_position/altitude_3sigma_smoothed",
+            t,
+            3.0 * sd_r,
+            names="3σ altitude, smoothed [m]",
+            colors=[EST],
+        )
+        rec.scalars("/plots/sigma_velocity", t, np.linalg.norm(sd_v, axis=1), names="|σ_v| [m/s]", colors=FWD)
+        rec.scalars("/plots/sigma_attitude", t, np.linalg.norm(sd_att, axis=1), names="|σ_θ| [deg]", colors=TRUTH)
         if tr_p is not None:
             rec.series_with_bounds("/plots/error/altitude", t, r - tr_r, sd_r, names="h error [m]", color=[EST])
 
