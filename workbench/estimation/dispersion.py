@@ -46,7 +46,7 @@ import numpy as np
 from workbench.core.atmosphere import Atmosphere, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_from_rotvec
-from workbench.estimation.strapdown import _qmul, _qnormalize, integrate_members
+from workbench.estimation.strapdown import ImuArrays, _qmul, _qnormalize, imu_arrays, integrate_members
 
 __all__ = [
     "SAMPLE_BLOCK",
@@ -257,30 +257,10 @@ def event_quantities(
 
 
 @dataclass(frozen=True)
-class _Gap:
-    t_a: float
-    t_b: float
-    dv_G: np.ndarray
-    dp_G: np.ndarray
-    dp_rel_G: np.ndarray
-    dC: np.ndarray
-
-
-@dataclass(frozen=True)
-class _IMU:
-    """What the member integration needs of a PreprocessedIMU (plain, picklable for workers)."""
-
-    t: np.ndarray
-    f_G: np.ndarray
-    w_G: np.ndarray
-    gaps: tuple[_Gap, ...]
-
-
-@dataclass(frozen=True)
 class _Job:
     """Everything a chunk task needs (shipped once to each worker)."""
 
-    imu: _IMU
+    imu: ImuArrays
     v0: np.ndarray
     q0: np.ndarray
     p0: np.ndarray
@@ -297,21 +277,6 @@ class _Job:
 
 def _offsets(job: _Job, start: int, stop: int) -> np.ndarray:
     return sample_offsets(job.seed, start, stop, job.sigmas, round_index=job.round_index, mean=job.mean, L=job.L)
-
-
-def _plain_imu(imu: Any) -> _IMU:
-    gaps = tuple(
-        _Gap(
-            float(g.t_a),
-            float(g.t_b),
-            np.asarray(g.dv_G, float),
-            np.asarray(g.dp_G, float),
-            np.asarray(g.dp_rel_G, float),
-            np.asarray(g.dC, float),
-        )
-        for g in (getattr(imu, "gaps", None) or ())
-    )
-    return _IMU(np.asarray(imu.t, float), np.asarray(imu.f_G, float), np.asarray(imu.w_G, float), gaps)
 
 
 def _run_chunk(job: _Job, start: int, stop: int) -> tuple[int, np.ndarray, dict[str, np.ndarray]]:
@@ -385,7 +350,7 @@ def _dask_map(client, job: _Job, ranges, fn):
     return client.gather(futs)
 
 
-def _event_times(imu: _IMU, events_t: Mapping[str, float]) -> tuple[np.ndarray, dict[str, float]]:
+def _event_times(imu: ImuArrays, events_t: Mapping[str, float]) -> tuple[np.ndarray, dict[str, float]]:
     try:
         t_pdd, t_fsr = float(events_t["PDD"]), float(events_t["FSR"])
     except KeyError as err:
@@ -514,7 +479,7 @@ def _finish(
 
 
 def _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground):
-    pim = _plain_imu(imu)
+    pim = imu_arrays(imu)
     et, ev_d = _event_times(pim, events_t)
     if np.any(et < pim.t[0]) or np.any(et > pim.t[-1]):
         raise ValueError(f"run_dispersion: event times {et} outside the IMU data [{pim.t[0]:.2f}, {pim.t[-1]:.2f}] s")

@@ -80,6 +80,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from workbench.core.bodies import MARS, Body
 from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import quat_conjugate, quat_from_jpl, quat_rotate, quat_to_dcm
+from workbench.estimation.strapdown import GapBridge
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, read_events, read_telemetry
 
@@ -138,23 +139,6 @@ class EntryTelemetry:
     epoch_utc: str
     problems: list[str]
     files: dict[str, Path]
-
-
-@dataclass(frozen=True)
-class GapBridge:
-    """A TM gap between samples a (``t_a``, last before) and b (``t_b``, first after), AMELIA Sect. 5.
-
-    From the on-board solution at the edges, with ``C = C_G_M`` of the on-board attitude:
-    ``dv_G = C_a (v_b − v_a)`` [m/s]; ``dp_G = C_a (p_b − p_a)`` [m];
-    ``dp_rel_G = C_a (p_b − p_a − v_a (t_b − t_a))`` [m]; ``dC = C_b C_aᵀ`` (3,3).
-    """
-
-    t_a: float
-    t_b: float
-    dv_G: np.ndarray
-    dp_G: np.ndarray
-    dp_rel_G: np.ndarray
-    dC: np.ndarray
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ gradient (the paper neglects it; it is cheap and included when a position is giv
 ``sample_dt`` seconds.  Covariance (Eq. A.15) is propagated in discrete form (:func:`covariance_step`).
 
 Data gaps (AMELIA Sect. 5, :func:`apply_gap`) are bridged with the on-board solution's velocity,
-position and attitude changes across the gap (:class:`~workbench.estimation.entry_preprocess.GapBridge`).
+position and attitude changes across the gap (:class:`GapBridge`).
 """
 
 from __future__ import annotations
@@ -45,6 +45,9 @@ from workbench.core.rotation import dcm_to_quat, skew
 
 __all__ = [
     "GAP_SIGMA_DEFAULT",
+    "GapBridge",
+    "ImuArrays",
+    "imu_arrays",
     "StrapdownPass",
     "gravity_M",
     "gravity_gradient_M",
@@ -353,7 +356,7 @@ def apply_gap(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Carry the state (v_M, q_M_G, p_M) across a data gap with the on-board changes (AMELIA Sect. 5).
 
-    ``bridge`` is a :class:`~workbench.estimation.entry_preprocess.GapBridge` (fields ``t_a``,
+    ``bridge`` is a :class:`GapBridge` (fields ``t_a``,
     ``t_b``, ``dv_G``, ``dp_G``, ``dp_rel_G``, ``dC``; ``C = C_G_M`` of the on-board attitude).
     With ``C_a = C_G_M`` of *our* state at a (``C_aᵀ = C_M_G``)::
 
@@ -427,6 +430,68 @@ def gap_transition(
 
 # ---------------------------------------------------------------------------------------------
 # whole passes
+
+
+@dataclass(frozen=True)
+class GapBridge:
+    """A TM gap between samples a (``t_a``, last before) and b (``t_b``, first after), AMELIA Sect. 5.
+
+    From the on-board solution at the edges, with ``C = C_G_M`` of the on-board attitude:
+    ``dv_G = C_a (v_b − v_a)`` [m/s]; ``dp_G = C_a (p_b − p_a)`` [m];
+    ``dp_rel_G = C_a (p_b − p_a − v_a (t_b − t_a))`` [m]; ``dC = C_b C_aᵀ`` (3,3).
+    """
+
+    t_a: float
+    t_b: float
+    dv_G: np.ndarray
+    dp_G: np.ndarray
+    dp_rel_G: np.ndarray
+    dC: np.ndarray
+
+
+@dataclass(frozen=True)
+class ImuArrays:
+    """What integration needs of a PreprocessedIMU, as plain picklable arrays (for worker processes).
+
+    ``t`` (n,) [s]; ``f_G`` (n, 3) [m/s²]; ``w_G`` (n, 3) [rad/s]; ``sigma_f``, ``sigma_w`` (n, 3)
+    per-sample 1σ; ``gaps`` the :class:`GapBridge` of each data gap.
+    """
+
+    t: np.ndarray
+    f_G: np.ndarray
+    w_G: np.ndarray
+    sigma_f: np.ndarray
+    sigma_w: np.ndarray
+    gaps: tuple[GapBridge, ...] = ()
+
+
+def imu_arrays(imu: Any) -> ImuArrays:
+    """:class:`ImuArrays` from any object with ``t``, ``f_G``, ``w_G`` (optional ``sigma_f``/``sigma_w``,
+    scalar or (n, 3), default 0; optional ``gaps``)."""
+    n = np.asarray(imu.t).size
+
+    def sig(a):
+        return np.broadcast_to(np.asarray(0.0 if a is None else a, float), (n, 3)).copy()
+
+    gaps = tuple(
+        GapBridge(
+            float(g.t_a),
+            float(g.t_b),
+            np.asarray(g.dv_G, float),
+            np.asarray(g.dp_G, float),
+            np.asarray(g.dp_rel_G, float),
+            np.asarray(g.dC, float),
+        )
+        for g in (getattr(imu, "gaps", None) or ())
+    )
+    return ImuArrays(
+        np.asarray(imu.t, float),
+        np.asarray(imu.f_G, float),
+        np.asarray(imu.w_G, float),
+        sig(getattr(imu, "sigma_f", None)),
+        sig(getattr(imu, "sigma_w", None)),
+        gaps,
+    )
 
 
 @dataclass(frozen=True)

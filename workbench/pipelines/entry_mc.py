@@ -89,7 +89,7 @@ from workbench.core.bodies import MARS
 from workbench.core.rotation import attitude_error, quat_boxplus
 from workbench.estimation.consistency import anees_bounds, fraction_inside, nees
 from workbench.estimation.entry_filter import CHANNELS, EntryFilterSigmas, RadarData, run_entry_smoother
-from workbench.estimation.strapdown import apply_gap, gap_transition, rk4_step
+from workbench.estimation.strapdown import GapBridge, ImuArrays, apply_gap, gap_transition, imu_arrays, rk4_step
 from workbench.sensors.radar import R_GROUND, beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
 
 __all__ = [
@@ -117,30 +117,8 @@ _NIS_DOF = {"slant_range": 4, "slant_out": 1, "velocity_out": 3}
 
 
 @dataclass(frozen=True)
-class _Gap:
-    t_a: float
-    t_b: float
-    dv_G: np.ndarray
-    dp_G: np.ndarray
-    dp_rel_G: np.ndarray
-    dC: np.ndarray
-
-
-@dataclass(frozen=True)
-class _IMU:
-    """What the truth and the smoother need of a PreprocessedIMU (picklable for workers)."""
-
-    t: np.ndarray
-    f_G: np.ndarray
-    w_G: np.ndarray
-    sigma_f: np.ndarray
-    sigma_w: np.ndarray
-    gaps: tuple[_Gap, ...] = ()
-
-
-@dataclass(frozen=True)
 class _Job:
-    imu: _IMU
+    imu: ImuArrays
     v0: np.ndarray
     q0: np.ndarray
     p0: np.ndarray
@@ -186,34 +164,7 @@ class _RunOut:
     wall_s: float
 
 
-def _plain_imu(imu: Any) -> _IMU:
-    gaps = tuple(
-        _Gap(
-            float(g.t_a),
-            float(g.t_b),
-            np.asarray(g.dv_G, float),
-            np.asarray(g.dp_G, float),
-            np.asarray(g.dp_rel_G, float),
-            np.asarray(g.dC, float),
-        )
-        for g in (getattr(imu, "gaps", None) or ())
-    )
-    n = np.asarray(imu.t).size
-
-    def sig(a):
-        return np.broadcast_to(np.asarray(a, float), (n, 3)).copy()
-
-    return _IMU(
-        np.asarray(imu.t, float),
-        np.asarray(imu.f_G, float),
-        np.asarray(imu.w_G, float),
-        sig(imu.sigma_f),
-        sig(imu.sigma_w),
-        gaps,
-    )
-
-
-def _gap_index(t: np.ndarray, gaps: Sequence[_Gap]) -> dict[int, _Gap]:
+def _gap_index(t: np.ndarray, gaps: Sequence[GapBridge]) -> dict[int, GapBridge]:
     out = {}
     for g in gaps:
         i = int(np.searchsorted(t, g.t_a - 1e-6))
@@ -240,7 +191,7 @@ def _noise_scale(t: np.ndarray, gap_at: Mapping[int, Any]) -> tuple[np.ndarray, 
 # one run
 
 
-def _truth(job: _Job, dx0: np.ndarray, rng: np.random.Generator, gap_at: dict[int, _Gap]):
+def _truth(job: _Job, dx0: np.ndarray, rng: np.random.Generator, gap_at: dict[int, GapBridge]):
     """Truth on the IMU grid (v (n,3), q (n,4), p (n,3)) from nominal ⊞ dx0, clean inputs."""
     imu = job.imu
     t, f, w = imu.t, imu.f_G, imu.w_G
@@ -376,7 +327,7 @@ def _run_one(job: _Job, r: int) -> _RunOut:
     scale, _ = _noise_scale(imu.t, gap_at)
     f_noisy = imu.f_G + imu.sigma_f * scale[:, None] * g_imu.standard_normal((n, 3))
     w_noisy = imu.w_G + imu.sigma_w * scale[:, None] * g_imu.standard_normal((n, 3))
-    noisy = _IMU(imu.t, f_noisy, w_noisy, imu.sigma_f, imu.sigma_w, imu.gaps)
+    noisy = ImuArrays(imu.t, f_noisy, w_noisy, imu.sigma_f, imu.sigma_w, imu.gaps)
 
     # radar from the truth at the telemetry time tags
     s_sr, s_so, s_vo = job.noise
@@ -578,7 +529,9 @@ class ValidationResult:
     )  # fmt: skip
 
 
-def _summary_times(t: np.ndarray, gaps: Sequence[_Gap], events: Mapping[str, float], t_fix: float) -> dict[str, float]:
+def _summary_times(
+    t: np.ndarray, gaps: Sequence[GapBridge], events: Mapping[str, float], t_fix: float
+) -> dict[str, float]:
     out = {"start": float(t[0])}
     if gaps:
         g = max(gaps, key=lambda g: g.t_b - g.t_a)
@@ -699,7 +652,7 @@ def validate_smoother(
         noise = tuple(float(x) for x in radar_noise)
         if len(noise) != 3:
             raise ValueError("radar_noise: mapping or (slant_range, slant_out, velocity_out)")
-    plain = _plain_imu(imu)
+    plain = imu_arrays(imu)
     t_sr = np.sort(np.asarray(radar_times[0], float).reshape(-1))
     t_rda = np.sort(np.asarray(radar_times[1], float).reshape(-1))
     first = [x[0] for x in (t_sr, t_rda) if x.size]
