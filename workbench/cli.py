@@ -20,12 +20,13 @@ from pathlib import Path
 import numpy as np
 
 EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_NUMERIC, EXIT_KIND, EXIT_INTERRUPT = 0, 2, 3, 4, 5, 130
-ASSETS = Path(__file__).resolve().parent.parent / "assets"
 
 
 def _assets_dir() -> Path:
-    """The shipped ``assets/`` folder (next to the package in a source checkout)."""
-    return ASSETS
+    """The shipped assets folder (package data ``workbench.assets``)."""
+    from workbench.io.assets import assets_dir
+
+    return assets_dir()
 
 
 def _progress(msg: str) -> None:
@@ -74,8 +75,8 @@ def run_scenario(
 def _run_entry(sc, out_dir: Path, seed, export: bool, quiet: bool, scheduler, members) -> dict:
     """Entry and descent (AMELIA): synthesize (if synthetic) -> reconstruct -> record -> summary."""
     from workbench.io.results import export_csv, write_summary
-    from workbench.pipelines import entry as en
-    from workbench.recording.entry import EntryRecorder, entry_blueprint
+    from workbench.problems.entry import pipeline as en
+    from workbench.problems.entry.recording import EntryRecorder, entry_blueprint
     from workbench.recording.writer import open_recording
 
     say = (lambda m: None) if quiet else _progress
@@ -84,7 +85,7 @@ def _run_entry(sc, out_dir: Path, seed, export: bool, quiet: bool, scheduler, me
     seed_used = int(sc.get("synthetic.seed", 0, kind="int") if seed is None else seed)
     truth = None
     if sc.is_synthetic:
-        from workbench.pipelines.entry_synthetic import load_entry_truth, synthesize_entry
+        from workbench.problems.entry.synthetic import load_entry_truth, synthesize_entry
 
         say(f"[{sc.name}] simulating the entry (truth) and writing telemetry ...")
         paths = synthesize_entry(sc, out_dir / sc.name / "telemetry", seed=seed_used)
@@ -158,9 +159,9 @@ def _run_droptest(sc, out_dir: Path, seed, export: bool, quiet: bool) -> dict:
 
     say = (lambda m: None) if quiet else _progress
     t_start = time.perf_counter()
-    from workbench.pipelines import droptest as dt
-    from workbench.pipelines.droptest_synthetic import load_truth, synthesize_droptest
-    from workbench.recording.droptest import DropTestRecorder, droptest_blueprint, impact_view
+    from workbench.problems.droptest import pipeline as dt
+    from workbench.problems.droptest.recording import DropTestRecorder, droptest_blueprint, impact_view
+    from workbench.problems.droptest.synthetic import load_truth, synthesize_droptest
     from workbench.recording.writer import open_recording
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -253,7 +254,7 @@ def cmd_mc(args: argparse.Namespace) -> int:
     AMELIA Sect. 8 validation of the smoother for an entry scenario (:func:`_mc_entry`)."""
     from workbench.io.results import write_summary
     from workbench.io.scenario import resolve_scenario
-    from workbench.pipelines.droptest_mc import monte_carlo, summarize_mc
+    from workbench.problems.droptest.montecarlo import monte_carlo, summarize_mc
     from workbench.recording.montecarlo import record_monte_carlo
 
     sc = resolve_scenario(args.scenario, _assets_dir())
@@ -284,20 +285,20 @@ def _mc_entry(sc, args: argparse.Namespace) -> int:
     member count, ``--scheduler`` also runs the dispersion on Dask).  Writes ``<out>/<name>.mc.json``
     and ``<out>/<name>_mc.rrd``."""
     from workbench.io.results import write_summary
-    from workbench.pipelines.entry_mc import prepare_validation, validate_smoother
-    from workbench.recording.entry_mc import record_entry_validation
+    from workbench.problems.entry.montecarlo import prepare_validation, validate_smoother
+    from workbench.problems.entry.recording_mc import record_entry_validation
 
     t_start = time.perf_counter()
     out = Path(args.out)
     if sc.is_synthetic:
-        from workbench.pipelines.entry_synthetic import synthesize_entry
+        from workbench.problems.entry.synthetic import synthesize_entry
 
         _progress(f"[{sc.name}] simulating the entry (truth) and writing telemetry ...")
         paths = synthesize_entry(
             sc, out / f"{sc.name}_mc_work" / "telemetry", seed=sc.get("synthetic.seed", 0, kind="int")
         )
     else:
-        from workbench.pipelines.entry import telemetry_paths
+        from workbench.problems.entry.pipeline import telemetry_paths
 
         paths = telemetry_paths(sc)
     _progress(f"[{sc.name}] preprocessing and dispersion analysis ...")

@@ -9,7 +9,7 @@ Run on demand from the repository root (not collected by pytest)::
 Input: ``--source scenario`` (default) synthesizes the ``schiaparelli`` scenario's telemetry
 (truth simulator → files), reads and preprocesses it exactly as the pipeline does, and starts the
 members about the scenario's (erroneous) nominal state; ``--source fixture`` uses the point-mass
-entry of ``tests/estimation/_entry_synth.py`` (no dependency on the entry pipeline).
+entry of ``tests/support/entry_synth.py`` (no dependency on the entry pipeline).
 
 Measured, in one run:
 
@@ -46,14 +46,14 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 from workbench.core.rotation import attitude_error  # noqa: E402
-from workbench.estimation import dispersion as ds  # noqa: E402
+from workbench.problems.entry import dispersion as ds  # noqa: E402
 
 
 def _scenario_input(seed: int):
     """(imu, nominal (v, q, p), events, truth (v, q, p) at t0, r_ground, description)."""
-    from workbench.estimation.entry_preprocess import preprocess, read_entry_telemetry
     from workbench.io.scenario import load_scenario
-    from workbench.pipelines.entry_synthetic import load_truth, synthesize_entry
+    from workbench.problems.entry.preprocess import preprocess, read_entry_telemetry
+    from workbench.problems.entry.synthetic import load_truth, synthesize_entry
 
     sc = load_scenario(ROOT / "assets" / "scenarios" / "schiaparelli.toml")
     with tempfile.TemporaryDirectory() as d:
@@ -73,7 +73,7 @@ def _scenario_input(seed: int):
 
 
 def _fixture_input():
-    spec = importlib.util.spec_from_file_location("_entry_synth", ROOT / "tests" / "estimation" / "_entry_synth.py")
+    spec = importlib.util.spec_from_file_location("_entry_synth", ROOT / "tests" / "support" / "entry_synth.py")
     m = importlib.util.module_from_spec(spec)
     sys.modules["_entry_synth"] = m
     spec.loader.exec_module(m)

@@ -7,12 +7,12 @@ Run on demand from the repository root (not collected by pytest)::
 
 Parts:
 
-1. Monte Carlo (:func:`workbench.pipelines.droptest_mc.monte_carlo`) over seeds 1..N for the
+1. Monte Carlo (:func:`workbench.problems.droptest.montecarlo.monte_carlo`) over seeds 1..N for the
    IMU-only kinematic, IMU-only dynamic and ranging kinematic configurations → every number of
-   :func:`~workbench.pipelines.droptest_mc.summarize_mc` and the wall time.
+   :func:`~workbench.problems.droptest.montecarlo.summarize_mc` and the wall time.
 2. Speed (IMU-only kinematic, seed 1): whole-process wall time of ``workbench run droptest``
    (subprocess), the stage times of one reconstruction (time between the yields of
-   :func:`workbench.pipelines.droptest.reconstruct`), filter steps per second of the production
+   :func:`workbench.problems.droptest.pipeline.reconstruct`), filter steps per second of the production
    forward pass (``forward_pass`` → ``run_filter``) against a plain hand-written baseline loop
    (same ``redland.propagate`` + ``F P Fᵀ + Q`` predict, one stacked update of all the step's
    measurements with ``np.linalg.solve`` and ``P = (I − K H) P``), and peak memory of one
@@ -41,12 +41,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from workbench.estimation import redland as rl  # noqa: E402
-from workbench.geometry.lander import load_lander  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
-from workbench.pipelines import droptest as dt  # noqa: E402
-from workbench.pipelines.droptest_mc import McResult, monte_carlo, summarize_mc  # noqa: E402
-from workbench.pipelines.droptest_synthetic import synthesize_droptest  # noqa: E402
+from workbench.problems.droptest import model as rl  # noqa: E402
+from workbench.problems.droptest import pipeline as dt  # noqa: E402
+from workbench.problems.droptest.lander import load_lander  # noqa: E402
+from workbench.problems.droptest.montecarlo import McResult, monte_carlo, summarize_mc  # noqa: E402
+from workbench.problems.droptest.synthetic import synthesize_droptest  # noqa: E402
 
 SCEN = ROOT / "assets" / "scenarios"
 CONFIGS = (

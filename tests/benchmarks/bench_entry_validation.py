@@ -6,11 +6,11 @@ Run on demand from the repository root (not collected by pytest)::
         [--refine-rounds R] [--scheduler local|tcp://...] [--workers 2] [--seed 1]
 
 Steps: synthesize the shipped ``schiaparelli`` scenario's telemetry
-(:func:`workbench.pipelines.entry_synthetic.synthesize_entry`, scenario seed), run the
+(:func:`workbench.problems.entry.synthetic.synthesize_entry`, scenario seed), run the
 reconstruction stages up to the dispersion with the scenario's settings
-(:func:`workbench.pipelines.entry_mc.prepare_validation`; ``--members`` / ``--refine-rounds``
+(:func:`workbench.problems.entry.montecarlo.prepare_validation`; ``--members`` / ``--refine-rounds``
 override ``[dispersion] members`` / ``refine_rounds``), then
-:func:`~workbench.pipelines.entry_mc.validate_smoother` with ``--runs`` runs (default: the
+:func:`~workbench.problems.entry.montecarlo.validate_smoother` with ``--runs`` runs (default: the
 scenario's ``[validation] runs``, else 100) from the smoother start the pipeline uses
 (``[reconstruction] initial``; truths from that start's Gaussian unless it is the paper's
 "dispersion" start) or, with ``--paper``, AMELIA's setting (refined state, truths from the
@@ -36,8 +36,8 @@ sys.path.insert(0, str(ROOT))
 
 from workbench.io.results import to_jsonable  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
-from workbench.pipelines.entry_mc import prepare_validation, validate_smoother  # noqa: E402
-from workbench.pipelines.entry_synthetic import synthesize_entry  # noqa: E402
+from workbench.problems.entry.montecarlo import prepare_validation, validate_smoother  # noqa: E402
+from workbench.problems.entry.synthetic import synthesize_entry  # noqa: E402
 
 
 def _table(s: dict) -> str:

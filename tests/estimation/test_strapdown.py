@@ -20,7 +20,8 @@ from workbench.estimation import strapdown as sd
 def _load_synth():
     name = "_entry_synth"
     if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("_entry_synth.py"))
+        path = Path(__file__).resolve().parents[1] / "support" / "entry_synth.py"
+        spec = importlib.util.spec_from_file_location(name, path)
         mod = importlib.util.module_from_spec(spec)
         sys.modules[name] = mod
         spec.loader.exec_module(mod)

@@ -1,0 +1,60 @@
+"""Monte Carlo driver of the drop test: executor independence and the summary statistics."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench.estimation.consistency import anees_bounds
+from workbench.io.scenario import load_scenario
+from workbench.problems.droptest.montecarlo import Z_NAMES, McResult, monte_carlo, summarize_mc
+
+SCENARIOS = Path(__file__).resolve().parents[3] / "assets" / "scenarios"
+
+
+@pytest.mark.slow
+def test_results_do_not_depend_on_the_executor(tmp_path):
+    """Each task's randomness comes only from its seed: loop and 2-process pool agree exactly."""
+    sc = load_scenario(SCENARIOS / "droptest.toml")
+    seeds = [3, 1, 2]
+    a = monte_carlo(sc, seeds, tmp_path / "loop")
+    b = monte_carlo(sc, seeds, tmp_path / "pool", workers=2)
+    assert a.executor == "loop" and b.executor.startswith("process pool")
+    for name in McResult.DETERMINISTIC:
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    np.testing.assert_array_equal(a.seed, seeds)
+    assert a.z_at_max.shape == (3, len(Z_NAMES)) and a.nees_blocks_mean.shape == (3, 4)
+    # every task cleaned up its subfolder
+    assert list((tmp_path / "loop").iterdir()) == [] and list((tmp_path / "pool").iterdir()) == []
+
+
+def _fake(n: int, err: np.ndarray, sigma: np.ndarray) -> McResult:
+    z = np.ones((n, len(Z_NAMES)))
+    return McResult(
+        scenario="fake", mode="kinematic", executor="none", total_wall_s=1.0,
+        seed=np.arange(n), max_stroke=0.3 + err, sigma=sigma, truth=np.full(n, 0.3), error=err,
+        inside_3sigma=np.abs(err) <= 3 * sigma, nees_pose_mean=np.full(n, 6.0),
+        nees_pose_at_max=np.full(n, 12.0), nees_stroke=(err / sigma) ** 2,
+        restitution_error=np.r_[np.nan, np.full(n - 1, 0.01)], z_at_max=z,
+        nees_blocks_mean=np.full((n, 4), 3.0), wall_time_s=np.ones(n), reconstruct_s=np.ones(n),
+    )  # fmt: skip
+
+
+def test_summary_statistics():
+    err = np.array([0.01, -0.02, 0.2, 0.05])
+    sig = np.array([0.01, 0.01, 0.05, 0.04])  # 3σ: 0.03, 0.03, 0.15, 0.12
+    s = summarize_mc(_fake(4, err, sig))
+    assert s["n_runs"] == 4
+    assert s["fraction_inside_3sigma"] == pytest.approx(0.75)  # run 2 (|−0.02| ≤ 0.03 ok), run 4 ok
+    assert s["median_3sigma_m"] == pytest.approx(0.075)
+    assert s["abs_error_median_m"] == pytest.approx(0.035)
+    assert s["fraction_mer_requirement"] == pytest.approx(0.5)  # runs 1 and 2
+    assert s["anees_pose_band"] == pytest.approx(list(anees_bounds(6, 4)))
+    assert s["anees_pose_time_avg"] == pytest.approx(6.0)
+    assert s["anees_pose_at_max"] == pytest.approx(12.0) and not s["anees_pose_at_max_inside"]
+    assert s["anees_stroke"] == pytest.approx(np.mean((err / sig) ** 2))
+    assert s["anees_stroke_band"] == pytest.approx(list(anees_bounds(1, 4)))
+    assert s["restitution_abs_error_median"] == pytest.approx(0.01)  # NaN run ignored
+    assert s["z2_at_max_mean"]["p.x"] == pytest.approx(1.0)

@@ -1,0 +1,256 @@
+"""The drop-test run end to end through the CLI path, read back from the ``.rrd``.
+
+What the recording must hold (DESIGN.md "Recording layout") and that the numbers in it are the
+numbers of the reconstruction: the pose per filter step, the stroke series and its bounds, the
+3σ ellipsoids, the events and the scorecard; the summary JSON's truth scoring for the three
+synthetic scenarios; the ``inspect`` and ``run`` commands; and that user telemetry goes through
+the same code path as a synthetic scenario.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench.cli import _assets_dir, main, run_scenario
+from workbench.problems.droptest import model as rl
+from workbench.recording import layout
+from workbench.recording.reader import read_recording, verify
+
+TRIADS = ("BP", "PYBP", "PXBP", "MXBP")
+
+
+@pytest.fixture(scope="module")
+def rec(droptest_run):
+    return read_recording(droptest_run.rrd)
+
+
+def _summary_json(run) -> dict:
+    return json.loads(run.summary_json.read_text(encoding="utf-8"))
+
+
+# ------------------------------------------------------------------------------ file
+
+
+def test_recording_verifies_and_no_partial_left(droptest_run):
+    ok, out = verify(droptest_run.rrd)
+    assert ok, out
+    assert not list(droptest_run.out.rglob("*.partial"))
+    assert droptest_run.summary["recording_bytes"] == droptest_run.rrd.stat().st_size
+
+
+def test_recording_identity(rec):
+    assert rec.application_id == layout.APPLICATION_ID
+    assert rec.recording_name == "droptest"
+    assert set(rec.timelines()) >= {layout.TIME, layout.STEP}
+
+
+def test_required_entities_present(rec):
+    required = [
+        layout.SURFACE,
+        layout.VEHICLE,
+        layout.VEHICLE_BODY,
+        layout.AIRBAGS,
+        layout.UNCERTAINTY,
+        layout.ESTIMATE_FORWARD,
+        layout.ESTIMATE_SMOOTHED,
+        f"{layout.TRUTH}/vehicle",
+        layout.STROKE,
+        "/world/roll_line",
+        "/sensors/BP",
+        layout.EVENTS,
+        layout.REPORT,
+    ]
+    required += [f"/plots/stroke/{s}" for s in ("value", "plus_1sigma", "minus_1sigma")]
+    required += [f"/plots/stroke/{s}" for s in ("plus_3sigma", "minus_3sigma", "truth")]
+    for sensor in (*TRIADS, "gyro"):
+        for axis in "xyz":
+            required += [f"/residuals/{sensor}/{axis}/{s}" for s in ("value", "plus_3sigma", "minus_3sigma")]
+    have = set(rec.entities())
+    missing = [e for e in required if e not in have]
+    assert not missing, f"missing entities: {missing}"
+    assert "Transform3D:translation" in rec.components(layout.VEHICLE)
+    assert "Transform3D:quaternion" in rec.components(layout.VEHICLE)
+
+
+# ------------------------------------------------------------------------------ numbers
+
+
+def test_pose_one_row_per_filter_step(rec, droptest_run, droptest_result):
+    n = droptest_run.summary["steps"]
+    assert rec.row_count(layout.VEHICLE, layout.TIME) == n
+    assert rec.row_count(layout.VEHICLE, layout.STEP) == n
+    t, p, _ = rec.transforms(layout.VEHICLE, layout.TIME)
+    steps, _, _ = rec.transforms(layout.VEHICLE, layout.STEP)
+    np.testing.assert_array_equal(steps, np.arange(n))
+    assert np.unique(t).size == n  # no step logged twice, none merged
+    smo = droptest_result.smoothed
+    np.testing.assert_allclose(t, smo.t, rtol=0, atol=1e-9)  # stored as integer ns
+    np.testing.assert_allclose(p, smo.x[:, rl.SP], rtol=0, atol=1e-5)  # float32 of metre-scale positions
+
+
+def test_stroke_minimum_is_the_max_stroke_of_the_summary(rec, droptest_run):
+    ms = droptest_run.summary["max_stroke"]
+    t, v = rec.scalars("/plots/stroke/value")
+    after = t >= droptest_run.summary["events"]["release"]
+    k = int(np.argmin(v[after, 0]))
+    # Scalars are float64 in Rerun, so this is tighter than float32 precision
+    assert v[after, 0][k] == pytest.approx(ms["distance_m"], rel=1e-12)
+    assert abs(t[after][k] - ms["time_s"]) <= 1e-9  # ns time stamps
+
+
+def test_stroke_bounds_consistent(rec):
+    _, v = rec.scalars("/plots/stroke/value")
+    _, p1 = rec.scalars("/plots/stroke/plus_1sigma")
+    _, m1 = rec.scalars("/plots/stroke/minus_1sigma")
+    _, p3 = rec.scalars("/plots/stroke/plus_3sigma")
+    _, m3 = rec.scalars("/plots/stroke/minus_3sigma")
+    assert np.all(p1 - v > 0.0)  # a zero σ would make the checks below vacuous
+    np.testing.assert_allclose(v - m1, p1 - v, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(p3 - v, 3.0 * (p1 - v), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(v - m3, 3.0 * (p1 - v), rtol=1e-9, atol=1e-12)
+
+
+def test_ellipsoids_are_3sigma_of_the_smoothed_position_covariance(rec, droptest_result):
+    steps, centers, half, _ = rec.ellipsoids(layout.UNCERTAINTY, layout.STEP)
+    P = droptest_result.smoothed.P[:, rl.EP, rl.EP]
+    assert steps.size == P.shape[0]
+    np.testing.assert_array_equal(centers, 0.0)  # body-frame ellipsoid centred on the vehicle
+    expected = 3.0 * np.sqrt(np.linalg.eigvalsh(P))  # ascending, every step
+    logged = np.sort(half[:, 0, :], axis=1)
+    # the re-run is bit-identical; the only difference is the float32 storage (≤ ½ ulp)
+    np.testing.assert_allclose(logged, expected, rtol=float(np.finfo(np.float32).eps))
+
+
+def test_events_and_report(rec, droptest_run):
+    ms = droptest_run.summary["max_stroke"]
+    log = rec.text_log(layout.EVENTS)
+    texts = [x for _, x, _ in log]
+    assert any(x.startswith("release") for x in texts)
+    hits = [(t, x) for t, x, _ in log if x.startswith("max stroke")]
+    assert len(hits) == 1
+    assert abs(hits[0][0] - ms["time_s"]) <= 1e-9
+    assert f"{ms['distance_m']:.3f} m" in hits[0][1]
+    contact = droptest_run.summary["contact"]
+    begins = [t for t, x, _ in log if "contact begins" in x]
+    rebound = [t for t, x, _ in log if x.startswith("rebound")]
+    assert begins and abs(begins[0] - contact["start_s"]) <= 1e-9
+    assert rebound and abs(rebound[0] - contact["end_s"]) <= 1e-9
+    report = rec.text_document(layout.REPORT)
+    assert "max stroke" in report
+    assert f"{ms['distance_m']:.3f} m ± {ms['sigma_m']:.3f} m" in report
+    assert "Against truth" in report
+
+
+# ------------------------------------------------------------------------------ scoring vs truth
+
+
+def test_droptest_truth_scoring(droptest_run):
+    s = _summary_json(droptest_run)
+    tr = s["truth"]
+    ms = s["max_stroke"]
+    # one seed: a smoke check; the statistical claim (coverage over seeds) is the benchmark's
+    assert abs(tr["max_stroke_error_m"]) <= 3.0 * ms["sigma_m"]
+    assert tr["max_stroke_inside_3sigma"] is True
+    assert abs(s["restitution"]["e"] - tr["restitution_truth"]) < 0.05
+    assert tr["full_stroke_truth"] is False and ms["full_stroke"] is False
+
+
+def test_ranging_truth_scoring(cli_run):
+    s = _summary_json(cli_run("droptest_ranging"))
+    assert abs(s["truth"]["max_stroke_error_m"]) < 0.10
+    assert "odometer" in s["innovations"]
+    assert {"G1.range", "G2.range", "G3.range"} <= set(s["innovations"])
+
+
+def test_fullstroke_truth_scoring(cli_run):
+    s = _summary_json(cli_run("droptest_fullstroke"))
+    ms = s["max_stroke"]
+    assert ms["full_stroke"] or ms["possible_full_stroke"]
+    assert s["truth"]["full_stroke_truth"] is True
+
+
+# ------------------------------------------------------------------------------ commands
+
+
+def test_inspect_prints_entities_and_scorecard(droptest_run, rec, capsys):
+    code = main(["inspect", str(droptest_run.rrd)])
+    out = capsys.readouterr().out
+    assert code == 0
+    n = droptest_run.summary["steps"]
+    assert f"{len(rec.entities())} entities (rows per timeline: step, time):" in out
+    for e in (layout.VEHICLE, layout.UNCERTAINTY, "/plots/stroke/value", layout.REPORT):
+        assert e in out
+    vehicle_line = next(ln for ln in out.splitlines() if ln.split()[:1] == [layout.VEHICLE])
+    assert vehicle_line.split()[1:] == [str(n), str(n)]  # one pose row per step on both timelines
+    assert "scorecard" in out and "max stroke" in out
+
+
+def test_run_unknown_scenario_exit_code_and_names(tmp_path, capsys):
+    code = main(["run", "no_such_scenario", "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 3
+    assert "no_such_scenario" in err
+    for name in ("droptest", "droptest_ranging", "droptest_fullstroke"):
+        assert name in err
+    assert not list(tmp_path.iterdir())  # nothing written for a rejected scenario
+
+
+# ------------------------------------------------------------------------------ same code path
+
+
+def test_user_telemetry_same_code_path(droptest_run, tmp_path):
+    """The synthetic run's files as user telemetry: the reconstruction never used the truth."""
+    tel = tmp_path / "mydrop" / "telemetry"
+    tel.mkdir(parents=True)
+    for f in ("imu.csv", "3dm.csv", "events.csv", "setup.toml"):
+        shutil.copy(droptest_run.telemetry_dir / f, tel / f)
+    text = (_assets_dir() / "scenarios" / "droptest.toml").read_text(encoding="utf-8")
+    assert text.count("[synthetic]") == 1
+    text = text.split("[synthetic]")[0]  # [synthetic] is the last table of droptest.toml
+    lander = (_assets_dir() / "landers" / "mer_drop_lander.toml").resolve()
+    text = text.replace('lander = "../landers/mer_drop_lander.toml"', f'lander = "{lander.as_posix()}"')
+    text = text.replace('name = "droptest"', 'name = "mydrop"')
+    text += (
+        "\n[telemetry]\n"
+        'imu = "telemetry/imu.csv"\n'
+        'attitude_3dm = "telemetry/3dm.csv"\n'
+        'events = "telemetry/events.csv"\n'
+        'setup = "telemetry/setup.toml"\n'
+    )
+    toml = tmp_path / "mydrop" / "mydrop.toml"
+    toml.write_text(text, encoding="utf-8")
+    out = tmp_path / "out"
+    s = run_scenario(str(toml), out, quiet=True)
+    assert s["scenario"] == "mydrop"
+    assert "truth" not in s
+    assert not (out / "mydrop").exists()  # no synthetic telemetry written for a user scenario
+    assert Path(s["recording"]).is_file()
+    ref = droptest_run.summary["max_stroke"]
+    assert abs(s["max_stroke"]["distance_m"] - ref["distance_m"]) <= 1e-9
+    assert s["max_stroke"]["time_s"] == ref["time_s"]
+    assert s["max_stroke"]["sigma_m"] == pytest.approx(ref["sigma_m"], rel=1e-12)
+
+
+def test_monte_carlo_command_writes_a_recording(tmp_path, capsys):
+    """`workbench mc` runs the members, writes the summary JSON and one row per member on `sample`."""
+    from workbench.recording.reader import read_recording, verify
+
+    code = main(["mc", "droptest", "--seeds", "2", "--out", str(tmp_path)])
+    assert code == 0
+    data = read_recording(tmp_path / "droptest_mc.rrd")
+    assert verify(tmp_path / "droptest_mc.rrd")[0]
+    assert data.timelines() == ["sample"]
+    assert data.row_count("/plots/mc/stroke/error", "sample") == 2
+    t, err = data.scalars("/plots/mc/stroke/error", timeline="sample")
+    _, plus = data.scalars("/plots/mc/stroke/plus_3sigma", timeline="sample")
+    summary = json.loads((tmp_path / "droptest.mc.json").read_text())
+    assert summary["n_runs"] == 2
+    # the logged ±3σ band is the reported 3σ of each member (median matches the summary)
+    assert np.isclose(np.median(plus), summary["median_3sigma_m"])
+    assert np.all(np.isfinite(err)) and list(t) == [1, 2]
+    assert "Monte Carlo" in data.text_document("/report")

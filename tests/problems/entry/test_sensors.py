@@ -1,0 +1,101 @@
+"""Entry instruments and on-board navigation (workbench.problems.entry.sensors): the pieces the synthetic
+Schiaparelli telemetry is built from."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from workbench.core.bodies import MARS
+from workbench.core.gravity import gravity_j2
+from workbench.core.rotation import attitude_error, quat_from_rotvec, quat_multiply, quat_normalize, quat_rotate
+from workbench.problems.entry.sensors import (
+    EntryImuModel,
+    NominalErrorModel,
+    apply_imu_errors,
+    beam_directions_G,
+    nominal_state,
+    quat_cumprod,
+    slant_ranges_sphere,
+    strapdown_onboard,
+    terrain_relative_velocity_G,
+)
+
+R_GROUND = MARS.reference_radius - 1440.0
+
+
+def test_quat_cumprod_matches_sequential_product():
+    rng = np.random.default_rng(1)
+    q = quat_normalize(rng.normal(size=(37, 4)))
+    ref = [q[0]]
+    for k in range(1, q.shape[0]):
+        ref.append(quat_multiply(ref[-1], q[k]))
+    out = quat_cumprod(q)
+    dots = np.abs(np.sum(out * np.array(ref), axis=1))
+    assert np.all(dots > 1 - 1e-12)
+
+
+def test_strapdown_free_fall_matches_ode_solver():
+    t = np.arange(0.0, 200.0 + 1e-9, 0.01)
+    p0 = np.array([-1317.4e3, 3254.9e3, -223.9e3]) * 1.03
+    v0 = np.array([-4963.6, -3313.8, 832.6])
+    z = np.zeros((t.size, 3))
+    sol = strapdown_onboard(t, z, z, v0, np.array([0.0, 0.0, 0.0, 1.0]), p0)
+    ode = solve_ivp(lambda _, y: np.r_[y[3:], gravity_j2(y[:3], MARS)], (0, 200), np.r_[p0, v0], rtol=1e-12, atol=1e-6)
+    assert np.linalg.norm(sol.p_M[-1] - ode.y[:3, -1]) < 0.05
+    assert np.linalg.norm(sol.v_M[-1] - ode.y[3:, -1]) < 1e-3
+    assert np.allclose(sol.a_M_total, gravity_j2(sol.p_M, MARS))
+
+
+def test_strapdown_attitude_constant_rate_is_exact():
+    t = np.arange(0.0, 30.0 + 1e-9, 0.01)
+    w = np.tile(np.radians([3.0, -16.0, 40.0]), (t.size, 1))
+    q0 = quat_normalize(np.array([0.1, -0.2, 0.3, 0.9]))
+    sol = strapdown_onboard(t, np.zeros_like(w), w, np.zeros(3), q0, np.array([0.0, 0.0, 4e6]))
+    ref = quat_multiply(q0, quat_from_rotvec(w * t[:, None]))
+    assert np.max(np.linalg.norm(attitude_error(ref, sol.q_M_G), axis=1)) < 1e-9
+
+
+def test_gyro_clipped_at_its_range():
+    rng = np.random.default_rng(0)
+    w = np.radians(np.array([[250.0, -10.0, 16.0], [-300.0, 190.0, 0.0]]))
+    _, wm, _ = apply_imu_errors(np.zeros_like(w), w, EntryImuModel(), rng)
+    assert np.allclose(np.degrees(wm[:, 0]), [187.5, -187.5])
+    assert math.isclose(np.degrees(wm[1, 1]), 187.5)
+
+
+def test_nominal_state_error_convention():
+    v0, p0 = np.array([1.0, 2.0, 3.0]), np.array([3.4e6, 0.0, 0.0])
+    q0 = quat_normalize(np.array([0.3, 0.1, -0.2, 0.9]))
+    dx = (1.0, -2.0, 3.0, 0.01, -0.02, 0.005, 1000.0, -2000.0, 500.0)
+    v, q, p, dx0 = nominal_state(v0, q0, p0, NominalErrorModel(dx0=dx), np.random.default_rng(0))
+    assert np.allclose(v + dx0[:3], v0) and np.allclose(p + dx0[6:], p0)
+    assert np.allclose(attitude_error(q, q0), dx0[3:6], atol=1e-12)
+
+
+def test_slant_ranges_exact_sphere_geometry():
+    h = 5000.0
+    p = np.array([[0.0, 0.0, R_GROUND + h]])
+    q = np.array([[0.0, 0.0, 0.0, 1.0]])  # Z_G up: B0 = −Z_G looks at the centre
+    beams = beam_directions_G()
+    assert np.allclose(beams[0], [0, 0, -1]) and np.allclose(np.degrees(np.arccos(-beams[1:, 2])), 20.0)
+    rho = slant_ranges_sphere(p, q, beams, R_GROUND)[0]
+    assert math.isclose(rho[0], h, rel_tol=1e-12)
+    # squinted beams: law of cosines on the triangle centre–vehicle–ground point
+    r0 = R_GROUND + h
+    c = math.cos(math.radians(20.0))
+    expect = r0 * c - math.sqrt(R_GROUND**2 - r0**2 * (1 - c * c))
+    assert np.allclose(rho[1:], expect, rtol=1e-12)
+    up = quat_normalize(np.array([[1.0, 0.0, 0.0, 0.0]]))  # 180° about X: B0 looks up -> no echo
+    assert np.isnan(slant_ranges_sphere(p, up, beams[:1], R_GROUND)[0, 0])
+
+
+def test_terrain_relative_velocity_zero_for_a_point_fixed_to_mars():
+    p = np.array([[3.39e6, 1.0e5, 2.0e5]])
+    v = np.cross([0.0, 0.0, MARS.rotation_rate], p)
+    q = quat_normalize(np.array([[0.2, 0.3, -0.1, 0.9]]))
+    assert np.allclose(terrain_relative_velocity_G(p, v, q), 0.0, atol=1e-9)
+    v2 = v + np.array([[0.0, 0.0, -80.0]])
+    assert np.allclose(quat_rotate(q, terrain_relative_velocity_G(p, v2, q)), [[0, 0, -80.0]])

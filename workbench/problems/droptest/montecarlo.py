@@ -1,0 +1,352 @@
+"""Monte Carlo of the synthetic drop test: synthesize → reconstruct → score, one task per seed.
+
+Each task (:func:`run_seed`) writes the telemetry of its seed into its own temporary subfolder
+of ``work_dir``, runs :func:`workbench.problems.droptest.pipeline.run_droptest`, scores the result against
+the truth with :func:`workbench.problems.droptest.pipeline.score` plus the consistency numbers below, and
+deletes the subfolder.  The truth trajectory is deterministic per scenario; every random draw of
+a task (sensor noise, bias, scale, 3DM errors, survey error, ranging noise, the posterior sampling
+of the stroke-σ check) comes from its seed alone, so the results do not depend on the executor:
+
+* ``scheduler=None, workers=1`` — a plain loop in this process;
+* ``scheduler=None, workers=2`` — :class:`concurrent.futures.ProcessPoolExecutor` (2 processes);
+* ``scheduler="local"`` — a ``dask.distributed.LocalCluster(n_workers=2, threads_per_worker=1,
+  processes=True)`` started and closed here;
+* ``scheduler="tcp://host:port"`` — a ``dask.distributed.Client`` to a running scheduler (its
+  workers must have the package installed and see ``work_dir``).
+
+Consistency statistics (Bar-Shalom, Li & Kirubarajan 2001, Sect. 5.4), per run:
+
+* ``nees_pose_mean`` — NEES of the smoothed pose [δp (SPF), δθ (body)] (6 dof) averaged over the
+  run's steps (as :func:`~workbench.problems.droptest.pipeline.score`);
+* ``nees_pose_at_max`` — the same NEES at the max-stroke step only (one value per run, χ²(6)
+  if consistent, independent across runs);
+* ``nees_stroke`` — 1-D NEES of the max stroke ``((d_est − d_true)/σ)²`` (χ²(1) if consistent);
+* ``z_at_max`` — normalised errors δ/σ of p, v, θ, ω and the gyro scale factors at the max-stroke
+  step (for finding which states are over- or under-confident).
+
+Error convention (the filter's, DESIGN.md): ``truth = estimate ⊞ δ``, ``δp = p_true − p_est``,
+``δθ = attitude_error(q_est, q_true)`` (``q_true = q_est ⊗ exp(δθ)``).
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import shutil
+import tempfile
+import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from workbench.io.scenario import Scenario
+
+__all__ = ["McResult", "SeedResult", "run_seed", "monte_carlo", "summarize_mc", "Z_NAMES"]
+
+#: Names of the columns of ``z_at_max``: position [SPF], velocity [SPF], attitude δθ [body],
+#: body rate ω [body], gyro scale factors.
+Z_NAMES: tuple[str, ...] = tuple(f"{blk}.{a}" for blk in ("p", "v", "theta", "w", "scale") for a in "xyz")
+#: Error-state indices (redland layout) of the ``z_at_max`` columns.
+_Z_INDEX = np.r_[0:6, 9:15, 18, 22, 26]  # p, v, θ, ω and the gyro scale factors (diagonal of E)
+
+
+@dataclass(frozen=True)
+class SeedResult:
+    """Outcome of one Monte Carlo task (one seed). Lengths in m, times in s.
+
+    ``max_stroke`` estimated max stroke (smoothed) [m]; ``sigma`` its reported 1σ [m]; ``truth``
+    the truth max stroke [m]; ``error = max_stroke − truth`` [m]; ``inside_3sigma``
+    ``|error| ≤ 3 σ``; ``nees_pose_mean`` time-averaged 6-dof pose NEES; ``nees_pose_at_max`` 6-dof
+    pose NEES at the max-stroke step; ``nees_stroke`` ``(error/σ)²``; ``restitution_error``
+    estimate − truth [-]; ``z_at_max`` (15,) δ/σ per state of :data:`Z_NAMES`;
+    ``nees_blocks_mean`` (4,) time-averaged 3-dof NEES of p, v, θ, ω over the run;
+    ``wall_time_s`` whole task; ``reconstruct_s`` the reconstruction alone.
+    """
+
+    seed: int
+    max_stroke: float
+    sigma: float
+    truth: float
+    error: float
+    inside_3sigma: bool
+    nees_pose_mean: float
+    nees_pose_at_max: float
+    nees_stroke: float
+    restitution_error: float
+    z_at_max: np.ndarray
+    nees_blocks_mean: np.ndarray
+    wall_time_s: float
+    reconstruct_s: float
+
+
+@dataclass(frozen=True)
+class McResult:
+    """Per-seed arrays of a Monte Carlo, all of length n (the number of seeds), in seed order.
+
+    Fields as in :class:`SeedResult` but stacked: ``seed`` (n,) int, ``max_stroke``, ``sigma``,
+    ``truth``, ``error`` (n,) [m], ``inside_3sigma`` (n,) bool, ``nees_pose_mean``,
+    ``nees_pose_at_max``, ``nees_stroke``, ``restitution_error`` (n,), ``z_at_max`` (n, 15),
+    ``nees_blocks_mean`` (n, 4), ``wall_time_s``, ``reconstruct_s`` (n,) [s].  ``scenario`` name,
+    ``mode`` filter mode, ``executor`` description, ``total_wall_s`` wall time of the whole
+    Monte Carlo [s].
+    """
+
+    scenario: str
+    mode: str
+    executor: str
+    total_wall_s: float
+    seed: np.ndarray
+    max_stroke: np.ndarray
+    sigma: np.ndarray
+    truth: np.ndarray
+    error: np.ndarray
+    inside_3sigma: np.ndarray
+    nees_pose_mean: np.ndarray
+    nees_pose_at_max: np.ndarray
+    nees_stroke: np.ndarray
+    restitution_error: np.ndarray
+    z_at_max: np.ndarray
+    nees_blocks_mean: np.ndarray
+    wall_time_s: np.ndarray
+    reconstruct_s: np.ndarray
+
+    @property
+    def n_runs(self) -> int:
+        """Number of runs (seeds)."""
+        return int(self.seed.size)
+
+    #: per-seed fields that depend only on the seed (not on timing): compare these across executors
+    DETERMINISTIC = (
+        "seed", "max_stroke", "sigma", "truth", "error", "inside_3sigma", "nees_pose_mean",
+        "nees_pose_at_max", "nees_stroke", "restitution_error", "z_at_max", "nees_blocks_mean",
+    )  # fmt: skip
+
+
+def run_seed(scenario: Scenario, seed: int, work_dir: str | Path) -> SeedResult:
+    """One Monte Carlo task: synthesize the drop with ``seed`` into a fresh subfolder of
+    ``work_dir``, reconstruct (posterior-sampling seed = ``seed``), score, delete the subfolder."""
+    from workbench.core.rotation import attitude_error
+    from workbench.estimation.consistency import nees
+    from workbench.problems.droptest import model as rl
+    from workbench.problems.droptest.pipeline import run_droptest, score, truth_on_grid
+    from workbench.problems.droptest.synthetic import load_truth, synthesize_droptest
+
+    t0 = time.perf_counter()
+    work = Path(work_dir)
+    work.mkdir(parents=True, exist_ok=True)
+    sub = Path(tempfile.mkdtemp(prefix=f"seed{int(seed):06d}_", dir=work))
+    try:
+        syn = synthesize_droptest(scenario, sub, seed=int(seed))
+        truth = load_truth(syn.truth_path)
+        t1 = time.perf_counter()
+        res = run_droptest(scenario, syn.telemetry, seed=int(seed))
+        t2 = time.perf_counter()
+        sc = score(res, truth)
+    finally:
+        shutil.rmtree(sub, ignore_errors=True)
+
+    smo = res.smoothed
+    tg = truth_on_grid(truth, smo.t)
+    # full error δ = truth ⊟ estimate on the states with a truth (p, v, θ, ω, gyro scale)
+    d = np.zeros((smo.t.size, rl.N_E))
+    d[:, rl.EP] = tg["p_I"] - smo.x[:, rl.SP]
+    d[:, rl.EV] = tg["v_I"] - smo.x[:, rl.SV]
+    d[:, rl.ETH] = attitude_error(smo.x[:, rl.SQ], tg["q_I_B"])
+    d[:, rl.EW] = tg["w_B"] - smo.x[:, rl.SW]
+    d[:, rl.ES] = np.asarray(truth["gyro_error_matrix"], float).ravel() - smo.x[:, rl.SS]
+    k = int(res.stroke.max.index)
+    e6 = np.concatenate([d[k, rl.EP], d[k, rl.ETH]])
+    nees_max = float(nees(e6, rl.pose_covariance(smo.P[k])))
+    sd = np.sqrt(np.diagonal(smo.P[k]))
+    z = d[k, _Z_INDEX] / sd[_Z_INDEX]
+    blocks = []
+    for sl in (rl.EP, rl.EV, rl.ETH, rl.EW):
+        blocks.append(float(np.mean(nees(d[:, sl], smo.P[:, sl, sl]))))
+    ms = res.stroke.max
+    err = float(ms.distance - sc["max_stroke_truth_m"])
+    return SeedResult(
+        seed=int(seed),
+        max_stroke=float(ms.distance),
+        sigma=float(ms.sigma),
+        truth=float(sc["max_stroke_truth_m"]),
+        error=err,
+        inside_3sigma=bool(sc["max_stroke_inside_3sigma"]),
+        nees_pose_mean=float(sc["nees_pose_mean"]),
+        nees_pose_at_max=nees_max,
+        nees_stroke=float((err / ms.sigma) ** 2),
+        restitution_error=float(sc["restitution_error"]),
+        z_at_max=z,
+        nees_blocks_mean=np.array(blocks),
+        wall_time_s=time.perf_counter() - t0,
+        reconstruct_s=t2 - t1,
+    )
+
+
+def _prime_truth(scenario: Scenario) -> None:
+    """Compute the (cached, deterministic) truth in this process so forked workers inherit it."""
+    from workbench.problems.droptest.synthetic import truth_for
+
+    truth_for(scenario)
+
+
+def monte_carlo(
+    scenario: Scenario,
+    seeds: Sequence[int],
+    work_dir: str | Path,
+    *,
+    scheduler: str | None = None,
+    workers: int = 1,
+) -> McResult:
+    """Run :func:`run_seed` for every seed and stack the results (see module docstring).
+
+    ``seeds`` sequence of non-negative ints (one task each); ``work_dir`` folder for the tasks'
+    temporary subfolders (created if needed; left empty).  ``scheduler`` None (in-process loop, or
+    a process pool of ``workers`` processes if ``workers > 1``), ``"local"`` (a 2-process dask
+    LocalCluster) or ``"tcp://…"`` (a dask Client to that scheduler).  The result is in the order
+    of ``seeds`` and does not depend on the executor (only ``wall_time_s``, ``reconstruct_s``,
+    ``total_wall_s`` and ``executor`` do).
+    """
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("monte_carlo: no seeds")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError("monte_carlo: repeated seeds")
+    work = Path(work_dir)
+    work.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    if scheduler is None and workers <= 1:
+        executor = "loop"
+        from threadpoolctl import threadpool_limits
+
+        # the same single BLAS thread as the pool workers: BLAS reductions are only bitwise
+        # reproducible for a fixed thread count, and results must not depend on the executor
+        with threadpool_limits(limits=1):
+            out = [run_seed(scenario, s, work) for s in seeds]
+    elif scheduler is None:
+        executor = f"process pool ({workers} workers)"
+        ctx = mp.get_context()
+        if ctx.get_start_method() == "fork":
+            _prime_truth(scenario)  # workers inherit the cached truth instead of each recomputing it
+        # one BLAS thread per worker: forked workers inherit OpenBLAS's pool, and two busy-waiting
+        # pools on two cores made each reconstruction ~10x slower (measured 2.5 s -> 20-45 s)
+        with ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx, initializer=_one_blas_thread) as pool:
+            futs = [pool.submit(run_seed, scenario, s, work) for s in seeds]
+            out = [f.result() for f in futs]
+    else:
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError as err:
+            raise NotImplementedError(
+                "a dask scheduler needs the optional dask extra: .venv/bin/pip install -e '.[dask]'"
+            ) from err
+
+        if scheduler == "local":
+            executor = "dask LocalCluster (2 workers x 1 thread, processes)"
+            with (
+                LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+                Client(cluster) as client,
+            ):
+                out = _dask_map(client, scenario, seeds, work)
+        elif scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
+            executor = f"dask scheduler {scheduler}"
+            with Client(scheduler) as client:
+                out = _dask_map(client, scenario, seeds, work)
+        else:
+            raise ValueError(f"scheduler must be None, 'local' or 'tcp://host:port', got {scheduler!r}")
+    total = time.perf_counter() - t0
+    cols = {}
+    for f in fields(SeedResult):
+        vals = [getattr(r, f.name) for r in out]
+        cols[f.name] = np.array(vals)
+    return McResult(
+        scenario=scenario.name,
+        mode=scenario.get("filter.mode", "kinematic", kind="str"),
+        executor=executor,
+        total_wall_s=total,
+        **cols,
+    )
+
+
+def _one_blas_thread() -> None:
+    """Pool-worker initializer: limit BLAS/OpenMP to one thread in this process."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1)
+
+
+def _dask_map(client, scenario: Scenario, seeds: list[int], work: Path) -> list[SeedResult]:
+    sc_f = client.scatter(scenario, broadcast=True)
+    futs = [client.submit(run_seed, sc_f, s, work, pure=False, key=f"droptest-seed-{s}") for s in seeds]
+    return client.gather(futs)
+
+
+def summarize_mc(res: McResult, probability: float = 0.95) -> dict:
+    """Statistics of a Monte Carlo (JSON-ready). Lengths in m.
+
+    * ``fraction_inside_3sigma`` — runs whose truth max stroke lies inside the reported ±3σ
+      (0.9973 expected for a consistent Gaussian estimate);
+    * ``median_3sigma_m``; ``error_mean_m`` (bias), ``error_median_m`` (signed),
+      ``abs_error_median_m``, ``abs_error_p95_m`` of the max-stroke error;
+    * ``fraction_mer_requirement`` — runs with ``|error| ≤ 0.10 m`` AND ``3σ ≤ 0.10 m``;
+    * ``anees_pose_time_avg`` — mean over runs of the per-run time-averaged smoothed-pose NEES
+      (6 dof) with ``anees_pose_band`` = ``anees_bounds(6, n_runs, probability)``.  The steps of a
+      run are strongly correlated (a smoother's errors are slow), so the time average is nearly as
+      spread as a single step's NEES and this band is **only indicative**;
+    * ``anees_pose_at_max`` — mean over runs of the pose NEES at the max-stroke step (one value
+      per run, independent across runs): the proper test against the same band;
+    * ``anees_stroke`` — mean of the 1-D max-stroke NEES ``(error/σ)²`` vs
+      ``anees_bounds(1, n_runs, probability)`` (``anees_stroke_band``);
+    * ``z2_at_max_mean`` — per state of :data:`Z_NAMES`, the mean over runs of (δ/σ)² at max stroke
+      (≈ 1 if consistent; ≫ 1 over-confident, ≪ 1 under-confident), its band
+      ``anees_bounds(1, n_runs, probability)``, and ``nees_blocks_time_avg`` (p, v, θ, ω; 3 dof);
+    * restitution error median/p95 of |·|, wall times [s].
+    """
+    from workbench.estimation.consistency import anees_bounds
+
+    n = res.n_runs
+    err = res.error
+    ae = np.abs(err)
+    s3 = 3.0 * res.sigma
+    b6 = anees_bounds(6, n, probability)
+    b3 = anees_bounds(3, n, probability)
+    b1 = anees_bounds(1, n, probability)
+    a_time = float(np.mean(res.nees_pose_mean))
+    a_max = float(np.mean(res.nees_pose_at_max))
+    a_str = float(np.mean(res.nees_stroke))
+    z2 = np.mean(res.z_at_max**2, axis=0)
+    rest = res.restitution_error[np.isfinite(res.restitution_error)]
+    blocks = np.mean(res.nees_blocks_mean, axis=0)
+    return {
+        "scenario": res.scenario,
+        "mode": res.mode,
+        "executor": res.executor,
+        "n_runs": n,
+        "band_probability": probability,
+        "fraction_inside_3sigma": float(np.mean(res.inside_3sigma)),
+        "median_3sigma_m": float(np.median(s3)),
+        "error_mean_m": float(np.mean(err)),
+        "error_median_m": float(np.median(err)),
+        "abs_error_median_m": float(np.median(ae)),
+        "abs_error_p95_m": float(np.percentile(ae, 95)),
+        "abs_error_max_m": float(np.max(ae)),
+        "fraction_mer_requirement": float(np.mean((ae <= 0.10) & (s3 <= 0.10))),
+        "anees_pose_time_avg": a_time,
+        "anees_pose_band": list(b6),
+        "anees_pose_time_avg_note": "steps within a run are correlated: band only indicative",
+        "anees_pose_at_max": a_max,
+        "anees_pose_at_max_inside": bool(b6[0] <= a_max <= b6[1]),
+        "anees_stroke": a_str,
+        "anees_stroke_band": list(b1),
+        "anees_stroke_inside": bool(b1[0] <= a_str <= b1[1]),
+        "z2_at_max_mean": {name: float(v) for name, v in zip(Z_NAMES, z2, strict=True)},
+        "z2_band": list(b1),
+        "nees_blocks_time_avg": {name: float(v) for name, v in zip(("p", "v", "theta", "w"), blocks, strict=True)},
+        "nees_block_band": list(b3),
+        "restitution_abs_error_median": float(np.median(np.abs(rest))) if rest.size else float("nan"),
+        "restitution_abs_error_p95": float(np.percentile(np.abs(rest), 95)) if rest.size else float("nan"),
+        "task_wall_median_s": float(np.median(res.wall_time_s)),
+        "reconstruct_median_s": float(np.median(res.reconstruct_s)),
+        "total_wall_s": float(res.total_wall_s),
+    }

@@ -1,0 +1,553 @@
+"""Draw the drop-test reconstruction stages into a Rerun recording (layout of DESIGN.md).
+
+The pipeline (``pipelines.droptest``) yields stages; :class:`DropTestRecorder` draws each one as it
+arrives and, for synthetic scenarios, the truth beside the estimate under ``/world/truth`` and
+``.../truth`` series. All geometry is in the SPF chamber frame (origin at the trigger nail, Z up,
+metres), which is local and float32-safe.
+
+What a reviewer scrubs through: the ramp and chamber axes; the lander body and airbag lobes moving
+with the smoothed pose (truth pose beside it, translucent green); forward, smoothed and truth CM
+tracks; the roll line; the stroke segment from the closest body point to the ramp with its value;
+the 3σ position ellipsoid; triad measured vs predicted specific force; rates, quaternion and
+1-2-3 Euler angles; stroke with ±1σ/±3σ; 1σ of every state; residuals with ±3σ bounds; events;
+the scorecard.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun.blueprint as rrb
+
+from workbench.core.rotation import euler123_from_quat, quat_conjugate, quat_rotate, quat_to_dcm
+from workbench.problems.droptest import model as rl
+from workbench.problems.droptest.lander import airbag_mesh
+from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
+from workbench.recording import layout
+from workbench.recording.writer import Recorder
+
+__all__ = ["DropTestRecorder", "droptest_blueprint", "impact_view"]
+
+G0 = 9.80665
+EST = (31, 119, 180, 255)
+FWD = (255, 127, 14, 255)
+TRUTH = (44, 160, 44, 255)
+XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
+XYZW = XYZ + [(120, 120, 120, 255)]
+
+
+_PLOTS = [
+    ("stroke (all)", "/plots/stroke"),
+    ("stroke 1σ", "/plots/stroke_sigma"),
+    ("position", "/plots/position"),
+    ("velocity", "/plots/velocity"),
+    ("accel body", "/plots/accel_body"),
+    ("accel SPF", "/plots/accel_spf"),
+    ("rate", "/plots/rate"),
+    ("ang. accel", "/plots/angular_accel"),
+    ("quaternion", "/plots/quaternion"),
+    ("Euler 1-2-3", "/plots/euler123"),
+    ("1σ states", "/plots/sigma"),
+    ("gyro scale", "/plots/gyro_scale"),
+    ("triads", "/plots/triads"),
+    ("NIS", "/plots/nis"),
+    ("process noise", "/plots/process_noise"),
+]
+
+
+def droptest_blueprint(residual_names: list[str], impact: dict | None = None) -> rrb.Blueprint:
+    """Default layout for stroke inspection.
+
+    Left: the 3D scene as two tabs — "Impact", a camera beside the impact point that follows the
+    lander, and "Chamber", the whole drop. Right: the stroke zoomed on the impact first, then the
+    other plots; residual tabs; the scorecard and the events log.
+    ``impact`` (known only after the reconstruction): ``point`` (3,) [m, SPF] CM at max stroke,
+    ``normal`` (3,) ramp normal, ``t0``/``t1`` [s] window of the impact, ``stroke_lo``/``stroke_hi``
+    [m] y-range of the zoomed stroke plot. Without it a generic layout is returned.
+    """
+    scene_kw = {}
+    stroke_kw = {}
+    if impact is not None:
+        pt = np.asarray(impact["point"], float)
+        n = np.asarray(impact["normal"], float)
+        # three-quarter view from the free side of the ramp: 8 m out along the normal, 7 m across
+        eye = pt + 8.0 * n + np.array([7.0, 0.0, 0.0])
+        scene_kw["eye_controls"] = rrb.EyeControls3D(position=eye, look_target=pt, eye_up=[0.0, 0.0, 1.0])
+        stroke_kw["axis_y"] = rrb.ScalarAxis(range=(impact["stroke_lo"], impact["stroke_hi"]))
+        stroke_kw["time_ranges"] = rrb.VisibleTimeRange(
+            layout.TIME,
+            start=rrb.TimeRangeBoundary.absolute(seconds=impact["t0"]),
+            end=rrb.TimeRangeBoundary.absolute(seconds=impact["t1"]),
+        )
+    scenes = rrb.Tabs(
+        rrb.Spatial3DView(name="Impact", origin=layout.WORLD, **scene_kw),
+        rrb.Spatial3DView(name="Chamber", origin=layout.WORLD),
+        active_tab=0,
+    )
+    plots = [rrb.TimeSeriesView(name="stroke (impact)", origin="/plots/stroke", **stroke_kw)]
+    plots += [rrb.TimeSeriesView(name=nm, origin=o) for nm, o in _PLOTS]
+    residuals = [rrb.TimeSeriesView(name=nm, origin=f"/residuals/{nm}") for nm in residual_names]
+    right = rrb.Vertical(
+        rrb.Tabs(*plots, active_tab=0),
+        rrb.Tabs(*residuals, active_tab=0),
+        rrb.Horizontal(
+            rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
+            rrb.TextLogView(name="Events", origin=layout.EVENTS),
+            column_shares=[3, 2],
+        ),
+        row_shares=[3, 2, 2],
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(scenes, right, column_shares=[3, 2]),
+        rrb.TimePanel(state="expanded", timeline=layout.TIME),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+    )
+
+
+def impact_view(result) -> dict:
+    """Camera and zoom settings of :func:`droptest_blueprint` from a ``DropResult``."""
+    st = result.stroke
+    smo = result.smoothed
+    i0, i1 = st.contact
+    if i0 < 0:
+        i0 = i1 = int(st.max.index)
+    h = st.smoothed
+    lo = float(min(0.0, st.max.distance - 3.5 * st.max.sigma)) - 0.05
+    hi = float(max(1.0, h.distance[i0] + 0.2))
+    return {
+        "point": smo.x[int(st.max.index), rl.SP],
+        "normal": st.surface.normal,
+        "t0": float(smo.t[i0]) - 0.15,
+        "t1": float(smo.t[i1]) + 0.25,
+        "stroke_lo": lo,
+        "stroke_hi": hi,
+    }
+
+
+class DropTestRecorder:
+    """Observer of the drop-test stages; ``truth`` is the dict of ``load_truth`` or None."""
+
+    def __init__(self, rec: Recorder, truth: dict | None = None):
+        self.rec = rec
+        self.truth = truth
+        self.tel = None
+        self.fwd = None
+        self._smoothed_x = None
+
+    # ---------------------------------------------------------------- dispatch
+    def handle(self, stage) -> None:
+        """Draw one stage of ``pipelines.droptest.reconstruct``."""
+        name = type(stage).__name__
+        fn = getattr(self, f"_on_{name}", None)
+        if fn is not None:
+            fn(stage)
+
+    # ---------------------------------------------------------------- stages
+    def _on_DropTelemetry(self, tel) -> None:
+        self.tel = tel
+        r = self.rec
+        r.view_coordinates(layout.WORLD)
+        r.axes("/world/chamber", 1.0)
+        t = tel.imu.time
+        for name in tel.triads:
+            r.scalars(
+                f"/sensors/{name}",
+                t,
+                tel.imu.stack([f"{name}.{a}" for a in "xyz"]) / G0,
+                names=[f"{name}.{a} [g]" for a in "xyz"],
+                colors=XYZ,
+            )
+        r.scalars(
+            "/sensors/gyro",
+            t,
+            np.degrees(tel.imu.stack(["gyro.x", "gyro.y", "gyro.z"])),
+            names=[f"gyro.{a} [deg/s]" for a in "xyz"],
+            colors=XYZ,
+        )
+        if tel.ranging is not None:
+            for ch in tel.ranging.names:
+                tt, vv = tel.ranging.samples(ch)
+                if tt.size:
+                    r.scatter(f"/sensors/ranging/{ch}", tt, vv, names=ch, colors=[(148, 103, 189, 255)], size=1.5)
+        entries = [(t_e, f"{name} (from the events file)", "INFO") for name, t_e in tel.events.items()]
+        entries += [(t_d, txt, lvl) for t_d, lvl, txt in tel.degradations]
+        r.events(sorted(entries))
+
+    def _on_InitialState(self, init) -> None:
+        r = self.rec
+        s = np.degrees(np.sqrt(np.diag(init.P_theta)))
+        r.events(
+            [
+                (
+                    float(self.tel.t[0]),
+                    f"3DM TRIAD attitude: 1σ body x/y/z = {s[0]:.2f}/{s[1]:.2f}/{s[2]:.2f} deg",
+                    "INFO",
+                )
+            ]
+        )
+
+    def _on_FilterStage(self, st) -> None:
+        if st.name == "forward":
+            self.fwd = st
+            self._forward(st)
+        else:
+            self._smoothed(st)
+
+    def _forward(self, st) -> None:
+        r = self.rec
+        t = st.t
+        step = np.arange(t.size)
+        r.line_strip(layout.ESTIMATE_FORWARD, st.x[:, rl.SP], color=FWD, radius=0.01)
+        fp = st.forward
+        for name, ih in fp.innovations.items():
+            m = ih.present
+            if not m.any():
+                continue
+            y = ih.y[m]
+            sig = np.sqrt(np.einsum("nii->ni", ih.S[m]))
+            labels = ("x", "y", "z") if y.shape[1] == 3 else ("value",)
+            for i, lab in enumerate(labels):
+                root = f"/residuals/{name}/{lab}" if y.shape[1] > 1 else f"/residuals/{name}"
+                # innovation with its ±3√S bounds about zero (DESIGN: value, plus_3sigma, minus_3sigma)
+                r.scalars(
+                    f"{root}/value",
+                    t[m],
+                    y[:, i],
+                    step=step[m],
+                    names=f"{name}.{lab} innovation",
+                    colors=[XYZ[i % 3]],
+                    widths=1.0,
+                )
+                for sign, bname in ((1.0, "plus_3sigma"), (-1.0, "minus_3sigma")):
+                    r.scalars(
+                        f"{root}/{bname}",
+                        t[m],
+                        sign * 3.0 * sig[:, i],
+                        step=step[m],
+                        names=f"{'+' if sign > 0 else '−'}3σ",
+                        colors=[(150, 150, 150, 255)],
+                        widths=0.8,
+                    )
+            r.scalars(f"/plots/nis/{name}", t[m], ih.nis[m], step=step[m], names=f"NIS {name}")
+        # measured vs predicted specific force at each triad (prediction from the prior state)
+        tel = self.tel
+        for j, name in enumerate(tel.triads):
+            ok = tel.f_valid[:, j]
+            pred = np.array([rl.triad_model(x, tel.lever_arms_B[j], j)[0] for x in fp.x_prior[ok]])
+            r.scalars(
+                f"/plots/triads/{name}/measured",
+                t[ok],
+                tel.f_B[ok, j] / G0,
+                names=[f"{name}.{a} measured [g]" for a in "xyz"],
+                colors=XYZ,
+                widths=1.0,
+            )
+            r.scalars(
+                f"/plots/triads/{name}/predicted",
+                t[ok],
+                pred / G0,
+                names=[f"{name}.{a} predicted [g]" for a in "xyz"],
+                colors=[(0, 0, 0, 255)] * 3,
+                widths=0.8,
+            )
+        r.scalars(
+            "/plots/process_noise",
+            t,
+            np.stack([st.q_accel, st.q_angular], 1),
+            step=step,
+            names=["q_accel [m²/s⁵]", "q_angular [rad²/s⁵]"],
+            colors=[EST, FWD],
+        )
+
+    def _smoothed(self, st) -> None:
+        r = self.rec
+        t = st.t
+        step = np.arange(t.size)
+        x, P = st.x, st.P
+        self._smoothed_x = x
+        tg = None
+        if self.truth is not None:
+            from workbench.problems.droptest.pipeline import truth_on_grid
+
+            tg = truth_on_grid(self.truth, t)
+        sd = np.sqrt(np.einsum("nii->ni", P))
+        p, q = x[:, rl.SP], x[:, rl.SQ]
+        r.poses(layout.VEHICLE, t, p, q, step=step)
+        r.line_strip(layout.ESTIMATE_SMOOTHED, p, color=EST, radius=0.012)
+        # 3σ position ellipsoid, expressed in the body frame so it can live under the vehicle
+        C = quat_to_dcm(q)
+        P_B = np.swapaxes(C, 1, 2) @ P[:, rl.EP, rl.EP] @ C
+        r.ellipsoids(layout.UNCERTAINTY, t, np.zeros((t.size, 3)), P_B, nsigma=3.0, color=(31, 119, 180, 90), step=step)
+        aI = rl.accel_inertial(x)
+        series = [
+            ("/plots/position", p, sd[:, rl.EP], None if tg is None else tg["p_I"], ["x", "y", "z"], 1.0),
+            (
+                "/plots/velocity",
+                x[:, rl.SV],
+                sd[:, rl.EV],
+                None if tg is None else tg["v_I"],
+                ["vx", "vy", "vz"],
+                1.0,
+            ),
+            (
+                "/plots/accel_body",
+                x[:, rl.SA] / G0,
+                sd[:, rl.EA] / G0,
+                None if tg is None else quat_rotate(quat_conjugate(tg["q_I_B"]), tg["a_ng_I"]) / G0,
+                ["ax_B [g]", "ay_B [g]", "az_B [g]"],
+                1.0,
+            ),
+            (
+                "/plots/rate",
+                np.degrees(x[:, rl.SW]),
+                np.degrees(sd[:, rl.EW]),
+                None if tg is None else np.degrees(tg["w_B"]),
+                ["p [deg/s]", "q [deg/s]", "r [deg/s]"],
+                1.0,
+            ),
+            ("/plots/angular_accel", x[:, rl.SAL], sd[:, rl.EAL], None, ["αx", "αy", "αz"], 1.0),
+            (
+                "/plots/gyro_scale",
+                100 * x[:, rl.GYRO_SCALE_X],
+                100 * sd[:, rl.GYRO_SCALE_E],
+                None if self.truth is None else np.broadcast_to(100 * self.truth["gyro_scale"], (t.size, 3)),
+                ["sx [%]", "sy [%]", "sz [%]"],
+                1.0,
+            ),
+        ]
+        for root, v, s, tr, names, _ in series:
+            for i, nm in enumerate(names):
+                r.series_with_bounds(
+                    f"{root}/{nm.split(' ')[0]}",
+                    t,
+                    v[:, i],
+                    s[:, i],
+                    truth=None if tr is None else tr[:, i],
+                    names=nm,
+                    step=step,
+                    color=[XYZ[i]],
+                )
+        r.scalars("/plots/accel_spf/value", t, aI / G0, step=step, names=["ax [g]", "ay [g]", "az [g]"], colors=XYZ)
+        if tg is not None:
+            r.scalars(
+                "/plots/accel_spf/truth",
+                t,
+                tg["a_ng_I"] / G0,
+                step=step,
+                names=["ax truth [g]", "ay truth [g]", "az truth [g]"],
+                colors=XYZ,
+                widths=0.6,
+            )
+        r.scalars("/plots/quaternion/value", t, q, step=step, names=["qx", "qy", "qz", "qw"], colors=XYZW)
+        eul = np.degrees(np.unwrap(euler123_from_quat(q), axis=0))
+        r.scalars("/plots/euler123/value", t, eul, step=step, names=["φ [deg]", "θ [deg]", "ψ [deg]"], colors=XYZ)
+        if tg is not None:
+            qt = tg["q_I_B"] * np.sign(np.sum(tg["q_I_B"] * q, axis=1))[:, None]
+            r.scalars(
+                "/plots/quaternion/truth",
+                t,
+                qt,
+                step=step,
+                names=["qx truth", "qy truth", "qz truth", "qw truth"],
+                colors=XYZW,
+                widths=0.6,
+            )
+            r.scalars(
+                "/plots/euler123/truth",
+                t,
+                np.degrees(np.unwrap(euler123_from_quat(tg["q_I_B"]), axis=0)),
+                step=step,
+                names=["φ truth", "θ truth", "ψ truth"],
+                colors=XYZ,
+                widths=0.6,
+            )
+        # 1σ of every state (REDLand Fig. 14), forward and smoothed
+        groups = [
+            ("position [m]", rl.EP, 1.0),
+            ("velocity [m/s]", rl.EV, 1.0),
+            ("accel [m/s²]", rl.EA, 1.0),
+            ("attitude [deg]", rl.ETH, np.degrees(1.0)),
+            ("rate [deg/s]", rl.EW, np.degrees(1.0)),
+            ("ang. accel [rad/s²]", rl.EAL, 1.0),
+        ]
+        sdf = np.sqrt(np.einsum("nii->ni", self.fwd.P)) if self.fwd is not None else None
+        for label, sl, k in groups:
+            key = label.split(" ")[0].replace(".", "")
+            r.scalars(
+                f"/plots/sigma/{key}/smoothed",
+                t,
+                sd[:, sl] * k,
+                step=step,
+                names=[f"σ{a} {label}" for a in "xyz"],
+                colors=XYZ,
+            )
+            if sdf is not None:
+                r.scalars(
+                    f"/plots/sigma/{key}/forward",
+                    t,
+                    sdf[:, sl] * k,
+                    step=step,
+                    names=[f"σ{a} {label} (forward)" for a in "xyz"],
+                    colors=XYZ,
+                    widths=0.6,
+                )
+
+    def _on_StrokeStage(self, st) -> None:
+        r = self.rec
+        lander, surf = st.lander, st.surface
+        t = self.fwd.t
+        step = np.arange(t.size)
+        h = st.smoothed
+        r.mesh(
+            layout.SURFACE,
+            ramp_mesh(surf, width=12.0, length_down=8.0, length_up=10.0),
+            color=(170, 150, 130, 255),
+        )
+        if surf.n_rocks:
+            r.mesh(f"{layout.SURFACE}/rocks", rock_meshes(surf), color=(90, 80, 75, 255))
+        r.mesh(layout.VEHICLE_BODY, lander.body, color=(200, 200, 210, 255))
+        r.mesh(layout.AIRBAGS, airbag_mesh(lander, subdivisions=2), color=(255, 200, 60, 45))
+        r.points(
+            f"{layout.VEHICLE}/triads",
+            np.array([lander.instruments[n] for n in self.tel.triads]),
+            colors=(255, 0, 255, 255),
+            radii=0.03,
+        )
+        # stroke segment: closest body point -> its foot on the ramp, coloured by distance
+        seg = np.stack([h.closest_point_I, h.surface_point_I], axis=1)[:, None]
+        frac = np.clip(h.distance / max(1e-3, float(np.max(h.distance[t >= 0]))), 0.0, 1.0)
+        cols = np.stack([255 * (1 - frac), 200 * frac, 40 * np.ones_like(frac), 255 * np.ones_like(frac)], 1)
+        r.line_strips_series(layout.STROKE, t, seg, colors=cols.astype(np.uint8)[:, None], radii=0.02, step=step)
+        r.text_labels_series(
+            f"{layout.STROKE}/label",
+            t,
+            h.closest_point_I[:, None],
+            [[f"stroke {d:.3f} ± {s:.3f} m (1σ)"] for d, s in zip(h.distance, h.sigma, strict=True)],
+            step=step,
+        )
+        # stroke plot with ±1σ and ±3σ, forward pass and truth
+        r.scalars(
+            "/plots/stroke/value",
+            t,
+            h.distance,
+            step=step,
+            names="stroke (smoothed) [m]",
+            colors=[EST],
+            widths=2.0,
+        )
+        for k, w in ((1, 1.0), (3, 0.6)):
+            r.scalars(
+                f"/plots/stroke/plus_{k}sigma",
+                t,
+                h.distance + k * h.sigma,
+                step=step,
+                names=f"+{k}σ",
+                colors=[(150, 150, 150, 255)],
+                widths=w,
+            )
+            r.scalars(
+                f"/plots/stroke/minus_{k}sigma",
+                t,
+                h.distance - k * h.sigma,
+                step=step,
+                names=f"−{k}σ",
+                colors=[(150, 150, 150, 255)],
+                widths=w,
+            )
+        r.scalars(
+            "/plots/stroke/forward",
+            t,
+            st.forward.distance,
+            step=step,
+            names="stroke (forward) [m]",
+            colors=[FWD],
+            widths=1.0,
+        )
+        r.scalars(
+            "/plots/stroke_sigma",
+            t,
+            np.stack([h.sigma, st.forward.sigma], 1),
+            step=step,
+            names=["1σ smoothed [m]", "1σ forward [m]"],
+            colors=[EST, FWD],
+        )
+        # roll line: would-be CM path in a perfectly inelastic collision (normal velocity removed)
+        i0, i1 = st.contact
+        if i0 >= 0 and self._smoothed_x is not None:
+            from workbench.problems.droptest.pipeline import GRAVITY
+
+            n = surf.normal
+            p0, v0 = self._smoothed_x[i0, rl.SP], self._smoothed_x[i0, rl.SV]
+            vt = v0 - (v0 @ n) * n
+            gt = GRAVITY - (GRAVITY @ n) * n
+            tau = np.linspace(0.0, 0.8, 40)
+            r.line_strip(
+                "/world/roll_line",
+                p0 + vt * tau[:, None] + 0.5 * gt * tau[:, None] ** 2,
+                color=(148, 103, 189, 255),
+                radius=0.01,
+            )
+        ms = st.max
+        # static snapshot of the lander at the max-stroke pose (visible whatever the time cursor)
+        k = int(ms.index)
+        snap = "/world/max_stroke"
+        r.static_transform(snap, translation=self._smoothed_x[k, rl.SP], quaternion_xyzw=self._smoothed_x[k, rl.SQ])
+        r.mesh(f"{snap}/body", lander.body, color=(230, 60, 60, 200))
+        r.mesh(f"{snap}/airbags", airbag_mesh(lander, subdivisions=2), color=(255, 140, 60, 35))
+        r.line_strip(
+            f"{snap}_segment",
+            np.stack([h.closest_point_I[k], h.surface_point_I[k]]),
+            color=(255, 0, 0, 255),
+            radius=0.03,
+        )
+        r.points(f"{snap}_point", ms.point_I[None], colors=(255, 0, 0, 255), radii=0.05)
+        ev = [
+            (
+                float(ms.time),
+                f"max stroke {ms.distance:.3f} m ± {ms.sigma:.3f} m (1σ; sampled {st.sampled_sigma:.3f}) at vertex "
+                f"{ms.vertex}"
+                + (
+                    " — FULL STROKE"
+                    if ms.full_stroke
+                    else " — full stroke within 3σ"
+                    if ms.possible_full_stroke
+                    else ""
+                ),
+                "WARN" if ms.possible_full_stroke else "INFO",
+            )
+        ]
+        if i0 >= 0:
+            ev.append((float(t[i0]), "airbag contact begins (estimated |a_ng| > 1 g)", "INFO"))
+            ev.append(
+                (
+                    float(t[i1]),
+                    f"rebound (contact ends); restitution e = {st.restitution[0]:.3f} ± {st.restitution[1]:.3f}",
+                    "INFO",
+                )
+            )
+        r.events(ev)
+        if self.truth is not None:
+            self._truth(st)
+
+    def _on_DropResult(self, res) -> None:
+        pass
+
+    def _truth(self, st) -> None:
+        from workbench.problems.droptest.pipeline import truth_on_grid, truth_stroke
+
+        r = self.rec
+        t = self.fwd.t
+        tg = truth_on_grid(self.truth, t)
+        r.poses(f"{layout.TRUTH}/vehicle", t, tg["p_I"], tg["q_I_B"], step=np.arange(t.size))
+        r.mesh(f"{layout.TRUTH}/vehicle/body", st.lander.body, color=(44, 160, 44, 110))
+        r.line_strip(f"{layout.TRUTH}/trajectory", self.truth["p_I"][::20], color=TRUTH, radius=0.008)
+        d, _, _ = truth_stroke(self.truth, st.lander, st.surface)
+        r.scalars(
+            "/plots/stroke/truth",
+            self.truth["t"][::5],
+            d[::5],
+            names="stroke truth [m]",
+            colors=[TRUTH],
+            widths=1.0,
+        )
+        r.events([(float(v), f"truth: {k}", "DEBUG") for k, v in self.truth["events"].items()])

@@ -1,0 +1,398 @@
+"""Airbag stroke: distance from the surface to the rigid lander, its 1σ, the max-stroke event,
+and the coefficient of restitution.
+
+REDLand paper [1], "Results": "a characterization of airbag stroke can be taken from the
+position and attitude information ... the distance from the surface to the closest point on the
+lander at that instant and the 1σ uncertainty of that measurement.  The point of closest
+approach is the maximum stroke event"; the test requirement is to know maximum stroke within
+10 cm (3σ).  "Full stroke" is the rigid lander reaching the surface (distance <= 0).  The
+restitution coefficient is "the ratio of velocity after the impact to the velocity before the
+impact in the surface normal direction".
+
+Provides :class:`StrokeHistory`, :func:`stroke_history`, :func:`sampled_stroke_sigma`,
+:class:`MaxStroke`, :func:`max_stroke`, :func:`restitution`.
+
+Pose and attitude-error convention (DESIGN.md, ``core/rotation.py``).  ``q_I_B`` maps body to
+chamber frame, ``x_I = p_I + C_I_B r_B``.  The pose error is the 6-vector ``[δp_I, δθ]``:
+``δp_I`` in the chamber frame I, ``δθ`` a BODY-frame small angle with
+``q_true = q_est ⊗ exp(δθ)`` (``quat_boxplus``).
+
+Linearised 1σ.  With ``C_true = C exp([δθ×]) ≈ C (I + [δθ×])`` a body point moves by
+``δx_I = δp_I + C (δθ × r_B) = δp_I − C [r_B×] δθ``; by the envelope theorem the minimum
+distance changes like the surface distance φ at the minimising body point, so
+
+    J = ∂d/∂[δp_I, δθ] = [ ∇φᵀ,  −∇φᵀ C_I_B [r_B×] ] = [ ∇φᵀ,  (r_B × C_I_Bᵀ ∇φ)ᵀ ],
+
+    σ_d = sqrt(J P_pose Jᵀ).
+
+This is exact to first order only where the minimiser is unique; where two body points tie
+(e.g. a face parallel to the ramp) the min of several Gaussians is biased low and narrower than
+σ_d -- :func:`sampled_stroke_sigma` gives the Monte Carlo answer to check against.
+
+What the distance is, exactly.  For the plane, the minimum over a polyhedron of a linear
+function is attained at a vertex, so the vertex minimum is exact (also for penetration of a
+convex body: minus the penetration depth).  For a rock sphere (centre c, radius r) the minimum
+is ``dist(c, body) − r``, attained possibly inside a face or an edge: when ``faces_B`` is given
+this is computed exactly (closest point on every triangle), with the sign of ``dist`` negative
+when c is inside the body (convex bodies only, which is checked); without ``faces_B`` rocks are
+checked at the vertices only (an upper bound of the distance).
+
+[1] JPL, REDLand paper on the MER airbag drop tests (/work/shared/references/
+    redland-mer-airbag-droptest.txt), "Results" and Fig. 13.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from workbench.core.rotation import quat_boxplus, quat_to_dcm
+from workbench.problems.droptest.surface import Surface
+
+__all__ = [
+    "StrokeHistory",
+    "stroke_history",
+    "sampled_stroke_sigma",
+    "MaxStroke",
+    "max_stroke",
+    "restitution",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class StrokeHistory:
+    """Stroke (surface-to-rigid-body distance) per step, with its linearised 1σ.
+
+    Attributes:
+        distance: (n,) [m] signed distance from the surface to the closest point of the rigid
+            body mesh; negative = penetration (full stroke).
+        sigma: (n,) [m] linearised 1σ of ``distance`` (module docstring).
+        vertex: (n,) int, the body vertex where the minimum is attained; when a rock's closest
+            point lies inside a face/edge, the vertex of that face nearest to it.
+        closest_point_I: (n, 3) [m] closest body point, chamber frame.
+        surface_point_I: (n, 3) [m] its foot on the surface, ``x − d ∇φ`` (chamber frame).
+        feature: (n,) int, -1 = plane, i = rock i.
+        jacobian: (n, 6) ∂d/∂[δp_I (m), δθ_B (rad)] [m/m, m/rad].
+    """
+
+    distance: np.ndarray
+    sigma: np.ndarray
+    vertex: np.ndarray
+    closest_point_I: np.ndarray
+    surface_point_I: np.ndarray
+    feature: np.ndarray
+    jacobian: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class MaxStroke:
+    """The maximum-stroke event = the step of closest approach of the rigid body to the surface.
+
+    Attributes:
+        index: step index; time: its time [s].
+        distance: [m] closest approach (negative = penetration); sigma: its 1σ [m].
+        vertex: body vertex index; faces: indices (k,) of the body faces that touch that vertex.
+        point_I: (3,) [m] closest body point, chamber frame.
+        full_stroke: ``distance <= 0`` (the rigid lander reached the surface).
+        possible_full_stroke: ``distance − 3σ <= 0`` (full stroke not excluded at 3σ).
+    """
+
+    index: int
+    time: float
+    distance: float
+    sigma: float
+    vertex: int
+    faces: np.ndarray
+    point_I: np.ndarray
+    full_stroke: bool
+    possible_full_stroke: bool
+
+
+# --------------------------------------------------------------------------- core geometry
+
+
+def _check_convex(vertices_B: np.ndarray, faces_B: np.ndarray) -> None:
+    tri = vertices_B[faces_B]
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+    h = np.einsum("fj,vfj->vf", nrm, vertices_B[:, None, :] - tri[None, :, 0])
+    scale = np.ptp(vertices_B, axis=0).max()
+    if np.any(h > 1e-9 * scale):
+        raise ValueError("stroke: the exact rock check needs a convex body with outward face winding")
+
+
+def _closest_approach(
+    vertices_B: np.ndarray,
+    faces_B: np.ndarray | None,
+    p_I: np.ndarray,
+    C_I_B: np.ndarray,
+    surface: Surface,
+) -> tuple[np.ndarray, ...]:
+    """Closest approach for m poses: returns d (m,), grad (m,3), r_B (m,3), x_I (m,3), vertex, feature."""
+    V = vertices_B
+    m = p_I.shape[0]
+    rows = np.arange(m)
+    X = p_I[:, None, :] + np.einsum("mij,vj->mvi", C_I_B, V)  # (m, v, 3)
+    # plane: the minimum of a linear function over a polyhedron is at a vertex (exact)
+    d_v = (X - surface.point) @ surface.normal  # (m, v)
+    k = np.argmin(d_v, axis=1)
+    d = d_v[rows, k]
+    grad = np.tile(surface.normal, (m, 1))
+    feature = np.full(m, -1, dtype=int)
+    vertex = k.copy()
+    r_B = V[k].copy()
+    x_I = X[rows, k].copy()
+    if surface.n_rocks == 0:
+        return d, grad, r_B, x_I, vertex, feature
+
+    # rocks: only (pose, rock) pairs whose bounding-sphere lower bound |c - p| - R_body - r can
+    # beat the plane are examined (|c - p|² expanded so no (m, r, 3) array is formed)
+    c = surface.rock_centers
+    rr = surface.rock_radii
+    R_body = np.linalg.norm(V, axis=1).max()
+    dist2 = np.sum(c * c, axis=1)[None, :] - 2.0 * p_I @ c.T + np.sum(p_I * p_I, axis=1)[:, None]
+    lower = np.sqrt(np.maximum(dist2, 0.0)) - R_body - rr
+    mi, ri = np.nonzero(lower < d[:, None] + 1e-9)
+    if mi.size == 0:
+        return d, grad, r_B, x_I, vertex, feature
+    K = np.arange(mi.size)
+    if faces_B is None:
+        # vertex-only rock check: an upper bound of dist(c, body) - r
+        diff = X[mi] - c[ri][:, None, :]  # (K, v, 3)
+        dist_v = np.linalg.norm(diff, axis=-1)
+        kv = np.argmin(dist_v, axis=1)
+        dist = dist_v[K, kv]
+        d_pair = dist - rr[ri]
+        ok = dist > 0.0
+        g_pair = np.where(ok[:, None], diff[K, kv] / np.where(ok, dist, 1.0)[:, None], surface.normal)
+        q_pair_B = V[kv]
+        vert_pair = kv
+    else:
+        # exact: closest point of every triangle to the rock centre, in the body frame
+        c_B = np.einsum("kji,kj->ki", C_I_B[mi], c[ri] - p_I[mi])  # (K, 3)
+        tri = V[faces_B]  # (f, 3, 3)
+        nf = tri.shape[0]
+        q = trimesh.triangles.closest_point(np.tile(tri, (mi.size, 1, 1)), np.repeat(c_B, nf, axis=0))
+        q = q.reshape(mi.size, nf, 3)
+        dist_f = np.linalg.norm(q - c_B[:, None, :], axis=-1)  # (K, f)
+        jf = np.argmin(dist_f, axis=1)
+        q_pair_B = q[K, jf]
+        dist = dist_f[K, jf]
+        # inside test (convex body): the centre is behind every face plane
+        nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
+        h = np.einsum("fj,kfj->kf", nrm, c_B[:, None, :] - tri[None, :, 0])
+        sign = np.where(np.all(h < 0.0, axis=1), -1.0, 1.0)
+        d_pair = sign * dist - rr[ri]
+        # gradient of the distance wrt the body point: sign * unit(q - c), in B then in I
+        ok = dist > 0.0
+        u_B = np.where(ok[:, None], (q_pair_B - c_B) / np.where(ok, dist, 1.0)[:, None], nrm[jf])
+        g_pair = np.einsum("kij,kj->ki", C_I_B[mi], sign[:, None] * u_B)
+        # report the vertex of the closest face nearest to the closest point
+        fv = faces_B[jf]  # (K, 3)
+        near = np.argmin(np.linalg.norm(V[fv] - q_pair_B[:, None, :], axis=-1), axis=1)
+        vert_pair = fv[K, near]
+    # best candidate pair per pose, kept where it beats the plane
+    order = np.lexsort((d_pair, mi))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = mi[order][1:] != mi[order][:-1]
+    best = order[first]
+    best = best[d_pair[best] < d[mi[best]]]
+    steps = mi[best]
+    if steps.size:
+        d[steps] = d_pair[best]
+        grad[steps] = g_pair[best]
+        r_B[steps] = q_pair_B[best]
+        x_I[steps] = p_I[steps] + np.einsum("mij,mj->mi", C_I_B[steps], q_pair_B[best])
+        feature[steps] = ri[best]
+        vertex[steps] = vert_pair[best]
+    return d, grad, r_B, x_I, vertex, feature
+
+
+def _prepare(vertices_B, p_I, q_I_B, faces_B):
+    V = np.asarray(vertices_B, dtype=float).reshape(-1, 3)
+    p = np.asarray(p_I, dtype=float)
+    q = np.asarray(q_I_B, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3 or q.shape != (p.shape[0], 4):
+        raise ValueError(f"stroke: need p_I (n, 3) and q_I_B (n, 4), got {p.shape} and {q.shape}")
+    F = None
+    if faces_B is not None:
+        F = np.asarray(faces_B, dtype=int).reshape(-1, 3)
+        _check_convex(V, F)
+    return V, p, q, F
+
+
+def stroke_history(
+    vertices_B: np.ndarray,
+    p_I: np.ndarray,
+    q_I_B: np.ndarray,
+    P_pose: np.ndarray,
+    surface: Surface,
+    faces_B: np.ndarray | None = None,
+) -> StrokeHistory:
+    """Distance from the surface to the rigid body at every step, with its linearised 1σ.
+
+    Args:
+        vertices_B: (v, 3) [m] body mesh vertices in the body frame (origin at the CM).
+        p_I: (n, 3) [m] CM position in the chamber frame I (the surface's frame).
+        q_I_B: (n, 4) unit quaternions body -> I, scalar-last Hamilton.
+        P_pose: (n, 6, 6) covariance of ``[δp_I [m], δθ [rad]]``, δθ a BODY-frame small angle with
+            ``q_true = q_est ⊗ exp(δθ)``.
+        surface: the impact :class:`Surface` in frame I.
+        faces_B: optional (f, 3) int triangles of the (convex) body; when given, rocks are checked
+            against faces and edges too (exact), otherwise at the vertices only.
+
+    Returns:
+        :class:`StrokeHistory`; ``jacobian = [∇φᵀ, −∇φᵀ C_I_B [r_B×]]`` and
+        ``sigma = sqrt(J P Jᵀ)`` (derivation in the module docstring).
+    """
+    V, p, q, F = _prepare(vertices_B, p_I, q_I_B, faces_B)
+    P = np.asarray(P_pose, dtype=float)
+    if P.shape != (p.shape[0], 6, 6):
+        raise ValueError(f"stroke_history: P_pose must be ({p.shape[0]}, 6, 6), got {P.shape}")
+    C = quat_to_dcm(q)
+    d, grad, r_B, x_I, vertex, feature = _closest_approach(V, F, p, C, surface)
+    a_B = np.einsum("nji,nj->ni", C, grad)  # C_I_Bᵀ ∇φ
+    J = np.concatenate([grad, np.cross(r_B, a_B)], axis=1)
+    var = np.einsum("ni,nij,nj->n", J, P, J)
+    return StrokeHistory(
+        distance=d,
+        sigma=np.sqrt(np.maximum(var, 0.0)),
+        vertex=vertex,
+        closest_point_I=x_I,
+        surface_point_I=x_I - d[:, None] * grad,
+        feature=feature,
+        jacobian=J,
+    )
+
+
+def _sqrt_psd(P: np.ndarray) -> np.ndarray:
+    """Matrix square roots L (..., 6, 6) with L Lᵀ = P for symmetric PSD P (eigen-decomposition)."""
+    w, U = np.linalg.eigh(0.5 * (P + np.swapaxes(P, -1, -2)))
+    return U * np.sqrt(np.maximum(w, 0.0))[..., None, :]
+
+
+def sampled_stroke_sigma(
+    vertices_B: np.ndarray,
+    p_I: np.ndarray,
+    q_I_B: np.ndarray,
+    P_pose: np.ndarray,
+    surface: Surface,
+    n_samples: int,
+    rng: np.random.Generator,
+    faces_B: np.ndarray | None = None,
+    steps: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Monte Carlo mean and 1σ of the stroke distance: the check of :func:`stroke_history`'s σ.
+
+    Draws ``n_samples`` pose errors ``[δp_I, δθ] ~ N(0, P_pose)`` per step (same convention as
+    :func:`stroke_history`: ``p = p_I + δp_I``, ``q = q_I_B ⊗ exp(δθ)``), computes the exact
+    minimum distance for each sample (same geometry as :func:`stroke_history`), and returns
+    ``(mean (k,) [m], std (k,) [m], ddof=1)`` for the selected ``steps`` (index array, default
+    all n steps).  Samples are drawn in chunks of bounded memory from ``rng``.
+    """
+    V, p, q, F = _prepare(vertices_B, p_I, q_I_B, faces_B)
+    P = np.asarray(P_pose, dtype=float)
+    idx = np.arange(p.shape[0]) if steps is None else np.asarray(steps, dtype=int).reshape(-1)
+    p, q, P = p[idx], q[idx], P[idx]
+    k = idx.size
+    n_samples = int(n_samples)
+    if n_samples < 2:
+        raise ValueError("sampled_stroke_sigma: need n_samples >= 2")
+    L = _sqrt_psd(P)  # (k, 6, 6)
+    chunk = max(1, int(1_000_000 // max(1, k * (V.shape[0] + surface.n_rocks))))
+    done = 0
+    all_d = []
+    while done < n_samples:
+        s = min(chunk, n_samples - done)
+        z = rng.standard_normal((s, k, 6))
+        e = np.einsum("kij,skj->ski", L, z)
+        ps = (p[None] + e[..., :3]).reshape(-1, 3)
+        qs = quat_boxplus(np.broadcast_to(q[None], (s, k, 4)), e[..., 3:]).reshape(-1, 4)
+        d = _closest_approach(V, F, ps, quat_to_dcm(qs), surface)[0].reshape(s, k)
+        all_d.append(d)
+        done += s
+    d = np.concatenate(all_d, axis=0)
+    return d.mean(axis=0), d.std(axis=0, ddof=1)
+
+
+def max_stroke(t: np.ndarray, history: StrokeHistory, body_mesh: trimesh.Trimesh) -> MaxStroke:
+    """The maximum-stroke (closest-approach) event of a :class:`StrokeHistory`.
+
+    Args:
+        t: (n,) [s] step times; history: from :func:`stroke_history` (NaN distances ignored);
+        body_mesh: the body mesh whose vertex indices ``history.vertex`` refers to.
+    """
+    t = np.asarray(t, dtype=float)
+    if t.shape != history.distance.shape:
+        raise ValueError(f"max_stroke: t {t.shape} and history {history.distance.shape} differ in length")
+    i = int(np.nanargmin(history.distance))
+    v = int(history.vertex[i])
+    faces = np.nonzero(np.any(np.asarray(body_mesh.faces) == v, axis=1))[0]
+    d = float(history.distance[i])
+    s = float(history.sigma[i])
+    return MaxStroke(
+        index=i,
+        time=float(t[i]),
+        distance=d,
+        sigma=s,
+        vertex=v,
+        faces=faces,
+        point_I=np.array(history.closest_point_I[i]),
+        full_stroke=bool(d <= 0.0),
+        possible_full_stroke=bool(d - 3.0 * s <= 0.0),
+    )
+
+
+def restitution(
+    t: np.ndarray,
+    v_I: np.ndarray,
+    P_v: np.ndarray,
+    normal: np.ndarray,
+    contact_start_idx: int,
+    contact_end_idx: int,
+    P_cross: np.ndarray | None = None,
+) -> tuple[float, float]:
+    """Coefficient of restitution along the surface normal and its first-order 1σ.
+
+    ``e = −v_n(after) / v_n(before)`` with ``v_n = n·v_I`` (n the unit surface normal toward the
+    free side; ``v_n(before) < 0`` when approaching), before = ``contact_start_idx``, after =
+    ``contact_end_idx``.  With ``a = v_n(after)``, ``b = v_n(before)``:
+    ``∂e/∂v_after = −n/b``, ``∂e/∂v_before = (a/b²) n`` and
+
+        σ_e² = nᵀP_after n / b² + a² nᵀP_before n / b⁴ − 2 (a/b³) nᵀ P_cross n.
+
+    By default ``P_cross = 0``: the two epochs' velocity errors are treated as independent.  In
+    a filter/smoother they are positively correlated (``δv_after = δv_before + ∫δa dt``), and
+    since ``a > 0 > b`` at a bounce the omitted term ``−2(a/b³) nᵀP_cross n`` is positive: the
+    independent σ_e is then optimistic (too small).  Pass ``P_cross = E[δv_before δv_afterᵀ]``
+    (3, 3) [m²/s²] to include it.
+
+    Args:
+        t: (n,) [s] times (checked for length and order of the two epochs).
+        v_I: (n, 3) [m/s] CM velocity in the surface's frame; P_v: (n, 3, 3) its covariance.
+        normal: (3,) surface normal (normalised here).
+
+    Returns ``(e, sigma_e)`` (dimensionless).  Raises ``ValueError`` if ``v_n(before) >= 0``.
+    """
+    t = np.asarray(t, dtype=float)
+    v = np.asarray(v_I, dtype=float)
+    P = np.asarray(P_v, dtype=float)
+    n = np.asarray(normal, dtype=float)
+    n = n / np.linalg.norm(n)
+    i0, i1 = int(contact_start_idx), int(contact_end_idx)
+    if v.shape != (t.shape[0], 3) or P.shape != (t.shape[0], 3, 3):
+        raise ValueError(f"restitution: need v_I (n,3), P_v (n,3,3) with n={t.shape[0]}")
+    if not t[i0] < t[i1]:
+        raise ValueError("restitution: the contact end must come after the contact start")
+    b = float(n @ v[i0])
+    a = float(n @ v[i1])
+    if not b < 0.0:
+        raise ValueError(f"restitution: normal velocity before contact is {b} m/s, not approaching")
+    e = -a / b
+    var = (n @ P[i1] @ n) / b**2 + a**2 * (n @ P[i0] @ n) / b**4
+    if P_cross is not None:
+        var += -2.0 * (a / b**3) * float(n @ np.asarray(P_cross, dtype=float) @ n)
+    return e, float(np.sqrt(max(var, 0.0)))

@@ -1,0 +1,308 @@
+"""Synthetic drop test: truth simulation -> telemetry files exactly as a test engineer supplies them.
+
+The truth (``physics.droptest``) is turned into instrument readings (``sensors.droptest``) and
+written to CSV/TOML files in the documented user format (``io/FORMATS.md``):
+
+* ``imu.csv`` — four accelerometer triads [g] and the rate gyro [deg/s] at the IDDAS rate,
+  from a few tenths of a second before release (the lander hanging) to the end of the event;
+* ``3dm.csv`` — the 3DM gravity and magnetic unit vectors (body frame) while hanging;
+* ``events.csv`` — release command and the nail microswitch (bungee cut);
+* ``setup.toml`` — surveyed hanging position of the CM (with its 1σ) and the bungee test plan;
+* ``ranging.csv`` (if ranging is configured) — bungee-sheave odometer until the cut and radar
+  gun ranges / range rates.
+
+The truth is saved beside them in ``truth.npz`` for scoring and drawing only; the
+reconstruction (``pipelines.droptest``) reads the telemetry files and never this one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.rotation import quat_conjugate, quat_rotate, quat_to_dcm
+from workbench.io.scenario import Scenario
+from workbench.io.telemetry import atomic_write_text, write_events, write_telemetry
+from workbench.problems.droptest.lander import LanderModel, load_lander
+from workbench.problems.droptest.sensors import (
+    G0,
+    ImuErrorModel,
+    RangingSpec,
+    acquisition_filter,
+    apply_errors,
+    specific_force_at,
+    tilt_unit_vectors,
+)
+from workbench.problems.droptest.surface import Surface, ramp_surface, rock_field
+from workbench.problems.droptest.truth import DropTestConfig, DropTruth, simulate_drop
+
+__all__ = ["SyntheticDrop", "synthesize_droptest", "lander_for", "surface_for", "truth_for", "load_truth"]
+
+TRIADS = ("BP", "PYBP", "PXBP", "MXBP")
+
+
+@dataclass(frozen=True)
+class SyntheticDrop:
+    """Paths written by :func:`synthesize_droptest` (telemetry for the pipeline, truth for scoring)."""
+
+    telemetry: dict[str, Path]
+    truth_path: Path
+
+
+def lander_for(scenario: Scenario) -> LanderModel:
+    """The lander asset named by ``[vehicle] lander`` (path relative to the scenario file)."""
+    return load_lander(scenario.path_of("vehicle.lander"))
+
+
+def surface_for(scenario: Scenario) -> Surface:
+    """The ramp of ``[chamber]`` (angle [deg], nail depth [m]) in the SPF frame, with the rock
+    field of ``[chamber.rocks]`` if present (seed, extent_m = [[u0, u1], [v0, v1]] in the ramp
+    plane: u across, v up-slope, from the foot of the nail; REDLand: 0.2–0.5 m rocks ~1 m apart)."""
+    surf = ramp_surface(
+        angle_deg=scenario.get("chamber.ramp_angle_deg", 60.0, kind="float"),
+        nail_depth=scenario.get("chamber.nail_depth_m", 0.3, kind="float"),
+    )
+    if scenario.has("chamber.rocks"):
+        ext = scenario.get("chamber.rocks.extent_m", [[-4.0, 4.0], [-7.0, 3.0]], kind="list")
+        surf = rock_field(
+            surf,
+            np.random.default_rng(scenario.get("chamber.rocks.seed", 0, kind="int")),
+            extent=((float(ext[0][0]), float(ext[0][1])), (float(ext[1][0]), float(ext[1][1]))),
+            spacing=scenario.get("chamber.rocks.spacing_m", 1.0, kind="float"),
+        )
+    return surf
+
+
+def _config(scenario: Scenario) -> DropTestConfig:
+    g = scenario.get
+    psi = g("synthetic.bag_pressure_psi", None)
+    return DropTestConfig(
+        impact_parallel_speed=g("synthetic.impact_parallel_mps", 16.0, kind="float"),
+        impact_normal_speed=g("synthetic.impact_normal_mps", 12.0, kind="float"),
+        release_euler123_deg=tuple(g("synthetic.release_euler123_deg", [0.0, 0.0, 0.0], kind="vec3")),
+        release_to_contact_s=g("synthetic.release_to_contact_s", 1.3, kind="float"),
+        pre_release_s=g("synthetic.pre_release_s", 0.5, kind="float"),
+        bungee_truth_scale=g("synthetic.bungee_truth_scale", 1.03, kind="float"),
+        pressure_pa=None if psi is None else float(psi) * 6894.757,
+    )
+
+
+_TRUTH_CACHE: dict[tuple, tuple[DropTruth, LanderModel]] = {}
+
+
+def truth_for(scenario: Scenario) -> tuple[DropTruth, LanderModel, Surface]:
+    """Truth simulation of the scenario's ``[synthetic]`` drop (deterministic; cached per process,
+    keyed by lander file, drop configuration and surface including rocks)."""
+    surf = surface_for(scenario)
+    lander_path = str(scenario.path_of("vehicle.lander"))
+    cfg = _config(scenario)
+    key = (
+        lander_path,
+        cfg,
+        surf.point.tobytes(),
+        surf.normal.tobytes(),
+        surf.rock_centers.tobytes(),
+        surf.rock_radii.tobytes(),
+    )
+    if key not in _TRUTH_CACHE:
+        lander = load_lander(lander_path)
+        if len(_TRUTH_CACHE) >= 8:
+            _TRUTH_CACHE.pop(next(iter(_TRUTH_CACHE)))
+        _TRUTH_CACHE[key] = (simulate_drop(cfg, lander, surf), lander)
+    truth, lander = _TRUTH_CACHE[key]
+    return truth, lander, surf
+
+
+def _imu_models(scenario: Scenario) -> tuple[ImuErrorModel, ImuErrorModel]:
+    g = scenario.get
+    acc = ImuErrorModel(
+        noise=g("sensors.accelerometer.noise_g", 0.2, kind="float") * G0,
+        bias=g("sensors.accelerometer.bias_g", 0.005, kind="float") * G0,
+        scale=g("sensors.accelerometer.scale", 0.002, kind="float"),
+        misalignment=np.radians(g("sensors.accelerometer.misalignment_deg", 0.05, kind="float")),
+        full_scale=g("sensors.accelerometer.full_scale_g", 2000.0, kind="float") * G0,
+    )
+    gyr = ImuErrorModel(
+        noise=np.radians(g("sensors.gyro.noise_dps", 0.4, kind="float")),
+        bias=np.radians(g("sensors.gyro.bias_dps", 0.05, kind="float")),
+        scale=g("sensors.gyro.scale", 0.01, kind="float"),
+        misalignment=np.radians(g("sensors.gyro.misalignment_deg", 0.05, kind="float")),
+        full_scale=np.radians(g("sensors.gyro.full_scale_dps", 1000.0, kind="float")),
+    )
+    return acc, gyr
+
+
+def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | None = None) -> SyntheticDrop:
+    """Simulate the scenario's drop and write its telemetry files into ``out_dir``.
+
+    ``seed`` (default ``[synthetic] seed``) drives every random draw: sensor noise, bias,
+    scale factor and misalignment, 3DM vector errors, the survey error of the hanging
+    position and the ranging noise. The truth trajectory itself is deterministic per scenario.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    seed = int(scenario.get("synthetic.seed", 0, kind="int") if seed is None else seed)
+    rng = np.random.default_rng(seed)
+    truth, lander, surf = truth_for(scenario)
+    acc_model, gyr_model = _imu_models(scenario)
+    fs_sim = truth.config.output_rate_hz
+    fs = scenario.get("sensors.acquisition.sample_rate_hz", 2000.0, kind="float")
+    cutoff = scenario.get("sensors.acquisition.filter_cutoff_hz", 500.0, kind="float")
+    order = scenario.get("sensors.acquisition.filter_order", 4, kind="int")
+    decim = int(round(fs_sim / fs))
+    if abs(decim * fs - fs_sim) > 1e-6:
+        raise ValueError(f"{scenario.path}: sensors.acquisition.sample_rate_hz must divide {fs_sim} Hz")
+
+    t_imu = truth.t[::decim]
+    channels: dict[str, tuple[np.ndarray, str]] = {}
+    drawn: dict[str, dict] = {}
+    for name in TRIADS:
+        r = lander.instruments[name]
+        f_true = specific_force_at(r, truth.a_ng_I, truth.q_I_B, truth.w_B, truth.alpha_B)
+        f_filt = acquisition_filter(f_true, fs_sim, cutoff, order)[::decim]
+        f_meas, drawn[name] = apply_errors(f_filt, acc_model, rng)
+        for i, ax in enumerate("xyz"):
+            channels[f"{name}.{ax}"] = (f_meas[:, i], "g")
+    w_filt = acquisition_filter(truth.w_B, fs_sim, cutoff, order)[::decim]
+    w_meas, drawn["gyro"] = apply_errors(w_filt, gyr_model, rng)
+    for i, ax in enumerate("xyz"):
+        channels[f"gyro.{ax}"] = (w_meas[:, i], "deg/s")
+    paths = {
+        "imu": write_telemetry(
+            out / "imu.csv",
+            t_imu,
+            channels,
+            meta={
+                "sensor": "IDDAS: 4 accelerometer triads (ENDEVCO 7264) + CFX rate gyro",
+                "rate_hz": fs,
+                "source": f"synthetic drop, seed {seed}",
+                "acquisition_filter": f"Butterworth order {order}, {cutoff:g} Hz",
+            },
+        )
+    }
+
+    # 3DM while hanging: gravity (accelerometer set measures -g => "up") and magnetic field
+    m_spf = scenario.get("chamber.magnetic_field_spf", kind="vec3")  # required, as in the reconstruction
+    m_spf = m_spf / np.linalg.norm(m_spf)
+    sg = np.radians(scenario.get("sensors.attitude_3dm.gravity_sigma_deg", 0.2, kind="float"))
+    sm = np.radians(scenario.get("sensors.attitude_3dm.magnetic_sigma_deg", 1.0, kind="float"))
+    rate3 = scenario.get("sensors.attitude_3dm.rate_hz", 100.0, kind="float")
+    n3 = max(2, int(truth.config.pre_release_s * rate3 * 0.8))
+    t3 = -truth.config.pre_release_s + np.arange(n3) / rate3
+    q_B_I = quat_conjugate(truth.q_release)
+    up_B = quat_rotate(q_B_I, np.array([0.0, 0.0, 1.0]))
+    mag_B = quat_rotate(q_B_I, m_spf)
+    # a per-run calibration error (the dominant term) plus small per-sample noise
+    up_cal = tilt_unit_vectors(up_B, sg, rng)
+    mag_cal = tilt_unit_vectors(mag_B, sm, rng)
+    up_s = tilt_unit_vectors(up_cal, 0.1 * sg, rng, n3)
+    mag_s = tilt_unit_vectors(mag_cal, 0.1 * sm, rng, n3)
+    ch3 = {f"up.{a}": (up_s[:, i], "1") for i, a in enumerate("xyz")}
+    ch3.update({f"mag.{a}": (mag_s[:, i], "1") for i, a in enumerate("xyz")})
+    paths["attitude_3dm"] = write_telemetry(
+        out / "3dm.csv",
+        t3,
+        ch3,
+        meta={
+            "sensor": "Microstrain 3DM: unit vectors of specific force (up) and magnetic field, body frame",
+            "rate_hz": rate3,
+        },
+    )
+
+    # events: release command and the nail microswitch
+    ev = [(0.0, "release")]
+    if "bungee_cut" in truth.events:
+        ev.append((round(truth.events["bungee_cut"] / (1.0 / fs)) * (1.0 / fs), "bungee_cut"))
+    paths["events"] = write_events(out / "events.csv", ev)
+
+    # setup: surveyed hanging position and the bungee test plan
+    sig_survey = scenario.get("synthetic.survey_sigma_m", 0.03, kind="float")
+    p_survey = truth.p_release + rng.normal(0.0, sig_survey, 3)
+    rig = truth.nominal_rig
+    fmt = lambda v: "[" + ", ".join(f"{float(x):.6f}" for x in v) + "]"  # noqa: E731
+    setup = (
+        "# Drop-test setup: surveyed hanging state and the bungee test plan (SPF frame, SI units)\n"
+        "[hanging]\n"
+        f"position_m = {fmt(p_survey)}\n"
+        f"position_sigma_m = {sig_survey}\n"
+        "[bungee]\n"
+        f"anchor_m = {fmt(rig.anchor_I)}\n"
+        f"rest_length_m = {rig.rest_length:.6f}\n"
+        f"coefficients = {fmt(rig.coeffs)}  # N/m^k per bungee, k = 1..\n"
+        f"count = {rig.count:.6f}\n"
+        f"attach_body_m = {fmt(rig.attach_B)}\n"
+        f"mass_kg = {lander.mass}\n"
+    )
+    if surf.n_rocks:  # the surveyed rock field (rigid spheres: centre in SPF, radius)
+        setup += "[rocks]\n# surveyed rock field on the ramp: sphere centres (SPF) and radii\n"
+        setup += "centers_m = [" + ", ".join(fmt(c) for c in surf.rock_centers) + "]\n"
+        setup += f"radii_m = {fmt(surf.rock_radii)}\n"
+    paths["setup"] = atomic_write_text(out / "setup.toml", setup)
+
+    if scenario.has("sensors.ranging"):
+        paths["ranging"] = _write_ranging(scenario, truth, out, rng)
+
+    truth_path = out / "truth.npz"
+    np.savez_compressed(
+        truth_path,
+        t=truth.t,
+        p_I=truth.p_I,
+        v_I=truth.v_I,
+        q_I_B=truth.q_I_B,
+        w_B=truth.w_B,
+        alpha_B=truth.alpha_B,
+        a_ng_I=truth.a_ng_I,
+        contact_force=truth.contact_force,
+        gauge_pressure=truth.gauge_pressure,
+        body_penetration=truth.body_penetration,
+        event_names=np.array(list(truth.events)),
+        event_times=np.array(list(truth.events.values())),
+        accel_bias=np.array([drawn[n]["bias"] for n in TRIADS]),
+        gyro_bias=drawn["gyro"]["bias"],
+        gyro_scale=drawn["gyro"]["scale"],
+        gyro_error_matrix=drawn["gyro"]["matrix"],
+        seed=seed,
+    )
+    return SyntheticDrop(telemetry=paths, truth_path=truth_path)
+
+
+def _write_ranging(scenario: Scenario, truth: DropTruth, out: Path, rng: np.random.Generator) -> Path:
+    spec = RangingSpec.from_scenario(scenario)
+    step = int(round(truth.config.output_rate_hz / spec.rate_hz))
+    idx = np.arange(0, truth.t.size, step)
+    t = truth.t[idx]
+    p, v, q, w = truth.p_I[idx], truth.v_I[idx], truth.q_I_B[idx], truth.w_B[idx]
+    C = quat_to_dcm(q)
+    ch: dict[str, tuple[np.ndarray, str]] = {}
+    sparse = []
+    if spec.odometer:
+        x_att = p + C @ truth.rig.attach_B
+        rho = np.linalg.norm(truth.rig.anchor_I - x_att, axis=1) + rng.normal(0.0, spec.odometer_sigma, t.size)
+        cut = truth.events.get("bungee_cut", np.inf)
+        rho = np.where((t >= 0.0) & (t < cut), rho, np.nan)  # the sheave turns only while towing
+        ch["odometer"] = (rho, "m")
+        sparse.append("odometer")
+    for name, G in spec.guns.items():
+        d = p + C @ spec.reflector_B - G
+        rho = np.linalg.norm(d, axis=1)
+        u = d / rho[:, None]
+        vr = v + np.einsum("nij,nj->ni", C, np.cross(w, spec.reflector_B))
+        ch[f"{name}.range"] = (rho + rng.normal(0.0, spec.range_sigma, t.size), "m")
+        ch[f"{name}.rate"] = (np.sum(u * vr, axis=1) + rng.normal(0.0, spec.rate_sigma, t.size), "m/s")
+    return write_telemetry(
+        out / "ranging.csv",
+        t,
+        ch,
+        sparse=tuple(sparse),
+        meta={"sensor": "bungee-sheave odometer and radar guns", "rate_hz": spec.rate_hz},
+    )
+
+
+def load_truth(path: str | Path) -> dict[str, np.ndarray]:
+    """Load ``truth.npz`` written by :func:`synthesize_droptest` (scoring and drawing only)."""
+    with np.load(path) as z:
+        d = {k: z[k] for k in z.files}
+    d["events"] = {str(k): float(v) for k, v in zip(d.pop("event_names"), d.pop("event_times"), strict=True)}
+    return d

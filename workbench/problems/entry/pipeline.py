@@ -1,0 +1,776 @@
+"""Entry and descent reconstruction (AMELIA method, Aboudan et al. 2018): telemetry -> trajectory, atmosphere, winds.
+
+Stages, each yielded as a frozen dataclass so the recorder (or a test) can observe them:
+
+1. :class:`~workbench.problems.entry.preprocess.EntryTelemetry` — the files as read and validated
+   (GNC rate/quaternion/total acceleration at 10 Hz, on-board position/velocity at 1 Hz, RDA
+   packets); defects reported by file, column and row.
+2. :class:`~workbench.problems.entry.preprocess.PreprocessedIMU` — AMELIA Sect. 4: gravity removed
+   at the on-board position, acceleration rotated to the body with the on-board quaternion, gaps
+   turned into Δv/Δp/ΔC bridges, the saturated X rate rebuilt, 100 Hz resampling after PDD.
+3. :class:`NominalIntegration` — Sect. 5: strapdown (RK4) with first-order covariance from the
+   nominal initial state, validated against the on-board solution before PDD.
+4. :class:`~workbench.problems.entry.dispersion.DispersionResult` — Sect. 6: ≥ 10 000 trajectories from a
+   dispersed initial state, acceptance rules, refined state and its uncertainty (in-process or Dask).
+5. :class:`~workbench.problems.entry.filter.EntryFilterResult` — Sects. 7–8: RDA plane fits, EKF with
+   the radar models B.3–B.6 and constrained update directions, RTS backward pass.
+6. :class:`~workbench.problems.entry.atmosphere.AtmosphereResult` — Sect. 9: density from drag with the
+   drag coefficient iterated from the tables, blackout fill, hydrostatic pressure, temperature, 1σ.
+7. :class:`~workbench.problems.entry.winds.WindResult` — Sect. 10: by default from the direction of the
+   measured specific force (the air-relative velocity of the parachute–module system); the attitude
+   method is computed as a cross-check (``[winds] method``).
+8. :class:`EntryResult` — all of it plus the summary numbers.
+
+The reconstruction reads only the scenario, the telemetry files and the nominal initial state
+(``initial_state.toml``, AMELIA Table 2 style); truth never enters here.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.atmosphere import MarsEngineeringAtmosphere
+from workbench.core.bodies import MARS
+from workbench.core.frames import julian_date_from_utc
+from workbench.core.rotation import attitude_error, quat_conjugate, quat_from_jpl, quat_normalize
+from workbench.io.scenario import Scenario, ScenarioError
+from workbench.models.aerodynamics import EntryVehicle, load_vehicle
+
+__all__ = [
+    "NominalState",
+    "NominalIntegration",
+    "SmootherStart",
+    "initial_for_smoother",
+    "EntryResult",
+    "telemetry_paths",
+    "read_nominal_state",
+    "write_nominal_state",
+    "vehicle_for",
+    "reconstruct",
+    "score",
+    "scorecard_markdown",
+    "event_table",
+    "check_config",
+    "epoch_utc",
+]
+
+R_MOLA = MARS.reference_radius
+TELEMETRY_FILES = ("gnc", "gnc_nav", "rda_slant_range", "rda_out", "events", "initial_state")
+
+
+@dataclass(frozen=True)
+class NominalState:
+    """Nominal initial state at ``t0`` [s from EIP] (AMELIA Table 2): MMED velocity [m/s], position [m],
+    attitude ``q_M_G`` (converted from the JPL "MMED to GNC" quaternion at the file edge)."""
+
+    t0: float
+    v_M: np.ndarray
+    p_M: np.ndarray
+    q_M_G: np.ndarray
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class NominalIntegration:
+    """Strapdown from the nominal state (Sect. 5) and its validation against the on-board solution.
+
+    ``onboard_t`` (m,) the on-board 1 Hz times before PDD; ``diff_position_m``, ``diff_velocity_mps``
+    (m,) |reconstruction − on-board|; ``diff_attitude_deg`` (m,) angle between the attitudes.
+    """
+
+    strapdown: object
+    onboard_t: np.ndarray | None
+    diff_position_m: np.ndarray | None
+    diff_velocity_mps: np.ndarray | None
+    diff_attitude_deg: np.ndarray | None
+    summary: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class EntryResult:
+    """Everything the reconstruction produced, plus ``summary`` (JSON-ready numbers)."""
+
+    telemetry: object
+    imu: object
+    nominal: NominalIntegration
+    dispersion: object
+    filter: object
+    atmosphere: object
+    winds: object
+    vehicle: EntryVehicle
+    events: dict
+    summary: dict
+    start: object = None
+
+
+# ----------------------------------------------------------------------------------------- inputs
+def vehicle_for(scenario: Scenario) -> EntryVehicle:
+    """The vehicle asset named by ``[vehicle] file`` (path relative to the scenario file)."""
+    return load_vehicle(scenario.path_of("vehicle.file"))
+
+
+def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
+    """User telemetry named in ``[telemetry]``: gnc, gnc_nav, rda_slant_range, rda_out, events, initial_state."""
+    return {k: scenario.path_of(f"telemetry.{k}") for k in TELEMETRY_FILES}
+
+
+def write_nominal_state(path: Path, st: NominalState, comment: str = "") -> Path:
+    """Write ``initial_state.toml`` in the user format (km, km/s, JPL quaternion MMED→GNC)."""
+    from workbench.core.rotation import quat_to_jpl
+
+    q_jpl = quat_to_jpl(quat_conjugate(st.q_M_G))  # JPL of G w.r.t. M has the DCM C_G_M
+    f = lambda a: ", ".join(f"{x:.9f}" for x in a)  # noqa: E731
+    text = (
+        f"# Nominal initial state (AMELIA Table 2 format). {comment}\n"
+        "[initial_state]\n"
+        f"t0_s = {st.t0:.6f}                  # seconds from EIP\n"
+        f"position_km = [{f(st.p_M / 1e3)}]   # MMED\n"
+        f"velocity_kmps = [{f(st.v_M / 1e3)}] # MMED\n"
+        f"quaternion_jpl = [{f(q_jpl)}]       # JPL (Shuster) scalar-last, MMED to GNC\n"
+    )
+    from workbench.io.telemetry import atomic_write_text
+
+    return atomic_write_text(path, text)
+
+
+def read_nominal_state(path: Path) -> NominalState:
+    """Read ``initial_state.toml``; errors name the file and key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise ScenarioError(path, "initial_state", f"cannot read: {e}") from None
+    st = data.get("initial_state")
+    if not isinstance(st, dict):
+        raise ScenarioError(path, "initial_state", "missing [initial_state] table")
+
+    def vec(key: str, n: int) -> np.ndarray:
+        v = st.get(key)
+        if not isinstance(v, list) or len(v) != n or not all(isinstance(x, int | float) for x in v):
+            raise ScenarioError(path, f"initial_state.{key}", f"need a list of {n} numbers")
+        a = np.asarray(v, dtype=float)
+        if not np.all(np.isfinite(a)):
+            raise ScenarioError(path, f"initial_state.{key}", "not finite")
+        return a
+
+    q_jpl = vec("quaternion_jpl", 4)
+    nq = float(np.linalg.norm(q_jpl))
+    if abs(nq - 1.0) > 1e-3:
+        raise ScenarioError(path, "initial_state.quaternion_jpl", f"not a unit quaternion (norm {nq:.6f})")
+    t0 = st.get("t0_s")
+    if not isinstance(t0, int | float):
+        raise ScenarioError(path, "initial_state.t0_s", "need a number (s from EIP)")
+    q_M_G = quat_conjugate(quat_from_jpl(quat_normalize(q_jpl)))
+    return NominalState(float(t0), vec("velocity_kmps", 3) * 1e3, vec("position_km", 3) * 1e3, q_M_G, str(path))
+
+
+# ----------------------------------------------------------------------------------------- stages
+def _cfg(sc: Scenario, key: str, default, kind: str = "float"):
+    return sc.get(key, default, kind=kind)
+
+
+_CHOICES = {
+    "reconstruction.bridge_mode": ("relative", "paper"),
+    "reconstruction.initial": ("fused", "dispersion", "nominal"),
+    "winds.method": ("specific_force", "attitude"),
+    "atmosphere.fill_method": ("hydrostatic", "exponential"),
+}
+_RULES = ("mach_pdd", "h_pdd_m", "h_fsr_m", "h_end_m", "time_to_impact_s")
+
+
+def check_config(sc: Scenario) -> None:
+    """Validate the entry keys of a scenario up front; raise :class:`ScenarioError` naming the key.
+
+    Choices (``bridge_mode``, ``initial``, ``winds.method``, ``fill_method``), the dispersion rules
+    (known names, each ``[centre, half-width]`` with half-width > 0), the radar azimuths (3 numbers)
+    and the positive counts/sigmas.
+    """
+    for key, choices in _CHOICES.items():
+        v = sc.get(key, choices[0], kind="str")
+        if v not in choices:
+            raise ScenarioError(sc.path, key, f"{v!r}: use one of {', '.join(choices)}")
+    rules = sc.get("dispersion.rules", {}, kind="table")
+    for k, v in rules.items():
+        if k not in _RULES:
+            raise ScenarioError(sc.path, f"dispersion.rules.{k}", f"unknown rule; rules: {', '.join(_RULES)}")
+        if not (isinstance(v, list) and len(v) == 2 and all(isinstance(x, int | float) for x in v) and v[1] > 0):
+            raise ScenarioError(sc.path, f"dispersion.rules.{k}", "need [centre, half-width] with half-width > 0")
+    az = sc.get("radar.azimuths_deg", [0.0, 120.0, 240.0], kind="list")
+    if len(az) != 3 or not all(isinstance(x, int | float) for x in az):
+        raise ScenarioError(sc.path, "radar.azimuths_deg", "need 3 numbers (beams B1..B3)")
+    for key, default, kind in (
+        ("dispersion.members", 10000, "int"),
+        ("dispersion.chunk_size", 1000, "int"),
+        ("reconstruction.velocity_mps", 10.0, "float"),
+        ("reconstruction.attitude_deg", 1.0, "float"),
+        ("reconstruction.position_m", 2000.0, "float"),
+        ("radar.slant_range_sigma_m", 100.0, "float"),
+        ("radar.slant_out_sigma_m", 100.0, "float"),
+        ("radar.velocity_out_sigma_mps", 25.0, "float"),
+        ("atmosphere.max_iterations", 10, "int"),
+        ("atmosphere.tolerance", 0.01, "float"),
+    ):
+        if sc.get(key, default, kind=kind) <= 0:
+            raise ScenarioError(sc.path, key, "must be > 0")
+    try:
+        julian_date_from_utc(sc.get("scenario.epoch_utc", "2016-10-19T14:42:22.132Z", kind="str"))
+    except ValueError as e:
+        raise ScenarioError(sc.path, "scenario.epoch_utc", str(e)) from None
+
+
+def _sigmas_P0(sc: Scenario) -> np.ndarray:
+    """Reconstruction initial covariance from Table 3 ("Reconstruction" column), (9, 9)."""
+    s_v = _cfg(sc, "reconstruction.velocity_mps", 10.0)
+    s_a = np.radians(_cfg(sc, "reconstruction.attitude_deg", 1.0))
+    s_p = _cfg(sc, "reconstruction.position_m", 2000.0)
+    return np.diag(np.r_[np.full(3, s_v**2), np.full(3, s_a**2), np.full(3, s_p**2)])
+
+
+def _nominal_integration(imu, nom: NominalState, tm, P0: np.ndarray, bridge_mode: str) -> NominalIntegration:
+    from workbench.estimation.strapdown import integrate
+
+    sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode)
+    # validation against the on-board solution before PDD (afterwards the on-board attitude is wrong)
+    t_pdd = tm.events.get("PDD", np.inf)
+    m = (tm.t_nav >= sp.t[0]) & (tm.t_nav <= min(t_pdd, sp.t[-1]))
+    if not m.any():
+        return NominalIntegration(sp, None, None, None, None, {})
+    tn = tm.t_nav[m]
+    pi = np.column_stack([np.interp(tn, sp.t, sp.p_M[:, i]) for i in range(3)])
+    vi = np.column_stack([np.interp(tn, sp.t, sp.v_M[:, i]) for i in range(3)])
+    dp = np.linalg.norm(pi - tm.p_M_nav[m], axis=1)
+    dv = np.linalg.norm(vi - tm.v_M_nav[m], axis=1)
+    k = np.searchsorted(sp.t, tn).clip(0, sp.t.size - 1)
+    kq = np.searchsorted(tm.t_gnc, tn).clip(0, tm.t_gnc.size - 1)
+    dth = np.degrees(np.linalg.norm(attitude_error(tm.q_M_G_nav[kq], sp.q_M_G[k]), axis=1))
+    summ = {
+        "vs_onboard_before_pdd": {
+            "max_velocity_mps": float(dv.max()),
+            "max_position_m": float(dp.max()),
+            "max_attitude_deg": float(dth.max()),
+            "paper": "7.5 m/s, 530 m, < 0.01 deg (AMELIA Sect. 5)",
+        }
+    }
+    return NominalIntegration(sp, tn, dp, dv, dth, summ)
+
+
+@dataclass(frozen=True)
+class SmootherStart:
+    """Initial state of the radar-aided smoother: ``mode`` ("fused", "dispersion" or "nominal"), state
+    ``v0`` [m/s], ``q0`` (``q_M_G``), ``p0`` [m], covariance ``P0`` (9, 9), and a note."""
+
+    mode: str
+    v0: np.ndarray
+    q0: np.ndarray
+    p0: np.ndarray
+    P0: np.ndarray
+    note: str
+
+
+def initial_for_smoother(sc: Scenario, disp, nom: NominalState, P_nav: np.ndarray) -> SmootherStart:
+    """The smoother's initial state from ``[reconstruction] initial`` (default "fused").
+
+    "dispersion": the paper's refined state (mean and spread of the accepted members);
+    "fused": that constraint combined with the navigation prior ``P_nav`` (Table 3, reconstruction
+    column) about the nominal (:func:`~workbench.problems.entry.dispersion.fuse_with_prior`);
+    "nominal": the nominal state with ``P_nav``.  Falls back to "nominal" (with a note) when fewer
+    than 10 members were accepted.
+    """
+    from workbench.problems.entry.dispersion import fuse_with_prior
+
+    mode = sc.get("reconstruction.initial", "fused", kind="str")
+    if mode not in ("fused", "dispersion", "nominal"):
+        raise ScenarioError(sc.path, "reconstruction.initial", f"{mode!r}: use fused, dispersion or nominal")
+    n_acc = int(np.sum(disp.accepted))
+    if mode != "nominal" and n_acc < 10:
+        return SmootherStart("nominal", nom.v_M, nom.q_M_G, nom.p_M, P_nav, f"only {n_acc} accepted: nominal used")
+    if mode == "dispersion":
+        return SmootherStart(mode, disp.refined_v0, disp.refined_q0, disp.refined_p0, disp.refined_P0, "")
+    if mode == "nominal":
+        return SmootherStart(mode, nom.v_M, nom.q_M_G, nom.p_M, P_nav, "")
+    f = fuse_with_prior(disp, nom.v_M, nom.q_M_G, nom.p_M, P_nav)
+    return SmootherStart(mode, f.v0, f.q0, f.p0, f.P0, f"rules constrain {f.constrained_dims} of 9 directions")
+
+
+def _phase(t: np.ndarray, events: dict) -> np.ndarray:
+    ph = np.zeros(t.shape, dtype=int)
+    ph[t >= events.get("PDD", np.inf)] = 1
+    ph[t >= events.get("FSR", np.inf)] = 2
+    return ph
+
+
+def reconstruct(
+    scenario: Scenario,
+    paths: dict[str, Path],
+    *,
+    scheduler: str | None = None,
+    members: int | None = None,
+    progress=None,
+) -> Iterator[object]:
+    """Run the entry reconstruction; yields the stages in order, the last an :class:`EntryResult`.
+
+    ``paths``: the telemetry files (keys of :data:`TELEMETRY_FILES`); ``scheduler``: None (in-process),
+    ``"local"`` (Dask LocalCluster) or ``"tcp://host:port"`` for the dispersion; ``members`` overrides
+    ``[dispersion] members``.
+    """
+    from workbench.models.radar import beam_directions_G
+    from workbench.problems.entry.atmosphere import reconstruct_atmosphere
+    from workbench.problems.entry.dispersion import AcceptanceRules, run_dispersion
+    from workbench.problems.entry.filter import RadarData, run_entry_smoother
+    from workbench.problems.entry.preprocess import preprocess, read_entry_telemetry
+    from workbench.problems.entry.winds import estimate_winds
+
+    sc = scenario
+    check_config(sc)
+    vehicle = vehicle_for(sc)
+    r_ground = R_MOLA + _cfg(sc, "site.terrain_m", -1440.0)
+    tm = read_entry_telemetry(paths, sc)
+    for ev in ("PDD", "FSR"):
+        if ev not in tm.events:
+            raise ScenarioError(Path(paths["events"]), ev, "event missing (needed for the dispersion rules and phases)")
+        if not (tm.t_gnc[0] <= tm.events[ev] <= tm.t_gnc[-1]):
+            raise ScenarioError(
+                Path(paths["events"]),
+                ev,
+                f"at {tm.events[ev]:.3f} s, outside the GNC data {tm.t_gnc[0]:.3f}–{tm.t_gnc[-1]:.3f} s",
+            )
+    yield tm
+    imu = preprocess(tm, sc)
+    yield imu
+    nom = read_nominal_state(paths["initial_state"])
+    if abs(nom.t0 - float(imu.t[0])) > 0.05:
+        raise ScenarioError(
+            Path(paths["initial_state"]),
+            "initial_state.t0_s",
+            f"{nom.t0:.3f} s, but the IMU data start at {float(imu.t[0]):.3f} s: the state must be given at the first "
+            "sample with an acceleration",
+        )
+    bridge_mode = _cfg(sc, "reconstruction.bridge_mode", "relative", "str")
+    P0 = _sigmas_P0(sc)
+    nomi = _nominal_integration(imu, nom, tm, P0, bridge_mode)
+    yield nomi
+
+    # ---- dispersion (Sect. 6)
+    rules_t = sc.get("dispersion.rules", {}, kind="table")
+    rules = AcceptanceRules(**{k: tuple(float(x) for x in v) for k, v in rules_t.items()})
+    sig = {
+        "attitude": np.radians(_cfg(sc, "dispersion.attitude_deg", 5.0)),
+        "velocity": _cfg(sc, "dispersion.velocity_mps", 500.0),
+        "position": _cfg(sc, "dispersion.position_m", 10000.0),
+    }
+    n_mem = int(members if members is not None else _cfg(sc, "dispersion.members", 10000, "int"))
+    disp = run_dispersion(
+        imu,
+        nom.v_M,
+        nom.q_M_G,
+        nom.p_M,
+        sig,
+        n_mem,
+        rules=rules,
+        events_t=tm.events,
+        atmosphere=MarsEngineeringAtmosphere(),
+        chunk_size=_cfg(sc, "dispersion.chunk_size", 1000, "int"),
+        seed=_cfg(sc, "dispersion.seed", 2016, "int"),
+        scheduler=scheduler,
+        n_cloud=_cfg(sc, "dispersion.cloud", 300, "int"),
+        r_ground=r_ground,
+        bridge_mode=bridge_mode,
+        refine_rounds=_cfg(sc, "dispersion.refine_rounds", 0, "int"),
+    )
+    yield disp
+
+    # ---- radar-aided smoother (Sects. 7-8) from the refined state
+    beams = beam_directions_G(
+        _cfg(sc, "radar.squint_deg", 20.0), tuple(sc.get("radar.azimuths_deg", [0.0, 120.0, 240.0], kind="list"))
+    )
+    radar = RadarData(
+        t_sr=tm.t_sr,
+        slant_ranges=tm.slant_ranges,
+        sr_valid=tm.sr_valid,
+        t_rda=tm.t_rda,
+        slant_out=tm.slant_out,
+        v_out_G=tm.v_out_G,
+        rda_valid=tm.rda_valid,
+        beams_G=beams,
+        r_ground=r_ground,
+    )
+    init = initial_for_smoother(sc, disp, nom, P0)
+    yield init
+    v0, q0, p0, P0_ref = init.v0, init.q0, init.p0, init.P0
+    filt = run_entry_smoother(
+        imu,
+        radar,
+        v0,
+        q0,
+        p0,
+        P0_ref,
+        sigmas={
+            "slant_range": _cfg(sc, "radar.slant_range_sigma_m", 100.0),
+            "slant_out": _cfg(sc, "radar.slant_out_sigma_m", 100.0),
+            "velocity_out": _cfg(sc, "radar.velocity_out_sigma_mps", 25.0),
+            "bridge_mode": bridge_mode,
+        },
+        constrained=sc.get("radar.constrained", True, kind="bool"),
+    )
+    yield filt
+
+    # ---- atmosphere (Sect. 9) and winds (Sect. 10) along the smoothed trajectory
+    sm = filt.smoothed
+    ph = _phase(sm.t, tm.events)
+    f_valid = np.ones(sm.t.size, dtype=bool)
+    atm = reconstruct_atmosphere(
+        sm.t,
+        sm.p_M,
+        sm.v_M,
+        sm.q_M_G,
+        sm.P,
+        imu.f_G,
+        f_valid,
+        ph,
+        vehicle,
+        default_atmosphere=MarsEngineeringAtmosphere(),
+        sigmas={
+            "cd": _cfg(sc, "atmosphere.cd_sigma", 0.10),
+            "wind": _cfg(sc, "atmosphere.wind_sigma_mps", 10.0),
+            "accel": _cfg(sc, "reconstruction.accel_mps2", 0.001),
+        },
+        events=tm.events,
+        molar_mass=_cfg(sc, "atmosphere.molar_mass_g_per_mol", 43.41) / 1e3,
+        tolerance=_cfg(sc, "atmosphere.tolerance", 0.01),
+        max_iterations=_cfg(sc, "atmosphere.max_iterations", 10, "int"),
+        fill_method=sc.get("atmosphere.fill_method", "hydrostatic", kind="str"),
+    )
+    yield atm
+    wind_method = sc.get("winds.method", "specific_force", kind="str")
+    winds = estimate_winds(
+        sm.t, sm.p_M, sm.v_M, sm.q_M_G, sm.P, imu.f_G, ph, vehicle, atm, events=tm.events, method=wind_method
+    )
+    other = "attitude" if wind_method == "specific_force" else "specific_force"
+    winds_check = estimate_winds(
+        sm.t, sm.p_M, sm.v_M, sm.q_M_G, sm.P, imu.f_G, ph, vehicle, atm, events=tm.events, method=other
+    )
+    yield winds
+
+    summary = _summary(sc, tm, imu, nomi, disp, filt, atm, winds, r_ground)
+    ok = winds.valid & winds_check.valid
+    summary["winds"] = {
+        "method": winds.method,
+        "valid_samples": int(np.sum(winds.valid)),
+        "cross_check_method": winds_check.method,
+        "max_difference_between_methods_mps": float(
+            np.max(np.hypot(winds.wind_N[ok] - winds_check.wind_N[ok], winds.wind_E[ok] - winds_check.wind_E[ok]))
+        )
+        if ok.any()
+        else float("nan"),
+    }
+    summary["smoother_start"] = {
+        "mode": init.mode,
+        "note": init.note,
+        "sigma_velocity_mps": float(np.sqrt(np.max(np.diag(init.P0)[0:3]))),
+        "sigma_attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(init.P0)[3:6])))),
+        "sigma_position_m": float(np.sqrt(np.max(np.diag(init.P0)[6:9]))),
+    }
+    yield EntryResult(tm, imu, nomi, disp, filt, atm, winds, vehicle, dict(tm.events), summary, init)
+
+
+# ----------------------------------------------------------------------------------------- summary
+def epoch_utc(sc: Scenario, tm=None) -> str:
+    """UTC of t = 0 (EIP): ``[scenario] epoch_utc``, else the telemetry's ``# epoch_utc:`` line."""
+    if sc.has("scenario.epoch_utc"):
+        return sc.get("scenario.epoch_utc", kind="str")
+    if tm is not None and getattr(tm, "epoch_utc", ""):
+        return str(tm.epoch_utc)
+    raise ScenarioError(sc.path, "scenario.epoch_utc", "missing, and the telemetry has no '# epoch_utc:' line")
+
+
+def _jd0(sc: Scenario, tm=None) -> float:
+    return julian_date_from_utc(epoch_utc(sc, tm))
+
+
+def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_ground: float, tm=None) -> list[dict]:
+    """AMELIA Table 5 analogue: event, t [s], UTC, east longitude / latitude [deg], altitude AMR [km]."""
+    import datetime as dt
+
+    from workbench.core.frames import C_bodyfixed_mmed, planetocentric_from_cartesian
+
+    jd0 = _jd0(sc, tm)
+    epoch = dt.datetime.fromisoformat(epoch_utc(sc, tm).replace("Z", "+00:00"))
+    rows = []
+    names = [("First data", float(t[0]))] + sorted(events.items(), key=lambda kv: kv[1]) + [("Last data", float(t[-1]))]
+    for name, te in names:
+        step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        if not (t[0] - 1e-9 <= te <= t[-1] + step + 1e-9):  # an event up to one sample after the end (BSR)
+            continue
+        te_pos = min(te, float(t[-1]))
+        p = np.array([np.interp(te_pos, t, p_M[:, i]) for i in range(3)])
+        rF = C_bodyfixed_mmed(MARS, jd0 + te_pos / 86400.0) @ p
+        lat, lon, r = planetocentric_from_cartesian(rF)
+        rows.append(
+            {
+                "event": name,
+                "t_s": float(te),
+                "utc": (epoch + dt.timedelta(seconds=float(te))).strftime("%H:%M:%S.%f")[:-3],
+                "lon_deg": float(np.degrees(lon)),
+                "lat_deg": float(np.degrees(lat)),
+                "alt_amr_km": float((r - R_MOLA) / 1e3),
+                "alt_agl_km": float((r - r_ground) / 1e3),
+            }
+        )
+    return rows
+
+
+def _summary(sc, tm, imu, nomi, disp, filt, atm, winds, r_ground) -> dict:
+    from workbench.estimation.consistency import is_symmetric_pd
+
+    sm = filt.smoothed
+    sym, pd = is_symmetric_pd(sm.P)
+    out = {
+        "scenario": sc.name,
+        "kind": "entry",
+        "r_ground_m": float(r_ground),
+        "samples": int(sm.t.size),
+        "events": dict(tm.events),
+        "event_table": event_table(sc, tm.events, sm.t, sm.p_M, r_ground, tm),
+        "telemetry_problems": list(tm.problems),
+        "gaps_s": [float(g.t_b - g.t_a) for g in imu.gaps],
+        "saturated_samples": int(np.sum(np.asarray(imu.saturated, bool) & ~np.asarray(imu.resampled, bool))),
+        "saturation_window_samples": int(np.sum(imu.saturated)),
+        "nominal_integration": nomi.summary,
+        "dispersion": {
+            "members": int(disp.n),
+            "accepted": int(np.sum(disp.accepted)),
+            "accepted_fraction": float(np.mean(disp.accepted)),
+            "wall_s": float(disp.wall_s),
+            "scheduler": str(disp.scheduler),
+            "refined_sigma": {
+                "velocity_mps": float(np.sqrt(np.max(np.diag(disp.refined_P0)[0:3]))),
+                "attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(disp.refined_P0)[3:6])))),
+                "position_m": float(np.sqrt(np.max(np.diag(disp.refined_P0)[6:9]))),
+            },
+        },
+        "covariance": {"symmetric": bool(np.all(sym)), "positive_definite": bool(np.all(pd))},
+        "atmosphere": {"iterations": int(atm.n_iterations), "converged": bool(atm.converged)},
+    }
+    # radar residual maxima (smoothed), the paper's goodness-of-fit bounds
+    res = {}
+    for ch, r in filt.smoothed_residuals.items():
+        if len(r.t):
+            res[ch] = {"max_abs": float(np.max(np.abs(r.y))), "n": int(len(r.t))}
+    out["radar_residuals"] = res
+    if filt.plane_fits:
+        out["plane_fits"] = [
+            {
+                "t_s": float(tp),
+                "h_agl_m": float(pf.h_agl),
+                "off_vertical_deg": float(np.degrees(pf.off_vertical)),
+                "rms_m": float(pf.rms),
+            }
+            for tp, pf in filt.plane_fits
+        ]
+    t_last = float(sm.t[-1])
+    out["end"] = {
+        "t_s": t_last,
+        "h_agl_m": float(np.linalg.norm(sm.p_M[-1]) - r_ground),
+        "sigma_h_m": float(np.sqrt(_radial_var(sm.p_M[-1], sm.P[-1]))),
+    }
+    return out
+
+
+def _radial_var(p: np.ndarray, P: np.ndarray) -> float:
+    u = p / np.linalg.norm(p)
+    return float(u @ P[6:9, 6:9] @ u)
+
+
+# ----------------------------------------------------------------------------------------- scoring
+def _truth_rows(truth: dict, key: str, t: np.ndarray) -> np.ndarray:
+    a = np.asarray(truth[key], float)
+    tt = np.asarray(truth["t"], float)
+    if a.ndim == 1:
+        return np.interp(t, tt, a)
+    return np.column_stack([np.interp(t, tt, a[:, i]) for i in range(a.shape[1])])
+
+
+def score(result: EntryResult, truth: dict) -> dict:
+    """Accuracy and consistency of a reconstruction against the synthetic truth (scoring only)."""
+    from workbench.estimation.consistency import chi2_interval, nees
+
+    sm = result.filter.smoothed
+    t = sm.t
+    pT = _truth_rows(truth, "p_M", t)
+    vT = _truth_rows(truth, "v_M", t)
+    qT = quat_normalize(_truth_rows(truth, "q_M_G", t))
+    err = np.concatenate([vT - sm.v_M, attitude_error(sm.q_M_G, qT), pT - sm.p_M], axis=1)
+    ne = nees(err, sm.P)
+    ev = result.events
+    out: dict = {}
+    rg = float(result.summary["r_ground_m"])
+    h_est = np.linalg.norm(sm.p_M, axis=1) - rg
+    h_true = np.linalg.norm(pT, axis=1) - rg
+    sd_h = np.sqrt([_radial_var(sm.p_M[k], sm.P[k]) for k in range(t.size)])
+    fix = result.filter.innovations.get("slant_out")
+    t_fix = float(fix.t[0]) if fix is not None and len(fix.t) else np.inf
+    m = t >= t_fix
+    if m.any():
+        e = np.abs(h_est[m] - h_true[m])
+        out["after_radar_fix"] = {
+            "max_h_agl_error_m": float(e.max()),
+            "inside_3sigma_fraction": float(np.mean(e <= 3 * sd_h[m])),
+            "median_3sigma_m": float(np.median(3 * sd_h[m])),
+        }
+    lo, hi = chi2_interval(9)
+    from workbench.problems.entry.montecarlo import _errors_sigmas
+
+    _, e_c, _, _ = _errors_sigmas(sm, vT, qT, pT)
+    ne_c = nees(e_c, sm.P)
+    out["nees_smoothed_curvilinear"] = {
+        "mean": float(np.mean(ne_c)),
+        "median": float(np.median(ne_c)),
+        "note": "position error as horizontal + altitude about the estimate (no |δp_h|²/2r curvature term); "
+        "one run: see `workbench mc` for the ANEES over many",
+    }
+    out["nees_smoothed"] = {
+        "mean": float(np.mean(ne)),
+        "median": float(np.median(ne)),
+        "single_step_95pct_band_9dof": [lo, hi],
+        "fraction_inside_band": float(np.mean((ne >= lo) & (ne <= hi))),
+    }
+    # initial states against the truth at t0: the paper's refined state and the smoother's start
+    t0 = np.array([float(sm.t[0])])
+    v_t0, p_t0 = _truth_rows(truth, "v_M", t0)[0], _truth_rows(truth, "p_M", t0)[0]
+    q_t0 = quat_normalize(_truth_rows(truth, "q_M_G", t0)[0])
+    d = result.dispersion
+    for name, (v0, q0, p0, P0) in {
+        "dispersion_refined": (d.refined_v0, d.refined_q0, d.refined_p0, d.refined_P0),
+        "smoother_start": (result.start.v0, result.start.q0, result.start.p0, result.start.P0),
+    }.items():
+        e0 = np.concatenate([v_t0 - v0, attitude_error(q0, q_t0), p_t0 - p0])
+        ok = np.all(np.isfinite(P0))
+        out[f"initial_{name}"] = {
+            "nees_9dof": float(e0 @ np.linalg.solve(P0, e0)) if ok else float("nan"),
+            "nees_95pct_band": list(chi2_interval(9)),
+            "error_velocity_mps": float(np.linalg.norm(e0[0:3])),
+            "error_attitude_deg": float(np.degrees(np.linalg.norm(e0[3:6]))),
+            "error_position_m": float(np.linalg.norm(e0[6:9])),
+        }
+    # atmosphere as a profile: reconstructed ρ(h) vs the true ρ at the same (reconstructed) altitude.
+    # (Blackout fill samples carry interpolated times, so a comparison along time would be wrong
+    # there; along the measured parts h_est is within tens of metres of the truth.)
+    atm = result.atmosphere
+    if truth.get("atmosphere") is not None:
+        fin = atm.final
+        ta = truth["atmosphere"]
+        rho_t = ta.density(np.asarray(fin.h_amr, float))
+        rel = atm.rho_smooth / rho_t - 1.0
+        rel_raw = fin.rho / rho_t - 1.0
+        pdd = ev.get("PDD", np.inf)
+        segs = {
+            "entry_measured": (fin.t < pdd) & ~np.asarray(fin.filled, bool),
+            "entry_filled_blackout": (fin.t < pdd) & np.asarray(fin.filled, bool),
+            "under_parachute": fin.t >= pdd,
+        }
+        a_out = {}
+        for nm, mk in segs.items():
+            mk = mk & np.isfinite(rel)
+            if mk.any():
+                a_out[nm] = {
+                    "max_abs_rel_error": float(np.max(np.abs(rel[mk]))),
+                    "median_abs_rel_error": float(np.median(np.abs(rel[mk]))),
+                    "max_abs_rel_error_raw": float(np.nanmax(np.abs(rel_raw[mk]))),
+                    "fraction_inside_1sigma": float(
+                        np.mean(np.abs(atm.rho_smooth[mk] - rho_t[mk]) <= atm.sigma_rho[mk])
+                    ),
+                    "n": int(mk.sum()),
+                }
+        a_out["targets"] = "10 % entry, 20 % filled blackout, 25 % under the parachute (issue #4)"
+        out["atmosphere"] = a_out
+    # winds inside the layers (where the true wind exceeds 5 m/s)
+    w = result.winds
+    if "wind_NE" in truth:
+        twN = np.interp(w.t, truth["t"], np.asarray(truth["wind_NE"])[:, 0])
+        twE = np.interp(w.t, truth["t"], np.asarray(truth["wind_NE"])[:, 1])
+        layer = w.valid & (np.hypot(twN, twE) > 5.0)
+        if layer.any():
+            err = np.hypot(w.wind_N[layer] - twN[layer], w.wind_E[layer] - twE[layer])
+            out["winds_in_layers"] = {
+                "max_error_mps": float(err.max()),
+                "rms_error_mps": float(np.sqrt(np.mean(err**2))),
+                "fraction_within_5mps": float(np.mean(err <= 5.0)),
+                "n": int(layer.sum()),
+                "method": w.method,
+            }
+    nom = result.nominal.strapdown
+    pN = _truth_rows(truth, "p_M", nom.t)
+    vN = _truth_rows(truth, "v_M", nom.t)
+    qN = quat_normalize(_truth_rows(truth, "q_M_G", nom.t))
+    pre = nom.t <= ev.get("PDD", np.inf)
+    out["nominal_vs_truth_before_pdd"] = {
+        "max_velocity_mps": float(np.max(np.linalg.norm(vN - nom.v_M, axis=1)[pre])),
+        "max_position_m": float(np.max(np.linalg.norm(pN - nom.p_M, axis=1)[pre])),
+        "max_attitude_deg": float(np.degrees(np.max(np.linalg.norm(attitude_error(nom.q_M_G, qN), axis=1)[pre]))),
+    }
+    return out
+
+
+def scorecard_markdown(summary: dict) -> str:
+    """The run's scorecard as markdown (``/report`` in the recording and ``workbench inspect``)."""
+    d = summary["dispersion"]
+    L = [
+        f"# Entry `{summary['scenario']}` — scorecard",
+        "",
+        f"AMELIA pipeline: preprocessing, strapdown + covariance, dispersion ({d['members']} members, "
+        f"{d['accepted']} accepted = {100 * d['accepted_fraction']:.1f} %, {d['wall_s']:.1f} s, "
+        f"{d['scheduler']}), radar-aided EKF + RTS, atmosphere "
+        f"({summary['atmosphere']['iterations']} iterations), winds.",
+        "",
+        "## Events (AMELIA Table 5 analogue, reconstructed)",
+        "",
+        "| event | t [s] | UTC | lon E [°] | lat N [°] | alt AMR [km] | alt AGL [km] |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in summary["event_table"]:
+        L.append(
+            f"| {r['event']} | {r['t_s']:.2f} | {r['utc']} | {r['lon_deg']:.4f} | {r['lat_deg']:.4f} | "
+            f"{r['alt_amr_km']:.3f} | {r['alt_agl_km']:.3f} |"
+        )
+    v = summary["nominal_integration"].get("vs_onboard_before_pdd")
+    if v:
+        L += [
+            "",
+            f"Strapdown vs on-board before PDD: max {v['max_velocity_mps']:.2f} m/s, {v['max_position_m']:.0f} m, "
+            f"{v['max_attitude_deg']:.4f}° (paper: {v['paper']}).",
+        ]
+    if "plane_fits" in summary:
+        L += [
+            "",
+            "## RDA plane fits (Table 4 method)",
+            "",
+            "| t [s] | AGL [m] | off-vertical [°] | rms [m] |",
+            "|---|---|---|---|",
+        ]
+        L += [
+            f"| {p['t_s']:.2f} | {p['h_agl_m']:.1f} | {p['off_vertical_deg']:.2f} | {p['rms_m']:.1f} |"
+            for p in summary["plane_fits"]
+        ]
+    rr_ = summary.get("radar_residuals", {})
+    if rr_:
+        L += [
+            "",
+            "Radar residuals (smoothed, max |r|): "
+            + ", ".join(f"{k} {v['max_abs']:.1f} (n={v['n']})" for k, v in rr_.items())
+            + " — paper bounds 150 m / 20 m/s.",
+        ]
+    if "truth" in summary:
+        tr = summary["truth"]
+        L += ["", "## Against the synthetic truth", ""]
+        for k, v in tr.items():
+            if isinstance(v, dict):
+                L.append(
+                    f"- **{k}**: "
+                    + ", ".join(f"{kk} {vv:.4g}" if isinstance(vv, float) else f"{kk} {vv}" for kk, vv in v.items())
+                )
+    return "\n".join(L) + "\n"

@@ -1,0 +1,748 @@
+"""Draw the entry and descent reconstruction stages into a Rerun recording (layout of DESIGN.md).
+
+The pipeline (``pipelines.entry``) yields stages; :class:`EntryRecorder` draws each one as it arrives
+and, for synthetic scenarios, the truth beside the estimate (``/world/truth``, ``.../truth``).
+
+Geometry is in the landing-site frame L (East-North-Up on the terrain sphere below the site,
+:class:`~workbench.problems.entry.scene.LandingSiteFrame`): float32-safe from the entry interface
+(~600 km up-range, 120 km up) down to the end of the descent.  The vehicle entity carries the
+smoothed position (``/world/vehicle``, translation only, so the 3σ ellipsoid and the radar beams are
+drawn in site axes) and ``/world/vehicle/body`` the smoothed attitude, with the 70° capsule, the
+front shield until FSR and the parachute from PDD (drawn along +Z_G at the riser length, i.e. aligned
+with the module as AMELIA assumes).  A second 3D view has its origin on the vehicle, so the descent is
+legible at metre scale while the first shows the whole entry at km scale.
+
+Atmosphere and wind profiles are drawn with altitude on the vertical axis in 2D views: x is the
+quantity (density and pressure as the percentage difference from the default model, temperature in K,
+wind in m/s), y is altitude above the MOLA radius in km times a per-view scale stated in the view name,
+with labelled grid lines.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from workbench.core.rotation import quat_to_dcm
+from workbench.problems.entry.scene import (
+    LandingSiteFrame,
+    capsule_meshes,
+    parachute_mesh,
+    site_frame_below,
+    terrain_patch,
+)
+from workbench.recording import layout
+from workbench.recording.writer import Recorder
+
+__all__ = ["EntryRecorder", "entry_blueprint"]
+
+EST = (31, 119, 180, 255)
+FWD = (255, 127, 14, 255)
+TRUTH = (44, 160, 44, 255)
+NOMINAL = (148, 103, 189, 255)
+ONBOARD = (214, 39, 40, 255)
+GREY = (150, 150, 150, 255)
+XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
+BEAMS = ["B0", "B1", "B2", "B3"]
+R_MOLA = 3396000.0
+
+_PLOTS = [
+    ("altitude AGL", "/plots/altitude_agl"),
+    ("altitude AMR", "/plots/altitude_amr"),
+    ("velocity NED", "/plots/velocity_ned"),
+    ("tilt (off-vertical)", "/plots/tilt"),
+    ("σ position (3σ altitude fwd/smoothed)", "/plots/sigma_position"),
+    ("σ velocity", "/plots/sigma_velocity"),
+    ("σ attitude", "/plots/sigma_attitude"),
+    ("error vs truth", "/plots/error"),
+    ("strapdown (nominal)", "/plots/strapdown"),
+    ("on-board vs recon", "/plots/onboard"),
+    ("body accel", "/plots/imu/f_G"),
+    ("body rate", "/plots/imu/w_G"),
+    ("density (time)", "/plots/atmosphere"),
+    ("wind (time)", "/plots/wind"),
+    ("dispersion", "/plots/dispersion"),
+]
+_RESIDUALS = [
+    ("slant-out", "/residuals/rda/slant_out"),
+    ("velocity-out", "/residuals/rda/velocity_out"),
+    ("slant range", "/residuals/rda/slant_range"),
+    ("radar meas vs pred", "/plots/radar"),
+]
+PROFILE_SCALE = {"density": 0.5, "pressure": 0.5, "temperature": 1.0, "wind": 4.0}
+"""y = altitude_km × scale in each 2D profile view (so both axes have similar spans)."""
+
+
+def entry_blueprint(
+    scene_tab: int = 0, profile_tab: int = 0, plot_tab: int = 0, residual_tab: int = 0
+) -> rrb.Blueprint:
+    """Default layout: 3D (descent at the vehicle, whole entry), plots, residuals, profiles, report.
+
+    The ``*_tab`` arguments pick the initially active tab of each group (0 = first), e.g. for a
+    presentation or a screenshot of another view.
+    """
+    scenes = rrb.Tabs(
+        rrb.Spatial3DView(
+            name="Descent (at the vehicle)",
+            origin=layout.VEHICLE,
+            contents=["/world/**", "- /world/dispersion/**", "- /world/estimate/forward_vehicle/**"],
+            eye_controls=rrb.EyeControls3D(position=[-30.0, -48.0, 14.0], look_target=[0.0, 0.0, 8.0]),
+        ),
+        rrb.Spatial3DView(
+            name="Entry (site frame, km scale)",
+            origin=layout.WORLD,
+            eye_controls=rrb.EyeControls3D(
+                position=[-200e3, -330e3, 160e3], look_target=[-280e3, 0.0, 20e3], eye_up=[0.0, 0.0, 1.0]
+            ),
+        ),
+        active_tab=scene_tab,
+    )
+    profiles = rrb.Tabs(
+        rrb.Spatial2DView(name="density Δ% vs default (y = 0.5·km)", origin="/profiles/density"),
+        rrb.Spatial2DView(name="temperature K (y = km)", origin="/profiles/temperature"),
+        rrb.Spatial2DView(name="pressure Δ% vs default (y = 0.5·km)", origin="/profiles/pressure"),
+        rrb.Spatial2DView(name="wind m/s (y = 4·km)", origin="/profiles/wind"),
+        active_tab=profile_tab,
+    )
+    plots = rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o) for n, o in _PLOTS], active_tab=plot_tab)
+    residuals = rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o) for n, o in _RESIDUALS], active_tab=residual_tab)
+    right = rrb.Vertical(
+        plots,
+        residuals,
+        rrb.Tabs(
+            rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
+            rrb.TextLogView(name="Events", origin=layout.EVENTS),
+            active_tab=0,
+        ),
+        row_shares=[3, 2, 2],
+    )
+    left = rrb.Vertical(scenes, profiles, row_shares=[3, 2])
+    return rrb.Blueprint(
+        rrb.Horizontal(left, right, column_shares=[3, 2]),
+        rrb.TimePanel(state="expanded", timeline=layout.TIME),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+    )
+
+
+def _interp_rows(t_new: np.ndarray, t: np.ndarray, a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, float)
+    return np.column_stack([np.interp(t_new, t, a[:, i]) for i in range(a.shape[1])])
+
+
+def _ned_from_L(v_L: np.ndarray) -> np.ndarray:
+    """ENU (site axes) -> NED components (the site frame is small enough for a common NED)."""
+    return np.column_stack([v_L[:, 1], v_L[:, 0], -v_L[:, 2]])
+
+
+class EntryRecorder:
+    """Draws the stages of :func:`workbench.problems.entry.pipeline.reconstruct` (and the truth, if given).
+
+    ``truth``: a mapping with the :class:`~workbench.problems.entry.truth.EntryTruth` arrays (``t``, ``p_M``,
+    ``v_M``, ``q_M_G``, ``h_amr``, ``wind_NE`` ...) and ``atmosphere`` (or None for user data).
+    ``vehicle``: the :class:`~workbench.models.aerodynamics.EntryVehicle` (meshes, riser length).
+    """
+
+    def __init__(
+        self, rec: Recorder, vehicle, truth=None, *, r_ground: float, jd_tdb0: float, body, beams_G=None
+    ) -> None:
+        from workbench.models.radar import beam_directions_G
+
+        self.beams_G = beam_directions_G() if beams_G is None else np.asarray(beams_G, float)
+        self.rec = rec
+        self.vehicle = vehicle
+        self.truth = truth
+        self.r_ground = r_ground
+        self.jd0 = jd_tdb0
+        self.body = body
+        self.site: LandingSiteFrame | None = None
+        self.events: dict[str, float] = {}
+        self.default_atmosphere = None
+
+    # ------------------------------------------------------------------ dispatch
+    def handle(self, stage) -> None:
+        """Draw one stage (dispatch on the dataclass name; unknown stages are ignored)."""
+        fn = getattr(self, "_" + type(stage).__name__, None)
+        if fn is not None:
+            fn(stage)
+
+    # ------------------------------------------------------------------ helpers
+    def _L(self, t, p_M):
+        return self.site.points(np.asarray(t, float), p_M)
+
+    def _static_scene(self) -> None:
+        rec, site = self.rec, self.site
+        rec.view_coordinates()
+        rec.mesh(layout.SURFACE, terrain_patch(site, (-700e3, 60e3), (-120e3, 120e3), 80), color=(190, 150, 120, 255))
+        rec.axes(layout.join(layout.WORLD, "site_axes"), 2000.0)
+        m = capsule_meshes(self.vehicle.diameter, self.vehicle.nose_radius)
+        rec.mesh(layout.join(layout.VEHICLE_BODY, "back_shell"), m["back_shell"], color=(220, 220, 225, 255))
+        self._front_shield = m["front_shield"]  # logged on the timeline (from the first sample to FSR)
+        rec.axes(layout.join(layout.VEHICLE_BODY, "axes"), 3.0)
+
+    # ------------------------------------------------------------------ stages
+    def _EntryTelemetry(self, tm) -> None:
+        rec = self.rec
+        self.events = dict(tm.events)
+        # landing-site frame: ground point below the on-board position at PDD (before it drifts)
+        t_site = self.events.get("PDD", float(tm.t_nav[len(tm.t_nav) // 2]))
+        p_site = _interp_rows(np.array([t_site]), tm.t_nav, tm.p_M_nav)[0]
+        if self.jd0 is None:  # user data without [scenario] epoch_utc: the telemetry's epoch line
+            from workbench.core.frames import julian_date_from_utc
+
+            self.jd0 = julian_date_from_utc(tm.epoch_utc)
+        self.site = site_frame_below(self.body, p_site, t_site, self.r_ground, self.jd0)
+        self.t_first = float(tm.t_gnc[0])
+        self._static_scene()
+        rec.scalars("/sensors/gnc/rate", tm.t_gnc, np.degrees(tm.w_G), names=["x", "y", "z"], colors=XYZ)
+        ok = tm.a_valid
+        rec.scalars("/sensors/gnc/accel_total_M", tm.t_gnc[ok], tm.a_M_total[ok], names=["x", "y", "z"], colors=XYZ)
+        if len(tm.t_rda):
+            rec.scalars("/sensors/rda/slant_out", tm.t_rda, tm.slant_out, names="slant-out", colors=EST)
+            rec.scalars("/sensors/rda/v_out_G", tm.t_rda, tm.v_out_G, names=["x", "y", "z"], colors=XYZ)
+        if len(tm.t_sr):
+            rec.scatter("/sensors/rda/slant_range", tm.t_sr, tm.slant_ranges, names=BEAMS, colors=XYZ + [GREY])
+        # on-board navigation track (it goes wrong after the gyro saturation)
+        p_L = self._L(tm.t_nav, tm.p_M_nav)
+        rec.line_strip(layout.join(layout.WORLD, "onboard", "track"), p_L, color=[ONBOARD], radius=-1.5)
+        ev = [
+            (float(t), f"{k} (telemetry event)", "INFO") for k, t in sorted(self.events.items(), key=lambda kv: kv[1])
+        ]
+        ev += [(float(tm.t_gnc[0]), p, "WARN" if p.startswith("WARN") else "INFO") for p in tm.problems]
+        rec.events(ev)
+        if self.truth is not None:
+            tt = self.truth
+            step = max(1, int(round(0.1 / float(tt["t"][1] - tt["t"][0]))))
+            ts = tt["t"][::step]
+            p_T = self._L(ts, tt["p_M"][::step])
+            rec.line_strip(layout.join(layout.TRUTH, "track"), p_T, color=[TRUTH], radius=-1.5)
+            g = self.site.ground_point_L(p_T)
+            rec.line_strip(layout.join(layout.TRUTH, "ground_track"), g + [0, 0, 30.0], color=[TRUTH], radius=-2.5)
+            rec.poses(layout.join(layout.TRUTH, "vehicle"), ts, p_T, self.site.attitudes(ts, tt["q_M_G"][::step]))
+            rec.axes(layout.join(layout.TRUTH, "vehicle", "axes"), 4.0)
+            if tt.get("parachute_p_M") is not None:
+                pp = np.asarray(tt["parachute_p_M"][::step])
+                ok = np.all(np.isfinite(pp), axis=1)
+                if ok.any():
+                    rec.points_series(
+                        layout.join(layout.TRUTH, "parachute"),
+                        ts[ok],
+                        self._L(ts[ok], pp[ok]),
+                        colors=TRUTH,
+                        radii=-4.0,
+                    )
+
+    def _PreprocessedIMU(self, imu) -> None:
+        rec = self.rec
+        rec.scalars("/plots/imu/f_G", imu.t, imu.f_G, names=["x", "y", "z"], colors=XYZ)
+        rec.scalars("/plots/imu/w_G", imu.t, np.degrees(imu.w_G), names=["x", "y", "z"], colors=XYZ)
+        sat = np.asarray(imu.saturated, bool)
+        if sat.any():
+            rec.scatter(
+                "/plots/imu/w_G/rebuilt_x", imu.t[sat], np.degrees(imu.w_G[sat, 0]), names="x rebuilt", colors=ONBOARD
+            )
+        res = np.asarray(imu.resampled, bool)
+        if res.any():
+            rec.scatter("/plots/imu/f_G/resampled_100Hz_z", imu.t[res], imu.f_G[res, 2], names="z 100 Hz", colors=GREY)
+        ev = [
+            (g.t_a, f"gap {g.t_b - g.t_a:.1f} s bridged with on-board Δv, Δp, ΔC (until t = {g.t_b:.2f} s)", "INFO")
+            for g in imu.gaps
+        ]
+        if sat.any():
+            n_tm = int(np.sum(sat & ~res))
+            ev.append(
+                (
+                    float(imu.t[sat][0]),
+                    f"gyro saturated in {n_tm} telemetry samples: rate rebuilt from the Y acceleration "
+                    f"({int(sat.sum())} samples of the 100 Hz window flagged)",
+                    "WARN",
+                )
+            )
+        rec.events(ev)
+
+    def _NominalIntegration(self, nom) -> None:
+        rec = self.rec
+        sp = nom.strapdown
+        p_L = self._L(sp.t, sp.p_M)
+        rec.line_strip(layout.join(layout.ESTIMATE, "nominal"), p_L, color=[NOMINAL], radius=-1.2)
+        h = np.linalg.norm(sp.p_M, axis=1) - R_MOLA
+        sd = self._radial_sigma(sp.p_M, sp.P)
+        rec.series_with_bounds(
+            "/plots/strapdown/h_amr", sp.t, h, sd, names="h AMR (nominal strapdown)", color=[NOMINAL]
+        )
+        if nom.onboard_t is not None:
+            d = nom.diff_position_m
+            rec.scalars(
+                "/plots/onboard/position_diff", nom.onboard_t, d, names="|Δp| recon − on-board [m]", colors=ONBOARD
+            )
+            rec.scalars(
+                "/plots/onboard/attitude_diff_deg", nom.onboard_t, nom.diff_attitude_deg, names="Δθ [deg]", colors=EST
+            )
+
+    @staticmethod
+    def _radial_sigma(p_M, P) -> np.ndarray:
+        u = p_M / np.linalg.norm(p_M, axis=1, keepdims=True)
+        return np.sqrt(np.einsum("ni,nij,nj->n", u, P[:, 6:9, 6:9], u))
+
+    def _DispersionResult(self, d) -> None:
+        rec = self.rec
+        acc = np.asarray(d.accepted, bool)
+        idx = np.arange(d.n)
+        # event quantities on the `sample` timeline (one row per member)
+        for key, vals in d.events.items():
+            v = np.asarray(vals, float)
+            for name, m, col in (("accepted", acc, TRUTH), ("rejected", ~acc, GREY)):
+                if m.any():
+                    self._sample_scatter(f"/plots/dispersion/{key}/{name}", idx[m], v[m], col)
+        # cloud: positions at PDD and thinned tracks
+        ct = np.asarray(d.cloud_t, float)
+        cp = np.asarray(d.cloud_p_M, float)
+        if cp.size:
+            k = int(np.argmin(np.abs(ct - self.events.get("PDD", ct[-1]))))
+            pts = np.stack([self._L(ct, cp[i]) for i in range(cp.shape[0])])  # (m, k, 3)
+            ca = np.asarray(d.cloud_accepted, bool)
+            for name, m, col in (("accepted", ca, (44, 160, 44, 255)), ("rejected", ~ca, (160, 160, 160, 160))):
+                if m.any():
+                    rec.points(layout.join(layout.DISPERSION, f"at_PDD_{name}"), pts[m, k], colors=col, radii=-3.0)
+                    rec.line_strip(
+                        layout.join(layout.DISPERSION, f"tracks_{name}"), list(pts[m]), color=col, radius=-0.5
+                    )
+
+    def _sample_scatter(self, entity: str, samples: np.ndarray, values: np.ndarray, color) -> None:
+        s = self.rec.stream
+        s.send_columns(
+            entity, indexes=[rr.TimeColumn(layout.SAMPLE, sequence=samples)], columns=rr.Scalars.columns(scalars=values)
+        )
+        s.log(entity, rr.SeriesPoints(colors=[color], markers=["circle"], marker_sizes=[2.0]), static=True)
+
+    def _EntryFilterResult(self, fr) -> None:
+        rec, site = self.rec, self.site
+        sm, fw = fr.smoothed, fr.forward
+        t = np.asarray(sm.t, float)
+        p_L = self._L(t, sm.p_M)
+        q_L = site.attitudes(t, sm.q_M_G)
+        rec.poses(layout.VEHICLE, t, p_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)), step=np.arange(len(t)))
+        rec.poses(layout.VEHICLE_BODY, t, np.zeros((len(t), 3)), q_L, step=np.arange(len(t)))
+        P_L = site.covariances(t, sm.P[:, 6:9, 6:9])
+        rec.ellipsoids(
+            layout.UNCERTAINTY,
+            t,
+            np.zeros((len(t), 3)),
+            P_L,
+            nsigma=3.0,
+            color=(31, 119, 180, 140),
+            step=np.arange(len(t)),
+        )
+        rec.line_strip(layout.ESTIMATE_SMOOTHED, p_L, color=[EST], radius=-2.0)
+        fw_L = self._L(fw.t, fw.p_M)
+        rec.line_strip(layout.ESTIMATE_FORWARD, fw_L, color=[FWD], radius=-1.5)
+        # the forward (filter) pass's own 3σ: it grows through the blackout and collapses vertically at
+        # the radar fix (the smoothed one above already knows the fix from the start)
+        fwd_vehicle = layout.join(layout.ESTIMATE, "forward_vehicle")
+        steps_f = np.arange(len(fw.t))
+        rec.poses(fwd_vehicle, fw.t, fw_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(fw.t), 1)), step=steps_f)
+        rec.ellipsoids(
+            layout.join(fwd_vehicle, "uncertainty"),
+            fw.t,
+            np.zeros((len(fw.t), 3)),
+            site.covariances(fw.t, fw.P[:, 6:9, 6:9]),
+            nsigma=3.0,
+            color=(255, 127, 14, 110),
+            step=steps_f,
+        )
+        u_f = fw.p_M / np.linalg.norm(fw.p_M, axis=1, keepdims=True)
+        sd_hf = np.sqrt(np.einsum("ni,nij,nj->n", u_f, fw.P[:, 6:9, 6:9], u_f))
+        rec.scalars(
+            "/plots/sigma_position/altitude_3sigma_forward",
+            fw.t,
+            3.0 * sd_hf,
+            names="3σ altitude, forward [m]",
+            colors=[FWD],
+        )
+        g = site.ground_point_L(p_L)
+        rec.line_strip(layout.join(layout.ESTIMATE, "ground_track"), g + [0, 0, 20.0], color=[EST], radius=-2.5)
+        # front shield leaves at FSR; the parachute appears at PDD (temporal logs, not static)
+        s = rec.stream
+        if "PDD" in self.events:
+            rr.set_time(layout.TIME, duration=self.events["PDD"], recording=s)
+            d_chute = float(np.sqrt(4.0 * self.vehicle.parachute.ref_area / np.pi))
+            pm = parachute_mesh(d_chute, self.vehicle.riser_length)
+            s.log(
+                layout.join(layout.VEHICLE_BODY, "parachute"),
+                rr.Mesh3D(
+                    vertex_positions=pm.vertices.astype(np.float32),
+                    triangle_indices=pm.faces.astype(np.uint32),
+                    vertex_normals=pm.vertex_normals.astype(np.float32),
+                    albedo_factor=[230, 120, 40, 255],
+                ),
+            )
+            a = np.asarray(self.vehicle.attach_point_G, float)
+            rim = [
+                [r * np.cos(u), r * np.sin(u), self.vehicle.riser_length]
+                for u in np.linspace(0, 2 * np.pi, 9)[:-1]
+                for r in [0.35 * d_chute]
+            ]
+            s.log(
+                layout.join(layout.VEHICLE_BODY, "risers"),
+                rr.LineStrips3D([[a, r] for r in rim], colors=[[120, 120, 120]], radii=[0.05]),
+            )
+        fsm = self._front_shield
+        rr.set_time(layout.TIME, duration=float(t[0]), recording=s)
+        s.log(
+            layout.join(layout.VEHICLE_BODY, "front_shield"),
+            rr.Mesh3D(
+                vertex_positions=fsm.vertices.astype(np.float32),
+                triangle_indices=fsm.faces.astype(np.uint32),
+                vertex_normals=fsm.vertex_normals.astype(np.float32),
+                albedo_factor=[90, 60, 40, 255],
+            ),
+        )
+        if "FSR" in self.events:
+            rr.set_time(layout.TIME, duration=self.events["FSR"], recording=s)
+            s.log(layout.join(layout.VEHICLE_BODY, "front_shield"), rr.Clear(recursive=False))
+        s.reset_time()
+        # radar beams from the module to the ground along the smoothed attitude, while the radar is on
+        on = t >= self.events.get("RDA_ON", np.inf)
+        if "slant_out" in fr.innovations:
+            on = t >= min(float(fr.innovations["slant_out"].t[0]), self.events.get("RDA_ON", np.inf))
+        if on.any():
+            C = quat_to_dcm(q_L[on])
+            beams = self.beams_G
+            nsig = self._beam_colour_source(fr, t[on])
+            for b in range(4):
+                d = np.einsum("nij,j->ni", C, beams[b])
+                end = site.ray_to_ground(p_L[on], d) - p_L[on]
+                strips = [np.stack([np.zeros(3), e]) for e in end]
+                cols = self._residual_colours(nsig[:, b])
+                rec.line_strips_series(
+                    layout.radar_beam_path(b), t[on], strips, colors=cols, radii=-1.5, step=np.flatnonzero(on)
+                )
+        # plots: altitude AGL, AMR, velocity, tilt with ±3σ and truth
+        self._trajectory_plots(fr)
+        self._residual_plots(fr)
+        if fr.plane_fits:
+            ev = [
+                (
+                    float(tp),
+                    f"RDA slant-range packet: plane fit AGL {pf.h_agl:.1f} m, off-vertical "
+                    f"{np.degrees(pf.off_vertical):.2f}°, rms {pf.rms:.1f} m",
+                    "INFO",
+                )
+                for tp, pf in fr.plane_fits
+            ]
+            rec.events(ev)
+            rec.scatter(
+                "/plots/altitude_agl/plane_fit",
+                [tp for tp, _ in fr.plane_fits],
+                [pf.h_agl for _, pf in fr.plane_fits],
+                names="plane fit (Table 4 method)",
+                colors=ONBOARD,
+                marker="diamond",
+                size=6.0,
+            )
+
+    def _beam_colour_source(self, fr, t_on: np.ndarray) -> np.ndarray:
+        """|normalised residual| per beam at each drawn step (NaN where no measurement)."""
+        out = np.full((len(t_on), 4), np.nan)
+        so = fr.smoothed_residuals.get("slant_out")
+        if so is not None and len(so.t):
+            z = np.abs(so.y[:, 0]) / np.sqrt(so.S[:, 0, 0])
+            k = np.searchsorted(t_on, so.t).clip(0, len(t_on) - 1)
+            out[k, 0] = z
+        sr = fr.smoothed_residuals.get("slant_range")
+        if sr is not None and len(sr.t):
+            for i, tp in enumerate(sr.t):
+                z = np.abs(sr.y[i]) / np.sqrt(np.diag(sr.S[i]))
+                m = (t_on >= tp) & (t_on < tp + 1.0)  # hold a packet's colour for 1 s
+                out[m, :] = z
+        return out
+
+    @staticmethod
+    def _residual_colours(z: np.ndarray) -> np.ndarray:
+        """Green (|r| ≤ 1σ) → yellow → red (≥ 3σ); grey where there is no measurement."""
+        c = np.tile(np.array([170, 170, 170, 140], np.uint8), (len(z), 1))
+        ok = np.isfinite(z)
+        f = np.clip(z[ok] / 3.0, 0.0, 1.0)
+        c[ok, 0] = (60 + 195 * f).astype(np.uint8)
+        c[ok, 1] = (200 - 150 * np.clip(f - 0.33, 0, 1) / 0.67).astype(np.uint8)
+        c[ok, 2] = 40
+        c[ok, 3] = 255
+        return c
+
+    def _truth_at(self, t: np.ndarray, key: str) -> np.ndarray | None:
+        if self.truth is None:
+            return None
+        a = np.asarray(self.truth[key], float)
+        tt = np.asarray(self.truth["t"], float)
+        return np.interp(t, tt, a) if a.ndim == 1 else _interp_rows(t, tt, a)
+
+    def _trajectory_plots(self, fr) -> None:
+        rec, site = self.rec, self.site
+        sm = fr.smoothed
+        t = np.asarray(sm.t, float)
+        r = np.linalg.norm(sm.p_M, axis=1)
+        sd_r = self._radial_sigma(sm.p_M, sm.P)
+        h_agl = r - self.r_ground
+        tr_p = self._truth_at(t, "p_M")
+        tr_r = None if tr_p is None else np.linalg.norm(tr_p, axis=1)
+        m = t >= self.events.get("PDD", t[0]) - 5.0
+        rec.series_with_bounds(
+            "/plots/altitude_agl/smoothed",
+            t[m],
+            h_agl[m],
+            sd_r[m],
+            truth=None if tr_r is None else (tr_r - self.r_ground)[m],
+            names="h AGL",
+            color=[EST],
+        )
+        fw = fr.forward
+        rf = np.linalg.norm(fw.p_M, axis=1)
+        mf = fw.t >= self.events.get("PDD", fw.t[0]) - 5.0
+        rec.scalars(
+            "/plots/altitude_agl/forward", fw.t[mf], (rf - self.r_ground)[mf], names="h AGL forward", colors=FWD
+        )
+        rec.series_with_bounds(
+            "/plots/altitude_amr",
+            t,
+            (r - R_MOLA) / 1e3,
+            sd_r / 1e3,
+            truth=None if tr_r is None else (tr_r - R_MOLA) / 1e3,
+            names="h AMR [km]",
+            color=[EST],
+        )
+        # ground-relative velocity in NED (site axes), its 1σ
+        omega = np.array([0.0, 0.0, self.body.rotation_rate])
+        v_rel_M = sm.v_M - np.cross(omega, sm.p_M)
+        v_N = _ned_from_L(site.vectors(t, v_rel_M))
+        C = site.C_L_M(t)
+        Pv = C @ sm.P[:, 0:3, 0:3] @ np.swapaxes(C, -1, -2)
+        sd_L = np.sqrt(np.einsum("nii->ni", Pv))
+        sd_N = sd_L[:, [1, 0, 2]]
+        tv = None
+        if tr_p is not None:
+            tv_M = self._truth_at(t, "v_M") - np.cross(omega, tr_p)
+            tv = _ned_from_L(site.vectors(t, tv_M))
+        rec.series_with_bounds("/plots/velocity_ned", t, v_N, sd_N, truth=tv, names=["v_N", "v_E", "v_D"], color=XYZ)
+        # tilt: angle between +Z_G and local up
+        up_M = sm.p_M / r[:, None]
+        zG_M = quat_to_dcm(sm.q_M_G)[:, :, 2]
+        tilt = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", up_M, zG_M), -1, 1)))
+        sd_att = np.degrees(np.sqrt(np.einsum("nii->ni", sm.P[:, 3:6, 3:6])))
+        tt = None
+        if tr_p is not None:
+            qT = self._truth_at(t, "q_M_G")
+            qT = qT / np.linalg.norm(qT, axis=1, keepdims=True)
+            zT = quat_to_dcm(qT)[:, :, 2]
+            tt = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", tr_p / tr_r[:, None], zT), -1, 1)))
+        rec.series_with_bounds(
+            "/plots/tilt",
+            t,
+            tilt,
+            np.linalg.norm(sd_att[:, :2], axis=1),
+            truth=tt,
+            names="Z_G from local up [deg]",
+            color=[EST],
+        )
+        sd_p = np.sqrt(np.einsum("nii->ni", sm.P[:, 6:9, 6:9]))
+        sd_v = np.sqrt(np.einsum("nii->ni", sm.P[:, 0:3, 0:3]))
+        rec.scalars("/plots/sigma_position/norm", t, np.linalg.norm(sd_p, axis=1), names="|σ_p| [m]", colors=EST)
+        rec.scalars(
+            "/plots/sigma_position/altitude_3sigma_smoothed",
+            t,
+            3.0 * sd_r,
+            names="3σ altitude, smoothed [m]",
+            colors=[EST],
+        )
+        rec.scalars("/plots/sigma_velocity", t, np.linalg.norm(sd_v, axis=1), names="|σ_v| [m/s]", colors=FWD)
+        rec.scalars("/plots/sigma_attitude", t, np.linalg.norm(sd_att, axis=1), names="|σ_θ| [deg]", colors=TRUTH)
+        if tr_p is not None:
+            rec.series_with_bounds("/plots/error/altitude", t, r - tr_r, sd_r, names="h error [m]", color=[EST])
+
+    def _residual_plots(self, fr) -> None:
+        rec = self.rec
+        for ch, res in fr.smoothed_residuals.items():
+            if not len(res.t):
+                continue
+            sd = np.sqrt(np.einsum("nii->ni", res.S))
+            if ch == "slant_range":
+                for b in range(res.y.shape[1]):
+                    base = f"/residuals/rda/slant_range/{BEAMS[b]}"
+                    rec.scatter(f"{base}/value", res.t, res.y[:, b], names=f"{BEAMS[b]} [m]", colors=[EST], size=6.0)
+                    rec.scatter(f"{base}/plus_3sigma", res.t, 3 * sd[:, b], names="+3σ", colors=[GREY], size=4.0)
+                    rec.scatter(f"{base}/minus_3sigma", res.t, -3 * sd[:, b], names="−3σ", colors=[GREY], size=4.0)
+                rec.scatter(
+                    "/plots/radar/slant_range_measured",
+                    res.t,
+                    res.measured,
+                    names=BEAMS,
+                    colors=XYZ + [GREY],
+                    marker="cross",
+                    size=6.0,
+                )
+                rec.scatter(
+                    "/plots/radar/slant_range_predicted",
+                    res.t,
+                    res.predicted,
+                    names=BEAMS,
+                    colors=XYZ + [GREY],
+                    marker="circle",
+                    size=4.0,
+                )
+                continue
+            names = ["slant-out [m]"] if ch == "slant_out" else ["x [m/s]", "y [m/s]", "z [m/s]"]
+            base = f"/residuals/rda/{ch}"
+            for i in range(res.y.shape[1]):
+                sub = base if res.y.shape[1] == 1 else f"{base}/{'xyz'[i]}"
+                rec.scalars(f"{sub}/value", res.t, res.y[:, i], names=names[i], colors=XYZ[i] if i else EST)
+                rec.scalars(f"{sub}/plus_3sigma", res.t, 3 * sd[:, i], names="+3σ", colors=GREY)
+                rec.scalars(f"{sub}/minus_3sigma", res.t, -3 * sd[:, i], names="−3σ", colors=GREY)
+            rec.scalars(
+                f"/plots/radar/{ch}_measured",
+                res.t,
+                res.measured,
+                names=[f"{n} meas" for n in names],
+                colors=[GREY] * len(names),
+            )
+            rec.scalars(
+                f"/plots/radar/{ch}_predicted",
+                res.t,
+                res.predicted,
+                names=[f"{n} smoothed" for n in names],
+                colors=XYZ[: len(names)] if len(names) > 1 else [EST],
+            )
+
+    # ------------------------------------------------------------------ profiles (2D, altitude up)
+    def _profile_axes(self, root: str, x_ticks, y_km_ticks, scale: float, x_unit: str) -> None:
+        s = self.rec.stream
+        x0, x1 = min(x_ticks), max(x_ticks)
+        y0, y1 = min(y_km_ticks) * scale, max(y_km_ticks) * scale
+        grid = [[[x0, -y * scale], [x1, -y * scale]] for y in y_km_ticks] + [[[x, -y0], [x, -y1]] for x in x_ticks]
+        s.log(f"{root}/grid", rr.LineStrips2D(grid, colors=[[70, 70, 70]], radii=[-0.5]), static=True)
+        labels = [f"{y:g} km" for y in y_km_ticks] + [f"{x:g} {x_unit}" for x in x_ticks]
+        pos = [[x0, -y * scale] for y in y_km_ticks] + [[x, -y0 + 1.5] for x in x_ticks]
+        s.log(f"{root}/labels", rr.Points2D(pos, labels=labels, radii=[0.01], show_labels=True), static=True)
+
+    def _profile(
+        self, root: str, x: np.ndarray, h_km: np.ndarray, scale: float, color, width: float = 0.15, static: bool = True
+    ) -> None:
+        ok = np.isfinite(x) & np.isfinite(h_km)
+        if ok.sum() < 2:
+            return
+        pts = np.column_stack([x[ok], -h_km[ok] * scale])  # 2D views have +y down: negate so altitude goes up
+        self.rec.stream.log(root, rr.LineStrips2D([pts], colors=[color], radii=[-10.0 * width]), static=static)
+
+    def _AtmosphereResult(self, atm) -> None:
+        from workbench.core.atmosphere import MarsEngineeringAtmosphere
+
+        fin = atm.final
+        h = np.asarray(fin.h_amr, float)
+        hk = h / 1e3
+        dflt = self.default_atmosphere or MarsEngineeringAtmosphere()
+        rho_d, p_d, T_d = dflt.density(h), dflt.pressure(h), dflt.temperature(h)
+        sc = PROFILE_SCALE
+        top = float(np.nanmax(hk)) if hk.size else 120.0
+        ticks = [v for v in range(0, int(top) + 11, 10)]
+        self._profile_axes("/profiles/density", [-60, -40, -20, 0, 20, 40, 60], ticks, sc["density"], "%")
+        self._profile_axes("/profiles/pressure", [-60, -40, -20, 0, 20, 40, 60], ticks, sc["pressure"], "%")
+        self._profile_axes("/profiles/temperature", [120, 160, 200, 240, 280], ticks, 1.0, "K")
+        pct = lambda a, b: 100.0 * (a / b - 1.0)  # noqa: E731
+        for name, val, sig, ref, scale in (
+            ("density", atm.rho_smooth, atm.sigma_rho, rho_d, sc["density"]),
+            ("pressure", atm.p_smooth, atm.sigma_p, p_d, sc["pressure"]),
+        ):
+            root = f"/profiles/{name}"
+            raw = fin.rho if name == "density" else fin.p
+            self._profile(f"{root}/raw", pct(raw, ref), hk, scale, (120, 160, 220, 255), 0.08)
+            self._profile(f"{root}/smoothed", pct(val, ref), hk, scale, EST, 0.2)
+            self._profile(f"{root}/plus_1sigma", pct(val + sig, ref), hk, scale, GREY, 0.08)
+            self._profile(f"{root}/minus_1sigma", pct(val - sig, ref), hk, scale, GREY, 0.08)
+            self._profile(f"{root}/default", np.zeros_like(hk), hk, scale, NOMINAL, 0.12)
+            filled = np.asarray(fin.filled, bool)
+            if filled.any():
+                self._profile(f"{root}/blackout_fill", np.where(filled, pct(val, ref), np.nan), hk, scale, ONBOARD, 0.2)
+        root = "/profiles/temperature"
+        self._profile(f"{root}/raw", fin.T, hk, 1.0, (120, 160, 220, 255), 0.08)
+        self._profile(f"{root}/smoothed", atm.T_smooth, hk, 1.0, EST, 0.2)
+        self._profile(f"{root}/plus_1sigma", atm.T_smooth + atm.sigma_T, hk, 1.0, GREY, 0.08)
+        self._profile(f"{root}/minus_1sigma", atm.T_smooth - atm.sigma_T, hk, 1.0, GREY, 0.08)
+        self._profile(f"{root}/default", T_d, hk, 1.0, NOMINAL, 0.12)
+        if self.truth is not None and self.truth.get("atmosphere") is not None:
+            ta = self.truth["atmosphere"]
+            hg = np.linspace(max(0.0, float(np.nanmin(h))), float(np.nanmax(h)), 400)
+            hgk = hg / 1e3
+            self._profile("/profiles/density/truth", pct(ta.density(hg), dflt.density(hg)), hgk, sc["density"], TRUTH)
+            self._profile(
+                "/profiles/pressure/truth", pct(ta.pressure(hg), dflt.pressure(hg)), hgk, sc["pressure"], TRUTH
+            )
+            self._profile("/profiles/temperature/truth", ta.temperature(hg), hgk, 1.0, TRUTH)
+        # each iteration of the drag-coefficient loop on the `iteration` timeline
+        s = self.rec.stream
+        for it in atm.iterations:
+            s.set_time(layout.ITERATION, sequence=int(it.iteration))
+            hk_i = np.asarray(it.h_amr, float) / 1e3
+            x = pct(np.asarray(it.rho, float), dflt.density(np.asarray(it.h_amr, float)))
+            ok = np.isfinite(x)
+            if ok.sum() > 1:
+                s.log(
+                    "/profiles/density/iteration",
+                    rr.LineStrips2D(
+                        [np.column_stack([x[ok], -hk_i[ok] * sc["density"]])], colors=[[255, 200, 0]], radii=[0.1]
+                    ),
+                )
+            if np.isfinite(it.max_rel_change):  # undefined for the first iteration
+                s.log("/plots/atmosphere/max_rel_change", rr.Scalars(float(it.max_rel_change)))
+        s.reset_time()
+        # time series too (for scrubbing against the trajectory)
+        t = np.asarray(fin.t, float)
+        self.rec.scalars(
+            "/plots/atmosphere/density_ratio_pct", t, pct(atm.rho_smooth, rho_d), names="ρ vs default [%]", colors=EST
+        )
+        tr = self._truth_at(t, "h_amr") if self.truth is not None else None
+        if tr is not None and self.truth.get("atmosphere") is not None:
+            ta = self.truth["atmosphere"]
+            self.rec.scalars(
+                "/plots/atmosphere/density_ratio_pct_truth",
+                t,
+                pct(ta.density(h), rho_d),
+                names="truth ρ vs default [%]",
+                colors=TRUTH,
+            )
+
+    def _WindResult(self, w) -> None:
+        sc = PROFILE_SCALE["wind"]
+        ok = np.asarray(w.valid, bool)
+        hk = np.asarray(w.h_amr, float) / 1e3
+        if not ok.any():
+            return
+        lo, hi = float(np.floor(hk[ok].min())), float(np.ceil(hk[ok].max()))
+        self._profile_axes(
+            "/profiles/wind", [-30, -20, -10, 0, 10, 20, 30], list(range(int(lo), int(hi) + 1)), sc, "m/s"
+        )
+        for name, v, s_, col in (("north", w.wind_N, w.sigma_N, XYZ[0]), ("east", w.wind_E, w.sigma_E, XYZ[2])):
+            v = np.where(ok, v, np.nan)
+            self._profile(f"/profiles/wind/{name}", v, hk, sc, col, 0.12)
+            self._profile(f"/profiles/wind/{name}_plus_1sigma", v + s_, hk, sc, GREY, 0.05)
+            self._profile(f"/profiles/wind/{name}_minus_1sigma", v - s_, hk, sc, GREY, 0.05)
+            self.rec.series_with_bounds(
+                f"/plots/wind/{name}",
+                w.t[ok],
+                v[ok],
+                s_[ok],
+                names=f"wind {name} [m/s]",
+                color=[col],
+                truth=None
+                if self.truth is None
+                else self._truth_at(w.t[ok], "wind_NE")[:, 0 if name == "north" else 1],
+            )
+        if self.truth is not None:
+            tw = self._truth_at(w.t, "wind_NE")
+            self._profile("/profiles/wind/north_truth", np.where(ok, tw[:, 0], np.nan), hk, sc, TRUTH, 0.08)
+            self._profile(
+                "/profiles/wind/east_truth", np.where(ok, tw[:, 1], np.nan), hk, sc, (120, 200, 120, 255), 0.08
+            )
+
+    def finish(self, events_table: list[tuple[float, str, str]], report_md: str) -> None:
+        """Final events and the scorecard."""
+        self.rec.events(events_table)
+        self.rec.report(report_md)

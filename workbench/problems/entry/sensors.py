@@ -1,0 +1,550 @@
+"""Entry-vehicle instruments and on-board navigation of a Schiaparelli-like lander (AMELIA Sects. 3, 7).
+
+What the real-time telemetry (TM) of the ExoMars Schiaparelli module held (AMELIA Table 1), and
+how this module produces the same thing from a truth trajectory for synthetic scenarios:
+
+* an IMU (accelerometer triad + rate gyros, assumed at the CoG) sampled by the GNC computer at
+  ``onboard_rate_hz`` = 100 Hz: white noise, optional per-run bias and scale factor, and the
+  gyro range of 187.5 °/s: a rate beyond it is **clipped** (:func:`apply_imu_errors`);
+* the **on-board navigation**: a strapdown integration of the measured (noisy, clipped) IMU at
+  100 Hz from the on-board initial state — the "nominal state" propagated from the TGO
+  prediction, which differs from truth by a few km, ~15 m/s and ~1° (:func:`nominal_state`,
+  :func:`strapdown_onboard`).  After the gyro saturates its attitude, hence its velocity and
+  position, go wrong, like Schiaparelli's;
+* the TM subset of the GNC outputs (:func:`generate_entry_tm`): at 10 Hz the measured body rate,
+  the on-board attitude and the on-board **total inertial acceleration**
+  ``a_M = gravity_j2(p_nav) + C_M_G(q_nav) f_meas`` (gravity included, MMED frame); at 1 Hz the
+  on-board position and velocity; rows inside the blackout windows are absent;
+* the Ka-band radar altimeter (RDA): 4-beam slant-range packets every 10 s (the first ones
+  zero-filled), slant-out along the central beam B0 and the terrain-relative velocity in the
+  GNC frame at 10 Hz, from ``RDA_ON`` to ``BSR``.  Truth ranges are exact ray/sphere
+  intersections with the terrain sphere ``r = 3396000 − 1440 m`` (:func:`slant_ranges_sphere`),
+  not the estimator's flat-terrain model (Eq. B.3).
+
+Frames and conventions (DESIGN.md, ``.entry_spec``): ``M`` = MMED inertial (Mars-centred, +Z the
+pole), ``G`` = GNC body frame (+Z towards the back shell, B0 along −Z_G); ``q_M_G`` is
+body → inertial, Hamilton, scalar-last; the TM quaternion is JPL "MMED to GNC", numerically the
+raw components of ``q_M_G`` (:func:`workbench.core.rotation.quat_from_jpl`).  Error state
+``[δv_M, δθ_G, δp_M]`` with ``v_true = v + δv``, ``q_true = q ⊗ exp(δθ)``, ``p_true = p + δp``.
+Time ``t`` [s] from the entry interface point (EIP).  SI inside.
+
+References: [1] Aboudan et al., "ExoMars 2016 Schiaparelli Module Trajectory and Atmospheric
+Profiles Reconstruction", Space Sci. Rev. 214:97, 2018 (AMELIA) — Table 1 (TM content), Sect. 3
+(gyro saturation at 187.5 °/s, blackout gaps of 1.4, 1.8, 3.3 and 57.2 s), Sect. 7 (RDA),
+Table 3 (measurement uncertainties), Appendix B (radar models); [2] Savage, "Strapdown inertial
+navigation integration algorithm design", J. Guid. Control Dyn. 21(1), 1998 (coning term of the
+attitude increment).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from workbench.core.bodies import MARS, Body
+from workbench.core.gravity import gravity_j2
+from workbench.core.rotation import (
+    quat_conjugate,
+    quat_from_rotvec,
+    quat_multiply,
+    quat_normalize,
+    quat_rotate,
+)
+
+try:  # the shared beam geometry (written by the radar helper); local fallback until it exists
+    from workbench.models.radar import beam_directions_G
+except ImportError:  # pragma: no cover - exercised only while radar.py is absent
+
+    def beam_directions_G(squint_deg: float = 20.0, azimuths_deg=(0.0, 120.0, 240.0)) -> np.ndarray:
+        """RDA beam unit vectors (4, 3) in G: B0 = −Z_G; B1..B3 squinted ``squint_deg`` from −Z_G at
+        azimuths ``azimuths_deg`` measured from +X_G towards +Y_G (fallback copy of sensors.radar)."""
+        s = math.radians(squint_deg)
+        az = np.radians(np.asarray(azimuths_deg, float))
+        sq = np.column_stack([np.sin(s) * np.cos(az), np.sin(s) * np.sin(az), -np.cos(s) * np.ones_like(az)])
+        return np.vstack([[0.0, 0.0, -1.0], sq])
+
+
+__all__ = [
+    "GYRO_SATURATION_DPS",
+    "TERRAIN_ELEVATION_M",
+    "EntryImuModel",
+    "NominalErrorModel",
+    "EntryTelemetrySpec",
+    "OnboardSolution",
+    "EntryTM",
+    "apply_imu_errors",
+    "nominal_state",
+    "quat_cumprod",
+    "strapdown_onboard",
+    "slant_ranges_sphere",
+    "terrain_relative_velocity_G",
+    "interp_rows",
+    "generate_entry_tm",
+    "beam_directions_G",
+]
+
+#: Design range of the Schiaparelli X gyro (AMELIA Sect. 3): rates beyond are clipped [deg/s].
+GYRO_SATURATION_DPS = 187.5
+#: Mean terrain elevation at the landing site w.r.t. the 3396 km MOLA radius (AMELIA Sect. 7) [m].
+TERRAIN_ELEVATION_M = -1440.0
+
+#: Blackout gaps (start [s from EIP], duration [s]): the four gaps of AMELIA Sect. 3 (1.4, 1.8,
+#: 3.3 and 57.2 s), chronologically inside the paper's 23 s → 91 s blackout window.
+DEFAULT_GAPS: tuple[tuple[float, float], ...] = ((22.9, 1.4), (24.8, 1.8), (27.1, 3.3), (33.7, 57.2))
+
+
+# --------------------------------------------------------------------------------------------
+# configuration
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class EntryImuModel:
+    """IMU error budget (1σ, SI), per axis.
+
+    ``accel_noise`` [m/s²] and ``gyro_noise`` [rad/s] white noise per on-board (100 Hz) sample
+    (defaults: AMELIA Table 3, 0.001 m/s² and 0.01 °/s); ``*_bias`` constant per run and axis;
+    ``*_scale`` scale-factor error (fraction) per run and axis; ``gyro_full_scale`` (3,) [rad/s]
+    range of each gyro axis (measured rates are clipped at ±range; default 187.5 °/s, AMELIA
+    Sect. 3); ``accel_full_scale`` [m/s²] likewise (default: no limit).
+    """
+
+    accel_noise: float = 1e-3
+    accel_bias: float = 0.0
+    accel_scale: float = 0.0
+    gyro_noise: float = math.radians(0.01)
+    gyro_bias: float = 0.0
+    gyro_scale: float = 0.0
+    gyro_full_scale: tuple[float, float, float] = (math.radians(GYRO_SATURATION_DPS),) * 3
+    accel_full_scale: float = math.inf
+
+
+@dataclass(frozen=True)
+class NominalErrorModel:
+    """Error of the on-board ("nominal") initial state w.r.t. truth, 1σ per axis (SI).
+
+    The nominal state is the TGO-predicted position/velocity plus the on-board attitude (AMELIA
+    Sect. 6); the paper's refined state differed from it by ~1°, ~15 m/s and ~3.5 km.
+    ``dx0`` — if given — fixes the offset instead of drawing it: the 9-vector
+    ``[δv_M (m/s), δθ_G (rad), δp_M (m)]`` = truth − nominal in the error-state convention.
+    """
+
+    velocity_sigma: float = 9.0
+    attitude_sigma: float = math.radians(0.6)
+    position_sigma: float = 2000.0
+    dx0: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class EntryTelemetrySpec:
+    """How the synthetic TM is produced (rates [Hz], gaps [s], radar noise, terrain).
+
+    ``gaps``: blackout windows ``(start_s, duration_s)``; TM rows strictly inside
+    ``(start, start + duration)`` are absent (the TM sample at ``start`` is the last before the
+    gap).  Radar: slant-range packets every ``sr_period_s`` starting ``sr_first_after_on_s``
+    after ``RDA_ON`` (= FSR + ``rda_on_after_fsr_s``), the first ``sr_zero_filled`` of them
+    zero-filled as on Schiaparelli; range noise 1σ ``hypot(range_sigma, range_sigma_frac ×
+    range)`` [m]; velocity noise 1σ ``velocity_sigma`` [m/s] per axis.  ``r_ground`` [m] radius of
+    the terrain sphere.  ``squint_deg``/``azimuths_deg`` the beam geometry.
+    """
+
+    imu: EntryImuModel = field(default_factory=EntryImuModel)
+    nominal: NominalErrorModel = field(default_factory=NominalErrorModel)
+    onboard_rate_hz: float = 100.0
+    gnc_rate_hz: float = 10.0
+    nav_rate_hz: float = 1.0
+    gaps: tuple[tuple[float, float], ...] = DEFAULT_GAPS
+    rda_rate_hz: float = 10.0
+    rda_on_after_fsr_s: float = 4.0
+    sr_period_s: float = 10.0
+    sr_first_after_on_s: float = 0.4
+    sr_zero_filled: int = 2
+    range_sigma: float = 5.0
+    range_sigma_frac: float = 0.01
+    velocity_sigma: float = 1.0
+    r_ground: float = MARS.reference_radius + TERRAIN_ELEVATION_M
+    squint_deg: float = 20.0
+    azimuths_deg: tuple[float, float, float] = (0.0, 120.0, 240.0)
+
+    @classmethod
+    def from_scenario(cls, scenario) -> EntryTelemetrySpec:
+        """Read ``[sensors.imu]``, ``[sensors.radar]``, ``[synthetic.nominal_error]`` and
+        ``synthetic.blackout_gaps_s`` of a :class:`~workbench.io.scenario.Scenario` (all optional).
+
+        Keys (units in the names): ``sensors.imu``: accel_noise_mps2, accel_bias_mps2,
+        accel_scale, gyro_noise_dps, gyro_bias_dps, gyro_scale, gyro_full_scale_dps (number or
+        list of 3), accel_full_scale_mps2, onboard_rate_hz, tm_rate_hz, nav_rate_hz;
+        ``sensors.radar``: range_sigma_m, range_sigma_frac, velocity_sigma_mps, rate_hz,
+        on_after_fsr_s, slant_range_period_s, first_packet_after_on_s, zero_filled_packets;
+        the shared ``site.terrain_m`` and ``radar.squint_deg`` / ``radar.azimuths_deg`` (the beam
+        geometry the filter uses too); ``synthetic.nominal_error``:
+        velocity_sigma_mps, attitude_sigma_deg, position_sigma_m, dx0 (9 numbers: m/s, deg, m);
+        ``synthetic.blackout_gaps_s``: list of [start_s, duration_s].
+        """
+        g = scenario.get
+        d = cls()
+        fs = g("sensors.imu.gyro_full_scale_dps", GYRO_SATURATION_DPS)
+        fs = [float(fs)] * 3 if isinstance(fs, int | float) else [float(x) for x in fs]
+        if len(fs) != 3:
+            raise ValueError(f"{scenario.path}: sensors.imu.gyro_full_scale_dps must be a number or 3 numbers")
+        imu = EntryImuModel(
+            accel_noise=g("sensors.imu.accel_noise_mps2", d.imu.accel_noise, kind="float"),
+            accel_bias=g("sensors.imu.accel_bias_mps2", d.imu.accel_bias, kind="float"),
+            accel_scale=g("sensors.imu.accel_scale", d.imu.accel_scale, kind="float"),
+            gyro_noise=math.radians(g("sensors.imu.gyro_noise_dps", 0.01, kind="float")),
+            gyro_bias=math.radians(g("sensors.imu.gyro_bias_dps", 0.0, kind="float")),
+            gyro_scale=g("sensors.imu.gyro_scale", d.imu.gyro_scale, kind="float"),
+            gyro_full_scale=tuple(math.radians(x) for x in fs),  # type: ignore[arg-type]
+            accel_full_scale=g("sensors.imu.accel_full_scale_mps2", math.inf, kind="float"),
+        )
+        dx0 = g("synthetic.nominal_error.dx0", None)
+        if dx0 is not None:
+            dx0 = [float(x) for x in dx0]
+            if len(dx0) != 9:
+                raise ValueError(f"{scenario.path}: synthetic.nominal_error.dx0 must hold 9 numbers")
+            dx0 = tuple(dx0[:3] + [math.radians(x) for x in dx0[3:6]] + dx0[6:])
+        nominal = NominalErrorModel(
+            velocity_sigma=g("synthetic.nominal_error.velocity_sigma_mps", d.nominal.velocity_sigma, kind="float"),
+            attitude_sigma=math.radians(g("synthetic.nominal_error.attitude_sigma_deg", 0.6, kind="float")),
+            position_sigma=g("synthetic.nominal_error.position_sigma_m", d.nominal.position_sigma, kind="float"),
+            dx0=dx0,
+        )
+        gaps = g("synthetic.blackout_gaps_s", None, kind=None)
+        gaps = d.gaps if gaps is None else tuple((float(a), float(b)) for a, b in gaps)
+        r = "sensors.radar."
+        return cls(
+            imu=imu,
+            nominal=nominal,
+            onboard_rate_hz=g("sensors.imu.onboard_rate_hz", d.onboard_rate_hz, kind="float"),
+            gnc_rate_hz=g("sensors.imu.tm_rate_hz", d.gnc_rate_hz, kind="float"),
+            nav_rate_hz=g("sensors.imu.nav_rate_hz", d.nav_rate_hz, kind="float"),
+            gaps=gaps,
+            rda_rate_hz=g(r + "rate_hz", d.rda_rate_hz, kind="float"),
+            rda_on_after_fsr_s=g(r + "on_after_fsr_s", d.rda_on_after_fsr_s, kind="float"),
+            sr_period_s=g(r + "slant_range_period_s", d.sr_period_s, kind="float"),
+            sr_first_after_on_s=g(r + "first_packet_after_on_s", d.sr_first_after_on_s, kind="float"),
+            sr_zero_filled=g(r + "zero_filled_packets", d.sr_zero_filled, kind="int"),
+            range_sigma=g(r + "range_sigma_m", d.range_sigma, kind="float"),
+            range_sigma_frac=g(r + "range_sigma_frac", d.range_sigma_frac, kind="float"),
+            velocity_sigma=g(r + "velocity_sigma_mps", d.velocity_sigma, kind="float"),
+            r_ground=MARS.reference_radius + g("site.terrain_m", TERRAIN_ELEVATION_M, kind="float"),
+            squint_deg=g("radar.squint_deg", d.squint_deg, kind="float"),
+            azimuths_deg=tuple(float(x) for x in g("radar.azimuths_deg", list(d.azimuths_deg), kind="vec3")),  # type: ignore[arg-type]
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# IMU and initial state
+# --------------------------------------------------------------------------------------------
+
+
+def apply_imu_errors(
+    f_G: np.ndarray, w_G: np.ndarray, model: EntryImuModel, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Measured specific force and body rate from truth (n,3) each [m/s², rad/s], G frame.
+
+    ``y = (1 + s) x + b + noise``, then clipped at ± full scale (a saturated channel reads its
+    limit, as Schiaparelli's X gyro did).  Returns ``(f_meas, w_meas, drawn)`` with ``drawn`` the
+    per-run errors (``accel_bias``, ``accel_scale``, ``gyro_bias``, ``gyro_scale``, (3,) each).
+    """
+    f_G = np.asarray(f_G, float)
+    w_G = np.asarray(w_G, float)
+    drawn = {
+        "accel_bias": rng.normal(0.0, model.accel_bias, 3),
+        "accel_scale": rng.normal(0.0, model.accel_scale, 3),
+        "gyro_bias": rng.normal(0.0, model.gyro_bias, 3),
+        "gyro_scale": rng.normal(0.0, model.gyro_scale, 3),
+    }
+    f = f_G * (1.0 + drawn["accel_scale"]) + drawn["accel_bias"] + rng.normal(0.0, model.accel_noise, f_G.shape)
+    w = w_G * (1.0 + drawn["gyro_scale"]) + drawn["gyro_bias"] + rng.normal(0.0, model.gyro_noise, w_G.shape)
+    f = np.clip(f, -model.accel_full_scale, model.accel_full_scale)
+    fs = np.asarray(model.gyro_full_scale, float)
+    w = np.clip(w, -fs, fs)
+    return f, w, drawn
+
+
+def nominal_state(
+    v0: np.ndarray, q0: np.ndarray, p0: np.ndarray, model: NominalErrorModel, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """On-board initial state from the true one: ``(v_nom (3,), q_nom (4,), p_nom (3,), dx0 (9,))``.
+
+    ``dx0 = [δv, δθ, δp]`` is truth − nominal in the error-state convention (``v_true = v_nom +
+    δv``, ``q_true = q_nom ⊗ exp(δθ)``, ``p_true = p_nom + δp``), drawn from ``model``'s sigmas
+    unless ``model.dx0`` fixes it.  v [m/s] and p [m] in M, q = q_M_G.
+    """
+    if model.dx0 is not None:
+        dx0 = np.asarray(model.dx0, float)
+    else:
+        dx0 = np.concatenate(
+            [
+                rng.normal(0.0, model.velocity_sigma, 3),
+                rng.normal(0.0, model.attitude_sigma, 3),
+                rng.normal(0.0, model.position_sigma, 3),
+            ]
+        )
+    v_nom = np.asarray(v0, float) - dx0[:3]
+    q_nom = quat_normalize(quat_multiply(np.asarray(q0, float), quat_from_rotvec(-dx0[3:6])))
+    p_nom = np.asarray(p0, float) - dx0[6:]
+    return v_nom, q_nom, p_nom, dx0
+
+
+# --------------------------------------------------------------------------------------------
+# on-board strapdown
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class OnboardSolution:
+    """On-board navigation at the GNC rate: ``t`` (n,) [s]; ``v_M``, ``p_M`` (n,3) [m/s, m];
+    ``q_M_G`` (n,4); ``a_M_total`` (n,3) [m/s²] = gravity_j2(p) + C_M_G f_G (what the TM reports);
+    ``f_G``, ``w_G`` (n,3) the measured IMU it integrated."""
+
+    t: np.ndarray
+    v_M: np.ndarray
+    q_M_G: np.ndarray
+    p_M: np.ndarray
+    a_M_total: np.ndarray
+    f_G: np.ndarray
+    w_G: np.ndarray
+
+
+def quat_cumprod(q: np.ndarray) -> np.ndarray:
+    """Inclusive running Hamilton product ``S[k] = q[0] ⊗ q[1] ⊗ … ⊗ q[k]`` of (n,4) quaternions.
+
+    A parallel-prefix (Hillis–Steele) scan: ⌈log2 n⌉ vectorised multiplications, renormalised
+    after each, instead of an n-step Python loop.  Returns (n,4).
+    """
+    s = np.array(q, dtype=float, copy=True)
+    n = s.shape[0]
+    k = 1
+    while k < n:
+        s[k:] = quat_multiply(s[:-k], s[k:])
+        s /= np.linalg.norm(s, axis=1, keepdims=True)
+        k *= 2
+    return s
+
+
+def _cumtrapz(y: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """Cumulative trapezoid integral along axis 0 (starts at 0); y (n,3), dt (n−1,)."""
+    out = np.zeros_like(y)
+    np.cumsum(0.5 * (y[1:] + y[:-1]) * dt[:, None], axis=0, out=out[1:])
+    return out
+
+
+def strapdown_onboard(
+    t: np.ndarray,
+    f_G: np.ndarray,
+    w_G: np.ndarray,
+    v0: np.ndarray,
+    q0: np.ndarray,
+    p0: np.ndarray,
+    *,
+    body: Body = MARS,
+    tol: float = 1e-5,
+    max_iter: int = 60,
+) -> OnboardSolution:
+    """Strapdown navigation in M from measured f_G, w_G (n,3) at times t (n,) [s], vectorised.
+
+    Attitude: ``q[k+1] = q[k] ⊗ exp(φ_k)`` with ``φ_k = (w_k + w_{k+1}) Δt/2 + (w_k × w_{k+1}) Δt²/12``
+    (rate linear over the step, with the coning term), evaluated for all steps at once by a
+    prefix product (:func:`quat_cumprod`).  Translation (AMELIA Eq. A.2): ``v̇ = C_M_G f + g(p)``,
+    ``ṗ = v`` by trapezoid sums; the gravity coupling is resolved by Picard iteration on the whole
+    arc (contraction ≈ |∂g/∂p| T²/2 ≈ 0.1 for 300 s) until the position changes by < ``tol`` [m].
+    Gravity: point mass + J2 of ``body`` evaluated in M (its +Z is the pole).
+    """
+    t = np.asarray(t, float)
+    f_G = np.asarray(f_G, float)
+    w_G = np.asarray(w_G, float)
+    dt = np.diff(t)
+    phi = 0.5 * (w_G[1:] + w_G[:-1]) * dt[:, None] + np.cross(w_G[:-1], w_G[1:]) * (dt**2 / 12.0)[:, None]
+    q = quat_cumprod(np.vstack([quat_normalize(np.asarray(q0, float))[None], quat_from_rotvec(phi)]))
+    a_ng = quat_rotate(q, f_G)
+    v0 = np.asarray(v0, float)
+    p0 = np.asarray(p0, float)
+    g = np.broadcast_to(gravity_j2(p0, body), a_ng.shape)
+    p = None
+    for _ in range(max_iter):
+        v = v0 + _cumtrapz(a_ng + g, dt)
+        p_new = p0 + _cumtrapz(v, dt)
+        done = p is not None and float(np.max(np.abs(p_new - p))) < tol
+        p = p_new
+        g = gravity_j2(p, body)
+        if done:
+            break
+    else:  # pragma: no cover - only for absurd arcs
+        raise RuntimeError("strapdown_onboard: gravity iteration did not converge")
+    v = v0 + _cumtrapz(a_ng + g, dt)
+    return OnboardSolution(t=t, v_M=v, q_M_G=q, p_M=p, a_M_total=a_ng + g, f_G=f_G, w_G=w_G)
+
+
+# --------------------------------------------------------------------------------------------
+# radar geometry (truth side)
+# --------------------------------------------------------------------------------------------
+
+
+def slant_ranges_sphere(p_M: np.ndarray, q_M_G: np.ndarray, beams_G: np.ndarray, r_ground: float) -> np.ndarray:
+    """Exact range [m] along each beam from the CoG to the terrain sphere ``|x| = r_ground``.
+
+    p_M (n,3) [m], q_M_G (n,4), beams_G (k,3) unit vectors → (n,k).  The nearest positive root of
+    ``|p + ρ d|² = r²`` with ``d = C_M_G s``; NaN where a beam misses the sphere (or points up).
+    """
+    p = np.asarray(p_M, float)[:, None, :]
+    d = quat_rotate(np.asarray(q_M_G, float)[:, None, :], np.asarray(beams_G, float)[None, :, :])
+    b = np.sum(p * d, axis=-1)
+    c = np.sum(p * p, axis=-1) - r_ground**2
+    disc = b * b - c
+    with np.errstate(invalid="ignore"):
+        rho = -b - np.sqrt(disc)
+    return np.where((disc >= 0.0) & (rho > 0.0), rho, np.nan)
+
+
+def terrain_relative_velocity_G(
+    p_M: np.ndarray, v_M: np.ndarray, q_M_G: np.ndarray, omega: float = MARS.rotation_rate
+) -> np.ndarray:
+    """Velocity relative to the rotating ground in G (AMELIA Eq. B.5): ``C_G_M (v − Ω × p)`` (n,3) [m/s],
+    Ω = [0, 0, ``omega``] [rad/s] in M."""
+    v_rel = np.asarray(v_M, float) - np.cross(np.array([0.0, 0.0, omega]), np.asarray(p_M, float))
+    return quat_rotate(quat_conjugate(np.asarray(q_M_G, float)), v_rel)
+
+
+# --------------------------------------------------------------------------------------------
+# TM generation
+# --------------------------------------------------------------------------------------------
+
+
+def interp_rows(t_src: np.ndarray, x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Linear interpolation of rows ``x`` (n, ...) given at ``t_src`` (n,) to times ``t`` (m,);
+    exact at the source times, clamped outside."""
+    t_src = np.asarray(t_src, float)
+    t = np.asarray(t, float)
+    i = np.clip(np.searchsorted(t_src, t, side="right") - 1, 0, t_src.size - 2)
+    w = np.clip((t - t_src[i]) / (t_src[i + 1] - t_src[i]), 0.0, 1.0)
+    w = w.reshape(w.shape + (1,) * (np.ndim(x) - 1))
+    x = np.asarray(x, float)
+    return x[i] * (1.0 - w) + x[i + 1] * w
+
+
+def _outside_gaps(t: np.ndarray, gaps, eps: float = 1e-6) -> np.ndarray:
+    keep = np.ones(t.shape, bool)
+    for start, dur in gaps:
+        keep &= ~((t > start + eps) & (t < start + dur - eps))
+    return keep
+
+
+@dataclass(frozen=True)
+class EntryTM:
+    """Synthetic telemetry in SI, before it is written to files (times [s] from EIP).
+
+    ``t_gnc`` (n,), ``w_G`` (n,3) measured rate, ``q_jpl`` (n,4) JPL MMED→GNC (= raw q_M_G of the
+    on-board navigation), ``a_M_total`` (n,3) on-board inertial acceleration incl. gravity;
+    ``t_nav`` (m,), ``p_M``, ``v_M`` (m,3) on-board position/velocity; ``t_sr`` (k,),
+    ``slant_ranges`` (k,4) (zero-filled packets are 0); ``t_rda`` (j,), ``slant_out`` (j,),
+    ``v_out_G`` (j,3); ``events`` (incl. RDA_ON); ``epoch_utc``; ``onboard`` the full on-board
+    solution at 100 Hz; ``nominal`` = (t0, v0, q0, p0, dx0) the on-board initial state and its
+    error; ``imu_errors`` the drawn per-run IMU errors; ``saturated_G`` (n,3) the clipped samples.
+    """
+
+    t_gnc: np.ndarray
+    w_G: np.ndarray
+    q_jpl: np.ndarray
+    a_M_total: np.ndarray
+    t_nav: np.ndarray
+    p_M: np.ndarray
+    v_M: np.ndarray
+    t_sr: np.ndarray
+    slant_ranges: np.ndarray
+    t_rda: np.ndarray
+    slant_out: np.ndarray
+    v_out_G: np.ndarray
+    events: dict[str, float]
+    epoch_utc: str
+    onboard: OnboardSolution
+    nominal: tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    imu_errors: dict[str, np.ndarray]
+    saturated_G: np.ndarray
+
+
+def _round_t(t: np.ndarray) -> np.ndarray:
+    return np.round(np.asarray(t, float), 9) + 0.0  # + 0.0 turns -0.0 into 0.0
+
+
+def generate_entry_tm(truth, spec: EntryTelemetrySpec, rng: np.random.Generator) -> EntryTM:
+    """Telemetry of AMELIA Table 1 from a truth trajectory (an ``EntryTruth`` or anything with the
+    fields ``t, p_M, v_M, q_M_G, w_G, f_G, events, epoch_utc``).
+
+    Draws, in this order from ``rng``: the on-board initial-state error, the IMU errors (per-run,
+    then 100 Hz noise), the slant-range noise, the slant-out and velocity-out noise.  The data
+    run from the truth's first sample to ``BSR`` (end of data; the truth's end if absent).
+    """
+    t_tr = np.asarray(truth.t, float)
+    events = {str(k): float(v) for k, v in dict(truth.events).items()}
+    t_end = min(float(t_tr[-1]), events.get("BSR", math.inf))
+    dt_ob = 1.0 / spec.onboard_rate_hz
+    n_ob = int(math.floor((t_end - t_tr[0]) / dt_ob + 1e-6)) + 1
+    t_ob = _round_t(t_tr[0] + dt_ob * np.arange(n_ob))
+
+    f_true = interp_rows(t_tr, truth.f_G, t_ob)
+    w_true = interp_rows(t_tr, truth.w_G, t_ob)
+    v0, q0, p0 = (np.asarray(truth.v_M[0], float), quat_normalize(truth.q_M_G[0]), np.asarray(truth.p_M[0], float))
+    v_nom, q_nom, p_nom, dx0 = nominal_state(v0, q0, p0, spec.nominal, rng)
+    f_meas, w_meas, drawn = apply_imu_errors(f_true, w_true, spec.imu, rng)
+    ob = strapdown_onboard(t_ob, f_meas, w_meas, v_nom, q_nom, p_nom)
+    sat = np.abs(w_meas) >= np.asarray(spec.imu.gyro_full_scale) * (1.0 - 1e-12)
+
+    # 10 Hz GNC TM and 1 Hz navigation TM (decimations of the 100 Hz on-board outputs)
+    k_gnc = max(1, int(round(spec.onboard_rate_hz / spec.gnc_rate_hz)))
+    k_nav = max(1, int(round(spec.onboard_rate_hz / spec.nav_rate_hz)))
+    ig = np.arange(0, n_ob, k_gnc)
+    ig = ig[_outside_gaps(t_ob[ig], spec.gaps)]
+    inav = np.arange(0, n_ob, k_nav)
+    inav = inav[_outside_gaps(t_ob[inav], spec.gaps)]
+
+    # radar (truth geometry, sampled at the radar times)
+    if "FSR" in events and "RDA_ON" not in events:
+        events["RDA_ON"] = events["FSR"] + spec.rda_on_after_fsr_s
+    beams = beam_directions_G(spec.squint_deg, spec.azimuths_deg)
+    t_sr = np.empty(0)
+    sr = np.empty((0, 4))
+    t_rda = np.empty(0)
+    so = np.empty(0)
+    vo = np.empty((0, 3))
+    if "RDA_ON" in events:
+        t_on = events["RDA_ON"]
+        t_sr = _round_t(np.arange(t_on + spec.sr_first_after_on_s, t_end + 1e-9, spec.sr_period_s))
+        q_sr = quat_normalize(interp_rows(t_tr, truth.q_M_G, t_sr))
+        sr = slant_ranges_sphere(interp_rows(t_tr, truth.p_M, t_sr), q_sr, beams, spec.r_ground)
+        sr = sr + rng.normal(0.0, 1.0, sr.shape) * np.hypot(spec.range_sigma, spec.range_sigma_frac * sr)
+        sr[: spec.sr_zero_filled] = 0.0
+        sr = np.where(np.isfinite(sr), sr, 0.0)  # a beam without a ground echo reports 0 (flagged on reading)
+        dt_r = 1.0 / spec.rda_rate_hz
+        t_rda = _round_t(dt_r * np.arange(math.ceil(t_on / dt_r - 1e-6), math.floor(t_end / dt_r + 1e-6) + 1))
+        p_r = interp_rows(t_tr, truth.p_M, t_rda)
+        q_r = quat_normalize(interp_rows(t_tr, truth.q_M_G, t_rda))
+        rho0 = slant_ranges_sphere(p_r, q_r, beams[:1], spec.r_ground)[:, 0]
+        so = rho0 + rng.normal(0.0, 1.0, rho0.shape) * np.hypot(spec.range_sigma, spec.range_sigma_frac * rho0)
+        so = np.where(np.isfinite(so), so, 0.0)
+        vo = terrain_relative_velocity_G(p_r, interp_rows(t_tr, truth.v_M, t_rda), q_r)
+        vo = vo + rng.normal(0.0, spec.velocity_sigma, vo.shape)
+
+    return EntryTM(
+        t_gnc=t_ob[ig],
+        w_G=w_meas[ig],
+        q_jpl=ob.q_M_G[ig],  # JPL "MMED to GNC" = raw components of q_M_G (quat_from_jpl docstring)
+        a_M_total=ob.a_M_total[ig],
+        t_nav=t_ob[inav],
+        p_M=ob.p_M[inav],
+        v_M=ob.v_M[inav],
+        t_sr=t_sr,
+        slant_ranges=sr,
+        t_rda=t_rda,
+        slant_out=so,
+        v_out_G=vo,
+        events=dict(sorted(events.items(), key=lambda kv: kv[1])),
+        epoch_utc=str(getattr(truth, "epoch_utc", "")),
+        onboard=ob,
+        nominal=(float(t_ob[0]), v_nom, q_nom, p_nom, dx0),
+        imu_errors=drawn,
+        saturated_G=sat[ig],
+    )

@@ -1,0 +1,791 @@
+"""Truth simulator of a Schiaparelli-like entry and parachute descent (synthetic scenarios only).
+
+This is the *truth*, not the estimator's model: a 6-DOF rigid capsule flying through a *true*
+atmosphere (which departs from :class:`MarsEngineeringAtmosphere`) with its aerodynamic database
+(:mod:`workbench.models.aerodynamics`), then a two-body system after parachute deployment — the
+module hangs from an elastic riser (spring-damper, slack when shorter than its length) whose far
+end is the canopy, a point mass with its own air-relative drag, inflation law and canopy
+"breathing".  Pendulum oscillations, the inflation snatch and the X-rate spike at deployment
+(the Schiaparelli anomaly: X gyro above 187.5 °/s for about 1 s, AMELIA Sect. 4) follow from the
+forces; nothing is scripted on the module's motion.
+
+Frames and conventions (``.entry_spec.md``):
+
+* ``M`` = MMED inertial frame (Mars-centred, +Z the pole at J2000).  For the ~300 s simulated
+  the body-fixed frame is ``Rz(W(t))`` of M and Mars rotates with ``ω = [0, 0, MARS.rotation_rate]``
+  in M; the atmosphere co-rotates; winds are given north/east in the local NED frame at the
+  vehicle (north/east from the +Z pole of M) and blow *towards* the stated direction.
+* Gravity: point mass + J2 (``gravity_j2`` is valid in M).  Altitude ``h_amr = |p| − 3396 km``
+  (above the MOLA radius, "AMR"); the atmosphere and winds are functions of ``h_amr`` only.
+  Terrain: a sphere of radius ``3396 km − 1440 m``.
+* Body frame G: origin at the CoG, +Z along the symmetry axis towards the back shell; during
+  entry the air-relative velocity is along −Z_G, under the parachute the riser pulls along +Z_G.
+  ``q_M_G`` is body -> inertial (Hamilton, scalar-last); ``w_G`` body rate; ``f_G`` the true
+  non-gravitational specific force at the CoG in G (what a perfect IMU at the CoG measures).
+* Time ``t`` [s] from the Entry Interface Point (EIP, t = 0); the run starts at ``t0 = −15 s``
+  from the AMELIA Table 2 nominal state and ends at back-shell release (BSR).
+
+Events: PDD (parachute deployment, the mortar fire) when the true Mach number first drops below
+``pdd_mach`` (or at ``pdd_time_s``); FSR = PDD + ``fsr_delay_s`` (front-shield mass leaves, the
+aerodynamic table switches to the descent module, inertia scaled with the mass); BSR = FSR +
+``bsr_delay_s`` = end of data.
+
+Parachute model (engineering choices, documented in :class:`EntryTruthSpec`): at PDD the canopy
+point mass is placed at line stretch, ``riser_length`` behind the attachment point (back-shell
+apex) along +Z_G tilted by ``deploy_tilt_deg`` towards the body azimuth ``deploy_azimuth_deg``
+(measured from +X_G towards +Y_G; a lateral offset of the mortar/bag trajectory), with the
+attachment point's velocity plus ``eject_speed_mps`` along that direction.  The canopy area grows
+``A = A0 u(τ) (1 + b(τ))``, ``u`` a C¹ smooth ramp 0 -> 1 over ``inflation_time_s`` and ``b``
+the breathing ``a cos(2π (τ − t_inf)/P + φ)``, decaying with ``breathing_decay_s`` after full
+inflation.  Drag ``½ ρ V² CD(M) A`` along the canopy's own air-relative velocity.  Asymmetric
+inflation: between ``side_force_start_s`` and ``side_force_end_s`` after PDD (smooth 0.15 s
+edges) the canopy also feels a side force ``side_force_coeff`` × drag, perpendicular to its air
+velocity, towards the body azimuth ``side_force_azimuth_deg`` frozen at PDD.  With the deploy
+tilt it drives the module's pendulum (~2 Hz under the riser) to the X-rate spike ~1-2 s after
+PDD that the flown X gyro saturated on; nothing else is scripted.  These are tuned engineering
+values (AMELIA gives only the observed motion).
+
+Integrator: fixed-step RK4, ``dt_entry`` (0.01 s) before PDD and ``dt_chute`` (≤ 0.002 s) from
+PDD on (stiff riser), outputs on a uniform ``dt_out`` = 0.01 s grid.  The per-step model is
+scalar Python (``math``) on purpose: for 19 states a numpy call costs more than the arithmetic.
+
+References: AMELIA (Aboudan et al., Space Sci. Rev. 2018) Sects. 3–4, 9, Table 2 (initial state),
+Fig. 2–4 (accelerations, 16 °/s spin, X-rate saturation ~1 s after PDD for ~1 s, Z acceleration
+peak ~101.5 m/s² ~0.6 s after PDD oscillating with ~0.35 s period); FACTS.md (Mars constants,
+Schiaparelli facts, molar mass 43.41 g/mol).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from workbench.core.atmosphere import (
+    CO2_SUTHERLAND,
+    MARS_GAMMA,
+    R_UNIVERSAL,
+    MarsEngineeringAtmosphere,
+    TabulatedAtmosphere,
+)
+from workbench.core.bodies import MARS
+from workbench.core.frames import julian_date_from_utc
+from workbench.core.rotation import quat_normalize, quat_to_dcm
+from workbench.models.aerodynamics import EntryVehicle
+
+__all__ = [
+    "EntryTruthSpec",
+    "EntryTruth",
+    "MARS_MOLAR_MASS",
+    "R_GROUND",
+    "truth_spec_from_scenario",
+    "true_atmosphere",
+    "wind_profile_truth",
+    "simulate_entry",
+]
+
+MARS_MOLAR_MASS = 0.04341
+"""Mean molar mass of the Martian atmosphere below 104 km [kg/mol] (AMELIA Sect. 9)."""
+R_GROUND = MARS.reference_radius - 1440.0
+"""Terrain radius [m]: flat terrain 1440 m below the 3396 km MOLA radius (AMELIA Sect. 7)."""
+
+
+def _wind_layers_default() -> tuple[tuple[float, float, float, float, float], ...]:
+    # (bottom_km, top_km, speed_mps, towards_azimuth_deg (from north, clockwise), edge_km)
+    return ((5.0, 6.0, 18.0, 250.0, 0.25), (3.2, 4.4, 20.0, 240.0, 0.3))
+
+
+@dataclass(frozen=True)
+class EntryTruthSpec:
+    """Settings of the truth simulation (SI unless a name carries a unit); built from ``[truth]``.
+
+    Initial state (AMELIA Table 2, nominal, at ``t0`` = −15 s from EIP): ``p0_km`` [km, M],
+    ``v0_kmps`` [km/s, M], ``q0_jpl`` the JPL quaternion "MMED to GNC" (numerically ``q_M_G``;
+    with our conventions −Z_G is 1.85° from the air-relative velocity, so it is used as is),
+    rotated by the optional extra tilt ``aoa_offset_deg`` (about the body axis at azimuth
+    ``aoa_offset_azimuth_deg`` from +X_G towards +Y_G); initial body rate ``w0_dps`` [°/s]
+    (spin 16 °/s about +Z_G, AMELIA Fig. 3).  The truth departs from the nominal like the flown
+    state did (AMELIA Sect. 3: separation over-performance, slightly steeper flight path): the
+    Table 2 velocity is rotated in its vertical plane by ``fpa_offset_deg`` (< 0 steeper) and
+    lengthened by ``speed_offset_mps``.  ``roll_moment_coeff``: constant roll-torque
+    coefficient (``M_z = Cl q S L``) standing for asymmetric ablation; it slows the spin from
+    16 to ~12 °/s over the entry as AMELIA observed (engineering value).
+
+    Atmosphere (see :func:`true_atmosphere`): ``surface_pressure_scale`` × the default's 699 Pa,
+    temperature = default + ``temperature_bias`` bumps + ``temperature_waves`` + inversion, each
+    wave ``(amplitude_K, wavelength_km, phase_deg)``, each bias ``(amplitude_K, centre_km,
+    width_km)``; ``inversion_*`` a Gaussian warm layer.  ``h_top_km`` top of the table.
+
+    Winds (see :func:`wind_profile_truth`): ``wind_layers`` of ``(bottom_km, top_km, speed_mps,
+    towards_azimuth_deg, edge_km)`` (AMR altitudes, azimuth clockwise from north) on top of a
+    light background ``background_wind_mps`` towards ``background_azimuth_deg`` (turning slowly
+    with altitude by ``background_turn_deg_per_km``).
+
+    Events / parachute / integration: see the module docstring.  ``aero_enabled = False`` flies
+    in vacuum (a test of the gravity integration) and needs ``t_end``.  ``rng`` draws only the
+    breathing phase jitter (``breathing_phase_sigma_deg``) and a ±``breathing_amp_jitter``
+    relative change of the breathing amplitude.
+    """
+
+    epoch_utc: str = "2016-10-19T14:42:22.132Z"
+    t0: float = -15.0
+    p0_km: tuple[float, float, float] = (-1317.4056, 3254.8625, -223.9034)
+    v0_kmps: tuple[float, float, float] = (-4.9636, -3.3138, 0.8326)
+    q0_jpl: tuple[float, float, float, float] = (0.7250, -0.2476, 0.3916, -0.5096)
+    fpa_offset_deg: float = -0.2
+    speed_offset_mps: float = 15.0
+    aoa_offset_deg: float = 0.0
+    aoa_offset_azimuth_deg: float = 0.0
+    w0_dps: tuple[float, float, float] = (0.0, 0.0, 16.0)
+    roll_moment_coeff: float = -3.0e-6
+    # atmosphere
+    surface_pressure_scale: float = 0.92
+    temperature_waves: tuple[tuple[float, float, float], ...] = (
+        (6.0, 22.0, 30.0),
+        (4.0, 14.0, 200.0),
+        (2.5, 10.0, 100.0),
+    )
+    temperature_bias: tuple[tuple[float, float, float], ...] = ((24.0, 30.0, 10.0), (12.0, 42.0, 6.0))
+    inversion_center_km: float = 11.5
+    inversion_width_km: float = 1.0
+    inversion_amplitude_K: float = 6.0
+    h_top_km: float = 140.0
+    # winds
+    wind_layers: tuple[tuple[float, float, float, float, float], ...] = field(default_factory=_wind_layers_default)
+    background_wind_mps: float = 2.5
+    background_azimuth_deg: float = 200.0
+    background_turn_deg_per_km: float = 2.0
+    # events
+    pdd_mach: float = 2.0
+    pdd_time_s: float | None = None
+    fsr_delay_s: float = 41.0
+    bsr_delay_s: float = 41.0
+    # parachute deployment
+    deploy_tilt_deg: float = 4.0
+    deploy_azimuth_deg: float = 90.0
+    eject_speed_mps: float = 3.0
+    inflation_time_s: float = 0.6
+    breathing_amplitude: float = 0.4
+    breathing_period_s: float = 0.35
+    breathing_decay_s: float = 1.2
+    side_force_coeff: float = 0.35
+    side_force_start_s: float = 0.7
+    side_force_end_s: float = 1.5
+    side_force_azimuth_deg: float = -90.0
+    breathing_phase_sigma_deg: float = 5.0
+    breathing_amp_jitter: float = 0.05
+    # integration
+    dt_entry: float = 0.01
+    dt_chute: float = 0.002
+    dt_out: float = 0.01
+    aero_enabled: bool = True
+    t_end: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (self.dt_out > 0 and self.dt_entry > 0 and self.dt_chute > 0):
+            raise ValueError("EntryTruthSpec: time steps must be positive")
+        for nm in ("dt_entry", "dt_chute"):
+            r = self.dt_out / getattr(self, nm)
+            if abs(r - round(r)) > 1e-9 or round(r) < 1:
+                raise ValueError(f"EntryTruthSpec: dt_out must be an integer multiple of {nm}")
+        if not self.aero_enabled and self.t_end is None:
+            raise ValueError("EntryTruthSpec: aero_enabled = False needs t_end")
+
+
+@dataclass(frozen=True, eq=False)
+class EntryTruth:
+    """Truth history of a simulated entry on a uniform ``dt_out`` grid (see ``.entry_spec.md``).
+
+    Shapes (n samples): ``t`` (n,) [s from EIP]; ``p_M``, ``v_M`` (n,3) [m, m/s, MMED, CoG];
+    ``q_M_G`` (n,4); ``w_G`` (n,3) [rad/s]; ``f_G`` (n,3) [m/s², non-gravitational specific force at
+    the CoG, body]; ``phase`` (n,) int (0 entry, 1 PDD..FSR, 2 FSR..BSR); ``mach``, ``knudsen``
+    (diameter-based), ``alpha_total`` [rad], ``dynamic_pressure`` [Pa], ``h_amr`` [m] (n,);
+    ``v_rel_M`` (n,3) air-relative velocity in M [m/s]; ``wind_NE`` (n,2) true wind north/east
+    [m/s, blowing towards]; ``events`` {EIP, PDD, FSR, BSR} [s]; ``atmosphere`` the true
+    atmosphere; ``epoch_utc`` of EIP and ``jd_tdb0`` its Julian date (TDB);
+    ``parachute_p_M`` (n,3) canopy position [m, M] (NaN before PDD).
+    Extra (not in the interface spec, for plots/diagnostics): ``riser_tension`` (n,) [N] and
+    ``parachute_area`` (n,) [m²]; ``spec`` the :class:`EntryTruthSpec` used.
+    """
+
+    t: np.ndarray
+    p_M: np.ndarray
+    v_M: np.ndarray
+    q_M_G: np.ndarray
+    w_G: np.ndarray
+    f_G: np.ndarray
+    phase: np.ndarray
+    mach: np.ndarray
+    knudsen: np.ndarray
+    alpha_total: np.ndarray
+    dynamic_pressure: np.ndarray
+    h_amr: np.ndarray
+    v_rel_M: np.ndarray
+    wind_NE: np.ndarray
+    events: dict[str, float]
+    atmosphere: TabulatedAtmosphere
+    epoch_utc: str
+    jd_tdb0: float
+    parachute_p_M: np.ndarray | None
+    riser_tension: np.ndarray | None = None
+    parachute_area: np.ndarray | None = None
+    spec: EntryTruthSpec | None = None
+
+
+# ------------------------------------------------------------------------------- scenario input
+
+_TUPLE_FIELDS = {
+    "p0_km": 1,
+    "v0_kmps": 1,
+    "q0_jpl": 1,
+    "w0_dps": 1,
+    "temperature_waves": 2,
+    "temperature_bias": 2,
+    "wind_layers": 2,
+}
+
+
+def truth_spec_from_scenario(scenario) -> EntryTruthSpec:
+    """Build an :class:`EntryTruthSpec` from a scenario's ``[truth]`` table (missing keys: defaults).
+
+    ``scenario`` is a :class:`workbench.io.scenario.Scenario` (or a plain dict standing for the
+    ``[truth]`` table).  Keys are the field names of :class:`EntryTruthSpec`; ``wind_layers``,
+    ``temperature_waves`` and ``temperature_bias`` are arrays of arrays.  ``epoch_utc`` defaults
+    to ``[scenario] epoch_utc`` when present.  Unknown keys raise ``ValueError`` naming them.
+    """
+    if isinstance(scenario, dict):
+        table, epoch, where = dict(scenario), None, "[truth]"
+    else:
+        table = scenario.get("truth", {}, kind="table")
+        epoch = scenario.get("scenario.epoch_utc", None)
+        where = f"{scenario.path}: [truth]"
+    names = {f.name for f in fields(EntryTruthSpec)}
+    unknown = sorted(set(table) - names)
+    if unknown:
+        raise ValueError(f"{where}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(names))}")
+    kw = {}
+    for key, val in table.items():
+        depth = _TUPLE_FIELDS.get(key)
+        try:
+            if depth == 1:
+                val = tuple(float(x) for x in val)
+            elif depth == 2:
+                val = tuple(tuple(float(x) for x in row) for row in val)
+            elif key in ("aero_enabled",):
+                val = bool(val)
+            elif key == "epoch_utc":
+                val = str(val)
+            elif val is not None:
+                val = float(val)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{where}: key '{key}' has a bad value {val!r}") from exc
+        kw[key] = val
+    if "epoch_utc" not in kw and isinstance(epoch, str):
+        kw["epoch_utc"] = epoch
+    return EntryTruthSpec(**kw)
+
+
+# ------------------------------------------------------------------------------- true atmosphere
+
+
+def _true_temperature(h: np.ndarray, spec: EntryTruthSpec) -> np.ndarray:
+    """Temperature [K] of the true atmosphere at h [m] AMR (default + bias + waves + inversion)."""
+    # Glenn engineering temperature (as MarsEngineeringAtmosphere, isothermal above its 50 km
+    # blend) with its 0.95 K step at 7 km smoothed over ±0.5 km: the truth has no discontinuity
+    hb = np.minimum(h, MarsEngineeringAtmosphere().h_blend)
+    w = np.clip((hb - 6500.0) / 1000.0, 0.0, 1.0)
+    w = w * w * (3.0 - 2.0 * w)
+    T = 273.15 + (1.0 - w) * (-31.0 - 0.000998 * hb) + w * (-23.4 - 0.00222 * hb)
+    hk = h / 1e3
+    for amp, ck, wk in spec.temperature_bias:
+        T = T + amp * np.exp(-0.5 * ((hk - ck) / wk) ** 2)
+    grow = 0.6 + 0.4 * np.clip(hk / 40.0, 0.0, 1.0)  # gravity waves grow with altitude
+    for amp, lam, ph in spec.temperature_waves:
+        T = T + grow * amp * np.sin(2.0 * np.pi * hk / lam + np.radians(ph))
+    T = T + spec.inversion_amplitude_K * np.exp(-0.5 * ((hk - spec.inversion_center_km) / spec.inversion_width_km) ** 2)
+    return T
+
+
+def true_atmosphere(spec: EntryTruthSpec, dh: float = 10.0, h_bottom: float = -5000.0) -> TabulatedAtmosphere:
+    """The true atmosphere as a :class:`TabulatedAtmosphere` on nodes every ``dh`` [m] AMR.
+
+    Temperature: :class:`MarsEngineeringAtmosphere` + ``temperature_bias`` Gaussian bumps +
+    ``temperature_waves`` (sinusoids in altitude, amplitude growing ×0.6 -> ×1 from 0 to 40 km)
+    + a Gaussian warm layer near ``inversion_center_km`` (a real inversion: dT/dh > 0 there).
+    Pressure: hydrostatic integration ``dp/dh = −ρ g``, ``ρ = p / (R T)``, ``g = GM/(R_ref + h)²``
+    (radial, no centrifugal term), from ``surface_pressure_scale`` × 699 Pa at h = 0, with
+    ``R = R_universal / 0.04341`` (molar mass 43.41 g/mol, AMELIA Sect. 9); density from the
+    ideal gas.  The integration is exact for T linear between nodes (trapezoid on 1/T is
+    replaced by the analytic layer formula).  Extrapolation: clamp (constant end values).
+    """
+    top = spec.h_top_km * 1e3
+    h = np.arange(h_bottom, top + 0.5 * dh, dh)
+    T = _true_temperature(h, spec)
+    R = R_UNIVERSAL / MARS_MOLAR_MASS
+    g = MARS.gm / (MARS.reference_radius + h) ** 2
+    # d ln p / dh = −g / (R T); integrate with the trapezoid rule on g/T (dh = 10 m: error ~1e-7)
+    f = g / (R * T)
+    lnp = np.concatenate([[0.0], -np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(h))])
+    i0 = np.searchsorted(h, 0.0)
+    p_surf = spec.surface_pressure_scale * 699.0
+    lnp = lnp - lnp[i0] + math.log(p_surf) if h[i0] == 0.0 else lnp - np.interp(0.0, h, lnp) + math.log(p_surf)
+    p = np.exp(lnp)
+    rho = p / (R * T)
+    return TabulatedAtmosphere(
+        h=h, rho=rho, p=p, T=T, gas_constant=R, gamma=MARS_GAMMA, sutherland=CO2_SUTHERLAND, extrapolate="clamp"
+    )
+
+
+# ------------------------------------------------------------------------------------- winds
+
+
+def _smooth_box(h, bottom, top, edge):
+    """≈1 inside [bottom, top], 0 outside, tanh edges of width ``edge`` (all in the same unit)."""
+    return 0.25 * (1.0 + np.tanh((h - bottom) / edge)) * (1.0 + np.tanh((top - h) / edge))
+
+
+def wind_profile_truth(h_amr, spec: EntryTruthSpec) -> np.ndarray:
+    """True horizontal wind (n, 2) = [north, east] [m/s] (blowing towards) at altitudes ``h_amr`` [m].
+
+    Sum of a light background (``background_wind_mps`` towards ``background_azimuth_deg``,
+    turning by ``background_turn_deg_per_km``) and the ``wind_layers`` (smooth boxes in altitude
+    with tanh edges).  Defaults: two layers blowing towards the WSW, 5–6 km at 18 m/s and
+    3.2–4.4 km at 20 m/s AMR (AMELIA Sect. 10 "direction west/south-west"; its Table 5 puts the
+    parachute, back shell and DM impacts W/SW of the last data point and the track hooks back
+    west, i.e. the air moved towards the WSW).  ``h_amr`` any shape (...,) -> (..., 2).
+    """
+    hk = np.asarray(h_amr, dtype=float) / 1e3
+    az = np.radians(spec.background_azimuth_deg + spec.background_turn_deg_per_km * hk)
+    n = spec.background_wind_mps * np.cos(az)
+    e = spec.background_wind_mps * np.sin(az)
+    for bottom, top, speed, azd, edge in spec.wind_layers:
+        s = speed * _smooth_box(hk, bottom, top, edge)
+        n = n + s * math.cos(math.radians(azd))
+        e = e + s * math.sin(math.radians(azd))
+    return np.stack([n, e], axis=-1)
+
+
+# ----------------------------------------------------------------------------------- the model
+
+
+class _Model:
+    """Scalar force/derivative model of the module (+ canopy) for the RK4 loop."""
+
+    def __init__(self, vehicle: EntryVehicle, spec: EntryTruthSpec, atm: TabulatedAtmosphere, rng):
+        self.spec = spec
+        self.veh = vehicle
+        self.gm = MARS.gm
+        self.re = MARS.equatorial_radius
+        self.j2k = 1.5 * MARS.j2 * MARS.gm * MARS.equatorial_radius**2
+        self.rref = MARS.reference_radius
+        self.om = MARS.rotation_rate
+        self.aero_on = bool(spec.aero_enabled)
+        # uniform-grid lookup tables (plain lists) for the atmosphere and winds
+        h = atm.h
+        self.h_lo = float(h[0])
+        self.inv_dh = 1.0 / float(h[1] - h[0])
+        self.n_h = h.size
+        self.LR = np.log(atm.rho).tolist()
+        self.A = np.asarray(atm.speed_of_sound(h)).tolist()
+        self.LL = np.log(atm.mean_free_path(h)).tolist()
+        w = wind_profile_truth(h, spec)
+        self.WN = w[:, 0].tolist()
+        self.WE = w[:, 1].tolist()
+        self.D = vehicle.diameter
+        self.set_phase(0)
+        # parachute
+        ch = vehicle.parachute
+        self.m_p = ch.mass
+        self.A0 = ch.ref_area
+        self.L0 = vehicle.riser_length
+        self.k_r = vehicle.riser_stiffness
+        self.c_r = vehicle.riser_damping
+        self.att = [float(x) for x in vehicle.attach_point_G]
+        self.t_pdd = math.inf
+        self.side_M = (0.0, 0.0, 0.0)  # inertial direction of the asymmetric-inflation side force
+        self.phi_b = math.radians(spec.breathing_phase_sigma_deg) * float(rng.standard_normal())
+        self.amp_b = spec.breathing_amplitude * (1.0 + spec.breathing_amp_jitter * float(rng.uniform(-1.0, 1.0)))
+
+    def set_phase(self, phase: int) -> None:
+        veh = self.veh
+        self.phase = phase
+        tab = veh.aero_at(phase)
+        self.tab = tab
+        self.S = tab.ref_area
+        self.Lref = tab.ref_length
+        self.cmq = tab.cmq
+        self.m = float(veh.mass_at(phase))
+        I = np.asarray(veh.inertia_G, float) * (self.m / float(veh.mass_at(1)) if phase >= 2 else 1.0)
+        self.I = I.tolist()
+        self.Iinv = np.linalg.inv(I).tolist()
+
+    def atm(self, h):
+        """(rho, sound speed, mean free path) at altitude h [m] (clamped) and the wind (N, E)."""
+        x = (h - self.h_lo) * self.inv_dh
+        i = int(x)
+        if i < 0:
+            i, f = 0, 0.0
+        elif i >= self.n_h - 1:
+            i, f = self.n_h - 2, 1.0
+        else:
+            f = x - i
+        LR, A, LL, WN, WE = self.LR, self.A, self.LL, self.WN, self.WE
+        return (
+            math.exp(LR[i] + f * (LR[i + 1] - LR[i])),
+            A[i] + f * (A[i + 1] - A[i]),
+            math.exp(LL[i] + f * (LL[i + 1] - LL[i])),
+            WN[i] + f * (WN[i + 1] - WN[i]),
+            WE[i] + f * (WE[i + 1] - WE[i]),
+        )
+
+    def area(self, t):
+        """Canopy drag area [m²] at time t [s] (0 before PDD)."""
+        tau = t - self.t_pdd
+        if tau <= 0.0:
+            return 0.0
+        sp = self.spec
+        ti = sp.inflation_time_s
+        s = tau / ti
+        u = 1.0 if s >= 1.0 else s * s * (3.0 - 2.0 * s)
+        env = 1.0 if tau <= ti else math.exp(-(tau - ti) / sp.breathing_decay_s)
+        b = self.amp_b * env * math.cos(2.0 * math.pi * (tau - ti) / sp.breathing_period_s + self.phi_b)
+        return self.A0 * u * (1.0 + b)
+
+    def side_weight(self, t):
+        """Side-force fraction of the canopy drag at time t: smooth window (0 -> coeff -> 0)."""
+        sp = self.spec
+        tau = t - self.t_pdd
+        a, b, e = sp.side_force_start_s, sp.side_force_end_s, 0.15
+        if tau <= a - e or tau >= b + e or sp.side_force_coeff == 0.0:
+            return 0.0
+        up = 1.0 if tau >= a + e else 0.5 - 0.5 * math.cos(math.pi * (tau - a + e) / (2 * e))
+        dn = 1.0 if tau <= b - e else 0.5 + 0.5 * math.cos(math.pi * (tau - b + e) / (2 * e))
+        return sp.side_force_coeff * up * dn
+
+    def gravity(self, x, y, z):
+        r2 = x * x + y * y + z * z
+        r = math.sqrt(r2)
+        ir3 = 1.0 / (r2 * r)
+        k = self.j2k / (r2 * r2 * r)
+        zz = 5.0 * z * z / r2
+        a = -self.gm * ir3
+        return a * x - k * x * (1.0 - zz), a * y - k * y * (1.0 - zz), a * z - k * z * (3.0 - zz), r
+
+    def deriv(self, t, s, aux=False):
+        """Time derivative of the state list s (13 entries, or 19 with the canopy)."""
+        px, py, pz, vx, vy, vz, qx, qy, qz, qw, wx, wy, wz = s[:13]
+        gx, gy, gz, r = self.gravity(px, py, pz)
+        h = r - self.rref
+        # DCM C_M_G from q_M_G
+        xx, yy, zz = qx * qx, qy * qy, qz * qz
+        xy, xz, yz = qx * qy, qx * qz, qy * qz
+        wqx, wqy, wqz = qw * qx, qw * qy, qw * qz
+        c00, c01, c02 = 1 - 2 * (yy + zz), 2 * (xy - wqz), 2 * (xz + wqy)
+        c10, c11, c12 = 2 * (xy + wqz), 1 - 2 * (xx + zz), 2 * (yz - wqx)
+        c20, c21, c22 = 2 * (xz - wqy), 2 * (yz + wqx), 1 - 2 * (xx + yy)
+        om = self.om
+        FGx = FGy = FGz = 0.0  # non-gravitational force on the module, body frame [N]
+        Mx = My = Mz = 0.0  # torque about the CoG, body frame [N m]
+        mach = kn = alpha = qd = 0.0
+        vrx = vry = vrz = 0.0
+        wn = we = 0.0
+        if self.aero_on:
+            rho, a_snd, lam, wn, we = self.atm(h)
+            # local north/east unit vectors in M (from the +Z pole)
+            rxy = math.sqrt(px * px + py * py)
+            ex, ey = -py / rxy, px / rxy
+            nx, ny, nz = -px * pz / (r * rxy), -py * pz / (r * rxy), rxy / r
+            vrx = vx + om * py - wn * nx - we * ex
+            vry = vy - om * px - wn * ny - we * ey
+            vrz = vz - wn * nz
+            V = math.sqrt(vrx * vrx + vry * vry + vrz * vrz)
+            if V > 1e-6:
+                # air-relative velocity in G: C_G_M = C_M_Gᵀ
+                bx = c00 * vrx + c10 * vry + c20 * vrz
+                by = c01 * vrx + c11 * vry + c21 * vrz
+                bz = c02 * vrx + c12 * vry + c22 * vrz
+                ca_ = -bz / V
+                alpha = math.acos(1.0 if ca_ > 1.0 else -1.0 if ca_ < -1.0 else ca_)
+                mach = V / a_snd
+                kn = lam / self.D
+                CA, CN, CM = self.tab.coefficients_scalar(mach, kn, alpha)
+                qd = 0.5 * rho * V * V
+                qS = qd * self.S
+                FGz = CA * qS
+                nl = math.sqrt(bx * bx + by * by)
+                if nl > 1e-9 * V:
+                    FGx = -CN * qS * bx / nl
+                    FGy = -CN * qS * by / nl
+                    # k = unit(v̂ × (−Z)) = (−by, bx, 0)/nl increases alpha; Cm < 0 restores
+                    mm = CM * qS * self.Lref / nl
+                    Mx = -mm * by
+                    My = mm * bx
+                damp = self.cmq * qS * self.Lref * self.Lref / (2.0 * V)
+                Mx += damp * wx
+                My += damp * wy
+                Mz += self.spec.roll_moment_coeff * qS * self.Lref
+        T = 0.0
+        ux = uy = uz = 0.0
+        chute = len(s) > 13
+        if chute:
+            ppx, ppy, ppz, vpx, vpy, vpz = s[13:19]
+            ax_, ay_, az_ = self.att
+            # attachment point position / velocity in M
+            cax = c00 * ax_ + c01 * ay_ + c02 * az_
+            cay = c10 * ax_ + c11 * ay_ + c12 * az_
+            caz = c20 * ax_ + c21 * ay_ + c22 * az_
+            # w × att (body), rotated to M
+            tx, ty, tz = wy * az_ - wz * ay_, wz * ax_ - wx * az_, wx * ay_ - wy * ax_
+            vax = vx + c00 * tx + c01 * ty + c02 * tz
+            vay = vy + c10 * tx + c11 * ty + c12 * tz
+            vaz = vz + c20 * tx + c21 * ty + c22 * tz
+            dx, dy, dz = ppx - px - cax, ppy - py - cay, ppz - pz - caz
+            L = math.sqrt(dx * dx + dy * dy + dz * dz)
+            ux, uy, uz = dx / L, dy / L, dz / L
+            stretch = L - self.L0
+            if stretch > 0.0:
+                sd = ux * (vpx - vax) + uy * (vpy - vay) + uz * (vpz - vaz)
+                T = self.k_r * stretch + self.c_r * sd
+                if T < 0.0:
+                    T = 0.0
+            # canopy aerodynamics
+            gpx, gpy, gpz, rp = self.gravity(ppx, ppy, ppz)
+            Dx = Dy = Dz = 0.0
+            Ap = self.area(t)
+            if self.aero_on and Ap > 0.0:
+                rho_p, a_p, _, wnp, wep = self.atm(rp - self.rref)
+                rxyp = math.sqrt(ppx * ppx + ppy * ppy)
+                exp_, eyp = -ppy / rxyp, ppx / rxyp
+                nxp, nyp, nzp = -ppx * ppz / (rp * rxyp), -ppy * ppz / (rp * rxyp), rxyp / rp
+                wx_p = vpx + om * ppy - wnp * nxp - wep * exp_
+                wy_p = vpy - om * ppx - wnp * nyp - wep * eyp
+                wz_p = vpz - wnp * nzp
+                Vp = math.sqrt(wx_p * wx_p + wy_p * wy_p + wz_p * wz_p)
+                if Vp > 1e-6:
+                    Dk = 0.5 * rho_p * Vp * self.veh.parachute.cd_scalar(Vp / a_p) * Ap
+                    Dx, Dy, Dz = -Dk * wx_p, -Dk * wy_p, -Dk * wz_p
+                    ks = self.side_weight(t)
+                    if ks > 0.0:  # asymmetric inflation: side force ⊥ the canopy's air velocity
+                        sx, sy, sz = self.side_M
+                        sv = (sx * wx_p + sy * wy_p + sz * wz_p) / (Vp * Vp)
+                        sx, sy, sz = sx - sv * wx_p, sy - sv * wy_p, sz - sv * wz_p
+                        sn = ks * Dk * Vp / math.sqrt(sx * sx + sy * sy + sz * sz)
+                        Dx, Dy, Dz = Dx + sn * sx, Dy + sn * sy, Dz + sn * sz
+            imp = 1.0 / self.m_p
+            dchute = [
+                vpx,
+                vpy,
+                vpz,
+                gpx + (Dx - T * ux) * imp,
+                gpy + (Dy - T * uy) * imp,
+                gpz + (Dz - T * uz) * imp,
+            ]
+            # riser force on the module in G and its torque about the CoG
+            fbx = T * (c00 * ux + c10 * uy + c20 * uz)
+            fby = T * (c01 * ux + c11 * uy + c21 * uz)
+            fbz = T * (c02 * ux + c12 * uy + c22 * uz)
+            FGx += fbx
+            FGy += fby
+            FGz += fbz
+            Mx += ay_ * fbz - az_ * fby
+            My += az_ * fbx - ax_ * fbz
+            Mz += ax_ * fby - ay_ * fbx
+        im = 1.0 / self.m
+        fx, fy, fz = FGx * im, FGy * im, FGz * im
+        # translational
+        dvx = gx + (c00 * fx + c01 * fy + c02 * fz)
+        dvy = gy + (c10 * fx + c11 * fy + c12 * fz)
+        dvz = gz + (c20 * fx + c21 * fy + c22 * fz)
+        # Euler's equations
+        I, Ii = self.I, self.Iinv
+        hx = I[0][0] * wx + I[0][1] * wy + I[0][2] * wz
+        hy = I[1][0] * wx + I[1][1] * wy + I[1][2] * wz
+        hz = I[2][0] * wx + I[2][1] * wy + I[2][2] * wz
+        rx = Mx - (wy * hz - wz * hy)
+        ry = My - (wz * hx - wx * hz)
+        rz = Mz - (wx * hy - wy * hx)
+        dwx = Ii[0][0] * rx + Ii[0][1] * ry + Ii[0][2] * rz
+        dwy = Ii[1][0] * rx + Ii[1][1] * ry + Ii[1][2] * rz
+        dwz = Ii[2][0] * rx + Ii[2][1] * ry + Ii[2][2] * rz
+        # q̇ = ½ q ⊗ [ω, 0]
+        dq = (
+            0.5 * (qw * wx + qy * wz - qz * wy),
+            0.5 * (qw * wy + qz * wx - qx * wz),
+            0.5 * (qw * wz + qx * wy - qy * wx),
+            -0.5 * (qx * wx + qy * wy + qz * wz),
+        )
+        d = [vx, vy, vz, dvx, dvy, dvz, *dq, dwx, dwy, dwz]
+        if chute:
+            d.extend(dchute)
+        if aux:
+            return d, (fx, fy, fz, mach, kn, alpha, qd, h, vrx, vry, vrz, wn, we, T, self.area(t) if chute else 0.0)
+        return d
+
+
+def _rk4(model: _Model, t: float, y: list, dt: float) -> list:
+    f = model.deriv
+    k1 = f(t, y)
+    h2 = 0.5 * dt
+    k2 = f(t + h2, [a + h2 * b for a, b in zip(y, k1, strict=True)])
+    k3 = f(t + h2, [a + h2 * b for a, b in zip(y, k2, strict=True)])
+    k4 = f(t + dt, [a + dt * b for a, b in zip(y, k3, strict=True)])
+    d6 = dt / 6.0
+    out = [a + d6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(y, k1, k2, k3, k4, strict=True)]
+    qn = 1.0 / math.sqrt(out[6] ** 2 + out[7] ** 2 + out[8] ** 2 + out[9] ** 2)
+    out[6] *= qn
+    out[7] *= qn
+    out[8] *= qn
+    out[9] *= qn
+    return out
+
+
+def _initial_velocity(p0: np.ndarray, v0: np.ndarray, spec: EntryTruthSpec) -> np.ndarray:
+    """Table 2 velocity [m/s, M] rotated in its vertical plane by ``fpa_offset_deg`` (< 0 steeper)
+    and lengthened by ``speed_offset_mps`` (the truth's departure from the nominal state)."""
+    if spec.fpa_offset_deg == 0.0 and spec.speed_offset_mps == 0.0:
+        return v0
+    speed = float(np.linalg.norm(v0))
+    axis = np.cross(v0, p0)  # rotating v about v × p by a positive angle raises the flight path
+    axis = axis / np.linalg.norm(axis)
+    a = math.radians(spec.fpa_offset_deg)
+    u = v0 / speed
+    u = u * math.cos(a) + np.cross(axis, u) * math.sin(a) + axis * float(axis @ u) * (1.0 - math.cos(a))
+    return u * (speed + spec.speed_offset_mps)
+
+
+def _initial_quaternion(spec: EntryTruthSpec) -> np.ndarray:
+    """q_M_G at t0: the Table 2 JPL quaternion (numerically q_M_G) with the optional extra tilt."""
+    q = quat_normalize(np.asarray(spec.q0_jpl, dtype=float))
+    if spec.aoa_offset_deg != 0.0:
+        az = math.radians(spec.aoa_offset_azimuth_deg)
+        half = 0.5 * math.radians(spec.aoa_offset_deg)
+        # body-frame rotation about the axis (cos az, sin az, 0)
+        dq = np.array([math.cos(az) * math.sin(half), math.sin(az) * math.sin(half), 0.0, math.cos(half)])
+        x1, y1, z1, w1 = q
+        x2, y2, z2, w2 = dq
+        q = np.array(
+            [
+                w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+                w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            ]
+        )
+    return quat_normalize(q)
+
+
+def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.Generator) -> EntryTruth:
+    """Simulate the entry and parachute descent from ``spec.t0`` to BSR (or ``spec.t_end``).
+
+    Args:
+        vehicle: the :class:`EntryVehicle` (``load_vehicle("assets/vehicles/schiaparelli.toml")``).
+        spec: :class:`EntryTruthSpec` (e.g. from :func:`truth_spec_from_scenario`).
+        rng: ``np.random.Generator``; only the canopy breathing phase/amplitude jitter uses it.
+
+    Returns:
+        :class:`EntryTruth` on a uniform ``spec.dt_out`` grid from ``t0`` to the end event,
+        with events {EIP: 0, PDD, FSR, BSR} (NaN for events not reached before ``t_end``).
+    """
+    atm = true_atmosphere(spec)
+    model = _Model(vehicle, spec, atm, rng)
+    p0 = np.asarray(spec.p0_km, float) * 1e3
+    v0 = _initial_velocity(p0, np.asarray(spec.v0_kmps, float) * 1e3, spec)
+    q0 = _initial_quaternion(spec)
+    w0 = np.radians(np.asarray(spec.w0_dps, float))
+    y = [*p0.tolist(), *v0.tolist(), *q0.tolist(), *w0.tolist()]
+
+    dt_out = spec.dt_out
+    n_entry = int(round(dt_out / spec.dt_entry))
+    n_chute = int(round(dt_out / spec.dt_chute))
+    h_ent, h_ch = dt_out / n_entry, dt_out / n_chute
+    t_stop_cap = spec.t_end if spec.t_end is not None else 2000.0
+    n_max = int(math.floor((t_stop_cap - spec.t0) / dt_out + 1e-9)) + 1
+
+    states = np.full((n_max, 19), np.nan)
+    auxs = np.zeros((n_max, 15))
+    phases = np.zeros(n_max, dtype=int)
+    events = {"EIP": 0.0, "PDD": math.nan, "FSR": math.nan, "BSR": math.nan}
+    k = 0
+    t = spec.t0
+    i_fsr = i_bsr = None
+    while True:
+        if i_fsr is not None and k == i_fsr:  # front shield leaves: mass, inertia and aero table switch
+            model.set_phase(2)
+        _, a = model.deriv(t, y, aux=True)
+        if model.phase == 0 and spec.aero_enabled:
+            trig = (t >= spec.pdd_time_s - 1e-9) if spec.pdd_time_s is not None else (a[3] < spec.pdd_mach and t > 0)
+            if trig:  # events on the output grid; the PDD sample belongs to phase 1
+                events["PDD"] = round(t, 9)
+                i_fsr = k + int(round(spec.fsr_delay_s / dt_out))
+                i_bsr = i_fsr + int(round(spec.bsr_delay_s / dt_out))
+                events["FSR"] = round(spec.t0 + i_fsr * dt_out, 9)
+                events["BSR"] = round(spec.t0 + i_bsr * dt_out, 9)
+                model.set_phase(1)
+                model.t_pdd = t
+                y = y + _deploy(model, y, spec)
+                _, a = model.deriv(t, y, aux=True)
+        states[k, : len(y)] = y
+        auxs[k] = a
+        phases[k] = model.phase
+        if (i_bsr is not None and k >= i_bsr) or k == n_max - 1:
+            break
+        if math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]) < R_GROUND:
+            raise RuntimeError(f"simulate_entry: the module hit the ground at t = {t:.2f} s")
+        if model.phase == 0:
+            for j in range(n_entry):
+                y = _rk4(model, t + j * h_ent, y, h_ent)
+        else:
+            for j in range(n_chute):
+                y = _rk4(model, t + j * h_ch, y, h_ch)
+        k += 1
+        t = spec.t0 + k * dt_out
+    n = k + 1
+    states, auxs, phases = states[:n], auxs[:n], phases[:n]
+    tgrid = np.round(spec.t0 + dt_out * np.arange(n), 9)
+    q = states[:, 6:10]
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    chute_p = states[:, 13:16] if np.isfinite(events["PDD"]) else None
+    return EntryTruth(
+        t=tgrid,
+        p_M=states[:, 0:3].copy(),
+        v_M=states[:, 3:6].copy(),
+        q_M_G=q,
+        w_G=states[:, 10:13].copy(),
+        f_G=auxs[:, 0:3].copy(),
+        phase=phases,
+        mach=auxs[:, 3].copy(),
+        knudsen=auxs[:, 4].copy(),
+        alpha_total=auxs[:, 5].copy(),
+        dynamic_pressure=auxs[:, 6].copy(),
+        h_amr=auxs[:, 7].copy(),
+        v_rel_M=auxs[:, 8:11].copy(),
+        wind_NE=auxs[:, 11:13].copy(),
+        events=events,
+        atmosphere=atm,
+        epoch_utc=spec.epoch_utc,
+        jd_tdb0=julian_date_from_utc(spec.epoch_utc),
+        parachute_p_M=None if chute_p is None else chute_p.copy(),
+        riser_tension=auxs[:, 13].copy(),
+        parachute_area=auxs[:, 14].copy(),
+        spec=spec,
+    )
+
+
+def _deploy(model: _Model, y: list, spec: EntryTruthSpec) -> list:
+    """Canopy state [p (3), v (3)] at line stretch, ``riser_length`` behind the attachment point."""
+    px, py, pz, vx, vy, vz, qx, qy, qz, qw, wx, wy, wz = y[:13]
+    q = np.array([qx, qy, qz, qw])
+    C = quat_to_dcm(q)
+    tilt, az = math.radians(spec.deploy_tilt_deg), math.radians(spec.deploy_azimuth_deg)
+    u_G = np.array([math.sin(tilt) * math.cos(az), math.sin(tilt) * math.sin(az), math.cos(tilt)])
+    att = np.asarray(model.att)
+    w = np.array([wx, wy, wz])
+    pa = np.array([px, py, pz]) + C @ att
+    va = np.array([vx, vy, vz]) + C @ np.cross(w, att)
+    u = C @ u_G
+    az_s = math.radians(spec.side_force_azimuth_deg)
+    model.side_M = tuple((C @ np.array([math.cos(az_s), math.sin(az_s), 0.0])).tolist())
+    pp = pa + model.L0 * u
+    vp = va + spec.eject_speed_mps * u
+    return [*pp.tolist(), *vp.tolist()]
