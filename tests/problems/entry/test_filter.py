@@ -400,3 +400,64 @@ def test_iterated_update_gauss_newton():
     # fixed point: one more step does not move it
     dx2, _ = _iterated_update(e, radar, sg, v, q, p, P, z, mask, dx, kind, True, 2)
     assert np.allclose(dx2, dx, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# pinned numbers: the forward and smoothed passes of a small deterministic case must not move when
+# the filter is refactored onto the shared engine (workbench.estimation.ekf / .smoother).
+
+PIN_FILE = __import__("pathlib").Path(__file__).with_name("data") / "entry_filter_pin.npz"
+
+
+def _pin_case() -> dict[str, np.ndarray]:
+    """Arrays of the pinned case: 27 s synthetic descent with a bridged IMU gap (10.0-11.2 s), RDA
+    samples between IMU samples (inserted nodes), one valid slant-range packet, a χ² gate,
+    relinearised RTS (3 passes) and iterated updates (4); constrained and unconstrained."""
+    out: dict[str, np.ndarray] = {}
+    for tag, constrained in (("c", True), ("u", False)):
+        imu, radar, tr, init = scenario(np.random.default_rng(11), t_end=27.0)
+        imu, tr = _with_gap(imu, tr, 100, 112)
+        sg = EntryFilterSigmas(**{**SIG.__dict__, "gate_probability": 0.9999})
+        res = run_entry_smoother(imu, radar, *init, sigmas=sg, constrained=constrained)
+        for name, ps in (("fwd", res.forward), ("smo", res.smoothed)):
+            for f in ("v_M", "q_M_G", "p_M"):
+                out[f"{tag}_{name}_{f}"] = getattr(ps, f)
+            out[f"{tag}_{name}_P"] = ps.P[::7]  # every 7th node keeps the file small
+        for c in ("slant_range", "slant_out", "velocity_out"):
+            for name, d in (("inn", res.innovations), ("sres", res.smoothed_residuals)):
+                out[f"{tag}_{name}_{c}_y"] = d[c].y
+                out[f"{tag}_{name}_{c}_S"] = d[c].S
+                out[f"{tag}_{name}_{c}_accepted"] = d[c].accepted
+    return out
+
+
+def _assert_close_rel(name: str, got: np.ndarray, want: np.ndarray, rtol: float = 1e-9) -> None:
+    """Elementwise |got − want| ≤ rtol·scale, with scale = max(|want|, rtol-scaled array norm) for
+    states and sqrt(P_ii P_jj) for covariance-like (…, d, d) arrays; NaN patterns must agree."""
+    assert got.shape == want.shape, name
+    assert np.array_equal(np.isnan(got), np.isnan(want)), name
+    if want.dtype == bool:
+        assert np.array_equal(got, want), name
+        return
+    g, w = np.nan_to_num(got), np.nan_to_num(want)
+    if name.endswith(("_P", "_S")):
+        d = np.sqrt(np.abs(np.einsum("...ii->...i", w)))
+        scale = d[..., :, None] * d[..., None, :]
+    else:
+        scale = np.abs(w)
+    bad = np.abs(g - w) > rtol * scale + 1e-300
+    assert not bad.any(), f"{name}: {bad.sum()} entries differ, max rel {np.max(np.abs(g - w) / (scale + 1e-300)):.2e}"
+
+
+def test_pinned_forward_and_smoothed_numbers():
+    """Forward/smoothed states, covariances, innovations and smoothed residuals equal (1e-9 rel) the
+    numbers of the pre-refactor entry filter (data/entry_filter_pin.npz, see data/README.md)."""
+    want = np.load(PIN_FILE)
+    got = _pin_case()
+    assert sorted(got) == sorted(want.files)
+    for k in want.files:
+        _assert_close_rel(k, got[k], want[k])
+
+
+if __name__ == "__main__":  # regenerate the pin (only when a number is meant to change)
+    np.savez_compressed(PIN_FILE, **_pin_case())
