@@ -228,6 +228,68 @@ def test_iterated_update_with_linear_model_equals_single():
     np.testing.assert_allclose(b.P_post, a.P_post, rtol=1e-12)
 
 
+def test_projected_gain_update_is_joseph_of_projected_gain():
+    """``gain_projector``: K = Π P Hᵀ S⁻¹, the state moves only inside range(Π), and P_post is the
+    Joseph form of that (sub-optimal) gain — larger in trace than the optimal update's."""
+    rng = np.random.default_rng(6)
+    lay = ErrorStateLayout(4)
+    x = np.array([30.0, 40.0, 1.0, -1.0])
+    A = rng.standard_normal((4, 4))
+    P = A @ A.T + np.eye(4)
+    R = np.diag([0.3, 0.02])
+    z = _range_bearing(x) + np.array([0.4, 0.01])
+    Pi = np.diag([1.0, 1.0, 0.0, 0.0])
+    res = update(x, P, z, _range_bearing, R, lay, H=_range_bearing_H, gain_projector=lambda s: Pi)
+    H = _range_bearing_H(x)
+    K = Pi @ P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    J = np.eye(4) - K @ H
+    np.testing.assert_allclose(res.K, K, rtol=1e-10)
+    np.testing.assert_array_equal(res.x_post[2:], x[2:])
+    np.testing.assert_allclose(res.x_post, x + K @ (z - _range_bearing(x)), rtol=1e-12)
+    np.testing.assert_allclose(res.P_post, J @ P @ J.T + K @ R @ K.T, rtol=1e-9, atol=1e-12)
+    opt = update(x, P, z, _range_bearing, R, lay, H=_range_bearing_H)
+    assert np.trace(res.P_post) > np.trace(opt.P_post)
+    # gate by threshold: the same decision as by probability
+    far = z + np.array([100.0, 0.0])
+    assert not update(x, P, far, _range_bearing, R, lay, H=_range_bearing_H, gate_threshold=9.21).accepted
+    assert update(x, P, z, _range_bearing, R, lay, H=_range_bearing_H, gate_threshold=9.21).accepted
+
+
+def test_iterated_update_absolute_step_rule_and_undefined_iterate():
+    """``step_tol``: a coarse absolute rule stops after fewer Gauss-Newton steps than the default
+    relative rule (different result), a fine one reaches the same fixed point; an iterate where h
+    is NaN ends the iterations at the previous iterate (here: the single update)."""
+    lay = ErrorStateLayout(2)
+    m = np.array([3.0, 0.5])
+    P = np.diag([4.0, 0.01])
+    station = np.array([0.0, 0.0])
+
+    def h(s):
+        return np.array([np.hypot(*(s - station))])
+
+    def Hf(s):
+        return ((s - station) / np.hypot(*(s - station)))[None]
+
+    z = np.array([1.0])
+    R = np.array([[1e-4]])
+    ref = update(m, P, z, h, R, lay, H=Hf, iterations=50)
+    fine = update(m, P, z, h, R, lay, H=Hf, iterations=50, step_tol=np.full(2, 1e-12))
+    coarse = update(m, P, z, h, R, lay, H=Hf, iterations=50, step_tol=np.full(2, 1.0))
+    np.testing.assert_allclose(fine.x_post, ref.x_post, atol=1e-10)
+    assert np.max(np.abs(coarse.x_post - ref.x_post)) > 1e-6
+    calls = []
+
+    def h_nan(s):
+        calls.append(s)
+        return h(s) if len(calls) == 1 else np.array([np.nan])
+
+    one = update(m, P, z, h, R, lay, H=Hf)
+    stop = update(m, P, z, h_nan, R, lay, H=Hf, iterations=10)
+    np.testing.assert_array_equal(stop.x_post, one.x_post)
+    np.testing.assert_array_equal(stop.P_post, one.P_post)
+    assert len(calls) == 2
+
+
 def test_iterated_update_reduces_error_on_strongly_nonlinear_range():
     """Range to a near station with a prior elongated across the line of sight: the single
     linearisation misses the curvature of the range circle; Gauss-Newton iterations reach the

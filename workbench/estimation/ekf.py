@@ -276,7 +276,8 @@ class Measurement:
     ``h(x) -> z_pred`` (m,); ``H`` (m, n_e) array, callable ``H(x)``, or None for central
     differences; ``residual(z, z_pred) -> y`` (default ``z − z_pred``, give one for angles);
     ``gate_probability`` e.g. 0.9973 for a χ² gate, None for no gate; ``iterations`` > 1 for an
-    iterated update; ``eps`` perturbation of the numeric H (scalar or (n_e,), error-state units).
+    iterated update; ``eps`` perturbation of the numeric H (scalar or (n_e,), error-state units);
+    ``gain_projector``, ``step_tol``, ``gate_threshold``: the options of :func:`update`.
     """
 
     name: str
@@ -288,6 +289,9 @@ class Measurement:
     gate_probability: float | None = None
     iterations: int = 1
     eps: float | np.ndarray = 1e-6
+    gain_projector: Callable[[np.ndarray], np.ndarray] | None = None
+    step_tol: np.ndarray | None = None
+    gate_threshold: float | None = None
 
 
 @dataclass(frozen=True)
@@ -440,14 +444,18 @@ def _chi2_threshold(probability: float, dof: int) -> float:
     return float(chi2.ppf(probability, dof))
 
 
-def _update(x, P, z, h, R, layout, H, residual, gate_probability, iterations, eps):
+def _as_vector(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    return a.reshape(1) if a.ndim == 0 else a
+
+
+def _update(
+    x, P, z, h, R, layout, H, residual, gate_probability, iterations, eps,
+    gain_projector=None, step_tol=None, gate_threshold=None,
+):  # fmt: skip
     """Core of :func:`update`; returns a tuple (x_post, P_post, y, S, K, H, nis, accepted)."""
-    z = np.asarray(z, dtype=float)
-    if z.ndim == 0:
-        z = z.reshape(1)
-    zp = np.asarray(h(x), dtype=float)
-    if zp.ndim == 0:
-        zp = zp.reshape(1)
+    z = _as_vector(z)
+    zp = _as_vector(h(x))
     y = z - zp if residual is None else np.atleast_1d(np.asarray(residual(z, zp), dtype=float))
     if H is None:
         Hk = numeric_measurement_jacobian(h, x, layout, residual, eps, hx=zp)
@@ -471,7 +479,11 @@ def _update(x, P, z, h, R, layout, H, residual, gate_probability, iterations, ep
         raise ValueError("non-finite innovation (check z, h(x) and R)")
     Kt, _ = _potrs(c, PHt.T, lower=1)
     K = Kt.T
-    if gate_probability is not None and nis > _chi2_threshold(float(gate_probability), y.shape[0]):
+    if gain_projector is not None:
+        K = gain_projector(x) @ K
+    if gate_threshold is None and gate_probability is not None:
+        gate_threshold = _chi2_threshold(float(gate_probability), y.shape[0])
+    if gate_threshold is not None and nis > gate_threshold:
         return x, P, y, S, K, Hk, nis, False
     dx = K @ y
     x_new = layout.boxplus(x, dx)
@@ -479,31 +491,41 @@ def _update(x, P, z, h, R, layout, H, residual, gate_probability, iterations, ep
         # Gauss-Newton step about the current iterate x_i (Bell & Cathey 1993):
         # x_{i+1} = x ⊞ K_i [ r(z, h(x_i)) − H_i (x ⊟ x_i) ]
         x_i = x_new
-        zp_i = np.asarray(h(x_i), dtype=float)
-        if zp_i.ndim == 0:
-            zp_i = zp_i.reshape(1)
+        zp_i = _as_vector(h(x_i))
+        if not np.all(np.isfinite(zp_i)):
+            break  # the model is not defined at the iterate: keep the last one
         r_i = z - zp_i if residual is None else np.atleast_1d(np.asarray(residual(z, zp_i), dtype=float))
         if H is None:
-            Hk = numeric_measurement_jacobian(h, x_i, layout, residual, eps, hx=zp_i)
+            H_i = numeric_measurement_jacobian(h, x_i, layout, residual, eps, hx=zp_i)
         elif callable(H):
-            Hk = np.asarray(H(x_i), dtype=float)
-            if Hk.ndim == 1:
-                Hk = Hk.reshape(1, -1)
-        PHt = P @ Hk.T
-        S_i = Hk @ PHt + R
+            H_i = np.asarray(H(x_i), dtype=float)
+            if H_i.ndim == 1:
+                H_i = H_i.reshape(1, -1)
+        else:
+            H_i = Hk
+        PHt_i = P @ H_i.T
+        S_i = H_i @ PHt_i + R
         c, info = _potrf(S_i, lower=1)
         if info != 0:
             raise np.linalg.LinAlgError(f"iterated update: H P Hᵀ + R not positive definite (potrf info={info})")
-        Kt, _ = _potrs(c, PHt.T, lower=1)
+        Kt, _ = _potrs(c, PHt_i.T, lower=1)
         K = Kt.T
+        if gain_projector is not None:
+            K = gain_projector(x_i) @ K
+        Hk, PHt = H_i, PHt_i
         dx_new = K @ (r_i - Hk @ layout.boxminus(x, x_i))
         x_new = layout.boxplus(x, dx_new)
-        if np.max(np.abs(dx_new - dx)) <= 1e-13 * (1.0 + np.max(np.abs(dx_new))):
-            break
+        step = np.abs(dx_new - dx)
         dx = dx_new
+        if step_tol is None:
+            if np.max(step) <= 1e-13 * (1.0 + np.max(np.abs(dx_new))):
+                break
+        elif np.all(step < step_tol):
+            break
     # Joseph form (I − KH) P (I − KH)ᵀ + K R Kᵀ, associated as M = (I − KH) P = P − K (P Hᵀ)ᵀ,
     # P_post = M − (M Hᵀ − K R) Kᵀ: the same products without forming n_e × n_e temporaries
-    # beyond M (O(n_e² m) instead of O(n_e³)); no optimal-gain identity is used.
+    # beyond M (O(n_e² m) instead of O(n_e³)); no optimal-gain identity is used, so it holds for a
+    # projected (sub-optimal) gain as well.
     M = P - K @ PHt.T
     A = M - (M @ Hk.T - K @ R) @ K.T
     A += A.T
@@ -523,6 +545,10 @@ def update(
     gate_probability: float | None = None,
     iterations: int = 1,
     eps: float | np.ndarray = 1e-6,
+    *,
+    gain_projector: Callable[[np.ndarray], np.ndarray] | None = None,
+    step_tol: np.ndarray | None = None,
+    gate_threshold: float | None = None,
 ) -> UpdateResult:
     """Measurement update of an error-state EKF with Joseph-form covariance.
 
@@ -542,6 +568,17 @@ def update(
     ``x_{i+1} = x ⊞ K_i [r(z, h(x_i)) − H_i (x ⊟ x_i)]``, stopping early when the step no longer
     changes; the covariance is the Joseph form with the last ``H_i``, ``K_i``.  The gate uses the
     prior innovation.  ``eps``: numeric-Jacobian perturbation (scalar or (n_e,)).
+
+    Options (keyword-only):
+
+    * ``gain_projector(x) -> Π`` (n_e, n_e): constrained update directions by gain projection
+      (Simon 2006, Sect. 7.5), ``K ← Π(x_i) K`` with Π evaluated at the prior and then at each
+      iterate.  The Joseph form stays the exact covariance for such a sub-optimal gain.
+    * ``step_tol`` (n_e,): absolute stop rule of the iterations, ``|δ_{i+1} − δ_i| < step_tol``
+      componentwise (error-state units); None: the relative rule
+      ``max|δ_{i+1} − δ_i| ≤ 1e-13 (1 + max|δ_{i+1}|)``.  An iterate where ``h`` is not finite
+      ends the iterations (the previous iterate and its gain are kept).
+    * ``gate_threshold``: χ² threshold on the NIS used instead of ``gate_probability``.
     """
     x = np.asarray(x, dtype=float)
     P = np.asarray(P, dtype=float)
@@ -549,7 +586,12 @@ def update(
         H = np.asarray(H, dtype=float)
     if iterations < 1:
         raise ValueError("iterations must be >= 1")
-    return UpdateResult(*_update(x, P, z, h, R, layout, H, residual, gate_probability, int(iterations), eps))
+    return UpdateResult(
+        *_update(
+            x, P, z, h, R, layout, H, residual, gate_probability, int(iterations), eps,
+            gain_projector, step_tol, gate_threshold,
+        )
+    )  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------
@@ -661,6 +703,9 @@ def run_filter(
                     meas.gate_probability,
                     meas.iterations,
                     meas.eps,
+                    meas.gain_projector,
+                    meas.step_tol,
+                    meas.gate_threshold,
                 )
             except (np.linalg.LinAlgError, ValueError) as err:
                 raise type(err)(f"step {k} (t={tk} s), measurement {meas.name!r}: {err}") from err

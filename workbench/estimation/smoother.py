@@ -48,8 +48,13 @@ def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPass:
     """Error-state RTS smoothing of a forward pass (formulas in the module docstring).
 
     ``fp``: output of :func:`~workbench.estimation.ekf.run_filter` (or any ForwardPass with
-    ``F[k]`` the transition from k−1 to k).  Raises ``ValueError`` naming the step if a predicted
-    covariance cannot be factorised or a smoothed covariance is not positive definite.
+    ``F[k]`` the transition from k−1 to k).  The gain is solved on the Jacobi-scaled ``P_prior``
+    (``D⁻¹ P D⁻¹``, D = sqrt(diag)) so that badly scaled states (position variances of (km)² next
+    to attitude variances of (µrad)² after a long free propagation) keep the Cholesky factor
+    accurate.  The covariance recursion is exact for any forward gain (projected, sub-optimal
+    ones included) as long as ``P_post``/``P_prior`` are the actual error covariances (Joseph
+    form): G is the regression of the filtered error on the predicted one.  Raises ``ValueError``
+    naming the step if a predicted covariance cannot be factorised or a smoothed covariance is not positive definite.
     """
     n = fp.t.shape[0]
     n_e = layout.n_e
@@ -63,14 +68,17 @@ def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPass:
     _check_pd(Ps[-1], n - 1, fp.t)
     for k in range(n - 2, -1, -1):
         Pp = fp.P_prior[k + 1]
-        c, info = lapack.dpotrf(Pp, lower=1)
-        if info != 0:
+        # Gᵀ = P_prior[k+1]⁻¹ F[k+1] P_post[k]   (P_post symmetric), solved on the Jacobi-scaled
+        # D⁻¹ P_prior D⁻¹ (D = sqrt diag): (km)² next to (µrad)² variances stay factorisable
+        d = np.sqrt(np.diag(Pp))
+        c, info = lapack.dpotrf(Pp / np.outer(d, d), lower=1)
+        if info != 0 or not np.all(d > 0.0):
             raise ValueError(
                 f"RTS smoother: predicted covariance P_prior[{k + 1}] (t={fp.t[k + 1]} s) is not "
                 f"positive definite (potrf info={info})"
             )
-        # Gᵀ = P_prior[k+1]⁻¹ F[k+1] P_post[k]   (P_post symmetric)
-        Gt, _ = lapack.dpotrs(c, fp.F[k + 1] @ fp.P_post[k], lower=1)
+        Gt, _ = lapack.dpotrs(c, (fp.F[k + 1] @ fp.P_post[k]) / d[:, None], lower=1)
+        Gt = Gt / d[:, None]
         Gk = Gt.T
         dx = Gk @ layout.boxminus(xs[k + 1], fp.x_prior[k + 1])
         xs[k] = layout.boxplus(fp.x_post[k], dx)

@@ -36,6 +36,7 @@ from workbench.problems.entry.filter import (
     EntryFilterSigmas,
     RadarData,
     gain_projector,
+    radar_measurement,
     radar_update,
     run_entry_smoother,
 )
@@ -369,8 +370,9 @@ def test_iterated_update_gauss_newton():
     """Iterated update (``update_iterations``): one step is the ordinary update; iterating re-linearises
     the slant ranges about the updated state and reaches the Gauss-Newton fixed point, with a
     smaller post-update residual than the single linearised step at a 7° attitude error."""
-    from workbench.problems.entry.filter import _Event, _iterated_update, _predict_channel
+    from workbench.estimation.ekf import ErrorStateLayout, update
 
+    lay = ErrorStateLayout(10, ((3, 3),))
     rng = np.random.default_rng(5)
     v, q_t, p, _ = _random_state(rng)
     q = quat_boxplus(q_t, np.deg2rad([5.0, -5.0, 0.0]))  # ~7° tilt error
@@ -380,26 +382,33 @@ def test_iterated_update_gauss_newton():
                       np.zeros(0, bool))  # fmt: skip
     sg = EntryFilterSigmas(slant_range=5.0)
     P = np.diag(np.r_[np.full(3, 10.0), np.full(3, np.deg2rad(7.0)), np.full(3, 200.0)] ** 2)
-    e = _Event(0.0, "slant_range", 0)
-    z_, pred, mask, H, R, kind = _predict_channel("slant_range", 0, radar, v, q, p, sg)
-    res0 = z[mask] - pred[mask]
-    _, q1, p1, P1, K, _ = radar_update(v, q, p, P, res0, H, R, kind)
-    dx1 = K @ res0
-    dxa, Pa = _iterated_update(e, radar, sg, v, q, p, P, z, mask, dx1, kind, True, 1)
-    assert np.allclose(dxa, dx1) and np.allclose(Pa, P1)
-    dx, Pn = _iterated_update(e, radar, sg, v, q, p, P, z, mask, dx1, kind, True, 30)
-    assert is_symmetric_pd(Pn)[0]
+    x = np.r_[v, q, p]
+    rm = radar_measurement("slant_range", 0, radar, x, sg)
+    m = rm.measurement
+    assert rm.mask.all() and m.z.shape == (4,)
 
-    def post_res(d):
-        _, pr, _, _, _, _ = _predict_channel(
-            "slant_range", 0, radar, v + d[0:3], quat_boxplus(q, d[3:6]), p + d[6:9], sg
-        )
-        return np.linalg.norm(z - pr)
+    def upd(n):
+        return update(x, P, m.z, m.h, m.R, lay, H=m.H, iterations=n, gain_projector=m.gain_projector,
+                      step_tol=m.step_tol)  # fmt: skip
 
-    assert post_res(dx) < 0.5 * post_res(dx1)
-    # fixed point: one more step does not move it
-    dx2, _ = _iterated_update(e, radar, sg, v, q, p, P, z, mask, dx, kind, True, 2)
-    assert np.allclose(dx2, dx, atol=1e-6)
+    res0 = z - rm.pred_full
+    _, q1, p1, P1, K, _ = radar_update(v, q, p, P, res0, m.H(x), m.R, rm.kind)
+    one = upd(1)
+    assert np.allclose(one.x_post, np.r_[v + (K @ res0)[0:3], q1, p1]) and np.allclose(one.P_post, P1)
+    it = upd(30)
+    assert is_symmetric_pd(it.P_post)[0]
+
+    def post_res(xx):
+        return np.linalg.norm(z - m.h(xx))
+
+    assert post_res(it.x_post) < 0.5 * post_res(one.x_post)
+    # fixed point: one more Gauss-Newton step about the result does not move it
+    xs = it.x_post
+    d = lay.boxminus(xs, x)
+    Hs = m.H(xs)
+    Ks = m.gain_projector(xs) @ P @ Hs.T @ np.linalg.inv(Hs @ P @ Hs.T + m.R)
+    d_next = Ks @ (m.z - m.h(xs) + Hs @ d)
+    assert np.linalg.norm(d) > 1e-3 and np.allclose(d_next, d, atol=1e-6)
 
 
 # ---------------------------------------------------------------------------------------------

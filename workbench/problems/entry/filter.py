@@ -57,8 +57,8 @@ projector Π at the iterate; Joseph covariance of the last gain).  The first rad
 with a ~7° attitude error; 50-run validation: forward curvilinear ANEES at the first radar sample
 12.7 → 10.5 (the NIS/innovations recorded are still the prior's).
 
-Backward pass: error-state RTS (same formulas as :func:`workbench.estimation.smoother.rts_smooth`,
-Särkkä 2013 Sect. 8.2) with the stored Φ, P_prior, P_post; the gain is solved on the
+Backward pass: :func:`workbench.estimation.smoother.rts_smooth` (error-state RTS, Särkkä 2013
+Sect. 8.2) of the stored Φ, P_prior, P_post on the augmented grid; the gain is solved on the
 Jacobi-scaled P_prior (position variances of (km)² next to attitude variances of (µrad)² make
 the unscaled Cholesky ill-conditioned after a long free propagation).  Smoothed residuals per
 channel: measured − h(x_s) with ``S = H P_s Hᵀ + R`` (a conservative band: the exact covariance
@@ -82,7 +82,8 @@ from scipy.linalg import lapack
 from scipy.stats import chi2
 
 from workbench.core.rotation import quat_boxplus, quat_to_dcm
-from workbench.estimation.ekf import ErrorStateLayout
+from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, update
+from workbench.estimation.smoother import rts_smooth
 from workbench.estimation.strapdown import (
     GAP_SIGMA_DEFAULT,
     apply_gap,
@@ -110,6 +111,9 @@ __all__ = [
     "radar_from_telemetry",
     "gain_projector",
     "radar_update",
+    "RadarMeasurement",
+    "radar_measurement",
+    "UPDATE_STEP_TOL",
     "run_entry_smoother",
 ]
 
@@ -293,7 +297,8 @@ def radar_update(
     constrained: bool = True,
     gate: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-    """One (possibly constrained) EKF update of the state (v_M, q_M_G, p_M) and P (9, 9).
+    """One (possibly constrained) EKF update of the state (v_M, q_M_G, p_M) and P (9, 9), by
+    :func:`workbench.estimation.ekf.update` with the gain projector of :func:`gain_projector`.
 
     ``residual`` (d,) measured − predicted, ``H`` (d, 9), ``R`` (d, d); ``kind`` "range" or
     "velocity" (:func:`gain_projector`), ignored when ``constrained`` is False.  ``gate``: χ²
@@ -302,24 +307,24 @@ def radar_update(
     practice).  Returns ``(v, q, p, P, K (9, d), accepted)``; when gated out, the inputs are
     returned unchanged with K = 0.
     """
-    S = H @ P @ H.T + R
-    S = 0.5 * (S + S.T)
-    c, info = lapack.dpotrf(S, lower=1)
-    if info != 0:
-        raise ValueError(f"radar_update: innovation covariance not positive definite (potrf info={info})")
-    if gate is not None:
-        w, _ = lapack.dpotrs(c, residual, lower=1)
-        if float(residual @ w) > gate:
-            return v, q, p, P, np.zeros((9, residual.size)), False
-    Kt, _ = lapack.dpotrs(c, H @ P, lower=1)  # S⁻¹ H P = Kᵀ
-    K = Kt.T
-    if constrained:
-        K = gain_projector(kind, p, q) @ K
-    dx = K @ residual
-    A = _I9 - K @ H
-    Pn = A @ P @ A.T + K @ R @ K.T
-    Pn = 0.5 * (Pn + Pn.T)
-    return v + dx[0:3], quat_boxplus(q, dx[3:6]), p + dx[6:9], Pn, K, True
+    x = np.r_[v, q, p]
+    res = np.asarray(residual, dtype=float)
+    Hc = np.asarray(H, dtype=float)
+    ur = update(
+        x,
+        P,
+        res,
+        lambda xx: Hc @ _LAYOUT.boxminus(xx, x),  # linear model about x: y = residual at x
+        R,
+        _LAYOUT,
+        H=Hc,
+        gain_projector=(lambda xx: gain_projector(kind, xx[7:10], xx[3:7])) if constrained else None,
+        gate_threshold=gate,
+    )
+    if not ur.accepted:
+        return v, q, p, P, np.zeros((9, res.size)), False
+    xn = ur.x_post
+    return xn[0:3], xn[3:7], xn[7:10], ur.P_post, ur.K, True
 
 
 # ---------------------------------------------------------------------------------------------
@@ -445,6 +450,102 @@ def _predict_channel(
     return z, y, np.ones(3, dtype=bool), H, sg.velocity_out**2 * np.eye(3), "velocity"
 
 
+#: Stop rule of the iterated radar update (error-state units): 1e-6 m/s, 1e-9 rad, 1e-6 m.
+UPDATE_STEP_TOL = np.r_[np.full(3, 1e-6), np.full(3, 1e-9), np.full(3, 1e-6)]
+
+
+class _ChannelModel:
+    """``h(x)``, ``H(x)`` of the used components of one radar sample, memoised on x (10,).
+
+    The iterated update evaluates h and H at the same iterate; a change of the set of usable
+    components (a beam that misses or starts hitting the terrain sphere) makes h NaN, which ends
+    the iterations of :func:`workbench.estimation.ekf.update` at the previous iterate.
+    """
+
+    def __init__(self, channel, index, radar, sg, mask, x, pred, H):
+        self.channel, self.index, self.radar, self.sg, self.mask = channel, index, radar, sg, mask
+        self.x, self.pred, self.Hm = x, pred[mask], H
+
+    def _at(self, x: np.ndarray) -> None:
+        if not np.array_equal(x, self.x):
+            _, pred, mask, H, _, _ = _predict_channel(
+                self.channel, self.index, self.radar, x[0:3], x[3:7], x[7:10], self.sg
+            )
+            m = int(self.mask.sum())
+            if np.array_equal(mask, self.mask):
+                self.pred, self.Hm = pred[mask], H
+            else:
+                self.pred, self.Hm = np.full(m, np.nan), np.full((m, 9), np.nan)
+            self.x = np.array(x)
+
+    def h(self, x: np.ndarray) -> np.ndarray:
+        self._at(x)
+        return self.pred
+
+    def H(self, x: np.ndarray) -> np.ndarray:
+        self._at(x)
+        return self.Hm
+
+
+@dataclass(frozen=True)
+class RadarMeasurement:
+    """One radar sample as a measurement of the shared EKF (:class:`~workbench.estimation.ekf.Measurement`).
+
+    ``z_full`` (d,) measured and ``pred_full`` (d,) predicted at the linearisation state (NaN where
+    the model is undefined), ``mask`` (d,) the used components (finite, positive measurement and
+    finite prediction); ``measurement``: name = channel, ``z = z_full[mask]``, ``h``/``H`` of the
+    used components (Jacobian w.r.t. ``[δv_M, δθ_G, δp_M]``), R, the gain projector of
+    :func:`gain_projector` (None when unconstrained) and :data:`UPDATE_STEP_TOL`; None when no
+    component is usable.  ``kind`` "range" | "velocity".
+    """
+
+    z_full: np.ndarray
+    pred_full: np.ndarray
+    mask: np.ndarray
+    kind: str
+    x_lin: np.ndarray
+    constrained: bool
+    measurement: Measurement | None
+
+    def linearised(self, x: np.ndarray) -> RadarMeasurement:
+        """The affine model about ``x_lin`` (x̄): ``h(x) = h(x̄) + H(x̄) (x ⊟ x̄)``, constant H and
+        projector Π(x̄) — the measurement of a relinearised (Gauss-Newton) smoother pass."""
+        mm = self.measurement
+        if mm is None:
+            return self
+        xb = self.x_lin
+        hb = self.pred_full[self.mask]
+        Hb = np.asarray(mm.H(xb), dtype=float)
+        Pi = None if mm.gain_projector is None else mm.gain_projector(xb)
+        lin = Measurement(
+            mm.name,
+            mm.z,
+            mm.R,
+            lambda xx: hb + Hb @ _LAYOUT.boxminus(xx, xb),
+            Hb,
+            gain_projector=None if Pi is None else (lambda _xx: Pi),
+        )
+        return RadarMeasurement(self.z_full, self.pred_full, self.mask, self.kind, xb, self.constrained, lin)
+
+
+def radar_measurement(
+    channel: str, index: int, radar: RadarData, x: np.ndarray, sg: EntryFilterSigmas, *, constrained: bool = True
+) -> RadarMeasurement:
+    """Sample ``index`` of radar ``channel`` (:data:`CHANNELS`) linearised at x = [v_M, q_M_G, p_M] (10,).
+
+    Models of :mod:`workbench.models.radar` (slant ranges B.3/B.4 of the four beams, slant-out
+    along B0, velocity-out B.5/B.6 [m/s]); R from ``sg`` (1σ per component, SI).
+    """
+    x = np.asarray(x, dtype=float)
+    z, pred, mask, H, R, kind = _predict_channel(channel, index, radar, x[0:3], x[3:7], x[7:10], sg)
+    if not mask.any():
+        return RadarMeasurement(z, pred, mask, kind, x, constrained, None)
+    model = _ChannelModel(channel, index, radar, sg, mask, x, pred, H)
+    proj = (lambda xx: gain_projector(kind, xx[7:10], xx[3:7])) if constrained else None
+    mm = Measurement(channel, z[mask], R, model.h, model.H, gain_projector=proj, step_tol=UPDATE_STEP_TOL)
+    return RadarMeasurement(z, pred, mask, kind, x, constrained, mm)
+
+
 # ---------------------------------------------------------------------------------------------
 # driver
 
@@ -511,13 +612,15 @@ def run_entry_smoother(
     for it in range(n_iter):
         fw = _forward(x0, np.asarray(P0, dtype=float), lin, t_aug, interval, imu_node, fa, wa, sw, sf, sample_dt,
                       gaps, by_node, radar, sg, qpsd, gate, constrained)  # fmt: skip
-        Xs, Ps = _rts(fw, t_aug)
+        fw, rec = fw
+        sp = rts_smooth(fw, _LAYOUT)
+        Xs, Ps = sp.x, sp.P
         if it == 0:
-            fw0 = fw
+            fw0, rec0 = fw, rec
         if lin is not None:
             steps.append(float(np.max(np.abs(_LAYOUT.boxminus(Xs, lin)[:, 3:6]))))
         lin = Xs
-    Xpo, Ppo, rec = fw0.Xpo, fw0.Ppo, fw0.rec
+    Xpo, Ppo, rec = fw0.x_post, fw0.P_post, rec0
     counts["iterations"] = n_iter
     counts["relinearisation_max_attitude_change_rad"] = steps
 
@@ -555,27 +658,16 @@ def run_entry_smoother(
     return EntryFilterResult(fwd, smo, innov, sres, fits, bool(constrained), counts)
 
 
-@dataclass
-class _Forward:
-    """Forward-pass histories on the augmented grid (N nodes): prior/posterior state (N, 10) and
-    covariance (N, 9, 9); ``F`` the error transition into node a (``F[0] = I``); ``rec`` the event
-    records (measured, predicted, S, accepted)."""
-
-    Xpr: np.ndarray
-    Ppr: np.ndarray
-    Xpo: np.ndarray
-    Ppo: np.ndarray
-    F: np.ndarray
-    rec: dict
-
-
 def _forward(
     x0, P0, lin, t_aug, interval, imu_node, fa, wa, sw, sf, sample_dt, gaps, by_node, radar, sg, qpsd, gate, constrained
-) -> _Forward:
-    """EKF forward pass.  ``lin`` None: the ordinary EKF (dynamics and measurements linearised at
-    the running estimate).  ``lin`` (N, 10) a linearisation trajectory (the previous iteration's
-    smoothed states): the step is the affine model ``x⁻ = f(x̄) ⊞ Φ(x̄) (x ⊟ x̄)`` and a measurement
-    ``h(x) ≈ h(x̄) + H(x̄) (x ⊟ x̄)`` (iterated extended smoother, Gauss-Newton; Bell 1994)."""
+) -> tuple[ForwardPass, dict]:
+    """EKF forward pass on the augmented grid (N nodes): a :class:`~workbench.estimation.ekf.ForwardPass`
+    (``F[a]``, ``Q[a]`` the error transition and process noise into node a) and the event records
+    ``id(event) -> (measured, predicted, S_full, accepted)``.  ``lin`` None: the ordinary EKF
+    (dynamics and measurements linearised at the running estimate).  ``lin`` (N, 10) a
+    linearisation trajectory (the previous iteration's smoothed states): the step is the affine
+    model ``x⁻ = f(x̄) ⊞ Φ(x̄) (x ⊟ x̄)`` and a measurement ``h(x) ≈ h(x̄) + H(x̄) (x ⊟ x̄)``
+    (iterated extended smoother, Gauss-Newton; Bell 1994)."""
     N = t_aug.size
     n_upd = max(1, int(sg.update_iterations))
     Xpr = np.empty((N, 10))
@@ -583,9 +675,11 @@ def _forward(
     Ppr = np.empty((N, 9, 9))
     Ppo = np.empty((N, 9, 9))
     F = np.empty((N, 9, 9))
+    Q = np.empty((N, 9, 9))
     v, q, p = x0[0:3].copy(), x0[3:7].copy(), x0[7:10].copy()
     P = P0.copy()
     F[0] = _I9
+    Q[0] = 0.0
     rec: dict[int, tuple] = {}  # event id -> (measured, predicted, S_full, accepted)
     for a in range(N):
         if a > 0:
@@ -623,85 +717,45 @@ def _forward(
             P = Fk @ P @ Fk.T + Qk
             P = 0.5 * (P + P.T)
             F[a] = Fk
+            Q[a] = Qk
         Xpr[a, 0:3], Xpr[a, 3:7], Xpr[a, 7:10] = v, q, p
         Ppr[a] = P
         for e in by_node.get(a, ()):
-            if lin is None:
-                z, pred, mask, H, R, kind = _predict_channel(e.channel, e.index, radar, v, q, p, sg)
-                res_off = np.zeros(int(mask.sum()))
-                pv, pq, pp = v, q, p
-            else:
-                xb = lin[a]
-                z, pred, mask, H, R, kind = _predict_channel(e.channel, e.index, radar, xb[0:3], xb[3:7], xb[7:10], sg)
-                res_off = H @ _LAYOUT.boxminus(np.r_[v, q, p], xb) if mask.any() else np.zeros(0)
-                pred = pred.copy()
-                pred[mask] = pred[mask] + res_off
-                pv, pq, pp = xb[0:3], xb[3:7], xb[7:10]
+            x = np.r_[v, q, p]
+            m = radar_measurement(e.channel, e.index, radar, x if lin is None else lin[a], sg, constrained=constrained)
+            z, pred = m.z_full, m.pred_full.copy()
+            if lin is not None and m.mask.any():  # h(x) ≈ h(x̄) + H(x̄) (x ⊟ x̄)
+                m = m.linearised(x)
+                pred[m.mask] = m.measurement.h(x)
             d = z.size
             S_full = np.full((d, d), np.nan)
-            if not mask.any():
+            if not m.mask.any():
                 rec[id(e)] = (z, pred, S_full, False)
                 continue
-            res = z[mask] - pred[mask]
-            S = H @ P @ H.T + R
-            S_full[np.ix_(mask, mask)] = S
-            _, _, _, Pn, K, ok = radar_update(
-                pv, pq, pp, P, res, H, R, kind, constrained=constrained, gate=gate[e.channel]
+            mm = m.measurement
+            ur = update(
+                x,
+                P,
+                mm.z,
+                mm.h,
+                mm.R,
+                _LAYOUT,
+                H=mm.H,
+                iterations=n_upd if lin is None else 1,
+                gain_projector=mm.gain_projector,
+                step_tol=mm.step_tol,
+                gate_threshold=gate[e.channel],
             )
-            if ok:
-                dx = K @ res
-                if lin is None and n_upd > 1:
-                    dx, Pn = _iterated_update(e, radar, sg, v, q, p, P, z, mask, dx, kind, constrained, n_upd)
-                v, q, p = v + dx[0:3], quat_boxplus(q, dx[3:6]), p + dx[6:9]
-                P = Pn
-            rec[id(e)] = (z, pred, S_full, ok)
+            S_full[np.ix_(m.mask, m.mask)] = ur.S
+            if ur.accepted:
+                xn = ur.x_post
+                v, q, p = xn[0:3], xn[3:7], xn[7:10]
+                P = ur.P_post
+            rec[id(e)] = (z, pred, S_full, ur.accepted)
         Xpo[a, 0:3], Xpo[a, 3:7], Xpo[a, 7:10] = v, q, p
         Ppo[a] = P
         _check_pd(P, a, t_aug, "forward")
-    return _Forward(Xpr, Ppr, Xpo, Ppo, F, rec)
-
-
-def _iterated_update(e, radar, sg, v, q, p, P, z, mask, dx, kind, constrained, n_upd):
-    """Iterated EKF update (Gauss-Newton on the measurement, Bell & Cathey 1993) of one event.
-
-    ``dx`` is the ordinary update's correction about the prior ``x⁻ = (v, q, p)``.  Iterate
-    ``x_i = x⁻ ⊞ δ_i``: ``h``, ``H_i`` and the projector ``Π_i`` at ``x_i``, ``K_i = Π_i P H_iᵀ
-    (H_i P H_iᵀ + R)⁻¹``, ``δ_{i+1} = K_i (z − h(x_i) + H_i δ_i)``; stop after ``n_upd`` − 1 further
-    steps, when the step is below 1e-9 rad / 1e-6 m·m/s, or if the set of usable beams changes
-    (keeping the last accepted iterate).  Returns ``(δ, P_post)`` with the Joseph covariance of the
-    last gain.  P stays the prior covariance of the error about x⁻ (the attitude error's
-    reparametrisation about x_i, ``J_r(δθ)``, is ignored: < 0.3 % at 7°)."""
-    xm = np.r_[v, q, p]
-    Pn = None
-    for _ in range(n_upd - 1):
-        vi, qi, pi = v + dx[0:3], quat_boxplus(q, dx[3:6]), p + dx[6:9]
-        _, pred_i, mask_i, H, R, _ = _predict_channel(e.channel, e.index, radar, vi, qi, pi, sg)
-        if not np.array_equal(mask_i, mask):
-            break
-        r = z[mask] - pred_i[mask] + H @ _LAYOUT.boxminus(np.r_[vi, qi, pi], xm)
-        S = H @ P @ H.T + R
-        Kt = np.linalg.solve(0.5 * (S + S.T), H @ P)
-        K = Kt.T
-        if constrained:
-            K = gain_projector(kind, pi, qi) @ K
-        dxn = K @ r
-        A = _I9 - K @ H
-        Pn = A @ P @ A.T + K @ R @ K.T
-        Pn = 0.5 * (Pn + Pn.T)
-        step = dxn - dx
-        dx = dxn
-        if np.max(np.abs(step[3:6])) < 1e-9 and np.max(np.abs(step[[0, 1, 2, 6, 7, 8]])) < 1e-6:
-            break
-    if Pn is None:  # no iteration taken: the ordinary update
-        _, pred0, _, H, R, _ = _predict_channel(e.channel, e.index, radar, v, q, p, sg)
-        S = H @ P @ H.T + R
-        K = np.linalg.solve(0.5 * (S + S.T), H @ P).T
-        if constrained:
-            K = gain_projector(kind, p, q) @ K
-        A = _I9 - K @ H
-        Pn = A @ P @ A.T + K @ R @ K.T
-        Pn = 0.5 * (Pn + Pn.T)
-    return dx, Pn
+    return ForwardPass(t_aug, Xpr, Ppr, Xpo, Ppo, F, Q, {}), rec
 
 
 def _gap_map(t: np.ndarray, gaps: Any) -> dict[int, Any]:
@@ -718,42 +772,3 @@ def _check_pd(A: np.ndarray, k: int, t: np.ndarray, which: str) -> None:
     _, info = lapack.dpotrf(A, lower=1)
     if info != 0 or not np.all(np.isfinite(A)):
         raise ValueError(f"entry smoother: {which} covariance at node {k} (t={t[k]:.3f} s) is not positive definite")
-
-
-def _rts(fw: _Forward, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Error-state RTS on the augmented grid (formulas of :mod:`workbench.estimation.smoother`).
-
-    ``G_k = P_post[k] F[k+1]ᵀ P_prior[k+1]⁻¹`` solved with P_prior Jacobi-scaled
-    (``D⁻¹ P D⁻¹``, D = sqrt(diag)) before the Cholesky factorisation; ``x_s[k] = x_f[k] ⊞ G_k
-    (x_s[k+1] ⊟ x⁻[k+1])``, ``P_s[k] = P_post[k] + G_k (P_s[k+1] − P_prior[k+1]) G_kᵀ``.
-
-    The covariance formula is exact for *any* forward gain, AMELIA's projected (sub-optimal)
-    ones included, as long as P_post/P_prior are the actual error covariances (Joseph form): G is
-    the regression of e_f[k] on e⁻[k+1], so ``e_f[k] − G e⁻[k+1]`` is uncorrelated with e⁻[k+1] and
-    with everything after it, whence ``e_s[k] = (e_f[k] − G e⁻[k+1]) + G e_s[k+1]`` has that
-    covariance.  (Measured: the backward recursion of the error's own transition through the
-    projected updates, ``A_k = I − G (I − A J) F``, gives the same numbers.)  With a projected
-    gain P_post can exceed P_prior in some directions, so P_s ≤ P_post no longer holds.
-    """
-    Xpr, Ppr, Xpo, Ppo, F = fw.Xpr, fw.Ppr, fw.Xpo, fw.Ppo, fw.F
-    N = t.size
-    Xs = np.empty_like(Xpo)
-    Ps = np.empty_like(Ppo)
-    Xs[-1] = Xpo[-1]
-    Ps[-1] = Ppo[-1]
-    for k in range(N - 2, -1, -1):
-        Pp = Ppr[k + 1]
-        d = np.sqrt(np.diag(Pp))
-        c, info = lapack.dpotrf(Pp / np.outer(d, d), lower=1)
-        if info != 0:
-            raise ValueError(f"entry smoother: predicted covariance at node {k + 1} (t={t[k + 1]:.3f} s) is not PD")
-        B = (F[k + 1] @ Ppo[k]) / d[:, None]
-        Gt, _ = lapack.dpotrs(c, B, lower=1)
-        Gt = Gt / d[:, None]  # P_prior⁻¹ F P_post
-        G = Gt.T
-        Xs[k] = _LAYOUT.boxplus(Xpo[k], G @ _LAYOUT.boxminus(Xs[k + 1], Xpr[k + 1]))
-        A = Ppo[k] + G @ (Ps[k + 1] - Pp) @ Gt
-        A = 0.5 * (A + A.T)
-        _check_pd(A, k, t, "smoothed")
-        Ps[k] = A
-    return Xs, Ps
