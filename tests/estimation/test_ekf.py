@@ -482,19 +482,24 @@ def test_run_filter_bookkeeping_gating_and_gains():
     np.testing.assert_array_equal(fp.Q[11], Q)
     pos = fp.innovations["pos"]
     present = np.arange(n) % 3 != 2
-    np.testing.assert_array_equal(pos.present, present)
-    assert np.all(np.isnan(pos.y[~present])) and np.all(np.isfinite(pos.y[present]))
-    assert np.all(np.isnan(pos.S[~present])) and np.all(np.isnan(pos.nis[~present]))
-    assert pos.K.shape == (n, 2, 1) and np.all(np.isnan(pos.K[~present]))
+    np.testing.assert_array_equal(pos.step, np.flatnonzero(present))
+    np.testing.assert_array_equal(pos.t, t[present])
+    k = pos.step.size
+    assert pos.y.shape == (k, 1) and pos.S.shape == (k, 1, 1) and pos.nis.shape == (k,)
+    assert np.all(np.isfinite(pos.y)) and np.all(np.isfinite(pos.S)) and np.all(np.isfinite(pos.nis))
+    np.testing.assert_array_equal(pos.z[:, 0], z[present])
+    np.testing.assert_allclose(pos.y, pos.z - pos.z_pred)
+    np.testing.assert_allclose(pos.z_pred[:, 0], fp.x_prior[present, 0])  # pos first at every step
+    assert pos.K.shape == (k, 2, 1) and np.all(np.isfinite(pos.K))
     # outlier at step 7 rejected: posterior == prior there (no vel measurement at 7)
-    assert not pos.accepted[7]
-    assert pos.accepted[present & (np.arange(n) != 7)].all()
+    assert not pos.accepted[pos.step == 7].any()
+    assert pos.accepted[pos.step != 7].all()
     np.testing.assert_array_equal(fp.x_post[7], fp.x_prior[7])
     np.testing.assert_array_equal(fp.P_post[7], fp.P_prior[7])
     # steps without measurements
     np.testing.assert_array_equal(fp.x_post[2], fp.x_prior[2])
     vel = fp.innovations["vel"]
-    np.testing.assert_array_equal(vel.present, (np.arange(n) % 5 == 0) & present)
+    np.testing.assert_array_equal(vel.step, np.flatnonzero((np.arange(n) % 5 == 0) & present))
     # sequential processing at step 0: pos then vel, posterior equals two explicit updates
     r1 = update(x0, P0, [z[0]], lambda s: H @ s, [[1.0]], lay, H=H)
     r2 = update(r1.x_post, r1.P_post, [0.3], lambda s: s[1:], [[0.04]], lay)
@@ -533,16 +538,31 @@ def test_run_filter_numeric_transition_matches_analytic():
     np.testing.assert_allclose(b.x_post, a.x_post, rtol=1e-7, atol=1e-8)
 
 
-def test_run_filter_rejects_repeated_name_and_reports_step():
+def test_run_filter_repeated_name_at_one_step_and_size_change_reported():
+    """A channel may be measured twice at one step (two rows, sequential updates); a size change
+    of a channel and a failing update are reported with the step."""
     lay = ErrorStateLayout(1)
 
     def meas(k, tk, x):
-        m = Measurement("a", np.array([0.0]), np.array([[1.0]]), lambda s: s, np.eye(1))
+        m = Measurement("a", np.array([1.0]), np.array([[1.0]]), lambda s: s, np.eye(1))
         return [m, m] if k == 2 else [m]
 
-    with pytest.raises(ValueError, match="step 2"):
+    fp = run_filter(
+        np.zeros(1), np.eye(1), np.arange(4.0), lambda x, a, b: (x, np.eye(1)), lambda *_: np.eye(1), meas, lay
+    )
+    a = fp.innovations["a"]
+    np.testing.assert_array_equal(a.step, [0, 1, 2, 2, 3])
+    r1 = update(fp.x_prior[2], fp.P_prior[2], [1.0], lambda s: s, [[1.0]], lay, H=np.eye(1))
+    r2 = update(r1.x_post, r1.P_post, [1.0], lambda s: s, [[1.0]], lay, H=np.eye(1))
+    np.testing.assert_allclose(a.y[2:4, 0], [r1.y[0], r2.y[0]])
+    np.testing.assert_allclose(fp.x_post[2], r2.x_post)
+
+    def grow(k, tk, x):
+        return [Measurement("a", np.zeros(1 + (k == 2)), np.eye(1 + (k == 2)), lambda s: np.repeat(s, 1 + (k == 2)))]
+
+    with pytest.raises(ValueError, match="step 2.*changed size"):
         run_filter(
-            np.zeros(1), np.eye(1), np.arange(4.0), lambda x, a, b: (x, np.eye(1)), lambda *_: np.eye(1), meas, lay
+            np.zeros(1), np.eye(1), np.arange(4.0), lambda x, a, b: (x, np.eye(1)), lambda *_: np.eye(1), grow, lay
         )
 
     def bad(k, tk, x):

@@ -8,7 +8,7 @@ State and error state
 ---------------------
 The full state ``x`` (n_x,) may contain unit quaternions; the covariance ``P`` (n_e, n_e)
 always lives in the *error state* ``e`` (n_e,), where each quaternion is represented by a 3-vector
-small angle.  :class:`ErrorStateLayout` says where.  Attitude-error convention (DESIGN.md, the
+small angle.  :class:`ErrorStateLayout` says where.  Attitude-error convention (the
 same as :mod:`workbench.core.rotation`): the error is a **body-frame** small angle δθ [rad] with
 ``q_true = q_est ⊗ exp(δθ)`` (right / local, multiplicative perturbation).
 ``x ⊞ e`` applies additive corrections to the additive entries and ``q ⊗ exp(δθ)`` to each
@@ -36,7 +36,7 @@ Iterated EKF: Bell & Cathey, "The iterated Kalman filter update as a Gauss-Newto
 IEEE TAC 38(2), 1993, written with ⊞/⊟.
 
 References: [1] Gelb, *Applied Optimal Estimation*, 1974 (Joseph form); [2] POST2 EKF thesis,
-Ch. 3.1 (in ``/work/shared/references``); [3] Solà, "Quaternion kinematics for the error-state
+Ch. 3.1; [3] Solà, "Quaternion kinematics for the error-state
 Kalman filter", 2017 (error-state / reset); [4] Bell & Cathey 1993.
 """
 
@@ -254,7 +254,7 @@ class UpdateResult:
     the error state; ``nis = yᵀ S⁻¹ y`` (dimensionless); ``accepted`` False when the χ² gate
     rejected the measurement (then ``x_post is x`` and ``P_post is P``).  For an iterated update
     ``y``, ``S``, ``nis`` belong to the prior linearisation (the gate statistic), ``H`` and ``K``
-    to the last iterate (the ones used in the Joseph covariance).
+    to the last iterate (the ones used in the Joseph covariance).  ``z_pred`` (m,) = ``h(x_prior)``.
     """
 
     x_post: np.ndarray
@@ -265,6 +265,7 @@ class UpdateResult:
     H: np.ndarray
     nis: float
     accepted: bool
+    z_pred: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -296,20 +297,47 @@ class Measurement:
 
 @dataclass(frozen=True)
 class InnovationHistory:
-    """Innovations of one named measurement over a forward pass of n steps (m = its size).
+    """Innovations of one named measurement channel at its k processed samples (m = its size).
 
-    ``y`` (n, m) and ``S`` (n, m, m): NaN where the measurement is absent; ``nis`` (n,) NaN where
-    absent; ``accepted`` (n,) bool (False where absent or gated out); ``present`` (n,) bool;
-    ``K`` (n, n_e, m) gains (NaN where absent) only if the pass was run with ``keep_gains=True``,
-    else None.
+    The one record type of both problems' filters (forward innovations and smoothed residuals).
+    ``t`` (k,) [s] sample times; ``step`` (k,) int index of the grid step it was applied at (for
+    a sample between grid steps, the step at or before it); ``z`` (k, m) measured, ``z_pred``
+    (k, m) predicted ``h(x)`` (prior for a forward pass); ``y`` (k, m) innovation/residual
+    ``residual(z, z_pred)``; ``S`` (k, m, m) its covariance ``H P Hᵀ + R``; ``nis`` (k,)
+    ``yᵀ S⁻¹ y`` over the used components; ``accepted`` (k,) bool (False: gated out or not
+    usable); ``K`` (k, n_e, m) gains if kept, else None.  A component not used at a sample (e.g.
+    a radar beam off the terrain) is NaN in y, S, z_pred and K.  A step may hold several samples
+    of one channel (samples are in processing order).
     """
 
+    t: np.ndarray
+    step: np.ndarray
+    z: np.ndarray
+    z_pred: np.ndarray
     y: np.ndarray
     S: np.ndarray
     nis: np.ndarray
     accepted: np.ndarray
-    present: np.ndarray
     K: np.ndarray | None = None
+
+    @staticmethod
+    def from_rows(rows: Sequence[tuple], m: int, n_e: int | None = None) -> InnovationHistory:
+        """Stack per-sample rows ``(t, step, z, z_pred, y, S, nis, accepted[, K])`` of a channel of
+        size m (gains kept when ``n_e`` is given and the rows carry K)."""
+        k = len(rows)
+        keep = n_e is not None and k > 0 and len(rows[0]) > 8
+        out = InnovationHistory(
+            t=np.array([r[0] for r in rows], dtype=float),
+            step=np.array([r[1] for r in rows], dtype=int),
+            z=np.array([r[2] for r in rows], dtype=float).reshape(k, m),
+            z_pred=np.array([r[3] for r in rows], dtype=float).reshape(k, m),
+            y=np.array([r[4] for r in rows], dtype=float).reshape(k, m),
+            S=np.array([r[5] for r in rows], dtype=float).reshape(k, m, m),
+            nis=np.array([r[6] for r in rows], dtype=float),
+            accepted=np.array([r[7] for r in rows], dtype=bool),
+            K=np.array([r[8] for r in rows], dtype=float).reshape(k, n_e, m) if keep else None,
+        )
+        return out
 
 
 @dataclass(frozen=True)
@@ -453,7 +481,7 @@ def _update(
     x, P, z, h, R, layout, H, residual, gate_probability, iterations, eps,
     gain_projector=None, step_tol=None, gate_threshold=None,
 ):  # fmt: skip
-    """Core of :func:`update`; returns a tuple (x_post, P_post, y, S, K, H, nis, accepted)."""
+    """Core of :func:`update`; returns a tuple (x_post, P_post, y, S, K, H, nis, accepted, z_pred)."""
     z = _as_vector(z)
     zp = _as_vector(h(x))
     y = z - zp if residual is None else np.atleast_1d(np.asarray(residual(z, zp), dtype=float))
@@ -484,7 +512,7 @@ def _update(
     if gate_threshold is None and gate_probability is not None:
         gate_threshold = _chi2_threshold(float(gate_probability), y.shape[0])
     if gate_threshold is not None and nis > gate_threshold:
-        return x, P, y, S, K, Hk, nis, False
+        return x, P, y, S, K, Hk, nis, False, zp
     dx = K @ y
     x_new = layout.boxplus(x, dx)
     for _ in range(1, iterations):
@@ -530,7 +558,7 @@ def _update(
     A = M - (M @ Hk.T - K @ R) @ K.T
     A += A.T
     A *= 0.5
-    return x_new, A, y, S, K, Hk, nis, True
+    return x_new, A, y, S, K, Hk, nis, True, zp
 
 
 def update(
@@ -599,22 +627,6 @@ def update(
 # ---------------------------------------------------------------------------------------------
 
 
-class _InnovationBuffer:
-    __slots__ = ("m", "y", "S", "nis", "accepted", "present", "K")
-
-    def __init__(self, n: int, m: int, n_e: int, keep_gains: bool) -> None:
-        self.m = m
-        self.y = np.full((n, m), np.nan)
-        self.S = np.full((n, m, m), np.nan)
-        self.nis = np.full(n, np.nan)
-        self.accepted = np.zeros(n, dtype=bool)
-        self.present = np.zeros(n, dtype=bool)
-        self.K = np.full((n, n_e, m), np.nan) if keep_gains else None
-
-    def freeze(self) -> InnovationHistory:
-        return InnovationHistory(self.y, self.S, self.nis, self.accepted, self.present, self.K)
-
-
 def run_filter(
     x0: np.ndarray,
     P0: np.ndarray,
@@ -640,9 +652,10 @@ def run_filter(
     * ``P_prior = F P Fᵀ + Q`` (symmetrised).
 
     Then ``measurements_at(k, t[k], x_prior)`` returns a list of :class:`Measurement`, processed
-    sequentially (each its own :func:`update`, in list order).  A name may appear at most once per
-    step and must keep its size m.  Gains are kept (``InnovationHistory.K``) only with
-    ``keep_gains=True``.  Attitude errors follow the body-frame convention of the module.
+    sequentially (each its own :func:`update`, in list order) and recorded in the
+    :class:`InnovationHistory` of its name (a name may appear several times at one step; it must
+    keep its size m).  Gains are kept (``InnovationHistory.K``) only with ``keep_gains=True``.
+    Attitude errors follow the body-frame convention of the module.
     Errors in an update are re-raised with the step, time and measurement name.
     """
     t = np.asarray(t, dtype=float)
@@ -661,7 +674,8 @@ def run_filter(
     if n:
         F_hist[0] = np.eye(n_e)
         Q_hist[0] = 0.0
-    buffers: dict[str, _InnovationBuffer] = {}
+    rows: dict[str, list[tuple]] = {}
+    sizes: dict[str, int] = {}
     tl = t.tolist()
     for k in range(n):
         tk = tl[k]
@@ -691,7 +705,7 @@ def run_filter(
             if H is not None and not callable(H):
                 H = np.asarray(H, dtype=float)
             try:
-                xn, Pn, y, S, K, _, nis, ok = _update(
+                xn, Pn, y, S, K, _, nis, ok, zp = _update(
                     x,
                     P,
                     meas.z,
@@ -709,21 +723,11 @@ def run_filter(
                 )
             except (np.linalg.LinAlgError, ValueError) as err:
                 raise type(err)(f"step {k} (t={tk} s), measurement {meas.name!r}: {err}") from err
-            buf = buffers.get(meas.name)
-            if buf is None:
-                buf = buffers[meas.name] = _InnovationBuffer(n, y.shape[0], n_e, keep_gains)
-            elif buf.present[k] or buf.m != y.shape[0]:
-                raise ValueError(
-                    f"step {k}: measurement {meas.name!r} repeated at one step or changed size "
-                    f"({buf.m} -> {y.shape[0]})"
-                )
-            buf.y[k] = y
-            buf.S[k] = S
-            buf.nis[k] = nis
-            buf.accepted[k] = ok
-            buf.present[k] = True
-            if keep_gains:
-                buf.K[k] = K
+            m = sizes.setdefault(meas.name, y.shape[0])
+            if m != y.shape[0]:
+                raise ValueError(f"step {k}: measurement {meas.name!r} changed size ({m} -> {y.shape[0]})")
+            row = (tk, k, _as_vector(meas.z), zp, y, S, nis, ok)
+            rows.setdefault(meas.name, []).append((*row, K) if keep_gains else row)
             x, P = xn, Pn
         x_post[k] = x
         P_post[k] = P
@@ -735,5 +739,7 @@ def run_filter(
         P_post=P_post,
         F=F_hist,
         Q=Q_hist,
-        innovations={name: b.freeze() for name, b in buffers.items()},
+        innovations={
+            name: InnovationHistory.from_rows(r, sizes[name], n_e if keep_gains else None) for name, r in rows.items()
+        },
     )

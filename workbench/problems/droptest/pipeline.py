@@ -772,15 +772,14 @@ def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: Fil
     fp = fwd.forward
     innov = {}
     for name, ih in fp.innovations.items():
-        m = ih.present
-        if not m.any():
+        if not ih.t.size:
             continue
         dof = ih.y.shape[1]
-        nis = ih.nis[m]
-        sig = np.sqrt(np.einsum("nii->ni", ih.S[m]))
-        inside = np.mean(np.abs(ih.y[m]) <= 3.0 * sig)
+        nis = ih.nis
+        sig = np.sqrt(np.einsum("nii->ni", ih.S))
+        inside = np.mean(np.abs(ih.y) <= 3.0 * sig)
         # whiteness of the normalised innovations y/√S (S varies by orders of magnitude at impact)
-        yn = ih.y[m] / sig
+        yn = ih.y / sig
         white = {}
         if yn.shape[0] > 40:
             acf, band, frac = whiteness(yn, 20)
@@ -791,11 +790,11 @@ def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: Fil
             }
         innov[name] = {
             **white,
-            "count": int(m.sum()),
+            "count": int(ih.t.size),
             "dof": dof,
             "mean_nis": float(np.mean(nis)),
             "fraction_inside_3sigma": float(inside),
-            "rejected": int((~ih.accepted[m]).sum()),
+            "rejected": int((~ih.accepted).sum()),
         }
     P = smo.P
     eig_min = float(np.min(np.linalg.eigvalsh(P)))

@@ -200,11 +200,11 @@ class DropTestRecorder:
         r.line_strip(layout.ESTIMATE_FORWARD, st.x[:, rl.SP], color=FWD, radius=0.01)
         fp = st.forward
         for name, ih in fp.innovations.items():
-            m = ih.present
-            if not m.any():
+            m = ih.step  # grid steps of the samples
+            if not m.size:
                 continue
-            y = ih.y[m]
-            sig = np.sqrt(np.einsum("nii->ni", ih.S[m]))
+            y = ih.y
+            sig = np.sqrt(np.einsum("nii->ni", ih.S))
             labels = ("x", "y", "z") if y.shape[1] == 3 else ("value",)
             for i, lab in enumerate(labels):
                 root = f"/residuals/{name}/{lab}" if y.shape[1] > 1 else f"/residuals/{name}"
@@ -228,7 +228,7 @@ class DropTestRecorder:
                         colors=[(150, 150, 150, 255)],
                         widths=0.8,
                     )
-            r.scalars(f"/plots/nis/{name}", t[m], ih.nis[m], step=step[m], names=f"NIS {name}")
+            r.scalars(f"/plots/nis/{name}", t[m], ih.nis, step=step[m], names=f"NIS {name}")
         # measured vs predicted specific force at each triad (prediction from the prior state)
         tel = self.tel
         for j, name in enumerate(tel.triads):

@@ -57,6 +57,12 @@ projector Π at the iterate; Joseph covariance of the last gain).  The first rad
 with a ~7° attitude error; 50-run validation: forward curvilinear ANEES at the first radar sample
 12.7 → 10.5 (the NIS/innovations recorded are still the prior's).
 
+Composition: this module supplies the models (strapdown propagation, radar measurement functions
+and Jacobians, the gain projector, the augmented time grid); the estimation steps are the shared
+engine's — each update is :func:`workbench.estimation.ekf.update` (Joseph form, ``gain_projector``,
+iterated with :data:`UPDATE_STEP_TOL`), the pass is a :class:`~workbench.estimation.ekf.ForwardPass`,
+the channel records are :class:`~workbench.estimation.ekf.InnovationHistory`.
+
 Backward pass: :func:`workbench.estimation.smoother.rts_smooth` (error-state RTS, Särkkä 2013
 Sect. 8.2) of the stored Φ, P_prior, P_post on the augmented grid; the gain is solved on the
 Jacobi-scaled P_prior (position variances of (km)² next to attitude variances of (µrad)² make
@@ -82,7 +88,7 @@ from scipy.linalg import lapack
 from scipy.stats import chi2
 
 from workbench.core.rotation import quat_boxplus, quat_to_dcm
-from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, update
+from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, InnovationHistory, Measurement, update
 from workbench.estimation.smoother import rts_smooth
 from workbench.estimation.strapdown import (
     GAP_SIGMA_DEFAULT,
@@ -105,7 +111,6 @@ __all__ = [
     "CHANNELS",
     "RadarData",
     "EntryFilterSigmas",
-    "ChannelInnovations",
     "EntryPass",
     "EntryFilterResult",
     "radar_from_telemetry",
@@ -176,7 +181,7 @@ class EntryFilterSigmas:
     [rad/s] (None: ``[0, 0, MARS.rotation_rate]``); ``iterations`` forward-backward passes, each
     after the first relinearised about the previous smoothed trajectory (1: the plain EKF + RTS);
     ``update_iterations`` Gauss-Newton steps of each radar update in the first (causal) pass
-    (iterated EKF, :func:`_iterated_update`; 1: the ordinary update).
+    (iterated EKF of :func:`workbench.estimation.ekf.update`; 1: the ordinary update).
     """
 
     slant_range: float = 100.0
@@ -207,24 +212,6 @@ class EntryFilterSigmas:
 
 
 @dataclass(frozen=True)
-class ChannelInnovations:
-    """Residuals of one radar channel at its k processed samples (invalid packets excluded).
-
-    ``t`` (k,) [s]; ``y`` (k, d) measured − predicted (prior prediction for the forward pass,
-    smoothed for the smoothed residuals); ``S`` (k, d, d) its covariance (``H P Hᵀ + R``);
-    ``measured``, ``predicted`` (k, d); ``accepted`` (k,) bool (False: gated out).  Slant ranges
-    have d = 4 with NaN rows/columns for a skipped beam; slant-out d = 1; velocity-out d = 3 [m/s].
-    """
-
-    t: np.ndarray
-    y: np.ndarray
-    S: np.ndarray
-    measured: np.ndarray
-    predicted: np.ndarray
-    accepted: np.ndarray
-
-
-@dataclass(frozen=True)
 class EntryPass:
     """A pass on the IMU grid: ``t`` (n,) [s]; ``v_M`` (n, 3) [m/s]; ``q_M_G`` (n, 4); ``p_M`` (n, 3)
     [m]; ``P`` (n, 9, 9) covariance of ``[δv_M, δθ_G, δp_M]`` (forward: post-update; smoothed: RTS)."""
@@ -241,7 +228,11 @@ class EntryFilterResult:
     """Output of :func:`run_entry_smoother`.
 
     ``forward``/``smoothed`` (:class:`EntryPass`, IMU grid); ``innovations`` and
-    ``smoothed_residuals``: channel name (:data:`CHANNELS`) -> :class:`ChannelInnovations`;
+    ``smoothed_residuals``: channel name (:data:`CHANNELS`) ->
+    :class:`~workbench.estimation.ekf.InnovationHistory` (processed samples, invalid packets
+    excluded; slant ranges d = 4 with NaN components for a skipped beam, slant-out d = 1 [m],
+    velocity-out d = 3 [m/s]; ``step`` the IMU sample at or before the sample; forward: prior
+    prediction, smoothed: ``h(x_s)`` with ``S = H P_s Hᵀ + R``);
     ``plane_fits``: (t [s], :class:`~workbench.models.radar.PlaneFit`) per valid slant-range packet;
     ``constrained``; ``info``: counts (nodes inserted, snapped, updates per channel, gated) and
     ``wall_s`` [s].
@@ -249,8 +240,8 @@ class EntryFilterResult:
 
     forward: EntryPass
     smoothed: EntryPass
-    innovations: dict[str, ChannelInnovations]
-    smoothed_residuals: dict[str, ChannelInnovations]
+    innovations: dict[str, InnovationHistory]
+    smoothed_residuals: dict[str, InnovationHistory]
     plane_fits: list[tuple[float, PlaneFit]]
     constrained: bool = True
     info: dict[str, Any] = field(default_factory=dict)
@@ -625,8 +616,8 @@ def run_entry_smoother(
     counts["relinearisation_max_attitude_change_rad"] = steps
 
     # residuals
-    innov: dict[str, ChannelInnovations] = {}
-    sres: dict[str, ChannelInnovations] = {}
+    innov: dict[str, InnovationHistory] = {}
+    sres: dict[str, InnovationHistory] = {}
     for c, d in (("slant_range", 4), ("slant_out", 1), ("velocity_out", 3)):
         ev = [e for e in events if e.channel == c]
         k = len(ev)
@@ -645,8 +636,9 @@ def run_entry_smoother(
             Ys[r] = pred_s
             if mask.any():
                 Ss[r][np.ix_(mask, mask)] = H @ Ps[e.node] @ H.T + R
-        innov[c] = ChannelInnovations(T, Z - Y, S, Z, Y, acc)
-        sres[c] = ChannelInnovations(T, Z - Ys, Ss, Z.copy(), Ys, acc.copy())
+        steps = np.array([interval[e.node] for e in ev], dtype=int)
+        innov[c] = InnovationHistory(T, steps, Z, Y, Z - Y, S, _nis(Z - Y, S), acc)
+        sres[c] = InnovationHistory(T, steps.copy(), Z.copy(), Ys, Z - Ys, Ss, _nis(Z - Ys, Ss), acc.copy())
         counts[f"n_{c}"] = int(k)
         counts[f"n_{c}_rejected"] = int(k - acc.sum())
 
@@ -756,6 +748,18 @@ def _forward(
         Ppo[a] = P
         _check_pd(P, a, t_aug, "forward")
     return ForwardPass(t_aug, Xpr, Ppr, Xpo, Ppo, F, Q, {}), rec
+
+
+def _nis(y: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """``yᵀ S⁻¹ y`` (k,) over the used (finite) components of each row of y (k, d), S (k, d, d); NaN
+    for a row without any."""
+    out = np.full(y.shape[0], np.nan)
+    for r in range(y.shape[0]):
+        u = np.isfinite(y[r]) & np.isfinite(np.diagonal(S[r]))
+        if u.any():
+            yu = y[r][u]
+            out[r] = float(yu @ np.linalg.solve(S[r][np.ix_(u, u)], yu))
+    return out
 
 
 def _gap_map(t: np.ndarray, gaps: Any) -> dict[int, Any]:

@@ -574,7 +574,7 @@ class EntryRecorder:
                 rec.scatter(
                     "/plots/radar/slant_range_measured",
                     res.t,
-                    res.measured,
+                    res.z,
                     names=BEAMS,
                     colors=XYZ + [GREY],
                     marker="cross",
@@ -583,7 +583,7 @@ class EntryRecorder:
                 rec.scatter(
                     "/plots/radar/slant_range_predicted",
                     res.t,
-                    res.predicted,
+                    res.z_pred,
                     names=BEAMS,
                     colors=XYZ + [GREY],
                     marker="circle",
@@ -600,14 +600,14 @@ class EntryRecorder:
             rec.scalars(
                 f"/plots/radar/{ch}_measured",
                 res.t,
-                res.measured,
+                res.z,
                 names=[f"{n} meas" for n in names],
                 colors=[GREY] * len(names),
             )
             rec.scalars(
                 f"/plots/radar/{ch}_predicted",
                 res.t,
-                res.predicted,
+                res.z_pred,
                 names=[f"{n} smoothed" for n in names],
                 colors=XYZ[: len(names)] if len(names) > 1 else [EST],
             )
