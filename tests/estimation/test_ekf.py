@@ -574,3 +574,24 @@ def test_run_filter_repeated_name_at_one_step_and_size_change_reported():
         run_filter(
             np.zeros(1), np.eye(1), np.arange(4.0), lambda x, a, b: (x, np.eye(1)), lambda *_: np.eye(1), bad, lay
         )
+
+
+def test_run_filter_transition_with_own_q_and_slotted_records():
+    """``transition`` may return (x, F, Q) with ``process_noise=None``; a measurement carrying
+    ``slots`` of a channel of ``size`` components is recorded NaN-padded to that size."""
+    lay = ErrorStateLayout(3)
+    Q = np.diag([0.1, 0.2, 0.3])
+
+    def meas(k, tk, x):
+        slots = np.array([0, 2]) if k % 2 else np.array([1])
+        return [Measurement("c", np.ones(slots.size), np.eye(slots.size), lambda s, i=slots: s[i], slots=slots, size=3)]
+
+    fp = run_filter(np.zeros(3), np.eye(3), np.arange(4.0), lambda x, a, b: (x, np.eye(3), Q), None, meas, lay)
+    np.testing.assert_allclose(fp.P_prior[1], fp.P_post[0] + Q)
+    c = fp.innovations["c"]
+    assert c.y.shape == (4, 3) and c.S.shape == (4, 3, 3)
+    np.testing.assert_array_equal(np.isnan(c.y[1]), [False, True, False])
+    np.testing.assert_array_equal(np.isnan(c.y[0]), [True, False, True])
+    np.testing.assert_array_equal(np.isnan(c.S[1]), ~np.outer([1, 0, 1], [1, 0, 1]).astype(bool))
+    np.testing.assert_array_equal(c.z[1], [1.0, np.nan, 1.0])
+    np.testing.assert_allclose(c.y[1][[0, 2]], 1.0 - fp.x_prior[1][[0, 2]])

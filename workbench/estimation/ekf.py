@@ -279,6 +279,9 @@ class Measurement:
     ``gate_probability`` e.g. 0.9973 for a χ² gate, None for no gate; ``iterations`` > 1 for an
     iterated update; ``eps`` perturbation of the numeric H (scalar or (n_e,), error-state units);
     ``gain_projector``, ``step_tol``, ``gate_threshold``: the options of :func:`update`.
+    ``slots`` (m,) int and ``size``: the measurement carries components ``slots`` of a channel of
+    ``size`` components (e.g. the beams of a radar that returned); its record in the
+    :class:`InnovationHistory` is NaN in the other components.  None: all components.
     """
 
     name: str
@@ -293,6 +296,8 @@ class Measurement:
     gain_projector: Callable[[np.ndarray], np.ndarray] | None = None
     step_tol: np.ndarray | None = None
     gate_threshold: float | None = None
+    slots: np.ndarray | None = None
+    size: int | None = None
 
 
 @dataclass(frozen=True)
@@ -627,12 +632,23 @@ def update(
 # ---------------------------------------------------------------------------------------------
 
 
+def _scatter(slots, size, z, zp, y, S, K):
+    idx = np.asarray(slots, dtype=int)
+    zf, zpf, yf = (np.full(size, np.nan) for _ in range(3))
+    zf[idx], zpf[idx], yf[idx] = z, zp, y
+    Sf = np.full((size, size), np.nan)
+    Sf[np.ix_(idx, idx)] = S
+    Kf = np.full((K.shape[0], size), np.nan)
+    Kf[:, idx] = K
+    return zf, zpf, yf, Sf, Kf
+
+
 def run_filter(
     x0: np.ndarray,
     P0: np.ndarray,
     t: np.ndarray,
     transition: Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray | None]],
-    process_noise: Callable[[np.ndarray, float, float], np.ndarray],
+    process_noise: Callable[[np.ndarray, float, float], np.ndarray] | None,
     measurements_at: Callable[[int, float, np.ndarray], Sequence[Measurement]],
     layout: ErrorStateLayout,
     adapt_q: Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None,
@@ -645,8 +661,9 @@ def run_filter(
     (``x_prior[0] = x0``).  For k ≥ 1:
 
     * ``transition(x, t[k-1], t[k]) -> (x_next, F or None)``; F (n_e, n_e) error-state
-      transition (None: central differences of ``transition`` with perturbation ``eps``);
-    * ``Q = process_noise(x, t[k-1], t[k])`` (n_e, n_e), then ``Q = adapt_q(k, x, P, Q)`` if given
+      transition (None: central differences of ``transition`` with perturbation ``eps``); a
+      model that computes its process noise with F returns ``(x_next, F, Q)`` instead;
+    * otherwise ``Q = process_noise(x, t[k-1], t[k])`` (n_e, n_e), then ``Q = adapt_q(k, x, P, Q)`` if given
       — the hook for raising process noise on rapid acceleration changes (REDLand); x, P are the
       posterior of step k−1;
     * ``P_prior = F P Fᵀ + Q`` (symmetrised).
@@ -681,8 +698,12 @@ def run_filter(
         tk = tl[k]
         if k:
             t0 = tl[k - 1]
-            x_next, Fk = transition(x, t0, tk)
-            Qk = process_noise(x, t0, tk)
+            step = transition(x, t0, tk)
+            if len(step) == 3:  # the model gives its own process noise
+                x_next, Fk, Qk = step
+            else:
+                x_next, Fk = step
+                Qk = process_noise(x, t0, tk)
             if adapt_q is not None:
                 Qk = adapt_q(k, x, P, Qk)
             x_next = np.asarray(x_next, dtype=float)
@@ -723,10 +744,13 @@ def run_filter(
                 )
             except (np.linalg.LinAlgError, ValueError) as err:
                 raise type(err)(f"step {k} (t={tk} s), measurement {meas.name!r}: {err}") from err
+            zr = _as_vector(meas.z)
+            if meas.slots is not None:  # scatter into the channel's full size, NaN elsewhere
+                zr, zp, y, S, K = _scatter(meas.slots, int(meas.size), zr, zp, y, S, K)
             m = sizes.setdefault(meas.name, y.shape[0])
             if m != y.shape[0]:
                 raise ValueError(f"step {k}: measurement {meas.name!r} changed size ({m} -> {y.shape[0]})")
-            row = (tk, k, _as_vector(meas.z), zp, y, S, nis, ok)
+            row = (tk, k, zr, zp, y, S, nis, ok)
             rows.setdefault(meas.name, []).append((*row, K) if keep_gains else row)
             x, P = xn, Pn
         x_post[k] = x

@@ -59,9 +59,12 @@ with a ~7° attitude error; 50-run validation: forward curvilinear ANEES at the 
 
 Composition: this module supplies the models (strapdown propagation, radar measurement functions
 and Jacobians, the gain projector, the augmented time grid); the estimation steps are the shared
-engine's — each update is :func:`workbench.estimation.ekf.update` (Joseph form, ``gain_projector``,
-iterated with :data:`UPDATE_STEP_TOL`), the pass is a :class:`~workbench.estimation.ekf.ForwardPass`,
-the channel records are :class:`~workbench.estimation.ekf.InnovationHistory`.
+engine's — the forward loop is :func:`workbench.estimation.ekf.run_filter` over the augmented grid
+(the model returns its own Φ and Qd), each update its :func:`~workbench.estimation.ekf.update`
+(Joseph form, ``gain_projector``, iterated with :data:`UPDATE_STEP_TOL`, slant-range records
+NaN-padded to the four beams with ``slots``), the backward pass
+:func:`workbench.estimation.smoother.rts_smooth`; the channel records are
+:class:`~workbench.estimation.ekf.InnovationHistory`.
 
 Backward pass: :func:`workbench.estimation.smoother.rts_smooth` (error-state RTS, Särkkä 2013
 Sect. 8.2) of the stored Φ, P_prior, P_post on the augmented grid; the gain is solved on the
@@ -80,7 +83,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -88,7 +91,14 @@ from scipy.linalg import lapack
 from scipy.stats import chi2
 
 from workbench.core.rotation import quat_boxplus, quat_to_dcm
-from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, InnovationHistory, Measurement, update
+from workbench.estimation.ekf import (
+    ErrorStateLayout,
+    ForwardPass,
+    InnovationHistory,
+    Measurement,
+    run_filter,
+    update,
+)
 from workbench.estimation.smoother import rts_smooth
 from workbench.estimation.strapdown import (
     GAP_SIGMA_DEFAULT,
@@ -603,15 +613,15 @@ def run_entry_smoother(
     for it in range(n_iter):
         fw = _forward(x0, np.asarray(P0, dtype=float), lin, t_aug, interval, imu_node, fa, wa, sw, sf, sample_dt,
                       gaps, by_node, radar, sg, qpsd, gate, constrained)  # fmt: skip
-        fw, rec = fw
+        fw, rms = fw
         sp = rts_smooth(fw, _LAYOUT)
         Xs, Ps = sp.x, sp.P
         if it == 0:
-            fw0, rec0 = fw, rec
+            fw0, rms0 = fw, rms
         if lin is not None:
             steps.append(float(np.max(np.abs(_LAYOUT.boxminus(Xs, lin)[:, 3:6]))))
         lin = Xs
-    Xpo, Ppo, rec = fw0.x_post, fw0.P_post, rec0
+    Xpo, Ppo = fw0.x_post, fw0.P_post
     counts["iterations"] = n_iter
     counts["relinearisation_max_attitude_change_rad"] = steps
 
@@ -626,18 +636,26 @@ def run_entry_smoother(
         Y = np.full((k, d), np.nan)
         S = np.full((k, d, d), np.nan)
         acc = np.zeros(k, dtype=bool)
+        nis = np.full(k, np.nan)
         Ys = np.full((k, d), np.nan)
         Ss = np.full((k, d, d), np.nan)
+        ih = fw0.innovations.get(c)
+        j = 0  # the channel's rows in the forward pass are in event order; unusable events have none
         for r, e in enumerate(ev):
-            z, pred, S_full, ok = rec[id(e)]
-            Z[r], Y[r], S[r], acc[r] = z, pred, S_full, ok
+            rm = rms0[id(e)]
+            Z[r], Y[r] = rm.z_full, rm.pred_full
+            if rm.measurement is not None:
+                u = rm.mask
+                Y[r][u] = ih.z_pred[j][u]  # predicted at the state the update saw
+                S[r], acc[r], nis[r] = ih.S[j], ih.accepted[j], ih.nis[j]
+                j += 1
             xs = Xs[e.node]
             z2, pred_s, mask, H, R, _ = _predict_channel(c, e.index, radar, xs[0:3], xs[3:7], xs[7:10], sg)
             Ys[r] = pred_s
             if mask.any():
                 Ss[r][np.ix_(mask, mask)] = H @ Ps[e.node] @ H.T + R
         steps = np.array([interval[e.node] for e in ev], dtype=int)
-        innov[c] = InnovationHistory(T, steps, Z, Y, Z - Y, S, _nis(Z - Y, S), acc)
+        innov[c] = InnovationHistory(T, steps, Z, Y, Z - Y, S, nis, acc)
         sres[c] = InnovationHistory(T, steps.copy(), Z.copy(), Ys, Z - Ys, Ss, _nis(Z - Ys, Ss), acc.copy())
         counts[f"n_{c}"] = int(k)
         counts[f"n_{c}_rejected"] = int(k - acc.sum())
@@ -653,101 +671,74 @@ def run_entry_smoother(
 def _forward(
     x0, P0, lin, t_aug, interval, imu_node, fa, wa, sw, sf, sample_dt, gaps, by_node, radar, sg, qpsd, gate, constrained
 ) -> tuple[ForwardPass, dict]:
-    """EKF forward pass on the augmented grid (N nodes): a :class:`~workbench.estimation.ekf.ForwardPass`
-    (``F[a]``, ``Q[a]`` the error transition and process noise into node a) and the event records
-    ``id(event) -> (measured, predicted, S_full, accepted)``.  ``lin`` None: the ordinary EKF
-    (dynamics and measurements linearised at the running estimate).  ``lin`` (N, 10) a
-    linearisation trajectory (the previous iteration's smoothed states): the step is the affine
-    model ``x⁻ = f(x̄) ⊞ Φ(x̄) (x ⊟ x̄)`` and a measurement ``h(x) ≈ h(x̄) + H(x̄) (x ⊟ x̄)``
-    (iterated extended smoother, Gauss-Newton; Bell 1994)."""
-    N = t_aug.size
+    """EKF forward pass on the augmented grid (N nodes) by :func:`workbench.estimation.ekf.run_filter`:
+    a :class:`~workbench.estimation.ekf.ForwardPass` (``F[a]``, ``Q[a]`` the error transition and
+    process noise into node a; ``innovations`` per channel, slant ranges NaN for unused beams) and
+    ``id(event) -> RadarMeasurement`` (prior predictions of each event, first pass only).
+    ``lin`` None: the ordinary EKF (dynamics and measurements linearised at the running estimate).
+    ``lin`` (N, 10) a linearisation trajectory (the previous iteration's smoothed states): the step
+    is the affine model ``x⁻ = f(x̄) ⊞ Φ(x̄) (x ⊟ x̄)`` and a measurement
+    ``h(x) ≈ h(x̄) + H(x̄) (x ⊟ x̄)`` (iterated extended smoother, Gauss-Newton; Bell 1994)."""
     n_upd = max(1, int(sg.update_iterations))
-    Xpr = np.empty((N, 10))
-    Xpo = np.empty((N, 10))
-    Ppr = np.empty((N, 9, 9))
-    Ppo = np.empty((N, 9, 9))
-    F = np.empty((N, 9, 9))
-    Q = np.empty((N, 9, 9))
-    v, q, p = x0[0:3].copy(), x0[3:7].copy(), x0[7:10].copy()
-    P = P0.copy()
-    F[0] = _I9
-    Q[0] = 0.0
-    rec: dict[int, tuple] = {}  # event id -> (measured, predicted, S_full, accepted)
-    for a in range(N):
-        if a > 0:
-            if lin is None:
-                vb, qb, pb = v, q, p
-            else:
-                vb, qb, pb = lin[a - 1, 0:3], lin[a - 1, 3:7], lin[a - 1, 7:10]
-            i = interval[a - 1]
-            if i in gaps and imu_node[a - 1] >= 0 and imu_node[a] == i + 1:
-                g = gaps[i]
-                Fk, Qk = gap_transition(qb, pb, g, sg.bridge_mode, sg.gap_sigma)
-                v1, q1, p1 = apply_gap(vb, qb, pb, g, sg.bridge_mode)
-            else:
-                dt = t_aug[a] - t_aug[a - 1]
-                v1, q1, p1 = rk4_step(vb, qb, pb, fa[a - 1], wa[a - 1], fa[a], wa[a], dt)
-                qm = qb + q1 if (qb @ q1) >= 0.0 else qb - q1
-                qm = qm / math.sqrt(qm @ qm)
-                _, Fk, Qk = covariance_step(
-                    _I9,
-                    qm,
-                    0.5 * (fa[a - 1] + fa[a]),
-                    0.5 * (wa[a - 1] + wa[a]),
-                    dt,
-                    np.sqrt(0.5 * (sw[i] ** 2 + sw[i + 1] ** 2)),
-                    np.sqrt(0.5 * (sf[i] ** 2 + sf[i + 1] ** 2)),
-                    sample_dt,
-                    qpsd,
-                    0.5 * (pb + p1) if sg.gravity_gradient else None,
-                )
-            if lin is None:
-                v, q, p = v1, q1, p1
-            else:  # affine model about x̄
-                dx = Fk @ _LAYOUT.boxminus(np.r_[v, q, p], lin[a - 1])
-                v, q, p = v1 + dx[0:3], quat_boxplus(q1, dx[3:6]), p1 + dx[6:9]
-            P = Fk @ P @ Fk.T + Qk
-            P = 0.5 * (P + P.T)
-            F[a] = Fk
-            Q[a] = Qk
-        Xpr[a, 0:3], Xpr[a, 3:7], Xpr[a, 7:10] = v, q, p
-        Ppr[a] = P
-        for e in by_node.get(a, ()):
-            x = np.r_[v, q, p]
-            m = radar_measurement(e.channel, e.index, radar, x if lin is None else lin[a], sg, constrained=constrained)
-            z, pred = m.z_full, m.pred_full.copy()
-            if lin is not None and m.mask.any():  # h(x) ≈ h(x̄) + H(x̄) (x ⊟ x̄)
-                m = m.linearised(x)
-                pred[m.mask] = m.measurement.h(x)
-            d = z.size
-            S_full = np.full((d, d), np.nan)
-            if not m.mask.any():
-                rec[id(e)] = (z, pred, S_full, False)
-                continue
-            mm = m.measurement
-            ur = update(
-                x,
-                P,
-                mm.z,
-                mm.h,
-                mm.R,
-                _LAYOUT,
-                H=mm.H,
-                iterations=n_upd if lin is None else 1,
-                gain_projector=mm.gain_projector,
-                step_tol=mm.step_tol,
-                gate_threshold=gate[e.channel],
+    node = {tt: a for a, tt in enumerate(t_aug.tolist())}
+    rms: dict[int, RadarMeasurement] = {}
+
+    def transition(x, t0, t1):
+        a = node[t1]
+        xb = x if lin is None else lin[a - 1]
+        vb, qb, pb = xb[0:3], xb[3:7], xb[7:10]
+        i = interval[a - 1]
+        if i in gaps and imu_node[a - 1] >= 0 and imu_node[a] == i + 1:
+            g = gaps[i]
+            Fk, Qk = gap_transition(qb, pb, g, sg.bridge_mode, sg.gap_sigma)
+            v1, q1, p1 = apply_gap(vb, qb, pb, g, sg.bridge_mode)
+        else:
+            dt = t_aug[a] - t_aug[a - 1]
+            v1, q1, p1 = rk4_step(vb, qb, pb, fa[a - 1], wa[a - 1], fa[a], wa[a], dt)
+            qm = qb + q1 if (qb @ q1) >= 0.0 else qb - q1
+            qm = qm / math.sqrt(qm @ qm)
+            _, Fk, Qk = covariance_step(
+                _I9,
+                qm,
+                0.5 * (fa[a - 1] + fa[a]),
+                0.5 * (wa[a - 1] + wa[a]),
+                dt,
+                np.sqrt(0.5 * (sw[i] ** 2 + sw[i + 1] ** 2)),
+                np.sqrt(0.5 * (sf[i] ** 2 + sf[i + 1] ** 2)),
+                sample_dt,
+                qpsd,
+                0.5 * (pb + p1) if sg.gravity_gradient else None,
             )
-            S_full[np.ix_(m.mask, m.mask)] = ur.S
-            if ur.accepted:
-                xn = ur.x_post
-                v, q, p = xn[0:3], xn[3:7], xn[7:10]
-                P = ur.P_post
-            rec[id(e)] = (z, pred, S_full, ur.accepted)
-        Xpo[a, 0:3], Xpo[a, 3:7], Xpo[a, 7:10] = v, q, p
-        Ppo[a] = P
-        _check_pd(P, a, t_aug, "forward")
-    return ForwardPass(t_aug, Xpr, Ppr, Xpo, Ppo, F, Q, {}), rec
+        if lin is not None:  # affine model about x̄
+            dx = Fk @ _LAYOUT.boxminus(x, xb)
+            q1 = quat_boxplus(q1, dx[3:6])
+            v1, p1 = v1 + dx[0:3], p1 + dx[6:9]
+        return np.r_[v1, q1, p1], Fk, Qk
+
+    def measurements_at(a, ta, x):
+        out = []
+        for e in by_node.get(a, ()):
+            rm = radar_measurement(e.channel, e.index, radar, x if lin is None else lin[a], sg, constrained=constrained)
+            if lin is None:
+                rms[id(e)] = rm
+            else:
+                rm = rm.linearised(x)
+            if rm.measurement is not None:
+                out.append(
+                    replace(
+                        rm.measurement,
+                        iterations=n_upd if lin is None else 1,
+                        gate_threshold=gate[e.channel],
+                        slots=np.flatnonzero(rm.mask),
+                        size=rm.mask.size,
+                    )
+                )
+        return out
+
+    fw = run_filter(x0, P0, t_aug, transition, None, measurements_at, _LAYOUT)
+    for a in range(t_aug.size):
+        _check_pd(fw.P_post[a], a, t_aug, "forward")
+    return fw, rms
 
 
 def _nis(y: np.ndarray, S: np.ndarray) -> np.ndarray:
