@@ -1,6 +1,6 @@
 """Tests of workbench.core.frames: time, IAU rotation, geodesy, NED and the SPF lab frame.
 
-Expected values are written out from the published elements (FACTS.md, pck00011), JPL Horizons
+Expected values are written out from the published elements (IAU 2015, NAIF pck00011), JPL Horizons
 (Mars sidereal period 24.622962 h) and the REDLand paper, not taken from the code.
 """
 
@@ -62,7 +62,7 @@ def _pole_radec_and_W(C):
 def test_mars_pole_and_meridian_at_j2000():
     C = frames.C_bodyfixed_inertial(MARS, J2000)
     ra, dec, W = _pole_radec_and_W(C)
-    # FACTS.md (pck00011) at T = d = 0, largest periodic terms evaluated by hand:
+    # pck00011 at T = d = 0, largest periodic terms evaluated by hand:
     assert ra == pytest.approx(317.269202 + 0.419057 * np.sin(np.radians(79.398797)), abs=1e-9)
     assert dec == pytest.approx(54.432516 + 1.591274 * np.cos(np.radians(166.325722)), abs=1e-9)
     assert W == pytest.approx(176.049863 + 0.584542 * np.sin(np.radians(95.391654)), abs=1e-9)

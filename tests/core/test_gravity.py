@@ -1,5 +1,5 @@
 """Tests of workbench.core.gravity against GM/r², a finite-difference gradient of the J2 potential
-and published surface gravities (Mars 3.71 m/s², NSSDC/Horizons; Titan 1.354 m/s², FACTS.md)."""
+and published surface gravities (Mars 3.71 m/s², NSSDC/Horizons; Titan 1.354 m/s² from GM/R², gm_de440 and pck00011)."""
 
 import numpy as np
 import pytest

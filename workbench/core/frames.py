@@ -1,6 +1,6 @@
 """Time scales, IAU body-fixed frames, planetocentric geodesy, local NED and test-chamber frames.
 
-Frames used (DESIGN.md):
+Frames used (docs/ARCHITECTURE.md, "Conventions"):
 
 * ``I`` — planet-centred inertial with ICRF/J2000 axes (for Mars this is the "MMED" frame of the
   AMELIA paper when expressed in the planet's mean equator; here we stay on ICRF axes).
@@ -286,7 +286,7 @@ def bodyfixed_from_ned(v_N: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.
 def local_ned_position(r_F: np.ndarray, origin_F: np.ndarray) -> np.ndarray:
     """Position (..., 3) [m] of r_F relative to ``origin_F`` (3,), in the NED frame at the origin.
 
-    This is the "local origin" frame for logging geometry (DESIGN.md: never log planet-centred
+    This is the "local origin" frame for logging geometry (docs/RECORDING.md: never log planet-centred
     metres); it is a flat tangent frame, so Down differs from the local vertical far away.
     """
     origin_F = np.asarray(origin_F, dtype=float)

@@ -1,6 +1,6 @@
 """Quaternions, direction-cosine matrices and attitude determination, vectorised over leading axes.
 
-Conventions (DESIGN.md):
+Conventions (docs/ARCHITECTURE.md):
 
 * Quaternions are scalar-last ``[x, y, z, w]`` with the Hamilton product, exactly as
   ``scipy.spatial.transform.Rotation`` and Rerun.  ``q_a_b`` rotates vectors from frame *b* to

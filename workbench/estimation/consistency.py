@@ -7,7 +7,7 @@ m-dimensional innovation is χ²(m); averaged over N independent Monte Carlo run
 χ²(N·d).  Whiteness of an innovation sequence uses the normalised sample autocorrelation with
 its ±1.96/√n band (Mehra 1970; Bar-Shalom Sect. 5.4.2).
 
-Attitude errors entering :func:`nees` must use the body-frame convention of DESIGN.md
+Attitude errors entering :func:`nees` must use the body-frame convention of docs/ARCHITECTURE.md ("Conventions")
 (``q_true = q_est ⊗ exp(δθ)``, :func:`workbench.core.rotation.attitude_error`).
 """
 

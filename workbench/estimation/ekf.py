@@ -8,7 +8,7 @@ State and error state
 ---------------------
 The full state ``x`` (n_x,) may contain unit quaternions; the covariance ``P`` (n_e, n_e)
 always lives in the *error state* ``e`` (n_e,), where each quaternion is represented by a 3-vector
-small angle.  :class:`ErrorStateLayout` says where.  Attitude-error convention (DESIGN.md, the
+small angle.  :class:`ErrorStateLayout` says where.  Attitude-error convention (docs/ARCHITECTURE.md, the
 same as :mod:`workbench.core.rotation`): the error is a **body-frame** small angle δθ [rad] with
 ``q_true = q_est ⊗ exp(δθ)`` (right / local, multiplicative perturbation).
 ``x ⊞ e`` applies additive corrections to the additive entries and ``q ⊗ exp(δθ)`` to each
@@ -36,7 +36,7 @@ Iterated EKF: Bell & Cathey, "The iterated Kalman filter update as a Gauss-Newto
 IEEE TAC 38(2), 1993, written with ⊞/⊟.
 
 References: [1] Gelb, *Applied Optimal Estimation*, 1974 (Joseph form); [2] POST2 EKF thesis,
-Ch. 3.1 (in ``/work/shared/references``); [3] Solà, "Quaternion kinematics for the error-state
+Ch. 3.1 (the POST2 EKF reconstruction of the Huygens probe, M.S. thesis); [3] Solà, "Quaternion kinematics for the error-state
 Kalman filter", 2017 (error-state / reset); [4] Bell & Cathey 1993.
 """
 

@@ -13,7 +13,7 @@ filterpy's ``rts_smoother`` indexes a time-varying F with the wrong step (filter
 here ``F[k+1]`` is the Jacobian used to predict ``P_prior[k+1]`` from ``P_post[k]``, so the gain
 is exact for linear time-varying systems (pinned against a batch least-squares test).
 
-Attitude error: body-frame small angle, ``q_true = q ⊗ exp(δθ)`` (DESIGN.md).  As in the filter,
+Attitude error: body-frame small angle, ``q_true = q ⊗ exp(δθ)`` (docs/ARCHITECTURE.md).  As in the filter,
 the covariance is not transported between the tangent spaces of ``x_prior[k+1]`` and
 ``x_s[k+1]`` (first-order, standard for multiplicative smoothers).
 

@@ -1,6 +1,6 @@
 """Strapdown integration of an entry vehicle's IMU with first-order covariance (AMELIA Appendix A).
 
-State (AMELIA Eq. A.1, our conventions, ``.entry_spec.md``): inertial velocity ``v_M`` [m/s],
+State (AMELIA Eq. A.1, our conventions, docs/ARCHITECTURE.md): inertial velocity ``v_M`` [m/s],
 attitude ``q_M_G`` (body G → inertial M, Hamilton scalar-last; ``C_G_M = quat_to_dcm(q_M_G).T`` is
 the paper's ``C(q)``) and inertial position ``p_M`` [m], all in the MMED frame M (Mars-centred,
 +Z the pole, so :func:`workbench.core.gravity.gravity_j2` applies directly).

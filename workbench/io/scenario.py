@@ -33,7 +33,7 @@ __all__ = [
     "resolve_scenario",
 ]
 
-#: The reconstruction problems a scenario may describe (DESIGN.md).
+#: The reconstruction problems a scenario may describe (docs/ARCHITECTURE.md).
 SCENARIO_KINDS: tuple[str, ...] = ("droptest", "entry", "parameters", "airdata")
 
 _VALUE_KINDS = ("float", "int", "str", "bool", "vec3", "list", "table")

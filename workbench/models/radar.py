@@ -1,15 +1,15 @@
 """Radar Doppler altimeter (RDA) of a Schiaparelli-like descent module: beam geometry, measurement
 models with their error-state Jacobians, exact ray-sphere ranges and the 4-beam plane fit.
 
-Beam geometry (an assumption, documented): FACTS.md quotes "one antenna at nadir and three
-squinted ~20° symmetrically along azimuth" (Cecchini et al., ESA antenna workshop 2015).  We take
+Beam geometry (an assumption, documented): the antenna description quotes "one antenna at nadir and three
+squinted ~20° symmetrically along azimuth" (Cecchini et al., ESA Antenna Workshop, 2015).  We take
 
 * B0 along −Z_G (the GNC +Z axis points aft, to the back shell, so −Z_G looks at the ground
   under the parachute);
 * B1..B3 squinted 20° from −Z_G at azimuths 0°, 120°, 240° measured from +X_G towards +Y_G:
   ``s_n = [sin σ cos a_n, sin σ sin a_n, −cos σ]``.  The 120° spacing is our assumption.
 
-Frames and conventions (DESIGN.md, .entry_spec.md): ``M`` = MMED inertial, ``G`` = GNC body,
+Frames and conventions (docs/ARCHITECTURE.md, "Conventions"): ``M`` = MMED inertial, ``G`` = GNC body,
 ``q_M_G`` Hamilton scalar-last body → inertial, ``C_M_G = quat_to_dcm(q_M_G)`` and
 ``C_G_M = C_M_Gᵀ`` (the paper's ``C(q)``).  Error state (9,) ``[δv_M, δθ_G, δp_M]`` with
 ``v_true = v + δv``, ``q_true = q ⊗ exp(δθ)`` (body-frame right perturbation, so
@@ -55,7 +55,7 @@ def beam_directions_G(
 
     B0 = ``[0, 0, −1]``; B(k+1) = ``[sin σ cos a_k, sin σ sin a_k, −cos σ]`` with σ = ``squint_deg``
     (off −Z_G) and a_k = ``azimuths_deg[k]`` measured from +X_G towards +Y_G.  Degrees only at this
-    I/O edge.  The 20° squint follows FACTS.md; the 0/120/240° azimuths are our assumption.
+    I/O edge.  The 20° squint follows Cecchini et al. (2015); the 0/120/240° azimuths are our assumption.
     """
     sig = np.deg2rad(float(squint_deg))
     az = np.deg2rad(np.asarray(azimuths_deg, dtype=float))

@@ -1,4 +1,4 @@
-"""Entity paths and timeline names of a workbench recording (DESIGN.md, "Recording layout (Rerun)").
+"""Entity paths and timeline names of a workbench recording (docs/RECORDING.md).
 
 Every pipeline and the reader name entities through this module, so the layout lives in one
 place. Paths are absolute Rerun entity paths (leading ``/``). Names of path parts given by callers

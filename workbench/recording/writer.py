@@ -3,7 +3,7 @@
 :func:`open_recording` creates one recording per run, logs into ``<final>.<pid>.partial`` in the
 same directory, and publishes it with an atomic ``os.replace`` only after the RRD footer has been
 written, so an interrupted run never leaves a half-written file at the final path
-(``/work/shared/RERUN.md`` §1). Inside the block Rerun's strict mode is on, so bad input raises
+(Rerun 0.41 Python API reference, ``rerun.RecordingStream.save``). Inside the block Rerun's strict mode is on, so bad input raises
 instead of being dropped with a warning (pitfall P1).
 
 :class:`Recorder` is the only logging surface the rest of the workbench sees. It takes numpy
@@ -17,7 +17,7 @@ over time (pitfall P2).
 Geometry conventions: positions/translations in metres in the entity's parent frame, expressed
 relative to a local origin (Rerun stores float32); quaternions scalar-last ``[x, y, z, w]``,
 Hamilton, ``q_parent_child`` (rotates child-frame vectors into the parent frame), as in
-``scipy.spatial.transform.Rotation`` and DESIGN.md. Colours are RGB or RGBA, integers 0–255 (or
+``scipy.spatial.transform.Rotation`` (docs/ARCHITECTURE.md, "Conventions"). Colours are RGB or RGBA, integers 0–255 (or
 floats 0–1).
 """
 

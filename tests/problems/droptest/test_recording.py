@@ -1,6 +1,6 @@
 """The drop-test run end to end through the CLI path, read back from the ``.rrd``.
 
-What the recording must hold (DESIGN.md "Recording layout") and that the numbers in it are the
+What the recording must hold (docs/RECORDING.md) and that the numbers in it are the
 numbers of the reconstruction: the pose per filter step, the stroke series and its bounds, the
 3σ ellipsoids, the events and the scorecard; the summary JSON's truth scoring for the three
 synthetic scenarios; the ``inspect`` and ``run`` commands; and that user telemetry goes through

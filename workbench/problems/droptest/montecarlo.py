@@ -24,7 +24,7 @@ Consistency statistics (Bar-Shalom, Li & Kirubarajan 2001, Sect. 5.4), per run:
 * ``z_at_max`` — normalised errors δ/σ of p, v, θ, ω and the gyro scale factors at the max-stroke
   step (for finding which states are over- or under-confident).
 
-Error convention (the filter's, DESIGN.md): ``truth = estimate ⊞ δ``, ``δp = p_true − p_est``,
+Error convention (the filter's, docs/ARCHITECTURE.md): ``truth = estimate ⊞ δ``, ``δp = p_true − p_est``,
 ``δθ = attitude_error(q_est, q_true)`` (``q_true = q_est ⊗ exp(δθ)``).
 """
 

@@ -1,4 +1,4 @@
-"""Draw the drop-test reconstruction stages into a Rerun recording (layout of DESIGN.md).
+"""Draw the drop-test reconstruction stages into a Rerun recording (layout in docs/RECORDING.md).
 
 The pipeline (``pipelines.droptest``) yields stages; :class:`DropTestRecorder` draws each one as it
 arrives and, for synthetic scenarios, the truth beside the estimate under ``/world/truth`` and

@@ -1,4 +1,4 @@
-"""Draw the entry and descent reconstruction stages into a Rerun recording (layout of DESIGN.md).
+"""Draw the entry and descent reconstruction stages into a Rerun recording (layout in docs/RECORDING.md).
 
 The pipeline (``pipelines.entry``) yields stages; :class:`EntryRecorder` draws each one as it arrives
 and, for synthetic scenarios, the truth beside the estimate (``/world/truth``, ``.../truth``).

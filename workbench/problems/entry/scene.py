@@ -1,6 +1,6 @@
 """Geometry for drawing an entry and descent: the landing-site frame, terrain, capsule and parachute meshes.
 
-The landing-site frame ``L`` (DESIGN.md: "log geometry relative to a local origin") is East-North-Up
+The landing-site frame ``L`` (docs/RECORDING.md: "log geometry relative to a local origin") is East-North-Up
 with its origin on the terrain sphere (radius ``r_ground``) below a chosen site; it is fixed to the
 planet (body-fixed, co-rotating).  A point of the MMED inertial frame ``M`` at time ``t`` [s from
 EIP] maps to ``p_L = C_L_F (C_F_M(t) p_M − o_F)``.  Within ±700 km of the site every coordinate is

@@ -21,7 +21,7 @@ how this module produces the same thing from a truth trajectory for synthetic sc
   intersections with the terrain sphere ``r = 3396000 − 1440 m`` (:func:`slant_ranges_sphere`),
   not the estimator's flat-terrain model (Eq. B.3).
 
-Frames and conventions (DESIGN.md, ``.entry_spec``): ``M`` = MMED inertial (Mars-centred, +Z the
+Frames and conventions (docs/ARCHITECTURE.md, "Conventions"): ``M`` = MMED inertial (Mars-centred, +Z the
 pole), ``G`` = GNC body frame (+Z towards the back shell, B0 along −Z_G); ``q_M_G`` is
 body → inertial, Hamilton, scalar-last; the TM quaternion is JPL "MMED to GNC", numerically the
 raw components of ``q_M_G`` (:func:`workbench.core.rotation.quat_from_jpl`).  Error state

@@ -9,7 +9,7 @@ end is the canopy, a point mass with its own air-relative drag, inflation law an
 (the Schiaparelli anomaly: X gyro above 187.5 °/s for about 1 s, AMELIA Sect. 4) follow from the
 forces; nothing is scripted on the module's motion.
 
-Frames and conventions (``.entry_spec.md``):
+Frames and conventions (docs/ARCHITECTURE.md, "Conventions"):
 
 * ``M`` = MMED inertial frame (Mars-centred, +Z the pole at J2000).  For the ~300 s simulated
   the body-fixed frame is ``Rz(W(t))`` of M and Mars rotates with ``ω = [0, 0, MARS.rotation_rate]``
@@ -51,8 +51,8 @@ scalar Python (``math``) on purpose: for 19 states a numpy call costs more than 
 
 References: AMELIA (Aboudan et al., Space Sci. Rev. 2018) Sects. 3–4, 9, Table 2 (initial state),
 Fig. 2–4 (accelerations, 16 °/s spin, X-rate saturation ~1 s after PDD for ~1 s, Z acceleration
-peak ~101.5 m/s² ~0.6 s after PDD oscillating with ~0.35 s period); FACTS.md (Mars constants,
-Schiaparelli facts, molar mass 43.41 g/mol).
+peak ~101.5 m/s² ~0.6 s after PDD oscillating with ~0.35 s period); Mars constants as in
+:mod:`workbench.core.bodies`; Schiaparelli mass and shield size from ESA; molar mass 43.41 g/mol (AMELIA Sect. 9).
 """
 
 from __future__ import annotations
@@ -195,7 +195,7 @@ class EntryTruthSpec:
 
 @dataclass(frozen=True, eq=False)
 class EntryTruth:
-    """Truth history of a simulated entry on a uniform ``dt_out`` grid (see ``.entry_spec.md``).
+    """Truth history of a simulated entry on a uniform ``dt_out`` grid (frames as in the module docstring).
 
     Shapes (n samples): ``t`` (n,) [s from EIP]; ``p_M``, ``v_M`` (n,3) [m, m/s, MMED, CoG];
     ``q_M_G`` (n,4); ``w_G`` (n,3) [rad/s]; ``f_G`` (n,3) [m/s², non-gravitational specific force at
