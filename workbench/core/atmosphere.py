@@ -14,7 +14,8 @@ Models:
 * :class:`TitanDefaultAtmosphere` — a documented layered engineering profile anchored on the
   Huygens surface values.
 
-References: NASA Glenn Research Center, "Mars Atmosphere Model" (engineering fit to MGS data); MEADS paper (Karlgaard et al., MSL air data),
+References: NASA Glenn Research Center, "Mars Atmosphere Model" (engineering fit to MGS data);
+MEADS paper (Karlgaard et al., MSL air data),
 Eq. (45)–(46) and Table 1 (Knudsen number, Sutherland law and constants for CO2); AMELIA Sect. 9
 (M = 43.41 g/mol); Fulchignoni et al., Nature 438, 2005 (Titan HASI profile); White, *Viscous
 Fluid Flow*, 3rd ed., Table 1-2 (Sutherland constants of N2).

@@ -36,8 +36,8 @@ Iterated EKF: Bell & Cathey, "The iterated Kalman filter update as a Gauss-Newto
 IEEE TAC 38(2), 1993, written with ⊞/⊟.
 
 References: [1] Gelb, *Applied Optimal Estimation*, 1974 (Joseph form); [2] POST2 EKF thesis,
-Ch. 3.1 (the POST2 EKF reconstruction of the Huygens probe, M.S. thesis); [3] Solà, "Quaternion kinematics for the error-state
-Kalman filter", 2017 (error-state / reset); [4] Bell & Cathey 1993.
+Ch. 3.1 (the POST2 EKF reconstruction of the Huygens probe, M.S. thesis); [3] Solà,
+"Quaternion kinematics for the error-state Kalman filter", 2017 (error-state / reset); [4] Bell & Cathey 1993.
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 :func:`open_recording` creates one recording per run, logs into ``<final>.<pid>.partial`` in the
 same directory, and publishes it with an atomic ``os.replace`` only after the RRD footer has been
 written, so an interrupted run never leaves a half-written file at the final path
-(Rerun 0.41 Python API reference, ``rerun.RecordingStream.save``). Inside the block Rerun's strict mode is on, so bad input raises
-instead of being dropped with a warning (pitfall P1).
+(Rerun 0.41 Python API reference, ``rerun.RecordingStream.save``). Inside the block Rerun's strict
+mode is on, so bad input raises instead of being dropped with a warning.
 
 :class:`Recorder` is the only logging surface the rest of the workbench sees. It takes numpy
 arrays and **times in float seconds** from the scenario's reference event; they are rounded to
