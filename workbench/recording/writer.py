@@ -8,7 +8,7 @@ mode is on, so bad input raises instead of being dropped with a warning.
 
 :class:`Recorder` is the only logging surface the rest of the workbench sees. It takes numpy
 arrays and **times in float seconds** from the scenario's reference event; they are rounded to
-integer nanoseconds (:func:`to_ns`, pitfall P7) on the ``time`` timeline. An optional integer
+integer nanoseconds (:func:`to_ns`) on the ``time`` timeline. An optional integer
 ``step`` array adds the ``step`` sequence timeline to the same rows. Every time series is sent
 with ``send_columns`` (one call per entity, no Python loop over time); styling that never changes
 (series names/colours, fill modes) is logged once as static data on fields that are never logged
@@ -56,7 +56,7 @@ _LEVELS = frozenset({"INFO", "WARN", "ERROR", "DEBUG", "TRACE", "CRITICAL"})
 def to_ns(t_s: Any) -> np.ndarray:
     """Float seconds (any shape) -> ``timedelta64[ns]`` array, **rounded** to the nearest nanosecond.
 
-    ``rr.TimeColumn(duration=float_array)`` truncates ``t*1e9`` (pitfall P7), so 2.05 s would land
+    ``rr.TimeColumn(duration=float_array)`` truncates ``t*1e9``, so 2.05 s would land
     at 2049999999 ns; rounding keeps a 10 ms grid exactly on ``k * 10_000_000`` ns.
     """
     t = np.asarray(t_s, dtype=np.float64)
@@ -283,7 +283,7 @@ class Recorder:
 
         translation (n, 3) [m], quaternion_xyzw (n, 4) ``q_parent_entity``; both go in one
         ``Transform3D`` call because the archetype is atomic (a row with only a translation
-        resets the rotation, pitfall P5). Children (meshes) follow the pose.
+        resets the rotation). Children (meshes) follow the pose.
         """
         idx, n = self._index(t, step)
         p = np.asarray(translation, dtype=np.float64)
