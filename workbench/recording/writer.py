@@ -12,7 +12,7 @@ integer nanoseconds (:func:`to_ns`) on the ``time`` timeline. An optional intege
 ``step`` array adds the ``step`` sequence timeline to the same rows. Every time series is sent
 with ``send_columns`` (one call per entity, no Python loop over time); styling that never changes
 (series names/colours, fill modes) is logged once as static data on fields that are never logged
-over time (pitfall P2).
+over time.
 
 Geometry conventions: positions/translations in metres in the entity's parent frame, expressed
 relative to a local origin (Rerun stores float32); quaternions scalar-last ``[x, y, z, w]``,
