@@ -27,17 +27,16 @@ Randomness and scheduling: members are drawn in fixed blocks of :data:`SAMPLE_BL
 uses ``np.random.SeedSequence(seed, spawn_key=(b,))``, so a member's offsets depend only on
 ``(seed, member index)`` — not on the chunk size, the scheduler or the number of workers.  The
 integration is member-wise element arithmetic, so results are bit-identical in-process, in a
-process pool, on a Dask cluster, and in the per-member loop baseline (:func:`run_dispersion_loop`).
+process pool, on a Dask cluster (chunks run by :func:`workbench.estimation.montecarlo.run_monte_carlo`),
+and in the per-member loop baseline (:func:`run_dispersion_loop`).
 Memory: only dx0 (n, 9), the five event quantities and a thinned position cloud (≤ n_cloud
 members at ~1 Hz) are kept; a chunk's working set is a few MB.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import time
 from collections.abc import Mapping
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -46,6 +45,7 @@ import numpy as np
 from workbench.core.atmosphere import Atmosphere, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_from_rotvec
+from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import ImuArrays, _qmul, _qnormalize, imu_arrays, integrate_members
 
 __all__ = [
@@ -279,8 +279,11 @@ def _offsets(job: _Job, start: int, stop: int) -> np.ndarray:
     return sample_offsets(job.seed, start, stop, job.sigmas, round_index=job.round_index, mean=job.mean, L=job.L)
 
 
-def _run_chunk(job: _Job, start: int, stop: int) -> tuple[int, np.ndarray, dict[str, np.ndarray]]:
-    """Integrate members start..stop−1 together; returns (start, dx0, events)."""
+def _run_chunk(job: _Job, start: int, stop: int, seeds=None) -> tuple[int, np.ndarray, dict[str, np.ndarray]]:
+    """Integrate members start..stop−1 together; returns (start, dx0, events).
+
+    A chunk task of :func:`~workbench.estimation.montecarlo.run_monte_carlo`; ``seeds`` is unused (None):
+    the members' offsets come from :func:`sample_offsets`' blocks."""
     dx0 = _offsets(job, start, stop)
     v, q, p = _members(job.v0, job.q0, job.p0, dx0)
     out = integrate_members(job.imu, v, q, p, bridge_mode=job.bridge_mode, at_t=job.event_times)
@@ -299,55 +302,6 @@ def _run_loop(job: _Job, start: int, stop: int) -> tuple[int, np.ndarray, dict[s
         for k in EVENT_NAMES:
             evs[k][i] = ev[k][0]
     return start, dx0, evs
-
-
-def _one_blas_thread() -> None:
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1)
-
-
-def _ranges(n: int, chunk_size: int) -> list[tuple[int, int]]:
-    return [(a, min(a + chunk_size, n)) for a in range(0, n, chunk_size)]
-
-
-def _execute(job: _Job, n: int, chunk_size: int, scheduler: str | None, workers: int, fn=_run_chunk):
-    """Run the chunks; returns (list of chunk results in order, executor description)."""
-    ranges = _ranges(n, chunk_size)
-    if scheduler is None and workers <= 1:
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=1):
-            return [fn(job, a, b) for a, b in ranges], "in-process loop over chunks"
-    if scheduler is None:
-        with ProcessPoolExecutor(
-            max_workers=int(workers), mp_context=mp.get_context(), initializer=_one_blas_thread
-        ) as ex:
-            futs = [ex.submit(fn, job, a, b) for a, b in ranges]
-            return [f.result() for f in futs], f"process pool ({workers} workers)"
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError as err:  # pragma: no cover - optional extra
-        raise NotImplementedError(
-            "a dask scheduler needs the optional dask extra: .venv/bin/pip install -e '.[dask]'"
-        ) from err
-    if scheduler == "local":
-        with (
-            LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
-            Client(cluster) as client,
-        ):
-            return _dask_map(client, job, ranges, fn), "dask LocalCluster (2 workers x 1 thread, processes)"
-    if scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
-        with Client(scheduler) as client:
-            return _dask_map(client, job, ranges, fn), f"dask scheduler {scheduler}"
-    raise ValueError(f"scheduler must be None, 'local' or 'tcp://host:port', got {scheduler!r}")
-
-
-def _dask_map(client, job: _Job, ranges, fn):
-    client.run(_one_blas_thread)
-    job_f = client.scatter(job, broadcast=True)
-    futs = [client.submit(fn, job_f, a, b, pure=False, key=f"dispersion-{job.seed}-{a}-{b}") for a, b in ranges]
-    return client.gather(futs)
 
 
 def _event_times(imu: ImuArrays, events_t: Mapping[str, float]) -> tuple[np.ndarray, dict[str, float]]:
@@ -532,7 +486,8 @@ def run_dispersion(
     optional "BSR" (default: end of the data)} [s]; ``atmosphere`` for the speed of sound (default
     :class:`~workbench.core.atmosphere.MarsEngineeringAtmosphere`); ``chunk_size`` members
     integrated together; ``seed``; ``scheduler`` None (in-process; a process pool if ``workers > 1``),
-    ``"local"`` (dask LocalCluster, 2 processes x 1 thread) or ``"tcp://host:port"`` (dask Client);
+    ``"local"`` (dask LocalCluster, ``workers`` (≥ 2) processes x 1 thread) or ``"tcp://host:port"``
+    (dask Client), as :func:`workbench.estimation.montecarlo.run_monte_carlo`;
     ``n_cloud`` members kept in the thinned cloud, sampled every ``cloud_dt`` [s];
     ``bridge_mode`` of the gap bridges; ``r_ground`` terrain radius [m].
 
@@ -559,7 +514,16 @@ def run_dispersion(
         if r > 0:
             job = replace(job, round_index=r, mean=mean, L=np.linalg.cholesky(cov))
         t0 = time.perf_counter()
-        parts, executor = _execute(job, int(n), int(chunk_size), scheduler, workers)
+        run = run_monte_carlo(
+            _run_chunk,
+            int(n),
+            shared=job,
+            chunk_size=int(chunk_size),
+            workers=workers,
+            scheduler=scheduler,
+            name=f"dispersion-{job.seed}-round{r}",
+        )
+        parts, executor = run.results, run.executor
         dt = time.perf_counter() - t0
         wall += dt
         dx0, events = _combine(parts)

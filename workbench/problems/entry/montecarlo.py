@@ -67,18 +67,17 @@ so the Cartesian NEES explodes after the fix even when the altitude, velocity an
 right.  Both are reported; the difference measures this linearisation limit of a Cartesian
 error state.
 
-Execution as :mod:`workbench.problems.droptest.montecarlo`: in-process loop (one BLAS thread), a process
-pool of ``workers`` (one BLAS thread each), a Dask ``LocalCluster`` (``scheduler="local"``) or a
-running Dask scheduler (``"tcp://…"``).  Results do not depend on the executor (only wall times do).
+Execution by :func:`workbench.estimation.montecarlo.run_monte_carlo`: in-process loop (one BLAS
+thread), a process pool of ``workers`` (one BLAS thread each), a Dask ``LocalCluster``
+(``scheduler="local"``) or a running Dask scheduler (``"tcp://…"``).  Results do not depend on the
+executor (only wall times do).
 """
 
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
 import time
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -88,6 +87,7 @@ import numpy as np
 from workbench.core.bodies import MARS
 from workbench.core.rotation import attitude_error, quat_boxplus
 from workbench.estimation.consistency import anees_bounds, fraction_inside, nees
+from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import GapBridge, ImuArrays, apply_gap, gap_transition, imu_arrays, rk4_step
 from workbench.models.radar import R_GROUND, beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
 from workbench.problems.entry.filter import CHANNELS, EntryFilterSigmas, RadarData, run_entry_smoother
@@ -308,10 +308,12 @@ def _nis_mean(res) -> np.ndarray:
     return out
 
 
-def _run_one(job: _Job, r: int) -> _RunOut:
-    """One validation run (module docstring); depends on (job, r) only."""
+def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> _RunOut:
+    """One validation run (module docstring); depends on (job, r) only.
+
+    A task of :func:`~workbench.estimation.montecarlo.run_monte_carlo`: ``ss`` is run r's
+    ``SeedSequence(job.seed, spawn_key=(r,))``."""
     t0 = time.perf_counter()
-    ss = np.random.SeedSequence(int(job.seed), spawn_key=(int(r),))
     g_member, g_truth, g_imu, g_radar = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(4))
     imu = job.imu
     n = imu.t.size
@@ -409,55 +411,6 @@ def _run_one(job: _Job, r: int) -> _RunOut:
         nis_mean=_nis_mean(res),
         wall_s=time.perf_counter() - t0,
     )
-
-
-# ---------------------------------------------------------------------------------------------
-# execution
-
-
-def _one_blas_thread() -> None:
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1)
-
-
-def _execute(job: _Job, runs: list[int], scheduler: str | None, workers: int) -> tuple[list[_RunOut], str]:
-    if scheduler is None and workers <= 1:
-        from threadpoolctl import threadpool_limits
-
-        # one BLAS thread as in the workers: results must not depend on the executor, and multi-threaded
-        # BLAS on 9x9 matrices made one smoother run ~10x slower (measured 0.65 s -> 7 s)
-        with threadpool_limits(limits=1):
-            return [_run_one(job, r) for r in runs], "in-process loop"
-    if scheduler is None:
-        with ProcessPoolExecutor(
-            max_workers=int(workers), mp_context=mp.get_context(), initializer=_one_blas_thread
-        ) as pool:
-            futs = [pool.submit(_run_one, job, r) for r in runs]
-            return [f.result() for f in futs], f"process pool ({workers} workers)"
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError as err:  # pragma: no cover - optional extra
-        raise NotImplementedError(
-            "a dask scheduler needs the optional dask extra: .venv/bin/pip install -e '.[dask]'"
-        ) from err
-    if scheduler == "local":
-        with (
-            LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
-            Client(cluster) as client,
-        ):
-            return _dask_map(client, job, runs), "dask LocalCluster (2 workers x 1 thread, processes)"
-    if scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
-        with Client(scheduler) as client:
-            return _dask_map(client, job, runs), f"dask scheduler {scheduler}"
-    raise ValueError(f"scheduler must be None, 'local' or 'tcp://host:port', got {scheduler!r}")
-
-
-def _dask_map(client, job: _Job, runs: list[int]) -> list[_RunOut]:
-    client.run(_one_blas_thread)
-    job_f = client.scatter(job, broadcast=True)
-    futs = [client.submit(_run_one, job_f, r, pure=False, key=f"entry-validation-{job.seed}-{r}") for r in runs]
-    return client.gather(futs)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -682,9 +635,18 @@ def validate_smoother(
         seed=int(seed),
         t_fix=t_fix,
     )
-    runs = list(range(int(n_runs)))
-    outs, executor = _execute(job, runs, scheduler, int(workers))
-    outs = sorted(outs, key=lambda o: o.r)
+    # one BLAS thread in every executor: results must not depend on it, and multi-threaded BLAS on
+    # 9x9 matrices made one smoother run ~10x slower (measured 0.65 s -> 7 s)
+    run = run_monte_carlo(
+        _run_one,
+        int(n_runs),
+        shared=job,
+        seed=job.seed,
+        workers=int(workers),
+        scheduler=scheduler,
+        name=f"entry-validation-{job.seed}",
+    )
+    outs, executor = run.results, run.executor
 
     t = plain.t
     failed = np.array([o.failed for o in outs])
