@@ -65,9 +65,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_mc(args: argparse.Namespace) -> int:
-    """The Monte Carlo analysis of a scenario's problem (drop test: consistency over synthetic
-    seeds; entry: the smoother validation of AMELIA Sect. 8); writes ``<name>.mc.json`` and
-    ``<name>_mc.rrd``."""
+    """The Monte Carlo analysis of the scenario's problem (``Problem.monte_carlo``); writes
+    ``<name>.mc.json`` and ``<name>_mc.rrd``."""
     from workbench.problems.base import McOptions
     from workbench.problems.runner import run_monte_carlo
 
