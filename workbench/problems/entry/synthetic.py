@@ -59,6 +59,7 @@ TELEMETRY_FILES = {
 }
 
 
+
 def vehicle_path(scenario: Scenario) -> Path:
     """The entry-vehicle asset: ``[vehicle] file`` (relative to the scenario file), else the
     shipped ``assets/vehicles/schiaparelli.toml``."""
