@@ -25,16 +25,12 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "SCENARIO_KINDS",
     "Scenario",
     "ScenarioError",
     "find_scenarios",
     "load_scenario",
     "resolve_scenario",
 ]
-
-#: The reconstruction problems a scenario may describe (docs/ARCHITECTURE.md).
-SCENARIO_KINDS: tuple[str, ...] = ("droptest", "entry", "parameters", "airdata")
 
 _VALUE_KINDS = ("float", "int", "str", "bool", "vec3", "list", "table")
 
@@ -215,9 +211,9 @@ def _from_data(path: Path, data: dict) -> Scenario:
     name = sc.get("name")
     if not isinstance(name, str) or not name.strip():
         raise ScenarioError(path, "scenario.name", f"expected a non-empty string, got {name!r}")
-    kind = sc.get("kind")
-    if kind not in SCENARIO_KINDS:
-        raise ScenarioError(path, "scenario.kind", f"expected one of {', '.join(SCENARIO_KINDS)}, got {kind!r}")
+    kind = sc.get("kind")  # which problem handles it is the registry's business (workbench.problems)
+    if not isinstance(kind, str) or not kind.strip():
+        raise ScenarioError(path, "scenario.kind", f"expected a non-empty string (the problem kind), got {kind!r}")
     desc = sc.get("description", "")
     if not isinstance(desc, str):
         raise ScenarioError(path, "scenario.description", f"expected a string, got {_type_name(desc)}")
@@ -235,7 +231,7 @@ def _from_data(path: Path, data: dict) -> Scenario:
     seed = data.get("synthetic", {}).get("seed", 0)
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         raise ScenarioError(path, "synthetic.seed", f"expected a non-negative integer, got {seed!r}")
-    return Scenario(path=path, name=name.strip(), kind=kind, description=desc.strip(), data=data)
+    return Scenario(path=path, name=name.strip(), kind=kind.strip(), description=desc.strip(), data=data)
 
 
 def load_scenario(path: str | os.PathLike) -> Scenario:

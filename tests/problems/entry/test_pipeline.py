@@ -16,9 +16,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from workbench.cli import _assets_dir, _run_entry, main, run_scenario
+from workbench.cli import main
+from workbench.io.assets import assets_dir
 from workbench.io.scenario import Scenario, ScenarioError, load_scenario
+from workbench.problems.base import RunOptions
 from workbench.problems.entry import pipeline as en
+from workbench.problems.runner import run_scenario
 from workbench.recording import layout
 from workbench.recording.reader import read_recording, verify
 
@@ -28,7 +31,7 @@ MEMBERS = 2000
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("entry")
-    summary = run_scenario("schiaparelli", out, quiet=True, members=MEMBERS)
+    summary = run_scenario("schiaparelli", out, RunOptions(members=MEMBERS)).summary
     return out, summary
 
 
@@ -175,14 +178,14 @@ def test_user_telemetry_takes_the_same_path(run, tmp_path):
     tel = tmp_path / "flight"
     shutil.copytree(out / "schiaparelli" / "telemetry", tel)
     (tel / "truth.npz").unlink()  # a user has no truth
-    base = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    base = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     data = {k: v for k, v in base.data.items() if k not in ("synthetic", "truth")}
     data["scenario"] = dict(data["scenario"], name="my_entry")
     data["vehicle"] = {"file": str(base.path_of("vehicle.file"))}
     data["telemetry"] = {k: str(tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}") for k in en.TELEMETRY_FILES}
     user_sc = Scenario(tmp_path / "my_entry.toml", "my_entry", "entry", "user data", data)
     assert not user_sc.is_synthetic
-    user = _run_entry(user_sc, tmp_path / "rec", None, False, True, None, MEMBERS)
+    user = run_scenario(user_sc, tmp_path / "rec", RunOptions(members=MEMBERS)).summary
     assert "truth" not in user
     assert user["dispersion"]["accepted"] == s["dispersion"]["accepted"]
     assert user["end"]["h_agl_m"] == pytest.approx(s["end"]["h_agl_m"], abs=1e-6)
@@ -226,7 +229,7 @@ def test_filled_blackout_density_within_20_percent(run):
     ],
 )
 def test_bad_entry_configuration_is_a_located_error(key, value, match):
-    base = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    base = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     with pytest.raises(ScenarioError, match=match):
         en.check_config(base.with_overrides({key: value}))
 
@@ -238,7 +241,7 @@ def test_initial_state_at_the_wrong_time_is_rejected(run, tmp_path):
     f = tel / "initial_state.toml"
     f.write_text(f.read_text().replace("t0_s = -15.000000", "t0_s = 5.0"))
     paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in en.TELEMETRY_FILES}
-    sc = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     with pytest.raises(ScenarioError, match="t0_s"):
         for _ in en.reconstruct(sc, paths, members=200):
             pass
@@ -251,7 +254,7 @@ def test_missing_pdd_event_is_a_located_error(run, tmp_path):
     ev = tel / "events.csv"
     ev.write_text("\n".join(line for line in ev.read_text().splitlines() if not line.endswith(",PDD")) + "\n")
     paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in en.TELEMETRY_FILES}
-    sc = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     with pytest.raises(ScenarioError, match="PDD"):
         for _ in en.reconstruct(sc, paths, members=200):
             pass

@@ -488,7 +488,8 @@ def epoch_utc(sc: Scenario, tm=None) -> str:
     raise ScenarioError(sc.path, "scenario.epoch_utc", "missing, and the telemetry has no '# epoch_utc:' line")
 
 
-def _jd0(sc: Scenario, tm=None) -> float:
+def epoch_jd_tdb(sc: Scenario, tm=None) -> float:
+    """Julian date (TDB) of t = 0 (EIP), from :func:`epoch_utc` (``core.frames.julian_date_from_utc``)."""
     return julian_date_from_utc(epoch_utc(sc, tm))
 
 
@@ -498,7 +499,7 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
 
     from workbench.core.frames import C_bodyfixed_mmed, planetocentric_from_cartesian
 
-    jd0 = _jd0(sc, tm)
+    jd0 = epoch_jd_tdb(sc, tm)
     epoch = dt.datetime.fromisoformat(epoch_utc(sc, tm).replace("Z", "+00:00"))
     rows = []
     names = [("First data", float(t[0]))] + sorted(events.items(), key=lambda kv: kv[1]) + [("Last data", float(t[-1]))]
