@@ -173,7 +173,9 @@ def _run_droptest(sc, out_dir: Path, seed, export: bool, quiet: bool) -> dict:
         paths = syn.telemetry
         truth = load_truth(syn.truth_path)
     else:
-        paths = dt.telemetry_paths(sc)
+        from workbench.problems.droptest.telemetry import telemetry_paths
+
+        paths = telemetry_paths(sc)
     residual_names = list(sc.get("sensors.accelerometer.triads", ["BP", "PYBP", "PXBP", "MXBP"], kind="list"))
     residual_names += ["gyro", "zupt"]
     if sc.has("sensors.ranging"):

@@ -28,6 +28,7 @@ __all__ = [
     "SCENARIO_KINDS",
     "Scenario",
     "ScenarioError",
+    "check_value",
     "find_scenarios",
     "load_scenario",
     "resolve_scenario",
@@ -120,7 +121,7 @@ class Scenario:
             raise ScenarioError(self.path, dotted_key, f"missing{' ' + kind if kind else ''} value{hint}")
         if kind is None:
             return copy.deepcopy(v) if isinstance(v, dict | list) else v
-        return _check(self.path, dotted_key, v, kind)
+        return check_value(self.path, dotted_key, v, kind)
 
     def path_of(self, dotted_key: str, *, must_exist: bool = True) -> Path:
         """The path string at ``dotted_key`` resolved against the scenario's directory.
@@ -168,7 +169,10 @@ class Scenario:
         return _from_data(self.path, data)
 
 
-def _check(path: Path, key: str, v: Any, kind: str) -> Any:
+def check_value(path: Path, key: str, v: Any, kind: str) -> Any:
+    """``v`` checked against ``kind`` (see :meth:`Scenario.get`); :class:`ScenarioError` naming
+    ``path`` and the dotted ``key`` otherwise.  Numbers come back as float for ``"float"``, a
+    ``"vec3"`` as a float array ``(3,)``, lists and tables as copies."""
     def fail(expected: str) -> ScenarioError:
         return ScenarioError(path, key, f"expected {expected}, got {_type_name(v)} {v!r}"[:300])
 
