@@ -91,7 +91,9 @@ def _run_entry(sc, out_dir: Path, seed, export: bool, quiet: bool, scheduler, me
         paths = synthesize_entry(sc, out_dir / sc.name / "telemetry", seed=seed_used)
         truth = load_entry_truth(paths["truth"])
     else:
-        paths = en.telemetry_paths(sc)
+        from workbench.problems.entry.telemetry import telemetry_paths
+
+        paths = telemetry_paths(sc)
     vehicle = en.vehicle_for(sc)
     r_ground = en.R_MOLA + sc.get("site.terrain_m", -1440.0, kind="float")
     rrd = out_dir / f"{sc.name}.rrd"
@@ -300,7 +302,7 @@ def _mc_entry(sc, args: argparse.Namespace) -> int:
             sc, out / f"{sc.name}_mc_work" / "telemetry", seed=sc.get("synthetic.seed", 0, kind="int")
         )
     else:
-        from workbench.problems.entry.pipeline import telemetry_paths
+        from workbench.problems.entry.telemetry import telemetry_paths
 
         paths = telemetry_paths(sc)
     _progress(f"[{sc.name}] preprocessing and dispersion analysis ...")

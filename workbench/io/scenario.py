@@ -34,7 +34,7 @@ __all__ = [
     "resolve_scenario",
 ]
 
-#: The reconstruction problems a scenario may describe (DESIGN.md).
+#: The reconstruction problems a scenario may describe (``[scenario] kind``).
 SCENARIO_KINDS: tuple[str, ...] = ("droptest", "entry", "parameters", "airdata")
 
 _VALUE_KINDS = ("float", "int", "str", "bool", "vec3", "list", "table")
@@ -173,6 +173,7 @@ def check_value(path: Path, key: str, v: Any, kind: str) -> Any:
     """``v`` checked against ``kind`` (see :meth:`Scenario.get`); :class:`ScenarioError` naming
     ``path`` and the dotted ``key`` otherwise.  Numbers come back as float for ``"float"``, a
     ``"vec3"`` as a float array ``(3,)``, lists and tables as copies."""
+
     def fail(expected: str) -> ScenarioError:
         return ScenarioError(path, key, f"expected {expected}, got {_type_name(v)} {v!r}"[:300])
 

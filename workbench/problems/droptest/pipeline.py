@@ -175,11 +175,11 @@ def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
     x0[rl.SA] = quat_rotate(quat_conjugate(x0[rl.SQ]), -GRAVITY)  # hanging: a_ng = -g, in body axes
     P0 = np.zeros((n_e, n_e))
     P0[rl.EP, rl.EP] = sp**2 * np.eye(3)
-    P0[rl.EV, rl.EV] = cfg.velocity_sigma_mps ** 2 * np.eye(3)
-    P0[rl.EA, rl.EA] = cfg.accel_sigma_mps2 ** 2 * np.eye(3)
+    P0[rl.EV, rl.EV] = cfg.velocity_sigma_mps**2 * np.eye(3)
+    P0[rl.EA, rl.EA] = cfg.accel_sigma_mps2**2 * np.eye(3)
     P0[rl.ETH, rl.ETH] = P_theta
     P0[rl.EW, rl.EW] = np.radians(cfg.rate_sigma_dps) ** 2 * np.eye(3)
-    P0[rl.EAL, rl.EAL] = cfg.angular_accel_sigma ** 2 * np.eye(3)
+    P0[rl.EAL, rl.EAL] = cfg.angular_accel_sigma**2 * np.eye(3)
     # gyro error matrix: scale factors on the diagonal, misalignment [rad] off it (datasheet 1σ)
     s_sc = cfg.gyro_scale
     s_mis = np.radians(cfg.gyro_misalignment_deg)

@@ -21,7 +21,7 @@ how this module produces the same thing from a truth trajectory for synthetic sc
   intersections with the terrain sphere ``r = 3396000 − 1440 m`` (:func:`slant_ranges_sphere`),
   not the estimator's flat-terrain model (Eq. B.3).
 
-Frames and conventions (DESIGN.md, ``.entry_spec``): ``M`` = MMED inertial (Mars-centred, +Z the
+Frames and conventions: ``M`` = MMED inertial (Mars-centred, +Z the
 pole), ``G`` = GNC body frame (+Z towards the back shell, B0 along −Z_G); ``q_M_G`` is
 body → inertial, Hamilton, scalar-last; the TM quaternion is JPL "MMED to GNC", numerically the
 raw components of ``q_M_G`` (:func:`workbench.core.rotation.quat_from_jpl`).  Error state
@@ -52,19 +52,7 @@ from workbench.core.rotation import (
     quat_normalize,
     quat_rotate,
 )
-
-try:  # the shared beam geometry (written by the radar helper); local fallback until it exists
-    from workbench.models.radar import beam_directions_G
-except ImportError:  # pragma: no cover - exercised only while radar.py is absent
-
-    def beam_directions_G(squint_deg: float = 20.0, azimuths_deg=(0.0, 120.0, 240.0)) -> np.ndarray:
-        """RDA beam unit vectors (4, 3) in G: B0 = −Z_G; B1..B3 squinted ``squint_deg`` from −Z_G at
-        azimuths ``azimuths_deg`` measured from +X_G towards +Y_G (fallback copy of sensors.radar)."""
-        s = math.radians(squint_deg)
-        az = np.radians(np.asarray(azimuths_deg, float))
-        sq = np.column_stack([np.sin(s) * np.cos(az), np.sin(s) * np.sin(az), -np.cos(s) * np.ones_like(az)])
-        return np.vstack([[0.0, 0.0, -1.0], sq])
-
+from workbench.models.radar import beam_directions_G
 
 __all__ = [
     "GYRO_SATURATION_DPS",
@@ -82,7 +70,6 @@ __all__ = [
     "terrain_relative_velocity_G",
     "interp_rows",
     "generate_entry_tm",
-    "beam_directions_G",
 ]
 
 #: Design range of the Schiaparelli X gyro (AMELIA Sect. 3): rates beyond are clipped [deg/s].
