@@ -220,7 +220,10 @@ def render_markdown(schema: Schema) -> str:
         lines += [f"`[{t.name}]` — {_cell(t.meaning)}", ""]
         lines += ["| key | type | unit | default | meaning |", "|---|---|---|---|---|"]
         for k in t.keys:
-            meaning = k.meaning + (f" One of: {', '.join(f'`{c}`' for c in k.choices)}." if k.choices else "")
+            meaning = k.meaning
+            if k.choices:
+                listed = ", ".join(f"`{c}`" for c in k.choices)
+                meaning += ("" if meaning.endswith(".") else ".") + f" One of: {listed}."
             kind = "number or vec3" if k.kind == "number_or_vec3" else k.kind
             lines.append(f"| `{k.name}` | {kind} | {_cell(k.unit)} | {_fmt_default(k)} | {_cell(meaning)} |")
         if t.free is not None:
@@ -265,5 +268,5 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+if __name__ == "__main__":  # run the imported module's main: the schemas compare with its REQUIRED
+    raise SystemExit(importlib.import_module("workbench.io.schema").main())

@@ -35,6 +35,7 @@ import numpy as np
 from workbench.io.assets import asset_path
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import write_events, write_telemetry
+from workbench.problems.entry.config import config_for
 from workbench.problems.entry.sensors import EntryTelemetrySpec, EntryTM, generate_entry_tm
 from workbench.problems.entry.telemetry import NominalState, write_nominal_state
 
@@ -241,6 +242,7 @@ def synthesize_entry(scenario: Scenario, out_dir: str | Path, seed: int | None =
     deterministic per scenario (:func:`truth_for`).  Returns ``{stream: path}`` (keys of
     :data:`TELEMETRY_FILES` plus ``"initial_state"`` and ``"truth"``).
     """
+    config_for(scenario)  # unknown or mistyped keys are errors before the simulation
     seed = int(scenario.get("synthetic.seed", 0, kind="int") if seed is None else seed)
     return synthesize_from_truth(truth_for(scenario), out_dir, EntryTelemetrySpec.from_scenario(scenario), seed)
 
