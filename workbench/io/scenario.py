@@ -1,10 +1,12 @@
 """Scenario files (TOML): what to reconstruct, from which telemetry, with which settings.
 
 A scenario is one TOML file with a ``[scenario]`` table (``name``, ``kind``, optional
-``description`` and ``epoch_utc``) and free-form tables read by the pipeline of that kind:
-``[vehicle]``, ``[sensors.*]``, ``[telemetry]`` (logical stream name → CSV path relative to the
-scenario file), ``[synthetic]`` (truth-simulator settings and ``seed``; its presence makes the
-scenario synthetic), ``[filter]``, ``[output]``.  FORMATS.md describes it for users.
+``description`` and ``epoch_utc``) and the tables of that kind: ``[vehicle]``, ``[sensors.*]``,
+``[telemetry]`` (logical stream name → file path relative to the scenario file), ``[synthetic]``
+(truth-simulator settings and ``seed``; its presence makes the scenario synthetic), ``[filter]``,
+...  Which tables and keys a kind has is declared once in its schema
+(``problems/<kind>/config.py``, :mod:`workbench.io.schema`); the problem validates the scenario
+against it before it runs (unknown keys are errors).  FORMATS.md describes it for users.
 
 Keys are addressed by dotted paths (``"sensors.imu.rate_hz"``) and type-checked on access by
 :meth:`Scenario.get`; every error names the file and the dotted key.  Values are whatever the
