@@ -20,7 +20,8 @@ from workbench.core.rotation import dcm_to_quat, quat_boxplus, quat_from_rotvec,
 from workbench.estimation.strapdown import gravity_M
 from workbench.models.radar import R_GROUND, mars_rate_M
 from workbench.problems.entry.filter import EntryFilterSigmas
-from workbench.problems.entry.montecarlo import ERROR_NAMES, ValidationResult, _noise_scale, validate_smoother
+from workbench.problems.entry.montecarlo import ValidationResult, _noise_scale, validate_smoother
+from workbench.problems.entry.scoring import ERROR_NAMES
 
 OM = mars_rate_M()
 EX, EY, EZ = np.eye(3)

@@ -26,7 +26,8 @@ from workbench.core.rotation import attitude_error, dcm_to_quat, quat_normalize,
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.problems.entry import synthetic as es
-from workbench.problems.entry.preprocess import PreprocessConfig, preprocess, read_entry_telemetry
+from workbench.problems.entry.config import config_for
+from workbench.problems.entry.preprocess import PreprocessConfig, preprocess
 from workbench.problems.entry.sensors import (
     EntryImuModel,
     EntryTelemetrySpec,
@@ -35,6 +36,7 @@ from workbench.problems.entry.sensors import (
     interp_rows,
     strapdown_onboard,
 )
+from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state, telemetry_paths
 
 PDD, FSR, BSR = 20.0, 30.0, 72.0
 GAPS = ((3.0, 1.4), (5.0, 1.8), (7.4, 3.3), (11.2, 7.2))
@@ -167,15 +169,14 @@ def test_round_trip_within_file_precision(synth, tel, truth, spec):
     assert 0.2 < np.degrees(np.linalg.norm(dx0[3:6])) < 3 and 100 < np.linalg.norm(dx0[6:]) < 10e3
     assert np.allclose(tel.q_M_G_nav[0], T["nominal_q0"], atol=5e-9)
     # the nominal initial state file the reconstruction starts from (AMELIA Table 2 style)
-    from workbench.problems.entry.pipeline import read_nominal_state
-
     nom = read_nominal_state(paths["initial_state"])
     assert nom.t0 == -15.0 and np.allclose(nom.p_M, T["nominal_p0"], atol=1e-3)
     assert np.allclose(nom.v_M, T["nominal_v0"], atol=1e-5) and np.allclose(nom.q_M_G, T["nominal_q0"], atol=1e-8)
 
 
 def test_radar_truth_geometry_within_noise(tel, truth, spec):
-    from workbench.problems.entry.sensors import beam_directions_G, slant_ranges_sphere
+    from workbench.models.radar import beam_directions_G
+    from workbench.problems.entry.sensors import slant_ranges_sphere
 
     q = quat_normalize(interp_rows(truth.t, truth.q_M_G, tel.t_sr))
     exact = slant_ranges_sphere(interp_rows(truth.t, truth.p_M, tel.t_sr), q, beam_directions_G(), spec.r_ground)
@@ -194,7 +195,7 @@ def test_synthesize_entry_from_a_scenario(tmp_path, monkeypatch, truth):
         "[synthetic.nominal_error]\ndx0 = [0, 0, 0, 0, 0, 0, 0, 0, 0]\n"
         "[sensors.imu]\ngyro_noise_dps = 0.02\n[sensors.radar]\nrange_sigma_m = 3.0\nzero_filled_packets = 1\n"
         '[telemetry]\ngnc = "tm/gnc.csv"\ngnc_nav = "tm/gnc_nav.csv"\nrda_slant_range = "tm/rda_slant_range.csv"\n'
-        'rda_out = "tm/rda_out.csv"\nevents = "tm/events.csv"\n'
+        'rda_out = "tm/rda_out.csv"\nevents = "tm/events.csv"\ninitial_state = "tm/initial_state.toml"\n'
     )
     scenario = load_scenario(sc)
     monkeypatch.setattr(es, "truth_for", lambda s: truth)
@@ -202,10 +203,12 @@ def test_synthesize_entry_from_a_scenario(tmp_path, monkeypatch, truth):
     assert set(paths) == {*es.TELEMETRY_FILES, "truth", "initial_state"}
     T = es.load_truth(paths["truth"])
     assert T["seed"] == 3 and np.all(T["nominal_dx0"] == 0)
-    t2 = read_entry_telemetry(scenario)
+    checks = config_for(scenario).checks
+    assert checks.zero_filled_packets == 1
+    t2 = read_entry_telemetry(telemetry_paths(scenario), checks)
     assert t2.sr_valid.tolist() == [False, True, True, True]
     assert [p.split(":")[0] for p in t2.problems] == ["INFO"]  # one zero-filled packet expected, as configured
-    t3 = read_entry_telemetry(paths, scenario)  # the pipeline's call: files + the scenario's settings
+    t3 = read_entry_telemetry(paths, checks)  # the synthesizer's paths, the scenario's settings
     assert t3.problems == t2.problems and np.array_equal(t3.a_M_total, t2.a_M_total)
     assert np.allclose(t2.q_M_G_nav[0], truth.q_M_G[0], atol=5e-9)
 

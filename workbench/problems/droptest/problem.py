@@ -17,6 +17,8 @@ from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
+from workbench.problems.droptest.config import SCHEMA
+from workbench.problems.droptest.telemetry import OPTIONAL_STREAMS, telemetry_paths
 
 __all__ = ["TELEMETRY_FILES", "DropTestProblem", "residual_names"]
 
@@ -28,7 +30,6 @@ TELEMETRY_FILES = {
     "setup": "setup.toml",
     "ranging": "ranging.csv",
 }
-OPTIONAL = ("ranging",)
 
 
 def residual_names(scenario: Scenario) -> list[str]:
@@ -73,15 +74,15 @@ class DropTestProblem:
 
     kind = "droptest"
     title = "drop"
-    schema: Any = None
+    schema = SCHEMA
 
     def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
         """``[telemetry]`` files (imu, attitude_3dm, events, setup, optional ranging), or the
         standard names in ``folder`` (ranging only if the file exists)."""
         if folder is None:
-            return dt.telemetry_paths(scenario)
+            return telemetry_paths(scenario)
         d = Path(folder)
-        return {k: d / f for k, f in TELEMETRY_FILES.items() if k not in OPTIONAL or (d / f).exists()}
+        return {k: d / f for k, f in TELEMETRY_FILES.items() if k not in OPTIONAL_STREAMS or (d / f).exists()}
 
     def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the drop (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""

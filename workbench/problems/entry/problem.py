@@ -18,6 +18,8 @@ import numpy as np
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.entry import pipeline as en
+from workbench.problems.entry.config import SCHEMA
+from workbench.problems.entry.telemetry import STREAMS, telemetry_paths
 
 __all__ = ["EntryProblem"]
 
@@ -42,14 +44,14 @@ class EntryProblem:
 
     kind = "entry"
     title = "entry"
-    schema: Any = None
+    schema = SCHEMA
 
     def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
-        """``[telemetry]`` files (``pipeline.TELEMETRY_FILES``), or the standard names in ``folder``."""
+        """``[telemetry]`` files (``telemetry.STREAMS``), or the standard names in ``folder``."""
         if folder is None:
-            return en.telemetry_paths(scenario)
+            return telemetry_paths(scenario)
         d = Path(folder)
-        return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in en.TELEMETRY_FILES}
+        return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
 
     def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the entry (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
@@ -140,7 +142,7 @@ class EntryProblem:
             seed = sc.get("synthetic.seed", 0, kind="int")
             paths = self.synthesize(sc, out / f"{sc.name}_mc_work" / "telemetry", seed).telemetry
         else:
-            paths = en.telemetry_paths(sc)
+            paths = telemetry_paths(sc)
         progress(f"[{sc.name}] preprocessing and dispersion analysis ...")
         inp = prepare_validation(sc, paths, members=options.members, scheduler=options.scheduler)
         d = inp.dispersion

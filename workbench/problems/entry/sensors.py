@@ -52,19 +52,7 @@ from workbench.core.rotation import (
     quat_normalize,
     quat_rotate,
 )
-
-try:  # the shared beam geometry (written by the radar helper); local fallback until it exists
-    from workbench.models.radar import beam_directions_G
-except ImportError:  # pragma: no cover - exercised only while radar.py is absent
-
-    def beam_directions_G(squint_deg: float = 20.0, azimuths_deg=(0.0, 120.0, 240.0)) -> np.ndarray:
-        """RDA beam unit vectors (4, 3) in G: B0 = −Z_G; B1..B3 squinted ``squint_deg`` from −Z_G at
-        azimuths ``azimuths_deg`` measured from +X_G towards +Y_G (fallback copy of sensors.radar)."""
-        s = math.radians(squint_deg)
-        az = np.radians(np.asarray(azimuths_deg, float))
-        sq = np.column_stack([np.sin(s) * np.cos(az), np.sin(s) * np.sin(az), -np.cos(s) * np.ones_like(az)])
-        return np.vstack([[0.0, 0.0, -1.0], sq])
-
+from workbench.models.radar import beam_directions_G
 
 __all__ = [
     "GYRO_SATURATION_DPS",
@@ -82,7 +70,6 @@ __all__ = [
     "terrain_relative_velocity_G",
     "interp_rows",
     "generate_entry_tm",
-    "beam_directions_G",
 ]
 
 #: Design range of the Schiaparelli X gyro (AMELIA Sect. 3): rates beyond are clipped [deg/s].
