@@ -47,11 +47,15 @@ def _silent(_msg: str) -> None:
 def resolve(scenario: str | os.PathLike | Scenario) -> tuple[Scenario, Problem]:
     """The scenario (a shipped name, a ``.toml`` path or a loaded :class:`Scenario`) and its problem.
 
-    Raises ``ScenarioError`` for an unknown name or a bad file, and
-    :class:`~workbench.problems.registry.UnknownKindError` if no problem handles its kind.
+    Raises ``ScenarioError`` for an unknown name or a bad file — including any key the problem's
+    schema does not declare (file, table, key and a "did you mean"), checked here before anything
+    runs — and :class:`~workbench.problems.registry.UnknownKindError` if no problem handles its kind.
     """
     sc = scenario if isinstance(scenario, Scenario) else resolve_scenario(scenario, assets_dir())
-    return sc, registry.get(sc.kind, where=str(sc.path))
+    problem = registry.get(sc.kind, where=str(sc.path))
+    if problem.schema is not None:
+        problem.schema.validate(sc.data, sc.path)
+    return sc, problem
 
 
 def run_scenario(

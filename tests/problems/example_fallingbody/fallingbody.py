@@ -17,6 +17,7 @@ import numpy as np
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
 from workbench.estimation.smoother import rts_smooth
 from workbench.io.scenario import Scenario
+from workbench.io.schema import REQUIRED, Key, Schema, Table
 from workbench.io.telemetry import read_telemetry, write_telemetry
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
 from workbench.recording.writer import open_recording
@@ -24,6 +25,66 @@ from workbench.recording.writer import open_recording
 G = 9.80665  # gravity [m/s^2]
 T0, LAPSE, P0, R_AIR = 288.15, 0.0065, 101325.0, 287.053  # ISA troposphere: K, K/m, Pa, J/(kg K)
 LAYOUT = ErrorStateLayout(3)  # no quaternion: the error state is the state
+
+#: Every scenario key, once (type, unit, default, meaning); unknown keys are an error.
+SCHEMA = Schema(
+    "fallingbody",
+    "1-D falling body with a barometer (worked example)",
+    (
+        Table(
+            "scenario",
+            "what the run is",
+            (
+                Key("name", "str", REQUIRED, meaning="names the run"),
+                Key("kind", "str", REQUIRED, meaning='`"fallingbody"`'),
+                Key("description", "str", "", meaning="one line for listings"),
+            ),
+        ),
+        Table(
+            "body",
+            "the falling body",
+            (
+                Key("mass_kg", "float", REQUIRED, "kg", "mass"),
+                Key("cda_m2", "float", REQUIRED, "m^2", "drag coefficient x reference area"),
+            ),
+        ),
+        Table(
+            "release",
+            "release state (the filter's prior)",
+            (
+                Key("altitude_m", "float", REQUIRED, "m", "nominal release altitude"),
+                Key("sigma_altitude_m", "float", 20.0, "m", "1-sigma of the release altitude"),
+            ),
+        ),
+        Table(
+            "barometer",
+            "the sensor",
+            (
+                Key("rate_hz", "float", 20.0, "Hz", "sample rate"),
+                Key("noise_pa", "float", 8.0, "Pa", "white noise, 1-sigma"),
+                Key("bias_sigma_pa", "float", 60.0, "Pa", "constant bias, 1-sigma"),
+            ),
+        ),
+        Table(
+            "filter",
+            "estimator tuning",
+            (Key("accel_psd", "float", 0.05, "(m/s^2)^2/Hz", "process noise on the velocity"),),
+        ),
+        Table(
+            "telemetry",
+            "user files (ignored by a synthetic scenario)",
+            (Key("baro", "str", None, meaning="barometer CSV: `pressure [hPa]`"),),
+        ),
+        Table(
+            "synthetic",
+            "simulate instead of reading telemetry",
+            (
+                Key("seed", "int", 0, meaning="seed of the sensor errors"),
+                Key("duration_s", "float", 40.0, "s", "simulated fall duration"),
+            ),
+        ),
+    ),
+)
 
 
 def pressure(h: np.ndarray) -> np.ndarray:
@@ -108,7 +169,7 @@ class FallingBodyProblem:
 
     kind = "fallingbody"
     title = "fall"
-    schema = None
+    schema = SCHEMA
 
     def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
         """``{"baro": baro.csv}`` from ``[telemetry] baro`` or inside ``folder``."""

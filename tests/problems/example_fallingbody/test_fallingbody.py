@@ -80,3 +80,13 @@ def test_recording_and_files_written(run):
 def test_no_monte_carlo_is_exit_code_5(problem, tmp_path, capsys):
     assert main(["mc", str(SCENARIO), "--out", str(tmp_path)]) == 5
     assert "no Monte Carlo" in capsys.readouterr().err
+
+
+def test_misspelt_key_is_refused_by_the_schema(problem, tmp_path, capsys):
+    """The runner checks every scenario against its problem's schema before anything runs."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SCENARIO.read_text().replace("noise_pa =", "noise_pa_ =", 1))
+    assert main(["run", str(bad), "--out", str(tmp_path / "out")]) == 3
+    err = capsys.readouterr().err
+    assert "bad.toml" in err and "barometer" in err and "noise_pa_" in err and "did you mean 'noise_pa'" in err
+    assert not (tmp_path / "out" / "fallingbody.rrd").exists()
