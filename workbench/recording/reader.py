@@ -1,8 +1,8 @@
 """Reading a workbench ``.rrd`` back into numpy arrays (tests, the ``inspect`` command, exports).
 
 The file is read once with ``rr.chunk.RrdReader(path).stream()``; each chunk becomes an Arrow
-record batch (``chunk.to_record_batch()``), so no server and no DataFusion are involved
-(``/work/shared/RERUN.md`` §6). Accessors gather one component of one entity across all chunks,
+record batch (``chunk.to_record_batch()``), so no server and no DataFusion are involved.
+Accessors gather one component of one entity across all chunks,
 drop rows where it is null, and sort the rows by the requested timeline (stable, so rows logged at
 the same time keep file order).
 

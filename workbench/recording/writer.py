@@ -2,9 +2,9 @@
 
 :func:`open_recording` creates one recording per run, logs into ``<final>.<pid>.partial`` in the
 same directory, and publishes it with an atomic ``os.replace`` only after the RRD footer has been
-written, so an interrupted run never leaves a half-written file at the final path
-(``/work/shared/RERUN.md`` §1). Inside the block Rerun's strict mode is on, so bad input raises
-instead of being dropped with a warning (pitfall P1).
+written, so an interrupted run never leaves a half-written file at the final path. Inside the
+block Rerun's strict mode is on, so bad input raises instead of being dropped with a warning
+(pitfall P1).
 
 :class:`Recorder` is the only logging surface the rest of the workbench sees. It takes numpy
 arrays and **times in float seconds** from the scenario's reference event; they are rounded to
@@ -17,8 +17,8 @@ over time (pitfall P2).
 Geometry conventions: positions/translations in metres in the entity's parent frame, expressed
 relative to a local origin (Rerun stores float32); quaternions scalar-last ``[x, y, z, w]``,
 Hamilton, ``q_parent_child`` (rotates child-frame vectors into the parent frame), as in
-``scipy.spatial.transform.Rotation`` and DESIGN.md. Colours are RGB or RGBA, integers 0–255 (or
-floats 0–1).
+``scipy.spatial.transform.Rotation``. Colours are RGB or RGBA, integers 0–255 (or floats 0–1).
+Entity paths and timelines come from :mod:`workbench.recording.layout` (docs/RECORDING.md).
 """
 
 from __future__ import annotations
