@@ -182,7 +182,7 @@ class EntryRecorder:
                 AtmosphereResult: self._on_atmosphere,
                 WindResult: self._on_winds,
             },
-            # the smoother's start is drawn with the filter result; the final bundle holds nothing new
+            # not drawn: the smoother's start (it goes into the summary) and the final bundle of all stages
             ignored=(SmootherStart, EntryResult),
         )
 
