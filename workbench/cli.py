@@ -83,6 +83,7 @@ def cmd_mc(args: argparse.Namespace) -> int:
 
 def cmd_inspect(args: argparse.Namespace) -> int:
     """Print what a recording holds: entities, timelines, time range, row counts, scorecard."""
+    from workbench.recording import layout
     from workbench.recording.reader import read_recording
 
     data = read_recording(args.recording)
@@ -103,7 +104,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         rows = " ".join(f"{data.row_count(e, tl):7d}" for tl in tls)
         print(f"  {e:60s} {rows}")
     try:
-        print("\n" + data.text_document("/report"))
+        print("\n" + data.text_document(layout.REPORT))
     except (KeyError, ValueError):
         print("(no /report scorecard in this recording)")
     return EXIT_OK

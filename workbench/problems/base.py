@@ -109,7 +109,8 @@ class StageRecorder(Protocol):
     """Draws a run into an open recording, stage by stage."""
 
     def handle(self, stage: object) -> None:
-        """Draw one stage yielded by :meth:`Problem.reconstruct` (unknown stages are ignored)."""
+        """Draw one stage yielded by :meth:`Problem.reconstruct`; a stage type the recorder does not
+        know is an error (``TypeError``, see :class:`workbench.recording.dispatch.StageDispatch`)."""
 
     def finish(self, result: object, summary: dict) -> None:
         """After the last stage: draw what needs the whole result (scorecard, final layout).

@@ -17,8 +17,8 @@ over time.
 Geometry conventions: positions/translations in metres in the entity's parent frame, expressed
 relative to a local origin (Rerun stores float32); quaternions scalar-last ``[x, y, z, w]``,
 Hamilton, ``q_parent_child`` (rotates child-frame vectors into the parent frame), as in
-``scipy.spatial.transform.Rotation`` (docs/ARCHITECTURE.md, "Conventions"). Colours are RGB or RGBA, integers 0–255 (or
-floats 0–1).
+``scipy.spatial.transform.Rotation``. Colours are RGB or RGBA, integers 0–255 (or floats 0–1).
+Entity paths and timelines come from :mod:`workbench.recording.layout` (docs/RECORDING.md).
 """
 
 from __future__ import annotations

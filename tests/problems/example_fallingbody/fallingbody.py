@@ -20,6 +20,8 @@ from workbench.io.scenario import Scenario
 from workbench.io.schema import REQUIRED, Key, Schema, Table
 from workbench.io.telemetry import read_telemetry, write_telemetry
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
+from workbench.recording import layout
+from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import open_recording
 
 G = 9.80665  # gravity [m/s^2]
@@ -140,25 +142,30 @@ class FallResult:
 
 
 class _Drawer:
-    """Draws the stages as time series (altitude, velocity, residuals) with the writer API."""
+    """Draws the stages as time series (pressure, altitude, residuals) with the writer API; the
+    entity paths come from :mod:`workbench.recording.layout`, the stage -> handler map from a
+    :class:`~workbench.recording.dispatch.StageDispatch` (an unknown stage is a ``TypeError``)."""
 
     def __init__(self, rec, truth):
         self.rec, self.truth = rec, truth
+        self.handle = StageDispatch({BaroData: self._baro, ForwardStage: self._forward, FallResult: self._result})
 
-    def handle(self, stage: object) -> None:
-        r = self.rec
-        if isinstance(stage, BaroData):
-            r.scalars("/sensors/baro/pressure", stage.t, stage.p, names="p [Pa]")
-        elif isinstance(stage, ForwardStage):
-            r.scalars("/plots/altitude/forward", stage.forward.t, stage.forward.x_post[:, 0], names="forward")
-            r.scalars("/residuals/baro/value", stage.forward.t, stage.forward.innovations["baro"].y[:, 0])
-        elif isinstance(stage, FallResult):
-            s3 = 3.0 * np.sqrt(stage.P[:, 0, 0])
-            r.scalars("/plots/altitude/smoothed", stage.t, stage.x[:, 0], names="smoothed")
-            r.scalars("/plots/altitude/plus_3sigma", stage.t, stage.x[:, 0] + s3)
-            r.scalars("/plots/altitude/minus_3sigma", stage.t, stage.x[:, 0] - s3)
-            if self.truth is not None:
-                r.scalars("/plots/altitude/truth", self.truth["t"], self.truth["h"], names="truth")
+    def _baro(self, stage: BaroData) -> None:
+        self.rec.scalars(layout.sensor_path("baro", "pressure"), stage.t, stage.p, names="p [Pa]")
+
+    def _forward(self, stage: ForwardStage) -> None:
+        fp = stage.forward
+        self.rec.scalars(layout.join(layout.plot_path("altitude"), "forward"), fp.t, fp.x_post[:, 0], names="forward")
+        self.rec.scalars(layout.join(layout.residual_path("baro"), "value"), fp.t, fp.innovations["baro"].y[:, 0])
+
+    def _result(self, stage: FallResult) -> None:
+        alt = layout.plot_path("altitude")
+        s3 = 3.0 * np.sqrt(stage.P[:, 0, 0])
+        self.rec.scalars(layout.join(alt, "smoothed"), stage.t, stage.x[:, 0], names="smoothed")
+        self.rec.scalars(layout.join(alt, "plus_3sigma"), stage.t, stage.x[:, 0] + s3)
+        self.rec.scalars(layout.join(alt, "minus_3sigma"), stage.t, stage.x[:, 0] - s3)
+        if self.truth is not None:
+            self.rec.scalars(layout.join(alt, "truth"), self.truth["t"], self.truth["h"], names="truth")
 
     def finish(self, result: object, summary: dict) -> None:
         self.rec.report(FallingBodyProblem().scorecard(summary))
