@@ -20,7 +20,7 @@ from workbench.core.rotation import dcm_to_quat, quat_boxplus, quat_from_rotvec,
 from workbench.estimation.strapdown import gravity_M
 from workbench.models.radar import R_GROUND, mars_rate_M
 from workbench.problems.entry.filter import EntryFilterSigmas
-from workbench.problems.entry.montecarlo import ValidationResult, _noise_scale, validate_smoother
+from workbench.problems.entry.montecarlo import ValidationResult, noise_scale, validate_smoother
 from workbench.problems.entry.scoring import ERROR_NAMES
 
 OM = mars_rate_M()
@@ -125,9 +125,9 @@ def _same(a: ValidationResult, b: ValidationResult) -> None:
         assert np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True), name
 
 
-def test_noise_scale_matches_filter_psd():
+def testnoise_scale_matches_filter_psd():
     t = np.r_[0.0, 0.1, 0.2, 0.21, 0.22, 0.3, 0.4, 2.0, 2.1, 2.2]  # a gap 0.4 -> 2.0
-    s, sample_dt = _noise_scale(t, {6: None})
+    s, sample_dt = noise_scale(t, {6: None})
     assert sample_dt == pytest.approx(0.1)
     assert s[0] == pytest.approx(1.0) and s[-1] == pytest.approx(1.0) and s[7] == pytest.approx(1.0)
     assert s[3] == pytest.approx(np.sqrt(10.0))  # the 100 Hz samples: PSD σ² · sample_dt as the filter assumes

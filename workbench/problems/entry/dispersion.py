@@ -56,6 +56,7 @@ __all__ = [
     "DispersionSigmas",
     "DispersionResult",
     "sample_offsets",
+    "sigma_vector",
     "event_quantities",
     "run_dispersion",
     "run_dispersion_loop",
@@ -314,7 +315,11 @@ def _event_times(imu: ImuArrays, events_t: Mapping[str, float]) -> tuple[np.ndar
     return np.array([t_pdd, t_fsr, t_end]), {"PDD": t_pdd, "FSR": t_fsr, "BSR": t_end}
 
 
-def _sigma_vector(sigmas: Any) -> np.ndarray:
+def sigma_vector(sigmas: Any) -> np.ndarray:
+    """The (9,) 1σ of the initial-state offsets ``[δv_M (m/s), δθ_G (rad), δp_M (m)]`` from
+    ``None`` (the defaults of :class:`DispersionSigmas`), a :class:`DispersionSigmas`, a mapping
+    ``{velocity|velocity_m_s, attitude|attitude_rad, position|position_m}``, a (3,) per block or a
+    (9,) per state; ``ValueError`` for an unknown key or shape."""
     if sigmas is None:
         return DispersionSigmas().vector()
     if isinstance(sigmas, DispersionSigmas):
@@ -442,7 +447,7 @@ def _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, 
         v0=np.asarray(v0, float),
         q0=_qnormalize(np.asarray(q0, float)),
         p0=np.asarray(p0, float),
-        sigmas=_sigma_vector(sigmas),
+        sigmas=sigma_vector(sigmas),
         seed=int(seed),
         event_times=et,
         atmosphere=atmosphere if atmosphere is not None else MarsEngineeringAtmosphere(),

@@ -103,6 +103,7 @@ __all__ = [
     "ValidationResult",
     "ValidationInputs",
     "validate_smoother",
+    "noise_scale",
     "summarize_validation",
     "prepare_validation",
 ]
@@ -173,8 +174,10 @@ def _gap_index(t: np.ndarray, gaps: Sequence[GapBridge]) -> dict[int, GapBridge]
     return out
 
 
-def _noise_scale(t: np.ndarray, gap_at: Mapping[int, Any]) -> tuple[np.ndarray, float]:
-    """Per-sample factor √(sample_dt / dt_k) (module docstring, step 2) and sample_dt [s]."""
+def noise_scale(t: np.ndarray, gap_at: Mapping[int, Any]) -> tuple[np.ndarray, float]:
+    """Per-sample factor √(sample_dt / dt_k) (module docstring, step 2), shape (n,), and the
+    median sample interval sample_dt [s], for IMU times ``t`` (n,) [s]; ``gap_at`` maps the index
+    of a sample followed by a data gap to its bridge (that interval is not a sampling interval)."""
     d = np.diff(t)
     sample_dt = float(np.median(d))
     d = d.copy()
@@ -283,7 +286,7 @@ def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> _RunOut:
     V, Q, X = _truth(job, dx0, g_truth, gap_at)
 
     # filter input: IMU + white noise with the filter's PSD
-    scale, _ = _noise_scale(imu.t, gap_at)
+    scale, _ = noise_scale(imu.t, gap_at)
     f_noisy = imu.f_G + imu.sigma_f * scale[:, None] * g_imu.standard_normal((n, 3))
     w_noisy = imu.w_G + imu.sigma_w * scale[:, None] * g_imu.standard_normal((n, 3))
     noisy = ImuArrays(imu.t, f_noisy, w_noisy, imu.sigma_f, imu.sigma_w, imu.gaps)
