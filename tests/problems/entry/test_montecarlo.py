@@ -125,7 +125,7 @@ def _same(a: ValidationResult, b: ValidationResult) -> None:
         assert np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True), name
 
 
-def testnoise_scale_matches_filter_psd():
+def test_noise_scale_matches_filter_psd():
     t = np.r_[0.0, 0.1, 0.2, 0.21, 0.22, 0.3, 0.4, 2.0, 2.1, 2.2]  # a gap 0.4 -> 2.0
     s, sample_dt = noise_scale(t, {6: None})
     assert sample_dt == pytest.approx(0.1)
