@@ -43,6 +43,7 @@ import numpy as np
 
 from workbench.estimation.montecarlo import resolve_scheduler, run_monte_carlo
 from workbench.io.scenario import Scenario
+from workbench.problems.droptest.config import config_for
 
 __all__ = ["McResult", "SeedResult", "run_seed", "monte_carlo", "summarize_mc", "Z_NAMES"]
 
@@ -247,7 +248,7 @@ def monte_carlo(
         cols[f.name] = np.array(vals)
     return McResult(
         scenario=scenario.name,
-        mode=scenario.get("filter.mode", "kinematic", kind="str"),
+        mode=config_for(scenario).mode,
         executor=executor,
         total_wall_s=total,
         **cols,

@@ -17,7 +17,7 @@ from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
-from workbench.problems.droptest.config import SCHEMA
+from workbench.problems.droptest.config import SCHEMA, config_for
 from workbench.problems.droptest.telemetry import OPTIONAL_STREAMS, telemetry_paths
 
 __all__ = ["TELEMETRY_FILES", "DropTestProblem", "residual_names"]
@@ -36,12 +36,12 @@ def residual_names(scenario: Scenario) -> list[str]:
     """Names of the measurement residual groups the scenario's filter has (blueprint panels):
     the accelerometer triads, ``gyro``, ``zupt``, and with ``[sensors.ranging]`` the odometer and
     ``<gun>.range``/``<gun>.rate`` per radar gun."""
-    names = list(scenario.get("sensors.accelerometer.triads", ["BP", "PYBP", "PXBP", "MXBP"], kind="list"))
-    names += ["gyro", "zupt"]
-    if scenario.has("sensors.ranging"):
-        if scenario.get("sensors.ranging.odometer", False, kind="bool"):
+    cfg = config_for(scenario)
+    names = [*cfg.triads, "gyro", "zupt"]
+    if cfg.ranging:
+        if cfg.odometer:
             names.append("odometer")
-        for gname in scenario.get("sensors.ranging.radar_guns", {}, kind="table"):
+        for gname in cfg.radar_guns:
             names += [f"{gname}.range", f"{gname}.rate"]
     return names
 

@@ -18,7 +18,7 @@ import numpy as np
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.entry import pipeline as en
-from workbench.problems.entry.config import SCHEMA
+from workbench.problems.entry.config import SCHEMA, config_for
 from workbench.problems.entry.telemetry import STREAMS, telemetry_paths
 
 __all__ = ["EntryProblem"]
@@ -98,7 +98,7 @@ class EntryProblem:
         from workbench.recording.writer import open_recording
 
         vehicle = en.vehicle_for(scenario)
-        r_ground = en.R_MOLA + scenario.get("site.terrain_m", -1440.0, kind="float")
+        r_ground = en.R_MOLA + config_for(scenario).terrain_m
         with open_recording(path, scenario.name, blueprint=entry_blueprint(), properties=properties) as rec:
             drawer = EntryRecorder(
                 rec,
