@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
+from workbench.core.bodies import MARS
+from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import (
     attitude_error,
     dcm_to_quat,
@@ -23,7 +25,7 @@ from workbench.core.rotation import (
     quat_to_dcm,
 )
 from workbench.estimation.consistency import anees_bounds, is_symmetric_pd, nees
-from workbench.estimation.strapdown import gravity_M, integrate
+from workbench.estimation.strapdown import integrate
 from workbench.models.radar import (
     R_GROUND,
     beam_directions_G,
@@ -90,7 +92,7 @@ def truth(t, h0=8000.0):
     Cx, Cy = quat_to_dcm(qx), quat_to_dcm(qy)
     w1 = np.einsum("nji,j->ni", Cx, EZ) * dpsi[:, None] + dphi[:, None] * EX
     w = np.einsum("nji,nj->ni", Cy, w1) + dth[:, None] * EY
-    f = -np.einsum("nji,nj->ni", quat_to_dcm(q), gravity_M(p))  # a = 0  ->  f = −g, in G
+    f = -np.einsum("nji,nj->ni", quat_to_dcm(q), gravity_j2(p, MARS))  # a = 0  ->  f = −g, in G
     return dict(t=t, v=np.broadcast_to(v, p.shape).copy(), p=p, q=q, w_G=w, f_G=f)
 
 

@@ -45,8 +45,8 @@ import numpy as np
 
 from workbench.core.atmosphere import Atmosphere, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
-from workbench.core.rotation import quat_from_rotvec
-from workbench.estimation.strapdown import ImuArrays, _qmul, _qnormalize, imu_arrays, integrate_members
+from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normalize
+from workbench.estimation.strapdown import ImuArrays, imu_arrays, integrate_members
 
 __all__ = [
     "SAMPLE_BLOCK",
@@ -223,7 +223,7 @@ def sample_offsets(
 def _members(v0, q0, p0, dx0):
     """Initial states (m, ·) of the members with offsets dx0 (m, 9)."""
     v = np.asarray(v0, dtype=float) + dx0[:, 0:3]
-    q = _qnormalize(_qmul(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, 3:6])))
+    q = quat_normalize(quat_multiply(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, 3:6])))
     p = np.asarray(p0, dtype=float) + dx0[:, 6:9]
     return v, q, p
 
@@ -486,7 +486,7 @@ def _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, 
     job = _Job(
         imu=pim,
         v0=np.asarray(v0, float),
-        q0=_qnormalize(np.asarray(q0, float)),
+        q0=quat_normalize(np.asarray(q0, float)),
         p0=np.asarray(p0, float),
         sigmas=_sigma_vector(sigmas),
         seed=int(seed),
@@ -712,6 +712,6 @@ def fuse_with_prior(
     dx = D * (Pf_n @ eta)
     P0 = Pf_n * np.outer(D, D)
     v0 = np.asarray(v_nom, float) + dx[0:3]
-    q0 = _qnormalize(_qmul(np.asarray(q_nom, float), quat_from_rotvec(dx[3:6])))
+    q0 = quat_normalize(quat_multiply(np.asarray(q_nom, float), quat_from_rotvec(dx[3:6])))
     p0 = np.asarray(p_nom, float) + dx[6:9]
     return FusedInitialState(v0, q0, p0, P0, dx, np.asarray(P_prior, float), int(keep.sum()))
