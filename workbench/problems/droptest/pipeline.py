@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.bodies import G0
 from workbench.core.rotation import quat_conjugate, quat_normalize, quat_rotate, triad, triad_covariance
 from workbench.estimation.consistency import whiteness
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
@@ -40,7 +41,7 @@ from workbench.io.scenario import Scenario, ScenarioError
 from workbench.io.telemetry import Telemetry, read_events, read_telemetry
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.lander import LanderModel, load_lander
-from workbench.problems.droptest.sensors import G0, RangingSpec, acquisition_group_delay
+from workbench.problems.droptest.sensors import RangingSpec, acquisition_group_delay
 from workbench.problems.droptest.stroke import (
     MaxStroke,
     StrokeHistory,
