@@ -93,7 +93,7 @@ def _run_entry(sc, out_dir: Path, seed, export: bool, quiet: bool, scheduler, me
     else:
         paths = en.telemetry_paths(sc)
     vehicle = en.vehicle_for(sc)
-    r_ground = en.R_MOLA + sc.get("site.terrain_m", -1440.0, kind="float")
+    r_ground = en.R_MOLA + sc.get("site.terrain_m", en.TERRAIN_ELEVATION_M, kind="float")
     rrd = out_dir / f"{sc.name}.rrd"
     with open_recording(
         rrd,

@@ -19,9 +19,10 @@ import pytest
 from workbench.core.bodies import MARS
 from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import dcm_to_quat, quat_boxplus, quat_from_rotvec, quat_multiply, quat_to_dcm
-from workbench.models.radar import R_GROUND, mars_rate_M
+from workbench.models.radar import mars_rate_M
 from workbench.problems.entry.filter import EntryFilterSigmas
 from workbench.problems.entry.montecarlo import ERROR_NAMES, ValidationResult, _noise_scale, validate_smoother
+from workbench.problems.entry.site import R_GROUND
 
 OM = mars_rate_M()
 EX, EY, EZ = np.eye(3)

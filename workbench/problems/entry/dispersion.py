@@ -47,10 +47,10 @@ from workbench.core.atmosphere import Atmosphere, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normalize
 from workbench.estimation.strapdown import ImuArrays, imu_arrays, integrate_members
+from workbench.problems.entry.site import R_GROUND, R_MOLA
 
 __all__ = [
     "SAMPLE_BLOCK",
-    "R_GROUND",
     "EVENT_NAMES",
     "AcceptanceRules",
     "DispersionSigmas",
@@ -65,8 +65,6 @@ __all__ = [
 
 #: Members per random-number block (block b has its own SeedSequence ``(seed, spawn_key=(b,))``).
 SAMPLE_BLOCK = 250
-#: Terrain radius [m]: MOLA radius − 1440 m (AMELIA Eq. B.1, flat terrain as a sphere).
-R_GROUND = MARS.reference_radius - 1440.0
 #: Names of the event quantities, in the order of :class:`AcceptanceRules`' fields.
 EVENT_NAMES = ("mach_pdd", "h_pdd", "h_fsr", "h_end", "time_to_impact")
 _OMEGA_Z = MARS.rotation_rate
@@ -241,7 +239,7 @@ def event_quantities(
     relative to the co-rotating atmosphere (no wind); the time to impact is the vertical
     gravity-only fall from the end state to ``r_ground`` [m] (0 if already below it).
     """
-    r_ref = MARS.reference_radius
+    r_ref = R_MOLA
     p, v = p_at[0], v_at[0]
     vr = np.stack([v[..., 0] + _OMEGA_Z * p[..., 1], v[..., 1] - _OMEGA_Z * p[..., 0], v[..., 2]], -1)
     h_pdd = _norm(p) - r_ref

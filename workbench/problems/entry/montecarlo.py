@@ -85,12 +85,12 @@ from typing import Any
 
 import numpy as np
 
-from workbench.core.bodies import MARS
 from workbench.core.rotation import attitude_error, quat_boxplus
 from workbench.estimation.consistency import anees_bounds, fraction_inside, nees
 from workbench.estimation.strapdown import GapBridge, ImuArrays, apply_gap, gap_transition, imu_arrays, rk4_step
-from workbench.models.radar import R_GROUND, beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
+from workbench.models.radar import beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
 from workbench.problems.entry.filter import CHANNELS, EntryFilterSigmas, RadarData, run_entry_smoother
+from workbench.problems.entry.site import R_GROUND, R_MOLA, TERRAIN_ELEVATION_M
 
 __all__ = [
     "ERROR_NAMES",
@@ -922,7 +922,7 @@ def prepare_validation(
 
     nom = read_nominal_state(paths["initial_state"])
     v0, q0, p0 = nom.v_M, nom.q_M_G, nom.p_M
-    r_ground = MARS.reference_radius + cfg("site.terrain_m", -1440.0)
+    r_ground = R_MOLA + cfg("site.terrain_m", TERRAIN_ELEVATION_M)
     bridge_mode = cfg("reconstruction.bridge_mode", "relative", "str")
     rules_t = sc.get("dispersion.rules", {}, kind="table")
     rules = AcceptanceRules(**{k: tuple(float(x) for x in v) for k, v in rules_t.items()})

@@ -37,9 +37,11 @@ import numpy as np
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.frames import julian_date_from_utc
+from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import attitude_error, quat_conjugate, quat_from_jpl, quat_normalize
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
+from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M
 
 __all__ = [
     "NominalState",
@@ -59,7 +61,6 @@ __all__ = [
     "epoch_utc",
 ]
 
-R_MOLA = MARS.reference_radius
 TELEMETRY_FILES = ("gnc", "gnc_nav", "rda_slant_range", "rda_out", "events", "initial_state")
 
 
@@ -241,8 +242,8 @@ def _nominal_integration(imu, nom: NominalState, tm, P0: np.ndarray, bridge_mode
     if not m.any():
         return NominalIntegration(sp, None, None, None, None, {})
     tn = tm.t_nav[m]
-    pi = np.column_stack([np.interp(tn, sp.t, sp.p_M[:, i]) for i in range(3)])
-    vi = np.column_stack([np.interp(tn, sp.t, sp.v_M[:, i]) for i in range(3)])
+    pi = interp_rows(tn, sp.t, sp.p_M)
+    vi = interp_rows(tn, sp.t, sp.v_M)
     dp = np.linalg.norm(pi - tm.p_M_nav[m], axis=1)
     dv = np.linalg.norm(vi - tm.v_M_nav[m], axis=1)
     k = np.searchsorted(sp.t, tn).clip(0, sp.t.size - 1)
@@ -328,7 +329,7 @@ def reconstruct(
     sc = scenario
     check_config(sc)
     vehicle = vehicle_for(sc)
-    r_ground = R_MOLA + _cfg(sc, "site.terrain_m", -1440.0)
+    r_ground = R_MOLA + _cfg(sc, "site.terrain_m", TERRAIN_ELEVATION_M)
     tm = read_entry_telemetry(paths, sc)
     for ev in ("PDD", "FSR"):
         if ev not in tm.events:
@@ -507,7 +508,7 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
         if not (t[0] - 1e-9 <= te <= t[-1] + step + 1e-9):  # an event up to one sample after the end (BSR)
             continue
         te_pos = min(te, float(t[-1]))
-        p = np.array([np.interp(te_pos, t, p_M[:, i]) for i in range(3)])
+        p = interp_rows(te_pos, t, p_M)
         rF = C_bodyfixed_mmed(MARS, jd0 + te_pos / 86400.0) @ p
         lat, lon, r = planetocentric_from_cartesian(rF)
         rows.append(
@@ -588,11 +589,7 @@ def _radial_var(p: np.ndarray, P: np.ndarray) -> float:
 
 # ----------------------------------------------------------------------------------------- scoring
 def _truth_rows(truth: dict, key: str, t: np.ndarray) -> np.ndarray:
-    a = np.asarray(truth[key], float)
-    tt = np.asarray(truth["t"], float)
-    if a.ndim == 1:
-        return np.interp(t, tt, a)
-    return np.column_stack([np.interp(t, tt, a[:, i]) for i in range(a.shape[1])])
+    return interp_rows(t, truth["t"], truth[key])
 
 
 def score(result: EntryResult, truth: dict) -> dict:

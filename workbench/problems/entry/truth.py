@@ -71,14 +71,15 @@ from workbench.core.atmosphere import (
 )
 from workbench.core.bodies import MARS
 from workbench.core.frames import julian_date_from_utc
-from workbench.core.rotation import quat_normalize, quat_to_dcm
+from workbench.core.gravity import gravity_j2_xyz, j2_factor
+from workbench.core.rotation import dcm_components, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import EntryVehicle
+from workbench.problems.entry.site import R_GROUND
 
 __all__ = [
     "EntryTruthSpec",
     "EntryTruth",
     "MARS_MOLAR_MASS",
-    "R_GROUND",
     "truth_spec_from_scenario",
     "true_atmosphere",
     "wind_profile_truth",
@@ -87,8 +88,6 @@ __all__ = [
 
 MARS_MOLAR_MASS = 0.04341
 """Mean molar mass of the Martian atmosphere below 104 km [kg/mol] (AMELIA Sect. 9)."""
-R_GROUND = MARS.reference_radius - 1440.0
-"""Terrain radius [m]: flat terrain 1440 m below the 3396 km MOLA radius (AMELIA Sect. 7)."""
 
 
 def _wind_layers_default() -> tuple[tuple[float, float, float, float, float], ...]:
@@ -376,8 +375,7 @@ class _Model:
         self.spec = spec
         self.veh = vehicle
         self.gm = MARS.gm
-        self.re = MARS.equatorial_radius
-        self.j2k = 1.5 * MARS.j2 * MARS.gm * MARS.equatorial_radius**2
+        self.j2k = j2_factor(MARS)
         self.rref = MARS.reference_radius
         self.om = MARS.rotation_rate
         self.aero_on = bool(spec.aero_enabled)
@@ -463,27 +461,13 @@ class _Model:
         dn = 1.0 if tau <= b - e else 0.5 + 0.5 * math.cos(math.pi * (tau - b + e) / (2 * e))
         return sp.side_force_coeff * up * dn
 
-    def gravity(self, x, y, z):
-        r2 = x * x + y * y + z * z
-        r = math.sqrt(r2)
-        ir3 = 1.0 / (r2 * r)
-        k = self.j2k / (r2 * r2 * r)
-        zz = 5.0 * z * z / r2
-        a = -self.gm * ir3
-        return a * x - k * x * (1.0 - zz), a * y - k * y * (1.0 - zz), a * z - k * z * (3.0 - zz), r
-
     def deriv(self, t, s, aux=False):
         """Time derivative of the state list s (13 entries, or 19 with the canopy)."""
         px, py, pz, vx, vy, vz, qx, qy, qz, qw, wx, wy, wz = s[:13]
-        gx, gy, gz, r = self.gravity(px, py, pz)
+        gx, gy, gz, r = gravity_j2_xyz(px, py, pz, self.gm, self.j2k)
         h = r - self.rref
         # DCM C_M_G from q_M_G
-        xx, yy, zz = qx * qx, qy * qy, qz * qz
-        xy, xz, yz = qx * qy, qx * qz, qy * qz
-        wqx, wqy, wqz = qw * qx, qw * qy, qw * qz
-        c00, c01, c02 = 1 - 2 * (yy + zz), 2 * (xy - wqz), 2 * (xz + wqy)
-        c10, c11, c12 = 2 * (xy + wqz), 1 - 2 * (xx + zz), 2 * (yz - wqx)
-        c20, c21, c22 = 2 * (xz - wqy), 2 * (yz + wqx), 1 - 2 * (xx + yy)
+        (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = dcm_components(qx, qy, qz, qw)
         om = self.om
         FGx = FGy = FGz = 0.0  # non-gravitational force on the module, body frame [N]
         Mx = My = Mz = 0.0  # torque about the CoG, body frame [N m]
@@ -550,7 +534,7 @@ class _Model:
                 if T < 0.0:
                     T = 0.0
             # canopy aerodynamics
-            gpx, gpy, gpz, rp = self.gravity(ppx, ppy, ppz)
+            gpx, gpy, gpz, rp = gravity_j2_xyz(ppx, ppy, ppz, self.gm, self.j2k)
             Dx = Dy = Dz = 0.0
             Ap = self.area(t)
             if self.aero_on and Ap > 0.0:
