@@ -67,18 +67,20 @@ def test_uniform_gravity():
         gravity.gravity_uniform(up=[0, 0, 0])
 
 
-def test_scalar_component_form_is_bit_identical_and_returns_radius():
+def test_component_form_matches_array_form_and_is_member_exact():
     rng = np.random.default_rng(5)
     r = rng.normal(size=(40, 3))
     r = r / np.linalg.norm(r, axis=-1, keepdims=True) * rng.uniform(3.4e6, 4e6, (40, 1))
     j2k = gravity.j2_factor(MARS)
     assert j2k == pytest.approx(1.5 * 1960.45e-6 * 42828.37362069909e9 * 3396.19e3**2, rel=1e-15)
     a = gravity.gravity_j2(r, MARS)
-    for k in range(r.shape[0]):
-        gx, gy, gz, rn = gravity.gravity_j2_xyz(*r[k].tolist(), MARS.gm, j2k)
-        assert (gx, gy, gz) == tuple(a[k].tolist())  # the same operations: equal to the last bit
-        assert rn == pytest.approx(np.linalg.norm(r[k]), rel=1e-15)
-        np.testing.assert_array_equal(gravity.gravity_j2(r[k], MARS), a[k])  # single-vector path
+    gx, gy, gz, rn = gravity.gravity_j2_xyz(r[:, 0], r[:, 1], r[:, 2], MARS.gm, j2k)  # arrays
+    np.testing.assert_allclose(np.stack([gx, gy, gz], -1), a, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(rn, np.linalg.norm(r, axis=-1), rtol=1e-15)
+    for k in range(r.shape[0]):  # Python floats: the same operations, equal to the array call's member
+        s = gravity.gravity_j2_xyz(*r[k].tolist(), MARS.gm, j2k)
+        assert all(isinstance(c, float) for c in s)
+        assert s == (gx[k], gy[k], gz[k], rn[k])
 
 
 def test_point_mass_gradient_against_finite_differences():

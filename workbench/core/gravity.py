@@ -61,31 +61,29 @@ def gravity_j2(r_F: np.ndarray, body: Body) -> np.ndarray:
     ``a = −GM r/r³ − (3/2) J2 GM Re²/r⁵ · [x (1 − 5z²/r²), y (1 − 5z²/r²), z (3 − 5z²/r²)]`` with
     ``Re = body.equatorial_radius`` and ``J2 = body.j2``.  No centrifugal term: in a rotating
     frame add ``−ω × (ω × r)`` yourself.  Also valid in any frame whose +Z is the pole (e.g. the
-    inertial frame of date aligned with the body equator, or Mars' MMED frame).  Same operations
-    in the same order as :func:`gravity_j2_xyz`, so the two agree to the last bit.
+    inertial frame of date aligned with the body equator, or Mars' MMED frame).
+    :func:`gravity_j2_xyz` is the same model by components (it differs by rounding only, ≲ 1e-15).
     """
-    p = np.asarray(r_F, dtype=float)
-    x, y, z = p[..., 0], p[..., 1], p[..., 2]
-    r2 = x * x + y * y + z * z
-    r = np.sqrt(r2)
-    gm_r3 = body.gm / (r2 * r)
-    z2 = 5.0 * (z * z) / r2
-    k = j2_factor(body) / (r2 * r2 * r)
-    a = gm_r3 + k * (1.0 - z2)
-    if p.ndim == 1:  # one position: np.array is ~5x cheaper than np.stack
-        return np.array((-a * x, -a * y, -(gm_r3 + k * (3.0 - z2)) * z), dtype=float)
-    return np.stack((-a * x, -a * y, -(gm_r3 + k * (3.0 - z2)) * z), -1)
+    r_F = np.asarray(r_F, dtype=float)
+    r2 = np.sum(r_F * r_F, axis=-1, keepdims=True)
+    rn = np.sqrt(r2)
+    z2_r2 = r_F[..., 2:3] ** 2 / r2
+    k = 1.5 * body.j2 * body.gm * body.equatorial_radius**2 / rn**5
+    factor = np.concatenate([1.0 - 5.0 * z2_r2, 1.0 - 5.0 * z2_r2, 3.0 - 5.0 * z2_r2], axis=-1)
+    return -body.gm * r_F / (rn * r2) - k * r_F * factor
 
 
-def gravity_j2_xyz(x: float, y: float, z: float, gm: float, j2k: float) -> tuple[float, float, float, float]:
-    """:func:`gravity_j2` for one position given as Python floats, for hot scalar loops.
+def gravity_j2_xyz(x, y, z, gm: float, j2k: float) -> tuple:
+    """:func:`gravity_j2` by components, for hot loops: Python floats, or arrays of one shape.
 
     x, y, z [m] in a frame whose +Z is the pole; ``gm`` [m³/s²]; ``j2k`` = :func:`j2_factor` of
-    the body [m⁵/s²].  Returns ``(g_x, g_y, g_z, r)``: the acceleration [m/s²] and ``|r|`` [m]
-    (which callers need for the altitude).  Bit-identical to :func:`gravity_j2`.
+    the body [m⁵/s²].  Returns ``(g_x, g_y, g_z, r)``: the acceleration components [m/s²] and
+    ``|r|`` [m] (callers need it for the altitude), each of the type of the inputs.  The same
+    operations are done for floats and arrays, so a member of an array call equals the scalar call
+    to the last bit (the strapdown relies on that).
     """
     r2 = x * x + y * y + z * z
-    r = math.sqrt(r2)
+    r = math.sqrt(r2) if isinstance(r2, float) else np.sqrt(r2)
     gm_r3 = gm / (r2 * r)
     z2 = 5.0 * (z * z) / r2
     k = j2k / (r2 * r2 * r)

@@ -44,7 +44,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from workbench.core.bodies import MARS, Body
-from workbench.core.gravity import gravity_j2, gravity_j2_xyz, gravity_point_mass_gradient, j2_factor
+from workbench.core.gravity import gravity_j2_xyz, gravity_point_mass_gradient, j2_factor
 from workbench.core.rotation import dcm_to_quat, quat_multiply, quat_normalize, quat_to_dcm, skew
 
 __all__ = [
@@ -118,10 +118,13 @@ def derivatives(
 
     v_M (..., 3) [m/s], q_M_G (..., 4), p_M (..., 3) [m]; f_G (..., 3) [m/s²] and w_G (..., 3)
     [rad/s] broadcast against the state (e.g. one IMU sample (3,) for all members (m, 3)).
-    Gravity: point mass + J2 of ``body`` (:func:`~workbench.core.gravity.gravity_j2`).
+    Gravity: point mass + J2 of ``body`` (:func:`~workbench.core.gravity.gravity_j2_xyz`, the
+    component form, so that the vectorised and the single-state RK4 agree to the last bit).
     Returns ``g_M(p) + C_M_G f_G`` (..., 3), ``½ q ⊗ [w_G, 0]`` (..., 4), ``v`` (..., 3).
     """
-    return gravity_j2(p, body) + _rot(q, f_G), _qdot(q, w_G), v
+    p = np.asarray(p, dtype=float)
+    g = gravity_j2_xyz(p[..., 0], p[..., 1], p[..., 2], body.gm, j2_factor(body))
+    return _stack(g[:3]) + _rot(q, f_G), _qdot(q, w_G), v
 
 
 def rk4_step(

@@ -235,7 +235,7 @@ def _sigmas_P0(sc: Scenario) -> np.ndarray:
 def _nominal_integration(imu, nom: NominalState, tm, P0: np.ndarray, bridge_mode: str) -> NominalIntegration:
     from workbench.estimation.strapdown import integrate
 
-    sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode)
+    sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode, body=MARS)
     # validation against the on-board solution before PDD (afterwards the on-board attitude is wrong)
     t_pdd = tm.events.get("PDD", np.inf)
     m = (tm.t_nav >= sp.t[0]) & (tm.t_nav <= min(t_pdd, sp.t[-1]))

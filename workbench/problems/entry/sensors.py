@@ -306,7 +306,7 @@ def quat_cumprod(q: np.ndarray) -> np.ndarray:
     k = 1
     while k < n:
         s[k:] = quat_multiply(s[:-k], s[k:])
-        s /= np.linalg.norm(s, axis=1, keepdims=True)
+        s = quat_normalize(s)
         k *= 2
     return s
 

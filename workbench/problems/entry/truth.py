@@ -71,7 +71,7 @@ from workbench.core.atmosphere import (
 )
 from workbench.core.bodies import MARS
 from workbench.core.frames import julian_date_from_utc
-from workbench.core.gravity import gravity_j2_xyz, j2_factor
+from workbench.core.gravity import j2_factor
 from workbench.core.rotation import dcm_components, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import EntryVehicle
 from workbench.problems.entry.site import R_GROUND
@@ -461,10 +461,26 @@ class _Model:
         dn = 1.0 if tau <= b - e else 0.5 + 0.5 * math.cos(math.pi * (tau - b + e) / (2 * e))
         return sp.side_force_coeff * up * dn
 
+    def gravity(self, x, y, z):
+        """Point mass + J2 of Mars at (x, y, z) [m] in M -> (g_x, g_y, g_z [m/s²], |r| [m]).
+
+        The model of :func:`workbench.core.gravity.gravity_j2_xyz`, written here with its own
+        operation order: the reference trajectory (and every number derived from the synthetic
+        telemetry) depends on it to the last bit — the riser dynamics amplify a 1-ulp change of g
+        to ~1e-9 of the summary numbers.  It differs from the shared model by rounding only.
+        """
+        r2 = x * x + y * y + z * z
+        r = math.sqrt(r2)
+        ir3 = 1.0 / (r2 * r)
+        k = self.j2k / (r2 * r2 * r)
+        zz = 5.0 * z * z / r2
+        a = -self.gm * ir3
+        return a * x - k * x * (1.0 - zz), a * y - k * y * (1.0 - zz), a * z - k * z * (3.0 - zz), r
+
     def deriv(self, t, s, aux=False):
         """Time derivative of the state list s (13 entries, or 19 with the canopy)."""
         px, py, pz, vx, vy, vz, qx, qy, qz, qw, wx, wy, wz = s[:13]
-        gx, gy, gz, r = gravity_j2_xyz(px, py, pz, self.gm, self.j2k)
+        gx, gy, gz, r = self.gravity(px, py, pz)
         h = r - self.rref
         # DCM C_M_G from q_M_G
         (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = dcm_components(qx, qy, qz, qw)
@@ -534,7 +550,7 @@ class _Model:
                 if T < 0.0:
                     T = 0.0
             # canopy aerodynamics
-            gpx, gpy, gpz, rp = gravity_j2_xyz(ppx, ppy, ppz, self.gm, self.j2k)
+            gpx, gpy, gpz, rp = self.gravity(ppx, ppy, ppz)
             Dx = Dy = Dz = 0.0
             Ap = self.area(t)
             if self.aero_on and Ap > 0.0:
