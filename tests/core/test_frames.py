@@ -212,3 +212,16 @@ def test_enu_basis_and_ned_from_enu():
     # consistent with the two DCMs
     np.testing.assert_allclose(frames.ned_from_enu(C_enu @ [0.1, 0.2, 0.3]),
                                frames.C_ned_bodyfixed(lat, lon) @ [0.1, 0.2, 0.3], atol=1e-15)  # fmt: skip
+
+
+def test_north_east_xyz_are_the_first_rows_of_ned_basis():
+    rng = np.random.default_rng(8)
+    r = rng.normal(size=(20, 3)) * 3.4e6
+    C = frames.ned_basis(r)
+    for k in range(20):
+        x, y, z = r[k].tolist()
+        nx, ny, nz, ex, ey = frames.north_east_xyz(x, y, z, float(np.linalg.norm(r[k])))
+        np.testing.assert_allclose([nx, ny, nz], C[k, 0], atol=1e-15)
+        np.testing.assert_allclose([ex, ey, 0.0], C[k, 1], atol=1e-15)
+    # hand value: on the equator at 0° E, north is +Z and east is +Y
+    np.testing.assert_allclose(frames.north_east_xyz(7.0, 0.0, 0.0, 7.0), [0.0, 0.0, 1.0, 0.0, 1.0], atol=0)

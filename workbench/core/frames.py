@@ -24,6 +24,7 @@ degrees as published and converted here.
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import re
 from dataclasses import dataclass, field
 
@@ -53,6 +54,7 @@ __all__ = [
     "C_ned_bodyfixed",
     "C_enu_bodyfixed",
     "ned_basis",
+    "north_east_xyz",
     "ned_from_enu",
     "ned_from_bodyfixed",
     "bodyfixed_from_ned",
@@ -299,6 +301,17 @@ def ned_basis(r: np.ndarray) -> np.ndarray:
     east /= np.linalg.norm(east, axis=-1, keepdims=True)
     north = np.cross(up, east)
     return np.stack([north, east, -up], axis=-2)
+
+
+def north_east_xyz(x: float, y: float, z: float, r: float) -> tuple[float, float, float, float, float]:
+    """Local north and east unit vectors at one position, by components (for hot scalar loops).
+
+    x, y, z [m] planet-centred in a frame whose +Z is the pole, ``r`` = ``|(x, y, z)|`` [m] (the
+    caller usually has it already).  Returns ``(n_x, n_y, n_z, e_x, e_y)`` (``e_z`` = 0): the first
+    two rows of :func:`ned_basis` written out.  Undefined on the pole axis.
+    """
+    rxy = math.sqrt(x * x + y * y)
+    return -x * z / (r * rxy), -y * z / (r * rxy), rxy / r, -y / rxy, x / rxy
 
 
 def ned_from_enu(v: np.ndarray) -> np.ndarray:

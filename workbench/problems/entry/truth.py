@@ -70,7 +70,7 @@ from workbench.core.atmosphere import (
     TabulatedAtmosphere,
 )
 from workbench.core.bodies import MARS
-from workbench.core.frames import julian_date_from_utc
+from workbench.core.frames import julian_date_from_utc, north_east_xyz
 from workbench.core.gravity import j2_factor
 from workbench.core.rotation import dcm_components, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import EntryVehicle
@@ -492,10 +492,7 @@ class _Model:
         wn = we = 0.0
         if self.aero_on:
             rho, a_snd, lam, wn, we = self.atm(h)
-            # local north/east unit vectors in M (from the +Z pole)
-            rxy = math.sqrt(px * px + py * py)
-            ex, ey = -py / rxy, px / rxy
-            nx, ny, nz = -px * pz / (r * rxy), -py * pz / (r * rxy), rxy / r
+            nx, ny, nz, ex, ey = north_east_xyz(px, py, pz, r)  # local north/east in M (+Z the pole)
             vrx = vx + om * py - wn * nx - we * ex
             vry = vy - om * px - wn * ny - we * ey
             vrz = vz - wn * nz
@@ -555,9 +552,7 @@ class _Model:
             Ap = self.area(t)
             if self.aero_on and Ap > 0.0:
                 rho_p, a_p, _, wnp, wep = self.atm(rp - self.rref)
-                rxyp = math.sqrt(ppx * ppx + ppy * ppy)
-                exp_, eyp = -ppy / rxyp, ppx / rxyp
-                nxp, nyp, nzp = -ppx * ppz / (rp * rxyp), -ppy * ppz / (rp * rxyp), rxyp / rp
+                nxp, nyp, nzp, exp_, eyp = north_east_xyz(ppx, ppy, ppz, rp)
                 wx_p = vpx + om * ppy - wnp * nxp - wep * exp_
                 wy_p = vpy - om * ppx - wnp * nyp - wep * eyp
                 wz_p = vpz - wnp * nzp
