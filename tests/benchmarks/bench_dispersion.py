@@ -47,6 +47,7 @@ sys.path.insert(0, str(ROOT))
 
 from workbench.core.rotation import attitude_error  # noqa: E402
 from workbench.problems.entry import dispersion as ds  # noqa: E402
+from workbench.problems.entry.site import R_GROUND  # noqa: E402
 
 
 def _scenario_input(seed: int):
@@ -82,7 +83,7 @@ def _fixture_input():
     tr = m.truth()
     imu = m.make_imu(tr, gaps=[(7.0, 8.4), (10.0, 11.8), (20.0, 23.3), (40.0, 97.2)])
     nominal = (tr["v"][0] + [8.0, -5.0, 3.0], m.perturb(tr["q"][0], np.radians([0.5, -0.3, 0.4])), tr["p"][0] + 1500.0)
-    return imu, nominal, tr["events"], (tr["v"][0], tr["q"][0], tr["p"][0]), ds.R_GROUND, "point-mass fixture"
+    return imu, nominal, tr["events"], (tr["v"][0], tr["q"][0], tr["p"][0]), R_GROUND, "point-mass fixture"
 
 
 def main(argv=None) -> int:

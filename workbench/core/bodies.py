@@ -5,6 +5,8 @@ A :class:`Body` is a small frozen record; the rotation model that uses its IAU e
 SI (m, s, m³/s²) except the IAU elements, which keep the units of the IAU report (degrees, Julian
 centuries and days from J2000 TDB) and say so in their names.
 
+Also the standard gravity :data:`G0` used for lab frames and g-unit conversion.
+
 Sources:
 
 [1] Archinal et al., "Report of the IAU Working Group on Cartographic Coordinates and Rotational
@@ -26,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = [
+    "G0",
     "PERIODIC_KINDS",
     "Body",
     "MARS",
@@ -34,6 +37,9 @@ __all__ = [
     "KNOWN_BODIES",
     "get_body",
 ]
+
+G0 = 9.80665
+"""Standard gravity [m/s²], exact by definition (CGPM 1901): the g unit and lab-frame gravity."""
 
 #: Kinds of IAU periodic terms: ``"alpha0"`` adds ``A sin(φ0 + ν T)`` to the pole right ascension,
 #: ``"delta0"`` adds ``A cos(φ0 + ν T)`` to the pole declination, ``"W"`` adds ``A sin(φ0 + ν T)``

@@ -45,13 +45,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 from scipy.linalg import lapack
-from scipy.stats import chi2
 
 from workbench.core.rotation import attitude_error, quat_boxplus, quat_normalize
+from workbench.estimation.consistency import chi2_gate
 
 __all__ = [
     "ErrorStateLayout",
@@ -435,11 +434,6 @@ def predict(
     return Prediction(x_prior, 0.5 * (A + A.T), Fm)
 
 
-@lru_cache(maxsize=256)
-def _chi2_threshold(probability: float, dof: int) -> float:
-    return float(chi2.ppf(probability, dof))
-
-
 def _update(x, P, z, h, R, layout, H, residual, gate_probability, iterations, eps):
     """Core of :func:`update`; returns a tuple (x_post, P_post, y, S, K, H, nis, accepted)."""
     z = np.asarray(z, dtype=float)
@@ -471,7 +465,7 @@ def _update(x, P, z, h, R, layout, H, residual, gate_probability, iterations, ep
         raise ValueError("non-finite innovation (check z, h(x) and R)")
     Kt, _ = _potrs(c, PHt.T, lower=1)
     K = Kt.T
-    if gate_probability is not None and nis > _chi2_threshold(float(gate_probability), y.shape[0]):
+    if gate_probability is not None and nis > chi2_gate(float(gate_probability), y.shape[0]):
         return x, P, y, S, K, Hk, nis, False
     dx = K @ y
     x_new = layout.boxplus(x, dx)

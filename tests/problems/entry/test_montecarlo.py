@@ -16,12 +16,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from workbench.core.bodies import MARS
+from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import dcm_to_quat, quat_boxplus, quat_from_rotvec, quat_multiply, quat_to_dcm
-from workbench.estimation.strapdown import gravity_M
-from workbench.models.radar import R_GROUND, mars_rate_M
+from workbench.models.radar import mars_rate_M
 from workbench.problems.entry.filter import EntryFilterSigmas
 from workbench.problems.entry.montecarlo import ValidationResult, noise_scale, validate_smoother
 from workbench.problems.entry.scoring import ERROR_NAMES
+from workbench.problems.entry.site import R_GROUND
 
 OM = mars_rate_M()
 EX, EY, EZ = np.eye(3)
@@ -66,7 +68,7 @@ def _truth(t: np.ndarray) -> dict:
     Cx, Cy = quat_to_dcm(qx), quat_to_dcm(qy)
     w = np.einsum("nji,nj->ni", Cy, np.einsum("nji,j->ni", Cx, EZ) * dpsi[:, None] + dphi[:, None] * EX)
     w = w + dth[:, None] * EY
-    f = -np.einsum("nji,nj->ni", quat_to_dcm(q), gravity_M(p))
+    f = -np.einsum("nji,nj->ni", quat_to_dcm(q), gravity_j2(p, MARS))
     return dict(v=np.broadcast_to(v, p.shape).copy(), p=p, q=q, w_G=w, f_G=f)
 
 

@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.bodies import G0
+from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_conjugate, quat_normalize, quat_rotate, triad, triad_covariance
 from workbench.estimation.consistency import whiteness
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
@@ -39,7 +41,7 @@ from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.config import config_for
 from workbench.problems.droptest.lander import LanderModel, load_lander
-from workbench.problems.droptest.sensors import G0, RangingSpec
+from workbench.problems.droptest.sensors import RangingSpec
 from workbench.problems.droptest.stroke import (
     MaxStroke,
     StrokeHistory,
@@ -592,7 +594,7 @@ def truth_on_grid(truth: dict, t: np.ndarray) -> dict[str, np.ndarray]:
     tt = truth["t"]
 
     def lin(a):
-        return np.stack([np.interp(t, tt, a[:, i]) for i in range(a.shape[1])], axis=1)
+        return interp_rows(t, tt, a)
 
     q = truth["q_I_B"].copy()
     q[1:] *= np.sign(np.sum(q[1:] * q[:-1], axis=1))[:, None].cumprod(axis=0)  # continuous sign

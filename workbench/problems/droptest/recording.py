@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 import rerun.blueprint as rrb
 
+from workbench.core.bodies import G0
 from workbench.core.rotation import euler123_from_quat, quat_conjugate, quat_rotate, quat_to_dcm
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.lander import airbag_mesh
@@ -31,7 +32,6 @@ from workbench.recording.writer import Recorder
 
 __all__ = ["DropTestRecorder", "droptest_blueprint", "impact_view"]
 
-G0 = 9.80665
 EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
 TRUTH = (44, 160, 44, 255)

@@ -26,8 +26,6 @@ from scipy.signal import butter, lfilter, lfilter_zi
 from workbench.core.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_rotate
 from workbench.problems.droptest.config import config_for
 
-G0 = 9.80665
-
 __all__ = [
     "ImuErrorModel",
     "specific_force_at",

@@ -22,13 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.bodies import G0
 from workbench.core.rotation import quat_conjugate, quat_rotate, quat_to_dcm
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import atomic_write_text, write_events, write_telemetry
 from workbench.problems.droptest.config import config_for
 from workbench.problems.droptest.lander import LanderModel, load_lander
 from workbench.problems.droptest.sensors import (
-    G0,
     ImuErrorModel,
     RangingSpec,
     acquisition_filter,

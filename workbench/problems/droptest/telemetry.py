@@ -15,11 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.bodies import G0
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.io.telemetry import Telemetry, read_events, read_telemetry
 from workbench.problems.droptest.config import config_for
 from workbench.problems.droptest.lander import LanderModel
-from workbench.problems.droptest.sensors import G0, RangingSpec, acquisition_group_delay
+from workbench.problems.droptest.sensors import RangingSpec, acquisition_group_delay
 
 __all__ = ["STREAMS", "OPTIONAL_STREAMS", "DropTelemetry", "telemetry_paths", "read_setup", "load_drop_telemetry"]
 

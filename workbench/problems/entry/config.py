@@ -23,6 +23,7 @@ from workbench.io.schema import REQUIRED, Key, Schema, Table
 from workbench.problems.entry.dispersion import AcceptanceRules
 from workbench.problems.entry.preprocess import PreprocessConfig
 from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryTelemetrySpec
+from workbench.problems.entry.site import TERRAIN_ELEVATION_M
 from workbench.problems.entry.telemetry import TelemetryChecks
 from workbench.problems.entry.truth import EntryTruthSpec
 
@@ -158,7 +159,11 @@ SCHEMA = Schema(
         Table(
             "site",
             "the landing site",
-            (Key("terrain_m", _F, -1440.0, "m", "terrain elevation above the MOLA radius (ground sphere)"),),
+            (
+                Key(
+                    "terrain_m", _F, TERRAIN_ELEVATION_M, "m", "terrain elevation above the MOLA radius (ground sphere)"
+                ),
+            ),
         ),
         Table(
             "preprocess",

@@ -44,13 +44,13 @@ import numpy as np
 
 from workbench.core.atmosphere import Atmosphere, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
-from workbench.core.rotation import quat_from_rotvec
+from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normalize
 from workbench.estimation.montecarlo import run_monte_carlo
-from workbench.estimation.strapdown import ImuArrays, _qmul, _qnormalize, imu_arrays, integrate_members
+from workbench.estimation.strapdown import ImuArrays, imu_arrays, integrate_members
+from workbench.problems.entry.site import R_GROUND, R_MOLA
 
 __all__ = [
     "SAMPLE_BLOCK",
-    "R_GROUND",
     "EVENT_NAMES",
     "AcceptanceRules",
     "DispersionSigmas",
@@ -66,8 +66,6 @@ __all__ = [
 
 #: Members per random-number block (block b has its own SeedSequence ``(seed, spawn_key=(b,))``).
 SAMPLE_BLOCK = 250
-#: Terrain radius [m]: MOLA radius − 1440 m (AMELIA Eq. B.1, flat terrain as a sphere).
-R_GROUND = MARS.reference_radius - 1440.0
 #: Names of the event quantities, in the order of :class:`AcceptanceRules`' fields.
 EVENT_NAMES = ("mach_pdd", "h_pdd", "h_fsr", "h_end", "time_to_impact")
 _OMEGA_Z = MARS.rotation_rate
@@ -224,7 +222,7 @@ def sample_offsets(
 def _members(v0, q0, p0, dx0):
     """Initial states (m, ·) of the members with offsets dx0 (m, 9)."""
     v = np.asarray(v0, dtype=float) + dx0[:, 0:3]
-    q = _qnormalize(_qmul(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, 3:6])))
+    q = quat_normalize(quat_multiply(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, 3:6])))
     p = np.asarray(p0, dtype=float) + dx0[:, 6:9]
     return v, q, p
 
@@ -242,7 +240,7 @@ def event_quantities(
     relative to the co-rotating atmosphere (no wind); the time to impact is the vertical
     gravity-only fall from the end state to ``r_ground`` [m] (0 if already below it).
     """
-    r_ref = MARS.reference_radius
+    r_ref = R_MOLA
     p, v = p_at[0], v_at[0]
     vr = np.stack([v[..., 0] + _OMEGA_Z * p[..., 1], v[..., 1] - _OMEGA_Z * p[..., 0], v[..., 2]], -1)
     h_pdd = _norm(p) - r_ref
@@ -445,7 +443,7 @@ def _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, 
     job = _Job(
         imu=pim,
         v0=np.asarray(v0, float),
-        q0=_qnormalize(np.asarray(q0, float)),
+        q0=quat_normalize(np.asarray(q0, float)),
         p0=np.asarray(p0, float),
         sigmas=sigma_vector(sigmas),
         seed=int(seed),
@@ -681,6 +679,6 @@ def fuse_with_prior(
     dx = D * (Pf_n @ eta)
     P0 = Pf_n * np.outer(D, D)
     v0 = np.asarray(v_nom, float) + dx[0:3]
-    q0 = _qnormalize(_qmul(np.asarray(q_nom, float), quat_from_rotvec(dx[3:6])))
+    q0 = quat_normalize(quat_multiply(np.asarray(q_nom, float), quat_from_rotvec(dx[3:6])))
     p0 = np.asarray(p_nom, float) + dx[6:9]
     return FusedInitialState(v0, q0, p0, P0, dx, np.asarray(P_prior, float), int(keep.sum()))

@@ -85,18 +85,18 @@ from typing import Any
 import numpy as np
 
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
-from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_boxplus
 from workbench.estimation.consistency import anees_bounds, fraction_inside, nees
 from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import GapBridge, ImuArrays, apply_gap, gap_transition, imu_arrays, rk4_step
-from workbench.models.radar import R_GROUND, beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
+from workbench.models.radar import beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
 from workbench.problems.entry.config import config_for
 from workbench.problems.entry.dispersion import run_dispersion
 from workbench.problems.entry.filter import CHANNELS, EntryFilterSigmas, RadarData, run_entry_smoother
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import ERROR_NAMES, ERROR_UNITS, errors_sigmas
+from workbench.problems.entry.site import R_GROUND, R_MOLA
 from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state
 
 __all__ = [
@@ -837,7 +837,7 @@ def prepare_validation(
     imu = preprocess(tm, cfg.preprocess)
     nom = read_nominal_state(paths["initial_state"])
     v0, q0, p0 = nom.v_M, nom.q_M_G, nom.p_M
-    r_ground = MARS.reference_radius + cfg.terrain_m
+    r_ground = R_MOLA + cfg.terrain_m
     bridge_mode = cfg.bridge_mode
     disp = run_dispersion(
         imu,

@@ -36,6 +36,7 @@ import numpy as np
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.frames import C_bodyfixed_mmed, julian_date_from_utc, planetocentric_from_cartesian
+from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import attitude_error, quat_normalize
 from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nees
 from workbench.estimation.strapdown import integrate
@@ -49,6 +50,7 @@ from workbench.problems.entry.filter import RadarData, run_entry_smoother
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import errors_sigmas
+from workbench.problems.entry.site import R_MOLA
 from workbench.problems.entry.telemetry import NominalState, read_entry_telemetry, read_nominal_state
 from workbench.problems.entry.winds import estimate_winds
 
@@ -64,7 +66,6 @@ __all__ = [
     "epoch_utc",
 ]
 
-R_MOLA = MARS.reference_radius
 
 
 @dataclass(frozen=True)
@@ -115,15 +116,15 @@ def check_config(sc: Scenario) -> EntryConfig:
 
 
 def _nominal_integration(imu, nom: NominalState, tm, P0: np.ndarray, bridge_mode: str) -> NominalIntegration:
-    sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode)
+    sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode, body=MARS)
     # validation against the on-board solution before PDD (afterwards the on-board attitude is wrong)
     t_pdd = tm.events.get("PDD", np.inf)
     m = (tm.t_nav >= sp.t[0]) & (tm.t_nav <= min(t_pdd, sp.t[-1]))
     if not m.any():
         return NominalIntegration(sp, None, None, None, None, {})
     tn = tm.t_nav[m]
-    pi = np.column_stack([np.interp(tn, sp.t, sp.p_M[:, i]) for i in range(3)])
-    vi = np.column_stack([np.interp(tn, sp.t, sp.v_M[:, i]) for i in range(3)])
+    pi = interp_rows(tn, sp.t, sp.p_M)
+    vi = interp_rows(tn, sp.t, sp.v_M)
     dp = np.linalg.norm(pi - tm.p_M_nav[m], axis=1)
     dv = np.linalg.norm(vi - tm.v_M_nav[m], axis=1)
     k = np.searchsorted(sp.t, tn).clip(0, sp.t.size - 1)
@@ -339,7 +340,7 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
         if not (t[0] - 1e-9 <= te <= t[-1] + step + 1e-9):  # an event up to one sample after the end (BSR)
             continue
         te_pos = min(te, float(t[-1]))
-        p = np.array([np.interp(te_pos, t, p_M[:, i]) for i in range(3)])
+        p = interp_rows(te_pos, t, p_M)
         rF = C_bodyfixed_mmed(MARS, jd0 + te_pos / 86400.0) @ p
         lat, lon, r = planetocentric_from_cartesian(rF)
         rows.append(
@@ -418,11 +419,7 @@ def _radial_var(p: np.ndarray, P: np.ndarray) -> float:
 
 # ----------------------------------------------------------------------------------------- scoring
 def _truth_rows(truth: dict, key: str, t: np.ndarray) -> np.ndarray:
-    a = np.asarray(truth[key], float)
-    tt = np.asarray(truth["t"], float)
-    if a.ndim == 1:
-        return np.interp(t, tt, a)
-    return np.column_stack([np.interp(t, tt, a[:, i]) for i in range(a.shape[1])])
+    return interp_rows(t, truth["t"], truth[key])
 
 
 def score(result: EntryResult, truth: dict) -> dict:

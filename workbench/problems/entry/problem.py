@@ -19,6 +19,7 @@ from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.entry import pipeline as en
 from workbench.problems.entry.config import SCHEMA, config_for
+from workbench.problems.entry.site import R_MOLA
 from workbench.problems.entry.telemetry import STREAMS, telemetry_paths
 
 __all__ = ["EntryProblem"]
@@ -98,7 +99,7 @@ class EntryProblem:
         from workbench.recording.writer import open_recording
 
         vehicle = en.vehicle_for(scenario)
-        r_ground = en.R_MOLA + config_for(scenario).terrain_m
+        r_ground = R_MOLA + config_for(scenario).terrain_m
         with open_recording(path, scenario.name, blueprint=entry_blueprint(), properties=properties) as rec:
             drawer = EntryRecorder(
                 rec,

@@ -26,6 +26,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from workbench.core.frames import ned_from_enu
+from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_to_dcm
 from workbench.problems.entry.atmosphere import AtmosphereResult
 from workbench.problems.entry.dispersion import DispersionResult
@@ -40,6 +42,7 @@ from workbench.problems.entry.scene import (
     site_frame_below,
     terrain_patch,
 )
+from workbench.problems.entry.site import R_MOLA
 from workbench.problems.entry.telemetry import EntryTelemetry
 from workbench.problems.entry.winds import WindResult
 from workbench.recording import layout
@@ -56,7 +59,6 @@ ONBOARD = (214, 39, 40, 255)
 GREY = (150, 150, 150, 255)
 XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
 BEAMS = ["B0", "B1", "B2", "B3"]
-R_MOLA = 3396000.0
 
 _PLOTS = [
     ("altitude AGL", layout.ENTRY_PLOT_ALTITUDE_AGL),
@@ -141,16 +143,6 @@ def entry_blueprint(
     )
 
 
-def _interp_rows(t_new: np.ndarray, t: np.ndarray, a: np.ndarray) -> np.ndarray:
-    a = np.asarray(a, float)
-    return np.column_stack([np.interp(t_new, t, a[:, i]) for i in range(a.shape[1])])
-
-
-def _ned_from_L(v_L: np.ndarray) -> np.ndarray:
-    """ENU (site axes) -> NED components (the site frame is small enough for a common NED)."""
-    return np.column_stack([v_L[:, 1], v_L[:, 0], -v_L[:, 2]])
-
-
 class EntryRecorder:
     """Draws the stages of :func:`workbench.problems.entry.pipeline.reconstruct` (and the truth, if given).
 
@@ -214,7 +206,7 @@ class EntryRecorder:
         self.events = dict(tm.events)
         # landing-site frame: ground point below the on-board position at PDD (before it drifts)
         t_site = self.events.get("PDD", float(tm.t_nav[len(tm.t_nav) // 2]))
-        p_site = _interp_rows(np.array([t_site]), tm.t_nav, tm.p_M_nav)[0]
+        p_site = interp_rows(t_site, tm.t_nav, tm.p_M_nav)
         if self.jd0 is None:  # user data without [scenario] epoch_utc: the telemetry's epoch line
             from workbench.core.frames import julian_date_from_utc
 
@@ -515,7 +507,7 @@ class EntryRecorder:
             return None
         a = np.asarray(self.truth[key], float)
         tt = np.asarray(self.truth["t"], float)
-        return np.interp(t, tt, a) if a.ndim == 1 else _interp_rows(t, tt, a)
+        return interp_rows(t, tt, a)
 
     def _trajectory_plots(self, fr) -> None:
         rec, site = self.rec, self.site
@@ -558,7 +550,7 @@ class EntryRecorder:
         # ground-relative velocity in NED (site axes), its 1σ
         omega = np.array([0.0, 0.0, self.body.rotation_rate])
         v_rel_M = sm.v_M - np.cross(omega, sm.p_M)
-        v_N = _ned_from_L(site.vectors(t, v_rel_M))
+        v_N = ned_from_enu(site.vectors(t, v_rel_M))
         C = site.C_L_M(t)
         Pv = C @ sm.P[:, 0:3, 0:3] @ np.swapaxes(C, -1, -2)
         sd_L = np.sqrt(np.einsum("nii->ni", Pv))
@@ -566,7 +558,7 @@ class EntryRecorder:
         tv = None
         if tr_p is not None:
             tv_M = self._truth_at(t, "v_M") - np.cross(omega, tr_p)
-            tv = _ned_from_L(site.vectors(t, tv_M))
+            tv = ned_from_enu(site.vectors(t, tv_M))
         rec.series_with_bounds(
             layout.ENTRY_PLOT_VELOCITY_NED, t, v_N, sd_N, truth=tv, names=["v_N", "v_E", "v_D"], color=XYZ
         )

@@ -19,18 +19,10 @@ import numpy as np
 import trimesh
 
 from workbench.core.bodies import Body
-from workbench.core.frames import C_bodyfixed_mmed, planetocentric_from_cartesian
+from workbench.core.frames import C_bodyfixed_mmed, C_enu_bodyfixed, planetocentric_from_cartesian
 from workbench.core.rotation import dcm_to_quat, quat_multiply
 
 __all__ = ["LandingSiteFrame", "site_frame_below", "terrain_patch", "capsule_meshes", "parachute_mesh"]
-
-
-def _C_enu_bodyfixed(lat: float, lon: float) -> np.ndarray:
-    sp, cp, sl, cl = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    east = np.array([-sl, cl, 0.0])
-    north = np.array([-sp * cl, -sp * sl, cp])
-    up = np.array([cp * cl, cp * sl, sp])
-    return np.stack([east, north, up])
 
 
 @dataclass(frozen=True)
@@ -49,7 +41,7 @@ class LandingSiteFrame:
     @property
     def C_L_F(self) -> np.ndarray:
         """DCM (3, 3) from the body-fixed frame F to L (rows E, N, U in F)."""
-        return _C_enu_bodyfixed(self.lat, self.lon)
+        return C_enu_bodyfixed(self.lat, self.lon)
 
     @property
     def origin_F(self) -> np.ndarray:

@@ -70,15 +70,16 @@ from workbench.core.atmosphere import (
     TabulatedAtmosphere,
 )
 from workbench.core.bodies import MARS
-from workbench.core.frames import julian_date_from_utc
-from workbench.core.rotation import quat_normalize, quat_to_dcm
+from workbench.core.frames import julian_date_from_utc, north_east_xyz
+from workbench.core.gravity import j2_factor
+from workbench.core.rotation import dcm_components, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import EntryVehicle
+from workbench.problems.entry.site import R_GROUND
 
 __all__ = [
     "EntryTruthSpec",
     "EntryTruth",
     "MARS_MOLAR_MASS",
-    "R_GROUND",
     "truth_spec_from_scenario",
     "true_atmosphere",
     "wind_profile_truth",
@@ -87,8 +88,6 @@ __all__ = [
 
 MARS_MOLAR_MASS = 0.04341
 """Mean molar mass of the Martian atmosphere below 104 km [kg/mol] (AMELIA Sect. 9)."""
-R_GROUND = MARS.reference_radius - 1440.0
-"""Terrain radius [m]: flat terrain 1440 m below the 3396 km MOLA radius (AMELIA Sect. 7)."""
 
 
 def _wind_layers_default() -> tuple[tuple[float, float, float, float, float], ...]:
@@ -376,8 +375,7 @@ class _Model:
         self.spec = spec
         self.veh = vehicle
         self.gm = MARS.gm
-        self.re = MARS.equatorial_radius
-        self.j2k = 1.5 * MARS.j2 * MARS.gm * MARS.equatorial_radius**2
+        self.j2k = j2_factor(MARS)
         self.rref = MARS.reference_radius
         self.om = MARS.rotation_rate
         self.aero_on = bool(spec.aero_enabled)
@@ -464,6 +462,13 @@ class _Model:
         return sp.side_force_coeff * up * dn
 
     def gravity(self, x, y, z):
+        """Point mass + J2 of Mars at (x, y, z) [m] in M -> (g_x, g_y, g_z [m/s²], |r| [m]).
+
+        The model of :func:`workbench.core.gravity.gravity_j2_xyz`, written here with its own
+        operation order: the reference trajectory (and every number derived from the synthetic
+        telemetry) depends on it to the last bit — the riser dynamics amplify a 1-ulp change of g
+        to ~1e-9 of the summary numbers.  It differs from the shared model by rounding only.
+        """
         r2 = x * x + y * y + z * z
         r = math.sqrt(r2)
         ir3 = 1.0 / (r2 * r)
@@ -478,12 +483,7 @@ class _Model:
         gx, gy, gz, r = self.gravity(px, py, pz)
         h = r - self.rref
         # DCM C_M_G from q_M_G
-        xx, yy, zz = qx * qx, qy * qy, qz * qz
-        xy, xz, yz = qx * qy, qx * qz, qy * qz
-        wqx, wqy, wqz = qw * qx, qw * qy, qw * qz
-        c00, c01, c02 = 1 - 2 * (yy + zz), 2 * (xy - wqz), 2 * (xz + wqy)
-        c10, c11, c12 = 2 * (xy + wqz), 1 - 2 * (xx + zz), 2 * (yz - wqx)
-        c20, c21, c22 = 2 * (xz - wqy), 2 * (yz + wqx), 1 - 2 * (xx + yy)
+        (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = dcm_components(qx, qy, qz, qw)
         om = self.om
         FGx = FGy = FGz = 0.0  # non-gravitational force on the module, body frame [N]
         Mx = My = Mz = 0.0  # torque about the CoG, body frame [N m]
@@ -492,10 +492,7 @@ class _Model:
         wn = we = 0.0
         if self.aero_on:
             rho, a_snd, lam, wn, we = self.atm(h)
-            # local north/east unit vectors in M (from the +Z pole)
-            rxy = math.sqrt(px * px + py * py)
-            ex, ey = -py / rxy, px / rxy
-            nx, ny, nz = -px * pz / (r * rxy), -py * pz / (r * rxy), rxy / r
+            nx, ny, nz, ex, ey = north_east_xyz(px, py, pz, r)  # local north/east in M (+Z the pole)
             vrx = vx + om * py - wn * nx - we * ex
             vry = vy - om * px - wn * ny - we * ey
             vrz = vz - wn * nz
@@ -555,9 +552,7 @@ class _Model:
             Ap = self.area(t)
             if self.aero_on and Ap > 0.0:
                 rho_p, a_p, _, wnp, wep = self.atm(rp - self.rref)
-                rxyp = math.sqrt(ppx * ppx + ppy * ppy)
-                exp_, eyp = -ppy / rxyp, ppx / rxyp
-                nxp, nyp, nzp = -ppx * ppz / (rp * rxyp), -ppy * ppz / (rp * rxyp), rxyp / rp
+                nxp, nyp, nzp, exp_, eyp = north_east_xyz(ppx, ppy, ppz, rp)
                 wx_p = vpx + om * ppy - wnp * nxp - wep * exp_
                 wy_p = vpy - om * ppx - wnp * nyp - wep * eyp
                 wz_p = vpz - wnp * nzp
