@@ -132,6 +132,7 @@ def _cv_monte_carlo(n_runs, n_steps, q_scale=1.0, seed=10):
     return nees_f, nees_s, nis_r
 
 
+@pytest.mark.slow
 def test_cv_monte_carlo_nees_nis_inside_bounds():
     n_runs, n_steps = 100, 40
     nees_f, nees_s, nis_r = _cv_monte_carlo(n_runs, n_steps)
@@ -150,6 +151,7 @@ def test_cv_monte_carlo_nees_nis_inside_bounds():
     assert np.isfinite(nees_s).all()
 
 
+@pytest.mark.slow
 def test_cv_monte_carlo_detects_mistuned_filter():
     """The same statistics flag a filter whose process noise is 30x too small (power of the test)."""
     nees_f, _, nis_r = _cv_monte_carlo(100, 40, q_scale=1.0 / 30.0)
@@ -238,6 +240,7 @@ def _attitude_filter(q_hat0, gyro, vec, numeric=False):
     return fp, rts_smooth(fp, LAYOUT_ATT)
 
 
+@pytest.mark.slow
 def test_attitude_filter_monte_carlo_anees_and_pd():
     n_runs, n_steps = 50, 100
     rng = np.random.default_rng(20)

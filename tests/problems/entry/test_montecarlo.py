@@ -135,6 +135,7 @@ def test_noise_scale_matches_filter_psd():
     assert s[3] == pytest.approx(np.sqrt(10.0))  # the 100 Hz samples: PSD σ² · sample_dt as the filter assumes
 
 
+@pytest.mark.slow
 def test_validation_consistent_and_shaped(result, fixture):
     res = result
     imu = fixture[0]
@@ -162,16 +163,19 @@ def test_validation_consistent_and_shaped(result, fixture):
         assert np.isfinite(s["nis_mean"][ch]["value"])
 
 
+@pytest.mark.slow
 def test_deterministic_per_seed(result, fixture):
     _same(result, _run(fixture))
     other = validate_smoother(*fixture, n_runs=6, seed=6, sigmas=SIG)
     assert not np.array_equal(other.nees, result.nees)
 
 
+@pytest.mark.slow
 def test_process_pool_identical(result, fixture):
     _same(result, _run(fixture, workers=2))
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(importlib.util.find_spec("distributed") is None, reason="dask.distributed not installed")
 def test_dask_local_identical(result, fixture):
     _same(result, _run(fixture, scheduler="local"))
@@ -189,6 +193,7 @@ def test_result_fields_documented():
     assert set(ValidationResult.DETERMINISTIC) <= names
 
 
+@pytest.mark.slow
 def test_recording_roundtrip(result, tmp_path):
     from workbench.problems.entry.recording_mc import record_entry_validation
     from workbench.recording.reader import read_recording
@@ -204,6 +209,7 @@ def test_recording_roundtrip(result, tmp_path):
     assert "ANEES (9 dof)" in data.text_document("/report")
 
 
+@pytest.mark.slow
 def test_gaussian_truths_about_a_given_start(fixture):
     """``start`` + ``truth_initial="gaussian"``: truths from the smoother's own initial distribution."""
     imu, nominal, disp, times = fixture

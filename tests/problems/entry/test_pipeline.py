@@ -174,6 +174,7 @@ def test_strapdown_validated_against_onboard_solution(run):
     assert s["saturated_samples"] > 0
 
 
+@pytest.mark.slow
 def test_user_telemetry_takes_the_same_path(run, tmp_path):
     out, s = run
     tel = tmp_path / "flight"
