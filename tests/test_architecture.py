@@ -1,7 +1,9 @@
 """The layer rules of docs/ARCHITECTURE.md, checked on the source tree (static, no imports run).
 
 - imports point up only: core <- io <- models/estimation <- recording <- problems <- cli;
-  a problem package never imports another problem package;
+  a problem package never imports another problem package, and the shared modules of
+  ``workbench/problems/`` (protocol, registry, runner) import none (the registry names the
+  built-in problems by string);
 - no import cycles between modules (imports inside functions count: they only hide a cycle);
 - no private name (leading underscore) imported from, or reached into, another module,
   in the package or in the tests;
@@ -82,8 +84,12 @@ def _layer(mod: str) -> str:
 
 
 def _problem(mod: str) -> str | None:
+    """The problem package of ``mod`` (``workbench.problems.<p>...``), None outside one.  The
+    modules directly in ``workbench/problems/`` (protocol, registry, runner) are shared by all."""
     parts = mod.split(".")
-    return parts[2] if len(parts) > 2 and parts[1] == "problems" else None
+    if len(parts) > 2 and parts[1] == "problems" and (PKG / "problems" / parts[2]).is_dir():
+        return parts[2]
+    return None
 
 
 def test_imports_point_up_and_problems_stay_apart():
@@ -96,6 +102,8 @@ def test_imports_point_up_and_problems_stay_apart():
             if target == "workbench" or dst == src:
                 if src == "problems" and _problem(mod) and _problem(target) and _problem(mod) != _problem(target):
                     bad.append(f"{path.relative_to(ROOT)}:{line} imports another problem: {target}")
+                if src == "problems" and not _problem(mod) and _problem(target):
+                    bad.append(f"{path.relative_to(ROOT)}:{line} shared problem code imports a problem: {target}")
                 continue
             if dst not in ALLOWED.get(src, set()):
                 bad.append(f"{path.relative_to(ROOT)}:{line} ({src}) imports {target} ({dst})")

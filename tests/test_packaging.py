@@ -41,7 +41,14 @@ def wheel_env(tmp_path_factory):
         [str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], capture_output=True, text=True
     ).stdout.strip()
     # dependencies from the running interpreter, appended after the venv's own site-packages
+    # (and wherever the running interpreter actually finds them, e.g. through a .pth of its own)
+    import numpy
+    import rerun
+    import scipy
+    import trimesh
+
     deps = {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]}
+    deps |= {str(Path(m.__file__).resolve().parents[1]) for m in (numpy, scipy, trimesh, rerun)}
     Path(site, "zz_deps.pth").write_text("\n".join(sorted(deps)) + "\n")
     r = subprocess.run(
         [sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", str(whl)],

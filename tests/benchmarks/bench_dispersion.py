@@ -47,19 +47,22 @@ sys.path.insert(0, str(ROOT))
 
 from workbench.core.rotation import attitude_error  # noqa: E402
 from workbench.problems.entry import dispersion as ds  # noqa: E402
+from workbench.problems.entry.site import R_GROUND  # noqa: E402
 
 
 def _scenario_input(seed: int):
     """(imu, nominal (v, q, p), events, truth (v, q, p) at t0, r_ground, description)."""
     from workbench.io.scenario import load_scenario
-    from workbench.problems.entry.preprocess import preprocess, read_entry_telemetry
+    from workbench.problems.entry.config import config_for
+    from workbench.problems.entry.preprocess import preprocess
     from workbench.problems.entry.synthetic import load_truth, synthesize_entry
+    from workbench.problems.entry.telemetry import read_entry_telemetry
 
     sc = load_scenario(ROOT / "assets" / "scenarios" / "schiaparelli.toml")
     with tempfile.TemporaryDirectory() as d:
         paths = synthesize_entry(sc, d, seed=seed)
-        tm = read_entry_telemetry({k: v for k, v in paths.items() if k != "truth"})
-        imu = preprocess(tm, sc)
+        tm = read_entry_telemetry(paths, config_for(sc).checks)
+        imu = preprocess(tm, config_for(sc).preprocess)
         tr = load_truth(paths["truth"])
     k0 = int(np.argmin(np.abs(tr["t"] - imu.t[0])))
     return (
@@ -80,7 +83,7 @@ def _fixture_input():
     tr = m.truth()
     imu = m.make_imu(tr, gaps=[(7.0, 8.4), (10.0, 11.8), (20.0, 23.3), (40.0, 97.2)])
     nominal = (tr["v"][0] + [8.0, -5.0, 3.0], m.perturb(tr["q"][0], np.radians([0.5, -0.3, 0.4])), tr["p"][0] + 1500.0)
-    return imu, nominal, tr["events"], (tr["v"][0], tr["q"][0], tr["p"][0]), ds.R_GROUND, "point-mass fixture"
+    return imu, nominal, tr["events"], (tr["v"][0], tr["q"][0], tr["p"][0]), R_GROUND, "point-mass fixture"
 
 
 def main(argv=None) -> int:

@@ -47,6 +47,7 @@ from workbench.problems.droptest import pipeline as dt  # noqa: E402
 from workbench.problems.droptest.lander import load_lander  # noqa: E402
 from workbench.problems.droptest.montecarlo import McResult, monte_carlo, summarize_mc  # noqa: E402
 from workbench.problems.droptest.synthetic import synthesize_droptest  # noqa: E402
+from workbench.problems.droptest.telemetry import DropTelemetry  # noqa: E402
 
 SCEN = ROOT / "assets" / "scenarios"
 CONFIGS = (
@@ -62,7 +63,7 @@ CONFIGS = (
 
 
 def baseline_filter(
-    tel: dt.DropTelemetry,
+    tel: DropTelemetry,
     init: dt.InitialState,
     q_accel: np.ndarray,
     q_angular: np.ndarray,

@@ -1,8 +1,8 @@
 """Tests of workbench.core.atmosphere.
 
-Mars values are hand-computed from the NASA Glenn formulas quoted in FACTS.md; gas properties
+Mars values are hand-computed from the NASA Glenn Mars Atmosphere Model formulas; gas properties
 from textbook relations (a = sqrt(γRT), MEADS Eq. 45–46); Titan surface values from Fulchignoni
-et al. (2005) via FACTS.md; hydrostatic balance dp/dh = −ρ g checked by finite differences.
+et al. (2005); hydrostatic balance dp/dh = −ρ g checked by finite differences.
 """
 
 import numpy as np
@@ -13,7 +13,7 @@ from workbench.core.bodies import TITAN
 
 
 def _glenn(h):
-    """FACTS.md: T[°C] = −31 − 0.000998 h (h < 7000 m) else −23.4 − 0.00222 h; p[kPa] = 0.699 e^(−0.00009 h);
+    """NASA Glenn: T[°C] = −31 − 0.000998 h (h < 7000 m) else −23.4 − 0.00222 h; p[kPa] = 0.699 e^(−0.00009 h);
     ρ = p / (0.1921 T[K])."""
     T_c = -31 - 0.000998 * h if h < 7000 else -23.4 - 0.00222 * h
     p_kpa = 0.699 * np.exp(-0.00009 * h)

@@ -1,4 +1,4 @@
-"""Tests of workbench.core.bodies: lookup and the published constants (FACTS.md, WGS 84)."""
+"""Tests of workbench.core.bodies: lookup and the published constants (NAIF pck00011/gm_de440, NSSDC, WGS 84)."""
 
 import pytest
 

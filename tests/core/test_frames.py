@@ -1,6 +1,6 @@
 """Tests of workbench.core.frames: time, IAU rotation, geodesy, NED and the SPF lab frame.
 
-Expected values are written out from the published elements (FACTS.md, pck00011), JPL Horizons
+Expected values are written out from the published elements (IAU 2015, NAIF pck00011), JPL Horizons
 (Mars sidereal period 24.622962 h) and the REDLand paper, not taken from the code.
 """
 
@@ -62,7 +62,7 @@ def _pole_radec_and_W(C):
 def test_mars_pole_and_meridian_at_j2000():
     C = frames.C_bodyfixed_inertial(MARS, J2000)
     ra, dec, W = _pole_radec_and_W(C)
-    # FACTS.md (pck00011) at T = d = 0, largest periodic terms evaluated by hand:
+    # pck00011 at T = d = 0, largest periodic terms evaluated by hand:
     assert ra == pytest.approx(317.269202 + 0.419057 * np.sin(np.radians(79.398797)), abs=1e-9)
     assert dec == pytest.approx(54.432516 + 1.591274 * np.cos(np.radians(166.325722)), abs=1e-9)
     assert W == pytest.approx(176.049863 + 0.584542 * np.sin(np.radians(95.391654)), abs=1e-9)
@@ -183,3 +183,45 @@ def test_lab_frame_round_trips_and_points():
     np.testing.assert_allclose(Rotation.from_quat(lab.q_planet_lab).as_matrix(), frames.C_mars_spf(), atol=1e-14)
     with pytest.raises(ValueError):
         frames.LabFrame("bad", np.diag([1.0, 1.0, -1.0]))
+
+
+# ------------------------------------------------------------------------ local bases from position
+def test_ned_basis_from_position_matches_latitude_longitude_form():
+    rng = np.random.default_rng(7)
+    lat = rng.uniform(-1.4, 1.4, 50)
+    lon = rng.uniform(-np.pi, np.pi, 50)
+    r = frames.cartesian_from_planetocentric(lat, lon, rng.uniform(3.3e6, 3.6e6, 50))
+    C = frames.ned_basis(r)
+    np.testing.assert_allclose(C, frames.C_ned_bodyfixed(lat, lon), atol=1e-14)
+    # Down is −r̂, written out by hand for one point on the equator at 90° E
+    np.testing.assert_allclose(frames.ned_basis(np.array([0.0, 5.0, 0.0])), [[0, 0, 1], [-1, 0, 0], [0, -1, 0]],
+                               atol=1e-15)  # fmt: skip
+
+
+def test_enu_basis_and_ned_from_enu():
+    lat, lon = 0.3, -2.0
+    C_enu = frames.C_enu_bodyfixed(lat, lon)
+    # up is the radial direction, east is horizontal and points to increasing longitude
+    up = [np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)]
+    np.testing.assert_allclose(C_enu[2], up, atol=1e-15)
+    np.testing.assert_allclose(C_enu[0], [-np.sin(lon), np.cos(lon), 0.0], atol=1e-15)
+    np.testing.assert_allclose(C_enu @ C_enu.T, np.eye(3), atol=1e-15)
+    assert np.linalg.det(C_enu) == pytest.approx(1.0)
+    v_enu = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+    np.testing.assert_array_equal(frames.ned_from_enu(v_enu), [[2.0, 1.0, -3.0], [5.0, 4.0, -6.0]])
+    # consistent with the two DCMs
+    np.testing.assert_allclose(frames.ned_from_enu(C_enu @ [0.1, 0.2, 0.3]),
+                               frames.C_ned_bodyfixed(lat, lon) @ [0.1, 0.2, 0.3], atol=1e-15)  # fmt: skip
+
+
+def test_north_east_xyz_are_the_first_rows_of_ned_basis():
+    rng = np.random.default_rng(8)
+    r = rng.normal(size=(20, 3)) * 3.4e6
+    C = frames.ned_basis(r)
+    for k in range(20):
+        x, y, z = r[k].tolist()
+        nx, ny, nz, ex, ey = frames.north_east_xyz(x, y, z, float(np.linalg.norm(r[k])))
+        np.testing.assert_allclose([nx, ny, nz], C[k, 0], atol=1e-15)
+        np.testing.assert_allclose([ex, ey, 0.0], C[k, 1], atol=1e-15)
+    # hand value: on the equator at 0° E, north is +Z and east is +Y
+    np.testing.assert_allclose(frames.north_east_xyz(7.0, 0.0, 0.0, 7.0), [0.0, 0.0, 1.0, 0.0, 1.0], atol=0)

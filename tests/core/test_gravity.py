@@ -1,5 +1,5 @@
 """Tests of workbench.core.gravity against GM/r², a finite-difference gradient of the J2 potential
-and published surface gravities (Mars 3.71 m/s², NSSDC/Horizons; Titan 1.354 m/s², FACTS.md)."""
+and published surface gravities (Mars 3.71 m/s², NSSDC/Horizons; Titan 1.354 m/s² from GM/R², gm_de440 and pck00011)."""
 
 import numpy as np
 import pytest
@@ -65,3 +65,34 @@ def test_uniform_gravity():
     np.testing.assert_allclose(a, np.tile([0, 0, -3.71], (7, 1)))
     with pytest.raises(ValueError):
         gravity.gravity_uniform(up=[0, 0, 0])
+
+
+def test_component_form_matches_array_form_and_is_member_exact():
+    rng = np.random.default_rng(5)
+    r = rng.normal(size=(40, 3))
+    r = r / np.linalg.norm(r, axis=-1, keepdims=True) * rng.uniform(3.4e6, 4e6, (40, 1))
+    j2k = gravity.j2_factor(MARS)
+    assert j2k == pytest.approx(1.5 * 1960.45e-6 * 42828.37362069909e9 * 3396.19e3**2, rel=1e-15)
+    a = gravity.gravity_j2(r, MARS)
+    gx, gy, gz, rn = gravity.gravity_j2_xyz(r[:, 0], r[:, 1], r[:, 2], MARS.gm, j2k)  # arrays
+    np.testing.assert_allclose(np.stack([gx, gy, gz], -1), a, rtol=1e-14, atol=0)
+    np.testing.assert_allclose(rn, np.linalg.norm(r, axis=-1), rtol=1e-15)
+    for k in range(r.shape[0]):  # Python floats: the same operations, equal to the array call's member
+        s = gravity.gravity_j2_xyz(*r[k].tolist(), MARS.gm, j2k)
+        assert all(isinstance(c, float) for c in s)
+        assert s == (gx[k], gy[k], gz[k], rn[k])
+
+
+def test_point_mass_gradient_against_finite_differences():
+    rng = np.random.default_rng(6)
+    r = rng.normal(size=(5, 3)) * 2e6 + np.array([3e6, 0, 0])
+    G = gravity.gravity_point_mass_gradient(r, MARS.gm)
+    assert G.shape == (5, 3, 3)
+    h = 1.0
+    for k in range(5):
+        fd = np.stack(
+            [(gravity.gravity_point_mass(r[k] + e, MARS.gm) - gravity.gravity_point_mass(r[k] - e, MARS.gm)) / (2 * h)
+             for e in h * np.eye(3)], -1)  # fmt: skip
+        np.testing.assert_allclose(G[k], fd, rtol=1e-6, atol=1e-14)
+        np.testing.assert_allclose(G[k], G[k].T, rtol=1e-15)
+        assert np.trace(G[k]) == pytest.approx(0.0, abs=1e-20)  # Laplace: the field is divergence-free

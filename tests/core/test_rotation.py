@@ -153,3 +153,25 @@ def test_triad_covariance_matches_monte_carlo(rng):
     eig = np.linalg.eigvalsh(0.5 * (W + W.T))
     assert np.all(np.abs(eig - 1.0) < 0.10), eig
     assert np.all(np.abs(err.mean(0)) < 3 * np.sqrt(np.diag(P) / err.shape[0]) + 1e-6)
+
+
+def test_single_quaternion_paths_equal_the_vectorised_ones(rng):
+    """The one-quaternion fast paths (used in hot loops) give the vectorised results to the bit."""
+    p = rng.normal(size=(20, 4))
+    q = rng.normal(size=(20, 4))
+    M = rot.quat_multiply(p, q)
+    C = rot.quat_to_dcm(q)
+    N = rot.quat_normalize(q)
+    np.testing.assert_array_equal(rot.quat_multiply(p[0], q), rot.quat_multiply(p[:1], q))  # broadcasting
+    for k in range(20):
+        np.testing.assert_array_equal(rot.quat_multiply(p[k], q[k]), M[k])
+        np.testing.assert_array_equal(rot.quat_to_dcm(q[k]), C[k])
+        np.testing.assert_array_equal(rot.quat_normalize(q[k]), N[k])
+        rows = rot.dcm_components(*q[k].tolist())  # Python floats in, Python floats out
+        assert isinstance(rows[0][0], float)
+        np.testing.assert_array_equal(np.array(rows), C[k])
+    # against scipy for unit quaternions, and the norm really is 1
+    np.testing.assert_allclose(np.linalg.norm(N, axis=-1), 1.0, rtol=1e-15)
+    np.testing.assert_allclose(rot.quat_to_dcm(N[3]), Rotation.from_quat(N[3]).as_matrix(), atol=1e-14)
+    with pytest.raises(ValueError):
+        rot.quat_normalize(np.zeros(4))

@@ -132,6 +132,7 @@ def _cv_monte_carlo(n_runs, n_steps, q_scale=1.0, seed=10):
     return nees_f, nees_s, np.array(nis_r)
 
 
+@pytest.mark.slow
 def test_cv_monte_carlo_nees_nis_inside_bounds():
     n_runs, n_steps = 100, 40
     nees_f, nees_s, nis_r = _cv_monte_carlo(n_runs, n_steps)
@@ -149,6 +150,7 @@ def test_cv_monte_carlo_nees_nis_inside_bounds():
     assert np.isfinite(nees_s).all()
 
 
+@pytest.mark.slow
 def test_cv_monte_carlo_detects_mistuned_filter():
     """The same statistics flag a filter whose process noise is 30x too small (power of the test)."""
     nees_f, _, nis_r = _cv_monte_carlo(100, 40, q_scale=1.0 / 30.0)
@@ -237,6 +239,7 @@ def _attitude_filter(q_hat0, gyro, vec, numeric=False):
     return fp, rts_smooth(fp, LAYOUT_ATT)
 
 
+@pytest.mark.slow
 def test_attitude_filter_monte_carlo_anees_and_pd():
     n_runs, n_steps = 50, 100
     rng = np.random.default_rng(20)
@@ -273,3 +276,16 @@ def test_attitude_filter_numeric_F_matches_analytic_to_first_order():
     F_tt = np.swapaxes(quat_to_dcm(quat_from_rotvec(phi)), 1, 2)
     np.testing.assert_allclose(fn.F[1:, :3, :3], F_tt, atol=1e-8)
     np.testing.assert_allclose(fn.x_post, fa.x_post, atol=1e-4)
+
+
+def test_chi2_gate_against_closed_forms():
+    """χ²(2) has cdf 1 − exp(−x/2), so its p-quantile is −2 ln(1 − p); χ²(1) at 95 % is 1.95996² (the
+    two-sided normal 95 % point squared)."""
+    from workbench.estimation.consistency import chi2_gate
+
+    for p in (0.5, 0.9, 0.99, 0.9999):
+        assert chi2_gate(p, 2) == pytest.approx(-2.0 * np.log(1.0 - p), rel=1e-12)
+    assert chi2_gate(0.95, 1) == pytest.approx(1.959963984540054**2, rel=1e-12)
+    assert chi2_gate(0.95, 4) > chi2_gate(0.95, 3) > chi2_gate(0.9, 3)
+    # the upper end of the two-sided interval is the gate at (1 + p) / 2
+    assert chi2_interval(3, 0.9)[1] == pytest.approx(chi2_gate(0.95, 3), rel=1e-14)

@@ -8,7 +8,6 @@ import pytest
 from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_boxplus, quat_from_rotvec, quat_multiply, quat_rotate
 from workbench.models.radar import (
-    R_GROUND,
     beam_directions_G,
     mars_rate_M,
     plane_fit,
@@ -16,6 +15,8 @@ from workbench.models.radar import (
     slant_range_sphere,
     velocity_out_model,
 )
+
+R_GROUND = MARS.reference_radius - 1440.0  # a terrain sphere for the tests [m]
 
 
 def _state(rng: np.random.Generator, h_agl: float = 5000.0, tilt_deg: float = 15.0):
@@ -76,14 +77,14 @@ def test_slant_range_jacobian_matches_finite_differences(beam):
     s = beam_directions_G()[beam]
     for _ in range(5):
         v, q, p = _state(rng, h_agl=rng.uniform(1e3, 8e3), tilt_deg=rng.uniform(0, 25))
-        y, H = slant_range_model(p, q, s)
+        y, H = slant_range_model(p, q, s, R_GROUND)
         assert H.shape == (1, 9) and np.ndim(y) == 0
-        J = _fd_jacobian(lambda v_, q_, p_: slant_range_model(p_, q_, s)[0], v, q, p, STEPS)
+        J = _fd_jacobian(lambda v_, q_, p_: slant_range_model(p_, q_, s, R_GROUND)[0], v, q, p, STEPS)
         for blk in (slice(0, 3), slice(3, 6), slice(6, 9)):  # relative error per error-state block
             scale = np.abs(J[:, blk]).max() + 1e-12
             assert np.all(np.abs(H[:, blk] - J[:, blk]) <= 1e-7 * scale + 1e-12), (H, J)
         # the literal B.4 (vertical frozen) differs only by O(h/|p|) in the position block
-        _, Hb = slant_range_model(p, q, s, exact=False)
+        _, Hb = slant_range_model(p, q, s, R_GROUND, exact=False)
         assert np.allclose(Hb[0, :6], H[0, :6])
         assert np.allclose(Hb[0, 6:], H[0, 6:], atol=5e-3 * np.abs(H[0, 6:]).max())
 
@@ -92,8 +93,8 @@ def test_slant_range_model_vs_exact_sphere_and_vectorised():
     rng = np.random.default_rng(3)
     B = beam_directions_G()
     v, q, p = _state(rng, h_agl=6000.0, tilt_deg=20.0)
-    y, _ = slant_range_model(np.broadcast_to(p, (4, 3)), np.broadcast_to(q, (4, 4)), B)
-    ys = slant_range_sphere(p, q, B)
+    y, _ = slant_range_model(np.broadcast_to(p, (4, 3)), np.broadcast_to(q, (4, 4)), B, R_GROUND)
+    ys = slant_range_sphere(p, q, B, R_GROUND)
     assert y.shape == (4,) and ys.shape == (4,)
     # flat plane vs sphere: the ground drops by x²/(2R) at horizontal distance x = ρ sin α
     cos_a = 6000.0 / y
@@ -104,11 +105,35 @@ def test_slant_range_model_vs_exact_sphere_and_vectorised():
     z = np.array([0.0, 0.0, 1.0])
     axis = np.cross(z, u)
     qv = quat_from_rotvec(axis / np.linalg.norm(axis) * np.arccos(z @ u))
-    assert np.isclose(slant_range_model(p, qv, B[0])[0], 6000.0)
-    assert np.isclose(slant_range_sphere(p, qv, B[0]), 6000.0)
+    assert np.isclose(slant_range_model(p, qv, B[0], R_GROUND)[0], 6000.0)
+    assert np.isclose(slant_range_sphere(p, qv, B[0], R_GROUND), 6000.0)
     # a beam looking up never hits
-    assert np.isinf(slant_range_sphere(p, qv, -B[0]))
-    assert np.isinf(slant_range_model(p, qv, -B[0])[0])
+    assert np.isnan(slant_range_sphere(p, qv, -B[0], R_GROUND))  # no echo: NaN
+    assert np.isinf(slant_range_model(p, qv, -B[0], R_GROUND)[0])
+
+
+def test_slant_range_sphere_geometry_and_broadcasting():
+    """Hand geometry: from straight above, B0 hits at the AGL height and the 20° beams by the law of
+    cosines; p (n, 1, 3), q (n, 1, 4) with four beams (4, 3) give (n, 4); a miss is NaN."""
+    import math
+
+    h = 5000.0
+    p = np.array([[0.0, 0.0, R_GROUND + h]])
+    q = np.array([[0.0, 0.0, 0.0, 1.0]])  # Z_G up: B0 = −Z_G looks at the centre
+    beams = beam_directions_G()
+    rho = slant_range_sphere(p[:, None], q[:, None], beams, R_GROUND)
+    assert rho.shape == (1, 4)
+    assert math.isclose(rho[0, 0], h, rel_tol=1e-12)
+    r0 = R_GROUND + h
+    c = math.cos(math.radians(20.0))
+    expect = r0 * c - math.sqrt(R_GROUND**2 - r0**2 * (1 - c * c))
+    np.testing.assert_allclose(rho[0, 1:], expect, rtol=1e-12)
+    up = np.array([1.0, 0.0, 0.0, 0.0])  # 180° about X: B0 looks up -> no echo
+    assert np.isnan(slant_range_sphere(p[0], up, beams[0], R_GROUND))
+    # a beam that passes beside the sphere misses too (NaN, not +inf)
+    far = np.array([0.0, 0.0, 3.0 * R_GROUND])
+    side = quat_from_rotvec(np.array([np.deg2rad(60.0), 0.0, 0.0]))  # −Z_G tilted 60° off the centre
+    assert np.isnan(slant_range_sphere(far, side, beams[0], R_GROUND))
 
 
 def test_velocity_out_model_and_jacobian():

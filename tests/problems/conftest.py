@@ -2,7 +2,7 @@
 
 A CLI run (truth simulation ~7–12 s, reconstruction ~2 s, recording ~5 s) is far too costly to
 repeat per test, so each shipped scenario is run at most once per session through the same
-entry point a user calls (``workbench.cli.run_scenario``), lazily, the first time a test asks
+entry point the command line calls (``workbench.problems.runner.run_scenario``), lazily, the first time a test asks
 for it. The clean reconstruction of the ``droptest`` telemetry (``run_droptest`` on the files the
 CLI wrote) is shared too: the recording tests compare the logged numbers with it and the
 telemetry-defect tests use it as the no-defect baseline.
@@ -16,15 +16,17 @@ from pathlib import Path
 
 import pytest
 
-from workbench.cli import _assets_dir, run_scenario
+from workbench.io.assets import assets_dir
 from workbench.io.scenario import Scenario, resolve_scenario
 from workbench.problems.droptest import pipeline as dt
+from workbench.problems.droptest.problem import DropTestProblem
 from workbench.problems.droptest.synthetic import load_truth
+from workbench.problems.runner import run_scenario
 
 
 @dataclass(frozen=True)
 class CliRun:
-    """One ``run_scenario(name, out, quiet=True)``: where it wrote, and the summary it returned."""
+    """One ``run_scenario(name, out)`` (quiet): where it wrote, and the summary it returned."""
 
     name: str
     out: Path
@@ -32,7 +34,7 @@ class CliRun:
 
     @property
     def scenario(self) -> Scenario:
-        return resolve_scenario(self.name, _assets_dir())
+        return resolve_scenario(self.name, assets_dir())
 
     @property
     def rrd(self) -> Path:
@@ -49,15 +51,7 @@ class CliRun:
     def telemetry_paths(self, folder: Path | None = None) -> dict[str, Path]:
         """The pipeline's ``paths`` dict for the telemetry files in ``folder`` (default: as written)."""
         d = self.telemetry_dir if folder is None else Path(folder)
-        paths = {
-            "imu": d / "imu.csv",
-            "attitude_3dm": d / "3dm.csv",
-            "events": d / "events.csv",
-            "setup": d / "setup.toml",
-        }
-        if (d / "ranging.csv").exists():
-            paths["ranging"] = d / "ranging.csv"
-        return paths
+        return DropTestProblem().telemetry_files(self.scenario, d)
 
     def truth(self) -> dict:
         return load_truth(self.telemetry_dir / "truth.npz")
@@ -71,7 +65,7 @@ def cli_run(tmp_path_factory) -> Callable[[str], CliRun]:
     def get(name: str) -> CliRun:
         if name not in cache:
             out = tmp_path_factory.mktemp(f"cli_{name}")
-            cache[name] = CliRun(name, out, run_scenario(name, out, quiet=True))
+            cache[name] = CliRun(name, out, run_scenario(name, out).summary)
         return cache[name]
 
     return get

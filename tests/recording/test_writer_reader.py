@@ -222,7 +222,7 @@ def test_time_rounding_on_ns_grid(tmp_path):
     k = np.arange(5000)
     t = k * 0.01
     raw_truncated = rr.TimeColumn("time", duration=t).as_arrow_array().cast("int64").to_numpy()
-    assert np.any(raw_truncated != k * 10_000_000)  # the pitfall P7 exists in this SDK
+    assert np.any(raw_truncated != k * 10_000_000)  # the truncation exists in this SDK
     assert np.array_equal(to_ns(t).astype(np.int64), k * 10_000_000)
     path = tmp_path / "grid.rrd"
     with open_recording(path, "grid") as rec:

@@ -14,7 +14,8 @@ Models:
 * :class:`TitanDefaultAtmosphere` — a documented layered engineering profile anchored on the
   Huygens surface values.
 
-References: FACTS.md (Glenn model, CO2 constants); MEADS paper (Karlgaard et al., MSL air data),
+References: NASA Glenn Research Center, "Mars Atmosphere Model" (engineering fit to MGS data);
+MEADS paper (Karlgaard et al., MSL air data),
 Eq. (45)–(46) and Table 1 (Knudsen number, Sutherland law and constants for CO2); AMELIA Sect. 9
 (M = 43.41 g/mol); Fulchignoni et al., Nature 438, 2005 (Titan HASI profile); White, *Viscous
 Fluid Flow*, 3rd ed., Table 1-2 (Sutherland constants of N2).
@@ -76,9 +77,9 @@ class Sutherland:
 
 
 CO2_SUTHERLAND = Sutherland(mu0=14.8e-6, T0=293.15, C=240.0)
-"""CO2: μ0 = 14.8e-6 Pa s, T0 = 293.15 K, C = 240 K (MEADS Table 1, FACTS.md)."""
+"""CO2: μ0 = 14.8e-6 Pa s, T0 = 293.15 K, C = 240 K (MEADS Table 1)."""
 N2_SUTHERLAND = Sutherland(mu0=1.663e-5, T0=273.0, C=107.0)
-"""N2: μ0 = 1.663e-5 Pa s, T0 = 273 K, C = 107 K (White, Table 1-2; not in FACTS.md).  Used for
+"""N2: μ0 = 1.663e-5 Pa s, T0 = 273 K, C = 107 K (White, Table 1-2).  Used for
 Titan below its ~100 K validity range: an engineering extrapolation."""
 
 
@@ -225,7 +226,7 @@ class TabulatedAtmosphere(Atmosphere):
 class MarsEngineeringAtmosphere(Atmosphere):
     """NASA Glenn Mars engineering model (fit to MGS data) with an isothermal extension aloft.
 
-    Below ``h_blend`` (default 50 km), exactly the published fit (FACTS.md):
+    Below ``h_blend`` (default 50 km), exactly the published NASA Glenn fit:
 
     * ``T[°C] = −31 − 0.000998 h`` for h < 7000 m, ``−23.4 − 0.00222 h`` above;
     * ``p[kPa] = 0.699 exp(−0.00009 h)``;
@@ -319,9 +320,9 @@ def _layered_pressure(h, h_nodes, T_nodes, p0, g0, R, radius):
 class TitanDefaultAtmosphere(Atmosphere):
     """Layered engineering atmosphere of Titan (N2), hydrostatic, anchored on Huygens surface data.
 
-    Surface: T = 93.65 K, p = 1467 hPa (Fulchignoni et al. 2005, FACTS.md).  Temperature is
+    Surface: T = 93.65 K, p = 1467 hPa (Fulchignoni et al., Nature 438, 2005).  Temperature is
     piecewise linear in geopotential altitude through engineering nodes chosen to follow the
-    Huygens HASI profile (values NOT in FACTS.md, documented choices):
+    Huygens HASI profile (engineering values, documented choices):
 
     * 0 km: 93.65 K  ->  44 km: 70.4 K (tropopause)  ->  250 km: 186 K (stratopause),
     * isothermal 186 K above 250 km (the HASI thermosphere oscillates around 150–180 K).

@@ -5,7 +5,9 @@ A :class:`Body` is a small frozen record; the rotation model that uses its IAU e
 SI (m, s, m³/s²) except the IAU elements, which keep the units of the IAU report (degrees, Julian
 centuries and days from J2000 TDB) and say so in their names.
 
-Sources (see ``/work/shared/references/FACTS.md`` for Mars and Titan):
+Also the standard gravity :data:`G0` used for lab frames and g-unit conversion.
+
+Sources:
 
 [1] Archinal et al., "Report of the IAU Working Group on Cartographic Coordinates and Rotational
     Elements: 2015", Celest. Mech. Dyn. Astron. 130:22, 2018, as distributed in NAIF
@@ -26,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = [
+    "G0",
     "PERIODIC_KINDS",
     "Body",
     "MARS",
@@ -34,6 +37,9 @@ __all__ = [
     "KNOWN_BODIES",
     "get_body",
 ]
+
+G0 = 9.80665
+"""Standard gravity [m/s²], exact by definition (CGPM 1901): the g unit and lab-frame gravity."""
 
 #: Kinds of IAU periodic terms: ``"alpha0"`` adds ``A sin(φ0 + ν T)`` to the pole right ascension,
 #: ``"delta0"`` adds ``A cos(φ0 + ν T)`` to the pole declination, ``"W"`` adds ``A sin(φ0 + ν T)``
@@ -113,7 +119,7 @@ MARS = Body(
     delta0_rate_deg_per_century=-0.05827105,
     w0_deg=176.049863,
     w_rate_deg_per_day=350.891982443297,
-    # Largest periodic terms only (FACTS.md); pck00011 lists further terms, each far smaller.
+    # Largest periodic terms only; pck00011 lists further terms, each far smaller.
     periodic_terms=(
         ("alpha0", 0.419057, 79.398797, 0.5042615),
         ("delta0", 1.591274, 166.325722, 0.5042615),
@@ -122,7 +128,7 @@ MARS = Body(
 )
 """Mars: IAU 2015 rotation with its three largest periodic terms (pck00011 [1]), GM from
 gm_de440 [2], J2 from NSSDC and rotation rate from Horizons [3], MOLA reference radius 3396.0 km
-as in AMELIA [4].  Values as listed in FACTS.md."""
+as in AMELIA [4]."""
 
 TITAN = Body(
     name="Titan",
@@ -131,7 +137,7 @@ TITAN = Body(
     polar_radius=2574.47e3,  # pck00011 [1]
     # [derived] volumetric mean radius (a b c)^(1/3) of the pck00011 triaxial radii
     reference_radius=float(np.cbrt(2575.15e3 * 2574.78e3 * 2574.47e3)),
-    # Engineering value NOT in FACTS.md: Iess et al., Science 327:1367 (2010), J2 = 31.808e-6.
+    # Engineering value: Iess et al., Science 327:1367 (2010), J2 = 31.808e-6.
     j2=31.808e-6,
     # [derived] from the IAU prime-meridian rate 22.5769768 deg/day
     rotation_rate=float(np.deg2rad(22.5769768) / 86400.0),
@@ -143,9 +149,9 @@ TITAN = Body(
     w_rate_deg_per_day=22.5769768,
 )
 """Titan: pck00011 pole 39.4827°/83.4279° (no secular rates given), W = 186.5855 + 22.5769768 d,
-radii 2575.15/2574.78/2574.47 km [1]; GM from gm_de440 [2] (FACTS.md).  Reference radius is the
+radii 2575.15/2574.78/2574.47 km [1]; GM from gm_de440 [2].  Reference radius is the
 [derived] volumetric mean 2574.80 km; J2 = 31.808e-6 is an engineering value from Iess et al.
-(2010), not from FACTS.md."""
+(2010)."""
 
 EARTH = Body(
     name="Earth",

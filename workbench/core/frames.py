@@ -1,6 +1,6 @@
 """Time scales, IAU body-fixed frames, planetocentric geodesy, local NED and test-chamber frames.
 
-Frames used (DESIGN.md):
+Frames used:
 
 * ``I`` — planet-centred inertial with ICRF/J2000 axes (for Mars this is the "MMED" frame of the
   AMELIA paper when expressed in the planet's mean equator; here we stay on ICRF axes).
@@ -24,6 +24,7 @@ degrees as published and converted here.
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import re
 from dataclasses import dataclass, field
 
@@ -51,6 +52,10 @@ __all__ = [
     "cartesian_from_planetocentric",
     "altitude_above_sphere",
     "C_ned_bodyfixed",
+    "C_enu_bodyfixed",
+    "ned_basis",
+    "north_east_xyz",
+    "ned_from_enu",
     "ned_from_bodyfixed",
     "bodyfixed_from_ned",
     "local_ned_position",
@@ -273,6 +278,48 @@ def C_ned_bodyfixed(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
     return np.stack([north, east, down], -2)
 
 
+def C_enu_bodyfixed(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """DCM ``C_L_F`` (..., 3, 3) from body-fixed F to East-North-Up at planetocentric (lat, lon) [rad].
+
+    The rows of :func:`C_ned_bodyfixed` reordered: E, N and Up = −D = r̂.  ``v_ENU = C_L_F @ v_F``.
+    """
+    C = C_ned_bodyfixed(lat, lon)
+    return np.stack([C[..., 1, :], C[..., 0, :], -C[..., 2, :]], -2)
+
+
+def ned_basis(r: np.ndarray) -> np.ndarray:
+    """``C_N_X`` (..., 3, 3): rows the local north, east, down unit vectors at position(s) r (..., 3) [m].
+
+    ``r`` is planet-centred in any frame X whose +Z is the pole (body-fixed F, or an inertial frame
+    such as Mars' MMED): Down is −r̂, East ``ẑ × r̂`` normalised, North ``r̂ × East``.  This equals
+    :func:`C_ned_bodyfixed` at the latitude and the longitude *in X* of r, without trigonometry.
+    Undefined on the pole axis.
+    """
+    r = np.asarray(r, dtype=float)
+    up = r / np.linalg.norm(r, axis=-1, keepdims=True)
+    east = np.cross(np.array([0.0, 0.0, 1.0]), up)
+    east /= np.linalg.norm(east, axis=-1, keepdims=True)
+    north = np.cross(up, east)
+    return np.stack([north, east, -up], axis=-2)
+
+
+def north_east_xyz(x: float, y: float, z: float, r: float) -> tuple[float, float, float, float, float]:
+    """Local north and east unit vectors at one position, by components (for hot scalar loops).
+
+    x, y, z [m] planet-centred in a frame whose +Z is the pole, ``r`` = ``|(x, y, z)|`` [m] (the
+    caller usually has it already).  Returns ``(n_x, n_y, n_z, e_x, e_y)`` (``e_z`` = 0): the first
+    two rows of :func:`ned_basis` written out.  Undefined on the pole axis.
+    """
+    rxy = math.sqrt(x * x + y * y)
+    return -x * z / (r * rxy), -y * z / (r * rxy), rxy / r, -y / rxy, x / rxy
+
+
+def ned_from_enu(v: np.ndarray) -> np.ndarray:
+    """Components (..., 3) of East-North-Up vector(s) v (..., 3) in North-East-Down: ``(v_N, v_E, −v_U)``."""
+    v = np.asarray(v, dtype=float)
+    return np.stack([v[..., 1], v[..., 0], -v[..., 2]], -1)
+
+
 def ned_from_bodyfixed(v_F: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
     """Express body-fixed vector(s) v_F (..., 3) in local NED at (lat, lon) [rad]: ``C_N_F v_F``."""
     return np.einsum("...ij,...j->...i", C_ned_bodyfixed(lat, lon), np.asarray(v_F, dtype=float))
@@ -286,8 +333,8 @@ def bodyfixed_from_ned(v_N: np.ndarray, lat: np.ndarray, lon: np.ndarray) -> np.
 def local_ned_position(r_F: np.ndarray, origin_F: np.ndarray) -> np.ndarray:
     """Position (..., 3) [m] of r_F relative to ``origin_F`` (3,), in the NED frame at the origin.
 
-    This is the "local origin" frame for logging geometry (DESIGN.md: never log planet-centred
-    metres); it is a flat tangent frame, so Down differs from the local vertical far away.
+    This is the "local origin" frame for logging geometry (never log planet-centred metres); it
+    is a flat tangent frame, so Down differs from the local vertical far away.
     """
     origin_F = np.asarray(origin_F, dtype=float)
     lat, lon, _ = planetocentric_from_cartesian(origin_F)

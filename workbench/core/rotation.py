@@ -1,6 +1,6 @@
 """Quaternions, direction-cosine matrices and attitude determination, vectorised over leading axes.
 
-Conventions (DESIGN.md):
+Conventions:
 
 * Quaternions are scalar-last ``[x, y, z, w]`` with the Hamilton product, exactly as
   ``scipy.spatial.transform.Rotation`` and Rerun.  ``q_a_b`` rotates vectors from frame *b* to
@@ -36,6 +36,7 @@ __all__ = [
     "quat_inverse",
     "quat_rotate",
     "quat_to_dcm",
+    "dcm_components",
     "dcm_to_quat",
     "quat_from_rotvec",
     "quat_to_rotvec",
@@ -74,10 +75,10 @@ def quat_identity(shape: tuple[int, ...] = ()) -> np.ndarray:
 def quat_normalize(q: np.ndarray) -> np.ndarray:
     """Unit quaternion(s) in the direction of ``q`` (..., 4); raises on a zero quaternion."""
     q = np.asarray(q, dtype=float)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    n = np.sqrt(q[..., 0] * q[..., 0] + q[..., 1] * q[..., 1] + q[..., 2] * q[..., 2] + q[..., 3] * q[..., 3])
     if np.any(n == 0.0):
         raise ValueError("cannot normalise a zero quaternion")
-    return q / n
+    return q / n[..., None]
 
 
 def quat_positive(q: np.ndarray) -> np.ndarray:
@@ -92,15 +93,15 @@ def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     px, py, pz, pw = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
     qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-            pw * qw - px * qx - py * qy - pz * qz,
-        ],
-        axis=-1,
+    parts = (
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+        pw * qw - px * qx - py * qy - pz * qz,
     )
+    if p.ndim == 1 and q.ndim == 1:  # one pair: np.array is ~5x cheaper than np.stack
+        return np.array(parts, dtype=float)
+    return np.stack(parts, axis=-1)
 
 
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
@@ -118,17 +119,26 @@ def quat_inverse(q: np.ndarray) -> np.ndarray:
 def quat_to_dcm(q: np.ndarray) -> np.ndarray:
     """DCM ``C_a_b`` (..., 3, 3) of a unit quaternion ``q_a_b`` (..., 4): ``v_a = C_a_b @ v_b``."""
     q = np.asarray(q, dtype=float)
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    rows = dcm_components(q[..., 0], q[..., 1], q[..., 2], q[..., 3])
+    if q.ndim == 1:  # one quaternion: the filter's hot path (np.stack costs ~10x more here)
+        return np.array(rows, dtype=float)
+    return np.stack([np.stack(r, -1) for r in rows], -2)
+
+
+def dcm_components(x, y, z, w):
+    """Rows of the DCM ``C_a_b`` of the unit quaternion ``q_a_b = [x, y, z, w]`` given by components.
+
+    The components may be Python floats (hot scalar loops) or arrays of one shape; returns three
+    row tuples ``((C00, C01, C02), (C10, C11, C12), (C20, C21, C22))`` of that type.
+    :func:`quat_to_dcm` is this, stacked.
+    """
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    return np.stack(
-        [
-            np.stack([1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)], -1),
-            np.stack([2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)], -1),
-            np.stack([2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)], -1),
-        ],
-        -2,
+    return (
+        (1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)),
+        (2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)),
+        (2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)),
     )
 
 

@@ -7,11 +7,13 @@ m-dimensional innovation is χ²(m); averaged over N independent Monte Carlo run
 χ²(N·d).  Whiteness of an innovation sequence uses the normalised sample autocorrelation with
 its ±1.96/√n band (Mehra 1970; Bar-Shalom Sect. 5.4.2).
 
-Attitude errors entering :func:`nees` must use the body-frame convention of DESIGN.md
+Attitude errors entering :func:`nees` must use the body-frame convention
 (``q_true = q_est ⊗ exp(δθ)``, :func:`workbench.core.rotation.attitude_error`).
 """
 
 from __future__ import annotations
+
+from functools import lru_cache
 
 import numpy as np
 from scipy.stats import chi2
@@ -21,6 +23,7 @@ __all__ = [
     "nis",
     "anees_bounds",
     "chi2_interval",
+    "chi2_gate",
     "fraction_inside",
     "is_symmetric_pd",
     "whiteness",
@@ -48,6 +51,16 @@ def chi2_interval(dof: int, probability: float = 0.95) -> tuple[float, float]:
     """Two-sided interval (lo, hi) that a χ²(dof) variable falls in with ``probability``."""
     a = 0.5 * (1.0 - probability)
     return float(chi2.ppf(a, dof)), float(chi2.ppf(1.0 - a, dof))
+
+
+@lru_cache(maxsize=256)
+def chi2_gate(probability: float, dof: int) -> float:
+    """One-sided bound ``chi2.ppf(probability, dof)``: a χ²(dof) variable stays below it with ``probability``.
+
+    The innovation gate of the filters (reject a measurement whose NIS exceeds it).  Cached: the
+    filters ask for the same few (probability, dof) pairs thousands of times.
+    """
+    return float(chi2.ppf(probability, dof))
 
 
 def anees_bounds(dof: int, n_runs: int, probability: float = 0.95) -> tuple[float, float]:

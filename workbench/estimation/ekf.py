@@ -8,7 +8,7 @@ State and error state
 ---------------------
 The full state ``x`` (n_x,) may contain unit quaternions; the covariance ``P`` (n_e, n_e)
 always lives in the *error state* ``e`` (n_e,), where each quaternion is represented by a 3-vector
-small angle.  :class:`ErrorStateLayout` says where.  Attitude-error convention (the
+small angle.  :class:`ErrorStateLayout` says where.  Attitude-error convention (docs/ARCHITECTURE.md, the
 same as :mod:`workbench.core.rotation`): the error is a **body-frame** small angle δθ [rad] with
 ``q_true = q_est ⊗ exp(δθ)`` (right / local, multiplicative perturbation).
 ``x ⊞ e`` applies additive corrections to the additive entries and ``q ⊗ exp(δθ)`` to each
@@ -36,8 +36,8 @@ Iterated EKF: Bell & Cathey, "The iterated Kalman filter update as a Gauss-Newto
 IEEE TAC 38(2), 1993, written with ⊞/⊟.
 
 References: [1] Gelb, *Applied Optimal Estimation*, 1974 (Joseph form); [2] POST2 EKF thesis,
-Ch. 3.1; [3] Solà, "Quaternion kinematics for the error-state
-Kalman filter", 2017 (error-state / reset); [4] Bell & Cathey 1993.
+Ch. 3.1 (the POST2 EKF reconstruction of the Huygens probe, M.S. thesis); [3] Solà,
+"Quaternion kinematics for the error-state Kalman filter", 2017 (error-state / reset); [4] Bell & Cathey 1993.
 """
 
 from __future__ import annotations
@@ -45,13 +45,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 from scipy.linalg import lapack
-from scipy.stats import chi2
 
 from workbench.core.rotation import attitude_error, quat_boxplus, quat_normalize
+from workbench.estimation.consistency import chi2_gate
 
 __all__ = [
     "ErrorStateLayout",
@@ -472,11 +471,6 @@ def predict(
     return Prediction(x_prior, 0.5 * (A + A.T), Fm)
 
 
-@lru_cache(maxsize=256)
-def _chi2_threshold(probability: float, dof: int) -> float:
-    return float(chi2.ppf(probability, dof))
-
-
 def _as_vector(a: np.ndarray) -> np.ndarray:
     a = np.asarray(a, dtype=float)
     return a.reshape(1) if a.ndim == 0 else a
@@ -515,7 +509,7 @@ def _update(
     if gain_projector is not None:
         K = gain_projector(x) @ K
     if gate_threshold is None and gate_probability is not None:
-        gate_threshold = _chi2_threshold(float(gate_probability), y.shape[0])
+        gate_threshold = chi2_gate(float(gate_probability), y.shape[0])
     if gate_threshold is not None and nis > gate_threshold:
         return x, P, y, S, K, Hk, nis, False, zp
     dx = K @ y

@@ -1,9 +1,12 @@
 """Strapdown integration of an entry vehicle's IMU with first-order covariance (AMELIA Appendix A).
 
-State (AMELIA Eq. A.1, our conventions, ``.entry_spec.md``): inertial velocity ``v_M`` [m/s],
+State (AMELIA Eq. A.1, our conventions, docs/ARCHITECTURE.md): inertial velocity ``v_M`` [m/s],
 attitude ``q_M_G`` (body G → inertial M, Hamilton scalar-last; ``C_G_M = quat_to_dcm(q_M_G).T`` is
-the paper's ``C(q)``) and inertial position ``p_M`` [m], all in the MMED frame M (Mars-centred,
-+Z the pole, so :func:`workbench.core.gravity.gravity_j2` applies directly).
+the paper's ``C(q)``) and inertial position ``p_M`` [m], all in a planet-centred inertial frame M
+whose +Z is the pole (Mars: MMED), so :func:`workbench.core.gravity.gravity_j2` applies directly.
+The planet is a parameter: every function that needs gravity takes ``body`` (a
+:class:`~workbench.core.bodies.Body`; GM, J2 and the equatorial radius are used).  It defaults to
+Mars, the planet of the existing callers.
 
 Equations of motion (Eq. A.2), inputs the body specific force ``f_G`` [m/s²] (non-gravitational
 acceleration) and body rate ``w_G`` [rad/s]::
@@ -40,8 +43,9 @@ from typing import Any
 import numpy as np
 from scipy.linalg import expm
 
-from workbench.core.bodies import MARS
-from workbench.core.rotation import dcm_to_quat, skew
+from workbench.core.bodies import MARS, Body
+from workbench.core.gravity import gravity_j2_xyz, gravity_point_mass_gradient, j2_factor
+from workbench.core.rotation import dcm_to_quat, quat_multiply, quat_normalize, quat_to_dcm, skew
 
 __all__ = [
     "GAP_SIGMA_DEFAULT",
@@ -49,8 +53,6 @@ __all__ = [
     "ImuArrays",
     "imu_arrays",
     "StrapdownPass",
-    "gravity_M",
-    "gravity_gradient_M",
     "derivatives",
     "rk4_step",
     "error_dynamics",
@@ -69,8 +71,6 @@ __all__ = [
 #: over the 57 s gap) and 5 m/s give 5.7 m/s, 0.0065° and 290 m across the longest gap.
 GAP_SIGMA_DEFAULT: tuple[float, float, float] = (0.1, 2.0e-6, 5.0)
 
-_GM = MARS.gm
-_J2K = 1.5 * MARS.j2 * MARS.gm * MARS.equatorial_radius**2
 _I3 = np.eye(3)
 _I9 = np.eye(9)
 
@@ -107,70 +107,24 @@ def _qdot(q: np.ndarray, w: np.ndarray) -> np.ndarray:
     )
 
 
-def _qnormalize(q: np.ndarray) -> np.ndarray:
-    n = np.sqrt(q[..., 0] * q[..., 0] + q[..., 1] * q[..., 1] + q[..., 2] * q[..., 2] + q[..., 3] * q[..., 3])
-    return q / n[..., None]
-
-
-def _dcm(q: np.ndarray) -> np.ndarray:
-    """``C_M_G`` (..., 3, 3) of ``q_M_G`` (..., 4); a fast path for a single quaternion."""
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    xx, yy, zz, xy, xz, yz, wx, wy, wz = x * x, y * y, z * z, x * y, x * z, y * z, w * x, w * y, w * z
-    rows = (
-        (1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)),
-        (2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)),
-        (2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)),
-    )
-    if q.ndim == 1:
-        return np.array(rows)
-    return np.stack([np.stack(r, -1) for r in rows], -2)
-
-
 # ---------------------------------------------------------------------------------------------
 # equations of motion
 
 
-def gravity_M(p_M: np.ndarray) -> np.ndarray:
-    """Mars gravity (point mass + J2, :data:`~workbench.core.bodies.MARS`) [m/s²] at p_M (..., 3) [m] in MMED.
-
-    MMED's +Z is the Mars pole (J2000), so :func:`~workbench.core.gravity.gravity_j2` applies
-    directly (the ~0.01° precession of the pole since J2000 is neglected).  This is the same
-    formula written component-wise (≈ 4x cheaper for one position, member-wise exact; the tests
-    pin it to ``gravity_j2``).
-    """
-    p = np.asarray(p_M, dtype=float)
-    x, y, z = p[..., 0], p[..., 1], p[..., 2]
-    r2 = x * x + y * y + z * z
-    r = np.sqrt(r2)
-    gm_r3 = _GM / (r2 * r)
-    z2 = 5.0 * (z * z) / r2
-    k = _J2K / (r2 * r2 * r)
-    a = gm_r3 + k * (1.0 - z2)
-    return _stack((-a * x, -a * y, -(gm_r3 + k * (3.0 - z2)) * z))
-
-
-def gravity_gradient_M(p_M: np.ndarray) -> np.ndarray:
-    """Point-mass gravity gradient ``∂g/∂p = GM/r³ (3 p̂ p̂ᵀ − I)`` [1/s²], p_M (..., 3) -> (..., 3, 3).
-
-    J2 changes it by ~0.2 %, negligible for the error dynamics.
-    """
-    p = np.asarray(p_M, dtype=float)
-    r2 = p[..., 0] * p[..., 0] + p[..., 1] * p[..., 1] + p[..., 2] * p[..., 2]
-    k = _GM / (r2 * np.sqrt(r2))
-    outer = p[..., :, None] * p[..., None, :]
-    return (3.0 * k / r2)[..., None, None] * outer - k[..., None, None] * _I3
-
-
 def derivatives(
-    v: np.ndarray, q: np.ndarray, p: np.ndarray, f_G: np.ndarray, w_G: np.ndarray
+    v: np.ndarray, q: np.ndarray, p: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, body: Body = MARS
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Right-hand side of AMELIA Eq. A.2: ``(dv/dt, dq/dt, dp/dt)``.
 
     v_M (..., 3) [m/s], q_M_G (..., 4), p_M (..., 3) [m]; f_G (..., 3) [m/s²] and w_G (..., 3)
     [rad/s] broadcast against the state (e.g. one IMU sample (3,) for all members (m, 3)).
+    Gravity: point mass + J2 of ``body`` (:func:`~workbench.core.gravity.gravity_j2_xyz`, the
+    component form, so that the vectorised and the single-state RK4 agree to the last bit).
     Returns ``g_M(p) + C_M_G f_G`` (..., 3), ``½ q ⊗ [w_G, 0]`` (..., 4), ``v`` (..., 3).
     """
-    return gravity_M(p) + _rot(q, f_G), _qdot(q, w_G), v
+    p = np.asarray(p, dtype=float)
+    g = gravity_j2_xyz(p[..., 0], p[..., 1], p[..., 2], body.gm, j2_factor(body))
+    return _stack(g[:3]) + _rot(q, f_G), _qdot(q, w_G), v
 
 
 def rk4_step(
@@ -182,48 +136,43 @@ def rk4_step(
     f1: np.ndarray,
     w1: np.ndarray,
     dt: float,
+    body: Body = MARS,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One classical RK4 step of Eq. A.2 over ``dt`` [s] from the state (v_M, q_M_G, p_M).
 
     The inputs are linear between the samples (f0, w0) at the start and (f1, w1) at the end
     (shapes as :func:`derivatives`); the two mid-point stages use their mean.  The quaternion is
-    renormalised at the end.  Vectorised over leading axes (members).  Returns (v, q, p).
+    renormalised at the end.  Vectorised over leading axes (members).  ``body`` gives the gravity
+    (:func:`derivatives`).  Returns (v, q, p).
     """
     if v.ndim == 1 and q.ndim == 1 and p.ndim == 1 and np.ndim(f0) == 1 and np.ndim(f1) == 1:
-        return _rk4_scalar(v, q, p, f0, w0, f1, w1, float(dt))
+        return _rk4_scalar(v, q, p, f0, w0, f1, w1, float(dt), body.gm, j2_factor(body))
     fm = 0.5 * (f0 + f1)
     wm = 0.5 * (w0 + w1)
     h = 0.5 * dt
-    k1v, k1q, k1p = derivatives(v, q, p, f0, w0)
-    k2v, k2q, k2p = derivatives(v + h * k1v, q + h * k1q, p + h * k1p, fm, wm)
-    k3v, k3q, k3p = derivatives(v + h * k2v, q + h * k2q, p + h * k2p, fm, wm)
-    k4v, k4q, k4p = derivatives(v + dt * k3v, q + dt * k3q, p + dt * k3p, f1, w1)
+    k1v, k1q, k1p = derivatives(v, q, p, f0, w0, body)
+    k2v, k2q, k2p = derivatives(v + h * k1v, q + h * k1q, p + h * k1p, fm, wm, body)
+    k3v, k3q, k3p = derivatives(v + h * k2v, q + h * k2q, p + h * k2p, fm, wm, body)
+    k4v, k4q, k4p = derivatives(v + dt * k3v, q + dt * k3q, p + dt * k3p, f1, w1, body)
     s = dt / 6.0
     v1 = v + s * (k1v + 2.0 * (k2v + k3v) + k4v)
     q1 = q + s * (k1q + 2.0 * (k2q + k3q) + k4q)
     p1 = p + s * (k1p + 2.0 * (k2p + k3p) + k4p)
-    return v1, _qnormalize(q1), p1
+    return v1, quat_normalize(q1), p1
 
 
-def _deriv_scalar(v, q, p, f, w):
+def _deriv_scalar(v, q, p, f, w, gm, j2k):
     """:func:`derivatives` on Python floats (tuples) — same operations in the same order."""
-    x, y, z = p
-    r2 = x * x + y * y + z * z
-    r = math.sqrt(r2)
-    gm_r3 = _GM / (r2 * r)
-    z2 = 5.0 * (z * z) / r2
-    k = _J2K / (r2 * r2 * r)
-    a = gm_r3 + k * (1.0 - z2)
-    az = gm_r3 + k * (3.0 - z2)
+    gx, gy, gz, _ = gravity_j2_xyz(p[0], p[1], p[2], gm, j2k)
     qx, qy, qz, qw = q
     X, Y, Z = f
     tx = 2.0 * (qy * Z - qz * Y)
     ty = 2.0 * (qz * X - qx * Z)
     tz = 2.0 * (qx * Y - qy * X)
     dv = (
-        -a * x + (X + qw * tx + (qy * tz - qz * ty)),
-        -a * y + (Y + qw * ty + (qz * tx - qx * tz)),
-        -az * z + (Z + qw * tz + (qx * ty - qy * tx)),
+        gx + (X + qw * tx + (qy * tz - qz * ty)),
+        gy + (Y + qw * ty + (qz * tx - qx * tz)),
+        gz + (Z + qw * tz + (qx * ty - qy * tx)),
     )
     wa, wb, wc = w
     dq = (
@@ -235,7 +184,7 @@ def _deriv_scalar(v, q, p, f, w):
     return dv, dq, v
 
 
-def _rk4_scalar(v, q, p, f0, w0, f1, w1, dt):
+def _rk4_scalar(v, q, p, f0, w0, f1, w1, dt, gm, j2k):
     """:func:`rk4_step` for one state with Python floats (the filter's hot path, ~6x cheaper)."""
     v, q, p = v.tolist(), q.tolist(), p.tolist()
     f0, w0, f1, w1 = f0.tolist(), w0.tolist(), f1.tolist(), w1.tolist()
@@ -246,10 +195,10 @@ def _rk4_scalar(v, q, p, f0, w0, f1, w1, dt):
     def add(x, c, d):
         return [a + c * b for a, b in zip(x, d, strict=True)]
 
-    k1v, k1q, k1p = _deriv_scalar(v, q, p, f0, w0)
-    k2v, k2q, k2p = _deriv_scalar(add(v, h, k1v), add(q, h, k1q), add(p, h, k1p), fm, wm)
-    k3v, k3q, k3p = _deriv_scalar(add(v, h, k2v), add(q, h, k2q), add(p, h, k2p), fm, wm)
-    k4v, k4q, k4p = _deriv_scalar(add(v, dt, k3v), add(q, dt, k3q), add(p, dt, k3p), f1, w1)
+    k1v, k1q, k1p = _deriv_scalar(v, q, p, f0, w0, gm, j2k)
+    k2v, k2q, k2p = _deriv_scalar(add(v, h, k1v), add(q, h, k1q), add(p, h, k1p), fm, wm, gm, j2k)
+    k3v, k3q, k3p = _deriv_scalar(add(v, h, k2v), add(q, h, k2q), add(p, h, k2p), fm, wm, gm, j2k)
+    k4v, k4q, k4p = _deriv_scalar(add(v, dt, k3v), add(q, dt, k3q), add(p, dt, k3p), f1, w1, gm, j2k)
     s = dt / 6.0
 
     def comb(x, a, b, c, d):
@@ -267,32 +216,32 @@ def _rk4_scalar(v, q, p, f0, w0, f1, w1, dt):
 
 
 def error_dynamics(
-    q_M_G: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, p_M: np.ndarray | None = None
+    q_M_G: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, p_M: np.ndarray | None = None, body: Body = MARS
 ) -> tuple[np.ndarray, np.ndarray]:
     """Continuous error dynamics ``d(δx)/dt = A δx + B ε`` (our AMELIA Eq. A.14, module docstring).
 
     q_M_G (..., 4), f_G (..., 3) [m/s²], w_G (..., 3) [rad/s]; ``p_M`` (..., 3) [m] adds the
-    point-mass gravity gradient ``G(p)`` in ``A[0:3, 6:9]`` (None: omitted, as the paper).
+    point-mass gravity gradient ``G(p)`` of ``body`` in ``A[0:3, 6:9]`` (None: omitted, as the paper).
     Returns A (..., 9, 9) over ``[δv_M, δθ_G, δp_M]`` and B (..., 9, 6) over ``[ε_ω, ε_a]``
     (``B[3:6, 0:3] = I``, ``B[0:3, 3:6] = C_M_G``).
     """
     q = np.asarray(q_M_G, dtype=float)
-    C = _dcm(q)
-    A = _a_matrix(C, np.asarray(f_G, dtype=float), np.asarray(w_G, dtype=float), p_M)
+    C = quat_to_dcm(q)
+    A = _a_matrix(C, np.asarray(f_G, dtype=float), np.asarray(w_G, dtype=float), p_M, body.gm)
     B = np.zeros((*A.shape[:-2], 9, 6))
     B[..., 3:6, 0:3] = _I3
     B[..., 0:3, 3:6] = C
     return A, B
 
 
-def _a_matrix(C: np.ndarray, f: np.ndarray, w: np.ndarray, p: np.ndarray | None) -> np.ndarray:
+def _a_matrix(C: np.ndarray, f: np.ndarray, w: np.ndarray, p: np.ndarray | None, gm: float) -> np.ndarray:
     shape = np.broadcast_shapes(C.shape[:-2], f.shape[:-1], w.shape[:-1])
     A = np.zeros((*shape, 9, 9))
     A[..., 0:3, 3:6] = -C @ skew(f)
     A[..., 3:6, 3:6] = -skew(w)
     A[..., 6:9, 0:3] = _I3
     if p is not None:
-        A[..., 0:3, 6:9] = gravity_gradient_M(p)
+        A[..., 0:3, 6:9] = gravity_point_mass_gradient(p, gm)
     return A
 
 
@@ -307,6 +256,7 @@ def covariance_step(
     sample_dt: float,
     Q_state_psd: np.ndarray | None = None,
     p: np.ndarray | None = None,
+    body: Body = MARS,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Discrete first-order covariance step (AMELIA Eq. A.15) over ``dt`` [s]: ``P⁺ = Φ P Φᵀ + Qd``.
 
@@ -322,10 +272,11 @@ def covariance_step(
         Qd = Qc dt + (A Qc + Qc Aᵀ) dt²/2 + A Qc Aᵀ dt³/3
 
     (second-order Van Loan series).  P (9, 9) (leading axes allowed); the result is symmetrised.
+    ``body`` gives GM for the gravity gradient.
     Returns (P⁺, Φ, Qd).
     """
-    C = _dcm(np.asarray(q, dtype=float))
-    A = _a_matrix(C, np.asarray(f, dtype=float), np.asarray(w, dtype=float), p)
+    C = quat_to_dcm(np.asarray(q, dtype=float))
+    A = _a_matrix(C, np.asarray(f, dtype=float), np.asarray(w, dtype=float), p, body.gm)
     Phi = expm(A * dt)
     psd_w = np.asarray(sigma_w, dtype=float) ** 2 * sample_dt * np.ones(3)
     psd_f = np.asarray(sigma_f, dtype=float) ** 2 * sample_dt * np.ones(3)
@@ -375,21 +326,8 @@ def apply_gap(
         p_b = p + _rot(q, np.asarray(bridge.dp_G, dtype=float))
     else:
         p_b = p + _bridge_dt(bridge) * v + _rot(q, np.asarray(bridge.dp_rel_G, dtype=float))
-    q_b = _qnormalize(_qmul(q, dq))
+    q_b = quat_normalize(quat_multiply(q, dq))
     return v_b, q_b, p_b
-
-
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return _stack(
-        (
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        )
-    )
 
 
 def gap_transition(
@@ -398,6 +336,7 @@ def gap_transition(
     bridge: Any,
     mode: str = "relative",
     gap_sigma: tuple[float, float, float] = GAP_SIGMA_DEFAULT,
+    body: Body = MARS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Error transition Φ (9, 9) and added noise Qd (9, 9) of :func:`apply_gap` (our state at a).
 
@@ -407,15 +346,15 @@ def gap_transition(
         δθ_b = dC δθ_a
         δp_b = δp_a + Δt δv_a − C_M_G S(dp_rel_G) δθ_a + ½ G Δt² δp_a
 
-    (G the point-mass gravity gradient at p_a).  The same Φ is used for mode "paper" (with dp_G in
+    (G the point-mass gravity gradient of ``body`` at p_a).  The same Φ is used for mode "paper" (with dp_G in
     place of dp_rel_G): there, the true error also gains Δt (v_est − v_onboard), a bias that Φ
     does not model.  ``gap_sigma`` = per-second 1σ (velocity [m/s/s], attitude [rad/s], position
     [m/s]) of the bridge's own error; the added standard deviation is ``gap_sigma · Δt``
     (``Qd = diag((gap_sigma Δt)²)`` on each block).
     """
     dt = _bridge_dt(bridge)
-    C = _dcm(np.asarray(q_a, dtype=float))
-    G = gravity_gradient_M(p_a)
+    C = quat_to_dcm(np.asarray(q_a, dtype=float))
+    G = gravity_point_mass_gradient(p_a, body.gm)
     dp = np.asarray(bridge.dp_G if mode == "paper" else bridge.dp_rel_G, dtype=float)
     Phi = np.eye(9)
     Phi[0:3, 3:6] = -C @ skew(np.asarray(bridge.dv_G, dtype=float))
@@ -543,6 +482,7 @@ def integrate(
     bridge_mode: str = "relative",
     sample_dt: float | None = None,
     gravity_gradient: bool = True,
+    body: Body = MARS,
 ) -> StrapdownPass:
     """Strapdown integration with first-order covariance over a PreprocessedIMU (AMELIA Sect. 5).
 
@@ -554,7 +494,8 @@ def integrate(
     samples'); a gap step is :func:`apply_gap` (``bridge_mode``) + :func:`gap_transition`
     (``gap_sigma``).  ``q_state_psd`` (9,) optional state noise PSD η (Eq. A.15's R) [units²/s];
     ``sample_dt`` [s] the raw sampling interval that turns per-sample σ into spectral densities
-    (default: the median sample interval); ``gravity_gradient`` include G(p) in A.
+    (default: the median sample interval); ``gravity_gradient`` include G(p) in A; ``body`` the
+    planet (gravity).
     """
     t = np.asarray(imu.t, dtype=float)
     f = np.asarray(imu.f_G, dtype=float)
@@ -577,21 +518,21 @@ def integrate(
     Qd = np.empty((n, 9, 9))
     bridged = np.zeros(n, dtype=bool)
     v = np.asarray(v0, dtype=float).copy()
-    q = _qnormalize(np.asarray(q0, dtype=float))
+    q = quat_normalize(np.asarray(q0, dtype=float))
     p = np.asarray(p0, dtype=float).copy()
     Pk = np.asarray(P0, dtype=float).copy()
     V[0], Q[0], X[0], P[0], Phi[0], Qd[0] = v, q, p, Pk, _I9, 0.0
     for k in range(n - 1):
         g = gaps.get(k)
         if g is not None:
-            F, Qk = gap_transition(q, p, g, bridge_mode, gap_sigma)
+            F, Qk = gap_transition(q, p, g, bridge_mode, gap_sigma, body)
             v, q, p = apply_gap(v, q, p, g, bridge_mode)
             Pk = F @ Pk @ F.T + Qk
             Pk = 0.5 * (Pk + Pk.T)
             bridged[k + 1] = True
         else:
             dt = t[k + 1] - t[k]
-            v1, q1, p1 = rk4_step(v, q, p, f[k], w[k], f[k + 1], w[k + 1], dt)
+            v1, q1, p1 = rk4_step(v, q, p, f[k], w[k], f[k + 1], w[k + 1], dt, body)
             qm = q + q1 if (q @ q1) >= 0.0 else q - q1
             qm = qm / np.sqrt(qm @ qm)
             Pk, F, Qk = covariance_step(
@@ -605,6 +546,7 @@ def integrate(
                 sample_dt,
                 q_state_psd,
                 0.5 * (p + p1) if gravity_gradient else None,
+                body,
             )
             v, q, p = v1, q1, p1
         V[k + 1], Q[k + 1], X[k + 1], P[k + 1], Phi[k + 1], Qd[k + 1] = v, q, p, Pk, F, Qk
@@ -620,11 +562,13 @@ def integrate_members(
     bridge_mode: str = "relative",
     at_t: np.ndarray | None = None,
     every: np.ndarray | None = None,
+    body: Body = MARS,
 ) -> dict[str, np.ndarray]:
     """Strapdown of many members at once (no covariance), vectorised over the leading member axis.
 
     v0 (m, 3) [m/s], q0 (m, 4) ``q_M_G``, p0 (m, 3) [m] (a single (3,)/(4,) state also works);
-    same IMU inputs and gap bridges (``bridge_mode``) for every member, as :func:`integrate`.
+    same IMU inputs and gap bridges (``bridge_mode``) and planet ``body`` for every member, as
+    :func:`integrate`.
     Returns a dict:
 
     * always ``"t"`` (n,) and the final state ``"v_end"``, ``"q_end"``, ``"p_end"`` (m, ·);
@@ -643,7 +587,7 @@ def integrate_members(
     n = t.size
     gaps = _gap_index(t, getattr(imu, "gaps", ()))
     v = np.array(v0, dtype=float)
-    q = _qnormalize(np.array(q0, dtype=float))
+    q = quat_normalize(np.array(q0, dtype=float))
     p = np.array(p0, dtype=float)
     out: dict[str, np.ndarray] = {"t": t}
     full = at_t is None and every is None
@@ -672,14 +616,14 @@ def integrate_members(
         if g is not None:
             v1, q1, p1 = apply_gap(v, q, p, g, bridge_mode)
         else:
-            v1, q1, p1 = rk4_step(v, q, p, f[k], w[k], f[k + 1], w[k + 1], t[k + 1] - t[k])
+            v1, q1, p1 = rk4_step(v, q, p, f[k], w[k], f[k + 1], w[k + 1], t[k + 1] - t[k], body)
         if at_t is not None:
             for i in np.flatnonzero(jj == k):
                 a = ww[i]
                 v_at[i] = (1.0 - a) * v + a * v1
                 p_at[i] = (1.0 - a) * p + a * p1
                 s = np.sign(np.sum(q * q1, axis=-1, keepdims=True))
-                q_at[i] = _qnormalize((1.0 - a) * q + (a * s) * q1)
+                q_at[i] = quat_normalize((1.0 - a) * q + (a * s) * q1)
         v, q, p = v1, q1, p1
         if full:
             Vh[k + 1], Qh[k + 1], Ph[k + 1] = v, q, p

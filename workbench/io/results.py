@@ -1,6 +1,6 @@
 """Run outputs: the JSON summary (scorecard) and CSV exports of reconstructed histories.
 
-``recordings/<name>.summary.json`` holds the key numbers of a run (DESIGN.md, "Outputs").
+``recordings/<name>.summary.json`` holds the key numbers of a run (docs/ARCHITECTURE.md, "Outputs").
 :func:`to_jsonable` turns numpy values, dataclasses and paths into plain JSON types; JSON has
 no NaN or infinity, so NaN becomes ``null`` and ±inf the strings ``"inf"``/``"-inf"``.
 CSV exports use the telemetry format (:func:`workbench.io.telemetry.write_telemetry`), so an

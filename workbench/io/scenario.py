@@ -1,10 +1,12 @@
 """Scenario files (TOML): what to reconstruct, from which telemetry, with which settings.
 
 A scenario is one TOML file with a ``[scenario]`` table (``name``, ``kind``, optional
-``description`` and ``epoch_utc``) and free-form tables read by the pipeline of that kind:
-``[vehicle]``, ``[sensors.*]``, ``[telemetry]`` (logical stream name → CSV path relative to the
-scenario file), ``[synthetic]`` (truth-simulator settings and ``seed``; its presence makes the
-scenario synthetic), ``[filter]``, ``[output]``.  FORMATS.md describes it for users.
+``description`` and ``epoch_utc``) and the tables of that kind: ``[vehicle]``, ``[sensors.*]``,
+``[telemetry]`` (logical stream name → file path relative to the scenario file), ``[synthetic]``
+(truth-simulator settings and ``seed``; its presence makes the scenario synthetic), ``[filter]``,
+...  Which tables and keys a kind has is declared once in its schema
+(``problems/<kind>/config.py``, :mod:`workbench.io.schema`); the problem validates the scenario
+against it before it runs (unknown keys are errors).  FORMATS.md describes it for users.
 
 Keys are addressed by dotted paths (``"sensors.imu.rate_hz"``) and type-checked on access by
 :meth:`Scenario.get`; every error names the file and the dotted key.  Values are whatever the
@@ -25,16 +27,13 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "SCENARIO_KINDS",
     "Scenario",
     "ScenarioError",
+    "check_value",
     "find_scenarios",
     "load_scenario",
     "resolve_scenario",
 ]
-
-#: The reconstruction problems a scenario may describe (DESIGN.md).
-SCENARIO_KINDS: tuple[str, ...] = ("droptest", "entry", "parameters", "airdata")
 
 _VALUE_KINDS = ("float", "int", "str", "bool", "vec3", "list", "table")
 
@@ -120,7 +119,7 @@ class Scenario:
             raise ScenarioError(self.path, dotted_key, f"missing{' ' + kind if kind else ''} value{hint}")
         if kind is None:
             return copy.deepcopy(v) if isinstance(v, dict | list) else v
-        return _check(self.path, dotted_key, v, kind)
+        return check_value(self.path, dotted_key, v, kind)
 
     def path_of(self, dotted_key: str, *, must_exist: bool = True) -> Path:
         """The path string at ``dotted_key`` resolved against the scenario's directory.
@@ -168,7 +167,11 @@ class Scenario:
         return _from_data(self.path, data)
 
 
-def _check(path: Path, key: str, v: Any, kind: str) -> Any:
+def check_value(path: Path, key: str, v: Any, kind: str) -> Any:
+    """``v`` checked against ``kind`` (see :meth:`Scenario.get`); :class:`ScenarioError` naming
+    ``path`` and the dotted ``key`` otherwise.  Numbers come back as float for ``"float"``, a
+    ``"vec3"`` as a float array ``(3,)``, lists and tables as copies."""
+
     def fail(expected: str) -> ScenarioError:
         return ScenarioError(path, key, f"expected {expected}, got {_type_name(v)} {v!r}"[:300])
 
@@ -215,9 +218,9 @@ def _from_data(path: Path, data: dict) -> Scenario:
     name = sc.get("name")
     if not isinstance(name, str) or not name.strip():
         raise ScenarioError(path, "scenario.name", f"expected a non-empty string, got {name!r}")
-    kind = sc.get("kind")
-    if kind not in SCENARIO_KINDS:
-        raise ScenarioError(path, "scenario.kind", f"expected one of {', '.join(SCENARIO_KINDS)}, got {kind!r}")
+    kind = sc.get("kind")  # which problem handles it is the registry's business (workbench.problems)
+    if not isinstance(kind, str) or not kind.strip():
+        raise ScenarioError(path, "scenario.kind", f"expected a non-empty string (the problem kind), got {kind!r}")
     desc = sc.get("description", "")
     if not isinstance(desc, str):
         raise ScenarioError(path, "scenario.description", f"expected a string, got {_type_name(desc)}")
@@ -235,7 +238,7 @@ def _from_data(path: Path, data: dict) -> Scenario:
     seed = data.get("synthetic", {}).get("seed", 0)
     if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
         raise ScenarioError(path, "synthetic.seed", f"expected a non-negative integer, got {seed!r}")
-    return Scenario(path=path, name=name.strip(), kind=kind, description=desc.strip(), data=data)
+    return Scenario(path=path, name=name.strip(), kind=kind.strip(), description=desc.strip(), data=data)
 
 
 def load_scenario(path: str | os.PathLike) -> Scenario:

@@ -19,6 +19,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from workbench.core.bodies import G0
+
 __all__ = [
     "KINDS",
     "SI_UNITS",
@@ -32,7 +34,6 @@ __all__ = [
     "unit_kind",
 ]
 
-STANDARD_GRAVITY = 9.80665  # m/s^2, exact by definition
 _LBF_PER_IN2 = 4.4482216152605 / 0.0254**2  # Pa in one psi
 _FT = 0.3048  # m, exact
 
@@ -63,7 +64,7 @@ UNITS: dict[str, Unit] = {
     "ft/s": Unit("velocity", _FT),
     # acceleration
     "m/s^2": Unit("acceleration", 1.0),
-    "g": Unit("acceleration", STANDARD_GRAVITY),
+    "g": Unit("acceleration", G0),
     # angle
     "rad": Unit("angle", 1.0),
     "deg": Unit("angle", np.pi / 180.0),

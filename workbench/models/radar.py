@@ -1,23 +1,23 @@
 """Radar Doppler altimeter (RDA) of a Schiaparelli-like descent module: beam geometry, measurement
 models with their error-state Jacobians, exact ray-sphere ranges and the 4-beam plane fit.
 
-Beam geometry (an assumption, documented): FACTS.md quotes "one antenna at nadir and three
-squinted ~20° symmetrically along azimuth" (Cecchini et al., ESA antenna workshop 2015).  We take
+Beam geometry (an assumption, documented): the antenna description quotes "one antenna at nadir and three
+squinted ~20° symmetrically along azimuth" (Cecchini et al., ESA Antenna Workshop, 2015).  We take
 
 * B0 along −Z_G (the GNC +Z axis points aft, to the back shell, so −Z_G looks at the ground
   under the parachute);
 * B1..B3 squinted 20° from −Z_G at azimuths 0°, 120°, 240° measured from +X_G towards +Y_G:
   ``s_n = [sin σ cos a_n, sin σ sin a_n, −cos σ]``.  The 120° spacing is our assumption.
 
-Frames and conventions (DESIGN.md, .entry_spec.md): ``M`` = MMED inertial, ``G`` = GNC body,
+Frames and conventions: ``M`` = MMED inertial, ``G`` = GNC body,
 ``q_M_G`` Hamilton scalar-last body → inertial, ``C_M_G = quat_to_dcm(q_M_G)`` and
 ``C_G_M = C_M_Gᵀ`` (the paper's ``C(q)``).  Error state (9,) ``[δv_M, δθ_G, δp_M]`` with
 ``v_true = v + δv``, ``q_true = q ⊗ exp(δθ)`` (body-frame right perturbation, so
 ``C_M_G,true ≈ C_M_G (I + [δθ×])``) and ``p_true = p + δp`` — the same linearisation as
 AMELIA A.10–A.12 (their ``C(δq) ≈ I − S(δθ)`` left-multiplies ``C_G_M``).
 
-Flat terrain: a sphere of radius ``r_ground`` about the Mars centre (AMELIA B.1 with
-``r_MOLA = 3396000 m`` and ``r_GROUND = −1440 m``).
+Flat terrain: a sphere of radius ``r_ground`` about the planet centre (AMELIA B.1); the value is
+the caller's (the entry problem's site, ``3396000 − 1440 m``).
 
 References: Aboudan et al., "ExoMars 2016 Schiaparelli module trajectory and atmospheric
 profiles reconstruction", Space Sci. Rev. 214:97, 2018 — Sect. 7 (plane fit, Table 4),
@@ -31,10 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.core.bodies import MARS
-from workbench.core.rotation import quat_to_dcm, skew
+from workbench.core.rotation import quat_rotate, quat_to_dcm, skew
 
 __all__ = [
-    "R_GROUND",
     "beam_directions_G",
     "mars_rate_M",
     "slant_range_model",
@@ -44,9 +43,6 @@ __all__ = [
     "plane_fit",
 ]
 
-#: Terrain radius of the landing site [m]: MOLA reference radius 3396 km minus 1440 m (AMELIA Sect. 7).
-R_GROUND: float = MARS.reference_radius - 1440.0
-
 
 def beam_directions_G(
     squint_deg: float = 20.0, azimuths_deg: tuple[float, float, float] = (0.0, 120.0, 240.0)
@@ -55,7 +51,7 @@ def beam_directions_G(
 
     B0 = ``[0, 0, −1]``; B(k+1) = ``[sin σ cos a_k, sin σ sin a_k, −cos σ]`` with σ = ``squint_deg``
     (off −Z_G) and a_k = ``azimuths_deg[k]`` measured from +X_G towards +Y_G.  Degrees only at this
-    I/O edge.  The 20° squint follows FACTS.md; the 0/120/240° azimuths are our assumption.
+    I/O edge.  The 20° squint follows Cecchini et al. (2015); the 0/120/240° azimuths are our assumption.
     """
     sig = np.deg2rad(float(squint_deg))
     az = np.deg2rad(np.asarray(azimuths_deg, dtype=float))
@@ -75,7 +71,7 @@ def mars_rate_M(rate: float = MARS.rotation_rate) -> np.ndarray:
 
 
 def slant_range_model(
-    p_M: np.ndarray, q_M_G: np.ndarray, s_G: np.ndarray, r_ground: float = R_GROUND, *, exact: bool = True
+    p_M: np.ndarray, q_M_G: np.ndarray, s_G: np.ndarray, r_ground: float, *, exact: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """Predicted slant range along beam ``s_G`` and its error-state Jacobian (AMELIA B.3/B.4).
 
@@ -118,22 +114,26 @@ def slant_range_model(
     return y, H
 
 
-def slant_range_sphere(p_M: np.ndarray, q_M_G: np.ndarray, s_G: np.ndarray, r_ground: float = R_GROUND) -> np.ndarray:
-    """Exact range [m] from ``p_M`` along beam ``s_G`` (G) to the sphere of radius ``r_ground``.
+def slant_range_sphere(p_M: np.ndarray, q_M_G: np.ndarray, s_G: np.ndarray, r_ground: float) -> np.ndarray:
+    """Exact range [m] from ``p_M`` along beam ``s_G`` (G) to the sphere of radius ``r_ground`` [m].
 
-    Nearest root of ``|p + ρ b|² = r_ground²`` with ``b = C_M_G s``: ``ρ = −p·b − √((p·b)² − |p|² + R²)``;
-    ``+inf`` where the ray misses the sphere (or points away).  Shapes as in
-    :func:`slant_range_model`; returns (...,).  Used to synthesise measurements (truth side) —
-    the flat-plane model B.3 is shorter by ≈ (ρ sin α)²/(2 R cos α) for a beam at α off the
+    Nearest root of ``|p + ρ d|² = r_ground²`` with ``d = C_M_G s``:
+    ``ρ = −p·d − √((p·d)² − |p|² + r_ground²)``; **NaN** where the ray misses the sphere or
+    points away from it (no ground echo).  ``p_M`` (..., 3) [m] in M, ``q_M_G`` (..., 4), ``s_G``
+    (..., 3) unit beam(s), broadcasting: one beam for many states, or e.g. p (n, 1, 3),
+    q (n, 1, 4) and four beams (4, 3) for (n, 4) ranges.  Returns the broadcast shape without the
+    last axis.  Used to synthesise measurements (truth side) — the flat-plane model B.3
+    (:func:`slant_range_model`) is shorter by ≈ (ρ sin α)²/(2 R cos α) for a beam at α off the
     local vertical (0.7 m at ρ = 6.4 km, α = 20°; 5 m at 7.8 km, 40°).
     """
     p = np.asarray(p_M, dtype=float)
-    b = np.einsum("...ij,...j->...i", quat_to_dcm(q_M_G), np.asarray(s_G, dtype=float))
-    pb = np.sum(p * b, axis=-1)
-    disc = pb**2 - np.sum(p * p, axis=-1) + float(r_ground) ** 2
+    d = quat_rotate(np.asarray(q_M_G, dtype=float), np.asarray(s_G, dtype=float))
+    b = np.sum(p * d, axis=-1)
+    c = np.sum(p * p, axis=-1) - float(r_ground) ** 2
+    disc = b * b - c
     with np.errstate(invalid="ignore"):
-        rho = -pb - np.sqrt(disc)
-    return np.where((disc >= 0.0) & (rho > 0.0), rho, np.inf)
+        rho = -b - np.sqrt(disc)
+    return np.where((disc >= 0.0) & (rho > 0.0), rho, np.nan)
 
 
 def velocity_out_model(

@@ -1,6 +1,6 @@
 """Default Viewer layouts (``rerun.blueprint``) embedded in workbench recordings.
 
-:func:`standard_blueprint` builds the layout every pipeline starts from (DESIGN.md: a 3D view,
+:func:`standard_blueprint` builds the layout every pipeline starts from (docs/RECORDING.md: a 3D view,
 the key time series, residuals, the report): the 3D scene on the left (60 %), and on the right a
 tab strip of time-series views, a tab strip of residual views (if any), the markdown report and
 the event log. Pipelines pass their own lists of ``(tab name, entity origin)``; the builder knows

@@ -3,8 +3,9 @@
 One row per Monte Carlo member on the ``sample`` timeline (sequence = the member's seed):
 ``/plots/mc/max_stroke_error`` with its reported ``plus_3sigma`` / ``minus_3sigma``,
 ``/plots/mc/nees_stroke`` (1 dof) and ``/plots/mc/nees_pose_at_max`` (6 dof) as markers, the
-restitution error, and the consistency summary as the ``/report`` scorecard. A reviewer scrubs
-through the members and sees at a glance which ones leave their 3σ band.
+restitution error, and the consistency summary as the ``/report`` scorecard (paths: the ``MC_*``
+names of :mod:`workbench.recording.layout`). A reviewer scrubs through the members and sees at a
+glance which ones leave their 3σ band.
 """
 
 from __future__ import annotations
@@ -64,9 +65,9 @@ def record_monte_carlo(path: str | Path, name: str, res, summary: dict) -> Path:
     bp = rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.TimeSeriesView(name="max-stroke error ±3σ [m]", origin="/plots/mc/stroke"),
-                rrb.TimeSeriesView(name="NEES", origin="/plots/mc/nees"),
-                rrb.TimeSeriesView(name="restitution error", origin="/plots/mc/restitution"),
+                rrb.TimeSeriesView(name="max-stroke error ±3σ [m]", origin=layout.MC_STROKE),
+                rrb.TimeSeriesView(name="NEES", origin=layout.MC_NEES),
+                rrb.TimeSeriesView(name="restitution error", origin=layout.MC_RESTITUTION),
             ),
             rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
             column_shares=[3, 2],
@@ -77,12 +78,12 @@ def record_monte_carlo(path: str | Path, name: str, res, summary: dict) -> Path:
         st = rec.stream
         three = 3.0 * np.asarray(res.sigma, float)
         for ent, vals, label, color in (
-            ("/plots/mc/stroke/error", res.error, "estimate − truth", (31, 119, 180)),
-            ("/plots/mc/stroke/plus_3sigma", three, "+3σ (reported)", (150, 150, 150)),
-            ("/plots/mc/stroke/minus_3sigma", -three, "−3σ (reported)", (150, 150, 150)),
-            ("/plots/mc/nees/stroke", res.nees_stroke, "max-stroke NEES (1 dof)", (214, 39, 40)),
-            ("/plots/mc/nees/pose_at_max", res.nees_pose_at_max, "pose NEES at max stroke (6 dof)", (44, 160, 44)),
-            ("/plots/mc/restitution/error", res.restitution_error, "restitution error", (148, 103, 189)),
+            (layout.MC_STROKE_ERROR, res.error, "estimate − truth", (31, 119, 180)),
+            (layout.MC_STROKE_PLUS_3SIGMA, three, "+3σ (reported)", (150, 150, 150)),
+            (layout.MC_STROKE_MINUS_3SIGMA, -three, "−3σ (reported)", (150, 150, 150)),
+            (layout.MC_NEES_STROKE, res.nees_stroke, "max-stroke NEES (1 dof)", (214, 39, 40)),
+            (layout.MC_NEES_POSE_AT_MAX, res.nees_pose_at_max, "pose NEES at max stroke (6 dof)", (44, 160, 44)),
+            (layout.MC_RESTITUTION_ERROR, res.restitution_error, "restitution error", (148, 103, 189)),
         ):
             _send(st, ent, seeds, vals)
             st.log(

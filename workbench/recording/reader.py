@@ -2,7 +2,8 @@
 
 The file is read once with ``rr.chunk.RrdReader(path).stream()``; each chunk becomes an Arrow
 record batch (``chunk.to_record_batch()``), so no server and no DataFusion are involved
-(``/work/shared/RERUN.md`` §6). Accessors gather one component of one entity across all chunks,
+(Rerun 0.41 Python API reference, ``rerun.chunk.RrdReader``). Accessors gather one component of
+one entity across all chunks,
 drop rows where it is null, and sort the rows by the requested timeline (stable, so rows logged at
 the same time keep file order).
 

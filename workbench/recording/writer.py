@@ -3,22 +3,22 @@
 :func:`open_recording` creates one recording per run, logs into ``<final>.<pid>.partial`` in the
 same directory, and publishes it with an atomic ``os.replace`` only after the RRD footer has been
 written, so an interrupted run never leaves a half-written file at the final path
-(``/work/shared/RERUN.md`` §1). Inside the block Rerun's strict mode is on, so bad input raises
-instead of being dropped with a warning (pitfall P1).
+(Rerun 0.41 Python API reference, ``rerun.RecordingStream.save``). Inside the block Rerun's strict
+mode is on, so bad input raises instead of being dropped with a warning.
 
 :class:`Recorder` is the only logging surface the rest of the workbench sees. It takes numpy
 arrays and **times in float seconds** from the scenario's reference event; they are rounded to
-integer nanoseconds (:func:`to_ns`, pitfall P7) on the ``time`` timeline. An optional integer
+integer nanoseconds (:func:`to_ns`) on the ``time`` timeline. An optional integer
 ``step`` array adds the ``step`` sequence timeline to the same rows. Every time series is sent
 with ``send_columns`` (one call per entity, no Python loop over time); styling that never changes
 (series names/colours, fill modes) is logged once as static data on fields that are never logged
-over time (pitfall P2).
+over time.
 
 Geometry conventions: positions/translations in metres in the entity's parent frame, expressed
 relative to a local origin (Rerun stores float32); quaternions scalar-last ``[x, y, z, w]``,
 Hamilton, ``q_parent_child`` (rotates child-frame vectors into the parent frame), as in
-``scipy.spatial.transform.Rotation`` and DESIGN.md. Colours are RGB or RGBA, integers 0–255 (or
-floats 0–1).
+``scipy.spatial.transform.Rotation``. Colours are RGB or RGBA, integers 0–255 (or floats 0–1).
+Entity paths and timelines come from :mod:`workbench.recording.layout` (docs/RECORDING.md).
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ _LEVELS = frozenset({"INFO", "WARN", "ERROR", "DEBUG", "TRACE", "CRITICAL"})
 def to_ns(t_s: Any) -> np.ndarray:
     """Float seconds (any shape) -> ``timedelta64[ns]`` array, **rounded** to the nearest nanosecond.
 
-    ``rr.TimeColumn(duration=float_array)`` truncates ``t*1e9`` (pitfall P7), so 2.05 s would land
+    ``rr.TimeColumn(duration=float_array)`` truncates ``t*1e9``, so 2.05 s would land
     at 2049999999 ns; rounding keeps a 10 ms grid exactly on ``k * 10_000_000`` ns.
     """
     t = np.asarray(t_s, dtype=np.float64)
@@ -283,7 +283,7 @@ class Recorder:
 
         translation (n, 3) [m], quaternion_xyzw (n, 4) ``q_parent_entity``; both go in one
         ``Transform3D`` call because the archetype is atomic (a row with only a translation
-        resets the rotation, pitfall P5). Children (meshes) follow the pose.
+        resets the rotation). Children (meshes) follow the pose.
         """
         idx, n = self._index(t, step)
         p = np.asarray(translation, dtype=np.float64)

@@ -1,6 +1,6 @@
 """The drop-test run end to end through the CLI path, read back from the ``.rrd``.
 
-What the recording must hold (DESIGN.md "Recording layout") and that the numbers in it are the
+What the recording must hold (docs/RECORDING.md) and that the numbers in it are the
 numbers of the reconstruction: the pose per filter step, the stroke series and its bounds, the
 3σ ellipsoids, the events and the scorecard; the summary JSON's truth scoring for the three
 synthetic scenarios; the ``inspect`` and ``run`` commands; and that user telemetry goes through
@@ -16,8 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from workbench.cli import _assets_dir, main, run_scenario
+from workbench.cli import main
+from workbench.io.assets import assets_dir
 from workbench.problems.droptest import model as rl
+from workbench.problems.runner import run_scenario
 from workbench.recording import layout
 from workbench.recording.reader import read_recording, verify
 
@@ -209,10 +211,10 @@ def test_user_telemetry_same_code_path(droptest_run, tmp_path):
     tel.mkdir(parents=True)
     for f in ("imu.csv", "3dm.csv", "events.csv", "setup.toml"):
         shutil.copy(droptest_run.telemetry_dir / f, tel / f)
-    text = (_assets_dir() / "scenarios" / "droptest.toml").read_text(encoding="utf-8")
+    text = (assets_dir() / "scenarios" / "droptest.toml").read_text(encoding="utf-8")
     assert text.count("[synthetic]") == 1
     text = text.split("[synthetic]")[0]  # [synthetic] is the last table of droptest.toml
-    lander = (_assets_dir() / "landers" / "mer_drop_lander.toml").resolve()
+    lander = (assets_dir() / "landers" / "mer_drop_lander.toml").resolve()
     text = text.replace('lander = "../landers/mer_drop_lander.toml"', f'lander = "{lander.as_posix()}"')
     text = text.replace('name = "droptest"', 'name = "mydrop"')
     text += (
@@ -225,7 +227,7 @@ def test_user_telemetry_same_code_path(droptest_run, tmp_path):
     toml = tmp_path / "mydrop" / "mydrop.toml"
     toml.write_text(text, encoding="utf-8")
     out = tmp_path / "out"
-    s = run_scenario(str(toml), out, quiet=True)
+    s = run_scenario(str(toml), out).summary
     assert s["scenario"] == "mydrop"
     assert "truth" not in s
     assert not (out / "mydrop").exists()  # no synthetic telemetry written for a user scenario

@@ -20,6 +20,7 @@ from workbench.io.telemetry import TelemetryError, read_telemetry, write_telemet
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
 from workbench.problems.droptest.synthetic import lander_for
+from workbench.problems.droptest.telemetry import DropTelemetry, load_drop_telemetry
 
 Rows = list[list[str]]
 
@@ -41,9 +42,9 @@ def _edit_csv(path: Path, fn: Callable[[list[str], Rows], tuple[list[str], Rows]
     path.write_text("\n".join([*lines[:h], ",".join(header), *(",".join(r) for r in rows)]) + "\n")
 
 
-def _load(run, paths: dict[str, Path]) -> dt.DropTelemetry:
+def _load(run, paths: dict[str, Path]) -> DropTelemetry:
     sc = run.scenario
-    return dt.load_drop_telemetry(sc, paths, lander_for(sc))
+    return load_drop_telemetry(sc, paths, lander_for(sc))
 
 
 def _run(run, paths: dict[str, Path]) -> dt.DropResult:

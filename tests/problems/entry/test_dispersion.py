@@ -159,11 +159,11 @@ def test_none_accepted_and_bad_inputs(case):
 
 def test_sigma_forms():
     ref = ds.DispersionSigmas(velocity_m_s=5.0, attitude_rad=0.01, position_m=100.0).vector()
-    np.testing.assert_array_equal(ds._sigma_vector({"velocity": 5.0, "attitude": 0.01, "position": 100.0}), ref)
-    np.testing.assert_array_equal(ds._sigma_vector([5.0, 0.01, 100.0]), ref)
-    np.testing.assert_array_equal(ds._sigma_vector(None), ds.DispersionSigmas().vector())
+    np.testing.assert_array_equal(ds.sigma_vector({"velocity": 5.0, "attitude": 0.01, "position": 100.0}), ref)
+    np.testing.assert_array_equal(ds.sigma_vector([5.0, 0.01, 100.0]), ref)
+    np.testing.assert_array_equal(ds.sigma_vector(None), ds.DispersionSigmas().vector())
     with pytest.raises(ValueError, match="unknown"):
-        ds._sigma_vector({"speed": 1.0})
+        ds.sigma_vector({"speed": 1.0})
 
 
 def test_refinement_rounds_are_deterministic_and_weighted(case):

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pytest
 
+from workbench.core.bodies import MARS
+from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import (
     attitude_error,
     dcm_to_quat,
@@ -23,9 +25,8 @@ from workbench.core.rotation import (
     quat_to_dcm,
 )
 from workbench.estimation.consistency import anees_bounds, is_symmetric_pd, nees
-from workbench.estimation.strapdown import gravity_M, integrate
+from workbench.estimation.strapdown import integrate
 from workbench.models.radar import (
-    R_GROUND,
     beam_directions_G,
     mars_rate_M,
     slant_range_model,
@@ -40,6 +41,7 @@ from workbench.problems.entry.filter import (
     radar_update,
     run_entry_smoother,
 )
+from workbench.problems.entry.site import R_GROUND
 
 OM = mars_rate_M()
 EX, EY, EZ = np.eye(3)
@@ -91,7 +93,7 @@ def truth(t, h0=8000.0):
     Cx, Cy = quat_to_dcm(qx), quat_to_dcm(qy)
     w1 = np.einsum("nji,j->ni", Cx, EZ) * dpsi[:, None] + dphi[:, None] * EX
     w = np.einsum("nji,nj->ni", Cy, w1) + dth[:, None] * EY
-    f = -np.einsum("nji,nj->ni", quat_to_dcm(q), gravity_M(p))  # a = 0  ->  f = −g, in G
+    f = -np.einsum("nji,nj->ni", quat_to_dcm(q), gravity_j2(p, MARS))  # a = 0  ->  f = −g, in G
     return dict(t=t, v=np.broadcast_to(v, p.shape).copy(), p=p, q=q, w_G=w, f_G=f)
 
 
@@ -110,12 +112,12 @@ def scenario(rng, t_end=60.0, dt=0.1, rda_offset=0.013, noise=True):
     B = beam_directions_G()
     t_sr = np.array([15.037, 25.037, 35.037, 45.037])
     ts = truth(t_sr)
-    sr = np.stack([slant_range_sphere(ts["p"], ts["q"], B[j]) for j in range(4)], -1)
+    sr = np.stack([slant_range_sphere(ts["p"], ts["q"], B[j], R_GROUND) for j in range(4)], -1)
     sr = sr + (SIG.slant_range * rng.standard_normal(sr.shape) if noise else 0.0)
     sr[0] = 0.0  # the first packet zero-filled (AMELIA Sect. 7)
     t_rda = 20.0 + rda_offset + 0.1 * np.arange(int((t_end - 20.5) / 0.1))
     trr = truth(t_rda)
-    so = slant_range_sphere(trr["p"], trr["q"], B[0])
+    so = slant_range_sphere(trr["p"], trr["q"], B[0], R_GROUND)
     vo = np.einsum("nji,nj->ni", quat_to_dcm(trr["q"]), trr["v"] - np.cross(OM, trr["p"]))
     if noise:
         so = so + SIG.slant_out * rng.standard_normal(so.shape)
@@ -228,7 +230,7 @@ def test_constrained_update_directions():
     for _ in range(5):
         v, q, p, P = _random_state(rng)
         u = p / np.linalg.norm(p)
-        y, H = slant_range_model(np.broadcast_to(p, (4, 3)), np.broadcast_to(q, (4, 4)), B)
+        y, H = slant_range_model(np.broadcast_to(p, (4, 3)), np.broadcast_to(q, (4, 4)), B, R_GROUND)
         res = rng.normal(scale=200.0, size=4)
         R = 30.0**2 * np.eye(4)
         v1, q1, p1, P1, K, ok = radar_update(v, q, p, P, res, H[:, 0, :], R, "range", constrained=True)
@@ -377,7 +379,7 @@ def test_iterated_update_gauss_newton():
     v, q_t, p, _ = _random_state(rng)
     q = quat_boxplus(q_t, np.deg2rad([5.0, -5.0, 0.0]))  # ~7° tilt error
     B = beam_directions_G()
-    z = np.array([float(slant_range_model(p, q_t, B[b])[0]) for b in range(4)])
+    z = np.array([float(slant_range_model(p, q_t, B[b], R_GROUND)[0]) for b in range(4)])
     radar = RadarData(np.array([0.0]), z[None, :], np.ones(1, bool), np.zeros(0), np.zeros(0), np.zeros((0, 3)),
                       np.zeros(0, bool))  # fmt: skip
     sg = EntryFilterSigmas(slant_range=5.0)

@@ -16,11 +16,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from workbench.core.bodies import MARS
+from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import dcm_to_quat, quat_boxplus, quat_from_rotvec, quat_multiply, quat_to_dcm
-from workbench.estimation.strapdown import gravity_M
-from workbench.models.radar import R_GROUND, mars_rate_M
+from workbench.models.radar import mars_rate_M
 from workbench.problems.entry.filter import EntryFilterSigmas
-from workbench.problems.entry.montecarlo import ERROR_NAMES, ValidationResult, _noise_scale, validate_smoother
+from workbench.problems.entry.montecarlo import ValidationResult, noise_scale, validate_smoother
+from workbench.problems.entry.scoring import ERROR_NAMES
+from workbench.problems.entry.site import R_GROUND
 
 OM = mars_rate_M()
 EX, EY, EZ = np.eye(3)
@@ -65,7 +68,7 @@ def _truth(t: np.ndarray) -> dict:
     Cx, Cy = quat_to_dcm(qx), quat_to_dcm(qy)
     w = np.einsum("nji,nj->ni", Cy, np.einsum("nji,j->ni", Cx, EZ) * dpsi[:, None] + dphi[:, None] * EX)
     w = w + dth[:, None] * EY
-    f = -np.einsum("nji,nj->ni", quat_to_dcm(q), gravity_M(p))
+    f = -np.einsum("nji,nj->ni", quat_to_dcm(q), gravity_j2(p, MARS))
     return dict(v=np.broadcast_to(v, p.shape).copy(), p=p, q=q, w_G=w, f_G=f)
 
 
@@ -126,12 +129,13 @@ def _same(a: ValidationResult, b: ValidationResult) -> None:
 
 def test_noise_scale_matches_filter_psd():
     t = np.r_[0.0, 0.1, 0.2, 0.21, 0.22, 0.3, 0.4, 2.0, 2.1, 2.2]  # a gap 0.4 -> 2.0
-    s, sample_dt = _noise_scale(t, {6: None})
+    s, sample_dt = noise_scale(t, {6: None})
     assert sample_dt == pytest.approx(0.1)
     assert s[0] == pytest.approx(1.0) and s[-1] == pytest.approx(1.0) and s[7] == pytest.approx(1.0)
     assert s[3] == pytest.approx(np.sqrt(10.0))  # the 100 Hz samples: PSD σ² · sample_dt as the filter assumes
 
 
+@pytest.mark.slow
 def test_validation_consistent_and_shaped(result, fixture):
     res = result
     imu = fixture[0]
@@ -159,16 +163,19 @@ def test_validation_consistent_and_shaped(result, fixture):
         assert np.isfinite(s["nis_mean"][ch]["value"])
 
 
+@pytest.mark.slow
 def test_deterministic_per_seed(result, fixture):
     _same(result, _run(fixture))
     other = validate_smoother(*fixture, n_runs=6, seed=6, sigmas=SIG)
     assert not np.array_equal(other.nees, result.nees)
 
 
+@pytest.mark.slow
 def test_process_pool_identical(result, fixture):
     _same(result, _run(fixture, workers=2))
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(importlib.util.find_spec("distributed") is None, reason="dask.distributed not installed")
 def test_dask_local_identical(result, fixture):
     _same(result, _run(fixture, scheduler="local"))
@@ -186,6 +193,7 @@ def test_result_fields_documented():
     assert set(ValidationResult.DETERMINISTIC) <= names
 
 
+@pytest.mark.slow
 def test_recording_roundtrip(result, tmp_path):
     from workbench.problems.entry.recording_mc import record_entry_validation
     from workbench.recording.reader import read_recording
@@ -201,6 +209,7 @@ def test_recording_roundtrip(result, tmp_path):
     assert "ANEES (9 dof)" in data.text_document("/report")
 
 
+@pytest.mark.slow
 def test_gaussian_truths_about_a_given_start(fixture):
     """``start`` + ``truth_initial="gaussian"``: truths from the smoother's own initial distribution."""
     imu, nominal, disp, times = fixture

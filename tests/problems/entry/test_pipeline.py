@@ -16,9 +16,13 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from workbench.cli import _assets_dir, _run_entry, main, run_scenario
+from workbench.cli import main
+from workbench.io.assets import assets_dir
 from workbench.io.scenario import Scenario, ScenarioError, load_scenario
+from workbench.problems.base import RunOptions
 from workbench.problems.entry import pipeline as en
+from workbench.problems.entry.telemetry import STREAMS, read_nominal_state
+from workbench.problems.runner import run_scenario
 from workbench.recording import layout
 from workbench.recording.reader import read_recording, verify
 
@@ -28,7 +32,7 @@ MEMBERS = 2000
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("entry")
-    summary = run_scenario("schiaparelli", out, quiet=True, members=MEMBERS)
+    summary = run_scenario("schiaparelli", out, RunOptions(members=MEMBERS)).summary
     return out, summary
 
 
@@ -170,19 +174,20 @@ def test_strapdown_validated_against_onboard_solution(run):
     assert s["saturated_samples"] > 0
 
 
+@pytest.mark.slow
 def test_user_telemetry_takes_the_same_path(run, tmp_path):
     out, s = run
     tel = tmp_path / "flight"
     shutil.copytree(out / "schiaparelli" / "telemetry", tel)
     (tel / "truth.npz").unlink()  # a user has no truth
-    base = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    base = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     data = {k: v for k, v in base.data.items() if k not in ("synthetic", "truth")}
     data["scenario"] = dict(data["scenario"], name="my_entry")
     data["vehicle"] = {"file": str(base.path_of("vehicle.file"))}
-    data["telemetry"] = {k: str(tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}") for k in en.TELEMETRY_FILES}
+    data["telemetry"] = {k: str(tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}") for k in STREAMS}
     user_sc = Scenario(tmp_path / "my_entry.toml", "my_entry", "entry", "user data", data)
     assert not user_sc.is_synthetic
-    user = _run_entry(user_sc, tmp_path / "rec", None, False, True, None, MEMBERS)
+    user = run_scenario(user_sc, tmp_path / "rec", RunOptions(members=MEMBERS)).summary
     assert "truth" not in user
     assert user["dispersion"]["accepted"] == s["dispersion"]["accepted"]
     assert user["end"]["h_agl_m"] == pytest.approx(s["end"]["h_agl_m"], abs=1e-6)
@@ -197,7 +202,7 @@ def test_bad_nominal_state_is_a_located_input_error(tmp_path, run):
 
     bad.write_text(re.sub(r"quaternion_jpl = \[[^\]]*\]", "quaternion_jpl = [0.9, 0.1, 0.0, 0.1]", text))
     with pytest.raises(ScenarioError, match="quaternion_jpl"):
-        en.read_nominal_state(bad)
+        read_nominal_state(bad)
 
 
 def test_cli_exit_code_for_unknown_scenario():
@@ -226,7 +231,7 @@ def test_filled_blackout_density_within_20_percent(run):
     ],
 )
 def test_bad_entry_configuration_is_a_located_error(key, value, match):
-    base = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    base = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     with pytest.raises(ScenarioError, match=match):
         en.check_config(base.with_overrides({key: value}))
 
@@ -237,8 +242,8 @@ def test_initial_state_at_the_wrong_time_is_rejected(run, tmp_path):
     shutil.copytree(out / "schiaparelli" / "telemetry", tel)
     f = tel / "initial_state.toml"
     f.write_text(f.read_text().replace("t0_s = -15.000000", "t0_s = 5.0"))
-    paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in en.TELEMETRY_FILES}
-    sc = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     with pytest.raises(ScenarioError, match="t0_s"):
         for _ in en.reconstruct(sc, paths, members=200):
             pass
@@ -250,8 +255,8 @@ def test_missing_pdd_event_is_a_located_error(run, tmp_path):
     shutil.copytree(out / "schiaparelli" / "telemetry", tel)
     ev = tel / "events.csv"
     ev.write_text("\n".join(line for line in ev.read_text().splitlines() if not line.endswith(",PDD")) + "\n")
-    paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in en.TELEMETRY_FILES}
-    sc = load_scenario(_assets_dir() / "scenarios" / "schiaparelli.toml")
+    paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     with pytest.raises(ScenarioError, match="PDD"):
         for _ in en.reconstruct(sc, paths, members=200):
             pass

@@ -15,10 +15,8 @@ from workbench.problems.entry.sensors import (
     EntryImuModel,
     NominalErrorModel,
     apply_imu_errors,
-    beam_directions_G,
     nominal_state,
     quat_cumprod,
-    slant_ranges_sphere,
     strapdown_onboard,
     terrain_relative_velocity_G,
 )
@@ -73,23 +71,6 @@ def test_nominal_state_error_convention():
     v, q, p, dx0 = nominal_state(v0, q0, p0, NominalErrorModel(dx0=dx), np.random.default_rng(0))
     assert np.allclose(v + dx0[:3], v0) and np.allclose(p + dx0[6:], p0)
     assert np.allclose(attitude_error(q, q0), dx0[3:6], atol=1e-12)
-
-
-def test_slant_ranges_exact_sphere_geometry():
-    h = 5000.0
-    p = np.array([[0.0, 0.0, R_GROUND + h]])
-    q = np.array([[0.0, 0.0, 0.0, 1.0]])  # Z_G up: B0 = −Z_G looks at the centre
-    beams = beam_directions_G()
-    assert np.allclose(beams[0], [0, 0, -1]) and np.allclose(np.degrees(np.arccos(-beams[1:, 2])), 20.0)
-    rho = slant_ranges_sphere(p, q, beams, R_GROUND)[0]
-    assert math.isclose(rho[0], h, rel_tol=1e-12)
-    # squinted beams: law of cosines on the triangle centre–vehicle–ground point
-    r0 = R_GROUND + h
-    c = math.cos(math.radians(20.0))
-    expect = r0 * c - math.sqrt(R_GROUND**2 - r0**2 * (1 - c * c))
-    assert np.allclose(rho[1:], expect, rtol=1e-12)
-    up = quat_normalize(np.array([[1.0, 0.0, 0.0, 0.0]]))  # 180° about X: B0 looks up -> no echo
-    assert np.isnan(slant_ranges_sphere(p, up, beams[:1], R_GROUND)[0, 0])
 
 
 def test_terrain_relative_velocity_zero_for_a_point_fixed_to_mars():

@@ -22,19 +22,21 @@ import pytest
 
 from workbench.core.bodies import MARS
 from workbench.core.gravity import gravity_j2
+from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import attitude_error, dcm_to_quat, quat_normalize, quat_rotate, quat_to_dcm
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.problems.entry import synthetic as es
-from workbench.problems.entry.preprocess import PreprocessConfig, preprocess, read_entry_telemetry
+from workbench.problems.entry.config import config_for
+from workbench.problems.entry.preprocess import PreprocessConfig, preprocess
 from workbench.problems.entry.sensors import (
     EntryImuModel,
     EntryTelemetrySpec,
     NominalErrorModel,
     generate_entry_tm,
-    interp_rows,
     strapdown_onboard,
 )
+from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state, telemetry_paths
 
 PDD, FSR, BSR = 20.0, 30.0, 72.0
 GAPS = ((3.0, 1.4), (5.0, 1.8), (7.4, 3.3), (11.2, 7.2))
@@ -167,22 +169,21 @@ def test_round_trip_within_file_precision(synth, tel, truth, spec):
     assert 0.2 < np.degrees(np.linalg.norm(dx0[3:6])) < 3 and 100 < np.linalg.norm(dx0[6:]) < 10e3
     assert np.allclose(tel.q_M_G_nav[0], T["nominal_q0"], atol=5e-9)
     # the nominal initial state file the reconstruction starts from (AMELIA Table 2 style)
-    from workbench.problems.entry.pipeline import read_nominal_state
-
     nom = read_nominal_state(paths["initial_state"])
     assert nom.t0 == -15.0 and np.allclose(nom.p_M, T["nominal_p0"], atol=1e-3)
     assert np.allclose(nom.v_M, T["nominal_v0"], atol=1e-5) and np.allclose(nom.q_M_G, T["nominal_q0"], atol=1e-8)
 
 
 def test_radar_truth_geometry_within_noise(tel, truth, spec):
-    from workbench.problems.entry.sensors import beam_directions_G, slant_ranges_sphere
+    from workbench.models.radar import beam_directions_G, slant_range_sphere
 
-    q = quat_normalize(interp_rows(truth.t, truth.q_M_G, tel.t_sr))
-    exact = slant_ranges_sphere(interp_rows(truth.t, truth.p_M, tel.t_sr), q, beam_directions_G(), spec.r_ground)
+    q = quat_normalize(interp_rows(tel.t_sr, truth.t, truth.q_M_G))
+    p = interp_rows(tel.t_sr, truth.t, truth.p_M)
+    exact = slant_range_sphere(p[:, None], q[:, None], beam_directions_G(), spec.r_ground)
     sig = np.hypot(spec.range_sigma, spec.range_sigma_frac * exact)
     z = (tel.slant_ranges - exact)[tel.sr_valid] / sig[tel.sr_valid]
     assert np.all(np.abs(z) < 5)
-    h_agl = np.linalg.norm(interp_rows(truth.t, truth.p_M, tel.t_rda), axis=1) - spec.r_ground
+    h_agl = np.linalg.norm(interp_rows(tel.t_rda, truth.t, truth.p_M), axis=1) - spec.r_ground
     assert np.all(tel.slant_out >= 0.97 * h_agl)  # B0 slant range ≥ altitude (flat-ish ground below)
 
 
@@ -194,7 +195,7 @@ def test_synthesize_entry_from_a_scenario(tmp_path, monkeypatch, truth):
         "[synthetic.nominal_error]\ndx0 = [0, 0, 0, 0, 0, 0, 0, 0, 0]\n"
         "[sensors.imu]\ngyro_noise_dps = 0.02\n[sensors.radar]\nrange_sigma_m = 3.0\nzero_filled_packets = 1\n"
         '[telemetry]\ngnc = "tm/gnc.csv"\ngnc_nav = "tm/gnc_nav.csv"\nrda_slant_range = "tm/rda_slant_range.csv"\n'
-        'rda_out = "tm/rda_out.csv"\nevents = "tm/events.csv"\n'
+        'rda_out = "tm/rda_out.csv"\nevents = "tm/events.csv"\ninitial_state = "tm/initial_state.toml"\n'
     )
     scenario = load_scenario(sc)
     monkeypatch.setattr(es, "truth_for", lambda s: truth)
@@ -202,10 +203,12 @@ def test_synthesize_entry_from_a_scenario(tmp_path, monkeypatch, truth):
     assert set(paths) == {*es.TELEMETRY_FILES, "truth", "initial_state"}
     T = es.load_truth(paths["truth"])
     assert T["seed"] == 3 and np.all(T["nominal_dx0"] == 0)
-    t2 = read_entry_telemetry(scenario)
+    checks = config_for(scenario).checks
+    assert checks.zero_filled_packets == 1
+    t2 = read_entry_telemetry(telemetry_paths(scenario), checks)
     assert t2.sr_valid.tolist() == [False, True, True, True]
     assert [p.split(":")[0] for p in t2.problems] == ["INFO"]  # one zero-filled packet expected, as configured
-    t3 = read_entry_telemetry(paths, scenario)  # the pipeline's call: files + the scenario's settings
+    t3 = read_entry_telemetry(paths, checks)  # the synthesizer's paths, the scenario's settings
     assert t3.problems == t2.problems and np.array_equal(t3.a_M_total, t2.a_M_total)
     assert np.allclose(t2.q_M_G_nav[0], truth.q_M_G[0], atol=5e-9)
 
@@ -216,13 +219,13 @@ def test_synthesize_entry_from_a_scenario(tmp_path, monkeypatch, truth):
 def test_preprocessing_recovers_true_specific_force_despite_wrong_attitude(imu, synth):
     _, T = synth
     orig = ~imu.resampled
-    f_true = interp_rows(T["t"], T["f_G"], imu.t)
+    f_true = interp_rows(imu.t, T["t"], T["f_G"])
     err = (imu.f_G - f_true)[orig]
     rms = np.sqrt(np.mean(err**2, axis=0))
     assert np.all(rms < 1.3e-3) and np.abs(err).max() < 5.5e-3  # IMU noise 1e-3 m/s² (Table 3)
     assert np.all(imu.sigma_f[orig] == 1e-3) and np.all(imu.sigma_f[~orig] == 1.0)  # interpolated: 1 m/s²
     # ... although the on-board attitude is ~1° off before PDD and tens of degrees after the saturation
-    q_true = quat_normalize(interp_rows(T["t"], T["q_M_G"], imu.t))
+    q_true = quat_normalize(interp_rows(imu.t, T["t"], T["q_M_G"]))
     att = np.degrees(np.linalg.norm(attitude_error(imu.q_M_G_nav, q_true), axis=1))
     assert att[imu.t < PDD].max() < 3 and att[imu.t > PDD + 3].min() > 10
     late = orig & (imu.t > PDD + 3)
@@ -232,7 +235,7 @@ def test_preprocessing_recovers_true_specific_force_despite_wrong_attitude(imu, 
 def test_gravity_removed_at_the_onboard_position(imu, tel, synth):
     _, T = synth
     assert np.allclose(imu.g_M, gravity_j2(imu.p_M_nav, MARS), rtol=0, atol=1e-12)
-    g_ob = gravity_j2(interp_rows(T["onboard_t"], T["onboard_p_M"], imu.t), MARS)
+    g_ob = gravity_j2(interp_rows(imu.t, T["onboard_t"], T["onboard_p_M"]), MARS)
     assert np.abs(imu.g_M - g_ob).max() < 1e-7
     assert np.all(np.abs(np.linalg.norm(imu.g_M, axis=1) - 3.6) < 0.2)
     # a_M = g + C_M_G f on every TM sample (the inverse of the on-board formation)
@@ -247,8 +250,8 @@ def test_onboard_nav_interpolation_error(tel, synth, method, p_tol, v_tol):
     _, T = synth
     imu = preprocess(tel, PreprocessConfig(nav_interpolation=method))
     ent = ~imu.resampled & (imu.t < PDD)
-    dp = np.abs(imu.p_M_nav - interp_rows(T["onboard_t"], T["onboard_p_M"], imu.t))[ent].max()
-    dv = np.abs(imu.v_M_nav - interp_rows(T["onboard_t"], T["onboard_v_M"], imu.t))[ent].max()
+    dp = np.abs(imu.p_M_nav - interp_rows(imu.t, T["onboard_t"], T["onboard_p_M"]))[ent].max()
+    dv = np.abs(imu.v_M_nav - interp_rows(imu.t, T["onboard_t"], T["onboard_v_M"]))[ent].max()
     assert dp < p_tol and dv < v_tol, (dp, dv)
 
 
@@ -299,13 +302,13 @@ def test_saturation_detected_and_rebuilt_closer_to_truth(tel, synth, from_accel,
     (default), or the plain cubic through the unsaturated neighbours."""
     _, T = synth
     imu = preprocess(tel, PreprocessConfig(rebuild_from_accel=from_accel))
-    w_true = interp_rows(T["t"], T["w_G"], tel.t_gnc)
+    w_true = interp_rows(tel.t_gnc, T["t"], T["w_G"])
     expect = tel.t_gnc[np.abs(w_true[:, 0]) > SAT]
     m = imu.saturated & ~imu.resampled
     assert np.allclose(imu.t[m], expect) and expect.size == 3
     clipped = tel.w_G[np.isin(tel.t_gnc, expect), 0]
     assert np.all(clipped == pytest.approx(SAT))
-    wt = interp_rows(T["t"], T["w_G"], imu.t[m])[:, 0]
+    wt = interp_rows(imu.t[m], T["t"], T["w_G"])[:, 0]
     rms_rebuilt = np.sqrt(np.mean((imu.w_G[m, 0] - wt) ** 2))
     rms_clipped = np.sqrt(np.mean((clipped - wt) ** 2))
     assert rms_rebuilt < ratio * rms_clipped, (np.degrees(rms_rebuilt), np.degrees(rms_clipped))
@@ -325,12 +328,12 @@ def test_100hz_resampling_after_pdd(imu, synth):
     assert imu.resampled.sum() == 450 and not imu.resampled[~win].any()
     assert np.all(np.diff(imu.t) > 0)
     r = imu.resampled
-    err = imu.f_G[r] - interp_rows(T["t"], T["f_G"], imu.t[r])
+    err = imu.f_G[r] - interp_rows(imu.t[r], T["t"], T["f_G"])
     assert np.abs(err[:, 0]).max() < 5e-3 and np.abs(err[:, 1]).max() < 0.02  # smooth channels
     assert np.sqrt(np.mean(err[:, 2] ** 2)) < 0.2  # 0.35 s parachute oscillation seen at 10 Hz
     assert np.allclose(np.linalg.norm(imu.q_M_G_nav, axis=1), 1.0)
     # the X rate between samples follows ẇ_x ∝ f_y (exact in this fake); Y has no such partner here
-    w_err = np.degrees(np.sqrt(np.mean((imu.w_G[r] - interp_rows(T["t"], T["w_G"], imu.t[r])) ** 2, axis=0)))
+    w_err = np.degrees(np.sqrt(np.mean((imu.w_G[r] - interp_rows(imu.t[r], T["t"], T["w_G"])) ** 2, axis=0)))
     assert w_err[0] < 0.1 and w_err[1] < 2.0 and any("w_x resampled consistently" in n for n in imu.notes)
     assert np.allclose(imu.sigma_w[r & ~imu.saturated], math.radians(10.0))
 

@@ -19,9 +19,9 @@ from workbench.core.bodies import MARS
 from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import quat_to_dcm
 from workbench.models.aerodynamics import AeroTable, knudsen_bridge, load_vehicle
+from workbench.problems.entry.site import R_GROUND
 from workbench.problems.entry.truth import (
     MARS_MOLAR_MASS,
-    R_GROUND,
     EntryTruthSpec,
     simulate_entry,
     true_atmosphere,

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from workbench.core.bodies import MARS
+from workbench.core.frames import ned_basis
 from workbench.core.rotation import dcm_to_quat, quat_boxplus
 from workbench.problems.entry.atmosphere import EntryProfileSigmas
-from workbench.problems.entry.winds import estimate_winds, ned_basis_M, pendulum_period
+from workbench.problems.entry.winds import estimate_winds, pendulum_period
 
 OMEGA = np.array([0.0, 0.0, MARS.rotation_rate])
 T_PDD, T_FSR = 175.0, 216.0
@@ -42,7 +43,7 @@ def descent(pendulum_deg: float = 0.0, period: float = 1.3, dt: float = 0.05):
     d_N = np.zeros((n, 3))
     wind = np.zeros((n, 2))
     for k in range(n):
-        C_N_M = ned_basis_M(p[None])[0]
+        C_N_M = ned_basis(p[None])[0]
         h = np.linalg.norm(p) - MARS.reference_radius
         v_air = np.array([2.0 * np.sin(0.1 * t[k]), 1.5 * np.cos(0.07 * t[k]), 65.0])
         wind[k] = true_wind(h)
@@ -52,7 +53,7 @@ def descent(pendulum_deg: float = 0.0, period: float = 1.3, dt: float = 0.05):
         p_M[k] = p
         v_M[k] = C_N_M.T @ v_g + np.cross(OMEGA, p)
         p = p + dt * v_M[k]
-    C_M_N = np.transpose(ned_basis_M(p_M), (0, 2, 1))
+    C_M_N = np.transpose(ned_basis(p_M), (0, 2, 1))
     d_M = np.einsum("nij,nj->ni", C_M_N, d_N)
     z = -d_M / np.linalg.norm(d_M, axis=-1, keepdims=True)
     x = np.cross([0.0, 0.0, 1.0], z)

@@ -17,7 +17,7 @@ Each face is stored ``[a, b, c]`` with outward (counter-clockwise seen from outs
 ``c`` is the face's "opposite" vertex: the apex for side faces, the -Y base vertex for the base.
 
 [1] JPL, REDLand (Reconstruction of Entry, Descent and Landing) paper on the MER airbag drop
-    tests at the SPF, 2001 test series (/work/shared/references/redland-mer-airbag-droptest.txt).
+    tests at the SPF, 2001 test series, section "Test article and equipment".
 """
 
 from __future__ import annotations

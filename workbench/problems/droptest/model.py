@@ -60,7 +60,6 @@ import numpy as np
 
 from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normalize, quat_to_dcm, skew
 
-G0 = 9.80665
 N_X = 31  # core state (without accelerometer biases)
 N_E = 30
 SP, SV, SA, SQ, SW, SAL = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 13), slice(13, 16), slice(16, 19)

@@ -5,12 +5,13 @@ of ``work_dir``, runs :func:`workbench.problems.droptest.pipeline.run_droptest`,
 the truth with :func:`workbench.problems.droptest.pipeline.score` plus the consistency numbers below, and
 deletes the subfolder.  The truth trajectory is deterministic per scenario; every random draw of
 a task (sensor noise, bias, scale, 3DM errors, survey error, ranging noise, the posterior sampling
-of the stroke-σ check) comes from its seed alone, so the results do not depend on the executor:
+of the stroke-σ check) comes from its seed alone, so the results do not depend on the executor
+(:func:`workbench.estimation.montecarlo.run_monte_carlo`, one BLAS thread everywhere):
 
 * ``scheduler=None, workers=1`` — a plain loop in this process;
 * ``scheduler=None, workers=2`` — :class:`concurrent.futures.ProcessPoolExecutor` (2 processes);
-* ``scheduler="local"`` — a ``dask.distributed.LocalCluster(n_workers=2, threads_per_worker=1,
-  processes=True)`` started and closed here;
+* ``scheduler="local"`` — a ``dask.distributed.LocalCluster(n_workers=max(workers, 2),
+  threads_per_worker=1, processes=True)`` started and closed here;
 * ``scheduler="tcp://host:port"`` — a ``dask.distributed.Client`` to a running scheduler (its
   workers must have the package installed and see ``work_dir``).
 
@@ -24,7 +25,7 @@ Consistency statistics (Bar-Shalom, Li & Kirubarajan 2001, Sect. 5.4), per run:
 * ``z_at_max`` — normalised errors δ/σ of p, v, θ, ω and the gyro scale factors at the max-stroke
   step (for finding which states are over- or under-confident).
 
-Error convention (the filter's, DESIGN.md): ``truth = estimate ⊞ δ``, ``δp = p_true − p_est``,
+Error convention (the filter's, docs/ARCHITECTURE.md): ``truth = estimate ⊞ δ``, ``δp = p_true − p_est``,
 ``δθ = attitude_error(q_est, q_true)`` (``q_true = q_est ⊗ exp(δθ)``).
 """
 
@@ -35,13 +36,14 @@ import shutil
 import tempfile
 import time
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 
+from workbench.estimation.montecarlo import resolve_scheduler, run_monte_carlo
 from workbench.io.scenario import Scenario
+from workbench.problems.droptest.config import config_for
 
 __all__ = ["McResult", "SeedResult", "run_seed", "monte_carlo", "summarize_mc", "Z_NAMES"]
 
@@ -191,6 +193,13 @@ def _prime_truth(scenario: Scenario) -> None:
     truth_for(scenario)
 
 
+def _seed_task(shared: tuple[Scenario, list[int], Path], k: int, _ss: None) -> SeedResult:
+    """Task k of :func:`~workbench.estimation.montecarlo.run_monte_carlo`: :func:`run_seed` of the k-th seed
+    (the seed is the task's only randomness, so the executor's member seed is not used)."""
+    scenario, seeds, work = shared
+    return run_seed(scenario, seeds[k], work)
+
+
 def monte_carlo(
     scenario: Scenario,
     seeds: Sequence[int],
@@ -203,8 +212,8 @@ def monte_carlo(
 
     ``seeds`` sequence of non-negative ints (one task each); ``work_dir`` folder for the tasks'
     temporary subfolders (created if needed; left empty).  ``scheduler`` None (in-process loop, or
-    a process pool of ``workers`` processes if ``workers > 1``), ``"local"`` (a 2-process dask
-    LocalCluster) or ``"tcp://…"`` (a dask Client to that scheduler).  The result is in the order
+    a process pool of ``workers`` processes if ``workers > 1``), ``"local"`` (a dask LocalCluster
+    of ``workers`` (≥ 2) processes) or ``"tcp://…"`` (a dask Client to that scheduler).  The result is in the order
     of ``seeds`` and does not depend on the executor (only ``wall_time_s``, ``reconstruct_s``,
     ``total_wall_s`` and ``executor`` do).
     """
@@ -215,46 +224,23 @@ def monte_carlo(
         raise ValueError("monte_carlo: repeated seeds")
     work = Path(work_dir)
     work.mkdir(parents=True, exist_ok=True)
+    kind = resolve_scheduler(scheduler, workers)
+    if kind == "processes" and mp.get_context().get_start_method() == "fork":
+        _prime_truth(scenario)  # workers inherit the cached truth instead of each recomputing it
+    # one BLAS thread in every executor (run_monte_carlo): BLAS reductions are only bitwise reproducible
+    # for a fixed thread count, and two busy-waiting pools on two cores made each reconstruction ~10x
+    # slower (measured 2.5 s -> 20-45 s)
     t0 = time.perf_counter()
-    if scheduler is None and workers <= 1:
-        executor = "loop"
-        from threadpoolctl import threadpool_limits
-
-        # the same single BLAS thread as the pool workers: BLAS reductions are only bitwise
-        # reproducible for a fixed thread count, and results must not depend on the executor
-        with threadpool_limits(limits=1):
-            out = [run_seed(scenario, s, work) for s in seeds]
-    elif scheduler is None:
-        executor = f"process pool ({workers} workers)"
-        ctx = mp.get_context()
-        if ctx.get_start_method() == "fork":
-            _prime_truth(scenario)  # workers inherit the cached truth instead of each recomputing it
-        # one BLAS thread per worker: forked workers inherit OpenBLAS's pool, and two busy-waiting
-        # pools on two cores made each reconstruction ~10x slower (measured 2.5 s -> 20-45 s)
-        with ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx, initializer=_one_blas_thread) as pool:
-            futs = [pool.submit(run_seed, scenario, s, work) for s in seeds]
-            out = [f.result() for f in futs]
-    else:
-        try:
-            from distributed import Client, LocalCluster
-        except ImportError as err:
-            raise NotImplementedError(
-                "a dask scheduler needs the optional dask extra: .venv/bin/pip install -e '.[dask]'"
-            ) from err
-
-        if scheduler == "local":
-            executor = "dask LocalCluster (2 workers x 1 thread, processes)"
-            with (
-                LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
-                Client(cluster) as client,
-            ):
-                out = _dask_map(client, scenario, seeds, work)
-        elif scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
-            executor = f"dask scheduler {scheduler}"
-            with Client(scheduler) as client:
-                out = _dask_map(client, scenario, seeds, work)
-        else:
-            raise ValueError(f"scheduler must be None, 'local' or 'tcp://host:port', got {scheduler!r}")
+    run = run_monte_carlo(
+        _seed_task,
+        len(seeds),
+        shared=(scenario, seeds, work),
+        workers=workers,
+        scheduler=scheduler,
+        name="droptest-seed",
+    )
+    out = run.results
+    executor = "loop" if run.kind == "loop" else run.executor
     total = time.perf_counter() - t0
     cols = {}
     for f in fields(SeedResult):
@@ -262,24 +248,11 @@ def monte_carlo(
         cols[f.name] = np.array(vals)
     return McResult(
         scenario=scenario.name,
-        mode=scenario.get("filter.mode", "kinematic", kind="str"),
+        mode=config_for(scenario).mode,
         executor=executor,
         total_wall_s=total,
         **cols,
     )
-
-
-def _one_blas_thread() -> None:
-    """Pool-worker initializer: limit BLAS/OpenMP to one thread in this process."""
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1)
-
-
-def _dask_map(client, scenario: Scenario, seeds: list[int], work: Path) -> list[SeedResult]:
-    sc_f = client.scatter(scenario, broadcast=True)
-    futs = [client.submit(run_seed, sc_f, s, work, pure=False, key=f"droptest-seed-{s}") for s in seeds]
-    return client.gather(futs)
 
 
 def summarize_mc(res: McResult, probability: float = 0.95) -> dict:

@@ -1,9 +1,11 @@
-"""Draw the drop-test reconstruction stages into a Rerun recording (layout of DESIGN.md).
+"""Draw the drop-test reconstruction stages into a Rerun recording (layout in docs/RECORDING.md).
 
-The pipeline (``pipelines.droptest``) yields stages; :class:`DropTestRecorder` draws each one as it
-arrives and, for synthetic scenarios, the truth beside the estimate under ``/world/truth`` and
-``.../truth`` series. All geometry is in the SPF chamber frame (origin at the trigger nail, Z up,
-metres), which is local and float32-safe.
+The pipeline (:mod:`workbench.problems.droptest.pipeline`) yields stages; :class:`DropTestRecorder`
+draws each one as it arrives and, for synthetic scenarios, the truth beside the estimate under
+``/world/truth`` and ``.../truth`` series. Every entity path comes from
+:mod:`workbench.recording.layout`; a stage type the recorder does not know is a ``TypeError``. All
+geometry is in the SPF chamber frame (origin at the trigger nail, Z up, metres), which is local and
+float32-safe.
 
 What a reviewer scrubs through: the ramp and chamber axes; the lander body and airbag lobes moving
 with the smoothed pose (truth pose beside it, translucent green); forward, smoothed and truth CM
@@ -18,16 +20,18 @@ from __future__ import annotations
 import numpy as np
 import rerun.blueprint as rrb
 
+from workbench.core.bodies import G0
 from workbench.core.rotation import euler123_from_quat, quat_conjugate, quat_rotate, quat_to_dcm
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.lander import airbag_mesh
+from workbench.problems.droptest.pipeline import DropResult, DropTelemetry, FilterStage, InitialState, StrokeStage
 from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
+from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
 __all__ = ["DropTestRecorder", "droptest_blueprint", "impact_view"]
 
-G0 = 9.80665
 EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
 TRUTH = (44, 160, 44, 255)
@@ -36,21 +40,21 @@ XYZW = XYZ + [(120, 120, 120, 255)]
 
 
 _PLOTS = [
-    ("stroke (all)", "/plots/stroke"),
-    ("stroke 1σ", "/plots/stroke_sigma"),
-    ("position", "/plots/position"),
-    ("velocity", "/plots/velocity"),
-    ("accel body", "/plots/accel_body"),
-    ("accel SPF", "/plots/accel_spf"),
-    ("rate", "/plots/rate"),
-    ("ang. accel", "/plots/angular_accel"),
-    ("quaternion", "/plots/quaternion"),
-    ("Euler 1-2-3", "/plots/euler123"),
-    ("1σ states", "/plots/sigma"),
-    ("gyro scale", "/plots/gyro_scale"),
-    ("triads", "/plots/triads"),
-    ("NIS", "/plots/nis"),
-    ("process noise", "/plots/process_noise"),
+    ("stroke (all)", layout.DROPTEST_PLOT_STROKE),
+    ("stroke 1σ", layout.DROPTEST_PLOT_STROKE_SIGMA),
+    ("position", layout.DROPTEST_PLOT_POSITION),
+    ("velocity", layout.DROPTEST_PLOT_VELOCITY),
+    ("accel body", layout.DROPTEST_PLOT_ACCEL_BODY),
+    ("accel SPF", layout.DROPTEST_PLOT_ACCEL_SPF),
+    ("rate", layout.DROPTEST_PLOT_RATE),
+    ("ang. accel", layout.DROPTEST_PLOT_ANGULAR_ACCEL),
+    ("quaternion", layout.DROPTEST_PLOT_QUATERNION),
+    ("Euler 1-2-3", layout.DROPTEST_PLOT_EULER123),
+    ("1σ states", layout.DROPTEST_PLOT_SIGMA),
+    ("gyro scale", layout.DROPTEST_PLOT_GYRO_SCALE),
+    ("triads", layout.DROPTEST_PLOT_TRIADS),
+    ("NIS", layout.DROPTEST_PLOT_NIS),
+    ("process noise", layout.DROPTEST_PLOT_PROCESS_NOISE),
 ]
 
 
@@ -83,9 +87,9 @@ def droptest_blueprint(residual_names: list[str], impact: dict | None = None) ->
         rrb.Spatial3DView(name="Chamber", origin=layout.WORLD),
         active_tab=0,
     )
-    plots = [rrb.TimeSeriesView(name="stroke (impact)", origin="/plots/stroke", **stroke_kw)]
+    plots = [rrb.TimeSeriesView(name="stroke (impact)", origin=layout.DROPTEST_PLOT_STROKE, **stroke_kw)]
     plots += [rrb.TimeSeriesView(name=nm, origin=o) for nm, o in _PLOTS]
-    residuals = [rrb.TimeSeriesView(name=nm, origin=f"/residuals/{nm}") for nm in residual_names]
+    residuals = [rrb.TimeSeriesView(name=nm, origin=layout.residual_path(nm)) for nm in residual_names]
     right = rrb.Vertical(
         rrb.Tabs(*plots, active_tab=0),
         rrb.Tabs(*residuals, active_tab=0),
@@ -133,32 +137,39 @@ class DropTestRecorder:
         self.tel = None
         self.fwd = None
         self._smoothed_x = None
+        self.dispatch = StageDispatch(
+            {
+                DropTelemetry: self._on_telemetry,
+                InitialState: self._on_initial_state,
+                FilterStage: self._on_filter,
+                StrokeStage: self._on_stroke,
+            },
+            ignored=(DropResult,),  # the final bundle: everything in it was drawn stage by stage
+        )
 
     # ---------------------------------------------------------------- dispatch
     def handle(self, stage) -> None:
-        """Draw one stage of ``pipelines.droptest.reconstruct``."""
-        name = type(stage).__name__
-        fn = getattr(self, f"_on_{name}", None)
-        if fn is not None:
-            fn(stage)
+        """Draw one stage of ``workbench.problems.droptest.pipeline.reconstruct``; a stage of a type
+        the recorder does not know is a ``TypeError`` (see :class:`~workbench.recording.dispatch.StageDispatch`)."""
+        self.dispatch(stage)
 
     # ---------------------------------------------------------------- stages
-    def _on_DropTelemetry(self, tel) -> None:
+    def _on_telemetry(self, tel) -> None:
         self.tel = tel
         r = self.rec
         r.view_coordinates(layout.WORLD)
-        r.axes("/world/chamber", 1.0)
+        r.axes(layout.DROPTEST_CHAMBER_AXES, 1.0)
         t = tel.imu.time
         for name in tel.triads:
             r.scalars(
-                f"/sensors/{name}",
+                layout.sensor_path(name),
                 t,
                 tel.imu.stack([f"{name}.{a}" for a in "xyz"]) / G0,
                 names=[f"{name}.{a} [g]" for a in "xyz"],
                 colors=XYZ,
             )
         r.scalars(
-            "/sensors/gyro",
+            layout.DROPTEST_SENSOR_GYRO,
             t,
             np.degrees(tel.imu.stack(["gyro.x", "gyro.y", "gyro.z"])),
             names=[f"gyro.{a} [deg/s]" for a in "xyz"],
@@ -168,12 +179,19 @@ class DropTestRecorder:
             for ch in tel.ranging.names:
                 tt, vv = tel.ranging.samples(ch)
                 if tt.size:
-                    r.scatter(f"/sensors/ranging/{ch}", tt, vv, names=ch, colors=[(148, 103, 189, 255)], size=1.5)
+                    r.scatter(
+                        layout.droptest_ranging_sensor_path(ch),
+                        tt,
+                        vv,
+                        names=ch,
+                        colors=[(148, 103, 189, 255)],
+                        size=1.5,
+                    )
         entries = [(t_e, f"{name} (from the events file)", "INFO") for name, t_e in tel.events.items()]
         entries += [(t_d, txt, lvl) for t_d, lvl, txt in tel.degradations]
         r.events(sorted(entries))
 
-    def _on_InitialState(self, init) -> None:
+    def _on_initial_state(self, init) -> None:
         r = self.rec
         s = np.degrees(np.sqrt(np.diag(init.P_theta)))
         r.events(
@@ -186,7 +204,7 @@ class DropTestRecorder:
             ]
         )
 
-    def _on_FilterStage(self, st) -> None:
+    def _on_filter(self, st) -> None:
         if st.name == "forward":
             self.fwd = st
             self._forward(st)
@@ -207,10 +225,10 @@ class DropTestRecorder:
             sig = np.sqrt(np.einsum("nii->ni", ih.S))
             labels = ("x", "y", "z") if y.shape[1] == 3 else ("value",)
             for i, lab in enumerate(labels):
-                root = f"/residuals/{name}/{lab}" if y.shape[1] > 1 else f"/residuals/{name}"
-                # innovation with its ±3√S bounds about zero (DESIGN: value, plus_3sigma, minus_3sigma)
+                root = layout.residual_path(name, lab) if y.shape[1] > 1 else layout.residual_path(name)
+                # innovation with its ±3√S bounds about zero (children value, plus_3sigma, minus_3sigma)
                 r.scalars(
-                    f"{root}/value",
+                    layout.join(root, layout.VALUE),
                     t[m],
                     y[:, i],
                     step=step[m],
@@ -218,9 +236,9 @@ class DropTestRecorder:
                     colors=[XYZ[i % 3]],
                     widths=1.0,
                 )
-                for sign, bname in ((1.0, "plus_3sigma"), (-1.0, "minus_3sigma")):
+                for sign, bname in zip((1.0, -1.0), layout.bound_names(3.0), strict=True):
                     r.scalars(
-                        f"{root}/{bname}",
+                        layout.join(root, bname),
                         t[m],
                         sign * 3.0 * sig[:, i],
                         step=step[m],
@@ -228,14 +246,14 @@ class DropTestRecorder:
                         colors=[(150, 150, 150, 255)],
                         widths=0.8,
                     )
-            r.scalars(f"/plots/nis/{name}", t[m], ih.nis, step=step[m], names=f"NIS {name}")
+            r.scalars(layout.droptest_nis_path(name), t[m], ih.nis, step=step[m], names=f"NIS {name}")
         # measured vs predicted specific force at each triad (prediction from the prior state)
         tel = self.tel
         for j, name in enumerate(tel.triads):
             ok = tel.f_valid[:, j]
             pred = np.array([rl.triad_model(x, tel.lever_arms_B[j], j)[0] for x in fp.x_prior[ok]])
             r.scalars(
-                f"/plots/triads/{name}/measured",
+                layout.droptest_triad_plot_path(name, layout.MEASURED_SERIES),
                 t[ok],
                 tel.f_B[ok, j] / G0,
                 names=[f"{name}.{a} measured [g]" for a in "xyz"],
@@ -243,7 +261,7 @@ class DropTestRecorder:
                 widths=1.0,
             )
             r.scalars(
-                f"/plots/triads/{name}/predicted",
+                layout.droptest_triad_plot_path(name, layout.PREDICTED_SERIES),
                 t[ok],
                 pred / G0,
                 names=[f"{name}.{a} predicted [g]" for a in "xyz"],
@@ -251,7 +269,7 @@ class DropTestRecorder:
                 widths=0.8,
             )
         r.scalars(
-            "/plots/process_noise",
+            layout.DROPTEST_PLOT_PROCESS_NOISE,
             t,
             np.stack([st.q_accel, st.q_angular], 1),
             step=step,
@@ -280,9 +298,9 @@ class DropTestRecorder:
         r.ellipsoids(layout.UNCERTAINTY, t, np.zeros((t.size, 3)), P_B, nsigma=3.0, color=(31, 119, 180, 90), step=step)
         aI = rl.accel_inertial(x)
         series = [
-            ("/plots/position", p, sd[:, rl.EP], None if tg is None else tg["p_I"], ["x", "y", "z"], 1.0),
+            (layout.DROPTEST_PLOT_POSITION, p, sd[:, rl.EP], None if tg is None else tg["p_I"], ["x", "y", "z"], 1.0),
             (
-                "/plots/velocity",
+                layout.DROPTEST_PLOT_VELOCITY,
                 x[:, rl.SV],
                 sd[:, rl.EV],
                 None if tg is None else tg["v_I"],
@@ -290,7 +308,7 @@ class DropTestRecorder:
                 1.0,
             ),
             (
-                "/plots/accel_body",
+                layout.DROPTEST_PLOT_ACCEL_BODY,
                 x[:, rl.SA] / G0,
                 sd[:, rl.EA] / G0,
                 None if tg is None else quat_rotate(quat_conjugate(tg["q_I_B"]), tg["a_ng_I"]) / G0,
@@ -298,16 +316,16 @@ class DropTestRecorder:
                 1.0,
             ),
             (
-                "/plots/rate",
+                layout.DROPTEST_PLOT_RATE,
                 np.degrees(x[:, rl.SW]),
                 np.degrees(sd[:, rl.EW]),
                 None if tg is None else np.degrees(tg["w_B"]),
                 ["p [deg/s]", "q [deg/s]", "r [deg/s]"],
                 1.0,
             ),
-            ("/plots/angular_accel", x[:, rl.SAL], sd[:, rl.EAL], None, ["αx", "αy", "αz"], 1.0),
+            (layout.DROPTEST_PLOT_ANGULAR_ACCEL, x[:, rl.SAL], sd[:, rl.EAL], None, ["αx", "αy", "αz"], 1.0),
             (
-                "/plots/gyro_scale",
+                layout.DROPTEST_PLOT_GYRO_SCALE,
                 100 * x[:, rl.GYRO_SCALE_X],
                 100 * sd[:, rl.GYRO_SCALE_E],
                 None if self.truth is None else np.broadcast_to(100 * self.truth["gyro_scale"], (t.size, 3)),
@@ -318,7 +336,7 @@ class DropTestRecorder:
         for root, v, s, tr, names, _ in series:
             for i, nm in enumerate(names):
                 r.series_with_bounds(
-                    f"{root}/{nm.split(' ')[0]}",
+                    layout.join(root, nm.split(" ")[0]),
                     t,
                     v[:, i],
                     s[:, i],
@@ -327,10 +345,17 @@ class DropTestRecorder:
                     step=step,
                     color=[XYZ[i]],
                 )
-        r.scalars("/plots/accel_spf/value", t, aI / G0, step=step, names=["ax [g]", "ay [g]", "az [g]"], colors=XYZ)
+        r.scalars(
+            layout.join(layout.DROPTEST_PLOT_ACCEL_SPF, layout.VALUE),
+            t,
+            aI / G0,
+            step=step,
+            names=["ax [g]", "ay [g]", "az [g]"],
+            colors=XYZ,
+        )
         if tg is not None:
             r.scalars(
-                "/plots/accel_spf/truth",
+                layout.join(layout.DROPTEST_PLOT_ACCEL_SPF, layout.TRUTH_SERIES),
                 t,
                 tg["a_ng_I"] / G0,
                 step=step,
@@ -338,13 +363,27 @@ class DropTestRecorder:
                 colors=XYZ,
                 widths=0.6,
             )
-        r.scalars("/plots/quaternion/value", t, q, step=step, names=["qx", "qy", "qz", "qw"], colors=XYZW)
+        r.scalars(
+            layout.join(layout.DROPTEST_PLOT_QUATERNION, layout.VALUE),
+            t,
+            q,
+            step=step,
+            names=["qx", "qy", "qz", "qw"],
+            colors=XYZW,
+        )
         eul = np.degrees(np.unwrap(euler123_from_quat(q), axis=0))
-        r.scalars("/plots/euler123/value", t, eul, step=step, names=["φ [deg]", "θ [deg]", "ψ [deg]"], colors=XYZ)
+        r.scalars(
+            layout.join(layout.DROPTEST_PLOT_EULER123, layout.VALUE),
+            t,
+            eul,
+            step=step,
+            names=["φ [deg]", "θ [deg]", "ψ [deg]"],
+            colors=XYZ,
+        )
         if tg is not None:
             qt = tg["q_I_B"] * np.sign(np.sum(tg["q_I_B"] * q, axis=1))[:, None]
             r.scalars(
-                "/plots/quaternion/truth",
+                layout.join(layout.DROPTEST_PLOT_QUATERNION, layout.TRUTH_SERIES),
                 t,
                 qt,
                 step=step,
@@ -353,7 +392,7 @@ class DropTestRecorder:
                 widths=0.6,
             )
             r.scalars(
-                "/plots/euler123/truth",
+                layout.join(layout.DROPTEST_PLOT_EULER123, layout.TRUTH_SERIES),
                 t,
                 np.degrees(np.unwrap(euler123_from_quat(tg["q_I_B"]), axis=0)),
                 step=step,
@@ -374,7 +413,7 @@ class DropTestRecorder:
         for label, sl, k in groups:
             key = label.split(" ")[0].replace(".", "")
             r.scalars(
-                f"/plots/sigma/{key}/smoothed",
+                layout.droptest_sigma_path(key, layout.SMOOTHED_SERIES),
                 t,
                 sd[:, sl] * k,
                 step=step,
@@ -383,7 +422,7 @@ class DropTestRecorder:
             )
             if sdf is not None:
                 r.scalars(
-                    f"/plots/sigma/{key}/forward",
+                    layout.droptest_sigma_path(key, layout.FORWARD_SERIES),
                     t,
                     sdf[:, sl] * k,
                     step=step,
@@ -392,7 +431,7 @@ class DropTestRecorder:
                     widths=0.6,
                 )
 
-    def _on_StrokeStage(self, st) -> None:
+    def _on_stroke(self, st) -> None:
         r = self.rec
         lander, surf = st.lander, st.surface
         t = self.fwd.t
@@ -404,11 +443,11 @@ class DropTestRecorder:
             color=(170, 150, 130, 255),
         )
         if surf.n_rocks:
-            r.mesh(f"{layout.SURFACE}/rocks", rock_meshes(surf), color=(90, 80, 75, 255))
+            r.mesh(layout.DROPTEST_ROCKS, rock_meshes(surf), color=(90, 80, 75, 255))
         r.mesh(layout.VEHICLE_BODY, lander.body, color=(200, 200, 210, 255))
         r.mesh(layout.AIRBAGS, airbag_mesh(lander, subdivisions=2), color=(255, 200, 60, 45))
         r.points(
-            f"{layout.VEHICLE}/triads",
+            layout.DROPTEST_TRIADS,
             np.array([lander.instruments[n] for n in self.tel.triads]),
             colors=(255, 0, 255, 255),
             radii=0.03,
@@ -419,7 +458,7 @@ class DropTestRecorder:
         cols = np.stack([255 * (1 - frac), 200 * frac, 40 * np.ones_like(frac), 255 * np.ones_like(frac)], 1)
         r.line_strips_series(layout.STROKE, t, seg, colors=cols.astype(np.uint8)[:, None], radii=0.02, step=step)
         r.text_labels_series(
-            f"{layout.STROKE}/label",
+            layout.DROPTEST_STROKE_LABEL,
             t,
             h.closest_point_I[:, None],
             [[f"stroke {d:.3f} ± {s:.3f} m (1σ)"] for d, s in zip(h.distance, h.sigma, strict=True)],
@@ -427,7 +466,7 @@ class DropTestRecorder:
         )
         # stroke plot with ±1σ and ±3σ, forward pass and truth
         r.scalars(
-            "/plots/stroke/value",
+            layout.join(layout.DROPTEST_PLOT_STROKE, layout.VALUE),
             t,
             h.distance,
             step=step,
@@ -436,8 +475,9 @@ class DropTestRecorder:
             widths=2.0,
         )
         for k, w in ((1, 1.0), (3, 0.6)):
+            plus, minus = layout.bound_names(k)
             r.scalars(
-                f"/plots/stroke/plus_{k}sigma",
+                layout.join(layout.DROPTEST_PLOT_STROKE, plus),
                 t,
                 h.distance + k * h.sigma,
                 step=step,
@@ -446,7 +486,7 @@ class DropTestRecorder:
                 widths=w,
             )
             r.scalars(
-                f"/plots/stroke/minus_{k}sigma",
+                layout.join(layout.DROPTEST_PLOT_STROKE, minus),
                 t,
                 h.distance - k * h.sigma,
                 step=step,
@@ -455,7 +495,7 @@ class DropTestRecorder:
                 widths=w,
             )
         r.scalars(
-            "/plots/stroke/forward",
+            layout.join(layout.DROPTEST_PLOT_STROKE, layout.FORWARD_SERIES),
             t,
             st.forward.distance,
             step=step,
@@ -464,7 +504,7 @@ class DropTestRecorder:
             widths=1.0,
         )
         r.scalars(
-            "/plots/stroke_sigma",
+            layout.DROPTEST_PLOT_STROKE_SIGMA,
             t,
             np.stack([h.sigma, st.forward.sigma], 1),
             step=step,
@@ -482,7 +522,7 @@ class DropTestRecorder:
             gt = GRAVITY - (GRAVITY @ n) * n
             tau = np.linspace(0.0, 0.8, 40)
             r.line_strip(
-                "/world/roll_line",
+                layout.DROPTEST_ROLL_LINE,
                 p0 + vt * tau[:, None] + 0.5 * gt * tau[:, None] ** 2,
                 color=(148, 103, 189, 255),
                 radius=0.01,
@@ -490,17 +530,20 @@ class DropTestRecorder:
         ms = st.max
         # static snapshot of the lander at the max-stroke pose (visible whatever the time cursor)
         k = int(ms.index)
-        snap = "/world/max_stroke"
-        r.static_transform(snap, translation=self._smoothed_x[k, rl.SP], quaternion_xyzw=self._smoothed_x[k, rl.SQ])
-        r.mesh(f"{snap}/body", lander.body, color=(230, 60, 60, 200))
-        r.mesh(f"{snap}/airbags", airbag_mesh(lander, subdivisions=2), color=(255, 140, 60, 35))
+        r.static_transform(
+            layout.DROPTEST_MAX_STROKE,
+            translation=self._smoothed_x[k, rl.SP],
+            quaternion_xyzw=self._smoothed_x[k, rl.SQ],
+        )
+        r.mesh(layout.DROPTEST_MAX_STROKE_BODY, lander.body, color=(230, 60, 60, 200))
+        r.mesh(layout.DROPTEST_MAX_STROKE_AIRBAGS, airbag_mesh(lander, subdivisions=2), color=(255, 140, 60, 35))
         r.line_strip(
-            f"{snap}_segment",
+            layout.DROPTEST_MAX_STROKE_SEGMENT,
             np.stack([h.closest_point_I[k], h.surface_point_I[k]]),
             color=(255, 0, 0, 255),
             radius=0.03,
         )
-        r.points(f"{snap}_point", ms.point_I[None], colors=(255, 0, 0, 255), radii=0.05)
+        r.points(layout.DROPTEST_MAX_STROKE_POINT, ms.point_I[None], colors=(255, 0, 0, 255), radii=0.05)
         ev = [
             (
                 float(ms.time),
@@ -529,21 +572,18 @@ class DropTestRecorder:
         if self.truth is not None:
             self._truth(st)
 
-    def _on_DropResult(self, res) -> None:
-        pass
-
     def _truth(self, st) -> None:
         from workbench.problems.droptest.pipeline import truth_on_grid, truth_stroke
 
         r = self.rec
         t = self.fwd.t
         tg = truth_on_grid(self.truth, t)
-        r.poses(f"{layout.TRUTH}/vehicle", t, tg["p_I"], tg["q_I_B"], step=np.arange(t.size))
-        r.mesh(f"{layout.TRUTH}/vehicle/body", st.lander.body, color=(44, 160, 44, 110))
-        r.line_strip(f"{layout.TRUTH}/trajectory", self.truth["p_I"][::20], color=TRUTH, radius=0.008)
+        r.poses(layout.TRUTH_VEHICLE, t, tg["p_I"], tg["q_I_B"], step=np.arange(t.size))
+        r.mesh(layout.DROPTEST_TRUTH_BODY, st.lander.body, color=(44, 160, 44, 110))
+        r.line_strip(layout.DROPTEST_TRUTH_TRAJECTORY, self.truth["p_I"][::20], color=TRUTH, radius=0.008)
         d, _, _ = truth_stroke(self.truth, st.lander, st.surface)
         r.scalars(
-            "/plots/stroke/truth",
+            layout.join(layout.DROPTEST_PLOT_STROKE, layout.TRUTH_SERIES),
             self.truth["t"][::5],
             d[::5],
             names="stroke truth [m]",

@@ -24,8 +24,7 @@ import numpy as np
 from scipy.signal import butter, lfilter, lfilter_zi
 
 from workbench.core.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_rotate
-
-G0 = 9.80665
+from workbench.problems.droptest.config import config_for
 
 __all__ = [
     "ImuErrorModel",
@@ -146,15 +145,15 @@ class RangingSpec:
 
     @classmethod
     def from_scenario(cls, scenario) -> RangingSpec:
-        """Read ``[sensors.ranging]`` of a :class:`workbench.io.scenario.Scenario`."""
-        g = scenario.get
-        guns = g("sensors.ranging.radar_guns", {}, kind="table")
+        """Read ``[sensors.ranging]`` of a :class:`workbench.io.scenario.Scenario` (validated,
+        defaults from :data:`workbench.problems.droptest.config.SCHEMA`)."""
+        cfg = config_for(scenario)
         return cls(
-            odometer=g("sensors.ranging.odometer", False, kind="bool"),
-            odometer_sigma=g("sensors.ranging.odometer_sigma_m", 0.01, kind="float"),
-            guns={str(k): np.asarray(v, float) for k, v in guns.items()},
-            reflector_B=np.asarray(g("sensors.ranging.reflector_body_m", [0.0, 0.0, 0.0], kind="vec3")),
-            range_sigma=g("sensors.ranging.radar_range_sigma_m", 0.02, kind="float"),
-            rate_sigma=g("sensors.ranging.radar_rate_sigma_mps", 0.05, kind="float"),
-            rate_hz=g("sensors.ranging.rate_hz", 200.0, kind="float"),
+            odometer=cfg.odometer,
+            odometer_sigma=cfg.odometer_sigma_m,
+            guns=dict(cfg.radar_guns),
+            reflector_B=np.asarray(cfg.reflector_body_m),
+            range_sigma=cfg.radar_range_sigma_m,
+            rate_sigma=cfg.radar_rate_sigma_mps,
+            rate_hz=cfg.ranging_rate_hz,
         )

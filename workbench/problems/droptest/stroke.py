@@ -12,7 +12,7 @@ impact in the surface normal direction".
 Provides :class:`StrokeHistory`, :func:`stroke_history`, :func:`sampled_stroke_sigma`,
 :class:`MaxStroke`, :func:`max_stroke`, :func:`restitution`.
 
-Pose and attitude-error convention (DESIGN.md, ``core/rotation.py``).  ``q_I_B`` maps body to
+Pose and attitude-error convention (docs/ARCHITECTURE.md, ``core/rotation.py``).  ``q_I_B`` maps body to
 chamber frame, ``x_I = p_I + C_I_B r_B``.  The pose error is the 6-vector ``[δp_I, δθ]``:
 ``δp_I`` in the chamber frame I, ``δθ`` a BODY-frame small angle with
 ``q_true = q_est ⊗ exp(δθ)`` (``quat_boxplus``).
@@ -37,8 +37,8 @@ this is computed exactly (closest point on every triangle), with the sign of ``d
 when c is inside the body (convex bodies only, which is checked); without ``faces_B`` rocks are
 checked at the vertices only (an upper bound of the distance).
 
-[1] JPL, REDLand paper on the MER airbag drop tests (/work/shared/references/
-    redland-mer-airbag-droptest.txt), "Results" and Fig. 13.
+[1] JPL, REDLand paper on the MER airbag drop tests, "Results" and
+    Fig. 13.
 """
 
 from __future__ import annotations

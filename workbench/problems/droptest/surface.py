@@ -18,8 +18,7 @@ solid (d > 0) this is the exact Euclidean distance to the union.  Inside (d < 0)
 "min of SDFs" union: minus the penetration depth when one feature is penetrated; inside several
 features at once its magnitude is the largest single depth, a lower bound of the true depth.
 
-[1] JPL, REDLand paper on the MER airbag drop tests (/work/shared/references/
-    redland-mer-airbag-droptest.txt), sections "Test facility" and "Results".
+[1] JPL, REDLand paper on the MER airbag drop tests, sections "Test facility" and "Results".
 """
 
 from __future__ import annotations

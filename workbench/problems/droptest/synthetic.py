@@ -22,12 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.bodies import G0
 from workbench.core.rotation import quat_conjugate, quat_rotate, quat_to_dcm
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import atomic_write_text, write_events, write_telemetry
+from workbench.problems.droptest.config import config_for
 from workbench.problems.droptest.lander import LanderModel, load_lander
 from workbench.problems.droptest.sensors import (
-    G0,
     ImuErrorModel,
     RangingSpec,
     acquisition_filter,
@@ -60,31 +61,29 @@ def surface_for(scenario: Scenario) -> Surface:
     """The ramp of ``[chamber]`` (angle [deg], nail depth [m]) in the SPF frame, with the rock
     field of ``[chamber.rocks]`` if present (seed, extent_m = [[u0, u1], [v0, v1]] in the ramp
     plane: u across, v up-slope, from the foot of the nail; REDLand: 0.2–0.5 m rocks ~1 m apart)."""
-    surf = ramp_surface(
-        angle_deg=scenario.get("chamber.ramp_angle_deg", 60.0, kind="float"),
-        nail_depth=scenario.get("chamber.nail_depth_m", 0.3, kind="float"),
-    )
-    if scenario.has("chamber.rocks"):
-        ext = scenario.get("chamber.rocks.extent_m", [[-4.0, 4.0], [-7.0, 3.0]], kind="list")
+    cfg = config_for(scenario)
+    surf = ramp_surface(angle_deg=cfg.ramp_angle_deg, nail_depth=cfg.nail_depth_m)
+    if cfg.rocks:
+        ext = cfg.rocks_extent_m
         surf = rock_field(
             surf,
-            np.random.default_rng(scenario.get("chamber.rocks.seed", 0, kind="int")),
+            np.random.default_rng(cfg.rocks_seed),
             extent=((float(ext[0][0]), float(ext[0][1])), (float(ext[1][0]), float(ext[1][1]))),
-            spacing=scenario.get("chamber.rocks.spacing_m", 1.0, kind="float"),
+            spacing=cfg.rocks_spacing_m,
         )
     return surf
 
 
 def _config(scenario: Scenario) -> DropTestConfig:
-    g = scenario.get
-    psi = g("synthetic.bag_pressure_psi", None)
+    cfg = config_for(scenario)
+    psi = cfg.bag_pressure_psi
     return DropTestConfig(
-        impact_parallel_speed=g("synthetic.impact_parallel_mps", 16.0, kind="float"),
-        impact_normal_speed=g("synthetic.impact_normal_mps", 12.0, kind="float"),
-        release_euler123_deg=tuple(g("synthetic.release_euler123_deg", [0.0, 0.0, 0.0], kind="vec3")),
-        release_to_contact_s=g("synthetic.release_to_contact_s", 1.3, kind="float"),
-        pre_release_s=g("synthetic.pre_release_s", 0.5, kind="float"),
-        bungee_truth_scale=g("synthetic.bungee_truth_scale", 1.03, kind="float"),
+        impact_parallel_speed=cfg.impact_parallel_mps,
+        impact_normal_speed=cfg.impact_normal_mps,
+        release_euler123_deg=tuple(cfg.release_euler123_deg),
+        release_to_contact_s=cfg.release_to_contact_s,
+        pre_release_s=cfg.pre_release_s,
+        bungee_truth_scale=cfg.bungee_truth_scale,
         pressure_pa=None if psi is None else float(psi) * 6894.757,
     )
 
@@ -116,20 +115,20 @@ def truth_for(scenario: Scenario) -> tuple[DropTruth, LanderModel, Surface]:
 
 
 def _imu_models(scenario: Scenario) -> tuple[ImuErrorModel, ImuErrorModel]:
-    g = scenario.get
+    cfg = config_for(scenario)
     acc = ImuErrorModel(
-        noise=g("sensors.accelerometer.noise_g", 0.2, kind="float") * G0,
-        bias=g("sensors.accelerometer.bias_g", 0.005, kind="float") * G0,
-        scale=g("sensors.accelerometer.scale", 0.002, kind="float"),
-        misalignment=np.radians(g("sensors.accelerometer.misalignment_deg", 0.05, kind="float")),
-        full_scale=g("sensors.accelerometer.full_scale_g", 2000.0, kind="float") * G0,
+        noise=cfg.accel_noise_g * G0,
+        bias=cfg.accel_bias_g * G0,
+        scale=cfg.accel_scale,
+        misalignment=np.radians(cfg.accel_misalignment_deg),
+        full_scale=cfg.accel_full_scale_g * G0,
     )
     gyr = ImuErrorModel(
-        noise=np.radians(g("sensors.gyro.noise_dps", 0.4, kind="float")),
-        bias=np.radians(g("sensors.gyro.bias_dps", 0.05, kind="float")),
-        scale=g("sensors.gyro.scale", 0.01, kind="float"),
-        misalignment=np.radians(g("sensors.gyro.misalignment_deg", 0.05, kind="float")),
-        full_scale=np.radians(g("sensors.gyro.full_scale_dps", 1000.0, kind="float")),
+        noise=np.radians(cfg.gyro_noise_dps),
+        bias=np.radians(cfg.gyro_bias_dps),
+        scale=cfg.gyro_scale,
+        misalignment=np.radians(cfg.gyro_misalignment_deg),
+        full_scale=np.radians(cfg.gyro_full_scale_dps),
     )
     return acc, gyr
 
@@ -141,16 +140,17 @@ def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | Non
     scale factor and misalignment, 3DM vector errors, the survey error of the hanging
     position and the ranging noise. The truth trajectory itself is deterministic per scenario.
     """
+    cfg = config_for(scenario)  # unknown or mistyped keys are errors before the simulation
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    seed = int(scenario.get("synthetic.seed", 0, kind="int") if seed is None else seed)
+    seed = int(cfg.seed if seed is None else seed)
     rng = np.random.default_rng(seed)
     truth, lander, surf = truth_for(scenario)
     acc_model, gyr_model = _imu_models(scenario)
     fs_sim = truth.config.output_rate_hz
-    fs = scenario.get("sensors.acquisition.sample_rate_hz", 2000.0, kind="float")
-    cutoff = scenario.get("sensors.acquisition.filter_cutoff_hz", 500.0, kind="float")
-    order = scenario.get("sensors.acquisition.filter_order", 4, kind="int")
+    fs = cfg.sample_rate_hz
+    cutoff = cfg.filter_cutoff_hz
+    order = cfg.filter_order
     decim = int(round(fs_sim / fs))
     if abs(decim * fs - fs_sim) > 1e-6:
         raise ValueError(f"{scenario.path}: sensors.acquisition.sample_rate_hz must divide {fs_sim} Hz")
@@ -184,11 +184,11 @@ def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | Non
     }
 
     # 3DM while hanging: gravity (accelerometer set measures -g => "up") and magnetic field
-    m_spf = scenario.get("chamber.magnetic_field_spf", kind="vec3")  # required, as in the reconstruction
+    m_spf = cfg.magnetic_field_spf  # required, as in the reconstruction
     m_spf = m_spf / np.linalg.norm(m_spf)
-    sg = np.radians(scenario.get("sensors.attitude_3dm.gravity_sigma_deg", 0.2, kind="float"))
-    sm = np.radians(scenario.get("sensors.attitude_3dm.magnetic_sigma_deg", 1.0, kind="float"))
-    rate3 = scenario.get("sensors.attitude_3dm.rate_hz", 100.0, kind="float")
+    sg = np.radians(cfg.gravity_sigma_deg)
+    sm = np.radians(cfg.magnetic_sigma_deg)
+    rate3 = cfg.attitude_3dm_rate_hz
     n3 = max(2, int(truth.config.pre_release_s * rate3 * 0.8))
     t3 = -truth.config.pre_release_s + np.arange(n3) / rate3
     q_B_I = quat_conjugate(truth.q_release)
@@ -218,7 +218,7 @@ def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | Non
     paths["events"] = write_events(out / "events.csv", ev)
 
     # setup: surveyed hanging position and the bungee test plan
-    sig_survey = scenario.get("synthetic.survey_sigma_m", 0.03, kind="float")
+    sig_survey = cfg.survey_sigma_m
     p_survey = truth.p_release + rng.normal(0.0, sig_survey, 3)
     rig = truth.nominal_rig
     fmt = lambda v: "[" + ", ".join(f"{float(x):.6f}" for x in v) + "]"  # noqa: E731
@@ -241,7 +241,7 @@ def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | Non
         setup += f"radii_m = {fmt(surf.rock_radii)}\n"
     paths["setup"] = atomic_write_text(out / "setup.toml", setup)
 
-    if scenario.has("sensors.ranging"):
+    if cfg.ranging:
         paths["ranging"] = _write_ranging(scenario, truth, out, rng)
 
     truth_path = out / "truth.npz"

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
+from workbench.core.bodies import G0
 from workbench.core.rotation import (
     quat_from_euler123,
     quat_multiply,
@@ -41,7 +42,6 @@ from workbench.core.rotation import (
 from workbench.problems.droptest.lander import LanderModel
 from workbench.problems.droptest.surface import Surface
 
-G0 = 9.80665
 GRAVITY_SPF = np.array([0.0, 0.0, -G0])
 
 __all__ = ["BungeeRig", "DropTestConfig", "DropTruth", "simulate_drop", "design_release", "C_MARS_SPF"]

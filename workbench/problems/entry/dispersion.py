@@ -27,17 +27,16 @@ Randomness and scheduling: members are drawn in fixed blocks of :data:`SAMPLE_BL
 uses ``np.random.SeedSequence(seed, spawn_key=(b,))``, so a member's offsets depend only on
 ``(seed, member index)`` — not on the chunk size, the scheduler or the number of workers.  The
 integration is member-wise element arithmetic, so results are bit-identical in-process, in a
-process pool, on a Dask cluster, and in the per-member loop baseline (:func:`run_dispersion_loop`).
+process pool, on a Dask cluster (chunks run by :func:`workbench.estimation.montecarlo.run_monte_carlo`),
+and in the per-member loop baseline (:func:`run_dispersion_loop`).
 Memory: only dx0 (n, 9), the five event quantities and a thinned position cloud (≤ n_cloud
 members at ~1 Hz) are kept; a chunk's working set is a few MB.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import time
 from collections.abc import Mapping
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -45,17 +44,19 @@ import numpy as np
 
 from workbench.core.atmosphere import Atmosphere, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
-from workbench.core.rotation import quat_from_rotvec
-from workbench.estimation.strapdown import ImuArrays, _qmul, _qnormalize, imu_arrays, integrate_members
+from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normalize
+from workbench.estimation.montecarlo import run_monte_carlo
+from workbench.estimation.strapdown import ImuArrays, imu_arrays, integrate_members
+from workbench.problems.entry.site import R_GROUND, R_MOLA
 
 __all__ = [
     "SAMPLE_BLOCK",
-    "R_GROUND",
     "EVENT_NAMES",
     "AcceptanceRules",
     "DispersionSigmas",
     "DispersionResult",
     "sample_offsets",
+    "sigma_vector",
     "event_quantities",
     "run_dispersion",
     "run_dispersion_loop",
@@ -65,8 +66,6 @@ __all__ = [
 
 #: Members per random-number block (block b has its own SeedSequence ``(seed, spawn_key=(b,))``).
 SAMPLE_BLOCK = 250
-#: Terrain radius [m]: MOLA radius − 1440 m (AMELIA Eq. B.1, flat terrain as a sphere).
-R_GROUND = MARS.reference_radius - 1440.0
 #: Names of the event quantities, in the order of :class:`AcceptanceRules`' fields.
 EVENT_NAMES = ("mach_pdd", "h_pdd", "h_fsr", "h_end", "time_to_impact")
 _OMEGA_Z = MARS.rotation_rate
@@ -223,7 +222,7 @@ def sample_offsets(
 def _members(v0, q0, p0, dx0):
     """Initial states (m, ·) of the members with offsets dx0 (m, 9)."""
     v = np.asarray(v0, dtype=float) + dx0[:, 0:3]
-    q = _qnormalize(_qmul(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, 3:6])))
+    q = quat_normalize(quat_multiply(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, 3:6])))
     p = np.asarray(p0, dtype=float) + dx0[:, 6:9]
     return v, q, p
 
@@ -241,7 +240,7 @@ def event_quantities(
     relative to the co-rotating atmosphere (no wind); the time to impact is the vertical
     gravity-only fall from the end state to ``r_ground`` [m] (0 if already below it).
     """
-    r_ref = MARS.reference_radius
+    r_ref = R_MOLA
     p, v = p_at[0], v_at[0]
     vr = np.stack([v[..., 0] + _OMEGA_Z * p[..., 1], v[..., 1] - _OMEGA_Z * p[..., 0], v[..., 2]], -1)
     h_pdd = _norm(p) - r_ref
@@ -279,8 +278,11 @@ def _offsets(job: _Job, start: int, stop: int) -> np.ndarray:
     return sample_offsets(job.seed, start, stop, job.sigmas, round_index=job.round_index, mean=job.mean, L=job.L)
 
 
-def _run_chunk(job: _Job, start: int, stop: int) -> tuple[int, np.ndarray, dict[str, np.ndarray]]:
-    """Integrate members start..stop−1 together; returns (start, dx0, events)."""
+def _run_chunk(job: _Job, start: int, stop: int, seeds=None) -> tuple[int, np.ndarray, dict[str, np.ndarray]]:
+    """Integrate members start..stop−1 together; returns (start, dx0, events).
+
+    A chunk task of :func:`~workbench.estimation.montecarlo.run_monte_carlo`; ``seeds`` is unused (None):
+    the members' offsets come from :func:`sample_offsets`' blocks."""
     dx0 = _offsets(job, start, stop)
     v, q, p = _members(job.v0, job.q0, job.p0, dx0)
     out = integrate_members(job.imu, v, q, p, bridge_mode=job.bridge_mode, at_t=job.event_times)
@@ -301,55 +303,6 @@ def _run_loop(job: _Job, start: int, stop: int) -> tuple[int, np.ndarray, dict[s
     return start, dx0, evs
 
 
-def _one_blas_thread() -> None:
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1)
-
-
-def _ranges(n: int, chunk_size: int) -> list[tuple[int, int]]:
-    return [(a, min(a + chunk_size, n)) for a in range(0, n, chunk_size)]
-
-
-def _execute(job: _Job, n: int, chunk_size: int, scheduler: str | None, workers: int, fn=_run_chunk):
-    """Run the chunks; returns (list of chunk results in order, executor description)."""
-    ranges = _ranges(n, chunk_size)
-    if scheduler is None and workers <= 1:
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=1):
-            return [fn(job, a, b) for a, b in ranges], "in-process loop over chunks"
-    if scheduler is None:
-        with ProcessPoolExecutor(
-            max_workers=int(workers), mp_context=mp.get_context(), initializer=_one_blas_thread
-        ) as ex:
-            futs = [ex.submit(fn, job, a, b) for a, b in ranges]
-            return [f.result() for f in futs], f"process pool ({workers} workers)"
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError as err:  # pragma: no cover - optional extra
-        raise NotImplementedError(
-            "a dask scheduler needs the optional dask extra: .venv/bin/pip install -e '.[dask]'"
-        ) from err
-    if scheduler == "local":
-        with (
-            LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
-            Client(cluster) as client,
-        ):
-            return _dask_map(client, job, ranges, fn), "dask LocalCluster (2 workers x 1 thread, processes)"
-    if scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
-        with Client(scheduler) as client:
-            return _dask_map(client, job, ranges, fn), f"dask scheduler {scheduler}"
-    raise ValueError(f"scheduler must be None, 'local' or 'tcp://host:port', got {scheduler!r}")
-
-
-def _dask_map(client, job: _Job, ranges, fn):
-    client.run(_one_blas_thread)
-    job_f = client.scatter(job, broadcast=True)
-    futs = [client.submit(fn, job_f, a, b, pure=False, key=f"dispersion-{job.seed}-{a}-{b}") for a, b in ranges]
-    return client.gather(futs)
-
-
 def _event_times(imu: ImuArrays, events_t: Mapping[str, float]) -> tuple[np.ndarray, dict[str, float]]:
     try:
         t_pdd, t_fsr = float(events_t["PDD"]), float(events_t["FSR"])
@@ -360,7 +313,11 @@ def _event_times(imu: ImuArrays, events_t: Mapping[str, float]) -> tuple[np.ndar
     return np.array([t_pdd, t_fsr, t_end]), {"PDD": t_pdd, "FSR": t_fsr, "BSR": t_end}
 
 
-def _sigma_vector(sigmas: Any) -> np.ndarray:
+def sigma_vector(sigmas: Any) -> np.ndarray:
+    """The (9,) 1σ of the initial-state offsets ``[δv_M (m/s), δθ_G (rad), δp_M (m)]`` from
+    ``None`` (the defaults of :class:`DispersionSigmas`), a :class:`DispersionSigmas`, a mapping
+    ``{velocity|velocity_m_s, attitude|attitude_rad, position|position_m}``, a (3,) per block or a
+    (9,) per state; ``ValueError`` for an unknown key or shape."""
     if sigmas is None:
         return DispersionSigmas().vector()
     if isinstance(sigmas, DispersionSigmas):
@@ -486,9 +443,9 @@ def _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, 
     job = _Job(
         imu=pim,
         v0=np.asarray(v0, float),
-        q0=_qnormalize(np.asarray(q0, float)),
+        q0=quat_normalize(np.asarray(q0, float)),
         p0=np.asarray(p0, float),
-        sigmas=_sigma_vector(sigmas),
+        sigmas=sigma_vector(sigmas),
         seed=int(seed),
         event_times=et,
         atmosphere=atmosphere if atmosphere is not None else MarsEngineeringAtmosphere(),
@@ -532,7 +489,8 @@ def run_dispersion(
     optional "BSR" (default: end of the data)} [s]; ``atmosphere`` for the speed of sound (default
     :class:`~workbench.core.atmosphere.MarsEngineeringAtmosphere`); ``chunk_size`` members
     integrated together; ``seed``; ``scheduler`` None (in-process; a process pool if ``workers > 1``),
-    ``"local"`` (dask LocalCluster, 2 processes x 1 thread) or ``"tcp://host:port"`` (dask Client);
+    ``"local"`` (dask LocalCluster, ``workers`` (≥ 2) processes x 1 thread) or ``"tcp://host:port"``
+    (dask Client), as :func:`workbench.estimation.montecarlo.run_monte_carlo`;
     ``n_cloud`` members kept in the thinned cloud, sampled every ``cloud_dt`` [s];
     ``bridge_mode`` of the gap bridges; ``r_ground`` terrain radius [m].
 
@@ -559,7 +517,16 @@ def run_dispersion(
         if r > 0:
             job = replace(job, round_index=r, mean=mean, L=np.linalg.cholesky(cov))
         t0 = time.perf_counter()
-        parts, executor = _execute(job, int(n), int(chunk_size), scheduler, workers)
+        run = run_monte_carlo(
+            _run_chunk,
+            int(n),
+            shared=job,
+            chunk_size=int(chunk_size),
+            workers=workers,
+            scheduler=scheduler,
+            name=f"dispersion-{job.seed}-round{r}",
+        )
+        parts, executor = run.results, run.executor
         dt = time.perf_counter() - t0
         wall += dt
         dx0, events = _combine(parts)
@@ -712,6 +679,6 @@ def fuse_with_prior(
     dx = D * (Pf_n @ eta)
     P0 = Pf_n * np.outer(D, D)
     v0 = np.asarray(v_nom, float) + dx[0:3]
-    q0 = _qnormalize(_qmul(np.asarray(q_nom, float), quat_from_rotvec(dx[3:6])))
+    q0 = quat_normalize(quat_multiply(np.asarray(q_nom, float), quat_from_rotvec(dx[3:6])))
     p0 = np.asarray(p_nom, float) + dx[6:9]
     return FusedInitialState(v0, q0, p0, P0, dx, np.asarray(P_prior, float), int(keep.sum()))

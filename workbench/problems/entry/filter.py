@@ -88,9 +88,9 @@ from typing import Any
 
 import numpy as np
 from scipy.linalg import lapack
-from scipy.stats import chi2
 
 from workbench.core.rotation import quat_boxplus, quat_to_dcm
+from workbench.estimation.consistency import chi2_gate
 from workbench.estimation.ekf import (
     ErrorStateLayout,
     ForwardPass,
@@ -108,7 +108,6 @@ from workbench.estimation.strapdown import (
     rk4_step,
 )
 from workbench.models.radar import (
-    R_GROUND,
     PlaneFit,
     beam_directions_G,
     mars_rate_M,
@@ -116,6 +115,7 @@ from workbench.models.radar import (
     slant_range_model,
     velocity_out_model,
 )
+from workbench.problems.entry.site import R_GROUND
 
 __all__ = [
     "CHANNELS",
@@ -601,7 +601,7 @@ def run_entry_smoother(
     for e in events:
         by_node.setdefault(e.node, []).append(e)
     gate = {
-        c: (None if sg.gate_probability is None else float(chi2.ppf(sg.gate_probability, d)))
+        c: (None if sg.gate_probability is None else chi2_gate(sg.gate_probability, d))
         for c, d in (("slant_range", 4), ("slant_out", 1), ("velocity_out", 3))
     }
     qpsd = None if sg.q_state_psd is None else np.asarray(sg.q_state_psd, dtype=float)

@@ -41,7 +41,7 @@ streams for the member draw, the truth's process noise, the IMU noise and the ra
    state ``(refined_v0, refined_q0, refined_p0)`` with ``refined_P0``.
 
 Other starts (``start=``, e.g. the pipeline's "fused" start: the rules' information combined with
-the navigation prior, ``workbench.problems.entry.pipeline.initial_for_smoother``) are tested with
+the navigation prior, ``workbench.problems.entry.initial.initial_for_smoother``) are tested with
 ``truth_initial="gaussian"``: the truth's initial state is drawn from the smoother's own initial
 distribution ``start ⊞ N(0, P0)`` — drawing it from the accepted set would put initial errors of
 the accepted spread (~10 km, 0.5 km/s in the directions the rules do not constrain) against a
@@ -67,47 +67,47 @@ so the Cartesian NEES explodes after the fix even when the altitude, velocity an
 right.  Both are reported; the difference measures this linearisation limit of a Cartesian
 error state.
 
-Execution as :mod:`workbench.problems.droptest.montecarlo`: in-process loop (one BLAS thread), a process
-pool of ``workers`` (one BLAS thread each), a Dask ``LocalCluster`` (``scheduler="local"``) or a
-running Dask scheduler (``"tcp://…"``).  Results do not depend on the executor (only wall times do).
+Execution by :func:`workbench.estimation.montecarlo.run_monte_carlo`: in-process loop (one BLAS
+thread), a process pool of ``workers`` (one BLAS thread each), a Dask ``LocalCluster``
+(``scheduler="local"``) or a running Dask scheduler (``"tcp://…"``).  Results do not depend on the
+executor (only wall times do).
 """
 
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
 import time
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from workbench.core.bodies import MARS
-from workbench.core.rotation import attitude_error, quat_boxplus
+from workbench.core.atmosphere import MarsEngineeringAtmosphere
+from workbench.core.rotation import quat_boxplus
 from workbench.estimation.consistency import anees_bounds, fraction_inside, nees
+from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import GapBridge, ImuArrays, apply_gap, gap_transition, imu_arrays, rk4_step
-from workbench.models.radar import R_GROUND, beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
+from workbench.models.radar import beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
+from workbench.problems.entry.config import config_for
+from workbench.problems.entry.dispersion import run_dispersion
 from workbench.problems.entry.filter import CHANNELS, EntryFilterSigmas, RadarData, run_entry_smoother
+from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
+from workbench.problems.entry.preprocess import preprocess
+from workbench.problems.entry.scoring import ERROR_NAMES, ERROR_UNITS, errors_sigmas
+from workbench.problems.entry.site import R_GROUND, R_MOLA
+from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state
 
 __all__ = [
-    "ERROR_NAMES",
-    "ERROR_UNITS",
     "ValidationResult",
     "ValidationInputs",
     "validate_smoother",
+    "noise_scale",
     "summarize_validation",
     "prepare_validation",
 ]
 
-#: Columns of the error / σ curves (estimate − truth), in the local frame at the estimate (north
-#: towards the MMED pole): horizontal position N, E [m] and altitude above ground ``|p| − r_ground``
-#: [m] (σ along the estimated local vertical); velocity N, E, D [m/s]; attitude error δθ about
-#: X_G, Y_G, Z_G [rad] (Z_G the spin axis).
-ERROR_NAMES: tuple[str, ...] = ("pos_N", "pos_E", "h_agl", "vel_N", "vel_E", "vel_D", "att_x", "att_y", "att_z")
-ERROR_UNITS: tuple[str, ...] = ("m",) * 3 + ("m/s",) * 3 + ("rad",) * 3
 #: Degrees of freedom of the radar channels' NIS (slant ranges: up to 4 beams, counted per packet).
 _NIS_DOF = {"slant_range": 4, "slant_out": 1, "velocity_out": 3}
 
@@ -174,8 +174,10 @@ def _gap_index(t: np.ndarray, gaps: Sequence[GapBridge]) -> dict[int, GapBridge]
     return out
 
 
-def _noise_scale(t: np.ndarray, gap_at: Mapping[int, Any]) -> tuple[np.ndarray, float]:
-    """Per-sample factor √(sample_dt / dt_k) (module docstring, step 2) and sample_dt [s]."""
+def noise_scale(t: np.ndarray, gap_at: Mapping[int, Any]) -> tuple[np.ndarray, float]:
+    """Per-sample factor √(sample_dt / dt_k) (module docstring, step 2), shape (n,), and the
+    median sample interval sample_dt [s], for IMU times ``t`` (n,) [s]; ``gap_at`` maps the index
+    of a sample followed by a data gap to its bridge (that interval is not a sampling interval)."""
     d = np.diff(t)
     sample_dt = float(np.median(d))
     d = d.copy()
@@ -246,48 +248,6 @@ def _truth_at(job: _Job, V, Q, X, gap_at, tm: np.ndarray):
     return out_v, out_q, out_p
 
 
-def _local_frame(p: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rows north, east, down at positions p (n, 3) in M (north towards the +Z_M pole)."""
-    up = p / np.linalg.norm(p, axis=1, keepdims=True)
-    east = np.cross(np.array([0.0, 0.0, 1.0]), up)
-    east /= np.linalg.norm(east, axis=1, keepdims=True)
-    north = np.cross(up, east)
-    return np.stack([north, east, -up], axis=1)
-
-
-def _errors_sigmas(est, V, Q, X) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Errors of a pass ``est`` (t, v_M, q_M_G, p_M, P) against the truth (V, Q, X).
-
-    Returns ``e`` (n, 9) truth ⊟ estimate (Cartesian, the filter's error state), ``e_c`` (n, 9) the
-    same with the position error written in curvilinear form about the estimate (horizontal part
-    ``(I − ûûᵀ) δp`` plus ``û (|p_t| − |p|)``, û = p/|p|: identical to first order, but free of the
-    ``|δp_h|²/2|p|`` curvature term that a tens-of-km horizontal error puts on the Cartesian
-    vertical), ``err`` (n, k) estimate − truth of :data:`ERROR_NAMES` and ``sig`` (n, k) the
-    reported 1σ (local frame at the estimate; altitude along û).
-    """
-    e = np.concatenate([V - est.v_M, attitude_error(est.q_M_G, Q), X - est.p_M], axis=1)
-    P = est.P
-    L = _local_frame(est.p_M)
-    up = -L[:, 2]
-    dh = np.linalg.norm(X, axis=1) - np.linalg.norm(est.p_M, axis=1)  # truth − estimate
-    dp = e[:, 6:9]
-    e_c = e.copy()
-    e_c[:, 6:9] = dp - up * np.sum(up * dp, axis=1, keepdims=True) + up * dh[:, None]
-    err = np.empty((V.shape[0], len(ERROR_NAMES)))
-    sig = np.empty_like(err)
-    Ppp = np.einsum("nij,njk,nlk->nil", L, P[:, 6:9, 6:9], L)
-    err[:, 0:2] = -np.einsum("nij,nj->ni", L[:, 0:2], dp)
-    sig[:, 0:2] = np.sqrt(np.einsum("nii->ni", Ppp)[:, 0:2])
-    err[:, 2] = -dh
-    sig[:, 2] = np.sqrt(Ppp[:, 2, 2])
-    Pvv = np.einsum("nij,njk,nlk->nil", L, P[:, 0:3, 0:3], L)
-    err[:, 3:6] = -np.einsum("nij,nj->ni", L, e[:, 0:3])
-    sig[:, 3:6] = np.sqrt(np.einsum("nii->ni", Pvv))
-    err[:, 6:9] = -e[:, 3:6]
-    sig[:, 6:9] = np.sqrt(np.einsum("nii->ni", P[:, 3:6, 3:6]))
-    return e, e_c, err, sig
-
-
 def _nis_mean(res) -> np.ndarray:
     out = np.full(len(CHANNELS), np.nan)
     for c, ch in enumerate(CHANNELS):
@@ -308,10 +268,12 @@ def _nis_mean(res) -> np.ndarray:
     return out
 
 
-def _run_one(job: _Job, r: int) -> _RunOut:
-    """One validation run (module docstring); depends on (job, r) only."""
+def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> _RunOut:
+    """One validation run (module docstring); depends on (job, r) only.
+
+    A task of :func:`~workbench.estimation.montecarlo.run_monte_carlo`: ``ss`` is run r's
+    ``SeedSequence(job.seed, spawn_key=(r,))``."""
     t0 = time.perf_counter()
-    ss = np.random.SeedSequence(int(job.seed), spawn_key=(int(r),))
     g_member, g_truth, g_imu, g_radar = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(4))
     imu = job.imu
     n = imu.t.size
@@ -324,7 +286,7 @@ def _run_one(job: _Job, r: int) -> _RunOut:
     V, Q, X = _truth(job, dx0, g_truth, gap_at)
 
     # filter input: IMU + white noise with the filter's PSD
-    scale, _ = _noise_scale(imu.t, gap_at)
+    scale, _ = noise_scale(imu.t, gap_at)
     f_noisy = imu.f_G + imu.sigma_f * scale[:, None] * g_imu.standard_normal((n, 3))
     w_noisy = imu.w_G + imu.sigma_w * scale[:, None] * g_imu.standard_normal((n, 3))
     noisy = ImuArrays(imu.t, f_noisy, w_noisy, imu.sigma_f, imu.sigma_w, imu.gaps)
@@ -378,8 +340,8 @@ def _run_one(job: _Job, r: int) -> _RunOut:
             math.nan, np.full(len(CHANNELS), np.nan), time.perf_counter() - t0,
         )  # fmt: skip
     sm = res.smoothed
-    e, e_c, err, sig = _errors_sigmas(sm, V, Q, X)
-    e_f, e_fc, _, _ = _errors_sigmas(res.forward, V, Q, X)
+    e, e_c, err, sig = errors_sigmas(sm, V, Q, X)
+    e_f, e_fc, _, _ = errors_sigmas(res.forward, V, Q, X)
     sd3 = 3.0 * np.sqrt(np.einsum("nii->ni", sm.P))
     after = imu.t >= job.t_fix
     if after.any():
@@ -412,55 +374,6 @@ def _run_one(job: _Job, r: int) -> _RunOut:
 
 
 # ---------------------------------------------------------------------------------------------
-# execution
-
-
-def _one_blas_thread() -> None:
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(limits=1)
-
-
-def _execute(job: _Job, runs: list[int], scheduler: str | None, workers: int) -> tuple[list[_RunOut], str]:
-    if scheduler is None and workers <= 1:
-        from threadpoolctl import threadpool_limits
-
-        # one BLAS thread as in the workers: results must not depend on the executor, and multi-threaded
-        # BLAS on 9x9 matrices made one smoother run ~10x slower (measured 0.65 s -> 7 s)
-        with threadpool_limits(limits=1):
-            return [_run_one(job, r) for r in runs], "in-process loop"
-    if scheduler is None:
-        with ProcessPoolExecutor(
-            max_workers=int(workers), mp_context=mp.get_context(), initializer=_one_blas_thread
-        ) as pool:
-            futs = [pool.submit(_run_one, job, r) for r in runs]
-            return [f.result() for f in futs], f"process pool ({workers} workers)"
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError as err:  # pragma: no cover - optional extra
-        raise NotImplementedError(
-            "a dask scheduler needs the optional dask extra: .venv/bin/pip install -e '.[dask]'"
-        ) from err
-    if scheduler == "local":
-        with (
-            LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
-            Client(cluster) as client,
-        ):
-            return _dask_map(client, job, runs), "dask LocalCluster (2 workers x 1 thread, processes)"
-    if scheduler.startswith(("tcp://", "tls://", "inproc://", "ucx://")):
-        with Client(scheduler) as client:
-            return _dask_map(client, job, runs), f"dask scheduler {scheduler}"
-    raise ValueError(f"scheduler must be None, 'local' or 'tcp://host:port', got {scheduler!r}")
-
-
-def _dask_map(client, job: _Job, runs: list[int]) -> list[_RunOut]:
-    client.run(_one_blas_thread)
-    job_f = client.scatter(job, broadcast=True)
-    futs = [client.submit(_run_one, job_f, r, pure=False, key=f"entry-validation-{job.seed}-{r}") for r in runs]
-    return client.gather(futs)
-
-
-# ---------------------------------------------------------------------------------------------
 # result
 
 
@@ -472,7 +385,8 @@ class ValidationResult:
     member each run took as its truth; ``failed`` (n_runs,) bool and ``messages`` (why);
     ``nees`` (n_runs, n) float32 smoothed NEES (9 dof, NaN for failed runs) of the Cartesian error
     state and ``nees_curvilinear`` the same with the curvilinear position error (horizontal +
-    altitude about the estimate, :func:`_errors_sigmas`); ``anees``, ``anees_curvilinear`` (n,)
+    altitude about the estimate, :func:`~workbench.problems.entry.scoring.errors_sigmas`); ``anees``,
+    ``anees_curvilinear`` (n,)
     their means over the successful runs, ``anees_forward``, ``anees_forward_curvilinear`` (n,)
     the forward pass's; ``anees_band`` the 95 % band ``anees_bounds(9, n_ok)``;
     ``error_names``/``error_units`` (:data:`ERROR_NAMES`),
@@ -682,9 +596,18 @@ def validate_smoother(
         seed=int(seed),
         t_fix=t_fix,
     )
-    runs = list(range(int(n_runs)))
-    outs, executor = _execute(job, runs, scheduler, int(workers))
-    outs = sorted(outs, key=lambda o: o.r)
+    # one BLAS thread in every executor: results must not depend on it, and multi-threaded BLAS on
+    # 9x9 matrices made one smoother run ~10x slower (measured 0.65 s -> 7 s)
+    run = run_monte_carlo(
+        _run_one,
+        int(n_runs),
+        shared=job,
+        seed=job.seed,
+        workers=int(workers),
+        scheduler=scheduler,
+        name=f"entry-validation-{job.seed}",
+    )
+    outs, executor = run.results, run.executor
 
     t = plain.t
     failed = np.array([o.failed for o in outs])
@@ -900,68 +823,46 @@ def prepare_validation(
     scenario: Any, paths: Mapping[str, Path], *, members: int | None = None, scheduler: str | None = None
 ) -> ValidationInputs:
     """The reconstruction stages up to the dispersion (AMELIA Sects. 4-6), configured as
-    :func:`workbench.problems.entry.pipeline.reconstruct` configures them: read the telemetry ``paths``,
-    preprocess, the nominal initial state (``paths["initial_state"]``, required), and the dispersion
-    with the scenario's ``[dispersion]`` settings (incl. ``refine_rounds`` if given; ``members``
-    overrides the member count; ``scheduler`` runs it on Dask).  Radar time tags are the valid packets'."""
-    from workbench.core.atmosphere import MarsEngineeringAtmosphere
-    from workbench.problems.entry.dispersion import AcceptanceRules, run_dispersion
-    from workbench.problems.entry.preprocess import preprocess, read_entry_telemetry
-
-    sc = scenario
-
-    def cfg(key, default, kind="float"):
-        return sc.get(key, default, kind=kind)
-
-    tm = read_entry_telemetry({k: v for k, v in paths.items() if k not in ("truth", "initial_state")})
-    imu = preprocess(tm, sc)
+    :func:`workbench.problems.entry.pipeline.reconstruct` configures them — from the same
+    :class:`~workbench.problems.entry.config.EntryConfig` of ``scenario``: read the telemetry ``paths``
+    (with the scenario's telemetry checks), preprocess, the nominal initial state
+    (``paths["initial_state"]``, required), and the dispersion with the scenario's ``[dispersion]``
+    settings (``members`` overrides the member count; ``scheduler`` runs it on Dask); the smoother
+    start of ``[reconstruction] initial``.  Radar time tags are the valid packets'."""
+    cfg = config_for(scenario)
     if "initial_state" not in paths or not Path(paths["initial_state"]).exists():
         # the estimator never reads truth.npz, not even for the nominal state
         raise FileNotFoundError("prepare_validation: no initial_state file among the telemetry paths")
-    from workbench.problems.entry.pipeline import read_nominal_state
-
+    tm = read_entry_telemetry(paths, cfg.checks)
+    imu = preprocess(tm, cfg.preprocess)
     nom = read_nominal_state(paths["initial_state"])
     v0, q0, p0 = nom.v_M, nom.q_M_G, nom.p_M
-    r_ground = MARS.reference_radius + cfg("site.terrain_m", -1440.0)
-    bridge_mode = cfg("reconstruction.bridge_mode", "relative", "str")
-    rules_t = sc.get("dispersion.rules", {}, kind="table")
-    rules = AcceptanceRules(**{k: tuple(float(x) for x in v) for k, v in rules_t.items()})
+    r_ground = R_MOLA + cfg.terrain_m
+    bridge_mode = cfg.bridge_mode
     disp = run_dispersion(
         imu,
         v0,
         q0,
         p0,
         {
-            "attitude": math.radians(cfg("dispersion.attitude_deg", 5.0)),
-            "velocity": cfg("dispersion.velocity_mps", 500.0),
-            "position": cfg("dispersion.position_m", 10000.0),
+            "attitude": math.radians(cfg.dispersion_attitude_deg),
+            "velocity": cfg.dispersion_velocity_mps,
+            "position": cfg.dispersion_position_m,
         },
-        int(members if members is not None else cfg("dispersion.members", 10000, "int")),
-        rules=rules,
+        int(members if members is not None else cfg.members),
+        rules=cfg.rules,
         events_t=tm.events,
         atmosphere=MarsEngineeringAtmosphere(),
-        chunk_size=cfg("dispersion.chunk_size", 1000, "int"),
-        seed=cfg("dispersion.seed", 2016, "int"),
+        chunk_size=cfg.chunk_size,
+        seed=cfg.dispersion_seed,
         scheduler=scheduler,
         n_cloud=0,
         r_ground=r_ground,
         bridge_mode=bridge_mode,
-        refine_rounds=cfg("dispersion.refine_rounds", 0, "int"),
+        refine_rounds=cfg.refine_rounds,
     )
-    start_mode, start, note = "dispersion", None, ""
-    try:  # the smoother start the pipeline uses ([reconstruction] initial)
-        from types import SimpleNamespace
-
-        from workbench.problems.entry.pipeline import _sigmas_P0, initial_for_smoother
-
-        st = initial_for_smoother(sc, disp, SimpleNamespace(v_M=v0, q_M_G=q0, p_M=p0), _sigmas_P0(sc))
-        start_mode, start, note = str(st.mode), (st.v0, st.q0, st.p0, st.P0), str(getattr(st, "note", ""))
-    except (ImportError, AttributeError, ValueError) as err:  # pipeline without that stage: the paper's start
-        note = f"pipeline start unavailable ({err}); the dispersion's refined state is used"
-    beams = beam_directions_G(
-        cfg("radar.squint_deg", 20.0),
-        tuple(float(a) for a in sc.get("radar.azimuths_deg", [0.0, 120.0, 240.0], kind="list")),
-    )
+    st = initial_for_smoother(cfg, disp, nom, reconstruction_P0(cfg))  # the pipeline's smoother start
+    beams = beam_directions_G(cfg.squint_deg, cfg.azimuths_deg)
     sr_ok = np.asarray(tm.sr_valid, bool)
     rda_ok = np.asarray(tm.rda_valid, bool)
     return ValidationInputs(
@@ -973,14 +874,14 @@ def prepare_validation(
         beams_G=beams,
         r_ground=float(r_ground),
         sigmas={
-            "slant_range": cfg("radar.slant_range_sigma_m", 100.0),
-            "slant_out": cfg("radar.slant_out_sigma_m", 100.0),
-            "velocity_out": cfg("radar.velocity_out_sigma_mps", 25.0),
+            "slant_range": cfg.slant_range_sigma_m,
+            "slant_out": cfg.slant_out_sigma_m,
+            "velocity_out": cfg.velocity_out_sigma_mps,
             "bridge_mode": bridge_mode,
         },
-        constrained=bool(sc.get("radar.constrained", True, kind="bool")),
+        constrained=cfg.constrained,
         events=dict(tm.events),
-        start_mode=start_mode,
-        start=start,
-        start_note=note,
+        start_mode=st.mode,
+        start=(st.v0, st.q0, st.p0, st.P0),
+        start_note=st.note,
     )

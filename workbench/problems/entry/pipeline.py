@@ -27,7 +27,6 @@ The reconstruction reads only the scenario, the telemetry files and the nominal 
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,20 +35,28 @@ import numpy as np
 
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
-from workbench.core.frames import julian_date_from_utc
-from workbench.core.rotation import attitude_error, quat_conjugate, quat_from_jpl, quat_normalize
+from workbench.core.frames import C_bodyfixed_mmed, julian_date_from_utc, planetocentric_from_cartesian
+from workbench.core.interpolation import interp_rows
+from workbench.core.rotation import attitude_error, quat_normalize
+from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nees
+from workbench.estimation.strapdown import integrate
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
+from workbench.models.radar import beam_directions_G
+from workbench.problems.entry.atmosphere import reconstruct_atmosphere
+from workbench.problems.entry.config import EntryConfig, config_for
+from workbench.problems.entry.dispersion import run_dispersion
+from workbench.problems.entry.filter import RadarData, run_entry_smoother
+from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
+from workbench.problems.entry.preprocess import preprocess
+from workbench.problems.entry.scoring import errors_sigmas
+from workbench.problems.entry.site import R_MOLA
+from workbench.problems.entry.telemetry import NominalState, read_entry_telemetry, read_nominal_state
+from workbench.problems.entry.winds import estimate_winds
 
 __all__ = [
-    "NominalState",
     "NominalIntegration",
-    "SmootherStart",
-    "initial_for_smoother",
     "EntryResult",
-    "telemetry_paths",
-    "read_nominal_state",
-    "write_nominal_state",
     "vehicle_for",
     "reconstruct",
     "score",
@@ -59,20 +66,6 @@ __all__ = [
     "epoch_utc",
 ]
 
-R_MOLA = MARS.reference_radius
-TELEMETRY_FILES = ("gnc", "gnc_nav", "rda_slant_range", "rda_out", "events", "initial_state")
-
-
-@dataclass(frozen=True)
-class NominalState:
-    """Nominal initial state at ``t0`` [s from EIP] (AMELIA Table 2): MMED velocity [m/s], position [m],
-    attitude ``q_M_G`` (converted from the JPL "MMED to GNC" quaternion at the file edge)."""
-
-    t0: float
-    v_M: np.ndarray
-    p_M: np.ndarray
-    q_M_G: np.ndarray
-    source: str = ""
 
 
 @dataclass(frozen=True)
@@ -114,135 +107,24 @@ def vehicle_for(scenario: Scenario) -> EntryVehicle:
     return load_vehicle(scenario.path_of("vehicle.file"))
 
 
-def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
-    """User telemetry named in ``[telemetry]``: gnc, gnc_nav, rda_slant_range, rda_out, events, initial_state."""
-    return {k: scenario.path_of(f"telemetry.{k}") for k in TELEMETRY_FILES}
-
-
-def write_nominal_state(path: Path, st: NominalState, comment: str = "") -> Path:
-    """Write ``initial_state.toml`` in the user format (km, km/s, JPL quaternion MMED→GNC)."""
-    from workbench.core.rotation import quat_to_jpl
-
-    q_jpl = quat_to_jpl(quat_conjugate(st.q_M_G))  # JPL of G w.r.t. M has the DCM C_G_M
-    f = lambda a: ", ".join(f"{x:.9f}" for x in a)  # noqa: E731
-    text = (
-        f"# Nominal initial state (AMELIA Table 2 format). {comment}\n"
-        "[initial_state]\n"
-        f"t0_s = {st.t0:.6f}                  # seconds from EIP\n"
-        f"position_km = [{f(st.p_M / 1e3)}]   # MMED\n"
-        f"velocity_kmps = [{f(st.v_M / 1e3)}] # MMED\n"
-        f"quaternion_jpl = [{f(q_jpl)}]       # JPL (Shuster) scalar-last, MMED to GNC\n"
-    )
-    from workbench.io.telemetry import atomic_write_text
-
-    return atomic_write_text(path, text)
-
-
-def read_nominal_state(path: Path) -> NominalState:
-    """Read ``initial_state.toml``; errors name the file and key."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as e:
-        raise ScenarioError(path, "initial_state", f"cannot read: {e}") from None
-    st = data.get("initial_state")
-    if not isinstance(st, dict):
-        raise ScenarioError(path, "initial_state", "missing [initial_state] table")
-
-    def vec(key: str, n: int) -> np.ndarray:
-        v = st.get(key)
-        if not isinstance(v, list) or len(v) != n or not all(isinstance(x, int | float) for x in v):
-            raise ScenarioError(path, f"initial_state.{key}", f"need a list of {n} numbers")
-        a = np.asarray(v, dtype=float)
-        if not np.all(np.isfinite(a)):
-            raise ScenarioError(path, f"initial_state.{key}", "not finite")
-        return a
-
-    q_jpl = vec("quaternion_jpl", 4)
-    nq = float(np.linalg.norm(q_jpl))
-    if abs(nq - 1.0) > 1e-3:
-        raise ScenarioError(path, "initial_state.quaternion_jpl", f"not a unit quaternion (norm {nq:.6f})")
-    t0 = st.get("t0_s")
-    if not isinstance(t0, int | float):
-        raise ScenarioError(path, "initial_state.t0_s", "need a number (s from EIP)")
-    q_M_G = quat_conjugate(quat_from_jpl(quat_normalize(q_jpl)))
-    return NominalState(float(t0), vec("velocity_kmps", 3) * 1e3, vec("position_km", 3) * 1e3, q_M_G, str(path))
-
-
 # ----------------------------------------------------------------------------------------- stages
-def _cfg(sc: Scenario, key: str, default, kind: str = "float"):
-    return sc.get(key, default, kind=kind)
-
-
-_CHOICES = {
-    "reconstruction.bridge_mode": ("relative", "paper"),
-    "reconstruction.initial": ("fused", "dispersion", "nominal"),
-    "winds.method": ("specific_force", "attitude"),
-    "atmosphere.fill_method": ("hydrostatic", "exponential"),
-}
-_RULES = ("mach_pdd", "h_pdd_m", "h_fsr_m", "h_end_m", "time_to_impact_s")
-
-
-def check_config(sc: Scenario) -> None:
-    """Validate the entry keys of a scenario up front; raise :class:`ScenarioError` naming the key.
-
-    Choices (``bridge_mode``, ``initial``, ``winds.method``, ``fill_method``), the dispersion rules
-    (known names, each ``[centre, half-width]`` with half-width > 0), the radar azimuths (3 numbers)
-    and the positive counts/sigmas.
-    """
-    for key, choices in _CHOICES.items():
-        v = sc.get(key, choices[0], kind="str")
-        if v not in choices:
-            raise ScenarioError(sc.path, key, f"{v!r}: use one of {', '.join(choices)}")
-    rules = sc.get("dispersion.rules", {}, kind="table")
-    for k, v in rules.items():
-        if k not in _RULES:
-            raise ScenarioError(sc.path, f"dispersion.rules.{k}", f"unknown rule; rules: {', '.join(_RULES)}")
-        if not (isinstance(v, list) and len(v) == 2 and all(isinstance(x, int | float) for x in v) and v[1] > 0):
-            raise ScenarioError(sc.path, f"dispersion.rules.{k}", "need [centre, half-width] with half-width > 0")
-    az = sc.get("radar.azimuths_deg", [0.0, 120.0, 240.0], kind="list")
-    if len(az) != 3 or not all(isinstance(x, int | float) for x in az):
-        raise ScenarioError(sc.path, "radar.azimuths_deg", "need 3 numbers (beams B1..B3)")
-    for key, default, kind in (
-        ("dispersion.members", 10000, "int"),
-        ("dispersion.chunk_size", 1000, "int"),
-        ("reconstruction.velocity_mps", 10.0, "float"),
-        ("reconstruction.attitude_deg", 1.0, "float"),
-        ("reconstruction.position_m", 2000.0, "float"),
-        ("radar.slant_range_sigma_m", 100.0, "float"),
-        ("radar.slant_out_sigma_m", 100.0, "float"),
-        ("radar.velocity_out_sigma_mps", 25.0, "float"),
-        ("atmosphere.max_iterations", 10, "int"),
-        ("atmosphere.tolerance", 0.01, "float"),
-    ):
-        if sc.get(key, default, kind=kind) <= 0:
-            raise ScenarioError(sc.path, key, "must be > 0")
-    try:
-        julian_date_from_utc(sc.get("scenario.epoch_utc", "2016-10-19T14:42:22.132Z", kind="str"))
-    except ValueError as e:
-        raise ScenarioError(sc.path, "scenario.epoch_utc", str(e)) from None
-
-
-def _sigmas_P0(sc: Scenario) -> np.ndarray:
-    """Reconstruction initial covariance from Table 3 ("Reconstruction" column), (9, 9)."""
-    s_v = _cfg(sc, "reconstruction.velocity_mps", 10.0)
-    s_a = np.radians(_cfg(sc, "reconstruction.attitude_deg", 1.0))
-    s_p = _cfg(sc, "reconstruction.position_m", 2000.0)
-    return np.diag(np.r_[np.full(3, s_v**2), np.full(3, s_a**2), np.full(3, s_p**2)])
+def check_config(sc: Scenario) -> EntryConfig:
+    """Validate the entry keys of a scenario up front and return its :class:`EntryConfig`; raise
+    :class:`ScenarioError` naming the file, table and key (unknown keys, types, choices, the
+    dispersion rules, positive counts and sigmas, the epoch)."""
+    return config_for(sc)
 
 
 def _nominal_integration(imu, nom: NominalState, tm, P0: np.ndarray, bridge_mode: str) -> NominalIntegration:
-    from workbench.estimation.strapdown import integrate
-
-    sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode)
+    sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode, body=MARS)
     # validation against the on-board solution before PDD (afterwards the on-board attitude is wrong)
     t_pdd = tm.events.get("PDD", np.inf)
     m = (tm.t_nav >= sp.t[0]) & (tm.t_nav <= min(t_pdd, sp.t[-1]))
     if not m.any():
         return NominalIntegration(sp, None, None, None, None, {})
     tn = tm.t_nav[m]
-    pi = np.column_stack([np.interp(tn, sp.t, sp.p_M[:, i]) for i in range(3)])
-    vi = np.column_stack([np.interp(tn, sp.t, sp.v_M[:, i]) for i in range(3)])
+    pi = interp_rows(tn, sp.t, sp.p_M)
+    vi = interp_rows(tn, sp.t, sp.v_M)
     dp = np.linalg.norm(pi - tm.p_M_nav[m], axis=1)
     dv = np.linalg.norm(vi - tm.v_M_nav[m], axis=1)
     k = np.searchsorted(sp.t, tn).clip(0, sp.t.size - 1)
@@ -257,44 +139,6 @@ def _nominal_integration(imu, nom: NominalState, tm, P0: np.ndarray, bridge_mode
         }
     }
     return NominalIntegration(sp, tn, dp, dv, dth, summ)
-
-
-@dataclass(frozen=True)
-class SmootherStart:
-    """Initial state of the radar-aided smoother: ``mode`` ("fused", "dispersion" or "nominal"), state
-    ``v0`` [m/s], ``q0`` (``q_M_G``), ``p0`` [m], covariance ``P0`` (9, 9), and a note."""
-
-    mode: str
-    v0: np.ndarray
-    q0: np.ndarray
-    p0: np.ndarray
-    P0: np.ndarray
-    note: str
-
-
-def initial_for_smoother(sc: Scenario, disp, nom: NominalState, P_nav: np.ndarray) -> SmootherStart:
-    """The smoother's initial state from ``[reconstruction] initial`` (default "fused").
-
-    "dispersion": the paper's refined state (mean and spread of the accepted members);
-    "fused": that constraint combined with the navigation prior ``P_nav`` (Table 3, reconstruction
-    column) about the nominal (:func:`~workbench.problems.entry.dispersion.fuse_with_prior`);
-    "nominal": the nominal state with ``P_nav``.  Falls back to "nominal" (with a note) when fewer
-    than 10 members were accepted.
-    """
-    from workbench.problems.entry.dispersion import fuse_with_prior
-
-    mode = sc.get("reconstruction.initial", "fused", kind="str")
-    if mode not in ("fused", "dispersion", "nominal"):
-        raise ScenarioError(sc.path, "reconstruction.initial", f"{mode!r}: use fused, dispersion or nominal")
-    n_acc = int(np.sum(disp.accepted))
-    if mode != "nominal" and n_acc < 10:
-        return SmootherStart("nominal", nom.v_M, nom.q_M_G, nom.p_M, P_nav, f"only {n_acc} accepted: nominal used")
-    if mode == "dispersion":
-        return SmootherStart(mode, disp.refined_v0, disp.refined_q0, disp.refined_p0, disp.refined_P0, "")
-    if mode == "nominal":
-        return SmootherStart(mode, nom.v_M, nom.q_M_G, nom.p_M, P_nav, "")
-    f = fuse_with_prior(disp, nom.v_M, nom.q_M_G, nom.p_M, P_nav)
-    return SmootherStart(mode, f.v0, f.q0, f.p0, f.P0, f"rules constrain {f.constrained_dims} of 9 directions")
 
 
 def _phase(t: np.ndarray, events: dict) -> np.ndarray:
@@ -314,22 +158,15 @@ def reconstruct(
 ) -> Iterator[object]:
     """Run the entry reconstruction; yields the stages in order, the last an :class:`EntryResult`.
 
-    ``paths``: the telemetry files (keys of :data:`TELEMETRY_FILES`); ``scheduler``: None (in-process),
-    ``"local"`` (Dask LocalCluster) or ``"tcp://host:port"`` for the dispersion; ``members`` overrides
-    ``[dispersion] members``.
+    ``paths``: the telemetry files (keys of :data:`~workbench.problems.entry.telemetry.STREAMS`);
+    ``scheduler``: None (in-process), ``"local"`` (Dask LocalCluster) or ``"tcp://host:port"`` for the
+    dispersion; ``members`` overrides ``[dispersion] members``.
     """
-    from workbench.models.radar import beam_directions_G
-    from workbench.problems.entry.atmosphere import reconstruct_atmosphere
-    from workbench.problems.entry.dispersion import AcceptanceRules, run_dispersion
-    from workbench.problems.entry.filter import RadarData, run_entry_smoother
-    from workbench.problems.entry.preprocess import preprocess, read_entry_telemetry
-    from workbench.problems.entry.winds import estimate_winds
-
     sc = scenario
-    check_config(sc)
+    cfg = config_for(sc)  # unknown or mistyped keys are errors before any work
     vehicle = vehicle_for(sc)
-    r_ground = R_MOLA + _cfg(sc, "site.terrain_m", -1440.0)
-    tm = read_entry_telemetry(paths, sc)
+    r_ground = R_MOLA + cfg.terrain_m
+    tm = read_entry_telemetry(paths, cfg.checks)
     for ev in ("PDD", "FSR"):
         if ev not in tm.events:
             raise ScenarioError(Path(paths["events"]), ev, "event missing (needed for the dispersion rules and phases)")
@@ -340,7 +177,7 @@ def reconstruct(
                 f"at {tm.events[ev]:.3f} s, outside the GNC data {tm.t_gnc[0]:.3f}–{tm.t_gnc[-1]:.3f} s",
             )
     yield tm
-    imu = preprocess(tm, sc)
+    imu = preprocess(tm, cfg.preprocess)
     yield imu
     nom = read_nominal_state(paths["initial_state"])
     if abs(nom.t0 - float(imu.t[0])) > 0.05:
@@ -350,20 +187,18 @@ def reconstruct(
             f"{nom.t0:.3f} s, but the IMU data start at {float(imu.t[0]):.3f} s: the state must be given at the first "
             "sample with an acceleration",
         )
-    bridge_mode = _cfg(sc, "reconstruction.bridge_mode", "relative", "str")
-    P0 = _sigmas_P0(sc)
+    bridge_mode = cfg.bridge_mode
+    P0 = reconstruction_P0(cfg)
     nomi = _nominal_integration(imu, nom, tm, P0, bridge_mode)
     yield nomi
 
     # ---- dispersion (Sect. 6)
-    rules_t = sc.get("dispersion.rules", {}, kind="table")
-    rules = AcceptanceRules(**{k: tuple(float(x) for x in v) for k, v in rules_t.items()})
     sig = {
-        "attitude": np.radians(_cfg(sc, "dispersion.attitude_deg", 5.0)),
-        "velocity": _cfg(sc, "dispersion.velocity_mps", 500.0),
-        "position": _cfg(sc, "dispersion.position_m", 10000.0),
+        "attitude": np.radians(cfg.dispersion_attitude_deg),
+        "velocity": cfg.dispersion_velocity_mps,
+        "position": cfg.dispersion_position_m,
     }
-    n_mem = int(members if members is not None else _cfg(sc, "dispersion.members", 10000, "int"))
+    n_mem = int(members if members is not None else cfg.members)
     disp = run_dispersion(
         imu,
         nom.v_M,
@@ -371,23 +206,21 @@ def reconstruct(
         nom.p_M,
         sig,
         n_mem,
-        rules=rules,
+        rules=cfg.rules,
         events_t=tm.events,
         atmosphere=MarsEngineeringAtmosphere(),
-        chunk_size=_cfg(sc, "dispersion.chunk_size", 1000, "int"),
-        seed=_cfg(sc, "dispersion.seed", 2016, "int"),
+        chunk_size=cfg.chunk_size,
+        seed=cfg.dispersion_seed,
         scheduler=scheduler,
-        n_cloud=_cfg(sc, "dispersion.cloud", 300, "int"),
+        n_cloud=cfg.cloud,
         r_ground=r_ground,
         bridge_mode=bridge_mode,
-        refine_rounds=_cfg(sc, "dispersion.refine_rounds", 0, "int"),
+        refine_rounds=cfg.refine_rounds,
     )
     yield disp
 
     # ---- radar-aided smoother (Sects. 7-8) from the refined state
-    beams = beam_directions_G(
-        _cfg(sc, "radar.squint_deg", 20.0), tuple(sc.get("radar.azimuths_deg", [0.0, 120.0, 240.0], kind="list"))
-    )
+    beams = beam_directions_G(cfg.squint_deg, cfg.azimuths_deg)
     radar = RadarData(
         t_sr=tm.t_sr,
         slant_ranges=tm.slant_ranges,
@@ -399,7 +232,7 @@ def reconstruct(
         beams_G=beams,
         r_ground=r_ground,
     )
-    init = initial_for_smoother(sc, disp, nom, P0)
+    init = initial_for_smoother(cfg, disp, nom, P0)
     yield init
     v0, q0, p0, P0_ref = init.v0, init.q0, init.p0, init.P0
     filt = run_entry_smoother(
@@ -410,12 +243,12 @@ def reconstruct(
         p0,
         P0_ref,
         sigmas={
-            "slant_range": _cfg(sc, "radar.slant_range_sigma_m", 100.0),
-            "slant_out": _cfg(sc, "radar.slant_out_sigma_m", 100.0),
-            "velocity_out": _cfg(sc, "radar.velocity_out_sigma_mps", 25.0),
+            "slant_range": cfg.slant_range_sigma_m,
+            "slant_out": cfg.slant_out_sigma_m,
+            "velocity_out": cfg.velocity_out_sigma_mps,
             "bridge_mode": bridge_mode,
         },
-        constrained=sc.get("radar.constrained", True, kind="bool"),
+        constrained=cfg.constrained,
     )
     yield filt
 
@@ -435,18 +268,18 @@ def reconstruct(
         vehicle,
         default_atmosphere=MarsEngineeringAtmosphere(),
         sigmas={
-            "cd": _cfg(sc, "atmosphere.cd_sigma", 0.10),
-            "wind": _cfg(sc, "atmosphere.wind_sigma_mps", 10.0),
-            "accel": _cfg(sc, "reconstruction.accel_mps2", 0.001),
+            "cd": cfg.cd_sigma,
+            "wind": cfg.wind_sigma_mps,
+            "accel": cfg.accel_mps2,
         },
         events=tm.events,
-        molar_mass=_cfg(sc, "atmosphere.molar_mass_g_per_mol", 43.41) / 1e3,
-        tolerance=_cfg(sc, "atmosphere.tolerance", 0.01),
-        max_iterations=_cfg(sc, "atmosphere.max_iterations", 10, "int"),
-        fill_method=sc.get("atmosphere.fill_method", "hydrostatic", kind="str"),
+        molar_mass=cfg.molar_mass_g_per_mol / 1e3,
+        tolerance=cfg.tolerance,
+        max_iterations=cfg.max_iterations,
+        fill_method=cfg.fill_method,
     )
     yield atm
-    wind_method = sc.get("winds.method", "specific_force", kind="str")
+    wind_method = cfg.wind_method
     winds = estimate_winds(
         sm.t, sm.p_M, sm.v_M, sm.q_M_G, sm.P, imu.f_G, ph, vehicle, atm, events=tm.events, method=wind_method
     )
@@ -481,14 +314,16 @@ def reconstruct(
 # ----------------------------------------------------------------------------------------- summary
 def epoch_utc(sc: Scenario, tm=None) -> str:
     """UTC of t = 0 (EIP): ``[scenario] epoch_utc``, else the telemetry's ``# epoch_utc:`` line."""
-    if sc.has("scenario.epoch_utc"):
-        return sc.get("scenario.epoch_utc", kind="str")
+    epoch = config_for(sc).epoch_utc
+    if epoch is not None:
+        return epoch
     if tm is not None and getattr(tm, "epoch_utc", ""):
         return str(tm.epoch_utc)
     raise ScenarioError(sc.path, "scenario.epoch_utc", "missing, and the telemetry has no '# epoch_utc:' line")
 
 
-def _jd0(sc: Scenario, tm=None) -> float:
+def epoch_jd_tdb(sc: Scenario, tm=None) -> float:
+    """Julian date (TDB) of t = 0 (EIP), from :func:`epoch_utc` (``core.frames.julian_date_from_utc``)."""
     return julian_date_from_utc(epoch_utc(sc, tm))
 
 
@@ -496,9 +331,7 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
     """AMELIA Table 5 analogue: event, t [s], UTC, east longitude / latitude [deg], altitude AMR [km]."""
     import datetime as dt
 
-    from workbench.core.frames import C_bodyfixed_mmed, planetocentric_from_cartesian
-
-    jd0 = _jd0(sc, tm)
+    jd0 = epoch_jd_tdb(sc, tm)
     epoch = dt.datetime.fromisoformat(epoch_utc(sc, tm).replace("Z", "+00:00"))
     rows = []
     names = [("First data", float(t[0]))] + sorted(events.items(), key=lambda kv: kv[1]) + [("Last data", float(t[-1]))]
@@ -507,7 +340,7 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
         if not (t[0] - 1e-9 <= te <= t[-1] + step + 1e-9):  # an event up to one sample after the end (BSR)
             continue
         te_pos = min(te, float(t[-1]))
-        p = np.array([np.interp(te_pos, t, p_M[:, i]) for i in range(3)])
+        p = interp_rows(te_pos, t, p_M)
         rF = C_bodyfixed_mmed(MARS, jd0 + te_pos / 86400.0) @ p
         lat, lon, r = planetocentric_from_cartesian(rF)
         rows.append(
@@ -525,8 +358,6 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
 
 
 def _summary(sc, tm, imu, nomi, disp, filt, atm, winds, r_ground) -> dict:
-    from workbench.estimation.consistency import is_symmetric_pd
-
     sm = filt.smoothed
     sym, pd = is_symmetric_pd(sm.P)
     out = {
@@ -588,17 +419,11 @@ def _radial_var(p: np.ndarray, P: np.ndarray) -> float:
 
 # ----------------------------------------------------------------------------------------- scoring
 def _truth_rows(truth: dict, key: str, t: np.ndarray) -> np.ndarray:
-    a = np.asarray(truth[key], float)
-    tt = np.asarray(truth["t"], float)
-    if a.ndim == 1:
-        return np.interp(t, tt, a)
-    return np.column_stack([np.interp(t, tt, a[:, i]) for i in range(a.shape[1])])
+    return interp_rows(t, truth["t"], truth[key])
 
 
 def score(result: EntryResult, truth: dict) -> dict:
     """Accuracy and consistency of a reconstruction against the synthetic truth (scoring only)."""
-    from workbench.estimation.consistency import chi2_interval, nees
-
     sm = result.filter.smoothed
     t = sm.t
     pT = _truth_rows(truth, "p_M", t)
@@ -623,9 +448,7 @@ def score(result: EntryResult, truth: dict) -> dict:
             "median_3sigma_m": float(np.median(3 * sd_h[m])),
         }
     lo, hi = chi2_interval(9)
-    from workbench.problems.entry.montecarlo import _errors_sigmas
-
-    _, e_c, _, _ = _errors_sigmas(sm, vT, qT, pT)
+    _, e_c, _, _ = errors_sigmas(sm, vT, qT, pT)
     ne_c = nees(e_c, sm.P)
     out["nees_smoothed_curvilinear"] = {
         "mean": float(np.mean(ne_c)),

@@ -1,25 +1,5 @@
-"""Entry telemetry: reading with defect checks, and the preprocessing of AMELIA Sect. 4.
-
-Reading (:func:`read_entry_telemetry`) turns the five telemetry files of an entry scenario
-(``gnc``, ``gnc_nav``, ``rda_slant_range``, ``rda_out``, ``events``; format in
-``pipelines/entry_synthetic.py`` and ``io/FORMATS.md``) into an :class:`EntryTelemetry` in SI.
-
-Defect policy — nothing is silently integrated; every finding names file, column and row:
-
-* format defects are **errors** (:class:`~workbench.io.telemetry.TelemetryError`, raised by
-  ``read_telemetry``): NaN/inf or unparsable cells (a NaN burst lists up to 20 rows and the
-  total), duplicated packets (repeated time) and out-of-order packets (time going backwards),
-  missing columns, wrong units, negative ranges;
-* a quaternion whose norm departs from 1 by more than ``quat_error_tol`` (1e-3) is an **error**;
-  by more than ``quat_warn_tol`` (1e-6) but less, a **WARN** and it is normalised;
-* a radar packet with a zero range where data is expected (after the first
-  ``zero_filled_packets`` slant-range packets, which Schiaparelli sent zero-filled: INFO) or a
-  zero slant-out / all-zero velocity-out is a **WARN** and the packet is marked invalid
-  (``sr_valid`` / ``rda_valid`` False) — never used as a range of 0 m;
-* empty acceleration cells (the ``a_*`` columns are sparse: the real TM stops the acceleration
-  before the rate) set ``a_valid`` False; outside a trailing block they are a WARN; those rows
-  are left out of the IMU grid (so a long run of them becomes a bridged gap);
-* repeated events: WARN, the first is used.
+"""Preprocessing of the entry telemetry (AMELIA Sect. 4): from the ``EntryTelemetry`` as read
+(:mod:`workbench.problems.entry.telemetry`) to the strapdown input :class:`PreprocessedIMU`.
 
 Preprocessing (:func:`preprocess`, AMELIA Sect. 4 and 5):
 
@@ -68,10 +48,7 @@ Reference: Aboudan et al., Space Sci. Rev. 214:97 (2018), Sects. 3–5, Tables 1
 from __future__ import annotations
 
 import math
-import os
-from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline, CubicSpline
@@ -79,66 +56,23 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from workbench.core.bodies import MARS, Body
 from workbench.core.gravity import gravity_j2
-from workbench.core.rotation import quat_conjugate, quat_from_jpl, quat_rotate, quat_to_dcm
+from workbench.core.rotation import quat_conjugate, quat_rotate, quat_to_dcm
 from workbench.estimation.strapdown import GapBridge
-from workbench.io.scenario import Scenario
-from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, read_events, read_telemetry
+from workbench.problems.entry.telemetry import EntryTelemetry, true_runs
 
 __all__ = [
-    "STREAMS",
-    "EntryTelemetry",
     "GapBridge",
     "PreprocessedIMU",
     "PreprocessConfig",
-    "telemetry_paths",
-    "read_entry_telemetry",
     "onboard_nav_at",
     "rebuild_saturated_rate",
     "preprocess",
 ]
 
-#: Telemetry streams of an entry scenario ([telemetry] keys); the radar ones are optional.
-STREAMS = ("gnc", "gnc_nav", "rda_slant_range", "rda_out", "events")
-_OPTIONAL = ("rda_slant_range", "rda_out")
-
 
 # --------------------------------------------------------------------------------------------
 # data model
 # --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class EntryTelemetry:
-    """Entry telemetry as read, SI, ``t`` [s] from EIP.
-
-    ``t_gnc`` (n,), ``w_G`` (n,3) [rad/s] body rate, ``q_M_G_nav`` (n,4) on-board attitude
-    (normalised), ``a_M_total`` (n,3) [m/s²] on-board inertial acceleration incl. gravity (NaN
-    where ``a_valid`` is False); ``t_nav`` (m,), ``p_M_nav``, ``v_M_nav`` (m,3) [m, m/s];
-    ``t_sr`` (k,), ``slant_ranges`` (k,4) [m], ``sr_valid`` (k,); ``t_rda`` (j,), ``slant_out``
-    (j,) [m], ``v_out_G`` (j,3) [m/s], ``rda_valid`` (j,); ``events`` name → t; ``epoch_utc``
-    (metadata); ``problems`` the WARN/INFO findings (located, see the module docstring);
-    ``files`` stream → path.
-    """
-
-    t_gnc: np.ndarray
-    w_G: np.ndarray
-    q_M_G_nav: np.ndarray
-    a_M_total: np.ndarray
-    a_valid: np.ndarray
-    t_nav: np.ndarray
-    p_M_nav: np.ndarray
-    v_M_nav: np.ndarray
-    t_sr: np.ndarray
-    slant_ranges: np.ndarray
-    sr_valid: np.ndarray
-    t_rda: np.ndarray
-    slant_out: np.ndarray
-    v_out_G: np.ndarray
-    rda_valid: np.ndarray
-    events: dict[str, float]
-    epoch_utc: str
-    problems: list[str]
-    files: dict[str, Path]
 
 
 @dataclass(frozen=True)
@@ -203,255 +137,6 @@ class PreprocessConfig:
             raise ValueError(f"nav_interpolation must be 'acceleration' or 'cubic', got {self.nav_interpolation!r}")
         if self.gap_factor <= 1.0:
             raise ValueError(f"gap_factor must be > 1, got {self.gap_factor}")
-
-    @classmethod
-    def from_scenario(cls, scenario: Scenario) -> PreprocessConfig:
-        """Read the optional ``[preprocess]`` table: saturation_dps, saturation_margin_dps,
-        gap_factor, resample_hz, resample_window_s, nav_interpolation, rebuild_neighbours,
-        rebuild_from_accel, and the per-sample sigmas sigma_rate_dps, sigma_accel_mps2,
-        sigma_rate_saturated_dps, sigma_rate_resampled_dps — which default to ``[reconstruction]``
-        rate_dps, accel_mps2, rate_pdd_dps (AMELIA Table 3) — and sigma_accel_resampled_mps2."""
-        g = scenario.get
-        d = cls()
-
-        def pick(key: str, fallback: str, default: float) -> float:
-            return g(f"preprocess.{key}", g(f"reconstruction.{fallback}", default, kind="float"), kind="float")
-
-        return cls(
-            sigma_w=math.radians(pick("sigma_rate_dps", "rate_dps", 0.01)),
-            sigma_f=pick("sigma_accel_mps2", "accel_mps2", d.sigma_f),
-            sigma_w_saturated=math.radians(pick("sigma_rate_saturated_dps", "rate_pdd_dps", 10.0)),
-            sigma_w_resampled=math.radians(pick("sigma_rate_resampled_dps", "rate_pdd_dps", 10.0)),
-            sigma_f_resampled=g("preprocess.sigma_accel_resampled_mps2", d.sigma_f_resampled, kind="float"),
-            saturation=math.radians(g("preprocess.saturation_dps", 187.5, kind="float")),
-            saturation_margin=math.radians(g("preprocess.saturation_margin_dps", 0.05, kind="float")),
-            gap_factor=g("preprocess.gap_factor", d.gap_factor, kind="float"),
-            resample_rate_hz=g("preprocess.resample_hz", d.resample_rate_hz, kind="float"),
-            resample_window_s=g("preprocess.resample_window_s", d.resample_window_s, kind="float"),
-            nav_interpolation=g("preprocess.nav_interpolation", d.nav_interpolation, kind="str"),
-            rebuild_neighbours=g("preprocess.rebuild_neighbours", d.rebuild_neighbours, kind="int"),
-            rebuild_from_accel=g("preprocess.rebuild_from_accel", d.rebuild_from_accel, kind="bool"),
-        )
-
-
-# --------------------------------------------------------------------------------------------
-# reading
-# --------------------------------------------------------------------------------------------
-
-
-def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
-    """Telemetry files named by the scenario's ``[telemetry]`` table (relative to the file);
-    ``gnc``, ``gnc_nav`` and ``events`` are required, the radar streams optional."""
-    paths = {k: scenario.path_of(f"telemetry.{k}") for k in STREAMS if k not in _OPTIONAL}
-    for k in _OPTIONAL:
-        if scenario.has(f"telemetry.{k}"):
-            paths[k] = scenario.path_of(f"telemetry.{k}")
-    return paths
-
-
-def _note(level: str, file, column: str | None, row: int | None, reason: str) -> str:
-    return f"{level}: {Problem(str(file), column, row, None, reason)}"
-
-
-def _header(tel, name: str) -> str:
-    return f"{name} [{tel.units[name]}]"
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """Inclusive (start, end) index pairs of the True runs of a 1-D mask."""
-    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
-    return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(), strict=True))
-
-
-def read_entry_telemetry(
-    source: Scenario | Mapping[str, str | os.PathLike],
-    scenario: Scenario | None = None,
-    *,
-    quat_error_tol: float | None = None,
-    quat_warn_tol: float | None = None,
-    zero_filled_packets: int | None = None,
-) -> EntryTelemetry:
-    """Read and check the entry telemetry of a scenario (its ``[telemetry]`` table) or of a
-    ``{stream: path}`` mapping (keys of :data:`STREAMS`; other keys are ignored).
-
-    Check settings: the keyword arguments, else the scenario's (``source`` or ``scenario``)
-    ``preprocess.quat_error_tol`` (1e-3), ``preprocess.quat_warn_tol`` (1e-6) and
-    ``sensors.radar.zero_filled_packets`` (2: the first two slant-range packets are expected
-    zero-filled).  Raises :class:`~workbench.io.telemetry.TelemetryError` (file, column, row) for
-    format defects and non-unit quaternions; returns the softer findings in ``problems``
-    (policy in the module docstring).
-    """
-    sc = source if isinstance(source, Scenario) else scenario
-    if quat_error_tol is None:
-        quat_error_tol = sc.get("preprocess.quat_error_tol", 1e-3, kind="float") if sc else 1e-3
-    if quat_warn_tol is None:
-        quat_warn_tol = sc.get("preprocess.quat_warn_tol", 1e-6, kind="float") if sc else 1e-6
-    if zero_filled_packets is None:
-        zero_filled_packets = sc.get("sensors.radar.zero_filled_packets", 2, kind="int") if sc else 2
-    if isinstance(source, Scenario):
-        paths = telemetry_paths(source)
-    else:
-        paths = {k: Path(v) for k, v in source.items() if k in STREAMS}
-        missing = [k for k in STREAMS if k not in _OPTIONAL and k not in paths]
-        if missing:
-            raise ValueError(f"read_entry_telemetry: missing telemetry stream(s) {missing}; give {STREAMS}")
-    problems: list[str] = []
-
-    # ---- GNC 10 Hz ---------------------------------------------------------------------------
-    req = {f"w_{a}": "angular_rate" for a in "xyz"}
-    req.update({f"q{i}": "dimensionless" for i in range(1, 5)})
-    req.update({f"a_{a}": "acceleration" for a in "xyz"})
-    gnc = read_telemetry(paths["gnc"], required=req, sparse=[f"a_{a}" for a in "xyz"])
-    fname = str(paths["gnc"])
-    q_raw = gnc.stack([f"q{i}" for i in range(1, 5)])
-    norm = np.linalg.norm(q_raw, axis=1)
-    dev = np.abs(norm - 1.0)
-    qcol = f"{_header(gnc, 'q1')}..{_header(gnc, 'q4')}"
-    bad = np.flatnonzero(dev > quat_error_tol)
-    if bad.size:
-        raise TelemetryError(
-            [
-                Problem(
-                    fname,
-                    qcol,
-                    int(r) + 1,
-                    None,
-                    f"quaternion norm {norm[r]:.6g} is not 1 (tolerance {quat_error_tol:g})",
-                )
-                for r in bad[:MAX_PROBLEMS]
-            ],
-            int(bad.size),
-        )
-    small = np.flatnonzero(dev > quat_warn_tol)
-    for r in small[:MAX_PROBLEMS]:
-        problems.append(
-            _note("WARN", fname, qcol, int(r) + 1, f"quaternion norm {norm[r]:.9g} is not unit: normalised")
-        )
-    if small.size > MAX_PROBLEMS:
-        problems.append(_note("WARN", fname, qcol, None, f"{small.size} non-unit quaternions in all, normalised"))
-    q_M_G = quat_conjugate(quat_from_jpl(q_raw / norm[:, None]))  # JPL MMED->GNC -> Hamilton q_M_G (raw numbers)
-    a_M = gnc.stack([f"a_{a}" for a in "xyz"])
-    a_valid = np.all(np.isfinite(a_M), axis=1)
-    for i0, i1 in _runs(~a_valid):
-        partial = np.isfinite(a_M[i0 : i1 + 1]).any()
-        if i1 == a_valid.size - 1 and not partial:
-            problems.append(
-                _note(
-                    "INFO",
-                    fname,
-                    "a_x..a_z",
-                    i0 + 1,
-                    f"acceleration ends at t = {gnc.time[i0 - 1]:.3f} s" if i0 else "no acceleration",
-                )
-            )
-            continue
-        problems.append(
-            _note(
-                "WARN",
-                fname,
-                "a_x..a_z",
-                i0 + 1,
-                f"acceleration missing in rows {i0 + 1}–{i1 + 1} (t = {gnc.time[i0]:.3f}–{gnc.time[i1]:.3f} s): "
-                "rows left out of the IMU grid",
-            )
-        )
-
-    # ---- on-board navigation 1 Hz -----------------------------------------------------------
-    req_nav = {f"p_{a}": "length" for a in "xyz"}
-    req_nav.update({f"v_{a}": "velocity" for a in "xyz"})
-    nav = read_telemetry(paths["gnc_nav"], required=req_nav)
-
-    # ---- radar --------------------------------------------------------------------------------
-    t_sr, sr, sr_valid = np.empty(0), np.empty((0, 4)), np.empty(0, bool)
-    if "rda_slant_range" in paths:
-        names = [f"B{i}" for i in range(4)]
-        tel = read_telemetry(
-            paths["rda_slant_range"], required=dict.fromkeys(names, "length"), limits=dict.fromkeys(names, (0.0, 1e7))
-        )
-        t_sr, sr = tel.time.copy(), tel.stack(names)
-        zero = sr == 0.0
-        sr_valid = ~zero.any(axis=1)
-        f = str(paths["rda_slant_range"])
-        for r in np.flatnonzero(~sr_valid):
-            cols = ",".join(_header(tel, names[j]) for j in np.flatnonzero(zero[r]))
-            if r < zero_filled_packets and zero[r].all():
-                problems.append(
-                    _note(
-                        "INFO", f, cols, int(r) + 1, "zero-filled slant-range packet (expected at RDA start): not used"
-                    )
-                )
-            else:
-                problems.append(
-                    _note(
-                        "WARN",
-                        f,
-                        cols,
-                        int(r) + 1,
-                        f"radar packet of zeros where data is expected (t = {t_sr[r]:.3f} s): marked invalid, not used",
-                    )
-                )
-    t_rda, so, vo, rda_valid = np.empty(0), np.empty(0), np.empty((0, 3)), np.empty(0, bool)
-    if "rda_out" in paths:
-        vn = [f"v_out_{a}" for a in "xyz"]
-        req_r = {"slant_out": "length", **dict.fromkeys(vn, "velocity")}
-        tel = read_telemetry(paths["rda_out"], required=req_r, limits={"slant_out": (0.0, 1e7)})
-        t_rda, so, vo = tel.time.copy(), tel.channel("slant_out").copy(), tel.stack(vn)
-        zero_so = so == 0.0
-        zero_v = np.all(vo == 0.0, axis=1)
-        rda_valid = ~(zero_so | zero_v)
-        f = str(paths["rda_out"])
-        bad = np.flatnonzero(~rda_valid)
-        for r in bad[:MAX_PROBLEMS]:
-            col = _header(tel, "slant_out") if zero_so[r] else ",".join(_header(tel, n) for n in vn)
-            problems.append(
-                _note(
-                    "WARN",
-                    f,
-                    col,
-                    int(r) + 1,
-                    f"radar packet of zeros (t = {t_rda[r]:.3f} s): marked invalid, not used",
-                )
-            )
-        if bad.size > MAX_PROBLEMS:
-            problems.append(_note("WARN", f, None, None, f"{bad.size} zero radar packets in all, marked invalid"))
-
-    # ---- events -------------------------------------------------------------------------------
-    events: dict[str, float] = {}
-    for t_e, name in read_events(paths["events"]):
-        if name in events:
-            problems.append(
-                _note(
-                    "WARN",
-                    paths["events"],
-                    "event",
-                    None,
-                    f"event {name!r} repeated at {t_e:.4f} s; the first, at {events[name]:.4f} s, is used",
-                )
-            )
-            continue
-        events[name] = float(t_e)
-
-    return EntryTelemetry(
-        t_gnc=gnc.time.copy(),
-        w_G=gnc.stack([f"w_{a}" for a in "xyz"]),
-        q_M_G_nav=q_M_G,
-        a_M_total=a_M,
-        a_valid=a_valid,
-        t_nav=nav.time.copy(),
-        p_M_nav=nav.stack([f"p_{a}" for a in "xyz"]),
-        v_M_nav=nav.stack([f"v_{a}" for a in "xyz"]),
-        t_sr=t_sr,
-        slant_ranges=sr,
-        sr_valid=sr_valid,
-        t_rda=t_rda,
-        slant_out=so,
-        v_out_G=vo,
-        rda_valid=rda_valid,
-        events=events,
-        epoch_utc=gnc.meta.get("epoch_utc", ""),
-        problems=problems,
-        files=dict(paths),
-    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -652,7 +337,7 @@ def rebuild_saturated_rate(
     for ax in range(3):
         for sgn in (1.0, -1.0):
             m = sat[:, ax] & (np.sign(w[:, ax]) == sgn)
-            for i0, i1 in _runs(m):
+            for i0, i1 in true_runs(m):
                 left, right = [], []
                 k = i0 - 1
                 while k >= 0 and len(left) < n_side and not sat[k, ax] and segment[k] == segment[i0]:
@@ -702,18 +387,14 @@ def rebuild_saturated_rate(
 # --------------------------------------------------------------------------------------------
 
 
-def preprocess(tm: EntryTelemetry, config: PreprocessConfig | Scenario | None = None) -> PreprocessedIMU:
+def preprocess(tm: EntryTelemetry, config: PreprocessConfig | None = None) -> PreprocessedIMU:
     """AMELIA Sect. 4 preprocessing of read telemetry into strapdown input (see the module docstring).
 
-    ``config``: a :class:`PreprocessConfig`, a scenario (its ``[preprocess]`` table) or None
-    (defaults).  Rows without acceleration are left out of the grid.
+    ``config``: a :class:`PreprocessConfig` (a scenario's: ``EntryConfig.preprocess`` of
+    :mod:`workbench.problems.entry.config`) or None (defaults).  Rows without acceleration are left
+    out of the grid.
     """
-    if config is None:
-        cfg = PreprocessConfig()
-    elif isinstance(config, Scenario):
-        cfg = PreprocessConfig.from_scenario(config)
-    else:
-        cfg = config
+    cfg = PreprocessConfig() if config is None else config
     notes: list[str] = []
     ok = np.asarray(tm.a_valid, bool)
     t = tm.t_gnc[ok]

@@ -1,7 +1,9 @@
-"""Draw the entry and descent reconstruction stages into a Rerun recording (layout of DESIGN.md).
+"""Draw the entry and descent reconstruction stages into a Rerun recording (layout in docs/RECORDING.md).
 
-The pipeline (``pipelines.entry``) yields stages; :class:`EntryRecorder` draws each one as it arrives
-and, for synthetic scenarios, the truth beside the estimate (``/world/truth``, ``.../truth``).
+The pipeline (:mod:`workbench.problems.entry.pipeline`) yields stages; :class:`EntryRecorder` draws each
+one as it arrives and, for synthetic scenarios, the truth beside the estimate (``/world/truth``,
+``.../truth``). Every entity path comes from :mod:`workbench.recording.layout`; a stage type the
+recorder does not know is a ``TypeError``.
 
 Geometry is in the landing-site frame L (East-North-Up on the terrain sphere below the site,
 :class:`~workbench.problems.entry.scene.LandingSiteFrame`): float32-safe from the entry interface
@@ -24,7 +26,15 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from workbench.core.frames import ned_from_enu
+from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_to_dcm
+from workbench.problems.entry.atmosphere import AtmosphereResult
+from workbench.problems.entry.dispersion import DispersionResult
+from workbench.problems.entry.filter import EntryFilterResult
+from workbench.problems.entry.initial import SmootherStart
+from workbench.problems.entry.pipeline import EntryResult, NominalIntegration
+from workbench.problems.entry.preprocess import PreprocessedIMU
 from workbench.problems.entry.scene import (
     LandingSiteFrame,
     capsule_meshes,
@@ -32,7 +42,11 @@ from workbench.problems.entry.scene import (
     site_frame_below,
     terrain_patch,
 )
+from workbench.problems.entry.site import R_MOLA
+from workbench.problems.entry.telemetry import EntryTelemetry
+from workbench.problems.entry.winds import WindResult
 from workbench.recording import layout
+from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
 __all__ = ["EntryRecorder", "entry_blueprint"]
@@ -45,30 +59,29 @@ ONBOARD = (214, 39, 40, 255)
 GREY = (150, 150, 150, 255)
 XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
 BEAMS = ["B0", "B1", "B2", "B3"]
-R_MOLA = 3396000.0
 
 _PLOTS = [
-    ("altitude AGL", "/plots/altitude_agl"),
-    ("altitude AMR", "/plots/altitude_amr"),
-    ("velocity NED", "/plots/velocity_ned"),
-    ("tilt (off-vertical)", "/plots/tilt"),
-    ("σ position (3σ altitude fwd/smoothed)", "/plots/sigma_position"),
-    ("σ velocity", "/plots/sigma_velocity"),
-    ("σ attitude", "/plots/sigma_attitude"),
-    ("error vs truth", "/plots/error"),
-    ("strapdown (nominal)", "/plots/strapdown"),
-    ("on-board vs recon", "/plots/onboard"),
-    ("body accel", "/plots/imu/f_G"),
-    ("body rate", "/plots/imu/w_G"),
-    ("density (time)", "/plots/atmosphere"),
-    ("wind (time)", "/plots/wind"),
-    ("dispersion", "/plots/dispersion"),
+    ("altitude AGL", layout.ENTRY_PLOT_ALTITUDE_AGL),
+    ("altitude AMR", layout.ENTRY_PLOT_ALTITUDE_AMR),
+    ("velocity NED", layout.ENTRY_PLOT_VELOCITY_NED),
+    ("tilt (off-vertical)", layout.ENTRY_PLOT_TILT),
+    ("σ position (3σ altitude fwd/smoothed)", layout.ENTRY_PLOT_SIGMA_POSITION),
+    ("σ velocity", layout.ENTRY_PLOT_SIGMA_VELOCITY),
+    ("σ attitude", layout.ENTRY_PLOT_SIGMA_ATTITUDE),
+    ("error vs truth", layout.ENTRY_PLOT_ERROR),
+    ("strapdown (nominal)", layout.ENTRY_PLOT_STRAPDOWN),
+    ("on-board vs recon", layout.ENTRY_PLOT_ONBOARD),
+    ("body accel", layout.ENTRY_PLOT_IMU_F),
+    ("body rate", layout.ENTRY_PLOT_IMU_W),
+    ("density (time)", layout.ENTRY_PLOT_ATMOSPHERE),
+    ("wind (time)", layout.ENTRY_PLOT_WIND),
+    ("dispersion", layout.ENTRY_PLOT_DISPERSION),
 ]
 _RESIDUALS = [
-    ("slant-out", "/residuals/rda/slant_out"),
-    ("velocity-out", "/residuals/rda/velocity_out"),
-    ("slant range", "/residuals/rda/slant_range"),
-    ("radar meas vs pred", "/plots/radar"),
+    ("slant-out", layout.ENTRY_RESIDUAL_SLANT_OUT),
+    ("velocity-out", layout.ENTRY_RESIDUAL_VELOCITY_OUT),
+    ("slant range", layout.ENTRY_RESIDUAL_SLANT_RANGE),
+    ("radar meas vs pred", layout.ENTRY_PLOT_RADAR),
 ]
 PROFILE_SCALE = {"density": 0.5, "pressure": 0.5, "temperature": 1.0, "wind": 4.0}
 """y = altitude_km × scale in each 2D profile view (so both axes have similar spans)."""
@@ -86,7 +99,11 @@ def entry_blueprint(
         rrb.Spatial3DView(
             name="Descent (at the vehicle)",
             origin=layout.VEHICLE,
-            contents=["/world/**", "- /world/dispersion/**", "- /world/estimate/forward_vehicle/**"],
+            contents=[
+                layout.subtree(layout.WORLD),
+                "- " + layout.subtree(layout.DISPERSION),
+                "- " + layout.subtree(layout.ENTRY_FORWARD_VEHICLE),
+            ],
             eye_controls=rrb.EyeControls3D(position=[-30.0, -48.0, 14.0], look_target=[0.0, 0.0, 8.0]),
         ),
         rrb.Spatial3DView(
@@ -99,10 +116,10 @@ def entry_blueprint(
         active_tab=scene_tab,
     )
     profiles = rrb.Tabs(
-        rrb.Spatial2DView(name="density Δ% vs default (y = 0.5·km)", origin="/profiles/density"),
-        rrb.Spatial2DView(name="temperature K (y = km)", origin="/profiles/temperature"),
-        rrb.Spatial2DView(name="pressure Δ% vs default (y = 0.5·km)", origin="/profiles/pressure"),
-        rrb.Spatial2DView(name="wind m/s (y = 4·km)", origin="/profiles/wind"),
+        rrb.Spatial2DView(name="density Δ% vs default (y = 0.5·km)", origin=layout.ENTRY_PROFILE_DENSITY),
+        rrb.Spatial2DView(name="temperature K (y = km)", origin=layout.ENTRY_PROFILE_TEMPERATURE),
+        rrb.Spatial2DView(name="pressure Δ% vs default (y = 0.5·km)", origin=layout.ENTRY_PROFILE_PRESSURE),
+        rrb.Spatial2DView(name="wind m/s (y = 4·km)", origin=layout.ENTRY_PROFILE_WIND),
         active_tab=profile_tab,
     )
     plots = rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o) for n, o in _PLOTS], active_tab=plot_tab)
@@ -124,16 +141,6 @@ def entry_blueprint(
         rrb.SelectionPanel(state="collapsed"),
         rrb.BlueprintPanel(state="collapsed"),
     )
-
-
-def _interp_rows(t_new: np.ndarray, t: np.ndarray, a: np.ndarray) -> np.ndarray:
-    a = np.asarray(a, float)
-    return np.column_stack([np.interp(t_new, t, a[:, i]) for i in range(a.shape[1])])
-
-
-def _ned_from_L(v_L: np.ndarray) -> np.ndarray:
-    """ENU (site axes) -> NED components (the site frame is small enough for a common NED)."""
-    return np.column_stack([v_L[:, 1], v_L[:, 0], -v_L[:, 2]])
 
 
 class EntryRecorder:
@@ -159,13 +166,25 @@ class EntryRecorder:
         self.site: LandingSiteFrame | None = None
         self.events: dict[str, float] = {}
         self.default_atmosphere = None
+        self.dispatch = StageDispatch(
+            {
+                EntryTelemetry: self._on_telemetry,
+                PreprocessedIMU: self._on_imu,
+                NominalIntegration: self._on_nominal,
+                DispersionResult: self._on_dispersion,
+                EntryFilterResult: self._on_filter,
+                AtmosphereResult: self._on_atmosphere,
+                WindResult: self._on_winds,
+            },
+            # not drawn: the smoother's start (it goes into the summary) and the final bundle of all stages
+            ignored=(SmootherStart, EntryResult),
+        )
 
     # ------------------------------------------------------------------ dispatch
     def handle(self, stage) -> None:
-        """Draw one stage (dispatch on the dataclass name; unknown stages are ignored)."""
-        fn = getattr(self, "_" + type(stage).__name__, None)
-        if fn is not None:
-            fn(stage)
+        """Draw one stage of :func:`workbench.problems.entry.pipeline.reconstruct`; a stage of a type the
+        recorder does not know is a ``TypeError`` (see :class:`~workbench.recording.dispatch.StageDispatch`)."""
+        self.dispatch(stage)
 
     # ------------------------------------------------------------------ helpers
     def _L(self, t, p_M):
@@ -175,19 +194,19 @@ class EntryRecorder:
         rec, site = self.rec, self.site
         rec.view_coordinates()
         rec.mesh(layout.SURFACE, terrain_patch(site, (-700e3, 60e3), (-120e3, 120e3), 80), color=(190, 150, 120, 255))
-        rec.axes(layout.join(layout.WORLD, "site_axes"), 2000.0)
+        rec.axes(layout.ENTRY_SITE_AXES, 2000.0)
         m = capsule_meshes(self.vehicle.diameter, self.vehicle.nose_radius)
-        rec.mesh(layout.join(layout.VEHICLE_BODY, "back_shell"), m["back_shell"], color=(220, 220, 225, 255))
+        rec.mesh(layout.ENTRY_BACK_SHELL, m["back_shell"], color=(220, 220, 225, 255))
         self._front_shield = m["front_shield"]  # logged on the timeline (from the first sample to FSR)
-        rec.axes(layout.join(layout.VEHICLE_BODY, "axes"), 3.0)
+        rec.axes(layout.ENTRY_BODY_AXES, 3.0)
 
     # ------------------------------------------------------------------ stages
-    def _EntryTelemetry(self, tm) -> None:
+    def _on_telemetry(self, tm) -> None:
         rec = self.rec
         self.events = dict(tm.events)
         # landing-site frame: ground point below the on-board position at PDD (before it drifts)
         t_site = self.events.get("PDD", float(tm.t_nav[len(tm.t_nav) // 2]))
-        p_site = _interp_rows(np.array([t_site]), tm.t_nav, tm.p_M_nav)[0]
+        p_site = interp_rows(t_site, tm.t_nav, tm.p_M_nav)
         if self.jd0 is None:  # user data without [scenario] epoch_utc: the telemetry's epoch line
             from workbench.core.frames import julian_date_from_utc
 
@@ -195,17 +214,17 @@ class EntryRecorder:
         self.site = site_frame_below(self.body, p_site, t_site, self.r_ground, self.jd0)
         self.t_first = float(tm.t_gnc[0])
         self._static_scene()
-        rec.scalars("/sensors/gnc/rate", tm.t_gnc, np.degrees(tm.w_G), names=["x", "y", "z"], colors=XYZ)
+        rec.scalars(layout.ENTRY_SENSOR_GNC_RATE, tm.t_gnc, np.degrees(tm.w_G), names=["x", "y", "z"], colors=XYZ)
         ok = tm.a_valid
-        rec.scalars("/sensors/gnc/accel_total_M", tm.t_gnc[ok], tm.a_M_total[ok], names=["x", "y", "z"], colors=XYZ)
+        rec.scalars(layout.ENTRY_SENSOR_GNC_ACCEL, tm.t_gnc[ok], tm.a_M_total[ok], names=["x", "y", "z"], colors=XYZ)
         if len(tm.t_rda):
-            rec.scalars("/sensors/rda/slant_out", tm.t_rda, tm.slant_out, names="slant-out", colors=EST)
-            rec.scalars("/sensors/rda/v_out_G", tm.t_rda, tm.v_out_G, names=["x", "y", "z"], colors=XYZ)
+            rec.scalars(layout.ENTRY_SENSOR_RDA_SLANT_OUT, tm.t_rda, tm.slant_out, names="slant-out", colors=EST)
+            rec.scalars(layout.ENTRY_SENSOR_RDA_V_OUT, tm.t_rda, tm.v_out_G, names=["x", "y", "z"], colors=XYZ)
         if len(tm.t_sr):
-            rec.scatter("/sensors/rda/slant_range", tm.t_sr, tm.slant_ranges, names=BEAMS, colors=XYZ + [GREY])
+            rec.scatter(layout.ENTRY_SENSOR_RDA_SLANT_RANGE, tm.t_sr, tm.slant_ranges, names=BEAMS, colors=XYZ + [GREY])
         # on-board navigation track (it goes wrong after the gyro saturation)
         p_L = self._L(tm.t_nav, tm.p_M_nav)
-        rec.line_strip(layout.join(layout.WORLD, "onboard", "track"), p_L, color=[ONBOARD], radius=-1.5)
+        rec.line_strip(layout.ENTRY_ONBOARD_TRACK, p_L, color=[ONBOARD], radius=-1.5)
         ev = [
             (float(t), f"{k} (telemetry event)", "INFO") for k, t in sorted(self.events.items(), key=lambda kv: kv[1])
         ]
@@ -216,35 +235,39 @@ class EntryRecorder:
             step = max(1, int(round(0.1 / float(tt["t"][1] - tt["t"][0]))))
             ts = tt["t"][::step]
             p_T = self._L(ts, tt["p_M"][::step])
-            rec.line_strip(layout.join(layout.TRUTH, "track"), p_T, color=[TRUTH], radius=-1.5)
+            rec.line_strip(layout.ENTRY_TRUTH_TRACK, p_T, color=[TRUTH], radius=-1.5)
             g = self.site.ground_point_L(p_T)
-            rec.line_strip(layout.join(layout.TRUTH, "ground_track"), g + [0, 0, 30.0], color=[TRUTH], radius=-2.5)
-            rec.poses(layout.join(layout.TRUTH, "vehicle"), ts, p_T, self.site.attitudes(ts, tt["q_M_G"][::step]))
-            rec.axes(layout.join(layout.TRUTH, "vehicle", "axes"), 4.0)
+            rec.line_strip(layout.ENTRY_TRUTH_GROUND_TRACK, g + [0, 0, 30.0], color=[TRUTH], radius=-2.5)
+            rec.poses(layout.TRUTH_VEHICLE, ts, p_T, self.site.attitudes(ts, tt["q_M_G"][::step]))
+            rec.axes(layout.ENTRY_TRUTH_VEHICLE_AXES, 4.0)
             if tt.get("parachute_p_M") is not None:
                 pp = np.asarray(tt["parachute_p_M"][::step])
                 ok = np.all(np.isfinite(pp), axis=1)
                 if ok.any():
                     rec.points_series(
-                        layout.join(layout.TRUTH, "parachute"),
+                        layout.ENTRY_TRUTH_PARACHUTE,
                         ts[ok],
                         self._L(ts[ok], pp[ok]),
                         colors=TRUTH,
                         radii=-4.0,
                     )
 
-    def _PreprocessedIMU(self, imu) -> None:
+    def _on_imu(self, imu) -> None:
         rec = self.rec
-        rec.scalars("/plots/imu/f_G", imu.t, imu.f_G, names=["x", "y", "z"], colors=XYZ)
-        rec.scalars("/plots/imu/w_G", imu.t, np.degrees(imu.w_G), names=["x", "y", "z"], colors=XYZ)
+        rec.scalars(layout.ENTRY_PLOT_IMU_F, imu.t, imu.f_G, names=["x", "y", "z"], colors=XYZ)
+        rec.scalars(layout.ENTRY_PLOT_IMU_W, imu.t, np.degrees(imu.w_G), names=["x", "y", "z"], colors=XYZ)
         sat = np.asarray(imu.saturated, bool)
         if sat.any():
             rec.scatter(
-                "/plots/imu/w_G/rebuilt_x", imu.t[sat], np.degrees(imu.w_G[sat, 0]), names="x rebuilt", colors=ONBOARD
+                layout.ENTRY_PLOT_IMU_W_REBUILT,
+                imu.t[sat],
+                np.degrees(imu.w_G[sat, 0]),
+                names="x rebuilt",
+                colors=ONBOARD,
             )
         res = np.asarray(imu.resampled, bool)
         if res.any():
-            rec.scatter("/plots/imu/f_G/resampled_100Hz_z", imu.t[res], imu.f_G[res, 2], names="z 100 Hz", colors=GREY)
+            rec.scatter(layout.ENTRY_PLOT_IMU_F_RESAMPLED, imu.t[res], imu.f_G[res, 2], names="z 100 Hz", colors=GREY)
         ev = [
             (g.t_a, f"gap {g.t_b - g.t_a:.1f} s bridged with on-board Δv, Δp, ΔC (until t = {g.t_b:.2f} s)", "INFO")
             for g in imu.gaps
@@ -261,23 +284,31 @@ class EntryRecorder:
             )
         rec.events(ev)
 
-    def _NominalIntegration(self, nom) -> None:
+    def _on_nominal(self, nom) -> None:
         rec = self.rec
         sp = nom.strapdown
         p_L = self._L(sp.t, sp.p_M)
-        rec.line_strip(layout.join(layout.ESTIMATE, "nominal"), p_L, color=[NOMINAL], radius=-1.2)
+        rec.line_strip(layout.ENTRY_NOMINAL_TRACK, p_L, color=[NOMINAL], radius=-1.2)
         h = np.linalg.norm(sp.p_M, axis=1) - R_MOLA
         sd = self._radial_sigma(sp.p_M, sp.P)
         rec.series_with_bounds(
-            "/plots/strapdown/h_amr", sp.t, h, sd, names="h AMR (nominal strapdown)", color=[NOMINAL]
+            layout.ENTRY_PLOT_STRAPDOWN_H_AMR, sp.t, h, sd, names="h AMR (nominal strapdown)", color=[NOMINAL]
         )
         if nom.onboard_t is not None:
             d = nom.diff_position_m
             rec.scalars(
-                "/plots/onboard/position_diff", nom.onboard_t, d, names="|Δp| recon − on-board [m]", colors=ONBOARD
+                layout.ENTRY_PLOT_ONBOARD_POSITION_DIFF,
+                nom.onboard_t,
+                d,
+                names="|Δp| recon − on-board [m]",
+                colors=ONBOARD,
             )
             rec.scalars(
-                "/plots/onboard/attitude_diff_deg", nom.onboard_t, nom.diff_attitude_deg, names="Δθ [deg]", colors=EST
+                layout.ENTRY_PLOT_ONBOARD_ATTITUDE_DIFF,
+                nom.onboard_t,
+                nom.diff_attitude_deg,
+                names="Δθ [deg]",
+                colors=EST,
             )
 
     @staticmethod
@@ -285,16 +316,16 @@ class EntryRecorder:
         u = p_M / np.linalg.norm(p_M, axis=1, keepdims=True)
         return np.sqrt(np.einsum("ni,nij,nj->n", u, P[:, 6:9, 6:9], u))
 
-    def _DispersionResult(self, d) -> None:
+    def _on_dispersion(self, d) -> None:
         rec = self.rec
         acc = np.asarray(d.accepted, bool)
         idx = np.arange(d.n)
         # event quantities on the `sample` timeline (one row per member)
         for key, vals in d.events.items():
             v = np.asarray(vals, float)
-            for name, m, col in (("accepted", acc, TRUTH), ("rejected", ~acc, GREY)):
+            for name, m, col in ((layout.ACCEPTED, acc, TRUTH), (layout.REJECTED, ~acc, GREY)):
                 if m.any():
-                    self._sample_scatter(f"/plots/dispersion/{key}/{name}", idx[m], v[m], col)
+                    self._sample_scatter(layout.entry_dispersion_plot_path(key, name), idx[m], v[m], col)
         # cloud: positions at PDD and thinned tracks
         ct = np.asarray(d.cloud_t, float)
         cp = np.asarray(d.cloud_p_M, float)
@@ -302,12 +333,13 @@ class EntryRecorder:
             k = int(np.argmin(np.abs(ct - self.events.get("PDD", ct[-1]))))
             pts = np.stack([self._L(ct, cp[i]) for i in range(cp.shape[0])])  # (m, k, 3)
             ca = np.asarray(d.cloud_accepted, bool)
-            for name, m, col in (("accepted", ca, (44, 160, 44, 255)), ("rejected", ~ca, (160, 160, 160, 160))):
+            for name, m, col in (
+                (layout.ACCEPTED, ca, (44, 160, 44, 255)),
+                (layout.REJECTED, ~ca, (160, 160, 160, 160)),
+            ):
                 if m.any():
-                    rec.points(layout.join(layout.DISPERSION, f"at_PDD_{name}"), pts[m, k], colors=col, radii=-3.0)
-                    rec.line_strip(
-                        layout.join(layout.DISPERSION, f"tracks_{name}"), list(pts[m]), color=col, radius=-0.5
-                    )
+                    rec.points(layout.entry_dispersion_at_pdd_path(name), pts[m, k], colors=col, radii=-3.0)
+                    rec.line_strip(layout.entry_dispersion_tracks_path(name), list(pts[m]), color=col, radius=-0.5)
 
     def _sample_scatter(self, entity: str, samples: np.ndarray, values: np.ndarray, color) -> None:
         s = self.rec.stream
@@ -316,7 +348,7 @@ class EntryRecorder:
         )
         s.log(entity, rr.SeriesPoints(colors=[color], markers=["circle"], marker_sizes=[2.0]), static=True)
 
-    def _EntryFilterResult(self, fr) -> None:
+    def _on_filter(self, fr) -> None:
         rec, site = self.rec, self.site
         sm, fw = fr.smoothed, fr.forward
         t = np.asarray(sm.t, float)
@@ -339,11 +371,11 @@ class EntryRecorder:
         rec.line_strip(layout.ESTIMATE_FORWARD, fw_L, color=[FWD], radius=-1.5)
         # the forward (filter) pass's own 3σ: it grows through the blackout and collapses vertically at
         # the radar fix (the smoothed one above already knows the fix from the start)
-        fwd_vehicle = layout.join(layout.ESTIMATE, "forward_vehicle")
+        fwd_vehicle = layout.ENTRY_FORWARD_VEHICLE
         steps_f = np.arange(len(fw.t))
         rec.poses(fwd_vehicle, fw.t, fw_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(fw.t), 1)), step=steps_f)
         rec.ellipsoids(
-            layout.join(fwd_vehicle, "uncertainty"),
+            layout.ENTRY_FORWARD_UNCERTAINTY,
             fw.t,
             np.zeros((len(fw.t), 3)),
             site.covariances(fw.t, fw.P[:, 6:9, 6:9]),
@@ -354,14 +386,14 @@ class EntryRecorder:
         u_f = fw.p_M / np.linalg.norm(fw.p_M, axis=1, keepdims=True)
         sd_hf = np.sqrt(np.einsum("ni,nij,nj->n", u_f, fw.P[:, 6:9, 6:9], u_f))
         rec.scalars(
-            "/plots/sigma_position/altitude_3sigma_forward",
+            layout.ENTRY_PLOT_ALTITUDE_3SIGMA_FORWARD,
             fw.t,
             3.0 * sd_hf,
             names="3σ altitude, forward [m]",
             colors=[FWD],
         )
         g = site.ground_point_L(p_L)
-        rec.line_strip(layout.join(layout.ESTIMATE, "ground_track"), g + [0, 0, 20.0], color=[EST], radius=-2.5)
+        rec.line_strip(layout.ENTRY_GROUND_TRACK, g + [0, 0, 20.0], color=[EST], radius=-2.5)
         # front shield leaves at FSR; the parachute appears at PDD (temporal logs, not static)
         s = rec.stream
         if "PDD" in self.events:
@@ -369,7 +401,7 @@ class EntryRecorder:
             d_chute = float(np.sqrt(4.0 * self.vehicle.parachute.ref_area / np.pi))
             pm = parachute_mesh(d_chute, self.vehicle.riser_length)
             s.log(
-                layout.join(layout.VEHICLE_BODY, "parachute"),
+                layout.ENTRY_PARACHUTE,
                 rr.Mesh3D(
                     vertex_positions=pm.vertices.astype(np.float32),
                     triangle_indices=pm.faces.astype(np.uint32),
@@ -384,13 +416,13 @@ class EntryRecorder:
                 for r in [0.35 * d_chute]
             ]
             s.log(
-                layout.join(layout.VEHICLE_BODY, "risers"),
+                layout.ENTRY_RISERS,
                 rr.LineStrips3D([[a, r] for r in rim], colors=[[120, 120, 120]], radii=[0.05]),
             )
         fsm = self._front_shield
         rr.set_time(layout.TIME, duration=float(t[0]), recording=s)
         s.log(
-            layout.join(layout.VEHICLE_BODY, "front_shield"),
+            layout.ENTRY_FRONT_SHIELD,
             rr.Mesh3D(
                 vertex_positions=fsm.vertices.astype(np.float32),
                 triangle_indices=fsm.faces.astype(np.uint32),
@@ -400,7 +432,7 @@ class EntryRecorder:
         )
         if "FSR" in self.events:
             rr.set_time(layout.TIME, duration=self.events["FSR"], recording=s)
-            s.log(layout.join(layout.VEHICLE_BODY, "front_shield"), rr.Clear(recursive=False))
+            s.log(layout.ENTRY_FRONT_SHIELD, rr.Clear(recursive=False))
         s.reset_time()
         # radar beams from the module to the ground along the smoothed attitude, while the radar is on
         on = t >= self.events.get("RDA_ON", np.inf)
@@ -433,7 +465,7 @@ class EntryRecorder:
             ]
             rec.events(ev)
             rec.scatter(
-                "/plots/altitude_agl/plane_fit",
+                layout.ENTRY_PLOT_ALTITUDE_AGL_PLANE_FIT,
                 [tp for tp, _ in fr.plane_fits],
                 [pf.h_agl for _, pf in fr.plane_fits],
                 names="plane fit (Table 4 method)",
@@ -475,7 +507,7 @@ class EntryRecorder:
             return None
         a = np.asarray(self.truth[key], float)
         tt = np.asarray(self.truth["t"], float)
-        return np.interp(t, tt, a) if a.ndim == 1 else _interp_rows(t, tt, a)
+        return interp_rows(t, tt, a)
 
     def _trajectory_plots(self, fr) -> None:
         rec, site = self.rec, self.site
@@ -488,7 +520,7 @@ class EntryRecorder:
         tr_r = None if tr_p is None else np.linalg.norm(tr_p, axis=1)
         m = t >= self.events.get("PDD", t[0]) - 5.0
         rec.series_with_bounds(
-            "/plots/altitude_agl/smoothed",
+            layout.join(layout.ENTRY_PLOT_ALTITUDE_AGL, layout.SMOOTHED_SERIES),
             t[m],
             h_agl[m],
             sd_r[m],
@@ -500,10 +532,14 @@ class EntryRecorder:
         rf = np.linalg.norm(fw.p_M, axis=1)
         mf = fw.t >= self.events.get("PDD", fw.t[0]) - 5.0
         rec.scalars(
-            "/plots/altitude_agl/forward", fw.t[mf], (rf - self.r_ground)[mf], names="h AGL forward", colors=FWD
+            layout.join(layout.ENTRY_PLOT_ALTITUDE_AGL, layout.FORWARD_SERIES),
+            fw.t[mf],
+            (rf - self.r_ground)[mf],
+            names="h AGL forward",
+            colors=FWD,
         )
         rec.series_with_bounds(
-            "/plots/altitude_amr",
+            layout.ENTRY_PLOT_ALTITUDE_AMR,
             t,
             (r - R_MOLA) / 1e3,
             sd_r / 1e3,
@@ -514,7 +550,7 @@ class EntryRecorder:
         # ground-relative velocity in NED (site axes), its 1σ
         omega = np.array([0.0, 0.0, self.body.rotation_rate])
         v_rel_M = sm.v_M - np.cross(omega, sm.p_M)
-        v_N = _ned_from_L(site.vectors(t, v_rel_M))
+        v_N = ned_from_enu(site.vectors(t, v_rel_M))
         C = site.C_L_M(t)
         Pv = C @ sm.P[:, 0:3, 0:3] @ np.swapaxes(C, -1, -2)
         sd_L = np.sqrt(np.einsum("nii->ni", Pv))
@@ -522,8 +558,10 @@ class EntryRecorder:
         tv = None
         if tr_p is not None:
             tv_M = self._truth_at(t, "v_M") - np.cross(omega, tr_p)
-            tv = _ned_from_L(site.vectors(t, tv_M))
-        rec.series_with_bounds("/plots/velocity_ned", t, v_N, sd_N, truth=tv, names=["v_N", "v_E", "v_D"], color=XYZ)
+            tv = ned_from_enu(site.vectors(t, tv_M))
+        rec.series_with_bounds(
+            layout.ENTRY_PLOT_VELOCITY_NED, t, v_N, sd_N, truth=tv, names=["v_N", "v_E", "v_D"], color=XYZ
+        )
         # tilt: angle between +Z_G and local up
         up_M = sm.p_M / r[:, None]
         zG_M = quat_to_dcm(sm.q_M_G)[:, :, 2]
@@ -536,7 +574,7 @@ class EntryRecorder:
             zT = quat_to_dcm(qT)[:, :, 2]
             tt = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", tr_p / tr_r[:, None], zT), -1, 1)))
         rec.series_with_bounds(
-            "/plots/tilt",
+            layout.ENTRY_PLOT_TILT,
             t,
             tilt,
             np.linalg.norm(sd_att[:, :2], axis=1),
@@ -546,18 +584,24 @@ class EntryRecorder:
         )
         sd_p = np.sqrt(np.einsum("nii->ni", sm.P[:, 6:9, 6:9]))
         sd_v = np.sqrt(np.einsum("nii->ni", sm.P[:, 0:3, 0:3]))
-        rec.scalars("/plots/sigma_position/norm", t, np.linalg.norm(sd_p, axis=1), names="|σ_p| [m]", colors=EST)
         rec.scalars(
-            "/plots/sigma_position/altitude_3sigma_smoothed",
+            layout.ENTRY_PLOT_SIGMA_POSITION_NORM, t, np.linalg.norm(sd_p, axis=1), names="|σ_p| [m]", colors=EST
+        )
+        rec.scalars(
+            layout.ENTRY_PLOT_ALTITUDE_3SIGMA_SMOOTHED,
             t,
             3.0 * sd_r,
             names="3σ altitude, smoothed [m]",
             colors=[EST],
         )
-        rec.scalars("/plots/sigma_velocity", t, np.linalg.norm(sd_v, axis=1), names="|σ_v| [m/s]", colors=FWD)
-        rec.scalars("/plots/sigma_attitude", t, np.linalg.norm(sd_att, axis=1), names="|σ_θ| [deg]", colors=TRUTH)
+        rec.scalars(layout.ENTRY_PLOT_SIGMA_VELOCITY, t, np.linalg.norm(sd_v, axis=1), names="|σ_v| [m/s]", colors=FWD)
+        rec.scalars(
+            layout.ENTRY_PLOT_SIGMA_ATTITUDE, t, np.linalg.norm(sd_att, axis=1), names="|σ_θ| [deg]", colors=TRUTH
+        )
         if tr_p is not None:
-            rec.series_with_bounds("/plots/error/altitude", t, r - tr_r, sd_r, names="h error [m]", color=[EST])
+            rec.series_with_bounds(
+                layout.ENTRY_PLOT_ERROR_ALTITUDE, t, r - tr_r, sd_r, names="h error [m]", color=[EST]
+            )
 
     def _residual_plots(self, fr) -> None:
         rec = self.rec
@@ -567,12 +611,20 @@ class EntryRecorder:
             sd = np.sqrt(np.einsum("nii->ni", res.S))
             if ch == "slant_range":
                 for b in range(res.y.shape[1]):
-                    base = f"/residuals/rda/slant_range/{BEAMS[b]}"
-                    rec.scatter(f"{base}/value", res.t, res.y[:, b], names=f"{BEAMS[b]} [m]", colors=[EST], size=6.0)
-                    rec.scatter(f"{base}/plus_3sigma", res.t, 3 * sd[:, b], names="+3σ", colors=[GREY], size=4.0)
-                    rec.scatter(f"{base}/minus_3sigma", res.t, -3 * sd[:, b], names="−3σ", colors=[GREY], size=4.0)
+                    base = layout.entry_residual_path(ch, BEAMS[b])
+                    plus, minus = layout.bound_names(3.0)
+                    rec.scatter(
+                        layout.join(base, layout.VALUE),
+                        res.t,
+                        res.y[:, b],
+                        names=f"{BEAMS[b]} [m]",
+                        colors=[EST],
+                        size=6.0,
+                    )
+                    rec.scatter(layout.join(base, plus), res.t, 3 * sd[:, b], names="+3σ", colors=[GREY], size=4.0)
+                    rec.scatter(layout.join(base, minus), res.t, -3 * sd[:, b], names="−3σ", colors=[GREY], size=4.0)
                 rec.scatter(
-                    "/plots/radar/slant_range_measured",
+                    layout.entry_radar_plot_path(ch, layout.MEASURED_SERIES),
                     res.t,
                     res.z,
                     names=BEAMS,
@@ -581,7 +633,7 @@ class EntryRecorder:
                     size=6.0,
                 )
                 rec.scatter(
-                    "/plots/radar/slant_range_predicted",
+                    layout.entry_radar_plot_path(ch, layout.PREDICTED_SERIES),
                     res.t,
                     res.z_pred,
                     names=BEAMS,
@@ -591,21 +643,25 @@ class EntryRecorder:
                 )
                 continue
             names = ["slant-out [m]"] if ch == "slant_out" else ["x [m/s]", "y [m/s]", "z [m/s]"]
-            base = f"/residuals/rda/{ch}"
+            plus, minus = layout.bound_names(3.0)
             for i in range(res.y.shape[1]):
-                sub = base if res.y.shape[1] == 1 else f"{base}/{'xyz'[i]}"
-                rec.scalars(f"{sub}/value", res.t, res.y[:, i], names=names[i], colors=XYZ[i] if i else EST)
-                rec.scalars(f"{sub}/plus_3sigma", res.t, 3 * sd[:, i], names="+3σ", colors=GREY)
-                rec.scalars(f"{sub}/minus_3sigma", res.t, -3 * sd[:, i], names="−3σ", colors=GREY)
+                sub = (
+                    layout.entry_residual_path(ch) if res.y.shape[1] == 1 else layout.entry_residual_path(ch, "xyz"[i])
+                )
+                rec.scalars(
+                    layout.join(sub, layout.VALUE), res.t, res.y[:, i], names=names[i], colors=XYZ[i] if i else EST
+                )
+                rec.scalars(layout.join(sub, plus), res.t, 3 * sd[:, i], names="+3σ", colors=GREY)
+                rec.scalars(layout.join(sub, minus), res.t, -3 * sd[:, i], names="−3σ", colors=GREY)
             rec.scalars(
-                f"/plots/radar/{ch}_measured",
+                layout.entry_radar_plot_path(ch, layout.MEASURED_SERIES),
                 res.t,
                 res.z,
                 names=[f"{n} meas" for n in names],
                 colors=[GREY] * len(names),
             )
             rec.scalars(
-                f"/plots/radar/{ch}_predicted",
+                layout.entry_radar_plot_path(ch, layout.PREDICTED_SERIES),
                 res.t,
                 res.z_pred,
                 names=[f"{n} smoothed" for n in names],
@@ -618,10 +674,14 @@ class EntryRecorder:
         x0, x1 = min(x_ticks), max(x_ticks)
         y0, y1 = min(y_km_ticks) * scale, max(y_km_ticks) * scale
         grid = [[[x0, -y * scale], [x1, -y * scale]] for y in y_km_ticks] + [[[x, -y0], [x, -y1]] for x in x_ticks]
-        s.log(f"{root}/grid", rr.LineStrips2D(grid, colors=[[70, 70, 70]], radii=[-0.5]), static=True)
+        s.log(layout.join(root, layout.GRID), rr.LineStrips2D(grid, colors=[[70, 70, 70]], radii=[-0.5]), static=True)
         labels = [f"{y:g} km" for y in y_km_ticks] + [f"{x:g} {x_unit}" for x in x_ticks]
         pos = [[x0, -y * scale] for y in y_km_ticks] + [[x, -y0 + 1.5] for x in x_ticks]
-        s.log(f"{root}/labels", rr.Points2D(pos, labels=labels, radii=[0.01], show_labels=True), static=True)
+        s.log(
+            layout.join(root, layout.LABELS),
+            rr.Points2D(pos, labels=labels, radii=[0.01], show_labels=True),
+            static=True,
+        )
 
     def _profile(
         self, root: str, x: np.ndarray, h_km: np.ndarray, scale: float, color, width: float = 0.15, static: bool = True
@@ -632,7 +692,7 @@ class EntryRecorder:
         pts = np.column_stack([x[ok], -h_km[ok] * scale])  # 2D views have +y down: negate so altitude goes up
         self.rec.stream.log(root, rr.LineStrips2D([pts], colors=[color], radii=[-10.0 * width]), static=static)
 
-    def _AtmosphereResult(self, atm) -> None:
+    def _on_atmosphere(self, atm) -> None:
         from workbench.core.atmosphere import MarsEngineeringAtmosphere
 
         fin = atm.final
@@ -643,39 +703,39 @@ class EntryRecorder:
         sc = PROFILE_SCALE
         top = float(np.nanmax(hk)) if hk.size else 120.0
         ticks = [v for v in range(0, int(top) + 11, 10)]
-        self._profile_axes("/profiles/density", [-60, -40, -20, 0, 20, 40, 60], ticks, sc["density"], "%")
-        self._profile_axes("/profiles/pressure", [-60, -40, -20, 0, 20, 40, 60], ticks, sc["pressure"], "%")
-        self._profile_axes("/profiles/temperature", [120, 160, 200, 240, 280], ticks, 1.0, "K")
+        self._profile_axes(layout.ENTRY_PROFILE_DENSITY, [-60, -40, -20, 0, 20, 40, 60], ticks, sc["density"], "%")
+        self._profile_axes(layout.ENTRY_PROFILE_PRESSURE, [-60, -40, -20, 0, 20, 40, 60], ticks, sc["pressure"], "%")
+        self._profile_axes(layout.ENTRY_PROFILE_TEMPERATURE, [120, 160, 200, 240, 280], ticks, 1.0, "K")
         pct = lambda a, b: 100.0 * (a / b - 1.0)  # noqa: E731
-        for name, val, sig, ref, scale in (
-            ("density", atm.rho_smooth, atm.sigma_rho, rho_d, sc["density"]),
-            ("pressure", atm.p_smooth, atm.sigma_p, p_d, sc["pressure"]),
+        j = layout.join
+        plus1, minus1 = layout.bound_names(1.0)
+        for root, raw, val, sig, ref, scale in (
+            (layout.ENTRY_PROFILE_DENSITY, fin.rho, atm.rho_smooth, atm.sigma_rho, rho_d, sc["density"]),
+            (layout.ENTRY_PROFILE_PRESSURE, fin.p, atm.p_smooth, atm.sigma_p, p_d, sc["pressure"]),
         ):
-            root = f"/profiles/{name}"
-            raw = fin.rho if name == "density" else fin.p
-            self._profile(f"{root}/raw", pct(raw, ref), hk, scale, (120, 160, 220, 255), 0.08)
-            self._profile(f"{root}/smoothed", pct(val, ref), hk, scale, EST, 0.2)
-            self._profile(f"{root}/plus_1sigma", pct(val + sig, ref), hk, scale, GREY, 0.08)
-            self._profile(f"{root}/minus_1sigma", pct(val - sig, ref), hk, scale, GREY, 0.08)
-            self._profile(f"{root}/default", np.zeros_like(hk), hk, scale, NOMINAL, 0.12)
+            self._profile(j(root, layout.RAW_SERIES), pct(raw, ref), hk, scale, (120, 160, 220, 255), 0.08)
+            self._profile(j(root, layout.SMOOTHED_SERIES), pct(val, ref), hk, scale, EST, 0.2)
+            self._profile(j(root, plus1), pct(val + sig, ref), hk, scale, GREY, 0.08)
+            self._profile(j(root, minus1), pct(val - sig, ref), hk, scale, GREY, 0.08)
+            self._profile(j(root, layout.DEFAULT_SERIES), np.zeros_like(hk), hk, scale, NOMINAL, 0.12)
             filled = np.asarray(fin.filled, bool)
             if filled.any():
-                self._profile(f"{root}/blackout_fill", np.where(filled, pct(val, ref), np.nan), hk, scale, ONBOARD, 0.2)
-        root = "/profiles/temperature"
-        self._profile(f"{root}/raw", fin.T, hk, 1.0, (120, 160, 220, 255), 0.08)
-        self._profile(f"{root}/smoothed", atm.T_smooth, hk, 1.0, EST, 0.2)
-        self._profile(f"{root}/plus_1sigma", atm.T_smooth + atm.sigma_T, hk, 1.0, GREY, 0.08)
-        self._profile(f"{root}/minus_1sigma", atm.T_smooth - atm.sigma_T, hk, 1.0, GREY, 0.08)
-        self._profile(f"{root}/default", T_d, hk, 1.0, NOMINAL, 0.12)
+                fill = np.where(filled, pct(val, ref), np.nan)
+                self._profile(j(root, layout.BLACKOUT_FILL_SERIES), fill, hk, scale, ONBOARD, 0.2)
+        root = layout.ENTRY_PROFILE_TEMPERATURE
+        self._profile(j(root, layout.RAW_SERIES), fin.T, hk, 1.0, (120, 160, 220, 255), 0.08)
+        self._profile(j(root, layout.SMOOTHED_SERIES), atm.T_smooth, hk, 1.0, EST, 0.2)
+        self._profile(j(root, plus1), atm.T_smooth + atm.sigma_T, hk, 1.0, GREY, 0.08)
+        self._profile(j(root, minus1), atm.T_smooth - atm.sigma_T, hk, 1.0, GREY, 0.08)
+        self._profile(j(root, layout.DEFAULT_SERIES), T_d, hk, 1.0, NOMINAL, 0.12)
         if self.truth is not None and self.truth.get("atmosphere") is not None:
             ta = self.truth["atmosphere"]
             hg = np.linspace(max(0.0, float(np.nanmin(h))), float(np.nanmax(h)), 400)
             hgk = hg / 1e3
-            self._profile("/profiles/density/truth", pct(ta.density(hg), dflt.density(hg)), hgk, sc["density"], TRUTH)
-            self._profile(
-                "/profiles/pressure/truth", pct(ta.pressure(hg), dflt.pressure(hg)), hgk, sc["pressure"], TRUTH
-            )
-            self._profile("/profiles/temperature/truth", ta.temperature(hg), hgk, 1.0, TRUTH)
+            rho_t, p_t = pct(ta.density(hg), dflt.density(hg)), pct(ta.pressure(hg), dflt.pressure(hg))
+            self._profile(j(layout.ENTRY_PROFILE_DENSITY, layout.TRUTH_SERIES), rho_t, hgk, sc["density"], TRUTH)
+            self._profile(j(layout.ENTRY_PROFILE_PRESSURE, layout.TRUTH_SERIES), p_t, hgk, sc["pressure"], TRUTH)
+            self._profile(j(layout.ENTRY_PROFILE_TEMPERATURE, layout.TRUTH_SERIES), ta.temperature(hg), hgk, 1.0, TRUTH)
         # each iteration of the drag-coefficient loop on the `iteration` timeline
         s = self.rec.stream
         for it in atm.iterations:
@@ -685,31 +745,31 @@ class EntryRecorder:
             ok = np.isfinite(x)
             if ok.sum() > 1:
                 s.log(
-                    "/profiles/density/iteration",
+                    j(layout.ENTRY_PROFILE_DENSITY, layout.ITERATION_SERIES),
                     rr.LineStrips2D(
                         [np.column_stack([x[ok], -hk_i[ok] * sc["density"]])], colors=[[255, 200, 0]], radii=[0.1]
                     ),
                 )
             if np.isfinite(it.max_rel_change):  # undefined for the first iteration
-                s.log("/plots/atmosphere/max_rel_change", rr.Scalars(float(it.max_rel_change)))
+                s.log(layout.ENTRY_PLOT_ATMOSPHERE_MAX_REL_CHANGE, rr.Scalars(float(it.max_rel_change)))
         s.reset_time()
         # time series too (for scrubbing against the trajectory)
         t = np.asarray(fin.t, float)
         self.rec.scalars(
-            "/plots/atmosphere/density_ratio_pct", t, pct(atm.rho_smooth, rho_d), names="ρ vs default [%]", colors=EST
+            layout.ENTRY_PLOT_DENSITY_RATIO, t, pct(atm.rho_smooth, rho_d), names="ρ vs default [%]", colors=EST
         )
         tr = self._truth_at(t, "h_amr") if self.truth is not None else None
         if tr is not None and self.truth.get("atmosphere") is not None:
             ta = self.truth["atmosphere"]
             self.rec.scalars(
-                "/plots/atmosphere/density_ratio_pct_truth",
+                layout.ENTRY_PLOT_DENSITY_RATIO_TRUTH,
                 t,
                 pct(ta.density(h), rho_d),
                 names="truth ρ vs default [%]",
                 colors=TRUTH,
             )
 
-    def _WindResult(self, w) -> None:
+    def _on_winds(self, w) -> None:
         sc = PROFILE_SCALE["wind"]
         ok = np.asarray(w.valid, bool)
         hk = np.asarray(w.h_amr, float) / 1e3
@@ -717,15 +777,16 @@ class EntryRecorder:
             return
         lo, hi = float(np.floor(hk[ok].min())), float(np.ceil(hk[ok].max()))
         self._profile_axes(
-            "/profiles/wind", [-30, -20, -10, 0, 10, 20, 30], list(range(int(lo), int(hi) + 1)), sc, "m/s"
+            layout.ENTRY_PROFILE_WIND, [-30, -20, -10, 0, 10, 20, 30], list(range(int(lo), int(hi) + 1)), sc, "m/s"
         )
+        plus1, minus1 = layout.bound_names(1.0)
         for name, v, s_, col in (("north", w.wind_N, w.sigma_N, XYZ[0]), ("east", w.wind_E, w.sigma_E, XYZ[2])):
             v = np.where(ok, v, np.nan)
-            self._profile(f"/profiles/wind/{name}", v, hk, sc, col, 0.12)
-            self._profile(f"/profiles/wind/{name}_plus_1sigma", v + s_, hk, sc, GREY, 0.05)
-            self._profile(f"/profiles/wind/{name}_minus_1sigma", v - s_, hk, sc, GREY, 0.05)
+            self._profile(layout.entry_wind_profile_path(name), v, hk, sc, col, 0.12)
+            self._profile(layout.entry_wind_profile_path(name, plus1), v + s_, hk, sc, GREY, 0.05)
+            self._profile(layout.entry_wind_profile_path(name, minus1), v - s_, hk, sc, GREY, 0.05)
             self.rec.series_with_bounds(
-                f"/plots/wind/{name}",
+                layout.entry_wind_plot_path(name),
                 w.t[ok],
                 v[ok],
                 s_[ok],
@@ -737,9 +798,10 @@ class EntryRecorder:
             )
         if self.truth is not None:
             tw = self._truth_at(w.t, "wind_NE")
-            self._profile("/profiles/wind/north_truth", np.where(ok, tw[:, 0], np.nan), hk, sc, TRUTH, 0.08)
+            north_t, east_t = np.where(ok, tw[:, 0], np.nan), np.where(ok, tw[:, 1], np.nan)
+            self._profile(layout.entry_wind_profile_path("north", layout.TRUTH_SERIES), north_t, hk, sc, TRUTH, 0.08)
             self._profile(
-                "/profiles/wind/east_truth", np.where(ok, tw[:, 1], np.nan), hk, sc, (120, 200, 120, 255), 0.08
+                layout.entry_wind_profile_path("east", layout.TRUTH_SERIES), east_t, hk, sc, (120, 200, 120, 255), 0.08
             )
 
     def finish(self, events_table: list[tuple[float, str, str]], report_md: str) -> None:

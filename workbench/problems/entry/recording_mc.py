@@ -9,6 +9,8 @@
   RMS errors over the runs with the RMS of the reported 1σ
   (``/plots/validation/rms/{position,altitude,velocity,attitude}/…``, attitude in degrees);
 * the summary as the ``/report`` scorecard (:func:`validation_markdown`).
+
+Paths: the ``VALIDATION_*`` names of :mod:`workbench.recording.layout`.
 """
 
 from __future__ import annotations
@@ -25,7 +27,6 @@ from workbench.recording.writer import open_recording
 
 __all__ = ["record_entry_validation", "validation_markdown", "validation_blueprint"]
 
-_ROOT = "/plots/validation"
 _BLUE, _RED, _GREEN, _GREY, _PURPLE, _ORANGE = (
     (31, 119, 180),
     (214, 39, 40),
@@ -109,15 +110,17 @@ def validation_blueprint() -> rrb.Blueprint:
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.TimeSeriesView(name="ANEES (9 dof) and 95 % band", origin=f"{_ROOT}/anees"),
-                rrb.TimeSeriesView(name="RMS horizontal position error [m]", origin=f"{_ROOT}/rms/position"),
-                rrb.TimeSeriesView(name="RMS altitude-AGL error [m]", origin=f"{_ROOT}/rms/altitude"),
-                rrb.TimeSeriesView(name="RMS velocity error [m/s]", origin=f"{_ROOT}/rms/velocity"),
-                rrb.TimeSeriesView(name="RMS attitude error [deg]", origin=f"{_ROOT}/rms/attitude"),
+                rrb.TimeSeriesView(name="ANEES (9 dof) and 95 % band", origin=layout.VALIDATION_ANEES),
+                rrb.TimeSeriesView(name="RMS horizontal position error [m]", origin=layout.VALIDATION_RMS_POSITION),
+                rrb.TimeSeriesView(name="RMS altitude-AGL error [m]", origin=layout.VALIDATION_RMS_ALTITUDE),
+                rrb.TimeSeriesView(name="RMS velocity error [m/s]", origin=layout.VALIDATION_RMS_VELOCITY),
+                rrb.TimeSeriesView(name="RMS attitude error [deg]", origin=layout.VALIDATION_RMS_ATTITUDE),
             ),
             rrb.Vertical(
-                rrb.TimeSeriesView(name="per run: time-averaged NEES", origin=f"{_ROOT}/runs/nees"),
-                rrb.TimeSeriesView(name="per run: max altitude error after fix [m]", origin=f"{_ROOT}/runs/h_agl"),
+                rrb.TimeSeriesView(name="per run: time-averaged NEES", origin=layout.VALIDATION_RUNS_NEES),
+                rrb.TimeSeriesView(
+                    name="per run: max altitude error after fix [m]", origin=layout.VALIDATION_RUNS_H_AGL
+                ),
                 rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
             ),
             column_shares=[3, 2],
@@ -154,36 +157,64 @@ def record_entry_validation(path: str | Path, name: str, res, summary: dict | No
     ) as rec:
         st = rec.stream
         # per run (sample timeline)
-        _per_run(st, f"{_ROOT}/runs/nees/time_avg", runs, res.nees_time_avg, "time-averaged NEES (9 dof)", _BLUE)
-        _per_run(st, f"{_ROOT}/runs/nees/curvilinear", runs, res.nees_curvilinear_time_avg, "… curvilinear", _GREEN)
+        _per_run(st, layout.VALIDATION_RUNS_NEES_TIME_AVG, runs, res.nees_time_avg, "time-averaged NEES (9 dof)", _BLUE)
         _per_run(
-            st, f"{_ROOT}/runs/nees/inside_3sigma_x9", runs, 9.0 * res.inside_3sigma, "9 × inside-3σ fraction", _GREY
+            st, layout.VALIDATION_RUNS_NEES_CURVILINEAR, runs, res.nees_curvilinear_time_avg, "… curvilinear", _GREEN
         )
         _per_run(
-            st, f"{_ROOT}/runs/h_agl/error_max", runs, res.h_err_max_after_fix, "max |h AGL error| after fix", _RED
+            st, layout.VALIDATION_RUNS_INSIDE_3SIGMA_X9, runs, 9.0 * res.inside_3sigma, "9 × inside-3σ fraction", _GREY
         )
-        _per_run(st, f"{_ROOT}/runs/h_agl/three_sigma", runs, res.h_3sigma_at_max, "3σ at that step", _GREY)
+        _per_run(
+            st,
+            layout.VALIDATION_RUNS_H_AGL_ERROR_MAX,
+            runs,
+            res.h_err_max_after_fix,
+            "max |h AGL error| after fix",
+            _RED,
+        )
+        _per_run(st, layout.VALIDATION_RUNS_H_AGL_THREE_SIGMA, runs, res.h_3sigma_at_max, "3σ at that step", _GREY)
         # curves (time timeline)
         t = res.t
         lo, hi = res.anees_band
         for ent, vals, label, col, wd in (
-            ("smoothed", res.anees, "ANEES smoothed", _BLUE, 1.5),
-            ("smoothed_curvilinear", res.anees_curvilinear, "ANEES smoothed, curvilinear", _GREEN, 1.5),
-            ("forward", res.anees_forward, "ANEES forward", _ORANGE, 1.0),
-            ("forward_curvilinear", res.anees_forward_curvilinear, "ANEES forward, curvilinear", _PURPLE, 1.0),
+            (layout.VALIDATION_ANEES_SMOOTHED, res.anees, "ANEES smoothed", _BLUE, 1.5),
+            (
+                layout.VALIDATION_ANEES_SMOOTHED_CURVILINEAR,
+                res.anees_curvilinear,
+                "ANEES smoothed, curvilinear",
+                _GREEN,
+                1.5,
+            ),
+            (layout.VALIDATION_ANEES_FORWARD, res.anees_forward, "ANEES forward", _ORANGE, 1.0),
+            (
+                layout.VALIDATION_ANEES_FORWARD_CURVILINEAR,
+                res.anees_forward_curvilinear,
+                "ANEES forward, curvilinear",
+                _PURPLE,
+                1.0,
+            ),
         ):
-            rec.scalars(f"{_ROOT}/anees/{ent}", t, vals, names=label, colors=[col], widths=wd)
-        rec.scalars(f"{_ROOT}/anees/band_lo", t, np.full(t.size, lo), names="95 % band", colors=[_GREY], widths=0.5)
-        rec.scalars(f"{_ROOT}/anees/band_hi", t, np.full(t.size, hi), names="95 % band", colors=[_GREY], widths=0.5)
+            rec.scalars(ent, t, vals, names=label, colors=[col], widths=wd)
+        rec.scalars(
+            layout.VALIDATION_ANEES_BAND_LO, t, np.full(t.size, lo), names="95 % band", colors=[_GREY], widths=0.5
+        )
+        rec.scalars(
+            layout.VALIDATION_ANEES_BAND_HI, t, np.full(t.size, hi), names="95 % band", colors=[_GREY], widths=0.5
+        )
         names = list(res.error_names)
         conv = np.array([180.0 / math.pi if u == "rad" else 1.0 for u in res.error_units])
-        groups = {"position": [0, 1], "altitude": [2], "velocity": [3, 4, 5], "attitude": [6, 7, 8]}
+        groups = {
+            layout.VALIDATION_RMS_POSITION: [0, 1],
+            layout.VALIDATION_RMS_ALTITUDE: [2],
+            layout.VALIDATION_RMS_VELOCITY: [3, 4, 5],
+            layout.VALIDATION_RMS_ATTITUDE: [6, 7, 8],
+        }
         palette = [_BLUE, _RED, _GREEN]
         for g, cols in groups.items():
             for j, c in enumerate(cols):
-                col = palette[j % 3] if g != "altitude" else _PURPLE
+                col = palette[j % 3] if g != layout.VALIDATION_RMS_ALTITUDE else _PURPLE
                 rec.scalars(
-                    f"{_ROOT}/rms/{g}/{names[c]}",
+                    layout.validation_rms_path(g, names[c]),
                     t,
                     res.rms_error[:, c] * conv[c],
                     names=f"RMS {names[c]}",
@@ -191,7 +222,7 @@ def record_entry_validation(path: str | Path, name: str, res, summary: dict | No
                     widths=1.5,
                 )
                 rec.scalars(
-                    f"{_ROOT}/rms/{g}/{names[c]}_sigma",
+                    layout.validation_rms_path(g, names[c], sigma=True),
                     t,
                     res.rms_sigma[:, c] * conv[c],
                     names=f"reported 1σ {names[c]}",

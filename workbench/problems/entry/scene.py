@@ -1,6 +1,6 @@
 """Geometry for drawing an entry and descent: the landing-site frame, terrain, capsule and parachute meshes.
 
-The landing-site frame ``L`` (DESIGN.md: "log geometry relative to a local origin") is East-North-Up
+The landing-site frame ``L`` (docs/RECORDING.md: "log geometry relative to a local origin") is East-North-Up
 with its origin on the terrain sphere (radius ``r_ground``) below a chosen site; it is fixed to the
 planet (body-fixed, co-rotating).  A point of the MMED inertial frame ``M`` at time ``t`` [s from
 EIP] maps to ``p_L = C_L_F (C_F_M(t) p_M − o_F)``.  Within ±700 km of the site every coordinate is
@@ -19,18 +19,10 @@ import numpy as np
 import trimesh
 
 from workbench.core.bodies import Body
-from workbench.core.frames import C_bodyfixed_mmed, planetocentric_from_cartesian
+from workbench.core.frames import C_bodyfixed_mmed, C_enu_bodyfixed, planetocentric_from_cartesian
 from workbench.core.rotation import dcm_to_quat, quat_multiply
 
 __all__ = ["LandingSiteFrame", "site_frame_below", "terrain_patch", "capsule_meshes", "parachute_mesh"]
-
-
-def _C_enu_bodyfixed(lat: float, lon: float) -> np.ndarray:
-    sp, cp, sl, cl = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    east = np.array([-sl, cl, 0.0])
-    north = np.array([-sp * cl, -sp * sl, cp])
-    up = np.array([cp * cl, cp * sl, sp])
-    return np.stack([east, north, up])
 
 
 @dataclass(frozen=True)
@@ -49,7 +41,7 @@ class LandingSiteFrame:
     @property
     def C_L_F(self) -> np.ndarray:
         """DCM (3, 3) from the body-fixed frame F to L (rows E, N, U in F)."""
-        return _C_enu_bodyfixed(self.lat, self.lon)
+        return C_enu_bodyfixed(self.lat, self.lon)
 
     @property
     def origin_F(self) -> np.ndarray:

@@ -18,10 +18,10 @@ how this module produces the same thing from a truth trajectory for synthetic sc
 * the Ka-band radar altimeter (RDA): 4-beam slant-range packets every 10 s (the first ones
   zero-filled), slant-out along the central beam B0 and the terrain-relative velocity in the
   GNC frame at 10 Hz, from ``RDA_ON`` to ``BSR``.  Truth ranges are exact ray/sphere
-  intersections with the terrain sphere ``r = 3396000 − 1440 m`` (:func:`slant_ranges_sphere`),
+  intersections with the terrain sphere ``r = 3396000 − 1440 m`` (:func:`~workbench.models.radar.slant_range_sphere`),
   not the estimator's flat-terrain model (Eq. B.3).
 
-Frames and conventions (DESIGN.md, ``.entry_spec``): ``M`` = MMED inertial (Mars-centred, +Z the
+Frames and conventions (docs/ARCHITECTURE.md, "Conventions"): ``M`` = MMED inertial (Mars-centred, +Z the
 pole), ``G`` = GNC body frame (+Z towards the back shell, B0 along −Z_G); ``q_M_G`` is
 body → inertial, Hamilton, scalar-last; the TM quaternion is JPL "MMED to GNC", numerically the
 raw components of ``q_M_G`` (:func:`workbench.core.rotation.quat_from_jpl`).  Error state
@@ -45,6 +45,7 @@ import numpy as np
 
 from workbench.core.bodies import MARS, Body
 from workbench.core.gravity import gravity_j2
+from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import (
     quat_conjugate,
     quat_from_rotvec,
@@ -52,23 +53,11 @@ from workbench.core.rotation import (
     quat_normalize,
     quat_rotate,
 )
-
-try:  # the shared beam geometry (written by the radar helper); local fallback until it exists
-    from workbench.models.radar import beam_directions_G
-except ImportError:  # pragma: no cover - exercised only while radar.py is absent
-
-    def beam_directions_G(squint_deg: float = 20.0, azimuths_deg=(0.0, 120.0, 240.0)) -> np.ndarray:
-        """RDA beam unit vectors (4, 3) in G: B0 = −Z_G; B1..B3 squinted ``squint_deg`` from −Z_G at
-        azimuths ``azimuths_deg`` measured from +X_G towards +Y_G (fallback copy of sensors.radar)."""
-        s = math.radians(squint_deg)
-        az = np.radians(np.asarray(azimuths_deg, float))
-        sq = np.column_stack([np.sin(s) * np.cos(az), np.sin(s) * np.sin(az), -np.cos(s) * np.ones_like(az)])
-        return np.vstack([[0.0, 0.0, -1.0], sq])
-
+from workbench.models.radar import beam_directions_G, slant_range_sphere
+from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M
 
 __all__ = [
     "GYRO_SATURATION_DPS",
-    "TERRAIN_ELEVATION_M",
     "EntryImuModel",
     "NominalErrorModel",
     "EntryTelemetrySpec",
@@ -78,17 +67,12 @@ __all__ = [
     "nominal_state",
     "quat_cumprod",
     "strapdown_onboard",
-    "slant_ranges_sphere",
     "terrain_relative_velocity_G",
-    "interp_rows",
     "generate_entry_tm",
-    "beam_directions_G",
 ]
 
 #: Design range of the Schiaparelli X gyro (AMELIA Sect. 3): rates beyond are clipped [deg/s].
 GYRO_SATURATION_DPS = 187.5
-#: Mean terrain elevation at the landing site w.r.t. the 3396 km MOLA radius (AMELIA Sect. 7) [m].
-TERRAIN_ELEVATION_M = -1440.0
 
 #: Blackout gaps (start [s from EIP], duration [s]): the four gaps of AMELIA Sect. 3 (1.4, 1.8,
 #: 3.3 and 57.2 s), chronologically inside the paper's 23 s → 91 s blackout window.
@@ -164,7 +148,7 @@ class EntryTelemetrySpec:
     range_sigma: float = 5.0
     range_sigma_frac: float = 0.01
     velocity_sigma: float = 1.0
-    r_ground: float = MARS.reference_radius + TERRAIN_ELEVATION_M
+    r_ground: float = R_MOLA + TERRAIN_ELEVATION_M
     squint_deg: float = 20.0
     azimuths_deg: tuple[float, float, float] = (0.0, 120.0, 240.0)
 
@@ -229,7 +213,7 @@ class EntryTelemetrySpec:
             range_sigma=g(r + "range_sigma_m", d.range_sigma, kind="float"),
             range_sigma_frac=g(r + "range_sigma_frac", d.range_sigma_frac, kind="float"),
             velocity_sigma=g(r + "velocity_sigma_mps", d.velocity_sigma, kind="float"),
-            r_ground=MARS.reference_radius + g("site.terrain_m", TERRAIN_ELEVATION_M, kind="float"),
+            r_ground=R_MOLA + g("site.terrain_m", TERRAIN_ELEVATION_M, kind="float"),
             squint_deg=g("radar.squint_deg", d.squint_deg, kind="float"),
             azimuths_deg=tuple(float(x) for x in g("radar.azimuths_deg", list(d.azimuths_deg), kind="vec3")),  # type: ignore[arg-type]
         )
@@ -321,7 +305,7 @@ def quat_cumprod(q: np.ndarray) -> np.ndarray:
     k = 1
     while k < n:
         s[k:] = quat_multiply(s[:-k], s[k:])
-        s /= np.linalg.norm(s, axis=1, keepdims=True)
+        s = quat_normalize(s)
         k *= 2
     return s
 
@@ -380,24 +364,8 @@ def strapdown_onboard(
 
 
 # --------------------------------------------------------------------------------------------
-# radar geometry (truth side)
+# radar velocity (truth side)
 # --------------------------------------------------------------------------------------------
-
-
-def slant_ranges_sphere(p_M: np.ndarray, q_M_G: np.ndarray, beams_G: np.ndarray, r_ground: float) -> np.ndarray:
-    """Exact range [m] along each beam from the CoG to the terrain sphere ``|x| = r_ground``.
-
-    p_M (n,3) [m], q_M_G (n,4), beams_G (k,3) unit vectors → (n,k).  The nearest positive root of
-    ``|p + ρ d|² = r²`` with ``d = C_M_G s``; NaN where a beam misses the sphere (or points up).
-    """
-    p = np.asarray(p_M, float)[:, None, :]
-    d = quat_rotate(np.asarray(q_M_G, float)[:, None, :], np.asarray(beams_G, float)[None, :, :])
-    b = np.sum(p * d, axis=-1)
-    c = np.sum(p * p, axis=-1) - r_ground**2
-    disc = b * b - c
-    with np.errstate(invalid="ignore"):
-        rho = -b - np.sqrt(disc)
-    return np.where((disc >= 0.0) & (rho > 0.0), rho, np.nan)
 
 
 def terrain_relative_velocity_G(
@@ -412,18 +380,6 @@ def terrain_relative_velocity_G(
 # --------------------------------------------------------------------------------------------
 # TM generation
 # --------------------------------------------------------------------------------------------
-
-
-def interp_rows(t_src: np.ndarray, x: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Linear interpolation of rows ``x`` (n, ...) given at ``t_src`` (n,) to times ``t`` (m,);
-    exact at the source times, clamped outside."""
-    t_src = np.asarray(t_src, float)
-    t = np.asarray(t, float)
-    i = np.clip(np.searchsorted(t_src, t, side="right") - 1, 0, t_src.size - 2)
-    w = np.clip((t - t_src[i]) / (t_src[i + 1] - t_src[i]), 0.0, 1.0)
-    w = w.reshape(w.shape + (1,) * (np.ndim(x) - 1))
-    x = np.asarray(x, float)
-    return x[i] * (1.0 - w) + x[i + 1] * w
 
 
 def _outside_gaps(t: np.ndarray, gaps, eps: float = 1e-6) -> np.ndarray:
@@ -485,8 +441,8 @@ def generate_entry_tm(truth, spec: EntryTelemetrySpec, rng: np.random.Generator)
     n_ob = int(math.floor((t_end - t_tr[0]) / dt_ob + 1e-6)) + 1
     t_ob = _round_t(t_tr[0] + dt_ob * np.arange(n_ob))
 
-    f_true = interp_rows(t_tr, truth.f_G, t_ob)
-    w_true = interp_rows(t_tr, truth.w_G, t_ob)
+    f_true = interp_rows(t_ob, t_tr, truth.f_G)
+    w_true = interp_rows(t_ob, t_tr, truth.w_G)
     v0, q0, p0 = (np.asarray(truth.v_M[0], float), quat_normalize(truth.q_M_G[0]), np.asarray(truth.p_M[0], float))
     v_nom, q_nom, p_nom, dx0 = nominal_state(v0, q0, p0, spec.nominal, rng)
     f_meas, w_meas, drawn = apply_imu_errors(f_true, w_true, spec.imu, rng)
@@ -513,19 +469,19 @@ def generate_entry_tm(truth, spec: EntryTelemetrySpec, rng: np.random.Generator)
     if "RDA_ON" in events:
         t_on = events["RDA_ON"]
         t_sr = _round_t(np.arange(t_on + spec.sr_first_after_on_s, t_end + 1e-9, spec.sr_period_s))
-        q_sr = quat_normalize(interp_rows(t_tr, truth.q_M_G, t_sr))
-        sr = slant_ranges_sphere(interp_rows(t_tr, truth.p_M, t_sr), q_sr, beams, spec.r_ground)
+        q_sr = quat_normalize(interp_rows(t_sr, t_tr, truth.q_M_G))
+        sr = slant_range_sphere(interp_rows(t_sr, t_tr, truth.p_M)[:, None], q_sr[:, None], beams, spec.r_ground)
         sr = sr + rng.normal(0.0, 1.0, sr.shape) * np.hypot(spec.range_sigma, spec.range_sigma_frac * sr)
         sr[: spec.sr_zero_filled] = 0.0
         sr = np.where(np.isfinite(sr), sr, 0.0)  # a beam without a ground echo reports 0 (flagged on reading)
         dt_r = 1.0 / spec.rda_rate_hz
         t_rda = _round_t(dt_r * np.arange(math.ceil(t_on / dt_r - 1e-6), math.floor(t_end / dt_r + 1e-6) + 1))
-        p_r = interp_rows(t_tr, truth.p_M, t_rda)
-        q_r = quat_normalize(interp_rows(t_tr, truth.q_M_G, t_rda))
-        rho0 = slant_ranges_sphere(p_r, q_r, beams[:1], spec.r_ground)[:, 0]
+        p_r = interp_rows(t_rda, t_tr, truth.p_M)
+        q_r = quat_normalize(interp_rows(t_rda, t_tr, truth.q_M_G))
+        rho0 = slant_range_sphere(p_r, q_r, beams[0], spec.r_ground)
         so = rho0 + rng.normal(0.0, 1.0, rho0.shape) * np.hypot(spec.range_sigma, spec.range_sigma_frac * rho0)
         so = np.where(np.isfinite(so), so, 0.0)
-        vo = terrain_relative_velocity_G(p_r, interp_rows(t_tr, truth.v_M, t_rda), q_r)
+        vo = terrain_relative_velocity_G(p_r, interp_rows(t_rda, t_tr, truth.v_M), q_r)
         vo = vo + rng.normal(0.0, spec.velocity_sigma, vo.shape)
 
     return EntryTM(

@@ -35,7 +35,9 @@ import numpy as np
 from workbench.io.assets import asset_path
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import write_events, write_telemetry
+from workbench.problems.entry.config import config_for
 from workbench.problems.entry.sensors import EntryTelemetrySpec, EntryTM, generate_entry_tm
+from workbench.problems.entry.telemetry import NominalState, write_nominal_state
 
 __all__ = [
     "TELEMETRY_FILES",
@@ -57,7 +59,6 @@ TELEMETRY_FILES = {
     "rda_out": "rda_out.csv",
     "events": "events.csv",
 }
-
 
 
 def vehicle_path(scenario: Scenario) -> Path:
@@ -226,11 +227,6 @@ def synthesize_from_truth(
         seed=np.array(int(seed)),
     )
     paths["truth"] = truth_path
-    from workbench.problems.entry.pipeline import (  # the reconstruction's reader/writer
-        NominalState,
-        write_nominal_state,
-    )
-
     paths["initial_state"] = write_nominal_state(
         out / "initial_state.toml",
         NominalState(t0=t0, v_M=v0, p_M=p0, q_M_G=q0),
@@ -246,6 +242,7 @@ def synthesize_entry(scenario: Scenario, out_dir: str | Path, seed: int | None =
     deterministic per scenario (:func:`truth_for`).  Returns ``{stream: path}`` (keys of
     :data:`TELEMETRY_FILES` plus ``"initial_state"`` and ``"truth"``).
     """
+    config_for(scenario)  # unknown or mistyped keys are errors before the simulation
     seed = int(scenario.get("synthetic.seed", 0, kind="int") if seed is None else seed)
     return synthesize_from_truth(truth_for(scenario), out_dir, EntryTelemetrySpec.from_scenario(scenario), seed)
 

@@ -9,7 +9,7 @@ end is the canopy, a point mass with its own air-relative drag, inflation law an
 (the Schiaparelli anomaly: X gyro above 187.5 °/s for about 1 s, AMELIA Sect. 4) follow from the
 forces; nothing is scripted on the module's motion.
 
-Frames and conventions (``.entry_spec.md``):
+Frames and conventions (docs/ARCHITECTURE.md, "Conventions"):
 
 * ``M`` = MMED inertial frame (Mars-centred, +Z the pole at J2000).  For the ~300 s simulated
   the body-fixed frame is ``Rz(W(t))`` of M and Mars rotates with ``ω = [0, 0, MARS.rotation_rate]``
@@ -51,8 +51,8 @@ scalar Python (``math``) on purpose: for 19 states a numpy call costs more than 
 
 References: AMELIA (Aboudan et al., Space Sci. Rev. 2018) Sects. 3–4, 9, Table 2 (initial state),
 Fig. 2–4 (accelerations, 16 °/s spin, X-rate saturation ~1 s after PDD for ~1 s, Z acceleration
-peak ~101.5 m/s² ~0.6 s after PDD oscillating with ~0.35 s period); FACTS.md (Mars constants,
-Schiaparelli facts, molar mass 43.41 g/mol).
+peak ~101.5 m/s² ~0.6 s after PDD oscillating with ~0.35 s period); Mars constants as in
+:mod:`workbench.core.bodies`; Schiaparelli mass and shield size from ESA; molar mass 43.41 g/mol (AMELIA Sect. 9).
 """
 
 from __future__ import annotations
@@ -70,15 +70,16 @@ from workbench.core.atmosphere import (
     TabulatedAtmosphere,
 )
 from workbench.core.bodies import MARS
-from workbench.core.frames import julian_date_from_utc
-from workbench.core.rotation import quat_normalize, quat_to_dcm
+from workbench.core.frames import julian_date_from_utc, north_east_xyz
+from workbench.core.gravity import j2_factor
+from workbench.core.rotation import dcm_components, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import EntryVehicle
+from workbench.problems.entry.site import R_GROUND
 
 __all__ = [
     "EntryTruthSpec",
     "EntryTruth",
     "MARS_MOLAR_MASS",
-    "R_GROUND",
     "truth_spec_from_scenario",
     "true_atmosphere",
     "wind_profile_truth",
@@ -87,8 +88,6 @@ __all__ = [
 
 MARS_MOLAR_MASS = 0.04341
 """Mean molar mass of the Martian atmosphere below 104 km [kg/mol] (AMELIA Sect. 9)."""
-R_GROUND = MARS.reference_radius - 1440.0
-"""Terrain radius [m]: flat terrain 1440 m below the 3396 km MOLA radius (AMELIA Sect. 7)."""
 
 
 def _wind_layers_default() -> tuple[tuple[float, float, float, float, float], ...]:
@@ -195,7 +194,7 @@ class EntryTruthSpec:
 
 @dataclass(frozen=True, eq=False)
 class EntryTruth:
-    """Truth history of a simulated entry on a uniform ``dt_out`` grid (see ``.entry_spec.md``).
+    """Truth history of a simulated entry on a uniform ``dt_out`` grid (frames as in the module docstring).
 
     Shapes (n samples): ``t`` (n,) [s from EIP]; ``p_M``, ``v_M`` (n,3) [m, m/s, MMED, CoG];
     ``q_M_G`` (n,4); ``w_G`` (n,3) [rad/s]; ``f_G`` (n,3) [m/s², non-gravitational specific force at
@@ -376,8 +375,7 @@ class _Model:
         self.spec = spec
         self.veh = vehicle
         self.gm = MARS.gm
-        self.re = MARS.equatorial_radius
-        self.j2k = 1.5 * MARS.j2 * MARS.gm * MARS.equatorial_radius**2
+        self.j2k = j2_factor(MARS)
         self.rref = MARS.reference_radius
         self.om = MARS.rotation_rate
         self.aero_on = bool(spec.aero_enabled)
@@ -464,6 +462,13 @@ class _Model:
         return sp.side_force_coeff * up * dn
 
     def gravity(self, x, y, z):
+        """Point mass + J2 of Mars at (x, y, z) [m] in M -> (g_x, g_y, g_z [m/s²], |r| [m]).
+
+        The model of :func:`workbench.core.gravity.gravity_j2_xyz`, written here with its own
+        operation order: the reference trajectory (and every number derived from the synthetic
+        telemetry) depends on it to the last bit — the riser dynamics amplify a 1-ulp change of g
+        to ~1e-9 of the summary numbers.  It differs from the shared model by rounding only.
+        """
         r2 = x * x + y * y + z * z
         r = math.sqrt(r2)
         ir3 = 1.0 / (r2 * r)
@@ -478,12 +483,7 @@ class _Model:
         gx, gy, gz, r = self.gravity(px, py, pz)
         h = r - self.rref
         # DCM C_M_G from q_M_G
-        xx, yy, zz = qx * qx, qy * qy, qz * qz
-        xy, xz, yz = qx * qy, qx * qz, qy * qz
-        wqx, wqy, wqz = qw * qx, qw * qy, qw * qz
-        c00, c01, c02 = 1 - 2 * (yy + zz), 2 * (xy - wqz), 2 * (xz + wqy)
-        c10, c11, c12 = 2 * (xy + wqz), 1 - 2 * (xx + zz), 2 * (yz - wqx)
-        c20, c21, c22 = 2 * (xz - wqy), 2 * (yz + wqx), 1 - 2 * (xx + yy)
+        (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = dcm_components(qx, qy, qz, qw)
         om = self.om
         FGx = FGy = FGz = 0.0  # non-gravitational force on the module, body frame [N]
         Mx = My = Mz = 0.0  # torque about the CoG, body frame [N m]
@@ -492,10 +492,7 @@ class _Model:
         wn = we = 0.0
         if self.aero_on:
             rho, a_snd, lam, wn, we = self.atm(h)
-            # local north/east unit vectors in M (from the +Z pole)
-            rxy = math.sqrt(px * px + py * py)
-            ex, ey = -py / rxy, px / rxy
-            nx, ny, nz = -px * pz / (r * rxy), -py * pz / (r * rxy), rxy / r
+            nx, ny, nz, ex, ey = north_east_xyz(px, py, pz, r)  # local north/east in M (+Z the pole)
             vrx = vx + om * py - wn * nx - we * ex
             vry = vy - om * px - wn * ny - we * ey
             vrz = vz - wn * nz
@@ -555,9 +552,7 @@ class _Model:
             Ap = self.area(t)
             if self.aero_on and Ap > 0.0:
                 rho_p, a_p, _, wnp, wep = self.atm(rp - self.rref)
-                rxyp = math.sqrt(ppx * ppx + ppy * ppy)
-                exp_, eyp = -ppy / rxyp, ppx / rxyp
-                nxp, nyp, nzp = -ppx * ppz / (rp * rxyp), -ppy * ppz / (rp * rxyp), rxyp / rp
+                nxp, nyp, nzp, exp_, eyp = north_east_xyz(ppx, ppy, ppz, rp)
                 wx_p = vpx + om * ppy - wnp * nxp - wep * exp_
                 wy_p = vpy - om * ppx - wnp * nyp - wep * eyp
                 wz_p = vpz - wnp * nzp

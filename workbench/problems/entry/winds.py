@@ -41,10 +41,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.core.bodies import MARS
+from workbench.core.frames import ned_basis
+from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_to_dcm, skew
 from workbench.problems.entry.atmosphere import as_profile_sigmas
 
-__all__ = ["WindResult", "ned_basis_M", "pendulum_period", "estimate_winds"]
+__all__ = ["WindResult", "pendulum_period", "estimate_winds"]
 
 
 @dataclass(frozen=True)
@@ -66,20 +68,6 @@ class WindResult:
     method: str
 
 
-def ned_basis_M(p_M: np.ndarray) -> np.ndarray:
-    """``C_N_M`` (n, 3, 3): rows the local north, east, down unit vectors in M at p_M (n, 3).
-
-    Same as ``frames.C_ned_bodyfixed`` at the latitude and (inertial) longitude of p_M: M and the
-    body-fixed frame differ by a rotation about the common pole, which moves N, E, D with it.
-    """
-    p_M = np.asarray(p_M, dtype=float)
-    up = p_M / np.linalg.norm(p_M, axis=-1, keepdims=True)
-    east = np.cross(np.array([0.0, 0.0, 1.0]), up)
-    east /= np.linalg.norm(east, axis=-1, keepdims=True)
-    north = np.cross(up, east)
-    return np.stack([north, east, -up], axis=-2)
-
-
 def pendulum_period(t: np.ndarray, x: np.ndarray, band_hz: tuple[float, float] = (0.25, 3.0)) -> float | None:
     """Dominant period [s] of the signal(s) x (n,) or (n, k) sampled at t (n,) within ``band_hz``.
 
@@ -94,7 +82,7 @@ def pendulum_period(t: np.ndarray, x: np.ndarray, band_hz: tuple[float, float] =
         return None
     dt = max(float(np.median(np.diff(t))), 1e-3)
     tu = np.arange(t[0], t[-1], dt)
-    xu = np.stack([np.interp(tu, t, x[:, j]) for j in range(x.shape[1])], -1)
+    xu = interp_rows(tu, t, x)
     A = np.stack([np.ones_like(tu), tu - tu.mean()], -1)
     xu = xu - A @ np.linalg.lstsq(A, xu, rcond=None)[0]
     nfft = int(2 ** np.ceil(np.log2(8 * tu.size)))
@@ -199,7 +187,7 @@ def estimate_winds(
     h = np.linalg.norm(p_M, axis=-1) - MARS.reference_radius
 
     omega = np.array([0.0, 0.0, MARS.rotation_rate])
-    C_N_M = ned_basis_M(p_M)
+    C_N_M = ned_basis(p_M)  # MMED's +Z is the pole
     C_M_G = quat_to_dcm(q_M_G)
     v_N = np.einsum("nij,nj->ni", C_N_M, v_M - np.cross(omega, p_M))
     d_G = -f_G if method == "specific_force" else np.broadcast_to([0.0, 0.0, -1.0], (n, 3))

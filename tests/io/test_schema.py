@@ -1,0 +1,149 @@
+"""The declarative scenario schema (workbench/io/schema.py): unknown keys, types, defaults, and
+FORMATS.md generated from the problems' schemas."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import workbench.io.schema as schema_mod
+from workbench.io.scenario import ScenarioError
+from workbench.io.schema import REQUIRED, Key, Schema, Table, render_markdown, update_formats
+from workbench.problems.droptest.config import SCHEMA as DROPTEST
+from workbench.problems.entry.config import SCHEMA as ENTRY
+
+FILE = Path("/data/my_scenario.toml")
+
+TOY = Schema(
+    "toy",
+    "a test schema",
+    (
+        Table("scenario", "what", (Key("name", "str", REQUIRED), Key("kind", "str", REQUIRED))),
+        Table(
+            "sensors.imu",
+            "an IMU",
+            (
+                Key("noise_dps", "float", 0.4, "deg/s", "noise"),
+                Key("rate_hz", "int", 100),
+                Key("mode", "str", "fast", choices=("fast", "slow")),
+                Key("lever_m", "vec3", [0.0, 0.0, 1.0], "m"),
+                Key("bias_dps", "float", None, "deg/s", "absent: none"),
+            ),
+        ),
+        Table("guns", "named guns", free="vec3", free_meaning="position"),
+    ),
+)
+
+
+def base(**imu) -> dict:
+    return {"scenario": {"name": "a", "kind": "toy"}, "sensors": {"imu": dict(imu)}}
+
+
+def test_unknown_key_names_file_table_key_and_suggests():
+    with pytest.raises(ScenarioError) as ei:
+        TOY.validate(base(noise_dsp=0.3), FILE)
+    e = ei.value
+    assert e.file == str(FILE) and e.key == "sensors.imu.noise_dsp"
+    msg = str(e)
+    assert str(FILE) in msg and "[sensors.imu]" in msg and "'noise_dsp'" in msg
+    assert "did you mean 'noise_dps'?" in msg
+
+
+def test_unknown_table_is_an_error_with_a_suggestion():
+    data = base()
+    data["sensor"] = {"imu": {}}
+    with pytest.raises(ScenarioError, match="did you mean 'sensors'") as ei:
+        TOY.validate(data, FILE)
+    assert ei.value.key == "sensor"
+    data = base()
+    data["sensors"]["gps"] = {}
+    with pytest.raises(ScenarioError, match=r"unknown key 'gps' in table \[sensors\]") as ei:
+        TOY.validate(data, FILE)
+    assert ei.value.key == "sensors.gps"
+
+
+def test_no_suggestion_for_a_far_off_key():
+    with pytest.raises(ScenarioError) as ei:
+        TOY.validate(base(xyzzy=1), FILE)
+    assert "did you mean" not in str(ei.value) and "noise_dps" in str(ei.value)  # lists the keys instead
+
+
+@pytest.mark.parametrize(
+    "key, value, match",
+    [
+        ("noise_dps", "0.4 deg/s", "expected a number"),
+        ("rate_hz", 100.0, "expected an integer"),
+        ("mode", "medium", "use one of fast, slow"),
+        ("lever_m", [1.0, 2.0], "expected a list of 3 numbers"),
+        ("noise_dps", True, "expected a number"),
+    ],
+)
+def test_wrong_type_is_a_located_error(key, value, match):
+    with pytest.raises(ScenarioError, match=match) as ei:
+        TOY.validate(base(**{key: value}), FILE)
+    assert ei.value.key == f"sensors.imu.{key}" and ei.value.file == str(FILE)
+
+
+def test_a_table_where_a_value_belongs_and_vice_versa():
+    with pytest.raises(ScenarioError, match="expected a table") as ei:
+        TOY.validate({"scenario": {"name": "a", "kind": "toy"}, "sensors": 3}, FILE)
+    assert ei.value.key == "sensors"
+
+
+def test_defaults_filled_and_values_converted():
+    v = TOY.validate(base(rate_hz=50), FILE)
+    imu = v["sensors"]["imu"]
+    assert imu["rate_hz"] == 50 and imu["noise_dps"] == 0.4 and imu["mode"] == "fast"
+    assert imu["bias_dps"] is None  # optional, absent
+    assert isinstance(imu["lever_m"], np.ndarray) and np.array_equal(imu["lever_m"], [0.0, 0.0, 1.0])
+    assert v["guns"] == {}
+    v = TOY.validate(base(noise_dps=1), FILE)
+    assert isinstance(v["sensors"]["imu"]["noise_dps"], float)
+
+
+def test_required_key_missing():
+    with pytest.raises(ScenarioError, match="required") as ei:
+        TOY.validate({"scenario": {"name": "a"}}, FILE)
+    assert ei.value.key == "scenario.kind"
+
+
+def test_free_table_checks_the_value_kind():
+    v = TOY.validate({**base(), "guns": {"G1": [1, 2, 3]}}, FILE)
+    assert np.array_equal(v["guns"]["G1"], [1.0, 2.0, 3.0])
+    with pytest.raises(ScenarioError, match="list of 3") as ei:
+        TOY.validate({**base(), "guns": {"G1": [1, 2]}}, FILE)
+    assert ei.value.key == "guns.G1"
+
+
+def test_markdown_lists_every_key_once():
+    md = render_markdown(TOY)
+    assert "`[sensors.imu]` — an IMU" in md and md.count("| `noise_dps` |") == 1
+    assert "| `name` | str |  | required |" in md and "| `bias_dps` | float | deg/s | — |" in md
+    assert "One of: `fast`, `slow`." in md and "*any name*" in md
+
+
+def test_update_formats_needs_the_markers():
+    with pytest.raises(ValueError, match="schema:toy:begin"):
+        update_formats("no markers here", [TOY])
+    text = "a\n<!-- schema:toy:begin -->\nold\n<!-- schema:toy:end -->\nb\n"
+    new = update_formats(text, [TOY])
+    assert "old" not in new and new.startswith("a\n<!-- schema:toy:begin -->\n") and new.endswith("end -->\nb\n")
+    assert update_formats(new, [TOY]) == new
+
+
+def test_formats_md_matches_the_schemas():
+    """io/FORMATS.md holds the generated tables; regenerate with
+    ``python -m workbench.io.schema --write-formats``."""
+    path = Path(schema_mod.__file__).with_name("FORMATS.md")
+    text = path.read_text(encoding="utf-8")
+    assert update_formats(text, [DROPTEST, ENTRY]) == text, (
+        "FORMATS.md is out of date: run python -m workbench.io.schema --write-formats"
+    )
+
+
+def test_the_formats_modules_are_the_problem_schemas():
+    import importlib
+
+    assert [importlib.import_module(m).SCHEMA for m in schema_mod.PROBLEM_CONFIG_MODULES] == [DROPTEST, ENTRY]

@@ -1,0 +1,161 @@
+"""Entry scenario configuration: every shipped scenario validates; the defaults are those of the
+code's dataclasses; a misspelt key is a located error; the pipeline and the smoother validation
+read the same configuration."""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import pytest
+
+from workbench.io.assets import assets_dir
+from workbench.io.scenario import Scenario, ScenarioError, find_scenarios, load_scenario
+from workbench.problems.entry import montecarlo as mc
+from workbench.problems.entry.config import SCHEMA, EntryConfig, config_for
+from workbench.problems.entry.dispersion import AcceptanceRules
+from workbench.problems.entry.preprocess import PreprocessConfig
+from workbench.problems.entry.sensors import EntryTelemetrySpec
+from workbench.problems.entry.synthetic import synthesize_entry
+from workbench.problems.entry.telemetry import TelemetryChecks, telemetry_paths
+from workbench.problems.entry.truth import EntryTruthSpec, truth_spec_from_scenario
+
+SHIPPED = {n: p for n, p in find_scenarios(assets_dir()).items() if load_scenario(p).kind == "entry"}
+
+
+def minimal(tmp_path: Path, **tables) -> Scenario:
+    data = {"scenario": {"name": "m", "kind": "entry"}, **tables}
+    return Scenario(tmp_path / "m.toml", "m", "entry", "", data)
+
+
+def test_there_is_a_shipped_entry_scenario():
+    assert "schiaparelli" in SHIPPED
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED))
+def test_every_shipped_scenario_validates(name):
+    sc = load_scenario(SHIPPED[name])
+    cfg = EntryConfig.from_scenario(sc)
+    assert cfg.members > 0 and cfg.bridge_mode in ("relative", "paper")
+    assert config_for(sc) is config_for(sc)
+    # the synthetic-side readers accept it too
+    EntryTelemetrySpec.from_scenario(sc)
+    truth_spec_from_scenario(sc)
+
+
+def test_schiaparelli_values():
+    cfg = config_for(load_scenario(SHIPPED["schiaparelli"]))
+    assert cfg.members == 10000 and cfg.refine_rounds == 3 and cfg.cloud == 300
+    assert cfg.rules == AcceptanceRules(h_pdd_m=(10000.0, 2000.0))  # the file's rules are the defaults
+    assert cfg.azimuths_deg == (0.0, 120.0, 240.0) and cfg.constrained and cfg.terrain_m == -1440.0
+
+
+def test_defaults_are_those_of_the_code(tmp_path):
+    cfg = EntryConfig.from_scenario(minimal(tmp_path))
+    assert cfg.preprocess == PreprocessConfig()
+    assert cfg.checks == TelemetryChecks()
+    assert cfg.rules == AcceptanceRules()
+    assert cfg.epoch_utc is None and cfg.initial == "fused" and cfg.wind_method == "specific_force"
+    assert EntryTelemetrySpec.from_scenario(minimal(tmp_path)) == EntryTelemetrySpec()
+    truth_keys = {k.name: k.default for k in SCHEMA.table("truth").keys}
+    d = EntryTruthSpec()
+    assert set(truth_keys) == set(EntryTruthSpec.__dataclass_fields__)
+    assert truth_keys["pdd_mach"] == d.pdd_mach and truth_keys["dt_chute"] == d.dt_chute
+
+
+def test_preprocess_sigmas_fall_back_to_the_reconstruction_table(tmp_path):
+    cfg = config_for(minimal(tmp_path, reconstruction={"rate_pdd_dps": 5.0}, preprocess={"sigma_rate_dps": 0.02}))
+    assert cfg.preprocess.sigma_w_saturated == math.radians(5.0) == cfg.preprocess.sigma_w_resampled
+    assert cfg.preprocess.sigma_w == math.radians(0.02)
+
+
+def _copy_with(tmp_path: Path, old: str, new: str) -> Path:
+    src = SHIPPED["schiaparelli"]
+    dst = tmp_path / "scenarios" / "my_entry.toml"
+    dst.parent.mkdir(parents=True)
+    shutil.copytree(src.parent.parent / "vehicles", tmp_path / "vehicles")
+    text = src.read_text()
+    assert text.count(old) == 1
+    dst.write_text(text.replace(old, new).replace('name = "schiaparelli"', 'name = "my_entry"'))
+    return dst
+
+
+@pytest.mark.parametrize(
+    "old, new, key, table, suggestion",
+    [
+        ("squint_deg = 20.0", "squint_dg = 20.0", "radar.squint_dg", "[radar]", "squint_deg"),
+        ("mach_pdd = [2.0, 0.2]", "mach_pd = [2.0, 0.2]", "dispersion.rules.mach_pd", "[dispersion.rules]", "mach_pdd"),
+        ("fsr_delay_s = 41.0", "fsr_delay = 41.0", "truth.fsr_delay", "[truth]", "fsr_delay_s"),
+        ("[winds]", "[wind]", "wind", "top level", "winds"),
+        (
+            "resample_hz = 100.0",
+            "resample_rate_hz = 100.0",
+            "preprocess.resample_rate_hz",
+            "[preprocess]",
+            "resample_hz",
+        ),
+    ],
+)
+def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggestion):
+    path = _copy_with(tmp_path, old, new)
+    with pytest.raises(ScenarioError) as ei:
+        EntryConfig.from_scenario(load_scenario(path))
+    e = ei.value
+    assert e.file == str(path) and e.key == key
+    assert table in str(e) and f"did you mean '{suggestion}'?" in str(e)
+
+
+@pytest.mark.parametrize(
+    "key, value, match",
+    [
+        ("reconstruction.initial", "fusion", "use one of fused, dispersion, nominal"),
+        ("dispersion.chunk_size", 0, "must be > 0"),
+        ("dispersion.rules.h_end_m", [3000.0, -1.0], "half-width > 0"),
+        ("scenario.epoch_utc", "yesterday", "epoch_utc"),
+        ("sensors.imu.gyro_full_scale_dps", [1.0, 2.0], "list of 3"),
+        ("preprocess.gap_factor", 0.5, "gap_factor"),
+    ],
+)
+def test_bad_values_are_located_errors(key, value, match):
+    sc = load_scenario(SHIPPED["schiaparelli"]).with_overrides({key: value})
+    with pytest.raises(ScenarioError, match=match) as ei:
+        EntryConfig.from_scenario(sc)
+    assert ei.value.key.split(".")[0] == key.split(".")[0]
+
+
+def test_synthesis_rejects_the_scenario_before_simulating(tmp_path):
+    path = _copy_with(tmp_path, "velocity_sigma_mps = 1.0", "velocity_sigma = 1.0")
+    with pytest.raises(ScenarioError, match=r"sensors.radar.velocity_sigma'.*did you mean 'velocity_sigma_mps'"):
+        synthesize_entry(load_scenario(path), tmp_path / "tel")
+    assert not (tmp_path / "tel").exists() or not list((tmp_path / "tel").iterdir())
+
+
+def test_telemetry_paths_need_every_stream_radar_included(tmp_path):
+    streams = {k: f"tm/{k}.csv" for k in ("gnc", "gnc_nav", "rda_slant_range", "events", "initial_state")}
+    with pytest.raises(ScenarioError, match="rda_out") as ei:
+        telemetry_paths(minimal(tmp_path, telemetry=streams))
+    assert ei.value.key == "telemetry.rda_out" and "radar" in str(ei.value)
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_prepare_validation_reads_the_scenarios_telemetry_checks(tmp_path, monkeypatch):
+    """The validation run reads the telemetry with the same checks as the pipeline
+    (``[preprocess] quat_*_tol``, ``[sensors.radar] zero_filled_packets``)."""
+    seen = {}
+
+    def fake_read(paths, checks=None):
+        seen["checks"] = checks
+        raise _Stop
+
+    monkeypatch.setattr(mc, "read_entry_telemetry", fake_read)
+    (tmp_path / "initial_state.toml").write_text("")
+    sc = load_scenario(SHIPPED["schiaparelli"]).with_overrides(
+        {"preprocess.quat_error_tol": 2e-3, "preprocess.quat_warn_tol": 1e-5, "sensors.radar.zero_filled_packets": 3}
+    )
+    with pytest.raises(_Stop):
+        mc.prepare_validation(sc, {"initial_state": tmp_path / "initial_state.toml"})
+    assert seen["checks"] == TelemetryChecks(quat_error_tol=2e-3, quat_warn_tol=1e-5, zero_filled_packets=3)

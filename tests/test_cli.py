@@ -1,0 +1,90 @@
+"""The command line: ``list``, the errors for no scenarios / an unknown kind, and a ``run``.
+
+The run uses the worked example problem (``tests/problems/example_fallingbody``, a few seconds),
+registered for the test, so it also checks that the command line holds no problem knowledge.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from workbench.cli import EXIT_INPUT, EXIT_KIND, EXIT_OK, main
+from workbench.problems import registry
+
+EXAMPLE = Path(__file__).resolve().parent / "problems" / "example_fallingbody"
+
+
+@pytest.fixture
+def fallingbody():
+    spec = importlib.util.spec_from_file_location("example_fallingbody_cli", EXAMPLE / "fallingbody.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    p = registry.register(module.FallingBodyProblem(), replace=True)
+    yield p
+    registry.unregister(p.kind)
+    sys.modules.pop(spec.name, None)
+
+
+def _assets(tmp_path, monkeypatch, scenarios: dict[str, str]) -> Path:
+    """A stand-in shipped-assets folder holding ``scenarios`` {file name: TOML text}."""
+    root = tmp_path / "assets"
+    (root / "scenarios").mkdir(parents=True)
+    for name, text in scenarios.items():
+        (root / "scenarios" / name).write_text(text, encoding="utf-8")
+    monkeypatch.setattr("workbench.io.assets.assets_dir", lambda: root)
+    return root
+
+
+def test_list_prints_every_shipped_scenario(capsys):
+    assert main(["list"]) == EXIT_OK
+    lines = capsys.readouterr().out.splitlines()
+    rows = {ln.split()[0]: ln.split()[1:3] for ln in lines}
+    assert rows["droptest"] == ["droptest", "(synthetic)"]
+    assert rows["schiaparelli"] == ["entry", "(synthetic)"]
+    assert len(lines) >= 5
+
+
+def test_list_with_no_scenarios_is_an_error(tmp_path, monkeypatch, capsys):
+    root = _assets(tmp_path, monkeypatch, {})
+    assert main(["list"]) == EXIT_INPUT
+    err = capsys.readouterr().err
+    assert "no scenarios found" in err and str(root / "scenarios") in err
+    assert main(["run", "all", "--out", str(tmp_path / "out")]) == EXIT_INPUT
+    assert not (tmp_path / "out").exists()
+
+
+def test_list_marks_a_kind_without_problem(tmp_path, monkeypatch, capsys):
+    _assets(tmp_path, monkeypatch, {"r.toml": '[scenario]\nname = "r"\nkind = "rocket"\ndescription = "d"\n'})
+    assert main(["list"]) == EXIT_OK
+    assert "rocket (no problem)" in capsys.readouterr().out
+
+
+def test_unknown_kind_is_exit_code_5_and_names_the_known_kinds(tmp_path, capsys):
+    toml = tmp_path / "rocket.toml"
+    toml.write_text('[scenario]\nname = "r"\nkind = "rocket"\n', encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["run", str(toml), "--out", str(out)]) == EXIT_KIND
+    err = capsys.readouterr().err
+    assert str(toml) in err and "'rocket'" in err and "known kinds: droptest, entry" in err
+    assert not out.exists()  # nothing written
+    assert main(["mc", str(toml), "--out", str(out)]) == EXIT_KIND
+
+
+def test_run_an_example_problem(fallingbody, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["run", str(EXAMPLE / "fallingbody.toml"), "--out", str(out), "--seed", "5"]) == EXIT_OK
+    err = capsys.readouterr().err.splitlines()
+    s = json.loads((out / "fallingbody.summary.json").read_text(encoding="utf-8"))
+    assert s["seed"] == 5 and s["truth"]["h_inside_3sigma_fraction"] >= 0.99
+    assert (out / "fallingbody.rrd").stat().st_size == s["recording_bytes"]
+    assert not (out / "fallingbody.reconstruction.csv").exists()  # no --export
+    # progress: the truth simulation, one line per stage, then the problem's headline
+    assert err[0] == "[fallingbody] simulating the fall (truth) and writing telemetry ..."
+    assert [ln.split()[1] for ln in err[1:4]] == ["BaroData", "ForwardStage", "FallResult"]
+    assert err[-1].startswith("[fallingbody] end altitude ") and f"wrote {out / 'fallingbody.rrd'}" in err[-1]

@@ -1,0 +1,174 @@
+"""The Problem protocol: what a reconstruction problem (drop test, entry, ...) gives the runner.
+
+A scenario file names its problem by ``[scenario] kind``; :mod:`workbench.problems.registry` maps
+the kind to an object implementing :class:`Problem`, and :mod:`workbench.problems.runner` runs
+any scenario through it with the same steps::
+
+    synthesize (synthetic scenarios) -> reconstruct (yields stages) -> record each stage
+    -> score against the truth (synthetic) -> scorecard -> summary.json (-> CSV export)
+
+A problem composes its own pipeline, truth simulator, recording and Monte Carlo modules; the
+runner and the command line hold no problem knowledge.  The small frozen dataclasses below are
+what crosses the boundary.  Units: SI; times in seconds from the problem's own epoch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import AbstractContextManager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from workbench.io.scenario import Scenario
+
+__all__ = [
+    "ExportTable",
+    "McOptions",
+    "McOutcome",
+    "Problem",
+    "Progress",
+    "RunOptions",
+    "StageRecorder",
+    "Synthesized",
+]
+
+#: A progress sink: one human-readable line per call (the command line prints it to stderr).
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Options of one reconstruction run.
+
+    ``seed``: seed of the synthetic sensors and of any sampling in the reconstruction (None: the
+    scenario's ``[synthetic] seed``, else 0); ``export``: also write the reconstructed histories as
+    CSV; ``scheduler``: ensemble stages on Dask (``"local"`` or ``"tcp://host:port"``; None:
+    in-process); ``members``: size of the problem's ensemble stage, if it has one (None: the
+    scenario's setting).
+    """
+
+    seed: int | None = None
+    export: bool = False
+    scheduler: str | None = None
+    members: int | None = None
+
+
+@dataclass(frozen=True)
+class McOptions:
+    """Options of a Monte Carlo run: ``n_runs`` runs seeded ``first_seed, first_seed + 1, ...``,
+    on ``workers`` local processes or a Dask ``scheduler``; ``members`` as in :class:`RunOptions`."""
+
+    n_runs: int = 20
+    first_seed: int = 1
+    workers: int = 2
+    scheduler: str | None = None
+    members: int | None = None
+
+    @property
+    def seeds(self) -> list[int]:
+        """The run seeds, ``[first_seed, ..., first_seed + n_runs - 1]``."""
+        return list(range(self.first_seed, self.first_seed + self.n_runs))
+
+
+@dataclass(frozen=True)
+class Synthesized:
+    """What :meth:`Problem.synthesize` wrote: ``telemetry`` {stream: file} exactly as a user would
+    supply it (the input of :meth:`Problem.reconstruct`) and ``truth`` (the ``truth.npz`` file)."""
+
+    telemetry: Mapping[str, Path]
+    truth: Path
+
+
+@dataclass(frozen=True)
+class ExportTable:
+    """Reconstructed histories for CSV export: ``time_s`` (n,) [s]; ``columns`` name ->
+    ``(values (n,) in SI, unit string)`` (the :func:`workbench.io.results.export_csv` convention);
+    ``frame``: the reference frame the columns are expressed in."""
+
+    time_s: np.ndarray
+    columns: Mapping[str, tuple[np.ndarray, str]]
+    frame: str
+
+
+@dataclass(frozen=True)
+class McOutcome:
+    """Result of :meth:`Problem.monte_carlo`: the JSON-ready ``summary`` (written by the runner to
+    ``<name>.mc.json``), the ``recording`` it wrote and a one-line ``headline`` for the user."""
+
+    summary: dict
+    recording: Path
+    headline: str
+    details: Any = field(default=None, repr=False)
+
+
+@runtime_checkable
+class StageRecorder(Protocol):
+    """Draws a run into an open recording, stage by stage."""
+
+    def handle(self, stage: object) -> None:
+        """Draw one stage yielded by :meth:`Problem.reconstruct`; a stage type the recorder does not
+        know is an error (``TypeError``, see :class:`workbench.recording.dispatch.StageDispatch`)."""
+
+    def finish(self, result: object, summary: dict) -> None:
+        """After the last stage: draw what needs the whole result (scorecard, final layout).
+        ``summary`` is the run's summary including the truth score, seed and wall time."""
+
+
+@runtime_checkable
+class Problem(Protocol):
+    """A reconstruction problem (one scenario ``kind``).
+
+    Attributes: ``kind`` (the ``[scenario] kind`` string it handles); ``title`` (what its truth
+    simulation simulates, for progress lines, e.g. ``"drop"``); ``schema``: the configuration
+    schema of its scenario tables, or None while it has none.
+    """
+
+    kind: str
+    title: str
+    schema: Any
+
+    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
+        """The telemetry files of a run, {stream: path}: those named by the scenario's
+        ``[telemetry]`` table, or (``folder`` given) the standard file names inside ``folder``
+        (the layout :meth:`synthesize` writes).  Raises ``ScenarioError`` naming a missing key/file."""
+
+    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+        """Simulate the truth and write telemetry files (as a user supplies them) and
+        ``truth.npz`` into ``out_dir``; ``seed`` drives the sensor errors."""
+
+    def load_truth(self, path: Path) -> Any:
+        """Read the ``truth.npz`` written by :meth:`synthesize` (for scoring and drawing only)."""
+
+    def reconstruct(self, scenario: Scenario, telemetry: Mapping[str, Path], options: RunOptions) -> Iterator[object]:
+        """Run the reconstruction on the ``telemetry`` files; yield typed stage results in order,
+        the last one the final result (with a JSON-ready ``summary`` dict attribute)."""
+
+    def summary(self, result: object) -> dict:
+        """The JSON-ready key numbers of a final result (no truth involved), a new dict."""
+
+    def score(self, result: object, truth: Any) -> dict:
+        """Errors of the final ``result`` against the ``truth`` (JSON-ready; under ``"truth"``)."""
+
+    def scorecard(self, summary: dict) -> str:
+        """The run's scorecard (markdown) from its summary (incl. ``"truth"`` when scored)."""
+
+    def headline(self, summary: dict) -> str:
+        """One line with the run's main result, for the user."""
+
+    def open_recording(
+        self, path: Path, scenario: Scenario, truth: Any, properties: dict
+    ) -> AbstractContextManager[StageRecorder]:
+        """Open the problem's recording at ``path`` (published only if the block succeeds), with
+        its layout; yields the :class:`StageRecorder`.  ``truth``: loaded truth or None;
+        ``properties``: recording properties (``{"run": {...}}``)."""
+
+    def export_columns(self, result: object) -> ExportTable:
+        """The reconstructed histories of a final result for CSV export."""
+
+    def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
+        """The problem's Monte Carlo / consistency analysis of ``scenario``; writes its recording
+        under ``out_dir``, reports its phases to ``progress`` and returns the summary.  Raises
+        ``NotImplementedError`` if the scenario does not allow one (e.g. not synthetic)."""

@@ -1,0 +1,172 @@
+"""The drop test (REDLand) as a :class:`~workbench.problems.base.Problem`.
+
+Composes :mod:`.pipeline` (reconstruction, scoring, scorecard), :mod:`.synthetic` (truth and
+telemetry), :mod:`.recording` (the recording layout and drawer) and :mod:`.montecarlo`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from workbench.io.scenario import Scenario
+from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
+from workbench.problems.droptest import model as rl
+from workbench.problems.droptest import pipeline as dt
+from workbench.problems.droptest.config import SCHEMA, config_for
+from workbench.problems.droptest.telemetry import OPTIONAL_STREAMS, telemetry_paths
+
+__all__ = ["TELEMETRY_FILES", "DropTestProblem", "residual_names"]
+
+#: telemetry stream -> file name in a telemetry folder (what synthetic.synthesize_droptest writes)
+TELEMETRY_FILES = {
+    "imu": "imu.csv",
+    "attitude_3dm": "3dm.csv",
+    "events": "events.csv",
+    "setup": "setup.toml",
+    "ranging": "ranging.csv",
+}
+
+
+def residual_names(scenario: Scenario) -> list[str]:
+    """Names of the measurement residual groups the scenario's filter has (blueprint panels):
+    the accelerometer triads, ``gyro``, ``zupt``, and with ``[sensors.ranging]`` the odometer and
+    ``<gun>.range``/``<gun>.rate`` per radar gun."""
+    cfg = config_for(scenario)
+    names = [*cfg.triads, "gyro", "zupt"]
+    if cfg.ranging:
+        if cfg.odometer:
+            names.append("odometer")
+        for gname in cfg.radar_guns:
+            names += [f"{gname}.range", f"{gname}.rate"]
+    return names
+
+
+class _Drawer:
+    """:class:`~workbench.problems.base.StageRecorder` of a drop test (wraps DropTestRecorder)."""
+
+    def __init__(self, rec, truth, residuals: list[str]):
+        from workbench.problems.droptest.recording import DropTestRecorder
+
+        self.rec = rec
+        self.residuals = residuals
+        self.drawer = DropTestRecorder(rec, truth)
+
+    def handle(self, stage: object) -> None:
+        self.drawer.handle(stage)
+
+    def finish(self, result: object, summary: dict) -> None:
+        from workbench.problems.droptest.recording import droptest_blueprint, impact_view
+
+        self.rec.report(dt.scorecard_markdown(summary))
+        # the layout that needs the result (camera at the impact, stroke zoom) becomes the default
+        self.rec.stream.send_blueprint(
+            droptest_blueprint(self.residuals, impact_view(result)), make_active=True, make_default=True
+        )
+
+
+class DropTestProblem:
+    """Airbag drop test in the SPF chamber: kinematic/dynamic EKF + RTS smoother + airbag stroke."""
+
+    kind = "droptest"
+    title = "drop"
+    schema = SCHEMA
+
+    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
+        """``[telemetry]`` files (imu, attitude_3dm, events, setup, optional ranging), or the
+        standard names in ``folder`` (ranging only if the file exists)."""
+        if folder is None:
+            return telemetry_paths(scenario)
+        d = Path(folder)
+        return {k: d / f for k, f in TELEMETRY_FILES.items() if k not in OPTIONAL_STREAMS or (d / f).exists()}
+
+    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+        """Simulate the drop (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
+        from workbench.problems.droptest.synthetic import synthesize_droptest
+
+        syn = synthesize_droptest(scenario, out_dir, seed=seed)
+        return Synthesized(telemetry=dict(syn.telemetry), truth=syn.truth_path)
+
+    def load_truth(self, path: Path) -> dict[str, np.ndarray]:
+        """The truth arrays of ``truth.npz`` (``synthetic.load_truth``)."""
+        from workbench.problems.droptest.synthetic import load_truth
+
+        return load_truth(path)
+
+    def reconstruct(self, scenario: Scenario, telemetry: Mapping[str, Path], options: RunOptions) -> Iterator[object]:
+        """``pipeline.reconstruct``; ``options.seed`` drives the posterior sampling of the stroke σ."""
+        return dt.reconstruct(scenario, dict(telemetry), seed=0 if options.seed is None else options.seed)
+
+    def summary(self, result: dt.DropResult) -> dict:
+        """A copy of ``result.summary`` (SI)."""
+        return dict(result.summary)
+
+    def score(self, result: dt.DropResult, truth: dict) -> dict:
+        """``pipeline.score``: max stroke, restitution, pose errors against the truth."""
+        return dt.score(result, truth)
+
+    def scorecard(self, summary: dict) -> str:
+        """``pipeline.scorecard_markdown``."""
+        return dt.scorecard_markdown(summary)
+
+    def headline(self, summary: dict) -> str:
+        """Max stroke ± 1σ and its time (and the true max stroke when scored)."""
+        ms = summary["max_stroke"]
+        line = f"max stroke {ms['distance_m']:.3f} ± {ms['sigma_m']:.3f} m (1σ) at t = {ms['time_s']:.3f} s"
+        if "truth" in summary:
+            line += f"; truth {summary['truth']['max_stroke_truth_m']:.3f} m"
+        return line
+
+    @contextlib.contextmanager
+    def open_recording(self, path: Path, scenario: Scenario, truth: Any, properties: dict) -> Iterator[_Drawer]:
+        """The drop-test recording (``recording.droptest_blueprint`` layout)."""
+        from workbench.problems.droptest.recording import droptest_blueprint
+        from workbench.recording.writer import open_recording
+
+        residuals = residual_names(scenario)
+        with open_recording(path, scenario.name, blueprint=droptest_blueprint(residuals), properties=properties) as rec:
+            yield _Drawer(rec, truth, residuals)
+
+    def export_columns(self, result: dt.DropResult) -> ExportTable:
+        """Smoothed position, velocity, attitude (SPF chamber frame), their σ, and the stroke."""
+        x = result.smoothed.x
+        sd = np.sqrt(np.einsum("nii->ni", result.smoothed.P))
+        p, v, q, sd_p = x[:, rl.SP], x[:, rl.SV], x[:, rl.SQ], sd[:, rl.EP]
+        cols: dict[str, tuple[np.ndarray, str]] = {}
+        for i, a in enumerate("xyz"):
+            cols[f"p.{a}"] = (p[:, i], "m")
+            cols[f"sigma_p.{a}"] = (sd_p[:, i], "m")
+            cols[f"v.{a}"] = (v[:, i], "m/s")
+        for i, a in enumerate("xyzw"):
+            cols[f"q_spf_body.{a}"] = (q[:, i], "1")
+        cols["stroke"] = (result.stroke.smoothed.distance, "m")
+        cols["sigma_stroke"] = (result.stroke.smoothed.sigma, "m")
+        return ExportTable(result.smoothed.t, cols, "SPF chamber frame")
+
+    def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
+        """Consistency statistics of a synthetic scenario over ``options.seeds`` (truth inside 3σ,
+        ANEES); writes ``<out>/<name>_mc.rrd`` and works in ``<out>/<name>_mc_work``."""
+        from workbench.problems.droptest.montecarlo import monte_carlo, summarize_mc
+        from workbench.recording.montecarlo import record_monte_carlo
+
+        if not scenario.is_synthetic:
+            raise NotImplementedError(f"{scenario.path}: Monte Carlo needs a synthetic droptest scenario")
+        out = Path(out_dir)
+        seeds = options.seeds
+        how = options.scheduler or f"{options.workers} local worker(s)"
+        progress(f"[{scenario.name}] Monte Carlo: {len(seeds)} runs ({how}) ...")
+        res = monte_carlo(
+            scenario, seeds, out / f"{scenario.name}_mc_work", scheduler=options.scheduler, workers=options.workers
+        )
+        summary = summarize_mc(res)
+        rrd = record_monte_carlo(out / f"{scenario.name}_mc.rrd", f"{scenario.name} Monte Carlo", res, summary)
+        headline = (
+            f"truth inside 3σ in {100 * summary['fraction_inside_3sigma']:.0f} % of runs, "
+            f"median 3σ {100 * summary['median_3sigma_m']:.1f} cm, max-stroke ANEES "
+            f"{summary['anees_stroke']:.2f}; wrote {rrd} in {res.total_wall_s:.0f} s"
+        )
+        return McOutcome(summary, Path(rrd), headline, res)

@@ -1,0 +1,283 @@
+"""Drop-test telemetry: the files a drop-test scenario names, read and validated.
+
+:func:`telemetry_paths` resolves the scenario's ``[telemetry]`` table: ``imu``, ``attitude_3dm``,
+``events`` and ``setup`` are required, ``ranging`` is optional (an optional sensor: the
+reconstruction uses it when the file is given).  :func:`load_drop_telemetry` reads them into a
+:class:`DropTelemetry` on the filter's time grid; format defects are errors naming file, column and
+row (:mod:`workbench.io.telemetry`), degradations (saturation, dead channels, gaps) are listed.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.bodies import G0
+from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.telemetry import Telemetry, read_events, read_telemetry
+from workbench.problems.droptest.config import config_for
+from workbench.problems.droptest.lander import LanderModel
+from workbench.problems.droptest.sensors import RangingSpec, acquisition_group_delay
+
+__all__ = ["STREAMS", "OPTIONAL_STREAMS", "DropTelemetry", "telemetry_paths", "read_setup", "load_drop_telemetry"]
+
+#: Telemetry streams of a drop-test scenario (``[telemetry]`` keys).
+STREAMS = ("imu", "attitude_3dm", "events", "setup", "ranging")
+#: Of those, the optional ones.
+OPTIONAL_STREAMS = ("ranging",)
+
+
+@dataclass(frozen=True)
+class DropTelemetry:
+    """Validated telemetry on the filter's time grid.
+
+    ``t`` (n,) [s from release], already shifted back by ``group_delay_s``; ``f_B`` (n, n_triads, 3)
+    triad specific forces [m/s², body] in the order of ``triads``; ``f_valid`` (n, n_triads) bool;
+    ``w_B`` (n, 3) gyro rates [rad/s, body]; ``w_valid`` (n,) bool; ``hanging`` (n,) bool (before
+    the release event); ``events`` name -> time [s]; ``degradations`` human-readable list of
+    what was dropped or bridged and why; ``raw`` the files as read (for ``/sensors``).
+    ``jerk`` (n,) measured jerk indicator [m/s³] that raises the process noise; ``counts`` the IMU
+    samples averaged into each step, per triad (n, n_triads) and for the gyro (n,); ``rate_hz`` the
+    filter rate actually used (a whole number of IMU samples per step).
+    """
+
+    t: np.ndarray
+    f_B: np.ndarray
+    f_valid: np.ndarray
+    w_B: np.ndarray
+    w_valid: np.ndarray
+    hanging: np.ndarray
+    triads: tuple[str, ...]
+    lever_arms_B: np.ndarray
+    events: dict[str, float]
+    setup: dict
+    group_delay_s: float
+    degradations: tuple[tuple[float, str, str], ...]
+    imu: Telemetry
+    attitude: Telemetry
+    ranging: Telemetry | None
+    jerk: np.ndarray
+    counts: tuple[np.ndarray, np.ndarray]
+    rate_hz: float
+
+
+# ---------------------------------------------------------------------------------------------
+# reading
+# ---------------------------------------------------------------------------------------------
+
+
+def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
+    """Telemetry files named by the scenario's ``[telemetry]`` table, resolved against the scenario
+    file: ``imu``, ``attitude_3dm``, ``events``, ``setup`` required (a missing key or file raises
+    :class:`ScenarioError` naming it), ``ranging`` optional."""
+    config_for(scenario)  # unknown or mistyped keys are errors before any file is opened
+    paths = {k: scenario.path_of(f"telemetry.{k}") for k in STREAMS if k not in OPTIONAL_STREAMS}
+    for k in OPTIONAL_STREAMS:
+        if scenario.has(f"telemetry.{k}"):
+            paths[k] = scenario.path_of(f"telemetry.{k}")
+    return paths
+
+
+def read_setup(path: Path) -> dict:
+    """The drop-test setup TOML (``[hanging]`` survey, optional ``[bungee]`` test plan and ``[rocks]``
+    field); a missing required key raises :class:`ScenarioError` naming file and key."""
+    try:
+        with open(path, "rb") as f:
+            d = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise ScenarioError(path, None, f"cannot read the setup file: {err}") from err
+    required = ["hanging.position_m", "hanging.position_sigma_m"]
+    if "bungee" in d:  # the test plan is optional, but complete when given (dynamic mode, odometer)
+        required += [
+            f"bungee.{k}" for k in ("anchor_m", "rest_length_m", "coefficients", "count", "attach_body_m", "mass_kg")
+        ]
+    for key in required:
+        a, b = key.split(".")
+        if not isinstance(d.get(a), dict) or b not in d[a]:
+            raise ScenarioError(path, key, "missing")
+    return d
+
+
+def _degrade(log: list, t: float, level: str, text: str) -> None:
+    log.append((float(t), level, text))
+
+
+def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: LanderModel) -> DropTelemetry:
+    """Read and validate the drop-test telemetry ``paths`` (:func:`telemetry_paths`); resample to the
+    filter rate (see :class:`DropTelemetry`)."""
+    cfg = config_for(scenario)
+    triads = cfg.triads
+    fs_acc = cfg.accel_full_scale_g * G0
+    fs_gyr = np.radians(cfg.gyro_full_scale_dps)
+    required = {f"{n}.{a}": "acceleration" for n in triads for a in "xyz"}
+    required.update({f"gyro.{a}": "angular_rate" for a in "xyz"})
+    sat = {k: (0.999 * fs_acc if k.split(".")[0] != "gyro" else 0.999 * fs_gyr) for k in required}
+    imu = read_telemetry(paths["imu"], required=required, saturation=sat)
+    att = read_telemetry(
+        paths["attitude_3dm"], required={f"{v}.{a}": "dimensionless" for v in ("up", "mag") for a in "xyz"}
+    )
+    ev_list = read_events(paths["events"])
+    att_log: list[tuple[float, str, str]] = []
+    for v in ("up", "mag"):
+        norms = np.linalg.norm(att.stack([f"{v}.x", f"{v}.y", f"{v}.z"]), axis=1)
+        if np.any(np.abs(norms - 1.0) > 0.05):
+            k = int(np.argmax(np.abs(norms - 1.0)))
+            att_log.append(
+                (
+                    float(att.time[k]),
+                    "WARN",
+                    f"{paths['attitude_3dm']}: '{v}' vectors are not unit (|v| = {norms.min():.3f}–"
+                    f"{norms.max():.3f}, worst at row {k + 1}); only their directions are used",
+                )
+            )
+    events: dict[str, float] = {}
+    dup_log: list[tuple[float, str, str]] = []
+    for t_e, name in ev_list:
+        if name in events:
+            dup_log.append(
+                (
+                    float(t_e),
+                    "WARN",
+                    f"{paths['events']}: event '{name}' repeated at {t_e:.4f} s; "
+                    f"the first, at {events[name]:.4f} s, is used",
+                )
+            )
+            continue
+        events[name] = t_e
+    if "release" not in events:
+        raise ScenarioError(paths["events"], None, "no 'release' event: the reconstruction needs the release time")
+    setup = read_setup(paths["setup"])
+    ranging = None
+    if "ranging" in paths:
+        spec = RangingSpec.from_scenario(scenario)
+        req = {"odometer": "length"} if spec.odometer else {}
+        for gun in spec.guns:
+            req.update({f"{gun}.range": "length", f"{gun}.rate": "velocity"})
+        ranging = read_telemetry(paths["ranging"], required=req, sparse=[k for k in req])
+    missing = [n for n in triads if n not in lander.instruments]
+    if missing:
+        raise ScenarioError(
+            scenario.path,
+            "sensors.accelerometer.triads",
+            f"triads {missing} have no lever arm in the lander asset's [instruments]",
+        )
+
+    log: list[tuple[float, str, str]] = list(att_log) + dup_log
+    n_raw = len(imu)
+    f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
+    w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])
+    f_ok = np.ones((n_raw, len(triads)), bool)
+    for j, n in enumerate(triads):
+        s = np.zeros(n_raw, bool)
+        for a in "xyz":
+            s |= imu.saturated[f"{n}.{a}"]
+        if s.any():
+            f_ok[s, j] = False
+            _degrade(
+                log,
+                imu.time[np.argmax(s)],
+                "WARN",
+                f"triad {n}: {int(s.sum())} saturated samples (±{fs_acc / G0:g} g) dropped from the filter",
+            )
+    w_ok = np.ones(n_raw, bool)
+    for a in "xyz":
+        s = imu.saturated[f"gyro.{a}"]
+        if s.any():
+            w_ok &= ~s
+            _degrade(
+                log,
+                imu.time[np.argmax(s)],
+                "WARN",
+                f"gyro.{a}: {int(s.sum())} saturated samples (±{np.degrees(fs_gyr):g} °/s); gyro dropped, "
+                "rate carried by the triads' lever arms",
+            )
+    # dead channels: a channel that does not move while the others see the impact
+    moving = imu.time >= events["release"]
+    if moving.sum() > 10:
+        spread = np.ptp(f_raw[moving], axis=0)  # (4,3)
+        ref = np.median(spread)
+        for j, n in enumerate(triads):
+            dead_axes = [a for i, a in enumerate("xyz") if spread[j, i] < 1e-3 * max(ref, 1.0)]
+            if dead_axes:
+                f_ok[:, j] = False
+                _degrade(
+                    log,
+                    events["release"],
+                    "ERROR",
+                    f"triad {n}: channel(s) {', '.join(dead_axes)} dead (no variation after release): "
+                    "triad excluded from the reconstruction",
+                )
+        if not f_ok.any():
+            raise ScenarioError(paths["imu"], None, "no usable accelerometer triad (all dead)")
+    for gap in imu.gaps:
+        _degrade(
+            log,
+            gap.start_s,
+            "WARN",
+            f"IMU gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row}): "
+            "bridged by propagation, covariance grows",
+        )
+
+    # average down to the filter rate (boxcar of k samples, grouped on the uniform sample grid)
+    rate_req = cfg.filter_rate_hz
+    dt_raw = float(np.median(np.diff(imu.time)))
+    k = max(1, int(round(1.0 / (rate_req * dt_raw))))
+    rate = 1.0 / (k * dt_raw)  # the grid actually used: a whole number k of IMU samples per step
+    slot = np.floor((imu.time - imu.time[0]) / (k * dt_raw) + 1e-6).astype(int)
+    starts = np.flatnonzero(np.r_[True, np.diff(slot) != 0])
+    counts = np.diff(np.r_[starts, n_raw])
+
+    def avg(x, ok):
+        okf = ok.astype(float)
+        num = np.add.reduceat(x * okf[..., None], starts, axis=0)
+        den = np.add.reduceat(okf, starts, axis=0)
+        return num / np.maximum(den, 1.0)[..., None], den
+
+    t = np.add.reduceat(imu.time, starts) / counts
+    f_B, f_cnt = avg(f_raw, f_ok)
+    w_B, w_cnt = avg(w_raw, w_ok)
+    cutoff = cfg.filter_cutoff_hz
+    order = cfg.filter_order
+    delay = acquisition_group_delay(cutoff, order)
+    t = t - delay
+    hanging = t < events["release"]
+
+    # measured jerk indicator (centred difference of 10 ms means of the mean triad force)
+    fbar = np.where(f_cnt[..., None] > 0, f_B, np.nan)
+    with np.errstate(invalid="ignore"):
+        fbar = np.nanmean(fbar, axis=1)
+    ok_rows = np.flatnonzero(np.all(np.isfinite(fbar), axis=1))
+    if ok_rows.size:  # slots with no valid triad: hold the last valid mean (no artificial jerk spike)
+        fill = ok_rows[np.clip(np.searchsorted(ok_rows, np.arange(fbar.shape[0]), side="right") - 1, 0, None)]
+        fbar = fbar[fill]
+    L = max(1, int(round(0.010 * rate)))
+    ker = np.ones(L) / L
+    sm = np.stack([np.convolve(np.nan_to_num(fbar[:, i]), ker, mode="same") for i in range(3)], 1)
+    jerk = np.zeros(t.size)
+    if t.size > 2 * L:
+        d = np.zeros_like(sm)
+        d[L:-L] = (sm[2 * L :] - sm[: -2 * L]) / (2 * L / rate)
+        jerk = np.linalg.norm(d, axis=1)
+    return DropTelemetry(
+        t=t,
+        f_B=f_B,
+        f_valid=f_cnt > 0,
+        w_B=w_B,
+        w_valid=w_cnt > 0,
+        hanging=hanging,
+        triads=triads,
+        lever_arms_B=np.array([lander.instruments[n] for n in triads]),
+        events=events,
+        setup=setup,
+        group_delay_s=delay,
+        degradations=tuple(sorted(log)),
+        imu=imu,
+        attitude=att,
+        ranging=ranging,
+        jerk=jerk,
+        counts=(f_cnt.astype(int), w_cnt.astype(int)),
+        rate_hz=rate,
+    )

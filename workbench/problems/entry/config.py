@@ -1,0 +1,508 @@
+"""Entry scenario configuration: the schema of a ``kind = "entry"`` scenario (every key the
+reconstruction, the synthetic telemetry and the truth simulator read, with its default, once) and
+:class:`EntryConfig`, the typed reconstruction settings built once from a validated scenario.
+
+The reconstruction (:func:`workbench.problems.entry.pipeline.reconstruct`) and the smoother
+validation (:func:`workbench.problems.entry.montecarlo.prepare_validation`) both read their
+settings from one :class:`EntryConfig`.  The synthetic-side defaults (``[sensors.*]``,
+``[synthetic]``, ``[truth]``) are those of :class:`~workbench.problems.entry.sensors.EntryTelemetrySpec`
+and :class:`~workbench.problems.entry.truth.EntryTruthSpec`, taken from them here so they are
+declared once.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import weakref
+from dataclasses import dataclass
+
+from workbench.core.frames import julian_date_from_utc
+from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.schema import REQUIRED, Key, Schema, Table
+from workbench.problems.entry.dispersion import AcceptanceRules
+from workbench.problems.entry.preprocess import PreprocessConfig
+from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryTelemetrySpec
+from workbench.problems.entry.site import TERRAIN_ELEVATION_M
+from workbench.problems.entry.telemetry import TelemetryChecks
+from workbench.problems.entry.truth import EntryTruthSpec
+
+__all__ = ["SCHEMA", "RULES", "EntryConfig", "config_for"]
+
+_F, _I, _S, _B, _V, _L = "float", "int", "str", "bool", "vec3", "list"
+
+#: Dispersion acceptance rules (``[dispersion.rules]``): name -> (unit, meaning); defaults those of
+#: :class:`~workbench.problems.entry.dispersion.AcceptanceRules` (AMELIA Sect. 6).
+RULES = {
+    "mach_pdd": ("1", "Mach number at PDD"),
+    "h_pdd_m": ("m", "altitude above the MOLA radius at PDD"),
+    "h_fsr_m": ("m", "altitude above the MOLA radius at FSR"),
+    "h_end_m": ("m", "altitude above the MOLA radius at the end of the data"),
+    "time_to_impact_s": ("s", "from the end of the data to the ballistic impact"),
+}
+
+_PRE = PreprocessConfig()
+_TM = EntryTelemetrySpec()
+_CHECKS = TelemetryChecks()
+_RULES = AcceptanceRules()
+
+_TRUTH_MEANING = {
+    "epoch_utc": ("", "UTC of EIP; absent: `[scenario] epoch_utc`"),
+    "t0": ("s", "start, from EIP (AMELIA Table 2)"),
+    "p0_km": ("km", "initial position, MMED"),
+    "v0_kmps": ("km/s", "initial velocity, MMED"),
+    "q0_jpl": ("1", 'JPL quaternion "MMED to GNC" (4 numbers, scalar last)'),
+    "fpa_offset_deg": ("deg", "truth flight-path angle minus the nominal (< 0 steeper)"),
+    "speed_offset_mps": ("m/s", "truth speed minus the nominal"),
+    "aoa_offset_deg": ("deg", "extra tilt of the nominal attitude"),
+    "aoa_offset_azimuth_deg": ("deg", "body azimuth of that tilt (from +X_G towards +Y_G)"),
+    "w0_dps": ("deg/s", "initial body rate"),
+    "roll_moment_coeff": ("1", "constant roll-moment coefficient (asymmetric ablation)"),
+    "surface_pressure_scale": ("1", "true surface pressure / the default model's 699 Pa"),
+    "temperature_waves": ("K, km, deg", "waves [amplitude_K, wavelength_km, phase_deg]"),
+    "temperature_bias": ("K, km, km", "bumps [amplitude_K, centre_km, width_km]"),
+    "inversion_center_km": ("km", "temperature inversion centre (AMR)"),
+    "inversion_width_km": ("km", "inversion width"),
+    "inversion_amplitude_K": ("K", "inversion amplitude"),
+    "h_top_km": ("km", "top of the true atmosphere table"),
+    "wind_layers": ("km, m/s, deg", "[bottom_km, top_km, speed_mps, towards_deg, edge_km] (AMR)"),
+    "background_wind_mps": ("m/s", "background wind speed"),
+    "background_azimuth_deg": ("deg", "direction the background wind blows towards"),
+    "background_turn_deg_per_km": ("deg/km", "turn of the background wind with altitude"),
+    "pdd_mach": ("1", "PDD when the true Mach number drops below this"),
+    "pdd_time_s": ("s", "PDD at this time instead (from EIP)"),
+    "fsr_delay_s": ("s", "FSR after PDD"),
+    "bsr_delay_s": ("s", "BSR (end of data) after FSR"),
+    "deploy_tilt_deg": ("deg", "canopy direction at line stretch: tilt from +Z_G"),
+    "deploy_azimuth_deg": ("deg", "... towards this body azimuth"),
+    "eject_speed_mps": ("m/s", "mortar ejection speed"),
+    "inflation_time_s": ("s", "canopy inflation time"),
+    "breathing_amplitude": ("1", "canopy area oscillation (fraction of the area)"),
+    "breathing_period_s": ("s", "breathing period"),
+    "breathing_decay_s": ("s", "breathing decay time"),
+    "side_force_coeff": ("1", "side force / drag during the asymmetric inflation"),
+    "side_force_start_s": ("s", "side force from (after PDD)"),
+    "side_force_end_s": ("s", "side force until (after PDD)"),
+    "side_force_azimuth_deg": ("deg", "body azimuth of the side force"),
+    "breathing_phase_sigma_deg": ("deg", "random breathing phase, 1σ"),
+    "breathing_amp_jitter": ("1", "random ± relative change of the breathing amplitude"),
+    "dt_entry": ("s", "integration step before PDD"),
+    "dt_chute": ("s", "integration step from PDD on"),
+    "dt_out": ("s", "output step"),
+    "aero_enabled": ("", "false: vacuum flight (a test; needs t_end)"),
+    "t_end": ("s", "end time (vacuum test)"),
+}
+
+
+def _truth_keys() -> tuple[Key, ...]:
+    keys = []
+    d = EntryTruthSpec()
+    for f in dataclasses.fields(EntryTruthSpec):
+        v = getattr(d, f.name)
+        if isinstance(v, bool):
+            kind = _B
+        elif isinstance(v, str):
+            kind = _S
+        elif isinstance(v, tuple):
+            kind = _V if len(v) == 3 and not isinstance(v[0], tuple) else _L
+            v = [list(x) if isinstance(x, tuple) else x for x in v]
+        else:
+            kind = _F
+        unit, meaning = _TRUTH_MEANING[f.name]
+        keys.append(Key(f.name, kind, v, unit, meaning))
+    return tuple(keys)
+
+
+def _deg(x: float) -> float:
+    return float(round(math.degrees(x), 12))
+
+
+SCHEMA = Schema(
+    "entry",
+    "AMELIA entry and descent reconstruction",
+    (
+        Table(
+            "scenario",
+            "what the run is",
+            (
+                Key("name", _S, REQUIRED, meaning="names the run, its recording and summary"),
+                Key("kind", _S, REQUIRED, meaning='`"entry"`'),
+                Key("description", _S, "", meaning="one line for listings"),
+                Key("epoch_utc", _S, None, meaning="UTC of EIP (t = 0); absent: the telemetry's `# epoch_utc:`"),
+            ),
+        ),
+        Table(
+            "vehicle",
+            "the entry vehicle",
+            (
+                Key(
+                    "file",
+                    _S,
+                    None,
+                    meaning="vehicle asset TOML, relative to the scenario file; required for a reconstruction "
+                    "(a synthetic scenario falls back to the shipped Schiaparelli)",
+                ),
+            ),
+        ),
+        Table(
+            "telemetry",
+            "user telemetry files, relative to the scenario file (ignored by a synthetic scenario); all required",
+            (
+                Key("gnc", _S, None, meaning="GNC CSV, 10 Hz: rate, JPL quaternion, total acceleration"),
+                Key("gnc_nav", _S, None, meaning="on-board navigation CSV, 1 Hz: position, velocity"),
+                Key("rda_slant_range", _S, None, meaning="radar slant ranges CSV (B0..B3)"),
+                Key("rda_out", _S, None, meaning="radar slant-out / velocity-out CSV"),
+                Key("events", _S, None, meaning="events CSV (PDD, FSR needed)"),
+                Key("initial_state", _S, None, meaning="nominal initial state TOML (AMELIA Table 2)"),
+            ),
+        ),
+        Table(
+            "site",
+            "the landing site",
+            (
+                Key(
+                    "terrain_m", _F, TERRAIN_ELEVATION_M, "m", "terrain elevation above the MOLA radius (ground sphere)"
+                ),
+            ),
+        ),
+        Table(
+            "preprocess",
+            "telemetry checks and AMELIA Sect. 4 preprocessing",
+            (
+                Key("quat_error_tol", _F, _CHECKS.quat_error_tol, "1", "a GNC quaternion norm off by more is an error"),
+                Key("quat_warn_tol", _F, _CHECKS.quat_warn_tol, "1", "... by more than this a WARN (normalised)"),
+                Key("saturation_dps", _F, _deg(_PRE.saturation), "deg/s", "gyro saturation threshold"),
+                Key("saturation_margin_dps", _F, _deg(_PRE.saturation_margin), "deg/s", "detection margin"),
+                Key("gap_factor", _F, _PRE.gap_factor, "1", "a gap is a step longer than this × the nominal"),
+                Key("resample_hz", _F, _PRE.resample_rate_hz, "Hz", "resampling rate after PDD"),
+                Key("resample_window_s", _F, _PRE.resample_window_s, "s", "resampled window after PDD"),
+                Key(
+                    "nav_interpolation",
+                    _S,
+                    _PRE.nav_interpolation,
+                    meaning="on-board p/v to the 10 Hz grid",
+                    choices=("acceleration", "cubic"),
+                ),
+                Key(
+                    "rebuild_neighbours", _I, _PRE.rebuild_neighbours, meaning="neighbours per side of a cubic rebuild"
+                ),
+                Key(
+                    "rebuild_from_accel",
+                    _B,
+                    _PRE.rebuild_from_accel,
+                    meaning="saturated X/Y rate from the lateral acceleration",
+                ),
+                Key("sigma_rate_dps", _F, None, "deg/s", "per-sample rate 1σ; absent: `[reconstruction] rate_dps`"),
+                Key(
+                    "sigma_accel_mps2",
+                    _F,
+                    None,
+                    "m/s²",
+                    "per-sample acceleration 1σ; absent: `[reconstruction] accel_mps2`",
+                ),
+                Key(
+                    "sigma_rate_saturated_dps",
+                    _F,
+                    None,
+                    "deg/s",
+                    "rebuilt saturated rate 1σ; absent: `[reconstruction] rate_pdd_dps`",
+                ),
+                Key(
+                    "sigma_rate_resampled_dps",
+                    _F,
+                    None,
+                    "deg/s",
+                    "resampled rate 1σ; absent: `[reconstruction] rate_pdd_dps`",
+                ),
+                Key("sigma_accel_resampled_mps2", _F, _PRE.sigma_f_resampled, "m/s²", "resampled acceleration 1σ"),
+            ),
+        ),
+        Table(
+            "reconstruction",
+            "AMELIA Table 3, reconstruction column (1σ)",
+            (
+                Key("attitude_deg", _F, 1.0, "deg", "initial attitude"),
+                Key("velocity_mps", _F, 10.0, "m/s", "initial velocity"),
+                Key("position_m", _F, 2000.0, "m", "initial position"),
+                Key("rate_dps", _F, 0.01, "deg/s", "body rate, per sample"),
+                Key("rate_pdd_dps", _F, 10.0, "deg/s", "body rate inside the saturation window"),
+                Key("accel_mps2", _F, 0.001, "m/s²", "specific force, per sample"),
+                Key("bridge_mode", _S, "relative", meaning="gap bridge position form", choices=("relative", "paper")),
+                Key("initial", _S, "fused", meaning="the smoother's start", choices=("fused", "dispersion", "nominal")),
+            ),
+        ),
+        Table(
+            "dispersion",
+            "AMELIA Sect. 6 dispersion analysis",
+            (
+                Key("members", _I, 10000, meaning="trajectories per round"),
+                Key("chunk_size", _I, 1000, meaning="members per work unit"),
+                Key("seed", _I, 2016, meaning="random seed"),
+                Key("attitude_deg", _F, 5.0, "deg", "initial attitude dispersion, 1σ"),
+                Key("velocity_mps", _F, 500.0, "m/s", "initial velocity dispersion, 1σ"),
+                Key("position_m", _F, 10000.0, "m", "initial position dispersion, 1σ"),
+                Key("cloud", _I, 300, meaning="members kept for the recording"),
+                Key("refine_rounds", _I, 0, meaning="extra rounds sampled about the previous elite"),
+            ),
+        ),
+        Table(
+            "dispersion.rules",
+            "acceptance rules, each [centre, half-width > 0]: a member is accepted when every quantity is inside",
+            tuple(Key(k, _L, list(getattr(_RULES, k)), u, m) for k, (u, m) in RULES.items()),
+        ),
+        Table(
+            "radar",
+            "radar altimeter model of the filter (AMELIA Appendix B)",
+            (
+                Key("squint_deg", _F, 20.0, "deg", "squint of beams B1..B3 from -Z_G"),
+                Key("azimuths_deg", _V, [0.0, 120.0, 240.0], "deg", "azimuths of B1..B3 from +X_G towards +Y_G"),
+                Key("slant_range_sigma_m", _F, 100.0, "m", "slant-range measurement 1σ"),
+                Key("slant_out_sigma_m", _F, 100.0, "m", "slant-out measurement 1σ"),
+                Key("velocity_out_sigma_mps", _F, 25.0, "m/s", "velocity-out measurement 1σ"),
+                Key("constrained", _B, True, meaning="AMELIA Sect. 8 constrained update directions"),
+            ),
+        ),
+        Table(
+            "atmosphere",
+            "AMELIA Sect. 9 atmosphere reconstruction",
+            (
+                Key("molar_mass_g_per_mol", _F, 43.41, "g/mol", "molar mass of the Mars atmosphere"),
+                Key(
+                    "fill_method",
+                    _S,
+                    "hydrostatic",
+                    meaning="blackout fill",
+                    choices=("hydrostatic", "exponential"),
+                ),
+                Key("tolerance", _F, 0.01, "1", "drag-coefficient iteration tolerance (relative)"),
+                Key("max_iterations", _I, 10, meaning="drag-coefficient iterations"),
+                Key("cd_sigma", _F, 0.10, "1", "drag coefficients, relative 1σ"),
+                Key("wind_sigma_mps", _F, 10.0, "m/s", "wind uncertainty below 30 km, 1σ"),
+            ),
+        ),
+        Table(
+            "winds",
+            "AMELIA Sect. 10 winds",
+            (Key("method", _S, "specific_force", meaning="wind estimator", choices=("specific_force", "attitude")),),
+        ),
+        Table(
+            "sensors.imu",
+            "synthetic IMU",
+            (
+                Key("accel_noise_mps2", _F, _TM.imu.accel_noise, "m/s²", "per on-board sample, 1σ"),
+                Key("accel_bias_mps2", _F, _TM.imu.accel_bias, "m/s²", "bias, 1σ"),
+                Key("accel_scale", _F, _TM.imu.accel_scale, "1", "scale-factor error, 1σ"),
+                Key("gyro_noise_dps", _F, _deg(_TM.imu.gyro_noise), "deg/s", "per on-board sample, 1σ"),
+                Key("gyro_bias_dps", _F, _deg(_TM.imu.gyro_bias), "deg/s", "bias, 1σ"),
+                Key("gyro_scale", _F, _TM.imu.gyro_scale, "1", "scale-factor error, 1σ"),
+                Key(
+                    "gyro_full_scale_dps",
+                    "number_or_vec3",
+                    _deg(_TM.imu.gyro_full_scale[0]),
+                    "deg/s",
+                    "gyro saturation, all axes or per axis",
+                ),
+                Key("accel_full_scale_mps2", _F, _TM.imu.accel_full_scale, "m/s²", "accelerometer saturation"),
+                Key("onboard_rate_hz", _F, _TM.onboard_rate_hz, "Hz", "on-board IMU rate"),
+                Key("tm_rate_hz", _F, _TM.gnc_rate_hz, "Hz", "GNC telemetry rate"),
+                Key("nav_rate_hz", _F, _TM.nav_rate_hz, "Hz", "on-board navigation telemetry rate"),
+            ),
+        ),
+        Table(
+            "sensors.radar",
+            "synthetic radar altimeter (RDA); zero_filled_packets also sets the telemetry check",
+            (
+                Key("range_sigma_m", _F, _TM.range_sigma, "m", "1σ = hypot(range_sigma_m, range_sigma_frac × range)"),
+                Key("range_sigma_frac", _F, _TM.range_sigma_frac, "1", "range-proportional part"),
+                Key("velocity_sigma_mps", _F, _TM.velocity_sigma, "m/s", "velocity-out noise, 1σ"),
+                Key("rate_hz", _F, _TM.rda_rate_hz, "Hz", "RDA packet rate"),
+                Key("on_after_fsr_s", _F, _TM.rda_on_after_fsr_s, "s", "RDA switched on after FSR"),
+                Key("slant_range_period_s", _F, _TM.sr_period_s, "s", "slant-range packet period"),
+                Key("first_packet_after_on_s", _F, _TM.sr_first_after_on_s, "s", "first slant-range packet after on"),
+                Key(
+                    "zero_filled_packets",
+                    _I,
+                    _TM.sr_zero_filled,
+                    meaning="leading zero-filled slant-range packets (written, and expected by the telemetry check)",
+                ),
+            ),
+        ),
+        Table(
+            "synthetic",
+            "synthetic telemetry (its presence makes the scenario synthetic)",
+            (
+                Key("seed", _I, 0, meaning="seed of the sensor-side draws"),
+                Key("truth_seed", _I, None, meaning="seed of the truth's random parts; absent: `seed`"),
+                Key(
+                    "blackout_gaps_s",
+                    _L,
+                    [list(g) for g in DEFAULT_GAPS],
+                    "s",
+                    "telemetry gaps [start_s, duration_s]",
+                ),
+            ),
+        ),
+        Table(
+            "synthetic.nominal_error",
+            "error of the on-board nominal initial state",
+            (
+                Key("velocity_sigma_mps", _F, _TM.nominal.velocity_sigma, "m/s", "velocity, 1σ"),
+                Key("attitude_sigma_deg", _F, _deg(_TM.nominal.attitude_sigma), "deg", "attitude, 1σ"),
+                Key("position_sigma_m", _F, _TM.nominal.position_sigma, "m", "position, 1σ"),
+                Key("dx0", _L, None, "m/s, deg, m", "a fixed error (9 numbers) instead of a draw"),
+            ),
+        ),
+        Table("truth", "truth simulator (synthetic only; never read by the reconstruction)", _truth_keys()),
+    ),
+)
+
+
+@dataclass(frozen=True)
+class EntryConfig:
+    """The reconstruction settings of one entry scenario, validated against :data:`SCHEMA`.
+
+    Units as the names say; ``rules`` the dispersion acceptance rules; ``preprocess`` the
+    :class:`PreprocessConfig` (SI); ``checks`` the telemetry checks; ``epoch_utc`` None when the scenario gives none.
+    """
+
+    epoch_utc: str | None
+    terrain_m: float
+    checks: TelemetryChecks
+    preprocess: PreprocessConfig
+    sigma_velocity_mps: float
+    sigma_attitude_deg: float
+    sigma_position_m: float
+    accel_mps2: float
+    bridge_mode: str
+    initial: str
+    members: int
+    chunk_size: int
+    dispersion_seed: int
+    dispersion_attitude_deg: float
+    dispersion_velocity_mps: float
+    dispersion_position_m: float
+    cloud: int
+    refine_rounds: int
+    rules: AcceptanceRules
+    squint_deg: float
+    azimuths_deg: tuple[float, float, float]
+    slant_range_sigma_m: float
+    slant_out_sigma_m: float
+    velocity_out_sigma_mps: float
+    constrained: bool
+    molar_mass_g_per_mol: float
+    fill_method: str
+    tolerance: float
+    max_iterations: int
+    cd_sigma: float
+    wind_sigma_mps: float
+    wind_method: str
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario) -> EntryConfig:
+        """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types, choices), check the
+        values (counts and sigmas > 0, rules ``[centre, half-width > 0]``, a parsable epoch) and build
+        the config; every error is a :class:`ScenarioError` naming file and key."""
+        if scenario.kind != "entry":
+            raise ScenarioError(scenario.path, "scenario.kind", f"{scenario.kind!r} is not an entry scenario")
+        file = scenario.path
+        v = SCHEMA.validate(scenario.data, file)
+        pre, rec, dis, rad, atm = v["preprocess"], v["reconstruction"], v["dispersion"], v["radar"], v["atmosphere"]
+        for table, key in (
+            ("dispersion", "members"),
+            ("dispersion", "chunk_size"),
+            ("reconstruction", "velocity_mps"),
+            ("reconstruction", "attitude_deg"),
+            ("reconstruction", "position_m"),
+            ("radar", "slant_range_sigma_m"),
+            ("radar", "slant_out_sigma_m"),
+            ("radar", "velocity_out_sigma_mps"),
+            ("atmosphere", "max_iterations"),
+            ("atmosphere", "tolerance"),
+        ):
+            if v[table][key] <= 0:
+                raise ScenarioError(file, f"{table}.{key}", "must be > 0")
+        rules = {}
+        for k, r in dis["rules"].items():
+            if not (
+                len(r) == 2 and all(isinstance(x, int | float) and not isinstance(x, bool) for x in r) and r[1] > 0
+            ):
+                raise ScenarioError(file, f"dispersion.rules.{k}", "need [centre, half-width] with half-width > 0")
+            rules[k] = (float(r[0]), float(r[1]))
+        epoch = v["scenario"]["epoch_utc"]
+        if epoch is not None:
+            try:
+                julian_date_from_utc(epoch)
+            except ValueError as e:
+                raise ScenarioError(file, "scenario.epoch_utc", str(e)) from None
+
+        def pick(key: str, fallback: str) -> float:
+            return pre[key] if pre[key] is not None else rec[fallback]
+
+        try:
+            prep = PreprocessConfig(
+                sigma_w=math.radians(pick("sigma_rate_dps", "rate_dps")),
+                sigma_f=pick("sigma_accel_mps2", "accel_mps2"),
+                sigma_w_saturated=math.radians(pick("sigma_rate_saturated_dps", "rate_pdd_dps")),
+                sigma_w_resampled=math.radians(pick("sigma_rate_resampled_dps", "rate_pdd_dps")),
+                sigma_f_resampled=pre["sigma_accel_resampled_mps2"],
+                saturation=math.radians(pre["saturation_dps"]),
+                saturation_margin=math.radians(pre["saturation_margin_dps"]),
+                gap_factor=pre["gap_factor"],
+                resample_rate_hz=pre["resample_hz"],
+                resample_window_s=pre["resample_window_s"],
+                nav_interpolation=pre["nav_interpolation"],
+                rebuild_neighbours=pre["rebuild_neighbours"],
+                rebuild_from_accel=pre["rebuild_from_accel"],
+            )
+        except ValueError as e:
+            raise ScenarioError(file, "preprocess", str(e)) from None
+        return cls(
+            epoch_utc=epoch,
+            terrain_m=v["site"]["terrain_m"],
+            checks=TelemetryChecks(
+                quat_error_tol=pre["quat_error_tol"],
+                quat_warn_tol=pre["quat_warn_tol"],
+                zero_filled_packets=v["sensors"]["radar"]["zero_filled_packets"],
+            ),
+            preprocess=prep,
+            sigma_velocity_mps=rec["velocity_mps"],
+            sigma_attitude_deg=rec["attitude_deg"],
+            sigma_position_m=rec["position_m"],
+            accel_mps2=rec["accel_mps2"],
+            bridge_mode=rec["bridge_mode"],
+            initial=rec["initial"],
+            members=dis["members"],
+            chunk_size=dis["chunk_size"],
+            dispersion_seed=dis["seed"],
+            dispersion_attitude_deg=dis["attitude_deg"],
+            dispersion_velocity_mps=dis["velocity_mps"],
+            dispersion_position_m=dis["position_m"],
+            cloud=dis["cloud"],
+            refine_rounds=dis["refine_rounds"],
+            rules=AcceptanceRules(**rules),
+            squint_deg=rad["squint_deg"],
+            azimuths_deg=tuple(float(a) for a in rad["azimuths_deg"]),
+            slant_range_sigma_m=rad["slant_range_sigma_m"],
+            slant_out_sigma_m=rad["slant_out_sigma_m"],
+            velocity_out_sigma_mps=rad["velocity_out_sigma_mps"],
+            constrained=rad["constrained"],
+            molar_mass_g_per_mol=atm["molar_mass_g_per_mol"],
+            fill_method=atm["fill_method"],
+            tolerance=atm["tolerance"],
+            max_iterations=atm["max_iterations"],
+            cd_sigma=atm["cd_sigma"],
+            wind_sigma_mps=atm["wind_sigma_mps"],
+            wind_method=v["winds"]["method"],
+        )
+
+
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def config_for(scenario: Scenario) -> EntryConfig:
+    """:meth:`EntryConfig.from_scenario`, built once per scenario object (scenarios are read-only)."""
+    cfg = _CACHE.get(scenario)
+    if cfg is None:
+        cfg = _CACHE[scenario] = EntryConfig.from_scenario(scenario)
+    return cfg

@@ -1,0 +1,192 @@
+"""Entry and descent (AMELIA, Schiaparelli-like) as a :class:`~workbench.problems.base.Problem`.
+
+Composes :mod:`.pipeline` (reconstruction, scoring, scorecard), :mod:`.synthetic` (truth and
+telemetry), :mod:`.recording` (layout and drawer) and :mod:`.montecarlo` / :mod:`.recording_mc`
+(the smoother validation of AMELIA Sect. 8).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from workbench.io.scenario import Scenario, ScenarioError
+from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
+from workbench.problems.entry import pipeline as en
+from workbench.problems.entry.config import SCHEMA, config_for
+from workbench.problems.entry.site import R_MOLA
+from workbench.problems.entry.telemetry import STREAMS, telemetry_paths
+
+__all__ = ["EntryProblem"]
+
+
+class _Drawer:
+    """:class:`~workbench.problems.base.StageRecorder` of an entry run (wraps EntryRecorder)."""
+
+    def __init__(self, rec, drawer):
+        self.rec = rec
+        self.drawer = drawer
+
+    def handle(self, stage: object) -> None:
+        self.drawer.handle(stage)
+
+    def finish(self, result: object, summary: dict) -> None:
+        self.rec.report(en.scorecard_markdown(summary))
+
+
+class EntryProblem:
+    """Entry, descent and landing from IMU + radar telemetry: strapdown, dispersion analysis,
+    radar-aided smoother, atmosphere and winds."""
+
+    kind = "entry"
+    title = "entry"
+    schema = SCHEMA
+
+    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
+        """``[telemetry]`` files (``telemetry.STREAMS``), or the standard names in ``folder``."""
+        if folder is None:
+            return telemetry_paths(scenario)
+        d = Path(folder)
+        return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+
+    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+        """Simulate the entry (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
+        from workbench.problems.entry.synthetic import synthesize_entry
+
+        paths = synthesize_entry(scenario, out_dir, seed=seed)
+        return Synthesized(telemetry={k: v for k, v in paths.items() if k != "truth"}, truth=paths["truth"])
+
+    def load_truth(self, path: Path) -> dict:
+        """The truth of ``truth.npz`` (``synthetic.load_truth``)."""
+        from workbench.problems.entry.synthetic import load_truth
+
+        return load_truth(path)
+
+    def reconstruct(self, scenario: Scenario, telemetry: Mapping[str, Path], options: RunOptions) -> Iterator[object]:
+        """``pipeline.reconstruct``; ``options.members``/``scheduler`` set the dispersion analysis."""
+        return en.reconstruct(scenario, dict(telemetry), scheduler=options.scheduler, members=options.members)
+
+    def summary(self, result: en.EntryResult) -> dict:
+        """A copy of ``result.summary`` (SI)."""
+        return dict(result.summary)
+
+    def score(self, result: en.EntryResult, truth: dict) -> dict:
+        """``pipeline.score``: trajectory, atmosphere and wind errors against the truth."""
+        return en.score(result, truth)
+
+    def scorecard(self, summary: dict) -> str:
+        """``pipeline.scorecard_markdown``."""
+        return en.scorecard_markdown(summary)
+
+    def headline(self, summary: dict) -> str:
+        """Altitude above ground ± 1σ at the end of the data and the dispersion acceptance."""
+        e, d = summary["end"], summary["dispersion"]
+        return (
+            f"end of data: h AGL {e['h_agl_m']:.0f} ± {e['sigma_h_m']:.0f} m (1σ); "
+            f"dispersion {d['accepted']}/{d['members']} accepted"
+        )
+
+    @contextlib.contextmanager
+    def open_recording(self, path: Path, scenario: Scenario, truth: Any, properties: dict) -> Iterator[_Drawer]:
+        """The entry recording (``recording.entry_blueprint`` layout) drawn in the landing-site frame."""
+        from workbench.core.bodies import MARS
+        from workbench.problems.entry.recording import EntryRecorder, entry_blueprint
+        from workbench.recording.writer import open_recording
+
+        vehicle = en.vehicle_for(scenario)
+        r_ground = R_MOLA + config_for(scenario).terrain_m
+        with open_recording(path, scenario.name, blueprint=entry_blueprint(), properties=properties) as rec:
+            drawer = EntryRecorder(
+                rec,
+                vehicle,
+                truth,
+                r_ground=r_ground,
+                jd_tdb0=en.epoch_jd_tdb(scenario) if scenario.has("scenario.epoch_utc") else None,
+                body=MARS,
+            )
+            yield _Drawer(rec, drawer)
+
+    def export_columns(self, result: en.EntryResult) -> ExportTable:
+        """Smoothed position, velocity (MMED inertial), attitude q_M_G and their σ."""
+        sm = result.filter.smoothed
+        sd = np.sqrt(np.einsum("nii->ni", sm.P))
+        cols: dict[str, tuple[np.ndarray, str]] = {}
+        for i, a in enumerate("xyz"):
+            cols[f"p_M.{a}"] = (sm.p_M[:, i], "m")
+            cols[f"v_M.{a}"] = (sm.v_M[:, i], "m/s")
+            cols[f"sigma_v.{a}"] = (sd[:, i], "m/s")
+            cols[f"sigma_theta.{a}"] = (sd[:, 3 + i], "rad")
+            cols[f"sigma_p.{a}"] = (sd[:, 6 + i], "m")
+        for i, a in enumerate("xyzw"):
+            cols[f"q_M_G.{a}"] = (sm.q_M_G[:, i], "1")
+        return ExportTable(sm.t, cols, "MMED inertial; q_M_G body (GNC) to MMED")
+
+    def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
+        """Validate the radar-aided smoother on ``options.n_runs`` trajectories drawn from the
+        accepted dispersion members (AMELIA Sect. 8).  Synthetic scenarios are synthesized first
+        (into ``<out>/<name>_mc_work/telemetry``); user scenarios use their telemetry.  The stages
+        up to the dispersion run with the scenario's settings (``options.members`` overrides the
+        member count, ``options.scheduler`` also runs the dispersion on Dask).  Writes
+        ``<out>/<name>_mc.rrd``; raises ``ScenarioError`` if fewer than 2 members were accepted."""
+        from workbench.problems.entry.montecarlo import prepare_validation, validate_smoother
+        from workbench.problems.entry.recording_mc import record_entry_validation
+
+        t_start = time.perf_counter()
+        sc, out = scenario, Path(out_dir)
+        if sc.is_synthetic:
+            progress(f"[{sc.name}] simulating the entry (truth) and writing telemetry ...")
+            seed = sc.get("synthetic.seed", 0, kind="int")
+            paths = self.synthesize(sc, out / f"{sc.name}_mc_work" / "telemetry", seed).telemetry
+        else:
+            paths = telemetry_paths(sc)
+        progress(f"[{sc.name}] preprocessing and dispersion analysis ...")
+        inp = prepare_validation(sc, paths, members=options.members, scheduler=options.scheduler)
+        d = inp.dispersion
+        progress(
+            f"[{sc.name}] dispersion: {int(d.accepted.sum())}/{d.accepted.size} accepted; validating the smoother on "
+            f"{options.n_runs} runs from the {inp.start_mode!r} start "
+            f"({options.scheduler or f'{options.workers} local worker(s)'}) ..."
+        )
+        if int(d.accepted.sum()) < 2 and inp.start_mode == "dispersion":
+            raise ScenarioError(
+                sc.path,
+                None,
+                f"the dispersion accepted {int(d.accepted.sum())} of {d.accepted.size} members; the validation "
+                "draws its truths from the accepted ones (need >= 2): raise --members, [dispersion] "
+                "refine_rounds or widen [dispersion.rules]",
+            )
+        res = validate_smoother(
+            inp.imu,
+            inp.nominal,
+            d,
+            inp.radar_times,
+            n_runs=options.n_runs,
+            seed=options.first_seed,
+            scheduler=options.scheduler,
+            workers=options.workers,
+            **inp.validation_kwargs(),
+        )
+        summary = {"scenario": sc.name, "kind": "entry_validation", **res.summary}
+        summary["smoother_start_mode"] = inp.start_mode
+        summary["smoother_start_note"] = inp.start_note
+        summary["dispersion"] = {
+            "members": int(d.accepted.size),
+            "accepted": int(d.accepted.sum()),
+            "wall_s": float(d.wall_s),
+            "scheduler": str(d.scheduler),
+        }
+        summary["wall_time_s"] = time.perf_counter() - t_start
+        rrd = record_entry_validation(out / f"{sc.name}_mc.rrd", f"{sc.name} smoother validation", res, summary)
+        lo, hi = summary["anees_band"]
+        h = summary.get("h_agl_after_fix", {})
+        headline = (
+            f"smoothed ANEES (9 dof) time-avg {summary['anees_time_avg']:.2f}, at end "
+            f"{summary['anees_at']['end']:.2f} (95 % band {lo:.2f}-{hi:.2f}); max altitude error after the radar "
+            f"fix {h.get('max_error_m', float('nan')):.1f} m; wrote {rrd} in {summary['wall_time_s']:.0f} s"
+        )
+        return McOutcome(summary, Path(rrd), headline, res)

@@ -1,0 +1,371 @@
+"""Entry telemetry (AMELIA Table 1 shape): the files an entry scenario names, read and checked.
+
+:func:`telemetry_paths` resolves the scenario's ``[telemetry]`` table.  Rule: all of :data:`STREAMS`
+are required — ``gnc``, ``gnc_nav``, ``rda_slant_range``, ``rda_out``, ``events`` and
+``initial_state``; the radar files feed the radar-aided smoother (AMELIA Sects. 7–8), without
+them there is nothing to reconstruct beyond the strapdown.  A missing key or file is a
+:class:`~workbench.io.scenario.ScenarioError` naming it.
+
+Reading (:func:`read_entry_telemetry`) turns the five CSV streams (format in ``io/FORMATS.md``) into
+an :class:`EntryTelemetry` in SI; :func:`read_nominal_state` reads ``initial_state.toml``
+(AMELIA Table 2 style) into a :class:`NominalState`.
+
+Defect policy — nothing is silently integrated; every finding names file, column and row:
+
+* format defects are **errors** (:class:`~workbench.io.telemetry.TelemetryError`, raised by
+  ``read_telemetry``): NaN/inf or unparsable cells (a NaN burst lists up to 20 rows and the
+  total), duplicated packets (repeated time) and out-of-order packets (time going backwards),
+  missing columns, wrong units, negative ranges;
+* a quaternion whose norm departs from 1 by more than ``quat_error_tol`` (1e-3) is an **error**;
+  by more than ``quat_warn_tol`` (1e-6) but less, a **WARN** and it is normalised;
+* a radar packet with a zero range where data is expected (after the first
+  ``zero_filled_packets`` slant-range packets, which Schiaparelli sent zero-filled: INFO) or a
+  zero slant-out / all-zero velocity-out is a **WARN** and the packet is marked invalid
+  (``sr_valid`` / ``rda_valid`` False) — never used as a range of 0 m;
+* empty acceleration cells (the ``a_*`` columns are sparse: the real TM stops the acceleration
+  before the rate) set ``a_valid`` False; outside a trailing block they are a WARN; those rows
+  are left out of the IMU grid (so a long run of them becomes a bridged gap);
+* repeated events: WARN, the first is used.
+
+Frames: M = MMED inertial, G = GNC body; the TM JPL quaternion "MMED to GNC" becomes
+``q_M_G = conj(quat_from_jpl(q_jpl))`` (numerically the raw components).
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.rotation import quat_conjugate, quat_from_jpl, quat_normalize, quat_to_jpl
+from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.telemetry import (
+    MAX_PROBLEMS,
+    Problem,
+    TelemetryError,
+    atomic_write_text,
+    read_events,
+    read_telemetry,
+)
+
+__all__ = [
+    "STREAMS",
+    "CSV_STREAMS",
+    "TelemetryChecks",
+    "EntryTelemetry",
+    "NominalState",
+    "telemetry_paths",
+    "read_entry_telemetry",
+    "read_nominal_state",
+    "write_nominal_state",
+    "true_runs",
+]
+
+#: ``[telemetry]`` keys of an entry scenario, all required (module docstring).
+STREAMS = ("gnc", "gnc_nav", "rda_slant_range", "rda_out", "events", "initial_state")
+#: The CSV streams among them (read by :func:`read_entry_telemetry`).
+CSV_STREAMS = ("gnc", "gnc_nav", "rda_slant_range", "rda_out", "events")
+
+
+@dataclass(frozen=True)
+class TelemetryChecks:
+    """Check settings of :func:`read_entry_telemetry`: a GNC quaternion whose norm is off by more
+    than ``quat_error_tol`` is an error, by more than ``quat_warn_tol`` a WARN (normalised); the
+    first ``zero_filled_packets`` slant-range packets are expected zero-filled (INFO).  Scenario
+    keys ``[preprocess] quat_error_tol``, ``quat_warn_tol``, ``[sensors.radar] zero_filled_packets``."""
+
+    quat_error_tol: float = 1e-3
+    quat_warn_tol: float = 1e-6
+    zero_filled_packets: int = 2
+
+
+@dataclass(frozen=True)
+class NominalState:
+    """Nominal initial state at ``t0`` [s from EIP] (AMELIA Table 2): MMED velocity [m/s], position [m],
+    attitude ``q_M_G`` (converted from the JPL "MMED to GNC" quaternion at the file edge)."""
+
+    t0: float
+    v_M: np.ndarray
+    p_M: np.ndarray
+    q_M_G: np.ndarray
+    source: str = ""
+
+
+@dataclass(frozen=True)
+class EntryTelemetry:
+    """Entry telemetry as read, SI, ``t`` [s] from EIP.
+
+    ``t_gnc`` (n,), ``w_G`` (n,3) [rad/s] body rate, ``q_M_G_nav`` (n,4) on-board attitude
+    (normalised), ``a_M_total`` (n,3) [m/s²] on-board inertial acceleration incl. gravity (NaN
+    where ``a_valid`` is False); ``t_nav`` (m,), ``p_M_nav``, ``v_M_nav`` (m,3) [m, m/s];
+    ``t_sr`` (k,), ``slant_ranges`` (k,4) [m], ``sr_valid`` (k,); ``t_rda`` (j,), ``slant_out``
+    (j,) [m], ``v_out_G`` (j,3) [m/s], ``rda_valid`` (j,); ``events`` name → t; ``epoch_utc``
+    (metadata); ``problems`` the WARN/INFO findings (located, see the module docstring);
+    ``files`` stream → path.
+    """
+
+    t_gnc: np.ndarray
+    w_G: np.ndarray
+    q_M_G_nav: np.ndarray
+    a_M_total: np.ndarray
+    a_valid: np.ndarray
+    t_nav: np.ndarray
+    p_M_nav: np.ndarray
+    v_M_nav: np.ndarray
+    t_sr: np.ndarray
+    slant_ranges: np.ndarray
+    sr_valid: np.ndarray
+    t_rda: np.ndarray
+    slant_out: np.ndarray
+    v_out_G: np.ndarray
+    rda_valid: np.ndarray
+    events: dict[str, float]
+    epoch_utc: str
+    problems: list[str]
+    files: dict[str, Path]
+
+
+def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
+    """The files of the scenario's ``[telemetry]`` table, resolved against the scenario file:
+    ``{stream: path}`` for every key of :data:`STREAMS` (all required; a missing key or file is a
+    :class:`ScenarioError` naming it)."""
+    missing = [k for k in STREAMS if not scenario.has(f"telemetry.{k}")]
+    if missing:
+        raise ScenarioError(
+            scenario.path,
+            f"telemetry.{missing[0]}",
+            f"missing [telemetry] key(s) {', '.join(missing)}: an entry reconstruction needs all of "
+            f"{', '.join(STREAMS)} (the radar files feed the radar-aided smoother)",
+        )
+    return {k: scenario.path_of(f"telemetry.{k}") for k in STREAMS}
+
+
+def write_nominal_state(path: Path, st: NominalState, comment: str = "") -> Path:
+    """Write ``initial_state.toml`` in the user format (km, km/s, JPL quaternion MMED→GNC)."""
+    q_jpl = quat_to_jpl(quat_conjugate(st.q_M_G))  # JPL of G w.r.t. M has the DCM C_G_M
+    f = lambda a: ", ".join(f"{x:.9f}" for x in a)  # noqa: E731
+    text = (
+        f"# Nominal initial state (AMELIA Table 2 format). {comment}\n"
+        "[initial_state]\n"
+        f"t0_s = {st.t0:.6f}                  # seconds from EIP\n"
+        f"position_km = [{f(st.p_M / 1e3)}]   # MMED\n"
+        f"velocity_kmps = [{f(st.v_M / 1e3)}] # MMED\n"
+        f"quaternion_jpl = [{f(q_jpl)}]       # JPL (Shuster) scalar-last, MMED to GNC\n"
+    )
+    return atomic_write_text(path, text)
+
+
+def read_nominal_state(path: Path) -> NominalState:
+    """Read ``initial_state.toml``; errors name the file and key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise ScenarioError(path, "initial_state", f"cannot read: {e}") from None
+    st = data.get("initial_state")
+    if not isinstance(st, dict):
+        raise ScenarioError(path, "initial_state", "missing [initial_state] table")
+
+    def vec(key: str, n: int) -> np.ndarray:
+        v = st.get(key)
+        if not isinstance(v, list) or len(v) != n or not all(isinstance(x, int | float) for x in v):
+            raise ScenarioError(path, f"initial_state.{key}", f"need a list of {n} numbers")
+        a = np.asarray(v, dtype=float)
+        if not np.all(np.isfinite(a)):
+            raise ScenarioError(path, f"initial_state.{key}", "not finite")
+        return a
+
+    q_jpl = vec("quaternion_jpl", 4)
+    nq = float(np.linalg.norm(q_jpl))
+    if abs(nq - 1.0) > 1e-3:
+        raise ScenarioError(path, "initial_state.quaternion_jpl", f"not a unit quaternion (norm {nq:.6f})")
+    t0 = st.get("t0_s")
+    if not isinstance(t0, int | float):
+        raise ScenarioError(path, "initial_state.t0_s", "need a number (s from EIP)")
+    q_M_G = quat_conjugate(quat_from_jpl(quat_normalize(q_jpl)))
+    return NominalState(float(t0), vec("velocity_kmps", 3) * 1e3, vec("position_km", 3) * 1e3, q_M_G, str(path))
+
+
+def _note(level: str, file, column: str | None, row: int | None, reason: str) -> str:
+    return f"{level}: {Problem(str(file), column, row, None, reason)}"
+
+
+def _header(tel, name: str) -> str:
+    return f"{name} [{tel.units[name]}]"
+
+
+def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Inclusive (start, end) index pairs of the True runs of a 1-D bool mask (n,)."""
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(), strict=True))
+
+
+def read_entry_telemetry(
+    paths: Mapping[str, str | os.PathLike], checks: TelemetryChecks | None = None
+) -> EntryTelemetry:
+    """Read and check the entry telemetry ``paths`` (``{stream: path}`` with the keys of
+    :data:`CSV_STREAMS`, e.g. from :func:`telemetry_paths`; other keys are ignored) with the
+    ``checks`` (default :class:`TelemetryChecks`).  Raises :class:`~workbench.io.telemetry.TelemetryError`
+    (file, column, row) for format defects and non-unit quaternions; returns the softer findings in
+    ``problems`` (policy in the module docstring).
+    """
+    checks = TelemetryChecks() if checks is None else checks
+    paths = {k: Path(v) for k, v in paths.items() if k in CSV_STREAMS}
+    missing = [k for k in CSV_STREAMS if k not in paths]
+    if missing:
+        raise ValueError(f"read_entry_telemetry: missing telemetry stream(s) {missing}; give {CSV_STREAMS}")
+    problems: list[str] = []
+
+    # ---- GNC 10 Hz ---------------------------------------------------------------------------
+    req = {f"w_{a}": "angular_rate" for a in "xyz"}
+    req.update({f"q{i}": "dimensionless" for i in range(1, 5)})
+    req.update({f"a_{a}": "acceleration" for a in "xyz"})
+    gnc = read_telemetry(paths["gnc"], required=req, sparse=[f"a_{a}" for a in "xyz"])
+    fname = str(paths["gnc"])
+    q_raw = gnc.stack([f"q{i}" for i in range(1, 5)])
+    norm = np.linalg.norm(q_raw, axis=1)
+    dev = np.abs(norm - 1.0)
+    qcol = f"{_header(gnc, 'q1')}..{_header(gnc, 'q4')}"
+    bad = np.flatnonzero(dev > checks.quat_error_tol)
+    if bad.size:
+        raise TelemetryError(
+            [
+                Problem(
+                    fname,
+                    qcol,
+                    int(r) + 1,
+                    None,
+                    f"quaternion norm {norm[r]:.6g} is not 1 (tolerance {checks.quat_error_tol:g})",
+                )
+                for r in bad[:MAX_PROBLEMS]
+            ],
+            int(bad.size),
+        )
+    small = np.flatnonzero(dev > checks.quat_warn_tol)
+    for r in small[:MAX_PROBLEMS]:
+        problems.append(
+            _note("WARN", fname, qcol, int(r) + 1, f"quaternion norm {norm[r]:.9g} is not unit: normalised")
+        )
+    if small.size > MAX_PROBLEMS:
+        problems.append(_note("WARN", fname, qcol, None, f"{small.size} non-unit quaternions in all, normalised"))
+    q_M_G = quat_conjugate(quat_from_jpl(q_raw / norm[:, None]))  # JPL MMED->GNC -> Hamilton q_M_G (raw numbers)
+    a_M = gnc.stack([f"a_{a}" for a in "xyz"])
+    a_valid = np.all(np.isfinite(a_M), axis=1)
+    for i0, i1 in true_runs(~a_valid):
+        partial = np.isfinite(a_M[i0 : i1 + 1]).any()
+        if i1 == a_valid.size - 1 and not partial:
+            problems.append(
+                _note(
+                    "INFO",
+                    fname,
+                    "a_x..a_z",
+                    i0 + 1,
+                    f"acceleration ends at t = {gnc.time[i0 - 1]:.3f} s" if i0 else "no acceleration",
+                )
+            )
+            continue
+        problems.append(
+            _note(
+                "WARN",
+                fname,
+                "a_x..a_z",
+                i0 + 1,
+                f"acceleration missing in rows {i0 + 1}–{i1 + 1} (t = {gnc.time[i0]:.3f}–{gnc.time[i1]:.3f} s): "
+                "rows left out of the IMU grid",
+            )
+        )
+
+    # ---- on-board navigation 1 Hz -----------------------------------------------------------
+    req_nav = {f"p_{a}": "length" for a in "xyz"}
+    req_nav.update({f"v_{a}": "velocity" for a in "xyz"})
+    nav = read_telemetry(paths["gnc_nav"], required=req_nav)
+
+    # ---- radar --------------------------------------------------------------------------------
+    names = [f"B{i}" for i in range(4)]
+    tel = read_telemetry(
+        paths["rda_slant_range"], required=dict.fromkeys(names, "length"), limits=dict.fromkeys(names, (0.0, 1e7))
+    )
+    t_sr, sr = tel.time.copy(), tel.stack(names)
+    zero = sr == 0.0
+    sr_valid = ~zero.any(axis=1)
+    f = str(paths["rda_slant_range"])
+    for r in np.flatnonzero(~sr_valid):
+        cols = ",".join(_header(tel, names[j]) for j in np.flatnonzero(zero[r]))
+        if r < checks.zero_filled_packets and zero[r].all():
+            problems.append(
+                _note("INFO", f, cols, int(r) + 1, "zero-filled slant-range packet (expected at RDA start): not used")
+            )
+        else:
+            problems.append(
+                _note(
+                    "WARN",
+                    f,
+                    cols,
+                    int(r) + 1,
+                    f"radar packet of zeros where data is expected (t = {t_sr[r]:.3f} s): marked invalid, not used",
+                )
+            )
+    vn = [f"v_out_{a}" for a in "xyz"]
+    req_r = {"slant_out": "length", **dict.fromkeys(vn, "velocity")}
+    tel = read_telemetry(paths["rda_out"], required=req_r, limits={"slant_out": (0.0, 1e7)})
+    t_rda, so, vo = tel.time.copy(), tel.channel("slant_out").copy(), tel.stack(vn)
+    zero_so = so == 0.0
+    zero_v = np.all(vo == 0.0, axis=1)
+    rda_valid = ~(zero_so | zero_v)
+    f = str(paths["rda_out"])
+    bad = np.flatnonzero(~rda_valid)
+    for r in bad[:MAX_PROBLEMS]:
+        col = _header(tel, "slant_out") if zero_so[r] else ",".join(_header(tel, n) for n in vn)
+        problems.append(
+            _note(
+                "WARN",
+                f,
+                col,
+                int(r) + 1,
+                f"radar packet of zeros (t = {t_rda[r]:.3f} s): marked invalid, not used",
+            )
+        )
+    if bad.size > MAX_PROBLEMS:
+        problems.append(_note("WARN", f, None, None, f"{bad.size} zero radar packets in all, marked invalid"))
+
+    # ---- events -------------------------------------------------------------------------------
+    events: dict[str, float] = {}
+    for t_e, name in read_events(paths["events"]):
+        if name in events:
+            problems.append(
+                _note(
+                    "WARN",
+                    paths["events"],
+                    "event",
+                    None,
+                    f"event {name!r} repeated at {t_e:.4f} s; the first, at {events[name]:.4f} s, is used",
+                )
+            )
+            continue
+        events[name] = float(t_e)
+
+    return EntryTelemetry(
+        t_gnc=gnc.time.copy(),
+        w_G=gnc.stack([f"w_{a}" for a in "xyz"]),
+        q_M_G_nav=q_M_G,
+        a_M_total=a_M,
+        a_valid=a_valid,
+        t_nav=nav.time.copy(),
+        p_M_nav=nav.stack([f"p_{a}" for a in "xyz"]),
+        v_M_nav=nav.stack([f"v_{a}" for a in "xyz"]),
+        t_sr=t_sr,
+        slant_ranges=sr,
+        sr_valid=sr_valid,
+        t_rda=t_rda,
+        slant_out=so,
+        v_out_G=vo,
+        rda_valid=rda_valid,
+        events=events,
+        epoch_utc=gnc.meta.get("epoch_utc", ""),
+        problems=problems,
+        files=dict(paths),
+    )

@@ -1,0 +1,141 @@
+"""Run any scenario through its problem: the same steps for every ``kind``.
+
+:func:`run_scenario`: (synthesize) -> reconstruct -> record -> score -> summary (-> CSV export);
+:func:`run_monte_carlo`: the problem's Monte Carlo analysis -> summary.  Both resolve a shipped
+scenario name (``workbench.io.assets.assets_dir()``) or a ``.toml`` path, and find the problem
+through :mod:`workbench.problems.registry` by the scenario's ``kind``.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from workbench.io.assets import assets_dir
+from workbench.io.results import export_csv, write_summary
+from workbench.io.scenario import Scenario, resolve_scenario
+from workbench.problems import registry
+from workbench.problems.base import McOptions, McOutcome, Problem, Progress, RunOptions
+
+__all__ = ["RunResult", "resolve", "run_monte_carlo", "run_scenario"]
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What :func:`run_scenario` produced: the ``summary`` (as written to ``summary_path``), the
+    final stage ``result``, the ``recording`` file, the ``telemetry`` files the reconstruction read
+    and, for a synthetic scenario, the loaded ``truth`` (else None)."""
+
+    scenario: Scenario
+    problem: Problem
+    summary: dict
+    result: Any = field(repr=False)
+    recording: Path
+    summary_path: Path
+    telemetry: dict[str, Path]
+    truth: Any = field(default=None, repr=False)
+    export_path: Path | None = None
+
+
+def _silent(_msg: str) -> None:
+    pass
+
+
+def resolve(scenario: str | os.PathLike | Scenario) -> tuple[Scenario, Problem]:
+    """The scenario (a shipped name, a ``.toml`` path or a loaded :class:`Scenario`) and its problem.
+
+    Raises ``ScenarioError`` for an unknown name or a bad file — including any key the problem's
+    schema does not declare (file, table, key and a "did you mean"), checked here before anything
+    runs — and :class:`~workbench.problems.registry.UnknownKindError` if no problem handles its kind.
+    """
+    sc = scenario if isinstance(scenario, Scenario) else resolve_scenario(scenario, assets_dir())
+    problem = registry.get(sc.kind, where=str(sc.path))
+    if problem.schema is not None:
+        problem.schema.validate(sc.data, sc.path)
+    return sc, problem
+
+
+def run_scenario(
+    scenario: str | os.PathLike | Scenario,
+    out_dir: str | os.PathLike,
+    options: RunOptions | None = None,
+    progress: Progress | None = None,
+) -> RunResult:
+    """Run one scenario end to end: (synthesize) -> reconstruct -> record -> score -> summary.
+
+    Writes ``<out>/<name>.rrd`` (atomically: nothing is left on failure), ``<out>/<name>.summary.json``,
+    for synthetic scenarios the telemetry and ``truth.npz`` it generated under
+    ``<out>/<name>/telemetry/``, and with ``options.export`` ``<out>/<name>.reconstruction.csv``.
+    ``progress`` receives one line per stage (None: quiet).
+    """
+    opts = options or RunOptions()
+    say = progress or _silent
+    t_start = time.perf_counter()
+    sc, problem = resolve(scenario)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    seed = int(sc.get("synthetic.seed", 0, kind="int") if opts.seed is None else opts.seed)
+    truth = None
+    if sc.is_synthetic:
+        say(f"[{sc.name}] simulating the {problem.title} (truth) and writing telemetry ...")
+        syn = problem.synthesize(sc, out / sc.name / "telemetry", seed)
+        telemetry = dict(syn.telemetry)
+        truth = problem.load_truth(syn.truth)
+    else:
+        telemetry = problem.telemetry_files(sc)
+    rrd = out / f"{sc.name}.rrd"
+    properties = {"run": {"scenario": str(sc.path), "kind": sc.kind, "seed": seed}}
+    with problem.open_recording(rrd, sc, truth, properties) as drawer:
+        result = None
+        t0 = time.perf_counter()
+        for stage in problem.reconstruct(sc, telemetry, replace(opts, seed=seed)):
+            say(f"[{sc.name}] {type(stage).__name__:20s} {time.perf_counter() - t0:6.2f} s")
+            drawer.handle(stage)
+            result = stage
+        if result is None:
+            raise RuntimeError(f"{sc.path}: the {sc.kind} reconstruction yielded no result")
+        summary = problem.summary(result)
+        if truth is not None:
+            summary["truth"] = problem.score(result, truth)
+        summary["seed"] = seed
+        summary["wall_time_s"] = time.perf_counter() - t_start
+        drawer.finish(result, summary)
+    summary["recording"] = str(rrd)
+    summary["recording_bytes"] = rrd.stat().st_size
+    summary_path = write_summary(out / f"{sc.name}.summary.json", summary)
+    export_path = None
+    if opts.export:
+        table = problem.export_columns(result)
+        export_path = export_csv(
+            out / f"{sc.name}.reconstruction.csv",
+            table.time_s,
+            table.columns,
+            meta={"source": f"workbench run {sc.name}", "frame": table.frame},
+        )
+    say(
+        f"[{sc.name}] {problem.headline(summary)}; "
+        f"wrote {rrd} ({summary['recording_bytes'] / 1e6:.1f} MB) in {summary['wall_time_s']:.1f} s"
+    )
+    return RunResult(sc, problem, summary, result, rrd, Path(summary_path), telemetry, truth, export_path)
+
+
+def run_monte_carlo(
+    scenario: str | os.PathLike | Scenario,
+    out_dir: str | os.PathLike,
+    options: McOptions | None = None,
+    progress: Progress | None = None,
+) -> McOutcome:
+    """The Monte Carlo analysis of the scenario's problem; writes its recording
+    (``<out>/<name>_mc.rrd``) and ``<out>/<name>.mc.json``.  ``NotImplementedError`` if the problem
+    has none for this scenario."""
+    say = progress or _silent
+    sc, problem = resolve(scenario)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    outcome = problem.monte_carlo(sc, out, options or McOptions(), say)
+    write_summary(out / f"{sc.name}.mc.json", outcome.summary)
+    say(f"[{sc.name}] {outcome.headline}")
+    return outcome
