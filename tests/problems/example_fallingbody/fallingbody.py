@@ -156,7 +156,8 @@ class _Drawer:
     def _forward(self, stage: ForwardStage) -> None:
         fp = stage.forward
         self.rec.scalars(layout.join(layout.plot_path("altitude"), "forward"), fp.t, fp.x_post[:, 0], names="forward")
-        self.rec.scalars(layout.join(layout.residual_path("baro"), "value"), fp.t, fp.innovations["baro"].y[:, 0])
+        baro = fp.innovations["baro"]
+        self.rec.scalars(layout.join(layout.residual_path("baro"), "value"), baro.t, baro.y[:, 0])
 
     def _result(self, stage: FallResult) -> None:
         alt = layout.plot_path("altitude")
