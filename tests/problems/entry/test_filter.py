@@ -337,6 +337,7 @@ def test_split_step_vs_snap():
     assert e_split < 30.0
 
 
+@pytest.mark.slow
 def test_smoothed_nees_over_seeded_runs():
     n_runs = 20
     vals = []
