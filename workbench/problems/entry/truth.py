@@ -72,7 +72,7 @@ from workbench.core.atmosphere import (
 from workbench.core.bodies import MARS
 from workbench.core.frames import julian_date_from_utc, north_east_xyz
 from workbench.core.gravity import j2_factor
-from workbench.core.rotation import dcm_components, quat_normalize, quat_to_dcm
+from workbench.core.rotation import dcm_components, quat_multiply, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import EntryVehicle
 from workbench.problems.entry.site import R_GROUND
 
@@ -657,16 +657,7 @@ def _initial_quaternion(spec: EntryTruthSpec) -> np.ndarray:
         half = 0.5 * math.radians(spec.aoa_offset_deg)
         # body-frame rotation about the axis (cos az, sin az, 0)
         dq = np.array([math.cos(az) * math.sin(half), math.sin(az) * math.sin(half), 0.0, math.cos(half)])
-        x1, y1, z1, w1 = q
-        x2, y2, z2, w2 = dq
-        q = np.array(
-            [
-                w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-                w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            ]
-        )
+        q = quat_multiply(q, dq)
     return quat_normalize(q)
 
 
