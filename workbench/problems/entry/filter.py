@@ -99,7 +99,8 @@ from workbench.estimation.ekf import (
     run_filter,
     update,
 )
-from workbench.estimation.smoother import rts_smooth
+from workbench.estimation.grid import MergedGrid, merge_time_tags
+from workbench.estimation.smoother import iterated_rts
 from workbench.estimation.strapdown import (
     GAP_SIGMA_DEFAULT,
     apply_gap,
@@ -372,59 +373,19 @@ def _build_events(radar: RadarData) -> tuple[list[_Event], list[tuple[float, Pla
 
 def _augmented_grid(
     t: np.ndarray, gaps: set[int], events: list[_Event], tol: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[_Event], dict[str, int]]:
-    """Insert measurement nodes; returns t_aug, interval (IMU interval index of each node),
-    imu_node (IMU index or −1), the events inside the span (node set) and counts."""
-    n = t.size
-    inserted: dict[int, list[float]] = {}
+) -> tuple[MergedGrid, list[_Event], dict[str, int]]:
+    """The IMU grid merged with the radar time tags (:func:`workbench.estimation.grid.merge_time_tags`,
+    no node inserted in a bridged gap); sets ``node`` of the events inside the span and returns the
+    merged grid, those events and the counts."""
+    g = merge_time_tags(t, [e.t for e in events], tol, no_insert=gaps)
     kept: list[_Event] = []
-    counts = {"n_outside": 0, "n_snapped": 0, "n_snapped_in_gap": 0}
-    pending: list[tuple[_Event, int, float]] = []  # (event, interval, time) for inserted ones
-    for e in events:
-        if e.t < t[0] - tol or e.t > t[-1] + tol:
-            counts["n_outside"] += 1
-            continue
-        k = int(np.clip(np.searchsorted(t, e.t), 1, n - 1))
-        k = k if abs(t[k] - e.t) <= abs(t[k - 1] - e.t) else k - 1
-        if abs(t[k] - e.t) <= tol:
-            e.node = -(k + 2)  # marker: IMU node k (resolved below)
-            counts["n_snapped"] += 1
-        else:
-            i = int(np.searchsorted(t, e.t)) - 1
-            if i in gaps:
-                e.node = -(k + 2)
-                counts["n_snapped_in_gap"] += 1
-            else:
-                lst = inserted.setdefault(i, [])
-                # merge with an inserted time within tol
-                tt = next((x for x in lst if abs(x - e.t) <= tol), None)
-                if tt is None:
-                    lst.append(e.t)
-                    tt = e.t
-                pending.append((e, i, tt))
-        kept.append(e)
-    t_aug: list[float] = []
-    interval: list[int] = []
-    imu_node: list[int] = []
-    imu_to_aug = np.empty(n, dtype=int)
-    ins_to_aug: dict[tuple[int, float], int] = {}
-    for k in range(n):
-        imu_to_aug[k] = len(t_aug)
-        t_aug.append(float(t[k]))
-        interval.append(k)
-        imu_node.append(k)
-        for tt in sorted(inserted.get(k, ())):
-            ins_to_aug[(k, tt)] = len(t_aug)
-            t_aug.append(tt)
-            interval.append(k)
-            imu_node.append(-1)
-    for e in kept:
-        if e.node <= -2:
-            e.node = int(imu_to_aug[-e.node - 2])
-    for e, i, tt in pending:
-        e.node = ins_to_aug[(i, tt)]
-    counts["n_inserted"] = len(ins_to_aug)
-    return np.array(t_aug), np.array(interval), np.array(imu_node), kept, counts
+    for e, a in zip(events, g.tag_node.tolist(), strict=True):
+        if a >= 0:
+            e.node = a
+            kept.append(e)
+    counts = {"n_outside": g.n_outside, "n_snapped": g.n_snapped, "n_snapped_in_gap": g.n_moved,
+              "n_inserted": g.n_inserted}  # fmt: skip
+    return g, kept, counts
 
 
 def _predict_channel(
@@ -583,7 +544,8 @@ def run_entry_smoother(
     sample_dt = float(np.median(np.diff(t)))
     gaps = _gap_map(t, getattr(imu, "gaps", ()) or ())
     events, fits = _build_events(radar)
-    t_aug, interval, imu_node, events, counts = _augmented_grid(t, set(gaps), events, sg.snap_tolerance)
+    grid, events, counts = _augmented_grid(t, set(gaps), events, sg.snap_tolerance)
+    t_aug, interval, imu_node = grid.t, grid.interval, grid.base_node
     N = t_aug.size
     # inputs on the augmented grid (IMU samples exactly, inserted nodes interpolated linearly)
     fa = np.empty((N, 3))
@@ -594,7 +556,7 @@ def run_entry_smoother(
             fa[a], wa[a] = f[k], w[k]
         else:
             i = interval[a]
-            s = (t_aug[a] - t[i]) / (t[i + 1] - t[i])
+            s = grid.fraction[a]
             fa[a] = f[i] + s * (f[i + 1] - f[i])
             wa[a] = w[i] + s * (w[i + 1] - w[i])
     by_node: dict[int, list[_Event]] = {}
@@ -608,22 +570,21 @@ def run_entry_smoother(
 
     x0 = np.concatenate([np.asarray(v0, dtype=float), np.asarray(q0, dtype=float) / np.linalg.norm(q0), p0])
     n_iter = max(1, int(sg.iterations))
-    lin = None
-    steps: list[float] = []
-    for it in range(n_iter):
-        fw = _forward(x0, np.asarray(P0, dtype=float), lin, t_aug, interval, imu_node, fa, wa, sw, sf, sample_dt,
-                      gaps, by_node, radar, sg, qpsd, gate, constrained)  # fmt: skip
-        fw, rms = fw
-        sp = rts_smooth(fw, _LAYOUT)
-        Xs, Ps = sp.x, sp.P
-        if it == 0:
-            fw0, rms0 = fw, rms
-        if lin is not None:
-            steps.append(float(np.max(np.abs(_LAYOUT.boxminus(Xs, lin)[:, 3:6]))))
-        lin = Xs
+    rms0: dict[int, RadarMeasurement] = {}
+
+    def run_pass(lin: np.ndarray | None) -> ForwardPass:
+        fw, rms = _forward(x0, np.asarray(P0, dtype=float), lin, t_aug, interval, imu_node, fa, wa, sw, sf,
+                           sample_dt, gaps, by_node, radar, sg, qpsd, gate, constrained)  # fmt: skip
+        if lin is None:
+            rms0.update(rms)
+        return fw
+
+    its = iterated_rts(run_pass, _LAYOUT, n_iter)
+    fw0 = its.first
+    Xs, Ps = its.smoothed.x, its.smoothed.P
     Xpo, Ppo = fw0.x_post, fw0.P_post
-    counts["iterations"] = n_iter
-    counts["relinearisation_max_attitude_change_rad"] = steps
+    counts["iterations"] = its.passes
+    counts["relinearisation_max_attitude_change_rad"] = [float(np.max(c[3:6])) for c in its.changes]
 
     # residuals
     innov: dict[str, InnovationHistory] = {}
