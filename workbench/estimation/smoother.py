@@ -1,5 +1,10 @@
 """Rauch-Tung-Striebel fixed-interval smoother for the error-state EKF of :mod:`.ekf`.
 
+Features: :func:`rts_smooth` (error-state RTS of a recorded forward pass, gain solved on the
+Jacobi-scaled predicted covariance, positive-definiteness checked per step) and
+:func:`iterated_rts` (iterated / re-linearised extended RTS smoother, Gauss-Newton on the batch
+MAP cost, with an optional absolute stop rule).
+
 It consumes a recorded :class:`~workbench.estimation.ekf.ForwardPass` (the Orekit pattern: the
 filter is observed, then smoothed backwards) and returns a :class:`SmoothedPass`.  In the error
 state, with ``F[k+1]`` the transition *from* step k *to* step k+1 as recorded by the driver:

@@ -15,7 +15,8 @@ covariance are propagated to it, updated, and propagated on to the next IMU samp
 nodes are kept for the backward pass (the RTS recursion runs on the augmented grid, so it stays
 exact) and dropped from the returned histories, which live on the IMU grid.  A measurement that
 falls inside a bridged data gap (no IMU inputs there) is snapped to the nearer gap end (counted
-in ``info["n_snapped_in_gap"]``).
+in ``info["n_snapped_in_gap"]``).  The grid is built by the shared
+:func:`workbench.estimation.grid.merge_time_tags` (gap intervals as ``no_insert``).
 
 Measurements (:mod:`workbench.models.radar`): slant ranges (the four beams stacked, B.3/B.4; a
 zero/invalid packet or beam is skipped), slant-out (the B0 model), velocity-out (B.5/B.6).
@@ -49,7 +50,9 @@ evaluated 7° off maps the later radar information back wrongly, and the single-
 ANEES (9 dof) there was ~1100 (50-run validation; 13.6 curvilinear after relinearising, with the
 window's σ cut to 1 °/s it is consistent without).  The returned ``forward`` pass and the
 innovations are the first (causal) pass's; ``info["relinearisation_max_attitude_change_rad"]``
-lists the largest attitude change of each further pass.
+lists the largest attitude change of each further pass.  The passes are run by the shared
+:func:`workbench.estimation.smoother.iterated_rts`; this module supplies the pass (its affine
+models about the reference trajectory).
 
 Iterated updates (``EntryFilterSigmas.update_iterations``, default 4): in the first (causal) pass
 each radar update is re-linearised about its own updated state (iterated EKF, Gauss-Newton; the
@@ -58,8 +61,11 @@ with a ~7° attitude error; 50-run validation: forward curvilinear ANEES at the 
 12.7 → 10.5 (the NIS/innovations recorded are still the prior's).
 
 Composition: this module supplies the models (strapdown propagation, radar measurement functions
-and Jacobians, the gain projector, the augmented time grid); the estimation steps are the shared
-engine's — the forward loop is :func:`workbench.estimation.ekf.run_filter` over the augmented grid
+and Jacobians, the gain projector, the affine models of a relinearised pass); the estimation
+steps are the shared engine's — the augmented time grid
+:func:`workbench.estimation.grid.merge_time_tags`, the passes
+:func:`workbench.estimation.smoother.iterated_rts`, the forward loop
+:func:`workbench.estimation.ekf.run_filter` over the augmented grid
 (the model returns its own Φ and Qd), each update its :func:`~workbench.estimation.ekf.update`
 (Joseph form, ``gain_projector``, iterated with :data:`UPDATE_STEP_TOL`, slant-range records
 NaN-padded to the four beams with ``slots``), the backward pass
