@@ -1,4 +1,5 @@
-"""Tests of workbench.estimation.smoother: exactness on a linear time-varying system, PD check."""
+"""Tests of workbench.estimation.smoother: exactness on a linear time-varying system, PD check,
+iterated (re-linearised) smoother as Gauss-Newton on a range-only tracking problem."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
-from workbench.estimation.smoother import rts_smooth
+from workbench.estimation.smoother import iterated_rts, rts_smooth
 
 
 def _spd(rng, n, scale):
@@ -125,3 +126,122 @@ def test_non_pd_smoothed_covariance_raises_naming_step():
     )
     with pytest.raises(ValueError, match="step 1"):
         rts_smooth(fp, lay)
+
+
+# ---------------------------------------------------------------------------------------------
+# iterated (re-linearised) RTS on a nonlinear problem: a constant-velocity target in the plane
+# tracked by ranges [m] from two stations, started 30 m off.  Independent of any problem package.
+
+_STATIONS = np.array([[0.0, 0.0], [60.0, 0.0]])
+
+
+def _ranges(x):
+    return np.linalg.norm(x[:2] - _STATIONS, axis=1)
+
+
+def _ranges_H(x):
+    d = x[:2] - _STATIONS
+    H = np.zeros((2, 4))
+    H[:, :2] = d / np.linalg.norm(d, axis=1)[:, None]
+    return H
+
+
+def _range_only_problem(seed=6, n=25):
+    """State [p_x, p_y, v_x, v_y] (m, m/s), dt = 1 s, white-acceleration process noise."""
+    rng = np.random.default_rng(seed)
+    F = np.eye(4)
+    F[0, 2] = F[1, 3] = 1.0
+    Q = 0.05 * np.array([[1 / 3, 0, 1 / 2, 0], [0, 1 / 3, 0, 1 / 2], [1 / 2, 0, 1, 0], [0, 1 / 2, 0, 1]])
+    P0 = np.diag([30.0, 30.0, 3.0, 3.0]) ** 2
+    x = np.array([10.0, 40.0, 2.0, -1.0])
+    m0 = x + rng.multivariate_normal(np.zeros(4), P0)
+    X = [x]
+    for _ in range(1, n):
+        X.append(F @ X[-1] + rng.multivariate_normal(np.zeros(4), Q))
+    X = np.array(X)
+    R = 0.5**2 * np.eye(2)
+    Z = np.array([_ranges(xk) for xk in X]) + 0.5 * rng.standard_normal((n, 2))
+    return F, Q, m0, P0, X, Z, R
+
+
+def _range_only_pass(F, Q, m0, P0, Z, R):
+    """``run_pass(reference)`` of :func:`iterated_rts`: the EKF, or the pass with the ranges
+    linearised about the reference trajectory (the dynamics are linear)."""
+    lay = ErrorStateLayout(4)
+    t = np.arange(Z.shape[0], dtype=float)
+
+    def run_pass(ref):
+        def measurements_at(k, tk, x):
+            if ref is None:
+                return [Measurement("range", Z[k], R, _ranges, _ranges_H)]
+            xb = ref[k]
+            hb, Hb = _ranges(xb), _ranges_H(xb)
+            return [Measurement("range", Z[k], R, lambda s: hb + Hb @ (s - xb), Hb)]
+
+        return run_filter(m0, P0, t, lambda x, t0, t1: (F @ x, F), lambda x, t0, t1: Q, measurements_at, lay)
+
+    return run_pass, lay
+
+
+def _map_cost_and_gradient(X, F, Q, m0, P0, Z, R):
+    """Batch MAP cost J (prior + dynamics + ranges) of a trajectory X (n, 4) and its gradient (n, 4)."""
+    g = np.zeros_like(X)
+    e = X[0] - m0
+    J = 0.5 * e @ np.linalg.solve(P0, e)
+    g[0] += np.linalg.solve(P0, e)
+    for k in range(1, X.shape[0]):
+        e = X[k] - F @ X[k - 1]
+        w = np.linalg.solve(Q, e)
+        J += 0.5 * e @ w
+        g[k] += w
+        g[k - 1] -= F.T @ w
+    for k in range(X.shape[0]):
+        e = Z[k] - _ranges(X[k])
+        w = np.linalg.solve(R, e)
+        J += 0.5 * e @ w
+        g[k] -= _ranges_H(X[k]).T @ w
+    return J, g
+
+
+def test_iterated_rts_is_gauss_newton_on_range_only_tracking():
+    F, Q, m0, P0, X, Z, R = _range_only_problem()
+    run_pass, lay = _range_only_pass(F, Q, m0, P0, Z, R)
+    one = iterated_rts(run_pass, lay, 1)
+    # one pass is the plain EKF + RTS
+    ref = rts_smooth(run_pass(None), lay)
+    np.testing.assert_array_equal(one.smoothed.x, ref.x)
+    np.testing.assert_array_equal(one.smoothed.P, ref.P)
+    assert one.passes == 1 and one.changes == [] and one.forward is one.first and not one.converged
+
+    it = iterated_rts(run_pass, lay, 8)
+    assert it.passes == 8 and len(it.changes) == 7 and not it.converged
+    # the first (causal) forward pass is kept; the last one is the re-linearised pass
+    np.testing.assert_array_equal(it.first.x_post, one.first.x_post)
+    assert not np.allclose(it.forward.x_post, it.first.x_post)
+    # the change between passes shrinks (quadratically here) to round-off
+    size = np.array([c.max() for c in it.changes])
+    assert size[0] > 1.0
+    assert np.all(size[1:5] < 0.1 * size[:4])
+    assert size[-1] < 1e-9
+    # it reaches the batch MAP estimate (gradient ~ 0) that the single pass misses ...
+    J1, g1 = _map_cost_and_gradient(one.smoothed.x, F, Q, m0, P0, Z, R)
+    J, g = _map_cost_and_gradient(it.smoothed.x, F, Q, m0, P0, Z, R)
+    assert J < 0.1 * J1
+    assert np.abs(g).max() < 1e-6 * np.abs(g1).max()
+    # ... and is closer to the truth: the first pass kept the EKF's linearisation errors
+    err1 = np.sqrt(np.mean((one.smoothed.x[:, :2] - X[:, :2]) ** 2))
+    err = np.sqrt(np.mean((it.smoothed.x[:, :2] - X[:, :2]) ** 2))
+    assert err < 0.5 * err1
+
+
+def test_iterated_rts_stops_on_step_tolerance():
+    F, Q, m0, P0, X, Z, R = _range_only_problem()
+    run_pass, lay = _range_only_pass(F, Q, m0, P0, Z, R)
+    full = iterated_rts(run_pass, lay, 8)
+    tol = np.array([1e-6, 1e-6, 1e-7, 1e-7])
+    early = iterated_rts(run_pass, lay, 8, step_tol=tol)
+    assert early.converged and early.passes < full.passes
+    assert np.all(early.changes[-1] < tol) and not np.all(early.changes[-2] < tol)
+    np.testing.assert_allclose(early.smoothed.x, full.smoothed.x, rtol=0, atol=1e-5)
+    with pytest.raises(ValueError, match="passes"):
+        iterated_rts(run_pass, lay, 0)

@@ -35,6 +35,16 @@ unchanged (``G ≈ I``), the standard MEKF practice (Markley & Crassidis 2014, S
 Iterated EKF: Bell & Cathey, "The iterated Kalman filter update as a Gauss-Newton method",
 IEEE TAC 38(2), 1993, written with ⊞/⊟.
 
+Features of :func:`update` / :class:`Measurement` / :func:`run_filter`: Joseph-form covariance;
+χ² gating (``gate_probability`` or ``gate_threshold``); iterated update with a relative or an
+absolute (``step_tol``) stop rule; constrained update directions by gain projection
+(``gain_projector``, Simon 2006); measurements carrying some components (``slots``) of a larger
+channel, recorded NaN-padded; a transition that returns its own process noise; the ``adapt_q``
+hook.  Companions: :func:`workbench.estimation.grid.merge_time_tags` builds the step grid with
+measurement nodes at their own time tags; :mod:`workbench.estimation.smoother` smooths a
+:class:`ForwardPass` (RTS) and iterates forward-backward passes about the smoothed trajectory
+(:func:`~workbench.estimation.smoother.iterated_rts`).
+
 References: [1] Gelb, *Applied Optimal Estimation*, 1974 (Joseph form); [2] POST2 EKF thesis,
 Ch. 3.1 (the POST2 EKF reconstruction of the Huygens probe, M.S. thesis); [3] Solà,
 "Quaternion kinematics for the error-state Kalman filter", 2017 (error-state / reset); [4] Bell & Cathey 1993.

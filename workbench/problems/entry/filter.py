@@ -15,7 +15,8 @@ covariance are propagated to it, updated, and propagated on to the next IMU samp
 nodes are kept for the backward pass (the RTS recursion runs on the augmented grid, so it stays
 exact) and dropped from the returned histories, which live on the IMU grid.  A measurement that
 falls inside a bridged data gap (no IMU inputs there) is snapped to the nearer gap end (counted
-in ``info["n_snapped_in_gap"]``).
+in ``info["n_snapped_in_gap"]``).  The grid is built by the shared
+:func:`workbench.estimation.grid.merge_time_tags` (gap intervals as ``no_insert``).
 
 Measurements (:mod:`workbench.models.radar`): slant ranges (the four beams stacked, B.3/B.4; a
 zero/invalid packet or beam is skipped), slant-out (the B0 model), velocity-out (B.5/B.6).
@@ -49,7 +50,9 @@ evaluated 7° off maps the later radar information back wrongly, and the single-
 ANEES (9 dof) there was ~1100 (50-run validation; 13.6 curvilinear after relinearising, with the
 window's σ cut to 1 °/s it is consistent without).  The returned ``forward`` pass and the
 innovations are the first (causal) pass's; ``info["relinearisation_max_attitude_change_rad"]``
-lists the largest attitude change of each further pass.
+lists the largest attitude change of each further pass.  The passes are run by the shared
+:func:`workbench.estimation.smoother.iterated_rts`; this module supplies the pass (its affine
+models about the reference trajectory).
 
 Iterated updates (``EntryFilterSigmas.update_iterations``, default 4): in the first (causal) pass
 each radar update is re-linearised about its own updated state (iterated EKF, Gauss-Newton; the
@@ -58,8 +61,11 @@ with a ~7° attitude error; 50-run validation: forward curvilinear ANEES at the 
 12.7 → 10.5 (the NIS/innovations recorded are still the prior's).
 
 Composition: this module supplies the models (strapdown propagation, radar measurement functions
-and Jacobians, the gain projector, the augmented time grid); the estimation steps are the shared
-engine's — the forward loop is :func:`workbench.estimation.ekf.run_filter` over the augmented grid
+and Jacobians, the gain projector, the affine models of a relinearised pass); the estimation
+steps are the shared engine's — the augmented time grid
+:func:`workbench.estimation.grid.merge_time_tags`, the passes
+:func:`workbench.estimation.smoother.iterated_rts`, the forward loop
+:func:`workbench.estimation.ekf.run_filter` over the augmented grid
 (the model returns its own Φ and Qd), each update its :func:`~workbench.estimation.ekf.update`
 (Joseph form, ``gain_projector``, iterated with :data:`UPDATE_STEP_TOL`, slant-range records
 NaN-padded to the four beams with ``slots``), the backward pass
@@ -99,7 +105,8 @@ from workbench.estimation.ekf import (
     run_filter,
     update,
 )
-from workbench.estimation.smoother import rts_smooth
+from workbench.estimation.grid import MergedGrid, merge_time_tags
+from workbench.estimation.smoother import iterated_rts
 from workbench.estimation.strapdown import (
     GAP_SIGMA_DEFAULT,
     apply_gap,
@@ -372,59 +379,19 @@ def _build_events(radar: RadarData) -> tuple[list[_Event], list[tuple[float, Pla
 
 def _augmented_grid(
     t: np.ndarray, gaps: set[int], events: list[_Event], tol: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[_Event], dict[str, int]]:
-    """Insert measurement nodes; returns t_aug, interval (IMU interval index of each node),
-    imu_node (IMU index or −1), the events inside the span (node set) and counts."""
-    n = t.size
-    inserted: dict[int, list[float]] = {}
+) -> tuple[MergedGrid, list[_Event], dict[str, int]]:
+    """The IMU grid merged with the radar time tags (:func:`workbench.estimation.grid.merge_time_tags`,
+    no node inserted in a bridged gap); sets ``node`` of the events inside the span and returns the
+    merged grid, those events and the counts."""
+    g = merge_time_tags(t, [e.t for e in events], tol, no_insert=gaps)
     kept: list[_Event] = []
-    counts = {"n_outside": 0, "n_snapped": 0, "n_snapped_in_gap": 0}
-    pending: list[tuple[_Event, int, float]] = []  # (event, interval, time) for inserted ones
-    for e in events:
-        if e.t < t[0] - tol or e.t > t[-1] + tol:
-            counts["n_outside"] += 1
-            continue
-        k = int(np.clip(np.searchsorted(t, e.t), 1, n - 1))
-        k = k if abs(t[k] - e.t) <= abs(t[k - 1] - e.t) else k - 1
-        if abs(t[k] - e.t) <= tol:
-            e.node = -(k + 2)  # marker: IMU node k (resolved below)
-            counts["n_snapped"] += 1
-        else:
-            i = int(np.searchsorted(t, e.t)) - 1
-            if i in gaps:
-                e.node = -(k + 2)
-                counts["n_snapped_in_gap"] += 1
-            else:
-                lst = inserted.setdefault(i, [])
-                # merge with an inserted time within tol
-                tt = next((x for x in lst if abs(x - e.t) <= tol), None)
-                if tt is None:
-                    lst.append(e.t)
-                    tt = e.t
-                pending.append((e, i, tt))
-        kept.append(e)
-    t_aug: list[float] = []
-    interval: list[int] = []
-    imu_node: list[int] = []
-    imu_to_aug = np.empty(n, dtype=int)
-    ins_to_aug: dict[tuple[int, float], int] = {}
-    for k in range(n):
-        imu_to_aug[k] = len(t_aug)
-        t_aug.append(float(t[k]))
-        interval.append(k)
-        imu_node.append(k)
-        for tt in sorted(inserted.get(k, ())):
-            ins_to_aug[(k, tt)] = len(t_aug)
-            t_aug.append(tt)
-            interval.append(k)
-            imu_node.append(-1)
-    for e in kept:
-        if e.node <= -2:
-            e.node = int(imu_to_aug[-e.node - 2])
-    for e, i, tt in pending:
-        e.node = ins_to_aug[(i, tt)]
-    counts["n_inserted"] = len(ins_to_aug)
-    return np.array(t_aug), np.array(interval), np.array(imu_node), kept, counts
+    for e, a in zip(events, g.tag_node.tolist(), strict=True):
+        if a >= 0:
+            e.node = a
+            kept.append(e)
+    counts = {"n_outside": g.n_outside, "n_snapped": g.n_snapped, "n_snapped_in_gap": g.n_moved,
+              "n_inserted": g.n_inserted}  # fmt: skip
+    return g, kept, counts
 
 
 def _predict_channel(
@@ -583,7 +550,8 @@ def run_entry_smoother(
     sample_dt = float(np.median(np.diff(t)))
     gaps = _gap_map(t, getattr(imu, "gaps", ()) or ())
     events, fits = _build_events(radar)
-    t_aug, interval, imu_node, events, counts = _augmented_grid(t, set(gaps), events, sg.snap_tolerance)
+    grid, events, counts = _augmented_grid(t, set(gaps), events, sg.snap_tolerance)
+    t_aug, interval, imu_node = grid.t, grid.interval, grid.base_node
     N = t_aug.size
     # inputs on the augmented grid (IMU samples exactly, inserted nodes interpolated linearly)
     fa = np.empty((N, 3))
@@ -594,7 +562,7 @@ def run_entry_smoother(
             fa[a], wa[a] = f[k], w[k]
         else:
             i = interval[a]
-            s = (t_aug[a] - t[i]) / (t[i + 1] - t[i])
+            s = grid.fraction[a]
             fa[a] = f[i] + s * (f[i + 1] - f[i])
             wa[a] = w[i] + s * (w[i + 1] - w[i])
     by_node: dict[int, list[_Event]] = {}
@@ -608,22 +576,21 @@ def run_entry_smoother(
 
     x0 = np.concatenate([np.asarray(v0, dtype=float), np.asarray(q0, dtype=float) / np.linalg.norm(q0), p0])
     n_iter = max(1, int(sg.iterations))
-    lin = None
-    steps: list[float] = []
-    for it in range(n_iter):
-        fw = _forward(x0, np.asarray(P0, dtype=float), lin, t_aug, interval, imu_node, fa, wa, sw, sf, sample_dt,
-                      gaps, by_node, radar, sg, qpsd, gate, constrained)  # fmt: skip
-        fw, rms = fw
-        sp = rts_smooth(fw, _LAYOUT)
-        Xs, Ps = sp.x, sp.P
-        if it == 0:
-            fw0, rms0 = fw, rms
-        if lin is not None:
-            steps.append(float(np.max(np.abs(_LAYOUT.boxminus(Xs, lin)[:, 3:6]))))
-        lin = Xs
+    rms0: dict[int, RadarMeasurement] = {}
+
+    def run_pass(lin: np.ndarray | None) -> ForwardPass:
+        fw, rms = _forward(x0, np.asarray(P0, dtype=float), lin, t_aug, interval, imu_node, fa, wa, sw, sf,
+                           sample_dt, gaps, by_node, radar, sg, qpsd, gate, constrained)  # fmt: skip
+        if lin is None:
+            rms0.update(rms)
+        return fw
+
+    its = iterated_rts(run_pass, _LAYOUT, n_iter)
+    fw0 = its.first
+    Xs, Ps = its.smoothed.x, its.smoothed.P
     Xpo, Ppo = fw0.x_post, fw0.P_post
-    counts["iterations"] = n_iter
-    counts["relinearisation_max_attitude_change_rad"] = steps
+    counts["iterations"] = its.passes
+    counts["relinearisation_max_attitude_change_rad"] = [float(np.max(c[3:6])) for c in its.changes]
 
     # residuals
     innov: dict[str, InnovationHistory] = {}
