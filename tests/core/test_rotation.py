@@ -175,3 +175,20 @@ def test_single_quaternion_paths_equal_the_vectorised_ones(rng):
     np.testing.assert_allclose(rot.quat_to_dcm(N[3]), Rotation.from_quat(N[3]).as_matrix(), atol=1e-14)
     with pytest.raises(ValueError):
         rot.quat_normalize(np.zeros(4))
+
+
+def test_single_quaternion_fast_paths_equal_the_vectorised_ones():
+    """quat_boxplus_one / attitude_error_one (the filters' hot path) equal the array versions."""
+    from workbench.core.rotation import attitude_error, attitude_error_one, quat_boxplus, quat_boxplus_one
+
+    rng = np.random.default_rng(11)
+    for scale in (1e-9, 1e-3, 0.5, 2.0):
+        for _ in range(50):
+            q = rng.normal(size=4)
+            q /= np.linalg.norm(q)
+            d = scale * rng.normal(size=3)
+            np.testing.assert_allclose(quat_boxplus_one(q, d), quat_boxplus(q, d), rtol=0, atol=1e-15)
+            q2 = quat_boxplus(q, d)
+            np.testing.assert_allclose(attitude_error_one(q, q2), attitude_error(q, q2), rtol=0, atol=1e-12)
+            if scale < 1.0:
+                np.testing.assert_allclose(attitude_error_one(q, q2), d, rtol=1e-9, atol=1e-15)

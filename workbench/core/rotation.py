@@ -25,6 +25,8 @@ cited by the REDLand paper for the 3DM initial attitude).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = [
@@ -43,6 +45,8 @@ __all__ = [
     "quat_from_axis_angle",
     "attitude_error",
     "quat_boxplus",
+    "quat_boxplus_one",
+    "attitude_error_one",
     "quat_integrate_body_rate",
     "euler123_from_quat",
     "quat_from_euler123",
@@ -378,3 +382,40 @@ def triad_covariance(u_B: np.ndarray, v_B: np.ndarray, sigma_u: float, sigma_v: 
         + ((sigma_v**2 - sigma_u**2) * np.outer(b1, b1) + sigma_u**2 * d * (np.outer(b1, b2) + np.outer(b2, b1))) / s2
     )
     return 0.5 * (P + P.T)
+
+
+# ---------------------------------------------------------------------------------------------
+# single-quaternion fast paths (a filter recursion calls ⊞ once per measurement; the vectorised
+# quat_boxplus / attitude_error cost ~20 µs for one quaternion, these ~2 µs).  Tested equal to them.
+# ---------------------------------------------------------------------------------------------
+
+
+def quat_boxplus_one(q: np.ndarray, d: np.ndarray) -> list[float]:
+    """``q ⊗ exp(d)`` renormalised, for one quaternion (4,) and one body small angle (3,) [rad]."""
+    qx, qy, qz, qw = q.tolist()
+    dx, dy, dz = d.tolist()
+    a = math.sqrt(dx * dx + dy * dy + dz * dz)
+    k = 0.5 - a * a / 48.0 if a < 1e-6 else math.sin(0.5 * a) / a
+    px, py, pz, pw = dx * k, dy * k, dz * k, math.cos(0.5 * a)
+    rx = qw * px + qx * pw + qy * pz - qz * py
+    ry = qw * py - qx * pz + qy * pw + qz * px
+    rz = qw * pz + qx * py - qy * px + qz * pw
+    rw = qw * pw - qx * px - qy * py - qz * pz
+    n = math.sqrt(rx * rx + ry * ry + rz * rz + rw * rw)
+    return [rx / n, ry / n, rz / n, rw / n]
+
+
+def attitude_error_one(q_ref: np.ndarray, q: np.ndarray) -> list[float]:
+    """Body small angle δθ (3,) [rad] with ``q = q_ref ⊗ exp(δθ)``, for single quaternions."""
+    ax, ay, az, aw = q_ref.tolist()
+    bx, by, bz, bw = q.tolist()
+    # conj(a) ⊗ b
+    rx = aw * bx - ax * bw - ay * bz + az * by
+    ry = aw * by + ax * bz - ay * bw - az * bx
+    rz = aw * bz - ax * by + ay * bx - az * bw
+    rw = aw * bw + ax * bx + ay * by + az * bz
+    if rw < 0.0:
+        rx, ry, rz, rw = -rx, -ry, -rz, -rw
+    s = math.sqrt(rx * rx + ry * ry + rz * rz)
+    k = 2.0 / max(rw, 1e-300) if s < 1e-8 else 2.0 * math.atan2(s, rw) / s
+    return [rx * k, ry * k, rz * k]

@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import lapack
 
-from workbench.core.rotation import attitude_error, quat_boxplus, quat_normalize
+from workbench.core.rotation import attitude_error, attitude_error_one, quat_boxplus, quat_boxplus_one, quat_normalize
 from workbench.estimation.consistency import chi2_gate
 
 __all__ = [
@@ -78,44 +78,6 @@ __all__ = [
 
 _potrf = lapack.dpotrf
 _potrs = lapack.dpotrs
-
-
-# ---------------------------------------------------------------------------------------------
-# single-quaternion fast paths (the filter recursion calls ⊞ once per measurement; the
-# vectorised helpers of core.rotation cost ~20 µs for one quaternion, these ~2 µs).  They are
-# tested equal to rotation.quat_boxplus / rotation.attitude_error.
-# ---------------------------------------------------------------------------------------------
-
-
-def _quat_boxplus_single(q: np.ndarray, d: np.ndarray) -> list[float]:
-    """``q ⊗ exp(d)`` renormalised, for one quaternion (4,) and one body small angle (3,) [rad]."""
-    qx, qy, qz, qw = q.tolist()
-    dx, dy, dz = d.tolist()
-    a = math.sqrt(dx * dx + dy * dy + dz * dz)
-    k = 0.5 - a * a / 48.0 if a < 1e-6 else math.sin(0.5 * a) / a
-    px, py, pz, pw = dx * k, dy * k, dz * k, math.cos(0.5 * a)
-    rx = qw * px + qx * pw + qy * pz - qz * py
-    ry = qw * py - qx * pz + qy * pw + qz * px
-    rz = qw * pz + qx * py - qy * px + qz * pw
-    rw = qw * pw - qx * px - qy * py - qz * pz
-    n = math.sqrt(rx * rx + ry * ry + rz * rz + rw * rw)
-    return [rx / n, ry / n, rz / n, rw / n]
-
-
-def _quat_error_single(q_ref: np.ndarray, q: np.ndarray) -> list[float]:
-    """Body small angle δθ (3,) [rad] with ``q = q_ref ⊗ exp(δθ)``, for single quaternions."""
-    ax, ay, az, aw = q_ref.tolist()
-    bx, by, bz, bw = q.tolist()
-    # conj(a) ⊗ b
-    rx = aw * bx - ax * bw - ay * bz + az * by
-    ry = aw * by + ax * bz - ay * bw - az * bx
-    rz = aw * bz - ax * by + ay * bx - az * bw
-    rw = aw * bw + ax * bx + ay * by + az * bz
-    if rw < 0.0:
-        rx, ry, rz, rw = -rx, -ry, -rz, -rw
-    s = math.sqrt(rx * rx + ry * ry + rz * rz)
-    k = 2.0 / max(rw, 1e-300) if s < 1e-8 else 2.0 * math.atan2(s, rw) / s
-    return [rx * k, ry * k, rz * k]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -197,7 +159,7 @@ class ErrorStateLayout:
             for xs, es in self._add_runs:
                 out[xs] += dx[es]
             for i_x, i_e in self.quat_blocks:
-                out[i_x : i_x + 4] = _quat_boxplus_single(x[i_x : i_x + 4], dx[i_e : i_e + 3])
+                out[i_x : i_x + 4] = quat_boxplus_one(x[i_x : i_x + 4], dx[i_e : i_e + 3])
             return out
         shape = np.broadcast_shapes(x.shape[:-1], dx.shape[:-1])
         out = np.array(np.broadcast_to(x, (*shape, self.n_x)), dtype=float)
@@ -222,7 +184,7 @@ class ErrorStateLayout:
             for xs, es in self._add_runs:
                 out[es] = x[xs] - x_ref[xs]
             for i_x, i_e in self.quat_blocks:
-                out[i_e : i_e + 3] = _quat_error_single(x_ref[i_x : i_x + 4], x[i_x : i_x + 4])
+                out[i_e : i_e + 3] = attitude_error_one(x_ref[i_x : i_x + 4], x[i_x : i_x + 4])
             return out
         shape = np.broadcast_shapes(x.shape[:-1], x_ref.shape[:-1])
         out = np.empty((*shape, self.n_e))
