@@ -52,6 +52,7 @@ __all__ = [
     "GapBridge",
     "ImuArrays",
     "imu_arrays",
+    "imu_columns",
     "StrapdownPass",
     "derivatives",
     "rk4_step",
@@ -404,6 +405,19 @@ class ImuArrays:
     gaps: tuple[GapBridge, ...] = ()
 
 
+def imu_columns(imu: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(t, f_G, w_G, sigma_f, sigma_w)`` of an IMU record (:class:`ImuArrays` or a
+    PreprocessedIMU) as float arrays: t (n,) [s], f_G (n, 3) [m/s²], w_G (n, 3) [rad/s] and the
+    per-sample 1σ (n, 3) of each."""
+    return (
+        np.asarray(imu.t, dtype=float),
+        np.asarray(imu.f_G, dtype=float),
+        np.asarray(imu.w_G, dtype=float),
+        np.asarray(imu.sigma_f, dtype=float),
+        np.asarray(imu.sigma_w, dtype=float),
+    )
+
+
 def imu_arrays(imu: Any) -> ImuArrays:
     """:class:`ImuArrays` from any object with ``t``, ``f_G``, ``w_G`` (optional ``sigma_f``/``sigma_w``,
     scalar or (n, 3), default 0; optional ``gaps``)."""
@@ -497,11 +511,7 @@ def integrate(
     (default: the median sample interval); ``gravity_gradient`` include G(p) in A; ``body`` the
     planet (gravity).
     """
-    t = np.asarray(imu.t, dtype=float)
-    f = np.asarray(imu.f_G, dtype=float)
-    w = np.asarray(imu.w_G, dtype=float)
-    sf = np.asarray(imu.sigma_f, dtype=float)
-    sw = np.asarray(imu.sigma_w, dtype=float)
+    t, f, w, sf, sw = imu_columns(imu)
     n = t.size
     if n < 2:
         raise ValueError("integrate: need at least two IMU samples")

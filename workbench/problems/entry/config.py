@@ -398,6 +398,17 @@ class EntryConfig:
     wind_sigma_mps: float
     wind_method: str
 
+    def smoother_sigmas(self) -> dict:
+        """The radar-aided smoother's measurement 1σ and gap-bridge mode, as
+        ``run_entry_smoother(sigmas=...)`` takes them: slant range [m], slant-out [m],
+        velocity-out [m/s], ``bridge_mode``."""
+        return {
+            "slant_range": self.slant_range_sigma_m,
+            "slant_out": self.slant_out_sigma_m,
+            "velocity_out": self.velocity_out_sigma_mps,
+            "bridge_mode": self.bridge_mode,
+        }
+
     @classmethod
     def from_scenario(cls, scenario: Scenario) -> EntryConfig:
         """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types, choices), check the

@@ -112,6 +112,7 @@ from workbench.estimation.strapdown import (
     apply_gap,
     covariance_step,
     gap_transition,
+    imu_columns,
     rk4_step,
 )
 from workbench.models.radar import (
@@ -539,11 +540,7 @@ def run_entry_smoother(
     """
     wall0 = time.perf_counter()
     sg = EntryFilterSigmas.from_any(sigmas)
-    t = np.asarray(imu.t, dtype=float)
-    f = np.asarray(imu.f_G, dtype=float)
-    w = np.asarray(imu.w_G, dtype=float)
-    sf = np.asarray(imu.sigma_f, dtype=float)
-    sw = np.asarray(imu.sigma_w, dtype=float)
+    t, f, w, sf, sw = imu_columns(imu)
     n = t.size
     if n < 2 or np.any(np.diff(t) <= 0.0):
         raise ValueError("run_entry_smoother: need ≥ 2 strictly increasing IMU times")

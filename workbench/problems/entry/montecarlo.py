@@ -873,12 +873,7 @@ def prepare_validation(
         radar_times=(np.asarray(tm.t_sr, float)[sr_ok], np.asarray(tm.t_rda, float)[rda_ok]),
         beams_G=beams,
         r_ground=float(r_ground),
-        sigmas={
-            "slant_range": cfg.slant_range_sigma_m,
-            "slant_out": cfg.slant_out_sigma_m,
-            "velocity_out": cfg.velocity_out_sigma_mps,
-            "bridge_mode": bridge_mode,
-        },
+        sigmas=cfg.smoother_sigmas(),
         constrained=cfg.constrained,
         events=dict(tm.events),
         start_mode=st.mode,

@@ -242,12 +242,7 @@ def reconstruct(
         q0,
         p0,
         P0_ref,
-        sigmas={
-            "slant_range": cfg.slant_range_sigma_m,
-            "slant_out": cfg.slant_out_sigma_m,
-            "velocity_out": cfg.velocity_out_sigma_mps,
-            "bridge_mode": bridge_mode,
-        },
+        sigmas=cfg.smoother_sigmas(),
         constrained=cfg.constrained,
     )
     yield filt
