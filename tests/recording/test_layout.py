@@ -17,7 +17,7 @@ RECORDERS = [
     "workbench/problems/droptest/recording.py",
     "workbench/problems/entry/recording.py",
     "workbench/problems/entry/recording_mc.py",
-    "workbench/recording/montecarlo.py",
+    "workbench/problems/droptest/recording_mc.py",
     "workbench/recording/blueprint.py",
     "workbench/cli.py",
 ]

@@ -7,7 +7,7 @@ are grouped:
 * generic paths every problem shares (``WORLD``, ``VEHICLE``, ``PLOTS``, ``REPORT`` ...);
 * ``DROPTEST_*``: the drop-test reconstruction (``workbench.problems.droptest.recording``);
 * ``ENTRY_*``: the entry and descent reconstruction (``workbench.problems.entry.recording``);
-* ``MC_*``: the drop-test Monte Carlo (``workbench.recording.montecarlo``);
+* ``MC_*``: the drop-test Monte Carlo (``workbench.problems.droptest.recording_mc``);
 * ``VALIDATION_*``: the entry smoother validation (``workbench.problems.entry.recording_mc``);
 * leaf names (``VALUE``, ``TRUTH_SERIES``, ``FORWARD_SERIES`` ...) of series under a plot root;
 * families of paths with a caller-given part (a sensor, an axis, a beam) as small functions, e.g.

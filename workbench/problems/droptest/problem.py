@@ -151,7 +151,7 @@ class DropTestProblem:
         """Consistency statistics of a synthetic scenario over ``options.seeds`` (truth inside 3σ,
         ANEES); writes ``<out>/<name>_mc.rrd`` and works in ``<out>/<name>_mc_work``."""
         from workbench.problems.droptest.montecarlo import monte_carlo, summarize_mc
-        from workbench.recording.montecarlo import record_monte_carlo
+        from workbench.problems.droptest.recording_mc import record_monte_carlo
 
         if not scenario.is_synthetic:
             raise NotImplementedError(f"{scenario.path}: Monte Carlo needs a synthetic droptest scenario")

@@ -1,4 +1,4 @@
-"""Draw a drop-test Monte Carlo (``pipelines.droptest_mc``) into a Rerun recording.
+"""Draw a drop-test Monte Carlo (:func:`workbench.problems.droptest.montecarlo.monte_carlo`) into a Rerun recording.
 
 One row per Monte Carlo member on the ``sample`` timeline (sequence = the member's seed):
 ``/plots/mc/max_stroke_error`` with its reported ``plus_3sigma`` / ``minus_3sigma``,
