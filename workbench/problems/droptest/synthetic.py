@@ -1,6 +1,6 @@
 """Synthetic drop test: truth simulation -> telemetry files exactly as a test engineer supplies them.
 
-The truth (``physics.droptest``) is turned into instrument readings (``sensors.droptest``) and
+The truth (``problems.droptest.truth``) is turned into instrument readings (``problems.droptest.sensors``) and
 written to CSV/TOML files in the documented user format (``io/FORMATS.md``):
 
 * ``imu.csv`` — four accelerometer triads [g] and the rate gyro [deg/s] at the IDDAS rate,
@@ -12,7 +12,7 @@ written to CSV/TOML files in the documented user format (``io/FORMATS.md``):
   gun ranges / range rates.
 
 The truth is saved beside them in ``truth.npz`` for scoring and drawing only; the
-reconstruction (``pipelines.droptest``) reads the telemetry files and never this one.
+reconstruction (``problems.droptest.pipeline``) reads the telemetry files and never this one.
 """
 
 from __future__ import annotations

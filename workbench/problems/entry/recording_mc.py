@@ -1,11 +1,11 @@
-"""Draw the entry smoother's validation (``pipelines.entry_mc``, AMELIA Sect. 8) into a Rerun recording.
+"""Draw the entry smoother's validation (``problems.entry.montecarlo``, AMELIA Sect. 8) into a Rerun recording.
 
 * ``sample`` timeline (sequence = run index): per run the time-averaged smoothed NEES
   (``/plots/validation/runs/nees_time_avg``), the max altitude-AGL error after the radar fix with
   its 3σ (``/plots/validation/runs/h_agl_error_max`` and ``.../h_agl_3sigma``) and the fraction of
   (step, state) pairs with the truth inside ±3σ (``/plots/validation/runs/inside_3sigma``);
 * ``time`` timeline [s from EIP]: ANEES(t) (9 dof) of the smoothed and forward passes, Cartesian
-  and curvilinear (``pipelines.entry_mc``), with the 95 % χ² band (``/plots/validation/anees/…``);
+  and curvilinear (``problems.entry.montecarlo``), with the 95 % χ² band (``/plots/validation/anees/…``);
   RMS errors over the runs with the RMS of the reported 1σ
   (``/plots/validation/rms/{position,altitude,velocity,attitude}/…``, attitude in degrees);
 * the summary as the ``/report`` scorecard (:func:`validation_markdown`).
@@ -57,7 +57,7 @@ def validation_markdown(summary: dict, title: str = "Entry smoother validation")
         f"## ANEES (9 dof), 95 % band {lo:.2f}–{hi:.2f}",
         "",
         "Cartesian: the filter's error state; curvilinear: position error as horizontal + altitude about "
-        "the estimate (free of the |δp_h|²/2R curvature term, see `pipelines/entry_mc.py`).",
+        "the estimate (free of the |δp_h|²/2R curvature term, see `problems/entry/montecarlo.py`).",
         "",
         "| epoch | t [s] | smoothed | inside | smoothed curvilinear | inside | forward | forward curvilinear |",
         "|---|---|---|---|---|---|---|---|",

@@ -1,6 +1,6 @@
 """Synthetic Schiaparelli-like entry: truth simulation -> telemetry files exactly as a user supplies them.
 
-The truth (``physics.entry.simulate_entry``) is turned into the real-time telemetry of AMELIA
+The truth (``problems.entry.truth.simulate_entry``) is turned into the real-time telemetry of AMELIA
 Table 1 by ``sensors.entry.generate_entry_tm`` (IMU errors, gyro clipping, the on-board strapdown
 from an erroneous nominal state, blackout gaps, radar) and written in the documented CSV format
 (``io/FORMATS.md``), times in seconds from the entry interface point (EIP), a ``# epoch_utc:``
