@@ -11,7 +11,6 @@ Events: PDD at Mach 2, FSR = PDD + 41 s, BSR = FSR + 41 s (end of data).  Load i
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -21,6 +20,7 @@ from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normalize, quat_to_dcm
+from workbench.estimation.strapdown import GapBridge, ImuArrays
 
 OMEGA_M = np.array([0.0, 0.0, MARS.rotation_rate])
 P0 = np.array([-1317.4056, 3254.8625, -223.9034]) * 1e3
@@ -30,28 +30,10 @@ T0 = -15.0
 ATM = MarsEngineeringAtmosphere()
 
 
-@dataclass(frozen=True)
-class Bridge:
-    """Duck-typed GapBridge (spec fields)."""
-
-    t_a: float
-    t_b: float
-    dv_G: np.ndarray
-    dp_G: np.ndarray
-    dp_rel_G: np.ndarray
-    dC: np.ndarray
+Bridge = GapBridge  # the workbench's own type (was a duck-typed copy)
 
 
-@dataclass(frozen=True)
-class SynthIMU:
-    """Duck-typed PreprocessedIMU (the fields the strapdown uses)."""
-
-    t: np.ndarray
-    f_G: np.ndarray
-    w_G: np.ndarray
-    sigma_f: np.ndarray
-    sigma_w: np.ndarray
-    gaps: list = field(default_factory=list)
+SynthIMU = ImuArrays  # the workbench's own type (was a duck-typed copy)
 
 
 def body_rate(t):

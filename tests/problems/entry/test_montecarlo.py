@@ -10,7 +10,7 @@ half are "accepted"; radar time tags off the IMU grid.
 from __future__ import annotations
 
 import importlib.util
-from dataclasses import dataclass, field, fields
+from dataclasses import fields
 from types import SimpleNamespace
 
 import numpy as np
@@ -19,6 +19,7 @@ import pytest
 from workbench.core.bodies import MARS
 from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import dcm_to_quat, quat_boxplus, quat_from_rotvec, quat_multiply, quat_to_dcm
+from workbench.estimation.strapdown import GapBridge, ImuArrays
 from workbench.models.radar import mars_rate_M
 from workbench.problems.entry.filter import EntryFilterSigmas
 from workbench.problems.entry.montecarlo import ValidationResult, noise_scale, validate_smoother
@@ -31,24 +32,10 @@ SIG = EntryFilterSigmas(slant_range=30.0, slant_out=30.0, velocity_out=3.0)
 DISP_SIG = np.r_[[3.0] * 3, [np.deg2rad(0.5)] * 3, [300.0] * 3]
 
 
-@dataclass(frozen=True)
-class _IMU:
-    t: np.ndarray
-    f_G: np.ndarray
-    w_G: np.ndarray
-    sigma_f: np.ndarray
-    sigma_w: np.ndarray
-    gaps: list = field(default_factory=list)
+_IMU = ImuArrays  # the workbench's own type (was a duck-typed copy)
 
 
-@dataclass(frozen=True)
-class _Bridge:
-    t_a: float
-    t_b: float
-    dv_G: np.ndarray
-    dp_G: np.ndarray
-    dp_rel_G: np.ndarray
-    dC: np.ndarray
+_Bridge = GapBridge  # the workbench's own type (was a duck-typed copy)
 
 
 def _truth(t: np.ndarray) -> dict:
