@@ -42,10 +42,12 @@ def test_derivatives_use_gravity_j2_of_the_body_and_gradient():
     p = p / np.linalg.norm(p, axis=1, keepdims=True) * rng.uniform(3.4e6, 4e6, (50, 1))
     z = np.zeros(3)
     q = np.array([0.0, 0.0, 0.0, 1.0])
-    np.testing.assert_allclose(sd.derivatives(z, q, p, z, z)[0], gravity_j2(p, MARS), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(sd.derivatives(z, q, p, z, z, body=MARS)[0], gravity_j2(p, MARS), rtol=1e-14, atol=1e-15)
     np.testing.assert_allclose(sd.derivatives(z, q, p[3], z, z, TITAN)[0], gravity_j2(p[3], TITAN), rtol=1e-14)
     # the single-state path equals a member of the vectorised one to the last bit
-    np.testing.assert_array_equal(sd.derivatives(z, q, p[3], z, z)[0], sd.derivatives(z, q, p, z, z)[0][3])
+    np.testing.assert_array_equal(
+        sd.derivatives(z, q, p[3], z, z, body=MARS)[0], sd.derivatives(z, q, p, z, z, body=MARS)[0][3]
+    )
     # point-mass gradient vs central differences of the point-mass field
     x = p[0]
     G = gravity_point_mass_gradient(x, MARS.gm)
@@ -112,7 +114,7 @@ def test_rk4_j2_conserves_energy_and_polar_momentum():
 
     E0, hz0 = energy(p, v), np.cross(p, v)[2]
     for _ in range(600):
-        v, q, p = sd.rk4_step(v, q, p, z, z, z, z, 1.0)
+        v, q, p = sd.rk4_step(v, q, p, z, z, z, z, 1.0, body=MARS)
     assert abs(energy(p, v) - E0) < 1e-6 * abs(E0)
     assert abs(np.cross(p, v)[2] - hz0) < 1e-9 * abs(hz0)
 
@@ -123,7 +125,7 @@ def test_rk4_constant_rate_spin_is_exact():
     v, p, z = np.zeros(3), np.array([3.5e6, 0, 0]), np.zeros(3)
     dt, n = 0.01, 500
     for _ in range(n):
-        _, q, _ = sd.rk4_step(v, q, p, z, w, z, w, dt)
+        _, q, _ = sd.rk4_step(v, q, p, z, w, z, w, dt, body=MARS)
     q_exact = _boxplus(synth.Q0, w * dt * n)
     assert np.linalg.norm(attitude_error(q_exact, q)) < 5e-8  # RK4: ~(|w| dt)^5 per step, 57 rad in all
     assert abs(np.linalg.norm(q) - 1.0) < 1e-15
@@ -134,7 +136,7 @@ def test_imu_of_known_trajectory_integrates_back():
     for dt in (0.1, 0.05):
         tr = synth.truth(dt=dt)
         imu = synth.make_imu(tr)
-        out = sd.integrate_members(imu, tr["v"][0], tr["q"][0], tr["p"][0])
+        out = sd.integrate_members(imu, tr["v"][0], tr["q"][0], tr["p"][0], body=MARS)
         k = tr["t"] < tr["events"]["PDD"]  # smooth inputs (the drag jumps at deployment: O(dt) there)
         dp = np.linalg.norm(out["p"] - tr["p"], axis=-1)
         dv = np.linalg.norm(out["v"] - tr["v"], axis=-1)
@@ -151,14 +153,14 @@ def test_imu_of_known_trajectory_integrates_back():
 
 def _fd_transition(v, q, p, f0, w0, f1, w1, dt, eps):
     """Finite-difference error transition of one RK4 step: columns d(δx_out)/d(δx_in)."""
-    v1, q1, p1 = sd.rk4_step(v, q, p, f0, w0, f1, w1, dt)
+    v1, q1, p1 = sd.rk4_step(v, q, p, f0, w0, f1, w1, dt, body=MARS)
     F = np.zeros((9, 9))
     for j in range(9):
         cols = []
         for s in (+1.0, -1.0):
             d = np.zeros(9)
             d[j] = s * eps[j]
-            vv, qq, pp = sd.rk4_step(v + d[0:3], _boxplus(q, d[3:6]), p + d[6:9], f0, w0, f1, w1, dt)
+            vv, qq, pp = sd.rk4_step(v + d[0:3], _boxplus(q, d[3:6]), p + d[6:9], f0, w0, f1, w1, dt, body=MARS)
             cols.append(np.concatenate([vv - v1, attitude_error(q1, qq), pp - p1]))
         F[:, j] = (cols[0] - cols[1]) / (2 * eps[j])
     return F, (v1, q1, p1)
@@ -173,7 +175,7 @@ def test_error_dynamics_matches_finite_differences_of_rk4(dt):
     F_fd, (v1, q1, p1) = _fd_transition(v, q, p, f0, w0, f1, w1, dt, eps)
     qm = quat_normalize(q + q1)
     _, Phi, Qd = sd.covariance_step(np.eye(9), qm, 0.5 * (f0 + f1), 0.5 * (w0 + w1), dt, 0.0, 0.0, dt, None,
-                                    0.5 * (p + p1))  # fmt: skip
+                                    0.5 * (p + p1), body=MARS)  # fmt: skip
     # compare Φ − I block by block relative to the block's scale.  Mid-point A (first Magnus term):
     # O(dt²) relative on δv/δθ, O(|Δf|/|f|) on δp←δθ (the double integral weights the start of the
     # step); the gravity gradient is point-mass only (J2 changes it by ~0.3 %).
@@ -186,7 +188,7 @@ def test_error_dynamics_matches_finite_differences_of_rk4(dt):
         assert np.abs(D[3 * r : 3 * r + 3, 3 * c : 3 * c + 3]).max() < 2e-8 * max(dt / 0.1, 1.0)
     np.testing.assert_array_equal(Qd, 0.0)
     # continuous A: the structure of Eq. A.14 (right perturbation)
-    A, B = sd.error_dynamics(q, f0, w0)
+    A, B = sd.error_dynamics(q, f0, w0, body=MARS)
     from workbench.core.rotation import quat_to_dcm, skew
 
     C = quat_to_dcm(q)
@@ -196,7 +198,7 @@ def test_error_dynamics_matches_finite_differences_of_rk4(dt):
     np.testing.assert_allclose(B[0:3, 3:6], C)
     np.testing.assert_array_equal(B[3:6, 0:3], np.eye(3))
     # vectorised over leading axes
-    A2, B2 = sd.error_dynamics(np.stack([q, q]), np.stack([f0, f1]), w0)
+    A2, B2 = sd.error_dynamics(np.stack([q, q]), np.stack([f0, f1]), w0, body=MARS)
     np.testing.assert_allclose(A2[0], A)
     assert A2.shape == (2, 9, 9) and B2.shape == (2, 9, 6)
 
@@ -213,7 +215,7 @@ def test_covariance_matches_monte_carlo_of_the_integrator():
     v0, q0, p0 = tr["v"][k0], tr["q"][k0], tr["p"][k0]
     s0 = np.r_[np.full(3, 2.0), np.full(3, np.deg2rad(0.2)), np.full(3, 100.0)]
     P0 = np.diag(s0**2)
-    res = sd.integrate(imu, v0, q0, p0, P0)
+    res = sd.integrate(imu, v0, q0, p0, P0, body=MARS)
     rng = np.random.default_rng(7)
     d0 = rng.standard_normal((m, 9)) * s0
     V, Q, X = v0 + d0[:, 0:3], _boxplus(q0, d0[:, 3:6]), p0 + d0[:, 6:9]
@@ -221,7 +223,7 @@ def test_covariance_matches_monte_carlo_of_the_integrator():
     nw = rng.standard_normal((t.size, m, 3)) * sig_w
     for k in range(n_steps):
         V, Q, X = sd.rk4_step(V, Q, X, f[k] + nf[k], w[k] + nw[k], f[k + 1] + nf[k + 1], w[k + 1] + nw[k + 1],
-                              t[k + 1] - t[k])  # fmt: skip
+                              t[k + 1] - t[k], body=MARS)  # fmt: skip
     err = np.concatenate([V - res.v_M[-1], attitude_error(res.q_M_G[-1], Q), X - res.p_M[-1]], axis=1)
     err = err - err.mean(axis=0)
     C_mc = err.T @ err / (m - 1)
@@ -239,7 +241,7 @@ def test_integrate_pass_structure_and_consistency():
     tr = synth.truth()
     imu = synth.make_imu(tr, gaps=[(20.0, 77.2), (100.0, 101.4)])
     P0 = np.diag(np.r_[np.full(3, 10.0**2), np.full(3, np.deg2rad(1.0) ** 2), np.full(3, 2000.0**2)])
-    res = sd.integrate(imu, tr["v"][0], tr["q"][0], tr["p"][0], P0)
+    res = sd.integrate(imu, tr["v"][0], tr["q"][0], tr["p"][0], P0, body=MARS)
     n = imu.t.size
     assert res.P.shape == res.Phi.shape == res.Qd.shape == (n, 9, 9)
     np.testing.assert_array_equal(res.Phi[0], np.eye(9))
@@ -250,7 +252,7 @@ def test_integrate_pass_structure_and_consistency():
     np.testing.assert_array_equal(res.P, np.swapaxes(res.P, 1, 2))
     assert np.all(np.linalg.eigvalsh(res.P) > 0)
     # the same states as the covariance-free member integration
-    out = sd.integrate_members(imu, tr["v"][0], tr["q"][0], tr["p"][0])
+    out = sd.integrate_members(imu, tr["v"][0], tr["q"][0], tr["p"][0], body=MARS)
     np.testing.assert_array_equal(out["p"], res.p_M)
     # position and velocity σ grow through the long gap (Δt·δv plus the bridge's own noise)
     ka = int(np.flatnonzero(res.bridged)[0]) - 1
@@ -279,7 +281,7 @@ def test_gap_bridge_reproduces_the_trajectory(mode):
                            g, mode)  # fmt: skip
     np.testing.assert_allclose(X[2], p, rtol=0, atol=1e-9)
     # the integration across the gap ends as close to the truth as without the gap
-    out = sd.integrate_members(imu, tr["v"][0], tr["q"][0], tr["p"][0], bridge_mode=mode)
+    out = sd.integrate_members(imu, tr["v"][0], tr["q"][0], tr["p"][0], bridge_mode=mode, body=MARS)
     kk = np.searchsorted(tr["t"], imu.t)
     assert np.linalg.norm(out["p"] - tr["p"][kk], axis=-1).max() < 150.0
 
@@ -290,7 +292,7 @@ def test_gap_transition_matches_finite_differences():
     ia = int(np.argmin(abs(tr["t"] - g.t_a)))
     v, q, p = tr["v"][ia], tr["q"][ia], tr["p"][ia]
     for mode in ("relative", "paper"):
-        Phi, Qd = sd.gap_transition(q, p, g, mode, gap_sigma=(0.1, 1e-5, 5.0))
+        Phi, Qd = sd.gap_transition(q, p, g, mode, gap_sigma=(0.1, 1e-5, 5.0), body=MARS)
         v1, q1, p1 = sd.apply_gap(v, q, p, g, mode)
         eps = np.r_[np.full(3, 1e-2), np.full(3, 1e-7), np.full(3, 1.0)]
         F = np.zeros((9, 9))
@@ -308,4 +310,3 @@ def test_gap_transition_matches_finite_differences():
         np.testing.assert_allclose(F, Phi_nog, atol=2e-5 * np.abs(Phi).max(), rtol=1e-4)
         dt = g.t_b - g.t_a
         np.testing.assert_allclose(np.diagonal(Qd), np.repeat(np.array([0.1, 1e-5, 5.0]) * dt, 3) ** 2)
-

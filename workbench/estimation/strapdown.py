@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import expm
 
-from workbench.core.bodies import MARS, Body
+from workbench.core.bodies import Body
 from workbench.core.gravity import gravity_j2_xyz, gravity_point_mass_gradient, j2_factor
 from workbench.core.rotation import dcm_to_quat, quat_multiply, quat_normalize, quat_to_dcm, skew
 
@@ -113,7 +113,7 @@ def _qdot(q: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def derivatives(
-    v: np.ndarray, q: np.ndarray, p: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, body: Body = MARS
+    v: np.ndarray, q: np.ndarray, p: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, body: Body
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Right-hand side of AMELIA Eq. A.2: ``(dv/dt, dq/dt, dp/dt)``.
 
@@ -137,7 +137,7 @@ def rk4_step(
     f1: np.ndarray,
     w1: np.ndarray,
     dt: float,
-    body: Body = MARS,
+    body: Body,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One classical RK4 step of Eq. A.2 over ``dt`` [s] from the state (v_M, q_M_G, p_M).
 
@@ -217,7 +217,7 @@ def _rk4_scalar(v, q, p, f0, w0, f1, w1, dt, gm, j2k):
 
 
 def error_dynamics(
-    q_M_G: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, p_M: np.ndarray | None = None, body: Body = MARS
+    q_M_G: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, p_M: np.ndarray | None = None, *, body: Body
 ) -> tuple[np.ndarray, np.ndarray]:
     """Continuous error dynamics ``d(δx)/dt = A δx + B ε`` (our AMELIA Eq. A.14, module docstring).
 
@@ -257,7 +257,8 @@ def covariance_step(
     sample_dt: float,
     Q_state_psd: np.ndarray | None = None,
     p: np.ndarray | None = None,
-    body: Body = MARS,
+    *,
+    body: Body,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Discrete first-order covariance step (AMELIA Eq. A.15) over ``dt`` [s]: ``P⁺ = Φ P Φᵀ + Qd``.
 
@@ -337,7 +338,8 @@ def gap_transition(
     bridge: Any,
     mode: str = "relative",
     gap_sigma: tuple[float, float, float] = GAP_SIGMA_DEFAULT,
-    body: Body = MARS,
+    *,
+    body: Body,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Error transition Φ (9, 9) and added noise Qd (9, 9) of :func:`apply_gap` (our state at a).
 
@@ -496,7 +498,7 @@ def integrate(
     bridge_mode: str = "relative",
     sample_dt: float | None = None,
     gravity_gradient: bool = True,
-    body: Body = MARS,
+    body: Body,
 ) -> StrapdownPass:
     """Strapdown integration with first-order covariance over a PreprocessedIMU (AMELIA Sect. 5).
 
@@ -535,7 +537,7 @@ def integrate(
     for k in range(n - 1):
         g = gaps.get(k)
         if g is not None:
-            F, Qk = gap_transition(q, p, g, bridge_mode, gap_sigma, body)
+            F, Qk = gap_transition(q, p, g, bridge_mode, gap_sigma, body=body)
             v, q, p = apply_gap(v, q, p, g, bridge_mode)
             Pk = F @ Pk @ F.T + Qk
             Pk = 0.5 * (Pk + Pk.T)
@@ -556,7 +558,7 @@ def integrate(
                 sample_dt,
                 q_state_psd,
                 0.5 * (p + p1) if gravity_gradient else None,
-                body,
+                body=body,
             )
             v, q, p = v1, q1, p1
         V[k + 1], Q[k + 1], X[k + 1], P[k + 1], Phi[k + 1], Qd[k + 1] = v, q, p, Pk, F, Qk
@@ -572,7 +574,7 @@ def integrate_members(
     bridge_mode: str = "relative",
     at_t: np.ndarray | None = None,
     every: np.ndarray | None = None,
-    body: Body = MARS,
+    body: Body,
 ) -> dict[str, np.ndarray]:
     """Strapdown of many members at once (no covariance), vectorised over the leading member axis.
 

@@ -166,7 +166,7 @@ def test_no_radar_forward_equals_strapdown_integrate():
         np.zeros(0), np.zeros((0, 4)), np.zeros(0, bool), np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros(0, bool)
     )
     res = run_entry_smoother(imu, empty, v0, q0, p0, P0, sigmas=SIG)
-    sp = integrate(imu, v0, q0, p0, P0)
+    sp = integrate(imu, v0, q0, p0, P0, body=MARS)
     assert sp.bridged.sum() == 1
     assert np.allclose(res.forward.p_M, sp.p_M, atol=1e-9, rtol=0)
     assert np.allclose(res.forward.q_M_G, sp.q_M_G, atol=1e-12)
@@ -190,7 +190,7 @@ def test_no_radar_forward_equals_strapdown_integrate():
 def test_noise_free_strapdown_tracks_truth():
     """The discrete model (RK4, inputs linear between samples) matches the analytic truth."""
     imu, _, tr, _ = scenario(np.random.default_rng(1), noise=False)
-    sp = integrate(imu, tr["v"][0], tr["q"][0], tr["p"][0], np.eye(9))
+    sp = integrate(imu, tr["v"][0], tr["q"][0], tr["p"][0], np.eye(9), body=MARS)
     e = errors(sp, tr)
     assert np.abs(e[:, 0:3]).max() < 0.02 and np.abs(e[:, 3:6]).max() < 2e-4 and np.abs(e[:, 6:9]).max() < 0.5
 
@@ -286,7 +286,7 @@ def test_constrained_vs_unconstrained_horizontal_position(one_run):
     only_sr = RadarData(
         radar.t_sr, radar.slant_ranges, radar.sr_valid, np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros(0, bool)
     )
-    sp = integrate(imu, *init)
+    sp = integrate(imu, *init, body=MARS)
     r_c = run_entry_smoother(imu, only_sr, *init, sigmas=SIG, constrained=True)
     r_u = run_entry_smoother(imu, only_sr, *init, sigmas=SIG, constrained=False)
     k = np.searchsorted(imu.t, radar.t_sr[1])  # first valid packet; strapdown identical before it

@@ -285,7 +285,7 @@ def _run_chunk(job: _Job, start: int, stop: int, seeds=None) -> tuple[int, np.nd
     the members' offsets come from :func:`sample_offsets`' blocks."""
     dx0 = _offsets(job, start, stop)
     v, q, p = _members(job.v0, job.q0, job.p0, dx0)
-    out = integrate_members(job.imu, v, q, p, bridge_mode=job.bridge_mode, at_t=job.event_times)
+    out = integrate_members(job.imu, v, q, p, bridge_mode=job.bridge_mode, at_t=job.event_times, body=MARS)
     ev = event_quantities(out["p_at"], out["v_at"], job.atmosphere, job.r_ground)
     return start, dx0, ev
 
@@ -296,7 +296,7 @@ def _run_loop(job: _Job, start: int, stop: int) -> tuple[int, np.ndarray, dict[s
     v, q, p = _members(job.v0, job.q0, job.p0, dx0)
     evs = {k: np.empty(stop - start) for k in EVENT_NAMES}
     for i in range(stop - start):
-        out = integrate_members(job.imu, v[i], q[i], p[i], bridge_mode=job.bridge_mode, at_t=job.event_times)
+        out = integrate_members(job.imu, v[i], q[i], p[i], bridge_mode=job.bridge_mode, at_t=job.event_times, body=MARS)
         ev = event_quantities(out["p_at"][:, None], out["v_at"][:, None], job.atmosphere, job.r_ground)
         for k in EVENT_NAMES:
             evs[k][i] = ev[k][0]
@@ -403,7 +403,7 @@ def _finish(
     if cloud_index.size:
         v, q, p = _members(job.v0, job.q0, job.p0, dx0[cloud_index])
         cloud_p = np.swapaxes(
-            integrate_members(job.imu, v, q, p, bridge_mode=job.bridge_mode, every=idx_t)["p_every"], 0, 1
+            integrate_members(job.imu, v, q, p, bridge_mode=job.bridge_mode, every=idx_t, body=MARS)["p_every"], 0, 1
         )
     else:
         cloud_p = np.empty((0, idx_t.size, 3))

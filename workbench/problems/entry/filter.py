@@ -95,6 +95,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import lapack
 
+from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_boxplus, quat_to_dcm
 from workbench.estimation.consistency import chi2_gate
 from workbench.estimation.ekf import (
@@ -654,11 +655,11 @@ def _forward(
         i = interval[a - 1]
         if i in gaps and imu_node[a - 1] >= 0 and imu_node[a] == i + 1:
             g = gaps[i]
-            Fk, Qk = gap_transition(qb, pb, g, sg.bridge_mode, sg.gap_sigma)
+            Fk, Qk = gap_transition(qb, pb, g, sg.bridge_mode, sg.gap_sigma, body=MARS)
             v1, q1, p1 = apply_gap(vb, qb, pb, g, sg.bridge_mode)
         else:
             dt = t_aug[a] - t_aug[a - 1]
-            v1, q1, p1 = rk4_step(vb, qb, pb, fa[a - 1], wa[a - 1], fa[a], wa[a], dt)
+            v1, q1, p1 = rk4_step(vb, qb, pb, fa[a - 1], wa[a - 1], fa[a], wa[a], dt, MARS)
             qm = qb + q1 if (qb @ q1) >= 0.0 else qb - q1
             qm = qm / math.sqrt(qm @ qm)
             _, Fk, Qk = covariance_step(
@@ -672,6 +673,7 @@ def _forward(
                 sample_dt,
                 qpsd,
                 0.5 * (pb + p1) if sg.gravity_gradient else None,
+                body=MARS,
             )
         if lin is not None:  # affine model about x̄
             dx = Fk @ _LAYOUT.boxminus(x, xb)

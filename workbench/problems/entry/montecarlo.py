@@ -85,6 +85,7 @@ from typing import Any
 import numpy as np
 
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
+from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_boxplus
 from workbench.estimation.consistency import anees_bounds, fraction_inside, nees
 from workbench.estimation.montecarlo import run_monte_carlo
@@ -209,14 +210,14 @@ def _truth(job: _Job, dx0: np.ndarray, rng: np.random.Generator, gap_at: dict[in
     for k in range(n - 1):
         g = gap_at.get(k)
         if g is not None:
-            _, Qd = gap_transition(q, p, g, job.sigmas.bridge_mode, job.sigmas.gap_sigma)
+            _, Qd = gap_transition(q, p, g, job.sigmas.bridge_mode, job.sigmas.gap_sigma, body=MARS)
             v, q, p = apply_gap(v, q, p, g, job.sigmas.bridge_mode)
             if job.gap_noise:
                 e = np.sqrt(np.diagonal(Qd)) * rng.standard_normal(9)
                 v, q, p = v + e[0:3], quat_boxplus(q, e[3:6]), p + e[6:9]
         else:
             dt = t[k + 1] - t[k]
-            v, q, p = rk4_step(v, q, p, f[k], w[k], f[k + 1], w[k + 1], dt)
+            v, q, p = rk4_step(v, q, p, f[k], w[k], f[k + 1], w[k + 1], dt, MARS)
             if qpsd is not None:
                 e = np.sqrt(qpsd * dt) * rng.standard_normal(9)
                 v, q, p = v + e[0:3], quat_boxplus(q, e[3:6]), p + e[6:9]
@@ -244,7 +245,7 @@ def _truth_at(job: _Job, V, Q, X, gap_at, tm: np.ndarray):
         s = (tj - t[i]) / (t[i + 1] - t[i])
         fm = f[i] + s * (f[i + 1] - f[i])
         wm = w[i] + s * (w[i + 1] - w[i])
-        out_v[j], out_q[j], out_p[j] = rk4_step(V[i], Q[i], X[i], f[i], w[i], fm, wm, tj - t[i])
+        out_v[j], out_q[j], out_p[j] = rk4_step(V[i], Q[i], X[i], f[i], w[i], fm, wm, tj - t[i], MARS)
     return out_v, out_q, out_p
 
 
