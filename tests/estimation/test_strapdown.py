@@ -4,10 +4,8 @@ differences of the RK4 step, the covariance against a Monte Carlo of the integra
 
 from __future__ import annotations
 
-import importlib.util
-import sys
+import importlib
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,19 +15,7 @@ from workbench.core.gravity import gravity_j2, gravity_point_mass_gradient
 from workbench.core.rotation import attitude_error, quat_from_rotvec, quat_multiply, quat_normalize
 from workbench.estimation import strapdown as sd
 
-
-def _load_synth():
-    name = "_entry_synth"
-    if name not in sys.modules:
-        path = Path(__file__).resolve().parents[1] / "support" / "entry_synth.py"
-        spec = importlib.util.spec_from_file_location(name, path)
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules[name]
-
-
-synth = _load_synth()
+synth = importlib.import_module("entry_synth")  # tests/support, on sys.path via tests/conftest.py
 
 
 def _boxplus(q, d):

@@ -3,9 +3,7 @@ sizes, the per-trajectory loop and a Dask LocalCluster; acceptance logic; the re
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
+import importlib
 
 import numpy as np
 import pytest
@@ -13,19 +11,7 @@ import pytest
 from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normalize
 from workbench.problems.entry import dispersion as ds
 
-
-def _load_synth():
-    name = "_entry_synth"
-    if name not in sys.modules:
-        path = Path(__file__).resolve().parents[2] / "support" / "entry_synth.py"
-        spec = importlib.util.spec_from_file_location(name, path)
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules[name]
-
-
-synth = _load_synth()
+synth = importlib.import_module("entry_synth")  # tests/support, on sys.path via tests/conftest.py
 #: small sigmas so that a fair share of the members is accepted by truth-centred rules
 SIG = ds.DispersionSigmas(velocity_m_s=5.0, attitude_rad=np.deg2rad(0.3), position_m=1000.0)
 
