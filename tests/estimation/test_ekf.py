@@ -189,14 +189,17 @@ def test_numeric_F_quaternion_body_error_matches_analytic():
 # --------------------------------------------------------------------------- update variants
 
 
-def test_single_update_matches_textbook_formulas():
-    rng = np.random.default_rng(3)
-    lay = ErrorStateLayout(4)
+def _random_prior_case(seed: int):
+    """(layout, x (4,), random SPD P (4, 4), R (2, 2), range-bearing z (2,)) of the update tests."""
+    rng = np.random.default_rng(seed)
     x = np.array([30.0, 40.0, 1.0, -1.0])
     A = rng.standard_normal((4, 4))
-    P = A @ A.T + np.eye(4)
-    R = np.diag([0.3, 0.02])
     z = _range_bearing(x) + np.array([0.4, 0.01])
+    return ErrorStateLayout(4), x, A @ A.T + np.eye(4), np.diag([0.3, 0.02]), z
+
+
+def test_single_update_matches_textbook_formulas():
+    lay, x, P, R, z = _random_prior_case(3)
     res = update(x, P, z, _range_bearing, R, lay, H=_range_bearing_H)
     H = _range_bearing_H(x)
     y = z - _range_bearing(x)
@@ -231,13 +234,7 @@ def test_iterated_update_with_linear_model_equals_single():
 def test_projected_gain_update_is_joseph_of_projected_gain():
     """``gain_projector``: K = Π P Hᵀ S⁻¹, the state moves only inside range(Π), and P_post is the
     Joseph form of that (sub-optimal) gain — larger in trace than the optimal update's."""
-    rng = np.random.default_rng(6)
-    lay = ErrorStateLayout(4)
-    x = np.array([30.0, 40.0, 1.0, -1.0])
-    A = rng.standard_normal((4, 4))
-    P = A @ A.T + np.eye(4)
-    R = np.diag([0.3, 0.02])
-    z = _range_bearing(x) + np.array([0.4, 0.01])
+    lay, x, P, R, z = _random_prior_case(6)
     Pi = np.diag([1.0, 1.0, 0.0, 0.0])
     res = update(x, P, z, _range_bearing, R, lay, H=_range_bearing_H, gain_projector=lambda s: Pi)
     H = _range_bearing_H(x)
