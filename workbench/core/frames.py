@@ -47,10 +47,11 @@ first row of its Table 5 (lon −17.3091°, lat −3.5723°, alt 122.6329 km AMR
   IAU 2009, Rz(W) on MMED     −0.2639    −0.2679             −0.0032              +0.0131
   ==========================  =========  ==================  ===================  ============
 
-  [a] seconds counted from 2000-01-01T12:00:00 *UTC* instead of J2000.0 TT.  Light time
-  (|p|/c ≈ 12 ms) is negligible; the IAU 2000 meridian (W0 = 176.753°) is off by −0.11° even with
-  UTC.  No hypothesis reproduces the printed 4th decimal; "UTC as TDB, MMED spun by W" is the
-  simplest one within 0.01°, and the one the tests pin.
+  IAU 2009 = pck00010 (α0 = 317.68143 − 0.1061 T, δ0 = 52.88650 − 0.0609 T, W = 176.630 +
+  350.89198226 d, no periodic terms).  [a] seconds counted from 2000-01-01T12:00:00 *UTC* instead
+  of J2000.0 TT.  Light time (|p|/c ≈ 12 ms) is negligible; the IAU 2000 meridian (W0 = 176.753°)
+  is off by −0.09° to −0.11° even with UTC.  No hypothesis reproduces the printed 4th decimal;
+  "UTC as TDB, MMED spun by W" is the simplest one within 0.01°, and the one the tests pin.
 
 Use :func:`planetocentric_of_date` (or :func:`C_bodyfixed_mmed` at a TDB date) for physics;
 use :func:`planetocentric_amelia` only to compare with numbers printed in the AMELIA paper.
