@@ -107,6 +107,7 @@ STATES: dict[str, StateDef] = {
     "ca_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the axial coefficient CA"),
     "cn_multiplier": StateDef(1, "1", False, (6,), 1e-4, "multiplier of the normal coefficient CN"),
     "cm_multiplier": StateDef(1, "1", False, (6,), 1e-4, "multiplier of the pitching-moment coefficient Cm"),
+    "density_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the model atmosphere's density"),
     "parachute_drag_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the parachute CD"),
     "accel_bias": StateDef(
         3, "m/s^2", False, (3, 6), 1e-6, "accelerometer bias, body frame (sensed-acceleration observations)"
@@ -348,6 +349,11 @@ class TrajectoryModel:
         self.events = tuple(events)
         self._inertia = np.asarray(vehicle.inertia_B, float)
         self._inertia_inv = np.linalg.inv(self._inertia)
+        a = vehicle.aero
+        # a continuum-only table does not depend on Knudsen: skip the mean free path
+        self._kn_matters = a is not None and not (
+            a.log10_kn.size == 2 and all(np.array_equal(c[:, 0], c[:, 1]) for c in (a.ca, a.cn, a.cm))
+        )
 
     # ------------------------------------------------------------------ parameters
     def param(self, x: np.ndarray, name: str, nominal: float | np.ndarray) -> np.ndarray:
@@ -380,12 +386,14 @@ class TrajectoryModel:
         w = self.env.omega
         return v - np.stack([-w * p[..., 1], w * p[..., 0], np.zeros_like(p[..., 0])], axis=-1)
 
-    def _air(self, h: np.ndarray):
+    def _air(self, h: np.ndarray, x: np.ndarray | None = None):
         atm = self.env.atmosphere
         hc = np.maximum(h, 0.0)
         rho = atm.density(hc)
         if self.env.density_factor is not None:
             rho = rho * self.env.density_factor(hc)
+        if x is not None and "density_multiplier" in self.smap:
+            rho = rho * self.smap.physical(x, "density_multiplier")[..., 0]
         return rho, atm.speed_of_sound(hc), atm
 
     def aero_force_moment(self, x: np.ndarray, phase: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -398,7 +406,7 @@ class TrajectoryModel:
             return F, M
         veh = self.vehicle
         h = self.altitude(x)
-        rho, a_snd, atm = self._air(h)
+        rho, a_snd, atm = self._air(h, x)
         vr = self.v_rel(x)
         V = np.linalg.norm(vr, axis=-1)
         qbar = 0.5 * rho * V * V
@@ -407,7 +415,7 @@ class TrajectoryModel:
         ca_m = self.param(x, "ca_multiplier", 1.0)[..., 0] * veh.ca_factor
         if veh.aero is not None:
             L = veh.aero.ref_length
-            kn = atm.knudsen(np.maximum(h, 0.0), L)
+            kn = atm.knudsen(np.maximum(h, 0.0), L) if self._kn_matters else np.full_like(h, 1e-6)
         if self.dof == 3:
             if veh.aero is not None:
                 ca, _, _ = veh.aero.coefficients(mach, kn, np.zeros_like(mach))
@@ -535,5 +543,5 @@ class TrajectoryModel:
             h = np.maximum(self.altitude(x), 0.0)
             if quantity == "pressure":
                 return self.env.atmosphere.pressure(h)[..., None]
-            return self._air(h)[0][..., None]
+            return self._air(h, x)[0][..., None]
         raise KeyError(f"unknown observation quantity {quantity!r}")

@@ -68,12 +68,13 @@ class Post2Problem:
             "cn_multiplier": tf["cn_factor"],
             "cm_multiplier": tf["cm_factor"],
             "parachute_drag_multiplier": 1.0,
+            "density_multiplier": 1.0,
             "accel_bias": np.zeros(3),
             "radar_scale_factor": 1.0,
         }
         for name, d in STATES.items():
-            if d.dynamic:
-                continue
+            if d.dynamic or (name == "density_multiplier" and tf["density_wave_amplitude"]):
+                continue  # a density wave has no single truth multiplier
             v = cfg.truth_states.get(name, defaults[name])
             if name in ("ca_multiplier", "cn_multiplier", "cm_multiplier") and name in cfg.truth_states:
                 v = np.asarray(v) * defaults[name]
