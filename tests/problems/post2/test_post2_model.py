@@ -1,0 +1,115 @@
+"""post2 model pieces: S-curve, process models, aerodynamic angles, Jacobians vs analytic, batched Jacobian."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from workbench.estimation.ekf import ErrorStateLayout, numeric_jacobian_batched, numeric_measurement_jacobian
+from workbench.io.assets import assets_dir
+from workbench.io.scenario import load_scenario
+from workbench.problems.post2.config import config_for
+from workbench.problems.post2.model import (
+    Environment,
+    StateMap,
+    TrajectoryModel,
+    Vehicle,
+    aero_angles,
+    quat_from_aero_angles,
+    scurve,
+    scurve_inverse,
+    scurve_slope,
+)
+from workbench.problems.post2.pipeline import Estimator
+
+MU, RE = 4.2828287e13, 3393940.0
+
+
+def test_scurve_keeps_the_physical_value_inside_its_bounds():
+    lo, hi = 0.6, 1.6
+    s = np.array([-1e6, -3.0, 0.6, 1.1, 1.5, 40.0])
+    p = scurve(s, lo, hi)
+    assert np.all((p >= lo) & (p <= hi))
+    assert scurve(1.1, lo, hi) == pytest.approx(1.1)  # centre maps to itself
+    assert scurve_slope(1.1, lo, hi) == pytest.approx(1.0)
+    inner = np.array([0.61, 1.0, 1.59])
+    np.testing.assert_allclose(scurve(scurve_inverse(inner, lo, hi), lo, hi), inner, rtol=1e-12)
+    ds = 1e-6
+    num = (scurve(1.4 + ds, lo, hi) - scurve(1.4 - ds, lo, hi)) / (2 * ds)
+    assert scurve_slope(1.4, lo, hi) == pytest.approx(num, rel=1e-8)
+
+
+def test_aero_angles_round_trip():
+    r = np.array([-2833460.1, -1796348.4, -1072627.1])
+    v = np.array([3532.51, -4171.4, 1338.9])
+    ang = np.radians([3.0, -2.0, 40.0])
+    q = quat_from_aero_angles(r, v, ang)
+    np.testing.assert_allclose(aero_angles(r, v, q)[0], ang, atol=1e-12)
+
+
+def _orbit_model(j2=1.9595e-3):
+    sm = StateMap(["position", "velocity", "j2"])
+    return TrajectoryModel(sm, 3, Environment(MU, RE, j2, RE, 0.0, None), Vehicle(1000.0, np.eye(3), None))
+
+
+def test_gravity_magnitude_jacobian_matches_the_analytic_point_mass_gradient():
+    m = _orbit_model()
+    layout = ErrorStateLayout(7)
+    x = np.array([3.0e6, 1.5e6, 1.0e6, 0.0, 3000.0, 1000.0, 0.0])  # J2 = 0: point mass
+    ph = m.initial_phase()
+    eps = np.array([1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3, 1e-6])
+    g0, H = numeric_jacobian_batched(lambda X: m.observe(X, "gravity_magnitude", ph), x, layout, eps)
+    r = np.linalg.norm(x[:3])
+    assert g0[0] == pytest.approx(MU / r**2, rel=1e-12)
+    np.testing.assert_allclose(H[0, :3], -2.0 * MU / r**3 * x[:3] / r, rtol=1e-6)
+    np.testing.assert_allclose(H[0, 3:6], 0.0, atol=1e-15)
+    # d|g|/dJ2 at J2 = 0: -(3/2) GM Re^2 / r^4 (1 - 3 sin^2 phi) projected on r̂ (radial part of the J2 term)
+    z2 = (x[2] / r) ** 2
+    dg = 1.5 * MU * RE**2 / r**4 * (1.0 - 3.0 * z2)
+    assert H[0, 6] == pytest.approx(dg, rel=1e-6)
+    # the one-call-per-column engine function gives the same numbers
+    H2 = numeric_measurement_jacobian(lambda xx: m.observe(xx, "gravity_magnitude", ph), x, layout, eps=eps)
+    np.testing.assert_allclose(H, H2, rtol=1e-12, atol=1e-20)
+
+
+def test_transition_jacobian_matches_analytic_free_flight():
+    """The position/velocity block of F over a short step is
+    [[I, dt I], [G dt, I]] to first order, G the point-mass gravity gradient."""
+    m = _orbit_model(j2=0.0)
+    layout = ErrorStateLayout(7)
+    x = np.array([3.5e6, 0.0, 0.0, 0.0, 3000.0, 0.0, 0.0])
+    dt = 0.1
+    ph = m.initial_phase()
+    _, F = numeric_jacobian_batched(
+        lambda X: m.propagate(X, 0.0, dt, ph, dt), x, layout, np.array([1, 1, 1, 1e-3, 1e-3, 1e-3, 1e-6]), out_layout=layout
+    )
+    r = 3.5e6
+    G = MU / r**3 * (3.0 * np.diag([1.0, 0.0, 0.0]) - np.eye(3))
+    np.testing.assert_allclose(F[:3, 3:6], dt * np.eye(3), atol=1e-6)
+    # first order in dt: the O(dt²) terms (gradient change along v dt) are ~1e-4 of G dt
+    np.testing.assert_allclose(F[3:6, :3], G * dt, rtol=1e-3, atol=1e-3 * np.abs(G * dt).max())
+    np.testing.assert_allclose(F[6, :6], 0.0, atol=1e-12)
+
+
+def test_process_models_random_walk_and_markov(tmp_path):
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_j2.toml")
+    sc = sc.with_overrides(
+        {
+            "states.j2.process": "markov",
+            "states.j2.tau_s": 50.0,
+            "states.velocity.process": "random_walk",
+            "states.velocity.psd": 4e-6,
+        }
+    )
+    est = Estimator(sc, config_for(sc))
+    Q, phis = est.q_matrix(10.0)
+    np.testing.assert_allclose(np.diag(Q)[3:6], 4e-5)  # PSD x dt
+    phi = math.exp(-10.0 / 50.0)
+    assert phis["j2"] == pytest.approx(phi)
+    assert Q[6, 6] == pytest.approx((2.0e-3) ** 2 * (1.0 - phi**2))  # stationary 1σ = prior 1σ
+    x = est.x0.copy()
+    x[6] = 1.0e-3
+    y = est.advance(x[None], 0.0, 10.0, est.phase, phis)[0]
+    assert y[6] == pytest.approx(phi * 1.0e-3)  # decays towards the initial value 0
