@@ -83,7 +83,11 @@ def test_transition_jacobian_matches_analytic_free_flight():
     dt = 0.1
     ph = m.initial_phase()
     _, F = numeric_jacobian_batched(
-        lambda X: m.propagate(X, 0.0, dt, ph, dt), x, layout, np.array([1, 1, 1, 1e-3, 1e-3, 1e-3, 1e-6]), out_layout=layout
+        lambda X: m.propagate(X, 0.0, dt, ph, dt),
+        x,
+        layout,
+        np.array([1, 1, 1, 1e-3, 1e-3, 1e-3, 1e-6]),
+        out_layout=layout,
     )
     r = 3.5e6
     G = MU / r**3 * (3.0 * np.diag([1.0, 0.0, 0.0]) - np.eye(3))

@@ -63,7 +63,11 @@ def _bad(tmp_path: Path, old: str, new: str) -> Path:
         ("[states.j2]", "[states.j2x]", ["states.j2x", "unknown state 'j2x'", "did you mean 'j2'"]),
         ('quantity = "gravity_magnitude"', 'quantity = "gravity_magnitud"', ["did you mean 'gravity_magnitude'"]),
         ('process = "constant"', 'proces = "constant"', ["states.j2.proces", "did you mean 'process'"]),
-        ("sigma = 2.0e-3 ", "bounds = [1.0, 0.5]\nsigma = 2.0e-3 ", ["states.j2.bounds", "lo (1) must be below hi (0.5)"]),
+        (
+            "sigma = 2.0e-3 ",
+            "bounds = [1.0, 0.5]\nsigma = 2.0e-3 ",
+            ["states.j2.bounds", "lo (1) must be below hi (0.5)"],
+        ),
     ],
 )
 def test_problem_file_errors_are_located_and_nothing_is_written(tmp_path, capsys, old, new, expect):
