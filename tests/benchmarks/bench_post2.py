@@ -127,7 +127,8 @@ def bench_entry(out: Path, variant: str) -> dict:
             "wall_time_s": time.perf_counter() - t0,
         }
         print(
-            f"  {variant} {case}: {e['start']:.0f} m -> {e['after_15s_forward']:.0f} m (15 s) -> {e['end_forward']:.1f} m",
+            f"  {variant} {case}: {e['start']:.0f} m -> {e['after_15s_forward']:.0f} m (15 s)"
+            f" -> {e['end_forward']:.1f} m",
             flush=True,
         )
     return res
