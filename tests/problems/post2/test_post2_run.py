@@ -124,3 +124,31 @@ def test_observation_outside_the_data_span_is_refused(tmp_path, j2_run, capsys):
     assert "observations.gravity" in err and "outside the data span" in err and "10050" in err
     assert not list((tmp_path / "out").glob("*.rrd")) and not list((tmp_path / "out").glob("*.json"))
     shutil.rmtree(tmp_path / "data")
+
+
+def test_sliding_median_removes_an_outlier_and_keeps_the_raw_samples(tmp_path, j2_run):
+    from workbench.io.scenario import load_scenario
+    from workbench.io.telemetry import read_telemetry
+    from workbench.problems.post2.config import config_for
+    from workbench.problems.post2.pipeline import read_observations
+
+    sc_path = _user_scenario(tmp_path, j2_run, None)
+    sc_path.write_text(
+        sc_path.read_text(encoding="utf-8").replace(
+            'file = "data/gravity.csv"', 'file = "data/gravity.csv"\nmedian_window = 3'
+        ),
+        encoding="utf-8",
+    )
+    tel = read_telemetry(tmp_path / "data" / "gravity.csv")
+    g = np.array(tel.channel("g"))
+    g[40] += 1.0  # a 1 m/s² spike
+    write_telemetry(tmp_path / "data" / "gravity.csv", tel.time, {"g": (g, "m/s^2")})
+    sc = load_scenario(sc_path)
+    ch = read_observations(
+        sc,
+        config_for(sc),
+        {"gravity": tmp_path / "data" / "gravity.csv", "gravity_weights": tmp_path / "data" / "w.csv"},
+    ).channels["gravity"]
+    assert ch.z_raw[40, 0] == pytest.approx(g[40])
+    assert ch.z[40, 0] == pytest.approx(np.median(g[39:42]))
+    np.testing.assert_allclose(ch.R[:, 0, 0], 1e-10)  # R = 1 / W
