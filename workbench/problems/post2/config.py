@@ -58,6 +58,7 @@ OBSERVATION_KEYS: dict[str, tuple[str, Any, str]] = {
     "sigma": ("number_or_list", None, "constant 1σ in the observation's unit (instead of a weights file)"),
     "median_window": (_I, 0, "sliding-median pre-smoothing over this many samples (0: none)"),
     "gate_probability": (_F, 0.0, "χ² gate probability of the update (0: no gate)"),
+    "iterations": (_I, 1, "Gauss-Newton iterations of the update (iterated EKF, Bell & Cathey 1993); 1: plain EKF"),
     "rate_hz": (_F, None, "synthetic: sample rate"),
     "start_s": (_F, None, "synthetic: first sample time (default: the start)"),
     "end_s": (_F, None, "synthetic: last sample time (default: the end)"),
@@ -267,6 +268,7 @@ class ObservationSpec:
     sigma: np.ndarray | None
     median_window: int
     gate_probability: float | None
+    iterations: int
     rate_hz: float | None
     start: float | None
     end: float | None
@@ -395,6 +397,8 @@ def _observation(file: Path, name: str, raw: dict, dof: int) -> ObservationSpec:
     gp = float(t["gate_probability"])
     if not 0.0 <= gp < 1.0:
         raise ScenarioError(file, f"{pre}.gate_probability", "must be in [0, 1)")
+    if t["iterations"] < 1:
+        raise ScenarioError(file, f"{pre}.iterations", "must be >= 1")
     return ObservationSpec(
         name,
         q,
@@ -405,6 +409,7 @@ def _observation(file: Path, name: str, raw: dict, dof: int) -> ObservationSpec:
         sigma,
         w,
         gp or None,
+        int(t["iterations"]),
         t["rate_hz"],
         t["start_s"],
         t["end_s"],

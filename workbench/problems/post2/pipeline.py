@@ -253,7 +253,15 @@ class Estimator:
         def H(x, q=q, phase=phase):
             return numeric_jacobian_batched(lambda X: model.observe(X, q, phase), x, self.layout, self.eps)[1]
 
-        return Measurement(ch.spec.name, ch.z[i], ch.R[i], h, H=H, gate_probability=ch.spec.gate_probability)
+        return Measurement(
+            ch.spec.name,
+            ch.z[i],
+            ch.R[i],
+            h,
+            H=H,
+            gate_probability=ch.spec.gate_probability,
+            iterations=ch.spec.iterations,
+        )
 
 
 def _grid(cfg: Post2Config, channels: dict[str, Channel]) -> np.ndarray:
