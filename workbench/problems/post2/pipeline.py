@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import median_filter
+from scipy.stats import chi2
 
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
@@ -345,6 +346,11 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
             "normalized_residual_rms": float(np.sqrt(np.mean(yn**2))),
             "dimension": int(ih.y.shape[1]),
         }
+        n_dof = ih.t.size * ih.y.shape[1]
+        lo, hi = (chi2.ppf([0.005, 0.995], n_dof) / ih.t.size).tolist()
+        m = obs[name]["mean_nis"]
+        obs[name]["mean_nis_band_99"] = [lo, hi]
+        obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
     summary["observations"] = obs
     summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
     yield Post2Result(

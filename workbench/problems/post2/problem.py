@@ -109,11 +109,14 @@ class Post2Problem:
             sd = ", ".join(f"{v:.3g}" for v in s["final_sigma"])
             md += f"| {name} | {fin} | {sd} | {s['unit']} |\n"
         md += (
-            "\n| observation | samples | accepted | mean NIS (dim) | normalized residual RMS |\n|---|---|---|---|---|\n"
+            "\n| observation | samples | accepted | mean NIS (dim) | 99 % band | verdict | normalized residual RMS |\n"
         )
+        md += "|---|---|---|---|---|---|---|\n"
         for name, o in summary["observations"].items():
             nis = f"{o['mean_nis']:.2f} ({o['dimension']})"
-            md += f"| {name} | {o['samples']} | {o['accepted']} | {nis} | {o['normalized_residual_rms']:.2f} |\n"
+            band = "{:.2f} .. {:.2f}".format(*o["mean_nis_band_99"])
+            md += f"| {name} | {o['samples']} | {o['accepted']} | {nis} | {band} | {o['nis_verdict']} |"
+            md += f" {o['normalized_residual_rms']:.2f} |\n"
         tr = summary.get("truth")
         if tr:
             md += "\n## Against the truth\n\n"
