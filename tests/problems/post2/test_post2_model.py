@@ -117,3 +117,32 @@ def test_process_models_random_walk_and_markov(tmp_path):
     x[6] = 1.0e-3
     y = est.advance(x[None], 0.0, 10.0, est.phase, phis)[0]
     assert y[6] == pytest.approx(phi * 1.0e-3)  # decays towards the initial value 0
+
+
+def test_events_fire_on_time_and_on_conditions():
+    from workbench.core.atmosphere import MarsEngineeringAtmosphere
+    from workbench.models.aerodynamics import load_vehicle
+    from workbench.problems.post2.model import Event
+
+    veh = load_vehicle(assets_dir() / "vehicles" / "mer_like.toml")
+    events = (
+        Event("chute", "mach_below", 2.0, parachute=True),
+        Event("shield", "time", 30.0, mass=700.0, ref_area=4.0),
+        Event("low", "altitude_below", 5000.0),
+    )
+    env = Environment(4.2828e13, 3396190.0, 0.0, 3396190.0, 0.0, MarsEngineeringAtmosphere())
+    m = TrajectoryModel(
+        StateMap(["position", "velocity"]), 3, env, Vehicle(827.0, np.eye(3), veh.capsule, veh.parachute), events
+    )
+    ph = m.initial_phase()
+    fast = np.array([3396190.0 + 10000.0, 0.0, 0.0, 0.0, 1000.0, 0.0])  # 10 km, ~Mach 4
+    slow = np.array([3396190.0 + 10000.0, 0.0, 0.0, 0.0, 300.0, 0.0])  # ~Mach 1.3
+    assert m.event_margin(fast, events[0]) > 0 > m.event_margin(slow, events[0])
+    p1 = m.check_events(fast, 10.0, ph)
+    assert p1["fired"] == () and not p1["parachute"] and p1["mass"] == 827.0
+    p2 = m.check_events(slow, 31.0, p1)
+    assert p2["fired"] == ("chute", "shield") and p2["parachute"] and p2["mass"] == 700.0 and p2["area"] == 4.0
+    # the open parachute adds drag along -v_rel
+    a1 = m.derivative(slow, p1)[3:6] - m.gravity(slow)
+    a2 = m.derivative(slow, p2)[3:6] - m.gravity(slow)
+    assert a2[1] < a1[1] < 0.0
