@@ -146,3 +146,47 @@ def test_events_fire_on_time_and_on_conditions():
     a1 = m.derivative(slow, p1)[3:6] - m.gravity(slow)
     a2 = m.derivative(slow, p2)[3:6] - m.gravity(slow)
     assert a2[1] < a1[1] < 0.0
+
+
+def test_truth_locates_a_condition_event_and_switches_phase():
+    from workbench.problems.post2.truth import simulate_truth
+
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml").with_overrides(
+        {
+            "model.dof": 3,
+            "truth.output_step_s": 0.5,
+            "truth.rtol": 1e-8,
+            "events.chute": {"when": "altitude_below", "value": 25000.0, "parachute": True},
+        }
+    )
+    for k in ("attitude", "body_rates", "cn_multiplier", "cm_multiplier"):
+        sc.data["states"].pop(k)
+    sc.data["truth"]["states"].pop("attitude")
+    sc.data["truth"]["states"].pop("body_rates")
+    sc.data["observations"].pop("rates")
+    tr = simulate_truth(sc, config_for(sc))
+    ((t_ev, name),) = tr["events"]
+    assert name == "chute"
+    m = tr["model"]
+    h = m.altitude(tr["x"])
+    k = np.searchsorted(tr["t"], t_ev)
+    assert h[k - 1] > 25000.0 > h[k]  # located between the samples that bracket the crossing
+    assert tr["phase_index"][k - 1] == 0 and tr["phase_index"][k] == 1 and tr["phases"][1]["parachute"]
+
+
+def test_truth_time_event_on_a_grid_sample_keeps_every_sample_once():
+    from workbench.problems.post2.truth import simulate_truth
+
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_j2.toml").with_overrides(
+        {"model.t_end_s": 1000.0, "events.mark": {"when": "time", "value": 300.0, "mass_kg": 900.0}}
+    )
+    tr = simulate_truth(sc, config_for(sc))
+    assert np.all(np.diff(tr["t"]) > 0) and tr["t"][-1] == 1000.0 and tr["t"].size == 101
+    assert tr["events"] == [(300.0, "mark")]
+    # a sample at the event time still belongs to the old phase (as in the estimator, which checks
+    # events at the start of each step)
+    assert tr["phase_index"][30] == 0 and tr["phase_index"][31] == 1
+    # vacuum, mass change only: the orbit continues smoothly through the event
+    plain = load_scenario(assets_dir() / "scenarios" / "post2_j2.toml").with_overrides({"model.t_end_s": 1000.0})
+    ref = simulate_truth(plain, config_for(plain))
+    np.testing.assert_allclose(tr["x"], ref["x"], rtol=0, atol=1e-3)

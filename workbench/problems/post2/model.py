@@ -490,6 +490,19 @@ class TrajectoryModel:
             return V / float(a) - ev.value
         return ev.value - 0.5 * float(rho) * V * V
 
+    @staticmethod
+    def apply_event(phase: dict, ev: Event) -> dict:
+        """The phase after event ``ev`` (mass, area, parachute changes; marked fired)."""
+        out = dict(phase)
+        out["fired"] = (*out["fired"], ev.name)
+        if ev.mass is not None:
+            out["mass"] = ev.mass
+        if ev.ref_area is not None:
+            out["area"] = ev.ref_area
+        if ev.parachute is not None:
+            out["parachute"] = ev.parachute
+        return out
+
     def check_events(self, x: np.ndarray, t: float, phase: dict) -> dict:
         """The phase after applying every not-yet-fired event whose condition holds at (x (n_x,), t)."""
         out = dict(phase)
@@ -498,13 +511,7 @@ class TrajectoryModel:
                 continue
             hit = (t >= ev.value - 1e-9) if ev.when == "time" else self.event_margin(x, ev) < 0.0
             if hit:
-                out["fired"] = (*out["fired"], ev.name)
-                if ev.mass is not None:
-                    out["mass"] = ev.mass
-                if ev.ref_area is not None:
-                    out["area"] = ev.ref_area
-                if ev.parachute is not None:
-                    out["parachute"] = ev.parachute
+                out = self.apply_event(out, ev)
         return out
 
     def propagate(self, x: np.ndarray, t0: float, t1: float, phase: dict, max_step: float) -> np.ndarray:

@@ -114,18 +114,19 @@ def simulate_truth(scenario: Scenario, cfg: Post2Config, extra_times: np.ndarray
     while True:
         pending = [e for e in model.events if e.name not in phase["fired"]]
         t_stop = min([cfg.t_end] + [e.value for e in pending if e.when == "time" and e.value > t])
-        funcs = []
+        funcs, cond = [], []
         for e in pending:
             if e.when == "time":
                 continue
+            cond.append(e)
 
             def fn(tt, y, e=e):
                 return model.event_margin(y, e)
 
             fn.terminal = True
             funcs.append(fn)
-        t_eval = grid[(grid >= t - 1e-12) & (grid <= t_stop + 1e-12)]
-        t_eval = t_eval[t_eval >= t]
+        rest = grid[done:]
+        t_eval = np.clip(rest[rest <= t_stop + 1e-12], t, t_stop)  # each grid sample exactly once
         sol = solve_ivp(
             lambda tt, y, phase=phase: model.derivative(y, phase),
             (t, t_stop),
@@ -135,18 +136,24 @@ def simulate_truth(scenario: Scenario, cfg: Post2Config, extra_times: np.ndarray
             rtol=tr["rtol"],
             atol=1e-9,
             events=funcs or None,
+            dense_output=True,
         )
-        ys = sol.y.T
+        ys = np.asarray(sol.y, dtype=float).reshape(x.size, -1).T
         if sq is not None and ys.size:
             ys[:, sq] = quat_normalize(ys[:, sq])
         X[done : done + ys.shape[0]] = ys
         pidx[done : done + ys.shape[0]] = len(phases) - 1
         done += ys.shape[0]
-        t = float(sol.t[-1]) if sol.status != 1 else float(next(te[0] for te in sol.t_events if te.size))
-        x = sol.y[:, -1] if sol.status != 1 else next(ye[0] for ye in sol.y_events if ye.size)
-        if t >= cfg.t_end - 1e-9:
-            break
-        new = model.check_events(x, t + 1e-9, phase)
+        new = phase
+        if sol.status == 1:  # a condition event: fire it (its margin is ~0 at the located time)
+            i = next(i for i, te in enumerate(sol.t_events) if te.size)
+            t, x = float(sol.t_events[i][0]), np.array(sol.y_events[i][0])
+            new = model.apply_event(phase, cond[i])
+        else:
+            t, x = t_stop, np.asarray(sol.sol(t_stop), dtype=float)
+            if t >= cfg.t_end - 1e-9:
+                break
+        new = model.check_events(x, t + 1e-9, new)
         fired += [(t, n) for n in new["fired"][len(phase["fired"]) :]]
         phase = new
         phases.append(phase)
