@@ -190,3 +190,24 @@ def test_truth_time_event_on_a_grid_sample_keeps_every_sample_once():
     plain = load_scenario(assets_dir() / "scenarios" / "post2_j2.toml").with_overrides({"model.t_end_s": 1000.0})
     ref = simulate_truth(plain, config_for(plain))
     np.testing.assert_allclose(tr["x"], ref["x"], rtol=0, atol=1e-3)
+
+
+def test_tabulated_atmosphere_from_the_problem_file():
+    from workbench.io.scenario import ScenarioError
+    from workbench.problems.post2 import build
+
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml").with_overrides(
+        {
+            "environment.atmosphere": "table",
+            "environment.table_altitude_m": [0.0, 50e3, 150e3],
+            "environment.table_density_kg_m3": [0.015, 1.5e-4, 1e-9],
+            "environment.table_pressure_pa": [600.0, 5.0, 1e-4],
+            "environment.table_temperature_K": [210.0, 160.0, 140.0],
+        }
+    )
+    env = build.environment(sc, config_for(sc))
+    assert env.atmosphere.density(50e3) == pytest.approx(1.5e-4)
+    assert env.atmosphere.density(25e3) == pytest.approx(math.sqrt(0.015 * 1.5e-4))  # log-linear
+    bad = sc.with_overrides({"environment.table_density_kg_m3": [0.015, -1.0, 1e-9]})
+    with pytest.raises(ScenarioError, match="table_altitude_m"):
+        build.environment(bad, config_for(bad))

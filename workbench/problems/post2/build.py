@@ -15,6 +15,7 @@ import numpy as np
 from workbench.core.atmosphere import (
     ExponentialAtmosphere,
     MarsEngineeringAtmosphere,
+    TabulatedAtmosphere,
     TitanDefaultAtmosphere,
 )
 from workbench.core.bodies import get_body
@@ -39,6 +40,15 @@ def environment(scenario: Scenario, cfg: Post2Config, density_factor=None) -> En
         atm = None
     elif atm_kind == "exponential":
         atm = ExponentialAtmosphere(e["rho0_kg_m3"], e["scale_height_m"], e["temperature_K"])
+    elif atm_kind == "table":
+        cols = ("table_altitude_m", "table_density_kg_m3", "table_pressure_pa", "table_temperature_K")
+        for c in cols:
+            if e[c] is None:
+                raise ScenarioError(scenario.path, f"environment.{c}", "atmosphere = 'table' needs this list")
+        try:
+            atm = TabulatedAtmosphere(*(np.asarray(e[c], dtype=float) for c in cols), extrapolate="clamp")
+        except (TypeError, ValueError) as err:
+            raise ScenarioError(scenario.path, "environment.table_altitude_m", f"bad atmosphere table: {err}") from None
     elif atm_kind == "mars_engineering":
         atm = MarsEngineeringAtmosphere()
     else:
