@@ -211,3 +211,28 @@ def test_tabulated_atmosphere_from_the_problem_file():
     bad = sc.with_overrides({"environment.table_density_kg_m3": [0.015, -1.0, 1e-9]})
     with pytest.raises(ScenarioError, match="table_altitude_m"):
         build.environment(bad, config_for(bad))
+
+
+def test_quaternion_observation_residual_is_the_body_small_angle():
+    from workbench.core.rotation import quat_boxplus
+    from workbench.problems.post2.pipeline import Channel
+
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml").with_overrides(
+        {"observations.att": {"quantity": "quaternion", "sigma": 0.01, "rate_hz": 8.0}}
+    )
+    cfg = config_for(sc)
+    spec = next(o for o in cfg.observations if o.name == "att")
+    assert spec.size == 3 and np.allclose(spec.sigma, np.radians(0.01))
+    est = Estimator(sc, cfg)
+    sq = est.smap.blocks["attitude"].sx
+    d = np.radians([0.02, -0.01, 0.03])
+    q_meas = quat_boxplus(est.x0[sq], d)
+    ch = Channel(spec, np.zeros(1), q_meas[None, :], q_meas[None, :], np.diag(spec.sigma**2)[None])
+    m = est.measurement(ch, 0)
+    y = m.z - m.h(est.x0)
+    np.testing.assert_allclose(y, d, atol=1e-12)  # the correction that takes the state to the measurement
+    H = m.H(est.x0)
+    se = est.smap.blocks["attitude"].se
+    # the Jacobian of the SO(3) log at the offset d: I + O(|d|/2) (off-diagonal ½[d×] terms)
+    np.testing.assert_allclose(H[:, se], np.eye(3), atol=0.5 * np.linalg.norm(d) + 1e-9)
+    assert np.allclose(np.delete(H, np.arange(se.start, se.stop), axis=1), 0.0)

@@ -118,13 +118,21 @@ STATES: dict[str, StateDef] = {
 
 @dataclass(frozen=True)
 class ObservationDef:
-    """An observable model output: ``size``, ``unit`` of its file columns, component names."""
+    """An observable model output: ``size`` of its residual (and of its σ / weights), ``unit`` of σ
+    and of the file columns, the file's column names ``components``, the DOFs it exists in, its
+    meaning, and ``file_unit`` when the file columns have another unit than σ (quaternion: ``1``)."""
 
     size: int
     unit: str
     components: tuple[str, ...]
     dofs: tuple[int, ...]
     meaning: str
+    file_unit: str | None = None
+
+    @property
+    def residual_names(self) -> tuple[str, ...]:
+        """Names of the residual components (the file columns, or x, y, z for a quaternion)."""
+        return self.components if len(self.components) == self.size else ("x", "y", "z")
 
 
 #: Every observation quantity the model computes (the problem file's ``[observations.<name>] quantity``).
@@ -138,6 +146,14 @@ OBSERVATIONS: dict[str, ObservationDef] = {
     ),
     "acceleration_axial": ObservationDef(1, "m/s^2", ("ax",), (6,), "sensed acceleration along +X_B + bias"),
     "body_rates": ObservationDef(3, "deg/s", ("p", "q", "r"), (6,), "body angular velocity (ROLBD, PITBD, YAWBD)"),
+    "quaternion": ObservationDef(
+        3,
+        "deg",
+        ("qx", "qy", "qz", "qw"),
+        (6,),
+        "attitude q_I_B (scalar last); residual = body-frame small angle to the measured attitude, σ per axis in deg",
+        file_unit="1",
+    ),
     "altitude": ObservationDef(1, "m", ("h",), (3, 6), "radar altitude = (|r| − R_ref) · radar_scale_factor"),
     "pressure": ObservationDef(1, "Pa", ("p",), (3, 6), "static pressure of the model atmosphere"),
     "density": ObservationDef(1, "kg/m^3", ("rho",), (3, 6), "density of the model atmosphere"),
@@ -542,6 +558,8 @@ class TrajectoryModel:
             return self.sensed_acceleration_B(x, phase)[..., :1]
         if quantity == "body_rates":
             return np.array(self.smap.raw(x, "body_rates"))
+        if quantity == "quaternion":
+            return np.array(self.smap.raw(x, "attitude"))
         if quantity == "altitude":
             return (self.altitude(x) * self.param(x, "radar_scale_factor", 1.0)[..., 0])[..., None]
         if quantity in ("pressure", "density"):

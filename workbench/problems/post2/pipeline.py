@@ -24,6 +24,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 from scipy.stats import chi2
 
+from workbench.core.rotation import attitude_error
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io.scenario import Scenario, ScenarioError
@@ -106,7 +107,7 @@ def _weights_R(scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: 
     1/SI², held from each row to the next); a weights file that ends before the observations is an error."""
     d = OBSERVATIONS[spec.quantity]
     wt = read_telemetry(wpath)
-    missing = [c for c in d.components if c not in wt.channels]
+    missing = [c for c in d.residual_names if c not in wt.channels]
     if missing:
         raise ScenarioError(scenario.path, f"observations.{spec.name}.weights", f"{wpath.name}: no column(s) {missing}")
     if wt.time[0] > t[0] + 1e-9 or wt.time[-1] < t[-1] - 1e-9:
@@ -117,7 +118,7 @@ def _weights_R(scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: 
             f"{t[0]:g} .. {t[-1]:g} s: the weights file is shorter than its observations",
         )
     idx = np.clip(np.searchsorted(wt.time, t + 1e-9, side="right") - 1, 0, wt.time.size - 1)
-    W = wt.stack(d.components)[idx]
+    W = wt.stack(d.residual_names)[idx]
     if np.any(W <= 0):
         raise ScenarioError(scenario.path, f"observations.{spec.name}.weights", f"{wpath.name}: weights must be > 0")
     R = np.zeros((t.size, d.size, d.size))
@@ -132,7 +133,7 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
     for spec in cfg.observations:
         d = OBSERVATIONS[spec.quantity]
         path = Path(telemetry[spec.name])
-        tel = read_telemetry(path, required={c: _kind(d.unit) for c in d.components})
+        tel = read_telemetry(path, required={c: _kind(d.file_unit or d.unit) for c in d.components})
         t = np.asarray(tel.time, float)
         outside = np.flatnonzero((t < cfg.t_start - 1e-9) | (t > cfg.t_end + 1e-9))
         if outside.size:
@@ -144,6 +145,18 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
             )
         z_raw = tel.stack(d.components)
         z = z_raw
+        if spec.quantity == "quaternion":
+            norm = np.linalg.norm(z_raw, axis=1)
+            bad = np.flatnonzero(np.abs(norm - 1.0) > 1e-3)
+            if bad.size:
+                raise ScenarioError(
+                    scenario.path,
+                    f"observations.{spec.name}",
+                    f"{path.name}: quaternion at {t[bad[0]]:g} s has norm {norm[bad[0]]:.6g}",
+                )
+            z = z_raw / norm[:, None]
+            if spec.median_window > 1:
+                raise ScenarioError(scenario.path, f"observations.{spec.name}.median_window", "not for a quaternion")
         if spec.median_window > 1:
             z = median_filter(z_raw, size=(spec.median_window, 1), mode="nearest")
         if spec.sigma is not None:
@@ -161,6 +174,7 @@ def _kind(unit: str) -> str:
         "m": "length",
         "Pa": "pressure",
         "kg/m^3": "density",
+        "1": "dimensionless",
     }[unit]
 
 
@@ -247,6 +261,20 @@ class Estimator:
         q = ch.spec.quantity
         phase = self.phase
         model = self.model
+        if q == "quaternion":  # z = 0, h = body small angle from the measured attitude to the state's
+            q_meas = ch.z[i]
+            sq = self.smap.blocks["attitude"].sx
+
+            def hq(x, q_meas=q_meas):
+                return attitude_error(q_meas, np.asarray(x, float)[..., sq])
+
+            def Hq(x):
+                return numeric_jacobian_batched(hq, x, self.layout, self.eps)[1]
+
+            return Measurement(
+                ch.spec.name, np.zeros(3), ch.R[i], hq, H=Hq, gate_probability=ch.spec.gate_probability,
+                iterations=ch.spec.iterations,
+            )  # fmt: skip
 
         def h(x, q=q, phase=phase):
             return model.observe(np.asarray(x, float), q, phase)

@@ -50,7 +50,7 @@ class Post2Drawer:
     def _forward(self, stage: ForwardStage) -> None:
         fp = stage.forward
         for name, ih in fp.innovations.items():
-            comps = OBSERVATIONS[stage.quantities[name]].components
+            comps = OBSERVATIONS[stage.quantities[name]].residual_names
             for i, c in enumerate(comps):
                 sd = np.sqrt(np.maximum(ih.S[:, i, i], 0.0))
                 self.rec.series_with_bounds(layout.residual_path(name, c), ih.t, ih.y[:, i], sd)

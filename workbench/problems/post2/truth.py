@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from workbench.core.rotation import quat_normalize
+from workbench.core.rotation import quat_boxplus, quat_normalize
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import write_telemetry
 from workbench.problems.post2 import build
@@ -182,7 +182,7 @@ def write_observations(scenario: Scenario, cfg: Post2Config, truth: dict, out_di
         k = np.searchsorted(t_all, np.round(ts, 9))
         if np.any(k >= t_all.size) or np.any(np.abs(t_all[np.minimum(k, t_all.size - 1)] - ts) > 1e-6):
             raise ValueError(f"observation {spec.name}: sample times are not on the truth grid")
-        z = np.empty((ts.size, d.size))
+        z = np.empty((ts.size, len(d.components)))
         for p in np.unique(truth["phase_index"][k]):
             sel = truth["phase_index"][k] == p
             z[sel] = model.observe(truth["x"][k[sel]], spec.quantity, truth["phases"][p])
@@ -193,13 +193,16 @@ def write_observations(scenario: Scenario, cfg: Post2Config, truth: dict, out_di
         noise = spec.noise if spec.noise is not None else spec.sigma
         if noise is None:
             raise ValueError(f"observation {spec.name}: give noise_sigma for a synthetic weights-file channel")
-        z = z + rng.standard_normal(z.shape) * noise
-        cols = {c: (z[:, i], d.unit) for i, c in enumerate(d.components)}
+        if spec.quantity == "quaternion":  # a body-frame small-angle error of 1σ noise [rad] per axis
+            z = quat_boxplus(z, rng.standard_normal((ts.size, 3)) * noise)
+        else:
+            z = z + rng.standard_normal(z.shape) * noise
+        cols = {c: (z[:, i], d.file_unit or d.unit) for i, c in enumerate(d.components)}
         out[spec.name] = write_telemetry(
             out_dir / f"{spec.name}.csv", ts, cols, meta={"source": "synthetic post2 truth"}
         )
         if spec.weights is not None:
-            w = {c: (np.full(ts.size, 1.0 / noise[i] ** 2), "1") for i, c in enumerate(d.components)}
+            w = {c: (np.full(ts.size, 1.0 / noise[i] ** 2), "1") for i, c in enumerate(d.residual_names)}
             out[spec.name + "_weights"] = write_telemetry(
                 out_dir / f"{spec.name}_weights.csv", ts, w, meta={"weights": "W = 1/sigma^2 in 1/SI^2 (R = W^-1)"}
             )
