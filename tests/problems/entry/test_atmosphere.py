@@ -400,7 +400,7 @@ def test_accelerometer_noise_is_reduced_by_smoothing():
 def test_sigma_from_velocity_matches_two_over_vr():
     sim = simulate()
     n = sim["t"].size
-    only_v = EntryProfileSigmas(cd_rel=0.0, accel=1e-12, wind=0.0, p_top_rel=0.0, fill_rel=0.0)
+    only_v = EntryProfileSigmas(cd_rel=0.0, accel=1e-12, wind=0.0, p_top_rel=0.0, fill_temperature_K=0.0)
     r1 = _run(sim, P=_P(n, sv=2.0, sp=0.0), sigmas=only_v)
     r2 = _run(sim, P=_P(n, sv=8.0, sp=0.0), sigmas=only_v)
     fin = r1.final
