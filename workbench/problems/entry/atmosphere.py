@@ -389,11 +389,12 @@ def fill_sigma(
     [m/s²], the fill's temperature ``T`` (k,) [K], gas constant ``R_gas`` [J/(kg K)].  The true
     temperature is the fill's plus ``δT``, a zero-mean Gaussian process (squared-exponential
     kernel, 1σ ``sigma_T`` [K], correlation length ``corr_m`` [m]).  To first order the density
-    error is ``δ ln ρ(h) = ∫_h^{h0} g δT /(R T²) dh' − δT(h)/T(h)`` (hydrostatic pressure from the
-    upper edge, ideal gas).  The fill matches the upper edge's temperature (``δT(h0) = 0``) and the
-    lower edge's density (``δ ln ρ(h_end) = 0``); the returned σ is that of ``δ ln ρ`` conditioned
-    on these constraints (a one-sided fill keeps only the upper one): zero at the edges, largest
-    inside the gap.  Returns (k,).
+    error is ``δ ln ρ(h) = −∫_h^{h0} g δT /(R T²) dh' − δT(h)/T(h)`` (hydrostatic pressure from the
+    upper edge, ideal gas).  The fill's temperature family (the assumed shape plus an offset and
+    a linear trend in depth) absorbs the part of δT that its two constraints see — the upper
+    edge's temperature and the lower edge's density — and the returned σ is that of ``δ ln ρ`` of
+    the remaining part (a one-sided fill: an offset and the upper constraint only): zero at the
+    matched edges, largest inside the gap.  Returns (k,).
     """
     h = np.asarray(h, dtype=float)
     g = np.asarray(g, dtype=float)
@@ -410,19 +411,25 @@ def fill_sigma(
         W[i] = W[i - 1]
         W[i, i - 1] += 0.5 * w[i - 1] * dh[i - 1]
         W[i, i] += 0.5 * w[i] * dh[i - 1]
-    A = W - np.diag(1.0 / T)  # δ ln ρ = A δT
-    rows = []
+    A = -W - np.diag(1.0 / T)  # δ ln ρ = A δT: warmer air above lets ln p grow more slowly
+    # the fill absorbs the part of δT in its own family (an offset, and a linear trend in depth
+    # when it is two-sided) chosen to meet its constraints: residual = (I − B (C B)⁻¹ C) δT
+    rows, cols = [], [np.ones(k)]
     if upper_edge:
         e0 = np.zeros(k)
         e0[0] = 1.0
         rows.append(e0)
     if lower_edge:
         rows.append(A[-1])
-    S = A @ K @ A.T
+        cols.append(np.abs(h - h[0]))
     if rows:
         C = np.array(rows)
-        KC = K @ C.T
-        S = S - (A @ KC) @ np.linalg.solve(C @ KC, (A @ KC).T)
+        B = np.array(cols[: len(rows)]).T
+        M = np.eye(k) - B @ np.linalg.solve(C @ B, C)
+    else:
+        M = np.eye(k)
+    AM = A @ M
+    S = AM @ K @ AM.T
     return np.sqrt(np.clip(np.diag(S), 0.0, None))
 
 
