@@ -362,8 +362,9 @@ def truth_spec_from_scenario(scenario) -> EntryTruthSpec:
 
     ``scenario`` is a :class:`workbench.io.scenario.Scenario` (or a plain dict standing for the
     ``[truth]`` table).  Keys are the field names of :class:`EntryTruthSpec`; ``wind_layers``,
-    ``temperature_waves`` and ``temperature_bias`` are arrays of arrays.  ``epoch_utc`` defaults
-    to ``[scenario] epoch_utc`` when present.  Unknown keys raise ``ValueError`` naming them.
+    ``temperature_profile_km_K``, ``temperature_waves`` and ``terrain_modes`` are arrays of
+    arrays.  ``epoch_utc`` defaults to ``[scenario] epoch_utc`` when present.  Unknown keys raise
+    ``ValueError`` naming them.
     """
     if isinstance(scenario, dict):
         table, epoch, where = dict(scenario), None, "[truth]"
