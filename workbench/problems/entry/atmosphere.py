@@ -57,8 +57,11 @@ Method (Aboudan et al. 2018, "Reconstruction of the Atmospheric Profiles"):
    fully correlated (conservative), the accelerometer noise as independent, plus ``p_top_rel`` of
    p0, all three in quadrature.  Temperature:
    ``σ_T/T = sqrt((σ_p/p)² + (σ_ρ/ρ)²)`` (independent; conservative because the correlated ρ and p
-   errors partly cancel in T).  The sigmas are those of the raw profile and are reported for the
-   smoothed one too (smoothing only lowers the white part).
+   errors partly cancel in T).  Last, because a profile is a function of altitude, the
+   trajectory's altitude 1σ (``σ_h² = ûᵀ P_pp û``) adds ``σ_h / H`` (H = R T / g, the local
+   scale height) in quadrature to the relative density and pressure σ (an altitude error shifts
+   the whole profile; T moves only by σ_h dT/dh, neglected).  The sigmas are those of the raw
+   profile and are reported for the smoothed one too (smoothing only lowers the white part).
 
 The profile grid: the input samples from the *top* (the first valid sample with
 ``a_Z ≥ min_specific_force``, 0.05 m/s² ≈ 50σ of the Table 3 accelerometer noise, which is the
@@ -671,6 +674,8 @@ def reconstruct_atmosphere(
     J[:, 0:3] = u
     J[:, 6:9] = np.cross(_omega_M(), u)
     var_vr_in = np.einsum("ni,nij,nj->n", J, P[s], J)
+    up_in = _up_M(pM)
+    var_h_in = np.einsum("ni,nij,nj->n", up_in, P[s][:, 6:9, 6:9], up_in)  # altitude variance [m²]
     u_h2_in = np.clip(1.0 - np.sum(u * _up_M(pM), axis=-1) ** 2, 0.0, 1.0)
 
     # profile grid (fill samples inside time gaps)
@@ -682,6 +687,7 @@ def reconstruct_atmosphere(
     alpha = _on_grid(angle_of_attack(q_M_G[s], v_rel_M), src, w)
     g_r = _on_grid(radial_gravity(pM), src, w)
     var_vr = _on_grid(var_vr_in, src, w)
+    var_h = _on_grid(var_h_in, src, w)
     u_h2 = _on_grid(u_h2_in, src, w)
     ph = ph_in[src]
     a_z = np.where(inserted, np.nan, a_z_all[s][src])
@@ -812,6 +818,11 @@ def reconstruct_atmosphere(
     sp_white = np.sqrt(np.concatenate([[0.0], np.cumsum(white_i**2)]))
     sigma_p = np.sqrt(sp_corr**2 + sp_white**2 + (sig.p_top_rel * p0) ** 2)
     sigma_T = final.T * np.sqrt((sigma_p / final.p) ** 2 + sigma_rho_rel**2)
+    # the profile is a function of altitude: the altitude's own 1σ moves ρ(h) and p(h) by σ_h / H
+    # (H = R T / g the local scale height); T(h) only by σ_h dT/dh, neglected
+    rel_h = np.sqrt(np.maximum(var_h, 0.0)) * g_r / (R_gas * final.T)
+    sigma_rho = np.sqrt(sigma_rho_rel**2 + rel_h**2) * final.rho
+    sigma_p = np.sqrt(sigma_p**2 + (rel_h * final.p) ** 2)
 
     return AtmosphereResult(
         iterations=iterations,
