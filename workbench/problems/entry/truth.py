@@ -1,8 +1,11 @@
 """Truth simulator of a Schiaparelli-like entry and parachute descent (synthetic scenarios only).
 
 This is the *truth*, not the estimator's model: a 6-DOF rigid capsule flying through a *true*
-atmosphere (which departs from :class:`MarsEngineeringAtmosphere`) with its aerodynamic database
-(:mod:`workbench.models.aerodynamics`), then a two-body system after parachute deployment — the
+atmosphere built from its own climate temperature profile, gas constants and gravity waves (not
+the estimator's :class:`~workbench.core.atmosphere.MarsEngineeringAtmosphere`), with the vehicle's
+aerodynamic database (:mod:`workbench.models.aerodynamics`) times planted, smooth, Mach-dependent
+coefficient deviations (10 % 1σ, AMELIA Table 3) that the estimator does not know, over a
+terrain with relief, then a two-body system after parachute deployment — the
 module hangs from an elastic riser (spring-damper, slack when shorter than its length) whose far
 end is the canopy, a point mass with its own air-relative drag, inflation law and canopy
 "breathing".  Pendulum oscillations, the inflation snatch and the X-rate spike at deployment
@@ -17,7 +20,8 @@ Frames and conventions (docs/ARCHITECTURE.md, "Conventions"):
   vehicle (north/east from the +Z pole of M) and blow *towards* the stated direction.
 * Gravity: point mass + J2 (``gravity_j2`` is valid in M).  Altitude ``h_amr = |p| − 3396 km``
   (above the MOLA radius, "AMR"); the atmosphere and winds are functions of ``h_amr`` only.
-  Terrain: a sphere of radius ``3396 km − 1440 m``.
+  Terrain: the sphere of radius ``3396 km − 1440 m`` (the ground-contact check) plus the relief
+  ``terrain_modes`` that the radar beams see (:class:`~workbench.problems.entry.site.TerrainRelief`).
 * Body frame G: origin at the CoG, +Z along the symmetry axis towards the back shell; during
   entry the air-relative velocity is along −Z_G, under the parachute the riser pulls along +Z_G.
   ``q_M_G`` is body -> inertial (Hamilton, scalar-last); ``w_G`` body rate; ``f_G`` the true
@@ -52,7 +56,8 @@ scalar Python (``math``) on purpose: for 19 states a numpy call costs more than 
 References: AMELIA (Aboudan et al., Space Sci. Rev. 2018) Sects. 3–4, 9, Table 2 (initial state),
 Fig. 2–4 (accelerations, 16 °/s spin, X-rate saturation ~1 s after PDD for ~1 s, Z acceleration
 peak ~101.5 m/s² ~0.6 s after PDD oscillating with ~0.35 s period); Mars constants as in
-:mod:`workbench.core.bodies`; Schiaparelli mass and shield size from ESA; molar mass 43.41 g/mol (AMELIA Sect. 9).
+:mod:`workbench.core.bodies`; Schiaparelli mass and shield size from ESA; the
+truth's molar mass 43.34 g/mol (NASA Mars fact sheet; AMELIA Sect. 9 uses 43.41).
 """
 
 from __future__ import annotations
