@@ -307,3 +307,20 @@ def test_missing_pdd_event_is_a_located_error(run, tmp_path):
     with pytest.raises(ScenarioError, match="PDD"):
         for _ in en.reconstruct(sc, paths, members=200):
             pass
+
+
+def test_imu_error_process_noise_reaches_each_error_at_the_end_of_the_arc():
+    """A random walk with the returned PSD reaches, at the arc's end, the 1σ the constant error
+    accumulates: b T for a bias, s ΔV for a scale factor; zero levels give zero noise."""
+    t = np.arange(0.0, 200.0 + 1e-9, 0.1)
+    f = np.zeros((t.size, 3))
+    f[:, 2] = 20.0  # ΔV = 4000 m/s
+    w = np.zeros((t.size, 3))
+    w[:, 2] = np.radians(16.0)
+    T = 200.0
+    eta = en.imu_error_process_noise(t, f, w, {"accel_bias": 1e-3})
+    assert np.sqrt(eta[0] * T) == pytest.approx(1e-3 * T) and np.all(eta[3:] == 0.0)
+    eta = en.imu_error_process_noise(t, f, w, {"accel_scale": 3e-4, "gyro_scale": 1e-4})
+    assert np.sqrt(eta[1] * T) == pytest.approx(3e-4 * 4000.0)
+    assert np.sqrt(eta[4] * T) == pytest.approx(1e-4 * np.radians(16.0) * T)
+    assert np.all(en.imu_error_process_noise(t, f, w, {}) == 0.0)
