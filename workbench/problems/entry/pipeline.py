@@ -713,6 +713,13 @@ def _truth_tables(tr: dict) -> list[str]:
                 f"{d['temperature_rms_sigma_K']:.1f} | {100 * d['temperature_fraction_within_3sigma']:.0f} % | "
                 f"{100 * cd:+.1f} % |"
             )
+        L += [
+            "",
+            "Errors are measured at the reconstructed altitude, so the trajectory's altitude error is part of "
+            "them (and σ_h/H part of the 1σ); C_D table−truth is the relative error of the coefficient the "
+            "reconstruction used (table) against the truth's planted one, carried by the density error and "
+            "covered by the 10 % coefficient term of its 1σ.  A bound is PASS or FAIL as measured.",
+        ]
         L.append("")
     w = tr.get("winds_in_layers")
     if w:
