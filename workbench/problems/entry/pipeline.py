@@ -600,8 +600,9 @@ def score_atmosphere(atm, truth: dict, events: dict) -> dict:
     ``temperature_*_K``; ``density_bound_rel`` and ``density_bound_pass`` (AMELIA's 10 / 20 / 25 %
     on the maximum |error|, measured, PASS or FAIL); ``drag_coefficient_rel_error_median`` and
     ``_max_abs``: the table coefficient the reconstruction used minus the truth's planted one,
-    relative (``truth["ca_factor"]`` along the entry, the planted parachute deviation under the
-    parachute), the part of the density error that the coefficient uncertainty stands for; n.
+    relative (``truth["ca_factor"]`` along the entry, ``truth["chute_cd_factor"]`` under the
+    parachute, whose drag dominates there), the part of the density error that the coefficient
+    uncertainty stands for; n.
     """
     fin = atm.final
     ta = truth["atmosphere"]
@@ -626,14 +627,9 @@ def score_atmosphere(atm, truth: dict, events: dict) -> dict:
     if "ca_factor" in truth:
         fac = np.interp(fin.t, truth["t"], np.asarray(truth["ca_factor"], float))
         coef = np.where(fin.t < pdd, 1.0 / np.where(fac > 0, fac, np.nan) - 1.0, np.nan)
-    if "planted_parachute_cd_deviation" in truth and "mach" in truth:
-        from scipy.interpolate import PchipInterpolator
-
-        nodes = np.log(np.asarray(truth["planted_parachute_deviation_mach"], float))
-        dev = PchipInterpolator(nodes, np.asarray(truth["planted_parachute_cd_deviation"], float))
-        m_t = np.interp(fin.t, truth["t"], np.asarray(truth["mach"], float))
-        d_p = dev(np.clip(np.log(np.maximum(m_t, 1e-6)), nodes[0], nodes[-1]))
-        coef = np.where(fin.t >= pdd, 1.0 / (1.0 + d_p) - 1.0, coef)
+    if "chute_cd_factor" in truth:
+        fac_p = np.interp(fin.t, truth["t"], np.asarray(truth["chute_cd_factor"], float))
+        coef = np.where(fin.t >= pdd, 1.0 / np.where(fac_p > 0, fac_p, np.nan) - 1.0, coef)
     out: dict = {}
     for nm, mk in segs.items():
         mk = mk & np.isfinite(e_rho)
