@@ -159,3 +159,17 @@ def test_prepare_validation_reads_the_scenarios_telemetry_checks(tmp_path, monke
     with pytest.raises(_Stop):
         mc.prepare_validation(sc, {"initial_state": tmp_path / "initial_state.toml"})
     assert seen["checks"] == TelemetryChecks(quat_error_tol=2e-3, quat_warn_tol=1e-5, zero_filled_packets=3)
+
+
+def test_terrain_correlation_inflates_only_the_slant_out_terrain_term(tmp_path):
+    sc = minimal(tmp_path, radar={"slant_out_sigma_m": 40.0, "slant_range_sigma_m": 40.0,
+                                  "terrain_sigma_m": 100.0, "terrain_correlation_s": 30.0})
+    cfg = EntryConfig.from_scenario(sc)
+    white = cfg.smoother_sigmas()
+    assert white["slant_out"] == pytest.approx(math.hypot(40.0, 100.0))
+    corr = cfg.smoother_sigmas(slant_out_dt_s=0.1)
+    # 30 s of 10 Hz samples count as one: terrain variance × 300
+    assert corr["slant_out"] == pytest.approx(math.hypot(40.0, 100.0 * math.sqrt(300.0)))
+    assert corr["slant_range"] == white["slant_range"] and corr["velocity_out"] == white["velocity_out"]
+    # a sample interval longer than the correlation time leaves the term white
+    assert cfg.smoother_sigmas(slant_out_dt_s=60.0)["slant_out"] == pytest.approx(white["slant_out"])

@@ -256,7 +256,7 @@ def test_cli_exit_code_for_unknown_scenario():
 
 @pytest.mark.xfail(
     strict=True,
-    reason="measured 39.9 % (seed 7): across the 57 s blackout (≈ 70 → 30 km) the hydrostatic fill assumes the "
+    reason="measured 33.4 % (seed 7): across the 57 s blackout (≈ 70 → 30 km) the hydrostatic fill assumes the "
     "default model's temperature shape, and the independent truth is up to ~27 K warmer at 40-60 km (its own "
     "climate profile); the fill's reported 1σ covers it within 3σ (test above), the 20 % bound it does not",
 )

@@ -286,6 +286,16 @@ SCHEMA = Schema(
                     "m",
                     "terrain relief about the sphere, 1σ: added in quadrature to both range 1σ",
                 ),
+                Key(
+                    "terrain_correlation_s",
+                    _F,
+                    0.0,
+                    "s",
+                    "time over which the terrain error of consecutive slant-out samples is correlated "
+                    "(relief correlation length / ground speed); 0 = white. The terrain variance of each "
+                    "slant-out sample is multiplied by this time × the sample rate (R inflation for "
+                    "time-correlated errors)",
+                ),
                 Key("velocity_out_sigma_mps", _F, 25.0, "m/s", "velocity-out measurement 1σ"),
                 Key("constrained", _B, True, meaning="AMELIA Sect. 8 constrained update directions"),
             ),
@@ -429,6 +439,7 @@ class EntryConfig:
     slant_range_sigma_m: float
     slant_out_sigma_m: float
     terrain_sigma_m: float
+    terrain_correlation_s: float
     imu_errors: dict
     velocity_out_sigma_mps: float
     constrained: bool
@@ -442,15 +453,27 @@ class EntryConfig:
     fill_correlation_km: float
     wind_method: str
 
-    def smoother_sigmas(self) -> dict:
+    def smoother_sigmas(self, slant_out_dt_s: float | None = None) -> dict:
         """The radar-aided smoother's measurement 1σ and gap-bridge mode, as
         ``run_entry_smoother(sigmas=...)`` takes them: slant range [m], slant-out [m],
         velocity-out [m/s], ``bridge_mode``.  The range 1σ are the instrument's
         (``slant_range_sigma_m``, ``slant_out_sigma_m``) and the terrain relief the filter does not
-        model (``terrain_sigma_m``, its sphere's error) in quadrature."""
+        model (``terrain_sigma_m``, its sphere's error) in quadrature.
+
+        The terrain error is not white: consecutive slant-out samples ``slant_out_dt_s`` [s] apart
+        see nearly the same relief for ``terrain_correlation_s``.  A white-noise filter fed N
+        samples of one constant error would average it down by √N; multiplying the terrain
+        variance by N = max(1, terrain_correlation_s / slant_out_dt_s) keeps the information the
+        filter draws from one correlation time equal to one independent sample (the usual R
+        inflation for time-correlated measurement errors; Bar-Shalom, Li & Kirubarajan 2001,
+        "Estimation with Applications to Tracking and Navigation", Sect. 8.3).  Without
+        ``slant_out_dt_s`` (or with ``terrain_correlation_s = 0``) the terrain error is white."""
+        n = 1.0
+        if slant_out_dt_s is not None and slant_out_dt_s > 0 and self.terrain_correlation_s > 0:
+            n = max(1.0, self.terrain_correlation_s / slant_out_dt_s)
         return {
             "slant_range": math.hypot(self.slant_range_sigma_m, self.terrain_sigma_m),
-            "slant_out": math.hypot(self.slant_out_sigma_m, self.terrain_sigma_m),
+            "slant_out": math.hypot(self.slant_out_sigma_m, self.terrain_sigma_m * math.sqrt(n)),
             "velocity_out": self.velocity_out_sigma_mps,
             "bridge_mode": self.bridge_mode,
         }
@@ -543,6 +566,7 @@ class EntryConfig:
             slant_range_sigma_m=rad["slant_range_sigma_m"],
             slant_out_sigma_m=rad["slant_out_sigma_m"],
             terrain_sigma_m=rad["terrain_sigma_m"],
+            terrain_correlation_s=rad["terrain_correlation_s"],
             imu_errors={
                 "accel_bias": rec["imu_accel_bias_mps2"],
                 "accel_scale": rec["imu_accel_scale"],

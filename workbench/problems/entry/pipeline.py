@@ -271,7 +271,9 @@ def reconstruct(
     init = initial_for_smoother(cfg, disp, nom, P0)
     yield init
     v0, q0, p0, P0_ref = init.v0, init.q0, init.p0, init.P0
-    sigmas = dict(cfg.smoother_sigmas())
+    t_out = np.asarray(tm.t_rda, float)[np.asarray(tm.rda_valid, bool)]
+    dt_out = float(np.median(np.diff(t_out))) if t_out.size > 1 else None
+    sigmas = dict(cfg.smoother_sigmas(slant_out_dt_s=dt_out))
     psd = imu_error_process_noise(imu.t, imu.f_G, imu.w_G, cfg.imu_errors)
     if np.any(psd > 0):
         sigmas["q_state_psd"] = tuple(float(x) for x in psd)
