@@ -236,9 +236,11 @@ def _seed_task(shared: tuple[list, list[int], str], k: int, _ss) -> dict:
     return out
 
 
-def run_mc(n_seeds: int, scheduler: str | None, workers: int, work: Path) -> dict:
+def run_mc(n_seeds: int, scheduler: str | None, workers: int, work: Path, batch: int = 10, on_batch=None) -> dict:
     """Monte Carlo over drops 1..n_seeds (every seed a different drop, ``disperse_drop``), each
-    reconstructed by the three configurations; returns {label: {"summary", "per_seed", "failed"}}."""
+    reconstructed by the three configurations; returns {label: {"summary", "per_seed", "failed"}}.
+    Runs in batches of ``batch`` drops and calls ``on_batch(partial_result)`` after each (so a long
+    run leaves its numbers so far on disk)."""
     configs = []
     for label, file, ov in CONFIGS:
         sc = load_scenario(SCEN / file)
@@ -247,27 +249,37 @@ def run_mc(n_seeds: int, scheduler: str | None, workers: int, work: Path) -> dic
     print(f"[bench] {n_seeds} drops x {len(configs)} reconstructions ({scheduler or f'{workers} workers'}) ...",
           file=sys.stderr, flush=True)  # fmt: skip
     t0 = time.perf_counter()
+    results: list[dict] = []
+    executor = "loop"
+    for start in range(0, len(seeds), batch):
+        part = seeds[start : start + batch]
+        run = run_monte_carlo(
+            _seed_task,
+            len(part),
+            shared=(configs, part, str(work)),
+            workers=workers,
+            scheduler=scheduler,
+            name="bench-droptest",
+        )
+        results += run.results
+        executor = run.executor if run.kind != "loop" else "loop"
+        print(
+            f"[bench] {len(results)}/{len(seeds)} drops, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True
+        )
+        out = _collect(configs, seeds[: len(results)], results, executor, time.perf_counter() - t0)
+        if on_batch is not None:
+            on_batch(out)
+    return out
 
-    def progress(done: int, total: int) -> None:
-        print(f"[bench] {done}/{total} drops, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
 
-    run = run_monte_carlo(
-        _seed_task,
-        len(seeds),
-        shared=(configs, seeds, str(work)),
-        workers=workers,
-        scheduler=scheduler,
-        progress=progress,
-        name="bench-droptest",
-    )
-    total = time.perf_counter() - t0
+def _collect(configs, seeds, results, executor, total) -> dict:
     out = {}
     for label, sc in configs:
-        ok = [r[label] for r in run.results if isinstance(r[label], SeedResult)]
+        ok = [r[label] for r in results if isinstance(r[label], SeedResult)]
         failed = {
-            int(s): r[label] for s, r in zip(seeds, run.results, strict=True) if not isinstance(r[label], SeedResult)
+            int(sd): r[label] for sd, r in zip(seeds, results, strict=True) if not isinstance(r[label], SeedResult)
         }
-        res: McResult = stack_results(sc, ok, run.executor if run.kind != "loop" else "loop", total)
+        res: McResult = stack_results(sc, ok, executor, total)
         s = summarize_mc(res)
         per = {
             f.name: np.asarray(getattr(res, f.name)).tolist()
@@ -353,6 +365,14 @@ def markdown(mc: dict, sp: dict) -> str:
         ),
         row("restitution median σ (reported)", lambda s: f"{s.get('restitution_sigma_median', np.nan):.4f}"),
         row(
+            "restitution as before (1 g ends vs touch/leave, estimation σ): |err| median, |err|/σ median, inside 3σ",
+            lambda s: (
+                f"{s.get('restitution_abs_error_median_before', np.nan):.4f}, "
+                f"{s.get('restitution_abs_z_median_before', np.nan):.2f}, "
+                f"{_pct(s.get('restitution_fraction_inside_3sigma_before', np.nan))}"
+            ),
+        ),
+        row(
             "restitution vs touch/leave truth: |err| median, inside 3σ",
             lambda s: (
                 f"{s.get('restitution_abs_error_median_touch_leave', np.nan):.4f}, "
@@ -425,22 +445,22 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     t0 = time.perf_counter()
     sp = {} if a.no_speed else speed()
-    with tempfile.TemporaryDirectory(prefix="droptest_mc_") as d:
-        mc = run_mc(a.seeds, a.scheduler, a.workers, Path(d))
-    wall = time.perf_counter() - t0
-    results = {
-        "n_drops": a.seeds,
-        "bench_wall_s": wall,
-        "monte_carlo_wall_s": mc["_wall_s"],
-        "configurations": {k: v for k, v in mc.items() if not k.startswith("_")},
-        "before_one_drop_readme": {
-            k: dict(zip([c[0] for c in CONFIGS], v, strict=True)) for k, v in BEFORE_ONE_DROP.items()
-        },
-        "speed": sp,
-        "git": _git_state(),
-    }
-    print(markdown(mc, sp))
-    if a.json:
+
+    def write(mc: dict) -> None:
+        if not a.json:
+            return
+        results = {
+            "n_drops": len(next(v for k, v in mc.items() if not k.startswith("_"))["per_seed"]["seed"]),
+            "n_drops_requested": a.seeds,
+            "bench_wall_s": time.perf_counter() - t0,
+            "monte_carlo_wall_s": mc["_wall_s"],
+            "configurations": {k: v for k, v in mc.items() if not k.startswith("_")},
+            "before_one_drop_readme": {
+                k: dict(zip([c[0] for c in CONFIGS], v, strict=True)) for k, v in BEFORE_ONE_DROP.items()
+            },
+            "speed": sp,
+            "git": _git_state(),
+        }
         doc = {
             "benchmark": Path(__file__).stem,
             "command": " ".join([Path(sys.executable).name, *sys.argv]),
@@ -451,7 +471,12 @@ def main(argv: list[str] | None = None) -> int:
         out = Path(a.json)
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps(doc, indent=1, default=float, allow_nan=True))
-        print(f"\nwrote {out}")
+        print(f"wrote {out}", file=sys.stderr, flush=True)
+
+    with tempfile.TemporaryDirectory(prefix="droptest_mc_") as d:
+        mc = run_mc(a.seeds, a.scheduler, a.workers, Path(d), on_batch=write)
+    wall = time.perf_counter() - t0
+    print(markdown(mc, sp))  # after the JSON: a formatting slip cannot lose the run
     print(f"benchmark wall time {wall:.0f} s")
     return 0
 

@@ -72,7 +72,8 @@ class SeedResult:
     ``restitution_sigma`` reported σ_e (estimation and definition in quadrature) and
     ``restitution_sigma_estimation`` its estimation part alone [-]; ``restitution_truth`` [-] (same
     definition); ``restitution_error_touch_leave`` estimate − the truth at the instants the bags touch
-    and leave (another definition) [-];
+    and leave (another definition) [-]; ``restitution_error_before`` the error as scored before the
+    definition was revised (estimate at the ends of the 1 g contact interval − truth at touch/leave) [-];
     ``drop`` (len(DROP_PARAMETER_NAMES),) the drawn and solved drop parameters
     (:func:`~workbench.problems.droptest.synthetic.drop_parameters`);
     ``wall_time_s`` whole task; ``reconstruct_s`` the reconstruction alone.
@@ -96,6 +97,7 @@ class SeedResult:
     restitution_sigma_estimation: float = float("nan")
     restitution_truth: float = float("nan")
     restitution_error_touch_leave: float = float("nan")
+    restitution_error_before: float = float("nan")
     drop: np.ndarray = field(default_factory=lambda: np.full(len(DROP_PARAMETER_NAMES), np.nan))
 
 
@@ -107,7 +109,8 @@ class McResult:
     ``truth``, ``error`` (n,) [m], ``inside_3sigma`` (n,) bool, ``nees_pose_mean``,
     ``nees_pose_at_max``, ``nees_stroke``, ``restitution_error`` (n,), ``z_at_max`` (n, 15),
     ``nees_blocks_mean`` (n, 4), ``wall_time_s``, ``reconstruct_s`` (n,) [s], ``restitution_sigma``,
-    ``restitution_sigma_estimation``, ``restitution_truth``, ``restitution_error_touch_leave`` (n,),
+    ``restitution_sigma_estimation``, ``restitution_truth``, ``restitution_error_touch_leave``,
+    ``restitution_error_before`` (n,),
     ``drop`` (n, k) (columns
     :data:`~workbench.problems.droptest.synthetic.DROP_PARAMETER_NAMES`).  ``scenario`` name,
     ``mode`` filter mode, ``executor`` description, ``total_wall_s`` wall time of the whole
@@ -136,6 +139,7 @@ class McResult:
     restitution_sigma_estimation: np.ndarray | None = None
     restitution_truth: np.ndarray | None = None
     restitution_error_touch_leave: np.ndarray | None = None
+    restitution_error_before: np.ndarray | None = None
     drop: np.ndarray | None = None
 
     @property
@@ -148,7 +152,7 @@ class McResult:
         "seed", "max_stroke", "sigma", "truth", "error", "inside_3sigma", "nees_pose_mean",
         "nees_pose_at_max", "nees_stroke", "restitution_error", "z_at_max", "nees_blocks_mean",
         "restitution_sigma", "restitution_sigma_estimation", "restitution_truth", "restitution_error_touch_leave",
-        "drop",
+        "restitution_error_before", "drop",
     )  # fmt: skip
 
 
@@ -214,6 +218,9 @@ def run_seed(scenario: Scenario, seed: int, work_dir: str | Path) -> SeedResult:
         restitution_sigma_estimation=float(res.stroke.restitution_sigma_estimation),
         restitution_truth=float(sc["restitution_truth"]),
         restitution_error_touch_leave=float(sc["restitution_error_touch_leave"]),
+        restitution_error_before=float(
+            res.stroke.restitution_definitions.get("ends_1g", np.nan) - sc["restitution_truth_touch_leave"]
+        ),
         drop=np.asarray(truth["drop_parameters"], float),
     )
 
@@ -303,7 +310,9 @@ def summarize_mc(res: McResult, probability: float = 0.95) -> dict:
       ``restitution_fraction_inside_3sigma_estimation_only`` (the σ of the estimation alone, as
       reported before the definition term), ``restitution_abs_z_median`` / ``_p95`` of |error|/σ
       and the same for the estimation-only σ, and (``_touch_leave``) the reported σ against the truth at
-      the instants the bags touch and leave (another definition); ``restitution_sigma_median``;
+      the instants the bags touch and leave (another definition), and (``_before``) the error as scored
+      before the revision (1 g contact ends vs truth touch/leave) against the estimation-only σ;
+      ``restitution_sigma_median``;
     * ``drop_spread``: per drawn/solved drop parameter (``DROP_PARAMETER_NAMES``) min, median, max;
     * wall times [s].
     """
@@ -375,6 +384,8 @@ def _restitution_stats(res: McResult) -> dict:
     cases = [("", err, res.restitution_sigma), ("_estimation_only", err, res.restitution_sigma_estimation)]
     if res.restitution_error_touch_leave is not None:
         cases.append(("_touch_leave", np.asarray(res.restitution_error_touch_leave, float), res.restitution_sigma))
+    if res.restitution_error_before is not None:  # the old definition and its estimation-only σ
+        cases.append(("_before", np.asarray(res.restitution_error_before, float), res.restitution_sigma_estimation))
     for key, err, sig in cases:
         sig = np.asarray(sig, float)
         ok = np.isfinite(err) & np.isfinite(sig) & (sig > 0)
