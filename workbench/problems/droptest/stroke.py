@@ -473,7 +473,7 @@ def restitution_definitions(
     normal: np.ndarray,
     after: float,
     thresholds_g: tuple[float, ...] = RESTITUTION_THRESHOLDS_G,
-    merge_s: float = 0.03,
+    merge_s: float = 0.01,
     pad_s: float = 0.05,
     gravity: np.ndarray | None = None,
 ) -> RestitutionDefinitions:
@@ -485,9 +485,11 @@ def restitution_definitions(
             free side (v_I's frame); after: [s] contact is searched after this time (the cut).
         thresholds_g: contact thresholds [g = 9.80665 m/s²]: ``"ends_<thr>g"`` is
             ``−v_n(i1+1)/v_n(i0−1)`` around the interval of :func:`contact_interval` (dips shorter
-            than ``merge_s`` [s] bridged); an interval that does not contain the step of peak
-            |a| (a broken-up detection, not the impact) gives NaN.
-        pad_s: the primary (extremes) window is the lowest threshold's interval widened by this [s].
+            than ``merge_s`` [s] bridged); an interval whose ends are not within ``pad_s`` of the
+            extremes (the threshold splits this impact in two) gives NaN.
+        pad_s: the primary (extremes) window is the lowest threshold's interval widened by this [s]
+            on both sides, but ending where the acceleration next exceeds the lowest threshold (a
+            second touch-down is a new contact).
         gravity: (3,) [m/s²] gravity in v_I's frame; when given, ``"touch_leave"`` extrapolates
             ``v_n`` from the lowest threshold's crossings to the instants the bags touch and leave:
             the bag force is taken to rise linearly from zero (rise time = the time between the
@@ -512,14 +514,14 @@ def restitution_definitions(
         i0, i1 = contact_interval(t, a_I, after, thr * G0, merge_s)
         if i0 > 0 and i1 > i0:
             intervals.append((i0, i1))
-    k_peak = -1
-    if intervals:
-        i0, i1 = intervals[0]  # the lowest threshold's: the widest
-        k_peak = i0 + int(np.argmax(an[i0 : i1 + 1]))
     kmin = kmax = -1
     if intervals:
-        i0, i1 = intervals[0]
-        w = np.flatnonzero((t >= t[i0] - pad_s) & (t <= t[i1] + pad_s) & (t > after))
+        i0, i1 = intervals[0]  # the lowest threshold's: the widest
+        # window: from pad_s before the contact to pad_s after it, but not into a next contact
+        lo = float(np.min(thresholds_g)) * G0
+        nxt = np.flatnonzero((an > lo) & (np.arange(t.size) > i1))
+        t_end = min(t[i1] + pad_s, t[nxt[0]] if nxt.size else np.inf)
+        w = np.flatnonzero((t >= t[i0] - pad_s) & (t < t_end) & (t > after))
         kmin = int(w[np.argmin(vn[w])])
         w2 = w[w >= kmin]
         kmax = int(w2[np.argmax(vn[w2])])
@@ -530,7 +532,14 @@ def restitution_definitions(
     for thr in thresholds_g:
         i0, i1 = contact_interval(t, a_I, after, thr * G0, merge_s)
         e = np.nan
-        if i0 > 0 and i1 > i0 and i0 <= k_peak <= i1:
+        # an equivalent definition brackets the same impact: its ends within pad_s of the extremes
+        same = (
+            kmin >= 0
+            and i0 > 0
+            and abs(t[i0] - t[kmin]) <= pad_s
+            and abs(t[min(i1 + 1, t.size - 1)] - t[kmax]) <= pad_s
+        )
+        if same and i1 > i0:
             a, b = i0 - 1, min(i1 + 1, t.size - 1)
             if vn[a] < 0.0 < vn[b]:
                 e = float(-vn[b] / vn[a])
