@@ -13,6 +13,10 @@ written to CSV/TOML files in the documented user format (``io/FORMATS.md``):
 
 The truth is saved beside them in ``truth.npz`` for scoring and drawing only; the
 reconstruction (``problems.droptest.pipeline``) reads the telemetry files and never this one.
+
+A scenario run flies the scenario's own fixed, documented drop (``[synthetic]``); the Monte Carlo
+flies a different drop per seed, drawn by :func:`disperse_drop` within :class:`DropEnvelope` (the
+REDLand test envelope: impact speeds, attitude, bag pressure, timing, true bungee stiffness).
 """
 
 from __future__ import annotations
