@@ -264,3 +264,56 @@ def test_restitution_value_and_sigma():
         restitution(t, v, P, n, 3, 2)
     with pytest.raises(ValueError):
         restitution(t[:3], v[1:], P[1:], n, 1, 2)  # "before" is already leaving the surface
+
+
+def _pulse_history(gap_s: float = 0.0):
+    """A bounce on a flat surface (normal +z, gravity -z): free fall, then a triangular bag pulse of
+    peak 20 g over 0.2 s (rising linearly from zero, so touch and leave are the pulse's ends), then
+    flight; with ``gap_s`` > 0 a second, separate 0.1 s pulse after that gap (a second touch-down)."""
+    g = 9.80665
+    dt = 1e-4
+    t = np.arange(0.0, 1.0, dt)
+    a = np.zeros_like(t)
+    t0, T = 0.2, 0.2
+    a += np.clip(20 * g * (1 - np.abs(t - t0 - T / 2) / (T / 2)), 0.0, None)
+    if gap_s:
+        t2 = t0 + T + gap_s
+        a += np.clip(8 * g * (1 - np.abs(t - t2 - 0.05) / 0.05), 0.0, None)
+    vz = -10.0 + np.concatenate([[0.0], np.cumsum(0.5 * (a[1:] + a[:-1]) - g) * dt])
+    v = np.column_stack([np.zeros_like(t), np.zeros_like(t), vz])
+    A = np.column_stack([np.zeros_like(t), np.zeros_like(t), a])
+    return t, v, A, np.array([0.0, 0.0, -g]), (t0, t0 + T)
+
+
+def test_restitution_definitions_on_a_known_pulse():
+    from workbench.problems.droptest.stroke import restitution_definitions
+
+    t, v, A, grav, (t_touch, t_leave) = _pulse_history()
+    n = np.array([0.0, 0.0, 1.0])
+    rd = restitution_definitions(t, v, A, n, after=0.0, gravity=grav)
+    vn = v[:, 2]
+    # primary: the extremes of v_n (where the bag force equals gravity: a = 1 g on this flat floor)
+    assert rd.primary == pytest.approx(-vn.max() / vn.min(), rel=1e-12)
+    assert vn[rd.i_before] == vn.min() and vn[rd.i_after] == pytest.approx(vn[t < 0.6].max())
+    # the physical touch/leave value differs (gravity acts while the force is still small) ...
+    e_tl = -np.interp(t_leave, t, vn) / np.interp(t_touch, t, vn)
+    assert abs(e_tl - rd.primary) > 5e-4
+    # ... and the extrapolation to touch/leave finds it (a linear rise is exact here)
+    assert rd.values["touch_leave"] == pytest.approx(e_tl, abs=5e-5)
+    for k in ("ends_0.25g", "ends_0.5g", "ends_1g"):
+        assert np.isfinite(rd.values[k])
+    # the definition spread covers the touch/leave value
+    assert rd.spread >= abs(e_tl - rd.primary) - 5e-5
+
+
+def test_restitution_definitions_stop_at_a_second_touch_down():
+    from workbench.problems.droptest.stroke import restitution_definitions
+
+    t, v, A, grav, _ = _pulse_history(gap_s=0.03)
+    n = np.array([0.0, 0.0, 1.0])
+    rd = restitution_definitions(t, v, A, n, after=0.0, gravity=grav)
+    t1, v1, A1, _, _ = _pulse_history()
+    first = restitution_definitions(t1, v1, A1, n, after=0.0, gravity=grav)
+    # the second pulse (after a 30 ms separation) is not part of the first impact's restitution
+    assert rd.primary == pytest.approx(first.primary, rel=1e-9)
+    assert t[rd.i_after] < 0.43

@@ -3,9 +3,14 @@
 Each task (:func:`run_seed`) writes the telemetry of its seed into its own temporary subfolder
 of ``work_dir``, runs :func:`workbench.problems.droptest.pipeline.run_droptest`, scores the result against
 the truth with :func:`workbench.problems.droptest.pipeline.score` plus the consistency numbers below, and
-deletes the subfolder.  The truth trajectory is deterministic per scenario; every random draw of
-a task (sensor noise, bias, scale, 3DM errors, survey error, ranging noise, the posterior sampling
-of the stroke-σ check) comes from its seed alone, so the results do not depend on the executor
+deletes the subfolder.  Every seed is a *different drop*: the impact speeds, release attitude, bag
+pressure, timing and true bungee stiffness are drawn by
+:func:`workbench.problems.droptest.synthetic.disperse_drop` within the REDLand test envelope
+(:class:`~workbench.problems.droptest.synthetic.DropEnvelope`), and the release point and bungee
+count follow from them; the truth simulator (its own airbag contact physics) flies that drop.
+Every random draw of a task (the drop, sensor noise, bias, scale, 3DM errors, survey error,
+ranging noise, the posterior sampling of the stroke-σ check) comes from its seed alone, so the
+results do not depend on the executor
 (:func:`workbench.estimation.montecarlo.run_monte_carlo`, one BLAS thread everywhere):
 
 * ``scheduler=None, workers=1`` — a plain loop in this process;
@@ -31,12 +36,11 @@ Error convention (the filter's, docs/ARCHITECTURE.md): ``truth = estimate ⊞ δ
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import shutil
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -44,8 +48,9 @@ import numpy as np
 from workbench.estimation.montecarlo import resolve_scheduler, run_monte_carlo
 from workbench.io.scenario import Scenario
 from workbench.problems.droptest.config import config_for
+from workbench.problems.droptest.synthetic import DROP_PARAMETER_NAMES
 
-__all__ = ["McResult", "SeedResult", "run_seed", "monte_carlo", "summarize_mc", "Z_NAMES"]
+__all__ = ["McResult", "SeedResult", "run_seed", "monte_carlo", "stack_results", "summarize_mc", "Z_NAMES"]
 
 #: Names of the columns of ``z_at_max``: position [SPF], velocity [SPF], attitude δθ [body],
 #: body rate ω [body], gyro scale factors.
@@ -64,6 +69,13 @@ class SeedResult:
     pose NEES at the max-stroke step; ``nees_stroke`` ``(error/σ)²``; ``restitution_error``
     estimate − truth [-]; ``z_at_max`` (15,) δ/σ per state of :data:`Z_NAMES`;
     ``nees_blocks_mean`` (4,) time-averaged 3-dof NEES of p, v, θ, ω over the run;
+    ``restitution_sigma`` reported σ_e (estimation and definition in quadrature) and
+    ``restitution_sigma_estimation`` its estimation part alone [-]; ``restitution_truth`` [-] (same
+    definition); ``restitution_error_touch_leave`` estimate − the truth at the instants the bags touch
+    and leave (another definition) [-]; ``restitution_error_before`` the error as scored before the
+    definition was revised (estimate at the ends of the 1 g contact interval − truth at touch/leave) [-];
+    ``drop`` (len(DROP_PARAMETER_NAMES),) the drawn and solved drop parameters
+    (:func:`~workbench.problems.droptest.synthetic.drop_parameters`);
     ``wall_time_s`` whole task; ``reconstruct_s`` the reconstruction alone.
     """
 
@@ -81,6 +93,12 @@ class SeedResult:
     nees_blocks_mean: np.ndarray
     wall_time_s: float
     reconstruct_s: float
+    restitution_sigma: float = float("nan")
+    restitution_sigma_estimation: float = float("nan")
+    restitution_truth: float = float("nan")
+    restitution_error_touch_leave: float = float("nan")
+    restitution_error_before: float = float("nan")
+    drop: np.ndarray = field(default_factory=lambda: np.full(len(DROP_PARAMETER_NAMES), np.nan))
 
 
 @dataclass(frozen=True)
@@ -90,7 +108,11 @@ class McResult:
     Fields as in :class:`SeedResult` but stacked: ``seed`` (n,) int, ``max_stroke``, ``sigma``,
     ``truth``, ``error`` (n,) [m], ``inside_3sigma`` (n,) bool, ``nees_pose_mean``,
     ``nees_pose_at_max``, ``nees_stroke``, ``restitution_error`` (n,), ``z_at_max`` (n, 15),
-    ``nees_blocks_mean`` (n, 4), ``wall_time_s``, ``reconstruct_s`` (n,) [s].  ``scenario`` name,
+    ``nees_blocks_mean`` (n, 4), ``wall_time_s``, ``reconstruct_s`` (n,) [s], ``restitution_sigma``,
+    ``restitution_sigma_estimation``, ``restitution_truth``, ``restitution_error_touch_leave``,
+    ``restitution_error_before`` (n,),
+    ``drop`` (n, k) (columns
+    :data:`~workbench.problems.droptest.synthetic.DROP_PARAMETER_NAMES`).  ``scenario`` name,
     ``mode`` filter mode, ``executor`` description, ``total_wall_s`` wall time of the whole
     Monte Carlo [s].
     """
@@ -113,6 +135,12 @@ class McResult:
     nees_blocks_mean: np.ndarray
     wall_time_s: np.ndarray
     reconstruct_s: np.ndarray
+    restitution_sigma: np.ndarray | None = None
+    restitution_sigma_estimation: np.ndarray | None = None
+    restitution_truth: np.ndarray | None = None
+    restitution_error_touch_leave: np.ndarray | None = None
+    restitution_error_before: np.ndarray | None = None
+    drop: np.ndarray | None = None
 
     @property
     def n_runs(self) -> int:
@@ -123,12 +151,15 @@ class McResult:
     DETERMINISTIC = (
         "seed", "max_stroke", "sigma", "truth", "error", "inside_3sigma", "nees_pose_mean",
         "nees_pose_at_max", "nees_stroke", "restitution_error", "z_at_max", "nees_blocks_mean",
+        "restitution_sigma", "restitution_sigma_estimation", "restitution_truth", "restitution_error_touch_leave",
+        "restitution_error_before", "drop",
     )  # fmt: skip
 
 
 def run_seed(scenario: Scenario, seed: int, work_dir: str | Path) -> SeedResult:
-    """One Monte Carlo task: synthesize the drop with ``seed`` into a fresh subfolder of
-    ``work_dir``, reconstruct (posterior-sampling seed = ``seed``), score, delete the subfolder."""
+    """One Monte Carlo task: synthesize drop ``seed`` (a different drop per seed,
+    ``synthesize_droptest(..., disperse=True)``) into a fresh subfolder of ``work_dir``,
+    reconstruct (posterior-sampling seed = ``seed``), score, delete the subfolder."""
     from workbench.core.rotation import attitude_error
     from workbench.estimation.consistency import nees
     from workbench.problems.droptest import model as rl
@@ -140,7 +171,7 @@ def run_seed(scenario: Scenario, seed: int, work_dir: str | Path) -> SeedResult:
     work.mkdir(parents=True, exist_ok=True)
     sub = Path(tempfile.mkdtemp(prefix=f"seed{int(seed):06d}_", dir=work))
     try:
-        syn = synthesize_droptest(scenario, sub, seed=int(seed))
+        syn = synthesize_droptest(scenario, sub, seed=int(seed), disperse=True)
         truth = load_truth(syn.truth_path)
         t1 = time.perf_counter()
         res = run_droptest(scenario, syn.telemetry, seed=int(seed))
@@ -183,14 +214,15 @@ def run_seed(scenario: Scenario, seed: int, work_dir: str | Path) -> SeedResult:
         nees_blocks_mean=np.array(blocks),
         wall_time_s=time.perf_counter() - t0,
         reconstruct_s=t2 - t1,
+        restitution_sigma=float(res.stroke.restitution[1]),
+        restitution_sigma_estimation=float(res.stroke.restitution_sigma_estimation),
+        restitution_truth=float(sc["restitution_truth"]),
+        restitution_error_touch_leave=float(sc["restitution_error_touch_leave"]),
+        restitution_error_before=float(
+            res.stroke.restitution_definitions.get("ends_1g", np.nan) - sc["restitution_truth_touch_leave"]
+        ),
+        drop=np.asarray(truth["drop_parameters"], float),
     )
-
-
-def _prime_truth(scenario: Scenario) -> None:
-    """Compute the (cached, deterministic) truth in this process so forked workers inherit it."""
-    from workbench.problems.droptest.synthetic import truth_for
-
-    truth_for(scenario)
 
 
 def _seed_task(shared: tuple[Scenario, list[int], Path], k: int, _ss: None) -> SeedResult:
@@ -224,9 +256,7 @@ def monte_carlo(
         raise ValueError("monte_carlo: repeated seeds")
     work = Path(work_dir)
     work.mkdir(parents=True, exist_ok=True)
-    kind = resolve_scheduler(scheduler, workers)
-    if kind == "processes" and mp.get_context().get_start_method() == "fork":
-        _prime_truth(scenario)  # workers inherit the cached truth instead of each recomputing it
+    resolve_scheduler(scheduler, workers)  # refuses a bad scheduler/workers pair before any work
     # one BLAS thread in every executor (run_monte_carlo): BLAS reductions are only bitwise reproducible
     # for a fixed thread count, and two busy-waiting pools on two cores made each reconstruction ~10x
     # slower (measured 2.5 s -> 20-45 s)
@@ -239,18 +269,19 @@ def monte_carlo(
         scheduler=scheduler,
         name="droptest-seed",
     )
-    out = run.results
     executor = "loop" if run.kind == "loop" else run.executor
-    total = time.perf_counter() - t0
-    cols = {}
-    for f in fields(SeedResult):
-        vals = [getattr(r, f.name) for r in out]
-        cols[f.name] = np.array(vals)
+    return stack_results(scenario, run.results, executor, time.perf_counter() - t0)
+
+
+def stack_results(scenario: Scenario, results: Sequence[SeedResult], executor: str, total_wall_s: float) -> McResult:
+    """Stack per-seed results (in the given order) into an :class:`McResult` of ``scenario``;
+    ``executor`` describes how they ran, ``total_wall_s`` [s] the wall time of the whole run."""
+    cols = {f.name: np.array([getattr(r, f.name) for r in results]) for f in fields(SeedResult)}
     return McResult(
         scenario=scenario.name,
         mode=config_for(scenario).mode,
         executor=executor,
-        total_wall_s=total,
+        total_wall_s=float(total_wall_s),
         **cols,
     )
 
@@ -274,7 +305,16 @@ def summarize_mc(res: McResult, probability: float = 0.95) -> dict:
     * ``z2_at_max_mean`` — per state of :data:`Z_NAMES`, the mean over runs of (δ/σ)² at max stroke
       (≈ 1 if consistent; ≫ 1 over-confident, ≪ 1 under-confident), its band
       ``anees_bounds(1, n_runs, probability)``, and ``nees_blocks_time_avg`` (p, v, θ, ω; 3 dof);
-    * restitution error median/p95 of |·|, wall times [s].
+    * restitution error median/p95 of |·|; ``restitution_fraction_inside_3sigma`` (|error| ≤ 3σ with
+      the reported σ, estimation and definition in quadrature) beside
+      ``restitution_fraction_inside_3sigma_estimation_only`` (the σ of the estimation alone, as
+      reported before the definition term), ``restitution_abs_z_median`` / ``_p95`` of |error|/σ
+      and the same for the estimation-only σ, and (``_touch_leave``) the reported σ against the truth at
+      the instants the bags touch and leave (another definition), and (``_before``) the error as scored
+      before the revision (1 g contact ends vs truth touch/leave) against the estimation-only σ;
+      ``restitution_sigma_median``;
+    * ``drop_spread``: per drawn/solved drop parameter (``DROP_PARAMETER_NAMES``) min, median, max;
+    * wall times [s].
     """
     from workbench.estimation.consistency import anees_bounds
 
@@ -290,6 +330,14 @@ def summarize_mc(res: McResult, probability: float = 0.95) -> dict:
     a_str = float(np.mean(res.nees_stroke))
     z2 = np.mean(res.z_at_max**2, axis=0)
     rest = res.restitution_error[np.isfinite(res.restitution_error)]
+    rest_stats = _restitution_stats(res)
+    drop_spread = {}
+    if res.drop is not None and np.size(res.drop):
+        for j, name in enumerate(DROP_PARAMETER_NAMES):
+            col = np.asarray(res.drop, float).reshape(n, -1)[:, j]
+            col = col[np.isfinite(col)]
+            if col.size:
+                drop_spread[name] = {"min": float(col.min()), "median": float(np.median(col)), "max": float(col.max())}
     blocks = np.mean(res.nees_blocks_mean, axis=0)
     return {
         "scenario": res.scenario,
@@ -319,7 +367,35 @@ def summarize_mc(res: McResult, probability: float = 0.95) -> dict:
         "nees_block_band": list(b3),
         "restitution_abs_error_median": float(np.median(np.abs(rest))) if rest.size else float("nan"),
         "restitution_abs_error_p95": float(np.percentile(np.abs(rest), 95)) if rest.size else float("nan"),
+        **rest_stats,
+        "drop_spread": drop_spread,
         "task_wall_median_s": float(np.median(res.wall_time_s)),
         "reconstruct_median_s": float(np.median(res.reconstruct_s)),
         "total_wall_s": float(res.total_wall_s),
     }
+
+
+def _restitution_stats(res: McResult) -> dict:
+    """Restitution error against its reported σ and against the estimation-only σ (see summarize_mc)."""
+    out: dict = {}
+    if res.restitution_sigma is None:
+        return out
+    err = np.asarray(res.restitution_error, float)
+    cases = [("", err, res.restitution_sigma), ("_estimation_only", err, res.restitution_sigma_estimation)]
+    if res.restitution_error_touch_leave is not None:
+        cases.append(("_touch_leave", np.asarray(res.restitution_error_touch_leave, float), res.restitution_sigma))
+    if res.restitution_error_before is not None:  # the old definition and its estimation-only σ
+        cases.append(("_before", np.asarray(res.restitution_error_before, float), res.restitution_sigma_estimation))
+    for key, err, sig in cases:
+        sig = np.asarray(sig, float)
+        ok = np.isfinite(err) & np.isfinite(sig) & (sig > 0)
+        if not ok.any():
+            continue
+        z = np.abs(err[ok] / sig[ok])
+        out[f"restitution_fraction_inside_3sigma{key}"] = float(np.mean(z <= 3.0))
+        out[f"restitution_abs_z_median{key}"] = float(np.median(z))
+        out[f"restitution_abs_z_p95{key}"] = float(np.percentile(z, 95))
+        out[f"restitution_sigma_median{key}"] = float(np.median(sig[ok]))
+        out[f"restitution_abs_error_median{key}"] = float(np.median(np.abs(err[ok])))
+        out[f"restitution_n{key}"] = int(ok.sum())
+    return out

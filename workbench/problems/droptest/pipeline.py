@@ -45,8 +45,10 @@ from workbench.problems.droptest.sensors import RangingSpec
 from workbench.problems.droptest.stroke import (
     MaxStroke,
     StrokeHistory,
+    contact_interval,
     max_stroke,
     restitution,
+    restitution_definitions,
     sampled_stroke_sigma,
     stroke_history,
 )
@@ -63,6 +65,15 @@ __all__ = [
 ]
 
 GRAVITY = np.array([0.0, 0.0, -G0])
+
+#: the restitution definition, as the summary and scorecard state it
+RESTITUTION_DEFINITION = (
+    "e = -max(v_n)/min(v_n), v_n the smoothed CM velocity along the ramp normal, its minimum (approaching) and "
+    "its maximum after it (leaving) over the first contact, i.e. where the bag normal force equals the normal "
+    "component of gravity; sigma = sqrt(sigma_estimation^2 + sigma_definition^2), sigma_definition = the largest "
+    "difference from v_n just outside the contact interval detected at 0.25, 0.5 or 1 g and from v_n extrapolated "
+    "to the instants the bags touch and leave"
+)
 
 
 def layout_for(n_triads: int) -> ErrorStateLayout:
@@ -111,7 +122,11 @@ class StrokeStage:
 
     ``smoothed``/``forward`` :class:`StrokeHistory` (n steps); ``max`` the maximum-stroke event;
     ``sampled_sigma`` 1σ at max stroke from 4000 posterior samples (check of the linearisation);
-    ``restitution`` (e, σ_e) from the ramp-normal CM velocity before/after the impact;
+    ``restitution`` (e, σ_e) from the ramp-normal CM velocity before/after the impact (definition in
+    :mod:`.stroke`), σ_e = √(σ_est² + σ_def²); ``restitution_sigma_estimation`` σ_est (smoothed
+    covariance, with the cross-covariance of the two epochs); ``restitution_sigma_definition``
+    σ_def = the largest |difference| of the equivalent definitions of
+    :func:`~.stroke.restitution_definitions` (``restitution_definitions``: name → e) from e;
     ``contact`` (i_start, i_end) filter indices of the airbag contact detected from the estimated
     non-gravitational acceleration; ``surface`` the ramp; ``lander`` the model.
     """
@@ -125,6 +140,9 @@ class StrokeStage:
     contact: tuple[int, int]
     surface: Surface = field(repr=False)
     lander: LanderModel = field(repr=False)
+    restitution_sigma_estimation: float = float("nan")
+    restitution_sigma_definition: float = float("nan")
+    restitution_definitions: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -385,25 +403,6 @@ def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, l
 # ---------------------------------------------------------------------------------------------
 
 
-def _contact_interval(
-    t: np.ndarray, a: np.ndarray, after: float, threshold: float = 1.0 * G0, merge_s: float = 0.01
-) -> tuple[int, int]:
-    """First airbag contact: first interval after ``after`` where |a_ng| > ``threshold`` (the bags
-    push), bridging dips shorter than ``merge_s`` (noise). A later separate touch-down (a second
-    bounce) is a new contact and is not part of the first impact's restitution."""
-    busy = (np.linalg.norm(a, axis=1) > threshold) & (t > after)
-    if not busy.any():
-        return -1, -1
-    idx = np.flatnonzero(busy)
-    i0 = int(idx[0])
-    i1 = i0
-    for j in idx[1:]:
-        if t[j] - t[i1] > merge_s:
-            break
-        i1 = int(j)
-    return i0, i1
-
-
 def stroke_stage(
     fwd: FilterStage,
     smo: FilterStage,
@@ -418,7 +417,7 @@ def stroke_stage(
     hist = stroke_history(verts, smo.x[:, rl.SP], smo.x[:, rl.SQ], rl.pose_covariance(smo.P), surface, faces_B=faces)
     hist_f = stroke_history(verts, fwd.x[:, rl.SP], fwd.x[:, rl.SQ], rl.pose_covariance(fwd.P), surface, faces_B=faces)
     after = events.get("bungee_cut", events["release"])
-    i0, i1 = _contact_interval(smo.t, smo.x[:, rl.SA], after)
+    i0, i1 = contact_interval(smo.t, smo.x[:, rl.SA], after, 1.0 * G0)
     mask = smo.t >= events["release"]  # the closest approach after release is the max stroke
     sub = _subset(hist, mask)
     ms = max_stroke(smo.t[mask], sub, lander.body)
@@ -434,25 +433,30 @@ def stroke_stage(
         rng,
         faces_B=faces,
     )
+    # restitution, primary definition (extremes of the ramp-normal velocity, module stroke), with its
+    # estimation σ from the smoothed covariance of the two epochs and their cross-covariance, and
+    # the spread of the equivalent definitions as its definition σ
+    rd = restitution_definitions(smo.t, smo.x[:, rl.SV], smo.x[:, rl.SA], surface.normal, after, gravity=GRAVITY)
     e = (np.nan, np.nan)
-    if i0 > 0 and i1 > i0:
-        a, b = i0 - 1, min(i1 + 1, smo.t.size - 1)
+    if rd.i_before >= 0:
+        a, b = rd.i_before, rd.i_after
         P_cross = _smoothed_cross_cov(smo, a, b)
-        P_v = smo.P[:, rl.EV, rl.EV]
-        v_in, v_out = smo.x[a, rl.SV] @ surface.normal, smo.x[b, rl.SV] @ surface.normal
-        if v_in < 0.0 < v_out:  # approaching before, leaving after: a rebound to measure
-            e = restitution(smo.t, smo.x[:, rl.SV], P_v, surface.normal, a, b, P_cross=P_cross[rl.EV, rl.EV])
-        # otherwise undefined (no rebound, or the detected interval is not an impact): NaN
+        e = restitution(smo.t, smo.x[:, rl.SV], smo.P[:, rl.EV, rl.EV], surface.normal, a, b, P_cross[rl.EV, rl.EV])
+    s_est = float(e[1])
+    s_def = rd.spread if np.isfinite(rd.spread) else 0.0
     return StrokeStage(
         smoothed=hist,
         forward=hist_f,
         max=ms,
         sampled_sigma=float(std[0]),
         sampled_mean=float(mean[0]),
-        restitution=(float(e[0]), float(e[1])),
+        restitution=(float(e[0]), float(np.hypot(s_est, s_def))),
         contact=(i0, i1),
         surface=surface,
         lander=lander,
+        restitution_sigma_estimation=s_est,
+        restitution_sigma_definition=s_def,
+        restitution_definitions=dict(rd.values),
     )
 
 
@@ -571,7 +575,14 @@ def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: Fil
             "full_stroke": bool(ms.full_stroke),
             "possible_full_stroke": bool(ms.possible_full_stroke),
         },
-        "restitution": {"e": st.restitution[0], "sigma": st.restitution[1]},
+        "restitution": {
+            "e": st.restitution[0],
+            "sigma": st.restitution[1],
+            "sigma_estimation": st.restitution_sigma_estimation,
+            "sigma_definition": st.restitution_sigma_definition,
+            "definitions": dict(st.restitution_definitions),
+            "definition": RESTITUTION_DEFINITION,
+        },
         "contact": {
             "start_s": float(smo.t[st.contact[0]]) if st.contact[0] >= 0 else None,
             "end_s": float(smo.t[st.contact[1]]) if st.contact[1] >= 0 else None,
@@ -644,7 +655,9 @@ def score(result: DropResult, truth: dict) -> dict:
     e6 = np.concatenate([err_p, err_th], axis=1)
     nees6 = nees(e6, rl.pose_covariance(smo.P))
     lo, hi = anees_bounds(6, smo.t.size)  # band of a time average if steps were independent
-    # truth restitution from the same normal-velocity definition, at the truth contact interval
+    # truth restitution by the primary definition (extremes of v_n) on the truth history, and at the
+    # instants the bags physically touch and leave (total bag force > 1 N: the truth simulator's
+    # events), a definition the IMU cannot see; the reported σ carries a definition term for that
     n = st.surface.normal
     ev = truth["events"]
     e_true = np.nan
@@ -652,6 +665,10 @@ def score(result: DropResult, truth: dict) -> dict:
         vb = np.interp(ev["first_contact"], truth["t"], truth["v_I"] @ n)
         va = np.interp(ev["rebound"], truth["t"], truth["v_I"] @ n)
         e_true = float(-va / vb) if va > 0.0 else np.nan  # no rebound: undefined
+    after = ev.get("bungee_cut", 0.0)
+    rd_true = restitution_definitions(truth["t"], truth["v_I"], truth["a_ng_I"], n, after, gravity=GRAVITY)
+    e_est, s_e = st.restitution
+    e_prim = rd_true.primary
     sig_p = np.sqrt(np.einsum("nii->ni", smo.P[:, rl.EP, rl.EP]))
     return {
         "max_stroke_truth_m": d_true,
@@ -665,8 +682,13 @@ def score(result: DropResult, truth: dict) -> dict:
         "attitude_error_max_deg": float(np.degrees(np.max(np.linalg.norm(err_th, axis=1)))),
         "nees_pose_mean": float(np.mean(nees6)),
         "nees_pose_band_one_run": [lo, hi],
-        "restitution_truth": e_true,
-        "restitution_error": float(st.restitution[0] - e_true),
+        "restitution_truth": e_prim,
+        "restitution_error": float(e_est - e_prim),
+        "restitution_error_over_sigma": float((e_est - e_prim) / s_e),
+        "restitution_inside_3sigma": bool(abs(e_est - e_prim) <= 3.0 * s_e),
+        "restitution_truth_touch_leave": e_true,
+        "restitution_error_touch_leave": float(e_est - e_true),
+        "restitution_truth_definitions": dict(rd_true.values),
         "full_stroke_truth": bool(np.max(truth["body_penetration"]) > 0.0),
     }
 
@@ -691,13 +713,16 @@ def scorecard_markdown(summary: dict) -> str:
         f"{' (within 3σ: possible)' if ms['possible_full_stroke'] and not ms['full_stroke'] else ''} |",
         "| coefficient of restitution | "
         + (
-            f"{e['e']:.3f} ± {e['sigma']:.3f} (1σ) |"
+            f"{e['e']:.3f} ± {e['sigma']:.3f} (1σ: estimation {e.get('sigma_estimation', np.nan):.4f}, "
+            f"definition {e.get('sigma_definition', np.nan):.4f}, in quadrature) |"
             if np.isfinite(e["e"])
             else "undefined (no rebound off the ramp) |"
         ),
         f"| covariance | symmetric (max asym {summary['covariance']['max_asymmetry']:.1e}), "
         f"min eigenvalue {summary['covariance']['min_eigenvalue']:.2e} |",
     ]
+    if "definition" in e:
+        lines += ["", f"Restitution definition: {e['definition']}."]
     if "truth" in summary:
         tr = summary["truth"]
         lines += [
@@ -714,7 +739,22 @@ def scorecard_markdown(summary: dict) -> str:
             f"(max {tr['position_error_over_sigma_max']:.1f} σ per axis) |",
             f"| max attitude error | {tr['attitude_error_max_deg']:.2f} deg |",
             f"| smoothed pose NEES (6 dof, mean over run) | {tr['nees_pose_mean']:.2f} |",
-            f"| restitution truth / error | {tr['restitution_truth']:.3f} / {tr['restitution_error']:+.3f} |",
+            f"| restitution truth (same definition) / error | {tr['restitution_truth']:.3f} / "
+            f"{tr['restitution_error']:+.4f}"
+            + (
+                f" = {tr['restitution_error_over_sigma']:+.2f} σ "
+                f"({'inside' if tr['restitution_inside_3sigma'] else '**outside**'} 3σ) |"
+                if "restitution_error_over_sigma" in tr
+                else " |"
+            ),
+            *(
+                [
+                    f"| restitution truth at bags touch / leave (another definition) / error | "
+                    f"{tr['restitution_truth_touch_leave']:.3f} / {tr['restitution_error_touch_leave']:+.4f} |"
+                ]
+                if "restitution_truth_touch_leave" in tr
+                else []
+            ),
             f"| truth full stroke | {'yes' if tr['full_stroke_truth'] else 'no'} |",
         ]
     lines += [

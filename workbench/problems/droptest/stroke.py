@@ -10,7 +10,25 @@ restitution coefficient is "the ratio of velocity after the impact to the veloci
 impact in the surface normal direction".
 
 Provides :class:`StrokeHistory`, :func:`stroke_history`, :func:`sampled_stroke_sigma`,
-:class:`MaxStroke`, :func:`max_stroke`, :func:`restitution`.
+:class:`MaxStroke`, :func:`max_stroke`, :func:`restitution`, :func:`contact_interval`,
+:func:`restitution_definitions`.
+
+Restitution: which velocities, exactly.  The paper names the ratio but not the instants.  The
+reported value (the *primary* definition) is ``e = −max v_n / min v_n``: ``v_n = n·v`` the CM
+velocity along the ramp normal n, its minimum (most negative, approaching) and its maximum
+after that minimum (leaving), both over the first contact.  These extremes are where the bag's
+normal force equals the normal component of gravity (``m g cos α`` on a ramp of inclination α);
+they are stationary points of ``v_n``, so e does not depend on how exactly contact is detected.
+Equivalent readings of the same sentence give different numbers, because gravity keeps acting
+on ``v_n`` while the bag force is still small: ``v_n`` at the instants the bags physically touch
+and leave (a truth simulator's natural choice), or just outside the interval where the
+non-gravitational acceleration exceeds a threshold (0.25, 0.5 or 1 g; higher thresholds cut
+the contact in two where the load has a long low tail), and the touch/leave instants
+extrapolated from the lowest threshold's crossings.
+:func:`restitution_definitions` evaluates them all on one velocity history; their largest
+difference from the primary value is the *definition* term of the reported σ, which is
+the reported σ, added in quadrature to the estimation σ of :func:`restitution` (evaluated at the
+two extremes, with their smoothed cross-covariance).
 
 Pose and attitude-error convention (docs/ARCHITECTURE.md, ``core/rotation.py``).  ``q_I_B`` maps body to
 chamber frame, ``x_I = p_I + C_I_B r_B``.  The pose error is the 6-vector ``[δp_I, δθ]``:
@@ -48,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from workbench.core.bodies import G0
 from workbench.core.rotation import quat_boxplus, quat_to_dcm
 from workbench.problems.droptest.surface import Surface
 
@@ -58,7 +77,14 @@ __all__ = [
     "MaxStroke",
     "max_stroke",
     "restitution",
+    "contact_interval",
+    "restitution_definitions",
+    "RestitutionDefinitions",
+    "RESTITUTION_THRESHOLDS_G",
 ]
+
+#: contact-detection thresholds [g] of the alternative ("ends") restitution definitions
+RESTITUTION_THRESHOLDS_G: tuple[float, ...] = (0.25, 0.5, 1.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -396,3 +422,138 @@ def restitution(
     if P_cross is not None:
         var += -2.0 * (a / b**3) * float(n @ np.asarray(P_cross, dtype=float) @ n)
     return e, float(np.sqrt(max(var, 0.0)))
+
+
+def contact_interval(
+    t: np.ndarray, a: np.ndarray, after: float, threshold: float, merge_s: float = 0.01
+) -> tuple[int, int]:
+    """First contact interval: first and last step index after ``after`` [s] where the norm of the
+    non-gravitational acceleration ``a`` (n, 3) [m/s², any frame] exceeds ``threshold`` [m/s²],
+    bridging dips shorter than ``merge_s`` [s] (noise).  A later separate touch-down (a second
+    bounce) is a new contact and not part of it.  ``(-1, -1)`` if there is none."""
+    t = np.asarray(t, dtype=float)
+    busy = (np.linalg.norm(np.asarray(a, dtype=float), axis=1) > threshold) & (t > after)
+    if not busy.any():
+        return -1, -1
+    idx = np.flatnonzero(busy)
+    i0 = int(idx[0])
+    i1 = i0
+    for j in idx[1:]:
+        if t[j] - t[i1] > merge_s:
+            break
+        i1 = int(j)
+    return i0, i1
+
+
+@dataclass(frozen=True)
+class RestitutionDefinitions:
+    """The coefficient of restitution of one history by each equivalent definition.
+
+    ``values``: name → e [-] (NaN when that definition finds no rebound): ``"extremes"`` (the
+    primary one) and ``"ends_<thr>g"`` per contact threshold; ``i_before`` / ``i_after`` the step
+    indices of the primary definition's two velocities (min and max of ``v_n``; -1 if none);
+    ``spread`` the largest |value − primary| over the other finite values (NaN if none).
+    """
+
+    values: dict
+    i_before: int
+    i_after: int
+    spread: float
+
+    @property
+    def primary(self) -> float:
+        """e by the primary definition (extremes of the normal velocity) [-]."""
+        return float(self.values["extremes"])
+
+
+def restitution_definitions(
+    t: np.ndarray,
+    v_I: np.ndarray,
+    a_I: np.ndarray,
+    normal: np.ndarray,
+    after: float,
+    thresholds_g: tuple[float, ...] = RESTITUTION_THRESHOLDS_G,
+    merge_s: float = 0.01,
+    pad_s: float = 0.05,
+    gravity: np.ndarray | None = None,
+) -> RestitutionDefinitions:
+    """The coefficient of restitution by each equivalent definition (module docstring), on one history.
+
+    Args:
+        t: (n,) [s]; v_I: (n, 3) [m/s] CM velocity; a_I: (n, 3) [m/s²] non-gravitational
+            acceleration (any frame: only its norm is used); normal: (3,) ramp normal toward the
+            free side (v_I's frame); after: [s] contact is searched after this time (the cut).
+        thresholds_g: contact thresholds [g = 9.80665 m/s²]: ``"ends_<thr>g"`` is
+            ``−v_n(i1+1)/v_n(i0−1)`` around the interval of :func:`contact_interval` (dips shorter
+            than ``merge_s`` [s] bridged); an interval whose ends are not within ``pad_s`` of the
+            extremes (the threshold splits this impact in two) gives NaN.
+        pad_s: the primary (extremes) window is the lowest threshold's interval widened by this [s]
+            on both sides, but ending where the acceleration next exceeds the lowest threshold (a
+            second touch-down is a new contact).
+        gravity: (3,) [m/s²] gravity in v_I's frame; when given, ``"touch_leave"`` extrapolates
+            ``v_n`` from the lowest threshold's crossings to the instants the bags touch and leave:
+            the bag force is taken to rise linearly from zero (rise time = the time between the
+            crossings of the two lowest thresholds), so over that time ``v_n`` changes by
+            ``(a_thr/2 − g_n) Δt`` with ``g_n`` = −gravity·n.
+
+    Primary, ``"extremes"``: ``e = −max v_n / min v_n``, the minimum of ``v_n`` over the window and
+    the maximum after it.  These are the instants where the bag's normal force equals the normal
+    component of gravity; being stationary points of ``v_n``, they make ``e`` insensitive to the
+    timing of the contact detection.  A definition without a rebound (``v_n`` not negative before
+    and positive after) is NaN.
+    """
+    t = np.asarray(t, dtype=float)
+    a_I = np.asarray(a_I, dtype=float)
+    n = np.asarray(normal, dtype=float)
+    n = n / np.linalg.norm(n)
+    vn = np.asarray(v_I, dtype=float) @ n
+    an = np.linalg.norm(a_I, axis=1)
+    vals: dict[str, float] = {"extremes": np.nan}
+    intervals = []
+    for thr in sorted(thresholds_g):
+        i0, i1 = contact_interval(t, a_I, after, thr * G0, merge_s)
+        if i0 > 0 and i1 > i0:
+            intervals.append((i0, i1))
+    kmin = kmax = -1
+    if intervals:
+        i0, i1 = intervals[0]  # the lowest threshold's: the widest
+        # window: from pad_s before the contact to pad_s after it, but not into a next contact
+        lo = float(np.min(thresholds_g)) * G0
+        nxt = np.flatnonzero((an > lo) & (np.arange(t.size) > i1))
+        t_end = min(t[i1] + pad_s, t[nxt[0]] if nxt.size else np.inf)
+        w = np.flatnonzero((t >= t[i0] - pad_s) & (t < t_end) & (t > after))
+        kmin = int(w[np.argmin(vn[w])])
+        w2 = w[w >= kmin]
+        kmax = int(w2[np.argmax(vn[w2])])
+        if vn[kmin] < 0.0 < vn[kmax]:
+            vals["extremes"] = float(-vn[kmax] / vn[kmin])
+        else:
+            kmin = kmax = -1
+    for thr in thresholds_g:
+        i0, i1 = contact_interval(t, a_I, after, thr * G0, merge_s)
+        e = np.nan
+        # an equivalent definition brackets the same impact: its ends within pad_s of the extremes
+        same = (
+            kmin >= 0
+            and i0 > 0
+            and abs(t[i0] - t[kmin]) <= pad_s
+            and abs(t[min(i1 + 1, t.size - 1)] - t[kmax]) <= pad_s
+        )
+        if same and i1 > i0:
+            a, b = i0 - 1, min(i1 + 1, t.size - 1)
+            if vn[a] < 0.0 < vn[b]:
+                e = float(-vn[b] / vn[a])
+        vals[f"ends_{thr:g}g"] = e
+    if gravity is not None and len(intervals) >= 2 and np.isfinite(vals["extremes"]):
+        g_n = -float(np.asarray(gravity, dtype=float) @ n)  # > 0: gravity pulls toward the ramp
+        thr = sorted(thresholds_g)
+        a_lo = thr[0] * G0
+        (i0, i1), (j0, j1) = intervals[0], intervals[1]
+        dt_in = max(0.0, float(t[j0] - t[i0])) * thr[0] / (thr[1] - thr[0])
+        dt_out = max(0.0, float(t[i1] - t[j1])) * thr[0] / (thr[1] - thr[0])
+        v_touch = vn[max(i0 - 1, 0)] - (0.5 * a_lo - g_n) * dt_in
+        v_leave = vn[min(i1 + 1, t.size - 1)] + (0.5 * a_lo - g_n) * dt_out
+        vals["touch_leave"] = float(-v_leave / v_touch) if v_touch < 0.0 < v_leave else np.nan
+    alt = np.array([v for k, v in vals.items() if k != "extremes" and np.isfinite(v)])
+    spread = float(np.max(np.abs(alt - vals["extremes"]))) if alt.size and np.isfinite(vals["extremes"]) else np.nan
+    return RestitutionDefinitions(values=vals, i_before=kmin, i_after=kmax, spread=spread)

@@ -13,11 +13,15 @@ written to CSV/TOML files in the documented user format (``io/FORMATS.md``):
 
 The truth is saved beside them in ``truth.npz`` for scoring and drawing only; the
 reconstruction (``problems.droptest.pipeline``) reads the telemetry files and never this one.
+
+A scenario run flies the scenario's own fixed, documented drop (``[synthetic]``); the Monte Carlo
+flies a different drop per seed, drawn by :func:`disperse_drop` within :class:`DropEnvelope` (the
+REDLand test envelope: impact speeds, attitude, bag pressure, timing, true bungee stiffness).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -37,9 +41,24 @@ from workbench.problems.droptest.sensors import (
     tilt_unit_vectors,
 )
 from workbench.problems.droptest.surface import Surface, ramp_surface, rock_field
-from workbench.problems.droptest.truth import DropTestConfig, DropTruth, simulate_drop
+from workbench.problems.droptest.truth import C_MARS_SPF, DropTestConfig, DropTruth, simulate_drop
 
-__all__ = ["SyntheticDrop", "synthesize_droptest", "lander_for", "surface_for", "truth_for", "load_truth"]
+__all__ = [
+    "SyntheticDrop",
+    "DropEnvelope",
+    "REDLAND_ENVELOPE",
+    "DROP_PARAMETER_NAMES",
+    "synthesize_droptest",
+    "disperse_drop",
+    "drop_config_for",
+    "drop_rng",
+    "drop_parameters",
+    "PSI",
+    "lander_for",
+    "surface_for",
+    "truth_for",
+    "load_truth",
+]
 
 TRIADS = ("BP", "PYBP", "PXBP", "MXBP")
 
@@ -74,29 +93,185 @@ def surface_for(scenario: Scenario) -> Surface:
     return surf
 
 
-def _config(scenario: Scenario) -> DropTestConfig:
+def drop_config_for(scenario: Scenario) -> DropTestConfig:
+    """The scenario's own (fixed, documented) drop: the truth simulator's settings from ``[synthetic]``."""
     cfg = config_for(scenario)
     psi = cfg.bag_pressure_psi
     return DropTestConfig(
         impact_parallel_speed=cfg.impact_parallel_mps,
         impact_normal_speed=cfg.impact_normal_mps,
-        release_euler123_deg=tuple(cfg.release_euler123_deg),
+        release_euler123_deg=tuple(float(a) for a in cfg.release_euler123_deg),
         release_to_contact_s=cfg.release_to_contact_s,
         pre_release_s=cfg.pre_release_s,
         bungee_truth_scale=cfg.bungee_truth_scale,
-        pressure_pa=None if psi is None else float(psi) * 6894.757,
+        pressure_pa=None if psi is None else float(psi) * PSI,
+    )
+
+
+#: one pound per square inch [Pa]
+PSI = 6894.757
+
+
+@dataclass(frozen=True)
+class DropEnvelope:
+    """The test envelope inside which :func:`disperse_drop` draws a drop (uniform draws; SI unless named).
+
+    Source: JPL, REDLand paper on the MER airbag drop tests in the Space Power Facility (c. 2002),
+    sections "Test facility" and "Typical test sequence":
+
+    * impact velocity in the Mars frame (ramp level): the worst case the 60° ramp tests is
+      "a horizontal velocity of approximately sixteen meters-per-second and a vertical velocity of
+      approximately twelve meters-per-second" (vertical from a bridle-release drop from 15 m);
+      "a nominal impact would have a minimal horizontal velocity".  Drawn: the speed normal to the
+      ramp (Mars vertical) in ``normal_mps`` and along it (Mars horizontal) in ``parallel_mps``,
+      the worst case being the upper corner;
+    * bag pressure: "the airbags are steadily inflated to the desired bag pressure (1.0 - 1.3 psi)",
+      drawn in ``pressure_psi`` (a scenario that sets ``[synthetic] bag_pressure_psi`` outside the
+      spec on purpose, the under-inflated full-stroke case, keeps its own pressure);
+    * attitude: the series had "down-bag/edge" and "up-bag/edge" drops (section "Results") at a
+      configured hanging attitude; the rigging spread is not stated, so roll and pitch are drawn
+      within ``tilt_deg`` of the scenario's angles (engineering choice) and the yaw about the body
+      +Z axis (the tetrahedron's threefold axis) within ``yaw_deg`` (±60° covers every relative
+      orientation of the base triangle);
+    * timing: the whole sequence lasts "less than 2.5 seconds" and the bungee is cut about 0.05 s
+      before contact.  The bungee can only pull toward the ramp, and the speed along the ramp is
+      mostly gained from gravity (``g sin α`` along a ramp of inclination α), so the time from
+      release to contact cannot exceed about ``v_parallel / (g sin α)``; it is drawn as the fraction
+      ``contact_time_fraction`` of that time (engineering choice that keeps the bungee design
+      feasible: 0.7–0.8 gives 0.8–1.5 s);
+    * bungee: the count and the stretch are *solved* per drop by the test engineer's energy
+      calculation (:func:`~workbench.problems.droptest.truth.design_release`), not drawn; the true
+      stiffness relative to the test plan is drawn in ``bungee_truth_scale`` (engineering choice: a
+      polynomial fit "accurately modeled" to a few per cent).
+    """
+
+    normal_mps: tuple[float, float] = (9.0, 12.0)
+    parallel_mps: tuple[float, float] = (10.0, 16.0)
+    pressure_psi: tuple[float, float] = (1.0, 1.3)
+    tilt_deg: float = 10.0
+    yaw_deg: float = 60.0
+    contact_time_fraction: tuple[float, float] = (0.70, 0.80)
+    bungee_truth_scale: tuple[float, float] = (0.97, 1.06)
+    ramp_angle_deg: float = 60.0
+
+
+#: the envelope used by the Monte Carlo (see :class:`DropEnvelope` for its source)
+REDLAND_ENVELOPE = DropEnvelope()
+
+#: names (and units) of :func:`drop_parameters`' entries, in order
+DROP_PARAMETER_NAMES: tuple[str, ...] = (
+    "impact_normal_target_mps",
+    "impact_parallel_target_mps",
+    "roll_deg",
+    "pitch_deg",
+    "yaw_deg",
+    "bag_pressure_psi",
+    "release_to_contact_s",
+    "bungee_truth_scale",
+    "bungee_count",
+    "impact_normal_truth_mps",
+    "impact_parallel_truth_mps",
+    "release_y_m",
+    "release_z_m",
+)
+
+
+def disperse_drop(
+    base: DropTestConfig,
+    rng: np.random.Generator,
+    envelope: DropEnvelope = REDLAND_ENVELOPE,
+    lander: LanderModel | None = None,
+) -> DropTestConfig:
+    """Draw one drop of the test envelope around ``base`` (the scenario's drop).
+
+    Every draw is uniform, in this order, from ``rng``:
+
+    * ``impact_normal_speed`` [m/s] in ``envelope.normal_mps`` (default 9–12 m/s, target speed
+      into the ramp at first contact, Mars-frame vertical);
+    * ``impact_parallel_speed`` [m/s] in ``envelope.parallel_mps`` (default 10–16 m/s, down the
+      ramp, Mars-frame horizontal);
+    * ``release_euler123_deg`` [deg]: roll and pitch = the base's ± ``envelope.tilt_deg`` (10°),
+      yaw = the base's ± ``envelope.yaw_deg`` (60°);
+    * ``pressure_pa`` [Pa] in ``envelope.pressure_psi`` (1.0–1.3 psi absolute, the test spec),
+      unless ``base.pressure_pa`` is set (a scenario's deliberate off-spec pressure is kept);
+    * ``release_to_contact_s`` [s] = f · v_parallel / (g sin α), f in
+      ``envelope.contact_time_fraction`` (0.70–0.80; α = ``envelope.ramp_angle_deg``, 60°);
+    * ``bungee_truth_scale`` [1] in ``envelope.bungee_truth_scale`` (0.97–1.06).
+
+    The release point, bungee count and rope direction follow from these targets by
+    :func:`~workbench.problems.droptest.truth.design_release` inside the truth simulation (a
+    solved quantity, reported by :func:`drop_parameters`).  ``lander`` is unused (kept for
+    envelopes that depend on it).  Sources and reasons of every range: :class:`DropEnvelope`.
+    Returns a new :class:`DropTestConfig`; ``base`` is unchanged.
+    """
+    del lander
+    e = envelope
+    vn = float(rng.uniform(*e.normal_mps))
+    vp = float(rng.uniform(*e.parallel_mps))
+    tilt = rng.uniform(-e.tilt_deg, e.tilt_deg, 2)
+    yaw = float(rng.uniform(-e.yaw_deg, e.yaw_deg))
+    psi = float(rng.uniform(*e.pressure_psi))
+    t_c = float(rng.uniform(*e.contact_time_fraction)) * vp / (G0 * np.sin(np.radians(e.ramp_angle_deg)))
+    scale = float(rng.uniform(*e.bungee_truth_scale))
+    r0, p0, y0 = (float(a) for a in base.release_euler123_deg)
+    return replace(
+        base,
+        impact_normal_speed=vn,
+        impact_parallel_speed=vp,
+        release_euler123_deg=(r0 + float(tilt[0]), p0 + float(tilt[1]), y0 + yaw),
+        pressure_pa=base.pressure_pa if base.pressure_pa is not None else psi * PSI,
+        release_to_contact_s=t_c,
+        bungee_truth_scale=scale,
+    )
+
+
+def drop_rng(seed: int) -> np.random.Generator:
+    """The generator of drop ``seed``'s draw (:func:`disperse_drop`): a stream of its own,
+    ``SeedSequence(seed, spawn_key=(1,))``, independent of the sensor draws (``default_rng(seed)``)."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(1,)))
+
+
+def drop_parameters(truth: DropTruth, lander: LanderModel) -> np.ndarray:
+    """The drawn and solved parameters of a simulated drop, in :data:`DROP_PARAMETER_NAMES` order:
+    target impact speeds [m/s], release attitude (1-2-3) [deg], bag pressure [psi], release to
+    contact [s], true bungee scale [1], solved bungee count (test plan), the truth's normal and
+    along-ramp CM speeds at first contact [m/s] and the solved release point (SPF y, z) [m]."""
+    c = truth.config
+    pa = lander.pressure_pa if c.pressure_pa is None else c.pressure_pa
+    ev = truth.events
+    vn = vp = np.nan
+    if "first_contact" in ev:
+        v = np.array([np.interp(ev["first_contact"], truth.t, truth.v_I[:, i]) for i in range(3)])
+        vm = C_MARS_SPF @ v
+        vn, vp = float(-vm[2]), float(np.hypot(vm[0], vm[1]))
+    return np.array(
+        [
+            c.impact_normal_speed,
+            c.impact_parallel_speed,
+            *c.release_euler123_deg,
+            pa / PSI,
+            c.release_to_contact_s,
+            c.bungee_truth_scale,
+            truth.nominal_rig.count,
+            vn,
+            vp,
+            truth.p_release[1],
+            truth.p_release[2],
+        ],
+        float,
     )
 
 
 _TRUTH_CACHE: dict[tuple, tuple[DropTruth, LanderModel]] = {}
 
 
-def truth_for(scenario: Scenario) -> tuple[DropTruth, LanderModel, Surface]:
-    """Truth simulation of the scenario's ``[synthetic]`` drop (deterministic; cached per process,
-    keyed by lander file, drop configuration and surface including rocks)."""
+def truth_for(scenario: Scenario, drop: DropTestConfig | None = None) -> tuple[DropTruth, LanderModel, Surface]:
+    """Truth simulation of a drop (deterministic; cached per process, keyed by lander file, drop
+    configuration and surface including rocks): ``drop`` (default the scenario's ``[synthetic]``
+    drop, :func:`drop_config_for`) on the scenario's lander and surface."""
     surf = surface_for(scenario)
     lander_path = str(scenario.path_of("vehicle.lander"))
-    cfg = _config(scenario)
+    cfg = drop_config_for(scenario) if drop is None else drop
     key = (
         lander_path,
         cfg,
@@ -112,6 +287,20 @@ def truth_for(scenario: Scenario) -> tuple[DropTruth, LanderModel, Surface]:
         _TRUTH_CACHE[key] = (simulate_drop(cfg, lander, surf), lander)
     truth, lander = _TRUTH_CACHE[key]
     return truth, lander, surf
+
+
+def _dispersed_truth(scenario: Scenario, seed: int, attempts: int = 5) -> tuple[DropTruth, LanderModel, Surface]:
+    """Truth of drop ``seed`` drawn by :func:`disperse_drop`; a draw whose bungee design is
+    infeasible (``design_release`` raises) is redrawn from the same stream, at most ``attempts`` times."""
+    rng = drop_rng(seed)
+    base = drop_config_for(scenario)
+    err: ValueError | None = None
+    for _ in range(attempts):
+        try:
+            return truth_for(scenario, disperse_drop(base, rng))
+        except ValueError as exc:  # the test engineer would pick another drop
+            err = exc
+    raise ValueError(f"{scenario.path}: no feasible drop in {attempts} draws for seed {seed}: {err}")
 
 
 def _imu_models(scenario: Scenario) -> tuple[ImuErrorModel, ImuErrorModel]:
@@ -133,19 +322,28 @@ def _imu_models(scenario: Scenario) -> tuple[ImuErrorModel, ImuErrorModel]:
     return acc, gyr
 
 
-def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | None = None) -> SyntheticDrop:
-    """Simulate the scenario's drop and write its telemetry files into ``out_dir``.
+def synthesize_droptest(
+    scenario: Scenario, out_dir: str | Path, seed: int | None = None, disperse: bool = False
+) -> SyntheticDrop:
+    """Simulate a drop and write its telemetry files into ``out_dir``.
 
-    ``seed`` (default ``[synthetic] seed``) drives every random draw: sensor noise, bias,
-    scale factor and misalignment, 3DM vector errors, the survey error of the hanging
-    position and the ranging noise. The truth trajectory itself is deterministic per scenario.
+    ``seed`` (default ``[synthetic] seed``) drives every sensor-side draw through
+    ``default_rng(seed)``: sensor noise, bias, scale factor and misalignment, 3DM vector errors,
+    the survey error of the hanging position and the ranging noise.  With ``disperse=False`` (a
+    scenario run) the drop is the scenario's own fixed, documented drop; with ``disperse=True`` (the
+    Monte Carlo) the drop itself is drawn by :func:`disperse_drop` from :func:`drop_rng` ``(seed)``,
+    so every seed is a different drop.  The drawn parameters are saved in ``truth.npz``
+    (``drop_parameters``, ``drop_parameter_names``).
     """
     cfg = config_for(scenario)  # unknown or mistyped keys are errors before the simulation
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     seed = int(cfg.seed if seed is None else seed)
     rng = np.random.default_rng(seed)
-    truth, lander, surf = truth_for(scenario)
+    if disperse:
+        truth, lander, surf = _dispersed_truth(scenario, seed)
+    else:
+        truth, lander, surf = truth_for(scenario)
     acc_model, gyr_model = _imu_models(scenario)
     fs_sim = truth.config.output_rate_hz
     fs = cfg.sample_rate_hz
@@ -264,6 +462,9 @@ def synthesize_droptest(scenario: Scenario, out_dir: str | Path, seed: int | Non
         gyro_scale=drawn["gyro"]["scale"],
         gyro_error_matrix=drawn["gyro"]["matrix"],
         seed=seed,
+        drop_parameters=drop_parameters(truth, lander),
+        drop_parameter_names=np.array(DROP_PARAMETER_NAMES),
+        dispersed=disperse,
     )
     return SyntheticDrop(telemetry=paths, truth_path=truth_path)
 

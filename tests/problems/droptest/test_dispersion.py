@@ -1,0 +1,91 @@
+"""Every Monte Carlo seed is a different drop: the draw, its envelope, and (slow) the
+reconstruction of a few different drops against their truth.
+
+The slow test uses the first natural seeds (1..4), not picked to pass.  If the reported σ are
+right, a max-stroke error outside 3σ has probability 0.0027 per drop (≈ 1 % for one of four);
+the restitution error is checked against its reported σ, which carries the estimation and the
+definition terms (``stroke.restitution_definitions``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench.io.scenario import load_scenario
+from workbench.problems.droptest.synthetic import (
+    DROP_PARAMETER_NAMES,
+    PSI,
+    REDLAND_ENVELOPE,
+    disperse_drop,
+    drop_config_for,
+    drop_rng,
+)
+
+SCENARIOS = Path(__file__).resolve().parents[3] / "assets" / "scenarios"
+ENV = REDLAND_ENVELOPE
+
+
+def _inside(x: float, lo_hi: tuple[float, float]) -> bool:
+    return lo_hi[0] <= x <= lo_hi[1]
+
+
+def test_disperse_drop_draws_different_drops_inside_the_envelope():
+    base = drop_config_for(load_scenario(SCENARIOS / "droptest.toml"))
+    drops = [disperse_drop(base, drop_rng(seed)) for seed in range(1, 21)]
+    vn = np.array([d.impact_normal_speed for d in drops])
+    vp = np.array([d.impact_parallel_speed for d in drops])
+    eul = np.array([d.release_euler123_deg for d in drops])
+    psi = np.array([d.pressure_pa for d in drops]) / PSI
+    assert np.unique(vn).size == 20 and np.unique(vp).size == 20 and np.unique(eul[:, 2]).size == 20
+    assert all(_inside(v, ENV.normal_mps) for v in vn) and all(_inside(v, ENV.parallel_mps) for v in vp)
+    assert all(_inside(p, ENV.pressure_psi) for p in psi)
+    d_att = eul - np.asarray(base.release_euler123_deg)
+    assert np.all(np.abs(d_att[:, :2]) <= ENV.tilt_deg) and np.all(np.abs(d_att[:, 2]) <= ENV.yaw_deg)
+    # the draws cover the envelope, not one corner of it
+    assert np.ptp(vn) > 0.5 * np.diff(ENV.normal_mps)[0] and np.ptp(vp) > 0.5 * np.diff(ENV.parallel_mps)[0]
+    # the same seed is the same drop; the scenario's own drop is untouched
+    assert disperse_drop(base, drop_rng(3)) == drops[2]
+    assert base == drop_config_for(load_scenario(SCENARIOS / "droptest.toml"))
+
+
+def test_an_off_spec_scenario_pressure_is_kept():
+    base = drop_config_for(load_scenario(SCENARIOS / "droptest_fullstroke.toml"))
+    assert disperse_drop(base, drop_rng(1)).pressure_pa == base.pressure_pa == pytest.approx(0.55 * PSI)
+
+
+@pytest.mark.slow
+def test_four_different_drops_are_reconstructed_inside_their_3sigma(tmp_path):
+    from workbench.problems.droptest.montecarlo import run_seed
+
+    sc = load_scenario(SCENARIOS / "droptest.toml")
+    res = [run_seed(sc, seed, tmp_path) for seed in (1, 2, 3, 4)]
+    col = {name: np.array([r.drop[j] for r in res]) for j, name in enumerate(DROP_PARAMETER_NAMES)}
+    # the drops differ: truth contact speeds and attitude
+    for name in ("impact_normal_truth_mps", "impact_parallel_truth_mps", "yaw_deg", "roll_deg", "bag_pressure_psi"):
+        assert np.unique(np.round(col[name], 6)).size == 4, f"{name} repeats: {col[name]}"
+    assert np.ptp(col["impact_normal_truth_mps"]) > 0.5 and np.ptp(col["impact_parallel_truth_mps"]) > 0.5
+    # each inside the envelope: targets inside it, the flown contact speeds within 10 % of them
+    for k, r in enumerate(res):
+        assert _inside(col["impact_normal_target_mps"][k], ENV.normal_mps)
+        assert _inside(col["impact_parallel_target_mps"][k], ENV.parallel_mps)
+        assert _inside(col["bag_pressure_psi"][k], ENV.pressure_psi)
+        for kind in ("normal", "parallel"):
+            tgt, flown = col[f"impact_{kind}_target_mps"][k], col[f"impact_{kind}_truth_mps"][k]
+            assert abs(flown - tgt) <= 0.1 * tgt, f"seed {r.seed}: {kind} contact speed {flown:.2f} vs {tgt:.2f}"
+    # max stroke: the truth inside the reported 3σ on every drop (or say which failed)
+    bad = [
+        f"seed {r.seed}: error {r.error * 100:+.1f} cm = {r.error / r.sigma:+.2f}σ" for r in res if not r.inside_3sigma
+    ]
+    assert not bad, "max stroke outside 3σ: " + "; ".join(bad)
+    # restitution: where a rebound is defined, the error inside its reported 3σ
+    rest = [r for r in res if np.isfinite(r.restitution_error)]
+    assert rest, "no drop with a defined restitution"
+    bad = [
+        f"seed {r.seed}: error {r.restitution_error:+.4f} = {r.restitution_error / r.restitution_sigma:+.2f}σ"
+        for r in rest
+        if abs(r.restitution_error) > 3.0 * r.restitution_sigma
+    ]
+    assert not bad, "restitution outside 3σ: " + "; ".join(bad)
