@@ -67,7 +67,6 @@ __all__ = [
 ]
 
 
-
 @dataclass(frozen=True)
 class NominalIntegration:
     """Strapdown from the nominal state (Sect. 5) and its validation against the on-board solution.

@@ -236,7 +236,9 @@ def _run_member(job: _Job, k: int, ss: np.random.SeedSequence) -> TruthMcMember:
     tm_seed = int(g_tm.integers(0, 2**62))
     with tempfile.TemporaryDirectory(prefix=f"entry_truth_mc_{k}_") as tmp:
         folder = Path(job.work_dir) / f"member_{k}" / "telemetry" if job.work_dir else Path(tmp) / "telemetry"
-        paths = dict(synthesize_from_truth(truth, folder, tspec, tm_seed, source=f"entry truth Monte Carlo, member {k}"))
+        paths = dict(
+            synthesize_from_truth(truth, folder, tspec, tm_seed, source=f"entry truth Monte Carlo, member {k}")
+        )
         truth_file = paths.pop("truth")
         info["telemetry_files"] = {s: p.name for s, p in sorted(paths.items())}
         info["telemetry_dir"] = str(folder) if job.work_dir else None
@@ -451,7 +453,10 @@ def _extra_summary(outs, ok, sigmas, job: _Job) -> dict:
         modes = [m.info["smoother_start"] for m in ok]
         out["smoother_start_modes"] = {md: modes.count(md) for md in sorted(set(modes))}
         out["covariance_symmetric_pd_all"] = bool(
-            all(m.info["covariance_symmetric_pd"]["smoothed"] and m.info["covariance_symmetric_pd"]["forward"] for m in ok)
+            all(
+                m.info["covariance_symmetric_pd"]["smoothed"] and m.info["covariance_symmetric_pd"]["forward"]
+                for m in ok
+            )
         )
         out["member_wall_median_s"] = float(np.median([m.info["wall_s"] for m in ok]))
         out["truth_sim_median_s"] = float(np.median([m.info["truth_s"] for m in ok]))
