@@ -112,6 +112,7 @@ __all__ = [
     "validate_smoother",
     "noise_scale",
     "summarize_validation",
+    "headline_numbers",
     "prepare_validation",
 ]
 
@@ -945,3 +946,69 @@ def prepare_validation(
         start=(st.v0, st.q0, st.p0, st.P0),
         start_note=st.note,
     )
+
+
+def _unit_key(name: str) -> str:
+    """'pos_N [m]' -> 'pos_N_m', 'vel_N [m/s]' -> 'vel_N_mps', 'att_x [deg]' -> 'att_x_deg'."""
+    base, _, unit = name.partition(" [")
+    unit = unit.rstrip("]").replace("m/s", "mps")
+    return f"{base}_{unit}" if unit else base
+
+
+def headline_numbers(summary: Mapping[str, Any]) -> dict:
+    """The headline numbers of a :func:`summarize_validation` summary with SI-unit key names (the
+    benchmark JSON convention): ANEES (9 dof) per epoch — smoothed and forward, Cartesian and
+    curvilinear — with the 95 % χ² band and whether it is inside, the time averages, the fraction
+    of steps of the ANEES(t) curve inside the band, the RMS error vs the RMS reported 1σ at the end,
+    the altitude-AGL error after the first radar fix (``h_agl_after_fix``, and ``h_agl_at_fix``
+    when the summary has it) and the mean NIS per radar channel."""
+    s = summary
+    lo, hi = s["anees_band"]
+    at = {}
+    for ep in s["anees_at"]:
+        at[ep] = {
+            "t_s": s["times_s"][ep],
+            "smoothed": s["anees_at"][ep],
+            "smoothed_curvilinear": s["anees_curvilinear_at"][ep],
+            "forward": s["anees_forward_at"][ep],
+            "forward_curvilinear": s["anees_forward_curvilinear_at"][ep],
+            "smoothed_inside_band": bool(lo <= s["anees_at"][ep] <= hi),
+            "smoothed_curvilinear_inside_band": bool(lo <= s["anees_curvilinear_at"][ep] <= hi),
+            "forward_inside_band": bool(lo <= s["anees_forward_at"][ep] <= hi),
+            "forward_curvilinear_inside_band": bool(lo <= s["anees_forward_curvilinear_at"][ep] <= hi),
+        }
+    end = s["rms_at"].get("end", {})
+    end_sig = s["rms_sigma_at"].get("end", {})
+    out = {
+        "n_runs": s["n_runs"],
+        "n_ok": s["n_ok"],
+        "n_failed": s["n_failed"],
+        "dof": s["dof"],
+        "anees_band_95": [lo, hi],
+        "anees_at": at,
+        "anees_time_avg": {
+            "smoothed": s["anees_time_avg"],
+            "smoothed_curvilinear": s["anees_curvilinear_time_avg"],
+            "forward": s["anees_forward_time_avg"],
+            "forward_curvilinear": s["anees_forward_curvilinear_time_avg"],
+            "note": s["anees_time_avg_note"],
+        },
+        "fraction_of_steps_in_band": {
+            "smoothed": s["anees_fraction_of_steps_in_band"],
+            "smoothed_curvilinear": s["anees_curvilinear_fraction_of_steps_in_band"],
+        },
+        "rms_at_end": {_unit_key(k): {"rms_error": v, "rms_sigma": end_sig.get(k, math.nan)} for k, v in end.items()},
+        "inside_3sigma_fraction": {
+            "cartesian": s["inside_3sigma_mean"],
+            "curvilinear": s["inside_3sigma_curvilinear_mean"],
+        },
+        "nis_mean": {ch: {"value": v["value"], "dof": v["dof"]} for ch, v in s["nis_mean"].items()},
+    }
+    if "h_agl_after_fix" in s:
+        out["h_agl_after_fix"] = dict(s["h_agl_after_fix"])
+    if "h_agl_at_fix" in s:
+        out["h_agl_at_fix"] = dict(s["h_agl_at_fix"])
+    for key in ("radar_noise", "radar_noise_simulated", "filter_R"):
+        if key in s:
+            out[key] = dict(s[key])
+    return out
