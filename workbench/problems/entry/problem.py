@@ -2,7 +2,8 @@
 
 Composes :mod:`.pipeline` (reconstruction, scoring, scorecard), :mod:`.synthetic` (truth and
 telemetry), :mod:`.recording` (layout and drawer) and :mod:`.montecarlo` / :mod:`.recording_mc`
-(the smoother validation of AMELIA Sect. 8).
+(the smoother validation of AMELIA Sect. 8, a self-consistency check) and :mod:`.truth_mc` (the
+Monte Carlo against the truth simulator through the full pipeline, ``mc --truth-sim``).
 """
 
 from __future__ import annotations
