@@ -1,41 +1,22 @@
 """Tests of workbench.core.frames: time, IAU rotation, geodesy, NED and the SPF lab frame.
 
 Expected values are written out from the published elements (IAU 2015, NAIF pck00011), JPL Horizons
-(Mars sidereal period 24.622962 h) and the REDLand paper, not taken from the code.
+(Mars sidereal period 24.622962 h), the REDLand paper and the AMELIA paper (Aboudan et al. 2018,
+Tables 2 and 5), not taken from the code.
 """
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from workbench.core import frames
+from workbench.core import frames, timescales
 from workbench.core.bodies import MARS, TITAN
 
 J2000 = 2451545.0
 
 
 # ------------------------------------------------------------------------------------------ time
-def test_julian_date_known_epochs():
-    # 2017-01-01T00:00:00 UTC is JD 2457754.5 (UTC); TDB ≈ UTC + 69.184 s
-    assert frames.julian_date_from_utc("2017-01-01T00:00:00Z") == pytest.approx(2457754.5 + 69.184 / 86400.0, abs=2e-9)
-    # J2000.0 = 2000-01-01T12:00:00 TT -> UTC string 69.184 s earlier under our constant offset
-    assert frames.julian_date_from_utc("2000-01-01T11:58:50.816Z") == pytest.approx(J2000, abs=2e-9)
-    # fractional seconds of any length, a leap second, no 'Z'
-    a = frames.julian_date_from_utc("2016-10-19T14:42:22.123456789Z")
-    b = frames.julian_date_from_utc("2016-10-19T14:42:22Z")
-    assert (a - b) * 86400.0 == pytest.approx(0.123456789, abs=1e-4)
-    c = frames.julian_date_from_utc("2016-12-31T23:59:60.5")
-    assert (c - frames.julian_date_from_utc("2016-12-31T23:59:59.5")) * 86400 == pytest.approx(1.0, abs=1e-4)
-
-
-@pytest.mark.parametrize(
-    "bad", ["2016-10-19", "2016-13-01T00:00:00Z", "2016-10-19T25:00:00Z", "2016-10-19T00:00:00+02:00"]
-)
-def test_julian_date_rejects_bad_strings(bad):
-    with pytest.raises(ValueError):
-        frames.julian_date_from_utc(bad)
-
-
+# UTC -> TDB itself is tested in test_timescales.py.
 def test_days_and_centuries():
     assert frames.days_since_j2000(J2000 + 36525.0) == pytest.approx(36525.0)
     np.testing.assert_allclose(frames.centuries_since_j2000(np.array([J2000, J2000 + 73050.0])), [0.0, 2.0])
@@ -225,3 +206,53 @@ def test_north_east_xyz_are_the_first_rows_of_ned_basis():
         np.testing.assert_allclose([ex, ey, 0.0], C[k, 1], atol=1e-15)
     # hand value: on the equator at 0° E, north is +Z and east is +Y
     np.testing.assert_allclose(frames.north_east_xyz(7.0, 0.0, 0.0, 7.0), [0.0, 0.0, 1.0, 0.0, 1.0], atol=0)
+
+
+# ------------------------------------------------------------------ AMELIA Table 2 -> Table 5
+# Aboudan et al. 2018, Space Sci. Rev. 214:97. Table 2, "Optimal" column: the MMED position of the
+# initial state at 14:42:07.125 UTC on 2016-10-19; Table 5, first row ("First data", same time):
+# lon E -17.3091 deg, lat N -3.5723 deg, altitude AMR 122.6329 km (above the 3396 km MOLA sphere).
+AMELIA_EPOCH_UTC = "2016-10-19T14:42:07.125Z"
+AMELIA_P_M_KM = np.array([-1317.8932, 3255.1296, -219.2404])
+AMELIA_TABLE5_FIRST = {"lon_deg": -17.3091, "lat_deg": -3.5723, "alt_km": 122.6329}
+
+
+def test_amelia_table5_first_row_from_table2_state():
+    p_M = AMELIA_P_M_KM * 1e3
+    lat, lon, r = frames.planetocentric_amelia(MARS, timescales.julian_date_utc(AMELIA_EPOCH_UTC), p_M)
+    # latitude and altitude to the paper's printed digits (4 decimals)
+    assert round(float(np.degrees(lat)), 4) == AMELIA_TABLE5_FIRST["lat_deg"]
+    assert round((float(r) - MARS.reference_radius) / 1e3, 4) == AMELIA_TABLE5_FIRST["alt_km"]
+    # longitude: the best convention found is +0.0102 deg from the printed value (frames module
+    # docstring lists the hypotheses measured); the issue asks for 0.3 deg, this pins the residual
+    assert float(np.degrees(lon)) - AMELIA_TABLE5_FIRST["lon_deg"] == pytest.approx(0.0102, abs=5e-4)
+
+
+def test_exact_conversion_against_an_independent_construction_and_the_paper():
+    """Pole and meridian of date at TDB: built here from the pole vector and node instead of the
+    Euler chain; it differs from Table 5 by the pole drift since J2000 in latitude and by ~68 s of
+    Mars rotation (plus the pole) in longitude."""
+    p_M = AMELIA_P_M_KM * 1e3
+    jd_tdb = frames.julian_date_from_utc(AMELIA_EPOCH_UTC)
+    lat, lon, r = frames.planetocentric_of_date(MARS, jd_tdb, p_M)
+    assert float(r) == pytest.approx(np.linalg.norm(p_M), rel=1e-14)
+    alpha, delta, W = frames.iau_pole_and_meridian(MARS, jd_tdb)
+    n = np.array([np.cos(delta) * np.cos(alpha), np.cos(delta) * np.sin(alpha), np.sin(delta)])
+    node = np.cross([0.0, 0.0, 1.0], n)
+    node /= np.linalg.norm(node)
+    p_I = frames.C_mmed_icrf(MARS).T @ p_M
+    lat_ref = np.arcsin(p_I @ n / np.linalg.norm(p_I))
+    lon_ref = np.arctan2(p_I @ np.cross(n, node), p_I @ node) - W
+    assert float(lat) == pytest.approx(float(lat_ref), abs=1e-12)
+    assert np.degrees(float(lon)) == pytest.approx((np.degrees(float(lon_ref)) + 180.0) % 360.0 - 180.0, abs=1e-9)
+    assert np.degrees(float(lat)) - AMELIA_TABLE5_FIRST["lat_deg"] == pytest.approx(-0.0055, abs=2e-4)
+    assert np.degrees(float(lon)) - AMELIA_TABLE5_FIRST["lon_deg"] == pytest.approx(-0.2513, abs=5e-4)
+
+
+def test_amelia_convention_vectorised_and_rotating():
+    p_M = np.tile(AMELIA_P_M_KM * 1e3, (3, 1))
+    dt = np.array([0.0, 100.0, 200.0])  # [s]; a one-float JD resolves ~40 µs
+    jd = timescales.julian_date_utc(AMELIA_EPOCH_UTC) + dt / 86400.0
+    lat, lon, r = frames.planetocentric_amelia(MARS, jd, p_M)
+    assert lat.shape == lon.shape == r.shape == (3,)
+    np.testing.assert_allclose(np.diff(lon), -frames.meridian_rate(MARS, jd[0]) * 100.0, rtol=1e-6)

@@ -1,9 +1,11 @@
-"""Time scales, IAU body-fixed frames, planetocentric geodesy, local NED and test-chamber frames.
+"""IAU body-fixed frames, planetocentric geodesy, local NED and test-chamber frames.
 
 Frames used:
 
-* ``I`` — planet-centred inertial with ICRF/J2000 axes (for Mars this is the "MMED" frame of the
-  AMELIA paper when expressed in the planet's mean equator; here we stay on ICRF axes).
+* ``I`` — planet-centred inertial with ICRF/J2000 axes.
+* ``M`` — for Mars the "MMED" frame of the AMELIA paper (Aboudan et al. 2018, Sect. 3, "Mars
+  Mean Equator and IAU vector of J2000", SPICE's MARSIAU): +Z the IAU pole at J2000.0, +X the
+  ascending node of the Mars equator of J2000 on the ICRF equator (:func:`C_mmed_icrf`).
 * ``F`` — body-fixed frame of the IAU rotation model: +Z along the north pole, +X through the
   prime meridian.  ``C_F_I = Rz(W) Rx(90° − δ0) Rz(90° + α0)`` with *frame* (passive) rotation
   matrices, exactly as in the IAU WGCCRE report (Archinal et al. 2018, Sect. 2).
@@ -11,11 +13,48 @@ Frames used:
 * lab frames (e.g. the SPF test chamber of the REDLand MER airbag tests) with a fixed rotation to
   a level "planet" frame, see :class:`LabFrame`.
 
-Time: epochs are Julian dates in TDB.  :func:`julian_date_from_utc` converts a UTC ISO-8601 string
-by adding the constant TT − UTC = 69.184 s (37 leap seconds, valid from 2017-01-01) and taking
-TDB ≈ TT (|TDB − TT| < 2 ms, irrelevant for a planet's rotation).  Earlier epochs are off by the
-leap seconds since inserted (at most a few tens of seconds, i.e. < 0.1° of Mars rotation);
-supply JD(TDB) directly where that matters.
+Time: epochs are Julian dates in TDB.  :func:`julian_date_from_utc` (from
+:mod:`workbench.core.timescales`, re-exported here for its callers) converts a UTC ISO-8601 string
+through UTC -> TAI (leap-second table) -> TT -> TDB with ERFA; the IAU rotation elements take that
+TDB date (Archinal et al. 2018: "d = interval in days from the standard epoch J2000.0 TDB").
+
+Pole, meridian and time conventions, and what they change for Mars.  Two latitude/longitude
+conventions are provided beside each other; measured on AMELIA Table 2's optimal initial state
+(MMED position [−1317.8932, 3255.1296, −219.2404] km at 2016-10-19T14:42:07.125 UTC) against the
+first row of its Table 5 (lon −17.3091°, lat −3.5723°, alt 122.6329 km AMR):
+
+* :func:`planetocentric_of_date` — the physically exact conversion: pole *and* prime meridian of
+  date from the body's IAU model (IAU 2015, pck00011, for :data:`~workbench.core.bodies.MARS`)
+  at the correct TDB (TAI − UTC = 36 s in October 2016, TT − TAI = 32.184 s, TDB − TT ≈ −1.6 ms).
+  It gives lat −3.5778°, lon −17.5604°: the latitude differs from the paper by −0.0055° because
+  the Mars pole of 2016 is not the J2000 pole that defines MMED's +Z; the longitude by −0.2513°.
+  (The former constant TT − UTC = 69.184 s was 1 s too large for 2016: lon −17.5645°.)
+* :func:`planetocentric_amelia` — the paper's convention as far as it can be recovered:
+  latitude ``asin(z/|p|)`` in MMED (reproduces −3.5723° to the printed digits, −3.57232°), and
+  longitude = MMED right ascension ``atan2(y, x)`` minus the IAU prime-meridian angle ``W``, i.e.
+  MMED spun about its own +Z, with the *UTC* Julian date fed in as the TDB argument (the
+  68.184 s TT − UTC of 2016 left out).  It gives −17.2989°, +0.0102° from the paper (the same
+  +0.0102° at the EIP row after a 15.007 s ballistic propagation, so the rate is right and the
+  residual is a constant angle, 0.6 km on the ground).
+  Other hypotheses measured (longitude minus the paper's, degrees):
+
+  ==========================  =========  ==================  ===================  ============
+  model / frame               TDB exact  TDB + 1 s (old)     t − 64.184 s [a]     UTC as TDB
+  ==========================  =========  ==================  ===================  ============
+  IAU 2015, pole of date      −0.2513    −0.2554             +0.0094              +0.0256
+  IAU 2015, Rz(W) on MMED     −0.2667    −0.2708             −0.0061              **+0.0102**
+  IAU 2009, pole of date      −0.2488    −0.2528             +0.0119              +0.0281
+  IAU 2009, Rz(W) on MMED     −0.2639    −0.2679             −0.0032              +0.0131
+  ==========================  =========  ==================  ===================  ============
+
+  IAU 2009 = pck00010 (α0 = 317.68143 − 0.1061 T, δ0 = 52.88650 − 0.0609 T, W = 176.630 +
+  350.89198226 d, no periodic terms).  [a] seconds counted from 2000-01-01T12:00:00 *UTC* instead
+  of J2000.0 TT.  Light time (|p|/c ≈ 12 ms) is negligible; the IAU 2000 meridian (W0 = 176.753°)
+  is off by −0.09° to −0.11° even with UTC.  No hypothesis reproduces the printed 4th decimal;
+  "UTC as TDB, MMED spun by W" is the simplest one within 0.01°, and the one the tests pin.
+
+Use :func:`planetocentric_of_date` (or :func:`C_bodyfixed_mmed` at a TDB date) for physics;
+use :func:`planetocentric_amelia` only to compare with numbers printed in the AMELIA paper.
 
 All angles are radians inside; the IAU elements of :class:`~workbench.core.bodies.Body` are in
 degrees as published and converted here.
@@ -23,19 +62,17 @@ degrees as published and converted here.
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from workbench.core.bodies import Body
 from workbench.core.rotation import dcm_to_quat, quat_from_axis_angle, quat_to_dcm
+from workbench.core.timescales import SECONDS_PER_DAY, julian_date_from_utc
 
 __all__ = [
     "J2000_JD",
-    "TT_MINUS_UTC",
     "SECONDS_PER_DAY",
     "DAYS_PER_CENTURY",
     "julian_date_from_utc",
@@ -49,6 +86,8 @@ __all__ = [
     "inertial_to_bodyfixed",
     "bodyfixed_to_inertial",
     "planetocentric_from_cartesian",
+    "planetocentric_of_date",
+    "planetocentric_amelia",
     "cartesian_from_planetocentric",
     "altitude_above_sphere",
     "C_ned_bodyfixed",
@@ -66,42 +105,10 @@ __all__ = [
 
 J2000_JD = 2451545.0
 """Julian date of the J2000.0 epoch, 2000-01-01T12:00:00 TDB."""
-TT_MINUS_UTC = 69.184
-"""TT − UTC [s] = 32.184 s + 37 leap seconds (valid since 2017-01-01, IERS Bulletin C)."""
-SECONDS_PER_DAY = 86400.0
 DAYS_PER_CENTURY = 36525.0
-
-_ISO_RE = re.compile(
-    r"^\s*(\d{4})-(\d{2})-(\d{2})[T ](\d{2}):(\d{2}):(\d{2}(?:\.\d*)?)\s*(Z|[+-]00:?00|UTC)?\s*$",
-    re.IGNORECASE,
-)
 
 
 # ----------------------------------------------------------------------------------------- time
-def julian_date_from_utc(iso: str) -> float:
-    """Julian date in TDB [days] of a UTC ISO-8601 string ``YYYY-MM-DDTHH:MM:SS[.fff][Z]``.
-
-    Fractional seconds of any length and a leap second (``:60``) are accepted; a time-zone suffix
-    other than ``Z`` / ``+00:00`` is rejected.  The constant :data:`TT_MINUS_UTC` (69.184 s) is
-    added and TDB ≈ TT is assumed (see the module docstring for the validity).
-    """
-    m = _ISO_RE.match(iso)
-    if m is None:
-        raise ValueError(f"not a UTC ISO-8601 time 'YYYY-MM-DDTHH:MM:SS[.fff]Z': {iso!r}")
-    year, month, day, hour, minute = (int(m.group(i)) for i in range(1, 6))
-    second = float(m.group(6))
-    if not (0 <= hour < 24 and 0 <= minute < 60 and 0.0 <= second < 61.0):
-        raise ValueError(f"time of day out of range in {iso!r}")
-    try:
-        ordinal = _dt.date(year, month, day).toordinal()  # proleptic Gregorian, 0001-01-01 -> 1
-    except ValueError as exc:
-        raise ValueError(f"invalid calendar date in {iso!r}: {exc}") from None
-    # JD at 0h UT of 0001-01-01 (Gregorian) is 1721425.5; split to keep precision.
-    day_jd = ordinal + 1721424.5
-    seconds_of_day = hour * 3600.0 + minute * 60.0 + second + TT_MINUS_UTC
-    return (day_jd - J2000_JD + seconds_of_day / SECONDS_PER_DAY) + J2000_JD
-
-
 def days_since_j2000(jd: np.ndarray | float) -> np.ndarray:
     """Days d since J2000.0 (JD 2451545.0) of Julian date(s) ``jd`` [days], any shape."""
     return np.asarray(jd, dtype=float) - J2000_JD
@@ -248,6 +255,48 @@ def planetocentric_from_cartesian(r_F: np.ndarray) -> tuple[np.ndarray, np.ndarr
     x, y, z = r_F[..., 0], r_F[..., 1], r_F[..., 2]
     rho = np.hypot(x, y)
     return np.arctan2(z, rho), np.arctan2(y, x), np.hypot(rho, z)
+
+
+def planetocentric_of_date(
+    body: Body, jd_tdb: np.ndarray | float, p_M: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Physically exact planetocentric latitude, east longitude [rad] and radius [m] of MMED position(s).
+
+    ``p_M`` (..., 3) [m] in the body's mean-equator-of-J2000 frame (:func:`C_mmed_icrf`) at Julian
+    date(s) ``jd_tdb`` (TDB, e.g. from :func:`julian_date_from_utc`; broadcast against ``p_M[..., 0]``)
+    is rotated into the IAU body-fixed frame with the pole *and* prime meridian of date
+    (:func:`C_bodyfixed_mmed`), then :func:`planetocentric_from_cartesian`.  This is the convention
+    of the whole workbench; see the module docstring for how it differs from the AMELIA paper's.
+    """
+    r_F = np.einsum("...ij,...j->...i", C_bodyfixed_mmed(body, jd_tdb), np.asarray(p_M, dtype=float))
+    return planetocentric_from_cartesian(r_F)
+
+
+def planetocentric_amelia(
+    body: Body, jd_utc: np.ndarray | float, p_M: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Latitude, east longitude [rad] and radius [m] in the convention that reproduces AMELIA's Table 5.
+
+    Aboudan et al. 2018 ("ExoMars 2016 Schiaparelli module trajectory and atmospheric profiles
+    reconstruction", Space Sci. Rev. 214:97), Table 5 from the MMED states of Table 2:
+
+    * latitude ``asin(z_M / |p|)`` — the MMED (J2000) pole, not the pole of date;
+    * longitude ``atan2(y_M, x_M) − W`` — MMED spun about its own +Z by the IAU prime-meridian
+      angle ``W`` of ``body``, with ``W`` evaluated at the **UTC** Julian date ``jd_utc``
+      (:func:`workbench.core.timescales.julian_date_utc`) in place of TDB, wrapped to [−π, π);
+    * radius ``|p|`` (altitude AMR = radius − ``body.reference_radius``).
+
+    Reproduces Table 5's first row to the printed digits in latitude and altitude and to +0.0102°
+    in longitude (module docstring: the hypotheses measured).  Not a physical frame: for physics
+    use :func:`planetocentric_of_date` at the TDB date.  ``p_M`` (..., 3) [m]; ``jd_utc`` [days]
+    broadcasts against ``p_M[..., 0]``.
+    """
+    p_M = np.asarray(p_M, dtype=float)
+    x, y, z = p_M[..., 0], p_M[..., 1], p_M[..., 2]
+    rho = np.hypot(x, y)
+    _, _, W = iau_pole_and_meridian(body, jd_utc)
+    lon = np.mod(np.arctan2(y, x) - W + np.pi, 2.0 * np.pi) - np.pi
+    return np.arctan2(z, rho), lon, np.hypot(rho, z)
 
 
 def cartesian_from_planetocentric(lat: np.ndarray, lon: np.ndarray, radius: np.ndarray) -> np.ndarray:

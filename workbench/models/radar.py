@@ -38,6 +38,7 @@ __all__ = [
     "mars_rate_M",
     "slant_range_model",
     "slant_range_sphere",
+    "slant_range_surface",
     "velocity_out_model",
     "PlaneFit",
     "plane_fit",
@@ -134,6 +135,40 @@ def slant_range_sphere(p_M: np.ndarray, q_M_G: np.ndarray, s_G: np.ndarray, r_gr
     with np.errstate(invalid="ignore"):
         rho = -b - np.sqrt(disc)
     return np.where((disc >= 0.0) & (rho > 0.0), rho, np.nan)
+
+
+def slant_range_surface(
+    p_M: np.ndarray,
+    q_M_G: np.ndarray,
+    s_G: np.ndarray,
+    r_ground: float,
+    radius_at,
+    iterations: int = 6,
+) -> np.ndarray:
+    """Range [m] from ``p_M`` along beam ``s_G`` to a star-shaped surface ``|x| = radius_at(x)``.
+
+    ``radius_at(x)`` maps points x (..., 3) [m, M] to the surface radius [m] below them (e.g. the
+    sphere ``r_ground`` plus a smooth relief).  Starts from the sphere's range
+    (:func:`slant_range_sphere`, same broadcasting) and solves ``g(ρ) = |x| − radius_at(x) = 0``,
+    ``x = p + ρ d``, by Newton steps with a 1 m finite-difference derivative (the relief's slope
+    included), ``iterations`` times.  NaN where the ray misses the sphere.  For a beam far off the
+    local vertical over steep relief the root nearest the sphere's range is returned, which need
+    not be the first along the ray (no occlusion test).
+    """
+    p = np.asarray(p_M, dtype=float)
+    d = quat_rotate(np.asarray(q_M_G, dtype=float), np.asarray(s_G, dtype=float))
+    rho = slant_range_sphere(p_M, q_M_G, s_G, r_ground)
+
+    def gap(r):
+        x = p + r[..., None] * d
+        return np.linalg.norm(x, axis=-1) - radius_at(x)
+
+    step = 1.0  # [m] finite-difference step of the derivative
+    for _ in range(int(iterations)):
+        g0 = gap(rho)
+        dg = (gap(rho + step) - g0) / step
+        rho = rho - g0 / np.where(np.abs(dg) > 1e-6, dg, -1e-6)
+    return np.where(rho > 0.0, rho, np.nan)
 
 
 def velocity_out_model(

@@ -143,6 +143,12 @@ def test_scorecard_and_event_table(rec, run):
     names = [r["event"] for r in summary["event_table"]]
     assert names[0] == "First data" and names[-1] == "Last data"
     assert {"EIP", "PDD", "FSR", "BSR"} <= set(names)
+    # both conventions: the paper's (meridian at the UTC date, MMED latitude) is ahead in longitude by
+    # the 68.184 s TT − UTC of 2016 (0.277° of Mars rotation) less the pole/node drift since J2000
+    for r in summary["event_table"]:
+        assert 0.25 < r["lon_amelia_deg"] - r["lon_deg"] < 0.28
+        assert abs(r["lat_amelia_deg"] - r["lat_deg"]) < 0.01
+    assert "as AMELIA" in md
     log = " ".join(text for _, text, _ in rec.text_log())
     assert "gap" in log and "saturated" in log and "plane fit" in log
 

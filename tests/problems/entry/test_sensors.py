@@ -80,3 +80,43 @@ def test_terrain_relative_velocity_zero_for_a_point_fixed_to_mars():
     assert np.allclose(terrain_relative_velocity_G(p, v, q), 0.0, atol=1e-9)
     v2 = v + np.array([[0.0, 0.0, -80.0]])
     assert np.allclose(quat_rotate(q, terrain_relative_velocity_G(p, v2, q)), [[0, 0, -80.0]])
+
+
+def test_imu_errors_bias_scale_misalignment_and_fixed_draw():
+    """y = (1 + s)(x + m × x) + b: the per-run errors act as stated, and a fixed set is used as given."""
+    f = np.tile([0.0, 0.0, 50.0], (4, 1))
+    w = np.tile(np.radians([0.0, 0.0, 16.0]), (4, 1))
+    errs = (
+        (1e-3, -2e-3, 3e-3),
+        (0.0, 0.0, 3e-4),
+        (2e-4, 0.0, 0.0),
+        (1e-6, 0.0, 0.0),
+        (0.0, 0.0, 1e-4),
+        (0.0, 2e-4, 0.0),
+    )
+    model = EntryImuModel(accel_noise=0.0, gyro_noise=0.0, errors=errs)
+    fm, wm, drawn = apply_imu_errors(f, w, model, np.random.default_rng(0))
+    assert np.allclose(drawn["accel_bias"], errs[0])
+    # misalignment about X tips the 50 m/s² Z force onto −Y; scale 300 ppm on Z; bias on every axis
+    np.testing.assert_allclose(fm[0], [1e-3, -2e-3 - 2e-4 * 50.0, 50.0 * (1 + 3e-4) + 3e-3], atol=1e-12)
+    np.testing.assert_allclose(
+        wm[0], np.radians([0.0, 0.0, 16.0]) * [0, 0, 1 + 1e-4] + [1e-6 + 2e-4 * np.radians(16.0), 0, 0], atol=1e-15
+    )
+
+
+def test_disperse_telemetry_spec_fixes_the_per_run_errors():
+    from workbench.problems.entry.sensors import IMU_ERROR_NAMES, EntryTelemetrySpec, disperse_telemetry_spec
+
+    spec = EntryTelemetrySpec()
+    rng = np.random.default_rng(4)
+    draws = [disperse_telemetry_spec(spec, rng) for _ in range(400)]
+    assert draws[0].imu.errors != draws[1].imu.errors and draws[0].nominal.dx0 != draws[1].nominal.dx0
+    e = np.array([d.imu.errors for d in draws])  # (400, 6, 3)
+    for i, name in enumerate(IMU_ERROR_NAMES):
+        assert (
+            np.std(e[:, i]) == np.float64(np.std(e[:, i])) and abs(np.std(e[:, i]) / getattr(spec.imu, name) - 1) < 0.1
+        )
+    # the fixed errors are what the telemetry then carries
+    f = np.zeros((3, 3))
+    _, _, drawn = apply_imu_errors(f, f, draws[0].imu, np.random.default_rng(9))
+    assert np.allclose(drawn["gyro_scale"], draws[0].imu.errors[4])

@@ -11,6 +11,7 @@ before PDD.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 from collections.abc import Callable
@@ -40,6 +41,10 @@ from workbench.problems.entry.telemetry import read_entry_telemetry, read_nomina
 
 PDD, FSR, BSR = 20.0, 30.0, 72.0
 GAPS = ((3.0, 1.4), (5.0, 1.8), (7.4, 3.3), (11.2, 7.2))
+#: The synthetic IMU without its per-run bias, scale and misalignment (white noise only).
+WHITE_ONLY = EntryImuModel(
+    accel_bias=0.0, accel_scale=0.0, accel_misalignment=0.0, gyro_bias=0.0, gyro_scale=0.0, gyro_misalignment=0.0
+)
 SEED = 7
 SAT = math.radians(187.5)
 
@@ -107,7 +112,8 @@ def truth() -> FakeTruth:
 
 @pytest.fixture(scope="module")
 def spec() -> EntryTelemetrySpec:
-    return EntryTelemetrySpec(gaps=GAPS)
+    # white IMU noise only: these tests check the preprocessing against the truth to the noise level
+    return EntryTelemetrySpec(gaps=GAPS, imu=WHITE_ONLY)
 
 
 @pytest.fixture(scope="module")
@@ -284,7 +290,9 @@ def test_gap_bridges_reproduce_onboard_and_true_increments(imu, synth):
 
 def test_gap_bridges_exact_without_initial_error_or_noise(truth, tmp_path):
     spec = EntryTelemetrySpec(
-        gaps=GAPS, nominal=NominalErrorModel(dx0=(0.0,) * 9), imu=EntryImuModel(accel_noise=0.0, gyro_noise=0.0)
+        gaps=GAPS,
+        nominal=NominalErrorModel(dx0=(0.0,) * 9),
+        imu=dataclasses.replace(WHITE_ONLY, accel_noise=0.0, gyro_noise=0.0),
     )
     paths = es.synthesize_from_truth(truth, tmp_path, spec, SEED)
     T = es.load_truth(paths["truth"])

@@ -23,6 +23,9 @@ from workbench.problems.entry.site import R_GROUND
 from workbench.problems.entry.truth import (
     MARS_MOLAR_MASS,
     EntryTruthSpec,
+    coefficient_deviation,
+    disperse_truth_spec,
+    draw_coefficient_deviation,
     simulate_entry,
     true_atmosphere,
     truth_spec_from_scenario,
@@ -126,15 +129,19 @@ def test_vacuum_invariants(vehicle):
 
 
 def test_true_atmosphere(truth):
+    """Hydrostatic, ideal gas with the truth's own constants, and not the estimator's model's shape."""
     atm = truth.atmosphere
     dflt = MarsEngineeringAtmosphere()
+    spec = EntryTruthSpec()
     h = np.arange(0.0, 120e3, 100.0)
     ratio = atm.density(h) / dflt.density(h)
     dev = np.abs(ratio - 1.0)
-    assert 0.05 < dev.max() < 0.35  # realistic departure somewhere, never wild
-    # ideal gas with M = 43.41 g/mol
-    R = R_UNIVERSAL / MARS_MOLAR_MASS
+    assert 0.05 < dev.max() < 0.6  # a realistic departure somewhere, never wild
+    # ideal gas with the truth's molar mass, which differs from AMELIA's 43.41 g/mol (the estimator's)
+    R = R_UNIVERSAL / (spec.molar_mass_g_per_mol * 1e-3)
+    assert spec.molar_mass_g_per_mol * 1e-3 != MARS_MOLAR_MASS
     np.testing.assert_allclose(atm.p, atm.rho * R * atm.T, rtol=1e-12)
+    assert atm.gas_constant == pytest.approx(R) and atm.gamma != dflt.gamma
     # hydrostatic: dp/dh = -rho g (central differences on the 10 m table)
     hh = atm.h[1:-1]
     dpdh = (atm.p[2:] - atm.p[:-2]) / (atm.h[2:] - atm.h[:-2])
@@ -143,9 +150,68 @@ def test_true_atmosphere(truth):
     # a temperature inversion near 10-13 km
     hi = np.arange(9e3, 14e3, 50.0)
     assert np.any(np.diff(atm.temperature(hi)) > 0.0)
-    # waves: the temperature departure changes sign with altitude (structure, not just a bias)
+    # surface temperature in the published 200-250 K daytime range, colder than the model's 242 K
+    assert 200.0 < float(atm.temperature(0.0)) < 235.0 < float(dflt.temperature(0.0))
+    # not the default shape plus bumps: the difference T_true - T_default is not a sum of a few
+    # narrow features but changes over the whole column (the lapse-rate structure differs), and
+    # the scale height differs by more than 10 % somewhere between 10 and 90 km
     dT = atm.temperature(h) - dflt.temperature(h)
-    assert dT.max() > 5.0 and dT.min() < -5.0
+    assert dT.max() > 10.0 and dT.min() < -10.0
+    hs = np.arange(10e3, 90e3, 1e3)
+    H_true = R * atm.temperature(hs) / (MARS.gm / (MARS.reference_radius + hs) ** 2)
+    H_dflt = dflt.gas_constant * dflt.temperature(hs) / (MARS.gm / (MARS.reference_radius + hs) ** 2)
+    assert np.max(np.abs(H_true / H_dflt - 1.0)) > 0.10
+    # gravity waves: a few K with 5-15 km vertical wavelengths (the band-pass residual of T)
+    from scipy.ndimage import uniform_filter1d
+
+    Tz = atm.temperature(np.arange(0.0, 60e3, 100.0))
+    resid = Tz - uniform_filter1d(Tz, 201, mode="nearest")
+    assert 1.0 < np.std(resid[100:-100]) < 10.0
+
+
+def test_planted_aerodynamic_deviations(vehicle, truth):
+    """The truth flies CA × (1 + δ(M)) — smooth in Mach, about 10 % — not the shared table."""
+    spec = EntryTruthSpec()
+    m = np.geomspace(0.3, 40.0, 400)
+    d = coefficient_deviation(m, spec.aero_deviation_mach, spec.ca_deviation)
+    assert np.all(np.abs(d) < 0.3) and np.ptp(d) > 0.05  # Mach-dependent, not a constant factor
+    assert np.max(np.abs(np.diff(d) / np.diff(np.log(m)))) < 0.2  # smooth in log Mach
+    np.testing.assert_allclose(
+        coefficient_deviation(spec.aero_deviation_mach, spec.aero_deviation_mach, spec.ca_deviation),
+        spec.ca_deviation,
+        atol=1e-12,
+    )
+    # along the flight: the factor the simulator applied is the planted one at the true Mach
+    ent = (truth.phase == 0) & (truth.t > 0)
+    np.testing.assert_allclose(
+        truth.ca_factor[ent],
+        1.0 + coefficient_deviation(truth.mach[ent], spec.aero_deviation_mach, spec.ca_deviation),
+        atol=2e-4,
+    )
+    # the hypersonic drag is measurably off the table (what the density reconstruction must absorb)
+    hyp = ent & (truth.mach > 15)
+    assert np.abs(truth.ca_factor[hyp] - 1.0).max() > 0.03
+    # the statistics of the draw: 10 % 1σ in total (AMELIA Table 3)
+    rng = np.random.default_rng(0)
+    draws = np.array([draw_coefficient_deviation(rng, spec.aero_deviation_mach) for _ in range(4000)])
+    assert np.std(draws, axis=0) == pytest.approx(np.full(draws.shape[1], 0.10), rel=0.08)
+
+
+def test_dispersed_truth_differs_and_still_flies(vehicle):
+    """disperse_truth_spec draws a different truth; it still reaches PDD and BSR above ground."""
+    rng = np.random.default_rng(11)
+    base = EntryTruthSpec()
+    a, b = disperse_truth_spec(base, rng), disperse_truth_spec(base, rng)
+    for f in ("ca_deviation", "parachute_cd_deviation", "temperature_profile_km_K", "wind_layers", "terrain_modes"):
+        assert getattr(a, f) != getattr(b, f) and getattr(a, f) != getattr(base, f), f
+    assert a.pdd_mach == base.pdd_mach and a.fsr_delay_s == base.fsr_delay_s  # events and parachute kept
+    assert (
+        truth_spec_from_scenario({k: getattr(a, k) for k in ("ca_deviation", "surface_pressure_pa")}).ca_deviation
+        == a.ca_deviation
+    )
+    tr = simulate_entry(vehicle, a, np.random.default_rng(1))
+    i = _index(tr, tr.events["PDD"])
+    assert 7e3 < tr.h_amr[i] < 14e3 and np.all(np.linalg.norm(tr.p_M, axis=1) > R_GROUND)
 
 
 def test_spec_from_proposal_and_errors():
@@ -275,3 +341,38 @@ def test_deterministic_given_rng(vehicle, truth):
 def test_true_atmosphere_function_matches(truth):
     atm = true_atmosphere(EntryTruthSpec())
     np.testing.assert_allclose(atm.rho, truth.atmosphere.rho)
+
+
+def test_terrain_relief_and_radar_ranges():
+    """The relief has the stated RMS, turns with Mars, and the beam ranges hit the relief, not the sphere."""
+    from workbench.core.rotation import quat_normalize
+    from workbench.models.radar import slant_range_sphere, slant_range_surface
+    from workbench.problems.entry.site import TerrainRelief
+
+    relief = TerrainRelief(R_GROUND, EntryTruthSpec().terrain_modes)
+    assert relief.rms_m() == pytest.approx(100.0, rel=1e-3)
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(20000, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    h = relief.height(u * R_GROUND, 0.0)
+    assert np.std(h) == pytest.approx(100.0, rel=0.1) and np.abs(h).max() < 500.0
+    # co-rotating: a point carried by the rotation keeps its height
+    t = 40.0
+    a = MARS.rotation_rate * t
+    Rz = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(relief.height((Rz @ (u[:50] * R_GROUND).T).T, t), h[:50], atol=1e-6)
+    # a beam's range ends on the relief surface
+    p = u[:200] * (R_GROUND + 5000.0)
+    q = quat_normalize(rng.normal(size=(200, 4)))
+    beam = np.array([0.0, 0.0, -1.0])
+    rho = slant_range_surface(p, q, beam, R_GROUND, lambda x: relief.radius(x, t))
+    sph = slant_range_sphere(p, q, beam, R_GROUND)
+    from workbench.core.rotation import quat_rotate
+
+    # beams within 60° of the local vertical (the radar's geometry: 20° squint plus the attitude)
+    steep = -np.sum(quat_rotate(q, beam) * u[:200], axis=1) > np.cos(np.radians(60.0))
+    ok = np.isfinite(rho) & np.isfinite(sph) & steep
+    assert ok.sum() > 30
+    x = p[ok] + rho[ok, None] * quat_rotate(q[ok], beam)
+    np.testing.assert_allclose(np.linalg.norm(x, axis=1), relief.radius(x, t), atol=1e-3)
+    assert np.std(rho[ok] - sph[ok]) > 30.0

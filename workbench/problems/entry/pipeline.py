@@ -35,9 +35,10 @@ import numpy as np
 
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
-from workbench.core.frames import C_bodyfixed_mmed, julian_date_from_utc, planetocentric_from_cartesian
+from workbench.core.frames import julian_date_from_utc, planetocentric_amelia, planetocentric_of_date
 from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import attitude_error, quat_normalize
+from workbench.core.timescales import julian_date_utc
 from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nees
 from workbench.estimation.strapdown import integrate
 from workbench.io.scenario import Scenario, ScenarioError
@@ -322,10 +323,16 @@ def epoch_jd_tdb(sc: Scenario, tm=None) -> float:
 
 
 def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_ground: float, tm=None) -> list[dict]:
-    """AMELIA Table 5 analogue: event, t [s], UTC, east longitude / latitude [deg], altitude AMR [km]."""
+    """AMELIA Table 5 analogue: event, t [s], UTC, east longitude / latitude [deg], altitude AMR [km].
+
+    ``lon_deg``/``lat_deg`` use the pole and meridian of date at TDB (``core.frames.planetocentric_of_date``);
+    ``lon_amelia_deg``/``lat_amelia_deg`` the convention that reproduces the paper's printed Table 5
+    (``core.frames.planetocentric_amelia``: MMED latitude, meridian at the UTC date), for comparison with it.
+    """
     import datetime as dt
 
     jd0 = epoch_jd_tdb(sc, tm)
+    jd0_utc = julian_date_utc(epoch_utc(sc, tm))
     epoch = dt.datetime.fromisoformat(epoch_utc(sc, tm).replace("Z", "+00:00"))
     rows = []
     names = [("First data", float(t[0]))] + sorted(events.items(), key=lambda kv: kv[1]) + [("Last data", float(t[-1]))]
@@ -335,8 +342,8 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
             continue
         te_pos = min(te, float(t[-1]))
         p = interp_rows(te_pos, t, p_M)
-        rF = C_bodyfixed_mmed(MARS, jd0 + te_pos / 86400.0) @ p
-        lat, lon, r = planetocentric_from_cartesian(rF)
+        lat, lon, r = planetocentric_of_date(MARS, jd0 + te_pos / 86400.0, p)
+        lat_a, lon_a, _ = planetocentric_amelia(MARS, jd0_utc + te_pos / 86400.0, p)
         rows.append(
             {
                 "event": name,
@@ -344,6 +351,8 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
                 "utc": (epoch + dt.timedelta(seconds=float(te))).strftime("%H:%M:%S.%f")[:-3],
                 "lon_deg": float(np.degrees(lon)),
                 "lat_deg": float(np.degrees(lat)),
+                "lon_amelia_deg": float(np.degrees(lon_a)),
+                "lat_amelia_deg": float(np.degrees(lat_a)),
                 "alt_amr_km": float((r - R_MOLA) / 1e3),
                 "alt_agl_km": float((r - r_ground) / 1e3),
             }
@@ -546,13 +555,17 @@ def scorecard_markdown(summary: dict) -> str:
         "",
         "## Events (AMELIA Table 5 analogue, reconstructed)",
         "",
-        "| event | t [s] | UTC | lon E [°] | lat N [°] | alt AMR [km] | alt AGL [km] |",
-        "|---|---|---|---|---|---|---|",
+        "lon/lat: pole and meridian of date at TDB; *as AMELIA*: the paper's Table 5 convention (MMED",
+        "latitude, meridian at the UTC date; `core.frames.planetocentric_amelia`), to compare with its printed rows.",
+        "",
+        "| event | t [s] | UTC | lon E [°] | lat N [°] | lon E as AMELIA [°] | lat N as AMELIA [°] "
+        "| alt AMR [km] | alt AGL [km] |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in summary["event_table"]:
         L.append(
             f"| {r['event']} | {r['t_s']:.2f} | {r['utc']} | {r['lon_deg']:.4f} | {r['lat_deg']:.4f} | "
-            f"{r['alt_amr_km']:.3f} | {r['alt_agl_km']:.3f} |"
+            f"{r['lon_amelia_deg']:.4f} | {r['lat_amelia_deg']:.4f} | {r['alt_amr_km']:.3f} | {r['alt_agl_km']:.3f} |"
         )
     v = summary["nominal_integration"].get("vs_onboard_before_pdd")
     if v:

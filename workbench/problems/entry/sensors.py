@@ -17,9 +17,11 @@ how this module produces the same thing from a truth trajectory for synthetic sc
   on-board position and velocity; rows inside the blackout windows are absent;
 * the Ka-band radar altimeter (RDA): 4-beam slant-range packets every 10 s (the first ones
   zero-filled), slant-out along the central beam B0 and the terrain-relative velocity in the
-  GNC frame at 10 Hz, from ``RDA_ON`` to ``BSR``.  Truth ranges are exact ray/sphere
-  intersections with the terrain sphere ``r = 3396000 − 1440 m`` (:func:`~workbench.models.radar.slant_range_sphere`),
-  not the estimator's flat-terrain model (Eq. B.3).
+  GNC frame at 10 Hz, from ``RDA_ON`` to ``BSR``.  Truth ranges are exact ray intersections with
+  the terrain sphere ``r = 3396000 − 1440 m`` plus the truth's smooth relief (the truth's
+  ``terrain_modes``, :class:`~workbench.problems.entry.site.TerrainRelief`,
+  :func:`~workbench.models.radar.slant_range_surface`), not the estimator's flat-terrain model
+  (Eq. B.3) on the sphere.
 
 Frames and conventions (docs/ARCHITECTURE.md, "Conventions"): ``M`` = MMED inertial (Mars-centred, +Z the
 pole), ``G`` = GNC body frame (+Z towards the back shell, B0 along −Z_G); ``q_M_G`` is
@@ -38,6 +40,7 @@ attitude increment).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -53,8 +56,8 @@ from workbench.core.rotation import (
     quat_normalize,
     quat_rotate,
 )
-from workbench.models.radar import beam_directions_G, slant_range_sphere
-from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M
+from workbench.models.radar import beam_directions_G, slant_range_sphere, slant_range_surface
+from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M, TerrainRelief
 
 __all__ = [
     "GYRO_SATURATION_DPS",
@@ -63,7 +66,10 @@ __all__ = [
     "EntryTelemetrySpec",
     "OnboardSolution",
     "EntryTM",
+    "IMU_ERROR_NAMES",
+    "draw_imu_errors",
     "apply_imu_errors",
+    "disperse_telemetry_spec",
     "nominal_state",
     "quat_cumprod",
     "strapdown_onboard",
@@ -84,25 +90,53 @@ DEFAULT_GAPS: tuple[tuple[float, float], ...] = ((22.9, 1.4), (24.8, 1.8), (27.1
 # --------------------------------------------------------------------------------------------
 
 
+#: Names of the per-run IMU errors (each (3,), per axis), in the order of ``EntryImuModel.errors``.
+IMU_ERROR_NAMES: tuple[str, ...] = (
+    "accel_bias",
+    "accel_scale",
+    "accel_misalignment",
+    "gyro_bias",
+    "gyro_scale",
+    "gyro_misalignment",
+)
+
+
 @dataclass(frozen=True)
 class EntryImuModel:
     """IMU error budget (1σ, SI), per axis.
 
     ``accel_noise`` [m/s²] and ``gyro_noise`` [rad/s] white noise per on-board (100 Hz) sample
-    (defaults: AMELIA Table 3, 0.001 m/s² and 0.01 °/s); ``*_bias`` constant per run and axis;
-    ``*_scale`` scale-factor error (fraction) per run and axis; ``gyro_full_scale`` (3,) [rad/s]
-    range of each gyro axis (measured rates are clipped at ±range; default 187.5 °/s, AMELIA
-    Sect. 3); ``accel_full_scale`` [m/s²] likewise (default: no limit).
+    (defaults: AMELIA Table 3, 0.001 m/s² and 0.01 °/s); ``*_bias`` constant per run and axis
+    [m/s², rad/s]; ``*_scale`` scale-factor error (fraction) per run and axis;
+    ``*_misalignment`` [rad] small-angle rotation of the sensor triad from the body axes per run
+    and axis; ``gyro_full_scale`` (3,) [rad/s] range of each gyro axis (measured rates are
+    clipped at ±range; default 187.5 °/s, AMELIA Sect. 3); ``accel_full_scale`` [m/s²] likewise
+    (default: no limit).
+
+    Default error levels: no Schiaparelli IMU specification is published (AMELIA Sect. 8
+    assumed a "standard navigation grade IMU"); the defaults are the intermediate/tactical-grade
+    levels of Groves, *Principles of GNSS, Inertial, and Multisensor Integrated Navigation
+    Systems*, 2nd ed., 2013, Sect. 4.4 (accelerometer bias 100-1000 μg, scale factor and
+    cross-coupling 100-1000 ppm / 0.1-1 mrad; tactical gyro bias 1-100 °/h, scale factor
+    100-1000 ppm): accelerometer bias 1e-3 m/s² (≈ 100 μg), scale 300 ppm, misalignment
+    0.2 mrad; gyro bias 1 °/h, scale 100 ppm, misalignment 0.2 mrad.
+
+    ``errors``: if given, the per-run errors themselves (six (3,) tuples in the order of
+    :data:`IMU_ERROR_NAMES`) instead of a draw from the 1σ levels (set by
+    :func:`disperse_telemetry_spec`).
     """
 
     accel_noise: float = 1e-3
-    accel_bias: float = 0.0
-    accel_scale: float = 0.0
+    accel_bias: float = 1e-3
+    accel_scale: float = 3e-4
+    accel_misalignment: float = 2e-4
     gyro_noise: float = math.radians(0.01)
-    gyro_bias: float = 0.0
-    gyro_scale: float = 0.0
+    gyro_bias: float = math.radians(1.0 / 3600.0)
+    gyro_scale: float = 1e-4
+    gyro_misalignment: float = 2e-4
     gyro_full_scale: tuple[float, float, float] = (math.radians(GYRO_SATURATION_DPS),) * 3
     accel_full_scale: float = math.inf
+    errors: tuple[tuple[float, float, float], ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -158,7 +192,8 @@ class EntryTelemetrySpec:
         ``synthetic.blackout_gaps_s`` of a :class:`~workbench.io.scenario.Scenario` (all optional).
 
         Keys (units in the names): ``sensors.imu``: accel_noise_mps2, accel_bias_mps2,
-        accel_scale, gyro_noise_dps, gyro_bias_dps, gyro_scale, gyro_full_scale_dps (number or
+        accel_scale, accel_misalignment_rad, gyro_noise_dps, gyro_bias_dps, gyro_scale,
+        gyro_misalignment_rad, gyro_full_scale_dps (number or
         list of 3), accel_full_scale_mps2, onboard_rate_hz, tm_rate_hz, nav_rate_hz;
         ``sensors.radar``: range_sigma_m, range_sigma_frac, velocity_sigma_mps, rate_hz,
         on_after_fsr_s, slant_range_period_s, first_packet_after_on_s, zero_filled_packets;
@@ -178,8 +213,10 @@ class EntryTelemetrySpec:
             accel_bias=g("sensors.imu.accel_bias_mps2", d.imu.accel_bias, kind="float"),
             accel_scale=g("sensors.imu.accel_scale", d.imu.accel_scale, kind="float"),
             gyro_noise=math.radians(g("sensors.imu.gyro_noise_dps", 0.01, kind="float")),
-            gyro_bias=math.radians(g("sensors.imu.gyro_bias_dps", 0.0, kind="float")),
+            gyro_bias=math.radians(g("sensors.imu.gyro_bias_dps", math.degrees(d.imu.gyro_bias), kind="float")),
             gyro_scale=g("sensors.imu.gyro_scale", d.imu.gyro_scale, kind="float"),
+            accel_misalignment=g("sensors.imu.accel_misalignment_rad", d.imu.accel_misalignment, kind="float"),
+            gyro_misalignment=g("sensors.imu.gyro_misalignment_rad", d.imu.gyro_misalignment, kind="float"),
             gyro_full_scale=tuple(math.radians(x) for x in fs),  # type: ignore[arg-type]
             accel_full_scale=g("sensors.imu.accel_full_scale_mps2", math.inf, kind="float"),
         )
@@ -224,29 +261,65 @@ class EntryTelemetrySpec:
 # --------------------------------------------------------------------------------------------
 
 
+def draw_imu_errors(model: EntryImuModel, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Per-run IMU errors ``{name: (3,)}`` of :data:`IMU_ERROR_NAMES`: ``model.errors`` when set,
+    else drawn N(0, 1σ) per axis from ``rng`` in that order (bias [m/s², rad/s], scale [-],
+    misalignment [rad])."""
+    if model.errors is not None:
+        if len(model.errors) != len(IMU_ERROR_NAMES):
+            raise ValueError(f"EntryImuModel.errors needs {len(IMU_ERROR_NAMES)} triads ({', '.join(IMU_ERROR_NAMES)})")
+        return {k: np.asarray(v, dtype=float).reshape(3) for k, v in zip(IMU_ERROR_NAMES, model.errors, strict=True)}
+    return {k: rng.normal(0.0, float(getattr(model, k)), 3) for k in IMU_ERROR_NAMES}
+
+
 def apply_imu_errors(
     f_G: np.ndarray, w_G: np.ndarray, model: EntryImuModel, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """Measured specific force and body rate from truth (n,3) each [m/s², rad/s], G frame.
 
-    ``y = (1 + s) x + b + noise``, then clipped at ± full scale (a saturated channel reads its
-    limit, as Schiaparelli's X gyro did).  Returns ``(f_meas, w_meas, drawn)`` with ``drawn`` the
-    per-run errors (``accel_bias``, ``accel_scale``, ``gyro_bias``, ``gyro_scale``, (3,) each).
+    ``y = (1 + s) ⊙ (x + m × x) + b + noise`` per triad (``m`` the small-angle misalignment
+    [rad], ``s`` the scale-factor error, ``b`` the bias), then clipped at ± full scale (a
+    saturated channel reads its limit, as Schiaparelli's X gyro did).  Returns ``(f_meas,
+    w_meas, drawn)`` with ``drawn`` the per-run errors (:func:`draw_imu_errors`, (3,) each).
     """
     f_G = np.asarray(f_G, float)
     w_G = np.asarray(w_G, float)
-    drawn = {
-        "accel_bias": rng.normal(0.0, model.accel_bias, 3),
-        "accel_scale": rng.normal(0.0, model.accel_scale, 3),
-        "gyro_bias": rng.normal(0.0, model.gyro_bias, 3),
-        "gyro_scale": rng.normal(0.0, model.gyro_scale, 3),
-    }
-    f = f_G * (1.0 + drawn["accel_scale"]) + drawn["accel_bias"] + rng.normal(0.0, model.accel_noise, f_G.shape)
-    w = w_G * (1.0 + drawn["gyro_scale"]) + drawn["gyro_bias"] + rng.normal(0.0, model.gyro_noise, w_G.shape)
+    drawn = draw_imu_errors(model, rng)
+    f = f_G + np.cross(drawn["accel_misalignment"], f_G)
+    w = w_G + np.cross(drawn["gyro_misalignment"], w_G)
+    f = f * (1.0 + drawn["accel_scale"]) + drawn["accel_bias"] + rng.normal(0.0, model.accel_noise, f_G.shape)
+    w = w * (1.0 + drawn["gyro_scale"]) + drawn["gyro_bias"] + rng.normal(0.0, model.gyro_noise, w_G.shape)
     f = np.clip(f, -model.accel_full_scale, model.accel_full_scale)
     fs = np.asarray(model.gyro_full_scale, float)
     w = np.clip(w, -fs, fs)
     return f, w, drawn
+
+
+def disperse_telemetry_spec(spec: EntryTelemetrySpec, rng: np.random.Generator) -> EntryTelemetrySpec:
+    """The telemetry spec of one Monte Carlo member: every per-run sensor error drawn and fixed as data.
+
+    Draws, in this order from ``rng``: the IMU errors of :data:`IMU_ERROR_NAMES` from the spec's
+    1σ levels (defaults, :class:`EntryImuModel`: accelerometer bias 1e-3 m/s², scale 300 ppm,
+    misalignment 0.2 mrad; gyro bias 1 °/h, scale 100 ppm, misalignment 0.2 mrad; per axis) into
+    ``imu.errors``; the on-board nominal initial-state error ``nominal.dx0`` = N(0, σ) per axis of
+    ``[δv (9 m/s), δθ (0.6°), δp (2 km)]`` (:class:`NominalErrorModel`).  The white noises (IMU
+    samples, radar ranges 1σ ``hypot(range_sigma, range_sigma_frac × range)``, velocity-out 1σ
+    ``velocity_sigma``) stay at the spec's levels and are drawn by :func:`generate_entry_tm`
+    from its own ``rng``.  Returns a new :class:`EntryTelemetrySpec`.
+    """
+    imu = spec.imu
+    drawn = draw_imu_errors(dataclasses.replace(imu, errors=None), rng)
+    imu = dataclasses.replace(imu, errors=tuple(tuple(float(x) for x in drawn[k]) for k in IMU_ERROR_NAMES))
+    nm = spec.nominal
+    dx0 = np.concatenate(
+        [
+            rng.normal(0.0, nm.velocity_sigma, 3),
+            rng.normal(0.0, nm.attitude_sigma, 3),
+            rng.normal(0.0, nm.position_sigma, 3),
+        ]
+    )
+    nominal = dataclasses.replace(nm, dx0=tuple(float(x) for x in dx0))
+    return dataclasses.replace(spec, imu=imu, nominal=nominal)
 
 
 def nominal_state(
@@ -399,7 +472,9 @@ class EntryTM:
     ``slant_ranges`` (k,4) (zero-filled packets are 0); ``t_rda`` (j,), ``slant_out`` (j,),
     ``v_out_G`` (j,3); ``events`` (incl. RDA_ON); ``epoch_utc``; ``onboard`` the full on-board
     solution at 100 Hz; ``nominal`` = (t0, v0, q0, p0, dx0) the on-board initial state and its
-    error; ``imu_errors`` the drawn per-run IMU errors; ``saturated_G`` (n,3) the clipped samples.
+    error; ``imu_errors`` the drawn per-run IMU errors; ``saturated_G`` (n,3) the clipped samples;
+    ``slant_out_true`` (j,) the noise-free slant-out on the truth's terrain and
+    ``slant_out_sphere`` (j,) the same on the terrain sphere the estimator assumes [m].
     """
 
     t_gnc: np.ndarray
@@ -420,6 +495,8 @@ class EntryTM:
     nominal: tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     imu_errors: dict[str, np.ndarray]
     saturated_G: np.ndarray
+    slant_out_true: np.ndarray | None = None
+    slant_out_sphere: np.ndarray | None = None
 
 
 def _round_t(t: np.ndarray) -> np.ndarray:
@@ -461,6 +538,10 @@ def generate_entry_tm(truth, spec: EntryTelemetrySpec, rng: np.random.Generator)
     if "FSR" in events and "RDA_ON" not in events:
         events["RDA_ON"] = events["FSR"] + spec.rda_on_after_fsr_s
     beams = beam_directions_G(spec.squint_deg, spec.azimuths_deg)
+    modes = getattr(truth, "terrain_modes", None)
+    modes = () if modes is None else tuple(tuple(float(x) for x in row) for row in np.asarray(modes).reshape(-1, 5))
+    relief = TerrainRelief(spec.r_ground, modes)
+    rho0 = rho0_sphere = np.empty(0)
     t_sr = np.empty(0)
     sr = np.empty((0, 4))
     t_rda = np.empty(0)
@@ -470,7 +551,8 @@ def generate_entry_tm(truth, spec: EntryTelemetrySpec, rng: np.random.Generator)
         t_on = events["RDA_ON"]
         t_sr = _round_t(np.arange(t_on + spec.sr_first_after_on_s, t_end + 1e-9, spec.sr_period_s))
         q_sr = quat_normalize(interp_rows(t_sr, t_tr, truth.q_M_G))
-        sr = slant_range_sphere(interp_rows(t_sr, t_tr, truth.p_M)[:, None], q_sr[:, None], beams, spec.r_ground)
+        p_sr = interp_rows(t_sr, t_tr, truth.p_M)
+        sr = _ranges(p_sr[:, None], q_sr[:, None], beams, t_sr[:, None], spec.r_ground, relief)
         sr = sr + rng.normal(0.0, 1.0, sr.shape) * np.hypot(spec.range_sigma, spec.range_sigma_frac * sr)
         sr[: spec.sr_zero_filled] = 0.0
         sr = np.where(np.isfinite(sr), sr, 0.0)  # a beam without a ground echo reports 0 (flagged on reading)
@@ -478,7 +560,8 @@ def generate_entry_tm(truth, spec: EntryTelemetrySpec, rng: np.random.Generator)
         t_rda = _round_t(dt_r * np.arange(math.ceil(t_on / dt_r - 1e-6), math.floor(t_end / dt_r + 1e-6) + 1))
         p_r = interp_rows(t_rda, t_tr, truth.p_M)
         q_r = quat_normalize(interp_rows(t_rda, t_tr, truth.q_M_G))
-        rho0 = slant_range_sphere(p_r, q_r, beams[0], spec.r_ground)
+        rho0 = _ranges(p_r, q_r, beams[0], t_rda, spec.r_ground, relief)
+        rho0_sphere = slant_range_sphere(p_r, q_r, beams[0], spec.r_ground)
         so = rho0 + rng.normal(0.0, 1.0, rho0.shape) * np.hypot(spec.range_sigma, spec.range_sigma_frac * rho0)
         so = np.where(np.isfinite(so), so, 0.0)
         vo = terrain_relative_velocity_G(p_r, interp_rows(t_rda, t_tr, truth.v_M), q_r)
@@ -503,4 +586,13 @@ def generate_entry_tm(truth, spec: EntryTelemetrySpec, rng: np.random.Generator)
         nominal=(float(t_ob[0]), v_nom, q_nom, p_nom, dx0),
         imu_errors=drawn,
         saturated_G=sat[ig],
+        slant_out_true=rho0,
+        slant_out_sphere=rho0_sphere,
     )
+
+
+def _ranges(p, q, beams, t, r_ground, relief: TerrainRelief):
+    """Noise-free ranges: on the sphere, or on the sphere plus the truth's relief at times t."""
+    if not relief.modes:
+        return slant_range_sphere(p, q, beams, r_ground)
+    return slant_range_surface(p, q, beams, r_ground, lambda x: relief.radius(x, t))

@@ -206,6 +206,16 @@ def synthesize_from_truth(
     arrays = _truth_arrays(truth)
     arrays["event_names"] = np.array(list(ev), dtype=str)
     arrays["event_times"] = np.array(list(ev.values()), dtype=float)
+    tspec = getattr(truth, "spec", None)
+    if tspec is not None and hasattr(tspec, "ca_deviation"):  # the planted coefficient deviations
+        for k in ("aero_deviation_mach", "ca_deviation", "parachute_deviation_mach", "parachute_cd_deviation"):
+            arrays[f"planted_{k}"] = np.asarray(getattr(tspec, k), dtype=float)
+        arrays["planted_cn_deviation"] = np.array(float(tspec.cn_deviation))
+        arrays["planted_cm_deviation"] = np.array(float(tspec.cm_deviation))
+    if tm.slant_out_true is not None and tm.slant_out_true.size:
+        arrays["radar_t"] = tm.t_rda
+        arrays["radar_slant_out_true"] = tm.slant_out_true
+        arrays["radar_slant_out_sphere"] = tm.slant_out_sphere
     truth_path = out / "truth.npz"
     np.savez_compressed(
         truth_path,
@@ -254,7 +264,10 @@ def load_truth(path: str | Path) -> dict:
     ``atmosphere`` is the true :class:`~workbench.core.atmosphere.TabulatedAtmosphere` rebuilt
     from its tables (``atmosphere_*``); ``nominal_*`` hold the on-board initial state at
     ``nominal_t0`` and ``nominal_dx0`` its error (truth − nominal, ``[δv, δθ, δp]``);
-    ``onboard_*`` the 100 Hz on-board solution (t, v_M, q_M_G, p_M and the measured w_G, f_G).
+    ``onboard_*`` the 100 Hz on-board solution (t, v_M, q_M_G, p_M and the measured w_G, f_G);
+    ``imu_*`` the per-run IMU errors; ``planted_*`` the planted coefficient deviations (truth
+    spec); ``radar_t``, ``radar_slant_out_true`` / ``radar_slant_out_sphere`` the noise-free
+    slant-out on the true terrain and on the estimator's sphere [m].
     """
     with np.load(path) as z:
         d = {k: z[k] for k in z.files}

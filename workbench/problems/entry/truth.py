@@ -57,6 +57,7 @@ peak ~101.5 m/s² ~0.6 s after PDD oscillating with ~0.35 s period); Mars consta
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field, fields
 
@@ -64,9 +65,7 @@ import numpy as np
 
 from workbench.core.atmosphere import (
     CO2_SUTHERLAND,
-    MARS_GAMMA,
     R_UNIVERSAL,
-    MarsEngineeringAtmosphere,
     TabulatedAtmosphere,
 )
 from workbench.core.bodies import MARS
@@ -80,7 +79,15 @@ __all__ = [
     "EntryTruthSpec",
     "EntryTruth",
     "MARS_MOLAR_MASS",
+    "AERO_DEVIATION_MACH",
+    "PARACHUTE_DEVIATION_MACH",
+    "AERO_SIGMA_COMMON",
+    "AERO_SIGMA_SHAPE",
+    "DispersionSigmas",
     "truth_spec_from_scenario",
+    "disperse_truth_spec",
+    "coefficient_deviation",
+    "draw_coefficient_deviation",
     "true_atmosphere",
     "wind_profile_truth",
     "simulate_entry",
@@ -88,6 +95,71 @@ __all__ = [
 
 MARS_MOLAR_MASS = 0.04341
 """Mean molar mass of the Martian atmosphere below 104 km [kg/mol] (AMELIA Sect. 9)."""
+
+
+AERO_DEVIATION_MACH: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+"""Mach nodes of the planted axial-coefficient deviation (smooth in log Mach between them, held
+constant outside)."""
+PARACHUTE_DEVIATION_MACH: tuple[float, ...] = (0.3, 0.8, 1.4, 2.2)
+"""Mach nodes of the planted parachute drag-coefficient deviation."""
+
+AERO_SIGMA_COMMON = 0.08
+"""1σ of the Mach-independent part of a drawn relative coefficient deviation [-]."""
+AERO_SIGMA_SHAPE = 0.06
+"""1σ of the Mach-dependent part (Gaussian process in ln Mach, correlation length 1) [-]; with
+:data:`AERO_SIGMA_COMMON` the total 1σ is 10 %, the drag-coefficient uncertainty of AMELIA Table 3."""
+
+# The shipped truth's planted values: one draw of :func:`draw_coefficient_deviation` (seed
+# 20161019), rounded.  Drag 4 % low subsonic, 5-7 % high in the hypersonic deceleration peak.
+_CA_DEVIATION_DEFAULT = (-0.043, -0.017, -0.020, -0.026, 0.006, 0.051, 0.072)
+_CHUTE_DEVIATION_DEFAULT = (0.059, 0.002, -0.041, -0.037)
+
+# Temperature of the true atmosphere [h_km AMR, T_K] (smooth monotone cubic between nodes): a
+# dusty-season (Ls ≈ 245°) afternoon profile of the Meridiani region built from published Mars
+# climate numbers, not from the estimator's default model: near-surface air ≈ 225 K (Viking /
+# Pathfinder / MER surface meteorology, 200-250 K by day), a lapse rate ≈ 2 K/km in the lowest
+# 10 km (below the 4.5 K/km dry adiabat: dust heating), ≈ 1 K/km through a dust-warmed 10-60 km,
+# a mesosphere cooling slowly to ≈ 128 K near 100 km and a thermosphere warming above 110 km
+# (pressure ≈ 7e-3 Pa at 100 km, AMELIA Sect. 9's 104 km reference value) (Mars Pathfinder
+# ASI/MET entry profile, Magalhães et al., JGR 104, 1999; Mars Climate Database climatology,
+# Millour et al. 2015).  The estimator's engineering model is 242 K at the surface, 2.2 K/km
+# above 7 km and isothermal (139 K) above 50 km: the truth is ~20 K colder near the ground and up
+# to ~27 K warmer at 40-60 km, so the scale height differs by up to ~20 %.
+_TEMPERATURE_PROFILE_DEFAULT: tuple[tuple[float, float], ...] = (
+    (-5.0, 234.0),
+    (0.0, 224.0),
+    (5.0, 214.0),
+    (10.0, 205.0),
+    (20.0, 195.0),
+    (30.0, 186.0),
+    (40.0, 176.0),
+    (50.0, 166.0),
+    (60.0, 156.0),
+    (70.0, 147.0),
+    (80.0, 139.0),
+    (90.0, 132.0),
+    (100.0, 128.0),
+    (110.0, 132.0),
+    (125.0, 150.0),
+    (140.0, 170.0),
+)
+
+# Terrain relief of the shipped truth: :func:`workbench.problems.entry.site.draw_terrain_modes`
+# with seed 2016, 12 modes, RMS 100 m, wavelengths 2-12 km (peak-to-peak a few hundred m).
+_TERRAIN_MODES_DEFAULT: tuple[tuple[float, float, float, float, float], ...] = (
+    (40.825, 11.3149, 16.4726, -106.2415, 18.302),
+    (40.825, 3.6758, -27.055, 73.0491, 303.669),
+    (40.825, 3.1621, 55.6913, -37.6515, 216.196),
+    (40.825, 4.1206, -6.8222, -127.0592, 358.279),
+    (40.825, 6.9982, -69.3257, -27.4544, 308.629),
+    (40.825, 10.9359, -18.2354, -160.3603, 167.356),
+    (40.825, 10.3157, -4.9217, -15.205, 63.267),
+    (40.825, 4.956, -68.8924, 104.7415, 0.643),
+    (40.825, 3.7852, -70.4766, 15.1472, 354.813),
+    (40.825, 3.4299, -43.6281, -103.1642, 359.455),
+    (40.825, 4.5793, -17.1632, -34.1432, 56.591),
+    (40.825, 2.1877, -39.6446, 171.2001, 259.469),
+)
 
 
 def _wind_layers_default() -> tuple[tuple[float, float, float, float, float], ...]:
@@ -111,10 +183,25 @@ class EntryTruthSpec:
     coefficient (``M_z = Cl q S L``) standing for asymmetric ablation; it slows the spin from
     16 to ~12 °/s over the entry as AMELIA observed (engineering value).
 
-    Atmosphere (see :func:`true_atmosphere`): ``surface_pressure_scale`` × the default's 699 Pa,
-    temperature = default + ``temperature_bias`` bumps + ``temperature_waves`` + inversion, each
-    wave ``(amplitude_K, wavelength_km, phase_deg)``, each bias ``(amplitude_K, centre_km,
-    width_km)``; ``inversion_*`` a Gaussian warm layer.  ``h_top_km`` top of the table.
+    ``initial_position_offset_km`` (3,) [km, M] moves the initial position off Table 2's.
+
+    Planted aerodynamic deviations (the estimator keeps the nominal tables of the vehicle
+    asset): the truth's axial coefficient is ``CA_table × (1 + δ_CA(M))`` with ``δ_CA`` given by
+    ``ca_deviation`` at the Mach nodes ``aero_deviation_mach`` (:func:`coefficient_deviation`);
+    ``CN × (1 + cn_deviation)``, ``Cm × (1 + cm_deviation)`` (both configurations); the parachute
+    ``CD × (1 + δ_P(M))`` from ``parachute_cd_deviation`` at ``parachute_deviation_mach``.  The
+    shipped values are one draw of :func:`draw_coefficient_deviation` (10 % 1σ, AMELIA Table 3).
+
+    Atmosphere (see :func:`true_atmosphere`): pressure ``surface_pressure_pa`` at 0 km AMR,
+    temperature from the climate profile ``temperature_profile_km_K`` ([h_km, T_K] nodes) +
+    ``temperature_waves`` (each ``(amplitude_K, wavelength_km, phase_deg)``, growing with
+    altitude with ``wave_growth_scale_km`` up to ``wave_growth_cap``×) + a Gaussian warm layer
+    ``inversion_*``; the truth's own ``molar_mass_g_per_mol`` and ``gamma``.  ``h_top_km`` top of
+    the table.
+
+    Terrain (see :class:`~workbench.problems.entry.site.TerrainRelief`): ``terrain_modes`` rows
+    ``(amplitude_m, wavelength_km, dir_lat_deg, dir_lon_deg, phase_deg)`` of the relief about the
+    terrain sphere that the radar beams see (the estimator keeps the sphere).
 
     Winds (see :func:`wind_profile_truth`): ``wind_layers`` of ``(bottom_km, top_km, speed_mps,
     towards_azimuth_deg, edge_km)`` (AMR altitudes, azimuth clockwise from north) on top of a
@@ -138,18 +225,32 @@ class EntryTruthSpec:
     aoa_offset_azimuth_deg: float = 0.0
     w0_dps: tuple[float, float, float] = (0.0, 0.0, 16.0)
     roll_moment_coeff: float = -3.0e-6
-    # atmosphere
-    surface_pressure_scale: float = 0.92
+    initial_position_offset_km: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # planted aerodynamic deviations (the estimator keeps the nominal tables)
+    aero_deviation_mach: tuple[float, ...] = AERO_DEVIATION_MACH
+    ca_deviation: tuple[float, ...] = _CA_DEVIATION_DEFAULT
+    cn_deviation: float = 0.07
+    cm_deviation: float = -0.05
+    parachute_deviation_mach: tuple[float, ...] = PARACHUTE_DEVIATION_MACH
+    parachute_cd_deviation: tuple[float, ...] = _CHUTE_DEVIATION_DEFAULT
+    # atmosphere (its own climate profile, gas constants and waves; see true_atmosphere)
+    surface_pressure_pa: float = 660.0
+    temperature_profile_km_K: tuple[tuple[float, float], ...] = _TEMPERATURE_PROFILE_DEFAULT
     temperature_waves: tuple[tuple[float, float, float], ...] = (
-        (6.0, 22.0, 30.0),
-        (4.0, 14.0, 200.0),
-        (2.5, 10.0, 100.0),
+        (2.5, 7.0, 40.0),
+        (2.0, 12.0, 150.0),
+        (1.2, 5.0, 270.0),
     )
-    temperature_bias: tuple[tuple[float, float, float], ...] = ((24.0, 30.0, 10.0), (12.0, 42.0, 6.0))
+    wave_growth_scale_km: float = 25.0
+    wave_growth_cap: float = 2.0
     inversion_center_km: float = 11.5
     inversion_width_km: float = 1.0
     inversion_amplitude_K: float = 6.0
+    molar_mass_g_per_mol: float = 43.34
+    gamma: float = 1.33
     h_top_km: float = 140.0
+    # terrain relief under the radar beams (see workbench.problems.entry.site.TerrainRelief)
+    terrain_modes: tuple[tuple[float, float, float, float, float], ...] = _TERRAIN_MODES_DEFAULT
     # winds
     wind_layers: tuple[tuple[float, float, float, float, float], ...] = field(default_factory=_wind_layers_default)
     background_wind_mps: float = 2.5
@@ -204,8 +305,11 @@ class EntryTruth:
     [m/s, blowing towards]; ``events`` {EIP, PDD, FSR, BSR} [s]; ``atmosphere`` the true
     atmosphere; ``epoch_utc`` of EIP and ``jd_tdb0`` its Julian date (TDB);
     ``parachute_p_M`` (n,3) canopy position [m, M] (NaN before PDD).
-    Extra (not in the interface spec, for plots/diagnostics): ``riser_tension`` (n,) [N] and
-    ``parachute_area`` (n,) [m²]; ``spec`` the :class:`EntryTruthSpec` used.
+    Extra (not in the interface spec, for plots/diagnostics): ``riser_tension`` (n,) [N],
+    ``parachute_area`` (n,) [m²], ``ca_factor`` (n,) the planted axial-coefficient factor
+    ``1 + δ_CA(M)`` along the flight [-], ``terrain_modes`` (k, 5) the terrain relief
+    (:class:`~workbench.problems.entry.site.TerrainRelief` rows) and ``spec`` the
+    :class:`EntryTruthSpec` used.
     """
 
     t: np.ndarray
@@ -229,6 +333,8 @@ class EntryTruth:
     parachute_p_M: np.ndarray | None
     riser_tension: np.ndarray | None = None
     parachute_area: np.ndarray | None = None
+    ca_factor: np.ndarray | None = None
+    terrain_modes: np.ndarray | None = None
     spec: EntryTruthSpec | None = None
 
 
@@ -239,8 +345,14 @@ _TUPLE_FIELDS = {
     "v0_kmps": 1,
     "q0_jpl": 1,
     "w0_dps": 1,
+    "initial_position_offset_km": 1,
+    "aero_deviation_mach": 1,
+    "ca_deviation": 1,
+    "parachute_deviation_mach": 1,
+    "parachute_cd_deviation": 1,
+    "temperature_profile_km_K": 2,
     "temperature_waves": 2,
-    "temperature_bias": 2,
+    "terrain_modes": 2,
     "wind_layers": 2,
 }
 
@@ -285,21 +397,142 @@ def truth_spec_from_scenario(scenario) -> EntryTruthSpec:
     return EntryTruthSpec(**kw)
 
 
+@dataclass(frozen=True)
+class DispersionSigmas:
+    """1σ (or ranges) of :func:`disperse_truth_spec`'s draws; SI unless a name carries a unit.
+
+    Initial state (AMELIA Table 3, "Reconstruction": 1°, 0.01 km/s, 2 km per axis — the
+    uncertainty delivered with the Table 2 state): ``fpa_deg`` flight-path angle (10 m/s across
+    5.9 km/s ≈ 0.1°), ``speed_mps``, ``attitude_deg`` (tilt of the initial attitude, random
+    azimuth), ``position_km`` per axis.  Aerodynamics (AMELIA Table 3, drag coefficients 10 %):
+    ``aero_common`` + ``aero_shape`` (see :func:`draw_coefficient_deviation`) for CA and the
+    parachute CD, ``cn_rel``, ``cm_rel`` for CN and Cm.  Atmosphere: ``surface_pressure_rel``;
+    ``temperature_K`` a smooth perturbation of the climate profile (Gaussian process in altitude,
+    correlation ``temperature_corr_km``); gravity waves redrawn (amplitudes uniform in
+    ``wave_amplitude_K``, wavelengths log-uniform in ``wave_wavelength_km``, phases uniform);
+    the inversion centre uniform in ``inversion_center_km``, amplitude in ``inversion_amplitude_K``.
+    Winds: each layer's speed × (1 + N(0, ``wind_speed_rel``)), direction + N(0,
+    ``wind_direction_deg``), altitude + N(0, ``wind_altitude_km``); background speed N(spec,
+    ``background_wind_mps``) (absolute value).  Terrain: new modes with RMS ``terrain_rms_m``.
+    """
+
+    fpa_deg: float = 0.1
+    speed_mps: float = 10.0
+    attitude_deg: float = 1.0
+    position_km: float = 2.0
+    aero_common: float = AERO_SIGMA_COMMON
+    aero_shape: float = AERO_SIGMA_SHAPE
+    cn_rel: float = 0.10
+    cm_rel: float = 0.10
+    surface_pressure_rel: float = 0.05
+    temperature_K: float = 6.0
+    temperature_corr_km: float = 15.0
+    wave_amplitude_K: tuple[float, float] = (1.0, 3.5)
+    wave_wavelength_km: tuple[float, float] = (5.0, 15.0)
+    inversion_center_km: tuple[float, float] = (9.0, 14.0)
+    inversion_amplitude_K: tuple[float, float] = (0.0, 8.0)
+    wind_speed_rel: float = 0.25
+    wind_direction_deg: float = 30.0
+    wind_altitude_km: float = 0.5
+    background_wind_mps: float = 2.0
+    terrain_rms_m: float = 100.0
+
+
+def disperse_truth_spec(
+    spec: EntryTruthSpec, rng: np.random.Generator, sigmas: DispersionSigmas | None = None
+) -> EntryTruthSpec:
+    """A new, different truth for one Monte Carlo member: ``spec`` with its planted deviations redrawn.
+
+    Draws (1σ in :class:`DispersionSigmas`, defaults in brackets), in this order from ``rng``:
+
+    * initial state about the Table 2 nominal (AMELIA Table 3 "Reconstruction"):
+      ``fpa_offset_deg`` N(0, 0.1°), ``speed_offset_mps`` N(0, 10 m/s), ``aoa_offset_deg``
+      |N(0, 1°)| at a uniform azimuth, ``initial_position_offset_km`` N(0, 2 km) per axis;
+    * aerodynamics: ``ca_deviation`` and ``parachute_cd_deviation`` smooth in Mach
+      (:func:`draw_coefficient_deviation`: 8 % common + 6 % Mach-dependent = 10 % 1σ, AMELIA
+      Table 3), ``cn_deviation`` and ``cm_deviation`` N(0, 10 %);
+    * atmosphere: ``surface_pressure_pa`` × (1 + N(0, 5 %)); the climate profile's node
+      temperatures + a smooth Gaussian-process perturbation (6 K, correlation 15 km); three new
+      gravity waves (1-3.5 K, 5-15 km, random phase); the inversion centre U(9, 14) km and
+      amplitude U(0, 8) K;
+    * winds: each layer's speed ×(1 + N(0, 25 %)), direction + N(0, 30°), altitude + N(0, 0.5 km);
+      background speed |N(spec, 2 m/s)|, azimuth uniform;
+    * terrain: 12 new relief modes, RMS 100 m, wavelengths 2-12 km
+      (:func:`~workbench.problems.entry.site.draw_terrain_modes`).
+
+    Everything else (events, parachute deployment, integration) is kept; the canopy breathing
+    jitter is drawn by :func:`simulate_entry` from its own ``rng``.  Returns a new
+    :class:`EntryTruthSpec` (``spec`` is not modified).
+    """
+    from workbench.problems.entry.site import draw_terrain_modes
+
+    sg = DispersionSigmas() if sigmas is None else sigmas
+    n = rng.standard_normal
+    kw: dict = {}
+    kw["fpa_offset_deg"] = float(sg.fpa_deg * n())
+    kw["speed_offset_mps"] = float(sg.speed_mps * n())
+    kw["aoa_offset_deg"] = float(abs(sg.attitude_deg * n()))
+    kw["aoa_offset_azimuth_deg"] = float(rng.uniform(0.0, 360.0))
+    kw["initial_position_offset_km"] = tuple(float(x) for x in sg.position_km * n(3))
+    kw["ca_deviation"] = draw_coefficient_deviation(rng, spec.aero_deviation_mach, sg.aero_common, sg.aero_shape)
+    kw["cn_deviation"] = float(sg.cn_rel * n())
+    kw["cm_deviation"] = float(sg.cm_rel * n())
+    kw["parachute_cd_deviation"] = draw_coefficient_deviation(
+        rng, spec.parachute_deviation_mach, sg.aero_common, sg.aero_shape
+    )
+    kw["surface_pressure_pa"] = float(spec.surface_pressure_pa * (1.0 + sg.surface_pressure_rel * n()))
+    prof = np.asarray(spec.temperature_profile_km_K, dtype=float)
+    hk = prof[:, 0]
+    K = np.exp(-0.5 * ((hk[:, None] - hk[None, :]) / sg.temperature_corr_km) ** 2) + 1e-9 * np.eye(hk.size)
+    dT = sg.temperature_K * (np.linalg.cholesky(K) @ n(hk.size))
+    kw["temperature_profile_km_K"] = tuple(
+        (float(h), round(float(T), 3)) for h, T in zip(hk, prof[:, 1] + dT, strict=True)
+    )
+    lo, hi = sg.wave_wavelength_km
+    kw["temperature_waves"] = tuple(
+        (
+            round(float(rng.uniform(*sg.wave_amplitude_K)), 3),
+            round(float(np.exp(rng.uniform(np.log(lo), np.log(hi)))), 3),
+            round(float(rng.uniform(0.0, 360.0)), 2),
+        )
+        for _ in range(3)
+    )
+    kw["inversion_center_km"] = float(rng.uniform(*sg.inversion_center_km))
+    kw["inversion_amplitude_K"] = float(rng.uniform(*sg.inversion_amplitude_K))
+    layers = []
+    for bottom, top, speed, az, edge in spec.wind_layers:
+        dz = sg.wind_altitude_km * n()
+        layers.append(
+            (
+                float(bottom + dz),
+                float(top + dz),
+                float(max(0.0, speed * (1.0 + sg.wind_speed_rel * n()))),
+                float(az + sg.wind_direction_deg * n()),
+                float(edge),
+            )
+        )
+    kw["wind_layers"] = tuple(layers)
+    kw["background_wind_mps"] = float(abs(spec.background_wind_mps + sg.background_wind_mps * n()))
+    kw["background_azimuth_deg"] = float(rng.uniform(0.0, 360.0))
+    kw["terrain_modes"] = draw_terrain_modes(rng, rms_m=sg.terrain_rms_m)
+    return dataclasses.replace(spec, **kw)
+
+
 # ------------------------------------------------------------------------------- true atmosphere
 
 
 def _true_temperature(h: np.ndarray, spec: EntryTruthSpec) -> np.ndarray:
-    """Temperature [K] of the true atmosphere at h [m] AMR (default + bias + waves + inversion)."""
-    # Glenn engineering temperature (as MarsEngineeringAtmosphere, isothermal above its 50 km
-    # blend) with its 0.95 K step at 7 km smoothed over ±0.5 km: the truth has no discontinuity
-    hb = np.minimum(h, MarsEngineeringAtmosphere().h_blend)
-    w = np.clip((hb - 6500.0) / 1000.0, 0.0, 1.0)
-    w = w * w * (3.0 - 2.0 * w)
-    T = 273.15 + (1.0 - w) * (-31.0 - 0.000998 * hb) + w * (-23.4 - 0.00222 * hb)
-    hk = h / 1e3
-    for amp, ck, wk in spec.temperature_bias:
-        T = T + amp * np.exp(-0.5 * ((hk - ck) / wk) ** 2)
-    grow = 0.6 + 0.4 * np.clip(hk / 40.0, 0.0, 1.0)  # gravity waves grow with altitude
+    """Temperature [K] of the true atmosphere at h [m] AMR: the climate profile
+    ``temperature_profile_km_K`` (monotone cubic, PCHIP, between its nodes; end values held
+    outside), + gravity waves, + the inversion layer."""
+    from scipy.interpolate import PchipInterpolator
+
+    nodes = np.asarray(spec.temperature_profile_km_K, dtype=float)
+    hk = np.asarray(h, dtype=float) / 1e3
+    T = PchipInterpolator(nodes[:, 0], nodes[:, 1], extrapolate=False)(np.clip(hk, nodes[0, 0], nodes[-1, 0]))
+    # gravity waves: amplitude ∝ exp(h / 2H) (energy conservation in a thinning atmosphere) until
+    # they saturate at ``wave_growth_cap`` times the surface amplitude
+    grow = np.minimum(np.exp(np.maximum(hk, 0.0) / spec.wave_growth_scale_km), spec.wave_growth_cap)
     for amp, lam, ph in spec.temperature_waves:
         T = T + grow * amp * np.sin(2.0 * np.pi * hk / lam + np.radians(ph))
     T = T + spec.inversion_amplitude_K * np.exp(-0.5 * ((hk - spec.inversion_center_km) / spec.inversion_width_km) ** 2)
@@ -309,31 +542,80 @@ def _true_temperature(h: np.ndarray, spec: EntryTruthSpec) -> np.ndarray:
 def true_atmosphere(spec: EntryTruthSpec, dh: float = 10.0, h_bottom: float = -5000.0) -> TabulatedAtmosphere:
     """The true atmosphere as a :class:`TabulatedAtmosphere` on nodes every ``dh`` [m] AMR.
 
-    Temperature: :class:`MarsEngineeringAtmosphere` + ``temperature_bias`` Gaussian bumps +
-    ``temperature_waves`` (sinusoids in altitude, amplitude growing ×0.6 -> ×1 from 0 to 40 km)
-    + a Gaussian warm layer near ``inversion_center_km`` (a real inversion: dT/dh > 0 there).
-    Pressure: hydrostatic integration ``dp/dh = −ρ g``, ``ρ = p / (R T)``, ``g = GM/(R_ref + h)²``
-    (radial, no centrifugal term), from ``surface_pressure_scale`` × 699 Pa at h = 0, with
-    ``R = R_universal / 0.04341`` (molar mass 43.41 g/mol, AMELIA Sect. 9); density from the
-    ideal gas.  The integration is exact for T linear between nodes (trapezoid on 1/T is
-    replaced by the analytic layer formula).  Extrapolation: clamp (constant end values).
+    Temperature (:func:`_true_temperature`): the climate profile ``temperature_profile_km_K``
+    (not the estimator's engineering model), gravity waves ``temperature_waves`` (amplitude
+    growing as ``exp(h / wave_growth_scale_km)`` up to ``wave_growth_cap``×) and a Gaussian warm
+    layer near ``inversion_center_km`` (a real inversion: dT/dh > 0 there).  Pressure: hydrostatic
+    integration ``dp/dh = −ρ g``, ``ρ = p / (R T)``, ``g = GM/(R_ref + h)²`` (radial, no
+    centrifugal term), from ``surface_pressure_pa`` at h = 0, with the truth's own gas constant
+    ``R = R_universal / molar_mass`` (``molar_mass_g_per_mol``, default 43.34 g/mol, the NASA Mars
+    fact sheet's mean molecular weight; the estimator assumes AMELIA's 43.41) and ratio of specific
+    heats ``gamma`` (default 1.33, CO2 near 200 K; the estimator's 1.335); density from the ideal
+    gas.  Trapezoid rule on g/T (dh = 10 m: relative error ~1e-7).  Extrapolation: clamp.
     """
     top = spec.h_top_km * 1e3
     h = np.arange(h_bottom, top + 0.5 * dh, dh)
     T = _true_temperature(h, spec)
-    R = R_UNIVERSAL / MARS_MOLAR_MASS
+    R = R_UNIVERSAL / (spec.molar_mass_g_per_mol * 1e-3)
     g = MARS.gm / (MARS.reference_radius + h) ** 2
-    # d ln p / dh = −g / (R T); integrate with the trapezoid rule on g/T (dh = 10 m: error ~1e-7)
     f = g / (R * T)
     lnp = np.concatenate([[0.0], -np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(h))])
-    i0 = np.searchsorted(h, 0.0)
-    p_surf = spec.surface_pressure_scale * 699.0
-    lnp = lnp - lnp[i0] + math.log(p_surf) if h[i0] == 0.0 else lnp - np.interp(0.0, h, lnp) + math.log(p_surf)
+    lnp = lnp - np.interp(0.0, h, lnp) + math.log(spec.surface_pressure_pa)
     p = np.exp(lnp)
     rho = p / (R * T)
     return TabulatedAtmosphere(
-        h=h, rho=rho, p=p, T=T, gas_constant=R, gamma=MARS_GAMMA, sutherland=CO2_SUTHERLAND, extrapolate="clamp"
+        h=h, rho=rho, p=p, T=T, gas_constant=R, gamma=spec.gamma, sutherland=CO2_SUTHERLAND, extrapolate="clamp"
     )
+
+
+# ------------------------------------------------------------------------- planted deviations
+
+
+def coefficient_deviation(mach, nodes_mach, deviation) -> np.ndarray:
+    """Relative coefficient deviation [-] at Mach ``mach`` (any shape): the node values
+    ``deviation`` at Mach ``nodes_mach`` (increasing, ≥ 2), joined by a monotone cubic (PCHIP) in
+    ln Mach, held constant outside the nodes.  The truth multiplies a table coefficient by
+    ``1 + deviation``."""
+    from scipy.interpolate import PchipInterpolator
+
+    x = np.log(np.asarray(nodes_mach, dtype=float))
+    m = np.log(np.clip(np.asarray(mach, dtype=float), np.exp(x[0]), np.exp(x[-1])))
+    return PchipInterpolator(x, np.asarray(deviation, dtype=float))(m)
+
+
+def draw_coefficient_deviation(
+    rng: np.random.Generator,
+    nodes_mach: tuple[float, ...],
+    sigma_common: float = AERO_SIGMA_COMMON,
+    sigma_shape: float = AERO_SIGMA_SHAPE,
+    corr_ln_mach: float = 1.0,
+) -> tuple[float, ...]:
+    """A smooth random relative deviation at the Mach nodes: a common offset N(0, ``sigma_common``)
+    plus a Gaussian process in ln Mach (squared-exponential, correlation length ``corr_ln_mach``,
+    1σ ``sigma_shape``).  Defaults: 10 % total 1σ (AMELIA Table 3).  Returns one value per node."""
+    x = np.log(np.asarray(nodes_mach, dtype=float))
+    K = np.exp(-0.5 * ((x[:, None] - x[None, :]) / corr_ln_mach) ** 2) + 1e-9 * np.eye(x.size)
+    d = sigma_common * rng.standard_normal() + sigma_shape * (np.linalg.cholesky(K) @ rng.standard_normal(x.size))
+    return tuple(round(float(v), 4) for v in d)
+
+
+def _deviation_lookup(nodes_mach, deviation, n: int = 512) -> tuple[float, float, list[float]]:
+    """(ln M_lo, 1/Δ, factors) of ``1 + deviation`` on a uniform ln-Mach grid for the scalar loop."""
+    x = np.log(np.asarray(nodes_mach, dtype=float))
+    grid = np.linspace(x[0], x[-1], n)
+    fac = 1.0 + coefficient_deviation(np.exp(grid), nodes_mach, deviation)
+    return float(x[0]), float((n - 1) / (x[-1] - x[0])), fac.tolist()
+
+
+def _lookup(tab: tuple[float, float, list[float]], mach: float) -> float:
+    x0, inv, fac = tab
+    u = (math.log(mach) - x0) * inv if mach > 0.0 else 0.0
+    if u <= 0.0:
+        return fac[0]
+    if u >= len(fac) - 1:
+        return fac[-1]
+    i = int(u)
+    return fac[i] + (u - i) * (fac[i + 1] - fac[i])
 
 
 # ------------------------------------------------------------------------------------- winds
@@ -402,6 +684,11 @@ class _Model:
         self.att = [float(x) for x in vehicle.attach_point_G]
         self.t_pdd = math.inf
         self.side_M = (0.0, 0.0, 0.0)  # inertial direction of the asymmetric-inflation side force
+        # planted aerodynamic deviations (lookup of 1 + δ(M) on a ln-Mach grid)
+        self.ca_fac = _deviation_lookup(spec.aero_deviation_mach, spec.ca_deviation)
+        self.cn_fac = 1.0 + spec.cn_deviation
+        self.cm_fac = 1.0 + spec.cm_deviation
+        self.cp_fac = _deviation_lookup(spec.parachute_deviation_mach, spec.parachute_cd_deviation)
         self.phi_b = math.radians(spec.breathing_phase_sigma_deg) * float(rng.standard_normal())
         self.amp_b = spec.breathing_amplitude * (1.0 + spec.breathing_amp_jitter * float(rng.uniform(-1.0, 1.0)))
 
@@ -488,6 +775,7 @@ class _Model:
         FGx = FGy = FGz = 0.0  # non-gravitational force on the module, body frame [N]
         Mx = My = Mz = 0.0  # torque about the CoG, body frame [N m]
         mach = kn = alpha = qd = 0.0
+        ca_f = 1.0
         vrx = vry = vrz = 0.0
         wn = we = 0.0
         if self.aero_on:
@@ -507,6 +795,8 @@ class _Model:
                 mach = V / a_snd
                 kn = lam / self.D
                 CA, CN, CM = self.tab.coefficients_scalar(mach, kn, alpha)
+                ca_f = _lookup(self.ca_fac, mach)
+                CA, CN, CM = CA * ca_f, CN * self.cn_fac, CM * self.cm_fac
                 qd = 0.5 * rho * V * V
                 qS = qd * self.S
                 FGz = CA * qS
@@ -558,7 +848,8 @@ class _Model:
                 wz_p = vpz - wnp * nzp
                 Vp = math.sqrt(wx_p * wx_p + wy_p * wy_p + wz_p * wz_p)
                 if Vp > 1e-6:
-                    Dk = 0.5 * rho_p * Vp * self.veh.parachute.cd_scalar(Vp / a_p) * Ap
+                    mp = Vp / a_p
+                    Dk = 0.5 * rho_p * Vp * self.veh.parachute.cd_scalar(mp) * _lookup(self.cp_fac, mp) * Ap
                     Dx, Dy, Dz = -Dk * wx_p, -Dk * wy_p, -Dk * wz_p
                     ks = self.side_weight(t)
                     if ks > 0.0:  # asymmetric inflation: side force ⊥ the canopy's air velocity
@@ -614,7 +905,8 @@ class _Model:
         if chute:
             d.extend(dchute)
         if aux:
-            return d, (fx, fy, fz, mach, kn, alpha, qd, h, vrx, vry, vrz, wn, we, T, self.area(t) if chute else 0.0)
+            area = self.area(t) if chute else 0.0
+            return d, (fx, fy, fz, mach, kn, alpha, qd, h, vrx, vry, vrz, wn, we, T, area, ca_f)
         return d
 
 
@@ -677,6 +969,7 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
     model = _Model(vehicle, spec, atm, rng)
     p0 = np.asarray(spec.p0_km, float) * 1e3
     v0 = _initial_velocity(p0, np.asarray(spec.v0_kmps, float) * 1e3, spec)
+    p0 = p0 + np.asarray(spec.initial_position_offset_km, float) * 1e3
     q0 = _initial_quaternion(spec)
     w0 = np.radians(np.asarray(spec.w0_dps, float))
     y = [*p0.tolist(), *v0.tolist(), *q0.tolist(), *w0.tolist()]
@@ -689,7 +982,7 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
     n_max = int(math.floor((t_stop_cap - spec.t0) / dt_out + 1e-9)) + 1
 
     states = np.full((n_max, 19), np.nan)
-    auxs = np.zeros((n_max, 15))
+    auxs = np.zeros((n_max, 16))
     phases = np.zeros(n_max, dtype=int)
     events = {"EIP": 0.0, "PDD": math.nan, "FSR": math.nan, "BSR": math.nan}
     k = 0
@@ -754,6 +1047,8 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
         parachute_p_M=None if chute_p is None else chute_p.copy(),
         riser_tension=auxs[:, 13].copy(),
         parachute_area=auxs[:, 14].copy(),
+        ca_factor=auxs[:, 15].copy(),
+        terrain_modes=np.asarray(spec.terrain_modes, dtype=float).reshape(-1, 5),
         spec=spec,
     )
 
