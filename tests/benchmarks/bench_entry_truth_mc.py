@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
             "dispersion_accepted": s.get("dispersion_accepted"),
             "smoother_start_modes": s.get("smoother_start_modes"),
             "epoch_spread_s": s.get("epoch_spread_s"),
-            "truth_dispersion_model": s["dispersion_model"],
+            "truth_dispersion_model": s["truth_dispersion_sigmas"],
             "covariance_symmetric_pd_all": s.get("covariance_symmetric_pd_all"),
             "failures": s["failures"],
             "executor": s["executor"],

@@ -55,8 +55,17 @@ def test_members_have_different_truths(mc):
     _, work, res = mc
     assert len(res.members) == N_RUNS and not any(m.scores.failed for m in res.members)
     specs = [m.info["truth_spec"] for m in res.members]
-    for key in ("fpa_offset_deg", "speed_offset_mps", "p0_km", "wind_layer_speeds_mps"):
+    for key in (
+        "fpa_offset_deg",
+        "speed_offset_mps",
+        "initial_position_offset_km",
+        "ca_deviation",
+        "wind_layer_speeds_mps",
+    ):
         assert len({str(s[key]) for s in specs}) == N_RUNS, key
+    for key in ("imu_errors", "nominal_dx0"):  # every member its own sensor errors
+        assert len({str(m.info[key]) for m in res.members}) == N_RUNS, key
+    assert res.members[0].info["imu_errors"]  # drawn (not empty)
     pdd = [m.info["truth_events"]["PDD"] for m in res.members]
     assert len(set(pdd)) > 1  # different trajectories reach Mach 2 at different times
     digests = {hashlib.sha256((work / f"member_{k}" / "telemetry" / "gnc.csv").read_bytes()).hexdigest()

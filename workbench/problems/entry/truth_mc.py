@@ -16,8 +16,9 @@ Member k (``np.random.SeedSequence(seed, spawn_key=(k,))``, the convention of
 :mod:`workbench.estimation.montecarlo`, spawned into the draws of the member's specs, the truth
 simulation and the telemetry):
 
-1. **specs** — :func:`disperse_member`: the scenario's truth spec and telemetry spec dispersed
-   (one function, so the dispersion model can be swapped);
+1. **specs** — :func:`disperse_member`: the scenario's truth spec and telemetry spec dispersed by
+   the truth package's own functions (initial state, planted aerodynamic deviations, atmosphere,
+   winds, terrain relief; IMU bias, scale and misalignment, the on-board nominal-state error);
 2. **truth** — :func:`~workbench.problems.entry.truth.simulate_entry` on the dispersed spec;
 3. **telemetry files** — :func:`~workbench.problems.entry.synthetic.synthesize_from_truth`
    (sensor errors, on-board strapdown from an erroneous nominal state, blackouts, radar) writes the
@@ -76,9 +77,15 @@ from workbench.problems.entry.montecarlo import (
     summary_times,
 )
 from workbench.problems.entry.preprocess import EntryTelemetry, PreprocessedIMU
-from workbench.problems.entry.sensors import EntryTelemetrySpec
+from workbench.problems.entry.sensors import IMU_ERROR_NAMES, EntryTelemetrySpec, disperse_telemetry_spec
 from workbench.problems.entry.synthetic import load_truth, synthesize_from_truth, vehicle_path
-from workbench.problems.entry.truth import EntryTruthSpec, simulate_entry, truth_spec_from_scenario
+from workbench.problems.entry.truth import (
+    DispersionSigmas,
+    EntryTruthSpec,
+    disperse_truth_spec,
+    simulate_entry,
+    truth_spec_from_scenario,
+)
 
 __all__ = [
     "TruthMcMember",
@@ -93,53 +100,20 @@ __all__ = [
 DEFAULT_MEMBERS = 2000
 DEFAULT_REFINE_ROUNDS = 1
 
-#: Dispersion of a member's truth (interim model until the truth package provides its own): 1σ of
-#: the flight-path-angle offset [deg], speed offset [m/s], extra angle of attack [deg], initial
-#: position per axis [km]; relative 1σ of the wind-layer and background wind speeds; 1σ of their
-#: directions [deg].
-_DISPERSION = {
-    "fpa_deg": 0.1,
-    "speed_mps": 5.0,
-    "aoa_deg": 0.5,
-    "position_km": 1.0,
-    "wind_speed_rel": 0.25,
-    "wind_azimuth_deg": 20.0,
-    "background_speed_rel": 0.3,
-    "background_azimuth_deg": 30.0,
-}
-
 
 def disperse_member(
-    truth_spec: EntryTruthSpec, telemetry_spec: EntryTelemetrySpec, rng: np.random.Generator
+    truth_spec: EntryTruthSpec,
+    telemetry_spec: EntryTelemetrySpec,
+    rng_truth: np.random.Generator,
+    rng_sensors: np.random.Generator,
 ) -> tuple[EntryTruthSpec, EntryTelemetrySpec]:
-    """One member's truth and telemetry specs drawn about the scenario's (SI unless named).
-
-    Truth: flight-path-angle and speed offsets, an extra angle of attack at a uniform azimuth, an
-    offset of the initial position (per axis, km), wind-layer speeds (relative, ≥ 0) and directions,
-    the background wind (1σ in ``_DISPERSION``).  Telemetry: the spec as given — every member still
-    draws its own nominal-state error, IMU noise and radar noise from it
-    (:func:`~workbench.problems.entry.sensors.generate_entry_tm`).
-    """
-    d = _DISPERSION
-    layers = tuple(
-        (b, t, max(0.0, s * (1.0 + d["wind_speed_rel"] * rng.standard_normal())),
-         a + d["wind_azimuth_deg"] * rng.standard_normal(), e)
-        for b, t, s, a, e in truth_spec.wind_layers
-    )  # fmt: skip
-    spec = dataclasses.replace(
-        truth_spec,
-        fpa_offset_deg=truth_spec.fpa_offset_deg + d["fpa_deg"] * rng.standard_normal(),
-        speed_offset_mps=truth_spec.speed_offset_mps + d["speed_mps"] * rng.standard_normal(),
-        aoa_offset_deg=truth_spec.aoa_offset_deg + abs(d["aoa_deg"] * rng.standard_normal()),
-        aoa_offset_azimuth_deg=float(rng.uniform(0.0, 360.0)),
-        p0_km=tuple(float(x) for x in np.asarray(truth_spec.p0_km) + d["position_km"] * rng.standard_normal(3)),
-        wind_layers=layers,
-        background_wind_mps=max(
-            0.0, truth_spec.background_wind_mps * (1.0 + d["background_speed_rel"] * rng.standard_normal())
-        ),
-        background_azimuth_deg=truth_spec.background_azimuth_deg + d["background_azimuth_deg"] * rng.standard_normal(),
-    )
-    return spec, telemetry_spec
+    """One member's truth and telemetry specs drawn about the scenario's: the truth simulator's own
+    dispersion (:func:`~workbench.problems.entry.truth.disperse_truth_spec`: initial state, planted
+    aerodynamic deviations, atmosphere, winds, terrain relief) and the sensors'
+    (:func:`~workbench.problems.entry.sensors.disperse_telemetry_spec`: IMU bias, scale and
+    misalignment, the on-board nominal-state error), from the independent streams ``rng_truth`` and
+    ``rng_sensors``.  The white noises (IMU samples, radar) are drawn later from the telemetry stream."""
+    return disperse_truth_spec(truth_spec, rng_truth), disperse_telemetry_spec(telemetry_spec, rng_sensors)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -213,16 +187,21 @@ def _run_member(job: _Job, k: int, ss: np.random.SeedSequence) -> TruthMcMember:
     """Member k (module docstring); depends on (job, k) only.  A task of
     :func:`~workbench.estimation.montecarlo.run_monte_carlo`."""
     t0 = time.perf_counter()
-    g_spec, g_sim, g_tm = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(3))
-    spec, tspec = disperse_member(job.truth_spec, job.telemetry_spec, g_spec)
+    g_spec, g_sensors, g_sim, g_tm = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(4))
+    spec, tspec = disperse_member(job.truth_spec, job.telemetry_spec, g_spec, g_sensors)
     info: dict[str, Any] = {
         "truth_spec": {
             "fpa_offset_deg": spec.fpa_offset_deg,
             "speed_offset_mps": spec.speed_offset_mps,
             "aoa_offset_deg": spec.aoa_offset_deg,
-            "p0_km": list(spec.p0_km),
+            "initial_position_offset_km": list(spec.initial_position_offset_km),
+            "ca_deviation": list(spec.ca_deviation),
+            "parachute_cd_deviation": list(spec.parachute_cd_deviation),
+            "surface_pressure_pa": spec.surface_pressure_pa,
             "wind_layer_speeds_mps": [w[2] for w in spec.wind_layers],
         },
+        "imu_errors": {nm: list(v) for nm, v in zip(IMU_ERROR_NAMES, tspec.imu.errors or (), strict=False)},
+        "nominal_dx0": list(tspec.nominal.dx0 or ()),
         "radar_noise_simulated": {
             "range_sigma_m": float(tspec.range_sigma),
             "range_sigma_frac": float(tspec.range_sigma_frac),
@@ -414,8 +393,8 @@ def _extra_summary(outs, ok, sigmas, job: _Job) -> dict:
     tspec = job.telemetry_spec
     out: dict[str, Any] = {
         "kind": "entry_truth_mc",
-        "truths_note": "6-DOF truth simulator per member (dispersed initial state and winds), telemetry files, "
-        "full pipeline (preprocessing, dispersion, iterated smoother)",
+        "truths_note": "6-DOF truth simulator per member (dispersed initial state, aerodynamics, atmosphere, "
+        "winds, terrain, IMU errors), telemetry files, full pipeline (preprocessing, dispersion, iterated smoother)",
         "members_per_dispersion": job.members,
         "refine_rounds": int(job.scenario.get("dispersion.refine_rounds", 0, kind="int")),
         "radar_noise_simulated": {
@@ -429,7 +408,7 @@ def _extra_summary(outs, ok, sigmas, job: _Job) -> dict:
             "slant_out_m": sg.slant_out,
             "velocity_out_mps": sg.velocity_out,
         },
-        "dispersion_model": dict(_DISPERSION),
+        "truth_dispersion_sigmas": dataclasses.asdict(DispersionSigmas()),
     }
     if ok:
         labels = list(ok[0].times)
