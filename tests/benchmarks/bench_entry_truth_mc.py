@@ -26,6 +26,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
@@ -106,6 +108,21 @@ def main(argv: list[str] | None = None) -> int:
             "wall_time_s": wall,
         }
     )
+    ok = [m for m in res.members if not m.scores.failed]
+    r["median_nees_at"] = {
+        lab: float(np.median([m.info["nees_stage"][lab] for m in ok if lab in m.info["nees_stage"]]))
+        for lab in r["anees_at"]
+    }
+    r["per_member"] = [
+        {
+            "smoother_start": m.info["smoother_start"],
+            "dispersion_accepted": m.info["dispersion"]["accepted"],
+            "nees_at": m.info["nees_stage"],
+            "h_agl_error_at_fix_m": m.info["h_agl_error_at_fix_m"],
+            "h_agl_3sigma_at_fix_m": m.info["h_agl_3sigma_at_fix_m"],
+        }
+        for m in ok
+    ]
     print(_table(r))
     if a.json:
         doc = {
