@@ -592,3 +592,39 @@ def test_run_filter_transition_with_own_q_and_slotted_records():
     np.testing.assert_array_equal(np.isnan(c.S[1]), ~np.outer([1, 0, 1], [1, 0, 1]).astype(bool))
     np.testing.assert_array_equal(c.z[1], [1.0, np.nan, 1.0])
     np.testing.assert_allclose(c.y[1][[0, 2]], 1.0 - fp.x_prior[1][[0, 2]])
+
+
+def test_numeric_jacobian_batched_equals_the_per_column_functions():
+    """One vectorised call gives the numbers of numeric_transition_jacobian / numeric_measurement_jacobian
+    (quaternion block included)."""
+    from workbench.core.rotation import quat_integrate_body_rate
+    from workbench.estimation.ekf import (
+        ErrorStateLayout,
+        numeric_jacobian_batched,
+        numeric_measurement_jacobian,
+        numeric_transition_jacobian,
+    )
+
+    layout = ErrorStateLayout(7, ((0, 0),))  # x = [q (4), w (3)], e = [dθ (3), w (3)]
+
+    def f(x):
+        x = np.atleast_2d(x)
+        out = x.copy()
+        out[:, :4] = quat_integrate_body_rate(x[:, :4], x[:, 4:7], 0.1)
+        out[:, 4:7] = x[:, 4:7] * 0.99
+        return out
+
+    def h(x):
+        x = np.atleast_2d(x)
+        return np.column_stack([x[:, 4] * x[:, 5], np.sin(x[:, 6]), x[:, 3]])
+
+    x = np.array([0.1, -0.2, 0.3, 0.9, 0.2, -0.1, 0.05])
+    x[:4] /= np.linalg.norm(x[:4])
+    eps = np.full(6, 1e-6)
+    fx, F = numeric_jacobian_batched(f, x, layout, eps, out_layout=layout)
+    np.testing.assert_allclose(fx, f(x)[0])
+    np.testing.assert_allclose(F, numeric_transition_jacobian(lambda z: f(z)[0], x, layout, eps), rtol=1e-9, atol=1e-12)
+    hx, H = numeric_jacobian_batched(h, x, layout, eps)
+    np.testing.assert_allclose(
+        H, numeric_measurement_jacobian(lambda z: h(z)[0], x, layout, eps=eps), rtol=1e-9, atol=1e-12
+    )

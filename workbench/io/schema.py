@@ -57,7 +57,11 @@ REQUIRED: Any = _Required()
 KINDS = ("float", "int", "str", "bool", "vec3", "list", "table", "number_or_vec3")
 
 #: Modules holding a problem's ``SCHEMA`` (used by ``--write-formats``).
-PROBLEM_CONFIG_MODULES = ("workbench.problems.droptest.config", "workbench.problems.entry.config")
+PROBLEM_CONFIG_MODULES = (
+    "workbench.problems.droptest.config",
+    "workbench.problems.entry.config",
+    "workbench.problems.post2.config",
+)
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ __all__ = ["UnknownKindError", "get", "kinds", "register", "unregister"]
 BUILTIN: dict[str, str] = {
     "droptest": "workbench.problems.droptest.problem:DropTestProblem",
     "entry": "workbench.problems.entry.problem:EntryProblem",
+    "post2": "workbench.problems.post2.problem:Post2Problem",
 }
 
 _registered: dict[str, Problem] = {}

@@ -16,7 +16,12 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from workbench.core.atmosphere import ExponentialAtmosphere, MarsEngineeringAtmosphere, TabulatedAtmosphere
+from workbench.core.atmosphere import (
+    R_UNIVERSAL,
+    ExponentialAtmosphere,
+    MarsEngineeringAtmosphere,
+    TabulatedAtmosphere,
+)
 from workbench.core.bodies import MARS
 from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import dcm_to_quat
@@ -400,7 +405,7 @@ def test_accelerometer_noise_is_reduced_by_smoothing():
 def test_sigma_from_velocity_matches_two_over_vr():
     sim = simulate()
     n = sim["t"].size
-    only_v = EntryProfileSigmas(cd_rel=0.0, accel=1e-12, wind=0.0, p_top_rel=0.0, fill_rel=0.0)
+    only_v = EntryProfileSigmas(cd_rel=0.0, accel=1e-12, wind=0.0, p_top_rel=0.0, fill_temperature_K=0.0)
     r1 = _run(sim, P=_P(n, sv=2.0, sp=0.0), sigmas=only_v)
     r2 = _run(sim, P=_P(n, sv=8.0, sp=0.0), sigmas=only_v)
     fin = r1.final
@@ -457,3 +462,46 @@ def test_bad_inputs_raise():
         _run(sim, f_valid=np.zeros(n, bool))
     with pytest.raises(TypeError):
         _run(sim, sigmas=3.0)
+
+
+def test_fill_sigma_matches_a_monte_carlo_of_temperature_departures():
+    """fill_sigma against the nonlinear fill on many random true temperature profiles: the fill
+    (assumed shape + offset + trend, meeting the upper-edge temperature and lower-edge density)
+    errs by what fill_sigma says, zero at the edges."""
+    from scipy.optimize import brentq
+
+    from workbench.problems.entry.atmosphere import fill_sigma
+
+    R = R_UNIVERSAL / 0.04341
+    h = np.linspace(70e3, 30e3, 161)  # flight order, 250 m steps
+    g = MARS.gm / (MARS.reference_radius + h) ** 2
+    T0 = 140.0 + 1.1e-3 * (70e3 - h)  # the assumed temperature
+    depth = h[0] - h
+
+    def log_rho(T):
+        f = g / (R * T)
+        lnp = np.log(3.0) + np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * 250.0)])
+        return lnp - np.log(R * T)
+
+    sT, L = 8.0, 10e3
+    K = sT**2 * np.exp(-0.5 * ((h[:, None] - h[None, :]) / L) ** 2) + 1e-9 * np.eye(h.size)
+    Lc = np.linalg.cholesky(K)
+    rng = np.random.default_rng(5)
+    errs = []
+    for _ in range(300):
+        T_true = T0 + Lc @ rng.standard_normal(h.size)
+        y_true = log_rho(T_true)
+        base = T0 + (T_true[0] - T0[0])  # the fill meets the upper-edge temperature ...
+        target = y_true[-1]
+
+        def mismatch(x, base=base, target=target):
+            return log_rho(base + x * depth)[-1] - target
+
+        b = brentq(mismatch, -1e-3, 1e-3)  # ... and the lower-edge density
+        errs.append(log_rho(base + b * depth) - y_true)
+    mc = np.std(np.array(errs), axis=0)
+    sig = fill_sigma(h, g, T0, R, sT, L)
+    assert sig[0] < 1e-9 and sig[-1] < 1e-6  # the matched edges
+    inner = slice(20, -20)
+    np.testing.assert_allclose(sig[inner], mc[inner], rtol=0.2)
+    assert sig.max() > 0.03  # a few percent mid-gap for 8 K

@@ -188,6 +188,13 @@ def test_planted_aerodynamic_deviations(vehicle, truth):
         1.0 + coefficient_deviation(truth.mach[ent], spec.aero_deviation_mach, spec.ca_deviation),
         atol=2e-4,
     )
+    # the parachute flies its planted CD deviation (at the canopy's own Mach), none before PDD
+    ch = truth.phase > 0
+    dp = np.asarray(spec.parachute_cd_deviation)
+    assert np.all(truth.chute_cd_factor[~ch] == 1.0)
+    fp = truth.chute_cd_factor[ch]
+    assert np.all((fp >= 1 + dp.min() - 1e-9) & (fp <= 1 + dp.max() + 1e-9))
+    assert np.ptp(truth.chute_cd_factor[ch]) > 0.02  # Mach-dependent: supersonic at PDD, subsonic later
     # the hypersonic drag is measurably off the table (what the density reconstruction must absorb)
     hyp = ent & (truth.mach > 15)
     assert np.abs(truth.ca_factor[hyp] - 1.0).max() > 0.03

@@ -29,10 +29,10 @@ Method (Aboudan et al. 2018, "Reconstruction of the Atmospheric Profiles"):
    temperature at the upper edge plus a linear trend, the density follows hydrostatically from the
    upper-edge pressure, and the trend is solved (Brent) so that the density meets the lower edge
    value.  An exponential is the isothermal special case; the paper's fill assumes one scale
-   height across 70→30 km where the default model's changes from ~7 to ~10 km, so on the truth
-   simulator's atmosphere the exponential fill errs by up to ~37 %, the hydrostatic one ~21 %
-   (tests: 26 % vs 12 % on a similar synthetic profile).  One-sided gaps (ends) are extrapolated
-   with the one-sided fit.
+   height across 70→30 km where the default model's changes from ~7 to ~10 km (tests: 26 % vs
+   12 % error on a synthetic profile).  Either fill is only as good as its assumed temperature
+   structure; its 1σ says so (step 7, :func:`fill_sigma`).  One-sided gaps (ends) are
+   extrapolated with the one-sided fit.
 4. **Pressure** by the hydrostatic equation ``dp/dh = −ρ g_r`` integrated along the trajectory,
    with ``g_r`` the radial component of J2 gravity at the sample (centrifugal terms neglected, as
    in the paper).  Between samples ρ is log-linear in h, so each interval contributes
@@ -48,14 +48,20 @@ Method (Aboudan et al. 2018, "Reconstruction of the Atmospheric Profiles"):
    ``σ_vr² = Jᵀ P J``, ``J = [u, 0, ω×u]`` on the error state ``[δv, δθ, δp]`` (u the unit
    air-relative velocity); from the drag coefficients (``cd_rel``, independent between module and
    canopy); from the horizontal wind (``wind`` 1σ per component below ``wind_ceiling_m``, zero
-   above, projected on u); from the accelerometer noise (``accel``/a_Z); plus ``fill_rel`` on
-   filled samples (per 10 km of gap depth, largest mid-gap).  Pressure: the time-correlated terms
-   (velocity, coefficients, wind, fill) are integrated as fully correlated (conservative), the
-   accelerometer noise as independent,
-   plus ``p_top_rel`` of p0, all three in quadrature.  Temperature:
+   above, projected on u); from the accelerometer noise (``accel``/a_Z); plus, on filled samples,
+   the fill's own 1σ (:func:`fill_sigma`): the true temperature departs from the assumed one by
+   a Gaussian process (``fill_temperature_K``, ``fill_correlation_km``), propagated through the
+   hydrostatic equation and conditioned on what the fill matches (the upper edge's temperature
+   and the lower edge's density) — zero at the measured edges, largest inside the gap.
+   Pressure: the time-correlated terms (velocity, coefficients, wind, fill) are integrated as
+   fully correlated (conservative), the accelerometer noise as independent, plus ``p_top_rel`` of
+   p0, all three in quadrature.  Temperature:
    ``σ_T/T = sqrt((σ_p/p)² + (σ_ρ/ρ)²)`` (independent; conservative because the correlated ρ and p
-   errors partly cancel in T).  The sigmas are those of the raw profile and are reported for the
-   smoothed one too (smoothing only lowers the white part).
+   errors partly cancel in T).  Last, because a profile is a function of altitude, the
+   trajectory's altitude 1σ (``σ_h² = ûᵀ P_pp û``) adds ``σ_h / H`` (H = R T / g, the local
+   scale height) in quadrature to the relative density and pressure σ (an altitude error shifts
+   the whole profile; T moves only by σ_h dT/dh, neglected).  The sigmas are those of the raw
+   profile and are reported for the smoothed one too (smoothing only lowers the white part).
 
 The profile grid: the input samples from the *top* (the first valid sample with
 ``a_Z ≥ min_specific_force``, 0.05 m/s² ≈ 50σ of the Table 3 accelerometer noise, which is the
@@ -88,6 +94,7 @@ __all__ = [
     "radial_gravity",
     "hydrostatic_pressure",
     "exponential_fill",
+    "fill_sigma",
     "smooth_in_altitude",
     "system_mass",
     "drag_area",
@@ -112,10 +119,16 @@ class EntryProfileSigmas:
         wind_ceiling_m: altitude AMR [m] above which the wind term is dropped (paper: 30 km).
         p_top_rel: relative 1σ of the top pressure taken from the default model [-] (engineering
             choice, 20 %: the paper's Table 7 models differ by tens of % at 100 km).
-        fill_rel: relative 1σ of the fill per 10 km of gap depth [-], shaped ``sin(π x)`` across a
-            two-sided gap (x the fractional depth: zero at the measured edges) and growing linearly
-            with the distance from the edge of a one-sided one (engineering choice, 5 %/10 km:
-            calibrated on the truth simulator, whose 40 km blackout fill errs by up to ~21 %).
+        fill_temperature_K: 1σ [K] of the true temperature's departure from the temperature the
+            fill assumes (the default model's shape plus a linear trend, or an isothermal layer
+            for the exponential fill), a Gaussian process in altitude (see :func:`fill_sigma`).
+            Physical argument, not a fit to any truth: Mars temperature profiles depart from a
+            climatological shape by ~10 K through the middle atmosphere (the Mars Climate
+            Database's climatology, warm, cold and dust scenarios differ by 10-20 K at 30-70 km,
+            which is AMELIA Table 7's model spread; entry profiles carry gravity waves of a few
+            K that grow with altitude).  Default 10 K.
+        fill_correlation_km: correlation length [km] of that departure (squared-exponential
+            kernel; default 10 km, the vertical scale of the waves and layers the shape misses).
         wind_model: model error of the wind estimate [m/s] (module/canopy misalignment and the
             module's lag in shear; engineering choice, 2 m/s), used by ``entry_winds``.
     """
@@ -125,7 +138,8 @@ class EntryProfileSigmas:
     wind: float = 10.0
     wind_ceiling_m: float = 30.0e3
     p_top_rel: float = 0.20
-    fill_rel: float = 0.05
+    fill_temperature_K: float = 10.0
+    fill_correlation_km: float = 10.0
     wind_model: float = 2.0
 
 
@@ -358,6 +372,68 @@ def _hydrostatic_gap(hh, gg, T_shape, T1, p1, y2, R_gas):
         return None
     b = brentq(lambda x: log_rho(x)[-1] - y2, lo, hi, xtol=1e-12)
     return np.exp(log_rho(b))
+
+
+def fill_sigma(
+    h: np.ndarray,
+    g: np.ndarray,
+    T: np.ndarray,
+    R_gas: float,
+    sigma_T: float,
+    corr_m: float,
+    *,
+    upper_edge: bool = True,
+    lower_edge: bool = True,
+) -> np.ndarray:
+    """Relative 1σ [-] of a hydrostatic blackout fill along its samples (k,), from a physical prior.
+
+    Samples ``h`` (k,) [m] in flight order (descending altitude; ``h[0]`` the upper edge when
+    ``upper_edge``, ``h[-1]`` the lower edge when ``lower_edge``), radial gravity ``g`` (k,)
+    [m/s²], the fill's temperature ``T`` (k,) [K], gas constant ``R_gas`` [J/(kg K)].  The true
+    temperature is the fill's plus ``δT``, a zero-mean Gaussian process (squared-exponential
+    kernel, 1σ ``sigma_T`` [K], correlation length ``corr_m`` [m]).  To first order the density
+    error is ``δ ln ρ(h) = −∫_h^{h0} g δT /(R T²) dh' − δT(h)/T(h)`` (hydrostatic pressure from the
+    upper edge, ideal gas).  The fill's temperature family (the assumed shape plus an offset and
+    a linear trend in depth) absorbs the part of δT that its two constraints see — the upper
+    edge's temperature and the lower edge's density — and the returned σ is that of ``δ ln ρ`` of
+    the remaining part (a one-sided fill: an offset and the upper constraint only): zero at the
+    matched edges, largest inside the gap.  Returns (k,).
+    """
+    h = np.asarray(h, dtype=float)
+    g = np.asarray(g, dtype=float)
+    T = np.asarray(T, dtype=float)
+    k = h.size
+    if k < 2 or sigma_T <= 0.0:
+        return np.zeros(k)
+    K = sigma_T**2 * np.exp(-0.5 * ((h[:, None] - h[None, :]) / corr_m) ** 2) + 1e-9 * np.eye(k)
+    # trapezoid integral of w = g/(R T²) from the first sample: I[i] = Σ_j<i ½ (w_j + w_{j+1}) |Δh_j|
+    w = g / (R_gas * T**2)
+    dh = np.abs(np.diff(h))
+    W = np.zeros((k, k))
+    for i in range(1, k):
+        W[i] = W[i - 1]
+        W[i, i - 1] += 0.5 * w[i - 1] * dh[i - 1]
+        W[i, i] += 0.5 * w[i] * dh[i - 1]
+    A = -W - np.diag(1.0 / T)  # δ ln ρ = A δT: warmer air above lets ln p grow more slowly
+    # the fill absorbs the part of δT in its own family (an offset, and a linear trend in depth
+    # when it is two-sided) chosen to meet its constraints: residual = (I − B (C B)⁻¹ C) δT
+    rows, cols = [], [np.ones(k)]
+    if upper_edge:
+        e0 = np.zeros(k)
+        e0[0] = 1.0
+        rows.append(e0)
+    if lower_edge:
+        rows.append(A[-1])
+        cols.append(np.abs(h - h[0]))
+    if rows:
+        C = np.array(rows)
+        B = np.array(cols[: len(rows)]).T
+        M = np.eye(k) - B @ np.linalg.solve(C @ B, C)
+    else:
+        M = np.eye(k)
+    AM = A @ M
+    S = AM @ K @ AM.T
+    return np.sqrt(np.clip(np.diag(S), 0.0, None))
 
 
 def smooth_in_altitude(h: np.ndarray, y: np.ndarray, window_m: float, min_samples: int = 5) -> np.ndarray:
@@ -598,6 +674,8 @@ def reconstruct_atmosphere(
     J[:, 0:3] = u
     J[:, 6:9] = np.cross(_omega_M(), u)
     var_vr_in = np.einsum("ni,nij,nj->n", J, P[s], J)
+    up_in = _up_M(pM)
+    var_h_in = np.einsum("ni,nij,nj->n", up_in, P[s][:, 6:9, 6:9], up_in)  # altitude variance [m²]
     u_h2_in = np.clip(1.0 - np.sum(u * _up_M(pM), axis=-1) ** 2, 0.0, 1.0)
 
     # profile grid (fill samples inside time gaps)
@@ -609,6 +687,7 @@ def reconstruct_atmosphere(
     alpha = _on_grid(angle_of_attack(q_M_G[s], v_rel_M), src, w)
     g_r = _on_grid(radial_gravity(pM), src, w)
     var_vr = _on_grid(var_vr_in, src, w)
+    var_h = _on_grid(var_h_in, src, w)
     u_h2 = _on_grid(u_h2_in, src, w)
     ph = ph_in[src]
     a_z = np.where(inserted, np.nan, a_z_all[s][src])
@@ -703,13 +782,31 @@ def reconstruct_atmosphere(
     rel_acc = sig.accel / np.maximum(np.abs(a_model), 1e-12)
     rel_fill = np.zeros(h.size)
     for a, b, h1, _, _, h2, _, _ in last_runs:
-        hs = h[a:b]
-        if h1 is not None and h2 is not None:
-            depth = abs(h1 - h2)
-            x = np.clip((h1 - hs) / (h1 - h2), 0.0, 1.0) if depth > 0 else np.full(hs.size, 0.5)
-            rel_fill[a:b] = sig.fill_rel * depth / 10.0e3 * np.sin(np.pi * x)
+        if b - a < 1:
+            continue
+        lo, hi = max(a - 1, 0), min(b + 1, h.size)  # the run with its measured edges
+        T_assumed = final.T[lo:hi]
+        if fill_method == "exponential" or h1 is None or h2 is None:
+            # an exponential (isothermal) fill misses the whole temperature structure across the gap
+            extra = float(np.std(T_shape[lo:hi] - np.polyval(np.polyfit(h[lo:hi], T_shape[lo:hi], 1), h[lo:hi])))
+            sT = (
+                float(np.hypot(sig.fill_temperature_K, extra))
+                if fill_method == "exponential"
+                else sig.fill_temperature_K
+            )
         else:
-            rel_fill[a:b] = sig.fill_rel * np.abs(hs - (h1 if h1 is not None else h2)) / 10.0e3
+            sT = sig.fill_temperature_K
+        s_run = fill_sigma(
+            h[lo:hi],
+            g_r[lo:hi],
+            T_assumed,
+            R_gas,
+            sT,
+            sig.fill_correlation_km * 1e3,
+            upper_edge=h1 is not None and lo == a - 1,
+            lower_edge=h2 is not None and hi == b + 1,
+        )
+        rel_fill[a:b] = s_run[(a - lo) : (a - lo) + (b - a)]
     rel_corr = np.sqrt(rel_v**2 + rel_cd**2 + rel_fill**2)
     sigma_rho_rel = np.sqrt(rel_corr**2 + rel_acc**2)
     sigma_rho = sigma_rho_rel * final.rho
@@ -721,6 +818,11 @@ def reconstruct_atmosphere(
     sp_white = np.sqrt(np.concatenate([[0.0], np.cumsum(white_i**2)]))
     sigma_p = np.sqrt(sp_corr**2 + sp_white**2 + (sig.p_top_rel * p0) ** 2)
     sigma_T = final.T * np.sqrt((sigma_p / final.p) ** 2 + sigma_rho_rel**2)
+    # the profile is a function of altitude: the altitude's own 1σ moves ρ(h) and p(h) by σ_h / H
+    # (H = R T / g the local scale height); T(h) only by σ_h dT/dh, neglected
+    rel_h = np.sqrt(np.maximum(var_h, 0.0)) * g_r / (R_gas * final.T)
+    sigma_rho = np.sqrt(sigma_rho_rel**2 + rel_h**2) * final.rho
+    sigma_p = np.sqrt(sigma_p**2 + (rel_h * final.p) ** 2)
 
     return AtmosphereResult(
         iterations=iterations,

@@ -244,6 +244,12 @@ SCHEMA = Schema(
                 Key("accel_mps2", _F, 0.001, "m/s²", "specific force, per sample"),
                 Key("bridge_mode", _S, "relative", meaning="gap bridge position form", choices=("relative", "paper")),
                 Key("initial", _S, "fused", meaning="the smoother's start", choices=("fused", "dispersion", "nominal")),
+                Key("imu_accel_bias_mps2", _F, 0.0, "m/s²", "IMU datasheet: accelerometer bias, 1σ (process noise)"),
+                Key("imu_accel_scale", _F, 0.0, "1", "IMU datasheet: accelerometer scale factor, 1σ"),
+                Key("imu_accel_misalignment_rad", _F, 0.0, "rad", "IMU datasheet: accelerometer misalignment, 1σ"),
+                Key("imu_gyro_bias_dps", _F, 0.0, "deg/s", "IMU datasheet: gyro bias, 1σ"),
+                Key("imu_gyro_scale", _F, 0.0, "1", "IMU datasheet: gyro scale factor, 1σ"),
+                Key("imu_gyro_misalignment_rad", _F, 0.0, "rad", "IMU datasheet: gyro misalignment, 1σ"),
             ),
         ),
         Table(
@@ -273,6 +279,13 @@ SCHEMA = Schema(
                 Key("azimuths_deg", _V, [0.0, 120.0, 240.0], "deg", "azimuths of B1..B3 from +X_G towards +Y_G"),
                 Key("slant_range_sigma_m", _F, 100.0, "m", "slant-range measurement 1σ"),
                 Key("slant_out_sigma_m", _F, 100.0, "m", "slant-out measurement 1σ"),
+                Key(
+                    "terrain_sigma_m",
+                    _F,
+                    0.0,
+                    "m",
+                    "terrain relief about the sphere, 1σ: added in quadrature to both range 1σ",
+                ),
                 Key("velocity_out_sigma_mps", _F, 25.0, "m/s", "velocity-out measurement 1σ"),
                 Key("constrained", _B, True, meaning="AMELIA Sect. 8 constrained update directions"),
             ),
@@ -293,6 +306,14 @@ SCHEMA = Schema(
                 Key("max_iterations", _I, 10, meaning="drag-coefficient iterations"),
                 Key("cd_sigma", _F, 0.10, "1", "drag coefficients, relative 1σ"),
                 Key("wind_sigma_mps", _F, 10.0, "m/s", "wind uncertainty below 30 km, 1σ"),
+                Key(
+                    "fill_temperature_sigma_K",
+                    _F,
+                    10.0,
+                    "K",
+                    "blackout fill: true temperature minus the assumed one, 1σ (Gaussian process)",
+                ),
+                Key("fill_correlation_km", _F, 10.0, "km", "blackout fill: correlation length of that departure"),
             ),
         ),
         Table(
@@ -379,7 +400,9 @@ class EntryConfig:
     """The reconstruction settings of one entry scenario, validated against :data:`SCHEMA`.
 
     Units as the names say; ``rules`` the dispersion acceptance rules; ``preprocess`` the
-    :class:`PreprocessConfig` (SI); ``checks`` the telemetry checks; ``epoch_utc`` None when the scenario gives none.
+    :class:`PreprocessConfig` (SI); ``checks`` the telemetry checks; ``epoch_utc`` None when the scenario gives none;
+    ``imu_errors`` the IMU datasheet error levels (1σ, SI: ``accel_bias`` [m/s²], ``gyro_bias``
+    [rad/s], scales [-], misalignments [rad]) the smoother turns into process noise.
     """
 
     epoch_utc: str | None
@@ -405,6 +428,8 @@ class EntryConfig:
     azimuths_deg: tuple[float, float, float]
     slant_range_sigma_m: float
     slant_out_sigma_m: float
+    terrain_sigma_m: float
+    imu_errors: dict
     velocity_out_sigma_mps: float
     constrained: bool
     molar_mass_g_per_mol: float
@@ -413,15 +438,19 @@ class EntryConfig:
     max_iterations: int
     cd_sigma: float
     wind_sigma_mps: float
+    fill_temperature_sigma_K: float
+    fill_correlation_km: float
     wind_method: str
 
     def smoother_sigmas(self) -> dict:
         """The radar-aided smoother's measurement 1σ and gap-bridge mode, as
         ``run_entry_smoother(sigmas=...)`` takes them: slant range [m], slant-out [m],
-        velocity-out [m/s], ``bridge_mode``."""
+        velocity-out [m/s], ``bridge_mode``.  The range 1σ are the instrument's
+        (``slant_range_sigma_m``, ``slant_out_sigma_m``) and the terrain relief the filter does not
+        model (``terrain_sigma_m``, its sphere's error) in quadrature."""
         return {
-            "slant_range": self.slant_range_sigma_m,
-            "slant_out": self.slant_out_sigma_m,
+            "slant_range": math.hypot(self.slant_range_sigma_m, self.terrain_sigma_m),
+            "slant_out": math.hypot(self.slant_out_sigma_m, self.terrain_sigma_m),
             "velocity_out": self.velocity_out_sigma_mps,
             "bridge_mode": self.bridge_mode,
         }
@@ -513,6 +542,15 @@ class EntryConfig:
             azimuths_deg=tuple(float(a) for a in rad["azimuths_deg"]),
             slant_range_sigma_m=rad["slant_range_sigma_m"],
             slant_out_sigma_m=rad["slant_out_sigma_m"],
+            terrain_sigma_m=rad["terrain_sigma_m"],
+            imu_errors={
+                "accel_bias": rec["imu_accel_bias_mps2"],
+                "accel_scale": rec["imu_accel_scale"],
+                "accel_misalignment": rec["imu_accel_misalignment_rad"],
+                "gyro_bias": math.radians(rec["imu_gyro_bias_dps"]),
+                "gyro_scale": rec["imu_gyro_scale"],
+                "gyro_misalignment": rec["imu_gyro_misalignment_rad"],
+            },
             velocity_out_sigma_mps=rad["velocity_out_sigma_mps"],
             constrained=rad["constrained"],
             molar_mass_g_per_mol=atm["molar_mass_g_per_mol"],
@@ -521,6 +559,8 @@ class EntryConfig:
             max_iterations=atm["max_iterations"],
             cd_sigma=atm["cd_sigma"],
             wind_sigma_mps=atm["wind_sigma_mps"],
+            fill_temperature_sigma_K=atm["fill_temperature_sigma_K"],
+            fill_correlation_km=atm["fill_correlation_km"],
             wind_method=v["winds"]["method"],
         )
 

@@ -58,9 +58,14 @@ from workbench.problems.entry.winds import estimate_winds
 __all__ = [
     "NominalIntegration",
     "EntryResult",
+    "imu_error_process_noise",
     "vehicle_for",
     "reconstruct",
     "score",
+    "score_atmosphere",
+    "score_winds",
+    "DENSITY_BOUNDS",
+    "WIND_BOUND_MPS",
     "scorecard_markdown",
     "event_table",
     "check_config",
@@ -105,6 +110,37 @@ class EntryResult:
 def vehicle_for(scenario: Scenario) -> EntryVehicle:
     """The vehicle asset named by ``[vehicle] file`` (path relative to the scenario file)."""
     return load_vehicle(scenario.path_of("vehicle.file"))
+
+
+def imu_error_process_noise(t: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, levels: dict) -> np.ndarray:
+    """State-noise PSD η (9,) [units²/s] of ``[δv_M, δθ_G, δp_M]`` that covers the IMU's per-run errors.
+
+    The filter has no bias/scale/misalignment states; instead each constant per-run error is
+    replaced by the random walk that reaches the same 1σ at the end of the arc of duration ``T``
+    (``t[-1] − t[0]`` [s]): a bias ``b`` integrates to ``b T`` (η = b² T); a scale factor ``s`` and
+    an accelerometer misalignment ``m`` to ``s ΔV`` and ``m ΔV`` with ``ΔV = ∫|f| dt`` over the arc
+    (η = (s² + m²) ΔV² / T); a gyro scale factor to ``s Θ`` with ``Θ = ∫|ω| dt``; a gyro
+    misalignment of a spinning body stays bounded at ≈ ``m`` (its error rotates with the spin), so
+    η = m² / T.  Per axis, velocity and attitude; the position noise is zero (it follows the
+    velocity).  The random walk spreads the error evenly in time where the true one follows the
+    deceleration pulse: a conservative, documented approximation.  ``t`` (n,) [s], ``f_G`` (n,3)
+    [m/s²], ``w_G`` (n,3) [rad/s]; ``levels`` the 1σ of ``accel_bias`` [m/s²], ``accel_scale``,
+    ``accel_misalignment`` [rad], ``gyro_bias`` [rad/s], ``gyro_scale``, ``gyro_misalignment`` [rad].
+    """
+    t = np.asarray(t, dtype=float)
+    T = float(t[-1] - t[0])
+    if T <= 0:
+        return np.zeros(9)
+    dt = np.diff(t)
+    fn = np.linalg.norm(np.nan_to_num(np.asarray(f_G, dtype=float)), axis=1)
+    wn = np.linalg.norm(np.nan_to_num(np.asarray(w_G, dtype=float)), axis=1)
+    dV = float(np.sum(0.5 * (fn[1:] + fn[:-1]) * dt))
+    Th = float(np.sum(0.5 * (wn[1:] + wn[:-1]) * dt))
+    g = {k: float(levels.get(k, 0.0)) for k in ("accel_bias", "accel_scale", "accel_misalignment")}
+    g.update({k: float(levels.get(k, 0.0)) for k in ("gyro_bias", "gyro_scale", "gyro_misalignment")})
+    eta_v = g["accel_bias"] ** 2 * T + (g["accel_scale"] ** 2 + g["accel_misalignment"] ** 2) * dV**2 / T
+    eta_th = g["gyro_bias"] ** 2 * T + g["gyro_scale"] ** 2 * Th**2 / T + g["gyro_misalignment"] ** 2 / T
+    return np.array([eta_v] * 3 + [eta_th] * 3 + [0.0] * 3)
 
 
 # ----------------------------------------------------------------------------------------- stages
@@ -235,6 +271,10 @@ def reconstruct(
     init = initial_for_smoother(cfg, disp, nom, P0)
     yield init
     v0, q0, p0, P0_ref = init.v0, init.q0, init.p0, init.P0
+    sigmas = dict(cfg.smoother_sigmas())
+    psd = imu_error_process_noise(imu.t, imu.f_G, imu.w_G, cfg.imu_errors)
+    if np.any(psd > 0):
+        sigmas["q_state_psd"] = tuple(float(x) for x in psd)
     filt = run_entry_smoother(
         imu,
         radar,
@@ -242,7 +282,7 @@ def reconstruct(
         q0,
         p0,
         P0_ref,
-        sigmas=cfg.smoother_sigmas(),
+        sigmas=sigmas,
         constrained=cfg.constrained,
     )
     yield filt
@@ -266,6 +306,8 @@ def reconstruct(
             "cd": cfg.cd_sigma,
             "wind": cfg.wind_sigma_mps,
             "accel": cfg.accel_mps2,
+            "fill_temperature_K": cfg.fill_temperature_sigma_K,
+            "fill_correlation_km": cfg.fill_correlation_km,
         },
         events=tm.events,
         molar_mass=cfg.molar_mass_g_per_mol / 1e3,
@@ -285,6 +327,13 @@ def reconstruct(
     yield winds
 
     summary = _summary(sc, tm, imu, nomi, disp, filt, atm, winds, r_ground)
+    summary["filter_sigmas"] = {
+        "slant_range_m": float(sigmas["slant_range"]),
+        "slant_out_m": float(sigmas["slant_out"]),
+        "velocity_out_mps": float(sigmas["velocity_out"]),
+        "imu_process_noise_velocity_m2ps3": float(psd[0]),
+        "imu_process_noise_attitude_rad2ps": float(psd[3]),
+    }
     ok = winds.valid & winds_check.valid
     summary["winds"] = {
         "method": winds.method,
@@ -488,46 +537,27 @@ def score(result: EntryResult, truth: dict) -> dict:
     # there; along the measured parts h_est is within tens of metres of the truth.)
     atm = result.atmosphere
     if truth.get("atmosphere") is not None:
-        fin = atm.final
-        ta = truth["atmosphere"]
-        rho_t = ta.density(np.asarray(fin.h_amr, float))
-        rel = atm.rho_smooth / rho_t - 1.0
-        rel_raw = fin.rho / rho_t - 1.0
-        pdd = ev.get("PDD", np.inf)
-        segs = {
-            "entry_measured": (fin.t < pdd) & ~np.asarray(fin.filled, bool),
-            "entry_filled_blackout": (fin.t < pdd) & np.asarray(fin.filled, bool),
-            "under_parachute": fin.t >= pdd,
-        }
-        a_out = {}
-        for nm, mk in segs.items():
-            mk = mk & np.isfinite(rel)
-            if mk.any():
-                a_out[nm] = {
-                    "max_abs_rel_error": float(np.max(np.abs(rel[mk]))),
-                    "median_abs_rel_error": float(np.median(np.abs(rel[mk]))),
-                    "max_abs_rel_error_raw": float(np.nanmax(np.abs(rel_raw[mk]))),
-                    "fraction_inside_1sigma": float(
-                        np.mean(np.abs(atm.rho_smooth[mk] - rho_t[mk]) <= atm.sigma_rho[mk])
-                    ),
-                    "n": int(mk.sum()),
-                }
-        a_out["targets"] = "10 % entry, 20 % filled blackout, 25 % under the parachute (issue #4)"
-        out["atmosphere"] = a_out
-    # winds inside the layers (where the true wind exceeds 5 m/s)
+        out["atmosphere"] = score_atmosphere(atm, truth, ev)
+    # winds inside the layers (where the true wind exceeds 5 m/s), with the reported 1σ
     w = result.winds
     if "wind_NE" in truth:
-        twN = np.interp(w.t, truth["t"], np.asarray(truth["wind_NE"])[:, 0])
-        twE = np.interp(w.t, truth["t"], np.asarray(truth["wind_NE"])[:, 1])
-        layer = w.valid & (np.hypot(twN, twE) > 5.0)
-        if layer.any():
-            err = np.hypot(w.wind_N[layer] - twN[layer], w.wind_E[layer] - twE[layer])
-            out["winds_in_layers"] = {
-                "max_error_mps": float(err.max()),
-                "rms_error_mps": float(np.sqrt(np.mean(err**2))),
-                "fraction_within_5mps": float(np.mean(err <= 5.0)),
-                "n": int(layer.sum()),
-                "method": w.method,
+        out["winds_in_layers"] = score_winds(w, truth)
+    # radar: what the filter's sphere model misses (relief + noise) against its 1σ
+    tm = result.telemetry
+    if "radar_slant_out_sphere" in truth and len(getattr(tm, "t_rda", [])):
+        sph = np.interp(tm.t_rda, truth["radar_t"], truth["radar_slant_out_sphere"])
+        ter = np.interp(tm.t_rda, truth["radar_t"], truth["radar_slant_out_true"]) - sph
+        ok = np.asarray(tm.rda_valid, bool) & np.isfinite(sph) & np.isfinite(tm.slant_out)
+        if ok.any():
+            e = tm.slant_out[ok] - sph[ok]
+            sg = float(result.summary.get("filter_sigmas", {}).get("slant_out_m", float("nan")))
+            out["radar"] = {
+                "slant_out_rms_error_vs_sphere_m": float(np.sqrt(np.mean(e**2))),
+                "slant_out_max_abs_error_vs_sphere_m": float(np.max(np.abs(e))),
+                "slant_out_rms_terrain_m": float(np.sqrt(np.mean(ter[ok] ** 2))),
+                "filter_slant_out_sigma_m": sg,
+                "slant_out_error_over_sigma_rms_ratio": float(np.sqrt(np.mean(e**2)) / sg),
+                "n": int(ok.sum()),
             }
     nom = result.nominal.strapdown
     pN = _truth_rows(truth, "p_M", nom.t)
@@ -540,6 +570,184 @@ def score(result: EntryResult, truth: dict) -> dict:
         "max_attitude_deg": float(np.degrees(np.max(np.linalg.norm(attitude_error(nom.q_M_G, qN), axis=1)[pre]))),
     }
     return out
+
+
+#: AMELIA's density accuracy per profile segment (issue #11 "Done means"): relative bound.
+DENSITY_BOUNDS = {"entry_measured": 0.10, "entry_filled_blackout": 0.20, "under_parachute": 0.25}
+#: AMELIA's wind accuracy bound [m/s].
+WIND_BOUND_MPS = 5.0
+
+
+def _err_stats(prefix: str, err: np.ndarray, sig: np.ndarray, unit: str) -> dict:
+    """Flat error-vs-σ numbers of one quantity: max/median/rms |error|, rms reported 1σ, the
+    fractions with |error| ≤ 2σ and ≤ 3σ, and rms(error)/rms(σ) (1 for a consistent σ)."""
+    err = np.asarray(err, dtype=float)
+    sig = np.asarray(sig, dtype=float)
+    ok = np.isfinite(err) & np.isfinite(sig)
+    err, sig = err[ok], sig[ok]
+    if err.size == 0:
+        return {}
+    rms_e = float(np.sqrt(np.mean(err**2)))
+    rms_s = float(np.sqrt(np.mean(sig**2)))
+    return {
+        f"{prefix}_max_abs_error_{unit}": float(np.max(np.abs(err))),
+        f"{prefix}_median_abs_error_{unit}": float(np.median(np.abs(err))),
+        f"{prefix}_rms_error_{unit}": rms_e,
+        f"{prefix}_rms_sigma_{unit}": rms_s,
+        f"{prefix}_error_over_sigma_rms_ratio": rms_e / rms_s if rms_s > 0 else float("nan"),
+        f"{prefix}_fraction_within_2sigma": float(np.mean(np.abs(err) <= 2.0 * sig)),
+        f"{prefix}_fraction_within_3sigma": float(np.mean(np.abs(err) <= 3.0 * sig)),
+    }
+
+
+def score_atmosphere(atm, truth: dict, events: dict) -> dict:
+    """Density, pressure and temperature of the reconstruction against the true atmosphere, per
+    segment (entry outside the blackout, the filled blackout, under the parachute), each error with
+    the reconstruction's reported 1σ (smoothed profile; the σ of :func:`reconstruct_atmosphere`).
+
+    Flat keys per segment: ``density_*_rel`` (relative error and σ), ``pressure_*_rel``,
+    ``temperature_*_K``; ``density_bound_rel`` and ``density_bound_pass`` (AMELIA's 10 / 20 / 25 %
+    on the maximum |error|, measured, PASS or FAIL); ``drag_coefficient_rel_error_median`` and
+    ``_max_abs``: the table coefficient the reconstruction used minus the truth's planted one,
+    relative (``truth["ca_factor"]`` along the entry, ``truth["chute_cd_factor"]`` under the
+    parachute, whose drag dominates there), the part of the density error that the coefficient
+    uncertainty stands for; n.
+    """
+    fin = atm.final
+    ta = truth["atmosphere"]
+    h = np.asarray(fin.h_amr, float)
+    rho_t, p_t, T_t = ta.density(h), ta.pressure(h), ta.temperature(h)
+    e_rho = atm.rho_smooth / rho_t - 1.0
+    s_rho = atm.sigma_rho / atm.rho_smooth
+    e_p = atm.p_smooth / p_t - 1.0
+    s_p = atm.sigma_p / atm.p_smooth
+    e_T = atm.T_smooth - T_t
+    s_T = atm.sigma_T
+    e_rho_raw = fin.rho / rho_t - 1.0
+    pdd = events.get("PDD", np.inf)
+    filled = np.asarray(fin.filled, bool)
+    segs = {
+        "entry_measured": (fin.t < pdd) & ~filled,
+        "entry_filled_blackout": (fin.t < pdd) & filled,
+        "under_parachute": fin.t >= pdd,
+    }
+    # the coefficient error the reconstruction carries: table / truth − 1 at the true Mach
+    coef = np.full(h.size, np.nan)
+    if "ca_factor" in truth:
+        fac = np.interp(fin.t, truth["t"], np.asarray(truth["ca_factor"], float))
+        coef = np.where(fin.t < pdd, 1.0 / np.where(fac > 0, fac, np.nan) - 1.0, np.nan)
+    if "chute_cd_factor" in truth:
+        fac_p = np.interp(fin.t, truth["t"], np.asarray(truth["chute_cd_factor"], float))
+        coef = np.where(fin.t >= pdd, 1.0 / np.where(fac_p > 0, fac_p, np.nan) - 1.0, coef)
+    out: dict = {}
+    for nm, mk in segs.items():
+        mk = mk & np.isfinite(e_rho)
+        if not mk.any():
+            continue
+        d = {"n": int(mk.sum())}
+        d.update(_err_stats("density", e_rho[mk], s_rho[mk], "rel"))
+        d["density_max_abs_error_raw_rel"] = float(np.nanmax(np.abs(e_rho_raw[mk])))
+        d.update(_err_stats("pressure", e_p[mk], s_p[mk], "rel"))
+        d.update(_err_stats("temperature", e_T[mk], s_T[mk], "K"))
+        bound = DENSITY_BOUNDS[nm]
+        d["density_bound_rel"] = bound
+        d["density_bound_pass"] = bool(d["density_max_abs_error_rel"] <= bound)
+        c = coef[mk]
+        c = c[np.isfinite(c)]
+        if c.size:
+            d["drag_coefficient_rel_error_median"] = float(np.median(c))
+            d["drag_coefficient_rel_error_max_abs"] = float(np.max(np.abs(c)))
+        out[nm] = d
+    out["bounds"] = "max |density error| <= 10 % entry, 20 % filled blackout, 25 % under the parachute (AMELIA)"
+    return out
+
+
+def score_winds(w, truth: dict) -> dict:
+    """Wind error against the truth inside the layers (true speed > 5 m/s), with the reported 1σ:
+    flat keys ``wind_N_*_mps``, ``wind_E_*_mps`` (error vs σ, :func:`_err_stats`),
+    ``max_error_mps`` (horizontal vector), ``bound_mps`` and ``bound_pass`` (AMELIA's 5 m/s, on the
+    largest vector error, measured), ``n``, ``method``."""
+    twN = np.interp(w.t, truth["t"], np.asarray(truth["wind_NE"])[:, 0])
+    twE = np.interp(w.t, truth["t"], np.asarray(truth["wind_NE"])[:, 1])
+    layer = w.valid & (np.hypot(twN, twE) > 5.0)
+    if not layer.any():
+        return {}
+    eN, eE = w.wind_N[layer] - twN[layer], w.wind_E[layer] - twE[layer]
+    err = np.hypot(eN, eE)
+    out = {
+        "max_error_mps": float(err.max()),
+        "rms_error_mps": float(np.sqrt(np.mean(err**2))),
+        "fraction_within_5mps": float(np.mean(err <= WIND_BOUND_MPS)),
+        "bound_mps": WIND_BOUND_MPS,
+        "bound_pass": bool(err.max() <= WIND_BOUND_MPS),
+        "n": int(layer.sum()),
+        "method": w.method,
+    }
+    out.update(_err_stats("wind_N", eN, w.sigma_N[layer], "mps"))
+    out.update(_err_stats("wind_E", eE, w.sigma_E[layer], "mps"))
+    return out
+
+
+def _pf(ok) -> str:
+    return "PASS" if ok else "**FAIL**"
+
+
+def _truth_tables(tr: dict) -> list[str]:
+    """Markdown tables of the atmosphere, wind and radar scores (error next to the reported 1σ)."""
+    L: list[str] = []
+    atm = tr.get("atmosphere", {})
+    rows = [(k, v) for k, v in atm.items() if isinstance(v, dict)]
+    if rows:
+        L += [
+            "### Atmosphere: error vs the reconstruction's 1σ (smoothed profile, at the reconstructed altitude)",
+            "",
+            "| segment | n | ρ max abs err | ρ rms err | ρ rms 1σ | ρ ≤2σ | ρ ≤3σ | bound | ρ bound | "
+            "p rms err | p rms 1σ | p ≤3σ | T rms err [K] | T rms 1σ [K] | T ≤3σ | C_D table−truth |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for nm, d in rows:
+            cd = d.get("drag_coefficient_rel_error_median", float("nan"))
+            L.append(
+                f"| {nm} | {d['n']} | {100 * d['density_max_abs_error_rel']:.1f} % | "
+                f"{100 * d['density_rms_error_rel']:.1f} % | {100 * d['density_rms_sigma_rel']:.1f} % | "
+                f"{100 * d['density_fraction_within_2sigma']:.0f} % | "
+                f"{100 * d['density_fraction_within_3sigma']:.0f} % | "
+                f"{100 * d['density_bound_rel']:.0f} % | {_pf(d['density_bound_pass'])} | "
+                f"{100 * d['pressure_rms_error_rel']:.1f} % | {100 * d['pressure_rms_sigma_rel']:.1f} % | "
+                f"{100 * d['pressure_fraction_within_3sigma']:.0f} % | {d['temperature_rms_error_K']:.1f} | "
+                f"{d['temperature_rms_sigma_K']:.1f} | {100 * d['temperature_fraction_within_3sigma']:.0f} % | "
+                f"{100 * cd:+.1f} % |"
+            )
+        L += [
+            "",
+            "Errors are measured at the reconstructed altitude, so the trajectory's altitude error is part of "
+            "them (and σ_h/H part of the 1σ); C_D table−truth is the relative error of the coefficient the "
+            "reconstruction used (table) against the truth's planted one, carried by the density error and "
+            "covered by the 10 % coefficient term of its 1σ.  A bound is PASS or FAIL as measured.",
+        ]
+        L.append("")
+    w = tr.get("winds_in_layers")
+    if w:
+        L += [
+            f"Winds in the layers ({w['method']}, n = {w['n']}): max error {w['max_error_mps']:.2f} m/s "
+            f"(bound {w['bound_mps']:.0f} m/s: {_pf(w['bound_pass'])}), rms {w['rms_error_mps']:.2f} m/s; "
+            f"north rms error {w.get('wind_N_rms_error_mps', float('nan')):.2f} vs rms 1σ "
+            f"{w.get('wind_N_rms_sigma_mps', float('nan')):.2f} m/s, east "
+            f"{w.get('wind_E_rms_error_mps', float('nan')):.2f} "
+            f"vs {w.get('wind_E_rms_sigma_mps', float('nan')):.2f} m/s; inside 3σ: north "
+            f"{100 * w.get('wind_N_fraction_within_3sigma', float('nan')):.0f} %, east "
+            f"{100 * w.get('wind_E_fraction_within_3sigma', float('nan')):.0f} %.",
+            "",
+        ]
+    r = tr.get("radar")
+    if r:
+        L += [
+            f"Radar slant-out against the filter's sphere: rms error {r['slant_out_rms_error_vs_sphere_m']:.1f} m "
+            f"(terrain relief alone {r['slant_out_rms_terrain_m']:.1f} m) vs the filter's 1σ "
+            f"{r['filter_slant_out_sigma_m']:.1f} m (ratio {r['slant_out_error_over_sigma_rms_ratio']:.2f}).",
+            "",
+        ]
+    return L
 
 
 def scorecard_markdown(summary: dict) -> str:
@@ -597,7 +805,10 @@ def scorecard_markdown(summary: dict) -> str:
     if "truth" in summary:
         tr = summary["truth"]
         L += ["", "## Against the synthetic truth", ""]
+        L += _truth_tables(tr)
         for k, v in tr.items():
+            if k in ("atmosphere", "winds_in_layers", "radar"):
+                continue
             if isinstance(v, dict):
                 L.append(
                     f"- **{k}**: "

@@ -85,12 +85,36 @@ class EntryProblem:
         return en.scorecard_markdown(summary)
 
     def headline(self, summary: dict) -> str:
-        """Altitude above ground ± 1σ at the end of the data and the dispersion acceptance."""
+        """Altitude above ground ± 1σ at the end of the data and the dispersion acceptance; with a
+        truth, the measured density error per segment against AMELIA's bounds and its share inside
+        3σ, and the wind bound (PASS/FAIL as measured)."""
         e, d = summary["end"], summary["dispersion"]
-        return (
+        line = (
             f"end of data: h AGL {e['h_agl_m']:.0f} ± {e['sigma_h_m']:.0f} m (1σ); "
             f"dispersion {d['accepted']}/{d['members']} accepted"
         )
+        tr = summary.get("truth", {})
+        parts = []
+        for seg, short in (
+            ("entry_measured", "entry"),
+            ("entry_filled_blackout", "blackout"),
+            ("under_parachute", "chute"),
+        ):
+            a = tr.get("atmosphere", {}).get(seg)
+            if a:
+                parts.append(
+                    f"{short} {100 * a['density_max_abs_error_rel']:.1f} %/{100 * a['density_bound_rel']:.0f} % "
+                    f"{'PASS' if a['density_bound_pass'] else 'FAIL'} "
+                    f"({100 * a['density_fraction_within_3sigma']:.0f} % in 3σ)"
+                )
+        w = tr.get("winds_in_layers")
+        if w:
+            parts.append(
+                f"winds {w['max_error_mps']:.1f}/{w['bound_mps']:.0f} m/s {'PASS' if w['bound_pass'] else 'FAIL'}"
+            )
+        if parts:
+            line += "; density max error " + ", ".join(parts)
+        return line
 
     @contextlib.contextmanager
     def open_recording(self, path: Path, scenario: Scenario, truth: Any, properties: dict) -> Iterator[_Drawer]:

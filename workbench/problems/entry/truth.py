@@ -1,8 +1,11 @@
 """Truth simulator of a Schiaparelli-like entry and parachute descent (synthetic scenarios only).
 
 This is the *truth*, not the estimator's model: a 6-DOF rigid capsule flying through a *true*
-atmosphere (which departs from :class:`MarsEngineeringAtmosphere`) with its aerodynamic database
-(:mod:`workbench.models.aerodynamics`), then a two-body system after parachute deployment — the
+atmosphere built from its own climate temperature profile, gas constants and gravity waves (not
+the estimator's :class:`~workbench.core.atmosphere.MarsEngineeringAtmosphere`), with the vehicle's
+aerodynamic database (:mod:`workbench.models.aerodynamics`) times planted, smooth, Mach-dependent
+coefficient deviations (10 % 1σ, AMELIA Table 3) that the estimator does not know, over a
+terrain with relief, then a two-body system after parachute deployment — the
 module hangs from an elastic riser (spring-damper, slack when shorter than its length) whose far
 end is the canopy, a point mass with its own air-relative drag, inflation law and canopy
 "breathing".  Pendulum oscillations, the inflation snatch and the X-rate spike at deployment
@@ -17,7 +20,8 @@ Frames and conventions (docs/ARCHITECTURE.md, "Conventions"):
   vehicle (north/east from the +Z pole of M) and blow *towards* the stated direction.
 * Gravity: point mass + J2 (``gravity_j2`` is valid in M).  Altitude ``h_amr = |p| − 3396 km``
   (above the MOLA radius, "AMR"); the atmosphere and winds are functions of ``h_amr`` only.
-  Terrain: a sphere of radius ``3396 km − 1440 m``.
+  Terrain: the sphere of radius ``3396 km − 1440 m`` (the ground-contact check) plus the relief
+  ``terrain_modes`` that the radar beams see (:class:`~workbench.problems.entry.site.TerrainRelief`).
 * Body frame G: origin at the CoG, +Z along the symmetry axis towards the back shell; during
   entry the air-relative velocity is along −Z_G, under the parachute the riser pulls along +Z_G.
   ``q_M_G`` is body -> inertial (Hamilton, scalar-last); ``w_G`` body rate; ``f_G`` the true
@@ -52,7 +56,8 @@ scalar Python (``math``) on purpose: for 19 states a numpy call costs more than 
 References: AMELIA (Aboudan et al., Space Sci. Rev. 2018) Sects. 3–4, 9, Table 2 (initial state),
 Fig. 2–4 (accelerations, 16 °/s spin, X-rate saturation ~1 s after PDD for ~1 s, Z acceleration
 peak ~101.5 m/s² ~0.6 s after PDD oscillating with ~0.35 s period); Mars constants as in
-:mod:`workbench.core.bodies`; Schiaparelli mass and shield size from ESA; molar mass 43.41 g/mol (AMELIA Sect. 9).
+:mod:`workbench.core.bodies`; Schiaparelli mass and shield size from ESA; the
+truth's molar mass 43.34 g/mol (NASA Mars fact sheet; AMELIA Sect. 9 uses 43.41).
 """
 
 from __future__ import annotations
@@ -62,6 +67,7 @@ import math
 from dataclasses import dataclass, field, fields
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 
 from workbench.core.atmosphere import (
     CO2_SUTHERLAND,
@@ -73,7 +79,7 @@ from workbench.core.frames import julian_date_from_utc, north_east_xyz
 from workbench.core.gravity import j2_factor
 from workbench.core.rotation import dcm_components, quat_multiply, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import EntryVehicle
-from workbench.problems.entry.site import R_GROUND
+from workbench.problems.entry.site import R_GROUND, draw_terrain_modes
 
 __all__ = [
     "EntryTruthSpec",
@@ -307,7 +313,8 @@ class EntryTruth:
     ``parachute_p_M`` (n,3) canopy position [m, M] (NaN before PDD).
     Extra (not in the interface spec, for plots/diagnostics): ``riser_tension`` (n,) [N],
     ``parachute_area`` (n,) [m²], ``ca_factor`` (n,) the planted axial-coefficient factor
-    ``1 + δ_CA(M)`` along the flight [-], ``terrain_modes`` (k, 5) the terrain relief
+    ``1 + δ_CA(M)`` along the flight [-], ``chute_cd_factor`` (n,) the parachute's ``1 + δ_P(M)``
+    at the canopy's Mach (1 before PDD) [-], ``terrain_modes`` (k, 5) the terrain relief
     (:class:`~workbench.problems.entry.site.TerrainRelief` rows) and ``spec`` the
     :class:`EntryTruthSpec` used.
     """
@@ -334,6 +341,7 @@ class EntryTruth:
     riser_tension: np.ndarray | None = None
     parachute_area: np.ndarray | None = None
     ca_factor: np.ndarray | None = None
+    chute_cd_factor: np.ndarray | None = None
     terrain_modes: np.ndarray | None = None
     spec: EntryTruthSpec | None = None
 
@@ -362,8 +370,9 @@ def truth_spec_from_scenario(scenario) -> EntryTruthSpec:
 
     ``scenario`` is a :class:`workbench.io.scenario.Scenario` (or a plain dict standing for the
     ``[truth]`` table).  Keys are the field names of :class:`EntryTruthSpec`; ``wind_layers``,
-    ``temperature_waves`` and ``temperature_bias`` are arrays of arrays.  ``epoch_utc`` defaults
-    to ``[scenario] epoch_utc`` when present.  Unknown keys raise ``ValueError`` naming them.
+    ``temperature_profile_km_K``, ``temperature_waves`` and ``terrain_modes`` are arrays of
+    arrays.  ``epoch_utc`` defaults to ``[scenario] epoch_utc`` when present.  Unknown keys raise
+    ``ValueError`` naming them.
     """
     if isinstance(scenario, dict):
         table, epoch, where = dict(scenario), None, "[truth]"
@@ -464,8 +473,6 @@ def disperse_truth_spec(
     jitter is drawn by :func:`simulate_entry` from its own ``rng``.  Returns a new
     :class:`EntryTruthSpec` (``spec`` is not modified).
     """
-    from workbench.problems.entry.site import draw_terrain_modes
-
     sg = DispersionSigmas() if sigmas is None else sigmas
     n = rng.standard_normal
     kw: dict = {}
@@ -525,8 +532,6 @@ def _true_temperature(h: np.ndarray, spec: EntryTruthSpec) -> np.ndarray:
     """Temperature [K] of the true atmosphere at h [m] AMR: the climate profile
     ``temperature_profile_km_K`` (monotone cubic, PCHIP, between its nodes; end values held
     outside), + gravity waves, + the inversion layer."""
-    from scipy.interpolate import PchipInterpolator
-
     nodes = np.asarray(spec.temperature_profile_km_K, dtype=float)
     hk = np.asarray(h, dtype=float) / 1e3
     T = PchipInterpolator(nodes[:, 0], nodes[:, 1], extrapolate=False)(np.clip(hk, nodes[0, 0], nodes[-1, 0]))
@@ -576,8 +581,6 @@ def coefficient_deviation(mach, nodes_mach, deviation) -> np.ndarray:
     ``deviation`` at Mach ``nodes_mach`` (increasing, ≥ 2), joined by a monotone cubic (PCHIP) in
     ln Mach, held constant outside the nodes.  The truth multiplies a table coefficient by
     ``1 + deviation``."""
-    from scipy.interpolate import PchipInterpolator
-
     x = np.log(np.asarray(nodes_mach, dtype=float))
     m = np.log(np.clip(np.asarray(mach, dtype=float), np.exp(x[0]), np.exp(x[-1])))
     return PchipInterpolator(x, np.asarray(deviation, dtype=float))(m)
@@ -775,7 +778,7 @@ class _Model:
         FGx = FGy = FGz = 0.0  # non-gravitational force on the module, body frame [N]
         Mx = My = Mz = 0.0  # torque about the CoG, body frame [N m]
         mach = kn = alpha = qd = 0.0
-        ca_f = 1.0
+        ca_f = cp_f = 1.0
         vrx = vry = vrz = 0.0
         wn = we = 0.0
         if self.aero_on:
@@ -849,7 +852,8 @@ class _Model:
                 Vp = math.sqrt(wx_p * wx_p + wy_p * wy_p + wz_p * wz_p)
                 if Vp > 1e-6:
                     mp = Vp / a_p
-                    Dk = 0.5 * rho_p * Vp * self.veh.parachute.cd_scalar(mp) * _lookup(self.cp_fac, mp) * Ap
+                    cp_f = _lookup(self.cp_fac, mp)
+                    Dk = 0.5 * rho_p * Vp * self.veh.parachute.cd_scalar(mp) * cp_f * Ap
                     Dx, Dy, Dz = -Dk * wx_p, -Dk * wy_p, -Dk * wz_p
                     ks = self.side_weight(t)
                     if ks > 0.0:  # asymmetric inflation: side force ⊥ the canopy's air velocity
@@ -906,7 +910,7 @@ class _Model:
             d.extend(dchute)
         if aux:
             area = self.area(t) if chute else 0.0
-            return d, (fx, fy, fz, mach, kn, alpha, qd, h, vrx, vry, vrz, wn, we, T, area, ca_f)
+            return d, (fx, fy, fz, mach, kn, alpha, qd, h, vrx, vry, vrz, wn, we, T, area, ca_f, cp_f)
         return d
 
 
@@ -982,7 +986,7 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
     n_max = int(math.floor((t_stop_cap - spec.t0) / dt_out + 1e-9)) + 1
 
     states = np.full((n_max, 19), np.nan)
-    auxs = np.zeros((n_max, 16))
+    auxs = np.zeros((n_max, 17))
     phases = np.zeros(n_max, dtype=int)
     events = {"EIP": 0.0, "PDD": math.nan, "FSR": math.nan, "BSR": math.nan}
     k = 0
@@ -1048,6 +1052,7 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
         riser_tension=auxs[:, 13].copy(),
         parachute_area=auxs[:, 14].copy(),
         ca_factor=auxs[:, 15].copy(),
+        chute_cd_factor=auxs[:, 16].copy(),
         terrain_modes=np.asarray(spec.terrain_modes, dtype=float).reshape(-1, 5),
         spec=spec,
     )

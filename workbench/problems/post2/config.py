@@ -1,0 +1,474 @@
+"""The post2 problem file: schema of a ``kind = "post2"`` scenario and :class:`Post2Config`, the typed
+settings built once from it.
+
+A user who has a new vehicle writes a problem file, not code (thesis [R3] Ch. 3.1.2: the
+estimated states, their derivatives and the observations are named in the input, the
+observations and their weights come from files vs time).  The fixed tables are declared in
+:data:`SCHEMA`; the named tables ``[states.<name>]``, ``[observations.<name>]``,
+``[events.<name>]`` and ``[truth.states]`` are checked here against the model's catalogues
+(:data:`~workbench.problems.post2.model.STATES`, :data:`~workbench.problems.post2.model.OBSERVATIONS`)
+and their own key lists: an unknown name or key is a :class:`~workbench.io.scenario.ScenarioError`
+naming the file and the dotted key, with a "did you mean".
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from workbench.io.scenario import Scenario, ScenarioError, check_value
+from workbench.io.schema import REQUIRED, Key, Schema, Table
+from workbench.io.units import to_si
+from workbench.problems.post2.model import OBSERVATIONS, STATES
+
+__all__ = [
+    "SCHEMA",
+    "STATE_KEYS",
+    "OBSERVATION_KEYS",
+    "EVENT_KEYS",
+    "StateSpec",
+    "ObservationSpec",
+    "EventSpec",
+    "Post2Config",
+    "config_for",
+]
+
+_F, _I, _S, _B, _L = "float", "int", "str", "bool", "list"
+
+#: keys of a ``[states.<name>]`` table: kind, default, unit note, meaning
+STATE_KEYS: dict[str, tuple[str, Any, str]] = {
+    "value": ("number_or_list", REQUIRED, "initial estimate, in the state's unit (attitude: [α, β, σ] deg)"),
+    "sigma": ("number_or_list", REQUIRED, "initial 1σ, same unit"),
+    "process": (_S, "constant", "`constant`, `random_walk` (with `psd`) or `markov` (with `tau_s`)"),
+    "psd": ("number_or_list", 0.0, "random-walk PSD [unit²/s], or the Markov driving PSD (0: from sigma)"),
+    "tau_s": (_F, None, "first-order Markov time constant [s]"),
+    "bounds": (_L, None, "[lo, hi]: the model uses the tanh S-curve of the estimated state (scalar parameters)"),
+    "step": (_F, None, "perturbation of the numeric Jacobian, state unit (default per state)"),
+}
+
+#: keys of an ``[observations.<name>]`` table
+OBSERVATION_KEYS: dict[str, tuple[str, Any, str]] = {
+    "quantity": (_S, REQUIRED, "model output observed: " + ", ".join(OBSERVATIONS)),
+    "file": (_S, None, "CSV of the observations (user telemetry; synthetic: written as <name>.csv)"),
+    "weights": (_S, None, "CSV of the weights W vs time (R = W⁻¹), columns as the observation's, unit 1/unit²"),
+    "sigma": ("number_or_list", None, "constant 1σ in the observation's unit (instead of a weights file)"),
+    "median_window": (_I, 0, "sliding-median pre-smoothing over this many samples (0: none)"),
+    "gate_probability": (_F, 0.0, "χ² gate probability of the update (0: no gate)"),
+    "iterations": (_I, 1, "Gauss-Newton iterations of the update (iterated EKF, Bell & Cathey 1993); 1: plain EKF"),
+    "rate_hz": (_F, None, "synthetic: sample rate"),
+    "start_s": (_F, None, "synthetic: first sample time (default: the start)"),
+    "end_s": (_F, None, "synthetic: last sample time (default: the end)"),
+    "noise_sigma": ("number_or_list", None, "synthetic: sensor white-noise 1σ (default: sigma)"),
+}
+
+#: keys of an ``[events.<name>]`` table
+EVENT_KEYS: dict[str, tuple[str, Any, str]] = {
+    "when": (_S, REQUIRED, "`time`, `mach_below`, `altitude_below` or `dynamic_pressure_above`"),
+    "value": (_F, REQUIRED, "time [s], Mach [-], altitude [m] or dynamic pressure [Pa]"),
+    "mass_kg": (_F, None, "new mass"),
+    "ref_area_m2": (_F, None, "new aerodynamic reference area"),
+    "parachute": (_B, None, "true: the parachute opens; false: it is released"),
+}
+
+EVENT_CONDITIONS = ("time", "mach_below", "altitude_below", "dynamic_pressure_above")
+PROCESSES = ("constant", "random_walk", "markov")
+
+
+def _named_meaning(keys: dict) -> str:
+    return "; ".join(f"`{k}`: {m}" for k, (_, _, m) in keys.items())
+
+
+SCHEMA = Schema(
+    "post2",
+    "parameter reconstruction from a problem file (POST2 EKF method)",
+    (
+        Table(
+            "scenario",
+            "what the run is",
+            (
+                Key("name", _S, REQUIRED, meaning="names the run"),
+                Key("kind", _S, REQUIRED, meaning='`"post2"`'),
+                Key("description", _S, "", meaning="one line for listings"),
+            ),
+        ),
+        Table(
+            "model",
+            "the trajectory model (simulator and the EKF's process model)",
+            (
+                Key("dof", _I, 3, meaning="3 (translation) or 6 (translation + rotation)"),
+                Key("t_start_s", _F, 0.0, "s", "start of the reconstruction (initial state epoch)"),
+                Key("t_end_s", _F, REQUIRED, "s", "end of the reconstruction"),
+                Key("step_s", _F, 1.0, "s", "largest RK4 step of the estimator's propagation"),
+                Key("grid_s", _F, None, "s", "propagation grid between observations (default: step_s)"),
+            ),
+        ),
+        Table(
+            "environment",
+            "planet, gravity, atmosphere",
+            (
+                Key("body", _S, "mars", meaning="central body", choices=("mars", "titan", "earth")),
+                Key("gm_m3_s2", _F, None, "m^3/s^2", "gravitational parameter (default: the body's)"),
+                Key("equatorial_radius_m", _F, None, "m", "J2 reference radius (default: the body's)"),
+                Key("reference_radius_m", _F, None, "m", "altitude reference sphere (default: the body's)"),
+                Key("j2", _F, None, "1", "nominal J2 when not estimated (default: the body's)"),
+                Key("rotation_rate_rad_s", _F, None, "rad/s", "planet rotation (atmosphere co-rotates)"),
+                Key(
+                    "atmosphere",
+                    _S,
+                    "none",
+                    meaning="atmosphere model",
+                    choices=("none", "exponential", "table", "mars_engineering", "titan_default"),
+                ),
+                Key("rho0_kg_m3", _F, 0.015, "kg/m^3", "exponential: density at h = 0"),
+                Key("scale_height_m", _F, 11100.0, "m", "exponential: scale height"),
+                Key("temperature_K", _F, 210.0, "K", "exponential: temperature"),
+                Key("table_altitude_m", _L, None, "m", "table: altitude nodes, increasing (held constant outside)"),
+                Key("table_density_kg_m3", _L, None, "kg/m^3", "table: density at the nodes (log-linear)"),
+                Key("table_pressure_pa", _L, None, "Pa", "table: pressure at the nodes (log-linear)"),
+                Key("table_temperature_K", _L, None, "K", "table: temperature at the nodes (linear)"),
+            ),
+        ),
+        Table(
+            "vehicle",
+            "mass properties and aerodynamics",
+            (
+                Key(
+                    "file",
+                    _S,
+                    None,
+                    meaning="vehicle asset (shipped name in assets/vehicles or a path), the entry vehicle's format",
+                ),
+                Key("mass_kg", _F, None, "kg", "mass (default: the asset's entry mass)"),
+                Key("ref_area_m2", _F, None, "m^2", "aerodynamic reference area (default: the asset's)"),
+            ),
+        ),
+        Table("events", "phase changes", free="table", free_meaning="`[events.<name>]`: " + _named_meaning(EVENT_KEYS)),
+        Table(
+            "states",
+            "estimated states by name: " + ", ".join(STATES),
+            free="table",
+            free_meaning="`[states.<name>]`: " + _named_meaning(STATE_KEYS),
+        ),
+        Table(
+            "observations",
+            "observations by name",
+            free="table",
+            free_meaning="`[observations.<name>]`: " + _named_meaning(OBSERVATION_KEYS),
+        ),
+        Table(
+            "filter",
+            "estimator options",
+            (Key("smoother", _B, True, meaning="run the RTS smoother after the forward pass"),),
+        ),
+        Table(
+            "truth",
+            "synthetic truth: how it differs from the estimator's model (never read by the reconstruction)",
+            (
+                Key("rtol", _F, 1e-10, "1", "relative tolerance of the truth's DOP853 integrator"),
+                Key("output_step_s", _F, 0.01, "s", "truth sampling step"),
+                Key("ca_factor", _F, 1.0, "1", "truth CA / table CA"),
+                Key("cn_factor", _F, 1.0, "1", "truth CN / table CN"),
+                Key("cm_factor", _F, 1.0, "1", "truth Cm / table Cm"),
+                Key("density_wave_amplitude", _F, 0.0, "1", "truth density × (1 + a sin(2π h / λ))"),
+                Key("density_wave_length_m", _F, 10000.0, "m", "λ of that wave"),
+            ),
+        ),
+        Table(
+            "truth.states",
+            "truth values of states and model inputs, by state name, in the state's unit",
+            free="number_or_vec3",
+            free_meaning="truth value (attitude: [α, β, σ] deg)",
+        ),
+        Table(
+            "synthetic",
+            "simulate instead of reading telemetry",
+            (Key("seed", _I, 0, meaning="seed of the sensor noise"),),
+        ),
+    ),
+)
+
+
+def _suggest(word: str, candidates) -> str:
+    close = difflib.get_close_matches(word, list(candidates), n=1, cutoff=0.5)
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+def _value(file: Path, dotted: str, v: Any, kind: str) -> Any:
+    if kind == "number_or_list":
+        if isinstance(v, int | float) and not isinstance(v, bool):
+            return float(v)
+        a = check_value(file, dotted, v, "list")
+        try:
+            return np.array(a, dtype=float)
+        except (TypeError, ValueError):
+            raise ScenarioError(file, dotted, f"expected a number or a list of numbers, got {a!r}") from None
+    return check_value(file, dotted, v, kind)
+
+
+def _sub(file: Path, prefix: str, table: Any, keys: dict) -> dict:
+    """Check a named sub-table against ``keys``; returns its values with defaults filled in."""
+    if not isinstance(table, dict):
+        raise ScenarioError(file, prefix, f"expected a table [{prefix}]")
+    out = {}
+    for k, v in table.items():
+        if k not in keys:
+            raise ScenarioError(
+                file,
+                f"{prefix}.{k}",
+                f"unknown key '{k}' in [{prefix}]{_suggest(k, keys)} (keys here: {', '.join(keys)})",
+            )
+        out[k] = _value(file, f"{prefix}.{k}", v, keys[k][0])
+    for k, (_, default, _) in keys.items():
+        if k not in out:
+            if default is REQUIRED:
+                raise ScenarioError(file, f"{prefix}.{k}", f"missing (required in [{prefix}])")
+            out[k] = default
+    return out
+
+
+def _vec(file: Path, dotted: str, v: Any, size: int) -> np.ndarray:
+    a = np.atleast_1d(np.asarray(v, dtype=float))
+    if a.size == 1 and size > 1:
+        a = np.full(size, float(a[0]))
+    if a.shape != (size,):
+        raise ScenarioError(file, dotted, f"expected {size} number(s), got {a.size}")
+    if not np.all(np.isfinite(a)):
+        raise ScenarioError(file, dotted, "must be finite")
+    return a
+
+
+@dataclass(frozen=True)
+class StateSpec:
+    """One estimated state: ``value``, ``sigma`` (size,) in SI (attitude: rad), ``process``,
+    ``psd`` (size,) SI per second, ``tau`` [s] or None, ``bounds`` (lo, hi) SI or None, ``step``
+    (error-state size,) SI perturbation."""
+
+    name: str
+    value: np.ndarray
+    sigma: np.ndarray
+    process: str
+    psd: np.ndarray
+    tau: float | None
+    bounds: tuple[float, float] | None
+    step: np.ndarray
+
+
+@dataclass(frozen=True)
+class ObservationSpec:
+    """One observation channel: ``quantity``, its ``size``, SI ``sigma`` (size,) or None (weights
+    file), ``weights`` file key present, pre-smoothing ``median_window``, ``gate_probability``
+    (None: no gate), and the synthetic sensor's ``rate_hz``, ``start``, ``end`` [s], ``noise`` (size,) SI."""
+
+    name: str
+    quantity: str
+    size: int
+    unit: str
+    file: str | None
+    weights: str | None
+    sigma: np.ndarray | None
+    median_window: int
+    gate_probability: float | None
+    iterations: int
+    rate_hz: float | None
+    start: float | None
+    end: float | None
+    noise: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class EventSpec:
+    """One event: ``name``, ``when`` condition, ``value`` (SI), new ``mass``/``ref_area``/``parachute``."""
+
+    name: str
+    when: str
+    value: float
+    mass: float | None
+    ref_area: float | None
+    parachute: bool | None
+
+
+@dataclass(frozen=True)
+class Post2Config:
+    """Validated post2 settings (SI): ``dof``, reconstruction span ``t_start``, ``t_end`` [s],
+    estimator ``step`` and ``grid`` [s]; ``states`` and ``observations`` in file order;
+    ``events``; ``truth_states`` name -> SI value; the raw validated ``data`` for the rest."""
+
+    dof: int
+    t_start: float
+    t_end: float
+    step: float
+    grid: float
+    states: tuple[StateSpec, ...]
+    observations: tuple[ObservationSpec, ...]
+    events: tuple[EventSpec, ...]
+    truth_states: dict[str, np.ndarray]
+    data: dict
+
+    def state(self, name: str) -> StateSpec | None:
+        """The :class:`StateSpec` called ``name`` or None."""
+        return next((s for s in self.states if s.name == name), None)
+
+
+def _factor(unit: str) -> float:
+    """SI value of one ``unit`` (a pure scale: the state units have no offset)."""
+    return 1.0 if unit in ("1", "-") else float(to_si(1.0, unit)[0])
+
+
+def _si(v: np.ndarray, unit: str) -> np.ndarray:
+    return np.asarray(v, dtype=float) * _factor(unit)
+
+
+def _check_name(file: Path, dotted: str, name: str, known, what: str) -> None:
+    if name not in known:
+        raise ScenarioError(
+            file,
+            dotted,
+            f"unknown {what} '{name}'{_suggest(name, known)} ({what}s the model knows: {', '.join(known)})",
+        )
+
+
+def _state(file: Path, name: str, raw: dict, dof: int) -> StateSpec:
+    pre = f"states.{name}"
+    d = STATES[name]
+    if dof not in d.dofs:
+        raise ScenarioError(file, pre, f"state '{name}' exists only in a {' or '.join(map(str, d.dofs))}-DOF model")
+    t = _sub(file, pre, raw, STATE_KEYS)
+    value = _si(_vec(file, f"{pre}.value", t["value"], d.size), d.unit)
+    sigma = _si(_vec(file, f"{pre}.sigma", t["sigma"], d.size), d.unit)
+    if np.any(sigma <= 0):
+        raise ScenarioError(file, f"{pre}.sigma", "must be > 0")
+    process = t["process"]
+    if process not in PROCESSES:
+        raise ScenarioError(
+            file, f"{pre}.process", f"{process!r}: use one of {', '.join(PROCESSES)}{_suggest(process, PROCESSES)}"
+        )
+    if process == "markov" and d.dynamic:
+        raise ScenarioError(file, f"{pre}.process", f"'{name}' has model dynamics: use constant or random_walk")
+    psd = _vec(file, f"{pre}.psd", t["psd"], d.size)
+    if np.any(psd < 0):
+        raise ScenarioError(file, f"{pre}.psd", "must be >= 0")
+    psd = psd * _factor(d.unit) ** 2  # unit²/s -> SI²/s
+    tau = t["tau_s"]
+    if process == "markov" and (tau is None or not tau > 0):
+        raise ScenarioError(file, f"{pre}.tau_s", "a markov process needs tau_s > 0")
+    bounds = None
+    if t["bounds"] is not None:
+        b = t["bounds"]
+        if d.size != 1 or name == "attitude":
+            raise ScenarioError(file, f"{pre}.bounds", "bounds apply to scalar parameters only")
+        if len(b) != 2 or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in b):
+            raise ScenarioError(file, f"{pre}.bounds", f"expected [lo, hi], got {b!r}")
+        lo, hi = float(b[0]), float(b[1])
+        if not lo < hi:
+            raise ScenarioError(file, f"{pre}.bounds", f"lo ({lo:g}) must be below hi ({hi:g})")
+        if not lo < float(value[0]) < hi:
+            raise ScenarioError(file, f"{pre}.value", f"{float(value[0]):g} is not inside the bounds ({lo:g}, {hi:g})")
+        bounds = (lo, hi)
+    step = t["step"] if t["step"] is not None else d.step
+    if not step > 0:
+        raise ScenarioError(file, f"{pre}.step", "must be > 0")
+    step_si = float(_si(np.array([step]), d.unit)[0])
+    return StateSpec(name, value, sigma, process, psd, tau, bounds, np.full(d.size, step_si))
+
+
+def _observation(file: Path, name: str, raw: dict, dof: int) -> ObservationSpec:
+    pre = f"observations.{name}"
+    t = _sub(file, pre, raw, OBSERVATION_KEYS)
+    q = t["quantity"]
+    _check_name(file, f"{pre}.quantity", q, OBSERVATIONS, "observation quantity")
+    d = OBSERVATIONS[q]
+    if dof not in d.dofs:
+        raise ScenarioError(file, f"{pre}.quantity", f"'{q}' needs a {' or '.join(map(str, d.dofs))}-DOF model")
+    if t["sigma"] is None and t["weights"] is None:
+        raise ScenarioError(file, pre, "give a constant `sigma` or a `weights` file")
+    if t["sigma"] is not None and t["weights"] is not None:
+        raise ScenarioError(file, pre, "give either `sigma` or `weights`, not both")
+    sigma = None
+    if t["sigma"] is not None:
+        sigma = _si(_vec(file, f"{pre}.sigma", t["sigma"], d.size), d.unit)
+        if np.any(sigma <= 0):
+            raise ScenarioError(file, f"{pre}.sigma", "must be > 0")
+    noise = (
+        None if t["noise_sigma"] is None else _si(_vec(file, f"{pre}.noise_sigma", t["noise_sigma"], d.size), d.unit)
+    )
+    w = int(t["median_window"])
+    if w < 0:
+        raise ScenarioError(file, f"{pre}.median_window", "must be >= 0")
+    gp = float(t["gate_probability"])
+    if not 0.0 <= gp < 1.0:
+        raise ScenarioError(file, f"{pre}.gate_probability", "must be in [0, 1)")
+    if t["iterations"] < 1:
+        raise ScenarioError(file, f"{pre}.iterations", "must be >= 1")
+    return ObservationSpec(
+        name,
+        q,
+        d.size,
+        d.unit,
+        t["file"],
+        t["weights"],
+        sigma,
+        w,
+        gp or None,
+        int(t["iterations"]),
+        t["rate_hz"],
+        t["start_s"],
+        t["end_s"],
+        noise,
+    )
+
+
+def _event(file: Path, name: str, raw: dict) -> EventSpec:
+    pre = f"events.{name}"
+    t = _sub(file, pre, raw, EVENT_KEYS)
+    if t["when"] not in EVENT_CONDITIONS:
+        raise ScenarioError(
+            file,
+            f"{pre}.when",
+            f"{t['when']!r}: use one of {', '.join(EVENT_CONDITIONS)}{_suggest(t['when'], EVENT_CONDITIONS)}",
+        )
+    return EventSpec(name, t["when"], float(t["value"]), t["mass_kg"], t["ref_area_m2"], t["parachute"])
+
+
+def config_for(scenario: Scenario) -> Post2Config:
+    """Build the :class:`Post2Config` of a scenario (validated against :data:`SCHEMA` and the named
+    tables); :class:`ScenarioError` naming file and dotted key for anything wrong."""
+    file = Path(scenario.path)
+    data = SCHEMA.validate(scenario.data, file)
+    m = data["model"]
+    dof = int(m["dof"])
+    if dof not in (3, 6):
+        raise ScenarioError(file, "model.dof", f"must be 3 or 6, got {dof}")
+    if not m["t_end_s"] > m["t_start_s"]:
+        raise ScenarioError(file, "model.t_end_s", "must be after t_start_s")
+    if not m["step_s"] > 0:
+        raise ScenarioError(file, "model.step_s", "must be > 0")
+    states = []
+    for name, raw in data.get("states", {}).items():
+        _check_name(file, f"states.{name}", name, STATES, "state")
+        states.append(_state(file, name, raw, dof))
+    names = [s.name for s in states]
+    for need in ("position", "velocity") + (("attitude", "body_rates") if dof == 6 else ()):
+        if need not in names:
+            raise ScenarioError(file, f"states.{need}", f"missing: a {dof}-DOF model needs the state '{need}'")
+    obs = []
+    for name, raw in data.get("observations", {}).items():
+        obs.append(_observation(file, name, raw, dof))
+    if not obs:
+        raise ScenarioError(file, "observations", "no observation declared")
+    events = tuple(_event(file, n, r) for n, r in data.get("events", {}).items())
+    truth_states = {}
+    for name, v in data.get("truth", {}).get("states", {}).items():
+        _check_name(file, f"truth.states.{name}", name, STATES, "state")
+        d = STATES[name]
+        truth_states[name] = _si(_vec(file, f"truth.states.{name}", v, d.size), d.unit)
+    grid = m["grid_s"] if m["grid_s"] is not None else m["step_s"]
+    if not grid > 0:
+        raise ScenarioError(file, "model.grid_s", "must be > 0")
+    return Post2Config(
+        dof, float(m["t_start_s"]), float(m["t_end_s"]), float(m["step_s"]), float(grid),
+        tuple(states), tuple(obs), events, truth_states, data,
+    )  # fmt: skip

@@ -1,0 +1,572 @@
+"""The POST2-style trajectory model: one simulator that runs forward *and* is the EKF's process model.
+
+POST2's premise (thesis [R3], Ch. 3.1.2): "any POST2 input parameter that has an associated
+derivative ... can be an estimated state, and any POST2 output parameter can be an observation".
+Here the state vector is assembled from named blocks (:data:`STATES`); every block the problem
+file does not estimate keeps its nominal value from the environment and vehicle.  The same
+:class:`TrajectoryModel` integrates the truth (with its own integrator and environment, see
+``truth.py``) and the estimator's prediction, and evaluates the named observations
+(:data:`OBSERVATIONS`).
+
+Frames and conventions (SI inside):
+
+* ``p_I``, ``v_I`` [m, m/s]: planet-centred inertial, +Z the body's pole (the J2 model of
+  :mod:`workbench.core.gravity` holds in any frame whose +Z is the pole); precession neglected.
+* ``q_I_B`` scalar-last, rotates body vectors to inertial; body frame B: +X along the symmetry
+  axis towards the heat shield (the air-relative velocity is along +X_B at zero angle of attack,
+  as in the thesis' Ch. 3.2.2 "the vehicle body X-axis aligned with the velocity vector"),
+  +Y, +Z completing a right-handed frame.  The vehicle asset's GNC frame G (+Z towards the back
+  shell, :mod:`workbench.models.aerodynamics`) maps as X_B = −Z_G, Y_B = Y_G, Z_B = X_G.
+* ``w_B`` [rad/s] body rates.  Aerodynamic angles from the air-relative body velocity
+  ``v_B = (u, v, w)``: α = atan2(w, u), β = asin(v / |v_B|); the bank angle σ about the
+  air-relative velocity from a reference "wind" frame W0 whose x is v̂_rel and whose z points
+  down (towards the planet, in the plane of r and v): ``R_I_B = R_I_W0 Rx(σ) Rz(−β) Ry(α)``.
+* The atmosphere co-rotates with the planet (rate ω about +Z): ``v_rel = v − ω × r``; altitude
+  is ``|r| − R_ref`` (spherical reference radius).
+
+Aerodynamics (conventions of :mod:`workbench.models.aerodynamics`, mapped to B): axial force
+``−CA q S X_B``, normal force ``−CN q S e⊥`` against the lateral air-relative velocity, moment
+``Cm q S L k̂`` with ``k̂ = unit(v̂ × X_B)`` (Cm < 0 restoring), pitch damping
+``Cmq q S L² / (2V) ω⊥``; coefficients vs (Mach, Knudsen, total α) from the vehicle's
+:class:`~workbench.models.aerodynamics.AeroTable`, each scaled by its multiplier state.  An open
+parachute adds ``−CD_p q S_p v̂_rel · multiplier`` (a drag element).  Rotational dynamics
+``I ω̇ = M − ω × I ω``; kinematics ``q̇ = ½ q ⊗ (ω, 0)``.  ``dof = 3`` drops the attitude: the
+aero force is drag only (``−CA q S v̂_rel``).
+
+Estimated-state processes (thesis Ch. 3.1.1 Eq. 3.1 with the system noise Q): ``constant``
+(no noise), ``random_walk`` with a PSD (Q = PSD dt per component), ``markov`` (first-order
+Gauss-Markov about the initial value, time constant τ, stationary 1σ equal to the prior 1σ
+unless a PSD is given: Φ = e^(−dt/τ), Q = σ² (1 − Φ²)).  Bounded parameters go through the tanh
+S-curve of the thesis' Ch. 5 (Fig. 5-15): the estimated state s is unbounded and the model uses
+``c + h tanh((s − c)/h)`` with c, h the centre and half-width of [lo, hi].
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from workbench.core.atmosphere import Atmosphere
+from workbench.core.gravity import gravity_j2_xyz
+from workbench.core.rotation import dcm_to_quat, quat_multiply, quat_normalize, quat_to_dcm
+from workbench.models.aerodynamics import AeroTable, ParachuteTable
+
+__all__ = [
+    "StateDef",
+    "ObservationDef",
+    "STATES",
+    "OBSERVATIONS",
+    "C_B_G",
+    "Environment",
+    "Vehicle",
+    "Event",
+    "StateBlock",
+    "StateMap",
+    "TrajectoryModel",
+    "scurve",
+    "scurve_inverse",
+    "scurve_slope",
+    "rk4_step",
+    "quat_from_aero_angles",
+    "aero_angles",
+]
+
+
+@dataclass(frozen=True)
+class StateDef:
+    """A state the model knows: ``size`` of its value, ``unit`` of its value in a problem file
+    (``"deg"`` for attitude: α, β, σ), ``dynamic`` (the model owns its derivative: only constant
+    or random-walk noise may be added), ``dofs`` it exists in, default numeric-Jacobian ``step``
+    (in ``unit``), and what it means."""
+
+    size: int
+    unit: str
+    dynamic: bool
+    dofs: tuple[int, ...]
+    step: float
+    meaning: str
+
+
+#: Every state name the model knows (the problem file's ``[states.<name>]``).
+STATES: dict[str, StateDef] = {
+    "position": StateDef(3, "m", True, (3, 6), 1.0, "inertial position p_I (thesis XI, YI, ZI)"),
+    "velocity": StateDef(3, "m/s", True, (3, 6), 1e-3, "inertial velocity v_I (VXI, VYI, VZI)"),
+    "attitude": StateDef(
+        3,
+        "deg",
+        True,
+        (6,),
+        1e-4,
+        "aerodynamic angles [α, β, σ] (ALPHA, BETA, BNKANG) at the start; carried as a quaternion",
+    ),
+    "body_rates": StateDef(3, "deg/s", True, (6,), 1e-5, "body angular velocity (ROLBD, PITBD, YAWBD)"),
+    "j2": StateDef(1, "1", False, (3, 6), 1e-6, "zonal harmonic J2 of the gravity field"),
+    "ca_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the axial coefficient CA"),
+    "cn_multiplier": StateDef(1, "1", False, (6,), 1e-4, "multiplier of the normal coefficient CN"),
+    "cm_multiplier": StateDef(1, "1", False, (6,), 1e-4, "multiplier of the pitching-moment coefficient Cm"),
+    "density_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the model atmosphere's density"),
+    "parachute_drag_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the parachute CD"),
+    "accel_bias": StateDef(
+        3, "m/s^2", False, (3, 6), 1e-6, "accelerometer bias, body frame (sensed-acceleration observations)"
+    ),
+    "radar_scale_factor": StateDef(1, "1", False, (3, 6), 1e-5, "radar altimeter scale factor (altitude observation)"),
+}
+
+
+@dataclass(frozen=True)
+class ObservationDef:
+    """An observable model output: ``size`` of its residual (and of its σ / weights), ``unit`` of σ
+    and of the file columns, the file's column names ``components``, the DOFs it exists in, its
+    meaning, and ``file_unit`` when the file columns have another unit than σ (quaternion: ``1``)."""
+
+    size: int
+    unit: str
+    components: tuple[str, ...]
+    dofs: tuple[int, ...]
+    meaning: str
+    file_unit: str | None = None
+
+    @property
+    def residual_names(self) -> tuple[str, ...]:
+        """Names of the residual components (the file columns, or x, y, z for a quaternion)."""
+        return self.components if len(self.components) == self.size else ("x", "y", "z")
+
+
+#: Every observation quantity the model computes (the problem file's ``[observations.<name>] quantity``).
+OBSERVATIONS: dict[str, ObservationDef] = {
+    "gravity_magnitude": ObservationDef(1, "m/s^2", ("g",), (3, 6), "|g| of point mass + J2 (thesis SPCV1)"),
+    "acceleration_inertial": ObservationDef(
+        3, "m/s^2", ("ax", "ay", "az"), (3, 6), "total inertial acceleration incl. gravity (AXI, AYI, AZI)"
+    ),
+    "acceleration_body": ObservationDef(
+        3, "m/s^2", ("ax", "ay", "az"), (6,), "sensed (non-gravitational) acceleration, body frame, + accel_bias"
+    ),
+    "acceleration_axial": ObservationDef(1, "m/s^2", ("ax",), (6,), "sensed acceleration along +X_B + bias"),
+    "body_rates": ObservationDef(3, "deg/s", ("p", "q", "r"), (6,), "body angular velocity (ROLBD, PITBD, YAWBD)"),
+    "quaternion": ObservationDef(
+        3,
+        "deg",
+        ("qx", "qy", "qz", "qw"),
+        (6,),
+        "attitude q_I_B (scalar last); residual = body-frame small angle to the measured attitude, σ per axis in deg",
+        file_unit="1",
+    ),
+    "altitude": ObservationDef(1, "m", ("h",), (3, 6), "radar altitude = (|r| − R_ref) · radar_scale_factor"),
+    "pressure": ObservationDef(1, "Pa", ("p",), (3, 6), "static pressure of the model atmosphere"),
+    "density": ObservationDef(1, "kg/m^3", ("rho",), (3, 6), "density of the model atmosphere"),
+}
+
+#: DCM from the GNC frame G of the vehicle asset to the post2 body frame B (X_B = −Z_G, Z_B = X_G).
+C_B_G = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+C_B_G.flags.writeable = False
+
+
+def scurve(s, lo: float, hi: float):
+    """Physical value in (lo, hi) of the unbounded estimated state ``s``: ``c + h tanh((s − c)/h)``,
+    c = (lo + hi)/2, h = (hi − lo)/2 (thesis Ch. 5, Fig. 5-15); identity near c (slope 1)."""
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    return c + h * np.tanh((np.asarray(s, dtype=float) - c) / h)
+
+
+def scurve_inverse(p, lo: float, hi: float):
+    """Estimated state ``s`` of a physical value ``p`` strictly inside (lo, hi) (inverse of :func:`scurve`)."""
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    return c + h * np.arctanh((np.asarray(p, dtype=float) - c) / h)
+
+
+def scurve_slope(s, lo: float, hi: float):
+    """d scurve / ds = 1 − tanh²((s − c)/h) (dimensionless), for mapping 1σ to the physical value."""
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    return 1.0 - np.tanh((np.asarray(s, dtype=float) - c) / h) ** 2
+
+
+@dataclass(frozen=True)
+class Environment:
+    """Planet and atmosphere: ``gm`` [m³/s²], ``radius_eq`` [m] (J2 reference radius), ``j2``
+    nominal [-], ``radius_ref`` [m] (altitude reference sphere), ``omega`` [rad/s] planet rate
+    about +Z, ``atmosphere`` (an :class:`~workbench.core.atmosphere.Atmosphere` or None: vacuum),
+    ``density_factor(h) -> factor`` (None: 1) an optional multiplicative density perturbation
+    (used by the truth simulator only)."""
+
+    gm: float
+    radius_eq: float
+    j2: float
+    radius_ref: float
+    omega: float
+    atmosphere: Atmosphere | None
+    density_factor: Callable[[np.ndarray], np.ndarray] | None = None
+
+
+@dataclass(frozen=True)
+class Event:
+    """A phase change: ``when`` ``"time"`` (``value`` [s]) or ``"mach_below"``, ``"altitude_below"``
+    [m], ``"dynamic_pressure_above"`` [Pa] evaluated on the propagated state; ``mass`` [kg] /
+    ``ref_area`` [m²] new values (None: unchanged); ``parachute`` True opens / False releases the
+    parachute (None: unchanged); ``name`` for the recording."""
+
+    name: str
+    when: str
+    value: float
+    mass: float | None = None
+    ref_area: float | None = None
+    parachute: bool | None = None
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """Mass [kg], body-frame inertia ``inertia_B`` (3, 3) [kg m²], ``aero`` table (its ref_area
+    [m²] and ref_length [m] unless ``ref_area`` overrides), ``parachute`` table or None, and
+    truth-side coefficient factors ``ca_factor``/``cn_factor``/``cm_factor`` (1 for the
+    estimator: how the truth's aero differs from the table the estimator uses)."""
+
+    mass: float
+    inertia_B: np.ndarray
+    aero: AeroTable | None
+    parachute: ParachuteTable | None = None
+    ref_area: float | None = None
+    ca_factor: float = 1.0
+    cn_factor: float = 1.0
+    cm_factor: float = 1.0
+
+    @property
+    def area(self) -> float:
+        """Aerodynamic reference area [m²]."""
+        if self.ref_area is not None:
+            return float(self.ref_area)
+        return float(self.aero.ref_area) if self.aero is not None else 0.0
+
+
+@dataclass(frozen=True)
+class StateBlock:
+    """One named block of the estimated state: slices into x and into the error state,
+    the block's ``StateDef`` and (for scalar parameters) optional ``bounds`` (lo, hi)."""
+
+    name: str
+    sx: slice
+    se: slice
+    definition: StateDef
+    bounds: tuple[float, float] | None = None
+
+
+class StateMap:
+    """Where each named block sits in the state ``x``; the quaternion block (attitude) is 4 long in
+    x and 3 in the error state.  Built from the ordered names and bounds."""
+
+    def __init__(self, names: list[str], bounds: dict[str, tuple[float, float]] | None = None):
+        bounds = bounds or {}
+        blocks: dict[str, StateBlock] = {}
+        ix = ie = 0
+        quats = []
+        for nm in names:
+            d = STATES[nm]
+            nx = 4 if nm == "attitude" else d.size
+            if nm == "attitude":
+                quats.append((ix, ie))
+            blocks[nm] = StateBlock(nm, slice(ix, ix + nx), slice(ie, ie + d.size), d, bounds.get(nm))
+            ix += nx
+            ie += d.size
+        self.blocks = blocks
+        self.n_x, self.n_e = ix, ie
+        self.quat_blocks = tuple(quats)
+        self.names = list(names)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.blocks
+
+    def raw(self, x: np.ndarray, name: str) -> np.ndarray:
+        """The block ``name`` of x (..., n_x) as stored (estimated, unbounded)."""
+        return x[..., self.blocks[name].sx]
+
+    def physical(self, x: np.ndarray, name: str) -> np.ndarray:
+        """The block's physical value (S-curve applied if bounded), (..., size)."""
+        b = self.blocks[name]
+        v = x[..., b.sx]
+        return scurve(v, *b.bounds) if b.bounds is not None else v
+
+
+def rk4_step(f: Callable[[np.ndarray, float], np.ndarray], x: np.ndarray, t: float, dt: float) -> np.ndarray:
+    """One classic Runge-Kutta step of ``ẋ = f(x, t)`` for x (..., n) over dt [s]."""
+    k1 = f(x, t)
+    k2 = f(x + 0.5 * dt * k1, t + 0.5 * dt)
+    k3 = f(x + 0.5 * dt * k2, t + 0.5 * dt)
+    k4 = f(x + dt * k3, t + dt)
+    return x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def _rx(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _rz(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _wind_frame(r_I: np.ndarray, v_rel_I: np.ndarray) -> np.ndarray:
+    """R_I_W0 (3, 3): x along v_rel, z down (towards the planet) in the plane of r and v_rel."""
+    x = v_rel_I / np.linalg.norm(v_rel_I)
+    down = -r_I / np.linalg.norm(r_I)
+    z = down - np.dot(down, x) * x
+    z /= np.linalg.norm(z)
+    y = np.cross(z, x)
+    return np.column_stack([x, y, z])
+
+
+def quat_from_aero_angles(r_I: np.ndarray, v_rel_I: np.ndarray, angles_rad: np.ndarray) -> np.ndarray:
+    """q_I_B (4,) scalar-last from the aerodynamic angles [α, β, σ] [rad] at position r_I [m] and
+    air-relative velocity v_rel_I [m/s]: ``R_I_B = R_I_W0 Rx(σ) Rz(−β) Ry(α)`` (module docstring)."""
+
+    a, b, s = (float(v) for v in angles_rad)
+    R = _wind_frame(np.asarray(r_I, float), np.asarray(v_rel_I, float)) @ _rx(s) @ _rz(-b) @ _ry(a)
+    return quat_normalize(dcm_to_quat(R))
+
+
+def aero_angles(r_I: np.ndarray, v_rel_I: np.ndarray, q_I_B: np.ndarray) -> np.ndarray:
+    """[α, β, σ] [rad] (n, 3) of states r_I, v_rel_I (n, 3) [m, m/s] and q_I_B (n, 4): inverse of
+    :func:`quat_from_aero_angles`."""
+    r_I, v_rel_I, q_I_B = (np.atleast_2d(np.asarray(a, float)) for a in (r_I, v_rel_I, q_I_B))
+    out = np.empty((r_I.shape[0], 3))
+    for i in range(r_I.shape[0]):
+        R_I_B = quat_to_dcm(q_I_B[i])
+        vb = R_I_B.T @ v_rel_I[i]
+        al = math.atan2(vb[2], vb[0])
+        be = math.asin(max(-1.0, min(1.0, vb[1] / np.linalg.norm(vb))))
+        M = _wind_frame(r_I[i], v_rel_I[i]).T @ R_I_B @ _ry(al).T @ _rz(-be).T
+        out[i] = (al, be, math.atan2(M[2, 1], M[1, 1]))
+    return out
+
+
+class TrajectoryModel:
+    """The 3-DOF / 6-DOF trajectory model over the state laid out by a :class:`StateMap`.
+
+    ``dof`` 3 or 6; ``env`` :class:`Environment`; ``vehicle`` :class:`Vehicle`; ``events``
+    the phase changes in order; ``nominal``: the value of every *model input* not in the state
+    (``"j2"``, multipliers, biases, scale factor; SI) and, for a 3-DOF model, nothing else.
+    Every method is vectorised over leading dimensions of x (..., n_x).
+    """
+
+    def __init__(self, smap: StateMap, dof: int, env: Environment, vehicle: Vehicle, events: tuple[Event, ...] = ()):
+        if dof not in (3, 6):
+            raise ValueError("dof must be 3 or 6")
+        if "position" not in smap or "velocity" not in smap:
+            raise ValueError("the state needs 'position' and 'velocity' blocks (the trajectory)")
+        if dof == 6 and ("attitude" not in smap or "body_rates" not in smap):
+            raise ValueError("a 6-DOF model needs 'attitude' and 'body_rates' blocks")
+        self.smap, self.dof, self.env, self.vehicle = smap, dof, env, vehicle
+        self.events = tuple(events)
+        self._inertia = np.asarray(vehicle.inertia_B, float)
+        self._inertia_inv = np.linalg.inv(self._inertia)
+        a = vehicle.aero
+        # a continuum-only table does not depend on Knudsen: skip the mean free path
+        self._kn_matters = a is not None and not (
+            a.log10_kn.size == 2 and all(np.array_equal(c[:, 0], c[:, 1]) for c in (a.ca, a.cn, a.cm))
+        )
+
+    # ------------------------------------------------------------------ parameters
+    def param(self, x: np.ndarray, name: str, nominal: float | np.ndarray) -> np.ndarray:
+        """Physical value of parameter ``name`` from x (..., n_x) if estimated, else ``nominal``,
+        shaped (..., size)."""
+        if name in self.smap:
+            return self.smap.physical(x, name)
+        size = STATES[name].size
+        return np.broadcast_to(np.asarray(nominal, float).reshape(size), (*x.shape[:-1], size))
+
+    def j2(self, x: np.ndarray) -> np.ndarray:
+        """J2 [-] (...,)."""
+        return self.param(x, "j2", self.env.j2)[..., 0]
+
+    # ------------------------------------------------------------------ physics pieces
+    def gravity(self, x: np.ndarray) -> np.ndarray:
+        """Point-mass + J2 gravity [m/s²] (..., 3) at the position of x, inertial frame (+Z pole)."""
+        p = self.smap.raw(x, "position")
+        j2k = 1.5 * self.j2(x) * self.env.gm * self.env.radius_eq**2
+        gx, gy, gz, _ = gravity_j2_xyz(p[..., 0], p[..., 1], p[..., 2], self.env.gm, j2k)
+        return np.stack([gx, gy, gz], axis=-1)
+
+    def altitude(self, x: np.ndarray) -> np.ndarray:
+        """Altitude |r| − R_ref [m] (...,)."""
+        return np.linalg.norm(self.smap.raw(x, "position"), axis=-1) - self.env.radius_ref
+
+    def v_rel(self, x: np.ndarray) -> np.ndarray:
+        """Air-relative velocity v − ω × r [m/s] (..., 3), inertial frame."""
+        p, v = self.smap.raw(x, "position"), self.smap.raw(x, "velocity")
+        w = self.env.omega
+        return v - np.stack([-w * p[..., 1], w * p[..., 0], np.zeros_like(p[..., 0])], axis=-1)
+
+    def _air(self, h: np.ndarray, x: np.ndarray | None = None):
+        atm = self.env.atmosphere
+        hc = np.maximum(h, 0.0)
+        rho = atm.density(hc)
+        if self.env.density_factor is not None:
+            rho = rho * self.env.density_factor(hc)
+        if x is not None and "density_multiplier" in self.smap:
+            rho = rho * self.smap.physical(x, "density_multiplier")[..., 0]
+        return rho, atm.speed_of_sound(hc), atm
+
+    def aero_force_moment(self, x: np.ndarray, phase: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Aerodynamic (+ parachute) force [N] in the inertial frame and moment [N m] in the body
+        frame, each (..., 3); zero in vacuum.  ``phase``: the current mass/area/parachute state."""
+        shape = x.shape[:-1]
+        F = np.zeros((*shape, 3))
+        M = np.zeros((*shape, 3))
+        if self.env.atmosphere is None:
+            return F, M
+        veh = self.vehicle
+        h = self.altitude(x)
+        rho, a_snd, atm = self._air(h, x)
+        vr = self.v_rel(x)
+        V = np.linalg.norm(vr, axis=-1)
+        qbar = 0.5 * rho * V * V
+        mach = V / a_snd
+        S = phase["area"]
+        ca_m = self.param(x, "ca_multiplier", 1.0)[..., 0] * veh.ca_factor
+        if veh.aero is not None:
+            L = veh.aero.ref_length
+            kn = atm.knudsen(np.maximum(h, 0.0), L) if self._kn_matters else np.full_like(h, 1e-6)
+        if self.dof == 3:
+            if veh.aero is not None:
+                ca, _, _ = veh.aero.coefficients(mach, kn, np.zeros_like(mach))
+                F = F - (ca_m * ca * qbar * S / np.maximum(V, 1e-9))[..., None] * vr
+        else:
+            q = self.smap.raw(x, "attitude")
+            R = quat_to_dcm(q)  # R_I_B (..., 3, 3)
+            vb = np.einsum("...ji,...j->...i", R, vr)
+            if veh.aero is not None:
+                cos_a = np.clip(vb[..., 0] / np.maximum(V, 1e-9), -1.0, 1.0)
+                alpha_t = np.arccos(cos_a)
+                ca, cn, cm = veh.aero.coefficients(mach, kn, alpha_t)
+                cn = cn * self.param(x, "cn_multiplier", 1.0)[..., 0] * veh.cn_factor
+                cm = cm * self.param(x, "cm_multiplier", 1.0)[..., 0] * veh.cm_factor
+                lat = np.sqrt(vb[..., 1] ** 2 + vb[..., 2] ** 2)
+                safe = np.maximum(lat, 1e-12)
+                e_y, e_z = vb[..., 1] / safe, vb[..., 2] / safe
+                e_y = np.where(lat > 1e-12, e_y, 0.0)
+                e_z = np.where(lat > 1e-12, e_z, 0.0)
+                qs = qbar * S
+                Fb = np.stack([-ca_m * ca * qs, -cn * qs * e_y, -cn * qs * e_z], axis=-1)
+                # k = unit(v̂ × X_B) = unit((0, vz, −vy)): rotation about k increases α
+                mk = cm * qs * L
+                w = self.smap.raw(x, "body_rates")
+                damp = veh.aero.cmq * qs * L * L / (2.0 * np.maximum(V, 1e-9))
+                M = np.stack([np.zeros_like(mk), mk * e_z + damp * w[..., 1], -mk * e_y + damp * w[..., 2]], axis=-1)
+                F = F + np.einsum("...ij,...j->...i", R, Fb)
+        if phase["parachute"] and veh.parachute is not None:
+            cd = veh.parachute.cd_at(mach) * self.param(x, "parachute_drag_multiplier", 1.0)[..., 0]
+            F = F - (cd * qbar * veh.parachute.ref_area / np.maximum(V, 1e-9))[..., None] * vr
+        return F, M
+
+    def sensed_acceleration_B(self, x: np.ndarray, phase: dict) -> np.ndarray:
+        """Non-gravitational acceleration in the body frame [m/s²] (..., 3) plus ``accel_bias``."""
+        F, _ = self.aero_force_moment(x, phase)
+        R = quat_to_dcm(self.smap.raw(x, "attitude"))
+        a_b = np.einsum("...ji,...j->...i", R, F / phase["mass"])
+        return a_b + self.param(x, "accel_bias", np.zeros(3))
+
+    # ------------------------------------------------------------------ dynamics
+    def derivative(self, x: np.ndarray, phase: dict) -> np.ndarray:
+        """ẋ (..., n_x): kinematics, translational and (6-DOF) rotational dynamics; parameters constant."""
+        sm = self.smap
+        dx = np.zeros_like(x)
+        F, M = self.aero_force_moment(x, phase)
+        dx[..., sm.blocks["position"].sx] = sm.raw(x, "velocity")
+        dx[..., sm.blocks["velocity"].sx] = self.gravity(x) + F / phase["mass"]
+        if self.dof == 6:
+            q = sm.raw(x, "attitude")
+            w = sm.raw(x, "body_rates")
+            w4 = np.concatenate([w, np.zeros((*w.shape[:-1], 1))], axis=-1)
+            dx[..., sm.blocks["attitude"].sx] = 0.5 * quat_multiply(q, w4)
+            Iw = w @ self._inertia.T
+            dx[..., sm.blocks["body_rates"].sx] = (M - np.cross(w, Iw)) @ self._inertia_inv.T
+        return dx
+
+    def initial_phase(self) -> dict:
+        """The phase state at the start: mass [kg], area [m²], parachute open (bool), events fired."""
+        return {"mass": float(self.vehicle.mass), "area": self.vehicle.area, "parachute": False, "fired": ()}
+
+    def event_margin(self, x: np.ndarray, ev: Event) -> float:
+        """Continuous margin of a condition event at x (n_x,): > 0 before, < 0 once it holds
+        (altitude − value, Mach − value, value − dynamic pressure); for the truth's event location."""
+        h = float(self.altitude(x))
+        if ev.when == "altitude_below":
+            return h - ev.value
+        if self.env.atmosphere is None:
+            return 1.0
+        rho, a, _ = self._air(np.array(h))
+        V = float(np.linalg.norm(self.v_rel(x)))
+        if ev.when == "mach_below":
+            return V / float(a) - ev.value
+        return ev.value - 0.5 * float(rho) * V * V
+
+    @staticmethod
+    def apply_event(phase: dict, ev: Event) -> dict:
+        """The phase after event ``ev`` (mass, area, parachute changes; marked fired)."""
+        out = dict(phase)
+        out["fired"] = (*out["fired"], ev.name)
+        if ev.mass is not None:
+            out["mass"] = ev.mass
+        if ev.ref_area is not None:
+            out["area"] = ev.ref_area
+        if ev.parachute is not None:
+            out["parachute"] = ev.parachute
+        return out
+
+    def check_events(self, x: np.ndarray, t: float, phase: dict) -> dict:
+        """The phase after applying every not-yet-fired event whose condition holds at (x (n_x,), t)."""
+        out = dict(phase)
+        for ev in self.events:
+            if ev.name in out["fired"]:
+                continue
+            hit = (t >= ev.value - 1e-9) if ev.when == "time" else self.event_margin(x, ev) < 0.0
+            if hit:
+                out = self.apply_event(out, ev)
+        return out
+
+    def propagate(self, x: np.ndarray, t0: float, t1: float, phase: dict, max_step: float) -> np.ndarray:
+        """RK4 from t0 to t1 [s] in equal sub-steps ≤ ``max_step`` [s]; x (..., n_x); quaternion
+        renormalised after each sub-step.  Events are not re-checked inside (the caller checks them
+        on the grid)."""
+        n = max(1, int(math.ceil((t1 - t0) / max_step - 1e-9)))
+        dt = (t1 - t0) / n
+        y = np.array(x, dtype=float)
+        for i in range(n):
+            y = rk4_step(lambda z, _t: self.derivative(z, phase), y, t0 + i * dt, dt)
+            if self.dof == 6:
+                sq = self.smap.blocks["attitude"].sx
+                y[..., sq] = quat_normalize(y[..., sq])
+        return y
+
+    # ------------------------------------------------------------------ observations
+    def observe(self, x: np.ndarray, quantity: str, phase: dict) -> np.ndarray:
+        """Model value of observation ``quantity`` (:data:`OBSERVATIONS`) at x (..., n_x), SI, (..., size)."""
+        if quantity == "gravity_magnitude":
+            return np.linalg.norm(self.gravity(x), axis=-1, keepdims=True)
+        if quantity == "acceleration_inertial":
+            F, _ = self.aero_force_moment(x, phase)
+            return self.gravity(x) + F / phase["mass"]
+        if quantity == "acceleration_body":
+            return self.sensed_acceleration_B(x, phase)
+        if quantity == "acceleration_axial":
+            return self.sensed_acceleration_B(x, phase)[..., :1]
+        if quantity == "body_rates":
+            return np.array(self.smap.raw(x, "body_rates"))
+        if quantity == "quaternion":
+            return np.array(self.smap.raw(x, "attitude"))
+        if quantity == "altitude":
+            return (self.altitude(x) * self.param(x, "radar_scale_factor", 1.0)[..., 0])[..., None]
+        if quantity in ("pressure", "density"):
+            if self.env.atmosphere is None:
+                raise ValueError(f"observation {quantity!r} needs an atmosphere")
+            h = np.maximum(self.altitude(x), 0.0)
+            if quantity == "pressure":
+                return self.env.atmosphere.pressure(h)[..., None]
+            return self._air(h, x)[0][..., None]
+        raise KeyError(f"unknown observation quantity {quantity!r}")

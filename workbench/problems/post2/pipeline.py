@@ -1,0 +1,386 @@
+"""The post2 reconstruction: observation files -> EKF forward pass (thesis [R3] Ch. 3.1.1) -> RTS smoother.
+
+Stages (typed results, drawn by ``recording.py``, consumed by tests and benchmarks as they are):
+
+1. :class:`ObservationData` — every observation channel read from its CSV (SI), optionally
+   median-smoothed, with its noise covariance per sample from the weights file (R = W⁻¹) or the
+   constant σ;
+2. :class:`ForwardStage` — the shared :func:`workbench.estimation.ekf.run_filter` over a grid that
+   holds every observation time; the transition is :class:`~workbench.problems.post2.model.TrajectoryModel`
+   integrated with RK4 and its error-state Jacobian by central differences (a per-state step,
+   one batched model call: :func:`~workbench.estimation.ekf.numeric_jacobian_batched`), the
+   system noise from each state's process model;
+3. :class:`Post2Result` — the RTS-smoothed pass (:func:`workbench.estimation.smoother.rts_smooth`)
+   and the summary.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import median_filter
+from scipy.stats import chi2
+
+from workbench.core.rotation import attitude_error
+from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
+from workbench.estimation.smoother import SmoothedPass, rts_smooth
+from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.telemetry import read_telemetry
+from workbench.problems.post2 import build
+from workbench.problems.post2.config import ObservationSpec, Post2Config, config_for
+from workbench.problems.post2.model import (
+    OBSERVATIONS,
+    STATES,
+    StateMap,
+    TrajectoryModel,
+    aero_angles,
+    quat_from_aero_angles,
+    scurve,
+    scurve_inverse,
+    scurve_slope,
+)
+
+__all__ = [
+    "Channel",
+    "ObservationData",
+    "ForwardStage",
+    "Post2Result",
+    "Estimator",
+    "read_observations",
+    "reconstruct",
+    "state_history",
+]
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One observation channel: ``t`` (n,) [s], ``z`` (n, m) SI (after pre-smoothing), ``z_raw``
+    (n, m) as read, ``R`` (n, m, m) noise covariance SI, its :class:`ObservationSpec`."""
+
+    spec: ObservationSpec
+    t: np.ndarray
+    z: np.ndarray
+    z_raw: np.ndarray
+    R: np.ndarray
+
+
+@dataclass(frozen=True)
+class ObservationData:
+    """Stage 1: the observation channels by name."""
+
+    channels: dict[str, Channel]
+
+
+@dataclass(frozen=True)
+class ForwardStage:
+    """Stage 2: the EKF forward pass, the events fired [(t [s], name)], and each channel's quantity."""
+
+    forward: ForwardPass
+    events: tuple[tuple[float, str], ...]
+    quantities: dict[str, str]
+
+
+@dataclass(frozen=True)
+class Post2Result:
+    """Final stage: grid ``t`` (n,) [s]; ``x``/``P`` the smoothed (or, without the smoother, the
+    forward) state (n, n_x) and error covariance (n, n_e, n_e); ``forward`` pass; ``names`` of the
+    state blocks; ``channels``; ``summary``; ``smap`` the state map; ``history`` per named quantity
+    (physical values and 1σ, see :func:`state_history`)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    forward: ForwardPass
+    smoothed: SmoothedPass | None
+    smap: StateMap
+    channels: dict[str, Channel]
+    events: tuple[tuple[float, str], ...]
+    history: dict
+    summary: dict
+
+
+def _weights_R(scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: Path) -> np.ndarray:
+    """R (n, m, m) = W⁻¹ from a weights CSV (columns as the observation's, unit ``1`` meaning
+    1/SI², held from each row to the next); a weights file that ends before the observations is an error."""
+    d = OBSERVATIONS[spec.quantity]
+    wt = read_telemetry(wpath)
+    missing = [c for c in d.residual_names if c not in wt.channels]
+    if missing:
+        raise ScenarioError(scenario.path, f"observations.{spec.name}.weights", f"{wpath.name}: no column(s) {missing}")
+    if wt.time[0] > t[0] + 1e-9 or wt.time[-1] < t[-1] - 1e-9:
+        raise ScenarioError(
+            scenario.path,
+            f"observations.{spec.name}.weights",
+            f"{wpath.name} covers {wt.time[0]:g} .. {wt.time[-1]:g} s but the observations run "
+            f"{t[0]:g} .. {t[-1]:g} s: the weights file is shorter than its observations",
+        )
+    idx = np.clip(np.searchsorted(wt.time, t + 1e-9, side="right") - 1, 0, wt.time.size - 1)
+    W = wt.stack(d.residual_names)[idx]
+    if np.any(W <= 0):
+        raise ScenarioError(scenario.path, f"observations.{spec.name}.weights", f"{wpath.name}: weights must be > 0")
+    R = np.zeros((t.size, d.size, d.size))
+    R[:, np.arange(d.size), np.arange(d.size)] = 1.0 / W
+    return R
+
+
+def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> ObservationData:
+    """Read every declared observation from ``telemetry`` {name: csv, name + "_weights": csv}; check
+    that its times lie inside the reconstruction span; build R; apply the sliding median."""
+    out = {}
+    for spec in cfg.observations:
+        d = OBSERVATIONS[spec.quantity]
+        path = Path(telemetry[spec.name])
+        tel = read_telemetry(path, required={c: _kind(d.file_unit or d.unit) for c in d.components})
+        t = np.asarray(tel.time, float)
+        outside = np.flatnonzero((t < cfg.t_start - 1e-9) | (t > cfg.t_end + 1e-9))
+        if outside.size:
+            raise ScenarioError(
+                scenario.path,
+                f"observations.{spec.name}",
+                f"{path.name}: observation at {t[outside[0]]:g} s is outside the data span "
+                f"[{cfg.t_start:g}, {cfg.t_end:g}] s of [model] ({outside.size} such rows)",
+            )
+        z_raw = tel.stack(d.components)
+        z = z_raw
+        if spec.quantity == "quaternion":
+            norm = np.linalg.norm(z_raw, axis=1)
+            bad = np.flatnonzero(np.abs(norm - 1.0) > 1e-3)
+            if bad.size:
+                raise ScenarioError(
+                    scenario.path,
+                    f"observations.{spec.name}",
+                    f"{path.name}: quaternion at {t[bad[0]]:g} s has norm {norm[bad[0]]:.6g}",
+                )
+            z = z_raw / norm[:, None]
+            if spec.median_window > 1:
+                raise ScenarioError(scenario.path, f"observations.{spec.name}.median_window", "not for a quaternion")
+        if spec.median_window > 1:
+            z = median_filter(z_raw, size=(spec.median_window, 1), mode="nearest")
+        if spec.sigma is not None:
+            R = np.broadcast_to(np.diag(spec.sigma**2), (t.size, d.size, d.size)).copy()
+        else:
+            R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]))
+        out[spec.name] = Channel(spec, t, z, z_raw, R)
+    return ObservationData(out)
+
+
+def _kind(unit: str) -> str:
+    return {
+        "m/s^2": "acceleration",
+        "deg/s": "angular_rate",
+        "m": "length",
+        "Pa": "pressure",
+        "kg/m^3": "density",
+        "1": "dimensionless",
+    }[unit]
+
+
+class Estimator:
+    """The EKF set-up of one run: state map, error-state layout, the model, x0, P0, eps, the
+    process models.  ``transition(x, t0, t1) -> (x1, F, Q)`` advances the event phase it keeps."""
+
+    def __init__(self, scenario: Scenario, cfg: Post2Config):
+        self.cfg = cfg
+        self.smap = build.state_map(cfg)
+        self.layout = ErrorStateLayout(self.smap.n_x, self.smap.quat_blocks)
+        self.model = TrajectoryModel(
+            self.smap, cfg.dof, build.environment(scenario, cfg), build.vehicle(scenario, cfg), build.events(cfg)
+        )
+        self.x0, self.P0, self.eps, self.mean = self._initial()
+        self.phase = self.model.initial_phase()
+        self.phase_log: list[tuple[float, str]] = []
+
+    def _initial(self):
+        sm, cfg = self.smap, self.cfg
+        x0 = np.zeros(sm.n_x)
+        sig = np.zeros(sm.n_e)
+        eps = np.zeros(sm.n_e)
+        for name, b in sm.blocks.items():
+            s = cfg.state(name)
+            if name == "attitude":
+                continue
+            val = s.value
+            sd = s.sigma
+            if b.bounds is not None:
+                val = scurve_inverse(val, *b.bounds)
+                sd = sd / scurve_slope(val, *b.bounds)
+            x0[b.sx] = val
+            sig[b.se] = sd
+            eps[b.se] = s.step
+        if "attitude" in sm:
+            s = cfg.state("attitude")
+            b = sm.blocks["attitude"]
+            x0[b.sx] = quat_from_aero_angles(sm.raw(x0, "position"), self.model.v_rel(x0), s.value)
+            # body-frame small angles: bank about X_B, α about Y_B, β about Z_B
+            sig[b.se] = s.sigma[[2, 0, 1]]
+            eps[b.se] = s.step
+        mean = x0.copy()
+        return x0, np.diag(sig**2), eps, mean
+
+    def q_matrix(self, dt: float) -> tuple[np.ndarray, dict]:
+        """System noise Q (n_e, n_e) of a step dt [s] and the Markov decay factors {name: Φ}."""
+        Q = np.zeros((self.smap.n_e, self.smap.n_e))
+        phis = {}
+        for name, b in self.smap.blocks.items():
+            s = self.cfg.state(name)
+            i = np.arange(b.se.start, b.se.stop)
+            if s.process == "random_walk":
+                Q[i, i] = s.psd * dt
+            elif s.process == "markov":
+                phi = math.exp(-dt / s.tau)
+                var = np.where(s.psd > 0, 0.5 * s.psd * s.tau, s.sigma**2)
+                Q[i, i] = var * (1.0 - phi * phi)
+                phis[name] = phi
+        return Q, phis
+
+    def advance(self, x: np.ndarray, t0: float, t1: float, phase: dict, phis: dict) -> np.ndarray:
+        """Propagate a batch x (b, n_x) from t0 to t1 [s] with the phase; Markov states decay."""
+        y = self.model.propagate(x, t0, t1, phase, self.cfg.step)
+        for name, phi in phis.items():
+            sx = self.smap.blocks[name].sx
+            y[..., sx] = self.mean[sx] + phi * (x[..., sx] - self.mean[sx])
+        return y
+
+    def transition(self, x: np.ndarray, t0: float, t1: float):
+        """run_filter's transition: events checked at (x, t0), RK4 to t1, batched numeric F, Q."""
+        new = self.model.check_events(x, t0, self.phase)
+        for nm in new["fired"][len(self.phase["fired"]) :]:
+            self.phase_log.append((t0, nm))
+        self.phase = new
+        Q, phis = self.q_matrix(t1 - t0)
+        x1, F = numeric_jacobian_batched(
+            lambda X: self.advance(X, t0, t1, self.phase, phis), x, self.layout, self.eps, out_layout=self.layout
+        )
+        return x1, F, Q
+
+    def measurement(self, ch: Channel, i: int) -> Measurement:
+        """The :class:`Measurement` of sample i of a channel (batched numeric H at the current phase)."""
+        q = ch.spec.quantity
+        phase = self.phase
+        model = self.model
+        if q == "quaternion":  # z = 0, h = body small angle from the measured attitude to the state's
+            q_meas = ch.z[i]
+            sq = self.smap.blocks["attitude"].sx
+
+            def hq(x, q_meas=q_meas):
+                return attitude_error(q_meas, np.asarray(x, float)[..., sq])
+
+            def Hq(x):
+                return numeric_jacobian_batched(hq, x, self.layout, self.eps)[1]
+
+            return Measurement(
+                ch.spec.name, np.zeros(3), ch.R[i], hq, H=Hq, gate_probability=ch.spec.gate_probability,
+                iterations=ch.spec.iterations,
+            )  # fmt: skip
+
+        def h(x, q=q, phase=phase):
+            return model.observe(np.asarray(x, float), q, phase)
+
+        def H(x, q=q, phase=phase):
+            return numeric_jacobian_batched(lambda X: model.observe(X, q, phase), x, self.layout, self.eps)[1]
+
+        return Measurement(
+            ch.spec.name,
+            ch.z[i],
+            ch.R[i],
+            h,
+            H=H,
+            gate_probability=ch.spec.gate_probability,
+            iterations=ch.spec.iterations,
+        )
+
+
+def _grid(cfg: Post2Config, channels: dict[str, Channel]) -> np.ndarray:
+    n = max(1, int(math.ceil((cfg.t_end - cfg.t_start) / cfg.grid - 1e-9)))
+    base = np.linspace(cfg.t_start, cfg.t_end, n + 1)
+    allt = np.concatenate([base] + [ch.t for ch in channels.values()])
+    g = np.unique(np.round(allt, 9))
+    return g
+
+
+def state_history(est: Estimator, t: np.ndarray, x: np.ndarray, P: np.ndarray) -> dict:
+    """Physical values and 1σ of every state block over (t, x (n, n_x), P (n, n_e, n_e)): name ->
+    ``{"value": (n, size), "sigma": (n, size)}`` in SI; attitude as aerodynamic angles [α, β, σ] [rad]
+    with the body small-angle 1σ mapped [σ_y, σ_z, σ_x]; bounded parameters through the S-curve."""
+    sm = est.smap
+    sd = np.sqrt(np.einsum("nii->ni", P))
+    out = {}
+    for name, b in sm.blocks.items():
+        if name == "attitude":
+            ang = aero_angles(sm.raw(x, "position"), est.model.v_rel(x), sm.raw(x, "attitude"))
+            out[name] = {"value": ang, "sigma": sd[:, b.se][:, [1, 2, 0]]}
+            continue
+        v = x[:, b.sx]
+        s = sd[:, b.se]
+        if b.bounds is not None:
+            s = s * scurve_slope(v, *b.bounds)
+            v = scurve(v, *b.bounds)
+        out[name] = {"value": v, "sigma": s}
+    return out
+
+
+def _unit_scale(name: str) -> float:
+    unit = STATES[name].unit
+    return {"deg": 180.0 / math.pi, "deg/s": 180.0 / math.pi}.get(unit, 1.0)
+
+
+def reconstruct(scenario: Scenario, telemetry, options=None):
+    """Generator of the stages (see the module docstring) for a post2 scenario and its telemetry files."""
+    cfg = config_for(scenario)
+    data = read_observations(scenario, cfg, telemetry)
+    yield data
+    est = Estimator(scenario, cfg)
+    t = _grid(cfg, data.channels)
+    index = {}
+    for name, ch in data.channels.items():
+        k = np.searchsorted(t, np.round(ch.t, 9))
+        for i, kk in enumerate(k):
+            index.setdefault(int(kk), []).append((name, i))
+
+    def measurements_at(k, tk, x):
+        return [est.measurement(data.channels[nm], i) for nm, i in index.get(k, ())]
+
+    fp = run_filter(est.x0, est.P0, t, est.transition, None, measurements_at, est.layout, eps=est.eps)
+    yield ForwardStage(fp, tuple(est.phase_log), {n: ch.spec.quantity for n, ch in data.channels.items()})
+    sm = rts_smooth(fp, est.layout) if cfg.data["filter"]["smoother"] else None
+    x, P = (sm.x, sm.P) if sm is not None else (fp.x_post, fp.P_post)
+    hist = state_history(est, t, x, P)
+    fwd = state_history(est, t, fp.x_post, fp.P_post)
+    prior = state_history(est, t[:1], est.x0[None, :], est.P0[None, :, :])
+    summary = {"scenario": scenario.name, "kind": "post2", "dof": cfg.dof, "grid_steps": int(t.size)}
+    summary["smoothed"] = sm is not None
+    states = {}
+    for name in est.smap.blocks:
+        k = _unit_scale(name)
+        unit = "deg" if name == "attitude" else STATES[name].unit
+        states[name] = {
+            "unit": unit,
+            "initial": (prior[name]["value"][0] * k).tolist(),
+            "final": (hist[name]["value"][-1] * k).tolist(),
+            "final_sigma": (hist[name]["sigma"][-1] * k).tolist(),
+        }
+    summary["states"] = states
+    obs = {}
+    for name, ih in fp.innovations.items():
+        ok = ih.accepted
+        yn = np.array([np.linalg.solve(np.linalg.cholesky(S), y) for S, y in zip(ih.S, ih.y, strict=True)])
+        obs[name] = {
+            "samples": int(ih.t.size),
+            "accepted": int(np.sum(ok)),
+            "mean_nis": float(np.mean(ih.nis)),
+            "normalized_residual_rms": float(np.sqrt(np.mean(yn**2))),
+            "dimension": int(ih.y.shape[1]),
+        }
+        n_dof = ih.t.size * ih.y.shape[1]
+        lo, hi = (chi2.ppf([0.005, 0.995], n_dof) / ih.t.size).tolist()
+        m = obs[name]["mean_nis"]
+        obs[name]["mean_nis_band_99"] = [lo, hi]
+        obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
+    summary["observations"] = obs
+    summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
+    yield Post2Result(
+        t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), {"smoothed": hist, "forward": fwd}, summary
+    )

@@ -1,0 +1,176 @@
+"""The post2 problem (kind ``post2``): parameter and trajectory reconstruction declared in a problem
+file, after the POST2 EKF reconstruction module (thesis [R3], Ch. 3).
+
+Synthetic scenarios: the truth simulator (``truth.py``) writes one CSV per observation (and a
+weights file where declared) exactly as a user supplies them, and ``truth.npz``; the
+reconstruction (``pipeline.py``) reads only those files.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from workbench.io.scenario import Scenario
+from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
+from workbench.problems.post2 import pipeline
+from workbench.problems.post2.config import SCHEMA, config_for
+from workbench.problems.post2.model import STATES, aero_angles
+from workbench.problems.post2.recording import COMPONENTS, open_post2_recording
+from workbench.problems.post2.scoring import score
+from workbench.problems.post2.truth import sample_times, simulate_truth, write_observations
+
+__all__ = ["Post2Problem"]
+
+
+class Post2Problem:
+    """Reconstruction from a POST2-style problem file (kind ``post2``)."""
+
+    kind = "post2"
+    title = "trajectory"
+    schema = SCHEMA
+
+    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
+        """{observation name: CSV, name + "_weights": CSV} from ``[observations.<name>] file/weights``
+        or, with ``folder``, ``<name>.csv`` / ``<name>_weights.csv`` inside it."""
+        cfg = config_for(scenario)
+        out = {}
+        for o in cfg.observations:
+            if folder is not None:
+                out[o.name] = Path(folder) / f"{o.name}.csv"
+                if o.weights is not None:
+                    out[o.name + "_weights"] = Path(folder) / f"{o.name}_weights.csv"
+                continue
+            out[o.name] = scenario.path_of(f"observations.{o.name}.file")
+            if o.weights is not None:
+                out[o.name + "_weights"] = scenario.path_of(f"observations.{o.name}.weights")
+        return out
+
+    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+        """Truth (DOP853, its own atmosphere and aero) -> observation CSVs (+ weights) and ``truth.npz``."""
+        cfg = config_for(scenario)
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        tr = simulate_truth(scenario, cfg, sample_times(cfg))
+        files = write_observations(scenario, cfg, tr, out, np.random.default_rng(seed))
+        model = tr["model"]
+        sm = model.smap
+        arrays = {"t": tr["t"], "position": sm.raw(tr["x"], "position"), "velocity": sm.raw(tr["x"], "velocity")}
+        if cfg.dof == 6:
+            arrays["quaternion"] = sm.raw(tr["x"], "attitude")
+            arrays["attitude"] = aero_angles(arrays["position"], model.v_rel(tr["x"]), arrays["quaternion"])
+            arrays["body_rates"] = sm.raw(tr["x"], "body_rates")
+        tf = cfg.data["truth"]
+        defaults = {
+            "j2": model.env.j2,
+            "ca_multiplier": tf["ca_factor"],
+            "cn_multiplier": tf["cn_factor"],
+            "cm_multiplier": tf["cm_factor"],
+            "parachute_drag_multiplier": 1.0,
+            "density_multiplier": 1.0,
+            "accel_bias": np.zeros(3),
+            "radar_scale_factor": 1.0,
+        }
+        for name, d in STATES.items():
+            if d.dynamic or (name == "density_multiplier" and tf["density_wave_amplitude"]):
+                continue  # a density wave has no single truth multiplier
+            v = cfg.truth_states.get(name, defaults[name])
+            if name in ("ca_multiplier", "cn_multiplier", "cm_multiplier") and name in cfg.truth_states:
+                v = np.asarray(v) * defaults[name]
+            arrays[f"param_{name}"] = np.atleast_1d(np.asarray(v, dtype=float))
+        arrays["event_times"] = np.array([t for t, _ in tr["events"]], dtype=float)
+        np.savez(out / "truth.npz", **arrays)
+        return Synthesized(files, out / "truth.npz")
+
+    def load_truth(self, path: Path) -> dict:
+        """The arrays of ``truth.npz`` (t, position, velocity[, quaternion, attitude, body_rates], param_*)."""
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files}
+
+    def reconstruct(self, scenario: Scenario, telemetry, options: RunOptions):
+        """Observation files -> EKF forward pass -> RTS smoother (stages of :mod:`.pipeline`)."""
+        yield from pipeline.reconstruct(scenario, telemetry, options)
+
+    def summary(self, result) -> dict:
+        """A copy of the result's summary."""
+        return dict(result.summary)
+
+    def score(self, result, truth: dict) -> dict:
+        """Errors against the truth (:func:`workbench.problems.post2.scoring.score`)."""
+        return score(result, truth)
+
+    def scorecard(self, summary: dict) -> str:
+        """Markdown: final states ± 1σ, observation statistics and, when scored, the errors."""
+        md = f"# {summary['scenario']} scorecard (post2, {summary['dof']}-DOF)\n\n"
+        md += "| state | final | 1σ | unit |\n|---|---|---|---|\n"
+        for name, s in summary["states"].items():
+            fin = ", ".join(f"{v:.6g}" for v in s["final"])
+            sd = ", ".join(f"{v:.3g}" for v in s["final_sigma"])
+            md += f"| {name} | {fin} | {sd} | {s['unit']} |\n"
+        md += (
+            "\n| observation | samples | accepted | mean NIS (dim) | 99 % band | verdict | normalized residual RMS |\n"
+        )
+        md += "|---|---|---|---|---|---|---|\n"
+        for name, o in summary["observations"].items():
+            nis = f"{o['mean_nis']:.2f} ({o['dimension']})"
+            band = "{:.2f} .. {:.2f}".format(*o["mean_nis_band_99"])
+            md += f"| {name} | {o['samples']} | {o['accepted']} | {nis} | {band} | {o['nis_verdict']} |"
+            md += f" {o['normalized_residual_rms']:.2f} |\n"
+        tr = summary.get("truth")
+        if tr:
+            md += "\n## Against the truth\n\n"
+            if "position_error_m" in tr:
+                e = tr["position_error_m"]
+                md += "| position error | m |\n|---|---|\n"
+                for k in ("start", "after_15s_forward", "end_forward", "end_smoothed", "max_smoothed"):
+                    md += f"| {k} | {e[k]:.1f} |\n"
+                md += (
+                    f"\nposition components inside 3σ (smoothed): {100 * tr['position_inside_3sigma_fraction']:.1f} %\n"
+                )
+            for name, p in tr.get("parameters", {}).items():
+                md += f"\n**{name}** (truth {p['truth']}):\n\n| after | error |\n|---|---|\n"
+                for n in (1, 4, 10):
+                    if f"error_after_{n}_obs" in p:
+                        md += f"| {n} observation(s) | {p[f'error_after_{n}_obs']} |\n"
+                md += f"| end (forward) | {p['final_error_forward']} (3σ {p['final_3sigma_forward']}) |\n"
+                flag = "inside" if p["inside_3sigma_at_end"] else "**OUTSIDE**"
+                md += f"\nfinal error {flag} its 3σ.\n"
+        return md
+
+    def headline(self, summary: dict) -> str:
+        """The main number: position error at the end, or the first parameter's final error."""
+        tr = summary.get("truth") or {}
+        if "position_error_m" in tr and "attitude" in summary["states"]:
+            e = tr["position_error_m"]
+            return (
+                f"position error {e['start']:.0f} m -> {e['after_15s_forward']:.0f} m after 15 s"
+                f" -> {e['end_forward']:.1f} m at the end"
+            )
+        for name, p in tr.get("parameters", {}).items():
+            return f"{name} error {p['final_error_forward']} (3σ {p['final_3sigma_forward']})"
+        s = next(iter(summary["states"].items()))
+        return f"{s[0]} final {s[1]['final']}"
+
+    def open_recording(self, path: Path, scenario: Scenario, truth, properties: dict):
+        """The post2 recording (:mod:`.recording`)."""
+        return open_post2_recording(path, scenario.name, truth, properties, self.scorecard)
+
+    def export_columns(self, result) -> ExportTable:
+        """Every state block (smoothed, physical) and its 1σ, SI (angles in rad)."""
+        cols = {}
+        for name, h in result.history["smoothed"].items():
+            unit = STATES[name].unit
+            comps = COMPONENTS.get(name, ("value",))
+            for i, c in enumerate(comps):
+                cols[f"{name}.{c}"] = (h["value"][:, i], _si_unit(unit))
+                cols[f"sigma_{name}.{c}"] = (h["sigma"][:, i], _si_unit(unit))
+        return ExportTable(result.t, cols, "planet-centred inertial (+Z pole); attitude as α, β, bank")
+
+    def monte_carlo(self, scenario, out_dir, options, progress) -> McOutcome:
+        """Not yet: the NEES study is in ``tests/benchmarks/bench_post2.py``."""
+        raise NotImplementedError("post2 has no Monte Carlo analysis yet (see tests/benchmarks/bench_post2.py)")
+
+
+def _si_unit(unit: str) -> str:
+    return {"deg": "rad", "deg/s": "rad/s"}.get(unit, unit)

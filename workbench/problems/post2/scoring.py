@@ -1,0 +1,110 @@
+"""Scoring of a post2 result against the synthetic truth (truth reaches only this module and the drawing).
+
+Numbers (thesis [R3] Ch. 3.2): for every estimated scalar parameter the error after the 1st, 4th and
+10th observation of the first observation channel (forward pass, as the thesis' Fig. 3-1), the final
+error and its ratio to the final 3σ; for the trajectory the position error at the start, after 15 s
+of observations and at the end (forward and smoothed; Fig. 3-4), velocity, aerodynamic-angle and
+body-rate errors at the end, and the fraction of grid steps where each position component is inside
+its 3σ.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from workbench.problems.post2.model import STATES
+
+__all__ = ["truth_on_grid", "score"]
+
+
+def truth_on_grid(truth: dict, t: np.ndarray) -> dict:
+    """Truth blocks at the grid times t (n,) [s]: linear interpolation for p, v, body rates; nearest
+    sample for the aerodynamic angles [rad]."""
+    tt = truth["t"]
+    out = {}
+    for name in ("position", "velocity", "body_rates", "attitude"):
+        if name not in truth:
+            continue
+        a = truth[name]
+        if name == "attitude":
+            k = np.clip(np.searchsorted(tt, t), 0, tt.size - 1)
+            out[name] = a[k]
+        else:
+            out[name] = np.column_stack([np.interp(t, tt, a[:, i]) for i in range(a.shape[1])])
+    return out
+
+
+def _scale(name: str) -> float:
+    return 180.0 / math.pi if STATES[name].unit in ("deg", "deg/s") else 1.0
+
+
+def score(result, truth: dict) -> dict:
+    """Errors of a :class:`~workbench.problems.post2.pipeline.Post2Result` against ``truth`` (the
+    arrays of ``truth.npz``); JSON-ready, in the problem file's units (deg, deg/s, m, m/s)."""
+    t = result.t
+    tg = truth_on_grid(truth, t)
+    fwd, smo = result.history["forward"], result.history["smoothed"]
+    out: dict = {}
+    if "position" in tg:
+        ef = np.linalg.norm(fwd["position"]["value"] - tg["position"], axis=1)
+        es = np.linalg.norm(smo["position"]["value"] - tg["position"], axis=1)
+        x0 = result.summary["states"]["position"]["initial"]
+        e0 = float(np.linalg.norm(np.asarray(x0) - tg["position"][0]))
+        k15 = int(np.searchsorted(t, t[0] + 15.0 - 1e-9))
+        out["position_error_m"] = {
+            "start": e0,
+            "after_15s_forward": float(ef[min(k15, t.size - 1)]),
+            "end_forward": float(ef[-1]),
+            "end_smoothed": float(es[-1]),
+            "max_smoothed": float(es.max()),
+        }
+        z = np.abs(smo["position"]["value"] - tg["position"]) / np.maximum(smo["position"]["sigma"], 1e-300)
+        out["position_inside_3sigma_fraction"] = float(np.mean(z <= 3.0))
+        out["position_error_history_forward_m"] = {
+            "t_s": t[:: max(1, t.size // 200)].tolist(),
+            "err": ef[:: max(1, t.size // 200)].tolist(),
+        }
+    for name in ("velocity", "attitude", "body_rates"):
+        if name in tg and name in fwd:
+            k = _scale(name)
+            ef = (fwd[name]["value"] - tg[name]) * k
+            es = (smo[name]["value"] - tg[name]) * k
+            if name == "attitude":
+                ef = (ef + 180.0) % 360.0 - 180.0
+                es = (es + 180.0) % 360.0 - 180.0
+            k15 = int(np.searchsorted(t, t[0] + 15.0 - 1e-9))
+            out[f"{name}_error"] = {
+                "unit": "deg" if name == "attitude" else STATES[name].unit,
+                "start_forward": ef[0].tolist(),
+                "after_15s_forward": ef[min(k15, t.size - 1)].tolist(),
+                "end_forward": ef[-1].tolist(),
+                "end_smoothed": es[-1].tolist(),
+                "end_sigma_smoothed": (smo[name]["sigma"][-1] * k).tolist(),
+            }
+    params = {}
+    first = next(iter(result.forward.innovations.values()), None)
+    for name in result.smap.blocks:
+        key = f"param_{name}"
+        if STATES[name].dynamic or key not in truth:
+            continue
+        tv = np.atleast_1d(truth[key]).astype(float)
+        vf, sf = fwd[name]["value"], fwd[name]["sigma"]
+        vs, ss = smo[name]["value"], smo[name]["sigma"]
+        rec = {"truth": tv.tolist(), "initial_error": (result.summary["states"][name]["initial"] - tv).tolist()}
+        if first is not None:
+            steps = np.unique(first.step)
+            for n in (1, 4, 10):
+                if steps.size >= n:
+                    rec[f"error_after_{n}_obs"] = (vf[steps[n - 1]] - tv).tolist()
+                    rec[f"sigma_after_{n}_obs"] = sf[steps[n - 1]].tolist()
+        rec["final_error_forward"] = (vf[-1] - tv).tolist()
+        rec["final_3sigma_forward"] = (3.0 * sf[-1]).tolist()
+        rec["final_error_over_3sigma_forward"] = ((vf[-1] - tv) / (3.0 * sf[-1])).tolist()
+        rec["final_error_smoothed"] = (vs[-1] - tv).tolist()
+        rec["final_error_over_3sigma_smoothed"] = ((vs[-1] - tv) / (3.0 * ss[-1])).tolist()
+        rec["inside_3sigma_at_end"] = bool(np.all(np.abs(vf[-1] - tv) <= 3.0 * sf[-1]))
+        params[name] = rec
+    out["parameters"] = params
+    return out
