@@ -76,6 +76,8 @@ def cmd_mc(args: argparse.Namespace) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
         members=args.members,
+        truth_sim=args.truth_sim,
+        refine_rounds=args.refine_rounds,
     )
     run_monte_carlo(args.scenario, Path(args.out), options, progress=_progress)
     return EXIT_OK
@@ -134,7 +136,21 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--first-seed", type=int, default=1)
     sp.add_argument("--workers", type=int, default=2, help="local worker processes without --scheduler")
     sp.add_argument("--scheduler", default=None, help="dask: 'local' (LocalCluster) or 'tcp://host:8786'")
-    sp.add_argument("--members", type=int, default=None, help="ensemble members (entry: dispersion; default: scenario)")
+    sp.add_argument(
+        "--members",
+        type=int,
+        default=None,
+        help="ensemble members (entry: dispersion; default: scenario, with --truth-sim 2000)",
+    )
+    sp.add_argument(
+        "--truth-sim",
+        action="store_true",
+        help="truths from the truth simulator, reconstructions by the full pipeline from telemetry files "
+        "(entry); writes <name>_truth.mc.json and <name>_truth_mc.rrd",
+    )
+    sp.add_argument(
+        "--refine-rounds", type=int, default=None, help="refinement rounds of the ensemble stage (entry --truth-sim: 1)"
+    )
     sp.add_argument("--out", default="recordings")
     sp.set_defaults(func=cmd_mc)
     sp = sub.add_parser("inspect", help="summarise a .rrd recording and print its scorecard")

@@ -59,13 +59,20 @@ class RunOptions:
 @dataclass(frozen=True)
 class McOptions:
     """Options of a Monte Carlo run: ``n_runs`` runs seeded ``first_seed, first_seed + 1, ...``,
-    on ``workers`` local processes or a Dask ``scheduler``; ``members`` as in :class:`RunOptions`."""
+    on ``workers`` local processes or a Dask ``scheduler``; ``members`` as in :class:`RunOptions`.
+
+    ``truth_sim``: every run's truth from the problem's truth simulator and its reconstruction
+    through the full pipeline from telemetry files (entry: ``problems/entry/truth_mc.py``; the drop
+    test's Monte Carlo already synthesizes every run and ignores it); ``refine_rounds``: refinement
+    rounds of the ensemble stage, if it has them (None: the study's default)."""
 
     n_runs: int = 20
     first_seed: int = 1
     workers: int = 2
     scheduler: str | None = None
     members: int | None = None
+    truth_sim: bool = False
+    refine_rounds: int | None = None
 
     @property
     def seeds(self) -> list[int]:

@@ -129,13 +129,15 @@ def run_monte_carlo(
     progress: Progress | None = None,
 ) -> McOutcome:
     """The Monte Carlo analysis of the scenario's problem; writes its recording
-    (``<out>/<name>_mc.rrd``) and ``<out>/<name>.mc.json``.  ``NotImplementedError`` if the problem
+    (``<out>/<name>_mc.rrd``) and ``<out>/<name>.mc.json`` (``<name>_truth.mc.json`` with
+    ``options.truth_sim``).  ``NotImplementedError`` if the problem
     has none for this scenario."""
     say = progress or _silent
     sc, problem = resolve(scenario)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    outcome = problem.monte_carlo(sc, out, options or McOptions(), say)
-    write_summary(out / f"{sc.name}.mc.json", outcome.summary)
+    options = options or McOptions()
+    outcome = problem.monte_carlo(sc, out, options, say)
+    write_summary(out / f"{sc.name}{'_truth' if options.truth_sim else ''}.mc.json", outcome.summary)
     say(f"[{sc.name}] {outcome.headline}")
     return outcome

@@ -101,11 +101,18 @@ from workbench.problems.entry.site import R_GROUND, R_MOLA
 from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state
 
 __all__ = [
+    "RunScores",
+    "score_run",
+    "failed_run",
+    "aggregate_runs",
+    "index_at",
+    "summary_times",
     "ValidationResult",
     "ValidationInputs",
     "validate_smoother",
     "noise_scale",
     "summarize_validation",
+    "headline_numbers",
     "prepare_validation",
 ]
 
@@ -145,7 +152,16 @@ class _Job:
 
 
 @dataclass(frozen=True)
-class _RunOut:
+class RunScores:
+    """Scores of one reconstruction against its truth (one Monte Carlo run), on the run's IMU grid
+    (n,): ``r`` run index, ``member`` (dispersion member taken as the truth, or −1), ``failed`` and
+    ``message``; NEES (9 dof) of the smoothed and forward passes, Cartesian and curvilinear
+    (float32, NaN if failed); ``err``/``sig`` (n, k) estimate − truth and reported 1σ of
+    :data:`~workbench.problems.entry.scoring.ERROR_NAMES`; fractions of (step, state) pairs inside
+    3σ; ``h_err_max_after_fix`` [m] max |altitude-AGL error| from the first radar time tag on,
+    ``h_3sigma_at_max`` [m] its 3σ, ``h_inside_after_fix`` fraction of those steps inside 3σ;
+    ``nis_mean`` (3,) mean NIS per radar channel (``filter.CHANNELS``); ``wall_s`` [s]."""
+
     r: int
     member: int
     failed: bool
@@ -269,7 +285,7 @@ def _nis_mean(res) -> np.ndarray:
     return out
 
 
-def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> _RunOut:
+def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> RunScores:
     """One validation run (module docstring); depends on (job, r) only.
 
     A task of :func:`~workbench.estimation.montecarlo.run_monte_carlo`: ``ss`` is run r's
@@ -321,7 +337,6 @@ def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> _RunOut:
         B,
         job.r_ground,
     )
-    k = len(ERROR_NAMES)
     try:
         res = run_entry_smoother(
             noisy,
@@ -334,17 +349,37 @@ def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> _RunOut:
             constrained=job.constrained,
         )
     except (ValueError, np.linalg.LinAlgError) as err:
-        nan = np.full(n, np.nan, np.float32)
-        nank = np.full((n, k), np.nan, np.float32)
-        return _RunOut(
-            r, member, True, str(err), nan, nan, nan, nan, nank, nank, math.nan, math.nan, math.nan, math.nan,
-            math.nan, np.full(len(CHANNELS), np.nan), time.perf_counter() - t0,
-        )  # fmt: skip
+        return failed_run(r, member, str(err), n, t0)
+    return score_run(res, V, Q, X, imu.t, job.t_fix, r=r, member=member, t_start=t0)
+
+
+def failed_run(r: int, member: int, message: str, n: int, t_start: float) -> RunScores:
+    """The :class:`RunScores` of a run that failed with ``message`` on a grid of ``n`` steps
+    (NaN everywhere); ``t_start`` its ``time.perf_counter()`` start [s]."""
+    k = len(ERROR_NAMES)
+    nan = np.full(n, np.nan, np.float32)
+    nank = np.full((n, k), np.nan, np.float32)
+    return RunScores(
+        r, member, True, message, nan, nan, nan, nan, nank, nank, math.nan, math.nan, math.nan, math.nan,
+        math.nan, np.full(len(CHANNELS), np.nan), time.perf_counter() - t_start,
+    )  # fmt: skip
+
+
+def score_run(
+    res: Any, V: np.ndarray, Q: np.ndarray, X: np.ndarray, t: np.ndarray, t_fix: float, *, r: int, member: int,
+    t_start: float,
+) -> RunScores:  # fmt: skip
+    """Score an :class:`~workbench.problems.entry.filter.EntryFilterResult` ``res`` (forward and
+    smoothed passes on the IMU grid ``t`` (n,) [s]) against the truth on the same samples: ``V``
+    (n, 3) [m/s], ``Q`` (n, 4) ``q_M_G``, ``X`` (n, 3) [m], MMED.  ``t_fix`` [s] the first radar
+    time tag (altitude statistics from there on); ``r`` run index, ``member`` truth member (or −1),
+    ``t_start`` the run's ``time.perf_counter()`` start [s].  NEES and errors as in the module
+    docstring (Cartesian and curvilinear, 9 dof)."""
     sm = res.smoothed
     e, e_c, err, sig = errors_sigmas(sm, V, Q, X)
     e_f, e_fc, _, _ = errors_sigmas(res.forward, V, Q, X)
     sd3 = 3.0 * np.sqrt(np.einsum("nii->ni", sm.P))
-    after = imu.t >= job.t_fix
+    after = t >= t_fix
     if after.any():
         dh = np.abs(err[after, 2])
         i_max = int(np.argmax(dh))
@@ -353,7 +388,7 @@ def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> _RunOut:
         h_in = float(np.mean(dh <= 3.0 * sig[after, 2]))
     else:
         h_max = h3 = h_in = math.nan
-    return _RunOut(
+    return RunScores(
         r=r,
         member=member,
         failed=False,
@@ -370,7 +405,7 @@ def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> _RunOut:
         h_3sigma_at_max=h3,
         h_inside_after_fix=h_in,
         nis_mean=_nis_mean(res),
-        wall_s=time.perf_counter() - t0,
+        wall_s=time.perf_counter() - t_start,
     )
 
 
@@ -444,9 +479,12 @@ class ValidationResult:
     )  # fmt: skip
 
 
-def _summary_times(
+def summary_times(
     t: np.ndarray, gaps: Sequence[GapBridge], events: Mapping[str, float], t_fix: float
 ) -> dict[str, float]:
+    """The summary epochs {label: t [s]} of a run on the IMU grid ``t`` (n,) [s]: "start", "blackout_end"
+    (end of the longest data gap of ``gaps``), "PDD" (from ``events``, if inside the data), "first_radar"
+    (``t_fix``, if finite and inside) and "end"."""
     out = {"start": float(t[0])}
     if gaps:
         g = max(gaps, key=lambda g: g.t_b - g.t_a)
@@ -459,8 +497,9 @@ def _summary_times(
     return out
 
 
-def _index_at(t: np.ndarray, te: float) -> int:
-    """IMU sample at or right after te (the first smoothed state that has seen that time)."""
+def index_at(t: np.ndarray, te: float) -> int:
+    """Index of the IMU sample of ``t`` (n,) [s] at or right after ``te`` [s] (the first smoothed state
+    that has seen that time), clipped to the grid."""
     return int(np.clip(np.searchsorted(t, te - 1e-9), 0, t.size - 1))
 
 
@@ -609,8 +648,50 @@ def validate_smoother(
         name=f"entry-validation-{job.seed}",
     )
     outs, executor = run.results, run.executor
+    ev = dict(getattr(dispersion, "events_t", {}) or {}) if events is None else dict(events)
+    res = aggregate_runs(
+        outs,
+        plain.t,
+        n_runs=int(n_runs),
+        seed=int(seed),
+        t_fix=t_fix,
+        times=summary_times(plain.t, plain.gaps, ev, t_fix),
+        executor=executor,
+        wall_s=time.perf_counter() - wall0,
+    )
+    summary = summarize_validation(res)
+    summary["radar_noise"] = {"slant_range_m": noise[0], "slant_out_m": noise[1], "velocity_out_mps": noise[2]}
+    summary["filter_R"] = {
+        "slant_range_m": sg.slant_range,
+        "slant_out_m": sg.slant_out,
+        "velocity_out_mps": sg.velocity_out,
+    }
+    summary["truth_initial"] = truth_initial
+    summary["smoother_start"] = "dispersion refined state" if start is None else "given"
+    summary["accepted_members"] = int(idx.size)
+    summary["accepted_effective_sample_size"] = ess
+    summary["distinct_members_used"] = int(np.unique(res.member).size)
+    summary["gap_noise_in_truth"] = bool(gap_noise)
+    summary["constrained"] = bool(constrained)
+    res.summary.update(summary)
+    return res
 
-    t = plain.t
+
+def aggregate_runs(
+    outs: Sequence[RunScores],
+    t: np.ndarray,
+    *,
+    n_runs: int,
+    seed: int,
+    t_fix: float,
+    times: Mapping[str, float],
+    executor: str,
+    wall_s: float,
+) -> ValidationResult:
+    """A :class:`ValidationResult` (without its summary) from the per-run scores ``outs`` on the
+    common grid ``t`` (n,) [s]: ANEES(t) and RMS curves over the successful runs, the 95 % band,
+    per-run scalars.  ``t_fix`` [s] first radar time tag, ``times`` {label: t [s]} the summary
+    epochs, ``executor`` and ``wall_s`` [s] as reported."""
     failed = np.array([o.failed for o in outs])
     ok = [o for o in outs if not o.failed]
     n_ok = len(ok)
@@ -636,7 +717,6 @@ def validate_smoother(
         rms_error = mean_error = rms_sigma = np.full((t.size, k), np.nan)
         an = {c: np.full(t.size, np.nan) for c in curves}
         band = (math.nan, math.nan)
-    ev = dict(getattr(dispersion, "events_t", {}) or {}) if events is None else dict(events)
     res = ValidationResult(
         t=t,
         n_runs=int(n_runs),
@@ -664,25 +744,10 @@ def validate_smoother(
         nis_mean=np.stack([o.nis_mean for o in outs]),
         run_wall_s=np.array([o.wall_s for o in outs]),
         t_fix=t_fix,
-        times=_summary_times(t, plain.gaps, ev, t_fix),
+        times=dict(times),
         executor=executor,
-        wall_s=time.perf_counter() - wall0,
+        wall_s=float(wall_s),
     )
-    summary = summarize_validation(res)
-    summary["radar_noise"] = {"slant_range_m": noise[0], "slant_out_m": noise[1], "velocity_out_mps": noise[2]}
-    summary["filter_R"] = {
-        "slant_range_m": sg.slant_range,
-        "slant_out_m": sg.slant_out,
-        "velocity_out_mps": sg.velocity_out,
-    }
-    summary["truth_initial"] = truth_initial
-    summary["smoother_start"] = "dispersion refined state" if start is None else "given"
-    summary["accepted_members"] = int(idx.size)
-    summary["accepted_effective_sample_size"] = ess
-    summary["distinct_members_used"] = int(np.unique(res.member).size)
-    summary["gap_noise_in_truth"] = bool(gap_noise)
-    summary["constrained"] = bool(constrained)
-    res.summary.update(summary)
     return res
 
 
@@ -723,7 +788,7 @@ def summarize_validation(res: ValidationResult, probability: float = 0.95) -> di
     at = {c: {} for c in curves}
     rms_at, rsig_at, rms_h = {}, {}, {}
     for label, te in res.times.items():
-        i = _index_at(res.t, te)
+        i = index_at(res.t, te)
         for c, a in curves.items():
             at[c][label] = float(a[i])
         rms_at[label] = {nm: float(v) for nm, v in zip(names, res.rms_error[i] * conv, strict=True)}
@@ -881,3 +946,69 @@ def prepare_validation(
         start=(st.v0, st.q0, st.p0, st.P0),
         start_note=st.note,
     )
+
+
+def _unit_key(name: str) -> str:
+    """'pos_N [m]' -> 'pos_N_m', 'vel_N [m/s]' -> 'vel_N_mps', 'att_x [deg]' -> 'att_x_deg'."""
+    base, _, unit = name.partition(" [")
+    unit = unit.rstrip("]").replace("m/s", "mps")
+    return f"{base}_{unit}" if unit else base
+
+
+def headline_numbers(summary: Mapping[str, Any]) -> dict:
+    """The headline numbers of a :func:`summarize_validation` summary with SI-unit key names (the
+    benchmark JSON convention): ANEES (9 dof) per epoch — smoothed and forward, Cartesian and
+    curvilinear — with the 95 % χ² band and whether it is inside, the time averages, the fraction
+    of steps of the ANEES(t) curve inside the band, the RMS error vs the RMS reported 1σ at the end,
+    the altitude-AGL error after the first radar fix (``h_agl_after_fix``, and ``h_agl_at_fix``
+    when the summary has it) and the mean NIS per radar channel."""
+    s = summary
+    lo, hi = s["anees_band"]
+    at = {}
+    for ep in s["anees_at"]:
+        at[ep] = {
+            "t_s": s["times_s"][ep],
+            "smoothed": s["anees_at"][ep],
+            "smoothed_curvilinear": s["anees_curvilinear_at"][ep],
+            "forward": s["anees_forward_at"][ep],
+            "forward_curvilinear": s["anees_forward_curvilinear_at"][ep],
+            "smoothed_inside_band": bool(lo <= s["anees_at"][ep] <= hi),
+            "smoothed_curvilinear_inside_band": bool(lo <= s["anees_curvilinear_at"][ep] <= hi),
+            "forward_inside_band": bool(lo <= s["anees_forward_at"][ep] <= hi),
+            "forward_curvilinear_inside_band": bool(lo <= s["anees_forward_curvilinear_at"][ep] <= hi),
+        }
+    end = s["rms_at"].get("end", {})
+    end_sig = s["rms_sigma_at"].get("end", {})
+    out = {
+        "n_runs": s["n_runs"],
+        "n_ok": s["n_ok"],
+        "n_failed": s["n_failed"],
+        "dof": s["dof"],
+        "anees_band_95": [lo, hi],
+        "anees_at": at,
+        "anees_time_avg": {
+            "smoothed": s["anees_time_avg"],
+            "smoothed_curvilinear": s["anees_curvilinear_time_avg"],
+            "forward": s["anees_forward_time_avg"],
+            "forward_curvilinear": s["anees_forward_curvilinear_time_avg"],
+            "note": s["anees_time_avg_note"],
+        },
+        "fraction_of_steps_in_band": {
+            "smoothed": s["anees_fraction_of_steps_in_band"],
+            "smoothed_curvilinear": s["anees_curvilinear_fraction_of_steps_in_band"],
+        },
+        "rms_at_end": {_unit_key(k): {"rms_error": v, "rms_sigma": end_sig.get(k, math.nan)} for k, v in end.items()},
+        "inside_3sigma_fraction": {
+            "cartesian": s["inside_3sigma_mean"],
+            "curvilinear": s["inside_3sigma_curvilinear_mean"],
+        },
+        "nis_mean": {ch: {"value": v["value"], "dof": v["dof"]} for ch, v in s["nis_mean"].items()},
+    }
+    if "h_agl_after_fix" in s:
+        out["h_agl_after_fix"] = dict(s["h_agl_after_fix"])
+    if "h_agl_at_fix" in s:
+        out["h_agl_at_fix"] = dict(s["h_agl_at_fix"])
+    for key in ("radar_noise", "radar_noise_simulated", "filter_R"):
+        if key in s:
+            out[key] = dict(s[key])
+    return out

@@ -2,7 +2,8 @@
 
 Composes :mod:`.pipeline` (reconstruction, scoring, scorecard), :mod:`.synthetic` (truth and
 telemetry), :mod:`.recording` (layout and drawer) and :mod:`.montecarlo` / :mod:`.recording_mc`
-(the smoother validation of AMELIA Sect. 8).
+(the smoother validation of AMELIA Sect. 8, a self-consistency check) and :mod:`.truth_mc` (the
+Monte Carlo against the truth simulator through the full pipeline, ``mc --truth-sim``).
 """
 
 from __future__ import annotations
@@ -160,6 +161,8 @@ class EntryProblem:
         from workbench.problems.entry.montecarlo import prepare_validation, validate_smoother
         from workbench.problems.entry.recording_mc import record_entry_validation
 
+        if options.truth_sim:
+            return self._truth_monte_carlo(scenario, Path(out_dir), options, progress)
         t_start = time.perf_counter()
         sc, out = scenario, Path(out_dir)
         if sc.is_synthetic:
@@ -212,5 +215,49 @@ class EntryProblem:
             f"smoothed ANEES (9 dof) time-avg {summary['anees_time_avg']:.2f}, at end "
             f"{summary['anees_at']['end']:.2f} (95 % band {lo:.2f}-{hi:.2f}); max altitude error after the radar "
             f"fix {h.get('max_error_m', float('nan')):.1f} m; wrote {rrd} in {summary['wall_time_s']:.0f} s"
+        )
+        return McOutcome(summary, Path(rrd), headline, res)
+
+    def _truth_monte_carlo(self, sc: Scenario, out: Path, options: McOptions, progress: Progress) -> McOutcome:
+        """``options.n_runs`` members, each a truth-simulator run and a full reconstruction from its
+        telemetry files (``truth_mc.run_truth_monte_carlo``); writes ``<out>/<name>_truth_mc.rrd``."""
+        from workbench.problems.entry.recording_mc import record_entry_validation
+        from workbench.problems.entry.truth_mc import DEFAULT_MEMBERS, run_truth_monte_carlo
+
+        if not sc.is_synthetic:
+            raise NotImplementedError(
+                f"{sc.path}: the Monte Carlo against the truth simulator needs a synthetic scenario"
+            )
+        t_start = time.perf_counter()
+        members = options.members or DEFAULT_MEMBERS
+        progress(
+            f"[{sc.name}] Monte Carlo against the truth simulator: {options.n_runs} members, each a 6-DOF truth, "
+            f"telemetry files and the full pipeline ({members} dispersion members) "
+            f"({options.scheduler or f'{options.workers} local worker(s)'}) ..."
+        )
+        res = run_truth_monte_carlo(
+            sc,
+            n_runs=options.n_runs,
+            seed=options.first_seed,
+            members=members,
+            refine_rounds=options.refine_rounds,
+            scheduler=options.scheduler,
+            workers=options.workers,
+        )
+        summary = {"scenario": sc.name, **res.summary, "wall_time_s": time.perf_counter() - t_start}
+        rrd = record_entry_validation(
+            out / f"{sc.name}_truth_mc.rrd",
+            f"{sc.name} Monte Carlo against the truth simulator",
+            res.validation,
+            summary,
+        )
+        lo, hi = summary["anees_band"]
+        h = summary.get("h_agl_at_fix", {})
+        headline = (
+            f"truth-simulator Monte Carlo: smoothed ANEES (9 dof) at end {summary['anees_at']['end']:.2f}, curvilinear "
+            f"{summary['anees_curvilinear_at']['end']:.2f} (95 % band {lo:.2f}-{hi:.2f}); altitude error at the radar "
+            f"fix RMS {h.get('rms_error_m', float('nan')):.1f} m vs median 3σ "
+            f"{h.get('median_3sigma_m', float('nan')):.1f} m; "
+            f"wrote {rrd} in {summary['wall_time_s']:.0f} s"
         )
         return McOutcome(summary, Path(rrd), headline, res)

@@ -48,9 +48,19 @@ def validation_markdown(summary: dict, title: str = "Entry smoother validation")
     L = [
         f"# {title} — {s['n_ok']}/{s['n_runs']} runs (AMELIA Sect. 8)",
         "",
-        f"Truths: accepted dispersion members ({s.get('accepted_members', '?')} accepted, "
-        f"{s.get('distinct_members_used', '?')} distinct used); radar noise "
-        + (", ".join(f"{k} {v:g}" for k, v in s["radar_noise"].items()) if "radar_noise" in s else "as the filter R")
+        (
+            f"Truths: {s['truths_note']}; radar noise "
+            if "truths_note" in s
+            else f"Truths: accepted dispersion members ({s.get('accepted_members', '?')} accepted, "
+            f"{s.get('distinct_members_used', '?')} distinct used); radar noise "
+        )
+        + (
+            ", ".join(f"{k} {v:g}" for k, v in s["radar_noise"].items())
+            if "radar_noise" in s
+            else ", ".join(f"{k} {v}" for k, v in s["radar_noise_simulated"].items())
+            if "radar_noise_simulated" in s
+            else "as the filter R"
+        )
         + f"; gap noise in the truth: {s.get('gap_noise_in_truth', '?')}. Executor: {s['executor']}; "
         f"wall time {s['total_wall_s']:.0f} s (median run {s['run_wall_median_s']:.2f} s).",
         "",
@@ -100,6 +110,17 @@ def validation_markdown(summary: dict, title: str = "Entry smoother validation")
     nis = s.get("nis_mean", {})
     if nis:
         L += ["", "Mean NIS: " + ", ".join(f"{k} {_fmt(v['value'])} (dof {v['dof']})" for k, v in nis.items()) + "."]
+    if "filter_R" in s:
+        L += ["", "Filter R (1σ): " + ", ".join(f"{k} {v:g}" for k, v in s["filter_R"].items()) + "."]
+    hf = s.get("h_agl_at_fix")
+    if hf:
+        L += [
+            "",
+            f"Altitude-AGL error at the first radar fix: RMS {hf['rms_error_m']:.1f} m, max "
+            f"{hf['max_abs_error_m']:.1f} m vs median 3σ {hf['median_3sigma_m']:.1f} m (inside 3σ in "
+            f"{100 * hf['fraction_inside_3sigma']:.0f} % of the runs; largest |error|/3σ "
+            f"{hf['max_abs_error_over_3sigma']:.2f}).",
+        ]
     if s.get("n_failed"):
         L += ["", f"**{s['n_failed']} runs failed**: " + "; ".join(s.get("failures", []))]
     return "\n".join(L) + "\n"
