@@ -36,7 +36,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS_DIR = ROOT / "docs" / "results"
 
-_PLACEHOLDER = re.compile(r"\{\{([A-Za-z0-9_./-]+):([A-Za-z0-9_.\[\]-]+)(?:\|([^}]*))?\}\}")
+_PLACEHOLDER = re.compile(r"\{\{([A-Za-z0-9_./-]+):([^|}]+)(?:\|([^}]*))?\}\}")
 _BLOCK = re.compile(r"(<!-- generated:([a-z0-9_-]+) -->\n)(.*?)(<!-- /generated:\2 -->)", re.DOTALL)
 
 
@@ -70,11 +70,14 @@ def lookup(doc: object, key: str, *, source: str = "?") -> object:
 
 
 def format_value(value: object, fmt: str | None) -> str:
-    """Format one JSON value: ``None`` → "n/a"; ``*S:spec`` scales by S first; ``mmss`` for seconds."""
+    """Format one JSON value: ``None`` → "n/a"; ``*S:spec`` scales by S first; ``mmss`` for seconds;
+    ``pass`` writes a boolean as PASS/FAIL."""
     if value is None:
         return "n/a"
     if not fmt:
         return str(value)
+    if fmt == "pass":
+        return "PASS" if value else "FAIL"
     if fmt == "mmss":
         s = round(float(value))
         return f"{s // 60} min {s % 60} s" if s >= 60 else f"{s} s"
@@ -82,7 +85,7 @@ def format_value(value: object, fmt: str | None) -> str:
     m = re.fullmatch(r"\*([0-9.eE+-]+):(.*)", fmt)
     if m:
         scale, fmt = float(m.group(1)), m.group(2)
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if isinstance(value, bool) or not isinstance(value, int | float) or (isinstance(value, int) and scale == 1.0):
         return format(value, fmt)
     return format(float(value) * scale, fmt)
 
