@@ -222,3 +222,47 @@ attitude {{{{{_TMC}:results.rms_at_end.att_x_deg.rms_error|.2f}}}}/{{{{{_TMC}:re
 """
 
 RESULTS_MD = RESULTS_MD + "\n" + _ENTRY + "\n" + _ENTRY_MC
+
+_K = "bench_droptest:results.configurations"
+README_BLOCKS["headline"] = f"""\
+- **Drop tests**, {{{{bench_droptest:results.n_drops}}}} different drops (contact speeds, attitude, bag pressure drawn
+  within the REDLand envelope; airbag-contact truth simulator): truth max stroke inside the reported 3σ in
+  {{{{{_K}.IMU-only kinematic.summary.fraction_inside_3sigma|*100:.0f}}}} % (IMU only) and
+  {{{{{_K}.ranging kinematic.summary.fraction_inside_3sigma|*100:.0f}}}} % (range aiding) of drops; |error| median
+  {{{{{_K}.IMU-only kinematic.summary.abs_error_median_m|*100:.1f}}}} cm with a median 3σ of
+  {{{{{_K}.IMU-only kinematic.summary.median_3sigma_m|*100:.1f}}}} cm IMU-only, and
+  {{{{{_K}.ranging kinematic.summary.abs_error_median_m|*1000:.1f}}}} mm with 3σ
+  {{{{{_K}.ranging kinematic.summary.median_3sigma_m|*1000:.1f}}}} mm with ranging; max-stroke ANEES
+  {{{{{_K}.IMU-only kinematic.summary.anees_stroke|.2f}}}} / {{{{{_K}.ranging kinematic.summary.anees_stroke|.2f}}}}
+  (band {{{{{_K}.IMU-only kinematic.summary.anees_stroke_band.0|.2f}}}}–{{{{{_K}.IMU-only kinematic.summary.anees_stroke_band.1|.2f}}}}).
+  Like REDLand, IMU-only reconstruction cannot meet the MER 10 cm (3σ) requirement; range aiding meets it
+  in {{{{{_K}.ranging kinematic.summary.fraction_mer_requirement|*100:.0f}}}} % of drops.
+- **Entry** (`schiaparelli`, seed 7, truth with its own aerodynamics, atmosphere, IMU errors and terrain):
+  altitude after the radar fix within {{{{{_S}:truth.after_radar_fix.max_h_agl_error_m|.0f}}}} m, inside 3σ at
+  {{{{{_S}:truth.after_radar_fix.inside_3sigma_fraction|*100:.0f}}}} % of steps; AMELIA density bounds: entry
+  {{{{{_S}:truth.atmosphere.entry_measured.density_max_abs_error_rel|*100:.1f}}}} % vs 10 %
+  **{{{{{_S}:truth.atmosphere.entry_measured.density_bound_pass|pass}}}}**, filled blackout
+  {{{{{_S}:truth.atmosphere.entry_filled_blackout.density_max_abs_error_rel|*100:.1f}}}} % vs 20 %
+  **{{{{{_S}:truth.atmosphere.entry_filled_blackout.density_bound_pass|pass}}}}**, under the parachute
+  {{{{{_S}:truth.atmosphere.under_parachute.density_max_abs_error_rel|*100:.1f}}}} % vs 25 %
+  **{{{{{_S}:truth.atmosphere.under_parachute.density_bound_pass|pass}}}}**; winds
+  {{{{{_S}:truth.winds_in_layers.max_error_mps|.1f}}}} m/s vs 5 m/s **{{{{{_S}:truth.winds_in_layers.bound_pass|pass}}}}**;
+  density points inside their reported 3σ:
+  {{{{{_S}:truth.atmosphere.entry_measured.density_fraction_within_3sigma|*100:.0f}}}} /
+  {{{{{_S}:truth.atmosphere.entry_filled_blackout.density_fraction_within_3sigma|*100:.0f}}}} /
+  {{{{{_S}:truth.atmosphere.under_parachute.density_fraction_within_3sigma|*100:.0f}}}} %.
+- **Entry consistency**, {{{{{_TMC}:results.n_ok}}}} members drawn from the 6-DOF truth simulator through the full
+  pipeline: smoothed ANEES (9 dof, curvilinear) {{{{{_TMC}:results.anees_at.PDD.smoothed_curvilinear|.2f}}}} at PDD and
+  {{{{{_TMC}:results.anees_at.end.smoothed_curvilinear|.2f}}}} at the end (band
+  {{{{{_TMC}:results.anees_band_95.0|.2f}}}}–{{{{{_TMC}:results.anees_band_95.1|.2f}}}}); the self-consistency check
+  ({{{{{_SC}:results.n_ok}}}} runs of the smoother's own model): {{{{{_SC}:results.anees_at.PDD.smoothed_curvilinear|.2f}}}}
+  and {{{{{_SC}:results.anees_at.end.smoothed_curvilinear|.2f}}}}.
+- **POST2 validation cases**: J2 error/3σ at the end {{{{bench_post2:results.j2.final_error_over_3sigma|.2f}}}}, NEES
+  {{{{bench_post2:results.j2.nees.mean|.2f}}}} over {{{{bench_post2:results.j2.nees.seeds}}}} seeds; 6-DOF entry from
+  Table 3-5's first start: {{{{bench_post2:results.entry6dof.model_error.test_case_1.position_error_start_m|.0f}}}} m →
+  {{{{bench_post2:results.entry6dof.model_error.test_case_1.position_error_after_15s_m|.0f}}}} m after 15 s →
+  {{{{bench_post2:results.entry6dof.model_error.test_case_1.position_error_end_smoothed_m|.0f}}}} m at the end.
+- **Speed** (the main job of `commands.json`): `schiaparelli` {{{{{_S}:wall_time_s|mmss}}}}, of which the
+  10 000-member dispersion {{{{{_S}:dispersion.wall_s|mmss}}}}; `droptest`
+  {{{{summaries/droptest.summary:wall_time_s|mmss}}}}.
+"""
