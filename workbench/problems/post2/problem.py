@@ -154,7 +154,16 @@ class Post2Problem:
 
     def open_recording(self, path: Path, scenario: Scenario, truth, properties: dict):
         """The post2 recording (:mod:`.recording`)."""
-        return open_post2_recording(path, scenario.name, truth, properties, self.scorecard)
+        cfg = config_for(scenario)
+        return open_post2_recording(
+            path,
+            scenario.name,
+            truth,
+            properties,
+            self.scorecard,
+            states=[st.name for st in cfg.states],
+            observations=[ob.name for ob in cfg.observations],
+        )
 
     def export_columns(self, result) -> ExportTable:
         """Every state block (smoothed, physical) and its 1σ, SI (angles in rad)."""

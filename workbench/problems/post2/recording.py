@@ -17,6 +17,7 @@ from workbench.problems.post2.model import OBSERVATIONS, STATES
 from workbench.problems.post2.pipeline import ForwardStage, ObservationData, Post2Result
 from workbench.problems.post2.scoring import truth_on_grid
 from workbench.recording import layout
+from workbench.recording.blueprint import standard_blueprint
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import open_recording
 
@@ -91,8 +92,24 @@ class Post2Drawer:
         self.rec.report(self.scorecard(summary))
 
 
+def post2_blueprint(state_names: list[str], observation_names: list[str], has_truth: bool):
+    """The default layout: the 3D tracks; one plot tab per estimated state (value with ±3σ and the
+    truth; position and velocity as errors against the truth when it is known) and one residual tab
+    per observation (residual with ±3σ); the scorecard and the event log."""
+    plots = []
+    for n in state_names:
+        shown = f"{n}_error" if has_truth and n in ("position", "velocity") else n
+        plots.append((shown, layout.plot_path(shown)))
+    residuals = [(n, layout.residual_path(n)) for n in observation_names]
+    return standard_blueprint(plots=plots, residuals=residuals)
+
+
 @contextlib.contextmanager
-def open_post2_recording(path: Path, name: str, truth, properties: dict, scorecard):
-    """Open the recording (published atomically) and yield its :class:`Post2Drawer`."""
-    with open_recording(path, name, properties=properties) as rec:
+def open_post2_recording(path: Path, name: str, truth, properties: dict, scorecard, *, states=(), observations=()):
+    """Open the recording (published atomically) and yield its :class:`Post2Drawer`.
+
+    ``states`` / ``observations``: the problem file's estimated-state and observation names, for the
+    default layout (:func:`post2_blueprint`)."""
+    bp = post2_blueprint(list(states), list(observations), truth is not None)
+    with open_recording(path, name, blueprint=bp, properties=properties) as rec:
         yield Post2Drawer(rec, truth, scorecard)
