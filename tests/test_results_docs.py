@@ -47,6 +47,14 @@ def test_placeholder_errors_name_file_and_key(tmp_path):
         mk.fill("{{nope:x}}", tmp_path)
     with pytest.raises(mk.ResultsError, match="lacks the generated block"):
         mk.render_readme("no blocks here", {"a": "x"}, tmp_path)
+    # the benchmarks' one JSON writer produces what the renderer reads (NaN → null → "n/a")
+    bj = _module("bench_json")
+    results = {"v": float("nan"), "w": 2.5}
+    bj.write_benchmark_json(tmp_path / "c.json", "tests/benchmarks/bench_c.py", results, ["-n", "3"])
+    assert mk.fill("{{c:benchmark}} {{c:command}} {{c:results.v|.1f}} {{c:results.w|.1f}}", tmp_path) == (
+        "bench_c python tests/benchmarks/bench_c.py -n 3 n/a 2.5"
+    )
+    assert not list(tmp_path.glob("*.partial"))
 
 
 def test_readme_times_come_from_the_commands_file():

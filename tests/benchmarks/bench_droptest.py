@@ -32,7 +32,6 @@ benchmark convention ``{"benchmark", "command", "utc", "machine", "results"}``.
 from __future__ import annotations
 
 import argparse
-import json
 import resource
 import subprocess
 import sys
@@ -46,6 +45,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+
+from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
 
 from workbench.estimation.montecarlo import run_monte_carlo  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
@@ -461,16 +462,7 @@ def main(argv: list[str] | None = None) -> int:
             "speed": sp,
             "git": _git_state(),
         }
-        doc = {
-            "benchmark": Path(__file__).stem,
-            "command": " ".join([Path(sys.executable).name, *sys.argv]),
-            "utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "machine": "2 cores",
-            "results": results,
-        }
-        out = Path(a.json)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(doc, indent=1, default=float, allow_nan=True))
+        out = write_benchmark_json(a.json, __file__, results)
         print(f"wrote {out}", file=sys.stderr, flush=True)
 
     with tempfile.TemporaryDirectory(prefix="droptest_mc_") as d:

@@ -19,9 +19,6 @@ the filter's R, wall time).  ``--runs`` members take ~20-40 s each on one core.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
-import json
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -31,7 +28,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from workbench.io.results import to_jsonable  # noqa: E402
+from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
+
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.entry.montecarlo import headline_numbers  # noqa: E402
 from workbench.problems.entry.truth_mc import run_truth_monte_carlo  # noqa: E402
@@ -125,18 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     print(_table(r))
     if a.json:
-        doc = {
-            "benchmark": Path(__file__).stem,
-            "command": shlex.join(
-                ["python", f"tests/benchmarks/{Path(__file__).name}", *(sys.argv[1:] if argv is None else argv)]
-            ),
-            "utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-            "machine": "2 cores",
-            "results": r,
-        }
-        path = Path(a.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(to_jsonable(doc), indent=1) + "\n")
+        path = write_benchmark_json(a.json, __file__, r, argv)
         print(f"\nwrote {path} (wall {wall:.0f} s)", file=sys.stderr)
     return 0
 

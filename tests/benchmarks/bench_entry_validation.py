@@ -28,9 +28,7 @@ Monte Carlo against the truth simulator is ``bench_entry_truth_mc.py``.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
-import shlex
 import sys
 import tempfile
 import time
@@ -40,6 +38,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+
+from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
 
 from workbench.io.results import to_jsonable  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
@@ -185,17 +185,7 @@ def main(argv: list[str] | None = None) -> int:
                 "wall_time_s": time.perf_counter() - t0,
             }
         )
-        words = sys.argv[1:] if argv is None else list(argv)
-        doc = {
-            "benchmark": Path(__file__).stem,
-            "command": shlex.join(["python", f"tests/benchmarks/{Path(__file__).name}", *words]),
-            "utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-            "machine": "2 cores",
-            "results": r,
-        }
-        jp = Path(a.json)
-        jp.parent.mkdir(parents=True, exist_ok=True)
-        jp.write_text(json.dumps(to_jsonable(doc), indent=1) + "\n")
+        jp = write_benchmark_json(a.json, __file__, r, argv)
         print(f"wrote {jp}", file=sys.stderr)
     return 0
 

@@ -24,7 +24,6 @@ import json
 import sys
 import tempfile
 import time
-from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +31,8 @@ from scipy.stats import chi2
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+
+from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
 
 from workbench.io.assets import assets_dir  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
@@ -147,19 +148,8 @@ def main(argv: list[str] | None = None) -> int:
         print("J2:", json.dumps(results["j2"]), flush=True)
         results["entry6dof"] = {v: bench_entry(out, v) for v in ("model_error", "model_matched")}
     results["wall_time_s"] = time.perf_counter() - t0
-    doc = {
-        "benchmark": "bench_post2",
-        "command": " ".join(
-            [".venv/bin/python", "tests/benchmarks/bench_post2.py", *(argv if argv is not None else sys.argv[1:])]
-        ),
-        "utc": datetime.now(UTC).isoformat(timespec="seconds"),
-        "machine": "2 cores",
-        "results": results,
-    }
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {args.json}")
+        print(f"wrote {write_benchmark_json(args.json, __file__, results, argv)}")
     return 0
 
 
