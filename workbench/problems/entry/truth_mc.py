@@ -383,7 +383,9 @@ def run_truth_monte_carlo(
         wall_s=time.perf_counter() - wall0,
     )
     summary = summarize_validation(res)
-    summary.update(_extra_summary(outs, ok, cfg.smoother_sigmas(), job))
+    # the R the pipeline used: slant-out terrain term inflated for its correlation at the telemetry's rate
+    sigmas = cfg.smoother_sigmas(slant_out_dt_s=1.0 / job.telemetry_spec.rda_rate_hz)
+    summary.update(_extra_summary(outs, ok, sigmas, job))
     res.summary.update(summary)
     return TruthMcResult(res, tuple(outs))
 
@@ -407,6 +409,7 @@ def _extra_summary(outs, ok, sigmas, job: _Job) -> dict:
             "slant_range_m": sg.slant_range,
             "slant_out_m": sg.slant_out,
             "velocity_out_mps": sg.velocity_out,
+            "note": "slant-out includes the terrain term × sqrt(terrain_correlation_s × rate) ([radar] keys)",
         },
         "truth_dispersion_sigmas": dataclasses.asdict(DispersionSigmas()),
     }
