@@ -1,4 +1,4 @@
-"""Command line: ``workbench list | run | mc | inspect``.
+"""Command line: ``workbench list | run | mc | inspect | compare | replay | init``.
 
 Exit codes (scripts can rely on them):
   0  success
@@ -112,6 +112,19 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_compare(args: argparse.Namespace) -> int:
+    """Compare two runs of the same kind of scenario: print the markdown table of what changed and,
+    with ``--out``, write the comparison recording."""
+    from workbench.recording.compare import changes_markdown, compare_runs, write_comparison
+
+    cmp = compare_runs(args.a, args.b)
+    print(changes_markdown(cmp, max_rows=args.rows))
+    if args.out:
+        path = write_comparison(cmp, args.out)
+        _progress(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (sub-commands list, run, inspect)."""
     p = argparse.ArgumentParser(prog="workbench", description="EDL reconstruction workbench")
@@ -157,6 +170,14 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("recording")
     sp.add_argument("--json", action="store_true", help="machine-readable summary")
     sp.set_defaults(func=cmd_inspect)
+    sp = sub.add_parser(
+        "compare", help="compare two runs of the same kind (seeds, tunings, code versions): table + recording"
+    )
+    sp.add_argument("a", help="recording A (.rrd; its <name>.summary.json beside it is read too)")
+    sp.add_argument("b", help="recording B (.rrd)")
+    sp.add_argument("--out", default=None, help="write the comparison recording here (.rrd)")
+    sp.add_argument("--rows", type=int, default=40, help="at most this many changed numbers in the table")
+    sp.set_defaults(func=cmd_compare)
     return p
 
 
@@ -166,6 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     from workbench.io.telemetry import TelemetryError
     from workbench.io.units import UnitError
     from workbench.problems.registry import UnknownKindError
+    from workbench.recording.compare import ComparisonError
+    from workbench.recording.reader import RecordingError
 
     parser = build_parser()
     try:
@@ -174,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE if e.code else EXIT_OK
     try:
         return args.func(args)
-    except (TelemetryError, ScenarioError, UnitError, FileNotFoundError) as err:
+    except (TelemetryError, ScenarioError, UnitError, FileNotFoundError, RecordingError, ComparisonError) as err:
         print(f"workbench: input error: {err}", file=sys.stderr)
         return EXIT_INPUT
     except (NotImplementedError, UnknownKindError) as err:

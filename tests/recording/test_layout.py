@@ -19,9 +19,10 @@ RECORDERS = [
     "workbench/problems/entry/recording_mc.py",
     "workbench/problems/droptest/recording_mc.py",
     "workbench/recording/blueprint.py",
+    "workbench/recording/compare.py",
     "workbench/cli.py",
 ]
-TOP = ("world", "plots", "residuals", "sensors", "profiles", "events", "report")
+TOP = ("world", "plots", "residuals", "sensors", "profiles", "events", "report", "compare")
 ROW = re.compile(r"^\|\s*`(/[^`]*)`\s*\|")
 
 # example arguments for each path family (the result must match the family's template)
@@ -43,6 +44,10 @@ FAMILY_ARGS = {
     "entry_wind_plot_path": ("north",),
     "entry_wind_profile_path": ("east", "plus_1sigma"),
     "validation_rms_path": (layout.VALIDATION_RMS_VELOCITY, "vel_N", True),
+    "compare_run_path": ("a", "vehicle"),
+    "compare_diff_path": ("stroke",),
+    "compare_overlay_path": ("stroke", "b"),
+    "compare_position_path": ("x",),
 }
 
 

@@ -216,6 +216,17 @@ VALIDATION_RUNS_H_AGL = "/plots/validation/runs/h_agl"
 VALIDATION_RUNS_H_AGL_ERROR_MAX = "/plots/validation/runs/h_agl/error_max"
 VALIDATION_RUNS_H_AGL_THREE_SIGMA = "/plots/validation/runs/h_agl/three_sigma"
 
+# ------------------------------------------- comparison of two runs (``workbench compare``)
+COMPARE_ROOT = "/compare"
+COMPARE_DIFF = "/compare/diff"
+COMPARE_OVERLAY = "/compare/overlay"
+COMPARE_POSITION = "/compare/position"
+COMPARE_POSITION_NORM = "/compare/position/norm"
+COMPARE_REPORT_A = "/compare/report_a"
+COMPARE_REPORT_B = "/compare/report_b"
+COMPARE_CHANGES = "/compare/changes"
+COMPARE_RUNS = ("a", "b")
+
 _PART = re.compile(r"^[\w.\-]+$")
 
 
@@ -344,6 +355,35 @@ def validation_rms_path(group: str, quantity: str, sigma: bool = False) -> str:
     return join(group, f"{quantity}_sigma" if sigma else quantity)
 
 
+# -------------------------------------------------------------------- comparison path families
+def compare_run_path(run: str, sub: str) -> str:
+    """``/world/run_<run>/<sub>``: the 3D scene of run ``a`` or ``b`` in a comparison recording
+    (``track``, ``vehicle`` and the copied vehicle meshes below it)."""
+    if run not in COMPARE_RUNS:
+        raise ValueError(f"run must be one of {COMPARE_RUNS}, got {run!r}")
+    return join(WORLD, f"run_{run}", sub)
+
+
+def compare_diff_path(quantity: str) -> str:
+    """``/compare/diff/<quantity>``: root of the difference A − B of one bounded series (children
+    ``value``, ``plus_3sigma``, ``minus_3sigma``: ±3 combined σ around zero); ``quantity`` is the
+    series root below ``/plots`` (e.g. ``stroke``, ``position/x``)."""
+    return join(COMPARE_DIFF, quantity)
+
+
+def compare_overlay_path(quantity: str, run: str) -> str:
+    """``/compare/overlay/<quantity>/<run>``: the estimate of one bounded series in run ``a`` or ``b``."""
+    if run not in COMPARE_RUNS:
+        raise ValueError(f"run must be one of {COMPARE_RUNS}, got {run!r}")
+    return join(COMPARE_OVERLAY, quantity, run)
+
+
+def compare_position_path(axis: str) -> str:
+    """``/compare/position/<axis>``: difference A − B of the vehicle position along ``x``, ``y``,
+    ``z`` (bounded series, ±3 combined σ from the two runs' uncertainty ellipsoids)."""
+    return join(COMPARE_POSITION, axis)
+
+
 _FAMILIES = {
     "radar_beam_path": "/world/vehicle/radar/B<beam>",
     "truth_path": "/world/truth/<sub>",
@@ -362,6 +402,10 @@ _FAMILIES = {
     "entry_wind_plot_path": "/plots/wind/<component>",
     "entry_wind_profile_path": "/profiles/wind/<component>[_<series>]",
     "validation_rms_path": "/plots/validation/rms/<group>/<quantity>[_sigma]",
+    "compare_run_path": "/world/run_<run>/<sub>",
+    "compare_diff_path": "/compare/diff/<quantity>",
+    "compare_overlay_path": "/compare/overlay/<quantity>/<run>",
+    "compare_position_path": "/compare/position/<axis>",
 }
 
 
@@ -380,6 +424,7 @@ __all__ = [
     "APPLICATION_ID",
     "TIMELINES",
     "VALIDATION_RMS_GROUPS",
+    "COMPARE_RUNS",
     *[k for k, v in list(globals().items()) if k.isupper() and isinstance(v, str) and k != "APPLICATION_ID"],
     "join",
     "part",

@@ -260,6 +260,63 @@ class RecordingData:
             raise RecordingError(f"{entity}: translation and quaternion rows differ")
         return self._to_time(t, timeline), _vec_rows(tr, 3, entity)[:, 0], _vec_rows(q, 4, entity)[:, 0]
 
+    def translations(self, entity: str, timeline: str = layout.TIME) -> tuple[np.ndarray, np.ndarray]:
+        """``Transform3D`` translations alone: times (n,), translation (n, 3) [m] (entities whose pose
+        carries no rotation, such as the entry's ``/world/vehicle``)."""
+        t, tr = self._gather(entity, "Transform3D:translation", timeline)
+        return self._to_time(t, timeline), _vec_rows(tr, 3, entity)[:, 0]
+
+    def has_temporal(self, entity: str, component: str, timeline: str = layout.TIME) -> bool:
+        """True if ``entity`` has at least one non-null temporal ``component`` row on ``timeline``."""
+        for batch in self._temporal.get(entity, []):
+            ti = batch.schema.get_field_index(timeline)
+            ci = batch.schema.get_field_index(component)
+            if ti >= 0 and ci >= 0 and batch.column(ci).null_count < len(batch):
+                return True
+        return False
+
+    def meshes(
+        self, entity: str, timeline: str = layout.TIME
+    ) -> list[tuple[float | None, np.ndarray, np.ndarray, int]]:
+        """Every ``Mesh3D`` of ``entity``: [(t or None if static, vertices (v, 3) [m], triangles (f, 3) int,
+        albedo colour as packed 0xRRGGBBAA int (0xC8C8C8FF if none))], the static one first, then by time."""
+        out: list[tuple[float | None, np.ndarray, np.ndarray, int]] = []
+
+        def colour(cells: Any) -> int:
+            return int(cells[0]) if cells else 0xC8C8C8FF
+
+        try:
+            v = np.asarray(self.static_component(entity, "Mesh3D:vertex_positions"), dtype=np.float64)
+            f = np.asarray(self.static_component(entity, "Mesh3D:triangle_indices"), dtype=np.int64)
+            try:
+                c = colour(self.static_component(entity, "Mesh3D:albedo_factor"))
+            except KeyError:
+                c = 0xC8C8C8FF
+            out.append((None, v.reshape(-1, 3), f.reshape(-1, 3), c))
+        except KeyError:
+            pass
+        if self.has_temporal(entity, "Mesh3D:vertex_positions", timeline):
+            t, vc = self._gather(entity, "Mesh3D:vertex_positions", timeline)
+            _, fc = self._gather(entity, "Mesh3D:triangle_indices", timeline)
+            try:
+                _, cc = self._gather(entity, "Mesh3D:albedo_factor", timeline)
+                cols = [colour(x) for x in cc.to_pylist()]
+            except KeyError:
+                cols = [0xC8C8C8FF] * len(t)
+            tt = self._to_time(t, timeline)
+            for i in range(len(t)):
+                v = np.asarray(vc[i].as_py(), dtype=np.float64).reshape(-1, 3)
+                f = np.asarray(fc[i].as_py(), dtype=np.int64).reshape(-1, 3)
+                out.append((float(tt[i]), v, f, cols[i]))
+        return out
+
+    def clear_times(self, entity: str, timeline: str = layout.TIME) -> np.ndarray:
+        """Times (n,) at which ``entity`` was cleared (``rr.Clear``), sorted; empty if never."""
+        if not self.has_temporal(entity, "Clear:is_recursive", timeline):
+            return np.zeros(0)
+        t, _ = self._gather(entity, "Clear:is_recursive", timeline)
+        return np.asarray(self._to_time(t, timeline), dtype=np.float64)
+
     def ellipsoids(
         self, entity: str, timeline: str = layout.TIME
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
