@@ -125,6 +125,50 @@ def cmd_compare(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _headline(rrd: Path, properties: dict) -> str | None:
+    """The run's one-line result (``Problem.headline`` of its sibling summary), or None."""
+    from workbench.problems import registry
+
+    summary = rrd.with_name(rrd.stem + ".summary.json")
+    kind = properties.get("run", {}).get("kind")
+    if not summary.is_file() or not kind:
+        return None
+    try:
+        return registry.get(str(kind)).headline(json.loads(summary.read_text(encoding="utf-8")))
+    except (LookupError, ValueError, TypeError, KeyError):
+        return None
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Presentation outputs of a run recording: ``--mp4`` video and/or ``--png`` summary image."""
+    if not args.mp4 and not args.png:
+        print("workbench replay: give --mp4 OUT.mp4 and/or --png OUT.png", file=sys.stderr)
+        return EXIT_USAGE
+    from workbench.recording.reader import read_recording
+
+    data = read_recording(args.recording)
+    if args.png:
+        from workbench.recording.summary_image import render_png
+
+        path = render_png(data, args.png, headline=_headline(data.path, data.properties()))
+        _progress(f"wrote {path}")
+    if args.mp4:
+        from workbench.recording.replay import ReplayError, render_mp4
+
+        try:
+            st = render_mp4(
+                data, args.mp4, fps=args.fps, duration_s=args.duration, progress=None if args.quiet else _progress
+            )
+        except ReplayError as err:
+            print(f"workbench: {err}", file=sys.stderr)
+            return EXIT_KIND
+        _progress(
+            f"wrote {st.path}: {st.frames} frames {st.size[0]}x{st.size[1]} at {st.fps:g} fps "
+            f"(t = {st.t0:.2f} .. {st.t1:.2f} s) in {st.render_s:.1f} s ({st.cpu_s:.1f} s CPU)"
+        )
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (sub-commands list, run, inspect)."""
     p = argparse.ArgumentParser(prog="workbench", description="EDL reconstruction workbench")
@@ -178,6 +222,14 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--out", default=None, help="write the comparison recording here (.rrd)")
     sp.add_argument("--rows", type=int, default=40, help="at most this many changed numbers in the table")
     sp.set_defaults(func=cmd_compare)
+    sp = sub.add_parser("replay", help="presentation outputs of a run: --mp4 video (OpenCV) and/or --png summary")
+    sp.add_argument("recording", help="a run recording (.rrd)")
+    sp.add_argument("--mp4", default=None, help="write the 1280x720 presentation video here")
+    sp.add_argument("--png", default=None, help="write the one-page summary image of the key plots here")
+    sp.add_argument("--fps", type=float, default=25.0, help="video frame rate (default 25)")
+    sp.add_argument("--duration", type=float, default=None, help="video length [s] (default: the problem's)")
+    sp.add_argument("--quiet", action="store_true", help="no progress lines")
+    sp.set_defaults(func=cmd_replay)
     return p
 
 
