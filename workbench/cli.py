@@ -169,6 +169,21 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_init(args: argparse.Namespace) -> int:
+    """Write a user-data scenario (scenario.toml, example telemetry, README) for a problem kind."""
+    from workbench.problems.template import init_scenario
+
+    res = init_scenario(args.kind, Path(args.dir), seed=args.seed, overwrite=args.force)
+    print(f"wrote {res.scenario} (from the shipped scenario {res.base.name!r}, kind {res.base.kind!r})")
+    for stream, path in res.telemetry.items():
+        print(f"  telemetry {stream:16s} {path}")
+    for path in res.copied:
+        print(f"  copied    {path}")
+    print(f"  {res.readme}: what to replace")
+    print(f"run it with: workbench run {res.scenario}")
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (sub-commands list, run, inspect)."""
     p = argparse.ArgumentParser(prog="workbench", description="EDL reconstruction workbench")
@@ -230,6 +245,12 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--duration", type=float, default=None, help="video length [s] (default: the problem's)")
     sp.add_argument("--quiet", action="store_true", help="no progress lines")
     sp.set_defaults(func=cmd_replay)
+    sp = sub.add_parser("init", help="write a user-data scenario to start from (scenario.toml, telemetry, README)")
+    sp.add_argument("kind", help="a problem kind (droptest, entry, post2) or a shipped scenario name")
+    sp.add_argument("dir", help="folder to write into (created)")
+    sp.add_argument("--seed", type=int, default=1, help="seed of the example telemetry's sensor errors")
+    sp.add_argument("--force", action="store_true", help="overwrite an existing scenario.toml in the folder")
+    sp.set_defaults(func=cmd_init)
     return p
 
 
@@ -249,7 +270,15 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE if e.code else EXIT_OK
     try:
         return args.func(args)
-    except (TelemetryError, ScenarioError, UnitError, FileNotFoundError, RecordingError, ComparisonError) as err:
+    except (
+        TelemetryError,
+        ScenarioError,
+        UnitError,
+        FileNotFoundError,
+        FileExistsError,
+        RecordingError,
+        ComparisonError,
+    ) as err:
         print(f"workbench: input error: {err}", file=sys.stderr)
         return EXIT_INPUT
     except (NotImplementedError, UnknownKindError) as err:
