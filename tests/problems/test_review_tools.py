@@ -1,0 +1,227 @@
+"""``workbench compare``, ``workbench replay --mp4/--png`` and ``workbench init``, through the
+command line (``workbench.cli.main``).
+
+Fast tier: the worked example problem (falling body, registered here only) run twice with the same
+seed and once with another, compared; a recording of another kind refused; the shared drop-test
+run of the session (``droptest_run``) compared with itself and replayed as a short MP4 read back
+with OpenCV, and its summary PNG; ``init`` scenarios generated from every problem's schema
+validate; ``init post2_j2`` runs end to end. Slow tier: ``init droptest`` runs end to end,
+``init schiaparelli`` validates with its example telemetry, the full-length MP4s.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+import sys
+import tomllib
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from workbench.cli import main
+from workbench.io.assets import assets_dir
+from workbench.io.scenario import find_scenarios, load_scenario
+from workbench.problems import registry
+from workbench.problems.template import SYNTHETIC_TABLE, scenario_toml
+from workbench.recording import layout
+from workbench.recording.compare import compare_runs
+from workbench.recording.reader import read_recording
+from workbench.recording.replay import frame_times
+from workbench.recording.summary_image import SIZE_PX
+from workbench.recording.writer import open_recording
+
+FALLING = Path(__file__).resolve().parent / "example_fallingbody"
+
+
+@pytest.fixture(scope="module")
+def falling(tmp_path_factory):
+    """Three falling-body runs: ``a`` and ``a2`` with seed 3, ``b`` with seed 4 -> {label: rrd}."""
+    spec = importlib.util.spec_from_file_location("example_fallingbody", FALLING / "fallingbody.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    p = registry.register(module.FallingBodyProblem(), replace=True)
+    out = {}
+    for label, seed in (("a", 3), ("a2", 3), ("b", 4)):
+        d = tmp_path_factory.mktemp(f"fall_{label}")
+        assert main(["run", str(FALLING / "fallingbody.toml"), "--out", str(d), "--seed", str(seed)]) == 0
+        out[label] = d / "fallingbody.rrd"
+    yield out
+    registry.unregister(p.kind)
+    sys.modules.pop(spec.name, None)
+
+
+def test_compare_two_identical_runs_differ_by_exactly_zero(falling, tmp_path, capsys):
+    c = tmp_path / "c.rrd"
+    assert main(["compare", str(falling["a"]), str(falling["a2"]), "--out", str(c)]) == 0
+    text = capsys.readouterr().out
+    assert "identical: every difference is exactly 0" in text
+    cmp = compare_runs(falling["a"], falling["a2"])
+    assert cmp.identical and cmp.series and not cmp.numbers
+    assert [d.root for d in cmp.series] == ["altitude"]
+    d = cmp.series[0]
+    assert len(d.t) == 801 and np.all(d.diff == 0.0) and np.all(d.sigma > 0)
+    rec = read_recording(c)
+    ents = set(rec.entities())
+    for e in (
+        layout.compare_diff_path("altitude") + "/value",
+        layout.compare_diff_path("altitude") + "/plus_3sigma",
+        layout.compare_overlay_path("altitude", "a"),
+        layout.compare_overlay_path("altitude", "b"),
+        layout.COMPARE_CHANGES,
+        layout.COMPARE_REPORT_A,
+        layout.COMPARE_REPORT_B,
+    ):
+        assert e in ents, e
+    _, diff = rec.scalars(layout.compare_diff_path("altitude") + "/value")
+    assert np.all(diff == 0.0)
+    _, plus = rec.scalars(layout.compare_diff_path("altitude") + "/plus_3sigma")
+    assert np.allclose(plus[:, 0], 3.0 * d.sigma[:, 0])
+    assert rec.properties()["compare"]["identical"] is True
+
+
+def test_compare_two_seeds_differ(falling, capsys):
+    assert main(["compare", str(falling["a"]), str(falling["b"])]) == 0
+    text = capsys.readouterr().out
+    cmp = compare_runs(falling["a"], falling["b"])
+    assert not cmp.identical
+    d = cmp.series[0]
+    assert np.max(np.abs(d.diff)) > 0.0
+    # the seed also draws the release altitude: A - B follows the truth difference, within a few
+    # combined sigma (the truths come from the telemetry folders, never from the recordings)
+    tr = {k: np.load(falling[k].parent / "fallingbody" / "telemetry" / "truth.npz") for k in ("a", "b")}
+    truth_diff = np.interp(d.t, tr["a"]["t"], tr["a"]["h"]) - np.interp(d.t, tr["b"]["t"], tr["b"]["h"])
+    assert np.max(np.abs(truth_diff)) > 1.0
+    assert np.max(np.abs(d.diff[:, 0] - truth_diff) / d.sigma[:, 0]) < 5.0
+    assert ("seed", 3, 4) in cmp.numbers
+    assert "| `seed` | 3 | 4 |" in text and "Key numbers" in text
+
+
+def test_compare_refuses_runs_of_different_kinds(falling, tmp_path, capsys):
+    other = tmp_path / "other.rrd"
+    with open_recording(other, "other", properties={"run": {"kind": "droptest", "seed": 1}}) as rec:
+        rec.report("other")
+    assert main(["compare", str(falling["a"]), str(other), "--out", str(tmp_path / "c.rrd")]) == 3
+    err = capsys.readouterr().err
+    assert "differ in kind" in err and "'fallingbody'" in err and "'droptest'" in err
+    assert not (tmp_path / "c.rrd").exists()
+    assert main(["compare", str(falling["a"]), str(tmp_path / "missing.rrd")]) == 3
+
+
+def test_replay_png_of_any_kind_and_no_mp4_without_a_vehicle(falling, tmp_path, capsys):
+    png = tmp_path / "s.png"
+    assert main(["replay", str(falling["a"]), "--png", str(png)]) == 0
+    img = cv2.imread(str(png))
+    assert img is not None and (img.shape[1], img.shape[0]) == SIZE_PX
+    assert main(["replay", str(falling["a"]), "--mp4", str(tmp_path / "v.mp4")]) == 5
+    assert "/world/vehicle" in capsys.readouterr().err
+    assert not (tmp_path / "v.mp4").exists()
+    assert main(["replay", str(falling["a"])]) == 2
+
+
+def test_frame_times_slow_down_around_events():
+    t = frame_times(0.0, 10.0, [5.0], duration_s=4.0, fps=25.0, slow=0.2, window_s=0.3)
+    assert len(t) == 100 and t[0] == 0.0 and t[-1] <= 10.0 and np.all(np.diff(t) > 0)
+    dt = np.diff(t)
+    near = dt[np.abs(t[1:] - 5.0) < 0.1]
+    far = dt[np.abs(t[1:] - 5.0) > 2.0]
+    assert near.max() < 0.3 * far.min()
+    assert np.allclose(far, far[0], rtol=1e-3)
+
+
+def test_droptest_compare_with_itself_and_replay(droptest_run, tmp_path, capsys):
+    a = droptest_run.rrd
+    b_dir = tmp_path / "copy"
+    b_dir.mkdir()
+    b = b_dir / a.name
+    shutil.copyfile(a, b)
+    shutil.copyfile(droptest_run.summary_json, b_dir / droptest_run.summary_json.name)
+    c = tmp_path / "c.rrd"
+    assert main(["compare", str(a), str(b), "--out", str(c)]) == 0
+    cmp = compare_runs(a, b)
+    assert cmp.identical and cmp.position is not None and np.all(cmp.position.diff == 0.0)
+    assert np.all(cmp.position.sigma > 0)  # from the two runs' 3-sigma ellipsoids
+    assert {"stroke", "position/x", "velocity/vz"} <= {d.root for d in cmp.series}
+    ents = set(read_recording(c).entities())
+    assert layout.compare_run_path("a", "vehicle") in ents and layout.compare_run_path("b", "track") in ents
+    assert layout.compare_position_path("x") + "/value" in ents and layout.SURFACE in ents
+    assert any(e.startswith(layout.compare_run_path("b", "vehicle") + "/") for e in ents)  # meshes copied
+
+    mp4, png = tmp_path / "d.mp4", tmp_path / "d.png"
+    assert main(["replay", str(a), "--mp4", str(mp4), "--png", str(png), "--duration", "2", "--quiet"]) == 0
+    assert "wrote" in capsys.readouterr().err
+    cap = cv2.VideoCapture(str(mp4))
+    assert cap.isOpened()
+    n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+    w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+    frames = []
+    ok, img = cap.read()
+    while ok:
+        frames.append(img)
+        ok, img = cap.read()
+    cap.release()
+    assert (n, w, h, len(frames)) == (50, 1280, 720, 50)
+    # the scene is drawn: frames differ from each other and are not a flat background
+    assert np.std(frames[25].astype(float)) > 10.0
+    assert np.mean(np.abs(frames[0].astype(float) - frames[-1].astype(float))) > 1.0
+    img = cv2.imread(str(png))
+    assert (img.shape[1], img.shape[0]) == SIZE_PX
+
+
+@pytest.mark.parametrize("kind", sorted(set(registry.kinds()) - {"fallingbody"}))
+def test_init_scenario_text_from_every_schema_validates(kind, tmp_path):
+    """The generated scenario of each problem's shipped scenarios loads as TOML and validates, and
+    lists every key of the schema (the telemetry part is exercised by the end-to-end tests)."""
+    problem = registry.get(kind)
+    shipped = [p for p in find_scenarios(assets_dir()).values() if load_scenario(p).kind == kind]
+    assert shipped
+    for path in shipped:
+        base = load_scenario(path)
+        data = {k: v for k, v in base.data.items() if k != SYNTHETIC_TABLE}
+        text = scenario_toml(problem.schema, data, "# test")
+        out = tmp_path / f"{base.name}.toml"
+        out.write_text(text, encoding="utf-8")
+        parsed = tomllib.loads(text)
+        assert SYNTHETIC_TABLE not in parsed
+        problem.schema.validate(parsed, out)
+        for t in problem.schema.tables:
+            if t.name.split(".")[0] == SYNTHETIC_TABLE:
+                continue
+            for k in t.keys:
+                assert f"# {k.name}" in text, (base.name, t.name, k.name)
+
+
+def test_init_post2_j2_runs_end_to_end(tmp_path, capsys):
+    d = tmp_path / "my_orbit"
+    assert main(["init", "post2_j2", str(d)]) == 0
+    assert "run it with: workbench run" in capsys.readouterr().out
+    sc = load_scenario(d / "scenario.toml")
+    assert not sc.is_synthetic and sc.name == "my_orbit"
+    assert (d / "telemetry" / "gravity.csv").is_file() and not (d / "telemetry" / "truth.npz").exists()
+    readme = (d / "README.md").read_text(encoding="utf-8")
+    assert "telemetry/gravity.csv" in readme and "observations.gravity.file" in readme
+    assert main(["run", str(d / "scenario.toml"), "--out", str(tmp_path / "out")]) == 0
+    assert (tmp_path / "out" / "my_orbit.rrd").is_file()
+    assert main(["init", "post2_j2", str(d)]) == 3  # refuses to overwrite
+
+
+@pytest.mark.slow
+def test_init_droptest_runs_end_to_end(tmp_path):
+    d = tmp_path / "drop"
+    assert main(["init", "droptest", str(d)]) == 0
+    assert (d / "mer_drop_lander.toml").is_file()  # the lander the scenario points at is copied
+    assert main(["run", str(d / "scenario.toml"), "--out", str(tmp_path / "out")]) == 0
+    assert (tmp_path / "out" / "drop.rrd").is_file()
+
+
+@pytest.mark.slow
+def test_init_schiaparelli_validates_with_its_telemetry(tmp_path):
+    d = tmp_path / "edm"
+    assert main(["init", "schiaparelli", str(d)]) == 0  # init checks the files resolve
+    sc = load_scenario(d / "scenario.toml")
+    assert sc.kind == "entry" and not sc.is_synthetic
+    assert (d / "schiaparelli.toml").is_file()
+    assert all((d / "telemetry" / f).is_file() for f in ("gnc.csv", "rda_slant_range.csv", "events.csv"))
