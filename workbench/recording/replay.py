@@ -156,7 +156,7 @@ _TRUTH = (200, 200, 200)
 _TEXT = (240, 240, 240)
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 _SHADES = 24  # shade levels of the flat shading
-_LAYERS = 10  # depth layers of the painter's algorithm
+_MAX_FACES = 4000  # larger meshes are simplified by vertex clustering for drawing
 _MAX_LINE_POINTS = 600
 _FILE_MESSAGE = re.compile(r"\.(csv|toml|npz|json)\b")  # static tracks are thinned to this many points
 
@@ -195,11 +195,40 @@ class _Xform:
         return self.R[i], self.p[i]
 
 
+def _decimate(v: np.ndarray, f: np.ndarray, max_faces: int = _MAX_FACES) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex-clustering simplification of a mesh (vertices (n, 3), faces (m, 3)) to at most
+    ``max_faces`` faces: vertices in one grid cell merge to their mean, degenerate and repeated
+    faces are dropped; the cell grows until the mesh is small enough."""
+    if len(f) <= max_faces or not len(v):
+        return v, f
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    cells = 48.0
+    while True:
+        cell = float(np.linalg.norm(hi - lo)) / cells
+        key = np.floor((v - lo) / cell).astype(np.int64)
+        _, inv = np.unique(key, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        nv = np.zeros((inv.max() + 1, 3))
+        np.add.at(nv, inv, v)
+        nv /= np.bincount(inv)[:, None]
+        nf = inv[f]
+        ok = (nf[:, 0] != nf[:, 1]) & (nf[:, 1] != nf[:, 2]) & (nf[:, 0] != nf[:, 2])
+        nf = nf[ok]
+        _, first = np.unique(np.sort(nf, axis=1), axis=0, return_index=True)
+        nf = nf[np.sort(first)]
+        if len(nf) <= max_faces or cells < 6:
+            return nv, nf
+        cells *= 0.75
+
+
 @dataclass
 class _Mesh:
     entity: str
     rows: list[tuple[float | None, np.ndarray, np.ndarray, int]]
     clears: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.rows = [(t, *_decimate(v, f), c) for t, v, f, c in self.rows]
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]] | None:
         best = None
@@ -444,24 +473,19 @@ def _draw_mesh(img: np.ndarray, cam: _Camera, verts_w: np.ndarray, faces: np.nda
         lo, hi = np.array([0, 0]), np.array([W - 1, H - 1])
     target = img if alpha >= 0.99 else img[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1].copy()
     off = np.array([0, 0]) if target is img else lo
-    # painter's order in depth layers; inside a layer one fillPoly call per shade level
-    level = np.minimum((shade * _SHADES).astype(int), _SHADES - 1)
-    layer = (np.arange(len(idx)) * _LAYERS) // max(len(idx), 1)
-    key = layer * _SHADES + level
+    # painter's order, one triangle at a time: OpenCV fills several polygons of one call with
+    # the even-odd rule, so overlapping triangles may not share a call
+    cols = ((np.minimum((shade * _SHADES).astype(int), _SHADES - 1) + 0.5) / _SHADES)[:, None] * bgr[None, :]
+    cols = cols.astype(int).tolist()
     pts_i = np.round(pts2 - off).astype(np.int32)
-    for j in np.nonzero(partial)[0]:  # clipped polygons are drawn in place of their triangle
-        poly = _clip_poly(tri[idx[j]], cam.near)
-        if len(poly) >= 3:
-            q = np.clip(cam.project(poly), -big, big) - off
-            c = ((level[j] + 0.5) / _SHADES * bgr).astype(int).tolist()
-            cv2.fillPoly(target, [np.round(q).astype(np.int32)], c)
-    order = np.argsort(key[whole], kind="stable")
-    kw, pw = key[whole][order], pts_i[whole][order]
-    cuts = np.flatnonzero(np.diff(kw)) + 1
-    for a0, a1 in zip(np.r_[0, cuts], np.r_[cuts, len(kw)], strict=True):
-        if a1 > a0:
-            c = ((kw[a0] % _SHADES + 0.5) / _SHADES * bgr).astype(int).tolist()
-            cv2.fillPoly(target, pw[a0:a1], c)
+    for j in range(len(idx)):
+        if partial[j]:
+            poly = _clip_poly(tri[idx[j]], cam.near)
+            if len(poly) >= 3:
+                q = np.clip(cam.project(poly), -big, big) - off
+                cv2.fillPoly(target, [np.round(q).astype(np.int32)], cols[j])
+        else:
+            cv2.fillConvexPoly(target, pts_i[j], cols[j])
     if target is not img:
         a = max(alpha, 0.45)  # very faint albedo (airbags) is raised so it reads on video
         roi = img[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1]
