@@ -129,7 +129,7 @@ PRESENTATIONS: dict[str, Presentation] = {
             HudItem("speed", layout.ENTRY_PLOT_VELOCITY_NED, "m/s", fmt=".1f", children=()),
             HudItem("tilt", layout.ENTRY_PLOT_TILT, "deg", fmt=".1f"),
         ),
-        distance=4.0,
+        distance=5.0,
         elevation_deg=10.0,
         duration_s=25.0,
         slow=0.2,
@@ -477,7 +477,7 @@ def _draw_mesh(img: np.ndarray, cam: _Camera, verts_w: np.ndarray, faces: np.nda
     # the even-odd rule, so overlapping triangles may not share a call
     cols = ((np.minimum((shade * _SHADES).astype(int), _SHADES - 1) + 0.5) / _SHADES)[:, None] * bgr[None, :]
     cols = cols.astype(int).tolist()
-    pts_i = np.round(pts2 - off).astype(np.int32)
+    pts_i = np.round(np.clip(pts2, -big, big) - off).astype(np.int32)
     for j in range(len(idx)):
         if partial[j]:
             poly = _clip_poly(tri[idx[j]], cam.near)
@@ -793,7 +793,9 @@ def render_mp4(
     bg = _background()
     try:
         for n, t in enumerate(times):
-            cam = _look_at(target[n] + dist[n] * offset_dir, target[n], near=0.02 * dist[n])
+            # aim a little below the box centre: the vehicle sits above the captions and the inset
+            aim = target[n] - np.array([0.0, 0.0, 0.25 * dist[n] / pres.distance])
+            cam = _look_at(aim + dist[n] * offset_dir, aim, near=0.02 * dist[n])
             img = bg.copy()
             for e, strips, colour, width in scene.static_lines:
                 pose = scene.pose(e, t)
