@@ -263,7 +263,7 @@ def init_scenario(
         keys[stream] = key
     header = "\n".join(
         [
-            f"# A {problem.schema.title} scenario on your own data (kind {base.kind!r}).",
+            f"# Your own data: {problem.schema.title} (kind {base.kind!r}).",
             f"# Written by `workbench init {kind_or_name}` from the shipped scenario {base.name!r}; every key of",
             "# the schema is listed with its unit, kind, default and meaning. Active keys hold the",
             "# shipped scenario's values; commented keys are at their default. The example files under",
@@ -298,7 +298,7 @@ def _readme(
 ) -> str:
     schema = problem.schema
     lines = [
-        f"# `{sc.name}`: a {schema.title} scenario on your own data",
+        f"# `{sc.name}`: your own data, {schema.title}",
         "",
         f"Written by `workbench init` from the shipped scenario `{base.name}` (kind `{base.kind}`). It runs as",
         "it is on the example telemetry in `telemetry/`, which the problem's truth simulator wrote in",
