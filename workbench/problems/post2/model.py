@@ -169,6 +169,9 @@ OBSERVATIONS: dict[str, ObservationDef] = {
     "acceleration_magnitude": ObservationDef(
         1, "m/s^2", ("a",), (3, 6), "|sensed (non-gravitational) acceleration|: drag / mass (attitude-free)"
     ),
+    "position_inertial": ObservationDef(
+        3, "m", ("x", "y", "z"), (3, 6), "inertial position p_I (e.g. a surveyed landing point at its time)"
+    ),
 }
 
 #: DCM from the GNC frame G of the vehicle asset to the post2 body frame B (X_B = −Z_G, Z_B = X_G).
@@ -595,6 +598,8 @@ class TrajectoryModel:
             return self.sensed_acceleration_B(x, phase)
         if quantity == "acceleration_axial":
             return self.sensed_acceleration_B(x, phase)[..., :1]
+        if quantity == "position_inertial":
+            return np.array(self.smap.raw(x, "position"))
         if quantity == "acceleration_magnitude":
             F, _ = self.aero_force_moment(x, phase)
             return np.linalg.norm(F, axis=-1, keepdims=True) / phase["mass"]

@@ -68,6 +68,12 @@ ACCEL_SCALE_SIGMA = 0.01
 #: magnetometer inside a rocket with a steel motor case: hard-iron errors of several degrees)
 TILT_SIGMA = math.radians(1.0)
 HEADING_SIGMA = math.radians(10.0)
+#: the magnetometer's heading is trusted only if its dip on the pad is within this of the site's
+#: magnetic inclination [deg]; otherwise (hard/soft iron, or magnetometer axes not those of the
+#: accelerometer) the heading is taken as unknown: 1σ HEADING_SIGMA_UNTRUSTED (as wide as a
+#: linearised filter can carry; the landing point's 3σ then says how little the boost tells)
+DIP_TOLERANCE_DEG = 10.0
+HEADING_SIGMA_UNTRUSTED = math.radians(60.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,13 +137,17 @@ def local_en(lat_deg, lon_deg, lat0_deg: float, lon0_deg: float) -> np.ndarray:
     return np.stack([de, dn], axis=-1)
 
 
-def reconstruct_boost(t, letters, f_B, w_B, mag_B, pressure, meta, declination_deg: float) -> BoostSolution:
+def reconstruct_boost(
+    t, letters, f_B, w_B, mag_B, pressure, meta, declination_deg: float, inclination_deg: float | None = None
+) -> BoostSolution:
     """Pad alignment + strapdown through the boost (module docstring).
 
     ``t`` (n,) [s from launch], ``letters`` (n,) phase letters, ``f_B`` (n, 3) [m/s²], ``w_B`` (n, 3)
     [rad/s], ``mag_B`` (n, 3) [T], ``pressure`` (n,) [Pa] as logged; ``meta`` the flight's
     :class:`~workbench.problems.post2.importers.airbrakes.FlightMetadata`; ``declination_deg`` east
-    positive.  ValueError if there is less than half a pad window of contiguous standby data."""
+    positive; ``inclination_deg`` the site's magnetic dip (down positive) that the pad's measured dip
+    is checked against (None: not checked, the heading trusted).  ValueError if there is less than
+    half a pad window of contiguous standby data."""
     k_launch = int(np.flatnonzero(letters == "M")[0])
     # the motor letter comes after lift-off is detected: ignition is the first sample of the last
     # run of |f| > 1.5 g before it; the pad window ends IGNITION_GUARD_S before ignition
@@ -172,7 +182,11 @@ def reconstruct_boost(t, letters, f_B, w_B, mag_B, pressure, meta, declination_d
     v0 = np.cross([0.0, 0.0, EARTH.rotation_rate], p0)
     # attitude 1σ: tilt about east/north, heading about up -> body frame small angles
     C_B_ENU = quat_to_dcm(q_enu_b).T
-    P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, HEADING_SIGMA**2]) @ C_B_ENU.T
+    down = -f_pad / np.linalg.norm(f_pad)
+    dip = 90.0 - math.degrees(math.acos(np.clip(np.dot(down, m_pad) / np.linalg.norm(m_pad), -1.0, 1.0)))
+    trusted = inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG
+    sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
+    P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_heading**2]) @ C_B_ENU.T
     P0 = np.zeros((9, 9))
     P0[0:3, 0:3] = np.eye(3) * 0.01**2
     P0[3:6, 3:6] = P_att
@@ -204,6 +218,11 @@ def reconstruct_boost(t, letters, f_B, w_B, mag_B, pressure, meta, declination_d
         "rocket_axis_imu": axis.tolist(),
         "tilt_on_pad_deg": math.degrees(math.acos(np.clip(np.dot(axis, f_pad / np.linalg.norm(f_pad)), -1, 1))),
         "samples": int(pad.size),
+        "magnetometer_dip_deg": dip,
+        "site_inclination_deg": inclination_deg,
+        "magnetometer_heading_trusted": bool(trusted),
+        "heading_sigma_deg": math.degrees(sig_heading),
+        "magnetic_field_uT": float(np.linalg.norm(m_pad) * 1e6),
         "ignition_t_s": t_ign,
     }
     C_ENU_M = C_M_ENU.T
@@ -288,12 +307,30 @@ def _fmt(v) -> str:
     return "[" + ", ".join(f"{float(x):.10g}" for x in np.atleast_1d(v)) + "]"
 
 
-def problem_file(name: str, meta, fl: BoostSolution, t0: float, t_end: float, t_apogee: float, t_main) -> str:
+#: 1σ [m] per inertial axis of the landed coordinates as an observation (the landing elevation
+#: is not known: taken as the pad's; ±15 m covers the terrain of the three sites' fields)
+LANDING_SIGMA = 15.0
+
+
+def landing_point_inertial(meta, h_pad: float, t_land: float) -> np.ndarray:
+    """The landed coordinates as a position (3,) [m] in M at ``t_land`` [s after launch] (pad
+    elevation; the Earth turned by ω t_land since launch)."""
+    p_e = pad_position(meta.landed_lat_deg, meta.landed_lon_deg, h_pad)
+    a = EARTH.rotation_rate * t_land
+    c, s_ = math.cos(a), math.sin(a)
+    return np.array([c * p_e[0] - s_ * p_e[1], s_ * p_e[0] + c * p_e[1], p_e[2]])
+
+
+def problem_file(
+    name: str, meta, fl: BoostSolution, t0: float, t_end: float, t_apogee: float, t_main, landing: bool = False
+) -> str:
     """Text of the post2 problem file of a flight's coast and descent (from ``t0`` to ``t_end`` [s
     after launch]): 3-DOF, Earth, the site's standard atmosphere, the rocket as a point mass with
     the metadata's Cd and area, drogue at the apogee letter and main at ``t_main``; states
     position, velocity (from the boost), coast drag multiplier, barometer bias, drogue and main
-    drag areas, wind (prior: the site's surface wind); observations pressure and |specific force|."""
+    drag areas, wind (prior: the site's surface wind); observations pressure and |specific force|;
+    with ``landing`` also the landed coordinates (``landing.csv``) — the variant that estimates the
+    winds under the parachutes (the IMU and the barometer do not see the horizontal drift)."""
     wf = math.radians(meta.wind_from_deg)
     w_en = (-meta.wind_speed * math.sin(wf), -meta.wind_speed * math.cos(wf))
     lines = [
@@ -302,12 +339,13 @@ def problem_file(name: str, meta, fl: BoostSolution, t0: float, t_end: float, t_
         "[scenario]",
         f'name = "{name}"',
         'kind = "post2"',
-        f'description = "real rocket flight {meta.name} ({meta.date[:10]}): coast and descent on Earth"',
+        f'description = "real rocket flight {meta.name} ({meta.date[:10]}): coast and descent on Earth'
+        + (', with the landed coordinates observed (winds)"' if landing else '"'),
         "",
         "[model]",
         "dof = 3",
-        f"t_start_s = {t0:.6f}",
-        f"t_end_s = {t_end:.6f}",
+        f"t_start_s = {t0:.9f}",
+        f"t_end_s = {t_end:.9f}",
         "step_s = 0.05",
         "grid_s = 0.1",
         "",
@@ -381,6 +419,14 @@ def problem_file(name: str, meta, fl: BoostSolution, t0: float, t_end: float, t_
         "gate_probability = 0.9999",
         "",
     ]
+    if landing:
+        lines += [
+            "[observations.landing]  # the landed coordinates at touchdown (metadata, within 1-2 m)",
+            'quantity = "position_inertial"',
+            'file = "landing.csv"',
+            f"sigma = {LANDING_SIGMA}",
+            "",
+        ]
     return "\n".join(lines)
 
 
@@ -390,18 +436,6 @@ def _earth_fixed(p_M: np.ndarray, t: np.ndarray) -> np.ndarray:
     a = -EARTH.rotation_rate * np.asarray(t, float)
     c, s = np.cos(a), np.sin(a)
     return np.column_stack([c * p_M[:, 0] - s * p_M[:, 1], s * p_M[:, 0] + c * p_M[:, 1], p_M[:, 2]])
-
-
-def _fc_frame(ref_q_pad: np.ndarray, f_pad: np.ndarray) -> tuple[bool, float]:
-    """Which way the flight computer's quaternion rotates, decided from the pad: (True if R(q)
-    maps body to its navigation frame, sign of 'up' along that frame's z).  The quaternion whose
-    rotation of the pad's specific force is closest to ±z wins."""
-    f = f_pad / np.linalg.norm(f_pad)
-    R = quat_to_dcm(ref_q_pad)
-    a, b = R @ f, R.T @ f
-    if abs(a[2]) >= abs(b[2]):
-        return True, float(np.sign(a[2]))
-    return False, float(np.sign(b[2]))
 
 
 def score_flight(result, flight: dict, imu, reference) -> dict:
@@ -491,61 +525,76 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     return out
 
 
+#: gyro full scale of the FIRM logs [rad/s] (~1 800 deg/s; samples at or above are saturated)
+GYRO_SATURATION = math.radians(1790.0)
+
+
+def _rotation_angle_deg(R: np.ndarray) -> np.ndarray:
+    """Rotation angle [deg] (n,) of rotation matrices R (n, 3, 3)."""
+    return np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)))
+
+
 def _attitude_scores(flight: dict, imu, reference) -> dict:
-    """Gyro attitude from the pad (bias removed) vs the flight computer's quaternion (see score_flight)."""
+    """Gyro attitude from the pad (bias removed) vs the flight computer's quaternion.
+
+    The flight computer's body frame is its own (flights 3 and 4 log a "rotated" acceleration with
+    +z along the rocket) and its navigation frame is not documented, so the comparison uses two
+    frame-free quantities: the **tilt** of the rocket's long axis from the vertical (ours: the IMU
+    axis of the boost's mean specific force, turned by the integrated gyro, against the pad's
+    vertical; the flight computer's: its body axis closest to its navigation z on the pad, with
+    R(q) read as body -> navigation, z vertical), and the **rotation angle since the pad**
+    (the angle of R_pad^T R(t) in each).  Both over boost and coast up to 1 s before the apogee
+    letter (the ejection and the tumbling under the drogue saturate the gyro)."""
     t = imu.time
-    w = imu.stack(["w.x", "w.y", "w.z"]) - np.radians(flight["pad"]["gyro_bias_deg_s"])
+    w = imu.stack(["w.x", "w.y", "w.z"])
     f = imu.stack(["f.x", "f.y", "f.z"])
+    w_c = w - np.radians(flight["pad"]["gyro_bias_deg_s"])
     qref = reference.stack(["qx", "qy", "qz", "qw"])
-    k0 = int(np.searchsorted(t, 0.0)) - 1
-    k1 = int(np.searchsorted(t, flight["t_end_s"]))
-    pad = (t > -PAD_WINDOW_S) & (t < 0.0)
-    body_to_nav, up_sign = _fc_frame(qref[k0], f[pad].mean(axis=0))
+    t_pad_end = flight["pad"]["ignition_t_s"] - IGNITION_GUARD_S
+    k0 = int(np.searchsorted(t, t_pad_end)) - 1
+    k1 = int(np.searchsorted(t, flight["t_apogee_letter_s"] - 1.0))
+    pad = (t > t_pad_end - PAD_WINDOW_S) & (t <= t_pad_end)
     axis = np.asarray(flight["pad"]["rocket_axis_imu"])
-
-    def R_nb(q):
-        R = quat_to_dcm(q)
-        return R if body_to_nav else np.swapaxes(R, -1, -2)
-
-    # our attitude relative to the pad: integrate the bias-free gyro (body frame) from k0
     n = k1 - k0
     q = np.zeros((n, 4))
     q[0] = [0.0, 0.0, 0.0, 1.0]
-    for i in range(1, n):
+    for i in range(1, n):  # body-frame right product, trapezoidal rate
         j = k0 + i
-        dt = t[j] - t[j - 1]
-        q[i] = quat_multiply(q[i - 1], quat_from_rotvec(0.5 * (w[j] + w[j - 1]) * dt))
+        q[i] = quat_multiply(q[i - 1], quat_from_rotvec(0.5 * (w_c[j] + w_c[j - 1]) * (t[j] - t[j - 1])))
         q[i] /= np.linalg.norm(q[i])
-    R_rel_ours = quat_to_dcm(q)  # R_{B0 B(t)}
-    R0 = R_nb(qref[k0])
-    Rfc = R_nb(qref[k0:k1])
-    R_rel_fc = np.einsum("ji,njk->nik", R0, Rfc)
-    E = np.einsum("nji,njk->nik", R_rel_fc, R_rel_ours)
-    ang = np.degrees(np.arccos(np.clip((np.trace(E, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)))
-    up_b0 = f[pad].mean(axis=0) / np.linalg.norm(f[pad].mean(axis=0))  # "up" in the pad body frame
-    ax_ours = R_rel_ours @ axis
-    tilt_ours = np.degrees(np.arccos(np.clip(ax_ours @ up_b0, -1, 1)))
-    ax_fc = Rfc @ axis
-    tilt_fc = np.degrees(np.arccos(np.clip(up_sign * ax_fc[:, 2], -1, 1)))
+    R_rel_ours = quat_to_dcm(q)  # R_{B_pad B(t)}
+    up_b0 = f[pad].mean(axis=0) / np.linalg.norm(f[pad].mean(axis=0))
+    tilt_ours = np.degrees(np.arccos(np.clip((R_rel_ours @ axis) @ up_b0, -1, 1)))
+    Rfc = quat_to_dcm(qref[k0:k1])  # read as body -> navigation
+    kax = int(np.argmax(np.abs(Rfc[0][2])))
+    sgn = float(np.sign(Rfc[0][2, kax]))
+    tilt_fc = np.degrees(np.arccos(np.clip(sgn * Rfc[:, 2, kax], -1, 1)))
+    ang_fc = _rotation_angle_deg(np.einsum("ji,njk->nik", Rfc[0], Rfc))
+    ang_ours = _rotation_angle_deg(R_rel_ours)
     tt = t[k0:k1]
-    boost_coast = tt < flight["t_apogee_letter_s"]
-    descent = ~boost_coast
     kb = int(np.searchsorted(tt, flight["t_start_s"]))
-    ka = int(np.searchsorted(tt, flight["t_apogee_letter_s"]))
+    dtilt = tilt_ours - tilt_fc
+    dang = ang_ours - ang_fc
+    sat = np.any(np.abs(w) >= GYRO_SATURATION, axis=1)
     return {
-        "convention": ("R(q) body->nav" if body_to_nav else "R(q) nav->body")
-        + f", up = {'+' if up_sign > 0 else '-'}z",
-        "relative_rotation_error_deg": {
-            "at_burnout": float(ang[kb]),
-            "at_apogee": float(ang[min(ka, ang.size - 1)]),
-            "rms_boost_coast": float(np.sqrt(np.mean(ang[boost_coast] ** 2))),
-            "rms_descent": float(np.sqrt(np.mean(ang[descent] ** 2))) if np.any(descent) else None,
-        },
+        "window_s": [float(tt[0]), float(tt[-1])],
+        "flight_computer_long_axis": f"{'+' if sgn > 0 else '-'}{'xyz'[kax]} (its body frame)",
         "tilt_deg": {
             "ours_at_burnout": float(tilt_ours[kb]),
             "flight_computer_at_burnout": float(tilt_fc[kb]),
-            "ours_at_apogee": float(tilt_ours[min(ka, tilt_ours.size - 1)]),
-            "flight_computer_at_apogee": float(tilt_fc[min(ka, tilt_fc.size - 1)]),
-            "difference_rms_boost_coast": float(np.sqrt(np.mean((tilt_ours - tilt_fc)[boost_coast] ** 2))),
+            "ours_end": float(tilt_ours[-1]),
+            "flight_computer_end": float(tilt_fc[-1]),
+            "difference_rms": float(np.sqrt(np.mean(dtilt**2))),
+            "difference_max_abs": float(np.max(np.abs(dtilt))),
+        },
+        "rotation_since_pad_deg": {
+            "ours_end": float(ang_ours[-1]),
+            "flight_computer_end": float(ang_fc[-1]),
+            "difference_rms": float(np.sqrt(np.mean(dang**2))),
+            "difference_max_abs": float(np.max(np.abs(dang))),
+        },
+        "gyro_saturated_samples": {
+            "boost_coast": int(np.sum(sat[(t >= 0) & (t < flight["t_apogee_letter_s"])])),
+            "descent": int(np.sum(sat[t >= flight["t_apogee_letter_s"]])),
         },
     }

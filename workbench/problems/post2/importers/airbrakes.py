@@ -36,6 +36,9 @@ from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, write_
 from workbench.problems.post2 import rocket
 
 __all__ = [
+    "HELP",
+    "add_arguments",
+    "run",
     "PHASES",
     "COLUMNS",
     "FlightLog",
@@ -339,14 +342,18 @@ def import_flight(
     out_dir: str | os.PathLike,
     *,
     declination_deg: float = 0.0,
+    inclination_deg: float | None = None,
     obs_rate_hz: float = 10.0,
     name: str | None = None,
     t_end_s: float | None = None,
 ) -> Path:
-    """Import one flight: writes telemetry CSVs, ``flight.json`` and ``<name>.toml`` into ``out_dir``.
+    """Import one flight: writes telemetry CSVs, ``flight.json``, ``<name>.toml`` and the variant
+    ``<name>_landing.toml`` that also observes the landed coordinates into ``out_dir``.
 
     ``declination_deg`` magnetic declination at the site (east positive; used for the pad heading);
-    ``obs_rate_hz`` rate of the block-mean observations; ``t_end_s`` [s after launch] ends the
+    ``inclination_deg`` the site's magnetic dip (the magnetometer's heading is trusted only if its
+    dip on the pad agrees within 10°; None: unchecked); ``obs_rate_hz`` rate of the block-mean
+    observations; ``t_end_s`` [s after launch] ends the
     reconstruction early (default: touchdown, the first ``L`` row).  Returns the problem file.
     """
     log = read_log(log_path)
@@ -364,7 +371,9 @@ def import_flight(
                 column="timestamp_seconds",
                 row=g.row,
             )
-    fl = rocket.reconstruct_boost(t, log.letters, log.f_B, log.w_B, log.mag_B, log.pressure, meta, declination_deg)
+    fl = rocket.reconstruct_boost(
+        t, log.letters, log.f_B, log.w_B, log.mag_B, log.pressure, meta, declination_deg, inclination_deg
+    )
     t_apogee = log.phase_start("F") - t_launch
     try:
         t_land = log.phase_start("L") - t_launch
@@ -444,4 +453,46 @@ def import_flight(
     (out / "flight.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
     path = out / f"{name}.toml"
     path.write_text(rocket.problem_file(name, meta, fl, t0, t_end, t_apogee, t_main), encoding="utf-8")
+    # the variant that also observes the landed coordinates (winds under the parachutes)
+    p_land = rocket.landing_point_inertial(meta, fl.h_pad, t_end)
+    write_telemetry(
+        out / "landing.csv",
+        np.array([t_end - 1e-3]),  # 1 ms before the touchdown letter: inside the span
+        {c: (np.array([p_land[i]]), "m") for i, c in enumerate("xyz")},
+        meta={"meaning": "metadata landed coordinates at touchdown, inertial frame M, pad elevation"},
+    )
+    text = rocket.problem_file(f"{name}_landing", meta, fl, t0, t_end, t_apogee, t_main, landing=True)
+    (out / f"{name}_landing.toml").write_text(text, encoding="utf-8")
     return path
+
+
+HELP = "AirbrakesV2 FIRM flight log (CSV + metadata.json) -> telemetry + post2 problem file"
+
+
+def add_arguments(parser) -> None:
+    """The ``workbench import airbrakes`` options (an ``argparse`` parser)."""
+    parser.add_argument("log", help="the flight's CSV log (e.g. jackpot_launch_1.csv)")
+    parser.add_argument("--metadata", required=True, help="metadata.json holding the flight's entry")
+    parser.add_argument("--out", required=True, help="output folder (telemetry CSVs, flight.json, problem files)")
+    parser.add_argument("--declination-deg", type=float, default=0.0, help="magnetic declination at the site, east +")
+    parser.add_argument(
+        "--inclination-deg",
+        type=float,
+        default=None,
+        help="magnetic dip at the site (down +): the magnetometer heading is trusted only if the pad agrees",
+    )
+    parser.add_argument("--obs-rate-hz", type=float, default=10.0, help="rate of the block-mean observations")
+    parser.add_argument("--name", default=None, help="problem name (default: the log's file stem)")
+
+
+def run(args) -> Path:
+    """Run the import from parsed ``args`` (:func:`add_arguments`); returns the problem file."""
+    return import_flight(
+        args.log,
+        args.metadata,
+        args.out,
+        declination_deg=args.declination_deg,
+        inclination_deg=args.inclination_deg,
+        obs_rate_hz=args.obs_rate_hz,
+        name=args.name,
+    )
