@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from workbench.core.bodies import EARTH, MARS, TITAN, Body
+from workbench.core.bodies import MARS, TITAN, Body
 
 __all__ = [
     "R_UNIVERSAL",
@@ -48,6 +48,7 @@ __all__ = [
     "TabulatedAtmosphere",
     "MarsEngineeringAtmosphere",
     "TitanDefaultAtmosphere",
+    "US76_EARTH_RADIUS",
     "AIR_GAS_CONSTANT",
     "AIR_GAMMA",
     "AIR_SUTHERLAND",
@@ -381,6 +382,8 @@ class TitanDefaultAtmosphere(Atmosphere):
         return p / (self.gas_constant * T)
 
 
+US76_EARTH_RADIUS = 6356766.0
+"""Effective Earth radius r0 [m] of the U.S. Standard Atmosphere 1976's geopotential altitude."""
 AIR_GAS_CONSTANT = 287.053
 """Specific gas constant of dry air [J/(kg K)] (U.S. Standard Atmosphere 1976: R*/M0)."""
 AIR_GAMMA = 1.4
@@ -398,8 +401,9 @@ class EarthStandardAtmosphere(Atmosphere):
     rates −6.5, 0, +1, +2.8, 0, −2.8, −2 K/km with T0 = 288.15 K reproduce the 1976 table).
     ``sea_level_pressure`` [Pa] (default 101 325; a site's QNH) and ``sea_level_temperature`` [K]
     (default 288.15) anchor the profile, so a day's weather shifts the whole column.
-    Altitudes above the Earth's mean radius (a sphere: the geopotential uses
-    ``EARTH.reference_radius`` and g0 = 9.80665 m/s²); held isothermal above 84.852 km.
+    Geometric altitudes h (above the sea-level sphere) and geopotential altitudes z are related as
+    in the standard, ``z = r0 h / (r0 + h)`` with its r0 = 6 356 766 m and g0 = 9.80665 m/s²;
+    held isothermal above 84.852 km.
     """
 
     sea_level_pressure: float = 101325.0
@@ -418,7 +422,7 @@ class EarthStandardAtmosphere(Atmosphere):
 
     def _profile(self, h):
         h = _h(h)
-        r = EARTH.reference_radius
+        r = US76_EARTH_RADIUS
         z = np.asarray(self.NODE_Z, dtype=float)
         h_nodes = r * z / (r - z)  # geometric altitude of the geopotential nodes
         T_nodes = self.sea_level_temperature + np.asarray(self.NODE_DT, dtype=float)
@@ -439,5 +443,5 @@ class EarthStandardAtmosphere(Atmosphere):
         p = np.asarray(p, dtype=float)
         T0, L = self.sea_level_temperature, 0.0065
         z = T0 / L * (1.0 - (p / self.sea_level_pressure) ** (self.gas_constant * L / 9.80665))
-        r = EARTH.reference_radius
+        r = US76_EARTH_RADIUS
         return r * z / (r - z)

@@ -30,8 +30,10 @@ difference between the day's lapse rate and the standard one).
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.stats import chi2
@@ -40,6 +42,10 @@ from workbench.core.atmosphere import EarthStandardAtmosphere
 from workbench.core.bodies import EARTH
 from workbench.core.rotation import dcm_to_quat, quat_from_rotvec, quat_multiply, quat_to_dcm, triad
 from workbench.estimation.strapdown import ImuArrays, integrate
+from workbench.io.scenario import load_scenario
+from workbench.io.telemetry import read_telemetry
+from workbench.problems.post2 import pipeline
+from workbench.problems.post2.problem import Post2Problem
 
 __all__ = [
     "PAD_WINDOW_S",
@@ -54,6 +60,8 @@ __all__ = [
     "problem_file",
     "local_en",
     "score_flight",
+    "run_flight",
+    "landing_point_inertial",
 ]
 
 #: length of the standby window that aligns the IMU on the pad [s]
@@ -430,6 +438,21 @@ def problem_file(
     return "\n".join(lines)
 
 
+def run_flight(problem_path) -> tuple[object, dict]:
+    """Reconstruct an imported flight (its post2 problem file; the import's ``flight.json``,
+    ``imu.csv`` and ``reference.csv`` beside it) and score it: (Post2Result, :func:`score_flight`)."""
+    path = Path(problem_path)
+    sc = load_scenario(path)
+    files = Post2Problem().telemetry_files(sc)
+    result = None
+    for stage in pipeline.reconstruct(sc, files, None):
+        result = stage
+    flight = json.loads((path.parent / "flight.json").read_text(encoding="utf-8"))
+    imu = read_telemetry(path.parent / "imu.csv")
+    ref = read_telemetry(path.parent / "reference.csv")
+    return result, score_flight(result, flight, imu, ref)
+
+
 def _earth_fixed(p_M: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Earth-fixed position (n, 3) of inertial p_M (n, 3) at t (n,) [s after launch] (M = the
     Earth-fixed axes at launch; rotation about +Z)."""
@@ -469,6 +492,13 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         "error_percent": float(100.0 * (h[k] - meta["apogee"]) / meta["apogee"]),
         "flight_computer_max_m": float(np.max(reference.channel("h"))),
     }
+    # the same apogee as a standard-day altimeter reads it (T0 = 288.15 K): the pressure altitude
+    atm, _ = site_atmosphere(meta["qnh"], meta["temperature"], flight["pad"]["standby_pressure_pa"])
+    std = EarthStandardAtmosphere(meta["qnh"], 288.15)
+    p_apo = float(atm.pressure(h[k] + h_pad))
+    h_std = float(std.altitude_of_pressure(p_apo) - std.altitude_of_pressure(flight["pad"]["standby_pressure_pa"]))
+    out["apogee"]["standard_day_pressure_altitude_m"] = h_std
+    out["apogee"]["standard_day_error_m"] = h_std - meta["apogee"]
     # landing point
     pe = _earth_fixed(p[-1:], t[-1:])[0]
     lat = math.degrees(math.asin(pe[2] / np.linalg.norm(pe)))
@@ -497,10 +527,13 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     # altitude vs the flight computer's solution
     href = np.interp(t, reference.time, reference.channel("h"))
     dh = h - href
+    late = t >= flight["t_start_s"] - TAIL_OFF_S + BURNOUT_TRANSIENT_S  # the baro is de-weighted before
     out["altitude_vs_flight_computer"] = {
         "rms_m": float(np.sqrt(np.mean(dh**2))),
         "max_abs_m": float(np.max(np.abs(dh))),
         "at_apogee_m": float(dh[k]),
+        "rms_after_burnout_transient_m": float(np.sqrt(np.mean(dh[late] ** 2))),
+        "max_abs_after_burnout_transient_m": float(np.max(np.abs(dh[late]))),
     }
     out["attitude_vs_flight_computer"] = _attitude_scores(flight, imu, reference)
     # estimated parameters (smoothed, end of the span) and the wind prior

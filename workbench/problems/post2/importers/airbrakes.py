@@ -46,6 +46,7 @@ __all__ = [
     "FlightMetadata",
     "read_log",
     "find_gaps",
+    "block_means",
     "read_metadata",
     "import_flight",
 ]
@@ -322,7 +323,7 @@ def read_metadata(path: str | os.PathLike, flight: str) -> FlightMetadata:
     )
 
 
-def _block_means(t: np.ndarray, v: np.ndarray, t0: float, t1: float, rate_hz: float, gaps: tuple[Gap, ...]):
+def block_means(t: np.ndarray, v: np.ndarray, t0: float, t1: float, rate_hz: float, gaps: tuple[Gap, ...]):
     """Means of v (n, k) over consecutive blocks of 1/rate_hz seconds in [t0, t1]; a block never
     spans a gap (the block is cut at the gap).  Returns (t_mean (m,), v_mean (m, k), count (m,))."""
     sel = (t >= t0) & (t <= t1)
@@ -346,6 +347,7 @@ def import_flight(
     obs_rate_hz: float = 10.0,
     name: str | None = None,
     t_end_s: float | None = None,
+    flight: str | None = None,
 ) -> Path:
     """Import one flight: writes telemetry CSVs, ``flight.json``, ``<name>.toml`` and the variant
     ``<name>_landing.toml`` that also observes the landed coordinates into ``out_dir``.
@@ -357,9 +359,8 @@ def import_flight(
     reconstruction early (default: touchdown, the first ``L`` row).  Returns the problem file.
     """
     log = read_log(log_path)
-    meta = read_metadata(metadata_path, Path(log_path).name)
+    meta = read_metadata(metadata_path, flight or Path(log_path).name)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     name = name or Path(log_path).stem
     t_launch = log.phase_start("M")
     t = log.t - t_launch  # seconds from launch (the first motor row)
@@ -385,10 +386,11 @@ def import_flight(
     if not t_end > t0 + 1.0:
         raise ValueError(f"{log.path.name}: the reconstruction span {t0:.2f} .. {t_end:.2f} s is too short")
 
+    out.mkdir(parents=True, exist_ok=True)  # only now: a refused log writes nothing
     # observations: block means after burnout, never across a gap
     gaps_rel = tuple(Gap(g.t_a - t_launch, g.t_b - t_launch, g.dt, g.row, g.phase) for g in log.gaps)
-    tp, pm, cnt = _block_means(t, log.pressure[:, None], t0, t_end, obs_rate_hz, gaps_rel)
-    ta, am, _ = _block_means(t, np.linalg.norm(log.f_B, axis=1)[:, None], t0, t_end, obs_rate_hz, gaps_rel)
+    tp, pm, cnt = block_means(t, log.pressure[:, None], t0, t_end, obs_rate_hz, gaps_rel)
+    ta, am, _ = block_means(t, np.linalg.norm(log.f_B, axis=1)[:, None], t0, t_end, obs_rate_hz, gaps_rel)
     write_telemetry(
         out / "pressure.csv", tp, {"p": (pm[:, 0], "Pa")}, meta={"source": log.path.name, "samples_per_block": "varies"}
     )
@@ -483,6 +485,7 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--obs-rate-hz", type=float, default=10.0, help="rate of the block-mean observations")
     parser.add_argument("--name", default=None, help="problem name (default: the log's file stem)")
+    parser.add_argument("--flight", default=None, help="the metadata entry (default: the log's file name)")
 
 
 def run(args) -> Path:
@@ -495,4 +498,5 @@ def run(args) -> Path:
         inclination_deg=args.inclination_deg,
         obs_rate_hz=args.obs_rate_hz,
         name=args.name,
+        flight=args.flight,
     )
