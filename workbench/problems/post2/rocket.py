@@ -45,7 +45,7 @@ from workbench.estimation.strapdown import ImuArrays, integrate
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import pipeline
-from workbench.problems.post2.problem import Post2Problem
+from workbench.problems.post2.config import config_for
 
 __all__ = [
     "PAD_WINDOW_S",
@@ -443,7 +443,11 @@ def run_flight(problem_path) -> tuple[object, dict]:
     ``imu.csv`` and ``reference.csv`` beside it) and score it: (Post2Result, :func:`score_flight`)."""
     path = Path(problem_path)
     sc = load_scenario(path)
-    files = Post2Problem().telemetry_files(sc)
+    files = {}
+    for o in config_for(sc).observations:  # as Post2Problem.telemetry_files (no recording import here)
+        files[o.name] = sc.path_of(f"observations.{o.name}.file")
+        if o.weights is not None:
+            files[o.name + "_weights"] = sc.path_of(f"observations.{o.name}.weights")
     result = None
     for stage in pipeline.reconstruct(sc, files, None):
         result = stage

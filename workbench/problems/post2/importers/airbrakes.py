@@ -33,7 +33,6 @@ import numpy as np
 
 from workbench.core.bodies import G0
 from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, write_events, write_telemetry
-from workbench.problems.post2 import rocket
 
 __all__ = [
     "HELP",
@@ -358,6 +357,9 @@ def import_flight(
     observations; ``t_end_s`` [s after launch] ends the
     reconstruction early (default: touchdown, the first ``L`` row).  Returns the problem file.
     """
+    # imported here: the command line builds its parser from this module and stays light
+    from workbench.problems.post2 import rocket
+
     log = read_log(log_path)
     meta = read_metadata(metadata_path, flight or Path(log_path).name)
     out = Path(out_dir)
