@@ -1,4 +1,4 @@
-"""Command line: ``workbench list | run | mc | inspect | compare | replay | init``.
+"""Command line: ``workbench list | run | mc | inspect | compare | replay | init | import``.
 
 Exit codes (scripts can rely on them):
   0  success
@@ -184,8 +184,17 @@ def cmd_init(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    """Convert a third-party log with the importer named on the command line (registry.IMPORTERS)."""
+    from workbench.problems import registry
+
+    path = registry.importer(args.importer).run(args)
+    print(f"wrote {path} (run it with: workbench run {path})")
+    return EXIT_OK
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser (sub-commands list, run, inspect)."""
+    """The argument parser (sub-commands list, run, mc, inspect, import)."""
     p = argparse.ArgumentParser(prog="workbench", description="EDL reconstruction workbench")
     sub = p.add_subparsers(dest="command", required=True)
     sp = sub.add_parser("list", help="list the shipped scenarios (an error if none are found)")
@@ -251,6 +260,15 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--seed", type=int, default=1, help="seed of the example telemetry's sensor errors")
     sp.add_argument("--force", action="store_true", help="overwrite an existing scenario.toml in the folder")
     sp.set_defaults(func=cmd_init)
+    from workbench.problems import registry
+
+    sp = sub.add_parser("import", help="convert a third-party flight log into telemetry files and a problem file")
+    isub = sp.add_subparsers(dest="importer", required=True)
+    for name in sorted(registry.IMPORTERS):
+        mod = registry.importer(name)
+        ip = isub.add_parser(name, help=mod.HELP)
+        mod.add_arguments(ip)
+        ip.set_defaults(func=cmd_import)
     return p
 
 

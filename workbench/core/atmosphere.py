@@ -13,12 +13,16 @@ Models:
   above ~50 km by an isothermal hydrostatic extension.
 * :class:`TitanDefaultAtmosphere` — a documented layered engineering profile anchored on the
   Huygens surface values.
+* :class:`EarthStandardAtmosphere` — the U.S. Standard Atmosphere 1976 layers to 86 km, with the
+  sea-level pressure and temperature replaceable by a site's weather (QNH and the site's
+  temperature reduced to sea level along the standard lapse rate).
 
 References: NASA Glenn Research Center, "Mars Atmosphere Model" (engineering fit to MGS data);
 MEADS paper (Karlgaard et al., MSL air data),
 Eq. (45)–(46) and Table 1 (Knudsen number, Sutherland law and constants for CO2); AMELIA Sect. 9
 (M = 43.41 g/mol); Fulchignoni et al., Nature 438, 2005 (Titan HASI profile); White, *Viscous
-Fluid Flow*, 3rd ed., Table 1-2 (Sutherland constants of N2).
+Fluid Flow*, 3rd ed., Table 1-2 (Sutherland constants of N2 and air); NOAA/NASA/USAF, *U.S.
+Standard Atmosphere, 1976*, Tables 1 and 4 (layers, R = 287.053 J/(kg K), γ = 1.4).
 """
 
 from __future__ import annotations
@@ -44,6 +48,11 @@ __all__ = [
     "TabulatedAtmosphere",
     "MarsEngineeringAtmosphere",
     "TitanDefaultAtmosphere",
+    "US76_EARTH_RADIUS",
+    "AIR_GAS_CONSTANT",
+    "AIR_GAMMA",
+    "AIR_SUTHERLAND",
+    "EarthStandardAtmosphere",
 ]
 
 R_UNIVERSAL = 8.314462618
@@ -371,3 +380,68 @@ class TitanDefaultAtmosphere(Atmosphere):
     def density(self, h):
         p, T = self._profile(h)
         return p / (self.gas_constant * T)
+
+
+US76_EARTH_RADIUS = 6356766.0
+"""Effective Earth radius r0 [m] of the U.S. Standard Atmosphere 1976's geopotential altitude."""
+AIR_GAS_CONSTANT = 287.053
+"""Specific gas constant of dry air [J/(kg K)] (U.S. Standard Atmosphere 1976: R*/M0)."""
+AIR_GAMMA = 1.4
+"""Ratio of specific heats of dry air [-]."""
+AIR_SUTHERLAND = Sutherland(mu0=1.716e-5, T0=273.15, C=110.4)
+"""Air: μ0 = 1.716e-5 Pa s, T0 = 273.15 K, C = 110.4 K (White, Table 1-2)."""
+
+
+@dataclass(frozen=True)
+class EarthStandardAtmosphere(Atmosphere):
+    """U.S. Standard Atmosphere 1976 (dry air, hydrostatic, T linear in geopotential altitude).
+
+    Layer nodes (geopotential km / K): 0 / T0, 11 / T0 − 71.5, 20 / T0 − 71.5, 32 / T0 − 59.5,
+    47 / T0 − 15.5, 51 / T0 − 15.5, 71 / T0 − 43.5, 84.852 / T0 − 101.3 (the standard lapse
+    rates −6.5, 0, +1, +2.8, 0, −2.8, −2 K/km with T0 = 288.15 K reproduce the 1976 table).
+    ``sea_level_pressure`` [Pa] (default 101 325; a site's QNH) and ``sea_level_temperature`` [K]
+    (default 288.15) anchor the profile, so a day's weather shifts the whole column.
+    Geometric altitudes h (above the sea-level sphere) and geopotential altitudes z are related as
+    in the standard, ``z = r0 h / (r0 + h)`` with its r0 = 6 356 766 m and g0 = 9.80665 m/s²;
+    held isothermal above 84.852 km.
+    """
+
+    sea_level_pressure: float = 101325.0
+    sea_level_temperature: float = 288.15
+    gas_constant: float = AIR_GAS_CONSTANT
+    gamma: float = AIR_GAMMA
+    sutherland: Sutherland = field(default=AIR_SUTHERLAND)
+
+    #: geopotential node altitudes [m] and temperature offsets from T0 [K] of the 1976 layers
+    NODE_Z = (0.0, 11000.0, 20000.0, 32000.0, 47000.0, 51000.0, 71000.0, 84852.0)
+    NODE_DT = (0.0, -71.5, -71.5, -59.5, -15.5, -15.5, -43.5, -101.3)
+
+    def __post_init__(self) -> None:
+        if not self.sea_level_pressure > 0 or not self.sea_level_temperature > 80.0:
+            raise ValueError("EarthStandardAtmosphere: sea-level pressure must be > 0 and temperature > 80 K")
+
+    def _profile(self, h):
+        h = _h(h)
+        r = US76_EARTH_RADIUS
+        z = np.asarray(self.NODE_Z, dtype=float)
+        h_nodes = r * z / (r - z)  # geometric altitude of the geopotential nodes
+        T_nodes = self.sea_level_temperature + np.asarray(self.NODE_DT, dtype=float)
+        return _layered_pressure(h, h_nodes, T_nodes, self.sea_level_pressure, 9.80665, self.gas_constant, r)
+
+    def pressure(self, h):
+        return self._profile(h)[0]
+
+    def temperature(self, h):
+        return self._profile(h)[1]
+
+    def density(self, h):
+        p, T = self._profile(h)
+        return p / (self.gas_constant * T)
+
+    def altitude_of_pressure(self, p) -> np.ndarray:
+        """Inverse of :meth:`pressure` in the troposphere (h < 11 km) [m] for p [Pa], any shape."""
+        p = np.asarray(p, dtype=float)
+        T0, L = self.sea_level_temperature, 0.0065
+        z = T0 / L * (1.0 - (p / self.sea_level_pressure) ** (self.gas_constant * L / 9.80665))
+        r = US76_EARTH_RADIUS
+        return r * z / (r - z)

@@ -11,13 +11,19 @@ import importlib
 
 from workbench.problems.base import Problem
 
-__all__ = ["UnknownKindError", "get", "kinds", "register", "unregister"]
+__all__ = ["IMPORTERS", "UnknownKindError", "get", "importer", "kinds", "register", "unregister"]
 
 #: built-in kinds -> "module:attribute" of a zero-argument factory (imported on first use)
 BUILTIN: dict[str, str] = {
     "droptest": "workbench.problems.droptest.problem:DropTestProblem",
     "entry": "workbench.problems.entry.problem:EntryProblem",
     "post2": "workbench.problems.post2.problem:Post2Problem",
+}
+
+#: importers of third-party logs (``workbench import <name> ...``) -> module; each module has
+#: ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> Path`` (the problem file written)
+IMPORTERS: dict[str, str] = {
+    "airbrakes": "workbench.problems.post2.importers.airbrakes",
 }
 
 _registered: dict[str, Problem] = {}
@@ -83,3 +89,10 @@ def kinds() -> list[str]:
 
 def _protocol_members() -> list[str]:
     return [*Problem.__annotations__, *(n for n in vars(Problem) if not n.startswith("_"))]
+
+
+def importer(name: str):
+    """The importer module called ``name`` (:data:`IMPORTERS`); KeyError listing the known ones."""
+    if name not in IMPORTERS:
+        raise KeyError(f"unknown importer {name!r}; importers: {', '.join(sorted(IMPORTERS))}")
+    return importlib.import_module(IMPORTERS[name])

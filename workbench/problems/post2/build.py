@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from workbench.core.atmosphere import (
+    EarthStandardAtmosphere,
     ExponentialAtmosphere,
     MarsEngineeringAtmosphere,
     TabulatedAtmosphere,
@@ -49,6 +50,8 @@ def environment(scenario: Scenario, cfg: Post2Config, density_factor=None) -> En
             atm = TabulatedAtmosphere(*(np.asarray(e[c], dtype=float) for c in cols), extrapolate="clamp")
         except (TypeError, ValueError) as err:
             raise ScenarioError(scenario.path, "environment.table_altitude_m", f"bad atmosphere table: {err}") from None
+    elif atm_kind == "earth_standard":
+        atm = EarthStandardAtmosphere(e["sea_level_pressure_pa"], e["sea_level_temperature_K"])
     elif atm_kind == "mars_engineering":
         atm = MarsEngineeringAtmosphere()
     else:
@@ -67,12 +70,12 @@ def environment(scenario: Scenario, cfg: Post2Config, density_factor=None) -> En
 def vehicle(scenario: Scenario, cfg: Post2Config, ca_factor=1.0, cn_factor=1.0, cm_factor=1.0) -> Vehicle:
     """The :class:`Vehicle` of ``[vehicle]``: the asset (a shipped name under ``assets/vehicles`` or a
     path) with its capsule table, parachute and inertia mapped to the body frame B; without a file a
-    point mass of ``mass_kg`` with no aerodynamics."""
+    point mass of ``mass_kg`` with no aerodynamics, or with a constant drag coefficient ``cd``."""
     v = cfg.data["vehicle"]
     if v["file"] is None:
         if v["mass_kg"] is None:
             raise ScenarioError(scenario.path, "vehicle.mass_kg", "needed when no vehicle file is given")
-        return Vehicle(float(v["mass_kg"]), np.eye(3), None, None, v["ref_area_m2"])
+        return Vehicle(float(v["mass_kg"]), np.eye(3), None, None, v["ref_area_m2"], cd=v["cd"])
     name = v["file"]
     shipped = assets_dir() / "vehicles" / f"{name}.toml"
     path = shipped if shipped.is_file() else scenario.resolve(name)
@@ -86,7 +89,7 @@ def vehicle(scenario: Scenario, cfg: Post2Config, ca_factor=1.0, cn_factor=1.0, 
 
 def events(cfg: Post2Config) -> tuple[Event, ...]:
     """The :class:`Event` list of ``[events.*]`` in file order."""
-    return tuple(Event(e.name, e.when, e.value, e.mass, e.ref_area, e.parachute) for e in cfg.events)
+    return tuple(Event(e.name, e.when, e.value, e.mass, e.ref_area, e.parachute, e.chute) for e in cfg.events)
 
 
 def state_map(cfg: Post2Config) -> StateMap:

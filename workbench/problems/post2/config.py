@@ -72,10 +72,12 @@ EVENT_KEYS: dict[str, tuple[str, Any, str]] = {
     "mass_kg": (_F, None, "new mass"),
     "ref_area_m2": (_F, None, "new aerodynamic reference area"),
     "parachute": (_B, None, "true: the parachute opens; false: it is released"),
+    "chute": (_S, None, "`drogue`, `main` or `none`: which drag-area state acts from here (rocket flights)"),
 }
 
 EVENT_CONDITIONS = ("time", "mach_below", "altitude_below", "dynamic_pressure_above")
 PROCESSES = ("constant", "random_walk", "markov")
+CHUTES = ("drogue", "main", "none")
 
 
 def _named_meaning(keys: dict) -> str:
@@ -121,8 +123,10 @@ SCHEMA = Schema(
                     _S,
                     "none",
                     meaning="atmosphere model",
-                    choices=("none", "exponential", "table", "mars_engineering", "titan_default"),
+                    choices=("none", "exponential", "table", "mars_engineering", "titan_default", "earth_standard"),
                 ),
+                Key("sea_level_pressure_pa", _F, 101325.0, "Pa", "earth_standard: sea-level pressure (a site's QNH)"),
+                Key("sea_level_temperature_K", _F, 288.15, "K", "earth_standard: sea-level temperature"),
                 Key("rho0_kg_m3", _F, 0.015, "kg/m^3", "exponential: density at h = 0"),
                 Key("scale_height_m", _F, 11100.0, "m", "exponential: scale height"),
                 Key("temperature_K", _F, 210.0, "K", "exponential: temperature"),
@@ -144,6 +148,7 @@ SCHEMA = Schema(
                 ),
                 Key("mass_kg", _F, None, "kg", "mass (default: the asset's entry mass)"),
                 Key("ref_area_m2", _F, None, "m^2", "aerodynamic reference area (default: the asset's)"),
+                Key("cd", _F, None, "1", "constant drag coefficient on ref_area_m2 when there is no vehicle file"),
             ),
         ),
         Table("events", "phase changes", free="table", free_meaning="`[events.<name>]`: " + _named_meaning(EVENT_KEYS)),
@@ -281,7 +286,8 @@ class ObservationSpec:
 
 @dataclass(frozen=True)
 class EventSpec:
-    """One event: ``name``, ``when`` condition, ``value`` (SI), new ``mass``/``ref_area``/``parachute``."""
+    """One event: ``name``, ``when`` condition, ``value`` (SI), new ``mass``/``ref_area``/``parachute``,
+    ``chute`` (``drogue``/``main``/``none``: which drag-area state acts from the event on)."""
 
     name: str
     when: str
@@ -289,6 +295,7 @@ class EventSpec:
     mass: float | None
     ref_area: float | None
     parachute: bool | None
+    chute: str | None = None
 
 
 @dataclass(frozen=True)
@@ -315,7 +322,7 @@ class Post2Config:
 
 def _factor(unit: str) -> float:
     """SI value of one ``unit`` (a pure scale: the state units have no offset)."""
-    return 1.0 if unit in ("1", "-") else float(to_si(1.0, unit)[0])
+    return 1.0 if unit in ("1", "-", "m^2") else float(to_si(1.0, unit)[0])
 
 
 def _si(v: np.ndarray, unit: str) -> np.ndarray:
@@ -430,7 +437,10 @@ def _event(file: Path, name: str, raw: dict) -> EventSpec:
             f"{pre}.when",
             f"{t['when']!r}: use one of {', '.join(EVENT_CONDITIONS)}{_suggest(t['when'], EVENT_CONDITIONS)}",
         )
-    return EventSpec(name, t["when"], float(t["value"]), t["mass_kg"], t["ref_area_m2"], t["parachute"])
+    if t["chute"] is not None and t["chute"] not in CHUTES:
+        hint = _suggest(t["chute"], CHUTES)
+        raise ScenarioError(file, f"{pre}.chute", f"{t['chute']!r}: use one of {', '.join(CHUTES)}{hint}")
+    return EventSpec(name, t["when"], float(t["value"]), t["mass_kg"], t["ref_area_m2"], t["parachute"], t["chute"])
 
 
 def config_for(scenario: Scenario) -> Post2Config:

@@ -70,6 +70,7 @@ __all__ = [
     "scurve_inverse",
     "scurve_slope",
     "rk4_step",
+    "wind_inertial",
     "quat_from_aero_angles",
     "aero_angles",
 ]
@@ -113,6 +114,13 @@ STATES: dict[str, StateDef] = {
         3, "m/s^2", False, (3, 6), 1e-6, "accelerometer bias, body frame (sensed-acceleration observations)"
     ),
     "radar_scale_factor": StateDef(1, "1", False, (3, 6), 1e-5, "radar altimeter scale factor (altitude observation)"),
+    # --- rocket flights (case 5): barometer, winds, drag areas of a two-stage recovery -----------
+    "baro_bias": StateDef(1, "Pa", False, (3, 6), 0.1, "barometer bias: measured = model pressure + baro_bias"),
+    "wind": StateDef(
+        2, "m/s", False, (3, 6), 1e-3, "horizontal wind [east, north] at the vehicle (air moves with it), local frame"
+    ),
+    "drogue_drag_area": StateDef(1, "m^2", False, (3, 6), 1e-4, "CD·S of the drogue (events with chute = 'drogue')"),
+    "main_drag_area": StateDef(1, "m^2", False, (3, 6), 1e-4, "CD·S of the main parachute (chute = 'main')"),
 }
 
 
@@ -157,6 +165,13 @@ OBSERVATIONS: dict[str, ObservationDef] = {
     "altitude": ObservationDef(1, "m", ("h",), (3, 6), "radar altitude = (|r| − R_ref) · radar_scale_factor"),
     "pressure": ObservationDef(1, "Pa", ("p",), (3, 6), "static pressure of the model atmosphere"),
     "density": ObservationDef(1, "kg/m^3", ("rho",), (3, 6), "density of the model atmosphere"),
+    # --- rocket flights (case 5) ----------------------------------------------------------------
+    "acceleration_magnitude": ObservationDef(
+        1, "m/s^2", ("a",), (3, 6), "|sensed (non-gravitational) acceleration|: drag / mass (attitude-free)"
+    ),
+    "position_inertial": ObservationDef(
+        3, "m", ("x", "y", "z"), (3, 6), "inertial position p_I (e.g. a surveyed landing point at its time)"
+    ),
 }
 
 #: DCM from the GNC frame G of the vehicle asset to the post2 body frame B (X_B = −Z_G, Z_B = X_G).
@@ -213,6 +228,7 @@ class Event:
     mass: float | None = None
     ref_area: float | None = None
     parachute: bool | None = None
+    chute: str | None = None  # "drogue" / "main" / "none": which drag-area state acts (rocket flights)
 
 
 @dataclass(frozen=True)
@@ -230,6 +246,7 @@ class Vehicle:
     ca_factor: float = 1.0
     cn_factor: float = 1.0
     cm_factor: float = 1.0
+    cd: float | None = None  # constant drag coefficient on ``ref_area`` when there is no aero table
 
     @property
     def area(self) -> float:
@@ -285,6 +302,17 @@ class StateMap:
         b = self.blocks[name]
         v = x[..., b.sx]
         return scurve(v, *b.bounds) if b.bounds is not None else v
+
+
+def wind_inertial(p_I: np.ndarray, wind_en: np.ndarray) -> np.ndarray:
+    """Inertial wind vector [m/s] (..., 3) of a horizontal wind ``wind_en`` (..., 2) [east, north]
+    [m/s] at positions ``p_I`` (..., 3) [m] (+Z the pole): east = unit(Ẑ × r̂), north = r̂ × east
+    (undefined exactly at a pole)."""
+    up = p_I / np.linalg.norm(p_I, axis=-1, keepdims=True)
+    east = np.stack([-up[..., 1], up[..., 0], np.zeros_like(up[..., 0])], axis=-1)
+    east = east / np.linalg.norm(east, axis=-1, keepdims=True)
+    north = np.cross(up, east)
+    return wind_en[..., :1] * east + wind_en[..., 1:2] * north
 
 
 def rk4_step(f: Callable[[np.ndarray, float], np.ndarray], x: np.ndarray, t: float, dt: float) -> np.ndarray:
@@ -397,10 +425,14 @@ class TrajectoryModel:
         return np.linalg.norm(self.smap.raw(x, "position"), axis=-1) - self.env.radius_ref
 
     def v_rel(self, x: np.ndarray) -> np.ndarray:
-        """Air-relative velocity v − ω × r [m/s] (..., 3), inertial frame."""
+        """Air-relative velocity v − ω × r − wind [m/s] (..., 3), inertial frame (wind: the
+        ``wind`` state [east, north] in the local horizontal frame at the vehicle, if estimated)."""
         p, v = self.smap.raw(x, "position"), self.smap.raw(x, "velocity")
         w = self.env.omega
-        return v - np.stack([-w * p[..., 1], w * p[..., 0], np.zeros_like(p[..., 0])], axis=-1)
+        out = v - np.stack([-w * p[..., 1], w * p[..., 0], np.zeros_like(p[..., 0])], axis=-1)
+        if "wind" in self.smap:
+            out = out - wind_inertial(p, self.smap.physical(x, "wind"))
+        return out
 
     def _air(self, h: np.ndarray, x: np.ndarray | None = None):
         atm = self.env.atmosphere
@@ -436,6 +468,8 @@ class TrajectoryModel:
             if veh.aero is not None:
                 ca, _, _ = veh.aero.coefficients(mach, kn, np.zeros_like(mach))
                 F = F - (ca_m * ca * qbar * S / np.maximum(V, 1e-9))[..., None] * vr
+            elif veh.cd is not None:  # a point mass with a constant drag coefficient (rocket flights)
+                F = F - (ca_m * veh.cd * qbar * S / np.maximum(V, 1e-9))[..., None] * vr
         else:
             q = self.smap.raw(x, "attitude")
             R = quat_to_dcm(q)  # R_I_B (..., 3, 3)
@@ -462,6 +496,10 @@ class TrajectoryModel:
         if phase["parachute"] and veh.parachute is not None:
             cd = veh.parachute.cd_at(mach) * self.param(x, "parachute_drag_multiplier", 1.0)[..., 0]
             F = F - (cd * qbar * veh.parachute.ref_area / np.maximum(V, 1e-9))[..., None] * vr
+        chute = phase.get("chute")
+        if chute in ("drogue", "main"):  # a drag area state (rocket flights): −CD·S q v̂_rel
+            cds = self.param(x, f"{chute}_drag_area", 0.0)[..., 0]
+            F = F - (cds * qbar / np.maximum(V, 1e-9))[..., None] * vr
         return F, M
 
     def sensed_acceleration_B(self, x: np.ndarray, phase: dict) -> np.ndarray:
@@ -490,7 +528,9 @@ class TrajectoryModel:
 
     def initial_phase(self) -> dict:
         """The phase state at the start: mass [kg], area [m²], parachute open (bool), events fired."""
-        return {"mass": float(self.vehicle.mass), "area": self.vehicle.area, "parachute": False, "fired": ()}
+        return {
+            "mass": float(self.vehicle.mass), "area": self.vehicle.area, "parachute": False, "fired": (), "chute": None,
+        }  # fmt: skip
 
     def event_margin(self, x: np.ndarray, ev: Event) -> float:
         """Continuous margin of a condition event at x (n_x,): > 0 before, < 0 once it holds
@@ -517,6 +557,8 @@ class TrajectoryModel:
             out["area"] = ev.ref_area
         if ev.parachute is not None:
             out["parachute"] = ev.parachute
+        if ev.chute is not None:
+            out["chute"] = None if ev.chute == "none" else ev.chute
         return out
 
     def check_events(self, x: np.ndarray, t: float, phase: dict) -> dict:
@@ -556,6 +598,11 @@ class TrajectoryModel:
             return self.sensed_acceleration_B(x, phase)
         if quantity == "acceleration_axial":
             return self.sensed_acceleration_B(x, phase)[..., :1]
+        if quantity == "position_inertial":
+            return np.array(self.smap.raw(x, "position"))
+        if quantity == "acceleration_magnitude":
+            F, _ = self.aero_force_moment(x, phase)
+            return np.linalg.norm(F, axis=-1, keepdims=True) / phase["mass"]
         if quantity == "body_rates":
             return np.array(self.smap.raw(x, "body_rates"))
         if quantity == "quaternion":
@@ -567,6 +614,6 @@ class TrajectoryModel:
                 raise ValueError(f"observation {quantity!r} needs an atmosphere")
             h = np.maximum(self.altitude(x), 0.0)
             if quantity == "pressure":
-                return self.env.atmosphere.pressure(h)[..., None]
+                return (self.env.atmosphere.pressure(h) + self.param(x, "baro_bias", 0.0)[..., 0])[..., None]
             return self._air(h, x)[0][..., None]
         raise KeyError(f"unknown observation quantity {quantity!r}")

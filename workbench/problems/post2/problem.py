@@ -71,6 +71,11 @@ class Post2Problem:
             "density_multiplier": 1.0,
             "accel_bias": np.zeros(3),
             "radar_scale_factor": 1.0,
+            # rocket flights (case 5): no synthetic truth of their own yet
+            "baro_bias": 0.0,
+            "wind": np.zeros(2),
+            "drogue_drag_area": 0.0,
+            "main_drag_area": 0.0,
         }
         for name, d in STATES.items():
             if d.dynamic or (name == "density_multiplier" and tf["density_wave_amplitude"]):

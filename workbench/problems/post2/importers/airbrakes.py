@@ -1,0 +1,504 @@
+"""Importer of the AirbrakesV2 "FIRM" flight-computer logs (NCSU High-Powered Rocketry Club, MIT
+licence) into the workbench's telemetry files and a post2 problem file.
+
+The log (one CSV per flight, ~91 Hz, one row per packet) and its ``metadata.json`` are described
+in ``workbench/io/FORMATS.md`` ("Rocket flight logs").  What the importer does:
+
+1. :func:`read_log` — reads the CSV with every problem located by file, column and data row
+   (missing column, text or NaN in a number, backwards or repeated time, unknown phase letter),
+   converts to SI (g → m/s² with g0 = 9.80665, deg/s → rad/s, °C → K, µT → T) and keeps the
+   flight computer's own solution (altitude, vertical velocity, quaternion scalar-first → scalar-last)
+   apart as a *reference*, never as an observation;
+2. :func:`find_gaps` — lists every step longer than ``gap_factor`` × the median step (reported in
+   the import summary and in ``events.csv``; nothing is interpolated: an averaging block never
+   spans a gap, and a gap inside the boost is refused because the IMU cannot be integrated across it);
+3. :func:`read_metadata` — the flight's entry of ``metadata.json`` (mass, Cd, area, site weather,
+   launch/landed coordinates, apogee), each missing or non-numeric field a located error;
+4. :func:`import_flight` — the boost integrated from the IMU (:mod:`workbench.problems.post2.rocket`),
+   the coast/descent observation files (pressure, |specific force|, 10 Hz block means with
+   their weights vs time), the reference files and ``<flight>.toml``, a post2 problem file that
+   ``workbench run`` reconstructs.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from workbench.core.bodies import G0
+from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, write_events, write_telemetry
+
+__all__ = [
+    "HELP",
+    "add_arguments",
+    "run",
+    "PHASES",
+    "COLUMNS",
+    "FlightLog",
+    "Gap",
+    "FlightMetadata",
+    "read_log",
+    "find_gaps",
+    "block_means",
+    "read_metadata",
+    "import_flight",
+]
+
+#: flight-phase letters of the FIRM log: standby, motor, coast, free fall / parachute, landed
+PHASES = {"S": "standby", "M": "motor", "C": "coast", "F": "descent", "L": "landed"}
+
+#: required columns -> (array name, SI scale from the logged unit, offset added after scaling)
+COLUMNS: dict[str, tuple[str, float, float]] = {
+    "timestamp_seconds": ("t", 1.0, 0.0),
+    "temperature_celsius": ("temperature", 1.0, 273.15),
+    "pressure_pascals": ("pressure", 1.0, 0.0),
+    "raw_acceleration_x_gs": ("ax", G0, 0.0),
+    "raw_acceleration_y_gs": ("ay", G0, 0.0),
+    "raw_acceleration_z_gs": ("az", G0, 0.0),
+    "raw_angular_rate_x_deg_per_s": ("wx", math.pi / 180.0, 0.0),
+    "raw_angular_rate_y_deg_per_s": ("wy", math.pi / 180.0, 0.0),
+    "raw_angular_rate_z_deg_per_s": ("wz", math.pi / 180.0, 0.0),
+    "magnetic_field_x_microteslas": ("mx", 1e-6, 0.0),
+    "magnetic_field_y_microteslas": ("my", 1e-6, 0.0),
+    "magnetic_field_z_microteslas": ("mz", 1e-6, 0.0),
+    "est_position_z_meters": ("ref_h", 1.0, 0.0),
+    "est_velocity_z_meters_per_s": ("ref_vz", 1.0, 0.0),
+    "est_quaternion_w": ("ref_qw", 1.0, 0.0),
+    "est_quaternion_x": ("ref_qx", 1.0, 0.0),
+    "est_quaternion_y": ("ref_qy", 1.0, 0.0),
+    "est_quaternion_z": ("ref_qz", 1.0, 0.0),
+}
+_LETTER = "state_letter"
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A gap in the log: samples at ``t_a`` and ``t_b`` [s, log clock] ``dt = t_b − t_a`` apart,
+    ``row`` the 1-based data row after it, ``phase`` the phase letter of that row."""
+
+    t_a: float
+    t_b: float
+    dt: float
+    row: int
+    phase: str
+
+
+@dataclass(frozen=True, eq=False)
+class FlightLog:
+    """A FIRM log in SI: ``t`` (n,) [s, log clock]; ``letters`` (n,) phase letters; ``f_B`` (n, 3)
+    specific force [m/s²] and ``w_B`` (n, 3) body rate [rad/s] in the IMU's frame B; ``mag_B``
+    (n, 3) [T]; ``pressure`` (n,) [Pa]; ``temperature`` (n,) [K] (the board's, not the air's);
+    reference solution of the flight computer: ``ref_h`` (n,) [m] above the pad, ``ref_vz`` (n,)
+    [m/s] up, ``ref_q`` (n, 4) its quaternion scalar-last (as logged, frame not documented);
+    ``gaps`` the gaps (:func:`find_gaps`); ``repeated_rows`` how many rows repeated the previous
+    packet exactly (dropped); ``path`` the file."""
+
+    path: Path
+    t: np.ndarray
+    letters: np.ndarray
+    f_B: np.ndarray
+    w_B: np.ndarray
+    mag_B: np.ndarray
+    pressure: np.ndarray
+    temperature: np.ndarray
+    ref_h: np.ndarray
+    ref_vz: np.ndarray
+    ref_q: np.ndarray
+    gaps: tuple[Gap, ...]
+    repeated_rows: int = 0
+
+    def phase_start(self, letter: str) -> float:
+        """Log time [s] of the first row with phase ``letter``; ValueError if the phase is absent."""
+        k = np.flatnonzero(self.letters == letter)
+        if k.size == 0:
+            raise ValueError(f"{self.path.name}: the log has no phase '{letter}' ({PHASES[letter]})")
+        return float(self.t[k[0]])
+
+
+def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
+    """Read a FIRM log CSV (:data:`COLUMNS` + ``state_letter``; other columns ignored) into SI.
+
+    Raises :class:`~workbench.io.telemetry.TelemetryError` locating every problem (file, column,
+    1-based data row and file line): a missing column, an empty/non-numeric/non-finite cell, a
+    wrong field count, a time not strictly after the previous row's (a row repeating the previous
+    row's time and every value is a packet logged twice: dropped and counted), a phase letter not in
+    :data:`PHASES`, a quaternion whose norm is not 1 ± 0.01.
+    """
+    path = Path(path)
+    fname = str(path)
+    try:
+        fh = path.open(newline="", encoding="utf-8")
+    except OSError as e:
+        raise TelemetryError.single(fname, f"cannot read: {e.strerror or e}") from None
+    problems: list[Problem] = []
+    total = 0
+
+    def add(column, row, reason):
+        nonlocal total
+        total += 1
+        if len(problems) < MAX_PROBLEMS:
+            problems.append(Problem(fname, column, row, None if row is None else row + 1, reason))
+
+    with fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if header is None:
+            raise TelemetryError.single(fname, "empty file (expected a header row of FIRM column names)")
+        header = [h.strip() for h in header]
+        missing = [c for c in (_LETTER, *COLUMNS) if c not in header]
+        if missing:
+            raise TelemetryError(
+                [Problem(fname, c, None, 1, "is missing (a FIRM log needs it)") for c in missing], len(missing)
+            )
+        idx = {c: header.index(c) for c in (_LETTER, *COLUMNS)}
+        width = len(header)
+        cols: dict[str, list[float]] = {c: [] for c in COLUMNS}
+        letters: list[str] = []
+        for r, cells in enumerate(reader, start=1):
+            if not cells or all(not c.strip() for c in cells):
+                add(None, r, "empty row")
+                continue
+            if len(cells) != width:
+                add(None, r, f"has {len(cells)} fields, the header has {width}")
+                continue
+            letter = cells[idx[_LETTER]].strip()
+            if letter not in PHASES:
+                add(_LETTER, r, f"{letter!r} is not a phase letter ({', '.join(PHASES)})")
+            letters.append(letter)
+            for c in COLUMNS:
+                s = cells[idx[c]].strip()
+                try:
+                    v = float(s)
+                except ValueError:
+                    v = math.nan
+                    add(c, r, f"{s!r} is not a number" if s else "empty cell")
+                else:
+                    if not math.isfinite(v):
+                        add(c, r, f"{s!r} is not a finite number")
+                cols[c].append(v)
+    n = len(letters)
+    if n == 0 and not problems:
+        raise TelemetryError.single(fname, "no data rows under the header")
+    arr = {COLUMNS[c][0]: np.asarray(v, float) * COLUMNS[c][1] + COLUMNS[c][2] for c, v in cols.items()}
+    t = arr["t"]
+    # a row repeating the previous row's time *and* every sensor value is the same packet logged
+    # twice (the logger re-reads the flight computer's last packet): dropped and counted
+    sensors = np.column_stack([arr[COLUMNS[c][0]] for c in COLUMNS])
+    repeat = np.zeros(t.size, dtype=bool)
+    repeat[1:] = np.all(sensors[1:] == sensors[:-1], axis=1)
+    rows = np.flatnonzero(~repeat)  # 0-based data rows kept
+    dt = np.diff(t[rows])
+    for i in np.flatnonzero(~(dt > 0)):
+        if np.isfinite(dt[i]):
+            r0, r1 = int(rows[i]), int(rows[i + 1])
+            what = "repeats (with other values)" if dt[i] == 0 else "goes backwards from"
+            add("timestamp_seconds", r1 + 1, f"time {t[r1]:.6f} s {what} the time {t[r0]:.6f} s of row {r0 + 1}")
+    q = np.column_stack([arr["ref_qx"], arr["ref_qy"], arr["ref_qz"], arr["ref_qw"]])
+    qn = np.linalg.norm(q, axis=1)
+    for i in np.flatnonzero(np.abs(qn - 1.0) > 0.01):
+        add("est_quaternion_w", int(i) + 1, f"quaternion norm {qn[i]:.4g} (expected 1)")
+    if problems:
+        problems.sort(key=lambda p: p.row or 0)
+        raise TelemetryError(problems, total)
+    arr = {k: v[rows] for k, v in arr.items()}
+    t = arr["t"]
+    q = q[rows]
+    qn = qn[rows]
+    letters_a = np.asarray(letters)[rows]
+    return FlightLog(
+        path,
+        t,
+        letters_a,
+        np.column_stack([arr["ax"], arr["ay"], arr["az"]]),
+        np.column_stack([arr["wx"], arr["wy"], arr["wz"]]),
+        np.column_stack([arr["mx"], arr["my"], arr["mz"]]),
+        arr["pressure"],
+        arr["temperature"],
+        arr["ref_h"],
+        arr["ref_vz"],
+        q / qn[:, None],
+        find_gaps(t, letters_a, gap_factor),
+        int(np.sum(repeat)),
+    )
+
+
+def find_gaps(t: np.ndarray, letters: np.ndarray, gap_factor: float = 3.0) -> tuple[Gap, ...]:
+    """Steps of t (n,) [s] longer than ``gap_factor`` × the median step, as :class:`Gap` (row
+    1-based of the sample after the gap; ``phase`` its letter)."""
+    if t.size < 2:
+        return ()
+    dt = np.diff(t)
+    lim = gap_factor * float(np.median(dt))
+    return tuple(
+        Gap(float(t[i]), float(t[i + 1]), float(dt[i]), int(i) + 2, str(letters[i + 1]))
+        for i in np.flatnonzero(dt > lim)
+    )
+
+
+@dataclass(frozen=True)
+class FlightMetadata:
+    """The flight's ``metadata.json`` entry in SI: ``mass`` [kg], ``cd`` [-], ``area`` [m²];
+    site ``temperature`` [K], ``qnh`` [Pa] (the reported air pressure, read as reduced to sea level),
+    ``wind_speed`` [m/s], ``wind_from_deg`` (direction the wind blows from, deg clockwise from north);
+    ``launch_lat_deg``/``launch_lon_deg``, ``landed_lat_deg``/``landed_lon_deg``, ``apogee`` [m],
+    ``rod_angle_deg``, ``date`` (ISO string), ``description``."""
+
+    name: str
+    mass: float
+    cd: float
+    area: float
+    temperature: float
+    qnh: float
+    wind_speed: float
+    wind_from_deg: float
+    launch_lat_deg: float
+    launch_lon_deg: float
+    landed_lat_deg: float
+    landed_lon_deg: float
+    apogee: float
+    rod_angle_deg: float
+    date: str
+    description: str
+
+
+_COMPASS = {d: 22.5 * i for i, d in enumerate("N NNE NE ENE E ESE SE SSE S SSW SW WSW W WNW NW NNW".split())}
+
+
+def read_metadata(path: str | os.PathLike, flight: str) -> FlightMetadata:
+    """The entry ``flight`` (the log's file name, e.g. ``jackpot_launch_1.csv``) of ``metadata.json``.
+
+    A missing entry or field, or a non-numeric value, is a
+    :class:`~workbench.io.telemetry.TelemetryError` naming the file and the JSON path."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as e:
+        raise TelemetryError.single(path, f"cannot read metadata: {e}") from None
+    if flight not in data:
+        known = ", ".join(k for k in data if not k.startswith("$"))
+        raise TelemetryError.single(path, f"no entry for {flight!r} (entries: {known})")
+    entry = data[flight]
+
+    def get(*keys, number=True):
+        v = entry
+        for k in keys:
+            if not isinstance(v, dict) or k not in v:
+                raise TelemetryError.single(path, "missing", column=f"{flight}." + ".".join(keys))
+            v = v[k]
+        if number and (isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v)):
+            raise TelemetryError.single(path, f"{v!r} is not a number", column=f"{flight}." + ".".join(keys))
+        return v
+
+    wdir = str(get("launch_site", "wind_direction", number=False)).strip().upper()
+    if wdir not in _COMPASS:
+        raise TelemetryError.single(
+            path,
+            f"{wdir!r} is not a compass point ({', '.join(_COMPASS)})",
+            column=f"{flight}.launch_site.wind_direction",
+        )
+    return FlightMetadata(
+        flight,
+        float(get("rocket", "rocket_dry_mass_kg")),
+        float(get("rocket", "rocket_Cd")),
+        float(get("rocket", "rocket_cross_sectional_area_m2")),
+        float(get("launch_site", "air_temperature_celsius")) + 273.15,
+        float(get("launch_site", "air_pressure_mb")) * 100.0,
+        float(get("launch_site", "wind_speed_kmh")) / 3.6,
+        _COMPASS[wdir],
+        float(get("launch_site", "launch_coordinates", "latitude")),
+        float(get("launch_site", "launch_coordinates", "longitude")),
+        float(get("flight_data", "landed_coordinates", "latitude")),
+        float(get("flight_data", "landed_coordinates", "longitude")),
+        float(get("flight_data", "apogee_meters")),
+        float(get("launch_site", "launch_rod_angle")),
+        str(entry.get("date", "")),
+        str(entry.get("flight_description", "")),
+    )
+
+
+def block_means(t: np.ndarray, v: np.ndarray, t0: float, t1: float, rate_hz: float, gaps: tuple[Gap, ...]):
+    """Means of v (n, k) over consecutive blocks of 1/rate_hz seconds in [t0, t1]; a block never
+    spans a gap (the block is cut at the gap).  Returns (t_mean (m,), v_mean (m, k), count (m,))."""
+    sel = (t >= t0) & (t <= t1)
+    ts, vs = t[sel], v[sel]
+    edges = np.floor((ts - t0) * rate_hz).astype(int)
+    for g in gaps:  # a new block after every gap
+        edges = edges + 1000000 * (ts >= g.t_b)
+    _, start, count = np.unique(edges, return_index=True, return_counts=True)
+    tm = np.add.reduceat(ts, start) / count
+    vm = np.add.reduceat(vs, start, axis=0) / count[:, None]
+    return tm, vm, count
+
+
+def import_flight(
+    log_path: str | os.PathLike,
+    metadata_path: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    declination_deg: float = 0.0,
+    inclination_deg: float | None = None,
+    obs_rate_hz: float = 10.0,
+    name: str | None = None,
+    t_end_s: float | None = None,
+    flight: str | None = None,
+) -> Path:
+    """Import one flight: writes telemetry CSVs, ``flight.json``, ``<name>.toml`` and the variant
+    ``<name>_landing.toml`` that also observes the landed coordinates into ``out_dir``.
+
+    ``declination_deg`` magnetic declination at the site (east positive; used for the pad heading);
+    ``inclination_deg`` the site's magnetic dip (the magnetometer's heading is trusted only if its
+    dip on the pad agrees within 10°; None: unchecked); ``obs_rate_hz`` rate of the block-mean
+    observations; ``t_end_s`` [s after launch] ends the
+    reconstruction early (default: touchdown, the first ``L`` row).  Returns the problem file.
+    """
+    # imported here: the command line builds its parser from this module and stays light
+    from workbench.problems.post2 import rocket
+
+    log = read_log(log_path)
+    meta = read_metadata(metadata_path, flight or Path(log_path).name)
+    out = Path(out_dir)
+    name = name or Path(log_path).stem
+    t_launch = log.phase_start("M")
+    t = log.t - t_launch  # seconds from launch (the first motor row)
+    for g in log.gaps:
+        if log.phase_start("M") <= g.t_a and (g.phase in ("M",) or g.t_b <= log.phase_start("C") + 0.5):
+            raise TelemetryError.single(
+                log.path,
+                f"gap of {g.dt:.3f} s inside the boost: the IMU cannot be integrated across it",
+                column="timestamp_seconds",
+                row=g.row,
+            )
+    fl = rocket.reconstruct_boost(
+        t, log.letters, log.f_B, log.w_B, log.mag_B, log.pressure, meta, declination_deg, inclination_deg
+    )
+    t_apogee = log.phase_start("F") - t_launch
+    try:
+        t_land = log.phase_start("L") - t_launch
+    except ValueError:
+        t_land = float(t[-1])
+    t_end = min(t_land, t_end_s) if t_end_s is not None else t_land
+    t_main = rocket.detect_main_deploy(t, log.pressure, log.f_B, fl.atmosphere, t_apogee, t_end)
+    t0 = fl.t_start
+    if not t_end > t0 + 1.0:
+        raise ValueError(f"{log.path.name}: the reconstruction span {t0:.2f} .. {t_end:.2f} s is too short")
+
+    out.mkdir(parents=True, exist_ok=True)  # only now: a refused log writes nothing
+    # observations: block means after burnout, never across a gap
+    gaps_rel = tuple(Gap(g.t_a - t_launch, g.t_b - t_launch, g.dt, g.row, g.phase) for g in log.gaps)
+    tp, pm, cnt = block_means(t, log.pressure[:, None], t0, t_end, obs_rate_hz, gaps_rel)
+    ta, am, _ = block_means(t, np.linalg.norm(log.f_B, axis=1)[:, None], t0, t_end, obs_rate_hz, gaps_rel)
+    write_telemetry(
+        out / "pressure.csv", tp, {"p": (pm[:, 0], "Pa")}, meta={"source": log.path.name, "samples_per_block": "varies"}
+    )
+    sig_p = rocket.pressure_sigma(tp, log.phase_start("C") - t_launch, t_apogee, fl.pad_pressure_std, cnt)
+    write_telemetry(
+        out / "pressure_weights.csv", tp, {"p": (1.0 / sig_p**2, "1")}, meta={"meaning": "W = 1/sigma^2 [1/Pa^2]"}
+    )
+    write_telemetry(out / "accel.csv", ta, {"a": (am[:, 0], "m/s^2")}, meta={"source": log.path.name})
+    sig_a = rocket.accel_sigma(ta, t_apogee, t_main)
+    write_telemetry(
+        out / "accel_weights.csv", ta, {"a": (1.0 / sig_a**2, "1")}, meta={"meaning": "W = 1/sigma^2 [s^4/m^2]"}
+    )
+    # the raw IMU and the flight computer's reference solution (for scoring and drawing, not observed)
+    write_telemetry(
+        out / "imu.csv",
+        t,
+        {
+            **{f"f.{c}": (log.f_B[:, i], "g") for i, c in enumerate("xyz")},
+            **{f"w.{c}": (log.w_B[:, i], "deg/s") for i, c in enumerate("xyz")},
+            **{f"mag.{c}": (log.mag_B[:, i], "uT") for i, c in enumerate("xyz")},
+            "pressure": (log.pressure, "Pa"),
+            "board_temperature": (log.temperature, "degC"),
+        },
+        meta={"source": log.path.name, "frame": "IMU axes as logged", "time_zero": "first motor row"},
+    )
+    write_telemetry(
+        out / "reference.csv",
+        t,
+        {
+            "h": (log.ref_h, "m"),
+            "vz": (log.ref_vz, "m/s"),
+            **{f"q{c}": (log.ref_q[:, i], "1") for i, c in enumerate("xyzw")},
+        },
+        meta={"source": log.path.name, "meaning": "the flight computer's own solution (reference, not observed)"},
+    )
+    events = [(float(t[0]), "log start")]
+    letters = log.letters
+    for k in np.flatnonzero(letters[1:] != letters[:-1]) + 1:
+        events.append((float(t[k]), f"phase {letters[k]} ({PHASES[letters[k]]})"))
+    for g in gaps_rel:
+        events.append((g.t_a, f"gap {g.dt:.3f} s before row {g.row}"))
+    if t_main is not None:
+        events.append((t_main, "main parachute (detected)"))
+    write_events(out / "events.csv", sorted(events))
+    info = {
+        "flight": meta.name,
+        "log": log.path.name,
+        "t_launch_log_s": t_launch,
+        "t_start_s": t0,
+        "t_apogee_letter_s": t_apogee,
+        "t_main_s": t_main,
+        "t_end_s": t_end,
+        "rows": int(t.size),
+        "repeated_rows_dropped": log.repeated_rows,
+        "gaps": [{"t_a_s": g.t_a, "t_b_s": g.t_b, "dt_s": g.dt, "row": g.row, "phase": g.phase} for g in gaps_rel],
+        "declination_deg": declination_deg,
+        "pad": fl.pad_info,
+        "burnout": fl.burnout_info,
+        "metadata": meta.__dict__,
+        "observation_rate_hz": obs_rate_hz,
+    }
+    (out / "flight.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
+    path = out / f"{name}.toml"
+    path.write_text(rocket.problem_file(name, meta, fl, t0, t_end, t_apogee, t_main), encoding="utf-8")
+    # the variant that also observes the landed coordinates (winds under the parachutes)
+    p_land = rocket.landing_point_inertial(meta, fl.h_pad, t_end)
+    write_telemetry(
+        out / "landing.csv",
+        np.array([t_end - 1e-3]),  # 1 ms before the touchdown letter: inside the span
+        {c: (np.array([p_land[i]]), "m") for i, c in enumerate("xyz")},
+        meta={"meaning": "metadata landed coordinates at touchdown, inertial frame M, pad elevation"},
+    )
+    text = rocket.problem_file(f"{name}_landing", meta, fl, t0, t_end, t_apogee, t_main, landing=True)
+    (out / f"{name}_landing.toml").write_text(text, encoding="utf-8")
+    return path
+
+
+HELP = "AirbrakesV2 FIRM flight log (CSV + metadata.json) -> telemetry + post2 problem file"
+
+
+def add_arguments(parser) -> None:
+    """The ``workbench import airbrakes`` options (an ``argparse`` parser)."""
+    parser.add_argument("log", help="the flight's CSV log (e.g. jackpot_launch_1.csv)")
+    parser.add_argument("--metadata", required=True, help="metadata.json holding the flight's entry")
+    parser.add_argument("--out", required=True, help="output folder (telemetry CSVs, flight.json, problem files)")
+    parser.add_argument("--declination-deg", type=float, default=0.0, help="magnetic declination at the site, east +")
+    parser.add_argument(
+        "--inclination-deg",
+        type=float,
+        default=None,
+        help="magnetic dip at the site (down +): the magnetometer heading is trusted only if the pad agrees",
+    )
+    parser.add_argument("--obs-rate-hz", type=float, default=10.0, help="rate of the block-mean observations")
+    parser.add_argument("--name", default=None, help="problem name (default: the log's file stem)")
+    parser.add_argument("--flight", default=None, help="the metadata entry (default: the log's file name)")
+
+
+def run(args) -> Path:
+    """Run the import from parsed ``args`` (:func:`add_arguments`); returns the problem file."""
+    return import_flight(
+        args.log,
+        args.metadata,
+        args.out,
+        declination_deg=args.declination_deg,
+        inclination_deg=args.inclination_deg,
+        obs_rate_hz=args.obs_rate_hz,
+        name=args.name,
+        flight=args.flight,
+    )

@@ -1,0 +1,637 @@
+"""Real rocket flights (issue #9, case 5): the boost from the IMU, the problem file of the coast and
+descent, and the scores against the flight's references.
+
+The motor's thrust history is not known, so the model-based estimation (post2's 3-DOF
+:class:`~workbench.problems.post2.model.TrajectoryModel` with the drag of the rocket and of its
+parachutes) starts shortly after burnout, and the boost is integrated from the IMU:
+
+* **pad alignment** — over the last second of standby before the first motor row: the mean
+  specific force is "up" (tilt), the mean magnetic field gives the heading through the site's
+  magnetic declination (TRIAD, :func:`workbench.core.rotation.triad`), the mean body rate is the
+  gyro bias;
+* **boost** — :func:`workbench.estimation.strapdown.integrate` (point mass + J2 gravity of the
+  Earth, first-order covariance) from the pad to ``t_start`` = first coast row + 0.3 s (tail-off),
+  in a planet-centred inertial frame M whose axes are the Earth-fixed axes at launch.  The pad sits
+  at the launch coordinates (geodetic latitude used as the spherical one) at the altitude where the
+  site's atmosphere has the standby pressure;
+* the covariance at ``t_start`` is the strapdown's, plus an engineering budget for what a white-noise
+  model leaves out: 1 % scale-factor error on the velocity gained and its integral on the
+  position (the post2 problem file takes a diagonal 1σ per component: correlations are dropped).
+
+The site's reported air pressure is read as QNH (reduced to sea level): the standby pressures of
+the three flights sit 0.1, 9.3 and 3.3 kPa below it, as the site elevations (a coastal field,
+a field in the Appalachians, the Huntsville area) would; the atmosphere is the U.S. Standard
+Atmosphere 1976 with that sea-level pressure and the site temperature reduced to sea level along
+−6.5 K/km.  The pad altitude is then the altitude of the standby pressure, so a constant barometer
+offset is folded into the pad altitude by construction; the ``baro_bias`` state measures the
+departure *in flight* from the standby-anchored profile (static-port and thermal effects and the
+difference between the day's lapse rate and the standard one).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+from workbench.core.atmosphere import EarthStandardAtmosphere
+from workbench.core.bodies import EARTH
+from workbench.core.rotation import dcm_to_quat, quat_from_rotvec, quat_multiply, quat_to_dcm, triad
+from workbench.estimation.strapdown import ImuArrays, integrate
+from workbench.io.scenario import load_scenario
+from workbench.io.telemetry import read_telemetry
+from workbench.problems.post2 import pipeline
+from workbench.problems.post2.config import config_for
+
+__all__ = [
+    "PAD_WINDOW_S",
+    "TAIL_OFF_S",
+    "BoostSolution",
+    "site_atmosphere",
+    "pad_position",
+    "reconstruct_boost",
+    "detect_main_deploy",
+    "pressure_sigma",
+    "accel_sigma",
+    "problem_file",
+    "local_en",
+    "score_flight",
+    "run_flight",
+    "landing_point_inertial",
+]
+
+#: length of the standby window that aligns the IMU on the pad [s]
+PAD_WINDOW_S = 1.0
+#: the pad window ends this long before the detected ignition [s]
+IGNITION_GUARD_S = 0.1
+#: the model starts this long after the first coast row (motor tail-off) [s]
+TAIL_OFF_S = 0.3
+#: engineering 1σ of what the strapdown's white noise leaves out: accelerometer scale factor [-]
+ACCEL_SCALE_SIGMA = 0.01
+#: 1σ of the pad tilt [rad] (accelerometer levelling) and heading [rad] (an uncalibrated
+#: magnetometer inside a rocket with a steel motor case: hard-iron errors of several degrees)
+TILT_SIGMA = math.radians(1.0)
+HEADING_SIGMA = math.radians(10.0)
+#: the magnetometer's heading is trusted only if its dip on the pad is within this of the site's
+#: magnetic inclination [deg]; otherwise (hard/soft iron, or magnetometer axes not those of the
+#: accelerometer) the heading is taken as unknown: 1σ HEADING_SIGMA_UNTRUSTED (as wide as a
+#: linearised filter can carry; the landing point's 3σ then says how little the boost tells)
+DIP_TOLERANCE_DEG = 10.0
+HEADING_SIGMA_UNTRUSTED = math.radians(60.0)
+
+
+@dataclass(frozen=True, eq=False)
+class BoostSolution:
+    """The boost integrated from the IMU: ``t_start`` [s after launch] where the model starts;
+    ``p_M``, ``v_M`` (3,) [m, m/s] there, 1σ ``sigma_p``, ``sigma_v`` (3,); ``atmosphere`` the site's;
+    ``h_pad`` [m] pad altitude (above the Earth's mean sphere); ``p_pad`` (3,) pad position in M;
+    ``q_M_B_pad`` (4,) pad attitude; ``gyro_bias`` (3,) [rad/s]; ``axis_B`` (3,) the rocket's long
+    axis in the IMU frame (mean specific force of the boost); ``pad_pressure_std`` [Pa] standby
+    noise; ``pad_info``/``burnout_info`` JSON-ready records."""
+
+    t_start: float
+    p_M: np.ndarray
+    v_M: np.ndarray
+    sigma_p: np.ndarray
+    sigma_v: np.ndarray
+    atmosphere: EarthStandardAtmosphere
+    h_pad: float
+    p_pad: np.ndarray
+    q_M_B_pad: np.ndarray
+    gyro_bias: np.ndarray
+    axis_B: np.ndarray
+    pad_pressure_std: float
+    pad_info: dict
+    burnout_info: dict
+
+
+def site_atmosphere(qnh_pa: float, site_temperature_K: float, standby_pressure_pa: float):
+    """(atmosphere, pad altitude [m]): the 1976 standard atmosphere with sea-level pressure ``qnh_pa``
+    and the site temperature reduced to sea level (−6.5 K/km) at the altitude of the standby pressure
+    (two fixed-point iterations; altitudes above the Earth's mean sphere)."""
+    h = 0.0
+    atm = EarthStandardAtmosphere(qnh_pa, site_temperature_K)
+    for _ in range(3):
+        atm = EarthStandardAtmosphere(qnh_pa, site_temperature_K + 0.0065 * h)
+        h = float(atm.altitude_of_pressure(standby_pressure_pa))
+    return atm, h
+
+
+def _enu_axes(lat: float, lon: float) -> np.ndarray:
+    """C_M_ENU (3, 3): columns east, north, up at spherical latitude/longitude [rad] (M = Earth-fixed
+    axes at launch)."""
+    up = np.array([math.cos(lat) * math.cos(lon), math.cos(lat) * math.sin(lon), math.sin(lat)])
+    east = np.array([-math.sin(lon), math.cos(lon), 0.0])
+    return np.column_stack([east, np.cross(up, east), up])
+
+
+def pad_position(lat_deg: float, lon_deg: float, h_pad: float) -> np.ndarray:
+    """Pad position (3,) [m] in M: the launch coordinates (geodetic latitude used as spherical) at
+    ``h_pad`` above the Earth's mean sphere."""
+    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+    return (EARTH.reference_radius + h_pad) * _enu_axes(lat, lon)[:, 2]
+
+
+def local_en(lat_deg, lon_deg, lat0_deg: float, lon0_deg: float) -> np.ndarray:
+    """East/north offsets [m] (..., 2) of coordinates [deg] from (lat0, lon0) on the mean sphere
+    (flat-Earth: fine over a few km)."""
+    r = EARTH.reference_radius
+    dn = np.radians(np.asarray(lat_deg, float) - lat0_deg) * r
+    de = np.radians(np.asarray(lon_deg, float) - lon0_deg) * r * math.cos(math.radians(lat0_deg))
+    return np.stack([de, dn], axis=-1)
+
+
+def reconstruct_boost(
+    t, letters, f_B, w_B, mag_B, pressure, meta, declination_deg: float, inclination_deg: float | None = None
+) -> BoostSolution:
+    """Pad alignment + strapdown through the boost (module docstring).
+
+    ``t`` (n,) [s from launch], ``letters`` (n,) phase letters, ``f_B`` (n, 3) [m/s²], ``w_B`` (n, 3)
+    [rad/s], ``mag_B`` (n, 3) [T], ``pressure`` (n,) [Pa] as logged; ``meta`` the flight's
+    :class:`~workbench.problems.post2.importers.airbrakes.FlightMetadata`; ``declination_deg`` east
+    positive; ``inclination_deg`` the site's magnetic dip (down positive) that the pad's measured dip
+    is checked against (None: not checked, the heading trusted).  ValueError if there is less than
+    half a pad window of contiguous standby data."""
+    k_launch = int(np.flatnonzero(letters == "M")[0])
+    # the motor letter comes after lift-off is detected: ignition is the first sample of the last
+    # run of |f| > 1.5 g before it; the pad window ends IGNITION_GUARD_S before ignition
+    fn = np.linalg.norm(f_B, axis=1) / 9.80665
+    k_ign = k_launch
+    while k_ign > 0 and fn[k_ign - 1] > 1.5:
+        k_ign -= 1
+    t_ign = float(t[k_ign])
+    t_pad_end = t_ign - IGNITION_GUARD_S
+    pad = np.flatnonzero((t >= t_pad_end - PAD_WINDOW_S) & (t < t_pad_end) & (letters == "S"))
+    # keep only the contiguous run just before launch (standby logs are sparse)
+    if pad.size:
+        steps = np.diff(t[pad])
+        cut = np.flatnonzero(steps > 3.0 * np.median(np.diff(t[max(0, k_launch - 50) : k_launch + 1])))
+        if cut.size:
+            pad = pad[cut[-1] + 1 :]
+    if pad.size < 5 or t[pad[-1]] - t[pad[0]] < 0.5 * PAD_WINDOW_S:
+        raise ValueError("fewer than 0.5 s of contiguous standby data before launch: cannot align the IMU on the pad")
+    f_pad = f_B[pad].mean(axis=0)
+    m_pad = mag_B[pad].mean(axis=0)
+    bias = w_B[pad].mean(axis=0)
+    p_standby = float(pressure[pad].mean())
+    p_std = float(pressure[pad].std(ddof=1))
+    atm, h_pad = site_atmosphere(meta.qnh, meta.temperature, p_standby)
+    dec = math.radians(declination_deg)
+    # TRIAD: up from the specific force, heading from the horizontal part of the field (any dip)
+    q_enu_b = triad(f_pad, m_pad, np.array([0.0, 0.0, 1.0]), np.array([math.sin(dec), math.cos(dec), -1.5]))
+    lat, lon = math.radians(meta.launch_lat_deg), math.radians(meta.launch_lon_deg)
+    C_M_ENU = _enu_axes(lat, lon)
+    q_m_b = quat_multiply(dcm_to_quat(C_M_ENU), q_enu_b)
+    p0 = pad_position(meta.launch_lat_deg, meta.launch_lon_deg, h_pad)
+    v0 = np.cross([0.0, 0.0, EARTH.rotation_rate], p0)
+    # attitude 1σ: tilt about east/north, heading about up -> body frame small angles
+    C_B_ENU = quat_to_dcm(q_enu_b).T
+    down = -f_pad / np.linalg.norm(f_pad)
+    dip = 90.0 - math.degrees(math.acos(np.clip(np.dot(down, m_pad) / np.linalg.norm(m_pad), -1.0, 1.0)))
+    trusted = inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG
+    sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
+    P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_heading**2]) @ C_B_ENU.T
+    P0 = np.zeros((9, 9))
+    P0[0:3, 0:3] = np.eye(3) * 0.01**2
+    P0[3:6, 3:6] = P_att
+    P0[6:9, 6:9] = np.eye(3) * 1.0**2
+    t_coast = float(t[np.flatnonzero(letters == "C")[0]])
+    t_start = t_coast + TAIL_OFF_S
+    sel = np.flatnonzero((t >= t[pad[-1]]) & (t <= t_start + 1e-9))
+    imu = ImuArrays(
+        t[sel], f_B[sel], w_B[sel] - bias, np.full((sel.size, 3), 0.05), np.full((sel.size, 3), math.radians(0.1))
+    )
+    sp = integrate(imu, v0, q_m_b, p0, P0, body=EARTH)
+    # the strapdown ends at the last sample before t_start: carry it ballistically (< 1 sample)
+    p1, v1 = sp.p_M[-1], sp.v_M[-1]
+    dv = v1 - v0
+    sig_v = np.sqrt(np.diag(sp.P[-1])[0:3] + (ACCEL_SCALE_SIGMA * np.abs(dv)) ** 2)
+    dur = float(sp.t[-1] - sp.t[0])
+    sig_p = np.sqrt(np.diag(sp.P[-1])[6:9] + (0.5 * ACCEL_SCALE_SIGMA * np.abs(dv) * dur) ** 2)
+    boost = (t >= 0.0) & (t < t_coast)
+    axis = f_B[boost].mean(axis=0)
+    axis /= np.linalg.norm(axis)
+    up = p1 / np.linalg.norm(p1)
+    info_pad = {
+        "standby_pressure_pa": p_standby,
+        "standby_pressure_std_pa": p_std,
+        "pad_altitude_m": h_pad,
+        "qnh_minus_standby_pa": meta.qnh - p_standby,
+        "gyro_bias_deg_s": np.degrees(bias).tolist(),
+        "specific_force_on_pad_g": float(np.linalg.norm(f_pad) / 9.80665),
+        "rocket_axis_imu": axis.tolist(),
+        "tilt_on_pad_deg": math.degrees(math.acos(np.clip(np.dot(axis, f_pad / np.linalg.norm(f_pad)), -1, 1))),
+        "samples": int(pad.size),
+        "magnetometer_dip_deg": dip,
+        "site_inclination_deg": inclination_deg,
+        "magnetometer_heading_trusted": bool(trusted),
+        "heading_sigma_deg": math.degrees(sig_heading),
+        "magnetic_field_uT": float(np.linalg.norm(m_pad) * 1e6),
+        "ignition_t_s": t_ign,
+    }
+    C_ENU_M = C_M_ENU.T
+    info_burnout = {
+        "t_s": float(sp.t[-1]),
+        "altitude_above_pad_m": float(np.linalg.norm(p1) - EARTH.reference_radius - h_pad),
+        "velocity_enu_m_s": (C_ENU_M @ (v1 - np.cross([0.0, 0.0, EARTH.rotation_rate], p1))).tolist(),
+        "sigma_position_m": sig_p.tolist(),
+        "sigma_velocity_m_s": sig_v.tolist(),
+        "vertical_speed_m_s": float(np.dot(v1 - np.cross([0.0, 0.0, EARTH.rotation_rate], p1), up)),
+    }
+    return BoostSolution(
+        float(sp.t[-1]), p1, v1, sig_p, sig_v, atm, h_pad, p0, q_m_b, bias, axis, p_std, info_pad, info_burnout
+    )
+
+
+def detect_main_deploy(t, pressure, f_B, atm, t_apogee: float, t_end: float) -> float | None:
+    """Time [s] of the main parachute's opening, or None: after apogee + 5 s, the barometric descent
+    rate (1 s differences of the altitude) falls below half the drogue's median rate and stays there
+    for 2 s; the opening is the largest |specific force| in the 3 s before that."""
+    sel = (t > t_apogee) & (t <= t_end)
+    ts = t[sel]
+    if ts.size < 20 or ts[-1] - ts[0] < 8.0:
+        return None
+    h = atm.altitude_of_pressure(pressure[sel])
+    grid = np.arange(ts[0], ts[-1], 0.25)
+    hg = np.interp(grid, ts, h)
+    rate = np.full(grid.size, np.nan)
+    rate[4:] = -(hg[4:] - hg[:-4]) / 1.0
+    drogue = (grid > t_apogee + 5.0) & (grid < t_apogee + 12.0)
+    if not np.any(drogue):
+        return None
+    v_d = float(np.nanmedian(rate[drogue]))
+    if not v_d > 3.0:
+        return None
+    slow = np.nan_to_num(rate, nan=np.inf) < 0.5 * v_d
+    for k in np.flatnonzero(slow & (grid > t_apogee + 5.0)):
+        later = (grid >= grid[k]) & (grid <= grid[k] + 2.0)
+        if np.all(slow[later]):
+            w = (t >= grid[k] - 3.0) & (t <= grid[k])
+            if not np.any(w):
+                return float(grid[k])
+            return float(t[w][np.argmax(np.linalg.norm(f_B[w], axis=1))])
+    return None
+
+
+#: 1σ floors of the block-mean pressure [Pa]: in the coast (static-port error at up to Mach 0.5,
+#: air-brake deployment), under the parachutes (the day's lapse rate vs the standard one: 1 % of
+#: a 1 km column is ~100 Pa; a random 25 Pa per 0.1 s block averages it only partly), and in the
+#: burnout transient (the first BURNOUT_TRANSIENT_S of the coast: the logs of flights 1 and 3
+#: show pressure excursions of 1–3 kPa there)
+PRESSURE_SIGMA_COAST = 60.0
+PRESSURE_SIGMA_DESCENT = 25.0
+PRESSURE_SIGMA_TRANSIENT = 3000.0
+BURNOUT_TRANSIENT_S = 2.5
+#: prior 1σ of the in-flight barometer offset [Pa] (~2.5 m): the pad altitude is fitted to the
+#: standby pressure, so what is left is a drift in flight (board heating, port effects)
+BARO_BIAS_SIGMA = 30.0
+
+
+def pressure_sigma(t, t_coast: float, t_apogee: float, standby_std: float, count) -> np.ndarray:
+    """1σ [Pa] (n,) of the block-mean pressures at t (n,) [s after launch]: the standby noise over
+    √count plus the model-error floors above (coast letter at ``t_coast``, apogee at ``t_apogee``)."""
+    t = np.asarray(t, float)
+    floor = np.where(t < t_apogee, PRESSURE_SIGMA_COAST, PRESSURE_SIGMA_DESCENT)
+    floor = np.where(t < t_coast + BURNOUT_TRANSIENT_S, PRESSURE_SIGMA_TRANSIENT, floor)
+    return np.sqrt(floor**2 + standby_std**2 / np.asarray(count, float))
+
+
+def accel_sigma(t, t_apogee: float, t_main: float | None) -> np.ndarray:
+    """1σ [m/s²] (n,) of the block-mean |specific force|: 0.5 in the coast (vibration, air brakes
+    moving), 3 under a parachute (swinging), 30 within 2 s of an opening (the shock is not modelled)."""
+    t = np.asarray(t, float)
+    s = np.where(t < t_apogee, 0.5, 3.0)
+    for te in (t_apogee, t_main):
+        if te is not None:
+            s = np.where((t >= te - 0.2) & (t <= te + 2.0), 30.0, s)
+    return s
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(f"{float(x):.10g}" for x in np.atleast_1d(v)) + "]"
+
+
+#: 1σ [m] per inertial axis of the landed coordinates as an observation (the landing elevation
+#: is not known: taken as the pad's; ±15 m covers the terrain of the three sites' fields)
+LANDING_SIGMA = 15.0
+
+
+def landing_point_inertial(meta, h_pad: float, t_land: float) -> np.ndarray:
+    """The landed coordinates as a position (3,) [m] in M at ``t_land`` [s after launch] (pad
+    elevation; the Earth turned by ω t_land since launch)."""
+    p_e = pad_position(meta.landed_lat_deg, meta.landed_lon_deg, h_pad)
+    a = EARTH.rotation_rate * t_land
+    c, s_ = math.cos(a), math.sin(a)
+    return np.array([c * p_e[0] - s_ * p_e[1], s_ * p_e[0] + c * p_e[1], p_e[2]])
+
+
+def problem_file(
+    name: str, meta, fl: BoostSolution, t0: float, t_end: float, t_apogee: float, t_main, landing: bool = False
+) -> str:
+    """Text of the post2 problem file of a flight's coast and descent (from ``t0`` to ``t_end`` [s
+    after launch]): 3-DOF, Earth, the site's standard atmosphere, the rocket as a point mass with
+    the metadata's Cd and area, drogue at the apogee letter and main at ``t_main``; states
+    position, velocity (from the boost), coast drag multiplier, barometer bias, drogue and main
+    drag areas, wind (prior: the site's surface wind); observations pressure and |specific force|;
+    with ``landing`` also the landed coordinates (``landing.csv``) — the variant that estimates the
+    winds under the parachutes (the IMU and the barometer do not see the horizontal drift)."""
+    wf = math.radians(meta.wind_from_deg)
+    w_en = (-meta.wind_speed * math.sin(wf), -meta.wind_speed * math.cos(wf))
+    lines = [
+        f"# post2 problem file of the flight {meta.name}, written by `workbench import airbrakes`.",
+        "# Coast and descent after the boost; the boost was integrated from the IMU (flight.json: burnout).",
+        "[scenario]",
+        f'name = "{name}"',
+        'kind = "post2"',
+        f'description = "real rocket flight {meta.name} ({meta.date[:10]}): coast and descent on Earth'
+        + (', with the landed coordinates observed (winds)"' if landing else '"'),
+        "",
+        "[model]",
+        "dof = 3",
+        f"t_start_s = {t0:.9f}",
+        f"t_end_s = {t_end:.9f}",
+        "step_s = 0.05",
+        "grid_s = 0.1",
+        "",
+        "[environment]",
+        'body = "earth"',
+        'atmosphere = "earth_standard"',
+        f"sea_level_pressure_pa = {fl.atmosphere.sea_level_pressure:.2f}  # the site's reported pressure, read as QNH",
+        f"sea_level_temperature_K = {fl.atmosphere.sea_level_temperature:.3f}  # site temperature + 6.5 K/km x pad",
+        f"# pad altitude {fl.h_pad:.1f} m above the mean sphere (the standby pressure in this atmosphere)",
+        "",
+        "[vehicle]",
+        f"mass_kg = {meta.mass}  # metadata dry mass: the coast/descent mass",
+        f"ref_area_m2 = {meta.area}",
+        f"cd = {meta.cd}",
+        "",
+        "[events.drogue]",
+        'when = "time"',
+        f"value = {t_apogee:.4f}  # the flight computer's descent letter (apogee)",
+        'chute = "drogue"',
+    ]
+    if t_main is not None:
+        lines += ["", "[events.main]", 'when = "time"', f"value = {t_main:.4f}  # detected opening", 'chute = "main"']
+    lines += [
+        "",
+        "[states.position]",
+        f"value = {_fmt(fl.p_M)}",
+        f"sigma = {_fmt(fl.sigma_p)}",
+        "",
+        "[states.velocity]",
+        f"value = {_fmt(fl.v_M)}",
+        f"sigma = {_fmt(fl.sigma_v)}",
+        'process = "random_walk"  # unmodelled forces: lift at incidence, gusts, swinging under a parachute',
+        "psd = 0.5",
+        "",
+        "[states.ca_multiplier]  # coast drag multiplier (air brakes, mass and Cd errors)",
+        "value = 1.0",
+        "sigma = 0.5",
+        'process = "random_walk"',
+        "psd = 0.005",
+        "bounds = [0.2, 6.0]",
+        "",
+        "[states.baro_bias]  # the pad altitude matches the standby pressure: only the in-flight offset",
+        "value = 0.0",
+        f"sigma = {BARO_BIAS_SIGMA}",
+        "",
+        "[states.drogue_drag_area]",
+        "value = 0.5",
+        "sigma = 0.5",
+        "bounds = [0.01, 5.0]",
+        "",
+        "[states.main_drag_area]",
+        "value = 8.0",
+        "sigma = 8.0",
+        "bounds = [0.1, 40.0]",
+        "",
+        "[states.wind]  # prior: the site's surface wind",
+        f"value = {_fmt(w_en)}",
+        "sigma = [4.0, 4.0]",
+        'process = "random_walk"',
+        "psd = [0.05, 0.05]",
+        "",
+        "[observations.baro]",
+        'quantity = "pressure"',
+        'file = "pressure.csv"',
+        'weights = "pressure_weights.csv"',
+        "",
+        "[observations.accel]",
+        'quantity = "acceleration_magnitude"',
+        'file = "accel.csv"',
+        'weights = "accel_weights.csv"',
+        "gate_probability = 0.9999",
+        "",
+    ]
+    if landing:
+        lines += [
+            "[observations.landing]  # the landed coordinates at touchdown (metadata, within 1-2 m)",
+            'quantity = "position_inertial"',
+            'file = "landing.csv"',
+            f"sigma = {LANDING_SIGMA}",
+            "",
+        ]
+    return "\n".join(lines)
+
+
+def run_flight(problem_path) -> tuple[object, dict]:
+    """Reconstruct an imported flight (its post2 problem file; the import's ``flight.json``,
+    ``imu.csv`` and ``reference.csv`` beside it) and score it: (Post2Result, :func:`score_flight`)."""
+    path = Path(problem_path)
+    sc = load_scenario(path)
+    files = {}
+    for o in config_for(sc).observations:  # as Post2Problem.telemetry_files (no recording import here)
+        files[o.name] = sc.path_of(f"observations.{o.name}.file")
+        if o.weights is not None:
+            files[o.name + "_weights"] = sc.path_of(f"observations.{o.name}.weights")
+    result = None
+    for stage in pipeline.reconstruct(sc, files, None):
+        result = stage
+    flight = json.loads((path.parent / "flight.json").read_text(encoding="utf-8"))
+    imu = read_telemetry(path.parent / "imu.csv")
+    ref = read_telemetry(path.parent / "reference.csv")
+    return result, score_flight(result, flight, imu, ref)
+
+
+def _earth_fixed(p_M: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Earth-fixed position (n, 3) of inertial p_M (n, 3) at t (n,) [s after launch] (M = the
+    Earth-fixed axes at launch; rotation about +Z)."""
+    a = -EARTH.rotation_rate * np.asarray(t, float)
+    c, s = np.cos(a), np.sin(a)
+    return np.column_stack([c * p_M[:, 0] - s * p_M[:, 1], s * p_M[:, 0] + c * p_M[:, 1], p_M[:, 2]])
+
+
+def score_flight(result, flight: dict, imu, reference) -> dict:
+    """Scores of a post2 :class:`~workbench.problems.post2.pipeline.Post2Result` of a flight against
+    its references: apogee vs the metadata (m, %), landing point vs the landed coordinates (m, and
+    the Mahalanobis distance with the reconstruction's horizontal covariance: inside 3σ when
+    d² ≤ χ²₂(0.9973)), altitude vs the flight computer's, the pad-aligned gyro attitude vs the flight
+    computer's quaternion (tilt from vertical and attitude change since the pad, deg), and the
+    estimated parameters.  ``flight`` the import's ``flight.json``; ``imu``, ``reference`` the
+    telemetry of ``imu.csv`` / ``reference.csv``."""
+    meta = flight["metadata"]
+    h_pad = flight["pad"]["pad_altitude_m"]
+    t = result.t
+    hist = result.history["smoothed"]
+    p = hist["position"]["value"]
+    r = np.linalg.norm(p, axis=1)
+    h = r - EARTH.reference_radius - h_pad
+    k = int(np.argmax(h))
+    out: dict = {"flight": flight["flight"]}
+    # apogee: the altitude of the reconstructed apogee above the pad
+    Pk = result.P[k]
+    sp = result.smap.blocks["position"].se
+    up = p[k] / r[k]
+    sig_h = float(np.sqrt(up @ Pk[sp, sp] @ up))
+    out["apogee"] = {
+        "reconstructed_m": float(h[k]),
+        "sigma_m": sig_h,
+        "t_s": float(t[k]),
+        "metadata_m": meta["apogee"],
+        "error_m": float(h[k] - meta["apogee"]),
+        "error_percent": float(100.0 * (h[k] - meta["apogee"]) / meta["apogee"]),
+        "flight_computer_max_m": float(np.max(reference.channel("h"))),
+    }
+    # the same apogee as a standard-day altimeter reads it (T0 = 288.15 K): the pressure altitude
+    atm, _ = site_atmosphere(meta["qnh"], meta["temperature"], flight["pad"]["standby_pressure_pa"])
+    std = EarthStandardAtmosphere(meta["qnh"], 288.15)
+    p_apo = float(atm.pressure(h[k] + h_pad))
+    h_std = float(std.altitude_of_pressure(p_apo) - std.altitude_of_pressure(flight["pad"]["standby_pressure_pa"]))
+    out["apogee"]["standard_day_pressure_altitude_m"] = h_std
+    out["apogee"]["standard_day_error_m"] = h_std - meta["apogee"]
+    # landing point
+    pe = _earth_fixed(p[-1:], t[-1:])[0]
+    lat = math.degrees(math.asin(pe[2] / np.linalg.norm(pe)))
+    lon = math.degrees(math.atan2(pe[1], pe[0]))
+    lat0, lon0 = meta["launch_lat_deg"], meta["launch_lon_deg"]
+    ours = local_en(lat, lon, lat0, lon0)
+    truth = local_en(meta["landed_lat_deg"], meta["landed_lon_deg"], lat0, lon0)
+    C_M_ENU = _enu_axes(math.radians(lat), math.radians(lon))
+    a = -EARTH.rotation_rate * float(t[-1])
+    Rz = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    C_EN_I = (C_M_ENU.T @ Rz)[:2]
+    P_en = C_EN_I @ result.P[-1][sp, sp] @ C_EN_I.T
+    err = ours - truth
+    d2 = float(err @ np.linalg.solve(P_en, err))
+    out["landing"] = {
+        "reconstructed_en_m": ours.tolist(),
+        "landed_en_m": truth.tolist(),
+        "error_m": float(np.linalg.norm(err)),
+        "error_en_m": err.tolist(),
+        "sigma_en_m": np.sqrt(np.diag(P_en)).tolist(),
+        "mahalanobis": math.sqrt(d2),
+        "inside_3sigma": bool(d2 <= chi2.ppf(0.9973, 2)),
+        "drift_from_pad_reconstructed_m": float(np.linalg.norm(ours)),
+        "drift_from_pad_landed_m": float(np.linalg.norm(truth)),
+    }
+    # altitude vs the flight computer's solution
+    href = np.interp(t, reference.time, reference.channel("h"))
+    dh = h - href
+    late = t >= flight["t_start_s"] - TAIL_OFF_S + BURNOUT_TRANSIENT_S  # the baro is de-weighted before
+    out["altitude_vs_flight_computer"] = {
+        "rms_m": float(np.sqrt(np.mean(dh**2))),
+        "max_abs_m": float(np.max(np.abs(dh))),
+        "at_apogee_m": float(dh[k]),
+        "rms_after_burnout_transient_m": float(np.sqrt(np.mean(dh[late] ** 2))),
+        "max_abs_after_burnout_transient_m": float(np.max(np.abs(dh[late]))),
+    }
+    out["attitude_vs_flight_computer"] = _attitude_scores(flight, imu, reference)
+    # estimated parameters (smoothed, end of the span) and the wind prior
+    params = {}
+    for name in ("ca_multiplier", "baro_bias", "drogue_drag_area", "main_drag_area", "wind"):
+        if name in hist:
+            params[name] = {
+                "value": hist[name]["value"][-1].tolist(),
+                "sigma": hist[name]["sigma"][-1].tolist(),
+                "prior": result.summary["states"][name]["initial"],
+            }
+    if "ca_multiplier" in hist:
+        coast = t < flight["t_apogee_letter_s"]
+        params["ca_multiplier"]["coast_mean"] = float(np.mean(hist["ca_multiplier"]["value"][coast, 0]))
+        params["ca_multiplier"]["coast_min_max"] = [
+            float(np.min(hist["ca_multiplier"]["value"][coast, 0])),
+            float(np.max(hist["ca_multiplier"]["value"][coast, 0])),
+        ]
+    out["parameters"] = params
+    out["pad_altitude_m"] = h_pad
+    out["observations"] = result.summary["observations"]
+    return out
+
+
+#: gyro full scale of the FIRM logs [rad/s] (~1 800 deg/s; samples at or above are saturated)
+GYRO_SATURATION = math.radians(1790.0)
+
+
+def _rotation_angle_deg(R: np.ndarray) -> np.ndarray:
+    """Rotation angle [deg] (n,) of rotation matrices R (n, 3, 3)."""
+    return np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def _attitude_scores(flight: dict, imu, reference) -> dict:
+    """Gyro attitude from the pad (bias removed) vs the flight computer's quaternion.
+
+    The flight computer's body frame is its own (flights 3 and 4 log a "rotated" acceleration with
+    +z along the rocket) and its navigation frame is not documented, so the comparison uses two
+    frame-free quantities: the **tilt** of the rocket's long axis from the vertical (ours: the IMU
+    axis of the boost's mean specific force, turned by the integrated gyro, against the pad's
+    vertical; the flight computer's: its body axis closest to its navigation z on the pad, with
+    R(q) read as body -> navigation, z vertical), and the **rotation angle since the pad**
+    (the angle of R_pad^T R(t) in each).  Both over boost and coast up to 1 s before the apogee
+    letter (the ejection and the tumbling under the drogue saturate the gyro)."""
+    t = imu.time
+    w = imu.stack(["w.x", "w.y", "w.z"])
+    f = imu.stack(["f.x", "f.y", "f.z"])
+    w_c = w - np.radians(flight["pad"]["gyro_bias_deg_s"])
+    qref = reference.stack(["qx", "qy", "qz", "qw"])
+    t_pad_end = flight["pad"]["ignition_t_s"] - IGNITION_GUARD_S
+    k0 = int(np.searchsorted(t, t_pad_end)) - 1
+    k1 = int(np.searchsorted(t, flight["t_apogee_letter_s"] - 1.0))
+    pad = (t > t_pad_end - PAD_WINDOW_S) & (t <= t_pad_end)
+    axis = np.asarray(flight["pad"]["rocket_axis_imu"])
+    n = k1 - k0
+    q = np.zeros((n, 4))
+    q[0] = [0.0, 0.0, 0.0, 1.0]
+    for i in range(1, n):  # body-frame right product, trapezoidal rate
+        j = k0 + i
+        q[i] = quat_multiply(q[i - 1], quat_from_rotvec(0.5 * (w_c[j] + w_c[j - 1]) * (t[j] - t[j - 1])))
+        q[i] /= np.linalg.norm(q[i])
+    R_rel_ours = quat_to_dcm(q)  # R_{B_pad B(t)}
+    up_b0 = f[pad].mean(axis=0) / np.linalg.norm(f[pad].mean(axis=0))
+    tilt_ours = np.degrees(np.arccos(np.clip((R_rel_ours @ axis) @ up_b0, -1, 1)))
+    Rfc = quat_to_dcm(qref[k0:k1])  # read as body -> navigation
+    kax = int(np.argmax(np.abs(Rfc[0][2])))
+    sgn = float(np.sign(Rfc[0][2, kax]))
+    tilt_fc = np.degrees(np.arccos(np.clip(sgn * Rfc[:, 2, kax], -1, 1)))
+    ang_fc = _rotation_angle_deg(np.einsum("ji,njk->nik", Rfc[0], Rfc))
+    ang_ours = _rotation_angle_deg(R_rel_ours)
+    tt = t[k0:k1]
+    kb = int(np.searchsorted(tt, flight["t_start_s"]))
+    dtilt = tilt_ours - tilt_fc
+    dang = ang_ours - ang_fc
+    sat = np.any(np.abs(w) >= GYRO_SATURATION, axis=1)
+    return {
+        "window_s": [float(tt[0]), float(tt[-1])],
+        "flight_computer_long_axis": f"{'+' if sgn > 0 else '-'}{'xyz'[kax]} (its body frame)",
+        "tilt_deg": {
+            "ours_at_burnout": float(tilt_ours[kb]),
+            "flight_computer_at_burnout": float(tilt_fc[kb]),
+            "ours_end": float(tilt_ours[-1]),
+            "flight_computer_end": float(tilt_fc[-1]),
+            "difference_rms": float(np.sqrt(np.mean(dtilt**2))),
+            "difference_max_abs": float(np.max(np.abs(dtilt))),
+        },
+        "rotation_since_pad_deg": {
+            "ours_end": float(ang_ours[-1]),
+            "flight_computer_end": float(ang_fc[-1]),
+            "difference_rms": float(np.sqrt(np.mean(dang**2))),
+            "difference_max_abs": float(np.max(np.abs(dang))),
+        },
+        "gyro_saturated_samples": {
+            "boost_coast": int(np.sum(sat[(t >= 0) & (t < flight["t_apogee_letter_s"])])),
+            "descent": int(np.sum(sat[t >= flight["t_apogee_letter_s"]])),
+        },
+    }
