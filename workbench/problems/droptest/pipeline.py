@@ -36,10 +36,12 @@ from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_conjugate, quat_normalize, quat_rotate, triad, triad_covariance
 from workbench.estimation.consistency import whiteness
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
+from workbench.estimation.health import health_markdown
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.config import config_for
+from workbench.problems.droptest.health import drop_health
 from workbench.problems.droptest.lander import LanderModel, load_lander
 from workbench.problems.droptest.sensors import RangingSpec
 from workbench.problems.droptest.stroke import (
@@ -590,6 +592,7 @@ def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: Fil
         "innovations": innov,
         "covariance": {"min_eigenvalue": eig_min, "max_asymmetry": sym, "positive_definite": eig_min > 0},
         "degradations": [{"time_s": t, "level": lvl, "text": txt} for t, lvl, txt in tel.degradations],
+        "health": drop_health(tel, fwd, smo, st),
     }
 
 
@@ -777,4 +780,6 @@ def scorecard_markdown(summary: dict) -> str:
         lines += [f"- t = {d['time_s']:.3f} s [{d['level']}] {d['text']}" for d in summary["degradations"]]
     else:
         lines += ["", "No telemetry degradations (no saturation, gaps or dead channels)."]
+    if "health" in summary:
+        lines += ["", health_markdown(summary["health"]).rstrip()]
     return "\n".join(lines) + "\n"

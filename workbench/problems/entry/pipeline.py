@@ -40,14 +40,17 @@ from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import attitude_error, quat_normalize
 from workbench.core.timescales import julian_date_utc
 from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nees
+from workbench.estimation.health import health_markdown
 from workbench.estimation.strapdown import integrate
 from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.telemetry import TelemetryError
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
 from workbench.models.radar import beam_directions_G
 from workbench.problems.entry.atmosphere import reconstruct_atmosphere
 from workbench.problems.entry.config import EntryConfig, config_for
 from workbench.problems.entry.dispersion import run_dispersion
 from workbench.problems.entry.filter import RadarData, run_entry_smoother
+from workbench.problems.entry.health import entry_health
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import errors_sigmas
@@ -206,6 +209,13 @@ def reconstruct(
     for ev in ("PDD", "FSR"):
         if ev not in tm.events:
             raise ScenarioError(Path(paths["events"]), ev, "event missing (needed for the dispersion rules and phases)")
+        if tm.t_gnc[-1] < tm.events[ev] < tm.t_gnc[-1] + 0.5 * (tm.t_gnc[-1] - tm.t_gnc[0]):
+            # the events are in order but the GNC data stop early: the GNC file is the suspect
+            raise TelemetryError.single(
+                paths["gnc"],
+                f"the data end at {tm.t_gnc[-1]:.3f} s, before the {ev} event at {tm.events[ev]:.3f} s "
+                f"({paths['events']}): is the GNC file truncated?",
+            )
         if not (tm.t_gnc[0] <= tm.events[ev] <= tm.t_gnc[-1]):
             raise ScenarioError(
                 Path(paths["events"]),
@@ -354,6 +364,7 @@ def reconstruct(
         "sigma_attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(init.P0)[3:6])))),
         "sigma_position_m": float(np.sqrt(np.max(np.diag(init.P0)[6:9]))),
     }
+    summary["health"] = entry_health(tm, imu, filt, atm, r_ground)
     yield EntryResult(tm, imu, nomi, disp, filt, atm, winds, vehicle, dict(tm.events), summary, init)
 
 
@@ -816,4 +827,6 @@ def scorecard_markdown(summary: dict) -> str:
                     f"- **{k}**: "
                     + ", ".join(f"{kk} {vv:.4g}" if isinstance(vv, float) else f"{kk} {vv}" for kk, vv in v.items())
                 )
+    if "health" in summary:
+        L += ["", health_markdown(summary["health"]).rstrip()]
     return "\n".join(L) + "\n"

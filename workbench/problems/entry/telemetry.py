@@ -51,6 +51,8 @@ from workbench.io.telemetry import (
     read_events,
     read_telemetry,
 )
+from workbench.io.units import likely_unit
+from workbench.problems.entry.site import R_MOLA
 
 __all__ = [
     "STREAMS",
@@ -204,6 +206,132 @@ def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(), strict=True))
 
 
+def _unit_problem(file, tel, name: str, ratio: float, what: str) -> Problem | None:
+    """A located problem when ``ratio`` (measured / expected) is explained by a unit mix-up."""
+    unit = tel.units[name]
+    likely = likely_unit(ratio, unit)
+    if likely is None:
+        return None
+    return Problem(str(file), f"{name} [{unit}]", None, None, f"{what}: the values look like [{likely}], not [{unit}]")
+
+
+def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str, float]) -> None:
+    """Unit plausibility from physics (frame-free magnitudes), raising :class:`TelemetryError` naming
+    the file, the column and the likely unit when a mismatch is a unit-like factor (9.81, 1000, 57.3,
+    3.28: :func:`~workbench.io.units.likely_unit`):
+
+    * the on-board position ``p_*`` (gnc_nav) lies near the Mars radius (median |p| / 3396 km);
+    * the on-board velocity ``v_*`` matches the position differences (median |v| / |Δp/Δt|);
+    * the total acceleration ``a_*`` (gnc) matches the on-board velocity differences;
+    * the body rate ``w_*`` (gnc) matches the rotation between successive attitude quaternions;
+    * the parachute deployment (PDD, events) comes after the peak of |a| (the hypersonic
+      deceleration), and a PDD time off by 1000 from it is an events time unit mix-up.
+    Magnitudes are compared by medians, so saturation and blackouts do not matter.
+    """
+    problems: list[Problem] = []
+    p = nav.stack([f"p_{a}" for a in "xyz"])
+    v = nav.stack([f"v_{a}" for a in "xyz"])
+    r = float(np.median(np.linalg.norm(p, axis=1)))
+    pos_ok = True
+    if r > 0 and abs(np.log(r / R_MOLA)) > np.log(1.5):
+        pos_ok = False
+        pr = _unit_problem(
+            paths["gnc_nav"],
+            nav,
+            "p_x",
+            r / R_MOLA,
+            f"the on-board position lies {r / 1e3:.4g} km "
+            f"from the centre of Mars, whose radius is {R_MOLA / 1e3:.0f} km",
+        )
+        problems.append(
+            pr
+            or Problem(
+                str(paths["gnc_nav"]),
+                f"p_x [{nav.units['p_x']}]",
+                None,
+                None,
+                f"the on-board position lies {r / 1e3:.4g} km from the centre of Mars "
+                f"(radius {R_MOLA / 1e3:.0f} km): wrong unit or frame",
+            )
+        )
+    if pos_ok and nav.time.size > 2:
+        dt = np.diff(nav.time)
+        dp = np.linalg.norm(np.diff(p, axis=0), axis=1) / dt
+        vm = 0.5 * (np.linalg.norm(v[1:], axis=1) + np.linalg.norm(v[:-1], axis=1))
+        ok = (dp > 1.0) & (vm > 0)
+        if ok.sum() > 2:
+            ratio = float(np.median(vm[ok] / dp[ok]))
+            if abs(np.log(ratio)) > np.log(1.5):
+                pr = _unit_problem(
+                    paths["gnc_nav"],
+                    nav,
+                    "v_x",
+                    ratio,
+                    f"the on-board speed is {ratio:.4g}× the rate of change of the on-board position",
+                )
+                if pr:
+                    problems.append(pr)
+    if nav.time.size > 2 and not problems:
+        dv = np.diff(v, axis=0) / np.diff(nav.time)[:, None]
+        tm = 0.5 * (nav.time[1:] + nav.time[:-1])
+        a = gnc.stack([f"a_{x}" for x in "xyz"])
+        ok_a = np.all(np.isfinite(a), axis=1)
+        if ok_a.sum() > 2:
+            ai = np.column_stack([np.interp(tm, gnc.time[ok_a], a[ok_a, i]) for i in range(3)])
+            na, ndv = np.linalg.norm(ai, axis=1), np.linalg.norm(dv, axis=1)
+            inside = (tm >= gnc.time[ok_a][0]) & (tm <= gnc.time[ok_a][-1]) & (ndv > 0.5)
+            if inside.sum() > 2:
+                ratio = float(np.median(na[inside] / ndv[inside]))
+                if abs(np.log(ratio)) > np.log(1.5):
+                    pr = _unit_problem(
+                        paths["gnc"],
+                        gnc,
+                        "a_x",
+                        ratio,
+                        f"the acceleration is {ratio:.4g}× the rate of change of the on-board velocity",
+                    )
+                    if pr:
+                        problems.append(pr)
+    q = gnc.stack([f"q{i}" for i in range(1, 5)])
+    if q.shape[0] > 3:
+        qn = q / np.linalg.norm(q, axis=1, keepdims=True)
+        dots = np.clip(np.abs(np.sum(qn[1:] * qn[:-1], axis=1)), 0.0, 1.0)
+        rate_q = 2.0 * np.arccos(dots) / np.diff(gnc.time)
+        w = np.linalg.norm(gnc.stack([f"w_{x}" for x in "xyz"]), axis=1)
+        wm = 0.5 * (w[1:] + w[:-1])
+        ok = (rate_q > np.radians(0.5)) & (wm > 0)
+        if ok.sum() > 5:
+            ratio = float(np.median(wm[ok] / rate_q[ok]))
+            if abs(np.log(ratio)) > np.log(1.5):
+                pr = _unit_problem(
+                    paths["gnc"],
+                    gnc,
+                    "w_x",
+                    ratio,
+                    f"the body rate is {ratio:.4g}× the rotation rate of the attitude quaternions",
+                )
+                if pr:
+                    problems.append(pr)
+    if problems:
+        raise TelemetryError(problems)
+    a = gnc.stack([f"a_{x}" for x in "xyz"])
+    ok_a = np.all(np.isfinite(a), axis=1)
+    if "PDD" in events and ok_a.sum() > 10:
+        t_peak = float(gnc.time[ok_a][int(np.argmax(np.linalg.norm(a[ok_a], axis=1)))])
+        t_pdd = events["PDD"]
+        span = (float(gnc.time[0]), float(gnc.time[-1]))
+        if not (t_peak < t_pdd <= span[1]):
+            for f in (1e3, 1e-3, 1e6):
+                if t_peak < t_pdd * f <= span[1] and not (t_peak < t_pdd <= span[1]):
+                    raise TelemetryError.single(
+                        paths["events"],
+                        f"the parachute deployment (PDD) at {t_pdd:.6g} s is not after the peak deceleration "
+                        f"({t_peak:.1f} s) inside the GNC data ({span[0]:.1f}–{span[1]:.1f} s), but {t_pdd * f:.6g} s "
+                        f"would be: the times look {1 / f:g}× off — a time unit mix-up (s ↔ ms)?",
+                        column="time",
+                    )
+
+
 def read_entry_telemetry(
     paths: Mapping[str, str | os.PathLike], checks: TelemetryChecks | None = None
 ) -> EntryTelemetry:
@@ -225,6 +353,7 @@ def read_entry_telemetry(
     req.update({f"q{i}": "dimensionless" for i in range(1, 5)})
     req.update({f"a_{a}": "acceleration" for a in "xyz"})
     gnc = read_telemetry(paths["gnc"], required=req, sparse=[f"a_{a}" for a in "xyz"])
+    problems += [f"WARN: {note}" for note in gnc.notes]
     fname = str(paths["gnc"])
     q_raw = gnc.stack([f"q{i}" for i in range(1, 5)])
     norm = np.linalg.norm(q_raw, axis=1)
@@ -283,12 +412,14 @@ def read_entry_telemetry(
     req_nav = {f"p_{a}": "length" for a in "xyz"}
     req_nav.update({f"v_{a}": "velocity" for a in "xyz"})
     nav = read_telemetry(paths["gnc_nav"], required=req_nav)
+    problems += [f"WARN: {note}" for note in nav.notes]
 
     # ---- radar --------------------------------------------------------------------------------
     names = [f"B{i}" for i in range(4)]
     tel = read_telemetry(
         paths["rda_slant_range"], required=dict.fromkeys(names, "length"), limits=dict.fromkeys(names, (0.0, 1e7))
     )
+    problems += [f"WARN: {note}" for note in tel.notes]
     t_sr, sr = tel.time.copy(), tel.stack(names)
     zero = sr == 0.0
     sr_valid = ~zero.any(axis=1)
@@ -312,6 +443,7 @@ def read_entry_telemetry(
     vn = [f"v_out_{a}" for a in "xyz"]
     req_r = {"slant_out": "length", **dict.fromkeys(vn, "velocity")}
     tel = read_telemetry(paths["rda_out"], required=req_r, limits={"slant_out": (0.0, 1e7)})
+    problems += [f"WARN: {note}" for note in tel.notes]
     t_rda, so, vo = tel.time.copy(), tel.channel("slant_out").copy(), tel.stack(vn)
     zero_so = so == 0.0
     zero_v = np.all(vo == 0.0, axis=1)
@@ -348,6 +480,7 @@ def read_entry_telemetry(
             continue
         events[name] = float(t_e)
 
+    check_units(gnc, nav, paths, events)
     return EntryTelemetry(
         t_gnc=gnc.time.copy(),
         w_G=gnc.stack([f"w_{a}" for a in "xyz"]),

@@ -26,6 +26,7 @@ from scipy.stats import chi2
 
 from workbench.core.rotation import attitude_error
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
+from workbench.estimation.health import WARNING, covariance_check, health_report, interval_check, nis_check
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.io.telemetry import read_telemetry
@@ -327,6 +328,24 @@ def _unit_scale(name: str) -> float:
     return {"deg": 180.0 / math.pi, "deg/s": 180.0 / math.pi}.get(unit, 1.0)
 
 
+def post2_health(fp, P: np.ndarray, x: np.ndarray) -> dict:
+    """``summary["health"]`` (:mod:`workbench.estimation.health`): mean NIS of every observation
+    against χ² bounds, the share of rejected samples (WARNING above 10 %), the final covariance
+    history ``P`` (n, k, k) symmetric positive definite and the state history ``x`` (n, m) finite."""
+    checks = []
+    for name, ih in fp.innovations.items():
+        if ih.t.size:
+            checks.append(nis_check(name, ih.nis, int(ih.y.shape[1])))
+            rej = float(np.mean(~ih.accepted))
+            checks.append(
+                interval_check(f"rejected.{name}", rej, 0.0, 0.1, f"share of {name} samples rejected", status=WARNING)
+            )
+    checks.append(covariance_check(P, "covariance"))
+    bad = int(np.sum(~np.isfinite(x)))
+    checks.append(interval_check("state.finite", bad, 0, 0, "non-finite state components"))
+    return health_report(checks)
+
+
 def reconstruct(scenario: Scenario, telemetry, options=None):
     """Generator of the stages (see the module docstring) for a post2 scenario and its telemetry files."""
     cfg = config_for(scenario)
@@ -381,6 +400,7 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
         obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
     summary["observations"] = obs
     summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
+    summary["health"] = post2_health(fp, P, x)
     yield Post2Result(
         t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), {"smoothed": hist, "forward": fwd}, summary
     )
