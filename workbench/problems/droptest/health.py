@@ -14,6 +14,7 @@ import numpy as np
 
 from workbench.core.bodies import G0
 from workbench.estimation.health import (
+    ERROR,
     WARNING,
     Check,
     covariance_check,
@@ -24,7 +25,61 @@ from workbench.estimation.health import (
     notes_check,
 )
 
-__all__ = ["drop_health"]
+__all__ = ["drop_health", "input_checks", "input_health"]
+
+
+def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None) -> list[Check]:
+    """The checks that need only the telemetry ``tel`` (``DropTelemetry``): no IMU gap across the
+    impact (where the mean triad specific force exceeds 2 g after the release or bungee cut, and
+    the extra ``windows`` {what: (t0, t1) [s]}), an impact present in the data at all, gaps after
+    release longer than 20 ms (WARNING), and the readers' warnings."""
+    windows = dict(windows or {})
+    imu = tel.imu
+    start = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
+    f = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in tel.triads], axis=1)
+    fmag = np.linalg.norm(np.mean(f, axis=1), axis=1)
+    hard = np.flatnonzero((imu.time >= start) & (fmag > 2.0 * G0))
+    gaps = [(g.start_s, g.end_s) for g in imu.gaps]
+    late = [(a, b) for a, b in gaps if b > tel.events.get("release", -np.inf)]
+    checks: list[Check] = []
+    if hard.size:
+        # padded by two samples: a gap just before the first or after the last > 2 g sample is across it
+        pad = 2.0 * float(np.median(np.diff(imu.time)))
+        windows["measured impact (|f| > 2 g)"] = (float(imu.time[hard[0]]) - pad, float(imu.time[hard[-1]]) + pad)
+    elif late:
+        a, b = max(late, key=lambda g: g[1] - g[0])
+        checks.append(
+            Check(
+                "gaps.impact",
+                ERROR,
+                float(b - a),
+                0.0,
+                f"no impact (> 2 g) in the IMU data after release, and a {b - a:.3g} s gap ({a:.4f}–{b:.4f} s) "
+                "may hide it: the contact is not observed",
+            )
+        )
+    checks.append(gap_check("gaps.contact", gaps, windows))
+    long_gaps = [(b - a, a, b) for a, b in late if b - a > 0.02]
+    if long_gaps:
+        d, a, b = max(long_gaps)
+        checks.append(
+            Check(
+                "gaps.after_release", WARNING, float(d), 0.02, f"a {d:.3g} s IMU gap after release ({a:.4f}–{b:.4f} s)"
+            )
+        )
+    checks.append(notes_check("telemetry", [f"{lvl}: {txt}" for _, lvl, txt in tel.degradations]))
+    return checks
+
+
+def input_health(scenario, paths) -> dict:
+    """``health_report`` of :func:`input_checks` after reading and validating the drop-test
+    telemetry ``paths`` of ``scenario`` (raises the readers' located errors) — what can be said
+    before the filter runs (the fuzz suite's fast path)."""
+    from workbench.problems.droptest.lander import load_lander
+    from workbench.problems.droptest.telemetry import load_drop_telemetry
+
+    tel = load_drop_telemetry(scenario, paths, load_lander(scenario.path_of("vehicle.lander")))
+    return health_report(input_checks(tel))
 
 
 def drop_health(tel, fwd, smo, st) -> dict:
@@ -54,16 +109,5 @@ def drop_health(tel, fwd, smo, st) -> dict:
     i0, i1 = st.contact
     if i0 >= 0 and i1 >= 0:
         windows["detected airbag contact"] = (float(smo.t[i0]) - 0.01, float(smo.t[i1]) + 0.01)
-    imu = tel.imu
-    start = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
-    f = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in tel.triads], axis=1)
-    fmag = np.linalg.norm(np.mean(f, axis=1), axis=1)
-    hard = np.flatnonzero((imu.time >= start) & (fmag > 2.0 * G0))
-    if hard.size:
-        # padded by two samples: a gap just before the first or after the last > 2 g sample is across it
-        pad = 2.0 * float(np.median(np.diff(imu.time)))
-        windows["measured impact (|f| > 2 g)"] = (float(imu.time[hard[0]]) - pad, float(imu.time[hard[-1]]) + pad)
-    gaps = [(g.start_s, g.end_s) for g in imu.gaps]
-    checks.append(gap_check("gaps.contact", gaps, windows))
-    checks.append(notes_check("telemetry", [f"{lvl}: {txt}" for _, lvl, txt in tel.degradations]))
+    checks += input_checks(tel, windows)
     return health_report(checks)

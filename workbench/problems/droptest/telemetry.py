@@ -160,6 +160,42 @@ def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> li
     return out
 
 
+def check_free_fall(imu: Telemetry, events: dict[str, float], triads, fname: str) -> list[tuple[float, str, str]]:
+    """The ``bungee_cut`` event against physics: between the cut (+10 ms) and the first impact
+    sample (mean triad specific force above 2 g) the lander falls freely, so the median specific
+    force there is below 0.5 g.  If not, and the cut time scaled by 1000 (a s ↔ ms mix-up in the
+    events file) would satisfy it, a :class:`TelemetryError` naming the events file and the likely
+    unit; otherwise a WARN degradation.  Nothing is checked without a cut or an impact."""
+    if "bungee_cut" not in events:
+        return []
+    cols = [[f"{n}.{a}" for a in "xyz"] for n in triads]
+    if not all(c in imu.channels for grp in cols for c in grp):
+        return []
+    f = np.linalg.norm(np.mean([imu.stack(grp) for grp in cols], axis=0), axis=1)
+
+    def falls_freely(t_cut: float) -> bool | None:
+        hard = np.flatnonzero((imu.time > t_cut) & (f > 2.0 * G0))
+        if not hard.size:
+            return None
+        m = (imu.time > t_cut + 0.01) & (imu.time < imu.time[hard[0]] - 0.005)
+        return None if m.sum() < 10 else bool(np.median(f[m]) < 0.5 * G0)
+
+    cut = events["bungee_cut"]
+    ok = falls_freely(cut)
+    if ok is None or ok:
+        return []
+    for fac in (1e3, 1e-3):
+        if imu.time[0] < cut * fac < imu.time[-1] and falls_freely(cut * fac):
+            raise TelemetryError.single(
+                fname,
+                f"after the bungee cut at {cut:.6g} s the lander does not fall freely (median specific force "
+                f"above 0.5 g), but it would after {cut * fac:.6g} s: the event times look {1 / fac:g}× off — "
+                "a time unit mix-up (s ↔ ms)?",
+                column="time",
+            )
+    return [(float(cut), "WARN", f"{fname}: the lander does not fall freely after the bungee cut at {cut:.4f} s")]
+
+
 def _degrade(log: list, t: float, level: str, text: str) -> None:
     log.append((float(t), level, text))
 
@@ -221,6 +257,7 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
                 )
             )
     unit_notes = check_units_at_rest(imu, events["release"], cfg, str(paths["imu"]))
+    unit_notes += check_free_fall(imu, events, cfg.triads, str(paths["events"]))
     setup = read_setup(paths["setup"])
     ranging = None
     if "ranging" in paths:
@@ -241,6 +278,14 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
     for tf in (imu, att, ranging):
         if tf is not None:
             log += [(float(tf.time[-1]), "WARN", note) for note in tf.notes]
+    for tf in (att, ranging):
+        for gap in tf.gaps if tf is not None else ():
+            _degrade(
+                log,
+                gap.start_s,
+                "WARN",
+                f"{tf.path}: gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row})",
+            )
     n_raw = len(imu)
     f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
     w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])

@@ -27,7 +27,18 @@ from workbench.estimation.health import (
     notes_check,
 )
 
-__all__ = ["entry_health"]
+__all__ = ["entry_health", "input_health"]
+
+
+def input_health(scenario, paths) -> dict:
+    """``health_report`` of what the telemetry alone tells, after reading and validating the entry
+    telemetry ``paths`` of ``scenario`` (raises the readers' located errors, unit mix-ups included):
+    the readers' warnings.  The fuzz suite's fast path (no dispersion, no smoother)."""
+    from workbench.problems.entry.config import config_for
+    from workbench.problems.entry.telemetry import read_entry_telemetry
+
+    tm = read_entry_telemetry(paths, config_for(scenario).checks)
+    return health_report([notes_check("telemetry", [p for p in tm.problems if not str(p).startswith("INFO")])])
 
 
 def entry_health(tm, imu, filt, atm, r_ground: float) -> dict:

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.bodies import G0
 from workbench.core.rotation import quat_conjugate, quat_from_jpl, quat_normalize, quat_to_jpl
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.io.telemetry import (
@@ -206,6 +207,31 @@ def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(), strict=True))
 
 
+def _flat_top_notes(tel, run: int = 5) -> list[str]:
+    """WARN notes for rate and acceleration channels holding one non-zero value for ``run`` or more
+    consecutive samples: a flat top (saturated or stuck sensor)."""
+    out = []
+    for name in [f"{q}_{a}" for q in "wa" for a in "xyz"]:
+        v = tel.channel(name)
+        same = np.r_[False, (v[1:] == v[:-1]) & (v[1:] != 0) & np.isfinite(v[1:])]
+        for i0, i1 in true_runs(same):
+            if i1 - i0 + 2 >= run:
+                out.append(
+                    f"WARN: {Problem(str(tel.path), f'{name} [{tel.units[name]}]', i0, None, '')}".rstrip(": ")
+                    + f": {i1 - i0 + 2} samples flat at {v[i0]:.6g} SI "
+                    f"(t = {tel.time[i0 - 1]:.3f}–{tel.time[i1]:.3f} s): saturated or stuck"
+                )
+                break
+    return out
+
+
+def _gap_notes(tel) -> list[str]:
+    """WARN notes for the time gaps of a telemetry file (blackouts are expected, but reported)."""
+    return [
+        f"WARN: {tel.path}: gap {g.start_s:.3f}–{g.end_s:.3f} s ({g.duration_s:.3g} s, row {g.row})" for g in tel.gaps
+    ]
+
+
 def _unit_problem(file, tel, name: str, ratio: float, what: str) -> Problem | None:
     """A located problem when ``ratio`` (measured / expected) is explained by a unit mix-up."""
     unit = tel.units[name]
@@ -352,8 +378,10 @@ def read_entry_telemetry(
     req = {f"w_{a}": "angular_rate" for a in "xyz"}
     req.update({f"q{i}": "dimensionless" for i in range(1, 5)})
     req.update({f"a_{a}": "acceleration" for a in "xyz"})
-    gnc = read_telemetry(paths["gnc"], required=req, sparse=[f"a_{a}" for a in "xyz"])
-    problems += [f"WARN: {note}" for note in gnc.notes]
+    lim = {f"a_{a}": (-100 * G0, 100 * G0) for a in "xyz"}  # physically possible: an entry peaks at ~10 g
+    lim.update({f"w_{a}": (-np.radians(3000.0), np.radians(3000.0)) for a in "xyz"})
+    gnc = read_telemetry(paths["gnc"], required=req, sparse=[f"a_{a}" for a in "xyz"], limits=lim)
+    problems += [f"WARN: {note}" for note in gnc.notes] + _gap_notes(gnc) + _flat_top_notes(gnc)
     fname = str(paths["gnc"])
     q_raw = gnc.stack([f"q{i}" for i in range(1, 5)])
     norm = np.linalg.norm(q_raw, axis=1)
@@ -411,15 +439,17 @@ def read_entry_telemetry(
     # ---- on-board navigation 1 Hz -----------------------------------------------------------
     req_nav = {f"p_{a}": "length" for a in "xyz"}
     req_nav.update({f"v_{a}": "velocity" for a in "xyz"})
-    nav = read_telemetry(paths["gnc_nav"], required=req_nav)
-    problems += [f"WARN: {note}" for note in nav.notes]
+    lim = {f"p_{a}": (-5 * R_MOLA, 5 * R_MOLA) for a in "xyz"}  # within a few Mars radii
+    lim.update({f"v_{a}": (-2e4, 2e4) for a in "xyz"})  # below 20 km/s (entries are 4-8 km/s)
+    nav = read_telemetry(paths["gnc_nav"], required=req_nav, limits=lim)
+    problems += [f"WARN: {note}" for note in nav.notes] + _gap_notes(nav)
 
     # ---- radar --------------------------------------------------------------------------------
     names = [f"B{i}" for i in range(4)]
     tel = read_telemetry(
         paths["rda_slant_range"], required=dict.fromkeys(names, "length"), limits=dict.fromkeys(names, (0.0, 1e7))
     )
-    problems += [f"WARN: {note}" for note in tel.notes]
+    problems += [f"WARN: {note}" for note in tel.notes] + _gap_notes(tel)
     t_sr, sr = tel.time.copy(), tel.stack(names)
     zero = sr == 0.0
     sr_valid = ~zero.any(axis=1)
@@ -443,7 +473,7 @@ def read_entry_telemetry(
     vn = [f"v_out_{a}" for a in "xyz"]
     req_r = {"slant_out": "length", **dict.fromkeys(vn, "velocity")}
     tel = read_telemetry(paths["rda_out"], required=req_r, limits={"slant_out": (0.0, 1e7)})
-    problems += [f"WARN: {note}" for note in tel.notes]
+    problems += [f"WARN: {note}" for note in tel.notes] + _gap_notes(tel)
     t_rda, so, vo = tel.time.copy(), tel.channel("slant_out").copy(), tel.stack(vn)
     zero_so = so == 0.0
     zero_v = np.all(vo == 0.0, axis=1)
