@@ -309,12 +309,19 @@ def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lan
 
     ranging = _ranging_measurements(scenario, tel) if tel.ranging is not None else {}
 
+    # the triads' declared scale-factor and misalignment errors (sensors.accelerometer.scale,
+    # misalignment_deg; no states for them) as measurement noise proportional to the measured force:
+    # per axis σ² = s² f_i² + m² (|f|² − f_i²) — not averaged down, the error is common to the samples
+    s2, m2 = cfg.accel_scale**2, np.radians(cfg.accel_misalignment_deg) ** 2
+    f2 = tel.f_B**2
+    r_sm = s2 * f2 + m2 * (np.sum(f2, axis=-1, keepdims=True) - f2)  # (n, n_triads, 3)
+
     def measurements_at(k, tk, x_prior):
         out = []
         for j, name in enumerate(tel.triads):
             if tel.f_valid[k, j]:
                 m = triad_memos[j]
-                out.append(Measurement(name, tel.f_B[k, j], v_acc / n_f[k, j] * eye3, m.h, m.H))
+                out.append(Measurement(name, tel.f_B[k, j], v_acc / n_f[k, j] * eye3 + np.diag(r_sm[k, j]), m.h, m.H))
         if tel.w_valid[k]:
             out.append(Measurement("gyro", tel.w_B[k], v_gyr / n_w[k] * eye3, gyro_memo.h, gyro_memo.H))
         if tel.hanging[k]:
