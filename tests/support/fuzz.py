@@ -116,6 +116,8 @@ def mutate_csv(text: str, cls: str, rng: np.random.Generator, *, column: int | N
         lines = lines[:last]
         lines.append(lines[-1][: len(lines[-1]) // 2])
         return "\n".join(lines)
+    elif cls == "truncated_rows":  # cut cleanly at a row boundary: a shorter, valid-looking file
+        return "\n".join(lines[: rows[int(0.6 * len(rows))]]) + "\n"
     elif cls == "empty_file":
         return ""
     elif cls == "header_only":
@@ -195,6 +197,7 @@ CSV_CLASSES = (
     "gap",
     "truncation",
     "truncation_mid_row",
+    "truncated_rows",
     "empty_file",
     "header_only",
     "missing_column",
@@ -310,11 +313,20 @@ def entry_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset
     sc, _ = resolve(load_scenario(scenario_path))
     tm = read_entry_telemetry(files, config_for(sc).checks)
     nom = read_nominal_state(files["initial_state"])
-    for ev in ("PDD", "FSR"):
-        if ev not in tm.events:
+    try:
+        from workbench.problems.entry.telemetry import check_event_span
+    except ImportError:  # before issue 12: the pipeline's check, as it was
+
+        def check_event_span(tm, paths):
             from workbench.io.scenario import ScenarioError
 
-            raise ScenarioError(files["events"], ev, "event missing")
+            for ev in ("PDD", "FSR"):
+                if ev not in tm.events:
+                    raise ScenarioError(paths["events"], ev, "event missing")
+                if not (tm.t_gnc[0] <= tm.events[ev] <= tm.t_gnc[-1]):
+                    raise ScenarioError(paths["events"], ev, "outside the GNC data")
+
+    check_event_span(tm, files)
     notes = frozenset(_nopath(str(p)) for p in tm.problems if not str(p).startswith("INFO"))
     fp = _fp(tm.t_gnc, tm.w_G, tm.a_M_total[tm.a_valid], tm.p_M_nav, tm.v_M_nav, tm.slant_ranges, tm.slant_out)
     return notes, fp + _fp(nom.p_M, list(tm.events.values()))

@@ -46,16 +46,20 @@ def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None) -> 
         # padded by two samples: a gap just before the first or after the last > 2 g sample is across it
         pad = 2.0 * float(np.median(np.diff(imu.time)))
         windows["measured impact (|f| > 2 g)"] = (float(imu.time[hard[0]]) - pad, float(imu.time[hard[-1]]) + pad)
-    elif late:
-        a, b = max(late, key=lambda g: g[1] - g[0])
+    else:
+        if late:
+            a, b = max(late, key=lambda g: g[1] - g[0])
+            why = f"a {b - a:.3g} s gap ({a:.4f}–{b:.4f} s) may hide it"
+        else:
+            why = f"the data end at {imu.time[-1]:.4f} s (a truncated file?)"
         checks.append(
             Check(
                 "gaps.impact",
                 ERROR,
-                float(b - a),
-                0.0,
-                f"no impact (> 2 g) in the IMU data after release, and a {b - a:.3g} s gap ({a:.4f}–{b:.4f} s) "
-                "may hide it: the contact is not observed",
+                None,
+                2.0 * G0,
+                f"no impact (mean triad specific force > 2 g) in the IMU data after release: {why}; "
+                "the contact is not observed",
             )
         )
     checks.append(gap_check("gaps.contact", gaps, windows))

@@ -278,6 +278,15 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
     for tf in (imu, att, ranging):
         if tf is not None:
             log += [(float(tf.time[-1]), "WARN", note) for note in tf.notes]
+    if att.time.size > 1:
+        early = events["release"] - float(att.time[-1])
+        if early > max(0.2, 10.0 * float(np.median(np.diff(att.time)))):
+            _degrade(
+                log,
+                float(att.time[-1]),
+                "WARN",
+                f"{paths['attitude_3dm']}: the readings end {early:.3g} s before the release: truncated?",
+            )
     for tf in (att, ranging):
         for gap in tf.gaps if tf is not None else ():
             _degrade(

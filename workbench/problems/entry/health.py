@@ -35,9 +35,10 @@ def input_health(scenario, paths) -> dict:
     telemetry ``paths`` of ``scenario`` (raises the readers' located errors, unit mix-ups included):
     the readers' warnings.  The fuzz suite's fast path (no dispersion, no smoother)."""
     from workbench.problems.entry.config import config_for
-    from workbench.problems.entry.telemetry import read_entry_telemetry
+    from workbench.problems.entry.telemetry import check_event_span, read_entry_telemetry
 
     tm = read_entry_telemetry(paths, config_for(scenario).checks)
+    check_event_span(tm, paths)
     return health_report([notes_check("telemetry", [p for p in tm.problems if not str(p).startswith("INFO")])])
 
 

@@ -43,7 +43,6 @@ from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nee
 from workbench.estimation.health import health_markdown
 from workbench.estimation.strapdown import integrate
 from workbench.io.scenario import Scenario, ScenarioError
-from workbench.io.telemetry import TelemetryError
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
 from workbench.models.radar import beam_directions_G
 from workbench.problems.entry.atmosphere import reconstruct_atmosphere
@@ -55,7 +54,12 @@ from workbench.problems.entry.initial import initial_for_smoother, reconstructio
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import errors_sigmas
 from workbench.problems.entry.site import R_MOLA
-from workbench.problems.entry.telemetry import NominalState, read_entry_telemetry, read_nominal_state
+from workbench.problems.entry.telemetry import (
+    NominalState,
+    check_event_span,
+    read_entry_telemetry,
+    read_nominal_state,
+)
 from workbench.problems.entry.winds import estimate_winds
 
 __all__ = [
@@ -206,22 +210,7 @@ def reconstruct(
     vehicle = vehicle_for(sc)
     r_ground = R_MOLA + cfg.terrain_m
     tm = read_entry_telemetry(paths, cfg.checks)
-    for ev in ("PDD", "FSR"):
-        if ev not in tm.events:
-            raise ScenarioError(Path(paths["events"]), ev, "event missing (needed for the dispersion rules and phases)")
-        if tm.t_gnc[-1] < tm.events[ev] < tm.t_gnc[-1] + 0.5 * (tm.t_gnc[-1] - tm.t_gnc[0]):
-            # the events are in order but the GNC data stop early: the GNC file is the suspect
-            raise TelemetryError.single(
-                paths["gnc"],
-                f"the data end at {tm.t_gnc[-1]:.3f} s, before the {ev} event at {tm.events[ev]:.3f} s "
-                f"({paths['events']}): is the GNC file truncated?",
-            )
-        if not (tm.t_gnc[0] <= tm.events[ev] <= tm.t_gnc[-1]):
-            raise ScenarioError(
-                Path(paths["events"]),
-                ev,
-                f"at {tm.events[ev]:.3f} s, outside the GNC data {tm.t_gnc[0]:.3f}–{tm.t_gnc[-1]:.3f} s",
-            )
+    check_event_span(tm, paths)
     yield tm
     imu = preprocess(tm, cfg.preprocess)
     yield imu

@@ -63,6 +63,7 @@ __all__ = [
     "NominalState",
     "telemetry_paths",
     "read_entry_telemetry",
+    "check_event_span",
     "read_nominal_state",
     "write_nominal_state",
     "true_runs",
@@ -222,6 +223,28 @@ def _flat_top_notes(tel, run: int = 5) -> list[str]:
                     f"(t = {tel.time[i0 - 1]:.3f}–{tel.time[i1]:.3f} s): saturated or stuck"
                 )
                 break
+    return out
+
+
+def _early_end_notes(gnc, others: Mapping[str, np.ndarray], paths, events: Mapping[str, float]) -> list[str]:
+    """WARN notes for files that end early (truncated?): the GNC data more than 1 s before the last
+    event, another stream more than 10 s before the GNC data (the radar may stop a few seconds
+    before the end of the data, not tens)."""
+    out = []
+    t_end = float(gnc.time[-1])
+    if events:
+        name, t_last = max(events.items(), key=lambda kv: kv[1])
+        if t_last > t_end + 1.0:
+            out.append(
+                f"WARN: {paths['gnc']}: the data end at {t_end:.3f} s, {t_last - t_end:.3g} s before the last "
+                f"event {name} ({t_last:.3f} s): truncated?"
+            )
+    for k, t in others.items():
+        if len(t) and t_end - float(t[-1]) > 10.0:
+            out.append(
+                f"WARN: {paths[k]}: the data end at {float(t[-1]):.3f} s, {t_end - float(t[-1]):.3g} s before the "
+                "GNC data: truncated?"
+            )
     return out
 
 
@@ -511,6 +534,7 @@ def read_entry_telemetry(
         events[name] = float(t_e)
 
     check_units(gnc, nav, paths, events)
+    problems += _early_end_notes(gnc, {"gnc_nav": nav.time, "rda_slant_range": t_sr, "rda_out": t_rda}, paths, events)
     return EntryTelemetry(
         t_gnc=gnc.time.copy(),
         w_G=gnc.stack([f"w_{a}" for a in "xyz"]),
@@ -532,3 +556,25 @@ def read_entry_telemetry(
         problems=problems,
         files=dict(paths),
     )
+
+
+def check_event_span(tm: EntryTelemetry, paths: Mapping[str, os.PathLike]) -> None:
+    """PDD and FSR present and inside the GNC data.  Each file's own problem is reported against it:
+    a GNC file that ends shortly before an event (truncated?) is a :class:`TelemetryError` on the GNC
+    file; an event far outside the data is a :class:`ScenarioError` on the events file."""
+    for ev in ("PDD", "FSR"):
+        if ev not in tm.events:
+            raise ScenarioError(Path(paths["events"]), ev, "event missing (needed for the dispersion rules and phases)")
+        if tm.t_gnc[-1] < tm.events[ev] < tm.t_gnc[-1] + 0.5 * (tm.t_gnc[-1] - tm.t_gnc[0]):
+            # the events are in order but the GNC data stop early: the GNC file is the suspect
+            raise TelemetryError.single(
+                paths["gnc"],
+                f"the data end at {tm.t_gnc[-1]:.3f} s, before the {ev} event at {tm.events[ev]:.3f} s "
+                f"({paths['events']}): is the GNC file truncated?",
+            )
+        if not (tm.t_gnc[0] <= tm.events[ev] <= tm.t_gnc[-1]):
+            raise ScenarioError(
+                Path(paths["events"]),
+                ev,
+                f"at {tm.events[ev]:.3f} s, outside the GNC data {tm.t_gnc[0]:.3f}–{tm.t_gnc[-1]:.3f} s",
+            )

@@ -191,6 +191,9 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
             R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]))
         out[spec.name] = Channel(spec, t, z, z_raw, R)
         notes += [*tel.notes, *(f"{path}: gap {g.start_s:g}–{g.end_s:g} s (row {g.row})" for g in tel.gaps)]
+        step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        if t.size > 1 and cfg.t_end - t[-1] > 3.0 * step:
+            notes.append(f"{path}: the observations end at {t[-1]:g} s, {cfg.t_end - t[-1]:g} s before [model] t_end_s")
         if spec.quantity == "gravity_magnitude" and z.size:
             _check_gravity_units(path, tel, d.components[0], cfg)
     return ObservationData(out, tuple(notes))
