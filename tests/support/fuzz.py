@@ -19,6 +19,7 @@ and after.  Load with ``import fuzz`` (``tests/support`` is on the path, see ``t
 
 from __future__ import annotations
 
+import functools
 import re
 import shutil
 from collections.abc import Callable
@@ -281,14 +282,21 @@ def _fp(*arrays) -> tuple:
     )
 
 
-def droptest_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset, tuple]:
-    """Drop test: ``load_drop_telemetry`` (validation, unit plausibility) + input health."""
+@functools.lru_cache(maxsize=64)
+def _resolved(path: str):
+    """The loaded, schema-validated scenario at ``path`` (cached: CSV mutations share the clean one)."""
     from workbench.io.scenario import load_scenario
-    from workbench.problems.droptest.lander import load_lander
-    from workbench.problems.droptest.telemetry import load_drop_telemetry
     from workbench.problems.runner import resolve
 
-    sc, _ = resolve(load_scenario(scenario_path))
+    return resolve(load_scenario(Path(path)))[0]
+
+
+def droptest_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset, tuple]:
+    """Drop test: ``load_drop_telemetry`` (validation, unit plausibility) + input health."""
+    from workbench.problems.droptest.lander import load_lander
+    from workbench.problems.droptest.telemetry import load_drop_telemetry
+
+    sc = _resolved(str(scenario_path))
     tel = load_drop_telemetry(sc, files, load_lander(sc.path_of("vehicle.lander")))
     try:
         from workbench.estimation.health import health_report
@@ -305,12 +313,10 @@ def droptest_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozen
 
 def entry_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset, tuple]:
     """Entry: ``read_entry_telemetry`` (validation, unit plausibility) + the readers' warnings."""
-    from workbench.io.scenario import load_scenario
     from workbench.problems.entry.config import config_for
     from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state
-    from workbench.problems.runner import resolve
 
-    sc, _ = resolve(load_scenario(scenario_path))
+    sc = _resolved(str(scenario_path))
     tm = read_entry_telemetry(files, config_for(sc).checks)
     nom = read_nominal_state(files["initial_state"])
     try:
@@ -334,11 +340,9 @@ def entry_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset
 
 def post2_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset, tuple]:
     """post2: the full reconstruction (a hundred-step filter, milliseconds) and its health."""
-    from workbench.io.scenario import load_scenario
     from workbench.problems.post2 import pipeline
-    from workbench.problems.runner import resolve
 
-    sc, _ = resolve(load_scenario(scenario_path))
+    sc = _resolved(str(scenario_path))
     res = None
     for stage in pipeline.reconstruct(sc, files):
         res = stage
@@ -388,6 +392,8 @@ def run_case(t: Target, case: Case, work: Path, control: tuple[frozenset, tuple]
         if new is None:
             return Outcome(case, "N/A", "not applicable")
         files[case.stream].write_bytes(new.encode("utf-8"))
+    if case.cls not in TOML_CLASSES:
+        sc = t.scenario  # unchanged: the clean copy (its parsed form is cached)
     try:
         verdict, fp = t.run(sc, files)
     except (TelemetryError, ScenarioError, UnitError, FileNotFoundError) as err:
