@@ -264,6 +264,29 @@ def _unit_problem(file, tel, name: str, ratio: float, what: str) -> Problem | No
     return Problem(str(file), f"{name} [{unit}]", None, None, f"{what}: the values look like [{likely}], not [{unit}]")
 
 
+def check_radar_units(nav, out, file) -> None:
+    """The radar's slant-out range (along the near-vertical beam B0) against the on-board altitude
+    above the Mars reference sphere at the same times (where the on-board navigation covers the
+    radar phase): their median ratio off by a unit-like factor (1000 m ↔ km, 3.28 ft ↔ m) is a
+    :class:`TelemetryError` naming the file, the column and the likely unit.  The terrain
+    (± a few km) and the beam's tilt keep the ratio within a factor 2 otherwise."""
+    t = out.time
+    so = out.channel("slant_out")
+    p = nav.stack([f"p_{a}" for a in "xyz"])
+    inside = (t >= nav.time[0]) & (t <= nav.time[-1]) & (so > 0)
+    if inside.sum() < 5:
+        return
+    h = np.linalg.norm(np.column_stack([np.interp(t[inside], nav.time, p[:, i]) for i in range(3)]), axis=1) - R_MOLA
+    ok = h > 2000.0  # well above the terrain uncertainty
+    if ok.sum() < 5:
+        return
+    ratio = float(np.median(so[inside][ok] / h[ok]))
+    if abs(np.log(ratio)) > np.log(2.5):
+        pr = _unit_problem(file, out, "slant_out", ratio, f"the slant-out range is {ratio:.4g}× the on-board altitude")
+        if pr:
+            raise TelemetryError([pr])
+
+
 def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str, float]) -> None:
     """Unit plausibility from physics (frame-free magnitudes), raising :class:`TelemetryError` naming
     the file, the column and the likely unit when a mismatch is a unit-like factor (9.81, 1000, 57.3,
@@ -497,6 +520,7 @@ def read_entry_telemetry(
     req_r = {"slant_out": "length", **dict.fromkeys(vn, "velocity")}
     tel = read_telemetry(paths["rda_out"], required=req_r, limits={"slant_out": (0.0, 1e7)})
     problems += [f"WARN: {note}" for note in tel.notes] + _gap_notes(tel)
+    check_radar_units(nav, tel, paths["rda_out"])
     t_rda, so, vo = tel.time.copy(), tel.channel("slant_out").copy(), tel.stack(vn)
     zero_so = so == 0.0
     zero_v = np.all(vo == 0.0, axis=1)
