@@ -63,3 +63,36 @@ def test_fuzz_no_silent_no_traceback(targets):
     by_problem = {p: [r for r in ran if r.case.problem == p] for p in ("droptest", "entry", "post2")}
     for p, rs in by_problem.items():  # every problem fuzzed, with real rejections among the outcomes
         assert rs and sum(r.outcome == fuzz.GOOD for r in rs) > len(rs) // 3, p
+
+
+def test_shipped_droptest_health_is_honest(droptest_run):
+    """The shipped drop test comes out OK or WARNING (its ZUPT is conservative: mean NIS ≪ 3)."""
+    h = droptest_run.summary["health"]
+    assert h["verdict"] in ("OK", "WARNING"), h
+    names = {c["name"]: c for c in h["checks"]}
+    assert names["max_stroke.clearance"]["status"] == "OK" and names["gaps.contact"]["status"] == "OK"
+
+
+def test_a_gap_across_contact_is_an_error(droptest_run, tmp_path):
+    """The issue's case: 0.5 s of IMU rows removed across the impact -> ERROR before any filter runs."""
+    import numpy as np
+
+    from workbench.problems.droptest.health import input_health
+
+    src = droptest_run.telemetry_paths()
+    paths = {}
+    for k, p in src.items():
+        paths[k] = tmp_path / p.name
+        paths[k].write_bytes(p.read_bytes())
+    lines = paths["imu"].read_text().split("\n")
+    h = next(i for i, s in enumerate(lines) if s.startswith("time"))
+    t = np.array([float(s.split(",")[0]) for s in lines[h + 1 :] if s.strip()])
+    f = np.array([[float(x) for x in s.split(",")[1:13]] for s in lines[h + 1 :] if s.strip()])
+    peak = t[int(np.argmax(np.linalg.norm(f[:, 0:3], axis=1)))]
+    keep = [s for s, tt in zip(lines[h + 1 :], t, strict=False) if not (peak - 0.25 < tt < peak + 0.25)]
+    paths["imu"].write_text("\n".join(lines[: h + 1] + keep) + "\n")
+    rep = input_health(droptest_run.scenario, paths)
+    assert rep["verdict"] == "ERROR"
+    bad = [c for c in rep["checks"] if c["status"] == "ERROR"]
+    assert bad and bad[0]["name"].startswith("gaps.") and "not observed" in bad[0]["message"]
+    assert input_health(droptest_run.scenario, src)["verdict"] != "ERROR"
