@@ -52,10 +52,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--label", default="after")
     ap.add_argument("--merge", action="store_true", help="keep the other labels already in --out")
+    ap.add_argument("--code", default=None, help="what code was measured (recorded; default: the label)")
     ap.add_argument("--out", default=str(HERE.parents[1] / "docs" / "results" / "bench_fuzz.json"))
     args = ap.parse_args(argv)
-    import workbench
-
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         targets = _targets(work)
@@ -81,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     data = json.loads(out.read_text())["results"] if args.merge and out.exists() else {}
     data[args.label] = {
-        "code": str(Path(workbench.__file__).resolve().parent),
+        "code": args.label if args.code is None else args.code,
         "seeds": args.seeds,
         "wall_s": wall,
         "totals": totals,
