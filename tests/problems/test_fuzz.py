@@ -57,7 +57,7 @@ def test_fuzz_no_silent_no_traceback(targets):
     tgts, work = targets
     results = fuzz.run_all(tgts, range(1), work / "cases")  # bench_fuzz.py runs more seeds
     ran = [r for r in results if r.outcome != "N/A"]
-    assert len(ran) >= 180
+    assert len(ran) >= 170
     bad = [r for r in ran if r.outcome in (fuzz.SILENT, fuzz.TRACEBACK)]
     assert not bad, "\n".join(f"{r.case}: {r.outcome} {r.detail}" for r in bad)
     by_problem = {p: [r for r in ran if r.case.problem == p] for p in ("droptest", "entry", "post2")}
