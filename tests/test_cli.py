@@ -88,3 +88,25 @@ def test_run_an_example_problem(fallingbody, tmp_path, capsys):
     assert err[0] == "[fallingbody] simulating the fall (truth) and writing telemetry ..."
     assert [ln.split()[1] for ln in err[1:4]] == ["BaroData", "ForwardStage", "FallResult"]
     assert err[-1].startswith("[fallingbody] end altitude ") and f"wrote {out / 'fallingbody.rrd'}" in err[-1]
+
+
+def test_unhealthy_run_exits_6_writes_nothing_unless_allowed(tmp_path, capsys):
+    """post2_j2 (a fraction of a second) with a gravity noise 1σ declared 100× too small: the filter is
+    inconsistent with its sensor, the health verdict is ERROR -> exit 6 and no output; with
+    --allow-unhealthy the outputs are written and marked."""
+    from workbench.cli import EXIT_UNHEALTHY
+    from workbench.io.assets import assets_dir
+
+    text = (assets_dir() / "scenarios" / "post2_j2.toml").read_text(encoding="utf-8")
+    assert "sigma = 1.0e-5" in text
+    sc = tmp_path / "j2 tight.toml"
+    sc.write_text(text.replace("sigma = 1.0e-5", "sigma = 1.0e-7\nnoise_sigma = 1.0e-5"), encoding="utf-8")
+    out = tmp_path / "out"
+    assert main(["run", str(sc), "--out", str(out)]) == EXIT_UNHEALTHY
+    err = capsys.readouterr().err
+    assert "health verdict ERROR" in err and "filter inconsistent with sensor gravity" in err
+    assert not list(out.glob("*.rrd")) and not list(out.glob("*.summary.json"))
+    assert main(["run", str(sc), "--out", str(out), "--allow-unhealthy"]) == EXIT_OK
+    s = json.loads((out / "post2_j2.summary.json").read_text())
+    assert s["health"]["verdict"] == "ERROR" and s["health"]["written_anyway"] is True
+    assert (out / "post2_j2.rrd").exists() and "UNHEALTHY" in capsys.readouterr().err

@@ -6,6 +6,9 @@ Exit codes (scripts can rely on them):
   3  bad input: scenario, telemetry or asset file rejected (the message names file, column, row)
   4  the reconstruction failed numerically (e.g. a covariance lost positive definiteness)
   5  no problem is registered for the scenario's kind, or it cannot do what was asked
+  6  unhealthy: the reconstruction ran but its health verdict is ERROR (filter inconsistent with a
+     sensor, physically impossible output, a data gap across contact ...); nothing is written
+     unless --allow-unhealthy (then the outputs are written, marked UNHEALTHY, and the exit code is 0)
   130 interrupted (Ctrl-C); no half-written recording is left behind
 """
 
@@ -19,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_NUMERIC, EXIT_KIND, EXIT_INTERRUPT = 0, 2, 3, 4, 5, 130
+EXIT_UNHEALTHY = 6
 
 
 def _progress(msg: str) -> None:
@@ -58,7 +62,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     names = list(args.scenario)
     if names == ["all"]:
         names = sorted(_shipped())
-    options = RunOptions(seed=args.seed, export=args.export, scheduler=args.scheduler, members=args.members)
+    options = RunOptions(
+        seed=args.seed,
+        export=args.export,
+        scheduler=args.scheduler,
+        members=args.members,
+        allow_unhealthy=args.allow_unhealthy,
+    )
     for name in names:
         run_scenario(name, Path(args.out), options, progress=_progress)
     return EXIT_OK
@@ -208,6 +218,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--scheduler", default=None, help="ensemble stages on dask: 'local' (LocalCluster) or 'tcp://host:8786'"
     )
     sp.add_argument("--members", type=int, default=None, help="ensemble members (entry: dispersion; default: scenario)")
+    sp.add_argument(
+        "--allow-unhealthy",
+        action="store_true",
+        help="write the outputs even when the health verdict is ERROR (marked UNHEALTHY; else exit 6, nothing written)",
+    )
     sp.set_defaults(func=cmd_run)
     sp = sub.add_parser(
         "mc", help="Monte Carlo analysis of a scenario (drop test: consistency; entry: smoother validation)"
@@ -274,6 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``workbench`` console script; returns the exit code."""
+    from workbench.estimation.health import UnhealthyError
     from workbench.io.scenario import ScenarioError
     from workbench.io.telemetry import TelemetryError
     from workbench.io.units import UnitError
@@ -302,6 +318,9 @@ def main(argv: list[str] | None = None) -> int:
     except (NotImplementedError, UnknownKindError) as err:
         print(f"workbench: {err}", file=sys.stderr)
         return EXIT_KIND
+    except UnhealthyError as err:
+        print(f"workbench: unhealthy: {err}", file=sys.stderr)
+        return EXIT_UNHEALTHY
     except np.linalg.LinAlgError as err:
         print(f"workbench: numerical failure: {err}", file=sys.stderr)
         return EXIT_NUMERIC

@@ -62,3 +62,17 @@ def test_unknown_unit_lists_known_units():
     assert "g" in info.value.known
     with pytest.raises(UnitError):
         unit_kind("MBAR")  # units are case-sensitive
+
+
+def test_likely_unit_names_the_unit_of_a_unit_like_mismatch():
+    from workbench.io.units import likely_unit
+
+    assert likely_unit(1 / 9.80665, "m/s^2") == "g"  # values in g under an m/s² header
+    assert likely_unit(9.7, "g") == "m/s^2"
+    assert likely_unit(1e-3, "m") == "km"
+    assert likely_unit(1e3, "km/s") == "m/s"
+    assert likely_unit(57.3, "rad/s") == "deg/s"
+    assert likely_unit(1 / 57.3, "deg/s") == "rad/s"
+    assert likely_unit(1e-3, "ms") == "s"
+    assert likely_unit(3.28, "m") == "ft"
+    assert likely_unit(1.05, "g") is None and likely_unit(4.0, "m") is None and likely_unit(0.0, "m") is None

@@ -188,7 +188,8 @@ class Telemetry:
     sparse channels hold NaN where the file had an empty cell); ``units`` holds each channel's
     unit as written in the file and ``kinds`` its quantity kind; ``meta`` the ``# key: value``
     lines; ``saturated[name]`` a boolean ``(n,)`` mask (all False without a threshold); ``gaps``
-    the time gaps.  Channel names are the header names without the unit (``'BP.x'``).
+    the time gaps; ``notes`` warnings about the file that are not errors (e.g. a last line without
+    a line end: possibly truncated).  Channel names are the header names without the unit (``'BP.x'``).
     """
 
     path: Path
@@ -202,6 +203,7 @@ class Telemetry:
     time_name: str = "time"
     time_unit: str = "s"
     sparse: frozenset[str] = field(default_factory=frozenset)
+    notes: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return int(self.time.shape[0])
@@ -323,6 +325,32 @@ def _parse_column(cells: list[str], allow_empty: bool) -> tuple[np.ndarray, np.n
     return vals, empty, bad
 
 
+def _foreign_delimiter(header: str) -> str | None:
+    """A message when ``header`` is delimited by ';' or a tab instead of commas, else None."""
+    if "," in header:
+        return None
+    for d, what in ((";", "semicolons (';')"), ("\t", "tabs")):
+        if header.count(d) >= 1:
+            return (
+                f"the header is delimited by {what}, not commas: save the file as comma-separated "
+                "(CSV with ',' between fields and '.' as the decimal point)"
+            )
+    return None
+
+
+def _truncation_notes(fname: str, ends_with_newline: bool, data: list[str], n: int, k: int) -> tuple[str, ...]:
+    """A note when the last data row has no line end and its last field is shorter than in the
+    row before (a file cut in the middle of a number still parses)."""
+    if ends_with_newline or n < 2:
+        return ()
+    last, prev = data[-1].rsplit(",", 1)[-1].strip(), data[-2].rsplit(",", 1)[-1].strip()
+    why = "its last field is shorter than the row before's" if len(last) < len(prev) else "possibly cut short"
+    return (
+        f"{fname}, row {n}: the file does not end with a line end and {why}: the file looks "
+        "truncated; the last row was read as is",
+    )
+
+
 def _fmt(v: float) -> str:
     return f"{v:.9g}"
 
@@ -379,6 +407,10 @@ def read_telemetry(
     header_line = h + 1
 
     # ---- header ----------------------------------------------------------------------------
+    delim = _foreign_delimiter(lines[h])
+    if delim:
+        col.add(delim, line=header_line)
+        col.raise_if_any()
     cells = _split_header(lines[h])
     k = len(cells)
     names: list[str] = []
@@ -451,6 +483,8 @@ def read_telemetry(
         for name in keys:
             if index.get(name, 0) != 0:
                 continue
+            if name in required and name != time_name:
+                continue  # already reported as a missing column: the option is the pipeline's, not the user's
             why = (
                 "the time column cannot be declared sparse"
                 if what == "sparse" and name == time_name
@@ -474,6 +508,7 @@ def read_telemetry(
 
     # ---- rows ------------------------------------------------------------------------------
     data = lines[h + 1 :]
+    ends_with_newline = text.endswith("\n")
     while data and not data[-1].strip():
         data.pop()
     n = len(data)
@@ -492,6 +527,11 @@ def read_telemetry(
                 return "blank row inside the data"
             if s.lstrip().startswith("#"):
                 return "comment line inside the data (comments go above the header)"
+            if wrong[i] == n - 1 and not ends_with_newline:
+                return (
+                    f"expected {k} fields, found {counts[wrong[i]] + 1}: the last line has no line end — "
+                    "the file looks truncated"
+                )
             return f"expected {k} fields, found {counts[wrong[i]] + 1}"
 
         col.add_rows(wrong, first_line, None, -1, wrong_reason)  # type: ignore[arg-type]
@@ -605,6 +645,7 @@ def read_telemetry(
         time_name=time_name,
         time_unit=units_raw[0],
         sparse=frozenset(sparse_set),
+        notes=_truncation_notes(fname, ends_with_newline, data, n, k),
     )
 
 
@@ -771,6 +812,10 @@ def read_events(path: str | os.PathLike) -> list[tuple[float, str]]:
         col.raise_if_any()
     cells = _split_header(lines[h])
     unit = None
+    delim = _foreign_delimiter(lines[h])
+    if delim:
+        col.add(delim, line=h + 1)
+        col.raise_if_any()
     if len(cells) != 2 or cells[1] != "event":
         col.add(f"header must be 'time [s],event', found {lines[h].strip()!r}", line=h + 1)
     else:

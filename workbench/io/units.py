@@ -30,6 +30,7 @@ __all__ = [
     "canonical_unit",
     "from_si",
     "known_units",
+    "likely_unit",
     "to_si",
     "unit_kind",
 ]
@@ -190,3 +191,31 @@ def from_si(values_si, unit: str):
     v = np.asarray(values_si, dtype=np.float64)
     out = (v - u.offset) / u.factor if (u.factor != 1.0 or u.offset != 0.0) else v.copy()
     return out[()] if out.ndim == 0 else out
+
+
+def likely_unit(ratio: float, declared: str, *, rtol: float = 0.15) -> str | None:
+    """The unit the values were probably written in, when a physics check finds them ``ratio``
+    (measured / expected, both SI) times off and ``ratio`` is within ``rtol`` (relative) of the
+    factor between the ``declared`` unit and another unit of the same kind (g ↔ m/s² 9.81,
+    km ↔ m 1000, deg ↔ rad 57.3, ft ↔ m 3.28, s ↔ ms 1000 ...).  None when no unit explains it.
+
+    Example: a triad declared ``[m/s^2]`` whose hanging specific force reads 1/9.81 of g gives
+    ``"g"``.
+    """
+    try:
+        cu = canonical_unit(declared)
+    except UnitError:
+        return None
+    ratio = float(ratio)
+    if not (np.isfinite(ratio) and ratio > 0):
+        return None
+    u0 = UNITS[cu]
+    best, err = None, np.log1p(rtol)
+    for name, u in UNITS.items():
+        if u.kind != u0.kind or name == cu or u.offset or u0.offset:
+            continue
+        # values meant in `name` but read as `cu`: SI values scale by u0.factor / u.factor
+        e = abs(np.log(ratio / (u0.factor / u.factor)))
+        if e < err and abs(np.log(u0.factor / u.factor)) > np.log(1.5):
+            best, err = name, e
+    return best

@@ -47,13 +47,16 @@ class RunOptions:
     scenario's ``[synthetic] seed``, else 0); ``export``: also write the reconstructed histories as
     CSV; ``scheduler``: ensemble stages on Dask (``"local"`` or ``"tcp://host:port"``; None:
     in-process); ``members``: size of the problem's ensemble stage, if it has one (None: the
-    scenario's setting).
+    scenario's setting); ``allow_unhealthy``: publish the outputs even when the health verdict
+    (``summary["health"]``, :mod:`workbench.estimation.health`) is ERROR, marked as such (else the
+    runner raises :class:`~workbench.estimation.health.UnhealthyError` and writes nothing).
     """
 
     seed: int | None = None
     export: bool = False
     scheduler: str | None = None
     members: int | None = None
+    allow_unhealthy: bool = False
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from workbench.estimation.health import ERROR, UnhealthyError
 from workbench.io.assets import assets_dir
 from workbench.io.results import export_csv, write_summary
 from workbench.io.scenario import Scenario, resolve_scenario
@@ -66,6 +67,10 @@ def run_scenario(
 ) -> RunResult:
     """Run one scenario end to end: (synthesize) -> reconstruct -> record -> score -> summary.
 
+    A summary whose ``"health"`` verdict is ERROR raises :class:`UnhealthyError` before anything is
+    published, unless ``options.allow_unhealthy`` (then ``health["written_anyway"]`` is True and the
+    scorecard and headline say UNHEALTHY).
+
     Writes ``<out>/<name>.rrd`` (atomically: nothing is left on failure), ``<out>/<name>.summary.json``,
     for synthetic scenarios the telemetry and ``truth.npz`` it generated under
     ``<out>/<name>/telemetry/``, and with ``options.export`` ``<out>/<name>.reconstruction.csv``.
@@ -102,6 +107,11 @@ def run_scenario(
             summary["truth"] = problem.score(result, truth)
         summary["seed"] = seed
         summary["wall_time_s"] = time.perf_counter() - t_start
+        health = summary.get("health")
+        if health is not None and health["verdict"] == ERROR:
+            if not opts.allow_unhealthy:
+                raise UnhealthyError(sc.path, health)  # inside the recording: nothing is published
+            health["written_anyway"] = True
         drawer.finish(result, summary)
     summary["recording"] = str(rrd)
     summary["recording_bytes"] = rrd.stat().st_size
@@ -115,8 +125,14 @@ def run_scenario(
             table.columns,
             meta={"source": f"workbench run {sc.name}", "frame": table.frame},
         )
+    verdict = (
+        ""
+        if health is None
+        else f"health {health['verdict']}"
+        + (" — UNHEALTHY, written with --allow-unhealthy" if health.get("written_anyway") else "")
+    )
     say(
-        f"[{sc.name}] {problem.headline(summary)}; "
+        f"[{sc.name}] {verdict + '; ' if verdict else ''}{problem.headline(summary)}; "
         f"wrote {rrd} ({summary['recording_bytes'] / 1e6:.1f} MB) in {summary['wall_time_s']:.1f} s"
     )
     return RunResult(sc, problem, summary, result, rrd, Path(summary_path), telemetry, truth, export_path)

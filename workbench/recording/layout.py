@@ -68,6 +68,8 @@ SENSORS = "/sensors"
 PROFILES = "/profiles"
 EVENTS = "/events"
 REPORT = "/report"
+#: The health verdict of the reconstruction (markdown TextDocument, ``estimation.health``).
+HEALTH = "/report/health"
 
 # ------------------------------------------------- leaf names of the series under a plot root
 VALUE = "value"

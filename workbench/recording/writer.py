@@ -34,6 +34,7 @@ import numpy as np
 import rerun as rr
 
 from workbench.core.rotation import dcm_to_quat
+from workbench.estimation.health import health_markdown
 from workbench.recording import layout
 
 __all__ = ["to_ns", "open_recording", "Recorder", "covariance_ellipsoids"]
@@ -451,6 +452,11 @@ class Recorder:
     def report(self, markdown: str, entity: str = layout.REPORT) -> None:
         """The scorecard as a static markdown ``TextDocument``."""
         self._log_static(entity, rr.TextDocument(markdown, media_type=rr.MediaType.MARKDOWN))
+
+    def health(self, health: dict, entity: str = layout.HEALTH) -> None:
+        """The health verdict (``summary["health"]``, :mod:`workbench.estimation.health`) as a static
+        markdown ``TextDocument``: the verdict and every check that is not OK."""
+        self._log_static(entity, rr.TextDocument(health_markdown(health), media_type=rr.MediaType.MARKDOWN))
 
     def property(self, name: str, values: dict[str, Any]) -> None:
         """Recording property ``name`` (stored under ``/__properties/<name>``) from a flat dict."""

@@ -89,8 +89,10 @@ SCHEMA = Schema(
                 ),
                 Key("noise_g", _F, 0.2, "g", "per-sample noise, 1σ"),
                 Key("bias_g", _F, 0.005, "g", "residual bias after zeroing, 1σ per axis"),
-                Key("scale", _F, 0.002, "1", "scale-factor error, 1σ"),
-                Key("misalignment_deg", _F, 0.05, "deg", "axis misalignment, 1σ"),
+                Key("scale", _F, 0.002, "1", "scale-factor error, 1σ (filter: measurement noise ∝ the force)"),
+                Key(
+                    "misalignment_deg", _F, 0.05, "deg", "axis misalignment, 1σ (filter: measurement noise ∝ the force)"
+                ),
                 Key("full_scale_g", _F, 2000.0, "g", "saturation level"),
             ),
         ),

@@ -36,10 +36,12 @@ from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_conjugate, quat_normalize, quat_rotate, triad, triad_covariance
 from workbench.estimation.consistency import whiteness
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
+from workbench.estimation.health import health_markdown
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.config import config_for
+from workbench.problems.droptest.health import drop_health
 from workbench.problems.droptest.lander import LanderModel, load_lander
 from workbench.problems.droptest.sensors import RangingSpec
 from workbench.problems.droptest.stroke import (
@@ -307,12 +309,19 @@ def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lan
 
     ranging = _ranging_measurements(scenario, tel) if tel.ranging is not None else {}
 
+    # the triads' declared scale-factor and misalignment errors (sensors.accelerometer.scale,
+    # misalignment_deg; no states for them) as measurement noise proportional to the measured force:
+    # per axis σ² = s² f_i² + m² (|f|² − f_i²) — not averaged down, the error is common to the samples
+    s2, m2 = cfg.accel_scale**2, np.radians(cfg.accel_misalignment_deg) ** 2
+    f2 = tel.f_B**2
+    r_sm = s2 * f2 + m2 * (np.sum(f2, axis=-1, keepdims=True) - f2)  # (n, n_triads, 3)
+
     def measurements_at(k, tk, x_prior):
         out = []
         for j, name in enumerate(tel.triads):
             if tel.f_valid[k, j]:
                 m = triad_memos[j]
-                out.append(Measurement(name, tel.f_B[k, j], v_acc / n_f[k, j] * eye3, m.h, m.H))
+                out.append(Measurement(name, tel.f_B[k, j], v_acc / n_f[k, j] * eye3 + np.diag(r_sm[k, j]), m.h, m.H))
         if tel.w_valid[k]:
             out.append(Measurement("gyro", tel.w_B[k], v_gyr / n_w[k] * eye3, gyro_memo.h, gyro_memo.H))
         if tel.hanging[k]:
@@ -590,6 +599,7 @@ def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: Fil
         "innovations": innov,
         "covariance": {"min_eigenvalue": eig_min, "max_asymmetry": sym, "positive_definite": eig_min > 0},
         "degradations": [{"time_s": t, "level": lvl, "text": txt} for t, lvl, txt in tel.degradations],
+        "health": drop_health(tel, fwd, smo, st),
     }
 
 
@@ -777,4 +787,6 @@ def scorecard_markdown(summary: dict) -> str:
         lines += [f"- t = {d['time_s']:.3f} s [{d['level']}] {d['text']}" for d in summary["degradations"]]
     else:
         lines += ["", "No telemetry degradations (no saturation, gaps or dead channels)."]
+    if "health" in summary:
+        lines += ["", health_markdown(summary["health"]).rstrip()]
     return "\n".join(lines) + "\n"

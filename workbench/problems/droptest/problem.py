@@ -63,6 +63,8 @@ class _Drawer:
         from workbench.problems.droptest.recording import droptest_blueprint, impact_view
 
         self.rec.report(dt.scorecard_markdown(summary))
+        if "health" in summary:
+            self.rec.health(summary["health"])
         # the layout that needs the result (camera at the impact, stroke zoom) becomes the default
         self.rec.stream.send_blueprint(
             droptest_blueprint(self.residuals, impact_view(result)), make_active=True, make_default=True

@@ -9,6 +9,7 @@ row (:mod:`workbench.io.telemetry`), degradations (saturation, dead channels, ga
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +18,8 @@ import numpy as np
 
 from workbench.core.bodies import G0
 from workbench.io.scenario import Scenario, ScenarioError
-from workbench.io.telemetry import Telemetry, read_events, read_telemetry
+from workbench.io.telemetry import Problem, Telemetry, TelemetryError, read_events, read_telemetry
+from workbench.io.units import likely_unit
 from workbench.problems.droptest.config import config_for
 from workbench.problems.droptest.lander import LanderModel
 from workbench.problems.droptest.sensors import RangingSpec, acquisition_group_delay
@@ -28,6 +30,8 @@ __all__ = ["STREAMS", "OPTIONAL_STREAMS", "DropTelemetry", "telemetry_paths", "r
 STREAMS = ("imu", "attitude_3dm", "events", "setup", "ranging")
 #: Of those, the optional ones.
 OPTIONAL_STREAMS = ("ranging",)
+#: Event labels of ``events.csv`` the reconstruction reads; any other label is reported (WARN).
+KNOWN_EVENTS = ("release", "bungee_cut")
 
 
 @dataclass(frozen=True)
@@ -101,6 +105,97 @@ def read_setup(path: Path) -> dict:
     return d
 
 
+def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> list[tuple[float, str, str]]:
+    """Unit plausibility from physics while the lander hangs still (IMU samples before
+    ``t_release`` [s]): every triad's mean specific force magnitude is 1 g and the gyro reads ≈ 0
+    with a scatter of its declared noise (``cfg.gyro_noise_dps``).  A mismatch by a unit-like
+    factor (9.81, 57.3, 1000 ...: :func:`~workbench.io.units.likely_unit`) is a
+    :class:`TelemetryError` naming the file, the column and the likely unit; a mismatch by
+    another factor (beyond ±30 % for the triads) is returned as a WARN degradation
+    ``(t, "WARN", text)``.  Fewer than 20 hanging samples: nothing is checked."""
+    hang = imu.time < t_release
+    out: list[tuple[float, str, str]] = []
+    if hang.sum() < 20:
+        return out
+    problems = []
+    for n in cfg.triads:
+        cols = [f"{n}.{a}" for a in "xyz"]
+        if not all(c in imu.channels for c in cols):
+            continue
+        g_meas = float(np.mean(np.linalg.norm(imu.stack(cols)[hang], axis=1)))
+        ratio = g_meas / G0
+        unit = imu.units[cols[0]]
+        if abs(np.log(ratio)) > np.log(1.3):
+            likely = likely_unit(ratio, unit)
+            what = (
+                f"the hanging lander reads {g_meas / G0:.4g} g on triad {n} (expected 1 g at rest): "
+                f"the values look like [{likely}], not [{unit}]"
+                if likely
+                else f"the hanging lander reads {g_meas / G0:.4g} g on triad {n} (expected 1 g at rest)"
+            )
+            if likely:
+                problems.append(Problem(fname, f"{cols[0]} [{unit}]", None, None, what))
+            else:
+                out.append((float(t_release), "WARN", f"{fname}: {what}"))
+    cols = [f"gyro.{a}" for a in "xyz"]
+    if all(c in imu.channels for c in cols) and cfg.gyro_noise_dps > 0:
+        w = imu.stack(cols)[hang]
+        spread = float(np.sqrt(np.mean(np.var(w, axis=0))))
+        ratio = spread / np.radians(cfg.gyro_noise_dps)
+        unit = imu.units[cols[0]]
+        likely = likely_unit(ratio, unit, rtol=0.3) if abs(np.log(ratio)) > np.log(3.0) else None
+        if likely:
+            problems.append(
+                Problem(
+                    fname,
+                    f"{cols[0]} [{unit}]",
+                    None,
+                    None,
+                    f"the hanging gyro scatters {ratio:.3g}× its declared noise (sensors.gyro.noise_dps = "
+                    f"{cfg.gyro_noise_dps:g}): the values look like [{likely}], not [{unit}]",
+                )
+            )
+    if problems:
+        raise TelemetryError(problems)
+    return out
+
+
+def check_free_fall(imu: Telemetry, events: dict[str, float], triads, fname: str) -> list[tuple[float, str, str]]:
+    """The ``bungee_cut`` event against physics: between the cut (+10 ms) and the first impact
+    sample (mean triad specific force above 2 g) the lander falls freely, so the median specific
+    force there is below 0.5 g.  If not, and the cut time scaled by 1000 (a s ↔ ms mix-up in the
+    events file) would satisfy it, a :class:`TelemetryError` naming the events file and the likely
+    unit; otherwise a WARN degradation.  Nothing is checked without a cut or an impact."""
+    if "bungee_cut" not in events:
+        return []
+    cols = [[f"{n}.{a}" for a in "xyz"] for n in triads]
+    if not all(c in imu.channels for grp in cols for c in grp):
+        return []
+    f = np.linalg.norm(np.mean([imu.stack(grp) for grp in cols], axis=0), axis=1)
+
+    def falls_freely(t_cut: float) -> bool | None:
+        hard = np.flatnonzero((imu.time > t_cut) & (f > 2.0 * G0))
+        if not hard.size:
+            return None
+        m = (imu.time > t_cut + 0.01) & (imu.time < imu.time[hard[0]] - 0.005)
+        return None if m.sum() < 10 else bool(np.median(f[m]) < 0.5 * G0)
+
+    cut = events["bungee_cut"]
+    ok = falls_freely(cut)
+    if ok is None or ok:
+        return []
+    for fac in (1e3, 1e-3):
+        if imu.time[0] < cut * fac < imu.time[-1] and falls_freely(cut * fac):
+            raise TelemetryError.single(
+                fname,
+                f"after the bungee cut at {cut:.6g} s the lander does not fall freely (median specific force "
+                f"above 0.5 g), but it would after {cut * fac:.6g} s: the event times look {1 / fac:g}× off — "
+                "a time unit mix-up (s ↔ ms)?",
+                column="time",
+            )
+    return [(float(cut), "WARN", f"{fname}: the lander does not fall freely after the bungee cut at {cut:.4f} s")]
+
+
 def _degrade(log: list, t: float, level: str, text: str) -> None:
     log.append((float(t), level, text))
 
@@ -149,6 +244,20 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
         events[name] = t_e
     if "release" not in events:
         raise ScenarioError(paths["events"], None, "no 'release' event: the reconstruction needs the release time")
+    for t_e, name in ev_list:
+        if name not in KNOWN_EVENTS:
+            close = difflib.get_close_matches(name, KNOWN_EVENTS, n=1, cutoff=0.6)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            dup_log.append(
+                (
+                    float(t_e),
+                    "WARN",
+                    f"{paths['events']}: unknown event label '{name}' at {t_e:.4f} s, ignored "
+                    f"(known: {', '.join(KNOWN_EVENTS)}){hint}",
+                )
+            )
+    unit_notes = check_units_at_rest(imu, events["release"], cfg, str(paths["imu"]))
+    unit_notes += check_free_fall(imu, events, cfg.triads, str(paths["events"]))
     setup = read_setup(paths["setup"])
     ranging = None
     if "ranging" in paths:
@@ -165,7 +274,27 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
             f"triads {missing} have no lever arm in the lander asset's [instruments]",
         )
 
-    log: list[tuple[float, str, str]] = list(att_log) + dup_log
+    log: list[tuple[float, str, str]] = list(att_log) + dup_log + unit_notes
+    for tf in (imu, att, ranging):
+        if tf is not None:
+            log += [(float(tf.time[-1]), "WARN", note) for note in tf.notes]
+    if att.time.size > 1:
+        early = events["release"] - float(att.time[-1])
+        if early > max(0.2, 10.0 * float(np.median(np.diff(att.time)))):
+            _degrade(
+                log,
+                float(att.time[-1]),
+                "WARN",
+                f"{paths['attitude_3dm']}: the readings end {early:.3g} s before the release: truncated?",
+            )
+    for tf in (att, ranging):
+        for gap in tf.gaps if tf is not None else ():
+            _degrade(
+                log,
+                gap.start_s,
+                "WARN",
+                f"{tf.path}: gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row})",
+            )
     n_raw = len(imu)
     f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
     w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])

@@ -40,6 +40,7 @@ from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import attitude_error, quat_normalize
 from workbench.core.timescales import julian_date_utc
 from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nees
+from workbench.estimation.health import health_markdown
 from workbench.estimation.strapdown import integrate
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
@@ -48,11 +49,17 @@ from workbench.problems.entry.atmosphere import reconstruct_atmosphere
 from workbench.problems.entry.config import EntryConfig, config_for
 from workbench.problems.entry.dispersion import run_dispersion
 from workbench.problems.entry.filter import RadarData, run_entry_smoother
+from workbench.problems.entry.health import entry_health
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import errors_sigmas
 from workbench.problems.entry.site import R_MOLA
-from workbench.problems.entry.telemetry import NominalState, read_entry_telemetry, read_nominal_state
+from workbench.problems.entry.telemetry import (
+    NominalState,
+    check_event_span,
+    read_entry_telemetry,
+    read_nominal_state,
+)
 from workbench.problems.entry.winds import estimate_winds
 
 __all__ = [
@@ -203,15 +210,7 @@ def reconstruct(
     vehicle = vehicle_for(sc)
     r_ground = R_MOLA + cfg.terrain_m
     tm = read_entry_telemetry(paths, cfg.checks)
-    for ev in ("PDD", "FSR"):
-        if ev not in tm.events:
-            raise ScenarioError(Path(paths["events"]), ev, "event missing (needed for the dispersion rules and phases)")
-        if not (tm.t_gnc[0] <= tm.events[ev] <= tm.t_gnc[-1]):
-            raise ScenarioError(
-                Path(paths["events"]),
-                ev,
-                f"at {tm.events[ev]:.3f} s, outside the GNC data {tm.t_gnc[0]:.3f}–{tm.t_gnc[-1]:.3f} s",
-            )
+    check_event_span(tm, paths)
     yield tm
     imu = preprocess(tm, cfg.preprocess)
     yield imu
@@ -354,6 +353,7 @@ def reconstruct(
         "sigma_attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(init.P0)[3:6])))),
         "sigma_position_m": float(np.sqrt(np.max(np.diag(init.P0)[6:9]))),
     }
+    summary["health"] = entry_health(tm, imu, filt, atm, r_ground)
     yield EntryResult(tm, imu, nomi, disp, filt, atm, winds, vehicle, dict(tm.events), summary, init)
 
 
@@ -816,4 +816,6 @@ def scorecard_markdown(summary: dict) -> str:
                     f"- **{k}**: "
                     + ", ".join(f"{kk} {vv:.4g}" if isinstance(vv, float) else f"{kk} {vv}" for kk, vv in v.items())
                 )
+    if "health" in summary:
+        L += ["", health_markdown(summary["health"]).rstrip()]
     return "\n".join(L) + "\n"

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.bodies import G0
 from workbench.core.rotation import quat_conjugate, quat_from_jpl, quat_normalize, quat_to_jpl
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.io.telemetry import (
@@ -51,6 +52,8 @@ from workbench.io.telemetry import (
     read_events,
     read_telemetry,
 )
+from workbench.io.units import likely_unit
+from workbench.problems.entry.site import R_MOLA
 
 __all__ = [
     "STREAMS",
@@ -60,6 +63,7 @@ __all__ = [
     "NominalState",
     "telemetry_paths",
     "read_entry_telemetry",
+    "check_event_span",
     "read_nominal_state",
     "write_nominal_state",
     "true_runs",
@@ -204,6 +208,202 @@ def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(), strict=True))
 
 
+def _flat_top_notes(tel, run: int = 5) -> list[str]:
+    """WARN notes for rate and acceleration channels holding one non-zero value for ``run`` or more
+    consecutive samples: a flat top (saturated or stuck sensor)."""
+    out = []
+    for name in [f"{q}_{a}" for q in "wa" for a in "xyz"]:
+        v = tel.channel(name)
+        same = np.r_[False, (v[1:] == v[:-1]) & (v[1:] != 0) & np.isfinite(v[1:])]
+        for i0, i1 in true_runs(same):
+            if i1 - i0 + 2 >= run:
+                out.append(
+                    f"WARN: {Problem(str(tel.path), f'{name} [{tel.units[name]}]', i0, None, '')}".rstrip(": ")
+                    + f": {i1 - i0 + 2} samples flat at {v[i0]:.6g} SI "
+                    f"(t = {tel.time[i0 - 1]:.3f}–{tel.time[i1]:.3f} s): saturated or stuck"
+                )
+                break
+    return out
+
+
+def _early_end_notes(gnc, others: Mapping[str, np.ndarray], paths, events: Mapping[str, float]) -> list[str]:
+    """WARN notes for files that end early (truncated?): the GNC data more than 1 s before the last
+    event, another stream more than 10 s before the GNC data (the radar may stop a few seconds
+    before the end of the data, not tens)."""
+    out = []
+    t_end = float(gnc.time[-1])
+    if events:
+        name, t_last = max(events.items(), key=lambda kv: kv[1])
+        if t_last > t_end + 1.0:
+            out.append(
+                f"WARN: {paths['gnc']}: the data end at {t_end:.3f} s, {t_last - t_end:.3g} s before the last "
+                f"event {name} ({t_last:.3f} s): truncated?"
+            )
+    for k, t in others.items():
+        if len(t) and t_end - float(t[-1]) > 10.0:
+            out.append(
+                f"WARN: {paths[k]}: the data end at {float(t[-1]):.3f} s, {t_end - float(t[-1]):.3g} s before the "
+                "GNC data: truncated?"
+            )
+    return out
+
+
+def _gap_notes(tel) -> list[str]:
+    """WARN notes for the time gaps of a telemetry file (blackouts are expected, but reported)."""
+    return [
+        f"WARN: {tel.path}: gap {g.start_s:.3f}–{g.end_s:.3f} s ({g.duration_s:.3g} s, row {g.row})" for g in tel.gaps
+    ]
+
+
+def _unit_problem(file, tel, name: str, ratio: float, what: str) -> Problem | None:
+    """A located problem when ``ratio`` (measured / expected) is explained by a unit mix-up."""
+    unit = tel.units[name]
+    likely = likely_unit(ratio, unit)
+    if likely is None:
+        return None
+    return Problem(str(file), f"{name} [{unit}]", None, None, f"{what}: the values look like [{likely}], not [{unit}]")
+
+
+def check_radar_units(nav, out, file) -> None:
+    """The radar's slant-out range (along the near-vertical beam B0) against the on-board altitude
+    above the Mars reference sphere at the same times (where the on-board navigation covers the
+    radar phase): their median ratio off by a unit-like factor (1000 m ↔ km, 3.28 ft ↔ m) is a
+    :class:`TelemetryError` naming the file, the column and the likely unit.  The terrain
+    (± a few km) and the beam's tilt keep the ratio within a factor 2 otherwise."""
+    t = out.time
+    so = out.channel("slant_out")
+    p = nav.stack([f"p_{a}" for a in "xyz"])
+    inside = (t >= nav.time[0]) & (t <= nav.time[-1]) & (so > 0)
+    if inside.sum() < 5:
+        return
+    h = np.linalg.norm(np.column_stack([np.interp(t[inside], nav.time, p[:, i]) for i in range(3)]), axis=1) - R_MOLA
+    ok = h > 2000.0  # well above the terrain uncertainty
+    if ok.sum() < 5:
+        return
+    ratio = float(np.median(so[inside][ok] / h[ok]))
+    if abs(np.log(ratio)) > np.log(2.5):
+        pr = _unit_problem(file, out, "slant_out", ratio, f"the slant-out range is {ratio:.4g}× the on-board altitude")
+        if pr:
+            raise TelemetryError([pr])
+
+
+def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str, float]) -> None:
+    """Unit plausibility from physics (frame-free magnitudes), raising :class:`TelemetryError` naming
+    the file, the column and the likely unit when a mismatch is a unit-like factor (9.81, 1000, 57.3,
+    3.28: :func:`~workbench.io.units.likely_unit`):
+
+    * the on-board position ``p_*`` (gnc_nav) lies near the Mars radius (median |p| / 3396 km);
+    * the on-board velocity ``v_*`` matches the position differences (median |v| / |Δp/Δt|);
+    * the total acceleration ``a_*`` (gnc) matches the on-board velocity differences;
+    * the body rate ``w_*`` (gnc) matches the rotation between successive attitude quaternions;
+    * the parachute deployment (PDD, events) comes after the peak of |a| (the hypersonic
+      deceleration), and a PDD time off by 1000 from it is an events time unit mix-up.
+    Magnitudes are compared by medians, so saturation and blackouts do not matter.
+    """
+    problems: list[Problem] = []
+    p = nav.stack([f"p_{a}" for a in "xyz"])
+    v = nav.stack([f"v_{a}" for a in "xyz"])
+    r = float(np.median(np.linalg.norm(p, axis=1)))
+    pos_ok = True
+    if r > 0 and abs(np.log(r / R_MOLA)) > np.log(1.5):
+        pos_ok = False
+        pr = _unit_problem(
+            paths["gnc_nav"],
+            nav,
+            "p_x",
+            r / R_MOLA,
+            f"the on-board position lies {r / 1e3:.4g} km "
+            f"from the centre of Mars, whose radius is {R_MOLA / 1e3:.0f} km",
+        )
+        problems.append(
+            pr
+            or Problem(
+                str(paths["gnc_nav"]),
+                f"p_x [{nav.units['p_x']}]",
+                None,
+                None,
+                f"the on-board position lies {r / 1e3:.4g} km from the centre of Mars "
+                f"(radius {R_MOLA / 1e3:.0f} km): wrong unit or frame",
+            )
+        )
+    if pos_ok and nav.time.size > 2:
+        dt = np.diff(nav.time)
+        dp = np.linalg.norm(np.diff(p, axis=0), axis=1) / dt
+        vm = 0.5 * (np.linalg.norm(v[1:], axis=1) + np.linalg.norm(v[:-1], axis=1))
+        ok = (dp > 1.0) & (vm > 0)
+        if ok.sum() > 2:
+            ratio = float(np.median(vm[ok] / dp[ok]))
+            if abs(np.log(ratio)) > np.log(1.5):
+                pr = _unit_problem(
+                    paths["gnc_nav"],
+                    nav,
+                    "v_x",
+                    ratio,
+                    f"the on-board speed is {ratio:.4g}× the rate of change of the on-board position",
+                )
+                if pr:
+                    problems.append(pr)
+    if nav.time.size > 2 and not problems:
+        dv = np.diff(v, axis=0) / np.diff(nav.time)[:, None]
+        tm = 0.5 * (nav.time[1:] + nav.time[:-1])
+        a = gnc.stack([f"a_{x}" for x in "xyz"])
+        ok_a = np.all(np.isfinite(a), axis=1)
+        if ok_a.sum() > 2:
+            ai = np.column_stack([np.interp(tm, gnc.time[ok_a], a[ok_a, i]) for i in range(3)])
+            na, ndv = np.linalg.norm(ai, axis=1), np.linalg.norm(dv, axis=1)
+            inside = (tm >= gnc.time[ok_a][0]) & (tm <= gnc.time[ok_a][-1]) & (ndv > 0.5)
+            if inside.sum() > 2:
+                ratio = float(np.median(na[inside] / ndv[inside]))
+                if abs(np.log(ratio)) > np.log(1.5):
+                    pr = _unit_problem(
+                        paths["gnc"],
+                        gnc,
+                        "a_x",
+                        ratio,
+                        f"the acceleration is {ratio:.4g}× the rate of change of the on-board velocity",
+                    )
+                    if pr:
+                        problems.append(pr)
+    q = gnc.stack([f"q{i}" for i in range(1, 5)])
+    if q.shape[0] > 3:
+        qn = q / np.linalg.norm(q, axis=1, keepdims=True)
+        dots = np.clip(np.abs(np.sum(qn[1:] * qn[:-1], axis=1)), 0.0, 1.0)
+        rate_q = 2.0 * np.arccos(dots) / np.diff(gnc.time)
+        w = np.linalg.norm(gnc.stack([f"w_{x}" for x in "xyz"]), axis=1)
+        wm = 0.5 * (w[1:] + w[:-1])
+        ok = (rate_q > np.radians(0.5)) & (wm > 0)
+        if ok.sum() > 5:
+            ratio = float(np.median(wm[ok] / rate_q[ok]))
+            if abs(np.log(ratio)) > np.log(1.5):
+                pr = _unit_problem(
+                    paths["gnc"],
+                    gnc,
+                    "w_x",
+                    ratio,
+                    f"the body rate is {ratio:.4g}× the rotation rate of the attitude quaternions",
+                )
+                if pr:
+                    problems.append(pr)
+    if problems:
+        raise TelemetryError(problems)
+    a = gnc.stack([f"a_{x}" for x in "xyz"])
+    ok_a = np.all(np.isfinite(a), axis=1)
+    if "PDD" in events and ok_a.sum() > 10:
+        t_peak = float(gnc.time[ok_a][int(np.argmax(np.linalg.norm(a[ok_a], axis=1)))])
+        t_pdd = events["PDD"]
+        span = (float(gnc.time[0]), float(gnc.time[-1]))
+        if not (t_peak < t_pdd <= span[1]):
+            for f in (1e3, 1e-3, 1e6):
+                if t_peak < t_pdd * f <= span[1] and not (t_peak < t_pdd <= span[1]):
+                    raise TelemetryError.single(
+                        paths["events"],
+                        f"the parachute deployment (PDD) at {t_pdd:.6g} s is not after the peak deceleration "
+                        f"({t_peak:.1f} s) inside the GNC data ({span[0]:.1f}–{span[1]:.1f} s), but {t_pdd * f:.6g} s "
+                        f"would be: the times look {1 / f:g}× off — a time unit mix-up (s ↔ ms)?",
+                        column="time",
+                    )
+
+
 def read_entry_telemetry(
     paths: Mapping[str, str | os.PathLike], checks: TelemetryChecks | None = None
 ) -> EntryTelemetry:
@@ -224,7 +424,10 @@ def read_entry_telemetry(
     req = {f"w_{a}": "angular_rate" for a in "xyz"}
     req.update({f"q{i}": "dimensionless" for i in range(1, 5)})
     req.update({f"a_{a}": "acceleration" for a in "xyz"})
-    gnc = read_telemetry(paths["gnc"], required=req, sparse=[f"a_{a}" for a in "xyz"])
+    lim = {f"a_{a}": (-100 * G0, 100 * G0) for a in "xyz"}  # physically possible: an entry peaks at ~10 g
+    lim.update({f"w_{a}": (-np.radians(3000.0), np.radians(3000.0)) for a in "xyz"})
+    gnc = read_telemetry(paths["gnc"], required=req, sparse=[f"a_{a}" for a in "xyz"], limits=lim)
+    problems += [f"WARN: {note}" for note in gnc.notes] + _gap_notes(gnc) + _flat_top_notes(gnc)
     fname = str(paths["gnc"])
     q_raw = gnc.stack([f"q{i}" for i in range(1, 5)])
     norm = np.linalg.norm(q_raw, axis=1)
@@ -282,13 +485,17 @@ def read_entry_telemetry(
     # ---- on-board navigation 1 Hz -----------------------------------------------------------
     req_nav = {f"p_{a}": "length" for a in "xyz"}
     req_nav.update({f"v_{a}": "velocity" for a in "xyz"})
-    nav = read_telemetry(paths["gnc_nav"], required=req_nav)
+    lim = {f"p_{a}": (-5 * R_MOLA, 5 * R_MOLA) for a in "xyz"}  # within a few Mars radii
+    lim.update({f"v_{a}": (-2e4, 2e4) for a in "xyz"})  # below 20 km/s (entries are 4-8 km/s)
+    nav = read_telemetry(paths["gnc_nav"], required=req_nav, limits=lim)
+    problems += [f"WARN: {note}" for note in nav.notes] + _gap_notes(nav)
 
     # ---- radar --------------------------------------------------------------------------------
     names = [f"B{i}" for i in range(4)]
     tel = read_telemetry(
         paths["rda_slant_range"], required=dict.fromkeys(names, "length"), limits=dict.fromkeys(names, (0.0, 1e7))
     )
+    problems += [f"WARN: {note}" for note in tel.notes] + _gap_notes(tel)
     t_sr, sr = tel.time.copy(), tel.stack(names)
     zero = sr == 0.0
     sr_valid = ~zero.any(axis=1)
@@ -312,6 +519,8 @@ def read_entry_telemetry(
     vn = [f"v_out_{a}" for a in "xyz"]
     req_r = {"slant_out": "length", **dict.fromkeys(vn, "velocity")}
     tel = read_telemetry(paths["rda_out"], required=req_r, limits={"slant_out": (0.0, 1e7)})
+    problems += [f"WARN: {note}" for note in tel.notes] + _gap_notes(tel)
+    check_radar_units(nav, tel, paths["rda_out"])
     t_rda, so, vo = tel.time.copy(), tel.channel("slant_out").copy(), tel.stack(vn)
     zero_so = so == 0.0
     zero_v = np.all(vo == 0.0, axis=1)
@@ -348,6 +557,8 @@ def read_entry_telemetry(
             continue
         events[name] = float(t_e)
 
+    check_units(gnc, nav, paths, events)
+    problems += _early_end_notes(gnc, {"gnc_nav": nav.time, "rda_slant_range": t_sr, "rda_out": t_rda}, paths, events)
     return EntryTelemetry(
         t_gnc=gnc.time.copy(),
         w_G=gnc.stack([f"w_{a}" for a in "xyz"]),
@@ -369,3 +580,25 @@ def read_entry_telemetry(
         problems=problems,
         files=dict(paths),
     )
+
+
+def check_event_span(tm: EntryTelemetry, paths: Mapping[str, os.PathLike]) -> None:
+    """PDD and FSR present and inside the GNC data.  Each file's own problem is reported against it:
+    a GNC file that ends shortly before an event (truncated?) is a :class:`TelemetryError` on the GNC
+    file; an event far outside the data is a :class:`ScenarioError` on the events file."""
+    for ev in ("PDD", "FSR"):
+        if ev not in tm.events:
+            raise ScenarioError(Path(paths["events"]), ev, "event missing (needed for the dispersion rules and phases)")
+        if tm.t_gnc[-1] < tm.events[ev] < tm.t_gnc[-1] + 0.5 * (tm.t_gnc[-1] - tm.t_gnc[0]):
+            # the events are in order but the GNC data stop early: the GNC file is the suspect
+            raise TelemetryError.single(
+                paths["gnc"],
+                f"the data end at {tm.t_gnc[-1]:.3f} s, before the {ev} event at {tm.events[ev]:.3f} s "
+                f"({paths['events']}): is the GNC file truncated?",
+            )
+        if not (tm.t_gnc[0] <= tm.events[ev] <= tm.t_gnc[-1]):
+            raise ScenarioError(
+                Path(paths["events"]),
+                ev,
+                f"at {tm.events[ev]:.3f} s, outside the GNC data {tm.t_gnc[0]:.3f}–{tm.t_gnc[-1]:.3f} s",
+            )

@@ -26,9 +26,11 @@ from scipy.stats import chi2
 
 from workbench.core.rotation import attitude_error
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
+from workbench.estimation.health import WARNING, covariance_check, health_report, interval_check, nis_check, notes_check
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io.scenario import Scenario, ScenarioError
-from workbench.io.telemetry import read_telemetry
+from workbench.io.telemetry import TelemetryError, read_telemetry
+from workbench.io.units import likely_unit
 from workbench.problems.post2 import build
 from workbench.problems.post2.config import ObservationSpec, Post2Config, config_for
 from workbench.problems.post2.model import (
@@ -72,6 +74,7 @@ class ObservationData:
     """Stage 1: the observation channels by name."""
 
     channels: dict[str, Channel]
+    notes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -126,10 +129,33 @@ def _weights_R(scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: 
     return R
 
 
+def _check_gravity_units(path: Path, tel, column: str, cfg: Post2Config) -> None:
+    """Unit plausibility of a gravity-magnitude observation: its median lies between a tenth of and
+    1.2 times the surface gravity GM/R² of ``[environment]``; a factor explained by a unit mix-up
+    (g ↔ m/s² ...) is a :class:`TelemetryError` naming the file, the column and the likely unit."""
+    env = cfg.data["environment"]
+    gm, radius = env.get("gm_m3_s2"), env.get("reference_radius_m")
+    if not gm or not radius:
+        return
+    g_surf = float(gm) / float(radius) ** 2
+    ratio = float(np.median(np.abs(tel.channel(column)))) / g_surf
+    if 0.1 <= ratio <= 1.2:
+        return
+    unit = tel.units[column]
+    likely = likely_unit(ratio, unit) or likely_unit(ratio / 0.9, unit)
+    why = f"the values look like [{likely}], not [{unit}]" if likely else "wrong unit or body?"
+    raise TelemetryError.single(
+        path,
+        f"median gravity {ratio:.4g}× the surface gravity {g_surf:.4g} m/s² of [environment]: {why}",
+        column=f"{column} [{unit}]",
+    )
+
+
 def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> ObservationData:
     """Read every declared observation from ``telemetry`` {name: csv, name + "_weights": csv}; check
     that its times lie inside the reconstruction span; build R; apply the sliding median."""
     out = {}
+    notes: list[str] = []
     for spec in cfg.observations:
         d = OBSERVATIONS[spec.quantity]
         path = Path(telemetry[spec.name])
@@ -164,7 +190,13 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
         else:
             R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]))
         out[spec.name] = Channel(spec, t, z, z_raw, R)
-    return ObservationData(out)
+        notes += [*tel.notes, *(f"{path}: gap {g.start_s:g}–{g.end_s:g} s (row {g.row})" for g in tel.gaps)]
+        step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        if t.size > 1 and cfg.t_end - t[-1] > 3.0 * step:
+            notes.append(f"{path}: the observations end at {t[-1]:g} s, {cfg.t_end - t[-1]:g} s before [model] t_end_s")
+        if spec.quantity == "gravity_magnitude" and z.size:
+            _check_gravity_units(path, tel, d.components[0], cfg)
+    return ObservationData(out, tuple(notes))
 
 
 def _kind(unit: str) -> str:
@@ -327,6 +359,25 @@ def _unit_scale(name: str) -> float:
     return {"deg": 180.0 / math.pi, "deg/s": 180.0 / math.pi}.get(unit, 1.0)
 
 
+def post2_health(fp, P: np.ndarray, x: np.ndarray, notes=()) -> dict:
+    """``summary["health"]`` (:mod:`workbench.estimation.health`): mean NIS of every observation
+    against χ² bounds, the share of rejected samples (WARNING above 10 %), the final covariance
+    history ``P`` (n, k, k) symmetric positive definite and the state history ``x`` (n, m) finite."""
+    checks = []
+    for name, ih in fp.innovations.items():
+        if ih.t.size:
+            checks.append(nis_check(name, ih.nis, int(ih.y.shape[1])))
+            rej = float(np.mean(~ih.accepted))
+            checks.append(
+                interval_check(f"rejected.{name}", rej, 0.0, 0.1, f"share of {name} samples rejected", status=WARNING)
+            )
+    checks.append(covariance_check(P, "covariance"))
+    bad = int(np.sum(~np.isfinite(x)))
+    checks.append(interval_check("state.finite", bad, 0, 0, "non-finite state components"))
+    checks.append(notes_check("observations", list(notes)))
+    return health_report(checks)
+
+
 def reconstruct(scenario: Scenario, telemetry, options=None):
     """Generator of the stages (see the module docstring) for a post2 scenario and its telemetry files."""
     cfg = config_for(scenario)
@@ -381,6 +432,7 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
         obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
     summary["observations"] = obs
     summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
+    summary["health"] = post2_health(fp, P, x, data.notes)
     yield Post2Result(
         t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), {"smoothed": hist, "forward": fwd}, summary
     )

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.estimation.health import health_markdown
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
 from workbench.problems.post2 import pipeline
@@ -141,6 +142,8 @@ class Post2Problem:
                 md += f"| end (forward) | {p['final_error_forward']} (3σ {p['final_3sigma_forward']}) |\n"
                 flag = "inside" if p["inside_3sigma_at_end"] else "**OUTSIDE**"
                 md += f"\nfinal error {flag} its 3σ.\n"
+        if "health" in summary:
+            md += "\n" + health_markdown(summary["health"])
         return md
 
     def headline(self, summary: dict) -> str:

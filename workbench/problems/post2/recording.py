@@ -91,6 +91,8 @@ class Post2Drawer:
     def finish(self, result: object, summary: dict) -> None:
         """Write the scorecard."""
         self.rec.report(self.scorecard(summary))
+        if "health" in summary:
+            self.rec.health(summary["health"])
 
 
 def post2_blueprint(state_names: list[str], observation_names: list[str], has_truth: bool):

@@ -1,0 +1,81 @@
+"""The health checks (``estimation/health.py``): each status reachable, bounds from χ², the
+verdict the worst status, and the report shape the summaries rely on."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workbench.estimation.health import (
+    ERROR,
+    OK,
+    WARNING,
+    Check,
+    UnhealthyError,
+    covariance_check,
+    gap_check,
+    health_markdown,
+    health_report,
+    interval_check,
+    nis_check,
+    notes_check,
+    verdict,
+)
+
+
+def test_nis_consistent_optimistic_conservative():
+    rng = np.random.default_rng(1)
+    nis = np.sum(rng.standard_normal((2000, 3)) ** 2, axis=1)  # χ²(3) samples: a consistent filter
+    assert nis_check("BP", nis, 3).status == OK
+    bad = nis_check("BP", 34.0 * nis, 3)  # a triad in g read as m/s² is ~100× in variance
+    assert bad.status == ERROR and "filter inconsistent with sensor BP" in bad.message
+    assert nis_check("zupt", 0.04 * nis, 3).status == WARNING  # conservative: over-large R
+    assert nis_check("BP", 3.0 * nis, 3).status == WARNING  # optimistic, but not a unit error
+    assert nis_check("x", np.array([]), 1).status == WARNING
+
+
+def test_nis_few_samples_use_the_band_of_the_mean():
+    # with one sample of dof 1 the mean may legitimately be large: the 99 % band is wide
+    assert nis_check("g", np.array([6.0]), 1).status != ERROR
+
+
+def test_covariance_check():
+    P = np.tile(np.eye(3), (5, 1, 1))
+    assert covariance_check(P).status == OK
+    Q = P.copy()
+    Q[3, 0, 0] = -1e-3
+    c = covariance_check(Q)
+    assert c.status == ERROR and "step 3" in c.message
+    R = P.copy()
+    R[2, 0, 1] = 0.5
+    assert covariance_check(R).status == ERROR and "symmetric" in covariance_check(R).message
+    S = P.copy()
+    S[1, 1, 1] = np.nan
+    assert covariance_check(S).status == ERROR
+
+
+def test_interval_and_gap_checks():
+    assert interval_check("e", 0.4, 0.0, 1.0, "restitution").status == OK
+    c = interval_check("e", 1.64, 0.0, 1.0, "restitution")
+    assert c.status == ERROR and "physically implausible" in c.message
+    assert interval_check("e", np.nan, 0.0, 1.0, "restitution").status == ERROR
+    assert interval_check("r", 0.5, 0.0, 0.1, "share", status=WARNING).status == WARNING
+    w = {"contact": (1.30, 1.45)}
+    assert gap_check("g", [(0.2, 0.3)], w).status == OK
+    c = gap_check("g", [(1.2, 1.7), (0.2, 0.3)], w)
+    assert c.status == ERROR and c.value == pytest.approx(0.5) and "contact" in c.message
+
+
+def test_verdict_report_markdown_and_error():
+    checks = [Check("a", OK, 1, None, "fine"), notes_check("t", ["WARN: x"])]
+    assert verdict(checks) == WARNING and verdict([]) == OK
+    checks.append(Check("b", ERROR, 2, 1, "bad thing"))
+    rep = health_report(checks)
+    assert rep["verdict"] == ERROR
+    assert set(rep["checks"][0]) == {"name", "status", "value", "bound", "message"}
+    md = health_markdown({**rep, "written_anyway": True})
+    assert "UNHEALTHY" in md and "bad thing" in md and "| a |" not in md  # OK checks are not listed
+    err = UnhealthyError("s.toml", rep)
+    assert "bad thing" in str(err) and "--allow-unhealthy" in str(err)
+    with pytest.raises(ValueError):
+        Check("c", "FINE", 0, None, "")

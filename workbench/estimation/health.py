@@ -1,0 +1,244 @@
+"""Health verdict of a reconstruction: is the answer trustworthy, or silently wrong?
+
+One home for the checks every problem composes (``problems/<p>/health.py`` or its pipeline):
+
+* :func:`nis_check` — innovation statistics of one sensor against χ² bounds (Bar-Shalom, Li &
+  Kirubarajan 2001, Sect. 5.4, the normalised innovation squared): a mean NIS far above its
+  dimension means the filter is inconsistent with that sensor (wrong unit, wrong noise, wrong
+  model) → ERROR; a mean NIS off by more than a factor 2 in variance → WARNING;
+* :func:`covariance_check` — covariance history symmetric and positive definite;
+* :func:`interval_check` — a physical quantity inside its plausible interval (stroke within the
+  bag geometry, restitution in [0, 1], altitude and speed inside the scenario's envelope, ...);
+* :func:`gap_check` — data gaps across the events that matter (contact, parachute deployment);
+* :func:`notes_check` — warnings the input readers reported.
+
+:func:`health_report` turns the checks into the summary's ``"health"`` entry::
+
+    {"verdict": "OK" | "WARNING" | "ERROR",
+     "checks": [{"name", "status", "value", "bound", "message"}, ...]}
+
+The verdict is the worst status.  The runner refuses to publish an ERROR run
+(:class:`UnhealthyError`, exit code 6) unless asked to (``--allow-unhealthy``), and then marks it.
+A new problem adopts it in a few lines: build its list of :class:`Check` with these functions and
+put ``health_report(checks)`` into its summary under ``"health"``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2
+
+__all__ = [
+    "OK",
+    "WARNING",
+    "ERROR",
+    "Check",
+    "UnhealthyError",
+    "covariance_check",
+    "gap_check",
+    "health_markdown",
+    "health_report",
+    "interval_check",
+    "nis_check",
+    "notes_check",
+    "verdict",
+]
+
+OK, WARNING, ERROR = "OK", "WARNING", "ERROR"
+_RANK = {OK: 0, WARNING: 1, ERROR: 2}
+
+
+@dataclass(frozen=True)
+class Check:
+    """One health check: ``name`` (e.g. ``"nis.BP"``), ``status`` (OK/WARNING/ERROR), the measured
+    ``value`` (a number, SI, or None), the ``bound`` it was held against (a number, a
+    ``[lo, hi]`` pair, or None) and a human ``message`` that says what it means."""
+
+    name: str
+    status: str
+    value: Any
+    bound: Any
+    message: str
+
+    def __post_init__(self) -> None:
+        if self.status not in _RANK:
+            raise ValueError(f"check {self.name!r}: status must be OK, WARNING or ERROR, got {self.status!r}")
+
+
+class UnhealthyError(RuntimeError):
+    """A reconstruction whose health verdict is ERROR (nothing was published).  ``health`` is the
+    summary's ``"health"`` dict, ``where`` the scenario."""
+
+    def __init__(self, where: str, health: dict):
+        self.where = str(where)
+        self.health = health
+        bad = [c for c in health.get("checks", []) if c["status"] == ERROR]
+        lines = "\n".join(f"  - {c['name']}: {c['message']}" for c in bad)
+        super().__init__(
+            f"{self.where}: health verdict ERROR — the reconstruction is not trustworthy:\n{lines}\n"
+            "nothing was written; rerun with --allow-unhealthy to write the outputs anyway (marked UNHEALTHY)"
+        )
+
+    def __reduce__(self):
+        return (type(self), (self.where, self.health))
+
+
+def _f(x: float) -> float:
+    return float(f"{float(x):.6g}")
+
+
+def nis_check(sensor: str, nis: np.ndarray, dof: int, *, error_quantile: float = 0.999) -> Check:
+    """Mean NIS of one sensor's innovations ``nis`` (n,) of dimension ``dof`` against χ² bounds.
+
+    ERROR when the mean exceeds both the ``error_quantile`` of a *single* χ²(dof) sample (for
+    dof = 3 and 0.999: 16.3, i.e. the average innovation as large as a 3.3σ outlier) and the 99 %
+    band of the mean of n independent samples; WARNING when the mean lies outside
+    [min(0.5·dof, band_lo), max(2·dof, band_hi)] (a factor 2 in variance; innovations of a smoothed
+    physical process are correlated, so the band of independent samples alone would be too strict).
+    """
+    nis = np.asarray(nis, float)
+    nis = nis[np.isfinite(nis)]
+    name = f"nis.{sensor}"
+    if nis.size == 0:
+        return Check(name, WARNING, None, None, f"sensor {sensor}: no innovation was processed")
+    n, mean = nis.size, float(np.mean(nis))
+    band = (float(chi2.ppf(0.005, n * dof) / n), float(chi2.ppf(0.995, n * dof) / n))
+    err_hi = max(float(chi2.ppf(error_quantile, dof)), band[1])
+    lo, hi = min(0.5 * dof, band[0]), max(2.0 * dof, band[1])
+    if mean > err_hi:
+        return Check(
+            name,
+            ERROR,
+            _f(mean),
+            _f(err_hi),
+            f"filter inconsistent with sensor {sensor}: mean NIS {mean:.3g} over {n} samples against {dof} "
+            f"expected (bound {err_hi:.3g}) — a wrong unit, noise level or model for this sensor?",
+        )
+    if not lo <= mean <= hi:
+        side = "conservative (R or Q too large)" if mean < lo else "optimistic (R or Q too small)"
+        return Check(
+            name,
+            WARNING,
+            _f(mean),
+            [_f(lo), _f(hi)],
+            f"sensor {sensor}: mean NIS {mean:.3g} over {n} samples, expected {dof} — the filter is {side}",
+        )
+    return Check(name, OK, _f(mean), [_f(lo), _f(hi)], f"sensor {sensor}: mean NIS {mean:.3g} (expected {dof})")
+
+
+def covariance_check(P: np.ndarray, name: str = "covariance", *, rtol: float = 1e-6) -> Check:
+    """Covariance history ``P`` (n, k, k) (or one (k, k)): symmetric to ``rtol`` relative to its
+    largest diagonal entry and positive definite at every step; ERROR otherwise (value: the smallest
+    eigenvalue over the history)."""
+    P = np.asarray(P, float)
+    if P.ndim == 2:
+        P = P[None]
+    if not np.all(np.isfinite(P)):
+        bad = int(np.flatnonzero(~np.all(np.isfinite(P), axis=(1, 2)))[0])
+        return Check(name, ERROR, None, None, f"{name}: not finite (first at step {bad})")
+    scale = np.maximum(np.max(np.abs(np.einsum("nii->ni", P)), axis=1), 1e-300)
+    asym = float(np.max(np.max(np.abs(P - np.swapaxes(P, 1, 2)), axis=(1, 2)) / scale))
+    eig = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, 1, 2)))
+    emin = float(np.min(eig))
+    if asym > rtol:
+        return Check(name, ERROR, _f(asym), rtol, f"{name}: not symmetric (relative asymmetry {asym:.2g})")
+    if emin <= 0.0:
+        step = int(np.argmin(np.min(eig, axis=1)))
+        return Check(
+            name, ERROR, _f(emin), 0.0, f"{name}: not positive definite (eigenvalue {emin:.3g} at step {step})"
+        )
+    return Check(name, OK, _f(emin), 0.0, f"{name}: symmetric, positive definite over {P.shape[0]} steps")
+
+
+def interval_check(
+    name: str,
+    value: float,
+    lo: float,
+    hi: float,
+    what: str,
+    unit: str = "",
+    *,
+    status: str = ERROR,
+) -> Check:
+    """``value`` of quantity ``what`` inside the plausible interval [``lo``, ``hi``] (SI, ``unit``
+    for the message); ``status`` (default ERROR) otherwise, also for a non-finite value."""
+    u = f" {unit}" if unit else ""
+    v = float(value)
+    if not np.isfinite(v):
+        return Check(name, status, None, [lo, hi], f"{what}: not finite")
+    if lo <= v <= hi:
+        return Check(name, OK, _f(v), [_f(lo), _f(hi)], f"{what} {v:.4g}{u} within [{lo:.4g}, {hi:.4g}]{u}")
+    return Check(
+        name,
+        status,
+        _f(v),
+        [_f(lo), _f(hi)],
+        f"{what} {v:.4g}{u} is physically implausible (outside [{lo:.4g}, {hi:.4g}]{u})",
+    )
+
+
+def gap_check(
+    name: str,
+    gaps: Iterable[tuple[float, float]],
+    windows: Mapping[str, tuple[float, float]],
+    *,
+    status: str = ERROR,
+) -> Check:
+    """Data gaps ``(start_s, end_s)`` against the time ``windows`` that matter ``{event: (t0, t1)}``
+    (s): a gap overlapping a window gets ``status`` (the event is not observed); value: the longest
+    such gap [s]."""
+    hits = []
+    for a, b in gaps:
+        for ev, (t0, t1) in windows.items():
+            if a < t1 and b > t0:
+                hits.append((b - a, a, b, ev))
+    if not hits:
+        return Check(name, OK, 0.0, None, f"no data gap across {', '.join(windows) or 'any event'}")
+    d, a, b, ev = max(hits)
+    return Check(
+        name,
+        status,
+        _f(d),
+        0.0,
+        f"a {d:.3g} s data gap ({a:.4f}–{b:.4f} s) lies across the {ev}: the reconstruction there is not observed",
+    )
+
+
+def notes_check(name: str, notes: Sequence[str]) -> Check:
+    """WARNING when the input readers reported anything (``notes``, one line each), else OK."""
+    if not notes:
+        return Check(name, OK, 0, None, "no warning from the input readers")
+    more = f" (and {len(notes) - 3} more)" if len(notes) > 3 else ""
+    return Check(name, WARNING, len(notes), None, "; ".join(notes[:3]) + more)
+
+
+def verdict(checks: Iterable[Check]) -> str:
+    """The worst status of ``checks`` (OK when there are none)."""
+    worst = OK
+    for c in checks:
+        if _RANK[c.status] > _RANK[worst]:
+            worst = c.status
+    return worst
+
+
+def health_report(checks: Sequence[Check]) -> dict:
+    """``{"verdict": ..., "checks": [...]}`` (JSON-ready) of ``checks``."""
+    return {"verdict": verdict(checks), "checks": [asdict(c) for c in checks]}
+
+
+def health_markdown(health: Mapping) -> str:
+    """A markdown section for a scorecard: the verdict, and every check that is not OK."""
+    v = health.get("verdict", "?")
+    lines = ["## Health", ""]
+    if health.get("written_anyway"):
+        lines += ["**UNHEALTHY — written with --allow-unhealthy; do not use these numbers.**", ""]
+    lines.append(f"verdict: **{v}** ({len(health.get('checks', []))} checks)")
+    bad = [c for c in health.get("checks", []) if c["status"] != OK]
+    if bad:
+        lines += ["", "| check | status | message |", "|---|---|---|"]
+        lines += [f"| {c['name']} | {c['status']} | {c['message'].replace('|', '/')} |" for c in bad]
+    return "\n".join(lines) + "\n"

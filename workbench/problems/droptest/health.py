@@ -1,0 +1,117 @@
+"""Health verdict of a drop-test reconstruction (composes :mod:`workbench.estimation.health`).
+
+Checks: mean NIS per sensor (every triad, gyro, ZUPT, ranging channels) against χ² bounds; the
+smoothed covariance symmetric and positive definite; the max-stroke clearance within the airbag
+geometry (0 … bag thickness = lobe diameter + standoff) and its 1σ below the bag thickness; the
+coefficient of restitution in [0, 1]; no IMU gap across the contact (the window the estimate
+detects and the one where the measured specific force exceeds 2 g after release or bungee cut);
+and every warning the telemetry readers reported.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workbench.core.bodies import G0
+from workbench.estimation.health import (
+    ERROR,
+    WARNING,
+    Check,
+    covariance_check,
+    gap_check,
+    health_report,
+    interval_check,
+    nis_check,
+    notes_check,
+)
+
+__all__ = ["drop_health", "input_checks", "input_health"]
+
+
+def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None) -> list[Check]:
+    """The checks that need only the telemetry ``tel`` (``DropTelemetry``): no IMU gap across the
+    impact (where the mean triad specific force exceeds 2 g after the release or bungee cut, and
+    the extra ``windows`` {what: (t0, t1) [s]}), an impact present in the data at all, gaps after
+    release longer than 20 ms (WARNING), and the readers' warnings."""
+    windows = dict(windows or {})
+    imu = tel.imu
+    start = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
+    f = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in tel.triads], axis=1)
+    fmag = np.linalg.norm(np.mean(f, axis=1), axis=1)
+    hard = np.flatnonzero((imu.time >= start) & (fmag > 2.0 * G0))
+    gaps = [(g.start_s, g.end_s) for g in imu.gaps]
+    late = [(a, b) for a, b in gaps if b > tel.events.get("release", -np.inf)]
+    checks: list[Check] = []
+    if hard.size:
+        # padded by two samples: a gap just before the first or after the last > 2 g sample is across it
+        pad = 2.0 * float(np.median(np.diff(imu.time)))
+        windows["measured impact (|f| > 2 g)"] = (float(imu.time[hard[0]]) - pad, float(imu.time[hard[-1]]) + pad)
+    else:
+        if late:
+            a, b = max(late, key=lambda g: g[1] - g[0])
+            why = f"a {b - a:.3g} s gap ({a:.4f}–{b:.4f} s) may hide it"
+        else:
+            why = f"the data end at {imu.time[-1]:.4f} s (a truncated file?)"
+        checks.append(
+            Check(
+                "gaps.impact",
+                ERROR,
+                None,
+                2.0 * G0,
+                f"no impact (mean triad specific force > 2 g) in the IMU data after release: {why}; "
+                "the contact is not observed",
+            )
+        )
+    checks.append(gap_check("gaps.contact", gaps, windows))
+    long_gaps = [(b - a, a, b) for a, b in late if b - a > 0.02]
+    if long_gaps:
+        d, a, b = max(long_gaps)
+        checks.append(
+            Check(
+                "gaps.after_release", WARNING, float(d), 0.02, f"a {d:.3g} s IMU gap after release ({a:.4f}–{b:.4f} s)"
+            )
+        )
+    checks.append(notes_check("telemetry", [f"{lvl}: {txt}" for _, lvl, txt in tel.degradations]))
+    return checks
+
+
+def input_health(scenario, paths) -> dict:
+    """``health_report`` of :func:`input_checks` after reading and validating the drop-test
+    telemetry ``paths`` of ``scenario`` (raises the readers' located errors) — what can be said
+    before the filter runs (the fuzz suite's fast path)."""
+    from workbench.problems.droptest.lander import load_lander
+    from workbench.problems.droptest.telemetry import load_drop_telemetry
+
+    tel = load_drop_telemetry(scenario, paths, load_lander(scenario.path_of("vehicle.lander")))
+    return health_report(input_checks(tel))
+
+
+def drop_health(tel, fwd, smo, st) -> dict:
+    """The ``summary["health"]`` of a drop test from its telemetry ``tel`` (``DropTelemetry``), the
+    forward and smoothed ``FilterStage`` and the ``StrokeStage`` ``st`` (lengths in m, times in s)."""
+    checks: list[Check] = []
+    for name, ih in fwd.forward.innovations.items():
+        if ih.t.size:
+            checks.append(nis_check(name, ih.nis, int(ih.y.shape[1])))
+    checks.append(covariance_check(smo.P, "covariance.smoothed"))
+
+    lander = st.lander
+    thickness = float(2.0 * lander.lobe_radius + lander.standoff)  # lander face to the outer bag surface
+    d, s = float(st.max.distance), float(st.max.sigma)
+    checks.append(
+        interval_check("max_stroke.clearance", d, -3.0 * max(s, 0.0) - 0.02, thickness, "max-stroke clearance", "m")
+    )
+    checks.append(interval_check("max_stroke.sigma", s, 0.0, 0.5 * thickness, "max-stroke 1σ", "m"))
+    e, se = st.restitution
+    if np.isfinite(e):
+        checks.append(interval_check("restitution", float(e), 0.0, 1.0, "coefficient of restitution"))
+        checks.append(interval_check("restitution.sigma", float(se), 0.0, 0.5, "restitution 1σ"))
+    else:
+        checks.append(Check("restitution", WARNING, None, [0.0, 1.0], "coefficient of restitution not determined"))
+
+    windows: dict[str, tuple[float, float]] = {}
+    i0, i1 = st.contact
+    if i0 >= 0 and i1 >= 0:
+        windows["detected airbag contact"] = (float(smo.t[i0]) - 0.01, float(smo.t[i1]) + 0.01)
+    checks += input_checks(tel, windows)
+    return health_report(checks)
