@@ -185,7 +185,8 @@ def excerpt_run(tmp_path_factory):
     args += ["--declination-deg", "-10.5", "--inclination-deg", "64"]
     assert main(args) == 0
     toml = out / "flight" / "jackpot_launch_1_excerpt.toml"
-    assert main(["run", str(toml), "--out", str(out / "rec")]) == 0
+    # --allow-unhealthy: the excerpt's verdict is ERROR today (see the xfail test below)
+    assert main(["run", str(toml), "--out", str(out / "rec"), "--allow-unhealthy"]) == 0
     result, score = rocket.run_flight(toml)
     return out, toml, result, score
 
@@ -206,6 +207,18 @@ def test_import_writes_telemetry_a_problem_file_and_the_references(excerpt_run):
     assert not fl["pad"]["magnetometer_heading_trusted"]
     assert (out / "rec" / "jackpot_launch_1_excerpt.rrd").is_file()
     assert "\\" not in toml.read_text(encoding="utf-8") and "shared" not in toml.read_text(encoding="utf-8")
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known (issue #9 case 5): the real flight's sensed-acceleration residuals are far outside their "
+    "sigma schedule (mean NIS ~117 on the excerpt, 10-29 on the full flights): the 3-DOF |a| model and the "
+    "noise are not fitted to the real flight, so the health verdict is ERROR",
+)
+def test_excerpt_reconstruction_is_healthy(excerpt_run):
+    out, _, _, _ = excerpt_run
+    summary = json.loads((out / "rec" / "jackpot_launch_1_excerpt.summary.json").read_text(encoding="utf-8"))
+    assert summary["health"]["verdict"] != "ERROR", summary["health"]
 
 
 def test_short_reconstruction_follows_the_flight(excerpt_run):
