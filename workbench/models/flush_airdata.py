@@ -252,7 +252,8 @@ def pressure_ratio(mach: np.ndarray, gamma: float = MARS_GAMMA) -> np.ndarray:
     m = np.asarray(mach, dtype=float)
     g = gamma
     m2 = np.maximum(m * m, 1e-12)
-    sup = (2.0 / ((g + 1.0) * m2)) ** (g / (g - 1.0)) * ((2.0 * g * m2 - (g - 1.0)) / (g + 1.0)) ** (1.0 / (g - 1.0))
+    m2s = np.maximum(m2, 1.0)
+    sup = (2.0 / ((g + 1.0) * m2s)) ** (g / (g - 1.0)) * ((2.0 * g * m2s - (g - 1.0)) / (g + 1.0)) ** (1.0 / (g - 1.0))
     sub = (1.0 + 0.5 * (g - 1.0) * m2) ** (-g / (g - 1.0))
     return np.where(m > 1.0, sup, sub)
 

@@ -175,6 +175,14 @@ ENTRY_PROFILE_PRESSURE = "/profiles/pressure"
 ENTRY_PROFILE_TEMPERATURE = "/profiles/temperature"
 ENTRY_PROFILE_WIND = "/profiles/wind"
 
+# ---------------------------------------------------------------------- flush air data (MEADS)
+MEADS_HEAT_SHIELD = "/world/vehicle/heat_shield"
+MEADS_PORTS = "/world/vehicle/heat_shield/ports"
+MEADS_PORT_RESIDUALS = "/world/vehicle/heat_shield/port_residuals"
+MEADS_AIR_VELOCITY = "/world/vehicle/air_velocity"
+MEADS_PLOT_PORTS = "/plots/ports"
+MEADS_TRADE_STUDY = "/plots/trade_study"
+
 # ------------------------------------------------------------------------- drop-test Monte Carlo
 MC_ROOT = "/plots/mc"
 MC_STROKE = "/plots/mc/stroke"
@@ -362,7 +370,19 @@ _FAMILIES = {
     "entry_wind_plot_path": "/plots/wind/<component>",
     "entry_wind_profile_path": "/profiles/wind/<component>[_<series>]",
     "validation_rms_path": "/plots/validation/rms/<group>/<quantity>[_sigma]",
+    "meads_port_plot_path": "/plots/ports/<port>/<series>",
+    "meads_trade_path": "/plots/trade_study/<quantity>/<level>",
 }
+
+
+def meads_port_plot_path(port: str, series: str) -> str:
+    """``/plots/ports/<port>/<series>``: one flush port's ``measured`` or ``predicted`` pressure."""
+    return join(MEADS_PLOT_PORTS, port, series)
+
+
+def meads_trade_path(quantity: str, level: str) -> str:
+    """``/plots/trade_study/<quantity>/<level>``: trade-study 3σ of ``quantity`` at one error level."""
+    return join(MEADS_TRADE_STUDY, quantity, level)
 
 
 def path_families() -> dict[str, str]:

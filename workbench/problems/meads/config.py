@@ -48,12 +48,13 @@ class EstimatorSettings:
     from there on; ``plausibility_factor``: the pressures' q∞ and the IMU drag's q∞ may differ by
     this factor before the run is refused; ``min_qbar_pa``: the objectives' threshold (850 Pa);
     ``wind_det_min``: |det| of the normalised wind Jacobian below which the wind solution is
-    declared singular (near-zero flight-path angle) and not published.
+    declared singular (near-zero flight-path angle) and not published; ``wind_sigma_max`` [m/s]: nor is a
+    wind whose 1σ (Eq. 16) exceeds it.
     """
 
     model: str = "newtonian"
     solution: str = "auto"
-    switch_mach: float = 10.0
+    switch_mach: float = 3.0
     fixed_r: float = 0.0
     gamma: float = 1.335
     model_error_frac: float = 0.01
@@ -64,6 +65,7 @@ class EstimatorSettings:
     plausibility_factor: float = 3.0
     min_qbar_pa: float = 850.0
     wind_det_min: float = 0.1
+    wind_sigma_max: float = 50.0
 
 
 @dataclass(frozen=True)
@@ -133,7 +135,7 @@ class MeadsConfig:
         nav = NavigationErrorSpec(
             sn["position_sigma_m"], sn["velocity_sigma_mps"], math.radians(sn["attitude_sigma_deg"])
         )
-        est = EstimatorSettings(**es, wind_det_min=wi["singular_det_min"])
+        est = EstimatorSettings(**es, wind_det_min=wi["singular_det_min"], wind_sigma_max=wi["max_sigma_mps"])
         if est.model == "table" and est.solution == "fixed_r":
             raise ScenarioError(
                 scenario.path,
@@ -296,7 +298,10 @@ SCHEMA = Schema(
         Table(
             "winds",
             "wind solution (paper Eq. 11-17)",
-            (Key("singular_det_min", "float", _E.wind_det_min, "", "normalised |det Gamma| below: singular"),),
+            (
+                Key("singular_det_min", "float", _E.wind_det_min, "", "normalised |det Gamma| below: singular"),
+                Key("max_sigma_mps", "float", _E.wind_sigma_max, "m/s", "winds with a larger 1-sigma: not published"),
+            ),
         ),
         Table(
             "montecarlo",

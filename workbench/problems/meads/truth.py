@@ -130,7 +130,7 @@ class MeadsTruthSpec:
     )
     rho_relax: float = 2.0e-5
     gamma_eq_hyper: float = 1.16
-    stagnation_shift: float = 0.06
+    stagnation_shift: float = 0.03
     shoulder: float = 0.10
 
 
