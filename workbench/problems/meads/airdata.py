@@ -259,12 +259,14 @@ def ned_frames(p_M: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class WindSolution:
-    """Horizontal wind ``wind_NE`` (n, 2) [m/s] (NaN where not published), its covariance ``P``
+    """Horizontal wind ``wind_NE`` (n, 2) [m/s] (NaN where not published; ``wind_raw_NE`` the
+    Newton solution everywhere it could be computed, for diagnosis), its covariance ``P``
     (n, 2, 2) (Eq. 16), ``det`` (n,) the normalised |det Γ|, ``singular`` (n,) True where
     |det| < the threshold (near-zero flight-path angle), ``v_ground_N`` (n, 3) planet-relative
     velocity in NED, ``fpa`` (n,) [rad] flight-path angle, ``iterations``."""
 
     wind_NE: np.ndarray
+    wind_raw_NE: np.ndarray
     P: np.ndarray
     det: np.ndarray
     singular: np.ndarray
@@ -339,7 +341,8 @@ def solve_winds(
     fpa = np.arcsin(np.clip(-v_ground_N[:, 2] / np.maximum(V, 1e-9), -1, 1))
     big = np.sqrt(np.max(np.einsum("nii->ni", np.nan_to_num(Pw, nan=np.inf)), axis=1)) > sigma_max
     out = np.where((singular | ~ok | big)[:, None], np.nan, w)
-    return WindSolution(out, Pw, det, singular & ok, v_ground_N, fpa, iterations)
+    raw = np.where(inv_ok[:, None], w, np.nan)
+    return WindSolution(out, raw, Pw, det, singular & ok, v_ground_N, fpa, iterations)
 
 
 def density_from_qbar(qbar: np.ndarray, v_air_N: np.ndarray) -> np.ndarray:

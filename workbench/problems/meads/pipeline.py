@@ -388,13 +388,16 @@ def _pad(a: np.ndarray, shape: tuple) -> np.ndarray:
 def fit_with_failures(
     t: np.ndarray, p: np.ndarray, vehicle: FadsVehicle, nav: Navigation, est: EstimatorSettings, ports, file: str
 ) -> tuple[AirDataFit, AirDataFit, np.ndarray, list[PortFailure], np.ndarray]:
-    """First fit, stuck/residual detection (at most two ports), refit; the mask of used ports."""
+    """Fit with every port (``first``), stuck detection, residual detection (at most two ports),
+    refits; returns (first, final, mask of the ports used, failures, fixed-R rows)."""
     mask = np.isfinite(p)
+    first, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask.copy())
     failures = detect_stuck(t, p, ports, vehicle)
     for f in failures:
         mask[f.k :, ports.index(f.port)] = False
-    first, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask)
     fit = first
+    if failures:
+        fit, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask)
     for _ in range(2):
         live = mask & (np.nan_to_num(fit.qbar)[:, None] > 50.0)
         f = detect_residual_failure(fit, t, ports, live, est.failed_port_nsigma, est.failed_port_samples)
@@ -535,6 +538,9 @@ def _summary(scenario, tel, nav, lag, air: AirDataStage, wind: WindStage, est) -
         "wind_singular_intervals_s": [[float(tel.t_p[a]), float(tel.t_p[b])] for a, b in sing],
         "wind_singular_samples": int((w.singular & above).sum()),
         "wind_published_samples": int((np.all(np.isfinite(w.wind_NE), axis=1) & above).sum()),
+        "wind_sigma_mps_nonsingular_above_min_qbar": _stats(
+            np.sqrt(np.max(np.einsum("nii->ni", w.P), axis=1))[above & ~w.singular]
+        ),
     }
 
 
@@ -587,8 +593,12 @@ def score_fit(t: np.ndarray, fit: AirDataFit, truth: dict, sel: np.ndarray, wind
     out["p_inf_pct"] = _err_block(((wind.p_inf - pt) / pt)[sel], (wind.sigma_p_inf / wind.p_inf)[sel], 100.0)
     wt = np.stack([np.interp(t, truth["t"], truth["wind_NE"][:, j]) for j in range(2)], 1)
     pub = sel & np.all(np.isfinite(wind.winds.wind_NE), axis=1)
+    raw = wind.winds.wind_raw_NE
+    nonsing = sel & ~wind.winds.singular & np.all(np.isfinite(raw), axis=1)
     for j, name in enumerate(("wind_north_mps", "wind_east_mps")):
-        out[name] = _err_block((wind.winds.wind_NE[:, j] - wt[:, j])[pub], np.sqrt(wind.winds.P[:, j, j])[pub])
+        sd = np.sqrt(wind.winds.P[:, j, j])
+        out[name] = _err_block((wind.winds.wind_NE[:, j] - wt[:, j])[pub], sd[pub])
+        out[name + "_unpublished_nonsingular"] = _err_block((raw[:, j] - wt[:, j])[nonsing], sd[nonsing])
     return out
 
 
