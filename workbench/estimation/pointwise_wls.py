@@ -110,8 +110,10 @@ def iterated_wls(
     HW = H * w[:, :, None]
     A = np.einsum("nmi,nmj->nij", HW, H)
     P = np.full((n, k, k), np.nan)
-    ok = enough & (np.linalg.cond(np.where(enough[:, None, None], A, eye)) < 1e14)
-    P[ok] = np.linalg.inv(A[ok])
+    d = np.sqrt(np.maximum(np.einsum("nii->ni", A), 1e-300))
+    An = A / (d[:, :, None] * d[:, None, :])  # unit diagonal: the determinant measures conditioning
+    ok = enough & (np.abs(np.linalg.det(np.where(enough[:, None, None], An, eye))) > 1e-14)
+    P[ok] = np.linalg.inv(An[ok]) / (d[ok][:, :, None] * d[ok][:, None, :])
     x[~enough] = np.nan
     res = np.where(used, z - model(np.where(np.isfinite(x), x, np.nan_to_num(x0))), np.nan)
     res[~enough] = np.nan

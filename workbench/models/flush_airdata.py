@@ -274,11 +274,10 @@ def incidence_cos(alpha: np.ndarray, beta: np.ndarray, cone: np.ndarray, clock: 
     """cos θ (Eq. 3) for angles α, β [rad] of shape (n, 1) (or broadcastable) and ports (m,)."""
     a, b = np.asarray(alpha, float), np.asarray(beta, float)
     c, k = np.asarray(cone, float), np.asarray(clock, float)
-    return (
-        np.cos(a) * np.cos(b) * np.cos(c)
-        + np.sin(b) * np.sin(k) * np.sin(c)
-        + np.sin(a) * np.cos(b) * np.cos(k) * np.sin(c)
-    )
+    cb = np.cos(b)
+    u, v, w = np.cos(a) * cb, np.sin(b), np.sin(a) * cb  # wind direction in B, per sample
+    sc = np.sin(c)
+    return u * np.cos(c) + v * (np.sin(k) * sc) + w * (np.cos(k) * sc)
 
 
 def total_angles(alpha: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

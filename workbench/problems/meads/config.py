@@ -76,7 +76,7 @@ class McSettings:
     runs: int = 3000
     levels: tuple[float, ...] = (0.005, 0.01, 0.025, 0.05)
     fixed_r: float = 0.001
-    stride: int = 4
+    stride: int = 8
 
 
 @dataclass(frozen=True)
