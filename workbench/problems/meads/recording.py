@@ -10,7 +10,8 @@ where the air comes from (``/world/vehicle/air_velocity``; its angle to the axis
 
 Plots (``/plots/<quantity>``, bounded series with truth): ``alpha_deg``, ``beta_deg``,
 ``qbar_kPa``, ``mach``, ``p_inf_Pa``, ``density_pct_error`` (ρ̂ vs truth, when known, otherwise
-ρ̂ in kg/m³), ``wind_north_mps``, ``wind_east_mps``, ``lag_delay_ms``; per port measured vs
+ρ̂ in kg/m³), ``wind_north_mps``, ``wind_east_mps``, ``lag_delay_ms``, ``lag_correction_Pa`` (the pneumatic-lag
+inversion: corrected − measured pressure of P1 and P4); per port measured vs
 modelled (``/plots/ports/<port>/measured|predicted``) and its residual ±3σ
 (``/residuals/pressure/<port>``); failed ports and singular wind intervals in ``/events``.
 """
@@ -50,6 +51,7 @@ PLOTS = (
     ("wind N m/s", "wind_north_mps"),
     ("wind E m/s", "wind_east_mps"),
     ("lag ms", "lag_delay_ms"),
+    ("lag correction Pa", "lag_correction_Pa"),
 )
 C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
@@ -186,6 +188,13 @@ class MeadsRecorder:
             st.t,
             1e3 * st.delay[:, [0, 3]],
             names=["P1 delay [ms]", "P4 delay [ms]"],
+        )
+        # before/after the inversion: what the correction added to the measured pressure
+        self.rec.scalars(
+            layout.join(layout.plot_path("lag_correction_Pa"), "P1_P4"),
+            st.t,
+            np.nan_to_num(st.p[:, [0, 3]] - st.p_raw[:, [0, 3]]),
+            names=["P1 corrected − measured [Pa]", "P4 corrected − measured [Pa]"],
         )
 
     def _air(self, st: AirDataStage) -> None:
