@@ -19,16 +19,13 @@ does not depend on the executor.  Mach on every :data:`MACH_EVERY`-th sample onl
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.io.scenario import Scenario
 from workbench.models.flush_airdata import FadsVehicle, load_fads_vehicle
-from workbench.problems.base import McOptions, McOutcome, Progress
 from workbench.problems.meads.airdata import fit_air_data, pressure_model
 from workbench.problems.meads.config import config_for
 from workbench.problems.meads.pipeline import sensor_sigma
@@ -41,7 +38,6 @@ __all__ = [
     "TradeStudy",
     "prepare_trade_study",
     "run_trade_study",
-    "trade_study_outcome",
     "level_name",
 ]
 
@@ -221,36 +217,6 @@ def run_trade_study(
         "table": table,
     }
     return TradeStudy(sh.t, sh.mach, sh.qbar, sh.levels, three, bias, summary, mc.wall_s)
-
-
-def trade_study_outcome(scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
-    """``workbench mc <meads scenario>``: the trade study with ``options.n_runs`` runs per level
-    (the scenario's ``[montecarlo] runs`` when ``--runs`` is not given), seed ``first_seed``; writes
-    ``<out>/<name>_mc.rrd``."""
-    from workbench.problems.meads.recording_mc import record_trade_study
-
-    t0 = time.perf_counter()
-    cfg = config_for(scenario)
-    runs = int(options.n_runs) if options.n_runs else cfg.mc.runs
-    progress(
-        f"[{scenario.name}] trade study: {runs} runs x {len(cfg.mc.levels)} levels "
-        f"({options.scheduler or f'{options.workers} local worker(s)'}) ..."
-    )
-    sh = prepare_trade_study(scenario)
-    ts = run_trade_study(sh, runs, options.first_seed, workers=options.workers, scheduler=options.scheduler)
-    summary = {
-        "scenario": scenario.name,
-        "kind": "meads_trade_study",
-        **ts.summary,
-        "wall_time_s": time.perf_counter() - t0,
-    }
-    rrd = record_trade_study(Path(out_dir) / f"{scenario.name}_mc.rrd", f"{scenario.name} trade study", ts, summary)
-    parts = []
-    for lv, row in summary["table"].items():
-        met = [q for q in QUANTITIES if row[q]["met"]]
-        parts.append(f"{lv}: meets {'/'.join(met) or 'none'}")
-    headline = f"trade study ({runs} runs/level, R = {sh.fixed_r:g}): " + "; ".join(parts) + f"; wrote {rrd}"
-    return McOutcome(summary, Path(rrd), headline, ts)
 
 
 def level_name(level: float) -> str:

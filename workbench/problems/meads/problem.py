@@ -7,6 +7,7 @@ telemetry), :mod:`.recording` and :mod:`.montecarlo` (the paper's trade study, `
 from __future__ import annotations
 
 import contextlib
+import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -123,7 +124,26 @@ class MeadsProblem:
         return ExportTable(result.air.t, cols, "air data: body axes B; winds: local north/east")
 
     def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
-        """The paper's trade study (:func:`.montecarlo.run_trade_study`)."""
-        from workbench.problems.meads.montecarlo import trade_study_outcome
+        """The paper's trade study (:mod:`.montecarlo`) with ``options.n_runs`` runs per error level
+        (``workbench mc msl_meads --seeds 3000``), seed ``first_seed``, on ``options.workers``
+        processes or ``options.scheduler``; writes ``<out>/<name>_mc.rrd`` (:mod:`.recording_mc`)."""
+        from workbench.problems.meads.config import config_for
+        from workbench.problems.meads.montecarlo import QUANTITIES, prepare_trade_study, run_trade_study
+        from workbench.problems.meads.recording_mc import record_trade_study
 
-        return trade_study_outcome(scenario, Path(out_dir), options, progress)
+        t0 = time.perf_counter()
+        cfg = config_for(scenario)
+        runs = int(options.n_runs) if options.n_runs else cfg.mc.runs
+        where = options.scheduler or f"{options.workers} local worker(s)"
+        progress(f"[{scenario.name}] trade study: {runs} runs x {len(cfg.mc.levels)} levels ({where}) ...")
+        sh = prepare_trade_study(scenario)
+        ts = run_trade_study(sh, runs, options.first_seed, workers=options.workers, scheduler=options.scheduler)
+        summary = {"scenario": scenario.name, "kind": "meads_trade_study", **ts.summary}
+        summary["wall_time_s"] = time.perf_counter() - t0
+        rrd = record_trade_study(Path(out_dir) / f"{scenario.name}_mc.rrd", f"{scenario.name} trade study", ts, summary)
+        parts = []
+        for lv, row in summary["table"].items():
+            met = [q for q in QUANTITIES if row[q]["met"]]
+            parts.append(f"{lv}: meets {'/'.join(met) or 'none'}")
+        headline = f"trade study ({runs} runs/level, R = {sh.fixed_r:g}): " + "; ".join(parts) + f"; wrote {rrd}"
+        return McOutcome(summary, Path(rrd), headline, ts)
