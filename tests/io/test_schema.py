@@ -13,6 +13,7 @@ from workbench.io.scenario import ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, render_markdown, update_formats
 from workbench.problems.droptest.config import SCHEMA as DROPTEST
 from workbench.problems.entry.config import SCHEMA as ENTRY
+from workbench.problems.meads.config import SCHEMA as MEADS
 from workbench.problems.post2.config import SCHEMA as POST2
 
 FILE = Path("/data/my_scenario.toml")
@@ -139,7 +140,7 @@ def test_formats_md_matches_the_schemas():
     ``python -m workbench.io.schema --write-formats``."""
     path = Path(schema_mod.__file__).with_name("FORMATS.md")
     text = path.read_text(encoding="utf-8")
-    assert update_formats(text, [DROPTEST, ENTRY, POST2]) == text, (
+    assert update_formats(text, [DROPTEST, ENTRY, POST2, MEADS]) == text, (
         "FORMATS.md is out of date: run python -m workbench.io.schema --write-formats"
     )
 
@@ -147,4 +148,9 @@ def test_formats_md_matches_the_schemas():
 def test_the_formats_modules_are_the_problem_schemas():
     import importlib
 
-    assert [importlib.import_module(m).SCHEMA for m in schema_mod.PROBLEM_CONFIG_MODULES] == [DROPTEST, ENTRY, POST2]
+    assert [importlib.import_module(m).SCHEMA for m in schema_mod.PROBLEM_CONFIG_MODULES] == [
+        DROPTEST,
+        ENTRY,
+        POST2,
+        MEADS,
+    ]

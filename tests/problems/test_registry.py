@@ -52,7 +52,7 @@ def test_unknown_kind_names_the_known_ones():
     with pytest.raises(registry.UnknownKindError) as info:
         registry.get("rocket", where="my.toml")
     msg = str(info.value)
-    assert msg.startswith("my.toml: ") and "'rocket'" in msg and "known kinds: droptest, entry, post2" in msg
+    assert msg.startswith("my.toml: ") and "'rocket'" in msg and "known kinds: droptest, entry, meads, post2" in msg
     assert info.value.kind == "rocket"
 
 

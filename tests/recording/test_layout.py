@@ -27,6 +27,8 @@ ROW = re.compile(r"^\|\s*`(/[^`]*)`\s*\|")
 
 # example arguments for each path family (the result must match the family's template)
 FAMILY_ARGS = {
+    "meads_port_plot_path": ("P1", "measured"),
+    "meads_trade_path": ("alpha_deg", "1pct"),
     "radar_beam_path": (2,),
     "truth_path": ("vehicle",),
     "plot_path": ("altitude",),

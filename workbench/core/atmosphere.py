@@ -27,6 +27,7 @@ Standard Atmosphere, 1976*, Tables 1 and 4 (layers, R = 287.053 J/(kg K), γ = 1
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
@@ -53,6 +54,9 @@ __all__ = [
     "AIR_GAMMA",
     "AIR_SUTHERLAND",
     "EarthStandardAtmosphere",
+    "hydrostatic_table",
+    "smooth_box",
+    "layered_wind_NE",
 ]
 
 R_UNIVERSAL = 8.314462618
@@ -445,3 +449,64 @@ class EarthStandardAtmosphere(Atmosphere):
         z = T0 / L * (1.0 - (p / self.sea_level_pressure) ** (self.gas_constant * L / 9.80665))
         r = US76_EARTH_RADIUS
         return r * z / (r - z)
+# ------------------------------------------------------------ building blocks of true atmospheres
+
+
+def hydrostatic_table(
+    h: np.ndarray,
+    T: np.ndarray,
+    surface_pressure: float,
+    gas_constant: float,
+    gamma: float,
+    body: Body = MARS,
+    sutherland: Sutherland = CO2_SUTHERLAND,
+) -> TabulatedAtmosphere:
+    """A hydrostatic :class:`TabulatedAtmosphere` from a temperature profile.
+
+    ``h`` (n,) node altitudes [m] above ``body.reference_radius`` (strictly increasing, must
+    bracket 0), ``T`` (n,) [K]; ``surface_pressure`` [Pa] at h = 0.  ``dp/dh = −ρ g`` with
+    ``ρ = p / (R T)`` and radial ``g = GM/(R_ref + h)²`` (no centrifugal term), integrated by the
+    trapezoid rule on g/T; density from the ideal gas.  Extrapolation: clamp.  Used by the truth
+    simulators (entry, flush air data) to build their own true atmospheres.
+    """
+    h = np.asarray(h, dtype=float)
+    T = np.asarray(T, dtype=float)
+    R = float(gas_constant)
+    g = body.gm / (body.reference_radius + h) ** 2
+    f = g / (R * T)
+    lnp = np.concatenate([[0.0], -np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(h))])
+    lnp = lnp - np.interp(0.0, h, lnp) + math.log(surface_pressure)
+    p = np.exp(lnp)
+    rho = p / (R * T)
+    return TabulatedAtmosphere(
+        h=h, rho=rho, p=p, T=T, gas_constant=R, gamma=gamma, sutherland=sutherland, extrapolate="clamp"
+    )
+
+
+def smooth_box(h, bottom, top, edge):
+    """≈1 inside [bottom, top], 0 outside, tanh edges of width ``edge`` (all in the same unit)."""
+    return 0.25 * (1.0 + np.tanh((h - bottom) / edge)) * (1.0 + np.tanh((top - h) / edge))
+
+
+def layered_wind_NE(
+    h,
+    background_mps: float,
+    background_azimuth_deg: float,
+    turn_deg_per_km: float,
+    layers,
+) -> np.ndarray:
+    """Horizontal wind (..., 2) = [north, east] [m/s] (blowing towards) at altitudes ``h`` [m] (any shape).
+
+    A background ``background_mps`` towards ``background_azimuth_deg`` (from north, clockwise)
+    turning by ``turn_deg_per_km`` with altitude, plus ``layers``: tuples ``(bottom_km, top_km,
+    speed_mps, towards_azimuth_deg, edge_km)``, each a :func:`smooth_box` in altitude.
+    """
+    hk = np.asarray(h, dtype=float) / 1e3
+    az = np.radians(background_azimuth_deg + turn_deg_per_km * hk)
+    n = background_mps * np.cos(az)
+    e = background_mps * np.sin(az)
+    for bottom, top, speed, azd, edge in layers:
+        s = speed * smooth_box(hk, bottom, top, edge)
+        n = n + s * math.cos(math.radians(azd))
+        e = e + s * math.sin(math.radians(azd))
+    return np.stack([n, e], axis=-1)

@@ -61,6 +61,7 @@ PROBLEM_CONFIG_MODULES = (
     "workbench.problems.droptest.config",
     "workbench.problems.entry.config",
     "workbench.problems.post2.config",
+    "workbench.problems.meads.config",
 )
 
 

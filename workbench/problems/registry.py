@@ -18,6 +18,7 @@ BUILTIN: dict[str, str] = {
     "droptest": "workbench.problems.droptest.problem:DropTestProblem",
     "entry": "workbench.problems.entry.problem:EntryProblem",
     "post2": "workbench.problems.post2.problem:Post2Problem",
+    "meads": "workbench.problems.meads.problem:MeadsProblem",
 }
 
 #: importers of third-party logs (``workbench import <name> ...``) -> module; each module has

@@ -177,6 +177,14 @@ ENTRY_PROFILE_PRESSURE = "/profiles/pressure"
 ENTRY_PROFILE_TEMPERATURE = "/profiles/temperature"
 ENTRY_PROFILE_WIND = "/profiles/wind"
 
+# ---------------------------------------------------------------------- flush air data (MEADS)
+MEADS_HEAT_SHIELD = "/world/vehicle/heat_shield"
+MEADS_PORTS = "/world/vehicle/heat_shield/ports"
+MEADS_PORT_RESIDUALS = "/world/vehicle/heat_shield/port_residuals"
+MEADS_AIR_VELOCITY = "/world/vehicle/air_velocity"
+MEADS_PLOT_PORTS = "/plots/ports"
+MEADS_TRADE_STUDY = "/plots/trade_study"
+
 # ------------------------------------------------------------------------- drop-test Monte Carlo
 MC_ROOT = "/plots/mc"
 MC_STROKE = "/plots/mc/stroke"
@@ -408,7 +416,19 @@ _FAMILIES = {
     "compare_diff_path": "/compare/diff/<quantity>",
     "compare_overlay_path": "/compare/overlay/<quantity>/<run>",
     "compare_position_path": "/compare/position/<axis>",
+    "meads_port_plot_path": "/plots/ports/<port>/<series>",
+    "meads_trade_path": "/plots/trade_study/<quantity>/<level>",
 }
+
+
+def meads_port_plot_path(port: str, series: str) -> str:
+    """``/plots/ports/<port>/<series>``: one flush port's ``measured`` or ``predicted`` pressure."""
+    return join(MEADS_PLOT_PORTS, port, series)
+
+
+def meads_trade_path(quantity: str, level: str) -> str:
+    """``/plots/trade_study/<quantity>/<level>``: trade-study 3σ of ``quantity`` at one error level."""
+    return join(MEADS_TRADE_STUDY, quantity, level)
 
 
 def path_families() -> dict[str, str]:

@@ -73,6 +73,8 @@ from workbench.core.atmosphere import (
     CO2_SUTHERLAND,
     R_UNIVERSAL,
     TabulatedAtmosphere,
+    hydrostatic_table,
+    layered_wind_NE,
 )
 from workbench.core.bodies import MARS
 from workbench.core.frames import julian_date_from_utc, north_east_xyz
@@ -560,17 +562,9 @@ def true_atmosphere(spec: EntryTruthSpec, dh: float = 10.0, h_bottom: float = -5
     """
     top = spec.h_top_km * 1e3
     h = np.arange(h_bottom, top + 0.5 * dh, dh)
-    T = _true_temperature(h, spec)
     R = R_UNIVERSAL / (spec.molar_mass_g_per_mol * 1e-3)
-    g = MARS.gm / (MARS.reference_radius + h) ** 2
-    f = g / (R * T)
-    lnp = np.concatenate([[0.0], -np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(h))])
-    lnp = lnp - np.interp(0.0, h, lnp) + math.log(spec.surface_pressure_pa)
-    p = np.exp(lnp)
-    rho = p / (R * T)
-    return TabulatedAtmosphere(
-        h=h, rho=rho, p=p, T=T, gas_constant=R, gamma=spec.gamma, sutherland=CO2_SUTHERLAND, extrapolate="clamp"
-    )
+    T = _true_temperature(h, spec)
+    return hydrostatic_table(h, T, spec.surface_pressure_pa, R, spec.gamma, MARS, CO2_SUTHERLAND)
 
 
 # ------------------------------------------------------------------------- planted deviations
@@ -624,11 +618,6 @@ def _lookup(tab: tuple[float, float, list[float]], mach: float) -> float:
 # ------------------------------------------------------------------------------------- winds
 
 
-def _smooth_box(h, bottom, top, edge):
-    """≈1 inside [bottom, top], 0 outside, tanh edges of width ``edge`` (all in the same unit)."""
-    return 0.25 * (1.0 + np.tanh((h - bottom) / edge)) * (1.0 + np.tanh((top - h) / edge))
-
-
 def wind_profile_truth(h_amr, spec: EntryTruthSpec) -> np.ndarray:
     """True horizontal wind (n, 2) = [north, east] [m/s] (blowing towards) at altitudes ``h_amr`` [m].
 
@@ -639,15 +628,9 @@ def wind_profile_truth(h_amr, spec: EntryTruthSpec) -> np.ndarray:
     parachute, back shell and DM impacts W/SW of the last data point and the track hooks back
     west, i.e. the air moved towards the WSW).  ``h_amr`` any shape (...,) -> (..., 2).
     """
-    hk = np.asarray(h_amr, dtype=float) / 1e3
-    az = np.radians(spec.background_azimuth_deg + spec.background_turn_deg_per_km * hk)
-    n = spec.background_wind_mps * np.cos(az)
-    e = spec.background_wind_mps * np.sin(az)
-    for bottom, top, speed, azd, edge in spec.wind_layers:
-        s = speed * _smooth_box(hk, bottom, top, edge)
-        n = n + s * math.cos(math.radians(azd))
-        e = e + s * math.sin(math.radians(azd))
-    return np.stack([n, e], axis=-1)
+    return layered_wind_NE(
+        h_amr, spec.background_wind_mps, spec.background_azimuth_deg, spec.background_turn_deg_per_km, spec.wind_layers
+    )
 
 
 # ----------------------------------------------------------------------------------- the model

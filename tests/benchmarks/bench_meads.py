@@ -1,0 +1,101 @@
+"""MEADS benchmark: the nominal and failed-port runs against the truth, and the paper's trade study.
+
+Run on demand from the repository root (not collected by pytest)::
+
+    .venv/bin/python tests/benchmarks/bench_meads.py [--runs 3000] [--scheduler local]
+        [--json docs/results/bench_meads.json]
+
+Measured, in one run:
+
+* ``workbench run msl_meads`` (the shipped scenario, P5 sticking at 150 s) and the same scenario
+  with no failure: max/RMS error above 850 Pa of α, β [deg], q∞ [%], Mach, density [%], p∞ [%],
+  winds [m/s] (published, and the unpublished non-singular solution), each against its median
+  reported 3σ and the fraction inside 3σ; the other estimator model (Newtonian vs table: the
+  model-form error); the wall time of each run;
+* the trade study (paper Sect. IV.B.1, Fig. 6): ``--runs`` runs at 0.5/1/2.5/5 % of reading,
+  Newtonian pressures, fixed R = 0.001: the 3σ table with the objectives met, on 2 local worker
+  processes and (``--scheduler``) on Dask, with a check that both give identical numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
+
+from workbench.io.assets import assets_dir  # noqa: E402
+from workbench.io.scenario import resolve_scenario  # noqa: E402
+from workbench.problems.meads.montecarlo import prepare_trade_study, run_trade_study  # noqa: E402
+from workbench.problems.runner import run_scenario  # noqa: E402
+
+
+def _run(scenario, out: Path) -> dict:
+    t0 = time.perf_counter()
+    r = run_scenario(scenario, out)
+    s = r.summary
+    return {
+        "wall_s": time.perf_counter() - t0,
+        "failed_ports": s["failed_ports"],
+        "truth": s["truth"],
+        "wind_singular_intervals_s": s["wind_singular_intervals_s"],
+        "wind_sigma_mps_nonsingular_above_min_qbar": s["wind_sigma_mps_nonsingular_above_min_qbar"],
+        "model": s["model"],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark; print a summary; write the JSON."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--runs", type=int, default=3000, help="trade-study runs per error level")
+    ap.add_argument("--scheduler", default=None, help="also run the trade study on Dask (local | tcp://...)")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--skip-runs", action="store_true", help="only the trade study")
+    ap.add_argument("--json", type=Path, default=None, help="write the results here")
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    results: dict = {}
+    sc = resolve_scenario("msl_meads", assets_dir())
+    if not args.skip_runs:
+        with tempfile.TemporaryDirectory(prefix="bench_meads_") as tmp:
+            out = Path(tmp)
+            results["run_failed_port"] = _run(sc, out / "failed")
+            print("failed-port run:", json.dumps(results["run_failed_port"]["truth"]["final"])[:600], flush=True)
+            nominal = sc.with_overrides({"sensors.pressure.failure_port": ""})
+            results["run_nominal"] = _run(nominal, out / "nominal")
+            print("nominal run:", json.dumps(results["run_nominal"]["truth"]["final"])[:600], flush=True)
+    sh = prepare_trade_study(sc)
+    ts = run_trade_study(sh, args.runs, args.seed, workers=2, scheduler=None)
+    results["trade_study"] = {**ts.summary, "executor_run": "2 local processes"}
+    print("trade study:", ts.summary["wall_s"], "s;", json.dumps(ts.summary["table"])[:800], flush=True)
+    if args.scheduler:
+        td = run_trade_study(sh, args.runs, args.seed, workers=2, scheduler=args.scheduler)
+        same = all(
+            np.array_equal(ts.three_sigma[lv], td.three_sigma[lv], equal_nan=True)
+            and np.array_equal(ts.bias[lv], td.bias[lv], equal_nan=True)
+            for lv in ts.levels
+        )
+        results["trade_study_dask"] = {
+            "scheduler": args.scheduler,
+            "executor": td.summary["executor"],
+            "wall_s": td.wall_s,
+            "identical_to_processes": bool(same),
+        }
+        print("dask:", results["trade_study_dask"], flush=True)
+    results["wall_time_s"] = time.perf_counter() - t0
+    if args.json:
+        print(f"wrote {write_benchmark_json(args.json, __file__, results, argv)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,52 @@
+"""MEADS end to end: the shipped scenario through the runner, and a unit error caught (slow tier)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workbench.io.telemetry import TelemetryError, read_telemetry, write_telemetry
+from workbench.problems.runner import run_scenario
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    return run_scenario("msl_meads", tmp_path_factory.mktemp("meads"))
+
+
+def test_msl_meads_end_to_end(run):
+    s = run.summary
+    assert run.recording.stat().st_size > 1e6
+    # the stuck P5 (150 s) is found within a second and dropped
+    assert [f["port"] for f in s["failed_ports"]] == ["P5"]
+    assert abs(s["failed_ports"][0]["t_s"] - 150.0) < 1.0
+    fin = s["truth"]["final"]
+    assert fin["beta_deg"]["max_abs"] < 0.5
+    assert fin["qbar_pct"]["fraction_within_3sigma"] > 0.95
+    assert fin["alpha_deg"]["fraction_within_3sigma"] > 0.95
+    # the wind singularity is reported around both true zero crossings of the flight-path angle
+    for tc in s["truth"]["true_fpa_zero_crossings_s"]:
+        assert any(a - 2.0 <= tc <= b + 2.0 for a, b in s["wind_singular_intervals_s"]), tc
+    # model form: the Newtonian model misses alpha by more than the table does
+    assert s["truth"]["other_model_newtonian"]["alpha_deg"]["rms"] > fin["alpha_deg"]["rms"]
+
+
+def test_kpa_labelled_pa_is_refused(run, tmp_path):
+    tel = dict(run.telemetry)
+    pr = read_telemetry(tel["pressures"], sparse=run.result.data.telemetry.ports)
+    ports = run.result.data.telemetry.ports
+    bad = tmp_path / "pressures.csv"
+    write_telemetry(bad, pr.time, {n: (pr.channel(n) / 1e3, "Pa") for n in ports}, sparse=ports)  # kPa numbers, "Pa"
+    toml = tmp_path / "user.toml"
+    veh = run.scenario.path_of("vehicle.file")
+    toml.write_text(
+        f'[scenario]\nname = "kpa"\nkind = "meads"\n[vehicle]\nfile = "{veh}"\n[telemetry]\n'
+        f'pressures = "{bad}"\nimu = "{tel["imu"]}"\ninitial_state = "{tel["initial_state"]}"\n'
+    )
+    with pytest.raises(TelemetryError, match=r"pressures.csv.*implausible pressures.*1e-3") as info:
+        run_scenario(toml, tmp_path / "out")
+    assert not (tmp_path / "out" / "kpa.summary.json").exists()
+    assert np.isfinite(run.summary["plausibility_qbar_ratio"])
+    assert "P1 [Pa]" in str(info.value)

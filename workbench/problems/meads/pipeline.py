@@ -1,0 +1,657 @@
+"""MEADS reconstruction stages: pressures + IMU -> q∞, Mach, α, β, p∞, density and winds.
+
+Stages (each a typed result, drawn by :mod:`.recording`, consumed by tests without a recorder):
+
+1. :class:`PressureData` — the pressure and IMU files read (SI), dropouts logged;
+2. :class:`Navigation` — strapdown of the IMU from the initial state
+   (:func:`workbench.estimation.strapdown.integrate`) with its first-order covariance; the
+   inertial Mach (planet-relative speed over the speed of sound of the estimator's engineering
+   atmosphere, :class:`~workbench.core.atmosphere.MarsEngineeringAtmosphere`) for the initial
+   guess and the fixed-R schedule;
+3. :class:`LagCorrection` — pneumatic-lag inversion ``p_port ≈ p_meas + τ ṗ_meas`` with the
+   group delay ``τ = 2ζ/ω_n`` of Eq. 41–42 at the measured pressure (tube gas at the transducer
+   temperature 300 K — the estimator does not know the wall temperature);
+4. :class:`AirDataStage` — the least-squares fit (:func:`.airdata.fit_air_data`), the stuck-
+   transducer and residual-based failed-port detection (a port failed from the first of
+   ``failed_port_samples`` consecutive samples beyond ``failed_port_nsigma``; the fit is redone
+   without it; each a logged degradation), the plausibility check of q∞ against the IMU drag
+   (``m |f| / (C_D S)``; a unit error such as kPa labelled Pa is refused, not published);
+5. :class:`WindStage` — winds (Eq. 11–17) and density (Eq. 18);
+6. :class:`MeadsResult` — everything plus the summary.
+
+The other estimator model (Newtonian vs table) is fitted too on the same corrected pressures, so
+the model-form difference can be scored (:func:`score`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from workbench.core.atmosphere import CO2_SUTHERLAND, MARS_CO2_GAS_CONSTANT, MarsEngineeringAtmosphere
+from workbench.core.bodies import MARS
+from workbench.core.rotation import quat_normalize
+from workbench.estimation.strapdown import imu_arrays, integrate
+from workbench.io.scenario import Scenario
+from workbench.io.telemetry import TelemetryError
+from workbench.models.flush_airdata import (
+    FadsVehicle,
+    build_estimator_table,
+    load_fads_vehicle,
+    second_order_tube,
+)
+from workbench.problems.meads.airdata import (
+    AirDataFit,
+    WindSolution,
+    attitude_C_B_N,
+    density_from_qbar,
+    fit_air_data,
+    ned_frames,
+    solve_winds,
+)
+from workbench.problems.meads.config import EstimatorSettings, config_for
+from workbench.problems.meads.telemetry import MeadsTelemetry, read_meads_telemetry, true_runs
+
+__all__ = [
+    "PressureData",
+    "Navigation",
+    "LagCorrection",
+    "AirDataStage",
+    "WindStage",
+    "MeadsResult",
+    "PortFailure",
+    "reconstruct",
+    "reduce_pressures",
+    "score",
+    "scorecard_markdown",
+    "vehicle_for",
+]
+
+TRANSDUCER_T_K = 300.0
+"""Gas temperature [K] the estimator assumes in the tubes (lag inversion)."""
+
+
+def vehicle_for(scenario: Scenario) -> FadsVehicle:
+    """The scenario's vehicle file, loaded and checked."""
+    return load_fads_vehicle(scenario.path_of("vehicle.file"))
+
+
+@dataclass(frozen=True)
+class PressureData:
+    """Stage 1: the read telemetry and the vehicle."""
+
+    telemetry: MeadsTelemetry
+    vehicle: FadsVehicle
+
+
+@dataclass(frozen=True)
+class Navigation:
+    """Stage 2: strapdown at the IMU times ``t`` and interpolated to the pressure times ``t_p``:
+    ``p_M``, ``v_M`` (n, 3), ``q_M_B`` (n, 4), ``Q`` (n, 6, 6) covariance of [δv_N, δθ_B],
+    ``mach_inertial`` (n,), ``h`` (n,) [m] altitude, ``f_mag`` (n,) [m/s²] |specific force|."""
+
+    t_imu: np.ndarray
+    p_M_imu: np.ndarray
+    t_p: np.ndarray
+    p_M: np.ndarray
+    v_M: np.ndarray
+    q_M_B: np.ndarray
+    Q: np.ndarray
+    mach_inertial: np.ndarray
+    h: np.ndarray
+    f_mag: np.ndarray
+
+
+@dataclass(frozen=True)
+class LagCorrection:
+    """Stage 3: ``p_raw`` and ``p`` (lag-inverted, or the same if off) (n, m), ``delay`` (n, m) [s]."""
+
+    t: np.ndarray
+    p_raw: np.ndarray
+    p: np.ndarray
+    delay: np.ndarray
+    applied: bool
+
+
+@dataclass(frozen=True)
+class PortFailure:
+    """A port declared failed at ``t`` [s] (sample ``k``) by ``how`` (``"stuck"`` or ``"residual"``)."""
+
+    port: str
+    k: int
+    t: float
+    how: str
+    message: str
+
+
+@dataclass(frozen=True)
+class AirDataStage:
+    """Stage 4: the fit with every port (``first``), the final fit (``fit``), the mask of ports used
+    (n, m), the failures, the alternative model's fit (``alt``) and the plausibility ratio."""
+
+    t: np.ndarray
+    first: AirDataFit
+    fit: AirDataFit
+    mask: np.ndarray
+    failures: tuple[PortFailure, ...]
+    alt: AirDataFit | None
+    plausibility_ratio: float
+    fixed_r_rows: np.ndarray
+
+
+@dataclass(frozen=True)
+class WindStage:
+    """Stage 5: winds and density at the pressure times."""
+
+    winds: WindSolution
+    density: np.ndarray
+    sigma_density: np.ndarray
+    mach: np.ndarray
+    sigma_mach: np.ndarray
+    mach_source: np.ndarray
+    p_inf: np.ndarray
+    sigma_p_inf: np.ndarray
+
+
+@dataclass(frozen=True)
+class MeadsResult:
+    """Final stage: all stages and the JSON-ready ``summary``."""
+
+    data: PressureData
+    nav: Navigation
+    lag: LagCorrection
+    air: AirDataStage
+    wind: WindStage
+    summary: dict
+
+
+# ------------------------------------------------------------------------------ navigation
+
+
+def navigate(tel: MeadsTelemetry, vehicle: FadsVehicle) -> Navigation:
+    """Strapdown of the IMU from the initial state; values at the pressure times."""
+    init = tel.initial
+    sel = tel.t_imu >= init.t - 1e-9
+    imu = imu_arrays(SimpleNamespace(t=tel.t_imu[sel], f_G=tel.f_B[sel], w_G=tel.w_B[sel], sigma_f=3e-3, sigma_w=1e-4))
+    P0 = np.diag(np.r_[np.full(3, init.sigma_v**2), np.full(3, init.sigma_att**2), np.full(3, init.sigma_p**2)])
+    with threadpool_limits(limits=1):  # 9x9 expm per step: BLAS threads only cost here
+        sd = integrate(imu, init.v_M, init.q_M_B, init.p_M, P0, body=MARS)
+    t_p = tel.t_p
+
+    def at(a):
+        return np.stack([np.interp(t_p, sd.t, a[:, j]) for j in range(a.shape[1])], 1)
+
+    p_M, v_M = at(sd.p_M), at(sd.v_M)
+    q = sd.q_M_G.copy()  # the strapdown calls the body frame G
+    flip = np.einsum("ni,ni->n", q[1:], q[:-1]) < 0
+    q[1:][np.cumsum(flip) % 2 == 1] *= -1
+    q_M_B = quat_normalize(at(q))
+    C_N_M = ned_frames(p_M)
+    P = np.stack([np.interp(t_p, sd.t, sd.P[:, i, j]) for i in range(6) for j in range(6)], 1).reshape(-1, 6, 6)
+    Q = P.copy()
+    Q[:, :3, :3] = np.einsum("nij,njk,nlk->nil", C_N_M, P[:, :3, :3], C_N_M)
+    Q[:, :3, 3:] = np.einsum("nij,njk->nik", C_N_M, P[:, :3, 3:])
+    Q[:, 3:, :3] = np.swapaxes(Q[:, :3, 3:], 1, 2)
+    h = np.linalg.norm(p_M, axis=1) - MARS.reference_radius
+    v_g = v_M - np.cross(np.array([0.0, 0.0, MARS.rotation_rate]), p_M)
+    atm = MarsEngineeringAtmosphere()
+    mach_i = np.linalg.norm(v_g, axis=1) / atm.speed_of_sound(h)
+    f_mag = np.interp(t_p, tel.t_imu, np.linalg.norm(tel.f_B, axis=1))
+    return Navigation(sd.t, sd.p_M, t_p, p_M, v_M, q_M_B, Q, mach_i, h, f_mag)
+
+
+# ----------------------------------------------------------------------------- pressures
+
+
+def invert_lag(t: np.ndarray, p: np.ndarray, vehicle: FadsVehicle, gamma: float, apply: bool) -> LagCorrection:
+    """``p + τ ṗ`` per port with the Eq. 41–42 group delay at the measured pressure (module docstring)."""
+    T = TRANSDUCER_T_K
+    pc = np.maximum(np.nan_to_num(p, nan=1.0), 1.0)
+    wn, z = second_order_tube(
+        pc,
+        T,
+        vehicle.tube_length,
+        vehicle.tube_diameter,
+        vehicle.transducer_volume,
+        gamma,
+        MARS_CO2_GAS_CONSTANT,
+        CO2_SUTHERLAND.viscosity(T),
+    )
+    delay = 2.0 * z / wn
+    if not apply:
+        return LagCorrection(t, p, p, delay, False)
+    dpdt = np.gradient(p, t, axis=0)
+    corr = p + np.where(np.isfinite(dpdt), delay * dpdt, 0.0)
+    return LagCorrection(t, p, corr, delay, True)
+
+
+def sensor_sigma(p: np.ndarray, vehicle: FadsVehicle, frac: float, bits: int = 14) -> np.ndarray:
+    """1σ [Pa] (n, m) assumed for each reading: quantisation and noise of a ``bits``-bit channel
+    over the transducer range (two counts, uniform) plus ``frac`` of reading (model form,
+    calibration, trade-study error)."""
+    count = vehicle.transducer_full_scale / 2.0**bits
+    return np.sqrt((2.0 * count) ** 2 / 3.0 + (frac * np.abs(np.nan_to_num(p))) ** 2)
+
+
+def detect_stuck(t: np.ndarray, p: np.ndarray, ports, vehicle: FadsVehicle, min_run: int = 8) -> list[PortFailure]:
+    """Ports whose reading repeats exactly for ≥ ``min_run`` samples (above 20 counts) while the
+    median of the other ports changes by more than 2 %: failed from the first repeated sample."""
+    count = vehicle.transducer_full_scale / 2.0**14
+    out = []
+    for j, name in enumerate(ports):
+        same = np.r_[False, np.diff(p[:, j]) == 0.0] & (p[:, j] > 20 * count)
+        others = np.nanmedian(np.delete(p, j, axis=1), axis=1)
+        for a, b in true_runs(same):
+            if b - a + 1 < min_run:
+                continue
+            k0 = a - 1
+            change = abs(others[b] - others[k0]) / max(abs(others[k0]), 1e-9)
+            if change > 0.02:
+                out.append(
+                    PortFailure(
+                        name,
+                        int(k0),
+                        float(t[k0]),
+                        "stuck",
+                        f"{name} stuck at {p[k0, j]:.1f} Pa from t = {t[k0]:.2f} s (row {k0 + 1}) while the other "
+                        f"ports changed by {100 * change:.0f} %: dropped from there on",
+                    )
+                )
+                break
+    return out
+
+
+def detect_residual_failure(
+    fit: AirDataFit, t: np.ndarray, ports, mask: np.ndarray, nsig: float, nrun: int
+) -> PortFailure | None:
+    """The port with the most samples in runs of ≥ ``nrun`` normalised residuals beyond ``nsig``
+    (its first such run marks the failure), or None."""
+    z = np.abs(fit.wls.residual) / fit.sigma_p
+    best = None
+    for j in range(len(ports)):
+        bad = (z[:, j] > nsig) & mask[:, j]
+        runs = [(a, b) for a, b in true_runs(bad) if b - a + 1 >= nrun]
+        total = sum(b - a + 1 for a, b in runs)
+        if runs and (best is None or total > best[0]):
+            best = (total, j, runs[0][0])
+    if best is None:
+        return None
+    total, j, k0 = best
+    return PortFailure(
+        ports[j],
+        int(k0),
+        float(t[k0]),
+        "residual",
+        f"{ports[j]} residual beyond {nsig:g} sigma for {total} samples from t = {t[k0]:.2f} s (row {k0 + 1}): "
+        "declared failed and removed from the fit from there on",
+    )
+
+
+def reduce_pressures(
+    t: np.ndarray,
+    p: np.ndarray,
+    vehicle: FadsVehicle,
+    mach_inertial: np.ndarray,
+    est: EstimatorSettings,
+    *,
+    model: str | None = None,
+    mask: np.ndarray | None = None,
+) -> tuple[AirDataFit, np.ndarray]:
+    """One least-squares reduction with the settings' solution set (``"auto"``: fixed R above
+    ``switch_mach``, the Mach set below); returns the fit and the rows solved with fixed R."""
+    model = model or est.model
+    table = build_estimator_table(vehicle) if model == "table" else None
+    sig = sensor_sigma(p, vehicle, est.model_error_frac)
+    kw = dict(gamma=est.gamma, table=table, iterations=est.iterations, mask=mask)
+    sol = est.solution
+    if sol == "auto":
+        hi = mach_inertial > est.switch_mach
+        if hi.all() or not hi.any():
+            s1 = "fixed_r" if hi.all() else "mach"
+            f = fit_air_data(
+                p, sig, vehicle, model=model, solution=s1, mach_guess=mach_inertial, fixed_r=est.fixed_r, **kw
+            )
+            return f, hi
+        parts = {}
+        for name, rows in (("fixed_r", hi), ("mach", ~hi)):
+            kw_r = {**kw, "mask": None if mask is None else mask[rows]}
+            parts[name] = fit_air_data(
+                p[rows],
+                sig[rows],
+                vehicle,
+                model=model,
+                solution=name,
+                mach_guess=mach_inertial[rows],
+                fixed_r=est.fixed_r,
+                **kw_r,
+            )
+        return _merge_rows(parts["mach"], parts["fixed_r"], hi), hi
+    f = fit_air_data(p, sig, vehicle, model=model, solution=sol, mach_guess=mach_inertial, fixed_r=est.fixed_r, **kw)
+    return f, np.full(t.size, sol == "fixed_r")
+
+
+def _merge_rows(lo: AirDataFit, hi: AirDataFit, use_hi: np.ndarray) -> AirDataFit:
+    """One fit from the Mach-set fit of the rows ``~use_hi`` and the fixed-R fit of the rows
+    ``use_hi`` (the WLS state and covariance are those of each row's own set, padded to 4 states)."""
+    n = use_hi.size
+
+    def put(a_lo, a_hi):
+        a_lo, a_hi = np.asarray(a_lo), np.asarray(a_hi)
+        out = np.full((n, *a_lo.shape[1:]), np.nan, dtype=float)
+        out[~use_hi] = a_lo
+        out[use_hi] = a_hi if a_hi.shape[1:] == a_lo.shape[1:] else _pad(a_hi, a_lo.shape[1:])
+        return out
+
+    keys = (
+        "qbar",
+        "alpha",
+        "beta",
+        "mach",
+        "p_inf",
+        "p_t",
+        "sigma_qbar",
+        "sigma_alpha",
+        "sigma_beta",
+        "sigma_mach",
+        "sigma_p_inf",
+        "sigma_p",
+        "predicted",
+    )
+    pick = {k: put(getattr(lo, k), getattr(hi, k)) for k in keys}
+    used = np.zeros((n, lo.wls.used.shape[1]), bool)
+    used[~use_hi], used[use_hi] = lo.wls.used, hi.wls.used
+    wls = type(lo.wls)(
+        put(lo.wls.x, hi.wls.x),
+        put(lo.wls.P, hi.wls.P),
+        put(lo.wls.residual, hi.wls.residual),
+        used,
+        max(lo.wls.iterations, hi.wls.iterations),
+        put(lo.wls.step, hi.wls.step),
+    )
+    return AirDataFit(**pick, wls=wls, solution="auto", model=lo.model)
+
+
+def _pad(a: np.ndarray, shape: tuple) -> np.ndarray:
+    """Pad the trailing axes of ``a`` with NaN up to ``shape``."""
+    out = np.full((a.shape[0], *shape), np.nan)
+    out[(slice(None), *[slice(0, s) for s in a.shape[1:]])] = a
+    return out
+
+
+def fit_with_failures(
+    t: np.ndarray, p: np.ndarray, vehicle: FadsVehicle, nav: Navigation, est: EstimatorSettings, ports, file: str
+) -> tuple[AirDataFit, AirDataFit, np.ndarray, list[PortFailure], np.ndarray]:
+    """Fit with every port (``first``), stuck detection, residual detection (at most two ports),
+    refits; returns (first, final, mask of the ports used, failures, fixed-R rows)."""
+    mask = np.isfinite(p)
+    first, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask.copy())
+    failures = detect_stuck(t, p, ports, vehicle)
+    for f in failures:
+        mask[f.k :, ports.index(f.port)] = False
+    fit = first
+    if failures:
+        fit, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask)
+    for _ in range(2):
+        live = mask & (np.nan_to_num(fit.qbar)[:, None] > 50.0)
+        f = detect_residual_failure(fit, t, ports, live, est.failed_port_nsigma, est.failed_port_samples)
+        if f is None:
+            break
+        failures.append(f)
+        mask[f.k :, ports.index(f.port)] = False
+        fit, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask)
+    return first, fit, mask, failures, hi
+
+
+def plausibility(
+    fit: AirDataFit, nav: Navigation, vehicle: FadsVehicle, est: EstimatorSettings, tel: MeadsTelemetry
+) -> float:
+    """Median ratio of the pressures' q∞ to the IMU drag's ``m |f| / (C_D S)`` where the latter
+    exceeds the objectives' threshold (or 100 Pa); raises a TelemetryError naming the pressure
+    file and its columns/units when outside ``[1/F, F]``."""
+    q_drag = vehicle.mass * nav.f_mag / (vehicle.drag_coefficient * vehicle.ref_area)
+    sel = q_drag > est.min_qbar_pa
+    if sel.sum() < 5:
+        sel = q_drag > 100.0
+    if sel.sum() < 5:
+        return float("nan")
+    ratio = float(np.nanmedian(fit.qbar[sel] / q_drag[sel]))
+    F = est.plausibility_factor
+    if not (1.0 / F <= ratio <= F) or not math.isfinite(ratio):
+        units = ", ".join(f"{n} [{u}]" for n, u in tel.pressure_units.items())
+        raise TelemetryError.single(
+            tel.pressure_file,
+            f"implausible pressures: the dynamic pressure fitted to them is {ratio:.3g} x the one implied by the "
+            f"IMU drag (m|f|/(C_D S), median over {int(sel.sum())} samples; allowed 1/{F:g}-{F:g}). A unit error? "
+            f"(kPa written as Pa gives 1e-3). Columns as read: {units}. Nothing is published.",
+            column=", ".join(tel.ports),
+        )
+    return ratio
+
+
+def winds_and_density(fit: AirDataFit, nav: Navigation, est: EstimatorSettings, fixed_rows: np.ndarray) -> WindStage:
+    """Winds (Eq. 11–17) and density (Eq. 18); Mach and p∞ from the air data where estimated,
+    else inertial (5 % 1σ)."""
+    C_N_M = ned_frames(nav.p_M)
+    v_g = nav.v_M - np.cross(np.array([0.0, 0.0, MARS.rotation_rate]), nav.p_M)
+    v_N = np.einsum("nij,nj->ni", C_N_M, v_g)
+    C_B_N = attitude_C_B_N(nav.q_M_B, nav.p_M)
+    Pab = np.zeros((fit.alpha.size, 2, 2))
+    Pab[:, 0, 0], Pab[:, 1, 1] = fit.sigma_alpha**2, fit.sigma_beta**2
+    winds = solve_winds(
+        fit.alpha, fit.beta, Pab, v_N, C_B_N, nav.Q, det_min=est.wind_det_min, sigma_max=est.wind_sigma_max
+    )
+    # density: the wind where published, else interpolated over the gap (1σ 20 m/s there)
+    w = winds.wind_NE.copy()
+    good = np.all(np.isfinite(w), axis=1)
+    sw2 = np.einsum("nii->n", np.nan_to_num(winds.P, nan=400.0))
+    if good.sum() >= 2:
+        for j in range(2):
+            w[:, j] = np.interp(nav.t_p, nav.t_p[good], w[good, j])
+    else:
+        w[:] = 0.0
+    sw2 = np.where(good, sw2, 2 * 20.0**2)
+    v_air = v_N - np.concatenate([w, np.zeros((w.shape[0], 1))], 1)
+    rho = density_from_qbar(fit.qbar, v_air)
+    V = np.linalg.norm(v_air, axis=1)
+    sv2 = np.einsum("nii->n", nav.Q[:, :3, :3]) + sw2
+    srho = rho * np.sqrt((fit.sigma_qbar / fit.qbar) ** 2 + 4.0 * sv2 / V**2)
+    mach = np.where(fixed_rows | ~np.isfinite(fit.mach), nav.mach_inertial, fit.mach)
+    smach = np.where(fixed_rows | ~np.isfinite(fit.sigma_mach), 0.05 * nav.mach_inertial, fit.sigma_mach)
+    src = np.where(fixed_rows | ~np.isfinite(fit.mach), "inertial", "air_data")
+    pinf = np.where(fixed_rows, 2.0 * fit.qbar / (est.gamma * mach**2), fit.p_inf)
+    spinf = np.where(
+        fixed_rows, pinf * np.sqrt((fit.sigma_qbar / fit.qbar) ** 2 + 4 * (smach / mach) ** 2), fit.sigma_p_inf
+    )
+    return WindStage(winds, rho, srho, mach, smach, src, pinf, spinf)
+
+
+# ------------------------------------------------------------------------------- pipeline
+
+
+def reconstruct(scenario: Scenario, telemetry: Mapping[str, Path]) -> Iterator[object]:
+    """Run the stages of the module docstring on the telemetry files; yields each stage."""
+    t_start = time.perf_counter()
+    cfg = config_for(scenario)
+    est = cfg.estimator
+    vehicle = vehicle_for(scenario)
+    tel = read_meads_telemetry(dict(telemetry), vehicle)
+    yield PressureData(tel, vehicle)
+    nav = navigate(tel, vehicle)
+    yield nav
+    lag = invert_lag(tel.t_p, tel.p, vehicle, est.gamma, est.lag_inversion)
+    yield lag
+    ports = list(tel.ports)
+    first, fit, mask, failures, hi = fit_with_failures(tel.t_p, lag.p, vehicle, nav, est, ports, tel.pressure_file)
+    ratio = plausibility(first, nav, vehicle, est, tel)
+    alt_model = "table" if est.model == "newtonian" else "newtonian"
+    alt_est = EstimatorSettings(**{**est.__dict__, "model": alt_model, "fixed_r": 0.0})
+    alt, _ = reduce_pressures(tel.t_p, lag.p, vehicle, nav.mach_inertial, alt_est, mask=mask)
+    air = AirDataStage(tel.t_p, first, fit, mask, tuple(failures), alt, ratio, hi)
+    yield air
+    wind = winds_and_density(fit, nav, est, hi)
+    yield wind
+    summary = _summary(scenario, tel, nav, lag, air, wind, est)
+    summary["reconstruction_wall_s"] = time.perf_counter() - t_start
+    yield MeadsResult(PressureData(tel, vehicle), nav, lag, air, wind, summary)
+
+
+def _stats(x: np.ndarray) -> dict:
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return {"n": 0}
+    return {"n": int(x.size), "min": float(x.min()), "max": float(x.max()), "median": float(np.median(x))}
+
+
+def _summary(scenario, tel, nav, lag, air: AirDataStage, wind: WindStage, est) -> dict:
+    fit = air.fit
+    above = np.nan_to_num(fit.qbar) >= est.min_qbar_pa
+    w = wind.winds
+    sing = true_runs(w.singular & above)
+    return {
+        "scenario": scenario.name,
+        "kind": "meads",
+        "model": est.model,
+        "solution": est.solution,
+        "samples": int(tel.t_p.size),
+        "samples_above_min_qbar": int(above.sum()),
+        "ports": list(tel.ports),
+        "max_qbar_pa": float(np.nanmax(fit.qbar)),
+        "three_sigma_above_min_qbar": {
+            "alpha_deg": _stats(3 * np.degrees(fit.sigma_alpha[above])),
+            "beta_deg": _stats(3 * np.degrees(fit.sigma_beta[above])),
+            "qbar_pct": _stats(300 * fit.sigma_qbar[above] / fit.qbar[above]),
+            "mach_air_data": _stats(3 * wind.sigma_mach[above & (wind.mach_source == "air_data")]),
+            "density_pct": _stats(300 * wind.sigma_density[above] / wind.density[above]),
+        },
+        "lag_delay_ms": _stats(1e3 * lag.delay[above]),
+        "fixed_r_samples": int(air.fixed_r_rows.sum()),
+        "plausibility_qbar_ratio": air.plausibility_ratio,
+        "failed_ports": [{"port": f.port, "t_s": f.t, "how": f.how, "message": f.message} for f in air.failures],
+        "degradations": list(tel.degradations) + [f.message for f in air.failures],
+        "wind_singular_intervals_s": [[float(tel.t_p[a]), float(tel.t_p[b])] for a, b in sing],
+        "wind_singular_samples": int((w.singular & above).sum()),
+        "wind_published_samples": int((np.all(np.isfinite(w.wind_NE), axis=1) & above).sum()),
+        "wind_sigma_mps_nonsingular_above_min_qbar": _stats(
+            np.sqrt(np.max(np.einsum("nii->ni", w.P), axis=1))[above & ~w.singular]
+        ),
+    }
+
+
+# --------------------------------------------------------------------------------- scoring
+
+
+def _err_block(err: np.ndarray, sig: np.ndarray, scale: float = 1.0) -> dict:
+    ok = np.isfinite(err) & np.isfinite(sig)
+    if not ok.any():
+        return {"n": 0}
+    e, s = err[ok] * scale, sig[ok] * scale
+    return {
+        "n": int(ok.sum()),
+        "max_abs": float(np.max(np.abs(e))),
+        "rms": float(np.sqrt(np.mean(e**2))),
+        "median_3sigma": float(np.median(3 * s)),
+        "fraction_within_3sigma": float(np.mean(np.abs(e) <= 3 * s)),
+    }
+
+
+def _truth_at(truth: dict, t: np.ndarray, key: str) -> np.ndarray:
+    return np.interp(t, truth["t"], truth[key])
+
+
+def score_fit(t: np.ndarray, fit: AirDataFit, truth: dict, sel: np.ndarray, wind: WindStage | None = None) -> dict:
+    """Errors of one fit against the truth on the samples ``sel`` (above 850 Pa): α, β [deg], q∞
+    [%], Mach (air-data rows), and with ``wind`` density [%], p∞ [%] and winds [m/s]."""
+    out = {
+        "alpha_deg": _err_block((fit.alpha - _truth_at(truth, t, "alpha"))[sel], fit.sigma_alpha[sel], 180 / math.pi),
+        "beta_deg": _err_block((fit.beta - _truth_at(truth, t, "beta"))[sel], fit.sigma_beta[sel], 180 / math.pi),
+        "qbar_pct": _err_block(
+            ((fit.qbar - _truth_at(truth, t, "qbar")) / _truth_at(truth, t, "qbar"))[sel],
+            (fit.sigma_qbar / fit.qbar)[sel],
+            100.0,
+        ),
+    }
+    mt = _truth_at(truth, t, "mach")
+    if wind is None:
+        out["mach"] = _err_block((fit.mach - mt)[sel], fit.sigma_mach[sel])
+        return out
+    ad = sel & (wind.mach_source == "air_data")
+    out["mach_air_data"] = _err_block((wind.mach - mt)[ad], wind.sigma_mach[ad])
+    iner = sel & (wind.mach_source == "inertial")
+    out["mach_inertial"] = _err_block((wind.mach - mt)[iner], wind.sigma_mach[iner])
+    rho_t = _truth_at(truth, t, "rho")
+    out["density_pct"] = _err_block(
+        ((wind.density - rho_t) / rho_t)[sel], (wind.sigma_density / wind.density)[sel], 100.0
+    )
+    pt = _truth_at(truth, t, "p_inf")
+    out["p_inf_pct"] = _err_block(((wind.p_inf - pt) / pt)[sel], (wind.sigma_p_inf / wind.p_inf)[sel], 100.0)
+    wt = np.stack([np.interp(t, truth["t"], truth["wind_NE"][:, j]) for j in range(2)], 1)
+    pub = sel & np.all(np.isfinite(wind.winds.wind_NE), axis=1)
+    raw = wind.winds.wind_raw_NE
+    nonsing = sel & ~wind.winds.singular & np.all(np.isfinite(raw), axis=1)
+    for j, name in enumerate(("wind_north_mps", "wind_east_mps")):
+        sd = np.sqrt(wind.winds.P[:, j, j])
+        out[name] = _err_block((wind.winds.wind_NE[:, j] - wt[:, j])[pub], sd[pub])
+        out[name + "_unpublished_nonsingular"] = _err_block((raw[:, j] - wt[:, j])[nonsing], sd[nonsing])
+    return out
+
+
+def score(result: MeadsResult, truth: dict) -> dict:
+    """Errors of the final result against the truth above 850 Pa (true q∞), each vs its reported 3σ;
+    the same for the fit with every port (before failure removal) and for the other model."""
+    t = result.air.t
+    est_min = 850.0
+    sel = _truth_at(truth, t, "qbar") >= est_min
+    out = {
+        "min_qbar_pa": est_min,
+        "samples": int(sel.sum()),
+        "final": score_fit(t, result.air.fit, truth, sel, result.wind),
+        "all_ports_no_failure_handling": score_fit(t, result.air.first, truth, sel),
+    }
+    if result.air.alt is not None:
+        out[f"other_model_{result.air.alt.model}"] = score_fit(t, result.air.alt, truth, sel)
+    fp = int(truth.get("sensor_failed_port", -1))
+    if fp >= 0:
+        ports = result.data.telemetry.ports
+        det = [f for f in result.air.failures if f.port == ports[fp]]
+        out["injected_failure"] = {"port": ports[fp], "detected": bool(det), "detected_at_s": det[0].t if det else None}
+    fpa = truth["fpa"]
+    out["true_fpa_zero_crossings_s"] = [float(x) for x in truth["t"][1:][np.diff(np.sign(fpa)) != 0]]
+    return out
+
+
+def scorecard_markdown(summary: dict) -> str:
+    """Markdown scorecard of a run (with its truth score when present)."""
+    md = [f"# {summary['scenario']} — flush air data (MEADS)", ""]
+    md.append(
+        f"model **{summary['model']}**, solution **{summary['solution']}**; {summary['samples']} samples, "
+        f"{summary['samples_above_min_qbar']} above 850 Pa; max q∞ {summary['max_qbar_pa']:.0f} Pa"
+    )
+    md.append("")
+    for f in summary["failed_ports"]:
+        md.append(f"- **failed port** {f['message']}")
+    for s in summary["wind_singular_intervals_s"]:
+        md.append(f"- wind solution singular (flight-path angle near zero) {s[0]:.1f}–{s[1]:.1f} s: not published")
+    tr = summary.get("truth")
+    if tr:
+        md += [
+            "",
+            "| quantity (above 850 Pa) | max error | RMS | median 3σ | within 3σ | objective |",
+            "|---|---|---|---|---|---|",
+        ]
+        obj = {"alpha_deg": 0.5, "beta_deg": 0.5, "qbar_pct": 2.0, "mach_air_data": 0.1}
+        for k, v in tr["final"].items():
+            if v.get("n", 0) == 0:
+                continue
+            o = obj.get(k)
+            md.append(
+                f"| {k} | {v['max_abs']:.3g} | {v['rms']:.3g} | {v['median_3sigma']:.3g} | "
+                f"{100 * v['fraction_within_3sigma']:.0f} % | {'' if o is None else f'3σ ≤ {o:g}'} |"
+            )
+    return "\n".join(md) + "\n"

@@ -1,0 +1,149 @@
+"""Flush air data (MEADS, MSL) as a :class:`~workbench.problems.base.Problem`.
+
+Composes :mod:`.pipeline` (reduction, scoring, scorecard), :mod:`.synthetic` (truth and
+telemetry), :mod:`.recording` and :mod:`.montecarlo` (the paper's trade study, ``workbench mc``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from workbench.io.scenario import Scenario
+from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
+from workbench.problems.meads import pipeline as md
+from workbench.problems.meads.config import SCHEMA
+from workbench.problems.meads.telemetry import STREAMS, telemetry_paths
+
+__all__ = ["MeadsProblem"]
+
+
+class _Drawer:
+    """:class:`~workbench.problems.base.StageRecorder` of a MEADS run."""
+
+    def __init__(self, rec, drawer):
+        self.rec = rec
+        self.drawer = drawer
+
+    def handle(self, stage: object) -> None:
+        self.drawer.handle(stage)
+
+    def finish(self, result: object, summary: dict) -> None:
+        self.rec.report(md.scorecard_markdown(summary))
+
+
+class MeadsProblem:
+    """Seven flush pressure ports + IMU -> q∞, Mach, α, β, p∞, density, winds (least squares)."""
+
+    kind = "meads"
+    title = "entry"
+    schema = SCHEMA
+
+    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
+        """``[telemetry]`` files, or the standard names in ``folder``."""
+        if folder is None:
+            return telemetry_paths(scenario)
+        d = Path(folder)
+        return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+
+    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+        """Simulate the entry (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
+        from workbench.problems.meads.synthetic import synthesize_meads
+
+        paths = synthesize_meads(scenario, out_dir, seed)
+        return Synthesized(telemetry={k: v for k, v in paths.items() if k != "truth"}, truth=paths["truth"])
+
+    def load_truth(self, path: Path) -> dict:
+        """The arrays of ``truth.npz``."""
+        from workbench.problems.meads.synthetic import load_truth
+
+        return load_truth(path)
+
+    def reconstruct(self, scenario: Scenario, telemetry: Mapping[str, Path], options: RunOptions) -> Iterator[object]:
+        """``pipeline.reconstruct``."""
+        return md.reconstruct(scenario, dict(telemetry))
+
+    def summary(self, result: md.MeadsResult) -> dict:
+        """A copy of ``result.summary``."""
+        return dict(result.summary)
+
+    def score(self, result: md.MeadsResult, truth: dict) -> dict:
+        """``pipeline.score``: errors above 850 Pa against the truth, each vs its reported 3σ."""
+        return md.score(result, truth)
+
+    def scorecard(self, summary: dict) -> str:
+        """``pipeline.scorecard_markdown``."""
+        return md.scorecard_markdown(summary)
+
+    def headline(self, summary: dict) -> str:
+        """Failed ports and, with a truth, the max α/β/q∞ errors above 850 Pa."""
+        fails = ", ".join(f"{f['port']} at {f['t_s']:.1f} s ({f['how']})" for f in summary["failed_ports"]) or "none"
+        line = f"{summary['model']} model; failed ports: {fails}"
+        tr = summary.get("truth", {}).get("final")
+        if tr:
+            line += (
+                f"; above 850 Pa max |error| α {tr['alpha_deg']['max_abs']:.2f}° β {tr['beta_deg']['max_abs']:.2f}° "
+                f"q∞ {tr['qbar_pct']['max_abs']:.2f} %"
+            )
+        return line
+
+    @contextlib.contextmanager
+    def open_recording(self, path: Path, scenario: Scenario, truth: Any, properties: dict) -> Iterator[_Drawer]:
+        """The MEADS recording (``recording.meads_blueprint``)."""
+        from workbench.problems.meads.recording import MeadsRecorder, meads_blueprint
+        from workbench.recording.writer import open_recording
+
+        vehicle = md.vehicle_for(scenario)
+        bp = meads_blueprint(vehicle.port_names)
+        with open_recording(path, scenario.name, blueprint=bp, properties=properties) as rec:
+            yield _Drawer(rec, MeadsRecorder(rec, truth))
+
+    def export_columns(self, result: md.MeadsResult) -> ExportTable:
+        """Air data, density and winds with their 1σ at the pressure times."""
+        f, w = result.air.fit, result.wind
+        cols: dict[str, tuple[np.ndarray, str]] = {
+            "qbar": (f.qbar, "Pa"),
+            "sigma_qbar": (f.sigma_qbar, "Pa"),
+            "alpha": (f.alpha, "rad"),
+            "sigma_alpha": (f.sigma_alpha, "rad"),
+            "beta": (f.beta, "rad"),
+            "sigma_beta": (f.sigma_beta, "rad"),
+            "mach": (w.mach, "1"),
+            "sigma_mach": (w.sigma_mach, "1"),
+            "p_inf": (w.p_inf, "Pa"),
+            "density": (w.density, "kg/m^3"),
+            "sigma_density": (w.sigma_density, "kg/m^3"),
+            "wind_north": (w.winds.wind_NE[:, 0], "m/s"),
+            "wind_east": (w.winds.wind_NE[:, 1], "m/s"),
+        }
+        return ExportTable(result.air.t, cols, "air data: body axes B; winds: local north/east")
+
+    def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
+        """The paper's trade study (:mod:`.montecarlo`) with ``options.n_runs`` runs per error level
+        (``workbench mc msl_meads --seeds 3000``), seed ``first_seed``, on ``options.workers``
+        processes or ``options.scheduler``; writes ``<out>/<name>_mc.rrd`` (:mod:`.recording_mc`)."""
+        from workbench.problems.meads.config import config_for
+        from workbench.problems.meads.montecarlo import QUANTITIES, prepare_trade_study, run_trade_study
+        from workbench.problems.meads.recording_mc import record_trade_study
+
+        t0 = time.perf_counter()
+        cfg = config_for(scenario)
+        runs = int(options.n_runs) if options.n_runs else cfg.mc.runs
+        where = options.scheduler or f"{options.workers} local worker(s)"
+        progress(f"[{scenario.name}] trade study: {runs} runs x {len(cfg.mc.levels)} levels ({where}) ...")
+        sh = prepare_trade_study(scenario)
+        ts = run_trade_study(sh, runs, options.first_seed, workers=options.workers, scheduler=options.scheduler)
+        summary = {"scenario": scenario.name, "kind": "meads_trade_study", **ts.summary}
+        summary["wall_time_s"] = time.perf_counter() - t0
+        rrd = record_trade_study(Path(out_dir) / f"{scenario.name}_mc.rrd", f"{scenario.name} trade study", ts, summary)
+        parts = []
+        for lv, row in summary["table"].items():
+            met = [q for q in QUANTITIES if row[q]["met"]]
+            parts.append(f"{lv}: meets {'/'.join(met) or 'none'}")
+        headline = f"trade study ({runs} runs/level, R = {sh.fixed_r:g}): " + "; ".join(parts) + f"; wrote {rrd}"
+        return McOutcome(summary, Path(rrd), headline, ts)

@@ -1,0 +1,311 @@
+"""Recording of a MEADS run: heat shield with its ports, air data with ±3σ and truth, per-port fits.
+
+Scene (``/world``, a local East-North-Up frame at the vehicle, metres): the heat shield mesh
+(``/world/vehicle/heat_shield``) rotated by the *reconstructed* attitude (IMU strapdown), its
+seven ports coloured by the measured pressure (``.../ports``, blue low → red high, scaled to the
+sample's highest reading) and, 0.15 m in front of each, a smaller marker coloured by the
+normalised fit residual (``.../port_residuals``: green |r| < 1σ → yellow 3σ → red ≥ 6σ, grey
+when the port is not used), and the wind-relative velocity as a 3 m segment from the nose towards
+where the air comes from (``/world/vehicle/air_velocity``; its angle to the axis is α_T).
+
+Plots (``/plots/<quantity>``, bounded series with truth): ``alpha_deg``, ``beta_deg``,
+``qbar_kPa``, ``mach``, ``p_inf_Pa``, ``density_pct_error`` (ρ̂ vs truth, when known, otherwise
+ρ̂ in kg/m³), ``wind_north_mps``, ``wind_east_mps``, ``lag_delay_ms``, ``lag_correction_Pa`` (the pneumatic-lag
+inversion: corrected − measured pressure of P1 and P4); per port measured vs
+modelled (``/plots/ports/<port>/measured|predicted``) and its residual ±3σ
+(``/residuals/pressure/<port>``); failed ports and singular wind intervals in ``/events``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import rerun.blueprint as rrb
+import trimesh
+
+from workbench.core.rotation import dcm_to_quat, quat_to_dcm
+from workbench.models.flush_airdata import FadsVehicle
+from workbench.problems.meads.airdata import ned_frames
+from workbench.problems.meads.pipeline import (
+    AirDataStage,
+    LagCorrection,
+    MeadsResult,
+    Navigation,
+    PressureData,
+    WindStage,
+)
+from workbench.problems.meads.telemetry import true_runs
+from workbench.recording import layout
+from workbench.recording.dispatch import StageDispatch
+
+__all__ = ["meads_blueprint", "MeadsRecorder", "heat_shield_mesh", "PLOTS"]
+
+PLOTS = (
+    ("α deg", "alpha_deg"),
+    ("β deg", "beta_deg"),
+    ("q∞ kPa", "qbar_kPa"),
+    ("Mach", "mach"),
+    ("p∞ Pa", "p_inf_Pa"),
+    ("density", "density"),
+    ("wind N m/s", "wind_north_mps"),
+    ("wind E m/s", "wind_east_mps"),
+    ("lag ms", "lag_delay_ms"),
+    ("lag correction Pa", "lag_correction_Pa"),
+)
+C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6", "P7")) -> rrb.Blueprint:
+    """Default layout: the heat shield (left top), air-data plots (right top, one tab per quantity),
+    per-port pressure and residual tabs (right bottom), scorecard and events (left bottom)."""
+    scene = rrb.Spatial3DView(
+        name="Heat shield (reconstructed attitude, local ENU)",
+        origin=layout.WORLD,
+        eye_controls=rrb.EyeControls3D(position=[6.0, -6.0, 3.0], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 0.0, 1.0]),
+    )
+    plots = rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=layout.plot_path(q)) for n, q in PLOTS], active_tab=0)
+    port_tabs = []
+    for p in ports:
+        port_tabs.append(
+            rrb.Vertical(
+                rrb.TimeSeriesView(name=f"{p} Pa: measured vs model", origin=layout.join(layout.MEADS_PLOT_PORTS, p)),
+                rrb.TimeSeriesView(name=f"{p} residual Pa ±3σ", origin=layout.residual_path("pressure", p)),
+                name=p,
+            )
+        )
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                scene,
+                rrb.Tabs(
+                    rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
+                    rrb.TextLogView(name="Events", origin=layout.EVENTS),
+                ),
+                row_shares=[3, 2],
+            ),
+            rrb.Vertical(plots, rrb.Tabs(*port_tabs), row_shares=[1, 1]),
+            column_shares=[2, 3],
+        ),
+        rrb.TimePanel(state="expanded", timeline=layout.TIME),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+    )
+
+
+def heat_shield_mesh(vehicle: FadsVehicle, n_r: int = 24, n_clock: int = 48) -> trimesh.Trimesh:
+    """The forebody as a mesh in body axes B (+x out of the nose, nose at the origin) [m]."""
+    r = vehicle.base_radius * np.sin(np.linspace(0.0, 0.5 * math.pi, n_r)) ** 1.0
+    x = -vehicle.surface_axial(r)
+    c = np.linspace(0.0, 2 * math.pi, n_clock, endpoint=False)
+    R, C = np.meshgrid(r, c, indexing="ij")
+    X = np.broadcast_to(x[:, None], R.shape)
+    V = np.stack([X, R * np.sin(C), R * np.cos(C)], -1).reshape(-1, 3)
+    faces = []
+    for i in range(n_r - 1):
+        for j in range(n_clock):
+            a, b = i * n_clock + j, i * n_clock + (j + 1) % n_clock
+            faces += [[a, a + n_clock, b], [b, a + n_clock, b + n_clock]]
+    return trimesh.Trimesh(V, np.array(faces), process=False)
+
+
+def _port_points(vehicle: FadsVehicle, offset: float) -> np.ndarray:
+    r, c, cone = vehicle.radius(), vehicle.clock(), vehicle.cone()
+    x = -vehicle.surface_axial(r)
+    base = np.stack([x, r * np.sin(c), r * np.cos(c)], 1)
+    normal = np.stack([np.cos(cone), np.sin(cone) * np.sin(c), np.sin(cone) * np.cos(c)], 1)
+    return base + (0.03 + offset) * normal
+
+
+def _ramp(u: np.ndarray) -> np.ndarray:
+    """Blue → red colours (..., 4) uint8 for u in [0, 1]."""
+    u = np.clip(np.nan_to_num(u), 0, 1)
+    return np.stack([255 * u, 60 + 80 * (1 - np.abs(2 * u - 1)), 255 * (1 - u), np.full_like(u, 255)], -1).astype(
+        np.uint8
+    )
+
+
+def _residual_colors(z: np.ndarray, used: np.ndarray) -> np.ndarray:
+    z = np.abs(np.nan_to_num(z, nan=0.0))
+    g = np.clip(1 - (z - 1) / 5, 0, 1)
+    col = np.stack([np.clip(z / 3, 0, 1) * 255, g * 220, np.zeros_like(z), np.full_like(z, 255)], -1)
+    col[~used] = (120, 120, 120, 255)
+    return col.astype(np.uint8)
+
+
+class MeadsRecorder:
+    """Draws the stages of :func:`workbench.problems.meads.pipeline.reconstruct` (truth: the arrays
+    of ``truth.npz`` or None)."""
+
+    def __init__(self, rec, truth: dict | None) -> None:
+        self.rec = rec
+        self.truth = truth
+        self.vehicle: FadsVehicle | None = None
+        self.nav: Navigation | None = None
+        self._fit = None
+        self.handle = StageDispatch(
+            {
+                PressureData: self._data,
+                Navigation: self._nav,
+                LagCorrection: self._lag,
+                AirDataStage: self._air,
+                WindStage: self._wind,
+                MeadsResult: self._result,
+            }
+        )
+
+    def _truth(self, key: str, t: np.ndarray, scale: float = 1.0, col: int | None = None):
+        if self.truth is None:
+            return None
+        y = self.truth[key] if col is None else self.truth[key][:, col]
+        return scale * np.interp(t, self.truth["t"], y)
+
+    def _data(self, st: PressureData) -> None:
+        self.vehicle = st.vehicle
+        self.rec.view_coordinates()
+        self.rec.mesh(layout.MEADS_HEAT_SHIELD, heat_shield_mesh(st.vehicle), color=(170, 120, 80, 255))
+        tel = st.telemetry
+        for j, p in enumerate(tel.ports):
+            self.rec.scatter(
+                layout.meads_port_plot_path(p, layout.MEASURED_SERIES),
+                tel.t_p,
+                tel.p[:, j],
+                names=f"{p} measured [Pa]",
+                colors=(30, 30, 30),
+                size=1.5,
+            )
+        self.rec.events([(float(tel.t_p[0]), d, "WARN") for d in tel.degradations])
+
+    def _nav(self, st: Navigation) -> None:
+        self.nav = st
+        C_M_B = quat_to_dcm(st.q_M_B)
+        C_L_B = np.einsum("ij,njk,nkl->nil", C_ENU_NED, ned_frames(st.p_M), C_M_B)
+        self.rec.poses(layout.VEHICLE, st.t_p, np.zeros((st.t_p.size, 3)), dcm_to_quat(C_L_B))
+
+    def _lag(self, st: LagCorrection) -> None:
+        self.rec.scalars(
+            layout.join(layout.plot_path("lag_delay_ms"), "P1_P4"),
+            st.t,
+            1e3 * st.delay[:, [0, 3]],
+            names=["P1 delay [ms]", "P4 delay [ms]"],
+        )
+        # before/after the inversion: what the correction added to the measured pressure
+        self.rec.scalars(
+            layout.join(layout.plot_path("lag_correction_Pa"), "P1_P4"),
+            st.t,
+            np.nan_to_num(st.p[:, [0, 3]] - st.p_raw[:, [0, 3]]),
+            names=["P1 corrected − measured [Pa]", "P4 corrected − measured [Pa]"],
+        )
+
+    def _air(self, st: AirDataStage) -> None:
+        f, t = st.fit, st.t
+        self._fit = f
+        rec = self.rec
+        rec.series_with_bounds(
+            layout.plot_path("alpha_deg"),
+            t,
+            np.degrees(f.alpha),
+            np.degrees(f.sigma_alpha),
+            truth=self._truth("alpha", t, 180 / math.pi),
+            names="α [deg]",
+        )
+        rec.series_with_bounds(
+            layout.plot_path("beta_deg"),
+            t,
+            np.degrees(f.beta),
+            np.degrees(f.sigma_beta),
+            truth=self._truth("beta", t, 180 / math.pi),
+            names="β [deg]",
+        )
+        rec.series_with_bounds(
+            layout.plot_path("qbar_kPa"),
+            t,
+            f.qbar / 1e3,
+            f.sigma_qbar / 1e3,
+            truth=self._truth("qbar", t, 1e-3),
+            names="q∞ [kPa]",
+        )
+        z = f.wls.residual / f.sigma_p
+        for j, p in enumerate(self.vehicle.port_names):
+            rec.scalars(
+                layout.meads_port_plot_path(p, layout.PREDICTED_SERIES),
+                t,
+                f.predicted[:, j],
+                names=f"{p} model ({f.model}) [Pa]",
+                colors=(220, 90, 30),
+            )
+            r = np.where(st.mask[:, j], f.wls.residual[:, j], np.nan)
+            rec.series_with_bounds(
+                layout.residual_path("pressure", p), t, np.nan_to_num(r), f.sigma_p[:, j], names=f"{p} residual [Pa]"
+            )
+        # 3D: ports coloured by the measured pressure and by the normalised residual
+        pts = _port_points(self.vehicle, 0.0)
+        pr = _port_points(self.vehicle, 0.15)
+        every = max(1, t.size // 600)
+        k = np.arange(0, t.size, every)
+        meas = f.predicted + np.nan_to_num(f.wls.residual)
+        u = meas[k] / np.maximum(np.nanmax(meas[k], axis=1, keepdims=True), 1e-9)
+        rec.points_series(
+            layout.MEADS_PORTS, t[k], np.broadcast_to(pts, (k.size, *pts.shape)), colors=_ramp(u), radii=0.09
+        )
+        rec.points_series(
+            layout.MEADS_PORT_RESIDUALS,
+            t[k],
+            np.broadcast_to(pr, (k.size, *pr.shape)),
+            colors=_residual_colors(z[k], st.mask[k]),
+            radii=0.05,
+        )
+        rec.events([(fl.t, fl.message, "WARN") for fl in st.failures])
+
+    def _wind(self, st: WindStage) -> None:
+        rec, nav = self.rec, self.nav
+        t = nav.t_p
+        rec.series_with_bounds(
+            layout.plot_path("mach"), t, st.mach, st.sigma_mach, truth=self._truth("mach", t), names="Mach"
+        )
+        rec.series_with_bounds(
+            layout.plot_path("p_inf_Pa"), t, st.p_inf, st.sigma_p_inf, truth=self._truth("p_inf", t), names="p∞ [Pa]"
+        )
+        rt = self._truth("rho", t)
+        if rt is not None:
+            rec.series_with_bounds(
+                layout.plot_path("density"),
+                t,
+                100 * (st.density / rt - 1),
+                100 * st.sigma_density / rt,
+                truth=np.zeros_like(t),
+                names="ρ error [%]",
+            )
+        else:
+            rec.series_with_bounds(layout.plot_path("density"), t, st.density, st.sigma_density, names="ρ [kg/m³]")
+        w = st.winds
+        for j, q in enumerate(("wind_north_mps", "wind_east_mps")):
+            sd = np.sqrt(np.nan_to_num(w.P[:, j, j], nan=0.0))
+            rec.series_with_bounds(
+                layout.plot_path(q),
+                t,
+                np.nan_to_num(w.wind_NE[:, j]),
+                np.where(np.isfinite(w.wind_NE[:, j]), sd, 0.0),
+                truth=self._truth("wind_NE", t, col=j),
+                names=f"{'north' if j == 0 else 'east'} [m/s] (0 where not published)",
+            )
+        # wind-relative velocity arrow in body axes, from the air-data angles
+        a, b = np.nan_to_num(self._fit.alpha), np.nan_to_num(self._fit.beta)
+        d = np.stack([np.cos(a) * np.cos(b), np.sin(b), np.sin(a) * np.cos(b)], 1)
+        every = max(1, t.size // 600)
+        k = np.arange(0, t.size, every)
+        strips = np.stack([np.zeros((k.size, 3)), 3.0 * d[k]], 1)
+        rec.line_strips_series(layout.MEADS_AIR_VELOCITY, t[k], strips, colors=(40, 160, 255), radii=0.03)
+        ev = [
+            (
+                float(t[a0]),
+                f"wind solution singular (|det Γ| small, flight-path angle near zero) {t[a0]:.1f}-"
+                f"{t[b0]:.1f} s: not published",
+                "INFO",
+            )
+            for a0, b0 in true_runs(w.singular)
+        ]
+        rec.events(ev)
+
+    def _result(self, st: MeadsResult) -> None:
+        pass

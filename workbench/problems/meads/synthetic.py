@@ -1,0 +1,67 @@
+"""Synthetic MSL-like entry for the flush air data problem: truth -> files exactly as a user supplies them.
+
+:func:`synthesize_meads` runs :func:`.truth.simulate_entry`, the pressure error chain and the IMU
+(:mod:`.sensors`) and writes ``pressures.csv`` (8 Hz, one column per port, Pa), ``imu.csv``,
+``initial_state.toml`` (formats in :mod:`.telemetry`) and ``truth.npz`` (scoring and drawing only).
+Seeds: the sensor draws use ``SeedSequence(seed)`` spawned into (pressures, imu, navigation).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from workbench.io.scenario import Scenario
+from workbench.io.telemetry import write_telemetry
+from workbench.models.flush_airdata import load_fads_vehicle
+from workbench.problems.meads.config import config_for
+from workbench.problems.meads.sensors import initial_navigation, measure_imu, measure_pressures
+from workbench.problems.meads.telemetry import IMU_COLUMNS, InitialState, write_initial_state
+from workbench.problems.meads.truth import simulate_entry
+
+__all__ = ["synthesize_meads", "load_truth", "vehicle_path"]
+
+
+def vehicle_path(scenario: Scenario) -> Path:
+    """The vehicle file of the scenario (``[vehicle] file``, relative to the scenario)."""
+    return scenario.path_of("vehicle.file")
+
+
+def synthesize_meads(scenario: Scenario, out_dir: str | Path, seed: int) -> dict[str, Path]:
+    """Simulate and write the telemetry + ``truth.npz`` into ``out_dir``; returns {stream: path, "truth": path}."""
+    cfg = config_for(scenario)
+    vehicle = load_fads_vehicle(vehicle_path(scenario))
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    truth = simulate_entry(vehicle, cfg.truth)
+    rp, ri, rn = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
+    pm = measure_pressures(truth, vehicle, cfg.truth, cfg.pressure, rp)
+    ti, f, w, drawn = measure_imu(truth, cfg.imu, cfg.imu_rate_hz, ri)
+    p0, v0, q0, sig = initial_navigation(truth, cfg.navigation, rn)
+    meta = {"source": f"workbench synthetic {scenario.name} (seed {seed})", "frame": "body B (+x out of the nose)"}
+    pressures = write_telemetry(
+        out / "pressures.csv",
+        pm.t,
+        {n: (pm.p[:, j], "Pa") for j, n in enumerate(vehicle.port_names)},
+        meta={**meta, "rate_hz": cfg.pressure.rate_hz},
+    )
+    cols = {c: (f[:, k], "m/s^2") for k, c in enumerate(IMU_COLUMNS[:3])}
+    cols |= {c: (w[:, k], "deg/s") for k, c in enumerate(IMU_COLUMNS[3:])}
+    imu = write_telemetry(out / "imu.csv", ti, cols, meta={**meta, "rate_hz": cfg.imu_rate_hz})
+    init = write_initial_state(
+        out / "initial_state.toml",
+        InitialState(0.0, p0, v0, q0, float(sig[0]), float(sig[1]), float(sig[2])),
+        "navigation state at the entry interface (inertial frame M, +Z the pole; q_M_B body -> M)",
+    )
+    arrays = truth.arrays()
+    arrays |= {f"sensor_{k}": np.asarray(v) for k, v in pm.__dict__.items()}
+    arrays |= {f"imu_{k}": np.asarray(v) for k, v in drawn.items()}
+    np.savez_compressed(out / "truth.npz", **arrays)
+    return {"pressures": pressures, "imu": imu, "initial_state": init, "truth": out / "truth.npz"}
+
+
+def load_truth(path: str | Path) -> dict:
+    """The arrays of ``truth.npz`` (truth fields, ``sensor_*`` of the pressure chain, ``imu_*``)."""
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
