@@ -17,7 +17,7 @@ Stages (typed results, drawn by ``recording.py``, consumed by tests and benchmar
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +30,7 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import build
+from workbench.problems.post2 import schedules as sched
 from workbench.problems.post2.config import ObservationSpec, Post2Config, config_for
 from workbench.problems.post2.model import (
     OBSERVATIONS,
@@ -76,11 +77,14 @@ class ObservationData:
 
 @dataclass(frozen=True)
 class ForwardStage:
-    """Stage 2: the EKF forward pass, the events fired [(t [s], name)], and each channel's quantity."""
+    """Stage 2: the EKF forward pass, the events fired [(t [s], name)], and each channel's quantity;
+    ``weight_factors`` {channel: (t (n,) [s], factor (n,))} of the channels a ``[schedules]`` window
+    touches (W × factor, R / factor, at each sample as applied)."""
 
     forward: ForwardPass
     events: tuple[tuple[float, str], ...]
     quantities: dict[str, str]
+    weight_factors: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -192,6 +196,7 @@ class Estimator:
         self.x0, self.P0, self.eps, self.mean = self._initial()
         self.phase = self.model.initial_phase()
         self.phase_log: list[tuple[float, str]] = []
+        self.weight_log: dict[str, list[tuple[float, float]]] = {}  # schedules: (t, factor) per channel
 
     def _initial(self):
         sm, cfg = self.smap, self.cfg
@@ -220,15 +225,18 @@ class Estimator:
         mean = x0.copy()
         return x0, np.diag(sig**2), eps, mean
 
-    def q_matrix(self, dt: float) -> tuple[np.ndarray, dict]:
-        """System noise Q (n_e, n_e) of a step dt [s] and the Markov decay factors {name: Φ}."""
+    def q_matrix(self, dt: float, t: float | None = None) -> tuple[np.ndarray, dict]:
+        """System noise Q (n_e, n_e) of a step dt [s] and the Markov decay factors {name: Φ}; with the
+        step's start ``t`` [s] the open ``[schedules]`` windows add their PSD (events: ``self.phase``)."""
         Q = np.zeros((self.smap.n_e, self.smap.n_e))
         phis = {}
         for name, b in self.smap.blocks.items():
             s = self.cfg.state(name)
             i = np.arange(b.se.start, b.se.stop)
+            if t is not None and self.cfg.schedules:  # ---- schedules: late system noise
+                Q[i, i] += sched.extra_psd(self.cfg.schedules, name, i.size, t, self.phase["fired"]) * dt
             if s.process == "random_walk":
-                Q[i, i] = s.psd * dt
+                Q[i, i] += s.psd * dt
             elif s.process == "markov":
                 phi = math.exp(-dt / s.tau)
                 var = np.where(s.psd > 0, 0.5 * s.psd * s.tau, s.sigma**2)
@@ -250,7 +258,7 @@ class Estimator:
         for nm in new["fired"][len(self.phase["fired"]) :]:
             self.phase_log.append((t0, nm))
         self.phase = new
-        Q, phis = self.q_matrix(t1 - t0)
+        Q, phis = self.q_matrix(t1 - t0, t0)
         x1, F = numeric_jacobian_batched(
             lambda X: self.advance(X, t0, t1, self.phase, phis), x, self.layout, self.eps, out_layout=self.layout
         )
@@ -261,6 +269,11 @@ class Estimator:
         q = ch.spec.quantity
         phase = self.phase
         model = self.model
+        R = ch.R[i]
+        if self.cfg.schedules:  # ---- schedules: weights × factor (R / factor) in the open windows
+            f = sched.weight_factor(self.cfg.schedules, ch.spec.name, float(ch.t[i]), phase["fired"])
+            self.weight_log.setdefault(ch.spec.name, []).append((float(ch.t[i]), f))
+            R = R / f
         if q == "quaternion":  # z = 0, h = body small angle from the measured attitude to the state's
             q_meas = ch.z[i]
             sq = self.smap.blocks["attitude"].sx
@@ -272,7 +285,7 @@ class Estimator:
                 return numeric_jacobian_batched(hq, x, self.layout, self.eps)[1]
 
             return Measurement(
-                ch.spec.name, np.zeros(3), ch.R[i], hq, H=Hq, gate_probability=ch.spec.gate_probability,
+                ch.spec.name, np.zeros(3), R, hq, H=Hq, gate_probability=ch.spec.gate_probability,
                 iterations=ch.spec.iterations,
             )  # fmt: skip
 
@@ -285,7 +298,7 @@ class Estimator:
         return Measurement(
             ch.spec.name,
             ch.z[i],
-            ch.R[i],
+            R,
             h,
             H=H,
             gate_probability=ch.spec.gate_probability,
@@ -344,7 +357,10 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
         return [est.measurement(data.channels[nm], i) for nm, i in index.get(k, ())]
 
     fp = run_filter(est.x0, est.P0, t, est.transition, None, measurements_at, est.layout, eps=est.eps)
-    yield ForwardStage(fp, tuple(est.phase_log), {n: ch.spec.quantity for n, ch in data.channels.items()})
+    wf = {n: (np.array([a for a, _ in v]), np.array([b for _, b in v])) for n, v in est.weight_log.items()}
+    touched = {s.target_name for s in cfg.schedules if s.target == "observation"}
+    wf = {n: v for n, v in wf.items() if n in touched}
+    yield ForwardStage(fp, tuple(est.phase_log), {n: ch.spec.quantity for n, ch in data.channels.items()}, wf)
     sm = rts_smooth(fp, est.layout) if cfg.data["filter"]["smoother"] else None
     x, P = (sm.x, sm.P) if sm is not None else (fp.x_post, fp.P_post)
     hist = state_history(est, t, x, P)
