@@ -53,6 +53,7 @@ __all__ = [
     "read_observations",
     "reconstruct",
     "state_history",
+    "propagation_only",
 ]
 
 
@@ -92,7 +93,8 @@ class Post2Result:
     """Final stage: grid ``t`` (n,) [s]; ``x``/``P`` the smoothed (or, without the smoother, the
     forward) state (n, n_x) and error covariance (n, n_e, n_e); ``forward`` pass; ``names`` of the
     state blocks; ``channels``; ``summary``; ``smap`` the state map; ``history`` per named quantity
-    (physical values and 1σ, see :func:`state_history`)."""
+    (physical values and 1σ, see :func:`state_history`) under ``"smoothed"``, ``"forward"`` and, with
+    ``[filter] compare_propagation``, ``"propagated"`` (:func:`propagation_only`, 1σ the prior's)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -106,7 +108,9 @@ class Post2Result:
     summary: dict
 
 
-def _weights_R(scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: Path) -> np.ndarray:
+def _weights_R(
+    scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: Path, obs_file: str = "the observation file"
+) -> np.ndarray:
     """R (n, m, m) = W⁻¹ from a weights CSV (columns as the observation's, unit ``1`` meaning
     1/SI², held from each row to the next); a weights file that ends before the observations is an error."""
     d = OBSERVATIONS[spec.quantity]
@@ -115,11 +119,13 @@ def _weights_R(scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: 
     if missing:
         raise ScenarioError(scenario.path, f"observations.{spec.name}.weights", f"{wpath.name}: no column(s) {missing}")
     if wt.time[0] > t[0] + 1e-9 or wt.time[-1] < t[-1] - 1e-9:
+        bad = np.flatnonzero((t < wt.time[0] - 1e-9) | (t > wt.time[-1] + 1e-9))
         raise ScenarioError(
             scenario.path,
             f"observations.{spec.name}.weights",
-            f"{wpath.name} covers {wt.time[0]:g} .. {wt.time[-1]:g} s but the observations run "
-            f"{t[0]:g} .. {t[-1]:g} s: the weights file is shorter than its observations",
+            f"{wpath.name} (column time, rows 1..{wt.time.size}) covers {wt.time[0]:g} .. {wt.time[-1]:g} s but the "
+            f"observations run {t[0]:g} .. {t[-1]:g} s: {obs_file} row {bad[0] + 1} ({t[bad[0]]:g} s) has no weight "
+            f"({bad.size} such rows): the weights file is shorter than its observations",
         )
     idx = np.clip(np.searchsorted(wt.time, t + 1e-9, side="right") - 1, 0, wt.time.size - 1)
     W = wt.stack(d.residual_names)[idx]
@@ -144,8 +150,8 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
             raise ScenarioError(
                 scenario.path,
                 f"observations.{spec.name}",
-                f"{path.name}: observation at {t[outside[0]]:g} s is outside the data span "
-                f"[{cfg.t_start:g}, {cfg.t_end:g}] s of [model] ({outside.size} such rows)",
+                f"{path.name} row {outside[0] + 1} (column time): observation at {t[outside[0]]:g} s is outside "
+                f"the data span [{cfg.t_start:g}, {cfg.t_end:g}] s of [model] ({outside.size} such rows)",
             )
         z_raw = tel.stack(d.components)
         z = z_raw
@@ -166,7 +172,7 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
         if spec.sigma is not None:
             R = np.broadcast_to(np.diag(spec.sigma**2), (t.size, d.size, d.size)).copy()
         else:
-            R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]))
+            R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]), path.name)
         out[spec.name] = Channel(spec, t, z, z_raw, R)
     return ObservationData(out)
 
@@ -335,6 +341,21 @@ def state_history(est: Estimator, t: np.ndarray, x: np.ndarray, P: np.ndarray) -
     return out
 
 
+def propagation_only(scenario: Scenario, cfg: Post2Config, t: np.ndarray) -> np.ndarray:
+    """The estimator's model run from its initial estimate over the grid t (n,) [s] with no
+    observation (events checked on its own state, Markov states decaying): x (n, n_x), the
+    "no reconstruction" reference of thesis [R3] Ch. 3.2.3 (Figs. 3-36/3-37)."""
+    est = Estimator(scenario, cfg)
+    X = np.empty((t.size, est.smap.n_x))
+    X[0] = est.x0
+    phase = est.model.initial_phase()
+    for k in range(1, t.size):
+        phase = est.model.check_events(X[k - 1], float(t[k - 1]), phase)
+        _, phis = est.q_matrix(float(t[k] - t[k - 1]))
+        X[k] = est.advance(X[k - 1][None, :], float(t[k - 1]), float(t[k]), phase, phis)[0]
+    return X
+
+
 def _unit_scale(name: str) -> float:
     unit = STATES[name].unit
     return {"deg": 180.0 / math.pi, "deg/s": 180.0 / math.pi}.get(unit, 1.0)
@@ -365,6 +386,10 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
     x, P = (sm.x, sm.P) if sm is not None else (fp.x_post, fp.P_post)
     hist = state_history(est, t, x, P)
     fwd = state_history(est, t, fp.x_post, fp.P_post)
+    histories = {"smoothed": hist, "forward": fwd}
+    if cfg.data["filter"]["compare_propagation"]:  # the no-observation reference (its P: the prior's)
+        xp = propagation_only(scenario, cfg, t)
+        histories["propagated"] = state_history(est, t, xp, np.broadcast_to(est.P0, (t.size, *est.P0.shape)))
     prior = state_history(est, t[:1], est.x0[None, :], est.P0[None, :, :])
     summary = {"scenario": scenario.name, "kind": "post2", "dof": cfg.dof, "grid_steps": int(t.size)}
     summary["smoothed"] = sm is not None
@@ -397,6 +422,4 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
         obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
     summary["observations"] = obs
     summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
-    yield Post2Result(
-        t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), {"smoothed": hist, "forward": fwd}, summary
-    )
+    yield Post2Result(t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), histories, summary)
