@@ -170,7 +170,15 @@ SCHEMA = Schema(
         Table(
             "filter",
             "estimator options",
-            (Key("smoother", _B, True, meaning="run the RTS smoother after the forward pass"),),
+            (
+                Key("smoother", _B, True, meaning="run the RTS smoother after the forward pass"),
+                Key(
+                    "compare_propagation",
+                    _B,
+                    False,
+                    meaning="also propagate the initial estimate without observations (propagation-only reference)",
+                ),
+            ),
         ),
         Table(
             "truth",

@@ -128,6 +128,16 @@ class Post2Problem:
                 md += (
                     f"\nposition components inside 3σ (smoothed): {100 * tr['position_inside_3sigma_fraction']:.1f} %\n"
                 )
+            md += _planted_table(summary)
+            fvp = tr.get("filtered_vs_propagation")
+            if fvp:
+                md += "\n| error at the end (norm) | propagation only | filtered (forward) | smoothed | unit |\n"
+                md += "|---|---|---|---|---|\n"
+                for name, c in fvp.items():
+                    e = c["end_error_norm"]
+                    shown = "attitude [α, β, bank]" if name == "attitude" else name
+                    md += f"| {shown} | {e['propagation_only']:.4g} | {e['forward']:.4g} | {e['smoothed']:.4g}"
+                    md += f" | {c['unit']} |\n"
             for name, p in tr.get("parameters", {}).items():
                 md += f"\n**{name}** (truth {p['truth']}):\n\n| after | error |\n|---|---|\n"
                 for n in (1, 4, 10):
@@ -179,6 +189,22 @@ class Post2Problem:
     def monte_carlo(self, scenario, out_dir, options, progress) -> McOutcome:
         """Not yet: the NEES study is in ``tests/benchmarks/bench_post2.py``."""
         raise NotImplementedError("post2 has no Monte Carlo analysis yet (see tests/benchmarks/bench_post2.py)")
+
+
+def _planted_table(summary: dict) -> str:
+    """Markdown table of the planted (truth) vs recovered (final, smoothed) value of every estimated
+    parameter with a known truth, with its 3σ and the error in units of 3σ."""
+    params = (summary.get("truth") or {}).get("parameters", {})
+    if not params:
+        return ""
+    md = "\n| parameter | planted | recovered | ±3σ | error / 3σ | inside 3σ |\n|---|---|---|---|---|---|\n"
+    for name, p in params.items():
+        st = summary["states"][name]
+        for i, tv in enumerate(p["truth"]):
+            z = p["final_error_over_3sigma_smoothed"][i]
+            md += f"| {name}{'' if len(p['truth']) == 1 else f'[{i}]'} | {tv:.6g} | {st['final'][i]:.6g} |"
+            md += f" {3.0 * st['final_sigma'][i]:.3g} | {z:+.2f} | {'yes' if abs(z) <= 1.0 else '**no**'} |\n"
+    return md
 
 
 def _si_unit(unit: str) -> str:

@@ -83,6 +83,21 @@ def score(result, truth: dict) -> dict:
                 "end_smoothed": es[-1].tolist(),
                 "end_sigma_smoothed": (smo[name]["sigma"][-1] * k).tolist(),
             }
+    if "propagated" in result.history:  # filtered vs propagation-only (thesis Ch. 3.2.3), at the end
+        prop = result.history["propagated"]
+        cmp = {}
+        for name in ("position", "velocity", "attitude", "body_rates"):
+            if name not in tg or name not in prop:
+                continue
+            k = _scale(name)
+            ends = {}
+            for label, h in (("propagation_only", prop), ("forward", fwd), ("smoothed", smo)):
+                e = (h[name]["value"][-1] - tg[name][-1]) * k
+                if name == "attitude":
+                    e = (e + 180.0) % 360.0 - 180.0
+                ends[label] = float(np.linalg.norm(e))
+            cmp[name] = {"unit": "deg" if name == "attitude" else STATES[name].unit, "end_error_norm": ends}
+        out["filtered_vs_propagation"] = cmp
     params = {}
     first = next(iter(result.forward.innovations.values()), None)
     for name in result.smap.blocks:
