@@ -175,6 +175,13 @@ ENTRY_PROFILE_PRESSURE = "/profiles/pressure"
 ENTRY_PROFILE_TEMPERATURE = "/profiles/temperature"
 ENTRY_PROFILE_WIND = "/profiles/wind"
 
+# ------------------------------------------------------------------ post2 (problem-file reconstruction)
+POST2_FOREBODY = "/world/vehicle/body/forebody"
+POST2_BACK_SHELL = "/world/vehicle/body/backshell"
+POST2_PARACHUTE = "/world/vehicle/parachute"
+POST2_RISERS = "/world/vehicle/parachute_risers"
+POST2_PHASE = "/plots/phase"
+
 # ------------------------------------------------------------------------- drop-test Monte Carlo
 MC_ROOT = "/plots/mc"
 MC_STROKE = "/plots/mc/stroke"

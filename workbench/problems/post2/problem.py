@@ -14,9 +14,9 @@ import numpy as np
 
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
-from workbench.problems.post2 import pipeline
+from workbench.problems.post2 import build, pipeline
 from workbench.problems.post2.config import SCHEMA, config_for
-from workbench.problems.post2.model import STATES, aero_angles
+from workbench.problems.post2.model import OBSERVATIONS, STATES, aero_angles
 from workbench.problems.post2.recording import COMPONENTS, open_post2_recording
 from workbench.problems.post2.scoring import score
 from workbench.problems.post2.truth import sample_times, simulate_truth, write_observations
@@ -165,6 +165,15 @@ class Post2Problem:
     def open_recording(self, path: Path, scenario: Scenario, truth, properties: dict):
         """The post2 recording (:mod:`.recording`)."""
         cfg = config_for(scenario)
+        geometry = None
+        veh = build.vehicle(scenario, cfg)
+        if veh.area > 0:  # display geometry: capsule from the reference area, canopy from the parachute's
+            d_chute = float(np.sqrt(4.0 * veh.parachute.ref_area / np.pi)) if veh.parachute is not None else None
+            geometry = {
+                "diameter_m": float(np.sqrt(4.0 * veh.area / np.pi)),
+                "parachute_diameter_m": d_chute,
+                "riser_m": 2.0 * d_chute if d_chute else 0.0,
+            }
         return open_post2_recording(
             path,
             scenario.name,
@@ -173,6 +182,12 @@ class Post2Problem:
             self.scorecard,
             states=[st.name for st in cfg.states],
             observations=[ob.name for ob in cfg.observations],
+            sizes={st.name: STATES[st.name].size for st in cfg.states},
+            residual_components={ob.name: OBSERVATIONS[ob.quantity].residual_names for ob in cfg.observations},
+            schedules=sorted({s.target_name for s in cfg.schedules if s.target == "observation"}),
+            geometry=geometry,
+            parachute_events={e.name: e.parachute for e in cfg.events if e.parachute is not None},
+            has_events=bool(cfg.events),
         )
 
     def export_columns(self, result) -> ExportTable:
