@@ -57,7 +57,7 @@ PHASE1 = {
 }
 
 
-def member(start: str, seed: int, variant: str, out: Path, t_end: float | None = None) -> dict:
+def member(start: str, seed: int, variant: str, out: Path, t_end: float | None = None, extra=None) -> dict:
     """One run: start ``start`` of Table 3-5, seed ``seed``; returns the numbers of one member."""
     p, v, a, w = STARTS[start]
     base = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml")
@@ -79,6 +79,7 @@ def member(start: str, seed: int, variant: str, out: Path, t_end: float | None =
         ov |= PHASE1
     if t_end is not None:
         ov["model.t_end_s"] = t_end
+    ov |= dict(extra or {})
     sc = base.with_overrides(ov)
     prob = Post2Problem()
     syn = prob.synthesize(sc, out / f"{start}_{seed}", seed)
@@ -165,10 +166,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--starts", default=",".join(STARTS), help="comma-separated Table 3-5 starts")
     ap.add_argument("--variant", choices=("shipped", "phase1"), default="shipped")
     ap.add_argument("--t-end", type=float, default=None, help="shorten the run (s); default: the scenario's")
+    ap.add_argument("--set", action="append", default=[], help="scenario override key=value (value as JSON)")
     ap.add_argument("--members", type=Path, default=None, help="directory of per-member results (kept)")
     ap.add_argument("--summarize-only", action="store_true", help="only summarise the members already there")
     ap.add_argument("--json", type=Path, default=None, help="write the results here")
     args = ap.parse_args(argv)
+    extra = {k: json.loads(v) for k, v in (a.split("=", 1) for a in args.set)}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="bench_post2_nees_") as tmp:
         mdir = args.members or Path(tmp) / "members"
@@ -176,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
             for start in args.starts.split(","):
                 for s in range(args.first_seed, args.first_seed + args.seeds):
                     tm = time.perf_counter()
-                    m = member(start, s, args.variant, Path(tmp), args.t_end)
+                    m = member(start, s, args.variant, Path(tmp), args.t_end, extra)
                     _save_member(mdir, start, s, m, time.perf_counter() - tm)
                     print(
                         f"  {start} seed {s}: pos err {m['position_error_m'][0]:.0f} -> {m['position_error_m'][1]:.1f}"
@@ -185,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
                         flush=True,
                     )
         members = _load_members(mdir)
-    results: dict = {"variant": args.variant, "t_end_s": args.t_end, "starts": {}}
+    results: dict = {"variant": args.variant, "overrides": extra, "t_end_s": args.t_end, "starts": {}}
     for start, ms in members.items():
         results["starts"][start] = summarize(ms) | {
             "seeds_run": sorted(int(m.get("seed", -1)) for m in ms),
