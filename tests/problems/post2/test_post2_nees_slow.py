@@ -45,13 +45,6 @@ def _member(seed: int, tmp) -> np.ndarray:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured: the forward NEES of the 12 trajectory states is ~1.7-2x its dimension from the start "
-    "(members of seed 1, three starts: 21-22 over 15-40 s, 26-30 at the end; the 6-seed band is ~8.3-16.1) "
-    "while the NIS is conservative (1.8 / 0.9 for dim 3): the covariance is too small in directions the "
-    "observations do not see; not yet found. Strict: this flips to a failure when it is fixed.",
-)
 def test_entry6dof_anees_after_15s_inside_its_band(tmp_path):
     nees = np.array([_member(s, tmp_path) for s in range(1, SEEDS + 1)])  # (seeds, steps after 15 s)
     anees = nees.mean(axis=0)
@@ -60,5 +53,7 @@ def test_entry6dof_anees_after_15s_inside_its_band(tmp_path):
     # anees_bounds), so the per-step 95 % band is already a loose test of it; the margin is 1.0x:
     # no widening.  Per step, at most 20 % of the steps may leave the band (5 % expected if the steps
     # were independent; they are correlated over the filter's memory, so excursions come in runs).
+    # measured with the benchmark's members (4 seeds, start 1, whole entry): ANEES over 15-40 s 13.8,
+    # 2 % of those steps outside the 4-seed band; later in the entry it rises above (bench_post2_nees.json)
     assert lo <= anees.mean() <= hi, (anees.mean(), lo, hi)
     assert np.mean((anees < lo) | (anees > hi)) <= 0.20
