@@ -3,6 +3,7 @@
 Run on demand from the repository root (not collected by pytest)::
 
     .venv/bin/python tests/benchmarks/bench_post2.py [--seeds 50] [--json docs/results/bench_post2.json]
+    .venv/bin/python tests/benchmarks/bench_post2.py --cases mer --json docs/results/bench_post2_mer.json
 
 Measured:
 
@@ -14,7 +15,10 @@ Measured:
   the end (forward pass and smoothed), mean NIS of both observation channels; for two truths:
   ``model_error`` (the shipped scenario: DOP853 truth with a density wave and CN/Cm factors, the
   estimator with density/CN/Cm multiplier states) and ``model_matched`` (the truth's only
-  difference is its integrator; no multiplier states) — the thesis' own setting.
+  difference is its integrator; no multiplier states) — the thesis' own setting;
+* **MER-type entry with quaternion observations** (``post2_mer_quaternion``, Tables 3-6/3-7, ``--cases
+  mer``) from each start of Table 3-7: the errors at the end of the filtered run (forward, smoothed) vs
+  the propagation-only run, the NIS, the events and the wall time of a ``workbench run``.
 """
 
 from __future__ import annotations
@@ -135,18 +139,88 @@ def bench_entry(out: Path, variant: str) -> dict:
     return res
 
 
+#: Table 3-7 of the thesis: the estimator's three starts of the MER-type case (position m, velocity m/s,
+#: [α, β, σ] deg, body rates deg/s)
+MER_STARTS = {
+    "test_case_1": (
+        [-3333672.1, -1343492.7, -201973.4],
+        [3361.50, -4527.61, 386.52],
+        [-0.25, -1.45, 89.4],
+        [11.99, 0.012, 0.008],
+    ),
+    "test_case_2": (
+        [-3333431.0, -1343517.1, -202231.5],
+        [3361.64, -4527.64, 386.74],
+        [-0.33, -2.00, 90.1],
+        [12.005, 0.0075, 0.0038],
+    ),
+    "test_case_3": (
+        [-3333479.0, -1343489.4, -202238.4],
+        [3361.60, -4527.64, 386.74],
+        [-0.33, -1.29, 90.3],
+        [12.0085, -0.0075, -0.0058],
+    ),
+}
+
+
+def bench_mer(out: Path) -> dict:
+    """Case 3 (``post2_mer_quaternion``, Tables 3-6/3-7) from the three starts of Table 3-7: errors at
+    the end, filtered (forward, smoothed) vs propagation-only; NIS; the run's wall time."""
+    res = {}
+    for case, (p, v, a, w) in MER_STARTS.items():
+        ov = {
+            "states.position.value": p,
+            "states.velocity.value": v,
+            "states.attitude.value": a,
+            "states.body_rates.value": w,
+        }
+        t0 = time.perf_counter()
+        r = run_scenario(_scenario("post2_mer_quaternion", ov), out / f"mer_{case}", RunOptions(seed=1))
+        tr = r.summary["truth"]
+        res[case] = {
+            "end_error_norm": {
+                k: c["end_error_norm"] | {"unit": c["unit"]} for k, c in tr["filtered_vs_propagation"].items()
+            },
+            "position_error_start_m": tr["position_error_m"]["start"],
+            "position_inside_3sigma_fraction": tr["position_inside_3sigma_fraction"],
+            "attitude_error_end_deg": tr["attitude_error"]["end_forward"],
+            "body_rates_error_end_deg_s": tr["body_rates_error"]["end_forward"],
+            "mean_nis": {k: o["mean_nis"] for k, o in r.summary["observations"].items()},
+            "events": r.summary["events"],
+            "wall_time_s": time.perf_counter() - t0,
+        }
+        e = res[case]["end_error_norm"]["position"]
+        print(
+            f"  mer {case}: position error at the end {e['propagation_only']:.0f} m (propagation only)"
+            f" -> {e['forward']:.1f} m (filtered)",
+            flush=True,
+        )
+    return res
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark; print a summary; write the JSON."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=50, help="seeds of the J2 NEES (0: none)")
     ap.add_argument("--json", type=Path, default=None, help="write the results here")
+    ap.add_argument(
+        "--cases",
+        default="j2,entry",
+        help="comma-separated: j2, entry, mer (case 3: docs/results/bench_post2_mer.json)",
+    )
     args = ap.parse_args(argv)
+    cases = args.cases.split(",")
     t0 = time.perf_counter()
+    results: dict = {}
     with tempfile.TemporaryDirectory(prefix="bench_post2_") as tmp:
         out = Path(tmp)
-        results = {"j2": bench_j2(out, args.seeds)}
-        print("J2:", json.dumps(results["j2"]), flush=True)
-        results["entry6dof"] = {v: bench_entry(out, v) for v in ("model_error", "model_matched")}
+        if "j2" in cases:
+            results["j2"] = bench_j2(out, args.seeds)
+            print("J2:", json.dumps(results["j2"]), flush=True)
+        if "entry" in cases:
+            results["entry6dof"] = {v: bench_entry(out, v) for v in ("model_error", "model_matched")}
+        if "mer" in cases:
+            results["mer_quaternion"] = bench_mer(out)
     results["wall_time_s"] = time.perf_counter() - t0
     if args.json:
         print(f"wrote {write_benchmark_json(args.json, __file__, results, argv)}")

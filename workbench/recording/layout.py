@@ -184,6 +184,12 @@ MEADS_PORT_RESIDUALS = "/world/vehicle/heat_shield/port_residuals"
 MEADS_AIR_VELOCITY = "/world/vehicle/air_velocity"
 MEADS_PLOT_PORTS = "/plots/ports"
 MEADS_TRADE_STUDY = "/plots/trade_study"
+# ------------------------------------------------------------------ post2 (problem-file reconstruction)
+POST2_FOREBODY = "/world/vehicle/body/forebody"
+POST2_BACK_SHELL = "/world/vehicle/body/backshell"
+POST2_PARACHUTE = "/world/vehicle/parachute"
+POST2_RISERS = "/world/vehicle/parachute_risers"
+POST2_PHASE = "/plots/phase"
 
 # ------------------------------------------------------------------------- drop-test Monte Carlo
 MC_ROOT = "/plots/mc"

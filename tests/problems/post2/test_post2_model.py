@@ -236,3 +236,24 @@ def test_quaternion_observation_residual_is_the_body_small_angle():
     # the Jacobian of the SO(3) log at the offset d: I + O(|d|/2) (off-diagonal ½[d×] terms)
     np.testing.assert_allclose(H[:, se], np.eye(3), atol=0.5 * np.linalg.norm(d) + 1e-9)
     assert np.allclose(np.delete(H, np.arange(se.start, se.stop), axis=1), 0.0)
+
+
+def test_aero_force_and_moment_ignore_the_quaternion_norm_at_small_alpha():
+    """RK4's intermediate stages carry |q|² = 1 + O((hω)²): the aerodynamics must use the unit
+    quaternion and a scale-invariant α (before the fix, |q|² = 1 + 2e-6 at α = 0.1° clipped
+    arccos(u/V) to α = 0 and the moment vanished)."""
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml").with_overrides(
+        {"states.attitude.value": [0.1, 0.0, 0.0], "states.position.value": [0.0, 0.0, 3396190.0 + 40e3]}
+    )
+    est = Estimator(sc, config_for(sc))
+    m, x = est.model, est.x0.copy()
+    ph = m.initial_phase()
+    F, M = m.aero_force_moment(x, ph)
+    assert np.linalg.norm(M) > 0.0
+    sq = est.smap.blocks["attitude"].sx
+    y = x.copy()
+    y[sq] *= math.sqrt(1.0 + 2e-6)
+    F2, M2 = m.aero_force_moment(y, ph)
+    np.testing.assert_allclose(M2, M, rtol=1e-9, atol=1e-12 * np.abs(M).max())
+    np.testing.assert_allclose(F2, F, rtol=1e-12)
+    np.testing.assert_allclose(m.sensed_acceleration_B(y, ph), m.sensed_acceleration_B(x, ph), rtol=1e-12)

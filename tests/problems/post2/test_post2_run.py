@@ -68,6 +68,21 @@ def _bad(tmp_path: Path, old: str, new: str) -> Path:
             "bounds = [1.0, 0.5]\nsigma = 2.0e-3 ",
             ["states.j2.bounds", "lo (1) must be below hi (0.5)"],
         ),
+        (
+            "sigma = 2.0e-3 ",
+            "bounds = [0.5, 0.5]\nsigma = 2.0e-3 ",
+            ["states.j2.bounds", "lo (0.5) must be below hi (0.5)"],
+        ),
+        (
+            "[truth]",
+            '[schedules.late]\nobservation = "gravty"\nweight_factor = 2.0\n\n[truth]',
+            ["schedules.late.observation", "unknown observation 'gravty'", "did you mean 'gravity'"],
+        ),
+        (
+            "[truth]",
+            '[schedules.late]\nstate = "cm_multiplier"\npsd = 1.0\n\n[truth]',
+            ["schedules.late.state", "unknown estimated state 'cm_multiplier'"],
+        ),
     ],
 )
 def test_problem_file_errors_are_located_and_nothing_is_written(tmp_path, capsys, old, new, expect):
@@ -114,6 +129,7 @@ def test_weights_file_shorter_than_observations_is_refused(tmp_path, j2_run, cap
     assert main(["run", str(sc), "--out", str(tmp_path / "out")]) == EXIT_INPUT
     err = capsys.readouterr().err
     assert "observations.gravity.weights" in err and "shorter than its observations" in err
+    assert "w.csv (column time, rows 1..50)" in err and "gravity.csv row 51 (5100 s) has no weight" in err
     assert not list((tmp_path / "out").glob("*.rrd")) and not list((tmp_path / "out").glob("*.json"))
 
 
@@ -122,6 +138,7 @@ def test_observation_outside_the_data_span_is_refused(tmp_path, j2_run, capsys):
     assert main(["run", str(sc), "--out", str(tmp_path / "out")]) == EXIT_INPUT
     err = capsys.readouterr().err
     assert "observations.gravity" in err and "outside the data span" in err and "10050" in err
+    assert "gravity.csv row 100 (column time)" in err and "(1 such rows)" in err
     assert not list((tmp_path / "out").glob("*.rrd")) and not list((tmp_path / "out").glob("*.json"))
     shutil.rmtree(tmp_path / "data")
 

@@ -10,6 +10,7 @@ ballistic Mars entry, Tables 3-3..3-5), Ch. 5 (the tanh S-curve of bounded param
 Modules: ``config`` (schema and the named states/observations/events), ``model`` (the 3/6-DOF
 trajectory model: simulator and process model), ``build`` (environment, vehicle, state map),
 ``truth`` (truth simulator and sensors), ``pipeline`` (stages: observations -> EKF -> RTS),
-``scoring``, ``recording``, ``problem`` (the Problem protocol object, kind ``post2``).
-Shipped scenarios: ``post2_j2`` and ``post2_entry6dof``.
+``scoring``, ``recording``, ``problem`` (the Problem protocol object, kind ``post2``), ``schedules``
+(observation weights and system noise vs time or event, Ch. 3.2.3).
+Shipped scenarios: ``post2_j2``, ``post2_entry6dof`` and ``post2_mer_quaternion``.
 """

@@ -24,6 +24,7 @@ from workbench.io.scenario import Scenario, ScenarioError, check_value
 from workbench.io.schema import REQUIRED, Key, Schema, Table
 from workbench.io.units import to_si
 from workbench.problems.post2.model import OBSERVATIONS, STATES
+from workbench.problems.post2.schedules import SCHEDULE_KEYS, Schedule
 
 __all__ = [
     "SCHEMA",
@@ -164,10 +165,25 @@ SCHEMA = Schema(
             free="table",
             free_meaning="`[observations.<name>]`: " + _named_meaning(OBSERVATION_KEYS),
         ),
+        # ---- schedules (observation weights / system noise vs time or event; schedules.py)
+        Table(
+            "schedules",
+            "observation weights and system noise vs time or event (thesis Ch. 3.2.3: early weight, late noise)",
+            free="table",
+            free_meaning="`[schedules.<name>]`: " + _named_meaning(SCHEDULE_KEYS),
+        ),
         Table(
             "filter",
             "estimator options",
-            (Key("smoother", _B, True, meaning="run the RTS smoother after the forward pass"),),
+            (
+                Key("smoother", _B, True, meaning="run the RTS smoother after the forward pass"),
+                Key(
+                    "compare_propagation",
+                    _B,
+                    False,
+                    meaning="also propagate the initial estimate without observations (propagation-only reference)",
+                ),
+            ),
         ),
         Table(
             "truth",
@@ -314,6 +330,7 @@ class Post2Config:
     events: tuple[EventSpec, ...]
     truth_states: dict[str, np.ndarray]
     data: dict
+    schedules: tuple[Schedule, ...] = ()  # weights / system noise windows (schedules.py)
 
     def state(self, name: str) -> StateSpec | None:
         """The :class:`StateSpec` called ``name`` or None."""
@@ -443,6 +460,60 @@ def _event(file: Path, name: str, raw: dict) -> EventSpec:
     return EventSpec(name, t["when"], float(t["value"]), t["mass_kg"], t["ref_area_m2"], t["parachute"], t["chute"])
 
 
+# ---- schedules (workbench/problems/post2/schedules.py): validation of [schedules.<name>]
+def _schedules(
+    file: Path, raw: dict, states: dict[str, tuple[int, float, str]], observations, events
+) -> tuple[Schedule, ...]:
+    """Validate the ``[schedules]`` tables.  ``raw``: {name: table}; ``states``: estimated state name
+    -> (size, SI factor of its unit, process); ``observations``, ``events``: the declared names.
+    Every mistake is a :class:`ScenarioError` naming ``file`` and the dotted key."""
+    out = []
+    for name, table in raw.items():
+        pre = f"schedules.{name}"
+        t = _sub(file, pre, table, SCHEDULE_KEYS)
+        if (t["observation"] is None) == (t["state"] is None):
+            raise ScenarioError(file, pre, "name exactly one target: `observation` or `state`")
+        for a, b in (("start_s", "start_event"), ("end_s", "end_event")):
+            if t[a] is not None and t[b] is not None:
+                raise ScenarioError(file, f"{pre}.{b}", f"give `{a}` or `{b}`, not both")
+        for k in ("start_event", "end_event"):
+            if t[k] is not None:
+                _check_name(file, f"{pre}.{k}", t[k], list(events), "event")
+        if t["start_s"] is not None and t["end_s"] is not None and not t["end_s"] > t["start_s"]:
+            raise ScenarioError(file, f"{pre}.end_s", f"{t['end_s']:g} s must be after start_s ({t['start_s']:g} s)")
+        if t["start_event"] is not None and t["start_event"] == t["end_event"]:
+            raise ScenarioError(file, f"{pre}.end_event", "the window would close when it opens")
+        factor = psd = None
+        if t["observation"] is not None:
+            target, tname = "observation", t["observation"]
+            _check_name(file, f"{pre}.observation", tname, list(observations), "observation")
+            if t["psd"] is not None:
+                raise ScenarioError(file, f"{pre}.psd", "an observation window takes `weight_factor`, not `psd`")
+            if t["weight_factor"] is None:
+                raise ScenarioError(file, f"{pre}.weight_factor", "missing (required with `observation`)")
+            factor = float(t["weight_factor"])
+            if not (factor > 0 and np.isfinite(factor)):
+                raise ScenarioError(file, f"{pre}.weight_factor", f"must be > 0, got {factor:g}")
+        else:
+            target, tname = "state", t["state"]
+            _check_name(file, f"{pre}.state", tname, list(states), "estimated state")
+            if t["weight_factor"] is not None:
+                raise ScenarioError(file, f"{pre}.weight_factor", "a state window takes `psd`, not `weight_factor`")
+            if t["psd"] is None:
+                raise ScenarioError(file, f"{pre}.psd", "missing (required with `state`)")
+            size, unit_si, process = states[tname]
+            if process == "markov":
+                raise ScenarioError(file, f"{pre}.state", f"'{tname}' is a markov state: schedule constant/random_walk")
+            psd = _vec(file, f"{pre}.psd", t["psd"], size)
+            if np.any(psd < 0):
+                raise ScenarioError(file, f"{pre}.psd", "must be >= 0")
+            psd = psd * unit_si**2
+        out.append(
+            Schedule(name, target, tname, factor, psd, t["start_s"], t["start_event"], t["end_s"], t["end_event"])
+        )
+    return tuple(out)
+
+
 def config_for(scenario: Scenario) -> Post2Config:
     """Build the :class:`Post2Config` of a scenario (validated against :data:`SCHEMA` and the named
     tables); :class:`ScenarioError` naming file and dotted key for anything wrong."""
@@ -478,7 +549,15 @@ def config_for(scenario: Scenario) -> Post2Config:
     grid = m["grid_s"] if m["grid_s"] is not None else m["step_s"]
     if not grid > 0:
         raise ScenarioError(file, "model.grid_s", "must be > 0")
+    # ---- schedules (schedules.py): targets and events must be declared above
+    schedules = _schedules(
+        file,
+        data.get("schedules", {}),
+        {s.name: (STATES[s.name].size, _factor(STATES[s.name].unit), s.process) for s in states},
+        [o.name for o in obs],
+        [e.name for e in events],
+    )
     return Post2Config(
         dof, float(m["t_start_s"]), float(m["t_end_s"]), float(m["step_s"]), float(grid),
-        tuple(states), tuple(obs), events, truth_states, data,
+        tuple(states), tuple(obs), events, truth_states, data, schedules,
     )  # fmt: skip

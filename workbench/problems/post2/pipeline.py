@@ -17,7 +17,7 @@ Stages (typed results, drawn by ``recording.py``, consumed by tests and benchmar
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +32,7 @@ from workbench.io.scenario import Scenario, ScenarioError
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.io.units import likely_unit
 from workbench.problems.post2 import build
+from workbench.problems.post2 import schedules as sched
 from workbench.problems.post2.config import ObservationSpec, Post2Config, config_for
 from workbench.problems.post2.model import (
     OBSERVATIONS,
@@ -54,6 +55,7 @@ __all__ = [
     "read_observations",
     "reconstruct",
     "state_history",
+    "propagation_only",
 ]
 
 
@@ -79,11 +81,14 @@ class ObservationData:
 
 @dataclass(frozen=True)
 class ForwardStage:
-    """Stage 2: the EKF forward pass, the events fired [(t [s], name)], and each channel's quantity."""
+    """Stage 2: the EKF forward pass, the events fired [(t [s], name)], and each channel's quantity;
+    ``weight_factors`` {channel: (t (n,) [s], factor (n,))} of the channels a ``[schedules]`` window
+    touches (W × factor, R / factor, at each sample as applied)."""
 
     forward: ForwardPass
     events: tuple[tuple[float, str], ...]
     quantities: dict[str, str]
+    weight_factors: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -91,7 +96,8 @@ class Post2Result:
     """Final stage: grid ``t`` (n,) [s]; ``x``/``P`` the smoothed (or, without the smoother, the
     forward) state (n, n_x) and error covariance (n, n_e, n_e); ``forward`` pass; ``names`` of the
     state blocks; ``channels``; ``summary``; ``smap`` the state map; ``history`` per named quantity
-    (physical values and 1σ, see :func:`state_history`)."""
+    (physical values and 1σ, see :func:`state_history`) under ``"smoothed"``, ``"forward"`` and, with
+    ``[filter] compare_propagation``, ``"propagated"`` (:func:`propagation_only`, 1σ the prior's)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -105,7 +111,9 @@ class Post2Result:
     summary: dict
 
 
-def _weights_R(scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: Path) -> np.ndarray:
+def _weights_R(
+    scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: Path, obs_file: str = "the observation file"
+) -> np.ndarray:
     """R (n, m, m) = W⁻¹ from a weights CSV (columns as the observation's, unit ``1`` meaning
     1/SI², held from each row to the next); a weights file that ends before the observations is an error."""
     d = OBSERVATIONS[spec.quantity]
@@ -114,11 +122,13 @@ def _weights_R(scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: 
     if missing:
         raise ScenarioError(scenario.path, f"observations.{spec.name}.weights", f"{wpath.name}: no column(s) {missing}")
     if wt.time[0] > t[0] + 1e-9 or wt.time[-1] < t[-1] - 1e-9:
+        bad = np.flatnonzero((t < wt.time[0] - 1e-9) | (t > wt.time[-1] + 1e-9))
         raise ScenarioError(
             scenario.path,
             f"observations.{spec.name}.weights",
-            f"{wpath.name} covers {wt.time[0]:g} .. {wt.time[-1]:g} s but the observations run "
-            f"{t[0]:g} .. {t[-1]:g} s: the weights file is shorter than its observations",
+            f"{wpath.name} (column time, rows 1..{wt.time.size}) covers {wt.time[0]:g} .. {wt.time[-1]:g} s but the "
+            f"observations run {t[0]:g} .. {t[-1]:g} s: {obs_file} row {bad[0] + 1} ({t[bad[0]]:g} s) has no weight "
+            f"({bad.size} such rows): the weights file is shorter than its observations",
         )
     idx = np.clip(np.searchsorted(wt.time, t + 1e-9, side="right") - 1, 0, wt.time.size - 1)
     W = wt.stack(d.residual_names)[idx]
@@ -166,8 +176,8 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
             raise ScenarioError(
                 scenario.path,
                 f"observations.{spec.name}",
-                f"{path.name}: observation at {t[outside[0]]:g} s is outside the data span "
-                f"[{cfg.t_start:g}, {cfg.t_end:g}] s of [model] ({outside.size} such rows)",
+                f"{path.name} row {outside[0] + 1} (column time): observation at {t[outside[0]]:g} s is outside "
+                f"the data span [{cfg.t_start:g}, {cfg.t_end:g}] s of [model] ({outside.size} such rows)",
             )
         z_raw = tel.stack(d.components)
         z = z_raw
@@ -188,7 +198,7 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
         if spec.sigma is not None:
             R = np.broadcast_to(np.diag(spec.sigma**2), (t.size, d.size, d.size)).copy()
         else:
-            R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]))
+            R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]), path.name)
         out[spec.name] = Channel(spec, t, z, z_raw, R)
         notes += [*tel.notes, *(f"{path}: gap {g.start_s:g}–{g.end_s:g} s (row {g.row})" for g in tel.gaps)]
         step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
@@ -224,6 +234,7 @@ class Estimator:
         self.x0, self.P0, self.eps, self.mean = self._initial()
         self.phase = self.model.initial_phase()
         self.phase_log: list[tuple[float, str]] = []
+        self.weight_log: dict[str, list[tuple[float, float]]] = {}  # schedules: (t, factor) per channel
 
     def _initial(self):
         sm, cfg = self.smap, self.cfg
@@ -252,15 +263,18 @@ class Estimator:
         mean = x0.copy()
         return x0, np.diag(sig**2), eps, mean
 
-    def q_matrix(self, dt: float) -> tuple[np.ndarray, dict]:
-        """System noise Q (n_e, n_e) of a step dt [s] and the Markov decay factors {name: Φ}."""
+    def q_matrix(self, dt: float, t: float | None = None) -> tuple[np.ndarray, dict]:
+        """System noise Q (n_e, n_e) of a step dt [s] and the Markov decay factors {name: Φ}; with the
+        step's start ``t`` [s] the open ``[schedules]`` windows add their PSD (events: ``self.phase``)."""
         Q = np.zeros((self.smap.n_e, self.smap.n_e))
         phis = {}
         for name, b in self.smap.blocks.items():
             s = self.cfg.state(name)
             i = np.arange(b.se.start, b.se.stop)
+            if t is not None and self.cfg.schedules:  # ---- schedules: late system noise
+                Q[i, i] += sched.extra_psd(self.cfg.schedules, name, i.size, t, self.phase["fired"]) * dt
             if s.process == "random_walk":
-                Q[i, i] = s.psd * dt
+                Q[i, i] += s.psd * dt
             elif s.process == "markov":
                 phi = math.exp(-dt / s.tau)
                 var = np.where(s.psd > 0, 0.5 * s.psd * s.tau, s.sigma**2)
@@ -282,7 +296,7 @@ class Estimator:
         for nm in new["fired"][len(self.phase["fired"]) :]:
             self.phase_log.append((t0, nm))
         self.phase = new
-        Q, phis = self.q_matrix(t1 - t0)
+        Q, phis = self.q_matrix(t1 - t0, t0)
         x1, F = numeric_jacobian_batched(
             lambda X: self.advance(X, t0, t1, self.phase, phis), x, self.layout, self.eps, out_layout=self.layout
         )
@@ -293,6 +307,11 @@ class Estimator:
         q = ch.spec.quantity
         phase = self.phase
         model = self.model
+        R = ch.R[i]
+        if self.cfg.schedules:  # ---- schedules: weights × factor (R / factor) in the open windows
+            f = sched.weight_factor(self.cfg.schedules, ch.spec.name, float(ch.t[i]), phase["fired"])
+            self.weight_log.setdefault(ch.spec.name, []).append((float(ch.t[i]), f))
+            R = R / f
         if q == "quaternion":  # z = 0, h = body small angle from the measured attitude to the state's
             q_meas = ch.z[i]
             sq = self.smap.blocks["attitude"].sx
@@ -304,7 +323,7 @@ class Estimator:
                 return numeric_jacobian_batched(hq, x, self.layout, self.eps)[1]
 
             return Measurement(
-                ch.spec.name, np.zeros(3), ch.R[i], hq, H=Hq, gate_probability=ch.spec.gate_probability,
+                ch.spec.name, np.zeros(3), R, hq, H=Hq, gate_probability=ch.spec.gate_probability,
                 iterations=ch.spec.iterations,
             )  # fmt: skip
 
@@ -317,7 +336,7 @@ class Estimator:
         return Measurement(
             ch.spec.name,
             ch.z[i],
-            ch.R[i],
+            R,
             h,
             H=H,
             gate_probability=ch.spec.gate_probability,
@@ -352,6 +371,21 @@ def state_history(est: Estimator, t: np.ndarray, x: np.ndarray, P: np.ndarray) -
             v = scurve(v, *b.bounds)
         out[name] = {"value": v, "sigma": s}
     return out
+
+
+def propagation_only(scenario: Scenario, cfg: Post2Config, t: np.ndarray) -> np.ndarray:
+    """The estimator's model run from its initial estimate over the grid t (n,) [s] with no
+    observation (events checked on its own state, Markov states decaying): x (n, n_x), the
+    "no reconstruction" reference of thesis [R3] Ch. 3.2.3 (Figs. 3-36/3-37)."""
+    est = Estimator(scenario, cfg)
+    X = np.empty((t.size, est.smap.n_x))
+    X[0] = est.x0
+    phase = est.model.initial_phase()
+    for k in range(1, t.size):
+        phase = est.model.check_events(X[k - 1], float(t[k - 1]), phase)
+        _, phis = est.q_matrix(float(t[k] - t[k - 1]))
+        X[k] = est.advance(X[k - 1][None, :], float(t[k - 1]), float(t[k]), phase, phis)[0]
+    return X
 
 
 def _unit_scale(name: str) -> float:
@@ -395,11 +429,18 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
         return [est.measurement(data.channels[nm], i) for nm, i in index.get(k, ())]
 
     fp = run_filter(est.x0, est.P0, t, est.transition, None, measurements_at, est.layout, eps=est.eps)
-    yield ForwardStage(fp, tuple(est.phase_log), {n: ch.spec.quantity for n, ch in data.channels.items()})
+    wf = {n: (np.array([a for a, _ in v]), np.array([b for _, b in v])) for n, v in est.weight_log.items()}
+    touched = {s.target_name for s in cfg.schedules if s.target == "observation"}
+    wf = {n: v for n, v in wf.items() if n in touched}
+    yield ForwardStage(fp, tuple(est.phase_log), {n: ch.spec.quantity for n, ch in data.channels.items()}, wf)
     sm = rts_smooth(fp, est.layout) if cfg.data["filter"]["smoother"] else None
     x, P = (sm.x, sm.P) if sm is not None else (fp.x_post, fp.P_post)
     hist = state_history(est, t, x, P)
     fwd = state_history(est, t, fp.x_post, fp.P_post)
+    histories = {"smoothed": hist, "forward": fwd}
+    if cfg.data["filter"]["compare_propagation"]:  # the no-observation reference (its P: the prior's)
+        xp = propagation_only(scenario, cfg, t)
+        histories["propagated"] = state_history(est, t, xp, np.broadcast_to(est.P0, (t.size, *est.P0.shape)))
     prior = state_history(est, t[:1], est.x0[None, :], est.P0[None, :, :])
     summary = {"scenario": scenario.name, "kind": "post2", "dof": cfg.dof, "grid_steps": int(t.size)}
     summary["smoothed"] = sm is not None
@@ -433,6 +474,4 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
     summary["observations"] = obs
     summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
     summary["health"] = post2_health(fp, P, x, data.notes)
-    yield Post2Result(
-        t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), {"smoothed": hist, "forward": fwd}, summary
-    )
+    yield Post2Result(t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), histories, summary)

@@ -15,9 +15,9 @@ import numpy as np
 from workbench.estimation.health import health_markdown
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
-from workbench.problems.post2 import pipeline
+from workbench.problems.post2 import build, pipeline
 from workbench.problems.post2.config import SCHEMA, config_for
-from workbench.problems.post2.model import STATES, aero_angles
+from workbench.problems.post2.model import OBSERVATIONS, STATES, aero_angles
 from workbench.problems.post2.recording import COMPONENTS, open_post2_recording
 from workbench.problems.post2.scoring import score
 from workbench.problems.post2.truth import sample_times, simulate_truth, write_observations
@@ -134,6 +134,16 @@ class Post2Problem:
                 md += (
                     f"\nposition components inside 3σ (smoothed): {100 * tr['position_inside_3sigma_fraction']:.1f} %\n"
                 )
+            md += _planted_table(summary)
+            fvp = tr.get("filtered_vs_propagation")
+            if fvp:
+                md += "\n| error at the end (norm) | propagation only | filtered (forward) | smoothed | unit |\n"
+                md += "|---|---|---|---|---|\n"
+                for name, c in fvp.items():
+                    e = c["end_error_norm"]
+                    shown = "attitude [α, β, bank]" if name == "attitude" else name
+                    md += f"| {shown} | {e['propagation_only']:.4g} | {e['forward']:.4g} | {e['smoothed']:.4g}"
+                    md += f" | {c['unit']} |\n"
             for name, p in tr.get("parameters", {}).items():
                 md += f"\n**{name}** (truth {p['truth']}):\n\n| after | error |\n|---|---|\n"
                 for n in (1, 4, 10):
@@ -163,6 +173,15 @@ class Post2Problem:
     def open_recording(self, path: Path, scenario: Scenario, truth, properties: dict):
         """The post2 recording (:mod:`.recording`)."""
         cfg = config_for(scenario)
+        geometry = None
+        veh = build.vehicle(scenario, cfg)
+        if veh.area > 0:  # display geometry: capsule from the reference area, canopy from the parachute's
+            d_chute = float(np.sqrt(4.0 * veh.parachute.ref_area / np.pi)) if veh.parachute is not None else None
+            geometry = {
+                "diameter_m": float(np.sqrt(4.0 * veh.area / np.pi)),
+                "parachute_diameter_m": d_chute,
+                "riser_m": 2.0 * d_chute if d_chute else 0.0,
+            }
         return open_post2_recording(
             path,
             scenario.name,
@@ -171,6 +190,12 @@ class Post2Problem:
             self.scorecard,
             states=[st.name for st in cfg.states],
             observations=[ob.name for ob in cfg.observations],
+            sizes={st.name: STATES[st.name].size for st in cfg.states},
+            residual_components={ob.name: OBSERVATIONS[ob.quantity].residual_names for ob in cfg.observations},
+            schedules=sorted({s.target_name for s in cfg.schedules if s.target == "observation"}),
+            geometry=geometry,
+            parachute_events={e.name: e.parachute for e in cfg.events if e.parachute is not None},
+            has_events=bool(cfg.events),
         )
 
     def export_columns(self, result) -> ExportTable:
@@ -187,6 +212,22 @@ class Post2Problem:
     def monte_carlo(self, scenario, out_dir, options, progress) -> McOutcome:
         """Not yet: the NEES study is in ``tests/benchmarks/bench_post2.py``."""
         raise NotImplementedError("post2 has no Monte Carlo analysis yet (see tests/benchmarks/bench_post2.py)")
+
+
+def _planted_table(summary: dict) -> str:
+    """Markdown table of the planted (truth) vs recovered (final, smoothed) value of every estimated
+    parameter with a known truth, with its 3σ and the error in units of 3σ."""
+    params = (summary.get("truth") or {}).get("parameters", {})
+    if not params:
+        return ""
+    md = "\n| parameter | planted | recovered | ±3σ | error / 3σ | inside 3σ |\n|---|---|---|---|---|---|\n"
+    for name, p in params.items():
+        st = summary["states"][name]
+        for i, tv in enumerate(p["truth"]):
+            z = p["final_error_over_3sigma_smoothed"][i]
+            md += f"| {name}{'' if len(p['truth']) == 1 else f'[{i}]'} | {tv:.6g} | {st['final'][i]:.6g} |"
+            md += f" {3.0 * st['final_sigma'][i]:.3g} | {z:+.2f} | {'yes' if abs(z) <= 1.0 else '**no**'} |\n"
+    return md
 
 
 def _si_unit(unit: str) -> str:

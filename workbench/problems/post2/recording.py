@@ -1,6 +1,10 @@
-"""The post2 recording: observations as read, residuals with ±3σ, every estimated state with ±3σ (and
-the truth when synthetic), the vehicle track in 3-D, the scorecard.
+"""The post2 recording: observations as read, residuals with ±3σ and the weight schedule, every
+estimated state with ±3σ converging (and the planted truth when synthetic), the phases, the vehicle
+in 3-D (capsule, parachute while open, tilt when a tilt state is estimated), the scorecard.
 
+States are read generically by name from the state map (``Post2Result.history``), so a state another
+module adds (per-regime multipliers, a drogue, a tilt, ...) is drawn without code here: scalar and
+vector blocks each get a tab with one small view per component (value, ±3σ, truth: four series).
 Drawn through :class:`workbench.recording.writer` and the entity paths of
 :mod:`workbench.recording.layout`; a :class:`~workbench.recording.dispatch.StageDispatch` maps each
 stage type to its handler (an unknown stage is a ``TypeError``).
@@ -9,19 +13,23 @@ stage type to its handler (an unknown stage is a ``TypeError``).
 from __future__ import annotations
 
 import contextlib
+import math
 from pathlib import Path
 
 import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+import trimesh
 
+from workbench.core.rotation import dcm_to_quat, quat_from_rotvec
 from workbench.problems.post2.model import OBSERVATIONS, STATES
 from workbench.problems.post2.pipeline import ForwardStage, ObservationData, Post2Result
 from workbench.problems.post2.scoring import truth_on_grid
 from workbench.recording import layout
-from workbench.recording.blueprint import standard_blueprint
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import open_recording
 
-__all__ = ["Post2Drawer", "open_post2_recording", "COMPONENTS"]
+__all__ = ["Post2Drawer", "open_post2_recording", "post2_blueprint", "COMPONENTS", "vehicle_meshes"]
 
 #: component names of the state blocks in the plots
 COMPONENTS = {
@@ -33,60 +41,214 @@ COMPONENTS = {
     "wind": ("east", "north"),
 }
 
+#: display unit of a state or observation unit (SI values are scaled by the factor for the plots)
+_DISPLAY = {"deg": ("deg", 180.0 / math.pi), "deg/s": ("deg/s", 180.0 / math.pi)}
+
+EST = (31, 119, 180, 255)
+FWD = (255, 127, 14, 255)
+TRUTH = (44, 160, 44, 255)
+PROP = (148, 103, 189, 255)
+
+
+def _display(unit: str) -> tuple[str, float]:
+    return _DISPLAY.get(unit, (unit, 1.0))
+
+
+def _components(name: str, size: int) -> tuple[str, ...]:
+    c = COMPONENTS.get(name)
+    if c is not None and len(c) == size:
+        return c
+    return ("value",) if size == 1 else tuple(f"c{i}" for i in range(size))
+
+
+def vehicle_meshes(diameter: float, parachute_diameter: float | None, riser: float) -> dict:
+    """Simple display meshes in the post2 body frame B (+X_B towards the heat shield): a 70° sphere-cone
+    forebody (apex on +X_B) and a conical back shell, and, with ``parachute_diameter`` [m], a canopy
+    ``riser`` [m] behind the vehicle (−X_B) with its riser end points; trimesh objects, metres."""
+    r = 0.5 * diameter
+    to_x = trimesh.transformations.rotation_matrix(math.pi / 2.0, [0.0, 1.0, 0.0])  # +Z -> +X
+    fore = trimesh.creation.cone(radius=r, height=r / math.tan(math.radians(70.0)), sections=32)
+    fore.apply_transform(to_x)
+    back = trimesh.creation.cone(radius=r, height=0.75 * diameter, sections=32)
+    back.apply_transform(trimesh.transformations.rotation_matrix(-math.pi / 2.0, [0.0, 1.0, 0.0]))  # apex -X
+    out = {"forebody": fore, "back_shell": back}
+    if parachute_diameter:
+        rp = 0.5 * parachute_diameter
+        canopy = trimesh.creation.cone(radius=rp, height=0.5 * rp, sections=32)
+        canopy.apply_transform(trimesh.transformations.rotation_matrix(-math.pi / 2.0, [0.0, 1.0, 0.0]))
+        canopy.apply_translation([-riser, 0.0, 0.0])
+        out["canopy"] = canopy
+        u = np.linspace(0.0, 2.0 * math.pi, 9)[:-1]
+        out["riser_ends"] = np.column_stack([np.full(u.size, -riser), rp * np.cos(u), rp * np.sin(u)])
+    return out
+
+
+def _along_velocity(v: np.ndarray) -> np.ndarray:
+    """q_I_B (n, 4) with X_B along v (n, 3) (3-DOF drawing: zero angle of attack)."""
+    out = np.empty((v.shape[0], 4))
+    for i, vi in enumerate(v):
+        x = vi / max(np.linalg.norm(vi), 1e-12)
+        a = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        y = np.cross(a, x)
+        y /= np.linalg.norm(y)
+        out[i] = dcm_to_quat(np.column_stack([x, y, np.cross(x, y)]))
+    return out
+
 
 class Post2Drawer:
-    """Draws the post2 stages; ``truth`` (the loaded truth.npz dict) or None."""
+    """Draws the post2 stages; ``truth`` (the loaded truth.npz dict) or None; ``geometry`` {"diameter_m",
+    "parachute_diameter_m" (or None), "riser_m"} and ``parachute_events`` {event name: True opens /
+    False releases} for the 3-D vehicle."""
 
-    def __init__(self, rec, truth, scorecard):
+    def __init__(self, rec, truth, scorecard, geometry=None, parachute_events=None):
         self.rec, self.truth, self.scorecard = rec, truth, scorecard
+        self.geometry = geometry or {}
+        self.parachute_events = dict(parachute_events or {})
+        self.events: tuple[tuple[float, str], ...] = ()
         self.handle = StageDispatch(
             {ObservationData: self._data, ForwardStage: self._forward, Post2Result: self._result}
         )
 
     def _data(self, stage: ObservationData) -> None:
         for name, ch in stage.channels.items():
-            comps = OBSERVATIONS[ch.spec.quantity].components
-            for i, c in enumerate(comps):
-                self.rec.scalars(layout.join(layout.sensor_path(name, c), layout.MEASURED_SERIES), ch.t, ch.z[:, i])
+            d = OBSERVATIONS[ch.spec.quantity]
+            unit, k = _display(d.file_unit or d.unit) if ch.spec.quantity != "quaternion" else ("1", 1.0)
+            for i, c in enumerate(d.components):
+                self.rec.scalars(
+                    layout.join(layout.sensor_path(name, c), layout.MEASURED_SERIES),
+                    ch.t,
+                    ch.z[:, i] * k,
+                    names=f"{name}.{c} measured [{unit}]",
+                )
 
     def _forward(self, stage: ForwardStage) -> None:
         fp = stage.forward
         for name, ih in fp.innovations.items():
-            comps = OBSERVATIONS[stage.quantities[name]].residual_names
-            for i, c in enumerate(comps):
+            d = OBSERVATIONS[stage.quantities[name]]
+            unit, k = _display(d.unit)
+            for i, c in enumerate(d.residual_names):
                 sd = np.sqrt(np.maximum(ih.S[:, i, i], 0.0))
-                self.rec.series_with_bounds(layout.residual_path(name, c), ih.t, ih.y[:, i], sd)
+                self.rec.series_with_bounds(
+                    layout.residual_path(name, c), ih.t, ih.y[:, i] * k, sd * k, names=f"{name}.{c} residual [{unit}]"
+                )
+        for name, (t, f) in stage.weight_factors.items():  # the weight schedule as applied
+            self.rec.scalars(
+                layout.plot_path(f"schedule/{name}_weight_factor"),
+                t,
+                f,
+                names=f"{name} weight factor (W × f, R / f) [1]",
+                colors=[FWD],
+            )
+        self.events = tuple(stage.events)
         if stage.events:
-            self.rec.events([(t, name, "INFO") for t, name in stage.events])
+            self.rec.events([(t, f"event {name}", "INFO") for t, name in stage.events])
+
+    def _phase_series(self, t: np.ndarray) -> None:
+        """Phase index vs time (0 before the first event, +1 at each), named after the events."""
+        if not self.events:
+            return
+        te = np.array([a for a, _ in self.events])
+        idx = np.searchsorted(te, t, side="right").astype(float)
+        label = "phase index [1] (" + ", ".join(f"{n} at {a:.1f} s" for a, n in self.events) + ")"
+        self.rec.scalars(layout.POST2_PHASE, t, idx, names=label, colors=[EST])
 
     def _result(self, res: Post2Result) -> None:
         tg = truth_on_grid(self.truth, res.t) if self.truth is not None else {}
+        prop = res.history.get("propagated")
         for name, h in res.history["smoothed"].items():
-            k = 180.0 / np.pi if STATES[name].unit in ("deg", "deg/s") else 1.0
-            comps = COMPONENTS.get(name, ("value",))
+            unit, k = _display(STATES[name].unit)
+            size = h["value"].shape[1]
+            comps = _components(name, size)
             v, s = h["value"] * k, h["sigma"] * k
             truth = None
             if name in tg:
                 truth = tg[name] * k
             elif self.truth is not None and f"param_{name}" in self.truth:
                 truth = np.broadcast_to(np.atleast_1d(self.truth[f"param_{name}"]) * k, v.shape)
+            shown = name
+            pv = prop[name]["value"] * k if prop is not None and name in prop else None
             if name in ("position", "velocity") and truth is not None:  # errors: values are too large to read
-                v, truth = v - truth, np.zeros_like(v)
-                name = f"{name}_error"
+                v, pv, truth = v - truth, None if pv is None else pv - truth, np.zeros_like(v)
+                shown = f"{name}_error"
             for i, c in enumerate(comps):
+                root = layout.plot_path(f"{shown}/{c}")
                 self.rec.series_with_bounds(
-                    layout.plot_path(f"{name}/{c}"),
+                    root,
                     res.t,
                     v[:, i],
                     s[:, i],
                     truth=None if truth is None else truth[:, i],
+                    names=f"{shown}.{c} [{unit}]",
                 )
+                if pv is not None:
+                    self.rec.scalars(
+                        layout.join(root, "propagation_only"),
+                        res.t,
+                        pv[:, i],
+                        names=f"{shown}.{c} propagation only [{unit}]",
+                        colors=[PROP],
+                    )
+        self._phase_series(res.t)
         p = res.smap.raw(res.x, "position")
-        self.rec.line_strip(layout.join(layout.ESTIMATE_SMOOTHED, "track"), p, color=(60, 140, 255, 255))
+        self.rec.line_strip(layout.join(layout.ESTIMATE_SMOOTHED, "track"), p, color=EST)
         pf = res.smap.raw(res.forward.x_post, "position")
-        self.rec.line_strip(layout.join(layout.ESTIMATE_FORWARD, "track"), pf, color=(255, 160, 40, 255))
+        self.rec.line_strip(layout.join(layout.ESTIMATE_FORWARD, "track"), pf, color=FWD)
         if self.truth is not None and "position" in self.truth:
-            self.rec.line_strip(layout.truth_path("track"), self.truth["position"], color=(120, 220, 120, 255))
+            self.rec.line_strip(layout.truth_path("track"), self.truth["position"], color=TRUTH)
+        self._vehicle(res)
+
+    def _vehicle(self, res: Post2Result) -> None:
+        """The vehicle at its smoothed pose (decimated to ≤ 2000 rows), with tilt and parachute."""
+        g = self.geometry
+        if not g.get("diameter_m"):
+            return
+        n = res.t.size
+        sel = np.unique(np.linspace(0, n - 1, min(n, 2000)).astype(int))
+        t = res.t[sel]
+        p = res.smap.raw(res.x[sel], "position")
+        if "attitude" in res.smap:
+            q = np.array(res.smap.raw(res.x[sel], "attitude"))
+        else:
+            q = _along_velocity(res.smap.raw(res.x[sel], "velocity"))
+        self.rec.poses(layout.VEHICLE, t, p, q)
+        tilt = next((nm for nm in res.history["smoothed"] if nm == "tilt" or nm.startswith("tilt")), None)
+        if tilt is not None:  # body drawn tilted by the estimated tilt (rad): about Y_B, or a rotation vector
+            a = np.asarray(res.history["smoothed"][tilt]["value"], float)[sel]
+            rv = np.zeros((a.shape[0], 3))
+            if a.shape[1] == 1:
+                rv[:, 1] = a[:, 0]
+            else:
+                rv[:, : min(3, a.shape[1])] = a[:, :3]
+            self.rec.poses(layout.VEHICLE_BODY, t, np.zeros((t.size, 3)), quat_from_rotvec(rv))
+        m = vehicle_meshes(g["diameter_m"], g.get("parachute_diameter_m"), g.get("riser_m", 0.0))
+        self.rec.mesh(layout.POST2_FOREBODY, m["forebody"], color=(200, 120, 60, 255))
+        self.rec.mesh(layout.POST2_BACK_SHELL, m["back_shell"], color=(220, 220, 225, 255))
+        if "canopy" not in m:
+            return
+        s = self.rec.stream
+        for te, name in self.events:
+            opens = self.parachute_events.get(name)
+            if opens is None:
+                continue
+            rr.set_time(layout.TIME, duration=float(te), recording=s)
+            if opens:
+                c = m["canopy"]
+                s.log(
+                    layout.POST2_PARACHUTE,
+                    rr.Mesh3D(
+                        vertex_positions=c.vertices.astype(np.float32),
+                        triangle_indices=c.faces.astype(np.uint32),
+                        vertex_normals=c.vertex_normals.astype(np.float32),
+                        albedo_factor=[230, 120, 40, 255],
+                    ),
+                )
+                s.log(
+                    layout.POST2_RISERS,
+                    rr.LineStrips3D([[[0.0, 0.0, 0.0], e] for e in m["riser_ends"]], colors=[[120, 120, 120]]),
+                )
+            else:
+                s.log(layout.POST2_PARACHUTE, rr.Clear(recursive=False))
+                s.log(layout.POST2_RISERS, rr.Clear(recursive=False))
 
     def finish(self, result: object, summary: dict) -> None:
         """Write the scorecard."""
@@ -95,24 +257,94 @@ class Post2Drawer:
             self.rec.health(summary["health"])
 
 
-def post2_blueprint(state_names: list[str], observation_names: list[str], has_truth: bool):
-    """The default layout: the 3D tracks; one plot tab per estimated state (value with ±3σ and the
-    truth; position and velocity as errors against the truth when it is known) and one residual tab
-    per observation (residual with ±3σ); the scorecard and the event log."""
-    plots = []
+def post2_blueprint(
+    state_names: list[str],
+    observation_names: list[str],
+    has_truth: bool,
+    *,
+    sizes: dict[str, int] | None = None,
+    residual_components: dict[str, tuple[str, ...]] | None = None,
+    schedules: list[str] | None = None,
+    has_events: bool = False,
+):
+    """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and "Vehicle" (origin
+    `/world/vehicle`: capsule, parachute, tilt); right, one tab per estimated state with a grid of one
+    view per component (value, ±3σ, truth; position and velocity as errors against the truth when it is
+    known), the phases and the weight schedule, one residual tab per observation (a view per component:
+    residual with ±3σ), the scorecard and the event log."""
+    sizes = sizes or {}
+    rc = residual_components or {}
+    tabs = []
     for n in state_names:
         shown = f"{n}_error" if has_truth and n in ("position", "velocity") else n
-        plots.append((shown, layout.plot_path(shown)))
-    residuals = [(n, layout.residual_path(n)) for n in observation_names]
-    return standard_blueprint(plots=plots, residuals=residuals)
+        comps = _components(n, sizes.get(n, STATES[n].size if n in STATES else 1))
+        views = [rrb.TimeSeriesView(name=f"{shown}.{c}", origin=layout.plot_path(f"{shown}/{c}")) for c in comps]
+        tabs.append(views[0] if len(views) == 1 else rrb.Grid(*views, name=shown))
+    if has_events:
+        tabs.append(rrb.TimeSeriesView(name="phases", origin=layout.POST2_PHASE))
+    for n in schedules or []:
+        tabs.append(
+            rrb.TimeSeriesView(name=f"{n} weight schedule", origin=layout.plot_path(f"schedule/{n}_weight_factor"))
+        )
+    res = []
+    for n in observation_names:
+        comps = rc.get(n)
+        if not comps:
+            res.append(rrb.TimeSeriesView(name=n, origin=layout.residual_path(n)))
+            continue
+        views = [rrb.TimeSeriesView(name=f"{n}.{c}", origin=layout.residual_path(n, c)) for c in comps]
+        res.append(views[0] if len(views) == 1 else rrb.Grid(*views, name=f"{n} residuals"))
+    scenes = rrb.Tabs(
+        rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD),
+        rrb.Spatial3DView(name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**"]),
+        active_tab=0,
+    )
+    right = [rrb.Tabs(*tabs, active_tab=0)]
+    if res:
+        right.append(rrb.Tabs(*res, active_tab=0))
+    right += [
+        rrb.TextDocumentView(name="Report", origin=layout.REPORT),
+        rrb.TextLogView(name="Events", origin=layout.EVENTS),
+    ]
+    shares = [3.0] + ([2.0] if res else []) + [1.5, 1.0]
+    return rrb.Blueprint(
+        rrb.Horizontal(scenes, rrb.Vertical(*right, row_shares=shares), column_shares=[2, 3]),
+        rrb.TimePanel(state="expanded", timeline=layout.TIME),
+        rrb.SelectionPanel(state="collapsed"),
+    )
 
 
 @contextlib.contextmanager
-def open_post2_recording(path: Path, name: str, truth, properties: dict, scorecard, *, states=(), observations=()):
+def open_post2_recording(
+    path: Path,
+    name: str,
+    truth,
+    properties: dict,
+    scorecard,
+    *,
+    states=(),
+    observations=(),
+    sizes=None,
+    residual_components=None,
+    schedules=(),
+    geometry=None,
+    parachute_events=None,
+    has_events: bool = False,
+):
     """Open the recording (published atomically) and yield its :class:`Post2Drawer`.
 
     ``states`` / ``observations``: the problem file's estimated-state and observation names, for the
-    default layout (:func:`post2_blueprint`)."""
-    bp = post2_blueprint(list(states), list(observations), truth is not None)
+    default layout (:func:`post2_blueprint`, with ``sizes`` {state: size}, ``residual_components``
+    {observation: names}, the observations a weight ``schedules`` touches, ``has_events``);
+    ``geometry``, ``parachute_events``: see :class:`Post2Drawer`."""
+    bp = post2_blueprint(
+        list(states),
+        list(observations),
+        truth is not None,
+        sizes=sizes,
+        residual_components=residual_components,
+        schedules=list(schedules),
+        has_events=has_events,
+    )
     with open_recording(path, name, blueprint=bp, properties=properties) as rec:
-        yield Post2Drawer(rec, truth, scorecard)
+        yield Post2Drawer(rec, truth, scorecard, geometry, parachute_events)

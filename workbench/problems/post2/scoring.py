@@ -14,9 +14,13 @@ import math
 
 import numpy as np
 
+from workbench.core.rotation import attitude_error
 from workbench.problems.post2.model import STATES
 
-__all__ = ["truth_on_grid", "score"]
+#: the trajectory blocks of the NEES (:func:`trajectory_nees`), in the error-state order of the state map
+TRAJECTORY = ("position", "velocity", "attitude", "body_rates")
+
+__all__ = ["truth_on_grid", "score", "TRAJECTORY", "trajectory_nees"]
 
 
 def truth_on_grid(truth: dict, t: np.ndarray) -> dict:
@@ -83,6 +87,21 @@ def score(result, truth: dict) -> dict:
                 "end_smoothed": es[-1].tolist(),
                 "end_sigma_smoothed": (smo[name]["sigma"][-1] * k).tolist(),
             }
+    if "propagated" in result.history:  # filtered vs propagation-only (thesis Ch. 3.2.3), at the end
+        prop = result.history["propagated"]
+        cmp = {}
+        for name in ("position", "velocity", "attitude", "body_rates"):
+            if name not in tg or name not in prop:
+                continue
+            k = _scale(name)
+            ends = {}
+            for label, h in (("propagation_only", prop), ("forward", fwd), ("smoothed", smo)):
+                e = (h[name]["value"][-1] - tg[name][-1]) * k
+                if name == "attitude":
+                    e = (e + 180.0) % 360.0 - 180.0
+                ends[label] = float(np.linalg.norm(e))
+            cmp[name] = {"unit": "deg" if name == "attitude" else STATES[name].unit, "end_error_norm": ends}
+        out["filtered_vs_propagation"] = cmp
     params = {}
     first = next(iter(result.forward.innovations.values()), None)
     for name in result.smap.blocks:
@@ -107,4 +126,33 @@ def score(result, truth: dict) -> dict:
         rec["inside_3sigma_at_end"] = bool(np.all(np.abs(vf[-1] - tv) <= 3.0 * sf[-1]))
         params[name] = rec
     out["parameters"] = params
+    return out
+
+
+def trajectory_nees(result, truth: dict, names=TRAJECTORY) -> dict:
+    """NEES of the trajectory blocks ``names`` present in the state over the grid: error
+    e = estimate ⊟ truth (position [m], velocity [m/s], body small angle of the attitude [rad], body
+    rates [rad/s]; the truth interpolated to the grid, its quaternion at the nearest truth sample) and
+    ``e P⁻¹ e`` with the matching block of the error covariance.  Returns ``{"t": (n,) [s],
+    "dim": int, "forward": (n,), "smoothed": (n,)}`` (χ²(dim) when the filter is consistent)."""
+    sm = result.smap
+    names = [n for n in names if n in sm.blocks]
+    idx = np.concatenate([np.arange(sm.blocks[n].se.start, sm.blocks[n].se.stop) for n in names])
+    t = result.t
+    tg = truth_on_grid(truth, t)
+    if "attitude" in names:
+        k = np.clip(np.searchsorted(truth["t"], t - 1e-9), 0, truth["t"].size - 1)
+        q_true = truth["quaternion"][k]
+    out = {"t": t, "dim": int(idx.size)}
+    passes = {"forward": (result.forward.x_post, result.forward.P_post), "smoothed": (result.x, result.P)}
+    for label, (x, P) in passes.items():
+        parts = []
+        for n in names:
+            if n == "attitude":
+                parts.append(attitude_error(q_true, sm.raw(x, "attitude")))
+            else:
+                parts.append(sm.raw(x, n) - tg[n])
+        e = np.concatenate(parts, axis=1)
+        Ps = P[:, idx[:, None], idx[None, :]]
+        out[label] = np.einsum("ni,ni->n", e, np.linalg.solve(Ps, e[..., None])[..., 0])
     return out

@@ -1,0 +1,72 @@
+"""post2 recording: a short 6-DOF entry with a parachute event, a weight schedule and the propagation-only
+reference — what the recording holds (per-component state views with truth, residuals with ±3σ, the
+applied weight factor, the phase index, the vehicle pose, the canopy from the opening event, the
+scorecard's planted-vs-recovered table)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from workbench.io.assets import assets_dir
+from workbench.io.scenario import load_scenario
+from workbench.problems.runner import run_scenario
+from workbench.recording import layout
+from workbench.recording.reader import read_recording
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory):
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml").with_overrides(
+        {
+            "model.t_end_s": 3.0,
+            "events.chute": {"when": "time", "value": 1.5, "parachute": True},
+            "schedules.early": {"observation": "rates", "weight_factor": 4.0, "end_event": "chute"},
+            "filter.compare_propagation": True,
+        }
+    )
+    out = tmp_path_factory.mktemp("post2_rec")
+    r = run_scenario(sc, out)
+    return r, read_recording(r.recording)
+
+
+def test_states_residuals_schedule_and_phases_are_drawn(short_run):
+    r, rec = short_run
+    n = r.summary["grid_steps"]
+    for c in ("x", "y", "z"):
+        assert rec.row_count(f"/plots/position_error/{c}/value") == n
+        assert rec.row_count(f"/plots/position_error/{c}/propagation_only") == n
+    for c in ("alpha", "beta", "bank"):
+        root = layout.plot_path(f"attitude/{c}")
+        assert rec.row_count(f"{root}/value") == n and rec.row_count(f"{root}/truth") == n
+        assert rec.row_count(f"{root}/plus_3sigma") == n
+    t, v = rec.scalars("/plots/cm_multiplier/value/truth")
+    assert np.allclose(v, 1.05)  # the planted truth beside the estimate
+    for c in ("p", "q", "r"):
+        assert rec.row_count(layout.join(layout.residual_path("rates", c), "value")) == 31
+    t, f = rec.scalars(layout.plot_path("schedule/rates_weight_factor"))
+    assert np.all(f[t < 1.5] == 4.0) and np.all(f[t > 1.5] == 1.0)  # the window closes at the event
+    t, ph = rec.scalars(layout.POST2_PHASE)
+    assert ph[0] == 0.0 and ph[-1] == 1.0
+    assert any("chute" in text for _, text, _ in rec.text_log())
+
+
+def test_vehicle_pose_and_parachute(short_run):
+    r, rec = short_run
+    t, tr, q = rec.transforms(layout.VEHICLE)
+    assert t.size == r.summary["grid_steps"] and np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
+    assert layout.POST2_FOREBODY in rec.entities() and layout.POST2_PARACHUTE in rec.entities()
+    assert rec.row_count(layout.POST2_PARACHUTE) == 1  # logged once, at the opening
+
+
+def test_scorecard_has_planted_vs_recovered_and_propagation_only(short_run):
+    r, rec = short_run
+    md = rec.text_document()
+    assert "| parameter | planted | recovered | ±3σ | error / 3σ | inside 3σ |" in md
+    assert "| cm_multiplier | 1.05 |" in md
+    assert "propagation only" in md
+    s = json.loads(r.summary_path.read_text(encoding="utf-8"))
+    e = s["truth"]["filtered_vs_propagation"]["position"]["end_error_norm"]
+    assert set(e) == {"propagation_only", "forward", "smoothed"}
