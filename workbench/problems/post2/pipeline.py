@@ -163,6 +163,8 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
             R = np.broadcast_to(np.diag(spec.sigma**2), (t.size, d.size, d.size)).copy()
         else:
             R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]))
+        if spec.decimate > 1:  # every n-th (pre-smoothed) sample
+            t, z, z_raw, R = (a[:: spec.decimate] for a in (t, z, z_raw, R))
         out[spec.name] = Channel(spec, t, z, z_raw, R)
     return ObservationData(out)
 
@@ -175,6 +177,7 @@ def _kind(unit: str) -> str:
         "Pa": "pressure",
         "kg/m^3": "density",
         "1": "dimensionless",
+        "K": "temperature",
     }[unit]
 
 

@@ -56,7 +56,7 @@ class Post2Drawer:
                 sd = np.sqrt(np.maximum(ih.S[:, i, i], 0.0))
                 self.rec.series_with_bounds(layout.residual_path(name, c), ih.t, ih.y[:, i], sd)
         if stage.events:
-            self.rec.events([(t, name, "event") for t, name in stage.events])
+            self.rec.events([(t, name, "INFO") for t, name in stage.events])
 
     def _result(self, res: Post2Result) -> None:
         tg = truth_on_grid(self.truth, res.t) if self.truth is not None else {}
