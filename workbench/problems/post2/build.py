@@ -82,7 +82,9 @@ def table_file_atmosphere(scenario: Scenario, body: str) -> TabulatedAtmosphere:
     except ValueError as err:
         raise ScenarioError(scenario.path, "environment.table_file", f"{path.name}: {err}") from None
     if a.shape[1] != 4:
-        raise ScenarioError(scenario.path, "environment.table_file", f"{path.name}: expected 4 columns, got {a.shape[1]}")
+        raise ScenarioError(
+            scenario.path, "environment.table_file", f"{path.name}: expected 4 columns, got {a.shape[1]}"
+        )
     gas = {"mars": (MARS_CO2_GAS_CONSTANT, MARS_GAMMA, CO2_SUTHERLAND)}.get(
         body, (TITAN_N2_GAS_CONSTANT, TITAN_GAMMA, N2_SUTHERLAND)
     )
@@ -120,9 +122,17 @@ def vehicle(scenario: Scenario, cfg: Post2Config, ca_factor=1.0, cn_factor=1.0, 
     )
 
 
-def events(cfg: Post2Config) -> tuple[Event, ...]:
-    """The :class:`Event` list of ``[events.*]`` in file order."""
-    return tuple(Event(e.name, e.when, e.value, e.mass, e.ref_area, e.parachute, e.chute) for e in cfg.events)
+def events(cfg: Post2Config, truth: bool = False) -> tuple[Event, ...]:
+    """The :class:`Event` list of ``[events.*]`` in file order (``truth``: with the truth's own triggers)."""
+    return tuple(
+        Event(
+            e.name,
+            e.truth_when if truth and e.truth_when else e.when,
+            e.truth_value if truth and e.truth_when else e.value,
+            e.mass, e.ref_area, e.parachute, e.chute,
+        )  # fmt: skip
+        for e in cfg.events
+    )
 
 
 def state_map(cfg: Post2Config) -> StateMap:

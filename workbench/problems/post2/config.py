@@ -74,6 +74,9 @@ EVENT_KEYS: dict[str, tuple[str, Any, str]] = {
     "ref_area_m2": (_F, None, "new aerodynamic reference area"),
     "parachute": (_B, None, "true: the parachute opens; false: it is released"),
     "chute": (_S, None, "which parachute opens: `main` (the vehicle file's) or `drogue` ([vehicle] drogue_*)"),
+    "truth_when": (_S, None, "synthetic truth only: its own trigger (e.g. `mach_below`) when the reconstruction's is "
+                   "the time read from the data"),
+    "truth_value": (_F, None, "synthetic truth only: the value of `truth_when`"),
 }
 
 EVENT_CONDITIONS = ("time", "mach_below", "altitude_below", "dynamic_pressure_above")
@@ -337,6 +340,8 @@ class EventSpec:
     ref_area: float | None
     parachute: bool | None
     chute: str | None = None
+    truth_when: str | None = None
+    truth_value: float | None = None
 
 
 @dataclass(frozen=True)
@@ -483,7 +488,12 @@ def _event(file: Path, name: str, raw: dict) -> EventSpec:
         )
     if t["chute"] not in (None, "main", "drogue"):
         raise ScenarioError(file, f"{pre}.chute", f"{t['chute']!r}: use `main` or `drogue`")
-    return EventSpec(name, t["when"], float(t["value"]), t["mass_kg"], t["ref_area_m2"], t["parachute"], t["chute"])
+    if t["truth_when"] is not None and (t["truth_when"] not in EVENT_CONDITIONS or t["truth_value"] is None):
+        raise ScenarioError(file, f"{pre}.truth_when", f"use one of {', '.join(EVENT_CONDITIONS)}, with truth_value")
+    return EventSpec(
+        name, t["when"], float(t["value"]), t["mass_kg"], t["ref_area_m2"], t["parachute"], t["chute"],
+        t["truth_when"], t["truth_value"],
+    )  # fmt: skip
 
 
 def config_for(scenario: Scenario) -> Post2Config:

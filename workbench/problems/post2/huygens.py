@@ -188,6 +188,7 @@ def _move(model: TrajectoryModel, X: np.ndarray, t0: float, dt: np.ndarray, h: f
     phase = model.initial_phase()
     step = dt / n
     for _ in range(n):  # each member its own (signed) step: the classic RK4 with a per-row dt
+
         def f(z):
             return model.derivative(z, phase)
 
@@ -285,13 +286,13 @@ def reconstruct(scenario: Scenario, telemetry, options):
 
 def _start_from(scenario: Scenario, sel: McSelection) -> Scenario:
     return scenario.with_overrides(
-            {
-                "states.position.value": sel.x0[:3].tolist(),
-                "states.position.sigma": sel.sigma0[:3].tolist(),
-                "states.velocity.value": sel.x0[3:].tolist(),
-                "states.velocity.sigma": sel.sigma0[3:].tolist(),
-            }
-        )
+        {
+            "states.position.value": sel.x0[:3].tolist(),
+            "states.position.sigma": sel.sigma0[:3].tolist(),
+            "states.velocity.value": sel.x0[3:].tolist(),
+            "states.velocity.sigma": sel.sigma0[3:].tolist(),
+        }
+    )
 
 
 # ------------------------------------------------------------------ scorecard

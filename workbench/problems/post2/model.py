@@ -136,7 +136,7 @@ STATES.update(
         "ca_multiplier_sup": StateDef(1, "1", False, (3, 6), 1e-4, "CA multiplier, supersonic continuum (Mach < 5)"),
         "drogue_drag_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the drogue parachute CD"),
         "tilt": StateDef(
-            1, "deg", False, (3,), 1e-3, "3-DOF: angle of the probe axis from the air-relative velocity under the drogue"
+            1, "deg", False, (3,), 1e-3, "3-DOF: probe axis from the air-relative velocity, under the drogue"
         ),
         "wind_vertical": StateDef(1, "m/s", False, (3, 6), 1e-3, "vertical wind, + up (the air moves along +r̂)"),
         "wind_horizontal": StateDef(1, "m/s", False, (3, 6), 1e-3, "horizontal (zonal, + east) wind"),
@@ -474,7 +474,8 @@ class TrajectoryModel:
         free-molecular w_fm = smoothstep of log10 Kn from −2 to −1 (full at Kn ≥ 0.1), the continuum
         rest split by smoothstep of Mach from 5 to 10 (hypersonic above 10, supersonic below 5)."""
         m = [self.param(x, f"ca_multiplier_{r}", 1.0)[..., 0] for r in ("fm", "hyp", "sup")]
-        if not any(np.any(v != 1.0) for v in m) and not any(f"ca_multiplier_{r}" in self.smap for r in ("fm", "hyp", "sup")):
+        estimated = any(f"ca_multiplier_{r}" in self.smap for r in ("fm", "hyp", "sup"))
+        if not estimated and not any(np.any(v != 1.0) for v in m):
             return np.ones_like(mach)
         w_fm = _smoothstep(np.log10(np.maximum(kn, 1e-12)) + 2.0)
         w_h = _smoothstep((mach - 5.0) / 5.0)

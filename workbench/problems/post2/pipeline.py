@@ -300,6 +300,8 @@ def _grid(cfg: Post2Config, channels: dict[str, Channel]) -> np.ndarray:
     n = max(1, int(math.ceil((cfg.t_end - cfg.t_start) / cfg.grid - 1e-9)))
     base = np.linspace(cfg.t_start, cfg.t_end, n + 1)
     allt = np.concatenate([base] + [ch.t for ch in channels.values()])
+    ev_t = [e.value for e in cfg.events if e.when == "time" and cfg.t_start < e.value < cfg.t_end]
+    allt = np.concatenate([allt, ev_t])  # time events exactly on the grid
     g = np.unique(np.round(allt, 9))
     return g
 

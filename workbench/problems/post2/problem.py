@@ -14,9 +14,8 @@ import numpy as np
 
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
-from workbench.problems.post2 import pipeline
-from workbench.problems.post2.config import SCHEMA, config_for
 from workbench.problems.post2 import huygens
+from workbench.problems.post2.config import SCHEMA, config_for
 from workbench.problems.post2.model import DESCENT_NOMINALS, STATES, aero_angles
 from workbench.problems.post2.recording import COMPONENTS, open_post2_recording
 from workbench.problems.post2.recording_mc import open_mc_recording
@@ -132,7 +131,8 @@ class Post2Problem:
             m = summary["mc_initial_state"]
             md += (
                 f"\n## Monte Carlo initial state\n\n{m['members']} members ({m['scheduler']}, {m['wall_s']:.1f} s): "
-                f"best member {m['best_member']} metric {m['best_metric']:.4g} (delivered state {m['nominal_metric']:.4g}), "
+                f"best member {m['best_member']} metric {m['best_metric']:.4g} "
+                f"(delivered state {m['nominal_metric']:.4g}), "
                 f"time shift {m['best_shift_s']:+.2f} s; {m['kept']} kept\n"
             )
         if tr:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 
 import numpy as np
+import rerun as rr
 
 from workbench.problems.post2.huygens import McSelection
 from workbench.recording import layout
@@ -31,26 +32,30 @@ def draw_mc_selection(rec, sel: McSelection) -> None:
     """Draw one :class:`McSelection` into the recording writer ``rec`` (paths in the module docstring)."""
     n = sel.metric.size
     idx = np.arange(n)
-    finite = np.isfinite(sel.metric)
-    rec.scatter(
-        layout.join(_BASE, "metric"), None, np.where(finite, sel.metric, np.nan), step=idx,
-        names="member metric [m/s²]", colors=(150, 150, 150, 255), size=1.5,
-    )  # fmt: skip
-    rec.scatter(
-        layout.join(_BASE, "kept"), None, sel.metric[sel.kept], step=sel.kept,
-        names="kept", colors=(255, 140, 0, 255), size=4.0,
-    )  # fmt: skip
-    rec.scatter(
-        layout.join(_BASE, "delivered"), None, np.array([sel.nominal_metric]), step=np.array([0]),
-        names="delivered state", colors=(60, 140, 255, 255), marker="diamond", size=6.0,
-    )  # fmt: skip
-    rec.scatter(
-        layout.join(_BASE, "shift"), None, np.where(np.isfinite(sel.shift_s), sel.shift_s, np.nan), step=idx,
-        names="time alignment Δ [s]", colors=(120, 200, 120, 255), size=1.5,
-    )  # fmt: skip
+    fin = np.isfinite(sel.metric)
+    grey, green = (150, 150, 150), (120, 200, 120)
+    _sample_points(rec, layout.join(_BASE, "metric"), idx[fin], sel.metric[fin], "member metric [m/s²]", grey, 1.5)
+    _sample_points(rec, layout.join(_BASE, "kept"), sel.kept, sel.metric[sel.kept], "kept", (255, 140, 0), 4.0)
+    _sample_points(rec, layout.join(_BASE, "delivered"), np.array([0]), np.array([sel.nominal_metric]),
+                   "delivered state (member 0)", (60, 140, 255), 6.0)  # fmt: skip
+    fs = np.isfinite(sel.shift_s)
+    _sample_points(rec, layout.join(_BASE, "shift"), idx[fs], sel.shift_s[fs], "time alignment Δ [s]", green, 1.5)
     rec.points(layout.join(_CLOUD, "members"), sel.members[:, :3], colors=(150, 150, 150, 160), radii=300.0)
     rec.points(layout.join(_CLOUD, "kept"), sel.members[sel.kept, :3], colors=(255, 140, 0, 255), radii=800.0)
     rec.points(layout.join(_CLOUD, "chosen"), sel.x0[None, :3], colors=(255, 40, 40, 255), radii=1500.0)
+
+
+def _sample_points(rec, entity: str, samples: np.ndarray, values: np.ndarray, name: str, color, size: float) -> None:
+    """Values (k,) against member indices ``samples`` (k,) on the ``sample`` timeline, as markers."""
+    rec.stream.send_columns(
+        entity,
+        indexes=[rr.TimeColumn(layout.SAMPLE, sequence=np.asarray(samples, dtype=np.int64))],
+        columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=np.float64)),
+    )
+    rec.stream.log(
+        entity, rr.SeriesPoints(names=[name], colors=[(*color, 255)], markers=["circle"], marker_sizes=[size]),
+        static=True,
+    )  # fmt: skip
 
 
 class McDrawer:

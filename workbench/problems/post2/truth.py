@@ -34,7 +34,13 @@ from workbench.io.scenario import Scenario
 from workbench.io.telemetry import write_telemetry
 from workbench.problems.post2 import build
 from workbench.problems.post2.config import Post2Config
-from workbench.problems.post2.model import DESCENT_NOMINALS, OBSERVATIONS, StateMap, TrajectoryModel, quat_from_aero_angles
+from workbench.problems.post2.model import (
+    DESCENT_NOMINALS,
+    OBSERVATIONS,
+    StateMap,
+    TrajectoryModel,
+    quat_from_aero_angles,
+)
 
 __all__ = ["truth_model", "simulate_truth", "write_observations", "sample_times"]
 
@@ -85,7 +91,7 @@ def truth_model(scenario: Scenario, cfg: Post2Config) -> TrajectoryModel:
         veh = replace(
             veh, ca_mach_factor=lambda m: 1.0 + aw * np.sin(2.0 * math.pi * np.log10(np.maximum(m, 1e-3)) / 1.2)
         )
-    return TrajectoryModel(StateMap(names), cfg.dof, env, veh, build.events(cfg), nominal=nominal)
+    return TrajectoryModel(StateMap(names), cfg.dof, env, veh, build.events(cfg, truth=True), nominal=nominal)
 
 
 def _x0(model: TrajectoryModel, cfg: Post2Config) -> np.ndarray:
