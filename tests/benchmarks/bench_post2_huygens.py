@@ -100,7 +100,7 @@ def _one_seed(seed: int, out: Path) -> dict:
     sc0 = load_scenario(TOML)
     cfg = config_for(sc0)
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
-    x_true = huygens.dispersed_members(mean, huygens._covariance(sc0, cfg), 2, seed=10_000 + seed)[1]
+    x_true = huygens.dispersed_members(mean, huygens.delivered_covariance(sc0, cfg), 2, seed=10_000 + seed)[1]
     sc = sc0.with_overrides(
         {"truth.states.position": x_true[:3].tolist(), "truth.states.velocity": x_true[3:].tolist()}
     )

@@ -148,7 +148,7 @@ def test_truth_writes_the_telemetry_files_a_user_supplies(tmp_path):
 
 def _entry_channel(model, x_true, t_end=200.0, noise=0.02, seed=0):
     t = np.arange(0.0, t_end + 1e-9, 0.32)
-    a = huygens._propagate_accel(model, x_true[None, :], 0.0, int(round(t_end / 0.02)), 0.02)[0]
+    a = huygens.propagate_axial_acceleration(model, x_true[None, :], 0.0, int(round(t_end / 0.02)), 0.02)[0]
     z = np.interp(t, 0.02 * np.arange(a.size), a) + np.random.default_rng(seed).normal(0.0, noise, t.size)
     spec = type("S", (), {"quantity": "acceleration_axial", "name": "accel_entry"})()
     return Channel(spec, t, z[:, None], z[:, None], np.full((t.size, 1, 1), noise**2))
@@ -159,7 +159,7 @@ def test_mc_selection_picks_the_member_nearest_the_truth():
     cfg = config_for(sc)
     model = huygens.entry_model(sc, cfg)
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
-    cov = huygens._covariance(sc, cfg)
+    cov = huygens.delivered_covariance(sc, cfg)
     x_true = huygens.dispersed_members(mean, cov, 2, seed=11)[1]
     ch = _entry_channel(model, x_true)
     sel = huygens.select_initial_state(sc, cfg, ch, 150, seed=5, extra_members=x_true[None, :])
@@ -184,7 +184,7 @@ def test_mc_selection_errors_are_located():
     bad[0][1] = 2.0
     sc2 = _scenario({"monte_carlo.covariance": bad})
     with pytest.raises(ScenarioError, match="monte_carlo.covariance"):
-        huygens._covariance(sc2, config_for(sc2))
+        huygens.delivered_covariance(sc2, config_for(sc2))
 
 
 MAIN_ONLY = """

@@ -34,14 +34,17 @@ import numpy as np
 
 from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.units import to_si
 from workbench.problems.post2 import build, pipeline
-from workbench.problems.post2.config import Post2Config, _factor, config_for
+from workbench.problems.post2.config import Post2Config, config_for
 from workbench.problems.post2.model import STATES, StateMap, TrajectoryModel
 
 __all__ = [
     "McSelection",
     "dispersed_members",
     "entry_model",
+    "delivered_covariance",
+    "propagate_axial_acceleration",
     "member_metrics",
     "member_loop_metric",
     "select_initial_state",
@@ -96,7 +99,9 @@ def entry_model(scenario: Scenario, cfg: Post2Config) -> TrajectoryModel:
     )
 
 
-def _covariance(scenario: Scenario, cfg: Post2Config) -> np.ndarray:
+def delivered_covariance(scenario: Scenario, cfg: Post2Config) -> np.ndarray:
+    """The ``[monte_carlo] covariance`` (6, 6) in SI (m², m²/s, m²/s²), checked symmetric positive
+    definite; without it the diagonal of the position/velocity states' 1σ."""
     mc = cfg.data["monte_carlo"]
     c = mc["covariance"]
     if c is None:
@@ -123,8 +128,11 @@ def dispersed_members(mean: np.ndarray, cov: np.ndarray, n: int, seed: int) -> n
     return mean + z @ np.linalg.cholesky(cov).T
 
 
-def _propagate_accel(model: TrajectoryModel, X: np.ndarray, t0: float, n_steps: int, h: float) -> np.ndarray:
-    """Axial acceleration [m/s²] (n, n_steps + 1) of members X (n, 6) on the grid t0 + h k (RK4)."""
+def propagate_axial_acceleration(
+    model: TrajectoryModel, X: np.ndarray, t0: float, n_steps: int, h: float
+) -> np.ndarray:
+    """Axial acceleration [m/s²] (n, n_steps + 1) of members X (n, 6) [m, m/s, inertial] on the grid
+    t0 + h k [s] (RK4 of step h, the entry phase: no events)."""
     phase = model.initial_phase()
     out = np.empty((X.shape[0], n_steps + 1))
     y = np.array(X, dtype=float)
@@ -151,7 +159,7 @@ def member_metrics(shared: tuple, start: int, stop: int, _seeds=None) -> tuple[n
     """Chunk task: metric and time shift Δ [s] of members ``start..stop`` (module docstring, steps
     2-4).  ``shared`` = (model, members (N, 6), t0, h, n_steps, obs t (m,), obs z (m,), level, end_s)."""
     model, X, t0, h, n_steps, tz, z, level, end = shared
-    a = _propagate_accel(model, X[start:stop], t0, n_steps, h)
+    a = propagate_axial_acceleration(model, X[start:stop], t0, n_steps, h)
     return _metric(a, t0, h, tz, z, level, end)
 
 
@@ -176,7 +184,7 @@ def member_loop_metric(model: TrajectoryModel, X: np.ndarray, t0, h, n_steps, tz
     m = np.empty(X.shape[0])
     s = np.empty(X.shape[0])
     for i in range(X.shape[0]):
-        mi, si = _metric(_propagate_accel(model, X[i : i + 1], t0, n_steps, h), t0, h, tz, z, level, end)
+        mi, si = _metric(propagate_axial_acceleration(model, X[i : i + 1], t0, n_steps, h), t0, h, tz, z, level, end)
         m[i], s[i] = mi[0], si[0]
     return m, s
 
@@ -228,7 +236,7 @@ def select_initial_state(
             f"the observation {channel.spec.name!r} never reaches {level:g} m/s² before end_s = {end:g} s",
         )  # fmt: skip
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
-    X = dispersed_members(mean, _covariance(scenario, cfg), members, seed)
+    X = dispersed_members(mean, delivered_covariance(scenario, cfg), members, seed)
     if extra_members is not None:
         X = np.vstack([X, extra_members])
     model = entry_model(scenario, cfg)
@@ -253,7 +261,7 @@ def select_initial_state(
     keep = max(1, min(int(mc["keep"]), X.shape[0]))
     kept = np.argsort(metric, kind="stable")[:keep]
     moved = _move(model, X[kept], cfg.t_start, shift[kept], h)
-    sigma0 = np.std(moved, axis=0, ddof=1) if keep > 1 else np.sqrt(np.diag(_covariance(scenario, cfg)))
+    sigma0 = np.std(moved, axis=0, ddof=1) if keep > 1 else np.sqrt(np.diag(delivered_covariance(scenario, cfg)))
     sigma0 = np.maximum(sigma0, np.r_[np.full(3, 10.0), np.full(3, 0.01)])  # floors: 10 m, 1 cm/s
     return McSelection(X, metric, shift, kept, moved[0], sigma0, float(metric[0]), mean, wall, desc)
 
@@ -296,6 +304,11 @@ def _start_from(scenario: Scenario, sel: McSelection) -> Scenario:
 
 
 # ------------------------------------------------------------------ scorecard
+def _factor(unit: str) -> float:
+    """SI value of one ``unit`` (the state units are pure scales)."""
+    return 1.0 if unit in ("1", "-") else float(to_si(1.0, unit)[0])
+
+
 def tolerance_si(scenario: Scenario, name: str, value) -> np.ndarray:
     """A ``[truth.tolerances]`` entry in SI (the state's unit converted), (size,)."""
     if name not in STATES:
