@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -118,58 +117,65 @@ def test_regime_multipliers_blend_smoothly():
     np.testing.assert_allclose(f, [1.1, 1.1, 0.5 * (1.1 + 0.97), 0.97, 0.97, 1.05])
 
 
-def _short_scenario(tmp_path: Path):
-    """Entry + main-chute start only (330 s), entry and main accelerometer and pressure channels."""
-    sc = _scenario({"model.t_end_s": 330.0, "observations.accel_main.end_s": 329.0,
-                    "observations.pressure.end_s": 329.0, "monte_carlo.members": 0})  # fmt: skip
-    for k in ("accel_drogue", "accel_late", "temperature", "radar_a", "radar_b"):
+def _short_scenario():
+    """The first 60 s of the entry (near vacuum: a fast truth), the entry accelerometer only."""
+    sc = _scenario({"model.t_end_s": 60.0, "observations.accel_entry.end_s": 59.0, "monte_carlo.members": 0})
+    for k in [k for k in sc.data["observations"] if k != "accel_entry"]:
         sc.data["observations"].pop(k)
-    for k in ("drogue",):
-        sc.data["events"].pop(k)
     return sc
 
 
 def test_truth_writes_the_telemetry_files_a_user_supplies(tmp_path):
-    sc = _short_scenario(tmp_path)
-    syn = Post2Problem().synthesize(sc, tmp_path, seed=3)
-    assert set(syn.telemetry) == {"accel_entry", "accel_main", "pressure"}
+    syn = Post2Problem().synthesize(_short_scenario(), tmp_path, seed=3)
+    assert set(syn.telemetry) == {"accel_entry"}
     ent = read_telemetry(syn.telemetry["accel_entry"])
-    assert np.allclose(np.diff(ent.time), 0.32)  # 3.125 Hz
-    main = read_telemetry(syn.telemetry["accel_main"])
-    assert np.allclose(np.diff(main.time), 1.0 / 4.167, atol=1e-6)
+    assert np.allclose(np.diff(ent.time), 0.32) and ent.time[-1] == pytest.approx(58.88)  # 3.125 Hz
     a = ent.stack(("ax",))[:, 0]
-    assert a.min() < -50.0  # the entry deceleration pulse (~ -120 m/s²)
+    assert abs(np.mean(a) - 0.003) < 0.01  # in near vacuum: the planted bias + 0.02 m/s² noise
     tr = Post2Problem().load_truth(syn.truth)
     assert tr["param_tilt"][0] == pytest.approx(math.radians(10.0))
     assert tr["param_radar_scale_factor"][0] == pytest.approx(0.93)
+    assert tr["param_parachute_drag_multiplier"][0] == pytest.approx(1.14)
     assert tr["tol_parachute_drag_multiplier"][0] == pytest.approx(0.02)
-    assert 260.0 < tr["event_times"][0] < 280.0  # the main chute at Mach 1.35, the thesis' T0 ~ 271 s
+    assert tr["tol_tilt"][0] == pytest.approx(math.radians(1.0))
 
 
 def _entry_channel(model, x_true, t_end=200.0, noise=0.02, seed=0):
-    t = np.arange(0.0, t_end + 1e-9, 0.32)
-    a = huygens.propagate_axial_acceleration(model, x_true[None, :], 0.0, int(round(t_end / 0.02)), 0.02)[0]
-    z = np.interp(t, 0.02 * np.arange(a.size), a) + np.random.default_rng(seed).normal(0.0, noise, t.size)
+    """An axial-accelerometer channel of the member ``x_true`` itself (no model error), every 1 s (on
+    the members' grid: the comparison is then exact but for the noise)."""
+    h = 1.0
+    a = huygens.propagate_axial_acceleration(model, x_true[None, :], 0.0, int(round(t_end / h)), h)[0]
+    t = h * np.arange(a.size)
+    z = a + np.random.default_rng(seed).normal(0.0, noise, t.size)
     spec = type("S", (), {"quantity": "acceleration_axial", "name": "accel_entry"})()
     return Channel(spec, t, z[:, None], z[:, None], np.full((t.size, 1, 1), noise**2))
 
 
 def test_mc_selection_picks_the_member_nearest_the_truth():
-    sc = _scenario({"monte_carlo.end_s": 200.0, "monte_carlo.step_s": 1.0, "monte_carlo.keep": 5})
+    sc = _scenario({"monte_carlo.end_s": 190.0, "monte_carlo.step_s": 1.0, "monte_carlo.keep": 5})
     cfg = config_for(sc)
     model = huygens.entry_model(sc, cfg)
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
     cov = huygens.delivered_covariance(sc, cfg)
     x_true = huygens.dispersed_members(mean, cov, 2, seed=11)[1]
     ch = _entry_channel(model, x_true)
-    sel = huygens.select_initial_state(sc, cfg, ch, 150, seed=5, extra_members=x_true[None, :])
-    assert sel.kept[0] == 150  # the truth, appended after the 150 dispersed members
-    assert abs(sel.shift_s[150]) < 0.05  # already aligned
-    assert np.linalg.norm(sel.x0[:3] - x_true[:3]) < 1.0
+    n = 60
+    sel = huygens.select_initial_state(sc, cfg, ch, n, seed=5, extra_members=x_true[None, :])
+    # members displaced along the trajectory (the covariance's long axis, X with VX correlated 0.999)
+    # are the truth at another time: after the time alignment they fit as well, so the test is that
+    # the truth is kept and the chosen state, moved by its Δ, is at the truth's altitude
+    assert n in sel.kept
+    assert abs(sel.shift_s[n]) < 0.2  # the truth needs (almost) no alignment
+    # the axial accelerometer sees the altitude history, not the cross-track position: the chosen
+    # state's radius is the truth's, far closer than the dispersed members'
+    r_true = np.linalg.norm(x_true[:3])
+    d_members = np.abs(np.linalg.norm(sel.members[:n, :3], axis=1) - r_true)
+    assert abs(np.linalg.norm(sel.x0[:3]) - r_true) < 0.1 * np.median(d_members)
     # the vectorised metric is the per-member loop's
-    m, s = huygens.member_loop_metric(model, sel.members[[0, 7, 150]], 0.0, 1.0, 260, ch.t, ch.z_raw[:, 0], 0.5, 200.0)
-    np.testing.assert_allclose(m, sel.metric[[0, 7, 150]], rtol=1e-9)
-    np.testing.assert_allclose(s, sel.shift_s[[0, 7, 150]], rtol=1e-9, atol=1e-9)
+    pick = [n]
+    m, s = huygens.member_loop_metric(model, sel.members[pick], 0.0, 1.0, 250, ch.t, ch.z_raw[:, 0], 0.5, 190.0)
+    np.testing.assert_allclose(m, sel.metric[pick], rtol=1e-9)
+    np.testing.assert_allclose(s, sel.shift_s[pick], rtol=1e-9, atol=1e-9)
 
 
 def test_mc_selection_errors_are_located():
@@ -177,7 +183,7 @@ def test_mc_selection_errors_are_located():
     cfg = config_for(sc)
     model = huygens.entry_model(sc, cfg)
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
-    ch = _entry_channel(model, mean)
+    ch = _entry_channel(model, mean, t_end=60.0)
     with pytest.raises(ScenarioError, match="monte_carlo.align_level_m_s2"):
         huygens.select_initial_state(sc, cfg, ch, 10, seed=1)
     bad = [[1.0] * 6 for _ in range(6)]
@@ -193,8 +199,8 @@ name = "huygens_main_only"
 kind = "post2"
 [model]
 dof = 3
-t_end_s = 400.0
-step_s = 1.0
+t_end_s = 240.0
+step_s = 2.0
 [environment]
 body = "titan"
 atmosphere = "table"
@@ -209,10 +215,10 @@ value = 0.0
 parachute = true
 chute = "main"
 [states.position]
-value = [2705000.0, 0.0, 0.0]
+value = [2725000.0, 0.0, 0.0]
 sigma = 200.0
 [states.velocity]
-value = [-40.0, 0.0, 0.0]
+value = [-150.0, 0.0, 0.0]
 sigma = 1.0
 [states.parachute_drag_multiplier]
 value = 1.0
@@ -228,17 +234,21 @@ quantity = "log_pressure"
 rate_hz = 0.5
 noise_sigma = 0.005
 sigma = 0.005
+[filter]
+smoother = false
 [truth]
 rtol = 1e-8
 output_step_s = 0.5
 density_wave_amplitude = 0.005
 density_wave_length_m = 7000.0
 [truth.states]
-position = [2705100.0, 0.0, 0.0]
-velocity = [-40.5, 0.0, 0.0]
+position = [2725100.0, 0.0, 0.0]
+velocity = [-150.5, 0.0, 0.0]
 parachute_drag_multiplier = 1.14
 [truth.tolerances]
 parachute_drag_multiplier = 0.02
+[synthetic]
+seed = 2
 """
 
 
