@@ -13,6 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from workbench.core.atmosphere import (
+    CO2_SUTHERLAND,
+    MARS_CO2_GAS_CONSTANT,
+    MARS_GAMMA,
+    N2_SUTHERLAND,
+    TITAN_GAMMA,
+    TITAN_N2_GAS_CONSTANT,
     EarthStandardAtmosphere,
     ExponentialAtmosphere,
     MarsEngineeringAtmosphere,
@@ -22,7 +28,7 @@ from workbench.core.atmosphere import (
 from workbench.core.bodies import get_body
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import Scenario, ScenarioError
-from workbench.models.aerodynamics import load_vehicle
+from workbench.models.aerodynamics import ParachuteTable, load_vehicle
 from workbench.problems.post2.config import Post2Config
 from workbench.problems.post2.model import C_B_G, Environment, Event, StateMap, Vehicle
 
@@ -41,6 +47,8 @@ def environment(scenario: Scenario, cfg: Post2Config, density_factor=None) -> En
         atm = None
     elif atm_kind == "exponential":
         atm = ExponentialAtmosphere(e["rho0_kg_m3"], e["scale_height_m"], e["temperature_K"])
+    elif atm_kind == "table" and e["table_file"] is not None:  # Huygens-like: the profile from a file
+        atm = table_file_atmosphere(scenario, e["body"])
     elif atm_kind == "table":
         cols = ("table_altitude_m", "table_density_kg_m3", "table_pressure_pa", "table_temperature_K")
         for c in cols:
@@ -67,6 +75,28 @@ def environment(scenario: Scenario, cfg: Post2Config, density_factor=None) -> En
     )
 
 
+def table_file_atmosphere(scenario: Scenario, body: str) -> TabulatedAtmosphere:
+    """The ``[environment] table_file`` profile (CSV: altitude_m, density_kg_m3, pressure_pa,
+    temperature_K; ``#`` comments) as a :class:`TabulatedAtmosphere` held constant outside, with the
+    gas of ``body`` (Titan N2, Mars CO2; Earth air as N2); a bad file is a located error."""
+    path = scenario.path_of("environment.table_file")
+    try:
+        a = np.loadtxt(path, delimiter=",", comments="#", skiprows=1, ndmin=2)
+    except ValueError as err:
+        raise ScenarioError(scenario.path, "environment.table_file", f"{path.name}: {err}") from None
+    if a.shape[1] != 4:
+        raise ScenarioError(
+            scenario.path, "environment.table_file", f"{path.name}: expected 4 columns, got {a.shape[1]}"
+        )
+    gas = {"mars": (MARS_CO2_GAS_CONSTANT, MARS_GAMMA, CO2_SUTHERLAND)}.get(
+        body, (TITAN_N2_GAS_CONSTANT, TITAN_GAMMA, N2_SUTHERLAND)
+    )
+    try:
+        return TabulatedAtmosphere(a[:, 0], a[:, 1], a[:, 2], a[:, 3], *gas, extrapolate="clamp")
+    except ValueError as err:
+        raise ScenarioError(scenario.path, "environment.table_file", f"{path.name}: {err}") from None
+
+
 def vehicle(scenario: Scenario, cfg: Post2Config, ca_factor=1.0, cn_factor=1.0, cm_factor=1.0) -> Vehicle:
     """The :class:`Vehicle` of ``[vehicle]``: the asset (a shipped name under ``assets/vehicles`` or a
     path) with its capsule table, parachute and inertia mapped to the body frame B; without a file a
@@ -84,12 +114,28 @@ def vehicle(scenario: Scenario, cfg: Post2Config, ca_factor=1.0, cn_factor=1.0, 
     ev = load_vehicle(path)
     inertia_B = C_B_G @ np.asarray(ev.inertia_G) @ C_B_G.T
     mass = float(v["mass_kg"]) if v["mass_kg"] is not None else float(ev.mass_entry)
-    return Vehicle(mass, inertia_B, ev.capsule, ev.parachute, v["ref_area_m2"], ca_factor, cn_factor, cm_factor)
+    drogue = None
+    if v["drogue_area_m2"] is not None:  # Huygens-like: the second parachute, constant CD
+        if not (v["drogue_area_m2"] > 0 and v["drogue_cd"] > 0):
+            raise ScenarioError(scenario.path, "vehicle.drogue_area_m2", "drogue area and drogue_cd must be > 0")
+        drogue = ParachuteTable("drogue", np.array([0.0, 10.0]), np.full(2, float(v["drogue_cd"])),
+                                float(v["drogue_area_m2"]), 1.0)  # fmt: skip
+    return Vehicle(
+        mass, inertia_B, ev.capsule, ev.parachute, v["ref_area_m2"], ca_factor, cn_factor, cm_factor, drogue=drogue
+    )
 
 
-def events(cfg: Post2Config) -> tuple[Event, ...]:
-    """The :class:`Event` list of ``[events.*]`` in file order."""
-    return tuple(Event(e.name, e.when, e.value, e.mass, e.ref_area, e.parachute, e.chute) for e in cfg.events)
+def events(cfg: Post2Config, truth: bool = False) -> tuple[Event, ...]:
+    """The :class:`Event` list of ``[events.*]`` in file order (``truth``: with the truth's own triggers)."""
+    return tuple(
+        Event(
+            e.name,
+            e.truth_when if truth and e.truth_when else e.when,
+            e.truth_value if truth and e.truth_when else e.value,
+            e.mass, e.ref_area, e.parachute, e.chute,
+        )  # fmt: skip
+        for e in cfg.events
+    )
 
 
 def state_map(cfg: Post2Config) -> StateMap:

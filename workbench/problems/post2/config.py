@@ -58,6 +58,7 @@ OBSERVATION_KEYS: dict[str, tuple[str, Any, str]] = {
     "weights": (_S, None, "CSV of the weights W vs time (R = W⁻¹), columns as the observation's, unit 1/unit²"),
     "sigma": ("number_or_list", None, "constant 1σ in the observation's unit (instead of a weights file)"),
     "median_window": (_I, 0, "sliding-median pre-smoothing over this many samples (0: none)"),
+    "decimate": (_I, 1, "assimilate every n-th sample after the pre-smoothing (smoothed samples are correlated)"),
     "gate_probability": (_F, 0.0, "χ² gate probability of the update (0: no gate)"),
     "iterations": (_I, 1, "Gauss-Newton iterations of the update (iterated EKF, Bell & Cathey 1993); 1: plain EKF"),
     "rate_hz": (_F, None, "synthetic: sample rate"),
@@ -73,7 +74,11 @@ EVENT_KEYS: dict[str, tuple[str, Any, str]] = {
     "mass_kg": (_F, None, "new mass"),
     "ref_area_m2": (_F, None, "new aerodynamic reference area"),
     "parachute": (_B, None, "true: the parachute opens; false: it is released"),
-    "chute": (_S, None, "`drogue`, `main` or `none`: which drag-area state acts from here (rocket flights)"),
+    "chute": (_S, None, "which parachute acts from here: `main` (the vehicle file's table, or the `main_drag_area` "
+               "state), `drogue` ([vehicle] drogue_* table, or the `drogue_drag_area` state) or `none`"),
+    "truth_when": (_S, None, "synthetic truth only: its own trigger (e.g. `mach_below`) when the reconstruction's is "
+                   "the time read from the data"),
+    "truth_value": (_F, None, "synthetic truth only: the value of `truth_when`"),
 }
 
 EVENT_CONDITIONS = ("time", "mach_below", "altitude_below", "dynamic_pressure_above")
@@ -135,6 +140,12 @@ SCHEMA = Schema(
                 Key("table_density_kg_m3", _L, None, "kg/m^3", "table: density at the nodes (log-linear)"),
                 Key("table_pressure_pa", _L, None, "Pa", "table: pressure at the nodes (log-linear)"),
                 Key("table_temperature_K", _L, None, "K", "table: temperature at the nodes (linear)"),
+                Key(
+                    "table_file",
+                    _S,
+                    None,
+                    meaning="table: CSV altitude_m, density_kg_m3, pressure_pa, temperature_K (instead of the lists)",
+                ),
             ),
         ),
         Table(
@@ -150,6 +161,9 @@ SCHEMA = Schema(
                 Key("mass_kg", _F, None, "kg", "mass (default: the asset's entry mass)"),
                 Key("ref_area_m2", _F, None, "m^2", "aerodynamic reference area (default: the asset's)"),
                 Key("cd", _F, None, "1", "constant drag coefficient on ref_area_m2 when there is no vehicle file"),
+                # ---- Huygens-like descent: the second (drogue / stabiliser) parachute
+                Key("drogue_area_m2", _F, None, "m^2", "drogue parachute reference area (events `chute = \"drogue\"`)"),
+                Key("drogue_cd", _F, 0.55, "1", "drogue parachute drag coefficient (constant)"),
             ),
         ),
         Table("events", "phase changes", free="table", free_meaning="`[events.<name>]`: " + _named_meaning(EVENT_KEYS)),
@@ -196,6 +210,41 @@ SCHEMA = Schema(
                 Key("cm_factor", _F, 1.0, "1", "truth Cm / table Cm"),
                 Key("density_wave_amplitude", _F, 0.0, "1", "truth density × (1 + a sin(2π h / λ))"),
                 Key("density_wave_length_m", _F, 10000.0, "m", "λ of that wave"),
+                # ---- Huygens-like descent: the truth's own Titan atmosphere and a smooth CA(Mach) error
+                Key(
+                    "titan_node_altitudes_m",
+                    _L,
+                    None,
+                    "m",
+                    "truth atmosphere: a layered Titan atmosphere through these temperature nodes (from 0)",
+                ),
+                Key("titan_node_temperatures_K", _L, None, "K", "truth atmosphere: temperatures at those nodes"),
+                Key("ca_mach_wave_amplitude", _F, 0.0, "1", "truth CA × (1 + a sin(2π log10(Mach) / 1.2))"),
+            ),
+        ),
+        Table(
+            "truth.tolerances",
+            "scorecard: recovered − planted must be inside this (state unit) as well as inside its 3σ",
+            free="number_or_vec3",
+            free_meaning="tolerance (state unit)",
+        ),
+        Table(
+            "monte_carlo",
+            "Monte Carlo initial-state selection (thesis [R3] Ch. 5.1); members = 0: off",
+            (
+                Key("members", _I, 0, meaning="dispersed initial states drawn from `covariance`"),
+                Key("keep", _I, 20, meaning="best members kept (their spread is the EKF's initial covariance)"),
+                Key("observation", _S, None, meaning="observation name whose residual is accumulated"),
+                Key("end_s", _F, None, "s", "end of the phase the residual is accumulated to"),
+                Key("align_level_m_s2", _F, 0.5, "m/s^2", "|measured acceleration| at which time is aligned"),
+                Key("step_s", _F, 0.5, "s", "RK4 step of the member propagation"),
+                Key("seed", _I, 0, meaning="seed of the dispersion (offset by the run seed)"),
+                Key(
+                    "covariance",
+                    _L,
+                    None,
+                    meaning="6×6 covariance of [position km, velocity km/s] (km², km²/s², km²/s): the delivered one",
+                ),
             ),
         ),
         Table(
@@ -298,6 +347,7 @@ class ObservationSpec:
     start: float | None
     end: float | None
     noise: np.ndarray | None
+    decimate: int = 1
 
 
 @dataclass(frozen=True)
@@ -312,6 +362,8 @@ class EventSpec:
     ref_area: float | None
     parachute: bool | None
     chute: str | None = None
+    truth_when: str | None = None
+    truth_value: float | None = None
 
 
 @dataclass(frozen=True)
@@ -427,6 +479,8 @@ def _observation(file: Path, name: str, raw: dict, dof: int) -> ObservationSpec:
         raise ScenarioError(file, f"{pre}.gate_probability", "must be in [0, 1)")
     if t["iterations"] < 1:
         raise ScenarioError(file, f"{pre}.iterations", "must be >= 1")
+    if t["decimate"] < 1:
+        raise ScenarioError(file, f"{pre}.decimate", "must be >= 1")
     return ObservationSpec(
         name,
         q,
@@ -442,6 +496,7 @@ def _observation(file: Path, name: str, raw: dict, dof: int) -> ObservationSpec:
         t["start_s"],
         t["end_s"],
         noise,
+        int(t["decimate"]),
     )
 
 
@@ -457,7 +512,12 @@ def _event(file: Path, name: str, raw: dict) -> EventSpec:
     if t["chute"] is not None and t["chute"] not in CHUTES:
         hint = _suggest(t["chute"], CHUTES)
         raise ScenarioError(file, f"{pre}.chute", f"{t['chute']!r}: use one of {', '.join(CHUTES)}{hint}")
-    return EventSpec(name, t["when"], float(t["value"]), t["mass_kg"], t["ref_area_m2"], t["parachute"], t["chute"])
+    if t["truth_when"] is not None and (t["truth_when"] not in EVENT_CONDITIONS or t["truth_value"] is None):
+        raise ScenarioError(file, f"{pre}.truth_when", f"use one of {', '.join(EVENT_CONDITIONS)}, with truth_value")
+    return EventSpec(
+        name, t["when"], float(t["value"]), t["mass_kg"], t["ref_area_m2"], t["parachute"], t["chute"],
+        t["truth_when"], t["truth_value"],
+    )  # fmt: skip
 
 
 # ---- schedules (workbench/problems/post2/schedules.py): validation of [schedules.<name>]

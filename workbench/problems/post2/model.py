@@ -59,6 +59,7 @@ __all__ = [
     "ObservationDef",
     "STATES",
     "OBSERVATIONS",
+    "DESCENT_NOMINALS",
     "C_B_G",
     "Environment",
     "Vehicle",
@@ -123,6 +124,33 @@ STATES: dict[str, StateDef] = {
     "main_drag_area": StateDef(1, "m^2", False, (3, 6), 1e-4, "CD·S of the main parachute (chute = 'main')"),
 }
 
+# ---- Huygens-like descent (thesis [R3] Ch. 4-5): per-regime CA, drogue, tilt, winds ------------------
+#: nominal (model-input) value of each of these states when not estimated nor planted
+DESCENT_NOMINALS: dict[str, float] = {
+    "ca_multiplier_fm": 1.0,
+    "ca_multiplier_hyp": 1.0,
+    "ca_multiplier_sup": 1.0,
+    "drogue_drag_multiplier": 1.0,
+    "tilt": 0.0,
+    "wind_vertical": 0.0,
+    "wind_horizontal": 0.0,
+}
+STATES.update(
+    {
+        "ca_multiplier_fm": StateDef(
+            1, "1", False, (3, 6), 1e-4, "CA multiplier in the free-molecular regime (Kn >= 0.1; Table 4-1)"
+        ),
+        "ca_multiplier_hyp": StateDef(1, "1", False, (3, 6), 1e-4, "CA multiplier, hypersonic continuum (Mach > 10)"),
+        "ca_multiplier_sup": StateDef(1, "1", False, (3, 6), 1e-4, "CA multiplier, supersonic continuum (Mach < 5)"),
+        "drogue_drag_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the drogue parachute CD"),
+        "tilt": StateDef(
+            1, "deg", False, (3,), 1e-3, "3-DOF: probe axis from the air-relative velocity, under the drogue"
+        ),
+        "wind_vertical": StateDef(1, "m/s", False, (3, 6), 1e-3, "vertical wind, + up (the air moves along +r̂)"),
+        "wind_horizontal": StateDef(1, "m/s", False, (3, 6), 1e-3, "horizontal (zonal, + east) wind"),
+    }
+)
+
 
 @dataclass(frozen=True)
 class ObservationDef:
@@ -152,7 +180,9 @@ OBSERVATIONS: dict[str, ObservationDef] = {
     "acceleration_body": ObservationDef(
         3, "m/s^2", ("ax", "ay", "az"), (6,), "sensed (non-gravitational) acceleration, body frame, + accel_bias"
     ),
-    "acceleration_axial": ObservationDef(1, "m/s^2", ("ax",), (6,), "sensed acceleration along +X_B + bias"),
+    "acceleration_axial": ObservationDef(
+        1, "m/s^2", ("ax",), (3, 6), "sensed acceleration along +X_B + bias (3-DOF: X_B along v_rel, tilted by `tilt`)"
+    ),
     "body_rates": ObservationDef(3, "deg/s", ("p", "q", "r"), (6,), "body angular velocity (ROLBD, PITBD, YAWBD)"),
     "quaternion": ObservationDef(
         3,
@@ -172,6 +202,9 @@ OBSERVATIONS: dict[str, ObservationDef] = {
     "position_inertial": ObservationDef(
         3, "m", ("x", "y", "z"), (3, 6), "inertial position p_I (e.g. a surveyed landing point at its time)"
     ),
+    # ---- Huygens-like descent (thesis [R3] Ch. 4.2.3): pressure over decades, temperature
+    "log_pressure": ObservationDef(1, "1", ("ln_p",), (3, 6), "ln(static pressure / 1 Pa): σ is the relative error"),
+    "temperature": ObservationDef(1, "K", ("T",), (3, 6), "static temperature of the model atmosphere"),
 }
 
 #: DCM from the GNC frame G of the vehicle asset to the post2 body frame B (X_B = −Z_G, Z_B = X_G).
@@ -228,7 +261,7 @@ class Event:
     mass: float | None = None
     ref_area: float | None = None
     parachute: bool | None = None
-    chute: str | None = None  # "drogue" / "main" / "none": which drag-area state acts (rocket flights)
+    chute: str | None = None  # "main" / "drogue" / "none": which parachute table or drag-area state acts
 
 
 @dataclass(frozen=True)
@@ -247,6 +280,9 @@ class Vehicle:
     cn_factor: float = 1.0
     cm_factor: float = 1.0
     cd: float | None = None  # constant drag coefficient on ``ref_area`` when there is no aero table
+    # ---- Huygens-like descent: a second parachute; truth only: CA × f(Mach) (smooth table error)
+    drogue: ParachuteTable | None = None
+    ca_mach_factor: Callable[[np.ndarray], np.ndarray] | None = None
 
     @property
     def area(self) -> float:
@@ -324,6 +360,12 @@ def rk4_step(f: Callable[[np.ndarray, float], np.ndarray], x: np.ndarray, t: flo
     return x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
+def _smoothstep(u):
+    """3u² − 2u³ of u clipped to [0, 1] (C¹ blend from 0 to 1)."""
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * (3.0 - 2.0 * u)
+
+
 def _rx(a):
     c, s = math.cos(a), math.sin(a)
     return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
@@ -382,7 +424,15 @@ class TrajectoryModel:
     Every method is vectorised over leading dimensions of x (..., n_x).
     """
 
-    def __init__(self, smap: StateMap, dof: int, env: Environment, vehicle: Vehicle, events: tuple[Event, ...] = ()):
+    def __init__(
+        self,
+        smap: StateMap,
+        dof: int,
+        env: Environment,
+        vehicle: Vehicle,
+        events: tuple[Event, ...] = (),
+        nominal: dict[str, float] | None = None,
+    ):
         if dof not in (3, 6):
             raise ValueError("dof must be 3 or 6")
         if "position" not in smap or "velocity" not in smap:
@@ -391,6 +441,8 @@ class TrajectoryModel:
             raise ValueError("a 6-DOF model needs 'attitude' and 'body_rates' blocks")
         self.smap, self.dof, self.env, self.vehicle = smap, dof, env, vehicle
         self.events = tuple(events)
+        # model inputs that are not in the state (the truth plants its values here); default DESCENT_NOMINALS
+        self.nominal = {**DESCENT_NOMINALS, **(nominal or {})}
         self._inertia = np.asarray(vehicle.inertia_B, float)
         self._inertia_inv = np.linalg.inv(self._inertia)
         a = vehicle.aero
@@ -405,6 +457,7 @@ class TrajectoryModel:
         shaped (..., size)."""
         if name in self.smap:
             return self.smap.physical(x, name)
+        nominal = self.nominal.get(name, nominal)
         size = STATES[name].size
         return np.broadcast_to(np.asarray(nominal, float).reshape(size), (*x.shape[:-1], size))
 
@@ -429,10 +482,35 @@ class TrajectoryModel:
         ``wind`` state [east, north] in the local horizontal frame at the vehicle, if estimated)."""
         p, v = self.smap.raw(x, "position"), self.smap.raw(x, "velocity")
         w = self.env.omega
-        out = v - np.stack([-w * p[..., 1], w * p[..., 0], np.zeros_like(p[..., 0])], axis=-1)
-        if "wind" in self.smap:
-            out = out - wind_inertial(p, self.smap.physical(x, "wind"))
-        return out
+        vr = v - np.stack([-w * p[..., 1], w * p[..., 0], np.zeros_like(p[..., 0])], axis=-1)
+        vr = vr - self._wind(x, p)
+        if "wind" in self.smap:  # rocket flights: [east, north] wind state
+            vr = vr - wind_inertial(p, self.smap.physical(x, "wind"))
+        return vr
+
+    def _wind(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Huygens-like: wind velocity [m/s] (..., 3), inertial: ``wind_vertical`` along r̂ (+ up) and
+        ``wind_horizontal`` along east ê = unit(ẑ × r) (zero when neither is estimated nor planted)."""
+        wv, wh = self.param(x, "wind_vertical", 0.0)[..., 0], self.param(x, "wind_horizontal", 0.0)[..., 0]
+        if not (np.any(wv) or np.any(wh)):
+            return np.zeros_like(p)
+        r = np.linalg.norm(p, axis=-1, keepdims=True)
+        east = np.stack([-p[..., 1], p[..., 0], np.zeros_like(p[..., 0])], axis=-1)
+        east = east / np.maximum(np.linalg.norm(east, axis=-1, keepdims=True), 1e-9)
+        return wv[..., None] * p / r + wh[..., None] * east
+
+    def ca_regime_multiplier(self, mach: np.ndarray, kn: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Huygens-like per-regime CA multiplier (...,): ``w_fm m_fm + w_hyp m_hyp + w_sup m_sup`` with
+        smooth weights (thesis [R3] Ch. 4.1.2: "a smooth transition between flight regimes"):
+        free-molecular w_fm = smoothstep of log10 Kn from −2 to −1 (full at Kn ≥ 0.1), the continuum
+        rest split by smoothstep of Mach from 5 to 10 (hypersonic above 10, supersonic below 5)."""
+        m = [self.param(x, f"ca_multiplier_{r}", 1.0)[..., 0] for r in ("fm", "hyp", "sup")]
+        estimated = any(f"ca_multiplier_{r}" in self.smap for r in ("fm", "hyp", "sup"))
+        if not estimated and not any(np.any(v != 1.0) for v in m):
+            return np.ones_like(mach)
+        w_fm = _smoothstep(np.log10(np.maximum(kn, 1e-12)) + 2.0)
+        w_h = _smoothstep((mach - 5.0) / 5.0)
+        return w_fm * m[0] + (1.0 - w_fm) * (w_h * m[1] + (1.0 - w_h) * m[2])
 
     def _air(self, h: np.ndarray, x: np.ndarray | None = None):
         atm = self.env.atmosphere
@@ -464,6 +542,10 @@ class TrajectoryModel:
         if veh.aero is not None:
             L = veh.aero.ref_length
             kn = atm.knudsen(np.maximum(h, 0.0), L) if self._kn_matters else np.full_like(h, 1e-6)
+        if veh.aero is not None:  # Huygens-like: per-regime multipliers; truth: CA × f(Mach)
+            ca_m = ca_m * self.ca_regime_multiplier(mach, kn, x)
+            if veh.ca_mach_factor is not None:
+                ca_m = ca_m * veh.ca_mach_factor(mach)
         if self.dof == 3:
             if veh.aero is not None:
                 ca, _, _ = veh.aero.coefficients(mach, kn, np.zeros_like(mach))
@@ -497,7 +579,10 @@ class TrajectoryModel:
                 damp = veh.aero.cmq * qs * L * L / (2.0 * np.maximum(V, 1e-9))
                 M = np.stack([np.zeros_like(mk), mk * e_z + damp * w[..., 1], -mk * e_y + damp * w[..., 2]], axis=-1)
                 F = F + np.einsum("...ij,...j->...i", R, Fb)
-        if phase["parachute"] and veh.parachute is not None:
+        if phase["parachute"] and phase.get("chute") == "drogue" and veh.drogue is not None:
+            cd = veh.drogue.cd_at(mach) * self.param(x, "drogue_drag_multiplier", 1.0)[..., 0]
+            F = F - (cd * qbar * veh.drogue.ref_area / np.maximum(V, 1e-9))[..., None] * vr
+        elif phase["parachute"] and veh.parachute is not None:
             cd = veh.parachute.cd_at(mach) * self.param(x, "parachute_drag_multiplier", 1.0)[..., 0]
             F = F - (cd * qbar * veh.parachute.ref_area / np.maximum(V, 1e-9))[..., None] * vr
         chute = phase.get("chute")
@@ -512,6 +597,18 @@ class TrajectoryModel:
         R = quat_to_dcm(quat_normalize(self.smap.raw(x, "attitude")))
         a_b = np.einsum("...ji,...j->...i", R, F / phase["mass"])
         return a_b + self.param(x, "accel_bias", np.zeros(3))
+
+    def axial_acceleration_3dof(self, x: np.ndarray, phase: dict) -> np.ndarray:
+        """Huygens-like 3-DOF axial accelerometer [m/s²] (..., 1): the probe axis X_B is along the
+        air-relative velocity (trimmed at zero α), tilted by ``tilt`` while the drogue is open, so the
+        reading is ``(F · v̂_rel / m) cos(tilt) + accel_bias_x`` (negative under drag)."""
+        F, _ = self.aero_force_moment(x, phase)
+        vr = self.v_rel(x)
+        vh = vr / np.maximum(np.linalg.norm(vr, axis=-1, keepdims=True), 1e-9)
+        a = np.sum(F * vh, axis=-1) / phase["mass"]
+        if phase["parachute"] and phase.get("chute") == "drogue":
+            a = a * np.cos(self.param(x, "tilt", 0.0)[..., 0])
+        return (a + self.param(x, "accel_bias", np.zeros(3))[..., 0])[..., None]
 
     # ------------------------------------------------------------------ dynamics
     def derivative(self, x: np.ndarray, phase: dict) -> np.ndarray:
@@ -600,6 +697,8 @@ class TrajectoryModel:
             return self.gravity(x) + F / phase["mass"]
         if quantity == "acceleration_body":
             return self.sensed_acceleration_B(x, phase)
+        if quantity == "acceleration_axial" and self.dof == 3:
+            return self.axial_acceleration_3dof(x, phase)
         if quantity == "acceleration_axial":
             return self.sensed_acceleration_B(x, phase)[..., :1]
         if quantity == "position_inertial":
@@ -620,4 +719,11 @@ class TrajectoryModel:
             if quantity == "pressure":
                 return (self.env.atmosphere.pressure(h) + self.param(x, "baro_bias", 0.0)[..., 0])[..., None]
             return self._air(h, x)[0][..., None]
+        if quantity in ("log_pressure", "temperature"):  # Huygens-like
+            if self.env.atmosphere is None:
+                raise ValueError(f"observation {quantity!r} needs an atmosphere")
+            h = np.maximum(self.altitude(x), 0.0)
+            if quantity == "log_pressure":
+                return np.log(self.env.atmosphere.pressure(h))[..., None]
+            return self.env.atmosphere.temperature(h)[..., None]
         raise KeyError(f"unknown observation quantity {quantity!r}")

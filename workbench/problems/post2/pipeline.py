@@ -199,6 +199,8 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
             R = np.broadcast_to(np.diag(spec.sigma**2), (t.size, d.size, d.size)).copy()
         else:
             R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]), path.name)
+        if spec.decimate > 1:  # every n-th (pre-smoothed) sample
+            t, z, z_raw, R = (a[:: spec.decimate] for a in (t, z, z_raw, R))
         out[spec.name] = Channel(spec, t, z, z_raw, R)
         notes += [*tel.notes, *(f"{path}: gap {g.start_s:g}–{g.end_s:g} s (row {g.row})" for g in tel.gaps)]
         step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
@@ -217,6 +219,7 @@ def _kind(unit: str) -> str:
         "Pa": "pressure",
         "kg/m^3": "density",
         "1": "dimensionless",
+        "K": "temperature",
     }[unit]
 
 
@@ -348,6 +351,8 @@ def _grid(cfg: Post2Config, channels: dict[str, Channel]) -> np.ndarray:
     n = max(1, int(math.ceil((cfg.t_end - cfg.t_start) / cfg.grid - 1e-9)))
     base = np.linspace(cfg.t_start, cfg.t_end, n + 1)
     allt = np.concatenate([base] + [ch.t for ch in channels.values()])
+    ev_t = [e.value for e in cfg.events if e.when == "time" and cfg.t_start < e.value < cfg.t_end]
+    allt = np.concatenate([allt, ev_t])  # time events exactly on the grid
     g = np.unique(np.round(allt, 9))
     return g
 

@@ -15,10 +15,11 @@ import numpy as np
 from workbench.estimation.health import health_markdown
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
-from workbench.problems.post2 import build, pipeline
+from workbench.problems.post2 import build, huygens
 from workbench.problems.post2.config import SCHEMA, config_for
-from workbench.problems.post2.model import OBSERVATIONS, STATES, aero_angles
+from workbench.problems.post2.model import DESCENT_NOMINALS, OBSERVATIONS, STATES, aero_angles
 from workbench.problems.post2.recording import COMPONENTS, open_post2_recording
+from workbench.problems.post2.recording_mc import open_mc_recording
 from workbench.problems.post2.scoring import score
 from workbench.problems.post2.truth import sample_times, simulate_truth, write_observations
 
@@ -77,6 +78,7 @@ class Post2Problem:
             "wind": np.zeros(2),
             "drogue_drag_area": 0.0,
             "main_drag_area": 0.0,
+            **DESCENT_NOMINALS,  # Huygens-like descent parameters
         }
         for name, d in STATES.items():
             if d.dynamic or (name == "density_multiplier" and tf["density_wave_amplitude"]):
@@ -86,6 +88,8 @@ class Post2Problem:
                 v = np.asarray(v) * defaults[name]
             arrays[f"param_{name}"] = np.atleast_1d(np.asarray(v, dtype=float))
         arrays["event_times"] = np.array([t for t, _ in tr["events"]], dtype=float)
+        for name, v in cfg.data["truth"].get("tolerances", {}).items():  # scorecard tolerances (SI)
+            arrays[f"tol_{name}"] = huygens.tolerance_si(scenario, name, v)
         np.savez(out / "truth.npz", **arrays)
         return Synthesized(files, out / "truth.npz")
 
@@ -96,7 +100,7 @@ class Post2Problem:
 
     def reconstruct(self, scenario: Scenario, telemetry, options: RunOptions):
         """Observation files -> EKF forward pass -> RTS smoother (stages of :mod:`.pipeline`)."""
-        yield from pipeline.reconstruct(scenario, telemetry, options)
+        yield from huygens.reconstruct(scenario, telemetry, options)  # [monte_carlo] stage first, if any
 
     def summary(self, result) -> dict:
         """A copy of the result's summary."""
@@ -104,7 +108,10 @@ class Post2Problem:
 
     def score(self, result, truth: dict) -> dict:
         """Errors against the truth (:func:`workbench.problems.post2.scoring.score`)."""
-        return score(result, truth)
+        out = score(result, truth)
+        if any(k.startswith("tol_") for k in truth):  # Huygens-like: the planted-vs-recovered scorecard
+            out["planted_vs_recovered"] = huygens.planted_table(result, truth)
+        return out
 
     def scorecard(self, summary: dict) -> str:
         """Markdown: final states ± 1σ, observation statistics and, when scored, the errors."""
@@ -124,6 +131,16 @@ class Post2Problem:
             md += f"| {name} | {o['samples']} | {o['accepted']} | {nis} | {band} | {o['nis_verdict']} |"
             md += f" {o['normalized_residual_rms']:.2f} |\n"
         tr = summary.get("truth")
+        if tr and "planted_vs_recovered" in tr:
+            md += huygens.planted_markdown(tr["planted_vs_recovered"])
+        if "mc_initial_state" in summary:
+            m = summary["mc_initial_state"]
+            md += (
+                f"\n## Monte Carlo initial state\n\n{m['members']} members ({m['scheduler']}, {m['wall_s']:.1f} s): "
+                f"best member {m['best_member']} metric {m['best_metric']:.4g} "
+                f"(delivered state {m['nominal_metric']:.4g}), "
+                f"time shift {m['best_shift_s']:+.2f} s; {m['kept']} kept\n"
+            )
         if tr:
             md += "\n## Against the truth\n\n"
             if "position_error_m" in tr:
@@ -182,7 +199,7 @@ class Post2Problem:
                 "parachute_diameter_m": d_chute,
                 "riser_m": 2.0 * d_chute if d_chute else 0.0,
             }
-        return open_post2_recording(
+        return open_mc_recording(open_post2_recording(
             path,
             scenario.name,
             truth,
@@ -196,7 +213,7 @@ class Post2Problem:
             geometry=geometry,
             parachute_events={e.name: e.parachute for e in cfg.events if e.parachute is not None},
             has_events=bool(cfg.events),
-        )
+        ))
 
     def export_columns(self, result) -> ExportTable:
         """Every state block (smoothed, physical) and its 1σ, SI (angles in rad)."""

@@ -28,12 +28,19 @@ from pathlib import Path
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from workbench.core.atmosphere import TabulatedAtmosphere, TitanDefaultAtmosphere
 from workbench.core.rotation import quat_boxplus, quat_normalize
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import write_telemetry
 from workbench.problems.post2 import build
 from workbench.problems.post2.config import Post2Config
-from workbench.problems.post2.model import OBSERVATIONS, StateMap, TrajectoryModel, quat_from_aero_angles
+from workbench.problems.post2.model import (
+    DESCENT_NOMINALS,
+    OBSERVATIONS,
+    StateMap,
+    TrajectoryModel,
+    quat_from_aero_angles,
+)
 
 __all__ = ["truth_model", "simulate_truth", "write_observations", "sample_times"]
 
@@ -66,7 +73,25 @@ def truth_model(scenario: Scenario, cfg: Post2Config) -> TrajectoryModel:
         m = float(cfg.truth_states["parachute_drag_multiplier"][0])
         veh = replace(veh, parachute=replace(veh.parachute, cd=veh.parachute.cd * m))
     names = ["position", "velocity"] + (["attitude", "body_rates"] if cfg.dof == 6 else [])
-    return TrajectoryModel(StateMap(names), cfg.dof, env, veh, build.events(cfg))
+    # ---- Huygens-like descent: planted descent parameters, own Titan atmosphere, CA(Mach) error
+    nominal = {k: float(cfg.truth_states[k][0]) for k in DESCENT_NOMINALS if k in cfg.truth_states}
+    if tr["titan_node_altitudes_m"] is not None:
+        lay = TitanDefaultAtmosphere(
+            node_altitudes=tuple(float(v) for v in tr["titan_node_altitudes_m"]),
+            node_temperatures=tuple(float(v) for v in tr["titan_node_temperatures_K"] or ()),
+        )
+        hs = np.arange(0.0, 1.4e6 + 1.0, 250.0)  # sampled finely once: the layered model is slow per call
+        atm = TabulatedAtmosphere(
+            hs, lay.density(hs), lay.pressure(hs), lay.temperature(hs),
+            lay.gas_constant, lay.gamma, lay.sutherland, extrapolate="clamp",
+        )  # fmt: skip
+        env = replace(env, atmosphere=atm)
+    if tr["ca_mach_wave_amplitude"]:
+        aw = float(tr["ca_mach_wave_amplitude"])
+        veh = replace(
+            veh, ca_mach_factor=lambda m: 1.0 + aw * np.sin(2.0 * math.pi * np.log10(np.maximum(m, 1e-3)) / 1.2)
+        )
+    return TrajectoryModel(StateMap(names), cfg.dof, env, veh, build.events(cfg, truth=True), nominal=nominal)
 
 
 def _x0(model: TrajectoryModel, cfg: Post2Config) -> np.ndarray:

@@ -1,0 +1,245 @@
+"""post2 case 4 benchmark: the Huygens-like descent at Titan (thesis [R3] Ch. 4-5).
+
+Run on demand from the repository root (not collected by pytest)::
+
+    .venv/bin/python tests/benchmarks/bench_post2_huygens.py [--seeds 50] [--mc-members 10000]
+        [--loop-members 200] [--skip-nominal] [--json docs/results/bench_post2_huygens.json]
+
+Measured:
+
+* **nominal** — the shipped scenario (seed 1): the planted-vs-recovered table (each planted
+  parameter's final smoothed value, error, 3σ, tolerance, PASS/FAIL), the MC selection summary,
+  wall time of the run;
+* **nees** — over ``--seeds`` truths, each with its own sensor noise AND its own initial state drawn
+  from the Table 4-2 covariance (the planted parameter deviations kept): the NEES of the estimated
+  parameter vector (final smoothed, the parameters' full covariance block) against the χ² band of
+  its mean (95 %), per-parameter error/σ statistics and the fraction inside 3σ; the main chute's
+  deploy time the reconstruction uses is read from each run's accelerometer file (the first jump of
+  |a| after the entry pulse, :func:`deploy_time_from_telemetry`), as a user would read it.  The JSON
+  is rewritten after every run, so a cut-short study still reports the runs it completed;
+* **mc_selection** — the Monte Carlo initial-state selection's member propagation: ``--mc-members``
+  members vectorised (one array) vs the same maths one member at a time over ``--loop-members``
+  members (the loop's wall time scaled to the vectorised count), in the same process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
+
+from workbench.io.assets import assets_dir  # noqa: E402
+from workbench.io.scenario import load_scenario  # noqa: E402
+from workbench.io.telemetry import read_telemetry  # noqa: E402
+from workbench.problems.base import RunOptions  # noqa: E402
+from workbench.problems.post2 import huygens  # noqa: E402
+from workbench.problems.post2.config import config_for  # noqa: E402
+from workbench.problems.post2.pipeline import read_observations  # noqa: E402
+from workbench.problems.post2.problem import Post2Problem  # noqa: E402
+from workbench.problems.runner import run_scenario  # noqa: E402
+
+TOML = assets_dir() / "scenarios" / "post2_huygens.toml"
+PARAMS = (
+    "ca_multiplier_fm", "ca_multiplier_hyp", "ca_multiplier_sup", "parachute_drag_multiplier",
+    "drogue_drag_multiplier", "accel_bias", "tilt", "wind_vertical", "radar_scale_factor",
+)  # fmt: skip
+
+
+def deploy_time_from_telemetry(folder: Path) -> float:
+    """Main-chute deploy time [s]: the first rise of |a| by > 1 m/s² between consecutive samples of
+    the entry + deploy accelerometer files after the entry pulse's peak (midpoint of the two samples)."""
+    t, a = [], []
+    for name in ("accel_entry", "accel_deploy"):
+        tel = read_telemetry(folder / f"{name}.csv")
+        t.append(tel.time)
+        a.append(np.abs(tel.stack(("ax",))[:, 0]))
+    t, a = np.concatenate(t), np.concatenate(a)
+    k0 = int(np.argmax(a))
+    jump = np.flatnonzero(np.diff(a[k0:]) > 1.0)
+    k = k0 + int(jump[0])
+    return 0.5 * (t[k] + t[k + 1])
+
+
+def _rows(summary: dict) -> list[dict]:
+    return summary["truth"]["planted_vs_recovered"]
+
+
+def bench_nominal(out: Path) -> dict:
+    """The shipped scenario, seed 1."""
+    t0 = time.perf_counter()
+    r = run_scenario(load_scenario(TOML), out / "nominal", RunOptions(seed=1))
+    wall = time.perf_counter() - t0
+    rows = _rows(r.summary)
+    return {
+        "wall_s": wall,
+        "planted_vs_recovered": rows,
+        "all_pass": all(x["pass"] for x in rows),
+        "passed": [x["parameter"] for x in rows if x["pass"]],
+        "failed": [x["parameter"] for x in rows if not x["pass"]],
+        "mc_initial_state": r.summary.get("mc_initial_state"),
+        "observations": {
+            k: {"mean_nis": v["mean_nis"], "verdict": v["nis_verdict"]} for k, v in r.summary["observations"].items()
+        },  # fmt: skip
+        "position_error_m": {k: v for k, v in r.summary["truth"]["position_error_m"].items()},
+    }
+
+
+def _one_seed(seed: int, out: Path) -> dict:
+    """A dispersed truth (initial state from the covariance, noise ``seed``) and its reconstruction."""
+    prob = Post2Problem()
+    sc0 = load_scenario(TOML)
+    cfg = config_for(sc0)
+    mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
+    x_true = huygens.dispersed_members(mean, huygens.delivered_covariance(sc0, cfg), 2, seed=10_000 + seed)[1]
+    sc = sc0.with_overrides(
+        {"truth.states.position": x_true[:3].tolist(), "truth.states.velocity": x_true[3:].tolist()}
+    )
+    tel_dir = out / f"seed{seed}"
+    syn = prob.synthesize(sc, tel_dir, seed)
+    t_dep = deploy_time_from_telemetry(tel_dir)
+    sc = sc.with_overrides({"events.main_chute.value": float(t_dep)})
+    truth = prob.load_truth(syn.truth)
+    opts = RunOptions(seed=seed)
+    res = None
+    for stage in prob.reconstruct(sc, syn.telemetry, opts):
+        res = stage
+    sm = res.smap
+    idx, err = [], []
+    for name in PARAMS:
+        b = sm.blocks[name]
+        h = res.history["smoothed"][name]
+        tv = np.atleast_1d(truth[f"param_{name}"]).astype(float)
+        e0 = b.se.start  # scalar parameters; the bias: its axial (x) component
+        idx.append(e0)
+        # error in the estimated (unbounded) coordinate: the covariance lives there
+        v_phys, s_phys = h["value"][-1][0], h["sigma"][-1][0]
+        raw_sigma = np.sqrt(res.P[-1][e0, e0])
+        err.append((v_phys - tv[0]) * raw_sigma / max(s_phys, 1e-300))
+    P = res.P[-1][np.ix_(idx, idx)]
+    err = np.asarray(err)
+    nees = float(err @ np.linalg.solve(P, err))
+    rows = huygens.planted_table(res, truth)
+    return {
+        "seed": seed,
+        "deploy_time_s": t_dep,
+        "truth_event_time_s": float(truth["event_times"][0]),
+        "nees": nees,
+        "z": (err / np.sqrt(np.diag(P))).tolist(),
+        "pass": {r["parameter"]: r["pass"] for r in rows},
+    }
+
+
+def bench_nees(out: Path, seeds: int, json_path: Path, results: dict, argv) -> dict:
+    """NEES of the parameter vector over ``seeds`` dispersed truths (JSON rewritten after each)."""
+    runs = []
+    d = len(PARAMS)
+    t_all = time.perf_counter()
+    for s in range(1, seeds + 1):
+        t0 = time.perf_counter()
+        r = _one_seed(s, out)
+        r["wall_s"] = time.perf_counter() - t0
+        runs.append(r)
+        n = len(runs)
+        z = np.array([x["z"] for x in runs])
+        lo, hi = (chi2.ppf([0.025, 0.975], n * d) / n).tolist()
+        mean = float(np.mean([x["nees"] for x in runs]))
+        results["nees"] = {
+            "runs_completed": n,
+            "runs_requested": seeds,
+            "dimension": d,
+            "parameters": list(PARAMS),
+            "mean_nees": mean,
+            "band_95": [lo, hi],
+            "verdict": "consistent" if lo <= mean <= hi else ("conservative" if mean < lo else "overconfident"),
+            "per_parameter_mean_z2": dict(zip(PARAMS, np.mean(z**2, axis=0).tolist(), strict=True)),
+            "per_parameter_inside_3sigma": dict(zip(PARAMS, np.mean(np.abs(z) <= 3.0, axis=0).tolist(), strict=True)),
+            "wall_s_total": time.perf_counter() - t_all,
+            "wall_s_per_run_mean": float(np.mean([x["wall_s"] for x in runs])),
+            "runs": runs,
+        }
+        write_benchmark_json(json_path, __file__, results, argv)
+        print(
+            f"seed {s}: NEES {r['nees']:.2f} (mean {mean:.2f}, band {lo:.2f}..{hi:.2f}) {r['wall_s']:.0f} s", flush=True
+        )
+    return results["nees"]
+
+
+def bench_mc(out: Path, members: int, loop_members: int) -> dict:
+    """Vectorised member propagation vs a per-member loop of the same maths (same process)."""
+    prob = Post2Problem()
+    sc = load_scenario(TOML)
+    cfg = config_for(sc)
+    short = sc.with_overrides({"model.t_end_s": 300.0})  # the entry phase is all the selection reads
+    for k in [k for k in short.data["observations"] if k != "accel_entry"]:
+        short.data["observations"].pop(k)
+    for k in ("front_shield_release", "drogue"):
+        short.data["events"].pop(k)
+    syn = prob.synthesize(short, out / "mc", 1)
+    data = read_observations(short, config_for(short), syn.telemetry)
+    ch = data.channels[cfg.data["monte_carlo"]["observation"]]
+    sel = huygens.select_initial_state(sc, cfg, ch, members, seed=1)
+    model = huygens.entry_model(sc, cfg)
+    mc = cfg.data["monte_carlo"]
+    h = float(mc["step_s"])
+    n_steps = int(np.ceil((mc["end_s"] + 60.0 - cfg.t_start) / h))
+    t0 = time.perf_counter()
+    m, s = huygens.member_loop_metric(
+        model, sel.members[:loop_members], cfg.t_start, h, n_steps, ch.t, ch.z_raw[:, 0],
+        float(mc["align_level_m_s2"]), float(mc["end_s"]),
+    )  # fmt: skip
+    loop = time.perf_counter() - t0
+    same = bool(np.allclose(m, sel.metric[:loop_members], rtol=1e-9) and np.allclose(s, sel.shift_s[:loop_members]))
+    return {
+        "members": members,
+        "vectorised_wall_s": sel.wall_s,
+        "loop_members": loop_members,
+        "loop_wall_s": loop,
+        "loop_wall_s_scaled_to_members": loop * members / loop_members,
+        "speedup": loop * members / loop_members / sel.wall_s,
+        "loop_equals_vectorised": same,
+        "rk4_step_s": h,
+        "steps": n_steps,
+        "selection": sel.summary(),
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=50)
+    ap.add_argument("--mc-members", type=int, default=10_000)
+    ap.add_argument("--loop-members", type=int, default=200)
+    ap.add_argument("--skip-nominal", action="store_true")
+    ap.add_argument("--skip-mc", action="store_true")
+    ap.add_argument("--json", type=Path, default=ROOT / "docs" / "results" / "bench_post2_huygens.json")
+    args = ap.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    results: dict = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp)
+        if not args.skip_mc:
+            results["mc_selection"] = bench_mc(out, args.mc_members, args.loop_members)
+            print("mc", {k: v for k, v in results["mc_selection"].items() if k != "selection"}, flush=True)
+            write_benchmark_json(args.json, __file__, results, argv)
+        if not args.skip_nominal:
+            results["nominal"] = bench_nominal(out)
+            for r in results["nominal"]["planted_vs_recovered"]:
+                print(r, flush=True)
+            write_benchmark_json(args.json, __file__, results, argv)
+        if args.seeds > 0:
+            bench_nees(out, args.seeds, args.json, results, argv)
+    write_benchmark_json(args.json, __file__, results, argv)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
