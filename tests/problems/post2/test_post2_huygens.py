@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from workbench.estimation.health import UnhealthyError
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import ScenarioError, load_scenario
 from workbench.io.telemetry import read_telemetry
@@ -251,6 +252,14 @@ seed = 2
 """
 
 
+@pytest.mark.xfail(
+    strict=True,
+    raises=UnhealthyError,
+    reason="known (issue #9 case 4): this 240 s main-chute-only case is filter-inconsistent - accel mean NIS "
+    "~2000 (residuals 60 m/s^2 in the opening transient at t = 0, -0.11 m/s^2 = 10 sigma at the end) and "
+    "log-pressure mean NIS ~3200 (the truth atmosphere's pressure ~8 % off the estimator's table, which no "
+    "state absorbs); the health verdict is ERROR, so nothing is published",
+)
 def test_short_reconstruction_recovers_the_main_chute_drag(tmp_path):
     atm = (assets_dir() / "scenarios" / "post2_huygens_atmosphere.csv").as_posix()
     p = tmp_path / "main_only.toml"
