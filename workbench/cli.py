@@ -6,19 +6,52 @@ Exit codes (scripts can rely on them):
   3  bad input: scenario, telemetry or asset file rejected (the message names file, column, row)
   4  the reconstruction failed numerically (e.g. a covariance lost positive definiteness)
   5  no problem is registered for the scenario's kind, or it cannot do what was asked
-  130 interrupted (Ctrl-C); no half-written recording is left behind
+  73 an output location cannot be written: read-only, missing (a parent is a file) or full disk
+     (the message names the path; folders the run created are removed again when left empty)
+  130 interrupted (Ctrl-C, SIGINT); no half-written recording is left behind
+  141 standard output closed early (e.g. ``workbench list | head -1``): stops quietly
+  143 terminated (SIGTERM); handled like Ctrl-C, no half-written recording is left behind
+A run killed outright (SIGKILL) cannot clean up; its ``<name>.rrd.<pid>.partial`` is removed by the
+next run writing the same recording.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
+import signal
 import sys
 from pathlib import Path
 
 import numpy as np
 
 EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_NUMERIC, EXIT_KIND, EXIT_INTERRUPT = 0, 2, 3, 4, 5, 130
+EXIT_OUTPUT, EXIT_PIPE, EXIT_TERMINATED = 73, 141, 143
+
+
+class Terminated(BaseException):
+    """Raised in the main thread by SIGTERM, so that a run unwinds like on Ctrl-C (the writer deletes
+    its partial recording); a ``BaseException`` so that no ``except Exception`` swallows it."""
+
+
+def _on_sigterm(signum, frame):  # noqa: ARG001 - signal handler signature
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def _sigterm_raises():
+    """SIGTERM raises :class:`Terminated` in the main thread for the duration of the block."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread (e.g. called from a worker thread): leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _progress(msg: str) -> None:
@@ -173,7 +206,8 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as e:
         return EXIT_USAGE if e.code else EXIT_OK
     try:
-        return args.func(args)
+        with _sigterm_raises():
+            return args.func(args)
     except (TelemetryError, ScenarioError, UnitError, FileNotFoundError) as err:
         print(f"workbench: input error: {err}", file=sys.stderr)
         return EXIT_INPUT
@@ -186,6 +220,22 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("workbench: interrupted; no partial recording was kept", file=sys.stderr)
         return EXIT_INTERRUPT
+    except Terminated:
+        print("workbench: terminated (SIGTERM); no partial recording was kept", file=sys.stderr)
+        return EXIT_TERMINATED
+    except BrokenPipeError:
+        # the reader went away (``| head``): say nothing more, and keep Python's exit-time flush of
+        # stdout from raising again
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_PIPE
+    except OSError as err:  # OutputError first: an output location that cannot be written
+        from workbench.io.results import OutputError
+
+        if isinstance(err, OutputError):
+            print(f"workbench: output error: {err}", file=sys.stderr)
+            return EXIT_OUTPUT
+        raise
 
 
 if __name__ == "__main__":

@@ -504,14 +504,64 @@ def reconstruct(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> It
     yield tel
     init = initial_state(scenario, tel)
     yield init
-    fwd = forward_pass(scenario, tel, init, lander)
+    try:
+        fwd = forward_pass(scenario, tel, init, lander)
+    except np.linalg.LinAlgError as err:
+        raise np.linalg.LinAlgError(f"forward EKF pass: {err}{_likely_keys(scenario, err)}") from err
     yield fwd
-    sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
+    try:
+        sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
+    except np.linalg.LinAlgError as err:
+        raise np.linalg.LinAlgError(f"RTS smoother: {err}{_likely_keys(scenario, err)}") from err
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
     yield smo
     st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))
     yield st
     yield DropResult(tel, init, fwd, smo, st, summarize(scenario, tel, fwd, smo, st))
+
+
+#: error-state component -> the scenario setting that sets its prior σ or process noise
+_ERROR_STATE_KEYS = (
+    (rl.EP, "the setup file's [hanging] position_sigma_m"),
+    (rl.EV, "[filter] velocity_sigma_mps / hang_zupt_sigma_mps"),
+    (rl.EA, "[filter] accel_sigma_mps2 / q_accel"),
+    (rl.ETH, "[sensors.attitude_3dm] gravity_sigma_deg / magnetic_sigma_deg"),
+    (rl.EW, "[filter] rate_sigma_dps"),
+    (rl.EAL, "[filter] angular_accel_sigma / q_angular"),
+    (rl.ES, "[sensors.gyro] scale / misalignment_deg"),
+    (rl.EBG, "[sensors.gyro] bias_dps"),
+)
+
+
+def _likely_keys(scenario: Scenario, err: Exception) -> str:
+    """The scenario settings behind a numerical failure: those of the error-state components the
+    error names (``CovarianceError.components``), and any σ set to 0 (an error declared absent)."""
+    cfg = config_for(scenario)
+    keys = []
+    for c in getattr(err, "components", ()):
+        for sl, key in _ERROR_STATE_KEYS:
+            if sl.start <= c < sl.stop and key not in keys:
+                keys.append(key)
+        if c >= rl.N_E and "[sensors.accelerometer] bias_g" not in keys:
+            keys.append("[sensors.accelerometer] bias_g")
+    zero = [
+        name
+        for name, v in (
+            ("[sensors.gyro] bias_dps", cfg.gyro_bias_dps),
+            ("[sensors.gyro] scale", cfg.gyro_scale),
+            ("[sensors.gyro] misalignment_deg", cfg.gyro_misalignment_deg),
+            ("[sensors.accelerometer] bias_g", cfg.accel_bias_g),
+            ("[filter] q_accel", cfg.q_accel),
+            ("[filter] q_angular", cfg.q_angular),
+        )
+        if v == 0.0
+    ]
+    out = ""
+    if keys:
+        out += f"; likely scenario setting: {', '.join(keys)}"
+    if zero:
+        out += f"; set to 0 in {scenario.path}: {', '.join(zero)}"
+    return out
 
 
 def run_droptest(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> DropResult:
