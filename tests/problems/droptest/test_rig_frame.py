@@ -331,3 +331,17 @@ def test_ranging_latency_is_taken_off_the_ranging_tags(tmp_path):
     declared.write_text(text.replace("[sensors.ranging]", "[sensors.ranging]\nlatency_s = 0.003", 1))
     with_latency = run_droptest(load_scenario(declared), lagged, seed=1).stroke.max
     assert abs(with_latency.distance - ref.distance) < 2e-4
+
+
+def test_bungee_table_only_as_the_mode_needs(tmp_path):
+    from workbench.problems.droptest.telemetry import BUNGEE_KEYS, ODOMETER_BUNGEE_KEYS, read_setup
+
+    p = tmp_path / "setup.toml"
+    p.write_text("[hanging]\nposition_m = [0, 0, 5]\nposition_sigma_m = 0.03\n[bungee]\nanchor_m = [0, 0, 20]\n")
+    assert read_setup(p, ())["bungee"] == {"anchor_m": [0, 0, 20]}  # kinematic: not needed, not checked
+    with pytest.raises(ScenarioError, match="bungee.attach_body_m"):
+        read_setup(p, ODOMETER_BUNGEE_KEYS)
+    with pytest.raises(ScenarioError, match="bungee.rest_length_m"):
+        read_setup(p, BUNGEE_KEYS)
+    with pytest.raises(ScenarioError, match="bungee.rest_length_m"):
+        read_setup(p)  # no mode given: a table that is there must be complete
