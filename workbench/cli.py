@@ -36,13 +36,20 @@ class Terminated(BaseException):
     its partial recording); a ``BaseException`` so that no ``except Exception`` swallows it."""
 
 
-def _on_sigterm(signum, frame):  # noqa: ARG001 - signal handler signature
-    raise Terminated()
-
-
 @contextlib.contextmanager
 def _sigterm_raises():
-    """SIGTERM raises :class:`Terminated` in the main thread for the duration of the block."""
+    """SIGTERM raises :class:`Terminated` in the main thread for the duration of the block.  A
+    process forked meanwhile (a Monte Carlo pool worker) inherits the handler; there SIGTERM keeps
+    its default meaning (the pool stops its workers with it)."""
+    main_pid = os.getpid()
+
+    def _on_sigterm(signum, frame):  # noqa: ARG001 - signal handler signature
+        if os.getpid() != main_pid:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
+        raise Terminated()
+
     try:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     except ValueError:  # not the main thread (e.g. called from a worker thread): leave signals alone
