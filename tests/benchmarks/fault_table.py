@@ -105,8 +105,13 @@ def _run(argv: list[str], code: str | None, *, user: int | None = None, tmpdir=N
     )
 
 
-def _finish(p: subprocess.Popen, timeout: float = 900.0) -> tuple[int, str, bool]:
-    _, err = p.communicate(timeout=timeout)
+def _finish(p: subprocess.Popen, timeout: float = 1800.0) -> tuple[int, str, bool]:
+    try:
+        _, err = p.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        _, err = p.communicate()
+        return None, f"(no exit within {timeout:.0f} s: killed by the benchmark)", False
     text = err.decode(errors="replace").strip().splitlines()
     last = text[-1] if text else ""
     return p.returncode, last[:160], any("Traceback" in line for line in text)
@@ -205,7 +210,7 @@ def case_dask_worker(base: Path, code: str | None) -> dict:
     cwd = base / "dask_cwd"
     cwd.mkdir()
     p = _run(
-        ["mc", SCENARIO, "--seeds", "4", "--workers", "2", "--scheduler", "local", "--out", str(out)],
+        ["mc", SCENARIO, "--seeds", "3", "--workers", "2", "--scheduler", "local", "--out", str(out)],
         code,
         tmpdir=str(tmp),
         cwd=str(cwd),
@@ -229,7 +234,7 @@ def case_dask_worker(base: Path, code: str | None) -> dict:
         if workers:
             killed = workers[0]
             os.kill(killed, signal.SIGKILL)
-    rc, last, tb = _finish(p, timeout=1800)
+    rc, last, tb = _finish(p, timeout=2400)
     return {
         "exit": rc,
         "stderr": last,
@@ -258,28 +263,35 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--label", default="this commit")
     ap.add_argument("--no-json", action="store_true")
     ap.add_argument("--skip-dask", action="store_true")
+    ap.add_argument("--only", nargs="*", default=None, help="run only the cases whose name contains one of these")
     args = ap.parse_args(argv)
     code = str(Path(args.code).resolve()) if args.code else None
     base = Path(tempfile.mkdtemp(prefix="wb-faults-"))
     rows: dict[str, dict] = {}
+    cases = [
+        ("SIGINT", lambda: case_signal(base, code, signal.SIGINT)),
+        ("SIGTERM", lambda: case_signal(base, code, signal.SIGTERM)),
+        ("SIGKILL", lambda: case_signal(base, code, signal.SIGKILL)),
+        ("read-only output folder", lambda: case_readonly(base, code, sub=False)),
+        ("new folder in a read-only folder", lambda: case_readonly(base, code, sub=True)),
+        ("output below a regular file", lambda: case_missing(base, code)),
+        ("full disk (Rerun flush fails)", lambda: case_full_disk(base, code)),
+        ("list | head -1", lambda: case_pipe(code)),
+    ]
+    if not args.skip_dask:
+        cases.append(("killed Dask worker (mc)", lambda: case_dask_worker(base, code)))
     try:
-        rows["SIGINT"] = case_signal(base, code, signal.SIGINT)
-        rows["SIGTERM"] = case_signal(base, code, signal.SIGTERM)
-        rows["SIGKILL"] = case_signal(base, code, signal.SIGKILL)
-        rows["read-only output folder"] = case_readonly(base, code, sub=False)
-        rows["new folder in a read-only folder"] = case_readonly(base, code, sub=True)
-        rows["output below a regular file"] = case_missing(base, code)
-        rows["full disk (Rerun flush fails)"] = case_full_disk(base, code)
-        rows["list | head -1"] = case_pipe(code)
-        if not args.skip_dask:
-            rows["killed Dask worker (mc)"] = case_dask_worker(base, code)
+        for name, case in cases:
+            if args.only and not any(o.lower() in name.lower() for o in args.only):
+                continue
+            r = rows[name] = case()
+            print(f"{name:34s} exit {r.get('exit')!s:5s} traceback {r.get('traceback')!s:5s} left: {r.get('left', '')}")
+            for k in ("stderr", "next_run_exit", "left_after_next_run", "left_in_tmpdir", "left_in_cwd"):
+                if k in r:
+                    print(f"{'':34s} {k}: {r[k]}")
+            sys.stdout.flush()
     finally:
         shutil.rmtree(base, ignore_errors=True)
-    for name, r in rows.items():
-        print(f"{name:34s} exit {r.get('exit')!s:5s} traceback {r.get('traceback')!s:5s} left: {r.get('left', '')}")
-        for k in ("stderr", "next_run_exit", "left_after_next_run", "left_in_tmpdir", "left_in_cwd"):
-            if k in r:
-                print(f"{'':34s} {k}: {r[k]}")
     results = {"label": args.label, "scenario": SCENARIO, "cases": rows}
     if not args.no_json and code is None:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
