@@ -242,6 +242,9 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(err, OutputError):
             print(f"workbench: output error: {err}", file=sys.stderr)
             return EXIT_OUTPUT
+        if err.filename is not None:  # any other file the run could not read (e.g. no permission)
+            print(f"workbench: input error: cannot read {err.filename}: {err.strerror or err}", file=sys.stderr)
+            return EXIT_INPUT
         raise
 
 
