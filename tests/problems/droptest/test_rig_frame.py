@@ -97,8 +97,11 @@ def rotate_telemetry(src: dict[str, Path], dst: Path) -> dict[str, Path]:
     return out
 
 
-def _scenario_text(shipped: Path, lander: str, acquisition: str, telemetry: dict[str, Path] | None) -> str:
-    """The shipped scenario with another lander, acquisition table and (user data) telemetry table."""
+def _scenario_text(
+    shipped: Path, lander: str, acquisition: str, telemetry: dict[str, Path] | None, gyro_errors: bool = True
+) -> str:
+    """The shipped scenario with another lander, acquisition table and (user data) telemetry table;
+    ``gyro_errors=False`` declares the gyro's scale-factor and misalignment errors absent (σ = 0)."""
     with open(shipped, "rb") as f:
         d = tomllib.load(f)
     lines = [
@@ -110,6 +113,8 @@ def _scenario_text(shipped: Path, lander: str, acquisition: str, telemetry: dict
         "[chamber]",
         *(f"{k} = {_vec(v) if isinstance(v, list) else v}" for k, v in d["chamber"].items()),
     ]
+    if not gyro_errors:
+        d["sensors"]["gyro"].update(scale=0.0, misalignment_deg=0.0)
     for table in ("accelerometer", "gyro", "attitude_3dm"):
         lines.append(f"[sensors.{table}]")
         lines += [f"{k} = {v!r}".replace("'", '"') for k, v in d["sensors"][table].items()]
@@ -251,45 +256,47 @@ def test_acquisition_filter_kinds():
 def test_rotated_rig_with_another_filter_gives_the_shipped_stroke(tmp_path):
     """The rotated, zero-phase rig from files alone vs the shipped rig (see module docstring).
 
-    Tolerances: the rotated run and the unrotated zero-phase run reconstruct the same samples in
-    two frames; the filter is rotation-invariant except for the gyro scale/misalignment prior
-    (diagonal in the sensor axes, which differ between the two descriptions) and CSV rounding, so
-    their max strokes agree to 1 mm.  Against the shipped (causal Butterworth) rig the telemetry
-    itself differs (zero-phase vs causal filtering of the same truth and noise draws); that
-    difference must stay below 0.1σ of the reported max-stroke uncertainty.
+    Both drops are the shipped scenario's with the gyro's scale-factor and misalignment errors
+    declared absent (σ = 0, in the simulator and the filter): those errors are per *sensor axis*, so
+    rotating a B-frame gyro record into L turns a diagonal scale error into a full matrix the L-frame
+    prior calls 10σ unlikely — no real rig records that.  (Measured with them present: rotated rig
+    0.22230 m against 0.24447 m for the same zero-phase files in B, 0.45σ.)  What remains differs
+    between the two runs only by the frame (exact up to CSV rounding at 12 digits) and by causal vs
+    zero-phase filtering of the same truth and noise draws (0.08 mm measured in B with the gyro errors
+    present); the tolerance is 1 mm, 0.02σ of the reported max-stroke uncertainty.
     """
     from workbench.problems.droptest.pipeline import run_droptest
     from workbench.problems.droptest.synthetic import synthesize_droptest
     from workbench.problems.droptest.telemetry import telemetry_paths
 
     shipped = resolve_scenario("droptest", ASSETS)
-    syn = synthesize_droptest(shipped, tmp_path / "shipped")
-    ref = run_droptest(shipped, syn.telemetry, seed=1).stroke.max
+    causal = "sample_rate_hz = 2000.0\nfilter_cutoff_hz = 500.0\nfilter_order = 4"
+    ref_path = tmp_path / "ref.toml"
+    ref_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), causal, None, gyro_errors=False))
+    ref_sc = load_scenario(ref_path)
+    syn = synthesize_droptest(ref_sc, tmp_path / "ref")
+    ref = run_droptest(ref_sc, syn.telemetry, seed=1).stroke.max
 
     zp_path = tmp_path / "zp.toml"
-    zp_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), ZERO_PHASE, None))
-    zp = load_scenario(zp_path)
-    syn_zp = synthesize_droptest(zp, tmp_path / "zp")
-    same_frame = run_droptest(zp, syn_zp.telemetry, seed=1).stroke.max
+    zp_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), ZERO_PHASE, None, gyro_errors=False))
+    syn_zp = synthesize_droptest(load_scenario(zp_path), tmp_path / "zp")
 
     rig = tmp_path / "rig"
     tel = rotate_telemetry(syn_zp.telemetry, rig / "data")
     lander = rotated_lander(rig / "lander.toml")
     rig_path = rig / "rig.toml"
-    rig_path.write_text(
-        _scenario_text(shipped.path, lander.name, ZERO_PHASE, {k: p.relative_to(rig) for k, p in tel.items()})
-    )
+    rel = {k: p.relative_to(rig) for k, p in tel.items()}
+    rig_path.write_text(_scenario_text(shipped.path, lander.name, ZERO_PHASE, rel, gyro_errors=False))
     rot_sc = load_scenario(rig_path)
     assert not rot_sc.is_synthetic
     rot = run_droptest(rot_sc, telemetry_paths(rot_sc), seed=1).stroke.max
 
     print(
-        f"max stroke: shipped {ref.distance:.5f} ± {ref.sigma:.5f} m; zero-phase same frame "
-        f"{same_frame.distance:.5f} ± {same_frame.sigma:.5f}; rotated rig {rot.distance:.5f} ± {rot.sigma:.5f}"
+        f"max stroke: shipped rig {ref.distance:.5f} ± {ref.sigma:.5f} m; "
+        f"rotated rig {rot.distance:.5f} ± {rot.sigma:.5f}"
     )
-    assert abs(rot.distance - same_frame.distance) < 1e-3
-    assert abs(rot.sigma - same_frame.sigma) < 1e-3
-    assert abs(rot.distance - ref.distance) < 0.1 * ref.sigma
+    assert abs(rot.distance - ref.distance) < 1e-3
+    assert abs(rot.sigma - ref.sigma) < 1e-3
     assert abs(rot.time - ref.time) < 0.005
 
 
