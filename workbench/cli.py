@@ -9,13 +9,22 @@ Exit codes (scripts can rely on them):
   6  unhealthy: the reconstruction ran but its health verdict is ERROR (filter inconsistent with a
      sensor, physically impossible output, a data gap across contact ...); nothing is written
      unless --allow-unhealthy (then the outputs are written, marked UNHEALTHY, and the exit code is 0)
-  130 interrupted (Ctrl-C); no half-written recording is left behind
+  73 an output location cannot be written: read-only, missing (a parent is a file) or full disk
+     (the message names the path; folders the run created are removed again when left empty)
+  130 interrupted (Ctrl-C, SIGINT); no half-written recording is left behind
+  141 standard output closed early (e.g. ``workbench list | head -1``): stops quietly
+  143 terminated (SIGTERM); handled like Ctrl-C, no half-written recording is left behind
+A run killed outright (SIGKILL) cannot clean up; its ``<name>.rrd.<pid>.partial`` is removed by the
+next run writing the same recording.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
+import signal
 import sys
 from pathlib import Path
 
@@ -23,6 +32,37 @@ import numpy as np
 
 EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_NUMERIC, EXIT_KIND, EXIT_INTERRUPT = 0, 2, 3, 4, 5, 130
 EXIT_UNHEALTHY = 6
+EXIT_OUTPUT, EXIT_PIPE, EXIT_TERMINATED = 73, 141, 143
+
+
+class Terminated(BaseException):
+    """Raised in the main thread by SIGTERM, so that a run unwinds like on Ctrl-C (the writer deletes
+    its partial recording); a ``BaseException`` so that no ``except Exception`` swallows it."""
+
+
+@contextlib.contextmanager
+def _sigterm_raises():
+    """SIGTERM raises :class:`Terminated` in the main thread for the duration of the block.  A
+    process forked meanwhile (a Monte Carlo pool worker) inherits the handler; there SIGTERM keeps
+    its default meaning (the pool stops its workers with it)."""
+    main_pid = os.getpid()
+
+    def _on_sigterm(signum, frame):  # noqa: ARG001 - signal handler signature
+        if os.getpid() != main_pid:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
+        raise Terminated()
+
+    try:
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread (e.g. called from a worker thread): leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _progress(msg: str) -> None:
@@ -303,7 +343,8 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as e:
         return EXIT_USAGE if e.code else EXIT_OK
     try:
-        return args.func(args)
+        with _sigterm_raises():
+            return args.func(args)
     except (
         TelemetryError,
         ScenarioError,
@@ -327,6 +368,25 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("workbench: interrupted; no partial recording was kept", file=sys.stderr)
         return EXIT_INTERRUPT
+    except Terminated:
+        print("workbench: terminated (SIGTERM); no partial recording was kept", file=sys.stderr)
+        return EXIT_TERMINATED
+    except BrokenPipeError:
+        # the reader went away (``| head``): say nothing more, and keep Python's exit-time flush of
+        # stdout from raising again
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_PIPE
+    except OSError as err:  # OutputError first: an output location that cannot be written
+        from workbench.io.results import OutputError
+
+        if isinstance(err, OutputError):
+            print(f"workbench: output error: {err}", file=sys.stderr)
+            return EXIT_OUTPUT
+        if err.filename is not None:  # any other file the run could not read (e.g. no permission)
+            print(f"workbench: input error: cannot read {err.filename}: {err.strerror or err}", file=sys.stderr)
+            return EXIT_INPUT
+        raise
 
 
 if __name__ == "__main__":

@@ -245,3 +245,42 @@ def test_iterated_rts_stops_on_step_tolerance():
     np.testing.assert_allclose(early.smoothed.x, full.smoothed.x, rtol=0, atol=1e-5)
     with pytest.raises(ValueError, match="passes"):
         iterated_rts(run_pass, lay, 0)
+
+
+def test_exactly_known_component_gets_no_gain_and_matches_the_reduced_smoother():
+    """A state with zero variance and no process noise (an error declared absent, σ = 0) is known
+    exactly: the smoother must not fail on it, keep it at its value with zero variance, and give the
+    other components exactly what the smoother of the reduced system gives."""
+    rng = np.random.default_rng(3)
+    n = 30
+    t = np.arange(n, dtype=float)
+    z = np.cumsum(rng.normal(0.0, 0.3, n)) + rng.normal(0.0, 0.5, n)
+
+    def run(full: bool):
+        d = 3 if full else 2
+        F = np.eye(d)
+        F[0, 1] = 1.0  # position, velocity (+ a bias of exactly 0.7 with σ = 0)
+        Q = np.zeros((d, d))
+        Q[1, 1] = 0.05
+        x0 = np.array([0.0, 0.0, 0.7])[:d]
+        P0 = np.diag([4.0, 1.0, 0.0][:d])
+        H = np.zeros((1, d))
+        H[0, 0] = 1.0
+        if full:
+            H[0, 2] = 1.0  # the measurement sees the (known) bias
+        zz = z + (0.7 if full else 0.0)
+
+        def transition(x, t0, t1):
+            return F @ x, F
+
+        def meas(k, tk, x):
+            return [Measurement("z", np.array([zz[k]]), np.array([[0.25]]), lambda x: H @ x, H)]
+
+        lay = ErrorStateLayout(d)
+        fp = run_filter(x0, P0, t, transition, lambda x, t0, t1: Q, meas, lay)
+        return rts_smooth(fp, lay)
+
+    full, reduced = run(True), run(False)
+    np.testing.assert_allclose(full.x[:, :2], reduced.x, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(full.P[:, :2, :2], reduced.P, rtol=1e-10, atol=1e-14)
+    assert np.all(full.x[:, 2] == 0.7) and np.all(full.P[:, 2, :] == 0.0)

@@ -46,7 +46,7 @@ from scipy.linalg import lapack
 
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass
 
-__all__ = ["SmoothedPass", "IteratedSmoothing", "rts_smooth", "iterated_rts"]
+__all__ = ["CovarianceError", "SmoothedPass", "IteratedSmoothing", "rts_smooth", "iterated_rts"]
 
 
 @dataclass(frozen=True)
@@ -69,8 +69,11 @@ def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPass:
     to attitude variances of (µrad)² after a long free propagation) keep the Cholesky factor
     accurate.  The covariance recursion is exact for any forward gain (projected, sub-optimal
     ones included) as long as ``P_post``/``P_prior`` are the actual error covariances (Joseph
-    form): G is the regression of the filtered error on the predicted one.  Raises ``ValueError``
-    naming the step if a predicted covariance cannot be factorised or a smoothed covariance is not positive definite.
+    form): G is the regression of the filtered error on the predicted one.  Components with zero
+    variance (a whole zero row: an error state declared absent, σ = 0, no process noise) are known
+    exactly: they get no smoother gain and keep zero variance.  Raises :class:`CovarianceError` (a
+    ``ValueError``) naming the step if a predicted covariance cannot be factorised or a smoothed
+    covariance is not positive definite (semi-definite on such exact components).
     """
     n = fp.t.shape[0]
     n_e = layout.n_e
@@ -87,14 +90,22 @@ def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPass:
         # Gᵀ = P_prior[k+1]⁻¹ F[k+1] P_post[k]   (P_post symmetric), solved on the Jacobi-scaled
         # D⁻¹ P_prior D⁻¹ (D = sqrt diag): (km)² next to (µrad)² variances stay factorisable
         d = np.sqrt(np.diag(Pp))
-        c, info = lapack.dpotrf(Pp / np.outer(d, d), lower=1)
-        if info != 0 or not np.all(d > 0.0):
-            raise ValueError(
-                f"RTS smoother: predicted covariance P_prior[{k + 1}] (t={fp.t[k + 1]} s) is not "
-                f"positive definite (potrf info={info})"
-            )
-        Gt, _ = lapack.dpotrs(c, (fp.F[k + 1] @ fp.P_post[k]) / d[:, None], lower=1)
-        Gt = Gt / d[:, None]
+        act = _active(Pp, k + 1, fp.t)
+        rhs = fp.F[k + 1] @ fp.P_post[k]
+        if act is None:
+            c, info = lapack.dpotrf(Pp / np.outer(d, d), lower=1)
+            if info != 0:
+                raise _not_pd(f"predicted covariance P_prior[{k + 1}]", fp.t[k + 1], info, Pp)
+            Gt, _ = lapack.dpotrs(c, rhs / d[:, None], lower=1)
+            Gt = Gt / d[:, None]
+        else:  # components known exactly (zero variance, e.g. an error declared absent): no gain
+            da = d[act]
+            c, info = lapack.dpotrf(Pp[np.ix_(act, act)] / np.outer(da, da), lower=1)
+            if info != 0:
+                raise _not_pd(f"predicted covariance P_prior[{k + 1}]", fp.t[k + 1], info, Pp)
+            Gt = np.zeros_like(rhs)
+            sol, _ = lapack.dpotrs(c, rhs[act] / da[:, None], lower=1)
+            Gt[act] = sol / da[:, None]
         Gk = Gt.T
         dx = Gk @ layout.boxminus(xs[k + 1], fp.x_prior[k + 1])
         xs[k] = layout.boxplus(fp.x_post[k], dx)
@@ -174,13 +185,53 @@ def iterated_rts(
     return IteratedSmoothing(sp, first, forward, changes, converged)
 
 
+class CovarianceError(np.linalg.LinAlgError):
+    """A covariance of the smoother is not positive definite (a ``ValueError`` too).  ``step`` the
+    step index, ``components`` the error-state indices most involved (the eigenvector of the
+    smallest eigenvalue, largest entries first) so a caller can name the setting behind them."""
+
+    def __init__(self, message: str, step: int = -1, components: tuple[int, ...] = ()):
+        super().__init__(message)
+        self.step = step
+        self.components = components
+
+
+def _not_pd(what: str, t: float, info: int, A: np.ndarray, step: int = -1) -> CovarianceError:
+    try:
+        w, v = np.linalg.eigh(0.5 * (A + A.T))
+    except np.linalg.LinAlgError:  # not finite
+        w, v = np.array([np.nan]), np.zeros((A.shape[0], 1))
+    comps = tuple(int(i) for i in np.argsort(-np.abs(v[:, 0]))[:3])
+    return CovarianceError(
+        f"RTS smoother: {what} (t={t} s) is not positive definite (potrf info={info}, smallest eigenvalue "
+        f"{w[0]:.3e}, mostly error-state components {list(comps)})",
+        step,
+        comps,
+    )
+
+
+def _active(A: np.ndarray, k: int, t: np.ndarray) -> np.ndarray | None:
+    """Indices of the components of covariance ``A`` with a positive variance, or None when all are.
+
+    A component with exactly zero variance is known exactly (an error declared absent: its prior
+    σ is 0 and no process noise reaches it); its whole row must then be zero, else
+    :class:`CovarianceError`."""
+    dg = np.diag(A)
+    if np.all(dg > 0.0):
+        return None
+    zero = dg == 0.0
+    if np.any(dg < 0.0) or np.any(A[zero] != 0.0) or not np.all(np.isfinite(A)):
+        raise _not_pd(f"covariance at step {k}", t[k], -1, A, k)
+    return np.flatnonzero(~zero)
+
+
 def _check_pd(A: np.ndarray, k: int, t: np.ndarray) -> None:
     if not np.all(np.isfinite(A)):
-        raise ValueError(f"RTS smoother: smoothed covariance at step {k} (t={t[k]} s) is not finite")
-    _, info = lapack.dpotrf(A, lower=1)
+        raise CovarianceError(f"RTS smoother: smoothed covariance at step {k} (t={t[k]} s) is not finite", k)
+    act = _active(A, k, t)
+    _, info = lapack.dpotrf(A if act is None else A[np.ix_(act, act)], lower=1)
     if info != 0:
-        w = np.linalg.eigvalsh(A)
-        raise ValueError(
-            f"RTS smoother: smoothed covariance at step {k} (t={t[k]} s) is not positive definite "
-            f"(smallest eigenvalue {w[0]:.3e}); the forward pass is inconsistent (P_prior vs F P_post Fᵀ + Q)"
+        err = _not_pd(f"smoothed covariance at step {k}", t[k], info, A, k)
+        raise CovarianceError(
+            f"{err}; the forward pass is inconsistent (P_prior vs F P_post Fᵀ + Q)", k, err.components
         )

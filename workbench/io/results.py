@@ -23,7 +23,23 @@ import numpy as np
 
 from workbench.io.telemetry import atomic_write_text, write_telemetry
 
-__all__ = ["export_csv", "read_summary", "to_jsonable", "write_summary"]
+__all__ = ["OutputError", "export_csv", "read_summary", "to_jsonable", "write_summary"]
+
+
+class OutputError(OSError):
+    """An output location cannot be written: read-only, missing (a path component is a file) or
+    full.  The message names the path and the operating system's reason; ``workbench`` exits 73
+    (``EX_CANTCREAT`` of sysexits.h) with it, no traceback."""
+
+    @classmethod
+    def wrap(cls, err: OSError, path: str | os.PathLike | None = None, what: str = "cannot write") -> OutputError:
+        """An :class:`OutputError` for the ``OSError`` ``err`` at ``path`` (default: the error's own
+        file name), keeping its ``errno``."""
+        where = path if path is not None else (err.filename or "the output folder")
+        reason = err.strerror or str(err)
+        out = cls(f"{what} {where}: {reason}")
+        out.errno = err.errno
+        return out
 
 
 def _float(x: float) -> float | str | None:

@@ -668,11 +668,13 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
             os.fsync(f.fileno())
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         try:
             os.unlink(tmp)
         except OSError:
             pass
+        if isinstance(err, OSError) and err.filename is None:  # e.g. ENOSPC from write/fsync: say where
+            raise OSError(err.errno, err.strerror or str(err), str(path)) from err
         raise
     return path
 

@@ -8,20 +8,82 @@ through :mod:`workbench.problems.registry` by the scenario's ``kind``.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from workbench.estimation.health import ERROR, UnhealthyError
 from workbench.io.assets import assets_dir
-from workbench.io.results import export_csv, write_summary
+from workbench.io.results import OutputError, export_csv, write_summary
 from workbench.io.scenario import Scenario, resolve_scenario
 from workbench.problems import registry
 from workbench.problems.base import McOptions, McOutcome, Problem, Progress, RunOptions
 
-__all__ = ["RunResult", "resolve", "run_monte_carlo", "run_scenario"]
+__all__ = ["NumericalFailure", "RunResult", "output_folder", "resolve", "run_monte_carlo", "run_scenario"]
+
+
+class NumericalFailure(np.linalg.LinAlgError):
+    """The reconstruction failed numerically; the message names the scenario file and the stage
+    (the one after the last stage that completed).  ``workbench`` exits 4 with it."""
+
+
+def _under(path: Path, folder: Path) -> bool:
+    try:
+        Path(os.path.abspath(path)).relative_to(os.path.abspath(folder))
+    except ValueError:
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def output_folder(out: Path) -> Iterator[Path]:
+    """Create the output folder ``out`` for the ``with`` block; if the block fails, the folders it
+    created (``out`` and any missing parents) are removed again when nothing was written into them,
+    so a rejected run leaves no empty ``--out``.  An ``OSError`` on a path inside ``out`` (or on
+    ``out`` itself: read-only, missing because a parent is a file, full disk) becomes an
+    :class:`~workbench.io.results.OutputError` naming the path."""
+    out = Path(out)
+    created = []
+    p = Path(os.path.abspath(out))
+    while not p.exists() and p != p.parent:
+        created.append(p)
+        p = p.parent
+    try:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise OutputError.wrap(err, out, "cannot create the output folder") from err
+        yield out
+    except OutputError:
+        _remove_empty(created)
+        raise
+    except OSError as err:
+        _remove_empty(created)
+        where = getattr(err, "filename", None)
+        if where is not None and _under(Path(where), out):
+            raise OutputError.wrap(err) from err
+        raise
+    except BaseException:
+        _remove_empty(created)
+        raise
+
+
+def _remove_empty(created: list[Path]) -> None:
+    """Remove the folders of ``created`` (deepest first) that are empty, and empty folders below them."""
+    for top in created:
+        if not top.is_dir():
+            continue
+        for sub in sorted((d for d in top.rglob("*") if d.is_dir()), key=lambda d: len(d.parts), reverse=True):
+            with contextlib.suppress(OSError):
+                sub.rmdir()  # only empty ones go
+        with contextlib.suppress(OSError):
+            top.rmdir()
 
 
 @dataclass(frozen=True)
@@ -81,7 +143,26 @@ def run_scenario(
     t_start = time.perf_counter()
     sc, problem = resolve(scenario)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    with output_folder(out):
+        result, summary, rrd, summary_path, export_path, telemetry, truth, seed = _run(
+            sc, problem, out, opts, say, t_start
+        )
+    health = summary.get("health")
+    verdict = (
+        ""
+        if health is None
+        else f"health {health['verdict']}"
+        + (" — UNHEALTHY, written with --allow-unhealthy" if health.get("written_anyway") else "")
+    )
+    say(
+        f"[{sc.name}] {verdict + '; ' if verdict else ''}{problem.headline(summary)}; "
+        f"wrote {rrd} ({summary['recording_bytes'] / 1e6:.1f} MB) in {summary['wall_time_s']:.1f} s"
+    )
+    return RunResult(sc, problem, summary, result, rrd, summary_path, telemetry, truth, export_path)
+
+
+def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, say: Progress, t_start: float):
+    """The body of :func:`run_scenario` inside its output folder."""
     seed = int(sc.get("synthetic.seed", 0, kind="int") if opts.seed is None else opts.seed)
     truth = None
     if sc.is_synthetic:
@@ -96,10 +177,18 @@ def run_scenario(
     with problem.open_recording(rrd, sc, truth, properties) as drawer:
         result = None
         t0 = time.perf_counter()
-        for stage in problem.reconstruct(sc, telemetry, replace(opts, seed=seed)):
-            say(f"[{sc.name}] {type(stage).__name__:20s} {time.perf_counter() - t0:6.2f} s")
-            drawer.handle(stage)
-            result = stage
+        last = "start"
+        try:
+            for stage in problem.reconstruct(sc, telemetry, replace(opts, seed=seed)):
+                say(f"[{sc.name}] {type(stage).__name__:20s} {time.perf_counter() - t0:6.2f} s")
+                drawer.handle(stage)
+                result, last = stage, type(stage).__name__
+        except NumericalFailure:
+            raise
+        except np.linalg.LinAlgError as err:
+            raise NumericalFailure(
+                f"{sc.path}: the {problem.title} reconstruction failed numerically in the stage after {last}: {err}"
+            ) from err
         if result is None:
             raise RuntimeError(f"{sc.path}: the {sc.kind} reconstruction yielded no result")
         summary = problem.summary(result)
@@ -125,17 +214,7 @@ def run_scenario(
             table.columns,
             meta={"source": f"workbench run {sc.name}", "frame": table.frame},
         )
-    verdict = (
-        ""
-        if health is None
-        else f"health {health['verdict']}"
-        + (" — UNHEALTHY, written with --allow-unhealthy" if health.get("written_anyway") else "")
-    )
-    say(
-        f"[{sc.name}] {verdict + '; ' if verdict else ''}{problem.headline(summary)}; "
-        f"wrote {rrd} ({summary['recording_bytes'] / 1e6:.1f} MB) in {summary['wall_time_s']:.1f} s"
-    )
-    return RunResult(sc, problem, summary, result, rrd, Path(summary_path), telemetry, truth, export_path)
+    return result, summary, rrd, Path(summary_path), export_path, telemetry, truth, seed
 
 
 def run_monte_carlo(
@@ -151,9 +230,9 @@ def run_monte_carlo(
     say = progress or _silent
     sc, problem = resolve(scenario)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     options = options or McOptions()
-    outcome = problem.monte_carlo(sc, out, options, say)
-    write_summary(out / f"{sc.name}{'_truth' if options.truth_sim else ''}.mc.json", outcome.summary)
+    with output_folder(out):
+        outcome = problem.monte_carlo(sc, out, options, say)
+        write_summary(out / f"{sc.name}{'_truth' if options.truth_sim else ''}.mc.json", outcome.summary)
     say(f"[{sc.name}] {outcome.headline}")
     return outcome

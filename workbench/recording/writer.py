@@ -24,7 +24,9 @@ Entity paths and timelines come from :mod:`workbench.recording.layout` (docs/REC
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
+import shutil
 import uuid
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -35,9 +37,10 @@ import rerun as rr
 
 from workbench.core.rotation import dcm_to_quat
 from workbench.estimation.health import health_markdown
+from workbench.io.results import OutputError
 from workbench.recording import layout
 
-__all__ = ["to_ns", "open_recording", "Recorder", "covariance_ellipsoids"]
+__all__ = ["to_ns", "open_recording", "remove_stale_partials", "Recorder", "covariance_ellipsoids"]
 
 _GREY = (150, 150, 150, 255)
 _PALETTE = (
@@ -89,29 +92,51 @@ def open_recording(
     On success: flush, disconnect (writes the RRD footer), fsync, then ``os.replace`` onto
     ``final_path``. On any exception, including ``KeyboardInterrupt``, the stream is disconnected,
     the partial file deleted and the exception re-raised; an existing file at ``final_path`` is
-    left untouched. Rerun strict mode is switched on (process-wide) for the duration of the block
+    left untouched. Partials of killed runs beside ``final_path`` are removed first
+    (:func:`remove_stale_partials`). A folder or file that cannot be written (read-only, missing,
+    full disk) raises :class:`workbench.io.results.OutputError` naming the path. Rerun strict mode
+    is switched on (process-wide) for the duration of the block
     and restored afterwards, so logging errors raise ``ValueError``/``TypeError``.
     """
     final = Path(final_path)
-    final.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        final.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError.wrap(err, final.parent, "cannot create the recording folder") from err
+    remove_stale_partials(final)
     tmp = final.with_name(f"{final.name}.{os.getpid()}.partial")
     previous_strict = rr.strict_mode()
     rr.set_strict_mode(True)
     stream = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
     try:
         try:
-            stream.save(str(tmp), default_blueprint=blueprint)
+            try:
+                # a read-only or missing folder is found here, not in Rerun's writer thread
+                with open(tmp, "wb"):
+                    pass
+                os.remove(tmp)
+                stream.save(str(tmp), default_blueprint=blueprint)
+            except OSError as err:
+                raise OutputError.wrap(err, tmp, "cannot write the recording") from err
             stream.set_log_time_enabled(False)
             stream.send_recording_name(name)
             recorder = Recorder(stream)
             for prop_name, values in (properties or {}).items():
                 recorder.property(prop_name, values)
             yield recorder
-            stream.flush()
-            stream.disconnect()
-            with open(tmp, "rb") as f:
-                os.fsync(f.fileno())
-            os.replace(tmp, final)
+            try:
+                stream.flush()
+                stream.disconnect()
+                with open(tmp, "rb") as f:
+                    os.fsync(f.fileno())
+                os.replace(tmp, final)
+            except OSError as err:
+                raise OutputError.wrap(err, final, "cannot write the recording") from err
+            except RuntimeError as err:  # Rerun's file writer died (e.g. "No space left on device")
+                raise OutputError(
+                    f"cannot write the recording {final}: Rerun's file writer failed ({err}); "
+                    f"{_space_note(final.parent)}"
+                ) from err
         except BaseException:
             with contextlib.suppress(Exception):
                 stream.disconnect()
@@ -120,6 +145,50 @@ def open_recording(
             raise
     finally:
         rr.set_strict_mode(previous_strict)
+
+
+def _space_note(folder: Path) -> str:
+    """A hint for a failed write: the free space left in ``folder``."""
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return "is the disk full or the folder not writable?"
+    return f"{free / 1e6:.1f} MB free in {folder}" + (" (the disk is full)" if free < 64e6 else "")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    return True
+
+
+def remove_stale_partials(final_path: str | os.PathLike[str]) -> list[Path]:
+    """Delete ``<final>.<pid>.partial`` files left beside ``final_path`` by runs that were killed
+    (SIGKILL, power loss: no cleanup could run), i.e. whose ``pid`` is no longer a live process.
+
+    A partial of a live process (a run in progress, or a reused pid) is left alone. Returns the
+    files removed; files that cannot be removed are skipped (the new run does not need them gone).
+    """
+    final = Path(final_path)
+    removed = []
+    try:
+        candidates = list(final.parent.glob(f"{glob.escape(final.name)}.*.partial"))
+    except OSError:
+        return removed
+    for p in candidates:
+        pid = p.name[len(final.name) + 1 : -len(".partial")]
+        if not pid.isdigit() or int(pid) == os.getpid() or _pid_alive(int(pid)):
+            continue
+        try:
+            p.unlink()
+            removed.append(p)
+        except OSError:
+            pass
+    return removed
 
 
 def covariance_ellipsoids(covariances: Any, nsigma: float = 3.0) -> tuple[np.ndarray, np.ndarray]:

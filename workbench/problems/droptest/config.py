@@ -60,9 +60,22 @@ SCHEMA = Schema(
             "chamber",
             "the test chamber, SPF frame",
             (
-                Key("ramp_angle_deg", _F, 60.0, "deg", "ramp inclination"),
-                Key("nail_depth_m", _F, 0.3, "m", "the nail (SPF origin) lies this far below the ramp surface"),
-                Key("magnetic_field_spf", _V, REQUIRED, "1", "local magnetic field direction in SPF (3DM attitude)"),
+                Key("ramp_angle_deg", _F, 60.0, "deg", "ramp inclination from the horizontal, in (0, 90)"),
+                Key(
+                    "nail_depth_m",
+                    _F,
+                    0.3,
+                    "m",
+                    "the nail (SPF origin, where the bungee-cut hammer strikes) lies this far below the ramp "
+                    "surface, along its normal; in [0, 10] (a nail in front of the ramp is rejected)",
+                ),
+                Key(
+                    "magnetic_field_spf",
+                    _V,
+                    REQUIRED,
+                    "1",
+                    "local magnetic field direction in SPF (3DM attitude); any non-zero length",
+                ),
             ),
         ),
         Table(
@@ -112,29 +125,96 @@ SCHEMA = Schema(
             "data acquisition",
             (
                 Key("sample_rate_hz", _F, 2000.0, "Hz", "IMU sample rate (synthetic)"),
-                Key("filter_cutoff_hz", _F, 500.0, "Hz", "Butterworth anti-alias cutoff (its group delay is removed)"),
-                Key("filter_order", _I, 4, meaning="Butterworth order"),
+                Key(
+                    "filter",
+                    _S,
+                    "butterworth",
+                    meaning="the anti-alias filter the IMU channels went through: `butterworth` causal (its "
+                    "low-frequency group delay is removed from the time tags), `zero_phase` (forward-backward, "
+                    "no delay), `none`",
+                    choices=("butterworth", "zero_phase", "none"),
+                ),
+                Key("filter_cutoff_hz", _F, 500.0, "Hz", "Butterworth cutoff, below half the sample rate"),
+                Key("filter_order", _I, 4, meaning="Butterworth order, 1–10 (0: no filter, as `filter = \"none\"`)"),
+                Key(
+                    "latency_s",
+                    _F,
+                    0.0,
+                    "s",
+                    "further delay of the IMU time tags behind the motion (transport, buffering), removed from "
+                    "them as the filter delay is; negative: tags early",
+                ),
             ),
         ),
         Table(
             "sensors.attitude_3dm",
             "3DM attitude sensor, read while hanging",
             (
-                Key("gravity_sigma_deg", _F, 0.2, "deg", "gravity-vector direction error, 1σ"),
-                Key("magnetic_sigma_deg", _F, 1.0, "deg", "magnetic-vector direction error, 1σ"),
+                Key(
+                    "gravity_sigma_deg",
+                    _F,
+                    0.2,
+                    "deg",
+                    "direction error of the measured gravity ('up') vector: 1σ of the tilt about each of the two "
+                    "axes perpendicular to it (a per-run calibration error; 10 % of it as per-sample noise in "
+                    "the simulator); ≥ 0",
+                ),
+                Key(
+                    "magnetic_sigma_deg",
+                    _F,
+                    1.0,
+                    "deg",
+                    "direction error of the measured magnetic vector, per perpendicular axis as above; ≥ 0",
+                ),
                 Key("rate_hz", _F, 100.0, "Hz", "sample rate (synthetic)"),
+                Key("latency_s", _F, 0.0, "s", "delay of the 3DM time tags behind the motion, removed from them"),
             ),
         ),
         Table(
             "sensors.ranging",
             "range aiding (its presence adds the ranging telemetry)",
             (
-                Key("rate_hz", _F, 200.0, "Hz", "ranging sample rate"),
+                Key(
+                    "rate_hz",
+                    _F,
+                    200.0,
+                    "Hz",
+                    "ranging sample rate: the synthetic writer's; with user data, when given, it must match the "
+                    "file's (median interval, within 10 %)",
+                ),
                 Key("odometer", _B, False, meaning="bungee-sheave odometer until the cut"),
                 Key("odometer_sigma_m", _F, 0.01, "m", "odometer noise, 1σ"),
-                Key("radar_range_sigma_m", _F, 0.02, "m", "radar-gun range noise, 1σ"),
-                Key("radar_rate_sigma_mps", _F, 0.05, "m/s", "radar-gun range-rate noise, 1σ"),
-                Key("reflector_body_m", _V, [0.0, 0.0, 0.0], "m", "corner reflector, body frame, from the CM"),
+                Key(
+                    "odometer_zero_m",
+                    _F,
+                    0.0,
+                    "m",
+                    "the odometer's zero: it reads the rope length (sheave to attachment) minus this",
+                ),
+                Key("radar_range_sigma_m", _F, 0.02, "m", "radar-gun range noise, 1σ (every gun without its own)"),
+                Key("radar_rate_sigma_mps", _F, 0.05, "m/s", "radar-gun range-rate noise, 1σ (idem)"),
+                Key(
+                    "reflector_body_m",
+                    _V,
+                    [0.0, 0.0, 0.0],
+                    "m",
+                    "corner reflector in the lander frame (the asset's; its origin is the CM unless the asset "
+                    "gives `cm_m`), for every gun without its own",
+                ),
+                Key(
+                    "latency_s",
+                    _F,
+                    0.0,
+                    "s",
+                    "delay of the ranging time tags behind the motion, removed from them",
+                ),
+                Key(
+                    "acquisition_filter",
+                    _B,
+                    False,
+                    meaning="the ranging channels went through the IMU's acquisition filter "
+                    "([sensors.acquisition]): its delay is removed from their tags too",
+                ),
             ),
         ),
         Table(
@@ -142,6 +222,24 @@ SCHEMA = Schema(
             "radar guns by name",
             free="vec3",
             free_meaning="gun position in SPF [m]",
+        ),
+        Table(
+            "sensors.ranging.reflectors",
+            "per gun: the reflector it tracks (default `reflector_body_m`)",
+            free="vec3",
+            free_meaning="gun name = reflector position in the lander frame [m]",
+        ),
+        Table(
+            "sensors.ranging.range_sigma_m",
+            "per gun: range noise (default `radar_range_sigma_m`)",
+            free="float",
+            free_meaning="gun name = range noise, 1σ [m]",
+        ),
+        Table(
+            "sensors.ranging.rate_sigma_mps",
+            "per gun: range-rate noise (default `radar_rate_sigma_mps`)",
+            free="float",
+            free_meaning="gun name = range-rate noise, 1σ [m/s]",
         ),
         Table(
             "filter",
@@ -217,6 +315,15 @@ class DropConfig:
     sample_rate_hz: float
     filter_cutoff_hz: float
     filter_order: int
+    acquisition_filter: str
+    imu_latency_s: float
+    attitude_3dm_latency_s: float
+    ranging_latency_s: float
+    ranging_filtered: bool
+    odometer_zero_m: float
+    gun_reflectors_body_m: dict
+    gun_range_sigma_m: dict
+    gun_rate_sigma_mps: dict
     gravity_sigma_deg: float
     magnetic_sigma_deg: float
     attitude_3dm_rate_hz: float
@@ -255,6 +362,7 @@ class DropConfig:
         if scenario.kind != "droptest":
             raise ScenarioError(scenario.path, "scenario.kind", f"{scenario.kind!r} is not a droptest scenario")
         v = SCHEMA.validate(scenario.data, scenario.path)
+        _check_ranges(v, scenario)
         for a in (v["chamber"]["magnetic_field_spf"], v["sensors"]["ranging"]["reflector_body_m"]):
             a.flags.writeable = False  # shared by every user of the config
         v["synthetic"]["release_euler123_deg"].flags.writeable = False
@@ -286,6 +394,15 @@ class DropConfig:
             sample_rate_hz=aq["sample_rate_hz"],
             filter_cutoff_hz=aq["filter_cutoff_hz"],
             filter_order=aq["filter_order"],
+            acquisition_filter="none" if aq["filter_order"] == 0 else aq["filter"],
+            imu_latency_s=aq["latency_s"],
+            attitude_3dm_latency_s=a3["latency_s"],
+            ranging_latency_s=rg["latency_s"],
+            ranging_filtered=rg["acquisition_filter"],
+            odometer_zero_m=rg["odometer_zero_m"],
+            gun_reflectors_body_m={str(k): np.asarray(p, float) for k, p in rg.get("reflectors", {}).items()},
+            gun_range_sigma_m={str(k): float(x) for k, x in rg.get("range_sigma_m", {}).items()},
+            gun_rate_sigma_mps={str(k): float(x) for k, x in rg.get("rate_sigma_mps", {}).items()},
             gravity_sigma_deg=a3["gravity_sigma_deg"],
             magnetic_sigma_deg=a3["magnetic_sigma_deg"],
             attitude_3dm_rate_hz=a3["rate_hz"],
@@ -317,6 +434,66 @@ class DropConfig:
             survey_sigma_m=s["survey_sigma_m"],
             bag_pressure_psi=s["bag_pressure_psi"],
         )
+
+
+# ------------------------------------------------------------------ value ranges (issue 12, item 4)
+def _check_ranges(v: dict, scenario: Scenario) -> None:
+    """Values the schema's types cannot refuse: a ScenarioError naming file and key."""
+    path = scenario.path
+
+    def bad(key: str, msg: str) -> None:
+        raise ScenarioError(path, key, msg)
+
+    ch = v["chamber"]
+    if not 0.0 < ch["ramp_angle_deg"] < 90.0:
+        bad("chamber.ramp_angle_deg", f"{ch['ramp_angle_deg']} deg: the ramp inclination must be in (0, 90) deg")
+    if not 0.0 <= ch["nail_depth_m"] <= 10.0:
+        bad(
+            "chamber.nail_depth_m",
+            f"{ch['nail_depth_m']} m: the nail must lie 0-10 m below the ramp surface (negative = in front of "
+            "the ramp, where the lander would hit it)",
+        )
+    if not np.linalg.norm(ch["magnetic_field_spf"]) > 0.0:
+        bad("chamber.magnetic_field_spf", "a zero vector has no direction")
+    sensors = v["sensors"]
+    sigmas = {
+        "accelerometer": ("noise_g", "bias_g", "scale", "misalignment_deg"),
+        "gyro": ("noise_dps", "bias_dps", "scale", "misalignment_deg"),
+        "attitude_3dm": ("gravity_sigma_deg", "magnetic_sigma_deg"),
+        "ranging": ("odometer_sigma_m", "radar_range_sigma_m", "radar_rate_sigma_mps"),
+    }
+    for table, keys in sigmas.items():
+        for k in keys:
+            x = sensors[table][k]
+            if not (x >= 0.0 and np.isfinite(x)):
+                bad(f"sensors.{table}.{k}", f"{x}: a 1σ must be ≥ 0 (0 = this error is absent)")
+    for table in ("range_sigma_m", "rate_sigma_mps"):
+        for gun, x in sensors["ranging"].get(table, {}).items():
+            if not (x >= 0.0 and np.isfinite(x)):
+                bad(f"sensors.ranging.{table}.{gun}", f"{x}: a 1σ must be ≥ 0")
+    guns = set(sensors["ranging"].get("radar_guns", {}))
+    for table in ("reflectors", "range_sigma_m", "rate_sigma_mps"):
+        for gun in sensors["ranging"].get(table, {}):
+            if gun not in guns:
+                bad(
+                    f"sensors.ranging.{table}.{gun}",
+                    f"no radar gun '{gun}' in [sensors.ranging.radar_guns] (guns: {', '.join(sorted(guns)) or 'none'})",
+                )
+    for table, k in (("accelerometer", "full_scale_g"), ("gyro", "full_scale_dps")):
+        if not sensors[table][k] > 0.0:
+            bad(f"sensors.{table}.{k}", f"{sensors[table][k]}: the saturation level must be > 0")
+    aq = sensors["acquisition"]
+    if not aq["sample_rate_hz"] > 0.0:
+        bad("sensors.acquisition.sample_rate_hz", "must be > 0")
+    if not 0 <= aq["filter_order"] <= 10:
+        bad("sensors.acquisition.filter_order", f"{aq['filter_order']}: use 1-10 (0: no filter)")
+    if aq["filter"] != "none" and aq["filter_order"] > 0 and not 0.0 < aq["filter_cutoff_hz"]:
+        bad("sensors.acquisition.filter_cutoff_hz", "must be > 0")
+    for key, x in (("sensors.attitude_3dm.rate_hz", sensors["attitude_3dm"]["rate_hz"]),
+                   ("sensors.ranging.rate_hz", sensors["ranging"]["rate_hz"]),
+                   ("filter.rate_hz", v["filter"]["rate_hz"])):  # fmt: skip
+        if not x > 0.0:
+            bad(key, f"{x}: a rate must be > 0")
 
 
 _CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

@@ -8,9 +8,15 @@ Geometry follows the REDLand paper [1], "Test article and equipment": the closed
 lander is 1.2 m tall with 1.6 m base sides (so it is *not* a regular tetrahedron); each face
 carries one airbag of six 2 m lobes in a "billiard rack" (rows of 3, 2, 1).
 
-Body frame B: origin at the centre of mass (CM), +Z from the base petal toward the apex, the
-base petal an equilateral triangle in the plane ``z = -cm_height`` whose +Y edge (the one
-carrying the PYBP accelerometer triad, REDLand Fig. 4-5) has its midpoint on the +Y axis.
+Lander frame L and body frame B.  The asset describes the rig in its own lander frame L: any
+orientation, any origin.  Either the shipped MER layout (``height_m``, ``base_side_m``,
+``cm_height_m``: +Z from the base petal toward the apex, the base an equilateral triangle in the
+plane ``z = -cm_height`` whose +Y edge (the one carrying the PYBP accelerometer triad, REDLand
+Fig. 4-5) has its midpoint on the +Y axis, origin on the axis ``cm_height`` above the base), or the
+four vertices ``vertices_m`` in L; ``cm_m`` the centre of mass (CM) in L (default: L's origin).
+Instrument lever arms, the inertia (about the CM) and every other body-fixed vector of the scenario
+are written in L.  The filter's body frame B has L's axes and its origin at the CM: ``x_B = x_L −
+cm_L``; :class:`LanderModel` holds everything in B and keeps ``cm_L`` to convert other L vectors.
 
 Face / bag order (index into ``body.faces`` and ``LanderModel.lobe_bag``): see :data:`FACE_NAMES`.
 Each face is stored ``[a, b, c]`` with outward (counter-clockwise seen from outside) winding, and
@@ -34,6 +40,7 @@ __all__ = [
     "LanderModel",
     "load_lander",
     "tetrahedron_body",
+    "tetrahedron_from_vertices",
     "airbag_lobes",
     "airbag_mesh",
     "lobe_meshes",
@@ -66,6 +73,8 @@ class LanderModel:
             lobes wrap the lander (centre closer than one radius to the face), > -lobe_radius.
         ambient_pressure_pa: chamber (or atmosphere) pressure [Pa].
         instruments: lever arms of the sensors from the CM in B, name -> (3,) [m].
+        cm_L: the CM in the asset's lander frame L (3,) [m]; a vector ``x_L`` written in L is
+            ``x_L − cm_L`` in B (same axes).
     """
 
     name: str
@@ -83,6 +92,38 @@ class LanderModel:
     standoff: float
     ambient_pressure_pa: float
     instruments: dict[str, np.ndarray] = field(default_factory=dict)
+    cm_L: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def to_body(self, x_L) -> np.ndarray:
+        """A point given in the lander frame L (3,) or (n, 3) [m] -> body frame B (from the CM) [m]."""
+        return np.asarray(x_L, float) - self.cm_L
+
+
+def tetrahedron_from_vertices(vertices: np.ndarray, origin: np.ndarray | None = None) -> trimesh.Trimesh:
+    """Tetrahedral body from its four vertices (4, 3) [m]: 0, 1, 2 the base, 3 the apex, in the
+    vertex order of :func:`tetrahedron_body` (side face ``side_PY`` is the one opposite vertex 0,
+    ``side_PX`` opposite vertex 2, ``side_MX`` opposite vertex 1).  Faces in the order of
+    :data:`FACE_NAMES`, wound outward about the tetrahedron's centroid, last vertex of each face the
+    one opposite its "rack base" edge.  ``origin`` (3,) (default: the centroid) must lie strictly
+    inside.  Raises ``ValueError`` for a degenerate tetrahedron (volume below 1e-9 m³)."""
+    V = np.asarray(vertices, float)
+    if V.shape != (4, 3) or not np.all(np.isfinite(V)):
+        raise ValueError(f"tetrahedron: need 4 finite vertices [x, y, z], got shape {V.shape}")
+    vol = abs(np.linalg.det(V[1:] - V[0])) / 6.0
+    if vol < 1e-9:
+        raise ValueError(f"tetrahedron: the four vertices are (nearly) coplanar (volume {vol:.2e} m³)")
+    faces = np.array([[2, 1, 0], [1, 2, 3], [0, 1, 3], [2, 0, 3]])
+    centre = V.mean(axis=0)
+    tri = V[faces]
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    flip = np.einsum("ij,ij->i", nrm, tri.mean(axis=1) - centre) < 0.0
+    faces[flip] = faces[flip][:, [1, 0, 2]]
+    if origin is not None:
+        tri = V[faces]
+        nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        if np.any(np.einsum("ij,ij->i", nrm, np.asarray(origin, float) - tri[:, 0]) >= 0.0):
+            raise ValueError("tetrahedron: the centre of mass is not inside the body")
+    return trimesh.Trimesh(vertices=V, faces=faces, process=False)
 
 
 def tetrahedron_body(height: float, base_side: float, cm_height: float) -> trimesh.Trimesh:
@@ -139,8 +180,8 @@ def _rack_offsets(spacing: float) -> np.ndarray:
 def airbag_lobes(
     body: trimesh.Trimesh,
     lobe_radius: float,
-    lobe_spacing: float,
-    standoff: float,
+    lobe_spacing: float | np.ndarray,
+    standoff: float | np.ndarray,
     lobes_per_bag: int = 6,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Centres of the airbag lobes, one "billiard rack" per face of a tetrahedral body.
@@ -153,6 +194,7 @@ def airbag_lobes(
     by ``standoff`` (a negative standoff means the spheres cut the face plane: lobes wrapping the
     lander).  Frame: whatever frame ``body`` is in (B for the lander).
 
+    ``lobe_spacing`` and ``standoff`` are one value for every face or one per face (face order).
     Returns ``(centers (n_faces*6, 3) [m], bag_index (n_faces*6,) int)``, lobes grouped by face
     in face order.  Only ``lobes_per_bag == 6`` (the MER rack) is supported.
     """
@@ -160,10 +202,12 @@ def airbag_lobes(
         raise ValueError(f"airbag_lobes: only the 3-2-1 rack (6 lobes per bag) is supported, got {lobes_per_bag}")
     V = np.asarray(body.vertices, dtype=float)
     F = np.asarray(body.faces, dtype=int)
-    offsets = _rack_offsets(lobe_spacing)
+    spacing = np.broadcast_to(np.asarray(lobe_spacing, float), (len(F),))
+    stand = np.broadcast_to(np.asarray(standoff, float), (len(F),))
     centers = []
     bag = []
     for k, (ia, ib, ic) in enumerate(F):
+        offsets = _rack_offsets(spacing[k])
         a, b, c = V[ia], V[ib], V[ic]
         n = np.cross(b - a, c - a)
         n /= np.linalg.norm(n)
@@ -171,7 +215,7 @@ def airbag_lobes(
         ey = np.cross(n, ex)  # in-plane, perpendicular to a-b
         if np.dot(ey, c - a) < 0.0:
             ey = -ey
-        origin = (a + b + c) / 3.0 + (float(lobe_radius) + float(standoff)) * n
+        origin = (a + b + c) / 3.0 + (float(lobe_radius) + float(stand[k])) * n
         centers.append(origin + offsets[:, :1] * ex + offsets[:, 1:] * ey)
         bag.append(np.full(6, k, dtype=int))
     return np.concatenate(centers, axis=0), np.concatenate(bag)
@@ -217,14 +261,44 @@ def _num(table: dict, dotted: str, path: Path, positive: bool = True) -> float:
     return v
 
 
+def _array(table: dict, dotted: str, path: Path, shape: tuple[int, ...]) -> np.ndarray:
+    v = _get(table, dotted, path)
+    try:
+        a = np.array(v, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: key '{dotted}' must be numbers of shape {list(shape)} [m]") from exc
+    if a.shape != shape or not np.all(np.isfinite(a)):
+        raise ValueError(f"{path}: key '{dotted}' must be finite numbers of shape {list(shape)}, got {v!r}")
+    return a
+
+
+def _per_face(table: dict, dotted: str, path: Path, positive: bool) -> np.ndarray:
+    """A number, or one per face (4, in the order of FACE_NAMES) -> (4,)."""
+    v = _get(table, dotted, path)
+    if isinstance(v, list):
+        if len(v) != len(FACE_NAMES) or any(isinstance(x, bool) or not isinstance(x, int | float) for x in v):
+            raise ValueError(f"{path}: key '{dotted}' must be a number or one per face ({', '.join(FACE_NAMES)})")
+        a = np.array(v, dtype=float)
+    else:
+        a = np.full(len(FACE_NAMES), _num(table, dotted, path, positive=positive))
+    if positive and not np.all(a > 0.0):
+        raise ValueError(f"{path}: key '{dotted}' must be > 0, got {v}")
+    return a
+
+
 def load_lander(path: str | Path) -> LanderModel:
     """Read a lander asset (TOML, SI units, body frame B) into a :class:`LanderModel`.
 
-    Expected tables/keys (see ``assets/landers/mer_drop_lander.toml``): ``[lander]`` name,
-    height_m, base_side_m, cm_height_m, mass_kg, inertia_kgm2 (3x3, symmetric positive
-    definite); ``[airbags]`` bags (= 4), lobes_per_bag (= 6), lobe_diameter_m, lobe_spacing_m,
-    standoff_m (> -lobe radius), pressure_pa, gas_volume_m3, gamma, damping_pa_s_per_m, friction;
-    ``[chamber]`` ambient_pressure_pa; ``[instruments]`` name = [x, y, z] lever arms [m].
+    Expected tables/keys (see ``assets/landers/mer_drop_lander.toml`` and ``workbench/io/FORMATS.md``,
+    "Lander asset"): ``[lander]`` name, either height_m, base_side_m, cm_height_m (the MER layout)
+    or vertices_m (4 x [x, y, z] in the lander frame L: base vertices, then the apex), optional cm_m
+    (the CM in L; required with vertices_m), mass_kg, inertia_kgm2 (3x3 in L's axes about the CM,
+    symmetric positive definite); ``[airbags]`` bags (= 4), lobe_diameter_m, and either
+    lobes_per_bag (= 6), lobe_spacing_m and standoff_m (> -lobe radius; each one number or one per
+    face) or lobe_centers_m (n x [x, y, z] in L) with lobe_faces (face of each lobe), pressure_pa,
+    gas_volume_m3, gamma, damping_pa_s_per_m, friction; ``[chamber]`` ambient_pressure_pa;
+    ``[instruments]`` name = [x, y, z] positions in L [m].  Everything is returned in B (L's axes,
+    origin at the CM).
 
     Raises ``FileNotFoundError`` if the file is missing and ``ValueError`` naming the file and
     the key for malformed TOML, missing keys or bad values.
@@ -239,11 +313,28 @@ def load_lander(path: str | Path) -> LanderModel:
         raise ValueError(f"{path}: invalid TOML: {exc}") from exc
 
     name = str(_get(data, "lander.name", path))
-    height = _num(data, "lander.height_m", path)
-    base_side = _num(data, "lander.base_side_m", path)
-    cm_height = _num(data, "lander.cm_height_m", path)
-    if not cm_height < height:
-        raise ValueError(f"{path}: key 'lander.cm_height_m' ({cm_height}) must be below 'lander.height_m'")
+    lt = data.get("lander", {})
+    legacy = [k for k in ("height_m", "base_side_m", "cm_height_m") if k in lt]
+    if "vertices_m" in lt:
+        if legacy:
+            raise ValueError(
+                f"{path}: give either 'lander.vertices_m' (any frame) or {legacy} (the MER layout), not both"
+            )
+        if "cm_m" not in lt:
+            raise ValueError(f"{path}: key 'lander.cm_m' is required with 'lander.vertices_m' (the CM in that frame)")
+        vertices_L = _array(data, "lander.vertices_m", path, (4, 3))
+    else:
+        height = _num(data, "lander.height_m", path)
+        base_side = _num(data, "lander.base_side_m", path)
+        cm_height = _num(data, "lander.cm_height_m", path)
+        if not cm_height < height:
+            raise ValueError(f"{path}: key 'lander.cm_height_m' ({cm_height}) must be below 'lander.height_m'")
+        vertices_L = np.asarray(tetrahedron_body(height, base_side, cm_height).vertices, float)
+    cm_L = _array(data, "lander.cm_m", path, (3,)) if "cm_m" in lt else np.zeros(3)
+    try:
+        body = tetrahedron_from_vertices(vertices_L - cm_L, origin=np.zeros(3))
+    except ValueError as exc:
+        raise ValueError(f"{path}: keys 'lander.vertices_m' / 'lander.cm_m': {exc}") from exc
     mass = _num(data, "lander.mass_kg", path)
     try:
         inertia = np.array(_get(data, "lander.inertia_kgm2", path), dtype=float)
@@ -257,15 +348,40 @@ def load_lander(path: str | Path) -> LanderModel:
     bags = int(_num(data, "airbags.bags", path))
     if bags != 4:
         raise ValueError(f"{path}: key 'airbags.bags' must be 4 (one per tetrahedron face), got {bags}")
-    lobes_per_bag = int(_num(data, "airbags.lobes_per_bag", path))
-    if lobes_per_bag != 6:
-        raise ValueError(f"{path}: key 'airbags.lobes_per_bag' must be 6 (3-2-1 rack), got {lobes_per_bag}")
     lobe_radius = 0.5 * _num(data, "airbags.lobe_diameter_m", path)
-    lobe_spacing = _num(data, "airbags.lobe_spacing_m", path)
-    standoff = _num(data, "airbags.standoff_m", path, positive=False)
-    if standoff <= -lobe_radius:
-        # negative: the lobes wrap the lander (centres closer than one radius to the face)
-        raise ValueError(f"{path}: key 'airbags.standoff_m' must be > -lobe radius, got {standoff}")
+    at = data.get("airbags", {})
+    if "lobe_centers_m" in at:  # an explicit lobe layout, any number of lobes per face
+        cen = np.array(at["lobe_centers_m"], dtype=float) if isinstance(at["lobe_centers_m"], list) else None
+        if cen is None or cen.ndim != 2 or cen.shape[1] != 3 or not np.all(np.isfinite(cen)):
+            raise ValueError(f"{path}: key 'airbags.lobe_centers_m' must be a list of [x, y, z] in the lander frame")
+        faces_raw = at.get("lobe_faces")
+        try:
+            bag = np.array([FACE_NAMES.index(f) if isinstance(f, str) else int(f) for f in faces_raw], dtype=int)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"{path}: key 'airbags.lobe_faces' must list, per lobe, its face ({', '.join(FACE_NAMES)} or 0-3)"
+            ) from exc
+        if bag.shape != (cen.shape[0],) or np.any((bag < 0) | (bag > 3)) or len(set(bag.tolist())) != 4:
+            raise ValueError(
+                f"{path}: key 'airbags.lobe_faces' needs one face per lobe of 'lobe_centers_m' "
+                f"({cen.shape[0]}), each face 0-3 used at least once"
+            )
+        centers = cen - cm_L
+        standoff = float(at.get("standoff_m", 0.0)) if not isinstance(at.get("standoff_m"), list) else 0.0
+    else:
+        lobes_per_bag = int(_num(data, "airbags.lobes_per_bag", path))
+        if lobes_per_bag != 6:
+            raise ValueError(
+                f"{path}: key 'airbags.lobes_per_bag' must be 6 (3-2-1 rack; other layouts: 'lobe_centers_m'), "
+                f"got {lobes_per_bag}"
+            )
+        lobe_spacing = _per_face(data, "airbags.lobe_spacing_m", path, positive=True)
+        standoffs = _per_face(data, "airbags.standoff_m", path, positive=False)
+        if np.any(standoffs <= -lobe_radius):
+            # negative: the lobes wrap the lander (centres closer than one radius to the face)
+            raise ValueError(f"{path}: key 'airbags.standoff_m' must be > -lobe radius, got {standoffs}")
+        centers, bag = airbag_lobes(body, lobe_radius, lobe_spacing, standoffs, lobes_per_bag)
+        standoff = float(standoffs[0]) if np.all(standoffs == standoffs[0]) else float(np.min(standoffs))
 
     instruments_raw = _get(data, "instruments", path)
     if not isinstance(instruments_raw, dict):
@@ -278,12 +394,11 @@ def load_lander(path: str | Path) -> LanderModel:
             raise ValueError(f"{path}: key 'instruments.{key}' must be [x, y, z] in metres") from exc
         if arm.shape != (3,):
             raise ValueError(f"{path}: key 'instruments.{key}' must be [x, y, z], got shape {arm.shape}")
+        arm = arm - cm_L
         arm.setflags(write=False)
         instruments[str(key)] = arm
 
-    body = tetrahedron_body(height, base_side, cm_height)
-    centers, bag = airbag_lobes(body, lobe_radius, lobe_spacing, standoff, lobes_per_bag)
-    for arr in (inertia, centers, bag):
+    for arr in (inertia, centers, bag, cm_L):
         arr.setflags(write=False)
     return LanderModel(
         name=name,
@@ -301,4 +416,5 @@ def load_lander(path: str | Path) -> LanderModel:
         standoff=standoff,
         ambient_pressure_pa=_num(data, "chamber.ambient_pressure_pa", path, positive=False),
         instruments=instruments,
+        cm_L=cm_L,
     )

@@ -36,6 +36,7 @@ Error convention (the filter's, docs/ARCHITECTURE.md): ``truth = estimate ⊞ δ
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import tempfile
 import time
@@ -243,7 +244,8 @@ def monte_carlo(
     """Run :func:`run_seed` for every seed and stack the results (see module docstring).
 
     ``seeds`` sequence of non-negative ints (one task each); ``work_dir`` folder for the tasks'
-    temporary subfolders (created if needed; left empty).  ``scheduler`` None (in-process loop, or
+    temporary subfolders (created if needed and then removed again; the ``seed*_`` subfolders of
+    members whose worker was killed are removed at the end).  ``scheduler`` None (in-process loop, or
     a process pool of ``workers`` processes if ``workers > 1``), ``"local"`` (a dask LocalCluster
     of ``workers`` (≥ 2) processes) or ``"tcp://…"`` (a dask Client to that scheduler).  The result is in the order
     of ``seeds`` and does not depend on the executor (only ``wall_time_s``, ``reconstruct_s``,
@@ -255,8 +257,24 @@ def monte_carlo(
     if len(set(seeds)) != len(seeds):
         raise ValueError("monte_carlo: repeated seeds")
     work = Path(work_dir)
-    work.mkdir(parents=True, exist_ok=True)
     resolve_scheduler(scheduler, workers)  # refuses a bad scheduler/workers pair before any work
+    created = not work.exists()
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        return _monte_carlo(scenario, seeds, work, scheduler, workers)
+    finally:
+        # a member whose worker was killed (SIGKILL, out of memory) could not delete its folder; the
+        # member was redone elsewhere, so what is left under work/ is an orphan: remove it, and the
+        # work folder itself when this call created it
+        for sub in work.glob("seed*_*"):
+            shutil.rmtree(sub, ignore_errors=True)
+        if created:
+            with contextlib.suppress(OSError):
+                work.rmdir()
+
+
+def _monte_carlo(scenario: Scenario, seeds: list[int], work: Path, scheduler: str | None, workers: int) -> McResult:
+    """The body of :func:`monte_carlo` with its work folder in place."""
     # one BLAS thread in every executor (run_monte_carlo): BLAS reductions are only bitwise reproducible
     # for a fixed thread count, and two busy-waiting pools on two cores made each reconstruction ~10x
     # slower (measured 2.5 s -> 20-45 s)

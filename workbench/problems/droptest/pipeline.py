@@ -171,7 +171,8 @@ def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
     """
     cfg = config_for(scenario)
     att = tel.attitude
-    hang = att.time < tel.events["release"]  # the 3DM reading is only valid while the lander hangs still
+    # the 3DM reading is only valid while the lander hangs still (its tags corrected by its latency)
+    hang = att.time - tel.time_shifts_s.get("attitude_3dm", 0.0) < tel.events["release"]
     if not hang.any():
         raise ScenarioError(
             att.path,
@@ -238,7 +239,7 @@ class _Memo:
         return self._get(x)[1]
 
 
-def _bungee(setup: dict) -> rl.BungeeModel | None:
+def _bungee(setup: dict, lander: LanderModel) -> rl.BungeeModel | None:
     b = setup.get("bungee")
     if not b:
         return None
@@ -248,7 +249,7 @@ def _bungee(setup: dict) -> rl.BungeeModel | None:
         coeffs=tuple(float(c) for c in b["coefficients"]),
         count=float(b["count"]),
         mass=float(b["mass_kg"]),
-        attach_B=np.asarray(b["attach_body_m"], float),
+        attach_B=lander.to_body(b["attach_body_m"]),
     )
 
 
@@ -258,7 +259,7 @@ def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lan
     mode = cfg.mode
     if mode not in ("kinematic", "dynamic"):
         raise ScenarioError(scenario.path, "filter.mode", f"must be 'kinematic' or 'dynamic', got {mode!r}")
-    bungee = _bungee(tel.setup) if mode == "dynamic" else None
+    bungee = _bungee(tel.setup, lander) if mode == "dynamic" else None
     if mode == "dynamic" and bungee is None:
         raise ScenarioError(scenario.path, "filter.mode", "'dynamic' needs a [bungee] table in the setup file")
     t_rel = tel.events["release"]
@@ -307,7 +308,7 @@ def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lan
     H_zupt = np.zeros((3, n_e))
     H_zupt[:, rl.EV] = np.eye(3)
 
-    ranging = _ranging_measurements(scenario, tel) if tel.ranging is not None else {}
+    ranging = _ranging_measurements(scenario, tel, lander) if tel.ranging is not None else {}
 
     # the triads' declared scale-factor and misalignment errors (sensors.accelerometer.scale,
     # misalignment_deg; no states for them) as measurement noise proportional to the measured force:
@@ -358,14 +359,17 @@ def _at_time(model: Callable, dt: float) -> Callable:
     return fn
 
 
-def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, list[Measurement]]:
+def _ranging_measurements(scenario: Scenario, tel: DropTelemetry, lander: LanderModel) -> dict[int, list[Measurement]]:
     """Range aiding attached to the nearest filter step and evaluated at its own time tag: the
-    odometer (rope length from the sheave to the attachment point, until the cut) and radar-gun
-    range / range rate to the reflector. Ranging has no IDDAS filter, so its tags are not shifted."""
+    odometer (rope length from the sheave to the attachment point, until the cut, plus the
+    odometer's zero) and radar-gun range / range rate to each gun's reflector, with each gun's noise.
+    The ranging tags are corrected by the ranging stream's own lag (``tel.time_shifts_s["ranging"]``:
+    its declared latency, plus the acquisition filter's delay only if it went through that filter),
+    just as the IMU tags are by theirs — the two streams meet on one time line."""
     spec = RangingSpec.from_scenario(scenario)
     rt = tel.ranging
     out: dict[int, list[Measurement]] = {}
-    t_meas = rt.time
+    t_meas = rt.time - tel.time_shifts_s.get("ranging", 0.0)
     idx = np.clip(np.searchsorted(tel.t, t_meas), 1, tel.t.size - 1)
     left = np.abs(tel.t[idx - 1] - t_meas) < np.abs(tel.t[idx] - t_meas)
     idx = np.where(left, idx - 1, idx)
@@ -377,16 +381,16 @@ def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, l
         if not b:
             raise ScenarioError(rt.path, None, "an odometer channel needs a [bungee] table in the setup file")
         anchor = np.asarray(b["anchor_m"], float)
-        attach = np.asarray(b["attach_body_m"], float)
+        attach = lander.to_body(b["attach_body_m"])
         s2 = np.array([[spec.odometer_sigma**2]])
-        vals = rt.channel("odometer")
+        vals = rt.channel("odometer") + spec.odometer_zero  # the rope length
         for i in np.flatnonzero(near & np.isfinite(vals)):
             m = _Memo(_at_time(lambda x: rl.range_model(x, anchor, attach), float(off[i])))
             out.setdefault(int(idx[i]), []).append(
                 Measurement("odometer", np.array([vals[i]]), s2, m.h, m.H, gate_probability=0.9999)
             )
-    r_ref = spec.reflector_B
     for name, G in spec.guns.items():
+        r_ref = lander.to_body(spec.reflectors_L[name])
         if f"{name}.range" not in rt.channels or f"{name}.rate" not in rt.channels:
             raise ScenarioError(
                 rt.path, None, f"radar gun {name} configured but no columns '{name}.range', '{name}.rate'"
@@ -395,14 +399,14 @@ def _ranging_measurements(scenario: Scenario, tel: DropTelemetry) -> dict[int, l
         zrr = rt.channel(f"{name}.rate")
         for i in np.flatnonzero(near & (np.isfinite(zr) | np.isfinite(zrr))):  # sparse columns: empty = NaN
             dt_i = float(off[i])
-            mr = _Memo(_at_time(lambda x, G=G: rl.range_model(x, G, r_ref), dt_i))
-            mrr = _Memo(_at_time(lambda x, G=G: rl.range_rate_model(x, G, r_ref), dt_i))
+            mr = _Memo(_at_time(lambda x, G=G, r=r_ref: rl.range_model(x, G, r), dt_i))
+            mrr = _Memo(_at_time(lambda x, G=G, r=r_ref: rl.range_rate_model(x, G, r), dt_i))
             lst = out.setdefault(int(idx[i]), [])
             if np.isfinite(zr[i]):
-                R_r = np.array([[spec.range_sigma**2]])
+                R_r = np.array([[spec.range_sigmas[name] ** 2]])
                 lst.append(Measurement(f"{name}.range", np.array([zr[i]]), R_r, mr.h, mr.H, gate_probability=0.9999))
             if np.isfinite(zrr[i]):
-                R_rr = np.array([[spec.rate_sigma**2]])
+                R_rr = np.array([[spec.rate_sigmas[name] ** 2]])
                 lst.append(Measurement(f"{name}.rate", np.array([zrr[i]]), R_rr, mrr.h, mrr.H, gate_probability=0.9999))
     return out
 
@@ -513,14 +517,64 @@ def reconstruct(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> It
     yield tel
     init = initial_state(scenario, tel)
     yield init
-    fwd = forward_pass(scenario, tel, init, lander)
+    try:
+        fwd = forward_pass(scenario, tel, init, lander)
+    except np.linalg.LinAlgError as err:
+        raise np.linalg.LinAlgError(f"forward EKF pass: {err}{_likely_keys(scenario, err)}") from err
     yield fwd
-    sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
+    try:
+        sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
+    except np.linalg.LinAlgError as err:
+        raise np.linalg.LinAlgError(f"RTS smoother: {err}{_likely_keys(scenario, err)}") from err
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
     yield smo
     st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))
     yield st
     yield DropResult(tel, init, fwd, smo, st, summarize(scenario, tel, fwd, smo, st))
+
+
+#: error-state component -> the scenario setting that sets its prior σ or process noise
+_ERROR_STATE_KEYS = (
+    (rl.EP, "the setup file's [hanging] position_sigma_m"),
+    (rl.EV, "[filter] velocity_sigma_mps / hang_zupt_sigma_mps"),
+    (rl.EA, "[filter] accel_sigma_mps2 / q_accel"),
+    (rl.ETH, "[sensors.attitude_3dm] gravity_sigma_deg / magnetic_sigma_deg"),
+    (rl.EW, "[filter] rate_sigma_dps"),
+    (rl.EAL, "[filter] angular_accel_sigma / q_angular"),
+    (rl.ES, "[sensors.gyro] scale / misalignment_deg"),
+    (rl.EBG, "[sensors.gyro] bias_dps"),
+)
+
+
+def _likely_keys(scenario: Scenario, err: Exception) -> str:
+    """The scenario settings behind a numerical failure: those of the error-state components the
+    error names (``CovarianceError.components``), and any σ set to 0 (an error declared absent)."""
+    cfg = config_for(scenario)
+    keys = []
+    for c in getattr(err, "components", ()):
+        for sl, key in _ERROR_STATE_KEYS:
+            if sl.start <= c < sl.stop and key not in keys:
+                keys.append(key)
+        if c >= rl.N_E and "[sensors.accelerometer] bias_g" not in keys:
+            keys.append("[sensors.accelerometer] bias_g")
+    zero = [
+        name
+        for name, v in (
+            ("[sensors.gyro] bias_dps", cfg.gyro_bias_dps),
+            ("[sensors.gyro] scale", cfg.gyro_scale),
+            ("[sensors.gyro] misalignment_deg", cfg.gyro_misalignment_deg),
+            ("[sensors.accelerometer] bias_g", cfg.accel_bias_g),
+            ("[filter] q_accel", cfg.q_accel),
+            ("[filter] q_angular", cfg.q_angular),
+        )
+        if v == 0.0
+    ]
+    out = ""
+    if keys:
+        out += f"; likely scenario setting: {', '.join(keys)}"
+    if zero:
+        out += f"; set to 0 in {scenario.path}: {', '.join(zero)}"
+    return out
 
 
 def run_droptest(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> DropResult:

@@ -18,10 +18,10 @@ Functions here produce *measurements from truth* (synthetic scenarios) and the m
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import butter, lfilter, lfilter_zi
+from scipy.signal import butter, filtfilt, lfilter, lfilter_zi
 
 from workbench.core.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_rotate
 from workbench.problems.droptest.config import config_for
@@ -64,11 +64,22 @@ def specific_force_at(
     return a_B + np.cross(alpha_B, r_B) + np.cross(w_B, np.cross(w_B, r_B))
 
 
-def acquisition_filter(x: np.ndarray, fs_hz: float, cutoff_hz: float = 500.0, order: int = 4) -> np.ndarray:
-    """Causal Butterworth low-pass (the IDDAS 500 Hz filter) along axis 0, started at rest on x[0]."""
-    b, a = butter(order, cutoff_hz / (0.5 * fs_hz))
-    zi = lfilter_zi(b, a)
+def acquisition_filter(
+    x: np.ndarray, fs_hz: float, cutoff_hz: float = 500.0, order: int = 4, kind: str = "butterworth"
+) -> np.ndarray:
+    """The acquisition (anti-alias) filter along axis 0 of ``x`` sampled at ``fs_hz`` [Hz]:
+    ``kind`` "butterworth" — causal Butterworth low-pass (the IDDAS 500 Hz filter), started at rest
+    on x[0]; "zero_phase" — the same design run forward and backward (``filtfilt``: no delay, the
+    squared magnitude); "none" (or ``order`` 0) — ``x`` unchanged."""
     x = np.asarray(x, float)
+    if kind == "none" or int(order) == 0:
+        return x.copy()
+    b, a = butter(order, cutoff_hz / (0.5 * fs_hz))
+    if kind == "zero_phase":
+        return filtfilt(b, a, x, axis=0)
+    if kind != "butterworth":
+        raise ValueError(f"acquisition filter kind must be butterworth, zero_phase or none, got {kind!r}")
+    zi = lfilter_zi(b, a)
     out = np.empty_like(x)
     flat = x.reshape(x.shape[0], -1)
     o = out.reshape(x.shape[0], -1)
@@ -77,13 +88,15 @@ def acquisition_filter(x: np.ndarray, fs_hz: float, cutoff_hz: float = 500.0, or
     return out
 
 
-def acquisition_group_delay(cutoff_hz: float = 500.0, order: int = 4) -> float:
-    """Low-frequency group delay [s] of the Butterworth acquisition filter.
+def acquisition_group_delay(cutoff_hz: float = 500.0, order: int = 4, kind: str = "butterworth") -> float:
+    """Low-frequency group delay [s] of the acquisition filter (0 for "zero_phase" and "none").
 
-    Evaluated with ``scipy.signal.group_delay`` on the same design at a sample rate 200× the
-    cutoff (close to the analogue filter): ≈ 0.83 ms for the 4th-order 500 Hz IDDAS filter.
+    Butterworth: evaluated with ``scipy.signal.group_delay`` on the same design at a sample rate
+    200× the cutoff (close to the analogue filter): ≈ 0.83 ms for the 4th-order 500 Hz IDDAS filter.
     The reconstruction shifts the telemetry time tags back by this delay.
     """
+    if kind in ("zero_phase", "none") or int(order) == 0:
+        return 0.0
     from scipy.signal import group_delay
 
     fs = 200.0 * cutoff_hz
@@ -132,7 +145,10 @@ class RangingSpec:
     anchor of the setup file) to the attachment point until the cut, 1σ ``odometer_sigma`` [m];
     ``guns``: radar-gun name -> fixed SPF position [m], measuring range (1σ ``range_sigma`` [m])
     and range rate (1σ ``rate_sigma`` [m/s]) to a reflector at ``reflector_B`` [m, body];
-    ``rate_hz`` sampling rate of the ranging file.
+    ``rate_hz`` sampling rate of the ranging file.  Per gun (name -> value, every gun listed):
+    ``reflectors_L`` its reflector in the lander frame L [m] (``reflector_B`` is the common one,
+    also in L: the asset's ``cm_m`` turns it into the body frame), ``range_sigmas`` [m] and
+    ``rate_sigmas`` [m/s]; ``odometer_zero`` [m] the odometer reads the rope length minus this.
     """
 
     odometer: bool
@@ -142,6 +158,10 @@ class RangingSpec:
     range_sigma: float
     rate_sigma: float
     rate_hz: float
+    reflectors_L: dict[str, np.ndarray] = field(default_factory=dict)
+    range_sigmas: dict[str, float] = field(default_factory=dict)
+    rate_sigmas: dict[str, float] = field(default_factory=dict)
+    odometer_zero: float = 0.0
 
     @classmethod
     def from_scenario(cls, scenario) -> RangingSpec:
@@ -156,4 +176,10 @@ class RangingSpec:
             range_sigma=cfg.radar_range_sigma_m,
             rate_sigma=cfg.radar_rate_sigma_mps,
             rate_hz=cfg.ranging_rate_hz,
+            reflectors_L={
+                g: np.asarray(cfg.gun_reflectors_body_m.get(g, cfg.reflector_body_m)) for g in cfg.radar_guns
+            },
+            range_sigmas={g: cfg.gun_range_sigma_m.get(g, cfg.radar_range_sigma_m) for g in cfg.radar_guns},
+            rate_sigmas={g: cfg.gun_rate_sigma_mps.get(g, cfg.radar_rate_sigma_mps) for g in cfg.radar_guns},
+            odometer_zero=cfg.odometer_zero_m,
         )

@@ -349,6 +349,7 @@ def synthesize_droptest(
     fs = cfg.sample_rate_hz
     cutoff = cfg.filter_cutoff_hz
     order = cfg.filter_order
+    kind = cfg.acquisition_filter
     decim = int(round(fs_sim / fs))
     if abs(decim * fs - fs_sim) > 1e-6:
         raise ValueError(f"{scenario.path}: sensors.acquisition.sample_rate_hz must divide {fs_sim} Hz")
@@ -359,11 +360,11 @@ def synthesize_droptest(
     for name in TRIADS:
         r = lander.instruments[name]
         f_true = specific_force_at(r, truth.a_ng_I, truth.q_I_B, truth.w_B, truth.alpha_B)
-        f_filt = acquisition_filter(f_true, fs_sim, cutoff, order)[::decim]
+        f_filt = acquisition_filter(f_true, fs_sim, cutoff, order, kind)[::decim]
         f_meas, drawn[name] = apply_errors(f_filt, acc_model, rng)
         for i, ax in enumerate("xyz"):
             channels[f"{name}.{ax}"] = (f_meas[:, i], "g")
-    w_filt = acquisition_filter(truth.w_B, fs_sim, cutoff, order)[::decim]
+    w_filt = acquisition_filter(truth.w_B, fs_sim, cutoff, order, kind)[::decim]
     w_meas, drawn["gyro"] = apply_errors(w_filt, gyr_model, rng)
     for i, ax in enumerate("xyz"):
         channels[f"gyro.{ax}"] = (w_meas[:, i], "deg/s")
@@ -376,7 +377,11 @@ def synthesize_droptest(
                 "sensor": "IDDAS: 4 accelerometer triads (ENDEVCO 7264) + CFX rate gyro",
                 "rate_hz": fs,
                 "source": f"synthetic drop, seed {seed}",
-                "acquisition_filter": f"Butterworth order {order}, {cutoff:g} Hz",
+                "acquisition_filter": (
+                    f"Butterworth order {order}, {cutoff:g} Hz" + (", zero-phase" if kind == "zero_phase" else "")
+                    if kind != "none"
+                    else "none"
+                ),
             },
         )
     }
@@ -430,7 +435,7 @@ def synthesize_droptest(
         f"rest_length_m = {rig.rest_length:.6f}\n"
         f"coefficients = {fmt(rig.coeffs)}  # N/m^k per bungee, k = 1..\n"
         f"count = {rig.count:.6f}\n"
-        f"attach_body_m = {fmt(rig.attach_B)}\n"
+        f"attach_body_m = {fmt(rig.attach_B + lander.cm_L)}  # lander frame\n"
         f"mass_kg = {lander.mass}\n"
     )
     if surf.n_rocks:  # the surveyed rock field (rigid spheres: centre in SPF, radius)
@@ -440,7 +445,7 @@ def synthesize_droptest(
     paths["setup"] = atomic_write_text(out / "setup.toml", setup)
 
     if cfg.ranging:
-        paths["ranging"] = _write_ranging(scenario, truth, out, rng)
+        paths["ranging"] = _write_ranging(scenario, truth, out, rng, lander)
 
     truth_path = out / "truth.npz"
     np.savez_compressed(
@@ -469,7 +474,9 @@ def synthesize_droptest(
     return SyntheticDrop(telemetry=paths, truth_path=truth_path)
 
 
-def _write_ranging(scenario: Scenario, truth: DropTruth, out: Path, rng: np.random.Generator) -> Path:
+def _write_ranging(
+    scenario: Scenario, truth: DropTruth, out: Path, rng: np.random.Generator, lander: LanderModel
+) -> Path:
     spec = RangingSpec.from_scenario(scenario)
     step = int(round(truth.config.output_rate_hz / spec.rate_hz))
     idx = np.arange(0, truth.t.size, step)
@@ -481,17 +488,19 @@ def _write_ranging(scenario: Scenario, truth: DropTruth, out: Path, rng: np.rand
     if spec.odometer:
         x_att = p + C @ truth.rig.attach_B
         rho = np.linalg.norm(truth.rig.anchor_I - x_att, axis=1) + rng.normal(0.0, spec.odometer_sigma, t.size)
+        rho = rho - spec.odometer_zero  # the odometer counts from its own zero
         cut = truth.events.get("bungee_cut", np.inf)
         rho = np.where((t >= 0.0) & (t < cut), rho, np.nan)  # the sheave turns only while towing
         ch["odometer"] = (rho, "m")
         sparse.append("odometer")
     for name, G in spec.guns.items():
-        d = p + C @ spec.reflector_B - G
+        r_B = lander.to_body(spec.reflectors_L[name])
+        d = p + C @ r_B - G
         rho = np.linalg.norm(d, axis=1)
         u = d / rho[:, None]
-        vr = v + np.einsum("nij,nj->ni", C, np.cross(w, spec.reflector_B))
-        ch[f"{name}.range"] = (rho + rng.normal(0.0, spec.range_sigma, t.size), "m")
-        ch[f"{name}.rate"] = (np.sum(u * vr, axis=1) + rng.normal(0.0, spec.rate_sigma, t.size), "m/s")
+        vr = v + np.einsum("nij,nj->ni", C, np.cross(w, r_B))
+        ch[f"{name}.range"] = (rho + rng.normal(0.0, spec.range_sigmas[name], t.size), "m")
+        ch[f"{name}.rate"] = (np.sum(u * vr, axis=1) + rng.normal(0.0, spec.rate_sigmas[name], t.size), "m/s")
     return write_telemetry(
         out / "ranging.csv",
         t,

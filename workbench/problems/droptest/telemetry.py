@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import difflib
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +45,11 @@ class DropTelemetry:
     what was dropped or bridged and why; ``raw`` the files as read (for ``/sensors``).
     ``jerk`` (n,) measured jerk indicator [m/s³] that raises the process noise; ``counts`` the IMU
     samples averaged into each step, per triad (n, n_triads) and for the gyro (n,); ``rate_hz`` the
-    filter rate actually used (a whole number of IMU samples per step).
+    filter rate actually used (a whole number of IMU samples per step).  ``time_shifts_s`` stream ->
+    the lag [s] taken off that stream's time tags: ``imu`` the acquisition filter's delay plus the
+    IMU latency (= ``group_delay_s``, already applied to ``t``), ``attitude_3dm`` and ``ranging``
+    their latencies (ranging plus the filter delay when it went through the acquisition filter),
+    applied where those streams are used.
     """
 
     t: np.ndarray
@@ -66,6 +70,7 @@ class DropTelemetry:
     jerk: np.ndarray
     counts: tuple[np.ndarray, np.ndarray]
     rate_hz: float
+    time_shifts_s: dict = field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -85,19 +90,27 @@ def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
     return paths
 
 
-def read_setup(path: Path) -> dict:
+#: keys of the setup file's ``[bungee]`` table: all of them for the dynamic filter, only the
+#: geometry for the odometer, none otherwise (kinematic mode ignores the table)
+BUNGEE_KEYS = ("anchor_m", "rest_length_m", "coefficients", "count", "attach_body_m", "mass_kg")
+ODOMETER_BUNGEE_KEYS = ("anchor_m", "attach_body_m")
+
+
+def read_setup(path: Path, bungee_keys: tuple[str, ...] | None = None) -> dict:
     """The drop-test setup TOML (``[hanging]`` survey, optional ``[bungee]`` test plan and ``[rocks]``
-    field); a missing required key raises :class:`ScenarioError` naming file and key."""
+    field); a missing required key raises :class:`ScenarioError` naming file and key.
+
+    ``bungee_keys``: the ``[bungee]`` keys the run needs (then the table is required); None: when a
+    ``[bungee]`` table is given it must be complete (:data:`BUNGEE_KEYS`)."""
     try:
         with open(path, "rb") as f:
             d = tomllib.load(f)
     except (OSError, tomllib.TOMLDecodeError) as err:
         raise ScenarioError(path, None, f"cannot read the setup file: {err}") from err
     required = ["hanging.position_m", "hanging.position_sigma_m"]
-    if "bungee" in d:  # the test plan is optional, but complete when given (dynamic mode, odometer)
-        required += [
-            f"bungee.{k}" for k in ("anchor_m", "rest_length_m", "coefficients", "count", "attach_body_m", "mass_kg")
-        ]
+    if bungee_keys is None and "bungee" in d:  # complete when given
+        bungee_keys = BUNGEE_KEYS
+    required += [f"bungee.{k}" for k in bungee_keys or ()]
     for key in required:
         a, b = key.split(".")
         if not isinstance(d.get(a), dict) or b not in d[a]:
@@ -258,14 +271,30 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
             )
     unit_notes = check_units_at_rest(imu, events["release"], cfg, str(paths["imu"]))
     unit_notes += check_free_fall(imu, events, cfg.triads, str(paths["events"]))
-    setup = read_setup(paths["setup"])
     ranging = None
+    uses_odometer = False
     if "ranging" in paths:
         spec = RangingSpec.from_scenario(scenario)
         req = {"odometer": "length"} if spec.odometer else {}
+        uses_odometer = spec.odometer
         for gun in spec.guns:
             req.update({f"{gun}.range": "length", f"{gun}.rate": "velocity"})
         ranging = read_telemetry(paths["ranging"], required=req, sparse=[k for k in req])
+        if scenario.has("sensors.ranging.rate_hz") and len(ranging) > 2:
+            rate_file = 1.0 / float(np.median(np.diff(ranging.time)))
+            if abs(rate_file / spec.rate_hz - 1.0) > 0.1:
+                raise ScenarioError(
+                    scenario.path,
+                    "sensors.ranging.rate_hz",
+                    f"{spec.rate_hz:g} Hz, but {paths['ranging']} is sampled at {rate_file:.4g} Hz "
+                    "(median interval); correct the key or leave it out",
+                )
+    if cfg.mode == "dynamic":
+        setup = read_setup(paths["setup"], BUNGEE_KEYS)
+    elif uses_odometer:
+        setup = read_setup(paths["setup"], ODOMETER_BUNGEE_KEYS)
+    else:
+        setup = read_setup(paths["setup"], ())
     missing = [n for n in triads if n not in lander.instruments]
     if missing:
         raise ScenarioError(
@@ -370,7 +399,8 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
     w_B, w_cnt = avg(w_raw, w_ok)
     cutoff = cfg.filter_cutoff_hz
     order = cfg.filter_order
-    delay = acquisition_group_delay(cutoff, order)
+    filter_delay = acquisition_group_delay(cutoff, order, cfg.acquisition_filter)
+    delay = filter_delay + cfg.imu_latency_s  # the IMU tags' total lag behind the motion
     t = t - delay
     hanging = t < events["release"]
 
@@ -409,4 +439,9 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
         jerk=jerk,
         counts=(f_cnt.astype(int), w_cnt.astype(int)),
         rate_hz=rate,
+        time_shifts_s={
+            "imu": delay,
+            "attitude_3dm": cfg.attitude_3dm_latency_s,
+            "ranging": cfg.ranging_latency_s + (filter_delay if cfg.ranging_filtered else 0.0),
+        },
     )
