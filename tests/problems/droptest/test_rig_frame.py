@@ -309,11 +309,11 @@ def test_rotated_rig_with_another_filter_gives_the_shipped_stroke(tmp_path):
 def test_numerical_failure_names_the_scenario_keys(tmp_path):
     from workbench.estimation.smoother import CovarianceError
     from workbench.problems.droptest import model as rl
-    from workbench.problems.droptest.pipeline import _likely_keys
+    from workbench.problems.droptest.pipeline import likely_keys
 
     sc = _shipped_copy(tmp_path, "")
     err = CovarianceError("not positive definite", 5, (rl.EBG.start, rl.ES.start + 1))
-    msg = _likely_keys(sc, err)
+    msg = likely_keys(sc, err)
     assert "[sensors.gyro] bias_dps" in msg and "[sensors.gyro] scale / misalignment_deg" in msg
 
 

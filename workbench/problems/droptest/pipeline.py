@@ -520,12 +520,12 @@ def reconstruct(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> It
     try:
         fwd = forward_pass(scenario, tel, init, lander)
     except np.linalg.LinAlgError as err:
-        raise np.linalg.LinAlgError(f"forward EKF pass: {err}{_likely_keys(scenario, err)}") from err
+        raise np.linalg.LinAlgError(f"forward EKF pass: {err}{likely_keys(scenario, err)}") from err
     yield fwd
     try:
         sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
     except np.linalg.LinAlgError as err:
-        raise np.linalg.LinAlgError(f"RTS smoother: {err}{_likely_keys(scenario, err)}") from err
+        raise np.linalg.LinAlgError(f"RTS smoother: {err}{likely_keys(scenario, err)}") from err
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
     yield smo
     st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))
@@ -546,7 +546,7 @@ _ERROR_STATE_KEYS = (
 )
 
 
-def _likely_keys(scenario: Scenario, err: Exception) -> str:
+def likely_keys(scenario: Scenario, err: Exception) -> str:
     """The scenario settings behind a numerical failure: those of the error-state components the
     error names (``CovarianceError.components``), and any σ set to 0 (an error declared absent)."""
     cfg = config_for(scenario)
