@@ -54,9 +54,18 @@ def _load(results_dir: Path, source: str, cache: dict) -> object:
 
 
 def lookup(doc: object, key: str, *, source: str = "?") -> object:
-    """Return ``doc[k1][k2]...`` for ``key = "k1.k2..."``; integer parts index lists."""
+    """Return ``doc[k1][k2]...`` for ``key = "k1.k2..."``; integer parts index lists; a dict key that
+    itself contains dots (e.g. ``"0.5%"``) is matched greedily."""
     cur = doc
-    for part in key.split("."):
+    parts = key.split(".")
+    while parts:
+        part = parts.pop(0)
+        if isinstance(cur, dict) and part not in cur:
+            for n in range(1, len(parts) + 1):  # the shortest join that is a key
+                joined = ".".join([part, *parts[:n]])
+                if joined in cur:
+                    part, parts = joined, parts[n:]
+                    break
         if isinstance(cur, list) and re.fullmatch(r"-?\d+", part):
             idx = int(part)
             if not -len(cur) <= idx < len(cur):

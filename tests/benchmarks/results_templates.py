@@ -271,7 +271,46 @@ README_BLOCKS["headline"] = f"""\
   {{{{bench_post2:results.j2.nees.mean|.2f}}}} over {{{{bench_post2:results.j2.nees.seeds}}}} seeds; 6-DOF entry from
   Table 3-5's first start: {{{{bench_post2:results.entry6dof.model_error.test_case_1.position_error_start_m|.0f}}}} m →
   {{{{bench_post2:results.entry6dof.model_error.test_case_1.position_error_after_15s_m|.0f}}}} m after 15 s →
-  {{{{bench_post2:results.entry6dof.model_error.test_case_1.position_error_end_smoothed_m|.0f}}}} m at the end.
+  {{{{bench_post2:results.entry6dof.model_error.test_case_1.position_error_end_smoothed_m|.0f}}}} m at the end
+  (`bench_post2.json`, measured before the quaternion-normalisation fix of the 6-DOF aerodynamics). After the fix,
+  {{{{bench_post2_nees:results.starts.test_case_1.seeds}}}} seeds per start: forward ANEES (12 states) at the end
+  {{{{bench_post2_nees:results.starts.test_case_1.anees_forward.at_end|.1f}}}} /
+  {{{{bench_post2_nees:results.starts.test_case_2.anees_forward.at_end|.1f}}}} /
+  {{{{bench_post2_nees:results.starts.test_case_3.anees_forward.at_end|.1f}}}} against the band
+  {{{{bench_post2_nees:results.starts.test_case_1.anees_band_95.0|.1f}}}}–{{{{bench_post2_nees:results.starts.test_case_1.anees_band_95.1|.1f}}}}
+  (**over-confident**); position error after 15 s {{{{bench_post2_nees:results.starts.test_case_1.position_error_m.after_15s_mean|.0f}}}} /
+  {{{{bench_post2_nees:results.starts.test_case_2.position_error_m.after_15s_mean|.0f}}}} /
+  {{{{bench_post2_nees:results.starts.test_case_3.position_error_m.after_15s_mean|.0f}}}} m, at the end
+  {{{{bench_post2_nees:results.starts.test_case_1.position_error_m.end_mean|.1f}}}} /
+  {{{{bench_post2_nees:results.starts.test_case_2.position_error_m.end_mean|.1f}}}} /
+  {{{{bench_post2_nees:results.starts.test_case_3.position_error_m.end_mean|.1f}}}} m.
+- **Huygens-like descent** (`post2_huygens`, planted main-chute drag +14 %, 10° tilt, radar scale 0.93, accelerometer
+  bias, CA per regime, vertical wind): all planted parameters within their 3σ and tolerance on the nominal seed
+  ({{{{bench_post2_huygens:results.nominal.all_pass|pass}}}}); over {{{{bench_post2_huygens:results.nees.runs_completed}}}} of
+  {{{{bench_post2_huygens:results.nees.runs_requested}}}} seeded truths the parameter NEES is
+  {{{{bench_post2_huygens:results.nees.mean_nees|.1f}}}} (9 parameters: **over-confident**). Monte Carlo initial-state selection:
+  {{{{bench_post2_huygens:results.mc_selection.members}}}} members vectorised in {{{{bench_post2_huygens:results.mc_selection.vectorised_wall_s|mmss}}}},
+  {{{{bench_post2_huygens:results.mc_selection.speedup|.0f}}}}× a per-member loop of the same maths.
+- **Real rocket flights** (three logs of a hobby rocket's flight computer, imported): apogee error
+  {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.apogee.error_percent|+.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.apogee.error_percent|+.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.apogee.error_percent|+.1f}}}} %; landing error
+  {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.landing.error_m|.0f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.landing.error_m|.0f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.landing.error_m|.0f}}}} m (Mahalanobis
+  {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.landing.mahalanobis|.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.landing.mahalanobis|.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.landing.mahalanobis|.1f}}}}); the sensed-acceleration
+  residuals are far outside their σ, so these runs' health verdict is ERROR and their σ are too small.
+- **Flush air data** (`msl_meads`, 3000-run trade study, Newtonian model, fixed R): max 3σ of α above 850 Pa
+  {{{{bench_meads:results.trade_study.table.0.5%.alpha_deg.max_3sigma|.2f}}}}° / {{{{bench_meads:results.trade_study.table.1%.alpha_deg.max_3sigma|.2f}}}}° /
+  {{{{bench_meads:results.trade_study.table.2.5%.alpha_deg.max_3sigma|.2f}}}}° / {{{{bench_meads:results.trade_study.table.5%.alpha_deg.max_3sigma|.2f}}}}°
+  and of q∞ {{{{bench_meads:results.trade_study.table.0.5%.qbar_pct.max_3sigma|.2f}}}} / {{{{bench_meads:results.trade_study.table.1%.qbar_pct.max_3sigma|.2f}}}} /
+  {{{{bench_meads:results.trade_study.table.2.5%.qbar_pct.max_3sigma|.2f}}}} / {{{{bench_meads:results.trade_study.table.5%.qbar_pct.max_3sigma|.2f}}}} %
+  at 0.5 / 1 / 2.5 / 5 % of reading (objectives 0.5° and 2 %: 1 % meets q∞, not α).
+- **Never silently wrong**: {{{{bench_fuzz:results.after.totals.runs}}}} mutated user inputs (drop test, entry and POST2 files):
+  SILENT {{{{bench_fuzz:results.before.totals.SILENT}}}} → {{{{bench_fuzz:results.after.totals.SILENT}}}}, TRACEBACK
+  {{{{bench_fuzz:results.before.totals.TRACEBACK}}}} → {{{{bench_fuzz:results.after.totals.TRACEBACK}}}}.
 - **Speed** (the main job of `commands.json`): `schiaparelli` {{{{{_S}:wall_time_s|mmss}}}}, of which the
   10 000-member dispersion {{{{{_S}:dispersion.wall_s|mmss}}}}; `droptest`
   {{{{summaries/droptest.summary:wall_time_s|mmss}}}}.
