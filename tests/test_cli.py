@@ -110,3 +110,30 @@ def test_unhealthy_run_exits_6_writes_nothing_unless_allowed(tmp_path, capsys):
     s = json.loads((out / "post2_j2.summary.json").read_text())
     assert s["health"]["verdict"] == "ERROR" and s["health"]["written_anyway"] is True
     assert (out / "post2_j2.rrd").exists() and "UNHEALTHY" in capsys.readouterr().err
+
+
+def test_several_scenarios_run_in_processes_and_a_failure_stops_none(tmp_path, capfd):
+    """``run A B --jobs 2``: each scenario in its own process; the unhealthy one (exit 6, nothing
+    written) does not stop the healthy one, whose outputs equal a run in this process; the exit code
+    is the failed scenario's and the failure is listed."""
+    from workbench.cli import EXIT_UNHEALTHY
+    from workbench.io.assets import assets_dir
+
+    text = (assets_dir() / "scenarios" / "post2_j2.toml").read_text(encoding="utf-8")
+    assert 'name = "post2_j2"' in text and "sigma = 1.0e-5" in text
+    bad = tmp_path / "tight.toml"
+    bad.write_text(
+        text.replace('name = "post2_j2"', 'name = "j2_tight"').replace(
+            "sigma = 1.0e-5", "sigma = 1.0e-7\nnoise_sigma = 1.0e-5"
+        ),
+        encoding="utf-8",
+    )
+    out, ref = tmp_path / "out", tmp_path / "ref"
+    assert main(["run", str(bad), "post2_j2", "--out", str(out), "--jobs", "2"]) == EXIT_UNHEALTHY
+    err = capfd.readouterr().err
+    assert "1 of 2 scenarios succeeded" in err and f"{bad}: exit {EXIT_UNHEALTHY}" in err
+    assert not (out / "j2_tight.rrd").exists() and not (out / "j2_tight.summary.json").exists()
+    assert main(["run", "post2_j2", "--out", str(ref), "--jobs", "1"]) == EXIT_OK
+    a = json.loads((out / "post2_j2.summary.json").read_text())
+    b = json.loads((ref / "post2_j2.summary.json").read_text())
+    assert a["health"] == b["health"] and a["truth"] == b["truth"]

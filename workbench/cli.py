@@ -109,9 +109,83 @@ def cmd_run(args: argparse.Namespace) -> int:
         members=args.members,
         allow_unhealthy=args.allow_unhealthy,
     )
+    jobs = _jobs(args.jobs, len(names))
+    if jobs > 1:
+        return _run_in_processes(names, args, jobs)
     for name in names:
         run_scenario(name, Path(args.out), options, progress=_progress)
     return EXIT_OK
+
+
+def _jobs(requested: int | None, n_scenarios: int) -> int:
+    """Scenario processes to run at once: ``requested`` (``--jobs``), else one per CPU core; never
+    more than there are scenarios."""
+    n = requested if requested is not None else (os.cpu_count() or 1)
+    return max(1, min(int(n), n_scenarios))
+
+
+def _cost_hint(name: str, out: Path) -> float:
+    """Expected wall time [s] of scenario ``name``: its last run's ``wall_time_s`` in ``out`` (0 when
+    never run), so that the longest scenarios start first (longest-processing-time order)."""
+    try:
+        return float(json.loads((out / f"{Path(name).stem}.summary.json").read_text(encoding="utf-8"))["wall_time_s"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0.0
+
+
+def _child_argv(name: str, args: argparse.Namespace) -> list[str]:
+    """The ``workbench run`` command line of one scenario in its own process (same options)."""
+    argv = [sys.executable, "-m", "workbench.cli", "run", str(name), "--out", str(args.out), "--jobs", "1"]
+    for flag, value in (("--seed", args.seed), ("--scheduler", args.scheduler), ("--members", args.members)):
+        if value is not None:
+            argv += [flag, str(value)]
+    argv += ["--export"] * bool(args.export) + ["--allow-unhealthy"] * bool(args.allow_unhealthy)
+    return argv
+
+
+def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> int:
+    """Run each scenario as its own ``workbench run`` process, ``jobs`` at a time, longest first.
+
+    Every scenario runs even when another fails; the progress lines of the processes interleave
+    (each names its scenario). Returns 0 when all succeed, else the exit code of the first failed
+    scenario in the order given (each failure is listed at the end). Ctrl-C or SIGTERM stop the
+    running processes with SIGTERM (each removes its partial recording) and start no new one.
+    Each process runs with one BLAS thread unless the caller set ``OMP_NUM_THREADS`` (two processes
+    on two cores, each with two BLAS threads, would fight over them).
+    """
+    import subprocess
+    import time
+
+    out = Path(args.out)
+    order = sorted(names, key=lambda n: -_cost_hint(n, out))
+    env = dict(os.environ)
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(var, "1")
+    pending, running, codes = list(order), {}, {}
+    t0 = time.perf_counter()
+    _progress(f"running {len(names)} scenarios, {jobs} at a time (--jobs), longest first: {', '.join(order)}")
+    try:
+        while pending or running:
+            while pending and len(running) < jobs:
+                name = pending.pop(0)
+                running[name] = subprocess.Popen(_child_argv(name, args), env=env)
+            time.sleep(0.05)
+            for name, proc in list(running.items()):
+                if proc.poll() is not None:
+                    codes[name] = proc.returncode
+                    del running[name]
+    except BaseException:
+        for proc in running.values():
+            proc.terminate()
+        for proc in running.values():
+            proc.wait()
+        raise
+    failed = [n for n in names if codes.get(n)]
+    _progress(
+        f"{len(names) - len(failed)} of {len(names)} scenarios succeeded in {time.perf_counter() - t0:.1f} s"
+        + "".join(f"\n  {n}: exit {codes[n]}" for n in failed)
+    )
+    return codes[failed[0]] if failed else EXIT_OK
 
 
 def cmd_mc(args: argparse.Namespace) -> int:
@@ -262,6 +336,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--allow-unhealthy",
         action="store_true",
         help="write the outputs even when the health verdict is ERROR (marked UNHEALTHY; else exit 6, nothing written)",
+    )
+    sp.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        help="scenarios run at once, each in its own process (default: one per CPU core; 1 = one after another "
+        "in this process). With several, every scenario runs even if one fails",
     )
     sp.set_defaults(func=cmd_run)
     sp = sub.add_parser(

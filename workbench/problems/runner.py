@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from workbench.estimation.health import ERROR, UnhealthyError
-from workbench.io.assets import assets_dir
+from workbench.io import assets
 from workbench.io.results import OutputError, export_csv, write_summary
 from workbench.io.scenario import Scenario, resolve_scenario
 from workbench.problems import registry
@@ -114,7 +114,7 @@ def resolve(scenario: str | os.PathLike | Scenario) -> tuple[Scenario, Problem]:
     schema does not declare (file, table, key and a "did you mean"), checked here before anything
     runs — and :class:`~workbench.problems.registry.UnknownKindError` if no problem handles its kind.
     """
-    sc = scenario if isinstance(scenario, Scenario) else resolve_scenario(scenario, assets_dir())
+    sc = scenario if isinstance(scenario, Scenario) else resolve_scenario(scenario, assets.assets_dir())
     problem = registry.get(sc.kind, where=str(sc.path))
     if problem.schema is not None:
         problem.schema.validate(sc.data, sc.path)
