@@ -5,6 +5,8 @@ no existing ``.venv`` helps), then runs, each timed with a wall clock:
 
 1. the main job: ``python3 -m venv .venv && .venv/bin/pip install -q -e . && .venv/bin/workbench run all``
    (the install and the run are timed separately);
+   (the run's wall time, the largest resident set of any of its processes and each scenario's own
+   wall time are kept);
 2. the test command: ``.venv/bin/pip install -q -e ".[test]"`` then
    ``.venv/bin/python -m pytest -q -m "not slow"`` (fast tier), and ``-m slow`` (statistical tier).
 
@@ -62,12 +64,28 @@ def main(argv: list[str] | None = None) -> int:
     work = args.keep or Path(tempfile.mkdtemp(prefix="wb_clone_"))
     clone = work / "repo"
     subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
-    res: dict = {"benchmark": "time_readme_commands", "commit": commit.stdout.strip(),
-                 "utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"), "machine": "2 cores",
-                 "command": "python tests/benchmarks/time_readme_commands.py"}
+    res: dict = {
+        "benchmark": "time_readme_commands",
+        "commit": commit.stdout.strip(),
+        "utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+        "machine": "2 cores",
+        "command": "python tests/benchmarks/time_readme_commands.py",
+    }
 
     res["install_s"], _ = _run("python3 -m venv .venv && .venv/bin/pip install -q -e .", clone)
-    res["run_all_s"], _ = _run(".venv/bin/workbench run all", clone)
+    # the main job under a small Python parent that reports the largest resident set of its
+    # descendants (every scenario process of ``run all`` is waited for, so it counts)
+    rss = (
+        ".venv/bin/python -c 'import resource, subprocess, sys; "
+        'r = subprocess.run([".venv/bin/workbench", "run", "all"]).returncode; '
+        'print("MAXRSS_KB", resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(r)\''
+    )
+    res["run_all_s"], out = _run(rss, clone)
+    res["run_all_max_rss_mb"] = int(re.search(r"MAXRSS_KB (\d+)", out).group(1)) / 1024.0
+    res["run_all_scenario_wall_s"] = {
+        f.name.removesuffix(".summary.json"): json.loads(f.read_text())["wall_time_s"]
+        for f in sorted((clone / "recordings").glob("*.summary.json"))
+    }
     res["install_test_extra_s"], _ = _run('.venv/bin/pip install -q -e ".[test]"', clone)
     res["fast_tier_s"], out = _run('.venv/bin/python -m pytest -q -p no:cacheprovider -m "not slow"', clone)
     res["fast_tier"] = pytest_counts(out)
