@@ -1,0 +1,257 @@
+"""Speed benchmark of issue #14: one table of every speed target, its named baseline and the ratio.
+
+Run on demand from the repository root (not collected by pytest), on an idle machine::
+
+    .venv/bin/python tests/benchmarks/bench_speed.py [--parts dask,truth,dispersion,filter]
+        [--json docs/results/bench_speed.json]
+    .venv/bin/python tests/benchmarks/bench_speed.py --table        # only print the table of the JSON files
+
+Each part measures a target beside its baseline in the same process run (the ratio is what carries to
+another machine; the absolute time is this machine's):
+
+* ``truth`` — the drop-test truth simulation (``droptest`` and ``droptest_rocks``): the compiled force
+  model against the numpy reference force model, same integrator (``bench_droptest_truth.py``).
+* ``dispersion`` — the entry dispersion with refinement (4 × 10 000 members) against the
+  per-trajectory loop of the same maths (``bench_dispersion.py``).
+* ``filter`` — the drop-test filter driver (``run_filter``, per-sensor innovations, Joseph form)
+  against the minimal stacked-update loop (``bench_droptest.py --speed-only``).
+* ``dask`` — the entry validation Monte Carlo against the truth simulator (``--dask-runs`` members,
+  each the full pipeline from telemetry files) on a Dask ``LocalCluster`` with 2 workers against the
+  same with 1 worker.
+
+Rows that come from other measurements are read, not re-run: ``docs/results/commands.json`` (the
+README's main job and test tiers from a fresh clone, ``time_readme_commands.py``) and
+``docs/results/bench_entry_truth_mc.json`` (the 50-member entry validation Monte Carlo,
+``bench_entry_truth_mc.py``).  The JSON keeps each part's own time stamp and commit; parts not re-run
+keep their earlier values.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tests" / "benchmarks"))
+
+from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
+
+RESULTS = ROOT / "docs" / "results"
+PARTS = ("truth", "dispersion", "filter", "dask")
+
+
+def _git_head() -> str:
+    try:
+        return subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
+        ).stdout.strip()
+    except OSError:
+        return "?"
+
+
+def _stamp(values: dict) -> dict:
+    """``values`` with the time stamp and commit of this measurement."""
+    return {**values, "utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "commit": _git_head()}
+
+
+def _script_json(script: str, *args: str) -> dict:
+    """Run ``tests/benchmarks/<script> <args> --json TMP`` and return the ``results`` of its JSON."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "r.json"
+        cmd = [sys.executable, str(ROOT / "tests" / "benchmarks" / script), *args, "--json", str(out)]
+        subprocess.run(cmd, cwd=ROOT, check=True)
+        return json.loads(out.read_text())["results"]
+
+
+def part_dask(runs: int, members: int) -> dict:
+    """Entry validation Monte Carlo (truth simulator → telemetry files → full pipeline, ``members``
+    dispersion members, 1 refinement round) of ``runs`` members on a Dask LocalCluster with 1 and
+    with 2 worker processes; wall times [s] and the speed-up (target ≥ 1.7)."""
+    from workbench.io.assets import assets_dir
+    from workbench.io.scenario import load_scenario
+    from workbench.problems.entry.truth_mc import run_truth_monte_carlo
+
+    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
+    wall = {}
+    for workers in (1, 2):
+        t0 = time.perf_counter()
+        res = run_truth_monte_carlo(
+            sc, n_runs=runs, seed=1, members=members, refine_rounds=1, scheduler="local", workers=workers
+        )
+        wall[workers] = time.perf_counter() - t0
+        if getattr(res, "n_failed", 0):
+            raise RuntimeError(f"dask part: {res.n_failed} members failed with {workers} workers")
+    return _stamp(
+        {
+            "runs": runs,
+            "dispersion_members": members,
+            "wall_1_worker_s": wall[1],
+            "wall_2_workers_s": wall[2],
+            "speedup_2_over_1": wall[1] / wall[2],
+        }
+    )
+
+
+def _load(name: str) -> dict | None:
+    path = RESULTS / f"{name}.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def rows(speed: dict) -> list[tuple[str, str, str, str, str, str]]:
+    """The table rows (target, measured here, named baseline, baseline here, ratio, verdict) from the
+    speed JSON ``results`` and the commands / entry Monte Carlo JSON files."""
+    out = []
+    cmd = _load("commands")
+    if cmd:
+        rss = cmd.get("run_all_max_rss_mb")
+        ok = cmd["run_all_s"] <= 60 and (rss is None or rss <= 600)
+        out.append(
+            (
+                "`workbench run all` ≤ 60 s, ≤ 600 MB (fresh clone)",
+                f"{cmd['run_all_s']:.0f} s, " + (f"{rss:.0f} MB" if rss else "RSS not measured"),
+                "sum of the scenarios' own wall times (one after another)",
+                f"{sum(cmd.get('run_all_scenario_wall_s', {}).values()):.0f} s"
+                if cmd.get("run_all_scenario_wall_s")
+                else "—",
+                f"{sum(cmd['run_all_scenario_wall_s'].values()) / cmd['run_all_s']:.2f}×"
+                if cmd.get("run_all_scenario_wall_s")
+                else "—",
+                "met" if ok else "**not met**",
+            )
+        )
+        out.append(
+            (
+                "README fast test tier ≤ 5 min",
+                f"{cmd['fast_tier_s'] / 60:.1f} min ({cmd['fast_tier']['passed']} tests)",
+                "target",
+                "5 min",
+                f"{cmd['fast_tier_s'] / 300:.2f} of the target",
+                "met" if cmd["fast_tier_s"] <= 300 else "**not met**",
+            )
+        )
+        if "slow_tier_s" in cmd:
+            out.append(
+                (
+                    "statistical tier ≤ 30 min",
+                    f"{cmd['slow_tier_s'] / 60:.1f} min ({cmd['slow_tier']['passed']} tests)",
+                    "target",
+                    "30 min",
+                    f"{cmd['slow_tier_s'] / 1800:.2f} of the target",
+                    "met" if cmd["slow_tier_s"] <= 1800 else "**not met**",
+                )
+            )
+    t = speed.get("truth")
+    if t:
+        for name, r in t["scenarios"].items():
+            out.append(
+                (
+                    f"drop-test truth simulation ≤ 3 s (`{name}`)",
+                    f"{r['fast_s']:.2f} s (max |Δp| {r['max_dp_m']:.1e} m)",
+                    "numpy reference force model, same integrator",
+                    f"{r['reference_s']:.1f} s",
+                    f"{r['reference_s'] / r['fast_s']:.1f}×",
+                    "met" if r["fast_s"] <= 3.0 else "**not met**",
+                )
+            )
+    d = speed.get("dispersion")
+    if d:
+        out.append(
+            (
+                "entry dispersion 4 × 10 000 with refinement ≤ 8 s, ≥ 300× the loop",
+                f"{d['refined_s']:.1f} s",
+                "per-trajectory loop of the same maths (scaled from a subset)",
+                f"{d['loop_s']:.0f} s",
+                f"{d['loop_s'] / d['refined_s']:.0f}×",
+                "met" if d["refined_s"] <= 8.0 and d["loop_s"] / d["refined_s"] >= 300 else "**not met**",
+            )
+        )
+    f = speed.get("filter")
+    if f:
+        out.append(
+            (
+                "drop-test filter driver ≥ 1.0× the stacked-update loop, ≥ 3× 3106 steps/s",
+                f"{f['production_steps_per_s']:.0f} steps/s",
+                "minimal stacked-update loop",
+                f"{f['baseline_steps_per_s']:.0f} steps/s",
+                f"{f['production_steps_per_s'] / f['baseline_steps_per_s']:.2f}×",
+                "met"
+                if f["production_steps_per_s"] >= f["baseline_steps_per_s"] and f["production_steps_per_s"] >= 3 * 3106
+                else "**not met**",
+            )
+        )
+    mc = _load("bench_entry_truth_mc")
+    if mc:
+        r = mc["results"]
+        out.append(
+            (
+                "50-member entry validation Monte Carlo ≤ 10 min",
+                f"{r['wall_time_s'] / 60:.1f} min ({r['n_runs']} members, {r['executor']})",
+                "target",
+                "10 min",
+                f"{r['wall_time_s'] / 600:.2f} of the target",
+                "met" if r["wall_time_s"] <= 600 and r["n_runs"] >= 50 else "**not met**",
+            )
+        )
+    k = speed.get("dask")
+    if k:
+        out.append(
+            (
+                "entry validation MC on Dask LocalCluster: 2 workers ≥ 1.7× 1 worker",
+                f"{k['wall_2_workers_s']:.0f} s ({k['runs']} members)",
+                "the same on 1 worker",
+                f"{k['wall_1_worker_s']:.0f} s",
+                f"{k['speedup_2_over_1']:.2f}×",
+                "met" if k["speedup_2_over_1"] >= 1.7 else "**not met**",
+            )
+        )
+    return out
+
+
+def markdown(speed: dict) -> str:
+    """The one table of the speed targets (markdown)."""
+    lines = [
+        "| target (issue #14) | measured here | named baseline | baseline here | ratio | |",
+        "|---|---|---|---|---|---|",
+    ]
+    lines += ["| " + " | ".join(r) + " |" for r in rows(speed)]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--parts", default=",".join(PARTS), help=f"comma-separated subset of {', '.join(PARTS)}")
+    ap.add_argument("--dask-runs", type=int, default=6, help="members of the Dask scaling part (default 6)")
+    ap.add_argument("--dask-members", type=int, default=2000, help="dispersion members per reconstruction")
+    ap.add_argument("--json", type=Path, default=RESULTS / "bench_speed.json", help="read, update and write")
+    ap.add_argument("--table", action="store_true", help="only print the table of the existing JSON")
+    args = ap.parse_args(argv)
+    old = json.loads(args.json.read_text())["results"] if args.json.is_file() else {}
+    if not args.table:
+        parts = [p.strip() for p in args.parts.split(",") if p.strip()]
+        unknown = sorted(set(parts) - set(PARTS))
+        if unknown:
+            ap.error(f"unknown part(s) {unknown}; known: {', '.join(PARTS)}")
+        speed = dict(old)
+        for part in parts:
+            print(f"[bench_speed] {part} ...", file=sys.stderr, flush=True)
+            if part == "dask":
+                speed["dask"] = part_dask(args.dask_runs, args.dask_members)
+            elif part == "truth":
+                speed["truth"] = _stamp(_script_json("bench_droptest_truth.py"))
+            elif part == "dispersion":
+                speed["dispersion"] = _stamp(_script_json("bench_dispersion.py"))
+            elif part == "filter":
+                speed["filter"] = _stamp(_script_json("bench_droptest.py", "--speed-only"))
+            write_benchmark_json(args.json, __file__, speed, argv)
+        old = speed
+    print(markdown(old))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
