@@ -73,11 +73,11 @@ def part_dask(runs: int, members: int) -> dict:
     dispersion members, 1 refinement round) of ``runs`` members on a Dask LocalCluster with 1 and
     with 2 worker processes (1 thread each); wall times [s] without the cluster start-up, and the
     speed-up (target ≥ 1.7)."""
+    from distributed import LocalCluster
+
     from workbench.io.assets import assets_dir
     from workbench.io.scenario import load_scenario
     from workbench.problems.entry.truth_mc import run_truth_monte_carlo
-
-    from distributed import LocalCluster
 
     sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     wall, startup = {}, {}
