@@ -413,6 +413,52 @@ def _nominal_rig(cfg: DropTestConfig, lander: LanderModel, surface: Surface, cou
     )
 
 
+def _fly_reference(
+    p0: np.ndarray,
+    rig: BungeeRig,
+    m: float,
+    n: np.ndarray,
+    point: np.ndarray,
+    h_c: float,
+    cut_lead_s: float,
+    dt: float = 1e-3,
+    n_max: int = 6000,
+) -> tuple[np.ndarray, np.ndarray, float, float | None]:
+    """Point-mass flight of the release design, pure-Python reference of :func:`.truth_fast.fly`.
+
+    From rest at ``p0`` (3,) [m, SPF] under gravity and ``rig`` (its attachment taken at the CM),
+    mass ``m`` [kg], until the CM is ``h_c`` [m] above the ramp plane (unit normal ``n``, through
+    ``point``, SPF); the rope is released ``cut_lead_s`` [s] before the predicted contact.
+    Semi-implicit Euler steps of ``dt`` [s], at most ``n_max``. Returns (p [m], v [m/s] at the
+    crossing, t [s] from release, cut time [s] or None).
+    """
+    rig = replace(rig, attach_B=np.zeros(3))
+    p = np.array(p0, float)
+    v = np.zeros(3)
+    cut_t = None
+    t = 0.0
+    # integrate until the CM reaches the contact height (plane distance); the crossing is
+    # interpolated inside the last step so that the residuals are smooth in the unknowns
+    h_prev = (p - point) @ n
+    for _ in range(n_max):
+        acc = GRAVITY_SPF + (rig.force(p) / m if cut_t is None else 0.0)
+        vn = -(v @ n)
+        if cut_t is None and vn > 0 and (h_prev - h_c) / vn < cut_lead_s:
+            cut_t = t
+        v_new = v + acc * dt
+        p_new = p + v_new * dt
+        h = (p_new - point) @ n
+        if h <= h_c:
+            frac = (h_prev - h_c) / (h_prev - h)
+            p = p + frac * (p_new - p)
+            v = v + frac * (v_new - v)
+            t += frac * dt
+            break
+        p, v, h_prev = p_new, v_new, h
+        t += dt
+    return p, v, t, cut_t
+
+
 def design_release(
     cfg: DropTestConfig, lander: LanderModel, surface: Surface, *, fast: bool | None = None
 ) -> tuple[np.ndarray, BungeeRig, float]:
@@ -446,48 +492,12 @@ def design_release(
     def fly(params):
         y0, z0, count, beta = params
         rig = _nominal_rig(cfg, lander, surface, count, pull_dir(beta))
-        if fast:
-            p, v, t, cut_t = truth_fast.fly(
-                np.array([0.0, y0, z0]),
-                rig.anchor_I,
-                rig.rest_length,
-                coeffs,
-                rig.count,
-                m,
-                n,
-                point,
-                h_c,
-                cfg.cut_lead_s,
-                1e-3,
-                6000,
-            )
-            return p, v, t, (None if cut_t < 0.0 else cut_t)
-        rig = replace(rig, attach_B=np.zeros(3))
-        p = np.array([0.0, y0, z0])
-        v = np.zeros(3)
-        dt = 1e-3
-        cut_t = None
-        t = 0.0
-        # integrate until the CM reaches the contact height (plane distance); the crossing is
-        # interpolated inside the last step so that the residuals are smooth in the unknowns
-        h_prev = (p - surface.point) @ n
-        for _ in range(6000):
-            acc = GRAVITY_SPF + (rig.force(p) / m if cut_t is None else 0.0)
-            vn = -(v @ n)
-            if cut_t is None and vn > 0 and (h_prev - h_c) / vn < cfg.cut_lead_s:
-                cut_t = t
-            v_new = v + acc * dt
-            p_new = p + v_new * dt
-            h = (p_new - surface.point) @ n
-            if h <= h_c:
-                frac = (h_prev - h_c) / (h_prev - h)
-                p = p + frac * (p_new - p)
-                v = v + frac * (v_new - v)
-                t += frac * dt
-                break
-            p, v, h_prev = p_new, v_new, h
-            t += dt
-        return p, v, t, cut_t
+        p0 = np.array([0.0, y0, z0])
+        if not fast:
+            return _fly_reference(p0, rig, m, n, point, h_c, cfg.cut_lead_s)
+        args = (rig.anchor_I, rig.rest_length, coeffs, rig.count, m, n, point, h_c, cfg.cut_lead_s, 1e-3, 6000)
+        p, v, t, cut_t = truth_fast.fly(p0, *args)
+        return p, v, t, (None if cut_t < 0.0 else cut_t)
 
     def resid(params):
         p, v, t, _ = fly(params)
