@@ -545,7 +545,9 @@ def design_release(
     return p_release, rig, t_contact
 
 
-def simulate_drop(cfg: DropTestConfig, lander: LanderModel, surface: Surface, *, fast: bool | None = None) -> DropTruth:
+def simulate_drop(
+    cfg: DropTestConfig, lander: LanderModel, surface: Surface, *, fast: bool | None = None, tol: float = 1e-9
+) -> DropTruth:
     """Simulate one drop (deterministic for a given config) and return its truth history.
 
     The lander hangs at rest for ``pre_release_s`` (t < 0), is released at t = 0, pulled by the
@@ -553,7 +555,9 @@ def simulate_drop(cfg: DropTestConfig, lander: LanderModel, surface: Surface, *,
     DOP853 with ``max_step``; output resampled on a uniform grid at ``output_rate_hz``.
     ``fast`` (default :data:`FAST`): the force model, derivative and release design run as the
     compiled kernels of :mod:`.truth_fast`; False runs the pure-numpy reference path (same
-    integrator and tolerances; the two trajectories agree to rounding).
+    integrator and tolerances; they agree to the integrator's truncation error, see
+    :mod:`.truth_fast`). ``tol``: DOP853's rtol = atol (the truth's is 1e-9; smaller values are
+    for convergence checks, e.g. tests/benchmarks/bench_droptest_truth.py).
     """
     fast = FAST if fast is None else fast
     q0 = quat_normalize(quat_from_euler123(np.radians(np.asarray(cfg.release_euler123_deg, float))))
@@ -579,7 +583,7 @@ def simulate_drop(cfg: DropTestConfig, lander: LanderModel, surface: Surface, *,
 
     separation.terminal = True
     separation.direction = -1
-    opts = dict(method="DOP853", max_step=cfg.max_step, rtol=1e-9, atol=1e-9, dense_output=True)
+    opts = dict(method="DOP853", max_step=cfg.max_step, rtol=tol, atol=tol, dense_output=True)
     sol1 = solve_ivp(model.rhs_fast() if fast else model.rhs, (0.0, cfg.duration_s), y0, events=cut_event, **opts)
     segments = [(0.0, sol1.t[-1], sol1.sol, False)]
     t_cut = float(sol1.t[-1]) if sol1.status == 1 else None
