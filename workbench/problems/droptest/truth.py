@@ -177,7 +177,10 @@ class _Model:
     def packed(self) -> tuple:
         """Parameters of the compiled kernels (:mod:`.truth_fast`), after ``y`` and ``cut``:
         (lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc); see that module's docstring."""
-        f = np.ascontiguousarray
+
+        def f(a):  # a writable C-contiguous copy: one compiled signature whatever the source
+            return np.array(a, float, order="C")
+
         return (
             f(self.lobes_B),
             f(self.verts_B),
@@ -216,7 +219,7 @@ class _Model:
     def rhs_fast(self) -> callable:
         """``fun(t, y)`` for solve_ivp through the compiled kernel, for the current ``cut`` state
         (the cut flag and parameters are bound now: make a new one after changing ``cut``)."""
-        args = (self.cut, *self.packed(), np.ascontiguousarray(self.J), np.ascontiguousarray(self.Jinv))
+        args = (self.cut, *self.packed(), np.array(self.J, float, order="C"), np.array(self.Jinv, float, order="C"))
         kernel = truth_fast.rhs
 
         def fun(t, y):
