@@ -39,10 +39,17 @@ from workbench.core.rotation import (
     quat_rotate,
     quat_to_dcm,
 )
+from workbench.problems.droptest import truth_fast
 from workbench.problems.droptest.lander import LanderModel
 from workbench.problems.droptest.surface import Surface
 
 GRAVITY_SPF = np.array([0.0, 0.0, -G0])
+
+#: Default path of :func:`simulate_drop` / :func:`design_release`: True runs the compiled numba
+#: kernels of :mod:`.truth_fast`, False the pure-numpy reference (``_Model.evaluate`` / ``rhs``
+#: and the Python ``fly``). Both give the same trajectory to rounding (tests/problems/droptest/
+#: test_truth_fast.py).
+FAST = True
 
 __all__ = ["BungeeRig", "DropTestConfig", "DropTruth", "simulate_drop", "design_release", "C_MARS_SPF"]
 
@@ -166,6 +173,59 @@ class _Model:
         self.k_body = 2.0e7  # rigid-body penalty stiffness [N/m] (aluminium frame on the ramp)
         self.c_body = 2.0e4  # [N s/m]
         self.cut = False
+
+    def packed(self) -> tuple:
+        """Parameters of the compiled kernels (:mod:`.truth_fast`), after ``y`` and ``cut``:
+        (lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc); see that module's docstring."""
+
+        def f(a):  # a writable C-contiguous copy: one compiled signature whatever the source
+            return np.array(a, float, order="C")
+
+        return (
+            f(self.lobes_B),
+            f(self.verts_B),
+            np.concatenate([self.n, self.P0]),
+            f(self.rock_c),
+            f(self.rock_r),
+            np.concatenate([np.asarray(self.rig.anchor_I, float), np.asarray(self.rig.attach_B, float)]),
+            np.asarray(self.rig.coeffs, float),
+            np.array(
+                [
+                    self.R,
+                    self.p0,
+                    self.p_amb,
+                    self.V0,
+                    self.gamma,
+                    self.damp,
+                    self.mu,
+                    self.k_body,
+                    self.c_body,
+                    self.rig.rest_length,
+                    self.rig.count,
+                    self.m,
+                ],
+                float,
+            ),
+        )
+
+    def evaluate_fast(self, y):
+        """:meth:`evaluate` through the compiled kernel (same returns; agrees to rounding)."""
+        F = np.empty(3)
+        T = np.empty(3)
+        pen = np.empty(self.lobes_B.shape[0])
+        fn, pg, bpen = truth_fast.evaluate(np.asarray(y, float), self.cut, *self.packed(), F, T, pen)
+        return F, T, fn, pg, pen, bpen
+
+    def rhs_fast(self) -> callable:
+        """``fun(t, y)`` for solve_ivp through the compiled kernel, for the current ``cut`` state
+        (the cut flag and parameters are bound now: make a new one after changing ``cut``)."""
+        args = (self.cut, *self.packed(), np.array(self.J, float, order="C"), np.array(self.Jinv, float, order="C"))
+        kernel = truth_fast.rhs
+
+        def fun(t, y):
+            return kernel(y, *args)
+
+        return fun
 
     def evaluate(self, y):
         """Forces for one state y = [p, v, q_I_B, ω_B] (13,).
@@ -356,7 +416,55 @@ def _nominal_rig(cfg: DropTestConfig, lander: LanderModel, surface: Surface, cou
     )
 
 
-def design_release(cfg: DropTestConfig, lander: LanderModel, surface: Surface) -> tuple[np.ndarray, BungeeRig, float]:
+def _fly_reference(
+    p0: np.ndarray,
+    rig: BungeeRig,
+    m: float,
+    n: np.ndarray,
+    point: np.ndarray,
+    h_c: float,
+    cut_lead_s: float,
+    dt: float = 1e-3,
+    n_max: int = 6000,
+) -> tuple[np.ndarray, np.ndarray, float, float | None]:
+    """Point-mass flight of the release design, pure-Python reference of :func:`.truth_fast.fly`.
+
+    From rest at ``p0`` (3,) [m, SPF] under gravity and ``rig`` (its attachment taken at the CM),
+    mass ``m`` [kg], until the CM is ``h_c`` [m] above the ramp plane (unit normal ``n``, through
+    ``point``, SPF); the rope is released ``cut_lead_s`` [s] before the predicted contact.
+    Semi-implicit Euler steps of ``dt`` [s], at most ``n_max``. Returns (p [m], v [m/s] at the
+    crossing, t [s] from release, cut time [s] or None).
+    """
+    rig = replace(rig, attach_B=np.zeros(3))
+    p = np.array(p0, float)
+    v = np.zeros(3)
+    cut_t = None
+    t = 0.0
+    # integrate until the CM reaches the contact height (plane distance); the crossing is
+    # interpolated inside the last step so that the residuals are smooth in the unknowns
+    h_prev = (p - point) @ n
+    for _ in range(n_max):
+        acc = GRAVITY_SPF + (rig.force(p) / m if cut_t is None else 0.0)
+        vn = -(v @ n)
+        if cut_t is None and vn > 0 and (h_prev - h_c) / vn < cut_lead_s:
+            cut_t = t
+        v_new = v + acc * dt
+        p_new = p + v_new * dt
+        h = (p_new - point) @ n
+        if h <= h_c:
+            frac = (h_prev - h_c) / (h_prev - h)
+            p = p + frac * (p_new - p)
+            v = v + frac * (v_new - v)
+            t += frac * dt
+            break
+        p, v, h_prev = p_new, v_new, h
+        t += dt
+    return p, v, t, cut_t
+
+
+def design_release(
+    cfg: DropTestConfig, lander: LanderModel, surface: Surface, *, fast: bool | None = None
+) -> tuple[np.ndarray, BungeeRig, float]:
     """Find the release point and bungee count that give the target impact velocity.
 
     Point-mass design (as the test engineer's energy calculation): gravity + the test-plan
@@ -365,8 +473,10 @@ def design_release(cfg: DropTestConfig, lander: LanderModel, surface: Surface) -
     velocity at first contact (parallel, normal) and first contact at the ramp point nearest
     the nail, ``release_to_contact_s`` after release. Unknowns: release (y, z), bungee count and
     the direction of the rope run (YZ plane). Returns (p_release [m, SPF], nominal rig with its
-    hammer length, t_contact [s]).
+    hammer length, t_contact [s]). ``fast`` (default :data:`FAST`): fly the trial releases with the
+    compiled :func:`.truth_fast.fly` instead of the Python reference loop (same steps).
     """
+    fast = FAST if fast is None else fast
     q0 = quat_from_euler123(np.radians(np.asarray(cfg.release_euler123_deg, float)))
     n = np.asarray(surface.normal, float)
     h_c = _contact_height(lander, surface, q0)
@@ -379,35 +489,18 @@ def design_release(cfg: DropTestConfig, lander: LanderModel, surface: Surface) -
     def pull_dir(beta):  # unit vector from the anchor toward the ramp, in the YZ plane
         return -np.array([0.0, np.sin(beta), -np.cos(beta)])
 
+    point = np.asarray(surface.point, float)
+    coeffs = np.asarray(cfg.bungee_coeffs, float)
+
     def fly(params):
         y0, z0, count, beta = params
         rig = _nominal_rig(cfg, lander, surface, count, pull_dir(beta))
-        rig = replace(rig, attach_B=np.zeros(3))
-        p = np.array([0.0, y0, z0])
-        v = np.zeros(3)
-        dt = 1e-3
-        cut_t = None
-        t = 0.0
-        # integrate until the CM reaches the contact height (plane distance); the crossing is
-        # interpolated inside the last step so that the residuals are smooth in the unknowns
-        h_prev = (p - surface.point) @ n
-        for _ in range(6000):
-            acc = GRAVITY_SPF + (rig.force(p) / m if cut_t is None else 0.0)
-            vn = -(v @ n)
-            if cut_t is None and vn > 0 and (h_prev - h_c) / vn < cfg.cut_lead_s:
-                cut_t = t
-            v_new = v + acc * dt
-            p_new = p + v_new * dt
-            h = (p_new - surface.point) @ n
-            if h <= h_c:
-                frac = (h_prev - h_c) / (h_prev - h)
-                p = p + frac * (p_new - p)
-                v = v + frac * (v_new - v)
-                t += frac * dt
-                break
-            p, v, h_prev = p_new, v_new, h
-            t += dt
-        return p, v, t, cut_t
+        p0 = np.array([0.0, y0, z0])
+        if not fast:
+            return _fly_reference(p0, rig, m, n, point, h_c, cfg.cut_lead_s)
+        args = (rig.anchor_I, rig.rest_length, coeffs, rig.count, m, n, point, h_c, cfg.cut_lead_s, 1e-3, 6000)
+        p, v, t, cut_t = truth_fast.fly(p0, *args)
+        return p, v, t, (None if cut_t < 0.0 else cut_t)
 
     def resid(params):
         p, v, t, _ = fly(params)
@@ -455,15 +548,23 @@ def design_release(cfg: DropTestConfig, lander: LanderModel, surface: Surface) -
     return p_release, rig, t_contact
 
 
-def simulate_drop(cfg: DropTestConfig, lander: LanderModel, surface: Surface) -> DropTruth:
+def simulate_drop(
+    cfg: DropTestConfig, lander: LanderModel, surface: Surface, *, fast: bool | None = None, tol: float = 1e-9
+) -> DropTruth:
     """Simulate one drop (deterministic for a given config) and return its truth history.
 
     The lander hangs at rest for ``pre_release_s`` (t < 0), is released at t = 0, pulled by the
     true bungee until the hammer hits the nail, then impacts the ramp on its airbags. Integration:
     DOP853 with ``max_step``; output resampled on a uniform grid at ``output_rate_hz``.
+    ``fast`` (default :data:`FAST`): the force model, derivative and release design run as the
+    compiled kernels of :mod:`.truth_fast`; False runs the pure-numpy reference path (same
+    integrator and tolerances; they agree to the integrator's truncation error, see
+    :mod:`.truth_fast`). ``tol``: DOP853's rtol = atol (the truth's is 1e-9; smaller values are
+    for convergence checks, e.g. tests/benchmarks/bench_droptest_truth.py).
     """
+    fast = FAST if fast is None else fast
     q0 = quat_normalize(quat_from_euler123(np.radians(np.asarray(cfg.release_euler123_deg, float))))
-    p_release, nominal_rig, _ = design_release(cfg, lander, surface)
+    p_release, nominal_rig, _ = design_release(cfg, lander, surface, fast=fast)
     true_rig = replace(nominal_rig, count=nominal_rig.count * cfg.bungee_truth_scale)
     pressure = lander.pressure_pa if cfg.pressure_pa is None else cfg.pressure_pa
     model = _Model(lander, surface, true_rig, pressure)
@@ -485,8 +586,8 @@ def simulate_drop(cfg: DropTestConfig, lander: LanderModel, surface: Surface) ->
 
     separation.terminal = True
     separation.direction = -1
-    opts = dict(method="DOP853", max_step=cfg.max_step, rtol=1e-9, atol=1e-9, dense_output=True)
-    sol1 = solve_ivp(model.rhs, (0.0, cfg.duration_s), y0, events=cut_event, **opts)
+    opts = dict(method="DOP853", max_step=cfg.max_step, rtol=tol, atol=tol, dense_output=True)
+    sol1 = solve_ivp(model.rhs_fast() if fast else model.rhs, (0.0, cfg.duration_s), y0, events=cut_event, **opts)
     segments = [(0.0, sol1.t[-1], sol1.sol, False)]
     t_cut = float(sol1.t[-1]) if sol1.status == 1 else None
     t_end = cfg.duration_s
@@ -494,12 +595,13 @@ def simulate_drop(cfg: DropTestConfig, lander: LanderModel, surface: Surface) ->
         model.cut = True
         y1 = sol1.y[:, -1].copy()
         y1[6:10] = quat_normalize(y1[6:10])
-        sol2 = solve_ivp(model.rhs, (t_cut, cfg.duration_s), y1, events=separation, **opts)
+        fun = model.rhs_fast() if fast else model.rhs
+        sol2 = solve_ivp(fun, (t_cut, cfg.duration_s), y1, events=separation, **opts)
         if sol2.status == 1:
             t_end = min(cfg.duration_s, float(sol2.t[-1]) + cfg.tail_s)
             y2 = sol2.y[:, -1].copy()
             y2[6:10] = quat_normalize(y2[6:10])
-            sol3 = solve_ivp(model.rhs, (float(sol2.t[-1]), t_end), y2, **opts)
+            sol3 = solve_ivp(fun, (float(sol2.t[-1]), t_end), y2, **opts)
             sol2 = _join(sol2, sol3)
         segments.append((t_cut, t_end, sol2 if callable(sol2) else sol2.sol, True))
 
@@ -518,16 +620,19 @@ def simulate_drop(cfg: DropTestConfig, lander: LanderModel, surface: Surface) ->
     p, v, q, w = Y[:, 0:3], Y[:, 3:6], quat_normalize(Y[:, 6:10]), Y[:, 10:13]
 
     # forces along the history: the same scalar force model, sample by sample
-    F = np.empty((t.size, 3))
-    T = np.empty((t.size, 3))
-    fn = np.empty(t.size)
-    pg = np.empty(t.size)
-    pen = np.empty((t.size, model.lobes_B.shape[0]))
-    bpen = np.empty(t.size)
     Yn = np.concatenate([p, v, q, w], axis=1)
-    for k in range(t.size):
-        model.cut = bool(cut_flag[k])
-        F[k], T[k], fn[k], pg[k], pen[k], bpen[k] = model.evaluate(Yn[k])
+    if fast:
+        F, T, fn, pg, pen, bpen = truth_fast.evaluate_many(Yn, cut_flag, *model.packed())
+    else:
+        F = np.empty((t.size, 3))
+        T = np.empty((t.size, 3))
+        fn = np.empty(t.size)
+        pg = np.empty(t.size)
+        pen = np.empty((t.size, model.lobes_B.shape[0]))
+        bpen = np.empty(t.size)
+        for k in range(t.size):
+            model.cut = bool(cut_flag[k])
+            F[k], T[k], fn[k], pg[k], pen[k], bpen[k] = model.evaluate(Yn[k])
     # hanging: the release rope holds the lander at rest (a_ng = -g)
     hang = t < 0
     a_ng = F / lander.mass
