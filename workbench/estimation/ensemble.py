@@ -29,7 +29,9 @@ Units SI, frame M (planet-centred inertial, +Z the pole), ``q_M_G`` scalar-last 
 from __future__ import annotations
 
 import math
+import os
 import types
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -55,11 +57,18 @@ __all__ = ["BACKENDS", "HAVE_NUMBA", "AttitudeTrack", "attitude_track", "integra
 #: The executions of the per-member maths (module docstring).
 BACKENDS = ("numba", "numpy", "python")
 HAVE_NUMBA = numba is not None
-#: Members per group of the compiled kernel (SIMD lanes; one group's code is written out 8 times).
-#: Members per group of the compiled kernel (SIMD lanes; one group's code is written out 4 times).
+#: Members per block of the compiled kernel (a block's states stay in L1; its loop over members is
+#: vectorised by LLVM, 4 doubles per AVX2 register).
 LANES = 32
 #: Step kinds of an :class:`AttitudeTrack`: an RK4 step, a "relative" or a "paper" gap bridge.
 STEP_RK4, STEP_GAP_RELATIVE, STEP_GAP_PAPER = 0, 1, 2
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
 
 
 def default_backend() -> str:
@@ -314,13 +323,13 @@ def _run_numpy(track: AttitudeTrack, v: np.ndarray, p: np.ndarray, R: np.ndarray
 
 if HAVE_NUMBA:
 
-    @numba.njit(parallel=True, cache=True, error_model="numpy")
-    def _run_numba(kind, dts, A, B, v, p, R, slot, out_v, out_p, gm, j2k):  # pragma: no cover - compiled
-        """Members in blocks of :data:`LANES` (``m`` a multiple of it), the blocks in parallel.  A
+    @numba.njit(nogil=True, cache=True, error_model="numpy")
+    def _run_numba(kind, dts, A, B, v, p, R, slot, out_v, out_p, gm, j2k, g0, g1):  # pragma: no cover - compiled
+        """Members in blocks of :data:`LANES` (``m`` a multiple of it), blocks ``g0..g1−1``.  A
         block's states are a (6, LANES) array; per step one loop over its members, which LLVM
-        vectorises (SIMD over members; the same IEEE operations per member)."""
-        m = v.shape[1]
-        for ig in numba.prange(m // LANES):
+        vectorises (SIMD over members; the same IEEE operations per member).  Releases the GIL,
+        so threads can run disjoint block ranges."""
+        for ig in range(g0, g1):
             i0 = LANES * ig
             S = np.empty((6, LANES))
             Rl = np.empty((9, LANES))
@@ -386,13 +395,15 @@ def integrate_ensemble(
     *,
     body: Body,
     backend: str | None = None,
+    threads: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Velocities and positions of members at chosen samples (module docstring).
 
     ``track`` from :func:`attitude_track`; initial states at ``track.t[0]``: v0 (m, 3) [m/s],
     q0 (m, 4) ``q_M_G`` (normalised here), p0 (m, 3) [m]; ``record`` (k,) sample indices (sorted,
     unique, in ``0..n−1``); ``body`` the planet (point mass + J2 gravity); ``backend`` one of
-    :data:`BACKENDS` (default :func:`default_backend`).  Returns ``v`` (k, m, 3) [m/s] and ``p``
+    :data:`BACKENDS` (default :func:`default_backend`); ``threads`` for "numba" (default: the
+    cores available to this process).  Returns ``v`` (k, m, 3) [m/s] and ``p``
     (k, m, 3) [m] in frame M at those samples; the attitude there is ``q0 ⊗ track.dq[record]``.
     A member's result does not depend on the other members of the call nor on the backend.
     """
@@ -421,7 +432,15 @@ def integrate_ensemble(
             v, p, R = (np.concatenate([x, np.repeat(x[:, -1:], pad, axis=1)], axis=1) for x in (v, p, R))
             out_v, out_p = np.empty((record.size, 3, m + pad)), np.empty((record.size, 3, m + pad))
         A, B = track.a.reshape(-1, 12), track.b.reshape(-1, 12)
-        _run_numba(track.kind, track.dt, A, B, v, p, R, slot, out_v, out_p, gm, j2k)
+        args = (track.kind, track.dt, A, B, v, p, R, slot, out_v, out_p, gm, j2k)
+        ng = (m + pad) // LANES
+        nt = max(1, min(int(threads or _cores()), ng))
+        if nt == 1:
+            _run_numba(*args, 0, ng)
+        else:  # threads on disjoint blocks (the kernel releases the GIL); no OpenMP, so fork-safe
+            edges = np.linspace(0, ng, nt + 1).round().astype(int)
+            with ThreadPoolExecutor(nt) as ex:
+                list(ex.map(lambda ab: _run_numba(*args, ab[0], ab[1]), zip(edges[:-1], edges[1:], strict=True)))
         out_v, out_p = out_v[:, :, :m], out_p[:, :, :m]
     elif backend == "numpy":
         _run_numpy(track, v, p, R, slot, out_v, out_p, gm, j2k)
