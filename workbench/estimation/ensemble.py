@@ -232,9 +232,10 @@ def _accel(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, ax, ay, az, 
 
 @register_jitable(inline="always")
 def _rk4_member(vx, vy, vz, px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, dt, A, B, gm, j2k):
-    """One translational RK4 step of a member (velocity, position); ``A``, ``B`` (12,) stage terms ``[stage s, component c]`` at ``3 s + c``.
+    """One translational RK4 step of a member: returns (v, p) components [m/s, m] after ``dt`` [s].
 
-    The stage order and operations of ``strapdown.rk4_step`` (``h = dt/2``, ``s = dt/6``)."""
+    ``A``, ``B`` (12,) the step's stage terms (``[stage s, component c]`` at ``3 s + c``); the stage
+    order and operations of ``strapdown.rk4_step`` (``h = dt/2``, ``s = dt/6``)."""
     h = 0.5 * dt
     s = dt / 6.0
     k1x, k1y, k1z = _accel(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22,
