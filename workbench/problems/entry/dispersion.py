@@ -38,6 +38,7 @@ members at ~1 Hz) are kept; a chunk's working set is a few MB.
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -280,6 +281,11 @@ class _Job:
     L: np.ndarray | None = None
 
 
+def _threads() -> int | None:
+    """Kernel threads: one inside a worker process (the executor already uses the cores), else all."""
+    return 1 if mp.parent_process() is not None else None
+
+
 def _event_states(job: _Job, v, q, p, backend: str) -> tuple[np.ndarray, np.ndarray]:
     """States (p_at, v_at) (3, m, 3) of members at the event times: linear between the bracketing
     samples (as ``strapdown.integrate_members``' ``at_t``)."""
@@ -287,7 +293,7 @@ def _event_states(job: _Job, v, q, p, backend: str) -> tuple[np.ndarray, np.ndar
     jj = np.clip(np.searchsorted(t, job.event_times, side="right") - 1, 0, t.size - 2)
     ww = (job.event_times - t[jj]) / (t[jj + 1] - t[jj])
     rec = np.unique(np.concatenate([jj, jj + 1]))
-    V, P = integrate_ensemble(job.track, v, q, p, rec, body=MARS, backend=backend)
+    V, P = integrate_ensemble(job.track, v, q, p, rec, body=MARS, backend=backend, threads=_threads())
     i0, i1 = np.searchsorted(rec, jj), np.searchsorted(rec, jj + 1)
     v_at = np.empty((jj.size, *V.shape[1:]))
     p_at = np.empty((jj.size, *P.shape[1:]))
