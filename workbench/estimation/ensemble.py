@@ -259,7 +259,7 @@ def _rk4_member(vx, vy, vz, px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, 
     )
 
 
-@register_jitable(inline="always")
+@register_jitable
 def _gap_member(vx, vy, vz, px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, dt, A, B, relative):
     """A gap bridge of a member (``strapdown.apply_gap``): ``v + C dv_G``, ``p [+ Δt v] + C dp``."""
     dvx = r00 * A[0] + r01 * A[1] + r02 * A[2] + B[0]
