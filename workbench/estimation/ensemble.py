@@ -18,8 +18,11 @@ Three executions of one definition of the per-member maths (:func:`_rk4_member`,
 :func:`_gap_member`, plain float arithmetic and ``math.sqrt``), all bit-identical because they do
 the same IEEE operations in the same order (no fused multiply-add, no reassociation):
 
-* ``"numba"`` — compiled (``numba.njit(parallel=True, cache=True)``), members in blocks over the
-  cores, the inner loop over a block's members vectorised; the default when numba imports;
+* ``"numba"`` — compiled (``numba.njit(nogil=True, cache=True)``), members in blocks of
+  :data:`LANES` whose per-step loop over members LLVM vectorises (AVX2: 4 members per
+  instruction), the blocks split over the cores by threads (not numba's OpenMP layer: GNU OpenMP
+  does not survive the fork of a process pool); the default when numba imports.  The first call
+  after an install or an edit compiles (~5 s CPU), later ones load numba's cache;
 * ``"numpy"`` — the pure-numpy reference path: the same functions on (m,) arrays per component;
 * ``"python"`` — one member at a time on Python floats: the per-trajectory loop baseline.
 
@@ -39,7 +42,7 @@ import numpy as np
 
 from workbench.core.bodies import Body
 from workbench.core.gravity import j2_factor
-from workbench.core.rotation import dcm_components, dcm_to_quat, quat_normalize
+from workbench.core.rotation import dcm_components, dcm_to_quat, quat_multiply, quat_normalize
 
 try:  # numba is a dependency, but keep the numpy path usable without it
     import numba
@@ -172,7 +175,7 @@ def attitude_track(imu: Any, bridge_mode: str = "relative") -> AttitudeTrack:
             Fs[k] = 0.0
             Fs[k, 0] = np.asarray(g.dv_G, dtype=float)
             Fs[k, 1] = np.asarray(g.dp_rel_G if bridge_mode == "relative" else g.dp_G, dtype=float)
-            qb = quat_normalize(_qmul(np.array(q), dcm_to_quat(np.asarray(g.dC, dtype=float).T)))
+            qb = quat_normalize(quat_multiply(np.array(q), dcm_to_quat(np.asarray(g.dC, dtype=float).T)))
             q = tuple(qb.tolist())
         else:
             dt = dts[k]
@@ -199,12 +202,6 @@ def attitude_track(imu: Any, bridge_mode: str = "relative") -> AttitudeTrack:
     b[gap, 2:] = 0.0
     return AttitudeTrack(t=t, dq=dq, kind=kind, dt=dts, a=np.ascontiguousarray(a), b=np.ascontiguousarray(b),
                          bridge_mode=bridge_mode)  # fmt: skip
-
-
-def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    from workbench.core.rotation import quat_multiply
-
-    return quat_multiply(p, q)
 
 
 # ---------------------------------------------------------------------------------------------
