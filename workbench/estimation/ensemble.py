@@ -22,7 +22,7 @@ the same IEEE operations in the same order (no fused multiply-add, no reassociat
   :data:`LANES` whose per-step loop over members LLVM vectorises (AVX2: 4 members per
   instruction), the blocks split over the cores by threads (not numba's OpenMP layer: GNU OpenMP
   does not survive the fork of a process pool); the default when numba imports.  The first call
-  after an install or an edit compiles (~5 s CPU), later ones load numba's cache;
+  after an install or an edit compiles (~3.5 s CPU), later ones load numba's cache;
 * ``"numpy"`` — the pure-numpy reference path: the same functions on (m,) arrays per component;
 * ``"python"`` — one member at a time on Python floats: the per-trajectory loop baseline.
 
@@ -208,7 +208,7 @@ def attitude_track(imu: Any, bridge_mode: str = "relative") -> AttitudeTrack:
 # per-member maths (one definition; plain float arithmetic, compiled by numba, or on arrays)
 
 
-@register_jitable(inline="always")
+@register_jitable(forceinline=True)
 def _accel(px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, r22, ax, ay, az, bx, by, bz, gm, j2k):
     """``g_J2(p) + (R0 a + b)``: the velocity derivative at one RK4 stage (operations of
     ``gravity_j2_xyz`` and ``strapdown.derivatives``)."""
