@@ -4,7 +4,10 @@ Members: initial states sampled about the nominal ``(v0, q0, p0)`` with the erro
 ``dx0 = [δv_M, δθ_G, δp_M]`` (``v = v0 + δv``, ``q = q0 ⊗ exp(δθ)``, ``p = p0 + δp``), 1σ per
 block from :class:`DispersionSigmas` (AMELIA Table 3: attitude 5°, velocity 0.5 km/s, position
 10 km).  Every member is integrated through the same preprocessed IMU data (with the same gap
-bridges) by :func:`workbench.estimation.strapdown.integrate_members`, and only its event
+bridges) by :func:`workbench.estimation.ensemble.integrate_ensemble` — the attitude integrated once
+for all members (``q_i = q0_i ⊗ Δq``, :func:`~workbench.estimation.ensemble.attitude_track`) and
+the translational RK4 per member, compiled with numba when available; the same RK4 as
+:func:`workbench.estimation.strapdown.integrate_members` up to rounding — and only its event
 quantities are kept:
 
 * ``mach_pdd`` — Mach at parachute deployment: speed relative to the co-rotating air (no wind),
@@ -28,13 +31,14 @@ uses ``np.random.SeedSequence(seed, spawn_key=(b,))``, so a member's offsets dep
 ``(seed, member index)`` — not on the chunk size, the scheduler or the number of workers.  The
 integration is member-wise element arithmetic, so results are bit-identical in-process, in a
 process pool, on a Dask cluster (chunks run by :func:`workbench.estimation.montecarlo.run_monte_carlo`),
-and in the per-member loop baseline (:func:`run_dispersion_loop`).
+with either backend, and in the per-member loop baseline (:func:`run_dispersion_loop`).
 Memory: only dx0 (n, 9), the five event quantities and a thinned position cloud (≤ n_cloud
 members at ~1 Hz) are kept; a chunk's working set is a few MB.
 """
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -45,8 +49,9 @@ import numpy as np
 from workbench.core.atmosphere import Atmosphere, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normalize
+from workbench.estimation.ensemble import AttitudeTrack, attitude_track, default_backend, integrate_ensemble
 from workbench.estimation.montecarlo import run_monte_carlo
-from workbench.estimation.strapdown import ImuArrays, imu_arrays, integrate_members
+from workbench.estimation.strapdown import ImuArrays, imu_arrays
 from workbench.problems.entry.site import R_GROUND, R_MOLA
 
 __all__ = [
@@ -269,9 +274,33 @@ class _Job:
     atmosphere: Atmosphere
     bridge_mode: str
     r_ground: float
+    track: AttitudeTrack | None = None
+    backend: str = "numba"
     round_index: int = 0
     mean: np.ndarray | None = None
     L: np.ndarray | None = None
+
+
+def _threads() -> int | None:
+    """Kernel threads: one inside a worker process (the executor already uses the cores), else all."""
+    return 1 if mp.parent_process() is not None else None
+
+
+def _event_states(job: _Job, v, q, p, backend: str) -> tuple[np.ndarray, np.ndarray]:
+    """States (p_at, v_at) (3, m, 3) of members at the event times: linear between the bracketing
+    samples (as ``strapdown.integrate_members``' ``at_t``)."""
+    t = job.track.t
+    jj = np.clip(np.searchsorted(t, job.event_times, side="right") - 1, 0, t.size - 2)
+    ww = (job.event_times - t[jj]) / (t[jj + 1] - t[jj])
+    rec = np.unique(np.concatenate([jj, jj + 1]))
+    V, P = integrate_ensemble(job.track, v, q, p, rec, body=MARS, backend=backend, threads=_threads())
+    i0, i1 = np.searchsorted(rec, jj), np.searchsorted(rec, jj + 1)
+    v_at = np.empty((jj.size, *V.shape[1:]))
+    p_at = np.empty((jj.size, *P.shape[1:]))
+    for i, a in enumerate(ww):
+        v_at[i] = (1.0 - a) * V[i0[i]] + a * V[i1[i]]
+        p_at[i] = (1.0 - a) * P[i0[i]] + a * P[i1[i]]
+    return p_at, v_at
 
 
 def _offsets(job: _Job, start: int, stop: int) -> np.ndarray:
@@ -285,19 +314,20 @@ def _run_chunk(job: _Job, start: int, stop: int, seeds=None) -> tuple[int, np.nd
     the members' offsets come from :func:`sample_offsets`' blocks."""
     dx0 = _offsets(job, start, stop)
     v, q, p = _members(job.v0, job.q0, job.p0, dx0)
-    out = integrate_members(job.imu, v, q, p, bridge_mode=job.bridge_mode, at_t=job.event_times, body=MARS)
-    ev = event_quantities(out["p_at"], out["v_at"], job.atmosphere, job.r_ground)
+    p_at, v_at = _event_states(job, v, q, p, job.backend)
+    ev = event_quantities(p_at, v_at, job.atmosphere, job.r_ground)
     return start, dx0, ev
 
 
 def _run_loop(job: _Job, start: int, stop: int) -> tuple[int, np.ndarray, dict[str, np.ndarray]]:
-    """The per-trajectory baseline: the same maths, one member (single (3,) state) at a time."""
+    """The per-trajectory baseline: the same maths, one member at a time on Python floats
+    (``integrate_ensemble(backend="python")``, sharing the job's attitude track)."""
     dx0 = _offsets(job, start, stop)
     v, q, p = _members(job.v0, job.q0, job.p0, dx0)
     evs = {k: np.empty(stop - start) for k in EVENT_NAMES}
     for i in range(stop - start):
-        out = integrate_members(job.imu, v[i], q[i], p[i], bridge_mode=job.bridge_mode, at_t=job.event_times, body=MARS)
-        ev = event_quantities(out["p_at"][:, None], out["v_at"][:, None], job.atmosphere, job.r_ground)
+        p_at, v_at = _event_states(job, v[i : i + 1], q[i : i + 1], p[i : i + 1], "python")
+        ev = event_quantities(p_at, v_at, job.atmosphere, job.r_ground)
         for k in EVENT_NAMES:
             evs[k][i] = ev[k][0]
     return start, dx0, evs
@@ -402,9 +432,7 @@ def _finish(
     cloud_index = _pick_cloud(accepted, n_cloud)
     if cloud_index.size:
         v, q, p = _members(job.v0, job.q0, job.p0, dx0[cloud_index])
-        cloud_p = np.swapaxes(
-            integrate_members(job.imu, v, q, p, bridge_mode=job.bridge_mode, every=idx_t, body=MARS)["p_every"], 0, 1
-        )
+        cloud_p = np.swapaxes(integrate_ensemble(job.track, v, q, p, idx_t, body=MARS, backend=job.backend)[1], 0, 1)
     else:
         cloud_p = np.empty((0, idx_t.size, 3))
     return DispersionResult(
@@ -435,7 +463,7 @@ def _finish(
     )
 
 
-def _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground):
+def _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground, backend=None):
     pim = imu_arrays(imu)
     et, ev_d = _event_times(pim, events_t)
     if np.any(et < pim.t[0]) or np.any(et > pim.t[-1]):
@@ -451,6 +479,8 @@ def _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, 
         atmosphere=atmosphere if atmosphere is not None else MarsEngineeringAtmosphere(),
         bridge_mode=bridge_mode,
         r_ground=float(r_ground),
+        track=attitude_track(pim, bridge_mode),
+        backend=backend or default_backend(),
     )
     return job, ev_d
 
@@ -478,6 +508,7 @@ def run_dispersion(
     elite_fraction: float = 0.01,
     min_elite: int = 20,
     inflation: float = 2.0,
+    backend: str | None = None,
 ) -> DispersionResult:
     """Dispersion analysis of the initial state (AMELIA Sect. 6; module docstring).
 
@@ -502,13 +533,17 @@ def run_dispersion(
     ``refined_P0`` are then importance-weighted estimates of the same prior-restricted moments as
     the paper's plain mean and spread (consistent while the proposal covers the accepted region).
 
-    Results do not depend on ``chunk_size``, ``scheduler`` or ``workers`` (only ``wall_s`` and
-    ``scheduler`` do).
+    ``backend`` of the member integration (:data:`~workbench.estimation.ensemble.BACKENDS`:
+    "numba" compiled, the default when numba imports; "numpy" the pure-numpy reference; "python"
+    per member): bit-identical results.
+
+    Results do not depend on ``chunk_size``, ``scheduler``, ``workers`` or ``backend`` (only
+    ``wall_s`` and ``scheduler`` do).
     """
     if n < 1 or chunk_size < 1 or refine_rounds < 0:
         raise ValueError("run_dispersion: n and chunk_size must be positive, refine_rounds >= 0")
     rules = rules or AcceptanceRules()
-    job, ev_d = _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground)
+    job, ev_d = _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground, backend)
     prior_cov = np.diag(job.sigmas**2)
     mean, cov = np.zeros(9), prior_cov
     history: list[dict] = []
@@ -592,10 +627,13 @@ def run_dispersion_loop(
     r_ground: float = R_GROUND,
 ) -> DispersionResult:
     """Per-trajectory loop baseline of :func:`run_dispersion`: the same members and maths, one
-    member (a single (3,) state through the scalar RK4 path) at a time, in this process.
+    member at a time on Python floats (:func:`~workbench.estimation.ensemble.integrate_ensemble`
+    with ``backend="python"``; the attitude track is shared, as in the vectorised run), in this
+    process.
 
     Same arguments and result (bit-identical event quantities); for benchmarking the vectorised
-    version.  ``scheduler`` of the result is "per-trajectory loop".
+    version.  ``scheduler`` of the result is "per-trajectory loop"; the cloud is integrated with
+    the default backend.
     """
     job, ev_d = _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground)
     t0 = time.perf_counter()
