@@ -53,6 +53,7 @@ from workbench.core.atmosphere import Atmosphere
 from workbench.core.gravity import gravity_j2_xyz
 from workbench.core.rotation import dcm_to_quat, quat_multiply, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import AeroTable, ParachuteTable
+from workbench.problems.post2 import kernels
 
 __all__ = [
     "StateDef",
@@ -74,7 +75,13 @@ __all__ = [
     "wind_inertial",
     "quat_from_aero_angles",
     "aero_angles",
+    "USE_KERNEL",
 ]
+
+#: evaluate :meth:`TrajectoryModel.derivative` / :meth:`TrajectoryModel.aero_force_moment` with the
+#: compiled :func:`~workbench.problems.post2.kernels.dynamics_kernel` (False: the numpy reference
+#: ``derivative_reference`` / ``aero_force_moment_reference``; the two agree to rounding)
+USE_KERNEL = True
 
 
 @dataclass(frozen=True)
@@ -465,6 +472,137 @@ class TrajectoryModel:
         """J2 [-] (...,)."""
         return self.param(x, "j2", self.env.j2)[..., 0]
 
+    # ------------------------------------------------------------------ compiled kernel
+    def _plan(self) -> dict | None:
+        """What the kernel needs that does not change per call (built once); None when the model
+        uses a feature the kernel does not have (the rocket flights' ``wind`` state)."""
+        plan = self.__dict__.get("_plan_cache", False)
+        if plan is not False:
+            return plan
+        if "wind" in self.smap:
+            self._plan_cache = None
+            return None
+        sm, env, veh = self.smap, self.env, self.vehicle
+        k = len(kernels.PARAM_SLOTS)
+        pmode, pidx, pnom = np.zeros(k, np.int64), np.zeros(k, np.int64), np.zeros(k)
+        bounded = []
+        defaults = {"j2": env.j2, "drogue_drag_area": 0.0, "main_drag_area": 0.0, "wind_vertical": 0.0, "wind_horizontal": 0.0}
+        for i, name in enumerate(kernels.PARAM_SLOTS):
+            if name in sm:
+                b = sm.blocks[name]
+                if b.bounds is not None:
+                    pmode[i], pidx[i] = 2, len(bounded)
+                    bounded.append((b.sx, b.bounds))
+                else:
+                    pmode[i], pidx[i] = 1, b.sx.start
+            elif name == "density_multiplier":  # the reference applies it only when estimated
+                pnom[i] = 1.0
+            else:
+                pnom[i] = float(np.asarray(self.nominal.get(name, defaults.get(name, 1.0)), float).reshape(1)[0])
+        regime_names = [f"ca_multiplier_{r}" for r in ("fm", "hyp", "sup")]
+        regime = any(n in sm for n in regime_names) or any(
+            pnom[kernels.PARAM_SLOTS.index(n)] != 1.0 for n in regime_names
+        )
+        wind = any(n in sm or self.nominal.get(n, 0.0) != 0.0 for n in ("wind_vertical", "wind_horizontal"))
+        a = veh.aero
+        ci = np.zeros(len(kernels.CI), np.int64)
+        ci[kernels.CI["dof"]] = self.dof
+        ci[kernels.CI["atm"]] = env.atmosphere is not None
+        ci[kernels.CI["aero"]] = a is not None
+        ci[kernels.CI["has_cd"]] = veh.cd is not None
+        ci[kernels.CI["kn_matters"]] = self._kn_matters
+        ci[kernels.CI["regime"]] = regime
+        ci[kernels.CI["wind"]] = wind
+        for key, name in (("i_pos", "position"), ("i_vel", "velocity"), ("i_att", "attitude"), ("i_w", "body_rates")):
+            ci[kernels.CI[key]] = sm.blocks[name].sx.start if name in sm else 0
+        cf = np.zeros(len(kernels.CF))
+        cf[kernels.CF["omega"]] = env.omega
+        cf[kernels.CF["gm"]] = env.gm
+        cf[kernels.CF["re2"]] = env.radius_eq**2
+        cf[kernels.CF["radius_ref"]] = env.radius_ref
+        cf[kernels.CF["ref_length"]] = a.ref_length if a is not None else 1.0
+        cf[kernels.CF["cmq"]] = a.cmq if a is not None else 0.0
+        cf[kernels.CF["ca_factor"]] = veh.ca_factor
+        cf[kernels.CF["cn_factor"]] = veh.cn_factor
+        cf[kernels.CF["cm_factor"]] = veh.cm_factor
+        cf[kernels.CF["cd"]] = veh.cd if veh.cd is not None else 0.0
+        dummy1, dummy4 = np.zeros(2), np.zeros((2, 2, 2, 3))
+        plan = {
+            "pmode": pmode, "pidx": pidx, "pnom": pnom, "bounded": tuple(bounded), "ci": ci, "cf": cf,
+            "inertia": np.ascontiguousarray(self._inertia), "inertia_inv": np.ascontiguousarray(self._inertia_inv),
+            "grids": (a.mach, a.log10_kn, a.alpha, a._stack) if a is not None else (dummy1, dummy1, dummy1, dummy4),
+            "dummy": dummy1, "phases": {},
+        }  # fmt: skip
+        self._plan_cache = plan
+        return plan
+
+    def _phase_consts(self, plan: dict, phase: dict):
+        """(ci, cf, chute mach, chute cd) of the kernel for a phase (cached per phase values)."""
+        key = (phase["mass"], phase["area"], bool(phase["parachute"]), phase.get("chute"))
+        got = plan["phases"].get(key)
+        if got is not None:
+            return got
+        veh = self.vehicle
+        ci, cf = plan["ci"].copy(), plan["cf"].copy()
+        cf[kernels.CF["area"]] = phase["area"]
+        cf[kernels.CF["mass"]] = phase["mass"]
+        table = None
+        if phase["parachute"] and phase.get("chute") == "drogue" and veh.drogue is not None:
+            ci[kernels.CI["chute"]], table = 1, veh.drogue
+        elif phase["parachute"] and veh.parachute is not None:
+            ci[kernels.CI["chute"]], table = 2, veh.parachute
+        if table is not None:
+            cf[kernels.CF["chute_area"]] = table.ref_area
+        ci[kernels.CI["area_chute"]] = {"drogue": 1, "main": 2}.get(phase.get("chute"), 0)
+        tm, tc = (table.mach, table.cd) if table is not None else (plan["dummy"], plan["dummy"])
+        got = (ci, cf, tm, tc)
+        plan["phases"][key] = got
+        return got
+
+    def _kernel_eval(self, x: np.ndarray, phase: dict, want_dx: bool):
+        """(ẋ or None, F, M) of x (..., n_x) by :func:`~workbench.problems.post2.kernels.dynamics_kernel`;
+        the atmosphere and bounded parameters evaluated here in numpy, as the reference does."""
+        plan = self._plan()
+        x = np.asarray(x, dtype=float)
+        shape = x.shape[:-1]
+        X = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
+        b = X.shape[0]
+        ci, cf, tm, tc = self._phase_consts(plan, phase)
+        env, veh = self.env, self.vehicle
+        atm = env.atmosphere
+        dummy = plan["dummy"]
+        rho = a_snd = kn = ca_extra = dummy
+        if atm is not None:
+            hc = np.maximum(self.altitude(X), 0.0)
+            rho = atm.density(hc)
+            if env.density_factor is not None:
+                rho = rho * env.density_factor(hc)
+            a_snd = atm.speed_of_sound(hc)
+            if veh.aero is not None and self._kn_matters:
+                kn = atm.knudsen(hc, veh.aero.ref_length)
+            if veh.aero is not None:
+                if veh.ca_mach_factor is not None:
+                    ca_extra = veh.ca_mach_factor(np.linalg.norm(self.v_rel(X), axis=-1) / a_snd)
+                else:
+                    ca_extra = np.ones(b)
+        if plan["bounded"]:
+            PB = np.empty((len(plan["bounded"]), b))
+            for i, (sx, bounds) in enumerate(plan["bounded"]):
+                PB[i] = scurve(X[..., sx], *bounds)[..., 0]
+        else:
+            PB = np.empty((0, b))
+        F = np.empty((b, 3))
+        M = np.empty((b, 3))
+        dx = np.empty_like(X) if want_dx else np.empty((0, 0))
+        gm_, gk, ga, tab = plan["grids"]
+        kernels.dynamics_kernel(
+            X, np.ascontiguousarray(rho, dtype=float), np.ascontiguousarray(a_snd, dtype=float),
+            np.ascontiguousarray(kn, dtype=float), np.ascontiguousarray(ca_extra, dtype=float), PB,
+            plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, plan["inertia"], plan["inertia_inv"],
+            gm_, gk, ga, tab, tm, tc, want_dx, dx, F, M,
+        )  # fmt: skip
+        return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
+
     # ------------------------------------------------------------------ physics pieces
     def gravity(self, x: np.ndarray) -> np.ndarray:
         """Point-mass + J2 gravity [m/s²] (..., 3) at the position of x, inertial frame (+Z pole)."""
@@ -524,7 +662,15 @@ class TrajectoryModel:
 
     def aero_force_moment(self, x: np.ndarray, phase: dict) -> tuple[np.ndarray, np.ndarray]:
         """Aerodynamic (+ parachute) force [N] in the inertial frame and moment [N m] in the body
-        frame, each (..., 3); zero in vacuum.  ``phase``: the current mass/area/parachute state."""
+        frame, each (..., 3); zero in vacuum.  ``phase``: the current mass/area/parachute state.
+        Compiled kernel when :data:`USE_KERNEL` (and the model is supported), else the reference."""
+        if USE_KERNEL and self._plan() is not None:
+            _, F, M = self._kernel_eval(x, phase, want_dx=False)
+            return F, M
+        return self.aero_force_moment_reference(x, phase)
+
+    def aero_force_moment_reference(self, x: np.ndarray, phase: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Numpy reference of :meth:`aero_force_moment` (same arguments, units, frames and shapes)."""
         shape = x.shape[:-1]
         F = np.zeros((*shape, 3))
         M = np.zeros((*shape, 3))
@@ -612,10 +758,17 @@ class TrajectoryModel:
 
     # ------------------------------------------------------------------ dynamics
     def derivative(self, x: np.ndarray, phase: dict) -> np.ndarray:
-        """ẋ (..., n_x): kinematics, translational and (6-DOF) rotational dynamics; parameters constant."""
+        """ẋ (..., n_x): kinematics, translational and (6-DOF) rotational dynamics; parameters constant.
+        Compiled kernel when :data:`USE_KERNEL` (and the model is supported), else the reference."""
+        if USE_KERNEL and self._plan() is not None:
+            return self._kernel_eval(x, phase, want_dx=True)[0]
+        return self.derivative_reference(x, phase)
+
+    def derivative_reference(self, x: np.ndarray, phase: dict) -> np.ndarray:
+        """Numpy reference of :meth:`derivative` (same arguments, units and shapes)."""
         sm = self.smap
         dx = np.zeros_like(x)
-        F, M = self.aero_force_moment(x, phase)
+        F, M = self.aero_force_moment_reference(x, phase)
         dx[..., sm.blocks["position"].sx] = sm.raw(x, "velocity")
         dx[..., sm.blocks["velocity"].sx] = self.gravity(x) + F / phase["mass"]
         if self.dof == 6:

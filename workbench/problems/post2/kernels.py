@@ -1,0 +1,308 @@
+"""Compiled (numba) evaluation of the POST2 trajectory model's dynamics, row by row over a batch.
+
+:meth:`~workbench.problems.post2.model.TrajectoryModel.derivative` and
+:meth:`~workbench.problems.post2.model.TrajectoryModel.aero_force_moment` are called ~10⁵ times per
+reconstruction on small batches (the 1 + 2 n_e rows of the batched numeric Jacobian, ~31 x 16): the
+numpy version spends its time in the overhead of ~150 array operations per call, not in arithmetic.
+:func:`dynamics_kernel` does the same arithmetic in one compiled loop over the rows, in the same
+order of operations as the numpy reference (``model.py``), so the two agree to a few units in the
+last place (the reference's BLAS/einsum sums may round differently; see
+``tests/problems/post2/test_post2_kernels.py``).  The atmosphere (density, speed of sound, Knudsen)
+and the S-curve of bounded parameters are evaluated by the caller in numpy (any
+:class:`~workbench.core.atmosphere.Atmosphere`; numpy's SIMD ``tanh`` differs from libm's in the
+last bit) and passed in per row.
+
+Layout of the arguments (built by ``TrajectoryModel._fast_plan``):
+
+* ``X`` (b, n_x) states; ``rho``, ``a_snd``, ``kn``, ``ca_extra`` (b,) density [kg/m³] (density
+  wave applied, multiplier not), speed of sound [m/s], Knudsen number [-], truth-side CA(Mach)
+  factor [-];
+* parameters: slot k of :data:`PARAM_SLOTS` is ``pnom[k]`` when ``pmode[k] == 0``, the raw state
+  ``X[:, pidx[k]]`` when 1, the precomputed row ``PB[pidx[k]]`` (S-curve applied) when 2;
+* ``ci`` integer flags, ``cf`` float constants (indices :data:`CI` / :data:`CF`);
+* ``inertia``, ``inertia_inv`` (3, 3) body frame [kg m²]; aero table grids ``g_mach``, ``g_lkn``,
+  ``g_alpha`` and coefficients ``tab`` (n_mach, n_kn, n_alpha, 3) [CA, CN, Cm]; the parachute
+  table ``chute_mach``, ``chute_cd`` of the open canopy (drogue or main);
+* outputs ``dx`` (b, n_x) (only if ``want_dx``), ``F`` (b, 3) inertial [N], ``M`` (b, 3) body [N m].
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["PARAM_SLOTS", "CI", "CF", "dynamics_kernel"]
+
+#: parameter slots of the kernel (name, size 1 each)
+PARAM_SLOTS = (
+    "j2",
+    "ca_multiplier",
+    "cn_multiplier",
+    "cm_multiplier",
+    "density_multiplier",
+    "ca_multiplier_fm",
+    "ca_multiplier_hyp",
+    "ca_multiplier_sup",
+    "drogue_drag_multiplier",
+    "parachute_drag_multiplier",
+    "drogue_drag_area",
+    "main_drag_area",
+    "wind_vertical",
+    "wind_horizontal",
+)
+_J2, _CAM, _CNM, _CMM, _RHOM, _FM, _HYP, _SUP, _DROGM, _PARAM, _DROGA, _MAINA, _WV, _WH = range(14)
+
+#: integer flags: dof, atmosphere present, aero table present, constant cd present, Knudsen
+#: matters, regime CA multiplier on, open chute table (0 none, 1 drogue, 2 parachute), drag-area state chute
+#: (0 none, 1 drogue, 2 main), Huygens wind on, x offsets of position, velocity, attitude, rates
+CI = {
+    "dof": 0,
+    "atm": 1,
+    "aero": 2,
+    "has_cd": 3,
+    "kn_matters": 4,
+    "regime": 5,
+    "chute": 6,
+    "area_chute": 7,
+    "wind": 8,
+    "i_pos": 9,
+    "i_vel": 10,
+    "i_att": 11,
+    "i_w": 12,
+}
+#: float constants: planet rate [rad/s], GM [m³/s²], R_eq² [m²], R_ref [m], S [m²], mass [kg],
+#: L [m], Cmq, CA/CN/Cm truth factors, constant cd, chute reference area [m²]
+CF = {
+    "omega": 0,
+    "gm": 1,
+    "re2": 2,
+    "radius_ref": 3,
+    "area": 4,
+    "mass": 5,
+    "ref_length": 6,
+    "cmq": 7,
+    "ca_factor": 8,
+    "cn_factor": 9,
+    "cm_factor": 10,
+    "cd": 11,
+    "chute_area": 12,
+}
+
+
+@njit(cache=True, inline="always")
+def _par(k, r, X, PB, pmode, pidx, pnom):
+    m = pmode[k]
+    if m == 0:
+        return pnom[k]
+    if m == 1:
+        return X[r, pidx[k]]
+    return PB[pidx[k], r]
+
+
+@njit(cache=True, inline="always")
+def _locate(grid, x):
+    """numpy's ``_locate`` of aerodynamics.py: lower node and clamped weight (searchsorted right)."""
+    n = grid.size
+    lo, hi = 0, n
+    while lo < hi:  # first index with grid[i] > x
+        mid = (lo + hi) // 2
+        if grid[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    i = lo - 1
+    if i < 0:
+        i = 0
+    if i > n - 2:
+        i = n - 2
+    w = (x - grid[i]) / (grid[i + 1] - grid[i])
+    if w < 0.0:
+        w = 0.0
+    elif w > 1.0:
+        w = 1.0
+    return i, w
+
+
+@njit(cache=True, inline="always")
+def _smoothstep(u):
+    if u < 0.0:
+        u = 0.0
+    elif u > 1.0:
+        u = 1.0
+    return u * u * (3.0 - 2.0 * u)
+
+
+@njit(cache=True)
+def dynamics_kernel(
+    X, rho, a_snd, kn, ca_extra, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv,
+    g_mach, g_lkn, g_alpha, tab, chute_mach, chute_cd, want_dx, dx, F, M,
+):  # fmt: skip
+    """Derivative ``dx`` (if ``want_dx``), aero force ``F`` (inertial) and moment ``M`` (body) of
+    each row of X (b, n_x); see the module docstring for the arguments.  No return value."""
+    b = X.shape[0]
+    dof = ci[0]
+    has_atm, has_aero, has_cd, kn_matters = ci[1], ci[2], ci[3], ci[4]
+    regime, chute, area_chute, wind = ci[5], ci[6], ci[7], ci[8]
+    ip, iv, iq, iw = ci[9], ci[10], ci[11], ci[12]
+    omega, gm, re2, S, mass = cf[0], cf[1], cf[2], cf[4], cf[5]
+    L, cmq = cf[6], cf[7]
+    for r in range(b):
+        px, py, pz = X[r, ip], X[r, ip + 1], X[r, ip + 2]
+        vx, vy, vz = X[r, iv], X[r, iv + 1], X[r, iv + 2]
+        F0 = F1 = F2 = 0.0
+        M0 = M1 = M2 = 0.0
+        if has_atm:
+            rho_r = rho[r] * _par(_RHOM, r, X, PB, pmode, pidx, pnom)
+            # v_rel = v − ω × r − wind
+            vr0 = vx - (-omega * py)
+            vr1 = vy - omega * px
+            vr2 = vz - 0.0
+            if wind:
+                wv = _par(_WV, r, X, PB, pmode, pidx, pnom)
+                wh = _par(_WH, r, X, PB, pmode, pidx, pnom)
+                if wv != 0.0 or wh != 0.0:
+                    rn = math.sqrt(px * px + py * py + pz * pz)
+                    e0, e1 = -py, px
+                    en = math.sqrt(e0 * e0 + e1 * e1 + 0.0 * 0.0)
+                    if en < 1e-9:
+                        en = 1e-9
+                    e0, e1, e2 = e0 / en, e1 / en, 0.0 / en
+                    vr0 = vr0 - (wv * px / rn + wh * e0)
+                    vr1 = vr1 - (wv * py / rn + wh * e1)
+                    vr2 = vr2 - (wv * pz / rn + wh * e2)
+            V = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2)
+            qbar = 0.5 * rho_r * V * V
+            mach = V / a_snd[r]
+            Vs = V if V > 1e-9 else 1e-9
+            ca_m = _par(_CAM, r, X, PB, pmode, pidx, pnom) * cf[8]
+            kn_r = kn[r] if kn_matters else 1e-6
+            if has_aero:
+                if regime:
+                    m_fm = _par(_FM, r, X, PB, pmode, pidx, pnom)
+                    m_h = _par(_HYP, r, X, PB, pmode, pidx, pnom)
+                    m_s = _par(_SUP, r, X, PB, pmode, pidx, pnom)
+                    w_fm = _smoothstep(math.log10(kn_r if kn_r > 1e-12 else 1e-12) + 2.0)
+                    w_h = _smoothstep((mach - 5.0) / 5.0)
+                    ca_m = ca_m * (w_fm * m_fm + (1.0 - w_fm) * (w_h * m_h + (1.0 - w_h) * m_s))
+                else:
+                    ca_m = ca_m * 1.0
+                ca_m = ca_m * ca_extra[r]
+            if dof == 3:
+                if has_aero:
+                    i, wi = _locate(g_mach, mach)
+                    j, wj = _locate(g_lkn, math.log10(kn_r if kn_r > 1e-300 else 1e-300))
+                    l, wl = _locate(g_alpha, 0.0)
+                    ca = 0.0
+                    for di in range(2):
+                        fi = wi if di == 1 else 1.0 - wi
+                        for dj in range(2):
+                            fj = wj if dj == 1 else 1.0 - wj
+                            for dl in range(2):
+                                fl = wl if dl == 1 else 1.0 - wl
+                                ca = ca + fi * fj * fl * tab[i + di, j + dj, l + dl, 0]
+                    c = ca_m * ca * qbar * S / Vs
+                    F0, F1, F2 = F0 - c * vr0, F1 - c * vr1, F2 - c * vr2
+                elif has_cd:
+                    c = ca_m * cf[11] * qbar * S / Vs
+                    F0, F1, F2 = F0 - c * vr0, F1 - c * vr1, F2 - c * vr2
+            elif has_aero:
+                qx, qy, qzz, qw = X[r, iq], X[r, iq + 1], X[r, iq + 2], X[r, iq + 3]
+                nq = math.sqrt(qx * qx + qy * qy + qzz * qzz + qw * qw)
+                if nq == 0.0:
+                    raise ValueError("cannot normalise a zero quaternion")
+                qx, qy, qzz, qw = qx / nq, qy / nq, qzz / nq, qw / nq
+                xx, yy, zz = qx * qx, qy * qy, qzz * qzz
+                xy, xz, yz = qx * qy, qx * qzz, qy * qzz
+                wx, wy, wz = qw * qx, qw * qy, qw * qzz
+                R00, R01, R02 = 1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)
+                R10, R11, R12 = 2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)
+                R20, R21, R22 = 2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)
+                # v_B = Rᵀ v_rel
+                vb0 = R00 * vr0 + R10 * vr1 + R20 * vr2
+                vb1 = R01 * vr0 + R11 * vr1 + R21 * vr2
+                vb2 = R02 * vr0 + R12 * vr1 + R22 * vr2
+                lat = math.sqrt(vb1 * vb1 + vb2 * vb2)
+                alpha_t = math.atan2(lat, vb0)
+                i, wi = _locate(g_mach, mach)
+                j, wj = _locate(g_lkn, math.log10(kn_r if kn_r > 1e-300 else 1e-300))
+                l, wl = _locate(g_alpha, alpha_t)
+                ca = 0.0
+                cn = 0.0
+                cm = 0.0
+                for di in range(2):
+                    fi = wi if di == 1 else 1.0 - wi
+                    for dj in range(2):
+                        fj = wj if dj == 1 else 1.0 - wj
+                        for dl in range(2):
+                            fl = wl if dl == 1 else 1.0 - wl
+                            f = fi * fj * fl
+                            ca = ca + f * tab[i + di, j + dj, l + dl, 0]
+                            cn = cn + f * tab[i + di, j + dj, l + dl, 1]
+                            cm = cm + f * tab[i + di, j + dj, l + dl, 2]
+                cn = cn * _par(_CNM, r, X, PB, pmode, pidx, pnom) * cf[9]
+                cm = cm * _par(_CMM, r, X, PB, pmode, pidx, pnom) * cf[10]
+                safe = lat if lat > 1e-12 else 1e-12
+                e_y, e_z = vb1 / safe, vb2 / safe
+                if not lat > 1e-12:
+                    e_y = 0.0
+                    e_z = 0.0
+                qs = qbar * S
+                Fb0 = -ca_m * ca * qs
+                Fb1 = -cn * qs * e_y
+                Fb2 = -cn * qs * e_z
+                mk = cm * qs * L
+                damp = cmq * qs * L * L / (2.0 * Vs)
+                M1 = mk * e_z + damp * X[r, iw + 1]
+                M2 = -mk * e_y + damp * X[r, iw + 2]
+                # R F_B: numpy's einsum("...ij,...j->...i") sums in the order (j0 + j2) + j1
+                F0 = F0 + ((R00 * Fb0 + R02 * Fb2) + R01 * Fb1)
+                F1 = F1 + ((R10 * Fb0 + R12 * Fb2) + R11 * Fb1)
+                F2 = F2 + ((R20 * Fb0 + R22 * Fb2) + R21 * Fb1)
+            if chute != 0:  # open canopy: 1 the drogue table, 2 the (main) parachute table
+                k = _DROGM if chute == 1 else _PARAM
+                cd = np.interp(mach, chute_mach, chute_cd) * _par(k, r, X, PB, pmode, pidx, pnom)
+                c = cd * qbar * cf[12] / Vs
+                F0, F1, F2 = F0 - c * vr0, F1 - c * vr1, F2 - c * vr2
+            if area_chute != 0:  # drag-area state −CD·S q v̂_rel
+                cds = _par(_DROGA if area_chute == 1 else _MAINA, r, X, PB, pmode, pidx, pnom)
+                c = cds * qbar / Vs
+                F0, F1, F2 = F0 - c * vr0, F1 - c * vr1, F2 - c * vr2
+        F[r, 0], F[r, 1], F[r, 2] = F0, F1, F2
+        M[r, 0], M[r, 1], M[r, 2] = M0, M1, M2
+        if not want_dx:
+            continue
+        for c in range(X.shape[1]):
+            dx[r, c] = 0.0
+        dx[r, ip], dx[r, ip + 1], dx[r, ip + 2] = vx, vy, vz
+        # point mass + J2 (gravity_j2_xyz)
+        j2k = 1.5 * _par(_J2, r, X, PB, pmode, pidx, pnom) * gm * re2
+        r2 = px * px + py * py + pz * pz
+        rr = math.sqrt(r2)
+        gm_r3 = gm / (r2 * rr)
+        z2 = 5.0 * (pz * pz) / r2
+        kk = j2k / (r2 * r2 * rr)
+        a = gm_r3 + kk * (1.0 - z2)
+        dx[r, iv] = -a * px + F0 / mass
+        dx[r, iv + 1] = -a * py + F1 / mass
+        dx[r, iv + 2] = -(gm_r3 + kk * (3.0 - z2)) * pz + F2 / mass
+        if dof == 6:
+            qx, qy, qzz, qw = X[r, iq], X[r, iq + 1], X[r, iq + 2], X[r, iq + 3]
+            w0, w1, w2 = X[r, iw], X[r, iw + 1], X[r, iw + 2]
+            w3 = 0.0
+            dx[r, iq] = 0.5 * (qw * w0 + qx * w3 + qy * w2 - qzz * w1)
+            dx[r, iq + 1] = 0.5 * (qw * w1 - qx * w2 + qy * w3 + qzz * w0)
+            dx[r, iq + 2] = 0.5 * (qw * w2 + qx * w1 - qy * w0 + qzz * w3)
+            dx[r, iq + 3] = 0.5 * (qw * w3 - qx * w0 - qy * w1 - qzz * w2)
+            I = inertia
+            Iw0 = w0 * I[0, 0] + w1 * I[0, 1] + w2 * I[0, 2]
+            Iw1 = w0 * I[1, 0] + w1 * I[1, 1] + w2 * I[1, 2]
+            Iw2 = w0 * I[2, 0] + w1 * I[2, 1] + w2 * I[2, 2]
+            t0 = M0 - (w1 * Iw2 - w2 * Iw1)
+            t1 = M1 - (w2 * Iw0 - w0 * Iw2)
+            t2 = M2 - (w0 * Iw1 - w1 * Iw0)
+            J = inertia_inv
+            dx[r, iw] = t0 * J[0, 0] + t1 * J[0, 1] + t2 * J[0, 2]
+            dx[r, iw + 1] = t0 * J[1, 0] + t1 * J[1, 1] + t2 * J[1, 2]
+            dx[r, iw + 2] = t0 * J[2, 0] + t1 * J[2, 1] + t2 * J[2, 2]
