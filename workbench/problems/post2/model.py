@@ -486,7 +486,13 @@ class TrajectoryModel:
         k = len(kernels.PARAM_SLOTS)
         pmode, pidx, pnom = np.zeros(k, np.int64), np.zeros(k, np.int64), np.zeros(k)
         bounded = []
-        defaults = {"j2": env.j2, "drogue_drag_area": 0.0, "main_drag_area": 0.0, "wind_vertical": 0.0, "wind_horizontal": 0.0}
+        defaults = {
+            "j2": env.j2,
+            "drogue_drag_area": 0.0,
+            "main_drag_area": 0.0,
+            "wind_vertical": 0.0,
+            "wind_horizontal": 0.0,
+        }
         for i, name in enumerate(kernels.PARAM_SLOTS):
             if name in sm:
                 b = sm.blocks[name]
