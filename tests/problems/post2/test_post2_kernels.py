@@ -1,0 +1,118 @@
+"""The compiled dynamics kernel (post2/kernels.py) against the numpy reference of the model.
+
+``TrajectoryModel.derivative`` / ``aero_force_moment`` run the numba kernel; ``*_reference`` keep the
+numpy code.  The kernel follows the reference's order of operations, so on the shipped scenarios'
+models (estimator and truth, every event phase) the two agree bit for bit; the assertion allows
+1e-12 relative (a few units in the last place) in case a numpy/BLAS build sums in another order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workbench.io.assets import assets_dir
+from workbench.io.scenario import load_scenario
+from workbench.problems.post2 import model as post2_model
+from workbench.problems.post2.config import config_for
+from workbench.problems.post2.model import Environment, StateMap, TrajectoryModel, Vehicle
+from workbench.problems.post2.pipeline import Estimator
+from workbench.problems.post2.truth import truth_model
+
+SCENARIOS = ("post2_entry6dof", "post2_mer_quaternion", "post2_huygens", "post2_j2")
+
+
+def _phases(model: TrajectoryModel) -> list[dict]:
+    """The initial phase and the phase after each event in turn."""
+    out = [model.initial_phase()]
+    for ev in model.events:
+        out.append(model.apply_event(out[-1], ev))
+    return out
+
+
+def _batch(model: TrajectoryModel, x0: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """n states around x0: perturbed positions (±2 km), velocities, attitude, rates, parameters."""
+    X = np.repeat(x0[None, :], n, axis=0)
+    sm = model.smap
+    X[:, sm.blocks["position"].sx] += rng.normal(scale=2000.0, size=(n, 3))
+    X[:, sm.blocks["velocity"].sx] *= 1.0 + rng.normal(scale=0.05, size=(n, 1))
+    for name, b in sm.blocks.items():
+        if name in ("position", "velocity"):
+            continue
+        X[:, b.sx] += rng.normal(scale=0.02, size=(n, b.sx.stop - b.sx.start))
+    return X
+
+
+def _models(name: str):
+    sc = load_scenario(assets_dir() / "scenarios" / f"{name}.toml")
+    cfg = config_for(sc)
+    est = Estimator(sc, cfg)
+    tm = truth_model(sc, cfg)
+    x_truth = np.zeros(tm.smap.n_x)
+    for blk in ("position", "velocity") + (("attitude", "body_rates") if cfg.dof == 6 else ()):
+        x_truth[tm.smap.blocks[blk].sx] = est.x0[est.smap.blocks[blk].sx]
+    return [(est.model, est.x0), (tm, x_truth)]
+
+
+def _assert_close(a: np.ndarray, b: np.ndarray) -> None:
+    scale = np.maximum(np.abs(b), 1e-300)
+    assert a.shape == b.shape
+    assert np.all(np.isfinite(a) == np.isfinite(b))
+    assert np.max(np.abs(a - b) / scale, initial=0.0) <= 1e-12
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_kernel_matches_the_numpy_reference_on_the_shipped_scenarios(name):
+    rng = np.random.default_rng(7)
+    for model, x0 in _models(name):
+        assert model._plan() is not None
+        for phase in _phases(model):
+            X = _batch(model, x0, 31, rng)
+            _assert_close(model.derivative(X, phase), model.derivative_reference(X, phase))
+            F, M = model.aero_force_moment(X, phase)
+            Fr, Mr = model.aero_force_moment_reference(X, phase)
+            _assert_close(F, Fr)
+            _assert_close(M, Mr)
+            # one state (the truth's solve_ivp) and a 2-D leading shape
+            _assert_close(model.derivative(X[3], phase), model.derivative_reference(X[3], phase))
+            X3 = X[:30].reshape(5, 6, -1)
+            _assert_close(model.derivative(X3, phase), model.derivative_reference(X3, phase))
+
+
+def test_kernel_matches_the_reference_for_a_constant_cd_and_drag_area_states():
+    """Rocket-flight style pieces: a 3-DOF point mass with a constant cd, drag-area states, winds."""
+    from workbench.core.atmosphere import ExponentialAtmosphere
+
+    env = Environment(3.986e14, 6378137.0, 1.08e-3, 6371000.0, 7.29e-5, ExponentialAtmosphere(1.2, 8500.0, 288.0))
+    veh = Vehicle(20.0, np.eye(3), None, ref_area=0.01, cd=0.45)
+    sm = StateMap(["position", "velocity", "drogue_drag_area", "main_drag_area", "wind_vertical"])
+    m = TrajectoryModel(sm, 3, env, veh, nominal={"wind_horizontal": 3.0})
+    rng = np.random.default_rng(3)
+    X = np.zeros((25, sm.n_x))
+    X[:, :3] = [6371000.0 + 3000.0, 0.0, 0.0] + rng.normal(scale=500.0, size=(25, 3))
+    X[:, 3:6] = rng.normal(scale=100.0, size=(25, 3))
+    X[:, 6:] = np.abs(rng.normal(scale=0.5, size=(25, 3)))
+    for chute in (None, "drogue", "main"):
+        phase = {**m.initial_phase(), "parachute": chute is not None, "chute": chute}
+        _assert_close(m.derivative(X, phase), m.derivative_reference(X, phase))
+
+
+def test_vacuum_model_and_the_switch_to_the_reference(monkeypatch):
+    sm = StateMap(["position", "velocity", "j2"])
+    m = TrajectoryModel(sm, 3, Environment(4.28e13, 3.39e6, 1.96e-3, 3.39e6, 0.0, None), Vehicle(1e3, np.eye(3), None))
+    X = np.array([[3.0e6, 1.5e6, 1.0e6, 0.0, 3000.0, 1000.0, 1.9e-3], [3.1e6, -1.5e6, 2.0e6, 10.0, 300.0, 100.0, 2e-3]])
+    ph = m.initial_phase()
+    _assert_close(m.derivative(X, ph), m.derivative_reference(X, ph))
+    calls = []
+    monkeypatch.setattr(post2_model, "USE_KERNEL", False)
+    monkeypatch.setattr(TrajectoryModel, "_kernel_eval", lambda *a, **k: calls.append(1))
+    np.testing.assert_array_equal(m.derivative(X, ph), m.derivative_reference(X, ph))
+    assert not calls
+
+
+def test_rocket_wind_state_falls_back_to_the_reference():
+    sm = StateMap(["position", "velocity", "wind"])
+    m = TrajectoryModel(sm, 3, Environment(4.28e13, 3.39e6, 0.0, 3.39e6, 0.0, None), Vehicle(1e3, np.eye(3), None))
+    assert m._plan() is None
+    X = np.array([3.0e6, 1.5e6, 1.0e6, 0.0, 3000.0, 1000.0, 1.0, 2.0])
+    np.testing.assert_array_equal(m.derivative(X, m.initial_phase()), m.derivative_reference(X, m.initial_phase()))
