@@ -15,7 +15,15 @@ from workbench.io.assets import assets_dir
 from workbench.io.scenario import load_scenario
 from workbench.problems.post2 import model as post2_model
 from workbench.problems.post2.config import config_for
-from workbench.problems.post2.model import Environment, StateMap, TrajectoryModel, Vehicle
+from workbench.problems.post2.model import (
+    Environment,
+    StateMap,
+    TrajectoryModel,
+    Vehicle,
+    aero_angles,
+    aero_angles_loop,
+    quat_from_aero_angles,
+)
 from workbench.problems.post2.pipeline import Estimator
 from workbench.problems.post2.truth import truth_model
 
@@ -73,6 +81,13 @@ def test_kernel_matches_the_numpy_reference_on_the_shipped_scenarios(name):
             Fr, Mr = model.aero_force_moment_reference(X, phase)
             _assert_close(F, Fr)
             _assert_close(M, Mr)
+            if "velocity" in model.smap:  # acceleration_inertial: the kernel's velocity block
+                sv = model.smap.blocks["velocity"].sx
+                F_ref = model.aero_force_moment_reference(X, phase)[0]
+                _assert_close(
+                    model.observe(X, "acceleration_inertial", phase), model.gravity(X) + F_ref / phase["mass"]
+                )
+                _assert_close(model.observe(X, "acceleration_inertial", phase), model.derivative(X, phase)[:, sv])
             # one state (the truth's solve_ivp) and a 2-D leading shape
             _assert_close(model.derivative(X[3], phase), model.derivative_reference(X[3], phase))
             X3 = X[:30].reshape(5, 6, -1)
@@ -116,3 +131,14 @@ def test_rocket_wind_state_falls_back_to_the_reference():
     assert m._plan() is None
     X = np.array([3.0e6, 1.5e6, 1.0e6, 0.0, 3000.0, 1000.0, 1.0, 2.0])
     np.testing.assert_array_equal(m.derivative(X, m.initial_phase()), m.derivative_reference(X, m.initial_phase()))
+
+
+def test_vectorised_aero_angles_match_the_row_loop():
+    rng = np.random.default_rng(0)
+    n = 300
+    r, v = rng.normal(size=(n, 3)) * 3e6, rng.normal(size=(n, 3)) * 4000.0
+    ang = np.radians(rng.uniform(-20.0, 20.0, (n, 3))) * [1.0, 1.0, 8.0]
+    q = np.array([quat_from_aero_angles(r[i], v[i], ang[i]) for i in range(n)])
+    _assert_close(aero_angles(r, v, q), aero_angles_loop(r, v, q))
+    np.testing.assert_allclose(aero_angles(r, v, q), ang, atol=1e-12)
+    assert aero_angles(r[0], v[0], q[0]).shape == (1, 3)

@@ -409,7 +409,29 @@ def quat_from_aero_angles(r_I: np.ndarray, v_rel_I: np.ndarray, angles_rad: np.n
 
 def aero_angles(r_I: np.ndarray, v_rel_I: np.ndarray, q_I_B: np.ndarray) -> np.ndarray:
     """[α, β, σ] [rad] (n, 3) of states r_I, v_rel_I (n, 3) [m, m/s] and q_I_B (n, 4): inverse of
-    :func:`quat_from_aero_angles`."""
+    :func:`quat_from_aero_angles` (vectorised over n; :func:`aero_angles_loop` is the row-by-row
+    reference, equal to rounding)."""
+    r_I, v_rel_I, q_I_B = (np.atleast_2d(np.asarray(a, float)) for a in (r_I, v_rel_I, q_I_B))
+    R = quat_to_dcm(q_I_B)  # (n, 3, 3) R_I_B
+    vb = np.einsum("nji,nj->ni", R, v_rel_I)
+    al = np.arctan2(vb[:, 2], vb[:, 0])
+    be = np.arcsin(np.clip(vb[:, 1] / np.sqrt(np.sum(vb * vb, axis=1)), -1.0, 1.0))
+    x = v_rel_I / np.sqrt(np.sum(v_rel_I * v_rel_I, axis=1))[:, None]
+    down = -r_I / np.sqrt(np.sum(r_I * r_I, axis=1))[:, None]
+    z = down - np.sum(down * x, axis=1)[:, None] * x
+    z = z / np.sqrt(np.sum(z * z, axis=1))[:, None]
+    y = np.cross(z, x)
+    W = np.stack([x, y, z], axis=2)  # R_I_W0, columns x, y, z
+    ca, sa, cb, sb = np.cos(al), np.sin(al), np.cos(-be), np.sin(-be)
+    o, n0 = np.ones_like(al), np.zeros_like(al)
+    ry_t = np.stack([np.stack([ca, n0, -sa], -1), np.stack([n0, o, n0], -1), np.stack([sa, n0, ca], -1)], -2)
+    rz_t = np.stack([np.stack([cb, sb, n0], -1), np.stack([-sb, cb, n0], -1), np.stack([n0, n0, o], -1)], -2)
+    M = np.swapaxes(W, 1, 2) @ R @ ry_t @ rz_t
+    return np.stack([al, be, np.arctan2(M[:, 2, 1], M[:, 1, 1])], axis=1)
+
+
+def aero_angles_loop(r_I: np.ndarray, v_rel_I: np.ndarray, q_I_B: np.ndarray) -> np.ndarray:
+    """Row-by-row reference of :func:`aero_angles` (same arguments, units and shape)."""
     r_I, v_rel_I, q_I_B = (np.atleast_2d(np.asarray(a, float)) for a in (r_I, v_rel_I, q_I_B))
     out = np.empty((r_I.shape[0], 3))
     for i in range(r_I.shape[0]):
@@ -852,6 +874,8 @@ class TrajectoryModel:
         if quantity == "gravity_magnitude":
             return np.linalg.norm(self.gravity(x), axis=-1, keepdims=True)
         if quantity == "acceleration_inertial":
+            if USE_KERNEL and self._plan() is not None:  # the velocity block of ẋ: gravity + F / m
+                return self._kernel_eval(x, phase, want_dx=True)[0][..., self.smap.blocks["velocity"].sx]
             F, _ = self.aero_force_moment(x, phase)
             return self.gravity(x) + F / phase["mass"]
         if quantity == "acceleration_body":
