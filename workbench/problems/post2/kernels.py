@@ -33,7 +33,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["PARAM_SLOTS", "CI", "CF", "dynamics_kernel"]
+__all__ = ["PARAM_SLOTS", "CI", "CF", "dynamics_kernel", "air_speed_kernel"]
 
 #: parameter slots of the kernel (name, size 1 each)
 PARAM_SLOTS = (
@@ -91,17 +91,20 @@ CF = {
 }
 
 
-@njit(cache=True, inline="always")
-def _par(k, r, X, PB, pmode, pidx, pnom):
-    m = pmode[k]
-    if m == 0:
-        return pnom[k]
-    if m == 1:
-        return X[r, pidx[k]]
-    return PB[pidx[k], r]
+@njit(cache=True)
+def _params(r, X, PB, pmode, pidx, pnom, pv):
+    """The parameter slots of row r into ``pv`` (nominal, raw state or precomputed S-curve value)."""
+    for k in range(pnom.size):
+        m = pmode[k]
+        if m == 0:
+            pv[k] = pnom[k]
+        elif m == 1:
+            pv[k] = X[r, pidx[k]]
+        else:
+            pv[k] = PB[pidx[k], r]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _locate(grid, x):
     """numpy's ``_locate`` of aerodynamics.py: lower node and clamped weight (searchsorted right)."""
     n = grid.size
@@ -125,13 +128,48 @@ def _locate(grid, x):
     return i, w
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _smoothstep(u):
     if u < 0.0:
         u = 0.0
     elif u > 1.0:
         u = 1.0
     return u * u * (3.0 - 2.0 * u)
+
+
+@njit(cache=True)
+def _vrel(r, X, pv, ci, cf):
+    """Air-relative velocity v − ω × r − wind [m/s] of row r (the model's ``v_rel``)."""
+    ip, iv = ci[9], ci[10]
+    px, py, pz = X[r, ip], X[r, ip + 1], X[r, ip + 2]
+    omega = cf[0]
+    vr0 = X[r, iv] - (-omega * py)
+    vr1 = X[r, iv + 1] - omega * px
+    vr2 = X[r, iv + 2] - 0.0
+    if ci[8]:
+        wv = pv[_WV]
+        wh = pv[_WH]
+        if wv != 0.0 or wh != 0.0:
+            rn = math.sqrt(px * px + py * py + pz * pz)
+            e0, e1 = -py, px
+            en = math.sqrt(e0 * e0 + e1 * e1 + 0.0 * 0.0)
+            if en < 1e-9:
+                en = 1e-9
+            e0, e1, e2 = e0 / en, e1 / en, 0.0 / en
+            vr0 = vr0 - (wv * px / rn + wh * e0)
+            vr1 = vr1 - (wv * py / rn + wh * e1)
+            vr2 = vr2 - (wv * pz / rn + wh * e2)
+    return vr0, vr1, vr2
+
+
+@njit(cache=True)
+def air_speed_kernel(X, PB, pmode, pidx, pnom, ci, cf, out):
+    """|v_rel| [m/s] of each row of X (b, n_x) into ``out`` (b,) (arguments as :func:`dynamics_kernel`)."""
+    pv = np.empty(pnom.size)
+    for r in range(X.shape[0]):
+        _params(r, X, PB, pmode, pidx, pnom, pv)
+        vr0, vr1, vr2 = _vrel(r, X, pv, ci, cf)
+        out[r] = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2)
 
 
 @njit(cache=True)
@@ -144,45 +182,31 @@ def dynamics_kernel(
     b = X.shape[0]
     dof = ci[0]
     has_atm, has_aero, has_cd, kn_matters = ci[1], ci[2], ci[3], ci[4]
-    regime, chute, area_chute, wind = ci[5], ci[6], ci[7], ci[8]
+    regime, chute, area_chute = ci[5], ci[6], ci[7]
     ip, iv, iq, iw = ci[9], ci[10], ci[11], ci[12]
-    omega, gm, re2, S, mass = cf[0], cf[1], cf[2], cf[4], cf[5]
+    gm, re2, S, mass = cf[1], cf[2], cf[4], cf[5]
     L, cmq = cf[6], cf[7]
+    pv = np.empty(pnom.size)
     for r in range(b):
+        _params(r, X, PB, pmode, pidx, pnom, pv)
         px, py, pz = X[r, ip], X[r, ip + 1], X[r, ip + 2]
         vx, vy, vz = X[r, iv], X[r, iv + 1], X[r, iv + 2]
         F0 = F1 = F2 = 0.0
         M0 = M1 = M2 = 0.0
         if has_atm:
-            rho_r = rho[r] * _par(_RHOM, r, X, PB, pmode, pidx, pnom)
-            # v_rel = v − ω × r − wind
-            vr0 = vx - (-omega * py)
-            vr1 = vy - omega * px
-            vr2 = vz - 0.0
-            if wind:
-                wv = _par(_WV, r, X, PB, pmode, pidx, pnom)
-                wh = _par(_WH, r, X, PB, pmode, pidx, pnom)
-                if wv != 0.0 or wh != 0.0:
-                    rn = math.sqrt(px * px + py * py + pz * pz)
-                    e0, e1 = -py, px
-                    en = math.sqrt(e0 * e0 + e1 * e1 + 0.0 * 0.0)
-                    if en < 1e-9:
-                        en = 1e-9
-                    e0, e1, e2 = e0 / en, e1 / en, 0.0 / en
-                    vr0 = vr0 - (wv * px / rn + wh * e0)
-                    vr1 = vr1 - (wv * py / rn + wh * e1)
-                    vr2 = vr2 - (wv * pz / rn + wh * e2)
+            rho_r = rho[r] * pv[_RHOM]
+            vr0, vr1, vr2 = _vrel(r, X, pv, ci, cf)
             V = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2)
             qbar = 0.5 * rho_r * V * V
             mach = V / a_snd[r]
             Vs = V if V > 1e-9 else 1e-9
-            ca_m = _par(_CAM, r, X, PB, pmode, pidx, pnom) * cf[8]
+            ca_m = pv[_CAM] * cf[8]
             kn_r = kn[r] if kn_matters else 1e-6
             if has_aero:
                 if regime:
-                    m_fm = _par(_FM, r, X, PB, pmode, pidx, pnom)
-                    m_h = _par(_HYP, r, X, PB, pmode, pidx, pnom)
-                    m_s = _par(_SUP, r, X, PB, pmode, pidx, pnom)
+                    m_fm = pv[_FM]
+                    m_h = pv[_HYP]
+                    m_s = pv[_SUP]
                     w_fm = _smoothstep(math.log10(kn_r if kn_r > 1e-12 else 1e-12) + 2.0)
                     w_h = _smoothstep((mach - 5.0) / 5.0)
                     ca_m = ca_m * (w_fm * m_fm + (1.0 - w_fm) * (w_h * m_h + (1.0 - w_h) * m_s))
@@ -241,8 +265,8 @@ def dynamics_kernel(
                             ca = ca + f * tab[i + di, j + dj, l + dl, 0]
                             cn = cn + f * tab[i + di, j + dj, l + dl, 1]
                             cm = cm + f * tab[i + di, j + dj, l + dl, 2]
-                cn = cn * _par(_CNM, r, X, PB, pmode, pidx, pnom) * cf[9]
-                cm = cm * _par(_CMM, r, X, PB, pmode, pidx, pnom) * cf[10]
+                cn = cn * pv[_CNM] * cf[9]
+                cm = cm * pv[_CMM] * cf[10]
                 safe = lat if lat > 1e-12 else 1e-12
                 e_y, e_z = vb1 / safe, vb2 / safe
                 if not lat > 1e-12:
@@ -261,12 +285,11 @@ def dynamics_kernel(
                 F1 = F1 + ((R10 * Fb0 + R12 * Fb2) + R11 * Fb1)
                 F2 = F2 + ((R20 * Fb0 + R22 * Fb2) + R21 * Fb1)
             if chute != 0:  # open canopy: 1 the drogue table, 2 the (main) parachute table
-                k = _DROGM if chute == 1 else _PARAM
-                cd = np.interp(mach, chute_mach, chute_cd) * _par(k, r, X, PB, pmode, pidx, pnom)
+                cd = np.interp(mach, chute_mach, chute_cd) * (pv[_DROGM] if chute == 1 else pv[_PARAM])
                 c = cd * qbar * cf[12] / Vs
                 F0, F1, F2 = F0 - c * vr0, F1 - c * vr1, F2 - c * vr2
             if area_chute != 0:  # drag-area state −CD·S q v̂_rel
-                cds = _par(_DROGA if area_chute == 1 else _MAINA, r, X, PB, pmode, pidx, pnom)
+                cds = pv[_DROGA] if area_chute == 1 else pv[_MAINA]
                 c = cds * qbar / Vs
                 F0, F1, F2 = F0 - c * vr0, F1 - c * vr1, F2 - c * vr2
         F[r, 0], F[r, 1], F[r, 2] = F0, F1, F2
@@ -277,7 +300,7 @@ def dynamics_kernel(
             dx[r, c] = 0.0
         dx[r, ip], dx[r, ip + 1], dx[r, ip + 2] = vx, vy, vz
         # point mass + J2 (gravity_j2_xyz)
-        j2k = 1.5 * _par(_J2, r, X, PB, pmode, pidx, pnom) * gm * re2
+        j2k = 1.5 * pv[_J2] * gm * re2
         r2 = px * px + py * py + pz * pz
         rr = math.sqrt(r2)
         gm_r3 = gm / (r2 * rr)

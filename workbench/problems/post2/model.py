@@ -558,7 +558,10 @@ class TrajectoryModel:
         plan = {
             "pmode": pmode, "pidx": pidx, "pnom": pnom, "bounded": tuple(bounded), "ci": ci, "cf": cf,
             "inertia": np.ascontiguousarray(self._inertia), "inertia_inv": np.ascontiguousarray(self._inertia_inv),
-            "grids": (a.mach, a.log10_kn, a.alpha, a._stack) if a is not None else (dummy1, dummy1, dummy1, dummy4),
+            # writable copies: one compiled signature for every model (read-only arrays type differently)
+            "grids": tuple(np.array(g, dtype=float) for g in (a.mach, a.log10_kn, a.alpha, a._stack))
+            if a is not None
+            else (dummy1, dummy1, dummy1, dummy4),
             "dummy": dummy1, "phases": {},
         }  # fmt: skip
         self._plan_cache = plan
@@ -582,7 +585,7 @@ class TrajectoryModel:
         if table is not None:
             cf[kernels.CF["chute_area"]] = table.ref_area
         ci[kernels.CI["area_chute"]] = {"drogue": 1, "main": 2}.get(phase.get("chute"), 0)
-        tm, tc = (table.mach, table.cd) if table is not None else (plan["dummy"], plan["dummy"])
+        tm, tc = (np.array(table.mach), np.array(table.cd)) if table is not None else (plan["dummy"], plan["dummy"])
         got = (ci, cf, tm, tc)
         plan["phases"][key] = got
         return got
@@ -594,6 +597,8 @@ class TrajectoryModel:
         x = np.asarray(x, dtype=float)
         shape = x.shape[:-1]
         X = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
+        if not X.flags.writeable:
+            X = X.copy()
         b = X.shape[0]
         ci, cf, tm, tc = self._phase_consts(plan, phase)
         env, veh = self.env, self.vehicle
@@ -608,17 +613,19 @@ class TrajectoryModel:
             a_snd = atm.speed_of_sound(hc)
             if veh.aero is not None and self._kn_matters:
                 kn = atm.knudsen(hc, veh.aero.ref_length)
-            if veh.aero is not None:
-                if veh.ca_mach_factor is not None:
-                    ca_extra = veh.ca_mach_factor(np.linalg.norm(self.v_rel(X), axis=-1) / a_snd)
-                else:
-                    ca_extra = np.ones(b)
         if plan["bounded"]:
             PB = np.empty((len(plan["bounded"]), b))
             for i, (sx, bounds) in enumerate(plan["bounded"]):
                 PB[i] = scurve(X[..., sx], *bounds)[..., 0]
         else:
             PB = np.empty((0, b))
+        if atm is not None and veh.aero is not None:
+            if veh.ca_mach_factor is not None:  # truth: CA × f(Mach), |v_rel| as the kernel has it
+                V = np.empty(b)
+                kernels.air_speed_kernel(X, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, V)
+                ca_extra = veh.ca_mach_factor(V / a_snd)
+            else:
+                ca_extra = np.ones(b)
         F = np.empty((b, 3))
         M = np.empty((b, 3))
         dx = np.empty_like(X) if want_dx else np.empty((0, 0))
