@@ -142,3 +142,45 @@ def test_vectorised_aero_angles_match_the_row_loop():
     _assert_close(aero_angles(r, v, q), aero_angles_loop(r, v, q))
     np.testing.assert_allclose(aero_angles(r, v, q), ang, atol=1e-12)
     assert aero_angles(r[0], v[0], q[0]).shape == (1, 3)
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_compiled_propagation_matches_the_numpy_rk4(name, monkeypatch):
+    """``propagate`` (all RK4 stages, atmosphere included, in one compiled call) against the numpy
+    RK4 over the numpy reference derivative, on the estimator's batch of every phase."""
+    rng = np.random.default_rng(11)
+    model, x0 = _models(name)[0]
+    for phase in _phases(model):
+        X = _batch(model, x0, 9, rng)
+        fast = model.propagate(X, 0.0, 0.3, phase, 0.1)
+        monkeypatch.setattr(post2_model, "USE_KERNEL", False)
+        ref = model.propagate(X, 0.0, 0.3, phase, 0.1)
+        monkeypatch.setattr(post2_model, "USE_KERNEL", True)
+        _assert_close(fast, ref)
+
+
+def test_atmosphere_kernel_matches_the_numpy_atmospheres():
+    from workbench.core.atmosphere import MarsEngineeringAtmosphere, TabulatedAtmosphere, TitanDefaultAtmosphere
+    from workbench.problems.post2 import kernels
+
+    lay = TitanDefaultAtmosphere()
+    hs = np.arange(0.0, 1.4e6 + 1.0, 2000.0)
+    tab = TabulatedAtmosphere(
+        hs, lay.density(hs), lay.pressure(hs), lay.temperature(hs), lay.gas_constant, lay.gamma, lay.sutherland,
+        extrapolate="clamp",
+    )  # fmt: skip
+    rng = np.random.default_rng(5)
+    for atm, kind, hmax in ((MarsEngineeringAtmosphere(), kernels.ATM_MARS, 2e5), (tab, kernels.ATM_TABLE, 1.6e6)):
+        m = TrajectoryModel(
+            StateMap(["position", "velocity"]),
+            3,
+            Environment(1.0, 1.0, 0.0, 1.0, 0.0, atm),
+            Vehicle(1.0, np.eye(3), None),
+        )
+        plan = m._plan()
+        h = np.concatenate([rng.uniform(0.0, hmax, 5000), hs[:20], [0.0, 7000.0, 50e3, 1.4e6]])
+        rho, a, kn = np.empty_like(h), np.empty_like(h), np.empty_like(h)
+        kernels.atmosphere_kernel(kind, plan["ac"], *plan["atm_tables"], h, True, 2.65, rho, a, kn)
+        _assert_close(rho, atm.density(h))
+        _assert_close(a, atm.speed_of_sound(h))
+        _assert_close(kn, atm.knudsen(h, 2.65))

@@ -329,3 +329,109 @@ def dynamics_kernel(
             dx[r, iw] = t0 * J[0, 0] + t1 * J[0, 1] + t2 * J[0, 2]
             dx[r, iw + 1] = t0 * J[1, 0] + t1 * J[1, 1] + t2 * J[1, 2]
             dx[r, iw + 2] = t0 * J[2, 0] + t1 * J[2, 1] + t2 * J[2, 2]
+
+
+# ---------------------------------------------------------------------------------------------
+# atmospheres (exact ports of workbench.core.atmosphere's numpy expressions, for the hot path)
+# ---------------------------------------------------------------------------------------------
+#: atmosphere kinds of :func:`atmosphere_kernel`: 1 MarsEngineeringAtmosphere, 2 TabulatedAtmosphere
+#: (extrapolate "clamp"); ``ac`` constants: [h_blend, H_aloft, GLENN_R, γR, μ0, T0, T0 + C, C, R]
+ATM_MARS, ATM_TABLE = 1, 2
+
+
+@njit(cache=True)
+def atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, want_kn, L, rho, a_snd, kn):
+    """Density [kg/m³], speed of sound [m/s] and (if ``want_kn``) Knudsen number on length L [m] at
+    altitudes ``hc`` (b,) [m] into ``rho``, ``a_snd``, ``kn`` (b,), same operations as the numpy
+    classes (``kind``/``ac`` above; ``t_*`` the table's nodes, log ρ, log p, T)."""
+    for r in range(hc.size):
+        h = hc[r]
+        if kind == 1:
+            hb = ac[0]
+            hm = h if h < hb else hb
+            T = (-31.0 - 0.000998 * hm if hm < 7000.0 else -23.4 - 0.00222 * hm) + 273.15
+            above = h - hb
+            if not above > 0.0:
+                above = 0.0
+            p = 0.699e3 * math.exp(-0.00009 * hm) * math.exp(-above / ac[1])
+            rho[r] = p / (ac[2] * T)
+        else:
+            T = np.interp(h, t_h, t_T)
+            p = math.exp(np.interp(h, t_h, t_lp))
+            rho[r] = math.exp(np.interp(h, t_h, t_lrho))
+        a_snd[r] = math.sqrt(ac[3] * T)
+        if want_kn:
+            mu = ac[4] * (T / ac[5]) ** 1.5 * ac[6] / (T + ac[7])
+            kn[r] = mu / p * math.sqrt(0.5 * np.pi * ac[8] * T) / L
+
+
+@njit(cache=True)
+def full_derivative(
+    X, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab, chute_mach, chute_cd,
+    kind, ac, t_h, t_lrho, t_lp, t_T, want_dx, dx, F, M, hc, rho, a_snd, kn, ones,
+):  # fmt: skip
+    """:func:`dynamics_kernel` with the altitude ``max(|r| − R_ref, 0)`` and the atmosphere
+    (:func:`atmosphere_kernel`, ``kind`` 0: vacuum) evaluated here; no density wave nor CA(Mach)
+    factor (``ones`` (b,)); scratch ``hc``, ``rho``, ``a_snd``, ``kn`` (b,)."""
+    if kind != 0:
+        ip, R = ci[9], cf[3]
+        for r in range(X.shape[0]):
+            px, py, pz = X[r, ip], X[r, ip + 1], X[r, ip + 2]
+            h = math.sqrt(px * px + py * py + pz * pz) - R
+            hc[r] = 0.0 if h < 0.0 else h
+        atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, ci[2] != 0 and ci[4] != 0, cf[6], rho, a_snd, kn)
+    dynamics_kernel(
+        X, rho, a_snd, kn, ones, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv,
+        g_mach, g_lkn, g_alpha, tab, chute_mach, chute_cd, want_dx, dx, F, M,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def propagate_kernel(
+    X0, n, dt, iq, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
+    chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T,
+):  # fmt: skip
+    """``n`` classic RK4 steps of ``dt`` [s] of the rows of X0 (b, n_x) (the model's ``propagate``:
+    ``rk4_step`` then the quaternion at x offset ``iq`` (−1: none) renormalised); returns (b, n_x).
+    Parameters are constant over the steps (their derivative is zero), so ``PB`` holds for all."""
+    b, nx = X0.shape
+    y = X0.copy()
+    k1, k2, k3, k4 = np.empty((b, nx)), np.empty((b, nx)), np.empty((b, nx)), np.empty((b, nx))
+    tmp = np.empty((b, nx))
+    F, M = np.empty((b, 3)), np.empty((b, 3))
+    hc, rho, a_snd, kn, ones = np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b)
+    half = 0.5 * dt
+    sixth = dt / 6.0
+    for _ in range(n):
+        for stage in range(4):
+            if stage == 0:
+                src, dst = y, k1
+            elif stage == 1:
+                for r in range(b):
+                    for c in range(nx):
+                        tmp[r, c] = y[r, c] + half * k1[r, c]
+                src, dst = tmp, k2
+            elif stage == 2:
+                for r in range(b):
+                    for c in range(nx):
+                        tmp[r, c] = y[r, c] + half * k2[r, c]
+                src, dst = tmp, k3
+            else:
+                for r in range(b):
+                    for c in range(nx):
+                        tmp[r, c] = y[r, c] + dt * k3[r, c]
+                src, dst = tmp, k4
+            full_derivative(
+                src, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
+                chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, True, dst, F, M, hc, rho, a_snd, kn, ones,
+            )  # fmt: skip
+        for r in range(b):
+            for c in range(nx):
+                y[r, c] = y[r, c] + sixth * (k1[r, c] + 2.0 * k2[r, c] + 2.0 * k3[r, c] + k4[r, c])
+            if iq >= 0:
+                q0, q1, q2, q3 = y[r, iq], y[r, iq + 1], y[r, iq + 2], y[r, iq + 3]
+                nq = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+                if nq == 0.0:
+                    raise ValueError("cannot normalise a zero quaternion")
+                y[r, iq], y[r, iq + 1], y[r, iq + 2], y[r, iq + 3] = q0 / nq, q1 / nq, q2 / nq, q3 / nq
+    return y

@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workbench.core.atmosphere import Atmosphere
+from workbench.core.atmosphere import Atmosphere, MarsEngineeringAtmosphere, TabulatedAtmosphere
 from workbench.core.gravity import gravity_j2_xyz
 from workbench.core.rotation import dcm_to_quat, quat_multiply, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import AeroTable, ParachuteTable
@@ -555,7 +555,24 @@ class TrajectoryModel:
         cf[kernels.CF["cm_factor"]] = veh.cm_factor
         cf[kernels.CF["cd"]] = veh.cd if veh.cd is not None else 0.0
         dummy1, dummy4 = np.zeros(2), np.zeros((2, 2, 2, 3))
+        # the atmosphere in the kernel too (exact ports; other kinds, a truth's density wave or CA(Mach)
+        # factor: the atmosphere in numpy per call, see _kernel_eval)
+        atm, ac, tabs, kind = env.atmosphere, np.zeros(9), (dummy1, dummy1, dummy1, dummy1), None
+        if atm is None:
+            kind = 0
+        elif type(atm) is MarsEngineeringAtmosphere:
+            kind = kernels.ATM_MARS
+            ac[:3] = atm.h_blend, atm.scale_height_aloft, atm.GLENN_R
+        elif type(atm) is TabulatedAtmosphere and atm.extrapolate == "clamp":
+            kind = kernels.ATM_TABLE
+            tabs = tuple(np.array(v, dtype=float) for v in (atm.h, atm._log_rho, atm._log_p, atm.T))
+        if atm is not None:
+            s = atm.sutherland
+            ac[3:] = atm.gamma * atm.gas_constant, s.mu0, s.T0, s.T0 + s.C, s.C, atm.gas_constant
+        if env.density_factor is not None or veh.ca_mach_factor is not None:
+            kind = None
         plan = {
+            "atm_kind": kind, "ac": ac, "atm_tables": tabs,
             "pmode": pmode, "pidx": pidx, "pnom": pnom, "bounded": tuple(bounded), "ci": ci, "cf": cf,
             "inertia": np.ascontiguousarray(self._inertia), "inertia_inv": np.ascontiguousarray(self._inertia_inv),
             # writable copies: one compiled signature for every model (read-only arrays type differently)
@@ -590,6 +607,14 @@ class TrajectoryModel:
         plan["phases"][key] = got
         return got
 
+    @staticmethod
+    def _bounded(plan: dict, X: np.ndarray) -> np.ndarray:
+        """Physical values (S-curve, numpy as the reference) of the bounded parameter slots, (k, b)."""
+        PB = np.empty((len(plan["bounded"]), X.shape[0]))
+        for i, (sx, bounds) in enumerate(plan["bounded"]):
+            PB[i] = scurve(X[..., sx], *bounds)[..., 0]
+        return PB
+
     def _kernel_eval(self, x: np.ndarray, phase: dict, want_dx: bool):
         """(ẋ or None, F, M) of x (..., n_x) by :func:`~workbench.problems.post2.kernels.dynamics_kernel`;
         the atmosphere and bounded parameters evaluated here in numpy, as the reference does."""
@@ -605,6 +630,18 @@ class TrajectoryModel:
         atm = env.atmosphere
         dummy = plan["dummy"]
         rho = a_snd = kn = ca_extra = dummy
+        PB = self._bounded(plan, X)
+        F = np.empty((b, 3))
+        M = np.empty((b, 3))
+        dx = np.empty_like(X) if want_dx else np.empty((0, 0))
+        gm_, gk, ga, tab = plan["grids"]
+        if plan["atm_kind"] is not None:  # altitude, atmosphere and dynamics in one compiled call
+            kernels.full_derivative(
+                X, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, plan["inertia"], plan["inertia_inv"],
+                gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"], *plan["atm_tables"], want_dx, dx, F, M,
+                np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b),
+            )  # fmt: skip
+            return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
         if atm is not None:
             hc = np.maximum(self.altitude(X), 0.0)
             rho = atm.density(hc)
@@ -613,12 +650,6 @@ class TrajectoryModel:
             a_snd = atm.speed_of_sound(hc)
             if veh.aero is not None and self._kn_matters:
                 kn = atm.knudsen(hc, veh.aero.ref_length)
-        if plan["bounded"]:
-            PB = np.empty((len(plan["bounded"]), b))
-            for i, (sx, bounds) in enumerate(plan["bounded"]):
-                PB[i] = scurve(X[..., sx], *bounds)[..., 0]
-        else:
-            PB = np.empty((0, b))
         if atm is not None and veh.aero is not None:
             if veh.ca_mach_factor is not None:  # truth: CA × f(Mach), |v_rel| as the kernel has it
                 V = np.empty(b)
@@ -626,10 +657,6 @@ class TrajectoryModel:
                 ca_extra = veh.ca_mach_factor(V / a_snd)
             else:
                 ca_extra = np.ones(b)
-        F = np.empty((b, 3))
-        M = np.empty((b, 3))
-        dx = np.empty_like(X) if want_dx else np.empty((0, 0))
-        gm_, gk, ga, tab = plan["grids"]
         kernels.dynamics_kernel(
             X, np.ascontiguousarray(rho, dtype=float), np.ascontiguousarray(a_snd, dtype=float),
             np.ascontiguousarray(kn, dtype=float), np.ascontiguousarray(ca_extra, dtype=float), PB,
@@ -867,6 +894,19 @@ class TrajectoryModel:
         on the grid)."""
         n = max(1, int(math.ceil((t1 - t0) / max_step - 1e-9)))
         dt = (t1 - t0) / n
+        plan = self._plan() if USE_KERNEL else None
+        if plan is not None and plan["atm_kind"] is not None:  # every RK4 stage in one compiled call
+            x = np.asarray(x, dtype=float)
+            X = np.array(x.reshape(-1, x.shape[-1]), dtype=float)
+            ci, cf, tm, tc = self._phase_consts(plan, phase)
+            gm_, gk, ga, tab = plan["grids"]
+            iq = self.smap.blocks["attitude"].sx.start if self.dof == 6 else -1
+            Y = kernels.propagate_kernel(
+                X, n, dt, iq, self._bounded(plan, X), plan["pmode"], plan["pidx"], plan["pnom"], ci, cf,
+                plan["inertia"], plan["inertia_inv"], gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"],
+                *plan["atm_tables"],
+            )  # fmt: skip
+            return Y.reshape(x.shape)
         y = np.array(x, dtype=float)
         for i in range(n):
             y = rk4_step(lambda z, _t: self.derivative(z, phase), y, t0 + i * dt, dt)
