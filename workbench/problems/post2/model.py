@@ -569,10 +569,9 @@ class TrajectoryModel:
         if atm is not None:
             s = atm.sutherland
             ac[3:] = atm.gamma * atm.gas_constant, s.mu0, s.T0, s.T0 + s.C, s.C, atm.gas_constant
-        if env.density_factor is not None or veh.ca_mach_factor is not None:
-            kind = None
+        full = kind is not None and env.density_factor is None and veh.ca_mach_factor is None
         plan = {
-            "atm_kind": kind, "ac": ac, "atm_tables": tabs,
+            "atm_kind": kind if full else None, "atm_port": kind, "ac": ac, "atm_tables": tabs,
             "pmode": pmode, "pidx": pidx, "pnom": pnom, "bounded": tuple(bounded), "ci": ci, "cf": cf,
             "inertia": np.ascontiguousarray(self._inertia), "inertia_inv": np.ascontiguousarray(self._inertia_inv),
             # writable copies: one compiled signature for every model (read-only arrays type differently)
@@ -644,12 +643,20 @@ class TrajectoryModel:
             return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
         if atm is not None:
             hc = np.maximum(self.altitude(X), 0.0)
-            rho = atm.density(hc)
+            want_kn = veh.aero is not None and self._kn_matters
+            if plan["atm_port"] is not None:  # the compiled port of this atmosphere
+                rho, a_snd, kn = np.empty(b), np.empty(b), np.empty(b)
+                L = veh.aero.ref_length if want_kn else 1.0
+                kernels.atmosphere_kernel(
+                    plan["atm_port"], plan["ac"], *plan["atm_tables"], hc, want_kn, L, rho, a_snd, kn
+                )
+            else:
+                rho = atm.density(hc)
+                a_snd = atm.speed_of_sound(hc)
+                if want_kn:
+                    kn = atm.knudsen(hc, veh.aero.ref_length)
             if env.density_factor is not None:
                 rho = rho * env.density_factor(hc)
-            a_snd = atm.speed_of_sound(hc)
-            if veh.aero is not None and self._kn_matters:
-                kn = atm.knudsen(hc, veh.aero.ref_length)
         if atm is not None and veh.aero is not None:
             if veh.ca_mach_factor is not None:  # truth: CA × f(Mach), |v_rel| as the kernel has it
                 V = np.empty(b)
