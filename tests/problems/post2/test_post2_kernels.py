@@ -184,3 +184,24 @@ def test_atmosphere_kernel_matches_the_numpy_atmospheres():
         _assert_close(rho, atm.density(h))
         _assert_close(a, atm.speed_of_sound(h))
         _assert_close(kn, atm.knudsen(h, 2.65))
+
+
+@pytest.mark.parametrize("m", [5, 64, 300, 1111])
+def test_mc_metric_kernel_matches_the_numpy_expression(m):
+    from workbench.problems.post2 import kernels
+
+    rng = np.random.default_rng(m)
+    n_members, n_grid, t0, h = 40, 400, 10.0, 0.5
+    a = rng.normal(size=(n_members, n_grid)) * 10 ** rng.uniform(-2, 2, (n_members, 1))
+    tu = np.sort(rng.uniform(t0 - 5.0, t0 + h * n_grid + 5.0, m))
+    zu = rng.normal(size=m)
+    sh = rng.normal(scale=3.0, size=n_members)
+    hi = a.shape[1] - 1.000001
+    rows = np.arange(n_members)[:, None]
+    u = np.clip((tu[None, :] + sh[:, None] - t0) / h, 0.0, hi)
+    k = np.floor(u).astype(int)
+    f = u - k
+    ref = np.sum(np.abs(zu[None, :] - (a[rows, k] * (1.0 - f) + a[rows, k + 1] * f)), axis=1)
+    out = np.empty(n_members)
+    kernels.metric_total_kernel(a, tu, zu, sh, t0, h, hi, out)
+    _assert_close(out, ref)

@@ -435,3 +435,91 @@ def propagate_kernel(
                     raise ValueError("cannot normalise a zero quaternion")
                 y[r, iq], y[r, iq + 1], y[r, iq + 2], y[r, iq + 3] = q0 / nq, q1 / nq, q2 / nq, q3 / nq
     return y
+
+
+# ---------------------------------------------------------------------------------------------
+# Huygens-like Monte Carlo alignment metric (huygens._metric's ``total``)
+# ---------------------------------------------------------------------------------------------
+@njit(cache=True)
+def _pairwise_block(a, lo, n):
+    """numpy's pairwise-summation leaf (n ≤ 128): 8 running sums, combined in a tree, then the rest."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    m = n - (n % 8)
+    while i < m:
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _pairwise_sum(a, lo, n):
+    """numpy's pairwise summation of a[lo:lo + n] (float64 add.reduce over a contiguous axis), to the
+    bit: blocks of ≤ 128 split in halves (multiples of 8), left + right.  No recursion (numba's cache
+    does not reload recursive functions reliably): an explicit post-order stack."""
+    if n <= 128:
+        return _pairwise_block(a, lo, n)
+    s_lo = np.empty(128, np.int64)
+    s_n = np.empty(128, np.int64)
+    s_st = np.empty(128, np.int64)
+    vals = np.empty(128)
+    top, nv = 0, 0
+    s_lo[0], s_n[0], s_st[0] = lo, n, 0
+    top = 1
+    while top > 0:
+        top -= 1
+        flo, fn, fst = s_lo[top], s_n[top], s_st[top]
+        if fn <= 128:
+            vals[nv] = _pairwise_block(a, flo, fn)
+            nv += 1
+        elif fst == 1:
+            right = vals[nv - 1]
+            left = vals[nv - 2]
+            nv -= 2
+            vals[nv] = left + right
+            nv += 1
+        else:
+            n2 = fn // 2
+            n2 -= n2 % 8
+            s_lo[top], s_n[top], s_st[top] = flo, fn, 1
+            s_lo[top + 1], s_n[top + 1], s_st[top + 1] = flo + n2, fn - n2, 0
+            s_lo[top + 2], s_n[top + 2], s_st[top + 2] = flo, n2, 0
+            top += 3
+    return vals[0]
+
+
+@njit(cache=True)
+def metric_total_kernel(a, tu, zu, sh, t0, h, hi, out):
+    """Σ_j |zu_j − a_r(tu_j + sh_r)| per member r into ``out`` (N,): ``a`` (N, n) the members' axial
+    acceleration on the grid t0 + h k [s], linear interpolation at u = clip((tu + sh − t0)/h, 0, hi);
+    the numpy expression of ``huygens._metric`` with its pairwise row sum."""
+    m = tu.size
+    row = np.empty(m)
+    for r in range(a.shape[0]):
+        for j in range(m):
+            u = (tu[j] + sh[r] - t0) / h
+            if u < 0.0:
+                u = 0.0
+            elif u > hi:
+                u = hi
+            k = int(math.floor(u))
+            f = u - k
+            row[j] = abs(zu[j] - (a[r, k] * (1.0 - f) + a[r, k + 1] * f))
+        out[r] = _pairwise_sum(row, 0, m)
