@@ -39,6 +39,12 @@ Gauss-Markov about the initial value, time constant τ, stationary 1σ equal to 
 unless a PSD is given: Φ = e^(−dt/τ), Q = σ² (1 − Φ²)).  Bounded parameters go through the tanh
 S-curve of the thesis' Ch. 5 (Fig. 5-15): the estimated state s is unbounded and the model uses
 ``c + h tanh((s − c)/h)`` with c, h the centre and half-width of [lo, hi].
+
+Speed (issue #14): ``derivative``, ``aero_force_moment`` and ``propagate`` run compiled numba
+kernels (:mod:`workbench.problems.post2.kernels`) that repeat the numpy reference's operations in
+the same order, so the numbers are the same to the bit on the shipped scenarios; the numpy code is
+kept (``derivative_reference``, ``aero_force_moment_reference``, and every path with
+:data:`USE_KERNEL` False) and ``tests/problems/post2/test_post2_kernels.py`` compares the two.
 """
 
 from __future__ import annotations
