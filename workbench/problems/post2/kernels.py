@@ -368,11 +368,12 @@ def atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, want_kn, L, rho, a_s
 @njit(cache=True)
 def full_derivative(
     X, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab, chute_mach, chute_cd,
-    kind, ac, t_h, t_lrho, t_lp, t_T, want_dx, dx, F, M, hc, rho, a_snd, kn, ones,
+    kind, ac, t_h, t_lrho, t_lp, t_T, waves, want_dx, dx, F, M, hc, rho, a_snd, kn, ones,
 ):  # fmt: skip
     """:func:`dynamics_kernel` with the altitude ``max(|r| − R_ref, 0)`` and the atmosphere
-    (:func:`atmosphere_kernel`, ``kind`` 0: vacuum) evaluated here; no density wave nor CA(Mach)
-    factor (``ones`` (b,)); scratch ``hc``, ``rho``, ``a_snd``, ``kn`` (b,)."""
+    (:func:`atmosphere_kernel`, ``kind`` 0: vacuum) evaluated here, and the truth's waves
+    (``waves`` = [density wave on, amplitude, wavelength [m], CA(Mach) wave on, amplitude], the
+    model's ``DensityWave`` / ``CaMachWave``); scratch ``hc``, ``rho``, ``a_snd``, ``kn``, ``ones`` (b,)."""
     if kind != 0:
         ip, R = ci[9], cf[3]
         for r in range(X.shape[0]):
@@ -380,6 +381,17 @@ def full_derivative(
             h = math.sqrt(px * px + py * py + pz * pz) - R
             hc[r] = 0.0 if h < 0.0 else h
         atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, ci[2] != 0 and ci[4] != 0, cf[6], rho, a_snd, kn)
+        if waves[0] != 0.0:
+            for r in range(X.shape[0]):
+                rho[r] = rho[r] * (1.0 + waves[1] * math.sin(2.0 * math.pi * hc[r] / waves[2]))
+        if waves[3] != 0.0:
+            pv = np.empty(pnom.size)
+            for r in range(X.shape[0]):
+                _params(r, X, PB, pmode, pidx, pnom, pv)
+                vr0, vr1, vr2 = _vrel(r, X, pv, ci, cf)
+                mach = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2) / a_snd[r]
+                lm = math.log10(mach if mach > 1e-3 else 1e-3)
+                ones[r] = 1.0 + waves[4] * math.sin(2.0 * math.pi * lm / 1.2)
     dynamics_kernel(
         X, rho, a_snd, kn, ones, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv,
         g_mach, g_lkn, g_alpha, tab, chute_mach, chute_cd, want_dx, dx, F, M,
@@ -389,7 +401,7 @@ def full_derivative(
 @njit(cache=True)
 def propagate_kernel(
     X0, n, dt, iq, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
-    chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T,
+    chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves,
 ):  # fmt: skip
     """``n`` classic RK4 steps of ``dt`` [s] of the rows of X0 (b, n_x) (the model's ``propagate``:
     ``rk4_step`` then the quaternion at x offset ``iq`` (−1: none) renormalised); returns (b, n_x).
@@ -423,7 +435,8 @@ def propagate_kernel(
                 src, dst = tmp, k4
             full_derivative(
                 src, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
-                chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, True, dst, F, M, hc, rho, a_snd, kn, ones,
+                chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, True, dst, F, M, hc, rho, a_snd, kn,
+                ones,
             )  # fmt: skip
         for r in range(b):
             for c in range(nx):

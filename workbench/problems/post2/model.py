@@ -82,6 +82,8 @@ __all__ = [
     "quat_from_aero_angles",
     "aero_angles",
     "USE_KERNEL",
+    "DensityWave",
+    "CaMachWave",
 ]
 
 #: evaluate :meth:`TrajectoryModel.derivative` / :meth:`TrajectoryModel.aero_force_moment` with the
@@ -242,6 +244,29 @@ def scurve_slope(s, lo: float, hi: float):
     """d scurve / ds = 1 − tanh²((s − c)/h) (dimensionless), for mapping 1σ to the physical value."""
     c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
     return 1.0 - np.tanh((np.asarray(s, dtype=float) - c) / h) ** 2
+
+
+@dataclass(frozen=True)
+class DensityWave:
+    """Truth-side density factor ``1 + amplitude sin(2π h / wavelength)`` [-] of altitude h [m] (any
+    shape); a class (not a closure) so that the compiled kernel evaluates it too."""
+
+    amplitude: float
+    wavelength: float
+
+    def __call__(self, h):
+        return 1.0 + self.amplitude * np.sin(2.0 * math.pi * np.asarray(h) / self.wavelength)
+
+
+@dataclass(frozen=True)
+class CaMachWave:
+    """Truth-side CA factor ``1 + amplitude sin(2π log10(max(Mach, 1e-3)) / 1.2)`` [-] (any shape);
+    a class (not a closure) so that the compiled kernel evaluates it too."""
+
+    amplitude: float
+
+    def __call__(self, mach):
+        return 1.0 + self.amplitude * np.sin(2.0 * math.pi * np.log10(np.maximum(mach, 1e-3)) / 1.2)
 
 
 @dataclass(frozen=True)
@@ -575,9 +600,15 @@ class TrajectoryModel:
         if atm is not None:
             s = atm.sutherland
             ac[3:] = atm.gamma * atm.gas_constant, s.mu0, s.T0, s.T0 + s.C, s.C, atm.gas_constant
-        full = kind is not None and env.density_factor is None and veh.ca_mach_factor is None
+        df, cm = env.density_factor, veh.ca_mach_factor
+        full = kind is not None and (df is None or type(df) is DensityWave) and (cm is None or type(cm) is CaMachWave)
+        waves = np.zeros(5)  # [density wave on, amplitude, wavelength, CA(Mach) wave on, amplitude]
+        if type(df) is DensityWave:
+            waves[:3] = 1.0, df.amplitude, df.wavelength
+        if type(cm) is CaMachWave and a is not None:
+            waves[3:] = 1.0, cm.amplitude
         plan = {
-            "atm_kind": kind if full else None, "atm_port": kind, "ac": ac, "atm_tables": tabs,
+            "atm_kind": kind if full else None, "atm_port": kind, "ac": ac, "atm_tables": tabs, "waves": waves,
             "pmode": pmode, "pidx": pidx, "pnom": pnom, "bounded": tuple(bounded), "ci": ci, "cf": cf,
             "inertia": np.ascontiguousarray(self._inertia), "inertia_inv": np.ascontiguousarray(self._inertia_inv),
             # writable copies: one compiled signature for every model (read-only arrays type differently)
@@ -643,7 +674,8 @@ class TrajectoryModel:
         if plan["atm_kind"] is not None:  # altitude, atmosphere and dynamics in one compiled call
             kernels.full_derivative(
                 X, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, plan["inertia"], plan["inertia_inv"],
-                gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"], *plan["atm_tables"], want_dx, dx, F, M,
+                gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"], *plan["atm_tables"], plan["waves"],
+                want_dx, dx, F, M,
                 np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b),
             )  # fmt: skip
             return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
@@ -917,7 +949,7 @@ class TrajectoryModel:
             Y = kernels.propagate_kernel(
                 X, n, dt, iq, self._bounded(plan, X), plan["pmode"], plan["pidx"], plan["pnom"], ci, cf,
                 plan["inertia"], plan["inertia_inv"], gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"],
-                *plan["atm_tables"],
+                *plan["atm_tables"], plan["waves"],
             )  # fmt: skip
             return Y.reshape(x.shape)
         y = np.array(x, dtype=float)
