@@ -37,7 +37,8 @@ import numpy as np
 from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.io.units import to_si
-from workbench.problems.post2 import build, pipeline
+from workbench.problems.post2 import build, kernels, pipeline
+from workbench.problems.post2 import model as post2_model
 from workbench.problems.post2.config import Post2Config, config_for
 from workbench.problems.post2.model import STATES, StateMap, TrajectoryModel
 
@@ -179,9 +180,16 @@ def _metric(a, t0, h, tz, z, level, end):
     use = tz <= end + 1e-9
     tu, zu = tz[use], z[use]
     rows = np.arange(a.shape[0])[:, None]
+    tu, zu = np.ascontiguousarray(tu, dtype=float), np.ascontiguousarray(zu, dtype=float)
+    hi = a.shape[1] - 1.000001
 
     def total(sh):
-        u = np.clip((tu[None, :] + sh[:, None] - t0) / h, 0.0, a.shape[1] - 1.000001)
+        if post2_model.USE_KERNEL:  # compiled, same numbers (tests/problems/post2/test_post2_kernels.py)
+            out = np.empty(a.shape[0])
+            ac = np.ascontiguousarray(a, dtype=float)
+            kernels.metric_total_kernel(ac, tu, zu, np.ascontiguousarray(sh, dtype=float), t0, h, hi, out)
+            return out
+        u = np.clip((tu[None, :] + sh[:, None] - t0) / h, 0.0, hi)
         k = np.floor(u).astype(int)
         f = u - k
         return np.sum(np.abs(zu[None, :] - (a[rows, k] * (1.0 - f) + a[rows, k + 1] * f)), axis=1)

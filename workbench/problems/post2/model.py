@@ -39,6 +39,12 @@ Gauss-Markov about the initial value, time constant τ, stationary 1σ equal to 
 unless a PSD is given: Φ = e^(−dt/τ), Q = σ² (1 − Φ²)).  Bounded parameters go through the tanh
 S-curve of the thesis' Ch. 5 (Fig. 5-15): the estimated state s is unbounded and the model uses
 ``c + h tanh((s − c)/h)`` with c, h the centre and half-width of [lo, hi].
+
+Speed (issue #14): ``derivative``, ``aero_force_moment`` and ``propagate`` run compiled numba
+kernels (:mod:`workbench.problems.post2.kernels`) that repeat the numpy reference's operations in
+the same order, so the numbers are the same to the bit on the shipped scenarios; the numpy code is
+kept (``derivative_reference``, ``aero_force_moment_reference``, and every path with
+:data:`USE_KERNEL` False) and ``tests/problems/post2/test_post2_kernels.py`` compares the two.
 """
 
 from __future__ import annotations
@@ -49,10 +55,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workbench.core.atmosphere import Atmosphere
+from workbench.core.atmosphere import Atmosphere, MarsEngineeringAtmosphere, TabulatedAtmosphere
 from workbench.core.gravity import gravity_j2_xyz
 from workbench.core.rotation import dcm_to_quat, quat_multiply, quat_normalize, quat_to_dcm
 from workbench.models.aerodynamics import AeroTable, ParachuteTable
+from workbench.problems.post2 import kernels
 
 __all__ = [
     "StateDef",
@@ -74,7 +81,15 @@ __all__ = [
     "wind_inertial",
     "quat_from_aero_angles",
     "aero_angles",
+    "USE_KERNEL",
+    "DensityWave",
+    "CaMachWave",
 ]
+
+#: evaluate :meth:`TrajectoryModel.derivative` / :meth:`TrajectoryModel.aero_force_moment` with the
+#: compiled :func:`~workbench.problems.post2.kernels.dynamics_kernel` (False: the numpy reference
+#: ``derivative_reference`` / ``aero_force_moment_reference``; the two agree to rounding)
+USE_KERNEL = True
 
 
 @dataclass(frozen=True)
@@ -229,6 +244,29 @@ def scurve_slope(s, lo: float, hi: float):
     """d scurve / ds = 1 − tanh²((s − c)/h) (dimensionless), for mapping 1σ to the physical value."""
     c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
     return 1.0 - np.tanh((np.asarray(s, dtype=float) - c) / h) ** 2
+
+
+@dataclass(frozen=True)
+class DensityWave:
+    """Truth-side density factor ``1 + amplitude sin(2π h / wavelength)`` [-] of altitude h [m] (any
+    shape); a class (not a closure) so that the compiled kernel evaluates it too."""
+
+    amplitude: float
+    wavelength: float
+
+    def __call__(self, h):
+        return 1.0 + self.amplitude * np.sin(2.0 * math.pi * np.asarray(h) / self.wavelength)
+
+
+@dataclass(frozen=True)
+class CaMachWave:
+    """Truth-side CA factor ``1 + amplitude sin(2π log10(max(Mach, 1e-3)) / 1.2)`` [-] (any shape);
+    a class (not a closure) so that the compiled kernel evaluates it too."""
+
+    amplitude: float
+
+    def __call__(self, mach):
+        return 1.0 + self.amplitude * np.sin(2.0 * math.pi * np.log10(np.maximum(mach, 1e-3)) / 1.2)
 
 
 @dataclass(frozen=True)
@@ -402,7 +440,29 @@ def quat_from_aero_angles(r_I: np.ndarray, v_rel_I: np.ndarray, angles_rad: np.n
 
 def aero_angles(r_I: np.ndarray, v_rel_I: np.ndarray, q_I_B: np.ndarray) -> np.ndarray:
     """[α, β, σ] [rad] (n, 3) of states r_I, v_rel_I (n, 3) [m, m/s] and q_I_B (n, 4): inverse of
-    :func:`quat_from_aero_angles`."""
+    :func:`quat_from_aero_angles` (vectorised over n; :func:`aero_angles_loop` is the row-by-row
+    reference, equal to rounding)."""
+    r_I, v_rel_I, q_I_B = (np.atleast_2d(np.asarray(a, float)) for a in (r_I, v_rel_I, q_I_B))
+    R = quat_to_dcm(q_I_B)  # (n, 3, 3) R_I_B
+    vb = np.einsum("nji,nj->ni", R, v_rel_I)
+    al = np.arctan2(vb[:, 2], vb[:, 0])
+    be = np.arcsin(np.clip(vb[:, 1] / np.sqrt(np.sum(vb * vb, axis=1)), -1.0, 1.0))
+    x = v_rel_I / np.sqrt(np.sum(v_rel_I * v_rel_I, axis=1))[:, None]
+    down = -r_I / np.sqrt(np.sum(r_I * r_I, axis=1))[:, None]
+    z = down - np.sum(down * x, axis=1)[:, None] * x
+    z = z / np.sqrt(np.sum(z * z, axis=1))[:, None]
+    y = np.cross(z, x)
+    W = np.stack([x, y, z], axis=2)  # R_I_W0, columns x, y, z
+    ca, sa, cb, sb = np.cos(al), np.sin(al), np.cos(-be), np.sin(-be)
+    o, n0 = np.ones_like(al), np.zeros_like(al)
+    ry_t = np.stack([np.stack([ca, n0, -sa], -1), np.stack([n0, o, n0], -1), np.stack([sa, n0, ca], -1)], -2)
+    rz_t = np.stack([np.stack([cb, sb, n0], -1), np.stack([-sb, cb, n0], -1), np.stack([n0, n0, o], -1)], -2)
+    M = np.swapaxes(W, 1, 2) @ R @ ry_t @ rz_t
+    return np.stack([al, be, np.arctan2(M[:, 2, 1], M[:, 1, 1])], axis=1)
+
+
+def aero_angles_loop(r_I: np.ndarray, v_rel_I: np.ndarray, q_I_B: np.ndarray) -> np.ndarray:
+    """Row-by-row reference of :func:`aero_angles` (same arguments, units and shape)."""
     r_I, v_rel_I, q_I_B = (np.atleast_2d(np.asarray(a, float)) for a in (r_I, v_rel_I, q_I_B))
     out = np.empty((r_I.shape[0], 3))
     for i in range(r_I.shape[0]):
@@ -465,6 +525,191 @@ class TrajectoryModel:
         """J2 [-] (...,)."""
         return self.param(x, "j2", self.env.j2)[..., 0]
 
+    # ------------------------------------------------------------------ compiled kernel
+    def _plan(self) -> dict | None:
+        """What the kernel needs that does not change per call (built once); None when the model
+        uses a feature the kernel does not have (the rocket flights' ``wind`` state)."""
+        plan = self.__dict__.get("_plan_cache", False)
+        if plan is not False:
+            return plan
+        if "wind" in self.smap:
+            self._plan_cache = None
+            return None
+        sm, env, veh = self.smap, self.env, self.vehicle
+        k = len(kernels.PARAM_SLOTS)
+        pmode, pidx, pnom = np.zeros(k, np.int64), np.zeros(k, np.int64), np.zeros(k)
+        bounded = []
+        defaults = {
+            "j2": env.j2,
+            "drogue_drag_area": 0.0,
+            "main_drag_area": 0.0,
+            "wind_vertical": 0.0,
+            "wind_horizontal": 0.0,
+        }
+        for i, name in enumerate(kernels.PARAM_SLOTS):
+            if name in sm:
+                b = sm.blocks[name]
+                if b.bounds is not None:
+                    pmode[i], pidx[i] = 2, len(bounded)
+                    bounded.append((b.sx, b.bounds))
+                else:
+                    pmode[i], pidx[i] = 1, b.sx.start
+            elif name == "density_multiplier":  # the reference applies it only when estimated
+                pnom[i] = 1.0
+            else:
+                pnom[i] = float(np.asarray(self.nominal.get(name, defaults.get(name, 1.0)), float).reshape(1)[0])
+        regime_names = [f"ca_multiplier_{r}" for r in ("fm", "hyp", "sup")]
+        regime = any(n in sm for n in regime_names) or any(
+            pnom[kernels.PARAM_SLOTS.index(n)] != 1.0 for n in regime_names
+        )
+        wind = any(n in sm or self.nominal.get(n, 0.0) != 0.0 for n in ("wind_vertical", "wind_horizontal"))
+        a = veh.aero
+        ci = np.zeros(len(kernels.CI), np.int64)
+        ci[kernels.CI["dof"]] = self.dof
+        ci[kernels.CI["atm"]] = env.atmosphere is not None
+        ci[kernels.CI["aero"]] = a is not None
+        ci[kernels.CI["has_cd"]] = veh.cd is not None
+        ci[kernels.CI["kn_matters"]] = self._kn_matters
+        ci[kernels.CI["regime"]] = regime
+        ci[kernels.CI["wind"]] = wind
+        for key, name in (("i_pos", "position"), ("i_vel", "velocity"), ("i_att", "attitude"), ("i_w", "body_rates")):
+            ci[kernels.CI[key]] = sm.blocks[name].sx.start if name in sm else 0
+        cf = np.zeros(len(kernels.CF))
+        cf[kernels.CF["omega"]] = env.omega
+        cf[kernels.CF["gm"]] = env.gm
+        cf[kernels.CF["re2"]] = env.radius_eq**2
+        cf[kernels.CF["radius_ref"]] = env.radius_ref
+        cf[kernels.CF["ref_length"]] = a.ref_length if a is not None else 1.0
+        cf[kernels.CF["cmq"]] = a.cmq if a is not None else 0.0
+        cf[kernels.CF["ca_factor"]] = veh.ca_factor
+        cf[kernels.CF["cn_factor"]] = veh.cn_factor
+        cf[kernels.CF["cm_factor"]] = veh.cm_factor
+        cf[kernels.CF["cd"]] = veh.cd if veh.cd is not None else 0.0
+        dummy1, dummy4 = np.zeros(2), np.zeros((2, 2, 2, 3))
+        # the atmosphere in the kernel too (exact ports; other kinds, a truth's density wave or CA(Mach)
+        # factor: the atmosphere in numpy per call, see _kernel_eval)
+        atm, ac, tabs, kind = env.atmosphere, np.zeros(9), (dummy1, dummy1, dummy1, dummy1), None
+        if atm is None:
+            kind = 0
+        elif type(atm) is MarsEngineeringAtmosphere:
+            kind = kernels.ATM_MARS
+            ac[:3] = atm.h_blend, atm.scale_height_aloft, atm.GLENN_R
+        elif type(atm) is TabulatedAtmosphere and atm.extrapolate == "clamp":
+            kind = kernels.ATM_TABLE
+            tabs = tuple(np.array(v, dtype=float) for v in (atm.h, atm._log_rho, atm._log_p, atm.T))
+        if atm is not None:
+            s = atm.sutherland
+            ac[3:] = atm.gamma * atm.gas_constant, s.mu0, s.T0, s.T0 + s.C, s.C, atm.gas_constant
+        df, cm = env.density_factor, veh.ca_mach_factor
+        full = kind is not None and (df is None or type(df) is DensityWave) and (cm is None or type(cm) is CaMachWave)
+        waves = np.zeros(5)  # [density wave on, amplitude, wavelength, CA(Mach) wave on, amplitude]
+        if type(df) is DensityWave:
+            waves[:3] = 1.0, df.amplitude, df.wavelength
+        if type(cm) is CaMachWave and a is not None:
+            waves[3:] = 1.0, cm.amplitude
+        plan = {
+            "atm_kind": kind if full else None, "atm_port": kind, "ac": ac, "atm_tables": tabs, "waves": waves,
+            "pmode": pmode, "pidx": pidx, "pnom": pnom, "bounded": tuple(bounded), "ci": ci, "cf": cf,
+            "inertia": np.ascontiguousarray(self._inertia), "inertia_inv": np.ascontiguousarray(self._inertia_inv),
+            # writable copies: one compiled signature for every model (read-only arrays type differently)
+            "grids": tuple(np.array(g, dtype=float) for g in (a.mach, a.log10_kn, a.alpha, a._stack))
+            if a is not None
+            else (dummy1, dummy1, dummy1, dummy4),
+            "dummy": dummy1, "phases": {},
+        }  # fmt: skip
+        self._plan_cache = plan
+        return plan
+
+    def _phase_consts(self, plan: dict, phase: dict):
+        """(ci, cf, chute mach, chute cd) of the kernel for a phase (cached per phase values)."""
+        key = (phase["mass"], phase["area"], bool(phase["parachute"]), phase.get("chute"))
+        got = plan["phases"].get(key)
+        if got is not None:
+            return got
+        veh = self.vehicle
+        ci, cf = plan["ci"].copy(), plan["cf"].copy()
+        cf[kernels.CF["area"]] = phase["area"]
+        cf[kernels.CF["mass"]] = phase["mass"]
+        table = None
+        if phase["parachute"] and phase.get("chute") == "drogue" and veh.drogue is not None:
+            ci[kernels.CI["chute"]], table = 1, veh.drogue
+        elif phase["parachute"] and veh.parachute is not None:
+            ci[kernels.CI["chute"]], table = 2, veh.parachute
+        if table is not None:
+            cf[kernels.CF["chute_area"]] = table.ref_area
+        ci[kernels.CI["area_chute"]] = {"drogue": 1, "main": 2}.get(phase.get("chute"), 0)
+        tm, tc = (np.array(table.mach), np.array(table.cd)) if table is not None else (plan["dummy"], plan["dummy"])
+        got = (ci, cf, tm, tc)
+        plan["phases"][key] = got
+        return got
+
+    @staticmethod
+    def _bounded(plan: dict, X: np.ndarray) -> np.ndarray:
+        """Physical values (S-curve, numpy as the reference) of the bounded parameter slots, (k, b)."""
+        PB = np.empty((len(plan["bounded"]), X.shape[0]))
+        for i, (sx, bounds) in enumerate(plan["bounded"]):
+            PB[i] = scurve(X[..., sx], *bounds)[..., 0]
+        return PB
+
+    def _kernel_eval(self, x: np.ndarray, phase: dict, want_dx: bool):
+        """(ẋ or None, F, M) of x (..., n_x) by :func:`~workbench.problems.post2.kernels.dynamics_kernel`;
+        the atmosphere and bounded parameters evaluated here in numpy, as the reference does."""
+        plan = self._plan()
+        x = np.asarray(x, dtype=float)
+        shape = x.shape[:-1]
+        X = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
+        if not X.flags.writeable:
+            X = X.copy()
+        b = X.shape[0]
+        ci, cf, tm, tc = self._phase_consts(plan, phase)
+        env, veh = self.env, self.vehicle
+        atm = env.atmosphere
+        dummy = plan["dummy"]
+        rho = a_snd = kn = ca_extra = dummy
+        PB = self._bounded(plan, X)
+        F = np.empty((b, 3))
+        M = np.empty((b, 3))
+        dx = np.empty_like(X) if want_dx else np.empty((0, 0))
+        gm_, gk, ga, tab = plan["grids"]
+        if plan["atm_kind"] is not None:  # altitude, atmosphere and dynamics in one compiled call
+            kernels.full_derivative(
+                X, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, plan["inertia"], plan["inertia_inv"],
+                gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"], *plan["atm_tables"], plan["waves"],
+                want_dx, dx, F, M,
+                np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b),
+            )  # fmt: skip
+            return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
+        if atm is not None:
+            hc = np.maximum(self.altitude(X), 0.0)
+            want_kn = veh.aero is not None and self._kn_matters
+            if plan["atm_port"] is not None:  # the compiled port of this atmosphere
+                rho, a_snd, kn = np.empty(b), np.empty(b), np.empty(b)
+                L = veh.aero.ref_length if want_kn else 1.0
+                kernels.atmosphere_kernel(
+                    plan["atm_port"], plan["ac"], *plan["atm_tables"], hc, want_kn, L, rho, a_snd, kn
+                )
+            else:
+                rho = atm.density(hc)
+                a_snd = atm.speed_of_sound(hc)
+                if want_kn:
+                    kn = atm.knudsen(hc, veh.aero.ref_length)
+            if env.density_factor is not None:
+                rho = rho * env.density_factor(hc)
+        if atm is not None and veh.aero is not None:
+            if veh.ca_mach_factor is not None:  # truth: CA × f(Mach), |v_rel| as the kernel has it
+                V = np.empty(b)
+                kernels.air_speed_kernel(X, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, V)
+                ca_extra = veh.ca_mach_factor(V / a_snd)
+            else:
+                ca_extra = np.ones(b)
+        kernels.dynamics_kernel(
+            X, np.ascontiguousarray(rho, dtype=float), np.ascontiguousarray(a_snd, dtype=float),
+            np.ascontiguousarray(kn, dtype=float), np.ascontiguousarray(ca_extra, dtype=float), PB,
+            plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, plan["inertia"], plan["inertia_inv"],
+            gm_, gk, ga, tab, tm, tc, want_dx, dx, F, M,
+        )  # fmt: skip
+        return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
+
     # ------------------------------------------------------------------ physics pieces
     def gravity(self, x: np.ndarray) -> np.ndarray:
         """Point-mass + J2 gravity [m/s²] (..., 3) at the position of x, inertial frame (+Z pole)."""
@@ -524,7 +769,15 @@ class TrajectoryModel:
 
     def aero_force_moment(self, x: np.ndarray, phase: dict) -> tuple[np.ndarray, np.ndarray]:
         """Aerodynamic (+ parachute) force [N] in the inertial frame and moment [N m] in the body
-        frame, each (..., 3); zero in vacuum.  ``phase``: the current mass/area/parachute state."""
+        frame, each (..., 3); zero in vacuum.  ``phase``: the current mass/area/parachute state.
+        Compiled kernel when :data:`USE_KERNEL` (and the model is supported), else the reference."""
+        if USE_KERNEL and self._plan() is not None:
+            _, F, M = self._kernel_eval(x, phase, want_dx=False)
+            return F, M
+        return self.aero_force_moment_reference(x, phase)
+
+    def aero_force_moment_reference(self, x: np.ndarray, phase: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Numpy reference of :meth:`aero_force_moment` (same arguments, units, frames and shapes)."""
         shape = x.shape[:-1]
         F = np.zeros((*shape, 3))
         M = np.zeros((*shape, 3))
@@ -612,10 +865,17 @@ class TrajectoryModel:
 
     # ------------------------------------------------------------------ dynamics
     def derivative(self, x: np.ndarray, phase: dict) -> np.ndarray:
-        """ẋ (..., n_x): kinematics, translational and (6-DOF) rotational dynamics; parameters constant."""
+        """ẋ (..., n_x): kinematics, translational and (6-DOF) rotational dynamics; parameters constant.
+        Compiled kernel when :data:`USE_KERNEL` (and the model is supported), else the reference."""
+        if USE_KERNEL and self._plan() is not None:
+            return self._kernel_eval(x, phase, want_dx=True)[0]
+        return self.derivative_reference(x, phase)
+
+    def derivative_reference(self, x: np.ndarray, phase: dict) -> np.ndarray:
+        """Numpy reference of :meth:`derivative` (same arguments, units and shapes)."""
         sm = self.smap
         dx = np.zeros_like(x)
-        F, M = self.aero_force_moment(x, phase)
+        F, M = self.aero_force_moment_reference(x, phase)
         dx[..., sm.blocks["position"].sx] = sm.raw(x, "velocity")
         dx[..., sm.blocks["velocity"].sx] = self.gravity(x) + F / phase["mass"]
         if self.dof == 6:
@@ -679,6 +939,19 @@ class TrajectoryModel:
         on the grid)."""
         n = max(1, int(math.ceil((t1 - t0) / max_step - 1e-9)))
         dt = (t1 - t0) / n
+        plan = self._plan() if USE_KERNEL else None
+        if plan is not None and plan["atm_kind"] is not None:  # every RK4 stage in one compiled call
+            x = np.asarray(x, dtype=float)
+            X = np.array(x.reshape(-1, x.shape[-1]), dtype=float)
+            ci, cf, tm, tc = self._phase_consts(plan, phase)
+            gm_, gk, ga, tab = plan["grids"]
+            iq = self.smap.blocks["attitude"].sx.start if self.dof == 6 else -1
+            Y = kernels.propagate_kernel(
+                X, n, dt, iq, self._bounded(plan, X), plan["pmode"], plan["pidx"], plan["pnom"], ci, cf,
+                plan["inertia"], plan["inertia_inv"], gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"],
+                *plan["atm_tables"], plan["waves"],
+            )  # fmt: skip
+            return Y.reshape(x.shape)
         y = np.array(x, dtype=float)
         for i in range(n):
             y = rk4_step(lambda z, _t: self.derivative(z, phase), y, t0 + i * dt, dt)
@@ -693,6 +966,8 @@ class TrajectoryModel:
         if quantity == "gravity_magnitude":
             return np.linalg.norm(self.gravity(x), axis=-1, keepdims=True)
         if quantity == "acceleration_inertial":
+            if USE_KERNEL and self._plan() is not None:  # the velocity block of ẋ: gravity + F / m
+                return self._kernel_eval(x, phase, want_dx=True)[0][..., self.smap.blocks["velocity"].sx]
             F, _ = self.aero_force_moment(x, phase)
             return self.gravity(x) + F / phase["mass"]
         if quantity == "acceleration_body":

@@ -37,6 +37,8 @@ from workbench.problems.post2.config import Post2Config
 from workbench.problems.post2.model import (
     DESCENT_NOMINALS,
     OBSERVATIONS,
+    CaMachWave,
+    DensityWave,
     StateMap,
     TrajectoryModel,
     quat_from_aero_angles,
@@ -58,10 +60,7 @@ def truth_model(scenario: Scenario, cfg: Post2Config) -> TrajectoryModel:
     tr = cfg.data["truth"]
     a, lam = tr["density_wave_amplitude"], tr["density_wave_length_m"]
 
-    def wave(h):
-        return 1.0 + a * np.sin(2.0 * math.pi * np.asarray(h) / lam)
-
-    env = build.environment(scenario, cfg, density_factor=wave if a else None)
+    env = build.environment(scenario, cfg, density_factor=DensityWave(a, lam) if a else None)
     j2 = _truth_value(cfg, "j2")
     if j2 is not None:
         env = replace(env, j2=float(j2[0]))
@@ -88,9 +87,7 @@ def truth_model(scenario: Scenario, cfg: Post2Config) -> TrajectoryModel:
         env = replace(env, atmosphere=atm)
     if tr["ca_mach_wave_amplitude"]:
         aw = float(tr["ca_mach_wave_amplitude"])
-        veh = replace(
-            veh, ca_mach_factor=lambda m: 1.0 + aw * np.sin(2.0 * math.pi * np.log10(np.maximum(m, 1e-3)) / 1.2)
-        )
+        veh = replace(veh, ca_mach_factor=CaMachWave(aw))
     return TrajectoryModel(StateMap(names), cfg.dof, env, veh, build.events(cfg, truth=True), nominal=nominal)
 
 

@@ -1,0 +1,207 @@
+"""The compiled dynamics kernel (post2/kernels.py) against the numpy reference of the model.
+
+``TrajectoryModel.derivative`` / ``aero_force_moment`` run the numba kernel; ``*_reference`` keep the
+numpy code.  The kernel follows the reference's order of operations, so on the shipped scenarios'
+models (estimator and truth, every event phase) the two agree bit for bit; the assertion allows
+1e-12 relative (a few units in the last place) in case a numpy/BLAS build sums in another order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workbench.io.assets import assets_dir
+from workbench.io.scenario import load_scenario
+from workbench.problems.post2 import model as post2_model
+from workbench.problems.post2.config import config_for
+from workbench.problems.post2.model import (
+    Environment,
+    StateMap,
+    TrajectoryModel,
+    Vehicle,
+    aero_angles,
+    aero_angles_loop,
+    quat_from_aero_angles,
+)
+from workbench.problems.post2.pipeline import Estimator
+from workbench.problems.post2.truth import truth_model
+
+SCENARIOS = ("post2_entry6dof", "post2_mer_quaternion", "post2_huygens", "post2_j2")
+
+
+def _phases(model: TrajectoryModel) -> list[dict]:
+    """The initial phase and the phase after each event in turn."""
+    out = [model.initial_phase()]
+    for ev in model.events:
+        out.append(model.apply_event(out[-1], ev))
+    return out
+
+
+def _batch(model: TrajectoryModel, x0: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """n states around x0: perturbed positions (±2 km), velocities, attitude, rates, parameters."""
+    X = np.repeat(x0[None, :], n, axis=0)
+    sm = model.smap
+    X[:, sm.blocks["position"].sx] += rng.normal(scale=2000.0, size=(n, 3))
+    X[:, sm.blocks["velocity"].sx] *= 1.0 + rng.normal(scale=0.05, size=(n, 1))
+    for name, b in sm.blocks.items():
+        if name in ("position", "velocity"):
+            continue
+        X[:, b.sx] += rng.normal(scale=0.02, size=(n, b.sx.stop - b.sx.start))
+    return X
+
+
+def _models(name: str):
+    sc = load_scenario(assets_dir() / "scenarios" / f"{name}.toml")
+    cfg = config_for(sc)
+    est = Estimator(sc, cfg)
+    tm = truth_model(sc, cfg)
+    x_truth = np.zeros(tm.smap.n_x)
+    for blk in ("position", "velocity") + (("attitude", "body_rates") if cfg.dof == 6 else ()):
+        x_truth[tm.smap.blocks[blk].sx] = est.x0[est.smap.blocks[blk].sx]
+    return [(est.model, est.x0), (tm, x_truth)]
+
+
+def _assert_close(a: np.ndarray, b: np.ndarray) -> None:
+    scale = np.maximum(np.abs(b), 1e-300)
+    assert a.shape == b.shape
+    assert np.all(np.isfinite(a) == np.isfinite(b))
+    assert np.max(np.abs(a - b) / scale, initial=0.0) <= 1e-12
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_kernel_matches_the_numpy_reference_on_the_shipped_scenarios(name):
+    rng = np.random.default_rng(7)
+    for model, x0 in _models(name):
+        assert model._plan() is not None
+        for phase in _phases(model):
+            X = _batch(model, x0, 31, rng)
+            _assert_close(model.derivative(X, phase), model.derivative_reference(X, phase))
+            F, M = model.aero_force_moment(X, phase)
+            Fr, Mr = model.aero_force_moment_reference(X, phase)
+            _assert_close(F, Fr)
+            _assert_close(M, Mr)
+            if "velocity" in model.smap:  # acceleration_inertial: the kernel's velocity block
+                sv = model.smap.blocks["velocity"].sx
+                F_ref = model.aero_force_moment_reference(X, phase)[0]
+                _assert_close(
+                    model.observe(X, "acceleration_inertial", phase), model.gravity(X) + F_ref / phase["mass"]
+                )
+                _assert_close(model.observe(X, "acceleration_inertial", phase), model.derivative(X, phase)[:, sv])
+            # one state (the truth's solve_ivp) and a 2-D leading shape
+            _assert_close(model.derivative(X[3], phase), model.derivative_reference(X[3], phase))
+            X3 = X[:30].reshape(5, 6, -1)
+            _assert_close(model.derivative(X3, phase), model.derivative_reference(X3, phase))
+
+
+def test_kernel_matches_the_reference_for_a_constant_cd_and_drag_area_states():
+    """Rocket-flight style pieces: a 3-DOF point mass with a constant cd, drag-area states, winds."""
+    from workbench.core.atmosphere import ExponentialAtmosphere
+
+    env = Environment(3.986e14, 6378137.0, 1.08e-3, 6371000.0, 7.29e-5, ExponentialAtmosphere(1.2, 8500.0, 288.0))
+    veh = Vehicle(20.0, np.eye(3), None, ref_area=0.01, cd=0.45)
+    sm = StateMap(["position", "velocity", "drogue_drag_area", "main_drag_area", "wind_vertical"])
+    m = TrajectoryModel(sm, 3, env, veh, nominal={"wind_horizontal": 3.0})
+    rng = np.random.default_rng(3)
+    X = np.zeros((25, sm.n_x))
+    X[:, :3] = [6371000.0 + 3000.0, 0.0, 0.0] + rng.normal(scale=500.0, size=(25, 3))
+    X[:, 3:6] = rng.normal(scale=100.0, size=(25, 3))
+    X[:, 6:] = np.abs(rng.normal(scale=0.5, size=(25, 3)))
+    for chute in (None, "drogue", "main"):
+        phase = {**m.initial_phase(), "parachute": chute is not None, "chute": chute}
+        _assert_close(m.derivative(X, phase), m.derivative_reference(X, phase))
+
+
+def test_vacuum_model_and_the_switch_to_the_reference(monkeypatch):
+    sm = StateMap(["position", "velocity", "j2"])
+    m = TrajectoryModel(sm, 3, Environment(4.28e13, 3.39e6, 1.96e-3, 3.39e6, 0.0, None), Vehicle(1e3, np.eye(3), None))
+    X = np.array([[3.0e6, 1.5e6, 1.0e6, 0.0, 3000.0, 1000.0, 1.9e-3], [3.1e6, -1.5e6, 2.0e6, 10.0, 300.0, 100.0, 2e-3]])
+    ph = m.initial_phase()
+    _assert_close(m.derivative(X, ph), m.derivative_reference(X, ph))
+    calls = []
+    monkeypatch.setattr(post2_model, "USE_KERNEL", False)
+    monkeypatch.setattr(TrajectoryModel, "_kernel_eval", lambda *a, **k: calls.append(1))
+    np.testing.assert_array_equal(m.derivative(X, ph), m.derivative_reference(X, ph))
+    assert not calls
+
+
+def test_rocket_wind_state_falls_back_to_the_reference():
+    sm = StateMap(["position", "velocity", "wind"])
+    m = TrajectoryModel(sm, 3, Environment(4.28e13, 3.39e6, 0.0, 3.39e6, 0.0, None), Vehicle(1e3, np.eye(3), None))
+    assert m._plan() is None
+    X = np.array([3.0e6, 1.5e6, 1.0e6, 0.0, 3000.0, 1000.0, 1.0, 2.0])
+    np.testing.assert_array_equal(m.derivative(X, m.initial_phase()), m.derivative_reference(X, m.initial_phase()))
+
+
+def test_vectorised_aero_angles_match_the_row_loop():
+    rng = np.random.default_rng(0)
+    n = 300
+    r, v = rng.normal(size=(n, 3)) * 3e6, rng.normal(size=(n, 3)) * 4000.0
+    ang = np.radians(rng.uniform(-20.0, 20.0, (n, 3))) * [1.0, 1.0, 8.0]
+    q = np.array([quat_from_aero_angles(r[i], v[i], ang[i]) for i in range(n)])
+    _assert_close(aero_angles(r, v, q), aero_angles_loop(r, v, q))
+    np.testing.assert_allclose(aero_angles(r, v, q), ang, atol=1e-12)
+    assert aero_angles(r[0], v[0], q[0]).shape == (1, 3)
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_compiled_propagation_matches_the_numpy_rk4(name, monkeypatch):
+    """``propagate`` (all RK4 stages, atmosphere included, in one compiled call) against the numpy
+    RK4 over the numpy reference derivative, on the estimator's batch of every phase."""
+    rng = np.random.default_rng(11)
+    model, x0 = _models(name)[0]
+    for phase in _phases(model):
+        X = _batch(model, x0, 9, rng)
+        fast = model.propagate(X, 0.0, 0.3, phase, 0.1)
+        monkeypatch.setattr(post2_model, "USE_KERNEL", False)
+        ref = model.propagate(X, 0.0, 0.3, phase, 0.1)
+        monkeypatch.setattr(post2_model, "USE_KERNEL", True)
+        _assert_close(fast, ref)
+
+
+def test_atmosphere_kernel_matches_the_numpy_atmospheres():
+    from workbench.core.atmosphere import MarsEngineeringAtmosphere, TabulatedAtmosphere, TitanDefaultAtmosphere
+    from workbench.problems.post2 import kernels
+
+    lay = TitanDefaultAtmosphere()
+    hs = np.arange(0.0, 1.4e6 + 1.0, 2000.0)
+    tab = TabulatedAtmosphere(
+        hs, lay.density(hs), lay.pressure(hs), lay.temperature(hs), lay.gas_constant, lay.gamma, lay.sutherland,
+        extrapolate="clamp",
+    )  # fmt: skip
+    rng = np.random.default_rng(5)
+    for atm, kind, hmax in ((MarsEngineeringAtmosphere(), kernels.ATM_MARS, 2e5), (tab, kernels.ATM_TABLE, 1.6e6)):
+        m = TrajectoryModel(
+            StateMap(["position", "velocity"]),
+            3,
+            Environment(1.0, 1.0, 0.0, 1.0, 0.0, atm),
+            Vehicle(1.0, np.eye(3), None),
+        )
+        plan = m._plan()
+        h = np.concatenate([rng.uniform(0.0, hmax, 5000), hs[:20], [0.0, 7000.0, 50e3, 1.4e6]])
+        rho, a, kn = np.empty_like(h), np.empty_like(h), np.empty_like(h)
+        kernels.atmosphere_kernel(kind, plan["ac"], *plan["atm_tables"], h, True, 2.65, rho, a, kn)
+        _assert_close(rho, atm.density(h))
+        _assert_close(a, atm.speed_of_sound(h))
+        _assert_close(kn, atm.knudsen(h, 2.65))
+
+
+@pytest.mark.parametrize("m", [5, 64, 300, 1111])
+def test_mc_metric_kernel_matches_the_numpy_expression(m):
+    from workbench.problems.post2 import kernels
+
+    rng = np.random.default_rng(m)
+    n_members, n_grid, t0, h = 40, 400, 10.0, 0.5
+    a = rng.normal(size=(n_members, n_grid)) * 10 ** rng.uniform(-2, 2, (n_members, 1))
+    tu = np.sort(rng.uniform(t0 - 5.0, t0 + h * n_grid + 5.0, m))
+    zu = rng.normal(size=m)
+    sh = rng.normal(scale=3.0, size=n_members)
+    hi = a.shape[1] - 1.000001
+    rows = np.arange(n_members)[:, None]
+    u = np.clip((tu[None, :] + sh[:, None] - t0) / h, 0.0, hi)
+    k = np.floor(u).astype(int)
+    f = u - k
+    ref = np.sum(np.abs(zu[None, :] - (a[rows, k] * (1.0 - f) + a[rows, k + 1] * f)), axis=1)
+    out = np.empty(n_members)
+    kernels.metric_total_kernel(a, tu, zu, sh, t0, h, hi, out)
+    _assert_close(out, ref)
