@@ -30,7 +30,8 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
+
+from workbench.estimation.consistency import chi2_ppf
 
 __all__ = [
     "OK",
@@ -106,8 +107,8 @@ def nis_check(sensor: str, nis: np.ndarray, dof: int, *, error_quantile: float =
     if nis.size == 0:
         return Check(name, WARNING, None, None, f"sensor {sensor}: no innovation was processed")
     n, mean = nis.size, float(np.mean(nis))
-    band = (float(chi2.ppf(0.005, n * dof) / n), float(chi2.ppf(0.995, n * dof) / n))
-    err_hi = max(float(chi2.ppf(error_quantile, dof)), band[1])
+    band = (float(chi2_ppf(0.005, n * dof) / n), float(chi2_ppf(0.995, n * dof) / n))
+    err_hi = max(float(chi2_ppf(error_quantile, dof)), band[1])
     lo, hi = min(0.5 * dof, band[0]), max(2.0 * dof, band[1])
     if mean > err_hi:
         return Check(

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import median_filter
-from scipy.stats import chi2
 
 from workbench.core.rotation import attitude_error
+from workbench.estimation.consistency import chi2_ppf
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
 from workbench.estimation.health import WARNING, covariance_check, health_report, interval_check, nis_check, notes_check
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
@@ -472,7 +472,7 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
             "dimension": int(ih.y.shape[1]),
         }
         n_dof = ih.t.size * ih.y.shape[1]
-        lo, hi = (chi2.ppf([0.005, 0.995], n_dof) / ih.t.size).tolist()
+        lo, hi = (chi2_ppf(np.array([0.005, 0.995]), n_dof) / ih.t.size).tolist()
         m = obs[name]["mean_nis"]
         obs[name]["mean_nis_band_99"] = [lo, hi]
         obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
