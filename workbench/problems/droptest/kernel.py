@@ -1,0 +1,495 @@
+"""Compiled (numba) recursion of the drop-test EKF in kinematic mode: the IMU part of a step.
+
+The same filter as :func:`workbench.problems.droptest.pipeline.forward_pass` through the generic
+:func:`workbench.estimation.ekf.run_filter` (the pure-numpy *reference* path, selectable there),
+written as one loop over the steps with nothing allocated per step:
+
+* predict: :func:`workbench.problems.droptest.model.propagate` (kinematic, no bungee) and
+  ``P = F P Fᵀ + Q`` with Q of :func:`~workbench.problems.droptest.model.process_noise`, using that F
+  is the identity outside its first 18 × 18 block (the core states p, v, a, θ, ω, α);
+* the step's measurements one after the other, in the order of the reference path — every valid
+  triad (:func:`~workbench.problems.droptest.model.triad_model`, bias states included), the gyro
+  (:func:`~workbench.problems.droptest.model.gyro_model`), the hanging zero-velocity update — each
+  its own update re-linearised at the current state, with the Cholesky-solved gain and the
+  **Joseph-form** covariance ``M = P − K (P Hᵀ)ᵀ``, ``P⁺ = M − (M Hᵀ − K R) Kᵀ`` symmetrised (the
+  association of :func:`workbench.estimation.ekf.update`), H used by its non-zero columns only;
+* every per-sensor predicted measurement, innovation, innovation covariance and NIS recorded.
+
+Units and frames are those of :mod:`workbench.problems.droptest.model` (SI, body-frame attitude
+error ``q_true = q ⊗ exp(δθ)``).  Numbers agree with the reference path to floating-point noise
+(sums taken in another order); ``tests/problems/droptest/test_kernel.py`` pins that.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["imu_steps", "NC"]
+
+#: size of the block of F that is not the identity (p, v, a, θ, ω, α)
+NC = 18
+
+
+@njit(cache=True)
+def _dcm(q, C):
+    x, y, z, w = q[0], q[1], q[2], q[3]
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    C[0, 0] = 1 - 2 * (yy + zz)
+    C[0, 1] = 2 * (xy - wz)
+    C[0, 2] = 2 * (xz + wy)
+    C[1, 0] = 2 * (xy + wz)
+    C[1, 1] = 1 - 2 * (xx + zz)
+    C[1, 2] = 2 * (yz - wx)
+    C[2, 0] = 2 * (xz - wy)
+    C[2, 1] = 2 * (yz + wx)
+    C[2, 2] = 1 - 2 * (xx + yy)
+
+
+@njit(cache=True)
+def _skew(v, S):
+    S[0, 0] = 0.0
+    S[0, 1] = -v[2]
+    S[0, 2] = v[1]
+    S[1, 0] = v[2]
+    S[1, 1] = 0.0
+    S[1, 2] = -v[0]
+    S[2, 0] = -v[1]
+    S[2, 1] = v[0]
+    S[2, 2] = 0.0
+
+
+@njit(cache=True)
+def _mm3(A, B, out):
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+
+
+@njit(cache=True)
+def _mv3(A, v, out):
+    for i in range(3):
+        out[i] = A[i, 0] * v[0] + A[i, 1] * v[1] + A[i, 2] * v[2]
+
+
+@njit(cache=True)
+def _propagate(x, dt, g, xn, F, w3):
+    """Kinematic ``model.propagate`` into xn (n_x,) and F (n_e, n_e); w3 (8, 3, 3) scratch."""
+    C, CaX, Sa, Rt, Jr, SJ, T = w3[0], w3[1], w3[2], w3[3], w3[4], w3[5], w3[6]
+    v3 = w3[7]
+    for i in range(x.shape[0]):
+        xn[i] = x[i]
+    q = x[9:13]
+    _dcm(q, C)
+    aB = x[6:9]
+    acc = v3[0]
+    for i in range(3):
+        acc[i] = C[i, 0] * aB[0] + C[i, 1] * aB[1] + C[i, 2] * aB[2] + g[i]
+    for i in range(3):
+        xn[i] = x[i] + x[3 + i] * dt + 0.5 * acc[i] * dt * dt
+        xn[3 + i] = x[3 + i] + acc[i] * dt
+    phi = v3[1]
+    for i in range(3):
+        phi[i] = x[13 + i] * dt + 0.5 * x[16 + i] * dt * dt
+    a = math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
+    half = 0.5 * a
+    k = 0.5 - a * a / 48.0 if a < 1e-6 else math.sin(half) / a
+    dq = v3[2]  # (x, y, z) of exp(φ); w below
+    dq[0], dq[1], dq[2] = phi[0] * k, phi[1] * k, phi[2] * k
+    dw = math.cos(half)
+    # Rt = dcm(dq)ᵀ
+    xq, yq, zq = dq[0], dq[1], dq[2]
+    xx, yy, zz = xq * xq, yq * yq, zq * zq
+    xy, xz, yz = xq * yq, xq * zq, yq * zq
+    wx, wy, wz = dw * xq, dw * yq, dw * zq
+    Rt[0, 0] = 1 - 2 * (yy + zz)
+    Rt[1, 0] = 2 * (xy - wz)
+    Rt[2, 0] = 2 * (xz + wy)
+    Rt[0, 1] = 2 * (xy + wz)
+    Rt[1, 1] = 1 - 2 * (xx + zz)
+    Rt[2, 1] = 2 * (yz - wx)
+    Rt[0, 2] = 2 * (xz - wy)
+    Rt[1, 2] = 2 * (yz + wx)
+    Rt[2, 2] = 1 - 2 * (xx + yy)
+    px, py, pz, pw = q[0], q[1], q[2], q[3]
+    rx = pw * dq[0] + px * dw + py * dq[2] - pz * dq[1]
+    ry = pw * dq[1] - px * dq[2] + py * dw + pz * dq[0]
+    rz = pw * dq[2] + px * dq[1] - py * dq[0] + pz * dw
+    rw = pw * dw - px * dq[0] - py * dq[1] - pz * dq[2]
+    nq = math.sqrt(rx * rx + ry * ry + rz * rz + rw * rw)
+    xn[9], xn[10], xn[11], xn[12] = rx / nq, ry / nq, rz / nq, rw / nq
+    aBn = v3[0]  # acc no longer needed
+    _mv3(Rt, aB, aBn)
+    for i in range(3):
+        xn[13 + i] = x[13 + i] + x[16 + i] * dt
+        xn[16 + i] = x[16 + i]
+        xn[6 + i] = aBn[i]
+    # F: identity, then the blocks of model.propagate
+    n_e = F.shape[0]
+    for i in range(n_e):
+        for j in range(n_e):
+            F[i, j] = 0.0
+        F[i, i] = 1.0
+    _skew(aB, Sa)
+    _mm3(C, Sa, CaX)
+    _skew(phi, Sa)
+    for i in range(3):
+        for j in range(3):
+            Jr[i, j] = (1.0 if i == j else 0.0) - 0.5 * Sa[i, j]
+    _skew(aBn, Sa)
+    _mm3(Sa, Jr, SJ)
+    h2 = 0.5 * dt * dt
+    for i in range(3):
+        F[i, 3 + i] = dt
+        F[12 + i, 15 + i] = dt
+        for j in range(3):
+            F[i, 6 + j] = h2 * C[i, j]
+            F[i, 9 + j] = -0.5 * dt * dt * CaX[i, j]
+            F[3 + i, 6 + j] = dt * C[i, j]
+            F[3 + i, 9 + j] = -dt * CaX[i, j]
+            F[9 + i, 9 + j] = Rt[i, j]
+            F[9 + i, 12 + j] = dt * Jr[i, j]
+            F[9 + i, 15 + j] = h2 * Jr[i, j]
+            F[6 + i, 6 + j] = Rt[i, j]
+            F[6 + i, 12 + j] = SJ[i, j] * dt
+            F[6 + i, 15 + j] = SJ[i, j] * h2
+    T[0, 0] = 0.0  # (T unused: kept for scratch layout)
+
+
+@njit(cache=True)
+def _process_noise(dt, qa, qw, Q):
+    """``model.process_noise`` into Q (n_e, n_e) (zero outside the (p, v, a), (θ, ω, α) chains)."""
+    n_e = Q.shape[0]
+    for i in range(n_e):
+        for j in range(n_e):
+            Q[i, j] = 0.0
+    b = np.empty((3, 3))
+    b[0, 0], b[0, 1], b[0, 2] = dt**5 / 20, dt**4 / 8, dt**3 / 6
+    b[1, 0], b[1, 1], b[1, 2] = dt**4 / 8, dt**3 / 3, dt**2 / 2
+    b[2, 0], b[2, 1], b[2, 2] = dt**3 / 6, dt**2 / 2, dt
+    for i in range(3):
+        for r in range(3):
+            for c in range(3):
+                Q[3 * r + i, 3 * c + i] = qa * b[r, c]
+                Q[9 + 3 * r + i, 9 + 3 * c + i] = qw * b[r, c]
+
+
+@njit(cache=True)
+def _predict_cov(P, F, Q, T):
+    """``P ← ½(A + Aᵀ)``, ``A = F P Fᵀ + Q``, F the identity outside its NC × NC block; T (NC, n_e) scratch."""
+    n_e = P.shape[0]
+    for i in range(NC):
+        for j in range(n_e):
+            s = 0.0
+            for c in range(NC):
+                s += F[i, c] * P[c, j]
+            T[i, j] = s
+    for i in range(NC):
+        for j in range(NC):
+            s = 0.0
+            for c in range(NC):
+                s += T[i, c] * F[j, c]
+            P[i, j] = s + Q[i, j]
+    for i in range(NC):
+        for j in range(i + 1, NC):
+            v = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = v
+            P[j, i] = v
+        for j in range(NC, n_e):
+            P[i, j] = T[i, j]
+            P[j, i] = T[i, j]
+    for i in range(NC, n_e):
+        for j in range(NC, n_e):
+            P[i, j] += Q[i, j]
+
+
+@njit(cache=True)
+def _update(x, P, z, zp, Hc, cols, R, y, S, W):
+    """Sequential Joseph-form update by the measurement of size m with H non-zero in ``cols``.
+
+    x (n_x,) and P (n_e, n_e) updated in place; z, zp (m,), Hc (m, nc), R (m, m); writes y (m,),
+    S (m, m); returns (nis, status) with status 0 ok, 1 S not positive definite, 2 non-finite NIS.
+    W (n_e, 4 m + 1 + ...) scratch of ``_scratch``.
+    """
+    n_e = P.shape[0]
+    m = z.shape[0]
+    nc = cols.shape[0]
+    PHt = W[:, 0:m]
+    K = W[:, m : 2 * m]
+    MHt = W[:, 2 * m : 3 * m]
+    M = W[:, 3 * m : 3 * m + n_e]
+    for a in range(m):
+        y[a] = z[a] - zp[a]
+    for i in range(n_e):
+        for a in range(m):
+            s = 0.0
+            for c in range(nc):
+                s += P[i, cols[c]] * Hc[a, c]
+            PHt[i, a] = s
+    for a in range(m):
+        for b in range(m):
+            s = 0.0
+            for c in range(nc):
+                s += Hc[a, c] * PHt[cols[c], b]
+            S[a, b] = s + R[a, b]
+    # Cholesky S = L Lᵀ (lower), m ≤ 3
+    L = np.zeros((m, m))
+    for j in range(m):
+        s = S[j, j]
+        for c in range(j):
+            s -= L[j, c] * L[j, c]
+        if not s > 0.0:
+            return 0.0, 1
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, m):
+            s = S[i, j]
+            for c in range(j):
+                s -= L[i, c] * L[j, c]
+            L[i, j] = s / L[j, j]
+    # w = S⁻¹ y, nis = yᵀ w
+    w = np.empty(m)
+    _cho_solve(L, y, w)
+    nis = 0.0
+    for a in range(m):
+        nis += y[a] * w[a]
+    if not math.isfinite(nis):
+        return nis, 2
+    # K = P Hᵀ S⁻¹ row by row
+    r = np.empty(m)
+    kr = np.empty(m)
+    for i in range(n_e):
+        for a in range(m):
+            r[a] = PHt[i, a]
+        _cho_solve(L, r, kr)
+        for a in range(m):
+            K[i, a] = kr[a]
+    dx = np.empty(n_e)
+    for i in range(n_e):
+        s = 0.0
+        for a in range(m):
+            s += K[i, a] * y[a]
+        dx[i] = s
+    # Joseph form: M = P − K (P Hᵀ)ᵀ, P⁺ = M − (M Hᵀ − K R) Kᵀ, symmetrised
+    for i in range(n_e):
+        for j in range(n_e):
+            s = 0.0
+            for a in range(m):
+                s += K[i, a] * PHt[j, a]
+            M[i, j] = P[i, j] - s
+    for i in range(n_e):
+        for a in range(m):
+            s = 0.0
+            for c in range(nc):
+                s += M[i, cols[c]] * Hc[a, c]
+            t = 0.0
+            for b in range(m):
+                t += K[i, b] * R[b, a]
+            MHt[i, a] = s - t
+    for i in range(n_e):
+        for j in range(n_e):
+            s = 0.0
+            for a in range(m):
+                s += MHt[i, a] * K[j, a]
+            P[i, j] = M[i, j] - s
+    for i in range(n_e):
+        for j in range(i + 1, n_e):
+            v = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = v
+            P[j, i] = v
+    _boxplus(x, dx)
+    return nis, 0
+
+
+@njit(cache=True)
+def _cho_solve(L, b, out):
+    m = L.shape[0]
+    for i in range(m):
+        s = b[i]
+        for c in range(i):
+            s -= L[i, c] * out[c]
+        out[i] = s / L[i, i]
+    for i in range(m - 1, -1, -1):
+        s = out[i]
+        for c in range(i + 1, m):
+            s -= L[c, i] * out[c]
+        out[i] = s / L[i, i]
+
+
+@njit(cache=True)
+def _boxplus(x, dx):
+    """x ⊞ dx in place for the drop-test layout (one quaternion at x[9:13], error dx[9:12])."""
+    for i in range(9):
+        x[i] += dx[i]
+    for i in range(13, x.shape[0]):
+        x[i] += dx[i - 1]
+    qx, qy, qz, qw = x[9], x[10], x[11], x[12]
+    ex, ey, ez = dx[9], dx[10], dx[11]
+    a = math.sqrt(ex * ex + ey * ey + ez * ez)
+    k = 0.5 - a * a / 48.0 if a < 1e-6 else math.sin(0.5 * a) / a
+    px, py, pz, pw = ex * k, ey * k, ez * k, math.cos(0.5 * a)
+    rx = qw * px + qx * pw + qy * pz - qz * py
+    ry = qw * py - qx * pz + qy * pw + qz * px
+    rz = qw * pz + qx * py - qy * px + qz * pw
+    rw = qw * pw - qx * px - qy * py - qz * pz
+    n = math.sqrt(rx * rx + ry * ry + rz * rz + rw * rw)
+    x[9], x[10], x[11], x[12] = rx / n, ry / n, rz / n, rw / n
+
+
+@njit(cache=True)
+def _triad(x, r, j, has_bias, zp, Hc, cols, w3):
+    """``model.triad_model`` into zp (3,), Hc (3, 12) over cols (12,) = a, ω, α, b_j columns."""
+    Sw, Sr, Swr, SS = w3[0], w3[1], w3[2], w3[3]
+    v = w3[4]
+    _skew(x[13:16], Sw)
+    _skew(r, Sr)
+    wr = v[0]
+    _mv3(Sw, r, wr)
+    ra = v[1]
+    _mv3(Sr, x[16:19], ra)
+    wwr = v[2]
+    _mv3(Sw, wr, wwr)
+    for i in range(3):
+        zp[i] = x[6 + i] - ra[i] + wwr[i]
+    _skew(wr, Swr)
+    _mm3(Sw, Sr, SS)
+    for a in range(3):
+        for c in range(12):
+            Hc[a, c] = 0.0
+        Hc[a, a] = 1.0
+        for c in range(3):
+            Hc[a, 3 + c] = -Swr[a, c] - SS[a, c]
+            Hc[a, 6 + c] = -Sr[a, c]
+    for c in range(3):
+        cols[c] = 6 + c
+        cols[3 + c] = 12 + c
+        cols[6 + c] = 15 + c
+    if has_bias:
+        for i in range(3):
+            zp[i] = zp[i] + x[31 + 3 * j + i]
+            Hc[i, 9 + i] = 1.0
+        for c in range(3):
+            cols[9 + c] = 30 + 3 * j + c
+        return 12
+    return 9
+
+
+@njit(cache=True)
+def _gyro(x, zp, Hc, cols):
+    """``model.gyro_model`` into zp (3,), Hc (3, 15) over cols = ω (3), E (9), b_g (3) columns."""
+    for i in range(3):
+        s = 0.0
+        for c in range(3):
+            s += x[19 + 3 * i + c] * x[13 + c]
+        zp[i] = x[13 + i] + s + x[28 + i]
+    for a in range(3):
+        for c in range(15):
+            Hc[a, c] = 0.0
+        for c in range(3):
+            Hc[a, c] = (1.0 if a == c else 0.0) + x[19 + 3 * a + c]
+            Hc[a, 3 + 3 * a + c] = x[13 + c]
+        Hc[a, 12 + a] = 1.0
+    for c in range(3):
+        cols[c] = 12 + c
+        cols[12 + c] = 27 + c
+    for c in range(9):
+        cols[3 + c] = 18 + c
+
+
+@njit(cache=True)
+def imu_steps(
+    k_a, k_b, x, P, t, g, q_accel, q_angular, lever, f_B, f_valid, r_tri, w_B, w_valid, r_gyr, hanging, r_zupt,
+    x_prior, x_post, P_prior, P_post, F_hist, Q_hist,
+    tri_zp, tri_y, tri_S, tri_nis, gyr_zp, gyr_y, gyr_S, gyr_nis, zu_zp, zu_y, zu_S, zu_nis,
+):  # fmt: skip
+    """Run steps ``k_a..k_b`` (inclusive) of the kinematic drop-test EKF, IMU measurements only.
+
+    State: x (n_x,), P (n_e, n_e) — the posterior of step ``k_a − 1`` (or the initial state when
+    ``k_a = 0``) on entry, the posterior of ``k_b`` on return (in place).  Inputs per step k: t (n,)
+    [s]; g (3,) gravity [m/s², SPF]; q_accel, q_angular (n,) jerk PSDs; lever (n_t, 3) [m, body];
+    f_B (n, n_t, 3) [m/s²]; f_valid (n, n_t); r_tri (n, n_t, 3) the diagonal of each triad's R;
+    w_B (n, 3) [rad/s]; w_valid (n,); r_gyr (n,) the gyro's R / I; hanging (n,); r_zupt (3, 3).
+    Written per step: x_prior, x_post (n, n_x), P_prior, P_post, F_hist, Q_hist (n, n_e, n_e);
+    predicted measurement, innovation, innovation covariance and NIS of each triad (tri_*: (n, n_t,
+    3), (n, n_t, 3), (n, n_t, 3, 3), (n, n_t)), the gyro (gyr_*) and the zero-velocity update (zu_*).
+    Returns (status, step, channel): status 0 ok, 1 an S not positive definite, 2 a non-finite NIS,
+    at that step, channel j < n_t a triad, n_t the gyro, n_t + 1 the zero-velocity update.
+    """
+    n_e = P.shape[0]
+    n_t = lever.shape[0]
+    has_bias = x.shape[0] >= 31 + 3 * n_t
+    xn = np.empty_like(x)
+    Fk = np.empty((n_e, n_e))
+    Qk = np.empty((n_e, n_e))
+    T = np.empty((NC, n_e))
+    W = np.empty((n_e, 3 * 3 + n_e))
+    w3 = np.empty((8, 3, 3))
+    zp = np.empty(3)
+    z = np.empty(3)
+    y = np.empty(3)
+    S = np.empty((3, 3))
+    R = np.zeros((3, 3))
+    Hc = np.empty((3, 15))
+    cols = np.empty(15, dtype=np.int64)
+    zero3 = np.zeros(3)
+    H_zu = np.eye(3)
+    cols_zu = np.array([3, 4, 5], dtype=np.int64)
+    for k in range(k_a, k_b + 1):
+        if k > 0:
+            dt = t[k] - t[k - 1]
+            _propagate(x, dt, g, xn, Fk, w3)
+            _process_noise(dt, q_accel[k], q_angular[k], Qk)
+            _predict_cov(P, Fk, Qk, T)
+            x[:] = xn
+            F_hist[k] = Fk
+            Q_hist[k] = Qk
+        else:
+            F_hist[0] = np.eye(n_e)
+            Q_hist[0] = 0.0
+        x_prior[k] = x
+        P_prior[k] = P
+        for j in range(n_t):
+            if not f_valid[k, j]:
+                continue
+            nc = _triad(x, lever[j], j, has_bias, zp, Hc, cols, w3)
+            for a in range(3):
+                for b in range(3):
+                    R[a, b] = 0.0
+                R[a, a] = r_tri[k, j, a]
+            nis, st = _update(x, P, f_B[k, j], zp, Hc[:, :nc], cols[:nc], R, y, S, W)
+            tri_zp[k, j] = zp
+            tri_y[k, j] = y
+            tri_S[k, j] = S
+            tri_nis[k, j] = nis
+            if st:
+                return st, k, j
+        if w_valid[k]:
+            _gyro(x, zp, Hc, cols)
+            for a in range(3):
+                for b in range(3):
+                    R[a, b] = 0.0
+                R[a, a] = r_gyr[k]
+            nis, st = _update(x, P, w_B[k], zp, Hc, cols, R, y, S, W)
+            gyr_zp[k] = zp
+            gyr_y[k] = y
+            gyr_S[k] = S
+            gyr_nis[k] = nis
+            if st:
+                return st, k, n_t
+        if hanging[k]:
+            for a in range(3):
+                zp[a] = x[3 + a]
+                z[a] = zero3[a]
+            nis, st = _update(x, P, z, zp, H_zu, cols_zu, r_zupt, y, S, W)
+            zu_zp[k] = zp
+            zu_y[k] = y
+            zu_S[k] = S
+            zu_nis[k] = nis
+            if st:
+                return st, k, n_t + 1
+        x_post[k] = x
+        P_post[k] = P
+    return 0, -1, -1
