@@ -79,7 +79,7 @@ def _mv3(A, v, out):
 @njit(cache=True)
 def _propagate(x, dt, g, xn, F, w3):
     """Kinematic ``model.propagate`` into xn (n_x,) and F (n_e, n_e); w3 (8, 3, 3) scratch."""
-    C, CaX, Sa, Rt, Jr, SJ, T = w3[0], w3[1], w3[2], w3[3], w3[4], w3[5], w3[6]
+    C, CaX, Sa, Rt, Jr, SJ = w3[0], w3[1], w3[2], w3[3], w3[4], w3[5]
     v3 = w3[7]
     for i in range(x.shape[0]):
         xn[i] = x[i]
@@ -157,17 +157,16 @@ def _propagate(x, dt, g, xn, F, w3):
             F[6 + i, 6 + j] = Rt[i, j]
             F[6 + i, 12 + j] = SJ[i, j] * dt
             F[6 + i, 15 + j] = SJ[i, j] * h2
-    T[0, 0] = 0.0  # (T unused: kept for scratch layout)
 
 
 @njit(cache=True)
-def _process_noise(dt, qa, qw, Q):
+def _process_noise(dt, qa, qw, Q, B3):
     """``model.process_noise`` into Q (n_e, n_e) (zero outside the (p, v, a), (θ, ω, α) chains)."""
     n_e = Q.shape[0]
     for i in range(n_e):
         for j in range(n_e):
             Q[i, j] = 0.0
-    b = np.empty((3, 3))
+    b = B3
     b[0, 0], b[0, 1], b[0, 2] = dt**5 / 20, dt**4 / 8, dt**3 / 6
     b[1, 0], b[1, 1], b[1, 2] = dt**4 / 8, dt**3 / 3, dt**2 / 2
     b[2, 0], b[2, 1], b[2, 2] = dt**3 / 6, dt**2 / 2, dt
@@ -184,10 +183,11 @@ def _predict_cov(P, F, Q, T):
     n_e = P.shape[0]
     for i in range(NC):
         for j in range(n_e):
-            s = 0.0
-            for c in range(NC):
-                s += F[i, c] * P[c, j]
-            T[i, j] = s
+            T[i, j] = 0.0
+        for c in range(NC):
+            f = F[i, c]
+            for j in range(n_e):
+                T[i, j] += f * P[c, j]
     for i in range(NC):
         for j in range(NC):
             s = 0.0
@@ -208,20 +208,18 @@ def _predict_cov(P, F, Q, T):
 
 
 @njit(cache=True)
-def _update(x, P, z, zp, Hc, cols, R, y, S, W):
-    """Sequential Joseph-form update by the measurement of size m with H non-zero in ``cols``.
+def _update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
+    """Sequential Joseph-form update by the measurement of size m = 3 with H non-zero in ``cols[:nc]``.
 
-    x (n_x,) and P (n_e, n_e) updated in place; z, zp (m,), Hc (m, nc), R (m, m); writes y (m,),
-    S (m, m); returns (nis, status) with status 0 ok, 1 S not positive definite, 2 non-finite NIS.
-    W (n_e, 4 m + 1 + ...) scratch of ``_scratch``.
+    x (n_x,) and P (n_e, n_e) updated in place; z, zp (3,), Hc (3, ≥ nc), R (3, 3); writes y (3,),
+    S (3, 3); returns (nis, status) with status 0 ok, 1 S not positive definite, 2 non-finite NIS.
+    Scratch: W (n_e, 4 m), M (n_e, n_e), L (m, m), v (4, n_e).
     """
     n_e = P.shape[0]
     m = z.shape[0]
-    nc = cols.shape[0]
     PHt = W[:, 0:m]
     K = W[:, m : 2 * m]
     MHt = W[:, 2 * m : 3 * m]
-    M = W[:, 3 * m : 3 * m + n_e]
     for a in range(m):
         y[a] = z[a] - zp[a]
     for i in range(n_e):
@@ -237,7 +235,6 @@ def _update(x, P, z, zp, Hc, cols, R, y, S, W):
                 s += Hc[a, c] * PHt[cols[c], b]
             S[a, b] = s + R[a, b]
     # Cholesky S = L Lᵀ (lower), m ≤ 3
-    L = np.zeros((m, m))
     for j in range(m):
         s = S[j, j]
         for c in range(j):
@@ -251,7 +248,7 @@ def _update(x, P, z, zp, Hc, cols, R, y, S, W):
                 s -= L[i, c] * L[j, c]
             L[i, j] = s / L[j, j]
     # w = S⁻¹ y, nis = yᵀ w
-    w = np.empty(m)
+    w, r, kr, dx = v[0, :m], v[1, :m], v[2, :m], v[3]
     _cho_solve(L, y, w)
     nis = 0.0
     for a in range(m):
@@ -259,15 +256,12 @@ def _update(x, P, z, zp, Hc, cols, R, y, S, W):
     if not math.isfinite(nis):
         return nis, 2
     # K = P Hᵀ S⁻¹ row by row
-    r = np.empty(m)
-    kr = np.empty(m)
     for i in range(n_e):
         for a in range(m):
             r[a] = PHt[i, a]
         _cho_solve(L, r, kr)
         for a in range(m):
             K[i, a] = kr[a]
-    dx = np.empty(n_e)
     for i in range(n_e):
         s = 0.0
         for a in range(m):
@@ -422,10 +416,11 @@ def imu_steps(
     n_t = lever.shape[0]
     has_bias = x.shape[0] >= 31 + 3 * n_t
     xn = np.empty_like(x)
-    Fk = np.empty((n_e, n_e))
-    Qk = np.empty((n_e, n_e))
     T = np.empty((NC, n_e))
-    W = np.empty((n_e, 3 * 3 + n_e))
+    W = np.empty((n_e, 12))
+    M = np.empty((n_e, n_e))
+    L = np.zeros((3, 3))
+    v = np.empty((4, n_e))
     w3 = np.empty((8, 3, 3))
     zp = np.empty(3)
     z = np.empty(3)
@@ -435,17 +430,20 @@ def imu_steps(
     Hc = np.empty((3, 15))
     cols = np.empty(15, dtype=np.int64)
     zero3 = np.zeros(3)
-    H_zu = np.eye(3)
-    cols_zu = np.array([3, 4, 5], dtype=np.int64)
+    H_zu = np.zeros((3, 15))
+    cols_zu = np.zeros(15, dtype=np.int64)
+    for a in range(3):
+        H_zu[a, a] = 1.0
+        cols_zu[a] = 3 + a
     for k in range(k_a, k_b + 1):
         if k > 0:
             dt = t[k] - t[k - 1]
+            Fk = F_hist[k]
+            Qk = Q_hist[k]
             _propagate(x, dt, g, xn, Fk, w3)
-            _process_noise(dt, q_accel[k], q_angular[k], Qk)
+            _process_noise(dt, q_accel[k], q_angular[k], Qk, w3[6])
             _predict_cov(P, Fk, Qk, T)
             x[:] = xn
-            F_hist[k] = Fk
-            Q_hist[k] = Qk
         else:
             F_hist[0] = np.eye(n_e)
             Q_hist[0] = 0.0
@@ -459,7 +457,7 @@ def imu_steps(
                 for b in range(3):
                     R[a, b] = 0.0
                 R[a, a] = r_tri[k, j, a]
-            nis, st = _update(x, P, f_B[k, j], zp, Hc[:, :nc], cols[:nc], R, y, S, W)
+            nis, st = _update(x, P, f_B[k, j], zp, Hc, cols, nc, R, y, S, W, M, L, v)
             tri_zp[k, j] = zp
             tri_y[k, j] = y
             tri_S[k, j] = S
@@ -472,7 +470,7 @@ def imu_steps(
                 for b in range(3):
                     R[a, b] = 0.0
                 R[a, a] = r_gyr[k]
-            nis, st = _update(x, P, w_B[k], zp, Hc, cols, R, y, S, W)
+            nis, st = _update(x, P, w_B[k], zp, Hc, cols, 15, R, y, S, W, M, L, v)
             gyr_zp[k] = zp
             gyr_y[k] = y
             gyr_S[k] = S
@@ -483,7 +481,7 @@ def imu_steps(
             for a in range(3):
                 zp[a] = x[3 + a]
                 z[a] = zero3[a]
-            nis, st = _update(x, P, z, zp, H_zu, cols_zu, r_zupt, y, S, W)
+            nis, st = _update(x, P, z, zp, H_zu, cols_zu, 3, r_zupt, y, S, W, M, L, v)
             zu_zp[k] = zp
             zu_y[k] = y
             zu_S[k] = S
