@@ -373,7 +373,7 @@ def _triad(x, r, j, has_bias, zp, Hc, cols, w3):
 
 @njit(cache=True)
 def _gyro(x, zp, Hc, cols):
-    """``model.gyro_model`` into zp (3,), Hc (3, 15) over cols = ω (3), E (9), b_g (3) columns."""
+    """``model.gyro_model`` into zp (3,), Hc (3, 15) over cols = ω (3), E (9), b_g (3) columns; returns 15."""
     for i in range(3):
         s = 0.0
         for c in range(3):
@@ -391,30 +391,31 @@ def _gyro(x, zp, Hc, cols):
         cols[12 + c] = 27 + c
     for c in range(9):
         cols[3 + c] = 18 + c
+    return 15
 
 
 @njit(cache=True)
 def imu_steps(
-    k_a, k_b, x, P, t, g, q_accel, q_angular, lever, f_B, f_valid, r_tri, w_B, w_valid, r_gyr, hanging, r_zupt,
-    x_prior, x_post, P_prior, P_post, F_hist, Q_hist,
-    tri_zp, tri_y, tri_S, tri_nis, gyr_zp, gyr_y, gyr_S, gyr_nis, zu_zp, zu_y, zu_S, zu_nis,
+    k_a, k_b, x, P, t, g, q_accel, q_angular, lever, z_meas, valid, r_diag, r_zupt,
+    x_prior, x_post, P_prior, P_post, F_hist, Q_hist, inn_zp, inn_y, inn_S, inn_nis,
 ):  # fmt: skip
     """Run steps ``k_a..k_b`` (inclusive) of the kinematic drop-test EKF, IMU measurements only.
 
     State: x (n_x,), P (n_e, n_e) — the posterior of step ``k_a − 1`` (or the initial state when
     ``k_a = 0``) on entry, the posterior of ``k_b`` on return (in place).  Inputs per step k: t (n,)
-    [s]; g (3,) gravity [m/s², SPF]; q_accel, q_angular (n,) jerk PSDs; lever (n_t, 3) [m, body];
-    f_B (n, n_t, 3) [m/s²]; f_valid (n, n_t); r_tri (n, n_t, 3) the diagonal of each triad's R;
-    w_B (n, 3) [rad/s]; w_valid (n,); r_gyr (n,) the gyro's R / I; hanging (n,); r_zupt (3, 3).
-    Written per step: x_prior, x_post (n, n_x), P_prior, P_post, F_hist, Q_hist (n, n_e, n_e);
-    predicted measurement, innovation, innovation covariance and NIS of each triad (tri_*: (n, n_t,
-    3), (n, n_t, 3), (n, n_t, 3, 3), (n, n_t)), the gyro (gyr_*) and the zero-velocity update (zu_*).
-    Returns (status, step, channel): status 0 ok, 1 an S not positive definite, 2 a non-finite NIS,
-    at that step, channel j < n_t a triad, n_t the gyro, n_t + 1 the zero-velocity update.
+    [s]; g (3,) gravity [m/s², SPF]; q_accel, q_angular (n,) jerk PSDs; lever (n_t, 3) [m, body].
+    Channels c = 0..n_t+1: triad c < n_t, the gyro (c = n_t), the zero-velocity update (c = n_t + 1),
+    processed in that order: z_meas (n, n_t + 2, 3) measured [m/s², rad/s, m/s], valid (n, n_t + 2)
+    bool, r_diag (n, n_t + 2, 3) the diagonal of R (triads, gyro), r_zupt (3, 3) the zero-velocity R.
+    Written per step: x_prior, x_post (n, n_x), P_prior, P_post, F_hist, Q_hist (n, n_e, n_e); per
+    step and channel the predicted measurement inn_zp and innovation inn_y (n, n_t + 2, 3), its
+    covariance inn_S (n, n_t + 2, 3, 3) and NIS inn_nis (n, n_t + 2).
+    Returns (status, step, channel): status 0 ok, 1 an S not positive definite, 2 a non-finite NIS.
     """
     n_e = P.shape[0]
+    n_x = x.shape[0]
     n_t = lever.shape[0]
-    has_bias = x.shape[0] >= 31 + 3 * n_t
+    has_bias = n_x >= 31 + 3 * n_t
     xn = np.empty_like(x)
     T = np.empty((NC, n_e))
     W = np.empty((n_e, 12))
@@ -429,65 +430,59 @@ def imu_steps(
     R = np.zeros((3, 3))
     Hc = np.empty((3, 15))
     cols = np.empty(15, dtype=np.int64)
-    zero3 = np.zeros(3)
-    H_zu = np.zeros((3, 15))
-    cols_zu = np.zeros(15, dtype=np.int64)
-    for a in range(3):
-        H_zu[a, a] = 1.0
-        cols_zu[a] = 3 + a
     for k in range(k_a, k_b + 1):
+        Fk = F_hist[k]
+        Qk = Q_hist[k]
         if k > 0:
             dt = t[k] - t[k - 1]
-            Fk = F_hist[k]
-            Qk = Q_hist[k]
             _propagate(x, dt, g, xn, Fk, w3)
             _process_noise(dt, q_accel[k], q_angular[k], Qk, w3[6])
             _predict_cov(P, Fk, Qk, T)
-            x[:] = xn
+            for i in range(n_x):
+                x[i] = xn[i]
         else:
-            F_hist[0] = np.eye(n_e)
-            Q_hist[0] = 0.0
-        x_prior[k] = x
-        P_prior[k] = P
-        for j in range(n_t):
-            if not f_valid[k, j]:
+            for i in range(n_e):
+                for j in range(n_e):
+                    Fk[i, j] = 1.0 if i == j else 0.0
+                    Qk[i, j] = 0.0
+        _copy2(P, P_prior[k])
+        for i in range(n_x):
+            x_prior[k, i] = x[i]
+        for c in range(n_t + 2):
+            if not valid[k, c]:
                 continue
-            nc = _triad(x, lever[j], j, has_bias, zp, Hc, cols, w3)
+            if c < n_t:
+                nc = _triad(x, lever[c], c, has_bias, zp, Hc, cols, w3)
+            elif c == n_t:
+                nc = _gyro(x, zp, Hc, cols)
+            else:  # zero velocity while hanging: h(x) = v
+                nc = 3
+                for a in range(3):
+                    zp[a] = x[3 + a]
+                    cols[a] = 3 + a
+                    for b in range(3):
+                        Hc[a, b] = 1.0 if a == b else 0.0
             for a in range(3):
+                z[a] = z_meas[k, c, a]
                 for b in range(3):
-                    R[a, b] = 0.0
-                R[a, a] = r_tri[k, j, a]
-            nis, st = _update(x, P, f_B[k, j], zp, Hc, cols, nc, R, y, S, W, M, L, v)
-            tri_zp[k, j] = zp
-            tri_y[k, j] = y
-            tri_S[k, j] = S
-            tri_nis[k, j] = nis
-            if st:
-                return st, k, j
-        if w_valid[k]:
-            _gyro(x, zp, Hc, cols)
+                    R[a, b] = r_zupt[a, b] if c > n_t else (r_diag[k, c, a] if a == b else 0.0)
+            nis, st = _update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v)
             for a in range(3):
+                inn_zp[k, c, a] = zp[a]
+                inn_y[k, c, a] = y[a]
                 for b in range(3):
-                    R[a, b] = 0.0
-                R[a, a] = r_gyr[k]
-            nis, st = _update(x, P, w_B[k], zp, Hc, cols, 15, R, y, S, W, M, L, v)
-            gyr_zp[k] = zp
-            gyr_y[k] = y
-            gyr_S[k] = S
-            gyr_nis[k] = nis
+                    inn_S[k, c, a, b] = S[a, b]
+            inn_nis[k, c] = nis
             if st:
-                return st, k, n_t
-        if hanging[k]:
-            for a in range(3):
-                zp[a] = x[3 + a]
-                z[a] = zero3[a]
-            nis, st = _update(x, P, z, zp, H_zu, cols_zu, 3, r_zupt, y, S, W, M, L, v)
-            zu_zp[k] = zp
-            zu_y[k] = y
-            zu_S[k] = S
-            zu_nis[k] = nis
-            if st:
-                return st, k, n_t + 1
-        x_post[k] = x
-        P_post[k] = P
+                return st, k, c
+        _copy2(P, P_post[k])
+        for i in range(n_x):
+            x_post[k, i] = x[i]
     return 0, -1, -1
+
+
+@njit(cache=True)
+def _copy2(A, B):
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            B[i, j] = A[i, j]

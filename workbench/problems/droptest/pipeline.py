@@ -407,16 +407,17 @@ def _forward_compiled(
     P_post = np.empty((n, n_e, n_e))
     F_hist = np.empty((n, n_e, n_e))
     Q_hist = np.empty((n, n_e, n_e))
-    tri = [np.full((n, n_t, 3), np.nan), np.full((n, n_t, 3), np.nan), np.full((n, n_t, 3, 3), np.nan)]
-    tri.append(np.full((n, n_t), np.nan))
-    gyr = [np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan), np.full(n, np.nan)]
-    zu = [np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan), np.full(n, np.nan)]
+    n_c = n_t + 2  # channels: the triads, the gyro, the zero-velocity update
+    valid = np.concatenate([f_valid, w_valid[:, None], hanging[:, None]], axis=1)
+    z_meas = np.concatenate([tel.f_B, tel.w_B[:, None, :], np.zeros((n, 1, 3))], axis=1)
+    r_diag = np.concatenate([r_tri, np.repeat(r_gyr[:, None, None], 3, axis=2), np.zeros((n, 1, 3))], axis=1)
+    inn = (np.full((n, n_c, 3), np.nan), np.full((n, n_c, 3), np.nan), np.full((n, n_c, 3, 3), np.nan))
+    inn = (*inn, np.full((n, n_c), np.nan))
     args = (
         t, np.asarray(GRAVITY, dtype=float), np.ascontiguousarray(q_accel, dtype=float),
         np.ascontiguousarray(q_angular, dtype=float), np.ascontiguousarray(tel.lever_arms_B, dtype=float),
-        np.ascontiguousarray(tel.f_B, dtype=float), f_valid, r_tri, np.ascontiguousarray(tel.w_B, dtype=float),
-        w_valid, r_gyr, hanging, np.ascontiguousarray(r_zupt, dtype=float),
-        x_prior, x_post, P_prior, P_post, F_hist, Q_hist, *tri, *gyr, *zu,
+        np.ascontiguousarray(z_meas, dtype=float), valid, np.ascontiguousarray(r_diag, dtype=float),
+        np.ascontiguousarray(r_zupt, dtype=float), x_prior, x_post, P_prior, P_post, F_hist, Q_hist, *inn,
     )  # fmt: skip
     names = [*tel.triads, "gyro", "zupt"]
     rows: dict[str, list[tuple]] = {}
@@ -446,16 +447,13 @@ def _forward_compiled(
             P_post[k_b] = P
         k_a = k_b + 1
     innov: dict[str, InnovationHistory] = {}
-    valid = [*(f_valid[:, j] for j in range(n_t)), w_valid, hanging]
-    zs = [*(tel.f_B[:, j] for j in range(n_t)), tel.w_B, np.zeros((n, 3))]
-    recs = [*((tri[0][:, j], tri[1][:, j], tri[2][:, j], tri[3][:, j]) for j in range(n_t)), gyr, zu]
     for c, name in enumerate(names):
-        ks = np.flatnonzero(valid[c])
+        ks = np.flatnonzero(valid[:, c])
         if ks.size:
             first[name] = (int(ks[0]), c)
-            zp, y, S, nis = (a[ks] for a in recs[c])
+            zp, y, S, nis = (a[ks, c] for a in inn)
             innov[name] = InnovationHistory(
-                t=t[ks], step=ks.astype(int), z=np.array(zs[c][ks], dtype=float), z_pred=zp, y=y, S=S, nis=nis,
+                t=t[ks], step=ks.astype(int), z=z_meas[ks, c], z_pred=zp, y=y, S=S, nis=nis,
                 accepted=np.ones(ks.size, dtype=bool),
             )  # fmt: skip
     for name, r in rows.items():
