@@ -86,7 +86,7 @@ def test_models_and_joseph_update(x, P, channel):
     z = z_ref + np.array([0.4, -0.2, 0.1])
     ref = update(x, P, z, lambda s: z_ref, R, dt.layout_for(N_T), H=H_ref)
     xk, Pk, y, S = x.copy(), P.copy(), np.empty(3), np.empty((3, 3))
-    W, M, L, v = np.empty((N_E, 12)), np.empty((N_E, N_E)), np.zeros((3, 3)), np.empty((4, N_E))
+    W, M, L, v = np.empty((9, N_E)), np.empty((N_E, N_E)), np.zeros((3, 3)), np.empty((4, N_E))
     nis, status = kn._update(xk, Pk, z, zp, Hc, cols, nc, R, y, S, W, M, L, v)
     assert status == 0
     _close(y, ref.y)

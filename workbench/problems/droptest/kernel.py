@@ -209,17 +209,17 @@ def _predict_cov(P, F, Q, T):
 
 @njit(cache=True)
 def _update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
-    """Sequential Joseph-form update by the measurement of size m = 3 with H non-zero in ``cols[:nc]``.
+    """Sequential Joseph-form update by a measurement of size 3 with H non-zero in ``cols[:nc]``.
 
     x (n_x,) and P (n_e, n_e) updated in place; z, zp (3,), Hc (3, ≥ nc), R (3, 3); writes y (3,),
     S (3, 3); returns (nis, status) with status 0 ok, 1 S not positive definite, 2 non-finite NIS.
-    Scratch: W (n_e, 4 m), M (n_e, n_e), L (m, m), v (4, n_e).
+    Scratch: W (9, n_e) holding (P Hᵀ)ᵀ, Kᵀ, (M Hᵀ − K R)ᵀ; M (n_e, n_e); L (3, 3); v (4, n_e).
     """
     n_e = P.shape[0]
-    m = z.shape[0]
-    PHt = W[:, 0:m]
-    K = W[:, m : 2 * m]
-    MHt = W[:, 2 * m : 3 * m]
+    m = 3
+    PHt = W[0:3]  # (P Hᵀ)ᵀ, rows contiguous: the n_e-long loops below vectorise
+    K = W[3:6]  # Kᵀ
+    D = W[6:9]  # (M Hᵀ − K R)ᵀ
     for a in range(m):
         y[a] = z[a] - zp[a]
     for i in range(n_e):
@@ -227,14 +227,14 @@ def _update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
             s = 0.0
             for c in range(nc):
                 s += P[i, cols[c]] * Hc[a, c]
-            PHt[i, a] = s
+            PHt[a, i] = s
     for a in range(m):
         for b in range(m):
             s = 0.0
             for c in range(nc):
-                s += Hc[a, c] * PHt[cols[c], b]
+                s += Hc[a, c] * PHt[b, cols[c]]
             S[a, b] = s + R[a, b]
-    # Cholesky S = L Lᵀ (lower), m ≤ 3
+    # Cholesky S = L Lᵀ (lower)
     for j in range(m):
         s = S[j, j]
         for c in range(j):
@@ -258,22 +258,18 @@ def _update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
     # K = P Hᵀ S⁻¹ row by row
     for i in range(n_e):
         for a in range(m):
-            r[a] = PHt[i, a]
+            r[a] = PHt[a, i]
         _cho_solve(L, r, kr)
         for a in range(m):
-            K[i, a] = kr[a]
+            K[a, i] = kr[a]
     for i in range(n_e):
-        s = 0.0
-        for a in range(m):
-            s += K[i, a] * y[a]
-        dx[i] = s
+        dx[i] = K[0, i] * y[0] + K[1, i] * y[1] + K[2, i] * y[2]
     # Joseph form: M = P − K (P Hᵀ)ᵀ, P⁺ = M − (M Hᵀ − K R) Kᵀ, symmetrised
+    P0, P1, P2 = PHt[0], PHt[1], PHt[2]
     for i in range(n_e):
+        k0, k1, k2 = K[0, i], K[1, i], K[2, i]
         for j in range(n_e):
-            s = 0.0
-            for a in range(m):
-                s += K[i, a] * PHt[j, a]
-            M[i, j] = P[i, j] - s
+            M[i, j] = P[i, j] - (k0 * P0[j] + k1 * P1[j] + k2 * P2[j])
     for i in range(n_e):
         for a in range(m):
             s = 0.0
@@ -281,19 +277,18 @@ def _update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
                 s += M[i, cols[c]] * Hc[a, c]
             t = 0.0
             for b in range(m):
-                t += K[i, b] * R[b, a]
-            MHt[i, a] = s - t
+                t += K[b, i] * R[b, a]
+            D[a, i] = s - t
+    K0, K1, K2 = K[0], K[1], K[2]
     for i in range(n_e):
+        d0, d1, d2 = D[0, i], D[1, i], D[2, i]
         for j in range(n_e):
-            s = 0.0
-            for a in range(m):
-                s += MHt[i, a] * K[j, a]
-            P[i, j] = M[i, j] - s
+            P[i, j] = M[i, j] - (d0 * K0[j] + d1 * K1[j] + d2 * K2[j])
     for i in range(n_e):
         for j in range(i + 1, n_e):
-            v = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = v
-            P[j, i] = v
+            u = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = u
+            P[j, i] = u
     _boxplus(x, dx)
     return nis, 0
 
@@ -418,7 +413,7 @@ def imu_steps(
     has_bias = n_x >= 31 + 3 * n_t
     xn = np.empty_like(x)
     T = np.empty((NC, n_e))
-    W = np.empty((n_e, 12))
+    W = np.empty((9, n_e))
     M = np.empty((n_e, n_e))
     L = np.zeros((3, 3))
     v = np.empty((4, n_e))
