@@ -10,7 +10,9 @@ Stages, each yielded as a frozen dataclass so that the recorder (or a test) can 
 3. :class:`FilterStage` ``forward`` — the REDLand EKF (19 states of the paper + gyro error matrix and
    bias + per-triad accelerometer biases; kinematic or dynamic mode), the
    four triads through their lever arms, the gyro, zero-velocity updates while hanging, optional
-   odometer / radar-gun ranges; process noise raised on rapid acceleration changes.
+   odometer / radar-gun ranges; process noise raised on rapid acceleration changes.  In kinematic
+   mode the IMU part of every step runs in the compiled recursion :mod:`.kernel` (numba; the
+   generic :func:`~workbench.estimation.ekf.run_filter` path is kept as ``engine="reference"``).
 4. :class:`FilterStage` ``smoothed`` — RTS smoother over the forward pass.
 5. :class:`StrokeStage` — at every step the distance from the ramp to the closest point of the
    lander mesh with its linearised 1σ (checked by sampling the posterior at max stroke), the
