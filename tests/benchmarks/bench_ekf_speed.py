@@ -47,7 +47,7 @@ from bench_droptest import baseline_filter  # noqa: E402 (beside this script)
 from bench_json import write_benchmark_json  # noqa: E402
 
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass  # noqa: E402
-from workbench.estimation.smoother import SmoothedPass, _active, _check_pd, _not_pd, rts_smooth  # noqa: E402
+from workbench.estimation.smoother import SmoothedPass, rts_smooth  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.droptest import model as rl  # noqa: E402
 from workbench.problems.droptest import pipeline as dt  # noqa: E402
@@ -57,8 +57,30 @@ from workbench.problems.droptest.synthetic import synthesize_droptest  # noqa: E
 SCEN = ROOT / "assets" / "scenarios" / "droptest.toml"
 
 
+def _active(A: np.ndarray) -> np.ndarray | None:
+    """Copy of the smoother's check (private there): indices with positive variance, None if all."""
+    dg = np.diag(A)
+    if np.all(dg > 0.0):
+        return None
+    zero = dg == 0.0
+    if np.any(dg < 0.0) or np.any(A[zero] != 0.0) or not np.all(np.isfinite(A)):
+        raise ValueError("covariance not positive semi-definite")
+    return np.flatnonzero(~zero)
+
+
+def _check_pd(A: np.ndarray) -> None:
+    """Copy of the smoother's per-step positive-definiteness check (a Cholesky factorisation)."""
+    if not np.all(np.isfinite(A)):
+        raise ValueError("smoothed covariance not finite")
+    act = _active(A)
+    _, info = lapack.dpotrf(A if act is None else A[np.ix_(act, act)], lower=1)
+    if info != 0:
+        raise ValueError(f"smoothed covariance not positive definite (potrf info={info})")
+
+
 def rts_smooth_previous(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPass:
-    """The smoother before issue #14 (commit d8f095f), verbatim: the named baseline.
+    """The smoother before issue #14 (commit d8f095f): the named baseline, verbatim but for the
+    error messages of its checks (same checks, copied above).
 
     Same formulas and outputs as :func:`workbench.estimation.smoother.rts_smooth` (x (n, n_x),
     P and G (n, n_e, n_e)); per step ``F P_post``, a Cholesky factor and ``dpotrs`` with the BLAS
@@ -73,23 +95,23 @@ def rts_smooth_previous(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPa
         return SmoothedPass(fp.t, xs, Ps, G)
     xs[-1] = fp.x_post[-1]
     Ps[-1] = fp.P_post[-1]
-    _check_pd(Ps[-1], n - 1, fp.t)
+    _check_pd(Ps[-1])
     for k in range(n - 2, -1, -1):
         Pp = fp.P_prior[k + 1]
         d = np.sqrt(np.diag(Pp))
-        act = _active(Pp, k + 1, fp.t)
+        act = _active(Pp)
         rhs = fp.F[k + 1] @ fp.P_post[k]
         if act is None:
             c, info = lapack.dpotrf(Pp / np.outer(d, d), lower=1)
             if info != 0:
-                raise _not_pd(f"predicted covariance P_prior[{k + 1}]", fp.t[k + 1], info, Pp)
+                raise ValueError(f"predicted covariance P_prior[{k + 1}] not positive definite")
             Gt, _ = lapack.dpotrs(c, rhs / d[:, None], lower=1)
             Gt = Gt / d[:, None]
         else:
             da = d[act]
             c, info = lapack.dpotrf(Pp[np.ix_(act, act)] / np.outer(da, da), lower=1)
             if info != 0:
-                raise _not_pd(f"predicted covariance P_prior[{k + 1}]", fp.t[k + 1], info, Pp)
+                raise ValueError(f"predicted covariance P_prior[{k + 1}] not positive definite")
             Gt = np.zeros_like(rhs)
             sol, _ = lapack.dpotrs(c, rhs[act] / da[:, None], lower=1)
             Gt[act] = sol / da[:, None]
@@ -98,7 +120,7 @@ def rts_smooth_previous(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPa
         xs[k] = layout.boxplus(fp.x_post[k], dx)
         A = fp.P_post[k] + Gk @ (Ps[k + 1] - Pp) @ Gt
         A = 0.5 * (A + A.T)
-        _check_pd(A, k, fp.t)
+        _check_pd(A)
         Ps[k] = A
         G[k] = Gk
     return SmoothedPass(fp.t, xs, Ps, G)

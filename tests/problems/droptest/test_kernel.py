@@ -52,16 +52,16 @@ def test_transition_and_process_noise(x, P):
     dt_ = 1e-3
     xn, F = np.empty(N_X), np.empty((N_E, N_E))
     w3 = np.empty((8, 3, 3))
-    kn._propagate(x, dt_, g, xn, F, w3)
+    kn.propagate_kinematic(x, dt_, g, xn, F, w3)
     xr, Fr = rl.propagate(x, dt_, g)
     _close(xn, xr)
     _close(F, Fr)
     assert np.array_equal(F[kn.NC :, :], np.eye(N_E)[kn.NC :, :]) and not F[: kn.NC, kn.NC :].any()
     Q = np.empty((N_E, N_E))
-    kn._process_noise(dt_, 3.0, 40.0, Q, w3[6])
+    kn.process_noise_into(dt_, 3.0, 40.0, Q, w3[6])
     _close(Q, rl.process_noise(dt_, 3.0, 40.0, N_E))
     Pk = P.copy()
-    kn._predict_cov(Pk, F, Q, np.empty((kn.NC, N_E)))
+    kn.predict_covariance(Pk, F, Q, np.empty((kn.NC, N_E)))
     A = Fr @ P @ Fr.T + Q
     _close(Pk, 0.5 * (A + A.T))
     assert np.array_equal(Pk, Pk.T)
@@ -72,11 +72,11 @@ def test_models_and_joseph_update(x, P, channel):
     zp, Hc, cols, w3 = np.empty(3), np.empty((3, 15)), np.empty(15, dtype=np.int64), np.empty((8, 3, 3))
     r = np.array([0.32, -0.185, -0.34])
     if channel == "triad":
-        nc = kn._triad(x, r, 2, True, zp, Hc, cols, w3)
+        nc = kn.triad_into(x, r, 2, True, zp, Hc, cols, w3)
         z_ref, H_ref = rl.triad_model(x, r, 2)
     else:
         nc = 15
-        kn._gyro(x, zp, Hc, cols)
+        kn.gyro_into(x, zp, Hc, cols)
         z_ref, H_ref = rl.gyro_model(x)
     H = np.zeros((3, N_E))
     H[:, cols[:nc]] = Hc[:, :nc]
@@ -87,7 +87,7 @@ def test_models_and_joseph_update(x, P, channel):
     ref = update(x, P, z, lambda s: z_ref, R, dt.layout_for(N_T), H=H_ref)
     xk, Pk, y, S = x.copy(), P.copy(), np.empty(3), np.empty((3, 3))
     W, M, L, v = np.empty((9, N_E)), np.empty((N_E, N_E)), np.zeros((3, 3)), np.empty((4, N_E))
-    nis, status = kn._update(xk, Pk, z, zp, Hc, cols, nc, R, y, S, W, M, L, v)
+    nis, status = kn.joseph_update(xk, Pk, z, zp, Hc, cols, nc, R, y, S, W, M, L, v)
     assert status == 0
     _close(y, ref.y)
     _close(S, ref.S)
@@ -95,7 +95,7 @@ def test_models_and_joseph_update(x, P, channel):
     _close(xk, ref.x_post)
     _close(Pk, ref.P_post)
     # a non-positive-definite S is reported, not factorised
-    assert kn._update(x.copy(), P.copy(), z, zp, Hc, cols, nc, -1e6 * np.eye(3), y, S, W, M, L, v)[1] == 1
+    assert kn.joseph_update(x.copy(), P.copy(), z, zp, Hc, cols, nc, -1e6 * np.eye(3), y, S, W, M, L, v)[1] == 1
 
 
 def _engines_agree(sc, tel, init, lander):

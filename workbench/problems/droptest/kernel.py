@@ -27,7 +27,16 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["imu_steps", "NC"]
+__all__ = [
+    "NC",
+    "imu_steps",
+    "propagate_kinematic",
+    "process_noise_into",
+    "predict_covariance",
+    "joseph_update",
+    "triad_into",
+    "gyro_into",
+]
 
 #: size of the block of F that is not the identity (p, v, a, θ, ω, α)
 NC = 18
@@ -77,8 +86,10 @@ def _mv3(A, v, out):
 
 
 @njit(cache=True)
-def _propagate(x, dt, g, xn, F, w3):
-    """Kinematic ``model.propagate`` into xn (n_x,) and F (n_e, n_e); w3 (8, 3, 3) scratch."""
+def propagate_kinematic(x, dt, g, xn, F, w3):
+    """Kinematic :func:`workbench.problems.droptest.model.propagate` (no bungee) of x (n_x,) over
+    dt [s] with gravity g (3,) [m/s², SPF], written into xn (n_x,) and the error transition F
+    (n_e, n_e) (body-frame attitude error); w3 (8, 3, 3) scratch (entries 0–5 and 7 used)."""
     C, CaX, Sa, Rt, Jr, SJ = w3[0], w3[1], w3[2], w3[3], w3[4], w3[5]
     v3 = w3[7]
     for i in range(x.shape[0]):
@@ -160,8 +171,10 @@ def _propagate(x, dt, g, xn, F, w3):
 
 
 @njit(cache=True)
-def _process_noise(dt, qa, qw, Q, B3):
-    """``model.process_noise`` into Q (n_e, n_e) (zero outside the (p, v, a), (θ, ω, α) chains)."""
+def process_noise_into(dt, qa, qw, Q, B3):
+    """:func:`workbench.problems.droptest.model.process_noise` into Q (n_e, n_e): white jerk PSD
+    qa [m²/s⁵] and angular jerk PSD qw [rad²/s⁵] over dt [s] (zero outside the (p, v, a) and
+    (θ, ω, α) chains); B3 (3, 3) scratch."""
     n_e = Q.shape[0]
     for i in range(n_e):
         for j in range(n_e):
@@ -178,8 +191,9 @@ def _process_noise(dt, qa, qw, Q, B3):
 
 
 @njit(cache=True)
-def _predict_cov(P, F, Q, T):
-    """``P ← ½(A + Aᵀ)``, ``A = F P Fᵀ + Q``, F the identity outside its NC × NC block; T (NC, n_e) scratch."""
+def predict_covariance(P, F, Q, T):
+    """``P ← ½(A + Aᵀ)``, ``A = F P Fᵀ + Q`` in place: P, F, Q (n_e, n_e) error-state units, F the
+    identity outside its first NC × NC block (as from :func:`propagate_kinematic`); T (NC, n_e) scratch."""
     n_e = P.shape[0]
     for i in range(NC):
         for j in range(n_e):
@@ -208,7 +222,7 @@ def _predict_cov(P, F, Q, T):
 
 
 @njit(cache=True)
-def _update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
+def joseph_update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
     """Sequential Joseph-form update by a measurement of size 3 with H non-zero in ``cols[:nc]``.
 
     x (n_x,) and P (n_e, n_e) updated in place; z, zp (3,), Hc (3, ≥ nc), R (3, 3); writes y (3,),
@@ -329,8 +343,11 @@ def _boxplus(x, dx):
 
 
 @njit(cache=True)
-def _triad(x, r, j, has_bias, zp, Hc, cols, w3):
-    """``model.triad_model`` into zp (3,), Hc (3, 12) over cols (12,) = a, ω, α, b_j columns."""
+def triad_into(x, r, j, has_bias, zp, Hc, cols, w3):
+    """:func:`workbench.problems.droptest.model.triad_model` of triad j at lever arm r (3,) [m, body]:
+    predicted specific force zp (3,) [m/s², body] and the non-zero columns of H, Hc[:, :nc] over the
+    error-state indices cols[:nc] (a, ω, α, and b_j when ``has_bias``); returns nc (12 or 9).
+    w3 (8, 3, 3) scratch (entries 0–4)."""
     Sw, Sr, Swr, SS = w3[0], w3[1], w3[2], w3[3]
     v = w3[4]
     _skew(x[13:16], Sw)
@@ -367,8 +384,10 @@ def _triad(x, r, j, has_bias, zp, Hc, cols, w3):
 
 
 @njit(cache=True)
-def _gyro(x, zp, Hc, cols):
-    """``model.gyro_model`` into zp (3,), Hc (3, 15) over cols = ω (3), E (9), b_g (3) columns; returns 15."""
+def gyro_into(x, zp, Hc, cols):
+    """:func:`workbench.problems.droptest.model.gyro_model`: predicted rate zp (3,) [rad/s, gyro axes]
+    and the non-zero columns of H, Hc (3, 15) over the error-state indices cols (15,) = ω (3),
+    E (9), b_g (3); returns 15."""
     for i in range(3):
         s = 0.0
         for c in range(3):
@@ -430,9 +449,9 @@ def imu_steps(
         Qk = Q_hist[k]
         if k > 0:
             dt = t[k] - t[k - 1]
-            _propagate(x, dt, g, xn, Fk, w3)
-            _process_noise(dt, q_accel[k], q_angular[k], Qk, w3[6])
-            _predict_cov(P, Fk, Qk, T)
+            propagate_kinematic(x, dt, g, xn, Fk, w3)
+            process_noise_into(dt, q_accel[k], q_angular[k], Qk, w3[6])
+            predict_covariance(P, Fk, Qk, T)
             for i in range(n_x):
                 x[i] = xn[i]
         else:
@@ -447,9 +466,9 @@ def imu_steps(
             if not valid[k, c]:
                 continue
             if c < n_t:
-                nc = _triad(x, lever[c], c, has_bias, zp, Hc, cols, w3)
+                nc = triad_into(x, lever[c], c, has_bias, zp, Hc, cols, w3)
             elif c == n_t:
-                nc = _gyro(x, zp, Hc, cols)
+                nc = gyro_into(x, zp, Hc, cols)
             else:  # zero velocity while hanging: h(x) = v
                 nc = 3
                 for a in range(3):
@@ -461,7 +480,7 @@ def imu_steps(
                 z[a] = z_meas[k, c, a]
                 for b in range(3):
                     R[a, b] = r_zupt[a, b] if c > n_t else (r_diag[k, c, a] if a == b else 0.0)
-            nis, st = _update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v)
+            nis, st = joseph_update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v)
             for a in range(3):
                 inn_zp[k, c, a] = zp[a]
                 inn_y[k, c, a] = y[a]
