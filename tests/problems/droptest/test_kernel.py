@@ -120,6 +120,12 @@ def test_engines_agree_on_the_drop(droptest_result, droptest_run):
     assert {"gyro", "zupt", *r.telemetry.triads} <= set(fp.innovations)
 
 
+def test_engines_agree_in_dynamic_mode(droptest_result, droptest_run):
+    r = droptest_result
+    sc = droptest_run.scenario.with_overrides({"filter.mode": "dynamic"})
+    _engines_agree(sc, r.telemetry, r.initial, load_lander(sc.path_of("vehicle.lander")))
+
+
 @pytest.mark.slow
 def test_engines_agree_with_ranging(cli_run):
     run = cli_run("droptest_ranging")

@@ -31,6 +31,8 @@ __all__ = [
     "NC",
     "imu_steps",
     "propagate_kinematic",
+    "bungee_accel",
+    "bungee_step",
     "process_noise_into",
     "predict_covariance",
     "joseph_update",
@@ -168,6 +170,87 @@ def propagate_kinematic(x, dt, g, xn, F, w3):
             F[6 + i, 6 + j] = Rt[i, j]
             F[6 + i, 12 + j] = SJ[i, j] * dt
             F[6 + i, 15 + j] = SJ[i, j] * h2
+
+
+@njit(cache=True)
+def bungee_accel(p, q, bungee, coeffs, a, J, w):
+    """:meth:`workbench.problems.droptest.model.BungeeModel.accel`: bungee acceleration a (3,)
+    [m/s², SPF] at CM position p (3,) [m, SPF] and attitude q (4,), and ∂a/∂p J (3, 3) [1/s²];
+    ``bungee``, ``coeffs`` as in :func:`imu_steps`; w (3, 3) scratch."""
+    C = w
+    _dcm(q, C)
+    d0 = bungee[1] - (p[0] + (C[0, 0] * bungee[4] + C[0, 1] * bungee[5] + C[0, 2] * bungee[6]))
+    d1 = bungee[2] - (p[1] + (C[1, 0] * bungee[4] + C[1, 1] * bungee[5] + C[1, 2] * bungee[6]))
+    d2 = bungee[3] - (p[2] + (C[2, 0] * bungee[4] + C[2, 1] * bungee[5] + C[2, 2] * bungee[6]))
+    L = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    u0, u1, u2 = d0 / L, d1 / L, d2 / L
+    s = L - bungee[7]
+    if s <= 0.0:
+        for i in range(3):
+            a[i] = 0.0
+            for j in range(3):
+                J[i, j] = 0.0
+        return
+    f = 0.0
+    fp = 0.0
+    for k in range(coeffs.shape[0]):
+        f += coeffs[k] * s ** (k + 1)
+        fp += (k + 1) * coeffs[k] * s**k
+    kk = bungee[8]
+    u = (u0, u1, u2)
+    for i in range(3):
+        a[i] = kk * f * u[i]
+        for j in range(3):
+            uu = u[i] * u[j]
+            J[i, j] = kk * (-fp * uu - f * ((1.0 if i == j else 0.0) - uu) / L)
+
+
+@njit(cache=True)
+def bungee_step(x, xn, F, dt, bungee, coeffs, bw):
+    """The bungee part of ``model.propagate`` (dynamic mode, between release and cut): adds the
+    change of bungee acceleration over the step, rotated to the new body frame, to xn[6:9] and its
+    Jacobian to F[a, v] and F[a, a] (n_e, n_e); x (n_x,) the state at the step's start, xn (n_x,)
+    after :func:`propagate_kinematic` (its a_B before the bungee); bw (8, 3, 3) scratch."""
+    a0, a1, J0, J1, C, Cn, A = bw[0, 0], bw[0, 1], bw[1], bw[2], bw[3], bw[4], bw[5]
+    da = bw[0, 2]
+    bungee_accel(x[0:3], x[9:13], bungee, coeffs, a0, J0, bw[6])
+    bungee_accel(xn[0:3], xn[9:13], bungee, coeffs, a1, J1, bw[6])
+    _dcm(x[9:13], C)
+    _dcm(xn[9:13], Cn)
+    for i in range(3):
+        da[i] = a1[i] - a0[i]
+    for i in range(3):
+        xn[6 + i] = xn[6 + i] + (Cn[0, i] * da[0] + Cn[1, i] * da[1] + Cn[2, i] * da[2])
+    for i in range(3):  # A = Cnᵀ J1
+        for j in range(3):
+            A[i, j] = Cn[0, i] * J1[0, j] + Cn[1, i] * J1[1, j] + Cn[2, i] * J1[2, j]
+    h2 = 0.5 * dt * dt
+    for i in range(3):
+        for j in range(3):
+            F[6 + i, 3 + j] += A[i, j] * dt
+            F[6 + i, 6 + j] += (A[i, 0] * C[0, j] + A[i, 1] * C[1, j] + A[i, 2] * C[2, j]) * h2
+
+
+@njit(cache=True)
+def _bungee_jump(xn, bungee, coeffs, g, sign, bw):
+    """Release (sign +1: a_B += C_B_I (a_bungee + g)) or cut (sign −1: a_B −= C_B_I a_bungee) at xn."""
+    a, J, Cn, v = bw[0, 0], bw[1], bw[4], bw[0, 1]
+    bungee_accel(xn[0:3], xn[9:13], bungee, coeffs, a, J, bw[6])
+    for i in range(3):
+        v[i] = a[i] + g[i] if sign > 0.0 else a[i]
+    # quat_rotate(conj(q), v): u = −q_vec, w = q_w; t = 2 u × v; v + w t + u × t
+    ux, uy, uz, w = -xn[9], -xn[10], -xn[11], xn[12]
+    tx = 2.0 * (uy * v[2] - uz * v[1])
+    ty = 2.0 * (uz * v[0] - ux * v[2])
+    tz = 2.0 * (ux * v[1] - uy * v[0])
+    rx = v[0] + w * tx + (uy * tz - uz * ty)
+    ry = v[1] + w * ty + (uz * tx - ux * tz)
+    rz = v[2] + w * tz + (ux * ty - uy * tx)
+    if sign > 0.0:
+        xn[6], xn[7], xn[8] = xn[6] + rx, xn[7] + ry, xn[8] + rz
+    else:
+        xn[6], xn[7], xn[8] = xn[6] - rx, xn[7] - ry, xn[8] - rz
+    Cn[0, 0] = 0.0
 
 
 @njit(cache=True)
@@ -410,7 +493,7 @@ def gyro_into(x, zp, Hc, cols):
 
 @njit(cache=True)
 def imu_steps(
-    k_a, k_b, x, P, t, g, q_accel, q_angular, lever, z_meas, valid, r_diag, r_zupt,
+    k_a, k_b, x, P, t, g, q_accel, q_angular, lever, z_meas, valid, r_diag, r_zupt, bungee, coeffs,
     x_prior, x_post, P_prior, P_post, F_hist, Q_hist, inn_zp, inn_y, inn_S, inn_nis,
 ):  # fmt: skip
     """Run steps ``k_a..k_b`` (inclusive) of the kinematic drop-test EKF, IMU measurements only.
@@ -424,6 +507,11 @@ def imu_steps(
     Written per step: x_prior, x_post (n, n_x), P_prior, P_post, F_hist, Q_hist (n, n_e, n_e); per
     step and channel the predicted measurement inn_zp and innovation inn_y (n, n_t + 2, 3), its
     covariance inn_S (n, n_t + 2, 3, 3) and NIS inn_nis (n, n_t + 2).
+    Dynamic mode (``bungee[0] > 0``): ``bungee`` (13,) = [on, anchor (3) [m, SPF], attachment (3)
+    [m, body], rest length [m], count / mass [1/kg], release time, cut time [s], unused (2)] and
+    ``coeffs`` (n_c,) the per-bungee force polynomial [N/m^k] (:class:`~workbench.problems.droptest.model.BungeeModel`):
+    the bungee increment between release and cut (:func:`bungee_step`) and the force steps at
+    release and cut, as in ``pipeline.forward_pass``'s transition; ``bungee[0] = 0``: kinematic.
     Returns (status, step, channel): status 0 ok, 1 an S not positive definite, 2 a non-finite NIS.
     """
     n_e = P.shape[0]
@@ -437,6 +525,7 @@ def imu_steps(
     L = np.zeros((3, 3))
     v = np.empty((4, n_e))
     w3 = np.empty((8, 3, 3))
+    bw = np.empty((8, 3, 3))
     zp = np.empty(3)
     z = np.empty(3)
     y = np.empty(3)
@@ -450,6 +539,14 @@ def imu_steps(
         if k > 0:
             dt = t[k] - t[k - 1]
             propagate_kinematic(x, dt, g, xn, Fk, w3)
+            if bungee[0] > 0.0:
+                t0, t1 = t[k - 1], t[k]
+                if bungee[11] <= t0 and t1 <= bungee[12]:
+                    bungee_step(x, xn, Fk, dt, bungee, coeffs, bw)
+                if t0 < bungee[11] <= t1:  # the release rope lets go: a jumps from -g to the bungee pull
+                    _bungee_jump(xn, bungee, coeffs, g, 1.0, bw)
+                if t0 < bungee[12] <= t1:  # the hammer hits the nail: the bungee pull vanishes
+                    _bungee_jump(xn, bungee, coeffs, g, -1.0, bw)
             process_noise_into(dt, q_accel[k], q_angular[k], Qk, w3[6])
             predict_covariance(P, Fk, Qk, T)
             for i in range(n_x):

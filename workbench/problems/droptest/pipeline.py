@@ -10,9 +10,9 @@ Stages, each yielded as a frozen dataclass so that the recorder (or a test) can 
 3. :class:`FilterStage` ``forward`` — the REDLand EKF (19 states of the paper + gyro error matrix and
    bias + per-triad accelerometer biases; kinematic or dynamic mode), the
    four triads through their lever arms, the gyro, zero-velocity updates while hanging, optional
-   odometer / radar-gun ranges; process noise raised on rapid acceleration changes.  In kinematic
-   mode the IMU part of every step runs in the compiled recursion :mod:`.kernel` (numba; the
-   generic :func:`~workbench.estimation.ekf.run_filter` path is kept as ``engine="reference"``).
+   odometer / radar-gun ranges; process noise raised on rapid acceleration changes.  The IMU part
+   of every step runs in the compiled recursion :mod:`.kernel` (numba; the generic
+   :func:`~workbench.estimation.ekf.run_filter` path is kept as ``engine="reference"``).
 4. :class:`FilterStage` ``smoothed`` — RTS smoother over the forward pass.
 5. :class:`StrokeStage` — at every step the distance from the ramp to the closest point of the
    lander mesh with its linearised 1σ (checked by sampling the posterior at max stroke), the
@@ -271,7 +271,7 @@ def forward_pass(
     through the compiled recursion :func:`workbench.problems.droptest.kernel.imu_steps` (ranging
     measurements still through :func:`~workbench.estimation.ekf.apply_measurements`); ``"reference"``
     the generic :func:`~workbench.estimation.ekf.run_filter` with the Python models.  The two agree
-    to floating-point noise; the dynamic mode (bungee) always takes the reference path.
+    to floating-point noise, in both modes.
     """
     cfg = config_for(scenario)
     mode = cfg.mode
@@ -352,8 +352,15 @@ def forward_pass(
     engine = FILTER_ENGINE if engine is None else engine
     if engine not in ("numba", "reference"):
         raise ValueError(f"forward_pass: engine must be 'numba' or 'reference', got {engine!r}")
-    if engine == "numba" and bungee is None:  # the kinematic filter: the compiled recursion
-        fp = _forward_compiled(tel, init, q_accel, q_angular, v_acc, v_gyr, r_sm, r_zupt, ranging)
+    if engine == "numba":  # the compiled recursion
+        bp = np.zeros(13)
+        coeffs = np.zeros(1)
+        if bungee is not None:
+            bp[0] = 1.0
+            bp[1:4], bp[4:7] = bungee.anchor_I, bungee.attach_B
+            bp[7], bp[8], bp[11], bp[12] = bungee.rest_length, bungee.count / bungee.mass, t_rel, t_cut
+            coeffs = np.array(bungee.coeffs, dtype=float)
+        fp = _forward_compiled(tel, init, q_accel, q_angular, v_acc, v_gyr, r_sm, r_zupt, ranging, bp, coeffs)
     else:
         fp = run_filter(
             init.x0,
@@ -382,8 +389,10 @@ def _forward_compiled(
     r_sm: np.ndarray,
     r_zupt: np.ndarray,
     ranging: dict[int, list[Measurement]],
+    bungee: np.ndarray,
+    coeffs: np.ndarray,
 ) -> ForwardPass:
-    """The kinematic forward pass by :func:`workbench.problems.droptest.kernel.imu_steps`, the steps
+    """The forward pass by :func:`workbench.problems.droptest.kernel.imu_steps`, the steps
     with ranging measurements split so that those are applied after the step's IMU updates (the
     order of the reference path); the same :class:`ForwardPass` as :func:`run_filter` would record."""
     from workbench.problems.droptest.kernel import imu_steps
@@ -419,7 +428,8 @@ def _forward_compiled(
         t, np.asarray(GRAVITY, dtype=float), np.ascontiguousarray(q_accel, dtype=float),
         np.ascontiguousarray(q_angular, dtype=float), np.ascontiguousarray(tel.lever_arms_B, dtype=float),
         np.ascontiguousarray(z_meas, dtype=float), valid, np.ascontiguousarray(r_diag, dtype=float),
-        np.ascontiguousarray(r_zupt, dtype=float), x_prior, x_post, P_prior, P_post, F_hist, Q_hist, *inn,
+        np.ascontiguousarray(r_zupt, dtype=float), bungee, coeffs, x_prior, x_post, P_prior, P_post, F_hist, Q_hist,
+        *inn,
     )  # fmt: skip
     names = [*tel.triads, "gyro", "zupt"]
     rows: dict[str, list[tuple]] = {}
