@@ -20,7 +20,8 @@ Parts:
 2. Speed (IMU-only kinematic, seed 1): whole-process wall time of ``workbench run droptest``
    (subprocess), the stage times of one reconstruction (time between the yields of
    :func:`workbench.problems.droptest.pipeline.reconstruct`), filter steps per second of the production
-   forward pass (``forward_pass`` → ``run_filter``) against a plain hand-written baseline loop
+   forward pass (``forward_pass``: the compiled recursion of ``droptest.kernel``; see also
+   ``bench_ekf_speed.py``) against a plain hand-written baseline loop
    (same ``redland.propagate`` + ``F P Fᵀ + Q`` predict, one stacked update of all the step's
    measurements with ``np.linalg.solve`` and ``P = (I − K H) P``), and peak memory of one
    reconstruction (tracemalloc peak; max RSS of the CLI subprocess).

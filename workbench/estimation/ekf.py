@@ -75,6 +75,7 @@ __all__ = [
     "predict",
     "update",
     "run_filter",
+    "apply_measurements",
 ]
 
 _potrf = lapack.dpotrf
@@ -643,6 +644,60 @@ def _scatter(slots, size, z, zp, y, S, K):
     return zf, zpf, yf, Sf, Kf
 
 
+def apply_measurements(
+    k: int,
+    tk: float,
+    x: np.ndarray,
+    P: np.ndarray,
+    measurements: Sequence[Measurement],
+    layout: ErrorStateLayout,
+    rows: dict[str, list[tuple]],
+    sizes: dict[str, int],
+    keep_gains: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The measurement part of step ``k`` of :func:`run_filter`: each :class:`Measurement` its own
+    :func:`update` of x (n_x,), P (n_e, n_e), in list order; returns the posterior (x, P).
+
+    Appends one row ``(t, step, z, z_pred, y, S, nis, accepted[, K])`` per measurement to
+    ``rows[name]`` (the input of :meth:`InnovationHistory.from_rows`) and keeps the channel's size
+    in ``sizes[name]``; ``tk`` [s] the step's time.  For drivers that run part of a step
+    themselves (a compiled recursion) and the rest through here.
+    """
+    for meas in measurements:
+        H = meas.H
+        if H is not None and not callable(H):
+            H = np.asarray(H, dtype=float)
+        try:
+            xn, Pn, y, S, K, _, nis, ok, zp = _update(
+                x,
+                P,
+                meas.z,
+                meas.h,
+                meas.R,
+                layout,
+                H,
+                meas.residual,
+                meas.gate_probability,
+                meas.iterations,
+                meas.eps,
+                meas.gain_projector,
+                meas.step_tol,
+                meas.gate_threshold,
+            )
+        except (np.linalg.LinAlgError, ValueError) as err:
+            raise type(err)(f"step {k} (t={tk} s), measurement {meas.name!r}: {err}") from err
+        zr = _as_vector(meas.z)
+        if meas.slots is not None:  # scatter into the channel's full size, NaN elsewhere
+            zr, zp, y, S, K = _scatter(meas.slots, int(meas.size), zr, zp, y, S, K)
+        m = sizes.setdefault(meas.name, y.shape[0])
+        if m != y.shape[0]:
+            raise ValueError(f"step {k}: measurement {meas.name!r} changed size ({m} -> {y.shape[0]})")
+        row = (tk, k, zr, zp, y, S, nis, ok)
+        rows.setdefault(meas.name, []).append((*row, K) if keep_gains else row)
+        x, P = xn, Pn
+    return x, P
+
+
 def run_filter(
     x0: np.ndarray,
     P0: np.ndarray,
@@ -721,38 +776,7 @@ def run_filter(
             x = x_next
         x_prior[k] = x
         P_prior[k] = P
-        for meas in measurements_at(k, tk, x):
-            H = meas.H
-            if H is not None and not callable(H):
-                H = np.asarray(H, dtype=float)
-            try:
-                xn, Pn, y, S, K, _, nis, ok, zp = _update(
-                    x,
-                    P,
-                    meas.z,
-                    meas.h,
-                    meas.R,
-                    layout,
-                    H,
-                    meas.residual,
-                    meas.gate_probability,
-                    meas.iterations,
-                    meas.eps,
-                    meas.gain_projector,
-                    meas.step_tol,
-                    meas.gate_threshold,
-                )
-            except (np.linalg.LinAlgError, ValueError) as err:
-                raise type(err)(f"step {k} (t={tk} s), measurement {meas.name!r}: {err}") from err
-            zr = _as_vector(meas.z)
-            if meas.slots is not None:  # scatter into the channel's full size, NaN elsewhere
-                zr, zp, y, S, K = _scatter(meas.slots, int(meas.size), zr, zp, y, S, K)
-            m = sizes.setdefault(meas.name, y.shape[0])
-            if m != y.shape[0]:
-                raise ValueError(f"step {k}: measurement {meas.name!r} changed size ({m} -> {y.shape[0]})")
-            row = (tk, k, zr, zp, y, S, nis, ok)
-            rows.setdefault(meas.name, []).append((*row, K) if keep_gains else row)
-            x, P = xn, Pn
+        x, P = apply_measurements(k, tk, x, P, measurements_at(k, tk, x), layout, rows, sizes, keep_gains)
         x_post[k] = x
         P_post[k] = P
     return ForwardPass(

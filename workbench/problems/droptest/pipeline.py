@@ -10,7 +10,9 @@ Stages, each yielded as a frozen dataclass so that the recorder (or a test) can 
 3. :class:`FilterStage` ``forward`` — the REDLand EKF (19 states of the paper + gyro error matrix and
    bias + per-triad accelerometer biases; kinematic or dynamic mode), the
    four triads through their lever arms, the gyro, zero-velocity updates while hanging, optional
-   odometer / radar-gun ranges; process noise raised on rapid acceleration changes.
+   odometer / radar-gun ranges; process noise raised on rapid acceleration changes.  The IMU part
+   of every step runs in the compiled recursion :mod:`.kernel` (numba; the generic
+   :func:`~workbench.estimation.ekf.run_filter` path is kept as ``engine="reference"``).
 4. :class:`FilterStage` ``smoothed`` — RTS smoother over the forward pass.
 5. :class:`StrokeStage` — at every step the distance from the ramp to the closest point of the
    lander mesh with its linearised 1σ (checked by sampling the posterior at max stroke), the
@@ -35,7 +37,14 @@ from workbench.core.bodies import G0
 from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_conjugate, quat_normalize, quat_rotate, triad, triad_covariance
 from workbench.estimation.consistency import whiteness
-from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
+from workbench.estimation.ekf import (
+    ErrorStateLayout,
+    ForwardPass,
+    InnovationHistory,
+    Measurement,
+    apply_measurements,
+    run_filter,
+)
 from workbench.estimation.health import health_markdown
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io.scenario import Scenario, ScenarioError
@@ -253,8 +262,17 @@ def _bungee(setup: dict, lander: LanderModel) -> rl.BungeeModel | None:
     )
 
 
-def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lander: LanderModel) -> FilterStage:
-    """Run the REDLand EKF over the telemetry (see module docstring)."""
+def forward_pass(
+    scenario: Scenario, tel: DropTelemetry, init: InitialState, lander: LanderModel, *, engine: str | None = None
+) -> FilterStage:
+    """Run the REDLand EKF over the telemetry (see module docstring).
+
+    ``engine``: ``"numba"`` (default, :data:`FILTER_ENGINE`) runs the kinematic filter's IMU part
+    through the compiled recursion :func:`workbench.problems.droptest.kernel.imu_steps` (ranging
+    measurements still through :func:`~workbench.estimation.ekf.apply_measurements`); ``"reference"``
+    the generic :func:`~workbench.estimation.ekf.run_filter` with the Python models.  The two agree
+    to floating-point noise, in both modes.
+    """
     cfg = config_for(scenario)
     mode = cfg.mode
     if mode not in ("kinematic", "dynamic"):
@@ -331,17 +349,138 @@ def forward_pass(scenario: Scenario, tel: DropTelemetry, init: InitialState, lan
             out.append(meas)
         return out
 
-    fp = run_filter(
-        init.x0,
-        init.P0,
-        tel.t,
-        transition,
-        process_noise,
-        measurements_at,
-        layout_for(len(tel.triads)),
-        adapt_q=adapt_q,
-    )
+    engine = FILTER_ENGINE if engine is None else engine
+    if engine not in ("numba", "reference"):
+        raise ValueError(f"forward_pass: engine must be 'numba' or 'reference', got {engine!r}")
+    if engine == "numba":  # the compiled recursion
+        bp = np.zeros(13)
+        coeffs = np.zeros(1)
+        if bungee is not None:
+            bp[0] = 1.0
+            bp[1:4], bp[4:7] = bungee.anchor_I, bungee.attach_B
+            bp[7], bp[8], bp[11], bp[12] = bungee.rest_length, bungee.count / bungee.mass, t_rel, t_cut
+            coeffs = np.array(bungee.coeffs, dtype=float)
+        fp = _forward_compiled(tel, init, q_accel, q_angular, v_acc, v_gyr, r_sm, r_zupt, ranging, bp, coeffs)
+    else:
+        fp = run_filter(
+            init.x0,
+            init.P0,
+            tel.t,
+            transition,
+            process_noise,
+            measurements_at,
+            layout_for(len(tel.triads)),
+            adapt_q=adapt_q,
+        )
     return FilterStage("forward", fp.t, fp.x_post, fp.P_post, forward=fp, q_accel=q_accel, q_angular=q_angular)
+
+
+#: default engine of :func:`forward_pass`: "numba" (compiled kinematic recursion) or "reference"
+FILTER_ENGINE = "numba"
+
+
+def _forward_compiled(
+    tel: DropTelemetry,
+    init: InitialState,
+    q_accel: np.ndarray,
+    q_angular: np.ndarray,
+    v_acc: float,
+    v_gyr: float,
+    r_sm: np.ndarray,
+    r_zupt: np.ndarray,
+    ranging: dict[int, list[Measurement]],
+    bungee: np.ndarray,
+    coeffs: np.ndarray,
+) -> ForwardPass:
+    """The forward pass by :func:`workbench.problems.droptest.kernel.imu_steps`, the steps
+    with ranging measurements split so that those are applied after the step's IMU updates (the
+    order of the reference path); the same :class:`ForwardPass` as :func:`run_filter` would record."""
+    from workbench.problems.droptest.kernel import imu_steps
+
+    layout = layout_for(len(tel.triads))
+    t = np.ascontiguousarray(tel.t, dtype=float)
+    n, n_t = t.size, len(tel.triads)
+    n_x, n_e = layout.n_x, layout.n_e
+    x = np.array(init.x0, dtype=float)
+    P = np.array(init.P0, dtype=float)
+    if x.shape != (n_x,) or P.shape != (n_e, n_e):
+        raise ValueError(f"x0 must be ({n_x},) and P0 ({n_e}, {n_e}); got {x.shape}, {P.shape}")
+    n_f, n_w = tel.counts
+    f_valid = np.ascontiguousarray(tel.f_valid, dtype=bool)
+    w_valid = np.ascontiguousarray(tel.w_valid, dtype=bool)
+    hanging = np.ascontiguousarray(tel.hanging, dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):  # no sample averaged: not used
+        r_tri = np.where(f_valid[..., None], v_acc / n_f[..., None] + r_sm, 0.0)
+        r_gyr = np.where(w_valid, v_gyr / n_w, 0.0)
+    x_prior = np.empty((n, n_x))
+    x_post = np.empty((n, n_x))
+    P_prior = np.empty((n, n_e, n_e))
+    P_post = np.empty((n, n_e, n_e))
+    F_hist = np.empty((n, n_e, n_e))
+    Q_hist = np.empty((n, n_e, n_e))
+    n_c = n_t + 2  # channels: the triads, the gyro, the zero-velocity update
+    valid = np.concatenate([f_valid, w_valid[:, None], hanging[:, None]], axis=1)
+    z_meas = np.concatenate([tel.f_B, tel.w_B[:, None, :], np.zeros((n, 1, 3))], axis=1)
+    r_diag = np.concatenate([r_tri, np.repeat(r_gyr[:, None, None], 3, axis=2), np.zeros((n, 1, 3))], axis=1)
+    inn = (np.full((n, n_c, 3), np.nan), np.full((n, n_c, 3), np.nan), np.full((n, n_c, 3, 3), np.nan))
+    inn = (*inn, np.full((n, n_c), np.nan))
+    args = (
+        t, np.asarray(GRAVITY, dtype=float), np.ascontiguousarray(q_accel, dtype=float),
+        np.ascontiguousarray(q_angular, dtype=float), np.ascontiguousarray(tel.lever_arms_B, dtype=float),
+        np.ascontiguousarray(z_meas, dtype=float), valid, np.ascontiguousarray(r_diag, dtype=float),
+        np.ascontiguousarray(r_zupt, dtype=float), bungee, coeffs, x_prior, x_post, P_prior, P_post, F_hist, Q_hist,
+        *inn,
+    )  # fmt: skip
+    names = [*tel.triads, "gyro", "zupt"]
+    rows: dict[str, list[tuple]] = {}
+    sizes: dict[str, int] = {}
+    first: dict[str, tuple[int, int]] = {}  # name -> (first step, position in the step): record order
+    k_a = 0
+    for k_b in [*sorted(k for k in ranging if 0 <= k < n), n - 1]:
+        if k_b < k_a:
+            continue
+        status, k_err, ch = imu_steps(k_a, k_b, x, P, *args)
+        if status:
+            what = (
+                "innovation covariance S is not positive definite (Cholesky)"
+                if status == 1
+                else "non-finite innovation (check z, h(x) and R)"
+            )
+            exc = np.linalg.LinAlgError if status == 1 else ValueError
+            raise exc(f"step {k_err} (t={t[k_err]} s), measurement {names[ch]!r}: {what}")
+        if k_b in ranging:
+            meas = ranging[k_b]
+            for i, m in enumerate(meas):
+                first.setdefault(m.name, (k_b, n_t + 2 + i))
+            xr, Pr = apply_measurements(k_b, float(t[k_b]), x, P, meas, layout, rows, sizes)
+            x[:] = xr
+            P[:] = Pr
+            x_post[k_b] = x
+            P_post[k_b] = P
+        k_a = k_b + 1
+    innov: dict[str, InnovationHistory] = {}
+    for c, name in enumerate(names):
+        ks = np.flatnonzero(valid[:, c])
+        if ks.size:
+            first[name] = (int(ks[0]), c)
+            zp, y, S, nis = (a[ks, c] for a in inn)
+            innov[name] = InnovationHistory(
+                t=t[ks], step=ks.astype(int), z=z_meas[ks, c], z_pred=zp, y=y, S=S, nis=nis,
+                accepted=np.ones(ks.size, dtype=bool),
+            )  # fmt: skip
+    for name, r in rows.items():
+        innov[name] = InnovationHistory.from_rows(r, sizes[name])
+    order = sorted(innov, key=lambda nm: first[nm])
+    return ForwardPass(
+        t=t,
+        x_prior=x_prior,
+        P_prior=P_prior,
+        x_post=x_post,
+        P_post=P_post,
+        F=F_hist,
+        Q=Q_hist,
+        innovations={name: innov[name] for name in order},
+    )
 
 
 def _at_time(model: Callable, dt: float) -> Callable:
