@@ -110,9 +110,9 @@ def _timed(fn):
 def _legacy_loop(imu, v0, q0, p0, n, kw):
     """The per-trajectory loop before the attitude was shared: the full strapdown
     (``strapdown.integrate_members`` on one state: scalar RK4 of v, q, p) member by member."""
-    job, _ = ds._make_job(imu, v0, q0, p0, None, kw["seed"], kw["events_t"], None, "relative", kw["r_ground"])
-    dx0 = ds._offsets(job, 0, n)
-    v, q, p = ds._members(job.v0, job.q0, job.p0, dx0)
+    job, _ = ds.make_job(imu, v0, q0, p0, None, kw["seed"], kw["events_t"], None, "relative", kw["r_ground"])
+    dx0 = ds.member_offsets(job, 0, n)
+    v, q, p = ds.member_states(job.v0, job.q0, job.p0, dx0)
     evs = {k: np.empty(n) for k in ds.EVENT_NAMES}
     for i in range(n):
         out = integrate_members(job.imu, v[i], q[i], p[i], at_t=job.event_times, body=MARS)
@@ -151,7 +151,7 @@ def main(argv=None) -> int:
     jit = None
     if en.HAVE_NUMBA:
         _, w_first, c_first = _timed(lambda: ds.run_dispersion(imu, v0, q0, p0, None, 4, n_cloud=0, **kw))
-        st = en._run_numba.stats
+        st = en.run_numba.stats
         jit = {"first_call_wall_s": w_first, "first_call_cpu_s": c_first,
                "from_cache": bool(sum(st.cache_hits.values())) and not sum(st.cache_misses.values())}  # fmt: skip
     backend = en.default_backend()

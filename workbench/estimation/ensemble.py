@@ -147,7 +147,7 @@ def attitude_track(imu: Any, bridge_mode: str = "relative") -> AttitudeTrack:
     stages at their mean, renormalised after each step) runs on Python floats; the stage force
     terms are then formed vectorised over the steps.
     """
-    from workbench.estimation.strapdown import _gap_index
+    from workbench.estimation.strapdown import gap_index
 
     if bridge_mode not in ("relative", "paper"):
         raise ValueError(f"attitude_track: bridge_mode must be 'relative' or 'paper', got {bridge_mode!r}")
@@ -157,7 +157,7 @@ def attitude_track(imu: Any, bridge_mode: str = "relative") -> AttitudeTrack:
     n = t.size
     if n < 2:
         raise ValueError("attitude_track: need at least two IMU samples")
-    gaps = _gap_index(t, getattr(imu, "gaps", ()))
+    gaps = gap_index(t, getattr(imu, "gaps", ()))
     dq = np.empty((n, 4))
     Qs = np.empty((n - 1, 4, 4))  # stage quaternions
     Fs = np.empty((n - 1, 4, 3))  # stage inputs
@@ -322,7 +322,7 @@ def _run_numpy(track: AttitudeTrack, v: np.ndarray, p: np.ndarray, R: np.ndarray
 if HAVE_NUMBA:
 
     @numba.njit(nogil=True, cache=True, error_model="numpy")
-    def _run_numba(kind, dts, A, B, v, p, R, slot, out_v, out_p, gm, j2k, g0, g1):  # pragma: no cover - compiled
+    def run_numba(kind, dts, A, B, v, p, R, slot, out_v, out_p, gm, j2k, g0, g1):  # pragma: no cover - compiled
         """Members in blocks of :data:`LANES` (``m`` a multiple of it), blocks ``g0..g1−1``.  A
         block's states are a (6, LANES) array; per step one loop over its members, which LLVM
         vectorises (SIMD over members; the same IEEE operations per member).  Releases the GIL,
@@ -434,11 +434,11 @@ def integrate_ensemble(
         ng = (m + pad) // LANES
         nt = max(1, min(int(threads or _cores()), ng))
         if nt == 1:
-            _run_numba(*args, 0, ng)
+            run_numba(*args, 0, ng)
         else:  # threads on disjoint blocks (the kernel releases the GIL); no OpenMP, so fork-safe
             edges = np.linspace(0, ng, nt + 1).round().astype(int)
             with ThreadPoolExecutor(nt) as ex:
-                list(ex.map(lambda ab: _run_numba(*args, ab[0], ab[1]), zip(edges[:-1], edges[1:], strict=True)))
+                list(ex.map(lambda ab: run_numba(*args, ab[0], ab[1]), zip(edges[:-1], edges[1:], strict=True)))
         out_v, out_p = out_v[:, :, :m], out_p[:, :, :m]
     elif backend == "numpy":
         _run_numpy(track, v, p, R, slot, out_v, out_p, gm, j2k)

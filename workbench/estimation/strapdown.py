@@ -471,7 +471,7 @@ class StrapdownPass:
     bridged: np.ndarray
 
 
-def _gap_index(t: np.ndarray, gaps: Any) -> dict[int, Any]:
+def gap_index(t: np.ndarray, gaps: Any) -> dict[int, Any]:
     """Map sample index i (gap between i and i+1, ``t[i] = t_a``) -> GapBridge; checks t_b."""
     out: dict[int, Any] = {}
     for g in gaps or ():
@@ -521,7 +521,7 @@ def integrate(
         raise ValueError("integrate: IMU times must be strictly increasing")
     if sample_dt is None:
         sample_dt = float(np.median(np.diff(t)))
-    gaps = _gap_index(t, getattr(imu, "gaps", ()))
+    gaps = gap_index(t, getattr(imu, "gaps", ()))
     V = np.empty((n, 3))
     Q = np.empty((n, 4))
     X = np.empty((n, 3))
@@ -597,7 +597,7 @@ def integrate_members(
     f = np.asarray(imu.f_G, dtype=float)
     w = np.asarray(imu.w_G, dtype=float)
     n = t.size
-    gaps = _gap_index(t, getattr(imu, "gaps", ()))
+    gaps = gap_index(t, getattr(imu, "gaps", ()))
     v = np.array(v0, dtype=float)
     q = quat_normalize(np.array(q0, dtype=float))
     p = np.array(p0, dtype=float)

@@ -16,7 +16,7 @@ from scipy.integrate import solve_ivp
 from workbench.problems.droptest import truth, truth_fast
 from workbench.problems.droptest.lander import load_lander
 from workbench.problems.droptest.surface import Surface
-from workbench.problems.droptest.truth import BungeeRig, DropTestConfig, _fly_reference, _Model
+from workbench.problems.droptest.truth import BungeeRig, DropTestConfig, ForceModel, fly_reference
 
 ROOT = Path(__file__).resolve().parents[3]
 LANDER = ROOT / "assets" / "landers" / "mer_drop_lander.toml"
@@ -77,7 +77,7 @@ def _assert_close(a, b):
 @pytest.mark.parametrize("rocks", [False, True])
 def test_evaluate_matches_reference_on_random_states(lander, rocks):
     surf = _ramp(rocks)
-    model = _Model(lander, surf, _rig(), lander.pressure_pa)
+    model = ForceModel(lander, surf, _rig(), lander.pressure_pa)
     rng = np.random.default_rng(3 + rocks)
     seen = {"lobe": 0, "body": 0, "rock": 0}
     for y in _states(lander, surf, rng, 250):
@@ -97,14 +97,14 @@ def test_evaluate_matches_reference_on_random_states(lander, rocks):
 def test_body_on_rock_matches_reference(lander):
     """A body vertex pushed into a rock (the rock-only body penalty) and the lobes wrapping it."""
     surf0 = _ramp(False)
-    model0 = _Model(lander, surf0, _rig(), lander.pressure_pa)
+    model0 = ForceModel(lander, surf0, _rig(), lander.pressure_pa)
     q = np.array([0.0, 0.0, 0.0, 1.0])
     p = surf0.normal * 1.0
     v_world = model0.verts_B + p
     k = int(np.argmin(v_world @ surf0.normal))  # the vertex nearest the ramp
     c = v_world[k] - 0.04 * surf0.normal  # rock centre 4 cm inside, radius 0.1 m: vertex 6 cm deep
     surf = Surface(point=surf0.point, normal=surf0.normal, rock_centers=c[None], rock_radii=[0.1])
-    model = _Model(lander, surf, _rig(), lander.pressure_pa)
+    model = ForceModel(lander, surf, _rig(), lander.pressure_pa)
     y = np.r_[p, 0.3, -2.0, -1.0, q, 0.5, -0.2, 0.1]
     ref = model.evaluate(y)
     assert ref[5] > 0.05
@@ -113,7 +113,7 @@ def test_body_on_rock_matches_reference(lander):
 
 def test_rhs_and_post_pass_match_reference(lander):
     surf = _ramp(True)
-    model = _Model(lander, surf, _rig(), lander.pressure_pa)
+    model = ForceModel(lander, surf, _rig(), lander.pressure_pa)
     Y = _states(lander, surf, np.random.default_rng(11), 200)
     cut = np.arange(Y.shape[0]) % 2 == 0
     out = truth_fast.evaluate_many(Y, cut, *model.packed())
@@ -129,8 +129,8 @@ def test_rhs_and_post_pass_match_reference(lander):
 
 
 def test_constants_shared():
-    assert truth_fast._V_SLIP == truth._V_SLIP
-    assert np.array_equal(np.array([0.0, 0.0, -truth_fast._G0]), truth.GRAVITY_SPF)
+    assert truth_fast.V_SLIP == truth.V_SLIP
+    assert np.array_equal(np.array([0.0, 0.0, -truth_fast.G0_MPS2]), truth.GRAVITY_SPF)
 
 
 @pytest.mark.parametrize("count", [0.4, 2.5])
@@ -140,7 +140,7 @@ def test_fly_matches_reference(lander, count):
     rig = BungeeRig(np.array([0.0, 12.0, -7.0]), cfg.bungee_rest_length, cfg.bungee_coeffs, count, np.zeros(3), 0.0)
     args = (lander.mass, surf.normal, surf.point, 0.9, cfg.cut_lead_s)
     p0 = np.array([0.0, -6.0, 9.0])
-    p, v, t, cut = _fly_reference(p0, rig, *args)
+    p, v, t, cut = fly_reference(p0, rig, *args)
     coeffs = np.asarray(rig.coeffs, float)
     pf, vf, tf, cutf = truth_fast.fly(p0, rig.anchor_I, rig.rest_length, coeffs, count, *args, 1e-3, 6000)
     assert cut is not None and abs(cutf - cut) < 1e-12
@@ -158,7 +158,7 @@ def test_integrated_contact_onset_matches_reference(lander, rocks):
     the 1e-9 m bound is checked over the onset (measured: 5e-15 m on the bare ramp, 2e-10 m with
     rocks, whose contacts start at once)."""
     surf = _ramp(rocks)
-    model = _Model(lander, surf, _rig(), lander.pressure_pa)
+    model = ForceModel(lander, surf, _rig(), lander.pressure_pa)
     model.cut = True
     q = np.array([0.05, -0.02, 0.01, 1.0])
     q /= np.linalg.norm(q)

@@ -46,7 +46,7 @@ from workbench.problems.droptest.surface import Surface
 GRAVITY_SPF = np.array([0.0, 0.0, -G0])
 
 #: Default path of :func:`simulate_drop` / :func:`design_release`: True runs the compiled numba
-#: kernels of :mod:`.truth_fast`, False the pure-numpy reference (``_Model.evaluate`` / ``rhs``
+#: kernels of :mod:`.truth_fast`, False the pure-numpy reference (``ForceModel.evaluate`` / ``rhs``
 #: and the Python ``fly``). Both give the same trajectory to rounding (tests/problems/droptest/
 #: test_truth_fast.py).
 FAST = True
@@ -55,7 +55,7 @@ __all__ = ["BungeeRig", "DropTestConfig", "DropTruth", "simulate_drop", "design_
 
 _c60, _s60 = np.cos(np.radians(-60.0)), np.sin(np.radians(-60.0))
 #: DCM from the SPF chamber frame to the "Mars" frame (−60° about X; REDLand "Test facility").
-_V_SLIP = 0.1  # friction regularisation speed [m/s]: |F_t| = μ F_n tanh(|v_t| / _V_SLIP)
+V_SLIP = 0.1  # friction regularisation speed [m/s]: |F_t| = μ F_n tanh(|v_t| / V_SLIP)
 
 C_MARS_SPF = np.array([[1.0, 0.0, 0.0], [0.0, _c60, -_s60], [0.0, _s60, _c60]])
 
@@ -149,7 +149,7 @@ class DropTruth:
     config: DropTestConfig = field(repr=False)
 
 
-class _Model:
+class ForceModel:
     """Force model of the lander + airbags against the ramp (vectorised over a leading axis)."""
 
     def __init__(self, lander: LanderModel, surface: Surface, rig: BungeeRig, pressure_pa: float):
@@ -297,7 +297,7 @@ class _Model:
         fn = np.clip(pg * area - self.damp * area * vn, 0.0, None)
         vt = vc - vn[:, None] * normals
         vtn = np.linalg.norm(vt, axis=1)
-        ft = -self.mu * (fn * np.tanh(vtn / _V_SLIP) / np.maximum(vtn, 1e-9))[:, None] * vt
+        ft = -self.mu * (fn * np.tanh(vtn / V_SLIP) / np.maximum(vtn, 1e-9))[:, None] * vt
         return fn[:, None] * normals + ft, float(fn.sum())
 
     def _rocks(self, p, v, C, w_I, r_I, pg):
@@ -416,7 +416,7 @@ def _nominal_rig(cfg: DropTestConfig, lander: LanderModel, surface: Surface, cou
     )
 
 
-def _fly_reference(
+def fly_reference(
     p0: np.ndarray,
     rig: BungeeRig,
     m: float,
@@ -497,7 +497,7 @@ def design_release(
         rig = _nominal_rig(cfg, lander, surface, count, pull_dir(beta))
         p0 = np.array([0.0, y0, z0])
         if not fast:
-            return _fly_reference(p0, rig, m, n, point, h_c, cfg.cut_lead_s)
+            return fly_reference(p0, rig, m, n, point, h_c, cfg.cut_lead_s)
         args = (rig.anchor_I, rig.rest_length, coeffs, rig.count, m, n, point, h_c, cfg.cut_lead_s, 1e-3, 6000)
         p, v, t, cut_t = truth_fast.fly(p0, *args)
         return p, v, t, (None if cut_t < 0.0 else cut_t)
@@ -567,7 +567,7 @@ def simulate_drop(
     p_release, nominal_rig, _ = design_release(cfg, lander, surface, fast=fast)
     true_rig = replace(nominal_rig, count=nominal_rig.count * cfg.bungee_truth_scale)
     pressure = lander.pressure_pa if cfg.pressure_pa is None else cfg.pressure_pa
-    model = _Model(lander, surface, true_rig, pressure)
+    model = ForceModel(lander, surface, true_rig, pressure)
 
     y0 = np.concatenate([p_release, np.zeros(3), q0, np.zeros(3)])
 

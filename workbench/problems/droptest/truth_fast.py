@@ -1,6 +1,6 @@
 """Compiled (numba) kernels of the drop-test truth simulator: the fast path of :mod:`.truth`.
 
-The same force model as :meth:`workbench.problems.droptest.truth._Model.evaluate` (the pure-numpy
+The same force model as :meth:`workbench.problems.droptest.truth.ForceModel.evaluate` (the pure-numpy
 reference path, kept selectable with ``simulate_drop(..., fast=False)``), written as scalar loops
 so that numba compiles it: airbag lobes flattened on the ramp (shared gas volume, lens overlap of
 neighbouring footprints), membrane pressure + damping + regularised Coulomb friction, lobe-on-rock
@@ -11,7 +11,7 @@ history (:func:`evaluate_many`) and the point-mass flight of the release design 
 Frames and units as in :mod:`.truth`: SPF chamber frame (I), body frame B at the CM, SI units;
 the state is ``y = [p_I (3) m, v_I (3) m/s, q_I_B (4, scalar last), ω_B (3) rad/s]``.
 
-Parameters are passed as a few flat arrays (built by ``_Model.packed``): ``lobes_B`` (n_l, 3) [m],
+Parameters are passed as a few flat arrays (built by ``ForceModel.packed``): ``lobes_B`` (n_l, 3) [m],
 ``verts_B`` (n_v, 3) [m], ``geo`` (6,) = ramp normal (3) and ramp point (3) [m, SPF], ``rock_c``
 (n_r, 3) [m, SPF], ``rock_r`` (n_r,) [m], ``rig`` (6,) = bungee anchor (3) [m, SPF] and attachment
 (3) [m, body], ``coeffs`` (k,) per-bungee polynomial [N/m^j], ``sc`` (12,) scalars, in order:
@@ -50,8 +50,8 @@ from workbench.core.bodies import G0
 
 __all__ = ["evaluate", "evaluate_many", "rhs", "fly"]
 
-_V_SLIP = 0.1  # friction regularisation speed [m/s]; the same constant as truth._V_SLIP
-_G0 = G0  # standard gravity [m/s²]; truth.GRAVITY_SPF = (0, 0, -G0)
+V_SLIP = 0.1  # friction regularisation speed [m/s]; the same constant as truth.V_SLIP
+G0_MPS2 = G0  # standard gravity [m/s²]; truth.GRAVITY_SPF = (0, 0, -G0)
 
 
 @njit(cache=True)
@@ -93,7 +93,7 @@ def _membrane(pg, area, rc, nx, ny, nz, v, w_I, damp, mu, F, T_I):
     vty = vcy - vn * ny
     vtz = vcz - vn * nz
     vtn = math.sqrt(vtx * vtx + vty * vty + vtz * vtz)
-    g = -mu * (fn * math.tanh(vtn / _V_SLIP) / max(vtn, 1e-9))
+    g = -mu * (fn * math.tanh(vtn / V_SLIP) / max(vtn, 1e-9))
     fx = fn * nx + g * vtx
     fy = fn * ny + g * vty
     fz = fn * nz + g * vtz
@@ -112,7 +112,7 @@ def evaluate(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, F, 
 
     Fills F (3,) non-gravitational force [N, SPF], T_B (3,) torque about the CM [N m, body] and
     pen (n_l,) lobe penetrations into the ramp [m]; returns (total airbag normal force [N], gauge
-    pressure [Pa], deepest body penetration [m]) — as ``_Model.evaluate``.
+    pressure [Pa], deepest body penetration [m]) — as ``ForceModel.evaluate``.
     """
     R, p0, p_amb, V0, gamma, damp, mu, k_body, c_body, rest, count = (
         sc[0],
@@ -319,7 +319,7 @@ def evaluate(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, F, 
 
 @njit(cache=True)
 def rhs(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, J, Jinv):
-    """State derivative (13,) of ``y`` (13,) — as ``_Model.rhs``: [v, a, q̇, ω̇] with a = F/m + g."""
+    """State derivative (13,) of ``y`` (13,) — as ``ForceModel.rhs``: [v, a, q̇, ω̇] with a = F/m + g."""
     F = np.empty(3)
     T = np.empty(3)
     pen = np.empty(lobes_B.shape[0])
@@ -329,7 +329,7 @@ def rhs(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, J, Jinv)
     out[0:3] = y[3:6]
     out[3] = F[0] / m
     out[4] = F[1] / m
-    out[5] = F[2] / m - _G0
+    out[5] = F[2] / m - G0_MPS2
     qn = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
     px, py, pz, pw = y[6] / qn, y[7] / qn, y[8] / qn, y[9] / qn
     qx, qy, qz = y[10], y[11], y[12]
@@ -390,7 +390,7 @@ def fly(p0, anchor, rest, coeffs, count, m, n, point, h_c, cut_lead_s, dt, n_max
     for _ in range(n_max):
         acc[0] = 0.0
         acc[1] = 0.0
-        acc[2] = -_G0
+        acc[2] = -G0_MPS2
         if cut_t < 0.0:
             d0 = anchor[0] - p[0]
             d1 = anchor[1] - p[1]

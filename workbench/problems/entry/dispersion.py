@@ -224,7 +224,7 @@ def sample_offsets(
     return dx
 
 
-def _members(v0, q0, p0, dx0):
+def member_states(v0, q0, p0, dx0):
     """Initial states (m, ·) of the members with offsets dx0 (m, 9)."""
     v = np.asarray(v0, dtype=float) + dx0[:, 0:3]
     q = quat_normalize(quat_multiply(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, 3:6])))
@@ -303,7 +303,9 @@ def _event_states(job: _Job, v, q, p, backend: str) -> tuple[np.ndarray, np.ndar
     return p_at, v_at
 
 
-def _offsets(job: _Job, start: int, stop: int) -> np.ndarray:
+def member_offsets(job: _Job, start: int, stop: int) -> np.ndarray:
+    """Initial-state offsets (stop − start, 9) [rad, m/s, m] of members ``start..stop−1`` of the
+    job's current round (deterministic in the job's seed and round)."""
     return sample_offsets(job.seed, start, stop, job.sigmas, round_index=job.round_index, mean=job.mean, L=job.L)
 
 
@@ -312,8 +314,8 @@ def _run_chunk(job: _Job, start: int, stop: int, seeds=None) -> tuple[int, np.nd
 
     A chunk task of :func:`~workbench.estimation.montecarlo.run_monte_carlo`; ``seeds`` is unused (None):
     the members' offsets come from :func:`sample_offsets`' blocks."""
-    dx0 = _offsets(job, start, stop)
-    v, q, p = _members(job.v0, job.q0, job.p0, dx0)
+    dx0 = member_offsets(job, start, stop)
+    v, q, p = member_states(job.v0, job.q0, job.p0, dx0)
     p_at, v_at = _event_states(job, v, q, p, job.backend)
     ev = event_quantities(p_at, v_at, job.atmosphere, job.r_ground)
     return start, dx0, ev
@@ -322,8 +324,8 @@ def _run_chunk(job: _Job, start: int, stop: int, seeds=None) -> tuple[int, np.nd
 def _run_loop(job: _Job, start: int, stop: int) -> tuple[int, np.ndarray, dict[str, np.ndarray]]:
     """The per-trajectory baseline: the same maths, one member at a time on Python floats
     (``integrate_ensemble(backend="python")``, sharing the job's attitude track)."""
-    dx0 = _offsets(job, start, stop)
-    v, q, p = _members(job.v0, job.q0, job.p0, dx0)
+    dx0 = member_offsets(job, start, stop)
+    v, q, p = member_states(job.v0, job.q0, job.p0, dx0)
     evs = {k: np.empty(stop - start) for k in EVENT_NAMES}
     for i in range(stop - start):
         p_at, v_at = _event_states(job, v[i : i + 1], q[i : i + 1], p[i : i + 1], "python")
@@ -424,14 +426,14 @@ def _finish(
         mean = np.average(acc, axis=0, weights=w) if acc.shape[0] else np.zeros(9)
         P0 = np.cov(acc, rowvar=False, aweights=w) if acc.shape[0] >= 2 else np.full((9, 9), np.nan)
     sig_max = np.sqrt(np.diagonal(P0)).reshape(3, 3).max(axis=1)
-    v_r, q_r, p_r = _members(job.v0, job.q0, job.p0, mean[None])
+    v_r, q_r, p_r = member_states(job.v0, job.q0, job.p0, mean[None])
     # thinned cloud: re-integrate the chosen members (bit-identical to their chunk) at ~1/cloud_dt Hz
     t = job.imu.t
     idx_t = np.unique(np.searchsorted(t, np.arange(t[0], t[-1], cloud_dt)).clip(0, t.size - 1))
     idx_t = np.unique(np.append(idx_t, t.size - 1))
     cloud_index = _pick_cloud(accepted, n_cloud)
     if cloud_index.size:
-        v, q, p = _members(job.v0, job.q0, job.p0, dx0[cloud_index])
+        v, q, p = member_states(job.v0, job.q0, job.p0, dx0[cloud_index])
         cloud_p = np.swapaxes(integrate_ensemble(job.track, v, q, p, idx_t, body=MARS, backend=job.backend)[1], 0, 1)
     else:
         cloud_p = np.empty((0, idx_t.size, 3))
@@ -463,7 +465,11 @@ def _finish(
     )
 
 
-def _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground, backend=None):
+def make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground, backend=None):
+    """The picklable job of :func:`run_dispersion` (IMU arrays, attitude track integrated once,
+    nominal state v0 [m/s], q0, p0 [m] in the Mars-fixed frame, 1σ ``sigmas`` (9,), seed, event
+    times [s], atmosphere, gap mode, ground radius [m], kernel backend) and the nominal event
+    quantities."""
     pim = imu_arrays(imu)
     et, ev_d = _event_times(pim, events_t)
     if np.any(et < pim.t[0]) or np.any(et > pim.t[-1]):
@@ -543,7 +549,7 @@ def run_dispersion(
     if n < 1 or chunk_size < 1 or refine_rounds < 0:
         raise ValueError("run_dispersion: n and chunk_size must be positive, refine_rounds >= 0")
     rules = rules or AcceptanceRules()
-    job, ev_d = _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground, backend)
+    job, ev_d = make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground, backend)
     prior_cov = np.diag(job.sigmas**2)
     mean, cov = np.zeros(9), prior_cov
     history: list[dict] = []
@@ -635,7 +641,7 @@ def run_dispersion_loop(
     version.  ``scheduler`` of the result is "per-trajectory loop"; the cloud is integrated with
     the default backend.
     """
-    job, ev_d = _make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground)
+    job, ev_d = make_job(imu, v0, q0, p0, sigmas, seed, events_t, atmosphere, bridge_mode, r_ground)
     t0 = time.perf_counter()
     dx0, events = _combine([_run_loop(job, 0, int(n))])
     wall = time.perf_counter() - t0
