@@ -100,8 +100,12 @@ def format_value(value: object, fmt: str | None) -> str:
 
 
 def fill(template: str, results_dir: Path = RESULTS_DIR, cache: dict | None = None) -> str:
-    """Replace every ``{{source:key|fmt}}`` in ``template`` by the formatted value."""
+    """Replace every ``{{source:key|fmt}}`` in ``template`` by the formatted value.  A callable
+    ``template`` is first called with ``results_dir`` (a table built by a benchmark script's own
+    renderer from the same JSON files, e.g. ``bench_speed.markdown``)."""
     cache = {} if cache is None else cache
+    if callable(template):
+        template = template(results_dir)
 
     def sub(m: re.Match) -> str:
         source, key, fmt = m.group(1), m.group(2), m.group(3)
