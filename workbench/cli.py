@@ -140,6 +140,33 @@ def _cost_hint(name: str, out: Path) -> float:
         return 0.0
 
 
+def _launch_order(names: list[str], out: Path) -> list[str]:
+    """The order in which the scenario processes start: longest first by their last wall time in
+    ``out``; with no earlier run (a fresh checkout), round-robin over the problem kinds, so that two
+    scenarios of one kind do not both compile the same kernels (numba, first run of a checkout) at
+    the same time — the second one starts when the first has written the compiled cache."""
+    hints = {n: _cost_hint(n, out) for n in names}
+    if any(hints.values()):
+        return sorted(names, key=lambda n: -hints[n])
+    from workbench.io.assets import assets_dir
+    from workbench.io.scenario import ScenarioError, resolve_scenario
+
+    by_kind: dict[str, list[str]] = {}
+    for n in names:
+        try:
+            kind = resolve_scenario(n, assets_dir()).kind
+        except (ScenarioError, OSError):
+            kind = ""  # reported by the scenario's own process
+        by_kind.setdefault(kind, []).append(n)
+    queues = list(by_kind.values())
+    order = []
+    while any(queues):
+        for q in queues:
+            if q:
+                order.append(q.pop(0))
+    return order
+
+
 def _child_argv(name: str, args: argparse.Namespace) -> list[str]:
     """The ``workbench run`` command line of one scenario in its own process (same options)."""
     argv = [sys.executable, "-m", "workbench.cli", "run", str(name), "--out", str(args.out), "--jobs", "1"]
@@ -164,13 +191,13 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
     import time
 
     out = Path(args.out)
-    order = sorted(names, key=lambda n: -_cost_hint(n, out))
+    order = _launch_order(names, out)
     env = dict(os.environ)
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         env.setdefault(var, "1")
     pending, running, codes = list(order), {}, {}
     t0 = time.perf_counter()
-    _progress(f"running {len(names)} scenarios, {jobs} at a time (--jobs), longest first: {', '.join(order)}")
+    _progress(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
     try:
         while pending or running:
             while pending and len(running) < jobs:
