@@ -70,8 +70,12 @@ def test_fresh_droptest_run_reproduces_the_committed_summary(tmp_path):
     cmp = _module("compare_summaries")
     committed = ROOT / "docs" / "results" / "summaries" / "droptest.summary.json"
     out = tmp_path / "out"
-    subprocess.run([sys.executable, "-m", "workbench.cli", "run", "droptest", "--out", str(out)],
-                   check=True, capture_output=True, text=True)
+    subprocess.run(
+        [sys.executable, "-m", "workbench.cli", "run", "droptest", "--out", str(out)],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     a = json.loads(committed.read_text())
     b = json.loads((out / "droptest.summary.json").read_text())
     diffs: list[str] = []

@@ -122,21 +122,28 @@ def rows(speed: dict, results_dir: Path = RESULTS) -> list[tuple[str, str, str, 
         walls = cmd.get("run_all_scenario_wall_s") or {}
         serial = sum(walls.values())
         warm = cmd.get("run_all_warm_s")
-        best = min(cmd["run_all_s"], warm) if warm else cmd["run_all_s"]
-        ok = best <= 60 and rss is not None and rss <= 600
+        cold = cmd["run_all_s"]
         out.append(
             (
-                "`workbench run all` ≤ 60 s wall, ≤ 600 MB max RSS (fresh clone)",
-                (
-                    f"{warm:.0f} s (first run, compiling: {cmd['run_all_s']:.0f} s)"
-                    if warm
-                    else f"{cmd['run_all_s']:.0f} s"
-                )
-                + (f", {rss:.0f} MB" if rss else ", RSS not measured"),
-                "the scenarios' own wall times added (one after another)",
+                "`workbench run all` ≤ 60 s wall (fresh clone; scenarios two at a time)",
+                f"{warm:.0f} s; the checkout's first run, which also compiles the kernels: {cold:.0f} s"
+                if warm
+                else f"{cold:.0f} s",
+                "the scenarios' own wall times of the first run, added (one after another)",
                 f"{serial:.0f} s" if walls else "—",
-                f"{serial / cmd['run_all_s']:.2f}×" if walls else "—",
-                "met" if ok else "**not met**",
+                f"{serial / cold:.2f}× (first run)" if walls else "—",
+                ("met" if (warm or cold) <= 60 else "**not met**")
+                + (f"; first run {cold - 60:.0f} s over" if warm and cold > 60 else ""),
+            )
+        )
+        out.append(
+            (
+                "`workbench run all` ≤ 600 MB max RSS (largest scenario process)",
+                f"{rss:.0f} MB" if rss else "not measured",
+                "—",
+                "—",
+                "—",
+                "met" if rss is not None and rss <= 600 else "**not met**",
             )
         )
         out.append(

@@ -10,11 +10,14 @@ README_BLOCKS: dict = {}
 
 README_BLOCKS["main-job-time"] = """\
 ({{commands:run_all_s|mmss}} on 2 cores after a {{commands:install_s|mmss}} install, measured from a fresh clone
-by `tests/benchmarks/time_readme_commands.py`):
+by `tests/benchmarks/time_readme_commands.py`; this first run of a checkout also compiles the numba
+kernels, a second run takes {{commands:run_all_warm_s|mmss}}; the scenarios run two at a time, `--jobs 1` runs
+them one after another):
 """
 
 README_BLOCKS["test-time"] = """\
-(the fast tier, {{commands:fast_tier.passed}} tests in {{commands:fast_tier_s|mmss}} on 2 cores from a fresh clone;
+(the fast tier, {{commands:fast_tier.passed}} tests in {{commands:fast_tier_s|mmss}} on 2 cores from a fresh clone, one
+pytest-xdist worker per core;
 the statistical / end-to-end tier is `.venv/bin/python -m pytest -q -m slow`, {{commands:slow_tier.passed}} tests in
 {{commands:slow_tier_s|mmss}}; `.ci/run` runs both):
 """

@@ -449,6 +449,8 @@ class EarthStandardAtmosphere(Atmosphere):
         z = T0 / L * (1.0 - (p / self.sea_level_pressure) ** (self.gas_constant * L / 9.80665))
         r = US76_EARTH_RADIUS
         return r * z / (r - z)
+
+
 # ------------------------------------------------------------ building blocks of true atmospheres
 
 

@@ -162,8 +162,15 @@ def test_prepare_validation_reads_the_scenarios_telemetry_checks(tmp_path, monke
 
 
 def test_terrain_correlation_inflates_only_the_slant_out_terrain_term(tmp_path):
-    sc = minimal(tmp_path, radar={"slant_out_sigma_m": 40.0, "slant_range_sigma_m": 40.0,
-                                  "terrain_sigma_m": 100.0, "terrain_correlation_s": 30.0})
+    sc = minimal(
+        tmp_path,
+        radar={
+            "slant_out_sigma_m": 40.0,
+            "slant_range_sigma_m": 40.0,
+            "terrain_sigma_m": 100.0,
+            "terrain_correlation_s": 30.0,
+        },
+    )
     cfg = EntryConfig.from_scenario(sc)
     white = cfg.smoother_sigmas()
     assert white["slant_out"] == pytest.approx(math.hypot(40.0, 100.0))

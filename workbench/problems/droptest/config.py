@@ -135,7 +135,7 @@ SCHEMA = Schema(
                     choices=("butterworth", "zero_phase", "none"),
                 ),
                 Key("filter_cutoff_hz", _F, 500.0, "Hz", "Butterworth cutoff, below half the sample rate"),
-                Key("filter_order", _I, 4, meaning="Butterworth order, 1–10 (0: no filter, as `filter = \"none\"`)"),
+                Key("filter_order", _I, 4, meaning='Butterworth order, 1–10 (0: no filter, as `filter = "none"`)'),
                 Key(
                     "latency_s",
                     _F,

@@ -132,7 +132,10 @@ def events(cfg: Post2Config, truth: bool = False) -> tuple[Event, ...]:
             e.name,
             e.truth_when if truth and e.truth_when else e.when,
             e.truth_value if truth and e.truth_when else e.value,
-            e.mass, e.ref_area, e.parachute, e.chute,
+            e.mass,
+            e.ref_area,
+            e.parachute,
+            e.chute,
         )  # fmt: skip
         for e in cfg.events
     )

@@ -74,10 +74,18 @@ EVENT_KEYS: dict[str, tuple[str, Any, str]] = {
     "mass_kg": (_F, None, "new mass"),
     "ref_area_m2": (_F, None, "new aerodynamic reference area"),
     "parachute": (_B, None, "true: the parachute opens; false: it is released"),
-    "chute": (_S, None, "which parachute acts from here: `main` (the vehicle file's table, or the `main_drag_area` "
-               "state), `drogue` ([vehicle] drogue_* table, or the `drogue_drag_area` state) or `none`"),
-    "truth_when": (_S, None, "synthetic truth only: its own trigger (e.g. `mach_below`) when the reconstruction's is "
-                   "the time read from the data"),
+    "chute": (
+        _S,
+        None,
+        "which parachute acts from here: `main` (the vehicle file's table, or the `main_drag_area` "
+        "state), `drogue` ([vehicle] drogue_* table, or the `drogue_drag_area` state) or `none`",
+    ),
+    "truth_when": (
+        _S,
+        None,
+        "synthetic truth only: its own trigger (e.g. `mach_below`) when the reconstruction's is "
+        "the time read from the data",
+    ),
     "truth_value": (_F, None, "synthetic truth only: the value of `truth_when`"),
 }
 
@@ -162,7 +170,7 @@ SCHEMA = Schema(
                 Key("ref_area_m2", _F, None, "m^2", "aerodynamic reference area (default: the asset's)"),
                 Key("cd", _F, None, "1", "constant drag coefficient on ref_area_m2 when there is no vehicle file"),
                 # ---- Huygens-like descent: the second (drogue / stabiliser) parachute
-                Key("drogue_area_m2", _F, None, "m^2", "drogue parachute reference area (events `chute = \"drogue\"`)"),
+                Key("drogue_area_m2", _F, None, "m^2", 'drogue parachute reference area (events `chute = "drogue"`)'),
                 Key("drogue_cd", _F, 0.55, "1", "drogue parachute drag coefficient (constant)"),
             ),
         ),

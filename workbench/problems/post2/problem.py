@@ -199,21 +199,23 @@ class Post2Problem:
                 "parachute_diameter_m": d_chute,
                 "riser_m": 2.0 * d_chute if d_chute else 0.0,
             }
-        return open_mc_recording(open_post2_recording(
-            path,
-            scenario.name,
-            truth,
-            properties,
-            self.scorecard,
-            states=[st.name for st in cfg.states],
-            observations=[ob.name for ob in cfg.observations],
-            sizes={st.name: STATES[st.name].size for st in cfg.states},
-            residual_components={ob.name: OBSERVATIONS[ob.quantity].residual_names for ob in cfg.observations},
-            schedules=sorted({s.target_name for s in cfg.schedules if s.target == "observation"}),
-            geometry=geometry,
-            parachute_events={e.name: e.parachute for e in cfg.events if e.parachute is not None},
-            has_events=bool(cfg.events),
-        ))
+        return open_mc_recording(
+            open_post2_recording(
+                path,
+                scenario.name,
+                truth,
+                properties,
+                self.scorecard,
+                states=[st.name for st in cfg.states],
+                observations=[ob.name for ob in cfg.observations],
+                sizes={st.name: STATES[st.name].size for st in cfg.states},
+                residual_components={ob.name: OBSERVATIONS[ob.quantity].residual_names for ob in cfg.observations},
+                schedules=sorted({s.target_name for s in cfg.schedules if s.target == "observation"}),
+                geometry=geometry,
+                parachute_events={e.name: e.parachute for e in cfg.events if e.parachute is not None},
+                has_events=bool(cfg.events),
+            )
+        )
 
     def export_columns(self, result) -> ExportTable:
         """Every state block (smoothed, physical) and its 1σ, SI (angles in rad)."""
