@@ -70,7 +70,7 @@ def standard_blueprint(
     if residuals:
         right.append(rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o, **ts_kwargs) for n, o in residuals], active_tab=0))
         shares.append(2.0)
-    right.append(rrb.TextDocumentView(name="Report", origin=layout.REPORT))
+    right.append(report_view("Report"))
     right.append(rrb.TextLogView(name="Events", origin=layout.EVENTS))
     shares += [1.5, 1.0]
 
@@ -89,3 +89,13 @@ def save_blueprint(
     p.parent.mkdir(parents=True, exist_ok=True)
     bp.save(application_id, str(p))
     return p
+
+
+def report_view(name: str = "Scorecard", health: bool = True) -> Any:
+    """The view of the run's markdown scorecard at ``layout.REPORT`` — that entity only, since the
+    health verdict is a second text document under it (``layout.HEALTH``) and a text view given
+    both shows neither — with, when ``health``, the verdict in a second tab."""
+    card = rrb.TextDocumentView(name=name, origin=layout.REPORT, contents="$origin")
+    if not health:
+        return card
+    return rrb.Tabs(card, rrb.TextDocumentView(name="Health", origin=layout.HEALTH, contents="$origin"), active_tab=0)

@@ -27,6 +27,7 @@ from workbench.problems.droptest.lander import airbag_mesh
 from workbench.problems.droptest.pipeline import DropResult, DropTelemetry, FilterStage, InitialState, StrokeStage
 from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
+from workbench.recording.blueprint import report_view
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
@@ -94,7 +95,7 @@ def droptest_blueprint(residual_names: list[str], impact: dict | None = None) ->
         rrb.Tabs(*plots, active_tab=0),
         rrb.Tabs(*residuals, active_tab=0),
         rrb.Horizontal(
-            rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
+            report_view("Scorecard"),
             rrb.TextLogView(name="Events", origin=layout.EVENTS),
             column_shares=[3, 2],
         ),

@@ -17,6 +17,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from workbench.recording import layout
+from workbench.recording.blueprint import report_view
 from workbench.recording.writer import open_recording
 
 __all__ = ["record_monte_carlo", "mc_markdown"]
@@ -69,7 +70,7 @@ def record_monte_carlo(path: str | Path, name: str, res, summary: dict) -> Path:
                 rrb.TimeSeriesView(name="NEES", origin=layout.MC_NEES),
                 rrb.TimeSeriesView(name="restitution error", origin=layout.MC_RESTITUTION),
             ),
-            rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
+            report_view("Scorecard", health=False),
             column_shares=[3, 2],
         ),
         rrb.TimePanel(state="expanded", timeline=layout.SAMPLE),

@@ -46,6 +46,7 @@ from workbench.problems.entry.site import R_MOLA
 from workbench.problems.entry.telemetry import EntryTelemetry
 from workbench.problems.entry.winds import WindResult
 from workbench.recording import layout
+from workbench.recording.blueprint import report_view
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
@@ -128,7 +129,7 @@ def entry_blueprint(
         plots,
         residuals,
         rrb.Tabs(
-            rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
+            report_view("Scorecard"),
             rrb.TextLogView(name="Events", origin=layout.EVENTS),
             active_tab=0,
         ),

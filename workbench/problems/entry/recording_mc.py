@@ -23,6 +23,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from workbench.recording import layout
+from workbench.recording.blueprint import report_view
 from workbench.recording.writer import open_recording
 
 __all__ = ["record_entry_validation", "validation_markdown", "validation_blueprint"]
@@ -142,7 +143,7 @@ def validation_blueprint() -> rrb.Blueprint:
                 rrb.TimeSeriesView(
                     name="per run: max altitude error after fix [m]", origin=layout.VALIDATION_RUNS_H_AGL
                 ),
-                rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
+                report_view("Scorecard", health=False),
             ),
             column_shares=[3, 2],
         ),

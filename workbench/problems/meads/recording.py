@@ -37,6 +37,7 @@ from workbench.problems.meads.pipeline import (
 )
 from workbench.problems.meads.telemetry import true_runs
 from workbench.recording import layout
+from workbench.recording.blueprint import report_view
 from workbench.recording.dispatch import StageDispatch
 
 __all__ = ["meads_blueprint", "MeadsRecorder", "heat_shield_mesh", "PLOTS"]
@@ -79,7 +80,7 @@ def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6"
             rrb.Vertical(
                 scene,
                 rrb.Tabs(
-                    rrb.TextDocumentView(name="Scorecard", origin=layout.REPORT),
+                    report_view("Scorecard", health=False),
                     rrb.TextLogView(name="Events", origin=layout.EVENTS),
                 ),
                 row_shares=[3, 2],

@@ -14,6 +14,7 @@ import rerun.blueprint as rrb
 
 from workbench.problems.meads.montecarlo import QUANTITIES, TradeStudy, level_name
 from workbench.recording import layout
+from workbench.recording.blueprint import report_view
 from workbench.recording.writer import open_recording
 
 __all__ = ["record_trade_study", "trade_blueprint", "trade_markdown"]
@@ -32,7 +33,7 @@ def trade_blueprint() -> rrb.Blueprint:
                     for q in QUANTITIES
                 ]
             ),
-            rrb.TextDocumentView(name="Trade study", origin=layout.REPORT),
+            report_view("Trade study", health=False),
             column_shares=[3, 2],
         ),
         rrb.TimePanel(state="collapsed", timeline=layout.TIME),

@@ -26,6 +26,7 @@ from workbench.problems.post2.model import OBSERVATIONS, STATES
 from workbench.problems.post2.pipeline import ForwardStage, ObservationData, Post2Result
 from workbench.problems.post2.scoring import truth_on_grid
 from workbench.recording import layout
+from workbench.recording.blueprint import report_view
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import open_recording
 
@@ -303,7 +304,7 @@ def post2_blueprint(
     if res:
         right.append(rrb.Tabs(*res, active_tab=0))
     right += [
-        rrb.TextDocumentView(name="Report", origin=layout.REPORT),
+        report_view("Report"),
         rrb.TextLogView(name="Events", origin=layout.EVENTS),
     ]
     shares = [3.0] + ([2.0] if res else []) + [1.5, 1.0]
