@@ -77,6 +77,19 @@ CONFIGS = (
 # ---------------------------------------------------------------------------------------------
 
 
+def baseline_noise(sc, tel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Measurement covariances of :func:`baseline_filter` from the scenario: accelerometer triad
+    [(m/s²)²] and gyro [(rad/s)²] (3, 3) per-sample noise over the samples averaged into one filter
+    step, and the hanging zero-velocity update [(m/s)²] (3, 3)."""
+    g = sc.get
+    rate = g("filter.rate_hz", 1000.0, kind="float")
+    n_avg = max(1, int(round(1.0 / (rate * float(np.median(np.diff(tel.imu.time)))))))
+    r_acc = (g("sensors.accelerometer.noise_g", kind="float") * dt.G0) ** 2 / n_avg * np.eye(3)
+    r_gyr = np.radians(g("sensors.gyro.noise_dps", kind="float")) ** 2 / n_avg * np.eye(3)
+    r_z = g("filter.hang_zupt_sigma_mps", kind="float") ** 2 * np.eye(3)
+    return r_acc, r_gyr, r_z
+
+
 def baseline_filter(
     tel: DropTelemetry,
     init: dt.InitialState,
@@ -182,12 +195,7 @@ def speed(seed: int = 1) -> dict:
             t0 = time.perf_counter()
             fwd = dt.forward_pass(sc, tel, init, lander)
             tp.append(time.perf_counter() - t0)
-        g = sc.get
-        rate = g("filter.rate_hz", 1000.0, kind="float")
-        n_avg = max(1, int(round(1.0 / (rate * float(np.median(np.diff(tel.imu.time)))))))
-        r_acc = (g("sensors.accelerometer.noise_g", kind="float") * dt.G0) ** 2 / n_avg * np.eye(3)
-        r_gyr = np.radians(g("sensors.gyro.noise_dps", kind="float")) ** 2 / n_avg * np.eye(3)
-        r_z = g("filter.hang_zupt_sigma_mps", kind="float") ** 2 * np.eye(3)
+        r_acc, r_gyr, r_z = baseline_noise(sc, tel)
         tb = []
         for _ in range(reps):
             p_base, tb_i = baseline_filter(tel, init, fwd.q_accel, fwd.q_angular, r_acc, r_gyr, r_z)

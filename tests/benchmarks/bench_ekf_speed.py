@@ -43,7 +43,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_droptest import baseline_filter  # noqa: E402 (beside this script)
+from bench_droptest import baseline_filter, baseline_noise  # noqa: E402 (beside this script)
 from bench_json import write_benchmark_json  # noqa: E402
 
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass  # noqa: E402
@@ -154,13 +154,7 @@ def setup(seed: int, work: str):
             break
         tel = stage
     lander = load_lander(sc.path_of("vehicle.lander"))
-    g = sc.get
-    rate = g("filter.rate_hz", 1000.0, kind="float")
-    n_avg = max(1, int(round(1.0 / (rate * float(np.median(np.diff(tel.imu.time)))))))
-    r_acc = (g("sensors.accelerometer.noise_g", kind="float") * dt.G0) ** 2 / n_avg * np.eye(3)
-    r_gyr = np.radians(g("sensors.gyro.noise_dps", kind="float")) ** 2 / n_avg * np.eye(3)
-    r_z = g("filter.hang_zupt_sigma_mps", kind="float") ** 2 * np.eye(3)
-    return sc, tel, init, lander, (r_acc, r_gyr, r_z)
+    return sc, tel, init, lander, baseline_noise(sc, tel)
 
 
 def filter_speed(sc, tel, init, lander, rs, reps: int) -> dict:
