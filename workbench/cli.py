@@ -184,17 +184,13 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
     (each names its scenario). Returns 0 when all succeed, else the exit code of the first failed
     scenario in the order given (each failure is listed at the end). Ctrl-C or SIGTERM stop the
     running processes with SIGTERM (each removes its partial recording) and start no new one.
-    Each process runs with one BLAS thread unless the caller set ``OMP_NUM_THREADS`` (two processes
-    on two cores, each with two BLAS threads, would fight over them).
+    Each process inherits this one's environment, so also its one BLAS thread (set at import).
     """
     import subprocess
     import time
 
     out = Path(args.out)
     order = _launch_order(names, out)
-    env = dict(os.environ)
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        env.setdefault(var, "1")
     pending, running, codes = list(order), {}, {}
     t0 = time.perf_counter()
     _progress(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
@@ -202,7 +198,7 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
         while pending or running:
             while pending and len(running) < jobs:
                 name = pending.pop(0)
-                running[name] = subprocess.Popen(_child_argv(name, args), env=env)
+                running[name] = subprocess.Popen(_child_argv(name, args))
             time.sleep(0.05)
             for name, proc in list(running.items()):
                 if proc.poll() is not None:
