@@ -13,6 +13,7 @@ from workbench.estimation.health import (
     Check,
     UnhealthyError,
     covariance_check,
+    covariance_stats,
     gap_check,
     health_markdown,
     health_report,
@@ -52,6 +53,30 @@ def test_covariance_check():
     S = P.copy()
     S[1, 1, 1] = np.nan
     assert covariance_check(S).status == ERROR
+
+
+def test_covariance_stats_chunked_equal_whole(monkeypatch):
+    """The history is examined in chunks of steps (bounded memory): the per-step numbers and the
+    step a failure names do not depend on the chunk size."""
+    import workbench.estimation.health as health
+
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(2500, 6, 6))
+    P = A @ np.swapaxes(A, 1, 2) + 1e-3 * np.eye(6)
+    P[1777, 2, 2] = -50.0  # one step not positive definite, in the second chunk
+    P[2100, 0, 5] += 1e-3  # one asymmetric step
+    whole = (
+        np.max(np.abs(P - np.swapaxes(P, 1, 2)), axis=(1, 2)),
+        np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, 1, 2))).min(axis=1),
+    )
+    for chunk in (1, 7, 1024, 10_000):
+        monkeypatch.setattr(health, "_CHUNK_STEPS", chunk)
+        a_abs, a_rel, emin = covariance_stats(P)
+        np.testing.assert_array_equal(a_abs, whole[0])
+        np.testing.assert_array_equal(emin, whole[1])
+        assert int(np.argmax(a_rel)) == 2100 and int(np.argmin(emin)) == 1777
+        P_sym = 0.5 * (P + np.swapaxes(P, 1, 2))
+        assert "step 1777" in covariance_check(P_sym).message
 
 
 def test_interval_and_gap_checks():

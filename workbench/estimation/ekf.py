@@ -325,7 +325,8 @@ class ForwardPass:
     ``t`` (n,) [s]; ``x_prior``, ``x_post`` (n, n_x); ``P_prior``, ``P_post`` (n, n_e, n_e)
     (forward-pass covariances, error state); ``F`` (n, n_e, n_e) with ``F[k]`` the error-state
     transition from step k−1 to k (``F[0] = I``); ``Q`` (n, n_e, n_e) the process noise added in
-    that transition (``Q[0] = 0``); ``innovations``: name -> :class:`InnovationHistory`.
+    that transition (``Q[0] = 0``), or None when the pass does not keep it (the smoother does not
+    need it); ``innovations``: name -> :class:`InnovationHistory`.
     """
 
     t: np.ndarray
@@ -334,7 +335,7 @@ class ForwardPass:
     x_post: np.ndarray
     P_post: np.ndarray
     F: np.ndarray
-    Q: np.ndarray
+    Q: np.ndarray | None
     innovations: dict[str, InnovationHistory]
 
 

@@ -131,6 +131,27 @@ def nis_check(sensor: str, nis: np.ndarray, dof: int, *, error_quantile: float =
     return Check(name, OK, _f(mean), [_f(lo), _f(hi)], f"sensor {sensor}: mean NIS {mean:.3g} (expected {dof})")
 
 
+#: covariance steps examined at once by :func:`covariance_stats` (bounds its temporaries)
+_CHUNK_STEPS = 1024
+
+
+def covariance_stats(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per step of a finite covariance history ``P`` (n, k, k): the largest absolute asymmetry
+    ``max|P − Pᵀ|`` (units of P), the same relative to the largest diagonal entry, and the smallest
+    eigenvalue of the symmetric part; three (n,) arrays.  Computed over chunks of steps so that a
+    long history needs no (n, k, k) temporaries."""
+    n = P.shape[0]
+    asym_abs, asym_rel, emin = np.empty(n), np.empty(n), np.empty(n)
+    for a in range(0, n, _CHUNK_STEPS):
+        Pc = P[a : a + _CHUNK_STEPS]
+        Pt = np.swapaxes(Pc, 1, 2)
+        scale = np.maximum(np.max(np.abs(np.einsum("nii->ni", Pc)), axis=1), 1e-300)
+        asym_abs[a : a + _CHUNK_STEPS] = np.max(np.abs(Pc - Pt), axis=(1, 2))
+        asym_rel[a : a + _CHUNK_STEPS] = asym_abs[a : a + _CHUNK_STEPS] / scale
+        emin[a : a + _CHUNK_STEPS] = np.min(np.linalg.eigvalsh(0.5 * (Pc + Pt)), axis=1)
+    return asym_abs, asym_rel, emin
+
+
 def covariance_check(P: np.ndarray, name: str = "covariance", *, rtol: float = 1e-6) -> Check:
     """Covariance history ``P`` (n, k, k) (or one (k, k)): symmetric to ``rtol`` relative to its
     largest diagonal entry and positive definite at every step; ERROR otherwise (value: the smallest
@@ -141,14 +162,13 @@ def covariance_check(P: np.ndarray, name: str = "covariance", *, rtol: float = 1
     if not np.all(np.isfinite(P)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(P), axis=(1, 2)))[0])
         return Check(name, ERROR, None, None, f"{name}: not finite (first at step {bad})")
-    scale = np.maximum(np.max(np.abs(np.einsum("nii->ni", P)), axis=1), 1e-300)
-    asym = float(np.max(np.max(np.abs(P - np.swapaxes(P, 1, 2)), axis=(1, 2)) / scale))
-    eig = np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, 1, 2)))
-    emin = float(np.min(eig))
+    _, asym_k, emin_k = covariance_stats(P)
+    asym = float(np.max(asym_k))
+    emin = float(np.min(emin_k))
     if asym > rtol:
         return Check(name, ERROR, _f(asym), rtol, f"{name}: not symmetric (relative asymmetry {asym:.2g})")
     if emin <= 0.0:
-        step = int(np.argmin(np.min(eig, axis=1)))
+        step = int(np.argmin(emin_k))
         return Check(
             name, ERROR, _f(emin), 0.0, f"{name}: not positive definite (eigenvalue {emin:.3g} at step {step})"
         )

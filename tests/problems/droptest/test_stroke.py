@@ -166,6 +166,29 @@ def test_stroke_exact_vs_dense_sampling_in_rock_field():
     assert np.all(vert.distance >= hist.distance - 1e-12)
 
 
+def test_stroke_history_chunked_equal_whole(monkeypatch):
+    """Poses and (pose, rock) pairs are examined in chunks (bounded memory): identical numbers for
+    any chunk size, in a rock field where many poses approach a rock."""
+    import workbench.problems.droptest.stroke as stroke
+
+    rng = np.random.default_rng(8)
+    s = rock_field(ramp_surface(), rng, ((-3.0, 3.0), (-3.0, 3.0)), size_range=(0.4, 0.5))
+    t1, t2 = s.tangent_basis()
+    n = 57
+    u = rng.uniform(-2, 2, (n, 2))
+    p = s.point + u[:, :1] * t1 + u[:, 1:] * t2 + rng.uniform(0.9, 1.3, (n, 1)) * s.normal
+    q = quat_boxplus(np.tile(_q_x(60.0), (n, 1)), rng.normal(0, 0.3, (n, 3)))
+    P = np.tile(np.diag([1e-4] * 3 + [1e-3] * 3), (n, 1, 1))
+    ref = stroke_history(V, p, q, P, s, faces_B=F)
+    assert np.any(ref.feature >= 0)
+    for pose_chunk, pair_chunk in ((1, 4), (10, 33), (4096, 65536)):
+        monkeypatch.setattr(stroke, "_POSE_CHUNK", pose_chunk)
+        monkeypatch.setattr(stroke, "_PAIR_FACE_CHUNK", pair_chunk)
+        h = stroke_history(V, p, q, P, s, faces_B=F)
+        for f in ("distance", "sigma", "vertex", "closest_point_I", "surface_point_I", "feature", "jacobian"):
+            np.testing.assert_array_equal(getattr(h, f), getattr(ref, f), err_msg=f)
+
+
 def _generic_case(with_rock):
     s = ramp_surface()
     if with_rock:  # a rock facing the middle of the side_PY face

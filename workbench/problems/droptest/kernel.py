@@ -504,7 +504,8 @@ def imu_steps(
     Channels c = 0..n_t+1: triad c < n_t, the gyro (c = n_t), the zero-velocity update (c = n_t + 1),
     processed in that order: z_meas (n, n_t + 2, 3) measured [m/s², rad/s, m/s], valid (n, n_t + 2)
     bool, r_diag (n, n_t + 2, 3) the diagonal of R (triads, gyro), r_zupt (3, 3) the zero-velocity R.
-    Written per step: x_prior, x_post (n, n_x), P_prior, P_post, F_hist, Q_hist (n, n_e, n_e); per
+    Written per step: x_prior, x_post (n, n_x), P_prior, P_post, F_hist (n, n_e, n_e) and Q_hist
+    (n, n_e, n_e) — or Q_hist (1, n_e, n_e), one scratch matrix, when the Q history is not kept; per
     step and channel the predicted measurement inn_zp and innovation inn_y (n, n_t + 2, 3), its
     covariance inn_S (n, n_t + 2, 3, 3) and NIS inn_nis (n, n_t + 2).
     Dynamic mode (``bungee[0] > 0``): ``bungee`` (13,) = [on, anchor (3) [m, SPF], attachment (3)
@@ -535,7 +536,7 @@ def imu_steps(
     cols = np.empty(15, dtype=np.int64)
     for k in range(k_a, k_b + 1):
         Fk = F_hist[k]
-        Qk = Q_hist[k]
+        Qk = Q_hist[k] if Q_hist.shape[0] > 1 else Q_hist[0]
         if k > 0:
             dt = t[k] - t[k - 1]
             propagate_kinematic(x, dt, g, xn, Fk, w3)

@@ -70,6 +70,11 @@ from workbench.core.bodies import G0
 from workbench.core.rotation import quat_boxplus, quat_to_dcm
 from workbench.problems.droptest.surface import Surface
 
+#: (pose, rock) pairs × body faces examined at once by the exact rock check (bounds its temporaries)
+_PAIR_FACE_CHUNK = 65536
+#: poses examined at once by :func:`stroke_history`
+_POSE_CHUNK = 4096
+
 __all__ = [
     "StrokeHistory",
     "stroke_history",
@@ -200,17 +205,28 @@ def _closest_approach(
         c_B = np.einsum("kji,kj->ki", C_I_B[mi], c[ri] - p_I[mi])  # (K, 3)
         tri = V[faces_B]  # (f, 3, 3)
         nf = tri.shape[0]
-        q = trimesh.triangles.closest_point(np.tile(tri, (mi.size, 1, 1)), np.repeat(c_B, nf, axis=0))
-        q = q.reshape(mi.size, nf, 3)
-        dist_f = np.linalg.norm(q - c_B[:, None, :], axis=-1)  # (K, f)
-        jf = np.argmin(dist_f, axis=1)
-        q_pair_B = q[K, jf]
-        dist = dist_f[K, jf]
-        # inside test (convex body): the centre is behind every face plane
         nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         nrm /= np.linalg.norm(nrm, axis=-1, keepdims=True)
-        h = np.einsum("fj,kfj->kf", nrm, c_B[:, None, :] - tri[None, :, 0])
-        sign = np.where(np.all(h < 0.0, axis=1), -1.0, 1.0)
+        q_pair_B = np.empty((mi.size, 3))
+        dist = np.empty(mi.size)
+        jf = np.empty(mi.size, dtype=int)
+        sign = np.empty(mi.size)
+        # pairs in chunks of ~_PAIR_FACE_CHUNK (pair, face) rows: the (K·f, 3, 3) temporaries of the
+        # closest-point search stay a few MB however many poses approach a rock (same numbers)
+        step = max(1, _PAIR_FACE_CHUNK // nf)
+        for a in range(0, mi.size, step):
+            cb = c_B[a : a + step]
+            kk = np.arange(cb.shape[0])
+            q = trimesh.triangles.closest_point(np.tile(tri, (cb.shape[0], 1, 1)), np.repeat(cb, nf, axis=0))
+            q = q.reshape(cb.shape[0], nf, 3)
+            dist_f = np.linalg.norm(q - cb[:, None, :], axis=-1)  # (k, f)
+            j = np.argmin(dist_f, axis=1)
+            jf[a : a + step] = j
+            q_pair_B[a : a + step] = q[kk, j]
+            dist[a : a + step] = dist_f[kk, j]
+            # inside test (convex body): the centre is behind every face plane
+            h = np.einsum("fj,kfj->kf", nrm, cb[:, None, :] - tri[None, :, 0])
+            sign[a : a + step] = np.where(np.all(h < 0.0, axis=1), -1.0, 1.0)
         d_pair = sign * dist - rr[ri]
         # gradient of the distance wrt the body point: sign * unit(q - c), in B then in I
         ok = dist > 0.0
@@ -279,7 +295,13 @@ def stroke_history(
     if P.shape != (p.shape[0], 6, 6):
         raise ValueError(f"stroke_history: P_pose must be ({p.shape[0]}, 6, 6), got {P.shape}")
     C = quat_to_dcm(q)
-    d, grad, r_B, x_I, vertex, feature = _closest_approach(V, F, p, C, surface)
+    # poses in chunks: every quantity is per pose, so the (m, v, 3) and (m, rocks) temporaries stay
+    # bounded for long histories without changing a number
+    parts = [
+        _closest_approach(V, F, p[a : a + _POSE_CHUNK], C[a : a + _POSE_CHUNK], surface)
+        for a in range(0, max(p.shape[0], 1), _POSE_CHUNK)
+    ]
+    d, grad, r_B, x_I, vertex, feature = (np.concatenate(c) for c in zip(*parts, strict=True))
     a_B = np.einsum("nji,nj->ni", C, grad)  # C_I_Bᵀ ∇φ
     J = np.concatenate([grad, np.cross(r_B, a_B)], axis=1)
     var = np.einsum("ni,nij,nj->n", J, P, J)
