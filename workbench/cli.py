@@ -76,6 +76,14 @@ def _progress(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+def _reporter(args: argparse.Namespace):
+    """The progress reporter of ``run`` / ``mc`` (``workbench.io.progress``): bars on stderr when it
+    is a terminal, plain timed lines when not (or ``--progress plain``), none with ``--quiet``."""
+    from workbench.io.progress import reporter_for
+
+    return reporter_for(args.progress, quiet=args.quiet)
+
+
 def _shipped() -> dict[str, Path]:
     """The shipped scenarios ``{name: path}``; ``FileNotFoundError`` if there are none."""
     from workbench.io.assets import assets_dir
@@ -119,8 +127,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     jobs = _jobs(args.jobs, len(names))
     if jobs > 1:
         return _run_in_processes(names, args, jobs)
+    rep = _reporter(args)
     for name in names:
-        run_scenario(name, Path(args.out), options, progress=_progress)
+        run_scenario(name, Path(args.out), options, progress=rep)
     return EXIT_OK
 
 
@@ -174,6 +183,9 @@ def _child_argv(name: str, args: argparse.Namespace) -> list[str]:
         if value is not None:
             argv += [flag, str(value)]
     argv += ["--export"] * bool(args.export) + ["--allow-unhealthy"] * bool(args.allow_unhealthy)
+    # several processes share the terminal: bars would overwrite each other's lines, so every child
+    # logs plain timed lines (each names its scenario) - or nothing but its results under --quiet
+    argv += ["--quiet"] if args.quiet else ["--progress", "plain"]
     return argv
 
 
@@ -193,7 +205,8 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
     order = _launch_order(names, out)
     pending, running, codes = list(order), {}, {}
     t0 = time.perf_counter()
-    _progress(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
+    if not args.quiet:
+        _progress(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
     try:
         while pending or running:
             while pending and len(running) < jobs:
@@ -233,7 +246,7 @@ def cmd_mc(args: argparse.Namespace) -> int:
         truth_sim=args.truth_sim,
         refine_rounds=args.refine_rounds,
     )
-    run_monte_carlo(args.scenario, Path(args.out), options, progress=_progress)
+    run_monte_carlo(args.scenario, Path(args.out), options, progress=_reporter(args))
     return EXIT_OK
 
 
@@ -347,6 +360,23 @@ def cmd_import(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _progress_options(sp: argparse.ArgumentParser) -> None:
+    """``--quiet/-q`` and ``--progress`` of the long-running commands (``run``, ``mc``)."""
+    sp.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="no progress output (no bars, no stage lines); the result lines and the paths written still print",
+    )
+    sp.add_argument(
+        "--progress",
+        choices=("auto", "bars", "plain"),
+        default="auto",
+        help="progress on stderr: 'bars' (counts and ETA), 'plain' (one timed line per stage, for logs), "
+        "'auto' (default: bars when stderr is a terminal, else plain)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (sub-commands list, run, mc, inspect, import)."""
     p = argparse.ArgumentParser(prog="workbench", description="EDL reconstruction workbench")
@@ -374,6 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="scenarios run at once, each in its own process (default: one per CPU core; 1 = one after another "
         "in this process). With several, every scenario runs even if one fails",
     )
+    _progress_options(sp)
     sp.set_defaults(func=cmd_run)
     sp = sub.add_parser(
         "mc", help="Monte Carlo analysis of a scenario (drop test: consistency; entry: smoother validation)"
@@ -399,6 +430,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--refine-rounds", type=int, default=None, help="refinement rounds of the ensemble stage (entry --truth-sim: 1)"
     )
     sp.add_argument("--out", default="recordings")
+    _progress_options(sp)
     sp.set_defaults(func=cmd_mc)
     sp = sub.add_parser("inspect", help="summarise a .rrd recording and print its scorecard")
     sp.add_argument("recording")
