@@ -176,7 +176,7 @@ def _launch_order(names: list[str], out: Path) -> list[str]:
     return order
 
 
-def _child_argv(name: str, args: argparse.Namespace) -> list[str]:
+def child_argv(name: str, args: argparse.Namespace) -> list[str]:
     """The ``workbench run`` command line of one scenario in its own process (same options)."""
     argv = [sys.executable, "-m", "workbench.cli", "run", str(name), "--out", str(args.out), "--jobs", "1"]
     for flag, value in (("--seed", args.seed), ("--scheduler", args.scheduler), ("--members", args.members)):
@@ -211,7 +211,7 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
         while pending or running:
             while pending and len(running) < jobs:
                 name = pending.pop(0)
-                running[name] = subprocess.Popen(_child_argv(name, args))
+                running[name] = subprocess.Popen(child_argv(name, args))
             time.sleep(0.05)
             for name, proc in list(running.items()):
                 if proc.poll() is not None:

@@ -280,7 +280,7 @@ def _monte_carlo(scenario: Scenario, seeds: list[int], work: Path, scheduler: st
     # for a fixed thread count, and two busy-waiting pools on two cores made each reconstruction ~10x
     # slower (measured 2.5 s -> 20-45 s)
     t0 = time.perf_counter()
-    with progress.current().counter("Monte Carlo members", total=len(seeds), unit="member") as bar:
+    with progress.current().counter("Monte Carlo members", total=len(seeds), unit="members") as bar:
         run = run_monte_carlo(
             _seed_task,
             len(seeds),

@@ -557,7 +557,7 @@ def run_dispersion(
     wall = 0.0
     rounds = int(refine_rounds) + 1
     bar = progress.current().counter(
-        f"dispersion members ({rounds} round{'s' if rounds > 1 else ''})", total=int(n) * rounds, unit="member"
+        f"dispersion members ({rounds} round{'s' if rounds > 1 else ''})", total=int(n) * rounds, unit="members"
     )
     try:
         for r in range(rounds):

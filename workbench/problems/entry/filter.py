@@ -593,7 +593,7 @@ def run_entry_smoother(
     with progress.current().counter(
         f"iterated smoother: forward + backward sweeps of {n_iter} pass{'es' if n_iter > 1 else ''}",
         total=2 * n_iter,
-        unit="sweep",
+        unit="sweeps",
     ) as bar:
         its = iterated_rts(run_pass, _LAYOUT, n_iter, progress=bar)
     fw0 = its.first

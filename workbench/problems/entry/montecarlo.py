@@ -639,7 +639,7 @@ def validate_smoother(
     )
     # one BLAS thread in every executor: results must not depend on it, and multi-threaded BLAS on
     # 9x9 matrices made one smoother run ~10x slower (measured 0.65 s -> 7 s)
-    with progress.current().counter("smoother validation runs", total=int(n_runs), unit="run") as bar:
+    with progress.current().counter("smoother validation runs", total=int(n_runs), unit="runs") as bar:
         run = run_monte_carlo(
             _run_one,
             int(n_runs),

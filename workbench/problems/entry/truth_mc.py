@@ -359,7 +359,7 @@ def run_truth_monte_carlo(
         members=int(members if members is not None else DEFAULT_MEMBERS),
         work_dir=None if work_dir is None else str(work_dir),
     )
-    with progress.current().counter("Monte Carlo members", total=int(n_runs), unit="member") as bar:
+    with progress.current().counter("Monte Carlo members", total=int(n_runs), unit="members") as bar:
         run = run_monte_carlo(
             _run_member,
             int(n_runs),

@@ -140,7 +140,7 @@ class MeadsProblem:
         rep = prog.current()
         with rep.stage("truth simulation + nominal air-data fit"):
             sh = prepare_trade_study(scenario)
-        with rep.counter(f"trade study tasks ({CHUNK} runs each)", unit="task") as bar:
+        with rep.counter(f"trade study tasks ({CHUNK} runs each)", unit="tasks") as bar:
             ts = run_trade_study(
                 sh, runs, options.first_seed, workers=options.workers, scheduler=options.scheduler, progress=bar
             )
