@@ -115,6 +115,7 @@ def test_run_export_prints_the_csv_path_and_quiet_prints_no_progress(fallingbody
     assert main([*argv, "--progress", "plain"]) == EXIT_OK
     plain = capsys.readouterr().err.splitlines()
     assert any(re.match(r"^\[fallingbody\] CSV export\s+[0-9.]+ s$", ln) for ln in plain)
+
     def strip(ln: str) -> str:  # the wall time in the .rrd line differs between two runs
         return re.sub(r" in [0-9.]+ s$", "", ln)
 
@@ -123,7 +124,7 @@ def test_run_export_prints_the_csv_path_and_quiet_prints_no_progress(fallingbody
 
 def test_children_of_a_parallel_run_log_plain_lines():
     """``run A B --jobs 2``: the child processes share the terminal, so none draws bars."""
-    from workbench.cli import child_argv, build_parser
+    from workbench.cli import build_parser, child_argv
 
     args = build_parser().parse_args(["run", "a", "b", "--jobs", "2"])
     assert child_argv("a", args)[-2:] == ["--progress", "plain"]

@@ -142,7 +142,7 @@ def test_progress_counter_counts_pool_members_once_each_also_after_a_killed_work
         seen = []
         with rep.counter("Monte Carlo members", total=8, unit="members") as bar:
 
-            def count(done, total, bar=bar):
+            def count(done, total, bar=bar, seen=seen):
                 seen.append(done)
                 bar(done, total)
 
