@@ -157,7 +157,8 @@ def test_unhealthy_run_exits_6_writes_nothing_unless_allowed(tmp_path, capsys):
 def test_several_scenarios_run_in_processes_and_a_failure_stops_none(tmp_path, capfd):
     """``run A B --jobs 2``: each scenario in its own process; the unhealthy one (exit 6, nothing
     written) does not stop the healthy one, whose outputs equal a run in this process; the exit code
-    is the failed scenario's and the failure is listed."""
+    is the failed scenario's and the failure is listed.  With bars (a terminal; forced here), the
+    children's plain timed lines are piped through the parent, above its bar of finished scenarios."""
     from workbench.cli import EXIT_UNHEALTHY
     from workbench.io.assets import assets_dir
 
@@ -171,9 +172,14 @@ def test_several_scenarios_run_in_processes_and_a_failure_stops_none(tmp_path, c
         encoding="utf-8",
     )
     out, ref = tmp_path / "out", tmp_path / "ref"
-    assert main(["run", str(bad), "post2_j2", "--out", str(out), "--jobs", "2"]) == EXIT_UNHEALTHY
+    argv = ["run", str(bad), "post2_j2", "--out", str(out), "--jobs", "2", "--progress", "bars"]
+    assert main(argv) == EXIT_UNHEALTHY
     err = capfd.readouterr().err
     assert "1 of 2 scenarios succeeded" in err and f"{bad}: exit {EXIT_UNHEALTHY}" in err
+    lines = err.replace("\r", "\n").splitlines()
+    assert f"[post2_j2] wrote {out / 'post2_j2.summary.json'}" in lines  # a child's line, through the parent
+    assert any(re.match(r"^\[post2_j2\] \S.*\s[0-9.]+ s$", ln) for ln in lines)  # its timed stage lines
+    assert any("scenarios finished" in ln for ln in lines)  # the parent's bar
     assert not (out / "j2_tight.rrd").exists() and not (out / "j2_tight.summary.json").exists()
     assert main(["run", "post2_j2", "--out", str(ref), "--jobs", "1"]) == EXIT_OK
     a = json.loads((out / "post2_j2.summary.json").read_text())

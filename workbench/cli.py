@@ -197,32 +197,58 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
     scenario in the order given (each failure is listed at the end). Ctrl-C or SIGTERM stop the
     running processes with SIGTERM (each removes its partial recording) and start no new one.
     Each process inherits this one's environment, so also its one BLAS thread (set at import).
+
+    Progress: every child logs plain timed lines (:func:`child_argv`). On a terminal (bars mode) the
+    children's stderr is piped through this process, which prints their lines above one bar of the
+    scenarios finished (count, ETA); otherwise the children write to the inherited stderr directly.
     """
     import subprocess
+    import threading
     import time
 
     out = Path(args.out)
     order = _launch_order(names, out)
     pending, running, codes = list(order), {}, {}
     t0 = time.perf_counter()
-    if not args.quiet:
-        _progress(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
+    rep = _reporter(args)
+    piped = rep.mode == "bars"
+    pumps: list[threading.Thread] = []
+
+    def pump(stream) -> None:  # a child's stderr, line by line, above the bar
+        for text in stream:
+            rep.result(text.rstrip("\n"))
+
+    rep.line(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
+    bar = rep.counter("scenarios finished", total=len(names), unit="scenarios")
     try:
         while pending or running:
             while pending and len(running) < jobs:
                 name = pending.pop(0)
-                running[name] = subprocess.Popen(child_argv(name, args))
+                if piped:
+                    proc = subprocess.Popen(
+                        child_argv(name, args), stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1
+                    )
+                    pumps.append(threading.Thread(target=pump, args=(proc.stderr,), daemon=True))
+                    pumps[-1].start()
+                else:
+                    proc = subprocess.Popen(child_argv(name, args))
+                running[name] = proc
             time.sleep(0.05)
             for name, proc in list(running.items()):
                 if proc.poll() is not None:
                     codes[name] = proc.returncode
                     del running[name]
+            bar.set(len(codes))
     except BaseException:
         for proc in running.values():
             proc.terminate()
         for proc in running.values():
             proc.wait()
         raise
+    finally:
+        for t in pumps:
+            t.join(timeout=5)
+        bar.close(report=False)
     failed = [n for n in names if codes.get(n)]
     _progress(
         f"{len(names) - len(failed)} of {len(names)} scenarios succeeded in {time.perf_counter() - t0:.1f} s"
