@@ -140,9 +140,14 @@ class MeadsProblem:
         rep = prog.current()
         with rep.stage("truth simulation + nominal air-data fit"):
             sh = prepare_trade_study(scenario)
-        with rep.counter(f"trade study tasks ({CHUNK} runs each)", unit="tasks") as bar:
+        with rep.counter("trade study runs", total=runs, unit="runs") as bar:  # counted in tasks of CHUNK runs
             ts = run_trade_study(
-                sh, runs, options.first_seed, workers=options.workers, scheduler=options.scheduler, progress=bar
+                sh,
+                runs,
+                options.first_seed,
+                workers=options.workers,
+                scheduler=options.scheduler,
+                progress=lambda done, _tasks: bar.set(min(done * CHUNK, runs)),
             )
         summary = {"scenario": scenario.name, "kind": "meads_trade_study", **ts.summary}
         summary["wall_time_s"] = time.perf_counter() - t0
