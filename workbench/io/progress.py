@@ -28,7 +28,7 @@ import contextvars
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, TextIO
 
@@ -42,6 +42,7 @@ __all__ = [
     "current",
     "format_seconds",
     "reporter_for",
+    "stage_times",
 ]
 
 #: The reporter modes (see the module docstring); ``"auto"`` in :func:`reporter_for` = bars on a terminal.
@@ -222,16 +223,9 @@ class Reporter:
         yield
         self.record(label, time.perf_counter() - t0)
 
-    def stage_times(self) -> dict[str, float]:
-        """The recorded stages as ``{label: wall_s}`` (a repeated label gets `` #2``, `` #3``, ...)."""
-        out: dict[str, float] = {}
-        for st in self.times:
-            key, k = st.label, 1
-            while key in out:
-                k += 1
-                key = f"{st.label} #{k}"
-            out[key] = round(st.wall_s, 4)
-        return out
+    def stage_times(self, since: int = 0) -> dict[str, float]:
+        """The stages recorded from index ``since`` on as ``{label: wall_s}`` (:func:`stage_times`)."""
+        return stage_times(self.times[since:])
 
     # -- counters ----------------------------------------------------------------------------
     def counter(self, desc: str, total: float | None = None, unit: str = "it") -> Counter:
@@ -266,6 +260,19 @@ class Reporter:
             bar_format=fmt,
             position=len(self._open),
         )
+
+
+def stage_times(times: Sequence[StageTime]) -> dict[str, float]:
+    """``{label: wall_s}`` [s, rounded to 0.1 ms] of ``times`` in order, JSON-ready; a repeated
+    label gets `` #2``, `` #3``, ..."""
+    out: dict[str, float] = {}
+    for st in times:
+        key, k = st.label, 1
+        while key in out:
+            k += 1
+            key = f"{st.label} #{k}"
+        out[key] = round(st.wall_s, 4)
+    return out
 
 
 _ACTIVE: contextvars.ContextVar[Reporter | None] = contextvars.ContextVar("workbench_progress", default=None)

@@ -244,7 +244,7 @@ def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, rep: prog.
         rep.record("summary" + (" + score against the truth" if truth is not None else ""), time.perf_counter() - t0)
         rep.record("drawing the stages into the recording", draw_s)
         summary["seed"] = seed
-        summary["stage_times_s"] = _stage_times(rep, n_times)
+        summary["stage_times_s"] = rep.stage_times(since=n_times)  # this run's (a reporter may serve several)
         summary["wall_time_s"] = time.perf_counter() - t_start
         health = summary.get("health")
         if health is not None and health["verdict"] == ERROR:
@@ -268,13 +268,6 @@ def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, rep: prog.
                 meta={"source": f"workbench run {sc.name}", "frame": table.frame},
             )
     return result, summary, rrd, Path(summary_path), export_path, telemetry, truth, seed
-
-
-def _stage_times(rep: prog.Reporter, since: int) -> dict[str, float]:
-    """The stages ``rep`` recorded from index ``since`` on, ``{label: wall_s}`` (this run's)."""
-    sub = prog.Reporter("quiet")
-    sub.times = rep.times[since:]
-    return sub.stage_times()
 
 
 def run_monte_carlo(
