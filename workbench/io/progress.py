@@ -245,9 +245,11 @@ class Reporter:
         """A ``tqdm`` bar on :attr:`stream` (``leave=False``: the final line replaces it)."""
         from tqdm import tqdm
 
-        fmt = None
+        fmt = None  # tqdm's default for integer counts
         if isinstance(total, float):
             fmt = "{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} {unit} [{elapsed}<{remaining}]"
+        elif total is None:  # e.g. simulated seconds until an event nobody knows in advance
+            fmt = "{desc}: {n:.1f} {unit} [{elapsed}]"
         return tqdm(
             total=total,
             desc=self.prefix + desc,
