@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -84,10 +85,51 @@ def test_run_an_example_problem(fallingbody, tmp_path, capsys):
     assert s["seed"] == 5 and s["truth"]["h_inside_3sigma_fraction"] >= 0.99
     assert (out / "fallingbody.rrd").stat().st_size == s["recording_bytes"]
     assert not (out / "fallingbody.reconstruction.csv").exists()  # no --export
-    # progress: the truth simulation, one line per stage, then the problem's headline
-    assert err[0] == "[fallingbody] simulating the fall (truth) and writing telemetry ..."
-    assert [ln.split()[1] for ln in err[1:4]] == ["BaroData", "ForwardStage", "FallResult"]
-    assert err[-1].startswith("[fallingbody] end altitude ") and f"wrote {out / 'fallingbody.rrd'}" in err[-1]
+    # progress (stderr is not a terminal here: plain lines): the truth simulation and every stage
+    # timed, one line each, then the problem's headline and the paths written
+    stage = re.compile(r"^\[fallingbody\] (?P<label>\S.*?)\s+(?P<s>[0-9.]+) s$")
+    timed = [stage.match(ln) for ln in err]
+    labels = [m["label"] for m in timed if m]
+    assert labels[:4] == ["fall truth simulation + telemetry", "BaroData", "ForwardStage", "FallResult"]
+    assert "drawing the stages into the recording" in labels and "CSV export" not in labels
+    # the summary keeps the same stage times (the run's own, as printed, rounded)
+    for m in timed[:4]:  # printed with 2 decimals below 10 s, 1 from 10 s
+        half_digit = 0.5 * 10.0 ** -len(m["s"].split(".")[1]) + 1e-4
+        assert s["stage_times_s"][m["label"]] == pytest.approx(float(m["s"]), abs=half_digit)
+    assert sum(s["stage_times_s"].values()) <= s["wall_time_s"]
+    assert any(ln.startswith("[fallingbody] end altitude ") for ln in err)
+    assert any(ln.startswith(f"[fallingbody] wrote {out / 'fallingbody.rrd'} (") for ln in err)
+    assert f"[fallingbody] wrote {out / 'fallingbody.summary.json'}" in err
+
+
+def test_run_export_prints_the_csv_path_and_quiet_prints_no_progress(fallingbody, tmp_path, capsys):
+    out = tmp_path / "out"
+    argv = ["run", str(EXAMPLE / "fallingbody.toml"), "--out", str(out), "--export"]
+    assert main([*argv, "--quiet"]) == EXIT_OK
+    err = capsys.readouterr().err.splitlines()
+    csv = out / "fallingbody.reconstruction.csv"
+    assert csv.is_file() and f"[fallingbody] wrote {csv} (--export)" in err
+    # --quiet: only the result lines (headline, paths written), no stage lines, no counters
+    assert all(ln.startswith(("[fallingbody] end altitude ", "[fallingbody] wrote ")) for ln in err), err
+    assert len(err) == 5  # headline, .rrd, summary, telemetry folder, CSV
+    assert main([*argv, "--progress", "plain"]) == EXIT_OK
+    plain = capsys.readouterr().err.splitlines()
+    assert any(re.match(r"^\[fallingbody\] CSV export\s+[0-9.]+ s$", ln) for ln in plain)
+
+    def strip(ln: str) -> str:  # the wall time in the .rrd line differs between two runs
+        return re.sub(r" in [0-9.]+ s$", "", ln)
+
+    assert {strip(ln) for ln in err} <= {strip(ln) for ln in plain} and len(plain) >= len(err) + 6
+
+
+def test_children_of_a_parallel_run_log_plain_lines():
+    """``run A B --jobs 2``: the child processes share the terminal, so none draws bars."""
+    from workbench.cli import build_parser, child_argv
+
+    args = build_parser().parse_args(["run", "a", "b", "--jobs", "2"])
+    assert child_argv("a", args)[-2:] == ["--progress", "plain"]
+    args = build_parser().parse_args(["run", "a", "b", "--jobs", "2", "-q"])
+    assert child_argv("a", args)[-1] == "--quiet" and "--progress" not in child_argv("a", args)
 
 
 def test_unhealthy_run_exits_6_writes_nothing_unless_allowed(tmp_path, capsys):
@@ -115,7 +157,8 @@ def test_unhealthy_run_exits_6_writes_nothing_unless_allowed(tmp_path, capsys):
 def test_several_scenarios_run_in_processes_and_a_failure_stops_none(tmp_path, capfd):
     """``run A B --jobs 2``: each scenario in its own process; the unhealthy one (exit 6, nothing
     written) does not stop the healthy one, whose outputs equal a run in this process; the exit code
-    is the failed scenario's and the failure is listed."""
+    is the failed scenario's and the failure is listed.  With bars (a terminal; forced here), the
+    children's plain timed lines are piped through the parent, above its bar of finished scenarios."""
     from workbench.cli import EXIT_UNHEALTHY
     from workbench.io.assets import assets_dir
 
@@ -129,9 +172,14 @@ def test_several_scenarios_run_in_processes_and_a_failure_stops_none(tmp_path, c
         encoding="utf-8",
     )
     out, ref = tmp_path / "out", tmp_path / "ref"
-    assert main(["run", str(bad), "post2_j2", "--out", str(out), "--jobs", "2"]) == EXIT_UNHEALTHY
+    argv = ["run", str(bad), "post2_j2", "--out", str(out), "--jobs", "2", "--progress", "bars"]
+    assert main(argv) == EXIT_UNHEALTHY
     err = capfd.readouterr().err
     assert "1 of 2 scenarios succeeded" in err and f"{bad}: exit {EXIT_UNHEALTHY}" in err
+    lines = err.replace("\r", "\n").splitlines()
+    assert f"[post2_j2] wrote {out / 'post2_j2.summary.json'}" in lines  # a child's line, through the parent
+    assert any(re.match(r"^\[post2_j2\] \S.*\s[0-9.]+ s$", ln) for ln in lines)  # its timed stage lines
+    assert any("scenarios finished" in ln for ln in lines)  # the parent's bar
     assert not (out / "j2_tight.rrd").exists() and not (out / "j2_tight.summary.json").exists()
     assert main(["run", "post2_j2", "--out", str(ref), "--jobs", "1"]) == EXIT_OK
     a = json.loads((out / "post2_j2.summary.json").read_text())

@@ -76,6 +76,14 @@ def _progress(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+def _reporter(args: argparse.Namespace):
+    """The progress reporter of ``run`` / ``mc`` (``workbench.io.progress``): bars on stderr when it
+    is a terminal, plain timed lines when not (or ``--progress plain``), none with ``--quiet``."""
+    from workbench.io.progress import reporter_for
+
+    return reporter_for(args.progress, quiet=args.quiet)
+
+
 def _shipped() -> dict[str, Path]:
     """The shipped scenarios ``{name: path}``; ``FileNotFoundError`` if there are none."""
     from workbench.io.assets import assets_dir
@@ -119,8 +127,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     jobs = _jobs(args.jobs, len(names))
     if jobs > 1:
         return _run_in_processes(names, args, jobs)
+    rep = _reporter(args)
     for name in names:
-        run_scenario(name, Path(args.out), options, progress=_progress)
+        run_scenario(name, Path(args.out), options, progress=rep)
     return EXIT_OK
 
 
@@ -167,13 +176,16 @@ def _launch_order(names: list[str], out: Path) -> list[str]:
     return order
 
 
-def _child_argv(name: str, args: argparse.Namespace) -> list[str]:
+def child_argv(name: str, args: argparse.Namespace) -> list[str]:
     """The ``workbench run`` command line of one scenario in its own process (same options)."""
     argv = [sys.executable, "-m", "workbench.cli", "run", str(name), "--out", str(args.out), "--jobs", "1"]
     for flag, value in (("--seed", args.seed), ("--scheduler", args.scheduler), ("--members", args.members)):
         if value is not None:
             argv += [flag, str(value)]
     argv += ["--export"] * bool(args.export) + ["--allow-unhealthy"] * bool(args.allow_unhealthy)
+    # several processes share the terminal: bars would overwrite each other's lines, so every child
+    # logs plain timed lines (each names its scenario) - or nothing but its results under --quiet
+    argv += ["--quiet"] if args.quiet else ["--progress", "plain"]
     return argv
 
 
@@ -185,31 +197,58 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
     scenario in the order given (each failure is listed at the end). Ctrl-C or SIGTERM stop the
     running processes with SIGTERM (each removes its partial recording) and start no new one.
     Each process inherits this one's environment, so also its one BLAS thread (set at import).
+
+    Progress: every child logs plain timed lines (:func:`child_argv`). On a terminal (bars mode) the
+    children's stderr is piped through this process, which prints their lines above one bar of the
+    scenarios finished (count, ETA); otherwise the children write to the inherited stderr directly.
     """
     import subprocess
+    import threading
     import time
 
     out = Path(args.out)
     order = _launch_order(names, out)
     pending, running, codes = list(order), {}, {}
     t0 = time.perf_counter()
-    _progress(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
+    rep = _reporter(args)
+    piped = rep.mode == "bars"
+    pumps: list[threading.Thread] = []
+
+    def pump(stream) -> None:  # a child's stderr, line by line, above the bar
+        for text in stream:
+            rep.result(text.rstrip("\n"))
+
+    rep.line(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
+    bar = rep.counter("scenarios finished", total=len(names), unit="scenarios")
     try:
         while pending or running:
             while pending and len(running) < jobs:
                 name = pending.pop(0)
-                running[name] = subprocess.Popen(_child_argv(name, args))
+                if piped:
+                    proc = subprocess.Popen(
+                        child_argv(name, args), stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1
+                    )
+                    pumps.append(threading.Thread(target=pump, args=(proc.stderr,), daemon=True))
+                    pumps[-1].start()
+                else:
+                    proc = subprocess.Popen(child_argv(name, args))
+                running[name] = proc
             time.sleep(0.05)
             for name, proc in list(running.items()):
                 if proc.poll() is not None:
                     codes[name] = proc.returncode
                     del running[name]
+            bar.set(len(codes))
     except BaseException:
         for proc in running.values():
             proc.terminate()
         for proc in running.values():
             proc.wait()
         raise
+    finally:
+        for t in pumps:
+            t.join(timeout=5)
+        bar.close(report=False)
     failed = [n for n in names if codes.get(n)]
     _progress(
         f"{len(names) - len(failed)} of {len(names)} scenarios succeeded in {time.perf_counter() - t0:.1f} s"
@@ -233,7 +272,7 @@ def cmd_mc(args: argparse.Namespace) -> int:
         truth_sim=args.truth_sim,
         refine_rounds=args.refine_rounds,
     )
-    run_monte_carlo(args.scenario, Path(args.out), options, progress=_progress)
+    run_monte_carlo(args.scenario, Path(args.out), options, progress=_reporter(args))
     return EXIT_OK
 
 
@@ -347,6 +386,23 @@ def cmd_import(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _progress_options(sp: argparse.ArgumentParser) -> None:
+    """``--quiet/-q`` and ``--progress`` of the long-running commands (``run``, ``mc``)."""
+    sp.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="no progress output (no bars, no stage lines); the result lines and the paths written still print",
+    )
+    sp.add_argument(
+        "--progress",
+        choices=("auto", "bars", "plain"),
+        default="auto",
+        help="progress on stderr: 'bars' (counts and ETA), 'plain' (one timed line per stage, for logs), "
+        "'auto' (default: bars when stderr is a terminal, else plain)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (sub-commands list, run, mc, inspect, import)."""
     p = argparse.ArgumentParser(prog="workbench", description="EDL reconstruction workbench")
@@ -374,6 +430,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="scenarios run at once, each in its own process (default: one per CPU core; 1 = one after another "
         "in this process). With several, every scenario runs even if one fails",
     )
+    _progress_options(sp)
     sp.set_defaults(func=cmd_run)
     sp = sub.add_parser(
         "mc", help="Monte Carlo analysis of a scenario (drop test: consistency; entry: smoother validation)"
@@ -399,6 +456,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--refine-rounds", type=int, default=None, help="refinement rounds of the ensemble stage (entry --truth-sim: 1)"
     )
     sp.add_argument("--out", default="recordings")
+    _progress_options(sp)
     sp.set_defaults(func=cmd_mc)
     sp = sub.add_parser("inspect", help="summarise a .rrd recording and print its scorecard")
     sp.add_argument("recording")

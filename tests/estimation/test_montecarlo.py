@@ -127,3 +127,27 @@ def test_dask_identical_and_scratch_removed(tmp_path, monkeypatch):
     assert run.kind == "dask" and "LocalCluster (2 workers" in run.executor
     np.testing.assert_array_equal(np.concatenate(run.results), np.concatenate(ref.results))
     assert list(tmp_path.iterdir()) == []  # the cluster's scratch folders (scheduler's and workers') are gone
+
+
+def test_progress_counter_counts_pool_members_once_each_also_after_a_killed_worker(tmp_path):
+    """The Monte Carlo counter of ``workbench mc`` (``io.progress``) driven by the pool's completed
+    futures: every member counted exactly once, also when a worker is killed and the pool restarted."""
+    import io
+
+    from workbench.io.progress import Reporter
+
+    for marker, restarts in ((None, 0), (str(tmp_path / "killed"), 1)):
+        out = io.StringIO()
+        rep = Reporter("plain", stream=out, bar_every_s=0.0)
+        seen = []
+        with rep.counter("Monte Carlo members", total=8, unit="members") as bar:
+
+            def count(done, total, bar=bar, seen=seen):
+                seen.append(done)
+                bar(done, total)
+
+            run = run_monte_carlo(killing_task, 8, shared=(6, marker), seed=2, workers=2, progress=count)
+            assert bar.n == 8
+        assert run.kind == "processes" and run.pool_restarts == restarts
+        assert seen == list(range(1, 9))
+        assert out.getvalue().startswith("Monte Carlo members: 8/8 members in ")

@@ -167,6 +167,7 @@ def iterated_rts(
     passes: int,
     *,
     step_tol: np.ndarray | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> IteratedSmoothing:
     """Iterated (re-linearised) extended RTS smoother: Gauss-Newton on the batch MAP cost.
 
@@ -182,21 +183,28 @@ def iterated_rts(
     ``passes`` ≥ 1 the maximum number of passes (1: the plain EKF + RTS); ``step_tol`` (n_e,)
     optional absolute stop rule in error-state units: stop after a pass whose change
     ``max_k |x_s⁽ⁱ⁾[k] ⊟ x_s⁽ⁱ⁻¹⁾[k]|`` is below it in every component.  Only the first and the
-    last forward pass are kept (a pass holds n × 4 covariance-sized arrays).  Returns
-    :class:`IteratedSmoothing`; errors of :func:`rts_smooth` propagate.
+    last forward pass are kept (a pass holds n × 4 covariance-sized arrays).  ``progress(done,
+    total)`` is called after every sweep (a forward pass or a smoothing; ``total`` = 2 ``passes``,
+    not reached when the stop rule ends it early).  Returns :class:`IteratedSmoothing`; errors of
+    :func:`rts_smooth` propagate.
     """
     n_pass = int(passes)
     if n_pass < 1:
         raise ValueError(f"iterated_rts: passes must be >= 1, got {passes}")
     tol = None if step_tol is None else np.broadcast_to(np.asarray(step_tol, dtype=float), (layout.n_e,))
+    tick = progress if progress is not None else (lambda done, total: None)
     first = forward = run_pass(None)
+    tick(1, 2 * n_pass)
     sp = rts_smooth(first, layout)
+    tick(2, 2 * n_pass)
     changes: list[np.ndarray] = []
     converged = False
-    for _ in range(1, n_pass):
+    for i in range(1, n_pass):
         ref = sp.x
         forward = run_pass(ref)
+        tick(2 * i + 1, 2 * n_pass)
         sp = rts_smooth(forward, layout)
+        tick(2 * i + 2, 2 * n_pass)
         d = np.abs(layout.boxminus(sp.x, ref))
         changes.append(d.max(axis=0) if d.shape[0] else np.zeros(layout.n_e))
         if tol is not None and bool(np.all(changes[-1] < tol)):

@@ -35,7 +35,9 @@ __all__ = [
     "Synthesized",
 ]
 
-#: A progress sink: one human-readable line per call (the command line prints it to stderr).
+#: A progress sink: one human-readable line per call.  The command line passes a
+#: :class:`workbench.io.progress.Reporter` (stderr; prefixes the scenario name; nothing under
+#: ``--quiet``); counters with an ETA come from :func:`workbench.io.progress.current`.
 Progress = Callable[[str], None]
 
 

@@ -20,12 +20,21 @@ import numpy as np
 
 from workbench.estimation.health import ERROR, UnhealthyError
 from workbench.io import assets
+from workbench.io import progress as prog
 from workbench.io.results import OutputError, export_csv, write_summary
 from workbench.io.scenario import Scenario, resolve_scenario
 from workbench.problems import registry
 from workbench.problems.base import McOptions, McOutcome, Problem, Progress, RunOptions
 
-__all__ = ["NumericalFailure", "RunResult", "output_folder", "resolve", "run_monte_carlo", "run_scenario"]
+__all__ = [
+    "NumericalFailure",
+    "RunResult",
+    "output_folder",
+    "resolve",
+    "run_monte_carlo",
+    "run_scenario",
+    "stage_label",
+]
 
 
 class NumericalFailure(np.linalg.LinAlgError):
@@ -103,8 +112,21 @@ class RunResult:
     export_path: Path | None = None
 
 
-def _silent(_msg: str) -> None:
-    pass
+def stage_label(stage: object, seen: dict[str, int]) -> str:
+    """The name of a reconstruction stage in progress lines and ``summary["stage_times_s"]``.
+
+    The stage's own ``stage_label`` attribute when it has one (e.g. the drop test's
+    ``"filter pass 1/2 (forward EKF)"``), else its type name with its ``name`` attribute when that
+    is a string (``"FilterStage (forward)"``); a type seen before (``seen``: type name -> count,
+    updated here) gets ``" #k"`` unless the label already differs."""
+    kind = type(stage).__name__
+    seen[kind] = seen.get(kind, 0) + 1
+    own = getattr(stage, "stage_label", None)
+    if isinstance(own, str) and own:
+        return own
+    name = getattr(stage, "name", None)
+    label = f"{kind} ({name})" if isinstance(name, str) and name else kind
+    return label if seen[kind] == 1 or label != kind else f"{kind} #{seen[kind]}"
 
 
 def resolve(scenario: str | os.PathLike | Scenario) -> tuple[Scenario, Problem]:
@@ -136,52 +158,76 @@ def run_scenario(
     Writes ``<out>/<name>.rrd`` (atomically: nothing is left on failure), ``<out>/<name>.summary.json``,
     for synthetic scenarios the telemetry and ``truth.npz`` it generated under
     ``<out>/<name>/telemetry/``, and with ``options.export`` ``<out>/<name>.reconstruction.csv``.
-    ``progress`` receives one line per stage (None: quiet).
+    ``progress``: a :class:`workbench.io.progress.Reporter` (bars or plain lines; made the active
+    reporter, so the truth simulation and ensemble stages show counters), or a callable receiving
+    one plain line per stage, or None (quiet).  Every stage is timed: one line per stage with its
+    wall time (the truth simulation, each reconstruction stage, drawing, writing), and the times
+    are in ``summary["stage_times_s"]`` {label: s}; the paths written are reported at the end.
     """
     opts = options or RunOptions()
-    say = progress or _silent
+    rep = prog.as_reporter(progress)
     t_start = time.perf_counter()
     sc, problem = resolve(scenario)
     out = Path(out_dir)
-    with output_folder(out):
-        result, summary, rrd, summary_path, export_path, telemetry, truth, seed = _run(
-            sc, problem, out, opts, say, t_start
+    prefix, rep.prefix = rep.prefix, f"[{sc.name}] "
+    try:
+        with prog.active(rep), output_folder(out):
+            result, summary, rrd, summary_path, export_path, telemetry, truth, seed = _run(
+                sc, problem, out, opts, rep, t_start
+            )
+        health = summary.get("health")
+        verdict = (
+            ""
+            if health is None
+            else f"health {health['verdict']}"
+            + (" — UNHEALTHY, written with --allow-unhealthy" if health.get("written_anyway") else "")
         )
-    health = summary.get("health")
-    verdict = (
-        ""
-        if health is None
-        else f"health {health['verdict']}"
-        + (" — UNHEALTHY, written with --allow-unhealthy" if health.get("written_anyway") else "")
-    )
-    say(
-        f"[{sc.name}] {verdict + '; ' if verdict else ''}{problem.headline(summary)}; "
-        f"wrote {rrd} ({summary['recording_bytes'] / 1e6:.1f} MB) in {summary['wall_time_s']:.1f} s"
-    )
+        rep.result(f"{verdict + '; ' if verdict else ''}{problem.headline(summary)}")
+        rep.result(
+            f"wrote {rrd} ({summary['recording_bytes'] / 1e6:.1f} MB) in "
+            f"{prog.format_seconds(time.perf_counter() - t_start)}"
+        )
+        rep.result(f"wrote {summary_path}")
+        if sc.is_synthetic:
+            rep.result(f"wrote {out / sc.name / 'telemetry'}{os.sep} (synthetic telemetry and truth.npz)")
+        if export_path is not None:
+            rep.result(f"wrote {export_path} (--export)")
+    finally:
+        rep.prefix = prefix
     return RunResult(sc, problem, summary, result, rrd, summary_path, telemetry, truth, export_path)
 
 
-def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, say: Progress, t_start: float):
+def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, rep: prog.Reporter, t_start: float):
     """The body of :func:`run_scenario` inside its output folder."""
     seed = int(sc.get("synthetic.seed", 0, kind="int") if opts.seed is None else opts.seed)
     truth = None
+    n_times = len(rep.times)
     if sc.is_synthetic:
-        say(f"[{sc.name}] simulating the {problem.title} (truth) and writing telemetry ...")
-        syn = problem.synthesize(sc, out / sc.name / "telemetry", seed)
-        telemetry = dict(syn.telemetry)
-        truth = problem.load_truth(syn.truth)
+        with rep.stage(f"{problem.title} truth simulation + telemetry"):
+            syn = problem.synthesize(sc, out / sc.name / "telemetry", seed)
+            telemetry = dict(syn.telemetry)
+            truth = problem.load_truth(syn.truth)
     else:
         telemetry = problem.telemetry_files(sc)
     rrd = out / f"{sc.name}.rrd"
     properties = {"run": {"scenario": str(sc.path), "kind": sc.kind, "seed": seed}}
     with problem.open_recording(rrd, sc, truth, properties) as drawer:
         result = None
-        t0 = time.perf_counter()
         last = "start"
+        seen: dict[str, int] = {}
+        draw_s = 0.0
         try:
-            for stage in problem.reconstruct(sc, telemetry, replace(opts, seed=seed)):
-                say(f"[{sc.name}] {type(stage).__name__:20s} {time.perf_counter() - t0:6.2f} s")
+            stages = iter(problem.reconstruct(sc, telemetry, replace(opts, seed=seed)))
+            while True:
+                t0 = time.perf_counter()
+                try:
+                    stage = next(stages)
+                except StopIteration:
+                    break
+                rep.record(stage_label(stage, seen), time.perf_counter() - t0)
+                t0 = time.perf_counter()
                 drawer.handle(stage)
+                draw_s += time.perf_counter() - t0
                 result, last = stage, type(stage).__name__
         except NumericalFailure:
             raise
@@ -191,29 +237,36 @@ def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, say: Progr
             ) from err
         if result is None:
             raise RuntimeError(f"{sc.path}: the {sc.kind} reconstruction yielded no result")
+        t0 = time.perf_counter()
         summary = problem.summary(result)
         if truth is not None:
             summary["truth"] = problem.score(result, truth)
+        rep.record("summary" + (" + score against the truth" if truth is not None else ""), time.perf_counter() - t0)
+        rep.record("drawing the stages into the recording", draw_s)
         summary["seed"] = seed
+        summary["stage_times_s"] = rep.stage_times(since=n_times)  # this run's (a reporter may serve several)
         summary["wall_time_s"] = time.perf_counter() - t_start
         health = summary.get("health")
         if health is not None and health["verdict"] == ERROR:
             if not opts.allow_unhealthy:
                 raise UnhealthyError(sc.path, health)  # inside the recording: nothing is published
             health["written_anyway"] = True
+        t0 = time.perf_counter()
         drawer.finish(result, summary)
+    rep.record("scorecard + writing the recording", time.perf_counter() - t0)
     summary["recording"] = str(rrd)
     summary["recording_bytes"] = rrd.stat().st_size
     summary_path = write_summary(out / f"{sc.name}.summary.json", summary)
     export_path = None
     if opts.export:
-        table = problem.export_columns(result)
-        export_path = export_csv(
-            out / f"{sc.name}.reconstruction.csv",
-            table.time_s,
-            table.columns,
-            meta={"source": f"workbench run {sc.name}", "frame": table.frame},
-        )
+        with rep.stage("CSV export"):
+            table = problem.export_columns(result)
+            export_path = export_csv(
+                out / f"{sc.name}.reconstruction.csv",
+                table.time_s,
+                table.columns,
+                meta={"source": f"workbench run {sc.name}", "frame": table.frame},
+            )
     return result, summary, rrd, Path(summary_path), export_path, telemetry, truth, seed
 
 
@@ -226,13 +279,22 @@ def run_monte_carlo(
     """The Monte Carlo analysis of the scenario's problem; writes its recording
     (``<out>/<name>_mc.rrd``) and ``<out>/<name>.mc.json`` (``<name>_truth.mc.json`` with
     ``options.truth_sim``).  ``NotImplementedError`` if the problem
-    has none for this scenario."""
-    say = progress or _silent
+    has none for this scenario.  ``progress`` as in :func:`run_scenario`: the problem's study shows
+    its members (and truth simulations, dispersions) as counters with an ETA on the active reporter;
+    the paths written are reported at the end."""
+    rep = prog.as_reporter(progress)
     sc, problem = resolve(scenario)
     out = Path(out_dir)
     options = options or McOptions()
-    with output_folder(out):
-        outcome = problem.monte_carlo(sc, out, options, say)
-        write_summary(out / f"{sc.name}{'_truth' if options.truth_sim else ''}.mc.json", outcome.summary)
-    say(f"[{sc.name}] {outcome.headline}")
+    prefix, rep.prefix = rep.prefix, f"[{sc.name}] "
+    try:
+        with prog.active(rep), output_folder(out):
+            outcome = problem.monte_carlo(sc, out, options, rep)
+            summary_path = write_summary(
+                out / f"{sc.name}{'_truth' if options.truth_sim else ''}.mc.json", outcome.summary
+            )
+        rep.result(outcome.headline)  # names the recording it wrote
+        rep.result(f"wrote {summary_path}")
+    finally:
+        rep.prefix = prefix
     return outcome

@@ -50,7 +50,7 @@ __all__ = [
 ]
 
 #: summary keys that differ between any two runs and say nothing about the result
-IGNORED_KEYS = ("wall_time_s", "recording", "recording_bytes")
+IGNORED_KEYS = ("wall_time_s", "stage_times_s", "recording", "recording_bytes")
 _BOUND = re.compile(r"^plus_(\d+(?:\.\d+)?)sigma$")
 _A_COLOUR = (31, 119, 180, 255)
 _B_COLOUR = (255, 127, 14, 255)

@@ -256,3 +256,9 @@ def test_monte_carlo_command_writes_a_recording(tmp_path, capsys):
     assert np.isclose(np.median(plus), summary["median_3sigma_m"])
     assert np.all(np.isfinite(err)) and list(t) == [1, 2]
     assert "Monte Carlo" in data.text_document("/report")
+    # progress (plain: stderr is not a terminal): the members counted as the pool's futures complete
+    # (default: 2 local workers), and the paths written
+    err = capsys.readouterr().err.splitlines()
+    assert any(ln.startswith("[droptest] Monte Carlo members: 2/2 members in ") for ln in err), err
+    assert f"[droptest] wrote {tmp_path / 'droptest.mc.json'}" in err
+    assert any(str(tmp_path / "droptest_mc.rrd") in ln for ln in err)

@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from workbench.estimation.montecarlo import resolve_scheduler, run_monte_carlo
+from workbench.io import progress
 from workbench.io.scenario import Scenario
 from workbench.problems.droptest.config import config_for
 from workbench.problems.droptest.synthetic import DROP_PARAMETER_NAMES
@@ -279,14 +280,16 @@ def _monte_carlo(scenario: Scenario, seeds: list[int], work: Path, scheduler: st
     # for a fixed thread count, and two busy-waiting pools on two cores made each reconstruction ~10x
     # slower (measured 2.5 s -> 20-45 s)
     t0 = time.perf_counter()
-    run = run_monte_carlo(
-        _seed_task,
-        len(seeds),
-        shared=(scenario, seeds, work),
-        workers=workers,
-        scheduler=scheduler,
-        name="droptest-seed",
-    )
+    with progress.current().counter("Monte Carlo members", total=len(seeds), unit="members") as bar:
+        run = run_monte_carlo(
+            _seed_task,
+            len(seeds),
+            shared=(scenario, seeds, work),
+            workers=workers,
+            scheduler=scheduler,
+            name="droptest-seed",
+            progress=bar,
+        )
     executor = "loop" if run.kind == "loop" else run.executor
     return stack_results(scenario, run.results, executor, time.perf_counter() - t0)
 

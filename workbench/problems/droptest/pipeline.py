@@ -126,6 +126,12 @@ class FilterStage:
     q_accel: np.ndarray | None = None
     q_angular: np.ndarray | None = None
 
+    @property
+    def stage_label(self) -> str:
+        """Its name in progress lines and ``summary["stage_times_s"]``: which of the two filter passes."""
+        what = {"forward": "1/2 (forward EKF)", "smoothed": "2/2 (RTS smoother)"}.get(self.name, f"({self.name})")
+        return f"filter pass {what}"
+
 
 @dataclass(frozen=True)
 class StrokeStage:

@@ -160,10 +160,10 @@ class DropTestProblem:
         out = Path(out_dir)
         seeds = options.seeds
         how = options.scheduler or f"{options.workers} local worker(s)"
-        progress(f"[{scenario.name}] Monte Carlo: {len(seeds)} runs ({how}) ...")
+        progress(f"Monte Carlo: {len(seeds)} runs ({how}) ...")
         if options.truth_sim:
             progress(
-                f"[{scenario.name}] note: every drop-test Monte Carlo member is already a different drop flown by "
+                "note: every drop-test Monte Carlo member is already a different drop flown by "
                 "the truth simulator (synthetic.disperse_drop); --truth-sim changes nothing here"
             )
         res = monte_carlo(

@@ -39,6 +39,7 @@ from workbench.core.rotation import (
     quat_rotate,
     quat_to_dcm,
 )
+from workbench.io import progress
 from workbench.problems.droptest import truth_fast
 from workbench.problems.droptest.lander import LanderModel
 from workbench.problems.droptest.surface import Surface
@@ -587,23 +588,33 @@ def simulate_drop(
     separation.terminal = True
     separation.direction = -1
     opts = dict(method="DOP853", max_step=cfg.max_step, rtol=tol, atol=tol, dense_output=True)
-    sol1 = solve_ivp(model.rhs_fast() if fast else model.rhs, (0.0, cfg.duration_s), y0, events=cut_event, **opts)
-    segments = [(0.0, sol1.t[-1], sol1.sol, False)]
-    t_cut = float(sol1.t[-1]) if sol1.status == 1 else None
-    t_end = cfg.duration_s
-    if t_cut is not None:
-        model.cut = True
-        y1 = sol1.y[:, -1].copy()
-        y1[6:10] = quat_normalize(y1[6:10])
-        fun = model.rhs_fast() if fast else model.rhs
-        sol2 = solve_ivp(fun, (t_cut, cfg.duration_s), y1, events=separation, **opts)
-        if sol2.status == 1:
-            t_end = min(cfg.duration_s, float(sol2.t[-1]) + cfg.tail_s)
-            y2 = sol2.y[:, -1].copy()
-            y2[6:10] = quat_normalize(y2[6:10])
-            sol3 = solve_ivp(fun, (float(sol2.t[-1]), t_end), y2, **opts)
-            sol2 = _join(sol2, sol3)
-        segments.append((t_cut, t_end, sol2 if callable(sol2) else sol2.sol, True))
+    with progress.current().counter("drop truth simulation", total=float(cfg.duration_s), unit="s simulated") as bar:
+
+        def tick(t, y):  # evaluated once per accepted step; never crosses zero, so never an event
+            bar.set(float(t))
+            return 1.0
+
+        sol1 = solve_ivp(
+            model.rhs_fast() if fast else model.rhs, (0.0, cfg.duration_s), y0, events=[cut_event, tick], **opts
+        )
+        segments = [(0.0, sol1.t[-1], sol1.sol, False)]
+        t_cut = float(sol1.t[-1]) if sol1.status == 1 else None
+        t_end = cfg.duration_s
+        if t_cut is not None:
+            model.cut = True
+            y1 = sol1.y[:, -1].copy()
+            y1[6:10] = quat_normalize(y1[6:10])
+            fun = model.rhs_fast() if fast else model.rhs
+            sol2 = solve_ivp(fun, (t_cut, cfg.duration_s), y1, events=[separation, tick], **opts)
+            if sol2.status == 1:
+                t_end = min(cfg.duration_s, float(sol2.t[-1]) + cfg.tail_s)
+                bar.set(float(sol2.t[-1]), total=float(t_end))
+                y2 = sol2.y[:, -1].copy()
+                y2[6:10] = quat_normalize(y2[6:10])
+                sol3 = solve_ivp(fun, (float(sol2.t[-1]), t_end), y2, events=[tick], **opts)
+                sol2 = _join(sol2, sol3)
+            segments.append((t_cut, t_end, sol2 if callable(sol2) else sol2.sol, True))
+        bar.set(float(t_end))
 
     dt = 1.0 / cfg.output_rate_hz
     n_pre = int(round(cfg.pre_release_s / dt))

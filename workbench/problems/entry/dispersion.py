@@ -52,6 +52,7 @@ from workbench.core.rotation import quat_from_rotvec, quat_multiply, quat_normal
 from workbench.estimation.ensemble import AttitudeTrack, attitude_track, default_backend, integrate_ensemble
 from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import ImuArrays, imu_arrays
+from workbench.io import progress
 from workbench.problems.entry.site import R_GROUND, R_MOLA
 
 __all__ = [
@@ -554,50 +555,58 @@ def run_dispersion(
     mean, cov = np.zeros(9), prior_cov
     history: list[dict] = []
     wall = 0.0
-    for r in range(int(refine_rounds) + 1):
-        if r > 0:
-            job = replace(job, round_index=r, mean=mean, L=np.linalg.cholesky(cov))
-        t0 = time.perf_counter()
-        run = run_monte_carlo(
-            _run_chunk,
-            int(n),
-            shared=job,
-            chunk_size=int(chunk_size),
-            workers=workers,
-            scheduler=scheduler,
-            name=f"dispersion-{job.seed}-round{r}",
-        )
-        parts, executor = run.results, run.executor
-        dt = time.perf_counter() - t0
-        wall += dt
-        dx0, events = _combine(parts)
-        accepted = rules.accept(events)
-        weights = None
-        if r > 0:
-            logw = _log_normal(dx0, np.zeros(9), prior_cov) - _log_normal(dx0, mean, cov)
-            weights = np.exp(logw - (logw[accepted].max() if accepted.any() else logw.max()))
-        wa = np.ones(int(accepted.sum())) if weights is None else weights[accepted]
-        history.append(
-            {
-                "round": r,
-                "n_accepted": int(accepted.sum()),
-                "proposal_sigma": np.sqrt(np.diagonal(cov)).copy(),
-                "ess": float(wa.sum() ** 2 / np.sum(wa * wa)) if wa.size else 0.0,
-                "wall_s": dt,
-            }
-        )
-        if r < refine_rounds:  # next proposal: the elite members' spread, inflated
-            n_elite = max(min_elite, int(np.ceil(elite_fraction * n)))
-            if accepted.sum() >= n_elite:
-                elite = np.flatnonzero(accepted)
-            else:
-                elite = np.argsort(rules.score(events), kind="stable")[:n_elite]
-            # the elite's Gaussian (inflated) times the prior: never wider than the prior
-            ce = inflation**2 * np.cov(dx0[elite], rowvar=False) + 1e-6 * prior_cov
-            ci = np.linalg.inv(ce)
-            cov = np.linalg.inv(ci + np.linalg.inv(prior_cov))
-            cov = 0.5 * (cov + cov.T)
-            mean = cov @ (ci @ dx0[elite].mean(axis=0))
+    rounds = int(refine_rounds) + 1
+    bar = progress.current().counter(
+        f"dispersion members ({rounds} round{'s' if rounds > 1 else ''})", total=int(n) * rounds, unit="members"
+    )
+    try:
+        for r in range(rounds):
+            if r > 0:
+                job = replace(job, round_index=r, mean=mean, L=np.linalg.cholesky(cov))
+            t0 = time.perf_counter()
+            run = run_monte_carlo(
+                _run_chunk,
+                int(n),
+                shared=job,
+                chunk_size=int(chunk_size),
+                workers=workers,
+                scheduler=scheduler,
+                name=f"dispersion-{job.seed}-round{r}",
+                progress=lambda done, _tasks, r=r: bar.set(r * int(n) + min(done * int(chunk_size), int(n))),
+            )
+            parts, executor = run.results, run.executor
+            dt = time.perf_counter() - t0
+            wall += dt
+            dx0, events = _combine(parts)
+            accepted = rules.accept(events)
+            weights = None
+            if r > 0:
+                logw = _log_normal(dx0, np.zeros(9), prior_cov) - _log_normal(dx0, mean, cov)
+                weights = np.exp(logw - (logw[accepted].max() if accepted.any() else logw.max()))
+            wa = np.ones(int(accepted.sum())) if weights is None else weights[accepted]
+            history.append(
+                {
+                    "round": r,
+                    "n_accepted": int(accepted.sum()),
+                    "proposal_sigma": np.sqrt(np.diagonal(cov)).copy(),
+                    "ess": float(wa.sum() ** 2 / np.sum(wa * wa)) if wa.size else 0.0,
+                    "wall_s": dt,
+                }
+            )
+            if r < refine_rounds:  # next proposal: the elite members' spread, inflated
+                n_elite = max(min_elite, int(np.ceil(elite_fraction * n)))
+                if accepted.sum() >= n_elite:
+                    elite = np.flatnonzero(accepted)
+                else:
+                    elite = np.argsort(rules.score(events), kind="stable")[:n_elite]
+                # the elite's Gaussian (inflated) times the prior: never wider than the prior
+                ce = inflation**2 * np.cov(dx0[elite], rowvar=False) + 1e-6 * prior_cov
+                ci = np.linalg.inv(ce)
+                cov = np.linalg.inv(ci + np.linalg.inv(prior_cov))
+                cov = 0.5 * (cov + cov.T)
+                mean = cov @ (ci @ dx0[elite].mean(axis=0))
+    finally:
+        bar.close()
     return _finish(
         job,
         dx0,

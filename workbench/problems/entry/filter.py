@@ -116,6 +116,7 @@ from workbench.estimation.strapdown import (
     imu_columns,
     rk4_step,
 )
+from workbench.io import progress
 from workbench.models.radar import (
     PlaneFit,
     beam_directions_G,
@@ -264,6 +265,12 @@ class EntryFilterResult:
     plane_fits: list[tuple[float, PlaneFit]]
     constrained: bool = True
     info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def stage_label(self) -> str:
+        """Its name in progress lines and ``summary["stage_times_s"]``, with the passes it ran."""
+        n = self.info.get("iterations")
+        return "radar-aided iterated smoother" + ("" if n is None else f" ({n} pass{'es' if n != 1 else ''})")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -583,7 +590,12 @@ def run_entry_smoother(
             rms0.update(rms)
         return fw
 
-    its = iterated_rts(run_pass, _LAYOUT, n_iter)
+    with progress.current().counter(
+        f"iterated smoother: forward + backward sweeps of {n_iter} pass{'es' if n_iter > 1 else ''}",
+        total=2 * n_iter,
+        unit="sweeps",
+    ) as bar:
+        its = iterated_rts(run_pass, _LAYOUT, n_iter, progress=bar)
     fw0 = its.first
     Xs, Ps = its.smoothed.x, its.smoothed.P
     Xpo, Ppo = fw0.x_post, fw0.P_post

@@ -90,6 +90,7 @@ from workbench.core.rotation import quat_boxplus
 from workbench.estimation.consistency import anees_bounds, fraction_inside, nees
 from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import GapBridge, ImuArrays, apply_gap, gap_transition, imu_arrays, rk4_step
+from workbench.io import progress
 from workbench.models.radar import beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
 from workbench.problems.entry.config import config_for
 from workbench.problems.entry.dispersion import run_dispersion
@@ -638,15 +639,17 @@ def validate_smoother(
     )
     # one BLAS thread in every executor: results must not depend on it, and multi-threaded BLAS on
     # 9x9 matrices made one smoother run ~10x slower (measured 0.65 s -> 7 s)
-    run = run_monte_carlo(
-        _run_one,
-        int(n_runs),
-        shared=job,
-        seed=job.seed,
-        workers=int(workers),
-        scheduler=scheduler,
-        name=f"entry-validation-{job.seed}",
-    )
+    with progress.current().counter("smoother validation runs", total=int(n_runs), unit="runs") as bar:
+        run = run_monte_carlo(
+            _run_one,
+            int(n_runs),
+            shared=job,
+            seed=job.seed,
+            workers=int(workers),
+            scheduler=scheduler,
+            name=f"entry-validation-{job.seed}",
+            progress=bar,
+        )
     outs, executor = run.results, run.executor
     ev = dict(getattr(dispersion, "events_t", {}) or {}) if events is None else dict(events)
     res = aggregate_runs(

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.io import progress as prog
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.entry import pipeline as en
@@ -167,17 +168,18 @@ class EntryProblem:
             return self._truth_monte_carlo(scenario, Path(out_dir), options, progress)
         t_start = time.perf_counter()
         sc, out = scenario, Path(out_dir)
+        rep = prog.current()
         if sc.is_synthetic:
-            progress(f"[{sc.name}] simulating the entry (truth) and writing telemetry ...")
-            seed = sc.get("synthetic.seed", 0, kind="int")
-            paths = self.synthesize(sc, out / f"{sc.name}_mc_work" / "telemetry", seed).telemetry
+            with rep.stage("entry truth simulation + telemetry"):
+                seed = sc.get("synthetic.seed", 0, kind="int")
+                paths = self.synthesize(sc, out / f"{sc.name}_mc_work" / "telemetry", seed).telemetry
         else:
             paths = telemetry_paths(sc)
-        progress(f"[{sc.name}] preprocessing and dispersion analysis ...")
-        inp = prepare_validation(sc, paths, members=options.members, scheduler=options.scheduler)
+        with rep.stage("preprocessing + dispersion analysis"):
+            inp = prepare_validation(sc, paths, members=options.members, scheduler=options.scheduler)
         d = inp.dispersion
         progress(
-            f"[{sc.name}] dispersion: {int(d.accepted.sum())}/{d.accepted.size} accepted; validating the smoother on "
+            f"dispersion: {int(d.accepted.sum())}/{d.accepted.size} accepted; validating the smoother on "
             f"{options.n_runs} runs from the {inp.start_mode!r} start "
             f"({options.scheduler or f'{options.workers} local worker(s)'}) ..."
         )
@@ -189,6 +191,7 @@ class EntryProblem:
                 "draws its truths from the accepted ones (need >= 2): raise --members, [dispersion] "
                 "refine_rounds or widen [dispersion.rules]",
             )
+        t_val = time.perf_counter()
         res = validate_smoother(
             inp.imu,
             inp.nominal,
@@ -200,6 +203,7 @@ class EntryProblem:
             workers=options.workers,
             **inp.validation_kwargs(),
         )
+        rep.record(f"smoother validation ({options.n_runs} runs)", time.perf_counter() - t_val)
         summary = {"scenario": sc.name, "kind": "entry_validation", **res.summary}
         summary["smoother_start_mode"] = inp.start_mode
         summary["smoother_start_note"] = inp.start_note
@@ -233,7 +237,7 @@ class EntryProblem:
         t_start = time.perf_counter()
         members = options.members or DEFAULT_MEMBERS
         progress(
-            f"[{sc.name}] Monte Carlo against the truth simulator: {options.n_runs} members, each a 6-DOF truth, "
+            f"Monte Carlo against the truth simulator: {options.n_runs} members, each a 6-DOF truth, "
             f"telemetry files and the full pipeline ({members} dispersion members) "
             f"({options.scheduler or f'{options.workers} local worker(s)'}) ..."
         )

@@ -80,6 +80,7 @@ from workbench.core.bodies import MARS
 from workbench.core.frames import julian_date_from_utc, north_east_xyz
 from workbench.core.gravity import j2_factor
 from workbench.core.rotation import dcm_components, quat_multiply, quat_normalize, quat_to_dcm
+from workbench.io import progress
 from workbench.models.aerodynamics import EntryVehicle
 from workbench.problems.entry.site import R_GROUND, draw_terrain_modes
 
@@ -975,37 +976,43 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
     k = 0
     t = spec.t0
     i_fsr = i_bsr = None
-    while True:
-        if i_fsr is not None and k == i_fsr:  # front shield leaves: mass, inertia and aero table switch
-            model.set_phase(2)
-        _, a = model.deriv(t, y, aux=True)
-        if model.phase == 0 and spec.aero_enabled:
-            trig = (t >= spec.pdd_time_s - 1e-9) if spec.pdd_time_s is not None else (a[3] < spec.pdd_mach and t > 0)
-            if trig:  # events on the output grid; the PDD sample belongs to phase 1
-                events["PDD"] = round(t, 9)
-                i_fsr = k + int(round(spec.fsr_delay_s / dt_out))
-                i_bsr = i_fsr + int(round(spec.bsr_delay_s / dt_out))
-                events["FSR"] = round(spec.t0 + i_fsr * dt_out, 9)
-                events["BSR"] = round(spec.t0 + i_bsr * dt_out, 9)
-                model.set_phase(1)
-                model.t_pdd = t
-                y = y + _deploy(model, y, spec)
-                _, a = model.deriv(t, y, aux=True)
-        states[k, : len(y)] = y
-        auxs[k] = a
-        phases[k] = model.phase
-        if (i_bsr is not None and k >= i_bsr) or k == n_max - 1:
-            break
-        if math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]) < R_GROUND:
-            raise RuntimeError(f"simulate_entry: the module hit the ground at t = {t:.2f} s")
-        if model.phase == 0:
-            for j in range(n_entry):
-                y = _rk4(model, t + j * h_ent, y, h_ent)
-        else:
-            for j in range(n_chute):
-                y = _rk4(model, t + j * h_ch, y, h_ch)
-        k += 1
-        t = spec.t0 + k * dt_out
+    with progress.current().counter(
+        "entry truth simulation", total=None if spec.t_end is None else float(spec.t_end - spec.t0), unit="s simulated"
+    ) as bar:
+        while True:
+            bar.set(float(t - spec.t0))
+            if i_fsr is not None and k == i_fsr:  # front shield leaves: mass, inertia and aero table switch
+                model.set_phase(2)
+            _, a = model.deriv(t, y, aux=True)
+            if model.phase == 0 and spec.aero_enabled:
+                trig = (
+                    (t >= spec.pdd_time_s - 1e-9) if spec.pdd_time_s is not None else (a[3] < spec.pdd_mach and t > 0)
+                )
+                if trig:  # events on the output grid; the PDD sample belongs to phase 1
+                    events["PDD"] = round(t, 9)
+                    i_fsr = k + int(round(spec.fsr_delay_s / dt_out))
+                    i_bsr = i_fsr + int(round(spec.bsr_delay_s / dt_out))
+                    events["FSR"] = round(spec.t0 + i_fsr * dt_out, 9)
+                    events["BSR"] = round(spec.t0 + i_bsr * dt_out, 9)
+                    model.set_phase(1)
+                    model.t_pdd = t
+                    y = y + _deploy(model, y, spec)
+                    _, a = model.deriv(t, y, aux=True)
+            states[k, : len(y)] = y
+            auxs[k] = a
+            phases[k] = model.phase
+            if (i_bsr is not None and k >= i_bsr) or k == n_max - 1:
+                break
+            if math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]) < R_GROUND:
+                raise RuntimeError(f"simulate_entry: the module hit the ground at t = {t:.2f} s")
+            if model.phase == 0:
+                for j in range(n_entry):
+                    y = _rk4(model, t + j * h_ent, y, h_ent)
+            else:
+                for j in range(n_chute):
+                    y = _rk4(model, t + j * h_ch, y, h_ch)
+            k += 1
+            t = spec.t0 + k * dt_out
     n = k + 1
     states, auxs, phases = states[:n], auxs[:n], phases[:n]
     tgrid = np.round(spec.t0 + dt_out * np.arange(n), 9)

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.io import progress as prog
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.meads import pipeline as md
@@ -128,16 +129,26 @@ class MeadsProblem:
         (``workbench mc msl_meads --seeds 3000``), seed ``first_seed``, on ``options.workers``
         processes or ``options.scheduler``; writes ``<out>/<name>_mc.rrd`` (:mod:`.recording_mc`)."""
         from workbench.problems.meads.config import config_for
-        from workbench.problems.meads.montecarlo import QUANTITIES, prepare_trade_study, run_trade_study
+        from workbench.problems.meads.montecarlo import CHUNK, QUANTITIES, prepare_trade_study, run_trade_study
         from workbench.problems.meads.recording_mc import record_trade_study
 
         t0 = time.perf_counter()
         cfg = config_for(scenario)
         runs = int(options.n_runs) if options.n_runs else cfg.mc.runs
         where = options.scheduler or f"{options.workers} local worker(s)"
-        progress(f"[{scenario.name}] trade study: {runs} runs x {len(cfg.mc.levels)} levels ({where}) ...")
-        sh = prepare_trade_study(scenario)
-        ts = run_trade_study(sh, runs, options.first_seed, workers=options.workers, scheduler=options.scheduler)
+        progress(f"trade study: {runs} runs x {len(cfg.mc.levels)} levels ({where}) ...")
+        rep = prog.current()
+        with rep.stage("truth simulation + nominal air-data fit"):
+            sh = prepare_trade_study(scenario)
+        with rep.counter("trade study runs", total=runs, unit="runs") as bar:  # counted in tasks of CHUNK runs
+            ts = run_trade_study(
+                sh,
+                runs,
+                options.first_seed,
+                workers=options.workers,
+                scheduler=options.scheduler,
+                progress=lambda done, _tasks: bar.set(min(done * CHUNK, runs)),
+            )
         summary = {"scenario": scenario.name, "kind": "meads_trade_study", **ts.summary}
         summary["wall_time_s"] = time.perf_counter() - t0
         rrd = record_trade_study(Path(out_dir) / f"{scenario.name}_mc.rrd", f"{scenario.name} trade study", ts, summary)
