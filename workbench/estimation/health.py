@@ -6,7 +6,8 @@ One home for the checks every problem composes (``problems/<p>/health.py`` or it
   Kirubarajan 2001, Sect. 5.4, the normalised innovation squared): a mean NIS far above its
   dimension means the filter is inconsistent with that sensor (wrong unit, wrong noise, wrong
   model) → ERROR; a mean NIS off by more than a factor 2 in variance → WARNING;
-* :func:`covariance_check` — covariance history symmetric and positive definite;
+* :func:`covariance_check` — covariance history symmetric and positive definite (the per-step
+  numbers from :func:`covariance_stats`);
 * :func:`interval_check` — a physical quantity inside its plausible interval (stroke within the
   bag geometry, restitution in [0, 1], altitude and speed inside the scenario's envelope, ...);
 * :func:`gap_check` — data gaps across the events that matter (contact, parachute deployment);
@@ -40,6 +41,7 @@ __all__ = [
     "Check",
     "UnhealthyError",
     "covariance_check",
+    "covariance_stats",
     "gap_check",
     "health_markdown",
     "health_report",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from workbench.estimation.health import UnhealthyError
 from workbench.io.telemetry import TelemetryError, read_telemetry, write_telemetry
 from workbench.problems.runner import run_scenario
 
@@ -50,3 +51,30 @@ def test_kpa_labelled_pa_is_refused(run, tmp_path):
     assert not (tmp_path / "out" / "kpa.summary.json").exists()
     assert np.isfinite(run.summary["plausibility_qbar_ratio"])
     assert "P1 [Pa]" in str(info.value)
+
+
+def test_health_verdict_of_the_shipped_run(run):
+    """The shipped run carries a verdict; its WLS residual χ² is judged, nothing is an ERROR."""
+    h = run.summary["health"]
+    names = {c["name"]: c for c in h["checks"]}
+    assert h["verdict"] in ("OK", "WARNING")
+    assert any(n.startswith("nis.pressure_wls_dof") for n in names)
+    for n in ("covariance.wls_qbar_alpha_beta", "plausibility.qbar_vs_imu_drag", "density.vs_default"):
+        assert names[n]["status"] == "OK", names[n]
+    assert names["telemetry"]["status"] == "WARNING"  # the stuck P5 is a degradation
+
+
+def test_no_model_form_allowance_is_unhealthy(run, tmp_path):
+    """The same telemetry reduced with port σ that leave out the model-form allowance: the WLS
+    residuals are far outside their χ² bounds, so the run is refused (exit 6), nothing published."""
+    tel = dict(run.telemetry)
+    veh = run.scenario.path_of("vehicle.file")
+    toml = tmp_path / "tight.toml"
+    toml.write_text(
+        f'[scenario]\nname = "tight"\nkind = "meads"\n[vehicle]\nfile = "{veh}"\n[telemetry]\n'
+        f'pressures = "{tel["pressures"]}"\nimu = "{tel["imu"]}"\ninitial_state = "{tel["initial_state"]}"\n'
+        "[estimator]\nmodel_error_frac = 0.0\n"
+    )
+    with pytest.raises(UnhealthyError, match="nis.pressure_wls_dof"):
+        run_scenario(toml, tmp_path / "out")
+    assert not (tmp_path / "out" / "tight.summary.json").exists()

@@ -38,6 +38,7 @@ from threadpoolctl import threadpool_limits
 from workbench.core.atmosphere import CO2_SUTHERLAND, MARS_CO2_GAS_CONSTANT, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_normalize
+from workbench.estimation.health import health_markdown
 from workbench.estimation.strapdown import imu_arrays, integrate
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import TelemetryError
@@ -57,6 +58,7 @@ from workbench.problems.meads.airdata import (
     solve_winds,
 )
 from workbench.problems.meads.config import EstimatorSettings, config_for
+from workbench.problems.meads.health import meads_health
 from workbench.problems.meads.telemetry import MeadsTelemetry, read_meads_telemetry, true_runs
 
 __all__ = [
@@ -498,6 +500,7 @@ def reconstruct(scenario: Scenario, telemetry: Mapping[str, Path]) -> Iterator[o
     wind = winds_and_density(fit, nav, est, hi)
     yield wind
     summary = _summary(scenario, tel, nav, lag, air, wind, est)
+    summary["health"] = meads_health(tel, nav, air, wind, est)
     summary["reconstruction_wall_s"] = time.perf_counter() - t_start
     yield MeadsResult(PressureData(tel, vehicle), nav, lag, air, wind, summary)
 
@@ -638,6 +641,8 @@ def scorecard_markdown(summary: dict) -> str:
         md.append(f"- **failed port** {f['message']}")
     for s in summary["wind_singular_intervals_s"]:
         md.append(f"- wind solution singular (flight-path angle near zero) {s[0]:.1f}–{s[1]:.1f} s: not published")
+    if "health" in summary:
+        md += ["", health_markdown(summary["health"]).rstrip()]
     tr = summary.get("truth")
     if tr:
         md += [

@@ -36,6 +36,8 @@ class _Drawer:
 
     def finish(self, result: object, summary: dict) -> None:
         self.rec.report(md.scorecard_markdown(summary))
+        if "health" in summary:
+            self.rec.health(summary["health"])
 
 
 class MeadsProblem:

@@ -80,7 +80,7 @@ def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6"
             rrb.Vertical(
                 scene,
                 rrb.Tabs(
-                    report_view("Scorecard", health=False),
+                    report_view("Scorecard"),
                     rrb.TextLogView(name="Events", origin=layout.EVENTS),
                 ),
                 row_shares=[3, 2],

@@ -1,0 +1,173 @@
+"""Health verdict of a flush-air-data reconstruction (``summary["health"]``).
+
+The MEADS reduction has no filter innovations; its consistency statistic is the per-sample
+weighted least-squares residual ``χ² = Σ_ports (r_i / σ_i)²`` of Karlgaard et al., "Mars Entry
+Atmospheric Data System Trajectory Reconstruction Algorithms and Flight Results" (AIAA 2013-0028),
+Sect. III.A, Eq. 5–10: with ``m`` ports used and ``k`` states solved it is χ²(m − k) distributed
+when the port σ are right, so it is judged like a normalised innovation squared
+(:func:`~workbench.estimation.health.nis_check`), one check per number of degrees of freedom
+(ports drop out when they fail; the fixed-R rows solve one state fewer).  The other checks:
+
+* the WLS covariance of every sample above the dynamic-pressure threshold symmetric and
+  positive definite;
+* physical plausibility: q∞ against the IMU drag (the reader's gross unit test, here as a
+  number), α and β inside the validity of the forebody pressure models, the air-data Mach against
+  the inertial Mach, the density within ×5 of the default Mars model;
+* data: pressure-sample gaps across the peak dynamic pressure, failed ports and the input
+  readers' notes (WARNING: a degradation, not a wrong answer).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from workbench.core.atmosphere import MarsEngineeringAtmosphere
+from workbench.estimation.health import (
+    OK,
+    WARNING,
+    Check,
+    covariance_check,
+    gap_check,
+    health_report,
+    interval_check,
+    nis_check,
+    notes_check,
+)
+
+__all__ = ["meads_health", "wls_chi2"]
+
+#: |α| [deg] beyond which the Newtonian / tabulated forebody models are outside their validity:
+#: the stagnation point leaves the 70° sphere-cone's nose cap region at about 20°, the models are
+#: tabulated / fitted to 30°; beyond 90° the ports face away from the flow (not physical)
+ALPHA_WARN_DEG, ALPHA_ERROR_DEG = 30.0, 90.0
+#: |β| [deg] likewise (the vehicle is trimmed near β = 0)
+BETA_WARN_DEG, BETA_ERROR_DEG = 15.0, 90.0
+#: relative difference of the air-data Mach to the inertial Mach that is worth a WARNING
+MACH_WARN_REL = 0.3
+#: a gap in the pressure samples longer than this many nominal intervals counts as a gap
+GAP_INTERVALS = 3.0
+#: minimum samples per degrees-of-freedom group for its χ² check
+MIN_SAMPLES = 20
+
+
+def wls_chi2(residual: np.ndarray, sigma: np.ndarray, used: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample WLS residual χ² and its degrees of freedom.
+
+    Args:
+        residual: (n, m) [Pa] z − h(x̂) per port (NaN where not used).
+        sigma: (n, m) [Pa] the 1σ each port was weighted with.
+        used: (n, m) bool, the ports that counted.
+        x: (n, k) the solved state (NaN in the columns a row did not solve).
+
+    Returns:
+        chi2 (n,) and dof (n,) int = ports used − states solved.
+    """
+    r = np.where(used, residual / np.where(used, sigma, 1.0), 0.0)
+    chi2 = np.sum(r * r, axis=1)
+    dof = used.sum(axis=1) - np.isfinite(x).sum(axis=1)
+    return chi2, dof.astype(int)
+
+
+def meads_health(tel, nav, air, wind, est) -> dict:
+    """``summary["health"]`` of a MEADS reconstruction: ``tel`` the telemetry (``MeadsTelemetry``),
+    ``nav`` the ``Navigation``, ``air`` the ``AirDataStage``, ``wind`` the ``WindStage``, ``est``
+    the ``EstimatorSettings`` (its ``min_qbar_pa`` [Pa] selects the samples judged, its
+    ``plausibility_factor`` the allowed q∞ ratio)."""
+    fit = air.fit
+    w = fit.wls
+    above = np.nan_to_num(fit.qbar) >= est.min_qbar_pa
+    checks: list[Check] = []
+    if not above.any():
+        checks.append(
+            Check("qbar.threshold", WARNING, None, est.min_qbar_pa, "no sample above the q∞ threshold: nothing judged")
+        )
+    chi2, dof = wls_chi2(w.residual, fit.sigma_p, w.used, w.x)
+    for d in np.unique(dof[above]):
+        sel = above & (dof == d)
+        if d < 1:
+            continue
+        if sel.sum() < MIN_SAMPLES:
+            continue
+        checks.append(nis_check(f"pressure_wls_dof{d}", chi2[sel], int(d)))
+
+    P = w.P[above]
+    fin = np.all(np.isfinite(P[:, :3, :3]), axis=(1, 2))
+    if fin.all():
+        checks.append(covariance_check(P[:, :3, :3], "covariance.wls_qbar_alpha_beta"))
+    else:
+        first = float(tel.t_p[above][~fin][0])
+        checks.append(
+            Check(
+                "covariance.wls_qbar_alpha_beta",
+                WARNING,
+                int((~fin).sum()),
+                0,
+                f"{int((~fin).sum())} samples above the threshold have no finite WLS covariance "
+                f"(first at {first:.3f} s)",
+            )
+        )
+
+    ratio = air.plausibility_ratio
+    if np.isfinite(ratio):
+        F = est.plausibility_factor
+        checks.append(
+            interval_check(
+                "plausibility.qbar_vs_imu_drag", ratio, 1.0 / F, F, "median q∞ / (m|f| / (C_D S)) from the IMU drag"
+            )
+        )
+    else:
+        checks.append(
+            Check("plausibility.qbar_vs_imu_drag", WARNING, None, None, "too little drag to compare q∞ with the IMU")
+        )
+
+    for name, val, warn, err in (
+        ("alpha", fit.alpha, ALPHA_WARN_DEG, ALPHA_ERROR_DEG),
+        ("beta", fit.beta, BETA_WARN_DEG, BETA_ERROR_DEG),
+    ):
+        a = np.abs(np.degrees(val[above]))
+        a = a[np.isfinite(a)]
+        worst = float(a.max()) if a.size else 0.0
+        c = interval_check(f"envelope.{name}_deg", worst, 0.0, err, f"largest |{name}| [deg]", "deg")
+        if c.status == OK and worst > warn:
+            c = Check(
+                c.name,
+                WARNING,
+                c.value,
+                [0.0, warn],
+                f"largest |{name}| {worst:.3g} deg is outside the pressure models' validity (|{name}| ≤ {warn:g} deg)",
+            )
+        checks.append(c)
+
+    air_rows = above & (wind.mach_source == "air_data") & np.isfinite(fit.mach)
+    if air_rows.any():
+        rel = np.abs(fit.mach[air_rows] / nav.mach_inertial[air_rows] - 1.0)
+        worst = float(np.median(rel))
+        c = interval_check("plausibility.mach_vs_inertial", worst, 0.0, 1.0, "median |Mach_air / Mach_inertial − 1|")
+        if c.status == OK and worst > MACH_WARN_REL:
+            msg = f"air-data Mach departs from inertial by {worst:.0%}"
+            c = Check(c.name, WARNING, c.value, [0.0, MACH_WARN_REL], msg)
+        checks.append(c)
+
+    rho = np.asarray(wind.density, float)
+    ok = above & np.isfinite(rho) & (rho > 0)
+    if ok.any():
+        ref = MarsEngineeringAtmosphere().density(nav.h[ok])
+        fac = float(np.exp(np.max(np.abs(np.log(rho[ok] / ref)))))
+        checks.append(
+            interval_check("density.vs_default", fac, 1.0, 5.0, "worst density ratio to the default model (either way)")
+        )
+    else:
+        checks.append(Check("density.vs_default", WARNING, None, None, "no valid air-data density"))
+
+    t = np.asarray(tel.t_p, float)
+    if t.size > 2:
+        dt = np.diff(t)
+        nominal = float(np.median(dt))
+        k = np.flatnonzero(dt > GAP_INTERVALS * nominal)
+        gaps = [(float(t[i]), float(t[i + 1])) for i in k]
+        if np.isfinite(fit.qbar).any():
+            tq = float(t[int(np.nanargmax(fit.qbar))])
+            checks.append(gap_check("gaps.peak_qbar", gaps, {"peak q∞": (tq - 2.0, tq + 2.0)}, status=WARNING))
+    notes = list(tel.degradations) + [f.message for f in air.failures]
+    checks.append(notes_check("telemetry", notes))
+    return health_report(checks)
