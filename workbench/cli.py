@@ -325,7 +325,7 @@ def cmd_open(args: argparse.Namespace) -> int:
         return EXIT_KIND
     proc = subprocess.Popen(cmd.argv)
     if moment is not None and cmd.control_url is not None:
-        if km.seek_viewer(cmd.control_url, moment.t_s, play=args.play):
+        if km.seek_viewer(cmd.control_url, moment.t_s, rbl=rbl, play=args.play):
             _progress(f"time cursor at {moment.t_s:.3f} s")
         else:
             _progress(

@@ -165,7 +165,13 @@ def test_moment_layout_copies_the_recording_layout_with_time_panel_and_follow(tm
     assert tp["TimePanelBlueprint:loop_mode"] == [2] and tp["TimePanelBlueprint:play_state"] == [1]  # selection, paused
     views = {d["ViewBlueprint:display_name"][0]: e for e, d in cells.items() if "ViewBlueprint:display_name" in d}
     assert set(views) == {"Impact", "Chamber", "stroke"}  # the recording's own views, copied
-    assert cells[views["Chamber"] + "/EyeControls3D"]["EyeControls3D:tracking_entity"] == [layout.VEHICLE]
+    eye = cells[views["Chamber"] + "/EyeControls3D"]
+    assert eye["EyeControls3D:tracking_entity"] == [layout.VEHICLE]
+    # the camera looks at the vehicle at the moment (pose row at 1.5 s), from 2 sizes (2 m: no
+    # meshes) back along the track it came in on (from higher up: it descends)
+    target, pos = np.array(eye["EyeControls3D:look_target"][0]), np.array(eye["EyeControls3D:position"][0])
+    assert np.allclose(target, [1.5, 0.0, 8.5], atol=1e-5)
+    assert np.linalg.norm(pos - target) == pytest.approx(4.0, rel=1e-5) and pos[2] > target[2]
     assert "EyeControls3D:tracking_entity" not in cells[views["Impact"] + "/EyeControls3D"]  # its own camera kept
     tabs = [d for d in cells.values() if "ContainerBlueprint:active_tab" in d]
     assert [d["ContainerBlueprint:active_tab"] for d in tabs] == [[views["Chamber"].lstrip("/")]]

@@ -57,6 +57,7 @@ __all__ = [
     "log_key_moments",
     "read_key_moments",
     "seek_viewer",
+    "vehicle_eye",
     "viewer_command",
     "write_moment_blueprint",
 ]
@@ -236,6 +237,39 @@ def _under(path: str, root: str) -> bool:
     return path == root or path.startswith(root.rstrip("/") + "/")
 
 
+def vehicle_eye(data: RecordingData, follow: str, t_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """A camera on the entity ``follow`` at ``t_s`` [s]: ``(eye position, look target)`` [m, in the
+    frame of ``follow``'s parent]. The target is its ``Transform3D`` translation at the last row at
+    or before ``t_s``; the eye sits 2 sizes away (size: the largest bounding-box diagonal of the
+    static meshes below it, 2 m without any) back along the track it came in on (from its position
+    where it was one size away), turned 30° sideways and raised, so that it looks at the vehicle
+    from its free side; None if ``follow`` has no translations."""
+    try:
+        t, tr = data.translations(follow)
+    except KeyError:
+        return None
+    if not len(t):
+        return None
+    k = int(np.clip(np.searchsorted(t, t_s, side="right") - 1, 0, len(t) - 1))
+    target = tr[k]
+    size = 0.0
+    for e in data.entities():
+        if _under(e, follow) and e != follow:
+            for when, v, _f, _c in data.meshes(e):
+                if when is None and len(v):
+                    size = max(size, float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))))
+    size = size or 2.0
+    back = tr[: k + 1] - target
+    far = np.flatnonzero(np.linalg.norm(back, axis=1) >= size)
+    d = back[far[-1]] if far.size else np.array([1.0, -1.0, 1.0])
+    d = d / np.linalg.norm(d)
+    side = np.cross([0.0, 0.0, 1.0], d)
+    if np.linalg.norm(side) < 1e-6:  # came straight down: look from the side
+        side = np.array([1.0, 0.0, 0.0])
+    d = d + 0.6 * side / np.linalg.norm(side) + np.array([0.0, 0.0, 0.3])
+    return target + 2.0 * size * d / np.linalg.norm(d), target
+
+
 def write_moment_blueprint(
     data: RecordingData,
     moment: KeyMoment,
@@ -281,7 +315,9 @@ def write_moment_blueprint(
         if follow is None or at_vehicle or has_eye:
             unchanged.append(name)
             continue
-        overrides.append((f"{e}/EyeControls3D", EyeControls3D(tracking_entity=follow)))
+        eye = vehicle_eye(data, follow, moment.t_s)
+        eye_kw = {} if eye is None else {"position": eye[0], "look_target": eye[1], "eye_up": [0.0, 0.0, 1.0]}
+        overrides.append((f"{e}/EyeControls3D", EyeControls3D(tracking_entity=follow, **eye_kw)))
         following.append(name)
         # make the following view the active tab of the tab strip holding it
         for ce, d in cells.items():
@@ -297,11 +333,20 @@ def write_moment_blueprint(
 
 
 # ------------------------------------------------------------------------------- the running Viewer
-def seek_viewer(url: str, t_s: float, *, timeout_s: float = 60.0, play: bool = False) -> bool:
+def seek_viewer(
+    url: str,
+    t_s: float,
+    *,
+    rbl: str | os.PathLike[str] | None = None,
+    timeout_s: float = 60.0,
+    play: bool = False,
+) -> bool:
     """Move the time cursor of the Viewer at ``url`` (``rerun+http://host:port/proxy``) to ``t_s``
     [s] on the ``time`` timeline once it shows a recording with that timeline, paused (or playing,
-    ``play``). Uses ``rerun.experimental.ViewerClient`` (Rerun 0.41, experimental). Returns False
-    if no Viewer answered with the recording within ``timeout_s`` [s]."""
+    ``play``); with ``rbl``, open that layout again first, so that it is the last one activated
+    whatever the recording itself activates. Uses ``rerun.experimental.ViewerClient`` (Rerun 0.41,
+    experimental; the native Viewer only — the web Viewer's server answers ``Unimplemented``).
+    Returns False if no Viewer answered with the recording within ``timeout_s`` [s]."""
     import time
 
     from rerun.experimental import ViewerClient
@@ -321,8 +366,13 @@ def seek_viewer(url: str, t_s: float, *, timeout_s: float = 60.0, play: bool = F
                 None,
             )
             if rec is not None and not state.loading:
+                if rbl is not None:
+                    client.open(str(Path(rbl).resolve()), navigate=False)
                 client.set_time(
-                    layout.TIME, duration=np.timedelta64(_ns(t_s), "ns"), play_state="playing" if play else "paused"
+                    layout.TIME,
+                    duration=np.timedelta64(_ns(t_s), "ns"),
+                    play_state="playing" if play else "paused",
+                    recording=rec.store_id,
                 )
                 return True
         except Exception:  # noqa: BLE001 - the Viewer is still starting (connection refused, timeouts)

@@ -50,3 +50,14 @@ def test_kpa_labelled_pa_is_refused(run, tmp_path):
     assert not (tmp_path / "out" / "kpa.summary.json").exists()
     assert np.isfinite(run.summary["plausibility_qbar_ratio"])
     assert "P1 [Pa]" in str(info.value)
+
+
+def test_key_moments_of_the_flush_air_data(run):
+    """Peak q∞ at the largest reconstructed q∞, the stuck port at its detection, in time order."""
+    km = run.summary["key_moments"]
+    t = {m["name"]: m["t_s"] for m in km}
+    assert {"peak_qbar", "max_alpha", "max_beta", "port_failure"} <= set(t)
+    assert [m["t_s"] for m in km] == sorted(t.values())
+    air = run.result.air
+    assert t["peak_qbar"] == air.t[np.nanargmax(air.fit.qbar)]
+    assert t["port_failure"] == run.summary["failed_ports"][0]["t_s"]

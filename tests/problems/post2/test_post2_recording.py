@@ -70,3 +70,21 @@ def test_scorecard_has_planted_vs_recovered_and_propagation_only(short_run):
     s = json.loads(r.summary_path.read_text(encoding="utf-8"))
     e = s["truth"]["filtered_vs_propagation"]["position"]["end_error_norm"]
     assert set(e) == {"propagation_only", "forward", "smoothed"}
+
+
+def test_key_moments_start_event_peak_and_end(short_run):
+    """The key moments of a post2 run: grid start and end, the event that fired and the peak of the
+    measured sensed acceleration, in time order, logged as bookmarks and the recording property."""
+    from workbench.recording.moments import read_key_moments
+
+    r, rec = short_run
+    km = r.summary["key_moments"]
+    t = {m["name"]: m["t_s"] for m in km}
+    assert set(t) == {"start", "chute", "peak_acceleration", "end"}
+    assert [m["t_s"] for m in km] == sorted(t.values())
+    assert t["start"] == r.result.t[0] and t["end"] == r.result.t[-1] and t["chute"] == 1.5
+    ch = r.result.channels["acceleration"]
+    a = np.linalg.norm(ch.z.reshape(len(ch.t), -1), axis=1)
+    assert t["peak_acceleration"] == ch.t[np.argmax(a)]
+    assert [m.to_dict() for m in read_key_moments(rec)] == km
+    assert len(rec.text_log(layout.KEY_MOMENTS)) == 4

@@ -55,24 +55,30 @@ _EVENT_TEXT = {
 
 
 def key_moments(result: dt.DropResult) -> list[KeyMoment]:
-    """Key moments of a drop from its reconstruction: the events-file entries (release, bungee
-    cut), first airbag contact, max stroke and rebound (contact end) of the smoothed pass, with
-    their times [s] on the ``time`` timeline. The moments of the impact share its window (0.15 s
-    before contact to 0.25 s after the rebound, as the "stroke (impact)" plot); contact and
-    rebound are left out when no contact was detected."""
+    """Key moments of a drop from its reconstruction, times [s] on the ``time`` timeline: the
+    events-file entries (release, bungee cut), the first airbag contact (start of the contact the
+    pipeline detects from the estimated non-gravitational acceleration, > 1 g), the max stroke,
+    and the rebound: the first time after the max stroke when the smoothed stroke is back at its
+    value at first contact (the airbags leave the ramp). The impact's moments share one window,
+    0.15 s before contact to 0.25 s after the rebound (or the end of the detected contact); contact
+    and rebound are left out when they did not happen in the data."""
     st, smo = result.stroke, result.smoothed
     t = smo.t
     out = []
     for name, t_e in sorted(result.telemetry.events.items(), key=lambda kv: kv[1]):
         text = _EVENT_TEXT.get(name, f"{name} (events file)")
         out.append(KeyMoment(slug(name), float(t_e), text, (float(t_e) - 0.25, float(t_e) + 0.5)))
-    ms = st.max
+    ms, h = st.max, st.smoothed
     i0, i1 = st.contact
+    k_max = int(ms.index)
+    k_up = None
     if i0 >= 0:
-        window = (float(t[i0]) - 0.15, float(t[i1]) + 0.25)
+        back = np.flatnonzero(h.distance[k_max:] >= h.distance[i0])
+        k_up = k_max + int(back[0]) if back.size else None
+        end = float(t[max(i1, k_up if k_up is not None else i1)])
+        window = (float(t[i0]) - 0.15, end + 0.25)
     else:
         window = (float(ms.time) - 0.3, float(ms.time) + 0.3)
-    h = st.smoothed
     if i0 >= 0:
         out.append(
             KeyMoment(
@@ -92,10 +98,17 @@ def key_moments(result: dt.DropResult) -> list[KeyMoment]:
             window,
         )
     )
-    if i0 >= 0:
+    if k_up is not None:
         e, se = st.restitution
         rest = f"restitution e = {e:.3f} ± {se:.3f} (1σ)" if np.isfinite(e) else "restitution not defined"
-        out.append(KeyMoment("rebound", float(t[i1]), f"rebound: contact ends, {rest}", window))
+        out.append(
+            KeyMoment(
+                "rebound",
+                float(t[k_up]),
+                f"rebound: the airbags leave the ramp (stroke back at {h.distance[i0]:.3f} m), {rest}",
+                window,
+            )
+        )
     return out
 
 
@@ -120,9 +133,11 @@ class _Drawer:
         if "health" in summary:
             self.rec.health(summary["health"])
         log_key_moments(self.rec, summary.get("key_moments", []))
-        # the layout that needs the result (camera at the impact, stroke zoom) becomes the default
+        # the layout that needs the result (camera at the impact, stroke zoom) becomes the default;
+        # not forced active, so that a layout opened with the recording (``workbench open --at``,
+        # ``rerun REC.rrd LAYOUT.rbl``) wins whichever the Viewer loads first
         self.rec.stream.send_blueprint(
-            droptest_blueprint(self.residuals, impact_view(result)), make_active=True, make_default=True
+            droptest_blueprint(self.residuals, impact_view(result)), make_active=False, make_default=True
         )
 
 
