@@ -315,10 +315,7 @@ def cmd_open(args: argparse.Namespace) -> int:
     print("command: " + shlex.join(cmd.argv))
     if args.dry_run:
         if moment is not None:
-            print(
-                f"(dry run: the Viewer was not started; once it shows the recording, the '★ {moment.name}' row "
-                f"of the events view puts the time cursor at {moment.t_s:.3f} s)"
-            )
+            print(f"(dry run: the Viewer was not started; {_seek_hint(moment)})")
         return EXIT_OK
     if rerun_executable() is None:
         print("workbench: the rerun Viewer (the `rerun` command of rerun-sdk) is not installed", file=sys.stderr)
@@ -328,16 +325,18 @@ def cmd_open(args: argparse.Namespace) -> int:
         if km.seek_viewer(cmd.control_url, moment.t_s, rbl=rbl, play=args.play):
             _progress(f"time cursor at {moment.t_s:.3f} s")
         else:
-            _progress(
-                "could not reach the Viewer to move the time cursor; "
-                f"click the '★ {moment.name}' row of the events view"
-            )
+            _progress(f"could not reach the Viewer to move the time cursor; {_seek_hint(moment)}")
     elif moment is not None:
-        _progress(
-            f"in the web Viewer, click the '★ {moment.name}' row of the events view "
-            f"to put the time cursor at {moment.t_s:.3f} s"
-        )
+        _progress(f"the web Viewer opens at the start; {_seek_hint(moment)}")
     return EXIT_OK if proc.wait() == 0 else EXIT_KIND
+
+
+def _seek_hint(moment) -> str:
+    """How to put the time cursor on ``moment`` by hand (a layout cannot set it in Rerun 0.41)."""
+    return (
+        f"a layout cannot place the time cursor: click the '★ {moment.name}' mark on the time panel's "
+        f"events row, or the row in the events view, for t = {moment.t_s:.3f} s"
+    )
 
 
 def _span(data) -> tuple[float, float] | None:

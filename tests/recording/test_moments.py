@@ -241,7 +241,7 @@ def test_open_at_dry_run_writes_the_layout_and_prints_the_command(falling, tmp_p
     assert out[1].startswith(f"layout: {rbl} (") and f"time selection {m.t_s - 2:.3f} .. {m.t_s + 2:.3f} s" in out[1]
     cmd = shlex.split(out[2].removeprefix("command: "))
     assert Path(cmd[0]).name == "rerun" and cmd[1:] == [str(falling), str(rbl)]
-    assert "'★ fastest' row" in out[3]
+    assert "'★ fastest' mark" in out[3] and f"t = {m.t_s:.3f} s" in out[3]
     tp = _blueprint_cells(rbl)["/time_panel"]
     assert tp["TimePanelBlueprint:time_selection"] == [
         {"min": round((m.t_s - 2) * 1e9), "max": round((m.t_s + 2) * 1e9)}

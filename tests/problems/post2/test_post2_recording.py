@@ -72,19 +72,46 @@ def test_scorecard_has_planted_vs_recovered_and_propagation_only(short_run):
     assert set(e) == {"propagation_only", "forward", "smoothed"}
 
 
-def test_key_moments_start_event_peak_and_end(short_run):
-    """The key moments of a post2 run: grid start and end, the event that fired and the peak of the
-    measured sensed acceleration, in time order, logged as bookmarks and the recording property."""
+def test_key_moments_start_event_and_end(short_run):
+    """The key moments of a post2 run: grid start and end and the event that fired, in time order,
+    logged as bookmarks and the recording property (no peak acceleration: this problem file
+    observes the total inertial acceleration, not a sensed one)."""
     from workbench.recording.moments import read_key_moments
 
     r, rec = short_run
     km = r.summary["key_moments"]
     t = {m["name"]: m["t_s"] for m in km}
-    assert set(t) == {"start", "chute", "peak_acceleration", "end"}
+    assert set(t) == {"start", "chute", "end"}
     assert [m["t_s"] for m in km] == sorted(t.values())
     assert t["start"] == r.result.t[0] and t["end"] == r.result.t[-1] and t["chute"] == 1.5
-    ch = r.result.channels["acceleration"]
-    a = np.linalg.norm(ch.z.reshape(len(ch.t), -1), axis=1)
-    assert t["peak_acceleration"] == ch.t[np.argmax(a)]
     assert [m.to_dict() for m in read_key_moments(rec)] == km
-    assert len(rec.text_log(layout.KEY_MOMENTS)) == 4
+    assert len(rec.text_log(layout.KEY_MOMENTS)) == 3
+
+
+def test_key_moments_peak_of_the_measured_sensed_acceleration():
+    """The peak is the largest |z| over the sensed-acceleration observations only; an event fired
+    twice is listed at its first time."""
+    from types import SimpleNamespace
+
+    from workbench.problems.post2.problem import key_moments
+
+    def channel(quantity, t, z):
+        return SimpleNamespace(spec=SimpleNamespace(quantity=quantity), t=np.asarray(t), z=np.asarray(z))
+
+    result = SimpleNamespace(
+        t=np.linspace(0.0, 10.0, 11),
+        events=((4.0, "Main chute"), (6.0, "Main chute")),
+        channels={
+            "axial": channel("acceleration_axial", [1.0, 2.0, 3.0], [[-5.0], [-30.0], [-8.0]]),
+            "total": channel("acceleration_inertial", [1.0, 5.0], [[0.0, 0.0, 99.0], [0.0, 0.0, 1.0]]),
+            "magnitude": channel("acceleration_magnitude", [7.0, 8.0], [[12.0], [29.0]]),
+        },
+    )
+    km = key_moments(result)
+    assert [(m.name, m.t_s) for m in km] == [
+        ("start", 0.0),
+        ("main_chute", 4.0),
+        ("peak_acceleration", 2.0),
+        ("end", 10.0),
+    ]
+    assert "3.06 g₀ (30.0 m/s², axial measured)" in km[2].description
