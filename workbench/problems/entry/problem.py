@@ -43,7 +43,8 @@ _RADAR_CHANNELS = ("slant_range", "slant_out", "velocity_out")
 def key_moments(result: en.EntryResult) -> list[KeyMoment]:
     """Key moments of an entry from its reconstruction, times [s] from EIP on the ``time`` timeline:
     every telemetry event (EIP, PDD, FSR, RDA_ON, BSR ...), the peak deceleration (largest
-    |specific force| of the preprocessed IMU, in g₀ = 9.80665 m/s²), the gyro saturation (first to
+    |specific force| of the preprocessed IMU before PDD, in g₀ = 9.80665 m/s²) and the parachute
+    opening load (the largest in the 10 s after PDD), the gyro saturation (first to
     last saturated sample, if any), the first radar measurement the smoother accepted, and the end
     of the data; each with the smoothed altitude above ground where the smoother covers it."""
     sm = result.filter.smoothed
@@ -63,17 +64,18 @@ def key_moments(result: en.EntryResult) -> list[KeyMoment]:
         )
     imu = result.imu
     f = np.linalg.norm(np.nan_to_num(np.asarray(imu.f_G, dtype=float)), axis=1)
-    if f.size:
-        k = int(np.argmax(f))
-        tk = float(imu.t[k])
-        out.append(
-            KeyMoment(
-                "peak_deceleration",
-                tk,
-                f"peak deceleration {f[k] / G0:.2f} g₀ ({f[k]:.1f} m/s², measured specific force){agl(tk)}",
-                (tk - 20, tk + 20),
-            )
-        )
+    t_imu = np.asarray(imu.t, dtype=float)
+    t_pdd = float(result.events.get("PDD", np.inf))
+    for name, what, sel, half in (
+        ("peak_deceleration", "peak deceleration", t_imu < t_pdd, 20.0),
+        ("opening_load", "parachute opening load", (t_imu >= t_pdd) & (t_imu <= t_pdd + 10.0), 5.0),
+    ):
+        if not sel.any():
+            continue
+        k = int(np.flatnonzero(sel)[np.argmax(f[sel])])
+        tk = float(t_imu[k])
+        text = f"{what} {f[k] / G0:.2f} g₀ ({f[k]:.1f} m/s², measured specific force){agl(tk)}"
+        out.append(KeyMoment(name, tk, text, (tk - half, tk + half)))
     sat = np.flatnonzero(np.asarray(imu.saturated, bool))
     if sat.size:
         a, b = float(imu.t[sat[0]]), float(imu.t[sat[-1]])
