@@ -36,11 +36,18 @@ def key_moments(result) -> list[KeyMoment]:
     of the grid, every event that fired (``[events]`` of the problem file: parachutes, separations,
     phase changes), and the peak of the measured sensed acceleration (largest |z| over the
     observations of ``acceleration_axial``/``_magnitude``/``_body``, in g₀ = 9.80665 m/s²) when the
-    problem file observes one."""
+    problem file observes one. Each has a window of ± 1 % of the grid's span, at least ± 15 s (or
+    ± 5 % of a span shorter than 300 s), clipped to the grid."""
     t = np.asarray(result.t, dtype=float)
-    out = [KeyMoment("start", float(t[0]), "start of the reconstruction (first grid time)")]
+    t0, t1 = float(t[0]), float(t[-1])
+    half = max(0.01 * (t1 - t0), min(0.05 * (t1 - t0), 15.0))  # an 8000 s descent: ± 80 s
+
+    def moment(name: str, tk: float, text: str) -> KeyMoment:
+        return KeyMoment(name, float(tk), text, (max(t0, tk - half), min(t1, tk + half)))
+
+    out = [moment("start", t0, "start of the reconstruction (first grid time)")]
     for t_e, name in result.events:
-        out.append(KeyMoment(slug(name), float(t_e), f"event {name!r} fires (problem file [events])"))
+        out.append(moment(slug(name), float(t_e), f"event {name!r} fires (problem file [events])"))
     peak = None
     for name, ch in result.channels.items():
         if ch.spec.quantity not in _SENSED_ACCELERATION or not len(ch.t):
@@ -53,11 +60,9 @@ def key_moments(result) -> list[KeyMoment]:
     if peak is not None:
         a, tk, name = peak
         out.append(
-            KeyMoment(
-                "peak_acceleration", tk, f"peak sensed acceleration {a / G0:.2f} g₀ ({a:.1f} m/s², {name} measured)"
-            )
+            moment("peak_acceleration", tk, f"peak sensed acceleration {a / G0:.2f} g₀ ({a:.1f} m/s², {name} measured)")
         )
-    out.append(KeyMoment("end", float(t[-1]), "end of the reconstruction (last grid time)"))
+    out.append(moment("end", t1, "end of the reconstruction (last grid time)"))
     names = [m.name for m in out]
     return [m for i, m in enumerate(out) if m.name not in names[:i]]  # an event fired twice: its first time
 
