@@ -1,4 +1,4 @@
-"""Command line: ``workbench list | run | mc | inspect | compare | replay | init | import``.
+"""Command line: ``workbench list | run | mc | inspect | open | compare | replay | init | import``.
 
 Exit codes (scripts can rely on them):
   0  success
@@ -305,6 +305,87 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def cmd_open(args: argparse.Namespace) -> int:
+    """List a recording's key moments, or open it in the Rerun Viewer, with ``--at NAME`` at that
+    moment (a layout ``.rbl`` written beside it; the time cursor moved there once loaded)."""
+    import shlex
+    import subprocess
+
+    from workbench.recording import moments as km
+    from workbench.recording.reader import read_recording, rerun_executable
+
+    data = read_recording(args.recording)
+    moments = km.read_key_moments(data)
+    if args.list:
+        if not moments:
+            print(f"{data.path}: no key moments (a recording of an older run, or of a Monte Carlo study)")
+        for m in moments:
+            lo, hi = m.window_or_default(_span(data))
+            print(f"{m.name:20s} t = {m.t_s:10.3f} s  [{lo:.3f}, {hi:.3f}] s  {m.description}")
+        return EXIT_OK
+    rerun = rerun_executable() or "rerun"
+    moment = km.find_moment(moments, args.at, where=str(data.path)) if args.at else None
+    rbl = None
+    if moment is not None:
+        rbl = Path(args.rbl) if args.rbl else data.path.with_name(f"{data.path.stem}.at_{moment.name}.rbl")
+        lay = km.write_moment_blueprint(
+            data, moment, rbl, follow=None if args.no_follow else km.layout.VEHICLE, play=args.play
+        )
+        lo, hi = lay.window_s
+        print(f"key moment {moment.name} at t = {moment.t_s:.3f} s: {moment.description}")
+        what = "the recording's layout" if lay.copied else "the Viewer's automatic layout"
+        follows = (
+            f"; 3D view {', '.join(repr(v) for v in lay.following_views)} follows {lay.follow}" if lay.follow else ""
+        )
+        print(
+            f"layout: {rbl} ({what}; time selection {lo:.3f} .. {hi:.3f} s, looped, "
+            f"{'playing' if args.play else 'paused'}{follows})"
+        )
+    port = None if args.dry_run or args.web or moment is None else _free_port()
+    cmd = km.viewer_command(rerun, data.path, rbl, web=args.web, port=port)
+    print("command: " + shlex.join(cmd.argv))
+    if args.dry_run:
+        if moment is not None:
+            print(f"(dry run: the Viewer was not started; {_seek_hint(moment)})")
+        return EXIT_OK
+    if rerun_executable() is None:
+        print("workbench: the rerun Viewer (the `rerun` command of rerun-sdk) is not installed", file=sys.stderr)
+        return EXIT_KIND
+    proc = subprocess.Popen(cmd.argv)
+    if moment is not None and cmd.control_url is not None:
+        if km.seek_viewer(cmd.control_url, moment.t_s, rbl=rbl, play=args.play):
+            _progress(f"time cursor at {moment.t_s:.3f} s")
+        else:
+            _progress(f"could not reach the Viewer to move the time cursor; {_seek_hint(moment)}")
+    elif moment is not None:
+        _progress(f"the web Viewer opens at the start; {_seek_hint(moment)}")
+    return EXIT_OK if proc.wait() == 0 else EXIT_KIND
+
+
+def _seek_hint(moment) -> str:
+    """How to put the time cursor on ``moment`` by hand (a layout cannot set it in Rerun 0.41)."""
+    return (
+        f"a layout cannot place the time cursor: click the '★ {moment.name}' mark on the time panel's "
+        f"events row, or the row in the events view, for t = {moment.t_s:.3f} s"
+    )
+
+
+def _span(data) -> tuple[float, float] | None:
+    """(first, last) time [s] of the recording's ``time`` timeline, or None without one."""
+    try:
+        return data.time_range("time")
+    except KeyError:
+        return None
+
+
 def cmd_compare(args: argparse.Namespace) -> int:
     """Compare two runs of the same kind of scenario: print the markdown table of what changed and,
     with ``--out``, write the comparison recording."""
@@ -404,7 +485,7 @@ def _progress_options(sp: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser (sub-commands list, run, mc, inspect, import)."""
+    """The argument parser (sub-commands list, run, mc, inspect, open, compare, replay, init, import)."""
     p = argparse.ArgumentParser(prog="workbench", description="EDL reconstruction workbench")
     sub = p.add_subparsers(dest="command", required=True)
     sp = sub.add_parser("list", help="list the shipped scenarios (an error if none are found)")
@@ -463,6 +544,21 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--json", action="store_true", help="machine-readable summary")
     sp.set_defaults(func=cmd_inspect)
     sp = sub.add_parser(
+        "open",
+        help="open a recording in the Rerun Viewer, --at a key moment (max_stroke, pdd ...); --list them",
+    )
+    sp.add_argument("recording", help="a run recording (.rrd)")
+    sp.add_argument("--at", default=None, metavar="NAME", help="start at this key moment (see --list)")
+    sp.add_argument("--list", action="store_true", help="list the key moments (name, time, window, what) and exit")
+    sp.add_argument(
+        "--dry-run", action="store_true", help="write the layout and print the command line; do not start the Viewer"
+    )
+    sp.add_argument("--rbl", default=None, help="write the moment's layout here (default: <recording>.at_<NAME>.rbl)")
+    sp.add_argument("--play", action="store_true", help="loop the moment's time range at 0.25x instead of pausing")
+    sp.add_argument("--web", action="store_true", help="serve the web Viewer instead of the native one")
+    sp.add_argument("--no-follow", action="store_true", help="leave the 3D cameras as the recording's layout has them")
+    sp.set_defaults(func=cmd_open)
+    sp = sub.add_parser(
         "compare", help="compare two runs of the same kind (seeds, tunings, code versions): table + recording"
     )
     sp.add_argument("a", help="recording A (.rrd; its <name>.summary.json beside it is read too)")
@@ -499,11 +595,13 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``workbench`` console script; returns the exit code."""
     from workbench.estimation.health import UnhealthyError
+    from workbench.io.moments import MomentError
     from workbench.io.scenario import ScenarioError
     from workbench.io.telemetry import TelemetryError
     from workbench.io.units import UnitError
     from workbench.problems.registry import UnknownKindError
     from workbench.recording.compare import ComparisonError
+    from workbench.recording.moments import UnknownMomentError
     from workbench.recording.reader import RecordingError
 
     parser = build_parser()
@@ -514,6 +612,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with _sigterm_raises():
             return args.func(args)
+    except UnknownMomentError as err:
+        print(f"workbench: {err}", file=sys.stderr)
+        return EXIT_USAGE
     except (
         TelemetryError,
         ScenarioError,
@@ -522,6 +623,7 @@ def main(argv: list[str] | None = None) -> int:
         FileExistsError,
         RecordingError,
         ComparisonError,
+        MomentError,
     ) as err:
         print(f"workbench: input error: {err}", file=sys.stderr)
         return EXIT_INPUT

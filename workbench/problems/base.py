@@ -5,7 +5,7 @@ the kind to an object implementing :class:`Problem`, and :mod:`workbench.problem
 any scenario through it with the same steps::
 
     synthesize (synthetic scenarios) -> reconstruct (yields stages) -> record each stage
-    -> score against the truth (synthetic) -> scorecard -> summary.json (-> CSV export)
+    -> key moments -> score against the truth (synthetic) -> scorecard -> summary.json (-> CSV export)
 
 A problem composes its own pipeline, truth simulator, recording and Monte Carlo modules; the
 runner and the command line hold no problem knowledge.  The small frozen dataclasses below are
@@ -22,10 +22,12 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from workbench.io.moments import KeyMoment
 from workbench.io.scenario import Scenario
 
 __all__ = [
     "ExportTable",
+    "KeyMoment",
     "McOptions",
     "McOutcome",
     "Problem",
@@ -125,8 +127,11 @@ class StageRecorder(Protocol):
         know is an error (``TypeError``, see :class:`workbench.recording.dispatch.StageDispatch`)."""
 
     def finish(self, result: object, summary: dict) -> None:
-        """After the last stage: draw what needs the whole result (scorecard, final layout).
-        ``summary`` is the run's summary including the truth score, seed and wall time."""
+        """After the last stage: draw what needs the whole result (scorecard, final layout) and
+        log the run's key moments, ``summary["key_moments"]``, with
+        :func:`workbench.recording.moments.log_key_moments` (bookmarks and the property that
+        ``workbench open --at`` reads). ``summary`` is the run's summary including the key
+        moments, the truth score, seed and wall time."""
 
 
 @runtime_checkable
@@ -160,6 +165,14 @@ class Problem(Protocol):
 
     def summary(self, result: object) -> dict:
         """The JSON-ready key numbers of a final result (no truth involved), a new dict."""
+
+    def key_moments(self, result: object) -> list[KeyMoment]:
+        """The moments of the final ``result`` a reviewer jumps to (drop test: release, bungee cut,
+        first contact, max stroke, rebound; entry: EIP, peak deceleration, PDD, FSR, first radar fix
+        ...), each with its time [s] on the recording's ``time`` timeline, a one-line description and
+        optionally a time window around it. From the reconstruction and the telemetry, never from
+        the truth; moments that did not happen (no contact, no radar) are left out. The runner
+        stores them in time order in ``summary["key_moments"]``."""
 
     def score(self, result: object, truth: Any) -> dict:
         """Errors of the final ``result`` against the ``truth`` (JSON-ready; under ``"truth"``)."""

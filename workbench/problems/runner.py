@@ -21,6 +21,7 @@ import numpy as np
 from workbench.estimation.health import ERROR, UnhealthyError
 from workbench.io import assets
 from workbench.io import progress as prog
+from workbench.io.moments import ordered
 from workbench.io.results import OutputError, export_csv, write_summary
 from workbench.io.scenario import Scenario, resolve_scenario
 from workbench.problems import registry
@@ -151,6 +152,9 @@ def run_scenario(
 ) -> RunResult:
     """Run one scenario end to end: (synthesize) -> reconstruct -> record -> score -> summary.
 
+    The problem's key moments (:meth:`Problem.key_moments`) go into ``summary["key_moments"]`` in
+    time order, before the recorder's ``finish`` (which logs them into the recording).
+
     A summary whose ``"health"`` verdict is ERROR raises :class:`UnhealthyError` before anything is
     published, unless ``options.allow_unhealthy`` (then ``health["written_anyway"]`` is True and the
     scorecard and headline say UNHEALTHY).
@@ -239,6 +243,7 @@ def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, rep: prog.
             raise RuntimeError(f"{sc.path}: the {sc.kind} reconstruction yielded no result")
         t0 = time.perf_counter()
         summary = problem.summary(result)
+        summary["key_moments"] = [m.to_dict() for m in ordered(problem.key_moments(result) or [])]
         if truth is not None:
             summary["truth"] = problem.score(result, truth)
         rep.record("summary" + (" + score against the truth" if truth is not None else ""), time.perf_counter() - t0)

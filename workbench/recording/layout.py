@@ -67,6 +67,8 @@ RESIDUALS = "/residuals"
 SENSORS = "/sensors"
 PROFILES = "/profiles"
 EVENTS = "/events"
+#: Bookmarks of the run's key moments (TextLog, one row per moment; ``recording.moments``).
+KEY_MOMENTS = "/events/key_moments"
 REPORT = "/report"
 #: The health verdict of the reconstruction (markdown TextDocument, ``estimation.health``).
 HEALTH = "/report/health"

@@ -32,7 +32,7 @@ import rerun as rr
 
 from workbench.recording import layout
 
-__all__ = ["RecordingError", "RecordingData", "read_recording", "verify"]
+__all__ = ["RecordingError", "RecordingData", "read_recording", "rerun_executable", "verify"]
 
 _PROPERTIES = "/__properties"
 
@@ -87,8 +87,7 @@ def verify(path: str | os.PathLike[str]) -> tuple[bool, str]:
     0.41 exits 0 for a file it cannot recognise as RRD at all ("0 files verified without error"),
     so ok also requires it to report exactly one verified file.
     """
-    exe = Path(sys.executable).parent / "rerun"
-    cmd = str(exe) if exe.is_file() else shutil.which("rerun")
+    cmd = rerun_executable()
     if cmd is None:
         return False, "rerun CLI not found next to the Python interpreter or on PATH"
     try:
@@ -98,6 +97,13 @@ def verify(path: str | os.PathLike[str]) -> tuple[bool, str]:
     out = (proc.stdout + proc.stderr).strip()
     m = re.search(r"(\d+) files? verified without error", out)
     return proc.returncode == 0 and m is not None and int(m.group(1)) == 1, out
+
+
+def rerun_executable() -> str | None:
+    """The ``rerun`` command-line tool (viewer, ``rrd verify``): next to ``sys.executable`` (the
+    venv) first, then on ``PATH``; None if there is none."""
+    exe = Path(sys.executable).parent / "rerun"
+    return str(exe) if exe.is_file() else shutil.which("rerun")
 
 
 def _kind(field: pa.Field) -> str:

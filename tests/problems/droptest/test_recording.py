@@ -148,6 +148,39 @@ def test_events_and_report(rec, droptest_run):
     assert "Against truth" in report
 
 
+def test_key_moments_in_summary_recording_and_open(rec, droptest_run, tmp_path, capsys):
+    """The drop's key moments, from the reconstruction: in time order in the summary, each one a
+    bookmark at its time and in the recording property; ``open --at max_stroke --dry-run`` writes
+    the layout with the impact window selected and the Chamber view following the lander."""
+    from workbench.recording.moments import bookmark_text, read_key_moments
+
+    s = _summary_json(droptest_run)
+    km = s["key_moments"]
+    names = [m["name"] for m in km]
+    assert names == ["release", "bungee_cut", "first_contact", "max_stroke", "rebound"]
+    t = {m["name"]: m["t_s"] for m in km}
+    assert list(t.values()) == sorted(t.values())
+    assert t["release"] == s["events"]["release"] and t["bungee_cut"] == s["events"]["bungee_cut"]
+    assert t["first_contact"] == s["contact"]["start_s"] and t["max_stroke"] == s["max_stroke"]["time_s"]
+    stroke_t, stroke = rec.scalars(layout.join(layout.DROPTEST_PLOT_STROKE, layout.VALUE))
+    k0, k_up = np.searchsorted(stroke_t, [t["first_contact"], t["rebound"]])
+    assert stroke[k_up, 0] >= stroke[k0, 0] > stroke[k_up - 1, 0]  # back at its first-contact value
+    ms = next(m for m in km if m["name"] == "max_stroke")
+    assert f"{s['max_stroke']['distance_m']:.3f} ± {s['max_stroke']['sigma_m']:.3f} m" in ms["description"]
+    lo, hi = ms["window_s"]
+    assert lo < t["first_contact"] and hi > t["rebound"]
+    moments = read_key_moments(rec)
+    assert [m.to_dict() for m in moments] == km
+    rows = rec.text_log(layout.KEY_MOMENTS)
+    assert [(x, lvl) for _, x, lvl in rows] == [(bookmark_text(m), "INFO") for m in moments]
+    assert np.allclose([r[0] for r in rows], [m.t_s for m in moments], rtol=0, atol=1e-9)  # on the ns grid
+    rbl = tmp_path / "max_stroke.rbl"
+    assert main(["open", str(droptest_run.rrd), "--at", "max_stroke", "--dry-run", "--rbl", str(rbl)]) == 0
+    out = capsys.readouterr().out
+    assert f"time selection {lo:.3f} .. {hi:.3f} s" in out and "3D view 'Chamber' follows /world/vehicle" in out
+    assert rbl.is_file() and rbl.stat().st_size > 0
+
+
 # ------------------------------------------------------------------------------ scoring vs truth
 
 

@@ -331,3 +331,26 @@ def test_imu_error_process_noise_reaches_each_error_at_the_end_of_the_arc():
     assert np.sqrt(eta[1] * T) == pytest.approx(3e-4 * 4000.0)
     assert np.sqrt(eta[4] * T) == pytest.approx(1e-4 * np.radians(16.0) * T)
     assert np.all(en.imu_error_process_noise(t, f, w, {}) == 0.0)
+
+
+def test_key_moments_of_the_entry(run, rec):
+    """EIP, peak deceleration, PDD, opening load, FSR, the radar, BSR and the end, from the
+    reconstruction, in time order: the telemetry events at their times, the peak deceleration
+    between EIP and PDD, the opening load in the 10 s after PDD, the first
+    radar fix after the radar is switched on; logged as bookmarks and the recording property."""
+    from workbench.recording.moments import read_key_moments
+
+    _, summary = run
+    km = summary["key_moments"]
+    t = {m["name"]: m["t_s"] for m in km}
+    ev = summary["events"]
+    assert {"eip", "pdd", "fsr", "rda_on", "bsr", "peak_deceleration", "first_radar_fix", "end"} <= set(t)
+    assert [m["t_s"] for m in km] == sorted(m["t_s"] for m in km)
+    assert t["eip"] == ev["EIP"] and t["pdd"] == ev["PDD"] and t["fsr"] == ev["FSR"]
+    assert ev["EIP"] < t["peak_deceleration"] < ev["PDD"] <= t["opening_load"] <= ev["PDD"] + 10
+    assert ev["RDA_ON"] <= t["first_radar_fix"] <= summary["end"]["t_s"] == t["end"]
+    if summary["saturation_window_samples"]:
+        assert "saturation" in t
+    peak = next(m for m in km if m["name"] == "peak_deceleration")
+    assert " g₀ (" in peak["description"] and "h AGL" in peak["description"]
+    assert [m.to_dict() for m in read_key_moments(rec)] == km

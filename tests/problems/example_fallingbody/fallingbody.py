@@ -19,9 +19,10 @@ from workbench.estimation.smoother import rts_smooth
 from workbench.io.scenario import Scenario
 from workbench.io.schema import REQUIRED, Key, Schema, Table
 from workbench.io.telemetry import read_telemetry, write_telemetry
-from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
+from workbench.problems.base import ExportTable, KeyMoment, McOutcome, RunOptions, Synthesized
 from workbench.recording import layout
 from workbench.recording.dispatch import StageDispatch
+from workbench.recording.moments import log_key_moments
 from workbench.recording.writer import open_recording
 
 G = 9.80665  # gravity [m/s^2]
@@ -170,6 +171,7 @@ class _Drawer:
 
     def finish(self, result: object, summary: dict) -> None:
         self.rec.report(FallingBodyProblem().scorecard(summary))
+        log_key_moments(self.rec, summary.get("key_moments", []))
 
 
 class FallingBodyProblem:
@@ -243,6 +245,18 @@ class FallingBodyProblem:
     def summary(self, result: FallResult) -> dict:
         """A copy of the result's summary."""
         return dict(result.summary)
+
+    def key_moments(self, result: FallResult) -> list[KeyMoment]:
+        """The first barometer sample, the fastest descent (smoothed) and the last sample."""
+        t, v = result.t, result.x[:, 1]
+        k = int(np.argmax(np.abs(v)))
+        return [
+            KeyMoment("first_sample", float(t[0]), f"first barometer sample, h {result.x[0, 0]:.0f} m"),
+            KeyMoment(
+                "fastest", float(t[k]), f"fastest descent {abs(v[k]):.1f} m/s", (float(t[k]) - 2.0, float(t[k]) + 2.0)
+            ),
+            KeyMoment("end", float(t[-1]), f"last sample, h {result.x[-1, 0]:.0f} m"),
+        ]
 
     def score(self, result: FallResult, truth: dict) -> dict:
         """Smoothed altitude errors against the truth (max, RMS, fraction inside 3σ) and the bias error."""

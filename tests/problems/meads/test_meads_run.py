@@ -78,3 +78,14 @@ def test_no_model_form_allowance_is_unhealthy(run, tmp_path):
     with pytest.raises(UnhealthyError, match="nis.pressure_wls_dof"):
         run_scenario(toml, tmp_path / "out")
     assert not (tmp_path / "out" / "tight.summary.json").exists()
+
+
+def test_key_moments_of_the_flush_air_data(run):
+    """Peak q∞ at the largest reconstructed q∞, the stuck port at its detection, in time order."""
+    km = run.summary["key_moments"]
+    t = {m["name"]: m["t_s"] for m in km}
+    assert {"peak_qbar", "max_alpha", "max_beta", "port_failure"} <= set(t)
+    assert [m["t_s"] for m in km] == sorted(t.values())
+    air = run.result.air
+    assert t["peak_qbar"] == air.t[np.nanargmax(air.fit.qbar)]
+    assert t["port_failure"] == run.summary["failed_ports"][0]["t_s"]

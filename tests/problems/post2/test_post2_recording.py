@@ -70,3 +70,48 @@ def test_scorecard_has_planted_vs_recovered_and_propagation_only(short_run):
     s = json.loads(r.summary_path.read_text(encoding="utf-8"))
     e = s["truth"]["filtered_vs_propagation"]["position"]["end_error_norm"]
     assert set(e) == {"propagation_only", "forward", "smoothed"}
+
+
+def test_key_moments_start_event_and_end(short_run):
+    """The key moments of a post2 run: grid start and end and the event that fired, in time order,
+    logged as bookmarks and the recording property (no peak acceleration: this problem file
+    observes the total inertial acceleration, not a sensed one)."""
+    from workbench.recording.moments import read_key_moments
+
+    r, rec = short_run
+    km = r.summary["key_moments"]
+    t = {m["name"]: m["t_s"] for m in km}
+    assert set(t) == {"start", "chute", "end"}
+    assert [m["t_s"] for m in km] == sorted(t.values())
+    assert t["start"] == r.result.t[0] and t["end"] == r.result.t[-1] and t["chute"] == 1.5
+    assert [m.to_dict() for m in read_key_moments(rec)] == km
+    assert len(rec.text_log(layout.KEY_MOMENTS)) == 3
+
+
+def test_key_moments_peak_of_the_measured_sensed_acceleration():
+    """The peak is the largest |z| over the sensed-acceleration observations only; an event fired
+    twice is listed at its first time."""
+    from types import SimpleNamespace
+
+    from workbench.problems.post2.problem import key_moments
+
+    def channel(quantity, t, z):
+        return SimpleNamespace(spec=SimpleNamespace(quantity=quantity), t=np.asarray(t), z=np.asarray(z))
+
+    result = SimpleNamespace(
+        t=np.linspace(0.0, 10.0, 11),
+        events=((4.0, "Main chute"), (6.0, "Main chute")),
+        channels={
+            "axial": channel("acceleration_axial", [1.0, 2.0, 3.0], [[-5.0], [-30.0], [-8.0]]),
+            "total": channel("acceleration_inertial", [1.0, 5.0], [[0.0, 0.0, 99.0], [0.0, 0.0, 1.0]]),
+            "magnitude": channel("acceleration_magnitude", [7.0, 8.0], [[12.0], [29.0]]),
+        },
+    )
+    km = key_moments(result)
+    assert [(m.name, m.t_s) for m in km] == [
+        ("start", 0.0),
+        ("main_chute", 4.0),
+        ("peak_acceleration", 2.0),
+        ("end", 10.0),
+    ]
+    assert "3.06 g₀ (30.0 m/s², axial measured)" in km[2].description

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.droptest import model as rl
@@ -20,7 +21,7 @@ from workbench.problems.droptest import pipeline as dt
 from workbench.problems.droptest.config import SCHEMA, config_for
 from workbench.problems.droptest.telemetry import OPTIONAL_STREAMS, telemetry_paths
 
-__all__ = ["TELEMETRY_FILES", "DropTestProblem", "residual_names"]
+__all__ = ["TELEMETRY_FILES", "DropTestProblem", "key_moments", "residual_names"]
 
 #: telemetry stream -> file name in a telemetry folder (what synthetic.synthesize_droptest writes)
 TELEMETRY_FILES = {
@@ -46,6 +47,71 @@ def residual_names(scenario: Scenario) -> list[str]:
     return names
 
 
+#: what the events-file entries of a drop mean (other names are listed as they are)
+_EVENT_TEXT = {
+    "release": "release: the lander leaves the release mechanism (events file)",
+    "bungee_cut": "bungee cut: the lander falls free (events file)",
+}
+
+
+def key_moments(result: dt.DropResult) -> list[KeyMoment]:
+    """Key moments of a drop from its reconstruction, times [s] on the ``time`` timeline: the
+    events-file entries (release, bungee cut), the first airbag contact (start of the contact the
+    pipeline detects from the estimated non-gravitational acceleration, > 1 g), the max stroke,
+    and the rebound: the first time after the max stroke when the smoothed stroke is back at its
+    value at first contact (the airbags leave the ramp). The impact's moments share one window,
+    0.15 s before contact to 0.25 s after the rebound (or the end of the detected contact); contact
+    and rebound are left out when they did not happen in the data."""
+    st, smo = result.stroke, result.smoothed
+    t = smo.t
+    out = []
+    for name, t_e in sorted(result.telemetry.events.items(), key=lambda kv: kv[1]):
+        text = _EVENT_TEXT.get(name, f"{name} (events file)")
+        out.append(KeyMoment(slug(name), float(t_e), text, (float(t_e) - 0.25, float(t_e) + 0.5)))
+    ms, h = st.max, st.smoothed
+    i0, i1 = st.contact
+    k_max = int(ms.index)
+    k_up = None
+    if i0 >= 0:
+        back = np.flatnonzero(h.distance[k_max:] >= h.distance[i0])
+        k_up = k_max + int(back[0]) if back.size else None
+        end = float(t[max(i1, k_up if k_up is not None else i1)])
+        window = (float(t[i0]) - 0.15, end + 0.25)
+    else:
+        window = (float(ms.time) - 0.3, float(ms.time) + 0.3)
+    if i0 >= 0:
+        out.append(
+            KeyMoment(
+                "first_contact",
+                float(t[i0]),
+                f"first airbag contact (estimated |a_ng| > 1 g), stroke {h.distance[i0]:.3f} ± "
+                f"{h.sigma[i0]:.3f} m (1σ)",
+                window,
+            )
+        )
+    flag = " — FULL STROKE" if ms.full_stroke else " — full stroke within 3σ" if ms.possible_full_stroke else ""
+    out.append(
+        KeyMoment(
+            "max_stroke",
+            float(ms.time),
+            f"max stroke {ms.distance:.3f} ± {ms.sigma:.3f} m (1σ) at vertex {ms.vertex}{flag}",
+            window,
+        )
+    )
+    if k_up is not None:
+        e, se = st.restitution
+        rest = f"restitution e = {e:.3f} ± {se:.3f} (1σ)" if np.isfinite(e) else "restitution not defined"
+        out.append(
+            KeyMoment(
+                "rebound",
+                float(t[k_up]),
+                f"rebound: the airbags leave the ramp (stroke back at {h.distance[i0]:.3f} m), {rest}",
+                window,
+            )
+        )
+    return out
+
+
 class _Drawer:
     """:class:`~workbench.problems.base.StageRecorder` of a drop test (wraps DropTestRecorder)."""
 
@@ -61,13 +127,17 @@ class _Drawer:
 
     def finish(self, result: object, summary: dict) -> None:
         from workbench.problems.droptest.recording import droptest_blueprint, impact_view
+        from workbench.recording.moments import log_key_moments
 
         self.rec.report(dt.scorecard_markdown(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
-        # the layout that needs the result (camera at the impact, stroke zoom) becomes the default
+        log_key_moments(self.rec, summary.get("key_moments", []))
+        # the layout that needs the result (camera at the impact, stroke zoom) becomes the default;
+        # not forced active, so that a layout opened with the recording (``workbench open --at``,
+        # ``rerun REC.rrd LAYOUT.rbl``) wins whichever the Viewer loads first
         self.rec.stream.send_blueprint(
-            droptest_blueprint(self.residuals, impact_view(result)), make_active=True, make_default=True
+            droptest_blueprint(self.residuals, impact_view(result)), make_active=False, make_default=True
         )
 
 
@@ -106,6 +176,10 @@ class DropTestProblem:
     def summary(self, result: dt.DropResult) -> dict:
         """A copy of ``result.summary`` (SI)."""
         return dict(result.summary)
+
+    def key_moments(self, result: dt.DropResult) -> list[KeyMoment]:
+        """Release, bungee cut, first contact, max stroke, rebound (:func:`key_moments`)."""
+        return key_moments(result)
 
     def score(self, result: dt.DropResult, truth: dict) -> dict:
         """``pipeline.score``: max stroke, restitution, pose errors against the truth."""

@@ -16,7 +16,9 @@ from typing import Any
 
 import numpy as np
 
+from workbench.core.bodies import G0
 from workbench.io import progress as prog
+from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.entry import pipeline as en
@@ -24,7 +26,92 @@ from workbench.problems.entry.config import SCHEMA, config_for
 from workbench.problems.entry.site import R_MOLA
 from workbench.problems.entry.telemetry import STREAMS, telemetry_paths
 
-__all__ = ["EntryProblem"]
+__all__ = ["EntryProblem", "key_moments"]
+
+#: what the telemetry events of an entry mean (other names are listed as they are)
+_EVENT_TEXT = {
+    "EIP": "entry interface point",
+    "PDD": "parachute deployment (PDD)",
+    "FSR": "front-shield release (FSR)",
+    "BSR": "back-shell release (BSR)",
+    "RDA_ON": "radar (RDA) switched on",
+}
+
+#: the radar channels of the smoother (``filter.innovations``)
+_RADAR_CHANNELS = ("slant_range", "slant_out", "velocity_out")
+
+
+def key_moments(result: en.EntryResult) -> list[KeyMoment]:
+    """Key moments of an entry from its reconstruction, times [s] from EIP on the ``time`` timeline:
+    every telemetry event (EIP, PDD, FSR, RDA_ON, BSR ...), the peak deceleration (largest
+    |specific force| of the preprocessed IMU before PDD, in g₀ = 9.80665 m/s²) and the parachute
+    opening load (the largest in the 10 s after PDD), the gyro saturation (first to
+    last saturated sample, if any), the first radar measurement the smoother accepted, and the end
+    of the data; each with the smoothed altitude above ground where the smoother covers it."""
+    sm = result.filter.smoothed
+    r_ground = float(result.summary["r_ground_m"])
+    radius = np.linalg.norm(sm.p_M, axis=1)
+
+    def agl(t: float) -> str:
+        if not sm.t[0] <= t <= sm.t[-1]:
+            return ""
+        return f", h AGL {(np.interp(t, sm.t, radius) - r_ground) / 1e3:.2f} km"
+
+    out = []
+    for name, t_e in sorted(result.events.items(), key=lambda kv: kv[1]):
+        t_e = float(t_e)
+        out.append(
+            KeyMoment(slug(name), t_e, _EVENT_TEXT.get(name, f"{name} (events file)") + agl(t_e), (t_e - 10, t_e + 20))
+        )
+    imu = result.imu
+    f = np.linalg.norm(np.nan_to_num(np.asarray(imu.f_G, dtype=float)), axis=1)
+    t_imu = np.asarray(imu.t, dtype=float)
+    t_pdd = float(result.events.get("PDD", np.inf))
+    for name, what, sel, half in (
+        ("peak_deceleration", "peak deceleration", t_imu < t_pdd, 20.0),
+        ("opening_load", "parachute opening load", (t_imu >= t_pdd) & (t_imu <= t_pdd + 10.0), 5.0),
+    ):
+        if not sel.any():
+            continue
+        k = int(np.flatnonzero(sel)[np.argmax(f[sel])])
+        tk = float(t_imu[k])
+        text = f"{what} {f[k] / G0:.2f} g₀ ({f[k]:.1f} m/s², measured specific force){agl(tk)}"
+        out.append(KeyMoment(name, tk, text, (tk - half, tk + half)))
+    sat = np.flatnonzero(np.asarray(imu.saturated, bool))
+    if sat.size:
+        a, b = float(imu.t[sat[0]]), float(imu.t[sat[-1]])
+        out.append(
+            KeyMoment(
+                "saturation",
+                a,
+                f"gyro saturation: {sat.size} samples from {a:.2f} to {b:.2f} s (rate rebuilt){agl(a)}",
+                (a - 2, b + 2),
+            )
+        )
+    first = [
+        (float(ih.t[np.asarray(ih.accepted, bool)][0]), ch)
+        for ch, ih in result.filter.innovations.items()
+        if ch in _RADAR_CHANNELS and np.any(np.asarray(ih.accepted, bool))
+    ]
+    if first:
+        t_r, ch = min(first)
+        out.append(
+            KeyMoment(
+                "first_radar_fix", t_r, f"first radar fix: {ch} accepted by the smoother{agl(t_r)}", (t_r - 5, t_r + 15)
+            )
+        )
+    e = result.summary["end"]
+    t_end = float(e["t_s"])
+    out.append(
+        KeyMoment(
+            "end",
+            t_end,
+            f"end of the data: h AGL {e['h_agl_m'] / 1e3:.2f} km ± {e['sigma_h_m']:.0f} m (1σ)",
+            (t_end - 20, t_end),
+        )
+    )
+    names = [m.name for m in out]
+    return [m for i, m in enumerate(out) if m.name not in names[:i]]  # an event named like a derived moment wins
 
 
 class _Drawer:
@@ -38,9 +125,12 @@ class _Drawer:
         self.drawer.handle(stage)
 
     def finish(self, result: object, summary: dict) -> None:
+        from workbench.recording.moments import log_key_moments
+
         self.rec.report(en.scorecard_markdown(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
+        log_key_moments(self.rec, summary.get("key_moments", []))
 
 
 class EntryProblem:
@@ -78,6 +168,10 @@ class EntryProblem:
     def summary(self, result: en.EntryResult) -> dict:
         """A copy of ``result.summary`` (SI)."""
         return dict(result.summary)
+
+    def key_moments(self, result: en.EntryResult) -> list[KeyMoment]:
+        """EIP, peak deceleration, PDD, saturation, FSR, first radar fix ... (:func:`key_moments`)."""
+        return key_moments(result)
 
     def score(self, result: en.EntryResult, truth: dict) -> dict:
         """``pipeline.score``: trajectory, atmosphere and wind errors against the truth."""

@@ -15,13 +15,48 @@ from typing import Any
 import numpy as np
 
 from workbench.io import progress as prog
+from workbench.io.moments import KeyMoment
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.meads import pipeline as md
 from workbench.problems.meads.config import SCHEMA
 from workbench.problems.meads.telemetry import STREAMS, telemetry_paths
 
-__all__ = ["MeadsProblem"]
+__all__ = ["MeadsProblem", "key_moments"]
+
+
+def key_moments(result: md.MeadsResult) -> list[KeyMoment]:
+    """Key moments of a flush-air-data reduction, times [s] on the ``time`` timeline: the peak
+    dynamic pressure, the largest |α| and |β| while q∞ is at least 10 % of its peak (below it the
+    angles are poorly observed), the first port failure, if any, and the transonic crossing (the
+    estimated Mach number first below 1, where it is estimated)."""
+    fit, t = result.air.fit, np.asarray(result.air.t, dtype=float)
+    q = np.nan_to_num(np.asarray(fit.qbar, dtype=float), nan=-np.inf)
+    out = []
+    if np.isfinite(q).any():
+        k = int(np.argmax(q))
+        out.append(KeyMoment("peak_qbar", float(t[k]), f"peak dynamic pressure q∞ {q[k] / 1e3:.2f} kPa"))
+        strong = q >= 0.1 * q[k]
+        for name, ang, sig in (("max_alpha", fit.alpha, fit.sigma_alpha), ("max_beta", fit.beta, fit.sigma_beta)):
+            a = np.where(strong, np.abs(np.nan_to_num(np.asarray(ang, dtype=float))), -1.0)
+            j = int(np.argmax(a))
+            if a[j] >= 0:
+                sym = "α" if name == "max_alpha" else "β"
+                out.append(
+                    KeyMoment(
+                        name,
+                        float(t[j]),
+                        f"largest |{sym}| {np.degrees(ang[j]):+.2f} ± {np.degrees(sig[j]):.2f} deg (1σ) "
+                        "with q∞ ≥ 10 % of its peak",
+                    )
+                )
+    for f in sorted(result.air.failures, key=lambda f: f.t)[:1]:
+        out.append(KeyMoment("port_failure", float(f.t), f"port {f.port} failed ({f.how})"))
+    mach = np.asarray(result.wind.mach, dtype=float)
+    sub = np.flatnonzero(np.isfinite(mach) & (mach < 1.0))
+    if sub.size and np.any(np.isfinite(mach[: sub[0]]) & (mach[: sub[0]] >= 1.0)):
+        out.append(KeyMoment("subsonic", float(t[sub[0]]), "transonic crossing: estimated Mach first below 1"))
+    return out
 
 
 class _Drawer:
@@ -35,9 +70,12 @@ class _Drawer:
         self.drawer.handle(stage)
 
     def finish(self, result: object, summary: dict) -> None:
+        from workbench.recording.moments import log_key_moments
+
         self.rec.report(md.scorecard_markdown(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
+        log_key_moments(self.rec, summary.get("key_moments", []))
 
 
 class MeadsProblem:
@@ -74,6 +112,10 @@ class MeadsProblem:
     def summary(self, result: md.MeadsResult) -> dict:
         """A copy of ``result.summary``."""
         return dict(result.summary)
+
+    def key_moments(self, result: md.MeadsResult) -> list[KeyMoment]:
+        """Peak q∞, largest |α| and |β|, first port failure, transonic crossing (:func:`key_moments`)."""
+        return key_moments(result)
 
     def score(self, result: md.MeadsResult, truth: dict) -> dict:
         """``pipeline.score``: errors above 850 Pa against the truth, each vs its reported 3σ."""

@@ -12,7 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.bodies import G0
 from workbench.estimation.health import health_markdown
+from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
 from workbench.problems.post2 import build, huygens
@@ -23,7 +25,46 @@ from workbench.problems.post2.recording_mc import open_mc_recording
 from workbench.problems.post2.scoring import score
 from workbench.problems.post2.truth import sample_times, simulate_truth, write_observations
 
-__all__ = ["Post2Problem"]
+__all__ = ["Post2Problem", "key_moments"]
+
+#: observation quantities that measure the sensed (non-gravitational) acceleration
+_SENSED_ACCELERATION = ("acceleration_axial", "acceleration_magnitude", "acceleration_body")
+
+
+def key_moments(result) -> list[KeyMoment]:
+    """Key moments of a post2 reconstruction, times [s] on the ``time`` timeline: the start and end
+    of the grid, every event that fired (``[events]`` of the problem file: parachutes, separations,
+    phase changes), and the peak of the measured sensed acceleration (largest |z| over the
+    observations of ``acceleration_axial``/``_magnitude``/``_body``, in g₀ = 9.80665 m/s²) when the
+    problem file observes one. Each has a window of ± 1 % of the grid's span, at least ± 15 s (or
+    ± 5 % of a span shorter than 300 s), clipped to the grid."""
+    t = np.asarray(result.t, dtype=float)
+    t0, t1 = float(t[0]), float(t[-1])
+    half = max(0.01 * (t1 - t0), min(0.05 * (t1 - t0), 15.0))  # an 8000 s descent: ± 80 s
+
+    def moment(name: str, tk: float, text: str) -> KeyMoment:
+        return KeyMoment(name, float(tk), text, (max(t0, tk - half), min(t1, tk + half)))
+
+    out = [moment("start", t0, "start of the reconstruction (first grid time)")]
+    for t_e, name in result.events:
+        out.append(moment(slug(name), float(t_e), f"event {name!r} fires (problem file [events])"))
+    peak = None
+    for name, ch in result.channels.items():
+        if ch.spec.quantity not in _SENSED_ACCELERATION or not len(ch.t):
+            continue
+        z = np.abs(np.asarray(ch.z, dtype=float).reshape(len(ch.t), -1))
+        a = np.linalg.norm(np.nan_to_num(z), axis=1)
+        k = int(np.argmax(a))
+        if peak is None or a[k] > peak[0]:
+            peak = (float(a[k]), float(ch.t[k]), name)
+    if peak is not None:
+        a, tk, name = peak
+        out.append(
+            moment("peak_acceleration", tk, f"peak sensed acceleration {a / G0:.2f} g₀ ({a:.1f} m/s², {name} measured)")
+        )
+    out.append(moment("end", t1, "end of the reconstruction (last grid time)"))
+    names = [m.name for m in out]
+    return [m for i, m in enumerate(out) if m.name not in names[:i]]  # an event fired twice: its first time
 
 
 class Post2Problem:
@@ -105,6 +146,10 @@ class Post2Problem:
     def summary(self, result) -> dict:
         """A copy of the result's summary."""
         return dict(result.summary)
+
+    def key_moments(self, result) -> list[KeyMoment]:
+        """Start, events fired, peak sensed acceleration, end (:func:`key_moments`)."""
+        return key_moments(result)
 
     def score(self, result, truth: dict) -> dict:
         """Errors against the truth (:func:`workbench.problems.post2.scoring.score`)."""

@@ -28,6 +28,7 @@ from workbench.problems.post2.scoring import truth_on_grid
 from workbench.recording import layout
 from workbench.recording.blueprint import report_view
 from workbench.recording.dispatch import StageDispatch
+from workbench.recording.moments import log_key_moments
 from workbench.recording.writer import open_recording
 
 __all__ = ["Post2Drawer", "open_post2_recording", "post2_blueprint", "COMPONENTS", "vehicle_meshes"]
@@ -252,10 +253,11 @@ class Post2Drawer:
                 s.log(layout.POST2_RISERS, rr.Clear(recursive=False))
 
     def finish(self, result: object, summary: dict) -> None:
-        """Write the scorecard."""
+        """Write the scorecard, the health verdict and the key moments."""
         self.rec.report(self.scorecard(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
+        log_key_moments(self.rec, summary.get("key_moments", []))
 
 
 def post2_blueprint(
