@@ -49,11 +49,12 @@ def residual_names(scenario: Scenario) -> list[str]:
 class _Drawer:
     """:class:`~workbench.problems.base.StageRecorder` of a drop test (wraps DropTestRecorder)."""
 
-    def __init__(self, rec, truth, residuals: list[str]):
+    def __init__(self, rec, truth, residuals: list[str], triads: list[str]):
         from workbench.problems.droptest.recording import DropTestRecorder
 
         self.rec = rec
         self.residuals = residuals
+        self.triads = triads
         self.drawer = DropTestRecorder(rec, truth)
 
     def handle(self, stage: object) -> None:
@@ -67,7 +68,7 @@ class _Drawer:
             self.rec.health(summary["health"])
         # the layout that needs the result (camera at the impact, stroke zoom) becomes the default
         self.rec.stream.send_blueprint(
-            droptest_blueprint(self.residuals, impact_view(result)), make_active=True, make_default=True
+            droptest_blueprint(self.residuals, impact_view(result), self.triads), make_active=True, make_default=True
         )
 
 
@@ -130,8 +131,10 @@ class DropTestProblem:
         from workbench.recording.writer import open_recording
 
         residuals = residual_names(scenario)
-        with open_recording(path, scenario.name, blueprint=droptest_blueprint(residuals), properties=properties) as rec:
-            yield _Drawer(rec, truth, residuals)
+        triads = list(config_for(scenario).triads)
+        bp = droptest_blueprint(residuals, triads=triads)
+        with open_recording(path, scenario.name, blueprint=bp, properties=properties) as rec:
+            yield _Drawer(rec, truth, residuals, triads)
 
     def export_columns(self, result: dt.DropResult) -> ExportTable:
         """Smoothed position, velocity, attitude (SPF chamber frame), their σ, and the stroke."""
