@@ -73,7 +73,7 @@ def num(
     """``x * scale`` with at most ``digits`` significant digits and ``unit`` after a space.
 
     Integers print exactly (``2791``); floats with ``digits`` significant digits and no trailing
-    zeros beyond them (``0.07048``, ``4.42``, ``1234``), in ``e`` notation only when
+    zeros beyond them (``0.07048``, ``4.42``, ``1235``, ``123500``), in ``e`` notation only when
     ``|x| < 1e-3`` or ``|x| >= 1e6``; ``sign`` forces a leading ``+`` (errors).  An undefined value
     (None, NaN, ±inf) prints ``undefined`` — pass the reason, e.g. ``"not defined: no rebound"``.
     """
@@ -93,10 +93,13 @@ def num(
             mant, exp = f"{v:{p}.{max(digits - 1, 0)}e}".split("e")
             s = (mant.rstrip("0").rstrip(".") if "." in mant else mant) + "e" + exp
         else:
-            decimals = max(digits - 1 - math.floor(math.log10(a)), 0)
-            s = f"{v:{p}.{decimals}f}"
-            if "." in s:
-                s = s.rstrip("0").rstrip(".")
+            mag = math.floor(math.log10(a))
+            if mag >= digits:  # 123456.7 -> 123500: the digits beyond `digits` are not meaningful
+                s = f"{round(v, digits - 1 - mag):{p}.0f}"
+            else:
+                s = f"{v:{p}.{max(digits - 1 - mag, 0)}f}"
+                if "." in s:
+                    s = s.rstrip("0").rstrip(".")
     return f"{s} {unit}" if unit else s
 
 

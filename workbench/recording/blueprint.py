@@ -20,7 +20,16 @@ import rerun.blueprint as rrb
 
 from workbench.recording import layout
 
-__all__ = ["standard_blueprint", "save_blueprint", "plot_view", "events_view", "report_view", "time_window"]
+__all__ = [
+    "standard_blueprint",
+    "save_blueprint",
+    "plot_view",
+    "events_view",
+    "report_view",
+    "time_window",
+    "tab",
+    "has_unit",
+]
 
 
 def standard_blueprint(
@@ -170,3 +179,9 @@ def events_view(name: str = "Events") -> rrb.TextLogView:
             ],
         ),
     )
+
+
+def tab(name: str, *views: Any, shares: Sequence[float] | None = None) -> rrb.Vertical:
+    """A tab with a short ``name`` (``"stroke [m]"``) holding ``views`` stacked: the views keep their
+    long names (unit and colour key) in their own title bars, while the tab strip stays readable."""
+    return rrb.Vertical(*views, name=name, row_shares=list(shares) if shares is not None else None)

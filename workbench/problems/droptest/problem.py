@@ -116,6 +116,12 @@ class DropTestProblem:
         """``pipeline.scorecard_markdown``."""
         return dt.scorecard_markdown(summary)
 
+    def estimator(self, scenario: Scenario) -> str:
+        """The size of the scenario's filter, for ``workbench list``: ``"EKF: 42 error states (43 full)"``
+        (``model.sizes`` of its triads, so the number follows the code)."""
+        n_x, n_e = rl.sizes(len(config_for(scenario).triads))
+        return f"EKF: {n_e} error states ({n_x} full)"
+
     def headline(self, summary: dict) -> str:
         """Max stroke ± 1σ and its time (and the true max stroke when scored)."""
         ms = summary["max_stroke"]

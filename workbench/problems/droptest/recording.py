@@ -27,7 +27,7 @@ from workbench.problems.droptest.lander import airbag_mesh
 from workbench.problems.droptest.pipeline import DropResult, DropTelemetry, FilterStage, InitialState, StrokeStage
 from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
-from workbench.recording.blueprint import events_view, plot_view, report_view, time_window
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab, time_window
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
@@ -41,7 +41,7 @@ XYZW = XYZ + [(120, 120, 120, 255)]
 
 
 #: key of the red/green/blue (x/y/z) colours, for view names (legends off: they covered the data)
-XYZ_KEY = "red x, green y, blue z"
+XYZ_KEY = "RGB = xyz"
 BOUNDS_KEY = "grey ±3σ, pale truth"
 
 #: bounded per-axis series under a plot root: (root, tab title, unit, axis leaf names). The leaf is the
@@ -108,11 +108,11 @@ def droptest_blueprint(
         rrb.Spatial3DView(name="Chamber", origin=layout.WORLD),
         active_tab=0,
     )
-    stroke_key = "blue smoothed, grey ±1σ ±3σ, orange forward, green truth"
+    stroke_key = "blue smoothed, grey ±1σ ±3σ, orange fwd, green truth"
     plots: list = [
-        plot_view(f"stroke at impact [m] — {stroke_key}", layout.DROPTEST_PLOT_STROKE, **stroke_kw),
-        plot_view(f"stroke, whole drop [m] — {stroke_key}", layout.DROPTEST_PLOT_STROKE),
-        plot_view("stroke 1σ [m] — blue smoothed, orange forward", layout.DROPTEST_PLOT_STROKE_SIGMA),
+        tab("stroke at impact [m]", plot_view(f"stroke [m] — {stroke_key}", layout.DROPTEST_PLOT_STROKE, **stroke_kw)),
+        tab("stroke [m]", plot_view(f"stroke, whole drop [m] — {stroke_key}", layout.DROPTEST_PLOT_STROKE)),
+        tab("stroke 1σ [m]", plot_view("stroke 1σ [m] — blue smoothed, orange fwd", layout.DROPTEST_PLOT_STROKE_SIGMA)),
     ]
     for root, title, unit, leaves in _BOUNDED:
         rows = []
@@ -122,19 +122,22 @@ def droptest_blueprint(
             if win is None or root == layout.DROPTEST_PLOT_GYRO_SCALE:
                 rows.append(full)
             else:
-                rows.append(
-                    rrb.Horizontal(
-                        full, plot_view(f"{leaf} at impact [{unit}]", path, time_range=win), column_shares=[1, 1]
-                    )
-                )
-        plots.append(rrb.Vertical(*rows, name=f"{title} [{unit}]"))
+                zoom = plot_view(f"{leaf} at impact [{unit}]", path, time_range=win)
+                rows.append(rrb.Horizontal(full, zoom, column_shares=[1, 1]))
+        plots.append(tab(f"{title} [{unit}]", *rows))
     plots += [
-        plot_view(f"accel SPF [g] — {XYZ_KEY}; thin truth", layout.DROPTEST_PLOT_ACCEL_SPF),
-        plot_view(f"quaternion [-] — {XYZ_KEY}, grey w; thin truth", layout.DROPTEST_PLOT_QUATERNION),
-        plot_view("Euler 1-2-3 [deg] — red φ, green θ, blue ψ; thin truth", layout.DROPTEST_PLOT_EULER123),
+        tab("accel SPF [g]", plot_view(f"accel SPF [g] — {XYZ_KEY}; thin truth", layout.DROPTEST_PLOT_ACCEL_SPF)),
+        tab(
+            "quaternion [-]",
+            plot_view(f"quaternion [-] — {XYZ_KEY}, grey w; thin truth", layout.DROPTEST_PLOT_QUATERNION),
+        ),
+        tab(
+            "Euler 1-2-3 [deg]",
+            plot_view("Euler 1-2-3 [deg] — red φ, green θ, blue ψ; thin truth", layout.DROPTEST_PLOT_EULER123),
+        ),
         rrb.Grid(
             *[
-                plot_view(f"1σ {title} — {XYZ_KEY}; thin forward", layout.join(layout.DROPTEST_PLOT_SIGMA, leaf))
+                plot_view(f"1σ {title} — {XYZ_KEY}; thin fwd", layout.join(layout.DROPTEST_PLOT_SIGMA, leaf))
                 for leaf, title in SIGMA_GROUPS
             ],
             grid_columns=2,
@@ -146,7 +149,7 @@ def droptest_blueprint(
             rrb.Grid(
                 *[
                     plot_view(
-                        f"{tr} specific force [g] — {XYZ_KEY} measured, black predicted",
+                        f"{tr} [g] — {XYZ_KEY} measured, black predicted",
                         layout.join(layout.DROPTEST_PLOT_TRIADS, tr),
                     )
                     for tr in triads
@@ -156,13 +159,15 @@ def droptest_blueprint(
             )
         )
     else:
-        plots.append(
-            plot_view("triads [g] — measured, black predicted", layout.DROPTEST_PLOT_TRIADS, legend="LeftBottom")
-        )
+        key = "triads [g] — measured, black predicted"
+        plots.append(tab("triads [g]", plot_view(key, layout.DROPTEST_PLOT_TRIADS, legend="LeftBottom")))
     plots += [
-        plot_view("NIS [-] — one series per sensor", layout.DROPTEST_PLOT_NIS, legend="RightTop"),
-        plot_view(
-            "process noise — blue q_accel [m²/s⁵], orange q_angular [rad²/s⁵]", layout.DROPTEST_PLOT_PROCESS_NOISE
+        tab("NIS [-]", plot_view("NIS [-] — one series per sensor", layout.DROPTEST_PLOT_NIS, legend="RightTop")),
+        tab(
+            "process noise",
+            plot_view(
+                "process noise — blue q_accel [m²/s⁵], orange q_angular [rad²/s⁵]", layout.DROPTEST_PLOT_PROCESS_NOISE
+            ),
         ),
     ]
     residuals = []
@@ -171,7 +176,7 @@ def droptest_blueprint(
         key = f"{XYZ_KEY}, grey ±3σ" if nm in triads or nm in ("gyro", "zupt") else "grey ±3σ"
         full = plot_view(f"{nm} innovation [{unit}] — {key}", layout.residual_path(nm))
         if win is None:
-            residuals.append(full)
+            residuals.append(tab(nm, full))
         else:
             zoom = plot_view(f"{nm} at impact [{unit}]", layout.residual_path(nm), time_range=win)
             residuals.append(rrb.Horizontal(full, zoom, column_shares=[1, 1], name=nm))

@@ -37,9 +37,14 @@ class _Drawer:
         self.drawer.handle(stage)
 
     def finish(self, result: object, summary: dict) -> None:
+        from workbench.problems.entry.recording import descent_window, entry_blueprint
+
         self.rec.report(en.scorecard_markdown(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
+        window = descent_window(summary)
+        if window is not None:  # the AGL views fixed on the descent, known only now
+            self.rec.stream.send_blueprint(entry_blueprint(descent=window), make_active=True, make_default=True)
 
 
 class EntryProblem:
