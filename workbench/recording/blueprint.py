@@ -101,14 +101,16 @@ def save_blueprint(
     return p
 
 
-def report_view(name: str = "Scorecard", health: bool = True) -> Any:
+def report_view(name: str = "Scorecard", health: bool = True, extra: Sequence[Any] = ()) -> Any:
     """The view of the run's markdown scorecard at ``layout.REPORT`` — that entity only, since the
     health verdict is a second text document under it (``layout.HEALTH``) and a text view given
-    both shows neither — with, when ``health``, the verdict in a second tab."""
+    both shows neither — with, when ``health``, the verdict in a second tab and ``extra`` views
+    (e.g. :func:`events_view`) as further tabs of the same strip (full width for the event text)."""
     card = rrb.TextDocumentView(name=name, origin=layout.REPORT, contents="$origin")
     if not health:
-        return card
-    return rrb.Tabs(card, rrb.TextDocumentView(name="Health", origin=layout.HEALTH, contents="$origin"), active_tab=0)
+        return card if not extra else rrb.Tabs(card, *extra, active_tab=0, name=name)
+    health_view = rrb.TextDocumentView(name="Health", origin=layout.HEALTH, contents="$origin")
+    return rrb.Tabs(card, health_view, *extra, active_tab=0, name=name)
 
 
 _UNIT = re.compile(r"\[[^\]]+\]")

@@ -174,7 +174,7 @@ def droptest_blueprint(
     for nm in residual_names:
         unit = _residual_unit(nm, triads)
         key = f"{XYZ_KEY}, grey ±3σ" if nm in triads or nm in ("gyro", "zupt") else "grey ±3σ"
-        full = plot_view(f"{nm} innovation [{unit}] — {key}", layout.residual_path(nm))
+        full = plot_view(f"{nm} [{unit}] — {key}", layout.residual_path(nm))
         if win is None:
             residuals.append(tab(nm, full))
         else:
@@ -183,11 +183,7 @@ def droptest_blueprint(
     right = rrb.Vertical(
         rrb.Tabs(*plots, active_tab=0),
         rrb.Tabs(*residuals, active_tab=0),
-        rrb.Horizontal(
-            report_view("Scorecard"),
-            events_view(),
-            column_shares=[3, 2],
-        ),
+        report_view("Scorecard", extra=[events_view()]),
         row_shares=[3, 2, 2],
     )
     return rrb.Blueprint(

@@ -229,7 +229,7 @@ def entry_blueprint(
     right = rrb.Vertical(
         plots,
         residuals,
-        rrb.Tabs(report_view("Scorecard"), events_view(), active_tab=0),
+        report_view("Scorecard", extra=[events_view()]),
         row_shares=[3, 2, 2],
     )
     left = rrb.Vertical(scenes, profiles, row_shares=[3, 2])
