@@ -84,6 +84,7 @@ def test_droptest_bounded_plots_have_an_impact_zoom_beside_the_whole_drop():
     assert len(pos_x) == 2 and len(zoomed) == 1  # whole drop + impact window
     rng = zoomed[0].properties["VisibleTimeRanges"].ranges.as_arrow_array().to_pylist()[0]["range"]
     assert (rng["start"], rng["end"]) == (1_500_000_000, 2_000_000_000)
+    assert "TimeAxis" in zoomed[0].properties  # the x axis opens on the window too
     # no view mixes the 12 position series any more: each axis has its own view
     assert not [v for v in views if str(v.origin) == layout.DROPTEST_PLOT_POSITION]
 
@@ -103,7 +104,7 @@ def test_entry_agl_views_are_fixed_on_the_descent():
     assert window == (175.0, 262.0)
     assert descent_window({"event_table": [{"event": "EIP", "t_s": 0.0}]}) is None
     agl = [v for v in _time_series(entry_blueprint(descent=window)) if str(v.origin) == layout.ENTRY_PLOT_ALTITUDE_AGL]
-    assert len(agl) == 2 and all("VisibleTimeRanges" in v.properties for v in agl)
+    assert len(agl) == 2 and all({"VisibleTimeRanges", "TimeAxis"} <= set(v.properties) for v in agl)
 
 
 def test_plot_view_refuses_a_name_without_unit_and_sets_the_legend():

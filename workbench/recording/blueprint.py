@@ -139,6 +139,7 @@ def plot_view(
     legend: str | None = None,
     y_range: tuple[float, float] | None = None,
     time_range: Any = None,
+    window: tuple[float, float] | None = None,
     contents: Any = None,
 ) -> rrb.TimeSeriesView:
     """A time-series view whose name states the y unit, with a legend that does not cover the data.
@@ -149,8 +150,9 @@ def plot_view(
     ``"… — blue smoothed, grey ±3σ"``); a corner (``"LeftTop"``, ``"RightBottom"`` …) shows it there,
     for views with few series whose curves leave that corner free. ``y_range`` (lo, hi) in the
     plotted unit fixes the y axis (zoom on an interesting band); ``time_range`` a
-    ``VisibleTimeRange`` (e.g. :func:`time_window`); ``contents`` an entity query other than
-    ``$origin/**``.
+    ``VisibleTimeRange`` (the data shown, e.g. trailing the cursor); ``window`` (t0, t1) [s] a fixed
+    zoom: only that data, and the x axis opened on it (the viewer otherwise opens the x axis on its
+    own span); ``contents`` an entity query other than ``$origin/**``.
     """
     if not has_unit(name):
         raise ValueError(f"plot view {name!r} must state its unit in brackets, e.g. '[m]' or '[-]'")
@@ -159,8 +161,18 @@ def plot_view(
     }
     if y_range is not None:
         kw["axis_y"] = rrb.ScalarAxis(range=(float(y_range[0]), float(y_range[1])))
+    if time_range is not None and window is not None:
+        raise ValueError("give time_range or window, not both")
     if time_range is not None:
         kw["time_ranges"] = time_range
+    if window is not None:
+        kw["time_ranges"] = time_window(*window)
+        kw["axis_x"] = rrb.TimeAxis(
+            view_range=rrb.TimeRange(
+                start=rrb.TimeRangeBoundary.absolute(seconds=float(window[0])),
+                end=rrb.TimeRangeBoundary.absolute(seconds=float(window[1])),
+            )
+        )
     if contents is not None:
         kw["contents"] = contents
     return rrb.TimeSeriesView(name=name, origin=origin, **kw)

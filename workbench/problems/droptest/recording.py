@@ -27,7 +27,7 @@ from workbench.problems.droptest.lander import airbag_mesh
 from workbench.problems.droptest.pipeline import DropResult, DropTelemetry, FilterStage, InitialState, StrokeStage
 from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
-from workbench.recording.blueprint import events_view, plot_view, report_view, tab, time_window
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
@@ -42,7 +42,7 @@ XYZW = XYZ + [(120, 120, 120, 255)]
 
 #: key of the red/green/blue (x/y/z) colours, for view names (legends off: they covered the data)
 XYZ_KEY = "RGB = xyz"
-BOUNDS_KEY = "grey ±3σ, pale truth"
+BOUNDS_KEY = "±3σ grey, truth pale"
 
 #: bounded per-axis series under a plot root: (root, tab title, unit, axis leaf names). The leaf is the
 #: first word of each series name the recorder gives (``layout.join(root, leaf)``).
@@ -101,8 +101,8 @@ def droptest_blueprint(
         # three-quarter view from the free side of the ramp: 8 m out along the normal, 7 m across
         eye = pt + 8.0 * n + np.array([7.0, 0.0, 0.0])
         scene_kw["eye_controls"] = rrb.EyeControls3D(position=eye, look_target=pt, eye_up=[0.0, 0.0, 1.0])
-        win = time_window(impact["t0"], impact["t1"])
-        stroke_kw = {"y_range": (impact["stroke_lo"], impact["stroke_hi"]), "time_range": win}
+        win = (float(impact["t0"]), float(impact["t1"]))
+        stroke_kw = {"y_range": (impact["stroke_lo"], impact["stroke_hi"]), "window": win}
     scenes = rrb.Tabs(
         rrb.Spatial3DView(name="Impact", origin=layout.WORLD, **scene_kw),
         rrb.Spatial3DView(name="Chamber", origin=layout.WORLD),
@@ -122,8 +122,8 @@ def droptest_blueprint(
             if win is None or root == layout.DROPTEST_PLOT_GYRO_SCALE:
                 rows.append(full)
             else:
-                zoom = plot_view(f"{leaf} at impact [{unit}]", path, time_range=win)
-                rows.append(rrb.Horizontal(full, zoom, column_shares=[1, 1]))
+                zoom = plot_view(f"{leaf} at impact [{unit}]", path, window=win)
+                rows.append(rrb.Horizontal(full, zoom, column_shares=[3, 2]))
         plots.append(tab(f"{title} [{unit}]", *rows))
     plots += [
         tab("accel SPF [g]", plot_view(f"accel SPF [g] — {XYZ_KEY}; thin truth", layout.DROPTEST_PLOT_ACCEL_SPF)),
@@ -175,11 +175,11 @@ def droptest_blueprint(
         unit = _residual_unit(nm, triads)
         key = f"{XYZ_KEY}, grey ±3σ" if nm in triads or nm in ("gyro", "zupt") else "grey ±3σ"
         full = plot_view(f"{nm} [{unit}] — {key}", layout.residual_path(nm))
-        if win is None:
+        if win is None or nm in ("zupt", "odometer"):  # measured only before the drop / until the cut
             residuals.append(tab(nm, full))
         else:
-            zoom = plot_view(f"{nm} at impact [{unit}]", layout.residual_path(nm), time_range=win)
-            residuals.append(rrb.Horizontal(full, zoom, column_shares=[1, 1], name=nm))
+            zoom = plot_view(f"{nm} at impact [{unit}]", layout.residual_path(nm), window=win)
+            residuals.append(rrb.Horizontal(full, zoom, column_shares=[3, 2], name=nm))
     right = rrb.Vertical(
         rrb.Tabs(*plots, active_tab=0),
         rrb.Tabs(*residuals, active_tab=0),

@@ -46,7 +46,7 @@ from workbench.problems.entry.site import R_MOLA
 from workbench.problems.entry.telemetry import EntryTelemetry
 from workbench.problems.entry.winds import WindResult
 from workbench.recording import layout
-from workbench.recording.blueprint import events_view, plot_view, report_view, tab, time_window
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
@@ -158,12 +158,12 @@ def entry_blueprint(
             plot_view(
                 f"altitude AGL [m] (from PDD − 5 s) — {agl_key}",
                 layout.ENTRY_PLOT_ALTITUDE_AGL,
-                time_range=time_window(t0, t1),
+                window=(t0, t1),
             ),
             plot_view(
                 "altitude AGL, last 20 s [m]",
                 layout.ENTRY_PLOT_ALTITUDE_AGL,
-                time_range=time_window(max(t0, t1 - 20.0), t1),
+                window=(max(t0, t1 - 20.0), t1),
             ),
             column_shares=[3, 2],
             name="altitude AGL [m]",
@@ -799,7 +799,7 @@ class EntryRecorder:
         )
         if legend:
             names, cols = zip(*legend, strict=True)
-            lpos = [[x1 + 0.22 * w, -y1 + 0.09 * h * i] for i in range(len(names))]
+            lpos = [[x1 + 0.22 * w, -y1 + 0.13 * h * i] for i in range(len(names))]
             s.log(
                 layout.join(root, layout.LEGEND),
                 rr.Points2D(lpos, labels=list(names), colors=list(cols), radii=[-6.0], show_labels=True),
