@@ -64,7 +64,7 @@ TRUTH_EAST = (120, 200, 120, 255)
 XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
 BEAMS = ["B0", "B1", "B2", "B3"]
 
-MAX_DISPERSION_TRACKS = 20
+MAX_DISPERSION_TRACKS = 12
 """Tracks drawn per status (accepted / rejected) of the dispersion cloud; the points at PDD are all drawn."""
 BOUNDS_KEY = "blue estimate, grey ±3σ, pale truth"
 XYZ_KEY = "RGB = xyz"
@@ -185,13 +185,13 @@ def entry_blueprint(
         rrb.Grid(
             *[
                 plot_view(
-                    f"{q} [{u}] — green accepted, grey rejected",
+                    f"{q} [{u}] per member: set the time panel to 'sample' — green accepted, grey rejected",
                     layout.join(layout.ENTRY_PLOT_DISPERSION, q),
                 )
                 for q, u in DISPERSION_UNITS.items()
             ],
             grid_columns=2,
-            name="dispersion (sample)",
+            name="dispersion (timeline sample)",
         )
     )
     plots = rrb.Tabs(*plot_tabs, active_tab=plot_tab)
