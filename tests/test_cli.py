@@ -55,15 +55,15 @@ def test_list_states_the_filter_size_the_code_builds(capsys):
     types a state count of its own (it said "19-state" where the filter has 42 error states)."""
     import re
 
-    from workbench.cli import _shipped
-    from workbench.io.scenario import load_scenario
+    from workbench.io.assets import assets_dir
+    from workbench.io.scenario import find_scenarios, load_scenario
     from workbench.problems.droptest import model as rl
     from workbench.problems.droptest.config import config_for
 
     assert main(["list"]) == EXIT_OK
     lines = {ln.split()[0]: ln for ln in capsys.readouterr().out.splitlines()}
     checked = 0
-    for name, path in _shipped().items():
+    for name, path in find_scenarios(assets_dir()).items():
         sc = load_scenario(path)
         assert not re.search(r"\d+-state", sc.description), name
         if sc.kind != "droptest":
