@@ -51,6 +51,31 @@ def test_list_prints_every_shipped_scenario(capsys):
     assert len(lines) >= 5
 
 
+def test_list_states_the_filter_size_the_code_builds(capsys):
+    """``list`` prints each drop test's error-state count from the filter model, and no description
+    types a state count of its own (it said "19-state" where the filter has 42 error states)."""
+    import re
+
+    from workbench.io.assets import assets_dir
+    from workbench.io.scenario import find_scenarios, load_scenario
+    from workbench.problems.droptest import model as rl
+    from workbench.problems.droptest.config import config_for
+
+    assert main(["list"]) == EXIT_OK
+    lines = {ln.split()[0]: ln for ln in capsys.readouterr().out.splitlines()}
+    checked = 0
+    for name, path in find_scenarios(assets_dir()).items():
+        sc = load_scenario(path)
+        assert not re.search(r"\d+-state", sc.description), name
+        if sc.kind != "droptest":
+            continue
+        n_x, n_e = rl.sizes(len(config_for(sc).triads))
+        assert re.findall(r"(\d+) error states", lines[name]) == [str(n_e)], lines[name]
+        assert f"({n_x} full)" in lines[name]
+        checked += 1
+    assert checked >= 4
+
+
 def test_list_with_no_scenarios_is_an_error(tmp_path, monkeypatch, capsys):
     root = _assets(tmp_path, monkeypatch, {})
     assert main(["list"]) == EXIT_INPUT

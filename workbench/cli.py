@@ -105,7 +105,9 @@ def cmd_list(args: argparse.Namespace) -> int:
     for name, path in sorted(_shipped().items()):
         sc = load_scenario(path)
         kind = sc.kind + (" (synthetic)" if sc.is_synthetic else "") + ("" if sc.kind in known else " (no problem)")
-        print(f"{name:22s} {kind:22s} {sc.description}")
+        # the filter size from the code (Problem.estimator, optional), never a number typed into a description
+        size = getattr(registry.get(sc.kind), "estimator", None) if sc.kind in known else None
+        print(f"{name:22s} {kind:22s} {sc.description}" + (f" [{size(sc)}]" if size is not None else ""))
     return EXIT_OK
 
 
@@ -276,8 +278,14 @@ def cmd_mc(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+INSPECT_ENTITY_ROWS = 25
+"""Entity rows ``inspect`` prints before the count of the rest (``--entities`` prints them all)."""
+
+
 def cmd_inspect(args: argparse.Namespace) -> int:
-    """Print what a recording holds: entities, timelines, time range, row counts, scorecard."""
+    """Print what a recording holds: name, timelines and time range, the scorecard, then the entities
+    with row counts (the first :data:`INSPECT_ENTITY_ROWS` and a count of the rest, all with
+    ``--entities``)."""
     from workbench.recording import layout
     from workbench.recording.reader import read_recording
 
@@ -293,15 +301,19 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     for tl in data.timelines():
         lo, hi = data.time_range(tl)
         print(f"timeline {tl}: {lo} .. {hi}")
-    tls = data.timelines()
-    print(f"{len(data.entities())} entities (rows per timeline: {', '.join(tls) or 'static only'}):")
-    for e in data.entities():
-        rows = " ".join(f"{data.row_count(e, tl):7d}" for tl in tls)
-        print(f"  {e:60s} {rows}")
     try:
         print("\n" + data.text_document(layout.REPORT))
     except (KeyError, ValueError):
-        print("(no /report scorecard in this recording)")
+        print("\n(no /report scorecard in this recording)\n")
+    tls = data.timelines()
+    entities = data.entities()
+    print(f"{len(entities)} entities (rows per timeline: {', '.join(tls) or 'static only'}):")
+    shown = entities if args.entities else entities[:INSPECT_ENTITY_ROWS]
+    for e in shown:
+        rows = " ".join(f"{data.row_count(e, tl):7d}" for tl in tls)
+        print(f"  {e:60s} {rows}")
+    if len(shown) < len(entities):
+        print(f"  ... {len(entities) - len(shown)} more (list them all with --entities)")
     return EXIT_OK
 
 
@@ -542,6 +554,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("inspect", help="summarise a .rrd recording and print its scorecard")
     sp.add_argument("recording")
     sp.add_argument("--json", action="store_true", help="machine-readable summary")
+    sp.add_argument("--entities", action="store_true", help="list every entity (default: the first 25 and a count)")
     sp.set_defaults(func=cmd_inspect)
     sp = sub.add_parser(
         "open",

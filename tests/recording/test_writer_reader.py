@@ -45,8 +45,8 @@ def recorded(tmp_path_factory):
     a = rng.normal(size=(n, 3, 3))
     inp["cov"] = a @ np.swapaxes(a, 1, 2) * 0.01 + np.eye(3) * 1e-4
     bp = standard_blueprint(
-        plots=[("altitude", layout.plot_path("altitude"))],
-        residuals=[("radar B0", layout.residual_path("radar", "B0"))],
+        plots=[("altitude [m]", layout.plot_path("altitude"))],
+        residuals=[("radar B0 [m]", layout.residual_path("radar", "B0"))],
         scene_exclude=[layout.TRUTH],
         time_window_s=5.0,
     )
@@ -305,7 +305,7 @@ def test_layout_paths():
 
 def test_blueprint_saves_and_verifies(tmp_path):
     bp = standard_blueprint(
-        plots=[("alt", layout.plot_path("alt")), ("vel", layout.plot_path("vel"))],
+        plots=[("alt [m]", layout.plot_path("alt")), ("vel [m/s]", layout.plot_path("vel"))],
         extra_views=[rr.blueprint.TimeSeriesView(name="dispersion", origin="/plots/dispersion")],
     )
     p = save_blueprint(bp, tmp_path / "layouts" / "std.rbl")

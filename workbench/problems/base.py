@@ -181,7 +181,11 @@ class Problem(Protocol):
         """The run's scorecard (markdown) from its summary (incl. ``"truth"`` when scored)."""
 
     def headline(self, summary: dict) -> str:
-        """One line with the run's main result, for the user."""
+        """One line with the run's main result, for the user.
+
+        A problem may also offer ``estimator(scenario) -> str``, the size of its filter computed from
+        the code (e.g. ``"EKF: 42 error states (43 full)"``); ``workbench list`` prints it after the
+        scenario's description, so no state count is typed into a description."""
 
     def open_recording(
         self, path: Path, scenario: Scenario, truth: Any, properties: dict

@@ -11,6 +11,7 @@ nothing about any one problem. A blueprint applies to recordings with the same a
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,16 @@ import rerun.blueprint as rrb
 
 from workbench.recording import layout
 
-__all__ = ["standard_blueprint", "save_blueprint"]
+__all__ = [
+    "standard_blueprint",
+    "save_blueprint",
+    "plot_view",
+    "events_view",
+    "report_view",
+    "time_window",
+    "tab",
+    "has_unit",
+]
 
 
 def standard_blueprint(
@@ -38,8 +48,8 @@ def standard_blueprint(
     scene_origin : origin of the 3D view (its subtree is shown).
     scene_exclude : entity paths hidden from the 3D view together with their subtrees
         (e.g. ``/world/truth`` for a clean scene).
-    plots : ``(tab name, origin)`` pairs, one ``TimeSeriesView`` tab each, e.g.
-        ``("altitude", layout.plot_path("altitude"))`` shows value, ±3σ and truth together.
+    plots : ``(tab name, origin)`` pairs, one ``TimeSeriesView`` tab each (:func:`plot_view`: the
+        name must carry the unit, e.g. ``("altitude [m]", layout.plot_path("altitude"))``).
     residuals : ``(tab name, origin)`` pairs for a second tab strip of residual views.
     extra_views : further blueprint views/containers, added as tabs next to the 3D view.
     time_window_s : if given, time-series views show only the trailing window
@@ -56,7 +66,7 @@ def standard_blueprint(
     if time_window_s is not None:
         if time_window_s <= 0:
             raise ValueError("time_window_s must be > 0")
-        ts_kwargs["time_ranges"] = rrb.VisibleTimeRange(
+        ts_kwargs["time_range"] = rrb.VisibleTimeRange(
             layout.TIME,
             start=rrb.TimeRangeBoundary.cursor_relative(seconds=-float(time_window_s)),
             end=rrb.TimeRangeBoundary.cursor_relative(),
@@ -65,13 +75,13 @@ def standard_blueprint(
     right: list[Any] = []
     shares: list[float] = []
     if plots:
-        right.append(rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o, **ts_kwargs) for n, o in plots], active_tab=0))
+        right.append(rrb.Tabs(*[plot_view(n, o, **ts_kwargs) for n, o in plots], active_tab=0))
         shares.append(3.0)
     if residuals:
-        right.append(rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o, **ts_kwargs) for n, o in residuals], active_tab=0))
+        right.append(rrb.Tabs(*[plot_view(n, o, **ts_kwargs) for n, o in residuals], active_tab=0))
         shares.append(2.0)
     right.append(report_view("Report"))
-    right.append(rrb.TextLogView(name="Events", origin=layout.EVENTS))
+    right.append(events_view())
     shares += [1.5, 1.0]
 
     return rrb.Blueprint(
@@ -91,11 +101,101 @@ def save_blueprint(
     return p
 
 
-def report_view(name: str = "Scorecard", health: bool = True) -> Any:
+def report_view(name: str = "Scorecard", health: bool = True, extra: Sequence[Any] = ()) -> Any:
     """The view of the run's markdown scorecard at ``layout.REPORT`` — that entity only, since the
     health verdict is a second text document under it (``layout.HEALTH``) and a text view given
-    both shows neither — with, when ``health``, the verdict in a second tab."""
+    both shows neither — with, when ``health``, the verdict in a second tab and ``extra`` views
+    (e.g. :func:`events_view`) as further tabs of the same strip (full width for the event text)."""
     card = rrb.TextDocumentView(name=name, origin=layout.REPORT, contents="$origin")
     if not health:
-        return card
-    return rrb.Tabs(card, rrb.TextDocumentView(name="Health", origin=layout.HEALTH, contents="$origin"), active_tab=0)
+        return card if not extra else rrb.Tabs(card, *extra, active_tab=0, name=name)
+    health_view = rrb.TextDocumentView(name="Health", origin=layout.HEALTH, contents="$origin")
+    return rrb.Tabs(card, health_view, *extra, active_tab=0, name=name)
+
+
+_UNIT = re.compile(r"\[[^\]]+\]")
+
+
+def has_unit(name: str) -> bool:
+    """True if a view name states a unit in brackets (``"stroke [m]"``, ``"NIS [-]"``)."""
+    return bool(_UNIT.search(name))
+
+
+def time_window(t0_s: float, t1_s: float) -> rrb.VisibleTimeRange:
+    """The fixed window ``[t0_s, t1_s]`` [s] of the ``time`` timeline (a zoomed plot of an event)."""
+    if not t1_s > t0_s:
+        raise ValueError(f"time window needs t1 > t0, got [{t0_s}, {t1_s}]")
+    return rrb.VisibleTimeRange(
+        layout.TIME,
+        start=rrb.TimeRangeBoundary.absolute(seconds=float(t0_s)),
+        end=rrb.TimeRangeBoundary.absolute(seconds=float(t1_s)),
+    )
+
+
+def plot_view(
+    name: str,
+    origin: str,
+    *,
+    legend: str | None = None,
+    y_range: tuple[float, float] | None = None,
+    time_range: Any = None,
+    window: tuple[float, float] | None = None,
+    contents: Any = None,
+) -> rrb.TimeSeriesView:
+    """A time-series view whose name states the y unit, with a legend that does not cover the data.
+
+    ``name`` must contain the unit in brackets (``"stroke [m]"``; ``[-]`` for a pure number), since
+    Rerun 0.41's plot has no y-axis title: the view name is the axis name (``ValueError`` otherwise).
+    ``legend``: None hides the legend (the colours are then explained in ``name``, e.g.
+    ``"… — blue smoothed, grey ±3σ"``); a corner (``"LeftTop"``, ``"RightBottom"`` …) shows it there,
+    for views with few series whose curves leave that corner free. ``y_range`` (lo, hi) in the
+    plotted unit fixes the y axis (zoom on an interesting band); ``time_range`` a
+    ``VisibleTimeRange`` (the data shown, e.g. trailing the cursor); ``window`` (t0, t1) [s] a fixed
+    zoom: only that data, and the x axis opened on it (the viewer otherwise opens the x axis on its
+    own span); ``contents`` an entity query other than ``$origin/**``.
+    """
+    if not has_unit(name):
+        raise ValueError(f"plot view {name!r} must state its unit in brackets, e.g. '[m]' or '[-]'")
+    kw: dict[str, Any] = {
+        "plot_legend": rrb.PlotLegend(visible=False) if legend is None else rrb.PlotLegend(corner=legend, visible=True),
+    }
+    if y_range is not None:
+        kw["axis_y"] = rrb.ScalarAxis(range=(float(y_range[0]), float(y_range[1])))
+    if time_range is not None and window is not None:
+        raise ValueError("give time_range or window, not both")
+    if time_range is not None:
+        kw["time_ranges"] = time_range
+    if window is not None:
+        kw["time_ranges"] = time_window(*window)
+        kw["axis_x"] = rrb.TimeAxis(
+            view_range=rrb.TimeRange(
+                start=rrb.TimeRangeBoundary.absolute(seconds=float(window[0])),
+                end=rrb.TimeRangeBoundary.absolute(seconds=float(window[1])),
+            )
+        )
+    if contents is not None:
+        kw["contents"] = contents
+    return rrb.TimeSeriesView(name=name, origin=origin, **kw)
+
+
+def events_view(name: str = "Events") -> rrb.TextLogView:
+    """The event log at ``layout.EVENTS``: time, level and text only (the entity-path column, always
+    ``/events``, and the other timelines are hidden, so the text gets the width)."""
+    return rrb.TextLogView(
+        name=name,
+        origin=layout.EVENTS,
+        columns=rrb.TextLogColumns(
+            timeline_columns=[rrb.encodings.TimelineColumn(tl, visible=tl == layout.TIME) for tl in layout.TIMELINES],
+            text_log_columns=[
+                rrb.encodings.TextLogColumn(rrb.encodings.TextLogColumnKind.LogLevel),
+                rrb.encodings.TextLogColumn(rrb.encodings.TextLogColumnKind.Body),
+                rrb.encodings.TextLogColumn(rrb.encodings.TextLogColumnKind.EntityPath, visible=False),
+            ],
+        ),
+    )
+
+
+def tab(name: str, *views: Any, shares: Sequence[float] | None = None) -> rrb.Vertical:
+    """A tab with a short ``name`` (``"stroke [m]"``) holding ``views`` stacked: the views keep their
+    long names (unit and colour key) in their own title bars, while the tab strip stays readable."""
+    return rrb.Vertical(*views, name=name, row_shares=list(shares) if shares is not None else None)

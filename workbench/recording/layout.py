@@ -86,6 +86,7 @@ BLACKOUT_FILL_SERIES = "blackout_fill"
 ITERATION_SERIES = "iteration"
 GRID = "grid"
 LABELS = "labels"
+LEGEND = "legend"
 ACCEPTED = "accepted"
 REJECTED = "rejected"
 

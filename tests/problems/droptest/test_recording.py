@@ -212,8 +212,22 @@ def test_fullstroke_truth_scoring(cli_run):
 # ------------------------------------------------------------------------------ commands
 
 
-def test_inspect_prints_entities_and_scorecard(droptest_run, rec, capsys):
+def test_inspect_prints_the_scorecard_before_a_short_entity_listing(droptest_run, rec, capsys):
+    from workbench.cli import INSPECT_ENTITY_ROWS
+
     code = main(["inspect", str(droptest_run.rrd)])
+    out = capsys.readouterr().out
+    assert code == 0
+    n_ent = len(rec.entities())
+    assert n_ent > INSPECT_ENTITY_ROWS
+    assert out.index("scorecard") < out.index(f"{n_ent} entities")
+    listed = [ln for ln in out.splitlines() if ln.startswith("  /")]
+    assert len(listed) == INSPECT_ENTITY_ROWS
+    assert f"... {n_ent - INSPECT_ENTITY_ROWS} more (list them all with --entities)" in out
+
+
+def test_inspect_entities_prints_entities_and_scorecard(droptest_run, rec, capsys):
+    code = main(["inspect", str(droptest_run.rrd), "--entities"])
     out = capsys.readouterr().out
     assert code == 0
     n = droptest_run.summary["steps"]

@@ -47,6 +47,7 @@ from workbench.estimation.ekf import (
 )
 from workbench.estimation.health import covariance_stats, health_markdown
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
+from workbench.io import scorecard as sc
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.config import config_for
@@ -76,6 +77,9 @@ __all__ = [
 ]
 
 GRAVITY = np.array([0.0, 0.0, -G0])
+
+#: what the scorecard says where the restitution has no value (the lander never left the ramp)
+NO_REBOUND = "not defined: no rebound"
 
 #: the restitution definition, as the summary and scorecard state it
 RESTITUTION_DEFINITION = (
@@ -922,10 +926,10 @@ def scorecard_markdown(summary: dict) -> str:
         f"{' (within 3σ: possible)' if ms['possible_full_stroke'] and not ms['full_stroke'] else ''} |",
         "| coefficient of restitution | "
         + (
-            f"{e['e']:.3f} ± {e['sigma']:.3f} (1σ: estimation {e.get('sigma_estimation', np.nan):.4f}, "
-            f"definition {e.get('sigma_definition', np.nan):.4f}, in quadrature) |"
-            if np.isfinite(e["e"])
-            else "undefined (no rebound off the ramp) |"
+            f"{e['e']:.3f} ± {e['sigma']:.3f} (1σ: estimation {sc.num(e.get('sigma_estimation'), digits=2)}, "
+            f"definition {sc.num(e.get('sigma_definition'), digits=2)}, in quadrature) |"
+            if sc.is_defined(e["e"])
+            else f"{NO_REBOUND} |"
         ),
         f"| covariance | symmetric (max asym {summary['covariance']['max_asymmetry']:.1e}), "
         f"min eigenvalue {summary['covariance']['min_eigenvalue']:.2e} |",
@@ -948,18 +952,27 @@ def scorecard_markdown(summary: dict) -> str:
             f"(max {tr['position_error_over_sigma_max']:.1f} σ per axis) |",
             f"| max attitude error | {tr['attitude_error_max_deg']:.2f} deg |",
             f"| smoothed pose NEES (6 dof, mean over run) | {tr['nees_pose_mean']:.2f} |",
-            f"| restitution truth (same definition) / error | {tr['restitution_truth']:.3f} / "
-            f"{tr['restitution_error']:+.4f}"
+            "| restitution truth (same definition) / error | "
             + (
-                f" = {tr['restitution_error_over_sigma']:+.2f} σ "
-                f"({'inside' if tr['restitution_inside_3sigma'] else '**outside**'} 3σ) |"
-                if "restitution_error_over_sigma" in tr
-                else " |"
+                f"{tr['restitution_truth']:.3f} / {tr['restitution_error']:+.4f}"
+                + (
+                    f" = {tr['restitution_error_over_sigma']:+.2f} σ "
+                    f"({'inside' if tr['restitution_inside_3sigma'] else '**outside**'} 3σ) |"
+                    if sc.is_defined(tr.get("restitution_error_over_sigma"))
+                    else " |"
+                )
+                if sc.is_defined(tr["restitution_truth"]) and sc.is_defined(tr["restitution_error"])
+                else f"{NO_REBOUND} |"
             ),
             *(
                 [
-                    f"| restitution truth at bags touch / leave (another definition) / error | "
-                    f"{tr['restitution_truth_touch_leave']:.3f} / {tr['restitution_error_touch_leave']:+.4f} |"
+                    "| restitution truth at bags touch / leave (another definition) / error | "
+                    + (
+                        f"{tr['restitution_truth_touch_leave']:.3f} / {tr['restitution_error_touch_leave']:+.4f} |"
+                        if sc.is_defined(tr["restitution_truth_touch_leave"])
+                        and sc.is_defined(tr["restitution_error_touch_leave"])
+                        else f"{NO_REBOUND} |"
+                    )
                 ]
                 if "restitution_truth_touch_leave" in tr
                 else []

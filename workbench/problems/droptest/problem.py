@@ -115,11 +115,12 @@ def key_moments(result: dt.DropResult) -> list[KeyMoment]:
 class _Drawer:
     """:class:`~workbench.problems.base.StageRecorder` of a drop test (wraps DropTestRecorder)."""
 
-    def __init__(self, rec, truth, residuals: list[str]):
+    def __init__(self, rec, truth, residuals: list[str], triads: list[str]):
         from workbench.problems.droptest.recording import DropTestRecorder
 
         self.rec = rec
         self.residuals = residuals
+        self.triads = triads
         self.drawer = DropTestRecorder(rec, truth)
 
     def handle(self, stage: object) -> None:
@@ -137,7 +138,7 @@ class _Drawer:
         # not forced active, so that a layout opened with the recording (``workbench open --at``,
         # ``rerun REC.rrd LAYOUT.rbl``) wins whichever the Viewer loads first
         self.rec.stream.send_blueprint(
-            droptest_blueprint(self.residuals, impact_view(result)), make_active=False, make_default=True
+            droptest_blueprint(self.residuals, impact_view(result), self.triads), make_active=False, make_default=True
         )
 
 
@@ -189,6 +190,12 @@ class DropTestProblem:
         """``pipeline.scorecard_markdown``."""
         return dt.scorecard_markdown(summary)
 
+    def estimator(self, scenario: Scenario) -> str:
+        """The size of the scenario's filter, for ``workbench list``: ``"EKF: 42 error states (43 full)"``
+        (``model.sizes`` of its triads, so the number follows the code)."""
+        n_x, n_e = rl.sizes(len(config_for(scenario).triads))
+        return f"EKF: {n_e} error states ({n_x} full)"
+
     def headline(self, summary: dict) -> str:
         """Max stroke ± 1σ and its time (and the true max stroke when scored)."""
         ms = summary["max_stroke"]
@@ -204,8 +211,10 @@ class DropTestProblem:
         from workbench.recording.writer import open_recording
 
         residuals = residual_names(scenario)
-        with open_recording(path, scenario.name, blueprint=droptest_blueprint(residuals), properties=properties) as rec:
-            yield _Drawer(rec, truth, residuals)
+        triads = list(config_for(scenario).triads)
+        bp = droptest_blueprint(residuals, triads=triads)
+        with open_recording(path, scenario.name, blueprint=bp, properties=properties) as rec:
+            yield _Drawer(rec, truth, residuals, triads)
 
     def export_columns(self, result: dt.DropResult) -> ExportTable:
         """Smoothed position, velocity, attitude (SPF chamber frame), their σ, and the stroke."""

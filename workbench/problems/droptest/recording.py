@@ -27,7 +27,7 @@ from workbench.problems.droptest.lander import airbag_mesh
 from workbench.problems.droptest.pipeline import DropResult, DropTelemetry, FilterStage, InitialState, StrokeStage
 from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
-from workbench.recording.blueprint import report_view
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
@@ -40,65 +40,150 @@ XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
 XYZW = XYZ + [(120, 120, 120, 255)]
 
 
-_PLOTS = [
-    ("stroke (all)", layout.DROPTEST_PLOT_STROKE),
-    ("stroke 1σ", layout.DROPTEST_PLOT_STROKE_SIGMA),
-    ("position", layout.DROPTEST_PLOT_POSITION),
-    ("velocity", layout.DROPTEST_PLOT_VELOCITY),
-    ("accel body", layout.DROPTEST_PLOT_ACCEL_BODY),
-    ("accel SPF", layout.DROPTEST_PLOT_ACCEL_SPF),
-    ("rate", layout.DROPTEST_PLOT_RATE),
-    ("ang. accel", layout.DROPTEST_PLOT_ANGULAR_ACCEL),
-    ("quaternion", layout.DROPTEST_PLOT_QUATERNION),
-    ("Euler 1-2-3", layout.DROPTEST_PLOT_EULER123),
-    ("1σ states", layout.DROPTEST_PLOT_SIGMA),
-    ("gyro scale", layout.DROPTEST_PLOT_GYRO_SCALE),
-    ("triads", layout.DROPTEST_PLOT_TRIADS),
-    ("NIS", layout.DROPTEST_PLOT_NIS),
-    ("process noise", layout.DROPTEST_PLOT_PROCESS_NOISE),
+#: key of the red/green/blue (x/y/z) colours, for view names (legends off: they covered the data)
+XYZ_KEY = "RGB = xyz"
+BOUNDS_KEY = "±3σ grey, truth pale"
+
+#: bounded per-axis series under a plot root: (root, tab title, unit, axis leaf names). The leaf is the
+#: first word of each series name the recorder gives (``layout.join(root, leaf)``).
+_BOUNDED = [
+    (layout.DROPTEST_PLOT_POSITION, "position", "m", ("x", "y", "z")),
+    (layout.DROPTEST_PLOT_VELOCITY, "velocity", "m/s", ("vx", "vy", "vz")),
+    (layout.DROPTEST_PLOT_ACCEL_BODY, "accel body", "g", ("ax_B", "ay_B", "az_B")),
+    (layout.DROPTEST_PLOT_RATE, "rate", "deg/s", ("p", "q", "r")),
+    (layout.DROPTEST_PLOT_ANGULAR_ACCEL, "ang. accel", "rad/s²", ("αx", "αy", "αz")),
+    (layout.DROPTEST_PLOT_GYRO_SCALE, "gyro scale", "%", ("sx", "sy", "sz")),
+]
+#: 1σ groups under ``/plots/sigma``: (leaf, title with unit); the labels the recorder gives
+SIGMA_GROUPS = [
+    ("position", "position [m]"),
+    ("velocity", "velocity [m/s]"),
+    ("accel", "accel [m/s²]"),
+    ("attitude", "attitude [deg]"),
+    ("rate", "rate [deg/s]"),
+    ("ang", "ang. accel [rad/s²]"),
 ]
 
 
-def droptest_blueprint(residual_names: list[str], impact: dict | None = None) -> rrb.Blueprint:
+def _residual_unit(name: str, triads) -> str:
+    """Unit of the innovation of measurement group ``name`` (SI, as the filter forms it)."""
+    if name in triads:
+        return "m/s²"
+    if name == "gyro":
+        return "rad/s"
+    if name == "zupt" or name.endswith(".rate"):
+        return "m/s"
+    return "m"  # odometer, <gun>.range
+
+
+def droptest_blueprint(
+    residual_names: list[str], impact: dict | None = None, triads: tuple[str, ...] | list[str] = ()
+) -> rrb.Blueprint:
     """Default layout for stroke inspection.
 
     Left: the 3D scene as two tabs — "Impact", a camera beside the impact point that follows the
     lander, and "Chamber", the whole drop. Right: the stroke zoomed on the impact first, then the
-    other plots; residual tabs; the scorecard and the events log.
+    other plots; residual tabs; the scorecard and the events log. Every plot names its unit and
+    explains its colours in its name (legends off: they covered a third of the data); bounded
+    quantities are split per axis, each with the impact window beside the whole drop so the ±3σ
+    band is visible.
     ``impact`` (known only after the reconstruction): ``point`` (3,) [m, SPF] CM at max stroke,
     ``normal`` (3,) ramp normal, ``t0``/``t1`` [s] window of the impact, ``stroke_lo``/``stroke_hi``
     [m] y-range of the zoomed stroke plot. Without it a generic layout is returned.
+    ``triads``: accelerometer triad names (one measured-vs-predicted plot each).
     """
     scene_kw = {}
     stroke_kw = {}
+    win = None
     if impact is not None:
         pt = np.asarray(impact["point"], float)
         n = np.asarray(impact["normal"], float)
         # three-quarter view from the free side of the ramp: 8 m out along the normal, 7 m across
         eye = pt + 8.0 * n + np.array([7.0, 0.0, 0.0])
         scene_kw["eye_controls"] = rrb.EyeControls3D(position=eye, look_target=pt, eye_up=[0.0, 0.0, 1.0])
-        stroke_kw["axis_y"] = rrb.ScalarAxis(range=(impact["stroke_lo"], impact["stroke_hi"]))
-        stroke_kw["time_ranges"] = rrb.VisibleTimeRange(
-            layout.TIME,
-            start=rrb.TimeRangeBoundary.absolute(seconds=impact["t0"]),
-            end=rrb.TimeRangeBoundary.absolute(seconds=impact["t1"]),
-        )
+        win = (float(impact["t0"]), float(impact["t1"]))
+        stroke_kw = {"y_range": (impact["stroke_lo"], impact["stroke_hi"]), "window": win}
     scenes = rrb.Tabs(
         rrb.Spatial3DView(name="Impact", origin=layout.WORLD, **scene_kw),
         rrb.Spatial3DView(name="Chamber", origin=layout.WORLD),
         active_tab=0,
     )
-    plots = [rrb.TimeSeriesView(name="stroke (impact)", origin=layout.DROPTEST_PLOT_STROKE, **stroke_kw)]
-    plots += [rrb.TimeSeriesView(name=nm, origin=o) for nm, o in _PLOTS]
-    residuals = [rrb.TimeSeriesView(name=nm, origin=layout.residual_path(nm)) for nm in residual_names]
+    stroke_key = "blue smoothed, grey ±1σ ±3σ, orange fwd, green truth"
+    plots: list = [
+        tab("stroke at impact [m]", plot_view(f"stroke [m] — {stroke_key}", layout.DROPTEST_PLOT_STROKE, **stroke_kw)),
+        tab("stroke [m]", plot_view(f"stroke, whole drop [m] — {stroke_key}", layout.DROPTEST_PLOT_STROKE)),
+        tab("stroke 1σ [m]", plot_view("stroke 1σ [m] — blue smoothed, orange fwd", layout.DROPTEST_PLOT_STROKE_SIGMA)),
+    ]
+    for root, title, unit, leaves in _BOUNDED:
+        rows = []
+        for leaf in leaves:
+            path = layout.join(root, leaf)
+            full = plot_view(f"{leaf} [{unit}] — {BOUNDS_KEY}", path)
+            if win is None or root == layout.DROPTEST_PLOT_GYRO_SCALE:
+                rows.append(full)
+            else:
+                zoom = plot_view(f"{leaf} at impact [{unit}]", path, window=win)
+                rows.append(rrb.Horizontal(full, zoom, column_shares=[3, 2]))
+        plots.append(tab(f"{title} [{unit}]", *rows))
+    plots += [
+        tab("accel SPF [g]", plot_view(f"accel SPF [g] — {XYZ_KEY}; thin truth", layout.DROPTEST_PLOT_ACCEL_SPF)),
+        tab(
+            "quaternion [-]",
+            plot_view(f"quaternion [-] — {XYZ_KEY}, grey w; thin truth", layout.DROPTEST_PLOT_QUATERNION),
+        ),
+        tab(
+            "Euler 1-2-3 [deg]",
+            plot_view("Euler 1-2-3 [deg] — red φ, green θ, blue ψ; thin truth", layout.DROPTEST_PLOT_EULER123),
+        ),
+        rrb.Grid(
+            *[
+                plot_view(f"1σ {title} — {XYZ_KEY}; thin fwd", layout.join(layout.DROPTEST_PLOT_SIGMA, leaf))
+                for leaf, title in SIGMA_GROUPS
+            ],
+            grid_columns=2,
+            name="1σ states",
+        ),
+    ]
+    if triads:
+        plots.append(
+            rrb.Grid(
+                *[
+                    plot_view(
+                        f"{tr} [g] — {XYZ_KEY} measured, black predicted",
+                        layout.join(layout.DROPTEST_PLOT_TRIADS, tr),
+                    )
+                    for tr in triads
+                ],
+                grid_columns=2,
+                name="triads [g]",
+            )
+        )
+    else:
+        key = "triads [g] — measured, black predicted"
+        plots.append(tab("triads [g]", plot_view(key, layout.DROPTEST_PLOT_TRIADS, legend="LeftBottom")))
+    plots += [
+        tab("NIS [-]", plot_view("NIS [-] — one series per sensor", layout.DROPTEST_PLOT_NIS, legend="RightTop")),
+        tab(
+            "process noise",
+            plot_view(
+                "process noise — blue q_accel [m²/s⁵], orange q_angular [rad²/s⁵]", layout.DROPTEST_PLOT_PROCESS_NOISE
+            ),
+        ),
+    ]
+    residuals = []
+    for nm in residual_names:
+        unit = _residual_unit(nm, triads)
+        key = f"{XYZ_KEY}, grey ±3σ" if nm in triads or nm in ("gyro", "zupt") else "grey ±3σ"
+        full = plot_view(f"{nm} [{unit}] — {key}", layout.residual_path(nm))
+        if win is None or nm in ("zupt", "odometer"):  # measured only before the drop / until the cut
+            residuals.append(tab(nm, full))
+        else:
+            zoom = plot_view(f"{nm} at impact [{unit}]", layout.residual_path(nm), window=win)
+            residuals.append(rrb.Horizontal(full, zoom, column_shares=[3, 2], name=nm))
     right = rrb.Vertical(
         rrb.Tabs(*plots, active_tab=0),
         rrb.Tabs(*residuals, active_tab=0),
-        rrb.Horizontal(
-            report_view("Scorecard"),
-            rrb.TextLogView(name="Events", origin=layout.EVENTS),
-            column_shares=[3, 2],
-        ),
+        report_view("Scorecard", extra=[events_view()]),
         row_shares=[3, 2, 2],
     )
     return rrb.Blueprint(

@@ -17,7 +17,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from workbench.recording import layout
-from workbench.recording.blueprint import report_view
+from workbench.recording.blueprint import plot_view, report_view
 from workbench.recording.writer import open_recording
 
 __all__ = ["record_monte_carlo", "mc_markdown"]
@@ -66,9 +66,9 @@ def record_monte_carlo(path: str | Path, name: str, res, summary: dict) -> Path:
     bp = rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.TimeSeriesView(name="max-stroke error ±3σ [m]", origin=layout.MC_STROKE),
-                rrb.TimeSeriesView(name="NEES", origin=layout.MC_NEES),
-                rrb.TimeSeriesView(name="restitution error", origin=layout.MC_RESTITUTION),
+                plot_view("max-stroke error ±3σ [m]", layout.MC_STROKE, legend="RightTop"),
+                plot_view("NEES [-]", layout.MC_NEES, legend="RightTop"),
+                plot_view("restitution error [-]", layout.MC_RESTITUTION, legend="RightTop"),
             ),
             report_view("Scorecard", health=False),
             column_shares=[3, 2],

@@ -42,6 +42,7 @@ from workbench.core.timescales import julian_date_utc
 from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nees
 from workbench.estimation.health import health_markdown
 from workbench.estimation.strapdown import integrate
+from workbench.io import scorecard as fmt
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
 from workbench.models.radar import beam_directions_G
@@ -718,7 +719,7 @@ def _truth_tables(tr: dict) -> list[str]:
                 f"{100 * d['pressure_rms_error_rel']:.1f} % | {100 * d['pressure_rms_sigma_rel']:.1f} % | "
                 f"{100 * d['pressure_fraction_within_3sigma']:.0f} % | {d['temperature_rms_error_K']:.1f} | "
                 f"{d['temperature_rms_sigma_K']:.1f} | {100 * d['temperature_fraction_within_3sigma']:.0f} % | "
-                f"{100 * cd:+.1f} % |"
+                f"{fmt.pct(cd, sign=True, digits=2)} |"
             )
         L += [
             "",
@@ -733,12 +734,12 @@ def _truth_tables(tr: dict) -> list[str]:
         L += [
             f"Winds in the layers ({w['method']}, n = {w['n']}): max error {w['max_error_mps']:.2f} m/s "
             f"(bound {w['bound_mps']:.0f} m/s: {_pf(w['bound_pass'])}), rms {w['rms_error_mps']:.2f} m/s; "
-            f"north rms error {w.get('wind_N_rms_error_mps', float('nan')):.2f} vs rms 1σ "
-            f"{w.get('wind_N_rms_sigma_mps', float('nan')):.2f} m/s, east "
-            f"{w.get('wind_E_rms_error_mps', float('nan')):.2f} "
-            f"vs {w.get('wind_E_rms_sigma_mps', float('nan')):.2f} m/s; inside 3σ: north "
-            f"{100 * w.get('wind_N_fraction_within_3sigma', float('nan')):.0f} %, east "
-            f"{100 * w.get('wind_E_fraction_within_3sigma', float('nan')):.0f} %.",
+            f"north rms error {fmt.num(w.get('wind_N_rms_error_mps'), digits=3)} vs rms 1σ "
+            f"{fmt.num(w.get('wind_N_rms_sigma_mps'), 'm/s', digits=3)}, east "
+            f"{fmt.num(w.get('wind_E_rms_error_mps'), digits=3)} "
+            f"vs {fmt.num(w.get('wind_E_rms_sigma_mps'), 'm/s', digits=3)}; inside 3σ: north "
+            f"{fmt.pct(w.get('wind_N_fraction_within_3sigma'))}, east "
+            f"{fmt.pct(w.get('wind_E_fraction_within_3sigma'))}.",
             "",
         ]
     r = tr.get("radar")
@@ -746,7 +747,8 @@ def _truth_tables(tr: dict) -> list[str]:
         L += [
             f"Radar slant-out against the filter's sphere: rms error {r['slant_out_rms_error_vs_sphere_m']:.1f} m "
             f"(terrain relief alone {r['slant_out_rms_terrain_m']:.1f} m) vs the filter's 1σ "
-            f"{r['filter_slant_out_sigma_m']:.1f} m (ratio {r['slant_out_error_over_sigma_rms_ratio']:.2f}).",
+            f"{r['filter_slant_out_sigma_m']:.1f} m "
+            f"(ratio {fmt.num(r['slant_out_error_over_sigma_rms_ratio'], digits=2)}).",
             "",
         ]
     return L
@@ -808,14 +810,12 @@ def scorecard_markdown(summary: dict) -> str:
         tr = summary["truth"]
         L += ["", "## Against the synthetic truth", ""]
         L += _truth_tables(tr)
-        for k, v in tr.items():
-            if k in ("atmosphere", "winds_in_layers", "radar"):
-                continue
-            if isinstance(v, dict):
-                L.append(
-                    f"- **{k}**: "
-                    + ", ".join(f"{kk} {vv:.4g}" if isinstance(vv, float) else f"{kk} {vv}" for kk, vv in v.items())
-                )
+        rest = [
+            (k, v) for k, v in tr.items() if isinstance(v, dict) and k not in ("atmosphere", "winds_in_layers", "radar")
+        ]
+        if rest:
+            L += ["| check | values |", "|---|---|"]
+            L += [f"| {k.replace('_', ' ')} | {'; '.join(fmt.fields(v))} |" for k, v in rest]
     if "health" in summary:
         L += ["", health_markdown(summary["health"]).rstrip()]
     return "\n".join(L) + "\n"

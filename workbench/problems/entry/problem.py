@@ -125,12 +125,17 @@ class _Drawer:
         self.drawer.handle(stage)
 
     def finish(self, result: object, summary: dict) -> None:
+        from workbench.problems.entry.recording import descent_window, entry_blueprint
         from workbench.recording.moments import log_key_moments
 
         self.rec.report(en.scorecard_markdown(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
         log_key_moments(self.rec, summary.get("key_moments", []))
+        window = descent_window(summary)
+        if window is not None:  # the AGL views fixed on the descent, known only now; a default, not
+            # forced active, so that a layout opened with the recording (``workbench open --at``) wins
+            self.rec.stream.send_blueprint(entry_blueprint(descent=window), make_active=False, make_default=True)
 
 
 class EntryProblem:

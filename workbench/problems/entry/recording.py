@@ -46,11 +46,11 @@ from workbench.problems.entry.site import R_MOLA
 from workbench.problems.entry.telemetry import EntryTelemetry
 from workbench.problems.entry.winds import WindResult
 from workbench.recording import layout
-from workbench.recording.blueprint import report_view
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
-__all__ = ["EntryRecorder", "entry_blueprint"]
+__all__ = ["EntryRecorder", "descent_window", "entry_blueprint"]
 
 EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
@@ -58,43 +58,66 @@ TRUTH = (44, 160, 44, 255)
 NOMINAL = (148, 103, 189, 255)
 ONBOARD = (214, 39, 40, 255)
 GREY = (150, 150, 150, 255)
+RAW = (120, 160, 220, 255)
+ITER = (255, 200, 0, 255)
+TRUTH_EAST = (120, 200, 120, 255)
 XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
 BEAMS = ["B0", "B1", "B2", "B3"]
 
+MAX_DISPERSION_TRACKS = 12
+"""Tracks drawn per status (accepted / rejected) of the dispersion cloud; the points at PDD are all drawn."""
+BOUNDS_KEY = "blue estimate, grey ±3σ, pale truth"
+XYZ_KEY = "RGB = xyz"
+
+#: (tab name with unit and colour key, plot root); legends are off (they covered the data), so each
+#: name says what its colours are
 _PLOTS = [
-    ("altitude AGL", layout.ENTRY_PLOT_ALTITUDE_AGL),
-    ("altitude AMR", layout.ENTRY_PLOT_ALTITUDE_AMR),
-    ("velocity NED", layout.ENTRY_PLOT_VELOCITY_NED),
-    ("tilt (off-vertical)", layout.ENTRY_PLOT_TILT),
-    ("σ position (3σ altitude fwd/smoothed)", layout.ENTRY_PLOT_SIGMA_POSITION),
-    ("σ velocity", layout.ENTRY_PLOT_SIGMA_VELOCITY),
-    ("σ attitude", layout.ENTRY_PLOT_SIGMA_ATTITUDE),
-    ("error vs truth", layout.ENTRY_PLOT_ERROR),
-    ("strapdown (nominal)", layout.ENTRY_PLOT_STRAPDOWN),
-    ("on-board vs recon", layout.ENTRY_PLOT_ONBOARD),
-    ("body accel", layout.ENTRY_PLOT_IMU_F),
-    ("body rate", layout.ENTRY_PLOT_IMU_W),
-    ("density (time)", layout.ENTRY_PLOT_ATMOSPHERE),
-    ("wind (time)", layout.ENTRY_PLOT_WIND),
-    ("dispersion", layout.ENTRY_PLOT_DISPERSION),
+    ("altitude AMR [km]", "altitude AMR [km] — " + BOUNDS_KEY, layout.ENTRY_PLOT_ALTITUDE_AMR),
+    ("velocity NED [m/s]", "velocity NED [m/s] — RGB = NED, grey ±3σ, pale truth", layout.ENTRY_PLOT_VELOCITY_NED),
+    ("tilt [deg]", "tilt off-vertical [deg] — " + BOUNDS_KEY, layout.ENTRY_PLOT_TILT),
+    (
+        "σ position [m]",
+        "σ position [m] — purple |σ_p|; 3σ altitude: blue smoothed, orange fwd",
+        layout.ENTRY_PLOT_SIGMA_POSITION,
+    ),
+    ("σ velocity [m/s]", "σ velocity [m/s] — |σ_v|", layout.ENTRY_PLOT_SIGMA_VELOCITY),
+    ("σ attitude [deg]", "σ attitude [deg] — |σ_θ|", layout.ENTRY_PLOT_SIGMA_ATTITUDE),
+    ("error vs truth [m]", "altitude error vs truth [m] — blue error, grey ±3σ", layout.ENTRY_PLOT_ERROR),
+    ("strapdown [km]", "strapdown h AMR (nominal) [km] — purple, grey ±3σ", layout.ENTRY_PLOT_STRAPDOWN),
+    ("on-board vs recon", "on-board vs recon — red |Δp| [m], blue Δθ [deg]", layout.ENTRY_PLOT_ONBOARD),
+    ("body accel [m/s²]", "body accel f_G [m/s²] — " + XYZ_KEY + "; grey 100 Hz z", layout.ENTRY_PLOT_IMU_F),
+    ("body rate [deg/s]", "body rate w_G [deg/s] — " + XYZ_KEY + "; rebuilt x", layout.ENTRY_PLOT_IMU_W),
+    ("density (time) [%]", "density vs default [%] — blue reconstructed, green truth", layout.ENTRY_PLOT_ATMOSPHERE),
 ]
 _RESIDUALS = [
-    ("slant-out", layout.ENTRY_RESIDUAL_SLANT_OUT),
-    ("velocity-out", layout.ENTRY_RESIDUAL_VELOCITY_OUT),
-    ("slant range", layout.ENTRY_RESIDUAL_SLANT_RANGE),
-    ("radar meas vs pred", layout.ENTRY_PLOT_RADAR),
+    ("slant-out [m]", "slant-out residual [m] — blue, grey ±3σ", layout.ENTRY_RESIDUAL_SLANT_OUT),
+    (
+        "velocity-out [m/s]",
+        "velocity-out residual [m/s] — " + XYZ_KEY + ", grey ±3σ",
+        layout.ENTRY_RESIDUAL_VELOCITY_OUT,
+    ),
+    ("slant range [m]", "slant-range residual [m] — per beam, grey ±3σ", layout.ENTRY_RESIDUAL_SLANT_RANGE),
 ]
+#: dispersion event quantities (``dispersion.EVENT_NAMES``) with their unit, on the ``sample`` timeline
+DISPERSION_UNITS = {"mach_pdd": "-", "h_pdd": "m", "h_fsr": "m", "h_end": "m", "time_to_impact": "s"}
 PROFILE_SCALE = {"density": 0.5, "pressure": 0.5, "temperature": 1.0, "wind": 4.0}
 """y = altitude_km × scale in each 2D profile view (so both axes have similar spans)."""
 
 
 def entry_blueprint(
-    scene_tab: int = 0, profile_tab: int = 0, plot_tab: int = 0, residual_tab: int = 0
+    scene_tab: int = 0,
+    profile_tab: int = 0,
+    plot_tab: int = 0,
+    residual_tab: int = 0,
+    descent: tuple[float, float] | None = None,
 ) -> rrb.Blueprint:
     """Default layout: 3D (descent at the vehicle, whole entry), plots, residuals, profiles, report.
 
     The ``*_tab`` arguments pick the initially active tab of each group (0 = first), e.g. for a
-    presentation or a screenshot of another view.
+    presentation or a screenshot of another view. ``descent`` (t_start, t_end) [s]: the window of the
+    altitude-AGL data (PDD − 5 s to the end, known after the run); the AGL views are fixed on it (the
+    AGL plot is empty before it) with the last 20 s zoomed beside, where ±3σ is legible. Every plot's
+    name states its unit and colours (legends off: they covered the data).
     """
     scenes = rrb.Tabs(
         rrb.Spatial3DView(
@@ -123,16 +146,90 @@ def entry_blueprint(
         rrb.Spatial2DView(name="wind m/s (y = 4·km)", origin=layout.ENTRY_PROFILE_WIND),
         active_tab=profile_tab,
     )
-    plots = rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o) for n, o in _PLOTS], active_tab=plot_tab)
-    residuals = rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=o) for n, o in _RESIDUALS], active_tab=residual_tab)
+    agl_key = "blue smoothed, grey ±3σ, pale truth, orange fwd, red ◆ plane fit"
+    if descent is None:
+        agl: object = tab(
+            "altitude AGL [m]",
+            plot_view(f"altitude AGL [m] (from PDD − 5 s) — {agl_key}", layout.ENTRY_PLOT_ALTITUDE_AGL),
+        )
+    else:
+        t0, t1 = descent
+        agl = rrb.Horizontal(
+            plot_view(
+                f"altitude AGL [m] (from PDD − 5 s) — {agl_key}",
+                layout.ENTRY_PLOT_ALTITUDE_AGL,
+                window=(t0, t1),
+            ),
+            plot_view(
+                "altitude AGL, last 20 s [m]",
+                layout.ENTRY_PLOT_ALTITUDE_AGL,
+                window=(max(t0, t1 - 20.0), t1),
+            ),
+            column_shares=[3, 2],
+            name="altitude AGL [m]",
+        )
+    plot_tabs = [agl, *[tab(short, plot_view(n, o)) for short, n, o in _PLOTS]]
+    plot_tabs.append(
+        rrb.Horizontal(
+            *[
+                plot_view(
+                    f"wind {c} [m/s] — " + ("red" if c == "north" else "blue") + ", grey ±3σ, pale truth",
+                    layout.entry_wind_plot_path(c),
+                )
+                for c in ("north", "east")
+            ],
+            name="wind (time) [m/s]",
+        )
+    )
+    plot_tabs.append(
+        rrb.Grid(
+            *[
+                plot_view(
+                    f"{q} [{u}] per member: set the time panel to 'sample' — green accepted, grey rejected",
+                    layout.join(layout.ENTRY_PLOT_DISPERSION, q),
+                )
+                for q, u in DISPERSION_UNITS.items()
+            ],
+            grid_columns=2,
+            name="dispersion (timeline sample)",
+        )
+    )
+    plots = rrb.Tabs(*plot_tabs, active_tab=plot_tab)
+    res_tabs = [tab(short, plot_view(n, o)) for short, n, o in _RESIDUALS]
+    res_tabs.append(
+        rrb.Vertical(
+            plot_view(
+                "slant-out [m] — grey measured, blue smoothed prediction",
+                layout.ENTRY_PLOT_RADAR,
+                contents=[
+                    layout.entry_radar_plot_path("slant_out", layout.MEASURED_SERIES),
+                    layout.entry_radar_plot_path("slant_out", layout.PREDICTED_SERIES),
+                ],
+            ),
+            plot_view(
+                "velocity-out [m/s] — grey measured, " + XYZ_KEY + " smoothed prediction",
+                layout.ENTRY_PLOT_RADAR,
+                contents=[
+                    layout.entry_radar_plot_path("velocity_out", layout.MEASURED_SERIES),
+                    layout.entry_radar_plot_path("velocity_out", layout.PREDICTED_SERIES),
+                ],
+            ),
+            plot_view(
+                "slant ranges [m] — B0 red, B1 green, B2 blue, B3 grey; × measured, ○ predicted",
+                layout.ENTRY_PLOT_RADAR,
+                contents=[
+                    layout.entry_radar_plot_path("slant_range", layout.MEASURED_SERIES),
+                    layout.entry_radar_plot_path("slant_range", layout.PREDICTED_SERIES),
+                ],
+            ),
+            name="radar meas vs pred",
+        )
+    )
+    residuals = rrb.Tabs(*res_tabs, active_tab=residual_tab)
     right = rrb.Vertical(
         plots,
         residuals,
-        rrb.Tabs(
-            report_view("Scorecard"),
-            rrb.TextLogView(name="Events", origin=layout.EVENTS),
-            active_tab=0,
-        ),
+        report_view("Scorecard", extra=[events_view()]),
         row_shares=[3, 2, 2],
     )
     left = rrb.Vertical(scenes, profiles, row_shares=[3, 2])
@@ -142,6 +239,16 @@ def entry_blueprint(
         rrb.SelectionPanel(state="collapsed"),
         rrb.BlueprintPanel(state="collapsed"),
     )
+
+
+def descent_window(summary: dict) -> tuple[float, float] | None:
+    """(PDD − 5 s, last data) [s] from a run summary's ``event_table``: the span of the AGL plot."""
+    t = {r["event"]: float(r["t_s"]) for r in summary.get("event_table", [])}
+    if "PDD" not in t:
+        return None
+    t1 = max(t.values())
+    t0 = t["PDD"] - 5.0
+    return (t0, t1) if t1 > t0 else None
 
 
 class EntryRecorder:
@@ -336,11 +443,14 @@ class EntryRecorder:
             ca = np.asarray(d.cloud_accepted, bool)
             for name, m, col in (
                 (layout.ACCEPTED, ca, (44, 160, 44, 255)),
-                (layout.REJECTED, ~ca, (160, 160, 160, 160)),
+                (layout.REJECTED, ~ca, (160, 160, 160, 90)),
             ):
                 if m.any():
                     rec.points(layout.entry_dispersion_at_pdd_path(name), pts[m, k], colors=col, radii=-3.0)
-                    rec.line_strip(layout.entry_dispersion_tracks_path(name), list(pts[m]), color=col, radius=-0.5)
+                    # a few evenly picked tracks: all of them drew a hairball that hid the cloud
+                    sel = np.flatnonzero(m)
+                    sel = sel[np.unique(np.linspace(0, sel.size - 1, min(sel.size, MAX_DISPERSION_TRACKS)).astype(int))]
+                    rec.line_strip(layout.entry_dispersion_tracks_path(name), list(pts[sel]), color=col, radius=-0.5)
 
     def _sample_scatter(self, entity: str, samples: np.ndarray, values: np.ndarray, color) -> None:
         s = self.rec.stream
@@ -586,7 +696,7 @@ class EntryRecorder:
         sd_p = np.sqrt(np.einsum("nii->ni", sm.P[:, 6:9, 6:9]))
         sd_v = np.sqrt(np.einsum("nii->ni", sm.P[:, 0:3, 0:3]))
         rec.scalars(
-            layout.ENTRY_PLOT_SIGMA_POSITION_NORM, t, np.linalg.norm(sd_p, axis=1), names="|σ_p| [m]", colors=EST
+            layout.ENTRY_PLOT_SIGMA_POSITION_NORM, t, np.linalg.norm(sd_p, axis=1), names="|σ_p| [m]", colors=NOMINAL
         )
         rec.scalars(
             layout.ENTRY_PLOT_ALTITUDE_3SIGMA_SMOOTHED,
@@ -649,9 +759,8 @@ class EntryRecorder:
                 sub = (
                     layout.entry_residual_path(ch) if res.y.shape[1] == 1 else layout.entry_residual_path(ch, "xyz"[i])
                 )
-                rec.scalars(
-                    layout.join(sub, layout.VALUE), res.t, res.y[:, i], names=names[i], colors=XYZ[i] if i else EST
-                )
+                col = EST if len(names) == 1 else XYZ[i]
+                rec.scalars(layout.join(sub, layout.VALUE), res.t, res.y[:, i], names=names[i], colors=col)
                 rec.scalars(layout.join(sub, plus), res.t, 3 * sd[:, i], names="+3σ", colors=GREY)
                 rec.scalars(layout.join(sub, minus), res.t, -3 * sd[:, i], names="−3σ", colors=GREY)
             rec.scalars(
@@ -670,19 +779,32 @@ class EntryRecorder:
             )
 
     # ------------------------------------------------------------------ profiles (2D, altitude up)
-    def _profile_axes(self, root: str, x_ticks, y_km_ticks, scale: float, x_unit: str) -> None:
+    def _profile_axes(
+        self, root: str, x_ticks, y_km_ticks, scale: float, x_unit: str, legend: list[tuple[str, tuple]] = ()
+    ) -> None:
+        """Grid, tick labels (altitude left of the grid, the quantity below it, apart so they never
+        overlap at the corner) and the colour key ``legend`` [(label, colour)] right of the grid."""
         s = self.rec.stream
         x0, x1 = min(x_ticks), max(x_ticks)
         y0, y1 = min(y_km_ticks) * scale, max(y_km_ticks) * scale
+        w, h = x1 - x0, max(y1 - y0, 1e-9)
         grid = [[[x0, -y * scale], [x1, -y * scale]] for y in y_km_ticks] + [[[x, -y0], [x, -y1]] for x in x_ticks]
         s.log(layout.join(root, layout.GRID), rr.LineStrips2D(grid, colors=[[70, 70, 70]], radii=[-0.5]), static=True)
         labels = [f"{y:g} km" for y in y_km_ticks] + [f"{x:g} {x_unit}" for x in x_ticks]
-        pos = [[x0, -y * scale] for y in y_km_ticks] + [[x, -y0 + 1.5] for x in x_ticks]
+        pos = [[x0 - 0.1 * w, -y * scale] for y in y_km_ticks] + [[x, -y0 + 0.06 * h] for x in x_ticks]
         s.log(
             layout.join(root, layout.LABELS),
             rr.Points2D(pos, labels=labels, radii=[0.01], show_labels=True),
             static=True,
         )
+        if legend:
+            names, cols = zip(*legend, strict=True)
+            lpos = [[x1 + 0.22 * w, -y1 + 0.13 * h * i] for i in range(len(names))]
+            s.log(
+                layout.join(root, layout.LEGEND),
+                rr.Points2D(lpos, labels=list(names), colors=list(cols), radii=[-6.0], show_labels=True),
+                static=True,
+            )
 
     def _profile(
         self, root: str, x: np.ndarray, h_km: np.ndarray, scale: float, color, width: float = 0.15, static: bool = True
@@ -704,9 +826,17 @@ class EntryRecorder:
         sc = PROFILE_SCALE
         top = float(np.nanmax(hk)) if hk.size else 120.0
         ticks = [v for v in range(0, int(top) + 11, 10)]
-        self._profile_axes(layout.ENTRY_PROFILE_DENSITY, [-60, -40, -20, 0, 20, 40, 60], ticks, sc["density"], "%")
-        self._profile_axes(layout.ENTRY_PROFILE_PRESSURE, [-60, -40, -20, 0, 20, 40, 60], ticks, sc["pressure"], "%")
-        self._profile_axes(layout.ENTRY_PROFILE_TEMPERATURE, [120, 160, 200, 240, 280], ticks, 1.0, "K")
+        has_truth = self.truth is not None and self.truth.get("atmosphere") is not None
+        key = [("smoothed", EST), ("raw", RAW), ("±1σ", GREY), ("default model", NOMINAL)]
+        key += [("truth", TRUTH)] if has_truth else []
+        filled_key = [("blackout fill", ONBOARD)] if np.asarray(fin.filled, bool).any() else []
+        iter_key = [("iterations", ITER)] if atm.iterations else []
+        pct_ticks = [-60, -40, -20, 0, 20, 40, 60]
+        self._profile_axes(
+            layout.ENTRY_PROFILE_DENSITY, pct_ticks, ticks, sc["density"], "%", key + filled_key + iter_key
+        )
+        self._profile_axes(layout.ENTRY_PROFILE_PRESSURE, pct_ticks, ticks, sc["pressure"], "%", key + filled_key)
+        self._profile_axes(layout.ENTRY_PROFILE_TEMPERATURE, [120, 160, 200, 240, 280], ticks, 1.0, "K", key)
         pct = lambda a, b: 100.0 * (a / b - 1.0)  # noqa: E731
         j = layout.join
         plus1, minus1 = layout.bound_names(1.0)
@@ -714,7 +844,7 @@ class EntryRecorder:
             (layout.ENTRY_PROFILE_DENSITY, fin.rho, atm.rho_smooth, atm.sigma_rho, rho_d, sc["density"]),
             (layout.ENTRY_PROFILE_PRESSURE, fin.p, atm.p_smooth, atm.sigma_p, p_d, sc["pressure"]),
         ):
-            self._profile(j(root, layout.RAW_SERIES), pct(raw, ref), hk, scale, (120, 160, 220, 255), 0.08)
+            self._profile(j(root, layout.RAW_SERIES), pct(raw, ref), hk, scale, RAW, 0.08)
             self._profile(j(root, layout.SMOOTHED_SERIES), pct(val, ref), hk, scale, EST, 0.2)
             self._profile(j(root, plus1), pct(val + sig, ref), hk, scale, GREY, 0.08)
             self._profile(j(root, minus1), pct(val - sig, ref), hk, scale, GREY, 0.08)
@@ -724,7 +854,7 @@ class EntryRecorder:
                 fill = np.where(filled, pct(val, ref), np.nan)
                 self._profile(j(root, layout.BLACKOUT_FILL_SERIES), fill, hk, scale, ONBOARD, 0.2)
         root = layout.ENTRY_PROFILE_TEMPERATURE
-        self._profile(j(root, layout.RAW_SERIES), fin.T, hk, 1.0, (120, 160, 220, 255), 0.08)
+        self._profile(j(root, layout.RAW_SERIES), fin.T, hk, 1.0, RAW, 0.08)
         self._profile(j(root, layout.SMOOTHED_SERIES), atm.T_smooth, hk, 1.0, EST, 0.2)
         self._profile(j(root, plus1), atm.T_smooth + atm.sigma_T, hk, 1.0, GREY, 0.08)
         self._profile(j(root, minus1), atm.T_smooth - atm.sigma_T, hk, 1.0, GREY, 0.08)
@@ -747,9 +877,7 @@ class EntryRecorder:
             if ok.sum() > 1:
                 s.log(
                     j(layout.ENTRY_PROFILE_DENSITY, layout.ITERATION_SERIES),
-                    rr.LineStrips2D(
-                        [np.column_stack([x[ok], -hk_i[ok] * sc["density"]])], colors=[[255, 200, 0]], radii=[0.1]
-                    ),
+                    rr.LineStrips2D([np.column_stack([x[ok], -hk_i[ok] * sc["density"]])], colors=[ITER], radii=[0.1]),
                 )
             if np.isfinite(it.max_rel_change):  # undefined for the first iteration
                 s.log(layout.ENTRY_PLOT_ATMOSPHERE_MAX_REL_CHANGE, rr.Scalars(float(it.max_rel_change)))
@@ -777,8 +905,10 @@ class EntryRecorder:
         if not ok.any():
             return
         lo, hi = float(np.floor(hk[ok].min())), float(np.ceil(hk[ok].max()))
+        key = [("north", XYZ[0]), ("east", XYZ[2]), ("±1σ", GREY)]
+        key += [("truth north", TRUTH), ("truth east", TRUTH_EAST)] if self.truth is not None else []
         self._profile_axes(
-            layout.ENTRY_PROFILE_WIND, [-30, -20, -10, 0, 10, 20, 30], list(range(int(lo), int(hi) + 1)), sc, "m/s"
+            layout.ENTRY_PROFILE_WIND, [-30, -20, -10, 0, 10, 20, 30], list(range(int(lo), int(hi) + 1)), sc, "m/s", key
         )
         plus1, minus1 = layout.bound_names(1.0)
         for name, v, s_, col in (("north", w.wind_N, w.sigma_N, XYZ[0]), ("east", w.wind_E, w.sigma_E, XYZ[2])):
@@ -801,9 +931,7 @@ class EntryRecorder:
             tw = self._truth_at(w.t, "wind_NE")
             north_t, east_t = np.where(ok, tw[:, 0], np.nan), np.where(ok, tw[:, 1], np.nan)
             self._profile(layout.entry_wind_profile_path("north", layout.TRUTH_SERIES), north_t, hk, sc, TRUTH, 0.08)
-            self._profile(
-                layout.entry_wind_profile_path("east", layout.TRUTH_SERIES), east_t, hk, sc, (120, 200, 120, 255), 0.08
-            )
+            self._profile(layout.entry_wind_profile_path("east", layout.TRUTH_SERIES), east_t, hk, sc, TRUTH_EAST, 0.08)
 
     def finish(self, events_table: list[tuple[float, str, str]], report_md: str) -> None:
         """Final events and the scorecard."""

@@ -23,7 +23,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from workbench.recording import layout
-from workbench.recording.blueprint import report_view
+from workbench.recording.blueprint import plot_view, report_view
 from workbench.recording.writer import open_recording
 
 __all__ = ["record_entry_validation", "validation_markdown", "validation_blueprint"]
@@ -132,17 +132,15 @@ def validation_blueprint() -> rrb.Blueprint:
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.TimeSeriesView(name="ANEES (9 dof) and 95 % band", origin=layout.VALIDATION_ANEES),
-                rrb.TimeSeriesView(name="RMS horizontal position error [m]", origin=layout.VALIDATION_RMS_POSITION),
-                rrb.TimeSeriesView(name="RMS altitude-AGL error [m]", origin=layout.VALIDATION_RMS_ALTITUDE),
-                rrb.TimeSeriesView(name="RMS velocity error [m/s]", origin=layout.VALIDATION_RMS_VELOCITY),
-                rrb.TimeSeriesView(name="RMS attitude error [deg]", origin=layout.VALIDATION_RMS_ATTITUDE),
+                plot_view("ANEES (9 dof) and 95 % band [-]", layout.VALIDATION_ANEES, legend="RightTop"),
+                plot_view("RMS horizontal position error [m]", layout.VALIDATION_RMS_POSITION, legend="RightTop"),
+                plot_view("RMS altitude-AGL error [m]", layout.VALIDATION_RMS_ALTITUDE, legend="RightTop"),
+                plot_view("RMS velocity error [m/s]", layout.VALIDATION_RMS_VELOCITY, legend="RightTop"),
+                plot_view("RMS attitude error [deg]", layout.VALIDATION_RMS_ATTITUDE, legend="RightTop"),
             ),
             rrb.Vertical(
-                rrb.TimeSeriesView(name="per run: time-averaged NEES", origin=layout.VALIDATION_RUNS_NEES),
-                rrb.TimeSeriesView(
-                    name="per run: max altitude error after fix [m]", origin=layout.VALIDATION_RUNS_H_AGL
-                ),
+                plot_view("per run: time-averaged NEES [-]", layout.VALIDATION_RUNS_NEES, legend="RightTop"),
+                plot_view("per run: max altitude error after fix [m]", layout.VALIDATION_RUNS_H_AGL, legend="RightTop"),
                 report_view("Scorecard", health=False),
             ),
             column_shares=[3, 2],

@@ -37,22 +37,22 @@ from workbench.problems.meads.pipeline import (
 )
 from workbench.problems.meads.telemetry import true_runs
 from workbench.recording import layout
-from workbench.recording.blueprint import report_view
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
 
 __all__ = ["meads_blueprint", "MeadsRecorder", "heat_shield_mesh", "PLOTS"]
 
 PLOTS = (
-    ("α deg", "alpha_deg"),
-    ("β deg", "beta_deg"),
-    ("q∞ kPa", "qbar_kPa"),
-    ("Mach", "mach"),
-    ("p∞ Pa", "p_inf_Pa"),
-    ("density", "density"),
-    ("wind N m/s", "wind_north_mps"),
-    ("wind E m/s", "wind_east_mps"),
-    ("lag ms", "lag_delay_ms"),
-    ("lag correction Pa", "lag_correction_Pa"),
+    ("α [deg]", "alpha_deg"),
+    ("β [deg]", "beta_deg"),
+    ("q∞ [kPa]", "qbar_kPa"),
+    ("Mach [-]", "mach"),
+    ("p∞ [Pa]", "p_inf_Pa"),
+    ("density [kg/m³]", "density"),
+    ("wind N [m/s]", "wind_north_mps"),
+    ("wind E [m/s]", "wind_east_mps"),
+    ("lag [ms]", "lag_delay_ms"),
+    ("lag correction [Pa]", "lag_correction_Pa"),
 )
 C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
@@ -65,13 +65,13 @@ def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6"
         origin=layout.WORLD,
         eye_controls=rrb.EyeControls3D(position=[6.0, -6.0, 3.0], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 0.0, 1.0]),
     )
-    plots = rrb.Tabs(*[rrb.TimeSeriesView(name=n, origin=layout.plot_path(q)) for n, q in PLOTS], active_tab=0)
+    plots = rrb.Tabs(*[tab(n, plot_view(n, layout.plot_path(q), legend="RightTop")) for n, q in PLOTS], active_tab=0)
     port_tabs = []
     for p in ports:
         port_tabs.append(
             rrb.Vertical(
-                rrb.TimeSeriesView(name=f"{p} Pa: measured vs model", origin=layout.join(layout.MEADS_PLOT_PORTS, p)),
-                rrb.TimeSeriesView(name=f"{p} residual Pa ±3σ", origin=layout.residual_path("pressure", p)),
+                plot_view(f"{p} [Pa]: measured vs model", layout.join(layout.MEADS_PLOT_PORTS, p), legend="RightTop"),
+                plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p)),
                 name=p,
             )
         )
@@ -81,7 +81,7 @@ def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6"
                 scene,
                 rrb.Tabs(
                     report_view("Scorecard"),
-                    rrb.TextLogView(name="Events", origin=layout.EVENTS),
+                    events_view(),
                 ),
                 row_shares=[3, 2],
             ),

@@ -14,12 +14,12 @@ import rerun.blueprint as rrb
 
 from workbench.problems.meads.montecarlo import QUANTITIES, TradeStudy, level_name
 from workbench.recording import layout
-from workbench.recording.blueprint import report_view
+from workbench.recording.blueprint import plot_view, report_view
 from workbench.recording.writer import open_recording
 
 __all__ = ["record_trade_study", "trade_blueprint", "trade_markdown"]
 
-_UNITS = {"alpha_deg": "α 3σ [deg]", "beta_deg": "β 3σ [deg]", "qbar_pct": "q∞ 3σ [%]", "mach": "Mach 3σ"}
+_UNITS = {"alpha_deg": "α 3σ [deg]", "beta_deg": "β 3σ [deg]", "qbar_pct": "q∞ 3σ [%]", "mach": "Mach 3σ [-]"}
 _COLORS = [(40, 120, 220), (40, 170, 60), (230, 150, 20), (200, 40, 40), (120, 60, 180)]
 
 
@@ -29,7 +29,7 @@ def trade_blueprint() -> rrb.Blueprint:
         rrb.Horizontal(
             rrb.Tabs(
                 *[
-                    rrb.TimeSeriesView(name=_UNITS[q] + " vs time", origin=layout.join(layout.MEADS_TRADE_STUDY, q))
+                    plot_view(_UNITS[q] + " vs time", layout.join(layout.MEADS_TRADE_STUDY, q), legend="RightTop")
                     for q in QUANTITIES
                 ]
             ),

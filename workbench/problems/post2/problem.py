@@ -255,6 +255,7 @@ class Post2Problem:
                 observations=[ob.name for ob in cfg.observations],
                 sizes={st.name: STATES[st.name].size for st in cfg.states},
                 residual_components={ob.name: OBSERVATIONS[ob.quantity].residual_names for ob in cfg.observations},
+                observation_units={ob.name: OBSERVATIONS[ob.quantity].unit for ob in cfg.observations},
                 schedules=sorted({s.target_name for s in cfg.schedules if s.target == "observation"}),
                 geometry=geometry,
                 parachute_events={e.name: e.parachute for e in cfg.events if e.parachute is not None},

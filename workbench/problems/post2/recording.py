@@ -26,7 +26,7 @@ from workbench.problems.post2.model import OBSERVATIONS, STATES
 from workbench.problems.post2.pipeline import ForwardStage, ObservationData, Post2Result
 from workbench.problems.post2.scoring import truth_on_grid
 from workbench.recording import layout
-from workbench.recording.blueprint import report_view
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.moments import log_key_moments
 from workbench.recording.writer import open_recording
@@ -269,34 +269,44 @@ def post2_blueprint(
     residual_components: dict[str, tuple[str, ...]] | None = None,
     schedules: list[str] | None = None,
     has_events: bool = False,
+    observation_units: dict[str, str] | None = None,
 ):
     """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and "Vehicle" (origin
     `/world/vehicle`: capsule, parachute, tilt); right, one tab per estimated state with a grid of one
     view per component (value, ±3σ, truth; position and velocity as errors against the truth when it is
     known), the phases and the weight schedule, one residual tab per observation (a view per component:
-    residual with ±3σ), the scorecard and the event log."""
+    residual with ±3σ), the scorecard and the event log. Every plot's name states its unit (the
+    display unit of the state; ``observation_units`` {observation: SI unit} for the residuals) and
+    its colours (legends off: they covered the data)."""
     sizes = sizes or {}
     rc = residual_components or {}
+    ou = observation_units or {}
+    key = "blue estimate, grey ±3σ, pale truth, purple propagation only"
     tabs = []
     for n in state_names:
         shown = f"{n}_error" if has_truth and n in ("position", "velocity") else n
+        unit = _display(STATES[n].unit)[0] if n in STATES else "-"
         comps = _components(n, sizes.get(n, STATES[n].size if n in STATES else 1))
-        views = [rrb.TimeSeriesView(name=f"{shown}.{c}", origin=layout.plot_path(f"{shown}/{c}")) for c in comps]
-        tabs.append(views[0] if len(views) == 1 else rrb.Grid(*views, name=shown))
+        views = [plot_view(f"{shown}.{c} [{unit or '-'}] — {key}", layout.plot_path(f"{shown}/{c}")) for c in comps]
+        tabs.append(tab(f"{shown} [{unit or '-'}]", views[0]) if len(views) == 1 else rrb.Grid(*views, name=shown))
     if has_events:
-        tabs.append(rrb.TimeSeriesView(name="phases", origin=layout.POST2_PHASE))
+        tabs.append(tab("phases", plot_view("phase index [-]", layout.POST2_PHASE)))
     for n in schedules or []:
         tabs.append(
-            rrb.TimeSeriesView(name=f"{n} weight schedule", origin=layout.plot_path(f"schedule/{n}_weight_factor"))
+            tab(
+                f"{n} schedule",
+                plot_view(f"{n} weight factor [-]", layout.plot_path(f"schedule/{n}_weight_factor")),
+            )
         )
     res = []
     for n in observation_names:
         comps = rc.get(n)
+        unit = _display(ou[n])[0] if n in ou else "as logged"
         if not comps:
-            res.append(rrb.TimeSeriesView(name=n, origin=layout.residual_path(n)))
+            res.append(tab(n, plot_view(f"{n} residual [{unit}] — blue, grey ±3σ", layout.residual_path(n))))
             continue
-        views = [rrb.TimeSeriesView(name=f"{n}.{c}", origin=layout.residual_path(n, c)) for c in comps]
-        res.append(views[0] if len(views) == 1 else rrb.Grid(*views, name=f"{n} residuals"))
+        views = [plot_view(f"{n}.{c} residual [{unit}] — blue, grey ±3σ", layout.residual_path(n, c)) for c in comps]
+        res.append(tab(n, views[0]) if len(views) == 1 else rrb.Grid(*views, name=f"{n} residuals"))
     scenes = rrb.Tabs(
         rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD),
         rrb.Spatial3DView(name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**"]),
@@ -307,7 +317,7 @@ def post2_blueprint(
         right.append(rrb.Tabs(*res, active_tab=0))
     right += [
         report_view("Report"),
-        rrb.TextLogView(name="Events", origin=layout.EVENTS),
+        events_view(),
     ]
     shares = [3.0] + ([2.0] if res else []) + [1.5, 1.0]
     return rrb.Blueprint(
@@ -329,6 +339,7 @@ def open_post2_recording(
     observations=(),
     sizes=None,
     residual_components=None,
+    observation_units=None,
     schedules=(),
     geometry=None,
     parachute_events=None,
@@ -338,7 +349,8 @@ def open_post2_recording(
 
     ``states`` / ``observations``: the problem file's estimated-state and observation names, for the
     default layout (:func:`post2_blueprint`, with ``sizes`` {state: size}, ``residual_components``
-    {observation: names}, the observations a weight ``schedules`` touches, ``has_events``);
+    {observation: names}, ``observation_units`` {observation: SI unit}, the observations a weight
+    ``schedules`` touches, ``has_events``);
     ``geometry``, ``parachute_events``: see :class:`Post2Drawer`."""
     bp = post2_blueprint(
         list(states),
@@ -346,6 +358,7 @@ def open_post2_recording(
         truth is not None,
         sizes=sizes,
         residual_components=residual_components,
+        observation_units=observation_units,
         schedules=list(schedules),
         has_events=has_events,
     )

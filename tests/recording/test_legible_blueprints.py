@@ -1,0 +1,128 @@
+"""Every plot of every problem's default layout states its unit and keeps its legend off the data.
+
+Rerun 0.41's time-series view has no y-axis title, so the view name is the axis name: it must carry the
+unit in brackets. A legend is either hidden (the colours are then named in the view name) or pinned to
+a corner by :func:`workbench.recording.blueprint.plot_view`; the event log hides the entity-path column.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import rerun.blueprint as rrb
+
+from workbench.recording import layout
+from workbench.recording.blueprint import events_view, has_unit, plot_view, standard_blueprint, tab, time_window
+
+
+def _walk(node):
+    """Every view below a blueprint / container (depth first)."""
+    if isinstance(node, rrb.Blueprint):
+        yield from _walk(node.root_container)
+    elif isinstance(node, rrb.Container):
+        for c in node.contents:
+            yield from _walk(c)
+    else:
+        yield node
+
+
+def _time_series(bp) -> list:
+    return [v for v in _walk(bp) if v.class_identifier == "TimeSeries"]
+
+
+def _blueprints():
+    from workbench.problems.droptest.recording import droptest_blueprint
+    from workbench.problems.entry.recording import entry_blueprint
+    from workbench.problems.entry.recording_mc import validation_blueprint
+    from workbench.problems.meads.recording import meads_blueprint
+    from workbench.problems.meads.recording_mc import trade_blueprint
+    from workbench.problems.post2.recording import post2_blueprint
+
+    impact = {"point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0]), "t0": 1.5, "t1": 2.0}
+    impact |= {"stroke_lo": 0.0, "stroke_hi": 1.0}
+    triads = ["BP", "PYBP"]
+    residuals = [*triads, "gyro", "zupt", "odometer", "gun1.range", "gun1.rate"]
+    return {
+        "droptest (generic)": droptest_blueprint(residuals, triads=triads),
+        "droptest (after the run)": droptest_blueprint(residuals, impact, triads),
+        "entry (generic)": entry_blueprint(),
+        "entry (after the run)": entry_blueprint(descent=(175.0, 262.0)),
+        "entry validation": validation_blueprint(),
+        "meads": meads_blueprint(),
+        "meads trade study": trade_blueprint(),
+        "post2": post2_blueprint(
+            ["position", "velocity", "j2"],
+            ["gravity"],
+            True,
+            residual_components={"gravity": ("value",)},
+            observation_units={"gravity": "m/s^2"},
+            schedules=["gravity"],
+            has_events=True,
+        ),
+        "standard": standard_blueprint(plots=[("altitude [m]", layout.plot_path("altitude"))]),
+    }
+
+
+@pytest.mark.parametrize("name", list(_blueprints()))
+def test_every_plot_names_its_unit_and_keeps_its_legend_off_the_data(name):
+    views = _time_series(_blueprints()[name])
+    assert views, name
+    for v in views:
+        assert has_unit(str(v.name)), f"{name}: view {v.name!r} has no [unit]"
+        legend = v.properties.get("PlotLegend")
+        assert legend is not None, f"{name}: view {v.name!r} keeps the default legend (over the data)"
+
+
+def test_droptest_bounded_plots_have_an_impact_zoom_beside_the_whole_drop():
+    from workbench.problems.droptest.recording import droptest_blueprint
+
+    impact = {"point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0]), "t0": 1.5, "t1": 2.0}
+    bp = droptest_blueprint(["BP", "gyro", "zupt"], impact | {"stroke_lo": 0.0, "stroke_hi": 1.0}, ["BP"])
+    views = _time_series(bp)
+    pos_x = [v for v in views if str(v.origin) == layout.join(layout.DROPTEST_PLOT_POSITION, "x")]
+    zoomed = [v for v in pos_x if "VisibleTimeRanges" in v.properties]
+    assert len(pos_x) == 2 and len(zoomed) == 1  # whole drop + impact window
+    rng = zoomed[0].properties["VisibleTimeRanges"].ranges.as_arrow_array().to_pylist()[0]["range"]
+    assert (rng["start"], rng["end"]) == (1_500_000_000, 2_000_000_000)
+    assert "TimeAxis" in zoomed[0].properties  # the x axis opens on the window too
+    # no view mixes the 12 position series any more: each axis has its own view
+    assert not [v for v in views if str(v.origin) == layout.DROPTEST_PLOT_POSITION]
+
+
+def test_entry_agl_views_are_fixed_on_the_descent():
+    from workbench.problems.entry.recording import descent_window, entry_blueprint
+
+    window = descent_window(
+        {
+            "event_table": [
+                {"event": "EIP", "t_s": 0.0},
+                {"event": "PDD", "t_s": 180.0},
+                {"event": "Last data", "t_s": 262.0},
+            ]
+        }
+    )
+    assert window == (175.0, 262.0)
+    assert descent_window({"event_table": [{"event": "EIP", "t_s": 0.0}]}) is None
+    agl = [v for v in _time_series(entry_blueprint(descent=window)) if str(v.origin) == layout.ENTRY_PLOT_ALTITUDE_AGL]
+    assert len(agl) == 2 and all({"VisibleTimeRanges", "TimeAxis"} <= set(v.properties) for v in agl)
+
+
+def test_plot_view_refuses_a_name_without_unit_and_sets_the_legend():
+    with pytest.raises(ValueError, match="unit"):
+        plot_view("stroke", "/plots/stroke")
+    hidden = plot_view("stroke [m]", "/plots/stroke").properties["PlotLegend"]
+    assert hidden.visible.as_arrow_array().to_pylist() == [False]
+    shown = plot_view("NIS [-]", "/plots/nis", legend="RightTop").properties["PlotLegend"]
+    assert shown.visible.as_arrow_array().to_pylist() == [True]
+    with pytest.raises(ValueError):
+        time_window(2.0, 1.0)
+    assert tab("stroke [m]", plot_view("stroke [m]", "/plots/stroke")).name == "stroke [m]"
+
+
+def test_events_view_hides_the_entity_path_column():
+    cols = events_view().properties["TextLogColumns"]
+    kinds = cols.text_log_columns.as_arrow_array().to_pylist()
+    hidden = [c["kind"] for c in kinds if not c["visible"]]
+    assert hidden == [1]  # TextLogColumnKind.EntityPath
+    timelines = {c["timeline"]: c["visible"] for c in cols.timeline_columns.as_arrow_array().to_pylist()}
+    assert timelines[layout.TIME] and not any(v for k, v in timelines.items() if k != layout.TIME)
