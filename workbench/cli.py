@@ -355,7 +355,13 @@ def cmd_open(args: argparse.Namespace) -> int:
         print(f"key moment {moment.name} at t = {moment.t_s:.3f} s: {moment.description}")
         what = "the recording's layout" if lay.copied else "the Viewer's automatic layout"
         follows = (
-            f"; 3D view {', '.join(repr(v) for v in lay.following_views)} follows {lay.follow}" if lay.follow else ""
+            (
+                f"; 3D view{'s' if len(lay.following_views) > 1 else ''} "
+                f"{', '.join(repr(v) for v in lay.following_views)} "
+                f"follow{'' if len(lay.following_views) > 1 else 's'} {lay.follow}"
+            )
+            if lay.follow
+            else ""
         )
         print(
             f"layout: {rbl} ({what}; time selection {lo:.3f} .. {hi:.3f} s, looped, "
