@@ -75,6 +75,7 @@ __all__ = [
     "find_rerun_cli",
     "free_port",
     "judge_scene",
+    "parse_viewer_logs",
     "parse_viewer_state",
     "server_command",
     "unavailable_reason",
@@ -335,7 +336,7 @@ def parse_viewer_state(buf: bytes) -> ViewerState:
     )
 
 
-def _parse_logs(buf: bytes) -> list[tuple[int, str, str]]:
+def parse_viewer_logs(buf: bytes) -> list[tuple[int, str, str]]:
     """``(sequence, level, "target: message")`` of an encoded ``ViewerControlResponse`` holding a
     ``GetViewerLogsResponse`` (field 2: entries 1 {1 sequence, 2 level, 3 target, 4 message})."""
     resp = _sub(decode_message(buf), 2)
@@ -671,7 +672,7 @@ class WebViewer:
         return bytes(r["ok"])
 
     def _logs(self, page) -> list[tuple[int, str, str]]:
-        return _parse_logs(self._control(page, encode_field(2, b"")))
+        return parse_viewer_logs(self._control(page, encode_field(2, b"")))
 
     def _show(self, page, urls: list[str], at: str | float, result: ViewerCheck) -> None:
         t0 = time.monotonic()
