@@ -94,7 +94,7 @@ def test_parse_viewer_state():
     assert st.version == "0.41.0" and st.active == store and st.recordings == (store,)
     assert st.timelines == {"step": (0, 2790), "time": (-500_581_715, 2_290_500_000)}
     assert st.cursor_timeline == "time" and st.cursor == 599_418_296
-    assert st.views == (("3D", "Impact", "/world"), ("TimeSeries", "stroke", "/plots/stroke"))
+    assert st.views == (("id-1", "3D", "Impact", "/world"), ("id-2", "TimeSeries", "stroke", "/plots/stroke"))
     assert st.reports == (("error", "view 'stroke': bad transform (entity /world/x)"),)
     assert st.loading == ("Loading a.rrd…",)
     assert br.parse_viewer_state(buf).loading == ()

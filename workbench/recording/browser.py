@@ -17,18 +17,21 @@ How a recording is shown (one browser for all of them; one page per recording):
 3. the time cursor is put where asked (``"end"`` of the ``time`` timeline by default) and playback
    paused (viewer-control ``SetTimeCursor``), the left panel hidden;
 4. screenshots are taken about once a second until two in a row are the same (software rendering
-   takes a while to draw a frame); the last one is saved;
-5. problems are collected: uncaught page errors, console errors, the viewer's log entries of level
+   takes a while to draw a frame); the last one is saved: the recording's own layout;
+5. each 3D view of the layout is then maximised in turn (viewer-control ``GetBlueprint`` /
+   ``SetBlueprint`` with the viewport's ``maximized`` view), its settled frame saved beside the first
+   and judged (below);
+6. problems are collected: uncaught page errors, console errors, the viewer's log entries of level
    ``ERROR`` (viewer-control ``GetViewerLogs``), ``error`` reports of any view, a crash of the viewer
    (``has_panicked``), a load that never finishes. ``WARN`` entries and view warnings are kept as
    warnings. Console errors caused by the blocked requests to other hosts are not problems.
 
-The empty-3D-view judgement (:func:`judge_scene`) works on pixels of a region that lies inside the
-3D view of the standard layout (``recording.blueprint.standard_blueprint``: the scene fills the left
-60 % of the viewport, below the top bar and above the time panel): the region's background is its
-most common colour, and a pixel is *content* where any channel differs from that background by more
-than ``DIFF_THRESHOLD`` (faint grid lines stay below it). The view is empty when the content share
-is below ``MIN_CONTENT_FRACTION`` (a 2-px line across the region is well above it).
+The empty-3D-view judgement (:func:`judge_scene`) works on the pixels of a maximised 3D view, in
+:data:`SCENE_REGION` (below the top bar and the view's tab strip, above the time panel, whatever the
+recording's layout): the region's background is its most common colour, and a pixel is *content*
+where any channel differs from that background by more than ``DIFF_THRESHOLD`` (the faint ground
+grid stays below it). The view is empty when the content share is below ``MIN_CONTENT_FRACTION``
+(a 2-px line across the region is above it).
 
 Needs: the ``playwright`` Python package (``pip install edl-workbench[browser]``), a Chromium
 (Debian ``chromium``; or ``WORKBENCH_CHROMIUM=/path/to/chrome``) and the ``rerun`` command line
@@ -36,12 +39,14 @@ Needs: the ``playwright`` Python package (``pip install edl-workbench[browser]``
 with the software rasterizer (SwiftShader): 10-60 s per recording on two cores.
 
 The protobuf field numbers are those of Rerun 0.41's ``viewer_control.proto`` (an experimental API
-without compatibility guarantee); the viewer's reported version is checked against them.
+without compatibility guarantee; read from the descriptor embedded in the 0.41 ``rerun`` binary);
+the viewer's reported version is checked against them.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import signal
@@ -87,15 +92,15 @@ __all__ = [
 VIEWER_VERSION = "0.41."
 """Version prefix of the viewer whose viewer-control field numbers this module uses."""
 
-SCENE_REGION = (0.03, 0.12, 0.55, 0.70)
+SCENE_REGION = (0.02, 0.10, 0.98, 0.70)
 """Part of the window judged for an empty 3D view, as fractions ``(left, top, right, bottom)`` of its
-width and height: inside the 3D view of the standard layout (left 60 % of the viewport, under the top
-bar and the view's tab strip, above the expanded time panel) with the left panel hidden."""
+width and height: inside a maximised view (under the top bar and the view's tab strip, above the
+expanded time panel) with the left and right panels hidden."""
 
 DIFF_THRESHOLD = 48
 """A pixel is content when a channel differs from the region's background by more than this (0-255)."""
 
-MIN_CONTENT_FRACTION = 0.002
+MIN_CONTENT_FRACTION = 0.001
 """Below this share of content pixels in :data:`SCENE_REGION` the 3D view counts as empty."""
 
 _CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
@@ -269,7 +274,7 @@ class ViewerState:
 
     ``timelines`` maps each timeline of the active recording to its ``(start, end)`` in the
     timeline's unit (nanoseconds for ``time``; ticks for sequences), ``cursor`` the current time on
-    ``cursor_timeline``; ``views`` are ``(class, name, origin)``; ``reports`` are
+    ``cursor_timeline``; ``views`` are ``(view id, class, name, origin)``; ``reports`` are
     ``(severity, "view name: summary")``; ``loading`` the status lines of sources still loading.
     """
 
@@ -279,7 +284,7 @@ class ViewerState:
     timelines: dict[str, tuple[int, int]]
     cursor_timeline: str | None
     cursor: int | None
-    views: tuple[tuple[str, str, str], ...]
+    views: tuple[tuple[str, str, str, str], ...]
     reports: tuple[tuple[str, str], ...]
     loading: tuple[str, ...]
 
@@ -315,7 +320,7 @@ def parse_viewer_state(buf: bytes) -> ViewerState:
     views, reports = [], []
     for raw in msg.get(5, []):
         v = decode_message(raw)  # type: ignore[arg-type]
-        views.append((_str(v, 2), _str(v, 3), _str(v, 4)))
+        views.append((_str(v, 1), _str(v, 2), _str(v, 3), _str(v, 4)))
         for rep_raw in v.get(6, []):
             rep = decode_message(rep_raw)  # type: ignore[arg-type]
             text = f"view {_str(v, 3)!r}: {_str(rep, 2)}"
@@ -407,11 +412,12 @@ def judge_scene(
 class ViewerCheck:
     """What the viewer showed for one recording.
 
-    ``png`` the saved screenshot; ``load_s`` seconds from opening the page until the recording was
+    ``png`` the saved screenshot of the layout; ``load_s`` seconds from opening the page until the recording was
     loaded, ``settle_s`` from then until the frame settled; ``errors`` problems (any one fails the
-    check), ``warnings`` the rest worth reading; ``views`` ``(class, name, origin)`` of the blueprint;
-    ``scene`` the empty-3D-view judgement (None if there was no screenshot); ``time_s`` where the
-    time cursor was put on the ``time`` timeline [s].
+    check), ``warnings`` the rest worth reading; ``views`` ``(view id, class, name, origin)`` of the
+    blueprint; ``scenes`` the empty-view judgement of each 3D view, by view name, and ``scene_pngs``
+    the screenshots of them maximised; ``time_s`` where the time cursor was put on the ``time``
+    timeline [s].
     """
 
     recording: Path
@@ -421,21 +427,24 @@ class ViewerCheck:
     time_s: float | None = None
     errors: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
-    views: tuple[tuple[str, str, str], ...] = ()
-    scene: SceneJudgement | None = None
+    views: tuple[tuple[str, str, str, str], ...] = ()
+    scenes: dict[str, SceneJudgement] = field(default_factory=dict)
+    scene_pngs: list[Path] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
-        """No errors, and a 3D view that shows something."""
-        return not self.errors and self.scene is not None and not self.scene.empty
+        """No errors, at least one 3D view, and none of them empty."""
+        return not self.errors and bool(self.scenes) and not any(j.empty for j in self.scenes.values())
 
     def summary(self) -> str:
-        """One line: verdict, timings, content share of the 3D view, first error."""
+        """One line: verdict, timings, content share of each 3D view, first error."""
         verdict = "OK" if self.ok else "FAIL"
         scene = (
-            f"3D view {'EMPTY' if self.scene.empty else 'drawn'} ({self.scene.content_fraction:.1%} content)"
-            if self.scene
-            else "no screenshot"
+            ", ".join(
+                f"3D view {name!r} {'EMPTY' if j.empty else 'drawn'} ({j.content_fraction:.1%} content)"
+                for name, j in self.scenes.items()
+            )
+            or "no 3D view judged"
         )
         first = f"; {len(self.errors)} error(s), first: {self.errors[0]}" if self.errors else ""
         return (
@@ -595,13 +604,16 @@ class WebViewer:
         blueprint: str | os.PathLike[str] | None = None,
         at: str | float = "end",
         region: tuple[float, float, float, float] = SCENE_REGION,
+        judge_views: bool = True,
     ) -> ViewerCheck:
         """Open ``recording`` (with the ``.rbl`` ``blueprint`` if given) in a new page, wait for it to
         load and settle, save the window as ``png`` and judge it (module docstring).
 
         ``at``: where to put the time cursor on the ``time`` timeline and pause: ``"end"``,
         ``"start"``, ``"keep"`` (where the viewer / blueprint put it, paused) or seconds (float).
-        Never raises for what the viewer does; problems are in the returned check's ``errors``.
+        With ``judge_views`` each 3D view is then maximised, saved as ``<png stem>.3d<k>.png`` and
+        judged in ``region``. Never raises for what the viewer does; problems are in the returned
+        check's ``errors``.
         """
         if self._context is None:
             raise RuntimeError("WebViewer.check outside its with-block")
@@ -622,22 +634,21 @@ class WebViewer:
         console: list[tuple[str, str, str]] = []
         page.on("console", lambda m: console.append((m.type, m.text, (m.location or {}).get("url", ""))))
         page.on("pageerror", lambda e: result.errors.append(f"page error: {str(e)[:500]}"))
+        out = Path(png)
         try:
-            self._show(page, urls, at, result)
-            if result.png is None:
-                out = Path(png)
-                out.parent.mkdir(parents=True, exist_ok=True)
-                shot = page.screenshot()
-                out.write_bytes(shot)
-                result.png = out
-            result.scene = judge_scene(_png_array(result.png.read_bytes()), region)
+            shot = self._show(page, urls, at, result)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_bytes(shot)
+            result.png = out
+            if judge_views:
+                self._judge_views(page, result, out, region)
         except Exception as err:  # a timeout or a browser failure is a failed check, not a crash
             result.errors.append(f"{type(err).__name__}: {str(err).splitlines()[0][:300]}")
-            with contextlib.suppress(Exception):
-                out = Path(png)
-                out.parent.mkdir(parents=True, exist_ok=True)
-                out.write_bytes(page.screenshot())
-                result.png = out
+            if result.png is None:
+                with contextlib.suppress(Exception):
+                    out.parent.mkdir(parents=True, exist_ok=True)
+                    out.write_bytes(page.screenshot())
+                    result.png = out
         finally:
             with contextlib.suppress(Exception):
                 panic = page.evaluate(_JS_PANIC)
@@ -674,7 +685,49 @@ class WebViewer:
     def _logs(self, page) -> list[tuple[int, str, str]]:
         return parse_viewer_logs(self._control(page, encode_field(2, b"")))
 
-    def _show(self, page, urls: list[str], at: str | float, result: ViewerCheck) -> None:
+    def _settle(self, page, result: ViewerCheck, what: str) -> bytes:
+        """Screenshots about once a second until two in a row agree (all but 0.01 % of the pixels);
+        returns the last one (PNG bytes), with a warning if it never settled."""
+        t1 = time.monotonic()
+        previous = None
+        while True:
+            time.sleep(1.0)
+            shot = page.screenshot()
+            arr = _png_array(shot)
+            if previous is not None and previous.shape == arr.shape and np.mean(previous != arr) < 1e-4:
+                return shot
+            previous = arr
+            if time.monotonic() - t1 > self.settle_timeout_s:
+                result.warnings.append(f"{what}: the picture was still changing after {self.settle_timeout_s:.0f} s")
+                return shot
+
+    def _judge_views(self, page, result: ViewerCheck, png: Path, region: tuple[float, float, float, float]) -> None:
+        """Maximise each 3D view in turn (the viewport's ``maximized`` view, set through the blueprint
+        JSON of viewer-control ``GetBlueprint``/``SetBlueprint``), save and judge its settled frame."""
+        views3d = [(vid, name) for vid, cls, name, _ in result.views if cls == "3D"]
+        if not views3d:
+            return
+        # GetBlueprintRequest {2 recording target {}} -> GetBlueprintResponse {2 json}
+        got = _sub(decode_message(self._control(page, encode_field(12, encode_field(2, b"")))), 12)
+        blueprint = json.loads(_str(got, 2) or "{}")
+        viewport = dict(blueprint.get("/viewport", {}).get("ViewportBlueprint", {}))
+        with contextlib.suppress(Exception):
+            page.evaluate("() => window._handle.override_panel_state('selection', 'hidden')")
+        for k, (vid, name) in enumerate(views3d):
+            viewport["maximized"] = vid
+            # SetBlueprintRequest {2 json, 3 recording target {}, 5 mode (2 = partial: only what is given)}
+            update = json.dumps({"/viewport": {"ViewportBlueprint": viewport}})
+            request = encode_field(2, update) + encode_field(3, b"") + encode_field(5, 2)
+            self._control(page, encode_field(14, request))
+            shot = self._settle(page, result, f"3D view {name!r}")
+            path = png.with_name(f"{png.stem}.3d{k}{png.suffix}")
+            path.write_bytes(shot)
+            result.scene_pngs.append(path)
+            result.scenes[name if name not in result.scenes else f"{name} ({k})"] = judge_scene(
+                _png_array(shot), region
+            )
+
+    def _show(self, page, urls: list[str], at: str | float, result: ViewerCheck) -> bytes:
         t0 = time.monotonic()
         page.goto(viewer_url(self.base, urls), wait_until="load", timeout=self.load_timeout_s * 1000)
         page.wait_for_function("() => window._handle !== undefined", timeout=self.load_timeout_s * 1000)
@@ -684,7 +737,7 @@ class WebViewer:
             if st.recordings and not st.loading and st.timelines:
                 break
             if page.evaluate(_JS_PANIC):
-                return
+                return page.screenshot()
             if time.monotonic() > deadline:
                 status = "; ".join(st.loading) or ("no recording opened" if not st.recordings else "no timeline")
                 raise TimeoutError(f"not loaded after {self.load_timeout_s:.0f} s ({status})")
@@ -693,27 +746,18 @@ class WebViewer:
         if not st.version.startswith(VIEWER_VERSION):
             result.warnings.append(f"viewer {st.version}: viewer-control fields are those of {VIEWER_VERSION}x")
         result.views = st.views
-        if not any(cls == "3D" for cls, _, _ in st.views):
+        if not any(cls == "3D" for _, cls, _, _ in st.views):
             result.errors.append("the blueprint has no 3D view")
         with contextlib.suppress(Exception):
             page.evaluate("() => window._handle.override_panel_state('blueprint', 'hidden')")
         result.time_s = self._seek(page, st, at)
         t1 = time.monotonic()
-        previous = None
-        while True:
-            time.sleep(1.0)
-            shot = page.screenshot()
-            arr = _png_array(shot)
-            if previous is not None and previous.shape == arr.shape and np.mean(previous != arr) < 1e-4:
-                break
-            previous = arr
-            if time.monotonic() - t1 > self.settle_timeout_s:
-                result.warnings.append(f"the picture was still changing after {self.settle_timeout_s:.0f} s")
-                break
+        shot = self._settle(page, result, "layout")
         result.settle_s = time.monotonic() - t1
         st = self._state(page)
         for severity, text in st.reports:
             (result.errors if severity == "error" else result.warnings).append(text)
+        return shot
 
     def _seek(self, page, st: ViewerState, at: str | float) -> float | None:
         """Put the cursor on the ``time`` timeline (``at``, see :meth:`check`) and pause; returns the
@@ -730,7 +774,8 @@ class WebViewer:
             t_ns = st.cursor if st.cursor is not None and st.cursor_timeline == tl else end
         else:
             t_ns = int(round(float(at) * 1e9))
-        request = encode_field(2, encode_field(1, tl)) + encode_field(3, encode_field(1, t_ns)) + encode_field(4, False)
+        # SetTimeCursorRequest: 2 timeline {1 name}, 3 time {1 ns}, 5 play_state (1 = paused)
+        request = encode_field(2, encode_field(1, tl)) + encode_field(3, encode_field(1, t_ns)) + encode_field(5, 1)
         self._control(page, encode_field(6, request))
         return t_ns / 1e9
 
