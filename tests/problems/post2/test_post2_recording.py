@@ -70,3 +70,17 @@ def test_scorecard_has_planted_vs_recovered_and_propagation_only(short_run):
     s = json.loads(r.summary_path.read_text(encoding="utf-8"))
     e = s["truth"]["filtered_vs_propagation"]["position"]["end_error_norm"]
     assert set(e) == {"propagation_only", "forward", "smoothed"}
+
+
+def _scene_views(bp):
+    tabs = bp.root_container.contents[0]
+    return [v.name for v in tabs.contents]
+
+
+def test_vehicle_view_only_when_a_vehicle_is_drawn():
+    """A 3-DOF case without a vehicle diameter (post2_j2) draws nothing under /world/vehicle, so its
+    layout has no "Vehicle" view (the browser test found that view empty in the web viewer)."""
+    from workbench.problems.post2.recording import post2_blueprint
+
+    assert _scene_views(post2_blueprint(["position"], ["gravity"], True, vehicle=False)) == ["Trajectory"]
+    assert _scene_views(post2_blueprint(["position"], ["gravity"], True)) == ["Trajectory", "Vehicle"]

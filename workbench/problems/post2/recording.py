@@ -267,12 +267,14 @@ def post2_blueprint(
     residual_components: dict[str, tuple[str, ...]] | None = None,
     schedules: list[str] | None = None,
     has_events: bool = False,
+    vehicle: bool = True,
 ):
-    """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and "Vehicle" (origin
-    `/world/vehicle`: capsule, parachute, tilt); right, one tab per estimated state with a grid of one
-    view per component (value, ±3σ, truth; position and velocity as errors against the truth when it is
-    known), the phases and the weight schedule, one residual tab per observation (a view per component:
-    residual with ±3σ), the scorecard and the event log."""
+    """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and, when ``vehicle`` (a
+    vehicle is drawn: the problem file gives its diameter), "Vehicle" (origin `/world/vehicle`:
+    capsule, parachute, tilt; without a vehicle that view would be empty); right, one tab per
+    estimated state with a grid of one view per component (value, ±3σ, truth; position and velocity
+    as errors against the truth when it is known), the phases and the weight schedule, one residual
+    tab per observation (a view per component: residual with ±3σ), the scorecard and the event log."""
     sizes = sizes or {}
     rc = residual_components or {}
     tabs = []
@@ -295,11 +297,10 @@ def post2_blueprint(
             continue
         views = [rrb.TimeSeriesView(name=f"{n}.{c}", origin=layout.residual_path(n, c)) for c in comps]
         res.append(views[0] if len(views) == 1 else rrb.Grid(*views, name=f"{n} residuals"))
-    scenes = rrb.Tabs(
-        rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD),
-        rrb.Spatial3DView(name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**"]),
-        active_tab=0,
-    )
+    scene_views = [rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD)]
+    if vehicle:
+        scene_views.append(rrb.Spatial3DView(name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**"]))
+    scenes = rrb.Tabs(*scene_views, active_tab=0)
     right = [rrb.Tabs(*tabs, active_tab=0)]
     if res:
         right.append(rrb.Tabs(*res, active_tab=0))
@@ -346,6 +347,7 @@ def open_post2_recording(
         residual_components=residual_components,
         schedules=list(schedules),
         has_events=has_events,
+        vehicle=bool((geometry or {}).get("diameter_m")),  # as Post2Drawer._vehicle draws it
     )
     with open_recording(path, name, blueprint=bp, properties=properties) as rec:
         yield Post2Drawer(rec, truth, scorecard, geometry, parachute_events)
