@@ -1,4 +1,4 @@
-"""Command line: ``workbench list | run | mc | inspect | open | compare | replay | init | import``.
+"""Command line: ``workbench list | run | mc | inspect | open | compare | replay | screenshot | init | import``.
 
 Exit codes (scripts can rely on them):
   0  success
@@ -9,6 +9,8 @@ Exit codes (scripts can rely on them):
   6  unhealthy: the reconstruction ran but its health verdict is ERROR (filter inconsistent with a
      sensor, physically impossible output, a data gap across contact ...); nothing is written
      unless --allow-unhealthy (then the outputs are written, marked UNHEALTHY, and the exit code is 0)
+  7  ``workbench screenshot``: the web viewer reported an error or showed an empty 3D view for a
+     recording (the screenshots are written all the same)
   73 an output location cannot be written: read-only, missing (a parent is a file) or full disk
      (the message names the path; folders the run created are removed again when left empty)
   130 interrupted (Ctrl-C, SIGINT); no half-written recording is left behind
@@ -39,6 +41,7 @@ import numpy as np  # noqa: E402 (after the BLAS thread setting)
 
 EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_NUMERIC, EXIT_KIND, EXIT_INTERRUPT = 0, 2, 3, 4, 5, 130
 EXIT_UNHEALTHY = 6
+EXIT_VIEWER = 7
 EXIT_OUTPUT, EXIT_PIPE, EXIT_TERMINATED = 73, 141, 143
 
 
@@ -461,6 +464,47 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_screenshot(args: argparse.Namespace) -> int:
+    """Open recordings in Rerun's web viewer (headless Chromium), save a PNG of each and check it:
+    exit 7 when the viewer reported an error or showed an empty 3D view for any of them."""
+    from workbench.recording.browser import ViewerUnavailable, check_recordings
+
+    at: str | float = args.at
+    if at not in ("end", "start", "keep"):
+        try:
+            at = float(at)
+        except ValueError:
+            print(f"workbench screenshot: --at must be end, start, keep or seconds, not {at!r}", file=sys.stderr)
+            return EXIT_USAGE
+    try:
+        w, h = (int(x) for x in args.size.lower().split("x"))
+    except ValueError:
+        print(f"workbench screenshot: --size must look like 1400x900, not {args.size!r}", file=sys.stderr)
+        return EXIT_USAGE
+    for path in [*args.recording, *([args.blueprint] if args.blueprint else [])]:
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"no such file: {path}")
+    failed = 0
+    try:
+        for check in check_recordings(
+            args.recording,
+            args.out,
+            blueprint=args.blueprint,
+            at=at,
+            progress=None if args.quiet else _progress,
+            size=(w, h),
+            load_timeout_s=args.timeout,
+        ):
+            failed += not check.ok
+            print(check.png if check.png else f"(no screenshot of {check.recording})")
+            for line in check.errors:
+                print(f"  error: {line}", file=sys.stderr)
+    except ViewerUnavailable as err:
+        print(f"workbench screenshot: cannot drive the web viewer: {err}", file=sys.stderr)
+        return EXIT_KIND
+    return EXIT_VIEWER if failed else EXIT_OK
+
+
 def cmd_init(args: argparse.Namespace) -> int:
     """Write a user-data scenario (scenario.toml, example telemetry, README) for a problem kind."""
     from workbench.problems.template import init_scenario
@@ -593,6 +637,24 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--duration", type=float, default=None, help="video length [s] (default: the problem's)")
     sp.add_argument("--quiet", action="store_true", help="no progress lines")
     sp.set_defaults(func=cmd_replay)
+    sp = sub.add_parser(
+        "screenshot",
+        help="open recordings in Rerun's web viewer (headless Chromium), save PNGs, fail on viewer errors "
+        "or an empty 3D view",
+    )
+    sp.add_argument("recording", nargs="+", help="run recordings (.rrd)")
+    sp.add_argument("--out", default="screenshots", help="folder for <name>.png (default: screenshots)")
+    sp.add_argument("--blueprint", default=None, help="open with this layout (.rbl) instead of the recording's own")
+    sp.add_argument(
+        "--at",
+        default="end",
+        help="time cursor on the 'time' timeline, paused: end (default), start, keep (as the layout sets it) "
+        "or seconds",
+    )
+    sp.add_argument("--size", default="1400x900", help="browser window in CSS pixels (default 1400x900)")
+    sp.add_argument("--timeout", type=float, default=240.0, help="seconds to wait for one recording to load")
+    sp.add_argument("--quiet", action="store_true", help="no progress lines")
+    sp.set_defaults(func=cmd_screenshot)
     sp = sub.add_parser("init", help="write a user-data scenario to start from (scenario.toml, telemetry, README)")
     sp.add_argument("kind", help="a problem kind (droptest, entry, post2) or a shipped scenario name")
     sp.add_argument("dir", help="folder to write into (created)")

@@ -115,3 +115,17 @@ def test_key_moments_peak_of_the_measured_sensed_acceleration():
         ("end", 10.0),
     ]
     assert "3.06 g₀ (30.0 m/s², axial measured)" in km[2].description
+
+
+def _scene_views(bp):
+    tabs = bp.root_container.contents[0]
+    return [v.name for v in tabs.contents]
+
+
+def test_vehicle_view_only_when_a_vehicle_is_drawn():
+    """A 3-DOF case without a vehicle diameter (post2_j2) draws nothing under /world/vehicle, so its
+    layout has no "Vehicle" view (the browser test found that view empty in the web viewer)."""
+    from workbench.problems.post2.recording import post2_blueprint
+
+    assert _scene_views(post2_blueprint(["position"], ["gravity"], True, vehicle=False)) == ["Trajectory"]
+    assert _scene_views(post2_blueprint(["position"], ["gravity"], True)) == ["Trajectory", "Vehicle"]

@@ -270,14 +270,16 @@ def post2_blueprint(
     schedules: list[str] | None = None,
     has_events: bool = False,
     observation_units: dict[str, str] | None = None,
+    vehicle: bool = True,
 ):
-    """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and "Vehicle" (origin
-    `/world/vehicle`: capsule, parachute, tilt); right, one tab per estimated state with a grid of one
-    view per component (value, ±3σ, truth; position and velocity as errors against the truth when it is
-    known), the phases and the weight schedule, one residual tab per observation (a view per component:
-    residual with ±3σ), the scorecard and the event log. Every plot's name states its unit (the
-    display unit of the state; ``observation_units`` {observation: SI unit} for the residuals) and
-    its colours (legends off: they covered the data)."""
+    """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and, when ``vehicle`` (a
+    vehicle is drawn: the problem file gives its diameter), "Vehicle" (origin `/world/vehicle`:
+    capsule, parachute, tilt; without a vehicle that view would be empty); right, one tab per
+    estimated state with a grid of one view per component (value, ±3σ, truth; position and velocity
+    as errors against the truth when it is known), the phases and the weight schedule, one residual
+    tab per observation (a view per component: residual with ±3σ), the scorecard and the event log.
+    Every plot's name states its unit (the display unit of the state; ``observation_units``
+    {observation: SI unit} for the residuals) and its colours (legends off: they covered the data)."""
     sizes = sizes or {}
     rc = residual_components or {}
     ou = observation_units or {}
@@ -307,11 +309,10 @@ def post2_blueprint(
             continue
         views = [plot_view(f"{n}.{c} residual [{unit}] — blue, grey ±3σ", layout.residual_path(n, c)) for c in comps]
         res.append(tab(n, views[0]) if len(views) == 1 else rrb.Grid(*views, name=f"{n} residuals"))
-    scenes = rrb.Tabs(
-        rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD),
-        rrb.Spatial3DView(name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**"]),
-        active_tab=0,
-    )
+    scene_views = [rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD)]
+    if vehicle:
+        scene_views.append(rrb.Spatial3DView(name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**"]))
+    scenes = rrb.Tabs(*scene_views, active_tab=0)
     right = [rrb.Tabs(*tabs, active_tab=0)]
     if res:
         right.append(rrb.Tabs(*res, active_tab=0))
@@ -361,6 +362,7 @@ def open_post2_recording(
         observation_units=observation_units,
         schedules=list(schedules),
         has_events=has_events,
+        vehicle=bool((geometry or {}).get("diameter_m")),  # as Post2Drawer._vehicle draws it
     )
     with open_recording(path, name, blueprint=bp, properties=properties) as rec:
         yield Post2Drawer(rec, truth, scorecard, geometry, parachute_events)

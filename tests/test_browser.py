@@ -1,0 +1,60 @@
+"""Every shipped recording, opened in Rerun's web viewer (headless Chromium), renders without a
+viewer error and with something in each of its 3D views (issue #13, item 7). Slow tier.
+
+The shipped scenarios are run once (``workbench run all``, in processes), then all recordings are
+opened one after another in one browser session (``workbench.recording.browser``; each 3D view is
+judged maximised), followed by a negative control: a recording whose 3D view has nothing in it must
+be judged empty, so the judgement can fail. Skipped, with what is missing, where Chromium,
+``playwright`` or the ``rerun`` command line is absent (``.ci/run`` installs them when it can). The
+screenshots stay in the test's temporary folder (``--basetemp`` to keep them somewhere known).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import pytest
+
+from workbench.recording import browser
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def checks(tmp_path_factory):
+    reason = browser.unavailable_reason()
+    if reason:
+        pytest.skip(f"web viewer test needs {reason}")
+    out = tmp_path_factory.mktemp("browser")
+    proc = subprocess.run(
+        [sys.executable, "-m", "workbench.cli", "run", "all", "--out", str(out / "recordings")],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    recordings = sorted((out / "recordings").glob("*.rrd"))
+    assert recordings, "workbench run all wrote no recordings"
+    control = browser.write_empty_scene_recording(out / "control" / "empty_scene.rrd")
+    t0 = time.monotonic()
+    results = list(browser.check_recordings([*recordings, control], out / "shots", progress=print))
+    print(f"{len(results)} recordings checked in the web viewer in {time.monotonic() - t0:.0f} s")
+    return {c.recording.stem: c for c in results}
+
+
+def test_every_shipped_recording_renders_without_errors_and_with_a_3d_scene(checks):
+    shipped = {name: c for name, c in checks.items() if name != "empty_scene"}
+    bad = [c.summary() + "".join(f"\n    {e}" for e in c.errors) for c in shipped.values() if not c.ok]
+    assert not bad, "\n".join(bad)
+    for c in shipped.values():
+        assert c.png is not None and c.png.stat().st_size > 10_000
+        n3d = sum(cls == "3D" for _, cls, _, _ in c.views)
+        assert n3d >= 1 and len(c.scenes) == n3d == len(c.scene_pngs), c.summary()
+
+
+def test_the_negative_control_is_judged_empty(checks):
+    control = checks["empty_scene"]
+    assert not control.errors, control.errors
+    assert len(control.scenes) == 1 and all(j.empty for j in control.scenes.values()), control.summary()
+    assert not control.ok
