@@ -79,10 +79,7 @@ def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6"
         rrb.Horizontal(
             rrb.Vertical(
                 scene,
-                rrb.Tabs(
-                    report_view("Scorecard"),
-                    events_view(),
-                ),
+                report_view("Scorecard", extra=[events_view()]),
                 row_shares=[3, 2],
             ),
             rrb.Vertical(plots, rrb.Tabs(*port_tabs), row_shares=[1, 1]),
