@@ -143,14 +143,20 @@ def test_stroke_rock_under_base_face_exact():
     assert inside.distance[0] == pytest.approx(-0.15)
 
 
-def test_stroke_exact_vs_dense_sampling_in_rock_field():
-    rng = np.random.default_rng(3)
+def _poses_over_rock_field(seed: int, n: int):
+    """A rock field on the ramp and n random poses 0.9-1.3 m above it, tilted around 60° about x."""
+    rng = np.random.default_rng(seed)
     s = rock_field(ramp_surface(), rng, ((-3.0, 3.0), (-3.0, 3.0)), size_range=(0.4, 0.5))
     t1, t2 = s.tangent_basis()
-    n = 30
     u = rng.uniform(-2, 2, (n, 2))
     p = s.point + u[:, :1] * t1 + u[:, 1:] * t2 + rng.uniform(0.9, 1.3, (n, 1)) * s.normal
     q = quat_boxplus(np.tile(_q_x(60.0), (n, 1)), rng.normal(0, 0.3, (n, 3)))
+    return s, p, q
+
+
+def test_stroke_exact_vs_dense_sampling_in_rock_field():
+    n = 30
+    s, p, q = _poses_over_rock_field(3, n)
     hist = stroke_history(V, p, q, np.zeros((n, 6, 6)), s, faces_B=F)
     pts_B = np.concatenate([V, BODY.sample(20000, seed=5)])
     brute = np.array([s.distance(p[i] + quat_rotate(q[i], pts_B))[0].min() for i in range(n)])
@@ -171,13 +177,8 @@ def test_stroke_history_chunked_equal_whole(monkeypatch):
     any chunk size, in a rock field where many poses approach a rock."""
     import workbench.problems.droptest.stroke as stroke
 
-    rng = np.random.default_rng(8)
-    s = rock_field(ramp_surface(), rng, ((-3.0, 3.0), (-3.0, 3.0)), size_range=(0.4, 0.5))
-    t1, t2 = s.tangent_basis()
     n = 57
-    u = rng.uniform(-2, 2, (n, 2))
-    p = s.point + u[:, :1] * t1 + u[:, 1:] * t2 + rng.uniform(0.9, 1.3, (n, 1)) * s.normal
-    q = quat_boxplus(np.tile(_q_x(60.0), (n, 1)), rng.normal(0, 0.3, (n, 3)))
+    s, p, q = _poses_over_rock_field(8, n)
     P = np.tile(np.diag([1e-4] * 3 + [1e-3] * 3), (n, 1, 1))
     ref = stroke_history(V, p, q, P, s, faces_B=F)
     assert np.any(ref.feature >= 0)
