@@ -136,15 +136,18 @@ def rows(speed: dict, results_dir: Path = RESULTS) -> list[tuple[str, str, str, 
                 + (f"; first run {cold - 60:.0f} s over" if warm and cold > 60 else ""),
             )
         )
-        out.append(
-            (
-                "`workbench run all` ≤ 600 MB max RSS (largest scenario process)",
-                f"{rss:.0f} MB" if rss else "not measured",
-                "—",
-                "—",
-                "—",
-                "met" if rss is not None and rss <= 600 else "**not met**",
+        rss_warm = cmd.get("run_all_warm_max_rss_mb")
+        if rss is None:
+            rss_text, rss_verdict = "not measured", "**not met**"
+        elif rss_warm is None:
+            rss_text, rss_verdict = f"{rss:.0f} MB", "met" if rss <= 600 else "**not met**"
+        else:  # the first run of a checkout also compiles the kernels (LLVM memory stays resident)
+            rss_text = f"{rss_warm:.0f} MB; the checkout's first run, which also compiles the kernels: {rss:.0f} MB"
+            rss_verdict = ("met" if rss_warm <= 600 else "**not met**") + (
+                f"; **first run {rss - 600:.0f} MB over**" if rss > 600 else ""
             )
+        out.append(
+            ("`workbench run all` ≤ 600 MB max RSS (largest scenario process)", rss_text, "—", "—", "—", rss_verdict)
         )
         out.append(
             (
