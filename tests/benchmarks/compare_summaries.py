@@ -19,7 +19,20 @@ import math
 import sys
 from pathlib import Path
 
-SKIP = ("wall", "second", "bytes", "recording", "path", "_dir", "elapsed", "time_s", "times_s", "duration_s", "workers", "rss")
+SKIP = (
+    "wall",
+    "second",
+    "bytes",
+    "recording",
+    "path",
+    "_dir",
+    "elapsed",
+    "time_s",
+    "times_s",
+    "duration_s",
+    "workers",
+    "rss",
+)
 
 
 def differences(a, b, where: str, base: str, new: str, rtol: float, out: list[str]) -> None:

@@ -135,3 +135,14 @@ def test_missing_chromium_is_named_and_the_cli_refuses(monkeypatch, tmp_path, ca
 def test_check_outside_a_session_is_an_error():
     with pytest.raises(RuntimeError, match="with-block"):
         br.WebViewer().check("a.rrd", "a.png")
+
+
+def test_the_negative_control_recording_is_written(tmp_path):
+    """The browser test's empty-scene control is a valid recording (its layout passes the same
+    checks as a problem's: this broke once without a browser to notice): a plot, a report, no /world."""
+    from workbench.recording.reader import read_recording
+
+    path = br.write_empty_scene_recording(tmp_path / "empty_scene.rrd")
+    assert path.is_file() and path.stat().st_size > 0
+    rec = read_recording(path)
+    assert not [e for e in rec.entities() if e.startswith("/world")]

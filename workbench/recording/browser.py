@@ -808,7 +808,7 @@ def write_empty_scene_recording(path: str | os.PathLike[str]) -> Path:
     from workbench.recording.writer import open_recording
 
     t = np.linspace(0.0, 10.0, 101)
-    bp = standard_blueprint(plots=[("signal", layout.plot_path("signal"))])
+    bp = standard_blueprint(plots=[("signal [1]", layout.plot_path("signal"))])
     with open_recording(path, "empty_scene", blueprint=bp) as rec:
         rec.scalars(layout.plot_path("signal"), t, np.sin(t), names="signal [1]")
         rec.events([(0.0, "start", "INFO")])
