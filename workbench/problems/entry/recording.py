@@ -196,35 +196,20 @@ def entry_blueprint(
     )
     plots = rrb.Tabs(*plot_tabs, active_tab=plot_tab)
     res_tabs = [tab(short, plot_view(n, o)) for short, n, o in _RESIDUALS]
-    res_tabs.append(
-        rrb.Vertical(
-            plot_view(
-                "slant-out [m] — grey measured, blue smoothed prediction",
-                layout.ENTRY_PLOT_RADAR,
-                contents=[
-                    layout.entry_radar_plot_path("slant_out", layout.MEASURED_SERIES),
-                    layout.entry_radar_plot_path("slant_out", layout.PREDICTED_SERIES),
-                ],
-            ),
-            plot_view(
-                "velocity-out [m/s] — grey measured, " + XYZ_KEY + " smoothed prediction",
-                layout.ENTRY_PLOT_RADAR,
-                contents=[
-                    layout.entry_radar_plot_path("velocity_out", layout.MEASURED_SERIES),
-                    layout.entry_radar_plot_path("velocity_out", layout.PREDICTED_SERIES),
-                ],
-            ),
-            plot_view(
-                "slant ranges [m] — B0 red, B1 green, B2 blue, B3 grey; × measured, ○ predicted",
-                layout.ENTRY_PLOT_RADAR,
-                contents=[
-                    layout.entry_radar_plot_path("slant_range", layout.MEASURED_SERIES),
-                    layout.entry_radar_plot_path("slant_range", layout.PREDICTED_SERIES),
-                ],
-            ),
-            name="radar meas vs pred",
-        )
+    radar = (  # channel, view name (unit and colours)
+        ("slant_out", "slant-out [m] — grey measured, blue smoothed prediction"),
+        ("velocity_out", "velocity-out [m/s] — grey measured, " + XYZ_KEY + " smoothed prediction"),
+        ("slant_range", "slant ranges [m] — B0 red, B1 green, B2 blue, B3 grey; × measured, ○ predicted"),
     )
+    radar_views = [
+        plot_view(
+            name,
+            layout.ENTRY_PLOT_RADAR,
+            contents=[layout.entry_radar_plot_path(ch, s) for s in (layout.MEASURED_SERIES, layout.PREDICTED_SERIES)],
+        )
+        for ch, name in radar
+    ]
+    res_tabs.append(rrb.Vertical(*radar_views, name="radar meas vs pred"))
     residuals = rrb.Tabs(*res_tabs, active_tab=residual_tab)
     right = rrb.Vertical(
         plots,
