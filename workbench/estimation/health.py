@@ -154,17 +154,24 @@ def covariance_stats(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return asym_abs, asym_rel, emin
 
 
-def covariance_check(P: np.ndarray, name: str = "covariance", *, rtol: float = 1e-6) -> Check:
+def covariance_check(
+    P: np.ndarray,
+    name: str = "covariance",
+    *,
+    rtol: float = 1e-6,
+    stats: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> Check:
     """Covariance history ``P`` (n, k, k) (or one (k, k)): symmetric to ``rtol`` relative to its
     largest diagonal entry and positive definite at every step; ERROR otherwise (value: the smallest
-    eigenvalue over the history)."""
+    eigenvalue over the history).  ``stats``: :func:`covariance_stats` of ``P`` when the caller has
+    them already (not computed again)."""
     P = np.asarray(P, float)
     if P.ndim == 2:
         P = P[None]
     if not np.all(np.isfinite(P)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(P), axis=(1, 2)))[0])
         return Check(name, ERROR, None, None, f"{name}: not finite (first at step {bad})")
-    _, asym_k, emin_k = covariance_stats(P)
+    _, asym_k, emin_k = covariance_stats(P) if stats is None else stats
     asym = float(np.max(asym_k))
     emin = float(np.min(emin_k))
     if asym > rtol:

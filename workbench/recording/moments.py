@@ -310,13 +310,15 @@ def write_moment_blueprint(
     overrides: list[tuple[str, Any]] = [(_TIME_PANEL, tp)]
     following, unchanged = [], []
     at_vehicle = follow is not None and any(_under(origin, follow) for _, origin in views.values())
+    eye_kw: dict | None = None  # the camera on the vehicle at the moment: the same for every view
     for e, (name, _origin) in views.items():
         has_eye = f"{e}/EyeControls3D" in cells
         if follow is None or at_vehicle or has_eye:
             unchanged.append(name)
             continue
-        eye = vehicle_eye(data, follow, moment.t_s)
-        eye_kw = {} if eye is None else {"position": eye[0], "look_target": eye[1], "eye_up": [0.0, 0.0, 1.0]}
+        if eye_kw is None:
+            eye = vehicle_eye(data, follow, moment.t_s)
+            eye_kw = {} if eye is None else {"position": eye[0], "look_target": eye[1], "eye_up": [0.0, 0.0, 1.0]}
         overrides.append((f"{e}/EyeControls3D", EyeControls3D(tracking_entity=follow, **eye_kw)))
         following.append(name)
         # make the following view the active tab of the tab strip holding it

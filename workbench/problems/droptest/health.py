@@ -86,14 +86,15 @@ def input_health(scenario, paths) -> dict:
     return health_report(input_checks(tel))
 
 
-def drop_health(tel, fwd, smo, st) -> dict:
+def drop_health(tel, fwd, smo, st, cov_stats=None) -> dict:
     """The ``summary["health"]`` of a drop test from its telemetry ``tel`` (``DropTelemetry``), the
-    forward and smoothed ``FilterStage`` and the ``StrokeStage`` ``st`` (lengths in m, times in s)."""
+    forward and smoothed ``FilterStage`` and the ``StrokeStage`` ``st`` (lengths in m, times in s);
+    ``cov_stats``: :func:`~workbench.estimation.health.covariance_stats` of ``smo.P`` if already known."""
     checks: list[Check] = []
     for name, ih in fwd.forward.innovations.items():
         if ih.t.size:
             checks.append(nis_check(name, ih.nis, int(ih.y.shape[1])))
-    checks.append(covariance_check(smo.P, "covariance.smoothed"))
+    checks.append(covariance_check(smo.P, "covariance.smoothed", stats=cov_stats))
 
     lander = st.lander
     thickness = float(2.0 * lander.lobe_radius + lander.standoff)  # lander face to the outer bag surface

@@ -765,9 +765,9 @@ def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: Fil
             "fraction_inside_3sigma": float(inside),
             "rejected": int((~ih.accepted).sum()),
         }
-    asym_abs, _, eig = covariance_stats(smo.P)
-    eig_min = float(np.min(eig))
-    sym = float(np.max(asym_abs))
+    cov_stats = covariance_stats(smo.P)  # once: the summary's numbers and the health check
+    eig_min = float(np.min(cov_stats[2]))
+    sym = float(np.max(cov_stats[0]))
     return {
         "scenario": scenario.name,
         "mode": config_for(scenario).mode,
@@ -802,7 +802,7 @@ def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: Fil
         "innovations": innov,
         "covariance": {"min_eigenvalue": eig_min, "max_asymmetry": sym, "positive_definite": eig_min > 0},
         "degradations": [{"time_s": t, "level": lvl, "text": txt} for t, lvl, txt in tel.degradations],
-        "health": drop_health(tel, fwd, smo, st),
+        "health": drop_health(tel, fwd, smo, st, cov_stats),
     }
 
 
