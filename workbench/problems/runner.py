@@ -26,6 +26,7 @@ from workbench.io.results import OutputError, export_csv, write_summary
 from workbench.io.scenario import Scenario, resolve_scenario
 from workbench.problems import registry
 from workbench.problems.base import McOptions, McOutcome, Problem, Progress, RunOptions
+from workbench.problems.precompile import precompile
 
 __all__ = [
     "NumericalFailure",
@@ -206,6 +207,7 @@ def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, rep: prog.
     seed = int(sc.get("synthetic.seed", 0, kind="int") if opts.seed is None else opts.seed)
     truth = None
     n_times = len(rep.times)
+    precompile(sc, problem, seed, rep)  # first run of a checkout: compile in a child (its memory goes with it)
     if sc.is_synthetic:
         with rep.stage(f"{problem.title} truth simulation + telemetry"):
             syn = problem.synthesize(sc, out / sc.name / "telemetry", seed)

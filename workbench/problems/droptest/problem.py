@@ -148,6 +148,9 @@ class DropTestProblem:
     kind = "droptest"
     title = "drop"
     schema = SCHEMA
+    #: modules of the cached numba kernels (truth forces, filter recursion): compiled in a child
+    #: process on a checkout's first run (:mod:`workbench.problems.precompile`)
+    compiled_modules = ("workbench.problems.droptest.truth_fast", "workbench.problems.droptest.kernel")
 
     def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
         """``[telemetry]`` files (imu, attitude_3dm, events, setup, optional ranging), or the

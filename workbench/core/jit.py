@@ -1,0 +1,64 @@
+"""Compiled-kernel cache state: which numba kernels of a module still have to be compiled.
+
+numba's ``cache=True`` writes each compiled kernel beside its source (``__pycache__``, or under
+``NUMBA_CACHE_DIR``) as an index file keyed by the source file's time stamp and size, so the first
+run of a fresh checkout (or the first after an edit) compiles, later runs load. Compiling leaves
+LLVM's memory resident in the process for the rest of its life (about 115 MB for the drop test's
+truth and filter kernels, measured), which is why :mod:`workbench.problems.precompile` compiles in a
+short child process when :func:`cold_kernels` names any.
+
+The check reads numba's own cache index (``Dispatcher._cache._cache_file._load_index``, numba
+0.5x-0.6x); if that internal API is missing, every kernel counts as warm (nothing is precompiled and
+the process compiles in place, as before).
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Iterable
+
+__all__ = ["cold_kernels", "cold_modules"]
+
+
+def _dispatchers(module_name: str) -> Iterable[tuple[str, object]]:
+    """(name, dispatcher) of every cached numba kernel defined at module level in ``module_name``."""
+    mod = importlib.import_module(module_name)
+    for name, obj in sorted(vars(mod).items()):
+        cache = getattr(obj, "_cache", None)
+        if cache is not None and hasattr(obj, "py_func") and getattr(obj.py_func, "__module__", None) == module_name:
+            yield name, obj
+
+
+def cold_kernels(modules: Iterable[str]) -> list[str]:
+    """``"module.function"`` of each cached numba kernel (``@njit(cache=True)``) in ``modules`` that
+    has no compiled version on disk for its current source: the kernels the next call would compile.
+
+    ``modules``: importable module names (imported here). Kernels without ``cache=True`` are not
+    listed (they compile in every process). An empty list means every kernel loads from the cache,
+    or that numba's cache index could not be read (see the module docstring)."""
+    cold = []
+    for module_name in modules:
+        for name, disp in _dispatchers(module_name):
+            try:
+                index = disp._cache._cache_file._load_index()
+            except (AttributeError, TypeError, OSError):  # another numba's internals: assume warm
+                continue
+            if not index:
+                cold.append(f"{module_name}.{name}")
+    return cold
+
+
+def cold_modules(modules: Iterable[str]) -> list[str]:
+    """The names in ``modules`` none of whose cached numba kernels has a compiled version on disk:
+    a fresh checkout, a cleared cache, or an edit of that module (numba keys its cache on the
+    source file's time stamp and size, so an edit makes every kernel of the module cold at once).
+
+    A module with some kernels warm is not listed: a kernel that a scenario never calls stays cold
+    for ever and must not make every run precompile. Modules without cached kernels are not listed."""
+    out = []
+    for module_name in modules:
+        names = [name for name, _ in _dispatchers(module_name)]
+        cold = cold_kernels([module_name])
+        if names and len(cold) == len(names):
+            out.append(module_name)
+    return out
