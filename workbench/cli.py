@@ -320,14 +320,6 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
 def cmd_open(args: argparse.Namespace) -> int:
     """List a recording's key moments, or open it in the Rerun Viewer, with ``--at NAME`` at that
     moment (a layout ``.rbl`` written beside it; the time cursor moved there once loaded)."""
@@ -335,6 +327,7 @@ def cmd_open(args: argparse.Namespace) -> int:
     import subprocess
 
     from workbench.recording import moments as km
+    from workbench.recording.browser import free_port
     from workbench.recording.reader import read_recording, rerun_executable
 
     data = read_recording(args.recording)
@@ -370,7 +363,7 @@ def cmd_open(args: argparse.Namespace) -> int:
             f"layout: {rbl} ({what}; time selection {lo:.3f} .. {hi:.3f} s, looped, "
             f"{'playing' if args.play else 'paused'}{follows})"
         )
-    port = None if args.dry_run or args.web or moment is None else _free_port()
+    port = None if args.dry_run or args.web or moment is None else free_port()
     cmd = km.viewer_command(rerun, data.path, rbl, web=args.web, port=port)
     print("command: " + shlex.join(cmd.argv))
     if args.dry_run:

@@ -52,7 +52,6 @@ import shutil
 import signal
 import socket
 import subprocess
-import sys
 import time
 import urllib.request
 from collections.abc import Iterator, Sequence
@@ -63,6 +62,7 @@ from urllib.parse import quote, urlsplit
 import numpy as np
 
 from workbench.recording import layout
+from workbench.recording.reader import rerun_executable
 
 __all__ = [
     "DIFF_THRESHOLD",
@@ -77,7 +77,6 @@ __all__ = [
     "decode_message",
     "encode_field",
     "find_chromium",
-    "find_rerun_cli",
     "free_port",
     "judge_scene",
     "parse_viewer_logs",
@@ -138,15 +137,6 @@ def find_chromium() -> str | None:
     return None
 
 
-def find_rerun_cli() -> str | None:
-    """Path of the ``rerun`` command line that belongs to this Python (beside ``sys.executable``, as in
-    a virtual environment), else the one on ``PATH``; None if there is none."""
-    beside = Path(sys.executable).parent / ("rerun.exe" if os.name == "nt" else "rerun")
-    if beside.is_file() and os.access(beside, os.X_OK):
-        return str(beside)
-    return shutil.which("rerun")
-
-
 def unavailable_reason() -> str | None:
     """Why the web viewer cannot be driven on this machine (what to install), or None if it can."""
     missing = []
@@ -156,7 +146,7 @@ def unavailable_reason() -> str | None:
         missing.append("the Python package 'playwright' (pip install 'edl-workbench[browser]')")
     if find_chromium() is None:
         missing.append("a Chromium browser (Debian: apt-get install chromium; or set WORKBENCH_CHROMIUM)")
-    if find_rerun_cli() is None:
+    if rerun_executable() is None:
         missing.append("the 'rerun' command line (installed with rerun-sdk)")
     return "missing " + " and ".join(missing) if missing else None
 
@@ -523,7 +513,7 @@ class WebViewer:
         self.close()
 
     def _start_server(self) -> None:
-        rerun = find_rerun_cli()
+        rerun = rerun_executable()
         assert rerun is not None
         web, grpc = free_port(self.host), free_port(self.host)
         env = dict(os.environ, RERUN_ANALYTICS="off")

@@ -102,8 +102,8 @@ def verify(path: str | os.PathLike[str]) -> tuple[bool, str]:
 def rerun_executable() -> str | None:
     """The ``rerun`` command-line tool (viewer, ``rrd verify``): next to ``sys.executable`` (the
     venv) first, then on ``PATH``; None if there is none."""
-    exe = Path(sys.executable).parent / "rerun"
-    return str(exe) if exe.is_file() else shutil.which("rerun")
+    exe = Path(sys.executable).parent / ("rerun.exe" if os.name == "nt" else "rerun")
+    return str(exe) if exe.is_file() and os.access(exe, os.X_OK) else shutil.which("rerun")
 
 
 def _kind(field: pa.Field) -> str:
