@@ -204,8 +204,9 @@ def process_noise(dt: float, q_a: float, q_alpha: float, C_I_B: np.ndarray, n_e:
     a step the noise is ``(∭j, ∬j, C_I_Bᵀ ∫j)`` and its cross-covariances with δa_B carry the
     attitude: ``Q_pa = q_a dt³/6 C_I_B``, ``Q_va = q_a dt²/2 C_I_B``, ``Q_aa = q_a dt I``.  (A
     per-axis-index coupling, SPF axis i with body axis i, would make the filter depend on how the
-    lander frame is oriented on the body: 22 mm of max stroke, 0.45σ, for the shipped rig rotated.)
-    The rotational chain is all body frame.
+    lander frame is oriented on the body: 22 mm of max stroke, 0.45σ, for the shipped rig rotated;
+    and, over 100 dispersed drops, a velocity at max stroke over-confident per axis, mean (δ/σ)²
+    1.5 / 3.0 / 4.8, now 1.0 / 0.9 / 1.1.)  The rotational chain is all body frame.
     """
     Q = np.zeros((n_e, n_e))
     Bt = _jerk_block(q_a, dt)
