@@ -259,10 +259,11 @@ def test_rotated_rig_with_another_filter_gives_the_shipped_stroke(tmp_path):
     Both drops are the shipped scenario's with the gyro's scale-factor and misalignment errors
     declared absent (σ = 0, in the simulator and the filter): those errors are per *sensor axis*, so
     rotating a B-frame gyro record into L turns a diagonal scale error into a full matrix the L-frame
-    prior calls 10σ unlikely — no real rig records that.  What remains differs between the two runs
-    only by the frame (exact up to CSV rounding at 12 digits) and by causal vs zero-phase filtering
-    of the same truth and noise draws (0.3 mm measured in B); the tolerance is 1 mm, 0.02σ of the
-    reported max-stroke uncertainty.
+    prior calls 10σ unlikely — no real rig records that (measured with them present all the same:
+    the rotated and the unrotated zero-phase files agree to 0.01 mm, 0.23583 m).  What remains
+    differs between the two runs only by the frame (exact up to CSV rounding at 12 digits) and by
+    causal vs zero-phase filtering of the same truth and noise draws (0.3 mm measured in B); the
+    tolerance is 1 mm, 0.02σ of the reported max-stroke uncertainty.
 
     This caught a frame-dependent process noise: the white-jerk block coupled SPF position/velocity
     axis i with *body* acceleration axis i, so the rotated rig gave 0.22070 m against 0.24299 m
