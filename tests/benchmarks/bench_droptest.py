@@ -49,6 +49,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
 
+from workbench.core.rotation import quat_to_dcm  # noqa: E402
 from workbench.estimation.montecarlo import run_monte_carlo  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.droptest import model as rl  # noqa: E402
@@ -120,7 +121,7 @@ def baseline_filter(
         if k:
             dtk = tel.t[k] - tel.t[k - 1]
             x, F = rl.propagate(x, dtk, g)
-            P = F @ P @ F.T + rl.process_noise(dtk, q_accel[k], q_angular[k], n_e)
+            P = F @ P @ F.T + rl.process_noise(dtk, q_accel[k], q_angular[k], quat_to_dcm(x[rl.SQ]), n_e)
         zs, hs, Hs, Rs = [], [], [], []
         for j, r in enumerate(tel.lever_arms_B):
             if tel.f_valid[k, j]:

@@ -9,7 +9,7 @@ floating-point noise (sums are taken in another order), every per-sensor innovat
 import numpy as np
 import pytest
 
-from workbench.core.rotation import quat_from_rotvec
+from workbench.core.rotation import quat_from_rotvec, quat_to_dcm
 from workbench.estimation.ekf import update
 from workbench.problems.droptest import kernel as kn
 from workbench.problems.droptest import model as rl
@@ -58,8 +58,9 @@ def test_transition_and_process_noise(x, P):
     _close(F, Fr)
     assert np.array_equal(F[kn.NC :, :], np.eye(N_E)[kn.NC :, :]) and not F[: kn.NC, kn.NC :].any()
     Q = np.empty((N_E, N_E))
-    kn.process_noise_into(dt_, 3.0, 40.0, Q, w3[6])
-    _close(Q, rl.process_noise(dt_, 3.0, 40.0, N_E))
+    C = quat_to_dcm(xr[rl.SQ])
+    kn.process_noise_into(dt_, 3.0, 40.0, C, Q, w3[6])
+    _close(Q, rl.process_noise(dt_, 3.0, 40.0, C, N_E))
     Pk = P.copy()
     kn.predict_covariance(Pk, F, Q, np.empty((kn.NC, N_E)))
     A = Fr @ P @ Fr.T + Q

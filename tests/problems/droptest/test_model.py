@@ -127,3 +127,34 @@ def test_triad_jacobian_with_bias_states(x):
     xn, F = rl.propagate(xb, 1e-3, np.array([0, 0, -G0]))
     np.testing.assert_array_equal(xn[rl.N_X :], xb[rl.N_X :])  # biases are random constants
     np.testing.assert_array_equal(F[rl.N_E :, rl.N_E :], np.eye(12))
+
+
+def test_prediction_does_not_depend_on_the_body_axes(x):
+    """One predict step ``F P Fᵀ + Q`` in body axes B and in B' = R B (the same lander, its frame
+    turned): the covariances are the same up to that rotation.  The jerk-noise blocks that couple
+    SPF position/velocity with body acceleration once paired SPF axis i with body axis i; a rig
+    described in another lander frame then gave another max stroke (test_rig_frame: −22 mm)."""
+    from workbench.core.rotation import dcm_to_quat, quat_to_dcm
+
+    rng = np.random.default_rng(11)
+    R = quat_to_dcm(quat_from_rotvec(np.array([0.4, -2.1, 1.3])))  # x_B' = R x_B
+    n_e = rl.N_E
+    T = np.eye(n_e)  # error state in B' = T (error state in B): body-frame blocks turn with R
+    for sl in (rl.EA, rl.ETH, rl.EW, rl.EAL, rl.EBG):
+        T[sl, sl] = R
+    T[rl.ES, rl.ES] = np.kron(R, R)  # E' = R E Rᵀ, row-major
+    x2 = x.copy()
+    x2[rl.SQ] = dcm_to_quat(quat_to_dcm(x[rl.SQ]) @ R.T)
+    for sl in (rl.SA, rl.SW, rl.SAL, rl.SBG):
+        x2[sl] = R @ x[sl]
+    x2[rl.SS] = (R @ x[rl.SS].reshape(3, 3) @ R.T).ravel()
+    A = rng.normal(0, 1, (n_e, n_e))
+    P = A @ A.T / n_e + 0.1 * np.eye(n_e)
+    dt, grav = 1e-3, np.array([0, 0, -G0])
+    out = []
+    for s, Ps in ((x, P), (x2, T @ P @ T.T)):
+        sn, F = rl.propagate(s, dt, grav)
+        Q = rl.process_noise(dt, 5e4, 3e5, quat_to_dcm(sn[rl.SQ]), n_e)  # impact-sized PSDs
+        assert np.min(np.linalg.eigvalsh(Q)) > -1e-12 * np.max(np.abs(Q))
+        out.append(F @ Ps @ F.T + Q)
+    np.testing.assert_allclose(out[1], T @ out[0] @ T.T, atol=1e-12 * float(np.max(np.abs(out[0]))))

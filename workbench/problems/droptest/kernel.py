@@ -5,7 +5,8 @@ The same filter as :func:`workbench.problems.droptest.pipeline.forward_pass` thr
 written as one loop over the steps with nothing allocated per step:
 
 * predict: :func:`workbench.problems.droptest.model.propagate` (kinematic, no bungee) and
-  ``P = F P Fᵀ + Q`` with Q of :func:`~workbench.problems.droptest.model.process_noise`, using that F
+  ``P = F P Fᵀ + Q`` with Q of :func:`~workbench.problems.droptest.model.process_noise` (at the
+  propagated attitude), using that F
   is the identity outside its first 18 × 18 block (the core states p, v, a, θ, ω, α);
 * the step's measurements one after the other, in the order of the reference path — every valid
   triad (:func:`~workbench.problems.droptest.model.triad_model`, bias states included), the gyro
@@ -254,10 +255,11 @@ def _bungee_jump(xn, bungee, coeffs, g, sign, bw):
 
 
 @njit(cache=True)
-def process_noise_into(dt, qa, qw, Q, B3):
+def process_noise_into(dt, qa, qw, C, Q, B3):
     """:func:`workbench.problems.droptest.model.process_noise` into Q (n_e, n_e): white jerk PSD
     qa [m²/s⁵] and angular jerk PSD qw [rad²/s⁵] over dt [s] (zero outside the (p, v, a) and
-    (θ, ω, α) chains); B3 (3, 3) scratch."""
+    (θ, ω, α) chains); C (3, 3) the attitude C_I_B at the end of the step (the SPF (p, v) –
+    body (a) cross blocks carry it); B3 (3, 3) scratch."""
     n_e = Q.shape[0]
     for i in range(n_e):
         for j in range(n_e):
@@ -266,11 +268,15 @@ def process_noise_into(dt, qa, qw, Q, B3):
     b[0, 0], b[0, 1], b[0, 2] = dt**5 / 20, dt**4 / 8, dt**3 / 6
     b[1, 0], b[1, 1], b[1, 2] = dt**4 / 8, dt**3 / 3, dt**2 / 2
     b[2, 0], b[2, 1], b[2, 2] = dt**3 / 6, dt**2 / 2, dt
-    for i in range(3):
-        for r in range(3):
-            for c in range(3):
-                Q[3 * r + i, 3 * c + i] = qa * b[r, c]
+    for r in range(3):
+        for c in range(3):
+            for i in range(3):
                 Q[9 + 3 * r + i, 9 + 3 * c + i] = qw * b[r, c]
+                if (r == 2) == (c == 2):
+                    Q[3 * r + i, 3 * c + i] = qa * b[r, c]
+                else:
+                    for j in range(3):
+                        Q[3 * r + i, 3 * c + j] = qa * b[r, c] * (C[i, j] if c == 2 else C[j, i])
 
 
 @njit(cache=True)
@@ -548,7 +554,8 @@ def imu_steps(
                     _bungee_jump(xn, bungee, coeffs, g, 1.0, bw)
                 if t0 < bungee[12] <= t1:  # the hammer hits the nail: the bungee pull vanishes
                     _bungee_jump(xn, bungee, coeffs, g, -1.0, bw)
-            process_noise_into(dt, q_accel[k], q_angular[k], Qk, w3[6])
+            _dcm(xn[9:13], w3[0])  # the attitude at the end of the step (w3[0] free again)
+            process_noise_into(dt, q_accel[k], q_angular[k], w3[0], Qk, w3[6])
             predict_covariance(P, Fk, Qk, T)
             for i in range(n_x):
                 x[i] = xn[i]

@@ -35,7 +35,14 @@ import numpy as np
 
 from workbench.core.bodies import G0
 from workbench.core.interpolation import interp_rows
-from workbench.core.rotation import quat_conjugate, quat_normalize, quat_rotate, triad, triad_covariance
+from workbench.core.rotation import (
+    quat_conjugate,
+    quat_normalize,
+    quat_rotate,
+    quat_to_dcm,
+    triad,
+    triad_covariance,
+)
 from workbench.estimation.consistency import whiteness
 from workbench.estimation.ekf import (
     ErrorStateLayout,
@@ -313,6 +320,7 @@ def forward_pass(
     q_angular = q_w0 + ratio**2 * s
 
     def transition(x, t0, t1):
+        """(x_next, F, Q): Q at the propagated attitude (the SPF–body cross blocks of the jerk chain)."""
         dt = t1 - t0
         active = bungee is not None and t_rel <= t0 and t1 <= t_cut
         xn, F = rl.propagate(x, dt, GRAVITY, bungee if active else None)
@@ -322,13 +330,8 @@ def forward_pass(
                 xn[rl.SA] += quat_rotate(to_body, bungee.accel(xn[rl.SP], xn[rl.SQ])[0] + GRAVITY)
             if t0 < t_cut <= t1:  # the hammer hits the nail: the bungee pull vanishes
                 xn[rl.SA] -= quat_rotate(to_body, bungee.accel(xn[rl.SP], xn[rl.SQ])[0])
-        return xn, F
-
-    def process_noise(x, t0, t1):
-        return None  # set per step in adapt_q
-
-    def adapt_q(k, x, P, Q):
-        return rl.process_noise(tel.t[k] - tel.t[k - 1], q_accel[k], q_angular[k], n_e)
+        k = int(np.searchsorted(tel.t, t1))  # the step's process-noise PSDs (raised on rapid jerk)
+        return xn, F, rl.process_noise(dt, q_accel[k], q_angular[k], quat_to_dcm(xn[rl.SQ]), n_e)
 
     triad_memos = [_Memo(lambda x, r=r, j=j: rl.triad_model(x, r, j)) for j, r in enumerate(tel.lever_arms_B)]
     gyro_memo = _Memo(rl.gyro_model)
@@ -377,10 +380,9 @@ def forward_pass(
             init.P0,
             tel.t,
             transition,
-            process_noise,
+            None,
             measurements_at,
             layout_for(len(tel.triads)),
-            adapt_q=adapt_q,
         )
     return FilterStage("forward", fp.t, fp.x_post, fp.P_post, forward=fp, q_accel=q_accel, q_angular=q_angular)
 
