@@ -1,0 +1,377 @@
+"""The tightly-coupled MEADS/IMU extended Kalman filter, multi-pass, with RTS smoothing.
+
+Karlgaard et al., "Mars Entry Atmospheric Data System Trajectory Reconstruction Algorithms and
+Flight Results", AIAA 2013, Sect. III.B (Eq. 19–35) and Sect. IV.B.4 (the multi-pass scheme),
+composed on the shared engine (:func:`workbench.estimation.ekf.run_filter`, iterated
+:func:`~workbench.estimation.ekf.update`, :func:`workbench.estimation.smoother.rts_smooth`).
+
+State (21, all additive; :data:`STATE_NAMES`)::
+
+    x = [p_M (3) m, v_M (3) m/s, δθ_B (3) rad, w_N (3) m/s, ln p∞, ln ρ∞, λ_1..λ_7]
+
+* ``p_M``, ``v_M``: inertial position and velocity in the planet-centred inertial frame M (the
+  paper's r, θ, φ, u, v, w of Eq. 19, in Cartesian form).  They are driven by the IMU through the
+  strapdown of :func:`.pipeline.navigate`: the filter propagates the deviation from the strapdown
+  solution, ``δp' = δp + δv Δt``, ``δv' = δv + G(p) δp Δt`` (G the point-mass gravity gradient;
+  the IMU increments themselves are in the strapdown), with accelerometer process noise
+  (the paper's "additive process noise on the acceleration measurements").
+* ``δθ_B``: the attitude.  The paper carries Euler parameters (Eq. 26) integrated from the gyros;
+  here the strapdown's attitude ``q_M_B`` is a known input and the state is the body-frame
+  small-angle error of it (``C_B_M = (I − [δθ×]) C_B_M,nav``), rotated with the body between
+  samples and driven by gyro process noise.  For a constant-rate strapdown error this is the
+  same first-order model as integrating Eq. 26 in the filter; it keeps the filter linear in the
+  attitude.
+* ``w_N``: wind (north, east, down) in the local-vertical frame, Eq. 29–31, a random walk whose
+  variance grows with the altitude travelled (winds change with height, not with time).
+* ``ln p∞``, ``ln ρ∞``: Eq. 27–28 (hydrostatic, isothermal over a step: both change by
+  ``−g Δh ρ∞/p∞``), in logarithms so the 10⁵ range of the entry stays well scaled; a random walk
+  per altitude travelled absorbs the temperature structure.
+* ``λ_i``: transducer scale factors, ``λ̇ = 0`` (Sect. III.B): the measured pressure of port i is
+  ``(1 + λ_i) h_i(x)``.
+
+Measurement (Eq. 33–35, iterated update): the seven port pressures through the same surface
+pressure model as the least squares (:func:`.airdata.pressure_model`, Newtonian or the
+estimator's table, "mach" set) with α, β, q∞ and Mach computed from the state — the
+air-relative velocity in body axes ``C_B_M (v_M − Ω × p_M − C_M_N w_N)``, ``q∞ = ½ ρ∞ V²``,
+``M = V / √(γ p∞/ρ∞)`` (the substitution of Eq. 11–12 the paper describes); R is the same
+per-port σ as the least squares (:func:`.pipeline.sensor_sigma`).  Ports the least squares
+declared failed or that have no sample are left out of the update.
+
+Multi-pass (Sect. IV.B.4): pass 1 estimates the scale factors with everything else; pass 2 divides
+the pressures by ``1 + λ̂`` (pass-1 smoothed) and runs again with the scale factors fixed (zero
+variance, no longer estimated); the pass-1 1σ of λ̂ enters pass 2's R as ``(σ_λ p)²`` per port (a
+white approximation of what is a constant error).  Each pass is a forward EKF and an RTS smoother.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from workbench.core.atmosphere import MarsEngineeringAtmosphere
+from workbench.core.bodies import MARS
+from workbench.core.gravity import gravity_point_mass_gradient
+from workbench.core.rotation import quat_to_dcm
+from workbench.estimation.ekf import (
+    ErrorStateLayout,
+    ForwardPass,
+    Measurement,
+    derived_with_sigma,
+    numeric_jacobian_batched,
+    run_filter,
+)
+from workbench.estimation.smoother import SmoothedPass, rts_smooth
+from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
+from workbench.problems.meads.airdata import ned_frames, pressure_model
+from workbench.problems.meads.config import EkfSettings
+
+__all__ = [
+    "STATE_NAMES",
+    "OUTPUT_NAMES",
+    "EkfSettings",
+    "EkfInputs",
+    "EkfPass",
+    "run_pass",
+    "run_passes",
+    "air_outputs",
+]
+
+N_PORTS = 7
+IP, IV, ITH, IW, ILP, ILR, ILAM = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), 12, 13, slice(14, 21)
+N_X = 21
+LAYOUT = ErrorStateLayout(N_X)
+STATE_NAMES = (
+    *(f"p_M_{a}" for a in "xyz"),
+    *(f"v_M_{a}" for a in "xyz"),
+    *(f"dtheta_B_{a}" for a in "xyz"),
+    "wind_north",
+    "wind_east",
+    "wind_down",
+    "ln_p_inf",
+    "ln_rho_inf",
+    *(f"scale_{i + 1}" for i in range(N_PORTS)),
+)
+OUTPUT_NAMES = ("alpha", "beta", "qbar", "mach", "p_inf", "rho", "wind_north", "wind_east", "wind_down")
+"""Columns of :func:`air_outputs` [rad, rad, Pa, 1, Pa, kg/m³, m/s, m/s, m/s]."""
+
+#: perturbations of the numeric Jacobians, error-state units
+EPS = np.r_[np.full(3, 1.0), np.full(3, 1e-2), np.full(3, 1e-6), np.full(3, 1e-2), 1e-5, 1e-5, np.full(7, 1e-6)]
+
+
+@dataclass(frozen=True)
+class EkfInputs:
+    """What the filter reads, at the n pressure times ``t`` [s]: the strapdown ``p_M``, ``v_M``
+    (n, 3) and ``q_M_B`` (n, 4) (:class:`.pipeline.Navigation`), the initial 1σ of position [m],
+    velocity [m/s] and attitude [rad], the (lag-corrected) pressures ``p`` (n, m) [Pa], their 1σ
+    ``sigma_p`` (n, m) [Pa], ``usable`` (n, m) bool (finite and not failed), the vehicle, the
+    pressure ``model`` (``"newtonian"``/``"table"``), its ``table`` and ``gamma``."""
+
+    t: np.ndarray
+    p_M: np.ndarray
+    v_M: np.ndarray
+    q_M_B: np.ndarray
+    sigma_pos: float
+    sigma_vel: float
+    sigma_att: float
+    p: np.ndarray
+    sigma_p: np.ndarray
+    usable: np.ndarray
+    vehicle: FadsVehicle
+    model: str
+    table: SurfacePressureTable | None
+    gamma: float
+
+
+@dataclass(frozen=True)
+class EkfPass:
+    """One filter pass (a pipeline stage): ``index`` 1 or 2 of ``passes``; ``t`` (n,) [s];
+    ``forward`` the :class:`ForwardPass` (innovations under ``"pressure"``, NaN for unused ports);
+    ``smoothed`` the :class:`SmoothedPass`; ``outputs`` (n, 9) and ``sigma`` (n, 9) of
+    :data:`OUTPUT_NAMES` from the smoothed state; ``scale`` (7,) the scale factors used or found
+    (smoothed) with 1σ ``sigma_scale``; ``scale_estimated`` whether this pass estimated them;
+    ``nis_port`` (k, 7) per-port normalised innovations squared ``y_i²/S_ii`` of the forward pass at
+    the processed samples (NaN where unused); ``wall_s`` [s]."""
+
+    index: int
+    passes: int
+    t: np.ndarray
+    forward: ForwardPass
+    smoothed: SmoothedPass
+    outputs: np.ndarray
+    sigma: np.ndarray
+    scale: np.ndarray
+    sigma_scale: np.ndarray
+    scale_estimated: bool
+    nis_port: np.ndarray
+    wall_s: float
+
+    @property
+    def stage_label(self) -> str:
+        """Its name in progress lines and ``summary["stage_times_s"]``."""
+        what = "scale factors estimated" if self.scale_estimated else "scale-corrected pressures"
+        return f"EKF pass {self.index}/{self.passes} ({what}, RTS smoothed)"
+
+    def output(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(value, 1σ) (n,) of one of :data:`OUTPUT_NAMES`."""
+        j = OUTPUT_NAMES.index(name)
+        return self.outputs[:, j], self.sigma[:, j]
+
+
+# ------------------------------------------------------------------------------------- model
+
+
+def _air(X: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[np.ndarray, ...]:
+    """(α, β, q∞, M, p∞, ρ∞) (...,) from states X (..., 21) and the strapdown C_B_M (..., 3, 3)."""
+    p_M, v_M = X[..., IP], X[..., IV]
+    v_g = v_M + MARS.rotation_rate * np.stack([p_M[..., 1], -p_M[..., 0], np.zeros_like(p_M[..., 0])], axis=-1)
+    C_N_M = ned_frames(p_M.reshape(-1, 3)).reshape(*p_M.shape[:-1], 3, 3)
+    v_air_M = v_g - np.einsum("...ji,...j->...i", C_N_M, X[..., IW])
+    u = np.einsum("...ij,...j->...i", C_B_M, v_air_M)
+    th = X[..., ITH]
+    u = u - np.stack(  # (I − [δθ×]) C_B_M,nav v
+        [
+            th[..., 1] * u[..., 2] - th[..., 2] * u[..., 1],
+            th[..., 2] * u[..., 0] - th[..., 0] * u[..., 2],
+            th[..., 0] * u[..., 1] - th[..., 1] * u[..., 0],
+        ],
+        axis=-1,
+    )
+    V = np.linalg.norm(u, axis=-1)
+    alpha = np.arctan2(u[..., 2], u[..., 0])
+    beta = np.arcsin(np.clip(u[..., 1] / V, -1.0, 1.0))
+    p_inf, rho = np.exp(X[..., ILP]), np.exp(X[..., ILR])
+    return alpha, beta, 0.5 * rho * V**2, V / np.sqrt(gamma * p_inf / rho), p_inf, rho
+
+
+def _pressure_fn(inp: EkfInputs):
+    h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
+
+    def h(X: np.ndarray, C_B_M: np.ndarray) -> np.ndarray:
+        """Port pressures (b, m) [Pa] of states X (b, 21) at the attitude C_B_M (3, 3)."""
+        a, b, q, M, _, _ = _air(X, C_B_M, inp.gamma)
+        p = h4(np.stack([q, a, b, M], axis=1))
+        return p * (1.0 + X[:, ILAM])
+
+    return h
+
+
+def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+    """:data:`OUTPUT_NAMES` (n, 9) and their 1σ (n, 9) from states x (n, 21), covariances P
+    (n, 21, 21) and the strapdown attitude q_M_B (n, 4) (first-order propagation)."""
+    C_B_M = np.swapaxes(quat_to_dcm(q_M_B), 1, 2)[:, None]
+
+    def g(X):
+        a, b, q, M, pi, rho = _air(X, C_B_M, gamma)
+        return np.stack([a, b, q, M, pi, rho, X[..., 9], X[..., 10], X[..., 11]], axis=-1)
+
+    y, s, _ = derived_with_sigma(g, x, P, LAYOUT, EPS)
+    return y, s
+
+
+def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_var: np.ndarray) -> tuple:
+    atm = MarsEngineeringAtmosphere()
+    h0 = float(np.linalg.norm(inp.p_M[0]) - MARS.reference_radius)
+    x0 = np.zeros(N_X)
+    x0[IP], x0[IV] = inp.p_M[0], inp.v_M[0]
+    x0[ILP], x0[ILR] = math.log(float(atm.pressure(h0))), math.log(float(atm.density(h0)))
+    x0[ILAM] = scale0
+    sw = st.wind_sigma_mps
+    d = np.r_[
+        np.full(3, inp.sigma_pos**2),
+        np.full(3, inp.sigma_vel**2),
+        np.full(3, inp.sigma_att**2),
+        [sw**2, sw**2, st.vertical_wind_sigma_mps**2],
+        np.full(2, st.atmosphere_sigma_ln**2),
+        scale_var,
+    ]
+    return x0, np.diag(d)
+
+
+def _transition(inp: EkfInputs, st: EkfSettings):
+    """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring)."""
+    t = inp.t
+    C_M_B = quat_to_dcm(inp.q_M_B)
+    idx = {float(v): i for i, v in enumerate(t.tolist())}
+    I3 = np.eye(3)
+
+    def transition(x, t0, t1):
+        k = idx[t1]
+        dt = t1 - t0
+        dp, dv = x[IP] - inp.p_M[k - 1], x[IV] - inp.v_M[k - 1]
+        G = gravity_point_mass_gradient(inp.p_M[k - 1][None], MARS.gm)[0]
+        x1 = x.copy()
+        x1[IP] = inp.p_M[k] + dp + dv * dt
+        x1[IV] = inp.v_M[k] + dv + G @ dp * dt
+        Rb = C_M_B[k].T @ C_M_B[k - 1]  # body at k-1 -> body at k
+        x1[ITH] = Rb @ x[ITH]
+        r0, r1 = np.linalg.norm(x[IP]), np.linalg.norm(x1[IP])
+        dh = r1 - r0
+        c = MARS.gm / r0**2 * math.exp(x[ILR] - x[ILP])  # g ρ/p [1/m]
+        x1[ILP] = x[ILP] - c * dh
+        x1[ILR] = x[ILR] - c * dh
+        F = np.eye(N_X)
+        F[IP, IV] = dt * I3
+        F[IV, IP] = G * dt
+        F[ITH, ITH] = Rb
+        u0, u1 = x[IP] / r0, x1[IP] / r1
+        dh_dp = u1 - u0  # ∂Δh/∂p (through p1 = p + ...)
+        dh_dv = u1 * dt
+        for i in (ILP, ILR):
+            F[i, IP] = -c * dh_dp
+            F[i, IV] = -c * dh_dv
+            F[i, ILP] = F[i, ILP] + c * dh
+            F[i, ILR] = F[i, ILR] - c * dh
+        Q = np.zeros((N_X, N_X))
+        qa = st.accel_psd
+        Q[IP, IP] = qa * dt**3 / 3.0 * I3
+        Q[IP, IV] = Q[IV, IP] = qa * dt**2 / 2.0 * I3
+        Q[IV, IV] = qa * dt * I3
+        Q[ITH, ITH] = st.attitude_psd * dt * I3
+        km = abs(dh) / 1e3
+        Q[9, 9] = Q[10, 10] = st.wind_var_per_km * km
+        Q[11, 11] = st.wind_var_per_km * km * (st.vertical_wind_sigma_mps / st.wind_sigma_mps) ** 2
+        Q[ILP, ILP] = Q[ILR, ILR] = st.atmosphere_var_per_km * km
+        return x1, F, Q
+
+    return transition
+
+
+def run_pass(
+    inp: EkfInputs,
+    st: EkfSettings,
+    *,
+    index: int = 1,
+    passes: int = 1,
+    estimate_scale: bool = True,
+    scale_fixed: np.ndarray | None = None,
+    sigma_scale_fixed: np.ndarray | None = None,
+) -> EkfPass:
+    """One pass: forward iterated EKF over the pressure samples, then RTS smoothing.
+
+    ``estimate_scale``: the scale factors are states (prior 0 ± ``st.scale_factor_sigma``);
+    otherwise the pressures are divided by ``1 + scale_fixed`` (7,), the scale-factor states are
+    held at zero with zero variance, and ``sigma_scale_fixed`` (7,) (their 1σ from the previous
+    pass) is added to R as ``(σ_λ p)²``.
+    """
+    t0 = time.perf_counter()
+    m = inp.p.shape[1]
+    p, sig = inp.p, inp.sigma_p
+    if estimate_scale:
+        scale0, var0 = np.zeros(m), np.full(m, st.scale_factor_sigma**2)
+    else:
+        lam = np.zeros(m) if scale_fixed is None else np.asarray(scale_fixed, float)
+        sl = np.zeros(m) if sigma_scale_fixed is None else np.asarray(sigma_scale_fixed, float)
+        p = p / (1.0 + lam)
+        sig = np.sqrt(sig**2 + (sl * np.nan_to_num(p)) ** 2)
+        scale0, var0 = np.zeros(m), np.zeros(m)
+    x0, P0 = _initial(inp, st, scale0, var0)
+    h = _pressure_fn(inp)
+    C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
+    transition = _transition(inp, st)
+
+    def measurements_at(k, tk, x):
+        use = np.flatnonzero(inp.usable[k] & np.isfinite(p[k]))
+        if use.size == 0:
+            return []
+        C = C_B_M[k]
+        cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+        def both(xx):
+            # h and its Jacobian from one batched call; the update asks for h(x_i), then H(x_i)
+            key = xx.tobytes()
+            if key not in cache:
+                cache.clear()
+                y0, J = numeric_jacobian_batched(lambda X: h(X, C), xx, LAYOUT, EPS)
+                cache[key] = (y0[use], J[use])
+            return cache[key]
+
+        return [
+            Measurement(
+                "pressure",
+                p[k, use],
+                np.diag(sig[k, use] ** 2),
+                lambda xx: both(xx)[0],
+                H=lambda xx: both(xx)[1],
+                iterations=st.iterations,
+                step_tol=EPS,
+                slots=use,
+                size=m,
+            )
+        ]
+
+    with np.errstate(invalid="ignore"):
+        fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, LAYOUT)
+        sm = rts_smooth(fp, LAYOUT)
+    out, sd = air_outputs(sm.x, sm.P, inp.q_M_B, inp.gamma)
+    inn = fp.innovations.get("pressure")
+    if inn is None:
+        nis_port = np.zeros((0, m))
+    else:
+        nis_port = inn.y**2 / np.einsum("kii->ki", inn.S)
+    if estimate_scale:
+        lam, slam = sm.x[0, ILAM].copy(), np.sqrt(np.einsum("ii->i", sm.P[0][ILAM, ILAM]))
+    else:
+        lam = np.zeros(m) if scale_fixed is None else np.asarray(scale_fixed, float)
+        slam = np.zeros(m) if sigma_scale_fixed is None else np.asarray(sigma_scale_fixed, float)
+    return EkfPass(index, passes, inp.t, fp, sm, out, sd, lam, slam, estimate_scale, nis_port, time.perf_counter() - t0)
+
+
+def run_passes(inp: EkfInputs, st: EkfSettings):
+    """Yield pass 1 (scale factors estimated) and, with ``st.passes == 2``, pass 2 (pressures
+    corrected by pass 1's scale factors)."""
+    n = int(st.passes)
+    first = run_pass(inp, st, index=1, passes=n, estimate_scale=True)
+    yield first
+    if n >= 2:
+        yield run_pass(
+            inp,
+            st,
+            index=2,
+            passes=n,
+            estimate_scale=False,
+            scale_fixed=first.scale,
+            sigma_scale_fixed=first.sigma_scale,
+        )
