@@ -163,15 +163,16 @@ class EkfPass:
 # ------------------------------------------------------------------------------------- model
 
 
-def _air(X: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[np.ndarray, ...]:
-    """(α, β, q∞, M, p∞, ρ∞) (...,) from states X (..., 21) and the strapdown C_B_M (..., 3, 3)."""
+def _air_velocity(X: np.ndarray, C_B_M: np.ndarray) -> np.ndarray:
+    """Air-relative velocity in body axes (..., 3) [m/s] of states X (..., 21) with the strapdown
+    attitude C_B_M (..., 3, 3): ``(I − [δθ×]) C_B_M (v_M − Ω × p_M − C_M_N w_N)``."""
     p_M, v_M = X[..., IP], X[..., IV]
     v_g = v_M + MARS.rotation_rate * np.stack([p_M[..., 1], -p_M[..., 0], np.zeros_like(p_M[..., 0])], axis=-1)
     C_N_M = ned_frames(p_M.reshape(-1, 3)).reshape(*p_M.shape[:-1], 3, 3)
     v_air_M = v_g - np.einsum("...ji,...j->...i", C_N_M, X[..., IW])
     u = np.einsum("...ij,...j->...i", C_B_M, v_air_M)
     th = X[..., ITH]
-    u = u - np.stack(  # (I − [δθ×]) C_B_M,nav v
+    return u - np.stack(
         [
             th[..., 1] * u[..., 2] - th[..., 2] * u[..., 1],
             th[..., 2] * u[..., 0] - th[..., 0] * u[..., 2],
@@ -179,21 +180,48 @@ def _air(X: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[np.ndarray, ..
         ],
         axis=-1,
     )
+
+
+def _freestream(u: np.ndarray, ln_p: np.ndarray, ln_rho: np.ndarray, gamma: float) -> tuple[np.ndarray, ...]:
+    """(α, β, q∞, M, p∞, ρ∞) (...,) from the body-axis air velocity u (..., 3) and ln p∞, ln ρ∞."""
     V = np.linalg.norm(u, axis=-1)
     alpha = np.arctan2(u[..., 2], u[..., 0])
     beta = np.arcsin(np.clip(u[..., 1] / V, -1.0, 1.0))
-    p_inf, rho = np.exp(X[..., ILP]), np.exp(X[..., ILR])
+    p_inf, rho = np.exp(ln_p), np.exp(ln_rho)
     return alpha, beta, 0.5 * rho * V**2, V / np.sqrt(gamma * p_inf / rho), p_inf, rho
 
 
-def _pressure_fn(inp: EkfInputs):
-    h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
+def _air(X: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[np.ndarray, ...]:
+    """(α, β, q∞, M, p∞, ρ∞) (...,) from states X (..., 21) and the strapdown C_B_M (..., 3, 3)."""
+    return _freestream(_air_velocity(X, C_B_M), X[..., ILP], X[..., ILR], gamma)
 
-    def h(X: np.ndarray, C_B_M: np.ndarray) -> np.ndarray:
-        """Port pressures (b, m) [Pa] of states X (b, 21) at the attitude C_B_M (3, 3)."""
-        a, b, q, M, _, _ = _air(X, C_B_M, inp.gamma)
-        p = h4(np.stack([q, a, b, M], axis=1))
-        return p * (1.0 + X[:, ILAM])
+
+#: perturbations of the air-data Jacobian in (u_B [m/s], ln p∞, ln ρ∞)
+_EPS_Z = np.array([1e-2, 1e-2, 1e-2, 1e-5, 1e-5])
+
+
+def _pressure_fn(inp: EkfInputs):
+    """``h(x, C_B_M, use) -> (p (k,), H (k, 21))``: the pressures of the ports ``use`` [Pa] and their
+    Jacobian.  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞) and λ, so the
+    surface-pressure model is differenced in z (11 evaluations) and chained with ∂z/∂x."""
+    h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
+    D = np.diag(_EPS_Z)
+    dz = np.concatenate([np.zeros((1, 5)), D, -D])
+
+    def h(x: np.ndarray, C_B_M: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        u0, Ju = numeric_jacobian_batched(lambda X: _air_velocity(X, C_B_M), x, LAYOUT, EPS)
+        Z = np.r_[u0, x[ILP], x[ILR]][None, :] + dz
+        a, b, q, M, _, _ = _freestream(Z[:, :3], Z[:, 3], Z[:, 4], inp.gamma)
+        pz = h4(np.stack([q, a, b, M], axis=1))[:, use]  # (11, k)
+        p0 = pz[0]
+        dp_dz = ((pz[1:6] - pz[6:11]) / (2.0 * _EPS_Z)[:, None]).T  # (k, 5)
+        Jz = np.zeros((5, N_X))
+        Jz[:3] = Ju
+        Jz[3, ILP] = Jz[4, ILR] = 1.0
+        lam = 1.0 + x[ILAM][use]
+        H = lam[:, None] * (dp_dz @ Jz)
+        H[np.arange(use.size), 14 + use] = p0
+        return p0 * lam, H
 
     return h
 
@@ -320,12 +348,11 @@ def run_pass(
         cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
         def both(xx):
-            # h and its Jacobian from one batched call; the update asks for h(x_i), then H(x_i)
+            # h and H from one evaluation; the update asks for h(x_i), then H(x_i)
             key = xx.tobytes()
             if key not in cache:
                 cache.clear()
-                y0, J = numeric_jacobian_batched(lambda X: h(X, C), xx, LAYOUT, EPS)
-                cache[key] = (y0[use], J[use])
+                cache[key] = h(xx, C, use)
             return cache[key]
 
         return [
