@@ -131,7 +131,8 @@ class EkfPass:
     ``forward`` the :class:`ForwardPass` (innovations under ``"pressure"``, NaN for unused ports);
     ``smoothed`` the :class:`SmoothedPass`; ``outputs`` (n, 9) and ``sigma`` (n, 9) of
     :data:`OUTPUT_NAMES` from the smoothed state; ``scale`` (7,) the scale factors used or found
-    (smoothed) with 1σ ``sigma_scale``; ``scale_estimated`` whether this pass estimated them;
+    (smoothed) with 1σ ``sigma_scale`` and covariance ``scale_cov`` (7, 7); ``scale_estimated``
+    whether this pass estimated them;
     ``nis_port`` (k, 7) per-port normalised innovations squared ``y_i²/S_ii`` of the forward pass at
     the processed samples (NaN where unused); ``wall_s`` [s]."""
 
@@ -144,6 +145,7 @@ class EkfPass:
     sigma: np.ndarray
     scale: np.ndarray
     sigma_scale: np.ndarray
+    scale_cov: np.ndarray
     scale_estimated: bool
     nis_port: np.ndarray
     wall_s: float
@@ -239,7 +241,7 @@ def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -
     return y, s
 
 
-def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_var: np.ndarray) -> tuple:
+def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.ndarray) -> tuple:
     atm = MarsEngineeringAtmosphere()
     h0 = float(np.linalg.norm(inp.p_M[0]) - MARS.reference_radius)
     x0 = np.zeros(N_X)
@@ -253,9 +255,11 @@ def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_var: np.
         np.full(3, inp.sigma_att**2),
         [sw**2, sw**2, st.vertical_wind_sigma_mps**2],
         np.full(2, st.atmosphere_sigma_ln**2),
-        scale_var,
+        np.zeros(scale0.size),
     ]
-    return x0, np.diag(d)
+    P0 = np.diag(d)
+    P0[ILAM, ILAM] = scale_cov
+    return x0, P0
 
 
 def _transition(inp: EkfInputs, st: EkfSettings):
@@ -315,27 +319,35 @@ def run_pass(
     passes: int = 1,
     estimate_scale: bool = True,
     scale_fixed: np.ndarray | None = None,
-    sigma_scale_fixed: np.ndarray | None = None,
+    scale_cov_fixed: np.ndarray | None = None,
 ) -> EkfPass:
     """One pass: forward iterated EKF over the pressure samples, then RTS smoothing.
 
     ``estimate_scale``: the scale factors are states (prior 0 ± ``st.scale_factor_sigma``);
-    otherwise the pressures are divided by ``1 + scale_fixed`` (7,), the scale-factor states are
-    held at zero with zero variance, and ``sigma_scale_fixed`` (7,) (their 1σ from the previous
-    pass) is added to R as ``(σ_λ p)²``.
+    otherwise the pressures are divided by ``1 + scale_fixed`` (7,) and the scale-factor states
+    become *consider* parameters (Schmidt): mean zero, covariance ``scale_cov_fixed`` (7, 7) (the
+    previous pass's), carried in P so that the innovations' S and the outputs' 1σ include them,
+    but never updated (gain projected to zero on them, no smoother gain) — the data are not
+    used twice.
     """
     t0 = time.perf_counter()
     m = inp.p.shape[1]
     p, sig = inp.p, inp.sigma_p
+    scale0 = np.zeros(m)
     if estimate_scale:
-        scale0, var0 = np.zeros(m), np.full(m, st.scale_factor_sigma**2)
+        Pl0 = np.diag(np.full(m, st.scale_factor_sigma**2))
+        projector = None
     else:
         lam = np.zeros(m) if scale_fixed is None else np.asarray(scale_fixed, float)
-        sl = np.zeros(m) if sigma_scale_fixed is None else np.asarray(sigma_scale_fixed, float)
+        Pl0 = np.zeros((m, m)) if scale_cov_fixed is None else np.asarray(scale_cov_fixed, float)
         p = p / (1.0 + lam)
-        sig = np.sqrt(sig**2 + (sl * np.nan_to_num(p)) ** 2)
-        scale0, var0 = np.zeros(m), np.zeros(m)
-    x0, P0 = _initial(inp, st, scale0, var0)
+        Pi = np.eye(N_X)
+        Pi[ILAM, ILAM] = 0.0
+
+        def projector(_x):
+            return Pi
+
+    x0, P0 = _initial(inp, st, scale0, Pl0)
     h = _pressure_fn(inp)
     C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
     transition = _transition(inp, st)
@@ -364,6 +376,7 @@ def run_pass(
                 H=lambda xx: both(xx)[1],
                 iterations=st.iterations,
                 step_tol=EPS,
+                gain_projector=projector,
                 slots=use,
                 size=m,
             )
@@ -371,7 +384,7 @@ def run_pass(
 
     with np.errstate(invalid="ignore"):
         fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, LAYOUT)
-        sm = rts_smooth(fp, LAYOUT)
+        sm = rts_smooth(fp, LAYOUT, consider=None if estimate_scale else np.arange(N_X)[ILAM])
     out, sd = air_outputs(sm.x, sm.P, inp.q_M_B, inp.gamma)
     inn = fp.innovations.get("pressure")
     if inn is None:
@@ -379,11 +392,12 @@ def run_pass(
     else:
         nis_port = inn.y**2 / np.einsum("kii->ki", inn.S)
     if estimate_scale:
-        lam, slam = sm.x[0, ILAM].copy(), np.sqrt(np.einsum("ii->i", sm.P[0][ILAM, ILAM]))
-    else:
-        lam = np.zeros(m) if scale_fixed is None else np.asarray(scale_fixed, float)
-        slam = np.zeros(m) if sigma_scale_fixed is None else np.asarray(sigma_scale_fixed, float)
-    return EkfPass(index, passes, inp.t, fp, sm, out, sd, lam, slam, estimate_scale, nis_port, time.perf_counter() - t0)
+        lam = sm.x[0, ILAM].copy()
+    Pl = sm.P[0][ILAM, ILAM].copy()
+    slam = np.sqrt(np.diag(Pl))
+    return EkfPass(
+        index, passes, inp.t, fp, sm, out, sd, lam, slam, Pl, estimate_scale, nis_port, time.perf_counter() - t0
+    )
 
 
 def run_passes(inp: EkfInputs, st: EkfSettings):
@@ -400,5 +414,5 @@ def run_passes(inp: EkfInputs, st: EkfSettings):
             passes=n,
             estimate_scale=False,
             scale_fixed=first.scale,
-            sigma_scale_fixed=first.sigma_scale,
+            scale_cov_fixed=first.scale_cov,
         )

@@ -18,8 +18,8 @@ when the port σ are right, so it is judged like a normalised innovation squared
 * the tightly-coupled EKF (Sect. III.B), when run: per pass and port, the normalised innovation
   squared ``y_i² / S_ii`` of the forward pass above the threshold (χ²(1) each), and the smoothed
   covariance symmetric and positive definite (judged on its correlation matrix, so that
-  variances of (10 m)² next to (10⁻⁴ rad)² do not decide it; components held fixed with zero
-  variance — the pass-2 scale factors — left out).
+  variances of (10 m)² next to (10⁻⁴ rad)² do not decide it; a component with zero variance,
+  e.g. a scale factor given a zero prior σ, is left out).
 """
 
 from __future__ import annotations
