@@ -89,3 +89,41 @@ def test_key_moments_of_the_flush_air_data(run):
     air = run.result.air
     assert t["peak_qbar"] == air.t[np.nanargmax(air.fit.qbar)]
     assert t["port_failure"] == run.summary["failed_ports"][0]["t_s"]
+
+
+def test_ekf_passes_of_the_shipped_run(run):
+    """The tightly-coupled EKF (Sect. III.B), both passes, against the CFD-like truth above 850 Pa."""
+    s, tr = run.summary, run.summary["truth"]
+    labels = [k for k in s["stage_times_s"] if k.startswith("EKF pass")]
+    assert len(labels) == 2 and labels[0].startswith("EKF pass 1/2") and labels[1].startswith("EKF pass 2/2")
+    ls, p1, p2 = tr["final"], tr["ekf_pass1"], tr["ekf_pass2"]
+    # pass 2 errors inside the reported 3σ for (nearly) every sample: α, β, Mach, p∞, density, winds
+    for k in ("alpha_deg", "beta_deg", "mach", "p_inf_pct", "density_pct", "wind_north_mps", "wind_east_mps"):
+        assert p2[k]["n"] > 900 and p2[k]["fraction_within_3sigma"] > 0.9, (k, p2[k])
+    # q∞: most samples only (72 % measured) — the estimator's table differs from the truth's
+    # pressures by a roughly constant ~1 % level that the filter puts into the scale factors'
+    # common mode, which is degenerate with density (q∞ = ρV²/2) and held by the priors alone
+    assert p2["qbar_pct"]["fraction_within_3sigma"] > 0.5
+    # the IMU coupling pins the angles: α, β far better than the point-wise least squares
+    for k in ("alpha_deg", "beta_deg"):
+        assert p1[k]["rms"] < 0.5 * ls[k]["rms"] and p2[k]["rms"] < 0.5 * ls[k]["rms"], k
+    # winds where the least squares publish none (singular or too uncertain)
+    assert ls["wind_north_mps"]["n"] == 0 and p2["wind_north_mps"]["max_abs"] < 10.0
+    names = {c["name"]: c for c in s["health"]["checks"]}
+    for i in (1, 2):
+        assert names[f"covariance.ekf_pass{i}_smoothed_correlation"]["status"] == "OK"
+        nis = [c for n, c in names.items() if n.startswith(f"nis.pressure_ekf_pass{i}_")]
+        assert len(nis) == 7 and all(c["status"] in ("OK", "WARNING") for c in nis)
+    sf = tr["ekf_scale_factors"]
+    assert len(sf["estimate"]) == 7 and all(0 < v < 0.01 for v in sf["sigma"])
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured 4 of 7 within 3σ: the table's model-form error against the CFD-like truth "
+    "(~1 % of reading, port-dependent, common mode -1.2 %) is indistinguishable from a transducer "
+    "scale factor; the filter recovers planted scale factors of its own model (tests/problems/meads/test_ekf.py)",
+)
+def test_ekf_scale_factors_inside_their_3_sigma(run):
+    sf = run.summary["truth"]["ekf_scale_factors"]
+    assert sf["fraction_within_3sigma"] == 1.0, sf
