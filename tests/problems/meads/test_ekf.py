@@ -18,11 +18,13 @@ from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.rotation import dcm_to_quat, quat_to_dcm
 from workbench.estimation.consistency import is_symmetric_pd
+from workbench.estimation.health import ERROR, OK
 from workbench.io.assets import asset_path
 from workbench.models.flush_airdata import load_fads_vehicle
 from workbench.problems.meads import ekf
 from workbench.problems.meads.airdata import ned_frames
 from workbench.problems.meads.config import EkfSettings
+from workbench.problems.meads.health import ekf_checks
 from workbench.problems.meads.pipeline import sensor_sigma
 
 VEHICLE = load_fads_vehicle(asset_path("vehicles", "msl_meads.toml"))
@@ -67,12 +69,12 @@ def _arc(n: int = 160, seed: int = 3):
     x[ekf.ILP] = math.log(atm.pressure(25e3)) + 0.15  # the truth is off the prior mean
     x[ekf.ILR] = math.log(atm.density(25e3)) + 0.25
     x[ekf.ILAM] = LAMBDA
-    step = ekf._transition(inp, EkfSettings())
+    step = ekf.make_transition(inp, EkfSettings())
     X = [x]
     for k in range(1, n):
         X.append(step(X[-1], t[k - 1], t[k])[0])
     X = np.array(X)
-    h = ekf._pressure_fn(inp)
+    h = ekf.make_pressure_model(inp)
     allp = np.arange(7)
     p_clean = np.array([h(X[k], C_B_M[k], allp)[0] for k in range(n)])
     sig = sensor_sigma(p_clean, VEHICLE, 0.002)
@@ -113,7 +115,7 @@ def test_innovations_are_consistent_and_outputs_track_the_truth(arc):
         nis = ps.nis_port[8:]
         assert 0.7 < float(np.mean(nis)) < 1.4, float(np.mean(nis))
         a, sa = ps.output("alpha")
-        ta = ekf._air(X, np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2), inp.gamma)
+        ta = ekf.air_data_of_state(X, np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2), inp.gamma)
         for j, name in enumerate(("alpha", "beta", "qbar", "mach")):
             v, s = ps.output(name)
             inside = np.mean(np.abs(v - ta[j]) <= 3.0 * s)
@@ -147,3 +149,18 @@ def test_pass2_uses_the_corrected_pressures_with_scale_factors_held(arc):
     rel = np.nanmean(inn.y[20:] / inn.z_pred[20:], axis=0)
     assert np.max(np.abs(rel - rel.mean())) < 0.2 * np.max(np.abs(LAMBDA))
     assert p2.stage_label.startswith("EKF pass 2/2")
+
+
+def test_health_checks_of_the_passes(arc):
+    inp, _, passes = arc
+    ports = VEHICLE.port_names
+    above = np.ones(inp.t.size, bool)
+    checks = {c.name: c for c in ekf_checks(passes, inp.t, above, ports)}
+    for i in (1, 2):
+        assert checks[f"covariance.ekf_pass{i}_smoothed_correlation"].status == OK
+        for p in ports:
+            assert checks[f"nis.pressure_ekf_pass{i}_{p}"].status == OK, checks[f"nis.pressure_ekf_pass{i}_{p}"]
+    # innovations 6x their σ (a wrong unit or noise level) are an ERROR
+    bad = replace(passes[1], nis_port=36.0 * passes[1].nis_port)
+    checks = {c.name: c for c in ekf_checks([bad], inp.t, above, ports)}
+    assert checks["nis.pressure_ekf_pass2_P1"].status == ERROR

@@ -77,6 +77,9 @@ __all__ = [
     "run_pass",
     "run_passes",
     "air_outputs",
+    "air_data_of_state",
+    "make_transition",
+    "make_pressure_model",
 ]
 
 N_PORTS = 7
@@ -193,7 +196,7 @@ def _freestream(u: np.ndarray, ln_p: np.ndarray, ln_rho: np.ndarray, gamma: floa
     return alpha, beta, 0.5 * rho * V**2, V / np.sqrt(gamma * p_inf / rho), p_inf, rho
 
 
-def _air(X: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[np.ndarray, ...]:
+def air_data_of_state(X: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[np.ndarray, ...]:
     """(α, β, q∞, M, p∞, ρ∞) (...,) from states X (..., 21) and the strapdown C_B_M (..., 3, 3)."""
     return _freestream(_air_velocity(X, C_B_M), X[..., ILP], X[..., ILR], gamma)
 
@@ -202,7 +205,7 @@ def _air(X: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[np.ndarray, ..
 _EPS_Z = np.array([1e-2, 1e-2, 1e-2, 1e-5, 1e-5])
 
 
-def _pressure_fn(inp: EkfInputs):
+def make_pressure_model(inp: EkfInputs):
     """``h(x, C_B_M, use) -> (p (k,), H (k, 21))``: the pressures of the ports ``use`` [Pa] and their
     Jacobian.  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞) and λ, so the
     surface-pressure model is differenced in z (11 evaluations) and chained with ∂z/∂x."""
@@ -234,7 +237,7 @@ def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -
     C_B_M = np.swapaxes(quat_to_dcm(q_M_B), 1, 2)[:, None]
 
     def g(X):
-        a, b, q, M, pi, rho = _air(X, C_B_M, gamma)
+        a, b, q, M, pi, rho = air_data_of_state(X, C_B_M, gamma)
         return np.stack([a, b, q, M, pi, rho, X[..., 9], X[..., 10], X[..., 11]], axis=-1)
 
     y, s, _ = derived_with_sigma(g, x, P, LAYOUT, EPS)
@@ -262,7 +265,7 @@ def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.
     return x0, P0
 
 
-def _transition(inp: EkfInputs, st: EkfSettings):
+def make_transition(inp: EkfInputs, st: EkfSettings):
     """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring)."""
     t = inp.t
     C_M_B = quat_to_dcm(inp.q_M_B)
@@ -348,9 +351,9 @@ def run_pass(
             return Pi
 
     x0, P0 = _initial(inp, st, scale0, Pl0)
-    h = _pressure_fn(inp)
+    h = make_pressure_model(inp)
     C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
-    transition = _transition(inp, st)
+    transition = make_transition(inp, st)
 
     def measurements_at(k, tk, x):
         use = np.flatnonzero(inp.usable[k] & np.isfinite(p[k]))

@@ -199,7 +199,8 @@ def meads_health(tel, nav, air, wind, est, passes=()) -> dict:
         if np.isfinite(fit.qbar).any():
             tq = float(t[int(np.nanargmax(fit.qbar))])
             checks.append(gap_check("gaps.peak_qbar", gaps, {"peak q∞": (tq - 2.0, tq + 2.0)}, status=WARNING))
-    checks += ekf_checks(passes, tel.t_p, above, tel.ports)
+    if passes:
+        checks += ekf_checks(passes, tel.t_p, above, tel.ports)
     notes = list(tel.degradations) + [f.message for f in air.failures]
     checks.append(notes_check("telemetry", notes))
     return health_report(checks)

@@ -63,8 +63,8 @@ PLOTS = (
     ("lag [ms]", "lag_delay_ms"),
     ("lag correction [Pa]", "lag_correction_Pa"),
 )
-EKF_INNOVATIONS = "pressure_ekf_pass2"
-"""Residual sensor name of the EKF innovations shown in the default blueprint (the last pass)."""
+EKF_SHOWN_PASS = 2
+"""The EKF pass whose innovations the default blueprint shows (the last of the default two)."""
 #: EKF outputs drawn next to the least-squares ones: (plot quantity, output, scale, label)
 EKF_PLOTS = (
     ("alpha_deg", "alpha", 180 / math.pi, "α [deg]"),
@@ -93,7 +93,7 @@ def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6"
             rrb.Vertical(
                 plot_view(f"{p} [Pa]: measured vs model", layout.join(layout.MEADS_PLOT_PORTS, p), legend="RightTop"),
                 plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p)),
-                plot_view(f"{p} EKF innovation [Pa] — grey ±3σ", layout.residual_path(EKF_INNOVATIONS, p)),
+                plot_view(f"{p} EKF innovation [Pa] — grey ±3σ", layout.meads_ekf_innovation_path(EKF_SHOWN_PASS, p)),
                 name=p,
             )
         )
@@ -332,10 +332,9 @@ class MeadsRecorder:
         rec, t = self.rec, st.t
         last = st.index == st.passes
         col = (200, 40, 160) if last else (120, 90, 200)
-        tag = f"ekf_pass{st.index}"
         for q, name, scale, label in EKF_PLOTS:
             v, s = st.output(name)
-            path = layout.join(layout.plot_path(q), tag)
+            path = layout.meads_ekf_plot_path(q, st.index)
             lab = f"EKF pass {st.index} {label}"
             if last:
                 rec.series_with_bounds(path, t, scale * v, scale * s, names=lab, color=[col])
@@ -343,7 +342,7 @@ class MeadsRecorder:
                 rec.scalars(layout.join(path, layout.VALUE), t, scale * v, names=lab, colors=[col])
         rho, srho = st.output("rho")
         rt = self._truth("rho", t)
-        path = layout.join(layout.plot_path("density"), tag)
+        path = layout.meads_ekf_plot_path("density", st.index)
         if rt is not None:
             if last:
                 rec.series_with_bounds(
@@ -366,7 +365,7 @@ class MeadsRecorder:
             lam = np.broadcast_to(st.scale, (t.size, m))
             slam = np.broadcast_to(st.sigma_scale, (t.size, m))
         rec.series_with_bounds(
-            layout.join(layout.plot_path("scale_factors"), f"pass{st.index}"),
+            layout.meads_scale_factor_path(f"pass{st.index}"),
             t,
             100 * lam,
             100 * slam,
@@ -374,7 +373,7 @@ class MeadsRecorder:
         )
         if self.truth is not None and "sensor_scale" in self.truth and st.index == 1:
             rec.scalars(
-                layout.join(layout.plot_path("scale_factors"), layout.TRUTH_SERIES),
+                layout.meads_scale_factor_path(layout.TRUTH_SERIES),
                 t,
                 100 * np.broadcast_to(np.asarray(self.truth["sensor_scale"], float), (t.size, m)),
                 names=[f"{p} truth [%]" for p in ports],
@@ -384,7 +383,7 @@ class MeadsRecorder:
             sd = np.sqrt(np.einsum("kii->ki", inn.S))
             for j, p in enumerate(ports):
                 rec.series_with_bounds(
-                    layout.residual_path(f"pressure_ekf_pass{st.index}", p),
+                    layout.meads_ekf_innovation_path(st.index, p),
                     inn.t,
                     np.nan_to_num(inn.y[:, j]),
                     np.nan_to_num(sd[:, j]),
