@@ -97,13 +97,11 @@ def test_ekf_passes_of_the_shipped_run(run):
     labels = [k for k in s["stage_times_s"] if k.startswith("EKF pass")]
     assert len(labels) == 2 and labels[0].startswith("EKF pass 1/2") and labels[1].startswith("EKF pass 2/2")
     ls, p1, p2 = tr["final"], tr["ekf_pass1"], tr["ekf_pass2"]
-    # pass 2 errors inside the reported 3σ for (nearly) every sample: α, β, Mach, p∞, density, winds
-    for k in ("alpha_deg", "beta_deg", "mach", "p_inf_pct", "density_pct", "wind_north_mps", "wind_east_mps"):
+    # pass 2 errors inside the reported 3σ for (nearly) every sample (α 91 % measured, the rest
+    # 100 %); q∞ thanks to the model-level state c ([ekf] model_level_sigma; without it 72 %)
+    keys = ("alpha_deg", "beta_deg", "qbar_pct", "mach", "p_inf_pct", "density_pct", "wind_north_mps", "wind_east_mps")
+    for k in keys:
         assert p2[k]["n"] > 900 and p2[k]["fraction_within_3sigma"] > 0.9, (k, p2[k])
-    # q∞: most samples only (72 % measured) — the estimator's table differs from the truth's
-    # pressures by a roughly constant ~1 % level that the filter puts into the scale factors'
-    # common mode, which is degenerate with density (q∞ = ρV²/2) and held by the priors alone
-    assert p2["qbar_pct"]["fraction_within_3sigma"] > 0.5
     # the IMU coupling pins the angles: α, β far better than the point-wise least squares
     for k in ("alpha_deg", "beta_deg"):
         assert p1[k]["rms"] < 0.5 * ls[k]["rms"] and p2[k]["rms"] < 0.5 * ls[k]["rms"], k

@@ -78,7 +78,9 @@ class EkfSettings:
     ``vertical_wind_sigma_mps`` prior 1σ of the horizontal / vertical wind; ``wind_var_per_km``
     [(m/s)² per km of altitude travelled]; ``atmosphere_sigma_ln`` prior 1σ of ln p∞ and ln ρ∞ about
     the engineering atmosphere; ``atmosphere_var_per_km`` [per km] random walk of ln p∞, ln ρ∞;
-    ``scale_factor_sigma`` prior 1σ of each transducer scale factor (of reading).
+    ``scale_factor_sigma`` prior 1σ of each transducer scale factor (of reading);
+    ``model_level_sigma`` prior 1σ of the common level error of the pressure model (of reading,
+    a constant state; 0: not modelled).
     """
 
     enabled: bool = True
@@ -92,6 +94,7 @@ class EkfSettings:
     atmosphere_sigma_ln: float = 1.0
     atmosphere_var_per_km: float = 1e-3
     scale_factor_sigma: float = 0.01
+    model_level_sigma: float = 0.01
 
 
 @dataclass(frozen=True)
@@ -177,7 +180,7 @@ class MeadsConfig:
         for k in ("wind_sigma_mps", "vertical_wind_sigma_mps", "atmosphere_sigma_ln", "scale_factor_sigma"):
             if not ek[k] > 0.0:
                 raise ScenarioError(scenario.path, f"ekf.{k}", f"{ek[k]}: a prior 1-sigma must be > 0")
-        for k in ("accel_psd", "attitude_psd", "wind_var_per_km", "atmosphere_var_per_km"):
+        for k in ("accel_psd", "attitude_psd", "wind_var_per_km", "atmosphere_var_per_km", "model_level_sigma"):
             if not ek[k] >= 0.0:
                 raise ScenarioError(scenario.path, f"ekf.{k}", f"{ek[k]}: a process noise must be >= 0")
         levels = tuple(float(x) / 100.0 for x in mc["levels_pct"])
@@ -358,6 +361,7 @@ SCHEMA = Schema(
                 Key("atmosphere_sigma_ln", "float", _K.atmosphere_sigma_ln, "", "prior 1-sigma of ln p and ln rho"),
                 Key("atmosphere_var_per_km", "float", _K.atmosphere_var_per_km, "1/km", "ln p, ln rho random walk"),
                 Key("scale_factor_sigma", "float", _K.scale_factor_sigma, "", "prior 1-sigma of each scale factor"),
+                Key("model_level_sigma", "float", _K.model_level_sigma, "", "prior 1-sigma, pressure model level"),
             ),
         ),
         Table(

@@ -5,9 +5,9 @@ Flight Results", AIAA 2013, Sect. III.B (Eq. 19–35) and Sect. IV.B.4 (the mult
 composed on the shared engine (:func:`workbench.estimation.ekf.run_filter`, iterated
 :func:`~workbench.estimation.ekf.update`, :func:`workbench.estimation.smoother.rts_smooth`).
 
-State (21, all additive; :data:`STATE_NAMES`)::
+State (22, all additive; :data:`STATE_NAMES`)::
 
-    x = [p_M (3) m, v_M (3) m/s, δθ_B (3) rad, w_N (3) m/s, ln p∞, ln ρ∞, λ_1..λ_7]
+    x = [p_M (3) m, v_M (3) m/s, δθ_B (3) rad, w_N (3) m/s, ln p∞, ln ρ∞, λ_1..λ_7, c]
 
 * ``p_M``, ``v_M``: inertial position and velocity in the planet-centred inertial frame M (the
   paper's r, θ, φ, u, v, w of Eq. 19, in Cartesian form).  They are driven by the IMU through the
@@ -27,7 +27,14 @@ State (21, all additive; :data:`STATE_NAMES`)::
   ``−g Δh ρ∞/p∞``), in logarithms so the 10⁵ range of the entry stays well scaled; a random walk
   per altitude travelled absorbs the temperature structure.
 * ``λ_i``: transducer scale factors, ``λ̇ = 0`` (Sect. III.B): the measured pressure of port i is
-  ``(1 + λ_i) h_i(x)``.
+  ``(1 + λ_i)(1 + c) h_i(x)``.
+* ``c``: an addition to the paper — the common level error of the estimator's pressure model
+  (a constant, prior 1σ ``[ekf] model_level_sigma``, by default the least squares' model-form
+  allowance).  It multiplies every port, like λ's common mode and like a common scaling of
+  p∞ and ρ∞ (q∞ = ρ∞V²/2, M unchanged): the pressures cannot tell these apart, so c keeps its
+  prior and what it does is carry the model-level uncertainty into the 1σ of q∞, p∞ and ρ∞
+  (without it the filter reports q∞ to ~0.5 % 1σ while the estimator's table differs from the
+  synthetic truth's pressures by ~1 %).  0 turns it off.
 
 Measurement (Eq. 33–35, iterated update): the seven port pressures through the same surface
 pressure model as the least squares (:func:`.airdata.pressure_model`, Newtonian or the
@@ -83,8 +90,8 @@ __all__ = [
 ]
 
 N_PORTS = 7
-IP, IV, ITH, IW, ILP, ILR, ILAM = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), 12, 13, slice(14, 21)
-N_X = 21
+IP, IV, ITH, IW, ILP, ILR, ILAM, IC = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), 12, 13, slice(14, 21), 21
+N_X = 22
 LAYOUT = ErrorStateLayout(N_X)
 STATE_NAMES = (
     *(f"p_M_{a}" for a in "xyz"),
@@ -96,12 +103,13 @@ STATE_NAMES = (
     "ln_p_inf",
     "ln_rho_inf",
     *(f"scale_{i + 1}" for i in range(N_PORTS)),
+    "model_level",
 )
 OUTPUT_NAMES = ("alpha", "beta", "qbar", "mach", "p_inf", "rho", "wind_north", "wind_east", "wind_down")
 """Columns of :func:`air_outputs` [rad, rad, Pa, 1, Pa, kg/m³, m/s, m/s, m/s]."""
 
 #: perturbations of the numeric Jacobians, error-state units
-EPS = np.r_[np.full(3, 1.0), np.full(3, 1e-2), np.full(3, 1e-6), np.full(3, 1e-2), 1e-5, 1e-5, np.full(7, 1e-6)]
+EPS = np.r_[np.full(3, 1.0), np.full(3, 1e-2), np.full(3, 1e-6), np.full(3, 1e-2), 1e-5, 1e-5, np.full(7, 1e-6), 1e-6]
 
 
 @dataclass(frozen=True)
@@ -224,9 +232,11 @@ def make_pressure_model(inp: EkfInputs):
         Jz[:3] = Ju
         Jz[3, ILP] = Jz[4, ILR] = 1.0
         lam = 1.0 + x[ILAM][use]
-        H = lam[:, None] * (dp_dz @ Jz)
-        H[np.arange(use.size), 14 + use] = p0
-        return p0 * lam, H
+        lev = 1.0 + x[IC]
+        H = (lam * lev)[:, None] * (dp_dz @ Jz)
+        H[np.arange(use.size), 14 + use] = p0 * lev
+        H[:, IC] = p0 * lam
+        return p0 * lam * lev, H
 
     return h
 
@@ -259,6 +269,7 @@ def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.
         [sw**2, sw**2, st.vertical_wind_sigma_mps**2],
         np.full(2, st.atmosphere_sigma_ln**2),
         np.zeros(scale0.size),
+        [st.model_level_sigma**2],
     ]
     P0 = np.diag(d)
     P0[ILAM, ILAM] = scale_cov
