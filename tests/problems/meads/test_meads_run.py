@@ -125,3 +125,21 @@ def test_ekf_passes_of_the_shipped_run(run):
 def test_ekf_scale_factors_inside_their_3_sigma(run):
     sf = run.summary["truth"]["ekf_scale_factors"]
     assert sf["fraction_within_3sigma"] == 1.0, sf
+
+
+def test_ekf_in_the_recording(run):
+    """The EKF's outputs sit next to the least squares', its scale factors converge to the summary's
+    values, its innovations are there per port (the default blueprint's views)."""
+    from workbench.recording import layout
+    from workbench.recording.reader import read_recording
+
+    rec = read_recording(run.recording)
+    ents = set(rec.entities())
+    for q in ("alpha_deg", "beta_deg", "qbar_kPa", "mach", "wind_north_mps", "wind_east_mps"):
+        assert layout.join(layout.meads_ekf_plot_path(q, 2), layout.VALUE) in ents, q
+        assert layout.join(layout.meads_ekf_plot_path(q, 1), layout.VALUE) in ents, q
+    _, lam = rec.scalars(layout.join(layout.meads_scale_factor_path("pass1"), layout.VALUE))
+    np.testing.assert_allclose(lam[-1] / 100.0, run.summary["ekf"]["pass1"]["scale_factors"], atol=2e-4)
+    for p in run.result.data.telemetry.ports:
+        _, y = rec.scalars(layout.join(layout.meads_ekf_innovation_path(2, p), layout.VALUE))
+        assert y.shape[0] > 2000
