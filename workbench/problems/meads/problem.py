@@ -140,11 +140,13 @@ class MeadsProblem:
     @contextlib.contextmanager
     def open_recording(self, path: Path, scenario: Scenario, truth: Any, properties: dict) -> Iterator[_Drawer]:
         """The MEADS recording (``recording.meads_blueprint``)."""
+        from workbench.problems.meads.config import config_for
         from workbench.problems.meads.recording import MeadsRecorder, meads_blueprint
         from workbench.recording.writer import open_recording
 
         vehicle = md.vehicle_for(scenario)
-        bp = meads_blueprint(vehicle.port_names)
+        ekf = config_for(scenario).ekf
+        bp = meads_blueprint(vehicle.port_names, ekf.passes if ekf.enabled else 0)
         with open_recording(path, scenario.name, blueprint=bp, properties=properties) as rec:
             yield _Drawer(rec, MeadsRecorder(rec, truth))
 

@@ -63,8 +63,6 @@ PLOTS = (
     ("lag [ms]", "lag_delay_ms"),
     ("lag correction [Pa]", "lag_correction_Pa"),
 )
-EKF_SHOWN_PASS = 2
-"""The EKF pass whose innovations the default blueprint shows (the last of the default two)."""
 #: EKF outputs drawn next to the least-squares ones: (plot quantity, output, scale, label)
 EKF_PLOTS = (
     ("alpha_deg", "alpha", 180 / math.pi, "α [deg]"),
@@ -78,9 +76,12 @@ EKF_PLOTS = (
 C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
-def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6", "P7")) -> rrb.Blueprint:
+def meads_blueprint(
+    ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6", "P7"), ekf_passes: int = 2
+) -> rrb.Blueprint:
     """Default layout: the heat shield (left top), air-data plots (right top, one tab per quantity),
-    per-port pressure and residual tabs (right bottom), scorecard and events (left bottom)."""
+    per-port pressure, residual and EKF-innovation tabs (right bottom; the innovations of the last
+    of ``ekf_passes``, none when 0), scorecard and events (left bottom)."""
     scene = rrb.Spatial3DView(
         name="Heat shield (reconstructed attitude, local ENU)",
         origin=layout.WORLD,
@@ -89,14 +90,18 @@ def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6"
     plots = rrb.Tabs(*[tab(n, plot_view(n, layout.plot_path(q), legend="RightTop")) for n, q in PLOTS], active_tab=0)
     port_tabs = []
     for p in ports:
-        port_tabs.append(
-            rrb.Vertical(
-                plot_view(f"{p} [Pa]: measured vs model", layout.join(layout.MEADS_PLOT_PORTS, p), legend="RightTop"),
-                plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p)),
-                plot_view(f"{p} EKF innovation [Pa] — grey ±3σ", layout.meads_ekf_innovation_path(EKF_SHOWN_PASS, p)),
-                name=p,
+        views = [
+            plot_view(f"{p} [Pa]: measured vs model", layout.join(layout.MEADS_PLOT_PORTS, p), legend="RightTop"),
+            plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p)),
+        ]
+        if ekf_passes:
+            views.append(
+                plot_view(
+                    f"{p} EKF pass {ekf_passes} innovation [Pa] — grey ±3σ",
+                    layout.meads_ekf_innovation_path(ekf_passes, p),
+                )
             )
-        )
+        port_tabs.append(rrb.Vertical(*views, name=p))
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
