@@ -284,3 +284,47 @@ def test_exactly_known_component_gets_no_gain_and_matches_the_reduced_smoother()
     np.testing.assert_allclose(full.x[:, :2], reduced.x, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(full.P[:, :2, :2], reduced.P, rtol=1e-10, atol=1e-14)
     assert np.all(full.x[:, 2] == 0.7) and np.all(full.P[:, 2, :] == 0.0)
+
+
+def test_consider_parameter_smoother_covariance_is_exact():
+    """A random walk seen through a constant bias c that is *considered* (Schmidt: carried in P,
+    never estimated): the smoothed error covariance equals the exact one, computed from the
+    estimator's linear response to each independent error source, and c is never moved."""
+    n, q, r, p0, pc = 12, 0.3, 0.5, 2.0, 0.8
+    layout = ErrorStateLayout(2)
+    Pi = np.diag([1.0, 0.0])
+    H = np.array([[1.0, 1.0]])
+
+    def run(e0, c, w, v):
+        x_true = e0 + np.cumsum(np.r_[0.0, w])
+        z = x_true + c + v
+
+        def transition(x, t0, t1):
+            return x, np.eye(2), np.diag([q, 0.0])
+
+        def meas(k, tk, x):
+            return [Measurement("z", z[k : k + 1], np.array([[r]]), lambda s: H @ s, H=H, gain_projector=lambda s: Pi)]
+
+        fp = run_filter(np.zeros(2), np.diag([p0, pc]), np.arange(n, dtype=float), transition, None, meas, layout)
+        sm = rts_smooth(fp, layout, consider=[1])
+        return sm, sm.x - np.stack([x_true, np.full(n, c)], 1)
+
+    sources = [(np.sqrt(p0), 0.0, np.zeros(n - 1), np.zeros(n)), (0.0, np.sqrt(pc), np.zeros(n - 1), np.zeros(n))]
+    for i in range(n - 1):
+        w = np.zeros(n - 1)
+        w[i] = np.sqrt(q)
+        sources.append((0.0, 0.0, w, np.zeros(n)))
+    for i in range(n):
+        v = np.zeros(n)
+        v[i] = np.sqrt(r)
+        sources.append((0.0, 0.0, np.zeros(n - 1), v))
+    errs = []
+    for s in sources:
+        sm, e = run(*s)
+        errs.append(e)
+        assert np.all(sm.x[:, 1] == 0.0)  # the consider parameter keeps its prior value
+    E = np.array(errs)  # (sources, n, 2)
+    exact = np.einsum("snj,snk->njk", E, E)
+    np.testing.assert_allclose(sm.P, exact, rtol=1e-9, atol=1e-12)
+    # and the smoother did help the estimated state where the filter alone could not
+    assert sm.P[0, 0, 0] < p0 + pc

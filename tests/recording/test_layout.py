@@ -29,6 +29,9 @@ ROW = re.compile(r"^\|\s*`(/[^`]*)`\s*\|")
 FAMILY_ARGS = {
     "meads_port_plot_path": ("P1", "measured"),
     "meads_trade_path": ("alpha_deg", "1pct"),
+    "meads_ekf_plot_path": ("alpha_deg", 2),
+    "meads_scale_factor_path": ("pass1",),
+    "meads_ekf_innovation_path": (1, "P3"),
     "radar_beam_path": (2,),
     "truth_path": ("vehicle",),
     "plot_path": ("altitude",),

@@ -72,6 +72,7 @@ __all__ = [
     "numeric_transition_jacobian",
     "numeric_measurement_jacobian",
     "numeric_jacobian_batched",
+    "derived_with_sigma",
     "predict",
     "update",
     "run_filter",
@@ -444,6 +445,37 @@ def numeric_jacobian_batched(
         cols = out_layout.boxminus(Yp, y0) - out_layout.boxminus(Ym, y0)
     cols = cols / (2.0 * e)[:, None]
     return y0, np.ascontiguousarray(cols.T)
+
+
+def derived_with_sigma(
+    g: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    P: np.ndarray,
+    layout: ErrorStateLayout,
+    eps: float | np.ndarray = 1e-6,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quantities derived from a history of states, with their covariance by first-order propagation.
+
+    ``x`` (n, n_x) states and ``P`` (n, n_e, n_e) their error covariances (e.g. a smoothed pass);
+    ``g`` maps states (n, r, n_x) to (n, r, k) derived quantities (sample i of the leading axis
+    belongs to ``x[i]``, so g may broadcast per-sample constants shaped (n, 1, ...)).  It is called
+    once on the stack ``[x, x ⊞ ε e_j, x ⊞ −ε e_j]`` (r = 1 + 2 n_e); ``J`` (n, k, n_e) are the central
+    differences.  Returns ``(g(x) (n, k), 1σ (n, k) = sqrt(diag(J P Jᵀ)), covariance (n, k, k))``.
+    ``eps`` scalar or (n_e,), error-state units.
+    """
+    x = np.asarray(x, dtype=float)
+    P = np.asarray(P, dtype=float)
+    n_e = layout.n_e
+    e = _eps_vector(eps, n_e)
+    D = np.diag(e)
+    dx = np.concatenate([np.zeros((1, n_e)), D, -D], axis=0)  # (r, n_e)
+    X = layout.boxplus(x[:, None, :], dx[None, :, :])
+    Y = np.asarray(g(X), dtype=float)
+    y0, Yp, Ym = Y[:, 0], Y[:, 1 : 1 + n_e], Y[:, 1 + n_e :]
+    J = np.swapaxes((Yp - Ym) / (2.0 * e)[None, :, None], 1, 2)
+    C = np.einsum("nkj,nji,nli->nkl", J, P, J)
+    C = 0.5 * (C + np.swapaxes(C, 1, 2))
+    return y0, np.sqrt(np.maximum(np.einsum("nkk->nk", C), 0.0)), C
 
 
 # ---------------------------------------------------------------------------------------------

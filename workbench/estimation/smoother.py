@@ -61,7 +61,7 @@ class SmoothedPass:
     G: np.ndarray
 
 
-def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPass:
+def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout, consider: np.ndarray | None = None) -> SmoothedPass:
     """Error-state RTS smoothing of a forward pass (formulas in the module docstring).
 
     ``fp``: output of :func:`~workbench.estimation.ekf.run_filter` (or any ForwardPass with
@@ -75,6 +75,14 @@ def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPass:
     exactly: they get no smoother gain and keep zero variance.  Raises :class:`CovarianceError` (a
     ``ValueError``) naming the step if a predicted covariance cannot be factorised or a smoothed
     covariance is not positive definite (semi-definite on such exact components).
+
+    ``consider``: error-state indices of constant *consider* parameters (Schmidt): uncertain,
+    carried in the covariance, never estimated — the forward pass held them with a projected gain
+    (:func:`~workbench.estimation.ekf.update`'s ``gain_projector``) and their transition is the
+    identity without process noise.  Their rows of G are then the selection of themselves
+    (``G[c, :] = 0``, ``G[c, c] = I``): they keep their value and covariance (the difference
+    ``x_s − x_prior`` is zero on them), and the cross-covariance of the other states with them
+    gets the smoothing term ``G_x (P_s[k+1] − P_prior[k+1])[:, c]`` it needs.
     """
     n = fp.t.shape[0]
     n_e = layout.n_e
@@ -87,11 +95,18 @@ def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout) -> SmoothedPass:
     # OpenBLAS's threaded dtrsm (inside dpotrs) spends ~30× the single-thread CPU time in
     # synchronisation (measured 2.6 ms vs 0.02 ms per 42 × 42 solve on 2 shared cores).
     with threadpool_limits(limits=1, user_api="blas"):
-        _rts_backward(fp, layout, xs, Ps, G)
+        _rts_backward(fp, layout, xs, Ps, G, None if consider is None else np.asarray(consider, dtype=int))
     return SmoothedPass(fp.t, xs, Ps, G)
 
 
-def _rts_backward(fp: ForwardPass, layout: ErrorStateLayout, xs: np.ndarray, Ps: np.ndarray, G: np.ndarray) -> None:
+def _rts_backward(
+    fp: ForwardPass,
+    layout: ErrorStateLayout,
+    xs: np.ndarray,
+    Ps: np.ndarray,
+    G: np.ndarray,
+    consider: np.ndarray | None = None,
+) -> None:
     """The backward recursion of :func:`rts_smooth`, filling xs (n, n_x), Ps and G (n, n_e, n_e)."""
     n = fp.t.shape[0]
     xs[-1] = fp.x_post[-1]
@@ -127,6 +142,9 @@ def _rts_backward(fp: ForwardPass, layout: ErrorStateLayout, xs: np.ndarray, Ps:
             Gt = np.zeros_like(rhs)
             sol, _ = lapack.dpotrs(c, rhs[act] / da[:, None], lower=1)
             Gt[act] = sol / da[:, None]
+        if consider is not None:  # constant consider parameters: G's rows are the selection of themselves
+            Gt[:, consider] = 0.0
+            Gt[consider, consider] = 1.0
         Gk = Gt.T
         dx = Gk @ layout.boxminus(xs[k + 1], fp.x_prior[k + 1])
         xs[k] = layout.boxplus(fp.x_post[k], dx)

@@ -38,6 +38,7 @@ from __future__ import annotations
 import math
 import tomllib
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -360,8 +361,13 @@ class SurfacePressureTable:
             ],
             axis=-1,
         )
-        f = RegularGridInterpolator((self.mach, self.alpha_t, self.clock, self.s), self.values, method="linear")
-        return f(pts.reshape(-1, 4)).reshape(m.shape)
+        return self._interpolator(pts.reshape(-1, 4)).reshape(m.shape)
+
+    @cached_property
+    def _interpolator(self) -> RegularGridInterpolator:
+        """The linear interpolator over the grid, built once per table (a filter calls :meth:`cp`
+        thousands of times with a few points each)."""
+        return RegularGridInterpolator((self.mach, self.alpha_t, self.clock, self.s), self.values, method="linear")
 
 
 def build_estimator_table(vehicle: FadsVehicle) -> SurfacePressureTable:

@@ -187,6 +187,7 @@ MEADS_PORT_RESIDUALS = "/world/vehicle/heat_shield/port_residuals"
 MEADS_AIR_VELOCITY = "/world/vehicle/air_velocity"
 MEADS_PLOT_PORTS = "/plots/ports"
 MEADS_TRADE_STUDY = "/plots/trade_study"
+MEADS_PLOT_SCALE_FACTORS = "/plots/scale_factors"
 # ------------------------------------------------------------------ post2 (problem-file reconstruction)
 POST2_FOREBODY = "/world/vehicle/body/forebody"
 POST2_BACK_SHELL = "/world/vehicle/body/backshell"
@@ -427,6 +428,9 @@ _FAMILIES = {
     "compare_position_path": "/compare/position/<axis>",
     "meads_port_plot_path": "/plots/ports/<port>/<series>",
     "meads_trade_path": "/plots/trade_study/<quantity>/<level>",
+    "meads_ekf_plot_path": "/plots/<quantity>/ekf_pass<pass>",
+    "meads_scale_factor_path": "/plots/scale_factors/<series>",
+    "meads_ekf_innovation_path": "/residuals/pressure_ekf_pass<pass>/<port>",
 }
 
 
@@ -438,6 +442,21 @@ def meads_port_plot_path(port: str, series: str) -> str:
 def meads_trade_path(quantity: str, level: str) -> str:
     """``/plots/trade_study/<quantity>/<level>``: trade-study 3σ of ``quantity`` at one error level."""
     return join(MEADS_TRADE_STUDY, quantity, level)
+
+
+def meads_ekf_plot_path(quantity: str, pass_index: int) -> str:
+    """``/plots/<quantity>/ekf_pass<pass>``: the MEADS EKF pass's estimate of one plotted quantity."""
+    return join(PLOTS, quantity, f"ekf_pass{int(pass_index)}")
+
+
+def meads_scale_factor_path(series: str) -> str:
+    """``/plots/scale_factors/<series>``: transducer scale factors, ``pass<i>`` or ``truth``."""
+    return join(MEADS_PLOT_SCALE_FACTORS, series)
+
+
+def meads_ekf_innovation_path(pass_index: int, port: str) -> str:
+    """``/residuals/pressure_ekf_pass<pass>/<port>``: one port's EKF pressure innovation (±3σ)."""
+    return join(RESIDUALS, f"pressure_ekf_pass{int(pass_index)}", port)
 
 
 def path_families() -> dict[str, str]:

@@ -89,3 +89,57 @@ def test_key_moments_of_the_flush_air_data(run):
     air = run.result.air
     assert t["peak_qbar"] == air.t[np.nanargmax(air.fit.qbar)]
     assert t["port_failure"] == run.summary["failed_ports"][0]["t_s"]
+
+
+def test_ekf_passes_of_the_shipped_run(run):
+    """The tightly-coupled EKF (Sect. III.B), both passes, against the CFD-like truth above 850 Pa."""
+    s, tr = run.summary, run.summary["truth"]
+    labels = [k for k in s["stage_times_s"] if k.startswith("EKF pass")]
+    assert len(labels) == 2 and labels[0].startswith("EKF pass 1/2") and labels[1].startswith("EKF pass 2/2")
+    ls, p1, p2 = tr["final"], tr["ekf_pass1"], tr["ekf_pass2"]
+    # pass 2 errors inside the reported 3σ for (nearly) every sample (α 91 % measured, the rest
+    # 100 %); q∞ thanks to the model-level state c ([ekf] model_level_sigma; without it 72 %)
+    keys = ("alpha_deg", "beta_deg", "qbar_pct", "mach", "p_inf_pct", "density_pct", "wind_north_mps", "wind_east_mps")
+    for k in keys:
+        assert p2[k]["n"] > 900 and p2[k]["fraction_within_3sigma"] > 0.9, (k, p2[k])
+    # the IMU coupling pins the angles: α, β far better than the point-wise least squares
+    for k in ("alpha_deg", "beta_deg"):
+        assert p1[k]["rms"] < 0.5 * ls[k]["rms"] and p2[k]["rms"] < 0.5 * ls[k]["rms"], k
+    # winds where the least squares publish none (singular or too uncertain)
+    assert ls["wind_north_mps"]["n"] == 0 and p2["wind_north_mps"]["max_abs"] < 10.0
+    names = {c["name"]: c for c in s["health"]["checks"]}
+    for i in (1, 2):
+        assert names[f"covariance.ekf_pass{i}_smoothed_correlation"]["status"] == "OK"
+        nis = [c for n, c in names.items() if n.startswith(f"nis.pressure_ekf_pass{i}_")]
+        assert len(nis) == 7 and all(c["status"] in ("OK", "WARNING") for c in nis)
+    sf = tr["ekf_scale_factors"]
+    assert len(sf["estimate"]) == 7 and all(0 < v < 0.01 for v in sf["sigma"])
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured 4 of 7 within 3σ: the table's model-form error against the CFD-like truth "
+    "(~1 % of reading, port-dependent, common mode -1.2 %) is indistinguishable from a transducer "
+    "scale factor; the filter recovers planted scale factors of its own model (tests/problems/meads/test_ekf.py)",
+)
+def test_ekf_scale_factors_inside_their_3_sigma(run):
+    sf = run.summary["truth"]["ekf_scale_factors"]
+    assert sf["fraction_within_3sigma"] == 1.0, sf
+
+
+def test_ekf_in_the_recording(run):
+    """The EKF's outputs sit next to the least squares', its scale factors converge to the summary's
+    values, its innovations are there per port (the default blueprint's views)."""
+    from workbench.recording import layout
+    from workbench.recording.reader import read_recording
+
+    rec = read_recording(run.recording)
+    ents = set(rec.entities())
+    for q in ("alpha_deg", "beta_deg", "qbar_kPa", "mach", "wind_north_mps", "wind_east_mps"):
+        assert layout.join(layout.meads_ekf_plot_path(q, 2), layout.VALUE) in ents, q
+        assert layout.join(layout.meads_ekf_plot_path(q, 1), layout.VALUE) in ents, q
+    _, lam = rec.scalars(layout.join(layout.meads_scale_factor_path("pass1"), layout.VALUE))
+    np.testing.assert_allclose(lam[-1] / 100.0, run.summary["ekf"]["pass1"]["scale_factors"], atol=2e-4)
+    for p in run.result.data.telemetry.ports:
+        _, y = rec.scalars(layout.join(layout.meads_ekf_innovation_path(2, p), layout.VALUE))
+        assert y.shape[0] > 2000

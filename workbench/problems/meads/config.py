@@ -16,7 +16,7 @@ from workbench.models.imu import ImuErrorModel
 from workbench.problems.meads.sensors import FAILURE_MODES, NavigationErrorSpec, PressureSensorSpec
 from workbench.problems.meads.truth import MeadsTruthSpec
 
-__all__ = ["SCHEMA", "EstimatorSettings", "McSettings", "MeadsConfig", "config_for"]
+__all__ = ["SCHEMA", "EstimatorSettings", "EkfSettings", "McSettings", "MeadsConfig", "config_for"]
 
 _T = MeadsTruthSpec()
 _P = PressureSensorSpec()
@@ -69,6 +69,35 @@ class EstimatorSettings:
 
 
 @dataclass(frozen=True)
+class EkfSettings:
+    """The filter's tuning (scenario ``[ekf]``).
+
+    ``enabled``; ``passes`` 1 or 2; ``iterations`` of the iterated update (Eq. 33);
+    ``accel_psd`` [m²/s³] velocity random walk (accelerometer noise, bias and scale not in the
+    strapdown); ``attitude_psd`` [rad²/s] attitude random walk (gyro); ``wind_sigma_mps`` /
+    ``vertical_wind_sigma_mps`` prior 1σ of the horizontal / vertical wind; ``wind_var_per_km``
+    [(m/s)² per km of altitude travelled]; ``atmosphere_sigma_ln`` prior 1σ of ln p∞ and ln ρ∞ about
+    the engineering atmosphere; ``atmosphere_var_per_km`` [per km] random walk of ln p∞, ln ρ∞;
+    ``scale_factor_sigma`` prior 1σ of each transducer scale factor (of reading);
+    ``model_level_sigma`` prior 1σ of the common level error of the pressure model (of reading,
+    a constant state; 0: not modelled).
+    """
+
+    enabled: bool = True
+    passes: int = 2
+    iterations: int = 4
+    accel_psd: float = 2e-4
+    attitude_psd: float = 4e-9
+    wind_sigma_mps: float = 30.0
+    vertical_wind_sigma_mps: float = 3.0
+    wind_var_per_km: float = 100.0
+    atmosphere_sigma_ln: float = 1.0
+    atmosphere_var_per_km: float = 1e-3
+    scale_factor_sigma: float = 0.01
+    model_level_sigma: float = 0.01
+
+
+@dataclass(frozen=True)
 class McSettings:
     """The trade study (``[montecarlo]``): ``runs`` per error level, ``levels`` (fractions of
     reading), ``fixed_r``, ``stride`` (every stride-th pressure sample)."""
@@ -91,6 +120,7 @@ class MeadsConfig:
     imu_rate_hz: float
     navigation: NavigationErrorSpec
     estimator: EstimatorSettings
+    ekf: EkfSettings
     mc: McSettings
     seed: int
 
@@ -100,7 +130,7 @@ class MeadsConfig:
         if scenario.kind != "meads":
             raise ScenarioError(scenario.path, "scenario.kind", f"{scenario.kind!r} is not a meads scenario")
         v = SCHEMA.validate(scenario.data, scenario.path)
-        tr, sp, si, sn, es, wi, mc = (
+        tr, sp, si, sn, es, wi, mc, ek = (
             v["truth"],
             v["sensors"]["pressure"],
             v["sensors"]["imu"],
@@ -108,6 +138,7 @@ class MeadsConfig:
             v["estimator"],
             v["winds"],
             v["montecarlo"],
+            v["ekf"],
         )
         truth = replace(
             _T,
@@ -142,6 +173,16 @@ class MeadsConfig:
                 "estimator.solution",
                 "the fixed-R solution is a Newtonian variant: use model = 'newtonian'",
             )
+        if ek["passes"] not in (1, 2):
+            raise ScenarioError(scenario.path, "ekf.passes", f"{ek['passes']}: use 1 or 2")
+        if ek["iterations"] < 1:
+            raise ScenarioError(scenario.path, "ekf.iterations", f"{ek['iterations']}: at least 1")
+        for k in ("wind_sigma_mps", "vertical_wind_sigma_mps", "atmosphere_sigma_ln", "scale_factor_sigma"):
+            if not ek[k] > 0.0:
+                raise ScenarioError(scenario.path, f"ekf.{k}", f"{ek[k]}: a prior 1-sigma must be > 0")
+        for k in ("accel_psd", "attitude_psd", "wind_var_per_km", "atmosphere_var_per_km", "model_level_sigma"):
+            if not ek[k] >= 0.0:
+                raise ScenarioError(scenario.path, f"ekf.{k}", f"{ek[k]}: a process noise must be >= 0")
         levels = tuple(float(x) / 100.0 for x in mc["levels_pct"])
         return cls(
             vehicle_file=v["vehicle"]["file"],
@@ -152,12 +193,14 @@ class MeadsConfig:
             imu_rate_hz=si["rate_hz"],
             navigation=nav,
             estimator=est,
+            ekf=EkfSettings(**ek),
             mc=McSettings(mc["runs"], levels, mc["fixed_r"], mc["stride"]),
             seed=v["synthetic"]["seed"],
         )
 
 
 _E = EstimatorSettings()
+_K = EkfSettings()
 _M = McSettings()
 
 SCHEMA = Schema(
@@ -301,6 +344,24 @@ SCHEMA = Schema(
             (
                 Key("singular_det_min", "float", _E.wind_det_min, "", "normalised |det Gamma| below: singular"),
                 Key("max_sigma_mps", "float", _E.wind_sigma_max, "m/s", "winds with a larger 1-sigma: not published"),
+            ),
+        ),
+        Table(
+            "ekf",
+            "the tightly-coupled EKF (paper Sect. III.B, Eq. 19-35), multi-pass, RTS smoothed",
+            (
+                Key("enabled", "bool", _K.enabled, meaning="run the filter after the least squares"),
+                Key("passes", "int", _K.passes, "", "1: scale factors estimated; 2: then reprocessed corrected"),
+                Key("iterations", "int", _K.iterations, "", "iterated measurement update (Eq. 33), at most"),
+                Key("accel_psd", "float", _K.accel_psd, "m^2/s^3", "velocity random walk beyond the strapdown"),
+                Key("attitude_psd", "float", _K.attitude_psd, "rad^2/s", "attitude random walk beyond the strapdown"),
+                Key("wind_sigma_mps", "float", _K.wind_sigma_mps, "m/s", "prior 1-sigma of the horizontal wind"),
+                Key("vertical_wind_sigma_mps", "float", _K.vertical_wind_sigma_mps, "m/s", "prior 1-sigma, vertical"),
+                Key("wind_var_per_km", "float", _K.wind_var_per_km, "(m/s)^2/km", "wind random walk per km descended"),
+                Key("atmosphere_sigma_ln", "float", _K.atmosphere_sigma_ln, "", "prior 1-sigma of ln p and ln rho"),
+                Key("atmosphere_var_per_km", "float", _K.atmosphere_var_per_km, "1/km", "ln p, ln rho random walk"),
+                Key("scale_factor_sigma", "float", _K.scale_factor_sigma, "", "prior 1-sigma of each scale factor"),
+                Key("model_level_sigma", "float", _K.model_level_sigma, "", "prior 1-sigma, pressure model level"),
             ),
         ),
         Table(

@@ -14,7 +14,12 @@ when the port σ are right, so it is judged like a normalised innovation squared
   number), α and β inside the validity of the forebody pressure models, the air-data Mach against
   the inertial Mach, the density within ×5 of the default Mars model;
 * data: pressure-sample gaps across the peak dynamic pressure, failed ports and the input
-  readers' notes (WARNING: a degradation, not a wrong answer).
+  readers' notes (WARNING: a degradation, not a wrong answer);
+* the tightly-coupled EKF (Sect. III.B), when run: per pass and port, the normalised innovation
+  squared ``y_i² / S_ii`` of the forward pass above the threshold (χ²(1) each), and the smoothed
+  covariance symmetric and positive definite (judged on its correlation matrix, so that
+  variances of (10 m)² next to (10⁻⁴ rad)² do not decide it; a component with zero variance,
+  e.g. a scale factor given a zero prior σ, is left out).
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ from workbench.estimation.health import (
     notes_check,
 )
 
-__all__ = ["meads_health", "wls_chi2"]
+__all__ = ["meads_health", "ekf_checks", "wls_chi2"]
 
 #: |α| [deg] beyond which the Newtonian / tabulated forebody models are outside their validity:
 #: the stagnation point leaves the 70° sphere-cone's nose cap region at about 20°, the models are
@@ -68,11 +73,37 @@ def wls_chi2(residual: np.ndarray, sigma: np.ndarray, used: np.ndarray, x: np.nd
     return chi2, dof.astype(int)
 
 
-def meads_health(tel, nav, air, wind, est) -> dict:
+def ekf_checks(passes, t: np.ndarray, above: np.ndarray, ports) -> list[Check]:
+    """Checks of the filter passes (``EkfPass``): per-port NIS above the threshold (``above`` (n,)
+    at the pressure times ``t``) and the smoothed covariance (module docstring)."""
+    checks: list[Check] = []
+    for ps in passes:
+        inn = ps.forward.innovations.get("pressure")
+        if inn is None:
+            checks.append(Check(f"nis.pressure_ekf_pass{ps.index}", WARNING, None, None, "no pressure was processed"))
+            continue
+        sel = above[inn.step]
+        for j, port in enumerate(ports):
+            v = ps.nis_port[sel, j]
+            v = v[np.isfinite(v)]
+            if v.size >= MIN_SAMPLES:
+                checks.append(nis_check(f"pressure_ekf_pass{ps.index}_{port}", v, 1))
+        P = ps.smoothed.P
+        d = np.einsum("nii->ni", P)
+        act = np.flatnonzero(np.all(d > 0.0, axis=0))
+        Pa = P[:, act][:, :, act]
+        s = 1.0 / np.sqrt(d[:, act])
+        checks.append(
+            covariance_check(Pa * s[:, :, None] * s[:, None, :], f"covariance.ekf_pass{ps.index}_smoothed_correlation")
+        )
+    return checks
+
+
+def meads_health(tel, nav, air, wind, est, passes=()) -> dict:
     """``summary["health"]`` of a MEADS reconstruction: ``tel`` the telemetry (``MeadsTelemetry``),
     ``nav`` the ``Navigation``, ``air`` the ``AirDataStage``, ``wind`` the ``WindStage``, ``est``
     the ``EstimatorSettings`` (its ``min_qbar_pa`` [Pa] selects the samples judged, its
-    ``plausibility_factor`` the allowed q∞ ratio)."""
+    ``plausibility_factor`` the allowed q∞ ratio), ``passes`` the EKF passes (``EkfPass``), if any."""
     fit = air.fit
     w = fit.wls
     above = np.nan_to_num(fit.qbar) >= est.min_qbar_pa
@@ -168,6 +199,8 @@ def meads_health(tel, nav, air, wind, est) -> dict:
         if np.isfinite(fit.qbar).any():
             tq = float(t[int(np.nanargmax(fit.qbar))])
             checks.append(gap_check("gaps.peak_qbar", gaps, {"peak q∞": (tq - 2.0, tq + 2.0)}, status=WARNING))
+    if passes:
+        checks += ekf_checks(passes, tel.t_p, above, tel.ports)
     notes = list(tel.degradations) + [f.message for f in air.failures]
     checks.append(notes_check("telemetry", notes))
     return health_report(checks)

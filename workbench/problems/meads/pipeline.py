@@ -17,7 +17,11 @@ Stages (each a typed result, drawn by :mod:`.recording`, consumed by tests witho
    without it; each a logged degradation), the plausibility check of q∞ against the IMU drag
    (``m |f| / (C_D S)``; a unit error such as kPa labelled Pa is refused, not published);
 5. :class:`WindStage` — winds (Eq. 11–17) and density (Eq. 18);
-6. :class:`MeadsResult` — everything plus the summary.
+6. :class:`~workbench.problems.meads.ekf.EkfPass` — the tightly-coupled EKF (Sect. III.B) on the
+   same lag-corrected pressures, ports and pressure model, RTS smoothed: pass 1 estimates the
+   transducer scale factors, pass 2 reprocesses the pressures corrected by them (scenario
+   ``[ekf]``; :mod:`.ekf`);
+7. :class:`MeadsResult` — everything plus the summary.
 
 The other estimator model (Newtonian vs table) is fitted too on the same corrected pressures, so
 the model-form difference can be scored (:func:`score`).
@@ -58,6 +62,7 @@ from workbench.problems.meads.airdata import (
     solve_winds,
 )
 from workbench.problems.meads.config import EstimatorSettings, config_for
+from workbench.problems.meads.ekf import EkfInputs, EkfPass, run_passes
 from workbench.problems.meads.health import meads_health
 from workbench.problems.meads.telemetry import MeadsTelemetry, read_meads_telemetry, true_runs
 
@@ -164,7 +169,8 @@ class WindStage:
 
 @dataclass(frozen=True)
 class MeadsResult:
-    """Final stage: all stages and the JSON-ready ``summary``."""
+    """Final stage: all stages and the JSON-ready ``summary``; ``ekf`` the filter passes (empty when
+    ``[ekf] enabled = false``)."""
 
     data: PressureData
     nav: Navigation
@@ -172,6 +178,7 @@ class MeadsResult:
     air: AirDataStage
     wind: WindStage
     summary: dict
+    ekf: tuple[EkfPass, ...] = ()
 
 
 # ------------------------------------------------------------------------------ navigation
@@ -499,10 +506,71 @@ def reconstruct(scenario: Scenario, telemetry: Mapping[str, Path]) -> Iterator[o
     yield air
     wind = winds_and_density(fit, nav, est, hi)
     yield wind
+    passes: list[EkfPass] = []
+    if cfg.ekf.enabled:
+        for ps in run_passes(ekf_inputs(tel, vehicle, nav, lag, air, est), cfg.ekf):
+            passes.append(ps)
+            yield ps
     summary = _summary(scenario, tel, nav, lag, air, wind, est)
-    summary["health"] = meads_health(tel, nav, air, wind, est)
+    if passes:
+        summary["ekf"] = _ekf_summary(passes, air, est)
+    summary["health"] = meads_health(tel, nav, air, wind, est, passes)
     summary["reconstruction_wall_s"] = time.perf_counter() - t_start
-    yield MeadsResult(PressureData(tel, vehicle), nav, lag, air, wind, summary)
+    yield MeadsResult(PressureData(tel, vehicle), nav, lag, air, wind, summary, tuple(passes))
+
+
+def ekf_inputs(
+    tel: MeadsTelemetry, vehicle: FadsVehicle, nav: Navigation, lag: LagCorrection, air: AirDataStage, est
+) -> EkfInputs:
+    """The filter's inputs: the strapdown at the pressure times, the lag-corrected pressures with
+    the least squares' σ (:func:`sensor_sigma`) and port mask (failed ports out), the model."""
+    init = tel.initial
+    return EkfInputs(
+        t=nav.t_p,
+        p_M=nav.p_M,
+        v_M=nav.v_M,
+        q_M_B=nav.q_M_B,
+        sigma_pos=init.sigma_p,
+        sigma_vel=init.sigma_v,
+        sigma_att=init.sigma_att,
+        p=lag.p,
+        sigma_p=sensor_sigma(lag.p, vehicle, est.model_error_frac),
+        usable=air.mask & np.isfinite(lag.p),
+        vehicle=vehicle,
+        model=est.model,
+        table=build_estimator_table(vehicle) if est.model == "table" else None,
+        gamma=est.gamma,
+    )
+
+
+def _ekf_summary(passes: list[EkfPass], air: AirDataStage, est) -> dict:
+    """Per pass: the scale factors (and 1σ), the mean per-port NIS above the q∞ threshold (of the
+    least squares), the reported 3σ of the outputs, the wall time."""
+    out = {}
+    above = np.nan_to_num(air.fit.qbar) >= est.min_qbar_pa
+    for ps in passes:
+        inn = ps.forward.innovations.get("pressure")
+        sel = above[inn.step] if inn is not None else np.zeros(0, bool)
+        nis = ps.nis_port[sel]
+        mean_nis = [float(np.nanmean(nis[:, j])) if np.isfinite(nis[:, j]).any() else None for j in range(nis.shape[1])]
+        a = above
+        out[f"pass{ps.index}"] = {
+            "scale_factors_estimated": ps.scale_estimated,
+            "scale_factors": [float(v) for v in ps.scale],
+            "scale_factor_sigma": [float(v) for v in ps.sigma_scale],
+            "mean_nis_per_port_above_min_qbar": mean_nis,
+            "three_sigma_above_min_qbar": {
+                "alpha_deg": _stats(3 * np.degrees(ps.output("alpha")[1][a])),
+                "beta_deg": _stats(3 * np.degrees(ps.output("beta")[1][a])),
+                "qbar_pct": _stats(300 * ps.output("qbar")[1][a] / ps.output("qbar")[0][a]),
+                "mach": _stats(3 * ps.output("mach")[1][a]),
+                "density_pct": _stats(300 * ps.output("rho")[1][a] / ps.output("rho")[0][a]),
+                "wind_north_mps": _stats(3 * ps.output("wind_north")[1][a]),
+                "wind_east_mps": _stats(3 * ps.output("wind_east")[1][a]),
+            },
+            "wall_s": ps.wall_s,
+        }
+    return out
 
 
 def _stats(x: np.ndarray) -> dict:
@@ -605,6 +673,30 @@ def score_fit(t: np.ndarray, fit: AirDataFit, truth: dict, sel: np.ndarray, wind
     return out
 
 
+def score_ekf(t: np.ndarray, ps: EkfPass, truth: dict, sel: np.ndarray) -> dict:
+    """Errors of one filter pass (smoothed) against the truth on the samples ``sel``: α, β [deg],
+    q∞ [%], Mach, p∞ [%], density [%], horizontal winds [m/s], each vs its reported 3σ."""
+    out = {}
+    for key, name, tkey in (("alpha_deg", "alpha", "alpha"), ("beta_deg", "beta", "beta")):
+        v, s = ps.output(name)
+        out[key] = _err_block((v - _truth_at(truth, t, tkey))[sel], s[sel], 180 / math.pi)
+    for key, name, tkey in (
+        ("qbar_pct", "qbar", "qbar"),
+        ("p_inf_pct", "p_inf", "p_inf"),
+        ("density_pct", "rho", "rho"),
+    ):
+        v, s = ps.output(name)
+        tr = _truth_at(truth, t, tkey)
+        out[key] = _err_block(((v - tr) / tr)[sel], (s / v)[sel], 100.0)
+    v, s = ps.output("mach")
+    out["mach"] = _err_block((v - _truth_at(truth, t, "mach"))[sel], s[sel])
+    for j, name in enumerate(("wind_north", "wind_east")):
+        v, s = ps.output(name)
+        wt = np.interp(t, truth["t"], truth["wind_NE"][:, j])
+        out[name + "_mps"] = _err_block((v - wt)[sel], s[sel])
+    return out
+
+
 def score(result: MeadsResult, truth: dict) -> dict:
     """Errors of the final result against the truth above 850 Pa (true q∞), each vs its reported 3σ;
     the same for the fit with every port (before failure removal) and for the other model."""
@@ -619,6 +711,22 @@ def score(result: MeadsResult, truth: dict) -> dict:
     }
     if result.air.alt is not None:
         out[f"other_model_{result.air.alt.model}"] = score_fit(t, result.air.alt, truth, sel)
+    for ps in result.ekf:
+        out[f"ekf_pass{ps.index}"] = score_ekf(t, ps, truth, sel)
+    if result.ekf and "sensor_scale" in truth:
+        ps = result.ekf[0]
+        true_scale = np.asarray(truth["sensor_scale"], float)
+        err = ps.scale - true_scale
+        out["ekf_scale_factors"] = {
+            "ports": list(result.data.telemetry.ports),
+            "estimate": [float(v) for v in ps.scale],
+            "sigma": [float(v) for v in ps.sigma_scale],
+            "truth": [float(v) for v in true_scale],
+            "error": [float(v) for v in err],
+            "max_abs_error": float(np.max(np.abs(err))),
+            "fraction_within_3sigma": float(np.mean(np.abs(err) <= 3 * ps.sigma_scale)),
+            "common_mode_error": float(np.mean(err)),
+        }
     fp = int(truth.get("sensor_failed_port", -1))
     if fp >= 0:
         ports = result.data.telemetry.ports
@@ -659,4 +767,38 @@ def scorecard_markdown(summary: dict) -> str:
                 f"| {k} | {v['max_abs']:.3g} | {v['rms']:.3g} | {v['median_3sigma']:.3g} | "
                 f"{100 * v['fraction_within_3sigma']:.0f} % | {'' if o is None else f'3σ ≤ {o:g}'} |"
             )
+        md += _ekf_table(tr)
     return "\n".join(md) + "\n"
+
+
+def _ekf_table(tr: dict) -> list[str]:
+    """Least squares vs EKF pass 1 vs pass 2 (max error / RMS / fraction within the reported 3σ)."""
+    cols = [("least squares", tr["final"])] + [
+        (f"EKF pass {i}", tr[f"ekf_pass{i}"]) for i in (1, 2) if f"ekf_pass{i}" in tr
+    ]
+    if len(cols) == 1:
+        return []
+    alias = {"mach": ("mach", "mach_air_data", "mach_inertial")}
+    keys = ("alpha_deg", "beta_deg", "qbar_pct", "mach", "p_inf_pct", "density_pct", "wind_north_mps", "wind_east_mps")
+    md = [
+        "",
+        "| above 850 Pa: max / RMS / within 3σ | " + " | ".join(c for c, _ in cols) + " |",
+        "|---" * (len(cols) + 1) + "|",
+    ]
+    for k in keys:
+        cells = []
+        for _, blk in cols:
+            v = next((blk[a] for a in alias.get(k, (k,)) if blk.get(a, {}).get("n", 0)), None)
+            cells.append(
+                "—" if v is None else f"{v['max_abs']:.3g} / {v['rms']:.3g} / {100 * v['fraction_within_3sigma']:.0f} %"
+            )
+        md.append(f"| {k} | " + " | ".join(cells) + " |")
+    sf = tr.get("ekf_scale_factors")
+    if sf:
+        md.append("")
+        md.append(
+            f"EKF pass 1 scale factors: max |error| {sf['max_abs_error']:.4f} "
+            f"(common mode {sf['common_mode_error']:+.4f}), "
+            f"{100 * sf['fraction_within_3sigma']:.0f} % within 3σ"
+        )
+    return md

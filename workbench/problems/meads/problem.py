@@ -140,16 +140,19 @@ class MeadsProblem:
     @contextlib.contextmanager
     def open_recording(self, path: Path, scenario: Scenario, truth: Any, properties: dict) -> Iterator[_Drawer]:
         """The MEADS recording (``recording.meads_blueprint``)."""
+        from workbench.problems.meads.config import config_for
         from workbench.problems.meads.recording import MeadsRecorder, meads_blueprint
         from workbench.recording.writer import open_recording
 
         vehicle = md.vehicle_for(scenario)
-        bp = meads_blueprint(vehicle.port_names)
+        ekf = config_for(scenario).ekf
+        bp = meads_blueprint(vehicle.port_names, ekf.passes if ekf.enabled else 0)
         with open_recording(path, scenario.name, blueprint=bp, properties=properties) as rec:
             yield _Drawer(rec, MeadsRecorder(rec, truth))
 
     def export_columns(self, result: md.MeadsResult) -> ExportTable:
-        """Air data, density and winds with their 1σ at the pressure times."""
+        """Air data, density and winds with their 1σ at the pressure times (least squares, and the
+        last EKF pass as ``ekf_*`` / ``sigma_ekf_*`` when it ran)."""
         f, w = result.air.fit, result.wind
         cols: dict[str, tuple[np.ndarray, str]] = {
             "qbar": (f.qbar, "Pa"),
@@ -166,7 +169,15 @@ class MeadsProblem:
             "wind_north": (w.winds.wind_NE[:, 0], "m/s"),
             "wind_east": (w.winds.wind_NE[:, 1], "m/s"),
         }
-        return ExportTable(result.air.t, cols, "air data: body axes B; winds: local north/east")
+        if result.ekf:  # the last EKF pass (smoothed), with its 1σ
+            last = result.ekf[-1]
+            units = {"alpha": "rad", "beta": "rad", "qbar": "Pa", "mach": "1", "p_inf": "Pa", "rho": "kg/m^3"}
+            units |= {"wind_north": "m/s", "wind_east": "m/s", "wind_down": "m/s"}
+            for name, unit in units.items():
+                v, sd = last.output(name)
+                cols[f"ekf_{name}"] = (v, unit)
+                cols[f"sigma_ekf_{name}"] = (sd, unit)
+        return ExportTable(result.air.t, cols, "air data: body axes B; winds: local north/east (EKF: north/east/down)")
 
     def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
         """The paper's trade study (:mod:`.montecarlo`) with ``options.n_runs`` runs per error level

@@ -14,6 +14,13 @@ Plots (``/plots/<quantity>``, bounded series with truth): ``alpha_deg``, ``beta_
 inversion: corrected − measured pressure of P1 and P4); per port measured vs
 modelled (``/plots/ports/<port>/measured|predicted``) and its residual ±3σ
 (``/residuals/pressure/<port>``); failed ports and singular wind intervals in ``/events``.
+
+The EKF passes (:mod:`.ekf`, smoothed): under each air-data plot, ``ekf_pass<i>`` (pass 2, or the
+only pass, with ±3σ; pass 1 as a line only when a pass 2 follows); the transducer scale factors
+[%] at ``/plots/scale_factors/pass<i>`` (pass 1: the forward filter's estimate converging, ±3σ;
+pass 2: the correction applied, constant) with the true ones at ``/plots/scale_factors/truth``
+when known; the forward pressure innovations per port with ±3σ (``√S_ii``) at
+``/residuals/pressure_ekf_pass<i>/<port>``.
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ import trimesh
 from workbench.core.rotation import dcm_to_quat, quat_to_dcm
 from workbench.models.flush_airdata import FadsVehicle
 from workbench.problems.meads.airdata import ned_frames
+from workbench.problems.meads.ekf import EkfPass
 from workbench.problems.meads.pipeline import (
     AirDataStage,
     LagCorrection,
@@ -51,15 +59,29 @@ PLOTS = (
     ("density [kg/m³]", "density"),
     ("wind N [m/s]", "wind_north_mps"),
     ("wind E [m/s]", "wind_east_mps"),
+    ("scale factors [%]", "scale_factors"),
     ("lag [ms]", "lag_delay_ms"),
     ("lag correction [Pa]", "lag_correction_Pa"),
+)
+#: EKF outputs drawn next to the least-squares ones: (plot quantity, output, scale, label)
+EKF_PLOTS = (
+    ("alpha_deg", "alpha", 180 / math.pi, "α [deg]"),
+    ("beta_deg", "beta", 180 / math.pi, "β [deg]"),
+    ("qbar_kPa", "qbar", 1e-3, "q∞ [kPa]"),
+    ("mach", "mach", 1.0, "Mach"),
+    ("p_inf_Pa", "p_inf", 1.0, "p∞ [Pa]"),
+    ("wind_north_mps", "wind_north", 1.0, "north [m/s]"),
+    ("wind_east_mps", "wind_east", 1.0, "east [m/s]"),
 )
 C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
-def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6", "P7")) -> rrb.Blueprint:
+def meads_blueprint(
+    ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6", "P7"), ekf_passes: int = 2
+) -> rrb.Blueprint:
     """Default layout: the heat shield (left top), air-data plots (right top, one tab per quantity),
-    per-port pressure and residual tabs (right bottom), scorecard and events (left bottom)."""
+    per-port pressure, residual and EKF-innovation tabs (right bottom; the innovations of the last
+    of ``ekf_passes``, none when 0), scorecard and events (left bottom)."""
     scene = rrb.Spatial3DView(
         name="Heat shield (reconstructed attitude, local ENU)",
         origin=layout.WORLD,
@@ -68,13 +90,18 @@ def meads_blueprint(ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6"
     plots = rrb.Tabs(*[tab(n, plot_view(n, layout.plot_path(q), legend="RightTop")) for n, q in PLOTS], active_tab=0)
     port_tabs = []
     for p in ports:
-        port_tabs.append(
-            rrb.Vertical(
-                plot_view(f"{p} [Pa]: measured vs model", layout.join(layout.MEADS_PLOT_PORTS, p), legend="RightTop"),
-                plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p)),
-                name=p,
+        views = [
+            plot_view(f"{p} [Pa]: measured vs model", layout.join(layout.MEADS_PLOT_PORTS, p), legend="RightTop"),
+            plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p)),
+        ]
+        if ekf_passes:
+            views.append(
+                plot_view(
+                    f"{p} EKF pass {ekf_passes} innovation [Pa] — grey ±3σ",
+                    layout.meads_ekf_innovation_path(ekf_passes, p),
+                )
             )
-        )
+        port_tabs.append(rrb.Vertical(*views, name=p))
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
@@ -148,6 +175,7 @@ class MeadsRecorder:
                 LagCorrection: self._lag,
                 AirDataStage: self._air,
                 WindStage: self._wind,
+                EkfPass: self._ekf,
                 MeadsResult: self._result,
             }
         )
@@ -304,6 +332,68 @@ class MeadsRecorder:
             for a0, b0 in true_runs(w.singular)
         ]
         rec.events(ev)
+
+    def _ekf(self, st: EkfPass) -> None:
+        rec, t = self.rec, st.t
+        last = st.index == st.passes
+        col = (200, 40, 160) if last else (120, 90, 200)
+        for q, name, scale, label in EKF_PLOTS:
+            v, s = st.output(name)
+            path = layout.meads_ekf_plot_path(q, st.index)
+            lab = f"EKF pass {st.index} {label}"
+            if last:
+                rec.series_with_bounds(path, t, scale * v, scale * s, names=lab, color=[col])
+            else:
+                rec.scalars(layout.join(path, layout.VALUE), t, scale * v, names=lab, colors=[col])
+        rho, srho = st.output("rho")
+        rt = self._truth("rho", t)
+        path = layout.meads_ekf_plot_path("density", st.index)
+        if rt is not None:
+            if last:
+                rec.series_with_bounds(
+                    path,
+                    t,
+                    100 * (rho / rt - 1),
+                    100 * srho / rt,
+                    names=f"EKF pass {st.index} ρ error [%]",
+                    color=[col],
+                )
+        elif last:
+            rec.series_with_bounds(path, t, rho, srho, names=f"EKF pass {st.index} ρ [kg/m³]", color=[col])
+        # scale factors [%]: pass 1 the forward estimate converging, pass 2 the correction applied
+        ports = self.vehicle.port_names
+        m = len(ports)
+        if st.scale_estimated:
+            lam = st.forward.x_post[:, 14 : 14 + m]
+            slam = np.sqrt(np.einsum("nii->ni", st.forward.P_post)[:, 14 : 14 + m])
+        else:
+            lam = np.broadcast_to(st.scale, (t.size, m))
+            slam = np.broadcast_to(st.sigma_scale, (t.size, m))
+        rec.series_with_bounds(
+            layout.meads_scale_factor_path(f"pass{st.index}"),
+            t,
+            100 * lam,
+            100 * slam,
+            names=[f"{p} pass {st.index} [%]" for p in ports],
+        )
+        if self.truth is not None and "sensor_scale" in self.truth and st.index == 1:
+            rec.scalars(
+                layout.meads_scale_factor_path(layout.TRUTH_SERIES),
+                t,
+                100 * np.broadcast_to(np.asarray(self.truth["sensor_scale"], float), (t.size, m)),
+                names=[f"{p} truth [%]" for p in ports],
+            )
+        inn = st.forward.innovations.get("pressure")
+        if inn is not None:
+            sd = np.sqrt(np.einsum("kii->ki", inn.S))
+            for j, p in enumerate(ports):
+                rec.series_with_bounds(
+                    layout.meads_ekf_innovation_path(st.index, p),
+                    inn.t,
+                    np.nan_to_num(inn.y[:, j]),
+                    np.nan_to_num(sd[:, j]),
+                    names=f"{p} EKF pass {st.index} innovation [Pa]",
+                )
 
     def _result(self, st: MeadsResult) -> None:
         pass

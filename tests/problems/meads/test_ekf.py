@@ -1,0 +1,166 @@
+"""MEADS tightly-coupled EKF (Karlgaard et al. 2013, Sect. III.B) — fast unit tests of the filter code.
+
+The arc is built from the estimator's own models (its pressure model, its transition), so what is
+tested is the filter: a planted transducer scale factor is found, the innovations are consistent
+with their covariance, the covariances stay symmetric positive definite, pass 2 reprocesses the
+corrected pressures.  How the filter does against the richer truth is the slow run test's job.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from workbench.core.atmosphere import MarsEngineeringAtmosphere
+from workbench.core.bodies import MARS
+from workbench.core.rotation import dcm_to_quat, quat_to_dcm
+from workbench.estimation.consistency import is_symmetric_pd
+from workbench.estimation.health import ERROR, OK
+from workbench.io.assets import asset_path
+from workbench.models.flush_airdata import load_fads_vehicle
+from workbench.problems.meads import ekf
+from workbench.problems.meads.airdata import ned_frames
+from workbench.problems.meads.config import EkfSettings
+from workbench.problems.meads.health import ekf_checks
+from workbench.problems.meads.pipeline import sensor_sigma
+
+VEHICLE = load_fads_vehicle(asset_path("vehicles", "msl_meads.toml"))
+LAMBDA = np.array([0.008, -0.006, 0.004, 0.0, -0.005, 0.007, -0.008])
+WIND_N = np.array([12.0, -6.0, 0.0])
+
+
+def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation matrix taking unit vector a to unit vector b (Rodrigues)."""
+    v, c = np.cross(a, b), float(a @ b)
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + K + K @ K / (1.0 + c)
+
+
+def _arc(n: int = 160, seed: int = 3):
+    """A straight 20 s arc at 25 km, 3 km/s, flight-path angle −10°, the attitude oscillating so
+    that α = 16 ± 4°, β = ±2° in a constant wind; truth states by the filter's own transition,
+    pressures by its own model with the planted scale factors and white noise of the σ the filter
+    is given."""
+    t = np.arange(n) / 8.0
+    r0 = MARS.reference_radius + 25e3
+    p0 = np.array([r0, 0.0, 0.0])
+    gam = math.radians(-10.0)
+    v_g = 3000.0 * np.array([math.sin(gam), math.cos(gam), 0.0])  # radial (x = up here), east (y)
+    v_M = v_g + np.cross([0.0, 0.0, MARS.rotation_rate], p0)
+    p_M = p0 + t[:, None] * v_M
+    C_N_M = ned_frames(p0[None])[0]
+    v_air_M = v_g - C_N_M.T @ WIND_N
+    a = np.radians(16.0 + 4.0 * np.sin(2 * np.pi * t / 10.0))
+    b = np.radians(2.0 * np.sin(2 * np.pi * t / 7.0))
+    u_dir = np.stack([np.cos(a) * np.cos(b), np.sin(b), np.sin(a) * np.cos(b)], 1)
+    C_A_M = _rotation_between(v_air_M / np.linalg.norm(v_air_M), np.array([1.0, 0, 0]))
+    C_B_M = np.array([_rotation_between(np.array([1.0, 0, 0]), u) @ C_A_M for u in u_dir])
+    q_M_B = dcm_to_quat(np.swapaxes(C_B_M, 1, 2))
+    inp = ekf.EkfInputs(
+        t, p_M, np.broadcast_to(v_M, (n, 3)).copy(), q_M_B, 5.0, 0.05, 1e-4,
+        np.zeros((n, 7)), np.ones((n, 7)), np.ones((n, 7), bool), VEHICLE, "newtonian", None, 1.335,
+    )  # fmt: skip
+    atm = MarsEngineeringAtmosphere()
+    x = np.zeros(ekf.N_X)
+    x[ekf.IP], x[ekf.IV], x[ekf.IW] = p_M[0], v_M, WIND_N
+    x[ekf.ILP] = math.log(atm.pressure(25e3)) + 0.15  # the truth is off the prior mean
+    x[ekf.ILR] = math.log(atm.density(25e3)) + 0.25
+    x[ekf.ILAM] = LAMBDA
+    step = ekf.make_transition(inp, EkfSettings())
+    X = [x]
+    for k in range(1, n):
+        X.append(step(X[-1], t[k - 1], t[k])[0])
+    X = np.array(X)
+    h = ekf.make_pressure_model(inp)
+    allp = np.arange(7)
+    p_clean = np.array([h(X[k], C_B_M[k], allp)[0] for k in range(n)])
+    sig = sensor_sigma(p_clean, VEHICLE, 0.002)
+    p = p_clean + np.random.default_rng(seed).normal(0.0, sig)
+    return replace(inp, p=p, sigma_p=sig), X
+
+
+@pytest.fixture(scope="module")
+def arc():
+    inp, X = _arc()
+    # the arc has no process noise: the filter is given (almost) none, so its NIS can be judged
+    st = EkfSettings(iterations=3, accel_psd=1e-8, attitude_psd=1e-14, wind_var_per_km=1e-4, atmosphere_var_per_km=1e-9)
+    passes = list(ekf.run_passes(inp, st))
+    return inp, X, passes
+
+
+def test_pass1_recovers_planted_scale_factors(arc):
+    inp, X, (p1, _) = arc
+    assert p1.scale_estimated
+    P = p1.smoothed.P[0][ekf.ILAM, ekf.ILAM]
+    err = p1.scale - LAMBDA
+    assert np.all(np.abs(err) <= 3.0 * p1.sigma_scale), (err, p1.sigma_scale)
+    # the common mode of the seven scale factors is the density's (q∞ = ρV²/2 scales every port):
+    # only the prior holds it; the differences between ports are observed
+    D = np.eye(7) - np.full((7, 7), 1.0 / 7.0)
+    sd_diff = np.sqrt(np.diag(D @ P @ D.T))
+    assert np.all(sd_diff < 0.1 * EkfSettings().scale_factor_sigma), sd_diff
+    assert np.all(np.abs(D @ err) <= 3.0 * sd_diff), (D @ err, sd_diff)
+    assert np.max(np.abs(D @ err)) < 0.25 * np.max(np.abs(LAMBDA))
+
+
+def test_innovations_are_consistent_and_outputs_track_the_truth(arc):
+    inp, X, (p1, p2) = arc
+    for ps in (p1, p2):
+        inn = ps.forward.innovations["pressure"]
+        assert inn.accepted.all()
+        # after the first few samples (prior transient) the NIS per port averages to ~1
+        nis = ps.nis_port[8:]
+        assert 0.7 < float(np.mean(nis)) < 1.4, float(np.mean(nis))
+        a, sa = ps.output("alpha")
+        ta = ekf.air_data_of_state(X, np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2), inp.gamma)
+        for j, name in enumerate(("alpha", "beta", "qbar", "mach")):
+            v, s = ps.output(name)
+            inside = np.mean(np.abs(v - ta[j]) <= 3.0 * s)
+            assert inside > 0.95, (ps.index, name, inside)
+        assert np.degrees(np.max(sa[20:])) < 0.1
+
+
+def test_covariances_symmetric_positive_definite(arc):
+    _, _, passes = arc
+    for ps in passes:
+        for P in (ps.forward.P_post, ps.smoothed.P):
+            d = np.einsum("nii->ni", P)
+            act = np.flatnonzero(np.all(d > 0, axis=0))
+            Pa = P[:, act][:, :, act]
+            s = 1.0 / np.sqrt(d[:, act])
+            ok, _ = is_symmetric_pd(Pa * s[:, :, None] * s[:, None, :])
+            assert np.all(ok)
+
+
+def test_pass2_uses_the_corrected_pressures_with_scale_factors_held(arc):
+    inp, X, (p1, p2) = arc
+    assert not p2.scale_estimated and p2.index == 2 and p2.passes == 2
+    np.testing.assert_array_equal(p2.scale, p1.scale)
+    # scale factors are consider parameters: held at zero (the pressures are corrected) with pass
+    # 1's covariance at every step, forward and smoothed - not re-estimated from the same data
+    for x, P in ((p2.forward.x_post, p2.forward.P_post), (p2.smoothed.x, p2.smoothed.P)):
+        assert np.all(x[:, ekf.ILAM] == 0.0)
+        np.testing.assert_allclose(P[:, ekf.ILAM, ekf.ILAM], np.broadcast_to(p1.scale_cov, (P.shape[0], 7, 7)))
+    # and the corrected pressures are what it fitted: its innovations have no scale-factor pattern
+    inn = p2.forward.innovations["pressure"]
+    rel = np.nanmean(inn.y[20:] / inn.z_pred[20:], axis=0)
+    assert np.max(np.abs(rel - rel.mean())) < 0.2 * np.max(np.abs(LAMBDA))
+    assert p2.stage_label.startswith("EKF pass 2/2")
+
+
+def test_health_checks_of_the_passes(arc):
+    inp, _, passes = arc
+    ports = VEHICLE.port_names
+    above = np.ones(inp.t.size, bool)
+    checks = {c.name: c for c in ekf_checks(passes, inp.t, above, ports)}
+    for i in (1, 2):
+        assert checks[f"covariance.ekf_pass{i}_smoothed_correlation"].status == OK
+        for p in ports:
+            assert checks[f"nis.pressure_ekf_pass{i}_{p}"].status == OK, checks[f"nis.pressure_ekf_pass{i}_{p}"]
+    # innovations 6x their σ (a wrong unit or noise level) are an ERROR
+    bad = replace(passes[1], nis_port=36.0 * passes[1].nis_port)
+    checks = {c.name: c for c in ekf_checks([bad], inp.t, above, ports)}
+    assert checks["nis.pressure_ekf_pass2_P1"].status == ERROR
