@@ -100,11 +100,13 @@ class Synthesized:
 class ExportTable:
     """Reconstructed histories for CSV export: ``time_s`` (n,) [s]; ``columns`` name ->
     ``(values (n,) in SI, unit string)`` (the :func:`workbench.io.results.export_csv` convention);
-    ``frame``: the reference frame the columns are expressed in."""
+    ``frame``: the reference frame the columns are expressed in; ``sparse``: the columns that have no
+    value at some times (NaN there; written as empty cells and declared ``# sparse:`` in the file)."""
 
     time_s: np.ndarray
     columns: Mapping[str, tuple[np.ndarray, str]]
     frame: str
+    sparse: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -273,6 +273,7 @@ def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, rep: prog.
                 table.time_s,
                 table.columns,
                 meta={"source": f"workbench run {sc.name}", "frame": table.frame},
+                sparse=table.sparse,
             )
     return result, summary, rrd, Path(summary_path), export_path, telemetry, truth, seed
 

@@ -143,3 +143,18 @@ def test_ekf_in_the_recording(run):
     for p in run.result.data.telemetry.ports:
         _, y = rec.scalars(layout.join(layout.meads_ekf_innovation_path(2, p), layout.VALUE))
         assert y.shape[0] > 2000
+
+
+def test_export_marks_unsolved_samples_empty_and_reads_back(run, tmp_path):
+    """``--export``: where the least squares has no solution (no 1σ: low q∞ early in the entry) the
+    value is an empty cell too, the columns are declared sparse, and the file reads back."""
+    from workbench.io.results import export_csv
+    from workbench.io.telemetry import read_telemetry
+
+    table = run.problem.export_columns(run.result)
+    assert "sigma_qbar" in table.sparse and "qbar" in table.sparse
+    path = export_csv(tmp_path / "x.csv", table.time_s, table.columns, sparse=table.sparse)
+    tel = read_telemetry(path)
+    q, sq = tel.channels["qbar"], tel.channels["sigma_qbar"]
+    assert np.array_equal(np.isnan(q), np.isnan(sq)) and np.isnan(q).any() and np.isfinite(q).sum() > 1000
+    assert np.all(np.isfinite(tel.channels["ekf_qbar"]))  # the filter runs through every sample

@@ -169,6 +169,9 @@ class MeadsProblem:
             "wind_north": (w.winds.wind_NE[:, 0], "m/s"),
             "wind_east": (w.winds.wind_NE[:, 1], "m/s"),
         }
+        for name in ("qbar", "alpha", "beta", "mach", "density"):  # no 1σ: the fit did not solve there
+            (v, unit), (sd, _) = cols[name], cols[f"sigma_{name}"]
+            cols[name] = (np.where(np.isfinite(sd), v, np.nan), unit)
         if result.ekf:  # the last EKF pass (smoothed), with its 1σ
             last = result.ekf[-1]
             units = {"alpha": "rad", "beta": "rad", "qbar": "Pa", "mach": "1", "p_inf": "Pa", "rho": "kg/m^3"}
@@ -177,7 +180,11 @@ class MeadsProblem:
                 v, sd = last.output(name)
                 cols[f"ekf_{name}"] = (v, unit)
                 cols[f"sigma_ekf_{name}"] = (sd, unit)
-        return ExportTable(result.air.t, cols, "air data: body axes B; winds: local north/east (EKF: north/east/down)")
+        # the least squares has no solution where too few ports are usable or q∞ is too low: those
+        # columns are sparse (empty cells there), not a dropout of the file
+        sparse = tuple(k for k, (v, _) in cols.items() if not np.all(np.isfinite(v)))
+        frame = "air data: body axes B; winds: local north/east (EKF: north/east/down)"
+        return ExportTable(result.air.t, cols, frame, sparse=sparse)
 
     def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
         """The paper's trade study (:mod:`.montecarlo`) with ``options.n_runs`` runs per error level
