@@ -397,7 +397,7 @@ class EventSpec:
 def _initial_correlation(file: Path, raw: dict, states: dict[str, int]) -> tuple[tuple[str, ...], np.ndarray] | None:
     """Validate ``[initial_correlation]``: ``raw`` the table, ``states`` estimated state name -> size.
     Returns (state names, correlation matrix (n, n)) or None when the table is absent."""
-    if not raw:
+    if not raw or (raw.get("states") is None and raw.get("matrix") is None):
         return None
     pre = "initial_correlation"
     names = raw.get("states")

@@ -636,6 +636,14 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     h_std = float(std.altitude_of_pressure(p_apo) - std.altitude_of_pressure(flight["pad"]["standby_pressure_pa"]))
     out["apogee"]["standard_day_pressure_altitude_m"] = h_std
     out["apogee"]["standard_day_error_m"] = h_std - meta["apogee"]
+    # ... and from the pressure the barometer reads there (model + estimated in-flight offset): the
+    # metadata's apogee is the flight computer's barometric altitude, so this is the like-for-like one
+    if "baro_bias" in hist:
+        p_read = p_apo + float(hist["baro_bias"]["value"][k, 0])
+        pad_p = flight["pad"]["standby_pressure_pa"]
+        h_read = float(std.altitude_of_pressure(p_read) - std.altitude_of_pressure(pad_p))
+        out["apogee"]["standard_day_barometer_altitude_m"] = h_read
+        out["apogee"]["standard_day_barometer_error_m"] = h_read - meta["apogee"]
     # landing point
     pe = _earth_fixed(p[-1:], t[-1:])[0]
     lat = math.degrees(math.asin(pe[2] / np.linalg.norm(pe)))
