@@ -53,7 +53,17 @@ def _one(log: str, data: Path, out: Path) -> dict:
         s["wall_s"] = time.perf_counter() - t0
         rec[variant] = s
     fl = json.loads((out / "flight.json").read_text(encoding="utf-8"))
-    rec["import"] = {k: fl[k] for k in ("t_start_s", "t_apogee_letter_s", "t_main_s", "t_end_s", "rows", "gaps")}
+    keys = (
+        "t_start_s",
+        "t_apogee_letter_s",
+        "t_ejection_s",
+        "t_main_s",
+        "t_end_s",
+        "rows",
+        "gaps",
+        "initial_ca_multiplier",
+    )
+    rec["import"] = {k: fl[k] for k in keys}
     rec["import"]["repeated_rows_dropped"] = fl["repeated_rows_dropped"]
     rec["pad"] = fl["pad"]
     rec["burnout"] = fl["burnout"]

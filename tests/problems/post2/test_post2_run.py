@@ -83,6 +83,22 @@ def _bad(tmp_path: Path, old: str, new: str) -> Path:
             '[schedules.late]\nstate = "cm_multiplier"\npsd = 1.0\n\n[truth]',
             ["schedules.late.state", "unknown estimated state 'cm_multiplier'"],
         ),
+        (
+            "[truth]",
+            '[initial_correlation]\nstates = ["velocty"]\nmatrix = [[1.0]]\n\n[truth]',
+            ["initial_correlation.states", "unknown estimated state 'velocty'"],
+        ),
+        (
+            "[truth]",
+            '[initial_correlation]\nstates = ["position"]\n'
+            "matrix = [[1.0, 0.9, -0.9], [0.9, 1.0, 0.9], [-0.9, 0.9, 1.0]]\n\n[truth]",
+            ["initial_correlation.matrix", "not positive semi-definite"],
+        ),
+        (
+            "[truth]",
+            '[initial_correlation]\nstates = ["position"]\nmatrix = [[1.0, 0.5], [0.5, 1.0]]\n\n[truth]',
+            ["initial_correlation.matrix", "expected a 3×3 matrix"],
+        ),
     ],
 )
 def test_problem_file_errors_are_located_and_nothing_is_written(tmp_path, capsys, old, new, expect):

@@ -195,6 +195,26 @@ SCHEMA = Schema(
             free_meaning="`[schedules.<name>]`: " + _named_meaning(SCHEDULE_KEYS),
         ),
         Table(
+            "initial_correlation",
+            "correlations of the initial errors of some states (default: independent)",
+            (
+                Key(
+                    "states",
+                    _L,
+                    None,
+                    meaning="the correlated estimated states, in the order of `matrix` (no attitude)",
+                ),
+                Key(
+                    "matrix",
+                    _L,
+                    None,
+                    "",
+                    "correlation matrix (symmetric, unit diagonal, positive semi-definite) over the listed states' "
+                    "components; the initial covariance block is diag(sigma) C diag(sigma)",
+                ),
+            ),
+        ),
+        Table(
             "filter",
             "estimator options",
             (
@@ -374,6 +394,37 @@ class EventSpec:
     truth_value: float | None = None
 
 
+def _initial_correlation(file: Path, raw: dict, states: dict[str, int]) -> tuple[tuple[str, ...], np.ndarray] | None:
+    """Validate ``[initial_correlation]``: ``raw`` the table, ``states`` estimated state name -> size.
+    Returns (state names, correlation matrix (n, n)) or None when the table is absent."""
+    if not raw or (raw.get("states") is None and raw.get("matrix") is None):
+        return None
+    pre = "initial_correlation"
+    names = raw.get("states")
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise ScenarioError(file, f"{pre}.states", "expected a non-empty list of estimated state names")
+    for n in names:
+        _check_name(file, f"{pre}.states", n, list(states), "estimated state")
+        if n == "attitude":
+            raise ScenarioError(file, f"{pre}.states", "the attitude's initial errors cannot be correlated here")
+    if len(set(names)) != len(names):
+        raise ScenarioError(file, f"{pre}.states", "a state is listed twice")
+    size = sum(states[n] for n in names)
+    try:
+        c = np.asarray(raw.get("matrix"), dtype=float)
+    except (TypeError, ValueError):
+        c = np.zeros(0)
+    if c.shape != (size, size):
+        raise ScenarioError(file, f"{pre}.matrix", f"expected a {size}×{size} matrix (the listed states' components)")
+    if not np.all(np.isfinite(c)) or not np.allclose(c, c.T, atol=1e-9):
+        raise ScenarioError(file, f"{pre}.matrix", "must be finite and symmetric")
+    if not np.allclose(np.diag(c), 1.0, atol=1e-9) or np.any(np.abs(c) > 1.0 + 1e-9):
+        raise ScenarioError(file, f"{pre}.matrix", "a correlation matrix has a unit diagonal and |entries| <= 1")
+    if np.min(np.linalg.eigvalsh(c)) < -1e-9:
+        raise ScenarioError(file, f"{pre}.matrix", "is not positive semi-definite")
+    return tuple(names), c
+
+
 @dataclass(frozen=True)
 class Post2Config:
     """Validated post2 settings (SI): ``dof``, reconstruction span ``t_start``, ``t_end`` [s],
@@ -391,6 +442,7 @@ class Post2Config:
     truth_states: dict[str, np.ndarray]
     data: dict
     schedules: tuple[Schedule, ...] = ()  # weights / system noise windows (schedules.py)
+    initial_correlation: tuple[tuple[str, ...], np.ndarray] | None = None  # (states, C) or None
 
     def state(self, name: str) -> StateSpec | None:
         """The :class:`StateSpec` called ``name`` or None."""
@@ -625,7 +677,10 @@ def config_for(scenario: Scenario) -> Post2Config:
         [o.name for o in obs],
         [e.name for e in events],
     )
+    corr = _initial_correlation(
+        file, data.get("initial_correlation", {}), {s.name: STATES[s.name].size for s in states}
+    )
     return Post2Config(
         dof, float(m["t_start_s"]), float(m["t_end_s"]), float(m["step_s"]), float(grid),
-        tuple(states), tuple(obs), events, truth_states, data, schedules,
+        tuple(states), tuple(obs), events, truth_states, data, schedules, corr,
     )  # fmt: skip

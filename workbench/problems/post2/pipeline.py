@@ -264,7 +264,12 @@ class Estimator:
             sig[b.se] = s.sigma[[2, 0, 1]]
             eps[b.se] = s.step
         mean = x0.copy()
-        return x0, np.diag(sig**2), eps, mean
+        P0 = np.diag(sig**2)
+        if cfg.initial_correlation is not None:  # [initial_correlation]: diag(σ) C diag(σ) over its states
+            names, corr = cfg.initial_correlation
+            idx = np.concatenate([np.arange(sm.n_e)[sm.blocks[n].se] for n in names])
+            P0[np.ix_(idx, idx)] = sig[idx, None] * corr * sig[None, idx]
+        return x0, P0, eps, mean
 
     def q_matrix(self, dt: float, t: float | None = None) -> tuple[np.ndarray, dict]:
         """System noise Q (n_e, n_e) of a step dt [s] and the Markov decay factors {name: Φ}; with the

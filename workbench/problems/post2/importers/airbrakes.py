@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.core.bodies import G0
+from workbench.core.bodies import EARTH, G0
 from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, write_events, write_telemetry
 
 __all__ = [
@@ -377,7 +377,8 @@ def import_flight(
     fl = rocket.reconstruct_boost(
         t, log.letters, log.f_B, log.w_B, log.mag_B, log.pressure, meta, declination_deg, inclination_deg
     )
-    t_apogee = log.phase_start("F") - t_launch
+    # the drogue opens at the ejection shock (the descent letter can lag it: flight 4, 3.5 s)
+    t_apogee = rocket.detect_ejection(t, log.f_B, log.phase_start("C") - t_launch, log.phase_start("F") - t_launch)
     try:
         t_land = log.phase_start("L") - t_launch
     except ValueError:
@@ -396,12 +397,14 @@ def import_flight(
     write_telemetry(
         out / "pressure.csv", tp, {"p": (pm[:, 0], "Pa")}, meta={"source": log.path.name, "samples_per_block": "varies"}
     )
-    sig_p = rocket.pressure_sigma(tp, log.phase_start("C") - t_launch, t_apogee, fl.pad_pressure_std, cnt)
+    sig_p = rocket.pressure_sigma(tp, log.phase_start("C") - t_launch, t_apogee, fl.pad_pressure_std, cnt, t_main)
     write_telemetry(
         out / "pressure_weights.csv", tp, {"p": (1.0 / sig_p**2, "1")}, meta={"meaning": "W = 1/sigma^2 [1/Pa^2]"}
     )
     write_telemetry(out / "accel.csv", ta, {"a": (am[:, 0], "m/s^2")}, meta={"source": log.path.name})
-    sig_a = rocket.accel_sigma(ta, t_apogee, t_main)
+    fn = np.linalg.norm(log.f_B, axis=1)
+    _, _, cnt_a = block_means(t, fn[:, None], t0, t_end, obs_rate_hz, gaps_rel)
+    sig_a = rocket.accel_sigma(ta, t_apogee, t_main, rocket.local_noise(ta, t, fn), cnt_a)
     write_telemetry(
         out / "accel_weights.csv", ta, {"a": (1.0 / sig_a**2, "1")}, meta={"meaning": "W = 1/sigma^2 [s^4/m^2]"}
     )
@@ -434,15 +437,23 @@ def import_flight(
         events.append((float(t[k]), f"phase {letters[k]} ({PHASES[letters[k]]})"))
     for g in gaps_rel:
         events.append((g.t_a, f"gap {g.dt:.3f} s before row {g.row}"))
+    events.append((t_apogee, "drogue ejection (detected)"))
     if t_main is not None:
         events.append((t_main, "main parachute (detected)"))
     write_events(out / "events.csv", sorted(events))
+    # the coast drag multiplier's prior from the first measured coast drag at the burnout state
+    r_b = float(np.linalg.norm(fl.p_M))
+    v_rel = float(np.linalg.norm(fl.v_M - np.cross([0.0, 0.0, EARTH.rotation_rate], fl.p_M)))
+    rho = float(fl.atmosphere.density(max(r_b - EARTH.reference_radius, 0.0)))
+    ca0 = rocket.initial_ca_multiplier(t, log.f_B, t0, v_rel, rho, meta)
     info = {
+        "initial_ca_multiplier": ca0,
         "flight": meta.name,
         "log": log.path.name,
         "t_launch_log_s": t_launch,
         "t_start_s": t0,
-        "t_apogee_letter_s": t_apogee,
+        "t_apogee_letter_s": log.phase_start("F") - t_launch,
+        "t_ejection_s": t_apogee,
         "t_main_s": t_main,
         "t_end_s": t_end,
         "rows": int(t.size),
@@ -456,7 +467,7 @@ def import_flight(
     }
     (out / "flight.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
     path = out / f"{name}.toml"
-    path.write_text(rocket.problem_file(name, meta, fl, t0, t_end, t_apogee, t_main), encoding="utf-8")
+    path.write_text(rocket.problem_file(name, meta, fl, t0, t_end, t_apogee, t_main, ca0=ca0), encoding="utf-8")
     # the variant that also observes the landed coordinates (winds under the parachutes)
     p_land = rocket.landing_point_inertial(meta, fl.h_pad, t_end)
     write_telemetry(
@@ -465,7 +476,7 @@ def import_flight(
         {c: (np.array([p_land[i]]), "m") for i, c in enumerate("xyz")},
         meta={"meaning": "metadata landed coordinates at touchdown, inertial frame M, pad elevation"},
     )
-    text = rocket.problem_file(f"{name}_landing", meta, fl, t0, t_end, t_apogee, t_main, landing=True)
+    text = rocket.problem_file(f"{name}_landing", meta, fl, t0, t_end, t_apogee, t_main, landing=True, ca0=ca0)
     (out / f"{name}_landing.toml").write_text(text, encoding="utf-8")
     return path
 
