@@ -233,6 +233,19 @@ def test_excerpt_reconstruction_is_healthy(excerpt_run):
     assert summary["health"]["verdict"] != "ERROR", summary["health"]
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="open (issue #9 case 5): since the boost's correlated start the reconstruction keeps the "
+    "IMU-integrated boost altitude, whose scale differs from the flight computer's barometric altitude by "
+    "~2 % (flight 1's baro offset estimate 196 Pa, ~7 sigma of its prior): 37 m RMS after the burnout "
+    "transient on the excerpt (was < 30 m with the diagonal start, whose residuals were NIS ~117); an "
+    "atmosphere-scale state, not a constant offset, would absorb it",
+)
+def test_altitude_follows_the_flight_computer_within_30_m(excerpt_run):
+    _, _, _, s = excerpt_run
+    assert s["altitude_vs_flight_computer"]["rms_after_burnout_transient_m"] < 30.0
+
+
 def test_short_reconstruction_follows_the_flight(excerpt_run):
     _, toml, result, s = excerpt_run
     # the excerpt ends 2.3 s after the apogee letter: apogee within 3 % of the metadata's (the flight
