@@ -21,8 +21,8 @@ Measured:
   the estimator's prior (:func:`draw_parameters`): the NEES is χ²(d) only for truths distributed
   as the filter assumes; with one fixed planted value, a parameter the data hardly inform adds its
   fixed (planted − prior)²/σ² to every run whatever the filter does (ca_multiplier_fm: the
-  posterior is the prior, planted 1.8σ off: 3.2; ca_multiplier_hyp: posterior/prior σ ≈ 0.8,
-  planted 2σ off: ≈ 2.4 — the CA multipliers' prior IS Table 4-1's dispersion);
+  posterior is the prior, planted 1.8σ off: z² = 3.2; ca_multiplier_hyp: posterior/prior σ ≈ 0.8,
+  planted 2σ off: z² ≈ 2.9 over 50 seeds — the CA multipliers' prior IS Table 4-1's dispersion);
 * **mc_selection** — the Monte Carlo initial-state selection's member propagation: ``--mc-members``
   members vectorised (one array) vs the same maths one member at a time over ``--loop-members``
   members (the loop's wall time scaled to the vectorised count), in the same process.
