@@ -256,8 +256,10 @@ class Estimator:
             self.smap, cfg.dof, build.environment(scenario, cfg), build.vehicle(scenario, cfg), build.events(cfg)
         )
         self.x0, self.P0, self.eps, self.mean = self._initial()
-        self.phase = self.model.initial_phase()
-        self.phase_log: list[tuple[float, str]] = []
+        # events due at the start apply from it, before its observations (as in the truth simulator;
+        # checked only at the first transition they came after the t_start samples, issue #9)
+        self.phase = self.model.check_events(self.x0, cfg.t_start, self.model.initial_phase())
+        self.phase_log: list[tuple[float, str]] = [(cfg.t_start, nm) for nm in self.phase["fired"]]
         self.weight_log: dict[str, list[tuple[float, float]]] = {}  # schedules: (t, factor) per channel
 
     def _initial(self):
