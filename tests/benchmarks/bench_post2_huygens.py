@@ -16,7 +16,13 @@ Measured:
   its mean (95 %), per-parameter error/σ statistics and the fraction inside 3σ; the main chute's
   deploy time the reconstruction uses is read from each run's accelerometer file (the first jump of
   |a| after the entry pulse, :func:`deploy_time_from_telemetry`), as a user would read it.  The JSON
-  is rewritten after every run, so a cut-short study still reports the runs it completed;
+  is rewritten after every run, so a cut-short study still reports the runs it completed.  With
+  ``--draw-parameters NAME,...`` (or ``all``) those parameters of each truth are ALSO drawn from
+  the estimator's prior (:func:`draw_parameters`): the NEES is χ²(d) only for truths distributed
+  as the filter assumes; with one fixed planted value, a parameter the data hardly inform adds its
+  fixed (planted − prior)²/σ² to every run whatever the filter does (ca_multiplier_fm: the
+  posterior is the prior, planted 1.8σ off: z² = 3.2; ca_multiplier_hyp: posterior/prior σ ≈ 0.8,
+  planted 2σ off: z² ≈ 2.9 over 50 seeds — the CA multipliers' prior IS Table 4-1's dispersion);
 * **mc_selection** — the Monte Carlo initial-state selection's member propagation: ``--mc-members``
   members vectorised (one array) vs the same maths one member at a time over ``--loop-members``
   members (the loop's wall time scaled to the vectorised count), in the same process.
@@ -44,6 +50,7 @@ from workbench.io.telemetry import read_telemetry  # noqa: E402
 from workbench.problems.base import RunOptions  # noqa: E402
 from workbench.problems.post2 import huygens  # noqa: E402
 from workbench.problems.post2.config import config_for  # noqa: E402
+from workbench.problems.post2.model import STATES, scurve, scurve_inverse, scurve_slope  # noqa: E402
 from workbench.problems.post2.pipeline import read_observations  # noqa: E402
 from workbench.problems.post2.problem import Post2Problem  # noqa: E402
 from workbench.problems.runner import run_scenario  # noqa: E402
@@ -70,6 +77,28 @@ def deploy_time_from_telemetry(folder: Path) -> float:
     return 0.5 * (t[k] + t[k + 1])
 
 
+def draw_parameters(cfg, seed: int, names=PARAMS) -> dict:
+    """One draw of the parameters ``names`` (of PARAMS) from the estimator's prior:
+    ``{"truth.states.<name>": value}`` in the file's unit (deg for tilt); N(value, σ²) in the
+    estimated coordinate, through the S-curve for a bounded state (the distribution the filter's
+    P0 describes); each parameter from its own stream (the same draw whatever else is drawn)."""
+    out = {}
+    for i, name in enumerate(PARAMS):
+        rng = np.random.default_rng([20_000 + seed, i])
+        if name not in names:
+            continue
+        s = cfg.state(name)
+        v, sd = np.asarray(s.value, float), np.asarray(s.sigma, float)
+        if s.bounds is not None:
+            raw = scurve_inverse(v, *s.bounds)
+            v = scurve(raw + sd / scurve_slope(raw, *s.bounds) * rng.standard_normal(v.shape), *s.bounds)
+        else:
+            v = v + sd * rng.standard_normal(v.shape)
+        v = v / huygens._factor(STATES[name].unit)
+        out[f"truth.states.{name}"] = v.tolist() if v.size > 1 else float(v[0])  # scalars as numbers
+    return out
+
+
 def _rows(summary: dict) -> list[dict]:
     return summary["truth"]["planted_vs_recovered"]
 
@@ -94,15 +123,20 @@ def bench_nominal(out: Path) -> dict:
     }
 
 
-def _one_seed(seed: int, out: Path) -> dict:
-    """A dispersed truth (initial state from the covariance, noise ``seed``) and its reconstruction."""
+def _one_seed(seed: int, out: Path, draw: tuple[str, ...] = ()) -> dict:
+    """A dispersed truth (initial state from the covariance, noise ``seed``; the parameters
+    ``draw`` from the estimator's prior, :func:`draw_parameters`) and its reconstruction."""
     prob = Post2Problem()
     sc0 = load_scenario(TOML)
     cfg = config_for(sc0)
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
     x_true = huygens.dispersed_members(mean, huygens.delivered_covariance(sc0, cfg), 2, seed=10_000 + seed)[1]
     sc = sc0.with_overrides(
-        {"truth.states.position": x_true[:3].tolist(), "truth.states.velocity": x_true[3:].tolist()}
+        {
+            "truth.states.position": x_true[:3].tolist(),
+            "truth.states.velocity": x_true[3:].tolist(),
+            **draw_parameters(cfg, seed, draw),
+        }
     )
     tel_dir = out / f"seed{seed}"
     syn = prob.synthesize(sc, tel_dir, seed)
@@ -139,14 +173,14 @@ def _one_seed(seed: int, out: Path) -> dict:
     }
 
 
-def bench_nees(out: Path, seeds: int, json_path: Path, results: dict, argv) -> dict:
+def bench_nees(out: Path, seeds: int, json_path: Path, results: dict, argv, draw: tuple[str, ...] = ()) -> dict:
     """NEES of the parameter vector over ``seeds`` dispersed truths (JSON rewritten after each)."""
     runs = []
     d = len(PARAMS)
     t_all = time.perf_counter()
     for s in range(1, seeds + 1):
         t0 = time.perf_counter()
-        r = _one_seed(s, out)
+        r = _one_seed(s, out, draw)
         r["wall_s"] = time.perf_counter() - t0
         runs.append(r)
         n = len(runs)
@@ -158,6 +192,7 @@ def bench_nees(out: Path, seeds: int, json_path: Path, results: dict, argv) -> d
             "runs_requested": seeds,
             "dimension": d,
             "parameters": list(PARAMS),
+            "parameters_drawn_from_prior": list(draw),
             "mean_nees": mean,
             "band_95": [lo, hi],
             "verdict": "consistent" if lo <= mean <= hi else ("conservative" if mean < lo else "overconfident"),
@@ -220,6 +255,7 @@ def main(argv=None) -> int:
     ap.add_argument("--loop-members", type=int, default=200)
     ap.add_argument("--skip-nominal", action="store_true")
     ap.add_argument("--skip-mc", action="store_true")
+    ap.add_argument("--draw-parameters", default="", help="NAME,... or 'all': NEES truths' parameters from the prior")
     ap.add_argument("--json", type=Path, default=ROOT / "docs" / "results" / "bench_post2_huygens.json")
     args = ap.parse_args(argv)
     argv = sys.argv[1:] if argv is None else argv
@@ -236,7 +272,10 @@ def main(argv=None) -> int:
                 print(r, flush=True)
             write_benchmark_json(args.json, __file__, results, argv)
         if args.seeds > 0:
-            bench_nees(out, args.seeds, args.json, results, argv)
+            draw = PARAMS if args.draw_parameters == "all" else tuple(filter(None, args.draw_parameters.split(",")))
+            if set(draw) - set(PARAMS):
+                ap.error(f"--draw-parameters: not among {PARAMS}: {sorted(set(draw) - set(PARAMS))}")
+            bench_nees(out, args.seeds, args.json, results, argv, draw)
     write_benchmark_json(args.json, __file__, results, argv)
     return 0
 

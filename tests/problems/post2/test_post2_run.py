@@ -182,6 +182,10 @@ def test_sliding_median_removes_an_outlier_and_keeps_the_raw_samples(tmp_path, j
         config_for(sc),
         {"gravity": tmp_path / "data" / "gravity.csv", "gravity_weights": tmp_path / "data" / "w.csv"},
     ).channels["gravity"]
-    assert ch.z_raw[40, 0] == pytest.approx(g[40])
-    assert ch.z[40, 0] == pytest.approx(np.median(g[39:42]))
+    k = int(np.flatnonzero(ch.t == tel.time[40])[0])
+    assert ch.z_raw[k, 0] == pytest.approx(g[40])
+    assert ch.z[k, 0] == pytest.approx(np.median(g[39:42]))
     np.testing.assert_allclose(ch.R[:, 0, 0], 1e-10)  # R = 1 / W
+    # only whole windows: the edge samples (a window padded with copies of one raw sample) are dropped
+    np.testing.assert_array_equal(ch.t, tel.time[1:-1])
+    np.testing.assert_allclose(ch.z[:, 0], [np.median(g[i - 1 : i + 2]) for i in range(1, g.size - 1)])

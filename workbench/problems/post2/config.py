@@ -57,7 +57,7 @@ OBSERVATION_KEYS: dict[str, tuple[str, Any, str]] = {
     "file": (_S, None, "CSV of the observations (user telemetry; synthetic: written as <name>.csv)"),
     "weights": (_S, None, "CSV of the weights W vs time (R = W⁻¹), columns as the observation's, unit 1/unit²"),
     "sigma": ("number_or_list", None, "constant 1σ in the observation's unit (instead of a weights file)"),
-    "median_window": (_I, 0, "sliding-median pre-smoothing over this many samples (0: none)"),
+    "median_window": (_I, 0, "sliding-median pre-smoothing over this many samples (0: none), whole windows only"),
     "decimate": (_I, 1, "assimilate every n-th sample after the pre-smoothing (smoothed samples are correlated)"),
     "gate_probability": (_F, 0.0, "χ² gate probability of the update (0: no gate)"),
     "iterations": (_I, 1, "Gauss-Newton iterations of the update (iterated EKF, Bell & Cathey 1993); 1: plain EKF"),

@@ -199,6 +199,9 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
             R = np.broadcast_to(np.diag(spec.sigma**2), (t.size, d.size, d.size)).copy()
         else:
             R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]), path.name)
+        if spec.median_window > 1:  # only medians over a whole window (see _complete_windows)
+            keep = _complete_windows(scenario, spec, path, t.size)
+            t, z, z_raw, R = (a[keep] for a in (t, z, z_raw, R))
         if spec.decimate > 1:  # every n-th (pre-smoothed) sample
             t, z, z_raw, R = (a[:: spec.decimate] for a in (t, z, z_raw, R))
         out[spec.name] = Channel(spec, t, z, z_raw, R)
@@ -209,6 +212,24 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
         if spec.quantity == "gravity_magnitude" and z.size:
             _check_gravity_units(path, tel, d.components[0], cfg)
     return ObservationData(out, tuple(notes))
+
+
+def _complete_windows(scenario: Scenario, spec: ObservationSpec, path: Path, n: int) -> slice:
+    """The samples (of ``n``) whose sliding-median window of ``spec.median_window`` samples lies
+    wholly inside the file: scipy's window at index i spans i − w//2 … i + w − 1 − w//2.  At the
+    edges ``mode="nearest"`` pads with copies of the first/last sample; once more than half the
+    window is padding the "median" IS that one raw sample, with the raw sensor noise, not the
+    smoothed noise the observation's σ describes (post2_huygens: the first drogue sample at
+    1171.2 s, raw noise 0.05 m/s², was assimilated at σ = 0.006 m/s² and pulled the drogue drag,
+    bias, tilt and wind together, issue #9).  A file shorter than one window is a located error."""
+    w = spec.median_window
+    lo, hi = w // 2, n - (w - 1 - w // 2)
+    if hi <= lo:
+        raise ScenarioError(
+            scenario.path, f"observations.{spec.name}.median_window",
+            f"{path.name} has {n} samples, fewer than one median window of {w}",
+        )  # fmt: skip
+    return slice(lo, hi)
 
 
 def _kind(unit: str) -> str:
@@ -235,8 +256,10 @@ class Estimator:
             self.smap, cfg.dof, build.environment(scenario, cfg), build.vehicle(scenario, cfg), build.events(cfg)
         )
         self.x0, self.P0, self.eps, self.mean = self._initial()
-        self.phase = self.model.initial_phase()
-        self.phase_log: list[tuple[float, str]] = []
+        # events due at the start apply from it, before its observations (as in the truth simulator;
+        # checked only at the first transition they came after the t_start samples, issue #9)
+        self.phase = self.model.check_events(self.x0, cfg.t_start, self.model.initial_phase())
+        self.phase_log: list[tuple[float, str]] = [(cfg.t_start, nm) for nm in self.phase["fired"]]
         self.weight_log: dict[str, list[tuple[float, float]]] = {}  # schedules: (t, factor) per channel
 
     def _initial(self):
