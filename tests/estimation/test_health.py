@@ -104,3 +104,19 @@ def test_verdict_report_markdown_and_error():
     assert "bad thing" in str(err) and "--allow-unhealthy" in str(err)
     with pytest.raises(ValueError):
         Check("c", "FINE", 0, None, "")
+
+
+def test_covariance_check_tells_round_off_from_indefinite():
+    """A state combination known to numerical precision (perfectly correlated states) gives an
+    eigenvalue of either sign at round-off level: a WARNING, not an ERROR; a correlation beyond 1 by
+    more than round-off is indefinite (ERROR). Both in units far from 1 (1e6 m², 1e-8)."""
+    sig = np.array([1e3, 1e-4, 2.0])
+    for eps, status in ((-1e-13, WARNING), (-1e-6, ERROR), (1e-11, OK)):
+        C = np.eye(3)
+        C[0, 1] = C[1, 0] = 1.0 - eps  # correlation 1 + 1e-13: eigenvalue -1e-13 of C
+        P = np.tile(sig[:, None] * C * sig[None, :], (4, 1, 1))
+        P[:2] = np.diag(sig**2)  # the first steps are fine
+        c = covariance_check(P)
+        assert c.status == status, (eps, c.message)
+        if status == WARNING:  # (the OK case: the unscaled eigenvalue's sign is itself round-off)
+            assert "round-off" in c.message and "2 step(s)" in c.message, c.message

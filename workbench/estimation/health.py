@@ -163,7 +163,10 @@ def covariance_check(
 ) -> Check:
     """Covariance history ``P`` (n, k, k) (or one (k, k)): symmetric to ``rtol`` relative to its
     largest diagonal entry and positive definite at every step; ERROR otherwise (value: the smallest
-    eigenvalue over the history).  ``stats``: :func:`covariance_stats` of ``P`` when the caller has
+    eigenvalue over the history). Where the smallest eigenvalue is ≤ 0 the correlation matrices of
+    those steps decide (their eigenvalues do not depend on the states' units): all > 0 is OK (value:
+    their smallest), within :data:`ROUNDOFF_CORRELATION_EIGENVALUE` of 0 a WARNING (semi-definite to
+    round-off), below that an ERROR.  ``stats``: :func:`covariance_stats` of ``P`` when the caller has
     them already (not computed again)."""
     P = np.asarray(P, float)
     if P.ndim == 2:
@@ -178,10 +181,50 @@ def covariance_check(
         return Check(name, ERROR, _f(asym), rtol, f"{name}: not symmetric (relative asymmetry {asym:.2g})")
     if emin <= 0.0:
         step = int(np.argmin(emin_k))
+        bad = np.flatnonzero(emin_k <= 0.0)
+        cmin = _correlation_min_eigenvalue(P[bad])
+        if cmin > 0.0:  # the states' scales (e.g. m² beside 1e-8) made eigvalsh's round-off negative
+            return Check(
+                name,
+                OK,
+                _f(cmin),
+                0.0,
+                f"{name}: symmetric, positive definite over {P.shape[0]} steps (at {bad.size} step(s) only its "
+                f"correlation matrix shows it, smallest eigenvalue {cmin:.2g}: the unscaled {emin:.3g} at step "
+                f"{step} is round-off of the states' different scales)",
+            )
+        if cmin >= -ROUNDOFF_CORRELATION_EIGENVALUE:
+            return Check(
+                name,
+                WARNING,
+                _f(emin),
+                0.0,
+                f"{name}: positive semi-definite only to round-off at {bad.size} step(s) (eigenvalue {emin:.3g} at "
+                f"step {step}; smallest eigenvalue of the correlation matrix {cmin:.2g}): a combination of the "
+                "states is known to numerical precision (no process noise on it?)",
+            )
         return Check(
             name, ERROR, _f(emin), 0.0, f"{name}: not positive definite (eigenvalue {emin:.3g} at step {step})"
         )
     return Check(name, OK, _f(emin), 0.0, f"{name}: symmetric, positive definite over {P.shape[0]} steps")
+
+
+ROUNDOFF_CORRELATION_EIGENVALUE = 1e-9
+"""A covariance whose smallest eigenvalue is ≤ 0 but whose correlation matrix D^-1/2 P D^-1/2 (unit
+diagonal, so eigenvalues are free of the states' units) has its smallest eigenvalue within this of
+zero is semi-definite to round-off (WARNING in :func:`covariance_check`); below −this it is
+indefinite (ERROR)."""
+
+
+def _correlation_min_eigenvalue(P: np.ndarray) -> float:
+    """Smallest eigenvalue [-] of the correlation matrices of the covariances ``P`` (m, k, k); −inf
+    when a diagonal entry is ≤ 0 (no correlation matrix: not a covariance)."""
+    d = np.einsum("nii->ni", P)
+    if np.any(d <= 0.0) or P.shape[0] == 0:
+        return -np.inf
+    s = 1.0 / np.sqrt(d)
+    C = P * s[:, :, None] * s[:, None, :]
+    return float(np.min(np.linalg.eigvalsh(0.5 * (C + np.swapaxes(C, 1, 2)))))
 
 
 def interval_check(
