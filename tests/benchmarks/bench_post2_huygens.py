@@ -49,7 +49,7 @@ from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.io.telemetry import read_telemetry  # noqa: E402
 from workbench.problems.base import RunOptions  # noqa: E402
 from workbench.problems.post2 import huygens  # noqa: E402
-from workbench.problems.post2.config import config_for  # noqa: E402
+from workbench.problems.post2.config import config_for, unit_factor  # noqa: E402
 from workbench.problems.post2.model import STATES, scurve, scurve_inverse, scurve_slope  # noqa: E402
 from workbench.problems.post2.pipeline import read_observations  # noqa: E402
 from workbench.problems.post2.problem import Post2Problem  # noqa: E402
@@ -94,7 +94,7 @@ def draw_parameters(cfg, seed: int, names=PARAMS) -> dict:
             v = scurve(raw + sd / scurve_slope(raw, *s.bounds) * rng.standard_normal(v.shape), *s.bounds)
         else:
             v = v + sd * rng.standard_normal(v.shape)
-        v = v / huygens._factor(STATES[name].unit)
+        v = v / unit_factor(STATES[name].unit)
         out[f"truth.states.{name}"] = v.tolist() if v.size > 1 else float(v[0])  # scalars as numbers
     return out
 

@@ -28,6 +28,7 @@ from workbench.problems.post2.schedules import SCHEDULE_KEYS, Schedule
 
 __all__ = [
     "SCHEMA",
+    "unit_factor",
     "STATE_KEYS",
     "OBSERVATION_KEYS",
     "EVENT_KEYS",
@@ -449,13 +450,14 @@ class Post2Config:
         return next((s for s in self.states if s.name == name), None)
 
 
-def _factor(unit: str) -> float:
-    """SI value of one ``unit`` (a pure scale: the state units have no offset)."""
+def unit_factor(unit: str) -> float:
+    """SI value [SI/unit] of one ``unit`` of a problem-file state (a pure scale: the state units have no
+    offset; ``"1"``, ``"-"`` and ``"m^2"`` are 1)."""
     return 1.0 if unit in ("1", "-", "m^2") else float(to_si(1.0, unit)[0])
 
 
 def _si(v: np.ndarray, unit: str) -> np.ndarray:
-    return np.asarray(v, dtype=float) * _factor(unit)
+    return np.asarray(v, dtype=float) * unit_factor(unit)
 
 
 def _check_name(file: Path, dotted: str, name: str, known, what: str) -> None:
@@ -487,7 +489,7 @@ def _state(file: Path, name: str, raw: dict, dof: int) -> StateSpec:
     psd = _vec(file, f"{pre}.psd", t["psd"], d.size)
     if np.any(psd < 0):
         raise ScenarioError(file, f"{pre}.psd", "must be >= 0")
-    psd = psd * _factor(d.unit) ** 2  # unit²/s -> SI²/s
+    psd = psd * unit_factor(d.unit) ** 2  # unit²/s -> SI²/s
     tau = t["tau_s"]
     if process == "markov" and (tau is None or not tau > 0):
         raise ScenarioError(file, f"{pre}.tau_s", "a markov process needs tau_s > 0")
@@ -673,7 +675,7 @@ def config_for(scenario: Scenario) -> Post2Config:
     schedules = _schedules(
         file,
         data.get("schedules", {}),
-        {s.name: (STATES[s.name].size, _factor(STATES[s.name].unit), s.process) for s in states},
+        {s.name: (STATES[s.name].size, unit_factor(STATES[s.name].unit), s.process) for s in states},
         [o.name for o in obs],
         [e.name for e in events],
     )

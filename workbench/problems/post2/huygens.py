@@ -36,10 +36,9 @@ import numpy as np
 
 from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.io.scenario import Scenario, ScenarioError
-from workbench.io.units import to_si
 from workbench.problems.post2 import build, kernels, pipeline
 from workbench.problems.post2 import model as post2_model
-from workbench.problems.post2.config import Post2Config, config_for
+from workbench.problems.post2.config import Post2Config, config_for, unit_factor
 from workbench.problems.post2.model import STATES, StateMap, TrajectoryModel
 
 __all__ = [
@@ -332,11 +331,6 @@ def _start_from(scenario: Scenario, sel: McSelection) -> Scenario:
 
 
 # ------------------------------------------------------------------ scorecard
-def _factor(unit: str) -> float:
-    """SI value of one ``unit`` (the state units are pure scales)."""
-    return 1.0 if unit in ("1", "-") else float(to_si(1.0, unit)[0])
-
-
 def tolerance_si(scenario: Scenario, name: str, value) -> np.ndarray:
     """A ``[truth.tolerances]`` entry in SI (the state's unit converted), (size,)."""
     if name not in STATES:
@@ -344,7 +338,7 @@ def tolerance_si(scenario: Scenario, name: str, value) -> np.ndarray:
     v = np.atleast_1d(np.asarray(value, dtype=float))
     if np.any(v <= 0):
         raise ScenarioError(scenario.path, f"truth.tolerances.{name}", "must be > 0")
-    return v * _factor(STATES[name].unit)
+    return v * unit_factor(STATES[name].unit)
 
 
 def planted_table(result, truth: dict) -> list[dict]:
@@ -357,7 +351,7 @@ def planted_table(result, truth: dict) -> list[dict]:
         d = STATES[name]
         if d.dynamic or f"param_{name}" not in truth:
             continue
-        k = 1.0 / _factor(d.unit)
+        k = 1.0 / unit_factor(d.unit)
         tv = np.atleast_1d(truth[f"param_{name}"]).astype(float)
         v, s = hist[name]["value"][-1], hist[name]["sigma"][-1]
         i = 0  # scalar parameters; the bias: its axial (x) component
