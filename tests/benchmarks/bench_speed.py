@@ -133,7 +133,7 @@ def rows(speed: dict, results_dir: Path = RESULTS) -> list[tuple[str, str, str, 
                 f"{serial:.0f} s" if walls else "—",
                 f"{serial / cold:.2f}× (first run)" if walls else "—",
                 ("met" if (warm or cold) <= 60 else "**not met**")
-                + (f"; first run {cold - 60:.0f} s over" if warm and cold > 60 else ""),
+                + (f"; **first run {cold - 60:.0f} s over**" if warm and cold > 60 else ""),
             )
         )
         rss_warm = cmd.get("run_all_warm_max_rss_mb")
