@@ -6,13 +6,12 @@ registered for the test, so it also checks that the command line holds no proble
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import re
-import sys
 from pathlib import Path
 
 import pytest
+from example_problem import registered_fallingbody  # tests/support, on sys.path via tests/conftest.py
 
 from workbench.cli import EXIT_INPUT, EXIT_KIND, EXIT_OK, main
 from workbench.problems import registry
@@ -22,14 +21,8 @@ EXAMPLE = Path(__file__).resolve().parent / "problems" / "example_fallingbody"
 
 @pytest.fixture
 def fallingbody():
-    spec = importlib.util.spec_from_file_location("example_fallingbody_cli", EXAMPLE / "fallingbody.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    p = registry.register(module.FallingBodyProblem(), replace=True)
-    yield p
-    registry.unregister(p.kind)
-    sys.modules.pop(spec.name, None)
+    with registered_fallingbody("example_fallingbody_cli") as module:
+        yield registry.get(module.FallingBodyProblem.kind)
 
 
 def _assets(tmp_path, monkeypatch, scenarios: dict[str, str]) -> Path:

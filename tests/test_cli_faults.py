@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from example_problem import registered_fallingbody  # tests/support, on sys.path via tests/conftest.py
 
 from workbench import cli
 from workbench.recording.writer import remove_stale_partials
@@ -163,18 +164,8 @@ def test_read_only_output_is_a_located_error(sub):
 
 @pytest.fixture
 def fallingbody():
-    import importlib.util
-
-    from workbench.problems import registry
-
-    spec = importlib.util.spec_from_file_location("example_fallingbody", EXAMPLE / "fallingbody.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    p = registry.register(module.FallingBodyProblem())
-    yield module
-    registry.unregister(p.kind)
-    sys.modules.pop(spec.name, None)
+    with registered_fallingbody(replace=False) as module:
+        yield module
 
 
 def test_output_below_a_file_is_a_located_error(tmp_path, fallingbody, capsys):

@@ -11,15 +11,14 @@ validate; ``init post2_j2`` runs end to end. Slow tier: ``init droptest`` runs e
 
 from __future__ import annotations
 
-import importlib.util
 import shutil
-import sys
 import tomllib
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from example_problem import registered_fallingbody  # tests/support, on sys.path via tests/conftest.py
 
 from workbench.cli import main
 from workbench.io.assets import assets_dir
@@ -39,19 +38,13 @@ FALLING = Path(__file__).resolve().parent / "example_fallingbody"
 @pytest.fixture(scope="module")
 def falling(tmp_path_factory):
     """Three falling-body runs: ``a`` and ``a2`` with seed 3, ``b`` with seed 4 -> {label: rrd}."""
-    spec = importlib.util.spec_from_file_location("example_fallingbody", FALLING / "fallingbody.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    p = registry.register(module.FallingBodyProblem(), replace=True)
-    out = {}
-    for label, seed in (("a", 3), ("a2", 3), ("b", 4)):
-        d = tmp_path_factory.mktemp(f"fall_{label}")
-        assert main(["run", str(FALLING / "fallingbody.toml"), "--out", str(d), "--seed", str(seed)]) == 0
-        out[label] = d / "fallingbody.rrd"
-    yield out
-    registry.unregister(p.kind)
-    sys.modules.pop(spec.name, None)
+    with registered_fallingbody():
+        out = {}
+        for label, seed in (("a", 3), ("a2", 3), ("b", 4)):
+            d = tmp_path_factory.mktemp(f"fall_{label}")
+            assert main(["run", str(FALLING / "fallingbody.toml"), "--out", str(d), "--seed", str(seed)]) == 0
+            out[label] = d / "fallingbody.rrd"
+        yield out
 
 
 def test_compare_two_identical_runs_differ_by_exactly_zero(falling, tmp_path, capsys):

@@ -4,21 +4,19 @@ recording, the per-moment layout (``recording.moments``), and ``workbench open``
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import shlex
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import rerun as rr
 import rerun.blueprint as rrb
+from example_problem import registered_fallingbody  # tests/support, on sys.path via tests/conftest.py
 
 from workbench.cli import EXIT_OK, EXIT_USAGE, main
 from workbench.io.moments import KeyMoment, MomentError, default_window, moments_from_dicts, ordered, slug
-from workbench.problems import registry
 from workbench.recording import layout
 from workbench.recording.moments import (
     KEY_MOMENTS_PROPERTY,
@@ -204,16 +202,10 @@ def test_viewer_command_native_web_and_control_url():
 @pytest.fixture(scope="module")
 def falling(tmp_path_factory):
     """One run of the worked example problem (registered for this module) -> its .rrd."""
-    spec = importlib.util.spec_from_file_location("example_fallingbody_moments", EXAMPLE / "fallingbody.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    p = registry.register(module.FallingBodyProblem(), replace=True)
-    out = tmp_path_factory.mktemp("fall")
-    assert main(["run", str(EXAMPLE / "fallingbody.toml"), "--out", str(out), "--seed", "3"]) == EXIT_OK
-    yield out / "fallingbody.rrd"
-    registry.unregister(p.kind)
-    sys.modules.pop(spec.name, None)
+    with registered_fallingbody("example_fallingbody_moments"):
+        out = tmp_path_factory.mktemp("fall")
+        assert main(["run", str(EXAMPLE / "fallingbody.toml"), "--out", str(out), "--seed", "3"]) == EXIT_OK
+        yield out / "fallingbody.rrd"
 
 
 def test_run_stores_key_moments_in_order_in_summary_and_recording(falling):
