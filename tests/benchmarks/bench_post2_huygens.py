@@ -196,6 +196,7 @@ def bench_nees(out: Path, seeds: int, json_path: Path, results: dict, argv, draw
             "mean_nees": mean,
             "band_95": [lo, hi],
             "verdict": "consistent" if lo <= mean <= hi else ("conservative" if mean < lo else "overconfident"),
+            "per_parameter_mean_z": dict(zip(PARAMS, np.mean(z, axis=0).tolist(), strict=True)),  # bias
             "per_parameter_mean_z2": dict(zip(PARAMS, np.mean(z**2, axis=0).tolist(), strict=True)),
             "per_parameter_inside_3sigma": dict(zip(PARAMS, np.mean(np.abs(z) <= 3.0, axis=0).tolist(), strict=True)),
             "wall_s_total": time.perf_counter() - t_all,

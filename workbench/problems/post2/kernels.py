@@ -51,8 +51,9 @@ PARAM_SLOTS = (
     "main_drag_area",
     "wind_vertical",
     "wind_horizontal",
+    "log_pressure_offset",
 )
-_J2, _CAM, _CNM, _CMM, _RHOM, _FM, _HYP, _SUP, _DROGM, _PARAM, _DROGA, _MAINA, _WV, _WH = range(14)
+_J2, _CAM, _CNM, _CMM, _RHOM, _FM, _HYP, _SUP, _DROGM, _PARAM, _DROGA, _MAINA, _WV, _WH, _LPO = range(15)
 
 #: integer flags: dof, atmosphere present, aero table present, constant cd present, Knudsen
 #: matters, regime CA multiplier on, open chute table (0 none, 1 drogue, 2 parachute), drag-area state chute
@@ -195,6 +196,8 @@ def dynamics_kernel(
         M0 = M1 = M2 = 0.0
         if has_atm:
             rho_r = rho[r] * pv[_RHOM]
+            if pv[_LPO] != 0.0:  # the atmosphere's ln-p offset: rho = p / (R T) moves with p
+                rho_r = rho_r * math.exp(pv[_LPO])
             vr0, vr1, vr2 = _vrel(r, X, pv, ci, cf)
             V = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2)
             qbar = 0.5 * rho_r * V * V

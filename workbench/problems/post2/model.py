@@ -163,6 +163,15 @@ STATES.update(
         ),
         "wind_vertical": StateDef(1, "m/s", False, (3, 6), 1e-3, "vertical wind, + up (the air moves along +r̂)"),
         "wind_horizontal": StateDef(1, "m/s", False, (3, 6), 1e-3, "horizontal (zonal, + east) wind"),
+        # the pre-flight atmosphere's error where the vehicle is (observation-only: the Huygens-like
+        # descent's log-pressure and temperature are modelled as table(h) + offset; a Markov process
+        # in time, the vehicle moving through an error profile that varies with altitude)
+        "log_pressure_offset": StateDef(
+            1, "1", False, (3, 6), 1e-4, "ln p of the atmosphere minus the model table's at the vehicle (log_pressure)"
+        ),
+        "temperature_offset": StateDef(
+            1, "K", False, (3, 6), 1e-3, "temperature of the atmosphere minus the model table's at the vehicle"
+        ),
     }
 )
 
@@ -545,6 +554,7 @@ class TrajectoryModel:
             "main_drag_area": 0.0,
             "wind_vertical": 0.0,
             "wind_horizontal": 0.0,
+            "log_pressure_offset": 0.0,
         }
         for i, name in enumerate(kernels.PARAM_SLOTS):
             if name in sm:
@@ -765,6 +775,8 @@ class TrajectoryModel:
             rho = rho * self.env.density_factor(hc)
         if x is not None and "density_multiplier" in self.smap:
             rho = rho * self.smap.physical(x, "density_multiplier")[..., 0]
+        if x is not None and "log_pressure_offset" in self.smap:  # ρ = p / (R T): the ln-p offset moves ρ too
+            rho = rho * np.exp(self.smap.physical(x, "log_pressure_offset")[..., 0])
         return rho, atm.speed_of_sound(hc), atm
 
     def aero_force_moment(self, x: np.ndarray, phase: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -999,6 +1011,8 @@ class TrajectoryModel:
                 raise ValueError(f"observation {quantity!r} needs an atmosphere")
             h = np.maximum(self.altitude(x), 0.0)
             if quantity == "log_pressure":
-                return np.log(self.env.atmosphere.pressure(h))[..., None]
-            return self.env.atmosphere.temperature(h)[..., None]
+                return (np.log(self.env.atmosphere.pressure(h)) + self.param(x, "log_pressure_offset", 0.0)[..., 0])[
+                    ..., None
+                ]
+            return (self.env.atmosphere.temperature(h) + self.param(x, "temperature_offset", 0.0)[..., 0])[..., None]
         raise KeyError(f"unknown observation quantity {quantity!r}")

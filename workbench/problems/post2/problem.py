@@ -124,6 +124,8 @@ class Post2Problem:
         for name, d in STATES.items():
             if d.dynamic or (name == "density_multiplier" and tf["density_wave_amplitude"]):
                 continue  # a density wave has no single truth multiplier
+            if name in ("log_pressure_offset", "temperature_offset"):
+                continue  # the truth's own atmosphere minus the table varies with altitude: no single value
             v = cfg.truth_states.get(name, defaults[name])
             if name in ("ca_multiplier", "cn_multiplier", "cm_multiplier") and name in cfg.truth_states:
                 v = np.asarray(v) * defaults[name]
