@@ -108,6 +108,30 @@ def test_updraft_lowers_the_air_relative_descent_speed_and_log_pressure_is_the_a
     assert m0.observe(x, "temperature", ph)[0] == pytest.approx(float(m0.env.atmosphere.temperature(h)))
 
 
+def test_atmosphere_offsets_move_the_observed_p_and_t_and_the_density_with_p():
+    """log_pressure_offset b: ln p = table + b and ρ = p / (R T) × e^b (drag too, compiled kernel);
+    temperature_offset: T = table + offset, drag unchanged."""
+    sc = _scenario()
+    cfg = config_for(sc)
+    from workbench.problems.post2 import build
+
+    env, veh = build.environment(sc, cfg), build.vehicle(sc, cfg)
+    off = TrajectoryModel(StateMap(["position", "velocity", "log_pressure_offset", "temperature_offset"]), 3, env, veh)
+    dens = TrajectoryModel(StateMap(["position", "velocity", "density_multiplier"]), 3, env, veh)
+    m0, x, ph = _vertical_model("drogue")
+    b, dT = 0.02, 0.7
+    xo, xd = np.r_[x, b, dT], np.r_[x, math.exp(b)]
+    h = m0.altitude(x)
+    assert off.observe(xo, "log_pressure", ph)[0] == pytest.approx(math.log(env.atmosphere.pressure(h)) + b, rel=1e-14)
+    assert off.observe(xo, "temperature", ph)[0] == pytest.approx(float(env.atmosphere.temperature(h)) + dT, rel=1e-14)
+    assert off.observe(xo, "density", ph)[0] == pytest.approx(float(env.atmosphere.density(h)) * math.exp(b), rel=1e-14)
+    a_off = off.observe(xo, "acceleration_axial", ph)[0]
+    assert a_off == pytest.approx(dens.observe(xd, "acceleration_axial", ph)[0], rel=1e-12)
+    assert a_off != pytest.approx(m0.observe(x, "acceleration_axial", ph)[0], rel=1e-3)  # e^0.02: 2 % more drag
+    xt = np.r_[x, 0.0, dT]  # the temperature offset alone leaves the dynamics as the table's
+    assert off.observe(xt, "acceleration_axial", ph)[0] == m0.observe(x, "acceleration_axial", ph)[0]
+
+
 def test_regime_multipliers_blend_smoothly():
     m, x, _ = _vertical_model("main", ca_multiplier_fm=1.05, ca_multiplier_hyp=0.97, ca_multiplier_sup=1.1)
     mach = np.array([1.0, 5.0, 7.5, 10.0, 20.0, 20.0])
