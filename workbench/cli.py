@@ -569,7 +569,9 @@ def build_parser() -> argparse.ArgumentParser:
     _progress_options(sp)
     sp.set_defaults(func=cmd_run)
     sp = sub.add_parser(
-        "mc", help="Monte Carlo analysis of a scenario (drop test: consistency; entry: smoother validation)"
+        "mc",
+        help="Monte Carlo analysis of a scenario (drop test: consistency; entry: smoother validation; "
+        "meads: trade study)",
     )
     sp.add_argument("scenario")
     sp.add_argument("--seeds", type=int, default=20, help="number of runs (default 20)")
@@ -586,7 +588,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--truth-sim",
         action="store_true",
         help="truths from the truth simulator, reconstructions by the full pipeline from telemetry files "
-        "(entry); writes <name>_truth.mc.json and <name>_truth_mc.rrd",
+        "(entry; meads: full error model, least squares vs EKF passes); writes <name>_truth.mc.json and "
+        "<name>_truth_mc.rrd",
     )
     sp.add_argument(
         "--refine-rounds", type=int, default=None, help="refinement rounds of the ensemble stage (entry --truth-sim: 1)"

@@ -1,8 +1,13 @@
-"""Recording of the MEADS trade study (``workbench mc msl_meads``): the paper's Fig. 6.
+"""Recordings of the MEADS Monte Carlo studies (``workbench mc msl_meads``).
 
-``/plots/trade_study/<quantity>/<level>`` — 3σ over the runs of α, β [deg], q∞ [%] and Mach error
-against time, one series per error level, and ``.../objective`` the science objective; the
-table of levels × objectives as the report.
+The trade study (paper Fig. 6, :mod:`.montecarlo`): ``/plots/trade_study/<quantity>/<level>`` —
+3σ over the runs of α, β [deg], q∞ [%] and Mach error against time, one series per error level,
+and ``.../objective`` the science objective; the table of levels × objectives as the report.
+
+The full-error-model Monte Carlo against the truth (paper Figs. 11–13, :mod:`.truth_mc`,
+``--truth-sim``): ``/plots/truth_mc/<quantity>/<estimator>_mc`` the 3σ of the error over the
+members and ``.../<estimator>_reported`` the mean reported 3σ against time (each member's samples
+above 850 Pa), ``.../objective``; the table as the report.
 """
 
 from __future__ import annotations
@@ -12,12 +17,20 @@ from pathlib import Path
 import numpy as np
 import rerun.blueprint as rrb
 
+from workbench.problems.meads import truth_mc as tmc
 from workbench.problems.meads.montecarlo import QUANTITIES, TradeStudy, level_name
 from workbench.recording import layout
 from workbench.recording.blueprint import plot_view, report_view
 from workbench.recording.writer import open_recording
 
-__all__ = ["record_trade_study", "trade_blueprint", "trade_markdown"]
+__all__ = [
+    "record_trade_study",
+    "trade_blueprint",
+    "trade_markdown",
+    "record_truth_mc",
+    "truth_mc_blueprint",
+    "truth_mc_markdown",
+]
 
 _UNITS = {"alpha_deg": "α 3σ [deg]", "beta_deg": "β 3σ [deg]", "qbar_pct": "q∞ 3σ [%]", "mach": "Mach 3σ [-]"}
 _COLORS = [(40, 120, 220), (40, 170, 60), (230, 150, 20), (200, 40, 40), (120, 60, 180)]
@@ -84,4 +97,142 @@ def record_trade_study(path: Path, name: str, ts: TradeStudy, summary: dict) -> 
                 colors=(0, 0, 0),
             )
         rec.report(trade_markdown(summary))
+    return Path(path)
+
+
+# ------------------------------------------------------------- full error model vs the truth
+
+_MC_UNITS = {
+    "alpha_deg": "α 3σ [deg]",
+    "beta_deg": "β 3σ [deg]",
+    "qbar_pct": "q∞ 3σ [%]",
+    "mach": "Mach 3σ [-]",
+    "p_inf_pct": "p∞ 3σ [%]",
+    "density_pct": "density 3σ [%]",
+    "wind_north_mps": "wind north 3σ [m/s]",
+    "wind_east_mps": "wind east 3σ [m/s]",
+    "wind_down_mps": "wind down 3σ [m/s]",
+}
+_EST = {
+    "least_squares": ("least squares", (40, 120, 220)),
+    "ekf_pass1": ("EKF pass 1", (230, 150, 20)),
+    "ekf_pass2": ("EKF pass 2", (40, 170, 60)),
+}
+
+
+def _tint(rgb: tuple[int, int, int], f: float = 0.5) -> tuple[int, int, int]:
+    """``rgb`` mixed with white by ``f``."""
+    return tuple(int(round(c + (255 - c) * f)) for c in rgb)
+
+
+def truth_mc_blueprint() -> rrb.Blueprint:
+    """One time-series tab per quantity (Monte Carlo and reported 3σ per estimator, objective) and
+    the table."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Tabs(
+                *[
+                    plot_view(
+                        _MC_UNITS[q] + " vs time — thick Monte Carlo, thin reported",
+                        layout.join(layout.MEADS_TRUTH_MC, q),
+                        legend="RightTop",
+                    )
+                    for q in tmc.QUANTITIES
+                ]
+            ),
+            report_view("Monte Carlo", health=False),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(state="collapsed", timeline=layout.TIME),
+    )
+
+
+def _cell(row: dict | None) -> str:
+    if row is None:
+        return "—"
+    met = ""
+    if "mc_meets_objective" in row:
+        met = " ✔" if row["mc_meets_objective"] else " ✘"
+    return (
+        f"{row['mc_3sigma_median']:.3g}{met} / {row['reported_3sigma_median']:.3g} "
+        f"({row['ratio_median']:.2g}×) {100 * row['fraction_inside_reported_3sigma']:.0f} %"
+    )
+
+
+def truth_mc_markdown(summary: dict) -> str:
+    """The estimators × quantities table and the disagreements (markdown)."""
+    s = summary
+    ests = [e for e in tmc.ESTIMATORS if e in s["table"]]
+    truth = "dispersed entry, atmosphere, winds, CFD-like pressures" if s["truth_dispersed"] else "the scenario's"
+    off = s.get("failure_port_switched_off")
+    unc = s.get("mc_3sigma_relative_uncertainty")
+    md = [
+        f"# MEADS Monte Carlo, full error model vs the truth ({s['n_ok']}/{s['n_runs']} members)",
+        "",
+        f"Every member: its own truth ({truth}) and its own sensor errors (port location, time tags, lag, "
+        "transpiration, calibration, scale factors, noise), reconstructed from its telemetry files as "
+        "`workbench run` does" + (f"; the scenario's failure of {off} switched off." if off else "."),
+        "",
+        f"Above {s['min_qbar_pa']:g} Pa (each member's true q∞), median over time: **Monte Carlo 3σ** "
+        "(✔/✘: its max meets the objective) / mean **reported 3σ** (ratio reported / Monte Carlo) and the "
+        "fraction of member-samples inside their reported 3σ."
+        + (f" The Monte Carlo 3σ itself is uncertain by ±{100 * unc:.0f} % (1σ)." if unc else ""),
+        "",
+        "| quantity | objective | " + " | ".join(_EST[e][0] for e in ests) + " |",
+        "|---|---|" + "---|" * len(ests),
+    ]
+    for q in tmc.QUANTITIES:
+        obj = s["objectives_3sigma"].get(q)
+        cells = [_cell(s["table"][e].get(q)) for e in ests]
+        md.append(f"| {q} | {'' if obj is None else f'≤ {obj:g}'} | " + " | ".join(cells) + " |")
+    md += ["", "## Where the reported 3σ disagrees with the Monte Carlo spread", ""]
+    md += [f"- {d}" for d in s["disagreements"]] or ["- nowhere (ratio within 0.67–1.5, ≥ 90 % inside)"]
+    md += [
+        "",
+        f"Executor: {s['executor']}; wall time {s['wall_s']:.0f} s; "
+        f"per member median {s['member_wall_s']['median']:.1f} s.",
+    ]
+    if s["failed_members"]:
+        md += ["", "Failed members: " + "; ".join(s["failed_members"])]
+    return "\n".join(md) + "\n"
+
+
+def record_truth_mc(path: Path, name: str, res: tmc.FullMcResult, summary: dict) -> Path:
+    """Write the full-error-model Monte Carlo recording (atomically) and return its path."""
+    with open_recording(
+        path, name, blueprint=truth_mc_blueprint(), properties={"run": {"kind": "meads_truth_mc"}}
+    ) as rec:
+        t = res.t
+        for j, q in enumerate(tmc.QUANTITIES):
+            for e, est in enumerate(tmc.ESTIMATORS):
+                label, rgb = _EST[est]
+                for series, key, color, width, what in (
+                    ("mc", "mc_3sigma", rgb, 2.5, "Monte Carlo 3σ"),
+                    ("reported", "reported_3sigma", _tint(rgb), 1.0, "reported 3σ"),
+                ):
+                    v = res.curves[key][:, j, e]
+                    ok = np.isfinite(v)
+                    if ok.sum() < 2:
+                        continue
+                    rec.scalars(
+                        layout.meads_truth_mc_path(q, f"{est}_{series}"),
+                        t[ok],
+                        v[ok],
+                        names=f"{label} {what}",
+                        colors=color,
+                        widths=width,
+                    )
+            obj = summary["objectives_3sigma"].get(q)
+            if obj is not None:
+                any_ok = np.isfinite(res.curves["mc_3sigma"][:, j, :]).any(axis=1)
+                if any_ok.sum() >= 2:
+                    tt = t[any_ok]
+                    rec.scalars(
+                        layout.meads_truth_mc_path(q, "objective"),
+                        tt,
+                        np.full(tt.size, obj),
+                        names="objective",
+                        colors=(0, 0, 0),
+                    )
+        rec.report(truth_mc_markdown(summary))
     return Path(path)

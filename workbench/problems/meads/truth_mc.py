@@ -69,6 +69,7 @@ __all__ = [
     "FullMcResult",
     "member_draws",
     "error_histories",
+    "stack_members",
     "aggregate",
     "summarize",
     "run_full_monte_carlo",
@@ -290,7 +291,7 @@ def _run_member(job: McJob, k: int, ss: np.random.SeedSequence) -> MemberErrors:
 # aggregation (pure functions of arrays)
 
 
-def _stack(members: list[MemberErrors]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def stack_members(members: list[MemberErrors]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The successful members on one grid: ``t`` (n,), ``err``/``sig`` (K, n, Q, E), true ``qbar``
     and ``mach`` (K, n), NaN-padded to the longest member."""
     n = max(m.t.size for m in members)
@@ -389,12 +390,14 @@ def summarize(agg: dict[str, np.ndarray]) -> dict:
                 row["fraction_of_samples_meeting_objective"] = float(np.mean(mc <= OBJECTIVES[q]))
             rows[q] = row
             r = row["ratio_median"]
-            if (math.isfinite(r) and not RATIO_BAND[0] <= r <= RATIO_BAND[1]) or inside < MIN_INSIDE:
-                what = "conservative" if r > 1 else "optimistic"
+            off_band = math.isfinite(r) and not RATIO_BAND[0] <= r <= RATIO_BAND[1]
+            if off_band or inside < MIN_INSIDE:
+                what = ("conservative" if r > 1 else "optimistic") if off_band else "spread matched"
                 notes.append(
                     f"{est} {q}: reported 3σ {row['reported_3sigma_median']:.3g} is {r:.2f}× the Monte Carlo 3σ "
                     f"{row['mc_3sigma_median']:.3g} (median above {MIN_QBAR_PA:g} Pa; {what}); "
-                    f"{100 * inside:.1f} % of member-samples inside the reported 3σ"
+                    f"{100 * inside:.1f} % of member-samples inside the reported 3σ, largest |bias| "
+                    f"{row['max_abs_bias']:.3g}"
                 )
         if rows:
             table[est] = rows
@@ -458,7 +461,7 @@ def run_full_monte_carlo(
     ok = [m for m in members if not m.failed]
     if not ok:
         raise RuntimeError("no Monte Carlo member could be reconstructed: " + "; ".join(m.failed for m in members))
-    t, err, sig, qbar, mach = _stack(ok)
+    t, err, sig, qbar, mach = stack_members(ok)
     above = (qbar >= MIN_QBAR_PA)[..., None, None]  # each member's own samples above 850 Pa
     curves = aggregate(np.where(above, err, np.nan), np.where(above, sig, np.nan))
     table = summarize(curves)
