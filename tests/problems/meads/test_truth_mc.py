@@ -108,8 +108,11 @@ def test_summarize_flags_disagreements_and_objectives():
     assert 0.2 < d["ratio_median"] < 0.3 and "objective_3sigma" not in d
     q = s["table"]["least_squares"]["qbar_pct"]
     assert 2.7 < q["ratio_median"] < 3.3 and q["mc_meets_objective"] is True  # MC 3σ 0.9 % ≤ 2 %
+    assert 2.7 < q["ratio_to_3rms_median"] < 3.3 and q["3rms_meets_objective"] is True  # no bias
     m = s["table"]["least_squares"]["mach"]
-    assert m["mc_meets_objective"] is True  # the spread is small: the bias shows in "inside" and |bias|
+    assert m["mc_meets_objective"] is True  # the spread is small: the bias shows in "inside", |bias| and 3 RMS
+    assert m["3rms_meets_objective"] is False and m["fraction_of_samples_3rms_meeting_objective"] == 0.0
+    assert m["ratio_to_3rms_median"] == pytest.approx(0.03 / 15.0, rel=0.01)
     assert m["fraction_inside_reported_3sigma"] == 0.0 and m["max_abs_bias"] == pytest.approx(5.0, abs=0.01)
     flagged = {line.split(":")[0] for line in s["disagreements"]}
     assert flagged == {"ekf_pass2 density_pct", "least_squares qbar_pct", "least_squares mach"}
@@ -141,7 +144,12 @@ def test_error_histories_of_a_constructed_reconstruction():
         qbar=1.02 * qt,
         sigma_qbar=0.01 * 1.02 * qt,
     )
-    winds = SimpleNamespace(wind_NE=np.tile([6.0, np.nan], (n, 1)), P=np.tile(np.diag([4.0, 4.0]), (n, 1, 1)))
+    winds = SimpleNamespace(
+        wind_NE=np.full((n, 2), np.nan),  # not published: the raw non-singular solution is scored
+        wind_raw_NE=np.tile([6.0, np.nan], (n, 1)),
+        singular=np.r_[True, np.zeros(n - 1, bool)],
+        P=np.tile(np.diag([4.0, 4.0]), (n, 1, 1)),
+    )
     wind = SimpleNamespace(
         mach=np.interp(t, truth["t"], truth["mach"]) + 0.05,
         sigma_mach=0.1 * one,
@@ -172,9 +180,10 @@ def test_error_histories_of_a_constructed_reconstruction():
     np.testing.assert_allclose(err[:, IQ["mach"], ls], 0.05, atol=1e-12)
     np.testing.assert_allclose(err[:, IQ["p_inf_pct"], ls], -10.0, rtol=1e-9)
     np.testing.assert_allclose(err[:, IQ["density_pct"], ls], 10.0, rtol=1e-9)
-    np.testing.assert_allclose(err[:, IQ["wind_north_mps"], ls], 1.0)
-    np.testing.assert_allclose(sig[:, IQ["wind_north_mps"], ls], 2.0)
-    assert np.isnan(err[:, IQ["wind_east_mps"], ls]).all()  # not published
+    assert np.isnan(err[0, IQ["wind_north_mps"], ls])  # singular
+    np.testing.assert_allclose(err[1:, IQ["wind_north_mps"], ls], 1.0)
+    np.testing.assert_allclose(sig[1:, IQ["wind_north_mps"], ls], 2.0)
+    assert np.isnan(err[:, IQ["wind_east_mps"], ls]).all()  # no solution
     assert np.isnan(err[:, IQ["wind_down_mps"], ls]).all()  # the least squares has none
     assert np.isnan(err[:, :, p1]).all()  # pass 1 did not run
     np.testing.assert_allclose(err[:, IQ["wind_down_mps"], p2], 1.5)  # the true vertical wind is 0
