@@ -311,7 +311,9 @@ def test_recording_holds_the_curves_and_the_table(tmp_path):
 
     res, summary = _constructed_result()
     md = truth_mc_markdown(summary)
-    assert "| alpha_deg | ≤ 0.5 |" in md and "EKF pass 2" in md and "P5 switched off" in md
+    assert "| alpha_deg | least squares |" in md and "|  | EKF pass 2 |" in md and "P5 switched off" in md
+    assert md.count("| mach |") == 1 and md.count("|  | EKF pass 1 |") == len(tmc.QUANTITIES) - 1
+    assert "| wind_down_mps | EKF pass 1 |" in md  # no least-squares vertical wind
     assert all(d in md for d in summary["disagreements"]) and summary["disagreements"]  # 3σ 1.5 vs MC ~3
     path = record_truth_mc(tmp_path / "mc.rrd", "mc", res, summary)
     rec = read_recording(path)
