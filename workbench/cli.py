@@ -238,6 +238,7 @@ class _Child:
                         os.close(r)
                         os.dup2(w, 2)
                         os.close(w)
+                        sys.stderr = open(2, "w", buffering=1, closefd=False)  # noqa: SIM115 - ends with the child
                     code = main(argv[3:])
                 except BaseException:  # noqa: BLE001 - a child must never return into the parent's loop
                     import traceback
