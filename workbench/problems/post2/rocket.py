@@ -6,9 +6,14 @@ The motor's thrust history is not known, so the model-based estimation (post2's 
 parachutes) starts shortly after burnout, and the boost is integrated from the IMU:
 
 * **pad alignment** — over the last second of standby before the first motor row: the mean
-  specific force is "up" (tilt), the mean magnetic field gives the heading through the site's
-  magnetic declination (TRIAD, :func:`workbench.core.rotation.triad`), the mean body rate is the
-  gyro bias;
+  specific force is "up" (tilt), the mean body rate is the gyro bias, and the magnetic field gives
+  the heading through the site's magnetic declination (TRIAD, :func:`workbench.core.rotation.triad`).
+  The field is the one at the pad attitude of the magnetometer's in-flight alignment
+  (:func:`magnetometer_alignment`: its axes, hard-iron offset and the field, fitted so the field
+  turns with the integrated gyro through boost and coast), because the FIRM boards' magnetometer
+  axes are not the IMU's (turned by −134° and −45° about z) and the steel launch rail distorts the
+  standby field; the heading is trusted when that fit is good and its dip matches the site's
+  inclination;
 * **boost** — :func:`workbench.estimation.strapdown.integrate` (point mass + J2 gravity of the
   Earth, first-order covariance) from the pad to ``t_start`` = first coast row + 0.3 s (tail-off),
   in a planet-centred inertial frame M whose axes are the Earth-fixed axes at launch.  The pad sits
@@ -39,8 +44,16 @@ import numpy as np
 
 from workbench.core.atmosphere import EarthStandardAtmosphere
 from workbench.core.bodies import EARTH
-from workbench.core.rotation import dcm_to_quat, quat_from_rotvec, quat_multiply, quat_to_dcm, triad
+from workbench.core.rotation import (
+    dcm_to_quat,
+    quat_history_from_body_rates,
+    quat_multiply,
+    quat_to_dcm,
+    quat_to_rotvec,
+    triad,
+)
 from workbench.estimation.consistency import chi2_ppf
+from workbench.estimation.magnetometer import align_magnetometer
 from workbench.estimation.strapdown import ImuArrays, integrate
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import read_telemetry
@@ -75,16 +88,51 @@ IGNITION_GUARD_S = 0.1
 TAIL_OFF_S = 0.3
 #: engineering 1σ of what the strapdown's white noise leaves out: accelerometer scale factor [-]
 ACCEL_SCALE_SIGMA = 0.01
-#: 1σ of the pad tilt [rad] (accelerometer levelling) and heading [rad] (an uncalibrated
-#: magnetometer inside a rocket with a steel motor case: hard-iron errors of several degrees)
+#: 1σ of the pad tilt [rad] (accelerometer levelling) and heading [rad] (the aligned magnetometer:
+#: the pad heading fitted on thirds of the alignment window spreads by 11° RMS about the whole
+#: window's on flight 1 and 4.5° on flight 4 — gyro scale errors over ~2 000° of roll, soft iron)
 TILT_SIGMA = math.radians(1.0)
 HEADING_SIGMA = math.radians(10.0)
-#: the magnetometer's heading is trusted only if its dip on the pad is within this of the site's
-#: magnetic inclination [deg]; otherwise (hard/soft iron, or magnetometer axes not those of the
-#: accelerometer) the heading is taken as unknown: 1σ HEADING_SIGMA_UNTRUSTED (as wide as a
-#: linearised filter can carry; the landing point's 3σ then says how little the boost tells)
+#: the magnetometer's heading is trusted only if its dip at the pad is within this of the site's
+#: magnetic inclination [deg] and its in-flight alignment fitted; otherwise (no alignment: a
+#: decimated log or a saturated gyro; hard/soft iron beyond the fit) the heading is taken as
+#: unknown: 1σ HEADING_SIGMA_UNTRUSTED (as wide as a linearised filter can carry)
 DIP_TOLERANCE_DEG = 10.0
 HEADING_SIGMA_UNTRUSTED = math.radians(60.0)
+#: gyro full scale of the FIRM logs [rad/s] (~1 800 deg/s; samples at or above are saturated)
+GYRO_SATURATION = math.radians(1790.0)
+
+
+#: the magnetometer's in-flight alignment (:func:`magnetometer_alignment`) is fitted from the pad to
+#: this long before the drogue's ejection [s] (the ejection tumbles the body beyond the gyro's range)
+MAG_FIT_BEFORE_EJECTION_S = 0.5
+#: ... and accepted when its residual RMS is at most this fraction of the fitted field (measured:
+#: 0.9, 2.9 and 2.0 µT of ~50 µT on flights 1, 3, 4 — servo currents and soft iron)
+MAG_FIT_RMS_FRACTION = 0.1
+#: ... on at least this many gyro/magnetometer samples (a decimated log cannot follow the coning)
+MAG_FIT_MIN_RATE_HZ = 50.0
+
+
+def magnetometer_alignment(t, w_B, mag_B, k0: int, t_end: float):
+    """The magnetometer's in-flight alignment (:func:`workbench.estimation.magnetometer.align_magnetometer`)
+    over the samples from index ``k0`` (the reference attitude: the pad) to ``t_end`` [s], from the
+    body rates ``w_B`` (n, 3) [rad/s, bias removed] and the field ``mag_B`` (n, 3) [T] at ``t`` (n,)
+    [s]; None when that stretch is shorter than 2 s, sampled below MAG_FIT_MIN_RATE_HZ, or
+    holds a saturated gyro sample (its attitude would be wrong from there on).
+
+    The FIRM logs need it: their magnetometer axes are turned about the IMU's z axis by −134°
+    (flight 1, FIRM v0.1) and −45° (flights 3, 4, v1.0) — in both boards the magnetometer's +y is
+    the rocket's nose, the IMU sits at 45° — which the pad's raw dip betrays (−49°, +7°, +30°
+    against the sites' +62–66°); aligned, the dips are 62°, 64°, 65°."""
+    k1 = int(np.searchsorted(t, t_end))
+    sel = slice(k0, k1)
+    tt = t[sel]
+    if tt.size < 10 or tt[-1] - tt[0] < 2.0 or (tt.size - 1) / (tt[-1] - tt[0]) < MAG_FIT_MIN_RATE_HZ:
+        return None
+    if np.any(np.abs(w_B[sel]) >= GYRO_SATURATION):
+        return None
+    C_0_B = quat_to_dcm(quat_history_from_body_rates(tt, w_B[sel]))
+    return align_magnetometer(C_0_B, mag_B[sel])
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,6 +240,16 @@ def reconstruct_boost(
     p_std = float(pressure[pad].std(ddof=1))
     atm, h_pad = site_atmosphere(meta.qnh, meta.temperature, p_standby)
     dec = math.radians(declination_deg)
+    # the magnetometer's own axes are not the IMU's: align it in flight (gyro-consistent fit through
+    # boost and coast) and take the field at the pad attitude from that fit, not the pad samples
+    # (the steel launch rail distorts those)
+    t_coast = float(t[np.flatnonzero(letters == "C")[0]])
+    k_f = np.flatnonzero(letters == "F")
+    t_ej = detect_ejection(t, f_B, t_coast, float(t[k_f[0]]) if k_f.size else float(t[-1]))
+    mag_fit = magnetometer_alignment(t, w_B - bias, mag_B, int(pad[-1]), t_ej - MAG_FIT_BEFORE_EJECTION_S)
+    m_pad_raw = m_pad
+    if mag_fit is not None:
+        m_pad = mag_fit.field_0
     # TRIAD: up from the specific force, heading from the horizontal part of the field (any dip)
     q_enu_b = triad(f_pad, m_pad, np.array([0.0, 0.0, 1.0]), np.array([math.sin(dec), math.cos(dec), -1.5]))
     lat, lon = math.radians(meta.launch_lat_deg), math.radians(meta.launch_lon_deg)
@@ -202,15 +260,19 @@ def reconstruct_boost(
     # attitude 1σ: tilt about east/north, heading about up -> body frame small angles
     C_B_ENU = quat_to_dcm(q_enu_b).T
     down = -f_pad / np.linalg.norm(f_pad)
-    dip = 90.0 - math.degrees(math.acos(np.clip(np.dot(down, m_pad) / np.linalg.norm(m_pad), -1.0, 1.0)))
-    trusted = inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG
+
+    def dip_of(m):
+        return 90.0 - math.degrees(math.acos(np.clip(np.dot(down, m) / np.linalg.norm(m), -1.0, 1.0)))
+
+    dip = dip_of(m_pad)
+    fit_ok = mag_fit is not None and mag_fit.rms <= MAG_FIT_RMS_FRACTION * float(np.linalg.norm(mag_fit.field_0))
+    trusted = fit_ok and (inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG)
     sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
     P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_heading**2]) @ C_B_ENU.T
     P0 = np.zeros((9, 9))
     P0[0:3, 0:3] = np.eye(3) * 0.01**2
     P0[3:6, 3:6] = P_att
     P0[6:9, 6:9] = np.eye(3) * 1.0**2
-    t_coast = float(t[np.flatnonzero(letters == "C")[0]])
     t_start = t_coast + TAIL_OFF_S
     sel = np.flatnonzero((t >= t[pad[-1]]) & (t <= t_start + 1e-9))
     imu = ImuArrays(
@@ -245,10 +307,23 @@ def reconstruct_boost(
         "tilt_on_pad_deg": math.degrees(math.acos(np.clip(np.dot(axis, f_pad / np.linalg.norm(f_pad)), -1, 1))),
         "samples": int(pad.size),
         "magnetometer_dip_deg": dip,
+        "magnetometer_dip_raw_pad_deg": dip_of(m_pad_raw),
         "site_inclination_deg": inclination_deg,
         "magnetometer_heading_trusted": bool(trusted),
         "heading_sigma_deg": math.degrees(sig_heading),
         "magnetic_field_uT": float(np.linalg.norm(m_pad) * 1e6),
+        "magnetometer_alignment": None
+        if mag_fit is None
+        else {
+            "rotation_imu_to_magnetometer_rotvec_deg": np.degrees(
+                quat_to_rotvec(dcm_to_quat(mag_fit.C_mag_imu))
+            ).tolist(),
+            "hard_iron_offset_uT": (mag_fit.offset * 1e6).tolist(),
+            "fit_rms_uT": mag_fit.rms * 1e6,
+            "samples": mag_fit.samples,
+            "window_s": [float(t[pad[-1]]), t_ej - MAG_FIT_BEFORE_EJECTION_S],
+            "fit_accepted": bool(fit_ok),
+        },
         "ignition_t_s": t_ign,
     }
     C_ENU_M = C_M_ENU.T
@@ -668,10 +743,10 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         "inside_3sigma": bool(d2 <= chi2_ppf(0.9973, 2)),
         "drift_from_pad_reconstructed_m": float(np.linalg.norm(ours)),
         "drift_from_pad_landed_m": float(np.linalg.norm(truth)),
-        # the boost's heading comes from the magnetometer only if it passed the pad dip check; when
-        # it did not, the heading is a 60 deg 1σ that a linearised filter cannot carry (a ±110 m/s
-        # cross-track velocity on a 104 m/s track changes the speed at second order, which the drag
-        # |f| then "observes"), so the 3σ above is too small: the bearing shows what is missing
+        # the boost's heading comes from the aligned magnetometer only if it passed the dip check;
+        # when it did not, the heading is a 60 deg 1σ that a linearised filter cannot carry (a
+        # ±110 m/s cross-track velocity on a 104 m/s track changes the speed at second order, which
+        # the drag |f| then "observes"), so the 3σ above is too small: the bearing shows what is missing
         "heading_trusted": bool(flight["pad"].get("magnetometer_heading_trusted", True)),
         "bearing_reconstructed_deg": float(np.degrees(np.arctan2(ours[0], ours[1]))),
         "bearing_landed_deg": float(np.degrees(np.arctan2(truth[0], truth[1]))),
@@ -710,10 +785,6 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     return out
 
 
-#: gyro full scale of the FIRM logs [rad/s] (~1 800 deg/s; samples at or above are saturated)
-GYRO_SATURATION = math.radians(1790.0)
-
-
 def _rotation_angle_deg(R: np.ndarray) -> np.ndarray:
     """Rotation angle [deg] (n,) of rotation matrices R (n, 3, 3)."""
     return np.degrees(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)))
@@ -741,14 +812,7 @@ def _attitude_scores(flight: dict, imu, reference) -> dict:
     k1 = int(np.searchsorted(t, t_ej - 1.0))
     pad = (t > t_pad_end - PAD_WINDOW_S) & (t <= t_pad_end)
     axis = np.asarray(flight["pad"]["rocket_axis_imu"])
-    n = k1 - k0
-    q = np.zeros((n, 4))
-    q[0] = [0.0, 0.0, 0.0, 1.0]
-    for i in range(1, n):  # body-frame right product, trapezoidal rate
-        j = k0 + i
-        q[i] = quat_multiply(q[i - 1], quat_from_rotvec(0.5 * (w_c[j] + w_c[j - 1]) * (t[j] - t[j - 1])))
-        q[i] /= np.linalg.norm(q[i])
-    R_rel_ours = quat_to_dcm(q)  # R_{B_pad B(t)}
+    R_rel_ours = quat_to_dcm(quat_history_from_body_rates(t[k0:k1], w_c[k0:k1]))  # R_{B_pad B(t)}
     up_b0 = f[pad].mean(axis=0) / np.linalg.norm(f[pad].mean(axis=0))
     tilt_ours = np.degrees(np.arccos(np.clip((R_rel_ours @ axis) @ up_b0, -1, 1)))
     Rfc = quat_to_dcm(qref[k0:k1])  # read as body -> navigation
