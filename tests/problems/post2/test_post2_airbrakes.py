@@ -14,6 +14,7 @@ import pytest
 from workbench.cli import main
 from workbench.core.atmosphere import EarthStandardAtmosphere
 from workbench.core.bodies import G0
+from workbench.estimation.consistency import mixture_hdr_level
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.problems.post2 import rocket
@@ -306,3 +307,32 @@ def test_barometer_scale_and_dynamic_pressure_states(excerpt_run):
     p0 = float(est0.model.observe(est0.x0, "pressure", est0.phase)[0])
     assert p0 == pytest.approx(float(m.env.atmosphere.pressure(h)), rel=1e-12)
     assert abs(float(expected) - p0) > 100.0  # the states change the reading by far more than round-off
+
+
+def test_landing_heading_mixture_turns_the_air_path_about_the_pad_and_keeps_the_wind_drift():
+    t = np.linspace(0.0, 50.0, 501)
+    wind = np.tile([2.0, -1.0], (t.size, 1))  # 100 m east, 50 m south over the span
+    landing = np.array([700.0, 450.0])
+    P = np.diag([30.0**2, 20.0**2])
+    means, covs, w, d_w = rocket.landing_heading_mixture(landing, P, t, wind, math.radians(60.0))
+    np.testing.assert_allclose(d_w, [100.0, -50.0], atol=1e-9)
+    r = np.linalg.norm(means - d_w, axis=1)
+    np.testing.assert_allclose(r, np.linalg.norm(landing - d_w), rtol=1e-12)  # a ring about the wind drift
+    assert w.sum() == pytest.approx(1.0) and np.allclose(covs, P)
+    np.testing.assert_allclose(means[np.argmax(w)], landing, atol=1e-9)  # the middle node: no heading error
+    # the landed point 60 deg round the ring: far outside the linearised ellipse, inside the mixture's 3 sigma
+    c, s = math.cos(math.radians(60.0)), math.sin(math.radians(60.0))
+    e, n = landing - d_w
+    other = d_w + np.array([c * e + s * n, -s * e + c * n])
+    assert float((other - landing) @ np.linalg.solve(P, other - landing)) > 100.0
+    assert mixture_hdr_level(other, means, covs, w, np.random.default_rng(1)) < 0.9973
+
+
+def test_untrusted_heading_landing_verdict_is_the_nonlinear_one(excerpt_run):
+    # the excerpt's heading is untrusted (60 deg 1 sigma): its landing verdict is the heading mixture's
+    _, _, _, s = excerpt_run
+    L = s["landing"]
+    nl = L["heading_nonlinear"]
+    assert 0.0 <= nl["hdr_level"] <= 1.0 and nl["turning_drift_m"] > 100.0
+    assert L["inside_3sigma"] == (nl["hdr_level"] <= 0.9973)
+    assert L["mahalanobis_linearised"] == L["mahalanobis"]

@@ -52,7 +52,7 @@ from workbench.core.rotation import (
     quat_to_rotvec,
     triad,
 )
-from workbench.estimation.consistency import chi2_ppf
+from workbench.estimation.consistency import chi2_ppf, mixture_hdr_level
 from workbench.estimation.magnetometer import align_magnetometer
 from workbench.estimation.strapdown import ImuArrays, integrate
 from workbench.io.scenario import load_scenario
@@ -660,6 +660,48 @@ def problem_file(
     return "\n".join(lines)
 
 
+#: the landing's non-linear verdict: the heading grid spans ±LANDING_MIXTURE_SPAN_SIGMA σ with nodes
+#: at most half the smaller landing 1σ apart along the ring (at most LANDING_MIXTURE_MAX_NODES);
+#: draws and seed of its Monte Carlo level
+LANDING_MIXTURE_SPAN_SIGMA = 4.0
+LANDING_MIXTURE_MAX_NODES = 4001
+LANDING_MIXTURE_SAMPLES = 20000
+LANDING_MIXTURE_SEED = 9
+
+
+def landing_heading_mixture(landing_en, P_en, t, wind_en, sigma_heading: float):
+    """The landing point's distribution under a pad heading error of 1σ ``sigma_heading`` [rad],
+    pushed through exactly instead of linearised: (means (K, 2) [m], covariances (K, 2, 2) [m²],
+    weights (K,), wind drift (2,) [m]), a Gaussian mixture over a grid of heading errors (spacing
+    along the ring at most half the smaller 1σ of ``P_en``, so the ring stays continuous).
+
+    A heading error turns the whole air-relative path about the pad (the boost is integrated in a
+    frame turned by it, and the coast and descent follow from the boost), while the drift with the
+    wind does not turn: with ``landing_en`` (2,) [m east/north of the pad] the reconstructed landing
+    and ``wind_en`` (n, 2) [m/s] the smoothed wind at ``t`` (n,) [s] (None: no wind state), the wind
+    drift is D_w = ∫ w dt and the node ψ_k lands at D_w + R(ψ_k)(landing − D_w).  Each node's
+    covariance is the filter's ``P_en`` (2, 2): with a heading of tens of degrees a linearised filter
+    has collapsed the heading's share (the drag |f| "observes" the cross-track speed at second order:
+    flight 1 before its magnetometer alignment kept 240 m beside a 1 500 m ring), so it stands for
+    the error given the heading."""
+    landing_en = np.asarray(landing_en, float)
+    if wind_en is None:
+        d_w = np.zeros(2)
+    else:
+        w = np.asarray(wind_en, float)
+        d_w = np.sum(0.5 * (w[1:] + w[:-1]) * np.diff(np.asarray(t, float))[:, None], axis=0)
+    e, n = landing_en - d_w
+    span = LANDING_MIXTURE_SPAN_SIGMA * sigma_heading
+    sig_min = math.sqrt(float(np.min(np.linalg.eigvalsh(P_en))))
+    k = int(np.clip(math.ceil(2.0 * span * math.hypot(e, n) / (0.5 * sig_min)) + 1, 41, LANDING_MIXTURE_MAX_NODES))
+    psi = np.linspace(-span, span, k | 1)  # odd: a node at no heading error
+    wts = np.exp(-0.5 * (psi / sigma_heading) ** 2)
+    c, s = np.cos(psi), np.sin(psi)
+    means = d_w + np.column_stack([c * e + s * n, -s * e + c * n])  # a heading error ψ turns bearings by +ψ
+    covs = np.broadcast_to(np.asarray(P_en, float), (psi.size, 2, 2))
+    return means, covs, wts / wts.sum(), d_w
+
+
 def run_flight(problem_path) -> tuple[object, dict]:
     """Reconstruct an imported flight (its post2 problem file; the import's ``flight.json``,
     ``imu.csv`` and ``reference.csv`` beside it) and score it: (Post2Result, :func:`score_flight`)."""
@@ -762,11 +804,28 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         # the boost's heading comes from the aligned magnetometer only if it passed the dip check;
         # when it did not, the heading is a 60 deg 1σ that a linearised filter cannot carry (a
         # ±110 m/s cross-track velocity on a 104 m/s track changes the speed at second order, which
-        # the drag |f| then "observes"), so the 3σ above is too small: the bearing shows what is missing
+        # the drag |f| then "observes"), so the 3σ above is too small: the verdict is then the
+        # heading pushed through exactly (heading_nonlinear, landing_heading_mixture)
         "heading_trusted": bool(flight["pad"].get("magnetometer_heading_trusted", True)),
         "bearing_reconstructed_deg": float(np.degrees(np.arctan2(ours[0], ours[1]))),
         "bearing_landed_deg": float(np.degrees(np.arctan2(truth[0], truth[1]))),
     }
+    if not out["landing"]["heading_trusted"]:  # the verdict from the heading pushed through, not linearised
+        wind_en = hist["wind"]["value"] if "wind" in hist else None
+        nl = landing_heading_mixture(ours, P_en, t, wind_en, math.radians(flight["pad"]["heading_sigma_deg"]))
+        rng = np.random.default_rng(LANDING_MIXTURE_SEED)
+        level = mixture_hdr_level(truth, *nl[:3], rng, LANDING_MIXTURE_SAMPLES)
+        out["landing"]["heading_nonlinear"] = {
+            "hdr_level": level,
+            # the 2-D Mahalanobis distance a Gaussian would give at that level (χ²₂ quantile)
+            "gaussian_equivalent_mahalanobis": math.sqrt(-2.0 * math.log(max(1.0 - level, 1e-12))),
+            "inside_3sigma": bool(level <= 0.9973),
+            "heading_sigma_deg": flight["pad"]["heading_sigma_deg"],
+            "turning_drift_m": float(np.linalg.norm(ours - nl[3])),
+            "wind_drift_en_m": nl[3].tolist(),
+        }
+        out["landing"]["mahalanobis_linearised"] = out["landing"]["mahalanobis"]
+        out["landing"]["inside_3sigma"] = out["landing"]["heading_nonlinear"]["inside_3sigma"]
     # altitude vs the flight computer's solution
     href = np.interp(t, reference.time, reference.channel("h"))
     dh = h - href
