@@ -48,11 +48,13 @@ State (37, all additive; :data:`STATE_NAMES`)::
   the flight condition changes, and λ's σ says so.
 * ``β_i`` [Pa]: the transducer's additive residual bias after the in-flight zero (Eq. 51), a
   constant of prior 1σ ``[ekf] bias_sigma_pa``: it is what a multiplicative error cannot be at the
-  low pressures of the first seconds (without it those samples drive λ to −5 %, measured).
+  low pressures of the first seconds (without it, measured on seed 11: λ of P1 −2.6 % against
+  its 3σ of 1.2 %, α inside its 3σ at 53 % of the samples).
 * ``m``: the model's relative Mach error, the pressures read at ``M (1 + m)`` (first-order
   Gauss–Markov over the same distance, 1σ ``[ekf] model_mach_sigma``): the table's Mach
-  dependence is the model's weakest part, and without ``m`` the white-noise R makes the filter
-  trust the ports' Mach signature (Mach 3σ 0.15 for an RMS error of 0.5).
+  dependence is the model's weakest part, which a white-noise R would otherwise let the filter
+  trust (measured on seed 11, pass 1, without it: Mach 99 % inside 3σ instead of 100 %, p∞ RMS
+  4.3 % instead of 3.3 %; before the flow angles were in the distance it was Mach 38 %).
 
 Measurement (Eq. 33–35, iterated update): the seven port pressures
 ``p_i = (1 + λ_i)(1 + c)(1 + b_i) h_i(x; M (1 + m)) + β_i`` through the same surface pressure
@@ -72,11 +74,12 @@ include them) but never updated (gain projected to zero on them; ``rts_smooth(co
 the data are not used twice.  Each pass is a forward iterated EKF and an RTS smoother.
 
 Measured (``msl_meads``, seeds 11/1/2, table model, above 850 Pa, pass 2; before → after
-issue #10): the outputs are honest — α, β, q∞, Mach, p∞, density and both horizontal winds
-inside their reported 3σ at every sample (before: α 91–94 %, Mach 78–100 %, wind 77–100 %),
-α RMS 0.08–0.16° (0.15–0.22°), q∞ 0.54–0.65 % (1.0–2.2 %), p∞ 2.3–3.4 % (4.0–7.4 %); the scale
-factors of pass 1 inside 3σ for 7 of 7 ports on every seed (4, 1, 5 of 7; common-mode error
-−0.1 to −0.5 % instead of −0.9 to −2.2 %).  Still conservative: the mean per-port NIS is 0.14–0.20
+issue #10): the outputs are honest — α, β, q∞, Mach, p∞, density and the north wind inside their
+reported 3σ at every sample, the east wind at 96–100 % (before: α 91–94 %, Mach 81–100 %, north
+wind 77–100 %); RMS errors α 0.08–0.16° (0.15–0.22°), q∞ 0.54–0.65 % (1.0–2.2 %), p∞ 2.3–3.4 %
+(4.0–7.4 %), Mach 0.21–0.25 (0.21–0.42), density 1.3–2.0 % (1.0–1.3 %); pass 1's scale factors
+inside 3σ for 7 of 7 ports on every seed (4, 1, 5 of 7), common-mode error −0.1 to −0.5 %
+(−0.9 to −2.2 %).  Still conservative: the mean per-port NIS is 0.14–0.20
 (0.02–0.15 before; health WARNING below 0.5).  The innovations' S is dominated by the per-step
 process noise of first-order models of smooth processes — the model-error Markov as α and Mach
 change, the wind and ln p∞/ln ρ∞ random walks per km — while the truth's errors are smooth, so
@@ -85,8 +88,9 @@ the one-step innovations are near the 1.4 Pa white noise.  The second-order Mark
 3σ; smaller wind/atmosphere random walks bring it to 0.7–1.4 but make Mach and p∞ overconfident
 (43 % and 86 % inside 3σ with 3e-5/km and 15 (m/s)²/km): the smooth atmosphere (gravity waves,
 lapse rate) would need its own higher-order model.  With the Newtonian model the 1 % σ is too
-small (its error against the truth is ~3 %, common mode 2.6 %): set ``model_error_sigma`` to
-match.  On pressures from the estimator's own model planted scale factors are recovered
+small (its error against the truth is ~3 %, common mode 2.6 %; α 37 % inside 3σ, 13 % before);
+``model_error_sigma = 0.03`` makes it α 77 %, q∞ 89 %, the rest 93–100 %: the Newtonian's error
+is more than a smooth per-port factor.  On pressures from the estimator's own model planted scale factors are recovered
 (tests/problems/meads/test_ekf.py).
 """
 
