@@ -118,6 +118,7 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
 from workbench.problems.meads.airdata import ned_frames, pressure_model
 from workbench.problems.meads.config import EkfSettings
+from workbench.problems.meads.kernel import N_U_COLS, pressure_kernel
 
 __all__ = [
     "STATE_NAMES",
@@ -134,6 +135,7 @@ __all__ = [
     "flight_distance",
     "markov_step",
     "markov_steady_var",
+    "USE_KERNEL",
 ]
 
 N_PORTS = 7
@@ -272,6 +274,12 @@ def air_data_of_state(X: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[n
 
 #: perturbations of the air-data Jacobian in (u_B [m/s], ln p∞, ln ρ∞)
 _EPS_Z = np.array([1e-2, 1e-2, 1e-2, 1e-5, 1e-5])
+_NO_GRID = np.zeros(2)
+_NO_TABLE = np.zeros((2, 2, 2, 2))
+
+#: the measurement function runs as the compiled :func:`.kernel.pressure_kernel`; False: the numpy
+#: reference path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)
+USE_KERNEL = True
 
 
 def make_pressure_model(inp: EkfInputs):
@@ -281,14 +289,29 @@ def make_pressure_model(inp: EkfInputs):
     h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
     D = np.diag(_EPS_Z)
     dz = np.concatenate([np.zeros((1, 5)), D, -D])
+    compiled = USE_KERNEL and inp.model in ("newtonian", "table")
+    if compiled:
+        veh, tab = inp.vehicle, inp.table
+        ports = (veh.cone(), veh.clock(), veh.radius() / veh.base_radius)
+        grids = (_NO_GRID,) * 4 + (_NO_TABLE,)
+        if tab is not None:
+            grids = (tab.mach, tab.alpha_t, tab.clock, tab.s, np.ascontiguousarray(tab.values, dtype=float))
+        table_model = inp.model == "table"
 
     def h(x: np.ndarray, C_B_M: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        u0, Ju = numeric_jacobian_batched(lambda X: _air_velocity(X, C_B_M), x, LAYOUT, EPS)
-        Z = np.r_[u0, x[ILP], x[ILR]][None, :] + dz
-        a, b, q, M, _, _ = _freestream(Z[:, :3], Z[:, 3], Z[:, 4], inp.gamma)
-        pz = h4(np.stack([q, a, b, M], axis=1))[:, use]  # (11, k)
-        p0 = pz[0]
-        dp_dz = ((pz[1:6] - pz[6:11]) / (2.0 * _EPS_Z)[:, None]).T  # (k, 5)
+        if compiled:
+            _, Ju12, p0, dp_dz = pressure_kernel(
+                x, C_B_M, EPS, _EPS_Z, use, inp.gamma, MARS.rotation_rate, table_model, *ports, *grids
+            )
+            Ju = np.zeros((3, N_X))
+            Ju[:, :N_U_COLS] = Ju12
+        else:
+            u0, Ju = numeric_jacobian_batched(lambda X: _air_velocity(X, C_B_M), x, LAYOUT, EPS)
+            Z = np.r_[u0, x[ILP], x[ILR]][None, :] + dz
+            a, b, q, M, _, _ = _freestream(Z[:, :3], Z[:, 3], Z[:, 4], inp.gamma)
+            pz = h4(np.stack([q, a, b, M], axis=1))[:, use]  # (11, k)
+            p0 = pz[0]
+            dp_dz = ((pz[1:6] - pz[6:11]) / (2.0 * _EPS_Z)[:, None]).T  # (k, 5)
         Jz = np.zeros((5, N_X))
         Jz[:3] = Ju
         Jz[3, ILP] = Jz[4, ILR] = 1.0
