@@ -11,7 +11,8 @@ Measured, in one run:
   with no failure: max/RMS error above 850 Pa of α, β [deg], q∞ [%], Mach, density [%], p∞ [%],
   winds [m/s] (published, and the unpublished non-singular solution), each against its median
   reported 3σ and the fraction inside 3σ; the other estimator model (Newtonian vs table: the
-  model-form error); the wall time of each run;
+  model-form error); the EKF passes (mean per-port NIS, errors against their 3σ, pass 1's scale
+  factors against the truth's); the wall time of each run;
 * the trade study (paper Sect. IV.B.1, Fig. 6): ``--runs`` runs at 0.5/1/2.5/5 % of reading,
   Newtonian pressures, fixed R = 0.001: the 3σ table with the objectives met, on 2 local worker
   processes and (``--scheduler``) on Dask, with a check that both give identical numbers;
@@ -57,7 +58,26 @@ def _run(scenario, out: Path) -> dict:
         "wind_singular_intervals_s": s["wind_singular_intervals_s"],
         "wind_sigma_mps_nonsingular_above_min_qbar": s["wind_sigma_mps_nonsingular_above_min_qbar"],
         "model": s["model"],
+        "ekf": s.get("ekf"),
     }
+
+
+def _print_ekf(name: str, run: dict) -> None:
+    """One line per EKF pass: mean per-port NIS and the errors against the reported 3σ."""
+    tr = run["truth"]
+    for i in (1, 2):
+        if f"ekf_pass{i}" not in tr:
+            continue
+        nis = run["ekf"][f"pass{i}"]["mean_nis_per_port_above_min_qbar"]
+        blocks = ", ".join(
+            f"{k} {v['max_abs']:.3g}/{v['rms']:.3g}/{100 * v['fraction_within_3sigma']:.0f}%"
+            for k, v in tr[f"ekf_pass{i}"].items()
+            if v.get("n", 0)
+        )
+        print(f"{name} EKF pass {i}: NIS/port {[None if v is None else round(v, 3) for v in nis]}; {blocks}")
+    sf = tr.get("ekf_scale_factors")
+    if sf:
+        print(f"{name} scale factors inside 3σ: {sf['fraction_within_3sigma'] * len(sf['estimate']):.0f} of 7")
 
 
 def _full_mc(sc, args) -> dict:
@@ -116,6 +136,8 @@ def main(argv: list[str] | None = None) -> int:
             nominal = sc.with_overrides({"sensors.pressure.failure_port": ""})
             results["run_nominal"] = _run(nominal, out / "nominal")
             print("nominal run:", json.dumps(results["run_nominal"]["truth"]["final"])[:600], flush=True)
+            for key in ("run_failed_port", "run_nominal"):
+                _print_ekf(key, results[key])
     if not args.skip_trade:
         sh = prepare_trade_study(sc)
         ts = run_trade_study(sh, args.runs, args.seed, workers=2, scheduler=None)
