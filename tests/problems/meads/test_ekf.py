@@ -97,7 +97,7 @@ def arc():
         atmosphere_var_per_km=1e-9,
         **NO_MODEL_ERROR,
     )
-    passes = list(ekf.run_passes(inp, st))
+    passes = list(ekf.run_passes(inp, st, keep_all=True))
     return inp, X, passes
 
 
@@ -254,7 +254,7 @@ def arc_model_error():
     sig = sensor_sigma(p_clean, VEHICLE, 0.0, noise_counts=st.noise_counts)
     p = p_clean * (1.0 + err) + bias + rng.normal(0.0, sig)
     inp = replace(inp, p=p, sigma_p=sig)
-    return inp, X, list(ekf.run_passes(inp, st))
+    return inp, X, list(ekf.run_passes(inp, st, keep_all=True))
 
 
 def test_model_error_states_keep_the_filter_honest(arc_model_error):

@@ -98,7 +98,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -202,13 +202,16 @@ class EkfInputs:
 @dataclass(frozen=True)
 class EkfPass:
     """One filter pass (a pipeline stage): ``index`` 1 or 2 of ``passes``; ``t`` (n,) [s];
-    ``forward`` the :class:`ForwardPass` (innovations under ``"pressure"``, NaN for unused ports);
-    ``smoothed`` the :class:`SmoothedPass`; ``outputs`` (n, 9) and ``sigma`` (n, 9) of
+    ``forward`` the :class:`ForwardPass` (innovations under ``"pressure"``, NaN for unused ports;
+    ``P_prior``, ``P_post``, ``F`` empty and ``Q`` None: dropped after smoothing, the forward 1σ
+    is ``sigma_post``; all kept with ``run_pass(keep_all=True)``); ``smoothed`` the
+    :class:`SmoothedPass` (``G`` empty, dropped); ``outputs`` (n, 9) and ``sigma`` (n, 9) of
     :data:`OUTPUT_NAMES` from the smoothed state; ``scale`` (7,) the scale factors used or found
     (smoothed) with 1σ ``sigma_scale`` and covariance ``scale_cov`` (7, 7); ``scale_estimated``
     whether this pass estimated them;
     ``nis_port`` (k, 7) per-port normalised innovations squared ``y_i²/S_ii`` of the forward pass at
-    the processed samples (NaN where unused); ``wall_s`` [s]."""
+    the processed samples (NaN where unused); ``wall_s`` [s]; ``sigma_post`` (n, N_X) the forward
+    pass's 1σ of every state (error-state units)."""
 
     index: int
     passes: int
@@ -223,6 +226,7 @@ class EkfPass:
     scale_estimated: bool
     nis_port: np.ndarray
     wall_s: float
+    sigma_post: np.ndarray
 
     @property
     def stage_label(self) -> str:
@@ -336,16 +340,28 @@ def make_pressure_model(inp: EkfInputs):
 
 
 def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -> tuple[np.ndarray, np.ndarray]:
-    """:data:`OUTPUT_NAMES` (n, 9) and their 1σ (n, 9) from states x (n, 21), covariances P
-    (n, 21, 21) and the strapdown attitude q_M_B (n, 4) (first-order propagation)."""
-    C_B_M = np.swapaxes(quat_to_dcm(q_M_B), 1, 2)[:, None]
+    """:data:`OUTPUT_NAMES` (n, 9) and their 1σ (n, 9) from states x (n, N_X), covariances P
+    (n, N_X, N_X) and the strapdown attitude q_M_B (n, 4) (first-order propagation).  Evaluated
+    :data:`OUTPUT_CHUNK` samples at a time (each sample's outputs depend on that sample only): the
+    perturbed-state stack of all samples at once would hold (n, 1 + 2 N_X, N_X) and its
+    intermediates (~150 MB on ``msl_meads``)."""
+    C_all = np.swapaxes(quat_to_dcm(q_M_B), 1, 2)[:, None]
+    ys, ss = [], []
+    for i in range(0, len(x), OUTPUT_CHUNK):
+        C_B_M = C_all[i : i + OUTPUT_CHUNK]
 
-    def g(X):
-        a, b, q, M, pi, rho = air_data_of_state(X, C_B_M, gamma)
-        return np.stack([a, b, q, M, pi, rho, X[..., 9], X[..., 10], X[..., 11]], axis=-1)
+        def g(X, C_B_M=C_B_M):
+            a, b, q, M, pi, rho = air_data_of_state(X, C_B_M, gamma)
+            return np.stack([a, b, q, M, pi, rho, X[..., 9], X[..., 10], X[..., 11]], axis=-1)
 
-    y, s, _ = derived_with_sigma(g, x, P, LAYOUT, EPS)
-    return y, s
+        y, s, _ = derived_with_sigma(g, x[i : i + OUTPUT_CHUNK], P[i : i + OUTPUT_CHUNK], LAYOUT, EPS)
+        ys.append(y)
+        ss.append(s)
+    return np.concatenate(ys), np.concatenate(ss)
+
+
+#: samples per block of :func:`air_outputs`
+OUTPUT_CHUNK = 256
 
 
 def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.ndarray) -> tuple:
@@ -484,8 +500,12 @@ def run_pass(
     estimate_scale: bool = True,
     scale_fixed: np.ndarray | None = None,
     scale_cov_fixed: np.ndarray | None = None,
+    keep_all: bool = False,
 ) -> EkfPass:
     """One pass: forward iterated EKF over the pressure samples, then RTS smoothing.
+
+    ``keep_all``: keep the forward pass's covariances and the smoother's gains in the result
+    (tests); by default they are dropped after smoothing (:class:`EkfPass`).
 
     ``estimate_scale``: the scale factors are states (prior 0 ± ``st.scale_factor_sigma``);
     otherwise the pressures are divided by ``1 + scale_fixed`` (7,) and the scale-factor states
@@ -547,7 +567,7 @@ def run_pass(
         ]
 
     with np.errstate(invalid="ignore"):
-        fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, LAYOUT)
+        fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, LAYOUT, keep_q=keep_all)
         sm = rts_smooth(fp, LAYOUT, consider=None if estimate_scale else np.arange(N_X)[ILAM])
     out, sd = air_outputs(sm.x, sm.P, inp.q_M_B, inp.gamma)
     inn = fp.innovations.get("pressure")
@@ -559,16 +579,37 @@ def run_pass(
         lam = sm.x[0, ILAM].copy()
     Pl = sm.P[0][ILAM, ILAM].copy()
     slam = np.sqrt(np.diag(Pl))
+    # what the pass keeps: the smoother's inputs P_prior and F, its gains G and the forward
+    # covariances are not read after it (recording, health and summary use x_post, its 1σ, the
+    # innovations, the smoothed x and P); each is an (n, N_X, N_X) array (36 MB on msl_meads)
+    sigma_post = np.sqrt(np.maximum(np.einsum("nii->ni", fp.P_post), 0.0))
+    if not keep_all:
+        none = np.empty((0, N_X, N_X))
+        fp = replace(fp, P_prior=none, P_post=none, F=none, Q=None)
+        sm = replace(sm, G=none)
     return EkfPass(
-        index, passes, inp.t, fp, sm, out, sd, lam, slam, Pl, estimate_scale, nis_port, time.perf_counter() - t0
+        index,
+        passes,
+        inp.t,
+        fp,
+        sm,
+        out,
+        sd,
+        lam,
+        slam,
+        Pl,
+        estimate_scale,
+        nis_port,
+        time.perf_counter() - t0,
+        sigma_post,
     )
 
 
-def run_passes(inp: EkfInputs, st: EkfSettings):
+def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False):
     """Yield pass 1 (scale factors estimated) and, with ``st.passes == 2``, pass 2 (pressures
-    corrected by pass 1's scale factors)."""
+    corrected by pass 1's scale factors); ``keep_all`` as :func:`run_pass`."""
     n = int(st.passes)
-    first = run_pass(inp, st, index=1, passes=n, estimate_scale=True)
+    first = run_pass(inp, st, index=1, passes=n, estimate_scale=True, keep_all=keep_all)
     yield first
     if n >= 2:
         yield run_pass(
@@ -579,4 +620,5 @@ def run_passes(inp: EkfInputs, st: EkfSettings):
             estimate_scale=False,
             scale_fixed=first.scale,
             scale_cov_fixed=first.scale_cov,
+            keep_all=keep_all,
         )
