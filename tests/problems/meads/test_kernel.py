@@ -1,6 +1,7 @@
 """The compiled MEADS measurement function (:mod:`workbench.problems.meads.kernel`) against its numpy
-reference path (``ekf.USE_KERNEL = False``): the same pressures and Jacobian, both pressure models,
-states spread over the entry's flight conditions, a subset of ports, and the table's edges."""
+reference path (``ekf.USE_KERNEL = False``): the same pressures and Jacobian (and flow angles, Mach),
+both pressure models, states spread over the entry's flight conditions, a subset of ports, and the
+table's edges."""
 
 from __future__ import annotations
 
@@ -104,3 +105,14 @@ def test_kernel_matches_the_numpy_reference(model, monkeypatch):
     # reference's own Jacobian carries the same noise.
     assert worst_H < 2e-6
     assert worst_m < 1e-9
+
+
+def test_flow_kernel_matches_the_numpy_air_data():
+    """The transition's flight-condition distance: α, β, Mach of one state, compiled vs numpy."""
+    from workbench.problems.meads.kernel import flow_kernel
+
+    X, C = _states(60, seed=9)
+    for x, Cb in zip(X, C, strict=True):
+        a, b, _, M, _, _ = ekf.air_data_of_state(x, Cb, 1.335)
+        got = flow_kernel(x, Cb, MARS.rotation_rate, 1.335)
+        np.testing.assert_allclose(got, (a, b, M), rtol=1e-12, atol=1e-14)

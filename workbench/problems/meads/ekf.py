@@ -118,7 +118,7 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
 from workbench.problems.meads.airdata import ned_frames, pressure_model
 from workbench.problems.meads.config import EkfSettings
-from workbench.problems.meads.kernel import N_U_COLS, pressure_kernel
+from workbench.problems.meads.kernel import N_U_COLS, flow_kernel, pressure_kernel
 
 __all__ = [
     "STATE_NAMES",
@@ -419,8 +419,12 @@ def flight_distance(
     C_B_M C0 (3, 3)) to x1 (C1): ``|ΔM| / model_error_mach_length + (|Δα| + |Δβ|) /
     model_error_angle_deg`` — the estimator's pressure model errs as a smooth function of Mach
     and the flow angles, so its error decorrelates with them, not with time."""
-    a0, b0, _, m0, _, _ = air_data_of_state(x0, C0, gamma)
-    a1, b1, _, m1, _, _ = air_data_of_state(x1, C1, gamma)
+    if USE_KERNEL:
+        a0, b0, m0 = flow_kernel(x0, C0, MARS.rotation_rate, gamma)
+        a1, b1, m1 = flow_kernel(x1, C1, MARS.rotation_rate, gamma)
+    else:
+        a0, b0, _, m0, _, _ = air_data_of_state(x0, C0, gamma)
+        a1, b1, _, m1, _, _ = air_data_of_state(x1, C1, gamma)
     d_angle = (abs(a1 - a0) + abs(b1 - b0)) / math.radians(st.model_error_angle_deg)
     return float(abs(m1 - m0) / st.model_error_mach_length + d_angle)
 

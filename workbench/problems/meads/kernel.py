@@ -28,7 +28,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["pressure_kernel", "N_U_COLS"]
+__all__ = ["pressure_kernel", "flow_kernel", "N_U_COLS"]
 
 #: state columns the air velocity depends on (position, velocity, attitude error, wind)
 N_U_COLS = 12
@@ -199,3 +199,16 @@ def pressure_kernel(
         for i in range(k):
             dp_dz[i, j] = (pz[1 + j, i] - pz[6 + j, i]) / (2.0 * eps_z[j])
     return u0, Ju, p0, dp_dz
+
+
+@njit(cache=True, nogil=True)
+def flow_kernel(x, C, omega, gamma):  # pragma: no cover - compiled
+    """(α [rad], β [rad], Mach) of one EKF state ``x`` (n_x,) with the strapdown C_B_M ``C`` (3, 3),
+    the planet's rotation rate ``omega`` [rad/s] and ``gamma``: ``ekf.air_data_of_state`` for one
+    state (the transition's flight-condition distance asks for it twice a step)."""
+    u = np.empty(3)
+    _air_velocity(x, C, omega, u)
+    V = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    a = math.atan2(u[2], u[0])
+    b = math.asin(min(max(u[1] / V, -1.0), 1.0))
+    return a, b, V / math.sqrt(gamma * math.exp(x[12]) / math.exp(x[13]))
