@@ -172,13 +172,17 @@ def test_unhealthy_run_exits_6_writes_nothing_unless_allowed(tmp_path, capsys):
     assert (out / "post2_j2.rrd").exists() and "UNHEALTHY" in capsys.readouterr().err
 
 
-def test_several_scenarios_run_in_processes_and_a_failure_stops_none(tmp_path, capfd):
+@pytest.mark.parametrize("fork", [True, False], ids=["forked", "new-interpreter"])
+def test_several_scenarios_run_in_processes_and_a_failure_stops_none(tmp_path, capfd, monkeypatch, fork):
     """``run A B --jobs 2``: each scenario in its own process; the unhealthy one (exit 6, nothing
     written) does not stop the healthy one, whose outputs equal a run in this process; the exit code
     is the failed scenario's and the failure is listed.  With bars (a terminal; forced here), the
     children's plain timed lines are piped through the parent, above its bar of finished scenarios."""
+    from workbench import cli
     from workbench.cli import EXIT_UNHEALTHY
     from workbench.io.assets import assets_dir
+
+    monkeypatch.setattr(cli, "FORK", fork)
 
     text = (assets_dir() / "scenarios" / "post2_j2.toml").read_text(encoding="utf-8")
     assert 'name = "post2_j2"' in text and "sigma = 1.0e-5" in text

@@ -99,6 +99,37 @@ def test_sigterm_and_sigint_remove_the_partial(tmp_path, sig, code):
     assert ("terminated" if sig == signal.SIGTERM else "interrupted") in err
 
 
+def test_sigterm_stops_every_scenario_process_of_a_multi_job_run(tmp_path):
+    """``run A B --jobs 2`` (each scenario in a process forked from the command's): SIGTERM to the
+    command reaches both running scenarios, each removes its partial recording, none is left
+    running, and the command exits 143."""
+    second = tmp_path / "fallingbody_b.toml"
+    text = SCENARIO.read_text(encoding="utf-8")
+    assert 'name = "fallingbody"' in text
+    second.write_text(text.replace('name = "fallingbody"', 'name = "fallingbody_b"'), encoding="utf-8")
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-c", DRIVER, "run", str(SCENARIO), str(second), "--jobs", "2", "--out", str(out)]
+    p = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    paused, t0 = 0, time.monotonic()
+    while paused < 2 and time.monotonic() - t0 < 120:
+        line = p.stderr.readline()
+        paused += "PAUSED" in line
+        if not line and p.poll() is not None:
+            break
+    assert paused == 2, "both scenario processes reach their pause"
+    children = subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True, text=True).stdout.split()
+    assert len(children) == 2
+    assert len(list(out.glob("*.partial"))) == 2
+    p.send_signal(signal.SIGTERM)
+    err = p.communicate(timeout=120)[1]
+    assert p.returncode == 143, err
+    assert "Traceback" not in err
+    assert err.count("terminated (SIGTERM)") == 3  # both scenarios and the command
+    assert not list(out.glob("*.partial")) and not list(out.glob("*.rrd"))
+    for pid in children:
+        assert not Path(f"/proc/{pid}").exists()
+
+
 def test_sigkill_partial_removed_by_the_next_run(tmp_path, fallingbody):
     out = tmp_path / "out"
     p = _start(out)

@@ -194,8 +194,127 @@ def child_argv(name: str, args: argparse.Namespace) -> list[str]:
     return argv
 
 
+#: modules every scenario process imports; ``run`` with several jobs imports them once and forks
+#: each scenario's process from itself, so no process pays the ~2 s of imports again
+PRELOAD = (
+    "scipy.interpolate",
+    "scipy.linalg",
+    "scipy.optimize",
+    "scipy.special",
+    "numba",
+    "trimesh",
+    "rerun",
+    "rerun.blueprint",
+    "workbench.problems.runner",
+    "workbench.recording.compare",
+)
+
+#: start scenario processes by forking this one (POSIX); False: a new interpreter each (``python -m
+#: workbench.cli run NAME ...``), which repeats the imports
+FORK = hasattr(os, "fork")
+
+
+class _Child:
+    """One scenario's process: forked from this one (its imports done, :data:`PRELOAD`), or a new
+    ``workbench run`` interpreter when :data:`FORK` is off.  ``pipe``: its stderr goes to a pipe
+    this process reads (:attr:`fd`, non-blocking), else to the inherited stderr.  The fork happens
+    while this process runs no other thread, so the child inherits no held lock."""
+
+    def __init__(self, name: str, args: argparse.Namespace, pipe: bool):
+        argv = child_argv(name, args)
+        r = w = None
+        if pipe:
+            r, w = os.pipe()
+        self.returncode: int | None = None
+        self.proc = None
+        if FORK:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            pid = os.fork()
+            if pid == 0:  # the child: run the scenario as `workbench run NAME --jobs 1 ...` would
+                code = 1
+                try:
+                    if w is not None:
+                        os.close(r)
+                        os.dup2(w, 2)
+                        os.close(w)
+                        sys.stderr = open(2, "w", buffering=1, closefd=False)  # noqa: SIM115 - ends with the child
+                    code = main(argv[3:])
+                except BaseException:  # noqa: BLE001 - a child must never return into the parent's loop
+                    import traceback
+
+                    traceback.print_exc()
+                finally:
+                    with contextlib.suppress(Exception):
+                        sys.stdout.flush()
+                        sys.stderr.flush()
+                    os._exit(code)
+            self.pid = pid
+        else:
+            import subprocess
+
+            self.proc = subprocess.Popen(argv, stderr=w)
+            self.pid = self.proc.pid
+        self.fd = None
+        if pipe:
+            os.close(w)
+            os.set_blocking(r, False)
+            self.fd = r
+        self._buf = b""
+
+    def poll(self) -> int | None:
+        """The exit code once the process ended (reaped here), else None."""
+        if self.returncode is None:
+            if self.proc is not None:
+                self.returncode = self.proc.poll()
+            else:
+                pid, status = os.waitpid(self.pid, os.WNOHANG)
+                if pid:
+                    self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def terminate(self) -> None:
+        """SIGTERM (the child removes its partial recording and exits 143)."""
+        if self.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signal.SIGTERM)
+
+    def wait(self) -> int:
+        """Block until the process ended; its exit code."""
+        while self.poll() is None:
+            if self.proc is not None:
+                self.proc.wait()
+            else:
+                _, status = os.waitpid(self.pid, 0)
+                self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def lines(self, final: bool = False) -> list[str]:
+        """The complete stderr lines the child wrote since the last call (pipe mode); ``final``: also
+        an unterminated last line, and close the pipe."""
+        if self.fd is None:
+            return []
+        while True:
+            try:
+                chunk = os.read(self.fd, 65536)
+            except BlockingIOError:
+                break
+            if not chunk:
+                final = True
+                break
+            self._buf += chunk
+        *done, self._buf = self._buf.split(b"\n")
+        if final:
+            if self._buf:
+                done.append(self._buf)
+            self._buf = b""
+            os.close(self.fd)
+            self.fd = None
+        return [d.decode("utf-8", errors="replace") for d in done]
+
+
 def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> int:
-    """Run each scenario as its own ``workbench run`` process, ``jobs`` at a time, longest first.
+    """Run each scenario in its own process, ``jobs`` at a time, longest first.
 
     Every scenario runs even when another fails; the progress lines of the processes interleave
     (each names its scenario). Returns 0 when all succeed, else the exit code of the first failed
@@ -203,25 +322,34 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
     running processes with SIGTERM (each removes its partial recording) and start no new one.
     Each process inherits this one's environment, so also its one BLAS thread (set at import).
 
+    The processes are forked from this one after it imported :data:`PRELOAD` (each would otherwise
+    spend ~2 s of CPU importing the same modules; :data:`FORK` off: ``python -m workbench.cli run``).
+    Each is this process's child, so its memory shows in this process's ``RUSAGE_CHILDREN``.
+
     Progress: every child logs plain timed lines (:func:`child_argv`). On a terminal (bars mode) the
     children's stderr is piped through this process, which prints their lines above one bar of the
     scenarios finished (count, ETA); otherwise the children write to the inherited stderr directly.
+    No thread is started here (a fork must not copy a lock another thread holds): the pipes are
+    read between polls.
     """
-    import subprocess
-    import threading
+    import importlib
+    import selectors
     import time
 
     out = Path(args.out)
     order = _launch_order(names, out)
-    pending, running, codes = list(order), {}, {}
     t0 = time.perf_counter()
     rep = _reporter(args)
     piped = rep.mode == "bars"
-    pumps: list[threading.Thread] = []
+    if FORK:
+        for mod in PRELOAD:
+            importlib.import_module(mod)
+    pending, running, codes = list(order), {}, {}
+    sel = selectors.DefaultSelector()
 
-    def pump(stream) -> None:  # a child's stderr, line by line, above the bar
-        for text in stream:
-            rep.result(text.rstrip("\n"))
+    def drain(child: _Child, final: bool = False) -> None:
+        for text in child.lines(final):
+            rep.result(text.rstrip("\r"))
 
     rep.line(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
     bar = rep.counter("scenarios finished", total=len(names), unit="scenarios")
@@ -229,30 +357,33 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
         while pending or running:
             while pending and len(running) < jobs:
                 name = pending.pop(0)
-                if piped:
-                    proc = subprocess.Popen(
-                        child_argv(name, args), stderr=subprocess.PIPE, text=True, errors="replace", bufsize=1
-                    )
-                    pumps.append(threading.Thread(target=pump, args=(proc.stderr,), daemon=True))
-                    pumps[-1].start()
-                else:
-                    proc = subprocess.Popen(child_argv(name, args))
-                running[name] = proc
-            time.sleep(0.05)
-            for name, proc in list(running.items()):
-                if proc.poll() is not None:
-                    codes[name] = proc.returncode
+                child = _Child(name, args, piped)
+                running[name] = child
+                if child.fd is not None:
+                    sel.register(child.fd, selectors.EVENT_READ, child)
+            if sel.get_map():
+                for key, _ in sel.select(timeout=0.05):
+                    drain(key.data)
+            else:
+                time.sleep(0.05)
+            for name, child in list(running.items()):
+                if child.poll() is not None:
+                    if child.fd is not None:
+                        sel.unregister(child.fd)
+                        drain(child, final=True)
+                    codes[name] = child.returncode
                     del running[name]
             bar.set(len(codes))
     except BaseException:
-        for proc in running.values():
-            proc.terminate()
-        for proc in running.values():
-            proc.wait()
+        for child in running.values():
+            child.terminate()
+        for child in running.values():
+            child.wait()
+            if child.fd is not None:
+                drain(child, final=True)
         raise
     finally:
-        for t in pumps:
-            t.join(timeout=5)
+        sel.close()
         bar.close(report=False)
     failed = [n for n in names if codes.get(n)]
     _progress(
@@ -569,7 +700,9 @@ def build_parser() -> argparse.ArgumentParser:
     _progress_options(sp)
     sp.set_defaults(func=cmd_run)
     sp = sub.add_parser(
-        "mc", help="Monte Carlo analysis of a scenario (drop test: consistency; entry: smoother validation)"
+        "mc",
+        help="Monte Carlo analysis of a scenario (drop test: consistency; entry: smoother validation; "
+        "meads: trade study)",
     )
     sp.add_argument("scenario")
     sp.add_argument("--seeds", type=int, default=20, help="number of runs (default 20)")
@@ -586,7 +719,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--truth-sim",
         action="store_true",
         help="truths from the truth simulator, reconstructions by the full pipeline from telemetry files "
-        "(entry); writes <name>_truth.mc.json and <name>_truth_mc.rrd",
+        "(entry; meads: full error model, least squares vs EKF passes); writes <name>_truth.mc.json and "
+        "<name>_truth_mc.rrd",
     )
     sp.add_argument(
         "--refine-rounds", type=int, default=None, help="refinement rounds of the ensemble stage (entry --truth-sim: 1)"

@@ -346,8 +346,8 @@ README_BLOCKS["headline"] = f"""\
   {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.landing.error_m|.0f}}}} m (Mahalanobis
   {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.landing.mahalanobis|.1f}}}} /
   {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.landing.mahalanobis|.1f}}}} /
-  {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.landing.mahalanobis|.1f}}}}: no trusted heading on
-  any flight, the magnetometer gives none, so flight 1's 60° heading uncertainty is beyond a linearised filter);
+  {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.landing.mahalanobis|.1f}}}}; the pad heading from
+  the magnetometer aligned in flight — its axes are turned −134° / −45° about the IMU's z on the two boards — 1σ 10°);
   as the barometer reads the apogee (model pressure + its estimated offset, like the flight computer's altitude)
   {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.apogee.standard_day_barometer_error_m|+.1f}}}} /
   {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.apogee.standard_day_barometer_error_m|+.1f}}}} /

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib
 import io
+import os
 import subprocess
 import sys
 import textwrap
@@ -76,6 +77,7 @@ def test_the_child_runs_only_for_a_cold_module_and_not_when_switched_off(kernels
         return subprocess.CompletedProcess(argv, 0, "", "")
 
     monkeypatch.setattr(pc.subprocess, "run", fake_run)
+    monkeypatch.setattr(pc, "FORK", False)
     problem = SimpleNamespace(compiled_modules=(name,))
     sc = SimpleNamespace(path=tmp_path / "x.toml")
     monkeypatch.setenv(pc.ENV_SWITCH, "0")
@@ -93,8 +95,39 @@ def test_a_failing_child_is_reported_and_the_run_goes_on(kernels, monkeypatch, t
     name, _ = kernels
     failed = subprocess.CompletedProcess([], 1, "", "Traceback\nValueError: boom\n")
     monkeypatch.setattr(pc.subprocess, "run", lambda argv, **kw: failed)
+    monkeypatch.setattr(pc, "FORK", False)
     rep, out = _rep()
     sc, problem = SimpleNamespace(path=Path("s.toml")), SimpleNamespace(compiled_modules=(name,))
     assert pc.precompile(sc, problem, 0, rep) is False
     assert "precompiling child exited 1 (ValueError: boom); compiling in this process" in out.getvalue()
     assert cold_modules([name]) == [name]
+
+
+def test_a_forked_child_compiles_for_the_run_and_its_failure_is_reported(kernels, monkeypatch, tmp_path):
+    """POSIX: the child is forked from the run (its imports done); a child that fails is one progress
+    line with its last line of output and the module stays cold; what a child compiles is cached
+    for the run."""
+    name, mod = kernels
+    if not pc.FORK:
+        pytest.skip("no fork on this platform")
+    parent = os.getpid()
+    problem = SimpleNamespace(compiled_modules=(name,))
+    sc = SimpleNamespace(path=tmp_path / "x.toml")
+
+    def failing(argv):
+        raise ValueError("boom")
+
+    monkeypatch.setattr(pc, "main", failing)
+    rep, out = _rep()
+    assert pc.precompile(sc, problem, 0, rep) is False
+    assert "precompiling child exited 1 (ValueError: boom); compiling in this process" in out.getvalue()
+    assert cold_modules([name]) == [name]
+
+    def child_main(argv):
+        assert os.getpid() != parent and argv == [str(sc.path), "--seed", "3"]
+        mod.used(1.0)  # what the child's run does: compile and cache
+        return 0
+
+    monkeypatch.setattr(pc, "main", child_main)
+    assert pc.precompile(sc, problem, 3, rep) is True
+    assert cold_modules([name]) == []

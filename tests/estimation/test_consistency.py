@@ -22,6 +22,7 @@ from workbench.estimation.consistency import (
     chi2_interval,
     fraction_inside,
     is_symmetric_pd,
+    mixture_hdr_level,
     nees,
     nis,
     whiteness,
@@ -289,3 +290,21 @@ def test_chi2_gate_against_closed_forms():
     assert chi2_gate(0.95, 4) > chi2_gate(0.95, 3) > chi2_gate(0.9, 3)
     # the upper end of the two-sided interval is the gate at (1 + p) / 2
     assert chi2_interval(3, 0.9)[1] == pytest.approx(chi2_gate(0.95, 3), rel=1e-14)
+
+
+def test_mixture_hdr_level_of_one_gaussian_is_the_chi2_cdf_and_a_ring_contains_its_rim():
+    rng = np.random.default_rng(7)
+    P = np.array([[4.0, 1.0], [1.0, 2.0]])
+    x = np.array([3.0, -2.0])
+    d2 = float(x @ np.linalg.solve(P, x))
+    level = mixture_hdr_level(x, np.zeros((1, 2)), P[None], np.ones(1), rng)
+    assert level == pytest.approx(chi2.cdf(d2, 2), abs=0.01)
+    # a ring of radius 100 (headings around a circle) with 5-unit blur: a point on the far side of the
+    # rim is inside its 3 sigma region, while the moment-matched Gaussian centred on the middle puts
+    # the centre (no mass there) inside and a point 2x the radius out far beyond
+    ang = np.linspace(0.0, 2.0 * np.pi, 72, endpoint=False)
+    means = 100.0 * np.column_stack([np.cos(ang), np.sin(ang)])
+    covs = np.tile(25.0 * np.eye(2), (72, 1, 1))
+    assert mixture_hdr_level(np.array([-100.0, 3.0]), means, covs, np.ones(72), rng) < 0.9
+    assert mixture_hdr_level(np.array([0.0, 0.0]), means, covs, np.ones(72), rng) > 0.9973
+    assert mixture_hdr_level(np.array([200.0, 0.0]), means, covs, np.ones(72), rng) > 0.9973

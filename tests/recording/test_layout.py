@@ -29,6 +29,7 @@ ROW = re.compile(r"^\|\s*`(/[^`]*)`\s*\|")
 FAMILY_ARGS = {
     "meads_port_plot_path": ("P1", "measured"),
     "meads_trade_path": ("alpha_deg", "1pct"),
+    "meads_truth_mc_path": ("qbar_pct", "ekf_pass2_mc"),
     "meads_ekf_plot_path": ("alpha_deg", 2),
     "meads_scale_factor_path": ("pass1",),
     "meads_ekf_innovation_path": (1, "P3"),

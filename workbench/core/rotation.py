@@ -48,6 +48,7 @@ __all__ = [
     "quat_boxplus_one",
     "attitude_error_one",
     "quat_integrate_body_rate",
+    "quat_history_from_body_rates",
     "euler123_from_quat",
     "quat_from_euler123",
     "quat_from_jpl",
@@ -266,6 +267,23 @@ def quat_integrate_body_rate(q: np.ndarray, omega_B: np.ndarray, dt: float | np.
     """
     dt = np.asarray(dt, dtype=float)
     return quat_boxplus(q, np.asarray(omega_B, dtype=float) * dt[..., None] if dt.ndim else omega_B * dt)
+
+
+def quat_history_from_body_rates(t: np.ndarray, omega_B: np.ndarray) -> np.ndarray:
+    """Attitudes ``q_0_B(t_k)`` (n, 4) of the body at the samples t (n,) [s] relative to its attitude
+    at ``t[0]`` (the identity), from the body rates ``omega_B`` (n, 3) [rad/s] sampled at t: body-frame
+    right products ``q_k = q_(k-1) ⊗ exp(½ (ω_k + ω_(k-1)) Δt)`` (trapezoidal rate), renormalised
+    each step.  A rotation of ``v_B`` into the frame at ``t[0]`` is ``quat_to_dcm(q) @ v_B``."""
+    t = np.asarray(t, float)
+    w = np.asarray(omega_B, float)
+    rv = 0.5 * (w[1:] + w[:-1]) * np.diff(t)[:, None]
+    steps = quat_from_rotvec(rv)
+    q = np.zeros((t.size, 4))
+    q[0] = [0.0, 0.0, 0.0, 1.0]
+    for i in range(1, t.size):  # a recursion: one cheap product per sample
+        q[i] = quat_multiply(q[i - 1], steps[i - 1])
+        q[i] /= np.linalg.norm(q[i])
+    return q
 
 
 def _rx(a):

@@ -742,6 +742,7 @@ def run_filter(
     adapt_q: Callable[[int, np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None,
     keep_gains: bool = False,
     eps: float | np.ndarray = 1e-6,
+    keep_q: bool = True,
 ) -> ForwardPass:
     """Run the error-state EKF over the times ``t`` (n,) [s] and record every step.
 
@@ -759,7 +760,9 @@ def run_filter(
     Then ``measurements_at(k, t[k], x_prior)`` returns a list of :class:`Measurement`, processed
     sequentially (each its own :func:`update`, in list order) and recorded in the
     :class:`InnovationHistory` of its name (a name may appear several times at one step; it must
-    keep its size m).  Gains are kept (``InnovationHistory.K``) only with ``keep_gains=True``.
+    keep its size m).  Gains are kept (``InnovationHistory.K``) only with ``keep_gains=True``;
+    the process-noise history (``ForwardPass.Q``, which the smoother does not read) only with
+    ``keep_q=True`` (else None: n·n_e² floats saved).
     Attitude errors follow the body-frame convention of the module.
     Errors in an update are re-raised with the step, time and measurement name.
     """
@@ -775,10 +778,11 @@ def run_filter(
     P_prior = np.empty((n, n_e, n_e))
     P_post = np.empty((n, n_e, n_e))
     F_hist = np.empty((n, n_e, n_e))
-    Q_hist = np.empty((n, n_e, n_e))
+    Q_hist = np.empty((n, n_e, n_e)) if keep_q else None
     if n:
         F_hist[0] = np.eye(n_e)
-        Q_hist[0] = 0.0
+        if keep_q:
+            Q_hist[0] = 0.0
     rows: dict[str, list[tuple]] = {}
     sizes: dict[str, int] = {}
     tl = t.tolist()
@@ -805,7 +809,8 @@ def run_filter(
             A *= 0.5
             P = A
             F_hist[k] = Fk
-            Q_hist[k] = Qk
+            if keep_q:
+                Q_hist[k] = Qk
             x = x_next
         x_prior[k] = x
         P_prior[k] = P

@@ -69,8 +69,9 @@ class McOptions:
     on ``workers`` local processes or a Dask ``scheduler``; ``members`` as in :class:`RunOptions`.
 
     ``truth_sim``: every run's truth from the problem's truth simulator and its reconstruction
-    through the full pipeline from telemetry files (entry: ``problems/entry/truth_mc.py``; the drop
-    test's Monte Carlo already synthesizes every run and ignores it); ``refine_rounds``: refinement
+    through the full pipeline from telemetry files (entry: ``problems/entry/truth_mc.py``; meads:
+    ``problems/meads/truth_mc.py``, the full error model; the drop test's Monte Carlo already
+    synthesizes every run and ignores it); ``refine_rounds``: refinement
     rounds of the ensemble stage, if it has them (None: the study's default)."""
 
     n_runs: int = 20

@@ -187,6 +187,7 @@ MEADS_PORT_RESIDUALS = "/world/vehicle/heat_shield/port_residuals"
 MEADS_AIR_VELOCITY = "/world/vehicle/air_velocity"
 MEADS_PLOT_PORTS = "/plots/ports"
 MEADS_TRADE_STUDY = "/plots/trade_study"
+MEADS_TRUTH_MC = "/plots/truth_mc"
 MEADS_PLOT_SCALE_FACTORS = "/plots/scale_factors"
 # ------------------------------------------------------------------ post2 (problem-file reconstruction)
 POST2_FOREBODY = "/world/vehicle/body/forebody"
@@ -428,6 +429,7 @@ _FAMILIES = {
     "compare_position_path": "/compare/position/<axis>",
     "meads_port_plot_path": "/plots/ports/<port>/<series>",
     "meads_trade_path": "/plots/trade_study/<quantity>/<level>",
+    "meads_truth_mc_path": "/plots/truth_mc/<quantity>/<series>",
     "meads_ekf_plot_path": "/plots/<quantity>/ekf_pass<pass>",
     "meads_scale_factor_path": "/plots/scale_factors/<series>",
     "meads_ekf_innovation_path": "/residuals/pressure_ekf_pass<pass>/<port>",
@@ -442,6 +444,12 @@ def meads_port_plot_path(port: str, series: str) -> str:
 def meads_trade_path(quantity: str, level: str) -> str:
     """``/plots/trade_study/<quantity>/<level>``: trade-study 3σ of ``quantity`` at one error level."""
     return join(MEADS_TRADE_STUDY, quantity, level)
+
+
+def meads_truth_mc_path(quantity: str, series: str) -> str:
+    """``/plots/truth_mc/<quantity>/<series>``: the full-error-model Monte Carlo's 3σ of ``quantity``
+    (``<estimator>_mc``, ``<estimator>_reported``) or its ``objective``."""
+    return join(MEADS_TRUTH_MC, quantity, series)
 
 
 def meads_ekf_plot_path(quantity: str, pass_index: int) -> str:

@@ -97,11 +97,11 @@ def test_ekf_passes_of_the_shipped_run(run):
     labels = [k for k in s["stage_times_s"] if k.startswith("EKF pass")]
     assert len(labels) == 2 and labels[0].startswith("EKF pass 1/2") and labels[1].startswith("EKF pass 2/2")
     ls, p1, p2 = tr["final"], tr["ekf_pass1"], tr["ekf_pass2"]
-    # pass 2 errors inside the reported 3σ for (nearly) every sample (α 91 % measured, the rest
-    # 100 %); q∞ thanks to the model-level state c ([ekf] model_level_sigma; without it 72 %)
+    # pass 2 errors inside the reported 3σ for (nearly) every sample (every sample measured, seeds
+    # 11/1/2; before the model error was a state α 91 %); q∞ thanks to the model-level state c
     keys = ("alpha_deg", "beta_deg", "qbar_pct", "mach", "p_inf_pct", "density_pct", "wind_north_mps", "wind_east_mps")
     for k in keys:
-        assert p2[k]["n"] > 900 and p2[k]["fraction_within_3sigma"] > 0.9, (k, p2[k])
+        assert p2[k]["n"] > 900 and p2[k]["fraction_within_3sigma"] > 0.97, (k, p2[k])
     # the IMU coupling pins the angles: α, β far better than the point-wise least squares
     for k in ("alpha_deg", "beta_deg"):
         assert p1[k]["rms"] < 0.5 * ls[k]["rms"] and p2[k]["rms"] < 0.5 * ls[k]["rms"], k
@@ -116,15 +116,22 @@ def test_ekf_passes_of_the_shipped_run(run):
     assert len(sf["estimate"]) == 7 and all(0 < v < 0.01 for v in sf["sigma"])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured 4 of 7 within 3σ: the table's model-form error against the CFD-like truth "
-    "(~1 % of reading, port-dependent, common mode -1.2 %) is indistinguishable from a transducer "
-    "scale factor; the filter recovers planted scale factors of its own model (tests/problems/meads/test_ekf.py)",
-)
 def test_ekf_scale_factors_inside_their_3_sigma(run):
+    """Pass 1's transducer scale factors against the truth's: with the table's model-form error a
+    coloured state (not λ) every port inside its 3σ (4 of 7 when R carried it as white noise)."""
     sf = run.summary["truth"]["ekf_scale_factors"]
     assert sf["fraction_within_3sigma"] == 1.0, sf
+    assert abs(sf["common_mode_error"]) < 0.005, sf
+
+
+def test_ekf_innovations_inside_their_band(run):
+    """Mean per-port NIS of both passes above 850 Pa (χ²(1) each): not optimistic (below 2) and no
+    longer an order of magnitude conservative (above 0.1; 0.02–0.08 when R carried the 1 % model
+    allowance as white noise; measured 0.14–0.20: the first-order Markov and the random walks add
+    more per-step variance than the smooth truth shows, see problems/meads/ekf.py)."""
+    for i in (1, 2):
+        nis = [v for v in run.summary["ekf"][f"pass{i}"]["mean_nis_per_port_above_min_qbar"] if v is not None]
+        assert len(nis) == 7 and all(0.1 < v < 2.0 for v in nis), (i, nis)
 
 
 def test_ekf_in_the_recording(run):

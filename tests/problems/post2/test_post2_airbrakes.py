@@ -14,6 +14,7 @@ import pytest
 from workbench.cli import main
 from workbench.core.atmosphere import EarthStandardAtmosphere
 from workbench.core.bodies import G0
+from workbench.estimation.consistency import mixture_hdr_level
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.problems.post2 import rocket
@@ -205,8 +206,12 @@ def test_import_writes_telemetry_a_problem_file_and_the_references(excerpt_run):
     assert "phase M (motor)" in events and "phase F (descent)" in events and "gap 1073" in events
     fl = json.loads((d / "flight.json").read_text(encoding="utf-8"))
     assert fl["gaps"][0]["row"] == 4
-    # pad: tilt = the 20 deg launch rod; the magnetometer's dip disagrees with the site's -> heading untrusted
+    # pad: tilt = the 20 deg launch rod.  The excerpt is decimated to ~8 Hz, too slow for the gyro to
+    # follow the coning, so the magnetometer is not aligned in flight; its raw axes (not the IMU's)
+    # give a pad dip that disagrees with the site's -> heading untrusted
     assert fl["pad"]["tilt_on_pad_deg"] == pytest.approx(20.0, abs=1.5)
+    assert fl["pad"]["magnetometer_alignment"] is None
+    assert abs(fl["pad"]["magnetometer_dip_deg"] - 64.0) > 10.0
     assert not fl["pad"]["magnetometer_heading_trusted"]
     assert (out / "rec" / "jackpot_launch_1_excerpt.rrd").is_file()
     assert "\\" not in toml.read_text(encoding="utf-8") and "shared" not in toml.read_text(encoding="utf-8")
@@ -235,11 +240,13 @@ def test_excerpt_reconstruction_is_healthy(excerpt_run):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="open (issue #9 case 5): since the boost's correlated start the reconstruction keeps the "
-    "IMU-integrated boost altitude, whose scale differs from the flight computer's barometric altitude by "
-    "~2 % (flight 1's baro offset estimate 196 Pa, ~7 sigma of its prior): 37 m RMS after the burnout "
-    "transient on the excerpt (was < 30 m with the diagonal start, whose residuals were NIS ~117); an "
-    "atmosphere-scale state, not a constant offset, would absorb it",
+    reason="open (issue #9 case 5): 37 m RMS after the burnout transient on the excerpt (27/35/31 m on the "
+    "full flights). The flight computer's altitude is a standard-day pressure altitude that follows its "
+    "barometer, ours the geometric one anchored by the IMU-integrated boost (3.5 % apart on the 25 C days "
+    "of flights 3 and 4; on flight 1 the open air brakes' static-port error, absorbed by a 150-190 Pa baro "
+    "offset). Measured: a barometric altitude-scale state (baro_scale, 1 sigma 3 %) makes it 101 m (full "
+    "flights 55/52/39 m: it stretches the barometer to the IMU's altitude), a dynamic-pressure port error "
+    "(baro_q_coefficient) 67 m (33/33/30 m); see rocket.py after BARO_BIAS_SIGMA",
 )
 def test_altitude_follows_the_flight_computer_within_30_m(excerpt_run):
     _, _, _, s = excerpt_run
@@ -273,3 +280,59 @@ def test_short_reconstruction_follows_the_flight(excerpt_run):
     t = s["attitude_vs_flight_computer"]["tilt_deg"]
     assert abs(t["ours_at_burnout"] - path_angle) < 10.0
     assert np.isfinite(t["difference_rms"])  # against the flight computer: reported (benchmark), not asserted
+
+
+def test_barometer_scale_and_dynamic_pressure_states(excerpt_run):
+    # the post2 barometer states a rocket problem file may add: baro_scale stretches the barometer's
+    # altitude about [environment] baro_scale_anchor_m (the import writes the pad's), and
+    # baro_q_coefficient adds a static-port error proportional to the dynamic pressure
+    _, toml, _, _ = excerpt_run
+    base = load_scenario(toml)
+    est0 = Estimator(base, config_for(base))
+    h_a = base.data["environment"]["baro_scale_anchor_m"]
+    sc = base.with_overrides(
+        {
+            "states.baro_scale": {"value": 1.04, "sigma": 0.03},
+            "states.baro_q_coefficient": {"value": 0.1, "sigma": 0.1},
+        }
+    )
+    est = Estimator(sc, config_for(sc))
+    m, x = est.model, est.x0
+    h = float(m.altitude(x))
+    rho = float(m.env.atmosphere.density(h))
+    q = 0.5 * rho * float(np.sum(m.v_rel(x) ** 2))
+    expected = m.env.atmosphere.pressure(h_a + 1.04 * (h - h_a)) + 0.1 * q  # baro_bias starts at 0
+    assert float(m.observe(x, "pressure", est.phase)[0]) == pytest.approx(float(expected), rel=1e-12)
+    # without the states: the model pressure at the altitude, unchanged
+    p0 = float(est0.model.observe(est0.x0, "pressure", est0.phase)[0])
+    assert p0 == pytest.approx(float(m.env.atmosphere.pressure(h)), rel=1e-12)
+    assert abs(float(expected) - p0) > 100.0  # the states change the reading by far more than round-off
+
+
+def test_landing_heading_mixture_turns_the_air_path_about_the_pad_and_keeps_the_wind_drift():
+    t = np.linspace(0.0, 50.0, 501)
+    wind = np.tile([2.0, -1.0], (t.size, 1))  # 100 m east, 50 m south over the span
+    landing = np.array([700.0, 450.0])
+    P = np.diag([30.0**2, 20.0**2])
+    means, covs, w, d_w = rocket.landing_heading_mixture(landing, P, t, wind, math.radians(60.0))
+    np.testing.assert_allclose(d_w, [100.0, -50.0], atol=1e-9)
+    r = np.linalg.norm(means - d_w, axis=1)
+    np.testing.assert_allclose(r, np.linalg.norm(landing - d_w), rtol=1e-12)  # a ring about the wind drift
+    assert w.sum() == pytest.approx(1.0) and np.allclose(covs, P)
+    np.testing.assert_allclose(means[np.argmax(w)], landing, atol=1e-9)  # the middle node: no heading error
+    # the landed point 60 deg round the ring: far outside the linearised ellipse, inside the mixture's 3 sigma
+    c, s = math.cos(math.radians(60.0)), math.sin(math.radians(60.0))
+    e, n = landing - d_w
+    other = d_w + np.array([c * e + s * n, -s * e + c * n])
+    assert float((other - landing) @ np.linalg.solve(P, other - landing)) > 100.0
+    assert mixture_hdr_level(other, means, covs, w, np.random.default_rng(1)) < 0.9973
+
+
+def test_untrusted_heading_landing_verdict_is_the_nonlinear_one(excerpt_run):
+    # the excerpt's heading is untrusted (60 deg 1 sigma): its landing verdict is the heading mixture's
+    _, _, _, s = excerpt_run
+    L = s["landing"]
+    nl = L["heading_nonlinear"]
+    assert 0.0 <= nl["hdr_level"] <= 1.0 and nl["turning_drift_m"] > 100.0
+    assert L["inside_3sigma"] == (nl["hdr_level"] <= 0.9973)
+    assert L["mahalanobis_linearised"] == L["mahalanobis"]

@@ -4,11 +4,13 @@ Needs ``EDL_FLIGHT_DATA`` (a folder containing ``airbrakes_firm/``); skipped wit
 The numbers are reported by ``tests/benchmarks/bench_post2_flights.py``; asserted here is what the
 reconstruction claims: every flight imported and reconstructed with every barometer sample used, the
 apogee within 5 % of the metadata's, the altitude within 40 m RMS of the flight computer's after the
-burnout transient, and the landing point inside its 3σ for flights 3 and 4 (flight 1's is not: its
-launch direction is unknown — magnetometer heading untrusted, 20° rod — see the benchmark).
+burnout transient, the magnetometer aligned in flight (its axes turned about the IMU's z, its dip
+then the site's) so the pad heading is trusted, and the landing point inside its 3σ on every flight.
 """
 
 from __future__ import annotations
+
+import json
 
 import pytest
 from flight_data import FLIGHTS, SITE_MAGNETIC, airbrakes_dir
@@ -30,5 +32,10 @@ def test_real_flight(log, tmp_path):
     assert s["altitude_vs_flight_computer"]["rms_after_burnout_transient_m"] < 40.0
     b = s["observations"]["baro"]
     assert b["accepted"] == b["samples"]
-    if log != "jackpot_launch_1.csv":
-        assert s["landing"]["inside_3sigma"]
+    fl = json.loads((tmp_path / "flight.json").read_text(encoding="utf-8"))
+    mag = fl["pad"]["magnetometer_alignment"]
+    assert mag["fit_accepted"] and abs(fl["pad"]["magnetometer_dip_deg"] - inc) < 5.0
+    # the raw magnetometer axes are not the IMU's (-134 deg about z on flight 1, -45 on 3 and 4): raw dip off
+    assert abs(mag["rotation_imu_to_magnetometer_rotvec_deg"][2]) > 30.0
+    assert abs(fl["pad"]["magnetometer_dip_raw_pad_deg"] - inc) > 30.0
+    assert s["landing"]["heading_trusted"] and s["landing"]["inside_3sigma"]

@@ -81,6 +81,20 @@ class EkfSettings:
     ``scale_factor_sigma`` prior 1σ of each transducer scale factor (of reading);
     ``model_level_sigma`` prior 1σ of the common level error of the pressure model (of reading,
     a constant state; 0: not modelled).
+
+    The pressure model's error as coloured states (:mod:`.ekf`): ``model_error_sigma`` the
+    steady-state 1σ of each port's multiplicative model error (of reading; the least squares'
+    1 % allowance, made a state; 0: not modelled, and R then carries the estimator's white
+    ``model_error_frac`` as before); ``model_error_order`` 1 (first-order Gauss–Markov) or 2
+    (critically damped second order: smooth, like the table's error; measured on ``msl_meads``
+    NIS 0.3 instead of 0.15 but scale factors 4–7 of 7 inside 3σ instead of 7, :mod:`.ekf`); ``model_error_mach_length``
+    [Mach] and ``model_error_angle_deg`` [deg of |Δα| + |Δβ|] its correlation lengths in flight
+    condition (:func:`.ekf.flight_distance`); ``model_mach_sigma`` 1σ of the model's relative
+    Mach error (pressures read at M(1 + m), a first-order Gauss–Markov over the same distance;
+    0: not modelled); ``bias_sigma_pa`` [Pa] prior 1σ of each transducer's additive residual
+    bias after the in-flight zero (Eq. 51; constant; 0: not modelled); ``noise_counts`` the
+    channel's white noise N in counts (Eq. 38, uniform over N counts): with the model error a
+    state, R is only that and the quantisation, σ² = (N² + 1)/12 counts².
     """
 
     enabled: bool = True
@@ -90,11 +104,18 @@ class EkfSettings:
     attitude_psd: float = 4e-9
     wind_sigma_mps: float = 30.0
     vertical_wind_sigma_mps: float = 3.0
-    wind_var_per_km: float = 100.0
+    wind_var_per_km: float = 30.0
     atmosphere_sigma_ln: float = 1.0
-    atmosphere_var_per_km: float = 1e-3
+    atmosphere_var_per_km: float = 1e-4
     scale_factor_sigma: float = 0.01
     model_level_sigma: float = 0.01
+    model_error_sigma: float = 0.01
+    model_error_mach_length: float = 3.0
+    model_error_angle_deg: float = 2.0
+    model_error_order: int = 1
+    noise_counts: float = 2.0
+    bias_sigma_pa: float = 3.5
+    model_mach_sigma: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -180,9 +201,23 @@ class MeadsConfig:
         for k in ("wind_sigma_mps", "vertical_wind_sigma_mps", "atmosphere_sigma_ln", "scale_factor_sigma"):
             if not ek[k] > 0.0:
                 raise ScenarioError(scenario.path, f"ekf.{k}", f"{ek[k]}: a prior 1-sigma must be > 0")
-        for k in ("accel_psd", "attitude_psd", "wind_var_per_km", "atmosphere_var_per_km", "model_level_sigma"):
+        if ek["model_error_order"] not in (1, 2):
+            raise ScenarioError(scenario.path, "ekf.model_error_order", f"{ek['model_error_order']}: use 1 or 2")
+        for k in ("model_error_mach_length", "model_error_angle_deg", "noise_counts"):
+            if not ek[k] > 0.0:
+                raise ScenarioError(scenario.path, f"ekf.{k}", f"{ek[k]}: must be > 0")
+        for k in (
+            "accel_psd",
+            "attitude_psd",
+            "wind_var_per_km",
+            "atmosphere_var_per_km",
+            "model_level_sigma",
+            "model_error_sigma",
+            "model_mach_sigma",
+            "bias_sigma_pa",
+        ):
             if not ek[k] >= 0.0:
-                raise ScenarioError(scenario.path, f"ekf.{k}", f"{ek[k]}: a process noise must be >= 0")
+                raise ScenarioError(scenario.path, f"ekf.{k}", f"{ek[k]}: a 1-sigma or process noise must be >= 0")
         levels = tuple(float(x) / 100.0 for x in mc["levels_pct"])
         return cls(
             vehicle_file=v["vehicle"]["file"],
@@ -362,6 +397,55 @@ SCHEMA = Schema(
                 Key("atmosphere_var_per_km", "float", _K.atmosphere_var_per_km, "1/km", "ln p, ln rho random walk"),
                 Key("scale_factor_sigma", "float", _K.scale_factor_sigma, "", "prior 1-sigma of each scale factor"),
                 Key("model_level_sigma", "float", _K.model_level_sigma, "", "prior 1-sigma, pressure model level"),
+                Key(
+                    "model_error_sigma",
+                    "float",
+                    _K.model_error_sigma,
+                    "",
+                    "model error per port, steady 1-sigma, of reading (0: off, R carries model_error_frac)",
+                ),
+                Key(
+                    "model_error_mach_length",
+                    "float",
+                    _K.model_error_mach_length,
+                    "",
+                    "model error correlation length in Mach",
+                ),
+                Key(
+                    "model_error_angle_deg",
+                    "float",
+                    _K.model_error_angle_deg,
+                    "deg",
+                    "model error correlation length in |d alpha| + |d beta|",
+                ),
+                Key(
+                    "model_error_order",
+                    "int",
+                    _K.model_error_order,
+                    "",
+                    "model error Gauss-Markov order: 1, or 2 (smooth)",
+                ),
+                Key(
+                    "noise_counts",
+                    "float",
+                    _K.noise_counts,
+                    "",
+                    "white noise counts N of the channel (R when the model error is a state)",
+                ),
+                Key(
+                    "bias_sigma_pa",
+                    "float",
+                    _K.bias_sigma_pa,
+                    "Pa",
+                    "prior 1-sigma of each transducer bias (0: not modelled)",
+                ),
+                Key(
+                    "model_mach_sigma",
+                    "float",
+                    _K.model_mach_sigma,
+                    "",
+                    "model Mach error 1-sigma, relative (0: not modelled)",
+                ),
             ),
         ),
         Table(

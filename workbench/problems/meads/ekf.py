@@ -5,9 +5,10 @@ Flight Results", AIAA 2013, Sect. III.B (Eq. 19–35) and Sect. IV.B.4 (the mult
 composed on the shared engine (:func:`workbench.estimation.ekf.run_filter`, iterated
 :func:`~workbench.estimation.ekf.update`, :func:`workbench.estimation.smoother.rts_smooth`).
 
-State (22, all additive; :data:`STATE_NAMES`)::
+State (37, all additive; :data:`STATE_NAMES`)::
 
-    x = [p_M (3) m, v_M (3) m/s, δθ_B (3) rad, w_N (3) m/s, ln p∞, ln ρ∞, λ_1..λ_7, c]
+    x = [p_M (3) m, v_M (3) m/s, δθ_B (3) rad, w_N (3) m/s, ln p∞, ln ρ∞, λ_1..λ_7, c,
+         b_1..b_7, b'_1..b'_7, β_1..β_7 Pa, m]
 
 * ``p_M``, ``v_M``: inertial position and velocity in the planet-centred inertial frame M (the
   paper's r, θ, φ, u, v, w of Eq. 19, in Cartesian form).  They are driven by the IMU through the
@@ -35,14 +36,36 @@ State (22, all additive; :data:`STATE_NAMES`)::
   prior and what it does is carry the model-level uncertainty into the 1σ of q∞, p∞ and ρ∞
   (without it the filter reports q∞ to ~0.5 % 1σ while the estimator's table differs from the
   synthetic truth's pressures by ~1 %).  0 turns it off.
+* ``b_i`` (and ``b'_i``): the estimator's pressure-model error of port i, multiplicative like λ —
+  the least squares' 1 % model-form allowance carried as a *coloured* state instead of white
+  noise in R (issue #10): a Gauss–Markov process of steady-state 1σ ``[ekf] model_error_sigma``
+  that decorrelates with the flight condition travelled, not with time
+  (:func:`flight_distance`: ``|ΔM|/model_error_mach_length + (|Δα| + |Δβ|)/model_error_angle_deg``:
+  the table errs as a smooth function of Mach and the flow angles — port-location errors make it
+  angle-dependent), first order (``b'`` absent) or a critically damped second order (``b'`` its
+  rate, smooth increments; :func:`markov_step`, Q exact for the stationary process).  λ is the
+  constant and b the varying part of the same multiplicative error: they separate only as far as
+  the flight condition changes, and λ's σ says so.
+* ``β_i`` [Pa]: the transducer's additive residual bias after the in-flight zero (Eq. 51), a
+  constant of prior 1σ ``[ekf] bias_sigma_pa``: it is what a multiplicative error cannot be at the
+  low pressures of the first seconds (without it, measured on seed 11: λ of P1 −2.6 % against
+  its 3σ of 1.2 %, α inside its 3σ at 53 % of the samples).
+* ``m``: the model's relative Mach error, the pressures read at ``M (1 + m)`` (first-order
+  Gauss–Markov over the same distance, 1σ ``[ekf] model_mach_sigma``): the table's Mach
+  dependence is the model's weakest part, which a white-noise R would otherwise let the filter
+  trust (measured on seed 11, pass 1, without it: Mach 99 % inside 3σ instead of 100 %, p∞ RMS
+  4.3 % instead of 3.3 %; before the flow angles were in the distance it was Mach 38 %).
 
-Measurement (Eq. 33–35, iterated update): the seven port pressures through the same surface
-pressure model as the least squares (:func:`.airdata.pressure_model`, Newtonian or the
-estimator's table, "mach" set) with α, β, q∞ and Mach computed from the state — the
-air-relative velocity in body axes ``C_B_M (v_M − Ω × p_M − C_M_N w_N)``, ``q∞ = ½ ρ∞ V²``,
-``M = V / √(γ p∞/ρ∞)`` (the substitution of Eq. 11–12 the paper describes); R is the same
-per-port σ as the least squares (:func:`.pipeline.sensor_sigma`).  Ports the least squares
-declared failed or that have no sample are left out of the update.
+Measurement (Eq. 33–35, iterated update): the seven port pressures
+``p_i = (1 + λ_i)(1 + c)(1 + b_i) h_i(x; M (1 + m)) + β_i`` through the same surface pressure
+model as the least squares (:func:`.airdata.pressure_model`, Newtonian or the estimator's table,
+"mach" set) with α, β, q∞ and Mach computed from the state — the air-relative velocity in body
+axes ``C_B_M (v_M − Ω × p_M − C_M_N w_N)``, ``q∞ = ½ ρ∞ V²``, ``M = V / √(γ p∞/ρ∞)`` (the
+substitution of Eq. 11–12 the paper describes).  R is only what is white: the channel's noise
+and quantisation (:func:`.pipeline.sensor_sigma` with ``noise_counts``, σ ≈ 0.65 count ≈ 1.4 Pa);
+with ``model_error_sigma = 0`` R is the least squares' σ with its white 1 % of reading, the
+filter before issue #10.  Ports the least squares declared failed or that have no sample are
+left out of the update.
 
 Multi-pass (Sect. IV.B.4): pass 1 estimates the scale factors with everything else; pass 2 divides
 the pressures by ``1 + λ̂`` (pass-1 smoothed) and runs again with the scale factors as Schmidt
@@ -50,20 +73,32 @@ the pressures by ``1 + λ̂`` (pass-1 smoothed) and runs again with the scale fa
 include them) but never updated (gain projected to zero on them; ``rts_smooth(consider=...)``):
 the data are not used twice.  Each pass is a forward iterated EKF and an RTS smoother.
 
-Known limitation (measured on ``msl_meads``): against the CFD-like truth the scale factors are not
-recovered — the estimator's table differs from the truth's pressures by ~1 % of reading,
-port-dependent, and that model-form error ends up in λ (common mode −1.2 %, 4 of 7 inside 3σ);
-on pressures generated by the estimator's own model planted scale factors are recovered
-(tests/problems/meads/test_ekf.py).  The innovations are far below their σ (mean NIS per port
-0.02–0.08): R carries the least squares' 1 % white model-form allowance, which the filter's
-states largely track.
+Measured (``msl_meads``, seeds 11/1/2, table model, above 850 Pa, pass 2; before → after
+issue #10): the outputs are honest — α, β, q∞, Mach, p∞, density and the north wind inside their
+reported 3σ at every sample, the east wind at 96–100 % (before: α 91–94 %, Mach 81–100 %, north
+wind 77–100 %); RMS errors α 0.08–0.16° (0.15–0.22°), q∞ 0.54–0.65 % (1.0–2.2 %), p∞ 2.3–3.4 %
+(4.0–7.4 %), Mach 0.21–0.25 (0.21–0.42), density 1.3–2.0 % (1.0–1.3 %); pass 1's scale factors
+inside 3σ for 7 of 7 ports on every seed (4, 1, 5 of 7), common-mode error −0.1 to −0.5 %
+(−0.9 to −2.2 %).  Still conservative: the mean per-port NIS is 0.14–0.20
+(0.02–0.15 before; health WARNING below 0.5).  The innovations' S is dominated by the per-step
+process noise of first-order models of smooth processes — the model-error Markov as α and Mach
+change, the wind and ln p∞/ln ρ∞ random walks per km — while the truth's errors are smooth, so
+the one-step innovations are near the 1.4 Pa white noise.  The second-order Markov
+(``model_error_order = 2``) doubles the NIS (0.29–0.38) but leaves 4–7 of 7 scale factors inside
+3σ; smaller wind/atmosphere random walks bring it to 0.7–1.4 but make Mach and p∞ overconfident
+(43 % and 86 % inside 3σ with 3e-5/km and 15 (m/s)²/km): the smooth atmosphere (gravity waves,
+lapse rate) would need its own higher-order model.  With the Newtonian model the 1 % σ is too
+small (its error against the truth is ~3 %, common mode 2.6 %; α 37 % inside 3σ, 13 % before);
+``model_error_sigma = 0.03`` makes it α 77 %, q∞ 89 %, the rest 93–100 %: the Newtonian's error
+is more than a smooth per-port factor.  On pressures from the estimator's own model planted scale factors are recovered
+(tests/problems/meads/test_ekf.py).
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -83,6 +118,7 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
 from workbench.problems.meads.airdata import ned_frames, pressure_model
 from workbench.problems.meads.config import EkfSettings
+from workbench.problems.meads.kernel import N_U_COLS, flow_kernel, pressure_kernel
 
 __all__ = [
     "STATE_NAMES",
@@ -96,11 +132,22 @@ __all__ = [
     "air_data_of_state",
     "make_transition",
     "make_pressure_model",
+    "flight_distance",
+    "markov_step",
+    "markov_steady_var",
+    "USE_KERNEL",
 ]
 
 N_PORTS = 7
 IP, IV, ITH, IW, ILP, ILR, ILAM, IC = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), 12, 13, slice(14, 21), 21
-N_X = 22
+#: the per-port model-error Gauss-Markov states (after ``model_level``): b_i [of reading] and, for
+#: the second-order process, its rate b_i' [of reading per correlation length]
+IB, IBD = slice(22, 22 + N_PORTS), slice(22 + N_PORTS, 22 + 2 * N_PORTS)
+#: the transducers' additive residual biases [Pa] (after the model-error states)
+IBIAS = slice(22 + 2 * N_PORTS, 22 + 3 * N_PORTS)
+#: the model's Mach error (relative): the pressure model read at M (1 + m) (after the biases)
+IMM = 22 + 3 * N_PORTS
+N_X = IMM + 1
 LAYOUT = ErrorStateLayout(N_X)
 STATE_NAMES = (
     *(f"p_M_{a}" for a in "xyz"),
@@ -113,12 +160,19 @@ STATE_NAMES = (
     "ln_rho_inf",
     *(f"scale_{i + 1}" for i in range(N_PORTS)),
     "model_level",
+    *(f"model_error_{i + 1}" for i in range(N_PORTS)),
+    *(f"model_error_rate_{i + 1}" for i in range(N_PORTS)),
+    *(f"bias_{i + 1}" for i in range(N_PORTS)),
+    "model_mach_error",
 )
 OUTPUT_NAMES = ("alpha", "beta", "qbar", "mach", "p_inf", "rho", "wind_north", "wind_east", "wind_down")
 """Columns of :func:`air_outputs` [rad, rad, Pa, 1, Pa, kg/m³, m/s, m/s, m/s]."""
 
 #: perturbations of the numeric Jacobians, error-state units
-EPS = np.r_[np.full(3, 1.0), np.full(3, 1e-2), np.full(3, 1e-6), np.full(3, 1e-2), 1e-5, 1e-5, np.full(7, 1e-6), 1e-6]
+EPS = np.r_[
+    np.full(3, 1.0), np.full(3, 1e-2), np.full(3, 1e-6), np.full(3, 1e-2), 1e-5, 1e-5, np.full(7, 1e-6), 1e-6,
+    np.full(2 * N_PORTS, 1e-6), np.full(N_PORTS, 1e-2), 1e-6,
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -148,13 +202,16 @@ class EkfInputs:
 @dataclass(frozen=True)
 class EkfPass:
     """One filter pass (a pipeline stage): ``index`` 1 or 2 of ``passes``; ``t`` (n,) [s];
-    ``forward`` the :class:`ForwardPass` (innovations under ``"pressure"``, NaN for unused ports);
-    ``smoothed`` the :class:`SmoothedPass`; ``outputs`` (n, 9) and ``sigma`` (n, 9) of
+    ``forward`` the :class:`ForwardPass` (innovations under ``"pressure"``, NaN for unused ports;
+    ``P_prior``, ``P_post``, ``F`` empty and ``Q`` None: dropped after smoothing, the forward 1σ
+    is ``sigma_post``; all kept with ``run_pass(keep_all=True)``); ``smoothed`` the
+    :class:`SmoothedPass` (``G`` empty, dropped); ``outputs`` (n, 9) and ``sigma`` (n, 9) of
     :data:`OUTPUT_NAMES` from the smoothed state; ``scale`` (7,) the scale factors used or found
     (smoothed) with 1σ ``sigma_scale`` and covariance ``scale_cov`` (7, 7); ``scale_estimated``
     whether this pass estimated them;
     ``nis_port`` (k, 7) per-port normalised innovations squared ``y_i²/S_ii`` of the forward pass at
-    the processed samples (NaN where unused); ``wall_s`` [s]."""
+    the processed samples (NaN where unused); ``wall_s`` [s]; ``sigma_post`` (n, N_X) the forward
+    pass's 1σ of every state (error-state units)."""
 
     index: int
     passes: int
@@ -169,6 +226,7 @@ class EkfPass:
     scale_estimated: bool
     nis_port: np.ndarray
     wall_s: float
+    sigma_post: np.ndarray
 
     @property
     def stage_label(self) -> str:
@@ -220,6 +278,12 @@ def air_data_of_state(X: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[n
 
 #: perturbations of the air-data Jacobian in (u_B [m/s], ln p∞, ln ρ∞)
 _EPS_Z = np.array([1e-2, 1e-2, 1e-2, 1e-5, 1e-5])
+_NO_GRID = np.zeros(2)
+_NO_TABLE = np.zeros((2, 2, 2, 2))
+
+#: the measurement function runs as the compiled :func:`.kernel.pressure_kernel`; False: the numpy
+#: reference path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)
+USE_KERNEL = True
 
 
 def make_pressure_model(inp: EkfInputs):
@@ -229,38 +293,75 @@ def make_pressure_model(inp: EkfInputs):
     h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
     D = np.diag(_EPS_Z)
     dz = np.concatenate([np.zeros((1, 5)), D, -D])
+    compiled = USE_KERNEL and inp.model in ("newtonian", "table")
+    if compiled:
+        veh, tab = inp.vehicle, inp.table
+        ports = (veh.cone(), veh.clock(), veh.radius() / veh.base_radius)
+        grids = (_NO_GRID,) * 4 + (_NO_TABLE,)
+        if tab is not None:
+            grids = (tab.mach, tab.alpha_t, tab.clock, tab.s, np.ascontiguousarray(tab.values, dtype=float))
+        table_model = inp.model == "table"
 
     def h(x: np.ndarray, C_B_M: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        u0, Ju = numeric_jacobian_batched(lambda X: _air_velocity(X, C_B_M), x, LAYOUT, EPS)
-        Z = np.r_[u0, x[ILP], x[ILR]][None, :] + dz
-        a, b, q, M, _, _ = _freestream(Z[:, :3], Z[:, 3], Z[:, 4], inp.gamma)
-        pz = h4(np.stack([q, a, b, M], axis=1))[:, use]  # (11, k)
-        p0 = pz[0]
-        dp_dz = ((pz[1:6] - pz[6:11]) / (2.0 * _EPS_Z)[:, None]).T  # (k, 5)
+        if compiled:
+            _, Ju12, p0, dp_dz = pressure_kernel(
+                x, C_B_M, EPS, _EPS_Z, use, inp.gamma, MARS.rotation_rate, table_model, *ports, *grids
+            )
+            Ju = np.zeros((3, N_X))
+            Ju[:, :N_U_COLS] = Ju12
+        else:
+            u0, Ju = numeric_jacobian_batched(lambda X: _air_velocity(X, C_B_M), x, LAYOUT, EPS)
+            Z = np.r_[u0, x[ILP], x[ILR]][None, :] + dz
+            a, b, q, M, _, _ = _freestream(Z[:, :3], Z[:, 3], Z[:, 4], inp.gamma)
+            pz = h4(np.stack([q, a, b, M], axis=1))[:, use]  # (11, k)
+            p0 = pz[0]
+            dp_dz = ((pz[1:6] - pz[6:11]) / (2.0 * _EPS_Z)[:, None]).T  # (k, 5)
         Jz = np.zeros((5, N_X))
         Jz[:3] = Ju
         Jz[3, ILP] = Jz[4, ILR] = 1.0
+        # the model read at M (1 + m): p ≈ p0 + m g_m with g_m = M ∂p/∂M at constant q∞, p∞, from
+        # the ln p∞, ln ρ∞ columns (M = V √(ρ∞/γp∞), p = p∞ + q∞ Cp); g_m's own derivatives
+        # (m times the model's curvature) are left out of H
+        g_m = dp_dz[:, 4] - dp_dz[:, 3] - p0 + 2.0 * math.exp(x[ILP])
+        pm = p0 + x[IMM] * g_m
         lam = 1.0 + x[ILAM][use]
         lev = 1.0 + x[IC]
-        H = (lam * lev)[:, None] * (dp_dz @ Jz)
-        H[np.arange(use.size), 14 + use] = p0 * lev
-        H[:, IC] = p0 * lam
-        return p0 * lam * lev, H
+        mod = 1.0 + x[IB][use]
+        rows = np.arange(use.size)
+        H = (lam * lev * mod)[:, None] * (dp_dz @ Jz)
+        H[rows, ILAM.start + use] = pm * lev * mod
+        H[:, IC] = pm * lam * mod
+        H[rows, IB.start + use] = pm * lam * lev
+        H[rows, IBIAS.start + use] = 1.0
+        H[:, IMM] = g_m * lam * lev * mod
+        return pm * lam * lev * mod + x[IBIAS][use], H
 
     return h
 
 
 def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -> tuple[np.ndarray, np.ndarray]:
-    """:data:`OUTPUT_NAMES` (n, 9) and their 1σ (n, 9) from states x (n, 21), covariances P
-    (n, 21, 21) and the strapdown attitude q_M_B (n, 4) (first-order propagation)."""
-    C_B_M = np.swapaxes(quat_to_dcm(q_M_B), 1, 2)[:, None]
+    """:data:`OUTPUT_NAMES` (n, 9) and their 1σ (n, 9) from states x (n, N_X), covariances P
+    (n, N_X, N_X) and the strapdown attitude q_M_B (n, 4) (first-order propagation).  Evaluated
+    :data:`OUTPUT_CHUNK` samples at a time (each sample's outputs depend on that sample only): the
+    perturbed-state stack of all samples at once would hold (n, 1 + 2 N_X, N_X) and its
+    intermediates (~150 MB on ``msl_meads``)."""
+    C_all = np.swapaxes(quat_to_dcm(q_M_B), 1, 2)[:, None]
+    ys, ss = [], []
+    for i in range(0, len(x), OUTPUT_CHUNK):
+        C_B_M = C_all[i : i + OUTPUT_CHUNK]
 
-    def g(X):
-        a, b, q, M, pi, rho = air_data_of_state(X, C_B_M, gamma)
-        return np.stack([a, b, q, M, pi, rho, X[..., 9], X[..., 10], X[..., 11]], axis=-1)
+        def g(X, C_B_M=C_B_M):
+            a, b, q, M, pi, rho = air_data_of_state(X, C_B_M, gamma)
+            return np.stack([a, b, q, M, pi, rho, X[..., 9], X[..., 10], X[..., 11]], axis=-1)
 
-    y, s, _ = derived_with_sigma(g, x, P, LAYOUT, EPS)
-    return y, s
+        y, s, _ = derived_with_sigma(g, x[i : i + OUTPUT_CHUNK], P[i : i + OUTPUT_CHUNK], LAYOUT, EPS)
+        ys.append(y)
+        ss.append(s)
+    return np.concatenate(ys), np.concatenate(ss)
+
+
+#: samples per block of :func:`air_outputs`
+OUTPUT_CHUNK = 256
 
 
 def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.ndarray) -> tuple:
@@ -279,10 +380,53 @@ def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.
         np.full(2, st.atmosphere_sigma_ln**2),
         np.zeros(scale0.size),
         [st.model_level_sigma**2],
+        np.full(N_PORTS, markov_steady_var(st)[0]),
+        np.full(N_PORTS, markov_steady_var(st)[1]),
+        np.full(N_PORTS, st.bias_sigma_pa**2),
+        [st.model_mach_sigma**2],
     ]
     P0 = np.diag(d)
     P0[ILAM, ILAM] = scale_cov
     return x0, P0
+
+
+def markov_steady_var(st: EkfSettings) -> tuple[float, float]:
+    """Steady-state variances of one port's model-error Gauss–Markov: (b [1], b' [1 per correlation
+    length]); b' is absent (0) for the first-order process."""
+    s2 = st.model_error_sigma**2
+    return (s2, s2) if st.model_error_order == 2 else (s2, 0.0)
+
+
+def markov_step(st: EkfSettings, d: float) -> tuple[np.ndarray, np.ndarray]:
+    """(Φ, Q) (2, 2) of one port's model-error state [b, b'] over the distance ``d`` >= 0 travelled
+    in flight condition, in correlation lengths (:func:`flight_distance`): first order
+    ``db/ds = −b + w`` or critically damped second order ``b'' = −2b' − b + w`` (smooth: its
+    increments over a short step are O(d^{3/2}) instead of O(d^{1/2})); Q is the exact
+    ``P∞ − Φ P∞ Φᵀ`` of the stationary process (``P∞`` of :func:`markov_steady_var`)."""
+    e = math.exp(-d)
+    if st.model_error_order == 2:
+        Phi = e * np.array([[1.0 + d, d], [-d, 1.0 - d]])
+    else:
+        Phi = np.array([[e, 0.0], [0.0, 0.0]])
+    Pinf = np.diag(markov_steady_var(st))
+    return Phi, Pinf - Phi @ Pinf @ Phi.T
+
+
+def flight_distance(
+    x0: np.ndarray, x1: np.ndarray, C0: np.ndarray, C1: np.ndarray, gamma: float, st: EkfSettings
+) -> float:
+    """The distance [correlation lengths] travelled in flight condition from state x0 (attitude
+    C_B_M C0 (3, 3)) to x1 (C1): ``|ΔM| / model_error_mach_length + (|Δα| + |Δβ|) /
+    model_error_angle_deg`` — the estimator's pressure model errs as a smooth function of Mach
+    and the flow angles, so its error decorrelates with them, not with time."""
+    if USE_KERNEL:
+        a0, b0, m0 = flow_kernel(x0, C0, MARS.rotation_rate, gamma)
+        a1, b1, m1 = flow_kernel(x1, C1, MARS.rotation_rate, gamma)
+    else:
+        a0, b0, _, m0, _, _ = air_data_of_state(x0, C0, gamma)
+        a1, b1, _, m1, _, _ = air_data_of_state(x1, C1, gamma)
+    d_angle = (abs(a1 - a0) + abs(b1 - b0)) / math.radians(st.model_error_angle_deg)
+    return float(abs(m1 - m0) / st.model_error_mach_length + d_angle)
 
 
 def make_transition(inp: EkfInputs, st: EkfSettings):
@@ -291,6 +435,9 @@ def make_transition(inp: EkfInputs, st: EkfSettings):
     C_M_B = quat_to_dcm(inp.q_M_B)
     idx = {float(v): i for i, v in enumerate(t.tolist())}
     I3 = np.eye(3)
+
+    C_B_M = np.swapaxes(C_M_B, 1, 2)
+    markov = st.model_error_sigma > 0.0 or st.model_mach_sigma > 0.0
 
     def transition(x, t0, t1):
         k = idx[t1]
@@ -329,6 +476,20 @@ def make_transition(inp: EkfInputs, st: EkfSettings):
         Q[9, 9] = Q[10, 10] = st.wind_var_per_km * km
         Q[11, 11] = st.wind_var_per_km * km * (st.vertical_wind_sigma_mps / st.wind_sigma_mps) ** 2
         Q[ILP, ILP] = Q[ILR, ILR] = st.atmosphere_var_per_km * km
+        dist = flight_distance(x, x1, C_B_M[k - 1], C_B_M[k], inp.gamma, st) if markov else 0.0
+        if st.model_error_sigma > 0.0:
+            Phi, Qb = markov_step(st, dist)
+            x1[IB] = Phi[0, 0] * x[IB] + Phi[0, 1] * x[IBD]
+            x1[IBD] = Phi[1, 0] * x[IB] + Phi[1, 1] * x[IBD]
+            for a, ia in ((0, IB), (1, IBD)):
+                for b, ib in ((0, IB), (1, IBD)):
+                    F[ia, ib] = Phi[a, b] * np.eye(N_PORTS)
+                    Q[ia, ib] = Qb[a, b] * np.eye(N_PORTS)
+        if st.model_mach_sigma > 0.0:
+            phi = math.exp(-dist)
+            x1[IMM] = phi * x[IMM]
+            F[IMM, IMM] = phi
+            Q[IMM, IMM] = st.model_mach_sigma**2 * (1.0 - phi**2)
         return x1, F, Q
 
     return transition
@@ -343,8 +504,12 @@ def run_pass(
     estimate_scale: bool = True,
     scale_fixed: np.ndarray | None = None,
     scale_cov_fixed: np.ndarray | None = None,
+    keep_all: bool = False,
 ) -> EkfPass:
     """One pass: forward iterated EKF over the pressure samples, then RTS smoothing.
+
+    ``keep_all``: keep the forward pass's covariances and the smoother's gains in the result
+    (tests); by default they are dropped after smoothing (:class:`EkfPass`).
 
     ``estimate_scale``: the scale factors are states (prior 0 ± ``st.scale_factor_sigma``);
     otherwise the pressures are divided by ``1 + scale_fixed`` (7,) and the scale-factor states
@@ -406,7 +571,7 @@ def run_pass(
         ]
 
     with np.errstate(invalid="ignore"):
-        fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, LAYOUT)
+        fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, LAYOUT, keep_q=keep_all)
         sm = rts_smooth(fp, LAYOUT, consider=None if estimate_scale else np.arange(N_X)[ILAM])
     out, sd = air_outputs(sm.x, sm.P, inp.q_M_B, inp.gamma)
     inn = fp.innovations.get("pressure")
@@ -418,16 +583,37 @@ def run_pass(
         lam = sm.x[0, ILAM].copy()
     Pl = sm.P[0][ILAM, ILAM].copy()
     slam = np.sqrt(np.diag(Pl))
+    # what the pass keeps: the smoother's inputs P_prior and F, its gains G and the forward
+    # covariances are not read after it (recording, health and summary use x_post, its 1σ, the
+    # innovations, the smoothed x and P); each is an (n, N_X, N_X) array (36 MB on msl_meads)
+    sigma_post = np.sqrt(np.maximum(np.einsum("nii->ni", fp.P_post), 0.0))
+    if not keep_all:
+        none = np.empty((0, N_X, N_X))
+        fp = replace(fp, P_prior=none, P_post=none, F=none, Q=None)
+        sm = replace(sm, G=none)
     return EkfPass(
-        index, passes, inp.t, fp, sm, out, sd, lam, slam, Pl, estimate_scale, nis_port, time.perf_counter() - t0
+        index,
+        passes,
+        inp.t,
+        fp,
+        sm,
+        out,
+        sd,
+        lam,
+        slam,
+        Pl,
+        estimate_scale,
+        nis_port,
+        time.perf_counter() - t0,
+        sigma_post,
     )
 
 
-def run_passes(inp: EkfInputs, st: EkfSettings):
+def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False):
     """Yield pass 1 (scale factors estimated) and, with ``st.passes == 2``, pass 2 (pressures
-    corrected by pass 1's scale factors)."""
+    corrected by pass 1's scale factors); ``keep_all`` as :func:`run_pass`."""
     n = int(st.passes)
-    first = run_pass(inp, st, index=1, passes=n, estimate_scale=True)
+    first = run_pass(inp, st, index=1, passes=n, estimate_scale=True, keep_all=keep_all)
     yield first
     if n >= 2:
         yield run_pass(
@@ -438,4 +624,5 @@ def run_passes(inp: EkfInputs, st: EkfSettings):
             estimate_scale=False,
             scale_fixed=first.scale,
             scale_cov_fixed=first.scale_cov,
+            keep_all=keep_all,
         )

@@ -241,12 +241,17 @@ def invert_lag(t: np.ndarray, p: np.ndarray, vehicle: FadsVehicle, gamma: float,
     return LagCorrection(t, p, corr, delay, True)
 
 
-def sensor_sigma(p: np.ndarray, vehicle: FadsVehicle, frac: float, bits: int = 14) -> np.ndarray:
+def sensor_sigma(
+    p: np.ndarray, vehicle: FadsVehicle, frac: float, bits: int = 14, noise_counts: float | None = None
+) -> np.ndarray:
     """1σ [Pa] (n, m) assumed for each reading: quantisation and noise of a ``bits``-bit channel
-    over the transducer range (two counts, uniform) plus ``frac`` of reading (model form,
-    calibration, trade-study error)."""
+    over the transducer range plus ``frac`` of reading (model form, calibration, trade-study
+    error).  ``noise_counts`` None: two counts each side, uniform (σ² = (2 counts)²/3, the least
+    squares' allowance); a number N: only the white part, noise uniform over N counts (Eq. 38)
+    plus the quantisation's one count, σ² = (N² + 1)/12 counts²."""
     count = vehicle.transducer_full_scale / 2.0**bits
-    return np.sqrt((2.0 * count) ** 2 / 3.0 + (frac * np.abs(np.nan_to_num(p))) ** 2)
+    var_counts = 4.0 / 3.0 if noise_counts is None else (noise_counts**2 + 1.0) / 12.0
+    return np.sqrt(var_counts * count**2 + (frac * np.abs(np.nan_to_num(p))) ** 2)
 
 
 def detect_stuck(t: np.ndarray, p: np.ndarray, ports, vehicle: FadsVehicle, min_run: int = 8) -> list[PortFailure]:
@@ -508,7 +513,7 @@ def reconstruct(scenario: Scenario, telemetry: Mapping[str, Path]) -> Iterator[o
     yield wind
     passes: list[EkfPass] = []
     if cfg.ekf.enabled:
-        for ps in run_passes(ekf_inputs(tel, vehicle, nav, lag, air, est), cfg.ekf):
+        for ps in run_passes(ekf_inputs(tel, vehicle, nav, lag, air, est, cfg.ekf), cfg.ekf):
             passes.append(ps)
             yield ps
     summary = _summary(scenario, tel, nav, lag, air, wind, est)
@@ -520,7 +525,13 @@ def reconstruct(scenario: Scenario, telemetry: Mapping[str, Path]) -> Iterator[o
 
 
 def ekf_inputs(
-    tel: MeadsTelemetry, vehicle: FadsVehicle, nav: Navigation, lag: LagCorrection, air: AirDataStage, est
+    tel: MeadsTelemetry,
+    vehicle: FadsVehicle,
+    nav: Navigation,
+    lag: LagCorrection,
+    air: AirDataStage,
+    est,
+    ek=None,
 ) -> EkfInputs:
     """The filter's inputs: the strapdown at the pressure times, the lag-corrected pressures with
     the least squares' σ (:func:`sensor_sigma`) and port mask (failed ports out), the model."""
@@ -534,7 +545,9 @@ def ekf_inputs(
         sigma_vel=init.sigma_v,
         sigma_att=init.sigma_att,
         p=lag.p,
-        sigma_p=sensor_sigma(lag.p, vehicle, est.model_error_frac),
+        sigma_p=sensor_sigma(lag.p, vehicle, est.model_error_frac)
+        if ek is None or ek.model_error_sigma == 0.0
+        else sensor_sigma(lag.p, vehicle, 0.0, noise_counts=ek.noise_counts),
         usable=air.mask & np.isfinite(lag.p),
         vehicle=vehicle,
         model=est.model,

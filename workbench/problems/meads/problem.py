@@ -16,7 +16,7 @@ import numpy as np
 
 from workbench.io import progress as prog
 from workbench.io.moments import KeyMoment
-from workbench.io.scenario import Scenario
+from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.meads import pipeline as md
 from workbench.problems.meads.config import SCHEMA
@@ -189,7 +189,12 @@ class MeadsProblem:
     def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
         """The paper's trade study (:mod:`.montecarlo`) with ``options.n_runs`` runs per error level
         (``workbench mc msl_meads --seeds 3000``), seed ``first_seed``, on ``options.workers``
-        processes or ``options.scheduler``; writes ``<out>/<name>_mc.rrd`` (:mod:`.recording_mc`)."""
+        processes or ``options.scheduler``; writes ``<out>/<name>_mc.rrd`` (:mod:`.recording_mc`).
+        With ``options.truth_sim`` the full-error-model Monte Carlo against the truth simulator
+        instead (:mod:`.truth_mc`, ``workbench mc msl_meads --truth-sim --seeds 50``; the runner
+        writes ``<name>_truth.mc.json``), recorded in ``<out>/<name>_truth_mc.rrd``."""
+        if options.truth_sim:
+            return self._truth_monte_carlo(scenario, Path(out_dir), options, progress)
         from workbench.problems.meads.config import config_for
         from workbench.problems.meads.montecarlo import CHUNK, QUANTITIES, prepare_trade_study, run_trade_study
         from workbench.problems.meads.recording_mc import record_trade_study
@@ -220,3 +225,35 @@ class MeadsProblem:
             parts.append(f"{lv}: meets {'/'.join(met) or 'none'}")
         headline = f"trade study ({runs} runs/level, R = {sh.fixed_r:g}): " + "; ".join(parts) + f"; wrote {rrd}"
         return McOutcome(summary, Path(rrd), headline, ts)
+
+    def _truth_monte_carlo(
+        self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress
+    ) -> McOutcome:
+        """``monte_carlo`` with ``truth_sim``: :func:`.truth_mc.run_full_monte_carlo` with
+        ``options.n_runs`` members seeded from ``options.first_seed``."""
+        from workbench.problems.meads.recording_mc import record_truth_mc
+        from workbench.problems.meads.truth_mc import run_full_monte_carlo
+
+        if not scenario.is_synthetic:
+            raise ScenarioError(
+                scenario.path, "synthetic", "the Monte Carlo against the truth needs a synthetic scenario ([synthetic])"
+            )
+        t0 = time.perf_counter()
+        n = int(options.n_runs)
+        where = options.scheduler or f"{options.workers} local worker(s)"
+        progress(f"Monte Carlo against the truth simulator, full error model: {n} members ({where}) ...")
+        res = run_full_monte_carlo(
+            scenario, n_runs=n, seed=options.first_seed, workers=options.workers, scheduler=options.scheduler
+        )
+        summary = {**res.summary, "wall_time_s": time.perf_counter() - t0}
+        rrd = record_truth_mc(
+            Path(out_dir) / f"{scenario.name}_truth_mc.rrd", f"{scenario.name} Monte Carlo vs truth", res, summary
+        )
+        last = summary["table"].get("ekf_pass2") or summary["table"]["least_squares"]
+        met = [q for q, row in last.items() if row.get("3rms_meets_objective")]
+        headline = (
+            f"Monte Carlo vs truth ({summary['n_ok']}/{n} members, median {summary['member_wall_s']['median']:.1f} "
+            f"s each): final estimator's 3 RMS meets {'/'.join(met) or 'no objective'}; "
+            f"{len(summary['disagreements'])} reported-vs-Monte-Carlo 3σ disagreement(s); wrote {rrd}"
+        )
+        return McOutcome(summary, Path(rrd), headline, res)

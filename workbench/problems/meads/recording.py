@@ -365,7 +365,7 @@ class MeadsRecorder:
         m = len(ports)
         if st.scale_estimated:
             lam = st.forward.x_post[:, 14 : 14 + m]
-            slam = np.sqrt(np.einsum("nii->ni", st.forward.P_post)[:, 14 : 14 + m])
+            slam = st.sigma_post[:, 14 : 14 + m]
         else:
             lam = np.broadcast_to(st.scale, (t.size, m))
             slam = np.broadcast_to(st.sigma_scale, (t.size, m))

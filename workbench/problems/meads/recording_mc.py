@@ -1,8 +1,13 @@
-"""Recording of the MEADS trade study (``workbench mc msl_meads``): the paper's Fig. 6.
+"""Recordings of the MEADS Monte Carlo studies (``workbench mc msl_meads``).
 
-``/plots/trade_study/<quantity>/<level>`` — 3σ over the runs of α, β [deg], q∞ [%] and Mach error
-against time, one series per error level, and ``.../objective`` the science objective; the
-table of levels × objectives as the report.
+The trade study (paper Fig. 6, :mod:`.montecarlo`): ``/plots/trade_study/<quantity>/<level>`` —
+3σ over the runs of α, β [deg], q∞ [%] and Mach error against time, one series per error level,
+and ``.../objective`` the science objective; the table of levels × objectives as the report.
+
+The full-error-model Monte Carlo against the truth (paper Figs. 11–13, :mod:`.truth_mc`,
+``--truth-sim``): ``/plots/truth_mc/<quantity>/<estimator>_mc`` the 3σ of the error over the
+members and ``.../<estimator>_reported`` the mean reported 3σ against time (each member's samples
+above 850 Pa), ``.../objective``; the table as the report.
 """
 
 from __future__ import annotations
@@ -12,12 +17,20 @@ from pathlib import Path
 import numpy as np
 import rerun.blueprint as rrb
 
+from workbench.problems.meads import truth_mc as tmc
 from workbench.problems.meads.montecarlo import QUANTITIES, TradeStudy, level_name
 from workbench.recording import layout
 from workbench.recording.blueprint import plot_view, report_view
 from workbench.recording.writer import open_recording
 
-__all__ = ["record_trade_study", "trade_blueprint", "trade_markdown"]
+__all__ = [
+    "record_trade_study",
+    "trade_blueprint",
+    "trade_markdown",
+    "record_truth_mc",
+    "truth_mc_blueprint",
+    "truth_mc_markdown",
+]
 
 _UNITS = {"alpha_deg": "α 3σ [deg]", "beta_deg": "β 3σ [deg]", "qbar_pct": "q∞ 3σ [%]", "mach": "Mach 3σ [-]"}
 _COLORS = [(40, 120, 220), (40, 170, 60), (230, 150, 20), (200, 40, 40), (120, 60, 180)]
@@ -84,4 +97,151 @@ def record_trade_study(path: Path, name: str, ts: TradeStudy, summary: dict) -> 
                 colors=(0, 0, 0),
             )
         rec.report(trade_markdown(summary))
+    return Path(path)
+
+
+# ------------------------------------------------------------- full error model vs the truth
+
+_MC_UNITS = {
+    "alpha_deg": "α 3σ [deg]",
+    "beta_deg": "β 3σ [deg]",
+    "qbar_pct": "q∞ 3σ [%]",
+    "mach": "Mach 3σ [-]",
+    "p_inf_pct": "p∞ 3σ [%]",
+    "density_pct": "density 3σ [%]",
+    "wind_north_mps": "wind north 3σ [m/s]",
+    "wind_east_mps": "wind east 3σ [m/s]",
+    "wind_down_mps": "wind down 3σ [m/s]",
+}
+_EST = {
+    "least_squares": ("least squares", (40, 120, 220)),
+    "ekf_pass1": ("EKF pass 1", (230, 150, 20)),
+    "ekf_pass2": ("EKF pass 2", (40, 170, 60)),
+}
+
+
+def _tint(rgb: tuple[int, int, int], f: float = 0.5) -> tuple[int, int, int]:
+    """``rgb`` mixed with white by ``f``."""
+    return tuple(int(round(c + (255 - c) * f)) for c in rgb)
+
+
+def truth_mc_blueprint(window: tuple[float, float] | None = None) -> rrb.Blueprint:
+    """One time-series tab per quantity (Monte Carlo and reported 3σ per estimator, objective),
+    opened on ``window`` (t0, t1) [s] (the samples above 850 Pa) when given, and the table; the
+    selection panel collapsed (the table needs the width)."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Tabs(
+                *[
+                    plot_view(
+                        _MC_UNITS[q] + " vs time — thick Monte Carlo, thin reported",
+                        layout.join(layout.MEADS_TRUTH_MC, q),
+                        legend="RightTop",
+                        window=window,
+                    )
+                    for q in tmc.QUANTITIES
+                ]
+            ),
+            report_view("Monte Carlo", health=False),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(state="collapsed", timeline=layout.TIME),
+        rrb.SelectionPanel(state="collapsed"),
+    )
+
+
+def _row(q: str, label: str, row: dict, obj: float | None) -> str:
+    met = ""
+    if "3rms_meets_objective" in row:
+        met = " ✔" if row["3rms_meets_objective"] else " ✘"
+    return (
+        f"| {q} | {label} | {row['mc_3sigma_median']:.3g} | {row['mc_3rms_median']:.3g}{met} | "
+        f"{row['reported_3sigma_median']:.3g} | {row['ratio_median']:.2f} | "
+        f"{100 * row['fraction_inside_reported_3sigma']:.1f} % | {'' if obj is None else f'{obj:g}'} |"
+    )
+
+
+def truth_mc_markdown(summary: dict) -> str:
+    """The estimators × quantities table and the disagreements (markdown)."""
+    s = summary
+    ests = [e for e in tmc.ESTIMATORS if e in s["table"]]
+    truth = "dispersed entry, atmosphere, winds, CFD-like pressures" if s["truth_dispersed"] else "the scenario's"
+    off = s.get("failure_port_switched_off")
+    unc = s.get("mc_3sigma_relative_uncertainty")
+    md = [
+        f"# MEADS Monte Carlo, full error model vs the truth ({s['n_ok']}/{s['n_runs']} members)",
+        "",
+        f"Every member: its own truth ({truth}) and its own sensor errors (port location, time tags, lag, "
+        "transpiration, calibration, scale factors, noise), reconstructed from its telemetry files as "
+        "`workbench run` does" + (f"; the scenario's failure of {off} switched off." if off else "."),
+        "",
+        f"Above {s['min_qbar_pa']:g} Pa (each member's true q∞), medians over time: **MC 3σ** the spread "
+        "over the members (3 × std), **3 RMS** the total error (bias included; ✔/✘ its max meets the "
+        "objective), **reported** the mean reported 3σ, **ratio** reported / MC 3σ (> 1 conservative), "
+        "**inside** the member-samples inside their reported 3σ."
+        + (f" The MC 3σ itself is uncertain by ±{100 * unc:.0f} % (1σ)." if unc else ""),
+        "",
+        "| quantity | estimator | MC 3σ | 3 RMS | reported | ratio | inside | objective |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for q in tmc.QUANTITIES:
+        obj = s["objectives_3sigma"].get(q)
+        first = True
+        for e in ests:
+            row = s["table"][e].get(q)
+            if row is not None:
+                md.append(_row(q if first else "", _EST[e][0], row, obj))
+                first = False
+    md += ["", "## Where the reported 3σ disagrees with the Monte Carlo spread", ""]
+    md += [f"- {d}" for d in s["disagreements"]] or ["- nowhere (ratio within 0.67–1.5, ≥ 90 % inside)"]
+    md += [
+        "",
+        f"Executor: {s['executor']}; wall time {s['wall_s']:.0f} s; "
+        f"per member median {s['member_wall_s']['median']:.1f} s.",
+    ]
+    if s["failed_members"]:
+        md += ["", "Failed members: " + "; ".join(s["failed_members"])]
+    return "\n".join(md) + "\n"
+
+
+def record_truth_mc(path: Path, name: str, res: tmc.FullMcResult, summary: dict) -> Path:
+    """Write the full-error-model Monte Carlo recording (atomically) and return its path."""
+    t = res.t
+    seen = np.isfinite(res.curves["mc_3sigma"]).any(axis=(1, 2))
+    window = (float(t[seen][0]), float(t[seen][-1])) if seen.sum() >= 2 else None
+    with open_recording(
+        path, name, blueprint=truth_mc_blueprint(window), properties={"run": {"kind": "meads_truth_mc"}}
+    ) as rec:
+        for j, q in enumerate(tmc.QUANTITIES):
+            for e, est in enumerate(tmc.ESTIMATORS):
+                label, rgb = _EST[est]
+                for series, key, color, width, what in (
+                    ("mc", "mc_3sigma", rgb, 2.5, "Monte Carlo 3σ"),
+                    ("reported", "reported_3sigma", _tint(rgb), 1.0, "reported 3σ"),
+                ):
+                    v = res.curves[key][:, j, e]
+                    ok = np.isfinite(v)
+                    if ok.sum() < 2:
+                        continue
+                    rec.scalars(
+                        layout.meads_truth_mc_path(q, f"{est}_{series}"),
+                        t[ok],
+                        v[ok],
+                        names=f"{label} {what}",
+                        colors=color,
+                        widths=width,
+                    )
+            obj = summary["objectives_3sigma"].get(q)
+            if obj is not None:
+                any_ok = np.isfinite(res.curves["mc_3sigma"][:, j, :]).any(axis=1)
+                if any_ok.sum() >= 2:
+                    tt = t[any_ok]
+                    rec.scalars(
+                        layout.meads_truth_mc_path(q, "objective"),
+                        tt,
+                        np.full(tt.size, obj),
+                        names="objective",
+                        colors=(0, 0, 0),
+                    )
+        rec.report(truth_mc_markdown(summary))
     return Path(path)

@@ -4,6 +4,8 @@
 (:mod:`.sensors`) and writes ``pressures.csv`` (8 Hz, one column per port, Pa), ``imu.csv``,
 ``initial_state.toml`` (formats in :mod:`.telemetry`) and ``truth.npz`` (scoring and drawing only).
 Seeds: the sensor draws use ``SeedSequence(seed)`` spawned into (pressures, imu, navigation).
+:func:`synthesize_from_truth` is the same on a given truth and seed sequence (the Monte Carlo
+against the truth simulator, :mod:`.truth_mc`).
 """
 
 from __future__ import annotations
@@ -18,9 +20,9 @@ from workbench.models.flush_airdata import load_fads_vehicle
 from workbench.problems.meads.config import config_for
 from workbench.problems.meads.sensors import initial_navigation, measure_imu, measure_pressures
 from workbench.problems.meads.telemetry import IMU_COLUMNS, InitialState, write_initial_state
-from workbench.problems.meads.truth import simulate_entry
+from workbench.problems.meads.truth import MeadsTruth, MeadsTruthSpec, simulate_entry
 
-__all__ = ["synthesize_meads", "load_truth", "vehicle_path"]
+__all__ = ["synthesize_meads", "synthesize_from_truth", "load_truth", "vehicle_path"]
 
 
 def vehicle_path(scenario: Scenario) -> Path:
@@ -31,15 +33,38 @@ def vehicle_path(scenario: Scenario) -> Path:
 def synthesize_meads(scenario: Scenario, out_dir: str | Path, seed: int) -> dict[str, Path]:
     """Simulate and write the telemetry + ``truth.npz`` into ``out_dir``; returns {stream: path, "truth": path}."""
     cfg = config_for(scenario)
+    truth = simulate_entry(load_fads_vehicle(vehicle_path(scenario)), cfg.truth)
+    return synthesize_from_truth(
+        scenario,
+        truth,
+        cfg.truth,
+        out_dir,
+        np.random.SeedSequence(seed),
+        f"workbench synthetic {scenario.name} (seed {seed})",
+    )
+
+
+def synthesize_from_truth(
+    scenario: Scenario,
+    truth: MeadsTruth,
+    truth_spec: MeadsTruthSpec,
+    out_dir: str | Path,
+    seed: np.random.SeedSequence,
+    source: str,
+) -> dict[str, Path]:
+    """The sensors of the scenario (``[sensors.*]``) on a simulated ``truth`` (whose surface-pressure
+    model is ``truth_spec``'s), written into ``out_dir`` as a user supplies them plus ``truth.npz``;
+    the draws are ``seed.spawn(3)`` (pressures, IMU, navigation); ``source`` goes into the files'
+    metadata.  Returns {stream: path, "truth": path}."""
+    cfg = config_for(scenario)
     vehicle = load_fads_vehicle(vehicle_path(scenario))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    truth = simulate_entry(vehicle, cfg.truth)
-    rp, ri, rn = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
-    pm = measure_pressures(truth, vehicle, cfg.truth, cfg.pressure, rp)
+    rp, ri, rn = (np.random.default_rng(s) for s in seed.spawn(3))
+    pm = measure_pressures(truth, vehicle, truth_spec, cfg.pressure, rp)
     ti, f, w, drawn = measure_imu(truth, cfg.imu, cfg.imu_rate_hz, ri)
     p0, v0, q0, sig = initial_navigation(truth, cfg.navigation, rn)
-    meta = {"source": f"workbench synthetic {scenario.name} (seed {seed})", "frame": "body B (+x out of the nose)"}
+    meta = {"source": source, "frame": "body B (+x out of the nose)"}
     pressures = write_telemetry(
         out / "pressures.csv",
         pm.t,

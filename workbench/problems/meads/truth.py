@@ -36,7 +36,7 @@ Units SI; times in seconds from the entry interface.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -47,7 +47,16 @@ from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import dcm_to_quat, quat_conjugate, quat_multiply, quat_positive, quat_to_rotvec
 from workbench.models.flush_airdata import FadsVehicle, rayleigh_pitot_cp
 
-__all__ = ["MeadsTruthSpec", "MeadsTruth", "true_atmosphere", "simulate_entry", "cfd_like_pressure", "alpha_trim"]
+__all__ = [
+    "MeadsTruthSpec",
+    "MeadsTruth",
+    "MeadsDispersionSigmas",
+    "disperse_truth_spec",
+    "true_atmosphere",
+    "simulate_entry",
+    "cfd_like_pressure",
+    "alpha_trim",
+]
 
 _TEMPERATURE_NODES_KM_K: tuple[tuple[float, float], ...] = (
     (-10.0, 238.0),
@@ -173,6 +182,70 @@ class MeadsTruth:
     def arrays(self) -> dict[str, np.ndarray]:
         """Every field as an array (for ``truth.npz``)."""
         return {k: np.asarray(v) for k, v in self.__dict__.items()}
+
+
+@dataclass(frozen=True)
+class MeadsDispersionSigmas:
+    """1σ of :func:`disperse_truth_spec`'s draws (SI unless a name carries a unit).
+
+    Entry state: ``entry_fpa_deg``, ``entry_speed_mps`` (a well-delivered entry state, MSL
+    delivered 0.01–0.05°).  Attitude: ``trim_alpha_deg`` (the hypersonic and low-Mach trim α, each).
+    Atmosphere: ``surface_pressure_rel`` (of the spec's), ``temperature_K`` added to every node of
+    the temperature profile independently (nodes 10 km apart, linear between: a perturbation
+    correlated over ~10 km), ``wave_amplitude_K`` (added, clipped at 0) and ``wave_length_km``
+    (added, clipped at 5 km) of the gravity wave.  Winds: ``background_wind_mps`` (|spec + N|),
+    ``background_azimuth_deg``, each layer's speed × (1 + N(0, ``wind_layer_rel``)) and direction
+    + N(0, ``wind_layer_deg``).  Surface pressures (the CFD uncertainty): ``stagnation_shift`` and
+    ``shoulder`` added (clipped at 0).
+    """
+
+    entry_fpa_deg: float = 0.05
+    entry_speed_mps: float = 2.0
+    trim_alpha_deg: float = 0.5
+    surface_pressure_rel: float = 0.05
+    temperature_K: float = 5.0
+    wave_amplitude_K: float = 2.0
+    wave_length_km: float = 2.0
+    background_wind_mps: float = 5.0
+    background_azimuth_deg: float = 45.0
+    wind_layer_rel: float = 0.3
+    wind_layer_deg: float = 30.0
+    stagnation_shift: float = 0.01
+    shoulder: float = 0.02
+
+
+def disperse_truth_spec(
+    spec: MeadsTruthSpec, rng: np.random.Generator, sigmas: MeadsDispersionSigmas | None = None
+) -> MeadsTruthSpec:
+    """A new truth for one Monte Carlo member: ``spec`` with its entry state, trim α, atmosphere,
+    winds and surface-pressure model drawn about the spec's values with the 1σ of ``sigmas``
+    (:class:`MeadsDispersionSigmas`), in a fixed order from ``rng`` (entry FPA, speed, the two
+    trim α, surface pressure, the node temperatures, wave amplitude and length, background wind
+    speed and azimuth, per layer speed and direction, stagnation shift, shoulder).  Everything else
+    (bank profile, oscillations, parachute, integration) is kept; ``spec`` is not modified."""
+    sg = MeadsDispersionSigmas() if sigmas is None else sigmas
+    n = rng.standard_normal
+    nodes = np.asarray(spec.temperature_nodes_km_K, float)
+    kw: dict = {
+        "entry_fpa_deg": spec.entry_fpa_deg + sg.entry_fpa_deg * n(),
+        "entry_speed_kmps": spec.entry_speed_kmps + 1e-3 * sg.entry_speed_mps * n(),
+        "alpha_hyper_deg": spec.alpha_hyper_deg + sg.trim_alpha_deg * n(),
+        "alpha_low_deg": spec.alpha_low_deg + sg.trim_alpha_deg * n(),
+        "surface_pressure_pa": spec.surface_pressure_pa * (1.0 + sg.surface_pressure_rel * n()),
+    }
+    dT = sg.temperature_K * n(nodes.shape[0])
+    kw["temperature_nodes_km_K"] = tuple((float(h), float(T + d)) for (h, T), d in zip(nodes, dT, strict=True))
+    kw["wave_amplitude_K"] = max(spec.wave_amplitude_K + sg.wave_amplitude_K * n(), 0.0)
+    kw["wave_length_km"] = max(spec.wave_length_km + sg.wave_length_km * n(), 5.0)
+    kw["background_wind_mps"] = abs(spec.background_wind_mps + sg.background_wind_mps * n())
+    kw["background_azimuth_deg"] = spec.background_azimuth_deg + sg.background_azimuth_deg * n()
+    layers = []
+    for bottom, top, speed, az, edge in spec.wind_layers:
+        layers.append((bottom, top, speed * (1.0 + sg.wind_layer_rel * n()), az + sg.wind_layer_deg * n(), edge))
+    kw["wind_layers"] = tuple(layers)
+    kw["stagnation_shift"] = max(spec.stagnation_shift + sg.stagnation_shift * n(), 0.0)
+    kw["shoulder"] = max(spec.shoulder + sg.shoulder * n(), 0.0)
+    return replace(spec, **{k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in kw.items()})
 
 
 def true_atmosphere(spec: MeadsTruthSpec):

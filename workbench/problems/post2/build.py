@@ -72,6 +72,7 @@ def environment(scenario: Scenario, cfg: Post2Config, density_factor=None) -> En
         omega=e["rotation_rate_rad_s"] if e["rotation_rate_rad_s"] is not None else body.rotation_rate,
         atmosphere=atm,
         density_factor=density_factor,
+        baro_anchor=e["baro_scale_anchor_m"],
     )
 
 

@@ -142,6 +142,13 @@ SCHEMA = Schema(
                 ),
                 Key("sea_level_pressure_pa", _F, 101325.0, "Pa", "earth_standard: sea-level pressure (a site's QNH)"),
                 Key("sea_level_temperature_K", _F, 288.15, "K", "earth_standard: sea-level temperature"),
+                Key(
+                    "baro_scale_anchor_m",
+                    _F,
+                    0.0,
+                    "m",
+                    "altitude about which the baro_scale state stretches the barometer's altitude (a launch pad's)",
+                ),
                 Key("rho0_kg_m3", _F, 0.015, "kg/m^3", "exponential: density at h = 0"),
                 Key("scale_height_m", _F, 11100.0, "m", "exponential: scale height"),
                 Key("temperature_K", _F, 210.0, "K", "exponential: temperature"),

@@ -132,6 +132,23 @@ STATES: dict[str, StateDef] = {
     "radar_scale_factor": StateDef(1, "1", False, (3, 6), 1e-5, "radar altimeter scale factor (altitude observation)"),
     # --- rocket flights (case 5): barometer, winds, drag areas of a two-stage recovery -----------
     "baro_bias": StateDef(1, "Pa", False, (3, 6), 0.1, "barometer bias: measured = model pressure + baro_bias"),
+    "baro_q_coefficient": StateDef(
+        1,
+        "1",
+        False,
+        (3, 6),
+        1e-5,
+        "static-port error per dynamic pressure: measured pressure += baro_q_coefficient · ½ρ|v_rel|²",
+    ),
+    "baro_scale": StateDef(
+        1,
+        "1",
+        False,
+        (3, 6),
+        1e-5,
+        "barometric altitude scale: the pressure is the model's at h_a + (h − h_a)·baro_scale, h_a = [environment] "
+        "baro_scale_anchor_m (a column warmer or colder than the model's: baro_scale ≈ T_model / T_air)",
+    ),
     "wind": StateDef(
         2, "m/s", False, (3, 6), 1e-3, "horizontal wind [east, north] at the vehicle (air moves with it), local frame"
     ),
@@ -284,7 +301,8 @@ class Environment:
     nominal [-], ``radius_ref`` [m] (altitude reference sphere), ``omega`` [rad/s] planet rate
     about +Z, ``atmosphere`` (an :class:`~workbench.core.atmosphere.Atmosphere` or None: vacuum),
     ``density_factor(h) -> factor`` (None: 1) an optional multiplicative density perturbation
-    (used by the truth simulator only)."""
+    (used by the truth simulator only); ``baro_anchor`` [m] the altitude about which the
+    ``baro_scale`` state stretches the barometer's altitude."""
 
     gm: float
     radius_eq: float
@@ -293,6 +311,7 @@ class Environment:
     omega: float
     atmosphere: Atmosphere | None
     density_factor: Callable[[np.ndarray], np.ndarray] | None = None
+    baro_anchor: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -1002,9 +1021,19 @@ class TrajectoryModel:
         if quantity in ("pressure", "density"):
             if self.env.atmosphere is None:
                 raise ValueError(f"observation {quantity!r} needs an atmosphere")
-            h = np.maximum(self.altitude(x), 0.0)
+            h = self.altitude(x)
             if quantity == "pressure":
-                return (self.env.atmosphere.pressure(h) + self.param(x, "baro_bias", 0.0)[..., 0])[..., None]
+                if "baro_scale" in self.smap:  # the barometer's altitude, stretched about the anchor
+                    a = self.env.baro_anchor
+                    h = a + (h - a) * self.smap.physical(x, "baro_scale")[..., 0]
+                h = np.maximum(h, 0.0)
+                p = self.env.atmosphere.pressure(h) + self.param(x, "baro_bias", 0.0)[..., 0]
+                if "baro_q_coefficient" in self.smap:  # static-port error with the dynamic pressure
+                    rho = self._air(np.maximum(self.altitude(x), 0.0), x)[0]
+                    q = 0.5 * rho * np.sum(self.v_rel(x) ** 2, axis=-1)
+                    p = p + self.smap.physical(x, "baro_q_coefficient")[..., 0] * q
+                return p[..., None]
+            h = np.maximum(h, 0.0)
             return self._air(h, x)[0][..., None]
         if quantity in ("log_pressure", "temperature"):  # Huygens-like
             if self.env.atmosphere is None:

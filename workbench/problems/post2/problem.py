@@ -116,6 +116,8 @@ class Post2Problem:
             "radar_scale_factor": 1.0,
             # rocket flights (case 5): no synthetic truth of their own yet
             "baro_bias": 0.0,
+            "baro_scale": 1.0,
+            "baro_q_coefficient": 0.0,
             "wind": np.zeros(2),
             "drogue_drag_area": 0.0,
             "main_drag_area": 0.0,

@@ -6,9 +6,14 @@ The motor's thrust history is not known, so the model-based estimation (post2's 
 parachutes) starts shortly after burnout, and the boost is integrated from the IMU:
 
 * **pad alignment** — over the last second of standby before the first motor row: the mean
-  specific force is "up" (tilt), the mean magnetic field gives the heading through the site's
-  magnetic declination (TRIAD, :func:`workbench.core.rotation.triad`), the mean body rate is the
-  gyro bias;
+  specific force is "up" (tilt), the mean body rate is the gyro bias, and the magnetic field gives
+  the heading through the site's magnetic declination (TRIAD, :func:`workbench.core.rotation.triad`).
+  The field is the one at the pad attitude of the magnetometer's in-flight alignment
+  (:func:`magnetometer_alignment`: its axes, hard-iron offset and the field, fitted so the field
+  turns with the integrated gyro through boost and coast), because the FIRM boards' magnetometer
+  axes are not the IMU's (turned by −134° and −45° about z) and the steel launch rail distorts the
+  standby field; the heading is trusted when that fit is good and its dip matches the site's
+  inclination;
 * **boost** — :func:`workbench.estimation.strapdown.integrate` (point mass + J2 gravity of the
   Earth, first-order covariance) from the pad to ``t_start`` = first coast row + 0.3 s (tail-off),
   in a planet-centred inertial frame M whose axes are the Earth-fixed axes at launch.  The pad sits
@@ -39,8 +44,16 @@ import numpy as np
 
 from workbench.core.atmosphere import EarthStandardAtmosphere
 from workbench.core.bodies import EARTH
-from workbench.core.rotation import dcm_to_quat, quat_from_rotvec, quat_multiply, quat_to_dcm, triad
-from workbench.estimation.consistency import chi2_ppf
+from workbench.core.rotation import (
+    dcm_to_quat,
+    quat_history_from_body_rates,
+    quat_multiply,
+    quat_to_dcm,
+    quat_to_rotvec,
+    triad,
+)
+from workbench.estimation.consistency import chi2_ppf, mixture_hdr_level
+from workbench.estimation.magnetometer import align_magnetometer
 from workbench.estimation.strapdown import ImuArrays, integrate
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import read_telemetry
@@ -75,16 +88,51 @@ IGNITION_GUARD_S = 0.1
 TAIL_OFF_S = 0.3
 #: engineering 1σ of what the strapdown's white noise leaves out: accelerometer scale factor [-]
 ACCEL_SCALE_SIGMA = 0.01
-#: 1σ of the pad tilt [rad] (accelerometer levelling) and heading [rad] (an uncalibrated
-#: magnetometer inside a rocket with a steel motor case: hard-iron errors of several degrees)
+#: 1σ of the pad tilt [rad] (accelerometer levelling) and heading [rad] (the aligned magnetometer:
+#: the pad heading fitted on thirds of the alignment window spreads by 11° RMS about the whole
+#: window's on flight 1 and 4.5° on flight 4 — gyro scale errors over ~2 000° of roll, soft iron)
 TILT_SIGMA = math.radians(1.0)
 HEADING_SIGMA = math.radians(10.0)
-#: the magnetometer's heading is trusted only if its dip on the pad is within this of the site's
-#: magnetic inclination [deg]; otherwise (hard/soft iron, or magnetometer axes not those of the
-#: accelerometer) the heading is taken as unknown: 1σ HEADING_SIGMA_UNTRUSTED (as wide as a
-#: linearised filter can carry; the landing point's 3σ then says how little the boost tells)
+#: the magnetometer's heading is trusted only if its dip at the pad is within this of the site's
+#: magnetic inclination [deg] and its in-flight alignment fitted; otherwise (no alignment: a
+#: decimated log or a saturated gyro; hard/soft iron beyond the fit) the heading is taken as
+#: unknown: 1σ HEADING_SIGMA_UNTRUSTED (as wide as a linearised filter can carry)
 DIP_TOLERANCE_DEG = 10.0
 HEADING_SIGMA_UNTRUSTED = math.radians(60.0)
+#: gyro full scale of the FIRM logs [rad/s] (~1 800 deg/s; samples at or above are saturated)
+GYRO_SATURATION = math.radians(1790.0)
+
+
+#: the magnetometer's in-flight alignment (:func:`magnetometer_alignment`) is fitted from the pad to
+#: this long before the drogue's ejection [s] (the ejection tumbles the body beyond the gyro's range)
+MAG_FIT_BEFORE_EJECTION_S = 0.5
+#: ... and accepted when its residual RMS is at most this fraction of the fitted field (measured:
+#: 0.9, 2.9 and 2.0 µT of ~50 µT on flights 1, 3, 4 — servo currents and soft iron)
+MAG_FIT_RMS_FRACTION = 0.1
+#: ... on at least this many gyro/magnetometer samples (a decimated log cannot follow the coning)
+MAG_FIT_MIN_RATE_HZ = 50.0
+
+
+def magnetometer_alignment(t, w_B, mag_B, k0: int, t_end: float):
+    """The magnetometer's in-flight alignment (:func:`workbench.estimation.magnetometer.align_magnetometer`)
+    over the samples from index ``k0`` (the reference attitude: the pad) to ``t_end`` [s], from the
+    body rates ``w_B`` (n, 3) [rad/s, bias removed] and the field ``mag_B`` (n, 3) [T] at ``t`` (n,)
+    [s]; None when that stretch is shorter than 2 s, sampled below MAG_FIT_MIN_RATE_HZ, or
+    holds a saturated gyro sample (its attitude would be wrong from there on).
+
+    The FIRM logs need it: their magnetometer axes are turned about the IMU's z axis by −134°
+    (flight 1, FIRM v0.1) and −45° (flights 3, 4, v1.0) — in both boards the magnetometer's +y is
+    the rocket's nose, the IMU sits at 45° — which the pad's raw dip betrays (−49°, +7°, +30°
+    against the sites' +62–66°); aligned, the dips are 62°, 64°, 65°."""
+    k1 = int(np.searchsorted(t, t_end))
+    sel = slice(k0, k1)
+    tt = t[sel]
+    if tt.size < 10 or tt[-1] - tt[0] < 2.0 or (tt.size - 1) / (tt[-1] - tt[0]) < MAG_FIT_MIN_RATE_HZ:
+        return None
+    if np.any(np.abs(w_B[sel]) >= GYRO_SATURATION):
+        return None
+    C_0_B = quat_to_dcm(quat_history_from_body_rates(tt, w_B[sel]))
+    return align_magnetometer(C_0_B, mag_B[sel])
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,6 +240,16 @@ def reconstruct_boost(
     p_std = float(pressure[pad].std(ddof=1))
     atm, h_pad = site_atmosphere(meta.qnh, meta.temperature, p_standby)
     dec = math.radians(declination_deg)
+    # the magnetometer's own axes are not the IMU's: align it in flight (gyro-consistent fit through
+    # boost and coast) and take the field at the pad attitude from that fit, not the pad samples
+    # (the steel launch rail distorts those)
+    t_coast = float(t[np.flatnonzero(letters == "C")[0]])
+    k_f = np.flatnonzero(letters == "F")
+    t_ej = detect_ejection(t, f_B, t_coast, float(t[k_f[0]]) if k_f.size else float(t[-1]))
+    mag_fit = magnetometer_alignment(t, w_B - bias, mag_B, int(pad[-1]), t_ej - MAG_FIT_BEFORE_EJECTION_S)
+    m_pad_raw = m_pad
+    if mag_fit is not None:
+        m_pad = mag_fit.field_0
     # TRIAD: up from the specific force, heading from the horizontal part of the field (any dip)
     q_enu_b = triad(f_pad, m_pad, np.array([0.0, 0.0, 1.0]), np.array([math.sin(dec), math.cos(dec), -1.5]))
     lat, lon = math.radians(meta.launch_lat_deg), math.radians(meta.launch_lon_deg)
@@ -202,15 +260,19 @@ def reconstruct_boost(
     # attitude 1σ: tilt about east/north, heading about up -> body frame small angles
     C_B_ENU = quat_to_dcm(q_enu_b).T
     down = -f_pad / np.linalg.norm(f_pad)
-    dip = 90.0 - math.degrees(math.acos(np.clip(np.dot(down, m_pad) / np.linalg.norm(m_pad), -1.0, 1.0)))
-    trusted = inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG
+
+    def dip_of(m):
+        return 90.0 - math.degrees(math.acos(np.clip(np.dot(down, m) / np.linalg.norm(m), -1.0, 1.0)))
+
+    dip = dip_of(m_pad)
+    fit_ok = mag_fit is not None and mag_fit.rms <= MAG_FIT_RMS_FRACTION * float(np.linalg.norm(mag_fit.field_0))
+    trusted = fit_ok and (inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG)
     sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
     P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_heading**2]) @ C_B_ENU.T
     P0 = np.zeros((9, 9))
     P0[0:3, 0:3] = np.eye(3) * 0.01**2
     P0[3:6, 3:6] = P_att
     P0[6:9, 6:9] = np.eye(3) * 1.0**2
-    t_coast = float(t[np.flatnonzero(letters == "C")[0]])
     t_start = t_coast + TAIL_OFF_S
     sel = np.flatnonzero((t >= t[pad[-1]]) & (t <= t_start + 1e-9))
     imu = ImuArrays(
@@ -245,10 +307,23 @@ def reconstruct_boost(
         "tilt_on_pad_deg": math.degrees(math.acos(np.clip(np.dot(axis, f_pad / np.linalg.norm(f_pad)), -1, 1))),
         "samples": int(pad.size),
         "magnetometer_dip_deg": dip,
+        "magnetometer_dip_raw_pad_deg": dip_of(m_pad_raw),
         "site_inclination_deg": inclination_deg,
         "magnetometer_heading_trusted": bool(trusted),
         "heading_sigma_deg": math.degrees(sig_heading),
         "magnetic_field_uT": float(np.linalg.norm(m_pad) * 1e6),
+        "magnetometer_alignment": None
+        if mag_fit is None
+        else {
+            "rotation_imu_to_magnetometer_rotvec_deg": np.degrees(
+                quat_to_rotvec(dcm_to_quat(mag_fit.C_mag_imu))
+            ).tolist(),
+            "hard_iron_offset_uT": (mag_fit.offset * 1e6).tolist(),
+            "fit_rms_uT": mag_fit.rms * 1e6,
+            "samples": mag_fit.samples,
+            "window_s": [float(t[pad[-1]]), t_ej - MAG_FIT_BEFORE_EJECTION_S],
+            "fit_accepted": bool(fit_ok),
+        },
         "ignition_t_s": t_ign,
     }
     C_ENU_M = C_M_ENU.T
@@ -339,6 +414,19 @@ BURNOUT_TRANSIENT_S = 2.5
 #: prior 1σ of the in-flight barometer offset [Pa] (~2.5 m): the pad altitude is fitted to the
 #: standby pressure, so what is left is a drift in flight (board heating, port effects)
 BARO_BIAS_SIGMA = 30.0
+# What the flight computer's altitude is: a standard-day pressure altitude above the pad (against the
+# standard-day altitude of the measured pressure: mean differences +8, −11, −8 m on the three
+# flights, 12-23 m RMS with its filter's lag at the ejection), so
+# on a 25 °C day it is ~3.5 % below the geometric altitude this reconstruction estimates (flights
+# 3, 4: the "2-5 % scale"); flight 1 (14 °C) differs by the static-port error of its open air
+# brakes.  Measured with the model's barometer states written into the problem files (benchmark,
+# predicted, altitude vs the flight computer after the burnout transient, RMS; without: 27/35/31 m,
+# excerpt 37 m): ``baro_scale`` (prior 1σ 3 %) 55/52/39 m (excerpt 101 m; it fits 0.92/0.97/0.99:
+# the barometer is stretched to the IMU's altitude, not the reverse); ``baro_q_coefficient``
+# (1σ 0.1) 33/33/30 m (excerpt 67 m; it fits 0.16/0.058/0.009 — the brakes stuck open, working,
+# retracted — and brings flight 1's baro_bias from 188 to 22 Pa, but moves its landing from 244 to
+# 444 m).  Neither is written: both move the reconstruction away from the barometer the flight
+# computer follows.
 
 
 def pressure_sigma(
@@ -477,6 +565,7 @@ def problem_file(
         f"sea_level_pressure_pa = {fl.atmosphere.sea_level_pressure:.2f}  # QNH (site_atmosphere)",
         f"sea_level_temperature_K = {fl.atmosphere.sea_level_temperature:.3f}  # site temperature + 6.5 K/km x pad",
         f"# pad altitude {fl.h_pad:.1f} m above the mean sphere (the standby pressure in this atmosphere)",
+        f"baro_scale_anchor_m = {fl.h_pad:.3f}  # a baro_scale state would stretch the baro altitude about the pad",
         "",
         "[vehicle]",
         f"mass_kg = {meta.mass}  # metadata dry mass: the coast/descent mass",
@@ -571,6 +660,48 @@ def problem_file(
     return "\n".join(lines)
 
 
+#: the landing's non-linear verdict: the heading grid spans ±LANDING_MIXTURE_SPAN_SIGMA σ with nodes
+#: at most half the smaller landing 1σ apart along the ring (at most LANDING_MIXTURE_MAX_NODES);
+#: draws and seed of its Monte Carlo level
+LANDING_MIXTURE_SPAN_SIGMA = 4.0
+LANDING_MIXTURE_MAX_NODES = 4001
+LANDING_MIXTURE_SAMPLES = 20000
+LANDING_MIXTURE_SEED = 9
+
+
+def landing_heading_mixture(landing_en, P_en, t, wind_en, sigma_heading: float):
+    """The landing point's distribution under a pad heading error of 1σ ``sigma_heading`` [rad],
+    pushed through exactly instead of linearised: (means (K, 2) [m], covariances (K, 2, 2) [m²],
+    weights (K,), wind drift (2,) [m]), a Gaussian mixture over a grid of heading errors (spacing
+    along the ring at most half the smaller 1σ of ``P_en``, so the ring stays continuous).
+
+    A heading error turns the whole air-relative path about the pad (the boost is integrated in a
+    frame turned by it, and the coast and descent follow from the boost), while the drift with the
+    wind does not turn: with ``landing_en`` (2,) [m east/north of the pad] the reconstructed landing
+    and ``wind_en`` (n, 2) [m/s] the smoothed wind at ``t`` (n,) [s] (None: no wind state), the wind
+    drift is D_w = ∫ w dt and the node ψ_k lands at D_w + R(ψ_k)(landing − D_w).  Each node's
+    covariance is the filter's ``P_en`` (2, 2): with a heading of tens of degrees a linearised filter
+    has collapsed the heading's share (the drag |f| "observes" the cross-track speed at second order:
+    flight 1 before its magnetometer alignment kept 240 m beside a 1 500 m ring), so it stands for
+    the error given the heading."""
+    landing_en = np.asarray(landing_en, float)
+    if wind_en is None:
+        d_w = np.zeros(2)
+    else:
+        w = np.asarray(wind_en, float)
+        d_w = np.sum(0.5 * (w[1:] + w[:-1]) * np.diff(np.asarray(t, float))[:, None], axis=0)
+    e, n = landing_en - d_w
+    span = LANDING_MIXTURE_SPAN_SIGMA * sigma_heading
+    sig_min = math.sqrt(float(np.min(np.linalg.eigvalsh(P_en))))
+    k = int(np.clip(math.ceil(2.0 * span * math.hypot(e, n) / (0.5 * sig_min)) + 1, 41, LANDING_MIXTURE_MAX_NODES))
+    psi = np.linspace(-span, span, k | 1)  # odd: a node at no heading error
+    wts = np.exp(-0.5 * (psi / sigma_heading) ** 2)
+    c, s = np.cos(psi), np.sin(psi)
+    means = d_w + np.column_stack([c * e + s * n, -s * e + c * n])  # a heading error ψ turns bearings by +ψ
+    covs = np.broadcast_to(np.asarray(P_en, float), (psi.size, 2, 2))
+    return means, covs, wts / wts.sum(), d_w
+
+
 def run_flight(problem_path) -> tuple[object, dict]:
     """Reconstruct an imported flight (its post2 problem file; the import's ``flight.json``,
     ``imu.csv`` and ``reference.csv`` beside it) and score it: (Post2Result, :func:`score_flight`)."""
@@ -639,6 +770,8 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     # ... and from the pressure the barometer reads there (model + estimated in-flight offset): the
     # metadata's apogee is the flight computer's barometric altitude, so this is the like-for-like one
     if "baro_bias" in hist:
+        if "baro_scale" in hist:
+            p_apo = float(atm.pressure(h_pad + h[k] * float(hist["baro_scale"]["value"][k, 0])))
         p_read = p_apo + float(hist["baro_bias"]["value"][k, 0])
         pad_p = flight["pad"]["standby_pressure_pa"]
         h_read = float(std.altitude_of_pressure(p_read) - std.altitude_of_pressure(pad_p))
@@ -668,14 +801,31 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         "inside_3sigma": bool(d2 <= chi2_ppf(0.9973, 2)),
         "drift_from_pad_reconstructed_m": float(np.linalg.norm(ours)),
         "drift_from_pad_landed_m": float(np.linalg.norm(truth)),
-        # the boost's heading comes from the magnetometer only if it passed the pad dip check; when
-        # it did not, the heading is a 60 deg 1σ that a linearised filter cannot carry (a ±110 m/s
-        # cross-track velocity on a 104 m/s track changes the speed at second order, which the drag
-        # |f| then "observes"), so the 3σ above is too small: the bearing shows what is missing
+        # the boost's heading comes from the aligned magnetometer only if it passed the dip check;
+        # when it did not, the heading is a 60 deg 1σ that a linearised filter cannot carry (a
+        # ±110 m/s cross-track velocity on a 104 m/s track changes the speed at second order, which
+        # the drag |f| then "observes"), so the 3σ above is too small: the verdict is then the
+        # heading pushed through exactly (heading_nonlinear, landing_heading_mixture)
         "heading_trusted": bool(flight["pad"].get("magnetometer_heading_trusted", True)),
         "bearing_reconstructed_deg": float(np.degrees(np.arctan2(ours[0], ours[1]))),
         "bearing_landed_deg": float(np.degrees(np.arctan2(truth[0], truth[1]))),
     }
+    if not out["landing"]["heading_trusted"]:  # the verdict from the heading pushed through, not linearised
+        wind_en = hist["wind"]["value"] if "wind" in hist else None
+        nl = landing_heading_mixture(ours, P_en, t, wind_en, math.radians(flight["pad"]["heading_sigma_deg"]))
+        rng = np.random.default_rng(LANDING_MIXTURE_SEED)
+        level = mixture_hdr_level(truth, *nl[:3], rng, LANDING_MIXTURE_SAMPLES)
+        out["landing"]["heading_nonlinear"] = {
+            "hdr_level": level,
+            # the 2-D Mahalanobis distance a Gaussian would give at that level (χ²₂ quantile)
+            "gaussian_equivalent_mahalanobis": math.sqrt(-2.0 * math.log(max(1.0 - level, 1e-12))),
+            "inside_3sigma": bool(level <= 0.9973),
+            "heading_sigma_deg": flight["pad"]["heading_sigma_deg"],
+            "turning_drift_m": float(np.linalg.norm(ours - nl[3])),
+            "wind_drift_en_m": nl[3].tolist(),
+        }
+        out["landing"]["mahalanobis_linearised"] = out["landing"]["mahalanobis"]
+        out["landing"]["inside_3sigma"] = out["landing"]["heading_nonlinear"]["inside_3sigma"]
     # altitude vs the flight computer's solution
     href = np.interp(t, reference.time, reference.channel("h"))
     dh = h - href
@@ -690,7 +840,15 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     out["attitude_vs_flight_computer"] = _attitude_scores(flight, imu, reference)
     # estimated parameters (smoothed, end of the span) and the wind prior
     params = {}
-    for name in ("ca_multiplier", "baro_bias", "drogue_drag_area", "main_drag_area", "wind"):
+    for name in (
+        "ca_multiplier",
+        "baro_bias",
+        "baro_scale",
+        "baro_q_coefficient",
+        "drogue_drag_area",
+        "main_drag_area",
+        "wind",
+    ):
         if name in hist:
             params[name] = {
                 "value": hist[name]["value"][-1].tolist(),
@@ -708,10 +866,6 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     out["pad_altitude_m"] = h_pad
     out["observations"] = result.summary["observations"]
     return out
-
-
-#: gyro full scale of the FIRM logs [rad/s] (~1 800 deg/s; samples at or above are saturated)
-GYRO_SATURATION = math.radians(1790.0)
 
 
 def _rotation_angle_deg(R: np.ndarray) -> np.ndarray:
@@ -741,14 +895,7 @@ def _attitude_scores(flight: dict, imu, reference) -> dict:
     k1 = int(np.searchsorted(t, t_ej - 1.0))
     pad = (t > t_pad_end - PAD_WINDOW_S) & (t <= t_pad_end)
     axis = np.asarray(flight["pad"]["rocket_axis_imu"])
-    n = k1 - k0
-    q = np.zeros((n, 4))
-    q[0] = [0.0, 0.0, 0.0, 1.0]
-    for i in range(1, n):  # body-frame right product, trapezoidal rate
-        j = k0 + i
-        q[i] = quat_multiply(q[i - 1], quat_from_rotvec(0.5 * (w_c[j] + w_c[j - 1]) * (t[j] - t[j - 1])))
-        q[i] /= np.linalg.norm(q[i])
-    R_rel_ours = quat_to_dcm(q)  # R_{B_pad B(t)}
+    R_rel_ours = quat_to_dcm(quat_history_from_body_rates(t[k0:k1], w_c[k0:k1]))  # R_{B_pad B(t)}
     up_b0 = f[pad].mean(axis=0) / np.linalg.norm(f[pad].mean(axis=0))
     tilt_ours = np.degrees(np.arccos(np.clip((R_rel_ours @ axis) @ up_b0, -1, 1)))
     Rfc = quat_to_dcm(qref[k0:k1])  # read as body -> navigation

@@ -1,0 +1,214 @@
+"""Compiled (numba) measurement function of the MEADS EKF: port pressures and their state Jacobian.
+
+:func:`workbench.problems.meads.ekf.make_pressure_model` is called ~11 000 times per run (two
+passes, iterated updates) on one state at a time. Its numpy version (the reference path,
+``ekf.USE_KERNEL = False``) spends ~1 ms a call in the overhead of ~200 small array operations
+(scipy's ``RegularGridInterpolator`` alone 0.4 ms), not in arithmetic. :func:`pressure_kernel`
+does the same arithmetic in one compiled call, in the same order of operations:
+
+1. the body-axis air velocity ``u = (I − [δθ×]) C_B_M (v_M + Ω ẑ × p_M − C_M_N w_N)`` at the state
+   and its central-difference Jacobian over position, velocity, attitude error and wind with the
+   filter's perturbations (``ekf.EPS``), exactly as ``estimation.ekf.numeric_jacobian_batched``
+   forms it (the other state columns are zero: ``u`` does not depend on them);
+2. the 11 points z = (u, ln p∞, ln ρ∞) ± ``eps_z`` → (α, β, q∞, M) (``ekf._freestream``);
+3. the port pressures through the "mach" set of :func:`workbench.problems.meads.airdata.pressure_model`:
+   Newtonian (Eq. 1–3 with R(M) of Eq. 2, ``models.flush_airdata.newtonian_pressure``) or the
+   estimator's table ``p∞ + q∞ Cp(M, α_T, φ − φ_w, s)`` with the multilinear interpolation and
+   edge clamping of :meth:`models.flush_airdata.SurfacePressureTable.cp`;
+4. ``p0`` at z and ``∂p/∂z`` by central differences.
+
+The two paths agree to a few units in the last place (``tests/problems/meads/test_kernel.py``);
+libm's and numpy's transcendental functions and summation orders may round differently.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["pressure_kernel", "flow_kernel", "N_U_COLS"]
+
+#: state columns the air velocity depends on (position, velocity, attitude error, wind)
+N_U_COLS = 12
+
+
+@njit(cache=True, nogil=True)
+def _air_velocity(x, C, omega, out):  # pragma: no cover - compiled
+    """Body-axis air velocity (3,) [m/s] of state x (n_x,) with the strapdown C_B_M (3, 3)."""
+    px, py, pz = x[0], x[1], x[2]
+    vgx = x[3] + omega * py
+    vgy = x[4] + omega * -px
+    vgz = x[5]
+    r = math.sqrt(px * px + py * py + pz * pz)
+    ux, uy, uz = px / r, py / r, pz / r
+    ex, ey = -uy, ux  # ẑ × up
+    ne = math.sqrt(ex * ex + ey * ey)
+    ex, ey = ex / ne, ey / ne
+    nx = uy * 0.0 - uz * ey  # up × east (east_z = 0)
+    ny = uz * ex - ux * 0.0
+    nz = ux * ey - uy * ex
+    wn, we, wd = x[9], x[10], x[11]
+    ax = vgx - (nx * wn + ex * we - ux * wd)
+    ay = vgy - (ny * wn + ey * we - uy * wd)
+    az = vgz - (nz * wn + 0.0 * we - uz * wd)
+    u0 = C[0, 0] * ax + C[0, 1] * ay + C[0, 2] * az
+    u1 = C[1, 0] * ax + C[1, 1] * ay + C[1, 2] * az
+    u2 = C[2, 0] * ax + C[2, 1] * ay + C[2, 2] * az
+    t0, t1, t2 = x[6], x[7], x[8]
+    out[0] = u0 - (t1 * u2 - t2 * u1)
+    out[1] = u1 - (t2 * u0 - t0 * u2)
+    out[2] = u2 - (t0 * u1 - t1 * u0)
+
+
+@njit(cache=True, nogil=True)
+def _pressure_ratio(m, g):  # pragma: no cover - compiled
+    """R = p∞/p_t (Eq. 2) at Mach m: Rayleigh pitot above 1, isentropic below."""
+    m2 = max(m * m, 1e-12)
+    if m > 1.0:
+        m2s = max(m2, 1.0)
+        return (2.0 / ((g + 1.0) * m2s)) ** (g / (g - 1.0)) * ((2.0 * g * m2s - (g - 1.0)) / (g + 1.0)) ** (
+            1.0 / (g - 1.0)
+        )
+    return (1.0 + 0.5 * (g - 1.0) * m2) ** (-g / (g - 1.0))
+
+
+@njit(cache=True, nogil=True)
+def _cell(grid, v):  # pragma: no cover - compiled
+    """(i, t): the lower node and the fraction of ``v`` in cell i of ``grid`` (scipy's rule)."""
+    n = grid.size
+    i = np.searchsorted(grid, v) - 1
+    if i < 0:
+        i = 0
+    if i > n - 2:
+        i = n - 2
+    return i, (v - grid[i]) / (grid[i + 1] - grid[i])
+
+
+@njit(cache=True, nogil=True)
+def _table_cp(gm, ga, gc, gs, values, m, a, c, s):  # pragma: no cover - compiled
+    """Cp of :meth:`SurfacePressureTable.cp` at one point (clock wrapped to 0..π, edges clamped)."""
+    c = abs(math.atan2(math.sin(c), math.cos(c)))
+    m = min(max(m, gm[0]), gm[-1])
+    a = min(max(a, ga[0]), ga[-1])
+    s = min(max(s, gs[0]), gs[-1])
+    i0, t0 = _cell(gm, m)
+    i1, t1 = _cell(ga, a)
+    i2, t2 = _cell(gc, c)
+    i3, t3 = _cell(gs, s)
+    out = 0.0
+    for b0 in range(2):
+        w0 = t0 if b0 else 1.0 - t0
+        for b1 in range(2):
+            w1 = t1 if b1 else 1.0 - t1
+            for b2 in range(2):
+                w2 = t2 if b2 else 1.0 - t2
+                for b3 in range(2):
+                    w3 = t3 if b3 else 1.0 - t3
+                    out += values[i0 + b0, i1 + b1, i2 + b2, i3 + b3] * (w0 * w1 * w2 * w3)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def pressure_kernel(
+    x,
+    C,
+    eps_x,
+    eps_z,
+    use,
+    gamma,
+    omega,
+    table_model,
+    port_cone,
+    port_clock,
+    port_s,
+    gm,
+    ga,
+    gc,
+    gs,
+    values,
+):  # pragma: no cover - compiled
+    """Port pressures and their Jacobian in z for one filter state.
+
+    ``x`` (n_x,) the EKF state (``ekf.STATE_NAMES``: p_M, v_M [m, m/s] in the planet-centred inertial
+    frame, δθ_B [rad], wind NED [m/s], ln p∞, ln ρ∞ at columns 12, 13); ``C`` (3, 3) the strapdown
+    C_B_M; ``eps_x`` (n_x,) the state perturbations; ``eps_z`` (5,) those of z = (u_B [m/s], ln p∞,
+    ln ρ∞); ``use`` (k,) int port indices; ``gamma``; ``omega`` the planet's rotation rate [rad/s];
+    ``table_model`` True: the table ``values`` on grids ``gm`` (Mach), ``ga`` (α_T [rad]), ``gc``
+    (relative clock [rad]), ``gs`` (r/Rb); False: Newtonian with the ports' ``port_cone`` [rad];
+    ``port_clock`` [rad], ``port_s`` (m,) of every port.
+
+    Returns ``u0`` (3,) [m/s], ``Ju`` (3, 12) the Jacobian of u over state columns 0–11, ``p0`` (k,)
+    [Pa] and ``dp_dz`` (k, 5) [Pa per unit of z].
+    """
+    u0 = np.empty(3)
+    Ju = np.empty((3, 12))
+    up = np.empty(3)
+    um = np.empty(3)
+    xp = x.copy()
+    _air_velocity(x, C, omega, u0)
+    for j in range(12):
+        e = eps_x[j]
+        xp[j] = x[j] + e
+        _air_velocity(xp, C, omega, up)
+        xp[j] = x[j] - e
+        _air_velocity(xp, C, omega, um)
+        xp[j] = x[j]
+        for r in range(3):
+            Ju[r, j] = (up[r] - um[r]) / (2.0 * e)
+    k = use.size
+    pz = np.empty((11, k))
+    z0 = np.array([u0[0], u0[1], u0[2], x[12], x[13]])
+    for row in range(11):
+        z = z0.copy()
+        if row > 0:
+            j = (row - 1) % 5
+            z[j] = z[j] + eps_z[j] if row <= 5 else z[j] - eps_z[j]
+        V = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2])
+        a = math.atan2(z[2], z[0])
+        b = math.asin(min(max(z[1] / V, -1.0), 1.0))
+        p_inf, rho = math.exp(z[3]), math.exp(z[4])
+        q = 0.5 * rho * V * V
+        M = V / math.sqrt(gamma * p_inf / rho)
+        R = _pressure_ratio(M, gamma)
+        pt = 2.0 * q / (gamma * R * M * M)
+        cb = math.cos(b)
+        wu, wv, ww = math.cos(a) * cb, math.sin(b), math.sin(a) * cb
+        if table_model:
+            at = math.acos(min(max(wu, -1.0), 1.0))
+            phw = math.atan2(wv, ww)
+            pm = R * pt
+            for i in range(k):
+                port = use[i]
+                cp = _table_cp(gm, ga, gc, gs, values, M, at, port_clock[port] - phw, port_s[port])
+                pz[row, i] = pm + q * cp
+        else:
+            for i in range(k):
+                port = use[i]
+                sc = math.sin(port_cone[port])
+                ct = (
+                    wu * math.cos(port_cone[port])
+                    + wv * (math.sin(port_clock[port]) * sc)
+                    + ww * (math.cos(port_clock[port]) * sc)
+                )
+                pz[row, i] = pt * ((1.0 - R) * ct * ct + R)
+    p0 = pz[0].copy()
+    dp_dz = np.empty((k, 5))
+    for j in range(5):
+        for i in range(k):
+            dp_dz[i, j] = (pz[1 + j, i] - pz[6 + j, i]) / (2.0 * eps_z[j])
+    return u0, Ju, p0, dp_dz
+
+
+@njit(cache=True, nogil=True)
+def flow_kernel(x, C, omega, gamma):  # pragma: no cover - compiled
+    """(α [rad], β [rad], Mach) of one EKF state ``x`` (n_x,) with the strapdown C_B_M ``C`` (3, 3),
+    the planet's rotation rate ``omega`` [rad/s] and ``gamma``: ``ekf.air_data_of_state`` for one
+    state (the transition's flight-condition distance asks for it twice a step)."""
+    u = np.empty(3)
+    _air_velocity(x, C, omega, u)
+    V = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    a = math.atan2(u[2], u[0])
+    b = math.asin(min(max(u[1] / V, -1.0), 1.0))
+    return a, b, V / math.sqrt(gamma * math.exp(x[12]) / math.exp(x[13]))
