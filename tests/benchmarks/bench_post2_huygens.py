@@ -220,6 +220,12 @@ def bench_mc(out: Path, members: int, loop_members: int) -> dict:
         short.data["observations"].pop(k)
     for k in ("front_shield_release", "drogue"):
         short.data["events"].pop(k)
+    for k, sched in list(short.data.get("schedules", {}).items()):  # schedules tied to a dropped event
+        if sched.get("end_event") in ("front_shield_release", "drogue") or sched.get("start_event") in (
+            "front_shield_release",
+            "drogue",
+        ):
+            short.data["schedules"].pop(k)
     syn = prob.synthesize(short, out / "mc", 1)
     data = read_observations(short, config_for(short), syn.telemetry)
     ch = data.channels[cfg.data["monte_carlo"]["observation"]]

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import sys
 from pathlib import Path
@@ -80,13 +81,20 @@ def lookup(doc: object, key: str, *, source: str = "?") -> object:
 
 def format_value(value: object, fmt: str | None) -> str:
     """Format one JSON value: ``None`` → "n/a"; ``*S:spec`` scales by S first; ``mmss`` for seconds;
-    ``pass`` writes a boolean as PASS/FAIL."""
+    ``pass`` writes a boolean as PASS/FAIL; ``min:spec`` / ``max:spec`` the smallest / largest finite
+    number of a list."""
     if value is None:
         return "n/a"
     if not fmt:
         return str(value)
     if fmt == "pass":
         return "PASS" if value else "FAIL"
+    m = re.fullmatch(r"(min|max):(.*)", fmt)
+    if m:  # the smallest / largest finite number of a list
+        vals = [float(v) for v in value if v is not None and math.isfinite(float(v))]
+        if not vals:
+            return "n/a"
+        return format(min(vals) if m.group(1) == "min" else max(vals), m.group(2))
     if fmt == "mmss":
         s = round(float(value))
         return f"{s // 60} min {s % 60} s" if s >= 60 else f"{s} s"
