@@ -374,6 +374,14 @@ README_BLOCKS["headline"] = f"""\
   {{{{bench_meads:results.run_nominal.ekf.pass2.mean_nis_per_port_above_min_qbar|min:.2f}}}}–{{{{bench_meads:results.run_nominal.ekf.pass2.mean_nis_per_port_above_min_qbar|max:.2f}}}}
   (a consistent filter gives 1; S is dominated by the first-order process models of smooth processes — the model error, winds and
   atmosphere — not by the 1.4 Pa white noise).
+  Full error model over {{{{bench_meads:results.truth_mc.n_ok|d}}}} dispersed truths (the paper's Figs. 11–13; median above 850 Pa), 3 × RMS of the error, least
+  squares / EKF pass 2: α {{{{bench_meads:results.truth_mc.table.least_squares.alpha_deg.mc_3rms_median|.2f}}}}° / {{{{bench_meads:results.truth_mc.table.ekf_pass2.alpha_deg.mc_3rms_median|.2f}}}}°, β
+  {{{{bench_meads:results.truth_mc.table.least_squares.beta_deg.mc_3rms_median|.2f}}}}° / {{{{bench_meads:results.truth_mc.table.ekf_pass2.beta_deg.mc_3rms_median|.2f}}}}°, q∞ {{{{bench_meads:results.truth_mc.table.least_squares.qbar_pct.mc_3rms_median|.2f}}}} /
+  {{{{bench_meads:results.truth_mc.table.ekf_pass2.qbar_pct.mc_3rms_median|.2f}}}} %, Mach {{{{bench_meads:results.truth_mc.table.least_squares.mach.mc_3rms_median|.2f}}}} / {{{{bench_meads:results.truth_mc.table.ekf_pass2.mach.mc_3rms_median|.2f}}}}; the EKF's reported 3σ
+  against the Monte Carlo 3σ: α ×{{{{bench_meads:results.truth_mc.table.ekf_pass2.alpha_deg.ratio_median|.2f}}}}, q∞ ×{{{{bench_meads:results.truth_mc.table.ekf_pass2.qbar_pct.ratio_median|.2f}}}},
+  density ×{{{{bench_meads:results.truth_mc.table.ekf_pass2.density_pct.ratio_median|.2f}}}}, vertical wind ×{{{{bench_meads:results.truth_mc.table.ekf_pass2.wind_down_mps.ratio_median|.2f}}}}
+  ({{{{bench_meads:results.truth_mc.table.ekf_pass2.wind_down_mps.fraction_inside_reported_3sigma|*100:.0f}}}} % inside: **optimistic**); least squares α ×{{{{bench_meads:results.truth_mc.table.least_squares.alpha_deg.ratio_median|.2f}}}}
+  ({{{{bench_meads:results.truth_mc.wall_s|mmss}}}} on 2 processes, `bench_meads.json`).
 - **Never silently wrong**: {{{{bench_fuzz:results.after.totals.runs}}}} mutated user inputs (drop test, entry and POST2 files):
   SILENT {{{{bench_fuzz:results.before.totals.SILENT}}}} → {{{{bench_fuzz:results.after.totals.SILENT}}}}, TRACEBACK
   {{{{bench_fuzz:results.before.totals.TRACEBACK}}}} → {{{{bench_fuzz:results.after.totals.TRACEBACK}}}}.
