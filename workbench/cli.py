@@ -39,6 +39,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402 (after the BLAS thread setting)
 
+from workbench.core.forking import CAN_FORK, fork_call  # noqa: E402
+
 EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_NUMERIC, EXIT_KIND, EXIT_INTERRUPT = 0, 2, 3, 4, 5, 130
 EXIT_UNHEALTHY = 6
 EXIT_VIEWER = 7
@@ -211,7 +213,7 @@ PRELOAD = (
 
 #: start scenario processes by forking this one (POSIX); False: a new interpreter each (``python -m
 #: workbench.cli run NAME ...``), which repeats the imports
-FORK = hasattr(os, "fork")
+FORK = CAN_FORK
 
 
 class _Child:
@@ -227,29 +229,8 @@ class _Child:
             r, w = os.pipe()
         self.returncode: int | None = None
         self.proc = None
-        if FORK:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            pid = os.fork()
-            if pid == 0:  # the child: run the scenario as `workbench run NAME --jobs 1 ...` would
-                code = 1
-                try:
-                    if w is not None:
-                        os.close(r)
-                        os.dup2(w, 2)
-                        os.close(w)
-                        sys.stderr = open(2, "w", buffering=1, closefd=False)  # noqa: SIM115 - ends with the child
-                    code = main(argv[3:])
-                except BaseException:  # noqa: BLE001 - a child must never return into the parent's loop
-                    import traceback
-
-                    traceback.print_exc()
-                finally:
-                    with contextlib.suppress(Exception):
-                        sys.stdout.flush()
-                        sys.stderr.flush()
-                    os._exit(code)
-            self.pid = pid
+        if FORK:  # the child: the scenario as `workbench run NAME --jobs 1 ...` would run it
+            self.pid = fork_call(lambda: main(argv[3:]), stderr_fd=w, close_fds=(r,) if pipe else ())
         else:
             import subprocess
 

@@ -25,6 +25,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from workbench.core.forking import CAN_FORK, fork_call
 from workbench.core.jit import cold_kernels, cold_modules
 from workbench.io import progress as prog
 from workbench.io.scenario import Scenario
@@ -67,7 +68,7 @@ def precompile(scenario: Scenario, problem: Problem, seed: int, rep: prog.Report
 
 #: fork the child from the running process (POSIX: its imports are done, ~2–3 s of CPU saved);
 #: False: a new interpreter (``python -m workbench.problems.precompile``)
-FORK = hasattr(os, "fork")
+FORK = CAN_FORK
 
 
 def _run_child(scenario: Scenario, seed: int) -> tuple[int, str]:
@@ -80,25 +81,7 @@ def _run_child(scenario: Scenario, seed: int) -> tuple[int, str]:
         proc = subprocess.run(child_argv(scenario, seed), capture_output=True, text=True, errors="replace")
         return proc.returncode, proc.stderr or proc.stdout
     with tempfile.TemporaryFile() as log:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        pid = os.fork()
-        if pid == 0:  # the child
-            code = 1
-            try:
-                os.dup2(log.fileno(), 1)
-                os.dup2(log.fileno(), 2)
-                sys.stdout = sys.stderr = open(2, "w", buffering=1, closefd=False)  # noqa: SIM115 - ends with the child
-                code = main(argv)
-            except BaseException:  # noqa: BLE001 - the child must never return into the run
-                import traceback
-
-                traceback.print_exc()
-            finally:
-                with contextlib.suppress(Exception):
-                    sys.stdout.flush()
-                    sys.stderr.flush()
-                os._exit(code)
+        pid = fork_call(lambda: main(argv), stdout_fd=log.fileno(), stderr_fd=log.fileno())
         try:
             _, status = os.waitpid(pid, 0)
         except BaseException:
