@@ -417,6 +417,10 @@ def propagate_kernel(
     hc, rho, a_snd, kn, ones = np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b)
     half = 0.5 * dt
     sixth = dt / 6.0
+    # want_dx as a run-time bool, not the literal True: a literal argument makes numba compile
+    # separate Literal[bool] versions of full_derivative and dynamics_kernel beside the ones Python
+    # calls (~4 s of compiling on a fresh checkout)
+    want_dx = b >= 0
     for _ in range(n):
         for stage in range(4):
             if stage == 0:
@@ -438,7 +442,7 @@ def propagate_kernel(
                 src, dst = tmp, k4
             full_derivative(
                 src, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
-                chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, True, dst, F, M, hc, rho, a_snd, kn,
+                chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, want_dx, dst, F, M, hc, rho, a_snd, kn,
                 ones,
             )  # fmt: skip
         for r in range(b):

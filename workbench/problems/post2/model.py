@@ -973,7 +973,7 @@ class TrajectoryModel:
         plan = self._plan() if USE_KERNEL else None
         if plan is not None and plan["atm_kind"] is not None:  # every RK4 stage in one compiled call
             x = np.asarray(x, dtype=float)
-            X = np.array(x.reshape(-1, x.shape[-1]), dtype=float)
+            X = np.array(x.reshape(-1, x.shape[-1]), dtype=float, order="C")  # one compiled layout
             ci, cf, tm, tc = self._phase_consts(plan, phase)
             gm_, gk, ga, tab = plan["grids"]
             iq = self.smap.blocks["attitude"].sx.start if self.dof == 6 else -1
