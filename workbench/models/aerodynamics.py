@@ -118,6 +118,7 @@ class AeroTable:
         # plain-Python copies for the scalar fast path used inside integrator loops
         object.__setattr__(self, "_grids", (self.mach.tolist(), self.log10_kn.tolist(), self.alpha.tolist()))
         object.__setattr__(self, "_stack", np.stack([self.ca, self.cn, self.cm], axis=-1))
+        object.__setattr__(self, "_stack_list", self._stack.tolist())  # nested lists for the scalar path
 
     def coefficients(self, mach, kn, alpha) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(CA, CN, Cm)`` at Mach ``mach`` [-], Knudsen ``kn`` [-] (not log) and total AoA ``alpha`` [rad].
@@ -146,12 +147,23 @@ class AeroTable:
         i, wi = _locate_scalar(gm, mach)
         j, wj = _locate_scalar(gk, math.log10(kn) if kn > 0.0 else -300.0)
         l, wl = _locate_scalar(ga, alpha)
-        c = self._stack[i : i + 2, j : j + 2, l : l + 2]  # (2, 2, 2, 3)
-        # collapse axis by axis (3 small numpy ops)
-        c = c[0] + wi * (c[1] - c[0])
-        c = c[0] + wj * (c[1] - c[0])
-        c = c[0] + wl * (c[1] - c[0])
-        return float(c[0]), float(c[1]), float(c[2])
+        # collapse axis by axis (Mach, then Kn, then α) in Python floats: the same IEEE operations in
+        # the same order as the (2, 2, 2, 3) numpy slice version, so the same bits, ~5x faster (the
+        # entry truth calls this ~270 000 times a run)
+        s0, s1 = self._stack_list[i], self._stack_list[i + 1]
+        out = []
+        for k in range(3):
+            u = []
+            for dl in (0, 1):
+                a0 = s0[j][l + dl][k]
+                b0 = s1[j][l + dl][k]
+                a1 = s0[j + 1][l + dl][k]
+                b1 = s1[j + 1][l + dl][k]
+                v0 = a0 + wi * (b0 - a0)
+                v1 = a1 + wi * (b1 - a1)
+                u.append(v0 + wj * (v1 - v0))
+            out.append(u[0] + wl * (u[1] - u[0]))
+        return out[0], out[1], out[2]
 
 
 @dataclass(frozen=True, eq=False)
