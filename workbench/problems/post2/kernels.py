@@ -532,6 +532,7 @@ def metric_total_kernel(a, tu, zu, sh, t0, h, hi, out):
     the numpy expression of ``huygens._metric`` with its pairwise row sum."""
     m = tu.size
     row = np.empty(m)
+    start = m - m  # 0 as a run-time int: a literal 0 would compile a second _pairwise_block
     for r in range(a.shape[0]):
         for j in range(m):
             u = (tu[j] + sh[r] - t0) / h
@@ -542,4 +543,4 @@ def metric_total_kernel(a, tu, zu, sh, t0, h, hi, out):
             k = int(math.floor(u))
             f = u - k
             row[j] = abs(zu[j] - (a[r, k] * (1.0 - f) + a[r, k + 1] * f))
-        out[r] = _pairwise_sum(row, 0, m)
+        out[r] = _pairwise_sum(row, start, m)
