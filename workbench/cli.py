@@ -242,6 +242,7 @@ class _Child:
             os.set_blocking(r, False)
             self.fd = r
         self._buf = b""
+        self.eof = False
 
     def poll(self) -> int | None:
         """The exit code once the process ended (reaped here), else None."""
@@ -271,17 +272,18 @@ class _Child:
         return self.returncode
 
     def lines(self, final: bool = False) -> list[str]:
-        """The complete stderr lines the child wrote since the last call (pipe mode); ``final``: also
-        an unterminated last line, and close the pipe."""
+        """The complete stderr lines the child wrote since the last call (pipe mode; :attr:`eof` once
+        the child closed its end); ``final``: also an unterminated last line, and close the pipe
+        (the caller unregisters it from its selector first)."""
         if self.fd is None:
             return []
-        while True:
+        while not self.eof:
             try:
                 chunk = os.read(self.fd, 65536)
             except BlockingIOError:
                 break
             if not chunk:
-                final = True
+                self.eof = True
                 break
             self._buf += chunk
         *done, self._buf = self._buf.split(b"\n")
@@ -329,8 +331,12 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
     sel = selectors.DefaultSelector()
 
     def drain(child: _Child, final: bool = False) -> None:
+        if child.fd is not None and (final or child.eof) and child.fd in sel.get_map():
+            sel.unregister(child.fd)  # before the pipe is closed (its number may be reused)
         for text in child.lines(final):
             rep.result(text.rstrip("\r"))
+        if child.eof and child.fd is not None and child.fd in sel.get_map():
+            sel.unregister(child.fd)  # at EOF a pipe is always readable: stop selecting it
 
     rep.line(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
     bar = rep.counter("scenarios finished", total=len(names), unit="scenarios")
@@ -349,9 +355,7 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
                 time.sleep(0.05)
             for name, child in list(running.items()):
                 if child.poll() is not None:
-                    if child.fd is not None:
-                        sel.unregister(child.fd)
-                        drain(child, final=True)
+                    drain(child, final=True)
                     codes[name] = child.returncode
                     del running[name]
             bar.set(len(codes))
@@ -360,8 +364,7 @@ def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> 
             child.terminate()
         for child in running.values():
             child.wait()
-            if child.fd is not None:
-                drain(child, final=True)
+            drain(child, final=True)
         raise
     finally:
         sel.close()
