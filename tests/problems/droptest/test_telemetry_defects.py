@@ -308,3 +308,54 @@ def test_3dm_is_averaged_only_while_hanging(droptest_run, tmp_path):
     _edit_csv(paths["attitude_3dm"], add_tumbling_rows)
     init1 = dt.initial_state(droptest_run.scenario, _load(droptest_run, paths))
     np.testing.assert_allclose(init1.q0, init0.q0, atol=1e-12)
+
+
+class _Imu:
+    """A stand-in for :class:`~workbench.io.telemetry.Telemetry` with one accelerometer triad whose
+    specific-force norm is ``f_g`` [g] along z, at 2 kHz."""
+
+    def __init__(self, t: np.ndarray, f_g: np.ndarray):
+        self.time = t
+        z = f_g * 9.80665
+        self.channels = {"BP.x": 0.0 * z, "BP.y": 0.0 * z, "BP.z": z}
+
+    def stack(self, cols):
+        return np.column_stack([self.channels[c] for c in cols])
+
+
+def _pendulum_drop(cut: float = 1.336) -> _Imu:
+    """The profile of the dispersed Monte Carlo drop seed 198: a bungee swing of 0.05–0.95 g until
+    the cut, 55 ms of free fall (0.25 g: noise and rotation), the airbag loading the lander
+    gradually from 0.5 to 1.6 g over 55 ms, then the impact (8 g) and the rebound (2 g)."""
+    t = np.arange(0.0, 2.0, 5e-4)
+    f = 0.55 + 0.4 * np.cos(2 * np.pi * t / 1.2)
+    free = (t >= cut) & (t < cut + 0.055)
+    ramp = (t >= cut + 0.055) & (t < cut + 0.11)
+    f[free] = 0.25
+    f[ramp] = np.linspace(0.5, 1.6, ramp.sum())
+    f[(t >= cut + 0.11) & (t < cut + 0.2)] = 8.0
+    f[t >= cut + 0.2] = 2.0
+    return _Imu(t, f)
+
+
+def test_free_fall_check_accepts_a_short_fall_onto_a_soft_airbag():
+    """A short free fall followed by a gradual airbag load is a valid drop; before the check looked
+    at the early window only, the whole fall's median (0.6 g) failed and the swing's before the cut
+    passed for a cut 1000× earlier: the Monte Carlo's seed 198 stopped with "the event times look
+    1000× off"."""
+    from workbench.problems.droptest.telemetry import check_free_fall
+
+    assert check_free_fall(_pendulum_drop(), {"bungee_cut": 1.336}, ["BP"], "events.csv") == []
+
+
+def test_free_fall_check_names_a_cut_time_in_the_wrong_unit():
+    """A cut written 1000× too small (ms values divided twice) lands in the swing: not free fall,
+    while 1000× it is — a located error naming the events file and the likely mix-up; a cut that
+    is simply wrong is a WARN degradation."""
+    from workbench.problems.droptest.telemetry import check_free_fall
+
+    imu = _pendulum_drop()
+    with pytest.raises(TelemetryError, match=r"events\.csv.*1000× too small"):
+        check_free_fall(imu, {"bungee_cut": 1.336e-3}, ["BP"], "events.csv")
+    log = check_free_fall(imu, {"bungee_cut": 0.9}, ["BP"], "events.csv")
+    assert len(log) == 1 and log[0][1] == "WARN" and "does not fall freely" in log[0][2]
