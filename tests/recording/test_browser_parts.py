@@ -146,3 +146,26 @@ def test_the_negative_control_recording_is_written(tmp_path):
     assert path.is_file() and path.stat().st_size > 0
     rec = read_recording(path)
     assert not [e for e in rec.entities() if e.startswith("/world")]
+
+
+def test_a_plots_only_recording_needs_no_3d_view(tmp_path):
+    """A Monte Carlo summary (plots and a table) has no 3D content: its blueprint's lack of a 3D view
+    is not an error, so ``workbench screenshot`` no longer exits 7 on it; a recording with any 3D
+    archetype still needs a drawn 3D view, and an empty one still fails."""
+    from pathlib import Path
+
+    import rerun as rr
+
+    from workbench.recording.writer import open_recording
+
+    plots = br.write_empty_scene_recording(tmp_path / "plots.rrd")
+    assert not br.has_3d_content(plots)
+    with open_recording(tmp_path / "scene.rrd", "scene") as rec:
+        rec.stream.log("world/line", rr.LineStrips3D([[[0, 0, 0], [1, 1, 1]]]), static=True)
+    assert br.has_3d_content(tmp_path / "scene.rrd")
+    assert br.has_3d_content(tmp_path / "missing.rrd")  # unreadable: the viewer judges it, as before
+    plots_only = br.ViewerCheck(recording=Path(plots), needs_3d=False)
+    assert plots_only.ok and "plots only" in plots_only.summary()
+    assert not br.ViewerCheck(recording=Path(plots)).ok  # a 3D recording without a judged 3D view
+    empty = br.SceneJudgement(content_fraction=0.0, background=(255, 255, 255), region_px=(0, 0, 1, 1), empty=True)
+    assert not br.ViewerCheck(recording=Path(plots), needs_3d=False, scenes={"3D": empty}).ok

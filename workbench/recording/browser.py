@@ -62,7 +62,7 @@ from urllib.parse import quote, urlsplit
 import numpy as np
 
 from workbench.recording import layout
-from workbench.recording.reader import rerun_executable
+from workbench.recording.reader import read_recording, rerun_executable
 
 __all__ = [
     "DIFF_THRESHOLD",
@@ -398,6 +398,17 @@ def judge_scene(
 # Driving the viewer
 
 
+def has_3d_content(path: str | os.PathLike[str]) -> bool:
+    """Whether the recording at ``path`` logs any 3D archetype (``Transform3D``, ``Mesh3D``,
+    ``Points3D``, ``LineStrips3D``, ...).  True when it cannot be read (the check then asks for
+    a 3D view, as before)."""
+    try:
+        rec = read_recording(path)
+        return any(c.split(":")[0].endswith("3D") for e in rec.entities() for c in rec.components(e))
+    except Exception:  # an unreadable recording is judged by the viewer, not here
+        return True
+
+
 @dataclass
 class ViewerCheck:
     """What the viewer showed for one recording.
@@ -407,7 +418,8 @@ class ViewerCheck:
     check), ``warnings`` the rest worth reading; ``views`` ``(view id, class, name, origin)`` of the
     blueprint; ``scenes`` the empty-view judgement of each 3D view, by view name, and ``scene_pngs``
     the screenshots of them maximised; ``time_s`` where the time cursor was put on the ``time``
-    timeline [s].
+    timeline [s]; ``needs_3d`` whether the recording logs any 3D archetype (:func:`has_3d_content`):
+    a recording of plots and tables only (a Monte Carlo summary) needs no 3D view.
     """
 
     recording: Path
@@ -420,22 +432,24 @@ class ViewerCheck:
     views: tuple[tuple[str, str, str, str], ...] = ()
     scenes: dict[str, SceneJudgement] = field(default_factory=dict)
     scene_pngs: list[Path] = field(default_factory=list)
+    needs_3d: bool = True
 
     @property
     def ok(self) -> bool:
-        """No errors, at least one 3D view, and none of them empty."""
-        return not self.errors and bool(self.scenes) and not any(j.empty for j in self.scenes.values())
+        """No errors, at least one 3D view when the recording has 3D content, and none of them empty."""
+        return (
+            not self.errors
+            and (bool(self.scenes) or not self.needs_3d)
+            and not any(j.empty for j in self.scenes.values())
+        )
 
     def summary(self) -> str:
         """One line: verdict, timings, content share of each 3D view, first error."""
         verdict = "OK" if self.ok else "FAIL"
-        scene = (
-            ", ".join(
-                f"3D view {name!r} {'EMPTY' if j.empty else 'drawn'} ({j.content_fraction:.1%} content)"
-                for name, j in self.scenes.items()
-            )
-            or "no 3D view judged"
-        )
+        scene = ", ".join(
+            f"3D view {name!r} {'EMPTY' if j.empty else 'drawn'} ({j.content_fraction:.1%} content)"
+            for name, j in self.scenes.items()
+        ) or ("no 3D view judged" if self.needs_3d else "plots only (no 3D content, no 3D view needed)")
         first = f"; {len(self.errors)} error(s), first: {self.errors[0]}" if self.errors else ""
         return (
             f"{verdict} {self.recording.name}: loaded in {self.load_s:.1f} s, settled in {self.settle_s:.1f} s, "
@@ -612,6 +626,7 @@ class WebViewer:
         if not rec_path.is_file():
             result.errors.append(f"no such recording: {rec_path}")
             return result
+        result.needs_3d = has_3d_content(rec_path)
         urls = [self._serve(rec_path)]
         if blueprint is not None:
             bp = Path(blueprint).resolve()
@@ -736,7 +751,7 @@ class WebViewer:
         if not st.version.startswith(VIEWER_VERSION):
             result.warnings.append(f"viewer {st.version}: viewer-control fields are those of {VIEWER_VERSION}x")
         result.views = st.views
-        if not any(cls == "3D" for _, cls, _, _ in st.views):
+        if result.needs_3d and not any(cls == "3D" for _, cls, _, _ in st.views):
             result.errors.append("the blueprint has no 3D view")
         with contextlib.suppress(Exception):
             page.evaluate("() => window._handle.override_panel_state('blueprint', 'hidden')")
