@@ -59,6 +59,13 @@ from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import pipeline
 from workbench.problems.post2.config import config_for
+from workbench.problems.post2.importers.airbrakes import (
+    FIRM_ALTITUDE_SCALE_M,
+    FIRM_PRESSURE_EXPONENT,
+    SEA_LEVEL_PRESSURE_PA,
+    firm_altitude,
+    firm_pressure,
+)
 
 __all__ = [
     "PAD_WINDOW_S",
@@ -76,6 +83,7 @@ __all__ = [
     "problem_file",
     "local_en",
     "score_flight",
+    "flight_computer_altimeter",
     "run_flight",
     "landing_point_inertial",
 ]
@@ -826,7 +834,7 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         }
         out["landing"]["mahalanobis_linearised"] = out["landing"]["mahalanobis"]
         out["landing"]["inside_3sigma"] = out["landing"]["heading_nonlinear"]["inside_3sigma"]
-    # altitude vs the flight computer's solution
+    # altitude vs the flight computer's solution: raw (its altitude as logged, ours geometric above the pad)
     href = np.interp(t, reference.time, reference.channel("h"))
     dh = h - href
     late = t >= flight["t_start_s"] - TAIL_OFF_S + BURNOUT_TRANSIENT_S  # the baro is de-weighted before
@@ -837,6 +845,7 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         "rms_after_burnout_transient_m": float(np.sqrt(np.mean(dh[late] ** 2))),
         "max_abs_after_burnout_transient_m": float(np.max(np.abs(dh[late]))),
     }
+    out["altitude_vs_flight_computer"].update(_altitude_like_for_like(flight, imu, reference, atm, t, h, hist, k, late))
     out["attitude_vs_flight_computer"] = _attitude_scores(flight, imu, reference)
     # estimated parameters (smoothed, end of the span) and the wind prior
     params = {}
@@ -865,6 +874,121 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     out["parameters"] = params
     out["pad_altitude_m"] = h_pad
     out["observations"] = result.summary["observations"]
+    return out
+
+
+#: the flight computer's altimeter is measured against its own barometer from the end of the burnout
+#: transient to the end of the span, without the drogue's ejection (−0.2 .. +2 s: the charge
+#: pressurises the bay) — the windows :func:`pressure_sigma` does not use either
+def _altimeter_window(t, flight: dict) -> np.ndarray:
+    """Boolean mask (n,) of the times ``t`` (n,) [s after launch] the altimeter is measured over."""
+    t = np.asarray(t, float)
+    t_ej = flight.get("t_ejection_s", flight["t_apogee_letter_s"])
+    sel = (t >= flight["t_start_s"] - TAIL_OFF_S + BURNOUT_TRANSIENT_S) & (t <= flight["t_end_s"])
+    return sel & ~((t >= t_ej - 0.2) & (t <= t_ej + 2.0))
+
+
+def flight_computer_altimeter(flight: dict, imu, reference) -> dict:
+    """What the flight computer's altitude is, measured on its own log (not assumed).
+
+    Its altitude is a standard-day pressure altitude (:func:`~workbench.problems.post2.importers.
+    airbrakes.firm_altitude`: 15 °C at its zero, −6.5 K/km) of its barometer, fused with its IMU,
+    h_fc = firm_altitude(p, p_ref) + c.  Two references occur: its **initial** pressure (c = 0: zero
+    where it was switched on, which is not the pad at launch when the weather or the board's warming
+    moved the pressure since) and the standard day's **101 325 Pa** (c: minus the altitude of the
+    initial pressure).  Each candidate is pinned to the pad — its mean altitude over the pad window
+    (the last PAD_WINDOW_S s before ignition − IGNITION_GUARD_S) at the standby pressure — and the one
+    closer to the flight computer's altitude over :func:`_altimeter_window` (RMS of h_fc minus the
+    formula of the logged pressure) is the flight computer's.  ``flight`` the import's
+    ``flight.json``, ``imu``/``reference`` the telemetry of ``imu.csv``/``reference.csv``.
+
+    Returns a JSON-ready dict: ``reference`` ("initial" or "101325"), ``p_ref_pa`` [Pa],
+    ``offset_m`` (c) [m], ``pad_reading_m`` [m] (its altitude on the pad at launch),
+    ``rms_vs_own_barometer_m`` {candidate: RMS [m]} and ``samples``."""
+    t = np.asarray(reference.time, float)
+    h_fc = np.asarray(reference.channel("h"), float)
+    p = np.asarray(imu.channel("pressure"), float)
+    t_pad_end = flight["pad"]["ignition_t_s"] - IGNITION_GUARD_S
+    pad = (t >= t_pad_end - PAD_WINDOW_S) & (t < t_pad_end)
+    if not np.any(pad):
+        raise ValueError("no flight-computer sample in the pad window: cannot pin its altimeter")
+    h_pad = float(np.mean(h_fc[pad]))
+    p_pad = float(flight["pad"]["standby_pressure_pa"])
+    candidates = {
+        "initial": (p_pad / (1.0 - h_pad / FIRM_ALTITUDE_SCALE_M) ** FIRM_PRESSURE_EXPONENT, 0.0),
+        "101325": (SEA_LEVEL_PRESSURE_PA, h_pad - float(firm_altitude(p_pad, SEA_LEVEL_PRESSURE_PA))),
+    }
+    win = _altimeter_window(t, flight)
+    rms = {
+        name: float(np.sqrt(np.mean((h_fc[win] - firm_altitude(p[win], p_ref) - c) ** 2)))
+        for name, (p_ref, c) in candidates.items()
+    }
+    best = min(rms, key=rms.get)
+    p_ref, c = candidates[best]
+    return {
+        "reference": best,
+        "p_ref_pa": float(p_ref),
+        "offset_m": float(c),
+        "pad_reading_m": h_pad,
+        "rms_vs_own_barometer_m": rms,
+        "samples": int(np.sum(win)),
+    }
+
+
+def _altitude_like_for_like(flight: dict, imu, reference, atm, t, h, hist, k: int, late) -> dict:
+    """The altitude comparisons with the flight computer that compare like with like (keys added to
+    ``altitude_vs_flight_computer`` by :func:`score_flight`; ``atm`` the site atmosphere, ``t`` (n,)
+    [s], ``h`` (n,) [m] our geometric altitude above the pad, ``hist`` the smoothed history, ``k`` the
+    apogee's index, ``late`` (n,) the mask after the burnout transient).
+
+    * ``like_for_like`` — the flight computer's altitude turned into what ours is, a geometric altitude
+      above the pad at launch: its formula inverted to the pressure it stands for
+      (:func:`flight_computer_altimeter`), that pressure's altitude in the site's atmosphere (the
+      reconstruction's own: the site temperature, −6.5 K/km — the hypsometric "true altitude"), minus
+      the pad's.  It takes out the two conventions (15 °C vs the day's temperature: 3.5 % of the
+      height on the 25 °C days; its zero at switch-on vs the pad at launch: +2.0 and +7.6 m on flights
+      3 and 4) and leaves what the two solutions disagree on: the barometer's in-flight error the
+      reconstruction estimates (``baro_bias``, the static-port error behind flight 1's open air
+      brakes) and the IMU-anchored coast against the barometer, the flight computer's own filter
+      (its lag and IMU-driven excursions, the ejection).  It cannot see an error of the site
+      atmosphere (temperature, lapse rate): both altitudes go through the same one.
+    * ``barometer_scale`` — the other way round: our reconstruction as the flight computer's
+      altimeter would read it (the model pressure at our altitude plus the estimated barometer
+      offset, through its formula).  Nearly a tautology — the reconstruction fits that same
+      barometer, so this compares the barometer with itself: what is left is the flight computer's
+      departure from its own barometer (``flight_computer_altimeter`` ``rms_vs_own_barometer_m``) and
+      our barometer residuals; it cannot detect an error of our altitude that the barometer fit hides."""
+    fc = flight_computer_altimeter(flight, imu, reference)
+    h_pad = flight["pad"]["pad_altitude_m"]
+    p_ref, c = fc["p_ref_pa"], fc["offset_m"]
+    tr = np.asarray(reference.time, float)
+    h_fc = np.asarray(reference.channel("h"), float)
+    h_fc_geo = atm.altitude_of_pressure(firm_pressure(h_fc - c, p_ref)) - h_pad  # geometric, above the pad
+    d = h - np.interp(t, tr, h_fc_geo)
+    out = {
+        "flight_computer_altimeter": fc,
+        "like_for_like": {
+            "meaning": "ours minus the flight computer's altitude as a geometric altitude above the pad "
+            "(its standard-day formula inverted, the pressure's altitude in the site atmosphere)",
+            "rms_m": float(np.sqrt(np.mean(d**2))),
+            "rms_after_burnout_transient_m": float(np.sqrt(np.mean(d[late] ** 2))),
+            "mean_after_burnout_transient_m": float(np.mean(d[late])),
+            "max_abs_after_burnout_transient_m": float(np.max(np.abs(d[late]))),
+            "at_apogee_m": float(d[k]),
+            "flight_computer_max_geometric_m": float(np.max(h_fc_geo)),
+            "scale_at_apogee": float(np.max(h_fc_geo) / (np.max(h_fc) - fc["pad_reading_m"])),
+        },
+    }
+    if "baro_bias" in hist:
+        h_b = h * (hist["baro_scale"]["value"][:, 0] if "baro_scale" in hist else 1.0)
+        p_read = atm.pressure(h_pad + h_b) + hist["baro_bias"]["value"][:, 0]
+        d_b = firm_altitude(p_read, p_ref) + c - np.interp(t, tr, h_fc)
+        out["barometer_scale"] = {
+            "meaning": "our reconstruction as the flight computer's altimeter reads it (model pressure + "
+            "estimated offset) minus its altitude: nearly the barometer against itself",
+            "rms_after_burnout_transient_m": float(np.sqrt(np.mean(d_b[late] ** 2))),
+            "mean_after_burnout_transient_m": float(np.mean(d_b[late])),
+        }
     return out
 
 
