@@ -378,6 +378,20 @@ def test_barometer_scale_and_dynamic_pressure_states(excerpt_run):
     assert abs(float(expected) - p0) > 100.0  # the states change the reading by far more than round-off
 
 
+def test_wind_prior_blows_away_from_where_the_metadata_says_it_comes_from(excerpt_run):
+    # metadata: where the wind comes from (flight 1: NNE, 5.5 km/h); the state: the air's velocity
+    # [east, north] (v_rel = v - wind), so its prior points the other way (SSW), and the score turns it back
+    _, toml, _, s = excerpt_run
+    w = np.asarray(load_scenario(toml).data["states"]["wind"]["value"], float)
+    frm = math.radians(22.5)
+    np.testing.assert_allclose(w, -5.5 / 3.6 * np.array([math.sin(frm), math.cos(frm)]), rtol=1e-9)
+    wind = s["parameters"]["wind"]
+    assert wind["metadata_from_deg"] == 22.5
+    v = np.asarray(wind["value"], float)
+    assert wind["from_deg"] == pytest.approx(math.degrees(math.atan2(-v[0], -v[1])) % 360.0)
+    assert wind["speed_m_s"] == pytest.approx(float(np.hypot(*v)))
+
+
 def test_landing_heading_mixture_turns_the_air_path_about_the_pad_and_keeps_the_wind_drift():
     t = np.linspace(0.0, 50.0, 501)
     wind = np.tile([2.0, -1.0], (t.size, 1))  # 100 m east, 50 m south over the span
