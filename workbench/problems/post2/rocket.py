@@ -860,6 +860,12 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         "max_abs_after_burnout_transient_m": float(np.max(np.abs(dh[late]))),
     }
     out["altitude_vs_flight_computer"].update(_altitude_like_for_like(flight, imu, reference, atm, t, h, hist, k, late))
+    # the apogee like for like: ours against the flight computer's highest altitude made geometric above
+    # the pad (the metadata's apogee is the flight computer's on flights 1 and 3, 762.28 and 1131.2 m)
+    h_fc_apo = out["altitude_vs_flight_computer"]["like_for_like"]["flight_computer_max_geometric_m"]
+    out["apogee"]["flight_computer_geometric_m"] = h_fc_apo
+    out["apogee"]["error_vs_flight_computer_geometric_m"] = float(h[k] - h_fc_apo)
+    out["apogee"]["error_vs_flight_computer_geometric_percent"] = float(100.0 * (h[k] - h_fc_apo) / h_fc_apo)
     out["attitude_vs_flight_computer"] = _attitude_scores(flight, imu, reference)
     # estimated parameters (smoothed, end of the span) and the wind prior
     params = {}
