@@ -296,9 +296,9 @@ def test_flight_computer_altimeter_reference_is_measured(reference):
     up = np.clip(t, 0.0, None)
     p = np.where(t < 0.0, p_pad, p_pad - 12000.0 * np.sin(np.pi * np.clip(up / 40.0, 0.0, 1.0)))
     if reference == "initial":
-        h_fc = airbrakes.firm_altitude(p, p_init)
+        h_fc = rocket.firm_altitude(p, p_init)
     else:
-        h_fc = airbrakes.firm_altitude(p, 101325.0) - airbrakes.firm_altitude(p_init, 101325.0)
+        h_fc = rocket.firm_altitude(p, 101325.0) - rocket.firm_altitude(p_init, 101325.0)
     flight = {
         "pad": {"ignition_t_s": 0.0, "standby_pressure_pa": p_pad},
         "t_start_s": 2.8,
@@ -315,11 +315,11 @@ def test_flight_computer_altimeter_reference_is_measured(reference):
         assert fc["p_ref_pa"] == pytest.approx(p_init, rel=1e-9) and fc["offset_m"] == 0.0
     else:
         assert fc["p_ref_pa"] == 101325.0
-        assert fc["offset_m"] == pytest.approx(-float(airbrakes.firm_altitude(p_init, 101325.0)), abs=1e-6)
+        assert fc["offset_m"] == pytest.approx(-float(rocket.firm_altitude(p_init, 101325.0)), abs=1e-6)
     # the formula and its inverse; the standard day's 1 000 m (U.S. Standard Atmosphere 1976) within 0.2 m
     # (the formula's altitude is geopotential: 999.84 m)
-    assert airbrakes.firm_pressure(airbrakes.firm_altitude(p, p_pad), p_pad) == pytest.approx(p, rel=1e-12)
-    assert float(airbrakes.firm_altitude(89874.6, 101325.0)) == pytest.approx(1000.0, abs=0.2)
+    assert rocket.firm_pressure(rocket.firm_altitude(p, p_pad), p_pad) == pytest.approx(p, rel=1e-12)
+    assert float(rocket.firm_altitude(89874.6, 101325.0)) == pytest.approx(1000.0, abs=0.2)
 
 
 def test_short_reconstruction_follows_the_flight(excerpt_run):

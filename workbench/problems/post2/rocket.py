@@ -59,13 +59,6 @@ from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import pipeline
 from workbench.problems.post2.config import config_for
-from workbench.problems.post2.importers.airbrakes import (
-    FIRM_ALTITUDE_SCALE_M,
-    FIRM_PRESSURE_EXPONENT,
-    SEA_LEVEL_PRESSURE_PA,
-    firm_altitude,
-    firm_pressure,
-)
 
 __all__ = [
     "PAD_WINDOW_S",
@@ -83,6 +76,11 @@ __all__ = [
     "problem_file",
     "local_en",
     "score_flight",
+    "FIRM_ALTITUDE_SCALE_M",
+    "FIRM_PRESSURE_EXPONENT",
+    "SEA_LEVEL_PRESSURE_PA",
+    "firm_altitude",
+    "firm_pressure",
     "flight_computer_altimeter",
     "run_flight",
     "landing_point_inertial",
@@ -905,6 +903,31 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     return out
 
 
+#: the FIRM flight computer's altimeter formula (the pressure model of its UKF, ``ukf_functions.c`` of
+#: the NCSU FIRM firmware): p = p_ref (1 − h/44330)^5.255876, the standard day's troposphere
+#: (288.15 K at h = 0, −6.5 K/km; 44330 ≈ 288.15/0.0065 m) with ``p_ref`` the pressure at h = 0.
+#: Which ``p_ref`` a log used is measured, not assumed (:func:`flight_computer_altimeter`): flight 3's
+#: is its initial pressure (4.8 m RMS from the formula of its own logged pressure, 11.5 m with the
+#: other), flight 4's the standard 101 325 Pa with the altitude of its initial pressure subtracted
+#: (1.0 m, 4.5 m with the other); on flight 1 (pad at 101.7 kPa) the two are alike (11.9, 12.1 m)
+FIRM_ALTITUDE_SCALE_M = 44330.0
+FIRM_PRESSURE_EXPONENT = 5.255876
+#: the standard day's sea-level pressure [Pa]
+SEA_LEVEL_PRESSURE_PA = 101325.0
+
+
+def firm_altitude(p, p_ref: float) -> np.ndarray:
+    """The FIRM altimeter's standard-day altitude [m] of the pressure ``p`` [Pa] (any shape) with
+    ``p_ref`` [Pa] the pressure at its zero (:data:`FIRM_ALTITUDE_SCALE_M`)."""
+    return FIRM_ALTITUDE_SCALE_M * (1.0 - (np.asarray(p, float) / p_ref) ** (1.0 / FIRM_PRESSURE_EXPONENT))
+
+
+def firm_pressure(h, p_ref: float) -> np.ndarray:
+    """Inverse of :func:`firm_altitude`: the pressure [Pa] (shape of ``h``) at the FIRM altimeter's
+    standard-day altitude ``h`` [m] with ``p_ref`` [Pa] the pressure at its zero."""
+    return p_ref * (1.0 - np.asarray(h, float) / FIRM_ALTITUDE_SCALE_M) ** FIRM_PRESSURE_EXPONENT
+
+
 #: the flight computer's altimeter is measured against its own barometer from the end of the burnout
 #: transient to the end of the span, without the drogue's ejection (−0.2 .. +2 s: the charge
 #: pressurises the bay) — the windows :func:`pressure_sigma` does not use either
@@ -919,16 +942,16 @@ def _altimeter_window(t, flight: dict) -> np.ndarray:
 def flight_computer_altimeter(flight: dict, imu, reference) -> dict:
     """What the flight computer's altitude is, measured on its own log (not assumed).
 
-    Its altitude is a standard-day pressure altitude (:func:`~workbench.problems.post2.importers.
-    airbrakes.firm_altitude`: 15 °C at its zero, −6.5 K/km) of its barometer, fused with its IMU,
-    h_fc = firm_altitude(p, p_ref) + c.  Two references occur: its **initial** pressure (c = 0: zero
-    where it was switched on, which is not the pad at launch when the weather or the board's warming
-    moved the pressure since) and the standard day's **101 325 Pa** (c: minus the altitude of the
-    initial pressure).  Each candidate is pinned to the pad — its mean altitude over the pad window
-    (the last PAD_WINDOW_S s before ignition − IGNITION_GUARD_S) at the standby pressure — and the one
-    closer to the flight computer's altitude over :func:`_altimeter_window` (RMS of h_fc minus the
-    formula of the logged pressure) is the flight computer's.  ``flight`` the import's
-    ``flight.json``, ``imu``/``reference`` the telemetry of ``imu.csv``/``reference.csv``.
+    Its altitude is a standard-day pressure altitude (:func:`firm_altitude`: 15 °C at its zero, −6.5
+    K/km) of its barometer, fused with its IMU, h_fc = firm_altitude(p, p_ref) + c. Two references
+    occur: its **initial** pressure (c = 0: zero where it was switched on, which is not the pad at
+    launch when the weather or the board's warming moved the pressure since) and the standard day's
+    **101 325 Pa** (c: minus the altitude of the initial pressure). Each candidate is pinned to the pad
+    — its mean altitude over the pad window (the last PAD_WINDOW_S s before ignition − IGNITION_GUARD_S)
+    at the standby pressure — and the one closer to the flight computer's altitude over
+    :func:`_altimeter_window` (RMS of h_fc minus the formula of the logged pressure) is the flight
+    computer's. ``flight`` the import's ``flight.json``, ``imu``/``reference`` the telemetry of
+    ``imu.csv``/``reference.csv``.
 
     Returns a JSON-ready dict: ``reference`` ("initial" or "101325"), ``p_ref_pa`` [Pa],
     ``offset_m`` (c) [m], ``pad_reading_m`` [m] (its altitude on the pad at launch),

@@ -48,11 +48,6 @@ __all__ = [
     "block_means",
     "read_metadata",
     "import_flight",
-    "FIRM_ALTITUDE_SCALE_M",
-    "FIRM_PRESSURE_EXPONENT",
-    "SEA_LEVEL_PRESSURE_PA",
-    "firm_altitude",
-    "firm_pressure",
 ]
 
 #: flight-phase letters of the FIRM log: standby, motor, coast, free fall / parachute, landed
@@ -81,30 +76,6 @@ COLUMNS: dict[str, tuple[str, float, float]] = {
 }
 _LETTER = "state_letter"
 
-#: the FIRM flight computer's altimeter formula (the pressure model of its UKF, ``ukf_functions.c`` of
-#: the NCSU FIRM firmware): p = p_ref (1 − h/44330)^5.255876, the standard day's troposphere
-#: (288.15 K at h = 0, −6.5 K/km; 44330 ≈ 288.15/0.0065 m) with ``p_ref`` the pressure at h = 0.
-#: Which ``p_ref`` a log used is measured, not assumed (:func:`workbench.problems.post2.rocket.
-#: flight_computer_altimeter`): flight 3's is its initial pressure, flight 4's the standard 101 325 Pa
-#: with the altitude of its initial pressure subtracted (its altitude is 1.1 m RMS from that formula of
-#: its own logged pressure under the parachutes, 4.1 m from the other)
-FIRM_ALTITUDE_SCALE_M = 44330.0
-FIRM_PRESSURE_EXPONENT = 5.255876
-#: the standard day's sea-level pressure [Pa]
-SEA_LEVEL_PRESSURE_PA = 101325.0
-
-
-def firm_altitude(p, p_ref: float) -> np.ndarray:
-    """The FIRM altimeter's standard-day altitude [m] of the pressure ``p`` [Pa] (any shape) with
-    ``p_ref`` [Pa] the pressure at its zero (:data:`FIRM_ALTITUDE_SCALE_M`)."""
-    return FIRM_ALTITUDE_SCALE_M * (1.0 - (np.asarray(p, float) / p_ref) ** (1.0 / FIRM_PRESSURE_EXPONENT))
-
-
-def firm_pressure(h, p_ref: float) -> np.ndarray:
-    """Inverse of :func:`firm_altitude`: the pressure [Pa] (shape of ``h``) at the FIRM altimeter's
-    standard-day altitude ``h`` [m] with ``p_ref`` [Pa] the pressure at its zero."""
-    return p_ref * (1.0 - np.asarray(h, float) / FIRM_ALTITUDE_SCALE_M) ** FIRM_PRESSURE_EXPONENT
-
 
 @dataclass(frozen=True)
 class Gap:
@@ -124,8 +95,9 @@ class FlightLog:
     specific force [m/s²] and ``w_B`` (n, 3) body rate [rad/s] in the IMU's frame B; ``mag_B``
     (n, 3) [T]; ``pressure`` (n,) [Pa]; ``temperature`` (n,) [K] (the board's, not the air's);
     reference solution of the flight computer: ``ref_h`` (n,) [m] its altitude — a standard-day
-    pressure altitude (:func:`firm_altitude`) whose zero is its initial pressure, not the pad at
-    launch (it reads +0.0, +2.0, +7.6 m on the pad at launch on flights 1, 3, 4) —, ``ref_vz`` (n,)
+    pressure altitude (:func:`workbench.problems.post2.rocket.firm_altitude`) whose zero is its
+    initial pressure, not the pad at launch (it reads +0.0, +2.0, +7.6 m on the pad at launch on
+    flights 1, 3, 4) —, ``ref_vz`` (n,)
     [m/s] up, ``ref_q`` (n, 4) its quaternion scalar-last (as logged, frame not documented);
     ``gaps`` the gaps (:func:`find_gaps`); ``repeated_rows`` how many rows repeated the previous
     packet exactly (dropped); ``path`` the file."""
