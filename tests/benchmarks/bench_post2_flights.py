@@ -16,9 +16,12 @@ Per flight, two reconstructions of the same import (``workbench import airbrakes
 
 Scores: apogee vs ``metadata.json`` (m, %; also the standard-day pressure altitude of the same
 apogee, as an altimeter that assumes 15 °C reads it), landing error vs its 3σ, altitude vs the flight
-computer's solution, the gyro attitude vs the flight computer's quaternion (frame-free: tilt and
-rotation since the pad), and the estimated coast drag multiplier, barometer offset, drogue and main
-drag areas and winds.
+computer's solution (``altitude_vs_flight_computer``: raw, its altitude as logged; ``like_for_like``, its
+standard-day altitude made geometric above the pad in the site atmosphere, with the altimeter
+convention measured from its log in ``flight_computer_altimeter``; ``barometer_scale``, ours as its
+altimeter would read it — nearly the barometer against itself), the gyro attitude vs the flight
+computer's quaternion (frame-free: tilt and rotation since the pad), and the estimated coast drag
+multiplier, barometer offset, drogue and main drag areas and winds.
 """
 
 from __future__ import annotations
@@ -89,7 +92,10 @@ def main(argv=None) -> int:
             print(
                 f"{log}: apogee {p['apogee']['reconstructed_m']:.1f} m vs {p['apogee']['metadata_m']:.1f} "
                 f"({p['apogee']['error_percent']:+.2f} %); landing error {p['landing']['error_m']:.0f} m, "
-                f"inside 3σ {p['landing']['inside_3sigma']}; wind with landing {w['parameters']['wind']['value']}",
+                f"inside 3σ {p['landing']['inside_3sigma']}; altitude vs the flight computer RMS "
+                f"{p['altitude_vs_flight_computer']['rms_after_burnout_transient_m']:.1f} m raw, "
+                f"{p['altitude_vs_flight_computer']['like_for_like']['rms_after_burnout_transient_m']:.1f} m like for "
+                f"like; wind with landing {w['parameters']['wind']['value']}",
                 flush=True,
             )
     write_benchmark_json(args.json, __file__, {"flights": results}, argv)

@@ -240,17 +240,86 @@ def test_excerpt_reconstruction_is_healthy(excerpt_run):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="open (issue #9 case 5): 37 m RMS after the burnout transient on the excerpt (27/35/31 m on the "
-    "full flights). The flight computer's altitude is a standard-day pressure altitude that follows its "
-    "barometer, ours the geometric one anchored by the IMU-integrated boost (3.5 % apart on the 25 C days "
-    "of flights 3 and 4; on flight 1 the open air brakes' static-port error, absorbed by a 150-190 Pa baro "
-    "offset). Measured: a barometric altitude-scale state (baro_scale, 1 sigma 3 %) makes it 101 m (full "
-    "flights 55/52/39 m: it stretches the barometer to the IMU's altitude), a dynamic-pressure port error "
-    "(baro_q_coefficient) 67 m (33/33/30 m); see rocket.py after BARO_BIAS_SIGMA",
+    reason="open (issue #9 case 5): like for like (the flight computer's standard-day altitude made geometric "
+    "above the pad: its formula inverted, the pressure's altitude in the site atmosphere) 39.0 m RMS after "
+    "the burnout transient on the excerpt (raw 37.2 m); full flights 28.2/16.8/12.6 m (raw 27.1/35.1/30.9 m). "
+    "Flights 3 and 4 were the conventions (15 C vs 25 C: 3.5 % of the height; zero at switch-on: +2.0/+7.6 m "
+    "on the pad). Flight 1 is not: ours sits above the barometer's geometric altitude all along (coast "
+    "+42 m mean, apogee +24 m, under the main +21 m; the reconstruction touches down 16.6 m above the pad "
+    "where the barometer reads +0.9 m): the constant baro_bias (188 Pa) fitted against the IMU-anchored coast "
+    "behind the open air brakes is carried into the descent, and its v0.1 flight computer is 8 m (mean) below "
+    "its own barometer. baro_q_coefficient makes it worse like for like too (excerpt 68.6 m, flight 1 "
+    "34.4 m); see rocket.py after BARO_BIAS_SIGMA",
 )
 def test_altitude_follows_the_flight_computer_within_30_m(excerpt_run):
     _, _, _, s = excerpt_run
-    assert s["altitude_vs_flight_computer"]["rms_after_burnout_transient_m"] < 30.0
+    a = s["altitude_vs_flight_computer"]
+    assert np.isfinite(a["rms_after_burnout_transient_m"])  # the raw comparison: reported, not asserted
+    assert a["like_for_like"]["rms_after_burnout_transient_m"] < 30.0
+
+
+def test_flight_computer_altitude_is_converted_like_for_like(excerpt_run):
+    # flight 1's flight computer (v0.1) holds 0 on the pad; its standard-day altitude (15 C at the pad)
+    # made geometric in the 14 C site atmosphere shrinks by the hypsometric ratio T_site / 288.15 K
+    out, toml, _, s = excerpt_run
+    fc = s["altitude_vs_flight_computer"]["flight_computer_altimeter"]
+    assert fc["pad_reading_m"] == pytest.approx(0.0, abs=0.1)
+    ll = s["altitude_vs_flight_computer"]["like_for_like"]
+    t_site = json.loads((toml.parent / "flight.json").read_text(encoding="utf-8"))["metadata"]["temperature"]
+    assert ll["scale_at_apogee"] == pytest.approx(t_site / 288.15, abs=1e-3)
+    ref = read_telemetry(toml.parent / "reference.csv")
+    assert ll["flight_computer_max_geometric_m"] == pytest.approx(
+        float(np.max(ref.channel("h"))) * t_site / 288.15, abs=1.0
+    )
+    # the reverse comparison (ours on the barometer's scale) is reported beside it
+    assert np.isfinite(s["altitude_vs_flight_computer"]["barometer_scale"]["rms_after_burnout_transient_m"])
+
+
+class _Series:
+    """A stand-in for :class:`~workbench.io.telemetry.Telemetry`: ``time`` and ``channel(name)``."""
+
+    def __init__(self, t, **channels):
+        self.time = t
+        self._c = channels
+
+    def channel(self, name):
+        return self._c[name]
+
+
+@pytest.mark.parametrize("reference", ["initial", "101325"])
+def test_flight_computer_altimeter_reference_is_measured(reference):
+    # a flight computer switched on at 98 473 Pa, the pad at 98 384 Pa at launch (the weather moved):
+    # its altitude is the standard-day formula with its initial pressure or with 101 325 Pa minus the
+    # altitude of the initial pressure; the two differ by 0.55 % of the height, which the log tells apart
+    t = np.linspace(-3.0, 40.0, 4301)
+    p_init, p_pad = 98473.0, 98384.0
+    up = np.clip(t, 0.0, None)
+    p = np.where(t < 0.0, p_pad, p_pad - 12000.0 * np.sin(np.pi * np.clip(up / 40.0, 0.0, 1.0)))
+    if reference == "initial":
+        h_fc = rocket.firm_altitude(p, p_init)
+    else:
+        h_fc = rocket.firm_altitude(p, 101325.0) - rocket.firm_altitude(p_init, 101325.0)
+    flight = {
+        "pad": {"ignition_t_s": 0.0, "standby_pressure_pa": p_pad},
+        "t_start_s": 2.8,
+        "t_end_s": 40.0,
+        "t_ejection_s": 20.0,
+        "t_apogee_letter_s": 20.0,
+    }
+    fc = rocket.flight_computer_altimeter(flight, _Series(t, pressure=p), _Series(t, h=h_fc))
+    assert fc["reference"] == reference
+    other = "101325" if reference == "initial" else "initial"
+    assert fc["rms_vs_own_barometer_m"][reference] < 1e-6 < 1.0 < fc["rms_vs_own_barometer_m"][other]
+    assert fc["pad_reading_m"] == pytest.approx(float(h_fc[0]), abs=1e-9) and 7.0 < h_fc[0] < 8.0
+    if reference == "initial":
+        assert fc["p_ref_pa"] == pytest.approx(p_init, rel=1e-9) and fc["offset_m"] == 0.0
+    else:
+        assert fc["p_ref_pa"] == 101325.0
+        assert fc["offset_m"] == pytest.approx(-float(rocket.firm_altitude(p_init, 101325.0)), abs=1e-6)
+    # the formula and its inverse; the standard day's 1 000 m (U.S. Standard Atmosphere 1976) within 0.2 m
+    # (the formula's altitude is geopotential: 999.84 m)
+    assert rocket.firm_pressure(rocket.firm_altitude(p, p_pad), p_pad) == pytest.approx(p, rel=1e-12)
+    assert float(rocket.firm_altitude(89874.6, 101325.0)) == pytest.approx(1000.0, abs=0.2)
 
 
 def test_short_reconstruction_follows_the_flight(excerpt_run):
@@ -307,6 +376,20 @@ def test_barometer_scale_and_dynamic_pressure_states(excerpt_run):
     p0 = float(est0.model.observe(est0.x0, "pressure", est0.phase)[0])
     assert p0 == pytest.approx(float(m.env.atmosphere.pressure(h)), rel=1e-12)
     assert abs(float(expected) - p0) > 100.0  # the states change the reading by far more than round-off
+
+
+def test_wind_prior_blows_away_from_where_the_metadata_says_it_comes_from(excerpt_run):
+    # metadata: where the wind comes from (flight 1: NNE, 5.5 km/h); the state: the air's velocity
+    # [east, north] (v_rel = v - wind), so its prior points the other way (SSW), and the score turns it back
+    _, toml, _, s = excerpt_run
+    w = np.asarray(load_scenario(toml).data["states"]["wind"]["value"], float)
+    frm = math.radians(22.5)
+    np.testing.assert_allclose(w, -5.5 / 3.6 * np.array([math.sin(frm), math.cos(frm)]), rtol=1e-9)
+    wind = s["parameters"]["wind"]
+    assert wind["metadata_from_deg"] == 22.5
+    v = np.asarray(wind["value"], float)
+    assert wind["from_deg"] == pytest.approx(math.degrees(math.atan2(-v[0], -v[1])) % 360.0)
+    assert wind["speed_m_s"] == pytest.approx(float(np.hypot(*v)))
 
 
 def test_landing_heading_mixture_turns_the_air_path_about_the_pad_and_keeps_the_wind_drift():

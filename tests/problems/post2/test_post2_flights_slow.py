@@ -4,8 +4,10 @@ Needs ``EDL_FLIGHT_DATA`` (a folder containing ``airbrakes_firm/``); skipped wit
 The numbers are reported by ``tests/benchmarks/bench_post2_flights.py``; asserted here is what the
 reconstruction claims: every flight imported and reconstructed with every barometer sample used, the
 apogee within 5 % of the metadata's, the altitude within 40 m RMS of the flight computer's after the
-burnout transient, the magnetometer aligned in flight (its axes turned about the IMU's z, its dip
-then the site's) so the pad heading is trusted, and the landing point inside its 3σ on every flight.
+burnout transient as logged and within 30 m compared like for like (its standard-day altitude made
+geometric above the pad in the site atmosphere; measured 28.2, 16.8, 12.6 m), the magnetometer
+aligned in flight (its axes turned about the IMU's z, its dip then the site's) so the pad heading is
+trusted, and the landing point inside its 3σ on every flight.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ def test_real_flight(log, tmp_path):
     _, s = rocket.run_flight(toml)
     assert abs(s["apogee"]["error_percent"]) < 5.0
     assert s["altitude_vs_flight_computer"]["rms_after_burnout_transient_m"] < 40.0
+    assert s["altitude_vs_flight_computer"]["like_for_like"]["rms_after_burnout_transient_m"] < 30.0
     b = s["observations"]["baro"]
     assert b["accepted"] == b["samples"]
     fl = json.loads((tmp_path / "flight.json").read_text(encoding="utf-8"))

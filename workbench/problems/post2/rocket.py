@@ -76,6 +76,12 @@ __all__ = [
     "problem_file",
     "local_en",
     "score_flight",
+    "FIRM_ALTITUDE_SCALE_M",
+    "FIRM_PRESSURE_EXPONENT",
+    "SEA_LEVEL_PRESSURE_PA",
+    "firm_altitude",
+    "firm_pressure",
+    "flight_computer_altimeter",
     "run_flight",
     "landing_point_inertial",
 ]
@@ -414,19 +420,24 @@ BURNOUT_TRANSIENT_S = 2.5
 #: prior 1σ of the in-flight barometer offset [Pa] (~2.5 m): the pad altitude is fitted to the
 #: standby pressure, so what is left is a drift in flight (board heating, port effects)
 BARO_BIAS_SIGMA = 30.0
-# What the flight computer's altitude is: a standard-day pressure altitude above the pad (against the
-# standard-day altitude of the measured pressure: mean differences +8, −11, −8 m on the three
-# flights, 12-23 m RMS with its filter's lag at the ejection), so
-# on a 25 °C day it is ~3.5 % below the geometric altitude this reconstruction estimates (flights
-# 3, 4: the "2-5 % scale"); flight 1 (14 °C) differs by the static-port error of its open air
-# brakes.  Measured with the model's barometer states written into the problem files (benchmark,
-# predicted, altitude vs the flight computer after the burnout transient, RMS; without: 27/35/31 m,
-# excerpt 37 m): ``baro_scale`` (prior 1σ 3 %) 55/52/39 m (excerpt 101 m; it fits 0.92/0.97/0.99:
-# the barometer is stretched to the IMU's altitude, not the reverse); ``baro_q_coefficient``
-# (1σ 0.1) 33/33/30 m (excerpt 67 m; it fits 0.16/0.058/0.009 — the brakes stuck open, working,
-# retracted — and brings flight 1's baro_bias from 188 to 22 Pa, but moves its landing from 244 to
-# 444 m).  Neither is written: both move the reconstruction away from the barometer the flight
-# computer follows.
+# What the flight computer's altitude is (measured on its logs, flight_computer_altimeter): the
+# standard-day altitude (15 °C at its zero, −6.5 K/km) of its barometer, fused with its IMU, zero at its
+# initial pressure (flights 1, 3; flight 3 reads +2.0 m on the pad at launch) or at 101 325 Pa minus the
+# altitude of its initial pressure (flight 4, +7.6 m on the pad): 11.9, 4.8, 1.0 m RMS from that formula
+# of its own logged pressure after the burnout transient (flight 1's v0.1 filter leans on its IMU).  On the
+# 25 °C days that is ~3.5 % below the geometric altitude this reconstruction estimates, so the score
+# compares like for like too (the flight computer's altitude made geometric above the pad in the site
+# atmosphere; predicted, RMS after the burnout transient): 28.2/16.8/12.6 m on flights 1/3/4, excerpt
+# 39.0 m (as logged: 27.1/35.1/30.9, excerpt 37.2).  What is left on flight 1 is not a convention: ours
+# sits above the barometer's geometric altitude throughout (coast +42 m mean, under the main +21 m; it
+# touches down 16.6 m above the pad where the barometer reads +0.9 m), the constant baro_bias (188 Pa)
+# fitted against the IMU-anchored coast behind the open air brakes being carried into the descent.
+# Measured with the model's barometer states written into the problem files (as logged / like for like):
+# ``baro_scale`` (prior 1σ 3 %) 55/52/39 m as logged (excerpt 101 m; it fits 0.92/0.97/0.99: the
+# barometer is stretched to the IMU's altitude, not the reverse); ``baro_q_coefficient`` (1σ 0.1)
+# 33/33/30 m as logged, 34.4/15.1/12.5 m like for like (excerpt 67 / 68.6 m; it fits 0.16/0.058/0.009 —
+# the brakes stuck open, working, retracted — and brings flight 1's baro_bias from 188 to 22 Pa, but moves
+# its landing from 244 to 444 m).  Neither is written.
 
 
 def pressure_sigma(
@@ -541,6 +552,15 @@ def problem_file(
     drag areas, wind (prior: the site's surface wind); observations pressure and |specific force|;
     with ``landing`` also the landed coordinates (``landing.csv``) — the variant that estimates the
     winds under the parachutes (the IMU and the barometer do not see the horizontal drift)."""
+    # the metadata's direction is where the wind comes from; the state is the air's velocity [east,
+    # north] (where it goes: v_rel = v − ω×r − wind), hence the minus signs.  Checked on flight 3 (wind
+    # from S, 4.3 m/s at the surface): with the landed coordinates observed the wind comes out
+    # (+1.6 ± 1.4, +7.5 ± 1.6) m/s, i.e. from 192° at 7.7 m/s — 12° from the metadata's, where a
+    # from/to error would be 180° off and an east/north swap ~77° (flight 4: 212° at 4.7 m/s against SW,
+    # 4.8 m/s).  Without the landing (``predicted``) nothing horizontal is observed: flight 3's +5.8 m/s
+    # east (1σ 4.2: the prior's 4 grown by the walk, no information) drifts in slowly (+3.8 by the
+    # ejection) through second-order channels; all three flights' come out +5.0 to +5.8 m/s east there,
+    # which points at a common model error leaking into the unobserved state, not at the wind
     wf = math.radians(meta.wind_from_deg)
     w_en = (-meta.wind_speed * math.sin(wf), -meta.wind_speed * math.cos(wf))
     lines = [
@@ -826,7 +846,7 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         }
         out["landing"]["mahalanobis_linearised"] = out["landing"]["mahalanobis"]
         out["landing"]["inside_3sigma"] = out["landing"]["heading_nonlinear"]["inside_3sigma"]
-    # altitude vs the flight computer's solution
+    # altitude vs the flight computer's solution: raw (its altitude as logged, ours geometric above the pad)
     href = np.interp(t, reference.time, reference.channel("h"))
     dh = h - href
     late = t >= flight["t_start_s"] - TAIL_OFF_S + BURNOUT_TRANSIENT_S  # the baro is de-weighted before
@@ -837,6 +857,13 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         "rms_after_burnout_transient_m": float(np.sqrt(np.mean(dh[late] ** 2))),
         "max_abs_after_burnout_transient_m": float(np.max(np.abs(dh[late]))),
     }
+    out["altitude_vs_flight_computer"].update(_altitude_like_for_like(flight, imu, reference, atm, t, h, hist, k, late))
+    # the apogee like for like: ours against the flight computer's highest altitude made geometric above
+    # the pad (the metadata's apogee is the flight computer's on flights 1 and 3, 762.28 and 1131.2 m)
+    h_fc_apo = out["altitude_vs_flight_computer"]["like_for_like"]["flight_computer_max_geometric_m"]
+    out["apogee"]["flight_computer_geometric_m"] = h_fc_apo
+    out["apogee"]["error_vs_flight_computer_geometric_m"] = float(h[k] - h_fc_apo)
+    out["apogee"]["error_vs_flight_computer_geometric_percent"] = float(100.0 * (h[k] - h_fc_apo) / h_fc_apo)
     out["attitude_vs_flight_computer"] = _attitude_scores(flight, imu, reference)
     # estimated parameters (smoothed, end of the span) and the wind prior
     params = {}
@@ -862,9 +889,157 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
             float(np.min(hist["ca_multiplier"]["value"][coast, 0])),
             float(np.max(hist["ca_multiplier"]["value"][coast, 0])),
         ]
+    if "wind" in hist:
+        # the state is the air's velocity [east, north] (where it blows to); the metadata gives where
+        # it blows from: both as a compass bearing the wind comes from [deg], with the speed [m/s]
+        w_end = np.asarray(hist["wind"]["value"][-1], float)
+        params["wind"]["from_deg"] = float(np.degrees(np.arctan2(-w_end[0], -w_end[1])) % 360.0)
+        params["wind"]["speed_m_s"] = float(np.hypot(*w_end))
+        params["wind"]["metadata_from_deg"] = float(meta["wind_from_deg"])
+        params["wind"]["metadata_speed_m_s"] = float(meta["wind_speed"])
     out["parameters"] = params
     out["pad_altitude_m"] = h_pad
     out["observations"] = result.summary["observations"]
+    return out
+
+
+#: the FIRM flight computer's altimeter formula (the pressure model of its UKF, ``ukf_functions.c`` of
+#: the NCSU FIRM firmware): p = p_ref (1 − h/44330)^5.255876, the standard day's troposphere
+#: (288.15 K at h = 0, −6.5 K/km; 44330 ≈ 288.15/0.0065 m) with ``p_ref`` the pressure at h = 0.
+#: Which ``p_ref`` a log used is measured, not assumed (:func:`flight_computer_altimeter`): flight 3's
+#: is its initial pressure (4.8 m RMS from the formula of its own logged pressure, 11.5 m with the
+#: other), flight 4's the standard 101 325 Pa with the altitude of its initial pressure subtracted
+#: (1.0 m, 4.5 m with the other); on flight 1 (pad at 101.7 kPa) the two are alike (11.9, 12.1 m)
+FIRM_ALTITUDE_SCALE_M = 44330.0
+FIRM_PRESSURE_EXPONENT = 5.255876
+#: the standard day's sea-level pressure [Pa]
+SEA_LEVEL_PRESSURE_PA = 101325.0
+
+
+def firm_altitude(p, p_ref: float) -> np.ndarray:
+    """The FIRM altimeter's standard-day altitude [m] of the pressure ``p`` [Pa] (any shape) with
+    ``p_ref`` [Pa] the pressure at its zero (:data:`FIRM_ALTITUDE_SCALE_M`)."""
+    return FIRM_ALTITUDE_SCALE_M * (1.0 - (np.asarray(p, float) / p_ref) ** (1.0 / FIRM_PRESSURE_EXPONENT))
+
+
+def firm_pressure(h, p_ref: float) -> np.ndarray:
+    """Inverse of :func:`firm_altitude`: the pressure [Pa] (shape of ``h``) at the FIRM altimeter's
+    standard-day altitude ``h`` [m] with ``p_ref`` [Pa] the pressure at its zero."""
+    return p_ref * (1.0 - np.asarray(h, float) / FIRM_ALTITUDE_SCALE_M) ** FIRM_PRESSURE_EXPONENT
+
+
+#: the flight computer's altimeter is measured against its own barometer from the end of the burnout
+#: transient to the end of the span, without the drogue's ejection (−0.2 .. +2 s: the charge
+#: pressurises the bay) — the windows :func:`pressure_sigma` does not use either
+def _altimeter_window(t, flight: dict) -> np.ndarray:
+    """Boolean mask (n,) of the times ``t`` (n,) [s after launch] the altimeter is measured over."""
+    t = np.asarray(t, float)
+    t_ej = flight.get("t_ejection_s", flight["t_apogee_letter_s"])
+    sel = (t >= flight["t_start_s"] - TAIL_OFF_S + BURNOUT_TRANSIENT_S) & (t <= flight["t_end_s"])
+    return sel & ~((t >= t_ej - 0.2) & (t <= t_ej + 2.0))
+
+
+def flight_computer_altimeter(flight: dict, imu, reference) -> dict:
+    """What the flight computer's altitude is, measured on its own log (not assumed).
+
+    Its altitude is a standard-day pressure altitude (:func:`firm_altitude`: 15 °C at its zero, −6.5
+    K/km) of its barometer, fused with its IMU, h_fc = firm_altitude(p, p_ref) + c. Two references
+    occur: its **initial** pressure (c = 0: zero where it was switched on, which is not the pad at
+    launch when the weather or the board's warming moved the pressure since) and the standard day's
+    **101 325 Pa** (c: minus the altitude of the initial pressure). Each candidate is pinned to the pad
+    — its mean altitude over the pad window (the last PAD_WINDOW_S s before ignition − IGNITION_GUARD_S)
+    at the standby pressure — and the one closer to the flight computer's altitude over
+    :func:`_altimeter_window` (RMS of h_fc minus the formula of the logged pressure) is the flight
+    computer's. ``flight`` the import's ``flight.json``, ``imu``/``reference`` the telemetry of
+    ``imu.csv``/``reference.csv``.
+
+    Returns a JSON-ready dict: ``reference`` ("initial" or "101325"), ``p_ref_pa`` [Pa],
+    ``offset_m`` (c) [m], ``pad_reading_m`` [m] (its altitude on the pad at launch),
+    ``rms_vs_own_barometer_m`` {candidate: RMS [m]} and ``samples``."""
+    t = np.asarray(reference.time, float)
+    h_fc = np.asarray(reference.channel("h"), float)
+    p = np.asarray(imu.channel("pressure"), float)
+    t_pad_end = flight["pad"]["ignition_t_s"] - IGNITION_GUARD_S
+    pad = (t >= t_pad_end - PAD_WINDOW_S) & (t < t_pad_end)
+    if not np.any(pad):
+        raise ValueError("no flight-computer sample in the pad window: cannot pin its altimeter")
+    h_pad = float(np.mean(h_fc[pad]))
+    p_pad = float(flight["pad"]["standby_pressure_pa"])
+    candidates = {
+        "initial": (p_pad / (1.0 - h_pad / FIRM_ALTITUDE_SCALE_M) ** FIRM_PRESSURE_EXPONENT, 0.0),
+        "101325": (SEA_LEVEL_PRESSURE_PA, h_pad - float(firm_altitude(p_pad, SEA_LEVEL_PRESSURE_PA))),
+    }
+    win = _altimeter_window(t, flight)
+    rms = {
+        name: float(np.sqrt(np.mean((h_fc[win] - firm_altitude(p[win], p_ref) - c) ** 2)))
+        for name, (p_ref, c) in candidates.items()
+    }
+    best = min(rms, key=rms.get)
+    p_ref, c = candidates[best]
+    return {
+        "reference": best,
+        "p_ref_pa": float(p_ref),
+        "offset_m": float(c),
+        "pad_reading_m": h_pad,
+        "rms_vs_own_barometer_m": rms,
+        "samples": int(np.sum(win)),
+    }
+
+
+def _altitude_like_for_like(flight: dict, imu, reference, atm, t, h, hist, k: int, late) -> dict:
+    """The altitude comparisons with the flight computer that compare like with like (keys added to
+    ``altitude_vs_flight_computer`` by :func:`score_flight`; ``atm`` the site atmosphere, ``t`` (n,)
+    [s], ``h`` (n,) [m] our geometric altitude above the pad, ``hist`` the smoothed history, ``k`` the
+    apogee's index, ``late`` (n,) the mask after the burnout transient).
+
+    * ``like_for_like`` — the flight computer's altitude turned into what ours is, a geometric altitude
+      above the pad at launch: its formula inverted to the pressure it stands for
+      (:func:`flight_computer_altimeter`), that pressure's altitude in the site's atmosphere (the
+      reconstruction's own: the site temperature, −6.5 K/km — the hypsometric "true altitude"), minus
+      the pad's.  It takes out the two conventions (15 °C vs the day's temperature: 3.5 % of the
+      height on the 25 °C days; its zero at switch-on vs the pad at launch: +2.0 and +7.6 m on flights
+      3 and 4) and leaves what the two solutions disagree on: the barometer's in-flight error the
+      reconstruction estimates (``baro_bias``, the static-port error behind flight 1's open air
+      brakes) and the IMU-anchored coast against the barometer, the flight computer's own filter
+      (its lag and IMU-driven excursions, the ejection).  It cannot see an error of the site
+      atmosphere (temperature, lapse rate): both altitudes go through the same one.
+    * ``barometer_scale`` — the other way round: our reconstruction as the flight computer's
+      altimeter would read it (the model pressure at our altitude plus the estimated barometer
+      offset, through its formula).  Nearly a tautology — the reconstruction fits that same
+      barometer, so this compares the barometer with itself: what is left is the flight computer's
+      departure from its own barometer (``flight_computer_altimeter`` ``rms_vs_own_barometer_m``) and
+      our barometer residuals; it cannot detect an error of our altitude that the barometer fit hides."""
+    fc = flight_computer_altimeter(flight, imu, reference)
+    h_pad = flight["pad"]["pad_altitude_m"]
+    p_ref, c = fc["p_ref_pa"], fc["offset_m"]
+    tr = np.asarray(reference.time, float)
+    h_fc = np.asarray(reference.channel("h"), float)
+    h_fc_geo = atm.altitude_of_pressure(firm_pressure(h_fc - c, p_ref)) - h_pad  # geometric, above the pad
+    d = h - np.interp(t, tr, h_fc_geo)
+    out = {
+        "flight_computer_altimeter": fc,
+        "like_for_like": {
+            "meaning": "ours minus the flight computer's altitude as a geometric altitude above the pad "
+            "(its standard-day formula inverted, the pressure's altitude in the site atmosphere)",
+            "rms_m": float(np.sqrt(np.mean(d**2))),
+            "rms_after_burnout_transient_m": float(np.sqrt(np.mean(d[late] ** 2))),
+            "mean_after_burnout_transient_m": float(np.mean(d[late])),
+            "max_abs_after_burnout_transient_m": float(np.max(np.abs(d[late]))),
+            "at_apogee_m": float(d[k]),
+            "flight_computer_max_geometric_m": float(np.max(h_fc_geo)),
+            "scale_at_apogee": float(np.max(h_fc_geo) / (np.max(h_fc) - fc["pad_reading_m"])),
+        },
+    }
+    if "baro_bias" in hist:
+        h_b = h * (hist["baro_scale"]["value"][:, 0] if "baro_scale" in hist else 1.0)
+        p_read = atm.pressure(h_pad + h_b) + hist["baro_bias"]["value"][:, 0]
+        d_b = firm_altitude(p_read, p_ref) + c - np.interp(t, tr, h_fc)
+        out["barometer_scale"] = {
+            "meaning": "our reconstruction as the flight computer's altimeter reads it (model pressure + "
+            "estimated offset) minus its altitude: nearly the barometer against itself",
+            "rms_after_burnout_transient_m": float(np.sqrt(np.mean(d_b[late] ** 2))),
+            "mean_after_burnout_transient_m": float(np.mean(d_b[late])),
+        }
     return out
 
 

@@ -94,7 +94,10 @@ class FlightLog:
     """A FIRM log in SI: ``t`` (n,) [s, log clock]; ``letters`` (n,) phase letters; ``f_B`` (n, 3)
     specific force [m/s²] and ``w_B`` (n, 3) body rate [rad/s] in the IMU's frame B; ``mag_B``
     (n, 3) [T]; ``pressure`` (n,) [Pa]; ``temperature`` (n,) [K] (the board's, not the air's);
-    reference solution of the flight computer: ``ref_h`` (n,) [m] above the pad, ``ref_vz`` (n,)
+    reference solution of the flight computer: ``ref_h`` (n,) [m] its altitude — a standard-day
+    pressure altitude (:func:`workbench.problems.post2.rocket.firm_altitude`) whose zero is its
+    initial pressure, not the pad at launch (it reads +0.0, +2.0, +7.6 m on the pad at launch on
+    flights 1, 3, 4) —, ``ref_vz`` (n,)
     [m/s] up, ``ref_q`` (n, 4) its quaternion scalar-last (as logged, frame not documented);
     ``gaps`` the gaps (:func:`find_gaps`); ``repeated_rows`` how many rows repeated the previous
     packet exactly (dropped); ``path`` the file."""
