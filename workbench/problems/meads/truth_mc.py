@@ -48,8 +48,6 @@ from typing import Any
 
 import numpy as np
 
-from workbench.estimation.montecarlo import run_monte_carlo
-from workbench.io import progress
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.problems.meads import pipeline as md
@@ -57,6 +55,7 @@ from workbench.problems.meads.config import config_for
 from workbench.problems.meads.montecarlo import OBJECTIVES
 from workbench.problems.meads.synthetic import load_truth, synthesize_from_truth
 from workbench.problems.meads.truth import MeadsDispersionSigmas, disperse_truth_spec, simulate_entry
+from workbench.problems.members import run_members
 
 __all__ = [
     "QUANTITIES",
@@ -455,17 +454,9 @@ def run_full_monte_carlo(
     removed = config_for(scenario).pressure.failure_port
     sc = scenario.with_overrides({"sensors.pressure.failure_port": ""}) if removed else scenario
     job = McJob(sc, bool(disperse_truth), sigmas or MeadsDispersionSigmas())
-    with progress.current().counter("Monte Carlo members", total=int(n_runs), unit="members") as bar:
-        run = run_monte_carlo(
-            _run_member,
-            int(n_runs),
-            shared=job,
-            seed=int(seed),
-            workers=int(workers),
-            scheduler=scheduler,
-            name=f"meads-truth-mc-{int(seed)}",
-            progress=bar,
-        )
+    run = run_members(
+        _run_member, n_runs, shared=job, seed=seed, workers=workers, scheduler=scheduler, name=f"meads-truth-mc-{seed}"
+    )
     members: list[MemberErrors] = list(run.results)
     ok = [m for m in members if not m.failed]
     if not ok:
