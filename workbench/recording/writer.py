@@ -283,7 +283,9 @@ class Recorder:
         self.stream = stream
 
     # ------------------------------------------------------------------ helpers
-    def _index(self, t: Any, step: Any = None, sequences: dict[str, Any] | None = None) -> tuple[list[rr.TimeColumn], int]:
+    def _index(
+        self, t: Any, step: Any = None, sequences: dict[str, Any] | None = None
+    ) -> tuple[list[rr.TimeColumn], int]:
         """The index columns of n rows: ``t`` (n,) [s] on ``time`` (None: no ``time`` index, then
         ``sequences`` must give one), ``step`` (n,) integers on ``step``, ``sequences`` {timeline:
         (n,) integers} on other sequence timelines (e.g. :data:`layout.MACH_DESCENDING`)."""
