@@ -2,7 +2,10 @@
 
 The trade study (paper Fig. 6, :mod:`.montecarlo`): ``/plots/trade_study/<quantity>/<level>`` —
 3σ over the runs of α, β [deg], q∞ [%] and Mach error against time, one series per error level,
-and ``.../objective`` the science objective; the table of levels × objectives as the report.
+and ``.../objective`` the science objective; the table of levels × objectives as the report.  The
+runs share one trajectory, so the same rows are also on the ``minus_100_mach`` timeline (its true
+Mach): the time panel's timeline switches the plots to Mach, for reading beside the full-error
+Monte Carlo.
 
 The full-error-model Monte Carlo against the truth (paper Figs. 11–13, :mod:`.truth_mc`,
 ``--truth-sim``), against the flight condition: on the ``minus_100_mach`` timeline (x =
@@ -78,7 +81,9 @@ def trade_markdown(summary: dict) -> str:
 
 
 def record_trade_study(path: Path, name: str, ts: TradeStudy, summary: dict) -> Path:
-    """Write the trade-study recording (atomically) and return its path."""
+    """Write the trade-study recording (atomically) and return its path: rows on ``time`` and on
+    ``minus_100_mach`` (module docstring)."""
+    x = {layout.MACH_DESCENDING: mach_axis(ts.mach)}  # the shared trajectory's true Mach
     with open_recording(
         path, name, blueprint=trade_blueprint(), properties={"run": {"kind": "meads_trade_study"}}
     ) as rec:
@@ -88,6 +93,7 @@ def record_trade_study(path: Path, name: str, ts: TradeStudy, summary: dict) -> 
                     layout.meads_trade_path(q, level_name(lv)),
                     ts.t,
                     ts.three_sigma[lv][:, j],
+                    sequences=x,
                     names=f"{100 * lv:g} % of reading",
                     colors=_COLORS[i % len(_COLORS)],
                 )
@@ -96,6 +102,7 @@ def record_trade_study(path: Path, name: str, ts: TradeStudy, summary: dict) -> 
                 layout.meads_trade_path(q, "objective"),
                 ts.t,
                 np.full(ts.t.size, obj),
+                sequences=x,
                 names="objective",
                 colors=(0, 0, 0),
             )
