@@ -26,7 +26,7 @@ import rerun.blueprint as rrb
 from workbench.problems.meads import truth_mc as tmc
 from workbench.problems.meads.montecarlo import QUANTITIES, TradeStudy, level_name
 from workbench.recording import layout
-from workbench.recording.blueprint import plot_view, report_view
+from workbench.recording.blueprint import plot_view, report_view, tab
 from workbench.recording.writer import open_recording
 
 __all__ = [
@@ -148,12 +148,15 @@ def truth_mc_blueprint(x_range: tuple[int, int] | None = None) -> rrb.Blueprint:
         rrb.Horizontal(
             rrb.Tabs(
                 *[
-                    plot_view(
-                        _MC_UNITS[q] + " vs Mach, x = −100·Mach (−2500 = M 25, flight left to right) — "
-                        "blue least squares, orange EKF pass 1, green EKF pass 2: thick Monte Carlo, "
-                        "thin median reported, dots bins with too few members; black objective",
-                        layout.join(layout.MEADS_TRUTH_MC, q),
-                        x_range=x_range,
+                    tab(
+                        _MC_UNITS[q].replace(" 3σ", ""),
+                        plot_view(
+                            _MC_UNITS[q] + " vs Mach, x = −100·Mach (−2500 = M 25, flight left to right) — "
+                            "blue least squares, orange EKF pass 1, green EKF pass 2: thick Monte Carlo, "
+                            "thin median reported, dots bins with too few members; black objective",
+                            layout.join(layout.MEADS_TRUTH_MC, q),
+                            x_range=x_range,
+                        ),
                     )
                     for q in tmc.QUANTITIES
                 ]
