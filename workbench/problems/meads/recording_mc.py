@@ -42,13 +42,19 @@ _UNITS = {"alpha_deg": "α 3σ [deg]", "beta_deg": "β 3σ [deg]", "qbar_pct": "
 _COLORS = [(40, 120, 220), (40, 170, 60), (230, 150, 20), (200, 40, 40), (120, 60, 180)]
 
 
-def trade_blueprint() -> rrb.Blueprint:
-    """One time-series tab per quantity and the table."""
+def trade_blueprint(window: tuple[float, float] | None = None) -> rrb.Blueprint:
+    """One time-series tab per quantity, opened on ``window`` (t0, t1) [s] (the study's samples)
+    when given, and the table."""
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Tabs(
                 *[
-                    plot_view(_UNITS[q] + " vs time", layout.join(layout.MEADS_TRADE_STUDY, q), legend="RightTop")
+                    plot_view(
+                        _UNITS[q] + " vs time",
+                        layout.join(layout.MEADS_TRADE_STUDY, q),
+                        legend="RightTop",
+                        window=window,
+                    )
                     for q in QUANTITIES
                 ]
             ),
@@ -84,8 +90,9 @@ def record_trade_study(path: Path, name: str, ts: TradeStudy, summary: dict) -> 
     """Write the trade-study recording (atomically) and return its path: rows on ``time`` and on
     ``minus_100_mach`` (module docstring)."""
     x = {layout.MACH_DESCENDING: mach_axis(ts.mach)}  # the shared trajectory's true Mach
+    window = (float(ts.t[0]), float(ts.t[-1])) if ts.t.size >= 2 else None  # the viewer opens on the cursor
     with open_recording(
-        path, name, blueprint=trade_blueprint(), properties={"run": {"kind": "meads_trade_study"}}
+        path, name, blueprint=trade_blueprint(window), properties={"run": {"kind": "meads_trade_study"}}
     ) as rec:
         for j, q in enumerate(QUANTITIES):
             for i, lv in enumerate(ts.levels):
