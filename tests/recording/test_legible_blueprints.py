@@ -35,7 +35,7 @@ def _blueprints():
     from workbench.problems.entry.recording import entry_blueprint
     from workbench.problems.entry.recording_mc import validation_blueprint
     from workbench.problems.meads.recording import meads_blueprint
-    from workbench.problems.meads.recording_mc import trade_blueprint
+    from workbench.problems.meads.recording_mc import trade_blueprint, truth_mc_blueprint
     from workbench.problems.post2.recording import post2_blueprint
 
     impact = {"point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0]), "t0": 1.5, "t1": 2.0}
@@ -50,6 +50,7 @@ def _blueprints():
         "entry validation": validation_blueprint(),
         "meads": meads_blueprint(),
         "meads trade study": trade_blueprint(),
+        "meads truth Monte Carlo": truth_mc_blueprint((-3050, -225)),
         "post2": post2_blueprint(
             ["position", "velocity", "j2"],
             ["gravity"],

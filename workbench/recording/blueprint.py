@@ -140,6 +140,7 @@ def plot_view(
     y_range: tuple[float, float] | None = None,
     time_range: Any = None,
     window: tuple[float, float] | None = None,
+    x_range: tuple[int, int] | None = None,
     contents: Any = None,
 ) -> rrb.TimeSeriesView:
     """A time-series view whose name states the y unit, with a legend that does not cover the data.
@@ -152,7 +153,9 @@ def plot_view(
     plotted unit fixes the y axis (zoom on an interesting band); ``time_range`` a
     ``VisibleTimeRange`` (the data shown, e.g. trailing the cursor); ``window`` (t0, t1) [s] a fixed
     zoom: only that data, and the x axis opened on it (the viewer otherwise opens the x axis on its
-    own span); ``contents`` an entity query other than ``$origin/**``.
+    own span); ``x_range`` (lo, hi) the x axis opened on that span of a *sequence* timeline (e.g.
+    ``minus_100_mach``; the viewer otherwise opens it around the time cursor); ``contents`` an
+    entity query other than ``$origin/**``.
     """
     if not has_unit(name):
         raise ValueError(f"plot view {name!r} must state its unit in brackets, e.g. '[m]' or '[-]'")
@@ -171,6 +174,15 @@ def plot_view(
             view_range=rrb.TimeRange(
                 start=rrb.TimeRangeBoundary.absolute(seconds=float(window[0])),
                 end=rrb.TimeRangeBoundary.absolute(seconds=float(window[1])),
+            )
+        )
+    if x_range is not None:
+        if window is not None:
+            raise ValueError("give window or x_range, not both")
+        kw["axis_x"] = rrb.TimeAxis(
+            view_range=rrb.TimeRange(
+                start=rrb.TimeRangeBoundary.absolute(seq=int(x_range[0])),
+                end=rrb.TimeRangeBoundary.absolute(seq=int(x_range[1])),
             )
         )
     if contents is not None:

@@ -43,7 +43,10 @@ TIME = "time"
 STEP = "step"
 ITERATION = "iteration"
 SAMPLE = "sample"
-TIMELINES = (TIME, STEP, ITERATION, SAMPLE)
+#: A flight condition as the x axis: the value is −round(100 · Mach), so Mach decreases left to
+#: right as in flight (−2500 = Mach 25); Rerun plots against timelines only, and they are integers.
+MACH_DESCENDING = "minus_100_mach"
+TIMELINES = (TIME, STEP, ITERATION, SAMPLE, MACH_DESCENDING)
 
 # ------------------------------------------------------------------------------- generic: 3D scene
 WORLD = "/world"

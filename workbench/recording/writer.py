@@ -283,17 +283,31 @@ class Recorder:
         self.stream = stream
 
     # ------------------------------------------------------------------ helpers
-    def _index(self, t: Any, step: Any = None) -> tuple[list[rr.TimeColumn], int]:
-        t = np.asarray(t, dtype=np.float64)
-        if t.ndim != 1:
-            raise ValueError(f"t must be 1-D seconds, got shape {t.shape}")
-        idx = [rr.TimeColumn(layout.TIME, duration=to_ns(t))]
-        if step is not None:
-            s = np.asarray(step)
-            if s.shape != t.shape or not np.issubdtype(s.dtype, np.integer):
-                raise ValueError(f"step must be integers of shape {t.shape}, got {s.dtype} {s.shape}")
-            idx.append(rr.TimeColumn(layout.STEP, sequence=s.astype(np.int64)))
-        return idx, len(t)
+    def _index(
+        self, t: Any, step: Any = None, sequences: dict[str, Any] | None = None
+    ) -> tuple[list[rr.TimeColumn], int]:
+        """The index columns of n rows: ``t`` (n,) [s] on ``time`` (None: no ``time`` index, then
+        ``sequences`` must give one), ``step`` (n,) integers on ``step``, ``sequences`` {timeline:
+        (n,) integers} on other sequence timelines (e.g. :data:`layout.MACH_DESCENDING`)."""
+        cols: dict[str, Any] = {} if step is None else {layout.STEP: step}
+        cols.update(sequences or {})
+        idx: list[rr.TimeColumn] = []
+        n = None
+        if t is not None:
+            t = np.asarray(t, dtype=np.float64)
+            if t.ndim != 1:
+                raise ValueError(f"t must be 1-D seconds, got shape {t.shape}")
+            idx.append(rr.TimeColumn(layout.TIME, duration=to_ns(t)))
+            n = len(t)
+        if not idx and not cols:
+            raise ValueError("rows need an index: t [s] or a sequence timeline")
+        for name, values in cols.items():
+            s = np.asarray(values)
+            if s.ndim != 1 or (n is not None and len(s) != n) or not np.issubdtype(s.dtype, np.integer):
+                raise ValueError(f"{name} must be 1-D integers of {n} rows, got {s.dtype} {s.shape}")
+            n = len(s)
+            idx.append(rr.TimeColumn(name, sequence=s.astype(np.int64)))
+        return idx, int(n)
 
     @staticmethod
     def _check_rows(name: str, a: np.ndarray, n: int) -> None:
@@ -370,6 +384,7 @@ class Recorder:
         values: Any,
         *,
         step: Any = None,
+        sequences: dict[str, Any] | None = None,
         names: str | Sequence[str] | None = None,
         colors: Any = None,
         widths: float | Sequence[float] | None = None,
@@ -378,8 +393,10 @@ class Recorder:
 
         ``names``/``colors``/``widths`` (one, or one per series) go into a static
         ``SeriesLines`` on the same entity, logged only when given. Units are the caller's (SI).
+        ``sequences`` {timeline: (n,) integers} indexes the rows on other sequence timelines too
+        (``t`` None: on those only), e.g. a flight condition as the x axis.
         """
-        idx, n = self._index(t, step)
+        idx, n = self._index(t, step, sequences)
         v = np.asarray(values, dtype=np.float64)
         if v.ndim not in (1, 2):
             raise ValueError(f"scalars: values must be (n,) or (n, k), got {v.shape}")
@@ -407,13 +424,14 @@ class Recorder:
         marker: str = "circle",
         size: float = 2.0,
         step: Any = None,
+        sequences: dict[str, Any] | None = None,
     ) -> None:
         """Raw measurements ``values`` (n,) or (n, k) drawn as markers (static ``SeriesPoints``).
 
         ``marker`` is a Rerun marker shape name ("circle", "cross", "diamond", ...), ``size`` in
-        UI points; ``names``/``colors`` one or one per series.
+        UI points; ``names``/``colors`` one or one per series; ``sequences`` as :meth:`scalars`.
         """
-        idx, n = self._index(t, step)
+        idx, n = self._index(t, step, sequences)
         v = np.asarray(values, dtype=np.float64)
         if v.ndim not in (1, 2):
             raise ValueError(f"scatter: values must be (n,) or (n, k), got {v.shape}")

@@ -29,3 +29,33 @@ def test_trade_study_is_executor_independent_and_scales(shared, monkeypatch):
     row = loop.summary["table"]["0.5%"]
     assert set(row) == {"alpha_deg", "beta_deg", "qbar_pct", "mach"}
     assert row["qbar_pct"]["max_3sigma"] < loop.summary["table"]["5%"]["qbar_pct"]["max_3sigma"]
+
+
+def test_trade_study_recording_is_on_time_and_on_mach(tmp_path):
+    from workbench.problems.meads.recording_mc import mach_axis, record_trade_study
+    from workbench.recording import layout
+    from workbench.recording.reader import read_recording
+
+    n, levels = 12, (0.01, 0.05)
+    t = 40.0 + np.arange(n)
+    mach = np.linspace(25.0, 3.0, n)
+    three = {lv: np.tile(100 * lv * np.linspace(1.0, 2.0, n)[:, None], (1, 4)) for lv in levels}
+    row = {"max_3sigma": 1.0, "median_3sigma": 0.5, "met": False}
+    summary = {
+        "runs_per_level": 10,
+        "fixed_r": 0.001,
+        "objectives_3sigma": mcmod.OBJECTIVES,
+        "table": {f"{100 * lv:g}%": {q: dict(row) for q in mcmod.QUANTITIES} for lv in levels},
+        "executor": "loop",
+        "wall_s": 0.1,
+    }
+    ts = mcmod.TradeStudy(t, mach, np.full(n, 1e3), levels, three, three, summary, 0.1)
+    rec = read_recording(record_trade_study(tmp_path / "trade.rrd", "trade", ts, summary))
+    entity = layout.meads_trade_path("qbar_pct", mcmod.level_name(0.05))
+    tt, y = rec.scalars(entity)
+    np.testing.assert_allclose(tt, t)
+    x, ym = rec.scalars(entity, layout.MACH_DESCENDING)
+    np.testing.assert_array_equal(x, mach_axis(mach))  # Mach falls: x rises
+    np.testing.assert_allclose(ym[:, 0], three[0.05][:, 2])
+    np.testing.assert_allclose(y, ym)  # the same rows on both timelines
+    assert x[0] == -2500 and x[-1] == -300

@@ -121,6 +121,57 @@ def test_summarize_flags_disagreements_and_objectives():
     assert "spread matched" in next(x for x in s["disagreements"] if x.startswith("least_squares mach"))
 
 
+def test_aggregate_by_mach_pools_each_member_at_its_own_flight_condition():
+    # 4 members fly the same Mach history shifted in time: per time they are at different Mach,
+    # per Mach bin the same.  The error depends on the Mach only (plus noise), so a per-time
+    # spread mixes flight conditions while the per-bin spread is the noise alone.
+    rng = np.random.default_rng(3)
+    K, n = 4, 400
+    shift = np.array([0, 40, 80, 120])
+    mach = np.full((K, n), np.nan)
+    for k in range(K):
+        mach[k, shift[k] :] = np.linspace(20.0, 2.0, n - shift[k])
+    qbar = np.where(np.isfinite(mach), 2000.0, np.nan)
+    qbar[0, -50:] = 500.0  # member 0 ends below 850 Pa: not scored
+    err = np.full((K, n, Q, E), np.nan)
+    sig = np.full_like(err, np.nan)
+    a = (slice(None), slice(None), IQ["alpha_deg"], IE["ekf_pass2"])
+    err[a] = 0.05 * mach + 0.01 * rng.standard_normal((K, n))
+    sig[a] = np.where(np.isfinite(mach), 0.01, np.nan)
+    m1 = (slice(1, 2), slice(None), IQ["mach"], IE["ekf_pass1"])  # one member only: thin everywhere
+    err[m1], sig[m1] = 0.1, 0.2
+    bm = tmc.aggregate_by_mach(err, sig, qbar, mach)
+    assert np.all(np.diff(bm["mach_mid"]) < 0)  # high Mach first
+    assert bm["mach_hi"][0] == 20.0 + 1.0 and bm["mach_lo"][-1] == 2.0  # Mach 20 falls in [20, 21)
+    j = (slice(None), IQ["alpha_deg"], IE["ekf_pass2"])
+    edges = np.asarray(tmc.MACH_BIN_EDGES)
+    for i, (lo, hi) in enumerate(zip(bm["mach_lo"], bm["mach_hi"], strict=True)):
+        assert hi == edges[np.searchsorted(edges, lo) + 1]
+        sel = (mach >= lo) & (mach < hi) & (qbar >= 850.0)
+        e = err[a][sel]
+        assert bm["count"][j][i] == sel.sum() and bm["members"][j][i] == np.any(sel, axis=1).sum()
+        np.testing.assert_allclose(bm["mc_3sigma"][j][i], 3 * e.std(ddof=1), rtol=1e-12)
+        np.testing.assert_allclose(bm["mc_3rms"][j][i], 3 * np.sqrt(np.mean(e**2)), rtol=1e-12)
+        assert bm["reported_3sigma_median"][j][i] == pytest.approx(0.03)
+    # within a 1-Mach bin the error changes by 0.05 (the bin width): spread ~ 0.05/√12 ⊕ 0.01
+    assert np.all(bm["mc_3sigma"][j][bm["mach_lo"] >= 5.0] < 3 * 0.025)
+    per_time = tmc.aggregate(err, sig)["mc_3sigma"][:, IQ["alpha_deg"], IE["ekf_pass2"]]
+    assert np.nanmedian(per_time) > 2 * np.median(bm["mc_3sigma"][j])  # time mixes flight conditions
+    assert bm["solid"][j].all()  # 3-4 members everywhere ≥ max(2, ⌈0.5 · 4⌉)
+    low = bm["mach_lo"] == 2.0
+    assert bm["members"][j][low][0] == 3  # member 0 is below 850 Pa there
+    m = (slice(None), IQ["mach"], IE["ekf_pass1"])
+    assert (bm["members"][m] == 1).all() and not bm["solid"][m].any()
+    assert np.nanmax(bm["mc_3sigma"][m]) < 1e-12 and (bm["inside"][m] == 1.0).all()  # one member's samples
+    table = tmc.summarize(tmc.solid_bins(bm), over="Mach bins")["table"]
+    assert "ekf_pass1" not in table  # thin bins are left out of the table
+    assert table["ekf_pass2"]["alpha_deg"]["samples"] == bm["solid"][j].sum()
+    js = tmc.by_mach_json(bm)
+    col = js["estimators"]["ekf_pass2"]["alpha_deg"]
+    assert js["mach_lo"] == bm["mach_lo"].tolist() and col["members"] == bm["members"][j].tolist()
+    assert js["estimators"]["ekf_pass1"]["mach"]["solid"] == [False] * len(js["mach_lo"])
+
+
 def test_error_histories_of_a_constructed_reconstruction():
     t = np.arange(6) / 8.0
     truth = {
@@ -273,10 +324,11 @@ def test_full_monte_carlo_is_executor_independent_and_recorded(scenario, tmp_pat
     # two different truths: the members' flights differ
     assert loop.members[0].info["truth"] != loop.members[1].info["truth"]
     rec = read_recording(tmp_path / "msl_meads_truth_mc.rrd")
-    t, y = rec.scalars(layout.meads_truth_mc_path("qbar_pct", "ekf_pass2_mc"))
-    y = y[:, 0]
-    v = loop.curves["mc_3sigma"][:, IQ["qbar_pct"], IE["ekf_pass2"]]
-    np.testing.assert_allclose(y, v[np.isfinite(v)], rtol=1e-12)
+    x, y = rec.scalars(layout.meads_truth_mc_path("qbar_pct", "ekf_pass2_mc"), layout.MACH_DESCENDING)
+    bm, j = loop.by_mach, (slice(None), IQ["qbar_pct"], IE["ekf_pass2"])
+    ok = bm["solid"][j] & np.isfinite(bm["mc_3sigma"][j])
+    np.testing.assert_allclose(y[:, 0], bm["mc_3sigma"][j][ok], rtol=1e-12)  # sorted by x: high Mach first
+    assert summary["by_mach"]["mach_lo"] == bm["mach_lo"].tolist() and summary["table_by_time"]
     assert "/plots/truth_mc/wind_down_mps/ekf_pass1_mc" in set(rec.entities())
 
 
@@ -285,9 +337,12 @@ def _constructed_result(K=5, n=40):
     t = np.arange(n) / 8.0
     err = rng.standard_normal((K, n, Q, E))
     sig = np.full_like(err, 0.5)
-    err[:, :5], sig[:, :5] = np.nan, np.nan  # below 850 Pa
     err[..., IQ["wind_down_mps"], IE["least_squares"]] = np.nan
-    agg = tmc.aggregate(err, sig)
+    mach = np.tile(np.linspace(12.0, 2.0, n), (K, 1)) + 0.3 * np.arange(K)[:, None]
+    qbar = np.full((K, n), 1e3)
+    qbar[:, :5] = 500.0  # below 850 Pa
+    err[1:, :, IQ["beta_deg"], IE["ekf_pass1"]] = np.nan  # one member only: thin bins
+    bm = tmc.aggregate_by_mach(err, sig, qbar, mach)
     summary = {
         "n_runs": K,
         "n_ok": K,
@@ -295,38 +350,50 @@ def _constructed_result(K=5, n=40):
         "failure_port_switched_off": "P5",
         "mc_3sigma_relative_uncertainty": 1 / math.sqrt(2 * (K - 1)),
         "min_qbar_pa": 850.0,
+        "min_bin_members": 3,
         "objectives_3sigma": {"alpha_deg": 0.5, "beta_deg": 0.5, "qbar_pct": 2.0, "mach": 0.1},
         "executor": "in-process loop",
         "wall_s": 1.0,
         "member_wall_s": {"median": 0.2, "max": 0.3},
         "failed_members": [],
-        **tmc.summarize(agg),
+        **tmc.summarize(tmc.solid_bins(bm), over="Mach bins"),
+        "by_mach": tmc.by_mach_json(bm),
     }
-    return tmc.FullMcResult(t, agg, np.ones(n), np.full(n, 1e3), (), summary), summary
+    agg = tmc.aggregate(err, sig)
+    return tmc.FullMcResult(t, agg, mach[0], qbar[0], (), summary, bm), summary
 
 
-def test_recording_holds_the_curves_and_the_table(tmp_path):
-    from workbench.problems.meads.recording_mc import record_truth_mc, truth_mc_markdown
+def test_recording_holds_the_curves_against_mach_and_the_table(tmp_path):
+    from workbench.problems.meads.recording_mc import mach_axis, record_truth_mc, truth_mc_markdown
     from workbench.recording.reader import read_recording
 
     res, summary = _constructed_result()
     md = truth_mc_markdown(summary)
     assert "| alpha_deg | least squares |" in md and "|  | EKF pass 2 |" in md and "P5 switched off" in md
-    assert md.count("| mach |") == 1 and md.count("|  | EKF pass 1 |") == len(tmc.QUANTITIES) - 1
+    assert md.count("| mach |") == 1
     assert "| wind_down_mps | EKF pass 1 |" in md  # no least-squares vertical wind
     assert all(d in md for d in summary["disagreements"]) and summary["disagreements"]  # 3σ 1.5 vs MC ~3
+    bm = res.by_mach
+    assert "Per Mach bin, EKF pass 2" in md and f"| {bm['mach_lo'][0]:g}–{bm['mach_hi'][0]:g} |" in md
     path = record_truth_mc(tmp_path / "mc.rrd", "mc", res, summary)
     rec = read_recording(path)
     ents = set(rec.entities())
     assert layout.meads_truth_mc_path("wind_down_mps", "least_squares_mc") not in ents  # no values: no series
     assert layout.meads_truth_mc_path("density_pct", "objective") not in ents  # no objective for density
-    t, y = rec.scalars(layout.meads_truth_mc_path("beta_deg", "ekf_pass1_mc"))
-    y = y[:, 0]
-    np.testing.assert_allclose(t, res.t[5:])
-    np.testing.assert_allclose(y, res.curves["mc_3sigma"][5:, IQ["beta_deg"], IE["ekf_pass1"]], rtol=1e-12)
-    _, r = rec.scalars(layout.meads_truth_mc_path("beta_deg", "ekf_pass1_reported"))
-    r = r[:, 0]
-    np.testing.assert_allclose(r, 1.5)
-    _, o = rec.scalars(layout.meads_truth_mc_path("mach", "objective"))
-    o = o[:, 0]
-    assert np.all(o == 0.1) and o.size == 35
+    assert layout.meads_truth_mc_path("beta_deg", "ekf_pass1_mc") not in ents  # thin everywhere: markers only
+    x_axis = layout.MACH_DESCENDING
+    x, y = rec.scalars(layout.meads_truth_mc_path("beta_deg", "ekf_pass1_mc_thin"), x_axis)
+    seen = bm["count"][:, IQ["beta_deg"], IE["ekf_pass1"]] > 0  # member 0's bins above 850 Pa
+    np.testing.assert_array_equal(x, np.sort(mach_axis(bm["mach_mid"][seen])))
+    j = (slice(None), IQ["alpha_deg"], IE["ekf_pass2"])
+    x, y = rec.scalars(layout.meads_truth_mc_path("alpha_deg", "ekf_pass2_mc"), x_axis)
+    solid = bm["solid"][j]
+    assert np.all(np.diff(x) > 0) and 3 < solid.sum() < solid.size  # the highest bins: too few members
+    np.testing.assert_allclose(-x / 100.0, bm["mach_mid"][solid], atol=0.005)  # x = −100 · Mach, high first
+    np.testing.assert_allclose(y[:, 0], bm["mc_3sigma"][j][solid], rtol=1e-12)
+    xt, _ = rec.scalars(layout.meads_truth_mc_path("alpha_deg", "ekf_pass2_mc_thin"), x_axis)
+    np.testing.assert_array_equal(xt, np.sort(mach_axis(bm["mach_mid"][~solid])))
+    _, r = rec.scalars(layout.meads_truth_mc_path("alpha_deg", "ekf_pass2_reported"), x_axis)
+    np.testing.assert_allclose(r[:, 0], 1.5)  # the median reported 3σ
+    _, o = rec.scalars(layout.meads_truth_mc_path("mach", "objective"), x_axis)
+    assert np.all(o[:, 0] == 0.1) and o.shape[0] == solid.sum()  # over the solid bins

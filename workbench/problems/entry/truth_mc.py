@@ -57,8 +57,6 @@ import numpy as np
 from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_normalize
 from workbench.estimation.consistency import is_symmetric_pd
-from workbench.estimation.montecarlo import run_monte_carlo
-from workbench.io import progress
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.models.aerodynamics import load_vehicle
@@ -87,6 +85,7 @@ from workbench.problems.entry.truth import (
     simulate_entry,
     truth_spec_from_scenario,
 )
+from workbench.problems.members import run_members
 
 __all__ = [
     "TruthMcMember",
@@ -359,17 +358,9 @@ def run_truth_monte_carlo(
         members=int(members if members is not None else DEFAULT_MEMBERS),
         work_dir=None if work_dir is None else str(work_dir),
     )
-    with progress.current().counter("Monte Carlo members", total=int(n_runs), unit="members") as bar:
-        run = run_monte_carlo(
-            _run_member,
-            int(n_runs),
-            shared=job,
-            seed=int(seed),
-            workers=int(workers),
-            scheduler=scheduler,
-            name=f"entry-truth-mc-{int(seed)}",
-            progress=bar,
-        )
+    run = run_members(
+        _run_member, n_runs, shared=job, seed=seed, workers=workers, scheduler=scheduler, name=f"entry-truth-mc-{seed}"
+    )
     outs: list[TruthMcMember] = list(run.results)
     ok = [m for m in outs if not m.scores.failed]
     ref = ok[0] if ok else outs[0]

@@ -2,12 +2,18 @@
 
 The trade study (paper Fig. 6, :mod:`.montecarlo`): ``/plots/trade_study/<quantity>/<level>`` —
 3σ over the runs of α, β [deg], q∞ [%] and Mach error against time, one series per error level,
-and ``.../objective`` the science objective; the table of levels × objectives as the report.
+and ``.../objective`` the science objective; the table of levels × objectives as the report.  The
+runs share one trajectory, so the same rows are also on the ``minus_100_mach`` timeline (its true
+Mach): the time panel's timeline switches the plots to Mach, for reading beside the full-error
+Monte Carlo.
 
 The full-error-model Monte Carlo against the truth (paper Figs. 11–13, :mod:`.truth_mc`,
-``--truth-sim``): ``/plots/truth_mc/<quantity>/<estimator>_mc`` the 3σ of the error over the
-members and ``.../<estimator>_reported`` the mean reported 3σ against time (each member's samples
-above 850 Pa), ``.../objective``; the table as the report.
+``--truth-sim``), against the flight condition: on the ``minus_100_mach`` timeline (x =
+−100 · Mach, Mach decreasing left to right as in flight; one row per Mach bin at its centre, each
+member-sample at its own true Mach, q∞ ≥ 850 Pa) ``/plots/truth_mc/<quantity>/<estimator>_mc`` the
+3σ of the error over the member-samples of the solid bins (a line), ``.../<estimator>_mc_thin`` of
+the thin bins (markers only: too few members), ``.../<estimator>_reported`` the median reported 3σ
+(solid bins), ``.../objective``; the table and the per-bin table as the report.
 """
 
 from __future__ import annotations
@@ -20,7 +26,7 @@ import rerun.blueprint as rrb
 from workbench.problems.meads import truth_mc as tmc
 from workbench.problems.meads.montecarlo import QUANTITIES, TradeStudy, level_name
 from workbench.recording import layout
-from workbench.recording.blueprint import plot_view, report_view
+from workbench.recording.blueprint import plot_view, report_view, tab
 from workbench.recording.writer import open_recording
 
 __all__ = [
@@ -36,13 +42,19 @@ _UNITS = {"alpha_deg": "α 3σ [deg]", "beta_deg": "β 3σ [deg]", "qbar_pct": "
 _COLORS = [(40, 120, 220), (40, 170, 60), (230, 150, 20), (200, 40, 40), (120, 60, 180)]
 
 
-def trade_blueprint() -> rrb.Blueprint:
-    """One time-series tab per quantity and the table."""
+def trade_blueprint(window: tuple[float, float] | None = None) -> rrb.Blueprint:
+    """One time-series tab per quantity, opened on ``window`` (t0, t1) [s] (the study's samples)
+    when given, and the table."""
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Tabs(
                 *[
-                    plot_view(_UNITS[q] + " vs time", layout.join(layout.MEADS_TRADE_STUDY, q), legend="RightTop")
+                    plot_view(
+                        _UNITS[q] + " vs time",
+                        layout.join(layout.MEADS_TRADE_STUDY, q),
+                        legend="RightTop",
+                        window=window,
+                    )
                     for q in QUANTITIES
                 ]
             ),
@@ -75,9 +87,12 @@ def trade_markdown(summary: dict) -> str:
 
 
 def record_trade_study(path: Path, name: str, ts: TradeStudy, summary: dict) -> Path:
-    """Write the trade-study recording (atomically) and return its path."""
+    """Write the trade-study recording (atomically) and return its path: rows on ``time`` and on
+    ``minus_100_mach`` (module docstring)."""
+    x = {layout.MACH_DESCENDING: mach_axis(ts.mach)}  # the shared trajectory's true Mach
+    window = (float(ts.t[0]), float(ts.t[-1])) if ts.t.size >= 2 else None  # the viewer opens on the cursor
     with open_recording(
-        path, name, blueprint=trade_blueprint(), properties={"run": {"kind": "meads_trade_study"}}
+        path, name, blueprint=trade_blueprint(window), properties={"run": {"kind": "meads_trade_study"}}
     ) as rec:
         for j, q in enumerate(QUANTITIES):
             for i, lv in enumerate(ts.levels):
@@ -85,6 +100,7 @@ def record_trade_study(path: Path, name: str, ts: TradeStudy, summary: dict) -> 
                     layout.meads_trade_path(q, level_name(lv)),
                     ts.t,
                     ts.three_sigma[lv][:, j],
+                    sequences=x,
                     names=f"{100 * lv:g} % of reading",
                     colors=_COLORS[i % len(_COLORS)],
                 )
@@ -93,6 +109,7 @@ def record_trade_study(path: Path, name: str, ts: TradeStudy, summary: dict) -> 
                 layout.meads_trade_path(q, "objective"),
                 ts.t,
                 np.full(ts.t.size, obj),
+                sequences=x,
                 names="objective",
                 colors=(0, 0, 0),
             )
@@ -125,19 +142,28 @@ def _tint(rgb: tuple[int, int, int], f: float = 0.5) -> tuple[int, int, int]:
     return tuple(int(round(c + (255 - c) * f)) for c in rgb)
 
 
-def truth_mc_blueprint(window: tuple[float, float] | None = None) -> rrb.Blueprint:
-    """One time-series tab per quantity (Monte Carlo and reported 3σ per estimator, objective),
-    opened on ``window`` (t0, t1) [s] (the samples above 850 Pa) when given, and the table; the
-    selection panel collapsed (the table needs the width)."""
+def mach_axis(mach: np.ndarray) -> np.ndarray:
+    """The ``minus_100_mach`` timeline value (n,) int64 of Mach (n,) [-]: −round(100 · Mach)."""
+    return -np.round(100.0 * np.asarray(mach, float)).astype(np.int64)
+
+
+def truth_mc_blueprint(x_range: tuple[int, int] | None = None) -> rrb.Blueprint:
+    """One tab per quantity (Monte Carlo and median reported 3σ per estimator, objective) against
+    the Mach timeline, opened on ``x_range`` (lo, hi) of :func:`mach_axis` values when given, and
+    the table; the selection panel collapsed (the table needs the width)."""
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Tabs(
                 *[
-                    plot_view(
-                        _MC_UNITS[q] + " vs time — thick Monte Carlo, thin reported",
-                        layout.join(layout.MEADS_TRUTH_MC, q),
-                        legend="RightTop",
-                        window=window,
+                    tab(
+                        _MC_UNITS[q].replace(" 3σ", ""),
+                        plot_view(
+                            _MC_UNITS[q] + " vs Mach, x = −100·Mach (−2500 = M 25, flight left to right) — "
+                            "blue least squares, orange EKF pass 1, green EKF pass 2: thick Monte Carlo, "
+                            "thin median reported, dots bins with too few members; black objective",
+                            layout.join(layout.MEADS_TRUTH_MC, q),
+                            x_range=x_range,
+                        ),
                     )
                     for q in tmc.QUANTITIES
                 ]
@@ -145,7 +171,7 @@ def truth_mc_blueprint(window: tuple[float, float] | None = None) -> rrb.Bluepri
             report_view("Monte Carlo", health=False),
             column_shares=[3, 2],
         ),
-        rrb.TimePanel(state="collapsed", timeline=layout.TIME),
+        rrb.TimePanel(state="collapsed", timeline=layout.MACH_DESCENDING, play_state="paused"),
         rrb.SelectionPanel(state="collapsed"),
     )
 
@@ -175,8 +201,9 @@ def truth_mc_markdown(summary: dict) -> str:
         "transpiration, calibration, scale factors, noise), reconstructed from its telemetry files as "
         "`workbench run` does" + (f"; the scenario's failure of {off} switched off." if off else "."),
         "",
-        f"Above {s['min_qbar_pa']:g} Pa (each member's true q∞), medians over time: **MC 3σ** the spread "
-        "over the members (3 × std), **3 RMS** the total error (bias included; ✔/✘ its max meets the "
+        f"Per Mach bin (each member-sample at its own true Mach, above {s['min_qbar_pa']:g} Pa true q∞), "
+        f"medians over the bins reached by ≥ {s.get('min_bin_members', 2)} members: **MC 3σ** the spread "
+        "of the pooled errors (3 × std), **3 RMS** the total error (bias included; ✔/✘ its max meets the "
         "objective), **reported** the mean reported 3σ, **ratio** reported / MC 3σ (> 1 conservative), "
         "**inside** the member-samples inside their reported 3σ."
         + (f" The MC 3σ itself is uncertain by ±{100 * unc:.0f} % (1σ)." if unc else ""),
@@ -192,6 +219,7 @@ def truth_mc_markdown(summary: dict) -> str:
             if row is not None:
                 md.append(_row(q if first else "", _EST[e][0], row, obj))
                 first = False
+    md += _bin_table(s)
     md += ["", "## Where the reported 3σ disagrees with the Monte Carlo spread", ""]
     md += [f"- {d}" for d in s["disagreements"]] or ["- nowhere (ratio within 0.67–1.5, ≥ 90 % inside)"]
     md += [
@@ -204,44 +232,100 @@ def truth_mc_markdown(summary: dict) -> str:
     return "\n".join(md) + "\n"
 
 
+_BIN_QUANTITIES = ("alpha_deg", "beta_deg", "qbar_pct", "mach")
+
+
+def _bin_table(s: dict, est: str = "ekf_pass2") -> list[str]:
+    """Markdown lines: per Mach bin (high first) of ``est``, for α, β, q∞, Mach: MC 3σ / median
+    reported 3σ (inside %), the members; thin bins in italics."""
+    bm = s.get("by_mach", {})
+    rows = bm.get("estimators", {}).get(est, {})
+    qs = [q for q in _BIN_QUANTITIES if q in rows]
+    if not qs:
+        return []
+    md = [
+        "",
+        f"## Per Mach bin, {_EST[est][0]}: MC 3σ / median reported 3σ (inside)",
+        "",
+        "*italics*: a thin bin (fewer members than the table needs).",
+        "",
+        "| Mach | members | " + " | ".join(_MC_UNITS[q].replace(" 3σ", "") for q in qs) + " |",
+        "|---|---|" + "---|" * len(qs),
+    ]
+    for i, (lo, hi) in enumerate(zip(bm["mach_lo"], bm["mach_hi"], strict=True)):
+        members = max(rows[q]["members"][i] for q in qs)
+        if members == 0:
+            continue
+        cells = []
+        for q in qs:
+            r = rows[q]
+            mc, rep, ins = r["mc_3sigma"][i], r["reported_3sigma_median"][i], r["inside"][i]
+            cells.append(f"{mc:.3g} / {rep:.3g} ({100 * ins:.0f} %)" if r["member_samples"][i] else "")
+        thin = not any(rows[q]["solid"][i] for q in qs)
+        mach = f"{lo:g}–{hi:g}"
+        md.append(f"| {f'*{mach}*' if thin else mach} | {members} | " + " | ".join(cells) + " |")
+    return md
+
+
 def record_truth_mc(path: Path, name: str, res: tmc.FullMcResult, summary: dict) -> Path:
-    """Write the full-error-model Monte Carlo recording (atomically) and return its path."""
-    t = res.t
-    seen = np.isfinite(res.curves["mc_3sigma"]).any(axis=(1, 2))
-    window = (float(t[seen][0]), float(t[seen][-1])) if seen.sum() >= 2 else None
+    """Write the full-error-model Monte Carlo recording (atomically) and return its path: per
+    quantity and estimator the Monte Carlo and median reported 3σ per Mach bin of ``res.by_mach``
+    on the ``minus_100_mach`` timeline (module docstring)."""
+    bm = res.by_mach
+    x = mach_axis(bm["mach_mid"])
+    span = None
+    if x.size >= 2:  # half a bin beyond the outer centres
+        lo, hi = mach_axis(bm["mach_hi"][0]), mach_axis(bm["mach_lo"][-1])
+        span = (int(lo), int(hi))
     with open_recording(
-        path, name, blueprint=truth_mc_blueprint(window), properties={"run": {"kind": "meads_truth_mc"}}
+        path, name, blueprint=truth_mc_blueprint(span), properties={"run": {"kind": "meads_truth_mc"}}
     ) as rec:
+
+        def line(entity: str, sel: np.ndarray, v: np.ndarray, **style) -> bool:
+            if sel.sum() < 1:
+                return False
+            rec.scalars(entity, None, v[sel], sequences={layout.MACH_DESCENDING: x[sel]}, **style)
+            return True
+
         for j, q in enumerate(tmc.QUANTITIES):
+            drawn = np.zeros(x.size, bool)
             for e, est in enumerate(tmc.ESTIMATORS):
                 label, rgb = _EST[est]
-                for series, key, color, width, what in (
-                    ("mc", "mc_3sigma", rgb, 2.5, "Monte Carlo 3σ"),
-                    ("reported", "reported_3sigma", _tint(rgb), 1.0, "reported 3σ"),
-                ):
-                    v = res.curves[key][:, j, e]
-                    ok = np.isfinite(v)
-                    if ok.sum() < 2:
-                        continue
-                    rec.scalars(
-                        layout.meads_truth_mc_path(q, f"{est}_{series}"),
-                        t[ok],
-                        v[ok],
-                        names=f"{label} {what}",
-                        colors=color,
-                        widths=width,
+                mc, rep = bm["mc_3sigma"][:, j, e], bm["reported_3sigma_median"][:, j, e]
+                solid = bm["solid"][:, j, e] & np.isfinite(mc)
+                thin = ~bm["solid"][:, j, e] & np.isfinite(mc)
+                if solid.sum() >= 2:
+                    path_mc = layout.meads_truth_mc_path(q, f"{est}_mc")
+                    line(path_mc, solid, mc, names=f"{label} Monte Carlo 3σ", colors=rgb, widths=2.5)
+                    ok = solid & np.isfinite(rep)
+                    name_rep = f"{label} median reported 3σ"
+                    line(
+                        layout.meads_truth_mc_path(q, f"{est}_reported"),
+                        ok,
+                        rep,
+                        names=name_rep,
+                        colors=_tint(rgb),
+                        widths=1.0,
+                    )
+                    drawn |= solid
+                if thin.any():
+                    rec.scatter(
+                        layout.meads_truth_mc_path(q, f"{est}_mc_thin"),
+                        None,
+                        mc[thin],
+                        sequences={layout.MACH_DESCENDING: x[thin]},
+                        names=f"{label} Monte Carlo 3σ, too few members",
+                        colors=rgb,
+                        size=3.0,
                     )
             obj = summary["objectives_3sigma"].get(q)
-            if obj is not None:
-                any_ok = np.isfinite(res.curves["mc_3sigma"][:, j, :]).any(axis=1)
-                if any_ok.sum() >= 2:
-                    tt = t[any_ok]
-                    rec.scalars(
-                        layout.meads_truth_mc_path(q, "objective"),
-                        tt,
-                        np.full(tt.size, obj),
-                        names="objective",
-                        colors=(0, 0, 0),
-                    )
+            if obj is not None and drawn.sum() >= 2:
+                line(
+                    layout.meads_truth_mc_path(q, "objective"),
+                    drawn,
+                    np.full(x.size, obj),
+                    names="objective",
+                    colors=(0, 0, 0),
+                )
         rec.report(truth_mc_markdown(summary))
     return Path(path)

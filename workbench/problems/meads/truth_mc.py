@@ -26,15 +26,20 @@ Member k (``SeedSequence(seed, spawn_key=(k,))``, the convention of
 4. **errors** — :func:`error_histories`: estimate − truth and the reported 1σ of every quantity of
    :data:`QUANTITIES` for every estimator of :data:`ESTIMATORS` at the pressure times.
 
-Every member's pressure times are ``k / rate`` from 0 (a dispersed truth ends at its own heat-shield
-separation), so the members meet on one grid of the longest, NaN-padded.  :func:`aggregate` reduces
-them per sample, quantity and estimator: the bias (mean error), the Monte Carlo 3σ (3 × the sample
-standard deviation over the members, ddof 1), 3 × the RMS, the mean reported 3σ, their ratio
-(reported / Monte Carlo: > 1 the estimator is conservative, < 1 optimistic) and the fraction of
-members inside their own reported 3σ, on the samples where each member's true q∞ ≥ 850 Pa (the
-objectives' threshold); :func:`summarize` tabulates that and lists where the reported 3σ disagrees
-with the spread (:data:`RATIO_BAND`, :data:`MIN_INSIDE`).  Results are gathered by member index, so they do
-not depend on the executor (loop, processes, Dask).
+Members fly different entries, so the same time is a different flight condition per member: the
+statistics are taken per **flight condition**, as the paper's figures plot them.
+:func:`aggregate_by_mach` bins every member-sample at its own true Mach on :data:`MACH_BIN_EDGES`
+(where its own true q∞ ≥ 850 Pa, the objectives' threshold) and reduces the pooled member-samples
+of each bin, per quantity and estimator: the bias (mean error), the Monte Carlo 3σ (3 × the sample
+standard deviation, ddof 1), 3 × the RMS, the mean and median reported 3σ, their ratio (mean
+reported / Monte Carlo: > 1 the estimator is conservative, < 1 optimistic), the fraction inside
+their own reported 3σ and how many members reach the bin — a bin reached by fewer than
+:data:`MIN_BIN_MEMBER_FRACTION` of the members is *thin*, marked and left out of the table;
+:func:`summarize` tabulates the solid bins and lists where the reported 3σ disagrees with the
+spread (:data:`RATIO_BAND`, :data:`MIN_INSIDE`).  The per-time reduction (:func:`aggregate` per
+pressure time ``k / rate`` from 0, each member's samples on one grid of the longest, NaN-padded:
+:func:`stack_members`) is kept in the summary as ``table_by_time`` for comparison.  Results are
+gathered by member index, so they do not depend on the executor (loop, processes, Dask).
 """
 
 from __future__ import annotations
@@ -42,14 +47,13 @@ from __future__ import annotations
 import math
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from workbench.estimation.montecarlo import run_monte_carlo
-from workbench.io import progress
 from workbench.io.scenario import Scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.problems.meads import pipeline as md
@@ -57,6 +61,7 @@ from workbench.problems.meads.config import config_for
 from workbench.problems.meads.montecarlo import OBJECTIVES
 from workbench.problems.meads.synthetic import load_truth, synthesize_from_truth
 from workbench.problems.meads.truth import MeadsDispersionSigmas, disperse_truth_spec, simulate_entry
+from workbench.problems.members import run_members
 
 __all__ = [
     "QUANTITIES",
@@ -64,6 +69,8 @@ __all__ = [
     "MIN_QBAR_PA",
     "RATIO_BAND",
     "MIN_INSIDE",
+    "MACH_BIN_EDGES",
+    "MIN_BIN_MEMBER_FRACTION",
     "McJob",
     "MemberErrors",
     "FullMcResult",
@@ -71,6 +78,9 @@ __all__ = [
     "error_histories",
     "stack_members",
     "aggregate",
+    "aggregate_by_mach",
+    "solid_bins",
+    "by_mach_json",
     "summarize",
     "run_full_monte_carlo",
 ]
@@ -95,6 +105,13 @@ MIN_QBAR_PA = 850.0
 RATIO_BAND = (1.0 / 1.5, 1.5)
 #: A fraction of member-samples inside the reported 3σ below this is listed as a disagreement.
 MIN_INSIDE = 0.9
+#: The Mach grid of the statistics per flight condition (bin edges [-], low to high): 0.5 wide
+#: below Mach 5 (where Mach becomes observable from the pressures and the flow changes fastest),
+#: 1 wide from Mach 5 to 40.  A sample is in bin i when edge[i] ≤ its true Mach < edge[i + 1].
+MACH_BIN_EDGES = tuple(float(x) for x in np.r_[np.arange(0.0, 5.0, 0.5), np.arange(5.0, 41.0, 1.0)])
+#: A Mach bin is *solid* (drawn as a curve, counted in the table) when at least this fraction of
+#: the reconstructed members, and at least 2, have a scored sample in it; thinner bins are marked.
+MIN_BIN_MEMBER_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -313,7 +330,8 @@ def stack_members(members: list[MemberErrors]) -> tuple[np.ndarray, np.ndarray, 
 
 def aggregate(err: np.ndarray, sig: np.ndarray) -> dict[str, np.ndarray]:
     """Per sample, quantity and estimator over the members (axis 0) of ``err`` and ``sig`` (K, n, ...)
-    — the error and reported 1σ, NaN where a member has none: ``count`` members with both,
+    — the error and reported 1σ, NaN where a member has none (axis 0 may also be the member-samples
+    pooled in one flight condition, :func:`aggregate_by_mach`): ``count`` members with both,
     ``bias`` the mean error, ``mc_3sigma`` 3 × the sample standard deviation (ddof 1), ``mc_3rms``
     3 × the root mean square (bias included), ``reported_3sigma`` the mean of 3σ, ``ratio`` =
     reported_3sigma / mc_3sigma, ``inside`` the fraction of members with |error| ≤ their 3σ.  Arrays
@@ -340,6 +358,94 @@ def aggregate(err: np.ndarray, sig: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
+def aggregate_by_mach(
+    err: np.ndarray,
+    sig: np.ndarray,
+    qbar: np.ndarray,
+    mach: np.ndarray,
+    edges: tuple[float, ...] = MACH_BIN_EDGES,
+    min_member_fraction: float = MIN_BIN_MEMBER_FRACTION,
+) -> dict[str, np.ndarray]:
+    """The statistics of :func:`aggregate` per flight condition: the member-samples of ``err`` and
+    ``sig`` (K, n, Q, E) whose own true ``mach`` (K, n) [-] falls in a bin of ``edges`` (low to high)
+    and whose own true ``qbar`` (K, n) [Pa] is ≥ :data:`MIN_QBAR_PA`, pooled per bin (members fly
+    different entries: the same time is a different flight condition per member, the same Mach is
+    not).  Bins with a sample, **high Mach first** (B of them); arrays (B, Q, E) unless noted:
+
+    ``mach_lo``, ``mach_hi``, ``mach_mid`` (B,) the bin's edges and centre; from :func:`aggregate`
+    over the pooled samples ``count`` (member-samples), ``bias``, ``mc_3sigma`` (3 × their standard
+    deviation, ddof 1), ``mc_3rms`` (3 × their RMS), ``reported_3sigma`` (mean reported 3σ),
+    ``ratio`` (that / ``mc_3sigma``), ``inside``; ``reported_3sigma_median`` the median reported 3σ;
+    ``members`` how many members have a sample there; ``solid`` True when ``members`` ≥
+    max(2, ⌈``min_member_fraction`` · K⌉) — else the bin is *thin* (too few members to stand for the
+    study)."""
+    K = err.shape[0]
+    e = np.asarray(edges, float)
+    with np.errstate(invalid="ignore"):
+        scored = (qbar >= MIN_QBAR_PA) & np.isfinite(mach)
+    b = np.digitize(np.where(scored, mach, -np.inf), e) - 1  # bin of each member-sample
+    scored &= (b >= 0) & (b < e.size - 1)
+    bins = np.unique(b[scored])[::-1]  # high Mach first
+    keys = ("count", "bias", "mc_3sigma", "mc_3rms", "reported_3sigma", "inside", "ratio")
+    shape = (bins.size, *err.shape[2:])
+    out: dict[str, np.ndarray] = {k: np.full(shape, np.nan) for k in (*keys, "reported_3sigma_median")}
+    out["count"] = np.zeros(shape, int)
+    out["members"] = np.zeros(shape, int)
+    for i, bi in enumerate(bins):
+        sel = scored & (b == bi)
+        ei, si = err[sel], sig[sel]  # (N, Q, E) pooled member-samples
+        a = aggregate(ei[:, None], si[:, None])
+        for k in keys:
+            out[k][i] = a[k][0]
+        ok = np.isfinite(ei) & np.isfinite(si)
+        has = np.zeros((K, *err.shape[2:]), bool)
+        np.logical_or.at(has, np.nonzero(sel)[0], ok)
+        out["members"][i] = has.sum(axis=0)
+        with warnings.catch_warnings():  # an estimator or quantity without values: NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out["reported_3sigma_median"][i] = np.nanmedian(np.where(ok, 3.0 * si, np.nan), axis=0)
+    out["solid"] = out["members"] >= max(2, math.ceil(min_member_fraction * K))
+    out["mach_lo"], out["mach_hi"] = e[bins], e[bins + 1]
+    out["mach_mid"] = 0.5 * (out["mach_lo"] + out["mach_hi"])
+    return out
+
+
+def solid_bins(by_mach: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The :func:`aggregate` arrays of :func:`aggregate_by_mach` with the thin bins blanked
+    (``count`` 0, the rest NaN), for :func:`summarize`: the table counts the solid bins only."""
+    keys = ("count", "bias", "mc_3sigma", "mc_3rms", "reported_3sigma", "inside", "ratio")
+    return {k: np.where(by_mach["solid"], by_mach[k], 0 if k == "count" else np.nan) for k in keys}
+
+
+def by_mach_json(by_mach: dict[str, np.ndarray]) -> dict:
+    """:func:`aggregate_by_mach` as JSON-ready columns: ``mach_lo``, ``mach_hi`` (B,) and, per
+    estimator and quantity with a value, lists (B,) of ``mc_3sigma``, ``mc_3rms``,
+    ``reported_3sigma_median``, ``ratio``, ``inside``, ``bias`` (NaN → None when written),
+    ``members``, ``member_samples`` and ``solid``; high Mach first."""
+
+    def col(x: np.ndarray) -> list:
+        return [float(v) for v in x]
+
+    out: dict = {"mach_lo": col(by_mach["mach_lo"]), "mach_hi": col(by_mach["mach_hi"]), "estimators": {}}
+    for e, est in enumerate(ESTIMATORS):
+        rows = {}
+        for j, q in enumerate(QUANTITIES):
+            if not np.any(by_mach["count"][:, j, e] > 0):
+                continue
+            rows[q] = {
+                **{
+                    k: col(by_mach[k][:, j, e])
+                    for k in ("mc_3sigma", "mc_3rms", "reported_3sigma_median", "ratio", "inside", "bias")
+                },
+                "members": [int(v) for v in by_mach["members"][:, j, e]],
+                "member_samples": [int(v) for v in by_mach["count"][:, j, e]],
+                "solid": [bool(v) for v in by_mach["solid"][:, j, e]],
+            }
+        if rows:
+            out["estimators"][est] = rows
+    return out
+
+
 def _median(x: np.ndarray) -> float:
     x = x[np.isfinite(x)]
     return float(np.median(x)) if x.size else math.nan
@@ -350,10 +456,12 @@ def _max(x: np.ndarray) -> float:
     return float(np.max(x)) if x.size else math.nan
 
 
-def summarize(agg: dict[str, np.ndarray]) -> dict:
+def summarize(agg: dict[str, np.ndarray], over: str = "samples") -> dict:
     """The study's table (JSON-ready) from :func:`aggregate` arrays (n, Q, E) of errors already
-    restricted to the samples that count (each member's true q∞ ≥ :data:`MIN_QBAR_PA`): per
-    estimator and quantity, over the samples with at least 2 members — the median and max of the
+    restricted to the samples that count (each member's true q∞ ≥ :data:`MIN_QBAR_PA`) — rows per
+    time sample, or per Mach bin (:func:`solid_bins`), named ``over`` in the disagreement lines
+    (``samples`` counts the rows): per
+    estimator and quantity, over the rows with at least 2 member-samples — the median and max of the
     Monte Carlo 3σ, the median of 3 × RMS, the median and max of the mean reported 3σ, the median
     and 10/90 % quantiles of the ratio reported / Monte Carlo, the largest |bias|, the fraction of
     member-samples inside their reported 3σ, the objective (α, β, q∞, Mach) and whether the Monte
@@ -403,7 +511,7 @@ def summarize(agg: dict[str, np.ndarray]) -> dict:
                 what = ("conservative" if r > 1 else "optimistic") if off_band else "spread matched"
                 notes.append(
                     f"{est} {q}: reported 3σ {row['reported_3sigma_median']:.3g} is {r:.2f}× the Monte Carlo 3σ "
-                    f"{row['mc_3sigma_median']:.3g} (median above {MIN_QBAR_PA:g} Pa; {what}; 3 × RMS "
+                    f"{row['mc_3sigma_median']:.3g} (median over the {over} above {MIN_QBAR_PA:g} Pa; {what}; 3 × RMS "
                     f"{row['mc_3rms_median']:.3g}, ratio {row['ratio_to_3rms_median']:.2f}); "
                     f"{100 * inside:.1f} % of member-samples inside the reported 3σ, largest |bias| "
                     f"{row['max_abs_bias']:.3g}"
@@ -419,9 +527,11 @@ def summarize(agg: dict[str, np.ndarray]) -> dict:
 
 @dataclass(frozen=True)
 class FullMcResult:
-    """Outcome of :func:`run_full_monte_carlo`: ``t`` (n,) [s] the common grid; ``curves`` the
-    :func:`aggregate` arrays (n, Q, E) of each member's samples above :data:`MIN_QBAR_PA` (the
-    summary's and the recording's), ``mach`` (n,) the
+    """Outcome of :func:`run_full_monte_carlo`: ``by_mach`` the :func:`aggregate_by_mach` arrays
+    (B, Q, E) per Mach bin, high Mach first (the summary's table and the recording's curves);
+    ``t`` (n,) [s] the common grid and ``curves`` the :func:`aggregate` arrays (n, Q, E) per time
+    sample of each member's samples above :data:`MIN_QBAR_PA` (the summary's ``table_by_time``,
+    for comparison: the same time is a different flight condition per member), ``mach`` (n,) the
     members' median true Mach, ``qbar`` (n,) their median true q∞ [Pa]; ``members`` every
     :class:`MemberErrors` in member order (failed ones included); ``summary`` JSON-ready."""
 
@@ -431,6 +541,7 @@ class FullMcResult:
     qbar: np.ndarray
     members: tuple[MemberErrors, ...]
     summary: dict
+    by_mach: dict = field(default_factory=dict)
 
 
 def run_full_monte_carlo(
@@ -455,25 +566,19 @@ def run_full_monte_carlo(
     removed = config_for(scenario).pressure.failure_port
     sc = scenario.with_overrides({"sensors.pressure.failure_port": ""}) if removed else scenario
     job = McJob(sc, bool(disperse_truth), sigmas or MeadsDispersionSigmas())
-    with progress.current().counter("Monte Carlo members", total=int(n_runs), unit="members") as bar:
-        run = run_monte_carlo(
-            _run_member,
-            int(n_runs),
-            shared=job,
-            seed=int(seed),
-            workers=int(workers),
-            scheduler=scheduler,
-            name=f"meads-truth-mc-{int(seed)}",
-            progress=bar,
-        )
+    run = run_members(
+        _run_member, n_runs, shared=job, seed=seed, workers=workers, scheduler=scheduler, name=f"meads-truth-mc-{seed}"
+    )
     members: list[MemberErrors] = list(run.results)
     ok = [m for m in members if not m.failed]
     if not ok:
         raise RuntimeError("no Monte Carlo member could be reconstructed: " + "; ".join(m.failed for m in members))
     t, err, sig, qbar, mach = stack_members(ok)
+    by_mach = aggregate_by_mach(err, sig, qbar, mach)  # each member's own Mach and q∞ ≥ 850 Pa
+    table = summarize(solid_bins(by_mach), over="Mach bins")
     above = (qbar >= MIN_QBAR_PA)[..., None, None]  # each member's own samples above 850 Pa
     curves = aggregate(np.where(above, err, np.nan), np.where(above, sig, np.nan))
-    table = summarize(curves)
+    by_time = summarize(curves, over="time samples")
     walls = np.array([m.info["wall_s"] for m in members])
     K = len(ok)
     summary = {
@@ -493,10 +598,21 @@ def run_full_monte_carlo(
             k: getattr(config_for(sc).pressure, k)
             for k in ("location", "time_tag", "lag", "transpiration", "calibration", "scale_factors", "noise")
         },
-        "ratio_definition": "mean reported 3σ / Monte Carlo 3σ (3 × std over members, ddof 1)",
+        "aggregation": (
+            "per Mach bin (mach_bin_edges, each member-sample at its own true Mach, q∞ ≥ min_qbar_pa), "
+            "the member-samples of a bin pooled; table: over the solid bins (≥ min_bin_members members)"
+        ),
+        "mach_bin_edges": list(MACH_BIN_EDGES),
+        "min_bin_members": max(2, math.ceil(MIN_BIN_MEMBER_FRACTION * K)),
+        "mc_3sigma_definition": "3 × the standard deviation (ddof 1) of the errors pooled in a Mach bin; "
+        "mc_3rms: 3 × their root mean square (bias included)",
+        "ratio_definition": "mean reported 3σ / Monte Carlo 3σ (3 × std of the pooled errors, ddof 1)",
         "mc_3sigma_relative_uncertainty": 1.0 / math.sqrt(2.0 * (K - 1)) if K > 1 else None,
         "objectives_3sigma": OBJECTIVES,
         **table,
+        "by_mach": by_mach_json(by_mach),
+        "table_by_time": by_time["table"],
+        "disagreements_by_time": by_time["disagreements"],
         "member_health": {m.k: m.info.get("health") for m in ok},
         "member_health_not_ok": {m.k: m.info.get("health_not_ok") for m in ok if m.info.get("health_not_ok")},
         "member_failed_ports": {m.k: m.info.get("failed_ports") for m in ok if m.info.get("failed_ports")},
@@ -509,4 +625,4 @@ def run_full_monte_carlo(
     }
     with np.errstate(all="ignore"):
         qm, mm = np.nanmedian(qbar, axis=0), np.nanmedian(mach, axis=0)
-    return FullMcResult(t, curves, mm, qm, tuple(members), summary)
+    return FullMcResult(t, curves, mm, qm, tuple(members), summary, by_mach)
