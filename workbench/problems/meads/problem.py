@@ -249,11 +249,17 @@ class MeadsProblem:
         rrd = record_truth_mc(
             Path(out_dir) / f"{scenario.name}_truth_mc.rrd", f"{scenario.name} Monte Carlo vs truth", res, summary
         )
-        last = summary["table"].get("ekf_pass2") or summary["table"]["least_squares"]
+        last = summary["table"].get("ekf_pass2") or summary["table"].get("least_squares") or {}
         met = [q for q, row in last.items() if row.get("3rms_meets_objective")]
+        verdict = (
+            f"final estimator's 3 RMS meets {'/'.join(met) or 'no objective'}; "
+            f"{len(summary['disagreements'])} reported-vs-Monte-Carlo 3σ disagreement(s)"
+            if last
+            else f"NO STATISTICS: no Mach bin was reached by {summary.get('min_bin_members', 2)} or more members "
+            "(run more members)"
+        )
         headline = (
             f"Monte Carlo vs truth ({summary['n_ok']}/{n} members, median {summary['member_wall_s']['median']:.1f} "
-            f"s each): final estimator's 3 RMS meets {'/'.join(met) or 'no objective'}; "
-            f"{len(summary['disagreements'])} reported-vs-Monte-Carlo 3σ disagreement(s); wrote {rrd}"
+            f"s each): {verdict}; wrote {rrd}"
         )
         return McOutcome(summary, Path(rrd), headline, res)
