@@ -132,6 +132,49 @@ def test_atmosphere_offsets_move_the_observed_p_and_t_and_the_density_with_p():
     assert off.observe(xt, "acceleration_axial", ph)[0] == m0.observe(x, "acceleration_axial", ph)[0]
 
 
+def test_log_pressure_offset_sigma_follows_the_altitude_profile():
+    """The ln p offset's stationary 1σ is the ``sigma_profile`` at the vehicle's altitude (the lower
+    atmosphere known better than the upper): Q = σ(h)² (1 − Φ²) of the step, linear between the
+    nodes, the end values outside them; without an altitude the state's sigma."""
+    from workbench.problems.post2.pipeline import Estimator
+
+    sc = _scenario()
+    cfg = config_for(sc)
+    s = cfg.state("log_pressure_offset")
+    h_nodes, sig = s.sigma_profile
+    assert h_nodes[0] == 0.0 and np.all(np.diff(sig) > 0)  # grows with altitude
+    est = Estimator(sc, cfg)
+    i = est.smap.blocks["log_pressure_offset"].se.start
+    phi2 = math.exp(-2.0 * 10.0 / s.tau)
+    for h, want in ((-50.0, sig[0]), (0.5 * (h_nodes[1] + h_nodes[2]), 0.5 * (sig[1] + sig[2])), (3e5, sig[-1])):
+        Q, _ = est.q_matrix(10.0, 1000.0, h)
+        assert Q[i, i] == pytest.approx(want**2 * (1.0 - phi2), rel=1e-12)
+    assert est.q_matrix(10.0, 1000.0)[0][i, i] == pytest.approx(s.sigma[0] ** 2 * (1.0 - phi2), rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "needle"),
+    [
+        ({"states.log_pressure_offset.sigma_profile": None}, "go together"),
+        ({"states.log_pressure_offset.sigma_profile": [0.01, 0.02]}, "as many sigmas"),
+        ({"states.log_pressure_offset.sigma_altitude_km": [0.0, 42.0, 20.0, 54.0]}, "increasing"),
+        ({"states.log_pressure_offset.sigma_profile": [0.01, 0.0, 0.02, 0.03]}, "> 0"),
+        ({"states.tilt.sigma_altitude_km": [0.0], "states.tilt.sigma_profile": [1.0]}, "scalar markov"),
+    ],
+)
+def test_bad_sigma_profile_is_a_located_error(overrides, needle):
+    sc = load_scenario(TOML)  # a fresh copy: its tables edited in place (a key removed, too)
+    for k, v in overrides.items():
+        *_, name, key = k.split(".")
+        if v is None:
+            sc.data["states"][name].pop(key)
+        else:
+            sc.data["states"][name][key] = v
+    with pytest.raises(ScenarioError) as e:
+        config_for(sc)
+    assert needle in str(e.value) and "states." in str(e.value)
+
+
 def test_regime_multipliers_blend_smoothly():
     m, x, _ = _vertical_model("main", ca_multiplier_fm=1.05, ca_multiplier_hyp=0.97, ca_multiplier_sup=1.1)
     mach = np.array([1.0, 5.0, 7.5, 10.0, 20.0, 20.0])

@@ -48,6 +48,13 @@ STATE_KEYS: dict[str, tuple[str, Any, str]] = {
     "process": (_S, "constant", "`constant`, `random_walk` (with `psd`) or `markov` (with `tau_s`)"),
     "psd": ("number_or_list", 0.0, "random-walk PSD [unit²/s], or the Markov driving PSD (0: from sigma)"),
     "tau_s": (_F, None, "first-order Markov time constant [s]"),
+    "sigma_altitude_km": (
+        _L,
+        None,
+        "markov, scalar state: altitudes [km] (increasing) of a stationary-1σ profile: the driving noise keeps "
+        "the 1σ at `sigma_profile` interpolated linearly at the vehicle's altitude (constant outside the nodes)",
+    ),
+    "sigma_profile": (_L, None, "the stationary 1σ at `sigma_altitude_km`, in the state's unit (> 0)"),
     "bounds": (_L, None, "[lo, hi]: the model uses the tanh S-curve of the estimated state (scalar parameters)"),
     "step": (_F, None, "perturbation of the numeric Jacobian, state unit (default per state)"),
 }
@@ -351,7 +358,8 @@ def _vec(file: Path, dotted: str, v: Any, size: int) -> np.ndarray:
 class StateSpec:
     """One estimated state: ``value``, ``sigma`` (size,) in SI (attitude: rad), ``process``,
     ``psd`` (size,) SI per second, ``tau`` [s] or None, ``bounds`` (lo, hi) SI or None, ``step``
-    (error-state size,) SI perturbation."""
+    (error-state size,) SI perturbation, ``sigma_profile`` None or (altitudes [m] (k,), stationary
+    1σ SI (k,)) of a Markov state whose stationary 1σ depends on the vehicle's altitude."""
 
     name: str
     value: np.ndarray
@@ -361,6 +369,7 @@ class StateSpec:
     tau: float | None
     bounds: tuple[float, float] | None
     step: np.ndarray
+    sigma_profile: tuple[np.ndarray, np.ndarray] | None = None
 
 
 @dataclass(frozen=True)
@@ -517,7 +526,34 @@ def _state(file: Path, name: str, raw: dict, dof: int) -> StateSpec:
     if not step > 0:
         raise ScenarioError(file, f"{pre}.step", "must be > 0")
     step_si = float(_si(np.array([step]), d.unit)[0])
-    return StateSpec(name, value, sigma, process, psd, tau, bounds, np.full(d.size, step_si))
+    profile = _sigma_profile(file, pre, t, d, process, psd)
+    return StateSpec(name, value, sigma, process, psd, tau, bounds, np.full(d.size, step_si), profile)
+
+
+def _sigma_profile(file: Path, pre: str, t: dict, d, process: str, psd: np.ndarray):
+    """``sigma_altitude_km`` + ``sigma_profile`` of a ``[states.<name>]`` table, checked: None or
+    (altitudes [m] (k,), stationary 1σ SI (k,))."""
+    alt, sig = t["sigma_altitude_km"], t["sigma_profile"]
+    if alt is None and sig is None:
+        return None
+    if alt is None or sig is None:
+        raise ScenarioError(file, pre, "sigma_altitude_km and sigma_profile go together")
+    if process != "markov" or d.size != 1:
+        raise ScenarioError(file, f"{pre}.sigma_profile", "an altitude profile of sigma is for scalar markov states")
+    if np.any(psd > 0):
+        raise ScenarioError(file, f"{pre}.sigma_profile", "give either a driving psd or a sigma profile")
+    try:
+        h = np.asarray(alt, dtype=float)
+        s = np.asarray(sig, dtype=float)
+    except (TypeError, ValueError):
+        raise ScenarioError(file, f"{pre}.sigma_profile", "expected lists of numbers") from None
+    if h.ndim != 1 or h.size < 1 or h.shape != s.shape:
+        raise ScenarioError(file, f"{pre}.sigma_profile", f"expected as many sigmas as altitudes ({h.size})")
+    if not (np.all(np.isfinite(h)) and np.all(np.isfinite(s))) or np.any(np.diff(h) <= 0):
+        raise ScenarioError(file, f"{pre}.sigma_altitude_km", "must be finite and increasing")
+    if np.any(s <= 0):
+        raise ScenarioError(file, f"{pre}.sigma_profile", "must be > 0")
+    return h * 1e3, _si(s, d.unit)
 
 
 def _observation(file: Path, name: str, raw: dict, dof: int) -> ObservationSpec:

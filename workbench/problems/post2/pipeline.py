@@ -294,9 +294,12 @@ class Estimator:
             P0[np.ix_(idx, idx)] = sig[idx, None] * corr * sig[None, idx]
         return x0, P0, eps, mean
 
-    def q_matrix(self, dt: float, t: float | None = None) -> tuple[np.ndarray, dict]:
+    def q_matrix(self, dt: float, t: float | None = None, h: float | None = None) -> tuple[np.ndarray, dict]:
         """System noise Q (n_e, n_e) of a step dt [s] and the Markov decay factors {name: Φ}; with the
-        step's start ``t`` [s] the open ``[schedules]`` windows add their PSD (events: ``self.phase``)."""
+        step's start ``t`` [s] the open ``[schedules]`` windows add their PSD (events: ``self.phase``);
+        ``h`` [m]: the vehicle's altitude at the step's start, where a Markov state's stationary 1σ
+        follows its ``sigma_profile`` (Q = σ(h)² (1 − Φ²): the variance relaxes towards σ(h)² with
+        τ/2, the time-varying Gauss-Markov process; without h the state's ``sigma``)."""
         Q = np.zeros((self.smap.n_e, self.smap.n_e))
         phis = {}
         for name, b in self.smap.blocks.items():
@@ -309,6 +312,8 @@ class Estimator:
             elif s.process == "markov":
                 phi = math.exp(-dt / s.tau)
                 var = np.where(s.psd > 0, 0.5 * s.psd * s.tau, s.sigma**2)
+                if s.sigma_profile is not None and h is not None:
+                    var = np.full(i.size, np.interp(h, *s.sigma_profile) ** 2)
                 Q[i, i] = var * (1.0 - phi * phi)
                 phis[name] = phi
         return Q, phis
@@ -327,7 +332,7 @@ class Estimator:
         for nm in new["fired"][len(self.phase["fired"]) :]:
             self.phase_log.append((t0, nm))
         self.phase = new
-        Q, phis = self.q_matrix(t1 - t0, t0)
+        Q, phis = self.q_matrix(t1 - t0, t0, float(self.model.altitude(np.asarray(x, float))))
         x1, F = numeric_jacobian_batched(
             lambda X: self.advance(X, t0, t1, self.phase, phis), x, self.layout, self.eps, out_layout=self.layout
         )
