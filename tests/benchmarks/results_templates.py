@@ -355,6 +355,18 @@ README_BLOCKS["headline"] = f"""\
   {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.apogee.standard_day_barometer_error_m|+.1f}}}} /
   {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.apogee.standard_day_barometer_error_m|+.1f}}}} /
   {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.apogee.standard_day_barometer_error_m|+.1f}}}} m.
+  Altitude against the flight computer's, like for like (its standard-day altitude — 15 °C at its zero — made
+  geometric above the pad in the site atmosphere; RMS after the burnout transient)
+  {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.altitude_vs_flight_computer.like_for_like.rms_after_burnout_transient_m|.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.altitude_vs_flight_computer.like_for_like.rms_after_burnout_transient_m|.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.altitude_vs_flight_computer.like_for_like.rms_after_burnout_transient_m|.1f}}}} m (as logged
+  {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.altitude_vs_flight_computer.rms_after_burnout_transient_m|.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.altitude_vs_flight_computer.rms_after_burnout_transient_m|.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.altitude_vs_flight_computer.rms_after_burnout_transient_m|.1f}}}} m); apogee against its highest
+  point made geometric {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.apogee.error_vs_flight_computer_geometric_percent|+.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.apogee.error_vs_flight_computer_geometric_percent|+.1f}}}} /
+  {{{{bench_post2_flights:results.flights.jackpot_launch_4.predicted.apogee.error_vs_flight_computer_geometric_percent|+.1f}}}} %. What is left on flight 1 is not a convention: its
+  constant barometer offset, fitted in the coast behind the stuck-open air brakes, is carried into the descent.
   Residuals against σ measured on the flights themselves: mean NIS barometer / |f|
   {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.observations.baro.mean_nis|.2f}}}} / {{{{bench_post2_flights:results.flights.jackpot_launch_1.predicted.observations.accel.mean_nis|.2f}}}},
   {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.observations.baro.mean_nis|.2f}}}} / {{{{bench_post2_flights:results.flights.jackpot_launch_3.predicted.observations.accel.mean_nis|.2f}}}},
