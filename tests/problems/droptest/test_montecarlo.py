@@ -60,3 +60,33 @@ def test_summary_statistics():
     assert s["anees_stroke_band"] == pytest.approx(list(anees_bounds(1, 4)))
     assert s["restitution_abs_error_median"] == pytest.approx(0.01)  # NaN run ignored
     assert s["z2_at_max_mean"]["p.x"] == pytest.approx(1.0)
+
+
+def test_a_failing_member_is_reported_and_the_others_kept(tmp_path, monkeypatch):
+    """One member that raises (before: the whole Monte Carlo stopped with that member's error and the
+    others' work was lost) is listed with its seed and error in the result, the summary, the
+    scorecard and the headline; the statistics are over the others; all failing is an error."""
+    from workbench.problems.droptest import montecarlo as mc
+    from workbench.problems.droptest.recording_mc import mc_markdown as scorecard_markdown
+
+    def fake_run_seed(scenario, seed, work_dir):
+        if seed == 7:
+            raise ValueError("events.csv: the event times look 1000× too small\nsecond line")
+        n = len(Z_NAMES)
+        return mc.SeedResult(
+            seed=seed, max_stroke=0.31, sigma=0.01, truth=0.3, error=0.01, inside_3sigma=True,
+            nees_pose_mean=6.0, nees_pose_at_max=6.0, nees_stroke=1.0, restitution_error=0.0,
+            z_at_max=np.ones(n), nees_blocks_mean=np.full(4, 3.0), wall_time_s=1.0, reconstruct_s=1.0,
+        )  # fmt: skip
+
+    monkeypatch.setattr(mc, "run_seed", fake_run_seed)
+    sc = load_scenario(SCENARIOS / "droptest.toml")
+    res = monte_carlo(sc, [5, 7, 9], tmp_path / "work")
+    np.testing.assert_array_equal(res.seed, [5, 9])
+    assert res.failed == (mc.FailedSeed(7, "ValueError: events.csv: the event times look 1000× too small"),)
+    s = summarize_mc(res)
+    assert s["n_runs"] == 2 and s["n_failed"] == 1 and s["failed_members"][0]["seed"] == 7
+    assert "1 member(s) FAILED" in scorecard_markdown(s) and "seed 7: ValueError" in scorecard_markdown(s)
+    monkeypatch.setattr(mc, "run_seed", lambda *a: (_ for _ in ()).throw(OSError("disk full")))
+    with pytest.raises(RuntimeError, match="all 2 members failed; first: seed 5: OSError: disk full"):
+        monte_carlo(sc, [5, 7], tmp_path / "work2")

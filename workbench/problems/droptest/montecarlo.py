@@ -41,7 +41,7 @@ import shutil
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +52,16 @@ from workbench.io.scenario import Scenario
 from workbench.problems.droptest.config import config_for
 from workbench.problems.droptest.synthetic import DROP_PARAMETER_NAMES
 
-__all__ = ["McResult", "SeedResult", "run_seed", "monte_carlo", "stack_results", "summarize_mc", "Z_NAMES"]
+__all__ = [
+    "FailedSeed",
+    "McResult",
+    "SeedResult",
+    "run_seed",
+    "monte_carlo",
+    "stack_results",
+    "summarize_mc",
+    "Z_NAMES",
+]
 
 #: Names of the columns of ``z_at_max``: position [SPF], velocity [SPF], attitude δθ [body],
 #: body rate ω [body], gyro scale factors.
@@ -104,6 +113,16 @@ class SeedResult:
 
 
 @dataclass(frozen=True)
+class FailedSeed:
+    """A Monte Carlo task that raised: its ``seed`` and the error as ``"<Type>: <message>"``.  The
+    Monte Carlo goes on without it and says so (``McResult.failed``, ``summary["failed_members"]``,
+    the headline): one bad member must not throw away the others, nor disappear."""
+
+    seed: int
+    error: str
+
+
+@dataclass(frozen=True)
 class McResult:
     """Per-seed arrays of a Monte Carlo, all of length n (the number of seeds), in seed order.
 
@@ -116,7 +135,7 @@ class McResult:
     ``drop`` (n, k) (columns
     :data:`~workbench.problems.droptest.synthetic.DROP_PARAMETER_NAMES`).  ``scenario`` name,
     ``mode`` filter mode, ``executor`` description, ``total_wall_s`` wall time of the whole
-    Monte Carlo [s].
+    Monte Carlo [s]; ``failed`` the tasks that raised (:class:`FailedSeed`, not in the arrays).
     """
 
     scenario: str
@@ -143,6 +162,7 @@ class McResult:
     restitution_error_touch_leave: np.ndarray | None = None
     restitution_error_before: np.ndarray | None = None
     drop: np.ndarray | None = None
+    failed: tuple[FailedSeed, ...] = ()
 
     @property
     def n_runs(self) -> int:
@@ -227,11 +247,15 @@ def run_seed(scenario: Scenario, seed: int, work_dir: str | Path) -> SeedResult:
     )
 
 
-def _seed_task(shared: tuple[Scenario, list[int], Path], k: int, _ss: None) -> SeedResult:
+def _seed_task(shared: tuple[Scenario, list[int], Path], k: int, _ss: None) -> SeedResult | FailedSeed:
     """Task k of :func:`~workbench.estimation.montecarlo.run_monte_carlo`: :func:`run_seed` of the k-th seed
-    (the seed is the task's only randomness, so the executor's member seed is not used)."""
+    (the seed is the task's only randomness, so the executor's member seed is not used); a task that
+    raises is a :class:`FailedSeed`."""
     scenario, seeds, work = shared
-    return run_seed(scenario, seeds[k], work)
+    try:
+        return run_seed(scenario, seeds[k], work)
+    except Exception as err:  # one member's failure is reported with the Monte Carlo, not fatal to it
+        return FailedSeed(int(seeds[k]), f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}")
 
 
 def monte_carlo(
@@ -291,7 +315,13 @@ def _monte_carlo(scenario: Scenario, seeds: list[int], work: Path, scheduler: st
             progress=bar,
         )
     executor = "loop" if run.kind == "loop" else run.executor
-    return stack_results(scenario, run.results, executor, time.perf_counter() - t0)
+    ok = [r for r in run.results if isinstance(r, SeedResult)]
+    failed = tuple(r for r in run.results if isinstance(r, FailedSeed))
+    if not ok:
+        raise RuntimeError(
+            f"droptest Monte Carlo: all {len(failed)} members failed; first: seed {failed[0].seed}: {failed[0].error}"
+        )
+    return replace(stack_results(scenario, ok, executor, time.perf_counter() - t0), failed=failed)
 
 
 def stack_results(scenario: Scenario, results: Sequence[SeedResult], executor: str, total_wall_s: float) -> McResult:
@@ -365,6 +395,8 @@ def summarize_mc(res: McResult, probability: float = 0.95) -> dict:
         "mode": res.mode,
         "executor": res.executor,
         "n_runs": n,
+        "n_failed": len(res.failed),
+        "failed_members": [{"seed": f.seed, "error": f.error} for f in res.failed],
         "band_probability": probability,
         "fraction_inside_3sigma": float(np.mean(res.inside_3sigma)),
         "median_3sigma_m": float(np.median(s3)),

@@ -257,7 +257,14 @@ class DropTestProblem:
         )
         summary = summarize_mc(res)
         rrd = record_monte_carlo(out / f"{scenario.name}_mc.rrd", f"{scenario.name} Monte Carlo", res, summary)
-        headline = (
+        first = summary["failed_members"][0] if summary["n_failed"] else {}
+        failed = (
+            f"{summary['n_failed']} of {len(seeds)} members FAILED (first: seed {first.get('seed')}: "
+            f"{first.get('error', '')[:200]}); the statistics are over the other {summary['n_runs']}; "
+            if summary["n_failed"]
+            else ""
+        )
+        headline = failed + (
             f"truth inside 3σ in {100 * summary['fraction_inside_3sigma']:.0f} % of runs, "
             f"median 3σ {100 * summary['median_3sigma_m']:.1f} cm, max-stroke ANEES "
             f"{summary['anees_stroke']:.2f}; wrote {rrd} in {res.total_wall_s:.0f} s"

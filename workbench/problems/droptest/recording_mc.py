@@ -43,6 +43,16 @@ def mc_markdown(summary: dict) -> str:
                 "",
                 f"Executor: {s['executor']}; wall time {s['total_wall_s']:.0f} s.",
                 "",
+                *(
+                    [
+                        f"**{s['n_failed']} member(s) FAILED and are not in the statistics:**",
+                        "",
+                        *(f"- seed {f['seed']}: {f['error']}" for f in s["failed_members"]),
+                        "",
+                    ]
+                    if s.get("n_failed")
+                    else []
+                ),
                 "| quantity | value |",
                 "|---|---|",
                 f"| truth max stroke inside reported 3σ | {100 * s['fraction_inside_3sigma']:.1f} % |",
