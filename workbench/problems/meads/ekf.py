@@ -122,10 +122,14 @@ vertical air-relative velocity is ``V × α`` (1 000 m/s × 0.5° = 9 m/s): what
 attribute to α goes into w_down (or, with the coupling, into δθ and through it into δv).  The
 coupling alone: velocity honest, p∞ 9.8 → 7.7 %, Mach 0.31 → 0.25, north wind inside 94 → 98 %,
 but w_down 31 m/s, 58 % and α inside 88 → 78 % (the new freedom is used to absorb the α error);
-with the flow-angle states at 0.6°: α 0.79 → 0.61° (97 % inside), w_down 26.5 m/s (75 %),
+the velocity errors inside their 3σ at 90–100 % of the member-samples per axis (22–43 % without);
+with the flow-angle states at 0.6° as well: α 0.79 → 0.61° (97 % inside), w_down 26.5 m/s (75 %),
 but q∞ 1.5 → 5.0 % and density 4.4 → 8.1 % (the flow-angle error trades with the level of the
-pressures).  Both stay off by default: neither is honest for every output; the table's α error at
-low Mach is the item to fix (its own flow-angle allowance), not the wind.
+pressures); the flow-angle states at 0.6° without the coupling: α 95 % inside, w_down 25.5 m/s
+at 59 %, q∞ 5.4 %, density 7.3 %.  Both stay off by default: neither is honest for every output;
+the table's α error at low Mach is the item to fix (its own flow-angle allowance), not the
+vertical wind's prior (3 m/s is the size of Martian gravity-wave vertical winds; a larger prior
+would only report the α error as wind).
 """
 
 from __future__ import annotations
