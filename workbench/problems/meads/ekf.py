@@ -21,8 +21,8 @@ State (46, all additive; :data:`STATE_NAMES`)::
   (:mod:`workbench.estimation.strapdown`, ``d(δv)/dt = −C_M_B [f×] δθ``): an attitude error tilts
   the specific force the strapdown integrated, so the velocity error grows as ``δθ × Δv`` — over
   the ~5.5 km/s the heat shield takes off, 1 mrad of attitude error is ~5 m/s of velocity error,
-  twenty times the 0.2 m/s the initial state is known to (``[ekf] attitude_velocity_coupling``;
-  issue #10 measured what leaving it out does, below).
+  twenty times the 0.2 m/s the initial state is known to (``[ekf] attitude_velocity_coupling``, off by default;
+  issue #10 measured both, below).
 * ``δθ_B``: the attitude.  The paper carries Euler parameters (Eq. 26) integrated from the gyros;
   here the strapdown's attitude ``q_M_B`` is a known input and the state is the body-frame
   small-angle error of it (``C_B_M = (I − [δθ×]) C_B_M,nav``), rotated with the body between
