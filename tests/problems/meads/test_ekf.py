@@ -16,6 +16,7 @@ import pytest
 
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
+from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import dcm_to_quat, quat_to_dcm
 from workbench.estimation.consistency import is_symmetric_pd
 from workbench.estimation.health import ERROR, OK
@@ -31,7 +32,7 @@ VEHICLE = load_fads_vehicle(asset_path("vehicles", "msl_meads.toml"))
 LAMBDA = np.array([0.008, -0.006, 0.004, 0.0, -0.005, 0.007, -0.008])
 WIND_N = np.array([12.0, -6.0, 0.0])
 #: the pressure model's error not carried as states (the filter before issue #10's coloured model error)
-NO_MODEL_ERROR = dict(model_error_sigma=0.0, bias_sigma_pa=0.0, model_mach_sigma=0.0)
+NO_MODEL_ERROR = dict(model_error_sigma=0.0, bias_sigma_pa=0.0, model_mach_sigma=0.0, model_angle_sigma_deg=0.0)
 
 
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -176,6 +177,49 @@ def test_health_checks_of_the_passes(arc):
     assert checks["nis.pressure_ekf_pass2_P1"].status == ERROR
 
 
+def test_attitude_error_tilts_the_integrated_specific_force():
+    """A strapdown that decelerates at 10 g along a fixed body axis: a planted attitude error
+    δθ (C_M_B,true = C_M_B (I + [δθ×])) makes the true velocity drift from the strapdown's by
+    C_M_B (δθ × f) Δt a step; the transition carries it (state and F[v, θ]), and without the
+    coupling the velocity error would stay at zero."""
+    n, dt = 17, 0.125
+    t = np.arange(n) * dt
+    rng = np.random.default_rng(5)
+    u = rng.normal(size=3)
+    C_M_B = _rotation_between(np.array([1.0, 0, 0]), u / np.linalg.norm(u))
+    f_B = np.array([-98.0, 3.0, 20.0])  # m/s², drag along −x_B with some lift
+    p0 = np.array([MARS.reference_radius + 40e3, 0.0, 0.0])
+    p_M, v_M = [p0], [np.array([-1000.0, 5000.0, 0.0])]
+    for _ in range(n - 1):  # the strapdown: specific force and gravity (trapezoidal)
+        p_M.append(p_M[-1] + v_M[-1] * dt)
+        g = 0.5 * (gravity_j2(p_M[-2][None], MARS)[0] + gravity_j2(p_M[-1][None], MARS)[0])
+        v_M.append(v_M[-1] + (C_M_B @ f_B + g) * dt)
+    p_M, v_M = np.array(p_M), np.array(v_M)
+    q = dcm_to_quat(np.broadcast_to(C_M_B, (n, 3, 3)).copy())
+    inp = ekf.EkfInputs(
+        t, p_M, v_M, q, 5.0, 0.05, 1e-4, np.zeros((n, 7)), np.ones((n, 7)), np.ones((n, 7), bool),
+        VEHICLE, "newtonian", None, 1.335,
+    )  # fmt: skip
+    dth = np.array([1e-3, -2e-3, 0.5e-3])
+    x = np.zeros(ekf.N_X)
+    x[ekf.IP], x[ekf.IV], x[ekf.ITH] = p_M[0], v_M[0], dth
+    x[ekf.ILP], x[ekf.ILR] = math.log(30.0), math.log(1e-3)
+    for on in (True, False):
+        step = ekf.make_transition(inp, EkfSettings(attitude_velocity_coupling=on))
+        xk = x.copy()
+        for k in range(1, n):
+            xk, F, _ = step(xk, t[k - 1], t[k])
+        dv = xk[ekf.IV] - v_M[-1]
+        # the true drift: the tilted specific force, (n − 1) steps (gravity differences are 2nd order)
+        want = (n - 1) * dt * C_M_B @ np.cross(dth, f_B)
+        if on:
+            np.testing.assert_allclose(dv, want, rtol=1e-6, atol=1e-6)
+            assert np.linalg.norm(want) > 0.1  # m/s after 2 s: the effect is not small
+            np.testing.assert_allclose(F[ekf.IV, ekf.ITH] @ dth, C_M_B @ np.cross(dth, f_B) * dt, rtol=1e-6)
+        else:
+            assert np.linalg.norm(dv) < 1e-6
+
+
 # ------------------------------------------------------------- the pressure model's error as states
 
 
@@ -215,7 +259,7 @@ def test_pressure_model_jacobian_of_the_model_error_states():
     x[ekf.IC], x[ekf.IMM] = 0.004, 0.05
     use = np.array([0, 2, 3, 6])
     cols = [*range(ekf.ILAM.start, ekf.ILAM.stop), ekf.IC, *range(ekf.IB.start, ekf.IB.stop)]
-    cols += [*range(ekf.IBIAS.start, ekf.IBIAS.stop), ekf.IMM]
+    cols += [*range(ekf.IBIAS.start, ekf.IBIAS.stop), ekf.IMM, *range(ekf.IMA.start, ekf.IMA.stop)]
 
     def check(x, cols):
         p, H = h(x, C[5], use)
@@ -230,6 +274,8 @@ def test_pressure_model_jacobian_of_the_model_error_states():
 
     H = check(x, cols)
     assert np.all(np.abs(H[:, ekf.IMM]) > 0)  # the Mach dependence of the table is felt
+    # the model's flow-angle errors are felt by every port
+    assert np.all(np.abs(H[:, ekf.IMA.start]) > 0) and np.all(np.abs(H[:, ekf.IMA.start + 1]) > 0)
     x[ekf.IMM] = 0.0
     check(x, [ekf.ILP, ekf.ILR, ekf.IMM])
 

@@ -39,9 +39,9 @@ def _stages(rng, *, sigma_scale=1.0, alpha_deg=18.0, density_factor=1.0):
     t = np.arange(N) / 8.0
     tel = SimpleNamespace(t_p=t, degradations=[])
     nav = SimpleNamespace(h=h, mach_inertial=np.full(N, 10.0))
-    air = SimpleNamespace(fit=fit, plausibility_ratio=1.02, failures=())
+    air = SimpleNamespace(fit=fit, plausibility_ratio=1.02, failures=(), alt=None)
     wind = SimpleNamespace(density=rho, mach_source=np.full(N, "air_data"))
-    est = SimpleNamespace(min_qbar_pa=850.0, plausibility_factor=3.0)
+    est = SimpleNamespace(min_qbar_pa=850.0, plausibility_factor=3.0, model="table")
     return tel, nav, air, wind, est
 
 
@@ -80,3 +80,24 @@ def test_each_check_can_fail(kw, name, status):
     h = meads_health(*_stages(np.random.default_rng(2), **kw))
     assert _by_name(h)[name]["status"] == status
     assert h["verdict"] in (status, "ERROR")
+
+
+@pytest.mark.parametrize(
+    ("shift_deg", "outside", "status"), [(0.05, 0.0, "OK"), (0.5, 0.3, "WARNING"), (0.5, 1.0, "ERROR")]
+)
+def test_newtonian_model_form_against_the_table(shift_deg, outside, status):
+    """With the Newtonian model the same pressures reduced with the table are the yardstick of its
+    model-form error: an α difference beyond the published 3σ (0.3° here) at a fraction
+    ``outside`` of the samples is a WARNING, at most of them an ERROR, one well inside it is OK;
+    with the table as the model nothing is judged."""
+    tel, nav, air, wind, est = _stages(np.random.default_rng(3))
+    shift = np.where(np.arange(N) < outside * N, shift_deg, 0.05)
+    fit = SimpleNamespace(
+        **{**air.fit.__dict__, "sigma_alpha": np.full(N, np.radians(0.1)), "sigma_qbar": np.full(N, 50.0)}
+    )
+    alt = SimpleNamespace(**{**fit.__dict__, "alpha": fit.alpha + np.radians(shift), "model": "table"})
+    air = SimpleNamespace(**{**air.__dict__, "fit": fit, "alt": alt})
+    names = _by_name(meads_health(tel, nav, air, wind, SimpleNamespace(**{**est.__dict__, "model": "newtonian"})))
+    assert names["model_form.alpha_newtonian_vs_table"]["status"] == status
+    assert names["model_form.qbar_newtonian_vs_table"]["status"] == "OK"
+    assert not any(n.startswith("model_form") for n in _by_name(meads_health(tel, nav, air, wind, est)))

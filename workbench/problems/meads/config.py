@@ -95,6 +95,10 @@ class EkfSettings:
     bias after the in-flight zero (Eq. 51; constant; 0: not modelled); ``noise_counts`` the
     channel's white noise N in counts (Eq. 38, uniform over N counts): with the model error a
     state, R is only that and the quantisation, σ² = (N² + 1)/12 counts².
+    ``model_angle_sigma_deg`` [deg] 1σ of the model's flow-angle errors (pressures read at
+    α + a_m, β + b_m; first-order Gauss–Markov over the same distance; 0: not modelled);
+    ``attitude_velocity_coupling``: the attitude error tilts the specific force the strapdown
+    integrated (``δv' = δv − [Δv_f×] C_M_B δθ``).  Both off by default: measured in :mod:`.ekf`.
     """
 
     enabled: bool = True
@@ -116,6 +120,8 @@ class EkfSettings:
     noise_counts: float = 2.0
     bias_sigma_pa: float = 3.5
     model_mach_sigma: float = 0.1
+    model_angle_sigma_deg: float = 0.0
+    attitude_velocity_coupling: bool = False
 
 
 @dataclass(frozen=True)
@@ -214,6 +220,7 @@ class MeadsConfig:
             "model_level_sigma",
             "model_error_sigma",
             "model_mach_sigma",
+            "model_angle_sigma_deg",
             "bias_sigma_pa",
         ):
             if not ek[k] >= 0.0:
@@ -445,6 +452,19 @@ SCHEMA = Schema(
                     _K.model_mach_sigma,
                     "",
                     "model Mach error 1-sigma, relative (0: not modelled)",
+                ),
+                Key(
+                    "model_angle_sigma_deg",
+                    "float",
+                    _K.model_angle_sigma_deg,
+                    "deg",
+                    "model flow-angle (stagnation-point) error 1-sigma, alpha and beta each (0: not modelled)",
+                ),
+                Key(
+                    "attitude_velocity_coupling",
+                    "bool",
+                    _K.attitude_velocity_coupling,
+                    meaning="attitude error tilts the integrated specific force (velocity error grows with it)",
                 ),
             ),
         ),

@@ -5,17 +5,24 @@ Flight Results", AIAA 2013, Sect. III.B (Eq. 19–35) and Sect. IV.B.4 (the mult
 composed on the shared engine (:func:`workbench.estimation.ekf.run_filter`, iterated
 :func:`~workbench.estimation.ekf.update`, :func:`workbench.estimation.smoother.rts_smooth`).
 
-State (37, all additive; :data:`STATE_NAMES`)::
+State (46, all additive; :data:`STATE_NAMES`)::
 
     x = [p_M (3) m, v_M (3) m/s, δθ_B (3) rad, w_N (3) m/s, ln p∞, ln ρ∞, λ_1..λ_7, c,
-         b_1..b_7, b'_1..b'_7, β_1..β_7 Pa, m]
+         b_1..b_7, b'_1..b'_7, β_1..β_7 Pa, m, a_m, b_m rad]
 
 * ``p_M``, ``v_M``: inertial position and velocity in the planet-centred inertial frame M (the
   paper's r, θ, φ, u, v, w of Eq. 19, in Cartesian form).  They are driven by the IMU through the
   strapdown of :func:`.pipeline.navigate`: the filter propagates the deviation from the strapdown
-  solution, ``δp' = δp + δv Δt``, ``δv' = δv + G(p) δp Δt`` (G the point-mass gravity gradient;
-  the IMU increments themselves are in the strapdown), with accelerometer process noise
-  (the paper's "additive process noise on the acceleration measurements").
+  solution, ``δp' = δp + δv Δt``, ``δv' = δv + G(p) δp Δt − [Δv_f×] C_M_B δθ`` (G the point-mass
+  gravity gradient; ``Δv_f`` the strapdown's specific-force velocity increment over the step in M,
+  its velocity change less its gravity; the IMU increments themselves are in the strapdown), with
+  accelerometer process noise (the paper's "additive process noise on the acceleration
+  measurements").  The last term is the strapdown's own error dynamics
+  (:mod:`workbench.estimation.strapdown`, ``d(δv)/dt = −C_M_B [f×] δθ``): an attitude error tilts
+  the specific force the strapdown integrated, so the velocity error grows as ``δθ × Δv`` — over
+  the ~5.5 km/s the heat shield takes off, 1 mrad of attitude error is ~5 m/s of velocity error,
+  twenty times the 0.2 m/s the initial state is known to (``[ekf] attitude_velocity_coupling``, off by default;
+  issue #10 measured both, below).
 * ``δθ_B``: the attitude.  The paper carries Euler parameters (Eq. 26) integrated from the gyros;
   here the strapdown's attitude ``q_M_B`` is a known input and the state is the body-frame
   small-angle error of it (``C_B_M = (I − [δθ×]) C_B_M,nav``), rotated with the body between
@@ -55,9 +62,17 @@ State (37, all additive; :data:`STATE_NAMES`)::
   dependence is the model's weakest part, which a white-noise R would otherwise let the filter
   trust (measured on seed 11, pass 1, without it: Mach 99 % inside 3σ instead of 100 %, p∞ RMS
   4.3 % instead of 3.3 %; before the flow angles were in the distance it was Mach 38 %).
+* ``a_m``, ``b_m`` [rad]: the model's flow-angle error, the pressures read at ``(α + a_m, β + b_m)``
+  (first-order Gauss–Markov over the same distance, 1σ ``[ekf] model_angle_sigma_deg``; 0, the
+  default: not modelled, the states stay at 0 with zero variance).  A forebody pressure model
+  places the stagnation point from the geometry; the real shock layer moves it (the FADS
+  "upwash"/flow-angle calibration of Whitmore et al.), an error a per-port multiplicative b
+  cannot represent because it is a rotation of the whole pattern — the least squares see it as
+  an α error and no residual shows it.
 
 Measurement (Eq. 33–35, iterated update): the seven port pressures
-``p_i = (1 + λ_i)(1 + c)(1 + b_i) h_i(x; M (1 + m)) + β_i`` through the same surface pressure
+``p_i = (1 + λ_i)(1 + c)(1 + b_i) h_i(x; M (1 + m), α + a_m, β + b_m) + β_i`` (m, a_m, b_m to
+first order) through the same surface pressure
 model as the least squares (:func:`.airdata.pressure_model`, Newtonian or the estimator's table,
 "mach" set) with α, β, q∞ and Mach computed from the state — the air-relative velocity in body
 axes ``C_B_M (v_M − Ω × p_M − C_M_N w_N)``, ``q∞ = ½ ρ∞ V²``, ``M = V / √(γ p∞/ρ∞)`` (the
@@ -90,8 +105,31 @@ the one-step innovations are near the 1.4 Pa white noise.  The second-order Mark
 lapse rate) would need its own higher-order model.  With the Newtonian model the 1 % σ is too
 small (its error against the truth is ~3 %, common mode 2.6 %; α 37 % inside 3σ, 13 % before);
 ``model_error_sigma = 0.03`` makes it α 77 %, q∞ 89 %, the rest 93–100 %: the Newtonian's error
-is more than a smooth per-port factor.  On pressures from the estimator's own model planted scale factors are recovered
-(tests/problems/meads/test_ekf.py).
+is more than a smooth per-port factor; the health verdict says so from the data (the same
+pressures reduced with the table, :func:`.health.model_form_checks`).  On pressures from the
+estimator's own model planted scale factors are recovered (tests/problems/meads/test_ekf.py).
+
+The vertical wind in the full-error Monte Carlo (issue #10; :mod:`.truth_mc`, seed 1, members
+0–7, pass 2, above 850 Pa; 3 × RMS, % of member-samples inside the reported 3σ): w_down 26.9 m/s
+reported 6.7 (58 % inside).  Measured cause, two parts: (1) the inertial velocity is not what the
+filter says — the strapdown's velocity error against the truth is 1–7 m/s per NED axis where the
+filter reports 0.25 m/s (5–19σ), and the true attitude error times the specific-force increments
+reproduces it (member 0 down −8.2 m/s true, −7.8 predicted; 3: −9.2/−9.9; 6: −13.0/−11.2): the
+missing ``δθ × Δv`` term above (``attitude_velocity_coupling``); (2) the dominant part: the
+estimator's table errs in α against the dispersed CFD-like truths at Mach < 8 by −0.4 to −1.1°
+in every member (the least squares' own α error), far beyond its 1 % pressure allowance, and the
+vertical air-relative velocity is ``V × α`` (1 000 m/s × 0.5° = 9 m/s): whatever the filter does not
+attribute to α goes into w_down (or, with the coupling, into δθ and through it into δv).  The
+coupling alone: velocity honest, p∞ 9.8 → 7.7 %, Mach 0.31 → 0.25, north wind inside 94 → 98 %,
+but w_down 31 m/s, 58 % and α inside 88 → 78 % (the new freedom is used to absorb the α error);
+the velocity errors inside their 3σ at 90–100 % of the member-samples per axis (22–43 % without);
+with the flow-angle states at 0.6° as well: α 0.79 → 0.61° (97 % inside), w_down 26.5 m/s (75 %),
+but q∞ 1.5 → 5.0 % and density 4.4 → 8.1 % (the flow-angle error trades with the level of the
+pressures); the flow-angle states at 0.6° without the coupling: α 95 % inside, w_down 25.5 m/s
+at 59 %, q∞ 5.4 %, density 7.3 %.  Both stay off by default: neither is honest for every output;
+the table's α error at low Mach is the item to fix (its own flow-angle allowance), not the
+vertical wind's prior (3 m/s is the size of Martian gravity-wave vertical winds; a larger prior
+would only report the α error as wind).
 """
 
 from __future__ import annotations
@@ -104,8 +142,8 @@ import numpy as np
 
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
-from workbench.core.gravity import gravity_point_mass_gradient
-from workbench.core.rotation import quat_to_dcm
+from workbench.core.gravity import gravity_j2, gravity_point_mass_gradient
+from workbench.core.rotation import quat_to_dcm, skew
 from workbench.estimation.ekf import (
     ErrorStateLayout,
     ForwardPass,
@@ -147,7 +185,9 @@ IB, IBD = slice(22, 22 + N_PORTS), slice(22 + N_PORTS, 22 + 2 * N_PORTS)
 IBIAS = slice(22 + 2 * N_PORTS, 22 + 3 * N_PORTS)
 #: the model's Mach error (relative): the pressure model read at M (1 + m) (after the biases)
 IMM = 22 + 3 * N_PORTS
-N_X = IMM + 1
+#: the model's flow-angle errors [rad]: the pressure model read at (α + a_m, β + b_m) (after m)
+IMA = slice(IMM + 1, IMM + 3)
+N_X = IMM + 3
 LAYOUT = ErrorStateLayout(N_X)
 STATE_NAMES = (
     *(f"p_M_{a}" for a in "xyz"),
@@ -164,6 +204,8 @@ STATE_NAMES = (
     *(f"model_error_rate_{i + 1}" for i in range(N_PORTS)),
     *(f"bias_{i + 1}" for i in range(N_PORTS)),
     "model_mach_error",
+    "model_alpha_error",
+    "model_beta_error",
 )
 OUTPUT_NAMES = ("alpha", "beta", "qbar", "mach", "p_inf", "rho", "wind_north", "wind_east", "wind_down")
 """Columns of :func:`air_outputs` [rad, rad, Pa, 1, Pa, kg/m³, m/s, m/s, m/s]."""
@@ -171,7 +213,7 @@ OUTPUT_NAMES = ("alpha", "beta", "qbar", "mach", "p_inf", "rho", "wind_north", "
 #: perturbations of the numeric Jacobians, error-state units
 EPS = np.r_[
     np.full(3, 1.0), np.full(3, 1e-2), np.full(3, 1e-6), np.full(3, 1e-2), 1e-5, 1e-5, np.full(7, 1e-6), 1e-6,
-    np.full(2 * N_PORTS, 1e-6), np.full(N_PORTS, 1e-2), 1e-6,
+    np.full(2 * N_PORTS, 1e-6), np.full(N_PORTS, 1e-2), 1e-6, 1e-6, 1e-6,
 ]  # fmt: skip
 
 
@@ -304,7 +346,7 @@ def make_pressure_model(inp: EkfInputs):
 
     def h(x: np.ndarray, C_B_M: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if compiled:
-            _, Ju12, p0, dp_dz = pressure_kernel(
+            u0, Ju12, p0, dp_dz = pressure_kernel(
                 x, C_B_M, EPS, _EPS_Z, use, inp.gamma, MARS.rotation_rate, table_model, *ports, *grids
             )
             Ju = np.zeros((3, N_X))
@@ -323,7 +365,14 @@ def make_pressure_model(inp: EkfInputs):
         # the ln p∞, ln ρ∞ columns (M = V √(ρ∞/γp∞), p = p∞ + q∞ Cp); g_m's own derivatives
         # (m times the model's curvature) are left out of H
         g_m = dp_dz[:, 4] - dp_dz[:, 3] - p0 + 2.0 * math.exp(x[ILP])
-        pm = p0 + x[IMM] * g_m
+        # and at (α + a_m, β + b_m): g_a, g_b = ∂p/∂α, ∂p/∂β at constant V, q∞, M (u rotated)
+        V = math.sqrt(float(u0 @ u0))
+        ca, sa = u0[0] / math.hypot(u0[0], u0[2]), u0[2] / math.hypot(u0[0], u0[2])
+        sb = u0[1] / V
+        cb = math.sqrt(max(1.0 - sb * sb, 0.0))
+        du = V * np.array([[-sa * cb, 0.0, ca * cb], [-ca * sb, cb, -sa * sb]])  # ∂u/∂α, ∂u/∂β
+        g_ab = dp_dz[:, :3] @ du.T  # (k, 2)
+        pm = p0 + x[IMM] * g_m + g_ab @ x[IMA]
         lam = 1.0 + x[ILAM][use]
         lev = 1.0 + x[IC]
         mod = 1.0 + x[IB][use]
@@ -334,6 +383,7 @@ def make_pressure_model(inp: EkfInputs):
         H[rows, IB.start + use] = pm * lam * lev
         H[rows, IBIAS.start + use] = 1.0
         H[:, IMM] = g_m * lam * lev * mod
+        H[:, IMA] = g_ab * (lam * lev * mod)[:, None]
         return pm * lam * lev * mod + x[IBIAS][use], H
 
     return h
@@ -384,6 +434,7 @@ def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.
         np.full(N_PORTS, markov_steady_var(st)[1]),
         np.full(N_PORTS, st.bias_sigma_pa**2),
         [st.model_mach_sigma**2],
+        np.full(2, math.radians(st.model_angle_sigma_deg) ** 2),
     ]
     P0 = np.diag(d)
     P0[ILAM, ILAM] = scale_cov
@@ -437,16 +488,23 @@ def make_transition(inp: EkfInputs, st: EkfSettings):
     I3 = np.eye(3)
 
     C_B_M = np.swapaxes(C_M_B, 1, 2)
-    markov = st.model_error_sigma > 0.0 or st.model_mach_sigma > 0.0
+    markov = st.model_error_sigma > 0.0 or st.model_mach_sigma > 0.0 or st.model_angle_sigma_deg > 0.0
+    # the strapdown's specific-force velocity increments in M over each step (n - 1, 3) [m/s]:
+    # its velocity change less the gravity it integrated (point mass + J2, trapezoidal)
+    g = gravity_j2(inp.p_M, MARS)
+    dv_sf = np.diff(inp.v_M, axis=0) - 0.5 * (g[1:] + g[:-1]) * np.diff(t)[:, None]
 
     def transition(x, t0, t1):
         k = idx[t1]
         dt = t1 - t0
         dp, dv = x[IP] - inp.p_M[k - 1], x[IV] - inp.v_M[k - 1]
         G = gravity_point_mass_gradient(inp.p_M[k - 1][None], MARS.gm)[0]
+        # the attitude error tilts the specific force the strapdown integrated:
+        # δv' = δv − [Δv_sf×] C_M_B δθ (module docstring)
+        Fvt = -skew(dv_sf[k - 1]) @ C_M_B[k - 1] if st.attitude_velocity_coupling else np.zeros((3, 3))
         x1 = x.copy()
         x1[IP] = inp.p_M[k] + dp + dv * dt
-        x1[IV] = inp.v_M[k] + dv + G @ dp * dt
+        x1[IV] = inp.v_M[k] + dv + G @ dp * dt + Fvt @ x[ITH]
         Rb = C_M_B[k].T @ C_M_B[k - 1]  # body at k-1 -> body at k
         x1[ITH] = Rb @ x[ITH]
         r0, r1 = np.linalg.norm(x[IP]), np.linalg.norm(x1[IP])
@@ -457,6 +515,7 @@ def make_transition(inp: EkfInputs, st: EkfSettings):
         F = np.eye(N_X)
         F[IP, IV] = dt * I3
         F[IV, IP] = G * dt
+        F[IV, ITH] = Fvt
         F[ITH, ITH] = Rb
         u0, u1 = x[IP] / r0, x1[IP] / r1
         dh_dp = u1 - u0  # ∂Δh/∂p (through p1 = p + ...)
@@ -490,6 +549,11 @@ def make_transition(inp: EkfInputs, st: EkfSettings):
             x1[IMM] = phi * x[IMM]
             F[IMM, IMM] = phi
             Q[IMM, IMM] = st.model_mach_sigma**2 * (1.0 - phi**2)
+        if st.model_angle_sigma_deg > 0.0:
+            phi = math.exp(-dist)
+            x1[IMA] = phi * x[IMA]
+            F[IMA, IMA] = phi * np.eye(2)
+            Q[IMA, IMA] = math.radians(st.model_angle_sigma_deg) ** 2 * (1.0 - phi**2) * np.eye(2)
         return x1, F, Q
 
     return transition
