@@ -220,6 +220,45 @@ def test_attitude_error_tilts_the_integrated_specific_force():
             assert np.linalg.norm(dv) < 1e-6
 
 
+def test_vertical_wind_and_flow_angle_errors_keep_their_stationary_variance():
+    """The vertical wind (a Gauss–Markov over the altitude travelled) and the model's flow-angle
+    errors (a Gauss–Markov whose 1σ follows Mach, :func:`ekf.angle_sigma`) propagate so that a
+    state at its stationary variance stays there: F P Fᵀ + Q = σ² after each step, with the wind
+    decaying by exp(−Δh / L) and the flow-angle σ moving with the Mach number of the step."""
+    st = EkfSettings()
+    assert st.vertical_wind_length_km > 0 and st.attitude_velocity_coupling and st.model_angle_sigma_deg > 0
+    deg = math.radians(1.0)
+    assert ekf.angle_sigma(st, 3.0) == pytest.approx(deg)
+    assert ekf.angle_sigma(st, 7.5) == pytest.approx(0.55 * deg)
+    assert ekf.angle_sigma(st, 25.0) == pytest.approx(0.1 * deg)
+    n, dt = 9, 0.125
+    t = np.arange(n) * dt
+    p0 = np.array([MARS.reference_radius + 40e3, 0.0, 0.0])
+    v0 = np.array([-1500.0, 1000.0, 0.0])  # descending 1.5 km/s: 190 m a step
+    p_M = p0 + v0 * t[:, None]
+    v_M = np.broadcast_to(v0, (n, 3)).copy()
+    q = dcm_to_quat(np.broadcast_to(np.eye(3), (n, 3, 3)).copy())
+    inp = ekf.EkfInputs(
+        t, p_M, v_M, q, 5.0, 0.05, 1e-4, np.zeros((n, 7)), np.ones((n, 7)), np.ones((n, 7), bool),
+        VEHICLE, "newtonian", None, 1.335,
+    )  # fmt: skip
+    x = np.zeros(ekf.N_X)
+    x[ekf.IP], x[ekf.IV] = p_M[0], v_M[0]
+    x[ekf.ILP], x[ekf.ILR] = math.log(30.0), math.log(1e-3)
+    x[11] = 2.0  # m/s down
+    step = ekf.make_transition(inp, st)
+    x1, F, Q = step(x, t[0], t[1])
+    dh_km = (np.linalg.norm(x1[ekf.IP]) - np.linalg.norm(x[ekf.IP])) / 1e3
+    assert dh_km == pytest.approx(-0.1875, rel=1e-3)
+    phi = math.exp(dh_km / st.vertical_wind_length_km)
+    assert x1[11] == pytest.approx(2.0 * phi) and F[11, 11] == pytest.approx(phi)
+    assert phi**2 * st.vertical_wind_sigma_mps**2 + Q[11, 11] == pytest.approx(st.vertical_wind_sigma_mps**2)
+    mach = [ekf.air_data_of_state(xx[None], np.eye(3)[None], 1.335)[3][0] for xx in (x, x1)]
+    s0, s1 = (ekf.angle_sigma(st, m) for m in mach)
+    a = ekf.IMA
+    np.testing.assert_allclose(F[a, a] @ (s0**2 * np.eye(2)) @ F[a, a].T + Q[a, a], s1**2 * np.eye(2), rtol=1e-12)
+
+
 # ------------------------------------------------------------- the pressure model's error as states
 
 
@@ -323,3 +362,13 @@ def test_model_error_states_keep_the_filter_honest(arc_model_error):
             assert np.all(ok)
     p1 = passes[0]
     assert np.all(np.abs(p1.scale - LAMBDA) <= 3.0 * p1.sigma_scale), (p1.scale - LAMBDA, p1.sigma_scale)
+
+
+def test_flow_angle_mach_range_must_be_ordered():
+    """``model_angle_mach_high`` at or below ``model_angle_mach_low`` is a located error."""
+    from workbench.io.scenario import ScenarioError, load_scenario
+    from workbench.problems.meads.config import config_for
+
+    sc = load_scenario(asset_path("scenarios", "msl_meads.toml"))
+    with pytest.raises(ScenarioError, match="ekf.model_angle_mach_high"):
+        config_for(sc.with_overrides({"ekf.model_angle_mach_low": 10.0, "ekf.model_angle_mach_high": 5.0}))

@@ -96,9 +96,15 @@ class EkfSettings:
     channel's white noise N in counts (Eq. 38, uniform over N counts): with the model error a
     state, R is only that and the quantisation, σ² = (N² + 1)/12 counts².
     ``model_angle_sigma_deg`` [deg] 1σ of the model's flow-angle errors (pressures read at
-    α + a_m, β + b_m; first-order Gauss–Markov over the same distance; 0: not modelled);
+    α + a_m, β + b_m; first-order Gauss–Markov over the same distance; 0: not modelled) at and
+    below Mach ``model_angle_mach_low``, ``model_angle_hypersonic_fraction`` of it at and above
+    ``model_angle_mach_high``, linear in Mach between (:func:`.ekf.angle_sigma`);
     ``attitude_velocity_coupling``: the attitude error tilts the specific force the strapdown
-    integrated (``δv' = δv − [Δv_f×] C_M_B δθ``).  Both off by default: measured in :mod:`.ekf`.
+    integrated (``δv' = δv − [Δv_f×] C_M_B δθ``); ``vertical_wind_length_km`` [km] the vertical
+    wind as a first-order Gauss–Markov over the altitude travelled, 1σ
+    ``vertical_wind_sigma_mps`` (gravity waves: zero mean, short vertical correlation; 0: a random
+    walk like the horizontal wind).  The defaults (1°, 0.1, coupling on, 5 km) and what each
+    changed are measured in :mod:`.ekf`.
     """
 
     enabled: bool = True
@@ -108,6 +114,7 @@ class EkfSettings:
     attitude_psd: float = 4e-9
     wind_sigma_mps: float = 30.0
     vertical_wind_sigma_mps: float = 3.0
+    vertical_wind_length_km: float = 5.0
     wind_var_per_km: float = 30.0
     atmosphere_sigma_ln: float = 1.0
     atmosphere_var_per_km: float = 1e-4
@@ -120,8 +127,11 @@ class EkfSettings:
     noise_counts: float = 2.0
     bias_sigma_pa: float = 3.5
     model_mach_sigma: float = 0.1
-    model_angle_sigma_deg: float = 0.0
-    attitude_velocity_coupling: bool = False
+    model_angle_sigma_deg: float = 1.0
+    model_angle_hypersonic_fraction: float = 0.1
+    model_angle_mach_low: float = 5.0
+    model_angle_mach_high: float = 10.0
+    attitude_velocity_coupling: bool = True
 
 
 @dataclass(frozen=True)
@@ -221,10 +231,18 @@ class MeadsConfig:
             "model_error_sigma",
             "model_mach_sigma",
             "model_angle_sigma_deg",
+            "model_angle_hypersonic_fraction",
+            "vertical_wind_length_km",
             "bias_sigma_pa",
         ):
             if not ek[k] >= 0.0:
                 raise ScenarioError(scenario.path, f"ekf.{k}", f"{ek[k]}: a 1-sigma or process noise must be >= 0")
+        if not ek["model_angle_mach_low"] < ek["model_angle_mach_high"]:
+            raise ScenarioError(
+                scenario.path,
+                "ekf.model_angle_mach_high",
+                f"{ek['model_angle_mach_high']}: must be above model_angle_mach_low ({ek['model_angle_mach_low']})",
+            )
         levels = tuple(float(x) / 100.0 for x in mc["levels_pct"])
         return cls(
             vehicle_file=v["vehicle"]["file"],
@@ -399,6 +417,13 @@ SCHEMA = Schema(
                 Key("attitude_psd", "float", _K.attitude_psd, "rad^2/s", "attitude random walk beyond the strapdown"),
                 Key("wind_sigma_mps", "float", _K.wind_sigma_mps, "m/s", "prior 1-sigma of the horizontal wind"),
                 Key("vertical_wind_sigma_mps", "float", _K.vertical_wind_sigma_mps, "m/s", "prior 1-sigma, vertical"),
+                Key(
+                    "vertical_wind_length_km",
+                    "float",
+                    _K.vertical_wind_length_km,
+                    "km",
+                    "vertical wind: Gauss-Markov correlation length in altitude (0: a random walk like the horizontal)",
+                ),
                 Key("wind_var_per_km", "float", _K.wind_var_per_km, "(m/s)^2/km", "wind random walk per km descended"),
                 Key("atmosphere_sigma_ln", "float", _K.atmosphere_sigma_ln, "", "prior 1-sigma of ln p and ln rho"),
                 Key("atmosphere_var_per_km", "float", _K.atmosphere_var_per_km, "1/km", "ln p, ln rho random walk"),
@@ -458,7 +483,28 @@ SCHEMA = Schema(
                     "float",
                     _K.model_angle_sigma_deg,
                     "deg",
-                    "model flow-angle (stagnation-point) error 1-sigma, alpha and beta each (0: not modelled)",
+                    "model flow-angle error 1-sigma, alpha and beta each, at low Mach (0: not modelled)",
+                ),
+                Key(
+                    "model_angle_hypersonic_fraction",
+                    "float",
+                    _K.model_angle_hypersonic_fraction,
+                    "",
+                    "the flow-angle error 1-sigma at and above model_angle_mach_high, a fraction of the low-Mach one",
+                ),
+                Key(
+                    "model_angle_mach_low",
+                    "float",
+                    _K.model_angle_mach_low,
+                    "",
+                    "Mach at and below which the flow-angle error has its full 1-sigma",
+                ),
+                Key(
+                    "model_angle_mach_high",
+                    "float",
+                    _K.model_angle_mach_high,
+                    "",
+                    "Mach at and above which it has the hypersonic fraction (linear in Mach between)",
                 ),
                 Key(
                     "attitude_velocity_coupling",
