@@ -96,26 +96,28 @@ the pressures by ``1 + λ̂`` (pass-1 smoothed) and runs again with the scale fa
 include them) but never updated (gain projected to zero on them; ``rts_smooth(consider=...)``):
 the data are not used twice.  Each pass is a forward iterated EKF and an RTS smoother.
 
-Measured (``msl_meads``, seeds 11/1/2, table model, above 850 Pa, pass 2; before → after
-issue #10): the outputs are honest — α, β, q∞, Mach, p∞, density and the north wind inside their
-reported 3σ at every sample, the east wind at 96–100 % (before: α 91–94 %, Mach 81–100 %, north
-wind 77–100 %); RMS errors α 0.08–0.16° (0.15–0.22°), q∞ 0.54–0.65 % (1.0–2.2 %), p∞ 2.3–3.4 %
-(4.0–7.4 %), Mach 0.21–0.25 (0.21–0.42), density 1.3–2.0 % (1.0–1.3 %); pass 1's scale factors
-inside 3σ for 7 of 7 ports on every seed (4, 1, 5 of 7), common-mode error −0.1 to −0.5 %
-(−0.9 to −2.2 %).  Still conservative: the mean per-port NIS is 0.14–0.20
-(0.02–0.15 before; health WARNING below 0.5).  The innovations' S is dominated by the per-step
-process noise of first-order models of smooth processes — the model-error Markov as α and Mach
-change, the wind and ln p∞/ln ρ∞ random walks per km — while the truth's errors are smooth, so
-the one-step innovations are near the 1.4 Pa white noise.  The second-order Markov
-(``model_error_order = 2``) doubles the NIS (0.29–0.38) but leaves 4–7 of 7 scale factors inside
-3σ; smaller wind/atmosphere random walks bring it to 0.7–1.4 but make Mach and p∞ overconfident
-(43 % and 86 % inside 3σ with 3e-5/km and 15 (m/s)²/km): the smooth atmosphere (gravity waves,
-lapse rate) would need its own higher-order model.  With the Newtonian model the 1 % σ is too
-small (its error against the truth is ~3 %, common mode 2.6 %; α 37 % inside 3σ, 13 % before);
-``model_error_sigma = 0.03`` makes it α 77 %, q∞ 89 %, the rest 93–100 %: the Newtonian's error
-is more than a smooth per-port factor; the health verdict says so from the data (the same
-pressures reduced with the table, :func:`.health.model_form_checks`).  On pressures from the
-estimator's own model planted scale factors are recovered (tests/problems/meads/test_ekf.py).
+Measured (``msl_meads``, seeds 11/1/2, table model, above 850 Pa, pass 2; before → after issue
+#10, and before the defaults of the last paragraph — with them, seed 11: RMS α 0.12°, β 0.06°, q∞
+0.69 %, p∞ 2.1 %, density 2.4 %, Mach 0.25, north wind 4.8 m/s, every output inside its 3σ at
+every sample, scale factors 7 of 7): the outputs are honest — α, β, q∞, Mach, p∞, density and the
+north wind inside their reported 3σ at every sample, the east wind at 96–100 % (before: α 91–94 %,
+Mach 81–100 %, north wind 77–100 %); RMS errors α 0.08–0.16° (0.15–0.22°), q∞ 0.54–0.65 % (1.0–2.2
+%), p∞ 2.3–3.4 % (4.0–7.4 %), Mach 0.21–0.25 (0.21–0.42), density 1.3–2.0 % (1.0–1.3 %); pass 1's
+scale factors inside 3σ for 7 of 7 ports on every seed (4, 1, 5 of 7), common-mode error −0.1 to
+−0.5 % (−0.9 to −2.2 %). Still conservative: the mean per-port NIS is 0.14–0.20 (0.02–0.15 before;
+health WARNING below 0.5). The innovations' S is dominated by the per-step process noise of
+first-order models of smooth processes — the model-error Markov as α and Mach change, the wind and
+ln p∞/ln ρ∞ random walks per km — while the truth's errors are smooth, so the one-step innovations
+are near the 1.4 Pa white noise. The second-order Markov (``model_error_order = 2``) doubles the
+NIS (0.29–0.38) but leaves 4–7 of 7 scale factors inside 3σ; smaller wind/atmosphere random walks
+bring it to 0.7–1.4 but make Mach and p∞ overconfident (43 % and 86 % inside 3σ with 3e-5/km and
+15 (m/s)²/km): the smooth atmosphere (gravity waves, lapse rate) would need its own higher-order
+model. With the Newtonian model the 1 % σ is too small (its error against the truth is ~3 %,
+common mode 2.6 %; α 37 % inside 3σ, 13 % before); ``model_error_sigma = 0.03`` makes it α 77 %,
+q∞ 89 %, the rest 93–100 %: the Newtonian's error is more than a smooth per-port factor; the
+health verdict says so from the data (the same pressures reduced with the table,
+:func:`.health.model_form_checks`). On pressures from the estimator's own model planted scale
+factors are recovered (tests/problems/meads/test_ekf.py).
 
 The vertical wind in the full-error Monte Carlo (issue #10; :mod:`.truth_mc`, seed 1, members
 0–7, pass 2, above 850 Pa; 3 × RMS, % of member-samples inside the reported 3σ): w_down 26.9 m/s
