@@ -521,8 +521,13 @@ def flight_distance(
     C_B_M C0 (3, 3)) to x1 (C1): ``|ΔM| / model_error_mach_length + (|Δα| + |Δβ|) /
     model_error_angle_deg`` — the estimator's pressure model errs as a smooth function of Mach
     and the flow angles, so its error decorrelates with them, not with time."""
-    a0, b0, m0 = _flow(x0, C0, gamma)
-    a1, b1, m1 = _flow(x1, C1, gamma)
+    return _distance(_flow(x0, C0, gamma), _flow(x1, C1, gamma), st)
+
+
+def _distance(f0: tuple[float, float, float], f1: tuple[float, float, float], st: EkfSettings) -> float:
+    """:func:`flight_distance` from the two states' (α [rad], β [rad], Mach) of :func:`_flow`."""
+    a0, b0, m0 = f0
+    a1, b1, m1 = f1
     d_angle = (abs(a1 - a0) + abs(b1 - b0)) / math.radians(st.model_error_angle_deg)
     return float(abs(m1 - m0) / st.model_error_mach_length + d_angle)
 
@@ -589,7 +594,10 @@ def make_transition(inp: EkfInputs, st: EkfSettings):
         else:
             Q[11, 11] = st.wind_var_per_km * km * (st.vertical_wind_sigma_mps / st.wind_sigma_mps) ** 2
         Q[ILP, ILP] = Q[ILR, ILR] = st.atmosphere_var_per_km * km
-        dist = flight_distance(x, x1, C_B_M[k - 1], C_B_M[k], inp.gamma, st) if markov else 0.0
+        # the flight condition at both ends, once: the distance and the flow-angle σ(M) read it
+        f0 = _flow(x, C_B_M[k - 1], inp.gamma) if markov else None
+        f1 = _flow(x1, C_B_M[k], inp.gamma) if markov else None
+        dist = _distance(f0, f1, st) if markov else 0.0
         if st.model_error_sigma > 0.0:
             Phi, Qb = markov_step(st, dist)
             x1[IB] = Phi[0, 0] * x[IB] + Phi[0, 1] * x[IBD]
@@ -606,8 +614,7 @@ def make_transition(inp: EkfInputs, st: EkfSettings):
         if st.model_angle_sigma_deg > 0.0:
             # a_m = s(M) z, z a unit first-order Gauss–Markov over the distance: as s(M) changes
             # with Mach (angle_sigma) the state scales with it, its variance stays s(M)²
-            s0 = angle_sigma(st, _flow(x, C_B_M[k - 1], inp.gamma)[2])
-            s1 = angle_sigma(st, _flow(x1, C_B_M[k], inp.gamma)[2])
+            s0, s1 = angle_sigma(st, f0[2]), angle_sigma(st, f1[2])
             phi = math.exp(-dist)
             f = phi * s1 / s0 if s0 > 0.0 else 0.0
             x1[IMA] = f * x[IMA]
