@@ -111,8 +111,11 @@ def cmd_list(args: argparse.Namespace) -> int:
         sc = load_scenario(path)
         kind = sc.kind + (" (synthetic)" if sc.is_synthetic else "") + ("" if sc.kind in known else " (no problem)")
         # the filter size from the code (Problem.estimator, optional), never a number typed into a description
-        size = getattr(registry.get(sc.kind), "estimator", None) if sc.kind in known else None
-        print(f"{name:22s} {kind:22s} {sc.description}" + (f" [{size(sc)}]" if size is not None else ""))
+        problem = registry.get(sc.kind) if sc.kind in known else None
+        size = getattr(problem, "estimator", None)
+        print(
+            f"{name:22s} {kind:22s} {sc.description}" + (f" [{size(problem.settings(sc))}]" if size is not None else "")
+        )
     return EXIT_OK
 
 

@@ -136,21 +136,103 @@ def test_update_formats_needs_the_markers():
 
 
 def test_formats_md_matches_the_schemas():
-    """io/FORMATS.md holds the generated tables; regenerate with
-    ``python -m workbench.io.schema --write-formats``."""
+    """io/FORMATS.md holds the generated tables of every file kind; regenerate with
+    ``python -m workbench.problems.registry --write-formats``."""
+    from workbench.problems import registry
+
     path = Path(schema_mod.__file__).with_name("FORMATS.md")
     text = path.read_text(encoding="utf-8")
-    assert update_formats(text, [DROPTEST, ENTRY, POST2, MEADS]) == text, (
-        "FORMATS.md is out of date: run python -m workbench.io.schema --write-formats"
+    assert update_formats(text, registry.schemas()) == text, (
+        "FORMATS.md is out of date: run python -m workbench.problems.registry --write-formats"
     )
 
 
-def test_the_formats_modules_are_the_problem_schemas():
-    import importlib
+def test_the_registry_hands_every_problem_schema():
+    from workbench.problems import registry
 
-    assert [importlib.import_module(m).SCHEMA for m in schema_mod.PROBLEM_CONFIG_MODULES] == [
-        DROPTEST,
-        ENTRY,
-        POST2,
-        MEADS,
-    ]
+    got = registry.schemas()
+    for s in (DROPTEST, ENTRY, POST2, MEADS):
+        assert any(g is s for g in got)
+    assert len({s.name for s in got}) == len(got), "two file kinds share a marker name"
+
+
+BOUNDED = Schema(
+    "rig",
+    "a test rig",
+    (
+        Table(
+            "",
+            "top-level keys",
+            (
+                Key("mass_kg", "float", REQUIRED, "kg", "mass", gt=0.0),
+                Key("angle_deg", "float", 60.0, "deg", "inclination", gt=0.0, lt=90.0),
+                Key("cm_m", "vec3", [0.0, 0.0, 0.0], "m", "centre of mass", ge=-10.0, le=10.0),
+            ),
+        ),
+        Table("bungee", "optional", (Key("count", "int", REQUIRED, meaning="cords", ge=1),)),
+    ),
+    noun="rig file",
+    intro="Keys of a rig file",
+)
+
+
+@pytest.mark.parametrize(
+    ("data", "key", "match"),
+    [
+        ({"mass_kg": 0.0}, "mass_kg", r"0 kg is out of range: must be > 0 kg"),
+        ({"mass_kg": float("nan")}, "mass_kg", "out of range"),
+        ({"mass_kg": 1.0, "angle_deg": 90}, "angle_deg", r"must be > 0, < 90 deg"),
+        ({"mass_kg": 1.0, "cm_m": [0, 11, 0]}, "cm_m", r"11 m is out of range: must be ≥ -10, ≤ 10 m"),
+        ({"mass_kg": 1.0, "bungee": {"count": 0}}, "bungee.count", r"must be ≥ 1"),
+    ],
+)
+def test_bounds_name_the_key_and_the_bound(data, key, match):
+    with pytest.raises(ScenarioError, match=match) as ei:
+        BOUNDED.validate(data, FILE)
+    assert ei.value.key == key and ei.value.file == str(FILE)
+
+
+def test_a_default_is_checked_against_the_bounds_too():
+    bad = Schema("b", "b", (Table("t", "t", (Key("x", "float", -1.0, ge=0.0),)),))
+    with pytest.raises(ScenarioError, match="out of range"):
+        bad.validate({}, FILE)
+
+
+def test_a_file_schema_names_its_noun_top_level_keys_and_optional_tables():
+    with pytest.raises(
+        ScenarioError, match=r"unknown key 'mas_kg' in the top level of a rig file; did you mean 'mass_kg'"
+    ):
+        BOUNDED.validate({"mas_kg": 1.0}, FILE)
+    with pytest.raises(ScenarioError, match=r"missing \(required in table \[bungee\] of a rig file\)"):
+        BOUNDED.validate({"mass_kg": 1.0, "bungee": {}}, FILE)
+    v = BOUNDED.validate({"mass_kg": 2}, FILE, optional=("bungee",))
+    assert v["mass_kg"] == 2.0 and v["angle_deg"] == 60.0 and v["bungee"] == {"count": None}
+    with pytest.raises(ScenarioError) as ei:
+        BOUNDED.validate({"mass_kg": -2}, FILE, where="flights.f1")
+    assert ei.value.key == "flights.f1.mass_kg"
+    md = render_markdown(BOUNDED)
+    assert md.startswith("Keys of a rig file.") and "| `angle_deg` | float | deg | `60.0` | > 0, < 90 |" in md
+
+
+def test_load_file_reads_toml_and_json_and_names_bad_files(tmp_path):
+    t = tmp_path / "rig.toml"
+    t.write_text("mass_kg = 3\n[bungee]\ncount = 2\n", encoding="utf-8")
+    assert schema_mod.load_file(t, BOUNDED)["bungee"]["count"] == 2
+    j = tmp_path / "rig.json"
+    j.write_text('{"mass_kg": 3, "bungee": {"count": 2}}', encoding="utf-8")
+    assert schema_mod.load_file(j, BOUNDED)["mass_kg"] == 3.0
+    j.write_text('{"mass_kg": 3,', encoding="utf-8")
+    with pytest.raises(ScenarioError, match=r"not valid JSON: .*line 1") as ei:
+        schema_mod.load_file(j, BOUNDED)
+    assert ei.value.file == str(j)
+    t.write_text("mass_kg = = 3\n", encoding="utf-8")
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        schema_mod.load_file(t, BOUNDED)
+    with pytest.raises(ScenarioError, match="file not found"):
+        schema_mod.load_file(tmp_path / "none.toml", BOUNDED)
+
+
+def test_a_wrong_choice_suggests_the_nearest():
+    s = Schema("c", "c", (Table("t", "t", (Key("mode", "str", "fast", choices=("kinematic", "dynamic")),)),))
+    with pytest.raises(ScenarioError, match="did you mean 'dynamic'"):
+        s.validate({"t": {"mode": "dynamik"}}, FILE)

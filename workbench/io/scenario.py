@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "RunInfo",
     "Scenario",
     "ScenarioError",
     "check_value",
@@ -165,6 +166,41 @@ class Scenario:
                 node = nxt
             node[parts[-1]] = value
         return _from_data(self.path, data)
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What every run's settings carry about its scenario file, read once by the problem's
+    ``settings(scenario)``: ``path`` of the file, ``name``, ``kind``, ``description``, ``synthetic``
+    (a ``[synthetic]`` table is present), ``seed`` (``[synthetic] seed``, 0 when absent) and
+    ``epoch_utc`` (ISO string or None).  Code below a problem's entry point resolves the file's
+    relative paths with :meth:`resolve` and never sees the :class:`Scenario`."""
+
+    path: Path
+    name: str
+    kind: str
+    description: str = ""
+    synthetic: bool = False
+    seed: int = 0
+    epoch_utc: str | None = None
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario) -> RunInfo:
+        """The run information of a loaded (already validated) ``scenario``."""
+        return cls(
+            path=scenario.path,
+            name=scenario.name,
+            kind=scenario.kind,
+            description=scenario.description,
+            synthetic=scenario.is_synthetic,
+            seed=int(scenario.data.get("synthetic", {}).get("seed", 0)),
+            epoch_utc=scenario.data["scenario"].get("epoch_utc"),
+        )
+
+    def resolve(self, rel_path: str | os.PathLike) -> Path:
+        """``rel_path`` relative to the directory of the scenario file (absolute paths pass)."""
+        p = Path(rel_path).expanduser()
+        return p if p.is_absolute() else (self.path.parent / p)
 
 
 def check_value(path: Path, key: str, v: Any, kind: str) -> Any:

@@ -1,28 +1,35 @@
-"""Declarative scenario schemas: which tables and keys a problem reads, once, with type, unit,
-default and meaning.
+"""Declarative schemas of every input file: which tables and keys a file kind has, once, with
+type, unit, default, bounds and meaning.
 
-A problem package declares its :class:`Schema` (``problems/<p>/config.py``); :meth:`Schema.validate`
-checks a scenario's parsed TOML against it and returns the values with every default filled in:
+A problem package declares the :class:`Schema` of its scenario (``problems/<p>/config.py``) and of
+every other file it reads (lander and vehicle assets, the drop setup file, a flight log's metadata:
+its ``file_schemas``); :meth:`Schema.validate` checks a parsed TOML or JSON document against it and
+returns the values with every default filled in:
 
 * a key that the schema does not know (a misspelling, a key of another problem) is an error —
   a :class:`~workbench.io.scenario.ScenarioError` naming the file, the table and the key, with a
   "did you mean" suggestion (:mod:`difflib`);
-* a value of the wrong type, or outside its ``choices``, is an error naming the key;
+* a value of the wrong type, outside its ``choices`` or outside its numeric bounds (``ge``, ``gt``,
+  ``le``, ``lt``; every element of a vector or list) is an error naming the key and the bound;
 * a missing key takes its default; a key whose default is :data:`REQUIRED` must be given; a
   default of ``None`` means "absent" (the code decides what that means, the meaning says it).
 
 :func:`render_markdown` turns a schema into the tables of ``io/FORMATS.md`` (between the markers
 ``<!-- schema:<name>:begin -->`` and ``<!-- schema:<name>:end -->``), so the user documentation is
 generated from the same declaration the code reads (:func:`update_formats`; a test checks the file
-is in sync).  Regenerate with ``python -m workbench.io.schema --write-formats``.
+is in sync).  The schemas are handed in by :func:`workbench.problems.registry.schemas`; regenerate
+with ``python -m workbench.problems.registry --write-formats``.
+
+This module and :mod:`workbench.io.scenario` are the schema layer: the only places that open a
+TOML or JSON input file (:func:`read_toml`, :func:`read_json`, :func:`load_file`).
 """
 
 from __future__ import annotations
 
 import difflib
-import importlib
+import json
 import math
-import sys
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,10 +44,12 @@ __all__ = [
     "Key",
     "Table",
     "Schema",
+    "load_file",
+    "read_json",
+    "read_toml",
     "render_markdown",
     "update_formats",
     "write_formats",
-    "PROBLEM_CONFIG_MODULES",
 ]
 
 
@@ -56,20 +65,14 @@ REQUIRED: Any = _Required()
 #: ``"number_or_vec3"`` (one number for all three axes, or a list of 3).
 KINDS = ("float", "int", "str", "bool", "vec3", "list", "table", "number_or_vec3")
 
-#: Modules holding a problem's ``SCHEMA`` (used by ``--write-formats``).
-PROBLEM_CONFIG_MODULES = (
-    "workbench.problems.droptest.config",
-    "workbench.problems.entry.config",
-    "workbench.problems.post2.config",
-    "workbench.problems.meads.config",
-)
-
 
 @dataclass(frozen=True)
 class Key:
     """One key of a table: ``name``, value ``kind`` (:data:`KINDS`), ``unit`` (as written in the
     file; "" when dimensionless or not a quantity), ``default`` (:data:`REQUIRED`, ``None`` for
-    "absent", or the value), what it means, and optional ``choices`` for string keys."""
+    "absent", or the value), what it means, optional ``choices`` for string keys, and optional
+    numeric bounds in the key's own unit: ``ge`` (≥), ``gt`` (>), ``le`` (≤), ``lt`` (<), applied
+    to a number and to every number of a vector or (nested) list; NaN is outside every bound."""
 
     name: str
     kind: str
@@ -77,10 +80,54 @@ class Key:
     unit: str = ""
     meaning: str = ""
     choices: tuple[str, ...] = ()
+    ge: float | None = None
+    gt: float | None = None
+    le: float | None = None
+    lt: float | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"key {self.name!r}: kind must be one of {KINDS}, got {self.kind!r}")
+
+    @property
+    def bounds(self) -> str:
+        """The bounds as text, e.g. ``"> 0, < 90"`` ("" when unbounded)."""
+        parts = [f"{op} {_num(v)}" for op, v in (("≥", self.ge), (">", self.gt), ("≤", self.le), ("<", self.lt))
+                 if v is not None]  # fmt: skip
+        return ", ".join(parts)
+
+    def check_bounds(self, file: Path, dotted: str, v: Any) -> None:
+        """:class:`ScenarioError` naming ``file``, ``dotted`` and the bound if a number of ``v``
+        is outside the bounds (or NaN) while the key has any."""
+        if self.ge is None and self.gt is None and self.le is None and self.lt is None:
+            return
+        for x in _numbers(v):
+            ok = (
+                (self.ge is None or x >= self.ge)
+                and (self.gt is None or x > self.gt)
+                and (self.le is None or x <= self.le)
+                and (self.lt is None or x < self.lt)
+            )
+            if not ok:
+                unit = f" {self.unit}" if self.unit and self.unit != "1" else ""
+                raise ScenarioError(file, dotted, f"{_num(x)}{unit} is out of range: must be {self.bounds}{unit}")
+
+
+def _num(x: float) -> str:
+    return f"{x:g}" if isinstance(x, float) else str(x)
+
+
+def _numbers(v: Any) -> list[float]:
+    """Every number in ``v`` (a number, an array, or nested lists); other values are skipped."""
+    if isinstance(v, bool) or v is None or isinstance(v, str):
+        return []
+    if isinstance(v, int | float):
+        return [float(v)]
+    if isinstance(v, np.ndarray):
+        return [float(x) for x in v.ravel()] if v.dtype.kind in "fiu" else []
+    if isinstance(v, list | tuple):
+        return [x for item in v for x in _numbers(item)]
+    return []
 
 
 @dataclass(frozen=True)
@@ -104,12 +151,19 @@ class Table:
 
 def _check(file: Path, dotted: str, v: Any, key: Key | None, kind: str) -> Any:
     if kind == "number_or_vec3":
-        if isinstance(v, int | float) and not isinstance(v, bool):
-            return float(v)
-        return check_value(file, dotted, v, "vec3")
+        out = (
+            float(v) if isinstance(v, int | float) and not isinstance(v, bool) else check_value(file, dotted, v, "vec3")
+        )
+        if key is not None:
+            key.check_bounds(file, dotted, out)
+        return out
     out = check_value(file, dotted, v, kind)
     if key is not None and key.choices and out not in key.choices:
-        raise ScenarioError(file, dotted, f"{out!r}: use one of {', '.join(key.choices)}")
+        raise ScenarioError(
+            file, dotted, f"{out!r}: use one of {', '.join(key.choices)}{_suggest(str(out), list(key.choices))}"
+        )
+    if key is not None:
+        key.check_bounds(file, dotted, out)
     return out
 
 
@@ -120,11 +174,17 @@ def _suggest(word: str, candidates: list[str]) -> str:
 
 @dataclass(frozen=True)
 class Schema:
-    """The scenario tables of one problem ``name`` (its ``[scenario] kind``)."""
+    """The tables of one file kind: a problem's scenario (``name`` its ``[scenario] kind``) or
+    another input file (``name`` e.g. ``"lander"``).  ``noun`` names the file kind in errors
+    (default ``"<name> scenario"``); ``intro``: the sentence that opens its generated documentation
+    (default: ``Keys of a `kind = "<name>"` scenario (<title>)``).  A table named ``""`` holds the
+    top-level keys of a file without tables (JSON)."""
 
     name: str
     title: str
     tables: tuple[Table, ...]
+    noun: str = ""
+    intro: str = ""
     _index: dict = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -132,6 +192,8 @@ class Schema:
         if len(index) != len(self.tables):
             raise ValueError(f"schema {self.name}: a table is declared twice")
         object.__setattr__(self, "_index", index)
+        if not self.noun:
+            object.__setattr__(self, "noun", f"{self.name} scenario")
 
     def table(self, name: str) -> Table | None:
         """The :class:`Table` called ``name`` (dotted), or None."""
@@ -141,59 +203,122 @@ class Schema:
         """Names (last part) of the tables directly below ``prefix`` ("" = top level)."""
         out = []
         for t in self.tables:
+            if not t.name:
+                continue
             parts = t.name.split(".")
             depth = 0 if not prefix else len(prefix.split("."))
             if len(parts) > depth and ".".join(parts[:depth]) == prefix and parts[depth] not in out:
                 out.append(parts[depth])
         return out
 
-    def validate(self, data: dict, file: str | Path) -> dict:
-        """Check ``data`` (the parsed TOML of ``file``) and return a new nested dict holding every
-        declared key — the file's values checked and converted (numbers to float where the kind is
-        ``"float"``, ``"vec3"`` to a float array (3,)), the defaults for the others.
+    def validate(self, data: dict, file: str | Path, *, where: str = "", optional: tuple[str, ...] = ()) -> dict:
+        """Check ``data`` (the parsed TOML or JSON of ``file``) and return a new nested dict holding
+        every declared key — the file's values checked and converted (numbers to float where the kind
+        is ``"float"``, ``"vec3"`` to a float array (3,)), the defaults for the others.
+
+        ``where``: the dotted path of ``data`` inside the file (an entry of a JSON document), put
+        before every key an error names.  ``optional``: tables whose required keys are required only
+        when the table is present (an absent one is filled with its defaults and ``None``).
 
         Raises :class:`ScenarioError` naming the file and the dotted key for an unknown key (with
-        the table and a "did you mean"), a wrong type, a value outside its choices, or a missing
-        required key.
+        the table and a "did you mean"), a wrong type, a value outside its choices or bounds, or a
+        missing required key.
         """
         file = Path(file)
+        if not isinstance(data, dict):
+            raise ScenarioError(file, where or None, f"expected a table of keys, got {type(data).__name__}")
         out: dict = {}
-        self._walk(data, "", file, out)
+        self._walk(data, "", file, out, where)
         for t in self.tables:
-            node = out
-            for part in t.name.split("."):
+            node, given = out, data
+            for part in [p for p in t.name.split(".") if p]:
                 node = node.setdefault(part, {})
+                given = given.get(part) if isinstance(given, dict) else None
+            absent_optional = given is None and t.name in optional
             for k in t.keys:
                 if k.name in node:
                     continue
-                if k.default is REQUIRED:
-                    raise ScenarioError(file, f"{t.name}.{k.name}", f"missing (required in [{t.name}])")
-                node[k.name] = None if k.default is None else _check(file, f"{t.name}.{k.name}", k.default, k, k.kind)
+                dotted = _join(where, f"{t.name}.{k.name}" if t.name else k.name)
+                if k.default is REQUIRED and not absent_optional:
+                    raise ScenarioError(file, dotted, f"missing (required in {_where(t.name)} of a {self.noun})")
+                node[k.name] = (
+                    None if (k.default is None or k.default is REQUIRED) else _check(file, dotted, k.default, k, k.kind)
+                )
         return out
 
-    def _walk(self, node: dict, prefix: str, file: Path, out: dict) -> None:
+    def _walk(self, node: dict, prefix: str, file: Path, out: dict, where: str = "") -> None:
         table = self._index.get(prefix)
         children = self._children(prefix)
         for name, v in node.items():
-            dotted = f"{prefix}.{name}" if prefix else name
+            name = str(name)
+            dotted = _join(where, f"{prefix}.{name}" if prefix else name)
             key = table.key(name) if table is not None else None
             if key is not None:
                 out[name] = _check(file, dotted, v, key, key.kind)
             elif name in children:
                 if not isinstance(v, dict):
                     raise ScenarioError(file, dotted, f"expected a table [{dotted}], got {type(v).__name__}")
-                self._walk(v, dotted, file, out.setdefault(name, {}))
+                self._walk(v, f"{prefix}.{name}" if prefix else name, file, out.setdefault(name, {}), where)
             elif table is not None and table.free is not None:
                 out[name] = _check(file, dotted, v, None, table.free)
             else:
                 known = ([k.name for k in table.keys] if table is not None else []) + children
-                where = f"table [{prefix}]" if prefix else "the top level"
                 raise ScenarioError(
                     file,
                     dotted,
-                    f"unknown key '{name}' in {where} of a {self.name} scenario{_suggest(name, known)} "
+                    f"unknown key '{name}' in {_where(prefix)} of a {self.noun}{_suggest(name, known)} "
                     f"(keys here: {', '.join(known) or 'none'})",
                 )
+
+
+def _join(where: str, dotted: str) -> str:
+    return f"{where}.{dotted}" if where else dotted
+
+
+def _where(table: str) -> str:
+    return f"table [{table}]" if table else "the top level"
+
+
+# ------------------------------------------------------------------------------ reading files
+def read_toml(path: str | Path) -> dict:
+    """The parsed TOML document at ``path``; :class:`ScenarioError` naming the file (and the line,
+    as :mod:`tomllib` reports it) when it is missing, unreadable, not UTF-8 or not valid TOML."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ScenarioError(path, None, "file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(path, None, f"not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(path, None, f"not valid UTF-8: {exc}") from None
+    except OSError as exc:
+        raise ScenarioError(path, None, f"cannot read file: {exc.strerror or exc}") from None
+
+
+def read_json(path: str | Path) -> Any:
+    """The parsed JSON document at ``path``; :class:`ScenarioError` naming the file (line and
+    column of a syntax error) when it is missing, unreadable or not valid JSON."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ScenarioError(path, None, "file not found") from None
+    except json.JSONDecodeError as exc:
+        raise ScenarioError(path, None, f"not valid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(path, None, f"not valid UTF-8: {exc}") from None
+    except OSError as exc:
+        raise ScenarioError(path, None, f"cannot read file: {exc.strerror or exc}") from None
+
+
+def load_file(path: str | Path, schema: Schema, *, optional: tuple[str, ...] = ()) -> dict:
+    """Read the TOML (or, for a ``.json`` path, JSON) file ``path`` and validate it against
+    ``schema`` (:meth:`Schema.validate`): the values with every default filled in."""
+    path = Path(path)
+    data = read_json(path) if path.suffix.lower() == ".json" else read_toml(path)
+    return schema.validate(data, path, optional=optional)
 
 
 # ------------------------------------------------------------------------------ documentation
@@ -220,19 +345,26 @@ def _cell(text: str) -> str:
 
 def render_markdown(schema: Schema) -> str:
     """The schema as markdown: one table per TOML table (key, type, unit, default, meaning)."""
-    lines = [f'Keys of a `kind = "{schema.name}"` scenario ({schema.title}). Unknown keys are errors.', ""]
+    intro = schema.intro or f'Keys of a `kind = "{schema.name}"` scenario ({schema.title})'
+    lines = [f"{intro}. Unknown keys are errors; a value outside its range is an error naming the bound.", ""]
+    bounded = any(k.bounds for t in schema.tables for k in t.keys)
     for t in schema.tables:
-        lines += [f"`[{t.name}]` — {_cell(t.meaning)}", ""]
-        lines += ["| key | type | unit | default | meaning |", "|---|---|---|---|---|"]
+        lines += [f"`[{t.name}]` — {_cell(t.meaning)}" if t.name else f"top level — {_cell(t.meaning)}", ""]
+        if bounded:
+            lines += ["| key | type | unit | default | range | meaning |", "|---|---|---|---|---|---|"]
+        else:
+            lines += ["| key | type | unit | default | meaning |", "|---|---|---|---|---|"]
         for k in t.keys:
             meaning = k.meaning
             if k.choices:
                 listed = ", ".join(f"`{c}`" for c in k.choices)
                 meaning += ("" if meaning.endswith(".") else ".") + f" One of: {listed}."
             kind = "number or vec3" if k.kind == "number_or_vec3" else k.kind
-            lines.append(f"| `{k.name}` | {kind} | {_cell(k.unit)} | {_fmt_default(k)} | {_cell(meaning)} |")
+            rng = f" {k.bounds} |" if bounded else ""
+            lines.append(f"| `{k.name}` | {kind} | {_cell(k.unit)} | {_fmt_default(k)} |{rng} {_cell(meaning)} |")
         if t.free is not None:
-            lines.append(f"| *any name* | {t.free} |  | — | {_cell(t.free_meaning)} |")
+            rng = "  |" if bounded else ""
+            lines.append(f"| *any name* | {t.free} |  | — |{rng} {_cell(t.free_meaning)} |")
         lines.append("")
     return "\n".join(lines).rstrip() + "\n"
 
@@ -258,20 +390,3 @@ def write_formats(path: str | Path, schemas: list[Schema] | tuple[Schema, ...]) 
     if new != old:
         path.write_text(new, encoding="utf-8")
     return new != old
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m workbench.io.schema --write-formats``: regenerate ``io/FORMATS.md`` from the
-    problems' schemas (the modules of :data:`PROBLEM_CONFIG_MODULES`, loaded by name)."""
-    argv = sys.argv[1:] if argv is None else argv
-    if argv != ["--write-formats"]:
-        print("usage: python -m workbench.io.schema --write-formats", file=sys.stderr)
-        return 2
-    schemas = [importlib.import_module(m).SCHEMA for m in PROBLEM_CONFIG_MODULES]
-    path = Path(__file__).with_name("FORMATS.md")
-    print(f"{path}: {'updated' if write_formats(path, schemas) else 'already up to date'}")
-    return 0
-
-
-if __name__ == "__main__":  # run the imported module's main: the schemas compare with its REQUIRED
-    raise SystemExit(importlib.import_module("workbench.io.schema").main())

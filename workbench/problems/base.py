@@ -4,8 +4,13 @@ A scenario file names its problem by ``[scenario] kind``; :mod:`workbench.proble
 the kind to an object implementing :class:`Problem`, and :mod:`workbench.problems.runner` runs
 any scenario through it with the same steps::
 
-    synthesize (synthetic scenarios) -> reconstruct (yields stages) -> record each stage
+    settings (validate the scenario and every file it names, once, before any computation)
+    -> synthesize (synthetic scenarios) -> reconstruct (yields stages) -> record each stage
     -> key moments -> score against the truth (synthetic) -> scorecard -> summary.json (-> CSV export)
+
+The :class:`Problem` methods are a problem's entry point: :meth:`Problem.settings` is the only one
+that sees the :class:`~workbench.io.scenario.Scenario`; every other receives the frozen settings
+object it built (:class:`Settings`), and nothing below them receives a scenario.
 
 A problem composes its own pipeline, truth simulator, recording and Monte Carlo modules; the
 runner and the command line hold no problem knowledge.  The small frozen dataclasses below are
@@ -23,7 +28,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from workbench.io.moments import KeyMoment
-from workbench.io.scenario import Scenario
+from workbench.io.scenario import RunInfo, Scenario
 
 __all__ = [
     "ExportTable",
@@ -33,6 +38,7 @@ __all__ = [
     "Problem",
     "Progress",
     "RunOptions",
+    "Settings",
     "StageRecorder",
     "Synthesized",
 ]
@@ -41,6 +47,16 @@ __all__ = [
 #: :class:`workbench.io.progress.Reporter` (stderr; prefixes the scenario name; nothing under
 #: ``--quiet``); counters with an ETA come from :func:`workbench.io.progress.current`.
 Progress = Callable[[str], None]
+
+
+@runtime_checkable
+class Settings(Protocol):
+    """The frozen settings of one run, built once by :meth:`Problem.settings` from the scenario and
+    every file it names (assets, setup files), before any computation: per-stage frozen dataclasses
+    (truth, sensors, filter, ...) with every default filled in from the schemas. ``run`` says which
+    scenario file they came from (:class:`~workbench.io.scenario.RunInfo`)."""
+
+    run: RunInfo
 
 
 @dataclass(frozen=True)
@@ -143,26 +159,34 @@ class Problem(Protocol):
 
     Attributes: ``kind`` (the ``[scenario] kind`` string it handles); ``title`` (what its truth
     simulation simulates, for progress lines, e.g. ``"drop"``); ``schema``: the configuration
-    schema of its scenario tables, or None while it has none.
+    schema of its scenario tables, or None while it has none. A problem may also list
+    ``file_schemas``, the :class:`~workbench.io.schema.Schema` of every other file kind it reads
+    (assets, setup files, log metadata), for the generated documentation
+    (:func:`workbench.problems.registry.schemas`).
     """
 
     kind: str
     title: str
     schema: Any
 
-    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
+    def settings(self, scenario: Scenario) -> Settings:
+        """Validate ``scenario`` against :attr:`schema` and read every file it names (assets, setup
+        files) against theirs; return the run's frozen :class:`Settings`. Raises ``ScenarioError``
+        naming file, key (with the nearest valid key) or bound. Called once per run, first."""
+
+    def telemetry_files(self, settings: Settings, folder: Path | None = None) -> dict[str, Path]:
         """The telemetry files of a run, {stream: path}: those named by the scenario's
         ``[telemetry]`` table, or (``folder`` given) the standard file names inside ``folder``
         (the layout :meth:`synthesize` writes).  Raises ``ScenarioError`` naming a missing key/file."""
 
-    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+    def synthesize(self, settings: Settings, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the truth and write telemetry files (as a user supplies them) and
         ``truth.npz`` into ``out_dir``; ``seed`` drives the sensor errors."""
 
     def load_truth(self, path: Path) -> Any:
         """Read the ``truth.npz`` written by :meth:`synthesize` (for scoring and drawing only)."""
 
-    def reconstruct(self, scenario: Scenario, telemetry: Mapping[str, Path], options: RunOptions) -> Iterator[object]:
+    def reconstruct(self, settings: Settings, telemetry: Mapping[str, Path], options: RunOptions) -> Iterator[object]:
         """Run the reconstruction on the ``telemetry`` files; yield typed stage results in order,
         the last one the final result (with a JSON-ready ``summary`` dict attribute)."""
 
@@ -186,12 +210,12 @@ class Problem(Protocol):
     def headline(self, summary: dict) -> str:
         """One line with the run's main result, for the user.
 
-        A problem may also offer ``estimator(scenario) -> str``, the size of its filter computed from
+        A problem may also offer ``estimator(settings) -> str``, the size of its filter computed from
         the code (e.g. ``"EKF: 42 error states (43 full)"``); ``workbench list`` prints it after the
         scenario's description, so no state count is typed into a description."""
 
     def open_recording(
-        self, path: Path, scenario: Scenario, truth: Any, properties: dict
+        self, path: Path, settings: Settings, truth: Any, properties: dict
     ) -> AbstractContextManager[StageRecorder]:
         """Open the problem's recording at ``path`` (published only if the block succeeds), with
         its layout; yields the :class:`StageRecorder`.  ``truth``: loaded truth or None;
@@ -200,7 +224,7 @@ class Problem(Protocol):
     def export_columns(self, result: object) -> ExportTable:
         """The reconstructed histories of a final result for CSV export."""
 
-    def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
-        """The problem's Monte Carlo / consistency analysis of ``scenario``; writes its recording
+    def monte_carlo(self, settings: Settings, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
+        """The problem's Monte Carlo / consistency analysis of the run ``settings``; writes its recording
         under ``out_dir``, reports its phases to ``progress`` and returns the summary.  Raises
         ``NotImplementedError`` if the scenario does not allow one (e.g. not synthetic)."""

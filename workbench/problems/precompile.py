@@ -108,15 +108,16 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     sc = resolve_scenario(args.scenario, assets_dir())  # validated by the parent run
     problem = registry.get(sc.kind, where=str(sc.path))
+    settings = problem.settings(sc)
     with tempfile.TemporaryDirectory(prefix="workbench_precompile_") as tmp:
         if sc.is_synthetic:
-            telemetry = dict(problem.synthesize(sc, Path(tmp) / "telemetry", args.seed).telemetry)
+            telemetry = dict(problem.synthesize(settings, Path(tmp) / "telemetry", args.seed).telemetry)
         else:
-            telemetry = problem.telemetry_files(sc)
+            telemetry = problem.telemetry_files(settings)
         modules = tuple(getattr(problem, "compiled_modules", ()) or ())
         if not cold_modules(modules):
             return 0
-        for _ in problem.reconstruct(sc, telemetry, RunOptions(seed=args.seed)):
+        for _ in problem.reconstruct(settings, telemetry, RunOptions(seed=args.seed)):
             if not cold_modules(modules):
                 break
     return 0

@@ -1,17 +1,24 @@
-"""Which :class:`~workbench.problems.base.Problem` handles a scenario ``kind``.
+"""Which :class:`~workbench.problems.base.Problem` handles a scenario ``kind``, and the schema of
+every input file kind.
 
-The built-in problems (``droptest``, ``entry``) are imported the first time they are asked for,
-so ``import workbench.problems`` stays light.  Other problems (a user's, a test's) are added with
-:func:`register` and removed with :func:`unregister`.
+The built-in problems (``droptest``, ``entry``, ``post2``, ``meads``) are imported the first time
+they are asked for, so ``import workbench.problems`` stays light.  Other problems (a user's, a
+test's) are added with :func:`register` and removed with :func:`unregister`.  This module is the
+only place that imports a module by name (the built-ins and the importers, :data:`BUILTIN`,
+:data:`IMPORTERS`); it hands the schemas to :mod:`workbench.io.schema` (:func:`schemas`,
+``python -m workbench.problems.registry --write-formats`` regenerates ``io/FORMATS.md``).
 """
 
 from __future__ import annotations
 
 import importlib
+import sys
+from pathlib import Path
 
+from workbench.io.schema import Schema, write_formats
 from workbench.problems.base import Problem
 
-__all__ = ["IMPORTERS", "UnknownKindError", "get", "importer", "kinds", "register", "unregister"]
+__all__ = ["IMPORTERS", "UnknownKindError", "get", "importer", "kinds", "register", "schemas", "unregister"]
 
 #: built-in kinds -> "module:attribute" of a zero-argument factory (imported on first use)
 BUILTIN: dict[str, str] = {
@@ -97,3 +104,36 @@ def importer(name: str):
     if name not in IMPORTERS:
         raise KeyError(f"unknown importer {name!r}; importers: {', '.join(sorted(IMPORTERS))}")
     return importlib.import_module(IMPORTERS[name])
+
+
+def schemas() -> list[Schema]:
+    """The schema of every input file kind of the built-in problems and importers, in
+    :data:`BUILTIN` order: each problem's scenario ``schema`` then its ``file_schemas`` (assets,
+    setup files), then each importer's ``file_schemas`` (log metadata).  A schema shared by two
+    problems (a vehicle asset) is listed once."""
+    out: list[Schema] = []
+    sources = [get(kind) for kind in BUILTIN] + [importer(name) for name in IMPORTERS]
+    for src in sources:
+        own = getattr(src, "schema", None)
+        for s in ([own] if isinstance(own, Schema) else []) + list(getattr(src, "file_schemas", ()) or ()):
+            if all(s is not o for o in out):
+                out.append(s)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m workbench.problems.registry --write-formats``: regenerate the generated tables of
+    ``workbench/io/FORMATS.md`` from :func:`schemas`."""
+    argv = sys.argv[1:] if argv is None else argv
+    if argv != ["--write-formats"]:
+        print("usage: python -m workbench.problems.registry --write-formats", file=sys.stderr)
+        return 2
+    import workbench.io.schema as schema_module
+
+    path = Path(schema_module.__file__).with_name("FORMATS.md")
+    print(f"{path}: {'updated' if write_formats(path, schemas()) else 'already up to date'}")
+    return 0
+
+
+if __name__ == "__main__":  # the imported module's main: its registry is the one the problems fill
+    raise SystemExit(importlib.import_module("workbench.problems.registry").main())

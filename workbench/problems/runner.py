@@ -1,9 +1,11 @@
 """Run any scenario through its problem: the same steps for every ``kind``.
 
-:func:`run_scenario`: (synthesize) -> reconstruct -> record -> score -> summary (-> CSV export);
-:func:`run_monte_carlo`: the problem's Monte Carlo analysis -> summary.  Both resolve a shipped
-scenario name (``workbench.io.assets.assets_dir()``) or a ``.toml`` path, and find the problem
-through :mod:`workbench.problems.registry` by the scenario's ``kind``.
+:func:`run_scenario`: settings -> (synthesize) -> reconstruct -> record -> score -> summary (-> CSV
+export); :func:`run_monte_carlo`: settings -> the problem's Monte Carlo analysis -> summary.  Both
+resolve a shipped scenario name (``workbench.io.assets.assets_dir()``) or a ``.toml`` path, find the
+problem through :mod:`workbench.problems.registry` by the scenario's ``kind`` and build the run's
+frozen settings once (:meth:`Problem.settings <workbench.problems.base.Problem.settings>`) before
+anything runs; every problem method after that receives the settings, not the scenario.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ __all__ = [
     "NumericalFailure",
     "RunResult",
     "output_folder",
+    "prepare",
     "resolve",
     "run_monte_carlo",
     "run_scenario",
@@ -106,6 +109,7 @@ class RunResult:
     scenario: Scenario
     problem: Problem
     summary: dict
+    settings: Any = field(repr=False)
     result: Any = field(repr=False)
     recording: Path
     summary_path: Path
@@ -145,6 +149,13 @@ def resolve(scenario: str | os.PathLike | Scenario) -> tuple[Scenario, Problem]:
     return sc, problem
 
 
+def prepare(scenario: str | os.PathLike | Scenario) -> tuple[Scenario, Problem, Any]:
+    """:func:`resolve`, then the run's frozen settings (``problem.settings(scenario)``: the scenario
+    and every file it names read against their schemas), before any computation."""
+    sc, problem = resolve(scenario)
+    return sc, problem, problem.settings(sc)
+
+
 def run_scenario(
     scenario: str | os.PathLike | Scenario,
     out_dir: str | os.PathLike,
@@ -172,13 +183,13 @@ def run_scenario(
     opts = options or RunOptions()
     rep = prog.as_reporter(progress)
     t_start = time.perf_counter()
-    sc, problem = resolve(scenario)
+    sc, problem, settings = prepare(scenario)
     out = Path(out_dir)
     prefix, rep.prefix = rep.prefix, f"[{sc.name}] "
     try:
         with prog.active(rep), output_folder(out):
             result, summary, rrd, summary_path, export_path, telemetry, truth, seed = _run(
-                sc, problem, out, opts, rep, t_start
+                sc, problem, settings, out, opts, rep, t_start
             )
         health = summary.get("health")
         verdict = (
@@ -199,10 +210,12 @@ def run_scenario(
             rep.result(f"wrote {export_path} (--export)")
     finally:
         rep.prefix = prefix
-    return RunResult(sc, problem, summary, result, rrd, summary_path, telemetry, truth, export_path)
+    return RunResult(sc, problem, summary, settings, result, rrd, summary_path, telemetry, truth, export_path)
 
 
-def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, rep: prog.Reporter, t_start: float):
+def _run(
+    sc: Scenario, problem: Problem, settings: Any, out: Path, opts: RunOptions, rep: prog.Reporter, t_start: float
+):
     """The body of :func:`run_scenario` inside its output folder."""
     seed = int(sc.get("synthetic.seed", 0, kind="int") if opts.seed is None else opts.seed)
     truth = None
@@ -210,20 +223,20 @@ def _run(sc: Scenario, problem: Problem, out: Path, opts: RunOptions, rep: prog.
     precompile(sc, problem, seed, rep)  # first run of a checkout: compile in a child (its memory goes with it)
     if sc.is_synthetic:
         with rep.stage(f"{problem.title} truth simulation + telemetry"):
-            syn = problem.synthesize(sc, out / sc.name / "telemetry", seed)
+            syn = problem.synthesize(settings, out / sc.name / "telemetry", seed)
             telemetry = dict(syn.telemetry)
             truth = problem.load_truth(syn.truth)
     else:
-        telemetry = problem.telemetry_files(sc)
+        telemetry = problem.telemetry_files(settings)
     rrd = out / f"{sc.name}.rrd"
     properties = {"run": {"scenario": str(sc.path), "kind": sc.kind, "seed": seed}}
-    with problem.open_recording(rrd, sc, truth, properties) as drawer:
+    with problem.open_recording(rrd, settings, truth, properties) as drawer:
         result = None
         last = "start"
         seen: dict[str, int] = {}
         draw_s = 0.0
         try:
-            stages = iter(problem.reconstruct(sc, telemetry, replace(opts, seed=seed)))
+            stages = iter(problem.reconstruct(settings, telemetry, replace(opts, seed=seed)))
             while True:
                 t0 = time.perf_counter()
                 try:
@@ -291,13 +304,13 @@ def run_monte_carlo(
     its members (and truth simulations, dispersions) as counters with an ETA on the active reporter;
     the paths written are reported at the end."""
     rep = prog.as_reporter(progress)
-    sc, problem = resolve(scenario)
+    sc, problem, settings = prepare(scenario)
     out = Path(out_dir)
     options = options or McOptions()
     prefix, rep.prefix = rep.prefix, f"[{sc.name}] "
     try:
         with prog.active(rep), output_folder(out):
-            outcome = problem.monte_carlo(sc, out, options, rep)
+            outcome = problem.monte_carlo(settings, out, options, rep)
             summary_path = write_summary(
                 out / f"{sc.name}{'_truth' if options.truth_sim else ''}.mc.json", outcome.summary
             )

@@ -246,7 +246,7 @@ def init_scenario(
         raise NotImplementedError(f"the {base.kind} problem declares no schema: cannot write a scenario from it")
     out.mkdir(parents=True, exist_ok=True)
     tel_dir = out / "telemetry"
-    syn = problem.synthesize(base, tel_dir, seed)
+    syn = problem.synthesize(problem.settings(base), tel_dir, seed)
     Path(syn.truth).unlink(missing_ok=True)
     copied: list[Path] = []
     data = {k: v for k, v in base.data.items() if k != SYNTHETIC_TABLE}
@@ -278,7 +278,7 @@ def init_scenario(
     sc, _ = resolve(load_scenario(path))
     if sc.is_synthetic:
         raise AssertionError(f"{path}: the written scenario is still synthetic")
-    found = {s: Path(p).resolve() for s, p in problem.telemetry_files(sc).items()}
+    found = {s: Path(p).resolve() for s, p in problem.telemetry_files(problem.settings(sc)).items()}
     want = {s: p.resolve() for s, p in telemetry.items()}
     if found != want:
         raise ScenarioError(path, "telemetry", f"resolves {found}, expected the files written: {want}")

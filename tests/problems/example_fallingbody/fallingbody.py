@@ -4,6 +4,11 @@ It implements :class:`workbench.problems.base.Problem` with the workbench's buil
 (telemetry files, the EKF and RTS smoother, the recording writer) and is registered by the tests
 only (``registry.register(FallingBodyProblem())``).  State ``x = [h, v, b]``: altitude [m], vertical
 velocity [m/s] (up positive) and the barometer bias [Pa].
+
+The settings flow every problem follows: the scenario file is validated against :data:`SCHEMA` once,
+by :meth:`FallingBodyProblem.settings`, into the frozen :class:`FallSettings` (one small dataclass per
+stage: body, release, barometer, filter, synthetic); every other method receives those settings and
+nothing below the problem object sees the scenario.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ import numpy as np
 
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
 from workbench.estimation.smoother import rts_smooth
-from workbench.io.scenario import Scenario
+from workbench.io.scenario import RunInfo, Scenario
 from workbench.io.schema import REQUIRED, Key, Schema, Table
 from workbench.io.telemetry import read_telemetry, write_telemetry
 from workbench.problems.base import ExportTable, KeyMoment, McOutcome, RunOptions, Synthesized
@@ -88,6 +93,61 @@ SCHEMA = Schema(
         ),
     ),
 )
+
+
+@dataclass(frozen=True)
+class Body:
+    """The falling body: ``mass_kg`` [kg], ``cda_m2`` drag coefficient × area [m²]."""
+
+    mass_kg: float
+    cda_m2: float
+
+    @property
+    def k_drag(self) -> float:
+        """``CdA / 2m`` [m²/kg]."""
+        return 0.5 * self.cda_m2 / self.mass_kg
+
+
+@dataclass(frozen=True)
+class Barometer:
+    """``rate_hz`` [Hz], white ``noise_pa`` and constant-bias ``bias_sigma_pa`` 1σ [Pa]."""
+
+    rate_hz: float
+    noise_pa: float
+    bias_sigma_pa: float
+
+
+@dataclass(frozen=True)
+class FallSettings:
+    """The frozen settings of one run (defaults filled from :data:`SCHEMA`): the body, the release
+    ``altitude_m`` and its ``sigma_altitude_m`` [m], the barometer, the filter's ``accel_psd``
+    [(m/s²)²/Hz], the telemetry file (absolute path or None) and the truth's ``duration_s`` [s]."""
+
+    run: RunInfo
+    body: Body
+    altitude_m: float
+    sigma_altitude_m: float
+    barometer: Barometer
+    accel_psd: float
+    baro_file: Path | None
+    duration_s: float
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario) -> FallSettings:
+        """Validate ``scenario`` against :data:`SCHEMA` and build the settings."""
+        v = SCHEMA.validate(scenario.data, scenario.path)
+        run = RunInfo.from_scenario(scenario)
+        baro = v["telemetry"]["baro"]
+        return cls(
+            run=run,
+            body=Body(**v["body"]),
+            altitude_m=v["release"]["altitude_m"],
+            sigma_altitude_m=v["release"]["sigma_altitude_m"],
+            barometer=Barometer(**v["barometer"]),
+            accel_psd=v["filter"]["accel_psd"],
+            baro_file=None if baro is None else run.resolve(baro),
+            duration_s=v["synthetic"]["duration_s"],
+        )
 
 
 def pressure(h: np.ndarray) -> np.ndarray:
@@ -181,29 +241,39 @@ class FallingBodyProblem:
     title = "fall"
     schema = SCHEMA
 
-    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
-        """``{"baro": baro.csv}`` from ``[telemetry] baro`` or inside ``folder``."""
-        return {"baro": Path(folder) / "baro.csv" if folder else scenario.path_of("telemetry.baro")}
+    def settings(self, scenario: Scenario) -> FallSettings:
+        """The run's frozen settings (:meth:`FallSettings.from_scenario`)."""
+        return FallSettings.from_scenario(scenario)
 
-    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+    def telemetry_files(self, settings: FallSettings, folder: Path | None = None) -> dict[str, Path]:
+        """``{"baro": baro.csv}`` from ``[telemetry] baro`` or inside ``folder``."""
+        if folder is not None:
+            return {"baro": Path(folder) / "baro.csv"}
+        if settings.baro_file is None or not settings.baro_file.exists():
+            from workbench.io.scenario import ScenarioError
+
+            raise ScenarioError(settings.run.path, "telemetry.baro", f"file not found: {settings.baro_file}")
+        return {"baro": settings.baro_file}
+
+    def synthesize(self, settings: FallSettings, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the fall (RK4, 100 Hz) and write ``baro.csv`` (hPa) and ``truth.npz``."""
         rng = np.random.default_rng(seed)
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        g = scenario.get
-        k = 0.5 * g("body.cda_m2", kind="float") / g("body.mass_kg", kind="float")
-        h0 = g("release.altitude_m", kind="float") + g("release.sigma_altitude_m", kind="float") * rng.standard_normal()
+        k = settings.body.k_drag
+        h0 = settings.altitude_m + settings.sigma_altitude_m * rng.standard_normal()
         dt = 0.01
-        n = int(round(g("synthetic.duration_s", kind="float") / dt))
+        n = int(round(settings.duration_s / dt))
         x = np.empty((n + 1, 2))
         x[0] = (h0, 0.0)
         for i in range(n):
             x[i + 1] = fall_step(x[i], dt, k)
         t = np.arange(n + 1) * dt
-        every = int(round(1.0 / (g("barometer.rate_hz", kind="float") * dt)))
+        baro_spec = settings.barometer
+        every = int(round(1.0 / (baro_spec.rate_hz * dt)))
         tb, hb = t[::every], x[::every, 0]
-        bias = g("barometer.bias_sigma_pa", kind="float") * rng.standard_normal()
-        p = pressure(hb) + bias + g("barometer.noise_pa", kind="float") * rng.standard_normal(tb.size)
+        bias = baro_spec.bias_sigma_pa * rng.standard_normal()
+        p = pressure(hb) + bias + baro_spec.noise_pa * rng.standard_normal(tb.size)
         baro = write_telemetry(out / "baro.csv", tb, {"pressure": (p, "hPa")}, meta={"source": "synthetic"})
         np.savez(out / "truth.npz", t=t, h=x[:, 0], v=x[:, 1], bias=bias)
         return Synthesized({"baro": baro}, out / "truth.npz")
@@ -213,17 +283,16 @@ class FallingBodyProblem:
         with np.load(path) as z:
             return {k: z[k] for k in z.files}
 
-    def reconstruct(self, scenario: Scenario, telemetry, options: RunOptions):
+    def reconstruct(self, settings: FallSettings, telemetry, options: RunOptions):
         """Read the barometer, run the EKF forward pass, then the RTS smoother."""
         tel = read_telemetry(telemetry["baro"], required={"pressure": "pressure"})
         t, p = tel.time, tel.channel("pressure")
         yield BaroData(t, p)
-        g = scenario.get
-        k = 0.5 * g("body.cda_m2", kind="float") / g("body.mass_kg", kind="float")
-        q = g("filter.accel_psd", kind="float")
-        r = np.array([[g("barometer.noise_pa", kind="float") ** 2]])
-        x0 = np.array([g("release.altitude_m", kind="float"), 0.0, 0.0])
-        sigma0 = [g("release.sigma_altitude_m", kind="float"), 0.1, g("barometer.bias_sigma_pa", kind="float")]
+        k = settings.body.k_drag
+        q = settings.accel_psd
+        r = np.array([[settings.barometer.noise_pa**2]])
+        x0 = np.array([settings.altitude_m, 0.0, 0.0])
+        sigma0 = [settings.sigma_altitude_m, 0.1, settings.barometer.bias_sigma_pa]
         fp = run_filter(
             x0,
             np.diag(np.square(sigma0)),
@@ -238,7 +307,7 @@ class FallingBodyProblem:
         sd = np.sqrt(sm.P[-1].diagonal())
         end = {"t_s": float(t[-1]), "h_m": float(sm.x[-1, 0]), "sigma_h_m": float(sd[0])}
         end |= {"v_mps": float(sm.x[-1, 1]), "sigma_v_mps": float(sd[1])}
-        summary = {"scenario": scenario.name, "kind": self.kind, "samples": int(t.size), "end": end}
+        summary = {"scenario": settings.run.name, "kind": self.kind, "samples": int(t.size), "end": end}
         summary["bias_pa"] = {"value": float(sm.x[0, 2]), "sigma": float(np.sqrt(sm.P[0, 2, 2]))}
         yield FallResult(sm.t, sm.x, sm.P, fp, summary)
 
@@ -286,9 +355,9 @@ class FallingBodyProblem:
         return f"end altitude {summary['end']['h_m']:.1f} ± {summary['end']['sigma_h_m']:.1f} m (1σ)"
 
     @contextlib.contextmanager
-    def open_recording(self, path: Path, scenario: Scenario, truth, properties: dict):
+    def open_recording(self, path: Path, settings: FallSettings, truth, properties: dict):
         """A recording with the writer's defaults (no custom layout)."""
-        with open_recording(path, scenario.name, properties=properties) as rec:
+        with open_recording(path, settings.run.name, properties=properties) as rec:
             yield _Drawer(rec, truth)
 
     def export_columns(self, result: FallResult) -> ExportTable:
@@ -298,6 +367,6 @@ class FallingBodyProblem:
         cols |= {"v": (result.x[:, 1], "m/s"), "sigma_v": (sd[:, 1], "m/s")}
         return ExportTable(result.t, cols, "local vertical, up positive")
 
-    def monte_carlo(self, scenario, out_dir, options, progress) -> McOutcome:
+    def monte_carlo(self, settings, out_dir, options, progress) -> McOutcome:
         """Not provided by this example."""
         raise NotImplementedError("the fallingbody example has no Monte Carlo analysis")

@@ -152,6 +152,10 @@ class DropTestProblem:
     #: process on a checkout's first run (:mod:`workbench.problems.precompile`)
     compiled_modules = ("workbench.problems.droptest.truth_fast", "workbench.problems.droptest.kernel")
 
+    def settings(self, scenario: Scenario) -> Scenario:
+        """TRANSITIONAL (issue 25): the scenario itself, until this package builds frozen settings."""
+        return scenario
+
     def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
         """``[telemetry]`` files (imu, attitude_3dm, events, setup, optional ranging), or the
         standard names in ``folder`` (ranging only if the file exists)."""

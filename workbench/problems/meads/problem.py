@@ -85,6 +85,10 @@ class MeadsProblem:
     title = "entry"
     schema = SCHEMA
 
+    def settings(self, scenario: Scenario) -> Scenario:
+        """TRANSITIONAL (issue 25): the scenario itself, until this package builds frozen settings."""
+        return scenario
+
     def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
         """``[telemetry]`` files, or the standard names in ``folder``."""
         if folder is None:

@@ -74,6 +74,10 @@ class Post2Problem:
     title = "trajectory"
     schema = SCHEMA
 
+    def settings(self, scenario: Scenario) -> Scenario:
+        """TRANSITIONAL (issue 25): the scenario itself, until this package builds frozen settings."""
+        return scenario
+
     def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
         """{observation name: CSV, name + "_weights": CSV} from ``[observations.<name>] file/weights``
         or, with ``folder``, ``<name>.csv`` / ``<name>_weights.csv`` inside it."""
