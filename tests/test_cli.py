@@ -178,11 +178,10 @@ def test_several_scenarios_run_in_processes_and_a_failure_stops_none(tmp_path, c
     written) does not stop the healthy one, whose outputs equal a run in this process; the exit code
     is the failed scenario's and the failure is listed.  With bars (a terminal; forced here), the
     children's plain timed lines are piped through the parent, above its bar of finished scenarios."""
-    from workbench import cli
     from workbench.cli import EXIT_UNHEALTHY
     from workbench.io.assets import assets_dir
 
-    monkeypatch.setattr(cli, "FORK", fork)
+    monkeypatch.setenv("WORKBENCH_FORK", "1" if fork else "0")
 
     text = (assets_dir() / "scenarios" / "post2_j2.toml").read_text(encoding="utf-8")
     assert 'name = "post2_j2"' in text and "sigma = 1.0e-5" in text

@@ -39,8 +39,6 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402 (after the BLAS thread setting)
 
-from workbench.core.forking import CAN_FORK, fork_call  # noqa: E402
-
 EXIT_OK, EXIT_USAGE, EXIT_INPUT, EXIT_NUMERIC, EXIT_KIND, EXIT_INTERRUPT = 0, 2, 3, 4, 5, 130
 EXIT_UNHEALTHY = 6
 EXIT_VIEWER = 7
@@ -134,56 +132,23 @@ def cmd_run(args: argparse.Namespace) -> int:
         members=args.members,
         allow_unhealthy=args.allow_unhealthy,
     )
-    jobs = _jobs(args.jobs, len(names))
+    from workbench.problems import scheduler
+
+    jobs = scheduler.jobs_for(args.jobs, len(names))
     if jobs > 1:
-        return _run_in_processes(names, args, jobs)
+        return scheduler.run_in_processes(
+            names,
+            lambda name: child_argv(name, args),
+            jobs,
+            Path(args.out),
+            _reporter(args),
+            entry=lambda argv: main(argv[3:]),
+            progress=_progress,
+        )
     rep = _reporter(args)
     for name in names:
         run_scenario(name, Path(args.out), options, progress=rep)
     return EXIT_OK
-
-
-def _jobs(requested: int | None, n_scenarios: int) -> int:
-    """Scenario processes to run at once: ``requested`` (``--jobs``), else one per CPU core; never
-    more than there are scenarios."""
-    n = requested if requested is not None else (os.cpu_count() or 1)
-    return max(1, min(int(n), n_scenarios))
-
-
-def _cost_hint(name: str, out: Path) -> float:
-    """Expected wall time [s] of scenario ``name``: its last run's ``wall_time_s`` in ``out`` (0 when
-    never run), so that the longest scenarios start first (longest-processing-time order)."""
-    try:
-        return float(json.loads((out / f"{Path(name).stem}.summary.json").read_text(encoding="utf-8"))["wall_time_s"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return 0.0
-
-
-def _launch_order(names: list[str], out: Path) -> list[str]:
-    """The order in which the scenario processes start: longest first by their last wall time in
-    ``out``; with no earlier run (a fresh checkout), round-robin over the problem kinds, so that two
-    scenarios of one kind do not both compile the same kernels (numba, first run of a checkout) at
-    the same time — the second one starts when the first has written the compiled cache."""
-    hints = {n: _cost_hint(n, out) for n in names}
-    if any(hints.values()):
-        return sorted(names, key=lambda n: -hints[n])
-    from workbench.io.assets import assets_dir
-    from workbench.io.scenario import ScenarioError, resolve_scenario
-
-    by_kind: dict[str, list[str]] = {}
-    for n in names:
-        try:
-            kind = resolve_scenario(n, assets_dir()).kind
-        except (ScenarioError, OSError):
-            kind = ""  # reported by the scenario's own process
-        by_kind.setdefault(kind, []).append(n)
-    queues = list(by_kind.values())
-    order = []
-    while any(queues):
-        for q in queues:
-            if q:
-                order.append(q.pop(0))
-    return order
 
 
 def child_argv(name: str, args: argparse.Namespace) -> list[str]:
@@ -197,187 +162,6 @@ def child_argv(name: str, args: argparse.Namespace) -> list[str]:
     # logs plain timed lines (each names its scenario) - or nothing but its results under --quiet
     argv += ["--quiet"] if args.quiet else ["--progress", "plain"]
     return argv
-
-
-#: modules every scenario process imports; ``run`` with several jobs imports them once and forks
-#: each scenario's process from itself, so no process pays the ~2 s of imports again
-PRELOAD = (
-    "scipy.interpolate",
-    "scipy.linalg",
-    "scipy.optimize",
-    "scipy.special",
-    "numba",
-    "trimesh",
-    "rerun",
-    "rerun.blueprint",
-    "workbench.problems.runner",
-    "workbench.recording.compare",
-)
-
-#: start scenario processes by forking this one (POSIX); False: a new interpreter each (``python -m
-#: workbench.cli run NAME ...``), which repeats the imports
-FORK = CAN_FORK
-
-
-class _Child:
-    """One scenario's process: forked from this one (its imports done, :data:`PRELOAD`), or a new
-    ``workbench run`` interpreter when :data:`FORK` is off.  ``pipe``: its stderr goes to a pipe
-    this process reads (:attr:`fd`, non-blocking), else to the inherited stderr.  The fork happens
-    while this process runs no other thread, so the child inherits no held lock."""
-
-    def __init__(self, name: str, args: argparse.Namespace, pipe: bool):
-        argv = child_argv(name, args)
-        r = w = None
-        if pipe:
-            r, w = os.pipe()
-        self.returncode: int | None = None
-        self.proc = None
-        if FORK:  # the child: the scenario as `workbench run NAME --jobs 1 ...` would run it
-            self.pid = fork_call(lambda: main(argv[3:]), stderr_fd=w, close_fds=(r,) if pipe else ())
-        else:
-            import subprocess
-
-            self.proc = subprocess.Popen(argv, stderr=w)
-            self.pid = self.proc.pid
-        self.fd = None
-        if pipe:
-            os.close(w)
-            os.set_blocking(r, False)
-            self.fd = r
-        self._buf = b""
-        self.eof = False
-
-    def poll(self) -> int | None:
-        """The exit code once the process ended (reaped here), else None."""
-        if self.returncode is None:
-            if self.proc is not None:
-                self.returncode = self.proc.poll()
-            else:
-                pid, status = os.waitpid(self.pid, os.WNOHANG)
-                if pid:
-                    self.returncode = os.waitstatus_to_exitcode(status)
-        return self.returncode
-
-    def terminate(self) -> None:
-        """SIGTERM (the child removes its partial recording and exits 143)."""
-        if self.poll() is None:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(self.pid, signal.SIGTERM)
-
-    def wait(self) -> int:
-        """Block until the process ended; its exit code."""
-        while self.poll() is None:
-            if self.proc is not None:
-                self.proc.wait()
-            else:
-                _, status = os.waitpid(self.pid, 0)
-                self.returncode = os.waitstatus_to_exitcode(status)
-        return self.returncode
-
-    def lines(self, final: bool = False) -> list[str]:
-        """The complete stderr lines the child wrote since the last call (pipe mode; :attr:`eof` once
-        the child closed its end); ``final``: also an unterminated last line, and close the pipe
-        (the caller unregisters it from its selector first)."""
-        if self.fd is None:
-            return []
-        while not self.eof:
-            try:
-                chunk = os.read(self.fd, 65536)
-            except BlockingIOError:
-                break
-            if not chunk:
-                self.eof = True
-                break
-            self._buf += chunk
-        *done, self._buf = self._buf.split(b"\n")
-        if final:
-            if self._buf:
-                done.append(self._buf)
-            self._buf = b""
-            os.close(self.fd)
-            self.fd = None
-        return [d.decode("utf-8", errors="replace") for d in done]
-
-
-def _run_in_processes(names: list[str], args: argparse.Namespace, jobs: int) -> int:
-    """Run each scenario in its own process, ``jobs`` at a time, longest first.
-
-    Every scenario runs even when another fails; the progress lines of the processes interleave
-    (each names its scenario). Returns 0 when all succeed, else the exit code of the first failed
-    scenario in the order given (each failure is listed at the end). Ctrl-C or SIGTERM stop the
-    running processes with SIGTERM (each removes its partial recording) and start no new one.
-    Each process inherits this one's environment, so also its one BLAS thread (set at import).
-
-    The processes are forked from this one after it imported :data:`PRELOAD` (each would otherwise
-    spend ~2 s of CPU importing the same modules; :data:`FORK` off: ``python -m workbench.cli run``).
-    Each is this process's child, so its memory shows in this process's ``RUSAGE_CHILDREN``.
-
-    Progress: every child logs plain timed lines (:func:`child_argv`). On a terminal (bars mode) the
-    children's stderr is piped through this process, which prints their lines above one bar of the
-    scenarios finished (count, ETA); otherwise the children write to the inherited stderr directly.
-    No thread is started here (a fork must not copy a lock another thread holds): the pipes are
-    read between polls.
-    """
-    import importlib
-    import selectors
-    import time
-
-    out = Path(args.out)
-    order = _launch_order(names, out)
-    t0 = time.perf_counter()
-    rep = _reporter(args)
-    piped = rep.mode == "bars"
-    if FORK:
-        for mod in PRELOAD:
-            importlib.import_module(mod)
-    pending, running, codes = list(order), {}, {}
-    sel = selectors.DefaultSelector()
-
-    def drain(child: _Child, final: bool = False) -> None:
-        if child.fd is not None and (final or child.eof) and child.fd in sel.get_map():
-            sel.unregister(child.fd)  # before the pipe is closed (its number may be reused)
-        for text in child.lines(final):
-            rep.result(text.rstrip("\r"))
-        if child.eof and child.fd is not None and child.fd in sel.get_map():
-            sel.unregister(child.fd)  # at EOF a pipe is always readable: stop selecting it
-
-    rep.line(f"running {len(names)} scenarios, {jobs} at a time (--jobs), in the order {', '.join(order)}")
-    bar = rep.counter("scenarios finished", total=len(names), unit="scenarios")
-    try:
-        while pending or running:
-            while pending and len(running) < jobs:
-                name = pending.pop(0)
-                child = _Child(name, args, piped)
-                running[name] = child
-                if child.fd is not None:
-                    sel.register(child.fd, selectors.EVENT_READ, child)
-            if sel.get_map():
-                for key, _ in sel.select(timeout=0.05):
-                    drain(key.data)
-            else:
-                time.sleep(0.05)
-            for name, child in list(running.items()):
-                if child.poll() is not None:
-                    drain(child, final=True)
-                    codes[name] = child.returncode
-                    del running[name]
-            bar.set(len(codes))
-    except BaseException:
-        for child in running.values():
-            child.terminate()
-        for child in running.values():
-            child.wait()
-            drain(child, final=True)
-        raise
-    finally:
-        sel.close()
-        bar.close(report=False)
-    failed = [n for n in names if codes.get(n)]
-    _progress(
-        f"{len(names) - len(failed)} of {len(names)} scenarios succeeded in {time.perf_counter() - t0:.1f} s"
-        + "".join(f"\n  {n}: exit {codes[n]}" for n in failed)
-    )
-    return codes[failed[0]] if failed else EXIT_OK
 
 
 def cmd_mc(args: argparse.Namespace) -> int:

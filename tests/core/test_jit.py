@@ -77,7 +77,7 @@ def test_the_child_runs_only_for_a_cold_module_and_not_when_switched_off(kernels
         return subprocess.CompletedProcess(argv, 0, "", "")
 
     monkeypatch.setattr(pc.subprocess, "run", fake_run)
-    monkeypatch.setattr(pc, "FORK", False)
+    monkeypatch.setenv("WORKBENCH_FORK", "0")
     problem = SimpleNamespace(compiled_modules=(name,))
     sc = SimpleNamespace(path=tmp_path / "x.toml")
     monkeypatch.setenv(pc.ENV_SWITCH, "0")
@@ -95,7 +95,7 @@ def test_a_failing_child_is_reported_and_the_run_goes_on(kernels, monkeypatch, t
     name, _ = kernels
     failed = subprocess.CompletedProcess([], 1, "", "Traceback\nValueError: boom\n")
     monkeypatch.setattr(pc.subprocess, "run", lambda argv, **kw: failed)
-    monkeypatch.setattr(pc, "FORK", False)
+    monkeypatch.setenv("WORKBENCH_FORK", "0")
     rep, out = _rep()
     sc, problem = SimpleNamespace(path=Path("s.toml")), SimpleNamespace(compiled_modules=(name,))
     assert pc.precompile(sc, problem, 0, rep) is False
@@ -108,7 +108,7 @@ def test_a_forked_child_compiles_for_the_run_and_its_failure_is_reported(kernels
     line with its last line of output and the module stays cold; what a child compiles is cached
     for the run."""
     name, mod = kernels
-    if not pc.FORK:
+    if not pc.fork_enabled():
         pytest.skip("no fork on this platform")
     parent = os.getpid()
     problem = SimpleNamespace(compiled_modules=(name,))

@@ -9,10 +9,19 @@ import os
 import sys
 from collections.abc import Callable, Iterable
 
-__all__ = ["CAN_FORK", "fork_call"]
+__all__ = ["CAN_FORK", "FORK_ENV", "fork_call", "fork_enabled"]
 
 CAN_FORK = hasattr(os, "fork")
 """Whether this platform forks (False on Windows: callers start a new interpreter instead)."""
+
+FORK_ENV = "WORKBENCH_FORK"
+"""The one switch: ``WORKBENCH_FORK=0`` makes the callers start a new interpreter instead of forking."""
+
+
+def fork_enabled() -> bool:
+    """True when child processes are forked from this one: the platform forks and the environment
+    variable :data:`FORK_ENV` is not ``"0"`` (read at each call, so a test or a user sets it per run)."""
+    return CAN_FORK and os.environ.get(FORK_ENV, "1").strip() != "0"
 
 
 def fork_call(

@@ -25,13 +25,13 @@ import sys
 import tempfile
 from pathlib import Path
 
-from workbench.core.forking import CAN_FORK, fork_call
+from workbench.core.forking import fork_call, fork_enabled
 from workbench.core.jit import cold_kernels, cold_modules
 from workbench.io import progress as prog
 from workbench.io.scenario import Scenario
 from workbench.problems.base import Problem, RunOptions
 
-__all__ = ["ENV_SWITCH", "FORK", "child_argv", "main", "precompile"]
+__all__ = ["ENV_SWITCH", "child_argv", "main", "precompile"]
 
 ENV_SWITCH = "WORKBENCH_PRECOMPILE"
 """Environment variable: ``0`` turns the precompiling child off (the run compiles in place)."""
@@ -66,18 +66,16 @@ def precompile(scenario: Scenario, problem: Problem, seed: int, rep: prog.Report
     return not cold_modules(modules)
 
 
-#: fork the child from the running process (POSIX: its imports are done, ~2–3 s of CPU saved);
-#: False: a new interpreter (``python -m workbench.problems.precompile``)
-FORK = CAN_FORK
-
-
 def _run_child(scenario: Scenario, seed: int) -> tuple[int, str]:
     """Run :func:`main` on the scenario in a child process; (exit code, its stdout and stderr).
 
-    Forked (:data:`FORK`) when the caller runs no other thread: the run calls this before it starts
-    its recording. Any exception here (Ctrl-C, SIGTERM's ``Terminated``) kills the child first."""
+    Forked from the running process (its imports are done, ~2–3 s of CPU saved) unless
+    ``WORKBENCH_FORK=0`` (:func:`~workbench.core.forking.fork_enabled`; then a new interpreter,
+    ``python -m workbench.problems.precompile``), when the caller runs no other thread: the run
+    calls this before it starts its recording. Any exception here (Ctrl-C, SIGTERM's
+    ``Terminated``) kills the child first."""
     argv = [str(scenario.path), "--seed", str(seed)]
-    if not FORK:
+    if not fork_enabled():
         proc = subprocess.run(child_argv(scenario, seed), capture_output=True, text=True, errors="replace")
         return proc.returncode, proc.stderr or proc.stdout
     with tempfile.TemporaryFile() as log:
