@@ -35,7 +35,6 @@ __all__ = [
     "quat_identity",
     "quat_multiply",
     "quat_conjugate",
-    "quat_inverse",
     "quat_rotate",
     "quat_to_dcm",
     "dcm_components",
@@ -113,12 +112,6 @@ def quat_conjugate(q: np.ndarray) -> np.ndarray:
     """Conjugate ``[-x, -y, -z, w]``; the inverse of a unit quaternion (``q_b_a`` from ``q_a_b``)."""
     q = np.asarray(q, dtype=float)
     return np.concatenate([-q[..., :3], q[..., 3:]], axis=-1)
-
-
-def quat_inverse(q: np.ndarray) -> np.ndarray:
-    """Inverse ``q⁻¹ = q* / |q|²`` (valid for non-unit quaternions too)."""
-    q = np.asarray(q, dtype=float)
-    return quat_conjugate(q) / np.sum(q * q, axis=-1, keepdims=True)
 
 
 def quat_to_dcm(q: np.ndarray) -> np.ndarray:

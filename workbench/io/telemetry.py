@@ -355,6 +355,286 @@ def _fmt(v: float) -> str:
     return f"{v:.9g}"
 
 
+@dataclass(frozen=True)
+class _Header:
+    """The parsed header row: raw ``cells``, channel ``names``, canonical ``units`` (None when unknown
+    or missing), the units as written (``units_raw``), quantity ``kinds`` and name -> column ``index``."""
+
+    cells: list[str]
+    names: list[str]
+    units: list[str | None]
+    units_raw: list[str]
+    kinds: list[str | None]
+    index: dict[str, int]
+
+    @property
+    def k(self) -> int:
+        """Number of columns."""
+        return len(self.cells)
+
+
+def _check_options(
+    required: dict[str, str], limits: dict[str, tuple[float, float]], saturation: dict[str, float], gap_factor: float
+) -> None:
+    """``ValueError`` for a caller's (not the file's) mistake in the options of :func:`read_telemetry`."""
+    for name, kind in required.items():
+        if kind not in KINDS:
+            raise ValueError(f"required[{name!r}] = {kind!r} is not a quantity kind; kinds: {', '.join(KINDS)}")
+    for name, lh in limits.items():
+        lo, hi = lh
+        if not lo <= hi:
+            raise ValueError(f"limits[{name!r}] = {lh!r}: lower limit above upper limit")
+    for name, thr in saturation.items():
+        if not thr > 0:
+            raise ValueError(f"saturation[{name!r}] = {thr!r}: threshold must be a positive SI magnitude")
+    if gap_factor <= 1.0:
+        raise ValueError(f"gap_factor must be > 1, got {gap_factor}")
+
+
+def _parse_header(line: str, header_line: int, required: dict[str, str], col: _Collector) -> _Header:
+    """The header row ``line`` (file line ``header_line``): every ``name [unit]`` cell, its unit
+    and kind; a cell without a unit, an unknown unit or a duplicate name is reported to ``col``."""
+    delim = _foreign_delimiter(line)
+    if delim:
+        col.add(delim, line=header_line)
+        col.raise_if_any()
+    cells = _split_header(line)
+    names: list[str] = []
+    units: list[str | None] = []
+    units_raw: list[str] = []
+    kinds: list[str | None] = []
+    for j, cell in enumerate(cells):
+        m = _HEADER_RE.match(cell)
+        if m is None or not m["name"].strip():
+            what = "has no '[unit]'" if m is None else "has no name"
+            col.add(
+                f"{what}; write headers as 'name [unit]' (use '[1]' for dimensionless)",
+                column=cell,
+                line=header_line,
+                order=j,
+            )
+            names.append(cell)
+            units.append(None)
+            units_raw.append("")
+            kinds.append(None)
+            continue
+        name, unit_raw = m["name"].strip(), m["unit"].strip()
+        names.append(name)
+        units_raw.append(unit_raw)
+        try:
+            cu = canonical_unit(unit_raw)
+        except UnitError:
+            want = required.get(name) or ("time" if j == 0 else None)
+            hint = f"expected {want}: {', '.join(known_units(want))}" if want else f"known units: {', '.join(UNITS)}"
+            col.add(f"has unknown unit {unit_raw!r} ({hint})", column=cell, line=header_line, order=j)
+            units.append(None)
+            kinds.append(None)
+            continue
+        units.append(cu)
+        kinds.append(UNITS[cu].kind)
+    index: dict[str, int] = {}
+    for j, name in enumerate(names):
+        if name in index:
+            col.add(
+                f"duplicate column name {name!r} (also column {index[name] + 1})",
+                column=cells[j],
+                line=header_line,
+                order=j,
+            )
+        else:
+            index[name] = j
+    return _Header(cells, names, units, units_raw, kinds, index)
+
+
+def _check_columns(
+    hd: _Header,
+    header_line: int,
+    required: dict[str, str],
+    options: dict[str, Collection[str]],
+    sparse_given: Collection[str],
+    meta_lines: dict[str, int],
+    col: _Collector,
+) -> None:
+    """The first column is time; every ``required`` channel is present with its kind; every channel
+    named in ``options`` (``{"limits": ..., "saturation": ..., "sparse": ...}``) is a channel of the
+    file (``sparse_given``: the caller's sparse names, the others came from the file's metadata)."""
+    k = hd.k
+    if hd.kinds and hd.kinds[0] not in (None, "time"):
+        col.add(
+            f"is the first column and must be time (unit s, ms or us), but has unit of {hd.kinds[0]}",
+            column=hd.cells[0],
+            line=header_line,
+            order=0,
+        )
+    time_name = hd.names[0] if hd.names else "time"
+    present = ", ".join(hd.cells)
+    for name, kind in required.items():
+        if name == time_name:
+            continue
+        j = hd.index.get(name)
+        if j is None:
+            col.add(f"missing column {name!r} ({kind}); columns present: {present}", line=header_line, order=k)
+        elif hd.kinds[j] is not None and hd.kinds[j] != kind:
+            col.add(f"has unit of {hd.kinds[j]}, expected {kind}", column=hd.cells[j], line=header_line, order=j)
+    for what, keys in options.items():
+        for name in keys:
+            if hd.index.get(name, 0) != 0:
+                continue
+            if name in required and name != time_name:
+                continue  # already reported as a missing column: the option is the pipeline's, not the user's
+            why = (
+                "the time column cannot be declared sparse"
+                if what == "sparse" and name == time_name
+                else "which is not a channel of this file"
+            )
+            col.add(
+                f"{what} given for {name!r}, {why}; columns present: {present}",
+                line=meta_lines.get("sparse") if what == "sparse" and name not in sparse_given else header_line,
+                order=k,
+            )
+
+
+def _metadata_dt(meta: dict[str, str], meta_lines: dict[str, int], col: _Collector) -> float | None:
+    """The sample interval [s] the metadata's ``rate_hz`` declares (None when absent or invalid)."""
+    if "rate_hz" not in meta:
+        return None
+    try:
+        rate = float(meta["rate_hz"])
+        if not (math.isfinite(rate) and rate > 0):
+            raise ValueError
+        return 1.0 / rate
+    except ValueError:
+        col.add(f"metadata rate_hz {meta['rate_hz']!r} is not a positive number", line=meta_lines["rate_hz"])
+        return None
+
+
+def _split_rows(data: list[str], k: int, first_line: int, ends_with_newline: bool, col: _Collector):
+    """The data rows with ``k`` fields: (indices of the good rows (m,), their cells flattened
+    row-major); a row with another field count is reported with the likely cause."""
+    n = len(data)
+    counts = np.fromiter((s.count(",") for s in data), dtype=np.int64, count=n)
+    wrong = np.flatnonzero(counts != k - 1)
+    if not wrong.size:
+        return np.arange(n), ",".join(data).split(",")
+
+    def wrong_reason(i: int) -> str:
+        s = data[wrong[i]]
+        if not s.strip():
+            return "blank row inside the data"
+        if s.lstrip().startswith("#"):
+            return "comment line inside the data (comments go above the header)"
+        if wrong[i] == n - 1 and not ends_with_newline:
+            return (
+                f"expected {k} fields, found {counts[wrong[i]] + 1}: the last line has no line end — "
+                "the file looks truncated"
+            )
+        return f"expected {k} fields, found {counts[wrong[i]] + 1}"
+
+    col.add_rows(wrong, first_line, None, -1, wrong_reason)  # type: ignore[arg-type]
+    good = np.flatnonzero(counts == k - 1)
+    return good, (",".join([data[i] for i in good]).split(",") if good.size else [])
+
+
+def _parse_cells(
+    hd: _Header, good: np.ndarray, flat: list[str], sparse_set: set[str], first_line: int, col: _Collector
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every cell as a number in the file's units: (values (m, k), cell parsed and finite (m, k));
+    an unparsable, empty (outside sparse columns) or non-finite cell is reported with its row."""
+    k, ng = hd.k, good.size
+    raw = np.empty((ng, k))
+    cell_ok = np.ones((ng, k), dtype=bool)
+    for j in range(k):
+        vals, empty, bad = _parse_column(flat[j::k], allow_empty=hd.names[j] in sparse_set and j > 0)
+        raw[:, j] = vals
+        if bad:
+            bi = np.array([b[0] for b in bad])
+            cell_ok[bi, j] = False
+            col.add_rows(good[bi], first_line, hd.cells[j], j, lambda q, bad=bad: bad[q][1])
+        nonfin = ~np.isfinite(vals)
+        if empty is not None:
+            nonfin &= ~empty
+        if bad:
+            nonfin[bi] = False
+        nf = np.flatnonzero(nonfin)
+        if nf.size:
+            cell_ok[nf, j] = False
+            col.add_rows(
+                good[nf],
+                first_line,
+                hd.cells[j],
+                j,
+                lambda q, nf=nf, v=vals: "value is NaN" if np.isnan(v[nf[q]]) else f"value is {v[nf[q]]:g}",
+            )
+    return raw, cell_ok
+
+
+def _check_time(
+    hd: _Header, raw: np.ndarray, cell_ok: np.ndarray, good: np.ndarray, first_line: int, col: _Collector
+) -> None:
+    """Time strictly increasing over the rows whose time cell parsed; a repeat or a step back is
+    reported with the row it repeats or follows."""
+    tok = np.flatnonzero(cell_ok[:, 0]) if hd.k else np.empty(0, int)
+    if tok.size <= 1:
+        return
+    tv = raw[tok, 0]
+    back = np.flatnonzero(~(np.diff(tv) > 0))
+    if not back.size:
+        return
+    tu = hd.units_raw[0] or "?"
+
+    def time_reason(q: int) -> str:
+        b = back[q]
+        prev_row = int(good[tok[b]]) + 1
+        t_prev, t_here = tv[b], tv[b + 1]
+        if t_here == t_prev:
+            return f"duplicate time {_fmt(t_here)} {tu}: same as row {prev_row}"
+        return f"time goes backwards: {_fmt(t_here)} {tu} after {_fmt(t_prev)} {tu} at row {prev_row}"
+
+    col.add_rows(good[tok[back + 1]], first_line, hd.cells[0], 0, time_reason)
+
+
+def _check_limits(
+    hd: _Header,
+    raw: np.ndarray,
+    cell_ok: np.ndarray,
+    good: np.ndarray,
+    limits: dict[str, tuple[float, float]],
+    first_line: int,
+    col: _Collector,
+) -> None:
+    """Values outside the caller's ``limits`` (SI) are reported in the file's unit and in SI."""
+    for name, (lo, hi) in limits.items():
+        j = hd.index.get(name)
+        if j is None or j == 0 or hd.units[j] is None:
+            continue
+        vsi, _ = to_si(raw[:, j], hd.units[j])
+        with np.errstate(invalid="ignore"):
+            out = np.flatnonzero(cell_ok[:, j] & ((vsi < lo) | (vsi > hi)))
+        if out.size:
+            si = SI_UNITS[hd.kinds[j]]  # type: ignore[index]
+
+            def lim_reason(q, j=j, out=out, vsi=vsi, lo=lo, hi=hi, si=si):
+                r = out[q]
+                return (
+                    f"value {_fmt(raw[r, j])} {hd.units_raw[j]} (= {_fmt(vsi[r])} {si}) is outside the "
+                    f"limits [{_fmt(lo)}, {_fmt(hi)}] {si}"
+                )
+
+            col.add_rows(good[out], first_line, hd.cells[j], j, lim_reason)
+
+
+def _find_gaps(time_s: np.ndarray, nominal: float | None, gap_factor: float) -> list[Gap]:
+    """Steps longer than ``gap_factor`` × the nominal interval [s] (the median step when None)."""
+    if time_s.size < 2:
+        return []
+    dt = np.diff(time_s)
+    nominal = float(np.median(dt)) if nominal is None else nominal
+    return [
+        Gap(float(time_s[i]), float(time_s[i + 1]), float(dt[i]), int(i) + 2)
+        for i in np.flatnonzero(dt > gap_factor * nominal)
+    ]
+
+
 def read_telemetry(
     path: str | os.PathLike,
     *,
@@ -375,25 +655,14 @@ def read_telemetry(
     ``# sparse:`` metadata line.  A gap is a step ``dt > gap_factor * nominal``, where nominal
     is ``nominal_dt`` (s), else ``1 / rate_hz`` from the metadata, else the median step.
 
-    Raises :class:`TelemetryError` listing every problem found (up to :data:`MAX_PROBLEMS`).
-    Channel names given in ``required``/``limits``/``saturation``/``sparse`` must exist.
+    Steps: the metadata preamble, the header (:func:`_parse_header`, :func:`_check_columns`), the
+    rows (:func:`_split_rows`, :func:`_parse_cells`), time and limits (:func:`_check_time`,
+    :func:`_check_limits`), then the SI result with saturation flags and gaps.  Raises
+    :class:`TelemetryError` listing every problem found (up to :data:`MAX_PROBLEMS`).  Channel names
+    given in ``required``/``limits``/``saturation``/``sparse`` must exist.
     """
-    required = dict(required or {})
-    limits = dict(limits or {})
-    saturation = dict(saturation or {})
-    for name, kind in required.items():
-        if kind not in KINDS:
-            raise ValueError(f"required[{name!r}] = {kind!r} is not a quantity kind; kinds: {', '.join(KINDS)}")
-    for name, lh in limits.items():
-        lo, hi = lh
-        if not lo <= hi:
-            raise ValueError(f"limits[{name!r}] = {lh!r}: lower limit above upper limit")
-    for name, thr in saturation.items():
-        if not thr > 0:
-            raise ValueError(f"saturation[{name!r}] = {thr!r}: threshold must be a positive SI magnitude")
-    if gap_factor <= 1.0:
-        raise ValueError(f"gap_factor must be > 1, got {gap_factor}")
-
+    required, limits, saturation = dict(required or {}), dict(limits or {}), dict(saturation or {})
+    _check_options(required, limits, saturation, gap_factor)
     path = Path(path)
     fname = str(path)
     text = _read_text(path, fname)
@@ -405,245 +674,54 @@ def read_telemetry(
         col.add("no header row (expected a line like 'time [s],BP.x [g],...')")
         col.raise_if_any()
     header_line = h + 1
-
-    # ---- header ----------------------------------------------------------------------------
-    delim = _foreign_delimiter(lines[h])
-    if delim:
-        col.add(delim, line=header_line)
-        col.raise_if_any()
-    cells = _split_header(lines[h])
-    k = len(cells)
-    names: list[str] = []
-    units: list[str | None] = []  # canonical unit, or None if unknown/missing
-    units_raw: list[str] = []
-    kinds_l: list[str | None] = []
-    for j, cell in enumerate(cells):
-        m = _HEADER_RE.match(cell)
-        if m is None or not m["name"].strip():
-            what = "has no '[unit]'" if m is None else "has no name"
-            col.add(
-                f"{what}; write headers as 'name [unit]' (use '[1]' for dimensionless)",
-                column=cell,
-                line=header_line,
-                order=j,
-            )
-            names.append(cell)
-            units.append(None)
-            units_raw.append("")
-            kinds_l.append(None)
-            continue
-        name, unit_raw = m["name"].strip(), m["unit"].strip()
-        names.append(name)
-        units_raw.append(unit_raw)
-        try:
-            cu = canonical_unit(unit_raw)
-        except UnitError:
-            want = required.get(name) or ("time" if j == 0 else None)
-            hint = f"expected {want}: {', '.join(known_units(want))}" if want else f"known units: {', '.join(UNITS)}"
-            col.add(f"has unknown unit {unit_raw!r} ({hint})", column=cell, line=header_line, order=j)
-            units.append(None)
-            kinds_l.append(None)
-            continue
-        units.append(cu)
-        kinds_l.append(UNITS[cu].kind)
-
-    index: dict[str, int] = {}
-    for j, name in enumerate(names):
-        if name in index:
-            col.add(
-                f"duplicate column name {name!r} (also column {index[name] + 1})",
-                column=cells[j],
-                line=header_line,
-                order=j,
-            )
-        else:
-            index[name] = j
-    if kinds_l and kinds_l[0] not in (None, "time"):
-        col.add(
-            f"is the first column and must be time (unit s, ms or us), but has unit of {kinds_l[0]}",
-            column=cells[0],
-            line=header_line,
-            order=0,
-        )
-    time_name = names[0] if names else "time"
-    present = ", ".join(cells)
-    for name, kind in required.items():
-        if name == time_name:
-            continue
-        j = index.get(name)
-        if j is None:
-            col.add(f"missing column {name!r} ({kind}); columns present: {present}", line=header_line, order=k)
-        elif kinds_l[j] is not None and kinds_l[j] != kind:
-            col.add(f"has unit of {kinds_l[j]}, expected {kind}", column=cells[j], line=header_line, order=j)
-
+    hd = _parse_header(lines[h], header_line, required, col)
     sparse_set = set(sparse)
     if "sparse" in meta:
         sparse_set |= {s.strip() for s in meta["sparse"].split(",") if s.strip()}
-    for what, keys in (("limits", limits), ("saturation", saturation), ("sparse", sparse_set)):
-        for name in keys:
-            if index.get(name, 0) != 0:
-                continue
-            if name in required and name != time_name:
-                continue  # already reported as a missing column: the option is the pipeline's, not the user's
-            why = (
-                "the time column cannot be declared sparse"
-                if what == "sparse" and name == time_name
-                else "which is not a channel of this file"
-            )
-            col.add(
-                f"{what} given for {name!r}, {why}; columns present: {present}",
-                line=meta_lines.get("sparse") if what == "sparse" and name not in sparse else header_line,
-                order=k,
-            )
+    options = {"limits": limits, "saturation": saturation, "sparse": sparse_set}
+    _check_columns(hd, header_line, required, options, sparse, meta_lines, col)
+    rate_dt = _metadata_dt(meta, meta_lines, col)
 
-    rate_dt = None
-    if "rate_hz" in meta:
-        try:
-            rate = float(meta["rate_hz"])
-            if not (math.isfinite(rate) and rate > 0):
-                raise ValueError
-            rate_dt = 1.0 / rate
-        except ValueError:
-            col.add(f"metadata rate_hz {meta['rate_hz']!r} is not a positive number", line=meta_lines["rate_hz"])
-
-    # ---- rows ------------------------------------------------------------------------------
     data = lines[h + 1 :]
     ends_with_newline = text.endswith("\n")
     while data and not data[-1].strip():
         data.pop()
-    n = len(data)
+    n, k = len(data), hd.k
     first_line = h + 2  # file line of data row 1
     if n == 0:
         col.add("no data rows below the header", line=header_line)
         col.raise_if_any()
-
-    counts = np.fromiter((s.count(",") for s in data), dtype=np.int64, count=n)
-    wrong = np.flatnonzero(counts != k - 1)
-    if wrong.size:
-
-        def wrong_reason(i: int) -> str:
-            s = data[wrong[i]]
-            if not s.strip():
-                return "blank row inside the data"
-            if s.lstrip().startswith("#"):
-                return "comment line inside the data (comments go above the header)"
-            if wrong[i] == n - 1 and not ends_with_newline:
-                return (
-                    f"expected {k} fields, found {counts[wrong[i]] + 1}: the last line has no line end — "
-                    "the file looks truncated"
-                )
-            return f"expected {k} fields, found {counts[wrong[i]] + 1}"
-
-        col.add_rows(wrong, first_line, None, -1, wrong_reason)  # type: ignore[arg-type]
-        good = np.flatnonzero(counts == k - 1)
-        flat = ",".join([data[i] for i in good]).split(",") if good.size else []
-    else:
-        good = np.arange(n)
-        flat = ",".join(data).split(",")
-
-    ng = good.size
-    raw = np.empty((ng, k))
-    cell_ok = np.ones((ng, k), dtype=bool)
-    for j in range(k):
-        vals, empty, bad = _parse_column(flat[j::k], allow_empty=names[j] in sparse_set and j > 0)
-        raw[:, j] = vals
-        if bad:
-            bi = np.array([b[0] for b in bad])
-            cell_ok[bi, j] = False
-            col.add_rows(good[bi], first_line, cells[j], j, lambda q, bad=bad: bad[q][1])
-        nonfin = ~np.isfinite(vals)
-        if empty is not None:
-            nonfin &= ~empty
-        if bad:
-            nonfin[bi] = False
-        nf = np.flatnonzero(nonfin)
-        if nf.size:
-            cell_ok[nf, j] = False
-            col.add_rows(
-                good[nf],
-                first_line,
-                cells[j],
-                j,
-                lambda q, nf=nf, v=vals: "value is NaN" if np.isnan(v[nf[q]]) else f"value is {v[nf[q]]:g}",
-            )
-
-    # time strictly increasing (on rows whose time cell parsed)
-    tok = np.flatnonzero(cell_ok[:, 0]) if k else np.empty(0, int)
-    if tok.size > 1:
-        tv = raw[tok, 0]
-        d = np.diff(tv)
-        back = np.flatnonzero(~(d > 0))
-        if back.size:
-            tu = units_raw[0] or "?"
-
-            def time_reason(q: int) -> str:
-                b = back[q]
-                prev_row = int(good[tok[b]]) + 1
-                t_prev, t_here = tv[b], tv[b + 1]
-                if t_here == t_prev:
-                    return f"duplicate time {_fmt(t_here)} {tu}: same as row {prev_row}"
-                return f"time goes backwards: {_fmt(t_here)} {tu} after {_fmt(t_prev)} {tu} at row {prev_row}"
-
-            col.add_rows(good[tok[back + 1]], first_line, cells[0], 0, time_reason)
-
-    # limits in SI
-    for name, (lo, hi) in limits.items():
-        j = index.get(name)
-        if j is None or j == 0 or units[j] is None:
-            continue
-        vsi, _ = to_si(raw[:, j], units[j])
-        with np.errstate(invalid="ignore"):
-            out = np.flatnonzero(cell_ok[:, j] & ((vsi < lo) | (vsi > hi)))
-        if out.size:
-            si = SI_UNITS[kinds_l[j]]  # type: ignore[index]
-
-            def lim_reason(q, j=j, out=out, vsi=vsi, lo=lo, hi=hi, si=si):
-                r = out[q]
-                return (
-                    f"value {_fmt(raw[r, j])} {units_raw[j]} (= {_fmt(vsi[r])} {si}) is outside the "
-                    f"limits [{_fmt(lo)}, {_fmt(hi)}] {si}"
-                )
-
-            col.add_rows(good[out], first_line, cells[j], j, lim_reason)
-
+    good, flat = _split_rows(data, k, first_line, ends_with_newline, col)
+    raw, cell_ok = _parse_cells(hd, good, flat, sparse_set, first_line, col)
+    _check_time(hd, raw, cell_ok, good, first_line, col)
+    _check_limits(hd, raw, cell_ok, good, limits, first_line, col)
     col.raise_if_any()
 
-    # ---- build the result (no problems: every row is good) ---------------------------------
-    time_s, _ = to_si(raw[:, 0], units[0])  # type: ignore[arg-type]
+    # no problems: every row is good
+    time_s, _ = to_si(raw[:, 0], hd.units[0])  # type: ignore[arg-type]
     channels: dict[str, np.ndarray] = {}
     for j in range(1, k):
-        v, _ = to_si(raw[:, j], units[j])  # type: ignore[arg-type]
+        v, _ = to_si(raw[:, j], hd.units[j])  # type: ignore[arg-type]
         v.flags.writeable = False
-        channels[names[j]] = v
+        channels[hd.names[j]] = v
     time_s.flags.writeable = False
-
     saturated: dict[str, np.ndarray] = {}
     for name, v in channels.items():
         thr = saturation.get(name)
         mask = np.zeros(n, dtype=bool) if thr is None else (np.abs(np.nan_to_num(v)) >= thr)
         mask.flags.writeable = False
         saturated[name] = mask
-
-    gaps: list[Gap] = []
-    if n > 1:
-        dt = np.diff(time_s)
-        nominal = nominal_dt if nominal_dt is not None else rate_dt
-        if nominal is None:
-            nominal = float(np.median(dt))
-        for i in np.flatnonzero(dt > gap_factor * nominal):
-            gaps.append(Gap(float(time_s[i]), float(time_s[i + 1]), float(dt[i]), int(i) + 2))
-
     return Telemetry(
         path=path,
         time=time_s,
         channels=channels,
-        units={names[j]: units_raw[j] for j in range(1, k)},
-        kinds={names[j]: kinds_l[j] for j in range(1, k)},  # type: ignore[misc]
+        units={hd.names[j]: hd.units_raw[j] for j in range(1, k)},
+        kinds={hd.names[j]: hd.kinds[j] for j in range(1, k)},  # type: ignore[misc]
         meta=meta,
         saturated=saturated,
-        gaps=gaps,
-        time_name=time_name,
-        time_unit=units_raw[0],
+        gaps=_find_gaps(time_s, nominal_dt if nominal_dt is not None else rate_dt, gap_factor),
+        time_name=hd.names[0] if hd.names else "time",
+        time_unit=hd.units_raw[0],
         sparse=frozenset(sparse_set),
         notes=_truncation_notes(fname, ends_with_newline, data, n, k),
     )
