@@ -48,18 +48,20 @@ def kernels(tmp_path, monkeypatch):
 
 def test_a_fresh_module_is_cold_and_a_call_warms_the_kernel_it_compiles(kernels):
     name, mod = kernels
-    assert cold_kernels([name]) == [f"{name}.never_called", f"{name}.used"]  # plain functions not listed
-    assert cold_modules([name]) == [name]
+    assert cold_kernels([mod]) == [f"{name}.never_called", f"{name}.used"]  # plain functions not listed
+    assert cold_modules([mod]) == [name]
     assert mod.used(1.5) == 3.0
-    assert cold_kernels([name]) == [f"{name}.never_called"]
+    assert cold_kernels([mod]) == [f"{name}.never_called"]
     # one kernel cached: the module is not cold (a kernel the scenario never calls must not make
     # every run precompile)
-    assert cold_modules([name]) == []
+    assert cold_modules([mod]) == []
 
 
 def test_a_module_without_cached_kernels_is_never_cold():
-    assert cold_kernels(["workbench.core.rotation"]) == []
-    assert cold_modules(["workbench.core.rotation"]) == []
+    import workbench.core.rotation as rotation
+
+    assert cold_kernels([rotation]) == []
+    assert cold_modules([rotation]) == []
 
 
 def _rep():
@@ -92,7 +94,7 @@ def test_the_child_runs_only_for_a_cold_module_and_not_when_switched_off(kernels
 
 
 def test_a_failing_child_is_reported_and_the_run_goes_on(kernels, monkeypatch, tmp_path):
-    name, _ = kernels
+    name, mod = kernels
     failed = subprocess.CompletedProcess([], 1, "", "Traceback\nValueError: boom\n")
     monkeypatch.setattr(pc.subprocess, "run", lambda argv, **kw: failed)
     monkeypatch.setenv("WORKBENCH_FORK", "0")
@@ -100,7 +102,7 @@ def test_a_failing_child_is_reported_and_the_run_goes_on(kernels, monkeypatch, t
     sc, problem = SimpleNamespace(path=Path("s.toml")), SimpleNamespace(compiled_modules=(name,))
     assert pc.precompile(sc, problem, 0, rep) is False
     assert "precompiling child exited 1 (ValueError: boom); compiling in this process" in out.getvalue()
-    assert cold_modules([name]) == [name]
+    assert cold_modules([mod]) == [name]
 
 
 def test_a_forked_child_compiles_for_the_run_and_its_failure_is_reported(kernels, monkeypatch, tmp_path):
@@ -121,7 +123,7 @@ def test_a_forked_child_compiles_for_the_run_and_its_failure_is_reported(kernels
     rep, out = _rep()
     assert pc.precompile(sc, problem, 0, rep) is False
     assert "precompiling child exited 1 (ValueError: boom); compiling in this process" in out.getvalue()
-    assert cold_modules([name]) == [name]
+    assert cold_modules([mod]) == [name]
 
     def child_main(argv):
         assert os.getpid() != parent and argv == [str(sc.path), "--seed", "3"]
@@ -130,4 +132,4 @@ def test_a_forked_child_compiles_for_the_run_and_its_failure_is_reported(kernels
 
     monkeypatch.setattr(pc, "main", child_main)
     assert pc.precompile(sc, problem, 3, rep) is True
-    assert cold_modules([name]) == []
+    assert cold_modules([mod]) == []

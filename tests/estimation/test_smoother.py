@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, run_filter
-from workbench.estimation.smoother import iterated_rts, rts_smooth
+from workbench.estimation.smoother import cross_covariance, iterated_rts, rts_smooth
 
 
 def _spd(rng, n, scale):
@@ -97,6 +97,33 @@ def test_kf_rts_equals_batch_map_on_linear_time_varying_system(seed):
     # smoothing never increases the variance
     var_s = np.diagonal(sp.P, axis1=1, axis2=2)
     assert np.all(var_s <= np.diagonal(fp.P_post, axis1=1, axis2=2) * (1 + 1e-12))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_cross_covariance_is_the_batch_joint_covariance(seed):
+    """The smoother's lag cross-covariance between two epochs equals the off-diagonal block of the
+    inverse batch information matrix (the exact joint posterior of the linear problem)."""
+    Fs, us, Qs, meas, m0, P0 = _ltv_problem(seed)
+    fp, sp = _run(Fs, us, Qs, meas, m0, P0)
+    n, d = len(Fs), m0.size
+    Lam = np.zeros((n * d, n * d))
+    # rebuild the information matrix as _batch_map does (it returns only the diagonal blocks)
+    Lam[:d, :d] += np.linalg.inv(P0)
+    for k in range(1, n):
+        A = [(k, np.eye(d)), (k - 1, -Fs[k])]
+        W = np.linalg.inv(Qs[k])
+        for i, Ai in A:
+            for j, Aj in A:
+                Lam[i * d : (i + 1) * d, j * d : (j + 1) * d] += Ai.T @ W @ Aj
+    for k, items in meas.items():
+        for H, R, _z in items:
+            Lam[k * d : (k + 1) * d, k * d : (k + 1) * d] += H.T @ np.linalg.inv(R) @ H
+    C = np.linalg.inv(Lam)
+    for a, b in ((2, 9), (0, n - 1), (5, 5)):
+        want = C[a * d : (a + 1) * d, b * d : (b + 1) * d]
+        np.testing.assert_allclose(cross_covariance(sp, a, b), want, rtol=1e-8, atol=1e-10)
+    with pytest.raises(ValueError):
+        cross_covariance(sp, 4, 3)
 
 
 def test_time_varying_F_index_matters():

@@ -14,51 +14,52 @@ the process compiles in place, as before).
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Iterable
+from types import ModuleType
 
 __all__ = ["cold_kernels", "cold_modules"]
 
 
-def _dispatchers(module_name: str) -> Iterable[tuple[str, object]]:
-    """(name, dispatcher) of every cached numba kernel defined at module level in ``module_name``."""
-    mod = importlib.import_module(module_name)
+def _dispatchers(mod: ModuleType) -> Iterable[tuple[str, object]]:
+    """(name, dispatcher) of every cached numba kernel defined at module level in the module ``mod``."""
+    module_name = mod.__name__
     for name, obj in sorted(vars(mod).items()):
         cache = getattr(obj, "_cache", None)
         if cache is not None and hasattr(obj, "py_func") and getattr(obj.py_func, "__module__", None) == module_name:
             yield name, obj
 
 
-def cold_kernels(modules: Iterable[str]) -> list[str]:
+def cold_kernels(modules: Iterable[ModuleType]) -> list[str]:
     """``"module.function"`` of each cached numba kernel (``@njit(cache=True)``) in ``modules`` that
     has no compiled version on disk for its current source: the kernels the next call would compile.
 
-    ``modules``: importable module names (imported here). Kernels without ``cache=True`` are not
+    ``modules``: imported modules (the caller imports them by name:
+    :func:`workbench.problems.registry.import_modules`). Kernels without ``cache=True`` are not
     listed (they compile in every process). An empty list means every kernel loads from the cache,
     or that numba's cache index could not be read (see the module docstring)."""
     cold = []
-    for module_name in modules:
-        for name, disp in _dispatchers(module_name):
+    for mod in modules:
+        for name, disp in _dispatchers(mod):
             try:
                 index = disp._cache._cache_file._load_index()
             except (AttributeError, TypeError, OSError):  # another numba's internals: assume warm
                 continue
             if not index:
-                cold.append(f"{module_name}.{name}")
+                cold.append(f"{mod.__name__}.{name}")
     return cold
 
 
-def cold_modules(modules: Iterable[str]) -> list[str]:
-    """The names in ``modules`` none of whose cached numba kernels has a compiled version on disk:
+def cold_modules(modules: Iterable[ModuleType]) -> list[str]:
+    """The names of the modules in ``modules`` none of whose cached numba kernels has a compiled version on disk:
     a fresh checkout, a cleared cache, or an edit of that module (numba keys its cache on the
     source file's time stamp and size, so an edit makes every kernel of the module cold at once).
 
     A module with some kernels warm is not listed: a kernel that a scenario never calls stays cold
     for ever and must not make every run precompile. Modules without cached kernels are not listed."""
     out = []
-    for module_name in modules:
-        names = [name for name, _ in _dispatchers(module_name)]
-        cold = cold_kernels([module_name])
+    for mod in modules:
+        names = [name for name, _ in _dispatchers(mod)]
+        cold = cold_kernels([mod])
         if names and len(cold) == len(names):
-            out.append(module_name)
+            out.append(mod.__name__)
     return out

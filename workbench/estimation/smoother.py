@@ -47,7 +47,7 @@ from threadpoolctl import threadpool_limits
 
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass
 
-__all__ = ["CovarianceError", "SmoothedPass", "IteratedSmoothing", "rts_smooth", "iterated_rts"]
+__all__ = ["CovarianceError", "SmoothedPass", "IteratedSmoothing", "cross_covariance", "rts_smooth", "iterated_rts"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,19 @@ class SmoothedPass:
     x: np.ndarray
     P: np.ndarray
     G: np.ndarray
+
+
+def cross_covariance(sp: SmoothedPass, a: int, b: int) -> np.ndarray:
+    """Smoothed cross-covariance ``E[δx_a δx_bᵀ]`` (n_e, n_e) of the error states at steps ``a ≤ b``:
+    ``G_a G_{a+1} … G_{b-1} P_s[b]`` (Rauch, Tung & Striebel 1965; the lag-covariance of the
+    fixed-interval smoother), e.g. for the σ of a difference of two epochs (a coefficient of
+    restitution from the velocities before and after contact)."""
+    if not 0 <= a <= b < sp.t.size:
+        raise ValueError(f"cross_covariance: need 0 <= a <= b < {sp.t.size}, got a={a}, b={b}")
+    M = sp.P[b]
+    for k in range(b - 1, a - 1, -1):
+        M = sp.G[k] @ M
+    return M
 
 
 def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout, consider: np.ndarray | None = None) -> SmoothedPass:

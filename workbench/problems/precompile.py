@@ -29,6 +29,7 @@ from workbench.core.forking import fork_call, fork_enabled
 from workbench.core.jit import cold_kernels, cold_modules
 from workbench.io import progress as prog
 from workbench.io.scenario import Scenario
+from workbench.problems import registry
 from workbench.problems.base import Problem, RunOptions
 
 __all__ = ["ENV_SWITCH", "child_argv", "main", "precompile"]
@@ -50,13 +51,14 @@ def precompile(scenario: Scenario, problem: Problem, seed: int, rep: prog.Report
     ``compiled_modules``, none cold, or ``WORKBENCH_PRECOMPILE=0``) or the child failed (one progress
     line says so, with its exit code and last line of output; the run then compiles in place).
     Interrupting the parent (Ctrl-C, SIGTERM) kills the child."""
-    modules = tuple(getattr(problem, "compiled_modules", ()) or ())
-    if not modules or os.environ.get(ENV_SWITCH, "1") == "0":
+    names = tuple(getattr(problem, "compiled_modules", ()) or ())
+    if not names or os.environ.get(ENV_SWITCH, "1") == "0":
         return False
+    modules = registry.import_modules(names)
     cold = cold_modules(modules)
     if not cold:
         return False
-    n = len(cold_kernels(cold))
+    n = len(cold_kernels([m for m in modules if m.__name__ in cold]))
     with rep.stage(f"compiling {n} kernels in a child process (first run of this checkout)"):
         code, output = _run_child(scenario, seed)
     if code != 0:
@@ -98,7 +100,6 @@ def main(argv: list[str] | None = None) -> int:
     kernels the run calls. Exit 0 on success."""
     from workbench.io.assets import assets_dir
     from workbench.io.scenario import resolve_scenario
-    from workbench.problems import registry
 
     ap = argparse.ArgumentParser(prog="python -m workbench.problems.precompile", description=main.__doc__)
     ap.add_argument("scenario", help="scenario .toml path or shipped name")
@@ -112,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
             telemetry = dict(problem.synthesize(settings, Path(tmp) / "telemetry", args.seed).telemetry)
         else:
             telemetry = problem.telemetry_files(settings)
-        modules = tuple(getattr(problem, "compiled_modules", ()) or ())
+        modules = registry.import_modules(tuple(getattr(problem, "compiled_modules", ()) or ()))
         if not cold_modules(modules):
             return 0
         for _ in problem.reconstruct(settings, telemetry, RunOptions(seed=args.seed)):

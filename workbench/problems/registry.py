@@ -14,11 +14,22 @@ from __future__ import annotations
 import importlib
 import sys
 from pathlib import Path
+from types import ModuleType
 
 from workbench.io.schema import Schema, write_formats
 from workbench.problems.base import Problem
 
-__all__ = ["IMPORTERS", "UnknownKindError", "get", "importer", "kinds", "register", "schemas", "unregister"]
+__all__ = [
+    "IMPORTERS",
+    "UnknownKindError",
+    "get",
+    "import_modules",
+    "importer",
+    "kinds",
+    "register",
+    "schemas",
+    "unregister",
+]
 
 #: built-in kinds -> "module:attribute" of a zero-argument factory (imported on first use)
 BUILTIN: dict[str, str] = {
@@ -104,6 +115,12 @@ def importer(name: str):
     if name not in IMPORTERS:
         raise KeyError(f"unknown importer {name!r}; importers: {', '.join(sorted(IMPORTERS))}")
     return importlib.import_module(IMPORTERS[name])
+
+
+def import_modules(names: tuple[str, ...] | list[str]) -> list[ModuleType]:
+    """The modules called ``names``, imported (a problem's ``compiled_modules``, the scheduler's
+    preloaded modules): the one place besides :func:`get` and :func:`importer` that imports by name."""
+    return [importlib.import_module(n) for n in names]
 
 
 def schemas() -> list[Schema]:

@@ -13,7 +13,6 @@ between polls. The command line builds each child's argument list and hands in i
 from __future__ import annotations
 
 import contextlib
-import importlib
 import json
 import os
 import selectors
@@ -25,6 +24,7 @@ from pathlib import Path
 
 from workbench.core.forking import fork_call, fork_enabled
 from workbench.io import progress as prog
+from workbench.problems import registry
 
 __all__ = ["PRELOAD", "Child", "cost_hint", "jobs_for", "launch_order", "run_in_processes"]
 
@@ -194,8 +194,7 @@ def run_in_processes(
     piped = rep.mode == "bars"
     fork = fork_enabled()
     if fork:
-        for mod in PRELOAD:
-            importlib.import_module(mod)
+        registry.import_modules(PRELOAD)
     pending, running, codes = list(order), {}, {}
     sel = selectors.DefaultSelector()
 
