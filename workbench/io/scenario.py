@@ -33,6 +33,7 @@ __all__ = [
     "check_value",
     "find_scenarios",
     "load_scenario",
+    "read_toml",
     "resolve_scenario",
 ]
 
@@ -277,12 +278,14 @@ def _from_data(path: Path, data: dict) -> Scenario:
     return Scenario(path=path, name=name.strip(), kind=kind.strip(), description=desc.strip(), data=data)
 
 
-def load_scenario(path: str | os.PathLike) -> Scenario:
-    """Load and validate a scenario TOML file; :class:`ScenarioError` names file and key/line."""
+def read_toml(path: str | os.PathLike) -> dict:
+    """The parsed TOML document at ``path``; :class:`ScenarioError` naming the file (and the line,
+    as :mod:`tomllib` reports it) when it is missing, unreadable, not UTF-8 or not valid TOML.
+    With :func:`workbench.io.schema.read_json`, the one place an input file's text is parsed."""
     path = Path(path)
     try:
         with path.open("rb") as f:
-            data = tomllib.load(f)
+            return tomllib.load(f)
     except FileNotFoundError:
         raise ScenarioError(path, None, "file not found") from None
     except tomllib.TOMLDecodeError as exc:
@@ -291,7 +294,12 @@ def load_scenario(path: str | os.PathLike) -> Scenario:
         raise ScenarioError(path, None, f"not valid UTF-8: {exc}") from None
     except OSError as exc:
         raise ScenarioError(path, None, f"cannot read file: {exc.strerror or exc}") from None
-    return _from_data(path, data)
+
+
+def load_scenario(path: str | os.PathLike) -> Scenario:
+    """Load and validate a scenario TOML file; :class:`ScenarioError` names file and key/line."""
+    path = Path(path)
+    return _from_data(path, read_toml(path))
 
 
 def find_scenarios(assets_dir: str | os.PathLike) -> dict[str, Path]:
@@ -306,11 +314,7 @@ def find_scenarios(assets_dir: str | os.PathLike) -> dict[str, Path]:
     if not root.is_dir():
         return found
     for p in sorted(root.rglob("*.toml")):
-        try:
-            with p.open("rb") as f:
-                data = tomllib.load(f)
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ScenarioError(p, None, f"not valid TOML: {exc}") from None
+        data = read_toml(p)
         if "scenario" not in data:
             continue
         sc = _from_data(p, data)

@@ -29,14 +29,13 @@ from __future__ import annotations
 import difflib
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from workbench.io.scenario import ScenarioError, check_value
+from workbench.io.scenario import ScenarioError, check_value, read_toml
 
 __all__ = [
     "REQUIRED",
@@ -280,23 +279,6 @@ def _where(table: str) -> str:
 
 
 # ------------------------------------------------------------------------------ reading files
-def read_toml(path: str | Path) -> dict:
-    """The parsed TOML document at ``path``; :class:`ScenarioError` naming the file (and the line,
-    as :mod:`tomllib` reports it) when it is missing, unreadable, not UTF-8 or not valid TOML."""
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise ScenarioError(path, None, "file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(path, None, f"not valid TOML: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ScenarioError(path, None, f"not valid UTF-8: {exc}") from None
-    except OSError as exc:
-        raise ScenarioError(path, None, f"cannot read file: {exc.strerror or exc}") from None
-
-
 def read_json(path: str | Path) -> Any:
     """The parsed JSON document at ``path``; :class:`ScenarioError` naming the file (line and
     column of a syntax error) when it is missing, unreadable or not valid JSON."""

@@ -609,11 +609,7 @@ class Recorder:
         as one row at that time. ``radius`` in scene units [m].
         """
         strips = _strip_list(points)
-        kwargs: dict[str, Any] = {"strips": strips}
-        if color is not None:
-            kwargs["colors"] = _tile(_as_colors(color), len(strips), 1)
-        if radius is not None:
-            kwargs["radii"] = _tile(np.asarray(radius, dtype=np.float32), len(strips), 0)
+        kwargs: dict[str, Any] = {"strips": strips, **_row_style(color, radius, len(strips))}
         self._log_row(entity, lambda: rr.LineStrips3D(**kwargs), lambda: rr.LineStrips3D.columns(**kwargs), static, t)
 
     def line_strips_series(
@@ -636,14 +632,7 @@ class Recorder:
         idx, n = self._index(t, step)
         flat, counts = _strips_per_step(strips, n)
         kwargs: dict[str, Any] = {"strips": flat}
-        static_style: dict[str, Any] = {}
-        for key, value, item_ndim in (("colors", colors, 1), ("radii", radii, 0)):
-            split = _split(value, n, counts, item_ndim, key)
-            if split is None:
-                continue
-            kind, arr = split
-            arr = _as_colors(arr) if key == "colors" else np.asarray(arr, dtype=np.float32)
-            (static_style if kind == "static" else kwargs)[key] = arr
+        static_style = _series_style(kwargs, colors, radii, n, counts)
         self._send(entity, idx, rr.LineStrips3D.columns(**kwargs).partition(counts))
         if static_style:
             self._log_static(entity, rr.LineStrips3D.from_fields(**static_style))
@@ -663,11 +652,7 @@ class Recorder:
         Static by default; with ``static=False`` give ``t`` [s] to log it as one row at that time.
         """
         p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
-        kwargs: dict[str, Any] = {"positions": p}
-        if colors is not None:
-            kwargs["colors"] = _tile(_as_colors(colors), len(p), 1)
-        if radii is not None:
-            kwargs["radii"] = _tile(np.asarray(radii, dtype=np.float32), len(p), 0)
+        kwargs: dict[str, Any] = {"positions": p, **_row_style(colors, radii, len(p))}
         self._log_row(entity, lambda: rr.Points3D(**kwargs), lambda: rr.Points3D.columns(**kwargs), static, t)
 
     def points_series(
@@ -689,14 +674,7 @@ class Recorder:
         idx, n = self._index(t, step)
         flat, counts = _points_per_step(positions, n)
         kwargs: dict[str, Any] = {"positions": flat}
-        static_style: dict[str, Any] = {}
-        for key, value, item_ndim in (("colors", colors, 1), ("radii", radii, 0)):
-            split = _split(value, n, counts, item_ndim, key)
-            if split is None:
-                continue
-            kind, arr = split
-            arr = _as_colors(arr) if key == "colors" else np.asarray(arr, dtype=np.float32)
-            (static_style if kind == "static" else kwargs)[key] = arr
+        static_style = _series_style(kwargs, colors, radii, n, counts)
         self._send(entity, idx, rr.Points3D.columns(**kwargs).partition(counts))
         if static_style:
             self._log_static(entity, rr.Points3D.from_fields(**static_style))
@@ -751,6 +729,30 @@ def _tile(a: np.ndarray, count: int, item_ndim: int) -> np.ndarray:
     if a.shape[0] != count:
         raise ValueError(f"expected one value or {count} values, got shape {a.shape}")
     return a
+
+
+def _row_style(colors: Any, radii: Any, k: int) -> dict[str, Any]:
+    """The ``colors`` / ``radii`` keyword arguments of one row of ``k`` items (each tiled to k)."""
+    out: dict[str, Any] = {}
+    if colors is not None:
+        out["colors"] = _tile(_as_colors(colors), k, 1)
+    if radii is not None:
+        out["radii"] = _tile(np.asarray(radii, dtype=np.float32), k, 0)
+    return out
+
+
+def _series_style(kwargs: dict[str, Any], colors: Any, radii: Any, n: int, counts: np.ndarray) -> dict[str, Any]:
+    """Split per-step ``colors`` / ``radii`` of a series of n steps (``counts`` items each): the
+    per-step ones go into ``kwargs`` (columns), the static ones are returned (logged once)."""
+    static_style: dict[str, Any] = {}
+    for key, value, item_ndim in (("colors", colors, 1), ("radii", radii, 0)):
+        split = _split(value, n, counts, item_ndim, key)
+        if split is None:
+            continue
+        kind, arr = split
+        arr = _as_colors(arr) if key == "colors" else np.asarray(arr, dtype=np.float32)
+        (static_style if kind == "static" else kwargs)[key] = arr
+    return static_style
 
 
 def _series_names(names: str | Sequence[str], k: int) -> list[str]:
