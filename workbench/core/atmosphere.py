@@ -329,8 +329,29 @@ def _layered_pressure(h, h_nodes, T_nodes, p0, g0, R, radius):
     return p, T
 
 
+
+class _LayeredAtmosphere(Atmosphere):
+    """A hydrostatic atmosphere whose pressure [Pa] and temperature [K] come together from one
+    layered profile, ``_profile(h) -> (p, T)``; density ``p / (R T)`` with its ``gas_constant``."""
+
+    gas_constant: float
+
+    @abstractmethod
+    def _profile(self, h) -> tuple[np.ndarray, np.ndarray]:
+        """(pressure [Pa], temperature [K]) at geometric altitude h [m], any shape."""
+
+    def pressure(self, h):
+        return self._profile(h)[0]
+
+    def temperature(self, h):
+        return self._profile(h)[1]
+
+    def density(self, h):
+        p, T = self._profile(h)
+        return p / (self.gas_constant * T)
+
 @dataclass(frozen=True)
-class TitanDefaultAtmosphere(Atmosphere):
+class TitanDefaultAtmosphere(_LayeredAtmosphere):
     """Layered engineering atmosphere of Titan (N2), hydrostatic, anchored on Huygens surface data.
 
     Surface: T = 93.65 K, p = 1467 hPa (Fulchignoni et al., Nature 438, 2005).  Temperature is
@@ -375,15 +396,6 @@ class TitanDefaultAtmosphere(Atmosphere):
             self.body.reference_radius,
         )
 
-    def pressure(self, h):
-        return self._profile(h)[0]
-
-    def temperature(self, h):
-        return self._profile(h)[1]
-
-    def density(self, h):
-        p, T = self._profile(h)
-        return p / (self.gas_constant * T)
 
 
 US76_EARTH_RADIUS = 6356766.0
@@ -397,7 +409,7 @@ AIR_SUTHERLAND = Sutherland(mu0=1.716e-5, T0=273.15, C=110.4)
 
 
 @dataclass(frozen=True)
-class EarthStandardAtmosphere(Atmosphere):
+class EarthStandardAtmosphere(_LayeredAtmosphere):
     """U.S. Standard Atmosphere 1976 (dry air, hydrostatic, T linear in geopotential altitude).
 
     Layer nodes (geopotential km / K): 0 / T0, 11 / T0 − 71.5, 20 / T0 − 71.5, 32 / T0 − 59.5,
@@ -432,15 +444,6 @@ class EarthStandardAtmosphere(Atmosphere):
         T_nodes = self.sea_level_temperature + np.asarray(self.NODE_DT, dtype=float)
         return _layered_pressure(h, h_nodes, T_nodes, self.sea_level_pressure, 9.80665, self.gas_constant, r)
 
-    def pressure(self, h):
-        return self._profile(h)[0]
-
-    def temperature(self, h):
-        return self._profile(h)[1]
-
-    def density(self, h):
-        p, T = self._profile(h)
-        return p / (self.gas_constant * T)
 
     def altitude_of_pressure(self, p) -> np.ndarray:
         """Inverse of :meth:`pressure` in the troposphere (h < 11 km) [m] for p [Pa], any shape."""
