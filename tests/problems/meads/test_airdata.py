@@ -2,20 +2,32 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from workbench.io.assets import asset_path
+from workbench.io.scenario import Scenario
 from workbench.io.telemetry import TelemetryError, write_telemetry
 from workbench.models.flush_airdata import build_estimator_table, load_fads_vehicle
 from workbench.problems.meads.airdata import fit_air_data, pressure_model, solve_winds
-from workbench.problems.meads.config import EstimatorSettings
+from workbench.problems.meads.config import MeadsSettings
 from workbench.problems.meads.pipeline import detect_residual_failure, detect_stuck, reduce_pressures, sensor_sigma
 from workbench.problems.meads.telemetry import InitialState, read_meads_telemetry, write_initial_state
 
 VEHICLE = load_fads_vehicle(asset_path("vehicles", "msl_meads.toml"))
+
+
+def _schema_defaults():
+    """Settings of a scenario that sets nothing but its vehicle: every default of the schema."""
+    data = {"scenario": {"name": "defaults", "kind": "meads"}, "vehicle": {"file": "../vehicles/msl_meads.toml"}}
+    sc = Scenario(asset_path("scenarios", "msl_meads.toml"), "defaults", "meads", "", data)
+    return MeadsSettings.from_scenario(sc)
+
+
+DEFAULTS = _schema_defaults()
 G = 1.335
 
 
@@ -115,7 +127,7 @@ def test_stuck_and_residual_failures_are_found():
     rng = np.random.default_rng(0)
     p *= 1 + 0.002 * rng.standard_normal(p.shape)
     t = np.arange(200) / 8.0
-    est = EstimatorSettings(solution="fixed_r", switch_mach=3.0)
+    est = dataclasses.replace(DEFAULTS.estimator, solution="fixed_r", switch_mach=3.0)
     bad = p.copy()
     bad[120:, 3] *= 1.12  # P4 reads 12 % high from sample 120 (a P5-P7 offset is partly absorbed by α, β)
     fit, _ = reduce_pressures(t, bad, VEHICLE, x[:, 3], est)
