@@ -182,7 +182,26 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
 from workbench.problems.meads.airdata import ned_frames, pressure_model
 from workbench.problems.meads.config import EkfSettings
-from workbench.problems.meads.kernel import N_U_COLS, flow_kernel, pressure_kernel
+from workbench.problems.meads.kernel import flow_kernel, pressure_kernel
+from workbench.problems.meads.state import (
+    IB,
+    IBD,
+    IBIAS,
+    IC,
+    ILAM,
+    ILP,
+    ILR,
+    IMA,
+    IMM,
+    IP,
+    ITH,
+    IV,
+    IW,
+    N_PORTS,
+    N_U_COLS,
+    N_X,
+    STATE_NAMES,
+)
 
 __all__ = [
     "STATE_NAMES",
@@ -202,37 +221,7 @@ __all__ = [
     "USE_KERNEL",
 ]
 
-N_PORTS = 7
-IP, IV, ITH, IW, ILP, ILR, ILAM, IC = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), 12, 13, slice(14, 21), 21
-#: the per-port model-error Gauss-Markov states (after ``model_level``): b_i [of reading] and, for
-#: the second-order process, its rate b_i' [of reading per correlation length]
-IB, IBD = slice(22, 22 + N_PORTS), slice(22 + N_PORTS, 22 + 2 * N_PORTS)
-#: the transducers' additive residual biases [Pa] (after the model-error states)
-IBIAS = slice(22 + 2 * N_PORTS, 22 + 3 * N_PORTS)
-#: the model's Mach error (relative): the pressure model read at M (1 + m) (after the biases)
-IMM = 22 + 3 * N_PORTS
-#: the model's flow-angle errors [rad]: the pressure model read at (α + a_m, β + b_m) (after m)
-IMA = slice(IMM + 1, IMM + 3)
-N_X = IMM + 3
 LAYOUT = ErrorStateLayout(N_X)
-STATE_NAMES = (
-    *(f"p_M_{a}" for a in "xyz"),
-    *(f"v_M_{a}" for a in "xyz"),
-    *(f"dtheta_B_{a}" for a in "xyz"),
-    "wind_north",
-    "wind_east",
-    "wind_down",
-    "ln_p_inf",
-    "ln_rho_inf",
-    *(f"scale_{i + 1}" for i in range(N_PORTS)),
-    "model_level",
-    *(f"model_error_{i + 1}" for i in range(N_PORTS)),
-    *(f"model_error_rate_{i + 1}" for i in range(N_PORTS)),
-    *(f"bias_{i + 1}" for i in range(N_PORTS)),
-    "model_mach_error",
-    "model_alpha_error",
-    "model_beta_error",
-)
 OUTPUT_NAMES = ("alpha", "beta", "qbar", "mach", "p_inf", "rho", "wind_north", "wind_east", "wind_down")
 """Columns of :func:`air_outputs` [rad, rad, Pa, 1, Pa, kg/m³, m/s, m/s, m/s]."""
 
@@ -306,6 +295,25 @@ class EkfPass:
         """(value, 1σ) (n,) of one of :data:`OUTPUT_NAMES`."""
         j = OUTPUT_NAMES.index(name)
         return self.outputs[:, j], self.sigma[:, j]
+
+    def output_error_pct(self, name: str, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(error, 1σ) (n,) [% of ``truth`` (n,), the true value on :attr:`t`] of one of
+        :data:`OUTPUT_NAMES`."""
+        v, s = self.output(name)
+        return 100 * (v / truth - 1), 100 * s / truth
+
+    def scale_history(self) -> tuple[np.ndarray, np.ndarray]:
+        """Scale factors and their 1σ (n, 7) [of reading] along the pass: the forward filter's
+        estimate converging when this pass estimated them, else the constant correction applied."""
+        if self.scale_estimated:
+            return self.forward.x_post[:, ILAM], self.sigma_post[:, ILAM]
+        n, m = self.t.size, self.scale.size
+        return np.broadcast_to(self.scale, (n, m)), np.broadcast_to(self.sigma_scale, (n, m))
+
+    def innovation_sigma(self) -> np.ndarray | None:
+        """√S_ii (k, 7) [Pa] of the forward pass's pressure innovations (None: no update ran)."""
+        inn = self.forward.innovations.get("pressure")
+        return None if inn is None else np.sqrt(np.einsum("kii->ki", inn.S))
 
 
 # ------------------------------------------------------------------------------------- model
@@ -428,7 +436,8 @@ def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -
 
         def g(X, C_B_M=C_B_M):
             a, b, q, M, pi, rho = air_data_of_state(X, C_B_M, gamma)
-            return np.stack([a, b, q, M, pi, rho, X[..., 9], X[..., 10], X[..., 11]], axis=-1)
+            w = X[..., IW]
+            return np.stack([a, b, q, M, pi, rho, w[..., 0], w[..., 1], w[..., 2]], axis=-1)
 
         y, s, _ = derived_with_sigma(g, x[i : i + OUTPUT_CHUNK], P[i : i + OUTPUT_CHUNK], LAYOUT, EPS)
         ys.append(y)

@@ -118,6 +118,11 @@ class LagCorrection:
     delay: np.ndarray
     applied: bool
 
+    @property
+    def correction(self) -> np.ndarray:
+        """What the inversion added to the measured pressures (n, m) [Pa] (NaN where no sample)."""
+        return self.p - self.p_raw
+
 
 @dataclass(frozen=True)
 class PortFailure:
@@ -144,6 +149,11 @@ class AirDataStage:
     plausibility_ratio: float
     fixed_r_rows: np.ndarray
 
+    @property
+    def residual_used(self) -> np.ndarray:
+        """The final fit's residuals (n, m) [Pa] of the ports used, NaN for the others."""
+        return np.where(self.mask, self.fit.wls.residual, np.nan)
+
 
 @dataclass(frozen=True)
 class WindStage:
@@ -157,6 +167,10 @@ class WindStage:
     mach_source: np.ndarray
     p_inf: np.ndarray
     sigma_p_inf: np.ndarray
+
+    def density_error_pct(self, rho_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(error, 1σ) (n,) [% of the true density ``rho_true`` (n,), kg/m³, on these samples]."""
+        return 100 * (self.density / rho_true - 1), 100 * self.sigma_density / rho_true
 
 
 @dataclass(frozen=True)

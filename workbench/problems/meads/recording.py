@@ -43,6 +43,7 @@ from workbench.problems.meads.pipeline import (
     PressureData,
     WindStage,
 )
+from workbench.problems.meads.synthetic import TruthArrays
 from workbench.problems.meads.telemetry import true_runs
 from workbench.recording import layout
 from workbench.recording.blueprint import events_view, plot_view, report_view, tab
@@ -164,7 +165,7 @@ class MeadsRecorder:
 
     def __init__(self, rec, truth: dict | None) -> None:
         self.rec = rec
-        self.truth = truth
+        self.truth = None if truth is None else TruthArrays(truth)
         self.vehicle: FadsVehicle | None = None
         self.nav: Navigation | None = None
         self._fit = None
@@ -181,10 +182,7 @@ class MeadsRecorder:
         )
 
     def _truth(self, key: str, t: np.ndarray, scale: float = 1.0, col: int | None = None):
-        if self.truth is None:
-            return None
-        y = self.truth[key] if col is None else self.truth[key][:, col]
-        return scale * np.interp(t, self.truth["t"], y)
+        return None if self.truth is None else self.truth.at(key, t, scale, col)
 
     def _data(self, st: PressureData) -> None:
         self.vehicle = st.vehicle
@@ -219,7 +217,7 @@ class MeadsRecorder:
         self.rec.scalars(
             layout.join(layout.plot_path("lag_correction_Pa"), "P1_P4"),
             st.t,
-            np.nan_to_num(st.p[:, [0, 3]] - st.p_raw[:, [0, 3]]),
+            np.nan_to_num(st.correction[:, [0, 3]]),
             names=["P1 corrected − measured [Pa]", "P4 corrected − measured [Pa]"],
         )
 
@@ -251,7 +249,7 @@ class MeadsRecorder:
             truth=self._truth("qbar", t, 1e-3),
             names="q∞ [kPa]",
         )
-        z = f.wls.residual / f.sigma_p
+        z = f.normalized_residual
         for j, p in enumerate(self.vehicle.port_names):
             rec.scalars(
                 layout.meads_port_plot_path(p, layout.PREDICTED_SERIES),
@@ -260,7 +258,7 @@ class MeadsRecorder:
                 names=f"{p} model ({f.model}) [Pa]",
                 colors=(220, 90, 30),
             )
-            r = np.where(st.mask[:, j], f.wls.residual[:, j], np.nan)
+            r = st.residual_used[:, j]
             rec.series_with_bounds(
                 layout.residual_path("pressure", p), t, np.nan_to_num(r), f.sigma_p[:, j], names=f"{p} residual [Pa]"
             )
@@ -269,7 +267,7 @@ class MeadsRecorder:
         pr = _port_points(self.vehicle, 0.15)
         every = max(1, t.size // 600)
         k = np.arange(0, t.size, every)
-        meas = f.predicted + np.nan_to_num(f.wls.residual)
+        meas = f.measured
         u = meas[k] / np.maximum(np.nanmax(meas[k], axis=1, keepdims=True), 1e-9)
         rec.points_series(
             layout.MEADS_PORTS, t[k], np.broadcast_to(pts, (k.size, *pts.shape)), colors=_ramp(u), radii=0.09
@@ -297,16 +295,16 @@ class MeadsRecorder:
             rec.series_with_bounds(
                 layout.plot_path("density"),
                 t,
-                100 * (st.density / rt - 1),
-                100 * st.sigma_density / rt,
+                *st.density_error_pct(rt),
                 truth=np.zeros_like(t),
                 names="ρ error [%]",
             )
         else:
             rec.series_with_bounds(layout.plot_path("density"), t, st.density, st.sigma_density, names="ρ [kg/m³]")
         w = st.winds
+        sigma = np.nan_to_num(w.sigma_NE)
         for j, q in enumerate(("wind_north_mps", "wind_east_mps")):
-            sd = np.sqrt(np.nan_to_num(w.P[:, j, j], nan=0.0))
+            sd = sigma[:, j]
             rec.series_with_bounds(
                 layout.plot_path(q),
                 t,
@@ -316,8 +314,7 @@ class MeadsRecorder:
                 names=f"{'north' if j == 0 else 'east'} [m/s] (0 where not published)",
             )
         # wind-relative velocity arrow in body axes, from the air-data angles
-        a, b = np.nan_to_num(self._fit.alpha), np.nan_to_num(self._fit.beta)
-        d = np.stack([np.cos(a) * np.cos(b), np.sin(b), np.sin(a) * np.cos(b)], 1)
+        d = self._fit.air_direction_B
         every = max(1, t.size // 600)
         k = np.arange(0, t.size, every)
         strips = np.stack([np.zeros((k.size, 3)), 3.0 * d[k]], 1)
@@ -353,8 +350,7 @@ class MeadsRecorder:
                 rec.series_with_bounds(
                     path,
                     t,
-                    100 * (rho / rt - 1),
-                    100 * srho / rt,
+                    *st.output_error_pct("rho", rt),
                     names=f"EKF pass {st.index} ρ error [%]",
                     color=[col],
                 )
@@ -363,12 +359,7 @@ class MeadsRecorder:
         # scale factors [%]: pass 1 the forward estimate converging, pass 2 the correction applied
         ports = self.vehicle.port_names
         m = len(ports)
-        if st.scale_estimated:
-            lam = st.forward.x_post[:, 14 : 14 + m]
-            slam = st.sigma_post[:, 14 : 14 + m]
-        else:
-            lam = np.broadcast_to(st.scale, (t.size, m))
-            slam = np.broadcast_to(st.sigma_scale, (t.size, m))
+        lam, slam = st.scale_history()
         rec.series_with_bounds(
             layout.meads_scale_factor_path(f"pass{st.index}"),
             t,
@@ -383,9 +374,8 @@ class MeadsRecorder:
                 100 * np.broadcast_to(np.asarray(self.truth["sensor_scale"], float), (t.size, m)),
                 names=[f"{p} truth [%]" for p in ports],
             )
-        inn = st.forward.innovations.get("pressure")
+        inn, sd = st.forward.innovations.get("pressure"), st.innovation_sigma()
         if inn is not None:
-            sd = np.sqrt(np.einsum("kii->ki", inn.S))
             for j, p in enumerate(ports):
                 rec.series_with_bounds(
                     layout.meads_ekf_innovation_path(st.index, p),

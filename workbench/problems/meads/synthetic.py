@@ -20,7 +20,18 @@ from workbench.problems.meads.sensors import initial_navigation, measure_imu, me
 from workbench.problems.meads.telemetry import IMU_COLUMNS, InitialState, write_initial_state
 from workbench.problems.meads.truth import MeadsTruth, MeadsTruthSpec, simulate_entry
 
-__all__ = ["synthesize_meads", "synthesize_from_truth", "load_truth"]
+__all__ = ["synthesize_meads", "synthesize_from_truth", "load_truth", "TruthArrays"]
+
+
+class TruthArrays(dict):
+    """The arrays of ``truth.npz`` by name (a dict: truth fields on the simulation grid ``t``,
+    ``sensor_*`` of the pressure chain, ``imu_*``) with the truth on an estimate's grid."""
+
+    def at(self, key: str, t: np.ndarray, scale: float = 1.0, col: int | None = None) -> np.ndarray:
+        """``scale`` × the truth field ``key`` (column ``col`` of a 2-D one) linearly interpolated
+        at the times ``t`` (n,) [s] of an estimate."""
+        y = self[key] if col is None else self[key][:, col]
+        return scale * np.interp(t, self["t"], y)
 
 
 def synthesize_meads(settings: MeadsSettings, out_dir: str | Path, seed: int) -> dict[str, Path]:
@@ -79,7 +90,7 @@ def synthesize_from_truth(
     return {"pressures": pressures, "imu": imu, "initial_state": init, "truth": out / "truth.npz"}
 
 
-def load_truth(path: str | Path) -> dict:
+def load_truth(path: str | Path) -> TruthArrays:
     """The arrays of ``truth.npz`` (truth fields, ``sensor_*`` of the pressure chain, ``imu_*``)."""
     with np.load(path) as z:
-        return {k: z[k] for k in z.files}
+        return TruthArrays({k: z[k] for k in z.files})
