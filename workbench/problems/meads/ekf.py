@@ -197,6 +197,9 @@ from workbench.problems.meads.state import (
     ITH,
     IV,
     IW,
+    IW_DOWN,
+    IW_EAST,
+    IW_NORTH,
     N_PORTS,
     N_U_COLS,
     N_X,
@@ -218,7 +221,6 @@ __all__ = [
     "flight_distance",
     "markov_step",
     "markov_steady_var",
-    "USE_KERNEL",
 ]
 
 LAYOUT = ErrorStateLayout(N_X)
@@ -357,19 +359,17 @@ _EPS_Z = np.array([1e-2, 1e-2, 1e-2, 1e-5, 1e-5])
 _NO_GRID = np.zeros(2)
 _NO_TABLE = np.zeros((2, 2, 2, 2))
 
-#: the measurement function runs as the compiled :func:`.kernel.pressure_kernel`; False: the numpy
-#: reference path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)
-USE_KERNEL = True
 
-
-def make_pressure_model(inp: EkfInputs):
-    """``h(x, C_B_M, use) -> (p (k,), H (k, 21))``: the pressures of the ports ``use`` [Pa] and their
-    Jacobian.  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞) and λ, so the
-    surface-pressure model is differenced in z (11 evaluations) and chained with ∂z/∂x."""
+def make_pressure_model(inp: EkfInputs, *, compiled: bool = True):
+    """``h(x, C_B_M, use) -> (p (k,), H (k, N_X))``: the pressures of the ports ``use`` [Pa] and
+    their Jacobian.  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞) and λ, so
+    the surface-pressure model is differenced in z (11 evaluations) and chained with ∂z/∂x.
+    ``compiled``: run as the compiled :func:`.kernel.pressure_kernel`; False: the numpy reference
+    path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)."""
     h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
     D = np.diag(_EPS_Z)
     dz = np.concatenate([np.zeros((1, 5)), D, -D])
-    compiled = USE_KERNEL and inp.model in ("newtonian", "table")
+    compiled = compiled and inp.model in ("newtonian", "table")
     if compiled:
         veh, tab = inp.vehicle, inp.table
         ports = (veh.cone(), veh.clock(), veh.radius() / veh.base_radius)
@@ -449,7 +449,7 @@ def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -
 OUTPUT_CHUNK = 256
 
 
-def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.ndarray) -> tuple:
+def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.ndarray, compiled: bool) -> tuple:
     atm = MarsEngineeringAtmosphere()
     h0 = float(np.linalg.norm(inp.p_M[0]) - MARS.reference_radius)
     x0 = np.zeros(N_X)
@@ -469,7 +469,7 @@ def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.
         np.full(N_PORTS, markov_steady_var(st)[1]),
         np.full(N_PORTS, st.bias_sigma_pa**2),
         [st.model_mach_sigma**2],
-        np.full(2, angle_sigma(st, _flow(x0, quat_to_dcm(inp.q_M_B[0]).T, inp.gamma)[2]) ** 2),
+        np.full(2, angle_sigma(st, _flow(x0, quat_to_dcm(inp.q_M_B[0]).T, inp.gamma, compiled)[2]) ** 2),
     ]
     P0 = np.diag(d)
     P0[ILAM, ILAM] = scale_cov
@@ -515,9 +515,10 @@ def angle_sigma(st: EkfSettings, mach: float) -> float:
     return s0 * (1.0 + w * (st.model_angle_hypersonic_fraction - 1.0))
 
 
-def _flow(x: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[float, float, float]:
-    """(α [rad], β [rad], Mach) of one state ``x`` (N_X,) with the strapdown C_B_M (3, 3)."""
-    if USE_KERNEL:
+def _flow(x: np.ndarray, C_B_M: np.ndarray, gamma: float, compiled: bool = True) -> tuple[float, float, float]:
+    """(α [rad], β [rad], Mach) of one state ``x`` (N_X,) with the strapdown C_B_M (3, 3); compiled
+    (:func:`.kernel.flow_kernel`) or the numpy :func:`air_data_of_state`."""
+    if compiled:
         return flow_kernel(x, C_B_M, MARS.rotation_rate, gamma)
     a, b, _, m, _, _ = air_data_of_state(x, C_B_M, gamma)
     return float(a), float(b), float(m)
@@ -541,8 +542,9 @@ def _distance(f0: tuple[float, float, float], f1: tuple[float, float, float], st
     return float(abs(m1 - m0) / st.model_error_mach_length + d_angle)
 
 
-def make_transition(inp: EkfInputs, st: EkfSettings):
-    """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring)."""
+def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True):
+    """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring);
+    ``compiled``: the flight condition of a state by the compiled kernel (else numpy)."""
     t = inp.t
     C_M_B = quat_to_dcm(inp.q_M_B)
     idx = {float(v): i for i, v in enumerate(t.tolist())}
@@ -593,19 +595,19 @@ def make_transition(inp: EkfInputs, st: EkfSettings):
         Q[IV, IV] = qa * dt * I3
         Q[ITH, ITH] = st.attitude_psd * dt * I3
         km = abs(dh) / 1e3
-        Q[9, 9] = Q[10, 10] = st.wind_var_per_km * km
+        Q[IW_NORTH, IW_NORTH] = Q[IW_EAST, IW_EAST] = st.wind_var_per_km * km
         if st.vertical_wind_length_km > 0.0:
             # the vertical wind as gravity waves: zero-mean, decorrelating over the altitude travelled
             phi_w = math.exp(-km / st.vertical_wind_length_km)
-            x1[11] = phi_w * x[11]
-            F[11, 11] = phi_w
-            Q[11, 11] = st.vertical_wind_sigma_mps**2 * (1.0 - phi_w**2)
+            x1[IW_DOWN] = phi_w * x[IW_DOWN]
+            F[IW_DOWN, IW_DOWN] = phi_w
+            Q[IW_DOWN, IW_DOWN] = st.vertical_wind_sigma_mps**2 * (1.0 - phi_w**2)
         else:
-            Q[11, 11] = st.wind_var_per_km * km * (st.vertical_wind_sigma_mps / st.wind_sigma_mps) ** 2
+            Q[IW_DOWN, IW_DOWN] = st.wind_var_per_km * km * (st.vertical_wind_sigma_mps / st.wind_sigma_mps) ** 2
         Q[ILP, ILP] = Q[ILR, ILR] = st.atmosphere_var_per_km * km
         # the flight condition at both ends, once: the distance and the flow-angle σ(M) read it
-        f0 = _flow(x, C_B_M[k - 1], inp.gamma) if markov else None
-        f1 = _flow(x1, C_B_M[k], inp.gamma) if markov else None
+        f0 = _flow(x, C_B_M[k - 1], inp.gamma, compiled) if markov else None
+        f1 = _flow(x1, C_B_M[k], inp.gamma, compiled) if markov else None
         dist = _distance(f0, f1, st) if markov else 0.0
         if st.model_error_sigma > 0.0:
             Phi, Qb = markov_step(st, dist)
@@ -644,11 +646,13 @@ def run_pass(
     scale_fixed: np.ndarray | None = None,
     scale_cov_fixed: np.ndarray | None = None,
     keep_all: bool = False,
+    compiled: bool = True,
 ) -> EkfPass:
     """One pass: forward iterated EKF over the pressure samples, then RTS smoothing.
 
     ``keep_all``: keep the forward pass's covariances and the smoother's gains in the result
-    (tests); by default they are dropped after smoothing (:class:`EkfPass`).
+    (tests); by default they are dropped after smoothing (:class:`EkfPass`).  ``compiled``: the
+    compiled measurement and flight-condition kernels (False: the numpy reference path).
 
     ``estimate_scale``: the scale factors are states (prior 0 ± ``st.scale_factor_sigma``);
     otherwise the pressures are divided by ``1 + scale_fixed`` (7,) and the scale-factor states
@@ -674,10 +678,10 @@ def run_pass(
         def projector(_x):
             return Pi
 
-    x0, P0 = _initial(inp, st, scale0, Pl0)
-    h = make_pressure_model(inp)
+    x0, P0 = _initial(inp, st, scale0, Pl0, compiled)
+    h = make_pressure_model(inp, compiled=compiled)
     C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
-    transition = make_transition(inp, st)
+    transition = make_transition(inp, st, compiled=compiled)
 
     def measurements_at(k, tk, x):
         use = np.flatnonzero(inp.usable[k] & np.isfinite(p[k]))
@@ -748,11 +752,11 @@ def run_pass(
     )
 
 
-def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False):
+def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False, *, compiled: bool = True):
     """Yield pass 1 (scale factors estimated) and, with ``st.passes == 2``, pass 2 (pressures
-    corrected by pass 1's scale factors); ``keep_all`` as :func:`run_pass`."""
+    corrected by pass 1's scale factors); ``keep_all``, ``compiled`` as :func:`run_pass`."""
     n = int(st.passes)
-    first = run_pass(inp, st, index=1, passes=n, estimate_scale=True, keep_all=keep_all)
+    first = run_pass(inp, st, index=1, passes=n, estimate_scale=True, keep_all=keep_all, compiled=compiled)
     yield first
     if n >= 2:
         yield run_pass(
@@ -764,4 +768,5 @@ def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False):
             scale_fixed=first.scale,
             scale_cov_fixed=first.scale_cov,
             keep_all=keep_all,
+            compiled=compiled,
         )

@@ -2,9 +2,9 @@
 
 :func:`workbench.problems.meads.ekf.make_pressure_model` is called ~11 000 times per run (two
 passes, iterated updates) on one state at a time. Its numpy version (the reference path,
-``ekf.USE_KERNEL = False``) spends ~1 ms a call in the overhead of ~200 small array operations
-(scipy's ``RegularGridInterpolator`` alone 0.4 ms), not in arithmetic. :func:`pressure_kernel`
-does the same arithmetic in one compiled call, in the same order of operations:
+``compiled=False`` of :func:`.ekf.run_pass`) spends ~1 ms a call in the overhead of ~200 small
+array operations (scipy's ``RegularGridInterpolator`` alone 0.4 ms), not in arithmetic.
+:func:`pressure_kernel` does the same arithmetic in one compiled call, in the same order of operations:
 
 1. the body-axis air velocity ``u = (I − [δθ×]) C_B_M (v_M + Ω ẑ × p_M − C_M_N w_N)`` at the state
    and its central-difference Jacobian over position, velocity, attitude error and wind with the
