@@ -471,7 +471,7 @@ def transpiration_ratio(
     diameter: float,
     gas_constant: float,
     viscosity_of,
-    model: str = "knudsen",
+    model: str,
     steps: int = 16,
 ) -> np.ndarray:
     """Thermal transpiration: transducer/port pressure ratio (any broadcast shape) (Eq. 43–47).

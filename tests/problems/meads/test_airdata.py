@@ -46,14 +46,34 @@ def test_wls_recovers_the_state_of_its_own_model(model):
     table = build_estimator_table(VEHICLE) if model == "table" else None
     p = pressure_model(VEHICLE, model, "mach", G, table)(x)
     sig = sensor_sigma(p, VEHICLE, 0.01)
-    f = fit_air_data(p, sig, VEHICLE, model=model, solution="mach", gamma=G, mach_guess=x[:, 3] * 1.2, table=table)
+    f = fit_air_data(
+        p,
+        sig,
+        VEHICLE,
+        model=model,
+        solution="mach",
+        gamma=G,
+        mach_guess=x[:, 3] * 1.2,
+        fixed_r=0.0,
+        iterations=12,
+        table=table,
+    )
     np.testing.assert_allclose(f.alpha, x[:, 1], atol=1e-5)
     np.testing.assert_allclose(f.beta, x[:, 2], atol=1e-5)
     np.testing.assert_allclose(f.qbar, x[:, 0], rtol=1e-4)
     np.testing.assert_allclose(f.mach, x[:, 3], rtol=2e-3)
     # the vectorised fit is the per-sample fit
     one = fit_air_data(
-        p[7:8], sig[7:8], VEHICLE, model=model, solution="mach", gamma=G, mach_guess=x[7:8, 3] * 1.2, table=table
+        p[7:8],
+        sig[7:8],
+        VEHICLE,
+        model=model,
+        solution="mach",
+        gamma=G,
+        mach_guess=x[7:8, 3] * 1.2,
+        fixed_r=0.0,
+        iterations=12,
+        table=table,
     )
     assert one.alpha[0] == pytest.approx(f.alpha[7], abs=1e-9)
 
@@ -63,11 +83,29 @@ def test_fixed_r_and_static_sets():
     x[:, 3] = 25.0  # hypersonic: R M^2 at its limit, R ~ 0.001
     p = pressure_model(VEHICLE, "newtonian", "mach", G)(x)
     sig = sensor_sigma(p, VEHICLE, 0.01)
-    f = fit_air_data(p, sig, VEHICLE, model="newtonian", solution="fixed_r", gamma=G, mach_guess=np.full(40, 25.0))
+    f = fit_air_data(
+        p,
+        sig,
+        VEHICLE,
+        model="newtonian",
+        solution="fixed_r",
+        gamma=G,
+        mach_guess=np.full(40, 25.0),
+        fixed_r=0.0,
+        iterations=12,
+    )
     np.testing.assert_allclose(f.alpha, x[:, 1], atol=1e-6)
     np.testing.assert_allclose(f.qbar, x[:, 0], rtol=1e-6)  # R scheduled at the true Mach: exact
     c = fit_air_data(
-        p, sig, VEHICLE, model="newtonian", solution="fixed_r", gamma=G, mach_guess=np.full(40, 25.0), fixed_r=0.001
+        p,
+        sig,
+        VEHICLE,
+        model="newtonian",
+        solution="fixed_r",
+        gamma=G,
+        mach_guess=np.full(40, 25.0),
+        fixed_r=0.001,
+        iterations=12,
     )
     assert np.max(np.abs(c.qbar / x[:, 0] - 1)) < 0.01  # constant R = 0.001: biased, but little at Mach 25
     assert np.all(np.isnan(c.sigma_mach))  # Mach is not estimated by the fixed-R set
@@ -81,6 +119,8 @@ def test_fixed_r_and_static_sets():
         solution="static",
         gamma=G,
         mach_guess=np.full(40, 4.0),
+        fixed_r=0.0,
+        iterations=12,
     )
     np.testing.assert_allclose(s.mach, 3.0, rtol=1e-3)
 

@@ -172,16 +172,17 @@ def fit_air_data(
     solution: str,
     gamma: float,
     mach_guess: np.ndarray,
+    fixed_r: float,
+    iterations: int,
     table: SurfacePressureTable | None = None,
-    fixed_r: float = 0.0,
     mask: np.ndarray | None = None,
-    iterations: int = 12,
 ) -> AirDataFit:
     """Fit every sample of ``p`` (n, m) [Pa] (1σ ``sigma_p`` (n, m)) with the solution set.
 
     ``mach_guess`` (n,): the initial Mach (inertial) — for ``"fixed_r"`` with ``fixed_r = 0`` it
-    also schedules R; ``mask`` (n, m) usable ports.  Initial α = 18°, β = 0, p_t = the largest
-    reading.  Derived quantities and their 1σ by first-order propagation of P.
+    also schedules R (``fixed_r`` is not used by the other sets); ``iterations`` of Gauss–Newton
+    (the scenario's ``[estimator]`` values in a run); ``mask`` (n, m) usable ports.  Initial
+    α = 18°, β = 0, p_t = the largest reading.  Derived quantities and their 1σ by first-order propagation of P.
     """
     n = p.shape[0]
     pmax = np.nanmax(np.where(np.isfinite(p), p, np.nan), axis=1)

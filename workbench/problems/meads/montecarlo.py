@@ -101,6 +101,7 @@ def _errors(sh: TradeShared, eps: np.ndarray, level: float) -> np.ndarray:
             solution="mach",
             gamma=sh.gamma,
             mach_guess=tile(sh.mach[k], r),
+            fixed_r=0.0,  # not used by the Mach set
             iterations=8,
         )
         e[:, k, 3] = g.mach.reshape(r, k.size) - sh.mach[k]

@@ -77,12 +77,11 @@ EKF_PLOTS = (
 C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
-def meads_blueprint(
-    ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6", "P7"), ekf_passes: int = 2
-) -> rrb.Blueprint:
+def meads_blueprint(ports: tuple[str, ...], ekf_passes: int) -> rrb.Blueprint:
     """Default layout: the heat shield (left top), air-data plots (right top, one tab per quantity),
-    per-port pressure, residual and EKF-innovation tabs (right bottom; the innovations of the last
-    of ``ekf_passes``, none when 0), scorecard and events (left bottom)."""
+    per-port pressure, residual and EKF-innovation tabs (right bottom, one per name of ``ports``, the
+    vehicle's; the innovations of the last of ``ekf_passes``, none when 0), scorecard and events
+    (left bottom)."""
     scene = rrb.Spatial3DView(
         name="Heat shield (reconstructed attitude, local ENU)",
         origin=layout.WORLD,
