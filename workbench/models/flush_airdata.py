@@ -188,8 +188,8 @@ FADS_VEHICLE_SCHEMA = Schema(
         ),
         Table(
             "",
-            "top level",
-            (Key("ports", "list", REQUIRED, meaning="the `[[ports]]` array of tables, keys below (at least one)"),),
+            "the pressure ports",
+            (Key("ports", "list", REQUIRED, meaning="the `[[ports]]` array of tables (keys below), at least one"),),
         ),
     ),
     noun=_NOUN,
@@ -203,7 +203,7 @@ FADS_PORT_SCHEMA = Schema(
     (
         Table(
             "",
-            "one `[[ports]]` entry",
+            "one `[[ports]]` entry (errors name it `ports[i]`, i from 1)",
             (
                 Key("name", "str", REQUIRED, meaning="port name, unique (the pressure CSV column)"),
                 Key("radius_m", "float", REQUIRED, "m", "distance of the orifice from the symmetry axis", ge=0.0),

@@ -41,7 +41,7 @@ from threadpoolctl import threadpool_limits
 
 from workbench.core.atmosphere import CO2_SUTHERLAND, MARS_CO2_GAS_CONSTANT, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
-from workbench.core.rotation import quat_normalize
+from workbench.core.rotation import dcm_to_quat, quat_normalize, quat_to_dcm
 from workbench.estimation.health import health_markdown
 from workbench.estimation.strapdown import imu_arrays, integrate
 from workbench.io.telemetry import TelemetryError
@@ -78,6 +78,9 @@ __all__ = [
     "scorecard_markdown",
 ]
 
+#: local East-North-Up from North-East-Down
+C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
 TRANSDUCER_T_K = 300.0
 """Gas temperature [K] the estimator assumes in the tubes (lag inversion)."""
 
@@ -106,6 +109,12 @@ class Navigation:
     mach_inertial: np.ndarray
     h: np.ndarray
     f_mag: np.ndarray
+
+    def q_ENU_B(self) -> np.ndarray:
+        """The strapdown attitude (n, 4) at ``t_p`` as body → local East-North-Up at the vehicle
+        (scalar-last), ``C_ENU_NED C_N_M C_M_B``: the frame the recording's scene is drawn in."""
+        C_L_B = np.einsum("ij,njk,nkl->nil", C_ENU_NED, ned_frames(self.p_M), quat_to_dcm(self.q_M_B))
+        return dcm_to_quat(C_L_B)
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ import numpy as np
 from workbench.io import progress as prog
 from workbench.io.moments import KeyMoment
 from workbench.io.scenario import Scenario, ScenarioError
-from workbench.models.flush_airdata import FADS_VEHICLE_SCHEMA
+from workbench.models.flush_airdata import FADS_PORT_SCHEMA, FADS_VEHICLE_SCHEMA
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.meads import pipeline as md
 from workbench.problems.meads.config import SCHEMA, MeadsSettings
@@ -85,7 +85,7 @@ class MeadsProblem:
     kind = "meads"
     title = "entry"
     schema = SCHEMA
-    file_schemas = (FADS_VEHICLE_SCHEMA, INITIAL_STATE_SCHEMA)
+    file_schemas = (FADS_VEHICLE_SCHEMA, FADS_PORT_SCHEMA, INITIAL_STATE_SCHEMA)
 
     def settings(self, scenario: Scenario) -> MeadsSettings:
         """The run's frozen settings (:meth:`MeadsSettings.from_scenario`: validated, the vehicle

@@ -31,9 +31,7 @@ import numpy as np
 import rerun.blueprint as rrb
 import trimesh
 
-from workbench.core.rotation import dcm_to_quat, quat_to_dcm
 from workbench.models.flush_airdata import FadsVehicle
-from workbench.problems.meads.airdata import ned_frames
 from workbench.problems.meads.ekf import EkfPass
 from workbench.problems.meads.pipeline import (
     AirDataStage,
@@ -74,7 +72,6 @@ EKF_PLOTS = (
     ("wind_north_mps", "wind_north", 1.0, "north [m/s]"),
     ("wind_east_mps", "wind_east", 1.0, "east [m/s]"),
 )
-C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
 def meads_blueprint(ports: tuple[str, ...], ekf_passes: int) -> rrb.Blueprint:
@@ -201,9 +198,7 @@ class MeadsRecorder:
 
     def _nav(self, st: Navigation) -> None:
         self.nav = st
-        C_M_B = quat_to_dcm(st.q_M_B)
-        C_L_B = np.einsum("ij,njk,nkl->nil", C_ENU_NED, ned_frames(st.p_M), C_M_B)
-        self.rec.poses(layout.VEHICLE, st.t_p, np.zeros((st.t_p.size, 3)), dcm_to_quat(C_L_B))
+        self.rec.poses(layout.VEHICLE, st.t_p, np.zeros((st.t_p.size, 3)), st.q_ENU_B())
 
     def _lag(self, st: LagCorrection) -> None:
         self.rec.scalars(
