@@ -43,6 +43,7 @@ from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
 from workbench.io.assets import assets_dir  # noqa: E402
 from workbench.io.scenario import resolve_scenario  # noqa: E402
 from workbench.problems.meads.montecarlo import prepare_trade_study, run_trade_study  # noqa: E402
+from workbench.problems.meads.problem import MeadsProblem  # noqa: E402
 from workbench.problems.meads.truth_mc import run_full_monte_carlo  # noqa: E402
 from workbench.problems.runner import run_scenario  # noqa: E402
 
@@ -139,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
             for key in ("run_failed_port", "run_nominal"):
                 _print_ekf(key, results[key])
     if not args.skip_trade:
-        sh = prepare_trade_study(sc)
+        sh = prepare_trade_study(MeadsProblem().settings(sc))
         ts = run_trade_study(sh, args.runs, args.seed, workers=2, scheduler=None)
         results["trade_study"] = {**ts.summary, "executor_run": "2 local processes"}
         print("trade study:", ts.summary["wall_s"], "s;", json.dumps(ts.summary["table"])[:800], flush=True)
@@ -158,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
             }
             print("dask:", results["trade_study_dask"], flush=True)
     if args.full_runs > 0:
-        results["truth_mc"] = _full_mc(sc, args)
+        results["truth_mc"] = _full_mc(MeadsProblem().settings(sc), args)
     results["wall_time_s"] = time.perf_counter() - t0
     if args.json:
         print(f"wrote {write_benchmark_json(args.json, __file__, results, argv)}")

@@ -48,7 +48,7 @@ def _blueprints():
         "entry (generic)": entry_blueprint(),
         "entry (after the run)": entry_blueprint(descent=(175.0, 262.0)),
         "entry validation": validation_blueprint(),
-        "meads": meads_blueprint(),
+        "meads": meads_blueprint(("P1", "P2", "P3", "P4", "P5", "P6", "P7"), 2),
         "meads trade study": trade_blueprint(),
         "meads truth Monte Carlo": truth_mc_blueprint((-3050, -225)),
         "post2": post2_blueprint(

@@ -36,7 +36,6 @@ Pressure models of the estimator (each ``p (n, m)`` for n samples and m ports, S
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -45,15 +44,18 @@ import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 from workbench.core.atmosphere import MARS_GAMMA
+from workbench.io.scenario import ScenarioError
+from workbench.io.schema import REQUIRED, Key, Schema, Table, load_file
 
 __all__ = [
     "FlushPort",
     "FadsVehicle",
     "VehicleFileError",
+    "FADS_VEHICLE_SCHEMA",
+    "FADS_PORT_SCHEMA",
     "load_fads_vehicle",
     "pressure_ratio",
     "rm2_limit",
-    "port_normals",
     "incidence_cos",
     "total_angles",
     "newtonian_pressure",
@@ -73,8 +75,9 @@ KNUDSEN_CONSTANTS = (2.46, 3.15, 24.6)
 POTTER_CONSTANTS = (0.275, 0.625, 24.0)
 
 
-class VehicleFileError(ValueError):
-    """A bad flush-air-data vehicle file; the message names the file and the port/key."""
+class VehicleFileError(ScenarioError):
+    """A bad flush-air-data vehicle file (a :class:`~workbench.io.scenario.ScenarioError`: the CLI
+    exits 3 with it); ``file`` and the dotted ``key`` (``ports[i].radius_m``, i from 1) name it."""
 
 
 @dataclass(frozen=True)
@@ -157,15 +160,70 @@ class FadsVehicle:
         return np.array([p.radius for p in self.ports])
 
 
-def _num(path: Path, table: dict, key: str, where: str, positive: bool = True) -> float:
-    if key not in table:
-        raise VehicleFileError(f"{path}: {where}: missing key '{key}'")
-    v = table[key]
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)):
-        raise VehicleFileError(f"{path}: {where}: key '{key}' must be a finite number, got {v!r}")
-    if positive and not float(v) > 0.0:
-        raise VehicleFileError(f"{path}: {where}: key '{key}' must be positive, got {v!r}")
-    return float(v)
+_NOUN = "flush-air-data vehicle asset"
+
+#: The flush-air-data vehicle asset (``assets/vehicles/*.toml``): ``[vehicle]`` and the
+#: ``[[ports]]`` array, each entry checked against :data:`FADS_PORT_SCHEMA`.  The forebody
+#: geometry of each port (on the heat shield, cone angle = surface normal) is checked in code.
+FADS_VEHICLE_SCHEMA = Schema(
+    "fads_vehicle",
+    "flush-air-data vehicle: sphere-cone heat shield and its pressure ports",
+    (
+        Table(
+            "vehicle",
+            "the sphere-cone heat shield and the pressure lines",
+            (
+                Key("name", "str", "", meaning="display name (empty: the file name)"),
+                Key("diameter_m", "float", REQUIRED, "m", "heat-shield diameter D", gt=0.0),
+                Key("half_angle_deg", "float", REQUIRED, "deg", "cone half-angle", gt=0.0, lt=90.0),
+                Key("nose_radius_m", "float", REQUIRED, "m", "nose radius Rn of the spherical cap", gt=0.0),
+                Key("mass_kg", "float", REQUIRED, "kg", "entry mass (plausibility checks only)", gt=0.0),
+                Key("ref_area_m2", "float", REQUIRED, "m^2", "aerodynamic reference area", gt=0.0),
+                Key("drag_coefficient", "float", REQUIRED, "", "nominal hypersonic C_D (plausibility only)", gt=0.0),
+                Key("transducer_full_scale_pa", "float", REQUIRED, "Pa", "range of the transducers", gt=0.0),
+                Key("tube_length_m", "float", REQUIRED, "m", "port-to-transducer line length", gt=0.0),
+                Key("tube_diameter_m", "float", REQUIRED, "m", "line (port) diameter", gt=0.0),
+                Key("transducer_volume_m3", "float", REQUIRED, "m^3", "entrapped transducer volume", gt=0.0),
+            ),
+        ),
+        Table(
+            "",
+            "the pressure ports",
+            (Key("ports", "list", REQUIRED, meaning="the `[[ports]]` array of tables (keys below), at least one"),),
+        ),
+    ),
+    noun=_NOUN,
+    intro="Keys of a flush-air-data vehicle asset (`[vehicle] file` of a meads scenario)",
+)
+
+#: One ``[[ports]]`` entry of a :data:`FADS_VEHICLE_SCHEMA` file.
+FADS_PORT_SCHEMA = Schema(
+    "fads_port",
+    "one flush pressure port",
+    (
+        Table(
+            "",
+            "one `[[ports]]` entry (errors name it `ports[i]`, i from 1)",
+            (
+                Key("name", "str", REQUIRED, meaning="port name, unique (the pressure CSV column)"),
+                Key("radius_m", "float", REQUIRED, "m", "distance of the orifice from the symmetry axis", ge=0.0),
+                Key(
+                    "cone_deg",
+                    "float",
+                    REQUIRED,
+                    "deg",
+                    "cone angle of the surface normal (from +x_B)",
+                    ge=0.0,
+                    lt=90.0,
+                ),
+                Key("clock_deg", "float", REQUIRED, "deg", "clock angle (from +z_B towards +y_B)", ge=-360.0, le=360.0),
+                Key("why", "str", "", meaning="the reason for its place (documentation)"),
+            ),
+        ),
+    ),
+    noun=_NOUN,
+    intro="Keys of each `[[ports]]` entry of a flush-air-data vehicle asset",
+)
 
 
 #: Tolerance [deg] between a port's stated cone angle and the forebody normal at its radius.
@@ -173,74 +231,68 @@ CONE_TOLERANCE_DEG = 0.5
 
 
 def load_fads_vehicle(path: str | Path) -> FadsVehicle:
-    """Read a flush-air-data vehicle file (TOML; see ``assets/vehicles/msl_meads.toml``).
+    """Read a flush-air-data vehicle asset (TOML, :data:`FADS_VEHICLE_SCHEMA`; see
+    ``assets/vehicles/msl_meads.toml``) into a :class:`FadsVehicle` (SI, angles in rad).
 
-    ``[vehicle]``: name, diameter_m, half_angle_deg, nose_radius_m, mass_kg, ref_area_m2,
-    drag_coefficient, transducer_full_scale_pa, tube_length_m, tube_diameter_m,
-    transducer_volume_m3; ``[[ports]]``: name, radius_m, cone_deg, clock_deg, why.  Raises
-    :class:`VehicleFileError` naming the file and port for a missing/bad key, a duplicated name, a
-    port beyond the heat-shield radius (not on the forebody) or a cone angle that is not the
-    surface normal at the stated radius (tolerance :data:`CONE_TOLERANCE_DEG`).
+    Raises a :class:`~workbench.io.scenario.ScenarioError` naming the file and the dotted key for
+    an unknown key (with the nearest valid one), a missing or mistyped key or a value out of its
+    bounds; a :class:`VehicleFileError` (also a ScenarioError) for what the schema cannot express:
+    no ports, a duplicated name, a port beyond the heat-shield radius (not on the forebody), a cone
+    angle that is not the surface normal at the stated radius (:data:`CONE_TOLERANCE_DEG`), a nose
+    radius that leaves no cone.
     """
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise VehicleFileError(f"{path}: vehicle file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise VehicleFileError(f"{path}: not valid TOML: {exc}") from None
-    v = data.get("vehicle")
-    if not isinstance(v, dict):
-        raise VehicleFileError(f"{path}: missing table [vehicle]")
-    w = "[vehicle]"
-    diameter = _num(path, v, "diameter_m", w)
-    half = math.radians(_num(path, v, "half_angle_deg", w))
-    rn = _num(path, v, "nose_radius_m", w)
-    ports_raw = data.get("ports")
-    if not isinstance(ports_raw, list) or not ports_raw:
-        raise VehicleFileError(f"{path}: needs at least one [[ports]] entry")
+    data = load_file(path, FADS_VEHICLE_SCHEMA)
+    v = data["vehicle"]
+    diameter, half, rn = v["diameter_m"], math.radians(v["half_angle_deg"]), v["nose_radius_m"]
+    ports_raw = data["ports"]
+    if not ports_raw:
+        raise VehicleFileError(path, "ports", "needs at least one [[ports]] entry")
     shell = FadsVehicle(
-        name=str(v.get("name", path.stem)),
+        name=v["name"] or path.stem,
         diameter=diameter,
         half_angle=half,
         nose_radius=rn,
-        mass=_num(path, v, "mass_kg", w),
-        ref_area=_num(path, v, "ref_area_m2", w),
-        drag_coefficient=_num(path, v, "drag_coefficient", w),
+        mass=v["mass_kg"],
+        ref_area=v["ref_area_m2"],
+        drag_coefficient=v["drag_coefficient"],
         ports=(),
-        transducer_full_scale=_num(path, v, "transducer_full_scale_pa", w),
-        tube_length=_num(path, v, "tube_length_m", w),
-        tube_diameter=_num(path, v, "tube_diameter_m", w),
-        transducer_volume=_num(path, v, "transducer_volume_m3", w),
+        transducer_full_scale=v["transducer_full_scale_pa"],
+        tube_length=v["tube_length_m"],
+        tube_diameter=v["tube_diameter_m"],
+        transducer_volume=v["transducer_volume_m3"],
         source=str(path),
     )
     if not rn * math.cos(half) < 0.5 * diameter:
-        raise VehicleFileError(f"{path}: [vehicle]: the nose radius {rn} m leaves no cone inside the diameter")
+        raise VehicleFileError(
+            path, "vehicle.nose_radius_m", f"the nose radius {rn} m leaves no cone inside the diameter"
+        )
     ports: list[FlushPort] = []
     seen: set[str] = set()
-    for i, p in enumerate(ports_raw):
-        name = str(p.get("name", "")) if isinstance(p, dict) else ""
-        where = f"[[ports]] #{i + 1}" + (f" '{name}'" if name else "")
-        if not name:
-            raise VehicleFileError(f"{path}: {where}: missing key 'name'")
+    for i, raw in enumerate(ports_raw):
+        where = f"ports[{i + 1}]"
+        p = FADS_PORT_SCHEMA.validate(raw, path, where=where)
+        name = p["name"]
         if name in seen:
-            raise VehicleFileError(f"{path}: {where}: duplicated port name")
+            raise VehicleFileError(path, f"{where}.name", f"duplicated port name '{name}'")
         seen.add(name)
-        r = _num(path, p, "radius_m", where, positive=False)
-        cone_deg = _num(path, p, "cone_deg", where, positive=False)
-        clock_deg = _num(path, p, "clock_deg", where, positive=False)
-        if r < 0.0 or r > shell.base_radius:
+        r, cone_deg, clock_deg = p["radius_m"], p["cone_deg"], p["clock_deg"]
+        if r > shell.base_radius:
             raise VehicleFileError(
-                f"{path}: {where}: radius_m = {r} m is not on the forebody (0 to {shell.base_radius} m from the axis)"
+                path,
+                f"{where}.radius_m",
+                f"port '{name}': radius_m = {r} m is not on the forebody (0 to {shell.base_radius} m from the axis)",
             )
         expect = math.degrees(float(shell.surface_cone_angle(r)))
         if abs(cone_deg - expect) > CONE_TOLERANCE_DEG:
             raise VehicleFileError(
-                f"{path}: {where}: cone_deg = {cone_deg} is not the forebody normal at radius_m = {r} m "
+                path,
+                f"{where}.cone_deg",
+                f"port '{name}': cone_deg = {cone_deg} is not the forebody normal at radius_m = {r} m "
                 f"(the {'spherical cap' if r <= shell.tangency_radius else 'cone flank'} there has {expect:.2f} deg); "
-                "the port is not on the forebody surface"
+                "the port is not on the forebody surface",
             )
-        ports.append(FlushPort(name, r, math.radians(cone_deg), math.radians(clock_deg % 360.0), str(p.get("why", ""))))
+        ports.append(FlushPort(name, r, math.radians(cone_deg), math.radians(clock_deg % 360.0), p["why"]))
     return FadsVehicle(**{**shell.__dict__, "ports": tuple(ports)})
 
 
@@ -263,12 +315,6 @@ def rm2_limit(gamma: float = MARS_GAMMA) -> float:
     """lim R M² as M → ∞ (Sect. II.A): ``(2/(γ+1))^(γ/(γ−1)) (2γ/(γ+1))^(1/(γ−1))``."""
     g = gamma
     return (2.0 / (g + 1.0)) ** (g / (g - 1.0)) * (2.0 * g / (g + 1.0)) ** (1.0 / (g - 1.0))
-
-
-def port_normals(cone: np.ndarray, clock: np.ndarray) -> np.ndarray:
-    """Outward unit normals (..., 3) in B of ports at cone λ and clock φ [rad]."""
-    c, k = np.asarray(cone, float), np.asarray(clock, float)
-    return np.stack([np.cos(c), np.sin(c) * np.sin(k), np.sin(c) * np.cos(k)], axis=-1)
 
 
 def incidence_cos(alpha: np.ndarray, beta: np.ndarray, cone: np.ndarray, clock: np.ndarray) -> np.ndarray:
@@ -425,7 +471,7 @@ def transpiration_ratio(
     diameter: float,
     gas_constant: float,
     viscosity_of,
-    model: str = "knudsen",
+    model: str,
     steps: int = 16,
 ) -> np.ndarray:
     """Thermal transpiration: transducer/port pressure ratio (any broadcast shape) (Eq. 43–47).

@@ -2,20 +2,32 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from workbench.io.assets import asset_path
+from workbench.io.scenario import Scenario
 from workbench.io.telemetry import TelemetryError, write_telemetry
 from workbench.models.flush_airdata import build_estimator_table, load_fads_vehicle
 from workbench.problems.meads.airdata import fit_air_data, pressure_model, solve_winds
-from workbench.problems.meads.config import EstimatorSettings
+from workbench.problems.meads.config import MeadsSettings
 from workbench.problems.meads.pipeline import detect_residual_failure, detect_stuck, reduce_pressures, sensor_sigma
 from workbench.problems.meads.telemetry import InitialState, read_meads_telemetry, write_initial_state
 
 VEHICLE = load_fads_vehicle(asset_path("vehicles", "msl_meads.toml"))
+
+
+def _schema_defaults():
+    """Settings of a scenario that sets nothing but its vehicle: every default of the schema."""
+    data = {"scenario": {"name": "defaults", "kind": "meads"}, "vehicle": {"file": "../vehicles/msl_meads.toml"}}
+    sc = Scenario(asset_path("scenarios", "msl_meads.toml"), "defaults", "meads", "", data)
+    return MeadsSettings.from_scenario(sc)
+
+
+DEFAULTS = _schema_defaults()
 G = 1.335
 
 
@@ -34,14 +46,34 @@ def test_wls_recovers_the_state_of_its_own_model(model):
     table = build_estimator_table(VEHICLE) if model == "table" else None
     p = pressure_model(VEHICLE, model, "mach", G, table)(x)
     sig = sensor_sigma(p, VEHICLE, 0.01)
-    f = fit_air_data(p, sig, VEHICLE, model=model, solution="mach", gamma=G, mach_guess=x[:, 3] * 1.2, table=table)
+    f = fit_air_data(
+        p,
+        sig,
+        VEHICLE,
+        model=model,
+        solution="mach",
+        gamma=G,
+        mach_guess=x[:, 3] * 1.2,
+        fixed_r=0.0,
+        iterations=12,
+        table=table,
+    )
     np.testing.assert_allclose(f.alpha, x[:, 1], atol=1e-5)
     np.testing.assert_allclose(f.beta, x[:, 2], atol=1e-5)
     np.testing.assert_allclose(f.qbar, x[:, 0], rtol=1e-4)
     np.testing.assert_allclose(f.mach, x[:, 3], rtol=2e-3)
     # the vectorised fit is the per-sample fit
     one = fit_air_data(
-        p[7:8], sig[7:8], VEHICLE, model=model, solution="mach", gamma=G, mach_guess=x[7:8, 3] * 1.2, table=table
+        p[7:8],
+        sig[7:8],
+        VEHICLE,
+        model=model,
+        solution="mach",
+        gamma=G,
+        mach_guess=x[7:8, 3] * 1.2,
+        fixed_r=0.0,
+        iterations=12,
+        table=table,
     )
     assert one.alpha[0] == pytest.approx(f.alpha[7], abs=1e-9)
 
@@ -51,11 +83,29 @@ def test_fixed_r_and_static_sets():
     x[:, 3] = 25.0  # hypersonic: R M^2 at its limit, R ~ 0.001
     p = pressure_model(VEHICLE, "newtonian", "mach", G)(x)
     sig = sensor_sigma(p, VEHICLE, 0.01)
-    f = fit_air_data(p, sig, VEHICLE, model="newtonian", solution="fixed_r", gamma=G, mach_guess=np.full(40, 25.0))
+    f = fit_air_data(
+        p,
+        sig,
+        VEHICLE,
+        model="newtonian",
+        solution="fixed_r",
+        gamma=G,
+        mach_guess=np.full(40, 25.0),
+        fixed_r=0.0,
+        iterations=12,
+    )
     np.testing.assert_allclose(f.alpha, x[:, 1], atol=1e-6)
     np.testing.assert_allclose(f.qbar, x[:, 0], rtol=1e-6)  # R scheduled at the true Mach: exact
     c = fit_air_data(
-        p, sig, VEHICLE, model="newtonian", solution="fixed_r", gamma=G, mach_guess=np.full(40, 25.0), fixed_r=0.001
+        p,
+        sig,
+        VEHICLE,
+        model="newtonian",
+        solution="fixed_r",
+        gamma=G,
+        mach_guess=np.full(40, 25.0),
+        fixed_r=0.001,
+        iterations=12,
     )
     assert np.max(np.abs(c.qbar / x[:, 0] - 1)) < 0.01  # constant R = 0.001: biased, but little at Mach 25
     assert np.all(np.isnan(c.sigma_mach))  # Mach is not estimated by the fixed-R set
@@ -69,6 +119,8 @@ def test_fixed_r_and_static_sets():
         solution="static",
         gamma=G,
         mach_guess=np.full(40, 4.0),
+        fixed_r=0.0,
+        iterations=12,
     )
     np.testing.assert_allclose(s.mach, 3.0, rtol=1e-3)
 
@@ -115,7 +167,7 @@ def test_stuck_and_residual_failures_are_found():
     rng = np.random.default_rng(0)
     p *= 1 + 0.002 * rng.standard_normal(p.shape)
     t = np.arange(200) / 8.0
-    est = EstimatorSettings(solution="fixed_r", switch_mach=3.0)
+    est = dataclasses.replace(DEFAULTS.estimator, solution="fixed_r", switch_mach=3.0)
     bad = p.copy()
     bad[120:, 3] *= 1.12  # P4 reads 12 % high from sample 120 (a P5-P7 offset is partly absorbed by α, β)
     fit, _ = reduce_pressures(t, bad, VEHICLE, x[:, 3], est)

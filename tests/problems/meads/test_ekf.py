@@ -21,14 +21,25 @@ from workbench.core.rotation import dcm_to_quat, quat_to_dcm
 from workbench.estimation.consistency import is_symmetric_pd
 from workbench.estimation.health import ERROR, OK
 from workbench.io.assets import asset_path
+from workbench.io.scenario import Scenario
 from workbench.models.flush_airdata import load_fads_vehicle
 from workbench.problems.meads import ekf
 from workbench.problems.meads.airdata import ned_frames
-from workbench.problems.meads.config import EkfSettings
+from workbench.problems.meads.config import MeadsSettings
 from workbench.problems.meads.health import ekf_checks
 from workbench.problems.meads.pipeline import sensor_sigma
 
 VEHICLE = load_fads_vehicle(asset_path("vehicles", "msl_meads.toml"))
+
+
+def _schema_defaults():
+    """Settings of a scenario that sets nothing but its vehicle: every default of the schema."""
+    data = {"scenario": {"name": "defaults", "kind": "meads"}, "vehicle": {"file": "../vehicles/msl_meads.toml"}}
+    sc = Scenario(asset_path("scenarios", "msl_meads.toml"), "defaults", "meads", "", data)
+    return MeadsSettings.from_scenario(sc)
+
+
+DEFAULTS = _schema_defaults()
 LAMBDA = np.array([0.008, -0.006, 0.004, 0.0, -0.005, 0.007, -0.008])
 WIND_N = np.array([12.0, -6.0, 0.0])
 #: the pressure model's error not carried as states (the filter before issue #10's coloured model error)
@@ -72,7 +83,7 @@ def _arc(n: int = 160, seed: int = 3):
     x[ekf.ILP] = math.log(atm.pressure(25e3)) + 0.15  # the truth is off the prior mean
     x[ekf.ILR] = math.log(atm.density(25e3)) + 0.25
     x[ekf.ILAM] = LAMBDA
-    step = ekf.make_transition(inp, EkfSettings(**NO_MODEL_ERROR))
+    step = ekf.make_transition(inp, replace(DEFAULTS.ekf, **NO_MODEL_ERROR))
     X = [x]
     for k in range(1, n):
         X.append(step(X[-1], t[k - 1], t[k])[0])
@@ -90,7 +101,8 @@ def arc():
     inp, X = _arc()
     # the arc has no process noise: the filter is given (almost) none, so its NIS can be judged;
     # and no model error (the pressures are the filter's own model): the paper's filter, R white
-    st = EkfSettings(
+    st = replace(
+        DEFAULTS.ekf,
         iterations=3,
         accel_psd=1e-8,
         attitude_psd=1e-14,
@@ -112,7 +124,7 @@ def test_pass1_recovers_planted_scale_factors(arc):
     # only the prior holds it; the differences between ports are observed
     D = np.eye(7) - np.full((7, 7), 1.0 / 7.0)
     sd_diff = np.sqrt(np.diag(D @ P @ D.T))
-    assert np.all(sd_diff < 0.1 * EkfSettings().scale_factor_sigma), sd_diff
+    assert np.all(sd_diff < 0.1 * DEFAULTS.ekf.scale_factor_sigma), sd_diff
     assert np.all(np.abs(D @ err) <= 3.0 * sd_diff), (D @ err, sd_diff)
     assert np.max(np.abs(D @ err)) < 0.25 * np.max(np.abs(LAMBDA))
 
@@ -205,7 +217,7 @@ def test_attitude_error_tilts_the_integrated_specific_force():
     x[ekf.IP], x[ekf.IV], x[ekf.ITH] = p_M[0], v_M[0], dth
     x[ekf.ILP], x[ekf.ILR] = math.log(30.0), math.log(1e-3)
     for on in (True, False):
-        step = ekf.make_transition(inp, EkfSettings(attitude_velocity_coupling=on))
+        step = ekf.make_transition(inp, replace(DEFAULTS.ekf, attitude_velocity_coupling=on))
         xk = x.copy()
         for k in range(1, n):
             xk, F, _ = step(xk, t[k - 1], t[k])
@@ -225,7 +237,7 @@ def test_vertical_wind_and_flow_angle_errors_keep_their_stationary_variance():
     errors (a Gauss–Markov whose 1σ follows Mach, :func:`ekf.angle_sigma`) propagate so that a
     state at its stationary variance stays there: F P Fᵀ + Q = σ² after each step, with the wind
     decaying by exp(−Δh / L) and the flow-angle σ moving with the Mach number of the step."""
-    st = EkfSettings()
+    st = DEFAULTS.ekf
     assert st.vertical_wind_length_km > 0 and st.attitude_velocity_coupling and st.model_angle_sigma_deg > 0
     deg = math.radians(1.0)
     assert ekf.angle_sigma(st, 3.0) == pytest.approx(deg)
@@ -267,7 +279,7 @@ def test_model_error_markov_is_stationary_and_smooth(order):
     """Φ, Q of the model-error Gauss–Markov keep its steady-state covariance (Q = P∞ − Φ P∞ Φᵀ,
     symmetric PSD), tend to I / 0 for short / long distances; the second order is smooth: its
     increments over a short step are far smaller than the first order's at the same σ."""
-    st = EkfSettings(model_error_sigma=0.01, model_error_order=order)
+    st = replace(DEFAULTS.ekf, model_error_sigma=0.01, model_error_order=order)
     Pinf = np.diag(ekf.markov_steady_var(st))
     for d in (1e-4, 0.1, 1.0, 10.0):
         Phi, Q = ekf.markov_step(st, d)
@@ -334,7 +346,9 @@ def arc_model_error():
     phase = rng.uniform(0.0, 2 * np.pi, 7)
     err = 0.006 * np.sin(2 * np.pi * inp.t[:, None] / 15.0 + phase[None, :])
     bias = rng.normal(0.0, 2.0, 7)
-    st = EkfSettings(iterations=3, accel_psd=1e-8, attitude_psd=1e-14, wind_var_per_km=1e-4, atmosphere_var_per_km=1e-9)
+    st = replace(
+        DEFAULTS.ekf, iterations=3, accel_psd=1e-8, attitude_psd=1e-14, wind_var_per_km=1e-4, atmosphere_var_per_km=1e-9
+    )
     assert st.model_error_sigma > 0.0 and st.bias_sigma_pa > 0.0
     sig = sensor_sigma(p_clean, VEHICLE, 0.0, noise_counts=st.noise_counts)
     p = p_clean * (1.0 + err) + bias + rng.normal(0.0, sig)
@@ -367,8 +381,8 @@ def test_model_error_states_keep_the_filter_honest(arc_model_error):
 def test_flow_angle_mach_range_must_be_ordered():
     """``model_angle_mach_high`` at or below ``model_angle_mach_low`` is a located error."""
     from workbench.io.scenario import ScenarioError, load_scenario
-    from workbench.problems.meads.config import config_for
+    from workbench.problems.meads.problem import MeadsProblem
 
     sc = load_scenario(asset_path("scenarios", "msl_meads.toml"))
     with pytest.raises(ScenarioError, match="ekf.model_angle_mach_high"):
-        config_for(sc.with_overrides({"ekf.model_angle_mach_low": 10.0, "ekf.model_angle_mach_high": 5.0}))
+        MeadsProblem().settings(sc.with_overrides({"ekf.model_angle_mach_low": 10.0, "ekf.model_angle_mach_high": 5.0}))

@@ -41,7 +41,7 @@ def test_kpa_labelled_pa_is_refused(run, tmp_path):
     bad = tmp_path / "pressures.csv"
     write_telemetry(bad, pr.time, {n: (pr.channel(n) / 1e3, "Pa") for n in ports}, sparse=ports)  # kPa numbers, "Pa"
     toml = tmp_path / "user.toml"
-    veh = run.scenario.path_of("vehicle.file")
+    veh = run.settings.vehicle_file
     toml.write_text(
         f'[scenario]\nname = "kpa"\nkind = "meads"\n[vehicle]\nfile = "{veh}"\n[telemetry]\n'
         f'pressures = "{bad}"\nimu = "{tel["imu"]}"\ninitial_state = "{tel["initial_state"]}"\n'
@@ -68,7 +68,7 @@ def test_no_model_form_allowance_is_unhealthy(run, tmp_path):
     """The same telemetry reduced with port σ that leave out the model-form allowance: the WLS
     residuals are far outside their χ² bounds, so the run is refused (exit 6), nothing published."""
     tel = dict(run.telemetry)
-    veh = run.scenario.path_of("vehicle.file")
+    veh = run.settings.vehicle_file
     toml = tmp_path / "tight.toml"
     toml.write_text(
         f'[scenario]\nname = "tight"\nkind = "meads"\n[vehicle]\nfile = "{veh}"\n[telemetry]\n'

@@ -10,11 +10,13 @@ import pytest
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import resolve_scenario
 from workbench.problems.meads import montecarlo as mcmod
+from workbench.problems.meads.problem import MeadsProblem
 
 
 @pytest.fixture(scope="module")
 def shared():
-    sh = mcmod.prepare_trade_study(resolve_scenario("msl_meads", assets_dir()), stride=32)
+    st = MeadsProblem().settings(resolve_scenario("msl_meads", assets_dir()))
+    sh = mcmod.prepare_trade_study(dataclasses.replace(st, mc=dataclasses.replace(st.mc, stride=32)))
     return dataclasses.replace(sh, levels=(0.005, 0.05))
 
 

@@ -9,12 +9,24 @@ import numpy as np
 import pytest
 
 from workbench.io.assets import asset_path
+from workbench.io.scenario import Scenario
 from workbench.models.flush_airdata import incidence_cos, load_fads_vehicle, newtonian_pressure, pressure_ratio
-from workbench.problems.meads.sensors import PressureSensorSpec, measure_pressures
-from workbench.problems.meads.truth import MeadsTruthSpec, simulate_entry
+from workbench.problems.meads.config import MeadsSettings
+from workbench.problems.meads.sensors import measure_pressures
+from workbench.problems.meads.truth import simulate_entry
 
 VEHICLE = load_fads_vehicle(asset_path("vehicles", "msl_meads.toml"))
-SPEC = MeadsTruthSpec()
+
+
+def _schema_defaults():
+    """Settings of a scenario that sets nothing but its vehicle: every default of the schema."""
+    data = {"scenario": {"name": "defaults", "kind": "meads"}, "vehicle": {"file": "../vehicles/msl_meads.toml"}}
+    sc = Scenario(asset_path("scenarios", "msl_meads.toml"), "defaults", "meads", "", data)
+    return MeadsSettings.from_scenario(sc)
+
+
+DEFAULTS = _schema_defaults()
+SPEC = DEFAULTS.truth
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +53,7 @@ def test_msl_like_entry(truth):
 
 def test_truth_pressures_differ_from_newtonian(truth):
     off = dataclasses.replace(
-        PressureSensorSpec(),
+        DEFAULTS.pressure,
         location=False,
         time_tag=False,
         lag=False,
@@ -77,7 +89,7 @@ def test_each_error_source_changes_the_reading(truth):
         quantization=False,
     )
     clean = measure_pressures(
-        truth, VEHICLE, SPEC, dataclasses.replace(PressureSensorSpec(), **base), np.random.default_rng(3)
+        truth, VEHICLE, SPEC, dataclasses.replace(DEFAULTS.pressure, **base), np.random.default_rng(3)
     )
     for key, val in (
         ("location", True),
@@ -89,10 +101,10 @@ def test_each_error_source_changes_the_reading(truth):
         ("quantization", True),
         ("time_tag", True),
     ):
-        spec = dataclasses.replace(PressureSensorSpec(), **{**base, key: val})
+        spec = dataclasses.replace(DEFAULTS.pressure, **{**base, key: val})
         pm = measure_pressures(truth, VEHICLE, SPEC, spec, np.random.default_rng(3))
         assert np.max(np.abs(pm.p - clean.p)) > 0.0, key
-    fail = dataclasses.replace(PressureSensorSpec(), failure_port="P5", failure_time_s=150.0, failure_mode="stuck")
+    fail = dataclasses.replace(DEFAULTS.pressure, failure_port="P5", failure_time_s=150.0, failure_mode="stuck")
     pm = measure_pressures(truth, VEHICLE, SPEC, fail, np.random.default_rng(3))
     after = pm.t >= 150.0
     assert np.all(pm.p[after, 4] == pm.p[np.argmax(after) - 1, 4]) and pm.failed_port == 4

@@ -20,7 +20,7 @@ from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import resolve_scenario
 from workbench.problems.meads import truth_mc as tmc
-from workbench.problems.meads.config import config_for
+from workbench.problems.meads.problem import MeadsProblem
 from workbench.problems.meads.truth import MeadsDispersionSigmas, disperse_truth_spec
 from workbench.recording import layout
 
@@ -30,8 +30,9 @@ IE = {e: j for j, e in enumerate(tmc.ESTIMATORS)}
 
 
 @pytest.fixture(scope="module")
-def scenario():
-    return resolve_scenario("msl_meads", assets_dir())
+def settings():
+    """The frozen settings of the shipped ``msl_meads`` (what every member receives)."""
+    return MeadsProblem().settings(resolve_scenario("msl_meads", assets_dir()))
 
 
 # ------------------------------------------------------------------------------- aggregation
@@ -257,8 +258,8 @@ def test_members_on_one_grid_are_padded():
 # ------------------------------------------------------------------------ draws and dispersion
 
 
-def test_each_member_draws_its_own_truth_and_sensors_whatever_the_executor(scenario):
-    job = tmc.McJob(scenario)
+def test_each_member_draws_its_own_truth_and_sensors_whatever_the_executor(settings):
+    job = tmc.McJob(settings)
     loop = run_monte_carlo(tmc.member_draws, 4, shared=job, seed=7, workers=1)
     pool = run_monte_carlo(tmc.member_draws, 4, shared=job, seed=7, workers=2, scheduler="processes")
     for (s1, q1, i1), (s2, q2, i2) in zip(loop.results, pool.results, strict=True):
@@ -268,15 +269,15 @@ def test_each_member_draws_its_own_truth_and_sensors_whatever_the_executor(scena
     assert len({s.surface_pressure_pa for s in specs}) == 4  # every member its own atmosphere
     assert len({s.wind_layers for s in specs}) == 4 and len({s.entry_fpa_deg for s in specs}) == 4
     assert len({tuple(r[2]["sensor_seed_state"]) for r in loop.results}) == 4  # and its own sensor errors
-    fixed = run_monte_carlo(tmc.member_draws, 2, shared=tmc.McJob(scenario, disperse_truth=False), seed=7)
-    base = config_for(scenario).truth
+    fixed = run_monte_carlo(tmc.member_draws, 2, shared=tmc.McJob(settings, disperse_truth=False), seed=7)
+    base = settings.truth
     assert all(r[0] == base for r in fixed.results)
     # the sensor stream does not depend on whether the truth is dispersed
     assert fixed.results[1][2]["sensor_seed_state"] == loop.results[1][2]["sensor_seed_state"]
 
 
-def test_truth_dispersion_draws_about_the_spec(scenario):
-    base = config_for(scenario).truth
+def test_truth_dispersion_draws_about_the_spec(settings):
+    base = settings.truth
     zero = MeadsDispersionSigmas(**{f.name: 0.0 for f in dataclasses.fields(MeadsDispersionSigmas)})
     same = disperse_truth_spec(base, np.random.default_rng(1), zero)
     assert same == dataclasses.replace(base, wave_length_km=max(base.wave_length_km, 5.0))
@@ -299,11 +300,11 @@ def test_truth_dispersion_draws_about_the_spec(scenario):
 
 
 @pytest.mark.slow
-def test_full_monte_carlo_is_executor_independent_and_recorded(scenario, tmp_path):
+def test_full_monte_carlo_is_executor_independent_and_recorded(settings, tmp_path):
     from workbench.cli import main
     from workbench.recording.reader import read_recording
 
-    loop = tmc.run_full_monte_carlo(scenario, n_runs=2, seed=3, workers=1)
+    loop = tmc.run_full_monte_carlo(settings, n_runs=2, seed=3, workers=1)
     assert main(["mc", "msl_meads", "--truth-sim", "--seeds", "2", "--first-seed", "3", "--workers", "2",
                  "--out", str(tmp_path), "--quiet"]) == 0  # fmt: skip
     summary = json.loads((tmp_path / "msl_meads_truth.mc.json").read_text())

@@ -80,6 +80,23 @@ class AirDataFit:
     sigma_p: np.ndarray
     predicted: np.ndarray
 
+    @property
+    def normalized_residual(self) -> np.ndarray:
+        """Residual / its sensor σ (n, m) [-] of every port (NaN where not fitted)."""
+        return self.wls.residual / self.sigma_p
+
+    @property
+    def measured(self) -> np.ndarray:
+        """The pressures the fit saw (n, m) [Pa]: model + residual (the model where no residual)."""
+        return self.predicted + np.nan_to_num(self.wls.residual)
+
+    @property
+    def air_direction_B(self) -> np.ndarray:
+        """Unit vector (n, 3) in body axes B of the wind-relative velocity from the fitted α, β
+        (``(cos α cos β, sin β, sin α cos β)``; α = β = 0 where not fitted)."""
+        a, b = np.nan_to_num(self.alpha), np.nan_to_num(self.beta)
+        return np.stack([np.cos(a) * np.cos(b), np.sin(b), np.sin(a) * np.cos(b)], 1)
+
 
 def _freestream(x: np.ndarray, solution: str, gamma: float, ratio: np.ndarray | None, mach_fixed: np.ndarray | None):
     """(q, α, β, M, p∞, p_t, R) columns (n, 1) from states x (n, k)."""
@@ -155,16 +172,17 @@ def fit_air_data(
     solution: str,
     gamma: float,
     mach_guess: np.ndarray,
+    fixed_r: float,
+    iterations: int,
     table: SurfacePressureTable | None = None,
-    fixed_r: float = 0.0,
     mask: np.ndarray | None = None,
-    iterations: int = 12,
 ) -> AirDataFit:
     """Fit every sample of ``p`` (n, m) [Pa] (1σ ``sigma_p`` (n, m)) with the solution set.
 
     ``mach_guess`` (n,): the initial Mach (inertial) — for ``"fixed_r"`` with ``fixed_r = 0`` it
-    also schedules R; ``mask`` (n, m) usable ports.  Initial α = 18°, β = 0, p_t = the largest
-    reading.  Derived quantities and their 1σ by first-order propagation of P.
+    also schedules R (``fixed_r`` is not used by the other sets); ``iterations`` of Gauss–Newton
+    (the scenario's ``[estimator]`` values in a run); ``mask`` (n, m) usable ports.  Initial
+    α = 18°, β = 0, p_t = the largest reading.  Derived quantities and their 1σ by first-order propagation of P.
     """
     n = p.shape[0]
     pmax = np.nanmax(np.where(np.isfinite(p), p, np.nan), axis=1)
@@ -273,6 +291,11 @@ class WindSolution:
     v_ground_N: np.ndarray
     fpa: np.ndarray
     iterations: int
+
+    @property
+    def sigma_NE(self) -> np.ndarray:
+        """1σ (n, 2) [m/s] of the north and east wind, the diagonal of ``P`` (NaN where unsolved)."""
+        return np.sqrt(np.stack([self.P[:, 0, 0], self.P[:, 1, 1]], axis=1))
 
 
 def _angles(C_B_N: np.ndarray, v_N: np.ndarray, w_NE: np.ndarray) -> np.ndarray:

@@ -1,161 +1,24 @@
 """The tightly-coupled MEADS/IMU extended Kalman filter, multi-pass, with RTS smoothing.
 
-Karlgaard et al., "Mars Entry Atmospheric Data System Trajectory Reconstruction Algorithms and
-Flight Results", AIAA 2013, Sect. III.B (Eq. 19–35) and Sect. IV.B.4 (the multi-pass scheme),
-composed on the shared engine (:func:`workbench.estimation.ekf.run_filter`, iterated
-:func:`~workbench.estimation.ekf.update`, :func:`workbench.estimation.smoother.rts_smooth`).
+Karlgaard et al., "Mars Entry Atmospheric Data System Modeling and Algorithm Development",
+AIAA 2009-3916, and "... Trajectory Reconstruction Algorithms and Flight Results", AIAA 2013,
+Sect. III.B (Eq. 19–35) and IV.B.4 (multi-pass), on the shared engine
+(:func:`workbench.estimation.ekf.run_filter`, iterated update, :func:`~workbench.estimation.smoother.rts_smooth`).
 
-State (46, all additive; :data:`STATE_NAMES`)::
+State (:mod:`.state`, all additive): the deviation of position and velocity in the inertial frame
+M from the IMU strapdown (with the attitude-error tilt of the integrated specific force,
+``attitude_velocity_coupling``), the body attitude error δθ_B, the NED wind (horizontal a random
+walk per km descended, vertical a Gauss–Markov over altitude: gravity waves), ln p∞ and ln ρ∞
+(hydrostatic), the transducer scale factors λ_i, and — additions to the paper, so the published
+1σ covers the estimator's pressure-model error — a common model level c, per-port coloured model
+errors b_i (Gauss–Markov over the flight condition travelled, :func:`flight_distance`), additive
+transducer biases β_i (Eq. 51), and the model's Mach and flow-angle errors m, a_m, b_m.
 
-    x = [p_M (3) m, v_M (3) m/s, δθ_B (3) rad, w_N (3) m/s, ln p∞, ln ρ∞, λ_1..λ_7, c,
-         b_1..b_7, b'_1..b'_7, β_1..β_7 Pa, m, a_m, b_m rad]
-
-* ``p_M``, ``v_M``: inertial position and velocity in the planet-centred inertial frame M (the
-  paper's r, θ, φ, u, v, w of Eq. 19, in Cartesian form).  They are driven by the IMU through the
-  strapdown of :func:`.pipeline.navigate`: the filter propagates the deviation from the strapdown
-  solution, ``δp' = δp + δv Δt``, ``δv' = δv + G(p) δp Δt − [Δv_f×] C_M_B δθ`` (G the point-mass
-  gravity gradient; ``Δv_f`` the strapdown's specific-force velocity increment over the step in M,
-  its velocity change less its gravity; the IMU increments themselves are in the strapdown), with
-  accelerometer process noise (the paper's "additive process noise on the acceleration
-  measurements").  The last term is the strapdown's own error dynamics
-  (:mod:`workbench.estimation.strapdown`, ``d(δv)/dt = −C_M_B [f×] δθ``): an attitude error tilts
-  the specific force the strapdown integrated, so the velocity error grows as ``δθ × Δv`` — over
-  the ~5.5 km/s the heat shield takes off, 1 mrad of attitude error is ~5 m/s of velocity error,
-  twenty times the 0.2 m/s the initial state is known to (``[ekf] attitude_velocity_coupling``, on
-  by default; Titterton & Weston, "Strapdown Inertial Navigation Technology", 2004, Sect. 12.3,
-  the velocity error equation; issue #10 measured it, below).
-* ``δθ_B``: the attitude.  The paper carries Euler parameters (Eq. 26) integrated from the gyros;
-  here the strapdown's attitude ``q_M_B`` is a known input and the state is the body-frame
-  small-angle error of it (``C_B_M = (I − [δθ×]) C_B_M,nav``), rotated with the body between
-  samples and driven by gyro process noise.  For a constant-rate strapdown error this is the
-  same first-order model as integrating Eq. 26 in the filter; it keeps the filter linear in the
-  attitude.
-* ``w_N``: wind (north, east, down) in the local-vertical frame, Eq. 29–31: the horizontal wind a
-  random walk whose variance grows with the altitude travelled (winds change with height, not
-  with time); the vertical wind a zero-mean first-order Gauss–Markov over the altitude travelled
-  (``[ekf] vertical_wind_length_km``, 5 km, 1σ ``vertical_wind_sigma_mps``, 3 m/s): Martian
-  vertical winds are gravity waves of ~10 km vertical wavelength (Creasey, Forbes & Hinson,
-  "Global and seasonal distribution of gravity wave activity in Mars' lower atmosphere derived
-  from MGS radio occultation data", GRL 2006), so a vertical wind does not persist over tens of
-  km as a random walk lets it.
-* ``ln p∞``, ``ln ρ∞``: Eq. 27–28 (hydrostatic, isothermal over a step: both change by
-  ``−g Δh ρ∞/p∞``), in logarithms so the 10⁵ range of the entry stays well scaled; a random walk
-  per altitude travelled absorbs the temperature structure.
-* ``λ_i``: transducer scale factors, ``λ̇ = 0`` (Sect. III.B): the measured pressure of port i is
-  ``(1 + λ_i)(1 + c) h_i(x)``.
-* ``c``: an addition to the paper — the common level error of the estimator's pressure model
-  (a constant, prior 1σ ``[ekf] model_level_sigma``, by default the least squares' model-form
-  allowance).  It multiplies every port, like λ's common mode and like a common scaling of
-  p∞ and ρ∞ (q∞ = ρ∞V²/2, M unchanged): the pressures cannot tell these apart, so c keeps its
-  prior and what it does is carry the model-level uncertainty into the 1σ of q∞, p∞ and ρ∞
-  (without it the filter reports q∞ to ~0.5 % 1σ while the estimator's table differs from the
-  synthetic truth's pressures by ~1 %).  0 turns it off.
-* ``b_i`` (and ``b'_i``): the estimator's pressure-model error of port i, multiplicative like λ —
-  the least squares' 1 % model-form allowance carried as a *coloured* state instead of white
-  noise in R (issue #10): a Gauss–Markov process of steady-state 1σ ``[ekf] model_error_sigma``
-  that decorrelates with the flight condition travelled, not with time
-  (:func:`flight_distance`: ``|ΔM|/model_error_mach_length + (|Δα| + |Δβ|)/model_error_angle_deg``:
-  the table errs as a smooth function of Mach and the flow angles — port-location errors make it
-  angle-dependent), first order (``b'`` absent) or a critically damped second order (``b'`` its
-  rate, smooth increments; :func:`markov_step`, Q exact for the stationary process).  λ is the
-  constant and b the varying part of the same multiplicative error: they separate only as far as
-  the flight condition changes, and λ's σ says so.
-* ``β_i`` [Pa]: the transducer's additive residual bias after the in-flight zero (Eq. 51), a
-  constant of prior 1σ ``[ekf] bias_sigma_pa``: it is what a multiplicative error cannot be at the
-  low pressures of the first seconds (without it, measured on seed 11: λ of P1 −2.6 % against
-  its 3σ of 1.2 %, α inside its 3σ at 53 % of the samples).
-* ``m``: the model's relative Mach error, the pressures read at ``M (1 + m)`` (first-order
-  Gauss–Markov over the same distance, 1σ ``[ekf] model_mach_sigma``): the table's Mach
-  dependence is the model's weakest part, which a white-noise R would otherwise let the filter
-  trust (measured on seed 11, pass 1, without it: Mach 99 % inside 3σ instead of 100 %, p∞ RMS
-  4.3 % instead of 3.3 %; before the flow angles were in the distance it was Mach 38 %).
-* ``a_m``, ``b_m`` [rad]: the model's flow-angle error, the pressures read at ``(α + a_m, β + b_m)``
-  (first-order Gauss–Markov over the same distance, 1σ :func:`angle_sigma` — by default 1° at and
-  below Mach 5 falling linearly to 0.1° at Mach 10 and above, the Mach-independence principle;
-  ``model_angle_sigma_deg = 0``: not modelled, the states stay at 0 with zero variance).  A forebody pressure model
-  places the stagnation point from the geometry; the real shock layer moves it (the FADS
-  "upwash"/flow-angle calibration of Whitmore et al.), an error a per-port multiplicative b
-  cannot represent because it is a rotation of the whole pattern — the least squares see it as
-  an α error and no residual shows it.
-
-Measurement (Eq. 33–35, iterated update): the seven port pressures
-``p_i = (1 + λ_i)(1 + c)(1 + b_i) h_i(x; M (1 + m), α + a_m, β + b_m) + β_i`` (m, a_m, b_m to
-first order) through the same surface pressure
-model as the least squares (:func:`.airdata.pressure_model`, Newtonian or the estimator's table,
-"mach" set) with α, β, q∞ and Mach computed from the state — the air-relative velocity in body
-axes ``C_B_M (v_M − Ω × p_M − C_M_N w_N)``, ``q∞ = ½ ρ∞ V²``, ``M = V / √(γ p∞/ρ∞)`` (the
-substitution of Eq. 11–12 the paper describes).  R is only what is white: the channel's noise
-and quantisation (:func:`.pipeline.sensor_sigma` with ``noise_counts``, σ ≈ 0.65 count ≈ 1.4 Pa);
-with ``model_error_sigma = 0`` R is the least squares' σ with its white 1 % of reading, the
-filter before issue #10.  Ports the least squares declared failed or that have no sample are
-left out of the update.
-
-Multi-pass (Sect. IV.B.4): pass 1 estimates the scale factors with everything else; pass 2 divides
-the pressures by ``1 + λ̂`` (pass-1 smoothed) and runs again with the scale factors as Schmidt
-*consider* parameters — mean zero, pass 1's covariance, carried in P (so S and the outputs' 1σ
-include them) but never updated (gain projected to zero on them; ``rts_smooth(consider=...)``):
-the data are not used twice.  Each pass is a forward iterated EKF and an RTS smoother.
-
-Measured (``msl_meads``, seeds 11/1/2, table model, above 850 Pa, pass 2; before → after issue
-#10, and before the defaults of the last paragraph — with them, seed 11: RMS α 0.12°, β 0.06°, q∞
-0.69 %, p∞ 2.1 %, density 2.4 %, Mach 0.25, north wind 4.8 m/s, every output inside its 3σ at
-every sample, scale factors 7 of 7): the outputs are honest — α, β, q∞, Mach, p∞, density and the
-north wind inside their reported 3σ at every sample, the east wind at 96–100 % (before: α 91–94 %,
-Mach 81–100 %, north wind 77–100 %); RMS errors α 0.08–0.16° (0.15–0.22°), q∞ 0.54–0.65 % (1.0–2.2
-%), p∞ 2.3–3.4 % (4.0–7.4 %), Mach 0.21–0.25 (0.21–0.42), density 1.3–2.0 % (1.0–1.3 %); pass 1's
-scale factors inside 3σ for 7 of 7 ports on every seed (4, 1, 5 of 7), common-mode error −0.1 to
-−0.5 % (−0.9 to −2.2 %). Still conservative: the mean per-port NIS is 0.14–0.20 (0.02–0.15 before;
-health WARNING below 0.5). The innovations' S is dominated by the per-step process noise of
-first-order models of smooth processes — the model-error Markov as α and Mach change, the wind and
-ln p∞/ln ρ∞ random walks per km — while the truth's errors are smooth, so the one-step innovations
-are near the 1.4 Pa white noise. The second-order Markov (``model_error_order = 2``) doubles the
-NIS (0.29–0.38) but leaves 4–7 of 7 scale factors inside 3σ; smaller wind/atmosphere random walks
-bring it to 0.7–1.4 but make Mach and p∞ overconfident (43 % and 86 % inside 3σ with 3e-5/km and
-15 (m/s)²/km): the smooth atmosphere (gravity waves, lapse rate) would need its own higher-order
-model. With the Newtonian model the 1 % σ is too small (its error against the truth is ~3 %,
-common mode 2.6 %; α 37 % inside 3σ, 13 % before); ``model_error_sigma = 0.03`` makes it α 77 %,
-q∞ 89 %, the rest 93–100 %: the Newtonian's error is more than a smooth per-port factor; the
-health verdict says so from the data (the same pressures reduced with the table,
-:func:`.health.model_form_checks`). On pressures from the estimator's own model planted scale
-factors are recovered (tests/problems/meads/test_ekf.py).
-
-The vertical wind in the full-error Monte Carlo (issue #10; :mod:`.truth_mc`, seed 1, members
-0–7, pass 2, above 850 Pa; 3 × RMS, % of member-samples inside the reported 3σ): w_down 26.9 m/s
-reported 6.7 (58 % inside).  Measured cause, two parts: (1) the inertial velocity is not what the
-filter says — the strapdown's velocity error against the truth is 1–7 m/s per NED axis where the
-filter reports 0.25 m/s (5–19σ), and the true attitude error times the specific-force increments
-reproduces it (member 0 down −8.2 m/s true, −7.8 predicted; 3: −9.2/−9.9; 6: −13.0/−11.2): the
-missing ``δθ × Δv`` term above (``attitude_velocity_coupling``); (2) the dominant part: the
-estimator's table errs in α against the dispersed CFD-like truths at Mach < 8 by −0.4 to −1.1°
-in every member (the least squares' own α error), far beyond its 1 % pressure allowance, and the
-vertical air-relative velocity is ``V × α`` (1 000 m/s × 0.5° = 9 m/s): whatever the filter does not
-attribute to α goes into w_down (or, with the coupling, into δθ and through it into δv).  The
-coupling alone: velocity honest, p∞ 9.8 → 7.7 %, Mach 0.31 → 0.25, north wind inside 94 → 98 %,
-but w_down 31 m/s, 58 % and α inside 88 → 78 % (the new freedom is used to absorb the α error);
-the velocity errors inside their 3σ at 90–100 % of the member-samples per axis (22–43 % without);
-with the flow-angle states at 0.6° as well: α 0.79 → 0.61° (97 % inside), w_down 26.5 m/s (75 %),
-but q∞ 1.5 → 5.0 % and density 4.4 → 8.1 % (the flow-angle error trades with the level of the
-pressures); the flow-angle states at 0.6° without the coupling: α 95 % inside, w_down 25.5 m/s
-at 59 %, q∞ 5.4 %, density 7.3 %.
-
-Per Mach bin (:mod:`.truth_mc`) the rest of the vertical-wind error showed itself: with the
-coupling it is a bias common to every member, set in the hypersonic phase (−6 to −9 m/s from
-Mach 22 down: the table's ~−0.1° α error there times ~5.5 km/s, absorbed into a vertical wind
-that a random walk per km then carries for 100 km), growing again below Mach 12 (the table's
-low-Mach α error times V).  Hence the defaults, each physical rather than fitted: the coupling
-on; the vertical wind a zero-mean Gauss–Markov of 5 km (above); the flow-angle error 1° at and
-below Mach 5 and 0.1° from Mach 10 (:func:`angle_sigma`: hypersonic pressure patterns are Mach
-independent).  Measured on the same 8 members (seed 1; pass 2, above 850 Pa, per Mach bin, the
-median over bins of 3 × RMS and of reported/MC 3σ, % of member-samples inside the reported 3σ;
-``workbench mc msl_meads --truth-sim --seeds 8 --first-seed 1``), before → after: α 0.73° ×0.75
-88 % → 0.58° ×0.95 99 %; β 0.44° 98 % → 0.48° 97 %; q∞ 1.51 % ×4.5 → 1.92 % ×3.5 (100 %: the
-angle states trade with the pressure level, the cost of the change); Mach 96 → 99.5 %; p∞ 9.4 →
-7.6 %, 99 → 100 %; density 4.3 → 4.2 %; north / east wind 94 / 97 → 98.5 / 98 %; vertical wind
-26.4 m/s ×0.30 58 % → 6.7 m/s ×3.2 94 %.  Each part alone (same members): the Gauss–Markov
-vertical wind with the coupling but no angle states, w_down 7.7 m/s, 77 % (the low-Mach α error
-goes into it), q∞ 1.47 %; the angle states (0.6°, 0.1 above Mach 10) with the coupling but a
-random-walk vertical wind, w_down 27.9 m/s, 68 %.  The 50-member numbers are the benchmark's
-(README).
+Measurement (Eq. 33–35, iterated): ``p_i = (1 + λ_i)(1 + c)(1 + b_i) h_i(x; M (1 + m), α + a_m,
+β + b_m) + β_i`` through the least squares' pressure model (:func:`.airdata.pressure_model`); R
+only the channel's white noise and quantisation.  Pass 1 estimates the scale factors; pass 2
+divides the pressures by ``1 + λ̂`` and carries λ as Schmidt consider parameters (the data are not
+used twice).  The tuning and what each default changed, measured: ``docs/tuning/meads.md``.
 """
 
 from __future__ import annotations
@@ -182,7 +45,29 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
 from workbench.problems.meads.airdata import ned_frames, pressure_model
 from workbench.problems.meads.config import EkfSettings
-from workbench.problems.meads.kernel import N_U_COLS, flow_kernel, pressure_kernel
+from workbench.problems.meads.kernel import flow_kernel, pressure_kernel
+from workbench.problems.meads.state import (
+    IB,
+    IBD,
+    IBIAS,
+    IC,
+    ILAM,
+    ILP,
+    ILR,
+    IMA,
+    IMM,
+    IP,
+    ITH,
+    IV,
+    IW,
+    IW_DOWN,
+    IW_EAST,
+    IW_NORTH,
+    N_PORTS,
+    N_U_COLS,
+    N_X,
+    STATE_NAMES,
+)
 
 __all__ = [
     "STATE_NAMES",
@@ -199,40 +84,9 @@ __all__ = [
     "flight_distance",
     "markov_step",
     "markov_steady_var",
-    "USE_KERNEL",
 ]
 
-N_PORTS = 7
-IP, IV, ITH, IW, ILP, ILR, ILAM, IC = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), 12, 13, slice(14, 21), 21
-#: the per-port model-error Gauss-Markov states (after ``model_level``): b_i [of reading] and, for
-#: the second-order process, its rate b_i' [of reading per correlation length]
-IB, IBD = slice(22, 22 + N_PORTS), slice(22 + N_PORTS, 22 + 2 * N_PORTS)
-#: the transducers' additive residual biases [Pa] (after the model-error states)
-IBIAS = slice(22 + 2 * N_PORTS, 22 + 3 * N_PORTS)
-#: the model's Mach error (relative): the pressure model read at M (1 + m) (after the biases)
-IMM = 22 + 3 * N_PORTS
-#: the model's flow-angle errors [rad]: the pressure model read at (α + a_m, β + b_m) (after m)
-IMA = slice(IMM + 1, IMM + 3)
-N_X = IMM + 3
 LAYOUT = ErrorStateLayout(N_X)
-STATE_NAMES = (
-    *(f"p_M_{a}" for a in "xyz"),
-    *(f"v_M_{a}" for a in "xyz"),
-    *(f"dtheta_B_{a}" for a in "xyz"),
-    "wind_north",
-    "wind_east",
-    "wind_down",
-    "ln_p_inf",
-    "ln_rho_inf",
-    *(f"scale_{i + 1}" for i in range(N_PORTS)),
-    "model_level",
-    *(f"model_error_{i + 1}" for i in range(N_PORTS)),
-    *(f"model_error_rate_{i + 1}" for i in range(N_PORTS)),
-    *(f"bias_{i + 1}" for i in range(N_PORTS)),
-    "model_mach_error",
-    "model_alpha_error",
-    "model_beta_error",
-)
 OUTPUT_NAMES = ("alpha", "beta", "qbar", "mach", "p_inf", "rho", "wind_north", "wind_east", "wind_down")
 """Columns of :func:`air_outputs` [rad, rad, Pa, 1, Pa, kg/m³, m/s, m/s, m/s]."""
 
@@ -307,6 +161,25 @@ class EkfPass:
         j = OUTPUT_NAMES.index(name)
         return self.outputs[:, j], self.sigma[:, j]
 
+    def output_error_pct(self, name: str, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(error, 1σ) (n,) [% of ``truth`` (n,), the true value on :attr:`t`] of one of
+        :data:`OUTPUT_NAMES`."""
+        v, s = self.output(name)
+        return 100 * (v / truth - 1), 100 * s / truth
+
+    def scale_history(self) -> tuple[np.ndarray, np.ndarray]:
+        """Scale factors and their 1σ (n, 7) [of reading] along the pass: the forward filter's
+        estimate converging when this pass estimated them, else the constant correction applied."""
+        if self.scale_estimated:
+            return self.forward.x_post[:, ILAM], self.sigma_post[:, ILAM]
+        n, m = self.t.size, self.scale.size
+        return np.broadcast_to(self.scale, (n, m)), np.broadcast_to(self.sigma_scale, (n, m))
+
+    def innovation_sigma(self) -> np.ndarray | None:
+        """√S_ii (k, 7) [Pa] of the forward pass's pressure innovations (None: no update ran)."""
+        inn = self.forward.innovations.get("pressure")
+        return None if inn is None else np.sqrt(np.einsum("kii->ki", inn.S))
+
 
 # ------------------------------------------------------------------------------------- model
 
@@ -349,19 +222,17 @@ _EPS_Z = np.array([1e-2, 1e-2, 1e-2, 1e-5, 1e-5])
 _NO_GRID = np.zeros(2)
 _NO_TABLE = np.zeros((2, 2, 2, 2))
 
-#: the measurement function runs as the compiled :func:`.kernel.pressure_kernel`; False: the numpy
-#: reference path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)
-USE_KERNEL = True
 
-
-def make_pressure_model(inp: EkfInputs):
-    """``h(x, C_B_M, use) -> (p (k,), H (k, 21))``: the pressures of the ports ``use`` [Pa] and their
-    Jacobian.  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞) and λ, so the
-    surface-pressure model is differenced in z (11 evaluations) and chained with ∂z/∂x."""
+def make_pressure_model(inp: EkfInputs, *, compiled: bool = True):
+    """``h(x, C_B_M, use) -> (p (k,), H (k, N_X))``: the pressures of the ports ``use`` [Pa] and
+    their Jacobian.  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞) and λ, so
+    the surface-pressure model is differenced in z (11 evaluations) and chained with ∂z/∂x.
+    ``compiled``: run as the compiled :func:`.kernel.pressure_kernel`; False: the numpy reference
+    path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)."""
     h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
     D = np.diag(_EPS_Z)
     dz = np.concatenate([np.zeros((1, 5)), D, -D])
-    compiled = USE_KERNEL and inp.model in ("newtonian", "table")
+    compiled = compiled and inp.model in ("newtonian", "table")
     if compiled:
         veh, tab = inp.vehicle, inp.table
         ports = (veh.cone(), veh.clock(), veh.radius() / veh.base_radius)
@@ -428,7 +299,8 @@ def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -
 
         def g(X, C_B_M=C_B_M):
             a, b, q, M, pi, rho = air_data_of_state(X, C_B_M, gamma)
-            return np.stack([a, b, q, M, pi, rho, X[..., 9], X[..., 10], X[..., 11]], axis=-1)
+            w = X[..., IW]
+            return np.stack([a, b, q, M, pi, rho, w[..., 0], w[..., 1], w[..., 2]], axis=-1)
 
         y, s, _ = derived_with_sigma(g, x[i : i + OUTPUT_CHUNK], P[i : i + OUTPUT_CHUNK], LAYOUT, EPS)
         ys.append(y)
@@ -440,7 +312,7 @@ def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -
 OUTPUT_CHUNK = 256
 
 
-def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.ndarray) -> tuple:
+def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.ndarray, compiled: bool) -> tuple:
     atm = MarsEngineeringAtmosphere()
     h0 = float(np.linalg.norm(inp.p_M[0]) - MARS.reference_radius)
     x0 = np.zeros(N_X)
@@ -460,7 +332,7 @@ def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.
         np.full(N_PORTS, markov_steady_var(st)[1]),
         np.full(N_PORTS, st.bias_sigma_pa**2),
         [st.model_mach_sigma**2],
-        np.full(2, angle_sigma(st, _flow(x0, quat_to_dcm(inp.q_M_B[0]).T, inp.gamma)[2]) ** 2),
+        np.full(2, angle_sigma(st, _flow(x0, quat_to_dcm(inp.q_M_B[0]).T, inp.gamma, compiled)[2]) ** 2),
     ]
     P0 = np.diag(d)
     P0[ILAM, ILAM] = scale_cov
@@ -506,9 +378,10 @@ def angle_sigma(st: EkfSettings, mach: float) -> float:
     return s0 * (1.0 + w * (st.model_angle_hypersonic_fraction - 1.0))
 
 
-def _flow(x: np.ndarray, C_B_M: np.ndarray, gamma: float) -> tuple[float, float, float]:
-    """(α [rad], β [rad], Mach) of one state ``x`` (N_X,) with the strapdown C_B_M (3, 3)."""
-    if USE_KERNEL:
+def _flow(x: np.ndarray, C_B_M: np.ndarray, gamma: float, compiled: bool = True) -> tuple[float, float, float]:
+    """(α [rad], β [rad], Mach) of one state ``x`` (N_X,) with the strapdown C_B_M (3, 3); compiled
+    (:func:`.kernel.flow_kernel`) or the numpy :func:`air_data_of_state`."""
+    if compiled:
         return flow_kernel(x, C_B_M, MARS.rotation_rate, gamma)
     a, b, _, m, _, _ = air_data_of_state(x, C_B_M, gamma)
     return float(a), float(b), float(m)
@@ -532,8 +405,9 @@ def _distance(f0: tuple[float, float, float], f1: tuple[float, float, float], st
     return float(abs(m1 - m0) / st.model_error_mach_length + d_angle)
 
 
-def make_transition(inp: EkfInputs, st: EkfSettings):
-    """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring)."""
+def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True):
+    """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring);
+    ``compiled``: the flight condition of a state by the compiled kernel (else numpy)."""
     t = inp.t
     C_M_B = quat_to_dcm(inp.q_M_B)
     idx = {float(v): i for i, v in enumerate(t.tolist())}
@@ -584,19 +458,19 @@ def make_transition(inp: EkfInputs, st: EkfSettings):
         Q[IV, IV] = qa * dt * I3
         Q[ITH, ITH] = st.attitude_psd * dt * I3
         km = abs(dh) / 1e3
-        Q[9, 9] = Q[10, 10] = st.wind_var_per_km * km
+        Q[IW_NORTH, IW_NORTH] = Q[IW_EAST, IW_EAST] = st.wind_var_per_km * km
         if st.vertical_wind_length_km > 0.0:
             # the vertical wind as gravity waves: zero-mean, decorrelating over the altitude travelled
             phi_w = math.exp(-km / st.vertical_wind_length_km)
-            x1[11] = phi_w * x[11]
-            F[11, 11] = phi_w
-            Q[11, 11] = st.vertical_wind_sigma_mps**2 * (1.0 - phi_w**2)
+            x1[IW_DOWN] = phi_w * x[IW_DOWN]
+            F[IW_DOWN, IW_DOWN] = phi_w
+            Q[IW_DOWN, IW_DOWN] = st.vertical_wind_sigma_mps**2 * (1.0 - phi_w**2)
         else:
-            Q[11, 11] = st.wind_var_per_km * km * (st.vertical_wind_sigma_mps / st.wind_sigma_mps) ** 2
+            Q[IW_DOWN, IW_DOWN] = st.wind_var_per_km * km * (st.vertical_wind_sigma_mps / st.wind_sigma_mps) ** 2
         Q[ILP, ILP] = Q[ILR, ILR] = st.atmosphere_var_per_km * km
         # the flight condition at both ends, once: the distance and the flow-angle σ(M) read it
-        f0 = _flow(x, C_B_M[k - 1], inp.gamma) if markov else None
-        f1 = _flow(x1, C_B_M[k], inp.gamma) if markov else None
+        f0 = _flow(x, C_B_M[k - 1], inp.gamma, compiled) if markov else None
+        f1 = _flow(x1, C_B_M[k], inp.gamma, compiled) if markov else None
         dist = _distance(f0, f1, st) if markov else 0.0
         if st.model_error_sigma > 0.0:
             Phi, Qb = markov_step(st, dist)
@@ -635,11 +509,13 @@ def run_pass(
     scale_fixed: np.ndarray | None = None,
     scale_cov_fixed: np.ndarray | None = None,
     keep_all: bool = False,
+    compiled: bool = True,
 ) -> EkfPass:
     """One pass: forward iterated EKF over the pressure samples, then RTS smoothing.
 
     ``keep_all``: keep the forward pass's covariances and the smoother's gains in the result
-    (tests); by default they are dropped after smoothing (:class:`EkfPass`).
+    (tests); by default they are dropped after smoothing (:class:`EkfPass`).  ``compiled``: the
+    compiled measurement and flight-condition kernels (False: the numpy reference path).
 
     ``estimate_scale``: the scale factors are states (prior 0 ± ``st.scale_factor_sigma``);
     otherwise the pressures are divided by ``1 + scale_fixed`` (7,) and the scale-factor states
@@ -665,10 +541,10 @@ def run_pass(
         def projector(_x):
             return Pi
 
-    x0, P0 = _initial(inp, st, scale0, Pl0)
-    h = make_pressure_model(inp)
+    x0, P0 = _initial(inp, st, scale0, Pl0, compiled)
+    h = make_pressure_model(inp, compiled=compiled)
     C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
-    transition = make_transition(inp, st)
+    transition = make_transition(inp, st, compiled=compiled)
 
     def measurements_at(k, tk, x):
         use = np.flatnonzero(inp.usable[k] & np.isfinite(p[k]))
@@ -739,11 +615,11 @@ def run_pass(
     )
 
 
-def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False):
+def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False, *, compiled: bool = True):
     """Yield pass 1 (scale factors estimated) and, with ``st.passes == 2``, pass 2 (pressures
-    corrected by pass 1's scale factors); ``keep_all`` as :func:`run_pass`."""
+    corrected by pass 1's scale factors); ``keep_all``, ``compiled`` as :func:`run_pass`."""
     n = int(st.passes)
-    first = run_pass(inp, st, index=1, passes=n, estimate_scale=True, keep_all=keep_all)
+    first = run_pass(inp, st, index=1, passes=n, estimate_scale=True, keep_all=keep_all, compiled=compiled)
     yield first
     if n >= 2:
         yield run_pass(
@@ -755,4 +631,5 @@ def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False):
             scale_fixed=first.scale,
             scale_cov_fixed=first.scale_cov,
             keep_all=keep_all,
+            compiled=compiled,
         )

@@ -20,12 +20,10 @@ when the port σ are right, so it is judged like a normalised innovation squared
   q∞ that differ by the Newtonian's model-form error (the noise is common to both fits and
   cancels); where that difference exceeds the published 3σ at more than
   :data:`MODEL_FORM_MAX_OUTSIDE` of the samples, the published uncertainty does not cover the
-  model's own error and the run cannot vouch for itself: a WARNING naming the output, the
-  fraction and the sizes, an ERROR above :data:`MODEL_FORM_ERROR_OUTSIDE` (measured on
-  ``msl_meads`` seeds 11/1/2, issue #10: the Newtonian's α differs from the table's by a median
-  1.13° against a published 3σ of 0.36°, beyond it at 71 % of the samples: ERROR; q∞ by 0.94 %
-  against 3.5 %: OK).  With the table as the model the check is not made: the
-  Newtonian is the cruder model, its difference is not an error of the table;
+  model's own error and the run cannot vouch for itself: a WARNING naming the output, the fraction
+  and the sizes, an ERROR above :data:`MODEL_FORM_ERROR_OUTSIDE` (measured:
+  ``docs/tuning/meads.md``). With the table as the model the check is not made: the Newtonian is
+  the cruder model, its difference is not an error of the table;
 * the tightly-coupled EKF (Sect. III.B), when run: per pass and port, the normalised innovation
   squared ``y_i² / S_ii`` of the forward pass above the threshold (χ²(1) each), and the smoothed
   covariance symmetric and positive definite (judged on its correlation matrix, so that

@@ -2,9 +2,9 @@
 
 :func:`workbench.problems.meads.ekf.make_pressure_model` is called ~11 000 times per run (two
 passes, iterated updates) on one state at a time. Its numpy version (the reference path,
-``ekf.USE_KERNEL = False``) spends ~1 ms a call in the overhead of ~200 small array operations
-(scipy's ``RegularGridInterpolator`` alone 0.4 ms), not in arithmetic. :func:`pressure_kernel`
-does the same arithmetic in one compiled call, in the same order of operations:
+``compiled=False`` of :func:`.ekf.run_pass`) spends ~1 ms a call in the overhead of ~200 small
+array operations (scipy's ``RegularGridInterpolator`` alone 0.4 ms), not in arithmetic.
+:func:`pressure_kernel` does the same arithmetic in one compiled call, in the same order of operations:
 
 1. the body-axis air velocity ``u = (I − [δθ×]) C_B_M (v_M + Ω ẑ × p_M − C_M_N w_N)`` at the state
    and its central-difference Jacobian over position, velocity, attitude error and wind with the
@@ -28,19 +28,21 @@ import math
 import numpy as np
 from numba import njit
 
+from workbench.problems.meads.state import ILP, ILR, IP, ITH, IV, IW, N_U_COLS
+
 __all__ = ["pressure_kernel", "flow_kernel", "N_U_COLS"]
 
-#: state columns the air velocity depends on (position, velocity, attitude error, wind)
-N_U_COLS = 12
+# the state's first columns as compile-time integers (the compiled code indexes element by element)
+_P0, _V0, _TH0, _W0 = IP.start, IV.start, ITH.start, IW.start
 
 
 @njit(cache=True, nogil=True)
 def _air_velocity(x, C, omega, out):  # pragma: no cover - compiled
     """Body-axis air velocity (3,) [m/s] of state x (n_x,) with the strapdown C_B_M (3, 3)."""
-    px, py, pz = x[0], x[1], x[2]
-    vgx = x[3] + omega * py
-    vgy = x[4] + omega * -px
-    vgz = x[5]
+    px, py, pz = x[_P0], x[_P0 + 1], x[_P0 + 2]
+    vgx = x[_V0] + omega * py
+    vgy = x[_V0 + 1] + omega * -px
+    vgz = x[_V0 + 2]
     r = math.sqrt(px * px + py * py + pz * pz)
     ux, uy, uz = px / r, py / r, pz / r
     ex, ey = -uy, ux  # ẑ × up
@@ -49,14 +51,14 @@ def _air_velocity(x, C, omega, out):  # pragma: no cover - compiled
     nx = uy * 0.0 - uz * ey  # up × east (east_z = 0)
     ny = uz * ex - ux * 0.0
     nz = ux * ey - uy * ex
-    wn, we, wd = x[9], x[10], x[11]
+    wn, we, wd = x[_W0], x[_W0 + 1], x[_W0 + 2]
     ax = vgx - (nx * wn + ex * we - ux * wd)
     ay = vgy - (ny * wn + ey * we - uy * wd)
     az = vgz - (nz * wn + 0.0 * we - uz * wd)
     u0 = C[0, 0] * ax + C[0, 1] * ay + C[0, 2] * az
     u1 = C[1, 0] * ax + C[1, 1] * ay + C[1, 2] * az
     u2 = C[2, 0] * ax + C[2, 1] * ay + C[2, 2] * az
-    t0, t1, t2 = x[6], x[7], x[8]
+    t0, t1, t2 = x[_TH0], x[_TH0 + 1], x[_TH0 + 2]
     out[0] = u0 - (t1 * u2 - t2 * u1)
     out[1] = u1 - (t2 * u0 - t0 * u2)
     out[2] = u2 - (t0 * u1 - t1 * u0)
@@ -131,24 +133,24 @@ def pressure_kernel(
 ):  # pragma: no cover - compiled
     """Port pressures and their Jacobian in z for one filter state.
 
-    ``x`` (n_x,) the EKF state (``ekf.STATE_NAMES``: p_M, v_M [m, m/s] in the planet-centred inertial
-    frame, δθ_B [rad], wind NED [m/s], ln p∞, ln ρ∞ at columns 12, 13); ``C`` (3, 3) the strapdown
-    C_B_M; ``eps_x`` (n_x,) the state perturbations; ``eps_z`` (5,) those of z = (u_B [m/s], ln p∞,
+    ``x`` (n_x,) the EKF state (:mod:`.state`: p_M, v_M [m, m/s] in the planet-centred inertial
+    frame, δθ_B [rad], wind NED [m/s], ln p∞, ln ρ∞ at ``ILP``, ``ILR``); ``C`` (3, 3) the
+    strapdown C_B_M; ``eps_x`` (n_x,) the state perturbations; ``eps_z`` (5,) those of z = (u_B [m/s], ln p∞,
     ln ρ∞); ``use`` (k,) int port indices; ``gamma``; ``omega`` the planet's rotation rate [rad/s];
     ``table_model`` True: the table ``values`` on grids ``gm`` (Mach), ``ga`` (α_T [rad]), ``gc``
     (relative clock [rad]), ``gs`` (r/Rb); False: Newtonian with the ports' ``port_cone`` [rad];
     ``port_clock`` [rad], ``port_s`` (m,) of every port.
 
-    Returns ``u0`` (3,) [m/s], ``Ju`` (3, 12) the Jacobian of u over state columns 0–11, ``p0`` (k,)
+    Returns ``u0`` (3,) [m/s], ``Ju`` (3, N_U_COLS) the Jacobian of u over state columns 0 to N_U_COLS − 1, ``p0`` (k,)
     [Pa] and ``dp_dz`` (k, 5) [Pa per unit of z].
     """
     u0 = np.empty(3)
-    Ju = np.empty((3, 12))
+    Ju = np.empty((3, N_U_COLS))
     up = np.empty(3)
     um = np.empty(3)
     xp = x.copy()
     _air_velocity(x, C, omega, u0)
-    for j in range(12):
+    for j in range(N_U_COLS):
         e = eps_x[j]
         xp[j] = x[j] + e
         _air_velocity(xp, C, omega, up)
@@ -159,7 +161,7 @@ def pressure_kernel(
             Ju[r, j] = (up[r] - um[r]) / (2.0 * e)
     k = use.size
     pz = np.empty((11, k))
-    z0 = np.array([u0[0], u0[1], u0[2], x[12], x[13]])
+    z0 = np.array([u0[0], u0[1], u0[2], x[ILP], x[ILR]])
     for row in range(11):
         z = z0.copy()
         if row > 0:
@@ -211,4 +213,4 @@ def flow_kernel(x, C, omega, gamma):  # pragma: no cover - compiled
     V = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
     a = math.atan2(u[2], u[0])
     b = math.asin(min(max(u[1] / V, -1.0), 1.0))
-    return a, b, V / math.sqrt(gamma * math.exp(x[12]) / math.exp(x[13]))
+    return a, b, V / math.sqrt(gamma * math.exp(x[ILP]) / math.exp(x[ILR]))

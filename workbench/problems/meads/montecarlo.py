@@ -24,10 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.estimation.montecarlo import run_monte_carlo
-from workbench.io.scenario import Scenario
-from workbench.models.flush_airdata import FadsVehicle, load_fads_vehicle
+from workbench.models.flush_airdata import FadsVehicle
 from workbench.problems.meads.airdata import fit_air_data, pressure_model
-from workbench.problems.meads.config import config_for
+from workbench.problems.meads.config import MeadsSettings
 from workbench.problems.meads.pipeline import sensor_sigma
 from workbench.problems.meads.truth import simulate_entry
 
@@ -102,6 +101,7 @@ def _errors(sh: TradeShared, eps: np.ndarray, level: float) -> np.ndarray:
             solution="mach",
             gamma=sh.gamma,
             mach_guess=tile(sh.mach[k], r),
+            fixed_r=0.0,  # not used by the Mach set
             iterations=8,
         )
         e[:, k, 3] = g.mach.reshape(r, k.size) - sh.mach[k]
@@ -134,13 +134,18 @@ class TradeStudy:
     wall_s: float
 
 
-def prepare_trade_study(scenario: Scenario, stride: int | None = None, min_qbar: float = 400.0) -> TradeShared:
-    """The reference trajectory (truth simulator, no sensor errors) sampled every ``stride``-th
-    pressure time where the true q∞ ≥ ``min_qbar`` [Pa], before the parachute."""
-    cfg = config_for(scenario)
-    vehicle = load_fads_vehicle(scenario.path_of("vehicle.file"))
+#: The trade study's samples: true q∞ at least this [Pa] (below the objectives' 850 Pa, to draw the curves).
+TRADE_MIN_QBAR_PA = 400.0
+
+
+def prepare_trade_study(settings: MeadsSettings) -> TradeShared:
+    """The reference trajectory (truth simulator of ``settings.truth``, no sensor errors) sampled
+    every ``settings.mc.stride``-th pressure time where the true q∞ ≥ :data:`TRADE_MIN_QBAR_PA`,
+    before the parachute (vary the stride with ``dataclasses.replace`` on ``settings.mc``)."""
+    cfg = settings
+    vehicle = cfg.vehicle
     truth = simulate_entry(vehicle, cfg.truth)
-    stride = stride or cfg.mc.stride
+    stride, min_qbar = cfg.mc.stride, TRADE_MIN_QBAR_PA
     t = np.arange(0.0, truth.t[-1], stride / cfg.pressure.rate_hz)
     f = {k: np.interp(t, truth.t, getattr(truth, k)) for k in ("qbar", "alpha", "beta", "mach")}
     sel = (f["qbar"] >= min_qbar) & (t < truth.t_chute)

@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -41,15 +41,13 @@ from threadpoolctl import threadpool_limits
 
 from workbench.core.atmosphere import CO2_SUTHERLAND, MARS_CO2_GAS_CONSTANT, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
-from workbench.core.rotation import quat_normalize
+from workbench.core.rotation import dcm_to_quat, quat_normalize, quat_to_dcm
 from workbench.estimation.health import health_markdown
 from workbench.estimation.strapdown import imu_arrays, integrate
-from workbench.io.scenario import Scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.models.flush_airdata import (
     FadsVehicle,
     build_estimator_table,
-    load_fads_vehicle,
     second_order_tube,
 )
 from workbench.problems.meads.airdata import (
@@ -61,7 +59,7 @@ from workbench.problems.meads.airdata import (
     ned_frames,
     solve_winds,
 )
-from workbench.problems.meads.config import EstimatorSettings, config_for
+from workbench.problems.meads.config import EstimatorSettings, MeadsSettings
 from workbench.problems.meads.ekf import EkfInputs, EkfPass, run_passes
 from workbench.problems.meads.health import meads_health
 from workbench.problems.meads.telemetry import MeadsTelemetry, read_meads_telemetry, true_runs
@@ -78,16 +76,13 @@ __all__ = [
     "reduce_pressures",
     "score",
     "scorecard_markdown",
-    "vehicle_for",
 ]
+
+#: local East-North-Up from North-East-Down
+C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 TRANSDUCER_T_K = 300.0
 """Gas temperature [K] the estimator assumes in the tubes (lag inversion)."""
-
-
-def vehicle_for(scenario: Scenario) -> FadsVehicle:
-    """The scenario's vehicle file, loaded and checked."""
-    return load_fads_vehicle(scenario.path_of("vehicle.file"))
 
 
 @dataclass(frozen=True)
@@ -115,6 +110,12 @@ class Navigation:
     h: np.ndarray
     f_mag: np.ndarray
 
+    def q_ENU_B(self) -> np.ndarray:
+        """The strapdown attitude (n, 4) at ``t_p`` as body → local East-North-Up at the vehicle
+        (scalar-last), ``C_ENU_NED C_N_M C_M_B``: the frame the recording's scene is drawn in."""
+        C_L_B = np.einsum("ij,njk,nkl->nil", C_ENU_NED, ned_frames(self.p_M), quat_to_dcm(self.q_M_B))
+        return dcm_to_quat(C_L_B)
+
 
 @dataclass(frozen=True)
 class LagCorrection:
@@ -125,6 +126,11 @@ class LagCorrection:
     p: np.ndarray
     delay: np.ndarray
     applied: bool
+
+    @property
+    def correction(self) -> np.ndarray:
+        """What the inversion added to the measured pressures (n, m) [Pa] (NaN where no sample)."""
+        return self.p - self.p_raw
 
 
 @dataclass(frozen=True)
@@ -152,6 +158,11 @@ class AirDataStage:
     plausibility_ratio: float
     fixed_r_rows: np.ndarray
 
+    @property
+    def residual_used(self) -> np.ndarray:
+        """The final fit's residuals (n, m) [Pa] of the ports used, NaN for the others."""
+        return np.where(self.mask, self.fit.wls.residual, np.nan)
+
 
 @dataclass(frozen=True)
 class WindStage:
@@ -165,6 +176,10 @@ class WindStage:
     mach_source: np.ndarray
     p_inf: np.ndarray
     sigma_p_inf: np.ndarray
+
+    def density_error_pct(self, rho_true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(error, 1σ) (n,) [% of the true density ``rho_true`` (n,), kg/m³, on these samples]."""
+        return 100 * (self.density / rho_true - 1), 100 * self.sigma_density / rho_true
 
 
 @dataclass(frozen=True)
@@ -489,12 +504,13 @@ def winds_and_density(fit: AirDataFit, nav: Navigation, est: EstimatorSettings, 
 # ------------------------------------------------------------------------------- pipeline
 
 
-def reconstruct(scenario: Scenario, telemetry: Mapping[str, Path]) -> Iterator[object]:
-    """Run the stages of the module docstring on the telemetry files; yields each stage."""
+def reconstruct(settings: MeadsSettings, telemetry: Mapping[str, Path]) -> Iterator[object]:
+    """Run the stages of the module docstring on the telemetry files (``{stream: path}``) with the
+    run's ``settings`` (its vehicle, estimator and filter); yields each stage."""
     t_start = time.perf_counter()
-    cfg = config_for(scenario)
+    cfg = settings
     est = cfg.estimator
-    vehicle = vehicle_for(scenario)
+    vehicle = cfg.vehicle
     tel = read_meads_telemetry(dict(telemetry), vehicle)
     yield PressureData(tel, vehicle)
     nav = navigate(tel, vehicle)
@@ -505,7 +521,7 @@ def reconstruct(scenario: Scenario, telemetry: Mapping[str, Path]) -> Iterator[o
     first, fit, mask, failures, hi = fit_with_failures(tel.t_p, lag.p, vehicle, nav, est, ports, tel.pressure_file)
     ratio = plausibility(first, nav, vehicle, est, tel)
     alt_model = "table" if est.model == "newtonian" else "newtonian"
-    alt_est = EstimatorSettings(**{**est.__dict__, "model": alt_model, "fixed_r": 0.0})
+    alt_est = replace(est, model=alt_model, fixed_r=0.0)
     alt, _ = reduce_pressures(tel.t_p, lag.p, vehicle, nav.mach_inertial, alt_est, mask=mask)
     air = AirDataStage(tel.t_p, first, fit, mask, tuple(failures), alt, ratio, hi)
     yield air
@@ -516,7 +532,7 @@ def reconstruct(scenario: Scenario, telemetry: Mapping[str, Path]) -> Iterator[o
         for ps in run_passes(ekf_inputs(tel, vehicle, nav, lag, air, est, cfg.ekf), cfg.ekf):
             passes.append(ps)
             yield ps
-    summary = _summary(scenario, tel, nav, lag, air, wind, est)
+    summary = _summary(settings.run.name, tel, nav, lag, air, wind, est)
     if passes:
         summary["ekf"] = _ekf_summary(passes, air, est)
     summary["health"] = meads_health(tel, nav, air, wind, est, passes)
@@ -593,13 +609,13 @@ def _stats(x: np.ndarray) -> dict:
     return {"n": int(x.size), "min": float(x.min()), "max": float(x.max()), "median": float(np.median(x))}
 
 
-def _summary(scenario, tel, nav, lag, air: AirDataStage, wind: WindStage, est) -> dict:
+def _summary(name: str, tel, nav, lag, air: AirDataStage, wind: WindStage, est) -> dict:
     fit = air.fit
     above = np.nan_to_num(fit.qbar) >= est.min_qbar_pa
     w = wind.winds
     sing = true_runs(w.singular & above)
     return {
-        "scenario": scenario.name,
+        "scenario": name,
         "kind": "meads",
         "model": est.model,
         "solution": est.solution,

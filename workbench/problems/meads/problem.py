@@ -17,10 +17,11 @@ import numpy as np
 from workbench.io import progress as prog
 from workbench.io.moments import KeyMoment
 from workbench.io.scenario import Scenario, ScenarioError
+from workbench.models.flush_airdata import FADS_PORT_SCHEMA, FADS_VEHICLE_SCHEMA
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.meads import pipeline as md
-from workbench.problems.meads.config import SCHEMA
-from workbench.problems.meads.telemetry import STREAMS, telemetry_paths
+from workbench.problems.meads.config import SCHEMA, MeadsSettings
+from workbench.problems.meads.telemetry import INITIAL_STATE_SCHEMA, STREAMS, telemetry_paths
 
 __all__ = ["MeadsProblem", "key_moments"]
 
@@ -84,23 +85,25 @@ class MeadsProblem:
     kind = "meads"
     title = "entry"
     schema = SCHEMA
+    file_schemas = (FADS_VEHICLE_SCHEMA, FADS_PORT_SCHEMA, INITIAL_STATE_SCHEMA)
 
-    def settings(self, scenario: Scenario) -> Scenario:
-        """TRANSITIONAL (issue 25): the scenario itself, until this package builds frozen settings."""
-        return scenario
+    def settings(self, scenario: Scenario) -> MeadsSettings:
+        """The run's frozen settings (:meth:`MeadsSettings.from_scenario`: validated, the vehicle
+        file read once); every other method receives them, never the scenario."""
+        return MeadsSettings.from_scenario(scenario)
 
-    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
-        """``[telemetry]`` files, or the standard names in ``folder``."""
+    def telemetry_files(self, settings: MeadsSettings, folder: Path | None = None) -> dict[str, Path]:
+        """``[telemetry]`` files (absolute), or the standard names in ``folder``."""
         if folder is None:
-            return telemetry_paths(scenario)
+            return telemetry_paths(settings.telemetry, settings.run.path)
         d = Path(folder)
         return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
 
-    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+    def synthesize(self, settings: MeadsSettings, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the entry (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
         from workbench.problems.meads.synthetic import synthesize_meads
 
-        paths = synthesize_meads(scenario, out_dir, seed)
+        paths = synthesize_meads(settings, out_dir, seed)
         return Synthesized(telemetry={k: v for k, v in paths.items() if k != "truth"}, truth=paths["truth"])
 
     def load_truth(self, path: Path) -> dict:
@@ -109,9 +112,11 @@ class MeadsProblem:
 
         return load_truth(path)
 
-    def reconstruct(self, scenario: Scenario, telemetry: Mapping[str, Path], options: RunOptions) -> Iterator[object]:
+    def reconstruct(
+        self, settings: MeadsSettings, telemetry: Mapping[str, Path], options: RunOptions
+    ) -> Iterator[object]:
         """``pipeline.reconstruct``."""
-        return md.reconstruct(scenario, dict(telemetry))
+        return md.reconstruct(settings, dict(telemetry))
 
     def summary(self, result: md.MeadsResult) -> dict:
         """A copy of ``result.summary``."""
@@ -142,16 +147,14 @@ class MeadsProblem:
         return line
 
     @contextlib.contextmanager
-    def open_recording(self, path: Path, scenario: Scenario, truth: Any, properties: dict) -> Iterator[_Drawer]:
+    def open_recording(self, path: Path, settings: MeadsSettings, truth: Any, properties: dict) -> Iterator[_Drawer]:
         """The MEADS recording (``recording.meads_blueprint``)."""
-        from workbench.problems.meads.config import config_for
         from workbench.problems.meads.recording import MeadsRecorder, meads_blueprint
         from workbench.recording.writer import open_recording
 
-        vehicle = md.vehicle_for(scenario)
-        ekf = config_for(scenario).ekf
-        bp = meads_blueprint(vehicle.port_names, ekf.passes if ekf.enabled else 0)
-        with open_recording(path, scenario.name, blueprint=bp, properties=properties) as rec:
+        ekf = settings.ekf
+        bp = meads_blueprint(settings.vehicle.port_names, ekf.passes if ekf.enabled else 0)
+        with open_recording(path, settings.run.name, blueprint=bp, properties=properties) as rec:
             yield _Drawer(rec, MeadsRecorder(rec, truth))
 
     def export_columns(self, result: md.MeadsResult) -> ExportTable:
@@ -190,7 +193,7 @@ class MeadsProblem:
         frame = "air data: body axes B; winds: local north/east (EKF: north/east/down)"
         return ExportTable(result.air.t, cols, frame, sparse=sparse)
 
-    def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
+    def monte_carlo(self, settings: MeadsSettings, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
         """The paper's trade study (:mod:`.montecarlo`) with ``options.n_runs`` runs per error level
         (``workbench mc msl_meads --seeds 3000``), seed ``first_seed``, on ``options.workers``
         processes or ``options.scheduler``; writes ``<out>/<name>_mc.rrd`` (:mod:`.recording_mc`).
@@ -198,19 +201,18 @@ class MeadsProblem:
         instead (:mod:`.truth_mc`, ``workbench mc msl_meads --truth-sim --seeds 50``; the runner
         writes ``<name>_truth.mc.json``), recorded in ``<out>/<name>_truth_mc.rrd``."""
         if options.truth_sim:
-            return self._truth_monte_carlo(scenario, Path(out_dir), options, progress)
-        from workbench.problems.meads.config import config_for
+            return self._truth_monte_carlo(settings, Path(out_dir), options, progress)
         from workbench.problems.meads.montecarlo import CHUNK, QUANTITIES, prepare_trade_study, run_trade_study
         from workbench.problems.meads.recording_mc import record_trade_study
 
         t0 = time.perf_counter()
-        cfg = config_for(scenario)
+        cfg, name = settings, settings.run.name
         runs = int(options.n_runs) if options.n_runs else cfg.mc.runs
         where = options.scheduler or f"{options.workers} local worker(s)"
         progress(f"trade study: {runs} runs x {len(cfg.mc.levels)} levels ({where}) ...")
         rep = prog.current()
         with rep.stage("truth simulation + nominal air-data fit"):
-            sh = prepare_trade_study(scenario)
+            sh = prepare_trade_study(settings)
         with rep.counter("trade study runs", total=runs, unit="runs") as bar:  # counted in tasks of CHUNK runs
             ts = run_trade_study(
                 sh,
@@ -220,9 +222,9 @@ class MeadsProblem:
                 scheduler=options.scheduler,
                 progress=lambda done, _tasks: bar.set(min(done * CHUNK, runs)),
             )
-        summary = {"scenario": scenario.name, "kind": "meads_trade_study", **ts.summary}
+        summary = {"scenario": name, "kind": "meads_trade_study", **ts.summary}
         summary["wall_time_s"] = time.perf_counter() - t0
-        rrd = record_trade_study(Path(out_dir) / f"{scenario.name}_mc.rrd", f"{scenario.name} trade study", ts, summary)
+        rrd = record_trade_study(Path(out_dir) / f"{name}_mc.rrd", f"{name} trade study", ts, summary)
         parts = []
         for lv, row in summary["table"].items():
             met = [q for q in QUANTITIES if row[q]["met"]]
@@ -231,28 +233,29 @@ class MeadsProblem:
         return McOutcome(summary, Path(rrd), headline, ts)
 
     def _truth_monte_carlo(
-        self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress
+        self, settings: MeadsSettings, out_dir: Path, options: McOptions, progress: Progress
     ) -> McOutcome:
         """``monte_carlo`` with ``truth_sim``: :func:`.truth_mc.run_full_monte_carlo` with
         ``options.n_runs`` members seeded from ``options.first_seed``."""
         from workbench.problems.meads.recording_mc import record_truth_mc
         from workbench.problems.meads.truth_mc import run_full_monte_carlo
 
-        if not scenario.is_synthetic:
+        name = settings.run.name
+        if not settings.run.synthetic:
             raise ScenarioError(
-                scenario.path, "synthetic", "the Monte Carlo against the truth needs a synthetic scenario ([synthetic])"
+                settings.run.path,
+                "synthetic",
+                "the Monte Carlo against the truth needs a synthetic scenario ([synthetic])",
             )
         t0 = time.perf_counter()
         n = int(options.n_runs)
         where = options.scheduler or f"{options.workers} local worker(s)"
         progress(f"Monte Carlo against the truth simulator, full error model: {n} members ({where}) ...")
         res = run_full_monte_carlo(
-            scenario, n_runs=n, seed=options.first_seed, workers=options.workers, scheduler=options.scheduler
+            settings, n_runs=n, seed=options.first_seed, workers=options.workers, scheduler=options.scheduler
         )
         summary = {**res.summary, "wall_time_s": time.perf_counter() - t0}
-        rrd = record_truth_mc(
-            Path(out_dir) / f"{scenario.name}_truth_mc.rrd", f"{scenario.name} Monte Carlo vs truth", res, summary
-        )
+        rrd = record_truth_mc(Path(out_dir) / f"{name}_truth_mc.rrd", f"{name} Monte Carlo vs truth", res, summary)
         last = summary["table"].get("ekf_pass2") or summary["table"].get("least_squares") or {}
         met = [q for q, row in last.items() if row.get("3rms_meets_objective")]
         verdict = (

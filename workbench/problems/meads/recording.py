@@ -31,9 +31,7 @@ import numpy as np
 import rerun.blueprint as rrb
 import trimesh
 
-from workbench.core.rotation import dcm_to_quat, quat_to_dcm
 from workbench.models.flush_airdata import FadsVehicle
-from workbench.problems.meads.airdata import ned_frames
 from workbench.problems.meads.ekf import EkfPass
 from workbench.problems.meads.pipeline import (
     AirDataStage,
@@ -43,6 +41,7 @@ from workbench.problems.meads.pipeline import (
     PressureData,
     WindStage,
 )
+from workbench.problems.meads.synthetic import TruthArrays
 from workbench.problems.meads.telemetry import true_runs
 from workbench.recording import layout
 from workbench.recording.blueprint import events_view, plot_view, report_view, tab
@@ -73,15 +72,13 @@ EKF_PLOTS = (
     ("wind_north_mps", "wind_north", 1.0, "north [m/s]"),
     ("wind_east_mps", "wind_east", 1.0, "east [m/s]"),
 )
-C_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
 
-def meads_blueprint(
-    ports: tuple[str, ...] = ("P1", "P2", "P3", "P4", "P5", "P6", "P7"), ekf_passes: int = 2
-) -> rrb.Blueprint:
+def meads_blueprint(ports: tuple[str, ...], ekf_passes: int) -> rrb.Blueprint:
     """Default layout: the heat shield (left top), air-data plots (right top, one tab per quantity),
-    per-port pressure, residual and EKF-innovation tabs (right bottom; the innovations of the last
-    of ``ekf_passes``, none when 0), scorecard and events (left bottom)."""
+    per-port pressure, residual and EKF-innovation tabs (right bottom, one per name of ``ports``, the
+    vehicle's; the innovations of the last of ``ekf_passes``, none when 0), scorecard and events
+    (left bottom)."""
     scene = rrb.Spatial3DView(
         name="Heat shield (reconstructed attitude, local ENU)",
         origin=layout.WORLD,
@@ -164,7 +161,7 @@ class MeadsRecorder:
 
     def __init__(self, rec, truth: dict | None) -> None:
         self.rec = rec
-        self.truth = truth
+        self.truth = None if truth is None else TruthArrays(truth)
         self.vehicle: FadsVehicle | None = None
         self.nav: Navigation | None = None
         self._fit = None
@@ -181,10 +178,7 @@ class MeadsRecorder:
         )
 
     def _truth(self, key: str, t: np.ndarray, scale: float = 1.0, col: int | None = None):
-        if self.truth is None:
-            return None
-        y = self.truth[key] if col is None else self.truth[key][:, col]
-        return scale * np.interp(t, self.truth["t"], y)
+        return None if self.truth is None else self.truth.at(key, t, scale, col)
 
     def _data(self, st: PressureData) -> None:
         self.vehicle = st.vehicle
@@ -204,9 +198,7 @@ class MeadsRecorder:
 
     def _nav(self, st: Navigation) -> None:
         self.nav = st
-        C_M_B = quat_to_dcm(st.q_M_B)
-        C_L_B = np.einsum("ij,njk,nkl->nil", C_ENU_NED, ned_frames(st.p_M), C_M_B)
-        self.rec.poses(layout.VEHICLE, st.t_p, np.zeros((st.t_p.size, 3)), dcm_to_quat(C_L_B))
+        self.rec.poses(layout.VEHICLE, st.t_p, np.zeros((st.t_p.size, 3)), st.q_ENU_B())
 
     def _lag(self, st: LagCorrection) -> None:
         self.rec.scalars(
@@ -219,7 +211,7 @@ class MeadsRecorder:
         self.rec.scalars(
             layout.join(layout.plot_path("lag_correction_Pa"), "P1_P4"),
             st.t,
-            np.nan_to_num(st.p[:, [0, 3]] - st.p_raw[:, [0, 3]]),
+            np.nan_to_num(st.correction[:, [0, 3]]),
             names=["P1 corrected − measured [Pa]", "P4 corrected − measured [Pa]"],
         )
 
@@ -251,7 +243,7 @@ class MeadsRecorder:
             truth=self._truth("qbar", t, 1e-3),
             names="q∞ [kPa]",
         )
-        z = f.wls.residual / f.sigma_p
+        z = f.normalized_residual
         for j, p in enumerate(self.vehicle.port_names):
             rec.scalars(
                 layout.meads_port_plot_path(p, layout.PREDICTED_SERIES),
@@ -260,7 +252,7 @@ class MeadsRecorder:
                 names=f"{p} model ({f.model}) [Pa]",
                 colors=(220, 90, 30),
             )
-            r = np.where(st.mask[:, j], f.wls.residual[:, j], np.nan)
+            r = st.residual_used[:, j]
             rec.series_with_bounds(
                 layout.residual_path("pressure", p), t, np.nan_to_num(r), f.sigma_p[:, j], names=f"{p} residual [Pa]"
             )
@@ -269,7 +261,7 @@ class MeadsRecorder:
         pr = _port_points(self.vehicle, 0.15)
         every = max(1, t.size // 600)
         k = np.arange(0, t.size, every)
-        meas = f.predicted + np.nan_to_num(f.wls.residual)
+        meas = f.measured
         u = meas[k] / np.maximum(np.nanmax(meas[k], axis=1, keepdims=True), 1e-9)
         rec.points_series(
             layout.MEADS_PORTS, t[k], np.broadcast_to(pts, (k.size, *pts.shape)), colors=_ramp(u), radii=0.09
@@ -297,16 +289,16 @@ class MeadsRecorder:
             rec.series_with_bounds(
                 layout.plot_path("density"),
                 t,
-                100 * (st.density / rt - 1),
-                100 * st.sigma_density / rt,
+                *st.density_error_pct(rt),
                 truth=np.zeros_like(t),
                 names="ρ error [%]",
             )
         else:
             rec.series_with_bounds(layout.plot_path("density"), t, st.density, st.sigma_density, names="ρ [kg/m³]")
         w = st.winds
+        sigma = np.nan_to_num(w.sigma_NE)
         for j, q in enumerate(("wind_north_mps", "wind_east_mps")):
-            sd = np.sqrt(np.nan_to_num(w.P[:, j, j], nan=0.0))
+            sd = sigma[:, j]
             rec.series_with_bounds(
                 layout.plot_path(q),
                 t,
@@ -316,8 +308,7 @@ class MeadsRecorder:
                 names=f"{'north' if j == 0 else 'east'} [m/s] (0 where not published)",
             )
         # wind-relative velocity arrow in body axes, from the air-data angles
-        a, b = np.nan_to_num(self._fit.alpha), np.nan_to_num(self._fit.beta)
-        d = np.stack([np.cos(a) * np.cos(b), np.sin(b), np.sin(a) * np.cos(b)], 1)
+        d = self._fit.air_direction_B
         every = max(1, t.size // 600)
         k = np.arange(0, t.size, every)
         strips = np.stack([np.zeros((k.size, 3)), 3.0 * d[k]], 1)
@@ -353,8 +344,7 @@ class MeadsRecorder:
                 rec.series_with_bounds(
                     path,
                     t,
-                    100 * (rho / rt - 1),
-                    100 * srho / rt,
+                    *st.output_error_pct("rho", rt),
                     names=f"EKF pass {st.index} ρ error [%]",
                     color=[col],
                 )
@@ -363,12 +353,7 @@ class MeadsRecorder:
         # scale factors [%]: pass 1 the forward estimate converging, pass 2 the correction applied
         ports = self.vehicle.port_names
         m = len(ports)
-        if st.scale_estimated:
-            lam = st.forward.x_post[:, 14 : 14 + m]
-            slam = st.sigma_post[:, 14 : 14 + m]
-        else:
-            lam = np.broadcast_to(st.scale, (t.size, m))
-            slam = np.broadcast_to(st.sigma_scale, (t.size, m))
+        lam, slam = st.scale_history()
         rec.series_with_bounds(
             layout.meads_scale_factor_path(f"pass{st.index}"),
             t,
@@ -383,9 +368,8 @@ class MeadsRecorder:
                 100 * np.broadcast_to(np.asarray(self.truth["sensor_scale"], float), (t.size, m)),
                 names=[f"{p} truth [%]" for p in ports],
             )
-        inn = st.forward.innovations.get("pressure")
+        inn, sd = st.forward.innovations.get("pressure"), st.innovation_sigma()
         if inn is not None:
-            sd = np.sqrt(np.einsum("kii->ki", inn.S))
             for j, p in enumerate(ports):
                 rec.series_with_bounds(
                     layout.meads_ekf_innovation_path(st.index, p),

@@ -57,31 +57,32 @@ FAILURE_MODES = ("stuck", "offset", "drift")
 
 @dataclass(frozen=True)
 class PressureSensorSpec:
-    """The pressure measurement chain (see the module docstring); SI, switches are booleans."""
+    """The pressure measurement chain (see the module docstring); SI, switches are booleans; the
+    values (and defaults) come from the scenario's ``[sensors.pressure]`` (:data:`.config.SCHEMA`)."""
 
-    rate_hz: float = 8.0
-    bits: int = 14
-    noise_counts: float = 2.0
-    port_location_sigma_m: float = 0.05 * 0.0254 / 3.0
-    time_tag_max_s: float = 25e-6
-    transducer_temperature_K: float = 300.0
-    wall_temperature_peak_K: float = 1500.0
-    scale_sigma: float = 0.003
-    nonlinearity_sigma: float = 0.001
-    residual_bias_sigma_pa: float = 3.5
-    multiplicative_sigma: float = 0.0
-    location: bool = True
-    time_tag: bool = True
-    lag: bool = True
-    transpiration: str = "knudsen"
-    calibration: bool = True
-    scale_factors: bool = True
-    noise: bool = True
-    quantization: bool = True
-    failure_port: str = ""
-    failure_time_s: float = 150.0
-    failure_mode: str = "stuck"
-    failure_size: float = 0.1
+    rate_hz: float
+    bits: int
+    noise_counts: float
+    port_location_sigma_m: float
+    time_tag_max_s: float
+    transducer_temperature_K: float
+    wall_temperature_peak_K: float
+    scale_sigma: float
+    nonlinearity_sigma: float
+    residual_bias_sigma_pa: float
+    multiplicative_sigma: float
+    location: bool
+    time_tag: bool
+    lag: bool
+    transpiration: str
+    calibration: bool
+    scale_factors: bool
+    noise: bool
+    quantization: bool
+    failure_port: str
+    failure_time_s: float
+    failure_mode: str
+    failure_size: float
 
 
 @dataclass(frozen=True)
@@ -224,11 +225,11 @@ def measure_pressures(
 @dataclass(frozen=True)
 class NavigationErrorSpec:
     """1σ error of the initial navigation state handed to the reconstruction (per axis): position
-    [m], velocity [m/s], attitude [rad] (engineering values for a cruise-navigated entry state)."""
+    [m], velocity [m/s], attitude [rad] (scenario ``[sensors.navigation]``, defaults in :data:`.config.SCHEMA`)."""
 
-    position_sigma: float = 200.0
-    velocity_sigma: float = 0.2
-    attitude_sigma: float = math.radians(0.05)
+    position_sigma: float
+    velocity_sigma: float
+    attitude_sigma: float
 
 
 def measure_imu(

@@ -14,55 +14,59 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.io.scenario import Scenario
 from workbench.io.telemetry import write_telemetry
-from workbench.models.flush_airdata import load_fads_vehicle
-from workbench.problems.meads.config import config_for
+from workbench.problems.meads.config import MeadsSettings
 from workbench.problems.meads.sensors import initial_navigation, measure_imu, measure_pressures
 from workbench.problems.meads.telemetry import IMU_COLUMNS, InitialState, write_initial_state
 from workbench.problems.meads.truth import MeadsTruth, MeadsTruthSpec, simulate_entry
 
-__all__ = ["synthesize_meads", "synthesize_from_truth", "load_truth", "vehicle_path"]
+__all__ = ["synthesize_meads", "synthesize_from_truth", "load_truth", "TruthArrays"]
 
 
-def vehicle_path(scenario: Scenario) -> Path:
-    """The vehicle file of the scenario (``[vehicle] file``, relative to the scenario)."""
-    return scenario.path_of("vehicle.file")
+class TruthArrays(dict):
+    """The arrays of ``truth.npz`` by name (a dict: truth fields on the simulation grid ``t``,
+    ``sensor_*`` of the pressure chain, ``imu_*``) with the truth on an estimate's grid."""
+
+    def at(self, key: str, t: np.ndarray, scale: float = 1.0, col: int | None = None) -> np.ndarray:
+        """``scale`` × the truth field ``key`` (column ``col`` of a 2-D one) linearly interpolated
+        at the times ``t`` (n,) [s] of an estimate."""
+        y = self[key] if col is None else self[key][:, col]
+        return scale * np.interp(t, self["t"], y)
 
 
-def synthesize_meads(scenario: Scenario, out_dir: str | Path, seed: int) -> dict[str, Path]:
-    """Simulate and write the telemetry + ``truth.npz`` into ``out_dir``; returns {stream: path, "truth": path}."""
-    cfg = config_for(scenario)
-    truth = simulate_entry(load_fads_vehicle(vehicle_path(scenario)), cfg.truth)
+def synthesize_meads(settings: MeadsSettings, out_dir: str | Path, seed: int) -> dict[str, Path]:
+    """Simulate the entry of ``settings.truth`` with ``settings.vehicle`` and write the telemetry +
+    ``truth.npz`` into ``out_dir``; returns {stream: path, "truth": path}."""
+    truth = simulate_entry(settings.vehicle, settings.truth)
     return synthesize_from_truth(
-        scenario,
+        settings,
         truth,
-        cfg.truth,
+        settings.truth,
         out_dir,
         np.random.SeedSequence(seed),
-        f"workbench synthetic {scenario.name} (seed {seed})",
+        f"workbench synthetic {settings.run.name} (seed {seed})",
     )
 
 
 def synthesize_from_truth(
-    scenario: Scenario,
+    settings: MeadsSettings,
     truth: MeadsTruth,
     truth_spec: MeadsTruthSpec,
     out_dir: str | Path,
     seed: np.random.SeedSequence,
     source: str,
 ) -> dict[str, Path]:
-    """The sensors of the scenario (``[sensors.*]``) on a simulated ``truth`` (whose surface-pressure
-    model is ``truth_spec``'s), written into ``out_dir`` as a user supplies them plus ``truth.npz``;
-    the draws are ``seed.spawn(3)`` (pressures, IMU, navigation); ``source`` goes into the files'
-    metadata.  Returns {stream: path, "truth": path}."""
-    cfg = config_for(scenario)
-    vehicle = load_fads_vehicle(vehicle_path(scenario))
+    """The sensors of ``settings`` (``pressure``, ``imu``, ``navigation``, on ``settings.vehicle``)
+    on a simulated ``truth`` (whose surface-pressure model is ``truth_spec``'s), written into
+    ``out_dir`` as a user supplies them plus ``truth.npz``; the draws are ``seed.spawn(3)``
+    (pressures, IMU, navigation); ``source`` goes into the files' metadata.  Returns
+    {stream: path, "truth": path}."""
+    cfg, vehicle = settings, settings.vehicle
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rp, ri, rn = (np.random.default_rng(s) for s in seed.spawn(3))
     pm = measure_pressures(truth, vehicle, truth_spec, cfg.pressure, rp)
-    ti, f, w, drawn = measure_imu(truth, cfg.imu, cfg.imu_rate_hz, ri)
+    ti, f, w, drawn = measure_imu(truth, cfg.imu.model, cfg.imu.rate_hz, ri)
     p0, v0, q0, sig = initial_navigation(truth, cfg.navigation, rn)
     meta = {"source": source, "frame": "body B (+x out of the nose)"}
     pressures = write_telemetry(
@@ -73,7 +77,7 @@ def synthesize_from_truth(
     )
     cols = {c: (f[:, k], "m/s^2") for k, c in enumerate(IMU_COLUMNS[:3])}
     cols |= {c: (w[:, k], "deg/s") for k, c in enumerate(IMU_COLUMNS[3:])}
-    imu = write_telemetry(out / "imu.csv", ti, cols, meta={**meta, "rate_hz": cfg.imu_rate_hz})
+    imu = write_telemetry(out / "imu.csv", ti, cols, meta={**meta, "rate_hz": cfg.imu.rate_hz})
     init = write_initial_state(
         out / "initial_state.toml",
         InitialState(0.0, p0, v0, q0, float(sig[0]), float(sig[1]), float(sig[2])),
@@ -86,7 +90,7 @@ def synthesize_from_truth(
     return {"pressures": pressures, "imu": imu, "initial_state": init, "truth": out / "truth.npz"}
 
 
-def load_truth(path: str | Path) -> dict:
+def load_truth(path: str | Path) -> TruthArrays:
     """The arrays of ``truth.npz`` (truth fields, ``sensor_*`` of the pressure chain, ``imu_*``)."""
     with np.load(path) as z:
-        return {k: z[k] for k in z.files}
+        return TruthArrays({k: z[k] for k in z.files})

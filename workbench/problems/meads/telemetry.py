@@ -18,18 +18,19 @@ Streams (:data:`STREAMS`, scenario ``[telemetry]``; the synthetic scenario write
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import ScenarioError
+from workbench.io.schema import REQUIRED, Key, Schema, Table, load_file
 from workbench.io.telemetry import read_telemetry
 from workbench.models.flush_airdata import FadsVehicle
 
 __all__ = [
     "STREAMS",
+    "INITIAL_STATE_SCHEMA",
     "InitialState",
     "MeadsTelemetry",
     "telemetry_paths",
@@ -41,6 +42,29 @@ __all__ = [
 
 STREAMS = ("pressures", "imu", "initial_state")
 IMU_COLUMNS = ("f_x", "f_y", "f_z", "w_x", "w_y", "w_z")
+
+#: ``initial_state.toml``: the navigation state at the first IMU time (a file kind of its own).
+INITIAL_STATE_SCHEMA = Schema(
+    "meads_initial_state",
+    "MEADS initial navigation state",
+    (
+        Table(
+            "state",
+            "the navigation state at the first IMU time (Mars-centred inertial frame M, +Z the pole)",
+            (
+                Key("time_s", "float", REQUIRED, "s", "time of the state", ge=0.0),
+                Key("p_M_m", "list", REQUIRED, "m", "position in M, 3 numbers"),
+                Key("v_M_mps", "list", REQUIRED, "m/s", "velocity in M, 3 numbers"),
+                Key("q_M_B", "list", REQUIRED, "", "attitude body -> M, scalar-last Hamilton unit quaternion (4)"),
+                Key("sigma_position_m", "float", REQUIRED, "m", "1-sigma per axis", ge=0.0),
+                Key("sigma_velocity_mps", "float", REQUIRED, "m/s", "1-sigma per axis", ge=0.0),
+                Key("sigma_attitude_deg", "float", REQUIRED, "deg", "1-sigma per axis", ge=0.0),
+            ),
+        ),
+    ),
+    noun="MEADS initial-state file",
+    intro="Keys of the MEADS `initial_state.toml` (written by a synthetic run; a user supplies the same)",
+)
 
 
 @dataclass(frozen=True)
@@ -75,15 +99,20 @@ class MeadsTelemetry:
     degradations: tuple[str, ...]
 
 
-def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
-    """``[telemetry]`` files of a user scenario; a missing key or file is a ScenarioError naming it."""
+def telemetry_paths(files, scenario_file: Path) -> dict[str, Path]:
+    """The ``[telemetry]`` files of a user scenario (``files``: the settings'
+    :class:`~workbench.problems.meads.config.TelemetryFiles`, absolute paths); a missing key or
+    file is a :class:`ScenarioError` naming ``scenario_file`` and the key."""
     out = {}
     for k in STREAMS:
-        if not scenario.has(f"telemetry.{k}"):
+        p = getattr(files, k)
+        if p is None:
             raise ScenarioError(
-                scenario.path, f"telemetry.{k}", "missing: a meads scenario needs pressures, imu, initial_state"
+                scenario_file, f"telemetry.{k}", "missing: a meads scenario needs pressures, imu, initial_state"
             )
-        out[k] = scenario.path_of(f"telemetry.{k}")
+        if not p.exists():
+            raise ScenarioError(scenario_file, f"telemetry.{k}", f"file not found: {p}")
+        out[k] = p
     return out
 
 
@@ -109,40 +138,33 @@ def write_initial_state(path: Path, st: InitialState, comment: str = "") -> Path
 
 
 def read_initial_state(path: Path) -> InitialState:
-    """Read ``initial_state.toml``; a missing/bad key is a ScenarioError naming the file and key."""
+    """Read ``initial_state.toml`` (:data:`INITIAL_STATE_SCHEMA`); an unknown, missing or bad key is
+    a :class:`ScenarioError` naming the file and key (the vector lengths and the quaternion's norm
+    are checked here, after validation)."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(path, None, f"not valid TOML: {exc}") from None
-    st = data.get("state")
-    if not isinstance(st, dict):
-        raise ScenarioError(path, "state", "missing table [state]")
+    st = load_file(path, INITIAL_STATE_SCHEMA)["state"]
 
     def arr(key, n):
-        v = st.get(key)
-        a = np.asarray(v, dtype=float) if isinstance(v, list) else None
+        v = st[key]
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            a = None
         if a is None or a.shape != (n,) or not np.all(np.isfinite(a)):
             raise ScenarioError(path, f"state.{key}", f"needs {n} finite numbers, got {v!r}")
         return a
-
-    def num(key):
-        v = st.get(key)
-        if isinstance(v, bool) or not isinstance(v, int | float) or not v >= 0:
-            raise ScenarioError(path, f"state.{key}", f"needs a non-negative number, got {v!r}")
-        return float(v)
 
     q = arr("q_M_B", 4)
     if abs(np.linalg.norm(q) - 1.0) > 1e-3:
         raise ScenarioError(path, "state.q_M_B", f"not a unit quaternion (norm {np.linalg.norm(q):.6f})")
     return InitialState(
-        num("time_s"),
+        st["time_s"],
         arr("p_M_m", 3),
         arr("v_M_mps", 3),
         q / np.linalg.norm(q),
-        num("sigma_position_m"),
-        num("sigma_velocity_mps"),
-        math.radians(num("sigma_attitude_deg")),
+        st["sigma_position_m"],
+        st["sigma_velocity_mps"],
+        math.radians(st["sigma_attitude_deg"]),
     )
 
 

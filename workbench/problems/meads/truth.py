@@ -76,9 +76,11 @@ _TEMPERATURE_NODES_KM_K: tuple[tuple[float, float], ...] = (
 )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MeadsTruthSpec:
-    """Parameters of the truth (SI unless the name says otherwise; defaults: an MSL-like entry).
+    """Parameters of the truth (SI unless the name says otherwise).  The scenario's ``[truth]`` keys
+    (defaults: an MSL-like entry, in :data:`.config.SCHEMA`) are required here; the others keep
+    their defaults below.
 
     Entry state at t = 0: altitude ``entry_altitude_km`` above the MOLA reference sphere,
     inertial speed ``entry_speed_kmps``, inertial flight-path angle ``entry_fpa_deg``, heading
@@ -93,41 +95,32 @@ class MeadsTruthSpec:
     ``gamma_eq_hyper``, ``stagnation_shift`` [-], ``shoulder`` [-].
     """
 
-    entry_altitude_km: float = 125.0
-    entry_speed_kmps: float = 5.845
-    entry_fpa_deg: float = -15.5
-    entry_azimuth_deg: float = 80.0
-    entry_latitude_deg: float = -10.0
-    mass_kg: float = 3300.0
-    bank_profile_deg: tuple[tuple[float, float], ...] = (
-        (0.0, 0.0),
-        (50.0, 0.0),
-        (58.0, 65.0),
-        (85.0, 65.0),
-        (92.0, 0.0),
-        (140.0, 0.0),
-        (148.0, -60.0),
-        (200.0, -60.0),
-    )
-    alpha_hyper_deg: float = 16.0
-    alpha_low_deg: float = 20.0
+    entry_altitude_km: float
+    entry_speed_kmps: float
+    entry_fpa_deg: float
+    entry_azimuth_deg: float
+    entry_latitude_deg: float
+    mass_kg: float
+    bank_profile_deg: tuple[tuple[float, float], ...]
+    alpha_hyper_deg: float
+    alpha_low_deg: float
     alpha_chute_deg: float = 4.0
-    alpha_osc_deg: float = 1.0
+    alpha_osc_deg: float
     alpha_osc_hz: float = 0.23
-    beta_osc_deg: float = 0.8
+    beta_osc_deg: float
     beta_osc_hz: float = 0.29
-    chute_mach: float = 1.75
+    chute_mach: float
     chute_cds_m2: float = 210.0
-    hss_delay_s: float = 24.0
+    hss_delay_s: float
     max_time_s: float = 600.0
     dt: float = 0.025
-    surface_pressure_pa: float = 640.0
-    gamma: float = 1.33
+    surface_pressure_pa: float
+    gamma: float
     molar_mass_g_per_mol: float = 43.34
-    wave_amplitude_K: float = 4.0
+    wave_amplitude_K: float
     wave_length_km: float = 13.0
     temperature_nodes_km_K: tuple[tuple[float, float], ...] = _TEMPERATURE_NODES_KM_K
-    background_wind_mps: float = 12.0
+    background_wind_mps: float
     background_azimuth_deg: float = 60.0
     background_turn_deg_per_km: float = 1.5
     wind_layers: tuple[tuple[float, float, float, float, float], ...] = field(
@@ -139,8 +132,8 @@ class MeadsTruthSpec:
     )
     rho_relax: float = 2.0e-5
     gamma_eq_hyper: float = 1.16
-    stagnation_shift: float = 0.03
-    shoulder: float = 0.10
+    stagnation_shift: float
+    shoulder: float
 
 
 @dataclass(frozen=True)

@@ -48,16 +48,15 @@ import math
 import tempfile
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from workbench.io.scenario import Scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.problems.meads import pipeline as md
-from workbench.problems.meads.config import config_for
+from workbench.problems.meads.config import MeadsSettings
 from workbench.problems.meads.montecarlo import OBJECTIVES
 from workbench.problems.meads.synthetic import load_truth, synthesize_from_truth
 from workbench.problems.meads.truth import MeadsDispersionSigmas, disperse_truth_spec, simulate_entry
@@ -116,10 +115,11 @@ MIN_BIN_MEMBER_FRACTION = 0.5
 
 @dataclass(frozen=True)
 class McJob:
-    """What every member needs: the ``scenario`` (failure switched off), whether to
-    ``disperse_truth`` and with which ``sigmas``."""
+    """What every member needs (picklable: shipped to process pools and Dask): the run's
+    ``settings`` (the injected failure switched off), whether to ``disperse_truth`` and with which
+    ``sigmas``."""
 
-    scenario: Scenario
+    settings: MeadsSettings
     disperse_truth: bool = True
     sigmas: MeadsDispersionSigmas = field(default_factory=MeadsDispersionSigmas)
 
@@ -151,7 +151,7 @@ def member_draws(job: McJob, k: int, ss: np.random.SeedSequence) -> tuple[Any, n
     info)`` — ``ss.spawn(2)`` = (truth dispersion, sensors); the spec is the scenario's when
     ``job.disperse_truth`` is off; ``info`` the dispersed values (JSON-ready)."""
     s_truth, s_sensors = ss.spawn(2)
-    base = config_for(job.scenario).truth
+    base = job.settings.truth
     spec = disperse_truth_spec(base, np.random.default_rng(s_truth), job.sigmas) if job.disperse_truth else base
     info = {
         "member": int(k),
@@ -257,7 +257,7 @@ def _run_member(job: McJob, k: int, ss: np.random.SeedSequence) -> MemberErrors:
     :func:`~workbench.estimation.montecarlo.run_monte_carlo`."""
     t0 = time.perf_counter()
     spec, s_sensors, info = member_draws(job, k, ss)
-    sc = job.scenario
+    sc = job.settings
     empty = np.zeros(0)
 
     def failed(msg: str) -> MemberErrors:
@@ -265,7 +265,7 @@ def _run_member(job: McJob, k: int, ss: np.random.SeedSequence) -> MemberErrors:
         return MemberErrors(k, empty, empty, empty, np.zeros((0, 0, 0)), np.zeros((0, 0, 0)), info, msg)
 
     try:
-        truth = simulate_entry(md.vehicle_for(sc), spec)
+        truth = simulate_entry(sc.vehicle, spec)
     except RuntimeError as err:
         return failed(f"member {k}: truth simulation: {err}")
     info["truth_s"] = time.perf_counter() - t0
@@ -545,7 +545,7 @@ class FullMcResult:
 
 
 def run_full_monte_carlo(
-    scenario: Scenario,
+    settings: MeadsSettings,
     *,
     n_runs: int,
     seed: int,
@@ -554,7 +554,7 @@ def run_full_monte_carlo(
     disperse_truth: bool = True,
     sigmas: MeadsDispersionSigmas | None = None,
 ) -> FullMcResult:
-    """The study of the module docstring for a synthetic ``kind = "meads"`` scenario: ``n_runs`` ≥ 1
+    """The study of the module docstring for the ``settings`` of a synthetic MEADS scenario: ``n_runs`` ≥ 1
     members seeded ``SeedSequence(seed, spawn_key=(k,))`` on
     :func:`~workbench.estimation.montecarlo.run_monte_carlo` (``workers``, ``scheduler`` as
     there); ``disperse_truth``: each member its own truth (``sigmas``, default
@@ -563,8 +563,8 @@ def run_full_monte_carlo(
     wall0 = time.perf_counter()
     if int(n_runs) < 1:
         raise ValueError("run_full_monte_carlo: n_runs must be ≥ 1")
-    removed = config_for(scenario).pressure.failure_port
-    sc = scenario.with_overrides({"sensors.pressure.failure_port": ""}) if removed else scenario
+    removed = settings.pressure.failure_port
+    sc = replace(settings, pressure=replace(settings.pressure, failure_port="")) if removed else settings
     job = McJob(sc, bool(disperse_truth), sigmas or MeadsDispersionSigmas())
     run = run_members(
         _run_member, n_runs, shared=job, seed=seed, workers=workers, scheduler=scheduler, name=f"meads-truth-mc-{seed}"
@@ -583,7 +583,7 @@ def run_full_monte_carlo(
     K = len(ok)
     summary = {
         "kind": "meads_truth_mc",
-        "scenario": scenario.name,
+        "scenario": settings.run.name,
         "n_runs": int(n_runs),
         "n_ok": K,
         "seed": int(seed),
@@ -595,7 +595,7 @@ def run_full_monte_carlo(
         "truth_dispersion_sigmas": dict(job.sigmas.__dict__) if disperse_truth else None,
         "failure_port_switched_off": removed or None,
         "error_model": {
-            k: getattr(config_for(sc).pressure, k)
+            k: getattr(sc.pressure, k)
             for k in ("location", "time_tag", "lag", "transpiration", "calibration", "scale_factors", "noise")
         },
         "aggregation": (
