@@ -20,6 +20,7 @@ SCENARIO_ROWS = [
     ("entry scenario", "schiaparelli", "scenarios/schiaparelli.toml", "gyro_noise_dps", "gyro_nois_dps"),
     ("meads scenario", "msl_meads", "scenarios/msl_meads.toml", "failure_port", "failur_port"),
     ("post2 problem file", "post2_huygens", "scenarios/post2_huygens.toml", "t_end_s", "t_ends_s"),
+    ("flush-air-data vehicle asset", "msl_meads", "vehicles/msl_meads.toml", "tube_length_m", "tube_lenght_m"),
 ]
 
 
