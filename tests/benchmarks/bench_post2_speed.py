@@ -40,7 +40,7 @@ from workbench.io.assets import assets_dir  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.base import RunOptions  # noqa: E402
 from workbench.problems.post2 import model as post2_model  # noqa: E402
-from workbench.problems.post2.config import config_for  # noqa: E402
+from workbench.problems.post2.config import Post2Settings  # noqa: E402
 from workbench.problems.post2.pipeline import Estimator  # noqa: E402
 from workbench.problems.post2.problem import Post2Problem  # noqa: E402
 
@@ -52,7 +52,7 @@ def _reconstruct(prob, sc, telemetry, seed: int, use_kernel: bool) -> tuple[floa
     try:
         t0 = time.process_time()
         result = None
-        for stage in prob.reconstruct(sc, telemetry, RunOptions(seed=seed)):
+        for stage in prob.reconstruct(prob.settings(sc), telemetry, RunOptions(seed=seed)):
             result = stage
         return time.process_time() - t0, prob.summary(result)
     finally:
@@ -67,7 +67,7 @@ def _per_call(fn, n: int) -> float:
 
 
 def _derivative_timings(sc, n_calls: int) -> dict:
-    est = Estimator(sc, config_for(sc))
+    est = Estimator(Post2Settings.from_scenario(sc))
     m, phase = est.model, est.model.initial_phase()
     n_e = est.layout.n_e
     D = np.diag(est.eps)
@@ -102,7 +102,7 @@ def main(argv=None) -> int:
         row = _derivative_timings(sc, args.calls)
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.process_time()
-            syn = prob.synthesize(sc, Path(tmp) / "telemetry", seed)
+            syn = prob.synthesize(prob.settings(sc), Path(tmp) / "telemetry", seed)
             row["synthesize_cpu_s"] = time.process_time() - t0
             kern_s, kern_sum = _reconstruct(prob, sc, dict(syn.telemetry), seed, True)
             row["reconstruct_cpu_s"] = {"kernel": kern_s}

@@ -18,7 +18,7 @@ from workbench.estimation.consistency import mixture_hdr_level
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.problems.post2 import rocket
-from workbench.problems.post2.config import config_for
+from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.importers import airbrakes
 from workbench.problems.post2.importers.airbrakes import find_gaps, read_log, read_metadata
 from workbench.problems.post2.pipeline import Estimator
@@ -222,11 +222,11 @@ def test_boost_covariance_keeps_its_correlations(excerpt_run):
     # carries the boost's correlation matrix and the EKF's P0 is diag(sigma) C diag(sigma) over it
     _, toml, _, _ = excerpt_run
     sc = load_scenario(toml)
-    cfg = config_for(sc)
+    cfg = Post2Settings.from_scenario(sc)
     names, corr = cfg.initial_correlation
     assert names == ("position", "velocity") and corr.shape == (6, 6)
     assert np.max(np.abs(corr - np.eye(6))) > 0.5  # strongly correlated, not a diagonal in disguise
-    est = Estimator(sc, cfg)
+    est = Estimator(cfg)
     sig = np.concatenate([cfg.state("position").sigma, cfg.state("velocity").sigma])
     np.testing.assert_allclose(est.P0[:6, :6], sig[:, None] * corr * sig[None, :], rtol=1e-12)
     assert np.min(np.linalg.eigvalsh(est.P0)) > -1e-6 * np.max(np.diag(est.P0))
@@ -357,7 +357,7 @@ def test_barometer_scale_and_dynamic_pressure_states(excerpt_run):
     # baro_q_coefficient adds a static-port error proportional to the dynamic pressure
     _, toml, _, _ = excerpt_run
     base = load_scenario(toml)
-    est0 = Estimator(base, config_for(base))
+    est0 = Estimator(Post2Settings.from_scenario(base))
     h_a = base.data["environment"]["baro_scale_anchor_m"]
     sc = base.with_overrides(
         {
@@ -365,7 +365,7 @@ def test_barometer_scale_and_dynamic_pressure_states(excerpt_run):
             "states.baro_q_coefficient": {"value": 0.1, "sigma": 0.1},
         }
     )
-    est = Estimator(sc, config_for(sc))
+    est = Estimator(Post2Settings.from_scenario(sc))
     m, x = est.model, est.x0
     h = float(m.altitude(x))
     rho = float(m.env.atmosphere.density(h))

@@ -14,7 +14,7 @@ import pytest
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import load_scenario
 from workbench.problems.post2 import model as post2_model
-from workbench.problems.post2.config import config_for
+from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.model import (
     Environment,
     StateMap,
@@ -53,9 +53,9 @@ def _batch(model: TrajectoryModel, x0: np.ndarray, n: int, rng: np.random.Genera
 
 def _models(name: str):
     sc = load_scenario(assets_dir() / "scenarios" / f"{name}.toml")
-    cfg = config_for(sc)
-    est = Estimator(sc, cfg)
-    tm = truth_model(sc, cfg)
+    cfg = Post2Settings.from_scenario(sc)
+    est = Estimator(cfg)
+    tm = truth_model(cfg)
     x_truth = np.zeros(tm.smap.n_x)
     for blk in ("position", "velocity") + (("attitude", "body_rates") if cfg.dof == 6 else ()):
         x_truth[tm.smap.blocks[blk].sx] = est.x0[est.smap.blocks[blk].sx]

@@ -35,7 +35,6 @@ difference between the day's lapse rate and the standard one).
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,9 +55,10 @@ from workbench.estimation.consistency import chi2_ppf, mixture_hdr_level
 from workbench.estimation.magnetometer import align_magnetometer
 from workbench.estimation.strapdown import ImuArrays, integrate
 from workbench.io.scenario import load_scenario
+from workbench.io.schema import read_json
 from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import pipeline
-from workbench.problems.post2.config import config_for
+from workbench.problems.post2.config import Post2Settings
 
 __all__ = [
     "PAD_WINDOW_S",
@@ -726,16 +726,11 @@ def run_flight(problem_path) -> tuple[object, dict]:
     """Reconstruct an imported flight (its post2 problem file; the import's ``flight.json``,
     ``imu.csv`` and ``reference.csv`` beside it) and score it: (Post2Result, :func:`score_flight`)."""
     path = Path(problem_path)
-    sc = load_scenario(path)
-    files = {}
-    for o in config_for(sc).observations:  # as Post2Problem.telemetry_files (no recording import here)
-        files[o.name] = sc.path_of(f"observations.{o.name}.file")
-        if o.weights is not None:
-            files[o.name + "_weights"] = sc.path_of(f"observations.{o.name}.weights")
+    settings = Post2Settings.from_scenario(load_scenario(path))
     result = None
-    for stage in pipeline.reconstruct(sc, files, None):
+    for stage in pipeline.reconstruct(settings, settings.telemetry_files(), None):
         result = stage
-    flight = json.loads((path.parent / "flight.json").read_text(encoding="utf-8"))
+    flight = read_json(path.parent / "flight.json")  # written by the importer (generated, not user input)
     imu = read_telemetry(path.parent / "imu.csv")
     ref = read_telemetry(path.parent / "reference.csv")
     return result, score_flight(result, flight, imu, ref)
