@@ -15,7 +15,7 @@ from workbench.cli import main
 from workbench.core.atmosphere import EarthStandardAtmosphere
 from workbench.core.bodies import G0
 from workbench.estimation.consistency import mixture_hdr_level
-from workbench.io.scenario import load_scenario
+from workbench.io.scenario import ScenarioError, load_scenario
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.problems.post2 import rocket
 from workbench.problems.post2.config import Post2Settings
@@ -160,11 +160,68 @@ def test_unknown_phase_letter_and_bad_metadata_are_located(tmp_path):
     del meta["jackpot_launch_1_excerpt.csv"]["rocket"]["rocket_Cd"]
     mp = tmp_path / "metadata.json"
     mp.write_text(json.dumps(meta), encoding="utf-8")
-    with pytest.raises(TelemetryError) as e:
+    with pytest.raises(ScenarioError) as e:
         read_metadata(mp, "jackpot_launch_1_excerpt.csv")
-    assert e.value.column == "jackpot_launch_1_excerpt.csv.rocket.rocket_Cd" and "missing" in str(e.value)
-    with pytest.raises(TelemetryError, match="no entry for 'other.csv'"):
+    assert e.value.key == "jackpot_launch_1_excerpt.csv.rocket.rocket_Cd" and "missing" in str(e.value)
+    with pytest.raises(ScenarioError, match="no entry for 'other.csv'"):
         read_metadata(META, "other.csv")
+
+
+def _metadata_with(tmp_path: Path, edit) -> Path:
+    """A copy of the excerpt's metadata.json with ``edit(entry)`` applied to the flight's entry."""
+    meta = json.loads(META.read_text(encoding="utf-8"))
+    edit(meta[LOG.name])
+    mp = tmp_path / "metadata.json"
+    mp.write_text(json.dumps(meta), encoding="utf-8")
+    return mp
+
+
+def test_a_misspelt_metadata_key_names_the_file_the_json_path_and_the_nearest_key(tmp_path, capsys):
+    mp = _metadata_with(tmp_path, lambda e: e["rocket"].update(rocket_dry_mas_kg=e["rocket"].pop("rocket_dry_mass_kg")))
+    with pytest.raises(ScenarioError) as e:
+        read_metadata(mp, LOG.name)
+    msg = str(e.value)
+    assert Path(e.value.file) == mp and e.value.key == f"{LOG.name}.rocket.rocket_dry_mas_kg"
+    assert "flight-log metadata file" in msg and "did you mean 'rocket_dry_mass_kg'?" in msg
+    out = tmp_path / "flight"
+    args = ["import", "airbrakes", str(LOG), "--metadata", str(mp), "--out", str(out)]
+    assert main(args) == EXIT_INPUT
+    err = capsys.readouterr().err
+    assert str(mp) in err and "rocket_dry_mas_kg" in err and "did you mean" in err
+    assert not out.exists()  # refused before anything is written
+
+
+@pytest.mark.parametrize(
+    ("table", "key", "value", "bound"),
+    [
+        ("rocket", "rocket_dry_mass_kg", -1.0, "> 0"),
+        ("launch_site", "air_temperature_celsius", 140.0, "≤ 60"),
+        ("launch_site", "air_pressure_mb", 101325.0, "≤ 1100"),  # Pa written where mb is meant
+        ("launch_site.launch_coordinates", "latitude", 135.2, "≤ 90"),
+        ("flight_data.landed_coordinates", "longitude", -200.0, "≥ -180"),
+    ],
+)
+def test_an_out_of_range_metadata_value_names_the_bound(tmp_path, table, key, value, bound):
+    def edit(entry):
+        node = entry
+        for part in table.split("."):
+            node = node[part]
+        node[key] = value
+
+    with pytest.raises(ScenarioError) as e:
+        read_metadata(_metadata_with(tmp_path, edit), LOG.name)
+    assert e.value.key == f"{LOG.name}.{table}.{key}" and "out of range" in str(e.value) and bound in str(e.value)
+
+
+def test_optional_metadata_fields_stay_optional(tmp_path):
+    def edit(entry):
+        for k in ("date", "flight_description", "ins_details"):
+            entry.pop(k)
+        entry["rocket"].pop("motor")
+        entry["flight_data"].pop("target_apogee_meters")
+
+    m = read_metadata(_metadata_with(tmp_path, edit), LOG.name)
+    assert m.date == "" and m.mass == pytest.approx(16.848) and m.qnh == pytest.approx(101514.0)
 
 
 def test_earth_standard_atmosphere_matches_the_1976_table():
