@@ -39,7 +39,7 @@ from workbench.io.scenario import ScenarioError
 from workbench.problems.post2 import build, kernels, pipeline
 from workbench.problems.post2 import model as post2_model
 from workbench.problems.post2.config import Post2Settings, unit_factor
-from workbench.problems.post2.model import STATES, StateMap, TrajectoryModel
+from workbench.problems.post2.model import POSITION, STATES, TRANSLATION, VELOCITY, TrajectoryModel
 
 __all__ = [
     "McSelection",
@@ -86,8 +86,8 @@ class McSelection:
             "best_metric": float(self.metric[self.kept[0]]),
             "nominal_metric": float(self.nominal_metric),
             "best_shift_s": float(self.shift_s[self.kept[0]]),
-            "chosen_minus_delivered_position_km": (d[:3] / 1e3).tolist(),
-            "chosen_minus_delivered_velocity_m_s": d[3:].tolist(),
+            "chosen_minus_delivered_position_km": (d[POSITION] / 1e3).tolist(),
+            "chosen_minus_delivered_velocity_m_s": d[VELOCITY].tolist(),
             "wall_s": float(self.wall_s),
             "scheduler": self.scheduler,
         }
@@ -96,7 +96,7 @@ class McSelection:
 def entry_model(cfg: Post2Settings) -> TrajectoryModel:
     """The estimator's 3-DOF model over [position, velocity] only (nominal model inputs, no events):
     the member propagation of the entry phase."""
-    return TrajectoryModel(StateMap(["position", "velocity"]), 3, build.environment(cfg), build.vehicle(cfg))
+    return TrajectoryModel(TRANSLATION, 3, build.environment(cfg), build.vehicle(cfg))
 
 
 def delivered_covariance(cfg: Post2Settings) -> np.ndarray:
@@ -273,7 +273,9 @@ def select_initial_state(
     kept = np.argsort(metric, kind="stable")[:keep]
     moved = _move(model, X[kept], cfg.t_start, shift[kept], h)
     sigma0 = np.std(moved, axis=0, ddof=1) if keep > 1 else np.sqrt(np.diag(delivered_covariance(cfg)))
-    sigma0 = np.maximum(sigma0, np.r_[np.full(3, 10.0), np.full(3, 0.01)])  # floors: 10 m, 1 cm/s
+    floor = np.empty(sigma0.size)
+    floor[POSITION], floor[VELOCITY] = 10.0, 0.01  # floors: 10 m, 1 cm/s
+    sigma0 = np.maximum(sigma0, floor)
     return McSelection(X, metric, shift, kept, moved[0], sigma0, float(metric[0]), mean, wall, desc)
 
 
@@ -303,8 +305,8 @@ def reconstruct(cfg: Post2Settings, telemetry, options):
 def start_from(cfg: Post2Settings, sel: McSelection) -> Post2Settings:
     """The settings with the EKF's initial position and velocity (and their 1σ) from the selection
     ``sel`` (SI, inertial): :func:`dataclasses.replace` of the two states."""
-    out = cfg.with_state("position", value=sel.x0[:3].copy(), sigma=sel.sigma0[:3].copy())
-    return out.with_state("velocity", value=sel.x0[3:].copy(), sigma=sel.sigma0[3:].copy())
+    out = cfg.with_state("position", value=sel.x0[POSITION].copy(), sigma=sel.sigma0[POSITION].copy())
+    return out.with_state("velocity", value=sel.x0[VELOCITY].copy(), sigma=sel.sigma0[VELOCITY].copy())
 
 
 # ------------------------------------------------------------------ scorecard

@@ -78,6 +78,9 @@ __all__ = [
     "scurve_inverse",
     "scurve_slope",
     "rk4_step",
+    "TRANSLATION",
+    "POSITION",
+    "VELOCITY",
     "wind_inertial",
     "quat_from_aero_angles",
     "aero_angles",
@@ -404,6 +407,12 @@ class StateMap:
         b = self.blocks[name]
         v = x[..., b.sx]
         return scurve(v, *b.bounds) if b.bounds is not None else v
+
+
+#: the 3-DOF translation state [position m, velocity m/s] (6,): the Monte Carlo members' and the
+#: entry model's layout; :data:`POSITION` and :data:`VELOCITY` are its named slices
+TRANSLATION = StateMap(["position", "velocity"])
+POSITION, VELOCITY = TRANSLATION.blocks["position"].sx, TRANSLATION.blocks["velocity"].sx
 
 
 def wind_inertial(p_I: np.ndarray, wind_en: np.ndarray) -> np.ndarray:

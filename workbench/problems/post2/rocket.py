@@ -59,6 +59,7 @@ from workbench.io.schema import read_json
 from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import pipeline
 from workbench.problems.post2.config import Post2Settings
+from workbench.problems.post2.model import POSITION, VELOCITY
 
 __all__ = [
     "PAD_WINDOW_S",
@@ -86,6 +87,8 @@ __all__ = [
     "landing_point_inertial",
 ]
 
+#: the strapdown's error state [δv, δθ, δp] (9,) (:func:`workbench.estimation.strapdown.integrate`)
+SD_VELOCITY, SD_ATTITUDE, SD_POSITION = slice(0, 3), slice(3, 6), slice(6, 9)
 #: length of the standby window that aligns the IMU on the pad [s]
 PAD_WINDOW_S = 1.0
 #: the pad window ends this long before the detected ignition [s]
@@ -276,9 +279,9 @@ def reconstruct_boost(
     sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
     P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_heading**2]) @ C_B_ENU.T
     P0 = np.zeros((9, 9))
-    P0[0:3, 0:3] = np.eye(3) * 0.01**2
-    P0[3:6, 3:6] = P_att
-    P0[6:9, 6:9] = np.eye(3) * 1.0**2
+    P0[SD_VELOCITY, SD_VELOCITY] = np.eye(3) * 0.01**2
+    P0[SD_ATTITUDE, SD_ATTITUDE] = P_att
+    P0[SD_POSITION, SD_POSITION] = np.eye(3) * 1.0**2
     t_start = t_coast + TAIL_OFF_S
     sel = np.flatnonzero((t >= t[pad[-1]]) & (t <= t_start + 1e-9))
     imu = ImuArrays(
@@ -291,12 +294,12 @@ def reconstruct_boost(
     dur = float(sp.t[-1] - sp.t[0])
     # covariance of [δp, δv] (6, 6) at t_start: the strapdown's (error state [δv, δθ, δp]) plus the
     # scale-factor error, one number s for the whole boost: δv = s Δv, δp ≈ s Δv T/2 (fully correlated)
-    ipv = [6, 7, 8, 0, 1, 2]
+    ipv = np.r_[np.arange(9)[SD_POSITION], np.arange(9)[SD_VELOCITY]]  # -> the TRANSLATION layout
     u = np.concatenate([0.5 * dv * dur, dv])
     P_pv = sp.P[-1][np.ix_(ipv, ipv)] + ACCEL_SCALE_SIGMA**2 * np.outer(u, u)
     P_pv = 0.5 * (P_pv + P_pv.T)
     sd = np.sqrt(np.diag(P_pv))
-    sig_p, sig_v = sd[:3], sd[3:]
+    sig_p, sig_v = sd[POSITION], sd[VELOCITY]
     corr_pv = P_pv / np.outer(sd, sd)
     boost = (t >= 0.0) & (t < t_coast)
     axis = f_B[boost].mean(axis=0)
