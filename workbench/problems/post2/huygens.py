@@ -37,7 +37,6 @@ import numpy as np
 from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.io.scenario import ScenarioError
 from workbench.problems.post2 import build, kernels, pipeline
-from workbench.problems.post2 import model as post2_model
 from workbench.problems.post2.config import Post2Settings, unit_factor
 from workbench.problems.post2.model import POSITION, STATES, TRANSLATION, VELOCITY, TrajectoryModel
 
@@ -154,10 +153,10 @@ def member_metrics(shared: tuple, start: int, stop: int, _seeds=None) -> tuple[n
     2-4).  ``shared`` = (model, members (N, 6), t0, h, n_steps, obs t (m,), obs z (m,), level, end_s)."""
     model, X, t0, h, n_steps, tz, z, level, end = shared
     a = propagate_axial_acceleration(model, X[start:stop], t0, n_steps, h)
-    return _metric(a, t0, h, tz, z, level, end)
+    return _metric(a, t0, h, tz, z, level, end, model.use_kernel)
 
 
-def _metric(a, t0, h, tz, z, level, end):
+def _metric(a, t0, h, tz, z, level, end, use_kernel: bool):
     tg = t0 + h * np.arange(a.shape[1])
     t_meas = _crossing(tz, z[None, :], level)[0]
     shift = _crossing(tg, a, level) - t_meas
@@ -168,7 +167,7 @@ def _metric(a, t0, h, tz, z, level, end):
     hi = a.shape[1] - 1.000001
 
     def total(sh):
-        if post2_model.USE_KERNEL:  # compiled, same numbers (tests/problems/post2/test_post2_kernels.py)
+        if use_kernel:  # compiled, same numbers (tests/problems/post2/test_post2_kernels.py)
             out = np.empty(a.shape[0])
             ac = np.ascontiguousarray(a, dtype=float)
             kernels.metric_total_kernel(ac, tu, zu, np.ascontiguousarray(sh, dtype=float), t0, h, hi, out)
@@ -196,7 +195,8 @@ def member_loop_metric(model: TrajectoryModel, X: np.ndarray, t0, h, n_steps, tz
     m = np.empty(X.shape[0])
     s = np.empty(X.shape[0])
     for i in range(X.shape[0]):
-        mi, si = _metric(propagate_axial_acceleration(model, X[i : i + 1], t0, n_steps, h), t0, h, tz, z, level, end)
+        a = propagate_axial_acceleration(model, X[i : i + 1], t0, n_steps, h)
+        mi, si = _metric(a, t0, h, tz, z, level, end, model.use_kernel)
         m[i], s[i] = mi[0], si[0]
     return m, s
 
