@@ -306,7 +306,7 @@ def test_excerpt_reconstruction_is_healthy(excerpt_run):
     "where the barometer reads +0.9 m): the constant baro_bias (188 Pa) fitted against the IMU-anchored coast "
     "behind the open air brakes is carried into the descent, and its v0.1 flight computer is 8 m (mean) below "
     "its own barometer. baro_q_coefficient makes it worse like for like too (excerpt 68.6 m, flight 1 "
-    "34.4 m); see rocket.py after BARO_BIAS_SIGMA",
+    "34.4 m); see docs/tuning/post2.md (the flight computer's altitude)",
 )
 def test_altitude_follows_the_flight_computer_within_30_m(excerpt_run):
     _, _, _, s = excerpt_run
