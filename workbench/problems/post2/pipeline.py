@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import median_filter
 
-from workbench.core.rotation import attitude_error
+from workbench.core.rotation import attitude_error, dcm_to_quat, quat_from_rotvec
 from workbench.estimation.consistency import chi2_ppf
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
 from workbench.estimation.health import WARNING, covariance_check, health_report, interval_check, nis_check, notes_check
@@ -90,6 +90,11 @@ class ForwardStage:
     quantities: dict[str, str]
     weight_factors: dict = field(default_factory=dict)
 
+    def residual_sigma(self, name: str) -> np.ndarray:
+        """1σ (n, m) of the innovations of channel ``name``: √diag S (negative rounding clipped to 0), SI."""
+        S = self.forward.innovations[name].S
+        return np.sqrt(np.maximum(np.einsum("nii->ni", S), 0.0))
+
 
 @dataclass(frozen=True)
 class Post2Result:
@@ -109,6 +114,44 @@ class Post2Result:
     events: tuple[tuple[float, str], ...]
     history: dict
     summary: dict
+
+    def phase_index(self) -> np.ndarray:
+        """(n,) float: how many events had fired at each grid time (0 before the first, +1 at each)."""
+        te = np.array([a for a, _ in self.events], dtype=float)
+        return np.searchsorted(te, self.t, side="right").astype(float)
+
+    def body_attitude(self, rows: np.ndarray) -> np.ndarray:
+        """q_I_B (k, 4) scalar-last at the grid ``rows`` (k,) of the smoothed state: the attitude block
+        (6-DOF) or, 3-DOF, +X_B along the inertial velocity (zero angle of attack)."""
+        if "attitude" in self.smap:
+            return np.array(self.smap.raw(self.x[rows], "attitude"))
+        return _along_velocity(self.smap.raw(self.x[rows], "velocity"))
+
+    def tilt_rotation(self, rows: np.ndarray) -> np.ndarray | None:
+        """q_B_tilted (k, 4) of an estimated tilt state (``tilt*``, rad: a scalar about Y_B or a
+        rotation vector) at the grid ``rows`` (k,) of the smoothed history; None without one."""
+        name = next((nm for nm in self.history["smoothed"] if nm == "tilt" or nm.startswith("tilt")), None)
+        if name is None:
+            return None
+        a = np.asarray(self.history["smoothed"][name]["value"], float)[rows]
+        rv = np.zeros((a.shape[0], 3))
+        if a.shape[1] == 1:
+            rv[:, 1] = a[:, 0]
+        else:
+            rv[:, : min(3, a.shape[1])] = a[:, :3]
+        return quat_from_rotvec(rv)
+
+
+def _along_velocity(v: np.ndarray) -> np.ndarray:
+    """q_I_B (n, 4) with X_B along v (n, 3) (3-DOF drawing: zero angle of attack)."""
+    out = np.empty((v.shape[0], 4))
+    for i, vi in enumerate(v):
+        x = vi / max(np.linalg.norm(vi), 1e-12)
+        a = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        y = np.cross(a, x)
+        y /= np.linalg.norm(y)
+        out[i] = dcm_to_quat(np.column_stack([x, y, np.cross(x, y)]))
+    return out
 
 
 def _weights_R(file: Path, spec: ObservationSpec, t: np.ndarray, wpath: Path, obs_file: str) -> np.ndarray:
