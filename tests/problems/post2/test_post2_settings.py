@@ -93,3 +93,14 @@ def test_no_module_below_the_problem_sees_a_scenario():
         assert "Scenario" not in names, path.name
         for attr in ("get", "has", "path_of", "data", "with_overrides"):
             assert f"scenario.{attr}" not in text and f"sc.{attr}" not in text, (path.name, attr)
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [("model.step_s", 0.0), ("model.grid_s", -1.0), ("monte_carlo.step_s", 0.0), ("vehicle.drogue_cd", 0.0)],
+)
+def test_a_step_or_coefficient_out_of_range_names_the_bound(key, value):
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_huygens.toml").with_overrides({key: value})
+    with pytest.raises(ScenarioError) as e:
+        Post2Settings.from_scenario(sc)
+    assert e.value.key == key and "out of range: must be > 0" in str(e.value)

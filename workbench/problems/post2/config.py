@@ -134,8 +134,8 @@ SCHEMA = Schema(
                 Key("dof", _I, 3, meaning="3 (translation) or 6 (translation + rotation)"),
                 Key("t_start_s", _F, 0.0, "s", "start of the reconstruction (initial state epoch)"),
                 Key("t_end_s", _F, REQUIRED, "s", "end of the reconstruction"),
-                Key("step_s", _F, 1.0, "s", "largest RK4 step of the estimator's propagation"),
-                Key("grid_s", _F, None, "s", "propagation grid between observations (default: step_s)"),
+                Key("step_s", _F, 1.0, "s", "largest RK4 step of the estimator's propagation", gt=0.0),
+                Key("grid_s", _F, None, "s", "propagation grid between observations (default: step_s)", gt=0.0),
             ),
         ),
         Table(
@@ -193,8 +193,8 @@ SCHEMA = Schema(
                 Key("ref_area_m2", _F, None, "m^2", "aerodynamic reference area (default: the asset's)"),
                 Key("cd", _F, None, "1", "constant drag coefficient on ref_area_m2 when there is no vehicle file"),
                 # ---- Huygens-like descent: the second (drogue / stabiliser) parachute
-                Key("drogue_area_m2", _F, None, "m^2", 'drogue parachute reference area (events `chute = "drogue"`)'),
-                Key("drogue_cd", _F, 0.55, "1", "drogue parachute drag coefficient (constant)"),
+                Key("drogue_area_m2", _F, None, "m^2", 'drogue parachute reference area (`chute = "drogue"`)', gt=0.0),
+                Key("drogue_cd", _F, 0.55, "1", "drogue parachute drag coefficient (constant)", gt=0.0),
             ),
         ),
         Table("events", "phase changes", free="table", free_meaning="`[events.<name>]`: " + _named_meaning(EVENT_KEYS)),
@@ -288,7 +288,7 @@ SCHEMA = Schema(
                 Key("observation", _S, None, meaning="observation name whose residual is accumulated"),
                 Key("end_s", _F, None, "s", "end of the phase the residual is accumulated to"),
                 Key("align_level_m_s2", _F, 0.5, "m/s^2", "|measured acceleration| at which time is aligned"),
-                Key("step_s", _F, 0.5, "s", "RK4 step of the member propagation"),
+                Key("step_s", _F, 0.5, "s", "RK4 step of the member propagation", gt=0.0),
                 Key("seed", _I, 0, meaning="seed of the dispersion (offset by the run seed)"),
                 Key(
                     "covariance",
@@ -834,8 +834,6 @@ def _settings(scenario: Scenario) -> Post2Settings:
         raise ScenarioError(file, "model.dof", f"must be 3 or 6, got {dof}")
     if not m["t_end_s"] > m["t_start_s"]:
         raise ScenarioError(file, "model.t_end_s", "must be after t_start_s")
-    if not m["step_s"] > 0:
-        raise ScenarioError(file, "model.step_s", "must be > 0")
     states = []
     for name, raw in data.get("states", {}).items():
         _check_name(file, f"states.{name}", name, STATES, "state")
@@ -857,8 +855,6 @@ def _settings(scenario: Scenario) -> Post2Settings:
         d = STATES[name]
         truth_states[name] = _si(_vec(file, f"truth.states.{name}", v, d.size), d.unit)
     grid = m["grid_s"] if m["grid_s"] is not None else m["step_s"]
-    if not grid > 0:
-        raise ScenarioError(file, "model.grid_s", "must be > 0")
     # ---- schedules (schedules.py): targets and events must be declared above
     schedules = _schedules(
         file,
@@ -919,8 +915,6 @@ def _vehicle(file: Path, run: RunInfo, v: dict) -> VehicleSettings:
     path = shipped if shipped.is_file() else run.resolve(name)
     if not Path(path).is_file():
         raise ScenarioError(file, "vehicle.file", f"no shipped vehicle {name!r} and no file {path}")
-    if v["drogue_area_m2"] is not None and not (v["drogue_area_m2"] > 0 and v["drogue_cd"] > 0):
-        raise ScenarioError(file, "vehicle.drogue_area_m2", "drogue area and drogue_cd must be > 0")
     return VehicleSettings(**v, path=Path(path), asset=load_vehicle(path))
 
 
