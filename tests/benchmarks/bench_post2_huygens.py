@@ -49,7 +49,7 @@ from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.io.telemetry import read_telemetry  # noqa: E402
 from workbench.problems.base import RunOptions  # noqa: E402
 from workbench.problems.post2 import huygens  # noqa: E402
-from workbench.problems.post2.config import config_for, unit_factor  # noqa: E402
+from workbench.problems.post2.config import Post2Settings, unit_factor  # noqa: E402
 from workbench.problems.post2.model import STATES, scurve, scurve_inverse, scurve_slope  # noqa: E402
 from workbench.problems.post2.pipeline import read_observations  # noqa: E402
 from workbench.problems.post2.problem import Post2Problem  # noqa: E402
@@ -128,9 +128,9 @@ def _one_seed(seed: int, out: Path, draw: tuple[str, ...] = ()) -> dict:
     ``draw`` from the estimator's prior, :func:`draw_parameters`) and its reconstruction."""
     prob = Post2Problem()
     sc0 = load_scenario(TOML)
-    cfg = config_for(sc0)
+    cfg = Post2Settings.from_scenario(sc0)
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
-    x_true = huygens.dispersed_members(mean, huygens.delivered_covariance(sc0, cfg), 2, seed=10_000 + seed)[1]
+    x_true = huygens.dispersed_members(mean, huygens.delivered_covariance(cfg), 2, seed=10_000 + seed)[1]
     sc = sc0.with_overrides(
         {
             "truth.states.position": x_true[:3].tolist(),
@@ -139,13 +139,13 @@ def _one_seed(seed: int, out: Path, draw: tuple[str, ...] = ()) -> dict:
         }
     )
     tel_dir = out / f"seed{seed}"
-    syn = prob.synthesize(sc, tel_dir, seed)
+    syn = prob.synthesize(prob.settings(sc), tel_dir, seed)
     t_dep = deploy_time_from_telemetry(tel_dir)
     sc = sc.with_overrides({"events.main_chute.value": float(t_dep)})
     truth = prob.load_truth(syn.truth)
     opts = RunOptions(seed=seed)
     res = None
-    for stage in prob.reconstruct(sc, syn.telemetry, opts):
+    for stage in prob.reconstruct(prob.settings(sc), syn.telemetry, opts):
         res = stage
     sm = res.smap
     idx, err = [], []
@@ -214,7 +214,7 @@ def bench_mc(out: Path, members: int, loop_members: int) -> dict:
     """Vectorised member propagation vs a per-member loop of the same maths (same process)."""
     prob = Post2Problem()
     sc = load_scenario(TOML)
-    cfg = config_for(sc)
+    cfg = Post2Settings.from_scenario(sc)
     short = sc.with_overrides({"model.t_end_s": 300.0})  # the entry phase is all the selection reads
     for k in [k for k in short.data["observations"] if k != "accel_entry"]:
         short.data["observations"].pop(k)
@@ -226,18 +226,19 @@ def bench_mc(out: Path, members: int, loop_members: int) -> dict:
             "drogue",
         ):
             short.data["schedules"].pop(k)
-    syn = prob.synthesize(short, out / "mc", 1)
-    data = read_observations(short, config_for(short), syn.telemetry)
-    ch = data.channels[cfg.data["monte_carlo"]["observation"]]
-    sel = huygens.select_initial_state(sc, cfg, ch, members, seed=1)
-    model = huygens.entry_model(sc, cfg)
-    mc = cfg.data["monte_carlo"]
-    h = float(mc["step_s"])
-    n_steps = int(np.ceil((mc["end_s"] + 60.0 - cfg.t_start) / h))
+    short_settings = prob.settings(short)
+    syn = prob.synthesize(short_settings, out / "mc", 1)
+    data = read_observations(short_settings, syn.telemetry)
+    ch = data.channels[cfg.monte_carlo.observation]
+    sel = huygens.select_initial_state(cfg, ch, members, seed=1)
+    model = huygens.entry_model(cfg)
+    mc = cfg.monte_carlo
+    h = float(mc.step_s)
+    n_steps = int(np.ceil((mc.end_s + 60.0 - cfg.t_start) / h))
     t0 = time.perf_counter()
     m, s = huygens.member_loop_metric(
         model, sel.members[:loop_members], cfg.t_start, h, n_steps, ch.t, ch.z_raw[:, 0],
-        float(mc["align_level_m_s2"]), float(mc["end_s"]),
+        float(mc.align_level_m_s2), float(mc.end_s),
     )  # fmt: skip
     loop = time.perf_counter() - t0
     same = bool(np.allclose(m, sel.metric[:loop_members], rtol=1e-9) and np.allclose(s, sel.shift_s[:loop_members]))

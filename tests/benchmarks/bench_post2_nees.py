@@ -44,7 +44,6 @@ from workbench.estimation.consistency import anees_bounds  # noqa: E402
 from workbench.io.assets import assets_dir  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.post2 import pipeline  # noqa: E402
-from workbench.problems.post2.config import config_for  # noqa: E402
 from workbench.problems.post2.problem import Post2Problem  # noqa: E402
 from workbench.problems.post2.scoring import score, trajectory_nees  # noqa: E402
 
@@ -61,12 +60,11 @@ def member(start: str, seed: int, variant: str, out: Path, t_end: float | None =
     """One run: start ``start`` of Table 3-5, seed ``seed``; returns the numbers of one member."""
     p, v, a, w = STARTS[start]
     base = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml")
-    cfg0 = config_for(base)
-    tr = cfg0.data["truth"]["states"]
+    tr = base.data["truth"]["states"]
     rng = np.random.default_rng(10_000 + seed)
     disp = {}
     for name in ("position", "velocity", "attitude", "body_rates"):
-        sd = np.asarray(cfg0.data["states"][name]["sigma"], dtype=float) * np.ones(3)
+        sd = np.asarray(base.data["states"][name]["sigma"], dtype=float) * np.ones(3)
         disp[f"truth.states.{name}"] = (np.asarray(tr[name], dtype=float) + sd * rng.standard_normal(3)).tolist()
     ov = {
         "states.position.value": p,
@@ -82,10 +80,11 @@ def member(start: str, seed: int, variant: str, out: Path, t_end: float | None =
     ov |= dict(extra or {})
     sc = base.with_overrides(ov)
     prob = Post2Problem()
-    syn = prob.synthesize(sc, out / f"{start}_{seed}", seed)
+    settings = prob.settings(sc)
+    syn = prob.synthesize(settings, out / f"{start}_{seed}", seed)
     truth = prob.load_truth(syn.truth)
     res = None
-    for stage in pipeline.reconstruct(sc, dict(syn.telemetry)):
+    for stage in pipeline.reconstruct(settings, dict(syn.telemetry)):
         res = stage
     sc_ = score(res, truth)
     nees = trajectory_nees(res, truth)

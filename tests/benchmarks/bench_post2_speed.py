@@ -9,8 +9,8 @@ Run on demand from the repository root (not collected by pytest)::
 Per scenario (its truth synthesised once into a temporary folder, then the reconstruction run on it):
 
 * ``reconstruct_cpu_s``: CPU time (``time.process_time``) of all stages of ``Post2Problem.reconstruct``
-  with the kernel (``model.USE_KERNEL = True``) and, unless ``--no-baseline``, with the numpy
-  reference (``USE_KERNEL = False``: the code before the kernel); ``speedup`` their ratio;
+  with the kernel and, unless ``--no-baseline``, with the numpy reference (``WORKBENCH_POST2_KERNEL=0``:
+  the code before the kernel); ``speedup`` their ratio;
   ``identical``: the two summaries equal number by number (``compare_summaries.differences``, rtol 0);
 * ``derivative_us``: CPU µs per ``derivative`` call on the estimator's batch (the 1 + 2 n_e rows the
   batched numeric Jacobian propagates): ``kernel_batched``, ``reference_batched`` (numpy, the whole
@@ -22,6 +22,7 @@ Per scenario (its truth synthesised once into a temporary folder, then the recon
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -40,7 +41,7 @@ from workbench.io.assets import assets_dir  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.base import RunOptions  # noqa: E402
 from workbench.problems.post2 import model as post2_model  # noqa: E402
-from workbench.problems.post2.config import config_for  # noqa: E402
+from workbench.problems.post2.config import Post2Settings  # noqa: E402
 from workbench.problems.post2.pipeline import Estimator  # noqa: E402
 from workbench.problems.post2.problem import Post2Problem  # noqa: E402
 
@@ -48,15 +49,15 @@ SCENARIOS = ("post2_entry6dof", "post2_mer_quaternion", "post2_huygens", "post2_
 
 
 def _reconstruct(prob, sc, telemetry, seed: int, use_kernel: bool) -> tuple[float, dict]:
-    post2_model.USE_KERNEL = use_kernel
+    os.environ[post2_model.KERNEL_ENV] = "1" if use_kernel else "0"  # the models are built in reconstruct
     try:
         t0 = time.process_time()
         result = None
-        for stage in prob.reconstruct(sc, telemetry, RunOptions(seed=seed)):
+        for stage in prob.reconstruct(prob.settings(sc), telemetry, RunOptions(seed=seed)):
             result = stage
         return time.process_time() - t0, prob.summary(result)
     finally:
-        post2_model.USE_KERNEL = True
+        os.environ.pop(post2_model.KERNEL_ENV, None)
 
 
 def _per_call(fn, n: int) -> float:
@@ -67,7 +68,7 @@ def _per_call(fn, n: int) -> float:
 
 
 def _derivative_timings(sc, n_calls: int) -> dict:
-    est = Estimator(sc, config_for(sc))
+    est = Estimator(Post2Settings.from_scenario(sc))
     m, phase = est.model, est.model.initial_phase()
     n_e = est.layout.n_e
     D = np.diag(est.eps)
@@ -102,7 +103,7 @@ def main(argv=None) -> int:
         row = _derivative_timings(sc, args.calls)
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.process_time()
-            syn = prob.synthesize(sc, Path(tmp) / "telemetry", seed)
+            syn = prob.synthesize(prob.settings(sc), Path(tmp) / "telemetry", seed)
             row["synthesize_cpu_s"] = time.process_time() - t0
             kern_s, kern_sum = _reconstruct(prob, sc, dict(syn.telemetry), seed, True)
             row["reconstruct_cpu_s"] = {"kernel": kern_s}

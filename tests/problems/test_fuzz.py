@@ -40,7 +40,7 @@ def post2_files(out: Path) -> Path:
     from workbench.problems.post2.problem import Post2Problem
 
     sc = load_scenario(assets_dir() / "scenarios" / "post2_j2.toml")
-    Post2Problem().synthesize(sc, out, 1)
+    Post2Problem().synthesize(Post2Problem().settings(sc), out, 1)
     return out
 
 

@@ -341,10 +341,11 @@ def entry_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset
 def post2_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset, tuple]:
     """post2: the full reconstruction (a hundred-step filter, milliseconds) and its health."""
     from workbench.problems.post2 import pipeline
+    from workbench.problems.post2.config import Post2Settings
 
-    sc = _resolved(str(scenario_path))
+    settings = Post2Settings.from_scenario(_resolved(str(scenario_path)))
     res = None
-    for stage in pipeline.reconstruct(sc, files):
+    for stage in pipeline.reconstruct(settings, files):
         res = stage
     health = res.summary.get("health")
     fp = _fp(*[ch.z for ch in res.channels.values()], *[ch.t for ch in res.channels.values()])

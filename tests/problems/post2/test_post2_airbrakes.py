@@ -15,10 +15,10 @@ from workbench.cli import main
 from workbench.core.atmosphere import EarthStandardAtmosphere
 from workbench.core.bodies import G0
 from workbench.estimation.consistency import mixture_hdr_level
-from workbench.io.scenario import load_scenario
+from workbench.io.scenario import ScenarioError, load_scenario
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.problems.post2 import rocket
-from workbench.problems.post2.config import config_for
+from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.importers import airbrakes
 from workbench.problems.post2.importers.airbrakes import find_gaps, read_log, read_metadata
 from workbench.problems.post2.pipeline import Estimator
@@ -160,11 +160,68 @@ def test_unknown_phase_letter_and_bad_metadata_are_located(tmp_path):
     del meta["jackpot_launch_1_excerpt.csv"]["rocket"]["rocket_Cd"]
     mp = tmp_path / "metadata.json"
     mp.write_text(json.dumps(meta), encoding="utf-8")
-    with pytest.raises(TelemetryError) as e:
+    with pytest.raises(ScenarioError) as e:
         read_metadata(mp, "jackpot_launch_1_excerpt.csv")
-    assert e.value.column == "jackpot_launch_1_excerpt.csv.rocket.rocket_Cd" and "missing" in str(e.value)
-    with pytest.raises(TelemetryError, match="no entry for 'other.csv'"):
+    assert e.value.key == "jackpot_launch_1_excerpt.csv.rocket.rocket_Cd" and "missing" in str(e.value)
+    with pytest.raises(ScenarioError, match="no entry for 'other.csv'"):
         read_metadata(META, "other.csv")
+
+
+def _metadata_with(tmp_path: Path, edit) -> Path:
+    """A copy of the excerpt's metadata.json with ``edit(entry)`` applied to the flight's entry."""
+    meta = json.loads(META.read_text(encoding="utf-8"))
+    edit(meta[LOG.name])
+    mp = tmp_path / "metadata.json"
+    mp.write_text(json.dumps(meta), encoding="utf-8")
+    return mp
+
+
+def test_a_misspelt_metadata_key_names_the_file_the_json_path_and_the_nearest_key(tmp_path, capsys):
+    mp = _metadata_with(tmp_path, lambda e: e["rocket"].update(rocket_dry_mas_kg=e["rocket"].pop("rocket_dry_mass_kg")))
+    with pytest.raises(ScenarioError) as e:
+        read_metadata(mp, LOG.name)
+    msg = str(e.value)
+    assert Path(e.value.file) == mp and e.value.key == f"{LOG.name}.rocket.rocket_dry_mas_kg"
+    assert "flight-log metadata file" in msg and "did you mean 'rocket_dry_mass_kg'?" in msg
+    out = tmp_path / "flight"
+    args = ["import", "airbrakes", str(LOG), "--metadata", str(mp), "--out", str(out)]
+    assert main(args) == EXIT_INPUT
+    err = capsys.readouterr().err
+    assert str(mp) in err and "rocket_dry_mas_kg" in err and "did you mean" in err
+    assert not out.exists()  # refused before anything is written
+
+
+@pytest.mark.parametrize(
+    ("table", "key", "value", "bound"),
+    [
+        ("rocket", "rocket_dry_mass_kg", -1.0, "> 0"),
+        ("launch_site", "air_temperature_celsius", 140.0, "≤ 60"),
+        ("launch_site", "air_pressure_mb", 101325.0, "≤ 1100"),  # Pa written where mb is meant
+        ("launch_site.launch_coordinates", "latitude", 135.2, "≤ 90"),
+        ("flight_data.landed_coordinates", "longitude", -200.0, "≥ -180"),
+    ],
+)
+def test_an_out_of_range_metadata_value_names_the_bound(tmp_path, table, key, value, bound):
+    def edit(entry):
+        node = entry
+        for part in table.split("."):
+            node = node[part]
+        node[key] = value
+
+    with pytest.raises(ScenarioError) as e:
+        read_metadata(_metadata_with(tmp_path, edit), LOG.name)
+    assert e.value.key == f"{LOG.name}.{table}.{key}" and "out of range" in str(e.value) and bound in str(e.value)
+
+
+def test_optional_metadata_fields_stay_optional(tmp_path):
+    def edit(entry):
+        for k in ("date", "flight_description", "ins_details"):
+            entry.pop(k)
+        entry["rocket"].pop("motor")
+        entry["flight_data"].pop("target_apogee_meters")
+
+    m = read_metadata(_metadata_with(tmp_path, edit), LOG.name)
+    assert m.date == "" and m.mass == pytest.approx(16.848) and m.qnh == pytest.approx(101514.0)
 
 
 def test_earth_standard_atmosphere_matches_the_1976_table():
@@ -222,11 +279,11 @@ def test_boost_covariance_keeps_its_correlations(excerpt_run):
     # carries the boost's correlation matrix and the EKF's P0 is diag(sigma) C diag(sigma) over it
     _, toml, _, _ = excerpt_run
     sc = load_scenario(toml)
-    cfg = config_for(sc)
+    cfg = Post2Settings.from_scenario(sc)
     names, corr = cfg.initial_correlation
     assert names == ("position", "velocity") and corr.shape == (6, 6)
     assert np.max(np.abs(corr - np.eye(6))) > 0.5  # strongly correlated, not a diagonal in disguise
-    est = Estimator(sc, cfg)
+    est = Estimator(cfg)
     sig = np.concatenate([cfg.state("position").sigma, cfg.state("velocity").sigma])
     np.testing.assert_allclose(est.P0[:6, :6], sig[:, None] * corr * sig[None, :], rtol=1e-12)
     assert np.min(np.linalg.eigvalsh(est.P0)) > -1e-6 * np.max(np.diag(est.P0))
@@ -249,7 +306,7 @@ def test_excerpt_reconstruction_is_healthy(excerpt_run):
     "where the barometer reads +0.9 m): the constant baro_bias (188 Pa) fitted against the IMU-anchored coast "
     "behind the open air brakes is carried into the descent, and its v0.1 flight computer is 8 m (mean) below "
     "its own barometer. baro_q_coefficient makes it worse like for like too (excerpt 68.6 m, flight 1 "
-    "34.4 m); see rocket.py after BARO_BIAS_SIGMA",
+    "34.4 m); see docs/tuning/post2.md (the flight computer's altitude)",
 )
 def test_altitude_follows_the_flight_computer_within_30_m(excerpt_run):
     _, _, _, s = excerpt_run
@@ -357,7 +414,7 @@ def test_barometer_scale_and_dynamic_pressure_states(excerpt_run):
     # baro_q_coefficient adds a static-port error proportional to the dynamic pressure
     _, toml, _, _ = excerpt_run
     base = load_scenario(toml)
-    est0 = Estimator(base, config_for(base))
+    est0 = Estimator(Post2Settings.from_scenario(base))
     h_a = base.data["environment"]["baro_scale_anchor_m"]
     sc = base.with_overrides(
         {
@@ -365,7 +422,7 @@ def test_barometer_scale_and_dynamic_pressure_states(excerpt_run):
             "states.baro_q_coefficient": {"value": 0.1, "sigma": 0.1},
         }
     )
-    est = Estimator(sc, config_for(sc))
+    est = Estimator(Post2Settings.from_scenario(sc))
     m, x = est.model, est.x0
     h = float(m.altitude(x))
     rho = float(m.env.atmosphere.density(h))

@@ -15,7 +15,7 @@ from workbench.io.scenario import ScenarioError, load_scenario
 from workbench.io.telemetry import read_telemetry
 from workbench.problems.base import RunOptions
 from workbench.problems.post2 import huygens
-from workbench.problems.post2.config import config_for
+from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.model import StateMap, TrajectoryModel
 from workbench.problems.post2.pipeline import Channel
 from workbench.problems.post2.problem import Post2Problem
@@ -29,7 +29,7 @@ def _scenario(overrides: dict | None = None):
 
 
 def test_problem_file_validates_with_the_thesis_numbers():
-    cfg = config_for(_scenario())
+    cfg = Post2Settings.from_scenario(_scenario())
     assert cfg.dof == 3
     names = [s.name for s in cfg.states]
     for n in ("ca_multiplier_fm", "ca_multiplier_hyp", "ca_multiplier_sup", "parachute_drag_multiplier",
@@ -40,7 +40,7 @@ def test_problem_file_validates_with_the_thesis_numbers():
     # Table 4-2: 1270 km altitude, 1-sigma = sqrt(diag covariance)
     r = np.linalg.norm(cfg.state("position").value)
     assert r - 2575.0e3 == pytest.approx(1270.0e3, abs=2.0e3)
-    C = np.array(cfg.data["monte_carlo"]["covariance"])
+    C = cfg.monte_carlo.covariance / 1e6  # SI -> km², km²/s, km²/s²
     assert np.allclose(C, C.T) and np.all(np.linalg.eigvalsh(C) > 0)
     np.testing.assert_allclose(cfg.state("position").sigma, np.sqrt(np.diag(C)[:3]) * 1e3, rtol=1e-4)
     ev = {e.name: e for e in cfg.events}
@@ -59,17 +59,17 @@ def test_problem_file_validates_with_the_thesis_numbers():
 )
 def test_bad_problem_file_is_a_located_error(key, value, needle):
     with pytest.raises(ScenarioError) as e:
-        config_for(_scenario({key: value}))
+        Post2Settings.from_scenario(_scenario({key: value}))
     assert needle in str(e.value)
 
 
 def _vertical_model(chute: str, **nominal) -> tuple[TrajectoryModel, np.ndarray, dict]:
     sc = _scenario()
-    cfg = config_for(sc)
+    cfg = Post2Settings.from_scenario(sc)
     from workbench.problems.post2 import build
 
     model = TrajectoryModel(
-        StateMap(["position", "velocity"]), 3, build.environment(sc, cfg), build.vehicle(sc, cfg), nominal=nominal
+        StateMap(["position", "velocity"]), 3, build.environment(cfg), build.vehicle(cfg), nominal=nominal
     )
     R = 2575.0e3 + 20.0e3
     x = np.array([R, 0.0, 0.0, -6.0, R * 0.0, 0.0])
@@ -112,10 +112,10 @@ def test_atmosphere_offsets_move_the_observed_p_and_t_and_the_density_with_p():
     """log_pressure_offset b: ln p = table + b and ρ = p / (R T) × e^b (drag too, compiled kernel);
     temperature_offset: T = table + offset, drag unchanged."""
     sc = _scenario()
-    cfg = config_for(sc)
+    cfg = Post2Settings.from_scenario(sc)
     from workbench.problems.post2 import build
 
-    env, veh = build.environment(sc, cfg), build.vehicle(sc, cfg)
+    env, veh = build.environment(cfg), build.vehicle(cfg)
     off = TrajectoryModel(StateMap(["position", "velocity", "log_pressure_offset", "temperature_offset"]), 3, env, veh)
     dens = TrajectoryModel(StateMap(["position", "velocity", "density_multiplier"]), 3, env, veh)
     m0, x, ph = _vertical_model("drogue")
@@ -139,11 +139,11 @@ def test_log_pressure_offset_sigma_follows_the_altitude_profile():
     from workbench.problems.post2.pipeline import Estimator
 
     sc = _scenario()
-    cfg = config_for(sc)
+    cfg = Post2Settings.from_scenario(sc)
     s = cfg.state("log_pressure_offset")
     h_nodes, sig = s.sigma_profile
     assert h_nodes[0] == 0.0 and np.all(np.diff(sig) > 0)  # grows with altitude
-    est = Estimator(sc, cfg)
+    est = Estimator(cfg)
     i = est.smap.blocks["log_pressure_offset"].se.start
     phi2 = math.exp(-2.0 * 10.0 / s.tau)
     for h, want in ((-50.0, sig[0]), (0.5 * (h_nodes[1] + h_nodes[2]), 0.5 * (sig[1] + sig[2])), (3e5, sig[-1])):
@@ -171,7 +171,7 @@ def test_bad_sigma_profile_is_a_located_error(overrides, needle):
         else:
             sc.data["states"][name][key] = v
     with pytest.raises(ScenarioError) as e:
-        config_for(sc)
+        Post2Settings.from_scenario(sc)
     assert needle in str(e.value) and "states." in str(e.value)
 
 
@@ -193,7 +193,7 @@ def _short_scenario():
 
 
 def test_truth_writes_the_telemetry_files_a_user_supplies(tmp_path):
-    syn = Post2Problem().synthesize(_short_scenario(), tmp_path, seed=3)
+    syn = Post2Problem().synthesize(Post2Settings.from_scenario(_short_scenario()), tmp_path, seed=3)
     assert set(syn.telemetry) == {"accel_entry"}
     ent = read_telemetry(syn.telemetry["accel_entry"])
     assert np.allclose(np.diff(ent.time), 0.32) and ent.time[-1] == pytest.approx(58.88)  # 3.125 Hz
@@ -219,14 +219,14 @@ def _entry_channel(model, x_true, t_end=200.0, noise=0.02, seed=0, h=2.0):
 
 def test_mc_selection_picks_the_member_nearest_the_truth():
     sc = _scenario({"monte_carlo.end_s": 190.0, "monte_carlo.step_s": 2.0, "monte_carlo.keep": 5})
-    cfg = config_for(sc)
-    model = huygens.entry_model(sc, cfg)
+    cfg = Post2Settings.from_scenario(sc)
+    model = huygens.entry_model(cfg)
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
-    cov = huygens.delivered_covariance(sc, cfg)
+    cov = huygens.delivered_covariance(cfg)
     x_true = huygens.dispersed_members(mean, cov, 2, seed=11)[1]
     ch = _entry_channel(model, x_true)
     n = 40
-    sel = huygens.select_initial_state(sc, cfg, ch, n, seed=5, extra_members=x_true[None, :])
+    sel = huygens.select_initial_state(cfg, ch, n, seed=5, extra_members=x_true[None, :])
     # members displaced along the trajectory (the covariance's long axis, X with VX correlated 0.999)
     # are the truth at another time: after the time alignment they fit as well, so the test is that
     # the truth is kept and the chosen state, moved by its Δ, is at the truth's altitude
@@ -246,17 +246,17 @@ def test_mc_selection_picks_the_member_nearest_the_truth():
 
 def test_mc_selection_errors_are_located():
     sc = _scenario({"monte_carlo.align_level_m_s2": 500.0, "monte_carlo.end_s": 200.0})
-    cfg = config_for(sc)
-    model = huygens.entry_model(sc, cfg)
+    cfg = Post2Settings.from_scenario(sc)
+    model = huygens.entry_model(cfg)
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
     ch = _entry_channel(model, mean, t_end=60.0)
     with pytest.raises(ScenarioError, match="monte_carlo.align_level_m_s2"):
-        huygens.select_initial_state(sc, cfg, ch, 10, seed=1)
+        huygens.select_initial_state(cfg, ch, 10, seed=1)
     bad = [[1.0] * 6 for _ in range(6)]
     bad[0][1] = 2.0
     sc2 = _scenario({"monte_carlo.covariance": bad})
     with pytest.raises(ScenarioError, match="monte_carlo.covariance"):
-        huygens.delivered_covariance(sc2, config_for(sc2))
+        huygens.delivered_covariance(Post2Settings.from_scenario(sc2))
 
 
 MAIN_ONLY = """
@@ -344,9 +344,10 @@ def test_an_event_at_the_start_applies_before_its_samples(tmp_path):
     atm = (assets_dir() / "scenarios" / "post2_huygens_atmosphere.csv").as_posix()
     p = tmp_path / "main_only.toml"
     p.write_text(MAIN_ONLY.format(atm=atm), encoding="utf-8")
-    sc, prob = load_scenario(p), Post2Problem()
-    syn = prob.synthesize(sc, tmp_path / "tel", 2)
-    res = list(prob.reconstruct(sc, syn.telemetry, RunOptions(seed=2)))[-1]
+    prob = Post2Problem()
+    settings = prob.settings(load_scenario(p))
+    syn = prob.synthesize(settings, tmp_path / "tel", 2)
+    res = list(prob.reconstruct(settings, syn.telemetry, RunOptions(seed=2)))[-1]
     assert res.events == ((0.0, "main"),)
     for name, ch in res.summary["observations"].items():
         assert ch["nis_verdict"] == "consistent", (name, ch["mean_nis"])

@@ -14,7 +14,7 @@ import pytest
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import load_scenario
 from workbench.problems.post2 import model as post2_model
-from workbench.problems.post2.config import config_for
+from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.model import (
     Environment,
     StateMap,
@@ -53,9 +53,9 @@ def _batch(model: TrajectoryModel, x0: np.ndarray, n: int, rng: np.random.Genera
 
 def _models(name: str):
     sc = load_scenario(assets_dir() / "scenarios" / f"{name}.toml")
-    cfg = config_for(sc)
-    est = Estimator(sc, cfg)
-    tm = truth_model(sc, cfg)
+    cfg = Post2Settings.from_scenario(sc)
+    est = Estimator(cfg)
+    tm = truth_model(cfg)
     x_truth = np.zeros(tm.smap.n_x)
     for blk in ("position", "velocity") + (("attitude", "body_rates") if cfg.dof == 6 else ()):
         x_truth[tm.smap.blocks[blk].sx] = est.x0[est.smap.blocks[blk].sx]
@@ -119,10 +119,14 @@ def test_vacuum_model_and_the_switch_to_the_reference(monkeypatch):
     ph = m.initial_phase()
     _assert_close(m.derivative(X, ph), m.derivative_reference(X, ph))
     calls = []
-    monkeypatch.setattr(post2_model, "USE_KERNEL", False)
+    monkeypatch.setenv(post2_model.KERNEL_ENV, "0")  # the one switch: models built from now on
+    ref = TrajectoryModel(sm, 3, m.env, m.vehicle)
+    assert not ref.use_kernel and m.use_kernel
     monkeypatch.setattr(TrajectoryModel, "_kernel_eval", lambda *a, **k: calls.append(1))
-    np.testing.assert_array_equal(m.derivative(X, ph), m.derivative_reference(X, ph))
+    np.testing.assert_array_equal(ref.derivative(X, ph), m.derivative_reference(X, ph))
     assert not calls
+    monkeypatch.delenv(post2_model.KERNEL_ENV)
+    assert TrajectoryModel(sm, 3, m.env, m.vehicle).use_kernel
 
 
 def test_rocket_wind_state_falls_back_to_the_reference():
@@ -153,9 +157,9 @@ def test_compiled_propagation_matches_the_numpy_rk4(name, monkeypatch):
     for phase in _phases(model):
         X = _batch(model, x0, 9, rng)
         fast = model.propagate(X, 0.0, 0.3, phase, 0.1)
-        monkeypatch.setattr(post2_model, "USE_KERNEL", False)
+        monkeypatch.setattr(model, "use_kernel", False)
         ref = model.propagate(X, 0.0, 0.3, phase, 0.1)
-        monkeypatch.setattr(post2_model, "USE_KERNEL", True)
+        monkeypatch.setattr(model, "use_kernel", True)
         _assert_close(fast, ref)
 
 

@@ -10,7 +10,7 @@ import pytest
 from workbench.estimation.ekf import ErrorStateLayout, numeric_jacobian_batched, numeric_measurement_jacobian
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import load_scenario
-from workbench.problems.post2.config import config_for
+from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.model import (
     Environment,
     StateMap,
@@ -107,7 +107,7 @@ def test_process_models_random_walk_and_markov(tmp_path):
             "states.velocity.psd": 4e-6,
         }
     )
-    est = Estimator(sc, config_for(sc))
+    est = Estimator(Post2Settings.from_scenario(sc))
     Q, phis = est.q_matrix(10.0)
     np.testing.assert_allclose(np.diag(Q)[3:6], 4e-5)  # PSD x dt
     phi = math.exp(-10.0 / 50.0)
@@ -164,7 +164,7 @@ def test_truth_locates_a_condition_event_and_switches_phase():
     sc.data["truth"]["states"].pop("attitude")
     sc.data["truth"]["states"].pop("body_rates")
     sc.data["observations"].pop("rates")
-    tr = simulate_truth(sc, config_for(sc))
+    tr = simulate_truth(Post2Settings.from_scenario(sc))
     ((t_ev, name),) = tr["events"]
     assert name == "chute"
     m = tr["model"]
@@ -180,7 +180,7 @@ def test_truth_time_event_on_a_grid_sample_keeps_every_sample_once():
     sc = load_scenario(assets_dir() / "scenarios" / "post2_j2.toml").with_overrides(
         {"model.t_end_s": 1000.0, "events.mark": {"when": "time", "value": 300.0, "mass_kg": 900.0}}
     )
-    tr = simulate_truth(sc, config_for(sc))
+    tr = simulate_truth(Post2Settings.from_scenario(sc))
     assert np.all(np.diff(tr["t"]) > 0) and tr["t"][-1] == 1000.0 and tr["t"].size == 101
     assert tr["events"] == [(300.0, "mark")]
     # a sample at the event time still belongs to the old phase (as in the estimator, which checks
@@ -188,7 +188,7 @@ def test_truth_time_event_on_a_grid_sample_keeps_every_sample_once():
     assert tr["phase_index"][30] == 0 and tr["phase_index"][31] == 1
     # vacuum, mass change only: the orbit continues smoothly through the event
     plain = load_scenario(assets_dir() / "scenarios" / "post2_j2.toml").with_overrides({"model.t_end_s": 1000.0})
-    ref = simulate_truth(plain, config_for(plain))
+    ref = simulate_truth(Post2Settings.from_scenario(plain))
     np.testing.assert_allclose(tr["x"], ref["x"], rtol=0, atol=1e-3)
 
 
@@ -205,12 +205,12 @@ def test_tabulated_atmosphere_from_the_problem_file():
             "environment.table_temperature_K": [210.0, 160.0, 140.0],
         }
     )
-    env = build.environment(sc, config_for(sc))
+    env = build.environment(Post2Settings.from_scenario(sc))
     assert env.atmosphere.density(50e3) == pytest.approx(1.5e-4)
     assert env.atmosphere.density(25e3) == pytest.approx(math.sqrt(0.015 * 1.5e-4))  # log-linear
     bad = sc.with_overrides({"environment.table_density_kg_m3": [0.015, -1.0, 1e-9]})
     with pytest.raises(ScenarioError, match="table_altitude_m"):
-        build.environment(bad, config_for(bad))
+        build.environment(Post2Settings.from_scenario(bad))
 
 
 def test_quaternion_observation_residual_is_the_body_small_angle():
@@ -220,10 +220,10 @@ def test_quaternion_observation_residual_is_the_body_small_angle():
     sc = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml").with_overrides(
         {"observations.att": {"quantity": "quaternion", "sigma": 0.01, "rate_hz": 8.0}}
     )
-    cfg = config_for(sc)
+    cfg = Post2Settings.from_scenario(sc)
     spec = next(o for o in cfg.observations if o.name == "att")
     assert spec.size == 3 and np.allclose(spec.sigma, np.radians(0.01))
-    est = Estimator(sc, cfg)
+    est = Estimator(cfg)
     sq = est.smap.blocks["attitude"].sx
     d = np.radians([0.02, -0.01, 0.03])
     q_meas = quat_boxplus(est.x0[sq], d)
@@ -245,7 +245,7 @@ def test_aero_force_and_moment_ignore_the_quaternion_norm_at_small_alpha():
     sc = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml").with_overrides(
         {"states.attitude.value": [0.1, 0.0, 0.0], "states.position.value": [0.0, 0.0, 3396190.0 + 40e3]}
     )
-    est = Estimator(sc, config_for(sc))
+    est = Estimator(Post2Settings.from_scenario(sc))
     m, x = est.model, est.x0.copy()
     ph = m.initial_phase()
     F, M = m.aero_force_moment(x, ph)

@@ -16,7 +16,6 @@ from workbench.estimation.consistency import anees_bounds
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import load_scenario
 from workbench.problems.post2 import pipeline
-from workbench.problems.post2.config import config_for
 from workbench.problems.post2.problem import Post2Problem
 from workbench.problems.post2.scoring import trajectory_nees
 
@@ -26,18 +25,18 @@ T_END = 40.0
 
 def _member(seed: int, tmp) -> np.ndarray:
     base = load_scenario(assets_dir() / "scenarios" / "post2_entry6dof.toml")
-    cfg = config_for(base)
     rng = np.random.default_rng(10_000 + seed)
     ov: dict = {"model.t_end_s": T_END}
     for name in ("position", "velocity", "attitude", "body_rates"):
-        sd = np.asarray(cfg.data["states"][name]["sigma"], dtype=float) * np.ones(3)
-        tv = np.asarray(cfg.data["truth"]["states"][name], dtype=float)
+        sd = np.asarray(base.data["states"][name]["sigma"], dtype=float) * np.ones(3)
+        tv = np.asarray(base.data["truth"]["states"][name], dtype=float)
         ov[f"truth.states.{name}"] = (tv + sd * rng.standard_normal(3)).tolist()
     sc = base.with_overrides(ov)
     prob = Post2Problem()
-    syn = prob.synthesize(sc, tmp / f"m{seed}", seed)
+    settings = prob.settings(sc)
+    syn = prob.synthesize(settings, tmp / f"m{seed}", seed)
     res = None
-    for stage in pipeline.reconstruct(sc, dict(syn.telemetry)):
+    for stage in pipeline.reconstruct(settings, dict(syn.telemetry)):
         res = stage
     n = trajectory_nees(res, prob.load_truth(syn.truth))
     k15 = int(np.searchsorted(n["t"], 15.0 - 1e-9))

@@ -129,3 +129,21 @@ def test_vehicle_view_only_when_a_vehicle_is_drawn():
 
     assert _scene_views(post2_blueprint(["position"], ["gravity"], True, vehicle=False)) == ["Trajectory"]
     assert _scene_views(post2_blueprint(["position"], ["gravity"], True)) == ["Trajectory", "Vehicle"]
+
+
+def test_the_drawn_quantities_come_from_the_result(short_run):
+    """The recorder only draws: the phase index, the body attitude and the residual 1σ are the
+    result's (issue 25)."""
+    r, _ = short_run
+    res = r.result
+    idx = res.phase_index()
+    assert idx.shape == res.t.shape and idx[0] == 0.0 and idx[-1] == float(len(res.events))
+    rows = np.arange(0, res.t.size, 7)
+    q = res.body_attitude(rows)
+    assert q.shape == (rows.size, 4) and np.allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-9)
+    assert res.tilt_rotation(rows) is None  # no tilt state in the 6-DOF entry
+    from workbench.problems.post2.pipeline import ForwardStage
+
+    fs = ForwardStage(res.forward, res.events, {})
+    for name, ih in res.forward.innovations.items():
+        np.testing.assert_array_equal(fs.residual_sigma(name)[:, 0], np.sqrt(np.maximum(ih.S[:, 0, 0], 0.0)))

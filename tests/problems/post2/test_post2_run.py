@@ -162,7 +162,7 @@ def test_observation_outside_the_data_span_is_refused(tmp_path, j2_run, capsys):
 def test_sliding_median_removes_an_outlier_and_keeps_the_raw_samples(tmp_path, j2_run):
     from workbench.io.scenario import load_scenario
     from workbench.io.telemetry import read_telemetry
-    from workbench.problems.post2.config import config_for
+    from workbench.problems.post2.config import Post2Settings
     from workbench.problems.post2.pipeline import read_observations
 
     sc_path = _user_scenario(tmp_path, j2_run, None)
@@ -178,8 +178,7 @@ def test_sliding_median_removes_an_outlier_and_keeps_the_raw_samples(tmp_path, j
     write_telemetry(tmp_path / "data" / "gravity.csv", tel.time, {"g": (g, "m/s^2")})
     sc = load_scenario(sc_path)
     ch = read_observations(
-        sc,
-        config_for(sc),
+        Post2Settings.from_scenario(sc),
         {"gravity": tmp_path / "data" / "gravity.csv", "gravity_weights": tmp_path / "data" / "w.csv"},
     ).channels["gravity"]
     k = int(np.flatnonzero(ch.t == tel.time[40])[0])

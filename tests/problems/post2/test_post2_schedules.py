@@ -8,7 +8,7 @@ import pytest
 
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import ScenarioError, load_scenario
-from workbench.problems.post2.config import config_for
+from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.pipeline import Channel, Estimator
 from workbench.problems.post2.schedules import extra_psd, is_active, weight_factor
 
@@ -17,7 +17,7 @@ J2 = assets_dir() / "scenarios" / "post2_j2.toml"
 
 
 def test_the_mer_schedules_parse_with_si_psd():
-    cfg = config_for(load_scenario(MER))
+    cfg = Post2Settings.from_scenario(load_scenario(MER))
     by = {s.name: s for s in cfg.schedules}
     q = by["quaternion_early"]
     assert q.target == "observation" and q.target_name == "attitude" and q.factor == 100.0
@@ -40,12 +40,12 @@ def test_time_windows_scale_r_and_add_q():
             "schedules.n": {"state": "j2", "psd": 1e-9, "start_s": 300.0},
         }
     )
-    cfg = config_for(sc)
+    cfg = Post2Settings.from_scenario(sc)
     assert weight_factor(cfg.schedules, "gravity", 100.0, ()) == 1.0
     assert weight_factor(cfg.schedules, "gravity", 200.0, ()) == 4.0
     assert weight_factor(cfg.schedules, "gravity", 450.0, ()) == 8.0  # overlapping windows multiply
     assert weight_factor(cfg.schedules, "gravity", 500.0, ()) == 2.0  # end_s closes the window
-    est = Estimator(sc, cfg)
+    est = Estimator(cfg)
     spec = cfg.observations[0]
     t = np.array([100.0, 250.0])
     R = np.full((2, 1, 1), 1e-10)
@@ -66,8 +66,8 @@ def test_event_windows_follow_the_estimators_phase():
             "schedules.n": {"state": "velocity", "psd": 1e-6, "start_event": "mark"},
         }
     )
-    cfg = config_for(sc)
-    est = Estimator(sc, cfg)
+    cfg = Post2Settings.from_scenario(sc)
+    est = Estimator(cfg)
     x = est.x0
     est.transition(x, 200.0, 300.0)  # checks events at t0 = 200: not yet
     assert est.phase["fired"] == ()
@@ -96,12 +96,12 @@ def test_event_windows_follow_the_estimators_phase():
 )
 def test_schedule_mistakes_are_located(table, key, message):
     with pytest.raises(ScenarioError) as ei:
-        config_for(_j2({"schedules.s": table}))
+        Post2Settings.from_scenario(_j2({"schedules.s": table}))
     assert ei.value.key == key and message in str(ei.value) and "post2_j2.toml" in str(ei.value)
 
 
 def test_markov_states_take_no_schedule():
     sc = _j2({"states.j2.process": "markov", "states.j2.tau_s": 50.0, "schedules.s": {"state": "j2", "psd": 1.0}})
     with pytest.raises(ScenarioError, match="markov") as ei:
-        config_for(sc)
+        Post2Settings.from_scenario(sc)
     assert ei.value.key == "schedules.s.state"

@@ -1,5 +1,7 @@
-"""The post2 problem file: schema of a ``kind = "post2"`` scenario and :class:`Post2Config`, the typed
-settings built once from it.
+"""The post2 problem file: schema of a ``kind = "post2"`` scenario and :class:`Post2Settings`, the
+frozen settings of one run built once from it (:meth:`Post2Settings.from_scenario`, called by
+:meth:`~workbench.problems.post2.problem.Post2Problem.settings`; nothing below the problem object sees
+the scenario).
 
 A user who has a new vehicle writes a problem file, not code (thesis [R3] Ch. 3.1.2: the
 estimated states, their derivatives and the observations are named in the input, the
@@ -14,15 +16,17 @@ naming the file and the dotted key, with a "did you mean".
 from __future__ import annotations
 
 import difflib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from workbench.io.scenario import Scenario, ScenarioError, check_value
+from workbench.io.assets import assets_dir
+from workbench.io.scenario import RunInfo, Scenario, ScenarioError, check_value
 from workbench.io.schema import REQUIRED, Key, Schema, Table
 from workbench.io.units import to_si
+from workbench.models.aerodynamics import EntryVehicle, load_vehicle
 from workbench.problems.post2.model import OBSERVATIONS, STATES
 from workbench.problems.post2.schedules import SCHEDULE_KEYS, Schedule
 
@@ -35,8 +39,12 @@ __all__ = [
     "StateSpec",
     "ObservationSpec",
     "EventSpec",
-    "Post2Config",
-    "config_for",
+    "EnvironmentSettings",
+    "VehicleSettings",
+    "FilterSettings",
+    "TruthSettings",
+    "MonteCarloSettings",
+    "Post2Settings",
 ]
 
 _F, _I, _S, _B, _L = "float", "int", "str", "bool", "list"
@@ -126,8 +134,8 @@ SCHEMA = Schema(
                 Key("dof", _I, 3, meaning="3 (translation) or 6 (translation + rotation)"),
                 Key("t_start_s", _F, 0.0, "s", "start of the reconstruction (initial state epoch)"),
                 Key("t_end_s", _F, REQUIRED, "s", "end of the reconstruction"),
-                Key("step_s", _F, 1.0, "s", "largest RK4 step of the estimator's propagation"),
-                Key("grid_s", _F, None, "s", "propagation grid between observations (default: step_s)"),
+                Key("step_s", _F, 1.0, "s", "largest RK4 step of the estimator's propagation", gt=0.0),
+                Key("grid_s", _F, None, "s", "propagation grid between observations (default: step_s)", gt=0.0),
             ),
         ),
         Table(
@@ -185,8 +193,8 @@ SCHEMA = Schema(
                 Key("ref_area_m2", _F, None, "m^2", "aerodynamic reference area (default: the asset's)"),
                 Key("cd", _F, None, "1", "constant drag coefficient on ref_area_m2 when there is no vehicle file"),
                 # ---- Huygens-like descent: the second (drogue / stabiliser) parachute
-                Key("drogue_area_m2", _F, None, "m^2", 'drogue parachute reference area (events `chute = "drogue"`)'),
-                Key("drogue_cd", _F, 0.55, "1", "drogue parachute drag coefficient (constant)"),
+                Key("drogue_area_m2", _F, None, "m^2", 'drogue parachute reference area (`chute = "drogue"`)', gt=0.0),
+                Key("drogue_cd", _F, 0.55, "1", "drogue parachute drag coefficient (constant)", gt=0.0),
             ),
         ),
         Table("events", "phase changes", free="table", free_meaning="`[events.<name>]`: " + _named_meaning(EVENT_KEYS)),
@@ -280,7 +288,7 @@ SCHEMA = Schema(
                 Key("observation", _S, None, meaning="observation name whose residual is accumulated"),
                 Key("end_s", _F, None, "s", "end of the phase the residual is accumulated to"),
                 Key("align_level_m_s2", _F, 0.5, "m/s^2", "|measured acceleration| at which time is aligned"),
-                Key("step_s", _F, 0.5, "s", "RK4 step of the member propagation"),
+                Key("step_s", _F, 0.5, "s", "RK4 step of the member propagation", gt=0.0),
                 Key("seed", _I, 0, meaning="seed of the dispersion (offset by the run seed)"),
                 Key(
                     "covariance",
@@ -376,7 +384,8 @@ class StateSpec:
 class ObservationSpec:
     """One observation channel: ``quantity``, its ``size``, SI ``sigma`` (size,) or None (weights
     file), ``weights`` file key present, pre-smoothing ``median_window``, ``gate_probability``
-    (None: no gate), and the synthetic sensor's ``rate_hz``, ``start``, ``end`` [s], ``noise`` (size,) SI."""
+    (None: no gate), and the synthetic sensor's ``rate_hz``, ``start``, ``end`` [s], ``noise`` (size,) SI;
+    ``path``/``weights_path`` the files resolved to absolute paths (None when not given)."""
 
     name: str
     quantity: str
@@ -393,6 +402,8 @@ class ObservationSpec:
     end: float | None
     noise: np.ndarray | None
     decimate: int = 1
+    path: Path | None = None  # ``file`` resolved against the problem file's folder
+    weights_path: Path | None = None  # ``weights`` resolved likewise
 
 
 @dataclass(frozen=True)
@@ -443,11 +454,105 @@ def _initial_correlation(file: Path, raw: dict, states: dict[str, int]) -> tuple
 
 
 @dataclass(frozen=True)
-class Post2Config:
-    """Validated post2 settings (SI): ``dof``, reconstruction span ``t_start``, ``t_end`` [s],
-    estimator ``step`` and ``grid`` [s]; ``states`` and ``observations`` in file order;
-    ``events``; ``truth_states`` name -> SI value; the raw validated ``data`` for the rest."""
+class EnvironmentSettings:
+    """``[environment]`` as validated (SI, the keys' names; None: the body's value), plus the
+    ``table_file`` resolved to an absolute path and its ``table`` (k, 4) [altitude m, density kg/m³,
+    pressure Pa, temperature K] read once (None without a table file)."""
 
+    body: str
+    gm_m3_s2: float | None
+    equatorial_radius_m: float | None
+    reference_radius_m: float | None
+    j2: float | None
+    rotation_rate_rad_s: float | None
+    atmosphere: str
+    sea_level_pressure_pa: float
+    sea_level_temperature_K: float
+    baro_scale_anchor_m: float
+    rho0_kg_m3: float
+    scale_height_m: float
+    temperature_K: float
+    table_altitude_m: list | None
+    table_density_kg_m3: list | None
+    table_pressure_pa: list | None
+    table_temperature_K: list | None
+    table_file: Path | None
+    table: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class VehicleSettings:
+    """``[vehicle]`` as validated (SI), the asset ``path`` resolved (a shipped name under
+    ``assets/vehicles`` or a path beside the problem file) and the ``asset`` loaded once by
+    :func:`~workbench.models.aerodynamics.load_vehicle` (both None without a vehicle file)."""
+
+    file: str | None
+    mass_kg: float | None
+    ref_area_m2: float | None
+    cd: float | None
+    drogue_area_m2: float | None
+    drogue_cd: float
+    path: Path | None = None
+    asset: EntryVehicle | None = None
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    """``[filter]``: run the RTS ``smoother``; ``compare_propagation`` with the no-observation run."""
+
+    smoother: bool
+    compare_propagation: bool
+
+
+@dataclass(frozen=True)
+class TruthSettings:
+    """``[truth]`` of a synthetic scenario (never read by the reconstruction): the DOP853 ``rtol``,
+    the sampling ``output_step_s`` [s], the coefficient factors, the density wave (amplitude, λ [m]),
+    the truth's own Titan temperature nodes [m], [K] and CA(Mach) wave; ``states`` the
+    ``[truth.states]`` by name in SI (size,); ``tolerances`` the ``[truth.tolerances]`` in SI (size,)."""
+
+    rtol: float
+    output_step_s: float
+    ca_factor: float
+    cn_factor: float
+    cm_factor: float
+    density_wave_amplitude: float
+    density_wave_length_m: float
+    titan_node_altitudes_m: list | None
+    titan_node_temperatures_K: list | None
+    ca_mach_wave_amplitude: float
+    states: dict[str, np.ndarray]
+    tolerances: dict[str, np.ndarray]
+
+
+@dataclass(frozen=True)
+class MonteCarloSettings:
+    """``[monte_carlo]`` initial-state selection (thesis [R3] Ch. 5.1): ``members`` (0: off), ``keep``,
+    the ``observation`` name, ``end_s`` [s] or None, ``align_level_m_s2`` [m/s²], RK4 ``step_s`` [s],
+    ``seed``; ``covariance`` (6, 6) SI [m², m²/s, m²/s²] checked symmetric positive definite, or
+    None (the position/velocity states' 1σ)."""
+
+    members: int
+    keep: int
+    observation: str | None
+    end_s: float | None
+    align_level_m_s2: float
+    step_s: float
+    seed: int
+    covariance: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Post2Settings:
+    """The frozen settings of one post2 run (SI), built once by :meth:`from_scenario`: ``run`` (the
+    scenario file's :class:`~workbench.io.scenario.RunInfo`), ``dof``, reconstruction span ``t_start``,
+    ``t_end`` [s], estimator ``step`` and ``grid`` [s]; ``states``, ``observations`` (telemetry paths
+    resolved), ``events`` and ``schedules`` in file order; ``initial_correlation`` (states, C) or None;
+    the ``environment`` and ``vehicle`` (asset loaded); the ``filter`` options; the synthetic
+    ``truth``; the ``monte_carlo`` selection.  Picklable (process pools, Dask); a study that varies
+    it uses :func:`dataclasses.replace`."""
+
+    run: RunInfo
     dof: int
     t_start: float
     t_end: float
@@ -456,14 +561,53 @@ class Post2Config:
     states: tuple[StateSpec, ...]
     observations: tuple[ObservationSpec, ...]
     events: tuple[EventSpec, ...]
-    truth_states: dict[str, np.ndarray]
-    data: dict
-    schedules: tuple[Schedule, ...] = ()  # weights / system noise windows (schedules.py)
-    initial_correlation: tuple[tuple[str, ...], np.ndarray] | None = None  # (states, C) or None
+    schedules: tuple[Schedule, ...]
+    initial_correlation: tuple[tuple[str, ...], np.ndarray] | None
+    environment: EnvironmentSettings
+    vehicle: VehicleSettings
+    filter: FilterSettings
+    truth: TruthSettings
+    monte_carlo: MonteCarloSettings
 
     def state(self, name: str) -> StateSpec | None:
         """The :class:`StateSpec` called ``name`` or None."""
         return next((s for s in self.states if s.name == name), None)
+
+    def with_state(self, name: str, **changes) -> Post2Settings:
+        """These settings with the state ``name``'s :class:`StateSpec` fields replaced (SI), e.g.
+        ``value=``, ``sigma=`` (a Monte Carlo initial state): :func:`dataclasses.replace`."""
+        if self.state(name) is None:
+            raise KeyError(f"no estimated state {name!r}")
+        return replace(self, states=tuple(replace(s, **changes) if s.name == name else s for s in self.states))
+
+    def telemetry_files(self, folder: Path | None = None) -> dict[str, Path]:
+        """{observation name: CSV, name + "_weights": CSV}: the ``[observations.<name>] file/weights``
+        paths (a missing key or file is a :class:`ScenarioError` naming the key) or, with ``folder``,
+        ``<name>.csv`` / ``<name>_weights.csv`` inside it (a synthetic run's)."""
+        out = {}
+        for o in self.observations:
+            if folder is not None:
+                out[o.name] = Path(folder) / f"{o.name}.csv"
+                if o.weights is not None:
+                    out[o.name + "_weights"] = Path(folder) / f"{o.name}_weights.csv"
+                continue
+            out[o.name] = self._existing(f"observations.{o.name}.file", o.path)
+            if o.weights is not None:
+                out[o.name + "_weights"] = self._existing(f"observations.{o.name}.weights", o.weights_path)
+        return out
+
+    def _existing(self, dotted: str, path: Path | None) -> Path:
+        if path is None:
+            raise ScenarioError(self.run.path, dotted, "missing str value")
+        if not path.exists():
+            raise ScenarioError(self.run.path, dotted, f"file not found: {path}")
+        return path
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario) -> Post2Settings:
+        """Validate ``scenario`` against :data:`SCHEMA` and the named tables, resolve its files and load
+        its vehicle asset; :class:`ScenarioError` naming file and dotted key for anything wrong."""
+        return _settings(scenario)
 
 
 def unit_factor(unit: str) -> float:
@@ -679,10 +823,10 @@ def _schedules(
     return tuple(out)
 
 
-def config_for(scenario: Scenario) -> Post2Config:
-    """Build the :class:`Post2Config` of a scenario (validated against :data:`SCHEMA` and the named
-    tables); :class:`ScenarioError` naming file and dotted key for anything wrong."""
+def _settings(scenario: Scenario) -> Post2Settings:
+    """:meth:`Post2Settings.from_scenario`."""
     file = Path(scenario.path)
+    run = RunInfo.from_scenario(scenario)
     data = SCHEMA.validate(scenario.data, file)
     m = data["model"]
     dof = int(m["dof"])
@@ -690,8 +834,6 @@ def config_for(scenario: Scenario) -> Post2Config:
         raise ScenarioError(file, "model.dof", f"must be 3 or 6, got {dof}")
     if not m["t_end_s"] > m["t_start_s"]:
         raise ScenarioError(file, "model.t_end_s", "must be after t_start_s")
-    if not m["step_s"] > 0:
-        raise ScenarioError(file, "model.step_s", "must be > 0")
     states = []
     for name, raw in data.get("states", {}).items():
         _check_name(file, f"states.{name}", name, STATES, "state")
@@ -702,7 +844,8 @@ def config_for(scenario: Scenario) -> Post2Config:
             raise ScenarioError(file, f"states.{need}", f"missing: a {dof}-DOF model needs the state '{need}'")
     obs = []
     for name, raw in data.get("observations", {}).items():
-        obs.append(_observation(file, name, raw, dof))
+        o = _observation(file, name, raw, dof)
+        obs.append(replace(o, path=_resolved(run, o.file), weights_path=_resolved(run, o.weights)))
     if not obs:
         raise ScenarioError(file, "observations", "no observation declared")
     events = tuple(_event(file, n, r) for n, r in data.get("events", {}).items())
@@ -712,8 +855,6 @@ def config_for(scenario: Scenario) -> Post2Config:
         d = STATES[name]
         truth_states[name] = _si(_vec(file, f"truth.states.{name}", v, d.size), d.unit)
     grid = m["grid_s"] if m["grid_s"] is not None else m["step_s"]
-    if not grid > 0:
-        raise ScenarioError(file, "model.grid_s", "must be > 0")
     # ---- schedules (schedules.py): targets and events must be declared above
     schedules = _schedules(
         file,
@@ -725,7 +866,81 @@ def config_for(scenario: Scenario) -> Post2Config:
     corr = _initial_correlation(
         file, data.get("initial_correlation", {}), {s.name: STATES[s.name].size for s in states}
     )
-    return Post2Config(
-        dof, float(m["t_start_s"]), float(m["t_end_s"]), float(m["step_s"]), float(grid),
-        tuple(states), tuple(obs), events, truth_states, data, schedules, corr,
+    tr = {k: v for k, v in data["truth"].items() if k not in ("states", "tolerances")}
+    tolerances = {n: _tolerance(file, n, v) for n, v in data["truth"].get("tolerances", {}).items()}
+    mc = dict(data["monte_carlo"])
+    mc["covariance"] = _covariance(file, mc["covariance"])
+    return Post2Settings(
+        run, dof, float(m["t_start_s"]), float(m["t_end_s"]), float(m["step_s"]), float(grid),
+        tuple(states), tuple(obs), events, schedules, corr,
+        _environment(file, run, data["environment"]), _vehicle(file, run, data["vehicle"]),
+        FilterSettings(**data["filter"]), TruthSettings(**tr, states=truth_states, tolerances=tolerances),
+        MonteCarloSettings(**mc),
     )  # fmt: skip
+
+
+def _resolved(run: RunInfo, rel: str | None) -> Path | None:
+    return None if rel is None else run.resolve(rel)
+
+
+def _environment(file: Path, run: RunInfo, e: dict) -> EnvironmentSettings:
+    """``[environment]``: the table atmosphere's lists or file checked, the file read once."""
+    path = table = None
+    if e["atmosphere"] == "table" and e["table_file"] is not None:  # Huygens-like: the profile from a file
+        path = run.resolve(e["table_file"])
+        if not path.exists():
+            raise ScenarioError(file, "environment.table_file", f"file not found: {path}")
+        try:
+            table = np.loadtxt(path, delimiter=",", comments="#", skiprows=1, ndmin=2)
+        except ValueError as err:
+            raise ScenarioError(file, "environment.table_file", f"{path.name}: {err}") from None
+        if table.shape[1] != 4:
+            why = f"{path.name}: expected 4 columns, got {table.shape[1]}"
+            raise ScenarioError(file, "environment.table_file", why)
+    elif e["atmosphere"] == "table":
+        for c in ("table_altitude_m", "table_density_kg_m3", "table_pressure_pa", "table_temperature_K"):
+            if e[c] is None:
+                raise ScenarioError(file, f"environment.{c}", "atmosphere = 'table' needs this list")
+    return EnvironmentSettings(**{**e, "table_file": path}, table=table)
+
+
+def _vehicle(file: Path, run: RunInfo, v: dict) -> VehicleSettings:
+    """``[vehicle]``: the asset found (shipped name or path) and loaded once; the cross-field checks."""
+    if v["file"] is None:
+        if v["mass_kg"] is None:
+            raise ScenarioError(file, "vehicle.mass_kg", "needed when no vehicle file is given")
+        return VehicleSettings(**v)
+    name = v["file"]
+    shipped = assets_dir() / "vehicles" / f"{name}.toml"
+    path = shipped if shipped.is_file() else run.resolve(name)
+    if not Path(path).is_file():
+        raise ScenarioError(file, "vehicle.file", f"no shipped vehicle {name!r} and no file {path}")
+    return VehicleSettings(**v, path=Path(path), asset=load_vehicle(path))
+
+
+def _tolerance(file: Path, name: str, value) -> np.ndarray:
+    """A ``[truth.tolerances]`` entry in SI (the state's unit converted), (size,)."""
+    if name not in STATES:
+        raise ScenarioError(file, f"truth.tolerances.{name}", f"unknown state '{name}'")
+    v = np.atleast_1d(np.asarray(value, dtype=float))
+    if np.any(v <= 0):
+        raise ScenarioError(file, f"truth.tolerances.{name}", "must be > 0")
+    return v * unit_factor(STATES[name].unit)
+
+
+def _covariance(file: Path, c) -> np.ndarray | None:
+    """``[monte_carlo] covariance`` (km², km²/s, km²/s²) -> (6, 6) SI, symmetric positive definite."""
+    if c is None:
+        return None
+    try:
+        C = np.array(c, dtype=float)
+    except (TypeError, ValueError):
+        raise ScenarioError(file, "monte_carlo.covariance", "expected a 6×6 list of numbers") from None
+    if C.shape != (6, 6) or not np.allclose(C, C.T, rtol=1e-9, atol=0.0):
+        raise ScenarioError(file, "monte_carlo.covariance", f"must be a symmetric 6×6, got shape {C.shape}")
+    C = C * 1e6  # km², km²/s, km²/s² -> m², m²/s, m²/s²
+    try:
+        np.linalg.cholesky(C)
+    except np.linalg.LinAlgError:
+        raise ScenarioError(file, "monte_carlo.covariance", "not positive definite") from None
+    return C

@@ -35,11 +35,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.estimation.montecarlo import run_monte_carlo
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import ScenarioError
 from workbench.problems.post2 import build, kernels, pipeline
-from workbench.problems.post2 import model as post2_model
-from workbench.problems.post2.config import Post2Config, config_for, unit_factor
-from workbench.problems.post2.model import STATES, StateMap, TrajectoryModel
+from workbench.problems.post2.config import Post2Settings, unit_factor
+from workbench.problems.post2.model import POSITION, STATES, TRANSLATION, VELOCITY, TrajectoryModel
 
 __all__ = [
     "McSelection",
@@ -51,7 +50,7 @@ __all__ = [
     "member_loop_metric",
     "select_initial_state",
     "reconstruct",
-    "tolerance_si",
+    "start_from",
     "planted_table",
 ]
 
@@ -86,41 +85,26 @@ class McSelection:
             "best_metric": float(self.metric[self.kept[0]]),
             "nominal_metric": float(self.nominal_metric),
             "best_shift_s": float(self.shift_s[self.kept[0]]),
-            "chosen_minus_delivered_position_km": (d[:3] / 1e3).tolist(),
-            "chosen_minus_delivered_velocity_m_s": d[3:].tolist(),
+            "chosen_minus_delivered_position_km": (d[POSITION] / 1e3).tolist(),
+            "chosen_minus_delivered_velocity_m_s": d[VELOCITY].tolist(),
             "wall_s": float(self.wall_s),
             "scheduler": self.scheduler,
         }
 
 
-def entry_model(scenario: Scenario, cfg: Post2Config) -> TrajectoryModel:
+def entry_model(cfg: Post2Settings) -> TrajectoryModel:
     """The estimator's 3-DOF model over [position, velocity] only (nominal model inputs, no events):
     the member propagation of the entry phase."""
-    return TrajectoryModel(
-        StateMap(["position", "velocity"]), 3, build.environment(scenario, cfg), build.vehicle(scenario, cfg)
-    )
+    return TrajectoryModel(TRANSLATION, 3, build.environment(cfg), build.vehicle(cfg))
 
 
-def delivered_covariance(scenario: Scenario, cfg: Post2Config) -> np.ndarray:
-    """The ``[monte_carlo] covariance`` (6, 6) in SI (m², m²/s, m²/s²), checked symmetric positive
-    definite; without it the diagonal of the position/velocity states' 1σ."""
-    mc = cfg.data["monte_carlo"]
-    c = mc["covariance"]
-    if c is None:
+def delivered_covariance(cfg: Post2Settings) -> np.ndarray:
+    """The ``[monte_carlo] covariance`` (6, 6) in SI (m², m²/s, m²/s², checked symmetric positive
+    definite by the settings); without it the diagonal of the position/velocity states' 1σ."""
+    if cfg.monte_carlo.covariance is None:
         pos, vel = cfg.state("position"), cfg.state("velocity")
         return np.diag(np.concatenate([pos.sigma, vel.sigma]) ** 2)
-    try:
-        C = np.array(c, dtype=float)
-    except (TypeError, ValueError):
-        raise ScenarioError(scenario.path, "monte_carlo.covariance", "expected a 6×6 list of numbers") from None
-    if C.shape != (6, 6) or not np.allclose(C, C.T, rtol=1e-9, atol=0.0):
-        raise ScenarioError(scenario.path, "monte_carlo.covariance", f"must be a symmetric 6×6, got shape {C.shape}")
-    C = C * 1e6  # km², km²/s, km²/s² -> m², m²/s, m²/s²
-    try:
-        np.linalg.cholesky(C)
-    except np.linalg.LinAlgError:
-        raise ScenarioError(scenario.path, "monte_carlo.covariance", "not positive definite") from None
-    return C
+    return cfg.monte_carlo.covariance
 
 
 def dispersed_members(mean: np.ndarray, cov: np.ndarray, n: int, seed: int) -> np.ndarray:
@@ -169,10 +153,10 @@ def member_metrics(shared: tuple, start: int, stop: int, _seeds=None) -> tuple[n
     2-4).  ``shared`` = (model, members (N, 6), t0, h, n_steps, obs t (m,), obs z (m,), level, end_s)."""
     model, X, t0, h, n_steps, tz, z, level, end = shared
     a = propagate_axial_acceleration(model, X[start:stop], t0, n_steps, h)
-    return _metric(a, t0, h, tz, z, level, end)
+    return _metric(a, t0, h, tz, z, level, end, model.use_kernel)
 
 
-def _metric(a, t0, h, tz, z, level, end):
+def _metric(a, t0, h, tz, z, level, end, use_kernel: bool):
     tg = t0 + h * np.arange(a.shape[1])
     t_meas = _crossing(tz, z[None, :], level)[0]
     shift = _crossing(tg, a, level) - t_meas
@@ -183,7 +167,7 @@ def _metric(a, t0, h, tz, z, level, end):
     hi = a.shape[1] - 1.000001
 
     def total(sh):
-        if post2_model.USE_KERNEL:  # compiled, same numbers (tests/problems/post2/test_post2_kernels.py)
+        if use_kernel:  # compiled, same numbers (tests/problems/post2/test_post2_kernels.py)
             out = np.empty(a.shape[0])
             ac = np.ascontiguousarray(a, dtype=float)
             kernels.metric_total_kernel(ac, tu, zu, np.ascontiguousarray(sh, dtype=float), t0, h, hi, out)
@@ -211,7 +195,8 @@ def member_loop_metric(model: TrajectoryModel, X: np.ndarray, t0, h, n_steps, tz
     m = np.empty(X.shape[0])
     s = np.empty(X.shape[0])
     for i in range(X.shape[0]):
-        mi, si = _metric(propagate_axial_acceleration(model, X[i : i + 1], t0, n_steps, h), t0, h, tz, z, level, end)
+        a = propagate_axial_acceleration(model, X[i : i + 1], t0, n_steps, h)
+        mi, si = _metric(a, t0, h, tz, z, level, end, model.use_kernel)
         m[i], s[i] = mi[0], si[0]
     return m, s
 
@@ -236,8 +221,7 @@ def _move(model: TrajectoryModel, X: np.ndarray, t0: float, dt: np.ndarray, h: f
 
 
 def select_initial_state(
-    scenario: Scenario,
-    cfg: Post2Config,
+    cfg: Post2Settings,
     channel,
     members: int,
     seed: int,
@@ -248,25 +232,23 @@ def select_initial_state(
     :class:`~workbench.problems.post2.pipeline.Channel` of axial acceleration, its raw samples)
     with ``members`` dispersed states (plus ``extra_members`` (k, 6) appended, for tests);
     in-process and vectorised, or chunked on a Dask ``scheduler``."""
-    mc = cfg.data["monte_carlo"]
+    mc = cfg.monte_carlo
     if channel.spec.quantity != "acceleration_axial":
-        raise ScenarioError(scenario.path, "monte_carlo.observation", "must name an acceleration_axial observation")
-    end = mc["end_s"] if mc["end_s"] is not None else float(channel.t[-1])
-    h = float(mc["step_s"])
-    if not h > 0:
-        raise ScenarioError(scenario.path, "monte_carlo.step_s", "must be > 0")
-    level = float(mc["align_level_m_s2"])
+        raise ScenarioError(cfg.run.path, "monte_carlo.observation", "must name an acceleration_axial observation")
+    end = mc.end_s if mc.end_s is not None else float(channel.t[-1])
+    h = float(mc.step_s)  # > 0 (the schema's bound)
+    level = float(mc.align_level_m_s2)
     tz, z = np.asarray(channel.t, float), np.asarray(channel.z_raw[:, 0], float)
     if not np.any(np.abs(z[tz <= end]) >= level):
         raise ScenarioError(
-            scenario.path, "monte_carlo.align_level_m_s2",
+            cfg.run.path, "monte_carlo.align_level_m_s2",
             f"the observation {channel.spec.name!r} never reaches {level:g} m/s² before end_s = {end:g} s",
         )  # fmt: skip
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
-    X = dispersed_members(mean, delivered_covariance(scenario, cfg), members, seed)
+    X = dispersed_members(mean, delivered_covariance(cfg), members, seed)
     if extra_members is not None:
         X = np.vstack([X, extra_members])
-    model = entry_model(scenario, cfg)
+    model = entry_model(cfg)
     margin = 60.0  # members cross the alignment level up to ~1 min before / after the measured one
     n_steps = int(math.ceil((end + margin - cfg.t_start) / h))
     shared = (model, X, cfg.t_start, h, n_steps, tz, z, level, end)
@@ -284,63 +266,48 @@ def select_initial_state(
         desc = f"{scheduler} (chunks of {max(1, X.shape[0] // 8)})"
     wall = time.perf_counter() - t0
     if not np.any(np.isfinite(metric)):
-        raise ScenarioError(scenario.path, "monte_carlo", "no member reached the alignment level: widen end_s")
-    keep = max(1, min(int(mc["keep"]), X.shape[0]))
+        raise ScenarioError(cfg.run.path, "monte_carlo", "no member reached the alignment level: widen end_s")
+    keep = max(1, min(int(mc.keep), X.shape[0]))
     kept = np.argsort(metric, kind="stable")[:keep]
     moved = _move(model, X[kept], cfg.t_start, shift[kept], h)
-    sigma0 = np.std(moved, axis=0, ddof=1) if keep > 1 else np.sqrt(np.diag(delivered_covariance(scenario, cfg)))
-    sigma0 = np.maximum(sigma0, np.r_[np.full(3, 10.0), np.full(3, 0.01)])  # floors: 10 m, 1 cm/s
+    sigma0 = np.std(moved, axis=0, ddof=1) if keep > 1 else np.sqrt(np.diag(delivered_covariance(cfg)))
+    floor = np.empty(sigma0.size)
+    floor[POSITION], floor[VELOCITY] = 10.0, 0.01  # floors: 10 m, 1 cm/s
+    sigma0 = np.maximum(sigma0, floor)
     return McSelection(X, metric, shift, kept, moved[0], sigma0, float(metric[0]), mean, wall, desc)
 
 
-def reconstruct(scenario: Scenario, telemetry, options):
+def reconstruct(cfg: Post2Settings, telemetry, options):
     """The post2 stages with, when ``[monte_carlo] members`` (or ``options.members``) > 0, the
     :class:`McSelection` stage first and the EKF started from its state and spread."""
-    cfg = config_for(scenario)
-    mc = cfg.data["monte_carlo"]
-    n = options.members if getattr(options, "members", None) is not None else int(mc["members"])
+    mc = cfg.monte_carlo
+    n = options.members if getattr(options, "members", None) is not None else int(mc.members)
     if n > 0:
-        if mc["observation"] is None or mc["observation"] not in {o.name for o in cfg.observations}:
+        if mc.observation is None or mc.observation not in {o.name for o in cfg.observations}:
             raise ScenarioError(
-                scenario.path, "monte_carlo.observation",
-                f"{mc['observation']!r} is not one of the declared observations",
+                cfg.run.path, "monte_carlo.observation",
+                f"{mc.observation!r} is not one of the declared observations",
             )  # fmt: skip
-        data = pipeline.read_observations(scenario, cfg, telemetry)
-        seed = int(mc["seed"]) + (int(options.seed) if getattr(options, "seed", None) is not None else 0)
-        sel = select_initial_state(
-            scenario, cfg, data.channels[mc["observation"]], n, seed, getattr(options, "scheduler", None)
-        )
+        data = pipeline.read_observations(cfg, telemetry)
+        seed = int(mc.seed) + (int(options.seed) if getattr(options, "seed", None) is not None else 0)
+        sel = select_initial_state(cfg, data.channels[mc.observation], n, seed, getattr(options, "scheduler", None))
         yield sel
-        for stage in pipeline.reconstruct(_start_from(scenario, sel), telemetry, options):
+        for stage in pipeline.reconstruct(start_from(cfg, sel), telemetry, options):
             if isinstance(stage, pipeline.Post2Result):
                 stage.summary["mc_initial_state"] = sel.summary()
             yield stage
         return
-    yield from pipeline.reconstruct(scenario, telemetry, options)
+    yield from pipeline.reconstruct(cfg, telemetry, options)
 
 
-def _start_from(scenario: Scenario, sel: McSelection) -> Scenario:
-    return scenario.with_overrides(
-        {
-            "states.position.value": sel.x0[:3].tolist(),
-            "states.position.sigma": sel.sigma0[:3].tolist(),
-            "states.velocity.value": sel.x0[3:].tolist(),
-            "states.velocity.sigma": sel.sigma0[3:].tolist(),
-        }
-    )
+def start_from(cfg: Post2Settings, sel: McSelection) -> Post2Settings:
+    """The settings with the EKF's initial position and velocity (and their 1σ) from the selection
+    ``sel`` (SI, inertial): :func:`dataclasses.replace` of the two states."""
+    out = cfg.with_state("position", value=sel.x0[POSITION].copy(), sigma=sel.sigma0[POSITION].copy())
+    return out.with_state("velocity", value=sel.x0[VELOCITY].copy(), sigma=sel.sigma0[VELOCITY].copy())
 
 
 # ------------------------------------------------------------------ scorecard
-def tolerance_si(scenario: Scenario, name: str, value) -> np.ndarray:
-    """A ``[truth.tolerances]`` entry in SI (the state's unit converted), (size,)."""
-    if name not in STATES:
-        raise ScenarioError(scenario.path, f"truth.tolerances.{name}", f"unknown state '{name}'")
-    v = np.atleast_1d(np.asarray(value, dtype=float))
-    if np.any(v <= 0):
-        raise ScenarioError(scenario.path, f"truth.tolerances.{name}", "must be > 0")
-    return v * unit_factor(STATES[name].unit)
-
-
 def planted_table(result, truth: dict) -> list[dict]:
     """Planted vs recovered, one row per estimated parameter with a planted truth value: the final
     smoothed value and 3σ, the error, the tolerance (``[truth.tolerances]``, if any), and

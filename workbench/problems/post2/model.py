@@ -43,13 +43,15 @@ S-curve of the thesis' Ch. 5 (Fig. 5-15): the estimated state s is unbounded and
 Speed (issue #14): ``derivative``, ``aero_force_moment`` and ``propagate`` run compiled numba
 kernels (:mod:`workbench.problems.post2.kernels`) that repeat the numpy reference's operations in
 the same order, so the numbers are the same to the bit on the shipped scenarios; the numpy code is
-kept (``derivative_reference``, ``aero_force_moment_reference``, and every path with
-:data:`USE_KERNEL` False) and ``tests/problems/post2/test_post2_kernels.py`` compares the two.
+kept (``derivative_reference``, ``aero_force_moment_reference``, and every path of a model with
+``use_kernel`` False: the environment variable ``WORKBENCH_POST2_KERNEL=0``, :data:`KERNEL_ENV`)
+and ``tests/problems/post2/test_post2_kernels.py`` compares the two.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -78,18 +80,29 @@ __all__ = [
     "scurve_inverse",
     "scurve_slope",
     "rk4_step",
+    "TRANSLATION",
+    "POSITION",
+    "VELOCITY",
     "wind_inertial",
     "quat_from_aero_angles",
     "aero_angles",
-    "USE_KERNEL",
+    "KERNEL_ENV",
+    "kernel_enabled",
     "DensityWave",
     "CaMachWave",
 ]
 
-#: evaluate :meth:`TrajectoryModel.derivative` / :meth:`TrajectoryModel.aero_force_moment` with the
-#: compiled :func:`~workbench.problems.post2.kernels.dynamics_kernel` (False: the numpy reference
-#: ``derivative_reference`` / ``aero_force_moment_reference``; the two agree to rounding)
-USE_KERNEL = True
+#: the one switch of the compiled kernels: ``WORKBENCH_POST2_KERNEL=0`` in the environment makes every
+#: :class:`TrajectoryModel` built afterwards evaluate :meth:`TrajectoryModel.derivative` /
+#: :meth:`TrajectoryModel.aero_force_moment` / ``propagate`` with the numpy reference
+#: (``derivative_reference`` / ``aero_force_moment_reference``; the two agree to rounding) instead of
+#: :func:`~workbench.problems.post2.kernels.dynamics_kernel`; unset or any other value: the kernels
+KERNEL_ENV = "WORKBENCH_POST2_KERNEL"
+
+
+def kernel_enabled() -> bool:
+    """True unless the environment sets :data:`KERNEL_ENV` to ``0`` (the numpy reference path)."""
+    return os.environ.get(KERNEL_ENV, "").strip() != "0"
 
 
 @dataclass(frozen=True)
@@ -406,6 +419,12 @@ class StateMap:
         return scurve(v, *b.bounds) if b.bounds is not None else v
 
 
+#: the 3-DOF translation state [position m, velocity m/s] (6,): the Monte Carlo members' and the
+#: entry model's layout; :data:`POSITION` and :data:`VELOCITY` are its named slices
+TRANSLATION = StateMap(["position", "velocity"])
+POSITION, VELOCITY = TRANSLATION.blocks["position"].sx, TRANSLATION.blocks["velocity"].sx
+
+
 def wind_inertial(p_I: np.ndarray, wind_en: np.ndarray) -> np.ndarray:
     """Inertial wind vector [m/s] (..., 3) of a horizontal wind ``wind_en`` (..., 2) [east, north]
     [m/s] at positions ``p_I`` (..., 3) [m] (+Z the pole): east = unit(Ẑ × r̂), north = r̂ × east
@@ -509,7 +528,8 @@ class TrajectoryModel:
     ``dof`` 3 or 6; ``env`` :class:`Environment`; ``vehicle`` :class:`Vehicle`; ``events``
     the phase changes in order; ``nominal``: the value of every *model input* not in the state
     (``"j2"``, multipliers, biases, scale factor; SI) and, for a 3-DOF model, nothing else.
-    Every method is vectorised over leading dimensions of x (..., n_x).
+    ``use_kernel``: evaluate with the compiled kernels (None: :func:`kernel_enabled`, the environment's
+    choice), False: the numpy reference.  Every method is vectorised over leading dimensions of x (..., n_x).
     """
 
     def __init__(
@@ -520,6 +540,7 @@ class TrajectoryModel:
         vehicle: Vehicle,
         events: tuple[Event, ...] = (),
         nominal: dict[str, float] | None = None,
+        use_kernel: bool | None = None,
     ):
         if dof not in (3, 6):
             raise ValueError("dof must be 3 or 6")
@@ -529,6 +550,7 @@ class TrajectoryModel:
             raise ValueError("a 6-DOF model needs 'attitude' and 'body_rates' blocks")
         self.smap, self.dof, self.env, self.vehicle = smap, dof, env, vehicle
         self.events = tuple(events)
+        self.use_kernel = kernel_enabled() if use_kernel is None else bool(use_kernel)
         # model inputs that are not in the state (the truth plants its values here); default DESCENT_NOMINALS
         self.nominal = {**DESCENT_NOMINALS, **(nominal or {})}
         self._inertia = np.asarray(vehicle.inertia_B, float)
@@ -801,8 +823,8 @@ class TrajectoryModel:
     def aero_force_moment(self, x: np.ndarray, phase: dict) -> tuple[np.ndarray, np.ndarray]:
         """Aerodynamic (+ parachute) force [N] in the inertial frame and moment [N m] in the body
         frame, each (..., 3); zero in vacuum.  ``phase``: the current mass/area/parachute state.
-        Compiled kernel when :data:`USE_KERNEL` (and the model is supported), else the reference."""
-        if USE_KERNEL and self._plan() is not None:
+        Compiled kernel when ``use_kernel`` (and the model is supported), else the reference."""
+        if self.use_kernel and self._plan() is not None:
             _, F, M = self._kernel_eval(x, phase, want_dx=False)
             return F, M
         return self.aero_force_moment_reference(x, phase)
@@ -897,8 +919,8 @@ class TrajectoryModel:
     # ------------------------------------------------------------------ dynamics
     def derivative(self, x: np.ndarray, phase: dict) -> np.ndarray:
         """ẋ (..., n_x): kinematics, translational and (6-DOF) rotational dynamics; parameters constant.
-        Compiled kernel when :data:`USE_KERNEL` (and the model is supported), else the reference."""
-        if USE_KERNEL and self._plan() is not None:
+        Compiled kernel when ``use_kernel`` (and the model is supported), else the reference."""
+        if self.use_kernel and self._plan() is not None:
             return self._kernel_eval(x, phase, want_dx=True)[0]
         return self.derivative_reference(x, phase)
 
@@ -970,7 +992,7 @@ class TrajectoryModel:
         on the grid)."""
         n = max(1, int(math.ceil((t1 - t0) / max_step - 1e-9)))
         dt = (t1 - t0) / n
-        plan = self._plan() if USE_KERNEL else None
+        plan = self._plan() if self.use_kernel else None
         if plan is not None and plan["atm_kind"] is not None:  # every RK4 stage in one compiled call
             x = np.asarray(x, dtype=float)
             X = np.array(x.reshape(-1, x.shape[-1]), dtype=float, order="C")  # one compiled layout
@@ -997,7 +1019,7 @@ class TrajectoryModel:
         if quantity == "gravity_magnitude":
             return np.linalg.norm(self.gravity(x), axis=-1, keepdims=True)
         if quantity == "acceleration_inertial":
-            if USE_KERNEL and self._plan() is not None:  # the velocity block of ẋ: gravity + F / m
+            if self.use_kernel and self._plan() is not None:  # the velocity block of ẋ: gravity + F / m
                 return self._kernel_eval(x, phase, want_dx=True)[0][..., self.smap.blocks["velocity"].sx]
             F, _ = self.aero_force_moment(x, phase)
             return self.gravity(x) + F / phase["mass"]

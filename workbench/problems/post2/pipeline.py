@@ -23,17 +23,17 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import median_filter
 
-from workbench.core.rotation import attitude_error
+from workbench.core.rotation import attitude_error, dcm_to_quat, quat_from_rotvec
 from workbench.estimation.consistency import chi2_ppf
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
 from workbench.estimation.health import WARNING, covariance_check, health_report, interval_check, nis_check, notes_check
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import ScenarioError
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.io.units import likely_unit
 from workbench.problems.post2 import build
 from workbench.problems.post2 import schedules as sched
-from workbench.problems.post2.config import ObservationSpec, Post2Config, config_for
+from workbench.problems.post2.config import ObservationSpec, Post2Settings
 from workbench.problems.post2.model import (
     OBSERVATIONS,
     STATES,
@@ -90,6 +90,11 @@ class ForwardStage:
     quantities: dict[str, str]
     weight_factors: dict = field(default_factory=dict)
 
+    def residual_sigma(self, name: str) -> np.ndarray:
+        """1σ (n, m) of the innovations of channel ``name``: √diag S (negative rounding clipped to 0), SI."""
+        S = self.forward.innovations[name].S
+        return np.sqrt(np.maximum(np.einsum("nii->ni", S), 0.0))
+
 
 @dataclass(frozen=True)
 class Post2Result:
@@ -110,21 +115,58 @@ class Post2Result:
     history: dict
     summary: dict
 
+    def phase_index(self) -> np.ndarray:
+        """(n,) float: how many events had fired at each grid time (0 before the first, +1 at each)."""
+        te = np.array([a for a, _ in self.events], dtype=float)
+        return np.searchsorted(te, self.t, side="right").astype(float)
 
-def _weights_R(
-    scenario: Scenario, spec: ObservationSpec, t: np.ndarray, wpath: Path, obs_file: str = "the observation file"
-) -> np.ndarray:
+    def body_attitude(self, rows: np.ndarray) -> np.ndarray:
+        """q_I_B (k, 4) scalar-last at the grid ``rows`` (k,) of the smoothed state: the attitude block
+        (6-DOF) or, 3-DOF, +X_B along the inertial velocity (zero angle of attack)."""
+        if "attitude" in self.smap:
+            return np.array(self.smap.raw(self.x[rows], "attitude"))
+        return _along_velocity(self.smap.raw(self.x[rows], "velocity"))
+
+    def tilt_rotation(self, rows: np.ndarray) -> np.ndarray | None:
+        """q_B_tilted (k, 4) of an estimated tilt state (``tilt*``, rad: a scalar about Y_B or a
+        rotation vector) at the grid ``rows`` (k,) of the smoothed history; None without one."""
+        name = next((nm for nm in self.history["smoothed"] if nm == "tilt" or nm.startswith("tilt")), None)
+        if name is None:
+            return None
+        a = np.asarray(self.history["smoothed"][name]["value"], float)[rows]
+        rv = np.zeros((a.shape[0], 3))
+        if a.shape[1] == 1:
+            rv[:, 1] = a[:, 0]
+        else:
+            rv[:, : min(3, a.shape[1])] = a[:, :3]
+        return quat_from_rotvec(rv)
+
+
+def _along_velocity(v: np.ndarray) -> np.ndarray:
+    """q_I_B (n, 4) with X_B along v (n, 3) (3-DOF drawing: zero angle of attack)."""
+    out = np.empty((v.shape[0], 4))
+    for i, vi in enumerate(v):
+        x = vi / max(np.linalg.norm(vi), 1e-12)
+        a = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        y = np.cross(a, x)
+        y /= np.linalg.norm(y)
+        out[i] = dcm_to_quat(np.column_stack([x, y, np.cross(x, y)]))
+    return out
+
+
+def _weights_R(file: Path, spec: ObservationSpec, t: np.ndarray, wpath: Path, obs_file: str) -> np.ndarray:
     """R (n, m, m) = W⁻¹ from a weights CSV (columns as the observation's, unit ``1`` meaning
-    1/SI², held from each row to the next); a weights file that ends before the observations is an error."""
+    1/SI², held from each row to the next); a weights file that ends before the observations is an error
+    located in the problem ``file`` (``obs_file``: the observation file's name, for the message)."""
     d = OBSERVATIONS[spec.quantity]
     wt = read_telemetry(wpath)
     missing = [c for c in d.residual_names if c not in wt.channels]
     if missing:
-        raise ScenarioError(scenario.path, f"observations.{spec.name}.weights", f"{wpath.name}: no column(s) {missing}")
+        raise ScenarioError(file, f"observations.{spec.name}.weights", f"{wpath.name}: no column(s) {missing}")
     if wt.time[0] > t[0] + 1e-9 or wt.time[-1] < t[-1] - 1e-9:
         bad = np.flatnonzero((t < wt.time[0] - 1e-9) | (t > wt.time[-1] + 1e-9))
         raise ScenarioError(
-            scenario.path,
+            file,
             f"observations.{spec.name}.weights",
             f"{wpath.name} (column time, rows 1..{wt.time.size}) covers {wt.time[0]:g} .. {wt.time[-1]:g} s but the "
             f"observations run {t[0]:g} .. {t[-1]:g} s: {obs_file} row {bad[0] + 1} ({t[bad[0]]:g} s) has no weight "
@@ -133,18 +175,17 @@ def _weights_R(
     idx = np.clip(np.searchsorted(wt.time, t + 1e-9, side="right") - 1, 0, wt.time.size - 1)
     W = wt.stack(d.residual_names)[idx]
     if np.any(W <= 0):
-        raise ScenarioError(scenario.path, f"observations.{spec.name}.weights", f"{wpath.name}: weights must be > 0")
+        raise ScenarioError(file, f"observations.{spec.name}.weights", f"{wpath.name}: weights must be > 0")
     R = np.zeros((t.size, d.size, d.size))
     R[:, np.arange(d.size), np.arange(d.size)] = 1.0 / W
     return R
 
 
-def _check_gravity_units(path: Path, tel, column: str, cfg: Post2Config) -> None:
+def _check_gravity_units(path: Path, tel, column: str, cfg: Post2Settings) -> None:
     """Unit plausibility of a gravity-magnitude observation: its median lies between a tenth of and
     1.2 times the surface gravity GM/R² of ``[environment]``; a factor explained by a unit mix-up
     (g ↔ m/s² ...) is a :class:`TelemetryError` naming the file, the column and the likely unit."""
-    env = cfg.data["environment"]
-    gm, radius = env.get("gm_m3_s2"), env.get("reference_radius_m")
+    gm, radius = cfg.environment.gm_m3_s2, cfg.environment.reference_radius_m
     if not gm or not radius:
         return
     g_surf = float(gm) / float(radius) ** 2
@@ -161,7 +202,7 @@ def _check_gravity_units(path: Path, tel, column: str, cfg: Post2Config) -> None
     )
 
 
-def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> ObservationData:
+def read_observations(cfg: Post2Settings, telemetry) -> ObservationData:
     """Read every declared observation from ``telemetry`` {name: csv, name + "_weights": csv}; check
     that its times lie inside the reconstruction span; build R; apply the sliding median."""
     out = {}
@@ -174,7 +215,7 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
         outside = np.flatnonzero((t < cfg.t_start - 1e-9) | (t > cfg.t_end + 1e-9))
         if outside.size:
             raise ScenarioError(
-                scenario.path,
+                cfg.run.path,
                 f"observations.{spec.name}",
                 f"{path.name} row {outside[0] + 1} (column time): observation at {t[outside[0]]:g} s is outside "
                 f"the data span [{cfg.t_start:g}, {cfg.t_end:g}] s of [model] ({outside.size} such rows)",
@@ -186,21 +227,21 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
             bad = np.flatnonzero(np.abs(norm - 1.0) > 1e-3)
             if bad.size:
                 raise ScenarioError(
-                    scenario.path,
+                    cfg.run.path,
                     f"observations.{spec.name}",
                     f"{path.name}: quaternion at {t[bad[0]]:g} s has norm {norm[bad[0]]:.6g}",
                 )
             z = z_raw / norm[:, None]
             if spec.median_window > 1:
-                raise ScenarioError(scenario.path, f"observations.{spec.name}.median_window", "not for a quaternion")
+                raise ScenarioError(cfg.run.path, f"observations.{spec.name}.median_window", "not for a quaternion")
         if spec.median_window > 1:
             z = median_filter(z_raw, size=(spec.median_window, 1), mode="nearest")
         if spec.sigma is not None:
             R = np.broadcast_to(np.diag(spec.sigma**2), (t.size, d.size, d.size)).copy()
         else:
-            R = _weights_R(scenario, spec, t, Path(telemetry[spec.name + "_weights"]), path.name)
+            R = _weights_R(cfg.run.path, spec, t, Path(telemetry[spec.name + "_weights"]), path.name)
         if spec.median_window > 1:  # only medians over a whole window (see _complete_windows)
-            keep = _complete_windows(scenario, spec, path, t.size)
+            keep = _complete_windows(cfg.run.path, spec, path, t.size)
             t, z, z_raw, R = (a[keep] for a in (t, z, z_raw, R))
         if spec.decimate > 1:  # every n-th (pre-smoothed) sample
             t, z, z_raw, R = (a[:: spec.decimate] for a in (t, z, z_raw, R))
@@ -214,19 +255,20 @@ def read_observations(scenario: Scenario, cfg: Post2Config, telemetry) -> Observ
     return ObservationData(out, tuple(notes))
 
 
-def _complete_windows(scenario: Scenario, spec: ObservationSpec, path: Path, n: int) -> slice:
+def _complete_windows(file: Path, spec: ObservationSpec, path: Path, n: int) -> slice:
     """The samples (of ``n``) whose sliding-median window of ``spec.median_window`` samples lies
     wholly inside the file: scipy's window at index i spans i − w//2 … i + w − 1 − w//2.  At the
     edges ``mode="nearest"`` pads with copies of the first/last sample; once more than half the
     window is padding the "median" IS that one raw sample, with the raw sensor noise, not the
     smoothed noise the observation's σ describes (post2_huygens: the first drogue sample at
     1171.2 s, raw noise 0.05 m/s², was assimilated at σ = 0.006 m/s² and pulled the drogue drag,
-    bias, tilt and wind together, issue #9).  A file shorter than one window is a located error."""
+    bias, tilt and wind together, issue #9).  A file shorter than one window is an error located in
+    the problem ``file``."""
     w = spec.median_window
     lo, hi = w // 2, n - (w - 1 - w // 2)
     if hi <= lo:
         raise ScenarioError(
-            scenario.path, f"observations.{spec.name}.median_window",
+            file, f"observations.{spec.name}.median_window",
             f"{path.name} has {n} samples, fewer than one median window of {w}",
         )  # fmt: skip
     return slice(lo, hi)
@@ -245,16 +287,15 @@ def _kind(unit: str) -> str:
 
 
 class Estimator:
-    """The EKF set-up of one run: state map, error-state layout, the model, x0, P0, eps, the
-    process models.  ``transition(x, t0, t1) -> (x1, F, Q)`` advances the event phase it keeps."""
+    """The EKF set-up of one run (from its :class:`Post2Settings`): state map, error-state layout, the
+    model, x0, P0, eps, the process models.  ``transition(x, t0, t1) -> (x1, F, Q)`` advances the
+    event phase it keeps."""
 
-    def __init__(self, scenario: Scenario, cfg: Post2Config):
+    def __init__(self, cfg: Post2Settings):
         self.cfg = cfg
         self.smap = build.state_map(cfg)
         self.layout = ErrorStateLayout(self.smap.n_x, self.smap.quat_blocks)
-        self.model = TrajectoryModel(
-            self.smap, cfg.dof, build.environment(scenario, cfg), build.vehicle(scenario, cfg), build.events(cfg)
-        )
+        self.model = TrajectoryModel(self.smap, cfg.dof, build.environment(cfg), build.vehicle(cfg), build.events(cfg))
         self.x0, self.P0, self.eps, self.mean = self._initial()
         # events due at the start apply from it, before its observations (as in the truth simulator;
         # checked only at the first transition they came after the t_start samples, issue #9)
@@ -380,7 +421,7 @@ class Estimator:
         )
 
 
-def _grid(cfg: Post2Config, channels: dict[str, Channel]) -> np.ndarray:
+def _grid(cfg: Post2Settings, channels: dict[str, Channel]) -> np.ndarray:
     n = max(1, int(math.ceil((cfg.t_end - cfg.t_start) / cfg.grid - 1e-9)))
     base = np.linspace(cfg.t_start, cfg.t_end, n + 1)
     allt = np.concatenate([base] + [ch.t for ch in channels.values()])
@@ -411,11 +452,11 @@ def state_history(est: Estimator, t: np.ndarray, x: np.ndarray, P: np.ndarray) -
     return out
 
 
-def propagation_only(scenario: Scenario, cfg: Post2Config, t: np.ndarray) -> np.ndarray:
+def propagation_only(cfg: Post2Settings, t: np.ndarray) -> np.ndarray:
     """The estimator's model run from its initial estimate over the grid t (n,) [s] with no
     observation (events checked on its own state, Markov states decaying): x (n, n_x), the
     "no reconstruction" reference of thesis [R3] Ch. 3.2.3 (Figs. 3-36/3-37)."""
-    est = Estimator(scenario, cfg)
+    est = Estimator(cfg)
     X = np.empty((t.size, est.smap.n_x))
     X[0] = est.x0
     phase = est.model.initial_phase()
@@ -450,12 +491,12 @@ def post2_health(fp, P: np.ndarray, x: np.ndarray, notes=()) -> dict:
     return health_report(checks)
 
 
-def reconstruct(scenario: Scenario, telemetry, options=None):
-    """Generator of the stages (see the module docstring) for a post2 scenario and its telemetry files."""
-    cfg = config_for(scenario)
-    data = read_observations(scenario, cfg, telemetry)
+def reconstruct(cfg: Post2Settings, telemetry, options=None):
+    """Generator of the stages (see the module docstring) for a post2 run's settings and its telemetry
+    files {name: csv, name + "_weights": csv}."""
+    data = read_observations(cfg, telemetry)
     yield data
-    est = Estimator(scenario, cfg)
+    est = Estimator(cfg)
     t = _grid(cfg, data.channels)
     index = {}
     for name, ch in data.channels.items():
@@ -471,16 +512,16 @@ def reconstruct(scenario: Scenario, telemetry, options=None):
     touched = {s.target_name for s in cfg.schedules if s.target == "observation"}
     wf = {n: v for n, v in wf.items() if n in touched}
     yield ForwardStage(fp, tuple(est.phase_log), {n: ch.spec.quantity for n, ch in data.channels.items()}, wf)
-    sm = rts_smooth(fp, est.layout) if cfg.data["filter"]["smoother"] else None
+    sm = rts_smooth(fp, est.layout) if cfg.filter.smoother else None
     x, P = (sm.x, sm.P) if sm is not None else (fp.x_post, fp.P_post)
     hist = state_history(est, t, x, P)
     fwd = state_history(est, t, fp.x_post, fp.P_post)
     histories = {"smoothed": hist, "forward": fwd}
-    if cfg.data["filter"]["compare_propagation"]:  # the no-observation reference (its P: the prior's)
-        xp = propagation_only(scenario, cfg, t)
+    if cfg.filter.compare_propagation:  # the no-observation reference (its P: the prior's)
+        xp = propagation_only(cfg, t)
         histories["propagated"] = state_history(est, t, xp, np.broadcast_to(est.P0, (t.size, *est.P0.shape)))
     prior = state_history(est, t[:1], est.x0[None, :], est.P0[None, :, :])
-    summary = {"scenario": scenario.name, "kind": "post2", "dof": cfg.dof, "grid_steps": int(t.size)}
+    summary = {"scenario": cfg.run.name, "kind": "post2", "dof": cfg.dof, "grid_steps": int(t.size)}
     summary["smoothed"] = sm is not None
     states = {}
     for name in est.smap.blocks:

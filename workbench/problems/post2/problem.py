@@ -18,7 +18,7 @@ from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
 from workbench.problems.post2 import build, huygens
-from workbench.problems.post2.config import SCHEMA, config_for
+from workbench.problems.post2.config import SCHEMA, Post2Settings
 from workbench.problems.post2.model import DESCENT_NOMINALS, OBSERVATIONS, STATES, aero_angles
 from workbench.problems.post2.recording import COMPONENTS, open_post2_recording
 from workbench.problems.post2.recording_mc import open_mc_recording
@@ -74,33 +74,24 @@ class Post2Problem:
     title = "trajectory"
     schema = SCHEMA
 
-    def settings(self, scenario: Scenario) -> Scenario:
-        """TRANSITIONAL (issue 25): the scenario itself, until this package builds frozen settings."""
-        return scenario
+    def settings(self, scenario: Scenario) -> Post2Settings:
+        """The run's frozen :class:`~workbench.problems.post2.config.Post2Settings` (validated, files
+        resolved, vehicle asset loaded), built once; every other method receives them."""
+        return Post2Settings.from_scenario(scenario)
 
-    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
+    def telemetry_files(self, settings: Post2Settings, folder: Path | None = None) -> dict[str, Path]:
         """{observation name: CSV, name + "_weights": CSV} from ``[observations.<name>] file/weights``
-        or, with ``folder``, ``<name>.csv`` / ``<name>_weights.csv`` inside it."""
-        cfg = config_for(scenario)
-        out = {}
-        for o in cfg.observations:
-            if folder is not None:
-                out[o.name] = Path(folder) / f"{o.name}.csv"
-                if o.weights is not None:
-                    out[o.name + "_weights"] = Path(folder) / f"{o.name}_weights.csv"
-                continue
-            out[o.name] = scenario.path_of(f"observations.{o.name}.file")
-            if o.weights is not None:
-                out[o.name + "_weights"] = scenario.path_of(f"observations.{o.name}.weights")
-        return out
+        (resolved by the settings; a missing one is a located error) or, with ``folder``,
+        ``<name>.csv`` / ``<name>_weights.csv`` inside it."""
+        return settings.telemetry_files(folder)
 
-    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+    def synthesize(self, settings: Post2Settings, out_dir: Path, seed: int) -> Synthesized:
         """Truth (DOP853, its own atmosphere and aero) -> observation CSVs (+ weights) and ``truth.npz``."""
-        cfg = config_for(scenario)
+        cfg = settings
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        tr = simulate_truth(scenario, cfg, sample_times(cfg))
-        files = write_observations(scenario, cfg, tr, out, np.random.default_rng(seed))
+        tr = simulate_truth(cfg, sample_times(cfg))
+        files = write_observations(cfg, tr, out, np.random.default_rng(seed))
         model = tr["model"]
         sm = model.smap
         arrays = {"t": tr["t"], "position": sm.raw(tr["x"], "position"), "velocity": sm.raw(tr["x"], "velocity")}
@@ -108,12 +99,12 @@ class Post2Problem:
             arrays["quaternion"] = sm.raw(tr["x"], "attitude")
             arrays["attitude"] = aero_angles(arrays["position"], model.v_rel(tr["x"]), arrays["quaternion"])
             arrays["body_rates"] = sm.raw(tr["x"], "body_rates")
-        tf = cfg.data["truth"]
+        tf = cfg.truth
         defaults = {
             "j2": model.env.j2,
-            "ca_multiplier": tf["ca_factor"],
-            "cn_multiplier": tf["cn_factor"],
-            "cm_multiplier": tf["cm_factor"],
+            "ca_multiplier": tf.ca_factor,
+            "cn_multiplier": tf.cn_factor,
+            "cm_multiplier": tf.cm_factor,
             "parachute_drag_multiplier": 1.0,
             "density_multiplier": 1.0,
             "accel_bias": np.zeros(3),
@@ -128,17 +119,17 @@ class Post2Problem:
             **DESCENT_NOMINALS,  # Huygens-like descent parameters
         }
         for name, d in STATES.items():
-            if d.dynamic or (name == "density_multiplier" and tf["density_wave_amplitude"]):
+            if d.dynamic or (name == "density_multiplier" and tf.density_wave_amplitude):
                 continue  # a density wave has no single truth multiplier
             if name in ("log_pressure_offset", "temperature_offset"):
                 continue  # the truth's own atmosphere minus the table varies with altitude: no single value
-            v = cfg.truth_states.get(name, defaults[name])
-            if name in ("ca_multiplier", "cn_multiplier", "cm_multiplier") and name in cfg.truth_states:
+            v = tf.states.get(name, defaults[name])
+            if name in ("ca_multiplier", "cn_multiplier", "cm_multiplier") and name in tf.states:
                 v = np.asarray(v) * defaults[name]
             arrays[f"param_{name}"] = np.atleast_1d(np.asarray(v, dtype=float))
         arrays["event_times"] = np.array([t for t, _ in tr["events"]], dtype=float)
-        for name, v in cfg.data["truth"].get("tolerances", {}).items():  # scorecard tolerances (SI)
-            arrays[f"tol_{name}"] = huygens.tolerance_si(scenario, name, v)
+        for name, v in tf.tolerances.items():  # scorecard tolerances (SI)
+            arrays[f"tol_{name}"] = v
         np.savez(out / "truth.npz", **arrays)
         return Synthesized(files, out / "truth.npz")
 
@@ -147,9 +138,9 @@ class Post2Problem:
         with np.load(path) as z:
             return {k: z[k] for k in z.files}
 
-    def reconstruct(self, scenario: Scenario, telemetry, options: RunOptions):
+    def reconstruct(self, settings: Post2Settings, telemetry, options: RunOptions):
         """Observation files -> EKF forward pass -> RTS smoother (stages of :mod:`.pipeline`)."""
-        yield from huygens.reconstruct(scenario, telemetry, options)  # [monte_carlo] stage first, if any
+        yield from huygens.reconstruct(settings, telemetry, options)  # [monte_carlo] stage first, if any
 
     def summary(self, result) -> dict:
         """A copy of the result's summary."""
@@ -240,11 +231,11 @@ class Post2Problem:
         s = next(iter(summary["states"].items()))
         return f"{s[0]} final {s[1]['final']}"
 
-    def open_recording(self, path: Path, scenario: Scenario, truth, properties: dict):
+    def open_recording(self, path: Path, settings: Post2Settings, truth, properties: dict):
         """The post2 recording (:mod:`.recording`)."""
-        cfg = config_for(scenario)
+        cfg = settings
         geometry = None
-        veh = build.vehicle(scenario, cfg)
+        veh = build.vehicle(cfg)
         if veh.area > 0:  # display geometry: capsule from the reference area, canopy from the parachute's
             d_chute = float(np.sqrt(4.0 * veh.parachute.ref_area / np.pi)) if veh.parachute is not None else None
             geometry = {
@@ -255,7 +246,7 @@ class Post2Problem:
         return open_mc_recording(
             open_post2_recording(
                 path,
-                scenario.name,
+                cfg.run.name,
                 truth,
                 properties,
                 self.scorecard,
@@ -282,7 +273,7 @@ class Post2Problem:
                 cols[f"sigma_{name}.{c}"] = (h["sigma"][:, i], _si_unit(unit))
         return ExportTable(result.t, cols, "planet-centred inertial (+Z pole); attitude as α, β, bank")
 
-    def monte_carlo(self, scenario, out_dir, options, progress) -> McOutcome:
+    def monte_carlo(self, settings, out_dir, options, progress) -> McOutcome:
         """Not yet: the NEES study is in ``tests/benchmarks/bench_post2.py``."""
         raise NotImplementedError("post2 has no Monte Carlo analysis yet (see tests/benchmarks/bench_post2.py)")
 

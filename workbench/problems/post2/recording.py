@@ -21,7 +21,6 @@ import rerun as rr
 import rerun.blueprint as rrb
 import trimesh
 
-from workbench.core.rotation import dcm_to_quat, quat_from_rotvec
 from workbench.problems.post2.model import OBSERVATIONS, STATES
 from workbench.problems.post2.pipeline import ForwardStage, ObservationData, Post2Result
 from workbench.problems.post2.scoring import truth_on_grid
@@ -85,18 +84,6 @@ def vehicle_meshes(diameter: float, parachute_diameter: float | None, riser: flo
     return out
 
 
-def _along_velocity(v: np.ndarray) -> np.ndarray:
-    """q_I_B (n, 4) with X_B along v (n, 3) (3-DOF drawing: zero angle of attack)."""
-    out = np.empty((v.shape[0], 4))
-    for i, vi in enumerate(v):
-        x = vi / max(np.linalg.norm(vi), 1e-12)
-        a = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        y = np.cross(a, x)
-        y /= np.linalg.norm(y)
-        out[i] = dcm_to_quat(np.column_stack([x, y, np.cross(x, y)]))
-    return out
-
-
 class Post2Drawer:
     """Draws the post2 stages; ``truth`` (the loaded truth.npz dict) or None; ``geometry`` {"diameter_m",
     "parachute_diameter_m" (or None), "riser_m"} and ``parachute_events`` {event name: True opens /
@@ -128,11 +115,10 @@ class Post2Drawer:
         for name, ih in fp.innovations.items():
             d = OBSERVATIONS[stage.quantities[name]]
             unit, k = _display(d.unit)
+            sd = stage.residual_sigma(name)
             for i, c in enumerate(d.residual_names):
-                sd = np.sqrt(np.maximum(ih.S[:, i, i], 0.0))
-                self.rec.series_with_bounds(
-                    layout.residual_path(name, c), ih.t, ih.y[:, i] * k, sd * k, names=f"{name}.{c} residual [{unit}]"
-                )
+                path, label = layout.residual_path(name, c), f"{name}.{c} residual [{unit}]"
+                self.rec.series_with_bounds(path, ih.t, ih.y[:, i] * k, sd[:, i] * k, names=label)
         for name, (t, f) in stage.weight_factors.items():  # the weight schedule as applied
             self.rec.scalars(
                 layout.plot_path(f"schedule/{name}_weight_factor"),
@@ -145,14 +131,12 @@ class Post2Drawer:
         if stage.events:
             self.rec.events([(t, f"event {name}", "INFO") for t, name in stage.events])
 
-    def _phase_series(self, t: np.ndarray) -> None:
-        """Phase index vs time (0 before the first event, +1 at each), named after the events."""
-        if not self.events:
+    def _phase_series(self, res: Post2Result) -> None:
+        """Phase index vs time (:meth:`Post2Result.phase_index`), named after the events."""
+        if not res.events:
             return
-        te = np.array([a for a, _ in self.events])
-        idx = np.searchsorted(te, t, side="right").astype(float)
-        label = "phase index [1] (" + ", ".join(f"{n} at {a:.1f} s" for a, n in self.events) + ")"
-        self.rec.scalars(layout.POST2_PHASE, t, idx, names=label, colors=[EST])
+        label = "phase index [1] (" + ", ".join(f"{n} at {a:.1f} s" for a, n in res.events) + ")"
+        self.rec.scalars(layout.POST2_PHASE, res.t, res.phase_index(), names=label, colors=[EST])
 
     def _result(self, res: Post2Result) -> None:
         tg = truth_on_grid(self.truth, res.t) if self.truth is not None else {}
@@ -190,7 +174,7 @@ class Post2Drawer:
                         names=f"{shown}.{c} propagation only [{unit}]",
                         colors=[PROP],
                     )
-        self._phase_series(res.t)
+        self._phase_series(res)
         p = res.smap.raw(res.x, "position")
         self.rec.line_strip(layout.join(layout.ESTIMATE_SMOOTHED, "track"), p, color=EST)
         pf = res.smap.raw(res.forward.x_post, "position")
@@ -207,21 +191,10 @@ class Post2Drawer:
         n = res.t.size
         sel = np.unique(np.linspace(0, n - 1, min(n, 2000)).astype(int))
         t = res.t[sel]
-        p = res.smap.raw(res.x[sel], "position")
-        if "attitude" in res.smap:
-            q = np.array(res.smap.raw(res.x[sel], "attitude"))
-        else:
-            q = _along_velocity(res.smap.raw(res.x[sel], "velocity"))
-        self.rec.poses(layout.VEHICLE, t, p, q)
-        tilt = next((nm for nm in res.history["smoothed"] if nm == "tilt" or nm.startswith("tilt")), None)
-        if tilt is not None:  # body drawn tilted by the estimated tilt (rad): about Y_B, or a rotation vector
-            a = np.asarray(res.history["smoothed"][tilt]["value"], float)[sel]
-            rv = np.zeros((a.shape[0], 3))
-            if a.shape[1] == 1:
-                rv[:, 1] = a[:, 0]
-            else:
-                rv[:, : min(3, a.shape[1])] = a[:, :3]
-            self.rec.poses(layout.VEHICLE_BODY, t, np.zeros((t.size, 3)), quat_from_rotvec(rv))
+        self.rec.poses(layout.VEHICLE, t, res.smap.raw(res.x[sel], "position"), res.body_attitude(sel))
+        q_tilt = res.tilt_rotation(sel)
+        if q_tilt is not None:  # body drawn tilted by the estimated tilt
+            self.rec.poses(layout.VEHICLE_BODY, t, np.zeros((t.size, 3)), q_tilt)
         m = vehicle_meshes(g["diameter_m"], g.get("parachute_diameter_m"), g.get("riser_m", 0.0))
         self.rec.mesh(layout.POST2_FOREBODY, m["forebody"], color=(200, 120, 60, 255))
         self.rec.mesh(layout.POST2_BACK_SHELL, m["back_shell"], color=(220, 220, 225, 255))

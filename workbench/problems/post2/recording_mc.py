@@ -20,6 +20,7 @@ import numpy as np
 import rerun as rr
 
 from workbench.problems.post2.huygens import McSelection
+from workbench.problems.post2.model import POSITION
 from workbench.recording import layout
 
 __all__ = ["McDrawer", "draw_mc_selection", "open_mc_recording"]
@@ -40,9 +41,9 @@ def draw_mc_selection(rec, sel: McSelection) -> None:
                    "delivered state (member 0)", (60, 140, 255), 6.0)  # fmt: skip
     fs = np.isfinite(sel.shift_s)
     _sample_points(rec, layout.join(_BASE, "shift"), idx[fs], sel.shift_s[fs], "time alignment Δ [s]", green, 1.5)
-    rec.points(layout.join(_CLOUD, "members"), sel.members[:, :3], colors=(150, 150, 150, 160), radii=300.0)
-    rec.points(layout.join(_CLOUD, "kept"), sel.members[sel.kept, :3], colors=(255, 140, 0, 255), radii=800.0)
-    rec.points(layout.join(_CLOUD, "chosen"), sel.x0[None, :3], colors=(255, 40, 40, 255), radii=1500.0)
+    rec.points(layout.join(_CLOUD, "members"), sel.members[:, POSITION], colors=(150, 150, 150, 160), radii=300.0)
+    rec.points(layout.join(_CLOUD, "kept"), sel.members[sel.kept, POSITION], colors=(255, 140, 0, 255), radii=800.0)
+    rec.points(layout.join(_CLOUD, "chosen"), sel.x0[None, POSITION], colors=(255, 40, 40, 255), radii=1500.0)
 
 
 def _sample_points(rec, entity: str, samples: np.ndarray, values: np.ndarray, name: str, color, size: float) -> None:

@@ -23,19 +23,15 @@ parachutes) starts shortly after burnout, and the boost is integrated from the I
   model leaves out: 1 % scale-factor error on the velocity gained and its integral on the
   position (the post2 problem file takes a diagonal 1σ per component: correlations are dropped).
 
-The site's reported air pressure is read as QNH (reduced to sea level): the standby pressures of
-the three flights sit 0.1, 9.3 and 3.3 kPa below it, as the site elevations (a coastal field,
-a field in the Appalachians, the Huntsville area) would; the atmosphere is the U.S. Standard
-Atmosphere 1976 with that sea-level pressure and the site temperature reduced to sea level along
-−6.5 K/km.  The pad altitude is then the altitude of the standby pressure, so a constant barometer
-offset is folded into the pad altitude by construction; the ``baro_bias`` state measures the
-departure *in flight* from the standby-anchored profile (static-port and thermal effects and the
-difference between the day's lapse rate and the standard one).
+The site's reported air pressure is read as QNH (reduced to sea level); the atmosphere is the U.S.
+Standard Atmosphere 1976 with that sea-level pressure, and the pad altitude is the altitude of the
+standby pressure, so the ``baro_bias`` state measures only the departure *in flight* from that
+profile.  The tuning constants below were measured on the three flights; the measurements are in
+``docs/tuning/post2.md``.
 """
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,9 +52,11 @@ from workbench.estimation.consistency import chi2_ppf, mixture_hdr_level
 from workbench.estimation.magnetometer import align_magnetometer
 from workbench.estimation.strapdown import ImuArrays, integrate
 from workbench.io.scenario import load_scenario
+from workbench.io.schema import read_json
 from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import pipeline
-from workbench.problems.post2.config import config_for
+from workbench.problems.post2.config import Post2Settings
+from workbench.problems.post2.model import POSITION, VELOCITY
 
 __all__ = [
     "PAD_WINDOW_S",
@@ -86,6 +84,8 @@ __all__ = [
     "landing_point_inertial",
 ]
 
+#: the strapdown's error state [δv, δθ, δp] (9,) (:func:`workbench.estimation.strapdown.integrate`)
+SD_VELOCITY, SD_ATTITUDE, SD_POSITION = slice(0, 3), slice(3, 6), slice(6, 9)
 #: length of the standby window that aligns the IMU on the pad [s]
 PAD_WINDOW_S = 1.0
 #: the pad window ends this long before the detected ignition [s]
@@ -276,9 +276,9 @@ def reconstruct_boost(
     sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
     P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_heading**2]) @ C_B_ENU.T
     P0 = np.zeros((9, 9))
-    P0[0:3, 0:3] = np.eye(3) * 0.01**2
-    P0[3:6, 3:6] = P_att
-    P0[6:9, 6:9] = np.eye(3) * 1.0**2
+    P0[SD_VELOCITY, SD_VELOCITY] = np.eye(3) * 0.01**2
+    P0[SD_ATTITUDE, SD_ATTITUDE] = P_att
+    P0[SD_POSITION, SD_POSITION] = np.eye(3) * 1.0**2
     t_start = t_coast + TAIL_OFF_S
     sel = np.flatnonzero((t >= t[pad[-1]]) & (t <= t_start + 1e-9))
     imu = ImuArrays(
@@ -291,12 +291,12 @@ def reconstruct_boost(
     dur = float(sp.t[-1] - sp.t[0])
     # covariance of [δp, δv] (6, 6) at t_start: the strapdown's (error state [δv, δθ, δp]) plus the
     # scale-factor error, one number s for the whole boost: δv = s Δv, δp ≈ s Δv T/2 (fully correlated)
-    ipv = [6, 7, 8, 0, 1, 2]
+    ipv = np.r_[np.arange(9)[SD_POSITION], np.arange(9)[SD_VELOCITY]]  # -> the TRANSLATION layout
     u = np.concatenate([0.5 * dv * dur, dv])
     P_pv = sp.P[-1][np.ix_(ipv, ipv)] + ACCEL_SCALE_SIGMA**2 * np.outer(u, u)
     P_pv = 0.5 * (P_pv + P_pv.T)
     sd = np.sqrt(np.diag(P_pv))
-    sig_p, sig_v = sd[:3], sd[3:]
+    sig_p, sig_v = sd[POSITION], sd[VELOCITY]
     corr_pv = P_pv / np.outer(sd, sd)
     boost = (t >= 0.0) & (t < t_coast)
     axis = f_B[boost].mean(axis=0)
@@ -393,25 +393,13 @@ def detect_main_deploy(t, pressure, f_B, atm, t_apogee: float, t_end: float) -> 
     return None
 
 
-#: random-walk PSD of the coast drag multiplier [1/s]: measured on the three flights as the
-#: variance per second of the increments of 1 s means of |f| m / (Cd S q̄) along a reconstructed
-#: coast (0.34, 0.54 and, before its ejection, ~0.3 for flights 1, 3, 4): air brakes deploying and
-#: retracting (flight 1's stayed open), the rocket coning at 100-300 deg/s and pitching over at apogee
+#: random-walk PSD of the coast drag multiplier [1/s] (air brakes, coning, pitch-over; measured:
+#: docs/tuning/post2.md)
 CA_PSD = 0.4
 
-#: 1σ model-error levels of the block-mean pressure [Pa], measured on the three flights as the RMS
-#: of the 10 Hz innovations of a reconstruction per phase (benchmark, issue #9 case 5):
-#:
-#: * coast after the burnout transient: 190, 138 and 19 Pa on flights 1, 3, 4 — the two flights
-#:   whose air brakes were out (1: stuck open, 3: working) vs the one whose stayed retracted, so the
-#:   brakes disturb the static port; pooled over the three, 120 Pa;
-#: * under the drogue: 101, 124, 147 Pa (correlation 0.6-0.8 at 0.1 s, ~0 at 1 s: the tumbling
-#:   body's static-port error at a dynamic pressure of ~300 Pa); pooled 125 Pa;
-#: * under the main: 28, 20, 21 Pa (slow: correlation 0.5-0.7 at 1 s, the day's lapse rate vs the
-#:   standard one); 25 Pa;
-#: * the burnout transient (the first BURNOUT_TRANSIENT_S of the coast: 1–3 kPa excursions on
-#:   flights 1 and 3) and the drogue's ejection (−0.2 .. +2 s: the charge pressurises the bay,
-#:   innovations of up to 0.9, 2.7 and 2.3 kPa on flights 1, 3, 4): 3 kPa, i.e. not used.
+#: 1σ model-error levels of the block-mean pressure [Pa] per phase (coast, drogue, main; the burnout
+#: transient of BURNOUT_TRANSIENT_S [s] and the drogue's ejection: 3 kPa, i.e. not used): the RMS of
+#: the 10 Hz innovations on the three flights, pooled (issue #9 case 5; docs/tuning/post2.md)
 PRESSURE_SIGMA_COAST = 120.0
 PRESSURE_SIGMA_DROGUE = 125.0
 PRESSURE_SIGMA_MAIN = 25.0
@@ -420,24 +408,9 @@ BURNOUT_TRANSIENT_S = 2.5
 #: prior 1σ of the in-flight barometer offset [Pa] (~2.5 m): the pad altitude is fitted to the
 #: standby pressure, so what is left is a drift in flight (board heating, port effects)
 BARO_BIAS_SIGMA = 30.0
-# What the flight computer's altitude is (measured on its logs, flight_computer_altimeter): the
-# standard-day altitude (15 °C at its zero, −6.5 K/km) of its barometer, fused with its IMU, zero at its
-# initial pressure (flights 1, 3; flight 3 reads +2.0 m on the pad at launch) or at 101 325 Pa minus the
-# altitude of its initial pressure (flight 4, +7.6 m on the pad): 11.9, 4.8, 1.0 m RMS from that formula
-# of its own logged pressure after the burnout transient (flight 1's v0.1 filter leans on its IMU).  On the
-# 25 °C days that is ~3.5 % below the geometric altitude this reconstruction estimates, so the score
-# compares like for like too (the flight computer's altitude made geometric above the pad in the site
-# atmosphere; predicted, RMS after the burnout transient): 28.2/16.8/12.6 m on flights 1/3/4, excerpt
-# 39.0 m (as logged: 27.1/35.1/30.9, excerpt 37.2).  What is left on flight 1 is not a convention: ours
-# sits above the barometer's geometric altitude throughout (coast +42 m mean, under the main +21 m; it
-# touches down 16.6 m above the pad where the barometer reads +0.9 m), the constant baro_bias (188 Pa)
-# fitted against the IMU-anchored coast behind the open air brakes being carried into the descent.
-# Measured with the model's barometer states written into the problem files (as logged / like for like):
-# ``baro_scale`` (prior 1σ 3 %) 55/52/39 m as logged (excerpt 101 m; it fits 0.92/0.97/0.99: the
-# barometer is stretched to the IMU's altitude, not the reverse); ``baro_q_coefficient`` (1σ 0.1)
-# 33/33/30 m as logged, 34.4/15.1/12.5 m like for like (excerpt 67 / 68.6 m; it fits 0.16/0.058/0.009 —
-# the brakes stuck open, working, retracted — and brings flight 1's baro_bias from 188 to 22 Pa, but moves
-# its landing from 244 to 444 m).  Neither is written.
+# The flight computer's altitude is a standard-day pressure altitude (flight_computer_altimeter scores
+# it raw and like for like); the barometer states baro_scale and baro_q_coefficient were tried and are
+# not written into the problem files (measurements: docs/tuning/post2.md, "the flight computer's altitude").
 
 
 def pressure_sigma(
@@ -456,13 +429,8 @@ def pressure_sigma(
 
 
 #: 1σ [m/s²] of the block-mean |specific force| against the 3-DOF drag model: the block's own
-#: sensor/vibration noise (:func:`local_noise` over √count) plus a model-error level, measured as
-#: the pressure levels above.  Coast: residual RMS 0.62, 1.19, 0.30 on flights 1, 3, 4, of which
-#: the block noise is 0.2-2.5 (it grows with the drag: ~10 % of |f|, vibration and buffeting), so the
-#: model level is the quiet flight's 0.3; under the drogue 12.3, 11.7, 16.1 with a mean of +5.6 to
-#: +8.0 (the IMU off the tumbling body's spin axis reads ω²r and the swinging; the 3-DOF model
-#: cannot: pooled 14); under the main 2.3, 4.6, 1.5 (3); within 2 s of an opening 30 (the shock
-#: is not modelled)
+#: sensor/vibration noise (:func:`local_noise` over √count) plus a model-error level per phase (coast,
+#: drogue, main, within 2 s of an opening), measured as the pressure levels (docs/tuning/post2.md)
 ACCEL_SIGMA_COAST = 0.3
 ACCEL_SIGMA_DROGUE = 14.0
 ACCEL_SIGMA_MAIN = 3.0
@@ -553,14 +521,8 @@ def problem_file(
     with ``landing`` also the landed coordinates (``landing.csv``) — the variant that estimates the
     winds under the parachutes (the IMU and the barometer do not see the horizontal drift)."""
     # the metadata's direction is where the wind comes from; the state is the air's velocity [east,
-    # north] (where it goes: v_rel = v − ω×r − wind), hence the minus signs.  Checked on flight 3 (wind
-    # from S, 4.3 m/s at the surface): with the landed coordinates observed the wind comes out
-    # (+1.6 ± 1.4, +7.5 ± 1.6) m/s, i.e. from 192° at 7.7 m/s — 12° from the metadata's, where a
-    # from/to error would be 180° off and an east/north swap ~77° (flight 4: 212° at 4.7 m/s against SW,
-    # 4.8 m/s).  Without the landing (``predicted``) nothing horizontal is observed: flight 3's +5.8 m/s
-    # east (1σ 4.2: the prior's 4 grown by the walk, no information) drifts in slowly (+3.8 by the
-    # ejection) through second-order channels; all three flights' come out +5.0 to +5.8 m/s east there,
-    # which points at a common model error leaking into the unobserved state, not at the wind
+    # north] (where it goes: v_rel = v − ω×r − wind), hence the minus signs (checked on flights 3 and 4:
+    # docs/tuning/post2.md, "the wind prior")
     wf = math.radians(meta.wind_from_deg)
     w_en = (-meta.wind_speed * math.sin(wf), -meta.wind_speed * math.cos(wf))
     lines = [
@@ -726,16 +688,11 @@ def run_flight(problem_path) -> tuple[object, dict]:
     """Reconstruct an imported flight (its post2 problem file; the import's ``flight.json``,
     ``imu.csv`` and ``reference.csv`` beside it) and score it: (Post2Result, :func:`score_flight`)."""
     path = Path(problem_path)
-    sc = load_scenario(path)
-    files = {}
-    for o in config_for(sc).observations:  # as Post2Problem.telemetry_files (no recording import here)
-        files[o.name] = sc.path_of(f"observations.{o.name}.file")
-        if o.weights is not None:
-            files[o.name + "_weights"] = sc.path_of(f"observations.{o.name}.weights")
+    settings = Post2Settings.from_scenario(load_scenario(path))
     result = None
-    for stage in pipeline.reconstruct(sc, files, None):
+    for stage in pipeline.reconstruct(settings, settings.telemetry_files(), None):
         result = stage
-    flight = json.loads((path.parent / "flight.json").read_text(encoding="utf-8"))
+    flight = read_json(path.parent / "flight.json")  # written by the importer (generated, not user input)
     imu = read_telemetry(path.parent / "imu.csv")
     ref = read_telemetry(path.parent / "reference.csv")
     return result, score_flight(result, flight, imu, ref)
@@ -906,10 +863,8 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
 #: the FIRM flight computer's altimeter formula (the pressure model of its UKF, ``ukf_functions.c`` of
 #: the NCSU FIRM firmware): p = p_ref (1 − h/44330)^5.255876, the standard day's troposphere
 #: (288.15 K at h = 0, −6.5 K/km; 44330 ≈ 288.15/0.0065 m) with ``p_ref`` the pressure at h = 0.
-#: Which ``p_ref`` a log used is measured, not assumed (:func:`flight_computer_altimeter`): flight 3's
-#: is its initial pressure (4.8 m RMS from the formula of its own logged pressure, 11.5 m with the
-#: other), flight 4's the standard 101 325 Pa with the altitude of its initial pressure subtracted
-#: (1.0 m, 4.5 m with the other); on flight 1 (pad at 101.7 kPa) the two are alike (11.9, 12.1 m)
+#: Which ``p_ref`` a log used is measured, not assumed (:func:`flight_computer_altimeter`; per flight:
+#: docs/tuning/post2.md)
 FIRM_ALTITUDE_SCALE_M = 44330.0
 FIRM_PRESSURE_EXPONENT = 5.255876
 #: the standard day's sea-level pressure [Pa]

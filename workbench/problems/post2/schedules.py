@@ -15,7 +15,7 @@ state's own, in the state's unit²/s).  Events are the ``[events.<name>]`` of th
 *estimator* sees them fire (conditions evaluated on its own state), so a schedule follows the
 reconstructed trajectory, as POST2's event-driven inputs do.  Several windows on one target
 combine: weight factors multiply, PSDs add.  The tables are validated in
-:func:`workbench.problems.post2.config.config_for`.
+:meth:`workbench.problems.post2.config.Post2Settings.from_scenario`.
 """
 
 from __future__ import annotations

@@ -30,10 +30,9 @@ from scipy.integrate import solve_ivp
 
 from workbench.core.atmosphere import TabulatedAtmosphere, TitanDefaultAtmosphere
 from workbench.core.rotation import quat_boxplus, quat_normalize
-from workbench.io.scenario import Scenario
 from workbench.io.telemetry import write_telemetry
 from workbench.problems.post2 import build
-from workbench.problems.post2.config import Post2Config
+from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.model import (
     DESCENT_NOMINALS,
     OBSERVATIONS,
@@ -47,37 +46,35 @@ from workbench.problems.post2.model import (
 __all__ = ["truth_model", "simulate_truth", "write_observations", "sample_times"]
 
 
-def _truth_value(cfg: Post2Config, name: str, default=None):
-    if name in cfg.truth_states:
-        return cfg.truth_states[name]
+def _truth_value(cfg: Post2Settings, name: str, default=None):
+    if name in cfg.truth.states:
+        return cfg.truth.states[name]
     s = cfg.state(name)
     return s.value if s is not None else default
 
 
-def truth_model(scenario: Scenario, cfg: Post2Config) -> TrajectoryModel:
+def truth_model(cfg: Post2Settings) -> TrajectoryModel:
     """The truth's :class:`TrajectoryModel` (its own atmosphere wave and aero factors; parameters at
     their truth values, none estimated)."""
-    tr = cfg.data["truth"]
-    a, lam = tr["density_wave_amplitude"], tr["density_wave_length_m"]
+    tr = cfg.truth
+    a, lam = tr.density_wave_amplitude, tr.density_wave_length_m
 
-    env = build.environment(scenario, cfg, density_factor=DensityWave(a, lam) if a else None)
+    env = build.environment(cfg, density_factor=DensityWave(a, lam) if a else None)
     j2 = _truth_value(cfg, "j2")
     if j2 is not None:
         env = replace(env, j2=float(j2[0]))
     mult = {k: float(_truth_value(cfg, f"{k}_multiplier", np.ones(1))[0]) for k in ("ca", "cn", "cm")}
-    veh = build.vehicle(
-        scenario, cfg, tr["ca_factor"] * mult["ca"], tr["cn_factor"] * mult["cn"], tr["cm_factor"] * mult["cm"]
-    )
-    if "parachute_drag_multiplier" in cfg.truth_states and veh.parachute is not None:
-        m = float(cfg.truth_states["parachute_drag_multiplier"][0])
+    veh = build.vehicle(cfg, tr.ca_factor * mult["ca"], tr.cn_factor * mult["cn"], tr.cm_factor * mult["cm"])
+    if "parachute_drag_multiplier" in cfg.truth.states and veh.parachute is not None:
+        m = float(cfg.truth.states["parachute_drag_multiplier"][0])
         veh = replace(veh, parachute=replace(veh.parachute, cd=veh.parachute.cd * m))
     names = ["position", "velocity"] + (["attitude", "body_rates"] if cfg.dof == 6 else [])
     # ---- Huygens-like descent: planted descent parameters, own Titan atmosphere, CA(Mach) error
-    nominal = {k: float(cfg.truth_states[k][0]) for k in DESCENT_NOMINALS if k in cfg.truth_states}
-    if tr["titan_node_altitudes_m"] is not None:
+    nominal = {k: float(cfg.truth.states[k][0]) for k in DESCENT_NOMINALS if k in cfg.truth.states}
+    if tr.titan_node_altitudes_m is not None:
         lay = TitanDefaultAtmosphere(
-            node_altitudes=tuple(float(v) for v in tr["titan_node_altitudes_m"]),
-            node_temperatures=tuple(float(v) for v in tr["titan_node_temperatures_K"] or ()),
+            node_altitudes=tuple(float(v) for v in tr.titan_node_altitudes_m),
+            node_temperatures=tuple(float(v) for v in tr.titan_node_temperatures_K or ()),
         )
         hs = np.arange(0.0, 1.4e6 + 1.0, 250.0)  # sampled finely once: the layered model is slow per call
         atm = TabulatedAtmosphere(
@@ -85,13 +82,13 @@ def truth_model(scenario: Scenario, cfg: Post2Config) -> TrajectoryModel:
             lay.gas_constant, lay.gamma, lay.sutherland, extrapolate="clamp",
         )  # fmt: skip
         env = replace(env, atmosphere=atm)
-    if tr["ca_mach_wave_amplitude"]:
-        aw = float(tr["ca_mach_wave_amplitude"])
+    if tr.ca_mach_wave_amplitude:
+        aw = float(tr.ca_mach_wave_amplitude)
         veh = replace(veh, ca_mach_factor=CaMachWave(aw))
     return TrajectoryModel(StateMap(names), cfg.dof, env, veh, build.events(cfg, truth=True), nominal=nominal)
 
 
-def _x0(model: TrajectoryModel, cfg: Post2Config) -> np.ndarray:
+def _x0(model: TrajectoryModel, cfg: Post2Settings) -> np.ndarray:
     sm = model.smap
     x = np.zeros(sm.n_x)
     for name in ("position", "velocity", "body_rates"):
@@ -104,19 +101,19 @@ def _x0(model: TrajectoryModel, cfg: Post2Config) -> np.ndarray:
     return x
 
 
-def simulate_truth(scenario: Scenario, cfg: Post2Config, extra_times: np.ndarray | None = None) -> dict:
+def simulate_truth(cfg: Post2Settings, extra_times: np.ndarray | None = None) -> dict:
     """Integrate the truth from ``[model] t_start_s`` to ``t_end_s``; returns ``t`` (n,) [s] (the
     ``output_step_s`` grid united with ``extra_times``), ``x`` (n, n_x) in the truth map's layout
     (position, velocity[, quaternion q_I_B, body rates]), ``phase_index`` (n,) into ``phases`` (the
     phase dicts), ``events`` [(t, name)], ``model``."""
-    tr = cfg.data["truth"]
-    model = truth_model(scenario, cfg)
-    n_out = int(round((cfg.t_end - cfg.t_start) / tr["output_step_s"]))
+    tr = cfg.truth
+    model = truth_model(cfg)
+    n_out = int(round((cfg.t_end - cfg.t_start) / tr.output_step_s))
     grid = np.unique(
         np.round(
             np.concatenate(
                 [
-                    cfg.t_start + tr["output_step_s"] * np.arange(n_out + 1),
+                    cfg.t_start + tr.output_step_s * np.arange(n_out + 1),
                     np.empty(0) if extra_times is None else extra_times,
                 ]
             ),
@@ -155,7 +152,7 @@ def simulate_truth(scenario: Scenario, cfg: Post2Config, extra_times: np.ndarray
             x,
             method="DOP853",
             t_eval=t_eval,
-            rtol=tr["rtol"],
+            rtol=tr.rtol,
             atol=1e-9,
             events=funcs or None,
             dense_output=True,
@@ -189,7 +186,7 @@ def simulate_truth(scenario: Scenario, cfg: Post2Config, extra_times: np.ndarray
     }
 
 
-def write_observations(scenario: Scenario, cfg: Post2Config, truth: dict, out_dir: Path, rng: np.random.Generator):
+def write_observations(cfg: Post2Settings, truth: dict, out_dir: Path, rng: np.random.Generator):
     """Sample every declared observation from the truth, add the sensor errors, and write
     ``<name>.csv`` (and ``<name>_weights.csv`` when the observation names a weights file: W = 1/σ²,
     column unit ``1`` meaning 1/SI²) into ``out_dir``; returns {stream: path}."""
@@ -231,7 +228,7 @@ def write_observations(scenario: Scenario, cfg: Post2Config, truth: dict, out_di
     return out
 
 
-def _sample_times(cfg: Post2Config, spec) -> np.ndarray:
+def _sample_times(cfg: Post2Settings, spec) -> np.ndarray:
     if spec.rate_hz is None or not spec.rate_hz > 0:
         raise ValueError(f"observation {spec.name}: a synthetic scenario needs rate_hz > 0")
     t0 = spec.start if spec.start is not None else cfg.t_start
@@ -241,6 +238,6 @@ def _sample_times(cfg: Post2Config, spec) -> np.ndarray:
     return np.round(t0 + dt * np.arange(n + 1), 9)
 
 
-def sample_times(cfg: Post2Config) -> np.ndarray:
+def sample_times(cfg: Post2Settings) -> np.ndarray:
     """All synthetic observation times of the scenario (s), to be on the truth grid."""
     return np.unique(np.concatenate([_sample_times(cfg, s) for s in cfg.observations]))

@@ -13,7 +13,8 @@ in ``workbench/io/FORMATS.md`` ("Rocket flight logs").  What the importer does:
    the import summary and in ``events.csv``; nothing is interpolated: an averaging block never
    spans a gap, and a gap inside the boost is refused because the IMU cannot be integrated across it);
 3. :func:`read_metadata` — the flight's entry of ``metadata.json`` (mass, Cd, area, site weather,
-   launch/landed coordinates, apogee), each missing or non-numeric field a located error;
+   launch/landed coordinates, apogee), validated against :data:`METADATA_SCHEMA` (an unknown,
+   missing, mistyped or out-of-range field a located :class:`~workbench.io.scenario.ScenarioError`);
 4. :func:`import_flight` — the boost integrated from the IMU (:mod:`workbench.problems.post2.rocket`),
    the coast/descent observation files (pressure, |specific force|, 10 Hz block means with
    their weights vs time), the reference files and ``<flight>.toml``, a post2 problem file that
@@ -23,6 +24,7 @@ in ``workbench/io/FORMATS.md`` ("Rocket flight logs").  What the importer does:
 from __future__ import annotations
 
 import csv
+import difflib
 import json
 import math
 import os
@@ -32,6 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from workbench.core.bodies import EARTH, G0
+from workbench.io.scenario import ScenarioError
+from workbench.io.schema import REQUIRED, Key, Schema, Table, read_json
 from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, write_events, write_telemetry
 
 __all__ = [
@@ -43,6 +47,8 @@ __all__ = [
     "FlightLog",
     "Gap",
     "FlightMetadata",
+    "METADATA_SCHEMA",
+    "file_schemas",
     "read_log",
     "find_gaps",
     "block_means",
@@ -272,56 +278,144 @@ class FlightMetadata:
 
 _COMPASS = {d: 22.5 * i for i, d in enumerate("N NNE NE ENE E ESE SE SSE S SSW SW WSW W WNW NW NNW".split())}
 
+_F, _S = "float", "str"
+
+
+def _coordinates(table: str, what: str) -> Table:
+    return Table(
+        table,
+        f"{what} (WGS-84 geodetic, decimal degrees)",
+        (
+            Key("latitude", _F, REQUIRED, "deg", "latitude, north positive", ge=-90.0, le=90.0),
+            Key("longitude", _F, REQUIRED, "deg", "longitude, east positive (0 … 360 accepted)", ge=-180.0, lt=360.0),
+        ),
+    )
+
+
+#: One flight's entry of ``metadata.json`` (the entry named as the log, e.g. ``jackpot_launch_1.csv``).
+#: Fields marked "not used" are documented so a misspelling of a used one is caught, not ignored.
+METADATA_SCHEMA = Schema(
+    "airbrakes_metadata",
+    "AirbrakesV2 flight-log metadata",
+    (
+        Table(
+            "",
+            "the flight's entry (`metadata.json` maps each log's file name to one)",
+            (
+                Key("date", _S, "", meaning="launch date and time, ISO 8601 (shown in the problem file)"),
+                Key("flight_description", _S, "", meaning="what happened on the flight (shown in the problem file)"),
+            ),
+        ),
+        Table(
+            "rocket",
+            "the rocket after burnout",
+            (
+                Key("rocket_dry_mass_kg", _F, REQUIRED, "kg", "dry mass: the coast and descent mass", gt=0.0),
+                Key("rocket_Cd", _F, REQUIRED, "1", "drag coefficient on the cross-sectional area (coast)", gt=0.0),
+                Key("rocket_cross_sectional_area_m2", _F, REQUIRED, "m^2", "aerodynamic reference area", gt=0.0),
+                Key("rocket_diameter_m", _F, None, "m", "body diameter (not used)", gt=0.0),
+                Key("rocket_moment_of_inertia_kg_m2", _F, None, "kg m^2", "moment of inertia (not used)", gt=0.0),
+                Key("rocket_stab_margin_cal", _F, None, "cal", "static stability margin (not used)"),
+                Key("rocket_cl_a", _F, None, "1/rad", "lift-curve slope (not used)"),
+                Key("motor", _S, None, meaning="motor designation (not used)"),
+            ),
+        ),
+        Table(
+            "launch_site",
+            "the site and its weather at launch",
+            (
+                Key("air_temperature_celsius", _F, REQUIRED, "degC", "air temperature at the site", ge=-60.0, le=60.0),
+                Key(
+                    "air_pressure_mb",
+                    _F,
+                    REQUIRED,
+                    "mb",
+                    "reported air pressure, read as QNH (reduced to sea level; 1 mb = 100 Pa)",
+                    ge=800.0,
+                    le=1100.0,
+                ),
+                Key("wind_speed_kmh", _F, REQUIRED, "km/h", "surface wind speed", ge=0.0, le=200.0),
+                Key(
+                    "wind_direction",
+                    _S,
+                    REQUIRED,
+                    meaning="where the wind blows from: a 16-point compass point (N, NNE, … NNW; any case)",
+                ),
+                Key("launch_rod_angle", _F, REQUIRED, "deg", "launch rod angle from the vertical", ge=0.0, lt=90.0),
+                Key("location", _S, None, meaning="site name (not used)"),
+                Key("launch_rod_length_ft", _F, None, "ft", "launch rod length (not used)", gt=0.0),
+            ),
+        ),
+        _coordinates("launch_site.launch_coordinates", "the pad"),
+        Table(
+            "ins_details",
+            "the flight computer (not used)",
+            (
+                Key("ins_model", _S, None, meaning="flight computer model"),
+                Key("data_packet_frequency", _F, None, "Hz", "nominal packet rate", gt=0.0),
+            ),
+        ),
+        Table(
+            "flight_data",
+            "what the team measured of the flight",
+            (
+                Key("apogee_meters", _F, REQUIRED, "m", "apogee above the pad (scored against)", gt=0.0),
+                Key("log_buffer_index", "int", None, meaning="flight computer buffer index (not used)"),
+                Key("landed_coordinates_precision", _S, None, meaning="how the landing point was found (not used)"),
+                Key("flight_length_seconds", _F, None, "s", "flight duration (not used)", gt=0.0),
+                Key("target_apogee_meters", _F, None, "m", "the air brakes' target apogee (not used)", gt=0.0),
+            ),
+        ),
+        _coordinates("flight_data.landed_coordinates", "the landing point (observed by the `_landing` variant)"),
+    ),
+    noun="flight-log metadata file",
+    intro="Keys of one flight's entry in an AirbrakesV2 `metadata.json`",
+)
+
+#: the schemas of the files this importer reads (listed in FORMATS.md by the registry)
+file_schemas = (METADATA_SCHEMA,)
+
 
 def read_metadata(path: str | os.PathLike, flight: str) -> FlightMetadata:
-    """The entry ``flight`` (the log's file name, e.g. ``jackpot_launch_1.csv``) of ``metadata.json``.
+    """The entry ``flight`` (the log's file name, e.g. ``jackpot_launch_1.csv``) of ``metadata.json``,
+    validated against :data:`METADATA_SCHEMA`, in SI (K, Pa, m/s, deg).
 
-    A missing entry or field, or a non-numeric value, is a
-    :class:`~workbench.io.telemetry.TelemetryError` naming the file and the JSON path."""
+    A missing entry, an unknown, missing or mistyped field or a value outside its bounds is a
+    :class:`~workbench.io.scenario.ScenarioError` naming the file and the JSON path (with a "did you
+    mean" for an unknown key, the bound for a value out of range)."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as e:
-        raise TelemetryError.single(path, f"cannot read metadata: {e}") from None
+    data = read_json(path)
+    if not isinstance(data, dict):
+        raise ScenarioError(path, None, f"expected a JSON object of flights, got {type(data).__name__}")
     if flight not in data:
-        known = ", ".join(k for k in data if not k.startswith("$"))
-        raise TelemetryError.single(path, f"no entry for {flight!r} (entries: {known})")
-    entry = data[flight]
-
-    def get(*keys, number=True):
-        v = entry
-        for k in keys:
-            if not isinstance(v, dict) or k not in v:
-                raise TelemetryError.single(path, "missing", column=f"{flight}." + ".".join(keys))
-            v = v[k]
-        if number and (isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v)):
-            raise TelemetryError.single(path, f"{v!r} is not a number", column=f"{flight}." + ".".join(keys))
-        return v
-
-    wdir = str(get("launch_site", "wind_direction", number=False)).strip().upper()
+        known = [k for k in data if not k.startswith("$")]
+        close = difflib.get_close_matches(flight, known, n=1, cutoff=0.5)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise ScenarioError(path, flight, f"no entry for {flight!r}{hint} (entries: {', '.join(known)})")
+    m = METADATA_SCHEMA.validate(data[flight], path, where=flight)
+    site, rocket, fd = m["launch_site"], m["rocket"], m["flight_data"]
+    wdir = site["wind_direction"].strip().upper()
     if wdir not in _COMPASS:
-        raise TelemetryError.single(
-            path,
-            f"{wdir!r} is not a compass point ({', '.join(_COMPASS)})",
-            column=f"{flight}.launch_site.wind_direction",
+        raise ScenarioError(
+            path, f"{flight}.launch_site.wind_direction", f"{wdir!r} is not a compass point ({', '.join(_COMPASS)})"
         )
     return FlightMetadata(
         flight,
-        float(get("rocket", "rocket_dry_mass_kg")),
-        float(get("rocket", "rocket_Cd")),
-        float(get("rocket", "rocket_cross_sectional_area_m2")),
-        float(get("launch_site", "air_temperature_celsius")) + 273.15,
-        float(get("launch_site", "air_pressure_mb")) * 100.0,
-        float(get("launch_site", "wind_speed_kmh")) / 3.6,
+        rocket["rocket_dry_mass_kg"],
+        rocket["rocket_Cd"],
+        rocket["rocket_cross_sectional_area_m2"],
+        site["air_temperature_celsius"] + 273.15,
+        site["air_pressure_mb"] * 100.0,
+        site["wind_speed_kmh"] / 3.6,
         _COMPASS[wdir],
-        float(get("launch_site", "launch_coordinates", "latitude")),
-        float(get("launch_site", "launch_coordinates", "longitude")),
-        float(get("flight_data", "landed_coordinates", "latitude")),
-        float(get("flight_data", "landed_coordinates", "longitude")),
-        float(get("flight_data", "apogee_meters")),
-        float(get("launch_site", "launch_rod_angle")),
-        str(entry.get("date", "")),
-        str(entry.get("flight_description", "")),
+        site["launch_coordinates"]["latitude"],
+        site["launch_coordinates"]["longitude"],
+        fd["landed_coordinates"]["latitude"],
+        fd["landed_coordinates"]["longitude"],
+        fd["apogee_meters"],
+        site["launch_rod_angle"],
+        m["date"],
+        m["flight_description"],
     )
 
 
