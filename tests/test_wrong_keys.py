@@ -55,3 +55,22 @@ def test_a_misspelt_key_is_exit_3_naming_file_key_and_nearest(tmp_path, capsys, 
     assert code == EXIT_INPUT, err
     _assert_named(err, path, typo, key)
     assert not out.exists(), "a rejected run wrote an output folder"
+
+
+def test_a_misspelt_metadata_key_of_a_flight_log_is_exit_3(tmp_path, capsys):
+    """The rocket log's metadata.json (``workbench import airbrakes``): the JSON path of the key."""
+    import json
+
+    data = Path(__file__).parent / "problems" / "post2" / "data" / "airbrakes_excerpt"
+    log = data / "jackpot_launch_1_excerpt.csv"
+    meta = json.loads((data / "metadata.json").read_text(encoding="utf-8"))
+    rocket = meta[log.name]["rocket"]
+    rocket["rocket_cross_sectional_area_m"] = rocket.pop("rocket_cross_sectional_area_m2")
+    path = tmp_path / "metadata.json"
+    path.write_text(json.dumps(meta), encoding="utf-8")
+    out = tmp_path / "flight"
+    code = main(["import", "airbrakes", str(log), "--metadata", str(path), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == EXIT_INPUT, err
+    _assert_named(err, path, f"{log.name}.rocket.rocket_cross_sectional_area_m", "rocket_cross_sectional_area_m2")
+    assert not out.exists()
