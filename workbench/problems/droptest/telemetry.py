@@ -10,18 +10,17 @@ row (:mod:`workbench.io.telemetry`), degradations (saturation, dead channels, ga
 from __future__ import annotations
 
 import difflib
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from workbench.core.bodies import G0
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import ScenarioError
+from workbench.io.schema import read_toml
 from workbench.io.telemetry import Problem, Telemetry, TelemetryError, read_events, read_telemetry
 from workbench.io.units import likely_unit
-from workbench.problems.droptest.config import config_for
-from workbench.problems.droptest.lander import LanderModel
+from workbench.problems.droptest.config import SETUP_SCHEMA, DropSettings
 from workbench.problems.droptest.sensors import RangingSpec, acquisition_group_delay
 
 __all__ = ["STREAMS", "OPTIONAL_STREAMS", "DropTelemetry", "telemetry_paths", "read_setup", "load_drop_telemetry"]
@@ -78,15 +77,23 @@ class DropTelemetry:
 # ---------------------------------------------------------------------------------------------
 
 
-def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
-    """Telemetry files named by the scenario's ``[telemetry]`` table, resolved against the scenario
-    file: ``imu``, ``attitude_3dm``, ``events``, ``setup`` required (a missing key or file raises
-    :class:`ScenarioError` naming it), ``ranging`` optional."""
-    config_for(scenario)  # unknown or mistyped keys are errors before any file is opened
-    paths = {k: scenario.path_of(f"telemetry.{k}") for k in STREAMS if k not in OPTIONAL_STREAMS}
-    for k in OPTIONAL_STREAMS:
-        if scenario.has(f"telemetry.{k}"):
-            paths[k] = scenario.path_of(f"telemetry.{k}")
+def telemetry_paths(settings: DropSettings) -> dict[str, Path]:
+    """The telemetry files of the settings' ``[telemetry]`` table (absolute paths): ``imu``,
+    ``attitude_3dm``, ``events``, ``setup`` required (a missing key or file raises
+    :class:`ScenarioError` naming the scenario file and the key), ``ranging`` optional."""
+    paths = {}
+    for k in STREAMS:
+        p = settings.telemetry.get(k)
+        if p is None:
+            if k in OPTIONAL_STREAMS:
+                continue
+            given = ", ".join(n for n, q in settings.telemetry.items() if q is not None)
+            raise ScenarioError(
+                settings.path, f"telemetry.{k}", f"missing str value{'; keys here: ' + given if given else ''}"
+            )
+        if not p.exists():
+            raise ScenarioError(settings.path, f"telemetry.{k}", f"file not found: {p}")
+        paths[k] = p
     return paths
 
 
@@ -97,31 +104,35 @@ ODOMETER_BUNGEE_KEYS = ("anchor_m", "attach_body_m")
 
 
 def read_setup(path: Path, bungee_keys: tuple[str, ...] | None = None) -> dict:
-    """The drop-test setup TOML (``[hanging]`` survey, optional ``[bungee]`` test plan and ``[rocks]``
-    field); a missing required key raises :class:`ScenarioError` naming file and key.
+    """The drop setup file (``[hanging]`` survey, optional ``[bungee]`` test plan and ``[rocks]``
+    field) validated against :data:`~workbench.problems.droptest.config.SETUP_SCHEMA`: an unknown
+    key, a wrong type or a value out of bounds raises :class:`ScenarioError` naming file and key.
+    Returns the nested dict; a table the file does not have is absent, and of ``[bungee]`` only the
+    keys the file gives are present.
 
     ``bungee_keys``: the ``[bungee]`` keys the run needs (then the table is required); None: when a
     ``[bungee]`` table is given it must be complete (:data:`BUNGEE_KEYS`)."""
-    try:
-        with open(path, "rb") as f:
-            d = tomllib.load(f)
-    except (OSError, tomllib.TOMLDecodeError) as err:
-        raise ScenarioError(path, None, f"cannot read the setup file: {err}") from err
-    required = ["hanging.position_m", "hanging.position_sigma_m"]
+    raw = read_toml(path)
+    d = SETUP_SCHEMA.validate(raw, path, optional=("rocks",))
+    for table in ("bungee", "rocks"):
+        if table not in raw:
+            del d[table]
+    if "bungee" in d:
+        d["bungee"] = {k: x for k, x in d["bungee"].items() if x is not None}
     if bungee_keys is None and "bungee" in d:  # complete when given
         bungee_keys = BUNGEE_KEYS
-    required += [f"bungee.{k}" for k in bungee_keys or ()]
-    for key in required:
-        a, b = key.split(".")
-        if not isinstance(d.get(a), dict) or b not in d[a]:
-            raise ScenarioError(path, key, "missing")
+    for k in bungee_keys or ():
+        if k not in d.get("bungee", {}):
+            raise ScenarioError(path, f"bungee.{k}", "missing")
     return d
 
 
-def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> list[tuple[float, str, str]]:
+def check_units_at_rest(
+    imu: Telemetry, t_release: float, triads: tuple[str, ...], gyro_noise_dps: float, fname: str
+) -> list[tuple[float, str, str]]:
     """Unit plausibility from physics while the lander hangs still (IMU samples before
-    ``t_release`` [s]): every triad's mean specific force magnitude is 1 g and the gyro reads ≈ 0
-    with a scatter of its declared noise (``cfg.gyro_noise_dps``).  A mismatch by a unit-like
+    ``t_release`` [s]): every one of the ``triads``' mean specific force magnitude is 1 g and the
+    gyro reads ≈ 0 with a scatter of its declared noise (``gyro_noise_dps`` [deg/s], 1σ).  A mismatch by a unit-like
     factor (9.81, 57.3, 1000 ...: :func:`~workbench.io.units.likely_unit`) is a
     :class:`TelemetryError` naming the file, the column and the likely unit; a mismatch by
     another factor (beyond ±30 % for the triads) is returned as a WARN degradation
@@ -131,7 +142,7 @@ def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> li
     if hang.sum() < 20:
         return out
     problems = []
-    for n in cfg.triads:
+    for n in triads:
         cols = [f"{n}.{a}" for a in "xyz"]
         if not all(c in imu.channels for c in cols):
             continue
@@ -151,10 +162,10 @@ def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> li
             else:
                 out.append((float(t_release), "WARN", f"{fname}: {what}"))
     cols = [f"gyro.{a}" for a in "xyz"]
-    if all(c in imu.channels for c in cols) and cfg.gyro_noise_dps > 0:
+    if all(c in imu.channels for c in cols) and gyro_noise_dps > 0:
         w = imu.stack(cols)[hang]
         spread = float(np.sqrt(np.mean(np.var(w, axis=0))))
-        ratio = spread / np.radians(cfg.gyro_noise_dps)
+        ratio = spread / np.radians(gyro_noise_dps)
         unit = imu.units[cols[0]]
         likely = likely_unit(ratio, unit, rtol=0.3) if abs(np.log(ratio)) > np.log(3.0) else None
         if likely:
@@ -165,7 +176,7 @@ def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> li
                     None,
                     None,
                     f"the hanging gyro scatters {ratio:.3g}× its declared noise (sensors.gyro.noise_dps = "
-                    f"{cfg.gyro_noise_dps:g}): the values look like [{likely}], not [{unit}]",
+                    f"{gyro_noise_dps:g}): the values look like [{likely}], not [{unit}]",
                 )
             )
     if problems:
@@ -222,13 +233,14 @@ def _degrade(log: list, t: float, level: str, text: str) -> None:
     log.append((float(t), level, text))
 
 
-def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: LanderModel) -> DropTelemetry:
-    """Read and validate the drop-test telemetry ``paths`` (:func:`telemetry_paths`); resample to the
-    filter rate (see :class:`DropTelemetry`)."""
-    cfg = config_for(scenario)
-    triads = cfg.triads
-    fs_acc = cfg.accel_full_scale_g * G0
-    fs_gyr = np.radians(cfg.gyro_full_scale_dps)
+def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropTelemetry:
+    """Read and validate the drop-test telemetry ``paths`` (:func:`telemetry_paths`) of a run with
+    ``settings`` (its lander's lever arms); resample to the filter rate (see :class:`DropTelemetry`)."""
+    cfg = settings
+    lander = settings.lander
+    triads = cfg.accelerometer.triads
+    fs_acc = cfg.accelerometer.full_scale_g * G0
+    fs_gyr = np.radians(cfg.gyro.full_scale_dps)
     required = {f"{n}.{a}": "acceleration" for n in triads for a in "xyz"}
     required.update({f"gyro.{a}": "angular_rate" for a in "xyz"})
     sat = {k: (0.999 * fs_acc if k.split(".")[0] != "gyro" else 0.999 * fs_gyr) for k in required}
@@ -278,27 +290,27 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
                     f"(known: {', '.join(KNOWN_EVENTS)}){hint}",
                 )
             )
-    unit_notes = check_units_at_rest(imu, events["release"], cfg, str(paths["imu"]))
-    unit_notes += check_free_fall(imu, events, cfg.triads, str(paths["events"]))
+    unit_notes = check_units_at_rest(imu, events["release"], triads, cfg.gyro.noise_dps, str(paths["imu"]))
+    unit_notes += check_free_fall(imu, events, triads, str(paths["events"]))
     ranging = None
     uses_odometer = False
     if "ranging" in paths:
-        spec = RangingSpec.from_scenario(scenario)
+        spec = RangingSpec.from_settings(cfg.ranging)
         req = {"odometer": "length"} if spec.odometer else {}
         uses_odometer = spec.odometer
         for gun in spec.guns:
             req.update({f"{gun}.range": "length", f"{gun}.rate": "velocity"})
         ranging = read_telemetry(paths["ranging"], required=req, sparse=[k for k in req])
-        if scenario.has("sensors.ranging.rate_hz") and len(ranging) > 2:
+        if cfg.ranging.rate_given and len(ranging) > 2:
             rate_file = 1.0 / float(np.median(np.diff(ranging.time)))
             if abs(rate_file / spec.rate_hz - 1.0) > 0.1:
                 raise ScenarioError(
-                    scenario.path,
+                    settings.path,
                     "sensors.ranging.rate_hz",
                     f"{spec.rate_hz:g} Hz, but {paths['ranging']} is sampled at {rate_file:.4g} Hz "
                     "(median interval); correct the key or leave it out",
                 )
-    if cfg.mode == "dynamic":
+    if cfg.filter.mode == "dynamic":
         setup = read_setup(paths["setup"], BUNGEE_KEYS)
     elif uses_odometer:
         setup = read_setup(paths["setup"], ODOMETER_BUNGEE_KEYS)
@@ -307,7 +319,7 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
     missing = [n for n in triads if n not in lander.instruments]
     if missing:
         raise ScenarioError(
-            scenario.path,
+            settings.path,
             "sensors.accelerometer.triads",
             f"triads {missing} have no lever arm in the lander asset's [instruments]",
         )
@@ -389,7 +401,7 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
         )
 
     # average down to the filter rate (boxcar of k samples, grouped on the uniform sample grid)
-    rate_req = cfg.filter_rate_hz
+    rate_req = cfg.filter.rate_hz
     dt_raw = float(np.median(np.diff(imu.time)))
     k = max(1, int(round(1.0 / (rate_req * dt_raw))))
     rate = 1.0 / (k * dt_raw)  # the grid actually used: a whole number k of IMU samples per step
@@ -406,10 +418,9 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
     t = np.add.reduceat(imu.time, starts) / counts
     f_B, f_cnt = avg(f_raw, f_ok)
     w_B, w_cnt = avg(w_raw, w_ok)
-    cutoff = cfg.filter_cutoff_hz
-    order = cfg.filter_order
-    filter_delay = acquisition_group_delay(cutoff, order, cfg.acquisition_filter)
-    delay = filter_delay + cfg.imu_latency_s  # the IMU tags' total lag behind the motion
+    aq = cfg.acquisition
+    filter_delay = acquisition_group_delay(aq.cutoff_hz, aq.order, aq.filter)
+    delay = filter_delay + aq.latency_s  # the IMU tags' total lag behind the motion
     t = t - delay
     hanging = t < events["release"]
 
@@ -450,7 +461,7 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
         rate_hz=rate,
         time_shifts_s={
             "imu": delay,
-            "attitude_3dm": cfg.attitude_3dm_latency_s,
-            "ranging": cfg.ranging_latency_s + (filter_delay if cfg.ranging_filtered else 0.0),
+            "attitude_3dm": cfg.attitude_3dm.latency_s,
+            "ranging": cfg.ranging.latency_s + (filter_delay if cfg.ranging.acquisition_filter else 0.0),
         },
     )
