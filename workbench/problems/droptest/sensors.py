@@ -18,7 +18,7 @@ Functions here produce *measurements from truth* (synthetic scenarios) and the m
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import butter, filtfilt, lfilter, lfilter_zi
@@ -153,10 +153,10 @@ class RangingSpec:
     range_sigma: float
     rate_sigma: float
     rate_hz: float
-    reflectors_L: dict[str, np.ndarray] = field(default_factory=dict)
-    range_sigmas: dict[str, float] = field(default_factory=dict)
-    rate_sigmas: dict[str, float] = field(default_factory=dict)
-    odometer_zero: float = 0.0
+    reflectors_L: dict[str, np.ndarray]
+    range_sigmas: dict[str, float]
+    rate_sigmas: dict[str, float]
+    odometer_zero: float
 
     @classmethod
     def from_settings(cls, r: Ranging) -> RangingSpec:

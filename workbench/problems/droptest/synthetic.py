@@ -3,8 +3,9 @@
 The truth (``problems.droptest.truth``) is turned into instrument readings (``problems.droptest.sensors``) and
 written to CSV/TOML files in the documented user format (``io/FORMATS.md``):
 
-* ``imu.csv`` — four accelerometer triads [g] and the rate gyro [deg/s] at the IDDAS rate,
-  from a few tenths of a second before release (the lander hanging) to the end of the event;
+* ``imu.csv`` — the accelerometer triads [g] (``[sensors.accelerometer] triads``) and the rate
+  gyro [deg/s] at the IDDAS rate, from a few tenths of a second before release (the lander
+  hanging) to the end of the event;
 * ``3dm.csv`` — the 3DM gravity and magnetic unit vectors (body frame) while hanging;
 * ``events.csv`` — release command and the nail microswitch (bungee cut);
 * ``setup.toml`` — surveyed hanging position of the CM (with its 1σ) and the bungee test plan;
@@ -58,8 +59,6 @@ __all__ = [
     "dispersed_truth",
     "load_truth",
 ]
-
-TRIADS = ("BP", "PYBP", "PXBP", "MXBP")
 
 
 @dataclass(frozen=True)
@@ -343,7 +342,8 @@ def synthesize_droptest(
     t_imu = truth.t[::decim]
     channels: dict[str, tuple[np.ndarray, str]] = {}
     drawn: dict[str, dict] = {}
-    for name in TRIADS:
+    triads = cfg.accelerometer.triads  # the scenario's triads, each at its lever arm in the asset
+    for name in triads:
         r = lander.instruments[name]
         f_true = specific_force_at(r, truth.a_ng_I, truth.q_I_B, truth.w_B, truth.alpha_B)
         f_filt = acquisition_filter(f_true, fs_sim, cutoff, order, kind)[::decim]
@@ -448,7 +448,7 @@ def synthesize_droptest(
         body_penetration=truth.body_penetration,
         event_names=np.array(list(truth.events)),
         event_times=np.array(list(truth.events.values())),
-        accel_bias=np.array([drawn[n]["bias"] for n in TRIADS]),
+        accel_bias=np.array([drawn[n]["bias"] for n in triads]),
         gyro_bias=drawn["gyro"]["bias"],
         gyro_scale=drawn["gyro"]["scale"],
         gyro_error_matrix=drawn["gyro"]["matrix"],
