@@ -235,81 +235,23 @@ def _degrade(log: list, t: float, level: str, text: str) -> None:
 
 def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropTelemetry:
     """Read and validate the drop-test telemetry ``paths`` (:func:`telemetry_paths`) of a run with
-    ``settings`` (its lander's lever arms); resample to the filter rate (see :class:`DropTelemetry`)."""
+    ``settings`` (its lander's lever arms); resample to the filter rate (see :class:`DropTelemetry`).
+
+    The steps, in order (each error raised before any later file is read): read the IMU, 3DM and
+    events files (:func:`_read_imu_3dm_events`), the events (:func:`_events`), unit plausibility from
+    physics (:func:`check_units_at_rest`, :func:`check_free_fall`), the ranging file
+    (:func:`_read_ranging`), the setup file as the filter mode needs it, the triads' lever arms;
+    then the degradations (:func:`_stream_notes`, :func:`_usable_samples`), the average down to the
+    filter rate (:func:`_average_down`) and the measured jerk (:func:`_jerk_indicator`)."""
     cfg = settings
     lander = settings.lander
     triads = cfg.accelerometer.triads
-    fs_acc = cfg.accelerometer.full_scale_g * G0
-    fs_gyr = np.radians(cfg.gyro.full_scale_dps)
-    required = {f"{n}.{a}": "acceleration" for n in triads for a in "xyz"}
-    required.update({f"gyro.{a}": "angular_rate" for a in "xyz"})
-    sat = {k: (0.999 * fs_acc if k.split(".")[0] != "gyro" else 0.999 * fs_gyr) for k in required}
-    imu = read_telemetry(paths["imu"], required=required, saturation=sat)
-    att = read_telemetry(
-        paths["attitude_3dm"], required={f"{v}.{a}": "dimensionless" for v in ("up", "mag") for a in "xyz"}
-    )
-    ev_list = read_events(paths["events"])
-    att_log: list[tuple[float, str, str]] = []
-    for v in ("up", "mag"):
-        norms = np.linalg.norm(att.stack([f"{v}.x", f"{v}.y", f"{v}.z"]), axis=1)
-        if np.any(np.abs(norms - 1.0) > 0.05):
-            k = int(np.argmax(np.abs(norms - 1.0)))
-            att_log.append(
-                (
-                    float(att.time[k]),
-                    "WARN",
-                    f"{paths['attitude_3dm']}: '{v}' vectors are not unit (|v| = {norms.min():.3f}–"
-                    f"{norms.max():.3f}, worst at row {k + 1}); only their directions are used",
-                )
-            )
-    events: dict[str, float] = {}
-    dup_log: list[tuple[float, str, str]] = []
-    for t_e, name in ev_list:
-        if name in events:
-            dup_log.append(
-                (
-                    float(t_e),
-                    "WARN",
-                    f"{paths['events']}: event '{name}' repeated at {t_e:.4f} s; "
-                    f"the first, at {events[name]:.4f} s, is used",
-                )
-            )
-            continue
-        events[name] = t_e
-    if "release" not in events:
-        raise ScenarioError(paths["events"], None, "no 'release' event: the reconstruction needs the release time")
-    for t_e, name in ev_list:
-        if name not in KNOWN_EVENTS:
-            close = difflib.get_close_matches(name, KNOWN_EVENTS, n=1, cutoff=0.6)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            dup_log.append(
-                (
-                    float(t_e),
-                    "WARN",
-                    f"{paths['events']}: unknown event label '{name}' at {t_e:.4f} s, ignored "
-                    f"(known: {', '.join(KNOWN_EVENTS)}){hint}",
-                )
-            )
+    imu, att, ev_list = _read_imu_3dm_events(settings, paths)
+    att_log = _unit_vector_notes(att, paths["attitude_3dm"])
+    events, ev_log = _events(ev_list, paths["events"])
     unit_notes = check_units_at_rest(imu, events["release"], triads, cfg.gyro.noise_dps, str(paths["imu"]))
     unit_notes += check_free_fall(imu, events, triads, str(paths["events"]))
-    ranging = None
-    uses_odometer = False
-    if "ranging" in paths:
-        spec = RangingSpec.from_settings(cfg.ranging)
-        req = {"odometer": "length"} if spec.odometer else {}
-        uses_odometer = spec.odometer
-        for gun in spec.guns:
-            req.update({f"{gun}.range": "length", f"{gun}.rate": "velocity"})
-        ranging = read_telemetry(paths["ranging"], required=req, sparse=[k for k in req])
-        if cfg.ranging.rate_given and len(ranging) > 2:
-            rate_file = 1.0 / float(np.median(np.diff(ranging.time)))
-            if abs(rate_file / spec.rate_hz - 1.0) > 0.1:
-                raise ScenarioError(
-                    settings.path,
-                    "sensors.ranging.rate_hz",
-                    f"{spec.rate_hz:g} Hz, but {paths['ranging']} is sampled at {rate_file:.4g} Hz "
-                    "(median interval); correct the key or leave it out",
-                )
+    ranging, uses_odometer = _read_ranging(settings, paths["ranging"]) if "ranging" in paths else (None, False)
     if cfg.filter.mode == "dynamic":
         setup = read_setup(paths["setup"], BUNGEE_KEYS)
     elif uses_odometer:
@@ -324,7 +266,137 @@ def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropT
             f"triads {missing} have no lever arm in the lander asset's [instruments]",
         )
 
-    log: list[tuple[float, str, str]] = list(att_log) + dup_log + unit_notes
+    log = att_log + ev_log + unit_notes + _stream_notes(imu, att, ranging, events, paths["attitude_3dm"])
+    f_raw, f_ok, w_raw, w_ok = _usable_samples(settings, imu, events, paths["imu"], log)
+    t, f_B, f_cnt, w_B, w_cnt, rate = _average_down(imu, f_raw, f_ok, w_raw, w_ok, cfg.filter.rate_hz)
+    aq = cfg.acquisition
+    filter_delay = acquisition_group_delay(aq.cutoff_hz, aq.order, aq.filter)
+    delay = filter_delay + aq.latency_s  # the IMU tags' total lag behind the motion
+    t = t - delay
+    return DropTelemetry(
+        t=t,
+        f_B=f_B,
+        f_valid=f_cnt > 0,
+        w_B=w_B,
+        w_valid=w_cnt > 0,
+        hanging=t < events["release"],
+        triads=triads,
+        lever_arms_B=np.array([lander.instruments[n] for n in triads]),
+        events=events,
+        setup=setup,
+        group_delay_s=delay,
+        degradations=tuple(sorted(log)),
+        imu=imu,
+        attitude=att,
+        ranging=ranging,
+        jerk=_jerk_indicator(t, f_B, f_cnt, rate),
+        counts=(f_cnt.astype(int), w_cnt.astype(int)),
+        rate_hz=rate,
+        time_shifts_s={
+            "imu": delay,
+            "attitude_3dm": cfg.attitude_3dm.latency_s,
+            "ranging": cfg.ranging.latency_s + (filter_delay if cfg.ranging.acquisition_filter else 0.0),
+        },
+    )
+
+
+Log = list[tuple[float, str, str]]
+
+
+def _read_imu_3dm_events(settings: DropSettings, paths: dict[str, Path]) -> tuple[Telemetry, Telemetry, list]:
+    """The IMU file (the triads' specific forces and the gyro rates, with their saturation levels:
+    99.9 % of the declared full scale), the 3DM file (unit vectors) and the events list."""
+    triads = settings.accelerometer.triads
+    fs_acc = settings.accelerometer.full_scale_g * G0
+    fs_gyr = np.radians(settings.gyro.full_scale_dps)
+    required = {f"{n}.{a}": "acceleration" for n in triads for a in "xyz"}
+    required.update({f"gyro.{a}": "angular_rate" for a in "xyz"})
+    sat = {k: (0.999 * fs_acc if k.split(".")[0] != "gyro" else 0.999 * fs_gyr) for k in required}
+    imu = read_telemetry(paths["imu"], required=required, saturation=sat)
+    att = read_telemetry(
+        paths["attitude_3dm"], required={f"{v}.{a}": "dimensionless" for v in ("up", "mag") for a in "xyz"}
+    )
+    return imu, att, read_events(paths["events"])
+
+
+def _unit_vector_notes(att: Telemetry, path: Path) -> Log:
+    """WARN where the 3DM ``up`` / ``mag`` vectors are not unit (beyond 5 %): only their directions are used."""
+    log: Log = []
+    for v in ("up", "mag"):
+        norms = np.linalg.norm(att.stack([f"{v}.x", f"{v}.y", f"{v}.z"]), axis=1)
+        if np.any(np.abs(norms - 1.0) > 0.05):
+            k = int(np.argmax(np.abs(norms - 1.0)))
+            log.append(
+                (
+                    float(att.time[k]),
+                    "WARN",
+                    f"{path}: '{v}' vectors are not unit (|v| = {norms.min():.3f}–"
+                    f"{norms.max():.3f}, worst at row {k + 1}); only their directions are used",
+                )
+            )
+    return log
+
+
+def _events(ev_list: list, path: Path) -> tuple[dict[str, float], Log]:
+    """Event name -> time [s] (the first of a repeated name, WARN), unknown labels WARNed with a
+    "did you mean"; no ``release`` event is a :class:`ScenarioError` naming the events file."""
+    events: dict[str, float] = {}
+    log: Log = []
+    for t_e, name in ev_list:
+        if name in events:
+            log.append(
+                (
+                    float(t_e),
+                    "WARN",
+                    f"{path}: event '{name}' repeated at {t_e:.4f} s; the first, at {events[name]:.4f} s, is used",
+                )
+            )
+            continue
+        events[name] = t_e
+    if "release" not in events:
+        raise ScenarioError(path, None, "no 'release' event: the reconstruction needs the release time")
+    for t_e, name in ev_list:
+        if name not in KNOWN_EVENTS:
+            close = difflib.get_close_matches(name, KNOWN_EVENTS, n=1, cutoff=0.6)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            log.append(
+                (
+                    float(t_e),
+                    "WARN",
+                    f"{path}: unknown event label '{name}' at {t_e:.4f} s, ignored "
+                    f"(known: {', '.join(KNOWN_EVENTS)}){hint}",
+                )
+            )
+    return events, log
+
+
+def _read_ranging(settings: DropSettings, path: Path) -> tuple[Telemetry, bool]:
+    """The ranging file with the channels ``[sensors.ranging]`` names (sparse columns), and whether
+    the odometer is used; a declared ``rate_hz`` off the file's median rate by more than 10 % is a
+    :class:`ScenarioError` naming the scenario key."""
+    spec = RangingSpec.from_settings(settings.ranging)
+    req = {"odometer": "length"} if spec.odometer else {}
+    for gun in spec.guns:
+        req.update({f"{gun}.range": "length", f"{gun}.rate": "velocity"})
+    ranging = read_telemetry(path, required=req, sparse=[k for k in req])
+    if settings.ranging.rate_given and len(ranging) > 2:
+        rate_file = 1.0 / float(np.median(np.diff(ranging.time)))
+        if abs(rate_file / spec.rate_hz - 1.0) > 0.1:
+            raise ScenarioError(
+                settings.path,
+                "sensors.ranging.rate_hz",
+                f"{spec.rate_hz:g} Hz, but {path} is sampled at {rate_file:.4g} Hz "
+                "(median interval); correct the key or leave it out",
+            )
+    return ranging, spec.odometer
+
+
+def _stream_notes(
+    imu: Telemetry, att: Telemetry, ranging: Telemetry | None, events: dict[str, float], att_path: Path
+) -> Log:
+    """The readers' notes of every file, a 3DM record that ends well before the release
+    (truncated?), and the gaps of the 3DM and ranging files (WARN)."""
+    log: Log = []
     for tf in (imu, att, ranging):
         if tf is not None:
             log += [(float(tf.time[-1]), "WARN", note) for note in tf.notes]
@@ -335,7 +407,7 @@ def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropT
                 log,
                 float(att.time[-1]),
                 "WARN",
-                f"{paths['attitude_3dm']}: the readings end {early:.3g} s before the release: truncated?",
+                f"{att_path}: the readings end {early:.3g} s before the release: truncated?",
             )
     for tf in (att, ranging):
         for gap in tf.gaps if tf is not None else ():
@@ -345,6 +417,19 @@ def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropT
                 "WARN",
                 f"{tf.path}: gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row})",
             )
+    return log
+
+
+def _usable_samples(
+    settings: DropSettings, imu: Telemetry, events: dict[str, float], imu_path: Path, log: Log
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The raw triad forces ``f_raw`` (n, n_triads, 3) [m/s²] and gyro rates ``w_raw`` (n, 3)
+    [rad/s] with their usable-sample masks: saturated samples dropped, a triad with a dead channel
+    (no variation after release) excluded (ERROR), IMU gaps noted; appends to ``log``.  No usable
+    triad at all is a :class:`ScenarioError` naming the IMU file."""
+    triads = settings.accelerometer.triads
+    fs_acc = settings.accelerometer.full_scale_g * G0
+    fs_gyr = np.radians(settings.gyro.full_scale_dps)
     n_raw = len(imu)
     f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
     w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])
@@ -390,7 +475,7 @@ def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropT
                     "triad excluded from the reconstruction",
                 )
         if not f_ok.any():
-            raise ScenarioError(paths["imu"], None, "no usable accelerometer triad (all dead)")
+            raise ScenarioError(imu_path, None, "no usable accelerometer triad (all dead)")
     for gap in imu.gaps:
         _degrade(
             log,
@@ -399,9 +484,17 @@ def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropT
             f"IMU gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row}): "
             "bridged by propagation, covariance grows",
         )
+    return f_raw, f_ok, w_raw, w_ok
 
-    # average down to the filter rate (boxcar of k samples, grouped on the uniform sample grid)
-    rate_req = cfg.filter.rate_hz
+
+def _average_down(
+    imu: Telemetry, f_raw: np.ndarray, f_ok: np.ndarray, w_raw: np.ndarray, w_ok: np.ndarray, rate_req: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """Average the usable samples down to the filter rate: a boxcar of k IMU samples (k the whole
+    number nearest the requested ``rate_req`` [Hz]), grouped on the uniform sample grid.  Returns
+    the step times (n,) [s, IMU tags], the mean forces and the samples in each ``(f_B, f_cnt)``,
+    the mean rates ``(w_B, w_cnt)`` and the rate actually used [Hz]."""
+    n_raw = len(imu)
     dt_raw = float(np.median(np.diff(imu.time)))
     k = max(1, int(round(1.0 / (rate_req * dt_raw))))
     rate = 1.0 / (k * dt_raw)  # the grid actually used: a whole number k of IMU samples per step
@@ -418,13 +511,13 @@ def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropT
     t = np.add.reduceat(imu.time, starts) / counts
     f_B, f_cnt = avg(f_raw, f_ok)
     w_B, w_cnt = avg(w_raw, w_ok)
-    aq = cfg.acquisition
-    filter_delay = acquisition_group_delay(aq.cutoff_hz, aq.order, aq.filter)
-    delay = filter_delay + aq.latency_s  # the IMU tags' total lag behind the motion
-    t = t - delay
-    hanging = t < events["release"]
+    return t, f_B, f_cnt, w_B, w_cnt, rate
 
-    # measured jerk indicator (centred difference of 10 ms means of the mean triad force)
+
+def _jerk_indicator(t: np.ndarray, f_B: np.ndarray, f_cnt: np.ndarray, rate: float) -> np.ndarray:
+    """The measured jerk indicator (n,) [m/s³] that raises the process noise: the centred
+    difference of 10 ms means of the mean triad force (slots without a valid triad hold the last
+    valid mean, so no artificial jerk spike)."""
     fbar = np.where(f_cnt[..., None] > 0, f_B, np.nan)
     with np.errstate(invalid="ignore"):
         fbar = np.nanmean(fbar, axis=1)
@@ -440,28 +533,4 @@ def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropT
         d = np.zeros_like(sm)
         d[L:-L] = (sm[2 * L :] - sm[: -2 * L]) / (2 * L / rate)
         jerk = np.linalg.norm(d, axis=1)
-    return DropTelemetry(
-        t=t,
-        f_B=f_B,
-        f_valid=f_cnt > 0,
-        w_B=w_B,
-        w_valid=w_cnt > 0,
-        hanging=hanging,
-        triads=triads,
-        lever_arms_B=np.array([lander.instruments[n] for n in triads]),
-        events=events,
-        setup=setup,
-        group_delay_s=delay,
-        degradations=tuple(sorted(log)),
-        imu=imu,
-        attitude=att,
-        ranging=ranging,
-        jerk=jerk,
-        counts=(f_cnt.astype(int), w_cnt.astype(int)),
-        rate_hz=rate,
-        time_shifts_s={
-            "imu": delay,
-            "attitude_3dm": cfg.attitude_3dm.latency_s,
-            "ranging": cfg.ranging.latency_s + (filter_delay if cfg.ranging.acquisition_filter else 0.0),
-        },
-    )
+    return jerk
