@@ -252,12 +252,9 @@ def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropT
     unit_notes = check_units_at_rest(imu, events["release"], triads, cfg.gyro.noise_dps, str(paths["imu"]))
     unit_notes += check_free_fall(imu, events, triads, str(paths["events"]))
     ranging, uses_odometer = _read_ranging(settings, paths["ranging"]) if "ranging" in paths else (None, False)
-    if cfg.filter.mode == "dynamic":
-        setup = read_setup(paths["setup"], BUNGEE_KEYS)
-    elif uses_odometer:
-        setup = read_setup(paths["setup"], ODOMETER_BUNGEE_KEYS)
-    else:
-        setup = read_setup(paths["setup"], ())
+    setup = read_setup(
+        paths["setup"], BUNGEE_KEYS if cfg.filter.mode == "dynamic" else ODOMETER_BUNGEE_KEYS if uses_odometer else ()
+    )
     missing = [n for n in triads if n not in lander.instruments]
     if missing:
         raise ScenarioError(
@@ -428,11 +425,30 @@ def _usable_samples(
     (no variation after release) excluded (ERROR), IMU gaps noted; appends to ``log``.  No usable
     triad at all is a :class:`ScenarioError` naming the IMU file."""
     triads = settings.accelerometer.triads
+    f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
+    w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])
+    f_ok, w_ok = _unsaturated(settings, imu, log)
+    _dead_channels(triads, imu, f_raw, f_ok, events, log)
+    if (imu.time >= events["release"]).sum() > 10 and not f_ok.any():
+        raise ScenarioError(imu_path, None, "no usable accelerometer triad (all dead)")
+    for gap in imu.gaps:
+        _degrade(
+            log,
+            gap.start_s,
+            "WARN",
+            f"IMU gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row}): "
+            "bridged by propagation, covariance grows",
+        )
+    return f_raw, f_ok, w_raw, w_ok
+
+
+def _unsaturated(settings: DropSettings, imu: Telemetry, log: Log) -> tuple[np.ndarray, np.ndarray]:
+    """The masks of unsaturated samples: per triad (n, n_triads) and for the gyro (n,) (a
+    saturated gyro axis drops the gyro sample: the rate is then carried by the lever arms)."""
+    triads = settings.accelerometer.triads
     fs_acc = settings.accelerometer.full_scale_g * G0
     fs_gyr = np.radians(settings.gyro.full_scale_dps)
     n_raw = len(imu)
-    f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
-    w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])
     f_ok = np.ones((n_raw, len(triads)), bool)
     for j, n in enumerate(triads):
         s = np.zeros(n_raw, bool)
@@ -458,7 +474,14 @@ def _usable_samples(
                 f"gyro.{a}: {int(s.sum())} saturated samples (±{np.degrees(fs_gyr):g} °/s); gyro dropped, "
                 "rate carried by the triads' lever arms",
             )
-    # dead channels: a channel that does not move while the others see the impact
+    return f_ok, w_ok
+
+
+def _dead_channels(
+    triads: tuple[str, ...], imu: Telemetry, f_raw: np.ndarray, f_ok: np.ndarray, events: dict, log: Log
+) -> None:
+    """Exclude (in ``f_ok``, ERROR in ``log``) a triad with a channel that does not vary after the
+    release while the others see the impact."""
     moving = imu.time >= events["release"]
     if moving.sum() > 10:
         spread = np.ptp(f_raw[moving], axis=0)  # (4,3)
@@ -474,17 +497,6 @@ def _usable_samples(
                     f"triad {n}: channel(s) {', '.join(dead_axes)} dead (no variation after release): "
                     "triad excluded from the reconstruction",
                 )
-        if not f_ok.any():
-            raise ScenarioError(imu_path, None, "no usable accelerometer triad (all dead)")
-    for gap in imu.gaps:
-        _degrade(
-            log,
-            gap.start_s,
-            "WARN",
-            f"IMU gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row}): "
-            "bridged by propagation, covariance grows",
-        )
-    return f_raw, f_ok, w_raw, w_ok
 
 
 def _average_down(
