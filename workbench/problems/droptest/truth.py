@@ -1,21 +1,22 @@
 """Truth simulator of a MER-style airbag drop test in the SPF chamber (synthetic scenarios only).
 
 This is the *truth*, not the estimator's model: a 6-DOF rigid body (lander + airbags) released
-from hanging, pulled toward a 60° ramp by a bungee whose force is a polynomial of stretch times
-the number of bungees, cut by the hammer/nail shortly before contact, then stopped and thrown
-back by **airbag contact forces**: each airbag lobe is a sphere that flattens against the ramp;
-the force on a lobe is the gauge pressure of the bags' *shared* gas volume (the bags vent into
-each other) times the flattened contact area, plus a damping term and Coulomb friction. The gas
-is compressed adiabatically by the volume the flattened caps displace. If the bags compress far
-enough, a vertex of the rigid lander body reaches the ramp: a stiff penalty contact then acts
-and the run is a *full stroke*.
+from hanging, pulled toward the ramp (60° at the SPF; any angle here) by a bungee whose force is a
+polynomial of stretch times the number of bungees, cut by the hammer/nail shortly before contact,
+then stopped and thrown back by **airbag contact forces**: each airbag lobe is a sphere that
+flattens against the ramp; the force on a lobe is the gauge pressure of the bags' *shared* gas
+volume (the bags vent into each other) times the flattened contact area, plus a damping term and
+Coulomb friction. The gas is compressed adiabatically by the volume the flattened caps displace.
+If the bags compress far enough, a vertex of the rigid lander body reaches the ramp: a stiff
+penalty contact then acts and the run is a *full stroke*.
 
 The REDLand estimator is kinematic (it never sees these forces); the only shared items are the
 geometry of the ramp and lander and the nominal bungee test plan (used by the estimator's
 optional dynamic mode, with the truth's bungee deliberately a few per cent off nominal).
 
 Chamber (SPF) frame: origin at the trigger nail, Z up, Y toward the ramp face, X = Y × Z
-(REDLand paper, "Test facility"). Mars frame = SPF rotated by −60° about X (ramp level).
+(REDLand paper, "Test facility"). Mars frame = SPF rotated by −α about X for a ramp of
+inclination α (−60° at the SPF), the ramp level: :func:`mars_from_spf`.
 Body frame B: origin at the CM (see ``assets/landers/mer_drop_lander.toml``).
 
 References: REDLand paper (``redland-mer-airbag-droptest.txt``): test sequence, bungee model,
