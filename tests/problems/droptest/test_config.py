@@ -64,7 +64,7 @@ def test_ranging_guns_are_read():
     assert s.ranging.odometer and s.ranging.rate_hz == 200.0 and s.ranging.rate_given
 
 
-def _copy_with(tmp_path: Path, old: str, new: str, lander: tuple[str, str] | None = None) -> Path:
+def _copy_with(tmp_path: Path, old: str, new: str, lander: tuple[tuple[str, str], ...] = ()) -> Path:
     src = SHIPPED["droptest"]
     dst = tmp_path / "scenarios" / "my_drop.toml"
     dst.parent.mkdir(parents=True)
@@ -72,11 +72,11 @@ def _copy_with(tmp_path: Path, old: str, new: str, lander: tuple[str, str] | Non
     text = src.read_text()
     assert text.count(old) == 1
     dst.write_text(text.replace(old, new).replace('name = "droptest"', 'name = "my_drop"'))
-    if lander is not None:
-        asset = tmp_path / "landers" / "mer_drop_lander.toml"
+    asset = tmp_path / "landers" / "mer_drop_lander.toml"
+    for a, b in lander:
         atext = asset.read_text()
-        assert atext.count(lander[0]) == 1
-        asset.write_text(atext.replace(*lander))
+        assert atext.count(a) == 1
+        asset.write_text(atext.replace(a, b))
     return dst
 
 
@@ -123,19 +123,28 @@ def test_workbench_run_rejects_an_unknown_key(tmp_path, capsys):
 
 
 # ------------------------------------------------------------------ the lander asset's schema
+#: the shipped asset with its lobes given one by one (the layout where `standoff_m` is optional)
+_EXPLICIT_LOBES = (
+    "lobes_per_bag = 6",
+    "lobe_centers_m = [[0, 0, -1.2], [0, 1.2, 0.3], [1.0, -0.6, 0.3], [-1.0, -0.6, 0.3]]\n"
+    'lobe_faces = ["base", "side_PY", "side_PX", "side_MX"]',
+)
+
+
 @pytest.mark.parametrize(
-    "old, new, key, suggestion",
+    "edits, key, suggestion",
     [
-        ("standoff_m = -0.60", "standof_m = -0.60", "airbags.standof_m", "standoff_m"),
-        ("gamma = 1.4 ", "gama = 1.4 ", "airbags.gama", "gamma"),
+        ((_EXPLICIT_LOBES, ("standoff_m = -0.60", "standof_m = -0.60")), "airbags.standof_m", "standoff_m"),
+        ((("gamma = 1.4 ", "gama = 1.4 "),), "airbags.gama", "gamma"),
     ],
 )
-def test_misspelt_lander_key_is_a_located_error(tmp_path, capsys, old, new, key, suggestion):
-    """Measured before the schema: `standof_m` was accepted (exit 0) and moved the health check's
-    bag-thickness bound; now the scenario is refused before any work, by settings and by the CLI."""
+def test_misspelt_lander_key_is_a_located_error(tmp_path, capsys, edits, key, suggestion):
+    """Before the schema a misspelt optional key was ignored (`standof_m` with explicit lobes: exit
+    0, the standoff taken as 0, the health check's bag-thickness bound moved); now the scenario is
+    refused before any work, by the settings and by the CLI (exit 3)."""
     from workbench.cli import main
 
-    path = _copy_with(tmp_path, "noise_g = 0.2", "noise_g = 0.2", lander=(old, new))
+    path = _copy_with(tmp_path, "noise_g = 0.2", "noise_g = 0.2", lander=edits)
     asset = tmp_path / "landers" / "mer_drop_lander.toml"
     with pytest.raises(ScenarioError) as ei:
         DropSettings.from_scenario(load_scenario(path))
@@ -149,7 +158,7 @@ def test_misspelt_lander_key_is_a_located_error(tmp_path, capsys, old, new, key,
 
 def test_lander_value_out_of_bounds_names_the_bound(tmp_path):
     path = _copy_with(
-        tmp_path, "noise_g = 0.2", "noise_g = 0.2", lander=("gas_volume_m3 = 40.0", "gas_volume_m3 = -4.0")
+        tmp_path, "noise_g = 0.2", "noise_g = 0.2", lander=(("gas_volume_m3 = 40.0", "gas_volume_m3 = -4.0"),)
     )
     with pytest.raises(ScenarioError, match="out of range: must be > 0") as ei:
         DropSettings.from_scenario(load_scenario(path))
