@@ -13,15 +13,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table
-
-if TYPE_CHECKING:
-    from workbench.problems.droptest.lander import LanderModel
+from workbench.problems.droptest.lander import LANDER_SCHEMA as _LANDER_SCHEMA
+from workbench.problems.droptest.lander import LanderModel, load_lander
 
 __all__ = [
     "SCHEMA",
@@ -322,128 +320,9 @@ SCHEMA = Schema(
 )
 
 
-#: The lander asset (``[vehicle] lander``, e.g. ``assets/landers/mer_drop_lander.toml``), read by
-#: :func:`workbench.problems.droptest.lander.load_lander`.  Cross-field rules stay there as code
-#: (the layout given one way or the other, ``cm_height_m < height_m``, the inertia symmetric positive
-#: definite, ``standoff_m`` above minus the lobe radius, one face per lobe).
-LANDER_SCHEMA = Schema(
-    "lander",
-    "drop-test lander asset",
-    (
-        Table(
-            "lander",
-            "the rigid lander in its own lander frame L",
-            (
-                Key("name", _S, REQUIRED, meaning="human-readable name"),
-                Key("mass_kg", _F, REQUIRED, "kg", "total mass", gt=0.0),
-                Key(
-                    "inertia_kgm2",
-                    _L,
-                    REQUIRED,
-                    "kg m²",
-                    "3 × 3 inertia about the CM, in L's axes; symmetric positive definite",
-                ),
-                Key(
-                    "vertices_m",
-                    _L,
-                    None,
-                    "m",
-                    "4 × [x, y, z]: the tetrahedron in L, base vertices 0, 1, 2, then the apex 3. The side face "
-                    "opposite vertex 0 is `side_PY`, opposite 2 `side_PX`, opposite 1 `side_MX` (the bag names)",
-                ),
-                Key(
-                    "cm_m",
-                    _V,
-                    None,
-                    "m",
-                    "the centre of mass in L; required with `vertices_m`, must lie inside the body; absent: L's origin",
-                ),
-                Key(
-                    "height_m",
-                    _F,
-                    None,
-                    "m",
-                    "instead of `vertices_m`, the MER layout: closed height (+Z towards the apex, a base-edge "
-                    "midpoint on +Y, L's origin on the axis `cm_height_m` above the base)",
-                    gt=0.0,
-                ),
-                Key("base_side_m", _F, None, "m", "MER layout: side of the equilateral base", gt=0.0),
-                Key("cm_height_m", _F, None, "m", "MER layout: CM above the base, below `height_m`", gt=0.0),
-            ),
-        ),
-        Table(
-            "airbags",
-            "the four airbags (one per face) and their gas",
-            (
-                Key("bags", _I, REQUIRED, meaning="number of bags: 4 (one per tetrahedron face)", ge=4, le=4),
-                Key("lobe_diameter_m", _F, REQUIRED, "m", "lobe sphere diameter", gt=0.0),
-                Key(
-                    "lobes_per_bag",
-                    _I,
-                    None,
-                    meaning="the 3-2-1 'billiard rack': 6 (required unless `lobe_centers_m` is given)",
-                    ge=6,
-                    le=6,
-                ),
-                Key(
-                    "lobe_spacing_m",
-                    _L,
-                    None,
-                    "m",
-                    "rack: lobe centre spacing, one number for every face or one per face in bag order `base, "
-                    "side_PY, side_PX, side_MX` (required with the rack)",
-                    gt=0.0,
-                ),
-                Key(
-                    "standoff_m",
-                    _L,
-                    None,
-                    "m",
-                    "lobe inner surface to its face, > −lobe radius (negative = lobes wrap the lander); one "
-                    "number or one per face as `lobe_spacing_m` (required with the rack; with `lobe_centers_m` "
-                    "only reported, absent = 0)",
-                ),
-                Key(
-                    "lobe_centers_m",
-                    _L,
-                    None,
-                    "m",
-                    "instead of the rack: n × [x, y, z], every lobe centre in L",
-                ),
-                Key(
-                    "lobe_faces",
-                    _L,
-                    None,
-                    meaning='with `lobe_centers_m`: the face of each lobe (`"base"`, `"side_PY"`, … or 0–3)',
-                ),
-                Key("pressure_pa", _F, REQUIRED, "Pa", "initial absolute inflation pressure (truth simulator)", gt=0.0),
-                Key("gas_volume_m3", _F, REQUIRED, "m³", "shared gas volume of the vented bags", gt=0.0),
-                Key("gamma", _F, REQUIRED, "1", "ratio of specific heats of the inflation gas", gt=0.0),
-                Key(
-                    "damping_pa_s_per_m",
-                    _F,
-                    REQUIRED,
-                    "Pa s/m",
-                    "fabric/venting damping, pressure-equivalent per m/s of penetration rate",
-                ),
-                Key("friction", _F, REQUIRED, "1", "Coulomb friction coefficient airbag/ramp"),
-            ),
-        ),
-        Table(
-            "chamber",
-            "the test chamber",
-            (Key("ambient_pressure_pa", _F, REQUIRED, "Pa", "chamber pressure (truth simulator)"),),
-        ),
-        Table(
-            "instruments",
-            "sensor positions (required table)",
-            free="vec3",
-            free_meaning="sensor position in L [m]: accelerometer triads by name, `gyro`",
-        ),
-    ),
-    noun="lander asset",
-    intro="Keys of a drop-test lander asset (`[vehicle] lander`)",
-)
+#: The lander asset's schema is declared beside its reader (:mod:`.lander` may not import this
+#: module: :class:`DropSettings` reads the asset) and listed here with the others.
+LANDER_SCHEMA = _LANDER_SCHEMA
 
 #: The drop setup file (``[telemetry] setup``), read by
 #: :func:`workbench.problems.droptest.telemetry.read_setup`: which ``[bungee]`` keys are needed
@@ -655,8 +534,6 @@ class DropSettings:
         """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types, bounds: a
         :class:`ScenarioError` naming file and key), check what the bounds cannot express, read the
         lander asset (:data:`LANDER_SCHEMA`) and build the settings."""
-        from workbench.problems.droptest.lander import load_lander
-
         if scenario.kind != "droptest":
             raise ScenarioError(scenario.path, "scenario.kind", f"{scenario.kind!r} is not a droptest scenario")
         v = SCHEMA.validate(scenario.data, scenario.path)

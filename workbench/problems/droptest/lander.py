@@ -35,10 +35,11 @@ import numpy as np
 import trimesh
 
 from workbench.io.scenario import ScenarioError
-from workbench.io.schema import read_toml
+from workbench.io.schema import REQUIRED, Key, Schema, Table, read_toml
 
 __all__ = [
     "FACE_NAMES",
+    "LANDER_SCHEMA",
     "LanderModel",
     "load_lander",
     "tetrahedron_body",
@@ -243,6 +244,136 @@ def airbag_mesh(model: LanderModel, subdivisions: int = 2) -> trimesh.Trimesh:
 
 # --------------------------------------------------------------------------- reading the asset
 
+#: The lander asset (``[vehicle] lander``, e.g. ``assets/landers/mer_drop_lander.toml``), read by
+#: :func:`load_lander` (listed with the drop test's other schemas in :mod:`.config`).  Cross-field
+#: rules stay there as code (the layout given one way or the other, ``cm_height_m < height_m``, the
+#: inertia symmetric positive definite, ``standoff_m`` above minus the lobe radius, one face per lobe).
+LANDER_SCHEMA = Schema(
+    "lander",
+    "drop-test lander asset",
+    (
+        Table(
+            "lander",
+            "the rigid lander in its own lander frame L",
+            (
+                Key("name", "str", REQUIRED, meaning="human-readable name"),
+                Key("mass_kg", "float", REQUIRED, "kg", "total mass", gt=0.0),
+                Key(
+                    "inertia_kgm2",
+                    "list",
+                    REQUIRED,
+                    "kg m²",
+                    "3 × 3 inertia about the CM, in L's axes; symmetric positive definite",
+                ),
+                Key(
+                    "vertices_m",
+                    "list",
+                    None,
+                    "m",
+                    "4 × [x, y, z]: the tetrahedron in L, base vertices 0, 1, 2, then the apex 3. The side face "
+                    "opposite vertex 0 is `side_PY`, opposite 2 `side_PX`, opposite 1 `side_MX` (the bag names)",
+                ),
+                Key(
+                    "cm_m",
+                    "vec3",
+                    None,
+                    "m",
+                    "the centre of mass in L; required with `vertices_m`, must lie inside the body; absent: L's origin",
+                ),
+                Key(
+                    "height_m",
+                    "float",
+                    None,
+                    "m",
+                    "instead of `vertices_m`, the MER layout: closed height (+Z towards the apex, a base-edge "
+                    "midpoint on +Y, L's origin on the axis `cm_height_m` above the base)",
+                    gt=0.0,
+                ),
+                Key("base_side_m", "float", None, "m", "MER layout: side of the equilateral base", gt=0.0),
+                Key("cm_height_m", "float", None, "m", "MER layout: CM above the base, below `height_m`", gt=0.0),
+            ),
+        ),
+        Table(
+            "airbags",
+            "the four airbags (one per face) and their gas",
+            (
+                Key("bags", "int", REQUIRED, meaning="number of bags: 4 (one per tetrahedron face)", ge=4, le=4),
+                Key("lobe_diameter_m", "float", REQUIRED, "m", "lobe sphere diameter", gt=0.0),
+                Key(
+                    "lobes_per_bag",
+                    "int",
+                    None,
+                    meaning="the 3-2-1 'billiard rack': 6 (required unless `lobe_centers_m` is given)",
+                    ge=6,
+                    le=6,
+                ),
+                Key(
+                    "lobe_spacing_m",
+                    "list",
+                    None,
+                    "m",
+                    "rack: lobe centre spacing, one number for every face or one per face in bag order `base, "
+                    "side_PY, side_PX, side_MX` (required with the rack)",
+                    gt=0.0,
+                ),
+                Key(
+                    "standoff_m",
+                    "list",
+                    None,
+                    "m",
+                    "lobe inner surface to its face, > −lobe radius (negative = lobes wrap the lander); one "
+                    "number or one per face as `lobe_spacing_m` (required with the rack; with `lobe_centers_m` "
+                    "only reported, absent = 0)",
+                ),
+                Key(
+                    "lobe_centers_m",
+                    "list",
+                    None,
+                    "m",
+                    "instead of the rack: n × [x, y, z], every lobe centre in L",
+                ),
+                Key(
+                    "lobe_faces",
+                    "list",
+                    None,
+                    meaning='with `lobe_centers_m`: the face of each lobe (`"base"`, `"side_PY"`, … or 0–3)',
+                ),
+                Key(
+                    "pressure_pa",
+                    "float",
+                    REQUIRED,
+                    "Pa",
+                    "initial absolute inflation pressure (truth simulator)",
+                    gt=0.0,
+                ),
+                Key("gas_volume_m3", "float", REQUIRED, "m³", "shared gas volume of the vented bags", gt=0.0),
+                Key("gamma", "float", REQUIRED, "1", "ratio of specific heats of the inflation gas", gt=0.0),
+                Key(
+                    "damping_pa_s_per_m",
+                    "float",
+                    REQUIRED,
+                    "Pa s/m",
+                    "fabric/venting damping, pressure-equivalent per m/s of penetration rate",
+                ),
+                Key("friction", "float", REQUIRED, "1", "Coulomb friction coefficient airbag/ramp"),
+            ),
+        ),
+        Table(
+            "chamber",
+            "the test chamber",
+            (Key("ambient_pressure_pa", "float", REQUIRED, "Pa", "chamber pressure (truth simulator)"),),
+        ),
+        Table(
+            "instruments",
+            "sensor positions (required table)",
+            free="vec3",
+            free_meaning="sensor position in L [m]: accelerometer triads by name, `gyro`",
+        ),
+    ),
+    noun="lander asset",
+    intro="Keys of a drop-test lander asset (`[vehicle] lander`)",
+)
+
 
 def _per_face(v: list, key: str, path: Path) -> np.ndarray:
     """A per-face value as the schema returned it (a number was made a list of one) -> (4,)."""
@@ -271,7 +402,7 @@ def load_lander(path: str | Path) -> LanderModel:
     """Read a lander asset (TOML, lengths in m, the lander frame L) into a :class:`LanderModel`
     (everything in B: L's axes, origin at the CM).
 
-    The keys, their types, defaults and bounds are :data:`~workbench.problems.droptest.config.LANDER_SCHEMA`
+    The keys, their types, defaults and bounds are :data:`LANDER_SCHEMA`
     (FORMATS.md, "Drop-test lander asset and setup file"); the rules between keys are checked here:
     either ``vertices_m`` (with ``cm_m``) or the MER layout ``height_m``, ``base_side_m``,
     ``cm_height_m`` (``cm_height_m < height_m``); the inertia symmetric positive definite; either the
@@ -279,8 +410,6 @@ def load_lander(path: str | Path) -> LanderModel:
     ``lobe_centers_m`` with ``lobe_faces``.  Every error (missing file, invalid TOML, unknown key with
     a "did you mean", out-of-range value) is a :class:`ScenarioError` naming the file and the key.
     """
-    from workbench.problems.droptest.config import LANDER_SCHEMA
-
     path = Path(path)
     raw = read_toml(path)
     at_raw = raw.get("airbags")
