@@ -52,7 +52,7 @@ def test_list_states_the_filter_size_the_code_builds(capsys):
     from workbench.io.assets import assets_dir
     from workbench.io.scenario import find_scenarios, load_scenario
     from workbench.problems.droptest import model as rl
-    from workbench.problems.droptest.config import config_for
+    from workbench.problems.droptest.config import DropSettings
 
     assert main(["list"]) == EXIT_OK
     lines = {ln.split()[0]: ln for ln in capsys.readouterr().out.splitlines()}
@@ -62,7 +62,7 @@ def test_list_states_the_filter_size_the_code_builds(capsys):
         assert not re.search(r"\d+-state", sc.description), name
         if sc.kind != "droptest":
             continue
-        n_x, n_e = rl.sizes(len(config_for(sc).triads))
+        n_x, n_e = rl.sizes(len(DropSettings.from_scenario(sc).accelerometer.triads))
         assert re.findall(r"(\d+) error states", lines[name]) == [str(n_e)], lines[name]
         assert f"({n_x} full)" in lines[name]
         checked += 1

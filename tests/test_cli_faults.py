@@ -311,14 +311,16 @@ def test_killed_monte_carlo_worker_leaves_no_orphan_folder(tmp_path, monkeypatch
     from workbench.io.scenario import resolve_scenario
     from workbench.problems.droptest import montecarlo
 
-    def killed_member(scenario, seeds, work, scheduler, workers):
+    def killed_member(settings, seeds, work, scheduler, workers):
         # what a SIGKILLed worker leaves: its member folder, never deleted (the member is redone)
         (work / "seed000003_abcd").mkdir()
         (work / "seed000003_abcd" / "imu.csv").write_text("x")
         return "done"
 
     monkeypatch.setattr(montecarlo, "_monte_carlo", killed_member)
-    sc = resolve_scenario("droptest", assets_dir())
+    from workbench.problems.droptest.problem import DropTestProblem
+
+    sc = DropTestProblem().settings(resolve_scenario("droptest", assets_dir()))
     work = tmp_path / "droptest_mc_work"
     assert montecarlo.monte_carlo(sc, [3], work) == "done"
     assert list(tmp_path.iterdir()) == []

@@ -54,7 +54,6 @@ from workbench.estimation.montecarlo import run_monte_carlo  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.droptest import model as rl  # noqa: E402
 from workbench.problems.droptest import pipeline as dt  # noqa: E402
-from workbench.problems.droptest.lander import load_lander  # noqa: E402
 from workbench.problems.droptest.montecarlo import (  # noqa: E402
     McResult,
     SeedResult,
@@ -62,6 +61,7 @@ from workbench.problems.droptest.montecarlo import (  # noqa: E402
     stack_results,
     summarize_mc,
 )
+from workbench.problems.droptest.problem import DropTestProblem  # noqa: E402
 from workbench.problems.droptest.synthetic import DROP_PARAMETER_NAMES, synthesize_droptest  # noqa: E402
 from workbench.problems.droptest.telemetry import DropTelemetry  # noqa: E402
 
@@ -78,16 +78,15 @@ CONFIGS = (
 # ---------------------------------------------------------------------------------------------
 
 
-def baseline_noise(sc, tel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Measurement covariances of :func:`baseline_filter` from the scenario: accelerometer triad
-    [(m/s²)²] and gyro [(rad/s)²] (3, 3) per-sample noise over the samples averaged into one filter
-    step, and the hanging zero-velocity update [(m/s)²] (3, 3)."""
-    g = sc.get
-    rate = g("filter.rate_hz", 1000.0, kind="float")
+def baseline_noise(st, tel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Measurement covariances of :func:`baseline_filter` from the run's settings ``st``: accelerometer
+    triad [(m/s²)²] and gyro [(rad/s)²] (3, 3) per-sample noise over the samples averaged into one
+    filter step, and the hanging zero-velocity update [(m/s)²] (3, 3)."""
+    rate = st.filter.rate_hz
     n_avg = max(1, int(round(1.0 / (rate * float(np.median(np.diff(tel.imu.time)))))))
-    r_acc = (g("sensors.accelerometer.noise_g", kind="float") * dt.G0) ** 2 / n_avg * np.eye(3)
-    r_gyr = np.radians(g("sensors.gyro.noise_dps", kind="float")) ** 2 / n_avg * np.eye(3)
-    r_z = g("filter.hang_zupt_sigma_mps", kind="float") ** 2 * np.eye(3)
+    r_acc = (st.accelerometer.noise_g * dt.G0) ** 2 / n_avg * np.eye(3)
+    r_gyr = np.radians(st.gyro.noise_dps) ** 2 / n_avg * np.eye(3)
+    r_z = st.filter.hang_zupt_sigma_mps**2 * np.eye(3)
     return r_acc, r_gyr, r_z
 
 
@@ -158,7 +157,7 @@ def baseline_filter(
 
 def speed(seed: int = 1) -> dict:
     """Speed and memory numbers on the IMU-only kinematic scenario (see module docstring)."""
-    sc = load_scenario(SCEN / "droptest.toml")
+    sc = DropTestProblem().settings(load_scenario(SCEN / "droptest.toml"))
     res: dict = {}
     # whole process: the CLI end to end (truth simulation, telemetry, reconstruction, recording)
     with tempfile.TemporaryDirectory() as d:
@@ -188,13 +187,12 @@ def speed(seed: int = 1) -> dict:
         res["steps"] = n
 
         # production forward pass vs the baseline loop (same telemetry, same initial state)
-        lander = load_lander(sc.path_of("vehicle.lander"))
         tel, init = result.telemetry, result.initial
         reps = 3
         tp = []
         for _ in range(reps):
             t0 = time.perf_counter()
-            fwd = dt.forward_pass(sc, tel, init, lander)
+            fwd = dt.forward_pass(sc, tel, init)
             tp.append(time.perf_counter() - t0)
         r_acc, r_gyr, r_z = baseline_noise(sc, tel)
         tb = []
@@ -255,7 +253,7 @@ def run_mc(n_seeds: int, scheduler: str | None, workers: int, work: Path, batch:
     configs = []
     for label, file, ov in CONFIGS:
         sc = load_scenario(SCEN / file)
-        configs.append((label, sc.with_overrides(ov) if ov else sc))
+        configs.append((label, DropTestProblem().settings(sc.with_overrides(ov) if ov else sc)))
     seeds = list(range(1, n_seeds + 1))
     print(f"[bench] {n_seeds} drops x {len(configs)} reconstructions ({scheduler or f'{workers} workers'}) ...",
           file=sys.stderr, flush=True)  # fmt: skip
@@ -290,7 +288,7 @@ def _collect(configs, seeds, results, executor, total) -> dict:
         failed = {
             int(sd): r[label] for sd, r in zip(seeds, results, strict=True) if not isinstance(r[label], SeedResult)
         }
-        res: McResult = stack_results(sc, ok, executor, total)
+        res: McResult = stack_results(sc.name, sc.filter.mode, ok, executor, total)
         s = summarize_mc(res)
         per = {
             f.name: np.asarray(getattr(res, f.name)).tolist()

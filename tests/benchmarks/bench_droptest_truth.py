@@ -42,7 +42,7 @@ from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.droptest import synthetic as syn  # noqa: E402
 from workbench.problems.droptest import truth  # noqa: E402
-from workbench.problems.droptest.lander import load_lander  # noqa: E402
+from workbench.problems.droptest.problem import DropTestProblem  # noqa: E402
 
 SCEN = ROOT / "assets" / "scenarios"
 
@@ -52,11 +52,10 @@ c0 = time.process_time()
 from pathlib import Path
 from workbench.io.scenario import load_scenario
 from workbench.problems.droptest import synthetic as syn
-from workbench.problems.droptest.lander import load_lander
+from workbench.problems.droptest.problem import DropTestProblem
 from workbench.problems.droptest.truth import simulate_drop
-sc = load_scenario(Path(sys.argv[1]))
-surf, cfg = syn.surface_for(sc), syn.drop_config_for(sc)
-lander = load_lander(str(sc.path_of("vehicle.lander")))
+st = DropTestProblem().settings(load_scenario(Path(sys.argv[1])))
+surf, cfg, lander = syn.surface_of(st.chamber), syn.drop_config(st.synthetic), st.lander
 c1 = time.process_time()
 simulate_drop(cfg, lander, surf)
 c2 = time.process_time()
@@ -67,8 +66,8 @@ print(json.dumps({"import_s": c1 - c0, "first_call_s": c2 - c1, "steady_call_s":
 
 
 def _inputs(name: str):
-    sc = load_scenario(SCEN / f"{name}.toml")
-    return sc, syn.drop_config_for(sc), load_lander(str(sc.path_of("vehicle.lander"))), syn.surface_for(sc)
+    st = DropTestProblem().settings(load_scenario(SCEN / f"{name}.toml"))
+    return st, syn.drop_config(st.synthetic), st.lander, syn.surface_of(st.chamber)
 
 
 def _cpu(fn, *args, **kw):

@@ -51,7 +51,7 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.droptest import model as rl  # noqa: E402
 from workbench.problems.droptest import pipeline as dt  # noqa: E402
-from workbench.problems.droptest.lander import load_lander  # noqa: E402
+from workbench.problems.droptest.problem import DropTestProblem  # noqa: E402
 from workbench.problems.droptest.synthetic import synthesize_droptest  # noqa: E402
 
 SCEN = ROOT / "assets" / "scenarios" / "droptest.toml"
@@ -144,8 +144,8 @@ def _rel(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def setup(seed: int, work: str):
-    """Simulate one drop and return (scenario, telemetry, initial state, lander, R's of the baseline)."""
-    sc = load_scenario(SCEN)
+    """Simulate one drop and return (settings, telemetry, initial state, lander, R's of the baseline)."""
+    sc = DropTestProblem().settings(load_scenario(SCEN))
     syn = synthesize_droptest(sc, work, seed=seed)
     tel = init = None
     for stage in dt.reconstruct(sc, syn.telemetry, seed=seed):
@@ -153,19 +153,18 @@ def setup(seed: int, work: str):
             init = stage
             break
         tel = stage
-    lander = load_lander(sc.path_of("vehicle.lander"))
-    return sc, tel, init, lander, baseline_noise(sc, tel)
+    return sc, tel, init, sc.lander, baseline_noise(sc, tel)
 
 
 def filter_speed(sc, tel, init, lander, rs, reps: int) -> dict:
     """Production forward pass vs the minimal stacked-update loop vs the reference engine."""
     n = int(tel.t.size)
     t0 = time.process_time()
-    prod = dt.forward_pass(sc, tel, init, lander)  # first call: numba cache load (or compile)
+    prod = dt.forward_pass(sc, tel, init)  # first call: numba cache load (or compile)
     first = time.process_time() - t0
-    tp, prod = _cpu(lambda: dt.forward_pass(sc, tel, init, lander), reps)
+    tp, prod = _cpu(lambda: dt.forward_pass(sc, tel, init), reps)
     tb, (p_base, _) = _cpu(lambda: baseline_filter(tel, init, prod.q_accel, prod.q_angular, *rs), reps)
-    tr, ref = _cpu(lambda: dt.forward_pass(sc, tel, init, lander, engine="reference"), max(1, reps // 2))
+    tr, ref = _cpu(lambda: dt.forward_pass(sc, tel, init, engine="reference"), max(1, reps // 2))
     fa, fr = prod.forward, ref.forward
     diffs = {f: _rel(getattr(fa, f), getattr(fr, f)) for f in ("x_post", "P_post", "x_prior", "P_prior", "F", "Q")}
     for name, h in fr.innovations.items():

@@ -39,7 +39,8 @@ def _targets(work: Path) -> list:
     from workbench.problems.droptest.problem import DropTestProblem
 
     drop_dir = work / "droptest_clean"
-    DropTestProblem().synthesize(load_scenario(assets_dir() / "scenarios" / "droptest.toml"), drop_dir, 1)
+    problem = DropTestProblem()
+    problem.synthesize(problem.settings(load_scenario(assets_dir() / "scenarios" / "droptest.toml")), drop_dir, 1)
     return [
         fuzz.droptest_target(drop_dir, work),
         fuzz.entry_target(mod.entry_fake_files(work / "entry_clean"), work),

@@ -37,6 +37,11 @@ class CliRun:
         return resolve_scenario(self.name, assets_dir())
 
     @property
+    def settings(self):
+        """The run's frozen settings (``DropTestProblem().settings``)."""
+        return DropTestProblem().settings(self.scenario)
+
+    @property
     def rrd(self) -> Path:
         return self.out / f"{self.name}.rrd"
 
@@ -51,7 +56,7 @@ class CliRun:
     def telemetry_paths(self, folder: Path | None = None) -> dict[str, Path]:
         """The pipeline's ``paths`` dict for the telemetry files in ``folder`` (default: as written)."""
         d = self.telemetry_dir if folder is None else Path(folder)
-        return DropTestProblem().telemetry_files(self.scenario, d)
+        return DropTestProblem().telemetry_files(self.settings, d)
 
     def truth(self) -> dict:
         return load_truth(self.telemetry_dir / "truth.npz")
@@ -80,7 +85,7 @@ def droptest_run(cli_run) -> CliRun:
 def droptest_result(droptest_run) -> dt.DropResult:
     """The reconstruction re-run (no recorder) on the telemetry files the ``droptest`` CLI run wrote."""
     run = droptest_run
-    return dt.run_droptest(run.scenario, run.telemetry_paths(), seed=run.summary["seed"])
+    return dt.run_droptest(run.settings, run.telemetry_paths(), seed=run.summary["seed"])
 
 
 @pytest.fixture(scope="session")

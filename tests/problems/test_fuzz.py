@@ -91,8 +91,8 @@ def test_a_gap_across_contact_is_an_error(droptest_run, tmp_path):
     peak = t[int(np.argmax(np.linalg.norm(f[:, 0:3], axis=1)))]
     keep = [s for s, tt in zip(lines[h + 1 :], t, strict=False) if not (peak - 0.25 < tt < peak + 0.25)]
     paths["imu"].write_text("\n".join(lines[: h + 1] + keep) + "\n")
-    rep = input_health(droptest_run.scenario, paths)
+    rep = input_health(droptest_run.settings, paths)
     assert rep["verdict"] == "ERROR"
     bad = [c for c in rep["checks"] if c["status"] == "ERROR"]
     assert bad and bad[0]["name"].startswith("gaps.") and "not observed" in bad[0]["message"]
-    assert input_health(droptest_run.scenario, src)["verdict"] != "ERROR"
+    assert input_health(droptest_run.settings, src)["verdict"] != "ERROR"

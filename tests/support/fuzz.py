@@ -291,13 +291,19 @@ def _resolved(path: str):
     return resolve(load_scenario(Path(path)))[0]
 
 
+@functools.lru_cache(maxsize=16)
+def _droptest_settings(path: str):
+    """The frozen drop-test settings of the scenario at ``path`` (cached: the lander read once)."""
+    from workbench.problems.droptest.config import DropSettings
+
+    return DropSettings.from_scenario(_resolved(path))
+
+
 def droptest_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset, tuple]:
     """Drop test: ``load_drop_telemetry`` (validation, unit plausibility) + input health."""
-    from workbench.problems.droptest.lander import load_lander
     from workbench.problems.droptest.telemetry import load_drop_telemetry
 
-    sc = _resolved(str(scenario_path))
-    tel = load_drop_telemetry(sc, files, load_lander(sc.path_of("vehicle.lander")))
+    tel = load_drop_telemetry(_droptest_settings(str(scenario_path)), files)
     try:
         from workbench.estimation.health import health_report
         from workbench.problems.droptest.health import input_checks

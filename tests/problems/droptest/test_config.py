@@ -1,8 +1,11 @@
-"""Drop-test scenario configuration: every shipped scenario validates; a misspelt or mistyped key
-in a copied scenario is a located error, also through ``workbench run``."""
+"""Drop-test settings: every shipped scenario validates into one frozen :class:`DropSettings`; a
+misspelt or mistyped key in a copied scenario, lander asset or setup file is a located error, also
+through ``workbench run``."""
 
 from __future__ import annotations
 
+import dataclasses
+import pickle
 import shutil
 from pathlib import Path
 
@@ -11,8 +14,10 @@ import pytest
 
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import ScenarioError, find_scenarios, load_scenario
-from workbench.problems.droptest.config import SCHEMA, DropConfig, config_for
+from workbench.problems.droptest.config import SCHEMA, DropSettings
+from workbench.problems.droptest.problem import DropTestProblem
 from workbench.problems.droptest.synthetic import synthesize_droptest
+from workbench.problems.droptest.telemetry import read_setup
 
 SHIPPED = {n: p for n, p in find_scenarios(assets_dir()).items() if load_scenario(p).kind == "droptest"}
 
@@ -24,28 +29,42 @@ def test_there_are_shipped_droptest_scenarios():
 @pytest.mark.parametrize("name", sorted(SHIPPED))
 def test_every_shipped_scenario_validates(name):
     sc = load_scenario(SHIPPED[name])
-    cfg = DropConfig.from_scenario(sc)
-    assert cfg.triads == ("BP", "PYBP", "PXBP", "MXBP") and cfg.mode == "kinematic"
-    assert cfg.ranging == (name == "droptest_ranging") and cfg.rocks == (name == "droptest_rocks")
-    assert config_for(sc) is config_for(sc)  # built once per scenario
+    s = DropTestProblem().settings(sc)
+    assert isinstance(s, DropSettings) and s.run.name == name
+    assert s.accelerometer.triads == ("BP", "PYBP", "PXBP", "MXBP") and s.filter.mode == "kinematic"
+    assert s.ranging.enabled == (name == "droptest_ranging") and (s.chamber.rocks is not None) == (
+        name == "droptest_rocks"
+    )
+    assert s.lander_file.is_absolute() and s.lander.mass > 0.0  # the asset, read once
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.filter = None  # type: ignore[misc]
+
+
+def test_settings_are_picklable_and_vary_with_replace():
+    s = DropTestProblem().settings(load_scenario(SHIPPED["droptest"]))
+    back = pickle.loads(pickle.dumps(s))
+    assert back.gyro == s.gyro and back.lander.mass == s.lander.mass
+    t = dataclasses.replace(s, chamber=dataclasses.replace(s.chamber, ramp_angle_deg=45.0))
+    assert t.chamber.ramp_angle_deg == 45.0 and s.chamber.ramp_angle_deg == 60.0
 
 
 def test_defaults_fill_what_a_scenario_leaves_out():
     sc = load_scenario(SHIPPED["droptest"])
     data = {k: v for k, v in sc.data.items() if k not in ("filter", "sensors")}
-    cfg = DropConfig.from_scenario(type(sc)(sc.path, sc.name, sc.kind, "", data))
-    assert cfg.filter_rate_hz == 1000.0 and cfg.q_accel == 5.0 and cfg.gyro_noise_dps == 0.4
-    assert cfg.accel_full_scale_g == 2000.0 and cfg.filter_order == 4 and cfg.bag_pressure_psi is None
-    assert not cfg.ranging and cfg.radar_guns == {}
+    s = DropSettings.from_scenario(type(sc)(sc.path, sc.name, sc.kind, "", data))
+    assert s.filter.rate_hz == 1000.0 and s.filter.q_accel == 5.0 and s.gyro.noise_dps == 0.4
+    assert s.accelerometer.full_scale_g == 2000.0 and s.acquisition.order == 4 and s.synthetic.bag_pressure_psi is None
+    assert not s.ranging.enabled and s.ranging.radar_guns == {}
 
 
 def test_ranging_guns_are_read():
-    cfg = config_for(load_scenario(SHIPPED["droptest_ranging"]))
-    assert set(cfg.radar_guns) == {"G1", "G2", "G3"} and np.array_equal(cfg.radar_guns["G3"], [0.0, -12.0, 4.0])
-    assert cfg.odometer and cfg.ranging_rate_hz == 200.0
+    s = DropSettings.from_scenario(load_scenario(SHIPPED["droptest_ranging"]))
+    assert set(s.ranging.radar_guns) == {"G1", "G2", "G3"}
+    assert np.array_equal(s.ranging.radar_guns["G3"], [0.0, -12.0, 4.0])
+    assert s.ranging.odometer and s.ranging.rate_hz == 200.0 and s.ranging.rate_given
 
 
-def _copy_with(tmp_path: Path, old: str, new: str) -> Path:
+def _copy_with(tmp_path: Path, old: str, new: str, lander: tuple[tuple[str, str], ...] = ()) -> Path:
     src = SHIPPED["droptest"]
     dst = tmp_path / "scenarios" / "my_drop.toml"
     dst.parent.mkdir(parents=True)
@@ -53,6 +72,11 @@ def _copy_with(tmp_path: Path, old: str, new: str) -> Path:
     text = src.read_text()
     assert text.count(old) == 1
     dst.write_text(text.replace(old, new).replace('name = "droptest"', 'name = "my_drop"'))
+    asset = tmp_path / "landers" / "mer_drop_lander.toml"
+    for a, b in lander:
+        atext = asset.read_text()
+        assert atext.count(a) == 1
+        asset.write_text(atext.replace(a, b))
     return dst
 
 
@@ -68,7 +92,7 @@ def _copy_with(tmp_path: Path, old: str, new: str) -> Path:
 def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggestion):
     path = _copy_with(tmp_path, old, new)
     with pytest.raises(ScenarioError) as ei:
-        DropConfig.from_scenario(load_scenario(path))
+        DropSettings.from_scenario(load_scenario(path))
     e = ei.value
     assert e.file == str(path) and e.key == key
     assert table in str(e) and f"did you mean '{suggestion}'?" in str(e)
@@ -77,14 +101,14 @@ def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggest
 def test_wrong_type_is_a_located_error(tmp_path):
     path = _copy_with(tmp_path, "nail_depth_m = 0.3", 'nail_depth_m = "0.3 m"')
     with pytest.raises(ScenarioError, match="expected a number") as ei:
-        config_for(load_scenario(path))
+        DropSettings.from_scenario(load_scenario(path))
     assert ei.value.key == "chamber.nail_depth_m"
 
 
 def test_synthesis_rejects_the_scenario_before_simulating(tmp_path):
     path = _copy_with(tmp_path, "noise_g = 0.2", "noise_gg = 0.2")
     with pytest.raises(ScenarioError, match="noise_gg"):
-        synthesize_droptest(load_scenario(path), tmp_path / "tel")
+        synthesize_droptest(DropTestProblem().settings(load_scenario(path)), tmp_path / "tel")
     assert not list((tmp_path / "tel").glob("*.csv"))
 
 
@@ -96,6 +120,111 @@ def test_workbench_run_rejects_an_unknown_key(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "filter.adaptive_gian" in err and "did you mean 'adaptive_gain'" in err and str(path) in err
     assert not list((tmp_path / "out").glob("*.rrd"))
+
+
+# ------------------------------------------------------------------ the lander asset's schema
+#: the shipped asset with its lobes given one by one (the layout where `standoff_m` is optional)
+_EXPLICIT_LOBES = (
+    "lobes_per_bag = 6",
+    "lobe_centers_m = [[0, 0, -1.2], [0, 1.2, 0.3], [1.0, -0.6, 0.3], [-1.0, -0.6, 0.3]]\n"
+    'lobe_faces = ["base", "side_PY", "side_PX", "side_MX"]',
+)
+
+
+@pytest.mark.parametrize(
+    "edits, key, suggestion",
+    [
+        ((_EXPLICIT_LOBES, ("standoff_m = -0.60", "standof_m = -0.60")), "airbags.standof_m", "standoff_m"),
+        ((("gamma = 1.4 ", "gama = 1.4 "),), "airbags.gama", "gamma"),
+    ],
+)
+def test_misspelt_lander_key_is_a_located_error(tmp_path, capsys, edits, key, suggestion):
+    """Before the schema a misspelt optional key was ignored (`standof_m` with explicit lobes: exit
+    0, the standoff taken as 0, the health check's bag-thickness bound moved); now the scenario is
+    refused before any work, by the settings and by the CLI (exit 3)."""
+    from workbench.cli import main
+
+    path = _copy_with(tmp_path, "noise_g = 0.2", "noise_g = 0.2", lander=edits)
+    asset = tmp_path / "landers" / "mer_drop_lander.toml"
+    with pytest.raises(ScenarioError) as ei:
+        DropSettings.from_scenario(load_scenario(path))
+    e = ei.value
+    assert Path(e.file).resolve() == asset.resolve() and e.key == key
+    assert "lander asset" in str(e) and f"did you mean '{suggestion}'?" in str(e)
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 3
+    err = capsys.readouterr().err
+    assert key in err and "mer_drop_lander.toml" in err and f"did you mean '{suggestion}'" in err
+
+
+def test_lander_value_out_of_bounds_names_the_bound(tmp_path):
+    path = _copy_with(
+        tmp_path, "noise_g = 0.2", "noise_g = 0.2", lander=(("gas_volume_m3 = 40.0", "gas_volume_m3 = -4.0"),)
+    )
+    with pytest.raises(ScenarioError, match="out of range: must be > 0") as ei:
+        DropSettings.from_scenario(load_scenario(path))
+    assert ei.value.key == "airbags.gas_volume_m3"
+
+
+# ------------------------------------------------------------------ the setup file's schema
+_SETUP = """[hanging]
+position_m = [0.0, -10.0, 8.0]
+position_sigma_m = 0.03
+[bungee]
+anchor_m = [0.0, 0.0, 20.0]
+rest_length_m = 4.0
+coefficients = [900.0, 60.0, -2.0]
+count = 1.2
+attach_body_m = [0.0, 0.0, -0.4]
+mass_kg = 533.0
+"""
+
+
+@pytest.mark.parametrize(
+    "old, new, key, suggestion",
+    [
+        ("position_sigma_m", "position_sigme_m", "hanging.position_sigme_m", "position_sigma_m"),
+        ("rest_length_m", "rest_lenght_m", "bungee.rest_lenght_m", "rest_length_m"),
+    ],
+)
+def test_misspelt_setup_key_is_a_located_error(tmp_path, old, new, key, suggestion):
+    p = tmp_path / "setup.toml"
+    p.write_text(_SETUP.replace(old, new))
+    with pytest.raises(ScenarioError) as ei:
+        read_setup(p, ())
+    e = ei.value
+    assert Path(e.file) == p and e.key == key
+    assert "drop setup file" in str(e) and f"did you mean '{suggestion}'?" in str(e)
+
+
+def test_negative_position_sigma_names_the_bound(tmp_path):
+    p = tmp_path / "setup.toml"
+    p.write_text(_SETUP.replace("position_sigma_m = 0.03", "position_sigma_m = -0.03"))
+    with pytest.raises(ScenarioError, match=r"-0.03 m is out of range: must be > 0 m") as ei:
+        read_setup(p, ())
+    assert ei.value.key == "hanging.position_sigma_m"
+
+
+def test_workbench_run_rejects_an_unknown_setup_key(tmp_path, capsys):
+    """A user-telemetry scenario whose setup file has a misspelt key: exit 3 naming file and key."""
+    from workbench.cli import main
+
+    tel = tmp_path / "tel"
+    synthesize_droptest(DropTestProblem().settings(load_scenario(SHIPPED["droptest"])), tel)
+    setup = tel / "setup.toml"
+    setup.write_text(setup.read_text().replace("position_sigma_m", "position_sigme_m"))
+    text = SHIPPED["droptest"].read_text()
+    user = text[: text.index("[synthetic]")]  # the last table: the scenario becomes a user-telemetry one
+    user = user.replace('lander = "../landers/', f'lander = "{SHIPPED["droptest"].parent.parent}/landers/')
+    user = user.replace('name = "droptest"', 'name = "my_user_drop"')
+    user += (
+        f'\n[telemetry]\nimu = "{tel / "imu.csv"}"\nattitude_3dm = "{tel / "3dm.csv"}"\n'
+        f'events = "{tel / "events.csv"}"\nsetup = "{setup}"\n'
+    )
+    path = tmp_path / "my_user_drop.toml"
+    path.write_text(user)
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 3
+    err = capsys.readouterr().err
+    assert "hanging.position_sigme_m" in err and str(setup) in err and "did you mean 'position_sigma_m'" in err
 
 
 def test_schema_declares_every_table_of_the_shipped_scenarios():

@@ -23,13 +23,14 @@ import pytest
 from workbench.estimation.consistency import anees_bounds
 from workbench.io.scenario import load_scenario
 from workbench.problems.droptest.montecarlo import monte_carlo
+from workbench.problems.droptest.problem import DropTestProblem
 
 SCENARIOS = Path(__file__).resolve().parents[3] / "assets" / "scenarios"
 
 
 @pytest.mark.slow
 def test_imu_only_kinematic_max_stroke_is_consistent(tmp_path):
-    sc = load_scenario(SCENARIOS / "droptest.toml")
+    sc = DropTestProblem().settings(load_scenario(SCENARIOS / "droptest.toml"))
     res = monte_carlo(sc, range(1, 9), tmp_path, workers=2)
     n_inside = int(np.sum(res.inside_3sigma))
     z = res.error / res.sigma
@@ -41,7 +42,7 @@ def test_imu_only_kinematic_max_stroke_is_consistent(tmp_path):
 
 @pytest.mark.slow
 def test_ranging_meets_the_mer_requirement(tmp_path):
-    sc = load_scenario(SCENARIOS / "droptest_ranging.toml")
+    sc = DropTestProblem().settings(load_scenario(SCENARIOS / "droptest_ranging.toml"))
     res = monte_carlo(sc, range(1, 5), tmp_path, workers=2)
     assert np.all(np.abs(res.error) <= 0.10), f"|error| = {np.abs(res.error)} m"
     assert np.all(3.0 * res.sigma <= 0.10), f"3σ = {3.0 * res.sigma} m"

@@ -6,6 +6,8 @@ random state, and whole forward passes of the shipped drops with ``engine="numba
 floating-point noise (sums are taken in another order), every per-sensor innovation channel kept.
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -14,7 +16,6 @@ from workbench.estimation.ekf import update
 from workbench.problems.droptest import kernel as kn
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
-from workbench.problems.droptest.lander import load_lander
 
 N_T = 4
 N_X, N_E = rl.sizes(N_T)
@@ -99,9 +100,9 @@ def test_models_and_joseph_update(x, P, channel):
     assert kn.joseph_update(x.copy(), P.copy(), z, zp, Hc, cols, nc, -1e6 * np.eye(3), y, S, W, M, L, v)[1] == 1
 
 
-def _engines_agree(sc, tel, init, lander):
-    a = dt.forward_pass(sc, tel, init, lander, engine="numba").forward
-    b = dt.forward_pass(sc, tel, init, lander, engine="reference").forward
+def _engines_agree(st, tel, init):
+    a = dt.forward_pass(st, tel, init, engine="numba").forward
+    b = dt.forward_pass(st, tel, init, engine="reference").forward
     for f in ("x_prior", "x_post", "P_prior", "P_post", "F"):
         _close(getattr(a, f), getattr(b, f), rtol=1e-9)
     # the compiled pass keeps no Q history (nothing downstream reads it; Q enters P_prior, compared)
@@ -118,28 +119,25 @@ def _engines_agree(sc, tel, init, lander):
 
 def test_engines_agree_on_the_drop(droptest_result, droptest_run):
     r = droptest_result
-    lander = load_lander(droptest_run.scenario.path_of("vehicle.lander"))
-    fp = _engines_agree(droptest_run.scenario, r.telemetry, r.initial, lander)
+    fp = _engines_agree(droptest_run.settings, r.telemetry, r.initial)
     assert {"gyro", "zupt", *r.telemetry.triads} <= set(fp.innovations)
 
 
 def test_engines_agree_in_dynamic_mode(droptest_result, droptest_run):
     r = droptest_result
-    sc = droptest_run.scenario.with_overrides({"filter.mode": "dynamic"})
-    _engines_agree(sc, r.telemetry, r.initial, load_lander(sc.path_of("vehicle.lander")))
+    st = droptest_run.settings
+    _engines_agree(replace(st, filter=replace(st.filter, mode="dynamic")), r.telemetry, r.initial)
 
 
 @pytest.mark.slow
 def test_engines_agree_with_ranging(cli_run):
     run = cli_run("droptest_ranging")
-    r = dt.run_droptest(run.scenario, run.telemetry_paths(), seed=run.summary["seed"])
-    lander = load_lander(run.scenario.path_of("vehicle.lander"))
-    fp = _engines_agree(run.scenario, r.telemetry, r.initial, lander)
+    r = dt.run_droptest(run.settings, run.telemetry_paths(), seed=run.summary["seed"])
+    fp = _engines_agree(run.settings, r.telemetry, r.initial)
     assert any(name.endswith(".range") for name in fp.innovations)
 
 
 def test_unknown_engine_is_an_error(droptest_result, droptest_run):
     r = droptest_result
-    lander = load_lander(droptest_run.scenario.path_of("vehicle.lander"))
     with pytest.raises(ValueError, match="engine"):
-        dt.forward_pass(droptest_run.scenario, r.telemetry, r.initial, lander, engine="fortran")
+        dt.forward_pass(droptest_run.settings, r.telemetry, r.initial, engine="fortran")

@@ -138,14 +138,18 @@ def test_load_lander_asset():
 def test_load_lander_errors_name_file_and_key(tmp_path):
     text = ASSET.read_text()
     bad = tmp_path / "no_mass.toml"
-    bad.write_text(text.replace("mass_kg =", "massx_kg ="))
-    with pytest.raises(ValueError, match=r"no_mass\.toml.*lander\.mass_kg"):
+    bad.write_text(re.sub(r"^mass_kg\s*=.*$", "", text, flags=re.M))
+    with pytest.raises(ValueError, match=r"no_mass\.toml.*lander\.mass_kg.*missing"):
         load_lander(bad)
+    typo = tmp_path / "typo.toml"
+    typo.write_text(text.replace("mass_kg =", "massx_kg ="))
+    with pytest.raises(ValueError, match=r"typo\.toml.*lander\.massx_kg.*did you mean 'mass_kg'"):
+        load_lander(typo)
     bad2 = tmp_path / "bad_arm.toml"
     bad2.write_text(re.sub(r"^gyro\s*=.*$", "gyro = [0.0, -0.30]", text, flags=re.M))
     with pytest.raises(ValueError, match=r"bad_arm\.toml.*instruments\.gyro"):
         load_lander(bad2)
-    with pytest.raises(FileNotFoundError, match="nope.toml"):
+    with pytest.raises(ValueError, match=r"nope\.toml: file not found"):  # a ScenarioError
         load_lander(tmp_path / "nope.toml")
     bad4 = tmp_path / "deep.toml"
     bad4.write_text(re.sub(r"^standoff_m\s*=.*$", "standoff_m = -1.5", text, flags=re.M))

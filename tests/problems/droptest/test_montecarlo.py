@@ -10,6 +10,7 @@ import pytest
 from workbench.estimation.consistency import anees_bounds
 from workbench.io.scenario import load_scenario
 from workbench.problems.droptest.montecarlo import Z_NAMES, McResult, monte_carlo, summarize_mc
+from workbench.problems.droptest.problem import DropTestProblem
 
 SCENARIOS = Path(__file__).resolve().parents[3] / "assets" / "scenarios"
 
@@ -17,7 +18,7 @@ SCENARIOS = Path(__file__).resolve().parents[3] / "assets" / "scenarios"
 @pytest.mark.slow
 def test_results_do_not_depend_on_the_executor(tmp_path):
     """Each task's randomness comes only from its seed: loop and 2-process pool agree exactly."""
-    sc = load_scenario(SCENARIOS / "droptest.toml")
+    sc = DropTestProblem().settings(load_scenario(SCENARIOS / "droptest.toml"))
     seeds = [3, 1, 2]
     a = monte_carlo(sc, seeds, tmp_path / "loop")
     b = monte_carlo(sc, seeds, tmp_path / "pool", workers=2)
@@ -69,7 +70,7 @@ def test_a_failing_member_is_reported_and_the_others_kept(tmp_path, monkeypatch)
     from workbench.problems.droptest import montecarlo as mc
     from workbench.problems.droptest.recording_mc import mc_markdown as scorecard_markdown
 
-    def fake_run_seed(scenario, seed, work_dir):
+    def fake_run_seed(settings, seed, work_dir):
         if seed == 7:
             raise ValueError("events.csv: the event times look 1000× too small\nsecond line")
         n = len(Z_NAMES)
@@ -80,7 +81,7 @@ def test_a_failing_member_is_reported_and_the_others_kept(tmp_path, monkeypatch)
         )  # fmt: skip
 
     monkeypatch.setattr(mc, "run_seed", fake_run_seed)
-    sc = load_scenario(SCENARIOS / "droptest.toml")
+    sc = DropTestProblem().settings(load_scenario(SCENARIOS / "droptest.toml"))
     res = monte_carlo(sc, [5, 7, 9], tmp_path / "work")
     np.testing.assert_array_equal(res.seed, [5, 9])
     assert res.failed == (mc.FailedSeed(7, "ValueError: events.csv: the event times look 1000× too small"),)

@@ -29,7 +29,7 @@ def _q_x(deg):
 
 
 def test_ramp_surface_frame():
-    s = ramp_surface()
+    s = ramp_surface(60.0, 0.3)
     assert np.allclose(s.normal, [0.0, -S60, C60])
     # the nail (origin) is 0.3 m behind the ramp face
     d, g, f = s.distance(np.zeros(3))
@@ -38,7 +38,7 @@ def test_ramp_surface_frame():
     d, _, _ = s.distance(np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [5.0, 0.0, 0.0]]))
     assert np.allclose(d, [0.2, S60 - 0.3, -0.3])
     # the ramp rises toward +Y: moving up-slope (0, cos60, sin60) keeps the distance
-    d2, _, _ = ramp_surface().distance(np.array([0.0, C60, S60]) * 4.0)
+    d2, _, _ = ramp_surface(60.0, 0.3).distance(np.array([0.0, C60, S60]) * 4.0)
     assert d2 == pytest.approx(-0.3)
 
 
@@ -56,7 +56,7 @@ def test_surface_distance_with_rock_hand_values():
 
 def test_surface_gradient_finite_differences():
     rng = np.random.default_rng(1)
-    s = rock_field(ramp_surface(), rng, ((-2.0, 2.0), (-2.0, 2.0)))
+    s = rock_field(ramp_surface(60.0, 0.3), rng, ((-2.0, 2.0), (-2.0, 2.0)), 1.0)
     t1, t2 = s.tangent_basis()
     u = rng.uniform(-2, 2, (200, 2))
     x = s.point + u[:, :1] * t1 + u[:, 1:] * t2 + rng.uniform(0.05, 0.6, (200, 1)) * s.normal
@@ -75,7 +75,7 @@ def test_surface_gradient_finite_differences():
 
 def test_rock_field_layout():
     rng = np.random.default_rng(7)
-    s = rock_field(ramp_surface(), rng, ((-3.0, 3.0), (-3.0, 3.0)))
+    s = rock_field(ramp_surface(60.0, 0.3), rng, ((-3.0, 3.0), (-3.0, 3.0)), 1.0)
     assert s.n_rocks == 49
     assert np.all((s.rock_radii >= 0.1) & (s.rock_radii <= 0.25))  # sizes 0.2-0.5 m = diameters
     h = (s.rock_centers - s.point) @ s.normal
@@ -95,7 +95,7 @@ def test_rock_field_layout():
 
 def _pose_base_parallel(h, along=(0.3, -0.7)):
     """CM at height h above the ramp with the base face parallel to it (body +Z = ramp normal)."""
-    s = ramp_surface()
+    s = ramp_surface(60.0, 0.3)
     t1, t2 = s.tangent_basis()
     p = s.point + h * s.normal + along[0] * t1 + along[1] * t2
     return s, p, _q_x(60.0)
@@ -113,7 +113,7 @@ def test_stroke_base_parallel_to_ramp():
 
 def test_stroke_apex_down_penetrating():
     # apex toward the ramp: body +Z = -n, i.e. R_x(60°) ⊗ R_x(180°); closest = apex, distance h - 0.8
-    s = ramp_surface()
+    s = ramp_surface(60.0, 0.3)
     q = quat_multiply(_q_x(60.0), _q_x(180.0))
     hs = np.array([1.5, 0.8, 0.7])
     p = s.point + hs[:, None] * s.normal
@@ -146,7 +146,7 @@ def test_stroke_rock_under_base_face_exact():
 def _poses_over_rock_field(seed: int, n: int):
     """A rock field on the ramp and n random poses 0.9-1.3 m above it, tilted around 60° about x."""
     rng = np.random.default_rng(seed)
-    s = rock_field(ramp_surface(), rng, ((-3.0, 3.0), (-3.0, 3.0)), size_range=(0.4, 0.5))
+    s = rock_field(ramp_surface(60.0, 0.3), rng, ((-3.0, 3.0), (-3.0, 3.0)), 1.0, size_range=(0.4, 0.5))
     t1, t2 = s.tangent_basis()
     u = rng.uniform(-2, 2, (n, 2))
     p = s.point + u[:, :1] * t1 + u[:, 1:] * t2 + rng.uniform(0.9, 1.3, (n, 1)) * s.normal
@@ -191,7 +191,7 @@ def test_stroke_history_chunked_equal_whole(monkeypatch):
 
 
 def _generic_case(with_rock):
-    s = ramp_surface()
+    s = ramp_surface(60.0, 0.3)
     if with_rock:  # a rock facing the middle of the side_PY face
         s = Surface(s.point, s.normal, rock_centers=[[0.2, -1.2, 0.2]], rock_radii=[0.3])
     p = np.array([0.1, -1.0, 1.3])
@@ -257,7 +257,7 @@ def test_max_stroke_picks_step_and_vertex():
 
 
 def _bounce(sig_b, sig_a):
-    s = ramp_surface()
+    s = ramp_surface(60.0, 0.3)
     t1, _ = s.tangent_basis()
     n = s.normal
     t = np.array([0.0, 0.1, 0.2, 0.3])

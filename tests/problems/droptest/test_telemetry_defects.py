@@ -19,7 +19,6 @@ import pytest
 from workbench.io.telemetry import TelemetryError, read_telemetry, write_telemetry
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
-from workbench.problems.droptest.synthetic import lander_for
 from workbench.problems.droptest.telemetry import DropTelemetry, load_drop_telemetry
 
 Rows = list[list[str]]
@@ -43,12 +42,11 @@ def _edit_csv(path: Path, fn: Callable[[list[str], Rows], tuple[list[str], Rows]
 
 
 def _load(run, paths: dict[str, Path]) -> DropTelemetry:
-    sc = run.scenario
-    return load_drop_telemetry(sc, paths, lander_for(sc))
+    return load_drop_telemetry(run.settings, paths)
 
 
 def _run(run, paths: dict[str, Path]) -> dt.DropResult:
-    return dt.run_droptest(run.scenario, paths, seed=run.summary["seed"])
+    return dt.run_droptest(run.settings, paths, seed=run.summary["seed"])
 
 
 def _error_over_sigma(result: dt.DropResult, truth: dict) -> float:
@@ -240,7 +238,7 @@ def test_non_unit_3dm_vectors_are_normalised(droptest_run, tmp_path):
     tel = _load(droptest_run, paths)
     up = tel.attitude.stack(["up.x", "up.y", "up.z"])
     np.testing.assert_allclose(np.linalg.norm(up, axis=1), 3.0, rtol=1e-6)  # the defect is in
-    sc = droptest_run.scenario
+    sc = droptest_run.settings
     a, b = dt.initial_state(sc, tel_ref), dt.initial_state(sc, tel)
     # the file holds 9 significant digits: directions agree to ~1e-9
     for name in ("up_B", "mag_B"):
@@ -299,14 +297,14 @@ def test_3dm_is_averaged_only_while_hanging(droptest_run, tmp_path):
     """3DM rows after release (the lander tumbling) must not enter the initial attitude."""
     paths = _copy_telemetry(droptest_run, tmp_path)
     tel0 = _load(droptest_run, paths)
-    init0 = dt.initial_state(droptest_run.scenario, tel0)
+    init0 = dt.initial_state(droptest_run.settings, tel0)
 
     def add_tumbling_rows(header, rows):
         extra = [[f"{0.1 + 0.01 * i:.3f}", "1", "0", "0", "0", "1", "0"] for i in range(50)]
         return header, rows + extra
 
     _edit_csv(paths["attitude_3dm"], add_tumbling_rows)
-    init1 = dt.initial_state(droptest_run.scenario, _load(droptest_run, paths))
+    init1 = dt.initial_state(droptest_run.settings, _load(droptest_run, paths))
     np.testing.assert_allclose(init1.q0, init0.q0, atol=1e-12)
 
 

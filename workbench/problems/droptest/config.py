@@ -1,23 +1,41 @@
-"""Drop-test scenario configuration: the schema of a ``kind = "droptest"`` scenario (every key the
-reconstruction, the synthetic-telemetry writer and the truth simulator read, with its default, once)
-and :class:`DropConfig`, the typed values built once from a validated scenario.
+"""Drop-test settings: the schemas of the three input file kinds a drop test reads — the
+``kind = "droptest"`` scenario (:data:`SCHEMA`), the lander asset (:data:`LANDER_SCHEMA`) and the
+drop setup file (:data:`SETUP_SCHEMA`), every key once with type, unit, default and bounds — and
+:class:`DropSettings`, the frozen settings of one run built once from a validated scenario by
+``DropTestProblem.settings`` (one small dataclass per stage, the lander model read once).
 
 Values keep the unit their key names (``noise_g``, ``bias_dps``); the code converts at its edge.
 Not to be confused with :class:`workbench.problems.droptest.truth.DropTestConfig` (the truth
-simulator's own settings, built from ``[synthetic]``).
+simulator's own settings of one drop, built from :class:`Synthetic`).
 """
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table
+from workbench.problems.droptest.lander import LANDER_SCHEMA as _LANDER_SCHEMA
+from workbench.problems.droptest.lander import LanderModel, load_lander
 
-__all__ = ["SCHEMA", "DropConfig", "config_for"]
+__all__ = [
+    "SCHEMA",
+    "LANDER_SCHEMA",
+    "SETUP_SCHEMA",
+    "DropSettings",
+    "Chamber",
+    "Rocks",
+    "Accelerometer",
+    "Gyro",
+    "Acquisition",
+    "Attitude3dm",
+    "Ranging",
+    "FilterSettings",
+    "Synthetic",
+]
 
 _F, _I, _S, _B, _V, _L = "float", "int", "str", "bool", "vec3", "list"
 
@@ -60,14 +78,17 @@ SCHEMA = Schema(
             "chamber",
             "the test chamber, SPF frame",
             (
-                Key("ramp_angle_deg", _F, 60.0, "deg", "ramp inclination from the horizontal, in (0, 90)"),
+                Key("ramp_angle_deg", _F, 60.0, "deg", "ramp inclination from the horizontal", gt=0.0, lt=90.0),
                 Key(
                     "nail_depth_m",
                     _F,
                     0.3,
                     "m",
                     "the nail (SPF origin, where the bungee-cut hammer strikes) lies this far below the ramp "
-                    "surface, along its normal; in [0, 10] (a nail in front of the ramp is rejected)",
+                    "surface, along its normal (a nail in front of the ramp, where the lander would hit it, is "
+                    "rejected)",
+                    ge=0.0,
+                    le=10.0,
                 ),
                 Key(
                     "magnetic_field_spf",
@@ -100,31 +121,36 @@ SCHEMA = Schema(
                 Key(
                     "triads", _L, ["BP", "PYBP", "PXBP", "MXBP"], meaning="triad names (lever arms in the lander asset)"
                 ),
-                Key("noise_g", _F, 0.2, "g", "per-sample noise, 1σ"),
-                Key("bias_g", _F, 0.005, "g", "residual bias after zeroing, 1σ per axis"),
-                Key("scale", _F, 0.002, "1", "scale-factor error, 1σ (filter: measurement noise ∝ the force)"),
+                Key("noise_g", _F, 0.2, "g", "per-sample noise, 1σ (0: absent)", ge=0.0),
+                Key("bias_g", _F, 0.005, "g", "residual bias after zeroing, 1σ per axis", ge=0.0),
+                Key("scale", _F, 0.002, "1", "scale-factor error, 1σ (filter: measurement noise ∝ the force)", ge=0.0),
                 Key(
-                    "misalignment_deg", _F, 0.05, "deg", "axis misalignment, 1σ (filter: measurement noise ∝ the force)"
+                    "misalignment_deg",
+                    _F,
+                    0.05,
+                    "deg",
+                    "axis misalignment, 1σ (filter: measurement noise ∝ the force)",
+                    ge=0.0,
                 ),
-                Key("full_scale_g", _F, 2000.0, "g", "saturation level"),
+                Key("full_scale_g", _F, 2000.0, "g", "saturation level", gt=0.0),
             ),
         ),
         Table(
             "sensors.gyro",
             "rate gyro",
             (
-                Key("noise_dps", _F, 0.4, "deg/s", "per-sample noise, 1σ"),
-                Key("bias_dps", _F, 0.05, "deg/s", "bias, 1σ"),
-                Key("scale", _F, 0.01, "1", "scale-factor error, 1σ"),
-                Key("misalignment_deg", _F, 0.05, "deg", "axis misalignment, 1σ"),
-                Key("full_scale_dps", _F, 1000.0, "deg/s", "saturation level"),
+                Key("noise_dps", _F, 0.4, "deg/s", "per-sample noise, 1σ", ge=0.0),
+                Key("bias_dps", _F, 0.05, "deg/s", "bias, 1σ", ge=0.0),
+                Key("scale", _F, 0.01, "1", "scale-factor error, 1σ", ge=0.0),
+                Key("misalignment_deg", _F, 0.05, "deg", "axis misalignment, 1σ", ge=0.0),
+                Key("full_scale_dps", _F, 1000.0, "deg/s", "saturation level", gt=0.0),
             ),
         ),
         Table(
             "sensors.acquisition",
             "data acquisition",
             (
-                Key("sample_rate_hz", _F, 2000.0, "Hz", "IMU sample rate (synthetic)"),
+                Key("sample_rate_hz", _F, 2000.0, "Hz", "IMU sample rate (synthetic)", gt=0.0),
                 Key(
                     "filter",
                     _S,
@@ -135,7 +161,9 @@ SCHEMA = Schema(
                     choices=("butterworth", "zero_phase", "none"),
                 ),
                 Key("filter_cutoff_hz", _F, 500.0, "Hz", "Butterworth cutoff, below half the sample rate"),
-                Key("filter_order", _I, 4, meaning='Butterworth order, 1–10 (0: no filter, as `filter = "none"`)'),
+                Key(
+                    "filter_order", _I, 4, meaning='Butterworth order (0: no filter, as `filter = "none"`)', ge=0, le=10
+                ),
                 Key(
                     "latency_s",
                     _F,
@@ -157,16 +185,18 @@ SCHEMA = Schema(
                     "deg",
                     "direction error of the measured gravity ('up') vector: 1σ of the tilt about each of the two "
                     "axes perpendicular to it (a per-run calibration error; 10 % of it as per-sample noise in "
-                    "the simulator); ≥ 0",
+                    "the simulator)",
+                    ge=0.0,
                 ),
                 Key(
                     "magnetic_sigma_deg",
                     _F,
                     1.0,
                     "deg",
-                    "direction error of the measured magnetic vector, per perpendicular axis as above; ≥ 0",
+                    "direction error of the measured magnetic vector, per perpendicular axis as above",
+                    ge=0.0,
                 ),
-                Key("rate_hz", _F, 100.0, "Hz", "sample rate (synthetic)"),
+                Key("rate_hz", _F, 100.0, "Hz", "sample rate (synthetic)", gt=0.0),
                 Key("latency_s", _F, 0.0, "s", "delay of the 3DM time tags behind the motion, removed from them"),
             ),
         ),
@@ -181,9 +211,10 @@ SCHEMA = Schema(
                     "Hz",
                     "ranging sample rate: the synthetic writer's; with user data, when given, it must match the "
                     "file's (median interval, within 10 %)",
+                    gt=0.0,
                 ),
                 Key("odometer", _B, False, meaning="bungee-sheave odometer until the cut"),
-                Key("odometer_sigma_m", _F, 0.01, "m", "odometer noise, 1σ"),
+                Key("odometer_sigma_m", _F, 0.01, "m", "odometer noise, 1σ", ge=0.0),
                 Key(
                     "odometer_zero_m",
                     _F,
@@ -191,8 +222,15 @@ SCHEMA = Schema(
                     "m",
                     "the odometer's zero: it reads the rope length (sheave to attachment) minus this",
                 ),
-                Key("radar_range_sigma_m", _F, 0.02, "m", "radar-gun range noise, 1σ (every gun without its own)"),
-                Key("radar_rate_sigma_mps", _F, 0.05, "m/s", "radar-gun range-rate noise, 1σ (idem)"),
+                Key(
+                    "radar_range_sigma_m",
+                    _F,
+                    0.02,
+                    "m",
+                    "radar-gun range noise, 1σ (every gun without its own)",
+                    ge=0.0,
+                ),
+                Key("radar_rate_sigma_mps", _F, 0.05, "m/s", "radar-gun range-rate noise, 1σ (idem)", ge=0.0),
                 Key(
                     "reflector_body_m",
                     _V,
@@ -252,7 +290,7 @@ SCHEMA = Schema(
                     meaning="`dynamic` models the bungee until the cut",
                     choices=("kinematic", "dynamic"),
                 ),
-                Key("rate_hz", _F, 1000.0, "Hz", "IMU samples are averaged down to this rate"),
+                Key("rate_hz", _F, 1000.0, "Hz", "IMU samples are averaged down to this rate", gt=0.0),
                 Key("q_accel", _F, 5.0, "m²/s⁵", "white-jerk PSD floor"),
                 Key("q_angular", _F, 20.0, "rad²/s⁵", "white angular-jerk PSD floor"),
                 Key("adaptive_gain", _F, 4.0, "1", "Q raised by gain × (measured jerk)² × dt"),
@@ -282,61 +320,155 @@ SCHEMA = Schema(
 )
 
 
+#: The lander asset's schema is declared beside its reader (:mod:`.lander` may not import this
+#: module: :class:`DropSettings` reads the asset) and listed here with the others.
+LANDER_SCHEMA = _LANDER_SCHEMA
+
+#: The drop setup file (``[telemetry] setup``), read by
+#: :func:`workbench.problems.droptest.telemetry.read_setup`: which ``[bungee]`` keys are needed
+#: depends on the filter mode and the odometer (code there); absent optional tables stay absent.
+SETUP_SCHEMA = Schema(
+    "droptest_setup",
+    "drop setup file",
+    (
+        Table(
+            "hanging",
+            "the surveyed hanging state (SPF)",
+            (
+                Key("position_m", _V, REQUIRED, "m", "the CM in SPF while hanging"),
+                Key("position_sigma_m", _F, REQUIRED, "m", "its 1σ per axis", gt=0.0),
+            ),
+        ),
+        Table(
+            "bungee",
+            'the bungee test plan: needed whole by `[filter] mode = "dynamic"`, only `anchor_m` and '
+            "`attach_body_m` by the odometer; the kinematic filter ignores it",
+            (
+                Key("anchor_m", _V, None, "m", "bungee anchor (the odometer's sheave) in SPF"),
+                Key("rest_length_m", _F, None, "m", "rest length", gt=0.0),
+                Key("coefficients", _L, None, "N/m^k", "per-bungee force polynomial in the stretch, k = 1.."),
+                Key("count", _F, None, "1", "number of bungees (continuous: the design's)", gt=0.0),
+                Key("attach_body_m", _V, None, "m", "rope attachment in the lander frame L"),
+                Key("mass_kg", _F, None, "kg", "lander mass of the test plan", gt=0.0),
+            ),
+        ),
+        Table(
+            "rocks",
+            "a surveyed rock field (rigid spheres)",
+            (
+                Key("centers_m", _L, REQUIRED, "m", "sphere centres, n × [x, y, z] in SPF"),
+                Key("radii_m", _L, REQUIRED, "m", "sphere radii (n)", gt=0.0),
+            ),
+        ),
+    ),
+    noun="drop setup file",
+    intro="Keys of a drop setup file (`[telemetry] setup`)",
+)
+
+
+# ------------------------------------------------------------------ the settings of one run
 @dataclass(frozen=True)
-class DropConfig:
-    """The settings of one drop-test scenario, validated against :data:`SCHEMA` (defaults filled).
+class Rocks:
+    """``[chamber.rocks]``: placement ``seed``, mean ``spacing_m`` [m], ``extent_m`` ramp-plane
+    window ``((u0, u1), (v0, v1))`` [m] (across, up-slope)."""
 
-    Units as the key names say.  ``rocks`` / ``ranging``: the ``[chamber.rocks]`` /
-    ``[sensors.ranging]`` tables are present; ``radar_guns`` name → SPF position (3,) [m];
-    ``magnetic_field_spf`` (3,) (not normalised); ``telemetry`` stream → path string as written
-    (None when absent).
-    """
+    seed: int
+    spacing_m: float
+    extent_m: tuple[tuple[float, float], tuple[float, float]]
 
-    lander: str
-    telemetry: dict
+
+@dataclass(frozen=True, eq=False)
+class Chamber:
+    """``[chamber]``: ``ramp_angle_deg`` [deg], ``nail_depth_m`` [m], ``magnetic_field_spf`` (3,)
+    read-only, not normalised; ``rocks`` the rock field, or None without ``[chamber.rocks]``."""
+
     ramp_angle_deg: float
     nail_depth_m: float
     magnetic_field_spf: np.ndarray
-    rocks: bool
-    rocks_seed: int
-    rocks_spacing_m: float
-    rocks_extent_m: list
+    rocks: Rocks | None
+
+
+@dataclass(frozen=True)
+class Accelerometer:
+    """``[sensors.accelerometer]`` (units as the names say): ``triads`` names, 1σ ``noise_g``,
+    ``bias_g``, ``scale``, ``misalignment_deg``, saturation ``full_scale_g``."""
+
     triads: tuple[str, ...]
-    accel_noise_g: float
-    accel_bias_g: float
-    accel_scale: float
-    accel_misalignment_deg: float
-    accel_full_scale_g: float
-    gyro_noise_dps: float
-    gyro_bias_dps: float
-    gyro_scale: float
-    gyro_misalignment_deg: float
-    gyro_full_scale_dps: float
+    noise_g: float
+    bias_g: float
+    scale: float
+    misalignment_deg: float
+    full_scale_g: float
+
+
+@dataclass(frozen=True)
+class Gyro:
+    """``[sensors.gyro]``: 1σ ``noise_dps``, ``bias_dps``, ``scale``, ``misalignment_deg``,
+    saturation ``full_scale_dps``."""
+
+    noise_dps: float
+    bias_dps: float
+    scale: float
+    misalignment_deg: float
+    full_scale_dps: float
+
+
+@dataclass(frozen=True)
+class Acquisition:
+    """``[sensors.acquisition]``: ``sample_rate_hz`` [Hz]; ``filter`` the anti-alias filter actually
+    applied (``"none"`` when ``filter_order = 0``), ``cutoff_hz`` [Hz], ``order``; ``latency_s`` [s]."""
+
     sample_rate_hz: float
-    filter_cutoff_hz: float
-    filter_order: int
-    acquisition_filter: str
-    imu_latency_s: float
-    attitude_3dm_latency_s: float
-    ranging_latency_s: float
-    ranging_filtered: bool
-    odometer_zero_m: float
-    gun_reflectors_body_m: dict
-    gun_range_sigma_m: dict
-    gun_rate_sigma_mps: dict
+    filter: str
+    cutoff_hz: float
+    order: int
+    latency_s: float
+
+
+@dataclass(frozen=True)
+class Attitude3dm:
+    """``[sensors.attitude_3dm]``: 1σ ``gravity_sigma_deg``, ``magnetic_sigma_deg`` [deg],
+    ``rate_hz`` [Hz], ``latency_s`` [s]."""
+
     gravity_sigma_deg: float
     magnetic_sigma_deg: float
-    attitude_3dm_rate_hz: float
-    ranging: bool
-    ranging_rate_hz: float
+    rate_hz: float
+    latency_s: float
+
+
+@dataclass(frozen=True, eq=False)
+class Ranging:
+    """``[sensors.ranging]`` (units as the key names say).  ``enabled``: the table is present (the
+    synthetic writer then writes ranging); ``rate_given``: ``rate_hz`` was written (user data is
+    then checked against it); ``radar_guns`` name -> SPF position (3,); per gun (every gun listed,
+    the common value where the scenario gives none): ``reflectors_body_m`` (3,) in the lander frame,
+    ``range_sigma_m``, ``rate_sigma_mps``."""
+
+    enabled: bool
+    rate_hz: float
+    rate_given: bool
     odometer: bool
     odometer_sigma_m: float
+    odometer_zero_m: float
     radar_range_sigma_m: float
     radar_rate_sigma_mps: float
     reflector_body_m: np.ndarray
-    radar_guns: dict
+    latency_s: float
+    acquisition_filter: bool
+    radar_guns: dict[str, np.ndarray]
+    reflectors_body_m: dict[str, np.ndarray]
+    range_sigma_m: dict[str, float]
+    rate_sigma_mps: dict[str, float]
+
+
+@dataclass(frozen=True)
+class FilterSettings:
+    """``[filter]``: ``mode``, ``rate_hz`` [Hz], PSD floors ``q_accel`` [m²/s⁵], ``q_angular``
+    [rad²/s⁵], ``adaptive_gain``, 1σ ``hang_zupt_sigma_mps``, ``velocity_sigma_mps`` [m/s],
+    ``accel_sigma_mps2`` [m/s²], ``rate_sigma_dps`` [deg/s], ``angular_accel_sigma`` [rad/s²]."""
+
     mode: str
-    filter_rate_hz: float
+    rate_hz: float
     q_accel: float
     q_angular: float
     adaptive_gain: float
@@ -345,163 +477,175 @@ class DropConfig:
     accel_sigma_mps2: float
     rate_sigma_dps: float
     angular_accel_sigma: float
+
+
+@dataclass(frozen=True)
+class Synthetic:
+    """``[synthetic]``, the truth side: sensor ``seed``; target impact speeds ``impact_parallel_mps``,
+    ``impact_normal_mps`` [m/s, Mars frame]; ``release_euler123_deg`` (3,) [deg];
+    ``release_to_contact_s``, ``pre_release_s`` [s]; ``bungee_truth_scale`` [1]; ``survey_sigma_m``
+    [m]; ``bag_pressure_psi`` [psi] or None (the lander asset's)."""
+
     seed: int
     impact_parallel_mps: float
     impact_normal_mps: float
-    release_euler123_deg: np.ndarray
+    release_euler123_deg: tuple[float, float, float]
     release_to_contact_s: float
     pre_release_s: float
     bungee_truth_scale: float
     survey_sigma_m: float
     bag_pressure_psi: float | None
 
+
+@dataclass(frozen=True, eq=False)
+class DropSettings:
+    """The frozen settings of one drop-test run, built once by :meth:`from_scenario` (defaults from
+    :data:`SCHEMA`).  ``run`` what the run is; ``lander_file`` the asset (absolute path) and
+    ``lander`` the model read from it once; ``telemetry`` stream -> absolute path of each
+    ``[telemetry]`` file given (None when absent; existence is checked when the files are used);
+    one small dataclass per stage.  Picklable (Monte Carlo workers receive it); vary it with
+    :func:`dataclasses.replace`."""
+
+    run: RunInfo
+    lander_file: Path
+    lander: LanderModel
+    telemetry: dict[str, Path | None]
+    chamber: Chamber
+    accelerometer: Accelerometer
+    gyro: Gyro
+    acquisition: Acquisition
+    attitude_3dm: Attitude3dm
+    ranging: Ranging
+    filter: FilterSettings
+    synthetic: Synthetic
+
+    @property
+    def name(self) -> str:
+        """The scenario name."""
+        return self.run.name
+
+    @property
+    def path(self) -> Path:
+        """The scenario file (errors name it)."""
+        return self.run.path
+
     @classmethod
-    def from_scenario(cls, scenario: Scenario) -> DropConfig:
-        """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types: a
-        :class:`ScenarioError` naming file, table and key) and build the config."""
+    def from_scenario(cls, scenario: Scenario) -> DropSettings:
+        """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types, bounds: a
+        :class:`ScenarioError` naming file and key), check what the bounds cannot express, read the
+        lander asset (:data:`LANDER_SCHEMA`) and build the settings."""
         if scenario.kind != "droptest":
             raise ScenarioError(scenario.path, "scenario.kind", f"{scenario.kind!r} is not a droptest scenario")
         v = SCHEMA.validate(scenario.data, scenario.path)
-        _check_ranges(v, scenario)
-        for a in (v["chamber"]["magnetic_field_spf"], v["sensors"]["ranging"]["reflector_body_m"]):
-            a.flags.writeable = False  # shared by every user of the config
-        v["synthetic"]["release_euler123_deg"].flags.writeable = False
+        _check_cross_fields(v, scenario.path)
+        run = RunInfo.from_scenario(scenario)
+        lander_file = run.resolve(v["vehicle"]["lander"]).absolute()
+        if not lander_file.exists():
+            raise ScenarioError(scenario.path, "vehicle.lander", f"file not found: {lander_file}")
         ch, rk = v["chamber"], v["chamber"]["rocks"]
         acc, gyr = v["sensors"]["accelerometer"], v["sensors"]["gyro"]
         aq, a3, rg = v["sensors"]["acquisition"], v["sensors"]["attitude_3dm"], v["sensors"]["ranging"]
         f, s = v["filter"], v["synthetic"]
+        guns = {str(k): _frozen(p) for k, p in rg.get("radar_guns", {}).items()}
+        reflector = _frozen(rg["reflector_body_m"])
+        refl = {str(k): _frozen(p) for k, p in rg.get("reflectors", {}).items()}
+        sig_r = {str(k): float(x) for k, x in rg.get("range_sigma_m", {}).items()}
+        sig_rr = {str(k): float(x) for k, x in rg.get("rate_sigma_mps", {}).items()}
+        ext = rk["extent_m"]
         return cls(
-            lander=v["vehicle"]["lander"],
-            telemetry=dict(v["telemetry"]),
-            ramp_angle_deg=ch["ramp_angle_deg"],
-            nail_depth_m=ch["nail_depth_m"],
-            magnetic_field_spf=ch["magnetic_field_spf"],
-            rocks=scenario.has("chamber.rocks"),
-            rocks_seed=rk["seed"],
-            rocks_spacing_m=rk["spacing_m"],
-            rocks_extent_m=rk["extent_m"],
-            triads=tuple(acc["triads"]),
-            accel_noise_g=acc["noise_g"],
-            accel_bias_g=acc["bias_g"],
-            accel_scale=acc["scale"],
-            accel_misalignment_deg=acc["misalignment_deg"],
-            accel_full_scale_g=acc["full_scale_g"],
-            gyro_noise_dps=gyr["noise_dps"],
-            gyro_bias_dps=gyr["bias_dps"],
-            gyro_scale=gyr["scale"],
-            gyro_misalignment_deg=gyr["misalignment_deg"],
-            gyro_full_scale_dps=gyr["full_scale_dps"],
-            sample_rate_hz=aq["sample_rate_hz"],
-            filter_cutoff_hz=aq["filter_cutoff_hz"],
-            filter_order=aq["filter_order"],
-            acquisition_filter="none" if aq["filter_order"] == 0 else aq["filter"],
-            imu_latency_s=aq["latency_s"],
-            attitude_3dm_latency_s=a3["latency_s"],
-            ranging_latency_s=rg["latency_s"],
-            ranging_filtered=rg["acquisition_filter"],
-            odometer_zero_m=rg["odometer_zero_m"],
-            gun_reflectors_body_m={str(k): np.asarray(p, float) for k, p in rg.get("reflectors", {}).items()},
-            gun_range_sigma_m={str(k): float(x) for k, x in rg.get("range_sigma_m", {}).items()},
-            gun_rate_sigma_mps={str(k): float(x) for k, x in rg.get("rate_sigma_mps", {}).items()},
-            gravity_sigma_deg=a3["gravity_sigma_deg"],
-            magnetic_sigma_deg=a3["magnetic_sigma_deg"],
-            attitude_3dm_rate_hz=a3["rate_hz"],
-            ranging=scenario.has("sensors.ranging"),
-            ranging_rate_hz=rg["rate_hz"],
-            odometer=rg["odometer"],
-            odometer_sigma_m=rg["odometer_sigma_m"],
-            radar_range_sigma_m=rg["radar_range_sigma_m"],
-            radar_rate_sigma_mps=rg["radar_rate_sigma_mps"],
-            reflector_body_m=rg["reflector_body_m"],
-            radar_guns={str(k): np.asarray(p, float) for k, p in rg.get("radar_guns", {}).items()},
-            mode=f["mode"],
-            filter_rate_hz=f["rate_hz"],
-            q_accel=f["q_accel"],
-            q_angular=f["q_angular"],
-            adaptive_gain=f["adaptive_gain"],
-            hang_zupt_sigma_mps=f["hang_zupt_sigma_mps"],
-            velocity_sigma_mps=f["velocity_sigma_mps"],
-            accel_sigma_mps2=f["accel_sigma_mps2"],
-            rate_sigma_dps=f["rate_sigma_dps"],
-            angular_accel_sigma=f["angular_accel_sigma"],
-            seed=s["seed"],
-            impact_parallel_mps=s["impact_parallel_mps"],
-            impact_normal_mps=s["impact_normal_mps"],
-            release_euler123_deg=s["release_euler123_deg"],
-            release_to_contact_s=s["release_to_contact_s"],
-            pre_release_s=s["pre_release_s"],
-            bungee_truth_scale=s["bungee_truth_scale"],
-            survey_sigma_m=s["survey_sigma_m"],
-            bag_pressure_psi=s["bag_pressure_psi"],
+            run=run,
+            lander_file=lander_file,
+            lander=load_lander(lander_file),
+            telemetry={k: (None if p is None else run.resolve(p).absolute()) for k, p in v["telemetry"].items()},
+            chamber=Chamber(
+                ramp_angle_deg=ch["ramp_angle_deg"],
+                nail_depth_m=ch["nail_depth_m"],
+                magnetic_field_spf=_frozen(ch["magnetic_field_spf"]),
+                rocks=Rocks(
+                    seed=rk["seed"],
+                    spacing_m=rk["spacing_m"],
+                    extent_m=((float(ext[0][0]), float(ext[0][1])), (float(ext[1][0]), float(ext[1][1]))),
+                )
+                if scenario.has("chamber.rocks")
+                else None,
+            ),
+            accelerometer=Accelerometer(
+                triads=tuple(acc["triads"]),
+                noise_g=acc["noise_g"],
+                bias_g=acc["bias_g"],
+                scale=acc["scale"],
+                misalignment_deg=acc["misalignment_deg"],
+                full_scale_g=acc["full_scale_g"],
+            ),
+            gyro=Gyro(**gyr),
+            acquisition=Acquisition(
+                sample_rate_hz=aq["sample_rate_hz"],
+                filter="none" if aq["filter_order"] == 0 else aq["filter"],
+                cutoff_hz=aq["filter_cutoff_hz"],
+                order=aq["filter_order"],
+                latency_s=aq["latency_s"],
+            ),
+            attitude_3dm=Attitude3dm(**a3),
+            ranging=Ranging(
+                enabled=scenario.has("sensors.ranging"),
+                rate_hz=rg["rate_hz"],
+                rate_given=scenario.has("sensors.ranging.rate_hz"),
+                odometer=rg["odometer"],
+                odometer_sigma_m=rg["odometer_sigma_m"],
+                odometer_zero_m=rg["odometer_zero_m"],
+                radar_range_sigma_m=rg["radar_range_sigma_m"],
+                radar_rate_sigma_mps=rg["radar_rate_sigma_mps"],
+                reflector_body_m=reflector,
+                latency_s=rg["latency_s"],
+                acquisition_filter=rg["acquisition_filter"],
+                radar_guns=guns,
+                reflectors_body_m={g: refl.get(g, reflector) for g in guns},
+                range_sigma_m={g: sig_r.get(g, rg["radar_range_sigma_m"]) for g in guns},
+                rate_sigma_mps={g: sig_rr.get(g, rg["radar_rate_sigma_mps"]) for g in guns},
+            ),
+            filter=FilterSettings(**f),
+            synthetic=Synthetic(
+                seed=s["seed"],
+                impact_parallel_mps=s["impact_parallel_mps"],
+                impact_normal_mps=s["impact_normal_mps"],
+                release_euler123_deg=tuple(float(a) for a in s["release_euler123_deg"]),
+                release_to_contact_s=s["release_to_contact_s"],
+                pre_release_s=s["pre_release_s"],
+                bungee_truth_scale=s["bungee_truth_scale"],
+                survey_sigma_m=s["survey_sigma_m"],
+                bag_pressure_psi=s["bag_pressure_psi"],
+            ),
         )
 
 
-# ------------------------------------------------------------------ value ranges (issue 12, item 4)
-def _check_ranges(v: dict, scenario: Scenario) -> None:
-    """Values the schema's types cannot refuse: a ScenarioError naming file and key."""
-    path = scenario.path
+def _frozen(a) -> np.ndarray:
+    out = np.array(a, float)
+    out.flags.writeable = False  # shared by every user of the settings
+    return out
+
+
+# ------------------------------------------------------------------ checks the bounds cannot express
+def _check_cross_fields(v: dict, path: Path) -> None:
+    """What the schema's types and bounds cannot refuse: a ScenarioError naming file and key."""
 
     def bad(key: str, msg: str) -> None:
         raise ScenarioError(path, key, msg)
 
-    ch = v["chamber"]
-    if not 0.0 < ch["ramp_angle_deg"] < 90.0:
-        bad("chamber.ramp_angle_deg", f"{ch['ramp_angle_deg']} deg: the ramp inclination must be in (0, 90) deg")
-    if not 0.0 <= ch["nail_depth_m"] <= 10.0:
-        bad(
-            "chamber.nail_depth_m",
-            f"{ch['nail_depth_m']} m: the nail must lie 0-10 m below the ramp surface (negative = in front of "
-            "the ramp, where the lander would hit it)",
-        )
-    if not np.linalg.norm(ch["magnetic_field_spf"]) > 0.0:
+    if not np.linalg.norm(v["chamber"]["magnetic_field_spf"]) > 0.0:
         bad("chamber.magnetic_field_spf", "a zero vector has no direction")
-    sensors = v["sensors"]
-    sigmas = {
-        "accelerometer": ("noise_g", "bias_g", "scale", "misalignment_deg"),
-        "gyro": ("noise_dps", "bias_dps", "scale", "misalignment_deg"),
-        "attitude_3dm": ("gravity_sigma_deg", "magnetic_sigma_deg"),
-        "ranging": ("odometer_sigma_m", "radar_range_sigma_m", "radar_rate_sigma_mps"),
-    }
-    for table, keys in sigmas.items():
-        for k in keys:
-            x = sensors[table][k]
-            if not (x >= 0.0 and np.isfinite(x)):
-                bad(f"sensors.{table}.{k}", f"{x}: a 1σ must be ≥ 0 (0 = this error is absent)")
+    rg = v["sensors"]["ranging"]
     for table in ("range_sigma_m", "rate_sigma_mps"):
-        for gun, x in sensors["ranging"].get(table, {}).items():
+        for gun, x in rg.get(table, {}).items():
             if not (x >= 0.0 and np.isfinite(x)):
                 bad(f"sensors.ranging.{table}.{gun}", f"{x}: a 1σ must be ≥ 0")
-    guns = set(sensors["ranging"].get("radar_guns", {}))
+    guns = set(rg.get("radar_guns", {}))
     for table in ("reflectors", "range_sigma_m", "rate_sigma_mps"):
-        for gun in sensors["ranging"].get(table, {}):
+        for gun in rg.get(table, {}):
             if gun not in guns:
                 bad(
                     f"sensors.ranging.{table}.{gun}",
                     f"no radar gun '{gun}' in [sensors.ranging.radar_guns] (guns: {', '.join(sorted(guns)) or 'none'})",
                 )
-    for table, k in (("accelerometer", "full_scale_g"), ("gyro", "full_scale_dps")):
-        if not sensors[table][k] > 0.0:
-            bad(f"sensors.{table}.{k}", f"{sensors[table][k]}: the saturation level must be > 0")
-    aq = sensors["acquisition"]
-    if not aq["sample_rate_hz"] > 0.0:
-        bad("sensors.acquisition.sample_rate_hz", "must be > 0")
-    if not 0 <= aq["filter_order"] <= 10:
-        bad("sensors.acquisition.filter_order", f"{aq['filter_order']}: use 1-10 (0: no filter)")
+    aq = v["sensors"]["acquisition"]
     if aq["filter"] != "none" and aq["filter_order"] > 0 and not 0.0 < aq["filter_cutoff_hz"]:
         bad("sensors.acquisition.filter_cutoff_hz", "must be > 0")
-    for key, x in (("sensors.attitude_3dm.rate_hz", sensors["attitude_3dm"]["rate_hz"]),
-                   ("sensors.ranging.rate_hz", sensors["ranging"]["rate_hz"]),
-                   ("filter.rate_hz", v["filter"]["rate_hz"])):  # fmt: skip
-        if not x > 0.0:
-            bad(key, f"{x}: a rate must be > 0")
-
-
-_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def config_for(scenario: Scenario) -> DropConfig:
-    """:meth:`DropConfig.from_scenario`, built once per scenario object (scenarios are read-only)."""
-    cfg = _CACHE.get(scenario)
-    if cfg is None:
-        cfg = _CACHE[scenario] = DropConfig.from_scenario(scenario)
-    return cfg

@@ -75,14 +75,13 @@ def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None) -> 
     return checks
 
 
-def input_health(scenario, paths) -> dict:
+def input_health(settings, paths) -> dict:
     """``health_report`` of :func:`input_checks` after reading and validating the drop-test
-    telemetry ``paths`` of ``scenario`` (raises the readers' located errors) — what can be said
-    before the filter runs (the fuzz suite's fast path)."""
-    from workbench.problems.droptest.lander import load_lander
+    telemetry ``paths`` of a run with ``settings`` (``DropSettings``; raises the readers' located
+    errors) — what can be said before the filter runs (the fuzz suite's fast path)."""
     from workbench.problems.droptest.telemetry import load_drop_telemetry
 
-    tel = load_drop_telemetry(scenario, paths, load_lander(scenario.path_of("vehicle.lander")))
+    tel = load_drop_telemetry(settings, paths)
     return health_report(input_checks(tel))
 
 

@@ -28,15 +28,18 @@ Each face is stored ``[a, b, c]`` with outward (counter-clockwise seen from outs
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from workbench.io.scenario import ScenarioError
+from workbench.io.schema import REQUIRED, Key, Schema, Table, read_toml
+
 __all__ = [
     "FACE_NAMES",
+    "LANDER_SCHEMA",
     "LanderModel",
     "load_lander",
     "tetrahedron_body",
@@ -239,182 +242,272 @@ def airbag_mesh(model: LanderModel, subdivisions: int = 2) -> trimesh.Trimesh:
     return trimesh.util.concatenate(lobe_meshes(model, subdivisions))
 
 
-# --------------------------------------------------------------------------- TOML loading
+# --------------------------------------------------------------------------- reading the asset
+
+#: The lander asset (``[vehicle] lander``, e.g. ``assets/landers/mer_drop_lander.toml``), read by
+#: :func:`load_lander` (listed with the drop test's other schemas in :mod:`.config`).  Cross-field
+#: rules stay there as code (the layout given one way or the other, ``cm_height_m < height_m``, the
+#: inertia symmetric positive definite, ``standoff_m`` above minus the lobe radius, one face per lobe).
+LANDER_SCHEMA = Schema(
+    "lander",
+    "drop-test lander asset",
+    (
+        Table(
+            "lander",
+            "the rigid lander in its own lander frame L",
+            (
+                Key("name", "str", REQUIRED, meaning="human-readable name"),
+                Key("mass_kg", "float", REQUIRED, "kg", "total mass", gt=0.0),
+                Key(
+                    "inertia_kgm2",
+                    "list",
+                    REQUIRED,
+                    "kg m²",
+                    "3 × 3 inertia about the CM, in L's axes; symmetric positive definite",
+                ),
+                Key(
+                    "vertices_m",
+                    "list",
+                    None,
+                    "m",
+                    "4 × [x, y, z]: the tetrahedron in L, base vertices 0, 1, 2, then the apex 3. The side face "
+                    "opposite vertex 0 is `side_PY`, opposite 2 `side_PX`, opposite 1 `side_MX` (the bag names)",
+                ),
+                Key(
+                    "cm_m",
+                    "vec3",
+                    None,
+                    "m",
+                    "the centre of mass in L; required with `vertices_m`, must lie inside the body; absent: L's origin",
+                ),
+                Key(
+                    "height_m",
+                    "float",
+                    None,
+                    "m",
+                    "instead of `vertices_m`, the MER layout: closed height (+Z towards the apex, a base-edge "
+                    "midpoint on +Y, L's origin on the axis `cm_height_m` above the base)",
+                    gt=0.0,
+                ),
+                Key("base_side_m", "float", None, "m", "MER layout: side of the equilateral base", gt=0.0),
+                Key("cm_height_m", "float", None, "m", "MER layout: CM above the base, below `height_m`", gt=0.0),
+            ),
+        ),
+        Table(
+            "airbags",
+            "the four airbags (one per face) and their gas",
+            (
+                Key("bags", "int", REQUIRED, meaning="number of bags: 4 (one per tetrahedron face)", ge=4, le=4),
+                Key("lobe_diameter_m", "float", REQUIRED, "m", "lobe sphere diameter", gt=0.0),
+                Key(
+                    "lobes_per_bag",
+                    "int",
+                    None,
+                    meaning="the 3-2-1 'billiard rack': 6 (required unless `lobe_centers_m` is given)",
+                    ge=6,
+                    le=6,
+                ),
+                Key(
+                    "lobe_spacing_m",
+                    "list",
+                    None,
+                    "m",
+                    "rack: lobe centre spacing, one number for every face or one per face in bag order `base, "
+                    "side_PY, side_PX, side_MX` (required with the rack)",
+                    gt=0.0,
+                ),
+                Key(
+                    "standoff_m",
+                    "list",
+                    None,
+                    "m",
+                    "lobe inner surface to its face, > −lobe radius (negative = lobes wrap the lander); one "
+                    "number or one per face as `lobe_spacing_m` (required with the rack; with `lobe_centers_m` "
+                    "only reported, absent = 0)",
+                ),
+                Key(
+                    "lobe_centers_m",
+                    "list",
+                    None,
+                    "m",
+                    "instead of the rack: n × [x, y, z], every lobe centre in L",
+                ),
+                Key(
+                    "lobe_faces",
+                    "list",
+                    None,
+                    meaning='with `lobe_centers_m`: the face of each lobe (`"base"`, `"side_PY"`, … or 0–3)',
+                ),
+                Key(
+                    "pressure_pa",
+                    "float",
+                    REQUIRED,
+                    "Pa",
+                    "initial absolute inflation pressure (truth simulator)",
+                    gt=0.0,
+                ),
+                Key("gas_volume_m3", "float", REQUIRED, "m³", "shared gas volume of the vented bags", gt=0.0),
+                Key("gamma", "float", REQUIRED, "1", "ratio of specific heats of the inflation gas", gt=0.0),
+                Key(
+                    "damping_pa_s_per_m",
+                    "float",
+                    REQUIRED,
+                    "Pa s/m",
+                    "fabric/venting damping, pressure-equivalent per m/s of penetration rate",
+                ),
+                Key("friction", "float", REQUIRED, "1", "Coulomb friction coefficient airbag/ramp"),
+            ),
+        ),
+        Table(
+            "chamber",
+            "the test chamber",
+            (Key("ambient_pressure_pa", "float", REQUIRED, "Pa", "chamber pressure (truth simulator)"),),
+        ),
+        Table(
+            "instruments",
+            "sensor positions (required table)",
+            free="vec3",
+            free_meaning="sensor position in L [m]: accelerometer triads by name, `gyro`",
+        ),
+    ),
+    noun="lander asset",
+    intro="Keys of a drop-test lander asset (`[vehicle] lander`)",
+)
 
 
-def _get(table: dict, dotted: str, path: Path):
-    cur = table
-    for part in dotted.split("."):
-        if not isinstance(cur, dict) or part not in cur:
-            raise ValueError(f"{path}: missing key '{dotted}'")
-        cur = cur[part]
-    return cur
+def _per_face(v: list, key: str, path: Path) -> np.ndarray:
+    """A per-face value as the schema returned it (a number was made a list of one) -> (4,)."""
+    if len(v) == 1:
+        v = v * len(FACE_NAMES)
+    if len(v) != len(FACE_NAMES) or any(isinstance(x, bool) or not isinstance(x, int | float) for x in v):
+        raise ScenarioError(path, key, f"must be a number or one per face ({', '.join(FACE_NAMES)})")
+    return np.array(v, dtype=float)
 
 
-def _num(table: dict, dotted: str, path: Path, positive: bool = True) -> float:
-    v = _get(table, dotted, path)
-    if isinstance(v, bool) or not isinstance(v, int | float):
-        raise ValueError(f"{path}: key '{dotted}' must be a number, got {v!r}")
-    v = float(v)
-    if positive and not v > 0.0:
-        raise ValueError(f"{path}: key '{dotted}' must be > 0, got {v}")
-    return v
-
-
-def _array(table: dict, dotted: str, path: Path, shape: tuple[int, ...]) -> np.ndarray:
-    v = _get(table, dotted, path)
+def _matrix(v, key: str, path: Path, shape: tuple[int, ...], what: str) -> np.ndarray:
     try:
         a = np.array(v, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{path}: key '{dotted}' must be numbers of shape {list(shape)} [m]") from exc
-    if a.shape != shape or not np.all(np.isfinite(a)):
-        raise ValueError(f"{path}: key '{dotted}' must be finite numbers of shape {list(shape)}, got {v!r}")
+    except (TypeError, ValueError):
+        raise ScenarioError(path, key, f"must be {what}") from None
+    if (shape and a.shape != shape) or not np.all(np.isfinite(a)):
+        raise ScenarioError(path, key, f"must be {what}, got {v!r}"[:300])
     return a
 
 
-def _per_face(table: dict, dotted: str, path: Path, positive: bool) -> np.ndarray:
-    """A number, or one per face (4, in the order of FACE_NAMES) -> (4,)."""
-    v = _get(table, dotted, path)
-    if isinstance(v, list):
-        if len(v) != len(FACE_NAMES) or any(isinstance(x, bool) or not isinstance(x, int | float) for x in v):
-            raise ValueError(f"{path}: key '{dotted}' must be a number or one per face ({', '.join(FACE_NAMES)})")
-        a = np.array(v, dtype=float)
-    else:
-        a = np.full(len(FACE_NAMES), _num(table, dotted, path, positive=positive))
-    if positive and not np.all(a > 0.0):
-        raise ValueError(f"{path}: key '{dotted}' must be > 0, got {v}")
-    return a
+#: keys whose value is one number for every face or one per face (the schema's kind is a list)
+_PER_FACE_KEYS = ("lobe_spacing_m", "standoff_m")
 
 
 def load_lander(path: str | Path) -> LanderModel:
-    """Read a lander asset (TOML, SI units, body frame B) into a :class:`LanderModel`.
+    """Read a lander asset (TOML, lengths in m, the lander frame L) into a :class:`LanderModel`
+    (everything in B: L's axes, origin at the CM).
 
-    Expected tables/keys (see ``assets/landers/mer_drop_lander.toml`` and ``workbench/io/FORMATS.md``,
-    "Lander asset"): ``[lander]`` name, either height_m, base_side_m, cm_height_m (the MER layout)
-    or vertices_m (4 x [x, y, z] in the lander frame L: base vertices, then the apex), optional cm_m
-    (the CM in L; required with vertices_m), mass_kg, inertia_kgm2 (3x3 in L's axes about the CM,
-    symmetric positive definite); ``[airbags]`` bags (= 4), lobe_diameter_m, and either
-    lobes_per_bag (= 6), lobe_spacing_m and standoff_m (> -lobe radius; each one number or one per
-    face) or lobe_centers_m (n x [x, y, z] in L) with lobe_faces (face of each lobe), pressure_pa,
-    gas_volume_m3, gamma, damping_pa_s_per_m, friction; ``[chamber]`` ambient_pressure_pa;
-    ``[instruments]`` name = [x, y, z] positions in L [m].  Everything is returned in B (L's axes,
-    origin at the CM).
-
-    Raises ``FileNotFoundError`` if the file is missing and ``ValueError`` naming the file and
-    the key for malformed TOML, missing keys or bad values.
+    The keys, their types, defaults and bounds are :data:`LANDER_SCHEMA`
+    (FORMATS.md, "Drop-test lander asset and setup file"); the rules between keys are checked here:
+    either ``vertices_m`` (with ``cm_m``) or the MER layout ``height_m``, ``base_side_m``,
+    ``cm_height_m`` (``cm_height_m < height_m``); the inertia symmetric positive definite; either the
+    3-2-1 rack (``lobes_per_bag``, ``lobe_spacing_m``, ``standoff_m`` > −lobe radius) or
+    ``lobe_centers_m`` with ``lobe_faces``.  Every error (missing file, invalid TOML, unknown key with
+    a "did you mean", out-of-range value) is a :class:`ScenarioError` naming the file and the key.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"lander asset not found: {path}")
-    try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: invalid TOML: {exc}") from exc
+    raw = read_toml(path)
+    at_raw = raw.get("airbags")
+    if isinstance(at_raw, dict):  # one number for every face: the schema's list kind holds it as [x]
+        for k in _PER_FACE_KEYS:
+            x = at_raw.get(k)
+            if isinstance(x, int | float) and not isinstance(x, bool):
+                at_raw[k] = [x]
+    data = LANDER_SCHEMA.validate(raw, path)
+    if "instruments" not in raw:
+        raise ScenarioError(path, "instruments", "missing (required table of a lander asset)")
+    lt, at = data["lander"], data["airbags"]
 
-    name = str(_get(data, "lander.name", path))
-    lt = data.get("lander", {})
-    legacy = [k for k in ("height_m", "base_side_m", "cm_height_m") if k in lt]
-    if "vertices_m" in lt:
+    legacy = [k for k in ("height_m", "base_side_m", "cm_height_m") if lt[k] is not None]
+    if lt["vertices_m"] is not None:
         if legacy:
-            raise ValueError(
-                f"{path}: give either 'lander.vertices_m' (any frame) or {legacy} (the MER layout), not both"
+            raise ScenarioError(
+                path,
+                "lander.vertices_m",
+                f"give either 'vertices_m' (any frame) or {legacy} (the MER layout), not both",
             )
-        if "cm_m" not in lt:
-            raise ValueError(f"{path}: key 'lander.cm_m' is required with 'lander.vertices_m' (the CM in that frame)")
-        vertices_L = _array(data, "lander.vertices_m", path, (4, 3))
+        if lt["cm_m"] is None:
+            raise ScenarioError(path, "lander.cm_m", "required with 'lander.vertices_m' (the CM in that frame)")
+        vertices_L = _matrix(lt["vertices_m"], "lander.vertices_m", path, (4, 3), "4 finite [x, y, z] vertices [m]")
     else:
-        height = _num(data, "lander.height_m", path)
-        base_side = _num(data, "lander.base_side_m", path)
-        cm_height = _num(data, "lander.cm_height_m", path)
-        if not cm_height < height:
-            raise ValueError(f"{path}: key 'lander.cm_height_m' ({cm_height}) must be below 'lander.height_m'")
-        vertices_L = np.asarray(tetrahedron_body(height, base_side, cm_height).vertices, float)
-    cm_L = _array(data, "lander.cm_m", path, (3,)) if "cm_m" in lt else np.zeros(3)
+        for k in ("height_m", "base_side_m", "cm_height_m"):
+            if lt[k] is None:
+                raise ScenarioError(path, f"lander.{k}", "missing (the MER layout; or give 'vertices_m' and 'cm_m')")
+        if not lt["cm_height_m"] < lt["height_m"]:
+            raise ScenarioError(path, "lander.cm_height_m", f"{lt['cm_height_m']} must be below 'lander.height_m'")
+        vertices_L = np.asarray(tetrahedron_body(lt["height_m"], lt["base_side_m"], lt["cm_height_m"]).vertices, float)
+    cm_L = np.array(lt["cm_m"], float) if lt["cm_m"] is not None else np.zeros(3)
     try:
         body = tetrahedron_from_vertices(vertices_L - cm_L, origin=np.zeros(3))
     except ValueError as exc:
-        raise ValueError(f"{path}: keys 'lander.vertices_m' / 'lander.cm_m': {exc}") from exc
-    mass = _num(data, "lander.mass_kg", path)
-    try:
-        inertia = np.array(_get(data, "lander.inertia_kgm2", path), dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{path}: key 'lander.inertia_kgm2' must be a 3x3 array of numbers") from exc
-    if inertia.shape != (3, 3):
-        raise ValueError(f"{path}: key 'lander.inertia_kgm2' must be 3x3, got shape {inertia.shape}")
+        raise ScenarioError(path, "lander.vertices_m", f"(with 'lander.cm_m'): {exc}") from exc
+    inertia = _matrix(lt["inertia_kgm2"], "lander.inertia_kgm2", path, (3, 3), "a 3x3 array of numbers [kg m²]")
     if not np.allclose(inertia, inertia.T) or np.any(np.linalg.eigvalsh(inertia) <= 0.0):
-        raise ValueError(f"{path}: key 'lander.inertia_kgm2' must be symmetric positive definite")
+        raise ScenarioError(path, "lander.inertia_kgm2", "must be symmetric positive definite")
 
-    bags = int(_num(data, "airbags.bags", path))
-    if bags != 4:
-        raise ValueError(f"{path}: key 'airbags.bags' must be 4 (one per tetrahedron face), got {bags}")
-    lobe_radius = 0.5 * _num(data, "airbags.lobe_diameter_m", path)
-    at = data.get("airbags", {})
-    if "lobe_centers_m" in at:  # an explicit lobe layout, any number of lobes per face
-        cen = np.array(at["lobe_centers_m"], dtype=float) if isinstance(at["lobe_centers_m"], list) else None
-        if cen is None or cen.ndim != 2 or cen.shape[1] != 3 or not np.all(np.isfinite(cen)):
-            raise ValueError(f"{path}: key 'airbags.lobe_centers_m' must be a list of [x, y, z] in the lander frame")
-        faces_raw = at.get("lobe_faces")
+    lobe_radius = 0.5 * at["lobe_diameter_m"]
+    if at["lobe_centers_m"] is not None:  # an explicit lobe layout, any number of lobes per face
+        cen = _matrix(at["lobe_centers_m"], "airbags.lobe_centers_m", path, (), "a list of [x, y, z] in L")
+        if cen.ndim != 2 or cen.shape[1] != 3:
+            raise ScenarioError(path, "airbags.lobe_centers_m", "must be a list of [x, y, z] in the lander frame")
         try:
+            faces_raw = at["lobe_faces"] or []
             bag = np.array([FACE_NAMES.index(f) if isinstance(f, str) else int(f) for f in faces_raw], dtype=int)
         except (TypeError, ValueError) as exc:
-            raise ValueError(
-                f"{path}: key 'airbags.lobe_faces' must list, per lobe, its face ({', '.join(FACE_NAMES)} or 0-3)"
+            raise ScenarioError(
+                path, "airbags.lobe_faces", f"must list, per lobe, its face ({', '.join(FACE_NAMES)} or 0-3)"
             ) from exc
         if bag.shape != (cen.shape[0],) or np.any((bag < 0) | (bag > 3)) or len(set(bag.tolist())) != 4:
-            raise ValueError(
-                f"{path}: key 'airbags.lobe_faces' needs one face per lobe of 'lobe_centers_m' "
-                f"({cen.shape[0]}), each face 0-3 used at least once"
+            raise ScenarioError(
+                path,
+                "airbags.lobe_faces",
+                f"needs one face per lobe of 'lobe_centers_m' ({cen.shape[0]}), each face 0-3 used at least once",
             )
         centers = cen - cm_L
-        standoff = float(at.get("standoff_m", 0.0)) if not isinstance(at.get("standoff_m"), list) else 0.0
+        st = at["standoff_m"]
+        standoff = float(st[0]) if st is not None and len(st) == 1 else 0.0
     else:
-        lobes_per_bag = int(_num(data, "airbags.lobes_per_bag", path))
-        if lobes_per_bag != 6:
-            raise ValueError(
-                f"{path}: key 'airbags.lobes_per_bag' must be 6 (3-2-1 rack; other layouts: 'lobe_centers_m'), "
-                f"got {lobes_per_bag}"
-            )
-        lobe_spacing = _per_face(data, "airbags.lobe_spacing_m", path, positive=True)
-        standoffs = _per_face(data, "airbags.standoff_m", path, positive=False)
+        for k in ("lobes_per_bag", "lobe_spacing_m", "standoff_m"):
+            if at[k] is None:
+                raise ScenarioError(path, f"airbags.{k}", "missing (the 3-2-1 rack; or give 'lobe_centers_m')")
+        lobe_spacing = _per_face(at["lobe_spacing_m"], "airbags.lobe_spacing_m", path)
+        standoffs = _per_face(at["standoff_m"], "airbags.standoff_m", path)
         if np.any(standoffs <= -lobe_radius):
             # negative: the lobes wrap the lander (centres closer than one radius to the face)
-            raise ValueError(f"{path}: key 'airbags.standoff_m' must be > -lobe radius, got {standoffs}")
-        centers, bag = airbag_lobes(body, lobe_radius, lobe_spacing, standoffs, lobes_per_bag)
+            raise ScenarioError(
+                path, "airbags.standoff_m", f"must be > -lobe radius ({-lobe_radius:g} m), got {standoffs}"
+            )
+        centers, bag = airbag_lobes(body, lobe_radius, lobe_spacing, standoffs, at["lobes_per_bag"])
         standoff = float(standoffs[0]) if np.all(standoffs == standoffs[0]) else float(np.min(standoffs))
 
-    instruments_raw = _get(data, "instruments", path)
-    if not isinstance(instruments_raw, dict):
-        raise ValueError(f"{path}: key 'instruments' must be a table")
     instruments: dict[str, np.ndarray] = {}
-    for key, val in instruments_raw.items():
-        try:
-            arm = np.array(val, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{path}: key 'instruments.{key}' must be [x, y, z] in metres") from exc
-        if arm.shape != (3,):
-            raise ValueError(f"{path}: key 'instruments.{key}' must be [x, y, z], got shape {arm.shape}")
-        arm = arm - cm_L
+    for key, arm in data["instruments"].items():
+        arm = np.asarray(arm, float) - cm_L
         arm.setflags(write=False)
         instruments[str(key)] = arm
 
     for arr in (inertia, centers, bag, cm_L):
         arr.setflags(write=False)
     return LanderModel(
-        name=name,
-        mass=mass,
+        name=lt["name"],
+        mass=lt["mass_kg"],
         inertia_B=inertia,
         body=body,
         lobe_centers_B=centers,
         lobe_radius=lobe_radius,
         lobe_bag=bag,
-        pressure_pa=_num(data, "airbags.pressure_pa", path),
-        gas_volume_m3=_num(data, "airbags.gas_volume_m3", path),
-        gamma=_num(data, "airbags.gamma", path),
-        damping=_num(data, "airbags.damping_pa_s_per_m", path, positive=False),
-        friction=_num(data, "airbags.friction", path, positive=False),
+        pressure_pa=at["pressure_pa"],
+        gas_volume_m3=at["gas_volume_m3"],
+        gamma=at["gamma"],
+        damping=at["damping_pa_s_per_m"],
+        friction=at["friction"],
         standoff=standoff,
-        ambient_pressure_pa=_num(data, "chamber.ambient_pressure_pa", path, positive=False),
+        ambient_pressure_pa=data["chamber"]["ambient_pressure_pa"],
         instruments=instruments,
         cm_L=cm_L,
     )

@@ -18,30 +18,18 @@ full   error       quantity                                                 fram
 31+3j  30+3j       b_j — bias of accelerometer triad j [m/s²] (constants)  body
 =====  ==========  ======================================================  =========
 
-The accelerometer biases are the second augmentation. Per-triad biases of the datasheet's size
-(0.005 g after zeroing), left unmodelled, made the IMU-only max stroke biased (+2 cm mean over
-100 seeds) and over-confident (max-stroke ANEES 1.64, band 0.74–1.30). While the lander hangs
-still (zero-velocity updates, known gravity) the triad-to-triad differences and the vertical
-common mode are observable; the horizontal common mode trades off against tilt, a correlation
-the filter now carries.
-
-The first 19 are REDLand's. The gyro error matrix is our augmentation: the CFX gyro is specified
-to ±3 %, and over ~900 °/s of tumbling at impact an unmodelled 1 % scale error tilts the attitude
-by ~1° (measured: 8σ over the filter's claimed tilt σ); a 0.05° axis misalignment couples
-~0.7 °/s across axes at those rates, which left the rate estimate over-confident (rate NEES ~11
-for 3 dof over 16 seeds) with scale factors alone. The triads' centripetal terms ω × (ω × r)
-and lever-arm differences make E observable during the impact.
+The first 19 states are REDLand's; the gyro error matrix E (the CFX gyro's ±3 % scale and axis
+misalignment, observable at impact through the triads' centripetal terms and lever arms) and the
+per-triad accelerometer biases (observable while hanging) are our augmentations: left out, they
+made the estimate over-confident (measurements: docs/tuning/droptest.md, "model.py").
 
 Attitude error convention: body-frame small angle, ``q_true = q_est ⊗ exp(δθ)``.
 
 **Deviation from the paper, on purpose:** REDLand carries the non-gravitational acceleration
-in inertial (SPF) coordinates. In an EKF that form couples δa and δθ in every triad Jacobian
-(H_θ = [C_B_I a ×]); each update moves the linearisation point off the unobservable heading
-direction and the filter gains *spurious* heading information. Measured on the synthetic drop:
-heading 1σ fell from 2.8° to 1.4° with nothing observing heading, and the heading error sat at
-4σ, giving a 0.9 m (4.4σ) cross-ramp position error. Carrying a in the **body** frame makes the
-triad model linear in it (H_θ = 0) and keeps heading exactly unobservable, as in a strapdown INS.
-The inertial acceleration is ``a_I = C_I_B a_B`` for plots.
+in inertial (SPF) coordinates; in an EKF that couples δa and δθ in every triad Jacobian and the
+filter gains spurious heading information (docs/tuning/droptest.md, "model.py").  Carrying a in
+the **body** frame makes the triad model linear in it (H_θ = 0) and keeps heading exactly
+unobservable, as in a strapdown INS.  The inertial acceleration is ``a_I = C_I_B a_B`` for plots.
 
 Kinematic mode: ``ṗ = v``, ``v̇ = C_I_B a_B + g``, ``a_I`` a random walk (so ``a_B`` turns with
 the body: ``a_B⁺ = exp(−φ) a_B``), ``q̇ = ½ q ⊗ ω``, ``ω̇ = α``, ``α̇ = w_α``. Dynamic mode: until

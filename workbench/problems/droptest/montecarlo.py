@@ -48,8 +48,7 @@ import numpy as np
 
 from workbench.estimation.montecarlo import resolve_scheduler, run_monte_carlo
 from workbench.io import progress
-from workbench.io.scenario import Scenario
-from workbench.problems.droptest.config import config_for
+from workbench.problems.droptest.config import DropSettings
 from workbench.problems.droptest.synthetic import DROP_PARAMETER_NAMES
 
 __all__ = [
@@ -178,8 +177,8 @@ class McResult:
     )  # fmt: skip
 
 
-def run_seed(scenario: Scenario, seed: int, work_dir: str | Path) -> SeedResult:
-    """One Monte Carlo task: synthesize drop ``seed`` (a different drop per seed,
+def run_seed(settings: DropSettings, seed: int, work_dir: str | Path) -> SeedResult:
+    """One Monte Carlo task of the run with ``settings``: synthesize drop ``seed`` (a different drop per seed,
     ``synthesize_droptest(..., disperse=True)``) into a fresh subfolder of ``work_dir``,
     reconstruct (posterior-sampling seed = ``seed``), score, delete the subfolder."""
     from workbench.core.rotation import attitude_error
@@ -193,10 +192,10 @@ def run_seed(scenario: Scenario, seed: int, work_dir: str | Path) -> SeedResult:
     work.mkdir(parents=True, exist_ok=True)
     sub = Path(tempfile.mkdtemp(prefix=f"seed{int(seed):06d}_", dir=work))
     try:
-        syn = synthesize_droptest(scenario, sub, seed=int(seed), disperse=True)
+        syn = synthesize_droptest(settings, sub, seed=int(seed), disperse=True)
         truth = load_truth(syn.truth_path)
         t1 = time.perf_counter()
-        res = run_droptest(scenario, syn.telemetry, seed=int(seed))
+        res = run_droptest(settings, syn.telemetry, seed=int(seed))
         t2 = time.perf_counter()
         sc = score(res, truth)
     finally:
@@ -247,26 +246,27 @@ def run_seed(scenario: Scenario, seed: int, work_dir: str | Path) -> SeedResult:
     )
 
 
-def _seed_task(shared: tuple[Scenario, list[int], Path], k: int, _ss: None) -> SeedResult | FailedSeed:
+def _seed_task(shared: tuple[DropSettings, list[int], Path], k: int, _ss: None) -> SeedResult | FailedSeed:
     """Task k of :func:`~workbench.estimation.montecarlo.run_monte_carlo`: :func:`run_seed` of the k-th seed
     (the seed is the task's only randomness, so the executor's member seed is not used); a task that
     raises is a :class:`FailedSeed`."""
-    scenario, seeds, work = shared
+    settings, seeds, work = shared
     try:
-        return run_seed(scenario, seeds[k], work)
+        return run_seed(settings, seeds[k], work)
     except Exception as err:  # one member's failure is reported with the Monte Carlo, not fatal to it
         return FailedSeed(int(seeds[k]), f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}")
 
 
 def monte_carlo(
-    scenario: Scenario,
+    settings: DropSettings,
     seeds: Sequence[int],
     work_dir: str | Path,
     *,
     scheduler: str | None = None,
     workers: int = 1,
 ) -> McResult:
-    """Run :func:`run_seed` for every seed and stack the results (see module docstring).
+    """Run :func:`run_seed` of the run with ``settings`` (picklable: every worker receives them)
+    for every seed and stack the results (see module docstring).
 
     ``seeds`` sequence of non-negative ints (one task each); ``work_dir`` folder for the tasks'
     temporary subfolders (created if needed and then removed again; the ``seed*_`` subfolders of
@@ -286,7 +286,7 @@ def monte_carlo(
     created = not work.exists()
     work.mkdir(parents=True, exist_ok=True)
     try:
-        return _monte_carlo(scenario, seeds, work, scheduler, workers)
+        return _monte_carlo(settings, seeds, work, scheduler, workers)
     finally:
         # a member whose worker was killed (SIGKILL, out of memory) could not delete its folder; the
         # member was redone elsewhere, so what is left under work/ is an orphan: remove it, and the
@@ -298,7 +298,7 @@ def monte_carlo(
                 work.rmdir()
 
 
-def _monte_carlo(scenario: Scenario, seeds: list[int], work: Path, scheduler: str | None, workers: int) -> McResult:
+def _monte_carlo(settings: DropSettings, seeds: list[int], work: Path, scheduler: str | None, workers: int) -> McResult:
     """The body of :func:`monte_carlo` with its work folder in place."""
     # one BLAS thread in every executor (run_monte_carlo): BLAS reductions are only bitwise reproducible
     # for a fixed thread count, and two busy-waiting pools on two cores made each reconstruction ~10x
@@ -308,7 +308,7 @@ def _monte_carlo(scenario: Scenario, seeds: list[int], work: Path, scheduler: st
         run = run_monte_carlo(
             _seed_task,
             len(seeds),
-            shared=(scenario, seeds, work),
+            shared=(settings, seeds, work),
             workers=workers,
             scheduler=scheduler,
             name="droptest-seed",
@@ -321,16 +321,19 @@ def _monte_carlo(scenario: Scenario, seeds: list[int], work: Path, scheduler: st
         raise RuntimeError(
             f"droptest Monte Carlo: all {len(failed)} members failed; first: seed {failed[0].seed}: {failed[0].error}"
         )
-    return replace(stack_results(scenario, ok, executor, time.perf_counter() - t0), failed=failed)
+    return replace(
+        stack_results(settings.name, settings.filter.mode, ok, executor, time.perf_counter() - t0), failed=failed
+    )
 
 
-def stack_results(scenario: Scenario, results: Sequence[SeedResult], executor: str, total_wall_s: float) -> McResult:
-    """Stack per-seed results (in the given order) into an :class:`McResult` of ``scenario``;
-    ``executor`` describes how they ran, ``total_wall_s`` [s] the wall time of the whole run."""
+def stack_results(name: str, mode: str, results: Sequence[SeedResult], executor: str, total_wall_s: float) -> McResult:
+    """Stack per-seed results (in the given order) into an :class:`McResult` of scenario ``name``
+    (filter ``mode``); ``executor`` describes how they ran, ``total_wall_s`` [s] the wall time of
+    the whole run."""
     cols = {f.name: np.array([getattr(r, f.name) for r in results]) for f in fields(SeedResult)}
     return McResult(
-        scenario=scenario.name,
-        mode=config_for(scenario).mode,
+        scenario=name,
+        mode=mode,
         executor=executor,
         total_wall_s=float(total_wall_s),
         **cols,

@@ -55,11 +55,11 @@ from workbench.estimation.ekf import (
 from workbench.estimation.health import covariance_stats, health_markdown
 from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io import scorecard as sc
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import ScenarioError
 from workbench.problems.droptest import model as rl
-from workbench.problems.droptest.config import config_for
+from workbench.problems.droptest.config import DropSettings
 from workbench.problems.droptest.health import drop_health
-from workbench.problems.droptest.lander import LanderModel, load_lander
+from workbench.problems.droptest.lander import LanderModel
 from workbench.problems.droptest.sensors import RangingSpec
 from workbench.problems.droptest.stroke import (
     MaxStroke,
@@ -190,12 +190,13 @@ class DropResult:
 # ---------------------------------------------------------------------------------------------
 
 
-def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
-    """Initial state and covariance at the first filter time (lander hanging at rest).
+def initial_state(settings: DropSettings, tel: DropTelemetry) -> InitialState:
+    """Initial state and covariance at the first filter time (lander hanging at rest), from the
+    run's ``settings`` (3DM and gyro errors, filter priors) and the telemetry ``tel``.
 
     The 3DM unit vectors are averaged over the samples before the release event only.
     """
-    cfg = config_for(scenario)
+    cfg = settings
     att = tel.attitude
     # the 3DM reading is only valid while the lander hangs still (its tags corrected by its latency)
     hang = att.time - tel.time_shifts_s.get("attitude_3dm", 0.0) < tel.events["release"]
@@ -209,10 +210,10 @@ def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
     mag_B = att.stack(["mag.x", "mag.y", "mag.z"])[hang].mean(0)
     up_B /= np.linalg.norm(up_B)
     mag_B /= np.linalg.norm(mag_B)
-    mag_I = cfg.magnetic_field_spf
+    mag_I = cfg.chamber.magnetic_field_spf
     q0 = triad(up_B, mag_B, np.array([0.0, 0.0, 1.0]), mag_I)
-    sg = np.radians(cfg.gravity_sigma_deg)
-    sm = np.radians(cfg.magnetic_sigma_deg)
+    sg = np.radians(cfg.attitude_3dm.gravity_sigma_deg)
+    sm = np.radians(cfg.attitude_3dm.magnetic_sigma_deg)
     P_theta = triad_covariance(up_B, mag_B, sg, sm)
     hang = tel.setup["hanging"]
     p0 = np.asarray(hang["position_m"], float)
@@ -224,17 +225,17 @@ def initial_state(scenario: Scenario, tel: DropTelemetry) -> InitialState:
     x0[rl.SA] = quat_rotate(quat_conjugate(x0[rl.SQ]), -GRAVITY)  # hanging: a_ng = -g, in body axes
     P0 = np.zeros((n_e, n_e))
     P0[rl.EP, rl.EP] = sp**2 * np.eye(3)
-    P0[rl.EV, rl.EV] = cfg.velocity_sigma_mps**2 * np.eye(3)
-    P0[rl.EA, rl.EA] = cfg.accel_sigma_mps2**2 * np.eye(3)
+    P0[rl.EV, rl.EV] = cfg.filter.velocity_sigma_mps**2 * np.eye(3)
+    P0[rl.EA, rl.EA] = cfg.filter.accel_sigma_mps2**2 * np.eye(3)
     P0[rl.ETH, rl.ETH] = P_theta
-    P0[rl.EW, rl.EW] = np.radians(cfg.rate_sigma_dps) ** 2 * np.eye(3)
-    P0[rl.EAL, rl.EAL] = cfg.angular_accel_sigma**2 * np.eye(3)
+    P0[rl.EW, rl.EW] = np.radians(cfg.filter.rate_sigma_dps) ** 2 * np.eye(3)
+    P0[rl.EAL, rl.EAL] = cfg.filter.angular_accel_sigma**2 * np.eye(3)
     # gyro error matrix: scale factors on the diagonal, misalignment [rad] off it (datasheet 1σ)
-    s_sc = cfg.gyro_scale
-    s_mis = np.radians(cfg.gyro_misalignment_deg)
+    s_sc = cfg.gyro.scale
+    s_mis = np.radians(cfg.gyro.misalignment_deg)
     P0[rl.ES, rl.ES] = np.diag(np.where(np.eye(3).ravel() > 0, s_sc, s_mis) ** 2)
-    P0[rl.EBG, rl.EBG] = np.radians(cfg.gyro_bias_dps) ** 2 * np.eye(3)
-    sb = cfg.accel_bias_g * G0  # residual after zeroing, 1σ
+    P0[rl.EBG, rl.EBG] = np.radians(cfg.gyro.bias_dps) ** 2 * np.eye(3)
+    sb = cfg.accelerometer.bias_g * G0  # residual after zeroing, 1σ
     for j in range(len(tel.triads)):
         P0[rl.bias_slices(j)[1], rl.bias_slices(j)[1]] = sb**2 * np.eye(3)
     return InitialState(x0=x0, P0=P0, q0=x0[rl.SQ].copy(), P_theta=P_theta, up_B=up_B, mag_B=mag_B)
@@ -280,39 +281,41 @@ def _bungee(setup: dict, lander: LanderModel) -> rl.BungeeModel | None:
 
 
 def forward_pass(
-    scenario: Scenario, tel: DropTelemetry, init: InitialState, lander: LanderModel, *, engine: str | None = None
+    settings: DropSettings, tel: DropTelemetry, init: InitialState, *, engine: str = "numba"
 ) -> FilterStage:
-    """Run the REDLand EKF over the telemetry (see module docstring).
+    """Run the REDLand EKF over the telemetry ``tel`` from ``init`` with the run's ``settings``
+    (filter tuning, sensor noise, the lander's mass and inertia; see module docstring).
 
-    ``engine``: ``"numba"`` (default, :data:`FILTER_ENGINE`) runs the kinematic filter's IMU part
+    ``engine``: ``"numba"`` (the default; every run uses it) runs the kinematic filter's IMU part
     through the compiled recursion :func:`workbench.problems.droptest.kernel.imu_steps` (ranging
     measurements still through :func:`~workbench.estimation.ekf.apply_measurements`); ``"reference"``
     the generic :func:`~workbench.estimation.ekf.run_filter` with the Python models.  The two agree
     to floating-point noise, in both modes.
     """
-    cfg = config_for(scenario)
-    mode = cfg.mode
+    cfg = settings
+    lander = settings.lander
+    mode = cfg.filter.mode
     if mode not in ("kinematic", "dynamic"):
-        raise ScenarioError(scenario.path, "filter.mode", f"must be 'kinematic' or 'dynamic', got {mode!r}")
+        raise ScenarioError(settings.path, "filter.mode", f"must be 'kinematic' or 'dynamic', got {mode!r}")
     bungee = _bungee(tel.setup, lander) if mode == "dynamic" else None
     if mode == "dynamic" and bungee is None:
-        raise ScenarioError(scenario.path, "filter.mode", "'dynamic' needs a [bungee] table in the setup file")
+        raise ScenarioError(settings.path, "filter.mode", "'dynamic' needs a [bungee] table in the setup file")
     t_rel = tel.events["release"]
     t_cut = tel.events.get("bungee_cut", np.inf)
 
     rate = tel.rate_hz
     # per-sample noise divided by the number of samples actually averaged into each step
-    v_acc = (cfg.accel_noise_g * G0) ** 2
-    v_gyr = np.radians(cfg.gyro_noise_dps) ** 2
+    v_acc = (cfg.accelerometer.noise_g * G0) ** 2
+    v_gyr = np.radians(cfg.gyro.noise_dps) ** 2
     n_f, n_w = tel.counts
     eye3 = np.eye(3)
-    r_zupt = cfg.hang_zupt_sigma_mps**2 * np.eye(3)
+    r_zupt = cfg.filter.hang_zupt_sigma_mps**2 * np.eye(3)
 
     # process noise schedule: floor + gain * (measured jerk)^2 * dt (REDLand: raised on rapid
     # acceleration changes); angular jerk scaled by m r / J (forces at ~1 m lever arm)
-    q_a0 = cfg.q_accel
-    q_w0 = cfg.q_angular
-    gain = cfg.adaptive_gain
+    q_a0 = cfg.filter.q_accel
+    q_w0 = cfg.filter.q_angular
+    gain = cfg.filter.adaptive_gain
     dt_nom = 1.0 / rate
     s = gain * tel.jerk**2 * dt_nom
     ratio = lander.mass * 1.0 / float(np.min(np.linalg.eigvalsh(lander.inertia_B)))
@@ -339,12 +342,14 @@ def forward_pass(
     H_zupt = np.zeros((3, n_e))
     H_zupt[:, rl.EV] = np.eye(3)
 
-    ranging = _ranging_measurements(scenario, tel, lander) if tel.ranging is not None else {}
+    ranging = (
+        _ranging_measurements(RangingSpec.from_settings(cfg.ranging), tel, lander) if tel.ranging is not None else {}
+    )
 
     # the triads' declared scale-factor and misalignment errors (sensors.accelerometer.scale,
     # misalignment_deg; no states for them) as measurement noise proportional to the measured force:
     # per axis σ² = s² f_i² + m² (|f|² − f_i²) — not averaged down, the error is common to the samples
-    s2, m2 = cfg.accel_scale**2, np.radians(cfg.accel_misalignment_deg) ** 2
+    s2, m2 = cfg.accelerometer.scale**2, np.radians(cfg.accelerometer.misalignment_deg) ** 2
     f2 = tel.f_B**2
     r_sm = s2 * f2 + m2 * (np.sum(f2, axis=-1, keepdims=True) - f2)  # (n, n_triads, 3)
 
@@ -362,7 +367,6 @@ def forward_pass(
             out.append(meas)
         return out
 
-    engine = FILTER_ENGINE if engine is None else engine
     if engine not in ("numba", "reference"):
         raise ValueError(f"forward_pass: engine must be 'numba' or 'reference', got {engine!r}")
     if engine == "numba":  # the compiled recursion
@@ -385,10 +389,6 @@ def forward_pass(
             layout_for(len(tel.triads)),
         )
     return FilterStage("forward", fp.t, fp.x_post, fp.P_post, forward=fp, q_accel=q_accel, q_angular=q_angular)
-
-
-#: default engine of :func:`forward_pass`: "numba" (compiled kinematic recursion) or "reference"
-FILTER_ENGINE = "numba"
 
 
 def _forward_compiled(
@@ -510,14 +510,13 @@ def _at_time(model: Callable, dt: float) -> Callable:
     return fn
 
 
-def _ranging_measurements(scenario: Scenario, tel: DropTelemetry, lander: LanderModel) -> dict[int, list[Measurement]]:
-    """Range aiding attached to the nearest filter step and evaluated at its own time tag: the
-    odometer (rope length from the sheave to the attachment point, until the cut, plus the
+def _ranging_measurements(spec: RangingSpec, tel: DropTelemetry, lander: LanderModel) -> dict[int, list[Measurement]]:
+    """Range aiding of the instruments ``spec`` attached to the nearest filter step and evaluated
+    at its own time tag: the odometer (rope length from the sheave to the attachment point, until the cut, plus the
     odometer's zero) and radar-gun range / range rate to each gun's reflector, with each gun's noise.
     The ranging tags are corrected by the ranging stream's own lag (``tel.time_shifts_s["ranging"]``:
     its declared latency, plus the acquisition filter's delay only if it went through that filter),
     just as the IMU tags are by theirs — the two streams meet on one time line."""
-    spec = RangingSpec.from_scenario(scenario)
     rt = tel.ranging
     out: dict[int, list[Measurement]] = {}
     t_meas = rt.time - tel.time_shifts_s.get("ranging", 0.0)
@@ -648,40 +647,40 @@ def _smoothed_cross_cov(smo: FilterStage, a: int, b: int) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 
-def reconstruct(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> Iterator[object]:
-    """Run the drop-test reconstruction; yields the stages in order, the last a :class:`DropResult`.
+def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -> Iterator[object]:
+    """Run the drop-test reconstruction of a run with ``settings``; yields the stages in order, the
+    last a :class:`DropResult`.
 
     ``paths`` maps imu, attitude_3dm, events, setup (and optionally ranging) to files.
     ``seed`` drives only the posterior sampling of the stroke-σ check.
     """
-    cfg = config_for(scenario)  # unknown or mistyped keys are errors before any work
-    lander = load_lander(scenario.path_of("vehicle.lander"))
-    tel = load_drop_telemetry(scenario, paths, lander)
+    lander = settings.lander
+    tel = load_drop_telemetry(settings, paths)
     rocks = tel.setup.get("rocks")
     surface = ramp_surface(
-        angle_deg=cfg.ramp_angle_deg,
-        nail_depth=cfg.nail_depth_m,
+        angle_deg=settings.chamber.ramp_angle_deg,
+        nail_depth=settings.chamber.nail_depth_m,
         rocks=None
         if not rocks
         else (np.asarray(rocks["centers_m"], float).reshape(-1, 3), np.asarray(rocks["radii_m"], float).reshape(-1)),
     )
     yield tel
-    init = initial_state(scenario, tel)
+    init = initial_state(settings, tel)
     yield init
     try:
-        fwd = forward_pass(scenario, tel, init, lander)
+        fwd = forward_pass(settings, tel, init)
     except np.linalg.LinAlgError as err:
-        raise np.linalg.LinAlgError(f"forward EKF pass: {err}{likely_keys(scenario, err)}") from err
+        raise np.linalg.LinAlgError(f"forward EKF pass: {err}{likely_keys(settings, err)}") from err
     yield fwd
     try:
         sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
     except np.linalg.LinAlgError as err:
-        raise np.linalg.LinAlgError(f"RTS smoother: {err}{likely_keys(scenario, err)}") from err
+        raise np.linalg.LinAlgError(f"RTS smoother: {err}{likely_keys(settings, err)}") from err
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
     yield smo
     st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))
     yield st
-    yield DropResult(tel, init, fwd, smo, st, summarize(scenario, tel, fwd, smo, st))
+    yield DropResult(tel, init, fwd, smo, st, summarize(settings, tel, fwd, smo, st))
 
 
 #: error-state component -> the scenario setting that sets its prior σ or process noise
@@ -697,10 +696,10 @@ _ERROR_STATE_KEYS = (
 )
 
 
-def likely_keys(scenario: Scenario, err: Exception) -> str:
+def likely_keys(settings: DropSettings, err: Exception) -> str:
     """The scenario settings behind a numerical failure: those of the error-state components the
     error names (``CovarianceError.components``), and any σ set to 0 (an error declared absent)."""
-    cfg = config_for(scenario)
+    cfg = settings
     keys = []
     for c in getattr(err, "components", ()):
         for sl, key in _ERROR_STATE_KEYS:
@@ -711,12 +710,12 @@ def likely_keys(scenario: Scenario, err: Exception) -> str:
     zero = [
         name
         for name, v in (
-            ("[sensors.gyro] bias_dps", cfg.gyro_bias_dps),
-            ("[sensors.gyro] scale", cfg.gyro_scale),
-            ("[sensors.gyro] misalignment_deg", cfg.gyro_misalignment_deg),
-            ("[sensors.accelerometer] bias_g", cfg.accel_bias_g),
-            ("[filter] q_accel", cfg.q_accel),
-            ("[filter] q_angular", cfg.q_angular),
+            ("[sensors.gyro] bias_dps", cfg.gyro.bias_dps),
+            ("[sensors.gyro] scale", cfg.gyro.scale),
+            ("[sensors.gyro] misalignment_deg", cfg.gyro.misalignment_deg),
+            ("[sensors.accelerometer] bias_g", cfg.accelerometer.bias_g),
+            ("[filter] q_accel", cfg.filter.q_accel),
+            ("[filter] q_angular", cfg.filter.q_angular),
         )
         if v == 0.0
     ]
@@ -724,21 +723,21 @@ def likely_keys(scenario: Scenario, err: Exception) -> str:
     if keys:
         out += f"; likely scenario setting: {', '.join(keys)}"
     if zero:
-        out += f"; set to 0 in {scenario.path}: {', '.join(zero)}"
+        out += f"; set to 0 in {settings.path}: {', '.join(zero)}"
     return out
 
 
-def run_droptest(scenario: Scenario, paths: dict[str, Path], seed: int = 0) -> DropResult:
+def run_droptest(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -> DropResult:
     """Run :func:`reconstruct` to the end without observers and return the :class:`DropResult`."""
     result = None
-    for stage in reconstruct(scenario, paths, seed):
+    for stage in reconstruct(settings, paths, seed):
         result = stage
     assert isinstance(result, DropResult)
     return result
 
 
-def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: FilterStage, st: StrokeStage) -> dict:
-    """Key numbers of the reconstruction (SI units; no truth involved)."""
+def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo: FilterStage, st: StrokeStage) -> dict:
+    """Key numbers of the reconstruction of a run with ``settings`` (SI units; no truth involved)."""
     ms = st.max
     fp = fwd.forward
     innov = {}
@@ -771,8 +770,8 @@ def summarize(scenario: Scenario, tel: DropTelemetry, fwd: FilterStage, smo: Fil
     eig_min = float(np.min(cov_stats[2]))
     sym = float(np.max(cov_stats[0]))
     return {
-        "scenario": scenario.name,
-        "mode": config_for(scenario).mode,
+        "scenario": settings.name,
+        "mode": settings.filter.mode,
         "steps": int(tel.t.size),
         "filter_rate_hz": float(1.0 / np.median(np.diff(tel.t))),
         "group_delay_s": tel.group_delay_s,

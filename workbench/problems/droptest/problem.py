@@ -18,7 +18,7 @@ from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
-from workbench.problems.droptest.config import SCHEMA, config_for
+from workbench.problems.droptest.config import LANDER_SCHEMA, SCHEMA, SETUP_SCHEMA, DropSettings
 from workbench.problems.droptest.telemetry import OPTIONAL_STREAMS, telemetry_paths
 
 __all__ = ["TELEMETRY_FILES", "DropTestProblem", "key_moments", "residual_names"]
@@ -33,16 +33,16 @@ TELEMETRY_FILES = {
 }
 
 
-def residual_names(scenario: Scenario) -> list[str]:
-    """Names of the measurement residual groups the scenario's filter has (blueprint panels):
+def residual_names(settings: DropSettings) -> list[str]:
+    """Names of the measurement residual groups the run's filter has (blueprint panels):
     the accelerometer triads, ``gyro``, ``zupt``, and with ``[sensors.ranging]`` the odometer and
     ``<gun>.range``/``<gun>.rate`` per radar gun."""
-    cfg = config_for(scenario)
-    names = [*cfg.triads, "gyro", "zupt"]
-    if cfg.ranging:
-        if cfg.odometer:
+    names = [*settings.accelerometer.triads, "gyro", "zupt"]
+    rg = settings.ranging
+    if rg.enabled:
+        if rg.odometer:
             names.append("odometer")
-        for gname in cfg.radar_guns:
+        for gname in rg.radar_guns:
             names += [f"{gname}.range", f"{gname}.rate"]
     return names
 
@@ -148,27 +148,30 @@ class DropTestProblem:
     kind = "droptest"
     title = "drop"
     schema = SCHEMA
+    #: the other input file kinds a drop test reads (FORMATS.md tables)
+    file_schemas = (LANDER_SCHEMA, SETUP_SCHEMA)
     #: modules of the cached numba kernels (truth forces, filter recursion): compiled in a child
     #: process on a checkout's first run (:mod:`workbench.problems.precompile`)
     compiled_modules = ("workbench.problems.droptest.truth_fast", "workbench.problems.droptest.kernel")
 
-    def settings(self, scenario: Scenario) -> Scenario:
-        """TRANSITIONAL (issue 25): the scenario itself, until this package builds frozen settings."""
-        return scenario
+    def settings(self, scenario: Scenario) -> DropSettings:
+        """The frozen settings of the run (:meth:`DropSettings.from_scenario`: the scenario
+        validated, the lander asset read); the only place below the runner that sees the scenario."""
+        return DropSettings.from_scenario(scenario)
 
-    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
+    def telemetry_files(self, settings: DropSettings, folder: Path | None = None) -> dict[str, Path]:
         """``[telemetry]`` files (imu, attitude_3dm, events, setup, optional ranging), or the
         standard names in ``folder`` (ranging only if the file exists)."""
         if folder is None:
-            return telemetry_paths(scenario)
+            return telemetry_paths(settings)
         d = Path(folder)
         return {k: d / f for k, f in TELEMETRY_FILES.items() if k not in OPTIONAL_STREAMS or (d / f).exists()}
 
-    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+    def synthesize(self, settings: DropSettings, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the drop (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
         from workbench.problems.droptest.synthetic import synthesize_droptest
 
-        syn = synthesize_droptest(scenario, out_dir, seed=seed)
+        syn = synthesize_droptest(settings, out_dir, seed=seed)
         return Synthesized(telemetry=dict(syn.telemetry), truth=syn.truth_path)
 
     def load_truth(self, path: Path) -> dict[str, np.ndarray]:
@@ -177,9 +180,11 @@ class DropTestProblem:
 
         return load_truth(path)
 
-    def reconstruct(self, scenario: Scenario, telemetry: Mapping[str, Path], options: RunOptions) -> Iterator[object]:
+    def reconstruct(
+        self, settings: DropSettings, telemetry: Mapping[str, Path], options: RunOptions
+    ) -> Iterator[object]:
         """``pipeline.reconstruct``; ``options.seed`` drives the posterior sampling of the stroke σ."""
-        return dt.reconstruct(scenario, dict(telemetry), seed=0 if options.seed is None else options.seed)
+        return dt.reconstruct(settings, dict(telemetry), seed=0 if options.seed is None else options.seed)
 
     def summary(self, result: dt.DropResult) -> dict:
         """A copy of ``result.summary`` (SI)."""
@@ -197,10 +202,10 @@ class DropTestProblem:
         """``pipeline.scorecard_markdown``."""
         return dt.scorecard_markdown(summary)
 
-    def estimator(self, scenario: Scenario) -> str:
-        """The size of the scenario's filter, for ``workbench list``: ``"EKF: 42 error states (43 full)"``
+    def estimator(self, settings: DropSettings) -> str:
+        """The size of the run's filter, for ``workbench list``: ``"EKF: 42 error states (43 full)"``
         (``model.sizes`` of its triads, so the number follows the code)."""
-        n_x, n_e = rl.sizes(len(config_for(scenario).triads))
+        n_x, n_e = rl.sizes(len(settings.accelerometer.triads))
         return f"EKF: {n_e} error states ({n_x} full)"
 
     def headline(self, summary: dict) -> str:
@@ -212,15 +217,15 @@ class DropTestProblem:
         return line
 
     @contextlib.contextmanager
-    def open_recording(self, path: Path, scenario: Scenario, truth: Any, properties: dict) -> Iterator[_Drawer]:
+    def open_recording(self, path: Path, settings: DropSettings, truth: Any, properties: dict) -> Iterator[_Drawer]:
         """The drop-test recording (``recording.droptest_blueprint`` layout)."""
         from workbench.problems.droptest.recording import droptest_blueprint
         from workbench.recording.writer import open_recording
 
-        residuals = residual_names(scenario)
-        triads = list(config_for(scenario).triads)
+        residuals = residual_names(settings)
+        triads = list(settings.accelerometer.triads)
         bp = droptest_blueprint(residuals, triads=triads)
-        with open_recording(path, scenario.name, blueprint=bp, properties=properties) as rec:
+        with open_recording(path, settings.name, blueprint=bp, properties=properties) as rec:
             yield _Drawer(rec, truth, residuals, triads)
 
     def export_columns(self, result: dt.DropResult) -> ExportTable:
@@ -239,14 +244,14 @@ class DropTestProblem:
         cols["sigma_stroke"] = (result.stroke.smoothed.sigma, "m")
         return ExportTable(result.smoothed.t, cols, "SPF chamber frame")
 
-    def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
+    def monte_carlo(self, settings: DropSettings, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
         """Consistency statistics of a synthetic scenario over ``options.seeds`` (truth inside 3σ,
         ANEES); writes ``<out>/<name>_mc.rrd`` and works in ``<out>/<name>_mc_work``."""
         from workbench.problems.droptest.montecarlo import monte_carlo, summarize_mc
         from workbench.problems.droptest.recording_mc import record_monte_carlo
 
-        if not scenario.is_synthetic:
-            raise NotImplementedError(f"{scenario.path}: Monte Carlo needs a synthetic droptest scenario")
+        if not settings.run.synthetic:
+            raise NotImplementedError(f"{settings.path}: Monte Carlo needs a synthetic droptest scenario")
         out = Path(out_dir)
         seeds = options.seeds
         how = options.scheduler or f"{options.workers} local worker(s)"
@@ -256,11 +261,12 @@ class DropTestProblem:
                 "note: every drop-test Monte Carlo member is already a different drop flown by "
                 "the truth simulator (synthetic.disperse_drop); --truth-sim changes nothing here"
             )
+        name = settings.name
         res = monte_carlo(
-            scenario, seeds, out / f"{scenario.name}_mc_work", scheduler=options.scheduler, workers=options.workers
+            settings, seeds, out / f"{name}_mc_work", scheduler=options.scheduler, workers=options.workers
         )
         summary = summarize_mc(res)
-        rrd = record_monte_carlo(out / f"{scenario.name}_mc.rrd", f"{scenario.name} Monte Carlo", res, summary)
+        rrd = record_monte_carlo(out / f"{name}_mc.rrd", f"{name} Monte Carlo", res, summary)
         first = summary["failed_members"][0] if summary["n_failed"] else {}
         failed = (
             f"{summary['n_failed']} of {len(seeds)} members FAILED (first: seed {first.get('seed')}: "

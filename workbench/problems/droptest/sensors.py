@@ -18,13 +18,13 @@ Functions here produce *measurements from truth* (synthetic scenarios) and the m
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import butter, filtfilt, lfilter, lfilter_zi
 
-from workbench.core.rotation import quat_conjugate, quat_from_rotvec, quat_multiply, quat_rotate
-from workbench.problems.droptest.config import config_for
+from workbench.core.rotation import quat_conjugate, quat_from_rotvec, quat_rotate
+from workbench.problems.droptest.config import Ranging
 
 __all__ = [
     "ImuErrorModel",
@@ -132,11 +132,6 @@ def tilt_unit_vectors(u: np.ndarray, sigma: float, rng: np.random.Generator, n: 
     return out[0] if n is None else out
 
 
-def body_rate_increment(q: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
-    """``q ⊗ exp(ω dt)`` for (n,4), (n,3); helper for tests of the gyro model."""
-    return quat_multiply(q, quat_from_rotvec(w * dt))
-
-
 @dataclass(frozen=True)
 class RangingSpec:
     """Range-aiding instruments of a scenario's ``[sensors.ranging]`` table (SI units).
@@ -158,28 +153,25 @@ class RangingSpec:
     range_sigma: float
     rate_sigma: float
     rate_hz: float
-    reflectors_L: dict[str, np.ndarray] = field(default_factory=dict)
-    range_sigmas: dict[str, float] = field(default_factory=dict)
-    rate_sigmas: dict[str, float] = field(default_factory=dict)
-    odometer_zero: float = 0.0
+    reflectors_L: dict[str, np.ndarray]
+    range_sigmas: dict[str, float]
+    rate_sigmas: dict[str, float]
+    odometer_zero: float
 
     @classmethod
-    def from_scenario(cls, scenario) -> RangingSpec:
-        """Read ``[sensors.ranging]`` of a :class:`workbench.io.scenario.Scenario` (validated,
-        defaults from :data:`workbench.problems.droptest.config.SCHEMA`)."""
-        cfg = config_for(scenario)
+    def from_settings(cls, r: Ranging) -> RangingSpec:
+        """The instruments of the run's ``[sensors.ranging]`` settings (:class:`~workbench.problems.
+        droptest.config.Ranging`), in SI units."""
         return cls(
-            odometer=cfg.odometer,
-            odometer_sigma=cfg.odometer_sigma_m,
-            guns=dict(cfg.radar_guns),
-            reflector_B=np.asarray(cfg.reflector_body_m),
-            range_sigma=cfg.radar_range_sigma_m,
-            rate_sigma=cfg.radar_rate_sigma_mps,
-            rate_hz=cfg.ranging_rate_hz,
-            reflectors_L={
-                g: np.asarray(cfg.gun_reflectors_body_m.get(g, cfg.reflector_body_m)) for g in cfg.radar_guns
-            },
-            range_sigmas={g: cfg.gun_range_sigma_m.get(g, cfg.radar_range_sigma_m) for g in cfg.radar_guns},
-            rate_sigmas={g: cfg.gun_rate_sigma_mps.get(g, cfg.radar_rate_sigma_mps) for g in cfg.radar_guns},
-            odometer_zero=cfg.odometer_zero_m,
+            odometer=r.odometer,
+            odometer_sigma=r.odometer_sigma_m,
+            guns=dict(r.radar_guns),
+            reflector_B=np.asarray(r.reflector_body_m),
+            range_sigma=r.radar_range_sigma_m,
+            rate_sigma=r.radar_rate_sigma_mps,
+            rate_hz=r.rate_hz,
+            reflectors_L={g: np.asarray(p) for g, p in r.reflectors_body_m.items()},
+            range_sigmas=dict(r.range_sigma_m),
+            rate_sigmas=dict(r.rate_sigma_mps),
+            odometer_zero=r.odometer_zero_m,
         )

@@ -127,8 +127,8 @@ class Surface:
 
 
 def ramp_surface(
-    angle_deg: float = 60.0,
-    nail_depth: float = 0.3,
+    angle_deg: float,
+    nail_depth: float,
     rocks: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Surface:
     """The SPF ramp in the SPF chamber frame (origin at the trigger nail, Z up, Y toward the ramp).
@@ -150,7 +150,7 @@ def rock_field(
     surface: Surface,
     rng: np.random.Generator,
     extent: tuple[tuple[float, float], tuple[float, float]],
-    spacing: float = 1.0,
+    spacing: float,
     size_range: tuple[float, float] = (0.2, 0.5),
     center_height: float = 0.5,
     jitter: float = 0.2,

@@ -3,8 +3,9 @@
 The truth (``problems.droptest.truth``) is turned into instrument readings (``problems.droptest.sensors``) and
 written to CSV/TOML files in the documented user format (``io/FORMATS.md``):
 
-* ``imu.csv`` — four accelerometer triads [g] and the rate gyro [deg/s] at the IDDAS rate,
-  from a few tenths of a second before release (the lander hanging) to the end of the event;
+* ``imu.csv`` — the accelerometer triads [g] (``[sensors.accelerometer] triads``) and the rate
+  gyro [deg/s] at the IDDAS rate, from a few tenths of a second before release (the lander
+  hanging) to the end of the event;
 * ``3dm.csv`` — the 3DM gravity and magnetic unit vectors (body frame) while hanging;
 * ``events.csv`` — release command and the nail microswitch (bungee cut);
 * ``setup.toml`` — surveyed hanging position of the CM (with its 1σ) and the bungee test plan;
@@ -28,10 +29,9 @@ import numpy as np
 
 from workbench.core.bodies import G0
 from workbench.core.rotation import quat_conjugate, quat_rotate, quat_to_dcm
-from workbench.io.scenario import Scenario
 from workbench.io.telemetry import atomic_write_text, write_events, write_telemetry
-from workbench.problems.droptest.config import config_for
-from workbench.problems.droptest.lander import LanderModel, load_lander
+from workbench.problems.droptest.config import Accelerometer, Chamber, DropSettings, Gyro, Synthetic
+from workbench.problems.droptest.lander import LanderModel
 from workbench.problems.droptest.sensors import (
     ImuErrorModel,
     RangingSpec,
@@ -41,7 +41,7 @@ from workbench.problems.droptest.sensors import (
     tilt_unit_vectors,
 )
 from workbench.problems.droptest.surface import Surface, ramp_surface, rock_field
-from workbench.problems.droptest.truth import C_MARS_SPF, DropTestConfig, DropTruth, simulate_drop
+from workbench.problems.droptest.truth import DropTestConfig, DropTruth, mars_from_spf, simulate_drop
 
 __all__ = [
     "SyntheticDrop",
@@ -50,17 +50,15 @@ __all__ = [
     "DROP_PARAMETER_NAMES",
     "synthesize_droptest",
     "disperse_drop",
-    "drop_config_for",
+    "drop_config",
     "drop_rng",
     "drop_parameters",
     "PSI",
-    "lander_for",
-    "surface_for",
+    "surface_of",
     "truth_for",
+    "dispersed_truth",
     "load_truth",
 ]
-
-TRIADS = ("BP", "PYBP", "PXBP", "MXBP")
 
 
 @dataclass(frozen=True)
@@ -71,39 +69,28 @@ class SyntheticDrop:
     truth_path: Path
 
 
-def lander_for(scenario: Scenario) -> LanderModel:
-    """The lander asset named by ``[vehicle] lander`` (path relative to the scenario file)."""
-    return load_lander(scenario.path_of("vehicle.lander"))
-
-
-def surface_for(scenario: Scenario) -> Surface:
-    """The ramp of ``[chamber]`` (angle [deg], nail depth [m]) in the SPF frame, with the rock
-    field of ``[chamber.rocks]`` if present (seed, extent_m = [[u0, u1], [v0, v1]] in the ramp
-    plane: u across, v up-slope, from the foot of the nail; REDLand: 0.2–0.5 m rocks ~1 m apart)."""
-    cfg = config_for(scenario)
-    surf = ramp_surface(angle_deg=cfg.ramp_angle_deg, nail_depth=cfg.nail_depth_m)
-    if cfg.rocks:
-        ext = cfg.rocks_extent_m
-        surf = rock_field(
-            surf,
-            np.random.default_rng(cfg.rocks_seed),
-            extent=((float(ext[0][0]), float(ext[0][1])), (float(ext[1][0]), float(ext[1][1]))),
-            spacing=cfg.rocks_spacing_m,
-        )
+def surface_of(chamber: Chamber) -> Surface:
+    """The ramp of the ``[chamber]`` settings (angle [deg], nail depth [m]) in the SPF frame, with
+    its rock field if ``chamber.rocks`` is set (seed, extent [[u0, u1], [v0, v1]] in the ramp plane:
+    u across, v up-slope, from the foot of the nail; REDLand: 0.2–0.5 m rocks ~1 m apart)."""
+    surf = ramp_surface(angle_deg=chamber.ramp_angle_deg, nail_depth=chamber.nail_depth_m)
+    if chamber.rocks is not None:
+        rk = chamber.rocks
+        surf = rock_field(surf, np.random.default_rng(rk.seed), extent=rk.extent_m, spacing=rk.spacing_m)
     return surf
 
 
-def drop_config_for(scenario: Scenario) -> DropTestConfig:
-    """The scenario's own (fixed, documented) drop: the truth simulator's settings from ``[synthetic]``."""
-    cfg = config_for(scenario)
-    psi = cfg.bag_pressure_psi
+def drop_config(syn: Synthetic) -> DropTestConfig:
+    """The scenario's own (fixed, documented) drop: the truth simulator's settings from the
+    ``[synthetic]`` settings ``syn`` (bag pressure psi -> Pa)."""
+    psi = syn.bag_pressure_psi
     return DropTestConfig(
-        impact_parallel_speed=cfg.impact_parallel_mps,
-        impact_normal_speed=cfg.impact_normal_mps,
-        release_euler123_deg=tuple(float(a) for a in cfg.release_euler123_deg),
-        release_to_contact_s=cfg.release_to_contact_s,
-        pre_release_s=cfg.pre_release_s,
-        bungee_truth_scale=cfg.bungee_truth_scale,
+        impact_parallel_speed=syn.impact_parallel_mps,
+        impact_normal_speed=syn.impact_normal_mps,
+        release_euler123_deg=tuple(float(a) for a in syn.release_euler123_deg),
+        release_to_contact_s=syn.release_to_contact_s,
+        pre_release_s=syn.pre_release_s,
+        bungee_truth_scale=syn.bungee_truth_scale,
         pressure_pa=None if psi is None else float(psi) * PSI,
     )
 
@@ -135,10 +122,11 @@ class DropEnvelope:
       orientation of the base triangle);
     * timing: the whole sequence lasts "less than 2.5 seconds" and the bungee is cut about 0.05 s
       before contact.  The bungee can only pull toward the ramp, and the speed along the ramp is
-      mostly gained from gravity (``g sin α`` along a ramp of inclination α), so the time from
-      release to contact cannot exceed about ``v_parallel / (g sin α)``; it is drawn as the fraction
+      mostly gained from gravity (``g sin α`` along a ramp of inclination α, the rig's own
+      ``[chamber] ramp_angle_deg``), so the time from release to contact cannot exceed about
+      ``v_parallel / (g sin α)``; it is drawn as the fraction
       ``contact_time_fraction`` of that time (engineering choice that keeps the bungee design
-      feasible: 0.7–0.8 gives 0.8–1.5 s);
+      feasible: 0.7–0.8 gives 0.8–1.5 s on the 60° ramp);
     * bungee: the count and the stretch are *solved* per drop by the test engineer's energy
       calculation (:func:`~workbench.problems.droptest.truth.design_release`), not drawn; the true
       stiffness relative to the test plan is drawn in ``bungee_truth_scale`` (engineering choice: a
@@ -152,7 +140,6 @@ class DropEnvelope:
     yaw_deg: float = 60.0
     contact_time_fraction: tuple[float, float] = (0.70, 0.80)
     bungee_truth_scale: tuple[float, float] = (0.97, 1.06)
-    ramp_angle_deg: float = 60.0
 
 
 #: the envelope used by the Monte Carlo (see :class:`DropEnvelope` for its source)
@@ -179,10 +166,11 @@ DROP_PARAMETER_NAMES: tuple[str, ...] = (
 def disperse_drop(
     base: DropTestConfig,
     rng: np.random.Generator,
+    ramp_angle_deg: float,
     envelope: DropEnvelope = REDLAND_ENVELOPE,
-    lander: LanderModel | None = None,
 ) -> DropTestConfig:
-    """Draw one drop of the test envelope around ``base`` (the scenario's drop).
+    """Draw one drop of the test envelope around ``base`` (the scenario's drop) for a rig whose
+    ramp is inclined ``ramp_angle_deg`` [deg] (``[chamber] ramp_angle_deg``).
 
     Every draw is uniform, in this order, from ``rng``:
 
@@ -195,23 +183,21 @@ def disperse_drop(
     * ``pressure_pa`` [Pa] in ``envelope.pressure_psi`` (1.0–1.3 psi absolute, the test spec),
       unless ``base.pressure_pa`` is set (a scenario's deliberate off-spec pressure is kept);
     * ``release_to_contact_s`` [s] = f · v_parallel / (g sin α), f in
-      ``envelope.contact_time_fraction`` (0.70–0.80; α = ``envelope.ramp_angle_deg``, 60°);
+      ``envelope.contact_time_fraction`` (0.70–0.80; α = ``ramp_angle_deg``, the rig's ramp);
     * ``bungee_truth_scale`` [1] in ``envelope.bungee_truth_scale`` (0.97–1.06).
 
     The release point, bungee count and rope direction follow from these targets by
     :func:`~workbench.problems.droptest.truth.design_release` inside the truth simulation (a
-    solved quantity, reported by :func:`drop_parameters`).  ``lander`` is unused (kept for
-    envelopes that depend on it).  Sources and reasons of every range: :class:`DropEnvelope`.
-    Returns a new :class:`DropTestConfig`; ``base`` is unchanged.
+    solved quantity, reported by :func:`drop_parameters`).  Sources and reasons of every range:
+    :class:`DropEnvelope`.  Returns a new :class:`DropTestConfig`; ``base`` is unchanged.
     """
-    del lander
     e = envelope
     vn = float(rng.uniform(*e.normal_mps))
     vp = float(rng.uniform(*e.parallel_mps))
     tilt = rng.uniform(-e.tilt_deg, e.tilt_deg, 2)
     yaw = float(rng.uniform(-e.yaw_deg, e.yaw_deg))
     psi = float(rng.uniform(*e.pressure_psi))
-    t_c = float(rng.uniform(*e.contact_time_fraction)) * vp / (G0 * np.sin(np.radians(e.ramp_angle_deg)))
+    t_c = float(rng.uniform(*e.contact_time_fraction)) * vp / (G0 * np.sin(np.radians(ramp_angle_deg)))
     scale = float(rng.uniform(*e.bungee_truth_scale))
     r0, p0, y0 = (float(a) for a in base.release_euler123_deg)
     return replace(
@@ -231,18 +217,19 @@ def drop_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(1,)))
 
 
-def drop_parameters(truth: DropTruth, lander: LanderModel) -> np.ndarray:
-    """The drawn and solved parameters of a simulated drop, in :data:`DROP_PARAMETER_NAMES` order:
-    target impact speeds [m/s], release attitude (1-2-3) [deg], bag pressure [psi], release to
-    contact [s], true bungee scale [1], solved bungee count (test plan), the truth's normal and
-    along-ramp CM speeds at first contact [m/s] and the solved release point (SPF y, z) [m]."""
+def drop_parameters(truth: DropTruth, lander: LanderModel, surface: Surface) -> np.ndarray:
+    """The drawn and solved parameters of a simulated drop on ``surface``, in
+    :data:`DROP_PARAMETER_NAMES` order: target impact speeds [m/s], release attitude (1-2-3) [deg],
+    bag pressure [psi], release to contact [s], true bungee scale [1], solved bungee count (test
+    plan), the truth's normal and along-ramp CM speeds at first contact [m/s] (in the ramp's Mars
+    frame) and the solved release point (SPF y, z) [m]."""
     c = truth.config
     pa = lander.pressure_pa if c.pressure_pa is None else c.pressure_pa
     ev = truth.events
     vn = vp = np.nan
     if "first_contact" in ev:
         v = np.array([np.interp(ev["first_contact"], truth.t, truth.v_I[:, i]) for i in range(3)])
-        vm = C_MARS_SPF @ v
+        vm = mars_from_spf(surface) @ v
         vn, vp = float(-vm[2]), float(np.hypot(vm[0], vm[1]))
     return np.array(
         [
@@ -262,18 +249,19 @@ def drop_parameters(truth: DropTruth, lander: LanderModel) -> np.ndarray:
     )
 
 
-_TRUTH_CACHE: dict[tuple, tuple[DropTruth, LanderModel]] = {}
+#: per-process memo of :func:`truth_for` (at most 8 drops; a cache, not a setting)
+_TRUTH_CACHE: dict[tuple, DropTruth] = {}
 
 
-def truth_for(scenario: Scenario, drop: DropTestConfig | None = None) -> tuple[DropTruth, LanderModel, Surface]:
+def truth_for(settings: DropSettings, drop: DropTestConfig | None = None) -> tuple[DropTruth, LanderModel, Surface]:
     """Truth simulation of a drop (deterministic; cached per process, keyed by lander file, drop
-    configuration and surface including rocks): ``drop`` (default the scenario's ``[synthetic]``
-    drop, :func:`drop_config_for`) on the scenario's lander and surface."""
-    surf = surface_for(scenario)
-    lander_path = str(scenario.path_of("vehicle.lander"))
-    cfg = drop_config_for(scenario) if drop is None else drop
+    configuration and surface including rocks): ``drop`` (default the run's ``[synthetic]`` drop,
+    :func:`drop_config`) on the settings' lander and surface."""
+    surf = surface_of(settings.chamber)
+    lander = settings.lander
+    cfg = drop_config(settings.synthetic) if drop is None else drop
     key = (
-        lander_path,
+        str(settings.lander_file),
         cfg,
         surf.point.tobytes(),
         surf.normal.tobytes(),
@@ -281,51 +269,50 @@ def truth_for(scenario: Scenario, drop: DropTestConfig | None = None) -> tuple[D
         surf.rock_radii.tobytes(),
     )
     if key not in _TRUTH_CACHE:
-        lander = load_lander(lander_path)
         if len(_TRUTH_CACHE) >= 8:
             _TRUTH_CACHE.pop(next(iter(_TRUTH_CACHE)))
-        _TRUTH_CACHE[key] = (simulate_drop(cfg, lander, surf), lander)
-    truth, lander = _TRUTH_CACHE[key]
-    return truth, lander, surf
+        _TRUTH_CACHE[key] = simulate_drop(cfg, lander, surf)
+    return _TRUTH_CACHE[key], lander, surf
 
 
-def _dispersed_truth(scenario: Scenario, seed: int, attempts: int = 5) -> tuple[DropTruth, LanderModel, Surface]:
-    """Truth of drop ``seed`` drawn by :func:`disperse_drop`; a draw whose bungee design is
-    infeasible (``design_release`` raises) is redrawn from the same stream, at most ``attempts`` times."""
+def dispersed_truth(settings: DropSettings, seed: int, attempts: int = 5) -> tuple[DropTruth, LanderModel, Surface]:
+    """Truth of Monte Carlo drop ``seed`` drawn by :func:`disperse_drop` (for the settings' own
+    ramp angle); a draw whose bungee design is infeasible (``design_release`` raises) is redrawn
+    from the same stream, at most ``attempts`` times."""
     rng = drop_rng(seed)
-    base = drop_config_for(scenario)
+    base = drop_config(settings.synthetic)
     err: ValueError | None = None
     for _ in range(attempts):
         try:
-            return truth_for(scenario, disperse_drop(base, rng))
+            return truth_for(settings, disperse_drop(base, rng, settings.chamber.ramp_angle_deg))
         except ValueError as exc:  # the test engineer would pick another drop
             err = exc
-    raise ValueError(f"{scenario.path}: no feasible drop in {attempts} draws for seed {seed}: {err}")
+    raise ValueError(f"{settings.path}: no feasible drop in {attempts} draws for seed {seed}: {err}")
 
 
-def _imu_models(scenario: Scenario) -> tuple[ImuErrorModel, ImuErrorModel]:
-    cfg = config_for(scenario)
-    acc = ImuErrorModel(
-        noise=cfg.accel_noise_g * G0,
-        bias=cfg.accel_bias_g * G0,
-        scale=cfg.accel_scale,
-        misalignment=np.radians(cfg.accel_misalignment_deg),
-        full_scale=cfg.accel_full_scale_g * G0,
+def _imu_models(acc: Accelerometer, gyro: Gyro) -> tuple[ImuErrorModel, ImuErrorModel]:
+    """The accelerometer and gyro error models (SI) of the sensor settings."""
+    acc_model = ImuErrorModel(
+        noise=acc.noise_g * G0,
+        bias=acc.bias_g * G0,
+        scale=acc.scale,
+        misalignment=np.radians(acc.misalignment_deg),
+        full_scale=acc.full_scale_g * G0,
     )
-    gyr = ImuErrorModel(
-        noise=np.radians(cfg.gyro_noise_dps),
-        bias=np.radians(cfg.gyro_bias_dps),
-        scale=cfg.gyro_scale,
-        misalignment=np.radians(cfg.gyro_misalignment_deg),
-        full_scale=np.radians(cfg.gyro_full_scale_dps),
+    gyr_model = ImuErrorModel(
+        noise=np.radians(gyro.noise_dps),
+        bias=np.radians(gyro.bias_dps),
+        scale=gyro.scale,
+        misalignment=np.radians(gyro.misalignment_deg),
+        full_scale=np.radians(gyro.full_scale_dps),
     )
-    return acc, gyr
+    return acc_model, gyr_model
 
 
 def synthesize_droptest(
-    scenario: Scenario, out_dir: str | Path, seed: int | None = None, disperse: bool = False
+    settings: DropSettings, out_dir: str | Path, seed: int | None = None, disperse: bool = False
 ) -> SyntheticDrop:
-    """Simulate a drop and write its telemetry files into ``out_dir``.
+    """Simulate a drop of the run with ``settings`` and write its telemetry files into ``out_dir``.
 
     ``seed`` (default ``[synthetic] seed``) drives every sensor-side draw through
     ``default_rng(seed)``: sensor noise, bias, scale factor and misalignment, 3DM vector errors,
@@ -335,29 +322,28 @@ def synthesize_droptest(
     so every seed is a different drop.  The drawn parameters are saved in ``truth.npz``
     (``drop_parameters``, ``drop_parameter_names``).
     """
-    cfg = config_for(scenario)  # unknown or mistyped keys are errors before the simulation
+    cfg = settings
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    seed = int(cfg.seed if seed is None else seed)
+    seed = int(cfg.synthetic.seed if seed is None else seed)
     rng = np.random.default_rng(seed)
     if disperse:
-        truth, lander, surf = _dispersed_truth(scenario, seed)
+        truth, lander, surf = dispersed_truth(settings, seed)
     else:
-        truth, lander, surf = truth_for(scenario)
-    acc_model, gyr_model = _imu_models(scenario)
+        truth, lander, surf = truth_for(settings)
+    acc_model, gyr_model = _imu_models(cfg.accelerometer, cfg.gyro)
     fs_sim = truth.config.output_rate_hz
-    fs = cfg.sample_rate_hz
-    cutoff = cfg.filter_cutoff_hz
-    order = cfg.filter_order
-    kind = cfg.acquisition_filter
+    aq = cfg.acquisition
+    fs, cutoff, order, kind = aq.sample_rate_hz, aq.cutoff_hz, aq.order, aq.filter
     decim = int(round(fs_sim / fs))
     if abs(decim * fs - fs_sim) > 1e-6:
-        raise ValueError(f"{scenario.path}: sensors.acquisition.sample_rate_hz must divide {fs_sim} Hz")
+        raise ValueError(f"{settings.path}: sensors.acquisition.sample_rate_hz must divide {fs_sim} Hz")
 
     t_imu = truth.t[::decim]
     channels: dict[str, tuple[np.ndarray, str]] = {}
     drawn: dict[str, dict] = {}
-    for name in TRIADS:
+    triads = cfg.accelerometer.triads  # the scenario's triads, each at its lever arm in the asset
+    for name in triads:
         r = lander.instruments[name]
         f_true = specific_force_at(r, truth.a_ng_I, truth.q_I_B, truth.w_B, truth.alpha_B)
         f_filt = acquisition_filter(f_true, fs_sim, cutoff, order, kind)[::decim]
@@ -387,11 +373,11 @@ def synthesize_droptest(
     }
 
     # 3DM while hanging: gravity (accelerometer set measures -g => "up") and magnetic field
-    m_spf = cfg.magnetic_field_spf  # required, as in the reconstruction
+    m_spf = cfg.chamber.magnetic_field_spf  # required, as in the reconstruction
     m_spf = m_spf / np.linalg.norm(m_spf)
-    sg = np.radians(cfg.gravity_sigma_deg)
-    sm = np.radians(cfg.magnetic_sigma_deg)
-    rate3 = cfg.attitude_3dm_rate_hz
+    sg = np.radians(cfg.attitude_3dm.gravity_sigma_deg)
+    sm = np.radians(cfg.attitude_3dm.magnetic_sigma_deg)
+    rate3 = cfg.attitude_3dm.rate_hz
     n3 = max(2, int(truth.config.pre_release_s * rate3 * 0.8))
     t3 = -truth.config.pre_release_s + np.arange(n3) / rate3
     q_B_I = quat_conjugate(truth.q_release)
@@ -421,7 +407,7 @@ def synthesize_droptest(
     paths["events"] = write_events(out / "events.csv", ev)
 
     # setup: surveyed hanging position and the bungee test plan
-    sig_survey = cfg.survey_sigma_m
+    sig_survey = cfg.synthetic.survey_sigma_m
     p_survey = truth.p_release + rng.normal(0.0, sig_survey, 3)
     rig = truth.nominal_rig
     fmt = lambda v: "[" + ", ".join(f"{float(x):.6f}" for x in v) + "]"  # noqa: E731
@@ -444,8 +430,8 @@ def synthesize_droptest(
         setup += f"radii_m = {fmt(surf.rock_radii)}\n"
     paths["setup"] = atomic_write_text(out / "setup.toml", setup)
 
-    if cfg.ranging:
-        paths["ranging"] = _write_ranging(scenario, truth, out, rng, lander)
+    if cfg.ranging.enabled:
+        paths["ranging"] = _write_ranging(RangingSpec.from_settings(cfg.ranging), truth, out, rng, lander)
 
     truth_path = out / "truth.npz"
     np.savez_compressed(
@@ -462,12 +448,12 @@ def synthesize_droptest(
         body_penetration=truth.body_penetration,
         event_names=np.array(list(truth.events)),
         event_times=np.array(list(truth.events.values())),
-        accel_bias=np.array([drawn[n]["bias"] for n in TRIADS]),
+        accel_bias=np.array([drawn[n]["bias"] for n in triads]),
         gyro_bias=drawn["gyro"]["bias"],
         gyro_scale=drawn["gyro"]["scale"],
         gyro_error_matrix=drawn["gyro"]["matrix"],
         seed=seed,
-        drop_parameters=drop_parameters(truth, lander),
+        drop_parameters=drop_parameters(truth, lander, surf),
         drop_parameter_names=np.array(DROP_PARAMETER_NAMES),
         dispersed=disperse,
     )
@@ -475,9 +461,9 @@ def synthesize_droptest(
 
 
 def _write_ranging(
-    scenario: Scenario, truth: DropTruth, out: Path, rng: np.random.Generator, lander: LanderModel
+    spec: RangingSpec, truth: DropTruth, out: Path, rng: np.random.Generator, lander: LanderModel
 ) -> Path:
-    spec = RangingSpec.from_scenario(scenario)
+    """Write ``ranging.csv`` of the instruments ``spec`` along ``truth`` (noise from ``rng``)."""
     step = int(round(truth.config.output_rate_hz / spec.rate_hz))
     idx = np.arange(0, truth.t.size, step)
     t = truth.t[idx]

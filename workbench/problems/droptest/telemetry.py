@@ -10,18 +10,17 @@ row (:mod:`workbench.io.telemetry`), degradations (saturation, dead channels, ga
 from __future__ import annotations
 
 import difflib
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from workbench.core.bodies import G0
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import ScenarioError
+from workbench.io.schema import read_toml
 from workbench.io.telemetry import Problem, Telemetry, TelemetryError, read_events, read_telemetry
 from workbench.io.units import likely_unit
-from workbench.problems.droptest.config import config_for
-from workbench.problems.droptest.lander import LanderModel
+from workbench.problems.droptest.config import SETUP_SCHEMA, DropSettings
 from workbench.problems.droptest.sensors import RangingSpec, acquisition_group_delay
 
 __all__ = ["STREAMS", "OPTIONAL_STREAMS", "DropTelemetry", "telemetry_paths", "read_setup", "load_drop_telemetry"]
@@ -78,15 +77,23 @@ class DropTelemetry:
 # ---------------------------------------------------------------------------------------------
 
 
-def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
-    """Telemetry files named by the scenario's ``[telemetry]`` table, resolved against the scenario
-    file: ``imu``, ``attitude_3dm``, ``events``, ``setup`` required (a missing key or file raises
-    :class:`ScenarioError` naming it), ``ranging`` optional."""
-    config_for(scenario)  # unknown or mistyped keys are errors before any file is opened
-    paths = {k: scenario.path_of(f"telemetry.{k}") for k in STREAMS if k not in OPTIONAL_STREAMS}
-    for k in OPTIONAL_STREAMS:
-        if scenario.has(f"telemetry.{k}"):
-            paths[k] = scenario.path_of(f"telemetry.{k}")
+def telemetry_paths(settings: DropSettings) -> dict[str, Path]:
+    """The telemetry files of the settings' ``[telemetry]`` table (absolute paths): ``imu``,
+    ``attitude_3dm``, ``events``, ``setup`` required (a missing key or file raises
+    :class:`ScenarioError` naming the scenario file and the key), ``ranging`` optional."""
+    paths = {}
+    for k in STREAMS:
+        p = settings.telemetry.get(k)
+        if p is None:
+            if k in OPTIONAL_STREAMS:
+                continue
+            given = ", ".join(n for n, q in settings.telemetry.items() if q is not None)
+            raise ScenarioError(
+                settings.path, f"telemetry.{k}", f"missing str value{'; keys here: ' + given if given else ''}"
+            )
+        if not p.exists():
+            raise ScenarioError(settings.path, f"telemetry.{k}", f"file not found: {p}")
+        paths[k] = p
     return paths
 
 
@@ -97,31 +104,35 @@ ODOMETER_BUNGEE_KEYS = ("anchor_m", "attach_body_m")
 
 
 def read_setup(path: Path, bungee_keys: tuple[str, ...] | None = None) -> dict:
-    """The drop-test setup TOML (``[hanging]`` survey, optional ``[bungee]`` test plan and ``[rocks]``
-    field); a missing required key raises :class:`ScenarioError` naming file and key.
+    """The drop setup file (``[hanging]`` survey, optional ``[bungee]`` test plan and ``[rocks]``
+    field) validated against :data:`~workbench.problems.droptest.config.SETUP_SCHEMA`: an unknown
+    key, a wrong type or a value out of bounds raises :class:`ScenarioError` naming file and key.
+    Returns the nested dict; a table the file does not have is absent, and of ``[bungee]`` only the
+    keys the file gives are present.
 
     ``bungee_keys``: the ``[bungee]`` keys the run needs (then the table is required); None: when a
     ``[bungee]`` table is given it must be complete (:data:`BUNGEE_KEYS`)."""
-    try:
-        with open(path, "rb") as f:
-            d = tomllib.load(f)
-    except (OSError, tomllib.TOMLDecodeError) as err:
-        raise ScenarioError(path, None, f"cannot read the setup file: {err}") from err
-    required = ["hanging.position_m", "hanging.position_sigma_m"]
+    raw = read_toml(path)
+    d = SETUP_SCHEMA.validate(raw, path, optional=("rocks",))
+    for table in ("bungee", "rocks"):
+        if table not in raw:
+            del d[table]
+    if "bungee" in d:
+        d["bungee"] = {k: x for k, x in d["bungee"].items() if x is not None}
     if bungee_keys is None and "bungee" in d:  # complete when given
         bungee_keys = BUNGEE_KEYS
-    required += [f"bungee.{k}" for k in bungee_keys or ()]
-    for key in required:
-        a, b = key.split(".")
-        if not isinstance(d.get(a), dict) or b not in d[a]:
-            raise ScenarioError(path, key, "missing")
+    for k in bungee_keys or ():
+        if k not in d.get("bungee", {}):
+            raise ScenarioError(path, f"bungee.{k}", "missing")
     return d
 
 
-def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> list[tuple[float, str, str]]:
+def check_units_at_rest(
+    imu: Telemetry, t_release: float, triads: tuple[str, ...], gyro_noise_dps: float, fname: str
+) -> list[tuple[float, str, str]]:
     """Unit plausibility from physics while the lander hangs still (IMU samples before
-    ``t_release`` [s]): every triad's mean specific force magnitude is 1 g and the gyro reads ≈ 0
-    with a scatter of its declared noise (``cfg.gyro_noise_dps``).  A mismatch by a unit-like
+    ``t_release`` [s]): every one of the ``triads``' mean specific force magnitude is 1 g and the
+    gyro reads ≈ 0 with a scatter of its declared noise (``gyro_noise_dps`` [deg/s], 1σ).  A mismatch by a unit-like
     factor (9.81, 57.3, 1000 ...: :func:`~workbench.io.units.likely_unit`) is a
     :class:`TelemetryError` naming the file, the column and the likely unit; a mismatch by
     another factor (beyond ±30 % for the triads) is returned as a WARN degradation
@@ -131,7 +142,7 @@ def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> li
     if hang.sum() < 20:
         return out
     problems = []
-    for n in cfg.triads:
+    for n in triads:
         cols = [f"{n}.{a}" for a in "xyz"]
         if not all(c in imu.channels for c in cols):
             continue
@@ -151,10 +162,10 @@ def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> li
             else:
                 out.append((float(t_release), "WARN", f"{fname}: {what}"))
     cols = [f"gyro.{a}" for a in "xyz"]
-    if all(c in imu.channels for c in cols) and cfg.gyro_noise_dps > 0:
+    if all(c in imu.channels for c in cols) and gyro_noise_dps > 0:
         w = imu.stack(cols)[hang]
         spread = float(np.sqrt(np.mean(np.var(w, axis=0))))
-        ratio = spread / np.radians(cfg.gyro_noise_dps)
+        ratio = spread / np.radians(gyro_noise_dps)
         unit = imu.units[cols[0]]
         likely = likely_unit(ratio, unit, rtol=0.3) if abs(np.log(ratio)) > np.log(3.0) else None
         if likely:
@@ -165,7 +176,7 @@ def check_units_at_rest(imu: Telemetry, t_release: float, cfg, fname: str) -> li
                     None,
                     None,
                     f"the hanging gyro scatters {ratio:.3g}× its declared noise (sensors.gyro.noise_dps = "
-                    f"{cfg.gyro_noise_dps:g}): the values look like [{likely}], not [{unit}]",
+                    f"{gyro_noise_dps:g}): the values look like [{likely}], not [{unit}]",
                 )
             )
     if problems:
@@ -222,13 +233,79 @@ def _degrade(log: list, t: float, level: str, text: str) -> None:
     log.append((float(t), level, text))
 
 
-def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: LanderModel) -> DropTelemetry:
-    """Read and validate the drop-test telemetry ``paths`` (:func:`telemetry_paths`); resample to the
-    filter rate (see :class:`DropTelemetry`)."""
-    cfg = config_for(scenario)
-    triads = cfg.triads
-    fs_acc = cfg.accel_full_scale_g * G0
-    fs_gyr = np.radians(cfg.gyro_full_scale_dps)
+def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropTelemetry:
+    """Read and validate the drop-test telemetry ``paths`` (:func:`telemetry_paths`) of a run with
+    ``settings`` (its lander's lever arms); resample to the filter rate (see :class:`DropTelemetry`).
+
+    The steps, in order (each error raised before any later file is read): read the IMU, 3DM and
+    events files (:func:`_read_imu_3dm_events`), the events (:func:`_events`), unit plausibility from
+    physics (:func:`check_units_at_rest`, :func:`check_free_fall`), the ranging file
+    (:func:`_read_ranging`), the setup file as the filter mode needs it, the triads' lever arms;
+    then the degradations (:func:`_stream_notes`, :func:`_usable_samples`), the average down to the
+    filter rate (:func:`_average_down`) and the measured jerk (:func:`_jerk_indicator`)."""
+    cfg = settings
+    lander = settings.lander
+    triads = cfg.accelerometer.triads
+    imu, att, ev_list = _read_imu_3dm_events(settings, paths)
+    att_log = _unit_vector_notes(att, paths["attitude_3dm"])
+    events, ev_log = _events(ev_list, paths["events"])
+    unit_notes = check_units_at_rest(imu, events["release"], triads, cfg.gyro.noise_dps, str(paths["imu"]))
+    unit_notes += check_free_fall(imu, events, triads, str(paths["events"]))
+    ranging, uses_odometer = _read_ranging(settings, paths["ranging"]) if "ranging" in paths else (None, False)
+    setup = read_setup(
+        paths["setup"], BUNGEE_KEYS if cfg.filter.mode == "dynamic" else ODOMETER_BUNGEE_KEYS if uses_odometer else ()
+    )
+    missing = [n for n in triads if n not in lander.instruments]
+    if missing:
+        raise ScenarioError(
+            settings.path,
+            "sensors.accelerometer.triads",
+            f"triads {missing} have no lever arm in the lander asset's [instruments]",
+        )
+
+    log = att_log + ev_log + unit_notes + _stream_notes(imu, att, ranging, events, paths["attitude_3dm"])
+    f_raw, f_ok, w_raw, w_ok = _usable_samples(settings, imu, events, paths["imu"], log)
+    t, f_B, f_cnt, w_B, w_cnt, rate = _average_down(imu, f_raw, f_ok, w_raw, w_ok, cfg.filter.rate_hz)
+    aq = cfg.acquisition
+    filter_delay = acquisition_group_delay(aq.cutoff_hz, aq.order, aq.filter)
+    delay = filter_delay + aq.latency_s  # the IMU tags' total lag behind the motion
+    t = t - delay
+    return DropTelemetry(
+        t=t,
+        f_B=f_B,
+        f_valid=f_cnt > 0,
+        w_B=w_B,
+        w_valid=w_cnt > 0,
+        hanging=t < events["release"],
+        triads=triads,
+        lever_arms_B=np.array([lander.instruments[n] for n in triads]),
+        events=events,
+        setup=setup,
+        group_delay_s=delay,
+        degradations=tuple(sorted(log)),
+        imu=imu,
+        attitude=att,
+        ranging=ranging,
+        jerk=_jerk_indicator(t, f_B, f_cnt, rate),
+        counts=(f_cnt.astype(int), w_cnt.astype(int)),
+        rate_hz=rate,
+        time_shifts_s={
+            "imu": delay,
+            "attitude_3dm": cfg.attitude_3dm.latency_s,
+            "ranging": cfg.ranging.latency_s + (filter_delay if cfg.ranging.acquisition_filter else 0.0),
+        },
+    )
+
+
+Log = list[tuple[float, str, str]]
+
+
+def _read_imu_3dm_events(settings: DropSettings, paths: dict[str, Path]) -> tuple[Telemetry, Telemetry, list]:
+    """The IMU file (the triads' specific forces and the gyro rates, with their saturation levels:
+    99.9 % of the declared full scale), the 3DM file (unit vectors) and the events list."""
+    triads = settings.accelerometer.triads
+    fs_acc = settings.accelerometer.full_scale_g * G0
+    fs_gyr = np.radians(settings.gyro.full_scale_dps)
     required = {f"{n}.{a}": "acceleration" for n in triads for a in "xyz"}
     required.update({f"gyro.{a}": "angular_rate" for a in "xyz"})
     sat = {k: (0.999 * fs_acc if k.split(".")[0] != "gyro" else 0.999 * fs_gyr) for k in required}
@@ -236,83 +313,87 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
     att = read_telemetry(
         paths["attitude_3dm"], required={f"{v}.{a}": "dimensionless" for v in ("up", "mag") for a in "xyz"}
     )
-    ev_list = read_events(paths["events"])
-    att_log: list[tuple[float, str, str]] = []
+    return imu, att, read_events(paths["events"])
+
+
+def _unit_vector_notes(att: Telemetry, path: Path) -> Log:
+    """WARN where the 3DM ``up`` / ``mag`` vectors are not unit (beyond 5 %): only their directions are used."""
+    log: Log = []
     for v in ("up", "mag"):
         norms = np.linalg.norm(att.stack([f"{v}.x", f"{v}.y", f"{v}.z"]), axis=1)
         if np.any(np.abs(norms - 1.0) > 0.05):
             k = int(np.argmax(np.abs(norms - 1.0)))
-            att_log.append(
+            log.append(
                 (
                     float(att.time[k]),
                     "WARN",
-                    f"{paths['attitude_3dm']}: '{v}' vectors are not unit (|v| = {norms.min():.3f}–"
+                    f"{path}: '{v}' vectors are not unit (|v| = {norms.min():.3f}–"
                     f"{norms.max():.3f}, worst at row {k + 1}); only their directions are used",
                 )
             )
+    return log
+
+
+def _events(ev_list: list, path: Path) -> tuple[dict[str, float], Log]:
+    """Event name -> time [s] (the first of a repeated name, WARN), unknown labels WARNed with a
+    "did you mean"; no ``release`` event is a :class:`ScenarioError` naming the events file."""
     events: dict[str, float] = {}
-    dup_log: list[tuple[float, str, str]] = []
+    log: Log = []
     for t_e, name in ev_list:
         if name in events:
-            dup_log.append(
+            log.append(
                 (
                     float(t_e),
                     "WARN",
-                    f"{paths['events']}: event '{name}' repeated at {t_e:.4f} s; "
-                    f"the first, at {events[name]:.4f} s, is used",
+                    f"{path}: event '{name}' repeated at {t_e:.4f} s; the first, at {events[name]:.4f} s, is used",
                 )
             )
             continue
         events[name] = t_e
     if "release" not in events:
-        raise ScenarioError(paths["events"], None, "no 'release' event: the reconstruction needs the release time")
+        raise ScenarioError(path, None, "no 'release' event: the reconstruction needs the release time")
     for t_e, name in ev_list:
         if name not in KNOWN_EVENTS:
             close = difflib.get_close_matches(name, KNOWN_EVENTS, n=1, cutoff=0.6)
             hint = f"; did you mean '{close[0]}'?" if close else ""
-            dup_log.append(
+            log.append(
                 (
                     float(t_e),
                     "WARN",
-                    f"{paths['events']}: unknown event label '{name}' at {t_e:.4f} s, ignored "
+                    f"{path}: unknown event label '{name}' at {t_e:.4f} s, ignored "
                     f"(known: {', '.join(KNOWN_EVENTS)}){hint}",
                 )
             )
-    unit_notes = check_units_at_rest(imu, events["release"], cfg, str(paths["imu"]))
-    unit_notes += check_free_fall(imu, events, cfg.triads, str(paths["events"]))
-    ranging = None
-    uses_odometer = False
-    if "ranging" in paths:
-        spec = RangingSpec.from_scenario(scenario)
-        req = {"odometer": "length"} if spec.odometer else {}
-        uses_odometer = spec.odometer
-        for gun in spec.guns:
-            req.update({f"{gun}.range": "length", f"{gun}.rate": "velocity"})
-        ranging = read_telemetry(paths["ranging"], required=req, sparse=[k for k in req])
-        if scenario.has("sensors.ranging.rate_hz") and len(ranging) > 2:
-            rate_file = 1.0 / float(np.median(np.diff(ranging.time)))
-            if abs(rate_file / spec.rate_hz - 1.0) > 0.1:
-                raise ScenarioError(
-                    scenario.path,
-                    "sensors.ranging.rate_hz",
-                    f"{spec.rate_hz:g} Hz, but {paths['ranging']} is sampled at {rate_file:.4g} Hz "
-                    "(median interval); correct the key or leave it out",
-                )
-    if cfg.mode == "dynamic":
-        setup = read_setup(paths["setup"], BUNGEE_KEYS)
-    elif uses_odometer:
-        setup = read_setup(paths["setup"], ODOMETER_BUNGEE_KEYS)
-    else:
-        setup = read_setup(paths["setup"], ())
-    missing = [n for n in triads if n not in lander.instruments]
-    if missing:
-        raise ScenarioError(
-            scenario.path,
-            "sensors.accelerometer.triads",
-            f"triads {missing} have no lever arm in the lander asset's [instruments]",
-        )
+    return events, log
 
-    log: list[tuple[float, str, str]] = list(att_log) + dup_log + unit_notes
+
+def _read_ranging(settings: DropSettings, path: Path) -> tuple[Telemetry, bool]:
+    """The ranging file with the channels ``[sensors.ranging]`` names (sparse columns), and whether
+    the odometer is used; a declared ``rate_hz`` off the file's median rate by more than 10 % is a
+    :class:`ScenarioError` naming the scenario key."""
+    spec = RangingSpec.from_settings(settings.ranging)
+    req = {"odometer": "length"} if spec.odometer else {}
+    for gun in spec.guns:
+        req.update({f"{gun}.range": "length", f"{gun}.rate": "velocity"})
+    ranging = read_telemetry(path, required=req, sparse=[k for k in req])
+    if settings.ranging.rate_given and len(ranging) > 2:
+        rate_file = 1.0 / float(np.median(np.diff(ranging.time)))
+        if abs(rate_file / spec.rate_hz - 1.0) > 0.1:
+            raise ScenarioError(
+                settings.path,
+                "sensors.ranging.rate_hz",
+                f"{spec.rate_hz:g} Hz, but {path} is sampled at {rate_file:.4g} Hz "
+                "(median interval); correct the key or leave it out",
+            )
+    return ranging, spec.odometer
+
+
+def _stream_notes(
+    imu: Telemetry, att: Telemetry, ranging: Telemetry | None, events: dict[str, float], att_path: Path
+) -> Log:
+    """The readers' notes of every file, a 3DM record that ends well before the release
+    (truncated?), and the gaps of the 3DM and ranging files (WARN)."""
+    log: Log = []
     for tf in (imu, att, ranging):
         if tf is not None:
             log += [(float(tf.time[-1]), "WARN", note) for note in tf.notes]
@@ -323,7 +404,7 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
                 log,
                 float(att.time[-1]),
                 "WARN",
-                f"{paths['attitude_3dm']}: the readings end {early:.3g} s before the release: truncated?",
+                f"{att_path}: the readings end {early:.3g} s before the release: truncated?",
             )
     for tf in (att, ranging):
         for gap in tf.gaps if tf is not None else ():
@@ -333,9 +414,41 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
                 "WARN",
                 f"{tf.path}: gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row})",
             )
-    n_raw = len(imu)
+    return log
+
+
+def _usable_samples(
+    settings: DropSettings, imu: Telemetry, events: dict[str, float], imu_path: Path, log: Log
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The raw triad forces ``f_raw`` (n, n_triads, 3) [m/s²] and gyro rates ``w_raw`` (n, 3)
+    [rad/s] with their usable-sample masks: saturated samples dropped, a triad with a dead channel
+    (no variation after release) excluded (ERROR), IMU gaps noted; appends to ``log``.  No usable
+    triad at all is a :class:`ScenarioError` naming the IMU file."""
+    triads = settings.accelerometer.triads
     f_raw = np.stack([imu.stack([f"{n}.x", f"{n}.y", f"{n}.z"]) for n in triads], axis=1)  # (n,4,3)
     w_raw = imu.stack(["gyro.x", "gyro.y", "gyro.z"])
+    f_ok, w_ok = _unsaturated(settings, imu, log)
+    _dead_channels(triads, imu, f_raw, f_ok, events, log)
+    if (imu.time >= events["release"]).sum() > 10 and not f_ok.any():
+        raise ScenarioError(imu_path, None, "no usable accelerometer triad (all dead)")
+    for gap in imu.gaps:
+        _degrade(
+            log,
+            gap.start_s,
+            "WARN",
+            f"IMU gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row}): "
+            "bridged by propagation, covariance grows",
+        )
+    return f_raw, f_ok, w_raw, w_ok
+
+
+def _unsaturated(settings: DropSettings, imu: Telemetry, log: Log) -> tuple[np.ndarray, np.ndarray]:
+    """The masks of unsaturated samples: per triad (n, n_triads) and for the gyro (n,) (a
+    saturated gyro axis drops the gyro sample: the rate is then carried by the lever arms)."""
+    triads = settings.accelerometer.triads
+    fs_acc = settings.accelerometer.full_scale_g * G0
+    fs_gyr = np.radians(settings.gyro.full_scale_dps)
+    n_raw = len(imu)
     f_ok = np.ones((n_raw, len(triads)), bool)
     for j, n in enumerate(triads):
         s = np.zeros(n_raw, bool)
@@ -361,7 +474,14 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
                 f"gyro.{a}: {int(s.sum())} saturated samples (±{np.degrees(fs_gyr):g} °/s); gyro dropped, "
                 "rate carried by the triads' lever arms",
             )
-    # dead channels: a channel that does not move while the others see the impact
+    return f_ok, w_ok
+
+
+def _dead_channels(
+    triads: tuple[str, ...], imu: Telemetry, f_raw: np.ndarray, f_ok: np.ndarray, events: dict, log: Log
+) -> None:
+    """Exclude (in ``f_ok``, ERROR in ``log``) a triad with a channel that does not vary after the
+    release while the others see the impact."""
     moving = imu.time >= events["release"]
     if moving.sum() > 10:
         spread = np.ptp(f_raw[moving], axis=0)  # (4,3)
@@ -377,19 +497,16 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
                     f"triad {n}: channel(s) {', '.join(dead_axes)} dead (no variation after release): "
                     "triad excluded from the reconstruction",
                 )
-        if not f_ok.any():
-            raise ScenarioError(paths["imu"], None, "no usable accelerometer triad (all dead)")
-    for gap in imu.gaps:
-        _degrade(
-            log,
-            gap.start_s,
-            "WARN",
-            f"IMU gap {gap.start_s:.4f}–{gap.end_s:.4f} s ({gap.duration_s * 1e3:.1f} ms, row {gap.row}): "
-            "bridged by propagation, covariance grows",
-        )
 
-    # average down to the filter rate (boxcar of k samples, grouped on the uniform sample grid)
-    rate_req = cfg.filter_rate_hz
+
+def _average_down(
+    imu: Telemetry, f_raw: np.ndarray, f_ok: np.ndarray, w_raw: np.ndarray, w_ok: np.ndarray, rate_req: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """Average the usable samples down to the filter rate: a boxcar of k IMU samples (k the whole
+    number nearest the requested ``rate_req`` [Hz]), grouped on the uniform sample grid.  Returns
+    the step times (n,) [s, IMU tags], the mean forces and the samples in each ``(f_B, f_cnt)``,
+    the mean rates ``(w_B, w_cnt)`` and the rate actually used [Hz]."""
+    n_raw = len(imu)
     dt_raw = float(np.median(np.diff(imu.time)))
     k = max(1, int(round(1.0 / (rate_req * dt_raw))))
     rate = 1.0 / (k * dt_raw)  # the grid actually used: a whole number k of IMU samples per step
@@ -406,14 +523,13 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
     t = np.add.reduceat(imu.time, starts) / counts
     f_B, f_cnt = avg(f_raw, f_ok)
     w_B, w_cnt = avg(w_raw, w_ok)
-    cutoff = cfg.filter_cutoff_hz
-    order = cfg.filter_order
-    filter_delay = acquisition_group_delay(cutoff, order, cfg.acquisition_filter)
-    delay = filter_delay + cfg.imu_latency_s  # the IMU tags' total lag behind the motion
-    t = t - delay
-    hanging = t < events["release"]
+    return t, f_B, f_cnt, w_B, w_cnt, rate
 
-    # measured jerk indicator (centred difference of 10 ms means of the mean triad force)
+
+def _jerk_indicator(t: np.ndarray, f_B: np.ndarray, f_cnt: np.ndarray, rate: float) -> np.ndarray:
+    """The measured jerk indicator (n,) [m/s³] that raises the process noise: the centred
+    difference of 10 ms means of the mean triad force (slots without a valid triad hold the last
+    valid mean, so no artificial jerk spike)."""
     fbar = np.where(f_cnt[..., None] > 0, f_B, np.nan)
     with np.errstate(invalid="ignore"):
         fbar = np.nanmean(fbar, axis=1)
@@ -429,28 +545,4 @@ def load_drop_telemetry(scenario: Scenario, paths: dict[str, Path], lander: Land
         d = np.zeros_like(sm)
         d[L:-L] = (sm[2 * L :] - sm[: -2 * L]) / (2 * L / rate)
         jerk = np.linalg.norm(d, axis=1)
-    return DropTelemetry(
-        t=t,
-        f_B=f_B,
-        f_valid=f_cnt > 0,
-        w_B=w_B,
-        w_valid=w_cnt > 0,
-        hanging=hanging,
-        triads=triads,
-        lever_arms_B=np.array([lander.instruments[n] for n in triads]),
-        events=events,
-        setup=setup,
-        group_delay_s=delay,
-        degradations=tuple(sorted(log)),
-        imu=imu,
-        attitude=att,
-        ranging=ranging,
-        jerk=jerk,
-        counts=(f_cnt.astype(int), w_cnt.astype(int)),
-        rate_hz=rate,
-        time_shifts_s={
-            "imu": delay,
-            "attitude_3dm": cfg.attitude_3dm_latency_s,
-            "ranging": cfg.ranging_latency_s + (filter_delay if cfg.ranging_filtered else 0.0),
-        },
-    )
+    return jerk

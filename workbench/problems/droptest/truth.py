@@ -1,21 +1,22 @@
 """Truth simulator of a MER-style airbag drop test in the SPF chamber (synthetic scenarios only).
 
 This is the *truth*, not the estimator's model: a 6-DOF rigid body (lander + airbags) released
-from hanging, pulled toward a 60° ramp by a bungee whose force is a polynomial of stretch times
-the number of bungees, cut by the hammer/nail shortly before contact, then stopped and thrown
-back by **airbag contact forces**: each airbag lobe is a sphere that flattens against the ramp;
-the force on a lobe is the gauge pressure of the bags' *shared* gas volume (the bags vent into
-each other) times the flattened contact area, plus a damping term and Coulomb friction. The gas
-is compressed adiabatically by the volume the flattened caps displace. If the bags compress far
-enough, a vertex of the rigid lander body reaches the ramp: a stiff penalty contact then acts
-and the run is a *full stroke*.
+from hanging, pulled toward the ramp (60° at the SPF; any angle here) by a bungee whose force is a
+polynomial of stretch times the number of bungees, cut by the hammer/nail shortly before contact,
+then stopped and thrown back by **airbag contact forces**: each airbag lobe is a sphere that
+flattens against the ramp; the force on a lobe is the gauge pressure of the bags' *shared* gas
+volume (the bags vent into each other) times the flattened contact area, plus a damping term and
+Coulomb friction. The gas is compressed adiabatically by the volume the flattened caps displace.
+If the bags compress far enough, a vertex of the rigid lander body reaches the ramp: a stiff
+penalty contact then acts and the run is a *full stroke*.
 
 The REDLand estimator is kinematic (it never sees these forces); the only shared items are the
 geometry of the ramp and lander and the nominal bungee test plan (used by the estimator's
 optional dynamic mode, with the truth's bungee deliberately a few per cent off nominal).
 
 Chamber (SPF) frame: origin at the trigger nail, Z up, Y toward the ramp face, X = Y × Z
-(REDLand paper, "Test facility"). Mars frame = SPF rotated by −60° about X (ramp level).
+(REDLand paper, "Test facility"). Mars frame = SPF rotated by −α about X for a ramp of
+inclination α (−60° at the SPF), the ramp level: :func:`mars_from_spf`.
 Body frame B: origin at the CM (see ``assets/landers/mer_drop_lander.toml``).
 
 References: REDLand paper (``redland-mer-airbag-droptest.txt``): test sequence, bungee model,
@@ -46,19 +47,18 @@ from workbench.problems.droptest.surface import Surface
 
 GRAVITY_SPF = np.array([0.0, 0.0, -G0])
 
-#: Default path of :func:`simulate_drop` / :func:`design_release`: True runs the compiled numba
-#: kernels of :mod:`.truth_fast`, False the pure-numpy reference (``ForceModel.evaluate`` / ``rhs``
-#: and the Python ``fly``). Both give the same trajectory to rounding (tests/problems/droptest/
-#: test_truth_fast.py).
-FAST = True
+__all__ = ["BungeeRig", "DropTestConfig", "DropTruth", "simulate_drop", "design_release", "mars_from_spf"]
 
-__all__ = ["BungeeRig", "DropTestConfig", "DropTruth", "simulate_drop", "design_release", "C_MARS_SPF"]
-
-_c60, _s60 = np.cos(np.radians(-60.0)), np.sin(np.radians(-60.0))
-#: DCM from the SPF chamber frame to the "Mars" frame (−60° about X; REDLand "Test facility").
 V_SLIP = 0.1  # friction regularisation speed [m/s]: |F_t| = μ F_n tanh(|v_t| / V_SLIP)
 
-C_MARS_SPF = np.array([[1.0, 0.0, 0.0], [0.0, _c60, -_s60], [0.0, _s60, _c60]])
+
+def mars_from_spf(surface: Surface) -> np.ndarray:
+    """DCM (3, 3) from the SPF chamber frame to the "Mars" frame of the ramp ``surface``, in which
+    the ramp is level: rows X (across the ramp), up-slope ``n × X`` and the ramp normal ``n``
+    (REDLand "Test facility": a −60° rotation about X for the SPF's 60° ramp; any ramp angle here)."""
+    n = np.asarray(surface.normal, float)
+    x = np.array([1.0, 0.0, 0.0])
+    return np.array([x, np.cross(n, x), n]) + 0.0  # + 0.0: no negative zeros
 
 
 @dataclass(frozen=True)
@@ -102,19 +102,19 @@ class DropTestConfig:
     (it flies into the catch net, which is not modelled) or at ``duration_s``.
     """
 
-    impact_parallel_speed: float = 16.0
-    impact_normal_speed: float = 12.0
-    release_euler123_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    pre_release_s: float = 0.5
+    impact_parallel_speed: float
+    impact_normal_speed: float
+    release_euler123_deg: tuple[float, float, float]
+    pre_release_s: float
+    release_to_contact_s: float
+    bungee_truth_scale: float  # true bungee stiffness / the test plan's
+    pressure_pa: float | None  # override the asset's bag pressure (full-stroke case); None: the asset's
     duration_s: float = 2.3
     cut_lead_s: float = 0.05
-    release_to_contact_s: float = 1.3
     tail_s: float = 0.35
     bungee_rest_length: float = 4.0
     bungee_coeffs: tuple[float, ...] = (900.0, 60.0, -2.0)
-    bungee_truth_scale: float = 1.03  # the real bungees are 3 % stiffer than the test plan says
     bungee_anchor_distance: float = 14.0
-    pressure_pa: float | None = None  # override the asset's bag pressure (full-stroke case)
     max_step: float = 1.0e-3
     output_rate_hz: float = 10_000.0
 
@@ -464,7 +464,7 @@ def fly_reference(
 
 
 def design_release(
-    cfg: DropTestConfig, lander: LanderModel, surface: Surface, *, fast: bool | None = None
+    cfg: DropTestConfig, lander: LanderModel, surface: Surface, *, fast: bool = True
 ) -> tuple[np.ndarray, BungeeRig, float]:
     """Find the release point and bungee count that give the target impact velocity.
 
@@ -474,16 +474,17 @@ def design_release(
     velocity at first contact (parallel, normal) and first contact at the ramp point nearest
     the nail, ``release_to_contact_s`` after release. Unknowns: release (y, z), bungee count and
     the direction of the rope run (YZ plane). Returns (p_release [m, SPF], nominal rig with its
-    hammer length, t_contact [s]). ``fast`` (default :data:`FAST`): fly the trial releases with the
-    compiled :func:`.truth_fast.fly` instead of the Python reference loop (same steps).
+    hammer length, t_contact [s]). The Mars frame is the ramp's own (:func:`mars_from_spf`), so
+    the targets hold for any ramp angle. ``fast`` (default True, what every run uses): fly the
+    trial releases with the compiled :func:`.truth_fast.fly`; False: the Python reference loop
+    :func:`fly_reference` (same steps).
     """
-    fast = FAST if fast is None else fast
     q0 = quat_from_euler123(np.radians(np.asarray(cfg.release_euler123_deg, float)))
     n = np.asarray(surface.normal, float)
     h_c = _contact_height(lander, surface, q0)
     p_contact = np.asarray(surface.point, float) + h_c * n
     # target velocity in SPF: Mars-frame (0, -v_par, -v_norm) -> SPF (down-slope, into the ramp)
-    v_target = C_MARS_SPF.T @ np.array([0.0, -cfg.impact_parallel_speed, -cfg.impact_normal_speed])
+    v_target = mars_from_spf(surface).T @ np.array([0.0, -cfg.impact_parallel_speed, -cfg.impact_normal_speed])
     u = v_target / np.linalg.norm(v_target)
     m = lander.mass
 
@@ -550,20 +551,20 @@ def design_release(
 
 
 def simulate_drop(
-    cfg: DropTestConfig, lander: LanderModel, surface: Surface, *, fast: bool | None = None, tol: float = 1e-9
+    cfg: DropTestConfig, lander: LanderModel, surface: Surface, *, fast: bool = True, tol: float = 1e-9
 ) -> DropTruth:
     """Simulate one drop (deterministic for a given config) and return its truth history.
 
     The lander hangs at rest for ``pre_release_s`` (t < 0), is released at t = 0, pulled by the
     true bungee until the hammer hits the nail, then impacts the ramp on its airbags. Integration:
     DOP853 with ``max_step``; output resampled on a uniform grid at ``output_rate_hz``.
-    ``fast`` (default :data:`FAST`): the force model, derivative and release design run as the
-    compiled kernels of :mod:`.truth_fast`; False runs the pure-numpy reference path (same
-    integrator and tolerances; they agree to the integrator's truncation error, see
-    :mod:`.truth_fast`). ``tol``: DOP853's rtol = atol (the truth's is 1e-9; smaller values are
+    ``fast`` (default True, what every run uses): the force model, derivative and release design
+    run as the compiled kernels of :mod:`.truth_fast`; False runs the pure-numpy reference path
+    (``ForceModel.evaluate`` / ``rhs``, :func:`fly_reference`; same integrator and tolerances; they
+    agree to the integrator's truncation error, tests/problems/droptest/test_truth_fast.py).
+    ``tol``: DOP853's rtol = atol (the truth's is 1e-9; smaller values are
     for convergence checks, e.g. tests/benchmarks/bench_droptest_truth.py).
     """
-    fast = FAST if fast is None else fast
     q0 = quat_normalize(quat_from_euler123(np.radians(np.asarray(cfg.release_euler123_deg, float))))
     p_release, nominal_rig, _ = design_release(cfg, lander, surface, fast=fast)
     true_rig = replace(nominal_rig, count=nominal_rig.count * cfg.bungee_truth_scale)

@@ -20,23 +20,9 @@ lobe radius [m], bag pressure [Pa], ambient pressure [Pa], gas volume [m³], γ,
 count, mass [kg]; ``J``, ``Jinv`` (3, 3) inertia about the CM [kg m², body] and its inverse.
 
 Agreement with the reference (tests/problems/droptest/test_truth_fast.py): the force model, the
-derivative and the release design agree to rounding (worst 3e-13 of each output's magnitude on
-random states; the sums run in another order, nothing else differs), and an integrated contact
-onset to < 1e-9 m. Over a whole drop the two truths differ by more than rounding, and by as much
-as the reference differs from itself under any rounding change: DOP853 (rtol = atol = 1e-9) takes
-its steps through the non-smooth contact forces, so a last-bit change flips accept/reject choices
-of its step control, and each flip moves the solution by the size of its truncation error.
-Measured (tests/benchmarks/bench_droptest_truth.py; max over the history of the norm), droptest:
-fast vs reference |Δp| 7.7e-5 m, |Δv| 1.4e-4 m/s, |Δa_ng| 0.05 m/s², |Δω| 6.4e-4 rad/s; the fast
-path with the release point nudged by 1e-12 m moves by the same 8.1e-5 m, 1.5e-4 m/s, 0.05 m/s²,
-6.3e-4 rad/s; the truncation error itself (rtol = atol 1e-9 against 1e-12) is 7.7e-5 m. The
-reference alone run with OpenBLAS's Nehalem kernels instead of Haswell moved by 5.2e-6 m. Each is
-far below the sensor noise (1σ per sample: accelerometer 0.2 g = 1.96 m/s², 40x; gyro 0.4°/s =
-7.0e-3 rad/s, 11x; hanging survey 0.03 m and radar range 0.02 m, > 250x). droptest_rocks:
-1.7e-6 m, 3.9e-6 m/s, 1.5e-4 m/s², 6.1e-6 rad/s. The drop-test reconstruction numbers
-(``workbench run``) move by ~1e-6 relative (droptest max stroke 0.2446635 → 0.2446630 m, σ
-0.049 m); the largest change is a difference of two near-equal numbers, droptest_ranging's
-restitution error 6.41e-4 → 6.40e-4 (its σ 9.5e-4).
+derivative and the release design agree to rounding; a whole drop agrees to the integrator's own
+truncation error (DOP853's step control reacts to rounding), far below the sensor noise
+(measurements: docs/tuning/droptest.md, "truth_fast.py").
 """
 
 from __future__ import annotations
