@@ -329,7 +329,6 @@ def _layered_pressure(h, h_nodes, T_nodes, p0, g0, R, radius):
     return p, T
 
 
-
 class _LayeredAtmosphere(Atmosphere):
     """A hydrostatic atmosphere whose pressure [Pa] and temperature [K] come together from one
     layered profile, ``_profile(h) -> (p, T)``; density ``p / (R T)`` with its ``gas_constant``."""
@@ -349,6 +348,7 @@ class _LayeredAtmosphere(Atmosphere):
     def density(self, h):
         p, T = self._profile(h)
         return p / (self.gas_constant * T)
+
 
 @dataclass(frozen=True)
 class TitanDefaultAtmosphere(_LayeredAtmosphere):
@@ -397,7 +397,6 @@ class TitanDefaultAtmosphere(_LayeredAtmosphere):
         )
 
 
-
 US76_EARTH_RADIUS = 6356766.0
 """Effective Earth radius r0 [m] of the U.S. Standard Atmosphere 1976's geopotential altitude."""
 AIR_GAS_CONSTANT = 287.053
@@ -443,7 +442,6 @@ class EarthStandardAtmosphere(_LayeredAtmosphere):
         h_nodes = r * z / (r - z)  # geometric altitude of the geopotential nodes
         T_nodes = self.sea_level_temperature + np.asarray(self.NODE_DT, dtype=float)
         return _layered_pressure(h, h_nodes, T_nodes, self.sea_level_pressure, 9.80665, self.gas_constant, r)
-
 
     def altitude_of_pressure(self, p) -> np.ndarray:
         """Inverse of :meth:`pressure` in the troposphere (h < 11 km) [m] for p [Pa], any shape."""

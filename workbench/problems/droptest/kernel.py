@@ -11,9 +11,10 @@ written as one loop over the steps with nothing allocated per step:
 * the step's measurements one after the other, in the order of the reference path — every valid
   triad (:func:`~workbench.problems.droptest.model.triad_model`, bias states included), the gyro
   (:func:`~workbench.problems.droptest.model.gyro_model`), the hanging zero-velocity update — each
-  its own update re-linearised at the current state, with the Cholesky-solved gain and the
-  **Joseph-form** covariance ``M = P − K (P Hᵀ)ᵀ``, ``P⁺ = M − (M Hᵀ − K R) Kᵀ`` symmetrised (the
-  association of :func:`workbench.estimation.ekf.update`), H used by its non-zero columns only;
+  its own update re-linearised at the current state by the compiled Joseph-form update of the
+  estimation core (:func:`workbench.estimation.kernels.joseph_update`, the association of
+  :func:`workbench.estimation.ekf.update`), H used by its non-zero columns only, then
+  :func:`boxplus_into` the drop-test state;
 * every per-sensor predicted measurement, innovation, innovation covariance and NIS recorded.
 
 Units and frames are those of :mod:`workbench.problems.droptest.model` (SI, body-frame attitude
@@ -28,6 +29,8 @@ import math
 import numpy as np
 from numba import njit
 
+from workbench.estimation.kernels import joseph_update
+
 __all__ = [
     "NC",
     "imu_steps",
@@ -36,7 +39,7 @@ __all__ = [
     "bungee_step",
     "process_noise_into",
     "predict_covariance",
-    "joseph_update",
+    "boxplus_into",
     "triad_into",
     "gyro_into",
 ]
@@ -311,108 +314,7 @@ def predict_covariance(P, F, Q, T):
 
 
 @njit(cache=True)
-def joseph_update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
-    """Sequential Joseph-form update by a measurement of size 3 with H non-zero in ``cols[:nc]``.
-
-    x (n_x,) and P (n_e, n_e) updated in place; z, zp (3,), Hc (3, ≥ nc), R (3, 3); writes y (3,),
-    S (3, 3); returns (nis, status) with status 0 ok, 1 S not positive definite, 2 non-finite NIS.
-    Scratch: W (9, n_e) holding (P Hᵀ)ᵀ, Kᵀ, (M Hᵀ − K R)ᵀ; M (n_e, n_e); L (3, 3); v (4, n_e).
-    """
-    n_e = P.shape[0]
-    m = 3
-    PHt = W[0:3]  # (P Hᵀ)ᵀ, rows contiguous: the n_e-long loops below vectorise
-    K = W[3:6]  # Kᵀ
-    D = W[6:9]  # (M Hᵀ − K R)ᵀ
-    for a in range(m):
-        y[a] = z[a] - zp[a]
-    for i in range(n_e):
-        for a in range(m):
-            s = 0.0
-            for c in range(nc):
-                s += P[i, cols[c]] * Hc[a, c]
-            PHt[a, i] = s
-    for a in range(m):
-        for b in range(m):
-            s = 0.0
-            for c in range(nc):
-                s += Hc[a, c] * PHt[b, cols[c]]
-            S[a, b] = s + R[a, b]
-    # Cholesky S = L Lᵀ (lower)
-    for j in range(m):
-        s = S[j, j]
-        for c in range(j):
-            s -= L[j, c] * L[j, c]
-        if not s > 0.0:
-            return 0.0, 1
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, m):
-            s = S[i, j]
-            for c in range(j):
-                s -= L[i, c] * L[j, c]
-            L[i, j] = s / L[j, j]
-    # w = S⁻¹ y, nis = yᵀ w
-    w, r, kr, dx = v[0, :m], v[1, :m], v[2, :m], v[3]
-    _cho_solve(L, y, w)
-    nis = 0.0
-    for a in range(m):
-        nis += y[a] * w[a]
-    if not math.isfinite(nis):
-        return nis, 2
-    # K = P Hᵀ S⁻¹ row by row
-    for i in range(n_e):
-        for a in range(m):
-            r[a] = PHt[a, i]
-        _cho_solve(L, r, kr)
-        for a in range(m):
-            K[a, i] = kr[a]
-    for i in range(n_e):
-        dx[i] = K[0, i] * y[0] + K[1, i] * y[1] + K[2, i] * y[2]
-    # Joseph form: M = P − K (P Hᵀ)ᵀ, P⁺ = M − (M Hᵀ − K R) Kᵀ, symmetrised
-    P0, P1, P2 = PHt[0], PHt[1], PHt[2]
-    for i in range(n_e):
-        k0, k1, k2 = K[0, i], K[1, i], K[2, i]
-        for j in range(n_e):
-            M[i, j] = P[i, j] - (k0 * P0[j] + k1 * P1[j] + k2 * P2[j])
-    for i in range(n_e):
-        for a in range(m):
-            s = 0.0
-            for c in range(nc):
-                s += M[i, cols[c]] * Hc[a, c]
-            t = 0.0
-            for b in range(m):
-                t += K[b, i] * R[b, a]
-            D[a, i] = s - t
-    K0, K1, K2 = K[0], K[1], K[2]
-    for i in range(n_e):
-        d0, d1, d2 = D[0, i], D[1, i], D[2, i]
-        for j in range(n_e):
-            P[i, j] = M[i, j] - (d0 * K0[j] + d1 * K1[j] + d2 * K2[j])
-    for i in range(n_e):
-        for j in range(i + 1, n_e):
-            u = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = u
-            P[j, i] = u
-    _boxplus(x, dx)
-    return nis, 0
-
-
-@njit(cache=True)
-def _cho_solve(L, b, out):
-    m = L.shape[0]
-    for i in range(m):
-        s = b[i]
-        for c in range(i):
-            s -= L[i, c] * out[c]
-        out[i] = s / L[i, i]
-    for i in range(m - 1, -1, -1):
-        s = out[i]
-        for c in range(i + 1, m):
-            s -= L[c, i] * out[c]
-        out[i] = s / L[i, i]
-
-
-@njit(cache=True)
-def _boxplus(x, dx):
+def boxplus_into(x, dx):
     """x ⊞ dx in place for the drop-test layout (one quaternion at x[9:13], error dx[9:12])."""
     for i in range(9):
         x[i] += dx[i]
@@ -585,7 +487,9 @@ def imu_steps(
                 z[a] = z_meas[k, c, a]
                 for b in range(3):
                     R[a, b] = r_zupt[a, b] if c > n_t else (r_diag[k, c, a] if a == b else 0.0)
-            nis, st = joseph_update(x, P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v)
+            nis, st = joseph_update(P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v)
+            if st == 0:
+                boxplus_into(x, v[3])
             for a in range(3):
                 inn_zp[k, c, a] = zp[a]
                 inn_y[k, c, a] = y[a]

@@ -53,7 +53,7 @@ from workbench.estimation.ekf import (
     run_filter,
 )
 from workbench.estimation.health import covariance_stats, health_markdown
-from workbench.estimation.smoother import SmoothedPass, rts_smooth
+from workbench.estimation.smoother import SmoothedPass, cross_covariance, rts_smooth
 from workbench.io import scorecard as sc
 from workbench.io.scenario import ScenarioError
 from workbench.problems.droptest import model as rl
@@ -603,7 +603,7 @@ def stroke_stage(
     e = (np.nan, np.nan)
     if rd.i_before >= 0:
         a, b = rd.i_before, rd.i_after
-        P_cross = _smoothed_cross_cov(smo, a, b)
+        P_cross = cross_covariance(smo.smoothed, a, b)
         e = restitution(smo.t, smo.x[:, rl.SV], smo.P[:, rl.EV, rl.EV], surface.normal, a, b, P_cross[rl.EV, rl.EV])
     s_est = float(e[1])
     s_def = rd.spread if np.isfinite(rd.spread) else 0.0
@@ -631,15 +631,6 @@ def _reindex(ms: MaxStroke, k: int) -> MaxStroke:
     d = {f: getattr(ms, f) for f in ms.__dataclass_fields__}
     d["index"] = k
     return MaxStroke(**d)
-
-
-def _smoothed_cross_cov(smo: FilterStage, a: int, b: int) -> np.ndarray:
-    """Smoothed cross-covariance E[δx_a δx_bᵀ] (N_E, N_E) for a < b: G_a G_{a+1} … G_{b-1} P_s[b]."""
-    G = smo.smoothed.G
-    M = smo.P[b]
-    for k in range(b - 1, a - 1, -1):
-        M = G[k] @ M
-    return M
 
 
 # ---------------------------------------------------------------------------------------------
