@@ -40,8 +40,10 @@ sys.path.insert(0, str(ROOT / "tests" / "support"))
 from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
 from flight_data import FLIGHTS, SITE_MAGNETIC, airbrakes_dir  # noqa: E402
 
+from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.post2 import rocket  # noqa: E402
 from workbench.problems.post2.importers.airbrakes import import_flight  # noqa: E402
+from workbench.problems.post2.problem import Post2Problem  # noqa: E402
 
 
 def _one(log: str, data: Path, out: Path) -> dict:
@@ -52,7 +54,7 @@ def _one(log: str, data: Path, out: Path) -> dict:
     rec = {"declination_deg": dec, "inclination_deg": inc, "import_s": t_imp}
     for variant, path in (("predicted", toml), ("with_landing", toml.with_name(toml.stem + "_landing.toml"))):
         t0 = time.perf_counter()
-        _, s = rocket.run_flight(path)
+        _, s = rocket.run_flight(Post2Problem().settings(load_scenario(path)))
         s["wall_s"] = time.perf_counter() - t0
         rec[variant] = s
     fl = json.loads((out / "flight.json").read_text(encoding="utf-8"))

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 import os
 import types
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -271,11 +272,17 @@ def _gap_member(vx, vy, vz, px, py, pz, r00, r01, r02, r10, r11, r12, r20, r21, 
 
 
 # the numpy reference path: the same code objects with numpy's sqrt (elementwise on (m,) arrays)
-_np_globals: dict[str, Any] = {**globals(), "math": types.SimpleNamespace(sqrt=np.sqrt)}
-_accel_np = types.FunctionType(_accel.__code__, _np_globals, "_accel")
-_np_globals["_accel"] = _accel_np
-_rk4_member_np = types.FunctionType(_rk4_member.__code__, _np_globals, "_rk4_member")
-_gap_member_np = types.FunctionType(_gap_member.__code__, _np_globals, "_gap_member")
+def _numpy_twins() -> tuple[Callable, Callable, Callable]:
+    """(_accel, _rk4_member, _gap_member) as plain Python functions of the same code objects in a
+    namespace whose ``math.sqrt`` is numpy's, so they run elementwise on (m,) arrays."""
+    ns: dict[str, Any] = {**globals(), "math": types.SimpleNamespace(sqrt=np.sqrt)}
+    ns["_accel"] = types.FunctionType(_accel.__code__, ns, "_accel")
+    rk4 = types.FunctionType(_rk4_member.__code__, ns, "_rk4_member")
+    gap = types.FunctionType(_gap_member.__code__, ns, "_gap_member")
+    return ns["_accel"], rk4, gap
+
+
+_accel_np, _rk4_member_np, _gap_member_np = _numpy_twins()
 
 
 def _run_python(track: AttitudeTrack, v: np.ndarray, p: np.ndarray, R: np.ndarray, slot: np.ndarray,

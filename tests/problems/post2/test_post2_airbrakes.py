@@ -22,6 +22,7 @@ from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.importers import airbrakes
 from workbench.problems.post2.importers.airbrakes import find_gaps, read_log, read_metadata
 from workbench.problems.post2.pipeline import Estimator
+from workbench.problems.post2.problem import Post2Problem
 
 DATA = Path(__file__).resolve().parent / "data" / "airbrakes_excerpt"
 LOG = DATA / "jackpot_launch_1_excerpt.csv"
@@ -248,7 +249,7 @@ def excerpt_run(tmp_path_factory):
     toml = out / "flight" / "jackpot_launch_1_excerpt.toml"
     # --allow-unhealthy: a WARNING verdict still writes; the health test below asserts it is not ERROR
     assert main(["run", str(toml), "--out", str(out / "rec"), "--allow-unhealthy"]) == 0
-    result, score = rocket.run_flight(toml)
+    result, score = rocket.run_flight(Post2Problem().settings(load_scenario(toml)))
     return out, toml, result, score
 
 

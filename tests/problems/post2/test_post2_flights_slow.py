@@ -17,8 +17,10 @@ import json
 import pytest
 from flight_data import FLIGHTS, SITE_MAGNETIC, airbrakes_dir
 
+from workbench.io.scenario import load_scenario
 from workbench.problems.post2 import rocket
 from workbench.problems.post2.importers.airbrakes import import_flight
+from workbench.problems.post2.problem import Post2Problem
 
 DATA, WHY = airbrakes_dir()
 
@@ -29,7 +31,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.skipif(DATA is None, reason=WHY)]
 def test_real_flight(log, tmp_path):
     dec, inc = SITE_MAGNETIC[log]
     toml = import_flight(DATA / log, DATA / "metadata.json", tmp_path, declination_deg=dec, inclination_deg=inc)
-    _, s = rocket.run_flight(toml)
+    _, s = rocket.run_flight(Post2Problem().settings(load_scenario(toml)))
     assert abs(s["apogee"]["error_percent"]) < 5.0
     assert s["altitude_vs_flight_computer"]["rms_after_burnout_transient_m"] < 40.0
     assert s["altitude_vs_flight_computer"]["like_for_like"]["rms_after_burnout_transient_m"] < 30.0

@@ -180,30 +180,27 @@ DESCENT_NOMINALS: dict[str, float] = {
     "wind_vertical": 0.0,
     "wind_horizontal": 0.0,
 }
-STATES.update(
-    {
-        "ca_multiplier_fm": StateDef(
-            1, "1", False, (3, 6), 1e-4, "CA multiplier in the free-molecular regime (Kn >= 0.1; Table 4-1)"
-        ),
-        "ca_multiplier_hyp": StateDef(1, "1", False, (3, 6), 1e-4, "CA multiplier, hypersonic continuum (Mach > 10)"),
-        "ca_multiplier_sup": StateDef(1, "1", False, (3, 6), 1e-4, "CA multiplier, supersonic continuum (Mach < 5)"),
-        "drogue_drag_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the drogue parachute CD"),
-        "tilt": StateDef(
-            1, "deg", False, (3,), 1e-3, "3-DOF: probe axis from the air-relative velocity, under the drogue"
-        ),
-        "wind_vertical": StateDef(1, "m/s", False, (3, 6), 1e-3, "vertical wind, + up (the air moves along +r̂)"),
-        "wind_horizontal": StateDef(1, "m/s", False, (3, 6), 1e-3, "horizontal (zonal, + east) wind"),
-        # the pre-flight atmosphere's error where the vehicle is (observation-only: the Huygens-like
-        # descent's log-pressure and temperature are modelled as table(h) + offset; a Markov process
-        # in time, the vehicle moving through an error profile that varies with altitude)
-        "log_pressure_offset": StateDef(
-            1, "1", False, (3, 6), 1e-4, "ln p of the atmosphere minus the model table's at the vehicle (log_pressure)"
-        ),
-        "temperature_offset": StateDef(
-            1, "K", False, (3, 6), 1e-3, "temperature of the atmosphere minus the model table's at the vehicle"
-        ),
-    }
-)
+STATES = {
+    **STATES,
+    "ca_multiplier_fm": StateDef(
+        1, "1", False, (3, 6), 1e-4, "CA multiplier in the free-molecular regime (Kn >= 0.1; Table 4-1)"
+    ),
+    "ca_multiplier_hyp": StateDef(1, "1", False, (3, 6), 1e-4, "CA multiplier, hypersonic continuum (Mach > 10)"),
+    "ca_multiplier_sup": StateDef(1, "1", False, (3, 6), 1e-4, "CA multiplier, supersonic continuum (Mach < 5)"),
+    "drogue_drag_multiplier": StateDef(1, "1", False, (3, 6), 1e-4, "multiplier of the drogue parachute CD"),
+    "tilt": StateDef(1, "deg", False, (3,), 1e-3, "3-DOF: probe axis from the air-relative velocity, under the drogue"),
+    "wind_vertical": StateDef(1, "m/s", False, (3, 6), 1e-3, "vertical wind, + up (the air moves along +r̂)"),
+    "wind_horizontal": StateDef(1, "m/s", False, (3, 6), 1e-3, "horizontal (zonal, + east) wind"),
+    # the pre-flight atmosphere's error where the vehicle is (observation-only: the Huygens-like
+    # descent's log-pressure and temperature are modelled as table(h) + offset; a Markov process
+    # in time, the vehicle moving through an error profile that varies with altitude)
+    "log_pressure_offset": StateDef(
+        1, "1", False, (3, 6), 1e-4, "ln p of the atmosphere minus the model table's at the vehicle (log_pressure)"
+    ),
+    "temperature_offset": StateDef(
+        1, "K", False, (3, 6), 1e-3, "temperature of the atmosphere minus the model table's at the vehicle"
+    ),
+}
 
 
 @dataclass(frozen=True)

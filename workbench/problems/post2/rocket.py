@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -51,7 +50,6 @@ from workbench.core.rotation import (
 from workbench.estimation.consistency import chi2_ppf, mixture_hdr_level
 from workbench.estimation.magnetometer import align_magnetometer
 from workbench.estimation.strapdown import ImuArrays, integrate
-from workbench.io.scenario import load_scenario
 from workbench.io.schema import read_json
 from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import pipeline
@@ -684,11 +682,11 @@ def landing_heading_mixture(landing_en, P_en, t, wind_en, sigma_heading: float):
     return means, covs, wts / wts.sum(), d_w
 
 
-def run_flight(problem_path) -> tuple[object, dict]:
-    """Reconstruct an imported flight (its post2 problem file; the import's ``flight.json``,
-    ``imu.csv`` and ``reference.csv`` beside it) and score it: (Post2Result, :func:`score_flight`)."""
-    path = Path(problem_path)
-    settings = Post2Settings.from_scenario(load_scenario(path))
+def run_flight(settings: Post2Settings) -> tuple[object, dict]:
+    """Reconstruct an imported flight from the settings of its post2 problem file (the import's
+    ``flight.json``, ``imu.csv`` and ``reference.csv`` beside that file) and score it:
+    (Post2Result, :func:`score_flight`)."""
+    path = settings.run.path
     result = None
     for stage in pipeline.reconstruct(settings, settings.telemetry_files(), None):
         result = stage
