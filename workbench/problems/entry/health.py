@@ -30,14 +30,14 @@ from workbench.estimation.health import (
 __all__ = ["entry_health", "input_health"]
 
 
-def input_health(scenario, paths) -> dict:
+def input_health(checks, paths) -> dict:
     """``health_report`` of what the telemetry alone tells, after reading and validating the entry
-    telemetry ``paths`` of ``scenario`` (raises the readers' located errors, unit mix-ups included):
-    the readers' warnings.  The fuzz suite's fast path (no dispersion, no smoother)."""
-    from workbench.problems.entry.config import config_for
+    telemetry ``paths`` with the run's :class:`~workbench.problems.entry.telemetry.TelemetryChecks`
+    (``EntrySettings.checks``; raises the readers' located errors, unit mix-ups included): the
+    readers' warnings.  The fuzz suite's fast path (no dispersion, no smoother)."""
     from workbench.problems.entry.telemetry import check_event_span, read_entry_telemetry
 
-    tm = read_entry_telemetry(paths, config_for(scenario).checks)
+    tm = read_entry_telemetry(paths, checks)
     check_event_span(tm, paths)
     return health_report([notes_check("telemetry", [p for p in tm.problems if not str(p).startswith("INFO")])])
 

@@ -80,7 +80,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -92,14 +92,16 @@ from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import GapBridge, ImuArrays, apply_gap, gap_transition, imu_arrays, rk4_step
 from workbench.io import progress
 from workbench.models.radar import beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
-from workbench.problems.entry.config import config_for
 from workbench.problems.entry.dispersion import run_dispersion
 from workbench.problems.entry.filter import CHANNELS, EntryFilterSigmas, RadarData, run_entry_smoother
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import ERROR_NAMES, ERROR_UNITS, errors_sigmas
-from workbench.problems.entry.site import R_GROUND, R_MOLA
+from workbench.problems.entry.site import R_GROUND
 from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state
+
+if TYPE_CHECKING:
+    from workbench.problems.entry.config import EntrySettings
 
 __all__ = [
     "RunScores",
@@ -111,6 +113,7 @@ __all__ = [
     "ValidationResult",
     "ValidationInputs",
     "validate_smoother",
+    "ValidationSettings",
     "noise_scale",
     "summarize_validation",
     "headline_numbers",
@@ -504,35 +507,10 @@ def index_at(t: np.ndarray, te: float) -> int:
     return int(np.clip(np.searchsorted(t, te - 1e-9), 0, t.size - 1))
 
 
-def validate_smoother(
-    imu: Any,
-    nominal: tuple[np.ndarray, np.ndarray, np.ndarray],
-    dispersion: Any,
-    radar_times: tuple[np.ndarray, np.ndarray],
-    *,
-    n_runs: int,
-    seed: int,
-    sigmas: EntryFilterSigmas | Mapping[str, Any] | None = None,
-    radar_noise: Mapping[str, float] | tuple[float, float, float] | None = None,
-    beams_G: np.ndarray | None = None,
-    r_ground: float = R_GROUND,
-    constrained: bool = True,
-    events: Mapping[str, float] | None = None,
-    gap_noise: bool = True,
-    start: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
-    truth_initial: str = "accepted",
-    scheduler: str | None = None,
-    workers: int = 1,
-) -> ValidationResult:
-    """Validate the radar-aided smoother on ``n_runs`` simulated trajectories (module docstring).
+@dataclass(frozen=True)
+class ValidationSettings:
+    """Settings of :func:`validate_smoother` (picklable).
 
-    ``imu``: a PreprocessedIMU (``t``, ``f_G``, ``w_G``, ``sigma_f``, ``sigma_w``, ``gaps``) — the
-    clean inputs of the truth; ``nominal``: ``(v0 [m/s], q0 q_M_G, p0 [m])`` at ``imu.t[0]`` about
-    which the dispersion offsets were drawn; ``dispersion``: a DispersionResult (``dx0`` (N, 9),
-    ``accepted`` (N,), ``refined_v0/q0/p0``, ``refined_P0`` (9, 9), optional ``weights`` (N,),
-    ``events_t``); ``radar_times``:
-    ``(t_sr (k,), t_rda (j,))`` [s] the (valid) telemetry time tags of the slant-range packets
-    and of the slant-out/velocity-out samples.
     ``n_runs`` ≥ 1; ``seed`` base seed (run r: ``SeedSequence(seed, spawn_key=(r,))``);
     ``sigmas``: the filter tuning (:class:`EntryFilterSigmas` or mapping); ``radar_noise``: 1σ of
     the simulated radar noise, mapping with keys ``slant_range`` [m], ``slant_out`` [m],
@@ -546,9 +524,46 @@ def validate_smoother(
     ``nominal``) or "gaussian" (truth initial state ``start ⊞ N(0, P0)``, the smoother's own
     initial assumption — the textbook NEES test for a start that is not the accepted set's
     spread; ``dispersion`` is then only used for ``events_t``); ``scheduler`` None | "local" |
-    "tcp://…" and ``workers`` (process pool when > 1 without a scheduler).  Raises ``ValueError``
-    if the dispersion has fewer than 2 accepted members and no ``start`` is given.
+    "tcp://…" and ``workers`` (process pool when > 1 without a scheduler).
     """
+
+    n_runs: int
+    seed: int
+    sigmas: EntryFilterSigmas | Mapping[str, Any] | None = None
+    radar_noise: Mapping[str, float] | tuple[float, float, float] | None = None
+    beams_G: np.ndarray | None = None
+    r_ground: float = R_GROUND
+    constrained: bool = True
+    events: Mapping[str, float] | None = None
+    gap_noise: bool = True
+    start: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+    truth_initial: str = "accepted"
+    scheduler: str | None = None
+    workers: int = 1
+
+
+def validate_smoother(
+    imu: Any,
+    nominal: tuple[np.ndarray, np.ndarray, np.ndarray],
+    dispersion: Any,
+    radar_times: tuple[np.ndarray, np.ndarray],
+    settings: ValidationSettings,
+) -> ValidationResult:
+    """Validate the radar-aided smoother on ``settings.n_runs`` simulated trajectories (module docstring).
+
+    ``imu``: a PreprocessedIMU (``t``, ``f_G``, ``w_G``, ``sigma_f``, ``sigma_w``, ``gaps``) — the
+    clean inputs of the truth; ``nominal``: ``(v0 [m/s], q0 q_M_G, p0 [m])`` at ``imu.t[0]`` about
+    which the dispersion offsets were drawn; ``dispersion``: a DispersionResult (``dx0`` (N, 9),
+    ``accepted`` (N,), ``refined_v0/q0/p0``, ``refined_P0`` (9, 9), optional ``weights`` (N,),
+    ``events_t``); ``radar_times``:
+    ``(t_sr (k,), t_rda (j,))`` [s] the (valid) telemetry time tags of the slant-range packets
+    and of the slant-out/velocity-out samples; ``settings`` the :class:`ValidationSettings`.
+    Raises ``ValueError`` if the dispersion has fewer than 2 accepted members and no ``start`` is given.
+    """
+    vs = settings
+    n_runs, seed, sigmas, radar_noise, beams_G = vs.n_runs, vs.seed, vs.sigmas, vs.radar_noise, vs.beams_G
+    r_ground, constrained, events, gap_noise = vs.r_ground, vs.constrained, vs.events, vs.gap_noise
+    start, truth_initial, scheduler, workers = vs.start, vs.truth_initial, vs.scheduler, vs.workers
     wall0 = time.perf_counter()
     if int(n_runs) < 1:
         raise ValueError("validate_smoother: n_runs must be ≥ 1")
@@ -889,16 +904,16 @@ class ValidationInputs:
 
 
 def prepare_validation(
-    scenario: Any, paths: Mapping[str, Path], *, members: int | None = None, scheduler: str | None = None
+    settings: EntrySettings, paths: Mapping[str, Path], *, members: int | None = None, scheduler: str | None = None
 ) -> ValidationInputs:
     """The reconstruction stages up to the dispersion (AMELIA Sects. 4-6), configured as
     :func:`workbench.problems.entry.pipeline.reconstruct` configures them — from the same
-    :class:`~workbench.problems.entry.config.EntryConfig` of ``scenario``: read the telemetry ``paths``
-    (with the scenario's telemetry checks), preprocess, the nominal initial state
+    :class:`~workbench.problems.entry.config.EntrySettings`: read the telemetry ``paths``
+    (with the run's telemetry checks), preprocess, the nominal initial state
     (``paths["initial_state"]``, required), and the dispersion with the scenario's ``[dispersion]``
     settings (``members`` overrides the member count; ``scheduler`` runs it on Dask); the smoother
     start of ``[reconstruction] initial``.  Radar time tags are the valid packets'."""
-    cfg = config_for(scenario)
+    cfg = settings
     if "initial_state" not in paths or not Path(paths["initial_state"]).exists():
         # the estimator never reads truth.npz, not even for the nominal state
         raise FileNotFoundError("prepare_validation: no initial_state file among the telemetry paths")
@@ -906,32 +921,29 @@ def prepare_validation(
     imu = preprocess(tm, cfg.preprocess)
     nom = read_nominal_state(paths["initial_state"])
     v0, q0, p0 = nom.v_M, nom.q_M_G, nom.p_M
-    r_ground = R_MOLA + cfg.terrain_m
-    bridge_mode = cfg.bridge_mode
+    r_ground = cfg.r_ground
+    ds = cfg.dispersion
     disp = run_dispersion(
         imu,
         v0,
         q0,
         p0,
-        {
-            "attitude": math.radians(cfg.dispersion_attitude_deg),
-            "velocity": cfg.dispersion_velocity_mps,
-            "position": cfg.dispersion_position_m,
-        },
-        int(members if members is not None else cfg.members),
-        rules=cfg.rules,
+        ds.sigmas(),
+        int(members if members is not None else ds.members),
+        rules=ds.rules,
         events_t=tm.events,
         atmosphere=MarsEngineeringAtmosphere(),
-        chunk_size=cfg.chunk_size,
-        seed=cfg.dispersion_seed,
+        chunk_size=ds.chunk_size,
+        seed=ds.seed,
         scheduler=scheduler,
         n_cloud=0,
         r_ground=r_ground,
-        bridge_mode=bridge_mode,
-        refine_rounds=cfg.refine_rounds,
+        bridge_mode=cfg.reconstruction.bridge_mode,
+        refine_rounds=ds.refine_rounds,
     )
-    st = initial_for_smoother(cfg, disp, nom, reconstruction_P0(cfg))  # the pipeline's smoother start
-    beams = beam_directions_G(cfg.squint_deg, cfg.azimuths_deg)
+    rec = cfg.reconstruction
+    st = initial_for_smoother(rec, disp, nom, reconstruction_P0(rec))  # the pipeline's smoother start
+    beams = cfg.radar.beams_G()
     sr_ok = np.asarray(tm.sr_valid, bool)
     rda_ok = np.asarray(tm.rda_valid, bool)
     return ValidationInputs(
@@ -943,7 +955,7 @@ def prepare_validation(
         beams_G=beams,
         r_ground=float(r_ground),
         sigmas=cfg.smoother_sigmas(),
-        constrained=cfg.constrained,
+        constrained=cfg.radar.constrained,
         events=dict(tm.events),
         start_mode=st.mode,
         start=(st.v0, st.q0, st.p0, st.P0),

@@ -43,7 +43,7 @@ import numpy as np
 
 from workbench.core.bodies import G0
 from workbench.core.rotation import quat_conjugate, quat_from_jpl, quat_normalize, quat_to_jpl
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import ScenarioError
 from workbench.io.telemetry import (
     MAX_PROBLEMS,
     Problem,
@@ -133,19 +133,22 @@ class EntryTelemetry:
     files: dict[str, Path]
 
 
-def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
-    """The files of the scenario's ``[telemetry]`` table, resolved against the scenario file:
-    ``{stream: path}`` for every key of :data:`STREAMS` (all required; a missing key or file is a
-    :class:`ScenarioError` naming it)."""
-    missing = [k for k in STREAMS if not scenario.has(f"telemetry.{k}")]
+def telemetry_paths(files: Mapping[str, Path], scenario_file: Path) -> dict[str, Path]:
+    """The ``[telemetry]`` files (``files``: stream -> absolute path, as resolved against the
+    scenario file by ``EntrySettings``): ``{stream: path}`` for every key of :data:`STREAMS` (all
+    required; a missing key or file is a :class:`ScenarioError` on ``scenario_file`` naming it)."""
+    missing = [k for k in STREAMS if k not in files]
     if missing:
         raise ScenarioError(
-            scenario.path,
+            scenario_file,
             f"telemetry.{missing[0]}",
             f"missing [telemetry] key(s) {', '.join(missing)}: an entry reconstruction needs all of "
             f"{', '.join(STREAMS)} (the radar files feed the radar-aided smoother)",
         )
-    return {k: scenario.path_of(f"telemetry.{k}") for k in STREAMS}
+    for k in STREAMS:
+        if not Path(files[k]).exists():
+            raise ScenarioError(scenario_file, f"telemetry.{k}", f"file not found: {files[k]}")
+    return {k: Path(files[k]) for k in STREAMS}
 
 
 def write_nominal_state(path: Path, st: NominalState, comment: str = "") -> Path:
