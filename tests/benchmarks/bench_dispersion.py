@@ -67,16 +67,16 @@ from workbench.problems.entry.site import R_GROUND  # noqa: E402
 def _scenario_input(seed: int):
     """(imu, nominal (v, q, p), events, truth (v, q, p) at t0, r_ground, description)."""
     from workbench.io.scenario import load_scenario
-    from workbench.problems.entry.config import config_for
+    from workbench.problems.entry.config import EntrySettings
     from workbench.problems.entry.preprocess import preprocess
     from workbench.problems.entry.synthetic import load_truth, synthesize_entry
     from workbench.problems.entry.telemetry import read_entry_telemetry
 
-    sc = load_scenario(ROOT / "assets" / "scenarios" / "schiaparelli.toml")
+    sc = EntrySettings.from_scenario(load_scenario(ROOT / "assets" / "scenarios" / "schiaparelli.toml"))
     with tempfile.TemporaryDirectory() as d:
         paths = synthesize_entry(sc, d, seed=seed)
-        tm = read_entry_telemetry(paths, config_for(sc).checks)
-        imu = preprocess(tm, config_for(sc).preprocess)
+        tm = read_entry_telemetry(paths, sc.checks)
+        imu = preprocess(tm, sc.preprocess)
         tr = load_truth(paths["truth"])
     k0 = int(np.argmin(np.abs(tr["t"] - imu.t[0])))
     return (

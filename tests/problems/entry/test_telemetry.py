@@ -28,7 +28,7 @@ from workbench.core.rotation import attitude_error, dcm_to_quat, quat_normalize,
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.problems.entry import synthetic as es
-from workbench.problems.entry.config import config_for
+from workbench.problems.entry.config import EntrySettings
 from workbench.problems.entry.preprocess import PreprocessConfig, preprocess
 from workbench.problems.entry.sensors import (
     EntryImuModel,
@@ -211,15 +211,15 @@ def test_synthesize_entry_from_a_scenario(tmp_path, monkeypatch, truth):
         '[telemetry]\ngnc = "tm/gnc.csv"\ngnc_nav = "tm/gnc_nav.csv"\nrda_slant_range = "tm/rda_slant_range.csv"\n'
         'rda_out = "tm/rda_out.csv"\nevents = "tm/events.csv"\ninitial_state = "tm/initial_state.toml"\n'
     )
-    scenario = load_scenario(sc)
+    scenario = EntrySettings.from_scenario(load_scenario(sc))
     monkeypatch.setattr(es, "truth_for", lambda s: truth)
     paths = es.synthesize_entry(scenario, tmp_path / "tm")
     assert set(paths) == {*es.TELEMETRY_FILES, "truth", "initial_state"}
     T = es.load_truth(paths["truth"])
     assert T["seed"] == 3 and np.all(T["nominal_dx0"] == 0)
-    checks = config_for(scenario).checks
+    checks = scenario.checks
     assert checks.zero_filled_packets == 1
-    t2 = read_entry_telemetry(telemetry_paths(scenario), checks)
+    t2 = read_entry_telemetry(telemetry_paths(scenario.telemetry, scenario.run.path), checks)
     assert t2.sr_valid.tolist() == [False, True, True, True]
     # one zero-filled packet expected, as configured (the blackout gaps are reported as WARN besides)
     assert [p.split(":")[0] for p in _non_gap(t2.problems)] == ["INFO"]
