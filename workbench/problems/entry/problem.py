@@ -20,6 +20,7 @@ from workbench.core.bodies import G0
 from workbench.io import progress as prog
 from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario, ScenarioError
+from workbench.models.aerodynamics import VEHICLE_SCHEMA
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.entry import pipeline as en
 from workbench.problems.entry.config import SCHEMA, EntrySettings
@@ -144,6 +145,7 @@ class EntryProblem:
     kind = "entry"
     title = "entry"
     schema = SCHEMA
+    file_schemas = (VEHICLE_SCHEMA,)
 
     def settings(self, scenario: Scenario) -> EntrySettings:
         """The run's frozen :class:`~workbench.problems.entry.config.EntrySettings` (validated once,
