@@ -32,6 +32,7 @@ from workbench.problems.entry.dispersion import AcceptanceRules
 from workbench.problems.entry.preprocess import PreprocessConfig
 from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryImuModel, EntryTelemetrySpec, NominalErrorModel
 from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M
+from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import TelemetryChecks
 from workbench.problems.entry.truth import EntryTruthSpec
 
@@ -742,7 +743,7 @@ def _telemetry_spec(file: Path, v: dict) -> EntryTelemetrySpec:
         dx0 = [float(x) for x in dx0]
         if len(dx0) != 9:
             raise ScenarioError(file, "synthetic.nominal_error.dx0", "must hold 9 numbers (m/s, deg, m)")
-        dx0 = tuple(dx0[:3] + [math.radians(x) for x in dx0[3:6]] + dx0[6:])
+        dx0 = tuple(dx0[DV] + [math.radians(x) for x in dx0[DTH]] + dx0[DP])
     return EntryTelemetrySpec(
         imu=EntryImuModel(
             accel_noise=imu["accel_noise_mps2"],

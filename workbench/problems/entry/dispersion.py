@@ -54,6 +54,7 @@ from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import ImuArrays, imu_arrays
 from workbench.io import progress
 from workbench.problems.entry.site import R_GROUND, R_MOLA
+from workbench.problems.entry.state import DP, DTH, DV
 
 __all__ = [
     "SAMPLE_BLOCK",
@@ -227,9 +228,9 @@ def sample_offsets(
 
 def member_states(v0, q0, p0, dx0):
     """Initial states (m, ·) of the members with offsets dx0 (m, 9)."""
-    v = np.asarray(v0, dtype=float) + dx0[:, 0:3]
-    q = quat_normalize(quat_multiply(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, 3:6])))
-    p = np.asarray(p0, dtype=float) + dx0[:, 6:9]
+    v = np.asarray(v0, dtype=float) + dx0[:, DV]
+    q = quat_normalize(quat_multiply(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, DTH])))
+    p = np.asarray(p0, dtype=float) + dx0[:, DP]
     return v, q, p
 
 
@@ -731,7 +732,7 @@ def fuse_with_prior(
     Pf_n = 0.5 * (Pf_n + Pf_n.T)
     dx = D * (Pf_n @ eta)
     P0 = Pf_n * np.outer(D, D)
-    v0 = np.asarray(v_nom, float) + dx[0:3]
-    q0 = quat_normalize(quat_multiply(np.asarray(q_nom, float), quat_from_rotvec(dx[3:6])))
-    p0 = np.asarray(p_nom, float) + dx[6:9]
+    v0 = np.asarray(v_nom, float) + dx[DV]
+    q0 = quat_normalize(quat_multiply(np.asarray(q_nom, float), quat_from_rotvec(dx[DTH])))
+    p0 = np.asarray(p_nom, float) + dx[DP]
     return FusedInitialState(v0, q0, p0, P0, dx, np.asarray(P_prior, float), int(keep.sum()))

@@ -126,6 +126,7 @@ from workbench.models.radar import (
     velocity_out_model,
 )
 from workbench.problems.entry.site import R_GROUND
+from workbench.problems.entry.state import DP, DTH, DV, N_ERR, N_X, XP, XQ, XV
 
 __all__ = [
     "CHANNELS",
@@ -133,7 +134,6 @@ __all__ = [
     "EntryFilterSigmas",
     "EntryPass",
     "EntryFilterResult",
-    "radar_from_telemetry",
     "gain_projector",
     "radar_update",
     "RadarMeasurement",
@@ -144,10 +144,10 @@ __all__ = [
 
 #: Radar channels, in the order they are applied at one node.
 CHANNELS: tuple[str, ...] = ("slant_range", "slant_out", "velocity_out")
-_I9 = np.eye(9)
+_I9 = np.eye(N_ERR)
 _I3 = np.eye(3)
-#: x = [v_M (0:3), q_M_G (3:7), p_M (7:10)], e = [δv_M, δθ_G, δp_M]
-_LAYOUT = ErrorStateLayout(10, ((3, 3),))
+#: x = [v_M, q_M_G, p_M], e = [δv_M, δθ_G, δp_M] (:mod:`.state`)
+_LAYOUT = ErrorStateLayout(N_X, ((XQ.start, DTH.start),))
 
 
 @dataclass(frozen=True)
@@ -170,22 +170,6 @@ class RadarData:
     rda_valid: np.ndarray
     beams_G: np.ndarray = field(default_factory=beam_directions_G)
     r_ground: float = R_GROUND
-
-
-def radar_from_telemetry(tm: Any, beams_G: np.ndarray | None = None, r_ground: float = R_GROUND) -> RadarData:
-    """:class:`RadarData` from an ``EntryTelemetry`` (fields ``t_sr``, ``slant_ranges``, ``sr_valid``,
-    ``t_rda``, ``slant_out``, ``v_out_G``, ``rda_valid``); beams default to the documented geometry."""
-    return RadarData(
-        t_sr=np.asarray(tm.t_sr, dtype=float),
-        slant_ranges=np.asarray(tm.slant_ranges, dtype=float).reshape(-1, 4),
-        sr_valid=np.asarray(tm.sr_valid, dtype=bool),
-        t_rda=np.asarray(tm.t_rda, dtype=float),
-        slant_out=np.asarray(tm.slant_out, dtype=float).reshape(-1),
-        v_out_G=np.asarray(tm.v_out_G, dtype=float).reshape(-1, 3),
-        rda_valid=np.asarray(tm.rda_valid, dtype=bool),
-        beams_G=beam_directions_G() if beams_G is None else np.asarray(beams_G, dtype=float),
-        r_ground=float(r_ground),
-    )
 
 
 @dataclass(frozen=True)
@@ -242,6 +226,34 @@ class EntryPass:
     p_M: np.ndarray
     P: np.ndarray
 
+    @property
+    def sigma_radial(self) -> np.ndarray:
+        """1σ (n,) [m] of the position along the local vertical (:func:`radial_sigma`)."""
+        return radial_sigma(self.p_M, self.P)
+
+    @property
+    def sigma_velocity(self) -> np.ndarray:
+        """Per-axis 1σ (n, 3) [m/s] of the MMED velocity."""
+        return np.sqrt(np.einsum("nii->ni", self.P[:, DV, DV]))
+
+    @property
+    def sigma_attitude(self) -> np.ndarray:
+        """Per-axis 1σ (n, 3) [rad] of the body-frame attitude error δθ_G."""
+        return np.sqrt(np.einsum("nii->ni", self.P[:, DTH, DTH]))
+
+    @property
+    def sigma_position(self) -> np.ndarray:
+        """Per-axis 1σ (n, 3) [m] of the MMED position."""
+        return np.sqrt(np.einsum("nii->ni", self.P[:, DP, DP]))
+
+
+def radial_sigma(p_M: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """1σ (n,) [m] of the position error along the local vertical û = p/|p|: ``sqrt(ûᵀ P_pp û)``,
+    the altitude's 1σ (a sphere's radius).  ``p_M`` (n, 3) [m] MMED, ``P`` (n, 9, 9) error-state
+    covariance ``[δv_M, δθ_G, δp_M]``."""
+    u = p_M / np.linalg.norm(p_M, axis=1, keepdims=True)
+    return np.sqrt(np.einsum("ni,nij,nj->n", u, P[:, DP, DP], u))
+
 
 @dataclass(frozen=True)
 class EntryFilterResult:
@@ -292,8 +304,8 @@ def gain_projector(kind: str, p_M: np.ndarray, q_M_G: np.ndarray) -> np.ndarray:
         u = u / math.sqrt(u @ u)
         vert = np.outer(u, u)
         C = quat_to_dcm(q_M_G)
-        Pi[3:6, 3:6] = C.T @ (_I3 - vert) @ C
-        Pi[6:9, 6:9] = vert
+        Pi[DTH, DTH] = C.T @ (_I3 - vert) @ C
+        Pi[DP, DP] = vert
     elif kind == "velocity":
         Pi[0:6, 0:6] = np.eye(6)
     else:
@@ -341,7 +353,7 @@ def radar_update(
     if not ur.accepted:
         return v, q, p, P, np.zeros((9, res.size)), False
     xn = ur.x_post
-    return xn[0:3], xn[3:7], xn[7:10], ur.P_post, ur.K, True
+    return xn[XV], xn[XQ], xn[XP], ur.P_post, ur.K, True
 
 
 # ---------------------------------------------------------------------------------------------
@@ -446,7 +458,7 @@ class _ChannelModel:
     def _at(self, x: np.ndarray) -> None:
         if not np.array_equal(x, self.x):
             _, pred, mask, H, _, _ = _predict_channel(
-                self.channel, self.index, self.radar, x[0:3], x[3:7], x[7:10], self.sg
+                self.channel, self.index, self.radar, x[XV], x[XQ], x[XP], self.sg
             )
             m = int(self.mask.sum())
             if np.array_equal(mask, self.mask):
@@ -514,7 +526,7 @@ def radar_measurement(
     along B0, velocity-out B.5/B.6 [m/s]); R from ``sg`` (1σ per component, SI).
     """
     x = np.asarray(x, dtype=float)
-    z, pred, mask, H, R, kind = _predict_channel(channel, index, radar, x[0:3], x[3:7], x[7:10], sg)
+    z, pred, mask, H, R, kind = _predict_channel(channel, index, radar, x[XV], x[XQ], x[XP], sg)
     if not mask.any():
         return RadarMeasurement(z, pred, mask, kind, x, constrained, None)
     model = _ChannelModel(channel, index, radar, sg, mask, x, pred, H)
@@ -600,7 +612,7 @@ def run_entry_smoother(
     Xs, Ps = its.smoothed.x, its.smoothed.P
     Xpo, Ppo = fw0.x_post, fw0.P_post
     counts["iterations"] = its.passes
-    counts["relinearisation_max_attitude_change_rad"] = [float(np.max(c[3:6])) for c in its.changes]
+    counts["relinearisation_max_attitude_change_rad"] = [float(np.max(c[DTH])) for c in its.changes]
 
     # residuals
     innov: dict[str, InnovationHistory] = {}
@@ -627,7 +639,7 @@ def run_entry_smoother(
                 S[r], acc[r], nis[r] = ih.S[j], ih.accepted[j], ih.nis[j]
                 j += 1
             xs = Xs[e.node]
-            z2, pred_s, mask, H, R, _ = _predict_channel(c, e.index, radar, xs[0:3], xs[3:7], xs[7:10], sg)
+            z2, pred_s, mask, H, R, _ = _predict_channel(c, e.index, radar, xs[XV], xs[XQ], xs[XP], sg)
             Ys[r] = pred_s
             if mask.any():
                 Ss[r][np.ix_(mask, mask)] = H @ Ps[e.node] @ H.T + R
@@ -638,8 +650,8 @@ def run_entry_smoother(
         counts[f"n_{c}_rejected"] = int(k - acc.sum())
 
     sel = np.flatnonzero(imu_node >= 0)
-    fwd = EntryPass(t.copy(), Xpo[sel, 0:3], Xpo[sel, 3:7], Xpo[sel, 7:10], Ppo[sel])
-    smo = EntryPass(t.copy(), Xs[sel, 0:3], Xs[sel, 3:7], Xs[sel, 7:10], Ps[sel])
+    fwd = EntryPass(t.copy(), Xpo[sel, XV], Xpo[sel, XQ], Xpo[sel, XP], Ppo[sel])
+    smo = EntryPass(t.copy(), Xs[sel, XV], Xs[sel, XQ], Xs[sel, XP], Ps[sel])
     counts["n_nodes"] = int(N)
     counts["wall_s"] = time.perf_counter() - wall0
     return EntryFilterResult(fwd, smo, innov, sres, fits, bool(constrained), counts)
@@ -663,7 +675,7 @@ def _forward(
     def transition(x, t0, t1):
         a = node[t1]
         xb = x if lin is None else lin[a - 1]
-        vb, qb, pb = xb[0:3], xb[3:7], xb[7:10]
+        vb, qb, pb = xb[XV], xb[XQ], xb[XP]
         i = interval[a - 1]
         if i in gaps and imu_node[a - 1] >= 0 and imu_node[a] == i + 1:
             g = gaps[i]
@@ -689,8 +701,8 @@ def _forward(
             )
         if lin is not None:  # affine model about x̄
             dx = Fk @ _LAYOUT.boxminus(x, xb)
-            q1 = quat_boxplus(q1, dx[3:6])
-            v1, p1 = v1 + dx[0:3], p1 + dx[6:9]
+            q1 = quat_boxplus(q1, dx[DTH])
+            v1, p1 = v1 + dx[DV], p1 + dx[DP]
         return np.r_[v1, q1, p1], Fk, Qk
 
     def measurements_at(a, ta, x):

@@ -26,6 +26,7 @@ from workbench.estimation.health import (
     nis_check,
     notes_check,
 )
+from workbench.problems.entry.state import DP
 
 __all__ = ["entry_health", "input_health"]
 
@@ -56,9 +57,7 @@ def entry_health(tm, imu, filt, atm, r_ground: float) -> dict:
 
     r = np.linalg.norm(sm.p_M, axis=1)
     h = r - r_ground
-    sig_h = np.sqrt(
-        np.maximum(np.einsum("ni,nij,nj->n", sm.p_M / r[:, None], sm.P[:, 6:9, 6:9], sm.p_M / r[:, None]), 0)
-    )
+    sig_h = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", sm.p_M / r[:, None], sm.P[:, DP, DP], sm.p_M / r[:, None]), 0))
     k = int(np.argmin(h + 3.0 * sig_h))
     checks.append(
         interval_check(

@@ -98,6 +98,7 @@ from workbench.problems.entry.initial import initial_for_smoother, reconstructio
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import ERROR_NAMES, ERROR_UNITS, errors_sigmas
 from workbench.problems.entry.site import R_GROUND
+from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state
 
 if TYPE_CHECKING:
@@ -222,9 +223,9 @@ def _truth(job: _Job, dx0: np.ndarray, rng: np.random.Generator, gap_at: dict[in
     V = np.empty((n, 3))
     Q = np.empty((n, 4))
     X = np.empty((n, 3))
-    v = job.v0 + dx0[0:3]
-    q = quat_boxplus(job.q0, dx0[3:6])
-    p = job.p0 + dx0[6:9]
+    v = job.v0 + dx0[DV]
+    q = quat_boxplus(job.q0, dx0[DTH])
+    p = job.p0 + dx0[DP]
     qpsd = None if job.sigmas.q_state_psd is None else np.asarray(job.sigmas.q_state_psd, float)
     V[0], Q[0], X[0] = v, q, p
     for k in range(n - 1):
@@ -234,13 +235,13 @@ def _truth(job: _Job, dx0: np.ndarray, rng: np.random.Generator, gap_at: dict[in
             v, q, p = apply_gap(v, q, p, g, job.sigmas.bridge_mode)
             if job.gap_noise:
                 e = np.sqrt(np.diagonal(Qd)) * rng.standard_normal(9)
-                v, q, p = v + e[0:3], quat_boxplus(q, e[3:6]), p + e[6:9]
+                v, q, p = v + e[DV], quat_boxplus(q, e[DTH]), p + e[DP]
         else:
             dt = t[k + 1] - t[k]
             v, q, p = rk4_step(v, q, p, f[k], w[k], f[k + 1], w[k + 1], dt, MARS)
             if qpsd is not None:
                 e = np.sqrt(qpsd * dt) * rng.standard_normal(9)
-                v, q, p = v + e[0:3], quat_boxplus(q, e[3:6]), p + e[6:9]
+                v, q, p = v + e[DV], quat_boxplus(q, e[DTH]), p + e[DP]
         V[k + 1], Q[k + 1], X[k + 1] = v, q, p
     return V, Q, X
 

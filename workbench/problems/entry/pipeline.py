@@ -55,6 +55,7 @@ from workbench.problems.entry.initial import initial_for_smoother, reconstructio
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import errors_sigmas
 from workbench.problems.entry.site import R_MOLA
+from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import (
     NominalState,
     check_event_span,
@@ -322,9 +323,9 @@ def reconstruct(
     summary["smoother_start"] = {
         "mode": init.mode,
         "note": init.note,
-        "sigma_velocity_mps": float(np.sqrt(np.max(np.diag(init.P0)[0:3]))),
-        "sigma_attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(init.P0)[3:6])))),
-        "sigma_position_m": float(np.sqrt(np.max(np.diag(init.P0)[6:9]))),
+        "sigma_velocity_mps": float(np.sqrt(np.max(np.diag(init.P0)[DV]))),
+        "sigma_attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(init.P0)[DTH])))),
+        "sigma_position_m": float(np.sqrt(np.max(np.diag(init.P0)[DP]))),
     }
     summary["health"] = entry_health(tm, imu, filt, atm, r_ground)
     yield EntryResult(tm, imu, nomi, disp, filt, atm, winds, vehicle, dict(tm.events), summary, init)
@@ -409,9 +410,9 @@ def _summary(settings: EntrySettings, tm, imu, nomi, disp, filt, atm, winds, r_g
             "wall_s": float(disp.wall_s),
             "scheduler": str(disp.scheduler),
             "refined_sigma": {
-                "velocity_mps": float(np.sqrt(np.max(np.diag(disp.refined_P0)[0:3]))),
-                "attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(disp.refined_P0)[3:6])))),
-                "position_m": float(np.sqrt(np.max(np.diag(disp.refined_P0)[6:9]))),
+                "velocity_mps": float(np.sqrt(np.max(np.diag(disp.refined_P0)[DV]))),
+                "attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(disp.refined_P0)[DTH])))),
+                "position_m": float(np.sqrt(np.max(np.diag(disp.refined_P0)[DP]))),
             },
         },
         "covariance": {"symmetric": bool(np.all(sym)), "positive_definite": bool(np.all(pd))},
@@ -444,7 +445,7 @@ def _summary(settings: EntrySettings, tm, imu, nomi, disp, filt, atm, winds, r_g
 
 def _radial_var(p: np.ndarray, P: np.ndarray) -> float:
     u = p / np.linalg.norm(p)
-    return float(u @ P[6:9, 6:9] @ u)
+    return float(u @ P[DP, DP] @ u)
 
 
 # ----------------------------------------------------------------------------------------- scoring
@@ -506,9 +507,9 @@ def score(result: EntryResult, truth: dict) -> dict:
         out[f"initial_{name}"] = {
             "nees_9dof": float(e0 @ np.linalg.solve(P0, e0)) if ok else float("nan"),
             "nees_95pct_band": list(chi2_interval(9)),
-            "error_velocity_mps": float(np.linalg.norm(e0[0:3])),
-            "error_attitude_deg": float(np.degrees(np.linalg.norm(e0[3:6]))),
-            "error_position_m": float(np.linalg.norm(e0[6:9])),
+            "error_velocity_mps": float(np.linalg.norm(e0[DV])),
+            "error_attitude_deg": float(np.degrees(np.linalg.norm(e0[DTH]))),
+            "error_position_m": float(np.linalg.norm(e0[DP])),
         }
     # atmosphere as a profile: reconstructed ρ(h) vs the true ρ at the same (reconstructed) altitude.
     # (Blackout fill samples carry interpolated times, so a comparison along time would be wrong

@@ -24,6 +24,7 @@ from workbench.models.aerodynamics import VEHICLE_SCHEMA
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.entry import pipeline as en
 from workbench.problems.entry.config import SCHEMA, EntrySettings
+from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import STREAMS, telemetry_paths
 
 __all__ = ["EntryProblem", "key_moments"]
@@ -252,9 +253,9 @@ class EntryProblem:
         for i, a in enumerate("xyz"):
             cols[f"p_M.{a}"] = (sm.p_M[:, i], "m")
             cols[f"v_M.{a}"] = (sm.v_M[:, i], "m/s")
-            cols[f"sigma_v.{a}"] = (sd[:, i], "m/s")
-            cols[f"sigma_theta.{a}"] = (sd[:, 3 + i], "rad")
-            cols[f"sigma_p.{a}"] = (sd[:, 6 + i], "m")
+            cols[f"sigma_v.{a}"] = (sd[:, DV][:, i], "m/s")
+            cols[f"sigma_theta.{a}"] = (sd[:, DTH][:, i], "rad")
+            cols[f"sigma_p.{a}"] = (sd[:, DP][:, i], "m")
         for i, a in enumerate("xyzw"):
             cols[f"q_M_G.{a}"] = (sm.q_M_G[:, i], "1")
         return ExportTable(sm.t, cols, "MMED inertial; q_M_G body (GNC) to MMED")

@@ -59,6 +59,7 @@ from workbench.core.rotation import (
 from workbench.models.imu import IMU_ERROR_NAMES, ImuErrorModel, apply_imu_errors, draw_imu_errors
 from workbench.models.radar import beam_directions_G, slant_range_sphere, slant_range_surface
 from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M, TerrainRelief
+from workbench.problems.entry.state import DP, DTH, DV
 
 __all__ = [
     "GYRO_SATURATION_DPS",
@@ -196,9 +197,9 @@ def nominal_state(
                 rng.normal(0.0, model.position_sigma, 3),
             ]
         )
-    v_nom = np.asarray(v0, float) - dx0[:3]
-    q_nom = quat_normalize(quat_multiply(np.asarray(q0, float), quat_from_rotvec(-dx0[3:6])))
-    p_nom = np.asarray(p0, float) - dx0[6:]
+    v_nom = np.asarray(v0, float) - dx0[DV]
+    q_nom = quat_normalize(quat_multiply(np.asarray(q0, float), quat_from_rotvec(-dx0[DTH])))
+    p_nom = np.asarray(p0, float) - dx0[DP]
     return v_nom, q_nom, p_nom, dx0
 
 

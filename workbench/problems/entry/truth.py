@@ -348,6 +348,12 @@ class EntryTruth:
     spec: EntryTruthSpec | None = None
 
 
+#: The truth simulator's state rows: module position p_M, velocity v_M, attitude q_M_G, body rate
+#: w_G, then the canopy position (from PDD on); its auxiliary output starts with f_G.
+_TP, _TV, _TQ, _TW, _TCHUTE = slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 13), slice(13, 16)
+_AUX_F = slice(0, 3)
+
+
 @dataclass(frozen=True)
 class DispersionSigmas:
     """1σ (or ranges) of :func:`disperse_truth_spec`'s draws; SI unless a name carries a unit.
@@ -955,16 +961,16 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
     n = k + 1
     states, auxs, phases = states[:n], auxs[:n], phases[:n]
     tgrid = np.round(spec.t0 + dt_out * np.arange(n), 9)
-    q = states[:, 6:10]
+    q = states[:, _TQ]
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    chute_p = states[:, 13:16] if np.isfinite(events["PDD"]) else None
+    chute_p = states[:, _TCHUTE] if np.isfinite(events["PDD"]) else None
     return EntryTruth(
         t=tgrid,
-        p_M=states[:, 0:3].copy(),
-        v_M=states[:, 3:6].copy(),
+        p_M=states[:, _TP].copy(),
+        v_M=states[:, _TV].copy(),
         q_M_G=q,
-        w_G=states[:, 10:13].copy(),
-        f_G=auxs[:, 0:3].copy(),
+        w_G=states[:, _TW].copy(),
+        f_G=auxs[:, _AUX_F].copy(),
         phase=phases,
         mach=auxs[:, 3].copy(),
         knudsen=auxs[:, 4].copy(),
