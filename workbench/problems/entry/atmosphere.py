@@ -1,73 +1,16 @@
 """Atmospheric density, pressure and temperature profiles from a reconstructed entry (AMELIA Sect. 9).
 
-Method (Aboudan et al. 2018, "Reconstruction of the Atmospheric Profiles"):
+What: the drag equation ``ρ = 2 m a_Z / (v_r² C S)`` along the smoothed trajectory, iterated on the
+drag coefficients (Mach, Knudsen, angle of attack from the previous smoothed profile), the
+blackout and transients filled (hydrostatic or exponential), hydrostatic pressure from the top,
+ideal-gas temperature, a refined (smoothed) profile and first-order 1σ
+(:func:`reconstruct_atmosphere`, settings :class:`AtmosphereSettings`).  Why: the entry's
+deceleration is the only in-situ measurement of the atmosphere along the path.  Every array of
+:class:`ProfileIteration` and :class:`AtmosphereResult` lives on the profile grid (the input
+samples from the top of the profile plus fill samples in time gaps).  The full method notes and
+the measurements behind the fill's choices are in ``docs/tuning/entry.md``.
 
-1. **Drag equation.**  During the entry (phase 0) ``ρ = 2 m a_Z / (v_r² C_A S)`` (AMELIA Eq. 2) with
-   ``a_Z`` the +Z_G specific force (drag pushes the aft-pointing +Z_G axis), ``v_r = |v − ω×p − w|``
-   the air-relative speed (``w`` the wind, zero unless given) and ``C_A``, ``S`` the axial
-   coefficient and reference area of the configuration.  Under the parachute (phase ≥ 1) the
-   module and canopy are taken as aligned (Eq. 5): ``ρ = 2 (m_D + m_P) a_Z / (v_r² (C_D S_D + C_P S_P))``;
-   before front-shield release (phase 1) the module is the full capsule, after it (phase 2) the
-   descent module.
-2. **Iteration 1**: constant ``C_A = 1.65`` for the entry (the paper's Monte Carlo mean); under
-   the parachute the table coefficients with Mach and Knudsen from ``default_atmosphere``.
-   **Iteration k > 1**: Mach ``v_r / sqrt(γ R T)`` and Knudsen ``λ/L`` (``λ = μ(T)/p sqrt(π R T/2)``,
-   Sutherland μ; γ, R, Sutherland constants of ``default_atmosphere`` as in
-   :mod:`workbench.core.atmosphere`) from the previous iteration's *smoothed* profile (the raw
-   temperature is noisy where the drag is small), angle of attack from the trajectory (angle
-   between −Z_G and the air-relative velocity), coefficients from the vehicle tables.  Stop when
-   the maximum relative change of ρ, p and T is below ``tolerance`` (1 %).
-3. **Fill.**  Samples without a usable drag measurement (``f_valid`` False; non-positive
-   density; fill samples inserted every ≤ ``fill_step_m`` of altitude inside time gaps longer
-   than ``max_gap_s`` — the strapdown grid has *no* samples in the 57 s plasma blackout), the
-   parachute inflation transient (PDD down to ``inflation_drop_m`` = 900 m below it, AMELIA
-   Sect. 9 "Descent") and the FSR spike (a time window around front-shield release) are filled.
-   Edge values: on each side of a gap log ρ is fitted linearly in h over the valid data within
-   ``fill_fit_window_m`` and evaluated at the edge.  ``fill_method="exponential"`` (the paper):
-   log ρ linear in h between the two edge values.  ``fill_method="hydrostatic"`` (default): the
-   temperature across the gap is the default model's shape offset to the reconstructed
-   temperature at the upper edge plus a linear trend, the density follows hydrostatically from the
-   upper-edge pressure, and the trend is solved (Brent) so that the density meets the lower edge
-   value.  An exponential is the isothermal special case; the paper's fill assumes one scale
-   height across 70→30 km where the default model's changes from ~7 to ~10 km (tests: 26 % vs
-   12 % error on a synthetic profile).  Either fill is only as good as its assumed temperature
-   structure; its 1σ says so (step 7, :func:`fill_sigma`).  One-sided gaps (ends) are
-   extrapolated with the one-sided fit.
-4. **Pressure** by the hydrostatic equation ``dp/dh = −ρ g_r`` integrated along the trajectory,
-   with ``g_r`` the radial component of J2 gravity at the sample (centrifugal terms neglected, as
-   in the paper).  Between samples ρ is log-linear in h, so each interval contributes
-   ``ḡ Δh (ρ_a − ρ_b)/ln(ρ_a/ρ_b)``.  The top pressure ``p0`` is the default model's pressure at the
-   top altitude of the profile (the paper took 7e-3 Pa at 104 km from the engineering model);
-   ``p_top`` overrides it.
-5. **Temperature** ``T = p M / (ρ k_B N_A)`` with M = 43.41 g/mol (AMELIA Eq. 4).
-6. **Refined profiles**: log ρ smoothed in altitude by a local linear fit over
-   ``smooth_window_m`` (at least 5 samples), then p and T recomputed.
-7. **1σ** (first order, Table 3): relative density error from the air-relative speed
-   (``∂ρ/∂v_r = −2ρ/v_r`` — ρ ∝ v_r⁻², so the paper's Eq. 6 ``−ρ/v_r`` is low by a factor 2: its
-   example, 1.4e−4 kg s/m⁴ after FSR, is ρ/v_r for ρ ≈ 0.01 kg/m³ at v_r ≈ 70 m/s), with
-   ``σ_vr² = Jᵀ P J``, ``J = [u, 0, ω×u]`` on the error state ``[δv, δθ, δp]`` (u the unit
-   air-relative velocity); from the drag coefficients (``cd_rel``, independent between module and
-   canopy); from the horizontal wind (``wind`` 1σ per component below ``wind_ceiling_m``, zero
-   above, projected on u); from the accelerometer noise (``accel``/a_Z); plus, on filled samples,
-   the fill's own 1σ (:func:`fill_sigma`): the true temperature departs from the assumed one by
-   a Gaussian process (``fill_temperature_K``, ``fill_correlation_km``), propagated through the
-   hydrostatic equation and conditioned on what the fill matches (the upper edge's temperature
-   and the lower edge's density) — zero at the measured edges, largest inside the gap.
-   Pressure: the time-correlated terms (velocity, coefficients, wind, fill) are integrated as
-   fully correlated (conservative), the accelerometer noise as independent, plus ``p_top_rel`` of
-   p0, all three in quadrature.  Temperature:
-   ``σ_T/T = sqrt((σ_p/p)² + (σ_ρ/ρ)²)`` (independent; conservative because the correlated ρ and p
-   errors partly cancel in T).  Last, because a profile is a function of altitude, the
-   trajectory's altitude 1σ (``σ_h² = ûᵀ P_pp û``) adds ``σ_h / H`` (H = R T / g, the local
-   scale height) in quadrature to the relative density and pressure σ (an altitude error shifts
-   the whole profile; T moves only by σ_h dT/dh, neglected).  The sigmas are those of the raw
-   profile and are reported for the smoothed one too (smoothing only lowers the white part).
-
-The profile grid: the input samples from the *top* (the first valid sample with
-``a_Z ≥ min_specific_force``, 0.05 m/s² ≈ 50σ of the Table 3 accelerometer noise, which is the
-paper's 104 km for Schiaparelli) to the last sample, plus the fill samples inserted in time gaps
-(their ``t`` is interpolated linearly in altitude; they are ``filled``).  Every array of
-:class:`ProfileIteration` and :class:`AtmosphereResult` lives on that grid (length m).
+Reference: Aboudan et al., Space Sci. Rev. 214:97, 2018 (AMELIA), Sect. 9, Eqs. 2-6, Table 3.
 """
 
 from __future__ import annotations
@@ -827,7 +770,7 @@ def _fill_rel_sigma(g: _Grid, gas: _Gas, final: ProfileIteration, runs: list, cf
 
 
 def _uncertainty(g: _Grid, gas: _Gas, final: ProfileIteration, areas: tuple, rel_fill, cfg) -> tuple:
-    """First-order 1σ of ρ, p, T (module docstring, item 7).  Returns (sigma_rho, sigma_p, sigma_T)."""
+    """First-order 1σ of ρ, p, T (docs/tuning/entry.md, atmosphere, item 7).  Returns (sigma_rho, sigma_p, sigma_T)."""
     sig, h, v_r, g_r = cfg.sigmas, g.h, g.v_r, g.g_r
     cs_mod, cs_par, cs = areas
     sig_wind = np.where(h < sig.wind_ceiling_m, sig.wind, 0.0)
@@ -869,7 +812,7 @@ def reconstruct_atmosphere(
     events: Mapping[str, float] | None = None,
     wind_NE: np.ndarray | None = None,
 ) -> AtmosphereResult:
-    """Reconstruct ρ, p, T along the trajectory by the drag-equation iteration (module docstring).
+    """Reconstruct ρ, p, T along the trajectory by the drag-equation iteration (docs/tuning/entry.md).
 
     ``t`` (n,) time [s from EIP], increasing (may jump over data gaps); ``p_M``, ``v_M`` (n, 3)
     MMED position [m] and inertial velocity [m/s] (the smoothed trajectory); ``q_M_G`` (n, 4)

@@ -1,87 +1,19 @@
-"""Radar-aided extended RTS smoother of the entry & descent (AMELIA Sect. 8, Appendix B).
+"""Radar-aided extended RTS smoother of the entry and descent (AMELIA Sect. 8, Appendix B).
 
-Forward pass: an error-state EKF over the PreprocessedIMU grid.  Between measurements the state
-``x = [v_M (3), q_M_G (4), p_M (3)]`` is propagated exactly as :func:`workbench.estimation.strapdown.integrate`
-does it (RK4 of Eq. A.2 with inputs linear between samples, first-order covariance A.14/A.15 with
-mid-step attitude/inputs, gaps bridged by :func:`~workbench.estimation.strapdown.apply_gap` and
-:func:`~workbench.estimation.strapdown.gap_transition`) — with no radar data the forward pass *is*
-the strapdown pass (tested).  Error state ``[δv_M, δθ_G, δp_M]``, ``q_true = q ⊗ exp(δθ)``.
+What: an error-state EKF over the preprocessed IMU grid (state ``[v_M, q_M_G, p_M]``, error
+``[δv_M, δθ_G, δp_M]``, propagation identical to the strapdown pass) with the radar slant-range,
+slant-out and velocity-out updates (B.3-B.6), AMELIA's constrained update directions (gain
+projection, Joseph covariance), optional χ² gating, iterated updates and relinearised passes,
+then the error-state RTS backward pass.  Why: the radar fixes the altitude and the
+terrain-relative velocity at the end of the descent; the smoother carries that information back
+along the whole trajectory.  This module supplies the models; the estimation steps are the shared
+engine's (:mod:`workbench.estimation.ekf`, :mod:`workbench.estimation.smoother`,
+:mod:`workbench.estimation.grid`).  The method notes and the tuning measurements are in
+``docs/tuning/entry.md``.
 
-Measurement time tags.  A radar sample at ``t_m`` within ``snap_tolerance`` (1 ms) of an IMU
-sample is applied at that sample (the state moves by < 0.1 m and < 0.01° in 1 ms — far below the
-100 m / 25 m/s radar σ).  Otherwise the IMU interval is *split*: a node is inserted at ``t_m``
-with the IMU inputs interpolated linearly (the same input model as RK4 uses), the state and
-covariance are propagated to it, updated, and propagated on to the next IMU sample.  The inserted
-nodes are kept for the backward pass (the RTS recursion runs on the augmented grid, so it stays
-exact) and dropped from the returned histories, which live on the IMU grid.  A measurement that
-falls inside a bridged data gap (no IMU inputs there) is snapped to the nearer gap end (counted
-in ``info["n_snapped_in_gap"]``).  The grid is built by the shared
-:func:`workbench.estimation.grid.merge_time_tags` (gap intervals as ``no_insert``).
-
-Measurements (:mod:`workbench.models.radar`): slant ranges (the four beams stacked, B.3/B.4; a
-zero/invalid packet or beam is skipped), slant-out (the B0 model), velocity-out (B.5/B.6).
-Several measurements at one node are applied sequentially (slant range, slant-out, velocity-out).
-
-Constrained updates (AMELIA Sect. 8, ``constrained=True``).  The Kalman gain
-``K = P Hᵀ S⁻¹`` is projected, ``K ← Π K``:
-
-* slant range / slant-out: velocity rows zeroed; position rows projected on the local vertical
-  (``p̂ p̂ᵀ``); attitude rows such that the attitude correction expressed in M lies in the local
-  horizontal plane: ``C_G_M (I − p̂ p̂ᵀ) C_M_G`` (B.3 is invariant for rotations about the
-  vertical);
-* velocity-out: position rows zeroed (velocity and attitude updated).
-
-With the block-diagonal orthogonal projector Π, ``Π P Hᵀ S⁻¹`` is the minimum-variance gain among
-gains of the form Π K' (the trace of the Joseph covariance is minimised with ``K S = Π P Hᵀ``).
-The covariance uses the Joseph form ``(I − KH) P (I − KH)ᵀ + K R Kᵀ``, valid for any gain, so P
-stays the true covariance of the (sub-optimally) updated error; it is symmetrised.
-``constrained=False`` gives the ordinary EKF update for comparison.
-
-Optional χ² gating (``gate_probability``): an update whose NIS exceeds the χ²(d) quantile is
-rejected (``accepted = False``).  Default: no gating (the paper does not gate).
-
-Relinearisation (``EntryFilterSigmas.iterations``, default 3): after the first forward/backward
-pass the forward pass is repeated with the dynamics (Φ, Qd, gap transitions) and the radar
-models linearised about the previous *smoothed* trajectory (affine model ``x⁻ = f(x̄) ⊞ Φ(x̄)
-(x ⊟ x̄)``, ``h(x) ≈ h(x̄) + H(x̄)(x ⊟ x̄)``: the iterated extended smoother, i.e. Gauss-Newton,
-Bell 1994).  Why: after parachute deployment the rate σ is 10 °/s for 5 s, so the causal
-attitude error reaches ~7° while the specific force is ~87 m/s² and the rate ~240 °/s; Φ
-evaluated 7° off maps the later radar information back wrongly, and the single-pass smoothed
-ANEES (9 dof) there was ~1100 (50-run validation; 13.6 curvilinear after relinearising, with the
-window's σ cut to 1 °/s it is consistent without).  The returned ``forward`` pass and the
-innovations are the first (causal) pass's; ``info["relinearisation_max_attitude_change_rad"]``
-lists the largest attitude change of each further pass.  The passes are run by the shared
-:func:`workbench.estimation.smoother.iterated_rts`; this module supplies the pass (its affine
-models about the reference trajectory).
-
-Iterated updates (``EntryFilterSigmas.update_iterations``, default 4): in the first (causal) pass
-each radar update is re-linearised about its own updated state (iterated EKF, Gauss-Newton; the
-projector Π at the iterate; Joseph covariance of the last gain).  The first radar update is made
-with a ~7° attitude error; 50-run validation: forward curvilinear ANEES at the first radar sample
-12.7 → 10.5 (the NIS/innovations recorded are still the prior's).
-
-Composition: this module supplies the models (strapdown propagation, radar measurement functions
-and Jacobians, the gain projector, the affine models of a relinearised pass); the estimation
-steps are the shared engine's — the augmented time grid
-:func:`workbench.estimation.grid.merge_time_tags`, the passes
-:func:`workbench.estimation.smoother.iterated_rts`, the forward loop
-:func:`workbench.estimation.ekf.run_filter` over the augmented grid
-(the model returns its own Φ and Qd), each update its :func:`~workbench.estimation.ekf.update`
-(Joseph form, ``gain_projector``, iterated with :data:`UPDATE_STEP_TOL`, slant-range records
-NaN-padded to the four beams with ``slots``), the backward pass
-:func:`workbench.estimation.smoother.rts_smooth`; the channel records are
-:class:`~workbench.estimation.ekf.InnovationHistory`.
-
-Backward pass: :func:`workbench.estimation.smoother.rts_smooth` (error-state RTS, Särkkä 2013
-Sect. 8.2) of the stored Φ, P_prior, P_post on the augmented grid; the gain is solved on the
-Jacobi-scaled P_prior (position variances of (km)² next to attitude variances of (µrad)² make
-the unscaled Cholesky ill-conditioned after a long free propagation).  Smoothed residuals per
-channel: measured − h(x_s) with ``S = H P_s Hᵀ + R`` (a conservative band: the exact covariance
-of a smoothed residual is ``R − H P_s Hᵀ``).
-
-References: Aboudan et al., Space Sci. Rev. 214:97, 2018 (Sects. 7-8, App. A-B); Särkkä,
-*Bayesian Filtering and Smoothing*, 2013; Gelb 1974 (Joseph form); Simon, *Optimal State
-Estimation*, 2006, Sect. 7.5 (constrained Kalman filtering by gain projection).
+References: Aboudan et al., "ExoMars 2016 Schiaparelli Module Trajectory and Atmospheric Profiles
+Reconstruction", Space Sci. Rev. 214:97, 2018 (AMELIA; Sects. 7-8, App. A-B); Särkkä, *Bayesian
+Filtering and Smoothing*, 2013; Simon, *Optimal State Estimation*, 2006, Sect. 7.5.
 """
 
 from __future__ import annotations
@@ -550,7 +482,7 @@ def run_entry_smoother(
     sigmas: EntryFilterSigmas | Mapping[str, Any] | None = None,
     constrained: bool = True,
 ) -> EntryFilterResult:
-    """Forward EKF with radar updates + error-state RTS backward pass (module docstring).
+    """Forward EKF with radar updates + error-state RTS backward pass (docs/tuning/entry.md).
 
     ``imu``: a PreprocessedIMU (uses ``t`` (n,), ``f_G``, ``w_G``, ``sigma_f``, ``sigma_w`` (n, 3),
     ``gaps``); ``radar``: :class:`RadarData`; initial state at ``imu.t[0]``: v0 (3,) [m/s], q0 (4,)

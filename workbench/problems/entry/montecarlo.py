@@ -1,76 +1,15 @@
 """Tuning and validation of the radar-aided entry smoother on simulated trajectories (AMELIA Sect. 8).
 
-AMELIA (Aboudan et al. 2018, Sect. 8, "Tuning and Validation of the Method") took 100 of the
-trajectories of the dispersion analysis, simulated the radar measurements on each, corrupted
-them with noise, reconstructed each trajectory from the perturbed (refined) initial state and
-compared it with the true one by the RMS errors of the state.  :func:`validate_smoother` does
-that, and adds the consistency test of the smoothed covariance (NEES, Bar-Shalom, Li &
-Kirubarajan 2001, Sect. 5.4).
+What: :func:`validate_smoother` draws truths from the accepted dispersion members (or from the
+smoother's own initial distribution), integrates them with the clean IMU, simulates the IMU and
+radar noise the filter assumes at the real telemetry time tags, runs the smoother on each and
+scores it (RMS errors, Cartesian and curvilinear NEES, NIS per radar channel, altitude error after
+the radar fix).  Why: AMELIA validated its smoother this way (100 dispersion trajectories); the
+NEES adds the consistency test of the reported covariance (Bar-Shalom, Li & Kirubarajan 2001,
+Sect. 5.4).  Runs are independent per seed and executor (loop, process pool, Dask).  The per-run
+recipe and the measurements behind its choices are in ``docs/tuning/entry.md``.
 
-One run r (its own ``np.random.SeedSequence(seed, spawn_key=(r,))``, spawned into independent
-streams for the member draw, the truth's process noise, the IMU noise and the radar noise):
-
-1. **truth** — member ``i_r`` drawn (with replacement, so a run depends on (seed, r) only) from
-   the *accepted* members of the dispersion, uniformly — or with probability ∝ the importance
-   weight when the dispersion used refinement rounds (``DispersionResult.weights``), so that the
-   drawn initial errors have the distribution ``refined_P0`` describes; its initial state is
-   ``nominal ⊞ dx0[i_r]`` (``v0 + δv``, ``q0 ⊗ exp(δθ)``, ``p0 + δp``), integrated
-   (:func:`~workbench.estimation.strapdown.rk4_step`, the filter's discrete model) with the
-   *clean* preprocessed IMU.  Across a data gap it is carried by
-   :func:`~workbench.estimation.strapdown.apply_gap` and then perturbed by a draw of the gap noise
-   the filter assumes (``gap_transition``'s ``Qd``, ``gap_sigma · Δt`` per block) — without it
-   the truth would follow the on-board bridge exactly and the test would not exercise the gap
-   model (``gap_noise=False`` switches it off).  A state-noise PSD ``q_state_psd`` in the filter
-   sigmas is drawn into the truth the same way.
-2. **filter input** — the IMU plus white noise whose spectral density is the one the filter
-   assumes: per sample ``σ_k · √(sample_dt / dt_k)`` with ``σ_k`` the PreprocessedIMU's
-   ``sigma_f``/``sigma_w``, ``sample_dt`` the median interval (the filter's conversion of
-   per-sample σ into a PSD) and ``dt_k`` the local interval (1 on the 10 Hz grid; √10 on the
-   100 Hz resampled stretch after PDD, where the filter's ``σ² · sample_dt`` would otherwise
-   over-state the noise tenfold).
-3. **radar** — at the real telemetry time tags (the valid ones): the four slant ranges and the
-   slant-out by exact ray-sphere intersection (:func:`~workbench.models.radar.slant_range_sphere`;
-   the filter's B.3 flat-terrain model differs by < 5 m), the velocity-out
-   ``C_G_M (v − Ω p)`` (:func:`~workbench.models.radar.velocity_out_model`), each plus Gaussian
-   noise of ``radar_noise`` (default: the filter's own R, so the NEES test is a test of the
-   filter's assumptions; pass larger values to test robustness to a mis-stated R).  The truth at
-   a time tag between IMU samples is the RK4 step from the previous sample with linearly
-   interpolated inputs — what the smoother's split step assumes; inside a gap it is the nearer
-   gap end (the smoother snaps such a measurement there too).
-4. **smoother** — :func:`~workbench.problems.entry.filter.run_entry_smoother` from the refined
-   state ``(refined_v0, refined_q0, refined_p0)`` with ``refined_P0``.
-
-Other starts (``start=``, e.g. the pipeline's "fused" start: the rules' information combined with
-the navigation prior, ``workbench.problems.entry.initial.initial_for_smoother``) are tested with
-``truth_initial="gaussian"``: the truth's initial state is drawn from the smoother's own initial
-distribution ``start ⊞ N(0, P0)`` — drawing it from the accepted set would put initial errors of
-the accepted spread (~10 km, 0.5 km/s in the directions the rules do not constrain) against a
-covariance that excludes them.
-
-Per run are kept (small): the smoothed and forward NEES (9 dof) at every IMU step (float32),
-the errors and reported 1σ of horizontal position north/east, altitude above ground, velocity
-north/east/down (local frame at the estimate, N towards the MMED pole) and attitude ``δθ_G``
-(body axes; Z_G is the spin axis) — these only as sums for the RMS/mean curves —, the fraction
-of (step, state) pairs with the truth inside ±3σ, the max altitude-AGL error after the first
-radar measurement and its 3σ, and the mean NIS of each radar channel.
-
-Error convention (the filter's): ``truth = estimate ⊞ e``, ``e = [v_t − v, δθ, p_t − p]`` with
-``q_t = q ⊗ exp(δθ)``; reported errors are estimate − truth.
-
-Two NEES.  ``nees`` uses this Cartesian error state, as the filter does.  ``nees_curvilinear``
-writes the position error about the estimate as its horizontal part plus the *altitude* error
-along the estimated vertical û: ``(I − ûûᵀ)(p_t − p) + û (|p_t| − |p|)``.  The two agree to
-first order, but they differ by the curvature term ``|δp_h|²/(2|p|)`` along û: with the tens of
-km of horizontal error the radar cannot see (AMELIA: "latitude and longitude are not fixed"),
-that is ~300 m on the Cartesian vertical while the radar pins the altitude to tens of metres —
-so the Cartesian NEES explodes after the fix even when the altitude, velocity and attitude are
-right.  Both are reported; the difference measures this linearisation limit of a Cartesian
-error state.
-
-Execution by :func:`workbench.estimation.montecarlo.run_monte_carlo`: in-process loop (one BLAS
-thread), a process pool of ``workers`` (one BLAS thread each), a Dask ``LocalCluster``
-(``scheduler="local"``) or a running Dask scheduler (``"tcp://…"``).  Results do not depend on the
-executor (only wall times do).
+Reference: Aboudan et al., Space Sci. Rev. 214:97, 2018 (AMELIA), Sect. 8.
 """
 
 from __future__ import annotations
@@ -197,7 +136,7 @@ def _gap_index(t: np.ndarray, gaps: Sequence[GapBridge]) -> dict[int, GapBridge]
 
 
 def noise_scale(t: np.ndarray, gap_at: Mapping[int, Any]) -> tuple[np.ndarray, float]:
-    """Per-sample factor √(sample_dt / dt_k) (module docstring, step 2), shape (n,), and the
+    """Per-sample factor √(sample_dt / dt_k) (docs/tuning/entry.md, montecarlo, step 2), shape (n,), and the
     median sample interval sample_dt [s], for IMU times ``t`` (n,) [s]; ``gap_at`` maps the index
     of a sample followed by a data gap to its bridge (that interval is not a sampling interval)."""
     d = np.diff(t)
@@ -291,7 +230,7 @@ def _nis_mean(res) -> np.ndarray:
 
 
 def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> RunScores:
-    """One validation run (module docstring); depends on (job, r) only.
+    """One validation run (docs/tuning/entry.md); depends on (job, r) only.
 
     A task of :func:`~workbench.estimation.montecarlo.run_monte_carlo`: ``ss`` is run r's
     ``SeedSequence(job.seed, spawn_key=(r,))``."""
@@ -420,7 +359,7 @@ def score_run(
 
 @dataclass(frozen=True)
 class ValidationResult:
-    """Outcome of :func:`validate_smoother` (SI; errors estimate − truth; see the module docstring).
+    """Outcome of :func:`validate_smoother` (SI; errors estimate − truth; method in docs/tuning/entry.md).
 
     ``t`` (n,) [s] IMU grid; ``n_runs``; ``seed``; ``member`` (n_runs,) the accepted dispersion
     member each run took as its truth; ``failed`` (n_runs,) bool and ``messages`` (why);
@@ -550,7 +489,7 @@ def validate_smoother(
     radar_times: tuple[np.ndarray, np.ndarray],
     settings: ValidationSettings,
 ) -> ValidationResult:
-    """Validate the radar-aided smoother on ``settings.n_runs`` simulated trajectories (module docstring).
+    """Validate the radar-aided smoother on ``settings.n_runs`` simulated trajectories (docs/tuning/entry.md).
 
     ``imu``: a PreprocessedIMU (``t``, ``f_G``, ``w_G``, ``sigma_f``, ``sigma_w``, ``gaps``) — the
     clean inputs of the truth; ``nominal``: ``(v0 [m/s], q0 q_M_G, p0 [m])`` at ``imu.t[0]`` about
@@ -891,7 +830,7 @@ class ValidationInputs:
     def validation_kwargs(self) -> dict:
         """Keyword arguments of :func:`validate_smoother` for these inputs: the pipeline's smoother
         start; truths from the accepted set for the paper's "dispersion" start, else drawn from the
-        start's own Gaussian (module docstring)."""
+        start's own Gaussian (docs/tuning/entry.md)."""
         kw = dict(
             sigmas=self.sigmas,
             beams_G=self.beams_G,
