@@ -484,3 +484,20 @@ def test_missing_acceleration_rows_reported_and_left_out(synth, tmp_path):
     assert len(w) == 1 and "rows 501–503" in w[0]
     imu = preprocess(tel)
     assert imu.t.size == tel.t_gnc.size - 3 + 450 and len(imu.gaps) == 5
+
+
+def test_initial_state_file_is_read_through_its_schema(tmp_path):
+    """``initial_state.toml`` (INITIAL_STATE_SCHEMA): a round trip, and a misspelt key is a located
+    error naming the nearest valid key."""
+    from workbench.io.scenario import ScenarioError
+    from workbench.problems.entry.telemetry import NominalState, write_nominal_state
+
+    st = NominalState(t0=-15.0, v_M=np.array([1.0e3, 2.0e3, 3.0e3]), p_M=np.array([3.4e6, 1.0e5, 2.0e5]),
+                      q_M_G=np.array([0.0, 0.0, 0.0, 1.0]))  # fmt: skip
+    path = write_nominal_state(tmp_path / "initial_state.toml", st)
+    back = read_nominal_state(path)
+    assert back.t0 == -15.0 and np.allclose(back.p_M, st.p_M) and np.allclose(back.v_M, st.v_M)
+    path.write_text(path.read_text().replace("velocity_kmps", "velocity_kmp"))
+    with pytest.raises(ScenarioError, match="did you mean 'velocity_kmps'") as ei:
+        read_nominal_state(path)
+    assert ei.value.key == "initial_state.velocity_kmp" and "initial-state file" in str(ei.value)

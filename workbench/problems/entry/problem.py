@@ -25,7 +25,7 @@ from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress,
 from workbench.problems.entry import pipeline as en
 from workbench.problems.entry.config import SCHEMA, EntrySettings
 from workbench.problems.entry.state import DP, DTH, DV
-from workbench.problems.entry.telemetry import STREAMS, telemetry_paths
+from workbench.problems.entry.telemetry import INITIAL_STATE_SCHEMA, STREAMS, telemetry_paths
 
 __all__ = ["EntryProblem", "key_moments"]
 
@@ -146,7 +146,7 @@ class EntryProblem:
     kind = "entry"
     title = "entry"
     schema = SCHEMA
-    file_schemas = (VEHICLE_SCHEMA,)
+    file_schemas = (VEHICLE_SCHEMA, INITIAL_STATE_SCHEMA)
 
     def settings(self, scenario: Scenario) -> EntrySettings:
         """The run's frozen :class:`~workbench.problems.entry.config.EntrySettings` (validated once,
