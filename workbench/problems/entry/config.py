@@ -29,6 +29,7 @@ from workbench.models.aerodynamics import EntryVehicle, load_vehicle
 from workbench.models.radar import beam_directions_G
 from workbench.problems.entry.atmosphere import AtmosphereSettings, EntryProfileSigmas
 from workbench.problems.entry.dispersion import AcceptanceRules
+from workbench.problems.entry.filter import EntryFilterSigmas
 from workbench.problems.entry.preprocess import PreprocessConfig
 from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryImuModel, EntryTelemetrySpec, NominalErrorModel
 from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M
@@ -63,6 +64,7 @@ _TM = EntryTelemetrySpec()
 _CHECKS = TelemetryChecks()
 _RULES = AcceptanceRules()
 _ATM = AtmosphereSettings()
+_FS = EntryFilterSigmas()
 
 _TRUTH_MEANING = {
     "epoch_utc": ("", "UTC of EIP; absent: `[scenario] epoch_utc`"),
@@ -262,7 +264,13 @@ SCHEMA = Schema(
                     "rate_pdd_dps", _F, _deg(_PRE.sigma_w_saturated), "deg/s", "body rate inside the saturation window"
                 ),
                 Key("accel_mps2", _F, _PRE.sigma_f, "m/s²", "specific force, per sample"),
-                Key("bridge_mode", _S, "relative", meaning="gap bridge position form", choices=("relative", "paper")),
+                Key(
+                    "bridge_mode",
+                    _S,
+                    _FS.bridge_mode,
+                    meaning="gap bridge position form",
+                    choices=("relative", "paper"),
+                ),
                 Key("initial", _S, "fused", meaning="the smoother's start", choices=("fused", "dispersion", "nominal")),
                 Key("imu_accel_bias_mps2", _F, 0.0, "m/s²", "IMU datasheet: accelerometer bias, 1σ (process noise)"),
                 Key("imu_accel_scale", _F, 0.0, "1", "IMU datasheet: accelerometer scale factor, 1σ"),
@@ -297,8 +305,8 @@ SCHEMA = Schema(
             (
                 Key("squint_deg", _F, 20.0, "deg", "squint of beams B1..B3 from -Z_G"),
                 Key("azimuths_deg", _V, [0.0, 120.0, 240.0], "deg", "azimuths of B1..B3 from +X_G towards +Y_G"),
-                Key("slant_range_sigma_m", _F, 100.0, "m", "slant-range measurement 1σ"),
-                Key("slant_out_sigma_m", _F, 100.0, "m", "slant-out measurement 1σ"),
+                Key("slant_range_sigma_m", _F, _FS.slant_range, "m", "slant-range measurement 1σ"),
+                Key("slant_out_sigma_m", _F, _FS.slant_out, "m", "slant-out measurement 1σ"),
                 Key(
                     "terrain_sigma_m",
                     _F,
@@ -316,7 +324,7 @@ SCHEMA = Schema(
                     "slant-out sample is multiplied by this time × the sample rate (R inflation for "
                     "time-correlated errors)",
                 ),
-                Key("velocity_out_sigma_mps", _F, 25.0, "m/s", "velocity-out measurement 1σ"),
+                Key("velocity_out_sigma_mps", _F, _FS.velocity_out, "m/s", "velocity-out measurement 1σ"),
                 Key("constrained", _B, True, meaning="AMELIA Sect. 8 constrained update directions"),
             ),
         ),
