@@ -90,3 +90,5 @@ def test_workbench_run_exits_3_on_a_wrong_vehicle_key(tmp_path, capsys):
     assert main(["run", str(tmp_path / "scenarios" / "my_entry.toml"), "--out", str(out), "-q"]) == EXIT_INPUT
     err = capsys.readouterr().err
     assert "vehicle.riser_lenght_m" in err and "did you mean 'riser_length_m'?" in err
+    assert str(tmp_path / "vehicles" / "schiaparelli.toml") in err
+    assert not out.exists(), "a rejected run wrote an output folder"

@@ -515,9 +515,9 @@ class EntrySettings:
     :meth:`from_scenario` (picklable: Monte Carlo workers receive them).
 
     ``run`` the scenario file's :class:`~workbench.io.scenario.RunInfo`; ``vehicle_path`` the
-    absolute vehicle asset path and ``vehicle`` the asset loaded once (None for a user scenario
+    absolute (resolved) vehicle asset path and ``vehicle`` the asset loaded once (None for a user scenario
     without ``[vehicle] file``: :meth:`require_vehicle` raises then); ``telemetry`` the absolute
-    paths of the ``[telemetry]`` keys given; ``epoch_utc`` of EIP or None; ``terrain_m`` [m] above
+    (resolved) paths of the ``[telemetry]`` keys given; ``epoch_utc`` of EIP or None; ``terrain_m`` [m] above
     the MOLA radius; the per-stage settings ``checks``, ``preprocess``, ``reconstruction``,
     ``dispersion``, ``radar``, ``atmosphere``, ``wind_method`` and ``synthetic``.
     """
@@ -610,7 +610,7 @@ class EntrySettings:
             run=run,
             vehicle_path=vpath,
             vehicle=vehicle,
-            telemetry={k: run.resolve(p) for k, p in v["telemetry"].items() if p is not None},
+            telemetry={k: run.resolve(p).resolve() for k, p in v["telemetry"].items() if p is not None},
             epoch_utc=epoch,
             terrain_m=v["site"]["terrain_m"],
             checks=TelemetryChecks(
@@ -643,7 +643,7 @@ def _vehicle(run: RunInfo, rel: str | None) -> tuple[Path | None, EntryVehicle |
             return None, None
         path = asset_path("vehicles", "schiaparelli.toml")
     else:
-        path = run.resolve(rel)
+        path = run.resolve(rel).resolve()
         if not path.exists():
             raise ScenarioError(run.path, "vehicle.file", f"file not found: {path}")
     return path, load_vehicle(path)
