@@ -22,7 +22,7 @@ from workbench.problems.entry.problem import EntryProblem
 from workbench.problems.entry.sensors import EntryTelemetrySpec
 from workbench.problems.entry.telemetry import TelemetryChecks, telemetry_paths
 from workbench.problems.entry.truth import EntryTruthSpec
-from workbench.problems.entry.truth_mc import _dispersion_overrides
+from workbench.problems.entry.truth_mc import member_settings
 
 SHIPPED = {n: p for n, p in find_scenarios(assets_dir()).items() if load_scenario(p).kind == "entry"}
 
@@ -49,7 +49,7 @@ def test_settings_are_frozen_and_varied_by_replace():
     cfg = EntrySettings.from_scenario(load_scenario(SHIPPED["schiaparelli"]))
     with pytest.raises(dataclasses.FrozenInstanceError):
         cfg.dispersion.members = 1  # type: ignore[misc]
-    mc_cfg = _dispersion_overrides(cfg, 2)
+    mc_cfg = member_settings(cfg, 2)
     assert mc_cfg.dispersion.refine_rounds == 2 and mc_cfg.dispersion.cloud == 0
     assert cfg.dispersion.refine_rounds == 3 and mc_cfg.vehicle is cfg.vehicle
 

@@ -89,6 +89,7 @@ __all__ = [
     "TruthMcResult",
     "disperse_member",
     "run_truth_monte_carlo",
+    "member_settings",
     "DEFAULT_MEMBERS",
     "DEFAULT_REFINE_ROUNDS",
 ]
@@ -319,7 +320,7 @@ class TruthMcResult:
         return self.validation.summary
 
 
-def _dispersion_overrides(settings: EntrySettings, refine_rounds: int | None) -> EntrySettings:
+def member_settings(settings: EntrySettings, refine_rounds: int | None) -> EntrySettings:
     """``settings`` with the members' dispersion: ``refine_rounds`` (default
     :data:`DEFAULT_REFINE_ROUNDS`) and no recording cloud."""
     rr = DEFAULT_REFINE_ROUNDS if refine_rounds is None else int(refine_rounds)
@@ -352,7 +353,7 @@ def run_truth_monte_carlo(
     wall0 = time.perf_counter()
     if int(n_runs) < 1:
         raise ValueError("run_truth_monte_carlo: n_runs must be ≥ 1")
-    cfg = _dispersion_overrides(settings, refine_rounds)
+    cfg = member_settings(settings, refine_rounds)
     job = _Job(
         settings=cfg,
         members=int(members if members is not None else DEFAULT_MEMBERS),
