@@ -141,7 +141,7 @@ def main(argv=None) -> int:
         imu, nom, events, truth0, r_ground, desc = _scenario_input(1)
     else:
         imu, nom, events, truth0, r_ground, desc = _fixture_input()
-    kw = dict(events_t=events, seed=a.seed, r_ground=r_ground)
+    kw = dict(events_t=events, seed=a.seed, r_ground=r_ground, bridge_mode="relative")
     v0, q0, p0 = nom
     n, R = a.members, a.refine_rounds
     passes = R + 1
@@ -157,14 +157,16 @@ def main(argv=None) -> int:
     backend = en.default_backend()
     # 1. the target: R + 1 passes (refinement rounds) of n members, the whole call
     rr, w_tgt, c_tgt = _timed(
-        lambda: ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, refine_rounds=R, **kw)
+        lambda: ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, refine_rounds=R, n_cloud=300, **kw)
     )
     # 2. one pass (round 0 only)
-    res, w_one, c_one = _timed(lambda: ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, **kw))
+    res, w_one, c_one = _timed(
+        lambda: ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, n_cloud=300, **kw)
+    )
     peak = None
     if not a.no_trace:
         tracemalloc.start()
-        res_t = ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, **kw)
+        res_t = ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, n_cloud=300, **kw)
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         assert np.array_equal(res.accepted, res_t.accepted)
@@ -204,7 +206,9 @@ def main(argv=None) -> int:
     # 6. optional Dask
     dask = None
     if a.scheduler:
-        r2 = ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, scheduler=a.scheduler, **kw)
+        r2 = ds.run_dispersion(
+            imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, scheduler=a.scheduler, n_cloud=300, **kw
+        )
         same = np.array_equal(r2.dx0, res.dx0) and all(
             np.array_equal(r2.events[k], res.events[k]) for k in ds.EVENT_NAMES
         )

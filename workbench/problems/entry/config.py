@@ -28,7 +28,7 @@ from workbench.io.schema import REQUIRED, Key, Schema, Table
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
 from workbench.models.radar import beam_directions_G
 from workbench.problems.entry.atmosphere import AtmosphereSettings, EntryProfileSigmas
-from workbench.problems.entry.dispersion import AcceptanceRules
+from workbench.problems.entry.dispersion import AcceptanceRules, DispersionSigmas
 from workbench.problems.entry.filter import EntryFilterSigmas
 from workbench.problems.entry.preprocess import PreprocessConfig
 from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryImuModel, EntryTelemetrySpec, NominalErrorModel
@@ -65,6 +65,7 @@ _CHECKS = TelemetryChecks()
 _RULES = AcceptanceRules()
 _ATM = AtmosphereSettings()
 _FS = EntryFilterSigmas()
+_DS = DispersionSigmas()
 
 _TRUTH_MEANING = {
     "epoch_utc": ("", "UTC of EIP; absent: `[scenario] epoch_utc`"),
@@ -287,9 +288,9 @@ SCHEMA = Schema(
                 Key("members", _I, 10000, meaning="trajectories per round"),
                 Key("chunk_size", _I, 1000, meaning="members per work unit"),
                 Key("seed", _I, 2016, meaning="random seed"),
-                Key("attitude_deg", _F, 5.0, "deg", "initial attitude dispersion, 1σ"),
-                Key("velocity_mps", _F, 500.0, "m/s", "initial velocity dispersion, 1σ"),
-                Key("position_m", _F, 10000.0, "m", "initial position dispersion, 1σ"),
+                Key("attitude_deg", _F, _deg(_DS.attitude_rad), "deg", "initial attitude dispersion, 1σ"),
+                Key("velocity_mps", _F, _DS.velocity_m_s, "m/s", "initial velocity dispersion, 1σ"),
+                Key("position_m", _F, _DS.position_m, "m", "initial position dispersion, 1σ"),
                 Key("cloud", _I, 300, meaning="members kept for the recording"),
                 Key("refine_rounds", _I, 0, meaning="extra rounds sampled about the previous elite"),
             ),
