@@ -67,16 +67,16 @@ from workbench.problems.entry.site import R_GROUND  # noqa: E402
 def _scenario_input(seed: int):
     """(imu, nominal (v, q, p), events, truth (v, q, p) at t0, r_ground, description)."""
     from workbench.io.scenario import load_scenario
-    from workbench.problems.entry.config import config_for
+    from workbench.problems.entry.config import EntrySettings
     from workbench.problems.entry.preprocess import preprocess
     from workbench.problems.entry.synthetic import load_truth, synthesize_entry
     from workbench.problems.entry.telemetry import read_entry_telemetry
 
-    sc = load_scenario(ROOT / "assets" / "scenarios" / "schiaparelli.toml")
+    sc = EntrySettings.from_scenario(load_scenario(ROOT / "assets" / "scenarios" / "schiaparelli.toml"))
     with tempfile.TemporaryDirectory() as d:
         paths = synthesize_entry(sc, d, seed=seed)
-        tm = read_entry_telemetry(paths, config_for(sc).checks)
-        imu = preprocess(tm, config_for(sc).preprocess)
+        tm = read_entry_telemetry(paths, sc.checks)
+        imu = preprocess(tm, sc.preprocess)
         tr = load_truth(paths["truth"])
     k0 = int(np.argmin(np.abs(tr["t"] - imu.t[0])))
     return (
@@ -141,7 +141,7 @@ def main(argv=None) -> int:
         imu, nom, events, truth0, r_ground, desc = _scenario_input(1)
     else:
         imu, nom, events, truth0, r_ground, desc = _fixture_input()
-    kw = dict(events_t=events, seed=a.seed, r_ground=r_ground)
+    kw = dict(events_t=events, seed=a.seed, r_ground=r_ground, bridge_mode="relative")
     v0, q0, p0 = nom
     n, R = a.members, a.refine_rounds
     passes = R + 1
@@ -157,14 +157,16 @@ def main(argv=None) -> int:
     backend = en.default_backend()
     # 1. the target: R + 1 passes (refinement rounds) of n members, the whole call
     rr, w_tgt, c_tgt = _timed(
-        lambda: ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, refine_rounds=R, **kw)
+        lambda: ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, refine_rounds=R, n_cloud=300, **kw)
     )
     # 2. one pass (round 0 only)
-    res, w_one, c_one = _timed(lambda: ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, **kw))
+    res, w_one, c_one = _timed(
+        lambda: ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, n_cloud=300, **kw)
+    )
     peak = None
     if not a.no_trace:
         tracemalloc.start()
-        res_t = ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, **kw)
+        res_t = ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, n_cloud=300, **kw)
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
         assert np.array_equal(res.accepted, res_t.accepted)
@@ -204,7 +206,9 @@ def main(argv=None) -> int:
     # 6. optional Dask
     dask = None
     if a.scheduler:
-        r2 = ds.run_dispersion(imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, scheduler=a.scheduler, **kw)
+        r2 = ds.run_dispersion(
+            imu, v0, q0, p0, None, n, chunk_size=a.chunk_size, scheduler=a.scheduler, n_cloud=300, **kw
+        )
         same = np.array_equal(r2.dx0, res.dx0) and all(
             np.array_equal(r2.events[k], res.events[k]) for k in ds.EVENT_NAMES
         )

@@ -32,6 +32,7 @@ from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
 
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.entry.montecarlo import headline_numbers  # noqa: E402
+from workbench.problems.entry.problem import EntryProblem  # noqa: E402
 from workbench.problems.entry.truth_mc import run_truth_monte_carlo  # noqa: E402
 
 SCHEDULERS = {"pool": "processes", "loop": "loop", "local": "local"}
@@ -77,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=None, help="write the benchmark JSON here")
     a = ap.parse_args(argv)
 
-    sc = load_scenario(a.scenario)
+    sc = EntryProblem().settings(load_scenario(a.scenario))
     t0 = time.perf_counter()
     res = run_truth_monte_carlo(
         sc,

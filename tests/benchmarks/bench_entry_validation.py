@@ -43,7 +43,13 @@ from bench_json import write_benchmark_json  # noqa: E402 (beside this script)
 
 from workbench.io.results import to_jsonable  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
-from workbench.problems.entry.montecarlo import headline_numbers, prepare_validation, validate_smoother  # noqa: E402
+from workbench.problems.entry.montecarlo import (  # noqa: E402
+    ValidationSettings,
+    headline_numbers,
+    prepare_validation,
+    validate_smoother,
+)
+from workbench.problems.entry.problem import EntryProblem  # noqa: E402
 from workbench.problems.entry.synthetic import synthesize_entry  # noqa: E402
 
 
@@ -101,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.refine_rounds is not None:
         sc = sc.with_overrides({"dispersion.refine_rounds": int(a.refine_rounds)})
     n_runs = int(a.runs if a.runs is not None else sc.get("validation.runs", 100, kind="int"))
+    name, sc = sc.name, EntryProblem().settings(sc)
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="bench_entry_validation_") as tmp:
         paths = synthesize_entry(sc, Path(tmp) / "telemetry")
@@ -126,16 +133,12 @@ def main(argv: list[str] | None = None) -> int:
         inp.nominal,
         d,
         inp.radar_times,
-        n_runs=n_runs,
-        seed=a.seed,
-        scheduler=a.scheduler,
-        workers=a.workers,
-        **kw,
+        ValidationSettings(n_runs=n_runs, seed=a.seed, scheduler=a.scheduler, workers=a.workers, **kw),
     )
     s = res.summary
     print(_table(s))
     out = {
-        "scenario": sc.name,
+        "scenario": name,
         "argv": sys.argv[1:],
         "synthesis_s": t1 - t0,
         "prepare_s": t2 - t1,

@@ -78,9 +78,10 @@ def part_dask(runs: int, members: int) -> dict:
 
     from workbench.io.assets import assets_dir
     from workbench.io.scenario import load_scenario
+    from workbench.problems.entry.problem import EntryProblem
     from workbench.problems.entry.truth_mc import run_truth_monte_carlo
 
-    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
+    sc = EntryProblem().settings(load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml"))
     wall, startup = {}, {}
     for workers in (1, 2):
         # ``scheduler="local"`` starts at least 2 workers (documented), so the cluster is started

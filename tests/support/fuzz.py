@@ -319,11 +319,11 @@ def droptest_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozen
 
 def entry_runner(scenario_path: Path, files: dict[str, Path]) -> tuple[frozenset, tuple]:
     """Entry: ``read_entry_telemetry`` (validation, unit plausibility) + the readers' warnings."""
-    from workbench.problems.entry.config import config_for
+    from workbench.problems.entry.config import EntrySettings
     from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state
 
     sc = _resolved(str(scenario_path))
-    tm = read_entry_telemetry(files, config_for(sc).checks)
+    tm = read_entry_telemetry(files, EntrySettings.from_scenario(sc).checks)
     nom = read_nominal_state(files["initial_state"])
     try:
         from workbench.problems.entry.telemetry import check_event_span

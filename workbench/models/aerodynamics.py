@@ -3,8 +3,8 @@
 The Schiaparelli AErodynamic DataBase (AEDB) tabulates the axial and normal coefficients of the
 descent module and of the parachute against Knudsen number, Mach number and angle of attack
 (AMELIA Sect. 9).  This module holds such tables (:class:`AeroTable`, :class:`ParachuteTable`),
-the vehicle that carries them (:class:`EntryVehicle`) and the TOML loader (:func:`load_vehicle`,
-e.g. ``assets/vehicles/schiaparelli.toml``).
+the vehicle that carries them (:class:`EntryVehicle`), the schema of the vehicle asset
+(:data:`VEHICLE_SCHEMA`) and its loader (:func:`load_vehicle`, e.g. ``assets/vehicles/schiaparelli.toml``).
 
 Conventions (GNC body frame G, origin at the CoG, +Z along the symmetry axis towards the back
 shell; during entry the air-relative velocity is along −Z_G):
@@ -29,13 +29,15 @@ from __future__ import annotations
 
 import bisect
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AeroTable", "ParachuteTable", "EntryVehicle", "load_vehicle", "knudsen_bridge"]
+from workbench.io.scenario import ScenarioError
+from workbench.io.schema import REQUIRED, Key, Schema, Table, load_file
+
+__all__ = ["AeroTable", "ParachuteTable", "EntryVehicle", "VEHICLE_SCHEMA", "load_vehicle", "knudsen_bridge"]
 
 
 def _locate(grid: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -258,58 +260,113 @@ class EntryVehicle:
 # ------------------------------------------------------------------------------------- loading
 
 
-def _get(table: dict, dotted: str, path: Path):
-    cur = table
-    for part in dotted.split("."):
-        if not isinstance(cur, dict) or part not in cur:
-            raise ValueError(f"{path}: missing key '{dotted}'")
-        cur = cur[part]
-    return cur
+_F, _S, _L, _V = "float", "str", "list", "vec3"
 
 
-def _num(table: dict, dotted: str, path: Path, positive: bool = True, default=None) -> float:
+def _aero_keys(kind: str) -> tuple[Key, ...]:
+    """The keys of an ``[aero.capsule]`` / ``[aero.descent_module]`` table (compact AEDB form)."""
+    return (
+        Key("name", _S, None, meaning=f"display name; absent: `{kind}`"),
+        Key("mach", _L, REQUIRED, "1", "Mach nodes (n_mach), increasing", ge=0.0),
+        Key("alpha_deg", _L, REQUIRED, "deg", "total angle-of-attack nodes (n_alpha), increasing", ge=0.0, le=180.0),
+        Key("ca", _L, REQUIRED, "1", "continuum axial coefficient, n_mach rows of n_alpha"),
+        Key("cn", _L, REQUIRED, "1", "continuum normal coefficient, n_mach × n_alpha"),
+        Key("cm", _L, REQUIRED, "1", "continuum pitching-moment coefficient about the CoG, n_mach × n_alpha"),
+        Key("cmq", _F, REQUIRED, "1", "pitch-damping coefficient (< 0 damps)"),
+        Key("ref_area_m2", _F, None, "m²", "reference area; absent: π d²/4 with d = `vehicle.diameter_m`", gt=0.0),
+        Key("ref_length_m", _F, None, "m", "reference length; absent: `vehicle.diameter_m`", gt=0.0),
+        Key("ca_fm", _L, None, "1", "free-molecular CA (n_alpha); present: the table is bridged in Kn"),
+        Key("cn_fm", _L, None, "1", "free-molecular CN (n_alpha); needed with `ca_fm`"),
+        Key("cm_fm", _L, None, "1", "free-molecular Cm (n_alpha); needed with `ca_fm`"),
+        Key("kn_continuum", _F, None, "1", "Knudsen number below which the flow is continuum; with `ca_fm`", gt=0.0),
+        Key(
+            "kn_free_molecular",
+            _F,
+            None,
+            "1",
+            "Knudsen number above which it is free-molecular (> `kn_continuum`); with `ca_fm`",
+            gt=0.0,
+        ),
+        Key("log10_kn", _L, None, "1", "log10 Kn nodes of the bridged table; with `ca_fm`"),
+    )
+
+
+#: The schema of an entry-vehicle asset (``assets/vehicles/*.toml``), read by :func:`load_vehicle`.
+VEHICLE_SCHEMA = Schema(
+    "vehicle",
+    "entry vehicle asset",
+    (
+        Table(
+            "vehicle",
+            "mass properties, geometry and parachute riser (GNC body frame G, origin at the CoG)",
+            (
+                Key("name", _S, REQUIRED, meaning="display name"),
+                Key("half_angle_deg", _F, None, "deg", "sphere-cone half-angle (documentation only)", gt=0.0, lt=90.0),
+                Key("diameter_m", _F, REQUIRED, "m", "maximum diameter (Knudsen reference length)", gt=0.0),
+                Key("nose_radius_m", _F, REQUIRED, "m", "nose radius", gt=0.0),
+                Key("mass_entry_kg", _F, REQUIRED, "kg", "total mass at entry incl. the parachute", gt=0.0),
+                Key("mass_front_shield_kg", _F, REQUIRED, "kg", "front shield released at FSR", gt=0.0),
+                Key("mass_back_shell_kg", _F, REQUIRED, "kg", "back shell released at BSR", gt=0.0),
+                Key("inertia_kgm2", _L, REQUIRED, "kg m²", "inertia tensor about the CoG at entry, 3×3 symmetric PD"),
+                Key("attach_point_m", _V, REQUIRED, "m", "riser attachment on the back shell apex [x, y, z]"),
+                Key("riser_length_m", _F, REQUIRED, "m", "unstretched riser + suspension-line length", gt=0.0),
+                Key("riser_stiffness_n_per_m", _F, REQUIRED, "N/m", "riser spring stiffness", gt=0.0),
+                Key("riser_damping_n_s_per_m", _F, REQUIRED, "N s/m", "riser damping"),
+            ),
+        ),
+        Table("aero.capsule", "entry configuration (front shield + back shell + module)", _aero_keys("capsule")),
+        Table(
+            "aero.descent_module",
+            "after FSR (back shell + module under the parachute)",
+            _aero_keys("descent_module"),
+        ),
+        Table(
+            "aero.parachute",
+            "the parachute",
+            (
+                Key("name", _S, REQUIRED, meaning="display name"),
+                Key("nominal_diameter_m", _F, REQUIRED, "m", "nominal diameter (reference area π D²/4)", gt=0.0),
+                Key("mass_kg", _F, REQUIRED, "kg", "canopy mass", gt=0.0),
+                Key("mach", _L, REQUIRED, "1", "Mach nodes, increasing", ge=0.0),
+                Key("cd", _L, REQUIRED, "1", "drag coefficient at those nodes", gt=0.0),
+            ),
+        ),
+    ),
+    noun="vehicle asset",
+    intro="Keys of an entry-vehicle asset (`assets/vehicles/*.toml`, read by `models.aerodynamics.load_vehicle`)",
+)
+
+
+def _shaped(path: Path, dotted: str, value, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """``value`` as a finite float array of ``shape`` (cross-field shape check after validation);
+    :class:`ScenarioError` naming the file and ``dotted`` otherwise."""
     try:
-        v = _get(table, dotted, path)
-    except ValueError:
-        if default is not None:
-            return float(default)
-        raise
-    if isinstance(v, bool) or not isinstance(v, int | float):
-        raise ValueError(f"{path}: key '{dotted}' must be a number, got {v!r}")
-    v = float(v)
-    if positive and not v > 0.0:
-        raise ValueError(f"{path}: key '{dotted}' must be > 0, got {v}")
-    return v
-
-
-def _arr(table: dict, dotted: str, path: Path, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    v = _get(table, dotted, path)
-    try:
-        a = np.array(v, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{path}: key '{dotted}' must be a (nested) array of numbers") from exc
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ScenarioError(path, dotted, "must be a (nested) array of numbers") from None
     if shape is not None and a.shape != shape:
-        raise ValueError(f"{path}: key '{dotted}' must have shape {shape}, got {a.shape}")
+        raise ScenarioError(path, dotted, f"must have shape {shape}, got {a.shape}")
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"{path}: key '{dotted}' must be finite")
+        raise ScenarioError(path, dotted, "must be finite")
     return a
 
 
-def _aero_table(data: dict, key: str, path: Path, diameter: float) -> AeroTable:
-    """Build a 3-D AeroTable from the compact AEDB form of ``[aero.<key>]`` (see the asset file)."""
+def _aero_table(tab: dict, key: str, path: Path, diameter: float) -> AeroTable:
+    """Build a 3-D AeroTable from the validated compact AEDB form of ``[aero.<key>]``."""
     pre = f"aero.{key}"
-    mach = _arr(data, f"{pre}.mach", path)
-    alpha_deg = _arr(data, f"{pre}.alpha_deg", path)
+    mach = _shaped(path, f"{pre}.mach", tab["mach"])
+    alpha_deg = _shaped(path, f"{pre}.alpha_deg", tab["alpha_deg"])
     nm, na = mach.size, alpha_deg.size
-    cont = {c: _arr(data, f"{pre}.{c}", path, (nm, na)) for c in ("ca", "cn", "cm")}
-    tab = _get(data, pre, path)
-    if "ca_fm" in tab:  # free-molecular limit + bridging in log Kn
-        fm = {c: _arr(data, f"{pre}.{c}_fm", path, (na,)) for c in ("ca", "cn", "cm")}
-        kn_c = _num(data, f"{pre}.kn_continuum", path)
-        kn_fm = _num(data, f"{pre}.kn_free_molecular", path)
+    cont = {c: _shaped(path, f"{pre}.{c}", tab[c], (nm, na)) for c in ("ca", "cn", "cm")}
+    if tab["ca_fm"] is not None:  # free-molecular limit + bridging in log Kn
+        for k in ("cn_fm", "cm_fm", "kn_continuum", "kn_free_molecular", "log10_kn"):
+            if tab[k] is None:
+                raise ScenarioError(path, f"{pre}.{k}", "missing (needed with ca_fm: a Kn-bridged table)")
+        fm = {c: _shaped(path, f"{pre}.{c}_fm", tab[f"{c}_fm"], (na,)) for c in ("ca", "cn", "cm")}
+        kn_c, kn_fm = tab["kn_continuum"], tab["kn_free_molecular"]
         if not kn_fm > kn_c:
-            raise ValueError(f"{path}: key '{pre}.kn_free_molecular' must exceed 'kn_continuum'")
-        log_kn = _arr(data, f"{pre}.log10_kn", path)
+            raise ScenarioError(path, f"{pre}.kn_free_molecular", "must exceed kn_continuum")
+        log_kn = _shaped(path, f"{pre}.log10_kn", tab["log10_kn"])
         B = knudsen_bridge(10.0**log_kn, kn_c, kn_fm)[None, :, None]
         coef = {c: cont[c][:, None, :] + (fm[c][None, None, :] - cont[c][:, None, :]) * B for c in cont}
     else:  # continuum only: independent of Kn
@@ -317,85 +374,75 @@ def _aero_table(data: dict, key: str, path: Path, diameter: float) -> AeroTable:
         coef = {c: np.repeat(cont[c][:, None, :], 2, axis=1) for c in cont}
     try:
         return AeroTable(
-            name=str(tab.get("name", key)),
+            name=key if tab["name"] is None else tab["name"],
             mach=mach,
             log10_kn=log_kn,
             alpha=np.deg2rad(alpha_deg),
             ca=coef["ca"],
             cn=coef["cn"],
             cm=coef["cm"],
-            cmq=_num(data, f"{pre}.cmq", path, positive=False),
-            ref_area=_num(data, f"{pre}.ref_area_m2", path, default=0.25 * math.pi * diameter**2),
-            ref_length=_num(data, f"{pre}.ref_length_m", path, default=diameter),
+            cmq=tab["cmq"],
+            ref_area=0.25 * math.pi * diameter**2 if tab["ref_area_m2"] is None else tab["ref_area_m2"],
+            ref_length=diameter if tab["ref_length_m"] is None else tab["ref_length_m"],
         )
     except ValueError as exc:
-        raise ValueError(f"{path}: [{pre}]: {exc}") from exc
+        raise ScenarioError(path, pre, str(exc)) from None
 
 
 def load_vehicle(path: str | Path) -> EntryVehicle:
-    """Read an entry-vehicle asset (TOML, SI) into an :class:`EntryVehicle`.
+    """Read an entry-vehicle asset (TOML, SI; :data:`VEHICLE_SCHEMA`) into an :class:`EntryVehicle`.
 
-    Tables/keys (see ``assets/vehicles/schiaparelli.toml``): ``[vehicle]`` name, diameter_m,
-    nose_radius_m, mass_entry_kg, mass_front_shield_kg, mass_back_shell_kg, inertia_kgm2 (3x3
-    SPD), attach_point_m [x, y, z], riser_length_m, riser_stiffness_n_per_m,
-    riser_damping_n_s_per_m; ``[aero.capsule]`` and ``[aero.descent_module]`` with mach,
-    alpha_deg, continuum ca/cn/cm (n_mach x n_alpha), cmq, optional ref_area_m2/ref_length_m
-    (default: π d²/4 and d) and, for the bridged table, ca_fm/cn_fm/cm_fm (n_alpha),
-    kn_continuum, kn_free_molecular, log10_kn (nodes); ``[aero.parachute]`` name, mach, cd,
-    nominal_diameter_m, mass_kg.
-
+    ``[vehicle]`` mass properties (inertia 3×3 symmetric PD), geometry and riser;
+    ``[aero.capsule]`` and ``[aero.descent_module]`` the compact AEDB tables (continuum
+    n_mach × n_alpha, optionally bridged to the free-molecular limit); ``[aero.parachute]``.
     The 3-D capsule table is ``C(M, Kn, α) = C_cont(M, α) + (C_fm(α) − C_cont(M, α)) B(Kn)`` with
     :func:`knudsen_bridge` ``B``, sampled at the ``log10_kn`` nodes.
 
-    Raises ``FileNotFoundError`` if the file is missing and ``ValueError`` naming the file and key
-    for malformed TOML, missing keys or bad values.
+    Raises ``FileNotFoundError`` if the file is missing and
+    :class:`~workbench.io.scenario.ScenarioError` (a ``ValueError``) naming the file and dotted key
+    for malformed TOML, unknown keys (with the nearest valid one), missing keys or bad values.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"vehicle asset not found: {path}")
-    try:
-        with path.open("rb") as fh:
-            data = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: invalid TOML: {exc}") from exc
-
-    d = _num(data, "vehicle.diameter_m", path)
-    inertia = _arr(data, "vehicle.inertia_kgm2", path, (3, 3))
+    data = load_file(path, VEHICLE_SCHEMA)
+    v, aero = data["vehicle"], data["aero"]
+    d = v["diameter_m"]
+    inertia = _shaped(path, "vehicle.inertia_kgm2", v["inertia_kgm2"], (3, 3))
     if not np.allclose(inertia, inertia.T) or np.any(np.linalg.eigvalsh(inertia) <= 0.0):
-        raise ValueError(f"{path}: key 'vehicle.inertia_kgm2' must be symmetric positive definite")
-    attach = _arr(data, "vehicle.attach_point_m", path, (3,))
-    pm = _arr(data, "aero.parachute.mach", path)
-    pcd = _arr(data, "aero.parachute.cd", path, pm.shape)
+        raise ScenarioError(path, "vehicle.inertia_kgm2", "must be symmetric positive definite")
+    attach = _shaped(path, "vehicle.attach_point_m", v["attach_point_m"], (3,))
+    pc = aero["parachute"]
+    pm = _shaped(path, "aero.parachute.mach", pc["mach"])
+    pcd = _shaped(path, "aero.parachute.cd", pc["cd"], pm.shape)
     try:
         chute = ParachuteTable(
-            name=str(_get(data, "aero.parachute.name", path)),
+            name=pc["name"],
             mach=pm,
             cd=pcd,
-            ref_area=0.25 * math.pi * _num(data, "aero.parachute.nominal_diameter_m", path) ** 2,
-            mass=_num(data, "aero.parachute.mass_kg", path),
+            ref_area=0.25 * math.pi * pc["nominal_diameter_m"] ** 2,
+            mass=pc["mass_kg"],
         )
     except ValueError as exc:
-        raise ValueError(f"{path}: [aero.parachute]: {exc}") from exc
-    m_entry = _num(data, "vehicle.mass_entry_kg", path)
-    m_fs = _num(data, "vehicle.mass_front_shield_kg", path)
-    m_bs = _num(data, "vehicle.mass_back_shell_kg", path)
+        raise ScenarioError(path, "aero.parachute", str(exc)) from None
+    m_entry, m_fs, m_bs = v["mass_entry_kg"], v["mass_front_shield_kg"], v["mass_back_shell_kg"]
     if not m_entry > chute.mass + m_fs + m_bs:
-        raise ValueError(f"{path}: key 'vehicle.mass_entry_kg' must exceed parachute + front shield + back shell")
+        raise ScenarioError(path, "vehicle.mass_entry_kg", "must exceed parachute + front shield + back shell")
     for a in (inertia, attach):
         a.flags.writeable = False
     return EntryVehicle(
-        name=str(_get(data, "vehicle.name", path)),
+        name=v["name"],
         mass_entry=m_entry,
         mass_front_shield=m_fs,
         mass_back_shell=m_bs,
         inertia_G=inertia,
         diameter=d,
-        nose_radius=_num(data, "vehicle.nose_radius_m", path),
-        capsule=_aero_table(data, "capsule", path, d),
-        descent_module=_aero_table(data, "descent_module", path, d),
+        nose_radius=v["nose_radius_m"],
+        capsule=_aero_table(aero["capsule"], "capsule", path, d),
+        descent_module=_aero_table(aero["descent_module"], "descent_module", path, d),
         parachute=chute,
         attach_point_G=attach,
-        riser_length=_num(data, "vehicle.riser_length_m", path),
-        riser_stiffness=_num(data, "vehicle.riser_stiffness_n_per_m", path),
-        riser_damping=_num(data, "vehicle.riser_damping_n_s_per_m", path, positive=False),
+        riser_length=v["riser_length_m"],
+        riser_stiffness=v["riser_stiffness_n_per_m"],
+        riser_damping=v["riser_damping_n_s_per_m"],
     )

@@ -10,6 +10,7 @@ to the coefficient iteration, the fills and the p0 of the default model.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -27,11 +28,13 @@ from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import dcm_to_quat
 from workbench.problems.entry.atmosphere import (
     CA_FIRST_GUESS,
+    AtmosphereSettings,
     EntryProfileSigmas,
     air_relative_velocity,
     drag_area,
     exponential_fill,
     hydrostatic_pressure,
+    profile_sigmas,
     reconstruct_atmosphere,
     smooth_in_altitude,
     system_mass,
@@ -192,6 +195,11 @@ def _run(sim, f_valid=None, P=None, **kw):
     if f_valid is None:
         f_valid = np.ones(n, bool)
     f_G[~f_valid] = np.nan
+    atm = kw.pop("default_atmosphere", MarsEngineeringAtmosphere())
+    call = {k: kw.pop(k) for k in ("events", "wind_NE") if k in kw}
+    if "sigmas" in kw:
+        kw["sigmas"] = profile_sigmas(kw["sigmas"])
+    settings = dataclasses.replace(AtmosphereSettings(), **kw)
     return reconstruct_atmosphere(
         sim["t"],
         sim["p_M"],
@@ -202,8 +210,9 @@ def _run(sim, f_valid=None, P=None, **kw):
         f_valid,
         sim["phase"],
         VEHICLE,
-        default_atmosphere=kw.pop("default_atmosphere", MarsEngineeringAtmosphere()),
-        **kw,
+        default_atmosphere=atm,
+        settings=settings,
+        **call,
     )
 
 

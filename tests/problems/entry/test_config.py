@@ -1,10 +1,12 @@
-"""Entry scenario configuration: every shipped scenario validates; the defaults are those of the
+"""Entry scenario settings: every shipped scenario validates; the defaults are those of the
 code's dataclasses; a misspelt key is a located error; the pipeline and the smoother validation
-read the same configuration."""
+read the same settings; the settings are frozen, picklable and varied with dataclasses.replace."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import pickle
 import shutil
 from pathlib import Path
 
@@ -13,13 +15,14 @@ import pytest
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import Scenario, ScenarioError, find_scenarios, load_scenario
 from workbench.problems.entry import montecarlo as mc
-from workbench.problems.entry.config import SCHEMA, EntryConfig, config_for
+from workbench.problems.entry.config import SCHEMA, EntrySettings
 from workbench.problems.entry.dispersion import AcceptanceRules
 from workbench.problems.entry.preprocess import PreprocessConfig
+from workbench.problems.entry.problem import EntryProblem
 from workbench.problems.entry.sensors import EntryTelemetrySpec
-from workbench.problems.entry.synthetic import synthesize_entry
 from workbench.problems.entry.telemetry import TelemetryChecks, telemetry_paths
-from workbench.problems.entry.truth import EntryTruthSpec, truth_spec_from_scenario
+from workbench.problems.entry.truth import EntryTruthSpec
+from workbench.problems.entry.truth_mc import member_settings
 
 SHIPPED = {n: p for n, p in find_scenarios(assets_dir()).items() if load_scenario(p).kind == "entry"}
 
@@ -36,28 +39,46 @@ def test_there_is_a_shipped_entry_scenario():
 @pytest.mark.parametrize("name", sorted(SHIPPED))
 def test_every_shipped_scenario_validates(name):
     sc = load_scenario(SHIPPED[name])
-    cfg = EntryConfig.from_scenario(sc)
-    assert cfg.members > 0 and cfg.bridge_mode in ("relative", "paper")
-    assert config_for(sc) is config_for(sc)
-    # the synthetic-side readers accept it too
-    EntryTelemetrySpec.from_scenario(sc)
-    truth_spec_from_scenario(sc)
+    cfg = EntryProblem().settings(sc)
+    assert cfg.dispersion.members > 0 and cfg.reconstruction.bridge_mode in ("relative", "paper")
+    assert cfg.vehicle is not None and cfg.vehicle_path.is_absolute()
+    assert pickle.loads(pickle.dumps(cfg)).run == cfg.run  # Monte Carlo workers receive it
+
+
+def test_settings_are_frozen_and_varied_by_replace():
+    cfg = EntrySettings.from_scenario(load_scenario(SHIPPED["schiaparelli"]))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.dispersion.members = 1  # type: ignore[misc]
+    mc_cfg = member_settings(cfg, 2)
+    assert mc_cfg.dispersion.refine_rounds == 2 and mc_cfg.dispersion.cloud == 0
+    assert cfg.dispersion.refine_rounds == 3 and mc_cfg.vehicle is cfg.vehicle
 
 
 def test_schiaparelli_values():
-    cfg = config_for(load_scenario(SHIPPED["schiaparelli"]))
-    assert cfg.members == 10000 and cfg.refine_rounds == 3 and cfg.cloud == 300
-    assert cfg.rules == AcceptanceRules(h_pdd_m=(10000.0, 2000.0))  # the file's rules are the defaults
-    assert cfg.azimuths_deg == (0.0, 120.0, 240.0) and cfg.constrained and cfg.terrain_m == -1440.0
+    cfg = EntrySettings.from_scenario(load_scenario(SHIPPED["schiaparelli"]))
+    d = cfg.dispersion
+    assert d.members == 10000 and d.refine_rounds == 3 and d.cloud == 300
+    assert d.rules == AcceptanceRules(h_pdd_m=(10000.0, 2000.0))  # the file's rules are the defaults
+    assert cfg.radar.azimuths_deg == (0.0, 120.0, 240.0) and cfg.radar.constrained and cfg.terrain_m == -1440.0
+    assert cfg.synthetic.seed == 7 == cfg.synthetic.truth_seed
+    assert cfg.synthetic.truth.epoch_utc == cfg.epoch_utc == "2016-10-19T14:42:22.132Z"
+    assert cfg.synthetic.telemetry.squint_deg == cfg.radar.squint_deg == 20.0
 
 
 def test_defaults_are_those_of_the_code(tmp_path):
-    cfg = EntryConfig.from_scenario(minimal(tmp_path))
+    cfg = EntrySettings.from_scenario(minimal(tmp_path))
     assert cfg.preprocess == PreprocessConfig()
     assert cfg.checks == TelemetryChecks()
-    assert cfg.rules == AcceptanceRules()
-    assert cfg.epoch_utc is None and cfg.initial == "fused" and cfg.wind_method == "specific_force"
-    assert EntryTelemetrySpec.from_scenario(minimal(tmp_path)) == EntryTelemetrySpec()
+    assert cfg.dispersion.rules == AcceptanceRules()
+    assert cfg.epoch_utc is None and cfg.reconstruction.initial == "fused" and cfg.wind_method == "specific_force"
+    assert cfg.vehicle is None  # a user scenario without [vehicle] file: only the reconstruction needs it
+    with pytest.raises(ScenarioError, match="vehicle"):
+        cfg.require_vehicle()
+    # the synthetic spec: the code's defaults, the beam geometry and terrain from [radar] and [site]
+    spec, d = cfg.synthetic.telemetry, EntryTelemetrySpec()
+    assert spec.imu.gyro_bias == pytest.approx(d.imu.gyro_bias, rel=1e-12)  # the schema rounds its degrees
+    assert dataclasses.replace(spec, imu=d.imu, squint_deg=None, azimuths_deg=None) == d
+    assert cfg.synthetic.truth == EntryTruthSpec()
     truth_keys = {k.name: k.default for k in SCHEMA.table("truth").keys}
     d = EntryTruthSpec()
     assert set(truth_keys) == set(EntryTruthSpec.__dataclass_fields__)
@@ -65,7 +86,9 @@ def test_defaults_are_those_of_the_code(tmp_path):
 
 
 def test_preprocess_sigmas_fall_back_to_the_reconstruction_table(tmp_path):
-    cfg = config_for(minimal(tmp_path, reconstruction={"rate_pdd_dps": 5.0}, preprocess={"sigma_rate_dps": 0.02}))
+    cfg = EntrySettings.from_scenario(
+        minimal(tmp_path, reconstruction={"rate_pdd_dps": 5.0}, preprocess={"sigma_rate_dps": 0.02})
+    )
     assert cfg.preprocess.sigma_w_saturated == math.radians(5.0) == cfg.preprocess.sigma_w_resampled
     assert cfg.preprocess.sigma_w == math.radians(0.02)
 
@@ -100,7 +123,7 @@ def _copy_with(tmp_path: Path, old: str, new: str) -> Path:
 def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggestion):
     path = _copy_with(tmp_path, old, new)
     with pytest.raises(ScenarioError) as ei:
-        EntryConfig.from_scenario(load_scenario(path))
+        EntrySettings.from_scenario(load_scenario(path))
     e = ei.value
     assert e.file == str(path) and e.key == key
     assert table in str(e) and f"did you mean '{suggestion}'?" in str(e)
@@ -115,26 +138,29 @@ def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggest
         ("scenario.epoch_utc", "yesterday", "epoch_utc"),
         ("sensors.imu.gyro_full_scale_dps", [1.0, 2.0], "list of 3"),
         ("preprocess.gap_factor", 0.5, "gap_factor"),
+        ("synthetic.nominal_error.dx0", [1.0, 2.0], "9 numbers"),
+        ("truth.wind_layers", [["a", 1, 2, 3, 4]], "wind_layers"),
+        ("vehicle.file", "nowhere.toml", "file not found"),
     ],
 )
 def test_bad_values_are_located_errors(key, value, match):
     sc = load_scenario(SHIPPED["schiaparelli"]).with_overrides({key: value})
     with pytest.raises(ScenarioError, match=match) as ei:
-        EntryConfig.from_scenario(sc)
+        EntrySettings.from_scenario(sc)
     assert ei.value.key.split(".")[0] == key.split(".")[0]
 
 
-def test_synthesis_rejects_the_scenario_before_simulating(tmp_path):
+def test_settings_reject_a_sensor_key_before_simulating(tmp_path):
     path = _copy_with(tmp_path, "velocity_sigma_mps = 1.0", "velocity_sigma = 1.0")
     with pytest.raises(ScenarioError, match=r"sensors.radar.velocity_sigma'.*did you mean 'velocity_sigma_mps'"):
-        synthesize_entry(load_scenario(path), tmp_path / "tel")
-    assert not (tmp_path / "tel").exists() or not list((tmp_path / "tel").iterdir())
+        EntryProblem().settings(load_scenario(path))
 
 
 def test_telemetry_paths_need_every_stream_radar_included(tmp_path):
     streams = {k: f"tm/{k}.csv" for k in ("gnc", "gnc_nav", "rda_slant_range", "events", "initial_state")}
     with pytest.raises(ScenarioError, match="rda_out") as ei:
-        telemetry_paths(minimal(tmp_path, telemetry=streams))
+        cfg = EntrySettings.from_scenario(minimal(tmp_path, telemetry=streams))
+        telemetry_paths(cfg.telemetry, cfg.run.path)
     assert ei.value.key == "telemetry.rda_out" and "radar" in str(ei.value)
 
 
@@ -157,7 +183,7 @@ def test_prepare_validation_reads_the_scenarios_telemetry_checks(tmp_path, monke
         {"preprocess.quat_error_tol": 2e-3, "preprocess.quat_warn_tol": 1e-5, "sensors.radar.zero_filled_packets": 3}
     )
     with pytest.raises(_Stop):
-        mc.prepare_validation(sc, {"initial_state": tmp_path / "initial_state.toml"})
+        mc.prepare_validation(EntrySettings.from_scenario(sc), {"initial_state": tmp_path / "initial_state.toml"})
     assert seen["checks"] == TelemetryChecks(quat_error_tol=2e-3, quat_warn_tol=1e-5, zero_filled_packets=3)
 
 
@@ -171,7 +197,7 @@ def test_terrain_correlation_inflates_only_the_slant_out_terrain_term(tmp_path):
             "terrain_correlation_s": 30.0,
         },
     )
-    cfg = EntryConfig.from_scenario(sc)
+    cfg = EntrySettings.from_scenario(sc)
     white = cfg.smoother_sigmas()
     assert white["slant_out"] == pytest.approx(math.hypot(40.0, 100.0))
     corr = cfg.smoother_sigmas(slant_out_dt_s=0.1)

@@ -22,7 +22,7 @@ def case():
     imu = synth.make_imu(tr, gaps=[(20.0, 77.0), (100.0, 101.5)])
     v0, q0, p0 = tr["v"][0], tr["q"][0], tr["p"][0]
     # truth-centred rules with the paper's half-widths
-    ref = ds.run_dispersion(imu, v0, q0, p0, np.zeros(9), n=1, events_t=tr["events"], n_cloud=0)
+    ref = ds.run_dispersion(imu, v0, q0, p0, np.zeros(9), n=1, events_t=tr["events"], n_cloud=0, bridge_mode="relative")
     e = {k: float(v[0]) for k, v in ref.events.items()}
     rules = ds.AcceptanceRules(
         mach_pdd=(e["mach_pdd"], 0.2),
@@ -32,7 +32,7 @@ def case():
         time_to_impact_s=(e["time_to_impact"], 15.0),
     )
     res = ds.run_dispersion(imu, v0, q0, p0, SIG, n=200, rules=rules, events_t=tr["events"], chunk_size=64, seed=3,
-                            n_cloud=40)  # fmt: skip
+                            n_cloud=40, bridge_mode="relative")  # fmt: skip
     return dict(tr=tr, imu=imu, v0=v0, q0=q0, p0=p0, rules=rules, res=res, e_nominal=e)
 
 
@@ -64,7 +64,7 @@ def test_offsets_depend_only_on_seed_and_member():
 def test_chunk_size_loop_and_dask_give_identical_results(case):
     c = case
     args = (c["imu"], c["v0"], c["q0"], c["p0"], SIG)
-    kw = dict(rules=c["rules"], events_t=c["tr"]["events"], seed=3, n_cloud=40)
+    kw = dict(rules=c["rules"], events_t=c["tr"]["events"], seed=3, n_cloud=40, bridge_mode="relative")
     other = ds.run_dispersion(*args, n=200, chunk_size=200, **kw)
     _same(c["res"], other)
     np.testing.assert_array_equal(c["res"].cloud_p_M, other.cloud_p_M)
@@ -133,14 +133,17 @@ def test_none_accepted_and_bad_inputs(case):
     c = case
     strict = ds.AcceptanceRules(mach_pdd=(10.0, 0.01))
     r = ds.run_dispersion(c["imu"], c["v0"], c["q0"], c["p0"], SIG, n=8, rules=strict, events_t=c["tr"]["events"],
-                          n_cloud=4)  # fmt: skip
+                          n_cloud=4, bridge_mode="relative")  # fmt: skip
     assert r.n_accepted == 0 and np.all(np.isnan(r.refined_P0))
     np.testing.assert_array_equal(r.refined_v0, c["v0"])
     assert r.cloud_index.size == 4 and not r.cloud_accepted.any()
     with pytest.raises(ValueError, match="PDD"):
-        ds.run_dispersion(c["imu"], c["v0"], c["q0"], c["p0"], SIG, n=2, events_t={"FSR": 10.0})
+        ds.run_dispersion(
+            c["imu"], c["v0"], c["q0"], c["p0"], SIG, n=2, events_t={"FSR": 10.0}, n_cloud=0, bridge_mode="relative"
+        )
     with pytest.raises(ValueError, match="scheduler"):
-        ds.run_dispersion(c["imu"], c["v0"], c["q0"], c["p0"], SIG, n=2, events_t=c["tr"]["events"], scheduler="x")
+        ds.run_dispersion(c["imu"], c["v0"], c["q0"], c["p0"], SIG, n=2, events_t=c["tr"]["events"], scheduler="x",
+                          n_cloud=0, bridge_mode="relative")  # fmt: skip
 
 
 def test_sigma_forms():
@@ -155,7 +158,8 @@ def test_sigma_forms():
 def test_refinement_rounds_are_deterministic_and_weighted(case):
     c = case
     wide = ds.DispersionSigmas(velocity_m_s=30.0, attitude_rad=np.deg2rad(1.0), position_m=5000.0)
-    kw = dict(rules=c["rules"], events_t=c["tr"]["events"], seed=9, n_cloud=10, refine_rounds=1, min_elite=10)
+    kw = dict(rules=c["rules"], events_t=c["tr"]["events"], seed=9, n_cloud=10, refine_rounds=1, min_elite=10,
+              bridge_mode="relative")  # fmt: skip
     a = ds.run_dispersion(c["imu"], c["v0"], c["q0"], c["p0"], wide, n=120, chunk_size=120, **kw)
     b = ds.run_dispersion(c["imu"], c["v0"], c["q0"], c["p0"], wide, n=120, chunk_size=50, **kw)
     _same(a, b)

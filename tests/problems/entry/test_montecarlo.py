@@ -22,7 +22,7 @@ from workbench.core.rotation import dcm_to_quat, quat_boxplus, quat_from_rotvec,
 from workbench.estimation.strapdown import GapBridge, ImuArrays
 from workbench.models.radar import mars_rate_M
 from workbench.problems.entry.filter import EntryFilterSigmas
-from workbench.problems.entry.montecarlo import ValidationResult, noise_scale, validate_smoother
+from workbench.problems.entry.montecarlo import ValidationResult, ValidationSettings, noise_scale, validate_smoother
 from workbench.problems.entry.scoring import ERROR_NAMES
 from workbench.problems.entry.site import R_GROUND
 
@@ -100,7 +100,8 @@ def fixture():
 
 def _run(fixture, **kw) -> ValidationResult:
     imu, nominal, disp, times = fixture
-    return validate_smoother(imu, nominal, disp, times, n_runs=kw.pop("n_runs", 6), seed=5, sigmas=SIG, **kw)
+    vs = ValidationSettings(n_runs=kw.pop("n_runs", 6), seed=5, sigmas=SIG, **kw)
+    return validate_smoother(imu, nominal, disp, times, vs)
 
 
 @pytest.fixture(scope="module")
@@ -153,7 +154,7 @@ def test_validation_consistent_and_shaped(result, fixture):
 @pytest.mark.slow
 def test_deterministic_per_seed(result, fixture):
     _same(result, _run(fixture))
-    other = validate_smoother(*fixture, n_runs=6, seed=6, sigmas=SIG)
+    other = validate_smoother(*fixture, ValidationSettings(n_runs=6, seed=6, sigmas=SIG))
     assert not np.array_equal(other.nees, result.nees)
 
 
@@ -172,7 +173,7 @@ def test_needs_accepted_members(fixture):
     imu, nominal, disp, times = fixture
     bad = SimpleNamespace(**{**vars(disp), "accepted": np.zeros(200, bool), "refined_P0": np.full((9, 9), np.nan)})
     with pytest.raises(ValueError, match="accepted"):
-        validate_smoother(imu, nominal, bad, times, n_runs=2, seed=1)
+        validate_smoother(imu, nominal, bad, times, ValidationSettings(n_runs=2, seed=1))
 
 
 def test_result_fields_documented():
@@ -202,11 +203,10 @@ def test_gaussian_truths_about_a_given_start(fixture):
     imu, nominal, disp, times = fixture
     P0 = np.diag(np.r_[[2.0] * 3, [np.deg2rad(0.3)] * 3, [200.0] * 3] ** 2)
     start = (nominal[0], nominal[1], nominal[2], P0)
-    res = validate_smoother(
-        imu, nominal, None, times, n_runs=6, seed=2, sigmas=SIG, start=start, truth_initial="gaussian", events={}
-    )
+    vs = ValidationSettings(n_runs=6, seed=2, sigmas=SIG, start=start, truth_initial="gaussian", events={})
+    res = validate_smoother(imu, nominal, None, times, vs)
     assert np.all(res.member == -1) and not res.failed.any()
     assert 9.0 / 3.0 < res.summary["anees_time_avg"] < 9.0 * 3.0
     assert res.summary["truth_initial"] == "gaussian" and "PDD" not in res.times
     with pytest.raises(ValueError, match="truth_initial"):
-        validate_smoother(imu, nominal, disp, times, n_runs=1, seed=1, truth_initial="members")
+        validate_smoother(imu, nominal, disp, times, ValidationSettings(n_runs=1, seed=1, truth_initial="members"))

@@ -21,6 +21,7 @@ from workbench.io.assets import assets_dir
 from workbench.io.scenario import Scenario, ScenarioError, load_scenario
 from workbench.problems.base import RunOptions
 from workbench.problems.entry import pipeline as en
+from workbench.problems.entry.problem import EntryProblem
 from workbench.problems.entry.telemetry import STREAMS, read_nominal_state
 from workbench.problems.runner import run_scenario
 from workbench.recording import layout
@@ -287,7 +288,7 @@ def test_filled_blackout_error_inside_its_reported_3sigma(run):
 def test_bad_entry_configuration_is_a_located_error(key, value, match):
     base = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
     with pytest.raises(ScenarioError, match=match):
-        en.check_config(base.with_overrides({key: value}))
+        EntryProblem().settings(base.with_overrides({key: value}))
 
 
 def test_initial_state_at_the_wrong_time_is_rejected(run, tmp_path):
@@ -297,7 +298,7 @@ def test_initial_state_at_the_wrong_time_is_rejected(run, tmp_path):
     f = tel / "initial_state.toml"
     f.write_text(f.read_text().replace("t0_s = -15.000000", "t0_s = 5.0"))
     paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
-    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
+    sc = EntryProblem().settings(load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml"))
     with pytest.raises(ScenarioError, match="t0_s"):
         for _ in en.reconstruct(sc, paths, members=200):
             pass
@@ -310,7 +311,7 @@ def test_missing_pdd_event_is_a_located_error(run, tmp_path):
     ev = tel / "events.csv"
     ev.write_text("\n".join(line for line in ev.read_text().splitlines() if not line.endswith(",PDD")) + "\n")
     paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
-    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
+    sc = EntryProblem().settings(load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml"))
     with pytest.raises(ScenarioError, match="PDD"):
         for _ in en.reconstruct(sc, paths, members=200):
             pass

@@ -28,7 +28,7 @@ from workbench.core.rotation import attitude_error, dcm_to_quat, quat_normalize,
 from workbench.io.scenario import load_scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.problems.entry import synthetic as es
-from workbench.problems.entry.config import config_for
+from workbench.problems.entry.config import EntrySettings
 from workbench.problems.entry.preprocess import PreprocessConfig, preprocess
 from workbench.problems.entry.sensors import (
     EntryImuModel,
@@ -211,15 +211,15 @@ def test_synthesize_entry_from_a_scenario(tmp_path, monkeypatch, truth):
         '[telemetry]\ngnc = "tm/gnc.csv"\ngnc_nav = "tm/gnc_nav.csv"\nrda_slant_range = "tm/rda_slant_range.csv"\n'
         'rda_out = "tm/rda_out.csv"\nevents = "tm/events.csv"\ninitial_state = "tm/initial_state.toml"\n'
     )
-    scenario = load_scenario(sc)
+    scenario = EntrySettings.from_scenario(load_scenario(sc))
     monkeypatch.setattr(es, "truth_for", lambda s: truth)
     paths = es.synthesize_entry(scenario, tmp_path / "tm")
     assert set(paths) == {*es.TELEMETRY_FILES, "truth", "initial_state"}
     T = es.load_truth(paths["truth"])
     assert T["seed"] == 3 and np.all(T["nominal_dx0"] == 0)
-    checks = config_for(scenario).checks
+    checks = scenario.checks
     assert checks.zero_filled_packets == 1
-    t2 = read_entry_telemetry(telemetry_paths(scenario), checks)
+    t2 = read_entry_telemetry(telemetry_paths(scenario.telemetry, scenario.run.path), checks)
     assert t2.sr_valid.tolist() == [False, True, True, True]
     # one zero-filled packet expected, as configured (the blackout gaps are reported as WARN besides)
     assert [p.split(":")[0] for p in _non_gap(t2.problems)] == ["INFO"]
@@ -484,3 +484,20 @@ def test_missing_acceleration_rows_reported_and_left_out(synth, tmp_path):
     assert len(w) == 1 and "rows 501–503" in w[0]
     imu = preprocess(tel)
     assert imu.t.size == tel.t_gnc.size - 3 + 450 and len(imu.gaps) == 5
+
+
+def test_initial_state_file_is_read_through_its_schema(tmp_path):
+    """``initial_state.toml`` (INITIAL_STATE_SCHEMA): a round trip, and a misspelt key is a located
+    error naming the nearest valid key."""
+    from workbench.io.scenario import ScenarioError
+    from workbench.problems.entry.telemetry import NominalState, write_nominal_state
+
+    st = NominalState(t0=-15.0, v_M=np.array([1.0e3, 2.0e3, 3.0e3]), p_M=np.array([3.4e6, 1.0e5, 2.0e5]),
+                      q_M_G=np.array([0.0, 0.0, 0.0, 1.0]))  # fmt: skip
+    path = write_nominal_state(tmp_path / "initial_state.toml", st)
+    back = read_nominal_state(path)
+    assert back.t0 == -15.0 and np.allclose(back.p_M, st.p_M) and np.allclose(back.v_M, st.v_M)
+    path.write_text(path.read_text().replace("velocity_kmps", "velocity_kmp"))
+    with pytest.raises(ScenarioError, match="did you mean 'velocity_kmps'") as ei:
+        read_nominal_state(path)
+    assert ei.value.key == "initial_state.velocity_kmp" and "initial-state file" in str(ei.value)

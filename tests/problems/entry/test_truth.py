@@ -8,7 +8,6 @@ specific force consistent with the trajectory.
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,9 @@ from workbench.core.atmosphere import R_UNIVERSAL, MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import quat_to_dcm
+from workbench.io.scenario import ScenarioError, load_scenario
 from workbench.models.aerodynamics import AeroTable, knudsen_bridge, load_vehicle
+from workbench.problems.entry.config import EntrySettings
 from workbench.problems.entry.site import R_GROUND
 from workbench.problems.entry.truth import (
     MARS_MOLAR_MASS,
@@ -28,7 +29,6 @@ from workbench.problems.entry.truth import (
     draw_coefficient_deviation,
     simulate_entry,
     true_atmosphere,
-    truth_spec_from_scenario,
     wind_profile_truth,
 )
 
@@ -212,24 +212,26 @@ def test_dispersed_truth_differs_and_still_flies(vehicle):
     for f in ("ca_deviation", "parachute_cd_deviation", "temperature_profile_km_K", "wind_layers", "terrain_modes"):
         assert getattr(a, f) != getattr(b, f) and getattr(a, f) != getattr(base, f), f
     assert a.pdd_mach == base.pdd_mach and a.fsr_delay_s == base.fsr_delay_s  # events and parachute kept
-    assert (
-        truth_spec_from_scenario({k: getattr(a, k) for k in ("ca_deviation", "surface_pressure_pa")}).ca_deviation
-        == a.ca_deviation
-    )
+    overrides = {"truth.ca_deviation": list(a.ca_deviation), "truth.surface_pressure_pa": a.surface_pressure_pa}
+    assert _truth_spec(overrides).ca_deviation == a.ca_deviation
     tr = simulate_entry(vehicle, a, np.random.default_rng(1))
     i = _index(tr, tr.events["PDD"])
     assert 7e3 < tr.h_amr[i] < 14e3 and np.all(np.linalg.norm(tr.p_M, axis=1) > R_GROUND)
 
 
+def _truth_spec(overrides: dict) -> EntryTruthSpec:
+    """The truth spec of the shipped scenario with ``overrides`` (dotted keys), through the settings."""
+    return EntrySettings.from_scenario(load_scenario(SCENARIO).with_overrides(overrides)).synthetic.truth
+
+
 def test_spec_from_proposal_and_errors():
-    table = tomllib.loads(SCENARIO.read_text())["truth"]
-    spec = truth_spec_from_scenario(table)
+    spec = _truth_spec({})
     assert spec == EntryTruthSpec()
     hash(spec)  # the pipeline caches truths keyed by the spec
-    with pytest.raises(ValueError, match="unknown key"):
-        truth_spec_from_scenario({"pdd_mahc": 2.0})
-    with pytest.raises(ValueError, match="wind_layers"):
-        truth_spec_from_scenario({"wind_layers": [["a", 1, 2, 3, 4]]})
+    with pytest.raises(ScenarioError, match="unknown key"):
+        _truth_spec({"truth.pdd_mahc": 2.0})
+    with pytest.raises(ScenarioError, match="wind_layers"):
+        _truth_spec({"truth.wind_layers": [["a", 1, 2, 3, 4]]})
 
 
 # ---------------------------------------------------------------------------------- entry

@@ -10,6 +10,7 @@ definite.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 
 import numpy as np
@@ -21,6 +22,7 @@ from workbench.io.assets import asset_path
 from workbench.io.scenario import load_scenario
 from workbench.problems.entry import pipeline as en
 from workbench.problems.entry.filter import EntryFilterResult
+from workbench.problems.entry.problem import EntryProblem
 from workbench.problems.entry.synthetic import TELEMETRY_FILES
 from workbench.problems.entry.truth_mc import run_truth_monte_carlo
 
@@ -36,7 +38,7 @@ def test_cli_routes_truth_sim_options():
 
 @pytest.fixture(scope="module")
 def mc(tmp_path_factory):
-    sc = load_scenario(asset_path("scenarios", "schiaparelli.toml"))
+    sc = EntryProblem().settings(load_scenario(asset_path("scenarios", "schiaparelli.toml")))
     work = tmp_path_factory.mktemp("truth_mc")
     res = run_truth_monte_carlo(
         sc, n_runs=N_RUNS, seed=SEED, members=MEMBERS, refine_rounds=ROUNDS, scheduler="loop", work_dir=work
@@ -125,7 +127,7 @@ def test_stage_anees_equal_manual_recomputation(mc):
     # (b) member 0's NEES recomputed from a fresh reconstruction of its kept files and its truth.npz
     folder = work / "member_0" / "telemetry"
     paths = {k: folder / v for k, v in TELEMETRY_FILES.items()} | {"initial_state": folder / "initial_state.toml"}
-    sc0 = sc.with_overrides({"dispersion.refine_rounds": ROUNDS, "dispersion.cloud": 0})
+    sc0 = dataclasses.replace(sc, dispersion=dataclasses.replace(sc.dispersion, refine_rounds=ROUNDS, cloud=0))
     filt = next(st for st in en.reconstruct(sc0, paths, members=MEMBERS) if isinstance(st, EntryFilterResult))
     sm = filt.smoothed
     m0 = res.members[0]

@@ -1,73 +1,16 @@
 """Atmospheric density, pressure and temperature profiles from a reconstructed entry (AMELIA Sect. 9).
 
-Method (Aboudan et al. 2018, "Reconstruction of the Atmospheric Profiles"):
+What: the drag equation ``ρ = 2 m a_Z / (v_r² C S)`` along the smoothed trajectory, iterated on the
+drag coefficients (Mach, Knudsen, angle of attack from the previous smoothed profile), the
+blackout and transients filled (hydrostatic or exponential), hydrostatic pressure from the top,
+ideal-gas temperature, a refined (smoothed) profile and first-order 1σ
+(:func:`reconstruct_atmosphere`, settings :class:`AtmosphereSettings`).  Why: the entry's
+deceleration is the only in-situ measurement of the atmosphere along the path.  Every array of
+:class:`ProfileIteration` and :class:`AtmosphereResult` lives on the profile grid (the input
+samples from the top of the profile plus fill samples in time gaps).  The full method notes and
+the measurements behind the fill's choices are in ``docs/tuning/entry.md``.
 
-1. **Drag equation.**  During the entry (phase 0) ``ρ = 2 m a_Z / (v_r² C_A S)`` (AMELIA Eq. 2) with
-   ``a_Z`` the +Z_G specific force (drag pushes the aft-pointing +Z_G axis), ``v_r = |v − ω×p − w|``
-   the air-relative speed (``w`` the wind, zero unless given) and ``C_A``, ``S`` the axial
-   coefficient and reference area of the configuration.  Under the parachute (phase ≥ 1) the
-   module and canopy are taken as aligned (Eq. 5): ``ρ = 2 (m_D + m_P) a_Z / (v_r² (C_D S_D + C_P S_P))``;
-   before front-shield release (phase 1) the module is the full capsule, after it (phase 2) the
-   descent module.
-2. **Iteration 1**: constant ``C_A = 1.65`` for the entry (the paper's Monte Carlo mean); under
-   the parachute the table coefficients with Mach and Knudsen from ``default_atmosphere``.
-   **Iteration k > 1**: Mach ``v_r / sqrt(γ R T)`` and Knudsen ``λ/L`` (``λ = μ(T)/p sqrt(π R T/2)``,
-   Sutherland μ; γ, R, Sutherland constants of ``default_atmosphere`` as in
-   :mod:`workbench.core.atmosphere`) from the previous iteration's *smoothed* profile (the raw
-   temperature is noisy where the drag is small), angle of attack from the trajectory (angle
-   between −Z_G and the air-relative velocity), coefficients from the vehicle tables.  Stop when
-   the maximum relative change of ρ, p and T is below ``tolerance`` (1 %).
-3. **Fill.**  Samples without a usable drag measurement (``f_valid`` False; non-positive
-   density; fill samples inserted every ≤ ``fill_step_m`` of altitude inside time gaps longer
-   than ``max_gap_s`` — the strapdown grid has *no* samples in the 57 s plasma blackout), the
-   parachute inflation transient (PDD down to ``inflation_drop_m`` = 900 m below it, AMELIA
-   Sect. 9 "Descent") and the FSR spike (a time window around front-shield release) are filled.
-   Edge values: on each side of a gap log ρ is fitted linearly in h over the valid data within
-   ``fill_fit_window_m`` and evaluated at the edge.  ``fill_method="exponential"`` (the paper):
-   log ρ linear in h between the two edge values.  ``fill_method="hydrostatic"`` (default): the
-   temperature across the gap is the default model's shape offset to the reconstructed
-   temperature at the upper edge plus a linear trend, the density follows hydrostatically from the
-   upper-edge pressure, and the trend is solved (Brent) so that the density meets the lower edge
-   value.  An exponential is the isothermal special case; the paper's fill assumes one scale
-   height across 70→30 km where the default model's changes from ~7 to ~10 km (tests: 26 % vs
-   12 % error on a synthetic profile).  Either fill is only as good as its assumed temperature
-   structure; its 1σ says so (step 7, :func:`fill_sigma`).  One-sided gaps (ends) are
-   extrapolated with the one-sided fit.
-4. **Pressure** by the hydrostatic equation ``dp/dh = −ρ g_r`` integrated along the trajectory,
-   with ``g_r`` the radial component of J2 gravity at the sample (centrifugal terms neglected, as
-   in the paper).  Between samples ρ is log-linear in h, so each interval contributes
-   ``ḡ Δh (ρ_a − ρ_b)/ln(ρ_a/ρ_b)``.  The top pressure ``p0`` is the default model's pressure at the
-   top altitude of the profile (the paper took 7e-3 Pa at 104 km from the engineering model);
-   ``p_top`` overrides it.
-5. **Temperature** ``T = p M / (ρ k_B N_A)`` with M = 43.41 g/mol (AMELIA Eq. 4).
-6. **Refined profiles**: log ρ smoothed in altitude by a local linear fit over
-   ``smooth_window_m`` (at least 5 samples), then p and T recomputed.
-7. **1σ** (first order, Table 3): relative density error from the air-relative speed
-   (``∂ρ/∂v_r = −2ρ/v_r`` — ρ ∝ v_r⁻², so the paper's Eq. 6 ``−ρ/v_r`` is low by a factor 2: its
-   example, 1.4e−4 kg s/m⁴ after FSR, is ρ/v_r for ρ ≈ 0.01 kg/m³ at v_r ≈ 70 m/s), with
-   ``σ_vr² = Jᵀ P J``, ``J = [u, 0, ω×u]`` on the error state ``[δv, δθ, δp]`` (u the unit
-   air-relative velocity); from the drag coefficients (``cd_rel``, independent between module and
-   canopy); from the horizontal wind (``wind`` 1σ per component below ``wind_ceiling_m``, zero
-   above, projected on u); from the accelerometer noise (``accel``/a_Z); plus, on filled samples,
-   the fill's own 1σ (:func:`fill_sigma`): the true temperature departs from the assumed one by
-   a Gaussian process (``fill_temperature_K``, ``fill_correlation_km``), propagated through the
-   hydrostatic equation and conditioned on what the fill matches (the upper edge's temperature
-   and the lower edge's density) — zero at the measured edges, largest inside the gap.
-   Pressure: the time-correlated terms (velocity, coefficients, wind, fill) are integrated as
-   fully correlated (conservative), the accelerometer noise as independent, plus ``p_top_rel`` of
-   p0, all three in quadrature.  Temperature:
-   ``σ_T/T = sqrt((σ_p/p)² + (σ_ρ/ρ)²)`` (independent; conservative because the correlated ρ and p
-   errors partly cancel in T).  Last, because a profile is a function of altitude, the
-   trajectory's altitude 1σ (``σ_h² = ûᵀ P_pp û``) adds ``σ_h / H`` (H = R T / g, the local
-   scale height) in quadrature to the relative density and pressure σ (an altitude error shifts
-   the whole profile; T moves only by σ_h dT/dh, neglected).  The sigmas are those of the raw
-   profile and are reported for the smoothed one too (smoothing only lowers the white part).
-
-The profile grid: the input samples from the *top* (the first valid sample with
-``a_Z ≥ min_specific_force``, 0.05 m/s² ≈ 50σ of the Table 3 accelerometer noise, which is the
-paper's 104 km for Schiaparelli) to the last sample, plus the fill samples inserted in time gaps
-(their ``t`` is interpolated linearly in altitude; they are ``filled``).  Every array of
-:class:`ProfileIteration` and :class:`AtmosphereResult` lives on that grid (length m).
+Reference: Aboudan et al., Space Sci. Rev. 214:97, 2018 (AMELIA), Sect. 9, Eqs. 2-6, Table 3.
 """
 
 from __future__ import annotations
@@ -81,12 +24,15 @@ from workbench.core.atmosphere import R_UNIVERSAL, Atmosphere
 from workbench.core.bodies import MARS
 from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import quat_to_dcm
+from workbench.problems.entry.state import DP, DV, N_ERR
 
 __all__ = [
     "MARS_MOLAR_MASS",
     "CA_FIRST_GUESS",
     "EntryProfileSigmas",
+    "AtmosphereSettings",
     "as_profile_sigmas",
+    "profile_sigmas",
     "ProfileIteration",
     "AtmosphereResult",
     "air_relative_velocity",
@@ -562,6 +508,294 @@ def _on_grid(x: np.ndarray, src: np.ndarray, w: np.ndarray) -> np.ndarray:
 _SIGMA_ALIASES = {"cd": "cd_rel", "cd_sigma": "cd_rel", "wind_mps": "wind", "accel_mps2": "accel"}
 
 
+@dataclass(frozen=True)
+class AtmosphereSettings:
+    """Settings of :func:`reconstruct_atmosphere` (``[atmosphere]``; defaults AMELIA Sect. 9).
+
+    ``molar_mass_g_per_mol`` [g/mol] of the ideal-gas temperature; ``fill_method``
+    "hydrostatic" or "exponential" (the paper) for two-sided gaps; ``tolerance`` convergence
+    threshold of the max relative change of ρ, p, T; ``max_iterations`` (≥ 1); ``sigmas`` the
+    :class:`EntryProfileSigmas` of the 1σ; ``min_specific_force`` a_Z [m/s²] that defines the top
+    of the profile; ``p_top`` pressure [Pa] there (None: the default model's); time gaps longer
+    than ``max_gap_s`` [s] get fill samples every ≤ ``fill_step_m`` [m] of altitude;
+    ``inflation_drop_m`` [m] below PDD filled (parachute inflation transient); ``fsr_exclusion_s``
+    (before, after) [s] around FSR filled (FSR spike); ``fill_fit_window_m`` [m] of the one-sided
+    edge fits; ``smooth_window_m`` [m] of the refined (smoothed) profile.
+    """
+
+    molar_mass_g_per_mol: float = MARS_MOLAR_MASS * 1e3
+    fill_method: str = "hydrostatic"
+    tolerance: float = 0.01
+    max_iterations: int = 10
+    sigmas: EntryProfileSigmas = EntryProfileSigmas()
+    min_specific_force: float = 0.05
+    p_top: float | None = None
+    max_gap_s: float = 0.5
+    fill_step_m: float = 100.0
+    inflation_drop_m: float = 900.0
+    fsr_exclusion_s: tuple[float, float] = (-0.5, 3.0)
+    fill_fit_window_m: float = 2000.0
+    smooth_window_m: float = 300.0
+
+    @property
+    def molar_mass(self) -> float:
+        """Mean molar mass [kg/mol]."""
+        return self.molar_mass_g_per_mol / 1e3
+
+
+def profile_sigmas(sigmas) -> EntryProfileSigmas:
+    """:func:`as_profile_sigmas` that also takes the scenario-style aliases (``cd``, ``cd_sigma``,
+    ``wind_mps``, ``accel_mps2``) in a mapping."""
+    if isinstance(sigmas, Mapping):
+        sigmas = {_SIGMA_ALIASES.get(k, k): v for k, v in sigmas.items()}
+    return as_profile_sigmas(sigmas)
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """The trajectory on the profile grid (m,), from the top of the profile: time ``t`` [s],
+    altitude ``h`` [m AMR], air-relative speed ``v_r`` [m/s], angle of attack ``alpha`` [rad],
+    radial gravity ``g_r`` [m/s²], variances of v_r and h, horizontal share ``u_h2`` of the
+    air-relative direction, ``phase``, measured ``a_z`` (NaN on inserted samples), ``valid``, and
+    the input samples' times and phases (``t_in``, ``phase_in``)."""
+
+    t: np.ndarray
+    h: np.ndarray
+    v_r: np.ndarray
+    alpha: np.ndarray
+    g_r: np.ndarray
+    var_vr: np.ndarray
+    var_h: np.ndarray
+    u_h2: np.ndarray
+    phase: np.ndarray
+    a_z: np.ndarray
+    valid: np.ndarray
+    t_in: np.ndarray
+    phase_in: np.ndarray
+
+
+def _checked_inputs(t, p_M, v_M, q_M_G, P, f_G, f_valid, phase, cfg: AtmosphereSettings) -> tuple:
+    """The inputs as arrays, their shapes checked against n = t.size; ``ValueError`` naming the bad one."""
+    t = np.asarray(t, dtype=float)
+    arrays = (
+        ("p_M", np.asarray(p_M, dtype=float), (t.size, 3)),
+        ("v_M", np.asarray(v_M, dtype=float), (t.size, 3)),
+        ("q_M_G", np.asarray(q_M_G, dtype=float), (t.size, 4)),
+        ("P", np.asarray(P, dtype=float), (t.size, 9, 9)),
+        ("f_G", np.asarray(f_G, dtype=float), (t.size, 3)),
+        ("f_valid", np.asarray(f_valid, dtype=bool), (t.size,)),
+        ("phase", np.asarray(phase, dtype=int), (t.size,)),
+    )
+    for name, a, shape in arrays:
+        if a.shape != shape:
+            raise ValueError(f"reconstruct_atmosphere: {name} has shape {a.shape}, expected {shape}")
+    if cfg.max_iterations < 1:
+        raise ValueError("reconstruct_atmosphere: max_iterations must be >= 1")
+    if cfg.fill_method not in ("hydrostatic", "exponential"):
+        raise ValueError(f"reconstruct_atmosphere: fill_method {cfg.fill_method!r}; use 'hydrostatic' or 'exponential'")
+    return (t, *(a for _, a, _ in arrays))
+
+
+def _profile_grid_inputs(t, p_M, v_M, q_M_G, P, f_G, f_valid, phase, wind_NE, cfg: AtmosphereSettings) -> _Grid:
+    """The trajectory from the top of the profile (first valid a_Z ≥ ``min_specific_force``) on
+    the profile grid (fill samples inside time gaps), with the per-sample inputs of the 1σ:
+    variance of v_r from P (J = [u, 0, ω×u]) and of the altitude, and the horizontal part of u."""
+    a_z_all = f_G[:, 2]
+    with np.errstate(invalid="ignore"):
+        usable = f_valid & np.isfinite(a_z_all) & (a_z_all >= cfg.min_specific_force)
+    if not usable.any():
+        raise ValueError(f"reconstruct_atmosphere: no valid sample with a_Z >= {cfg.min_specific_force} m/s²")
+    s = slice(int(np.argmax(usable)), t.size)
+    tt, pM, vM = t[s], p_M[s], v_M[s]
+    h_in = np.linalg.norm(pM, axis=-1) - MARS.reference_radius
+    wind = None if wind_NE is None else np.asarray(wind_NE, dtype=float)[s]
+    v_rel_M = air_relative_velocity(pM, vM, wind)
+    v_r_in = np.linalg.norm(v_rel_M, axis=-1)
+    u = v_rel_M / v_r_in[:, None]
+    J = np.zeros((h_in.size, N_ERR))
+    J[:, DV] = u
+    J[:, DP] = np.cross(_omega_M(), u)
+    up_in = _up_M(pM)
+    src, w = _profile_grid(tt, h_in, cfg.max_gap_s, cfg.fill_step_m)
+    inserted = w > 0
+    return _Grid(
+        t=_on_grid(tt, src, w),
+        h=_on_grid(h_in, src, w),
+        v_r=_on_grid(v_r_in, src, w),
+        alpha=_on_grid(angle_of_attack(q_M_G[s], v_rel_M), src, w),
+        g_r=_on_grid(radial_gravity(pM), src, w),
+        var_vr=_on_grid(np.einsum("ni,nij,nj->n", J, P[s], J), src, w),
+        var_h=_on_grid(np.einsum("ni,nij,nj->n", up_in, P[s][:, DP, DP], up_in), src, w),  # [m²]
+        u_h2=_on_grid(np.clip(1.0 - np.sum(u * up_in, axis=-1) ** 2, 0.0, 1.0), src, w),
+        phase=phase[s][src],
+        a_z=np.where(inserted, np.nan, a_z_all[s][src]),
+        valid=f_valid[s][src] & ~inserted,
+        t_in=tt,
+        phase_in=phase[s],
+    )
+
+
+def _excluded(g: _Grid, events: Mapping[str, float] | None, cfg: AtmosphereSettings) -> np.ndarray:
+    """Samples whose drag is not used (m,): invalid, the inflation transient below PDD, the FSR spike."""
+    events = {} if events is None else dict(events)
+    tt, ph_in, t_s, h = g.t_in, g.phase_in, g.t, g.h
+    exclude = ~(g.valid & np.isfinite(g.a_z))
+    t_pdd = events.get("PDD", tt[int(np.argmax(ph_in >= 1))] if (ph_in >= 1).any() else None)
+    t_fsr = events.get("FSR", tt[int(np.argmax(ph_in >= 2))] if (ph_in >= 2).any() else None)
+    if t_pdd is not None and t_s[0] <= t_pdd <= t_s[-1]:
+        h_pdd = float(np.interp(t_pdd, t_s, h))
+        exclude |= (t_s >= t_pdd) & (h > h_pdd - cfg.inflation_drop_m)
+    if t_fsr is not None:
+        exclude |= (t_s >= t_fsr + cfg.fsr_exclusion_s[0]) & (t_s <= t_fsr + cfg.fsr_exclusion_s[1])
+    return exclude
+
+
+@dataclass(frozen=True)
+class _Gas:
+    """What every profile pass shares: system ``mass`` (m,) [kg], capsule reference area ``s_ref``
+    [m²], top pressure ``p0`` [Pa], gas constant ``R_gas`` [J/(kg K)], the default model's
+    temperature ``T_shape`` (m,) [K] on the grid."""
+
+    mass: np.ndarray
+    s_ref: float
+    p0: float
+    R_gas: float
+    T_shape: np.ndarray
+
+
+def _profile(g: _Grid, gas: _Gas, cs: np.ndarray, exclude: np.ndarray, cfg: AtmosphereSettings) -> tuple:
+    """One raw profile from the drag equation with drag area ``cs`` (m,) [m²]: ρ from a_Z, the
+    excluded runs filled (exponential, then hydrostatic for two-sided runs when so configured),
+    hydrostatic p from the top, T = p/(ρ R).  Returns (rho, p, T, filled, runs)."""
+    h = g.h
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho_raw = 2.0 * gas.mass * g.a_z / (g.v_r**2 * cs)
+    rho, filled, runs = _exponential_fill(h, rho_raw, ~exclude, cfg.fill_fit_window_m)
+    if cfg.fill_method == "hydrostatic":
+        for a, b, h1, y1, _, h2, y2, _ in runs:
+            if h1 is None or h2 is None:
+                continue
+            p1 = hydrostatic_pressure(h[:a], rho[:a], g.g_r[:a], gas.p0)[-1]
+            hh = np.concatenate([[h1], h[a:b], [h2]])
+            gg = g.g_r[a - 1 : b + 1]
+            Tsh = gas.T_shape[a - 1 : b + 1]
+            fill = _hydrostatic_gap(hh, gg, Tsh, p1 / (np.exp(y1) * gas.R_gas), p1, y2, gas.R_gas)
+            if fill is not None:
+                rho[a:b] = fill[1:-1]
+    p = hydrostatic_pressure(h, rho, g.g_r, gas.p0)
+    return rho, p, p / (rho * gas.R_gas), filled, runs
+
+
+def _smoothed(g: _Grid, gas: _Gas, rho: np.ndarray, cfg: AtmosphereSettings) -> tuple:
+    """The refined profile: log ρ smoothed in altitude, p and T recomputed.  Returns (rho, p, T)."""
+    rho_s = np.exp(smooth_in_altitude(g.h, np.log(rho), cfg.smooth_window_m))
+    p_s = hydrostatic_pressure(g.h, rho_s, g.g_r, gas.p0)
+    return rho_s, p_s, p_s / (rho_s * gas.R_gas)
+
+
+def _iterate(g: _Grid, gas: _Gas, vehicle, atm: Atmosphere, exclude: np.ndarray, cfg: AtmosphereSettings) -> tuple:
+    """The drag-coefficient loop: iteration 1 takes Mach/Kn from the default model and a constant
+    C_A for the entry, later ones from the previous smoothed profile, until the max relative change
+    of ρ, p, T is below ``tolerance``.  Returns (iterations, converged, smoothed (rho, p, T),
+    (cs_mod, cs_par, cs) of the last pass, the fill runs of the last pass)."""
+    T_prev = gas.T_shape
+    p_prev = np.asarray(atm.pressure(g.h), dtype=float)
+    iterations: list[ProfileIteration] = []
+    converged = False
+    prev = None
+    for it in range(1, cfg.max_iterations + 1):
+        mach = g.v_r / _speed_of_sound(atm, T_prev)
+        lam = _mean_free_path(atm, p_prev, T_prev)
+        cs_mod, cs_par, kn, _ = drag_area(vehicle, g.phase, mach, lam, g.alpha)
+        if it == 1:
+            cs_mod = np.where(g.phase == 0, CA_FIRST_GUESS * gas.s_ref, cs_mod)
+        cs = cs_mod + cs_par
+        rho, p, T, filled, runs = _profile(g, gas, cs, exclude, cfg)
+        change = np.nan if prev is None else max(_rel_change(x, y) for x, y in zip((rho, p, T), prev, strict=True))
+        iterations.append(
+            ProfileIteration(
+                iteration=it,
+                t=g.t,
+                h_amr=g.h,
+                rho=rho,
+                p=p,
+                T=T,
+                cd=cs / gas.s_ref,
+                mach=mach,
+                kn=kn,
+                filled=filled,
+                max_rel_change=float(change),
+            )
+        )
+        smooth = _smoothed(g, gas, rho, cfg)
+        if prev is not None and change < cfg.tolerance:
+            converged = True
+            break
+        prev = (rho, p, T)
+        T_prev, p_prev = smooth[2], smooth[1]
+    return iterations, converged, smooth, (cs_mod, cs_par, cs), runs
+
+
+def _fill_rel_sigma(g: _Grid, gas: _Gas, final: ProfileIteration, runs: list, cfg: AtmosphereSettings) -> np.ndarray:
+    """Relative density 1σ (m,) of the filled samples (:func:`fill_sigma` per run), zero elsewhere."""
+    sig, h = cfg.sigmas, g.h
+    rel_fill = np.zeros(h.size)
+    for a, b, h1, _, _, h2, _, _ in runs:
+        if b - a < 1:
+            continue
+        lo, hi = max(a - 1, 0), min(b + 1, h.size)  # the run with its measured edges
+        T_shape = gas.T_shape[lo:hi]
+        if cfg.fill_method == "exponential" or h1 is None or h2 is None:
+            # an exponential (isothermal) fill misses the whole temperature structure across the gap
+            extra = float(np.std(T_shape - np.polyval(np.polyfit(h[lo:hi], T_shape, 1), h[lo:hi])))
+            sT = (
+                float(np.hypot(sig.fill_temperature_K, extra))
+                if cfg.fill_method == "exponential"
+                else sig.fill_temperature_K
+            )
+        else:
+            sT = sig.fill_temperature_K
+        s_run = fill_sigma(
+            h[lo:hi],
+            g.g_r[lo:hi],
+            final.T[lo:hi],
+            gas.R_gas,
+            sT,
+            sig.fill_correlation_km * 1e3,
+            upper_edge=h1 is not None and lo == a - 1,
+            lower_edge=h2 is not None and hi == b + 1,
+        )
+        rel_fill[a:b] = s_run[(a - lo) : (a - lo) + (b - a)]
+    return rel_fill
+
+
+def _uncertainty(g: _Grid, gas: _Gas, final: ProfileIteration, areas: tuple, rel_fill, cfg) -> tuple:
+    """First-order 1σ of ρ, p, T (docs/tuning/entry.md, atmosphere, item 7).  Returns (sigma_rho, sigma_p, sigma_T)."""
+    sig, h, v_r, g_r = cfg.sigmas, g.h, g.v_r, g.g_r
+    cs_mod, cs_par, cs = areas
+    sig_wind = np.where(h < sig.wind_ceiling_m, sig.wind, 0.0)
+    rel_v = 2.0 * np.sqrt(g.var_vr + sig_wind**2 * g.u_h2) / v_r  # ∂ρ/∂v_r = −2ρ/v_r
+    rel_cd = sig.cd_rel * np.sqrt(cs_mod**2 + cs_par**2) / cs
+    a_model = final.rho * v_r**2 * cs / (2.0 * gas.mass)  # equals a_Z where not filled
+    rel_acc = sig.accel / np.maximum(np.abs(a_model), 1e-12)
+    rel_corr = np.sqrt(rel_v**2 + rel_cd**2 + rel_fill**2)
+    sigma_rho_rel = np.sqrt(rel_corr**2 + rel_acc**2)
+    # pressure: correlated part integrated linearly, white part and p0 in quadrature
+    wgt = 0.5 * (g_r[1:] + g_r[:-1]) * np.abs(np.diff(h))
+    corr_i = wgt * 0.5 * (rel_corr[1:] * final.rho[1:] + rel_corr[:-1] * final.rho[:-1])
+    white_i = wgt * 0.5 * (rel_acc[1:] * final.rho[1:] + rel_acc[:-1] * final.rho[:-1])
+    sp_corr = np.concatenate([[0.0], np.cumsum(corr_i)])
+    sp_white = np.sqrt(np.concatenate([[0.0], np.cumsum(white_i**2)]))
+    sigma_p = np.sqrt(sp_corr**2 + sp_white**2 + (sig.p_top_rel * gas.p0) ** 2)
+    sigma_T = final.T * np.sqrt((sigma_p / final.p) ** 2 + sigma_rho_rel**2)
+    # the profile is a function of altitude: the altitude's own 1σ moves ρ(h) and p(h) by σ_h / H
+    # (H = R T / g the local scale height); T(h) only by σ_h dT/dh, neglected
+    rel_h = np.sqrt(np.maximum(g.var_h, 0.0)) * g_r / (gas.R_gas * final.T)
+    sigma_rho = np.sqrt(sigma_rho_rel**2 + rel_h**2) * final.rho
+    sigma_p = np.sqrt(sigma_p**2 + (rel_h * final.p) ** 2)
+    return sigma_rho, sigma_p, sigma_T
+
+
 def reconstruct_atmosphere(
     t: np.ndarray,
     p_M: np.ndarray,
@@ -574,256 +808,39 @@ def reconstruct_atmosphere(
     vehicle,
     *,
     default_atmosphere: Atmosphere,
-    sigmas=None,
+    settings: AtmosphereSettings | None = None,
     events: Mapping[str, float] | None = None,
     wind_NE: np.ndarray | None = None,
-    tolerance: float = 0.01,
-    max_iterations: int = 10,
-    min_specific_force: float = 0.05,
-    p_top: float | None = None,
-    molar_mass: float = MARS_MOLAR_MASS,
-    fill_method: str = "hydrostatic",
-    max_gap_s: float = 0.5,
-    fill_step_m: float = 100.0,
-    inflation_drop_m: float = 900.0,
-    fsr_exclusion_s: tuple[float, float] = (-0.5, 3.0),
-    fill_fit_window_m: float = 2000.0,
-    smooth_window_m: float = 300.0,
 ) -> AtmosphereResult:
-    """Reconstruct ρ, p, T along the trajectory by the drag-equation iteration (see module docstring).
+    """Reconstruct ρ, p, T along the trajectory by the drag-equation iteration (docs/tuning/entry.md).
 
-    Args:
-        t: (n,) time [s from EIP], increasing; may jump over data gaps (the strapdown grid).
-        p_M, v_M: (n, 3) position [m] and inertial velocity [m/s] in MMED (the smoothed trajectory).
-        q_M_G: (n, 4) attitude (G → M, scalar-last).
-        P: (n, 9, 9) error-state covariance ``[δv_M, δθ_G, δp_M]`` of the trajectory.
-        f_G: (n, 3) specific force in G [m/s²]; only ``f_G[:, 2]`` (a_Z) is used.
-        f_valid: (n,) bool, False where the acceleration is missing or unusable (filled).
-        phase: (n,) int, 0 entry, 1 PDD..FSR, 2 FSR..BSR.
-        vehicle: object with ``capsule``/``descent_module`` (AeroTable: ``coefficients``,
-            ``ref_area``, ``ref_length``), ``parachute`` (``cd_at``, ``ref_area``, ``mass``), ``mass_at``
-            (module mass without the canopy, as ``core.aerodynamics.EntryVehicle``).
-        default_atmosphere: model for iteration 1 (Mach/Kn under the parachute), the top pressure,
-            the temperature shape of the hydrostatic fill and the gas constants (γ, R, Sutherland).
-        sigmas: :class:`EntryProfileSigmas`, a mapping of its fields (aliases: ``cd`` for
-            ``cd_rel``), or None (Table 3 defaults).
-        events: optional {"PDD": t, "FSR": t} [s]; default: first sample of phase 1 / phase 2.
-        wind_NE: optional (n, 2) wind north/east [m/s] subtracted in v_r (e.g. from ``entry_winds``
-            for a second pass); None = zero wind as in the paper.
-        tolerance: convergence threshold of the max relative change of ρ, p, T.
-        max_iterations: iteration cap (≥ 1).
-        min_specific_force: a_Z [m/s²] that defines the top of the profile.
-        p_top: pressure [Pa] at the top; None = ``default_atmosphere.pressure(h_top)``.
-        molar_mass: mean molar mass [kg/mol] of the ideal-gas temperature.
-        fill_method: "hydrostatic" (default) or "exponential" (the paper) for two-sided gaps.
-        max_gap_s, fill_step_m: time gaps longer than ``max_gap_s`` [s] between samples (the
-            blackout on the strapdown grid) get fill samples every ≤ ``fill_step_m`` [m] of altitude.
-        inflation_drop_m: altitude span [m] below PDD filled (parachute inflation transient).
-        fsr_exclusion_s: (before, after) [s] around FSR filled (FSR spike).
-        fill_fit_window_m: altitude span [m] of the one-sided edge fits of the fills.
-        smooth_window_m: altitude window [m] of the refined (smoothed) profile.
-
-    Returns:
-        :class:`AtmosphereResult` on the profile grid (input samples from the top of the profile
-        to the last one, plus fill samples inside time gaps).
+    ``t`` (n,) time [s from EIP], increasing (may jump over data gaps); ``p_M``, ``v_M`` (n, 3)
+    MMED position [m] and inertial velocity [m/s] (the smoothed trajectory); ``q_M_G`` (n, 4)
+    attitude (G → M, scalar-last); ``P`` (n, 9, 9) error-state covariance ``[δv_M, δθ_G, δp_M]``;
+    ``f_G`` (n, 3) specific force in G [m/s²] (only a_Z is used); ``f_valid`` (n,) bool; ``phase``
+    (n,) 0 entry, 1 PDD..FSR, 2 FSR..BSR; ``vehicle`` the :class:`~workbench.models.aerodynamics.EntryVehicle`;
+    ``default_atmosphere`` the model of iteration 1, of the top pressure, of the hydrostatic fill's
+    temperature shape and of the gas constants; ``settings`` the :class:`AtmosphereSettings`
+    (None: defaults); ``events`` optional {"PDD": t, "FSR": t} [s] (default: first sample of phase
+    1 / 2); ``wind_NE`` optional (n, 2) wind north/east [m/s] subtracted in v_r (None: zero wind,
+    as in the paper).  Returns an :class:`AtmosphereResult` on the profile grid.
     """
-    t = np.asarray(t, dtype=float)
-    p_M = np.asarray(p_M, dtype=float)
-    v_M = np.asarray(v_M, dtype=float)
-    q_M_G = np.asarray(q_M_G, dtype=float)
-    P = np.asarray(P, dtype=float)
-    f_G = np.asarray(f_G, dtype=float)
-    f_valid = np.asarray(f_valid, dtype=bool)
-    phase = np.asarray(phase, dtype=int)
-    n = t.size
-    for name, a, shape in (
-        ("p_M", p_M, (n, 3)),
-        ("v_M", v_M, (n, 3)),
-        ("q_M_G", q_M_G, (n, 4)),
-        ("P", P, (n, 9, 9)),
-        ("f_G", f_G, (n, 3)),
-        ("f_valid", f_valid, (n,)),
-        ("phase", phase, (n,)),
-    ):
-        if a.shape != shape:
-            raise ValueError(f"reconstruct_atmosphere: {name} has shape {a.shape}, expected {shape}")
-    if max_iterations < 1:
-        raise ValueError("reconstruct_atmosphere: max_iterations must be >= 1")
-    if fill_method not in ("hydrostatic", "exponential"):
-        raise ValueError(f"reconstruct_atmosphere: fill_method {fill_method!r}; use 'hydrostatic' or 'exponential'")
-    if isinstance(sigmas, Mapping):
-        sigmas = {_SIGMA_ALIASES.get(k, k): v for k, v in sigmas.items()}
-    sig = as_profile_sigmas(sigmas)
+    cfg = AtmosphereSettings() if settings is None else settings
+    t, p_M, v_M, q_M_G, P, f_G, f_valid, phase = _checked_inputs(t, p_M, v_M, q_M_G, P, f_G, f_valid, phase, cfg)
     atm = default_atmosphere
-
-    a_z_all = f_G[:, 2]
-    with np.errstate(invalid="ignore"):
-        usable = f_valid & np.isfinite(a_z_all) & (a_z_all >= min_specific_force)
-    if not usable.any():
-        raise ValueError(f"reconstruct_atmosphere: no valid sample with a_Z >= {min_specific_force} m/s²")
-    i0 = int(np.argmax(usable))
-    s = slice(i0, n)
-    tt, pM, vM, ph_in = t[s], p_M[s], v_M[s], phase[s]
-    h_in = np.linalg.norm(pM, axis=-1) - MARS.reference_radius
-    wind = None if wind_NE is None else np.asarray(wind_NE, dtype=float)[s]
-    v_rel_M = air_relative_velocity(pM, vM, wind)
-    v_r_in = np.linalg.norm(v_rel_M, axis=-1)
-    u = v_rel_M / v_r_in[:, None]
-    # per-sample inputs of the 1σ: variance of v_r from P (J = [u, 0, ω×u]) and the horizontal part of u
-    J = np.zeros((h_in.size, 9))
-    J[:, 0:3] = u
-    J[:, 6:9] = np.cross(_omega_M(), u)
-    var_vr_in = np.einsum("ni,nij,nj->n", J, P[s], J)
-    up_in = _up_M(pM)
-    var_h_in = np.einsum("ni,nij,nj->n", up_in, P[s][:, 6:9, 6:9], up_in)  # altitude variance [m²]
-    u_h2_in = np.clip(1.0 - np.sum(u * _up_M(pM), axis=-1) ** 2, 0.0, 1.0)
-
-    # profile grid (fill samples inside time gaps)
-    src, w = _profile_grid(tt, h_in, max_gap_s, fill_step_m)
-    inserted = w > 0
-    h = _on_grid(h_in, src, w)
-    t_s = _on_grid(tt, src, w)
-    v_r = _on_grid(v_r_in, src, w)
-    alpha = _on_grid(angle_of_attack(q_M_G[s], v_rel_M), src, w)
-    g_r = _on_grid(radial_gravity(pM), src, w)
-    var_vr = _on_grid(var_vr_in, src, w)
-    var_h = _on_grid(var_h_in, src, w)
-    u_h2 = _on_grid(u_h2_in, src, w)
-    ph = ph_in[src]
-    a_z = np.where(inserted, np.nan, a_z_all[s][src])
-    valid = f_valid[s][src] & ~inserted
-    mass = system_mass(vehicle, ph)
-    s_ref = float(vehicle.capsule.ref_area)
-    p0 = float(atm.pressure(h[0])) if p_top is None else float(p_top)
-    R_gas = R_UNIVERSAL / molar_mass
-    T_shape = np.asarray(atm.temperature(h), dtype=float)
-
-    # samples whose drag is not used: invalid, inflation transient, FSR spike
-    events = {} if events is None else dict(events)
-    exclude = ~(valid & np.isfinite(a_z))
-    t_pdd = events.get("PDD", tt[int(np.argmax(ph_in >= 1))] if (ph_in >= 1).any() else None)
-    t_fsr = events.get("FSR", tt[int(np.argmax(ph_in >= 2))] if (ph_in >= 2).any() else None)
-    if t_pdd is not None and t_s[0] <= t_pdd <= t_s[-1]:
-        h_pdd = float(np.interp(t_pdd, t_s, h))
-        exclude |= (t_s >= t_pdd) & (h > h_pdd - inflation_drop_m)
-    if t_fsr is not None:
-        exclude |= (t_s >= t_fsr + fsr_exclusion_s[0]) & (t_s <= t_fsr + fsr_exclusion_s[1])
-
-    def profile(cs):
-        with np.errstate(invalid="ignore", divide="ignore"):
-            rho_raw = 2.0 * mass * a_z / (v_r**2 * cs)
-        rho, filled, runs = _exponential_fill(h, rho_raw, ~exclude, fill_fit_window_m)
-        last_runs[:] = runs
-        if fill_method == "hydrostatic":
-            for a, b, h1, y1, _, h2, y2, _ in runs:
-                if h1 is None or h2 is None:
-                    continue
-                p1 = hydrostatic_pressure(h[:a], rho[:a], g_r[:a], p0)[-1]
-                hh = np.concatenate([[h1], h[a:b], [h2]])
-                gg = g_r[a - 1 : b + 1]
-                Tsh = T_shape[a - 1 : b + 1]
-                fill = _hydrostatic_gap(hh, gg, Tsh, p1 / (np.exp(y1) * R_gas), p1, y2, R_gas)
-                if fill is not None:
-                    rho[a:b] = fill[1:-1]
-        p = hydrostatic_pressure(h, rho, g_r, p0)
-        T = p / (rho * R_gas)
-        return rho, p, T, filled
-
-    def smoothed(rho):
-        rho_s = np.exp(smooth_in_altitude(h, np.log(rho), smooth_window_m))
-        p_s = hydrostatic_pressure(h, rho_s, g_r, p0)
-        return rho_s, p_s, p_s / (rho_s * R_gas)
-
-    # iteration 1: Mach/Kn from the default model; constant C_A for the entry
-    T_prev = T_shape
-    p_prev = np.asarray(atm.pressure(h), dtype=float)
-    iterations: list[ProfileIteration] = []
-    last_runs: list[tuple] = []
-    converged = False
-    prev = None
-    for it in range(1, max_iterations + 1):
-        mach = v_r / _speed_of_sound(atm, T_prev)
-        lam = _mean_free_path(atm, p_prev, T_prev)
-        cs_mod, cs_par, kn, _ = drag_area(vehicle, ph, mach, lam, alpha)
-        if it == 1:
-            cs_mod = np.where(ph == 0, CA_FIRST_GUESS * s_ref, cs_mod)
-        cs = cs_mod + cs_par
-        rho, p, T, filled = profile(cs)
-        change = np.nan if prev is None else max(_rel_change(x, y) for x, y in zip((rho, p, T), prev, strict=True))
-        iterations.append(
-            ProfileIteration(
-                iteration=it,
-                t=t_s,
-                h_amr=h,
-                rho=rho,
-                p=p,
-                T=T,
-                cd=cs / s_ref,
-                mach=mach,
-                kn=kn,
-                filled=filled,
-                max_rel_change=float(change),
-            )
-        )
-        rho_s, p_s, T_s = smoothed(rho)
-        if prev is not None and change < tolerance:
-            converged = True
-            break
-        prev = (rho, p, T)
-        T_prev, p_prev = T_s, p_s
-
+    g = _profile_grid_inputs(t, p_M, v_M, q_M_G, P, f_G, f_valid, phase, wind_NE, cfg)
+    gas = _Gas(
+        mass=system_mass(vehicle, g.phase),
+        s_ref=float(vehicle.capsule.ref_area),
+        p0=float(atm.pressure(g.h[0])) if cfg.p_top is None else float(cfg.p_top),
+        R_gas=R_UNIVERSAL / cfg.molar_mass,
+        T_shape=np.asarray(atm.temperature(g.h), dtype=float),
+    )
+    exclude = _excluded(g, events, cfg)
+    iterations, converged, (rho_s, p_s, T_s), areas, runs = _iterate(g, gas, vehicle, atm, exclude, cfg)
     final = iterations[-1]
-
-    # ---- first-order 1σ
-    sig_wind = np.where(h < sig.wind_ceiling_m, sig.wind, 0.0)
-    rel_v = 2.0 * np.sqrt(var_vr + sig_wind**2 * u_h2) / v_r  # ∂ρ/∂v_r = −2ρ/v_r
-    rel_cd = sig.cd_rel * np.sqrt(cs_mod**2 + cs_par**2) / cs
-    a_model = final.rho * v_r**2 * cs / (2.0 * mass)  # equals a_Z where not filled
-    rel_acc = sig.accel / np.maximum(np.abs(a_model), 1e-12)
-    rel_fill = np.zeros(h.size)
-    for a, b, h1, _, _, h2, _, _ in last_runs:
-        if b - a < 1:
-            continue
-        lo, hi = max(a - 1, 0), min(b + 1, h.size)  # the run with its measured edges
-        T_assumed = final.T[lo:hi]
-        if fill_method == "exponential" or h1 is None or h2 is None:
-            # an exponential (isothermal) fill misses the whole temperature structure across the gap
-            extra = float(np.std(T_shape[lo:hi] - np.polyval(np.polyfit(h[lo:hi], T_shape[lo:hi], 1), h[lo:hi])))
-            sT = (
-                float(np.hypot(sig.fill_temperature_K, extra))
-                if fill_method == "exponential"
-                else sig.fill_temperature_K
-            )
-        else:
-            sT = sig.fill_temperature_K
-        s_run = fill_sigma(
-            h[lo:hi],
-            g_r[lo:hi],
-            T_assumed,
-            R_gas,
-            sT,
-            sig.fill_correlation_km * 1e3,
-            upper_edge=h1 is not None and lo == a - 1,
-            lower_edge=h2 is not None and hi == b + 1,
-        )
-        rel_fill[a:b] = s_run[(a - lo) : (a - lo) + (b - a)]
-    rel_corr = np.sqrt(rel_v**2 + rel_cd**2 + rel_fill**2)
-    sigma_rho_rel = np.sqrt(rel_corr**2 + rel_acc**2)
-    sigma_rho = sigma_rho_rel * final.rho
-    # pressure: correlated part integrated linearly, white part and p0 in quadrature
-    wgt = 0.5 * (g_r[1:] + g_r[:-1]) * np.abs(np.diff(h))
-    corr_i = wgt * 0.5 * (rel_corr[1:] * final.rho[1:] + rel_corr[:-1] * final.rho[:-1])
-    white_i = wgt * 0.5 * (rel_acc[1:] * final.rho[1:] + rel_acc[:-1] * final.rho[:-1])
-    sp_corr = np.concatenate([[0.0], np.cumsum(corr_i)])
-    sp_white = np.sqrt(np.concatenate([[0.0], np.cumsum(white_i**2)]))
-    sigma_p = np.sqrt(sp_corr**2 + sp_white**2 + (sig.p_top_rel * p0) ** 2)
-    sigma_T = final.T * np.sqrt((sigma_p / final.p) ** 2 + sigma_rho_rel**2)
-    # the profile is a function of altitude: the altitude's own 1σ moves ρ(h) and p(h) by σ_h / H
-    # (H = R T / g the local scale height); T(h) only by σ_h dT/dh, neglected
-    rel_h = np.sqrt(np.maximum(var_h, 0.0)) * g_r / (R_gas * final.T)
-    sigma_rho = np.sqrt(sigma_rho_rel**2 + rel_h**2) * final.rho
-    sigma_p = np.sqrt(sigma_p**2 + (rel_h * final.p) ** 2)
-
+    rel_fill = _fill_rel_sigma(g, gas, final, runs, cfg)
+    sigma_rho, sigma_p, sigma_T = _uncertainty(g, gas, final, areas, rel_fill, cfg)
     return AtmosphereResult(
         iterations=iterations,
         final=final,

@@ -1,33 +1,51 @@
-"""Entry scenario configuration: the schema of a ``kind = "entry"`` scenario (every key the
+"""Entry scenario settings: the schema of a ``kind = "entry"`` scenario (every key the
 reconstruction, the synthetic telemetry and the truth simulator read, with its default, once) and
-:class:`EntryConfig`, the typed reconstruction settings built once from a validated scenario.
+:class:`EntrySettings`, the frozen settings of one run built once by
+:meth:`EntrySettings.from_scenario` (``EntryProblem.settings``).
 
-The reconstruction (:func:`workbench.problems.entry.pipeline.reconstruct`) and the smoother
-validation (:func:`workbench.problems.entry.montecarlo.prepare_validation`) both read their
-settings from one :class:`EntryConfig`.  The synthetic-side defaults (``[sensors.*]``,
-``[synthetic]``, ``[truth]``) are those of :class:`~workbench.problems.entry.sensors.EntryTelemetrySpec`
-and :class:`~workbench.problems.entry.truth.EntryTruthSpec`, taken from them here so they are
-declared once.
+Only this module sees the :class:`~workbench.io.scenario.Scenario`; every stage below receives its
+own small frozen dataclass (telemetry checks, preprocessing, reconstruction prior, dispersion,
+radar/filter, atmosphere, winds, synthetic sensors and truth) and the vehicle asset loaded once.
+Defaults a stage dataclass already carries (:class:`~workbench.problems.entry.preprocess.PreprocessConfig`,
+:class:`~workbench.problems.entry.sensors.EntryTelemetrySpec`, :class:`~workbench.problems.entry.truth.EntryTruthSpec`,
+:class:`~workbench.problems.entry.atmosphere.AtmosphereSettings` ...) are read from it into the schema so
+they are declared once; every other default lives in the schema's :class:`Key`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import weakref
 from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
 
 from workbench.core.frames import julian_date_from_utc
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.assets import asset_path
+from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table
-from workbench.problems.entry.dispersion import AcceptanceRules
+from workbench.models.aerodynamics import EntryVehicle, load_vehicle
+from workbench.models.radar import beam_directions_G
+from workbench.problems.entry.atmosphere import AtmosphereSettings, EntryProfileSigmas
+from workbench.problems.entry.dispersion import AcceptanceRules, DispersionSigmas
+from workbench.problems.entry.filter import EntryFilterSigmas
 from workbench.problems.entry.preprocess import PreprocessConfig
-from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryTelemetrySpec
-from workbench.problems.entry.site import TERRAIN_ELEVATION_M
+from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryImuModel, EntryTelemetrySpec, NominalErrorModel
+from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M
+from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import TelemetryChecks
 from workbench.problems.entry.truth import EntryTruthSpec
 
-__all__ = ["SCHEMA", "RULES", "EntryConfig", "config_for"]
+__all__ = [
+    "SCHEMA",
+    "RULES",
+    "EntrySettings",
+    "ReconstructionSettings",
+    "DispersionSettings",
+    "RadarSettings",
+    "SyntheticSettings",
+]
 
 _F, _I, _S, _B, _V, _L = "float", "int", "str", "bool", "vec3", "list"
 
@@ -45,6 +63,9 @@ _PRE = PreprocessConfig()
 _TM = EntryTelemetrySpec()
 _CHECKS = TelemetryChecks()
 _RULES = AcceptanceRules()
+_ATM = AtmosphereSettings()
+_FS = EntryFilterSigmas()
+_DS = DispersionSigmas()
 
 _TRUTH_MEANING = {
     "epoch_utc": ("", "UTC of EIP; absent: `[scenario] epoch_utc`"),
@@ -239,10 +260,18 @@ SCHEMA = Schema(
                 Key("attitude_deg", _F, 1.0, "deg", "initial attitude"),
                 Key("velocity_mps", _F, 10.0, "m/s", "initial velocity"),
                 Key("position_m", _F, 2000.0, "m", "initial position"),
-                Key("rate_dps", _F, 0.01, "deg/s", "body rate, per sample"),
-                Key("rate_pdd_dps", _F, 10.0, "deg/s", "body rate inside the saturation window"),
-                Key("accel_mps2", _F, 0.001, "m/s²", "specific force, per sample"),
-                Key("bridge_mode", _S, "relative", meaning="gap bridge position form", choices=("relative", "paper")),
+                Key("rate_dps", _F, _deg(_PRE.sigma_w), "deg/s", "body rate, per sample"),
+                Key(
+                    "rate_pdd_dps", _F, _deg(_PRE.sigma_w_saturated), "deg/s", "body rate inside the saturation window"
+                ),
+                Key("accel_mps2", _F, _PRE.sigma_f, "m/s²", "specific force, per sample"),
+                Key(
+                    "bridge_mode",
+                    _S,
+                    _FS.bridge_mode,
+                    meaning="gap bridge position form",
+                    choices=("relative", "paper"),
+                ),
                 Key("initial", _S, "fused", meaning="the smoother's start", choices=("fused", "dispersion", "nominal")),
                 Key("imu_accel_bias_mps2", _F, 0.0, "m/s²", "IMU datasheet: accelerometer bias, 1σ (process noise)"),
                 Key("imu_accel_scale", _F, 0.0, "1", "IMU datasheet: accelerometer scale factor, 1σ"),
@@ -259,9 +288,9 @@ SCHEMA = Schema(
                 Key("members", _I, 10000, meaning="trajectories per round"),
                 Key("chunk_size", _I, 1000, meaning="members per work unit"),
                 Key("seed", _I, 2016, meaning="random seed"),
-                Key("attitude_deg", _F, 5.0, "deg", "initial attitude dispersion, 1σ"),
-                Key("velocity_mps", _F, 500.0, "m/s", "initial velocity dispersion, 1σ"),
-                Key("position_m", _F, 10000.0, "m", "initial position dispersion, 1σ"),
+                Key("attitude_deg", _F, _deg(_DS.attitude_rad), "deg", "initial attitude dispersion, 1σ"),
+                Key("velocity_mps", _F, _DS.velocity_m_s, "m/s", "initial velocity dispersion, 1σ"),
+                Key("position_m", _F, _DS.position_m, "m", "initial position dispersion, 1σ"),
                 Key("cloud", _I, 300, meaning="members kept for the recording"),
                 Key("refine_rounds", _I, 0, meaning="extra rounds sampled about the previous elite"),
             ),
@@ -277,8 +306,8 @@ SCHEMA = Schema(
             (
                 Key("squint_deg", _F, 20.0, "deg", "squint of beams B1..B3 from -Z_G"),
                 Key("azimuths_deg", _V, [0.0, 120.0, 240.0], "deg", "azimuths of B1..B3 from +X_G towards +Y_G"),
-                Key("slant_range_sigma_m", _F, 100.0, "m", "slant-range measurement 1σ"),
-                Key("slant_out_sigma_m", _F, 100.0, "m", "slant-out measurement 1σ"),
+                Key("slant_range_sigma_m", _F, _FS.slant_range, "m", "slant-range measurement 1σ"),
+                Key("slant_out_sigma_m", _F, _FS.slant_out, "m", "slant-out measurement 1σ"),
                 Key(
                     "terrain_sigma_m",
                     _F,
@@ -296,7 +325,7 @@ SCHEMA = Schema(
                     "slant-out sample is multiplied by this time × the sample rate (R inflation for "
                     "time-correlated errors)",
                 ),
-                Key("velocity_out_sigma_mps", _F, 25.0, "m/s", "velocity-out measurement 1σ"),
+                Key("velocity_out_sigma_mps", _F, _FS.velocity_out, "m/s", "velocity-out measurement 1σ"),
                 Key("constrained", _B, True, meaning="AMELIA Sect. 8 constrained update directions"),
             ),
         ),
@@ -304,26 +333,34 @@ SCHEMA = Schema(
             "atmosphere",
             "AMELIA Sect. 9 atmosphere reconstruction",
             (
-                Key("molar_mass_g_per_mol", _F, 43.41, "g/mol", "molar mass of the Mars atmosphere"),
+                Key(
+                    "molar_mass_g_per_mol", _F, _ATM.molar_mass_g_per_mol, "g/mol", "molar mass of the Mars atmosphere"
+                ),
                 Key(
                     "fill_method",
                     _S,
-                    "hydrostatic",
+                    _ATM.fill_method,
                     meaning="blackout fill",
                     choices=("hydrostatic", "exponential"),
                 ),
-                Key("tolerance", _F, 0.01, "1", "drag-coefficient iteration tolerance (relative)"),
-                Key("max_iterations", _I, 10, meaning="drag-coefficient iterations"),
-                Key("cd_sigma", _F, 0.10, "1", "drag coefficients, relative 1σ"),
-                Key("wind_sigma_mps", _F, 10.0, "m/s", "wind uncertainty below 30 km, 1σ"),
+                Key("tolerance", _F, _ATM.tolerance, "1", "drag-coefficient iteration tolerance (relative)"),
+                Key("max_iterations", _I, _ATM.max_iterations, meaning="drag-coefficient iterations"),
+                Key("cd_sigma", _F, _ATM.sigmas.cd_rel, "1", "drag coefficients, relative 1σ"),
+                Key("wind_sigma_mps", _F, _ATM.sigmas.wind, "m/s", "wind uncertainty below 30 km, 1σ"),
                 Key(
                     "fill_temperature_sigma_K",
                     _F,
-                    10.0,
+                    _ATM.sigmas.fill_temperature_K,
                     "K",
                     "blackout fill: true temperature minus the assumed one, 1σ (Gaussian process)",
                 ),
-                Key("fill_correlation_km", _F, 10.0, "km", "blackout fill: correlation length of that departure"),
+                Key(
+                    "fill_correlation_km",
+                    _F,
+                    _ATM.sigmas.fill_correlation_km,
+                    "km",
+                    "blackout fill: correlation length of that departure",
+                ),
             ),
         ),
         Table(
@@ -405,53 +442,112 @@ SCHEMA = Schema(
 )
 
 
+# ------------------------------------------------------------------------------------ settings
 @dataclass(frozen=True)
-class EntryConfig:
-    """The reconstruction settings of one entry scenario, validated against :data:`SCHEMA`.
+class ReconstructionSettings:
+    """``[reconstruction]``: the navigation prior 1σ of AMELIA Table 3 (velocity [m/s], attitude
+    [deg], position [m]), the gap-bridge mode, the smoother start (``initial``) and the IMU datasheet
+    error levels ``imu_errors`` (1σ, SI: ``accel_bias`` [m/s²], ``gyro_bias`` [rad/s], scales [-],
+    misalignments [rad]) the smoother turns into process noise."""
 
-    Units as the names say; ``rules`` the dispersion acceptance rules; ``preprocess`` the
-    :class:`PreprocessConfig` (SI); ``checks`` the telemetry checks; ``epoch_utc`` None when the scenario gives none;
-    ``imu_errors`` the IMU datasheet error levels (1σ, SI: ``accel_bias`` [m/s²], ``gyro_bias``
-    [rad/s], scales [-], misalignments [rad]) the smoother turns into process noise.
-    """
-
-    epoch_utc: str | None
-    terrain_m: float
-    checks: TelemetryChecks
-    preprocess: PreprocessConfig
     sigma_velocity_mps: float
     sigma_attitude_deg: float
     sigma_position_m: float
-    accel_mps2: float
     bridge_mode: str
     initial: str
+    imu_errors: dict
+
+
+@dataclass(frozen=True)
+class DispersionSettings:
+    """``[dispersion]`` (AMELIA Sect. 6): member count, work-unit size, seed, the initial-state
+    dispersion 1σ (attitude [deg], velocity [m/s], position [m]), members kept for the recording
+    (``cloud``), refinement rounds and the acceptance ``rules``."""
+
     members: int
     chunk_size: int
-    dispersion_seed: int
-    dispersion_attitude_deg: float
-    dispersion_velocity_mps: float
-    dispersion_position_m: float
+    seed: int
+    attitude_deg: float
+    velocity_mps: float
+    position_m: float
     cloud: int
     refine_rounds: int
     rules: AcceptanceRules
+
+    def sigmas(self) -> dict:
+        """The dispersion 1σ as ``run_dispersion`` takes them: attitude [rad], velocity [m/s], position [m]."""
+        return {"attitude": math.radians(self.attitude_deg), "velocity": self.velocity_mps, "position": self.position_m}
+
+
+@dataclass(frozen=True)
+class RadarSettings:
+    """``[radar]``: the filter's radar altimeter model (AMELIA Appendix B): beam squint and azimuths
+    [deg], the instrument's range 1σ [m], the terrain relief 1σ [m] and its correlation time [s],
+    the velocity-out 1σ [m/s] and the constrained update directions (AMELIA Sect. 8)."""
+
     squint_deg: float
     azimuths_deg: tuple[float, float, float]
     slant_range_sigma_m: float
     slant_out_sigma_m: float
     terrain_sigma_m: float
     terrain_correlation_s: float
-    imu_errors: dict
     velocity_out_sigma_mps: float
     constrained: bool
-    molar_mass_g_per_mol: float
-    fill_method: str
-    tolerance: float
-    max_iterations: int
-    cd_sigma: float
-    wind_sigma_mps: float
-    fill_temperature_sigma_K: float
-    fill_correlation_km: float
+
+    def beams_G(self) -> np.ndarray:
+        """The beam unit vectors (4, 3) in the GNC frame (``models.radar.beam_directions_G``)."""
+        return beam_directions_G(self.squint_deg, self.azimuths_deg)
+
+
+@dataclass(frozen=True)
+class SyntheticSettings:
+    """``[synthetic]``, ``[sensors.*]`` and ``[truth]``: the sensor-side seed, the truth seed
+    (``truth_seed``, else ``seed``), the synthetic telemetry spec and the truth simulator spec."""
+
+    seed: int
+    truth_seed: int
+    telemetry: EntryTelemetrySpec
+    truth: EntryTruthSpec
+
+
+@dataclass(frozen=True)
+class EntrySettings:
+    """The frozen settings of one entry run, validated against :data:`SCHEMA` and built once by
+    :meth:`from_scenario` (picklable: Monte Carlo workers receive them).
+
+    ``run`` the scenario file's :class:`~workbench.io.scenario.RunInfo`; ``vehicle_path`` the
+    absolute (resolved) vehicle asset path and ``vehicle`` the asset loaded once (None for a user scenario
+    without ``[vehicle] file``: :meth:`require_vehicle` raises then); ``telemetry`` the absolute
+    (resolved) paths of the ``[telemetry]`` keys given; ``epoch_utc`` of EIP or None; ``terrain_m`` [m] above
+    the MOLA radius; the per-stage settings ``checks``, ``preprocess``, ``reconstruction``,
+    ``dispersion``, ``radar``, ``atmosphere``, ``wind_method`` and ``synthetic``.
+    """
+
+    run: RunInfo
+    vehicle_path: Path | None
+    vehicle: EntryVehicle | None
+    telemetry: dict
+    epoch_utc: str | None
+    terrain_m: float
+    checks: TelemetryChecks
+    preprocess: PreprocessConfig
+    reconstruction: ReconstructionSettings
+    dispersion: DispersionSettings
+    radar: RadarSettings
+    atmosphere: AtmosphereSettings
     wind_method: str
+    synthetic: SyntheticSettings
+
+    @property
+    def r_ground(self) -> float:
+        """Radius of the ground sphere [m]: the MOLA radius plus ``terrain_m``."""
+        return R_MOLA + self.terrain_m
+
+    def require_vehicle(self) -> EntryVehicle:
+        """The vehicle asset; a :class:`ScenarioError` on ``vehicle.file`` if the scenario names none."""
+        if self.vehicle is None:
+            raise ScenarioError(self.run.path, "vehicle.file", "missing: a reconstruction needs the vehicle asset")
+        return self.vehicle
 
     def smoother_sigmas(self, slant_out_dt_s: float | None = None) -> dict:
         """The radar-aided smoother's measurement 1σ and gap-bridge mode, as
@@ -468,26 +564,28 @@ class EntryConfig:
         inflation for time-correlated measurement errors; Bar-Shalom, Li & Kirubarajan 2001,
         "Estimation with Applications to Tracking and Navigation", Sect. 8.3).  Without
         ``slant_out_dt_s`` (or with ``terrain_correlation_s = 0``) the terrain error is white."""
+        r = self.radar
         n = 1.0
-        if slant_out_dt_s is not None and slant_out_dt_s > 0 and self.terrain_correlation_s > 0:
-            n = max(1.0, self.terrain_correlation_s / slant_out_dt_s)
+        if slant_out_dt_s is not None and slant_out_dt_s > 0 and r.terrain_correlation_s > 0:
+            n = max(1.0, r.terrain_correlation_s / slant_out_dt_s)
         return {
-            "slant_range": math.hypot(self.slant_range_sigma_m, self.terrain_sigma_m),
-            "slant_out": math.hypot(self.slant_out_sigma_m, self.terrain_sigma_m * math.sqrt(n)),
-            "velocity_out": self.velocity_out_sigma_mps,
-            "bridge_mode": self.bridge_mode,
+            "slant_range": math.hypot(r.slant_range_sigma_m, r.terrain_sigma_m),
+            "slant_out": math.hypot(r.slant_out_sigma_m, r.terrain_sigma_m * math.sqrt(n)),
+            "velocity_out": r.velocity_out_sigma_mps,
+            "bridge_mode": self.reconstruction.bridge_mode,
         }
 
     @classmethod
-    def from_scenario(cls, scenario: Scenario) -> EntryConfig:
+    def from_scenario(cls, scenario: Scenario) -> EntrySettings:
         """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types, choices), check the
-        values (counts and sigmas > 0, rules ``[centre, half-width > 0]``, a parsable epoch) and build
-        the config; every error is a :class:`ScenarioError` naming file and key."""
+        values (counts and sigmas > 0, rules ``[centre, half-width > 0]``, a parsable epoch, the
+        truth and sensor specs), load the vehicle asset once and build the settings; every error is
+        a :class:`ScenarioError` naming file and key."""
         if scenario.kind != "entry":
             raise ScenarioError(scenario.path, "scenario.kind", f"{scenario.kind!r} is not an entry scenario")
         file = scenario.path
         v = SCHEMA.validate(scenario.data, file)
-        pre, rec, dis, rad, atm = v["preprocess"], v["reconstruction"], v["dispersion"], v["radar"], v["atmosphere"]
+        run = RunInfo.from_scenario(scenario)
         for table, key in (
             ("dispersion", "members"),
             ("dispersion", "chunk_size"),
@@ -502,99 +600,231 @@ class EntryConfig:
         ):
             if v[table][key] <= 0:
                 raise ScenarioError(file, f"{table}.{key}", "must be > 0")
-        rules = {}
-        for k, r in dis["rules"].items():
-            if not (
-                len(r) == 2 and all(isinstance(x, int | float) and not isinstance(x, bool) for x in r) and r[1] > 0
-            ):
-                raise ScenarioError(file, f"dispersion.rules.{k}", "need [centre, half-width] with half-width > 0")
-            rules[k] = (float(r[0]), float(r[1]))
         epoch = v["scenario"]["epoch_utc"]
         if epoch is not None:
             try:
                 julian_date_from_utc(epoch)
             except ValueError as e:
                 raise ScenarioError(file, "scenario.epoch_utc", str(e)) from None
-
-        def pick(key: str, fallback: str) -> float:
-            return pre[key] if pre[key] is not None else rec[fallback]
-
-        try:
-            prep = PreprocessConfig(
-                sigma_w=math.radians(pick("sigma_rate_dps", "rate_dps")),
-                sigma_f=pick("sigma_accel_mps2", "accel_mps2"),
-                sigma_w_saturated=math.radians(pick("sigma_rate_saturated_dps", "rate_pdd_dps")),
-                sigma_w_resampled=math.radians(pick("sigma_rate_resampled_dps", "rate_pdd_dps")),
-                sigma_f_resampled=pre["sigma_accel_resampled_mps2"],
-                saturation=math.radians(pre["saturation_dps"]),
-                saturation_margin=math.radians(pre["saturation_margin_dps"]),
-                gap_factor=pre["gap_factor"],
-                resample_rate_hz=pre["resample_hz"],
-                resample_window_s=pre["resample_window_s"],
-                nav_interpolation=pre["nav_interpolation"],
-                rebuild_neighbours=pre["rebuild_neighbours"],
-                rebuild_from_accel=pre["rebuild_from_accel"],
-            )
-        except ValueError as e:
-            raise ScenarioError(file, "preprocess", str(e)) from None
+        vpath, vehicle = _vehicle(run, v["vehicle"]["file"])
         return cls(
+            run=run,
+            vehicle_path=vpath,
+            vehicle=vehicle,
+            telemetry={k: run.resolve(p).resolve() for k, p in v["telemetry"].items() if p is not None},
             epoch_utc=epoch,
             terrain_m=v["site"]["terrain_m"],
             checks=TelemetryChecks(
-                quat_error_tol=pre["quat_error_tol"],
-                quat_warn_tol=pre["quat_warn_tol"],
+                quat_error_tol=v["preprocess"]["quat_error_tol"],
+                quat_warn_tol=v["preprocess"]["quat_warn_tol"],
                 zero_filled_packets=v["sensors"]["radar"]["zero_filled_packets"],
             ),
-            preprocess=prep,
-            sigma_velocity_mps=rec["velocity_mps"],
-            sigma_attitude_deg=rec["attitude_deg"],
-            sigma_position_m=rec["position_m"],
-            accel_mps2=rec["accel_mps2"],
-            bridge_mode=rec["bridge_mode"],
-            initial=rec["initial"],
-            members=dis["members"],
-            chunk_size=dis["chunk_size"],
-            dispersion_seed=dis["seed"],
-            dispersion_attitude_deg=dis["attitude_deg"],
-            dispersion_velocity_mps=dis["velocity_mps"],
-            dispersion_position_m=dis["position_m"],
-            cloud=dis["cloud"],
-            refine_rounds=dis["refine_rounds"],
-            rules=AcceptanceRules(**rules),
-            squint_deg=rad["squint_deg"],
-            azimuths_deg=tuple(float(a) for a in rad["azimuths_deg"]),
-            slant_range_sigma_m=rad["slant_range_sigma_m"],
-            slant_out_sigma_m=rad["slant_out_sigma_m"],
-            terrain_sigma_m=rad["terrain_sigma_m"],
-            terrain_correlation_s=rad["terrain_correlation_s"],
-            imu_errors={
-                "accel_bias": rec["imu_accel_bias_mps2"],
-                "accel_scale": rec["imu_accel_scale"],
-                "accel_misalignment": rec["imu_accel_misalignment_rad"],
-                "gyro_bias": math.radians(rec["imu_gyro_bias_dps"]),
-                "gyro_scale": rec["imu_gyro_scale"],
-                "gyro_misalignment": rec["imu_gyro_misalignment_rad"],
-            },
-            velocity_out_sigma_mps=rad["velocity_out_sigma_mps"],
-            constrained=rad["constrained"],
-            molar_mass_g_per_mol=atm["molar_mass_g_per_mol"],
-            fill_method=atm["fill_method"],
-            tolerance=atm["tolerance"],
-            max_iterations=atm["max_iterations"],
-            cd_sigma=atm["cd_sigma"],
-            wind_sigma_mps=atm["wind_sigma_mps"],
-            fill_temperature_sigma_K=atm["fill_temperature_sigma_K"],
-            fill_correlation_km=atm["fill_correlation_km"],
+            preprocess=_preprocess(file, v["preprocess"], v["reconstruction"]),
+            reconstruction=_reconstruction(v["reconstruction"]),
+            dispersion=_dispersion(file, v["dispersion"]),
+            radar=_radar(v["radar"]),
+            atmosphere=_atmosphere(v["atmosphere"], v["reconstruction"]["accel_mps2"]),
             wind_method=v["winds"]["method"],
+            synthetic=SyntheticSettings(
+                seed=v["synthetic"]["seed"],
+                truth_seed=v["synthetic"]["seed"]
+                if v["synthetic"]["truth_seed"] is None
+                else v["synthetic"]["truth_seed"],
+                telemetry=_telemetry_spec(file, v),
+                truth=_truth_spec(file, v["truth"], epoch, "epoch_utc" in scenario.data.get("truth", {})),
+            ),
         )
 
 
-_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+def _vehicle(run: RunInfo, rel: str | None) -> tuple[Path | None, EntryVehicle | None]:
+    """``[vehicle] file`` resolved and loaded; absent: the shipped Schiaparelli for a synthetic
+    scenario, nothing for a user one."""
+    if rel is None:
+        if not run.synthetic:
+            return None, None
+        path = asset_path("vehicles", "schiaparelli.toml")
+    else:
+        path = run.resolve(rel).resolve()
+        if not path.exists():
+            raise ScenarioError(run.path, "vehicle.file", f"file not found: {path}")
+    return path, load_vehicle(path)
 
 
-def config_for(scenario: Scenario) -> EntryConfig:
-    """:meth:`EntryConfig.from_scenario`, built once per scenario object (scenarios are read-only)."""
-    cfg = _CACHE.get(scenario)
-    if cfg is None:
-        cfg = _CACHE[scenario] = EntryConfig.from_scenario(scenario)
-    return cfg
+def _preprocess(file: Path, pre: dict, rec: dict) -> PreprocessConfig:
+    def pick(key: str, fallback: str) -> float:
+        return pre[key] if pre[key] is not None else rec[fallback]
+
+    try:
+        return PreprocessConfig(
+            sigma_w=math.radians(pick("sigma_rate_dps", "rate_dps")),
+            sigma_f=pick("sigma_accel_mps2", "accel_mps2"),
+            sigma_w_saturated=math.radians(pick("sigma_rate_saturated_dps", "rate_pdd_dps")),
+            sigma_w_resampled=math.radians(pick("sigma_rate_resampled_dps", "rate_pdd_dps")),
+            sigma_f_resampled=pre["sigma_accel_resampled_mps2"],
+            saturation=math.radians(pre["saturation_dps"]),
+            saturation_margin=math.radians(pre["saturation_margin_dps"]),
+            gap_factor=pre["gap_factor"],
+            resample_rate_hz=pre["resample_hz"],
+            resample_window_s=pre["resample_window_s"],
+            nav_interpolation=pre["nav_interpolation"],
+            rebuild_neighbours=pre["rebuild_neighbours"],
+            rebuild_from_accel=pre["rebuild_from_accel"],
+        )
+    except ValueError as e:
+        raise ScenarioError(file, "preprocess", str(e)) from None
+
+
+def _reconstruction(rec: dict) -> ReconstructionSettings:
+    return ReconstructionSettings(
+        sigma_velocity_mps=rec["velocity_mps"],
+        sigma_attitude_deg=rec["attitude_deg"],
+        sigma_position_m=rec["position_m"],
+        bridge_mode=rec["bridge_mode"],
+        initial=rec["initial"],
+        imu_errors={
+            "accel_bias": rec["imu_accel_bias_mps2"],
+            "accel_scale": rec["imu_accel_scale"],
+            "accel_misalignment": rec["imu_accel_misalignment_rad"],
+            "gyro_bias": math.radians(rec["imu_gyro_bias_dps"]),
+            "gyro_scale": rec["imu_gyro_scale"],
+            "gyro_misalignment": rec["imu_gyro_misalignment_rad"],
+        },
+    )
+
+
+def _dispersion(file: Path, dis: dict) -> DispersionSettings:
+    rules = {}
+    for k, r in dis["rules"].items():
+        if not (len(r) == 2 and all(isinstance(x, int | float) and not isinstance(x, bool) for x in r) and r[1] > 0):
+            raise ScenarioError(file, f"dispersion.rules.{k}", "need [centre, half-width] with half-width > 0")
+        rules[k] = (float(r[0]), float(r[1]))
+    return DispersionSettings(
+        members=dis["members"],
+        chunk_size=dis["chunk_size"],
+        seed=dis["seed"],
+        attitude_deg=dis["attitude_deg"],
+        velocity_mps=dis["velocity_mps"],
+        position_m=dis["position_m"],
+        cloud=dis["cloud"],
+        refine_rounds=dis["refine_rounds"],
+        rules=AcceptanceRules(**rules),
+    )
+
+
+def _radar(rad: dict) -> RadarSettings:
+    return RadarSettings(
+        squint_deg=rad["squint_deg"],
+        azimuths_deg=tuple(float(a) for a in rad["azimuths_deg"]),
+        slant_range_sigma_m=rad["slant_range_sigma_m"],
+        slant_out_sigma_m=rad["slant_out_sigma_m"],
+        terrain_sigma_m=rad["terrain_sigma_m"],
+        terrain_correlation_s=rad["terrain_correlation_s"],
+        velocity_out_sigma_mps=rad["velocity_out_sigma_mps"],
+        constrained=rad["constrained"],
+    )
+
+
+def _atmosphere(atm: dict, accel_mps2: float) -> AtmosphereSettings:
+    return dataclasses.replace(
+        _ATM,
+        molar_mass_g_per_mol=atm["molar_mass_g_per_mol"],
+        fill_method=atm["fill_method"],
+        tolerance=atm["tolerance"],
+        max_iterations=atm["max_iterations"],
+        sigmas=EntryProfileSigmas(
+            cd_rel=atm["cd_sigma"],
+            accel=accel_mps2,
+            wind=atm["wind_sigma_mps"],
+            fill_temperature_K=atm["fill_temperature_sigma_K"],
+            fill_correlation_km=atm["fill_correlation_km"],
+        ),
+    )
+
+
+def _telemetry_spec(file: Path, v: dict) -> EntryTelemetrySpec:
+    """The synthetic telemetry spec from the validated ``[sensors.*]``, ``[synthetic]``, ``[site]``
+    and ``[radar]`` tables (the beam geometry and terrain the filter uses too)."""
+    imu, rad, syn, ne = v["sensors"]["imu"], v["sensors"]["radar"], v["synthetic"], v["synthetic"]["nominal_error"]
+    fs = imu["gyro_full_scale_dps"]
+    fs = [float(fs)] * 3 if isinstance(fs, int | float) else [float(x) for x in fs]
+    dx0 = ne["dx0"]
+    if dx0 is not None:
+        dx0 = [float(x) for x in dx0]
+        if len(dx0) != 9:
+            raise ScenarioError(file, "synthetic.nominal_error.dx0", "must hold 9 numbers (m/s, deg, m)")
+        dx0 = tuple(dx0[DV] + [math.radians(x) for x in dx0[DTH]] + dx0[DP])
+    return EntryTelemetrySpec(
+        imu=EntryImuModel(
+            accel_noise=imu["accel_noise_mps2"],
+            accel_bias=imu["accel_bias_mps2"],
+            accel_scale=imu["accel_scale"],
+            gyro_noise=math.radians(imu["gyro_noise_dps"]),
+            gyro_bias=math.radians(imu["gyro_bias_dps"]),
+            gyro_scale=imu["gyro_scale"],
+            accel_misalignment=imu["accel_misalignment_rad"],
+            gyro_misalignment=imu["gyro_misalignment_rad"],
+            gyro_full_scale=tuple(math.radians(x) for x in fs),  # type: ignore[arg-type]
+            accel_full_scale=imu["accel_full_scale_mps2"],
+        ),
+        nominal=NominalErrorModel(
+            velocity_sigma=ne["velocity_sigma_mps"],
+            attitude_sigma=math.radians(ne["attitude_sigma_deg"]),
+            position_sigma=ne["position_sigma_m"],
+            dx0=dx0,
+        ),
+        onboard_rate_hz=imu["onboard_rate_hz"],
+        gnc_rate_hz=imu["tm_rate_hz"],
+        nav_rate_hz=imu["nav_rate_hz"],
+        gaps=tuple((float(a), float(b)) for a, b in syn["blackout_gaps_s"]),
+        rda_rate_hz=rad["rate_hz"],
+        rda_on_after_fsr_s=rad["on_after_fsr_s"],
+        sr_period_s=rad["slant_range_period_s"],
+        sr_first_after_on_s=rad["first_packet_after_on_s"],
+        sr_zero_filled=rad["zero_filled_packets"],
+        range_sigma=rad["range_sigma_m"],
+        range_sigma_frac=rad["range_sigma_frac"],
+        velocity_sigma=rad["velocity_sigma_mps"],
+        r_ground=R_MOLA + v["site"]["terrain_m"],
+        squint_deg=v["radar"]["squint_deg"],
+        azimuths_deg=tuple(float(x) for x in v["radar"]["azimuths_deg"]),  # type: ignore[arg-type]
+    )
+
+
+#: ``[truth]`` keys holding arrays: 1 = a list of numbers, 2 = a list of rows of numbers.
+_TRUTH_DEPTH = {
+    "p0_km": 1,
+    "v0_kmps": 1,
+    "q0_jpl": 1,
+    "w0_dps": 1,
+    "initial_position_offset_km": 1,
+    "aero_deviation_mach": 1,
+    "ca_deviation": 1,
+    "parachute_deviation_mach": 1,
+    "parachute_cd_deviation": 1,
+    "temperature_profile_km_K": 2,
+    "temperature_waves": 2,
+    "terrain_modes": 2,
+    "wind_layers": 2,
+}
+
+
+def _truth_spec(file: Path, table: dict, epoch: str | None, epoch_given: bool) -> EntryTruthSpec:
+    """The truth simulator spec from the validated ``[truth]`` table; its ``epoch_utc`` is
+    ``[scenario] epoch_utc`` unless ``[truth]`` gives one."""
+    kw = {}
+    for key, val in table.items():
+        depth = _TRUTH_DEPTH.get(key)
+        try:
+            if depth == 1:
+                val = tuple(float(x) for x in val)
+            elif depth == 2:
+                val = tuple(tuple(float(x) for x in row) for row in val)
+        except (TypeError, ValueError):
+            raise ScenarioError(file, f"truth.{key}", f"need numbers, got {val!r}"[:300]) from None
+        kw[key] = val
+    if not epoch_given and epoch is not None:
+        kw["epoch_utc"] = epoch
+    try:
+        return EntryTruthSpec(**kw)
+    except ValueError as e:
+        raise ScenarioError(file, "truth", str(e)) from None

@@ -54,6 +54,7 @@ from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import ImuArrays, imu_arrays
 from workbench.io import progress
 from workbench.problems.entry.site import R_GROUND, R_MOLA
+from workbench.problems.entry.state import DP, DTH, DV
 
 __all__ = [
     "SAMPLE_BLOCK",
@@ -227,9 +228,9 @@ def sample_offsets(
 
 def member_states(v0, q0, p0, dx0):
     """Initial states (m, ·) of the members with offsets dx0 (m, 9)."""
-    v = np.asarray(v0, dtype=float) + dx0[:, 0:3]
-    q = quat_normalize(quat_multiply(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, 3:6])))
-    p = np.asarray(p0, dtype=float) + dx0[:, 6:9]
+    v = np.asarray(v0, dtype=float) + dx0[:, DV]
+    q = quat_normalize(quat_multiply(np.asarray(q0, dtype=float), quat_from_rotvec(dx0[:, DTH])))
+    p = np.asarray(p0, dtype=float) + dx0[:, DP]
     return v, q, p
 
 
@@ -497,8 +498,8 @@ def run_dispersion(
     v0: np.ndarray,
     q0: np.ndarray,
     p0: np.ndarray,
-    sigmas: DispersionSigmas | np.ndarray | None = None,
-    n: int = 10_000,
+    sigmas: DispersionSigmas | np.ndarray | None,
+    n: int,
     *,
     rules: AcceptanceRules | None = None,
     events_t: Mapping[str, float],
@@ -507,9 +508,9 @@ def run_dispersion(
     seed: int = 0,
     scheduler: str | None = None,
     workers: int = 1,
-    n_cloud: int = 300,
+    n_cloud: int,
     cloud_dt: float = 1.0,
-    bridge_mode: str = "relative",
+    bridge_mode: str,
     r_ground: float = R_GROUND,
     refine_rounds: int = 0,
     elite_fraction: float = 0.01,
@@ -629,16 +630,16 @@ def run_dispersion_loop(
     v0: np.ndarray,
     q0: np.ndarray,
     p0: np.ndarray,
-    sigmas: DispersionSigmas | np.ndarray | None = None,
-    n: int = 200,
+    sigmas: DispersionSigmas | np.ndarray | None,
+    n: int,
     *,
     rules: AcceptanceRules | None = None,
     events_t: Mapping[str, float],
     atmosphere: Atmosphere | None = None,
     seed: int = 0,
-    n_cloud: int = 300,
+    n_cloud: int,
     cloud_dt: float = 1.0,
-    bridge_mode: str = "relative",
+    bridge_mode: str,
     r_ground: float = R_GROUND,
 ) -> DispersionResult:
     """Per-trajectory loop baseline of :func:`run_dispersion`: the same members and maths, one
@@ -731,7 +732,7 @@ def fuse_with_prior(
     Pf_n = 0.5 * (Pf_n + Pf_n.T)
     dx = D * (Pf_n @ eta)
     P0 = Pf_n * np.outer(D, D)
-    v0 = np.asarray(v_nom, float) + dx[0:3]
-    q0 = quat_normalize(quat_multiply(np.asarray(q_nom, float), quat_from_rotvec(dx[3:6])))
-    p0 = np.asarray(p_nom, float) + dx[6:9]
+    v0 = np.asarray(v_nom, float) + dx[DV]
+    q0 = quat_normalize(quat_multiply(np.asarray(q_nom, float), quat_from_rotvec(dx[DTH])))
+    p0 = np.asarray(p_nom, float) + dx[DP]
     return FusedInitialState(v0, q0, p0, P0, dx, np.asarray(P_prior, float), int(keep.sum()))

@@ -1,87 +1,19 @@
-"""Radar-aided extended RTS smoother of the entry & descent (AMELIA Sect. 8, Appendix B).
+"""Radar-aided extended RTS smoother of the entry and descent (AMELIA Sect. 8, Appendix B).
 
-Forward pass: an error-state EKF over the PreprocessedIMU grid.  Between measurements the state
-``x = [v_M (3), q_M_G (4), p_M (3)]`` is propagated exactly as :func:`workbench.estimation.strapdown.integrate`
-does it (RK4 of Eq. A.2 with inputs linear between samples, first-order covariance A.14/A.15 with
-mid-step attitude/inputs, gaps bridged by :func:`~workbench.estimation.strapdown.apply_gap` and
-:func:`~workbench.estimation.strapdown.gap_transition`) — with no radar data the forward pass *is*
-the strapdown pass (tested).  Error state ``[δv_M, δθ_G, δp_M]``, ``q_true = q ⊗ exp(δθ)``.
+What: an error-state EKF over the preprocessed IMU grid (state ``[v_M, q_M_G, p_M]``, error
+``[δv_M, δθ_G, δp_M]``, propagation identical to the strapdown pass) with the radar slant-range,
+slant-out and velocity-out updates (B.3-B.6), AMELIA's constrained update directions (gain
+projection, Joseph covariance), optional χ² gating, iterated updates and relinearised passes,
+then the error-state RTS backward pass.  Why: the radar fixes the altitude and the
+terrain-relative velocity at the end of the descent; the smoother carries that information back
+along the whole trajectory.  This module supplies the models; the estimation steps are the shared
+engine's (:mod:`workbench.estimation.ekf`, :mod:`workbench.estimation.smoother`,
+:mod:`workbench.estimation.grid`).  The method notes and the tuning measurements are in
+``docs/tuning/entry.md``.
 
-Measurement time tags.  A radar sample at ``t_m`` within ``snap_tolerance`` (1 ms) of an IMU
-sample is applied at that sample (the state moves by < 0.1 m and < 0.01° in 1 ms — far below the
-100 m / 25 m/s radar σ).  Otherwise the IMU interval is *split*: a node is inserted at ``t_m``
-with the IMU inputs interpolated linearly (the same input model as RK4 uses), the state and
-covariance are propagated to it, updated, and propagated on to the next IMU sample.  The inserted
-nodes are kept for the backward pass (the RTS recursion runs on the augmented grid, so it stays
-exact) and dropped from the returned histories, which live on the IMU grid.  A measurement that
-falls inside a bridged data gap (no IMU inputs there) is snapped to the nearer gap end (counted
-in ``info["n_snapped_in_gap"]``).  The grid is built by the shared
-:func:`workbench.estimation.grid.merge_time_tags` (gap intervals as ``no_insert``).
-
-Measurements (:mod:`workbench.models.radar`): slant ranges (the four beams stacked, B.3/B.4; a
-zero/invalid packet or beam is skipped), slant-out (the B0 model), velocity-out (B.5/B.6).
-Several measurements at one node are applied sequentially (slant range, slant-out, velocity-out).
-
-Constrained updates (AMELIA Sect. 8, ``constrained=True``).  The Kalman gain
-``K = P Hᵀ S⁻¹`` is projected, ``K ← Π K``:
-
-* slant range / slant-out: velocity rows zeroed; position rows projected on the local vertical
-  (``p̂ p̂ᵀ``); attitude rows such that the attitude correction expressed in M lies in the local
-  horizontal plane: ``C_G_M (I − p̂ p̂ᵀ) C_M_G`` (B.3 is invariant for rotations about the
-  vertical);
-* velocity-out: position rows zeroed (velocity and attitude updated).
-
-With the block-diagonal orthogonal projector Π, ``Π P Hᵀ S⁻¹`` is the minimum-variance gain among
-gains of the form Π K' (the trace of the Joseph covariance is minimised with ``K S = Π P Hᵀ``).
-The covariance uses the Joseph form ``(I − KH) P (I − KH)ᵀ + K R Kᵀ``, valid for any gain, so P
-stays the true covariance of the (sub-optimally) updated error; it is symmetrised.
-``constrained=False`` gives the ordinary EKF update for comparison.
-
-Optional χ² gating (``gate_probability``): an update whose NIS exceeds the χ²(d) quantile is
-rejected (``accepted = False``).  Default: no gating (the paper does not gate).
-
-Relinearisation (``EntryFilterSigmas.iterations``, default 3): after the first forward/backward
-pass the forward pass is repeated with the dynamics (Φ, Qd, gap transitions) and the radar
-models linearised about the previous *smoothed* trajectory (affine model ``x⁻ = f(x̄) ⊞ Φ(x̄)
-(x ⊟ x̄)``, ``h(x) ≈ h(x̄) + H(x̄)(x ⊟ x̄)``: the iterated extended smoother, i.e. Gauss-Newton,
-Bell 1994).  Why: after parachute deployment the rate σ is 10 °/s for 5 s, so the causal
-attitude error reaches ~7° while the specific force is ~87 m/s² and the rate ~240 °/s; Φ
-evaluated 7° off maps the later radar information back wrongly, and the single-pass smoothed
-ANEES (9 dof) there was ~1100 (50-run validation; 13.6 curvilinear after relinearising, with the
-window's σ cut to 1 °/s it is consistent without).  The returned ``forward`` pass and the
-innovations are the first (causal) pass's; ``info["relinearisation_max_attitude_change_rad"]``
-lists the largest attitude change of each further pass.  The passes are run by the shared
-:func:`workbench.estimation.smoother.iterated_rts`; this module supplies the pass (its affine
-models about the reference trajectory).
-
-Iterated updates (``EntryFilterSigmas.update_iterations``, default 4): in the first (causal) pass
-each radar update is re-linearised about its own updated state (iterated EKF, Gauss-Newton; the
-projector Π at the iterate; Joseph covariance of the last gain).  The first radar update is made
-with a ~7° attitude error; 50-run validation: forward curvilinear ANEES at the first radar sample
-12.7 → 10.5 (the NIS/innovations recorded are still the prior's).
-
-Composition: this module supplies the models (strapdown propagation, radar measurement functions
-and Jacobians, the gain projector, the affine models of a relinearised pass); the estimation
-steps are the shared engine's — the augmented time grid
-:func:`workbench.estimation.grid.merge_time_tags`, the passes
-:func:`workbench.estimation.smoother.iterated_rts`, the forward loop
-:func:`workbench.estimation.ekf.run_filter` over the augmented grid
-(the model returns its own Φ and Qd), each update its :func:`~workbench.estimation.ekf.update`
-(Joseph form, ``gain_projector``, iterated with :data:`UPDATE_STEP_TOL`, slant-range records
-NaN-padded to the four beams with ``slots``), the backward pass
-:func:`workbench.estimation.smoother.rts_smooth`; the channel records are
-:class:`~workbench.estimation.ekf.InnovationHistory`.
-
-Backward pass: :func:`workbench.estimation.smoother.rts_smooth` (error-state RTS, Särkkä 2013
-Sect. 8.2) of the stored Φ, P_prior, P_post on the augmented grid; the gain is solved on the
-Jacobi-scaled P_prior (position variances of (km)² next to attitude variances of (µrad)² make
-the unscaled Cholesky ill-conditioned after a long free propagation).  Smoothed residuals per
-channel: measured − h(x_s) with ``S = H P_s Hᵀ + R`` (a conservative band: the exact covariance
-of a smoothed residual is ``R − H P_s Hᵀ``).
-
-References: Aboudan et al., Space Sci. Rev. 214:97, 2018 (Sects. 7-8, App. A-B); Särkkä,
-*Bayesian Filtering and Smoothing*, 2013; Gelb 1974 (Joseph form); Simon, *Optimal State
-Estimation*, 2006, Sect. 7.5 (constrained Kalman filtering by gain projection).
+References: Aboudan et al., "ExoMars 2016 Schiaparelli Module Trajectory and Atmospheric Profiles
+Reconstruction", Space Sci. Rev. 214:97, 2018 (AMELIA; Sects. 7-8, App. A-B); Särkkä, *Bayesian
+Filtering and Smoothing*, 2013; Simon, *Optimal State Estimation*, 2006, Sect. 7.5.
 """
 
 from __future__ import annotations
@@ -126,6 +58,7 @@ from workbench.models.radar import (
     velocity_out_model,
 )
 from workbench.problems.entry.site import R_GROUND
+from workbench.problems.entry.state import DP, DTH, DV, N_ERR, N_X, XP, XQ, XV
 
 __all__ = [
     "CHANNELS",
@@ -133,7 +66,6 @@ __all__ = [
     "EntryFilterSigmas",
     "EntryPass",
     "EntryFilterResult",
-    "radar_from_telemetry",
     "gain_projector",
     "radar_update",
     "RadarMeasurement",
@@ -144,10 +76,10 @@ __all__ = [
 
 #: Radar channels, in the order they are applied at one node.
 CHANNELS: tuple[str, ...] = ("slant_range", "slant_out", "velocity_out")
-_I9 = np.eye(9)
+_I9 = np.eye(N_ERR)
 _I3 = np.eye(3)
-#: x = [v_M (0:3), q_M_G (3:7), p_M (7:10)], e = [δv_M, δθ_G, δp_M]
-_LAYOUT = ErrorStateLayout(10, ((3, 3),))
+#: x = [v_M, q_M_G, p_M], e = [δv_M, δθ_G, δp_M] (:mod:`.state`)
+_LAYOUT = ErrorStateLayout(N_X, ((XQ.start, DTH.start),))
 
 
 @dataclass(frozen=True)
@@ -170,22 +102,6 @@ class RadarData:
     rda_valid: np.ndarray
     beams_G: np.ndarray = field(default_factory=beam_directions_G)
     r_ground: float = R_GROUND
-
-
-def radar_from_telemetry(tm: Any, beams_G: np.ndarray | None = None, r_ground: float = R_GROUND) -> RadarData:
-    """:class:`RadarData` from an ``EntryTelemetry`` (fields ``t_sr``, ``slant_ranges``, ``sr_valid``,
-    ``t_rda``, ``slant_out``, ``v_out_G``, ``rda_valid``); beams default to the documented geometry."""
-    return RadarData(
-        t_sr=np.asarray(tm.t_sr, dtype=float),
-        slant_ranges=np.asarray(tm.slant_ranges, dtype=float).reshape(-1, 4),
-        sr_valid=np.asarray(tm.sr_valid, dtype=bool),
-        t_rda=np.asarray(tm.t_rda, dtype=float),
-        slant_out=np.asarray(tm.slant_out, dtype=float).reshape(-1),
-        v_out_G=np.asarray(tm.v_out_G, dtype=float).reshape(-1, 3),
-        rda_valid=np.asarray(tm.rda_valid, dtype=bool),
-        beams_G=beam_directions_G() if beams_G is None else np.asarray(beams_G, dtype=float),
-        r_ground=float(r_ground),
-    )
 
 
 @dataclass(frozen=True)
@@ -242,6 +158,34 @@ class EntryPass:
     p_M: np.ndarray
     P: np.ndarray
 
+    @property
+    def sigma_radial(self) -> np.ndarray:
+        """1σ (n,) [m] of the position along the local vertical (:func:`radial_sigma`)."""
+        return radial_sigma(self.p_M, self.P)
+
+    @property
+    def sigma_velocity(self) -> np.ndarray:
+        """Per-axis 1σ (n, 3) [m/s] of the MMED velocity."""
+        return np.sqrt(np.einsum("nii->ni", self.P[:, DV, DV]))
+
+    @property
+    def sigma_attitude(self) -> np.ndarray:
+        """Per-axis 1σ (n, 3) [rad] of the body-frame attitude error δθ_G."""
+        return np.sqrt(np.einsum("nii->ni", self.P[:, DTH, DTH]))
+
+    @property
+    def sigma_position(self) -> np.ndarray:
+        """Per-axis 1σ (n, 3) [m] of the MMED position."""
+        return np.sqrt(np.einsum("nii->ni", self.P[:, DP, DP]))
+
+
+def radial_sigma(p_M: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """1σ (n,) [m] of the position error along the local vertical û = p/|p|: ``sqrt(ûᵀ P_pp û)``,
+    the altitude's 1σ (a sphere's radius).  ``p_M`` (n, 3) [m] MMED, ``P`` (n, 9, 9) error-state
+    covariance ``[δv_M, δθ_G, δp_M]``."""
+    u = p_M / np.linalg.norm(p_M, axis=1, keepdims=True)
+    return np.sqrt(np.einsum("ni,nij,nj->n", u, P[:, DP, DP], u))
+
 
 @dataclass(frozen=True)
 class EntryFilterResult:
@@ -292,8 +236,8 @@ def gain_projector(kind: str, p_M: np.ndarray, q_M_G: np.ndarray) -> np.ndarray:
         u = u / math.sqrt(u @ u)
         vert = np.outer(u, u)
         C = quat_to_dcm(q_M_G)
-        Pi[3:6, 3:6] = C.T @ (_I3 - vert) @ C
-        Pi[6:9, 6:9] = vert
+        Pi[DTH, DTH] = C.T @ (_I3 - vert) @ C
+        Pi[DP, DP] = vert
     elif kind == "velocity":
         Pi[0:6, 0:6] = np.eye(6)
     else:
@@ -341,7 +285,7 @@ def radar_update(
     if not ur.accepted:
         return v, q, p, P, np.zeros((9, res.size)), False
     xn = ur.x_post
-    return xn[0:3], xn[3:7], xn[7:10], ur.P_post, ur.K, True
+    return xn[XV], xn[XQ], xn[XP], ur.P_post, ur.K, True
 
 
 # ---------------------------------------------------------------------------------------------
@@ -446,7 +390,7 @@ class _ChannelModel:
     def _at(self, x: np.ndarray) -> None:
         if not np.array_equal(x, self.x):
             _, pred, mask, H, _, _ = _predict_channel(
-                self.channel, self.index, self.radar, x[0:3], x[3:7], x[7:10], self.sg
+                self.channel, self.index, self.radar, x[XV], x[XQ], x[XP], self.sg
             )
             m = int(self.mask.sum())
             if np.array_equal(mask, self.mask):
@@ -514,7 +458,7 @@ def radar_measurement(
     along B0, velocity-out B.5/B.6 [m/s]); R from ``sg`` (1σ per component, SI).
     """
     x = np.asarray(x, dtype=float)
-    z, pred, mask, H, R, kind = _predict_channel(channel, index, radar, x[0:3], x[3:7], x[7:10], sg)
+    z, pred, mask, H, R, kind = _predict_channel(channel, index, radar, x[XV], x[XQ], x[XP], sg)
     if not mask.any():
         return RadarMeasurement(z, pred, mask, kind, x, constrained, None)
     model = _ChannelModel(channel, index, radar, sg, mask, x, pred, H)
@@ -538,7 +482,7 @@ def run_entry_smoother(
     sigmas: EntryFilterSigmas | Mapping[str, Any] | None = None,
     constrained: bool = True,
 ) -> EntryFilterResult:
-    """Forward EKF with radar updates + error-state RTS backward pass (module docstring).
+    """Forward EKF with radar updates + error-state RTS backward pass (docs/tuning/entry.md).
 
     ``imu``: a PreprocessedIMU (uses ``t`` (n,), ``f_G``, ``w_G``, ``sigma_f``, ``sigma_w`` (n, 3),
     ``gaps``); ``radar``: :class:`RadarData`; initial state at ``imu.t[0]``: v0 (3,) [m/s], q0 (4,)
@@ -600,7 +544,7 @@ def run_entry_smoother(
     Xs, Ps = its.smoothed.x, its.smoothed.P
     Xpo, Ppo = fw0.x_post, fw0.P_post
     counts["iterations"] = its.passes
-    counts["relinearisation_max_attitude_change_rad"] = [float(np.max(c[3:6])) for c in its.changes]
+    counts["relinearisation_max_attitude_change_rad"] = [float(np.max(c[DTH])) for c in its.changes]
 
     # residuals
     innov: dict[str, InnovationHistory] = {}
@@ -627,7 +571,7 @@ def run_entry_smoother(
                 S[r], acc[r], nis[r] = ih.S[j], ih.accepted[j], ih.nis[j]
                 j += 1
             xs = Xs[e.node]
-            z2, pred_s, mask, H, R, _ = _predict_channel(c, e.index, radar, xs[0:3], xs[3:7], xs[7:10], sg)
+            z2, pred_s, mask, H, R, _ = _predict_channel(c, e.index, radar, xs[XV], xs[XQ], xs[XP], sg)
             Ys[r] = pred_s
             if mask.any():
                 Ss[r][np.ix_(mask, mask)] = H @ Ps[e.node] @ H.T + R
@@ -638,8 +582,8 @@ def run_entry_smoother(
         counts[f"n_{c}_rejected"] = int(k - acc.sum())
 
     sel = np.flatnonzero(imu_node >= 0)
-    fwd = EntryPass(t.copy(), Xpo[sel, 0:3], Xpo[sel, 3:7], Xpo[sel, 7:10], Ppo[sel])
-    smo = EntryPass(t.copy(), Xs[sel, 0:3], Xs[sel, 3:7], Xs[sel, 7:10], Ps[sel])
+    fwd = EntryPass(t.copy(), Xpo[sel, XV], Xpo[sel, XQ], Xpo[sel, XP], Ppo[sel])
+    smo = EntryPass(t.copy(), Xs[sel, XV], Xs[sel, XQ], Xs[sel, XP], Ps[sel])
     counts["n_nodes"] = int(N)
     counts["wall_s"] = time.perf_counter() - wall0
     return EntryFilterResult(fwd, smo, innov, sres, fits, bool(constrained), counts)
@@ -663,7 +607,7 @@ def _forward(
     def transition(x, t0, t1):
         a = node[t1]
         xb = x if lin is None else lin[a - 1]
-        vb, qb, pb = xb[0:3], xb[3:7], xb[7:10]
+        vb, qb, pb = xb[XV], xb[XQ], xb[XP]
         i = interval[a - 1]
         if i in gaps and imu_node[a - 1] >= 0 and imu_node[a] == i + 1:
             g = gaps[i]
@@ -689,8 +633,8 @@ def _forward(
             )
         if lin is not None:  # affine model about x̄
             dx = Fk @ _LAYOUT.boxminus(x, xb)
-            q1 = quat_boxplus(q1, dx[3:6])
-            v1, p1 = v1 + dx[0:3], p1 + dx[6:9]
+            q1 = quat_boxplus(q1, dx[DTH])
+            v1, p1 = v1 + dx[DV], p1 + dx[DP]
         return np.r_[v1, q1, p1], Fk, Qk
 
     def measurements_at(a, ta, x):

@@ -26,18 +26,19 @@ from workbench.estimation.health import (
     nis_check,
     notes_check,
 )
+from workbench.problems.entry.state import DP
 
 __all__ = ["entry_health", "input_health"]
 
 
-def input_health(scenario, paths) -> dict:
+def input_health(checks, paths) -> dict:
     """``health_report`` of what the telemetry alone tells, after reading and validating the entry
-    telemetry ``paths`` of ``scenario`` (raises the readers' located errors, unit mix-ups included):
-    the readers' warnings.  The fuzz suite's fast path (no dispersion, no smoother)."""
-    from workbench.problems.entry.config import config_for
+    telemetry ``paths`` with the run's :class:`~workbench.problems.entry.telemetry.TelemetryChecks`
+    (``EntrySettings.checks``; raises the readers' located errors, unit mix-ups included): the
+    readers' warnings.  The fuzz suite's fast path (no dispersion, no smoother)."""
     from workbench.problems.entry.telemetry import check_event_span, read_entry_telemetry
 
-    tm = read_entry_telemetry(paths, config_for(scenario).checks)
+    tm = read_entry_telemetry(paths, checks)
     check_event_span(tm, paths)
     return health_report([notes_check("telemetry", [p for p in tm.problems if not str(p).startswith("INFO")])])
 
@@ -56,9 +57,7 @@ def entry_health(tm, imu, filt, atm, r_ground: float) -> dict:
 
     r = np.linalg.norm(sm.p_M, axis=1)
     h = r - r_ground
-    sig_h = np.sqrt(
-        np.maximum(np.einsum("ni,nij,nj->n", sm.p_M / r[:, None], sm.P[:, 6:9, 6:9], sm.p_M / r[:, None]), 0)
-    )
+    sig_h = np.sqrt(np.maximum(np.einsum("ni,nij,nj->n", sm.p_M / r[:, None], sm.P[:, DP, DP], sm.p_M / r[:, None]), 0))
     k = int(np.argmin(h + 3.0 * sig_h))
     checks.append(
         interval_check(

@@ -8,11 +8,14 @@ validation (:mod:`workbench.problems.entry.montecarlo`), so both start the smoot
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from workbench.problems.entry.config import EntryConfig
 from workbench.problems.entry.dispersion import fuse_with_prior
+
+if TYPE_CHECKING:
+    from workbench.problems.entry.config import ReconstructionSettings
 
 __all__ = ["SmootherStart", "reconstruction_P0", "initial_for_smoother"]
 
@@ -30,16 +33,16 @@ class SmootherStart:
     note: str
 
 
-def reconstruction_P0(config: EntryConfig) -> np.ndarray:
-    """Navigation prior covariance (9, 9) from ``[reconstruction]`` velocity [m/s], attitude [deg →
-    rad], position [m] 1σ (AMELIA Table 3, "Reconstruction" column); order v, δθ, p."""
+def reconstruction_P0(config: ReconstructionSettings) -> np.ndarray:
+    """Navigation prior covariance (9, 9) from the ``[reconstruction]`` velocity [m/s], attitude
+    [deg → rad], position [m] 1σ (AMELIA Table 3, "Reconstruction" column); order v, δθ, p."""
     s_v = config.sigma_velocity_mps
     s_a = np.radians(config.sigma_attitude_deg)
     s_p = config.sigma_position_m
     return np.diag(np.r_[np.full(3, s_v**2), np.full(3, s_a**2), np.full(3, s_p**2)])
 
 
-def initial_for_smoother(config: EntryConfig, disp, nom, P_nav: np.ndarray) -> SmootherStart:
+def initial_for_smoother(config: ReconstructionSettings, disp, nom, P_nav: np.ndarray) -> SmootherStart:
     """The smoother's initial state from ``config.initial`` (``[reconstruction] initial``).
 
     ``disp`` the :class:`~workbench.problems.entry.dispersion.DispersionResult`; ``nom`` the nominal

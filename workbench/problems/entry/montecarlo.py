@@ -1,76 +1,15 @@
 """Tuning and validation of the radar-aided entry smoother on simulated trajectories (AMELIA Sect. 8).
 
-AMELIA (Aboudan et al. 2018, Sect. 8, "Tuning and Validation of the Method") took 100 of the
-trajectories of the dispersion analysis, simulated the radar measurements on each, corrupted
-them with noise, reconstructed each trajectory from the perturbed (refined) initial state and
-compared it with the true one by the RMS errors of the state.  :func:`validate_smoother` does
-that, and adds the consistency test of the smoothed covariance (NEES, Bar-Shalom, Li &
-Kirubarajan 2001, Sect. 5.4).
+What: :func:`validate_smoother` draws truths from the accepted dispersion members (or from the
+smoother's own initial distribution), integrates them with the clean IMU, simulates the IMU and
+radar noise the filter assumes at the real telemetry time tags, runs the smoother on each and
+scores it (RMS errors, Cartesian and curvilinear NEES, NIS per radar channel, altitude error after
+the radar fix).  Why: AMELIA validated its smoother this way (100 dispersion trajectories); the
+NEES adds the consistency test of the reported covariance (Bar-Shalom, Li & Kirubarajan 2001,
+Sect. 5.4).  Runs are independent per seed and executor (loop, process pool, Dask).  The per-run
+recipe and the measurements behind its choices are in ``docs/tuning/entry.md``.
 
-One run r (its own ``np.random.SeedSequence(seed, spawn_key=(r,))``, spawned into independent
-streams for the member draw, the truth's process noise, the IMU noise and the radar noise):
-
-1. **truth** — member ``i_r`` drawn (with replacement, so a run depends on (seed, r) only) from
-   the *accepted* members of the dispersion, uniformly — or with probability ∝ the importance
-   weight when the dispersion used refinement rounds (``DispersionResult.weights``), so that the
-   drawn initial errors have the distribution ``refined_P0`` describes; its initial state is
-   ``nominal ⊞ dx0[i_r]`` (``v0 + δv``, ``q0 ⊗ exp(δθ)``, ``p0 + δp``), integrated
-   (:func:`~workbench.estimation.strapdown.rk4_step`, the filter's discrete model) with the
-   *clean* preprocessed IMU.  Across a data gap it is carried by
-   :func:`~workbench.estimation.strapdown.apply_gap` and then perturbed by a draw of the gap noise
-   the filter assumes (``gap_transition``'s ``Qd``, ``gap_sigma · Δt`` per block) — without it
-   the truth would follow the on-board bridge exactly and the test would not exercise the gap
-   model (``gap_noise=False`` switches it off).  A state-noise PSD ``q_state_psd`` in the filter
-   sigmas is drawn into the truth the same way.
-2. **filter input** — the IMU plus white noise whose spectral density is the one the filter
-   assumes: per sample ``σ_k · √(sample_dt / dt_k)`` with ``σ_k`` the PreprocessedIMU's
-   ``sigma_f``/``sigma_w``, ``sample_dt`` the median interval (the filter's conversion of
-   per-sample σ into a PSD) and ``dt_k`` the local interval (1 on the 10 Hz grid; √10 on the
-   100 Hz resampled stretch after PDD, where the filter's ``σ² · sample_dt`` would otherwise
-   over-state the noise tenfold).
-3. **radar** — at the real telemetry time tags (the valid ones): the four slant ranges and the
-   slant-out by exact ray-sphere intersection (:func:`~workbench.models.radar.slant_range_sphere`;
-   the filter's B.3 flat-terrain model differs by < 5 m), the velocity-out
-   ``C_G_M (v − Ω p)`` (:func:`~workbench.models.radar.velocity_out_model`), each plus Gaussian
-   noise of ``radar_noise`` (default: the filter's own R, so the NEES test is a test of the
-   filter's assumptions; pass larger values to test robustness to a mis-stated R).  The truth at
-   a time tag between IMU samples is the RK4 step from the previous sample with linearly
-   interpolated inputs — what the smoother's split step assumes; inside a gap it is the nearer
-   gap end (the smoother snaps such a measurement there too).
-4. **smoother** — :func:`~workbench.problems.entry.filter.run_entry_smoother` from the refined
-   state ``(refined_v0, refined_q0, refined_p0)`` with ``refined_P0``.
-
-Other starts (``start=``, e.g. the pipeline's "fused" start: the rules' information combined with
-the navigation prior, ``workbench.problems.entry.initial.initial_for_smoother``) are tested with
-``truth_initial="gaussian"``: the truth's initial state is drawn from the smoother's own initial
-distribution ``start ⊞ N(0, P0)`` — drawing it from the accepted set would put initial errors of
-the accepted spread (~10 km, 0.5 km/s in the directions the rules do not constrain) against a
-covariance that excludes them.
-
-Per run are kept (small): the smoothed and forward NEES (9 dof) at every IMU step (float32),
-the errors and reported 1σ of horizontal position north/east, altitude above ground, velocity
-north/east/down (local frame at the estimate, N towards the MMED pole) and attitude ``δθ_G``
-(body axes; Z_G is the spin axis) — these only as sums for the RMS/mean curves —, the fraction
-of (step, state) pairs with the truth inside ±3σ, the max altitude-AGL error after the first
-radar measurement and its 3σ, and the mean NIS of each radar channel.
-
-Error convention (the filter's): ``truth = estimate ⊞ e``, ``e = [v_t − v, δθ, p_t − p]`` with
-``q_t = q ⊗ exp(δθ)``; reported errors are estimate − truth.
-
-Two NEES.  ``nees`` uses this Cartesian error state, as the filter does.  ``nees_curvilinear``
-writes the position error about the estimate as its horizontal part plus the *altitude* error
-along the estimated vertical û: ``(I − ûûᵀ)(p_t − p) + û (|p_t| − |p|)``.  The two agree to
-first order, but they differ by the curvature term ``|δp_h|²/(2|p|)`` along û: with the tens of
-km of horizontal error the radar cannot see (AMELIA: "latitude and longitude are not fixed"),
-that is ~300 m on the Cartesian vertical while the radar pins the altitude to tens of metres —
-so the Cartesian NEES explodes after the fix even when the altitude, velocity and attitude are
-right.  Both are reported; the difference measures this linearisation limit of a Cartesian
-error state.
-
-Execution by :func:`workbench.estimation.montecarlo.run_monte_carlo`: in-process loop (one BLAS
-thread), a process pool of ``workers`` (one BLAS thread each), a Dask ``LocalCluster``
-(``scheduler="local"``) or a running Dask scheduler (``"tcp://…"``).  Results do not depend on the
-executor (only wall times do).
+Reference: Aboudan et al., Space Sci. Rev. 214:97, 2018 (AMELIA), Sect. 8.
 """
 
 from __future__ import annotations
@@ -80,7 +19,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -92,14 +31,17 @@ from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import GapBridge, ImuArrays, apply_gap, gap_transition, imu_arrays, rk4_step
 from workbench.io import progress
 from workbench.models.radar import beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
-from workbench.problems.entry.config import config_for
 from workbench.problems.entry.dispersion import run_dispersion
 from workbench.problems.entry.filter import CHANNELS, EntryFilterSigmas, RadarData, run_entry_smoother
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import ERROR_NAMES, ERROR_UNITS, errors_sigmas
-from workbench.problems.entry.site import R_GROUND, R_MOLA
+from workbench.problems.entry.site import R_GROUND
+from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import read_entry_telemetry, read_nominal_state
+
+if TYPE_CHECKING:
+    from workbench.problems.entry.config import EntrySettings
 
 __all__ = [
     "RunScores",
@@ -111,6 +53,7 @@ __all__ = [
     "ValidationResult",
     "ValidationInputs",
     "validate_smoother",
+    "ValidationSettings",
     "noise_scale",
     "summarize_validation",
     "headline_numbers",
@@ -193,7 +136,7 @@ def _gap_index(t: np.ndarray, gaps: Sequence[GapBridge]) -> dict[int, GapBridge]
 
 
 def noise_scale(t: np.ndarray, gap_at: Mapping[int, Any]) -> tuple[np.ndarray, float]:
-    """Per-sample factor √(sample_dt / dt_k) (module docstring, step 2), shape (n,), and the
+    """Per-sample factor √(sample_dt / dt_k) (docs/tuning/entry.md, montecarlo, step 2), shape (n,), and the
     median sample interval sample_dt [s], for IMU times ``t`` (n,) [s]; ``gap_at`` maps the index
     of a sample followed by a data gap to its bridge (that interval is not a sampling interval)."""
     d = np.diff(t)
@@ -219,9 +162,9 @@ def _truth(job: _Job, dx0: np.ndarray, rng: np.random.Generator, gap_at: dict[in
     V = np.empty((n, 3))
     Q = np.empty((n, 4))
     X = np.empty((n, 3))
-    v = job.v0 + dx0[0:3]
-    q = quat_boxplus(job.q0, dx0[3:6])
-    p = job.p0 + dx0[6:9]
+    v = job.v0 + dx0[DV]
+    q = quat_boxplus(job.q0, dx0[DTH])
+    p = job.p0 + dx0[DP]
     qpsd = None if job.sigmas.q_state_psd is None else np.asarray(job.sigmas.q_state_psd, float)
     V[0], Q[0], X[0] = v, q, p
     for k in range(n - 1):
@@ -231,13 +174,13 @@ def _truth(job: _Job, dx0: np.ndarray, rng: np.random.Generator, gap_at: dict[in
             v, q, p = apply_gap(v, q, p, g, job.sigmas.bridge_mode)
             if job.gap_noise:
                 e = np.sqrt(np.diagonal(Qd)) * rng.standard_normal(9)
-                v, q, p = v + e[0:3], quat_boxplus(q, e[3:6]), p + e[6:9]
+                v, q, p = v + e[DV], quat_boxplus(q, e[DTH]), p + e[DP]
         else:
             dt = t[k + 1] - t[k]
             v, q, p = rk4_step(v, q, p, f[k], w[k], f[k + 1], w[k + 1], dt, MARS)
             if qpsd is not None:
                 e = np.sqrt(qpsd * dt) * rng.standard_normal(9)
-                v, q, p = v + e[0:3], quat_boxplus(q, e[3:6]), p + e[6:9]
+                v, q, p = v + e[DV], quat_boxplus(q, e[DTH]), p + e[DP]
         V[k + 1], Q[k + 1], X[k + 1] = v, q, p
     return V, Q, X
 
@@ -287,7 +230,7 @@ def _nis_mean(res) -> np.ndarray:
 
 
 def _run_one(job: _Job, r: int, ss: np.random.SeedSequence) -> RunScores:
-    """One validation run (module docstring); depends on (job, r) only.
+    """One validation run (docs/tuning/entry.md); depends on (job, r) only.
 
     A task of :func:`~workbench.estimation.montecarlo.run_monte_carlo`: ``ss`` is run r's
     ``SeedSequence(job.seed, spawn_key=(r,))``."""
@@ -416,7 +359,7 @@ def score_run(
 
 @dataclass(frozen=True)
 class ValidationResult:
-    """Outcome of :func:`validate_smoother` (SI; errors estimate − truth; see the module docstring).
+    """Outcome of :func:`validate_smoother` (SI; errors estimate − truth; method in docs/tuning/entry.md).
 
     ``t`` (n,) [s] IMU grid; ``n_runs``; ``seed``; ``member`` (n_runs,) the accepted dispersion
     member each run took as its truth; ``failed`` (n_runs,) bool and ``messages`` (why);
@@ -504,35 +447,10 @@ def index_at(t: np.ndarray, te: float) -> int:
     return int(np.clip(np.searchsorted(t, te - 1e-9), 0, t.size - 1))
 
 
-def validate_smoother(
-    imu: Any,
-    nominal: tuple[np.ndarray, np.ndarray, np.ndarray],
-    dispersion: Any,
-    radar_times: tuple[np.ndarray, np.ndarray],
-    *,
-    n_runs: int,
-    seed: int,
-    sigmas: EntryFilterSigmas | Mapping[str, Any] | None = None,
-    radar_noise: Mapping[str, float] | tuple[float, float, float] | None = None,
-    beams_G: np.ndarray | None = None,
-    r_ground: float = R_GROUND,
-    constrained: bool = True,
-    events: Mapping[str, float] | None = None,
-    gap_noise: bool = True,
-    start: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
-    truth_initial: str = "accepted",
-    scheduler: str | None = None,
-    workers: int = 1,
-) -> ValidationResult:
-    """Validate the radar-aided smoother on ``n_runs`` simulated trajectories (module docstring).
+@dataclass(frozen=True)
+class ValidationSettings:
+    """Settings of :func:`validate_smoother` (picklable).
 
-    ``imu``: a PreprocessedIMU (``t``, ``f_G``, ``w_G``, ``sigma_f``, ``sigma_w``, ``gaps``) — the
-    clean inputs of the truth; ``nominal``: ``(v0 [m/s], q0 q_M_G, p0 [m])`` at ``imu.t[0]`` about
-    which the dispersion offsets were drawn; ``dispersion``: a DispersionResult (``dx0`` (N, 9),
-    ``accepted`` (N,), ``refined_v0/q0/p0``, ``refined_P0`` (9, 9), optional ``weights`` (N,),
-    ``events_t``); ``radar_times``:
-    ``(t_sr (k,), t_rda (j,))`` [s] the (valid) telemetry time tags of the slant-range packets
-    and of the slant-out/velocity-out samples.
     ``n_runs`` ≥ 1; ``seed`` base seed (run r: ``SeedSequence(seed, spawn_key=(r,))``);
     ``sigmas``: the filter tuning (:class:`EntryFilterSigmas` or mapping); ``radar_noise``: 1σ of
     the simulated radar noise, mapping with keys ``slant_range`` [m], ``slant_out`` [m],
@@ -546,9 +464,46 @@ def validate_smoother(
     ``nominal``) or "gaussian" (truth initial state ``start ⊞ N(0, P0)``, the smoother's own
     initial assumption — the textbook NEES test for a start that is not the accepted set's
     spread; ``dispersion`` is then only used for ``events_t``); ``scheduler`` None | "local" |
-    "tcp://…" and ``workers`` (process pool when > 1 without a scheduler).  Raises ``ValueError``
-    if the dispersion has fewer than 2 accepted members and no ``start`` is given.
+    "tcp://…" and ``workers`` (process pool when > 1 without a scheduler).
     """
+
+    n_runs: int
+    seed: int
+    sigmas: EntryFilterSigmas | Mapping[str, Any] | None = None
+    radar_noise: Mapping[str, float] | tuple[float, float, float] | None = None
+    beams_G: np.ndarray | None = None
+    r_ground: float = R_GROUND
+    constrained: bool = True
+    events: Mapping[str, float] | None = None
+    gap_noise: bool = True
+    start: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+    truth_initial: str = "accepted"
+    scheduler: str | None = None
+    workers: int = 1
+
+
+def validate_smoother(
+    imu: Any,
+    nominal: tuple[np.ndarray, np.ndarray, np.ndarray],
+    dispersion: Any,
+    radar_times: tuple[np.ndarray, np.ndarray],
+    settings: ValidationSettings,
+) -> ValidationResult:
+    """Validate the radar-aided smoother on ``settings.n_runs`` simulated trajectories (docs/tuning/entry.md).
+
+    ``imu``: a PreprocessedIMU (``t``, ``f_G``, ``w_G``, ``sigma_f``, ``sigma_w``, ``gaps``) — the
+    clean inputs of the truth; ``nominal``: ``(v0 [m/s], q0 q_M_G, p0 [m])`` at ``imu.t[0]`` about
+    which the dispersion offsets were drawn; ``dispersion``: a DispersionResult (``dx0`` (N, 9),
+    ``accepted`` (N,), ``refined_v0/q0/p0``, ``refined_P0`` (9, 9), optional ``weights`` (N,),
+    ``events_t``); ``radar_times``:
+    ``(t_sr (k,), t_rda (j,))`` [s] the (valid) telemetry time tags of the slant-range packets
+    and of the slant-out/velocity-out samples; ``settings`` the :class:`ValidationSettings`.
+    Raises ``ValueError`` if the dispersion has fewer than 2 accepted members and no ``start`` is given.
+    """
+    vs = settings
+    n_runs, seed, sigmas, radar_noise, beams_G = vs.n_runs, vs.seed, vs.sigmas, vs.radar_noise, vs.beams_G
+    r_ground, constrained, events, gap_noise = vs.r_ground, vs.constrained, vs.events, vs.gap_noise
+    start, truth_initial, scheduler, workers = vs.start, vs.truth_initial, vs.scheduler, vs.workers
     wall0 = time.perf_counter()
     if int(n_runs) < 1:
         raise ValueError("validate_smoother: n_runs must be ≥ 1")
@@ -875,7 +830,7 @@ class ValidationInputs:
     def validation_kwargs(self) -> dict:
         """Keyword arguments of :func:`validate_smoother` for these inputs: the pipeline's smoother
         start; truths from the accepted set for the paper's "dispersion" start, else drawn from the
-        start's own Gaussian (module docstring)."""
+        start's own Gaussian (docs/tuning/entry.md)."""
         kw = dict(
             sigmas=self.sigmas,
             beams_G=self.beams_G,
@@ -889,16 +844,16 @@ class ValidationInputs:
 
 
 def prepare_validation(
-    scenario: Any, paths: Mapping[str, Path], *, members: int | None = None, scheduler: str | None = None
+    settings: EntrySettings, paths: Mapping[str, Path], *, members: int | None = None, scheduler: str | None = None
 ) -> ValidationInputs:
     """The reconstruction stages up to the dispersion (AMELIA Sects. 4-6), configured as
     :func:`workbench.problems.entry.pipeline.reconstruct` configures them — from the same
-    :class:`~workbench.problems.entry.config.EntryConfig` of ``scenario``: read the telemetry ``paths``
-    (with the scenario's telemetry checks), preprocess, the nominal initial state
+    :class:`~workbench.problems.entry.config.EntrySettings`: read the telemetry ``paths``
+    (with the run's telemetry checks), preprocess, the nominal initial state
     (``paths["initial_state"]``, required), and the dispersion with the scenario's ``[dispersion]``
     settings (``members`` overrides the member count; ``scheduler`` runs it on Dask); the smoother
     start of ``[reconstruction] initial``.  Radar time tags are the valid packets'."""
-    cfg = config_for(scenario)
+    cfg = settings
     if "initial_state" not in paths or not Path(paths["initial_state"]).exists():
         # the estimator never reads truth.npz, not even for the nominal state
         raise FileNotFoundError("prepare_validation: no initial_state file among the telemetry paths")
@@ -906,32 +861,29 @@ def prepare_validation(
     imu = preprocess(tm, cfg.preprocess)
     nom = read_nominal_state(paths["initial_state"])
     v0, q0, p0 = nom.v_M, nom.q_M_G, nom.p_M
-    r_ground = R_MOLA + cfg.terrain_m
-    bridge_mode = cfg.bridge_mode
+    r_ground = cfg.r_ground
+    ds = cfg.dispersion
     disp = run_dispersion(
         imu,
         v0,
         q0,
         p0,
-        {
-            "attitude": math.radians(cfg.dispersion_attitude_deg),
-            "velocity": cfg.dispersion_velocity_mps,
-            "position": cfg.dispersion_position_m,
-        },
-        int(members if members is not None else cfg.members),
-        rules=cfg.rules,
+        ds.sigmas(),
+        int(members if members is not None else ds.members),
+        rules=ds.rules,
         events_t=tm.events,
         atmosphere=MarsEngineeringAtmosphere(),
-        chunk_size=cfg.chunk_size,
-        seed=cfg.dispersion_seed,
+        chunk_size=ds.chunk_size,
+        seed=ds.seed,
         scheduler=scheduler,
         n_cloud=0,
         r_ground=r_ground,
-        bridge_mode=bridge_mode,
-        refine_rounds=cfg.refine_rounds,
+        bridge_mode=cfg.reconstruction.bridge_mode,
+        refine_rounds=ds.refine_rounds,
     )
-    st = initial_for_smoother(cfg, disp, nom, reconstruction_P0(cfg))  # the pipeline's smoother start
-    beams = beam_directions_G(cfg.squint_deg, cfg.azimuths_deg)
+    rec = cfg.reconstruction
+    st = initial_for_smoother(rec, disp, nom, reconstruction_P0(rec))  # the pipeline's smoother start
+    beams = cfg.radar.beams_G()
     sr_ok = np.asarray(tm.sr_valid, bool)
     rda_ok = np.asarray(tm.rda_valid, bool)
     return ValidationInputs(
@@ -943,7 +895,7 @@ def prepare_validation(
         beams_G=beams,
         r_ground=float(r_ground),
         sigmas=cfg.smoother_sigmas(),
-        constrained=cfg.constrained,
+        constrained=cfg.radar.constrained,
         events=dict(tm.events),
         start_mode=st.mode,
         start=(st.v0, st.q0, st.p0, st.P0),

@@ -21,8 +21,9 @@ Stages, each yielded as a frozen dataclass so the recorder (or a test) can obser
    method is computed as a cross-check (``[winds] method``).
 8. :class:`EntryResult` — all of it plus the summary numbers.
 
-The reconstruction reads only the scenario, the telemetry files and the nominal initial state
-(``initial_state.toml``, AMELIA Table 2 style); truth never enters here.
+The reconstruction reads only its :class:`~workbench.problems.entry.config.EntrySettings`, the
+telemetry files and the nominal initial state (``initial_state.toml``, AMELIA Table 2 style); truth
+never enters here.
 """
 
 from __future__ import annotations
@@ -43,11 +44,10 @@ from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nee
 from workbench.estimation.health import health_markdown
 from workbench.estimation.strapdown import integrate
 from workbench.io import scorecard as fmt
-from workbench.io.scenario import Scenario, ScenarioError
-from workbench.models.aerodynamics import EntryVehicle, load_vehicle
-from workbench.models.radar import beam_directions_G
+from workbench.io.scenario import ScenarioError
+from workbench.models.aerodynamics import EntryVehicle
 from workbench.problems.entry.atmosphere import reconstruct_atmosphere
-from workbench.problems.entry.config import EntryConfig, config_for
+from workbench.problems.entry.config import EntrySettings
 from workbench.problems.entry.dispersion import run_dispersion
 from workbench.problems.entry.filter import RadarData, run_entry_smoother
 from workbench.problems.entry.health import entry_health
@@ -55,6 +55,7 @@ from workbench.problems.entry.initial import initial_for_smoother, reconstructio
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import errors_sigmas
 from workbench.problems.entry.site import R_MOLA
+from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import (
     NominalState,
     check_event_span,
@@ -67,7 +68,6 @@ __all__ = [
     "NominalIntegration",
     "EntryResult",
     "imu_error_process_noise",
-    "vehicle_for",
     "reconstruct",
     "score",
     "score_atmosphere",
@@ -76,7 +76,6 @@ __all__ = [
     "WIND_BOUND_MPS",
     "scorecard_markdown",
     "event_table",
-    "check_config",
     "epoch_utc",
 ]
 
@@ -115,11 +114,6 @@ class EntryResult:
 
 
 # ----------------------------------------------------------------------------------------- inputs
-def vehicle_for(scenario: Scenario) -> EntryVehicle:
-    """The vehicle asset named by ``[vehicle] file`` (path relative to the scenario file)."""
-    return load_vehicle(scenario.path_of("vehicle.file"))
-
-
 def imu_error_process_noise(t: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, levels: dict) -> np.ndarray:
     """State-noise PSD η (9,) [units²/s] of ``[δv_M, δθ_G, δp_M]`` that covers the IMU's per-run errors.
 
@@ -152,13 +146,6 @@ def imu_error_process_noise(t: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, lev
 
 
 # ----------------------------------------------------------------------------------------- stages
-def check_config(sc: Scenario) -> EntryConfig:
-    """Validate the entry keys of a scenario up front and return its :class:`EntryConfig`; raise
-    :class:`ScenarioError` naming the file, table and key (unknown keys, types, choices, the
-    dispersion rules, positive counts and sigmas, the epoch)."""
-    return config_for(sc)
-
-
 def _nominal_integration(imu, nom: NominalState, tm, P0: np.ndarray, bridge_mode: str) -> NominalIntegration:
     sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode, body=MARS)
     # validation against the on-board solution before PDD (afterwards the on-board attitude is wrong)
@@ -193,7 +180,7 @@ def _phase(t: np.ndarray, events: dict) -> np.ndarray:
 
 
 def reconstruct(
-    scenario: Scenario,
+    settings: EntrySettings,
     paths: dict[str, Path],
     *,
     scheduler: str | None = None,
@@ -202,14 +189,14 @@ def reconstruct(
 ) -> Iterator[object]:
     """Run the entry reconstruction; yields the stages in order, the last an :class:`EntryResult`.
 
-    ``paths``: the telemetry files (keys of :data:`~workbench.problems.entry.telemetry.STREAMS`);
+    ``settings``: the run's :class:`~workbench.problems.entry.config.EntrySettings`; ``paths``: the
+    telemetry files (keys of :data:`~workbench.problems.entry.telemetry.STREAMS`);
     ``scheduler``: None (in-process), ``"local"`` (Dask LocalCluster) or ``"tcp://host:port"`` for the
     dispersion; ``members`` overrides ``[dispersion] members``.
     """
-    sc = scenario
-    cfg = config_for(sc)  # unknown or mistyped keys are errors before any work
-    vehicle = vehicle_for(sc)
-    r_ground = R_MOLA + cfg.terrain_m
+    cfg = settings
+    vehicle = cfg.require_vehicle()
+    r_ground = cfg.r_ground
     tm = read_entry_telemetry(paths, cfg.checks)
     check_event_span(tm, paths)
     yield tm
@@ -223,40 +210,36 @@ def reconstruct(
             f"{nom.t0:.3f} s, but the IMU data start at {float(imu.t[0]):.3f} s: the state must be given at the first "
             "sample with an acceleration",
         )
-    bridge_mode = cfg.bridge_mode
-    P0 = reconstruction_P0(cfg)
+    bridge_mode = cfg.reconstruction.bridge_mode
+    P0 = reconstruction_P0(cfg.reconstruction)
     nomi = _nominal_integration(imu, nom, tm, P0, bridge_mode)
     yield nomi
 
     # ---- dispersion (Sect. 6)
-    sig = {
-        "attitude": np.radians(cfg.dispersion_attitude_deg),
-        "velocity": cfg.dispersion_velocity_mps,
-        "position": cfg.dispersion_position_m,
-    }
-    n_mem = int(members if members is not None else cfg.members)
+    ds = cfg.dispersion
+    n_mem = int(members if members is not None else ds.members)
     disp = run_dispersion(
         imu,
         nom.v_M,
         nom.q_M_G,
         nom.p_M,
-        sig,
+        ds.sigmas(),
         n_mem,
-        rules=cfg.rules,
+        rules=ds.rules,
         events_t=tm.events,
         atmosphere=MarsEngineeringAtmosphere(),
-        chunk_size=cfg.chunk_size,
-        seed=cfg.dispersion_seed,
+        chunk_size=ds.chunk_size,
+        seed=ds.seed,
         scheduler=scheduler,
-        n_cloud=cfg.cloud,
+        n_cloud=ds.cloud,
         r_ground=r_ground,
         bridge_mode=bridge_mode,
-        refine_rounds=cfg.refine_rounds,
+        refine_rounds=ds.refine_rounds,
     )
     yield disp
 
     # ---- radar-aided smoother (Sects. 7-8) from the refined state
-    beams = beam_directions_G(cfg.squint_deg, cfg.azimuths_deg)
+    beams = cfg.radar.beams_G()
     radar = RadarData(
         t_sr=tm.t_sr,
         slant_ranges=tm.slant_ranges,
@@ -268,13 +251,13 @@ def reconstruct(
         beams_G=beams,
         r_ground=r_ground,
     )
-    init = initial_for_smoother(cfg, disp, nom, P0)
+    init = initial_for_smoother(cfg.reconstruction, disp, nom, P0)
     yield init
     v0, q0, p0, P0_ref = init.v0, init.q0, init.p0, init.P0
     t_out = np.asarray(tm.t_rda, float)[np.asarray(tm.rda_valid, bool)]
     dt_out = float(np.median(np.diff(t_out))) if t_out.size > 1 else None
     sigmas = dict(cfg.smoother_sigmas(slant_out_dt_s=dt_out))
-    psd = imu_error_process_noise(imu.t, imu.f_G, imu.w_G, cfg.imu_errors)
+    psd = imu_error_process_noise(imu.t, imu.f_G, imu.w_G, cfg.reconstruction.imu_errors)
     if np.any(psd > 0):
         sigmas["q_state_psd"] = tuple(float(x) for x in psd)
     filt = run_entry_smoother(
@@ -285,7 +268,7 @@ def reconstruct(
         p0,
         P0_ref,
         sigmas=sigmas,
-        constrained=cfg.constrained,
+        constrained=cfg.radar.constrained,
     )
     yield filt
 
@@ -304,18 +287,8 @@ def reconstruct(
         ph,
         vehicle,
         default_atmosphere=MarsEngineeringAtmosphere(),
-        sigmas={
-            "cd": cfg.cd_sigma,
-            "wind": cfg.wind_sigma_mps,
-            "accel": cfg.accel_mps2,
-            "fill_temperature_K": cfg.fill_temperature_sigma_K,
-            "fill_correlation_km": cfg.fill_correlation_km,
-        },
+        settings=cfg.atmosphere,
         events=tm.events,
-        molar_mass=cfg.molar_mass_g_per_mol / 1e3,
-        tolerance=cfg.tolerance,
-        max_iterations=cfg.max_iterations,
-        fill_method=cfg.fill_method,
     )
     yield atm
     wind_method = cfg.wind_method
@@ -328,7 +301,7 @@ def reconstruct(
     )
     yield winds
 
-    summary = _summary(sc, tm, imu, nomi, disp, filt, atm, winds, r_ground)
+    summary = _summary(cfg, tm, imu, nomi, disp, filt, atm, winds, r_ground)
     summary["filter_sigmas"] = {
         "slant_range_m": float(sigmas["slant_range"]),
         "slant_out_m": float(sigmas["slant_out"]),
@@ -350,31 +323,34 @@ def reconstruct(
     summary["smoother_start"] = {
         "mode": init.mode,
         "note": init.note,
-        "sigma_velocity_mps": float(np.sqrt(np.max(np.diag(init.P0)[0:3]))),
-        "sigma_attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(init.P0)[3:6])))),
-        "sigma_position_m": float(np.sqrt(np.max(np.diag(init.P0)[6:9]))),
+        "sigma_velocity_mps": float(np.sqrt(np.max(np.diag(init.P0)[DV]))),
+        "sigma_attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(init.P0)[DTH])))),
+        "sigma_position_m": float(np.sqrt(np.max(np.diag(init.P0)[DP]))),
     }
     summary["health"] = entry_health(tm, imu, filt, atm, r_ground)
     yield EntryResult(tm, imu, nomi, disp, filt, atm, winds, vehicle, dict(tm.events), summary, init)
 
 
 # ----------------------------------------------------------------------------------------- summary
-def epoch_utc(sc: Scenario, tm=None) -> str:
+def epoch_utc(settings: EntrySettings, tm=None) -> str:
     """UTC of t = 0 (EIP): ``[scenario] epoch_utc``, else the telemetry's ``# epoch_utc:`` line."""
-    epoch = config_for(sc).epoch_utc
-    if epoch is not None:
-        return epoch
+    if settings.epoch_utc is not None:
+        return settings.epoch_utc
     if tm is not None and getattr(tm, "epoch_utc", ""):
         return str(tm.epoch_utc)
-    raise ScenarioError(sc.path, "scenario.epoch_utc", "missing, and the telemetry has no '# epoch_utc:' line")
+    raise ScenarioError(
+        settings.run.path, "scenario.epoch_utc", "missing, and the telemetry has no '# epoch_utc:' line"
+    )
 
 
-def epoch_jd_tdb(sc: Scenario, tm=None) -> float:
+def epoch_jd_tdb(settings: EntrySettings, tm=None) -> float:
     """Julian date (TDB) of t = 0 (EIP), from :func:`epoch_utc` (``core.frames.julian_date_from_utc``)."""
-    return julian_date_from_utc(epoch_utc(sc, tm))
+    return julian_date_from_utc(epoch_utc(settings, tm))
 
 
-def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_ground: float, tm=None) -> list[dict]:
+def event_table(
+    settings: EntrySettings, events: dict, t: np.ndarray, p_M: np.ndarray, r_ground: float, tm=None
+) -> list[dict]:
     """AMELIA Table 5 analogue: event, t [s], UTC, east longitude / latitude [deg], altitude AMR [km].
 
     ``lon_deg``/``lat_deg`` use the pole and meridian of date at TDB (``core.frames.planetocentric_of_date``);
@@ -383,9 +359,9 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
     """
     import datetime as dt
 
-    jd0 = epoch_jd_tdb(sc, tm)
-    jd0_utc = julian_date_utc(epoch_utc(sc, tm))
-    epoch = dt.datetime.fromisoformat(epoch_utc(sc, tm).replace("Z", "+00:00"))
+    jd0 = epoch_jd_tdb(settings, tm)
+    jd0_utc = julian_date_utc(epoch_utc(settings, tm))
+    epoch = dt.datetime.fromisoformat(epoch_utc(settings, tm).replace("Z", "+00:00"))
     rows = []
     names = [("First data", float(t[0]))] + sorted(events.items(), key=lambda kv: kv[1]) + [("Last data", float(t[-1]))]
     for name, te in names:
@@ -412,16 +388,16 @@ def event_table(sc: Scenario, events: dict, t: np.ndarray, p_M: np.ndarray, r_gr
     return rows
 
 
-def _summary(sc, tm, imu, nomi, disp, filt, atm, winds, r_ground) -> dict:
+def _summary(settings: EntrySettings, tm, imu, nomi, disp, filt, atm, winds, r_ground) -> dict:
     sm = filt.smoothed
     sym, pd = is_symmetric_pd(sm.P)
     out = {
-        "scenario": sc.name,
+        "scenario": settings.run.name,
         "kind": "entry",
         "r_ground_m": float(r_ground),
         "samples": int(sm.t.size),
         "events": dict(tm.events),
-        "event_table": event_table(sc, tm.events, sm.t, sm.p_M, r_ground, tm),
+        "event_table": event_table(settings, tm.events, sm.t, sm.p_M, r_ground, tm),
         "telemetry_problems": list(tm.problems),
         "gaps_s": [float(g.t_b - g.t_a) for g in imu.gaps],
         "saturated_samples": int(np.sum(np.asarray(imu.saturated, bool) & ~np.asarray(imu.resampled, bool))),
@@ -434,9 +410,9 @@ def _summary(sc, tm, imu, nomi, disp, filt, atm, winds, r_ground) -> dict:
             "wall_s": float(disp.wall_s),
             "scheduler": str(disp.scheduler),
             "refined_sigma": {
-                "velocity_mps": float(np.sqrt(np.max(np.diag(disp.refined_P0)[0:3]))),
-                "attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(disp.refined_P0)[3:6])))),
-                "position_m": float(np.sqrt(np.max(np.diag(disp.refined_P0)[6:9]))),
+                "velocity_mps": float(np.sqrt(np.max(np.diag(disp.refined_P0)[DV]))),
+                "attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(disp.refined_P0)[DTH])))),
+                "position_m": float(np.sqrt(np.max(np.diag(disp.refined_P0)[DP]))),
             },
         },
         "covariance": {"symmetric": bool(np.all(sym)), "positive_definite": bool(np.all(pd))},
@@ -469,7 +445,7 @@ def _summary(sc, tm, imu, nomi, disp, filt, atm, winds, r_ground) -> dict:
 
 def _radial_var(p: np.ndarray, P: np.ndarray) -> float:
     u = p / np.linalg.norm(p)
-    return float(u @ P[6:9, 6:9] @ u)
+    return float(u @ P[DP, DP] @ u)
 
 
 # ----------------------------------------------------------------------------------------- scoring
@@ -531,9 +507,9 @@ def score(result: EntryResult, truth: dict) -> dict:
         out[f"initial_{name}"] = {
             "nees_9dof": float(e0 @ np.linalg.solve(P0, e0)) if ok else float("nan"),
             "nees_95pct_band": list(chi2_interval(9)),
-            "error_velocity_mps": float(np.linalg.norm(e0[0:3])),
-            "error_attitude_deg": float(np.degrees(np.linalg.norm(e0[3:6]))),
-            "error_position_m": float(np.linalg.norm(e0[6:9])),
+            "error_velocity_mps": float(np.linalg.norm(e0[DV])),
+            "error_attitude_deg": float(np.degrees(np.linalg.norm(e0[DTH]))),
+            "error_position_m": float(np.linalg.norm(e0[DP])),
         }
     # atmosphere as a profile: reconstructed ρ(h) vs the true ρ at the same (reconstructed) altitude.
     # (Blackout fill samples carry interpolated times, so a comparison along time would be wrong

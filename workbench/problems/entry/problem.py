@@ -20,11 +20,12 @@ from workbench.core.bodies import G0
 from workbench.io import progress as prog
 from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario, ScenarioError
+from workbench.models.aerodynamics import VEHICLE_SCHEMA
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
 from workbench.problems.entry import pipeline as en
-from workbench.problems.entry.config import SCHEMA, config_for
-from workbench.problems.entry.site import R_MOLA
-from workbench.problems.entry.telemetry import STREAMS, telemetry_paths
+from workbench.problems.entry.config import SCHEMA, EntrySettings
+from workbench.problems.entry.state import DP, DTH, DV
+from workbench.problems.entry.telemetry import INITIAL_STATE_SCHEMA, STREAMS, telemetry_paths
 
 __all__ = ["EntryProblem", "key_moments"]
 
@@ -145,23 +146,25 @@ class EntryProblem:
     kind = "entry"
     title = "entry"
     schema = SCHEMA
+    file_schemas = (VEHICLE_SCHEMA, INITIAL_STATE_SCHEMA)
 
-    def settings(self, scenario: Scenario) -> Scenario:
-        """TRANSITIONAL (issue 25): the scenario itself, until this package builds frozen settings."""
-        return scenario
+    def settings(self, scenario: Scenario) -> EntrySettings:
+        """The run's frozen :class:`~workbench.problems.entry.config.EntrySettings` (validated once,
+        the vehicle asset loaded once); a :class:`ScenarioError` naming file and key otherwise."""
+        return EntrySettings.from_scenario(scenario)
 
-    def telemetry_files(self, scenario: Scenario, folder: Path | None = None) -> dict[str, Path]:
+    def telemetry_files(self, settings: EntrySettings, folder: Path | None = None) -> dict[str, Path]:
         """``[telemetry]`` files (``telemetry.STREAMS``), or the standard names in ``folder``."""
         if folder is None:
-            return telemetry_paths(scenario)
+            return telemetry_paths(settings.telemetry, settings.run.path)
         d = Path(folder)
         return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
 
-    def synthesize(self, scenario: Scenario, out_dir: Path, seed: int) -> Synthesized:
+    def synthesize(self, settings: EntrySettings, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the entry (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
         from workbench.problems.entry.synthetic import synthesize_entry
 
-        paths = synthesize_entry(scenario, out_dir, seed=seed)
+        paths = synthesize_entry(settings, out_dir, seed=seed)
         return Synthesized(telemetry={k: v for k, v in paths.items() if k != "truth"}, truth=paths["truth"])
 
     def load_truth(self, path: Path) -> dict:
@@ -170,9 +173,11 @@ class EntryProblem:
 
         return load_truth(path)
 
-    def reconstruct(self, scenario: Scenario, telemetry: Mapping[str, Path], options: RunOptions) -> Iterator[object]:
+    def reconstruct(
+        self, settings: EntrySettings, telemetry: Mapping[str, Path], options: RunOptions
+    ) -> Iterator[object]:
         """``pipeline.reconstruct``; ``options.members``/``scheduler`` set the dispersion analysis."""
-        return en.reconstruct(scenario, dict(telemetry), scheduler=options.scheduler, members=options.members)
+        return en.reconstruct(settings, dict(telemetry), scheduler=options.scheduler, members=options.members)
 
     def summary(self, result: en.EntryResult) -> dict:
         """A copy of ``result.summary`` (SI)."""
@@ -223,21 +228,19 @@ class EntryProblem:
         return line
 
     @contextlib.contextmanager
-    def open_recording(self, path: Path, scenario: Scenario, truth: Any, properties: dict) -> Iterator[_Drawer]:
+    def open_recording(self, path: Path, settings: EntrySettings, truth: Any, properties: dict) -> Iterator[_Drawer]:
         """The entry recording (``recording.entry_blueprint`` layout) drawn in the landing-site frame."""
         from workbench.core.bodies import MARS
         from workbench.problems.entry.recording import EntryRecorder, entry_blueprint
         from workbench.recording.writer import open_recording
 
-        vehicle = en.vehicle_for(scenario)
-        r_ground = R_MOLA + config_for(scenario).terrain_m
-        with open_recording(path, scenario.name, blueprint=entry_blueprint(), properties=properties) as rec:
+        with open_recording(path, settings.run.name, blueprint=entry_blueprint(), properties=properties) as rec:
             drawer = EntryRecorder(
                 rec,
-                vehicle,
+                settings.require_vehicle(),
                 truth,
-                r_ground=r_ground,
-                jd_tdb0=en.epoch_jd_tdb(scenario) if scenario.has("scenario.epoch_utc") else None,
+                r_ground=settings.r_ground,
+                jd_tdb0=en.epoch_jd_tdb(settings) if settings.epoch_utc is not None else None,
                 body=MARS,
             )
             yield _Drawer(rec, drawer)
@@ -250,34 +253,34 @@ class EntryProblem:
         for i, a in enumerate("xyz"):
             cols[f"p_M.{a}"] = (sm.p_M[:, i], "m")
             cols[f"v_M.{a}"] = (sm.v_M[:, i], "m/s")
-            cols[f"sigma_v.{a}"] = (sd[:, i], "m/s")
-            cols[f"sigma_theta.{a}"] = (sd[:, 3 + i], "rad")
-            cols[f"sigma_p.{a}"] = (sd[:, 6 + i], "m")
+            cols[f"sigma_v.{a}"] = (sd[:, DV][:, i], "m/s")
+            cols[f"sigma_theta.{a}"] = (sd[:, DTH][:, i], "rad")
+            cols[f"sigma_p.{a}"] = (sd[:, DP][:, i], "m")
         for i, a in enumerate("xyzw"):
             cols[f"q_M_G.{a}"] = (sm.q_M_G[:, i], "1")
         return ExportTable(sm.t, cols, "MMED inertial; q_M_G body (GNC) to MMED")
 
-    def monte_carlo(self, scenario: Scenario, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
+    def monte_carlo(self, settings: EntrySettings, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
         """Validate the radar-aided smoother on ``options.n_runs`` trajectories drawn from the
         accepted dispersion members (AMELIA Sect. 8).  Synthetic scenarios are synthesized first
         (into ``<out>/<name>_mc_work/telemetry``); user scenarios use their telemetry.  The stages
         up to the dispersion run with the scenario's settings (``options.members`` overrides the
         member count, ``options.scheduler`` also runs the dispersion on Dask).  Writes
         ``<out>/<name>_mc.rrd``; raises ``ScenarioError`` if fewer than 2 members were accepted."""
-        from workbench.problems.entry.montecarlo import prepare_validation, validate_smoother
+        from workbench.problems.entry.montecarlo import ValidationSettings, prepare_validation, validate_smoother
         from workbench.problems.entry.recording_mc import record_entry_validation
 
         if options.truth_sim:
-            return self._truth_monte_carlo(scenario, Path(out_dir), options, progress)
+            return self._truth_monte_carlo(settings, Path(out_dir), options, progress)
         t_start = time.perf_counter()
-        sc, out = scenario, Path(out_dir)
+        sc, out = settings, Path(out_dir)
+        name = sc.run.name
         rep = prog.current()
-        if sc.is_synthetic:
+        if sc.run.synthetic:
             with rep.stage("entry truth simulation + telemetry"):
-                seed = sc.get("synthetic.seed", 0, kind="int")
-                paths = self.synthesize(sc, out / f"{sc.name}_mc_work" / "telemetry", seed).telemetry
+                paths = self.synthesize(sc, out / f"{name}_mc_work" / "telemetry", sc.synthetic.seed).telemetry
         else:
-            paths = telemetry_paths(sc)
+            paths = self.telemetry_files(sc)
         with rep.stage("preprocessing + dispersion analysis"):
             inp = prepare_validation(sc, paths, members=options.members, scheduler=options.scheduler)
         d = inp.dispersion
@@ -288,7 +291,7 @@ class EntryProblem:
         )
         if int(d.accepted.sum()) < 2 and inp.start_mode == "dispersion":
             raise ScenarioError(
-                sc.path,
+                sc.run.path,
                 None,
                 f"the dispersion accepted {int(d.accepted.sum())} of {d.accepted.size} members; the validation "
                 "draws its truths from the accepted ones (need >= 2): raise --members, [dispersion] "
@@ -300,14 +303,16 @@ class EntryProblem:
             inp.nominal,
             d,
             inp.radar_times,
-            n_runs=options.n_runs,
-            seed=options.first_seed,
-            scheduler=options.scheduler,
-            workers=options.workers,
-            **inp.validation_kwargs(),
+            ValidationSettings(
+                n_runs=options.n_runs,
+                seed=options.first_seed,
+                scheduler=options.scheduler,
+                workers=options.workers,
+                **inp.validation_kwargs(),
+            ),
         )
         rep.record(f"smoother validation ({options.n_runs} runs)", time.perf_counter() - t_val)
-        summary = {"scenario": sc.name, "kind": "entry_validation", **res.summary}
+        summary = {"scenario": name, "kind": "entry_validation", **res.summary}
         summary["smoother_start_mode"] = inp.start_mode
         summary["smoother_start_note"] = inp.start_note
         summary["dispersion"] = {
@@ -317,7 +322,7 @@ class EntryProblem:
             "scheduler": str(d.scheduler),
         }
         summary["wall_time_s"] = time.perf_counter() - t_start
-        rrd = record_entry_validation(out / f"{sc.name}_mc.rrd", f"{sc.name} smoother validation", res, summary)
+        rrd = record_entry_validation(out / f"{name}_mc.rrd", f"{name} smoother validation", res, summary)
         lo, hi = summary["anees_band"]
         h = summary.get("h_agl_after_fix", {})
         headline = (
@@ -327,15 +332,15 @@ class EntryProblem:
         )
         return McOutcome(summary, Path(rrd), headline, res)
 
-    def _truth_monte_carlo(self, sc: Scenario, out: Path, options: McOptions, progress: Progress) -> McOutcome:
+    def _truth_monte_carlo(self, sc: EntrySettings, out: Path, options: McOptions, progress: Progress) -> McOutcome:
         """``options.n_runs`` members, each a truth-simulator run and a full reconstruction from its
         telemetry files (``truth_mc.run_truth_monte_carlo``); writes ``<out>/<name>_truth_mc.rrd``."""
         from workbench.problems.entry.recording_mc import record_entry_validation
         from workbench.problems.entry.truth_mc import DEFAULT_MEMBERS, run_truth_monte_carlo
 
-        if not sc.is_synthetic:
+        if not sc.run.synthetic:
             raise NotImplementedError(
-                f"{sc.path}: the Monte Carlo against the truth simulator needs a synthetic scenario"
+                f"{sc.run.path}: the Monte Carlo against the truth simulator needs a synthetic scenario"
             )
         t_start = time.perf_counter()
         members = options.members or DEFAULT_MEMBERS
@@ -353,10 +358,10 @@ class EntryProblem:
             scheduler=options.scheduler,
             workers=options.workers,
         )
-        summary = {"scenario": sc.name, **res.summary, "wall_time_s": time.perf_counter() - t_start}
+        summary = {"scenario": sc.run.name, **res.summary, "wall_time_s": time.perf_counter() - t_start}
         rrd = record_entry_validation(
-            out / f"{sc.name}_truth_mc.rrd",
-            f"{sc.name} Monte Carlo against the truth simulator",
+            out / f"{sc.run.name}_truth_mc.rrd",
+            f"{sc.run.name} Monte Carlo against the truth simulator",
             res.validation,
             summary,
         )

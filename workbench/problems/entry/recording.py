@@ -31,7 +31,7 @@ from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_to_dcm
 from workbench.problems.entry.atmosphere import AtmosphereResult
 from workbench.problems.entry.dispersion import DispersionResult
-from workbench.problems.entry.filter import EntryFilterResult
+from workbench.problems.entry.filter import EntryFilterResult, radial_sigma
 from workbench.problems.entry.initial import SmootherStart
 from workbench.problems.entry.pipeline import EntryResult, NominalIntegration
 from workbench.problems.entry.preprocess import PreprocessedIMU
@@ -43,6 +43,7 @@ from workbench.problems.entry.scene import (
     terrain_patch,
 )
 from workbench.problems.entry.site import R_MOLA
+from workbench.problems.entry.state import DP, DV
 from workbench.problems.entry.telemetry import EntryTelemetry
 from workbench.problems.entry.winds import WindResult
 from workbench.recording import layout
@@ -383,7 +384,7 @@ class EntryRecorder:
         p_L = self._L(sp.t, sp.p_M)
         rec.line_strip(layout.ENTRY_NOMINAL_TRACK, p_L, color=[NOMINAL], radius=-1.2)
         h = np.linalg.norm(sp.p_M, axis=1) - R_MOLA
-        sd = self._radial_sigma(sp.p_M, sp.P)
+        sd = radial_sigma(sp.p_M, sp.P)
         rec.series_with_bounds(
             layout.ENTRY_PLOT_STRAPDOWN_H_AMR, sp.t, h, sd, names="h AMR (nominal strapdown)", color=[NOMINAL]
         )
@@ -403,11 +404,6 @@ class EntryRecorder:
                 names="Δθ [deg]",
                 colors=EST,
             )
-
-    @staticmethod
-    def _radial_sigma(p_M, P) -> np.ndarray:
-        u = p_M / np.linalg.norm(p_M, axis=1, keepdims=True)
-        return np.sqrt(np.einsum("ni,nij,nj->n", u, P[:, 6:9, 6:9], u))
 
     def _on_dispersion(self, d) -> None:
         rec = self.rec
@@ -452,7 +448,7 @@ class EntryRecorder:
         q_L = site.attitudes(t, sm.q_M_G)
         rec.poses(layout.VEHICLE, t, p_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)), step=np.arange(len(t)))
         rec.poses(layout.VEHICLE_BODY, t, np.zeros((len(t), 3)), q_L, step=np.arange(len(t)))
-        P_L = site.covariances(t, sm.P[:, 6:9, 6:9])
+        P_L = site.covariances(t, sm.P[:, DP, DP])
         rec.ellipsoids(
             layout.UNCERTAINTY,
             t,
@@ -474,13 +470,12 @@ class EntryRecorder:
             layout.ENTRY_FORWARD_UNCERTAINTY,
             fw.t,
             np.zeros((len(fw.t), 3)),
-            site.covariances(fw.t, fw.P[:, 6:9, 6:9]),
+            site.covariances(fw.t, fw.P[:, DP, DP]),
             nsigma=3.0,
             color=(255, 127, 14, 110),
             step=steps_f,
         )
-        u_f = fw.p_M / np.linalg.norm(fw.p_M, axis=1, keepdims=True)
-        sd_hf = np.sqrt(np.einsum("ni,nij,nj->n", u_f, fw.P[:, 6:9, 6:9], u_f))
+        sd_hf = fw.sigma_radial
         rec.scalars(
             layout.ENTRY_PLOT_ALTITUDE_3SIGMA_FORWARD,
             fw.t,
@@ -610,7 +605,7 @@ class EntryRecorder:
         sm = fr.smoothed
         t = np.asarray(sm.t, float)
         r = np.linalg.norm(sm.p_M, axis=1)
-        sd_r = self._radial_sigma(sm.p_M, sm.P)
+        sd_r = sm.sigma_radial
         h_agl = r - self.r_ground
         tr_p = self._truth_at(t, "p_M")
         tr_r = None if tr_p is None else np.linalg.norm(tr_p, axis=1)
@@ -648,7 +643,7 @@ class EntryRecorder:
         v_rel_M = sm.v_M - np.cross(omega, sm.p_M)
         v_N = ned_from_enu(site.vectors(t, v_rel_M))
         C = site.C_L_M(t)
-        Pv = C @ sm.P[:, 0:3, 0:3] @ np.swapaxes(C, -1, -2)
+        Pv = C @ sm.P[:, DV, DV] @ np.swapaxes(C, -1, -2)
         sd_L = np.sqrt(np.einsum("nii->ni", Pv))
         sd_N = sd_L[:, [1, 0, 2]]
         tv = None
@@ -662,7 +657,7 @@ class EntryRecorder:
         up_M = sm.p_M / r[:, None]
         zG_M = quat_to_dcm(sm.q_M_G)[:, :, 2]
         tilt = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", up_M, zG_M), -1, 1)))
-        sd_att = np.degrees(np.sqrt(np.einsum("nii->ni", sm.P[:, 3:6, 3:6])))
+        sd_att = np.degrees(sm.sigma_attitude)
         tt = None
         if tr_p is not None:
             qT = self._truth_at(t, "q_M_G")
@@ -678,8 +673,7 @@ class EntryRecorder:
             names="Z_G from local up [deg]",
             color=[EST],
         )
-        sd_p = np.sqrt(np.einsum("nii->ni", sm.P[:, 6:9, 6:9]))
-        sd_v = np.sqrt(np.einsum("nii->ni", sm.P[:, 0:3, 0:3]))
+        sd_p, sd_v = sm.sigma_position, sm.sigma_velocity
         rec.scalars(
             layout.ENTRY_PLOT_SIGMA_POSITION_NORM, t, np.linalg.norm(sd_p, axis=1), names="|σ_p| [m]", colors=NOMINAL
         )

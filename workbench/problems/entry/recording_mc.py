@@ -112,7 +112,10 @@ def validation_markdown(summary: dict, title: str = "Entry smoother validation")
     if nis:
         L += ["", "Mean NIS: " + ", ".join(f"{k} {_fmt(v['value'])} (dof {v['dof']})" for k, v in nis.items()) + "."]
     if "filter_R" in s:
-        L += ["", "Filter R (1σ): " + ", ".join(f"{k} {v:g}" for k, v in s["filter_R"].items()) + "."]
+        fr = s["filter_R"]
+        L += ["", "Filter R (1σ): " + ", ".join(f"{k} {v:g}" for k, v in fr.items() if k != "note") + "."]
+        if "note" in fr:  # the truth-simulator Monte Carlo says how the slant-out R was inflated
+            L[-1] += f" ({fr['note']})"
     hf = s.get("h_agl_at_fix")
     if hf:
         L += [

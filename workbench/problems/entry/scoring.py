@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from workbench.core.rotation import attitude_error
+from workbench.problems.entry.state import DP, DTH, DV
 
 __all__ = ["ERROR_NAMES", "ERROR_UNITS", "local_frame", "errors_sigmas"]
 
@@ -16,6 +17,8 @@ __all__ = ["ERROR_NAMES", "ERROR_UNITS", "local_frame", "errors_sigmas"]
 #: [m] (σ along the estimated local vertical); velocity N, E, D [m/s]; attitude error δθ about
 #: X_G, Y_G, Z_G [rad] (Z_G the spin axis).
 ERROR_NAMES: tuple[str, ...] = ("pos_N", "pos_E", "h_agl", "vel_N", "vel_E", "vel_D", "att_x", "att_y", "att_z")
+#: Column blocks of :data:`ERROR_NAMES` after the local position (N, E, h): local velocity (N, E, D), attitude.
+_VEL, _ATT = slice(3, 6), slice(6, 9)
 ERROR_UNITS: tuple[str, ...] = ("m",) * 3 + ("m/s",) * 3 + ("rad",) * 3
 
 
@@ -44,19 +47,19 @@ def errors_sigmas(est, V, Q, X) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
     L = local_frame(est.p_M)
     up = -L[:, 2]
     dh = np.linalg.norm(X, axis=1) - np.linalg.norm(est.p_M, axis=1)  # truth − estimate
-    dp = e[:, 6:9]
+    dp = e[:, DP]
     e_c = e.copy()
-    e_c[:, 6:9] = dp - up * np.sum(up * dp, axis=1, keepdims=True) + up * dh[:, None]
+    e_c[:, DP] = dp - up * np.sum(up * dp, axis=1, keepdims=True) + up * dh[:, None]
     err = np.empty((V.shape[0], len(ERROR_NAMES)))
     sig = np.empty_like(err)
-    Ppp = np.einsum("nij,njk,nlk->nil", L, P[:, 6:9, 6:9], L)
+    Ppp = np.einsum("nij,njk,nlk->nil", L, P[:, DP, DP], L)
     err[:, 0:2] = -np.einsum("nij,nj->ni", L[:, 0:2], dp)
     sig[:, 0:2] = np.sqrt(np.einsum("nii->ni", Ppp)[:, 0:2])
     err[:, 2] = -dh
     sig[:, 2] = np.sqrt(Ppp[:, 2, 2])
-    Pvv = np.einsum("nij,njk,nlk->nil", L, P[:, 0:3, 0:3], L)
-    err[:, 3:6] = -np.einsum("nij,nj->ni", L, e[:, 0:3])
-    sig[:, 3:6] = np.sqrt(np.einsum("nii->ni", Pvv))
-    err[:, 6:9] = -e[:, 3:6]
-    sig[:, 6:9] = np.sqrt(np.einsum("nii->ni", P[:, 3:6, 3:6]))
+    Pvv = np.einsum("nij,njk,nlk->nil", L, P[:, DV, DV], L)
+    err[:, _VEL] = -np.einsum("nij,nj->ni", L, e[:, DV])
+    sig[:, _VEL] = np.sqrt(np.einsum("nii->ni", Pvv))
+    err[:, _ATT] = -e[:, DTH]
+    sig[:, _ATT] = np.sqrt(np.einsum("nii->ni", P[:, DTH, DTH]))
     return e, e_c, err, sig

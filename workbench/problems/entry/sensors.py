@@ -59,6 +59,7 @@ from workbench.core.rotation import (
 from workbench.models.imu import IMU_ERROR_NAMES, ImuErrorModel, apply_imu_errors, draw_imu_errors
 from workbench.models.radar import beam_directions_G, slant_range_sphere, slant_range_surface
 from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M, TerrainRelief
+from workbench.problems.entry.state import DP, DTH, DV
 
 __all__ = [
     "GYRO_SATURATION_DPS",
@@ -121,7 +122,9 @@ class EntryTelemetrySpec:
     after ``RDA_ON`` (= FSR + ``rda_on_after_fsr_s``), the first ``sr_zero_filled`` of them
     zero-filled as on Schiaparelli; range noise 1σ ``hypot(range_sigma, range_sigma_frac ×
     range)`` [m]; velocity noise 1σ ``velocity_sigma`` [m/s] per axis.  ``r_ground`` [m] radius of
-    the terrain sphere.  ``squint_deg``/``azimuths_deg`` the beam geometry.
+    the terrain sphere.  ``squint_deg``/``azimuths_deg`` the beam geometry (None: the documented
+    geometry of :func:`~workbench.models.radar.beam_directions_G`; a scenario's comes from ``[radar]``).
+    Built from a scenario by :meth:`~workbench.problems.entry.config.EntrySettings.from_scenario`.
     """
 
     imu: EntryImuModel = field(default_factory=EntryImuModel)
@@ -139,77 +142,8 @@ class EntryTelemetrySpec:
     range_sigma_frac: float = 0.01
     velocity_sigma: float = 1.0
     r_ground: float = R_MOLA + TERRAIN_ELEVATION_M
-    squint_deg: float = 20.0
-    azimuths_deg: tuple[float, float, float] = (0.0, 120.0, 240.0)
-
-    @classmethod
-    def from_scenario(cls, scenario) -> EntryTelemetrySpec:
-        """Read ``[sensors.imu]``, ``[sensors.radar]``, ``[synthetic.nominal_error]`` and
-        ``synthetic.blackout_gaps_s`` of a :class:`~workbench.io.scenario.Scenario` (all optional).
-
-        Keys (units in the names): ``sensors.imu``: accel_noise_mps2, accel_bias_mps2,
-        accel_scale, accel_misalignment_rad, gyro_noise_dps, gyro_bias_dps, gyro_scale,
-        gyro_misalignment_rad, gyro_full_scale_dps (number or
-        list of 3), accel_full_scale_mps2, onboard_rate_hz, tm_rate_hz, nav_rate_hz;
-        ``sensors.radar``: range_sigma_m, range_sigma_frac, velocity_sigma_mps, rate_hz,
-        on_after_fsr_s, slant_range_period_s, first_packet_after_on_s, zero_filled_packets;
-        the shared ``site.terrain_m`` and ``radar.squint_deg`` / ``radar.azimuths_deg`` (the beam
-        geometry the filter uses too); ``synthetic.nominal_error``:
-        velocity_sigma_mps, attitude_sigma_deg, position_sigma_m, dx0 (9 numbers: m/s, deg, m);
-        ``synthetic.blackout_gaps_s``: list of [start_s, duration_s].
-        """
-        g = scenario.get
-        d = cls()
-        fs = g("sensors.imu.gyro_full_scale_dps", GYRO_SATURATION_DPS)
-        fs = [float(fs)] * 3 if isinstance(fs, int | float) else [float(x) for x in fs]
-        if len(fs) != 3:
-            raise ValueError(f"{scenario.path}: sensors.imu.gyro_full_scale_dps must be a number or 3 numbers")
-        imu = EntryImuModel(
-            accel_noise=g("sensors.imu.accel_noise_mps2", d.imu.accel_noise, kind="float"),
-            accel_bias=g("sensors.imu.accel_bias_mps2", d.imu.accel_bias, kind="float"),
-            accel_scale=g("sensors.imu.accel_scale", d.imu.accel_scale, kind="float"),
-            gyro_noise=math.radians(g("sensors.imu.gyro_noise_dps", 0.01, kind="float")),
-            gyro_bias=math.radians(g("sensors.imu.gyro_bias_dps", math.degrees(d.imu.gyro_bias), kind="float")),
-            gyro_scale=g("sensors.imu.gyro_scale", d.imu.gyro_scale, kind="float"),
-            accel_misalignment=g("sensors.imu.accel_misalignment_rad", d.imu.accel_misalignment, kind="float"),
-            gyro_misalignment=g("sensors.imu.gyro_misalignment_rad", d.imu.gyro_misalignment, kind="float"),
-            gyro_full_scale=tuple(math.radians(x) for x in fs),  # type: ignore[arg-type]
-            accel_full_scale=g("sensors.imu.accel_full_scale_mps2", math.inf, kind="float"),
-        )
-        dx0 = g("synthetic.nominal_error.dx0", None)
-        if dx0 is not None:
-            dx0 = [float(x) for x in dx0]
-            if len(dx0) != 9:
-                raise ValueError(f"{scenario.path}: synthetic.nominal_error.dx0 must hold 9 numbers")
-            dx0 = tuple(dx0[:3] + [math.radians(x) for x in dx0[3:6]] + dx0[6:])
-        nominal = NominalErrorModel(
-            velocity_sigma=g("synthetic.nominal_error.velocity_sigma_mps", d.nominal.velocity_sigma, kind="float"),
-            attitude_sigma=math.radians(g("synthetic.nominal_error.attitude_sigma_deg", 0.6, kind="float")),
-            position_sigma=g("synthetic.nominal_error.position_sigma_m", d.nominal.position_sigma, kind="float"),
-            dx0=dx0,
-        )
-        gaps = g("synthetic.blackout_gaps_s", None, kind=None)
-        gaps = d.gaps if gaps is None else tuple((float(a), float(b)) for a, b in gaps)
-        r = "sensors.radar."
-        return cls(
-            imu=imu,
-            nominal=nominal,
-            onboard_rate_hz=g("sensors.imu.onboard_rate_hz", d.onboard_rate_hz, kind="float"),
-            gnc_rate_hz=g("sensors.imu.tm_rate_hz", d.gnc_rate_hz, kind="float"),
-            nav_rate_hz=g("sensors.imu.nav_rate_hz", d.nav_rate_hz, kind="float"),
-            gaps=gaps,
-            rda_rate_hz=g(r + "rate_hz", d.rda_rate_hz, kind="float"),
-            rda_on_after_fsr_s=g(r + "on_after_fsr_s", d.rda_on_after_fsr_s, kind="float"),
-            sr_period_s=g(r + "slant_range_period_s", d.sr_period_s, kind="float"),
-            sr_first_after_on_s=g(r + "first_packet_after_on_s", d.sr_first_after_on_s, kind="float"),
-            sr_zero_filled=g(r + "zero_filled_packets", d.sr_zero_filled, kind="int"),
-            range_sigma=g(r + "range_sigma_m", d.range_sigma, kind="float"),
-            range_sigma_frac=g(r + "range_sigma_frac", d.range_sigma_frac, kind="float"),
-            velocity_sigma=g(r + "velocity_sigma_mps", d.velocity_sigma, kind="float"),
-            r_ground=R_MOLA + g("site.terrain_m", TERRAIN_ELEVATION_M, kind="float"),
-            squint_deg=g("radar.squint_deg", d.squint_deg, kind="float"),
-            azimuths_deg=tuple(float(x) for x in g("radar.azimuths_deg", list(d.azimuths_deg), kind="vec3")),  # type: ignore[arg-type]
-        )
+    squint_deg: float | None = None
+    azimuths_deg: tuple[float, float, float] | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -263,9 +197,9 @@ def nominal_state(
                 rng.normal(0.0, model.position_sigma, 3),
             ]
         )
-    v_nom = np.asarray(v0, float) - dx0[:3]
-    q_nom = quat_normalize(quat_multiply(np.asarray(q0, float), quat_from_rotvec(-dx0[3:6])))
-    p_nom = np.asarray(p0, float) - dx0[6:]
+    v_nom = np.asarray(v0, float) - dx0[DV]
+    q_nom = quat_normalize(quat_multiply(np.asarray(q0, float), quat_from_rotvec(-dx0[DTH])))
+    p_nom = np.asarray(p0, float) - dx0[DP]
     return v_nom, q_nom, p_nom, dx0
 
 
@@ -459,7 +393,7 @@ def generate_entry_tm(truth, spec: EntryTelemetrySpec, rng: np.random.Generator)
     # radar (truth geometry, sampled at the radar times)
     if "FSR" in events and "RDA_ON" not in events:
         events["RDA_ON"] = events["FSR"] + spec.rda_on_after_fsr_s
-    beams = beam_directions_G(spec.squint_deg, spec.azimuths_deg)
+    beams = beam_directions_G() if spec.squint_deg is None else beam_directions_G(spec.squint_deg, spec.azimuths_deg)
     modes = getattr(truth, "terrain_modes", None)
     modes = () if modes is None else tuple(tuple(float(x) for x in row) for row in np.asarray(modes).reshape(-1, 5))
     relief = TerrainRelief(spec.r_ground, modes)

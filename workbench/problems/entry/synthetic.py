@@ -29,19 +29,19 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from workbench.io.assets import asset_path
-from workbench.io.scenario import Scenario
 from workbench.io.telemetry import write_events, write_telemetry
-from workbench.problems.entry.config import config_for
 from workbench.problems.entry.sensors import EntryTelemetrySpec, EntryTM, generate_entry_tm
 from workbench.problems.entry.telemetry import NominalState, write_nominal_state
 
+if TYPE_CHECKING:
+    from workbench.problems.entry.config import EntrySettings
+
 __all__ = [
     "TELEMETRY_FILES",
-    "vehicle_path",
     "truth_for",
     "write_entry_telemetry",
     "synthesize_from_truth",
@@ -61,27 +61,18 @@ TELEMETRY_FILES = {
 }
 
 
-def vehicle_path(scenario: Scenario) -> Path:
-    """The entry-vehicle asset: ``[vehicle] file`` (relative to the scenario file), else the
-    shipped ``assets/vehicles/schiaparelli.toml``."""
-    if scenario.has("vehicle.file"):
-        return scenario.path_of("vehicle.file")
-    return asset_path("vehicles", "schiaparelli.toml")
-
-
 _TRUTH_CACHE: dict[tuple, object] = {}
 
 
-def truth_for(scenario: Scenario):
-    """Truth simulation of the scenario (``EntryTruth``), deterministic per scenario: its random
+def truth_for(settings: EntrySettings):
+    """Truth simulation of the run (``EntryTruth``), deterministic per settings: its random
     parts (true atmosphere, winds) draw from ``synthetic.truth_seed`` (default ``synthetic.seed``).
     Cached per process, keyed by vehicle file, truth spec and seed (when the spec is hashable)."""
-    from workbench.models.aerodynamics import load_vehicle
-    from workbench.problems.entry.truth import simulate_entry, truth_spec_from_scenario
+    from workbench.problems.entry.truth import simulate_entry
 
-    vpath = vehicle_path(scenario)
-    spec = truth_spec_from_scenario(scenario)
-    tseed = scenario.get("synthetic.truth_seed", scenario.get("synthetic.seed", 0, kind="int"), kind="int")
+    vpath = settings.vehicle_path
+    spec = settings.synthetic.truth
+    tseed = settings.synthetic.truth_seed
     try:
         key = (str(vpath), spec, tseed)
         hash(key)
@@ -89,7 +80,7 @@ def truth_for(scenario: Scenario):
         key = None
     if key is not None and key in _TRUTH_CACHE:
         return _TRUTH_CACHE[key]
-    truth = simulate_entry(load_vehicle(vpath), spec, np.random.default_rng([tseed, 1]))
+    truth = simulate_entry(settings.require_vehicle(), spec, np.random.default_rng([tseed, 1]))
     if key is not None:
         if len(_TRUTH_CACHE) >= 4:
             _TRUTH_CACHE.pop(next(iter(_TRUTH_CACHE)))
@@ -245,16 +236,15 @@ def synthesize_from_truth(
     return paths
 
 
-def synthesize_entry(scenario: Scenario, out_dir: str | Path, seed: int | None = None) -> dict[str, Path]:
-    """Simulate the scenario's entry and write its telemetry files (and ``truth.npz``) into ``out_dir``.
+def synthesize_entry(settings: EntrySettings, out_dir: str | Path, seed: int | None = None) -> dict[str, Path]:
+    """Simulate the run's entry and write its telemetry files (and ``truth.npz``) into ``out_dir``.
 
     ``seed`` (default ``[synthetic] seed``) drives the sensor-side draws; the truth trajectory is
-    deterministic per scenario (:func:`truth_for`).  Returns ``{stream: path}`` (keys of
+    deterministic per settings (:func:`truth_for`).  Returns ``{stream: path}`` (keys of
     :data:`TELEMETRY_FILES` plus ``"initial_state"`` and ``"truth"``).
     """
-    config_for(scenario)  # unknown or mistyped keys are errors before the simulation
-    seed = int(scenario.get("synthetic.seed", 0, kind="int") if seed is None else seed)
-    return synthesize_from_truth(truth_for(scenario), out_dir, EntryTelemetrySpec.from_scenario(scenario), seed)
+    seed = int(settings.synthetic.seed if seed is None else seed)
+    return synthesize_from_truth(truth_for(settings), out_dir, settings.synthetic.telemetry, seed)
 
 
 def load_truth(path: str | Path) -> dict:

@@ -34,7 +34,6 @@ Frames: M = MMED inertial, G = GNC body; the TM JPL quaternion "MMED to GNC" bec
 from __future__ import annotations
 
 import os
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,7 +42,8 @@ import numpy as np
 
 from workbench.core.bodies import G0
 from workbench.core.rotation import quat_conjugate, quat_from_jpl, quat_normalize, quat_to_jpl
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import ScenarioError
+from workbench.io.schema import REQUIRED, Key, Schema, Table, load_file
 from workbench.io.telemetry import (
     MAX_PROBLEMS,
     Problem,
@@ -64,6 +64,7 @@ __all__ = [
     "telemetry_paths",
     "read_entry_telemetry",
     "check_event_span",
+    "INITIAL_STATE_SCHEMA",
     "read_nominal_state",
     "write_nominal_state",
     "true_runs",
@@ -133,19 +134,22 @@ class EntryTelemetry:
     files: dict[str, Path]
 
 
-def telemetry_paths(scenario: Scenario) -> dict[str, Path]:
-    """The files of the scenario's ``[telemetry]`` table, resolved against the scenario file:
-    ``{stream: path}`` for every key of :data:`STREAMS` (all required; a missing key or file is a
-    :class:`ScenarioError` naming it)."""
-    missing = [k for k in STREAMS if not scenario.has(f"telemetry.{k}")]
+def telemetry_paths(files: Mapping[str, Path], scenario_file: Path) -> dict[str, Path]:
+    """The ``[telemetry]`` files (``files``: stream -> absolute path, as resolved against the
+    scenario file by ``EntrySettings``): ``{stream: path}`` for every key of :data:`STREAMS` (all
+    required; a missing key or file is a :class:`ScenarioError` on ``scenario_file`` naming it)."""
+    missing = [k for k in STREAMS if k not in files]
     if missing:
         raise ScenarioError(
-            scenario.path,
+            scenario_file,
             f"telemetry.{missing[0]}",
             f"missing [telemetry] key(s) {', '.join(missing)}: an entry reconstruction needs all of "
             f"{', '.join(STREAMS)} (the radar files feed the radar-aided smoother)",
         )
-    return {k: scenario.path_of(f"telemetry.{k}") for k in STREAMS}
+    for k in STREAMS:
+        if not Path(files[k]).exists():
+            raise ScenarioError(scenario_file, f"telemetry.{k}", f"file not found: {files[k]}")
+    return {k: Path(files[k]) for k in STREAMS}
 
 
 def write_nominal_state(path: Path, st: NominalState, comment: str = "") -> Path:
@@ -163,35 +167,63 @@ def write_nominal_state(path: Path, st: NominalState, comment: str = "") -> Path
     return atomic_write_text(path, text)
 
 
-def read_nominal_state(path: Path) -> NominalState:
-    """Read ``initial_state.toml``; errors name the file and key."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as e:
-        raise ScenarioError(path, "initial_state", f"cannot read: {e}") from None
-    st = data.get("initial_state")
-    if not isinstance(st, dict):
-        raise ScenarioError(path, "initial_state", "missing [initial_state] table")
+#: The schema of the nominal initial state file (``initial_state.toml``, AMELIA Table 2 style).
+INITIAL_STATE_SCHEMA = Schema(
+    "initial_state",
+    "entry nominal initial state",
+    (
+        Table(
+            "initial_state",
+            "the on-board nominal state at the first IMU sample (MMED inertial)",
+            (
+                Key(
+                    "t0_s",
+                    "float",
+                    REQUIRED,
+                    "s",
+                    "time of the state, from EIP (the first sample with an acceleration)",
+                ),
+                Key("position_km", "vec3", REQUIRED, "km", "position, MMED"),
+                Key("velocity_kmps", "vec3", REQUIRED, "km/s", "inertial velocity, MMED"),
+                Key(
+                    "quaternion_jpl",
+                    "list",
+                    REQUIRED,
+                    "1",
+                    "JPL (Shuster) quaternion MMED→GNC, scalar last, 4 numbers; norm within 1e-3 of 1",
+                ),
+            ),
+        ),
+    ),
+    noun="initial-state file",
+    intro="Keys of the nominal initial state file (`[telemetry] initial_state`, `initial_state.toml`)",
+)
 
-    def vec(key: str, n: int) -> np.ndarray:
-        v = st.get(key)
-        if not isinstance(v, list) or len(v) != n or not all(isinstance(x, int | float) for x in v):
-            raise ScenarioError(path, f"initial_state.{key}", f"need a list of {n} numbers")
-        a = np.asarray(v, dtype=float)
+
+def read_nominal_state(path: Path) -> NominalState:
+    """Read ``initial_state.toml`` (:data:`INITIAL_STATE_SCHEMA`): position [km] and velocity [km/s]
+    to SI, the JPL quaternion to ``q_M_G``; every error is a :class:`ScenarioError` naming the file
+    and key (unknown keys with the nearest valid one, non-finite values, a non-unit quaternion)."""
+    path = Path(path)
+    st = load_file(path, INITIAL_STATE_SCHEMA)["initial_state"]
+    q = st["quaternion_jpl"]
+    if len(q) != 4 or not all(isinstance(x, int | float) and not isinstance(x, bool) for x in q):
+        raise ScenarioError(path, "initial_state.quaternion_jpl", "need a list of 4 numbers")
+    q_jpl = np.asarray(q, dtype=float)
+    for key, a in (
+        ("quaternion_jpl", q_jpl),
+        ("position_km", st["position_km"]),
+        ("velocity_kmps", st["velocity_kmps"]),
+    ):
         if not np.all(np.isfinite(a)):
             raise ScenarioError(path, f"initial_state.{key}", "not finite")
-        return a
-
-    q_jpl = vec("quaternion_jpl", 4)
     nq = float(np.linalg.norm(q_jpl))
     if abs(nq - 1.0) > 1e-3:
         raise ScenarioError(path, "initial_state.quaternion_jpl", f"not a unit quaternion (norm {nq:.6f})")
-    t0 = st.get("t0_s")
-    if not isinstance(t0, int | float):
-        raise ScenarioError(path, "initial_state.t0_s", "need a number (s from EIP)")
+    if not np.isfinite(st["t0_s"]):
+        raise ScenarioError(path, "initial_state.t0_s", "not finite")
     q_M_G = quat_conjugate(quat_from_jpl(quat_normalize(q_jpl)))
-    return NominalState(float(t0), vec("velocity_kmps", 3) * 1e3, vec("position_km", 3) * 1e3, q_M_G, str(path))
+    return NominalState(st["t0_s"], st["velocity_kmps"] * 1e3, st["position_km"] * 1e3, q_M_G, str(path))
 
 
 def _note(level: str, file, column: str | None, row: int | None, reason: str) -> str:

@@ -64,7 +64,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
@@ -93,7 +93,6 @@ __all__ = [
     "AERO_SIGMA_COMMON",
     "AERO_SIGMA_SHAPE",
     "DispersionSigmas",
-    "truth_spec_from_scenario",
     "disperse_truth_spec",
     "coefficient_deviation",
     "draw_coefficient_deviation",
@@ -349,64 +348,10 @@ class EntryTruth:
     spec: EntryTruthSpec | None = None
 
 
-# ------------------------------------------------------------------------------- scenario input
-
-_TUPLE_FIELDS = {
-    "p0_km": 1,
-    "v0_kmps": 1,
-    "q0_jpl": 1,
-    "w0_dps": 1,
-    "initial_position_offset_km": 1,
-    "aero_deviation_mach": 1,
-    "ca_deviation": 1,
-    "parachute_deviation_mach": 1,
-    "parachute_cd_deviation": 1,
-    "temperature_profile_km_K": 2,
-    "temperature_waves": 2,
-    "terrain_modes": 2,
-    "wind_layers": 2,
-}
-
-
-def truth_spec_from_scenario(scenario) -> EntryTruthSpec:
-    """Build an :class:`EntryTruthSpec` from a scenario's ``[truth]`` table (missing keys: defaults).
-
-    ``scenario`` is a :class:`workbench.io.scenario.Scenario` (or a plain dict standing for the
-    ``[truth]`` table).  Keys are the field names of :class:`EntryTruthSpec`; ``wind_layers``,
-    ``temperature_profile_km_K``, ``temperature_waves`` and ``terrain_modes`` are arrays of
-    arrays.  ``epoch_utc`` defaults to ``[scenario] epoch_utc`` when present.  Unknown keys raise
-    ``ValueError`` naming them.
-    """
-    if isinstance(scenario, dict):
-        table, epoch, where = dict(scenario), None, "[truth]"
-    else:
-        table = scenario.get("truth", {}, kind="table")
-        epoch = scenario.get("scenario.epoch_utc", None)
-        where = f"{scenario.path}: [truth]"
-    names = {f.name for f in fields(EntryTruthSpec)}
-    unknown = sorted(set(table) - names)
-    if unknown:
-        raise ValueError(f"{where}: unknown key(s) {', '.join(unknown)}; known: {', '.join(sorted(names))}")
-    kw = {}
-    for key, val in table.items():
-        depth = _TUPLE_FIELDS.get(key)
-        try:
-            if depth == 1:
-                val = tuple(float(x) for x in val)
-            elif depth == 2:
-                val = tuple(tuple(float(x) for x in row) for row in val)
-            elif key in ("aero_enabled",):
-                val = bool(val)
-            elif key == "epoch_utc":
-                val = str(val)
-            elif val is not None:
-                val = float(val)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"{where}: key '{key}' has a bad value {val!r}") from exc
-        kw[key] = val
-    if "epoch_utc" not in kw and isinstance(epoch, str):
-        kw["epoch_utc"] = epoch
-    return EntryTruthSpec(**kw)
+#: The truth simulator's state rows: module position p_M, velocity v_M, attitude q_M_G, body rate
+#: w_G, then the canopy position (from PDD on); its auxiliary output starts with f_G.
+_TP, _TV, _TQ, _TW, _TCHUTE = slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 13), slice(13, 16)
+_AUX_F = slice(0, 3)
 
 
 @dataclass(frozen=True)
@@ -946,7 +891,7 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
 
     Args:
         vehicle: the :class:`EntryVehicle` (``load_vehicle("assets/vehicles/schiaparelli.toml")``).
-        spec: :class:`EntryTruthSpec` (e.g. from :func:`truth_spec_from_scenario`).
+        spec: :class:`EntryTruthSpec` (a scenario's: ``EntrySettings.synthetic.truth``).
         rng: ``np.random.Generator``; only the canopy breathing phase/amplitude jitter uses it.
 
     Returns:
@@ -1016,16 +961,16 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
     n = k + 1
     states, auxs, phases = states[:n], auxs[:n], phases[:n]
     tgrid = np.round(spec.t0 + dt_out * np.arange(n), 9)
-    q = states[:, 6:10]
+    q = states[:, _TQ]
     q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    chute_p = states[:, 13:16] if np.isfinite(events["PDD"]) else None
+    chute_p = states[:, _TCHUTE] if np.isfinite(events["PDD"]) else None
     return EntryTruth(
         t=tgrid,
-        p_M=states[:, 0:3].copy(),
-        v_M=states[:, 3:6].copy(),
+        p_M=states[:, _TP].copy(),
+        v_M=states[:, _TV].copy(),
         q_M_G=q,
-        w_G=states[:, 10:13].copy(),
-        f_G=auxs[:, 0:3].copy(),
+        w_G=states[:, _TW].copy(),
+        f_G=auxs[:, _AUX_F].copy(),
         phase=phases,
         mach=auxs[:, 3].copy(),
         knudsen=auxs[:, 4].copy(),

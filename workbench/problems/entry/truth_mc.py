@@ -57,11 +57,9 @@ import numpy as np
 from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_normalize
 from workbench.estimation.consistency import is_symmetric_pd
-from workbench.io.scenario import Scenario
 from workbench.io.telemetry import TelemetryError
-from workbench.models.aerodynamics import load_vehicle
 from workbench.problems.entry import pipeline as en
-from workbench.problems.entry.config import config_for
+from workbench.problems.entry.config import EntrySettings
 from workbench.problems.entry.dispersion import DispersionResult
 from workbench.problems.entry.filter import EntryFilterResult, EntryFilterSigmas
 from workbench.problems.entry.initial import SmootherStart
@@ -77,13 +75,12 @@ from workbench.problems.entry.montecarlo import (
 )
 from workbench.problems.entry.preprocess import EntryTelemetry, PreprocessedIMU
 from workbench.problems.entry.sensors import IMU_ERROR_NAMES, EntryTelemetrySpec, disperse_telemetry_spec
-from workbench.problems.entry.synthetic import load_truth, synthesize_from_truth, vehicle_path
+from workbench.problems.entry.synthetic import load_truth, synthesize_from_truth
 from workbench.problems.entry.truth import (
     DispersionSigmas,
     EntryTruthSpec,
     disperse_truth_spec,
     simulate_entry,
-    truth_spec_from_scenario,
 )
 from workbench.problems.members import run_members
 
@@ -92,6 +89,7 @@ __all__ = [
     "TruthMcResult",
     "disperse_member",
     "run_truth_monte_carlo",
+    "member_settings",
     "DEFAULT_MEMBERS",
     "DEFAULT_REFINE_ROUNDS",
 ]
@@ -122,12 +120,17 @@ def disperse_member(
 
 @dataclass(frozen=True)
 class _Job:
-    scenario: Scenario
-    vehicle_file: str
-    truth_spec: EntryTruthSpec
-    telemetry_spec: EntryTelemetrySpec
+    settings: EntrySettings  # picklable: the process pool / Dask workers receive it
     members: int
     work_dir: str | None
+
+    @property
+    def truth_spec(self) -> EntryTruthSpec:
+        return self.settings.synthetic.truth
+
+    @property
+    def telemetry_spec(self) -> EntryTelemetrySpec:
+        return self.settings.synthetic.telemetry
 
 
 @dataclass(frozen=True)
@@ -143,10 +146,10 @@ class TruthMcMember:
     info: dict = field(default_factory=dict)
 
 
-def _stages(scenario: Scenario, paths: Mapping[str, Path], members: int) -> dict[str, Any]:
+def _stages(settings: EntrySettings, paths: Mapping[str, Path], members: int) -> dict[str, Any]:
     """The pipeline's stages up to the smoother (``pipeline.reconstruct``, the ``workbench run`` path)."""
     out: dict[str, Any] = {}
-    gen = en.reconstruct(scenario, dict(paths), members=members)
+    gen = en.reconstruct(settings, dict(paths), members=members)
     try:
         for st in gen:
             for name, typ in (
@@ -208,7 +211,7 @@ def _run_member(job: _Job, k: int, ss: np.random.SeedSequence) -> TruthMcMember:
             "velocity_sigma_mps": float(tspec.velocity_sigma),
         },
     }
-    truth = simulate_entry(load_vehicle(job.vehicle_file), spec, g_sim)
+    truth = simulate_entry(job.settings.require_vehicle(), spec, g_sim)
     t1 = time.perf_counter()
     info["truth_s"] = t1 - t0
     info["truth_events"] = dict(truth.events)
@@ -222,7 +225,7 @@ def _run_member(job: _Job, k: int, ss: np.random.SeedSequence) -> TruthMcMember:
         info["telemetry_files"] = {s: p.name for s, p in sorted(paths.items())}
         info["telemetry_dir"] = str(folder) if job.work_dir else None
         try:
-            st = _stages(job.scenario, paths, job.members)
+            st = _stages(job.settings, paths, job.members)
         except (ValueError, TelemetryError, ArithmeticError, np.linalg.LinAlgError) as err:
             return TruthMcMember(failed_run(k, -1, f"member {k}: {err}", 1, t0), np.zeros(1), {}, info)
         truth_npz = load_truth(truth_file)  # scoring only
@@ -317,13 +320,15 @@ class TruthMcResult:
         return self.validation.summary
 
 
-def _dispersion_overrides(scenario: Scenario, refine_rounds: int | None) -> Scenario:
+def member_settings(settings: EntrySettings, refine_rounds: int | None) -> EntrySettings:
+    """``settings`` with the members' dispersion: ``refine_rounds`` (default
+    :data:`DEFAULT_REFINE_ROUNDS`) and no recording cloud."""
     rr = DEFAULT_REFINE_ROUNDS if refine_rounds is None else int(refine_rounds)
-    return scenario.with_overrides({"dispersion.refine_rounds": rr, "dispersion.cloud": 0})
+    return dataclasses.replace(settings, dispersion=dataclasses.replace(settings.dispersion, refine_rounds=rr, cloud=0))
 
 
 def run_truth_monte_carlo(
-    scenario: Scenario,
+    settings: EntrySettings,
     *,
     n_runs: int,
     seed: int,
@@ -333,10 +338,10 @@ def run_truth_monte_carlo(
     workers: int = 1,
     work_dir: str | Path | None = None,
 ) -> TruthMcResult:
-    """The entry Monte Carlo against the truth simulator (module docstring) for a synthetic entry
-    ``scenario`` (its ``[truth]``, ``[sensors]`` and ``[synthetic]`` tables give the specs the
-    members are dispersed about; every other table configures the reconstruction as for
-    ``workbench run``).
+    """The entry Monte Carlo against the truth simulator (module docstring) for the
+    :class:`~workbench.problems.entry.config.EntrySettings` of a synthetic entry scenario (its
+    ``synthetic`` truth and telemetry specs are what the members are dispersed about; every other
+    stage is configured as for ``workbench run``).
 
     ``n_runs`` ≥ 1 members, member k seeded ``SeedSequence(seed, spawn_key=(k,))``; ``members``
     dispersion members of each reconstruction (default :data:`DEFAULT_MEMBERS`),
@@ -348,13 +353,9 @@ def run_truth_monte_carlo(
     wall0 = time.perf_counter()
     if int(n_runs) < 1:
         raise ValueError("run_truth_monte_carlo: n_runs must be ≥ 1")
-    sc = _dispersion_overrides(scenario, refine_rounds)
-    cfg = config_for(sc)
+    cfg = member_settings(settings, refine_rounds)
     job = _Job(
-        scenario=sc,
-        vehicle_file=str(vehicle_path(sc)),
-        truth_spec=truth_spec_from_scenario(sc),
-        telemetry_spec=EntryTelemetrySpec.from_scenario(sc),
+        settings=cfg,
         members=int(members if members is not None else DEFAULT_MEMBERS),
         work_dir=None if work_dir is None else str(work_dir),
     )
@@ -392,7 +393,7 @@ def _extra_summary(outs, ok, sigmas, job: _Job) -> dict:
         "truths_note": "6-DOF truth simulator per member (dispersed initial state, aerodynamics, atmosphere, "
         "winds, terrain, IMU errors), telemetry files, full pipeline (preprocessing, dispersion, iterated smoother)",
         "members_per_dispersion": job.members,
-        "refine_rounds": int(job.scenario.get("dispersion.refine_rounds", 0, kind="int")),
+        "refine_rounds": int(job.settings.dispersion.refine_rounds),
         "radar_noise_simulated": {
             "range_sigma_m": float(tspec.range_sigma),
             "range_sigma_frac": float(tspec.range_sigma_frac),

@@ -45,6 +45,7 @@ from workbench.core.frames import ned_basis
 from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import quat_to_dcm, skew
 from workbench.problems.entry.atmosphere import as_profile_sigmas
+from workbench.problems.entry.state import DP, DTH, DV
 
 __all__ = ["WindResult", "pendulum_period", "estimate_winds"]
 
@@ -220,10 +221,10 @@ def estimate_winds(
     Jd[:, 0, 0] = Jd[:, 1, 1] = -vD / dD
     Jd[:, :, 2] = vD[:, None] * dh / dD[:, None] ** 2
     J = np.zeros((n, 2, 9))
-    J[:, :, 0:3] = Jv @ C_N_M  # δv_N = C_N_M δv_M
-    J[:, :, 6:9] = -(Jv @ C_N_M) @ skew(omega)  # δv_ground = −ω×δp
+    J[:, :, DV] = Jv @ C_N_M  # δv_N = C_N_M δv_M
+    J[:, :, DP] = -(Jv @ C_N_M) @ skew(omega)  # δv_ground = −ω×δp
     C_N_G = C_N_M @ C_M_G
-    J[:, :, 3:6] = -(Jd @ C_N_G) @ skew(np.asarray(d_G))  # δd_M = C (δθ × d_G) = −C [d_G×] δθ
+    J[:, :, DTH] = -(Jd @ C_N_G) @ skew(np.asarray(d_G))  # δd_M = C (δθ × d_G) = −C [d_G×] δθ
     cov = np.einsum("nai,nij,nbj->nab", J, P, J)
     if method == "specific_force":
         Jf = Jd @ C_N_G  # δd_G = −δf_G; sign irrelevant for the variance
