@@ -8,7 +8,11 @@
 - no private name (leading underscore) imported from, or reached into, another module,
   in the package or in the tests;
 - ``rerun`` is imported only by the recording code;
-- no file of the repository points at a path outside it.
+- no file of the repository points at a path outside it;
+- settings in one place (issue 25): no Scenario below a problem's entry point (``Problem.settings``
+  builds the frozen settings once; no ``config_for``), TOML parsed only in the schema layer and JSON
+  input files through it, no dynamic import outside the registry, no module-level switch or
+  written-to module-level container (the documented exceptions listed with their reason).
 """
 
 from __future__ import annotations
@@ -231,3 +235,186 @@ def test_no_paths_outside_the_repository(folder):
             if needle in text:
                 bad.append(f"{p.relative_to(ROOT)}: {needle}")
     assert not bad, "files pointing outside the repository:\n" + "\n".join(bad)
+
+
+# ------------------------------------------------------------------ settings in one place (issue 25)
+#: modules that may see a Scenario: the schema layer, the problems' shared entry (protocol, registry,
+#: runner, template, precompile), each problem's config.py (``from_scenario``) and problem.py
+#: (``settings``), and the command line
+SCENARIO_ALLOWED = (
+    "workbench.io.scenario",
+    "workbench.io.schema",
+    "workbench.problems.base",
+    "workbench.problems.registry",
+    "workbench.problems.runner",
+    "workbench.problems.template",
+    "workbench.problems.precompile",
+    "workbench.problems.scheduler",
+    "workbench.cli",
+)
+SCENARIO_METHODS = {"get", "has", "path_of", "with_overrides", "is_synthetic"}
+
+
+def _scenario_allowed(mod: str) -> bool:
+    return mod in SCENARIO_ALLOWED or (_problem(mod) is not None and mod.rsplit(".", 1)[-1] in ("config", "problem"))
+
+
+def _scenario_uses(path: Path, mod: str) -> list[str]:
+    """Where ``path`` imports ``Scenario``, takes a parameter named ``scenario`` or annotated
+    ``Scenario``, or reads a scenario (``scenario.get``/``has``/``path_of``/... on a name ``scenario``)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out = []
+    where = path.relative_to(ROOT)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").endswith("io.scenario"):
+            if any(a.name in ("Scenario", "load_scenario", "resolve_scenario") for a in node.names):
+                out.append(f"{where}:{node.lineno} imports {', '.join(a.name for a in node.names)}")
+        elif isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            args = node.args.posonlyargs + node.args.args + node.args.kwonlyargs
+            for a in args:
+                ann = ast.unparse(a.annotation) if a.annotation is not None else ""
+                if a.arg == "scenario" or "Scenario" in ann.replace("ScenarioError", ""):
+                    out.append(f"{where}:{node.lineno} {node.name}({a.arg}: {ann or '?'}) takes a scenario")
+        elif (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id in ("scenario", "sc")
+            and node.attr in SCENARIO_METHODS
+        ):
+            out.append(f"{where}:{node.lineno} reads scenario.{node.attr}")
+        elif isinstance(node, ast.Name) and node.id == "config_for":
+            out.append(f"{where}:{node.lineno} uses config_for (settings are built once, by Problem.settings)")
+    return out
+
+
+def test_no_scenario_below_a_problems_entry_point():
+    """A run's settings are built once (``Problem.settings``); below the problem object no function
+    receives a Scenario, reads one, or re-derives settings (``config_for``)."""
+    bad = []
+    for mod, path in _modules().items():
+        if not _scenario_allowed(mod):
+            bad += _scenario_uses(path, mod)
+        else:
+            bad += [u for u in _scenario_uses(path, mod) if "config_for" in u]
+    assert not bad, "a scenario below a problem's entry point:\n" + "\n".join(bad)
+
+
+#: the schema layer: the only modules that parse an input file's TOML
+SCHEMA_LAYER = ("workbench.io.scenario", "workbench.io.schema")
+
+
+def test_input_files_are_parsed_only_in_the_schema_layer():
+    """``tomllib`` is imported only by io/scenario.py and io/schema.py; no problem package or model
+    parses JSON itself (``io.schema.read_json`` / ``load_file``): every input file has a schema."""
+    bad = []
+    for mod, path in _modules().items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else []
+            )
+            if "tomllib" in names and mod not in SCHEMA_LAYER:
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno} imports tomllib")
+            if (
+                isinstance(node, ast.Attribute)
+                and isinstance(node.value, ast.Name)
+                and node.value.id == "json"
+                and node.attr in ("load", "loads")
+                and (_problem(mod) is not None or _layer(mod) == "models")
+            ):
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno} parses JSON itself (use io.schema.read_json)")
+    assert not bad, "input files parsed outside the schema layer:\n" + "\n".join(bad)
+
+
+def test_dynamic_imports_only_in_the_registry():
+    """``importlib.import_module`` / ``__import__`` only in problems/registry.py, where the built-in
+    problems, importers and preloaded modules are named (an import by name is invisible to the
+    layer and cycle checks above)."""
+    bad = []
+    for mod, path in _modules().items():
+        if mod == "workbench.problems.registry":
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Call):
+                f = node.func
+                name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+                if name in ("import_module", "__import__"):
+                    bad.append(f"{path.relative_to(ROOT)}:{node.lineno} {name}(...)")
+    assert not bad, "dynamic imports outside the registry:\n" + "\n".join(bad)
+
+
+_MUTATORS = {
+    "append",
+    "extend",
+    "insert",
+    "update",
+    "setdefault",
+    "pop",
+    "popitem",
+    "clear",
+    "add",
+    "discard",
+    "remove",
+}
+_CONTAINERS = {"dict", "list", "set", "defaultdict", "OrderedDict", "WeakKeyDictionary", "WeakValueDictionary", "deque"}
+
+#: module-level state that is there by design, each with its reason
+MUTABLE_GLOBALS_ALLOWED = {
+    # the registry of problems a user or a test adds (register/unregister): the one registry
+    ("workbench.problems.registry", "_registered"),
+    # a process-pool worker's shared input, set once by the pool's initializer in that process
+    ("workbench.estimation.montecarlo", "_WORKER_SHARED"),
+    # a memo of the deterministic drop-test truth simulation (the same results with or without it;
+    # bounded to 8 drops): the tests and Monte Carlo members of one process fly the same drops
+    ("workbench.problems.droptest.synthetic", "_TRUTH_CACHE"),
+    # the same for the entry truth (4 trajectories)
+    ("workbench.problems.entry.synthetic", "_TRUTH_CACHE"),
+}
+
+
+def _module_state(path: Path, mod: str) -> list[str]:
+    """Module-level switches (a name bound to True/False) and module-level containers that code
+    mutates (subscript store, a mutating method, ``global``) in ``path``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    where = path.relative_to(ROOT)
+    containers, out = {}, []
+    for node in tree.body:
+        if not isinstance(node, ast.Assign | ast.AnnAssign) or node.value is None:
+            continue
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+        for t in targets:
+            if not isinstance(t, ast.Name) or t.id == "__all__" or (mod, t.id) in MUTABLE_GLOBALS_ALLOWED:
+                continue
+            v = node.value
+            if isinstance(v, ast.Constant) and isinstance(v.value, bool):
+                out.append(f"{where}:{node.lineno} module-level switch {t.id} = {v.value} (a setting or an env var)")
+            is_container = isinstance(v, ast.Dict | ast.List | ast.Set | ast.DictComp | ast.ListComp | ast.SetComp)
+            if isinstance(v, ast.Call):
+                f = v.func
+                is_container = (f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", "")) in _CONTAINERS
+            if is_container:
+                containers[t.id] = node.lineno
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Global):
+            out += [f"{where}:{node.lineno} global {n}" for n in node.names if (mod, n) not in MUTABLE_GLOBALS_ALLOWED]
+        target = None
+        if isinstance(node, ast.Subscript) and isinstance(node.ctx, ast.Store | ast.Del):
+            target = node.value
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in _MUTATORS:
+            target = node.func.value
+        if isinstance(target, ast.Name) and target.id in containers:
+            out.append(f"{where}:{node.lineno} mutates the module-level {target.id} (line {containers[target.id]})")
+    return out
+
+
+def test_no_module_level_mutable_state():
+    """No module-level switches or caches (docs/ARCHITECTURE.md: no globals, no singletons): a
+    switch is a setting, a keyword argument or one documented environment variable; constant
+    lookup tables are fine as long as nothing writes into them."""
+    bad = [line for mod, path in _modules().items() for line in _module_state(path, mod)]
+    assert not bad, "module-level mutable state:\n" + "\n".join(bad)

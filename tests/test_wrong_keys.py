@@ -21,6 +21,8 @@ SCENARIO_ROWS = [
     ("meads scenario", "msl_meads", "scenarios/msl_meads.toml", "failure_port", "failur_port"),
     ("post2 problem file", "post2_huygens", "scenarios/post2_huygens.toml", "t_end_s", "t_ends_s"),
     ("flush-air-data vehicle asset", "msl_meads", "vehicles/msl_meads.toml", "tube_length_m", "tube_lenght_m"),
+    ("entry vehicle asset", "schiaparelli", "vehicles/schiaparelli.toml", "nose_radius_m", "nose_radus_m"),
+    ("drop-test lander asset", "droptest", "landers/mer_drop_lander.toml", "standoff_m", "standof_m"),
 ]
 
 
@@ -73,4 +75,20 @@ def test_a_misspelt_metadata_key_of_a_flight_log_is_exit_3(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == EXIT_INPUT, err
     _assert_named(err, path, f"{log.name}.rocket.rocket_cross_sectional_area_m", "rocket_cross_sectional_area_m2")
+    assert not out.exists()
+
+
+def test_a_misspelt_key_of_the_drop_setup_file_is_exit_3(tmp_path, capsys):
+    """The drop rig's setup file (``[telemetry] setup``, a user-data scenario written by ``workbench
+    init droptest``): a misspelt ``position_sigma_m`` in ``[hanging]``."""
+    folder = tmp_path / "rig"
+    assert main(["init", "droptest", str(folder)]) == 0
+    capsys.readouterr()
+    setup = next((folder / "telemetry").glob("*setup*.toml"))
+    _misspell(setup, "position_sigma_m", "position_sigm_m")
+    out = tmp_path / "out"
+    code = main(["run", str(folder / "scenario.toml"), "--out", str(out), "--jobs", "1", "-q"])
+    err = capsys.readouterr().err
+    assert code == EXIT_INPUT, err
+    _assert_named(err, setup.resolve(), "position_sigm_m", "position_sigma_m")
     assert not out.exists()

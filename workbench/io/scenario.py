@@ -199,9 +199,11 @@ class RunInfo:
         )
 
     def resolve(self, rel_path: str | os.PathLike) -> Path:
-        """``rel_path`` relative to the directory of the scenario file (absolute paths pass)."""
+        """``rel_path`` relative to the directory of the scenario file (absolute paths pass), made
+        absolute and normalised (``a/scenarios/../landers/x.toml`` -> ``a/landers/x.toml``; links
+        are not followed), so a message names the file as the user finds it."""
         p = Path(rel_path).expanduser()
-        return p if p.is_absolute() else (self.path.parent / p)
+        return Path(os.path.normpath(os.path.abspath(p if p.is_absolute() else (self.path.parent / p))))
 
 
 def check_value(path: Path, key: str, v: Any, kind: str) -> Any:
