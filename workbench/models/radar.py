@@ -34,6 +34,8 @@ from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_rotate, quat_to_dcm, skew
 
 __all__ = [
+    "AZIMUTHS_DEG",
+    "SQUINT_DEG",
     "beam_directions_G",
     "mars_rate_M",
     "slant_range_model",
@@ -45,8 +47,14 @@ __all__ = [
 ]
 
 
+#: the documented beam geometry: B1..B3 squinted 20° off −Z_G (Cecchini et al. 2015) at azimuths
+#: 0/120/240° from +X_G towards +Y_G (our assumption); the entry schema's ``[radar]`` defaults
+SQUINT_DEG = 20.0
+AZIMUTHS_DEG = (0.0, 120.0, 240.0)
+
+
 def beam_directions_G(
-    squint_deg: float = 20.0, azimuths_deg: tuple[float, float, float] = (0.0, 120.0, 240.0)
+    squint_deg: float = SQUINT_DEG, azimuths_deg: tuple[float, float, float] = AZIMUTHS_DEG
 ) -> np.ndarray:
     """Unit sensing directions of beams B0..B3 in the GNC frame G, shape (4, 3).
 

@@ -26,7 +26,7 @@ from workbench.io.assets import asset_path
 from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
-from workbench.models.radar import beam_directions_G
+from workbench.models.radar import AZIMUTHS_DEG, SQUINT_DEG, beam_directions_G
 from workbench.problems.entry.atmosphere import AtmosphereSettings, EntryProfileSigmas
 from workbench.problems.entry.dispersion import AcceptanceRules, DispersionSigmas
 from workbench.problems.entry.filter import EntryFilterSigmas
@@ -304,8 +304,8 @@ SCHEMA = Schema(
             "radar",
             "radar altimeter model of the filter (AMELIA Appendix B)",
             (
-                Key("squint_deg", _F, 20.0, "deg", "squint of beams B1..B3 from -Z_G"),
-                Key("azimuths_deg", _V, [0.0, 120.0, 240.0], "deg", "azimuths of B1..B3 from +X_G towards +Y_G"),
+                Key("squint_deg", _F, SQUINT_DEG, "deg", "squint of beams B1..B3 from -Z_G"),
+                Key("azimuths_deg", _V, list(AZIMUTHS_DEG), "deg", "azimuths of B1..B3 from +X_G towards +Y_G"),
                 Key("slant_range_sigma_m", _F, _FS.slant_range, "m", "slant-range measurement 1σ"),
                 Key("slant_out_sigma_m", _F, _FS.slant_out, "m", "slant-out measurement 1σ"),
                 Key(
