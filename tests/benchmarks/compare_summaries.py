@@ -6,7 +6,8 @@ commit and ``--out B`` on the new one, then::
     .venv/bin/python tests/benchmarks/compare_summaries.py A B [name ...] [--rtol 1e-9]
 
 Every number must agree within ``rtol`` relative (NaN equals NaN); strings, lists and keys must be
-equal, except that each folder's own path inside a string is ignored. Keys that are timings,
+equal, except that each run's own output folder inside a string is ignored (the folder of the
+summary's ``recording``, so a summary copied to another folder compares as well). Keys that are timings,
 sizes or output paths (``wall``, ``seconds``, ``bytes``, ``recording``, ``path``...) are skipped.
 Prints one line per scenario and the differences; exit code 1 if any scenario differs.
 """
@@ -63,6 +64,13 @@ def differences(a, b, where: str, base: str, new: str, rtol: float, out: list[st
         out.append(f"{where}: {a!r} -> {b!r}")
 
 
+def _written_in(summary: dict, folder: Path) -> str:
+    """The output folder a summary was written in (the folder of its ``recording``; a summary copied
+    elsewhere keeps the paths of where it was made), else ``folder``."""
+    rec = summary.get("recording")
+    return str(Path(rec).parent) if isinstance(rec, str) and rec else str(folder)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("old", type=Path)
@@ -80,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         diffs: list[str] = []
         a, b = json.loads(p_old.read_text()), json.loads(p_new.read_text())
-        differences(a, b, "", str(args.old), str(args.new), args.rtol, diffs)
+        differences(a, b, "", _written_in(a, args.old), _written_in(b, args.new), args.rtol, diffs)
         print(f"{name}: {'identical' if not diffs else f'{len(diffs)} differences'}")
         for d in diffs[:30]:
             print("   ", d)
