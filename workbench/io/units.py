@@ -89,6 +89,9 @@ UNITS: dict[str, Unit] = {
     # density, mass
     "kg/m^3": Unit("density", 1.0),
     "kg": Unit("mass", 1.0),
+    "m^2": Unit("area", 1.0),
+    "cm^2": Unit("area", 1e-4),
+    "ft^2": Unit("area", _FT**2),
     # dimensionless
     "1": Unit("dimensionless", 1.0),
     "-": Unit("dimensionless", 1.0),
@@ -119,6 +122,12 @@ ALIASES: dict[str, str] = {
     "°C": "degC",
     "kg/m3": "kg/m^3",
     "kg/m³": "kg/m^3",
+    "m2": "m^2",
+    "m²": "m^2",
+    "cm2": "cm^2",
+    "cm²": "cm^2",
+    "ft2": "ft^2",
+    "ft²": "ft^2",
 }
 
 #: Quantity kinds, in table order.

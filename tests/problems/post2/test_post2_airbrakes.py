@@ -248,9 +248,20 @@ def excerpt_run(tmp_path_factory):
     assert main(args) == 0
     toml = out / "flight" / "jackpot_launch_1_excerpt.toml"
     # --allow-unhealthy: a WARNING verdict still writes; the health test below asserts it is not ERROR
-    assert main(["run", str(toml), "--out", str(out / "rec"), "--allow-unhealthy"]) == 0
+    assert main(["run", str(toml), "--out", str(out / "rec"), "--allow-unhealthy", "--export"]) == 0
     result, score = rocket.run_flight(Post2Problem().settings(load_scenario(toml)))
     return out, toml, result, score
+
+
+def test_an_imported_flight_exports_its_reconstruction(excerpt_run):
+    """``--export`` of an imported rocket problem (issue 27: it failed with "unknown unit 'm^2'" on
+    the drag-area states after the recording was written): every state and its 1σ in SI."""
+    out, toml, _, _ = excerpt_run
+    tel = read_telemetry(out / "rec" / f"{toml.stem}.reconstruction.csv", sparse=())
+    assert "position.x" in tel.channels and "sigma_position.x" in tel.channels
+    areas = [c for c, u in tel.units.items() if u == "m^2"]
+    assert areas, f"no drag-area column among {list(tel.units)}"
+    assert tel.kinds[areas[0]] == "area"
 
 
 def test_import_writes_telemetry_a_problem_file_and_the_references(excerpt_run):
