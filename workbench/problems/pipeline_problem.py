@@ -3,14 +3,32 @@
 A problem composes a pipeline module that holds the reconstruction's final result (with its
 JSON-ready ``summary``), ``score(result, truth)`` and ``scorecard_markdown(summary)``; the problem's
 methods of those names only hand over.  :class:`PipelineProblem` is that hand-over once: a problem
-class derives from it and names its module in ``pipeline``.
+class derives from it and names its module in ``pipeline``.  :func:`folder_telemetry` and
+:func:`synthesized` are the telemetry-folder convention the entry problems share.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
+from pathlib import Path
 from typing import Any
 
-__all__ = ["PipelineProblem"]
+from workbench.problems.base import Synthesized
+
+__all__ = ["PipelineProblem", "folder_telemetry", "synthesized"]
+
+
+def folder_telemetry(folder: Path, streams: Iterable[str]) -> dict[str, Path]:
+    """The standard telemetry file names inside ``folder`` (the layout a synthetic run writes):
+    ``{stream: folder/<stream>.csv}`` for every stream, ``initial_state.toml`` for the initial state."""
+    d = Path(folder)
+    return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in streams}
+
+
+def synthesized(paths: Mapping[str, Path]) -> Synthesized:
+    """:class:`~workbench.problems.base.Synthesized` of what a truth simulation wrote, ``paths``:
+    {stream: telemetry file, ..., ``"truth"``: ``truth.npz``}."""
+    return Synthesized(telemetry={k: v for k, v in paths.items() if k != "truth"}, truth=paths["truth"])
 
 
 class PipelineProblem:

@@ -27,7 +27,7 @@ from workbench.problems.entry import pipeline as en
 from workbench.problems.entry.config import SCHEMA, EntrySettings
 from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import INITIAL_STATE_SCHEMA, STREAMS, telemetry_paths
-from workbench.problems.pipeline_problem import PipelineProblem
+from workbench.problems.pipeline_problem import PipelineProblem, folder_telemetry, synthesized
 
 __all__ = ["EntryProblem", "key_moments"]
 
@@ -138,15 +138,14 @@ class EntryProblem(PipelineProblem):
         """``[telemetry]`` files (``telemetry.STREAMS``), or the standard names in ``folder``."""
         if folder is None:
             return telemetry_paths(settings.telemetry, settings.run.path)
-        d = Path(folder)
-        return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+        return folder_telemetry(folder, STREAMS)
 
     def synthesize(self, settings: EntrySettings, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the entry (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
         from workbench.problems.entry.synthetic import synthesize_entry
 
         paths = synthesize_entry(settings, out_dir, seed=seed)
-        return Synthesized(telemetry={k: v for k, v in paths.items() if k != "truth"}, truth=paths["truth"])
+        return synthesized(paths)
 
     def load_truth(self, path: Path) -> dict:
         """The truth of ``truth.npz`` (``synthetic.load_truth``)."""

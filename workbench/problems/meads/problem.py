@@ -23,7 +23,7 @@ from workbench.problems.drawer import RunDrawer
 from workbench.problems.meads import pipeline as md
 from workbench.problems.meads.config import SCHEMA, MeadsSettings
 from workbench.problems.meads.telemetry import INITIAL_STATE_SCHEMA, STREAMS, telemetry_paths
-from workbench.problems.pipeline_problem import PipelineProblem
+from workbench.problems.pipeline_problem import PipelineProblem, folder_telemetry, synthesized
 
 __all__ = ["MeadsProblem", "key_moments"]
 
@@ -82,15 +82,14 @@ class MeadsProblem(PipelineProblem):
         """``[telemetry]`` files (absolute), or the standard names in ``folder``."""
         if folder is None:
             return telemetry_paths(settings.telemetry, settings.run.path)
-        d = Path(folder)
-        return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+        return folder_telemetry(folder, STREAMS)
 
     def synthesize(self, settings: MeadsSettings, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the entry (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
         from workbench.problems.meads.synthetic import synthesize_meads
 
         paths = synthesize_meads(settings, out_dir, seed)
-        return Synthesized(telemetry={k: v for k, v in paths.items() if k != "truth"}, truth=paths["truth"])
+        return synthesized(paths)
 
     def load_truth(self, path: Path) -> dict:
         """The arrays of ``truth.npz``."""
