@@ -16,10 +16,12 @@ import numpy as np
 from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
+from workbench.problems.drawer import RunDrawer
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
 from workbench.problems.droptest.config import LANDER_SCHEMA, SCHEMA, SETUP_SCHEMA, DropSettings
 from workbench.problems.droptest.telemetry import OPTIONAL_STREAMS, telemetry_paths
+from workbench.problems.pipeline_problem import PipelineProblem
 
 __all__ = ["TELEMETRY_FILES", "DropTestProblem", "key_moments", "residual_names"]
 
@@ -112,40 +114,13 @@ def key_moments(result: dt.DropResult) -> list[KeyMoment]:
     return out
 
 
-class _Drawer:
-    """:class:`~workbench.problems.base.StageRecorder` of a drop test (wraps DropTestRecorder)."""
+class DropTestProblem(PipelineProblem):
+    """Airbag drop test in the SPF chamber: kinematic/dynamic EKF + RTS smoother + airbag stroke.
 
-    def __init__(self, rec, truth, residuals: list[str], triads: list[str]):
-        from workbench.problems.droptest.recording import DropTestRecorder
-
-        self.rec = rec
-        self.residuals = residuals
-        self.triads = triads
-        self.drawer = DropTestRecorder(rec, truth)
-
-    def handle(self, stage: object) -> None:
-        self.drawer.handle(stage)
-
-    def finish(self, result: object, summary: dict) -> None:
-        from workbench.problems.droptest.recording import droptest_blueprint, impact_view
-        from workbench.recording.moments import log_key_moments
-
-        self.rec.report(dt.scorecard_markdown(summary))
-        if "health" in summary:
-            self.rec.health(summary["health"])
-        log_key_moments(self.rec, summary.get("key_moments", []))
-        # the layout that needs the result (camera at the impact, stroke zoom) becomes the default;
-        # not forced active, so that a layout opened with the recording (``workbench open --at``,
-        # ``rerun REC.rrd LAYOUT.rbl``) wins whichever the Viewer loads first
-        self.rec.stream.send_blueprint(
-            droptest_blueprint(self.residuals, impact_view(result), self.triads), make_active=False, make_default=True
-        )
-
-
-class DropTestProblem:
-    """Airbag drop test in the SPF chamber: kinematic/dynamic EKF + RTS smoother + airbag stroke."""
+    Scored (``pipeline.score``) on the max stroke, the restitution and the pose errors against the truth."""
 
     kind = "droptest"
+    pipeline = dt
     title = "drop"
     schema = SCHEMA
     #: the other input file kinds a drop test reads (FORMATS.md tables)
@@ -186,21 +161,9 @@ class DropTestProblem:
         """``pipeline.reconstruct``; ``options.seed`` drives the posterior sampling of the stroke σ."""
         return dt.reconstruct(settings, dict(telemetry), seed=0 if options.seed is None else options.seed)
 
-    def summary(self, result: dt.DropResult) -> dict:
-        """A copy of ``result.summary`` (SI)."""
-        return dict(result.summary)
-
     def key_moments(self, result: dt.DropResult) -> list[KeyMoment]:
         """Release, bungee cut, first contact, max stroke, rebound (:func:`key_moments`)."""
         return key_moments(result)
-
-    def score(self, result: dt.DropResult, truth: dict) -> dict:
-        """``pipeline.score``: max stroke, restitution, pose errors against the truth."""
-        return dt.score(result, truth)
-
-    def scorecard(self, summary: dict) -> str:
-        """``pipeline.scorecard_markdown``."""
-        return dt.scorecard_markdown(summary)
 
     def estimator(self, settings: DropSettings) -> str:
         """The size of the run's filter, for ``workbench list``: ``"EKF: 42 error states (43 full)"``
@@ -217,16 +180,22 @@ class DropTestProblem:
         return line
 
     @contextlib.contextmanager
-    def open_recording(self, path: Path, settings: DropSettings, truth: Any, properties: dict) -> Iterator[_Drawer]:
-        """The drop-test recording (``recording.droptest_blueprint`` layout)."""
-        from workbench.problems.droptest.recording import droptest_blueprint
+    def open_recording(self, path: Path, settings: DropSettings, truth: Any, properties: dict) -> Iterator[RunDrawer]:
+        """The drop-test recording (``recording.droptest_blueprint`` layout); when the run is done, the
+        layout that needs the result (camera at the impact, stroke zoom) becomes its default."""
+        from workbench.problems.droptest.recording import DropTestRecorder, droptest_blueprint, impact_view
         from workbench.recording.writer import open_recording
 
         residuals = residual_names(settings)
         triads = list(settings.accelerometer.triads)
         bp = droptest_blueprint(residuals, triads=triads)
         with open_recording(path, settings.name, blueprint=bp, properties=properties) as rec:
-            yield _Drawer(rec, truth, residuals, triads)
+            yield RunDrawer(
+                rec,
+                DropTestRecorder(rec, truth),
+                dt.scorecard_markdown,
+                layout=lambda result, summary: droptest_blueprint(residuals, impact_view(result), triads),
+            )
 
     def export_columns(self, result: dt.DropResult) -> ExportTable:
         """Smoothed position, velocity, attitude (SPF chamber frame), their σ, and the stroke."""

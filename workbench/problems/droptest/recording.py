@@ -498,24 +498,20 @@ class DropTestRecorder:
         sdf = np.sqrt(np.einsum("nii->ni", self.fwd.P)) if self.fwd is not None else None
         for label, sl, k in groups:
             key = label.split(" ")[0].replace(".", "")
-            r.scalars(
-                layout.droptest_sigma_path(key, layout.SMOOTHED_SERIES),
-                t,
-                sd[:, sl] * k,
-                step=step,
-                names=[f"σ{a} {label}" for a in "xyz"],
-                colors=XYZ,
-            )
-            if sdf is not None:
-                r.scalars(
-                    layout.droptest_sigma_path(key, layout.FORWARD_SERIES),
-                    t,
-                    sdf[:, sl] * k,
-                    step=step,
-                    names=[f"σ{a} {label} (forward)" for a in "xyz"],
-                    colors=XYZ,
-                    widths=0.6,
-                )
+            for series, sigma, tag, style in (
+                (layout.SMOOTHED_SERIES, sd, "", {}),
+                (layout.FORWARD_SERIES, sdf, " (forward)", {"widths": 0.6}),
+            ):
+                if sigma is not None:
+                    r.scalars(
+                        layout.droptest_sigma_path(key, series),
+                        t,
+                        sigma[:, sl] * k,
+                        step=step,
+                        names=[f"σ{a} {label}{tag}" for a in "xyz"],
+                        colors=XYZ,
+                        **style,
+                    )
 
     def _on_stroke(self, st) -> None:
         r = self.rec

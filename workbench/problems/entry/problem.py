@@ -22,10 +22,12 @@ from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.models.aerodynamics import VEHICLE_SCHEMA
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
+from workbench.problems.drawer import RunDrawer
 from workbench.problems.entry import pipeline as en
 from workbench.problems.entry.config import SCHEMA, EntrySettings
 from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import INITIAL_STATE_SCHEMA, STREAMS, telemetry_paths
+from workbench.problems.pipeline_problem import PipelineProblem, folder_telemetry, synthesized
 
 __all__ = ["EntryProblem", "key_moments"]
 
@@ -115,35 +117,14 @@ def key_moments(result: en.EntryResult) -> list[KeyMoment]:
     return [m for i, m in enumerate(out) if m.name not in names[:i]]  # an event named like a derived moment wins
 
 
-class _Drawer:
-    """:class:`~workbench.problems.base.StageRecorder` of an entry run (wraps EntryRecorder)."""
-
-    def __init__(self, rec, drawer):
-        self.rec = rec
-        self.drawer = drawer
-
-    def handle(self, stage: object) -> None:
-        self.drawer.handle(stage)
-
-    def finish(self, result: object, summary: dict) -> None:
-        from workbench.problems.entry.recording import descent_window, entry_blueprint
-        from workbench.recording.moments import log_key_moments
-
-        self.rec.report(en.scorecard_markdown(summary))
-        if "health" in summary:
-            self.rec.health(summary["health"])
-        log_key_moments(self.rec, summary.get("key_moments", []))
-        window = descent_window(summary)
-        if window is not None:  # the AGL views fixed on the descent, known only now; a default, not
-            # forced active, so that a layout opened with the recording (``workbench open --at``) wins
-            self.rec.stream.send_blueprint(entry_blueprint(descent=window), make_active=False, make_default=True)
-
-
-class EntryProblem:
+class EntryProblem(PipelineProblem):
     """Entry, descent and landing from IMU + radar telemetry: strapdown, dispersion analysis,
-    radar-aided smoother, atmosphere and winds."""
+    radar-aided smoother, atmosphere and winds.
+
+    Scored (``pipeline.score``) on the trajectory, atmosphere and wind errors against the truth."""
 
     kind = "entry"
+    pipeline = en
     title = "entry"
     schema = SCHEMA
     file_schemas = (VEHICLE_SCHEMA, INITIAL_STATE_SCHEMA)
@@ -157,15 +138,14 @@ class EntryProblem:
         """``[telemetry]`` files (``telemetry.STREAMS``), or the standard names in ``folder``."""
         if folder is None:
             return telemetry_paths(settings.telemetry, settings.run.path)
-        d = Path(folder)
-        return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+        return folder_telemetry(folder, STREAMS)
 
     def synthesize(self, settings: EntrySettings, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the entry (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
         from workbench.problems.entry.synthetic import synthesize_entry
 
         paths = synthesize_entry(settings, out_dir, seed=seed)
-        return Synthesized(telemetry={k: v for k, v in paths.items() if k != "truth"}, truth=paths["truth"])
+        return synthesized(paths)
 
     def load_truth(self, path: Path) -> dict:
         """The truth of ``truth.npz`` (``synthetic.load_truth``)."""
@@ -179,21 +159,9 @@ class EntryProblem:
         """``pipeline.reconstruct``; ``options.members``/``scheduler`` set the dispersion analysis."""
         return en.reconstruct(settings, dict(telemetry), scheduler=options.scheduler, members=options.members)
 
-    def summary(self, result: en.EntryResult) -> dict:
-        """A copy of ``result.summary`` (SI)."""
-        return dict(result.summary)
-
     def key_moments(self, result: en.EntryResult) -> list[KeyMoment]:
         """EIP, peak deceleration, PDD, saturation, FSR, first radar fix ... (:func:`key_moments`)."""
         return key_moments(result)
-
-    def score(self, result: en.EntryResult, truth: dict) -> dict:
-        """``pipeline.score``: trajectory, atmosphere and wind errors against the truth."""
-        return en.score(result, truth)
-
-    def scorecard(self, summary: dict) -> str:
-        """``pipeline.scorecard_markdown``."""
-        return en.scorecard_markdown(summary)
 
     def headline(self, summary: dict) -> str:
         """Altitude above ground ± 1σ at the end of the data and the dispersion acceptance; with a
@@ -228,10 +196,12 @@ class EntryProblem:
         return line
 
     @contextlib.contextmanager
-    def open_recording(self, path: Path, settings: EntrySettings, truth: Any, properties: dict) -> Iterator[_Drawer]:
-        """The entry recording (``recording.entry_blueprint`` layout) drawn in the landing-site frame."""
+    def open_recording(self, path: Path, settings: EntrySettings, truth: Any, properties: dict) -> Iterator[RunDrawer]:
+        """The entry recording (``recording.entry_blueprint`` layout) drawn in the landing-site frame;
+        when the run is done, the layout with the AGL views fixed on the descent (known only then)
+        becomes its default."""
         from workbench.core.bodies import MARS
-        from workbench.problems.entry.recording import EntryRecorder, entry_blueprint
+        from workbench.problems.entry.recording import EntryRecorder, descent_window, entry_blueprint
         from workbench.recording.writer import open_recording
 
         with open_recording(path, settings.run.name, blueprint=entry_blueprint(), properties=properties) as rec:
@@ -243,7 +213,12 @@ class EntryProblem:
                 jd_tdb0=en.epoch_jd_tdb(settings) if settings.epoch_utc is not None else None,
                 body=MARS,
             )
-            yield _Drawer(rec, drawer)
+
+            def layout(result: object, summary: dict):
+                window = descent_window(summary)
+                return None if window is None else entry_blueprint(descent=window)
+
+            yield RunDrawer(rec, drawer, en.scorecard_markdown, layout=layout)
 
     def export_columns(self, result: en.EntryResult) -> ExportTable:
         """Smoothed position, velocity (MMED inertial), attitude q_M_G and their σ."""

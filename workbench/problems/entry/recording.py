@@ -49,6 +49,7 @@ from workbench.problems.entry.winds import WindResult
 from workbench.recording import layout
 from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
+from workbench.recording.meshes import mesh3d
 from workbench.recording.writer import Recorder
 
 __all__ = ["EntryRecorder", "descent_window", "entry_blueprint"]
@@ -491,15 +492,7 @@ class EntryRecorder:
             rr.set_time(layout.TIME, duration=self.events["PDD"], recording=s)
             d_chute = float(np.sqrt(4.0 * self.vehicle.parachute.ref_area / np.pi))
             pm = parachute_mesh(d_chute, self.vehicle.riser_length)
-            s.log(
-                layout.ENTRY_PARACHUTE,
-                rr.Mesh3D(
-                    vertex_positions=pm.vertices.astype(np.float32),
-                    triangle_indices=pm.faces.astype(np.uint32),
-                    vertex_normals=pm.vertex_normals.astype(np.float32),
-                    albedo_factor=[230, 120, 40, 255],
-                ),
-            )
+            s.log(layout.ENTRY_PARACHUTE, mesh3d(pm, [230, 120, 40, 255]))
             a = np.asarray(self.vehicle.attach_point_G, float)
             rim = [
                 [r * np.cos(u), r * np.sin(u), self.vehicle.riser_length]
@@ -512,15 +505,7 @@ class EntryRecorder:
             )
         fsm = self._front_shield
         rr.set_time(layout.TIME, duration=float(t[0]), recording=s)
-        s.log(
-            layout.ENTRY_FRONT_SHIELD,
-            rr.Mesh3D(
-                vertex_positions=fsm.vertices.astype(np.float32),
-                triangle_indices=fsm.faces.astype(np.uint32),
-                vertex_normals=fsm.vertex_normals.astype(np.float32),
-                albedo_factor=[90, 60, 40, 255],
-            ),
-        )
+        s.log(layout.ENTRY_FRONT_SHIELD, mesh3d(fsm, [90, 60, 40, 255]))
         if "FSR" in self.events:
             rr.set_time(layout.TIME, duration=self.events["FSR"], recording=s)
             s.log(layout.ENTRY_FRONT_SHIELD, rr.Clear(recursive=False))
@@ -713,24 +698,19 @@ class EntryRecorder:
                     )
                     rec.scatter(layout.join(base, plus), res.t, 3 * sd[:, b], names="+3σ", colors=[GREY], size=4.0)
                     rec.scatter(layout.join(base, minus), res.t, -3 * sd[:, b], names="−3σ", colors=[GREY], size=4.0)
-                rec.scatter(
-                    layout.entry_radar_plot_path(ch, layout.MEASURED_SERIES),
-                    res.t,
-                    res.z,
-                    names=BEAMS,
-                    colors=XYZ + [GREY],
-                    marker="cross",
-                    size=6.0,
-                )
-                rec.scatter(
-                    layout.entry_radar_plot_path(ch, layout.PREDICTED_SERIES),
-                    res.t,
-                    res.z_pred,
-                    names=BEAMS,
-                    colors=XYZ + [GREY],
-                    marker="circle",
-                    size=4.0,
-                )
+                for series, z, marker, size in (
+                    (layout.MEASURED_SERIES, res.z, "cross", 6.0),
+                    (layout.PREDICTED_SERIES, res.z_pred, "circle", 4.0),
+                ):
+                    rec.scatter(
+                        layout.entry_radar_plot_path(ch, series),
+                        res.t,
+                        z,
+                        names=BEAMS,
+                        colors=XYZ + [GREY],
+                        marker=marker,
+                        size=size,
+                    )
                 continue
             names = ["slant-out [m]"] if ch == "slant_out" else ["x [m/s]", "y [m/s]", "z [m/s]"]
             plus, minus = layout.bound_names(3.0)

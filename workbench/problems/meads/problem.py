@@ -19,9 +19,11 @@ from workbench.io.moments import KeyMoment
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.models.flush_airdata import FADS_PORT_SCHEMA, FADS_VEHICLE_SCHEMA
 from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
+from workbench.problems.drawer import RunDrawer
 from workbench.problems.meads import pipeline as md
 from workbench.problems.meads.config import SCHEMA, MeadsSettings
 from workbench.problems.meads.telemetry import INITIAL_STATE_SCHEMA, STREAMS, telemetry_paths
+from workbench.problems.pipeline_problem import PipelineProblem, folder_telemetry, synthesized
 
 __all__ = ["MeadsProblem", "key_moments"]
 
@@ -60,29 +62,13 @@ def key_moments(result: md.MeadsResult) -> list[KeyMoment]:
     return out
 
 
-class _Drawer:
-    """:class:`~workbench.problems.base.StageRecorder` of a MEADS run."""
+class MeadsProblem(PipelineProblem):
+    """Seven flush pressure ports + IMU -> q∞, Mach, α, β, p∞, density, winds (least squares).
 
-    def __init__(self, rec, drawer):
-        self.rec = rec
-        self.drawer = drawer
-
-    def handle(self, stage: object) -> None:
-        self.drawer.handle(stage)
-
-    def finish(self, result: object, summary: dict) -> None:
-        from workbench.recording.moments import log_key_moments
-
-        self.rec.report(md.scorecard_markdown(summary))
-        if "health" in summary:
-            self.rec.health(summary["health"])
-        log_key_moments(self.rec, summary.get("key_moments", []))
-
-
-class MeadsProblem:
-    """Seven flush pressure ports + IMU -> q∞, Mach, α, β, p∞, density, winds (least squares)."""
+    Scored (``pipeline.score``) on the errors above 850 Pa against the truth, each vs its reported 3σ."""
 
     kind = "meads"
+    pipeline = md
     title = "entry"
     schema = SCHEMA
     file_schemas = (FADS_VEHICLE_SCHEMA, FADS_PORT_SCHEMA, INITIAL_STATE_SCHEMA)
@@ -96,15 +82,14 @@ class MeadsProblem:
         """``[telemetry]`` files (absolute), or the standard names in ``folder``."""
         if folder is None:
             return telemetry_paths(settings.telemetry, settings.run.path)
-        d = Path(folder)
-        return {k: d / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+        return folder_telemetry(folder, STREAMS)
 
     def synthesize(self, settings: MeadsSettings, out_dir: Path, seed: int) -> Synthesized:
         """Simulate the entry (truth) and write the telemetry + ``truth.npz`` into ``out_dir``."""
         from workbench.problems.meads.synthetic import synthesize_meads
 
         paths = synthesize_meads(settings, out_dir, seed)
-        return Synthesized(telemetry={k: v for k, v in paths.items() if k != "truth"}, truth=paths["truth"])
+        return synthesized(paths)
 
     def load_truth(self, path: Path) -> dict:
         """The arrays of ``truth.npz``."""
@@ -118,21 +103,9 @@ class MeadsProblem:
         """``pipeline.reconstruct``."""
         return md.reconstruct(settings, dict(telemetry))
 
-    def summary(self, result: md.MeadsResult) -> dict:
-        """A copy of ``result.summary``."""
-        return dict(result.summary)
-
     def key_moments(self, result: md.MeadsResult) -> list[KeyMoment]:
         """Peak q∞, largest |α| and |β|, first port failure, transonic crossing (:func:`key_moments`)."""
         return key_moments(result)
-
-    def score(self, result: md.MeadsResult, truth: dict) -> dict:
-        """``pipeline.score``: errors above 850 Pa against the truth, each vs its reported 3σ."""
-        return md.score(result, truth)
-
-    def scorecard(self, summary: dict) -> str:
-        """``pipeline.scorecard_markdown``."""
-        return md.scorecard_markdown(summary)
 
     def headline(self, summary: dict) -> str:
         """Failed ports and, with a truth, the max α/β/q∞ errors above 850 Pa."""
@@ -147,7 +120,7 @@ class MeadsProblem:
         return line
 
     @contextlib.contextmanager
-    def open_recording(self, path: Path, settings: MeadsSettings, truth: Any, properties: dict) -> Iterator[_Drawer]:
+    def open_recording(self, path: Path, settings: MeadsSettings, truth: Any, properties: dict) -> Iterator[RunDrawer]:
         """The MEADS recording (``recording.meads_blueprint``)."""
         from workbench.problems.meads.recording import MeadsRecorder, meads_blueprint
         from workbench.recording.writer import open_recording
@@ -155,7 +128,7 @@ class MeadsProblem:
         ekf = settings.ekf
         bp = meads_blueprint(settings.vehicle.port_names, ekf.passes if ekf.enabled else 0)
         with open_recording(path, settings.run.name, blueprint=bp, properties=properties) as rec:
-            yield _Drawer(rec, MeadsRecorder(rec, truth))
+            yield RunDrawer(rec, MeadsRecorder(rec, truth), md.scorecard_markdown)
 
     def export_columns(self, result: md.MeadsResult) -> ExportTable:
         """Air data, density and winds with their 1σ at the pressure times (least squares, and the

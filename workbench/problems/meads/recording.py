@@ -219,30 +219,20 @@ class MeadsRecorder:
         f, t = st.fit, st.t
         self._fit = f
         rec = self.rec
-        rec.series_with_bounds(
-            layout.plot_path("alpha_deg"),
-            t,
-            np.degrees(f.alpha),
-            np.degrees(f.sigma_alpha),
-            truth=self._truth("alpha", t, 180 / math.pi),
-            names="α [deg]",
-        )
-        rec.series_with_bounds(
-            layout.plot_path("beta_deg"),
-            t,
-            np.degrees(f.beta),
-            np.degrees(f.sigma_beta),
-            truth=self._truth("beta", t, 180 / math.pi),
-            names="β [deg]",
-        )
-        rec.series_with_bounds(
-            layout.plot_path("qbar_kPa"),
-            t,
-            f.qbar / 1e3,
-            f.sigma_qbar / 1e3,
-            truth=self._truth("qbar", t, 1e-3),
-            names="q∞ [kPa]",
-        )
+        # the fit's outputs in display units: value and 1σ (same conversion), truth scale, label
+        for name, plot, to_unit, truth_scale, label in (
+            ("alpha", "alpha_deg", np.degrees, 180 / math.pi, "α [deg]"),
+            ("beta", "beta_deg", np.degrees, 180 / math.pi, "β [deg]"),
+            ("qbar", "qbar_kPa", lambda v: v / 1e3, 1e-3, "q∞ [kPa]"),
+        ):
+            rec.series_with_bounds(
+                layout.plot_path(plot),
+                t,
+                to_unit(getattr(f, name)),
+                to_unit(getattr(f, f"sigma_{name}")),
+                truth=self._truth(name, t, truth_scale),
+                names=label,
+            )
         z = f.normalized_residual
         for j, p in enumerate(self.vehicle.port_names):
             rec.scalars(

@@ -27,6 +27,7 @@ from workbench.problems.post2.scoring import truth_on_grid
 from workbench.recording import layout
 from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
+from workbench.recording.meshes import mesh3d
 from workbench.recording.moments import log_key_moments
 from workbench.recording.writer import open_recording
 
@@ -207,16 +208,7 @@ class Post2Drawer:
                 continue
             rr.set_time(layout.TIME, duration=float(te), recording=s)
             if opens:
-                c = m["canopy"]
-                s.log(
-                    layout.POST2_PARACHUTE,
-                    rr.Mesh3D(
-                        vertex_positions=c.vertices.astype(np.float32),
-                        triangle_indices=c.faces.astype(np.uint32),
-                        vertex_normals=c.vertex_normals.astype(np.float32),
-                        albedo_factor=[230, 120, 40, 255],
-                    ),
-                )
+                s.log(layout.POST2_PARACHUTE, mesh3d(m["canopy"], [230, 120, 40, 255]))
                 s.log(
                     layout.POST2_RISERS,
                     rr.LineStrips3D([[[0.0, 0.0, 0.0], e] for e in m["riser_ends"]], colors=[[120, 120, 120]]),
