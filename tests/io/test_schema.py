@@ -302,3 +302,16 @@ def test_parse_file_names_the_file_for_every_failure(tmp_path):
         with pytest.raises(ScenarioError, match=match) as e:
             read(path)
         assert path.name in str(e.value)
+
+
+def test_number_or_list_takes_one_number_or_a_list_within_the_bounds():
+    s = Schema("toy", "a test", (Table("", "top", (Key("spacing_m", "number_or_list", None, "m", gt=0.0),)),))
+    assert s.validate({"spacing_m": 2}, FILE)["spacing_m"] == 2.0
+    assert isinstance(s.validate({"spacing_m": 2}, FILE)["spacing_m"], float)
+    assert s.validate({"spacing_m": [1.0, 1.5]}, FILE)["spacing_m"] == [1.0, 1.5]
+    assert s.validate({}, FILE)["spacing_m"] is None
+    with pytest.raises(ScenarioError, match="spacing_m"):
+        s.validate({"spacing_m": "wide"}, FILE)
+    with pytest.raises(ScenarioError, match="out of range"):
+        s.validate({"spacing_m": [1.0, -1.0]}, FILE)
+    assert "| `spacing_m` | number or list |" in render_markdown(s)

@@ -64,8 +64,9 @@ class _Required:
 REQUIRED: Any = _Required()
 
 #: Value kinds: those of :meth:`Scenario.get <workbench.io.scenario.Scenario.get>`, plus
-#: ``"number_or_vec3"`` (one number for all three axes, or a list of 3).
-KINDS = ("float", "int", "str", "bool", "vec3", "list", "table", "number_or_vec3")
+#: ``"number_or_vec3"`` (one number for all three axes, or a list of 3) and ``"number_or_list"``
+#: (one number for every item, or a list: e.g. one value per face); a number is returned as float.
+KINDS = ("float", "int", "str", "bool", "vec3", "list", "table", "number_or_vec3", "number_or_list")
 
 
 @dataclass(frozen=True)
@@ -169,10 +170,9 @@ def scenario_table(
 
 
 def _check(file: Path, dotted: str, v: Any, key: Key | None, kind: str) -> Any:
-    if kind == "number_or_vec3":
-        out = (
-            float(v) if isinstance(v, int | float) and not isinstance(v, bool) else check_value(file, dotted, v, "vec3")
-        )
+    if kind in ("number_or_vec3", "number_or_list"):
+        one = isinstance(v, int | float) and not isinstance(v, bool)
+        out = float(v) if one else check_value(file, dotted, v, kind.removeprefix("number_or_"))
         if key is not None:
             key.check_bounds(file, dotted, out)
         return out
@@ -378,7 +378,7 @@ def render_markdown(schema: Schema) -> str:
             if k.choices:
                 listed = ", ".join(f"`{c}`" for c in k.choices)
                 meaning += ("" if meaning.endswith(".") else ".") + f" One of: {listed}."
-            kind = "number or vec3" if k.kind == "number_or_vec3" else k.kind
+            kind = k.kind.replace("_", " ") if k.kind.startswith("number_or_") else k.kind
             rng = f" {k.bounds} |" if bounded else ""
             lines.append(f"| `{k.name}` | {kind} | {_cell(k.unit)} | {_fmt_default(k)} |{rng} {_cell(meaning)} |")
         if t.free is not None:
