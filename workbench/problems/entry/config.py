@@ -31,11 +31,12 @@ from workbench.problems.entry.atmosphere import AtmosphereSettings, EntryProfile
 from workbench.problems.entry.dispersion import AcceptanceRules, DispersionSigmas
 from workbench.problems.entry.filter import EntryFilterSigmas
 from workbench.problems.entry.preprocess import PreprocessConfig
-from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryImuModel, EntryTelemetrySpec, NominalErrorModel
+from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryTelemetrySpec, NominalErrorModel
 from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M
 from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import TelemetryChecks
 from workbench.problems.entry.truth import EntryTruthSpec
+from workbench.problems.imu_settings import imu_error_model
 
 __all__ = [
     "SCHEMA",
@@ -726,13 +727,8 @@ def _telemetry_spec(file: Path, v: dict) -> EntryTelemetrySpec:
             raise ScenarioError(file, "synthetic.nominal_error.dx0", "must hold 9 numbers (m/s, deg, m)")
         dx0 = tuple(dx0[DV] + [math.radians(x) for x in dx0[DTH]] + dx0[DP])
     return EntryTelemetrySpec(
-        imu=EntryImuModel(
-            accel_noise=imu["accel_noise_mps2"],
-            accel_bias=imu["accel_bias_mps2"],
-            accel_scale=imu["accel_scale"],
-            gyro_noise=math.radians(imu["gyro_noise_dps"]),
-            gyro_bias=math.radians(imu["gyro_bias_dps"]),
-            gyro_scale=imu["gyro_scale"],
+        imu=imu_error_model(
+            imu,
             accel_misalignment=imu["accel_misalignment_rad"],
             gyro_misalignment=imu["gyro_misalignment_rad"],
             gyro_full_scale=tuple(math.radians(x) for x in fs),  # type: ignore[arg-type]

@@ -17,6 +17,7 @@ from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, from_table, scenario_table
 from workbench.models.flush_airdata import FadsVehicle, load_fads_vehicle
 from workbench.models.imu import ImuErrorModel
+from workbench.problems.imu_settings import imu_error_model
 from workbench.problems.meads.sensors import FAILURE_MODES, NavigationErrorSpec, PressureSensorSpec
 from workbench.problems.meads.truth import MeadsTruthSpec
 
@@ -198,15 +199,7 @@ class MeadsSettings:
             MeadsTruthSpec, tr, bank_profile_deg=tuple((float(a), float(b)) for a, b in tr["bank_profile_deg"])
         )
         pressure = from_table(PressureSensorSpec, sp, time_tag_max_s=sp["time_tag_max_us"] * 1e-6)
-        imu = ImuErrorModel(
-            accel_noise=si["accel_noise_mps2"],
-            accel_bias=si["accel_bias_mps2"],
-            accel_scale=si["accel_scale"],
-            gyro_noise=math.radians(si["gyro_noise_dps"]),
-            gyro_bias=math.radians(si["gyro_bias_dps"]),
-            gyro_scale=si["gyro_scale"],
-            gyro_full_scale=(math.radians(400.0),) * 3,
-        )
+        imu = imu_error_model(si, gyro_full_scale=(math.radians(400.0),) * 3)
         nav = NavigationErrorSpec(
             sn["position_sigma_m"], sn["velocity_sigma_mps"], math.radians(sn["attitude_sigma_deg"])
         )
