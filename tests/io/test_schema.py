@@ -3,14 +3,24 @@ FORMATS.md generated from the problems' schemas."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import workbench.io.schema as schema_mod
-from workbench.io.scenario import ScenarioError
-from workbench.io.schema import REQUIRED, Key, Schema, Table, render_markdown, update_formats
+from workbench.io.scenario import ScenarioError, parse_file
+from workbench.io.schema import (
+    REQUIRED,
+    Key,
+    Schema,
+    Table,
+    from_table,
+    render_markdown,
+    scenario_table,
+    update_formats,
+)
 from workbench.problems.droptest.config import SCHEMA as DROPTEST
 from workbench.problems.entry.config import SCHEMA as ENTRY
 from workbench.problems.meads.config import SCHEMA as MEADS
@@ -236,3 +246,72 @@ def test_a_wrong_choice_suggests_the_nearest():
     s = Schema("c", "c", (Table("t", "t", (Key("mode", "str", "fast", choices=("kinematic", "dynamic")),)),))
     with pytest.raises(ScenarioError, match="did you mean 'dynamic'"):
         s.validate({"t": {"mode": "dynamik"}}, FILE)
+
+
+def test_scenario_table_declares_the_common_keys():
+    t = scenario_table("toy", epoch="UTC of t = 0")
+    assert t.name == "scenario" and [k.name for k in t.keys] == ["name", "kind", "description", "epoch_utc"]
+    assert t.key("kind").meaning == '`"toy"`' and t.key("name").default is REQUIRED
+    assert scenario_table("toy").key("epoch_utc") is None  # no epoch: no key
+    s = Schema("toy", "a test", (scenario_table("toy"),))
+    with pytest.raises(ScenarioError, match="missing"):
+        s.validate({"scenario": {"kind": "toy"}}, FILE)
+    assert s.validate({"scenario": {"name": "a", "kind": "toy"}}, FILE)["scenario"]["description"] == ""
+
+
+@dataclass(frozen=True)
+class _Stage:
+    noise_dps: float
+    rate_hz: int
+    lever_m: tuple
+    extra: int = 7
+
+
+def test_from_table_takes_the_keys_named_like_the_fields():
+    v = TOY.validate({"scenario": {"name": "a", "kind": "toy"}, "sensors": {"imu": {"rate_hz": 50}}}, FILE)
+    imu = v["sensors"]["imu"]
+    st = from_table(_Stage, imu, lever_m=tuple(imu["lever_m"]))
+    assert st == _Stage(0.4, 50, (0.0, 0.0, 1.0), 7)  # keys that are no field (mode, bias_dps) are the caller's
+    assert from_table(_Stage, imu, lever_m=(), extra=1).extra == 1
+    with pytest.raises(TypeError, match="no field lever"):
+        from_table(_Stage, imu, lever=())
+    with pytest.raises(TypeError):
+        from_table(_Stage, {"noise_dps": 1.0})  # rate_hz, lever_m: no value
+
+
+class _SyntaxError(Exception):
+    pass
+
+
+def test_parse_file_names_the_file_for_every_failure(tmp_path):
+    def load(p: Path) -> str:
+        text = p.read_text(encoding="utf-8")
+        if text.startswith("bad"):
+            raise _SyntaxError("line 1")
+        return text
+
+    def read(path):
+        return parse_file(path, load, _SyntaxError, lambda exc: f"broken: {exc}")
+
+    ok, bad, binary = tmp_path / "ok.txt", tmp_path / "bad.txt", tmp_path / "bin.txt"
+    ok.write_text("fine")
+    bad.write_text("bad")
+    binary.write_bytes(b"\xff\xfe\x00")
+    assert read(ok) == "fine"
+    for path, match in ((bad, "broken: line 1"), (binary, "not valid UTF-8"), (tmp_path / "no.txt", "not found")):
+        with pytest.raises(ScenarioError, match=match) as e:
+            read(path)
+        assert path.name in str(e.value)
+
+
+def test_number_or_list_takes_one_number_or_a_list_within_the_bounds():
+    s = Schema("toy", "a test", (Table("", "top", (Key("spacing_m", "number_or_list", None, "m", gt=0.0),)),))
+    assert s.validate({"spacing_m": 2}, FILE)["spacing_m"] == 2.0
+    assert isinstance(s.validate({"spacing_m": 2}, FILE)["spacing_m"], float)
+    assert s.validate({"spacing_m": [1.0, 1.5]}, FILE)["spacing_m"] == [1.0, 1.5]
+    assert s.validate({}, FILE)["spacing_m"] is None
+    with pytest.raises(ScenarioError, match="spacing_m"):
+        s.validate({"spacing_m": "wide"}, FILE)
+    with pytest.raises(ScenarioError, match="out of range"):
+        s.validate({"spacing_m": [1.0, -1.0]}, FILE)
+    assert "| `spacing_m` | number or list |" in render_markdown(s)

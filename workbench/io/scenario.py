@@ -20,6 +20,7 @@ import copy
 import datetime as _dt
 import os
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -33,6 +34,7 @@ __all__ = [
     "check_value",
     "find_scenarios",
     "load_scenario",
+    "parse_file",
     "read_toml",
     "resolve_scenario",
 ]
@@ -284,14 +286,28 @@ def read_toml(path: str | os.PathLike) -> dict:
     """The parsed TOML document at ``path``; :class:`ScenarioError` naming the file (and the line,
     as :mod:`tomllib` reports it) when it is missing, unreadable, not UTF-8 or not valid TOML.
     With :func:`workbench.io.schema.read_json`, the one place an input file's text is parsed."""
+    return parse_file(path, _load_toml, tomllib.TOMLDecodeError, lambda exc: f"not valid TOML: {exc}")
+
+
+def _load_toml(path: Path) -> dict:
+    with path.open("rb") as f:
+        return tomllib.load(f)
+
+
+def parse_file(
+    path: str | os.PathLike, load: Callable[[Path], Any], syntax_error: type[Exception], describe: Callable[[Any], str]
+) -> Any:
+    """``load(path)`` (the parsed document of one input file), every failure a :class:`ScenarioError`
+    naming the file: "file not found", ``describe(exc)`` for the format's ``syntax_error`` (e.g. line
+    and column), not UTF-8, or any other read error.  Shared by :func:`read_toml` and
+    :func:`workbench.io.schema.read_json` so both report a bad file the same way."""
     path = Path(path)
     try:
-        with path.open("rb") as f:
-            return tomllib.load(f)
+        return load(path)
     except FileNotFoundError:
         raise ScenarioError(path, None, "file not found") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(path, None, f"not valid TOML: {exc}") from None
+    except syntax_error as exc:
+        raise ScenarioError(path, None, describe(exc)) from None
     except UnicodeDecodeError as exc:
         raise ScenarioError(path, None, f"not valid UTF-8: {exc}") from None
     except OSError as exc:

@@ -26,16 +26,17 @@ TOML or JSON input file (:func:`read_toml`, :func:`read_json`, :func:`load_file`
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
-from workbench.io.scenario import ScenarioError, check_value, read_toml
+from workbench.io.scenario import ScenarioError, check_value, parse_file, read_toml
 
 __all__ = [
     "REQUIRED",
@@ -43,10 +44,12 @@ __all__ = [
     "Key",
     "Table",
     "Schema",
+    "from_table",
     "load_file",
     "read_json",
     "read_toml",
     "render_markdown",
+    "scenario_table",
     "update_formats",
     "write_formats",
 ]
@@ -61,8 +64,9 @@ class _Required:
 REQUIRED: Any = _Required()
 
 #: Value kinds: those of :meth:`Scenario.get <workbench.io.scenario.Scenario.get>`, plus
-#: ``"number_or_vec3"`` (one number for all three axes, or a list of 3).
-KINDS = ("float", "int", "str", "bool", "vec3", "list", "table", "number_or_vec3")
+#: ``"number_or_vec3"`` (one number for all three axes, or a list of 3) and ``"number_or_list"``
+#: (one number for every item, or a list: e.g. one value per face); a number is returned as float.
+KINDS = ("float", "int", "str", "bool", "vec3", "list", "table", "number_or_vec3", "number_or_list")
 
 
 @dataclass(frozen=True)
@@ -148,11 +152,27 @@ class Table:
         return None
 
 
+def scenario_table(
+    kind: str, *, epoch: str | None = None, name: str = "names the run, its recording and summary"
+) -> Table:
+    """The ``[scenario]`` table every scenario opens with (the keys :func:`~workbench.io.scenario.load_scenario`
+    reads before the problem is known): ``name`` (required; ``name`` says what it names), ``kind``
+    (required, ``"<kind>"``), ``description`` and, when ``epoch`` gives its meaning, ``epoch_utc``
+    (UTC of t = 0; absent = the problem has no epoch)."""
+    keys = (
+        Key("name", "str", REQUIRED, meaning=name),
+        Key("kind", "str", REQUIRED, meaning=f'`"{kind}"`'),
+        Key("description", "str", "", meaning="one line for listings"),
+    )
+    if epoch is not None:
+        keys += (Key("epoch_utc", "str", None, meaning=epoch),)
+    return Table("scenario", "what the run is", keys)
+
+
 def _check(file: Path, dotted: str, v: Any, key: Key | None, kind: str) -> Any:
-    if kind == "number_or_vec3":
-        out = (
-            float(v) if isinstance(v, int | float) and not isinstance(v, bool) else check_value(file, dotted, v, "vec3")
-        )
+    if kind in ("number_or_vec3", "number_or_list"):
+        one = isinstance(v, int | float) and not isinstance(v, bool)
+        out = float(v) if one else check_value(file, dotted, v, kind.removeprefix("number_or_"))
         if key is not None:
             key.check_bounds(file, dotted, out)
         return out
@@ -278,21 +298,38 @@ def _where(table: str) -> str:
     return f"table [{table}]" if table else "the top level"
 
 
+_T = TypeVar("_T")
+
+
+def from_table(cls: type[_T], table: dict, **given: Any) -> _T:
+    """The frozen settings dataclass ``cls`` of one validated table (:meth:`Schema.validate`):
+    each field takes the value ``given`` for it, else the table's key of the same name (already
+    checked and defaulted), else the field's own default.  For a stage whose fields mirror its
+    table's keys, so only the fields that are converted or derived are spelled out; keys of the
+    table that are no field of ``cls`` are left to the caller.  TypeError for a ``given`` name that
+    is no field (a typo), or a field without a value."""
+    fields = [f for f in dataclasses.fields(cls) if f.init]  # type: ignore[arg-type]
+    unknown = set(given) - {f.name for f in fields}
+    if unknown:
+        raise TypeError(f"{cls.__name__} has no field {', '.join(sorted(unknown))}")
+    kw = {
+        f.name: given[f.name] if f.name in given else table[f.name]
+        for f in fields
+        if f.name in given or f.name in table
+    }
+    return cls(**kw)
+
+
 # ------------------------------------------------------------------------------ reading files
 def read_json(path: str | Path) -> Any:
     """The parsed JSON document at ``path``; :class:`ScenarioError` naming the file (line and
     column of a syntax error) when it is missing, unreadable or not valid JSON."""
-    path = Path(path)
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ScenarioError(path, None, "file not found") from None
-    except json.JSONDecodeError as exc:
-        raise ScenarioError(path, None, f"not valid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})") from None
-    except UnicodeDecodeError as exc:
-        raise ScenarioError(path, None, f"not valid UTF-8: {exc}") from None
-    except OSError as exc:
-        raise ScenarioError(path, None, f"cannot read file: {exc.strerror or exc}") from None
+    return parse_file(
+        path,
+        lambda p: json.loads(p.read_text(encoding="utf-8")),
+        json.JSONDecodeError,
+        lambda exc: f"not valid JSON: {exc.msg} (line {exc.lineno}, column {exc.colno})",
+    )
 
 
 def load_file(path: str | Path, schema: Schema, *, optional: tuple[str, ...] = ()) -> dict:
@@ -341,7 +378,7 @@ def render_markdown(schema: Schema) -> str:
             if k.choices:
                 listed = ", ".join(f"`{c}`" for c in k.choices)
                 meaning += ("" if meaning.endswith(".") else ".") + f" One of: {listed}."
-            kind = "number or vec3" if k.kind == "number_or_vec3" else k.kind
+            kind = k.kind.replace("_", " ") if k.kind.startswith("number_or_") else k.kind
             rng = f" {k.bounds} |" if bounded else ""
             lines.append(f"| `{k.name}` | {kind} | {_cell(k.unit)} | {_fmt_default(k)} |{rng} {_cell(meaning)} |")
         if t.free is not None:

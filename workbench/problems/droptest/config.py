@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from workbench.io.scenario import RunInfo, Scenario, ScenarioError
-from workbench.io.schema import REQUIRED, Key, Schema, Table
+from workbench.io.schema import REQUIRED, Key, Schema, Table, from_table, scenario_table
 from workbench.problems.droptest.lander import LANDER_SCHEMA as _LANDER_SCHEMA
 from workbench.problems.droptest.lander import LanderModel, load_lander
 
@@ -43,16 +43,7 @@ SCHEMA = Schema(
     "droptest",
     "REDLand airbag drop test",
     (
-        Table(
-            "scenario",
-            "what the run is",
-            (
-                Key("name", _S, REQUIRED, meaning="names the run, its recording and summary"),
-                Key("kind", _S, REQUIRED, meaning='`"droptest"`'),
-                Key("description", _S, "", meaning="one line for listings"),
-                Key("epoch_utc", _S, None, meaning="UTC of t = 0 (metadata)"),
-            ),
-        ),
+        scenario_table("droptest", epoch="UTC of t = 0 (metadata)"),
         Table(
             "vehicle",
             "the lander",
@@ -557,26 +548,17 @@ class DropSettings:
             lander_file=lander_file,
             lander=load_lander(lander_file),
             telemetry={k: (None if p is None else run.resolve(p).absolute()) for k, p in v["telemetry"].items()},
-            chamber=Chamber(
-                ramp_angle_deg=ch["ramp_angle_deg"],
-                nail_depth_m=ch["nail_depth_m"],
+            chamber=from_table(
+                Chamber,
+                ch,
                 magnetic_field_spf=_frozen(ch["magnetic_field_spf"]),
-                rocks=Rocks(
-                    seed=rk["seed"],
-                    spacing_m=rk["spacing_m"],
-                    extent_m=((float(ext[0][0]), float(ext[0][1])), (float(ext[1][0]), float(ext[1][1]))),
+                rocks=from_table(
+                    Rocks, rk, extent_m=((float(ext[0][0]), float(ext[0][1])), (float(ext[1][0]), float(ext[1][1])))
                 )
                 if scenario.has("chamber.rocks")
                 else None,
             ),
-            accelerometer=Accelerometer(
-                triads=tuple(acc["triads"]),
-                noise_g=acc["noise_g"],
-                bias_g=acc["bias_g"],
-                scale=acc["scale"],
-                misalignment_deg=acc["misalignment_deg"],
-                full_scale_g=acc["full_scale_g"],
-            ),
+            accelerometer=from_table(Accelerometer, acc, triads=tuple(acc["triads"])),
             gyro=Gyro(**gyr),
             acquisition=Acquisition(
                 sample_rate_hz=aq["sample_rate_hz"],
@@ -586,35 +568,19 @@ class DropSettings:
                 latency_s=aq["latency_s"],
             ),
             attitude_3dm=Attitude3dm(**a3),
-            ranging=Ranging(
+            ranging=from_table(
+                Ranging,
+                rg,
                 enabled=scenario.has("sensors.ranging"),
-                rate_hz=rg["rate_hz"],
                 rate_given=scenario.has("sensors.ranging.rate_hz"),
-                odometer=rg["odometer"],
-                odometer_sigma_m=rg["odometer_sigma_m"],
-                odometer_zero_m=rg["odometer_zero_m"],
-                radar_range_sigma_m=rg["radar_range_sigma_m"],
-                radar_rate_sigma_mps=rg["radar_rate_sigma_mps"],
                 reflector_body_m=reflector,
-                latency_s=rg["latency_s"],
-                acquisition_filter=rg["acquisition_filter"],
                 radar_guns=guns,
                 reflectors_body_m={g: refl.get(g, reflector) for g in guns},
                 range_sigma_m={g: sig_r.get(g, rg["radar_range_sigma_m"]) for g in guns},
                 rate_sigma_mps={g: sig_rr.get(g, rg["radar_rate_sigma_mps"]) for g in guns},
             ),
             filter=FilterSettings(**f),
-            synthetic=Synthetic(
-                seed=s["seed"],
-                impact_parallel_mps=s["impact_parallel_mps"],
-                impact_normal_mps=s["impact_normal_mps"],
-                release_euler123_deg=tuple(float(a) for a in s["release_euler123_deg"]),
-                release_to_contact_s=s["release_to_contact_s"],
-                pre_release_s=s["pre_release_s"],
-                bungee_truth_scale=s["bungee_truth_scale"],
-                survey_sigma_m=s["survey_sigma_m"],
-                bag_pressure_psi=s["bag_pressure_psi"],
-            ),
+            synthetic=from_table(Synthetic, s, release_euler123_deg=tuple(float(a) for a in s["release_euler123_deg"])),
         )
 
 

@@ -309,7 +309,7 @@ LANDER_SCHEMA = Schema(
                 ),
                 Key(
                     "lobe_spacing_m",
-                    "list",
+                    "number_or_list",
                     None,
                     "m",
                     "rack: lobe centre spacing, one number for every face or one per face in bag order `base, "
@@ -318,7 +318,7 @@ LANDER_SCHEMA = Schema(
                 ),
                 Key(
                     "standoff_m",
-                    "list",
+                    "number_or_list",
                     None,
                     "m",
                     "lobe inner surface to its face, > −lobe radius (negative = lobes wrap the lander); one "
@@ -375,8 +375,10 @@ LANDER_SCHEMA = Schema(
 )
 
 
-def _per_face(v: list, key: str, path: Path) -> np.ndarray:
-    """A per-face value as the schema returned it (a number was made a list of one) -> (4,)."""
+def _per_face(v: float | list, key: str, path: Path) -> np.ndarray:
+    """A per-face value as the schema returned it (one number for every face, or a list) -> (4,)."""
+    if isinstance(v, float):
+        v = [v]
     if len(v) == 1:
         v = v * len(FACE_NAMES)
     if len(v) != len(FACE_NAMES) or any(isinstance(x, bool) or not isinstance(x, int | float) for x in v):
@@ -394,10 +396,6 @@ def _matrix(v, key: str, path: Path, shape: tuple[int, ...], what: str) -> np.nd
     return a
 
 
-#: keys whose value is one number for every face or one per face (the schema's kind is a list)
-_PER_FACE_KEYS = ("lobe_spacing_m", "standoff_m")
-
-
 def load_lander(path: str | Path) -> LanderModel:
     """Read a lander asset (TOML, lengths in m, the lander frame L) into a :class:`LanderModel`
     (everything in B: L's axes, origin at the CM).
@@ -412,12 +410,6 @@ def load_lander(path: str | Path) -> LanderModel:
     """
     path = Path(path)
     raw = read_toml(path)
-    at_raw = raw.get("airbags")
-    if isinstance(at_raw, dict):  # one number for every face: the schema's list kind holds it as [x]
-        for k in _PER_FACE_KEYS:
-            x = at_raw.get(k)
-            if isinstance(x, int | float) and not isinstance(x, bool):
-                at_raw[k] = [x]
     data = LANDER_SCHEMA.validate(raw, path)
     if "instruments" not in raw:
         raise ScenarioError(path, "instruments", "missing (required table of a lander asset)")
@@ -470,7 +462,7 @@ def load_lander(path: str | Path) -> LanderModel:
             )
         centers = cen - cm_L
         st = at["standoff_m"]
-        standoff = float(st[0]) if st is not None and len(st) == 1 else 0.0
+        standoff = st if isinstance(st, float) else float(st[0]) if st is not None and len(st) == 1 else 0.0
     else:
         for k in ("lobes_per_bag", "lobe_spacing_m", "standoff_m"):
             if at[k] is None:

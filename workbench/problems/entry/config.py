@@ -24,18 +24,19 @@ import numpy as np
 from workbench.core.frames import julian_date_from_utc
 from workbench.io.assets import asset_path
 from workbench.io.scenario import RunInfo, Scenario, ScenarioError
-from workbench.io.schema import REQUIRED, Key, Schema, Table
+from workbench.io.schema import Key, Schema, Table, from_table, scenario_table
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
 from workbench.models.radar import AZIMUTHS_DEG, SQUINT_DEG, beam_directions_G
 from workbench.problems.entry.atmosphere import AtmosphereSettings, EntryProfileSigmas
 from workbench.problems.entry.dispersion import AcceptanceRules, DispersionSigmas
 from workbench.problems.entry.filter import EntryFilterSigmas
 from workbench.problems.entry.preprocess import PreprocessConfig
-from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryImuModel, EntryTelemetrySpec, NominalErrorModel
+from workbench.problems.entry.sensors import DEFAULT_GAPS, EntryTelemetrySpec, NominalErrorModel
 from workbench.problems.entry.site import R_MOLA, TERRAIN_ELEVATION_M
 from workbench.problems.entry.state import DP, DTH, DV
 from workbench.problems.entry.telemetry import TelemetryChecks
 from workbench.problems.entry.truth import EntryTruthSpec
+from workbench.problems.imu_settings import imu_error_model
 
 __all__ = [
     "SCHEMA",
@@ -157,16 +158,7 @@ SCHEMA = Schema(
     "entry",
     "AMELIA entry and descent reconstruction",
     (
-        Table(
-            "scenario",
-            "what the run is",
-            (
-                Key("name", _S, REQUIRED, meaning="names the run, its recording and summary"),
-                Key("kind", _S, REQUIRED, meaning='`"entry"`'),
-                Key("description", _S, "", meaning="one line for listings"),
-                Key("epoch_utc", _S, None, meaning="UTC of EIP (t = 0); absent: the telemetry's `# epoch_utc:`"),
-            ),
-        ),
+        scenario_table("entry", epoch="UTC of EIP (t = 0); absent: the telemetry's `# epoch_utc:`"),
         Table(
             "vehicle",
             "the entry vehicle",
@@ -698,30 +690,11 @@ def _dispersion(file: Path, dis: dict) -> DispersionSettings:
         if not (len(r) == 2 and all(isinstance(x, int | float) and not isinstance(x, bool) for x in r) and r[1] > 0):
             raise ScenarioError(file, f"dispersion.rules.{k}", "need [centre, half-width] with half-width > 0")
         rules[k] = (float(r[0]), float(r[1]))
-    return DispersionSettings(
-        members=dis["members"],
-        chunk_size=dis["chunk_size"],
-        seed=dis["seed"],
-        attitude_deg=dis["attitude_deg"],
-        velocity_mps=dis["velocity_mps"],
-        position_m=dis["position_m"],
-        cloud=dis["cloud"],
-        refine_rounds=dis["refine_rounds"],
-        rules=AcceptanceRules(**rules),
-    )
+    return from_table(DispersionSettings, dis, rules=AcceptanceRules(**rules))
 
 
 def _radar(rad: dict) -> RadarSettings:
-    return RadarSettings(
-        squint_deg=rad["squint_deg"],
-        azimuths_deg=tuple(float(a) for a in rad["azimuths_deg"]),
-        slant_range_sigma_m=rad["slant_range_sigma_m"],
-        slant_out_sigma_m=rad["slant_out_sigma_m"],
-        terrain_sigma_m=rad["terrain_sigma_m"],
-        terrain_correlation_s=rad["terrain_correlation_s"],
-        velocity_out_sigma_mps=rad["velocity_out_sigma_mps"],
-        constrained=rad["constrained"],
-    )
+    return from_table(RadarSettings, rad, azimuths_deg=tuple(float(a) for a in rad["azimuths_deg"]))
 
 
 def _atmosphere(atm: dict, accel_mps2: float) -> AtmosphereSettings:
@@ -754,13 +727,8 @@ def _telemetry_spec(file: Path, v: dict) -> EntryTelemetrySpec:
             raise ScenarioError(file, "synthetic.nominal_error.dx0", "must hold 9 numbers (m/s, deg, m)")
         dx0 = tuple(dx0[DV] + [math.radians(x) for x in dx0[DTH]] + dx0[DP])
     return EntryTelemetrySpec(
-        imu=EntryImuModel(
-            accel_noise=imu["accel_noise_mps2"],
-            accel_bias=imu["accel_bias_mps2"],
-            accel_scale=imu["accel_scale"],
-            gyro_noise=math.radians(imu["gyro_noise_dps"]),
-            gyro_bias=math.radians(imu["gyro_bias_dps"]),
-            gyro_scale=imu["gyro_scale"],
+        imu=imu_error_model(
+            imu,
             accel_misalignment=imu["accel_misalignment_rad"],
             gyro_misalignment=imu["gyro_misalignment_rad"],
             gyro_full_scale=tuple(math.radians(x) for x in fs),  # type: ignore[arg-type]

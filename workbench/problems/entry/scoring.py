@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from workbench.core.frames import ned_basis
 from workbench.core.rotation import attitude_error
 from workbench.problems.entry.state import DP, DTH, DV
 
@@ -23,12 +24,9 @@ ERROR_UNITS: tuple[str, ...] = ("m",) * 3 + ("m/s",) * 3 + ("rad",) * 3
 
 
 def local_frame(p: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) rows north, east, down at positions p (n, 3) in M (north towards the +Z_M pole)."""
-    up = p / np.linalg.norm(p, axis=1, keepdims=True)
-    east = np.cross(np.array([0.0, 0.0, 1.0]), up)
-    east /= np.linalg.norm(east, axis=1, keepdims=True)
-    north = np.cross(up, east)
-    return np.stack([north, east, -up], axis=1)
+    """(n, 3, 3) rows north, east, down at positions p (n, 3) in M (north towards the +Z_M pole):
+    :func:`workbench.core.frames.ned_basis`."""
+    return ned_basis(p)
 
 
 def errors_sigmas(est, V, Q, X) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

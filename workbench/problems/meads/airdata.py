@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from workbench.core.frames import ned_basis
 from workbench.core.rotation import quat_to_dcm, skew
 from workbench.estimation.pointwise_wls import WlsResult, iterated_wls
 from workbench.models.flush_airdata import (
@@ -267,12 +268,9 @@ def _propagate(f, x: np.ndarray, P: np.ndarray) -> np.ndarray:
 
 
 def ned_frames(p_M: np.ndarray) -> np.ndarray:
-    """C_N_M (n, 3, 3): rows north, east, down at positions p_M (n, 3) (+Z of M the pole)."""
-    up = p_M / np.linalg.norm(p_M, axis=1, keepdims=True)
-    east = np.cross(np.array([0.0, 0.0, 1.0]), up)
-    east /= np.linalg.norm(east, axis=1, keepdims=True)
-    north = np.cross(up, east)
-    return np.stack([north, east, -up], axis=1)
+    """C_N_M (n, 3, 3): rows north, east, down at positions p_M (n, 3) (+Z of M the pole):
+    :func:`workbench.core.frames.ned_basis`."""
+    return ned_basis(p_M)
 
 
 @dataclass(frozen=True)

@@ -14,9 +14,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from workbench.io.scenario import RunInfo, Scenario, ScenarioError
-from workbench.io.schema import REQUIRED, Key, Schema, Table
+from workbench.io.schema import REQUIRED, Key, Schema, Table, from_table, scenario_table
 from workbench.models.flush_airdata import FadsVehicle, load_fads_vehicle
 from workbench.models.imu import ImuErrorModel
+from workbench.problems.imu_settings import imu_error_model
 from workbench.problems.meads.sensors import FAILURE_MODES, NavigationErrorSpec, PressureSensorSpec
 from workbench.problems.meads.truth import MeadsTruthSpec
 
@@ -194,22 +195,11 @@ class MeadsSettings:
             v["montecarlo"],
             v["ekf"],
         )
-        truth = MeadsTruthSpec(
-            **{k: tr[k] for k in tr if k != "bank_profile_deg"},
-            bank_profile_deg=tuple((float(a), float(b)) for a, b in tr["bank_profile_deg"]),
+        truth = from_table(
+            MeadsTruthSpec, tr, bank_profile_deg=tuple((float(a), float(b)) for a, b in tr["bank_profile_deg"])
         )
-        pressure = PressureSensorSpec(
-            **{k: sp[k] for k in sp if k != "time_tag_max_us"}, time_tag_max_s=sp["time_tag_max_us"] * 1e-6
-        )
-        imu = ImuErrorModel(
-            accel_noise=si["accel_noise_mps2"],
-            accel_bias=si["accel_bias_mps2"],
-            accel_scale=si["accel_scale"],
-            gyro_noise=math.radians(si["gyro_noise_dps"]),
-            gyro_bias=math.radians(si["gyro_bias_dps"]),
-            gyro_scale=si["gyro_scale"],
-            gyro_full_scale=(math.radians(400.0),) * 3,
-        )
+        pressure = from_table(PressureSensorSpec, sp, time_tag_max_s=sp["time_tag_max_us"] * 1e-6)
+        imu = imu_error_model(si, gyro_full_scale=(math.radians(400.0),) * 3)
         nav = NavigationErrorSpec(
             sn["position_sigma_m"], sn["velocity_sigma_mps"], math.radians(sn["attitude_sigma_deg"])
         )
@@ -255,15 +245,10 @@ SCHEMA = Schema(
     "meads",
     "flush air data (MEADS): forebody pressures + IMU -> q, Mach, alpha, beta, density, winds",
     (
-        Table(
-            "scenario",
-            "what the run is",
-            (
-                Key("name", "str", REQUIRED, meaning="names the run and its output files"),
-                Key("kind", "str", REQUIRED, meaning='`"meads"`'),
-                Key("description", "str", "", meaning="one line for listings"),
-                Key("epoch_utc", "str", None, meaning="UTC of t = 0 (the entry interface), metadata only"),
-            ),
+        scenario_table(
+            "meads",
+            epoch="UTC of t = 0 (the entry interface), metadata only",
+            name="names the run and its output files",
         ),
         Table(
             "vehicle",

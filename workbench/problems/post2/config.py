@@ -24,7 +24,7 @@ import numpy as np
 
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import RunInfo, Scenario, ScenarioError, check_value
-from workbench.io.schema import REQUIRED, Key, Schema, Table
+from workbench.io.schema import REQUIRED, Key, Schema, Table, scenario_table
 from workbench.io.units import to_si
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
 from workbench.problems.post2.model import OBSERVATIONS, STATES
@@ -118,15 +118,7 @@ SCHEMA = Schema(
     "post2",
     "parameter reconstruction from a problem file (POST2 EKF method)",
     (
-        Table(
-            "scenario",
-            "what the run is",
-            (
-                Key("name", _S, REQUIRED, meaning="names the run"),
-                Key("kind", _S, REQUIRED, meaning='`"post2"`'),
-                Key("description", _S, "", meaning="one line for listings"),
-            ),
-        ),
+        scenario_table("post2", name="names the run"),
         Table(
             "model",
             "the trajectory model (simulator and the EKF's process model)",
