@@ -296,6 +296,17 @@ def _unit_problem(file, tel, name: str, ratio: float, what: str) -> Problem | No
     return Problem(str(file), f"{name} [{unit}]", None, None, f"{what}: the values look like [{likely}], not [{unit}]")
 
 
+def _factor_problem(
+    file, tel, name: str, ratio: float, quantity: str, reference: str, tol: float = 1.5
+) -> Problem | None:
+    """:func:`_unit_problem` when the median ``ratio`` of ``quantity`` to ``reference`` (two
+    magnitudes that should agree, e.g. a speed and the rate of change of a position) is off by
+    more than the factor ``tol`` either way; None otherwise (also for a NaN ratio)."""
+    if not abs(np.log(ratio)) > np.log(tol):
+        return None
+    return _unit_problem(file, tel, name, ratio, f"{quantity} is {ratio:.4g}× {reference}")
+
+
 def radar_unit_notes(nav, out, file) -> list[str]:
     """WARN notes when the radar's slant-out range (along the near-vertical beam B0) and the on-board
     altitude above the Mars reference sphere, at the same times (where the on-board navigation covers
@@ -318,17 +329,16 @@ def radar_unit_notes(nav, out, file) -> list[str]:
     if ok.sum() < 5:
         return []
     ratio = float(np.median(so[inside][ok] / h[ok]))
-    if abs(np.log(ratio)) > np.log(2.5):
-        pr = _unit_problem(
-            file,
-            out,
-            "slant_out",
-            ratio,
-            f"the slant-out range is {ratio:.4g}× the on-board altitude (or the on-board altitude is off)",
-        )
-        if pr:
-            return [f"WARN: {pr}"]
-    return []
+    pr = _factor_problem(
+        file,
+        out,
+        "slant_out",
+        ratio,
+        "the slant-out range",
+        "the on-board altitude (or the on-board altitude is off)",
+        tol=2.5,
+    )
+    return [f"WARN: {pr}"] if pr else []
 
 
 def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str, float]) -> None:
@@ -377,16 +387,9 @@ def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str,
         ok = (dp > 1.0) & (vm > 0)
         if ok.sum() > 2:
             ratio = float(np.median(vm[ok] / dp[ok]))
-            if abs(np.log(ratio)) > np.log(1.5):
-                pr = _unit_problem(
-                    paths["gnc_nav"],
-                    nav,
-                    "v_x",
-                    ratio,
-                    f"the on-board speed is {ratio:.4g}× the rate of change of the on-board position",
-                )
-                if pr:
-                    problems.append(pr)
+            ref = "the rate of change of the on-board position"
+            pr = _factor_problem(paths["gnc_nav"], nav, "v_x", ratio, "the on-board speed", ref)
+            problems += [pr] if pr else []
     if nav.time.size > 2 and not problems:
         dv = np.diff(v, axis=0) / np.diff(nav.time)[:, None]
         tm = 0.5 * (nav.time[1:] + nav.time[:-1])
@@ -398,16 +401,9 @@ def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str,
             inside = (tm >= gnc.time[ok_a][0]) & (tm <= gnc.time[ok_a][-1]) & (ndv > 0.5)
             if inside.sum() > 2:
                 ratio = float(np.median(na[inside] / ndv[inside]))
-                if abs(np.log(ratio)) > np.log(1.5):
-                    pr = _unit_problem(
-                        paths["gnc"],
-                        gnc,
-                        "a_x",
-                        ratio,
-                        f"the acceleration is {ratio:.4g}× the rate of change of the on-board velocity",
-                    )
-                    if pr:
-                        problems.append(pr)
+                ref = "the rate of change of the on-board velocity"
+                pr = _factor_problem(paths["gnc"], gnc, "a_x", ratio, "the acceleration", ref)
+                problems += [pr] if pr else []
     q = gnc.stack([f"q{i}" for i in range(1, 5)])
     if q.shape[0] > 3:
         qn = q / np.linalg.norm(q, axis=1, keepdims=True)
@@ -418,16 +414,9 @@ def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str,
         ok = (rate_q > np.radians(0.5)) & (wm > 0)
         if ok.sum() > 5:
             ratio = float(np.median(wm[ok] / rate_q[ok]))
-            if abs(np.log(ratio)) > np.log(1.5):
-                pr = _unit_problem(
-                    paths["gnc"],
-                    gnc,
-                    "w_x",
-                    ratio,
-                    f"the body rate is {ratio:.4g}× the rotation rate of the attitude quaternions",
-                )
-                if pr:
-                    problems.append(pr)
+            ref = "the rotation rate of the attitude quaternions"
+            pr = _factor_problem(paths["gnc"], gnc, "w_x", ratio, "the body rate", ref)
+            problems += [pr] if pr else []
     if problems:
         raise TelemetryError(problems)
     a = gnc.stack([f"a_{x}" for x in "xyz"])
