@@ -103,6 +103,14 @@ class RadarData:
     beams_G: np.ndarray = field(default_factory=beam_directions_G)
     r_ground: float = R_GROUND
 
+    @classmethod
+    def of(cls, tracks: Any, beams_G: np.ndarray, r_ground: float) -> RadarData:
+        """The radar data of ``tracks``, any object with the seven track fields of this class
+        (``t_sr`` … ``rda_valid``, e.g. the telemetry as read), with the beam directions
+        ``beams_G`` (4, 3) in G and the terrain radius ``r_ground`` [m]."""
+        names = [f.name for f in fields(cls) if f.name not in ("beams_G", "r_ground")]
+        return cls(**{name: getattr(tracks, name) for name in names}, beams_G=beams_G, r_ground=r_ground)
+
 
 @dataclass(frozen=True)
 class EntryFilterSigmas:
