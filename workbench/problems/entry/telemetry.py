@@ -59,6 +59,7 @@ __all__ = [
     "STREAMS",
     "CSV_STREAMS",
     "TelemetryChecks",
+    "RadarTracks",
     "EntryTelemetry",
     "NominalState",
     "telemetry_paths",
@@ -101,7 +102,24 @@ class NominalState:
 
 
 @dataclass(frozen=True)
-class EntryTelemetry:
+class RadarTracks:
+    """The radar altimeter's tracks, SI, times [s] from EIP: ``t_sr`` (k,), ``slant_ranges`` (k, 4)
+    [m] beams B0..B3, ``sr_valid`` (k,) bool; ``t_rda`` (j,), ``slant_out`` (j,) [m] along B0,
+    ``v_out_G`` (j, 3) [m/s] terrain-relative velocity in G, ``rda_valid`` (j,) bool.  Shared by
+    the telemetry as read (:class:`EntryTelemetry`) and the smoother's input
+    (:class:`~workbench.problems.entry.filter.RadarData`)."""
+
+    t_sr: np.ndarray
+    slant_ranges: np.ndarray
+    sr_valid: np.ndarray
+    t_rda: np.ndarray
+    slant_out: np.ndarray
+    v_out_G: np.ndarray
+    rda_valid: np.ndarray
+
+
+@dataclass(frozen=True)
+class EntryTelemetry(RadarTracks):
     """Entry telemetry as read, SI, ``t`` [s] from EIP.
 
     ``t_gnc`` (n,), ``w_G`` (n,3) [rad/s] body rate, ``q_M_G_nav`` (n,4) on-board attitude
@@ -121,13 +139,6 @@ class EntryTelemetry:
     t_nav: np.ndarray
     p_M_nav: np.ndarray
     v_M_nav: np.ndarray
-    t_sr: np.ndarray
-    slant_ranges: np.ndarray
-    sr_valid: np.ndarray
-    t_rda: np.ndarray
-    slant_out: np.ndarray
-    v_out_G: np.ndarray
-    rda_valid: np.ndarray
     events: dict[str, float]
     epoch_utc: str
     problems: list[str]
