@@ -117,6 +117,16 @@ def cmd_list(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _options_from(cls, args: argparse.Namespace, **given):
+    """An options dataclass ``cls`` (:class:`~workbench.problems.base.RunOptions`,
+    :class:`~workbench.problems.base.McOptions`) from the parsed ``args``: every field from the
+    argument of the same name (``--first-seed`` → ``first_seed``), but those ``given`` (an
+    argument named otherwise, e.g. ``n_runs`` from ``--seeds``)."""
+    from dataclasses import fields
+
+    return cls(**{f.name: getattr(args, f.name) for f in fields(cls) if f.name not in given}, **given)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     """Run scenarios by name or path (``all`` = every shipped scenario)."""
     from workbench.problems.base import RunOptions
@@ -125,13 +135,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     names = list(args.scenario)
     if names == ["all"]:
         names = sorted(_shipped())
-    options = RunOptions(
-        seed=args.seed,
-        export=args.export,
-        scheduler=args.scheduler,
-        members=args.members,
-        allow_unhealthy=args.allow_unhealthy,
-    )
+    options = _options_from(RunOptions, args)
     from workbench.problems import scheduler
 
     jobs = scheduler.jobs_for(args.jobs, len(names))
@@ -170,15 +174,7 @@ def cmd_mc(args: argparse.Namespace) -> int:
     from workbench.problems.base import McOptions
     from workbench.problems.runner import run_monte_carlo
 
-    options = McOptions(
-        n_runs=args.seeds,
-        first_seed=args.first_seed,
-        workers=args.workers,
-        scheduler=args.scheduler,
-        members=args.members,
-        truth_sim=args.truth_sim,
-        refine_rounds=args.refine_rounds,
-    )
+    options = _options_from(McOptions, args, n_runs=args.seeds)
     run_monte_carlo(args.scenario, Path(args.out), options, progress=_reporter(args))
     return EXIT_OK
 

@@ -7,7 +7,7 @@ gap bridge ``q_b = q_a ⊗ q(dCᵀ)``) is linear in q and acts from the right.  
 is ``q_i(t) = q0_i ⊗ Δq(t)``, with ``Δq`` integrated once from the identity (the renormalisation
 commutes with the left product by a unit ``q0_i``), and so is every RK4 stage quaternion
 ``q0_i ⊗ Q_s``.  The rotation of the specific force at a stage, ``C(q0_i ⊗ Q_s) f_s`` in the
-component form of :func:`~workbench.estimation.strapdown._rot` (which, for a stage quaternion of
+component form of :func:`~workbench.estimation.strapdown.rotate` (which, for a stage quaternion of
 norm ``s ≠ 1``, equals ``s² R(Q̂_s) f_s + (1 − s²) f_s``), is then ``R0_i a_s + b_s`` with the shared
 ``a_s = s² R(Q̂_s) f_s`` and ``b_s = (1 − s²) f_s`` (:func:`attitude_track`), and only the
 translational RK4 (J2 gravity, a 3x3 product per stage) is done per member
@@ -44,6 +44,7 @@ import numpy as np
 from workbench.core.bodies import Body
 from workbench.core.gravity import j2_factor
 from workbench.core.rotation import dcm_components, dcm_to_quat, quat_multiply, quat_normalize
+from workbench.estimation.strapdown import rotate
 
 try:  # numba is a dependency, but keep the numpy path usable without it
     import numba
@@ -118,23 +119,11 @@ def _qdot_f(q, w):
     )
 
 
-def _rot_np(q: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``strapdown._rot`` (the component form of ``C(q) x``, also for a non-unit q), (..., 3)."""
-    qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    X, Y, Z = x[..., 0], x[..., 1], x[..., 2]
-    tx = 2.0 * (qy * Z - qz * Y)
-    ty = 2.0 * (qz * X - qx * Z)
-    tz = 2.0 * (qx * Y - qy * X)
-    return np.stack(
-        (X + qw * tx + (qy * tz - qz * ty), Y + qw * ty + (qz * tx - qx * tz), Z + qw * tz + (qx * ty - qy * tx)), -1
-    )
-
-
 def _split_rot(Q: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(a, b)`` with ``_rot(q0 ⊗ Q, x) = R(q0) a + b`` for any unit q0: ``b = (1 − |Q|²) x``."""
+    """``(a, b)`` with ``rotate(q0 ⊗ Q, x) = R(q0) a + b`` for any unit q0: ``b = (1 − |Q|²) x``."""
     s2 = np.sum(Q * Q, axis=-1, keepdims=True)
     b = (1.0 - s2) * x
-    return _rot_np(Q, x) - b, b
+    return rotate(Q, x) - b, b
 
 
 def attitude_track(imu: Any, bridge_mode: str = "relative") -> AttitudeTrack:

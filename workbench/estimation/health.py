@@ -94,6 +94,12 @@ def _f(x: float) -> float:
     return float(f"{float(x):.6g}")
 
 
+def _banded(name: str, status: str, value: float, lo: float, hi: float, message: str) -> Check:
+    """A :class:`Check` of ``value`` against the interval [``lo``, ``hi``] (all three rounded to
+    6 significant digits for the summary), with ``status`` and ``message``."""
+    return Check(name, status, _f(value), [_f(lo), _f(hi)], message)
+
+
 def nis_check(sensor: str, nis: np.ndarray, dof: int, *, error_quantile: float = 0.999) -> Check:
     """Mean NIS of one sensor's innovations ``nis`` (n,) of dimension ``dof`` against χ² bounds.
 
@@ -123,14 +129,9 @@ def nis_check(sensor: str, nis: np.ndarray, dof: int, *, error_quantile: float =
         )
     if not lo <= mean <= hi:
         side = "conservative (R or Q too large)" if mean < lo else "optimistic (R or Q too small)"
-        return Check(
-            name,
-            WARNING,
-            _f(mean),
-            [_f(lo), _f(hi)],
-            f"sensor {sensor}: mean NIS {mean:.3g} over {n} samples, expected {dof} — the filter is {side}",
-        )
-    return Check(name, OK, _f(mean), [_f(lo), _f(hi)], f"sensor {sensor}: mean NIS {mean:.3g} (expected {dof})")
+        message = f"sensor {sensor}: mean NIS {mean:.3g} over {n} samples, expected {dof} — the filter is {side}"
+        return _banded(name, WARNING, mean, lo, hi, message)
+    return _banded(name, OK, mean, lo, hi, f"sensor {sensor}: mean NIS {mean:.3g} (expected {dof})")
 
 
 #: covariance steps examined at once by :func:`covariance_stats` (bounds its temporaries)
@@ -244,13 +245,9 @@ def interval_check(
     if not np.isfinite(v):
         return Check(name, status, None, [lo, hi], f"{what}: not finite")
     if lo <= v <= hi:
-        return Check(name, OK, _f(v), [_f(lo), _f(hi)], f"{what} {v:.4g}{u} within [{lo:.4g}, {hi:.4g}]{u}")
-    return Check(
-        name,
-        status,
-        _f(v),
-        [_f(lo), _f(hi)],
-        f"{what} {v:.4g}{u} is physically implausible (outside [{lo:.4g}, {hi:.4g}]{u})",
+        return _banded(name, OK, v, lo, hi, f"{what} {v:.4g}{u} within [{lo:.4g}, {hi:.4g}]{u}")
+    return _banded(
+        name, status, v, lo, hi, f"{what} {v:.4g}{u} is physically implausible (outside [{lo:.4g}, {hi:.4g}]{u})"
     )
 
 

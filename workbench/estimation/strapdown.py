@@ -53,6 +53,7 @@ __all__ = [
     "ImuArrays",
     "imu_arrays",
     "imu_columns",
+    "rotate",
     "StrapdownPass",
     "derivatives",
     "rk4_step",
@@ -87,8 +88,9 @@ def _stack(parts: list | tuple) -> np.ndarray:
     return np.stack(np.broadcast_arrays(*parts), -1)
 
 
-def _rot(q: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``C(q) x`` for q (..., 4) (scalar-last Hamilton) and x (..., 3), broadcasting."""
+def rotate(q: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``C(q) x`` [units of x] for q (..., 4) (scalar-last Hamilton) and x (..., 3), broadcasting;
+    in component form, so also defined (scaled as the component formula scales) for a non-unit q."""
     qx, qy, qz, qw = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     X, Y, Z = x[..., 0], x[..., 1], x[..., 2]
     tx = 2.0 * (qy * Z - qz * Y)
@@ -125,7 +127,7 @@ def derivatives(
     """
     p = np.asarray(p, dtype=float)
     g = gravity_j2_xyz(p[..., 0], p[..., 1], p[..., 2], body.gm, j2_factor(body))
-    return _stack(g[:3]) + _rot(q, f_G), _qdot(q, w_G), v
+    return _stack(g[:3]) + rotate(q, f_G), _qdot(q, w_G), v
 
 
 def rk4_step(
@@ -323,11 +325,11 @@ def apply_gap(
     if mode not in ("relative", "paper"):
         raise ValueError(f"apply_gap: mode must be 'relative' or 'paper', got {mode!r}")
     dq = dcm_to_quat(np.asarray(bridge.dC, dtype=float).T)  # q_Ga_Gb
-    v_b = v + _rot(q, np.asarray(bridge.dv_G, dtype=float))
+    v_b = v + rotate(q, np.asarray(bridge.dv_G, dtype=float))
     if mode == "paper":
-        p_b = p + _rot(q, np.asarray(bridge.dp_G, dtype=float))
+        p_b = p + rotate(q, np.asarray(bridge.dp_G, dtype=float))
     else:
-        p_b = p + _bridge_dt(bridge) * v + _rot(q, np.asarray(bridge.dp_rel_G, dtype=float))
+        p_b = p + _bridge_dt(bridge) * v + rotate(q, np.asarray(bridge.dp_rel_G, dtype=float))
     q_b = quat_normalize(quat_multiply(q, dq))
     return v_b, q_b, p_b
 

@@ -292,6 +292,38 @@ def _preamble(lines: list[str], col: _Collector) -> tuple[dict[str, str], dict[s
     return meta, meta_lines, -1
 
 
+@dataclass(frozen=True, eq=False)
+class _OpenedCsv:
+    """A telemetry-style CSV read up to its header: the text and its lines, the problem
+    collector, the ``# key: value`` metadata (and the line of each key) and ``h``, the index of
+    the header line in ``lines``."""
+
+    path: Path
+    fname: str
+    text: str
+    lines: list[str]
+    col: _Collector
+    meta: dict[str, str]
+    meta_lines: dict[str, int]
+    h: int
+
+
+def _open_csv(path: str | os.PathLike, expected_header: str) -> _OpenedCsv:
+    """Read ``path`` (UTF-8, any newline) and parse its comment preamble.  Raises
+    :class:`TelemetryError` (no header row, naming ``expected_header``, an example header line)
+    when the file holds comments only.  Shared by :func:`read_telemetry` and :func:`read_events`."""
+    path = Path(path)
+    fname = str(path)
+    text = _read_text(path, fname)
+    lines = text.split("\n")
+    col = _Collector(fname)
+    meta, meta_lines, h = _preamble(lines, col)
+    if h < 0:
+        col.add(f"no header row (expected {expected_header})")
+        col.raise_if_any()
+    return _OpenedCsv(path, fname, text, lines, col, meta, meta_lines, h)
+
+
 def _split_header(line: str) -> list[str]:
     return [c.strip() for c in next(csv.reader([line]))]
 
@@ -663,16 +695,9 @@ def read_telemetry(
     """
     required, limits, saturation = dict(required or {}), dict(limits or {}), dict(saturation or {})
     _check_options(required, limits, saturation, gap_factor)
-    path = Path(path)
-    fname = str(path)
-    text = _read_text(path, fname)
-    lines = text.split("\n")
-    col = _Collector(fname)
-
-    meta, meta_lines, h = _preamble(lines, col)
-    if h < 0:
-        col.add("no header row (expected a line like 'time [s],BP.x [g],...')")
-        col.raise_if_any()
+    src = _open_csv(path, "a line like 'time [s],BP.x [g],...'")
+    path, fname, text, lines, col = src.path, src.fname, src.text, src.lines, src.col
+    meta, meta_lines, h = src.meta, src.meta_lines, src.h
     header_line = h + 1
     hd = _parse_header(lines[h], header_line, required, col)
     sparse_set = set(sparse)
@@ -881,15 +906,8 @@ def read_events(path: str | os.PathLike) -> list[tuple[float, str]]:
     comma is written in double quotes.  ``# key: value`` lines above the header are allowed.
     Raises :class:`TelemetryError` with every problem located.
     """
-    path = Path(path)
-    fname = str(path)
-    text = _read_text(path, fname)
-    lines = text.split("\n")
-    col = _Collector(fname)
-    _, _, h = _preamble(lines, col)
-    if h < 0:
-        col.add("no header row (expected 'time [s],event')")
-        col.raise_if_any()
+    src = _open_csv(path, "'time [s],event'")
+    lines, col, h = src.lines, src.col, src.h
     cells = _split_header(lines[h])
     unit = None
     delim = _foreign_delimiter(lines[h])

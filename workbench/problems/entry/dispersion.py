@@ -67,6 +67,7 @@ __all__ = [
     "event_quantities",
     "run_dispersion",
     "run_dispersion_loop",
+    "run_configured_dispersion",
     "FusedInitialState",
     "fuse_with_prior",
 ]
@@ -622,6 +623,44 @@ def run_dispersion(
         events_t=ev_d,
         weights=weights,
         rounds=history,
+    )
+
+
+def run_configured_dispersion(
+    settings: Any,
+    imu: Any,
+    nominal: Any,
+    events_t: Mapping[str, float],
+    *,
+    members: int | None = None,
+    scheduler: str | None = None,
+    n_cloud: int,
+) -> DispersionResult:
+    """:func:`run_dispersion` as a run's settings configure it: the scenario's ``[dispersion]``
+    (sigmas, rules, member count unless ``members``, chunk size, seed, refinement rounds), its
+    terrain radius ``settings.r_ground`` [m] and ``[reconstruction] bridge_mode``, about the
+    nominal initial state ``nominal`` (``v_M`` [m/s], ``q_M_G``, ``p_M`` [m] at ``imu.t[0]``),
+    with the engineering atmosphere.  ``settings`` is an
+    :class:`~workbench.problems.entry.config.EntrySettings`; the pipeline and the smoother
+    validation call this so that both run the same dispersion."""
+    ds = settings.dispersion
+    return run_dispersion(
+        imu,
+        nominal.v_M,
+        nominal.q_M_G,
+        nominal.p_M,
+        ds.sigmas(),
+        int(members if members is not None else ds.members),
+        rules=ds.rules,
+        events_t=events_t,
+        atmosphere=MarsEngineeringAtmosphere(),
+        chunk_size=ds.chunk_size,
+        seed=ds.seed,
+        scheduler=scheduler,
+        n_cloud=n_cloud,
+        r_ground=settings.r_ground,
+        bridge_mode=settings.reconstruction.bridge_mode,
+        refine_rounds=ds.refine_rounds,
     )
 
 

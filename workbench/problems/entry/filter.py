@@ -59,6 +59,7 @@ from workbench.models.radar import (
 )
 from workbench.problems.entry.site import R_GROUND
 from workbench.problems.entry.state import DP, DTH, DV, N_ERR, N_X, XP, XQ, XV
+from workbench.problems.entry.telemetry import RadarTracks
 
 __all__ = [
     "CHANNELS",
@@ -83,7 +84,7 @@ _LAYOUT = ErrorStateLayout(N_X, ((XQ.start, DTH.start),))
 
 
 @dataclass(frozen=True)
-class RadarData:
+class RadarData(RadarTracks):
     """Radar altimeter telemetry, SI, times [s] from EIP.
 
     ``t_sr`` (k,), ``slant_ranges`` (k, 4) [m] beams B0..B3, ``sr_valid`` (k,) bool (False for the
@@ -93,15 +94,16 @@ class RadarData:
     terrain sphere radius.
     """
 
-    t_sr: np.ndarray
-    slant_ranges: np.ndarray
-    sr_valid: np.ndarray
-    t_rda: np.ndarray
-    slant_out: np.ndarray
-    v_out_G: np.ndarray
-    rda_valid: np.ndarray
     beams_G: np.ndarray = field(default_factory=beam_directions_G)
     r_ground: float = R_GROUND
+
+    @classmethod
+    def of(cls, tracks: Any, beams_G: np.ndarray, r_ground: float) -> RadarData:
+        """The radar data of ``tracks`` (:class:`~workbench.problems.entry.telemetry.RadarTracks`,
+        e.g. the telemetry as read), with the beam directions ``beams_G`` (4, 3) in G and the
+        terrain radius ``r_ground`` [m]."""
+        names = [f.name for f in fields(RadarTracks)]
+        return cls(**{name: getattr(tracks, name) for name in names}, beams_G=beams_G, r_ground=r_ground)
 
 
 @dataclass(frozen=True)

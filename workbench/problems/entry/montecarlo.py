@@ -23,7 +23,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
 from workbench.core.rotation import quat_boxplus
 from workbench.estimation.consistency import anees_bounds, fraction_inside, nees
@@ -31,7 +30,7 @@ from workbench.estimation.montecarlo import run_monte_carlo
 from workbench.estimation.strapdown import GapBridge, ImuArrays, apply_gap, gap_transition, imu_arrays, rk4_step
 from workbench.io import progress
 from workbench.models.radar import beam_directions_G, mars_rate_M, slant_range_sphere, velocity_out_model
-from workbench.problems.entry.dispersion import run_dispersion
+from workbench.problems.entry.dispersion import run_configured_dispersion
 from workbench.problems.entry.filter import CHANNELS, EntryFilterSigmas, RadarData, run_entry_smoother
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
 from workbench.problems.entry.preprocess import preprocess
@@ -862,25 +861,7 @@ def prepare_validation(
     nom = read_nominal_state(paths["initial_state"])
     v0, q0, p0 = nom.v_M, nom.q_M_G, nom.p_M
     r_ground = cfg.r_ground
-    ds = cfg.dispersion
-    disp = run_dispersion(
-        imu,
-        v0,
-        q0,
-        p0,
-        ds.sigmas(),
-        int(members if members is not None else ds.members),
-        rules=ds.rules,
-        events_t=tm.events,
-        atmosphere=MarsEngineeringAtmosphere(),
-        chunk_size=ds.chunk_size,
-        seed=ds.seed,
-        scheduler=scheduler,
-        n_cloud=0,
-        r_ground=r_ground,
-        bridge_mode=cfg.reconstruction.bridge_mode,
-        refine_rounds=ds.refine_rounds,
-    )
+    disp = run_configured_dispersion(cfg, imu, nom, tm.events, members=members, scheduler=scheduler, n_cloud=0)
     rec = cfg.reconstruction
     st = initial_for_smoother(rec, disp, nom, reconstruction_P0(rec))  # the pipeline's smoother start
     beams = cfg.radar.beams_G()

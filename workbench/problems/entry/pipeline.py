@@ -48,7 +48,7 @@ from workbench.io.scenario import ScenarioError
 from workbench.models.aerodynamics import EntryVehicle
 from workbench.problems.entry.atmosphere import reconstruct_atmosphere
 from workbench.problems.entry.config import EntrySettings
-from workbench.problems.entry.dispersion import run_dispersion
+from workbench.problems.entry.dispersion import run_configured_dispersion
 from workbench.problems.entry.filter import RadarData, run_entry_smoother
 from workbench.problems.entry.health import entry_health
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
@@ -216,41 +216,14 @@ def reconstruct(
     yield nomi
 
     # ---- dispersion (Sect. 6)
-    ds = cfg.dispersion
-    n_mem = int(members if members is not None else ds.members)
-    disp = run_dispersion(
-        imu,
-        nom.v_M,
-        nom.q_M_G,
-        nom.p_M,
-        ds.sigmas(),
-        n_mem,
-        rules=ds.rules,
-        events_t=tm.events,
-        atmosphere=MarsEngineeringAtmosphere(),
-        chunk_size=ds.chunk_size,
-        seed=ds.seed,
-        scheduler=scheduler,
-        n_cloud=ds.cloud,
-        r_ground=r_ground,
-        bridge_mode=bridge_mode,
-        refine_rounds=ds.refine_rounds,
+    disp = run_configured_dispersion(
+        cfg, imu, nom, tm.events, members=members, scheduler=scheduler, n_cloud=cfg.dispersion.cloud
     )
     yield disp
 
     # ---- radar-aided smoother (Sects. 7-8) from the refined state
     beams = cfg.radar.beams_G()
-    radar = RadarData(
-        t_sr=tm.t_sr,
-        slant_ranges=tm.slant_ranges,
-        sr_valid=tm.sr_valid,
-        t_rda=tm.t_rda,
-        slant_out=tm.slant_out,
-        v_out_G=tm.v_out_G,
-        rda_valid=tm.rda_valid,
-        beams_G=beams,
-        r_ground=r_ground,
-    )
+    radar = RadarData.of(tm, beams, r_ground)
     init = initial_for_smoother(cfg.reconstruction, disp, nom, P0)
     yield init
     v0, q0, p0, P0_ref = init.v0, init.q0, init.p0, init.P0

@@ -59,6 +59,7 @@ __all__ = [
     "STREAMS",
     "CSV_STREAMS",
     "TelemetryChecks",
+    "RadarTracks",
     "EntryTelemetry",
     "NominalState",
     "telemetry_paths",
@@ -101,7 +102,24 @@ class NominalState:
 
 
 @dataclass(frozen=True)
-class EntryTelemetry:
+class RadarTracks:
+    """The radar altimeter's tracks, SI, times [s] from EIP: ``t_sr`` (k,), ``slant_ranges`` (k, 4)
+    [m] beams B0..B3, ``sr_valid`` (k,) bool; ``t_rda`` (j,), ``slant_out`` (j,) [m] along B0,
+    ``v_out_G`` (j, 3) [m/s] terrain-relative velocity in G, ``rda_valid`` (j,) bool.  Shared by
+    the telemetry as read (:class:`EntryTelemetry`) and the smoother's input
+    (:class:`~workbench.problems.entry.filter.RadarData`)."""
+
+    t_sr: np.ndarray
+    slant_ranges: np.ndarray
+    sr_valid: np.ndarray
+    t_rda: np.ndarray
+    slant_out: np.ndarray
+    v_out_G: np.ndarray
+    rda_valid: np.ndarray
+
+
+@dataclass(frozen=True)
+class EntryTelemetry(RadarTracks):
     """Entry telemetry as read, SI, ``t`` [s] from EIP.
 
     ``t_gnc`` (n,), ``w_G`` (n,3) [rad/s] body rate, ``q_M_G_nav`` (n,4) on-board attitude
@@ -121,13 +139,6 @@ class EntryTelemetry:
     t_nav: np.ndarray
     p_M_nav: np.ndarray
     v_M_nav: np.ndarray
-    t_sr: np.ndarray
-    slant_ranges: np.ndarray
-    sr_valid: np.ndarray
-    t_rda: np.ndarray
-    slant_out: np.ndarray
-    v_out_G: np.ndarray
-    rda_valid: np.ndarray
     events: dict[str, float]
     epoch_utc: str
     problems: list[str]
@@ -296,6 +307,17 @@ def _unit_problem(file, tel, name: str, ratio: float, what: str) -> Problem | No
     return Problem(str(file), f"{name} [{unit}]", None, None, f"{what}: the values look like [{likely}], not [{unit}]")
 
 
+def _factor_problem(
+    file, tel, name: str, ratio: float, quantity: str, reference: str, tol: float = 1.5
+) -> Problem | None:
+    """:func:`_unit_problem` when the median ``ratio`` of ``quantity`` to ``reference`` (two
+    magnitudes that should agree, e.g. a speed and the rate of change of a position) is off by
+    more than the factor ``tol`` either way; None otherwise (also for a NaN ratio)."""
+    if not abs(np.log(ratio)) > np.log(tol):
+        return None
+    return _unit_problem(file, tel, name, ratio, f"{quantity} is {ratio:.4g}× {reference}")
+
+
 def radar_unit_notes(nav, out, file) -> list[str]:
     """WARN notes when the radar's slant-out range (along the near-vertical beam B0) and the on-board
     altitude above the Mars reference sphere, at the same times (where the on-board navigation covers
@@ -318,17 +340,16 @@ def radar_unit_notes(nav, out, file) -> list[str]:
     if ok.sum() < 5:
         return []
     ratio = float(np.median(so[inside][ok] / h[ok]))
-    if abs(np.log(ratio)) > np.log(2.5):
-        pr = _unit_problem(
-            file,
-            out,
-            "slant_out",
-            ratio,
-            f"the slant-out range is {ratio:.4g}× the on-board altitude (or the on-board altitude is off)",
-        )
-        if pr:
-            return [f"WARN: {pr}"]
-    return []
+    pr = _factor_problem(
+        file,
+        out,
+        "slant_out",
+        ratio,
+        "the slant-out range",
+        "the on-board altitude (or the on-board altitude is off)",
+        tol=2.5,
+    )
+    return [f"WARN: {pr}"] if pr else []
 
 
 def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str, float]) -> None:
@@ -377,16 +398,9 @@ def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str,
         ok = (dp > 1.0) & (vm > 0)
         if ok.sum() > 2:
             ratio = float(np.median(vm[ok] / dp[ok]))
-            if abs(np.log(ratio)) > np.log(1.5):
-                pr = _unit_problem(
-                    paths["gnc_nav"],
-                    nav,
-                    "v_x",
-                    ratio,
-                    f"the on-board speed is {ratio:.4g}× the rate of change of the on-board position",
-                )
-                if pr:
-                    problems.append(pr)
+            ref = "the rate of change of the on-board position"
+            pr = _factor_problem(paths["gnc_nav"], nav, "v_x", ratio, "the on-board speed", ref)
+            problems += [pr] if pr else []
     if nav.time.size > 2 and not problems:
         dv = np.diff(v, axis=0) / np.diff(nav.time)[:, None]
         tm = 0.5 * (nav.time[1:] + nav.time[:-1])
@@ -398,16 +412,9 @@ def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str,
             inside = (tm >= gnc.time[ok_a][0]) & (tm <= gnc.time[ok_a][-1]) & (ndv > 0.5)
             if inside.sum() > 2:
                 ratio = float(np.median(na[inside] / ndv[inside]))
-                if abs(np.log(ratio)) > np.log(1.5):
-                    pr = _unit_problem(
-                        paths["gnc"],
-                        gnc,
-                        "a_x",
-                        ratio,
-                        f"the acceleration is {ratio:.4g}× the rate of change of the on-board velocity",
-                    )
-                    if pr:
-                        problems.append(pr)
+                ref = "the rate of change of the on-board velocity"
+                pr = _factor_problem(paths["gnc"], gnc, "a_x", ratio, "the acceleration", ref)
+                problems += [pr] if pr else []
     q = gnc.stack([f"q{i}" for i in range(1, 5)])
     if q.shape[0] > 3:
         qn = q / np.linalg.norm(q, axis=1, keepdims=True)
@@ -418,16 +425,9 @@ def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str,
         ok = (rate_q > np.radians(0.5)) & (wm > 0)
         if ok.sum() > 5:
             ratio = float(np.median(wm[ok] / rate_q[ok]))
-            if abs(np.log(ratio)) > np.log(1.5):
-                pr = _unit_problem(
-                    paths["gnc"],
-                    gnc,
-                    "w_x",
-                    ratio,
-                    f"the body rate is {ratio:.4g}× the rotation rate of the attitude quaternions",
-                )
-                if pr:
-                    problems.append(pr)
+            ref = "the rotation rate of the attitude quaternions"
+            pr = _factor_problem(paths["gnc"], gnc, "w_x", ratio, "the body rate", ref)
+            problems += [pr] if pr else []
     if problems:
         raise TelemetryError(problems)
     a = gnc.stack([f"a_{x}" for x in "xyz"])
