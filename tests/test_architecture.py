@@ -193,6 +193,15 @@ def test_no_private_names_across_modules():
     assert not bad, "private names used across modules:\n" + "\n".join(bad)
 
 
+def _imported_names(node: ast.AST) -> list[str]:
+    """The module names an ``import`` / ``from ... import`` node imports ([] for other nodes)."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    if isinstance(node, ast.ImportFrom):
+        return [node.module or ""]
+    return []
+
+
 def test_rerun_only_in_recording_code():
     bad = []
     for mod, path in _modules().items():
@@ -204,13 +213,7 @@ def test_rerun_only_in_recording_code():
             continue
         tree = ast.parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
-            names = (
-                [a.name for a in node.names]
-                if isinstance(node, ast.Import)
-                else [node.module or ""]
-                if isinstance(node, ast.ImportFrom)
-                else []
-            )
+            names = _imported_names(node)
             if any(n == "rerun" or n.startswith("rerun.") for n in names):
                 bad.append(f"{path.relative_to(ROOT)}:{node.lineno}")
     assert not bad, "rerun imported outside recording code: " + ", ".join(bad)
@@ -310,13 +313,7 @@ def test_input_files_are_parsed_only_in_the_schema_layer():
     for mod, path in _modules().items():
         tree = ast.parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
-            names = (
-                [a.name for a in node.names]
-                if isinstance(node, ast.Import)
-                else [node.module or ""]
-                if isinstance(node, ast.ImportFrom)
-                else []
-            )
+            names = _imported_names(node)
             if "tomllib" in names and mod not in SCHEMA_LAYER:
                 bad.append(f"{path.relative_to(ROOT)}:{node.lineno} imports tomllib")
             if (

@@ -1,63 +1,19 @@
 """IAU body-fixed frames, planetocentric geodesy, local NED and test-chamber frames.
 
-Frames used:
+Frames: ``I`` planet-centred inertial (ICRF/J2000 axes); ``M`` for Mars the MMED frame of AMELIA
+(Aboudan et al. 2018, Sect. 3; SPICE's MARSIAU: +Z the IAU pole at J2000.0, :func:`C_mmed_icrf`);
+``F`` the body-fixed frame of the IAU rotation model, ``C_F_I = Rz(W) Rx(90° − δ0) Rz(90° + α0)``
+(frame rotations, Archinal et al. 2018, Sect. 2); ``N`` local North-East-Down at a planetocentric
+latitude/longitude; lab frames (the REDLand SPF chamber) with a fixed rotation to a level "planet"
+frame (:class:`LabFrame`). Epochs are TDB Julian dates (:func:`julian_date_from_utc`, re-exported
+from :mod:`workbench.core.timescales`: UTC -> TAI -> TT -> TDB with ERFA).
 
-* ``I`` — planet-centred inertial with ICRF/J2000 axes.
-* ``M`` — for Mars the "MMED" frame of the AMELIA paper (Aboudan et al. 2018, Sect. 3, "Mars
-  Mean Equator and IAU vector of J2000", SPICE's MARSIAU): +Z the IAU pole at J2000.0, +X the
-  ascending node of the Mars equator of J2000 on the ICRF equator (:func:`C_mmed_icrf`).
-* ``F`` — body-fixed frame of the IAU rotation model: +Z along the north pole, +X through the
-  prime meridian.  ``C_F_I = Rz(W) Rx(90° − δ0) Rz(90° + α0)`` with *frame* (passive) rotation
-  matrices, exactly as in the IAU WGCCRE report (Archinal et al. 2018, Sect. 2).
-* ``N`` — local North-East-Down at a planetocentric latitude/longitude (Down = −r̂).
-* lab frames (e.g. the SPF test chamber of the REDLand MER airbag tests) with a fixed rotation to
-  a level "planet" frame, see :class:`LabFrame`.
-
-Time: epochs are Julian dates in TDB.  :func:`julian_date_from_utc` (from
-:mod:`workbench.core.timescales`, re-exported here for its callers) converts a UTC ISO-8601 string
-through UTC -> TAI (leap-second table) -> TT -> TDB with ERFA; the IAU rotation elements take that
-TDB date (Archinal et al. 2018: "d = interval in days from the standard epoch J2000.0 TDB").
-
-Pole, meridian and time conventions, and what they change for Mars.  Two latitude/longitude
-conventions are provided beside each other; measured on AMELIA Table 2's optimal initial state
-(MMED position [−1317.8932, 3255.1296, −219.2404] km at 2016-10-19T14:42:07.125 UTC) against the
-first row of its Table 5 (lon −17.3091°, lat −3.5723°, alt 122.6329 km AMR):
-
-* :func:`planetocentric_of_date` — the physically exact conversion: pole *and* prime meridian of
-  date from the body's IAU model (IAU 2015, pck00011, for :data:`~workbench.core.bodies.MARS`)
-  at the correct TDB (TAI − UTC = 36 s in October 2016, TT − TAI = 32.184 s, TDB − TT ≈ −1.6 ms).
-  It gives lat −3.5778°, lon −17.5604°: the latitude differs from the paper by −0.0055° because
-  the Mars pole of 2016 is not the J2000 pole that defines MMED's +Z; the longitude by −0.2513°.
-  (The former constant TT − UTC = 69.184 s was 1 s too large for 2016: lon −17.5645°.)
-* :func:`planetocentric_amelia` — the paper's convention as far as it can be recovered:
-  latitude ``asin(z/|p|)`` in MMED (reproduces −3.5723° to the printed digits, −3.57232°), and
-  longitude = MMED right ascension ``atan2(y, x)`` minus the IAU prime-meridian angle ``W``, i.e.
-  MMED spun about its own +Z, with the *UTC* Julian date fed in as the TDB argument (the
-  68.184 s TT − UTC of 2016 left out).  It gives −17.2989°, +0.0102° from the paper (the same
-  +0.0102° at the EIP row after a 15.007 s ballistic propagation, so the rate is right and the
-  residual is a constant angle, 0.6 km on the ground).
-  Other hypotheses measured (longitude minus the paper's, degrees):
-
-  ==========================  =========  ==================  ===================  ============
-  model / frame               TDB exact  TDB + 1 s (old)     t − 64.184 s [a]     UTC as TDB
-  ==========================  =========  ==================  ===================  ============
-  IAU 2015, pole of date      −0.2513    −0.2554             +0.0094              +0.0256
-  IAU 2015, Rz(W) on MMED     −0.2667    −0.2708             −0.0061              **+0.0102**
-  IAU 2009, pole of date      −0.2488    −0.2528             +0.0119              +0.0281
-  IAU 2009, Rz(W) on MMED     −0.2639    −0.2679             −0.0032              +0.0131
-  ==========================  =========  ==================  ===================  ============
-
-  IAU 2009 = pck00010 (α0 = 317.68143 − 0.1061 T, δ0 = 52.88650 − 0.0609 T, W = 176.630 +
-  350.89198226 d, no periodic terms).  [a] seconds counted from 2000-01-01T12:00:00 *UTC* instead
-  of J2000.0 TT.  Light time (|p|/c ≈ 12 ms) is negligible; the IAU 2000 meridian (W0 = 176.753°)
-  is off by −0.09° to −0.11° even with UTC.  No hypothesis reproduces the printed 4th decimal;
-  "UTC as TDB, MMED spun by W" is the simplest one within 0.01°, and the one the tests pin.
-
-Use :func:`planetocentric_of_date` (or :func:`C_bodyfixed_mmed` at a TDB date) for physics;
-use :func:`planetocentric_amelia` only to compare with numbers printed in the AMELIA paper.
-
-All angles are radians inside; the IAU elements of :class:`~workbench.core.bodies.Body` are in
-degrees as published and converted here.
+Two latitude/longitude conventions: :func:`planetocentric_of_date` (pole and prime meridian of date
+at the exact TDB: for physics) and :func:`planetocentric_amelia` (latitude in MMED, longitude as
+MMED spun by the IAU ``W`` with the UTC date as TDB: only to compare with numbers printed in the
+AMELIA paper). Why two, and the hypotheses measured against AMELIA Table 5: docs/tuning/core.md.
+Angles are radians inside; the IAU elements of :class:`~workbench.core.bodies.Body` are in degrees
+as published and converted here.
 """
 
 from __future__ import annotations

@@ -1,53 +1,23 @@
 """Error-state extended Kalman filter: layout of the error state, predict, update, forward driver.
 
-The filter is written as plain functions over numpy arrays (pyins 1.0 style) and every
-intermediate of a step is exposed under the filterpy names ``x_prior``, ``P_prior``, ``y``
-(innovation), ``S`` (innovation covariance), ``K`` (gain), ``x_post``, ``P_post``.
+Plain functions over numpy arrays (pyins 1.0 style); every intermediate of a step is exposed under
+the filterpy names ``x_prior``, ``P_prior``, ``y``, ``S``, ``K``, ``x_post``, ``P_post``. The full
+state ``x`` (n_x,) may hold unit quaternions; the covariance ``P`` (n_e, n_e) lives in the error
+state, each quaternion a **body-frame** small angle δθ [rad] with ``q_true = q_est ⊗ exp(δθ)``
+(:class:`ErrorStateLayout`; ``⊞``/``⊟``). The step follows the POST2 EKF thesis, Sect. 3.1.1:
+nonlinear prediction, ``P`` propagated with the transition matrix plus ``Q``, residual observed
+minus computed, gain ``K = P Hᵀ (H P Hᵀ + R)⁻¹``, covariance in Joseph form (Gelb 1974);
+sensitivities not supplied are central differences of size ``eps`` per error-state entry. After an
+update the error state is reset keeping ``P`` (``G ≈ I``, Markley & Crassidis 2014, Sect. 6.2.4).
 
-State and error state
----------------------
-The full state ``x`` (n_x,) may contain unit quaternions; the covariance ``P`` (n_e, n_e)
-always lives in the *error state* ``e`` (n_e,), where each quaternion is represented by a 3-vector
-small angle.  :class:`ErrorStateLayout` says where.  Attitude-error convention (docs/ARCHITECTURE.md, the
-same as :mod:`workbench.core.rotation`): the error is a **body-frame** small angle δθ [rad] with
-``q_true = q_est ⊗ exp(δθ)`` (right / local, multiplicative perturbation).
-``x ⊞ e`` applies additive corrections to the additive entries and ``q ⊗ exp(δθ)`` to each
-quaternion; ``x ⊟ x_ref`` is its inverse (``x_ref ⊞ (x ⊟ x_ref) == x``).
-
-Algorithm
----------
-The step follows Sect. 3.1.1 of the POST2 reconstruction thesis (Huygens at Titan): predict the
-state with the nonlinear model, propagate ``P`` with the state-transition (sensitivity) matrix
-plus process noise ``Q``, compute the residual ``y = O − G`` (observed minus computed), the gain
-``K = P Hᵀ (H P Hᵀ + R)⁻¹`` with ``R`` the inverse of the observation weights, correct the
-state, and update the covariance in **Joseph form** ``(I − KH) P (I − KH)ᵀ + K R Kᵀ`` (Eq. 3.1
-ff.; Gelb 1974).  Sensitivities that are not supplied are computed, as in POST2, by perturbing
-the (error) state — here with central differences of size ``eps`` per error-state entry.
-Process noise can be raised on the fly (REDLand drop-test filter: "the process noise is
-increased when rapid changes of acceleration are observed") with the ``adapt_q`` hook of
-:func:`run_filter`.
-
-Quaternion reset: after ``x_post = x ⊞ K y`` the error state is reset to zero.  With a
-body-frame error the exact reset Jacobian is ``G = I − ½[δθ×] + O(δθ²)``; we keep ``P_post``
-unchanged (``G ≈ I``), the standard MEKF practice (Markley & Crassidis 2014, Sect. 6.2.4), since
-δθ after a healthy update is small and the neglected term is below the linearisation error.
-
-Iterated EKF: Bell & Cathey, "The iterated Kalman filter update as a Gauss-Newton method",
-IEEE TAC 38(2), 1993, written with ⊞/⊟.
-
-Features of :func:`update` / :class:`Measurement` / :func:`run_filter`: Joseph-form covariance;
-χ² gating (``gate_probability`` or ``gate_threshold``); iterated update with a relative or an
-absolute (``step_tol``) stop rule; constrained update directions by gain projection
-(``gain_projector``, Simon 2006); measurements carrying some components (``slots``) of a larger
-channel, recorded NaN-padded; a transition that returns its own process noise; the ``adapt_q``
-hook.  Companions: :func:`workbench.estimation.grid.merge_time_tags` builds the step grid with
-measurement nodes at their own time tags; :mod:`workbench.estimation.smoother` smooths a
-:class:`ForwardPass` (RTS) and iterates forward-backward passes about the smoothed trajectory
-(:func:`~workbench.estimation.smoother.iterated_rts`).
-
-References: [1] Gelb, *Applied Optimal Estimation*, 1974 (Joseph form); [2] POST2 EKF thesis,
-Ch. 3.1 (the POST2 EKF reconstruction of the Huygens probe, M.S. thesis); [3] Solà,
-"Quaternion kinematics for the error-state Kalman filter", 2017 (error-state / reset); [4] Bell & Cathey 1993.
+:func:`update` / :class:`Measurement` / :func:`run_filter` also give χ² gating, the iterated update
+(Bell & Cathey, IEEE TAC 38(2), 1993), gain projection for constrained directions (Simon 2006),
+measurements carrying some components (``slots``) of a channel, a transition returning its own
+process noise and the ``adapt_q`` hook (REDLand: Q raised on rapid acceleration changes).
+Companions: :func:`workbench.estimation.grid.merge_time_tags`, :mod:`workbench.estimation.smoother`
+and the compiled update :mod:`workbench.estimation.kernels`. References: Gelb, *Applied Optimal
+Estimation*, 1974; POST2 EKF thesis, Ch. 3.1; Solà, "Quaternion kinematics for the error-state
+Kalman filter", 2017; Bell & Cathey 1993.
 """
 
 from __future__ import annotations

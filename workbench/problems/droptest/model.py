@@ -1,43 +1,20 @@
-"""The REDLand drop-test filter model (19 states of the paper + augmentations): state, transition,
+"""The REDLand drop-test filter model (the paper's 19 states + augmentations): state, transition,
 Jacobians, measurement models.
 
-State (19, full) and error state (18), after the REDLand paper ("Algorithm", Eq. 9–19):
+State (full / error): p [m, SPF] 0:3 / 0:3; v [m/s, SPF] 3:6 / 3:6; a_B non-gravitational
+acceleration [m/s², body] 6:9 / 6:9; q_I_B (scalar last) / δθ [rad, body] 9:13 / 9:12; ω [rad/s]
+13:16 / 12:15; α [rad/s²] 16:19 / 15:18 (REDLand "Algorithm", Eq. 9–19); then our augmentations:
+the gyro error matrix E (scale and misalignment, row-major, 19:28 / 18:27), the gyro bias b_g
+(28:31 / 27:30) and each triad's bias b_j (31+3j / 30+3j) — left out, the estimate was
+over-confident (docs/tuning/droptest.md, "model.py"). Attitude error: ``q_true = q_est ⊗ exp(δθ)``.
 
-=====  ==========  ======================================================  =========
-full   error       quantity                                                 frame
-=====  ==========  ======================================================  =========
-0:3    0:3         p — position of the CM [m]                               SPF (I)
-3:6    3:6         v — velocity of the CM [m/s]                             SPF
-6:9    6:9         a_B — non-gravitational acceleration of the CM [m/s²]    body
-9:13   9:12        q_I_B — attitude quaternion (scalar last) / δθ [rad]     body
-13:16  12:15       ω — angular rate [rad/s]                                 body
-16:19  15:18       α — angular acceleration [rad/s²]                        body
-19:28  18:27       E — gyro error matrix [-], row-major (constants):        gyro axes
-                   diagonal = scale factors, off-diagonal = misalignment
-28:31  27:30       b_g — gyro bias [rad/s] (constant)                       gyro axes
-31+3j  30+3j       b_j — bias of accelerometer triad j [m/s²] (constants)  body
-=====  ==========  ======================================================  =========
-
-The first 19 states are REDLand's; the gyro error matrix E (the CFX gyro's ±3 % scale and axis
-misalignment, observable at impact through the triads' centripetal terms and lever arms) and the
-per-triad accelerometer biases (observable while hanging) are our augmentations: left out, they
-made the estimate over-confident (measurements: docs/tuning/droptest.md, "model.py").
-
-Attitude error convention: body-frame small angle, ``q_true = q_est ⊗ exp(δθ)``.
-
-**Deviation from the paper, on purpose:** REDLand carries the non-gravitational acceleration
-in inertial (SPF) coordinates; in an EKF that couples δa and δθ in every triad Jacobian and the
-filter gains spurious heading information (docs/tuning/droptest.md, "model.py").  Carrying a in
-the **body** frame makes the triad model linear in it (H_θ = 0) and keeps heading exactly
-unobservable, as in a strapdown INS.  The inertial acceleration is ``a_I = C_I_B a_B`` for plots.
-
-Kinematic mode: ``ṗ = v``, ``v̇ = C_I_B a_B + g``, ``a_I`` a random walk (so ``a_B`` turns with
-the body: ``a_B⁺ = exp(−φ) a_B``), ``q̇ = ½ q ⊗ ω``, ``ω̇ = α``, ``α̇ = w_α``. Dynamic mode: until
-the bungee cut, the test plan's change of bungee acceleration is added to the prediction; the
-residual is estimated; at release and at the cut the known force step is applied.
-
-Measurements: a triad at lever arm r senses ``f = a_B + α × r + ω × (ω × r)`` (Eq. 3–8);
-the gyro senses ω; optional ranges to fixed points.
+On purpose unlike the paper, ``a`` is carried in the **body** frame: in SPF it couples δa and δθ
+in every triad Jacobian and gives the filter spurious heading information; in the body frame the
+triad model is linear in it and heading stays unobservable, as in a strapdown INS
+(``a_I = C_I_B a_B`` for plots). Kinematic mode: ``ṗ = v``, ``v̇ = C_I_B a_B + g``, ``a_I`` a
+random walk, ``q̇ = ½ q ⊗ ω``, ``ω̇ = α``, ``α̇ = w_α``; dynamic mode adds the test plan's bungee
+until the cut. A triad at lever arm r senses ``f = a_B + α × r + ω × (ω × r)`` (Eq. 3–8); the gyro
+senses ω; optional ranges to fixed points.
 """
 
 from __future__ import annotations

@@ -1,62 +1,23 @@
 """Airbag stroke: distance from the surface to the rigid lander, its 1σ, the max-stroke event,
 and the coefficient of restitution.
 
-REDLand paper [1], "Results": "a characterization of airbag stroke can be taken from the
-position and attitude information ... the distance from the surface to the closest point on the
-lander at that instant and the 1σ uncertainty of that measurement.  The point of closest
-approach is the maximum stroke event"; the test requirement is to know maximum stroke within
-10 cm (3σ).  "Full stroke" is the rigid lander reaching the surface (distance <= 0).  The
-restitution coefficient is "the ratio of velocity after the impact to the velocity before the
-impact in the surface normal direction".
+REDLand paper [1], "Results": stroke is "the distance from the surface to the closest point on the
+lander at that instant and the 1σ uncertainty of that measurement", the point of closest approach
+the maximum stroke event (requirement: known within 10 cm, 3σ); "full stroke" is the rigid lander
+reaching the surface; restitution "the ratio of velocity after the impact to the velocity before
+the impact in the surface normal direction". The distance is exact for the plane (a vertex
+minimum) and for rock spheres with ``faces_B`` (closest point on every triangle); its linearised
+1σ is ``sqrt(J P_pose Jᵀ)`` over the pose error ``[δp_I, δθ]`` (body-frame δθ,
+``q_true = q_est ⊗ exp(δθ)``), checked by posterior sampling where two body points tie
+(:func:`sampled_stroke_sigma`). Restitution's primary definition is ``−max v_n / min v_n`` over the
+first contact; the spread of the equivalent readings is its definition σ
+(:func:`restitution_definitions`). The derivations: docs/tuning/droptest.md, "stroke.py".
 
 Provides :class:`StrokeHistory`, :func:`stroke_history`, :func:`sampled_stroke_sigma`,
 :class:`MaxStroke`, :func:`max_stroke`, :func:`restitution`, :func:`contact_interval`,
 :func:`restitution_definitions`.
 
-Restitution: which velocities, exactly.  The paper names the ratio but not the instants.  The
-reported value (the *primary* definition) is ``e = −max v_n / min v_n``: ``v_n = n·v`` the CM
-velocity along the ramp normal n, its minimum (most negative, approaching) and its maximum
-after that minimum (leaving), both over the first contact.  These extremes are where the bag's
-normal force equals the normal component of gravity (``m g cos α`` on a ramp of inclination α);
-they are stationary points of ``v_n``, so e does not depend on how exactly contact is detected.
-Equivalent readings of the same sentence give different numbers, because gravity keeps acting
-on ``v_n`` while the bag force is still small: ``v_n`` at the instants the bags physically touch
-and leave (a truth simulator's natural choice), or just outside the interval where the
-non-gravitational acceleration exceeds a threshold (0.25, 0.5 or 1 g; higher thresholds cut
-the contact in two where the load has a long low tail), and the touch/leave instants
-extrapolated from the lowest threshold's crossings.
-:func:`restitution_definitions` evaluates them all on one velocity history; their largest
-difference from the primary value is the *definition* term of the reported σ, which is
-the reported σ, added in quadrature to the estimation σ of :func:`restitution` (evaluated at the
-two extremes, with their smoothed cross-covariance).
-
-Pose and attitude-error convention (docs/ARCHITECTURE.md, ``core/rotation.py``).  ``q_I_B`` maps body to
-chamber frame, ``x_I = p_I + C_I_B r_B``.  The pose error is the 6-vector ``[δp_I, δθ]``:
-``δp_I`` in the chamber frame I, ``δθ`` a BODY-frame small angle with
-``q_true = q_est ⊗ exp(δθ)`` (``quat_boxplus``).
-
-Linearised 1σ.  With ``C_true = C exp([δθ×]) ≈ C (I + [δθ×])`` a body point moves by
-``δx_I = δp_I + C (δθ × r_B) = δp_I − C [r_B×] δθ``; by the envelope theorem the minimum
-distance changes like the surface distance φ at the minimising body point, so
-
-    J = ∂d/∂[δp_I, δθ] = [ ∇φᵀ,  −∇φᵀ C_I_B [r_B×] ] = [ ∇φᵀ,  (r_B × C_I_Bᵀ ∇φ)ᵀ ],
-
-    σ_d = sqrt(J P_pose Jᵀ).
-
-This is exact to first order only where the minimiser is unique; where two body points tie
-(e.g. a face parallel to the ramp) the min of several Gaussians is biased low and narrower than
-σ_d -- :func:`sampled_stroke_sigma` gives the Monte Carlo answer to check against.
-
-What the distance is, exactly.  For the plane, the minimum over a polyhedron of a linear
-function is attained at a vertex, so the vertex minimum is exact (also for penetration of a
-convex body: minus the penetration depth).  For a rock sphere (centre c, radius r) the minimum
-is ``dist(c, body) − r``, attained possibly inside a face or an edge: when ``faces_B`` is given
-this is computed exactly (closest point on every triangle), with the sign of ``dist`` negative
-when c is inside the body (convex bodies only, which is checked); without ``faces_B`` rocks are
-checked at the vertices only (an upper bound of the distance).
-
-[1] JPL, REDLand paper on the MER airbag drop tests, "Results" and
-    Fig. 13.
+[1] JPL, REDLand paper on the MER airbag drop tests, "Results" and Fig. 13.
 """
 
 from __future__ import annotations

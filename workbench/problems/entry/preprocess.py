@@ -1,47 +1,20 @@
 """Preprocessing of the entry telemetry (AMELIA Sect. 4): from the ``EntryTelemetry`` as read
 (:mod:`workbench.problems.entry.telemetry`) to the strapdown input :class:`PreprocessedIMU`.
 
-Preprocessing (:func:`preprocess`, AMELIA Sect. 4 and 5):
+:func:`preprocess` (AMELIA Sects. 4–5): (1) the 1 Hz on-board position/velocity brought to the 10 Hz
+grid, by default acceleration-aided (the on-board total acceleration integrated between nodes, the
+mismatch spread so the result passes through every node; ``nav_interpolation="cubic"`` is the
+paper's plain cubic); (2) gravity removed at the on-board position and the result rotated to the
+body with the on-board attitude, ``f_G = C_G_M(q_nav) (a_M − g)``, which recovers the measured
+specific force whatever the attitude error; (3) gaps become :class:`GapBridge` from the on-board
+solution at their edges (Sect. 5); (4) saturated X/Y rates rebuilt consistently with the lateral
+acceleration the riser drives (``ẇ_x ≈ c f_y``, c fitted around the run; a cubic when the fit is
+poor or for Z), with a 10 °/s ``sigma_w`` there (Table 3); (5) 100 Hz resampling for
+``resample_window_s`` after PDD (Sect. 4, "Data extrapolation during PDD") with their own 1σ.
+Measured accuracies of each step: docs/tuning/entry.md, "preprocess.py".
 
-1. the on-board position/velocity (1 Hz) are brought to the 10 Hz grid — by default
-   *acceleration-aided*: the 10 Hz on-board total acceleration (the quantity the on-board
-   navigation integrated) is integrated from the previous 1 Hz node, and the mismatch at the
-   next node is spread linearly (velocity) and linearly plus quadratically (position), so the
-   result passes through every node; ``nav_interpolation="cubic"`` gives the paper's plain cubic
-   interpolation (Hermite in position with the velocity as slope, cubic spline in velocity).
-   Measured against the 100 Hz on-board solution (synthetic ``schiaparelli``, seed 7): aided
-   ≤ 4.4 cm / 0.3 m/s (the worst in a 0.5 s TM segment between two gaps that holds no 1 Hz
-   node, where the cubic over all nodes is the fallback; elsewhere mm and mm/s during entry,
-   ≤ 0.1 m/s through the parachute inflation); plain cubic: metres and 10–30 m/s next to gaps
-   (a 1 Hz node alone cannot follow a 50 m/s² deceleration).  The effect on gravity is
-   negligible either way (∂g/∂p ≈ 2.2e-6 s⁻²); the gap bridges need the aided method;
-2. gravity ``gravity_j2(p_nav)`` is removed and the result rotated to the body with the on-board
-   attitude: ``f_G = C_G_M(q_nav) (a_M − g)``.  Since the on-board navigation formed ``a_M`` with
-   its own (possibly wrong) attitude, this recovers the measured specific force exactly,
-   whatever the attitude error (it also undoes the wrong attitude after the gyro saturation);
-3. gaps: consecutive samples further apart than ``gap_factor`` × the nominal step give a
-   :class:`GapBridge` from the on-board solution at the gap edges (Sect. 5);
-4. saturation: samples with ``|w| ≥ saturation − margin`` on any axis.  Each run of the X or Y
-   rate is rebuilt **consistently with the acceleration**: the riser pulls at a point on the
-   symmetry axis, so ``ẇ_x ≈ c f_y`` (``ẇ_y ≈ c' f_x``); ``c`` is fitted on the unsaturated
-   samples around the run (on the synthetic truth: R² 0.99, c = −3.15 rad/m, the physical
-   −m z_attach / I_xx being −3.18) and the rate integrated across the run from both
-   neighbours.  When the
-   fit is poor (R² < 0.9), or for Z, a cubic through up to two unsaturated neighbours per side
-   is used.  The magnitude is bounded below by the threshold (the true rate exceeded it).
-   ``sigma_w`` of that axis becomes 10 °/s there (Table 3, "angular rate at PDD");
-5. for ``resample_window_s`` (5 s) after PDD, acceleration and rate are resampled at 100 Hz
-   (Sect. 4, "Data extrapolation during PDD"): cubic spline through the 10 Hz samples, the X/Y
-   rates between samples by the same ``ẇ ∝ f_lateral`` model when it fits, attitude by slerp,
-   on-board p/v by step 1.  Interpolated samples carry ``sigma_w_resampled`` (10 °/s) and
-   ``sigma_f_resampled`` (1 m/s²): 10 Hz samples of a 0.35 s parachute oscillation cannot be
-   interpolated better (measured rms errors: rate 4 °/s on X, acceleration 0.1–0.9 m/s²).
-
-Frames: M = MMED inertial, G = GNC body; ``q_M_G`` body → inertial (Hamilton, scalar-last); the
-TM JPL quaternion "MMED to GNC" is converted with :func:`~workbench.core.rotation.quat_from_jpl`
-(``q_M_G = conj(quat_from_jpl(q_jpl))``, numerically the raw components).  ``C_a`` etc. below
-are ``C_G_M`` (inertial → body) of the on-board attitude, as ``C(q)`` in the paper.
-
+Frames: M = MMED inertial, G = GNC body; ``q_M_G`` body → inertial (Hamilton, scalar-last); the TM
+JPL quaternion is converted with :func:`~workbench.core.rotation.quat_from_jpl`.
 Reference: Aboudan et al., Space Sci. Rev. 214:97 (2018), Sects. 3–5, Tables 1 and 3.
 """
 

@@ -1,63 +1,21 @@
 """Truth simulator of a Schiaparelli-like entry and parachute descent (synthetic scenarios only).
 
-This is the *truth*, not the estimator's model: a 6-DOF rigid capsule flying through a *true*
-atmosphere built from its own climate temperature profile, gas constants and gravity waves (not
-the estimator's :class:`~workbench.core.atmosphere.MarsEngineeringAtmosphere`), with the vehicle's
-aerodynamic database (:mod:`workbench.models.aerodynamics`) times planted, smooth, Mach-dependent
-coefficient deviations (10 % 1σ, AMELIA Table 3) that the estimator does not know, over a
-terrain with relief, then a two-body system after parachute deployment — the
-module hangs from an elastic riser (spring-damper, slack when shorter than its length) whose far
-end is the canopy, a point mass with its own air-relative drag, inflation law and canopy
-"breathing".  Pendulum oscillations, the inflation snatch and the X-rate spike at deployment
-(the Schiaparelli anomaly: X gyro above 187.5 °/s for about 1 s, AMELIA Sect. 4) follow from the
-forces; nothing is scripted on the module's motion.
+The *truth*, not the estimator's model: a 6-DOF rigid capsule through a true atmosphere of its own
+(climate temperature profile, gas constants, gravity waves), the vehicle's aerodynamic database
+times planted Mach-dependent deviations (10 % 1σ, AMELIA Table 3) the estimator does not know, over
+a terrain with relief; after parachute deployment a two-body system — the module on an elastic
+riser to the canopy, a point mass with its own drag, inflation and breathing, and an asymmetric
+inflation side force — so the pendulum, the snatch and the X-rate spike past 187.5 °/s (AMELIA
+Sect. 4) follow from the forces, nothing scripted on the module's motion.
 
-Frames and conventions (docs/ARCHITECTURE.md, "Conventions"):
-
-* ``M`` = MMED inertial frame (Mars-centred, +Z the pole at J2000).  For the ~300 s simulated
-  the body-fixed frame is ``Rz(W(t))`` of M and Mars rotates with ``ω = [0, 0, MARS.rotation_rate]``
-  in M; the atmosphere co-rotates; winds are given north/east in the local NED frame at the
-  vehicle (north/east from the +Z pole of M) and blow *towards* the stated direction.
-* Gravity: point mass + J2 (``gravity_j2`` is valid in M).  Altitude ``h_amr = |p| − 3396 km``
-  (above the MOLA radius, "AMR"); the atmosphere and winds are functions of ``h_amr`` only.
-  Terrain: the sphere of radius ``3396 km − 1440 m`` (the ground-contact check) plus the relief
-  ``terrain_modes`` that the radar beams see (:class:`~workbench.problems.entry.site.TerrainRelief`).
-* Body frame G: origin at the CoG, +Z along the symmetry axis towards the back shell; during
-  entry the air-relative velocity is along −Z_G, under the parachute the riser pulls along +Z_G.
-  ``q_M_G`` is body -> inertial (Hamilton, scalar-last); ``w_G`` body rate; ``f_G`` the true
-  non-gravitational specific force at the CoG in G (what a perfect IMU at the CoG measures).
-* Time ``t`` [s] from the Entry Interface Point (EIP, t = 0); the run starts at ``t0 = −15 s``
-  from the AMELIA Table 2 nominal state and ends at back-shell release (BSR).
-
-Events: PDD (parachute deployment, the mortar fire) when the true Mach number first drops below
-``pdd_mach`` (or at ``pdd_time_s``); FSR = PDD + ``fsr_delay_s`` (front-shield mass leaves, the
-aerodynamic table switches to the descent module, inertia scaled with the mass); BSR = FSR +
-``bsr_delay_s`` = end of data.
-
-Parachute model (engineering choices, documented in :class:`EntryTruthSpec`): at PDD the canopy
-point mass is placed at line stretch, ``riser_length`` behind the attachment point (back-shell
-apex) along +Z_G tilted by ``deploy_tilt_deg`` towards the body azimuth ``deploy_azimuth_deg``
-(measured from +X_G towards +Y_G; a lateral offset of the mortar/bag trajectory), with the
-attachment point's velocity plus ``eject_speed_mps`` along that direction.  The canopy area grows
-``A = A0 u(τ) (1 + b(τ))``, ``u`` a C¹ smooth ramp 0 -> 1 over ``inflation_time_s`` and ``b``
-the breathing ``a cos(2π (τ − t_inf)/P + φ)``, decaying with ``breathing_decay_s`` after full
-inflation.  Drag ``½ ρ V² CD(M) A`` along the canopy's own air-relative velocity.  Asymmetric
-inflation: between ``side_force_start_s`` and ``side_force_end_s`` after PDD (smooth 0.15 s
-edges) the canopy also feels a side force ``side_force_coeff`` × drag, perpendicular to its air
-velocity, towards the body azimuth ``side_force_azimuth_deg`` frozen at PDD.  With the deploy
-tilt it drives the module's pendulum (~2 Hz under the riser) to the X-rate spike ~1-2 s after
-PDD that the flown X gyro saturated on; nothing else is scripted.  These are tuned engineering
-values (AMELIA gives only the observed motion).
-
-Integrator: fixed-step RK4, ``dt_entry`` (0.01 s) before PDD and ``dt_chute`` (≤ 0.002 s) from
-PDD on (stiff riser), outputs on a uniform ``dt_out`` = 0.01 s grid.  The per-step model is
-scalar Python (``math``) on purpose: for 19 states a numpy call costs more than the arithmetic.
-
-References: AMELIA (Aboudan et al., Space Sci. Rev. 2018) Sects. 3–4, 9, Table 2 (initial state),
-Fig. 2–4 (accelerations, 16 °/s spin, X-rate saturation ~1 s after PDD for ~1 s, Z acceleration
-peak ~101.5 m/s² ~0.6 s after PDD oscillating with ~0.35 s period); Mars constants as in
-:mod:`workbench.core.bodies`; Schiaparelli mass and shield size from ESA; the
-truth's molar mass 43.34 g/mol (NASA Mars fact sheet; AMELIA Sect. 9 uses 43.41).
+Frames: M = MMED inertial (Mars rotating about its +Z, the atmosphere co-rotating; winds north/east
+in local NED, blowing *towards* the stated direction); gravity point mass + J2; altitude above the
+MOLA radius; body G with +Z towards the back shell, ``q_M_G`` body -> inertial. Time from EIP,
+starting at −15 s from AMELIA Table 2's state; events PDD (Mach or time), FSR, BSR (end). Fixed-step
+RK4 (``dt_entry``, ``dt_chute`` under the stiff riser), scalar Python per step on purpose (19
+states: a numpy call costs more than the arithmetic). The parachute's engineering choices are
+documented in :class:`EntryTruthSpec`; the full model description: docs/tuning/entry.md, "truth.py".
+References: Aboudan et al., Space Sci. Rev. 2018, Sects. 3–4, 9, Table 2, Figs. 2–4.
 """
 
 from __future__ import annotations

@@ -1,44 +1,19 @@
 """Entry Monte Carlo against the 6-DOF truth simulator, through the full pipeline from telemetry files.
 
-:mod:`workbench.problems.entry.montecarlo` (``workbench mc schiaparelli``) is a *self-consistency*
-check: its truths are integrated with the filter's own discrete model on the clean preprocessed
-IMU and its radar noise is the filter's R, so it tests the filter against its own assumptions.
-This module is the other half of the picture (issue "honest numbers"): every member's truth comes
-from the truth simulator (:func:`workbench.problems.entry.truth.simulate_entry`: its own
-aerodynamics, atmosphere, winds, parachute dynamics) and every reconstruction runs the whole
-pipeline from the telemetry files a user would supply — reading and checks, preprocessing
-(gap bridges, the rebuilt saturated rate, 100 Hz resampling), the nominal integration, the
-dispersion analysis (fewer members, e.g. 2000 and 1 refinement round) and the iterated
-radar-aided smoother — exactly as ``workbench run`` does (:func:`workbench.problems.entry.pipeline.reconstruct`,
-consumed up to its smoother stage; the atmosphere and wind stages are not scored here).
+:mod:`workbench.problems.entry.montecarlo` checks the filter against its own assumptions (truths from
+its own discrete model); this module is the other half: every member's truth comes from
+:func:`workbench.problems.entry.truth.simulate_entry` (its own aerodynamics, atmosphere, winds,
+parachute) and every reconstruction runs the whole pipeline from the files a user would supply
+(:func:`workbench.problems.entry.pipeline.reconstruct` up to its smoother stage).
 
-Member k (``np.random.SeedSequence(seed, spawn_key=(k,))``, the convention of
-:mod:`workbench.estimation.montecarlo`, spawned into the draws of the member's specs, the truth
-simulation and the telemetry):
-
-1. **specs** — :func:`disperse_member`: the scenario's truth spec and telemetry spec dispersed by
-   the truth package's own functions (initial state, planted aerodynamic deviations, atmosphere,
-   winds, terrain relief; IMU bias, scale and misalignment, the on-board nominal-state error);
-2. **truth** — :func:`~workbench.problems.entry.truth.simulate_entry` on the dispersed spec;
-3. **telemetry files** — :func:`~workbench.problems.entry.synthetic.synthesize_from_truth`
-   (sensor errors, on-board strapdown from an erroneous nominal state, blackouts, radar) writes the
-   five CSV files, ``initial_state.toml`` and ``truth.npz`` into a temporary folder (or
-   ``work_dir/member_<k>/telemetry``);
-4. **reconstruction** — the pipeline's stages from those files;
-5. **scores** — the smoothed and forward passes against ``truth.npz`` (interpolated to the IMU
-   grid; the reconstruction never reads it) with
-   :func:`~workbench.problems.entry.montecarlo.score_run`: NEES (9 dof, Cartesian and curvilinear),
-   errors and reported 1σ, altitude-AGL error after the first radar fix, NIS per radar channel.
-
-Members' grids differ (PDD, the resampled window after it, the first radar packet and the end of
-data depend on the dispersed trajectory).  The stage values are taken on each member's own grid at
-its own epochs (start, blackout end, PDD, first radar, end:
-:func:`~workbench.problems.entry.montecarlo.summary_times`); for the ANEES(t) and RMS curves every
-member is mapped onto the first successful member's grid piecewise-linearly between the epochs
-(event-aligned time; at each epoch the mapped sample is exactly the member's own epoch sample).
-The aggregation and the summary are those of the self-consistency check
-(:func:`~workbench.problems.entry.montecarlo.aggregate_runs`,
-:func:`~workbench.problems.entry.montecarlo.summarize_validation`), so the two read side by side.
+Member k (``SeedSequence(seed, spawn_key=(k,))``, :mod:`workbench.estimation.montecarlo`'s rule):
+dispersed specs (:func:`member_settings`, ``dataclasses.replace`` of the run's settings), the truth,
+the telemetry files (:func:`~workbench.problems.entry.synthetic.synthesize_from_truth`), the
+reconstruction, and the scores against ``truth.npz`` (:func:`~workbench.problems.entry.montecarlo.score_run`:
+NEES, errors and reported 1σ, AGL error, NIS per radar channel). Members' grids differ, so values
+are taken at each member's own epochs and the ANEES(t) curves map every member onto the first
+one's grid between epochs; aggregation and summary are the self-consistency check's, so the two
+read side by side. The step-by-step description: docs/tuning/entry.md, "truth_mc.py".
 """
 
 from __future__ import annotations

@@ -1,45 +1,21 @@
 """MEADS Monte Carlo with the full error model against the truth simulator (paper Sect. IV, Figs. 11–13).
 
 Karlgaard et al., "Mars Entry Atmospheric Data System Trajectory Reconstruction Algorithms and
-Flight Results", AIAA 2013: the least squares, EKF pass 1 and EKF pass 2 over many seeded entries
-with every error source of the pressure chain on — the 3σ of the error of α, β, q∞, Mach, p∞,
-density and the three wind components over the members, against what each estimator reports.
-:mod:`.montecarlo` is the other study, the Newtonian trade study of Fig. 6.
+Flight Results", AIAA 2013: least squares, EKF pass 1 and pass 2 over many seeded entries with every
+error source of the pressure chain on; the 3σ of the error of α, β, q∞, Mach, p∞, density and the
+winds over the members, against what each estimator reports (:mod:`.montecarlo` is the Newtonian
+trade study of Fig. 6).
 
-Member k (``SeedSequence(seed, spawn_key=(k,))``, the convention of
-:mod:`workbench.estimation.montecarlo`, spawned into a truth stream and a sensor stream;
-:func:`member_draws`):
-
-1. **truth** — the scenario's ``[truth]`` spec dispersed by
-   :func:`~workbench.problems.meads.truth.disperse_truth_spec` (entry state, trim α, atmosphere,
-   winds, the CFD-like pressure model; ``disperse_truth=False`` keeps the scenario's), simulated
-   by :func:`~workbench.problems.meads.truth.simulate_entry`;
-2. **telemetry files** — :func:`~workbench.problems.meads.synthetic.synthesize_from_truth`: the
-   scenario's ``[sensors.*]`` error chain (port location, time tags, lag, transpiration,
-   calibration and scale factors, noise, quantisation; IMU; initial navigation) drawn from the
-   member's sensor stream, written into a temporary folder as a user supplies them.  The
-   scenario's injected port failure is switched off (``[sensors.pressure] failure_port = ""``): the
-   study is of the error model, not of failure handling;
-3. **reconstruction** — :func:`~workbench.problems.meads.pipeline.reconstruct` on those files,
-   exactly as ``workbench run``: least squares, winds and density, EKF pass 1 and pass 2; it never
-   reads ``truth.npz``;
-4. **errors** — :func:`error_histories`: estimate − truth and the reported 1σ of every quantity of
-   :data:`QUANTITIES` for every estimator of :data:`ESTIMATORS` at the pressure times.
-
-Members fly different entries, so the same time is a different flight condition per member: the
-statistics are taken per **flight condition**, as the paper's figures plot them.
-:func:`aggregate_by_mach` bins every member-sample at its own true Mach on :data:`MACH_BIN_EDGES`
-(where its own true q∞ ≥ 850 Pa, the objectives' threshold) and reduces the pooled member-samples
-of each bin, per quantity and estimator: the bias (mean error), the Monte Carlo 3σ (3 × the sample
-standard deviation, ddof 1), 3 × the RMS, the mean and median reported 3σ, their ratio (mean
-reported / Monte Carlo: > 1 the estimator is conservative, < 1 optimistic), the fraction inside
-their own reported 3σ and how many members reach the bin — a bin reached by fewer than
-:data:`MIN_BIN_MEMBER_FRACTION` of the members is *thin*, marked and left out of the table;
-:func:`summarize` tabulates the solid bins and lists where the reported 3σ disagrees with the
-spread (:data:`RATIO_BAND`, :data:`MIN_INSIDE`).  The per-time reduction (:func:`aggregate` per
-pressure time ``k / rate`` from 0, each member's samples on one grid of the longest, NaN-padded:
-:func:`stack_members`) is kept in the summary as ``table_by_time`` for comparison.  Results are
-gathered by member index, so they do not depend on the executor (loop, processes, Dask).
+Member k (``SeedSequence(seed, spawn_key=(k,))``, a truth and a sensor stream, :func:`member_draws`):
+the dispersed ``[truth]`` spec simulated (:func:`~workbench.problems.meads.truth.simulate_entry`),
+telemetry files written with the scenario's ``[sensors.*]`` error chain (the injected port failure
+switched off: the study is of the error model), the reconstruction exactly as ``workbench run``, and
+the errors with their reported 1σ (:func:`error_histories`). Members fly different entries, so the
+statistics are per flight condition: :func:`aggregate_by_mach` bins every member-sample at its own
+true Mach (where its q∞ ≥ 850 Pa) and reduces each bin (bias, Monte Carlo 3σ, reported 3σ, their
+ratio, fraction inside; thin bins marked); :func:`summarize` tabulates them. Results are gathered by
+member index, so they do not depend on the executor. The full description: docs/tuning/meads.md,
+"truth_mc.py".
 """
 
 from __future__ import annotations
