@@ -97,7 +97,7 @@ def test_verdict_report_markdown_and_error():
     checks.append(Check("b", ERROR, 2, 1, "bad thing"))
     rep = health_report(checks)
     assert rep["verdict"] == ERROR
-    assert set(rep["checks"][0]) == {"name", "status", "value", "bound", "message"}
+    assert set(rep["checks"][0]) == {"name", "status", "value", "bound", "message", "stat"}
     md = health_markdown({**rep, "written_anyway": True})
     assert "UNHEALTHY" in md and "bad thing" in md and "| a |" not in md  # OK checks are not listed
     err = UnhealthyError("s.toml", rep)

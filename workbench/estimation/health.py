@@ -59,13 +59,17 @@ _RANK = {OK: 0, WARNING: 1, ERROR: 2}
 class Check:
     """One health check: ``name`` (e.g. ``"nis.BP"``), ``status`` (OK/WARNING/ERROR), the measured
     ``value`` (a number, SI, or None), the ``bound`` it was held against (a number, a
-    ``[lo, hi]`` pair, or None) and a human ``message`` that says what it means."""
+    ``[lo, hi]`` pair, or None) and a human ``message`` that says what it means.  ``stat``: how a
+    truth-Monte-Carlo calibration re-judges the value (:mod:`workbench.estimation.calibration`):
+    ``{"kind": "nis", "dof": k}``, ``{"kind": "upper"}`` (large is bad) or ``{"kind": "two_sided"}``;
+    None for a check whose bound is physics, not a statistic of the filter."""
 
     name: str
     status: str
     value: Any
     bound: Any
     message: str
+    stat: Any = None
 
     def __post_init__(self) -> None:
         if self.status not in _RANK:
@@ -94,10 +98,10 @@ def _f(x: float) -> float:
     return float(f"{float(x):.6g}")
 
 
-def _banded(name: str, status: str, value: float, lo: float, hi: float, message: str) -> Check:
+def _banded(name: str, status: str, value: float, lo: float, hi: float, message: str, stat: Any = None) -> Check:
     """A :class:`Check` of ``value`` against the interval [``lo``, ``hi``] (all three rounded to
-    6 significant digits for the summary), with ``status`` and ``message``."""
-    return Check(name, status, _f(value), [_f(lo), _f(hi)], message)
+    6 significant digits for the summary), with ``status``, ``message`` and ``stat``."""
+    return Check(name, status, _f(value), [_f(lo), _f(hi)], message, stat)
 
 
 def nis_check(sensor: str, nis: np.ndarray, dof: int, *, error_quantile: float = 0.999) -> Check:
@@ -112,6 +116,7 @@ def nis_check(sensor: str, nis: np.ndarray, dof: int, *, error_quantile: float =
     nis = np.asarray(nis, float)
     nis = nis[np.isfinite(nis)]
     name = f"nis.{sensor}"
+    stat = {"kind": "nis", "dof": int(dof)}
     if nis.size == 0:
         return Check(name, WARNING, None, None, f"sensor {sensor}: no innovation was processed")
     n, mean = nis.size, float(np.mean(nis))
@@ -126,12 +131,13 @@ def nis_check(sensor: str, nis: np.ndarray, dof: int, *, error_quantile: float =
             _f(err_hi),
             f"filter inconsistent with sensor {sensor}: mean NIS {mean:.3g} over {n} samples against {dof} "
             f"expected (bound {err_hi:.3g}) — a wrong unit, noise level or model for this sensor?",
+            stat,
         )
     if not lo <= mean <= hi:
         side = "conservative (R or Q too large)" if mean < lo else "optimistic (R or Q too small)"
         message = f"sensor {sensor}: mean NIS {mean:.3g} over {n} samples, expected {dof} — the filter is {side}"
-        return _banded(name, WARNING, mean, lo, hi, message)
-    return _banded(name, OK, mean, lo, hi, f"sensor {sensor}: mean NIS {mean:.3g} (expected {dof})")
+        return _banded(name, WARNING, mean, lo, hi, message, stat)
+    return _banded(name, OK, mean, lo, hi, f"sensor {sensor}: mean NIS {mean:.3g} (expected {dof})", stat)
 
 
 #: covariance steps examined at once by :func:`covariance_stats` (bounds its temporaries)
@@ -295,9 +301,11 @@ def verdict(checks: Iterable[Check]) -> str:
     return worst
 
 
-def health_report(checks: Sequence[Check]) -> dict:
-    """``{"verdict": ..., "checks": [...]}`` (JSON-ready) of ``checks``."""
-    return {"verdict": verdict(checks), "checks": [asdict(c) for c in checks]}
+def health_report(checks: Sequence[Check], notes: Sequence[str] = ()) -> dict:
+    """``{"verdict": ..., "checks": [...], "notes": [...]}`` (JSON-ready) of ``checks``; ``notes``:
+    facts a reviewer reads once, not anomalies (e.g. a filter conservative by design, with its
+    measured factor)."""
+    return {"verdict": verdict(checks), "checks": [asdict(c) for c in checks], "notes": list(notes)}
 
 
 def health_markdown(health: Mapping) -> str:
@@ -311,4 +319,6 @@ def health_markdown(health: Mapping) -> str:
     if bad:
         lines += ["", "| check | status | message |", "|---|---|---|"]
         lines += [f"| {c['name']} | {c['status']} | {c['message'].replace('|', '/')} |" for c in bad]
+    if health.get("notes"):
+        lines += ["", "Notes:", ""] + [f"- {n}" for n in health["notes"]]
     return "\n".join(lines) + "\n"

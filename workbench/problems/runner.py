@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -20,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.estimation.calibration import finish_health, load_table
 from workbench.estimation.health import ERROR, UnhealthyError
 from workbench.io import assets
 from workbench.io import progress as prog
@@ -33,6 +35,9 @@ from workbench.problems.precompile import precompile
 __all__ = [
     "NumericalFailure",
     "RunResult",
+    "calibration_path",
+    "evaluate",
+    "judge_health",
     "output_folder",
     "prepare",
     "resolve",
@@ -266,6 +271,7 @@ def _run(
         summary["seed"] = seed
         summary["stage_times_s"] = rep.stage_times(since=n_times)  # this run's (a reporter may serve several)
         summary["wall_time_s"] = time.perf_counter() - t_start
+        judge_health(problem, summary)
         health = summary.get("health")
         if health is not None and health["verdict"] == ERROR:
             if not opts.allow_unhealthy:
@@ -289,6 +295,49 @@ def _run(
                 sparse=table.sparse,
             )
     return result, summary, rrd, Path(summary_path), export_path, telemetry, truth, seed
+
+
+def calibration_path(problem: Problem) -> Path:
+    """Where the problem's truth-Monte-Carlo health calibration lives:
+    ``health_calibration.json`` in the package of the problem's class (may not exist)."""
+    return Path(sys.modules[type(problem).__module__].__file__).parent / "health_calibration.json"
+
+
+def judge_health(problem: Problem, summary: dict, *, calibrated: bool = True) -> None:
+    """Replace ``summary["health"]`` (if any) by its final form: the statistic checks re-judged
+    against the problem's calibration table (:func:`calibration_path`; ``calibrated=False``: none)
+    and a synthetic run's headline quantities against its truth (``summary["truth"]["headline"]``),
+    see :func:`workbench.estimation.calibration.finish_health`."""
+    health = summary.get("health")
+    if health is None:
+        return
+    table = load_table(calibration_path(problem)) if calibrated else None
+    summary["health"] = finish_health(health, table, summary.get("truth"))
+
+
+def evaluate(
+    scenario: str | os.PathLike | Scenario, work_dir: Path, seed: int, *, calibrated: bool = True
+) -> dict:
+    """The summary of one run of ``scenario`` with ``seed`` — synthesized into ``work_dir`` when
+    synthetic, reconstructed, summarised, scored against its truth and its health judged
+    (:func:`judge_health`) — without a recording: a Monte Carlo member of the health calibration
+    (:mod:`workbench.problems.calibration`)."""
+    sc, problem, settings = prepare(scenario)
+    truth = None
+    if sc.is_synthetic:
+        syn = problem.synthesize(settings, Path(work_dir) / "telemetry", int(seed))
+        telemetry, truth = dict(syn.telemetry), problem.load_truth(syn.truth)
+    else:
+        telemetry = problem.telemetry_files(settings)
+    result = None
+    for stage in problem.reconstruct(settings, telemetry, RunOptions(seed=int(seed))):
+        result = stage
+    summary = problem.summary(result)
+    if truth is not None:
+        summary["truth"] = problem.score(result, truth)
+    summary["seed"] = int(seed)
+    judge_health(problem, summary, calibrated=calibrated)
+    return summary
 
 
 def run_monte_carlo(
