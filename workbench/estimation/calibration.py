@@ -208,5 +208,10 @@ def finish_health(health: Mapping, table: Mapping | None, truth_score: Mapping |
     info = None
     if table:
         info = {k: table.get(k) for k in ("source", "command", "members", "seeds", "scenarios")}
-    return {**health, "verdict": worst, "checks": checks, "notes": list(health.get("notes", [])) + notes,
-            "calibration": info}
+    return {
+        **health,
+        "verdict": worst,
+        "checks": checks,
+        "notes": list(health.get("notes", [])) + notes,
+        "calibration": info,
+    }

@@ -315,9 +315,7 @@ def judge_health(problem: Problem, summary: dict, *, calibrated: bool = True) ->
     summary["health"] = finish_health(health, table, summary.get("truth"))
 
 
-def evaluate(
-    scenario: str | os.PathLike | Scenario, work_dir: Path, seed: int, *, calibrated: bool = True
-) -> dict:
+def evaluate(scenario: str | os.PathLike | Scenario, work_dir: Path, seed: int, *, calibrated: bool = True) -> dict:
     """The summary of one run of ``scenario`` with ``seed`` — synthesized into ``work_dir`` when
     synthetic, reconstructed, summarised, scored against its truth and its health judged
     (:func:`judge_health`) — without a recording: a Monte Carlo member of the health calibration
