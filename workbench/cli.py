@@ -420,6 +420,15 @@ def cmd_import(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """Calibrate the health thresholds of problems on their truth Monte Carlo
+    (:mod:`workbench.problems.calibration`); ``--write`` stores each problem's table."""
+    from workbench.problems.calibration import main as calibrate_main
+
+    argv = [*args.kinds, "--members", str(args.members), "--jobs", str(args.jobs)]
+    return calibrate_main(argv + (["--write"] if args.write else []))
+
+
 def _progress_options(sp: argparse.ArgumentParser) -> None:
     """``--quiet/-q`` and ``--progress`` of the long-running commands (``run``, ``mc``)."""
     sp.add_argument(
@@ -438,7 +447,7 @@ def _progress_options(sp: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser (sub-commands list, run, mc, inspect, open, compare, replay, init, import)."""
+    """The argument parser (sub-commands list, run, mc, inspect, open, compare, replay, calibrate, init, import)."""
     p = argparse.ArgumentParser(prog="workbench", description="EDL reconstruction workbench")
     sub = p.add_subparsers(dest="command", required=True)
     sp = sub.add_parser("list", help="list the shipped scenarios (an error if none are found)")
@@ -549,6 +558,15 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--timeout", type=float, default=240.0, help="seconds to wait for one recording to load")
     sp.add_argument("--quiet", action="store_true", help="no progress lines")
     sp.set_defaults(func=cmd_screenshot)
+    sp = sub.add_parser(
+        "calibrate",
+        help="health thresholds from a problem's truth Monte Carlo (each shipped synthetic scenario over N seeds)",
+    )
+    sp.add_argument("kinds", nargs="+", help="problem kinds (droptest, entry, meads, post2)")
+    sp.add_argument("--members", type=int, default=30, help="seeds per scenario (default 30)")
+    sp.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="processes (default 2)")
+    sp.add_argument("--write", action="store_true", help="write workbench/problems/<kind>/health_calibration.json")
+    sp.set_defaults(func=cmd_calibrate)
     sp = sub.add_parser("init", help="write a user-data scenario to start from (scenario.toml, telemetry, README)")
     sp.add_argument("kind", help="a problem kind (droptest, entry, post2) or a shipped scenario name")
     sp.add_argument("dir", help="folder to write into (created)")

@@ -309,7 +309,8 @@ def health_report(checks: Sequence[Check], notes: Sequence[str] = ()) -> dict:
 
 
 def health_markdown(health: Mapping) -> str:
-    """A markdown section for a scorecard: the verdict, and every check that is not OK."""
+    """A markdown section for a scorecard: the verdict, every check that is not OK, the notes and
+    where the statistic thresholds came from (the truth-Monte-Carlo calibration table, or χ² alone)."""
     v = health.get("verdict", "?")
     lines = ["## Health", ""]
     if health.get("written_anyway"):
@@ -321,4 +322,12 @@ def health_markdown(health: Mapping) -> str:
         lines += [f"| {c['name']} | {c['status']} | {c['message'].replace('|', '/')} |" for c in bad]
     if health.get("notes"):
         lines += ["", "Notes:", ""] + [f"- {n}" for n in health["notes"]]
+    cal = health.get("calibration")
+    if cal:
+        lines += [
+            "",
+            f"Statistic thresholds: {cal.get('members')} members of {cal.get('source')} (`{cal.get('command')}`).",
+        ]
+    elif "calibration" in health:
+        lines += ["", "Statistic thresholds: χ² bounds (no truth-Monte-Carlo calibration for this problem)."]
     return "\n".join(lines) + "\n"

@@ -12,7 +12,7 @@ Seed streams (one rule, the same in every benchmark): ``np.random.SeedSequence(S
 spawn_key=(k,))`` with k = 1 tuning, 2 validation, 3 health calibration; the shipped scenarios' own
 seeds are never calibration members.
 
-    python -m workbench.problems.calibration droptest --members 30 --write
+    workbench calibrate droptest --members 30 --write      (or python -m workbench.problems.calibration ...)
 """
 
 from __future__ import annotations
@@ -119,7 +119,7 @@ def calibrate(kind: str, members: int, *, jobs: int = 2, scenarios: Sequence[Pat
     return {
         "kind": kind,
         "source": f"{kind} truth Monte Carlo, calibration stream",
-        "command": f"python -m workbench.problems.calibration {kind} --members {members} --write",
+        "command": f"workbench calibrate {kind} --members {members} --write",
         "seed_stream": {"entropy": SEED_ENTROPY, "spawn_key": [CALIBRATION_STREAM]},
         "members": len([r for r in rows if "checks" in r]),
         "seeds": seeds,
