@@ -242,7 +242,7 @@ def test_no_paths_outside_the_repository(folder):
 
 # ------------------------------------------------------------------ settings in one place (issue 25)
 #: modules that may see a Scenario: the schema layer, the problems' shared entry (protocol, registry,
-#: runner, template, precompile), each problem's config.py (``from_scenario``) and problem.py
+#: runner, template, precompile, calibration — which runs shipped scenarios as the runner does), each problem's config.py (``from_scenario``) and problem.py
 #: (``settings``), and the command line
 SCENARIO_ALLOWED = (
     "workbench.io.scenario",
@@ -253,6 +253,7 @@ SCENARIO_ALLOWED = (
     "workbench.problems.template",
     "workbench.problems.precompile",
     "workbench.problems.scheduler",
+    "workbench.problems.calibration",
     "workbench.cli",
 )
 SCENARIO_METHODS = {"get", "has", "path_of", "with_overrides", "is_synthetic"}

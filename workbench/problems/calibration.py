@@ -33,6 +33,8 @@ import numpy as np
 from workbench.estimation.calibration import fit_band
 from workbench.io import assets
 from workbench.io.scenario import resolve_scenario
+from workbench.problems import registry
+from workbench.problems.runner import calibration_path, evaluate
 
 __all__ = [
     "CALIBRATION_STREAM",
@@ -70,8 +72,6 @@ def shipped_scenarios(kind: str) -> list[Path]:
 
 def _member(args: tuple[str, int]) -> dict:
     """One calibration member: the checks of scenario ``args[0]`` run with seed ``args[1]`` (uncalibrated)."""
-    from workbench.problems.runner import evaluate
-
     path, seed = args
     with tempfile.TemporaryDirectory(prefix="wb-calib-") as tmp:
         try:
@@ -132,9 +132,6 @@ def calibrate(kind: str, members: int, *, jobs: int = 2, scenarios: Sequence[Pat
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line: calibrate one or more problems and (``--write``) store their tables."""
-    from workbench.problems import registry
-    from workbench.problems.runner import calibration_path
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("kinds", nargs="+", help="problem kinds (droptest, entry, meads, post2)")
     ap.add_argument("--members", type=int, default=30, help="seeds per scenario (default 30)")
