@@ -242,7 +242,8 @@ def test_no_paths_outside_the_repository(folder):
 
 # ------------------------------------------------------------------ settings in one place (issue 25)
 #: modules that may see a Scenario: the schema layer, the problems' shared entry (protocol, registry,
-#: runner, template, precompile, calibration — which runs shipped scenarios as the runner does), each problem's config.py (``from_scenario``) and problem.py
+#: runner, template, precompile, calibration — which runs shipped scenarios as the runner does), each
+#: problem's config.py (``from_scenario``) and problem.py
 #: (``settings``), and the command line
 SCENARIO_ALLOWED = (
     "workbench.io.scenario",
