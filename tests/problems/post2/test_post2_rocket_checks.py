@@ -178,29 +178,29 @@ def _pad(dip):
 
 def test_aligned_magnetometer_dip_with_the_wrong_sign_names_the_accelerometer():
     meta = airbrakes.read_metadata(META, LOG.name)
-    ok = {c.name: c for c in rocket_checks._site_checks(meta, _pad(62.3), 64.0, LOG.name)}
+    ok = {c.name: c for c in rocket_checks.site_checks(meta, _pad(62.3), 64.0, LOG.name)}
     assert ok["physics.magnetic_dip"].status == OK and ok["units.magnetometer"].status == OK
-    bad = {c.name: c for c in rocket_checks._site_checks(meta, _pad(-62.3), 64.0, LOG.name)}
+    bad = {c.name: c for c in rocket_checks.site_checks(meta, _pad(-62.3), 64.0, LOG.name)}
     c = bad["physics.magnetic_dip"]
     assert c.status == ERROR and "accelerometer's axes look sign-flipped" in c.message
-    gauss = {c.name: c for c in rocket_checks._site_checks(meta, {"magnetic_field_uT": 0.47}, None, LOG.name)}
+    gauss = {c.name: c for c in rocket_checks.site_checks(meta, {"magnetic_field_uT": 0.47}, None, LOG.name)}
     assert gauss["units.magnetometer"].status == WARNING and "gauss" in gauss["units.magnetometer"].message
 
 
 def test_observation_rate_above_the_packet_rate():
-    assert rocket_checks._rate_check(10.0, 90.0, "f.csv").status == OK
-    assert rocket_checks._rate_check(10.0, 8.25, "f.csv").status == OK  # the decimated excerpt
-    c = rocket_checks._rate_check(200.0, 90.0, "f.csv")
+    assert rocket_checks.rate_check(10.0, 90.0, "f.csv").status == OK
+    assert rocket_checks.rate_check(10.0, 8.25, "f.csv").status == OK  # the decimated excerpt
+    c = rocket_checks.rate_check(200.0, 90.0, "f.csv")
     assert c.status == ERROR and "packet rate" in c.message and c.value == pytest.approx(90.0)
-    assert rocket_checks._rate_check(15.0, 90.0, "f.csv").status == WARNING
+    assert rocket_checks.rate_check(15.0, 90.0, "f.csv").status == WARNING
 
 
 def test_wind_beyond_any_launch_day_is_a_warning():
     meta = airbrakes.read_metadata(META, LOG.name)
     board = meta.temperature + 15.0
-    assert {c.name: c.status for c in rocket_checks._weather_checks(meta, board)}["physics.wind"] == OK
+    assert {c.name: c.status for c in rocket_checks.weather_checks(meta, board)}["physics.wind"] == OK
     windy = type(meta)(**{**meta.__dict__, "wind_speed": 30.0})
-    assert {c.name: c.status for c in rocket_checks._weather_checks(windy, board)}["physics.wind"] == WARNING
+    assert {c.name: c.status for c in rocket_checks.weather_checks(windy, board)}["physics.wind"] == WARNING
 
 
 def _cut_coast(lines: list[str], n: int) -> list[str]:

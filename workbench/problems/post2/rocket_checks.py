@@ -19,7 +19,6 @@ a declination.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -27,6 +26,7 @@ import numpy as np
 
 from workbench.core.rotation import quat_history_from_body_rates, quat_to_rotvec
 from workbench.estimation.health import ERROR, OK, WARNING, Check
+from workbench.io.schema import read_json
 
 __all__ = [
     "dipole_field",
@@ -35,6 +35,11 @@ __all__ = [
     "undefined_outputs",
     "coast_drag_coefficient",
     "KEY_WINDOWS",
+    "key_windows",
+    "rate_check",
+    "site_checks",
+    "weather_checks",
+    "fl_gaps",
 ]
 
 #: IGRF-13 degree-1 Gauss coefficients at epoch 2020 [nT] (Alken et al. 2021, Table 2)
@@ -188,7 +193,7 @@ def _mag_gyro_check(t, w_B, mag_B, bias, k0: int, t_end: float, log_name: str) -
     return _check("units.gyro", ERROR, ratio, MAG_GYRO_RATIO_MAX, msg)
 
 
-def _site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Check]:
+def site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Check]:
     """The launch coordinates against the landed ones, the dipole field against the measured field and
     the declared inclination (geometry.site, units.magnetometer, physics.magnetic_dip)."""
     out = []
@@ -267,7 +272,7 @@ def _site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[C
     return out
 
 
-def _weather_checks(meta, board_pad_K: float) -> list[Check]:
+def weather_checks(meta, board_pad_K: float) -> list[Check]:
     """The metadata's site temperature against the board's own pad temperature (the board runs warmer
     than the air) and the wind against the launch limit (physics.site_temperature, physics.wind)."""
     out = []
@@ -292,7 +297,7 @@ def _weather_checks(meta, board_pad_K: float) -> list[Check]:
     return out
 
 
-def _rate_check(obs_rate_hz: float, packet_hz: float, log_name: str) -> Check:
+def rate_check(obs_rate_hz: float, packet_hz: float, log_name: str) -> Check:
     """timing.observation_rate: the block-mean observations' effective rate (at most one block per
     packet) against the rate the per-block model-error levels were measured at."""
     eff = min(obs_rate_hz, packet_hz)
@@ -367,10 +372,10 @@ def import_checks(
     checks = [_axes_check(t, log.f_B, log.w_B, fl.gyro_bias, t_coast, t_ej, name)]
     k0 = int(np.searchsorted(t, fl.pad_info["ignition_t_s"] - 0.2))
     checks.append(_mag_gyro_check(t, log.w_B, log.mag_B, fl.gyro_bias, k0, t_ej - 0.5, name))
-    checks += _site_checks(meta, fl.pad_info, inclination_deg, name)
+    checks += site_checks(meta, fl.pad_info, inclination_deg, name)
     t_pad_end = fl.pad_info["ignition_t_s"] - 0.1
     pad = (t >= t_pad_end - 1.0) & (t < t_pad_end)
-    checks += _weather_checks(meta, float(np.mean(log.temperature[pad])))
+    checks += weather_checks(meta, float(np.mean(log.temperature[pad])))
     cd = coast_drag_coefficient(ca0_unclipped, meta.cd)
     lo, hi = ROCKET_CD_RANGE
     msg = (
@@ -382,7 +387,7 @@ def import_checks(
     else:
         msg += ": check rocket_dry_mass_kg (in lb? ×0.4536; ×10?), rocket_Cd and rocket_cross_sectional_area_m2"
         checks.append(_check("physics.coast_drag_coefficient", ERROR, cd, [lo, hi], msg))
-    checks.append(_rate_check(obs_rate_hz, 1.0 / float(np.median(np.diff(log.t))), name))
+    checks.append(rate_check(obs_rate_hz, 1.0 / float(np.median(np.diff(log.t))), name))
     gaps_rel = fl_gaps(log, t)
     gc, undefined, notes = _gap_checks(gaps_rel, key_windows(t_coast, t_ej, t_main), name)
     checks += gc
@@ -412,10 +417,7 @@ def run_checks(cfg, hist: dict) -> tuple[list[Check], list[str]]:
     path = getattr(getattr(cfg, "run", None), "path", None)
     if path is None or not (Path(path).parent / "flight.json").is_file():
         return [], []
-    try:
-        flight = json.loads((Path(path).parent / "flight.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return [], []
+    flight = read_json(Path(path).parent / "flight.json")  # written by the import (generated)
     hc = flight.get("health_checks") or {}
     checks = [Check(**c) for c in hc.get("checks", [])]
     for spec in cfg.states:
