@@ -82,6 +82,7 @@ def test_clean_excerpt_passes_every_import_check(clean):
     assert not bad
     for name in (
         "geometry.imu_axes",
+        "geometry.pad_tilt",
         "units.gyro",
         "geometry.landing_distance",
         "units.magnetometer",
@@ -193,6 +194,12 @@ def test_observation_rate_above_the_packet_rate():
     c = rocket_checks.rate_check(200.0, 90.0, "f.csv")
     assert c.status == ERROR and "packet rate" in c.message and c.value == pytest.approx(90.0)
     assert rocket_checks.rate_check(15.0, 90.0, "f.csv").status == WARNING
+
+
+def test_pad_tilt_against_the_launch_rod_angle(clean):
+    assert abs(clean["geometry.pad_tilt"]["value"]) < 1.0  # 19.6 deg seen vs the 20 deg rod
+    c = rocket_checks.pad_tilt_check(19.6, math.radians(20.0))  # the rod angle written in radians
+    assert c.status == WARNING and "launch_rod_angle" in c.message
 
 
 def test_wind_beyond_any_launch_day_is_a_warning():

@@ -40,6 +40,7 @@ __all__ = [
     "site_checks",
     "weather_checks",
     "fl_gaps",
+    "pad_tilt_check",
 ]
 
 #: IGRF-13 degree-1 Gauss coefficients at epoch 2020 [nT] (Alken et al. 2021, Table 2)
@@ -55,8 +56,9 @@ FIELD_RATIO_BAND = (0.7, 1.3)
 #: principal axis of the body rates over boost and coast (gyro frame, a rolling rocket) agree within
 #: this [deg] if the two sensors share their axes (measured 0.8–3.0° on the three flights)
 AXES_TOLERANCE_DEG = 15.0
-#: the specific force on the pad is 1 g [g]: a mean outside this band is a unit or scale error
-PAD_G_BAND = (0.8, 1.2)
+#: the pad tilt the IMU sees agrees with the metadata's launch rod angle within this [deg] (measured
+#: −0.4, +0.2, +0.7 deg on the three flights); the rod angle is not used by the reconstruction: WARNING
+PAD_TILT_TOLERANCE_DEG = 5.0
 #: the magnetic field's turning over a short window cannot exceed the body's rotation (a vector
 #: turns at most by the rotation angle): Σθ_mag / Σθ_gyro above this means the gyro reads too small
 #: (hard iron, noise: ≤ 0.6 measured on the three flights and the excerpt); windows of this length [s]
@@ -159,6 +161,21 @@ def _axes_check(t, f_B, w_B, bias, t_coast: float, t_ej: float, log_name: str) -
         "sign-flipped (columns raw_acceleration_[xyz]_gs / raw_angular_rate_[xyz]_deg_per_s)"
     )
     return _check("geometry.imu_axes", ERROR, ang, AXES_TOLERANCE_DEG, msg)
+
+
+def pad_tilt_check(tilt_deg: float, rod_deg: float) -> Check:
+    """geometry.pad_tilt: the angle [deg] between the pad's specific force (up) and the boost's (the
+    rocket's axis) — the rod's tilt the IMU sees — against the metadata's ``launch_rod_angle`` [deg]."""
+    d = tilt_deg - rod_deg
+    msg = f"the IMU's pad tilt {tilt_deg:.1f} deg (pad specific force vs the boost's axis)"
+    msg += f" vs launch_rod_angle {rod_deg:g} deg"
+    if abs(d) <= PAD_TILT_TOLERANCE_DEG:
+        return _check("geometry.pad_tilt", OK, d, PAD_TILT_TOLERANCE_DEG, msg)
+    msg += (
+        ": the rod angle in the metadata is wrong (radians? the angle from the horizontal?) or an accelerometer "
+        "axis has another scale than the others"
+    )
+    return _check("geometry.pad_tilt", WARNING, d, PAD_TILT_TOLERANCE_DEG, msg)
 
 
 def _mag_gyro_check(t, w_B, mag_B, bias, k0: int, t_end: float, log_name: str) -> Check:
@@ -370,6 +387,7 @@ def import_checks(
     name = log.path.name
     t_coast = float(t[np.flatnonzero(log.letters == "C")[0]])
     checks = [_axes_check(t, log.f_B, log.w_B, fl.gyro_bias, t_coast, t_ej, name)]
+    checks.append(pad_tilt_check(float(fl.pad_info["tilt_on_pad_deg"]), float(meta.rod_angle_deg)))
     k0 = int(np.searchsorted(t, fl.pad_info["ignition_t_s"] - 0.2))
     checks.append(_mag_gyro_check(t, log.w_B, log.mag_B, fl.gyro_bias, k0, t_ej - 0.5, name))
     checks += site_checks(meta, fl.pad_info, inclination_deg, name)
