@@ -83,6 +83,7 @@ def test_clean_excerpt_passes_every_import_check(clean):
     for name in (
         "geometry.imu_axes",
         "geometry.pad_tilt",
+        "geometry.accel_sign",
         "units.gyro",
         "geometry.landing_distance",
         "units.magnetometer",
@@ -118,6 +119,13 @@ def test_accelerometer_axes_swapped_against_the_gyro(tmp_path):
 def test_one_accelerometer_axis_sign_flipped_against_the_gyro(tmp_path):
     c = _import(tmp_path, _map(_lines(), ACC, lambda v: [-v[0], v[1], v[2]]))["geometry.imu_axes"]
     assert c["status"] == ERROR and c["value"] > 60.0
+
+
+def test_all_accelerometer_signs_flipped_against_the_flight_computers_attitude(tmp_path, clean):
+    # −I commutes with every rotation: the gyro cannot see it; the flight computer's own attitude can
+    assert clean["geometry.accel_sign"]["value"] > 0.5
+    c = _import(tmp_path, _map(_lines(), ACC, lambda v: [-x for x in v]))["geometry.accel_sign"]
+    assert c["status"] == ERROR and c["value"] < 0.0 and "look flipped" in c["message"]
 
 
 def test_gyro_in_rad_per_s_labelled_deg_per_s(tmp_path):

@@ -67,6 +67,7 @@ def test_flight_1_mutations(tmp_path):
     log = FLIGHTS[0]
     c = _checks(_mutated(tmp_path / "a", log, _flip), tmp_path / "a", allow_unhealthy=True)
     assert c["physics.magnetic_dip"]["status"] == ERROR and "sign-flipped" in c["physics.magnetic_dip"]["message"]
+    assert c["geometry.accel_sign"]["status"] == ERROR
     c = _checks(_mutated(tmp_path / "b", log, _cut_coast), tmp_path / "b", allow_unhealthy=True)
     assert c["data.gap.coast"]["status"] == ERROR and c["data.gap.coast"]["value"] > 2.0
     c = _checks(DATA / log, tmp_path / "c", allow_unhealthy=True, obs_rate_hz=200.0)

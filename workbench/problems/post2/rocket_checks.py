@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.core.rotation import quat_history_from_body_rates, quat_to_rotvec
+from workbench.core.rotation import dcm_to_quat, quat_history_from_body_rates, quat_to_dcm, quat_to_rotvec
 from workbench.estimation.health import ERROR, OK, WARNING, Check
 from workbench.io.schema import read_json
 
@@ -41,6 +41,7 @@ __all__ = [
     "weather_checks",
     "fl_gaps",
     "pad_tilt_check",
+    "accel_sign_check",
 ]
 
 #: IGRF-13 degree-1 Gauss coefficients at epoch 2020 [nT] (Alken et al. 2021, Table 2)
@@ -59,6 +60,8 @@ AXES_TOLERANCE_DEG = 15.0
 #: the pad tilt the IMU sees agrees with the metadata's launch rod angle within this [deg] (measured
 #: −0.4, +0.2, +0.7 deg on the three flights); the rod angle is not used by the reconstruction: WARNING
 PAD_TILT_TOLERANCE_DEG = 5.0
+#: geometry.accel_sign needs this much mean roll [deg/s] in both solutions (measured −115 .. −228)
+ROLL_MIN_DEG_S = 20.0
 #: the magnetic field's turning over a short window cannot exceed the body's rotation (a vector
 #: turns at most by the rotation angle): Σθ_mag / Σθ_gyro above this means the gyro reads too small
 #: (hard iron, noise: ≤ 0.6 measured on the three flights and the excerpt); windows of this length [s]
@@ -161,6 +164,46 @@ def _axes_check(t, f_B, w_B, bias, t_coast: float, t_ej: float, log_name: str) -
         "sign-flipped (columns raw_acceleration_[xyz]_gs / raw_angular_rate_[xyz]_deg_per_s)"
     )
     return _check("geometry.imu_axes", ERROR, ang, AXES_TOLERANCE_DEG, msg)
+
+
+def accel_sign_check(t, f_B, w_B, ref_q, t_coast: float, t_end: float, log_name: str) -> Check:
+    """geometry.accel_sign: the roll rate about the rocket's nose as the accelerometer defines it
+    (mean of ω·n over boost and coast, n the boost's mean specific-force direction) against the roll
+    rate the flight computer's own attitude (``ref_q`` (n, 4) scalar-last, body → navigation, z up)
+    shows about its body axis that pointed up on the pad.  The same gyro turns both, so the two agree
+    in sign unless the accelerometer's "up" is the flight computer's "down": all the accelerometer's
+    signs flipped, which no rotation of the IMU frame and no other check without an aligned
+    magnetometer can see (−I commutes with every rotation).  ``t`` (n,) [s after launch], ``f_B``,
+    ``w_B`` (n, 3) [m/s², rad/s]; ``t_coast``/``t_end`` [s] the coast letter and the window's end."""
+    name = "geometry.accel_sign"
+    boost = (t >= 0.0) & (t < t_coast)
+    sel = np.flatnonzero((t >= 0.0) & (t < t_end))
+    if np.sum(boost) < 3 or sel.size < 10:
+        return _check(name, OK, None, 0.0, "too few boost/coast samples: unchecked")
+    n = f_B[boost].mean(axis=0)
+    n /= np.linalg.norm(n)
+    ours = float(np.mean(w_B[sel] @ n))
+    R = quat_to_dcm(ref_q[sel])
+    inc = np.einsum("nji,njk->nik", R[:-1], R[1:])  # R_(k-1)^T R_k: the increments in its body axes
+    rv = quat_to_rotvec(dcm_to_quat(inc))
+    k = int(np.argmax(np.abs(R[0][2])))
+    fc = float(np.mean(np.sign(R[0][2, k]) * rv[:, k] / np.diff(t[sel])))
+    if min(abs(ours), abs(fc)) < math.radians(ROLL_MIN_DEG_S):
+        msg = f"roll {math.degrees(ours):.0f} deg/s (ours) / {math.degrees(fc):.0f} deg/s (flight computer)"
+        msg += ": too slow to tell"
+        return _check(name, OK, None, 0.0, msg)
+    ratio = ours / fc
+    msg = (
+        f"roll rate about the nose {math.degrees(ours):.0f} deg/s (gyro about the accelerometer's boost axis) vs "
+        f"{math.degrees(fc):.0f} deg/s about the flight computer's own up axis (est_quaternion), ratio {ratio:.2f}"
+    )
+    if ratio > 0.0:
+        return _check(name, OK, ratio, 0.0, msg)
+    msg += (
+        f": opposite senses — the accelerometer's 'up' is the flight computer's 'down': the signs of "
+        f"raw_acceleration_[xyz]_gs of {log_name} look flipped"
+    )
+    return _check(name, ERROR, ratio, 0.0, msg)
 
 
 def pad_tilt_check(tilt_deg: float, rod_deg: float) -> Check:
@@ -387,6 +430,8 @@ def import_checks(
     name = log.path.name
     t_coast = float(t[np.flatnonzero(log.letters == "C")[0]])
     checks = [_axes_check(t, log.f_B, log.w_B, fl.gyro_bias, t_coast, t_ej, name)]
+    t_f = float(t[np.flatnonzero(log.letters == "F")[0]])
+    checks.append(accel_sign_check(t, log.f_B, log.w_B, log.ref_q, t_coast, min(t_ej, t_f) - 1.0, name))
     checks.append(pad_tilt_check(float(fl.pad_info["tilt_on_pad_deg"]), float(meta.rod_angle_deg)))
     k0 = int(np.searchsorted(t, fl.pad_info["ignition_t_s"] - 0.2))
     checks.append(_mag_gyro_check(t, log.w_B, log.mag_B, fl.gyro_bias, k0, t_ej - 0.5, name))
