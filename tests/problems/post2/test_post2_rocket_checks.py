@@ -26,6 +26,7 @@ LOG = DATA / "jackpot_launch_1_excerpt.csv"
 META = DATA / "metadata.json"
 ACC = ("raw_acceleration_x_gs", "raw_acceleration_y_gs", "raw_acceleration_z_gs")
 TIME = "timestamp_seconds"
+MAG = ("magnetic_field_x_microteslas", "magnetic_field_y_microteslas", "magnetic_field_z_microteslas")
 GYRO = ("raw_angular_rate_x_deg_per_s", "raw_angular_rate_y_deg_per_s", "raw_angular_rate_z_deg_per_s")
 
 
@@ -261,8 +262,10 @@ def test_parameter_ending_at_its_bound_is_an_error(tmp_path):
         (lambda ls: _map(ls, ACC, lambda v: [x * 1000.0 for x in v]), "raw_acceleration_x_gs", "mg"),
         (lambda ls: _map(ls, (TIME,), lambda v: [x * 1e3 for x in v]), TIME, "milliseconds"),
         (lambda ls: [ln for ln in ls if ln[:2] not in ("F,", "L,")], "state_letter", "no phase 'F'"),
+        (lambda ls: _map(ls, MAG, lambda v: [0.0, 0.0, 0.0]), MAG[0], "dead or missing magnetometer"),
+        (lambda ls: _map(ls, ACC, lambda v: [v[0], 0.0, v[2]]), ACC[0], "y +0"),
     ],
-    ids=["accel_m_s2", "accel_mg", "time_ms", "ends_in_coast"],
+    ids=["accel_m_s2", "accel_mg", "time_ms", "ends_in_coast", "magnetometer_zero", "accel_axis_dead"],
 )
 def test_former_tracebacks_are_located_input_errors(tmp_path, capsys, mutation, column, words):
     log = _log(tmp_path, mutation(_lines()))

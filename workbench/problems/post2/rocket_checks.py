@@ -234,7 +234,10 @@ def _mag_gyro_check(t, w_B, mag_B, bias, k0: int, t_end: float, log_name: str) -
         if b - a < 1:
             continue
         m0, m1 = mm[a], mm[b]
-        th_m += math.acos(max(-1.0, min(1.0, float(m0 @ m1) / float(np.linalg.norm(m0) * np.linalg.norm(m1)))))
+        nn = float(np.linalg.norm(m0) * np.linalg.norm(m1))
+        if not nn > 0.0:
+            continue
+        th_m += math.acos(max(-1.0, min(1.0, float(m0 @ m1) / nn)))
         q = quat_history_from_body_rates(tt[a : b + 1], ww[a : b + 1])[-1]
         th_g += float(np.linalg.norm(quat_to_rotvec(q)))
     if th_g < math.radians(90.0) and th_m < math.radians(90.0):

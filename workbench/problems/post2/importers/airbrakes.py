@@ -251,6 +251,9 @@ def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
 
 #: a flight log samples faster than this step [s] (median): a slower one is in other units (ms)
 MAX_MEDIAN_STEP_S = 1.0
+#: a magnetometer reading less than this on the pad [T] is dead or missing (the Earth's surface field
+#: is 22–67 µT)
+MIN_FIELD_T = 1e-6
 #: the standby specific force is 1 g: its median outside this band [g] is a unit error
 STANDBY_G_BAND = (0.8, 1.2)
 
@@ -274,11 +277,17 @@ def _check_units(fname: str, t: np.ndarray, letters: np.ndarray, f: np.ndarray, 
         g = float(np.median(np.linalg.norm(f[standby], axis=1))) / G0
         lo, hi = STANDBY_G_BAND
         if not lo <= g <= hi:
-            unit = "m/s²" if 0.8 * G0 <= g <= 1.2 * G0 else ("mg" if 800.0 <= g <= 1200.0 else "another unit")
+            if 0.8 * G0 <= g <= 1.2 * G0 or 800.0 <= g <= 1200.0:
+                why = f"the acceleration columns look like {'m/s²' if g < 100.0 else 'mg'}, not g"
+            else:
+                axes = ", ".join(
+                    f"{c} {v:+.3g}" for c, v in zip("xyz", np.median(f[standby], axis=0) / G0, strict=True)
+                )
+                why = f"per axis (median, g) {axes}: a dead, missing or mis-scaled axis?"
             raise TelemetryError.single(
                 fname,
                 f"the standby rows' specific force is {g:.4g} g (median of |a| over {standby.size} rows, expected 1 g "
-                f"at rest): the acceleration columns look like {unit}, not g",
+                f"at rest): {why}",
                 column="raw_acceleration_x_gs",
                 row=int(rows[standby[0]]) + 1,
             )
@@ -528,6 +537,16 @@ def import_flight(
                 column="timestamp_seconds",
                 row=g.row,
             )
+    pad_field = (
+        float(np.median(np.linalg.norm(log.mag_B[log.letters == "S"], axis=1))) if np.any(log.letters == "S") else 0.0
+    )
+    if not pad_field > MIN_FIELD_T:
+        raise TelemetryError.single(
+            log.path,
+            f"the magnetometer reads {pad_field * 1e6:.3g} µT on the pad (median |B| of the standby rows; the Earth's "
+            "field is 22–67 µT): a dead or missing magnetometer — the pad heading cannot be found",
+            column="magnetic_field_x_microteslas",
+        )
     try:
         fl = rocket.reconstruct_boost(
             t, log.letters, log.f_B, log.w_B, log.mag_B, log.pressure, meta, declination_deg, inclination_deg
@@ -545,6 +564,10 @@ def import_flight(
     t_end = min(t_land, t_end_s) if t_end_s is not None else t_land
     t_main = rocket.detect_main_deploy(t, log.pressure, log.f_B, fl.atmosphere, t_apogee, t_end)
     t0 = fl.t_start
+    if not (np.all(np.isfinite(fl.p_M)) and np.all(np.isfinite(fl.v_M))):
+        raise TelemetryError.single(
+            log.path, "the boost integrated from the IMU is not finite (a degenerate pad alignment?)", column=_LETTER
+        )
     if not t_end > t0 + 1.0:
         raise TelemetryError.single(
             log.path, f"the reconstruction span {t0:.2f} .. {t_end:.2f} s after launch is too short", column=_LETTER
