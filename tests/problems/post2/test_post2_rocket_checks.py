@@ -241,6 +241,19 @@ def test_a_gap_in_the_coast_makes_the_apogee_undefined(tmp_path):
     assert c["status"] in (OK, WARNING)
 
 
+def test_a_mass_in_lb_pins_the_drag_multiplier_at_its_bound_in_the_run(tmp_path):
+    def edit(e):
+        e["rocket"]["rocket_dry_mass_kg"] *= 2.20462
+
+    _import(tmp_path, edit=edit)
+    toml = tmp_path / "flight" / f"{LOG.stem}.toml"
+    result, _ = rocket.run_flight(Post2Problem().settings(load_scenario(toml)))
+    checks = {c["name"]: c for c in result.summary["health"]["checks"]}
+    assert checks["physics.bound.ca_multiplier"]["status"] == ERROR
+    assert "rocket_dry_mass_kg" in checks["physics.bound.ca_multiplier"]["message"]
+    assert checks["physics.bound.drogue_drag_area"]["status"] == OK
+
+
 def test_parameter_ending_at_its_bound_is_an_error(tmp_path):
     (tmp_path / "flight.json").write_text(json.dumps({"health_checks": {"checks": []}}), encoding="utf-8")
     spec = SimpleNamespace(name="ca_multiplier", bounds=(0.2, 6.0))
