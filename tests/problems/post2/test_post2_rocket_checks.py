@@ -106,7 +106,7 @@ def test_an_error_check_refuses_the_import_and_writes_nothing(tmp_path):
     with pytest.raises(UnhealthyError) as e:
         airbrakes.import_flight(log, META, out, flight=LOG.name)
     assert "geometry.imu_axes" in str(e.value) and "--allow-unhealthy" in str(e.value)
-    assert not out.exists() and not list(tmp_path.glob(".flight.partial-*"))
+    assert not out.exists() and not list(tmp_path.glob(".flight.*.partial"))
     args = ["import", "airbrakes", str(log), "--metadata", str(META), "--out", str(out), "--flight", LOG.name]
     assert main(args) == 6 and not out.exists()
 
@@ -306,6 +306,8 @@ def test_import_is_atomic(tmp_path, monkeypatch):
         airbrakes.import_flight(LOG, META, tmp_path / "flight", declination_deg=-10.5)
     assert list(tmp_path.iterdir()) == []  # neither the folder nor a partial one
     monkeypatch.undo()
+    # a partial folder of an import killed outright (its process gone) is removed by the next import
+    (tmp_path / ".flight.999999999.partial").mkdir()
     # into an existing folder: the files replaced, others kept
     (tmp_path / "flight").mkdir()
     (tmp_path / "flight" / "notes.txt").write_text("mine", encoding="utf-8")

@@ -29,7 +29,6 @@ import json
 import math
 import os
 import shutil
-import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -618,11 +617,29 @@ def import_flight(
 
 
 def _staging_dir(out: Path) -> Path:
-    """A new empty folder beside ``out`` to write the import into (named so a reader sees it is partial)."""
+    """A new empty folder ``.<out name>.<pid>.partial`` beside ``out`` to write the import into (named
+    so a reader sees it is partial); the folders an import killed outright (SIGKILL) left behind —
+    their process gone — are removed first."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.parent / f".{out.name}.partial-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    for old in out.parent.glob(f".{out.name}.*.partial"):
+        pid = old.name[len(out.name) + 2 : -len(".partial")]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(old, ignore_errors=True)
+    tmp = out.parent / f".{out.name}.{os.getpid()}.partial"
+    shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir()
     return tmp
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (signal 0 probes without sending anything)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
 
 
 def _commit_dir(tmp: Path, out: Path) -> None:
