@@ -3,7 +3,7 @@ the metadata's site, weather and vehicle against what the log itself measures, d
 key moments, and (after the run) estimated parameters pinned at their bounds.
 
 Each check is a :class:`~workbench.estimation.health.Check` named ``units.*``, ``geometry.*``,
-``physics.*`` or ``data.*`` with its statistic, a bound taken from physics or the sensor (the
+``physics.*``, ``timing.*`` or ``data.*`` with its statistic, a bound taken from physics or the sensor (the
 source is said beside each constant) and a message naming the file, column or metadata key and the
 likely cause.  The import (:mod:`workbench.problems.post2.importers.airbrakes`) computes the checks
 on the log and the metadata (:func:`import_checks`), refuses on an ERROR unless asked not to, and
@@ -13,8 +13,9 @@ together with the checks of its own estimate (:func:`run_checks`).
 The Earth's field for the site checks is a centred tilted dipole: the degree-1 Gauss coefficients of
 IGRF-13 (Alken et al. 2021, "International Geomagnetic Reference Field: the thirteenth
 generation", Earth Planets Space 73:49), epoch 2020.  It gives the inclination's sign and the field
-magnitude within ~30 % anywhere outside the South Atlantic anomaly — enough to tell a hemisphere, not
-a declination.
+magnitude within ~30 % (the South Atlantic anomaly, ~25 % below it, is the worst) — enough to tell a
+hemisphere, not a declination.  No check here has a truth-Monte-Carlo band (``stat`` is None): the
+truth simulator makes no raw flight-computer log, so every bound is the physics' or the sensor's.
 """
 
 from __future__ import annotations
