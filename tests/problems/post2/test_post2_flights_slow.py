@@ -31,7 +31,12 @@ pytestmark = [pytest.mark.slow, pytest.mark.skipif(DATA is None, reason=WHY)]
 def test_real_flight(log, tmp_path):
     dec, inc = SITE_MAGNETIC[log]
     toml = import_flight(DATA / log, DATA / "metadata.json", tmp_path, declination_deg=dec, inclination_deg=inc)
-    _, s = rocket.run_flight(Post2Problem().settings(load_scenario(toml)))
+    result, s = rocket.run_flight(Post2Problem().settings(load_scenario(toml)))
+    # the physics cross-checks (rocket_checks) join the run's verdict: none fires on a real flight
+    cross = ("physics.", "geometry.", "units.", "data.", "timing.")
+    checks = result.summary["health"]["checks"]
+    assert [c["message"] for c in checks if c["name"].startswith(cross) and c["status"] != "OK"] == []
+    assert sum(c["name"].startswith(cross) for c in checks) >= 12
     assert abs(s["apogee"]["error_percent"]) < 5.0
     assert s["altitude_vs_flight_computer"]["rms_after_burnout_transient_m"] < 40.0
     assert s["altitude_vs_flight_computer"]["like_for_like"]["rms_after_burnout_transient_m"] < 30.0

@@ -31,7 +31,7 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io.scenario import ScenarioError
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.io.units import likely_unit
-from workbench.problems.post2 import build
+from workbench.problems.post2 import build, rocket_checks
 from workbench.problems.post2 import schedules as sched
 from workbench.problems.post2.config import ObservationSpec, Post2Settings
 from workbench.problems.post2.model import (
@@ -472,10 +472,11 @@ def _unit_scale(name: str) -> float:
     return {"deg": 180.0 / math.pi, "deg/s": 180.0 / math.pi}.get(unit, 1.0)
 
 
-def post2_health(fp, P: np.ndarray, x: np.ndarray, notes=()) -> dict:
+def post2_health(fp, P: np.ndarray, x: np.ndarray, notes=(), extra=(), facts=()) -> dict:
     """``summary["health"]`` (:mod:`workbench.estimation.health`): mean NIS of every observation
     against χ² bounds, the share of rejected samples (WARNING above 10 %), the final covariance
-    history ``P`` (n, k, k) symmetric positive definite and the state history ``x`` (n, m) finite."""
+    history ``P`` (n, k, k) symmetric positive definite and the state history ``x`` (n, m) finite;
+    ``extra`` further checks and ``facts`` notes (an imported rocket flight's: ``rocket_checks``)."""
     checks = []
     for name, ih in fp.innovations.items():
         if ih.t.size:
@@ -488,7 +489,7 @@ def post2_health(fp, P: np.ndarray, x: np.ndarray, notes=()) -> dict:
     bad = int(np.sum(~np.isfinite(x)))
     checks.append(interval_check("state.finite", bad, 0, 0, "non-finite state components"))
     checks.append(notes_check("observations", list(notes)))
-    return health_report(checks)
+    return health_report([*checks, *extra], facts)
 
 
 def reconstruct(cfg: Post2Settings, telemetry, options=None):
@@ -552,5 +553,6 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
         obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
     summary["observations"] = obs
     summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
-    summary["health"] = post2_health(fp, P, x, data.notes)
+    extra, facts = rocket_checks.run_checks(cfg, hist)  # none unless an imported rocket flight
+    summary["health"] = post2_health(fp, P, x, data.notes, extra, facts)
     yield Post2Result(t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), histories, summary)

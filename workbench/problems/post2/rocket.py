@@ -52,7 +52,7 @@ from workbench.estimation.magnetometer import align_magnetometer
 from workbench.estimation.strapdown import ImuArrays, integrate
 from workbench.io.schema import read_json
 from workbench.io.telemetry import read_telemetry
-from workbench.problems.post2 import pipeline
+from workbench.problems.post2 import pipeline, rocket_checks
 from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.model import POSITION, VELOCITY
 
@@ -470,16 +470,18 @@ def accel_sigma(t, t_apogee: float, t_main: float | None, noise=None, count=None
     return s
 
 
-def initial_ca_multiplier(t, f_B, t0: float, v_rel: float, rho: float, meta) -> float:
+def initial_ca_multiplier(t, f_B, t0: float, v_rel: float, rho: float, meta, clip: bool = True) -> float:
     """The coast drag multiplier at ``t0`` [s] measured from the data: the mean |specific force| (``f_B``
     (n, 3) [m/s²] at ``t`` (n,) [s]) over the first 0.3 s after ``t0`` times the mass over the
     metadata's Cd S and the dynamic pressure ½ ``rho`` ``v_rel``² of the burnout state; clipped to
-    [0.3, 5.5] (flight 1, air brakes stuck open: 4.0; flights 3, 4: 1.4, 1.0)."""
+    [0.3, 5.5] (flight 1, air brakes stuck open: 4.0; flights 3, 4: 1.4, 1.0) unless not ``clip`` (the
+    measurement itself, for :mod:`workbench.problems.post2.rocket_checks`)."""
     sel = (t >= t0) & (t <= t0 + 0.3)
     if not np.any(sel) or not v_rel > 1.0:
         return 1.0
     a = float(np.mean(np.linalg.norm(f_B[sel], axis=1)))
-    return float(np.clip(a * meta.mass / (meta.cd * meta.area * 0.5 * rho * v_rel**2), 0.3, 5.5))
+    m = a * meta.mass / (meta.cd * meta.area * 0.5 * rho * v_rel**2)
+    return float(np.clip(m, 0.3, 5.5)) if clip else float(m)
 
 
 def _fmt(v) -> str:
@@ -855,7 +857,29 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     out["parameters"] = params
     out["pad_altitude_m"] = h_pad
     out["observations"] = result.summary["observations"]
+    _mark_undefined(out, rocket_checks.undefined_outputs(flight))
     return out
+
+
+#: the outputs of each key window (rocket_checks.KEY_WINDOWS) that a gap inside it makes undefined
+UNDEFINED_OUTPUTS = {
+    "coast": ("apogee",),
+    "drogue_opening": ("parameters.drogue_drag_area",),
+    "main_opening": ("parameters.main_drag_area",),
+}
+
+
+def _mark_undefined(out: dict, undefined: dict) -> None:
+    """Replace the numbers of the outputs of each undefined key window ({window: why}) in the scores
+    ``out`` by None, with the reason under ``"undefined"``: never a number where the data break."""
+    for window, why in undefined.items():
+        for key in UNDEFINED_OUTPUTS.get(window, ()):
+            node, leaf = out, key
+            if "." in key:
+                head, leaf = key.split(".", 1)
+                node = out.get(head, {})
+            if leaf in node and isinstance(node[leaf], dict):
+                node[leaf] = {k: None for k in node[leaf]} | {"undefined": why}
 
 
 #: the FIRM flight computer's altimeter formula (the pressure model of its UKF, ``ukf_functions.c`` of

@@ -28,6 +28,7 @@ import difflib
 import json
 import math
 import os
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -123,10 +124,19 @@ class FlightLog:
     repeated_rows: int = 0
 
     def phase_start(self, letter: str) -> float:
-        """Log time [s] of the first row with phase ``letter``; ValueError if the phase is absent."""
+        """Log time [s] of the first row with phase ``letter``; a TelemetryError (a ValueError) naming
+        the last row if the phase is absent."""
         k = np.flatnonzero(self.letters == letter)
         if k.size == 0:
-            raise ValueError(f"{self.path.name}: the log has no phase '{letter}' ({PHASES[letter]})")
+            last = self.letters[-1] if self.letters.size else "-"
+            raise TelemetryError.single(
+                self.path,
+                f"the log has no phase '{letter}' ({PHASES[letter]}); it ends in phase '{last}' "
+                f"({PHASES.get(str(last), '?')}) at {self.t[-1] if self.t.size else float('nan'):.3f} s: "
+                "a truncated log? the import needs the boost, the coast and the descent's start",
+                column=_LETTER,
+                row=int(self.t.size),
+            )
         return float(self.t[k[0]])
 
 
@@ -142,7 +152,7 @@ def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
     path = Path(path)
     fname = str(path)
     try:
-        fh = path.open(newline="", encoding="utf-8")
+        fh = path.open(newline="", encoding="utf-8-sig")  # a byte-order mark is not part of the first name
     except OSError as e:
         raise TelemetryError.single(fname, f"cannot read: {e.strerror or e}") from None
     problems: list[Problem] = []
@@ -217,6 +227,7 @@ def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
         raise TelemetryError(problems, total)
     arr = {k: v[rows] for k, v in arr.items()}
     t = arr["t"]
+    _check_units(fname, t, np.asarray(letters)[rows], np.column_stack([arr["ax"], arr["ay"], arr["az"]]), rows)
     q = q[rows]
     qn = qn[rows]
     letters_a = np.asarray(letters)[rows]
@@ -235,6 +246,50 @@ def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
         find_gaps(t, letters_a, gap_factor),
         int(np.sum(repeat)),
     )
+
+
+#: a flight log samples faster than this step [s] (median): a slower one is in other units (ms)
+MAX_MEDIAN_STEP_S = 1.0
+#: a magnetometer reading less than this on the pad [T] is dead or missing (the Earth's surface field
+#: is 22–67 µT)
+MIN_FIELD_T = 1e-6
+#: the standby specific force is 1 g: its median outside this band [g] is a unit error
+STANDBY_G_BAND = (0.8, 1.2)
+
+
+def _check_units(fname: str, t: np.ndarray, letters: np.ndarray, f: np.ndarray, rows: np.ndarray) -> None:
+    """Refuse a log whose time or accelerations are in other units than the column names say: the
+    median time step above MAX_MEDIAN_STEP_S (milliseconds), the standby rows' median |specific
+    force| outside STANDBY_G_BAND × 1 g (m/s², mg).  ``t`` (n,) [s], ``f`` (n, 3) [m/s²] of the kept
+    rows ``rows`` (n,) (0-based data rows, for the message)."""
+    if t.size >= 3:
+        step = float(np.median(np.diff(t)))
+        if step > MAX_MEDIAN_STEP_S:
+            raise TelemetryError.single(
+                fname,
+                f"median time step {step:.4g} s ({1.0 / step:.3g} Hz): a flight log samples at 10 Hz or more — "
+                f"the time looks like milliseconds ({step / 1000.0:.4g} s if so); convert it to seconds",
+                column="timestamp_seconds",
+            )
+    standby = np.flatnonzero(letters == "S")
+    if standby.size >= 3:
+        g = float(np.median(np.linalg.norm(f[standby], axis=1))) / G0
+        lo, hi = STANDBY_G_BAND
+        if not lo <= g <= hi:
+            if 0.8 * G0 <= g <= 1.2 * G0 or 800.0 <= g <= 1200.0:
+                why = f"the acceleration columns look like {'m/s²' if g < 100.0 else 'mg'}, not g"
+            else:
+                axes = ", ".join(
+                    f"{c} {v:+.3g}" for c, v in zip("xyz", np.median(f[standby], axis=0) / G0, strict=True)
+                )
+                why = f"per axis (median, g) {axes}: a dead, missing or mis-scaled axis?"
+            raise TelemetryError.single(
+                fname,
+                f"the standby rows' specific force is {g:.4g} g (median of |a| over {standby.size} rows, expected 1 g "
+                f"at rest): {why}",
+                column="raw_acceleration_x_gs",
+                row=int(rows[standby[0]]) + 1,
+            )
 
 
 def find_gaps(t: np.ndarray, letters: np.ndarray, gap_factor: float = 3.0) -> tuple[Gap, ...]:
@@ -444,6 +499,7 @@ def import_flight(
     name: str | None = None,
     t_end_s: float | None = None,
     flight: str | None = None,
+    allow_unhealthy: bool = False,
 ) -> Path:
     """Import one flight: writes telemetry CSVs, ``flight.json``, ``<name>.toml`` and the variant
     ``<name>_landing.toml`` that also observes the landed coordinates into ``out_dir``.
@@ -453,15 +509,24 @@ def import_flight(
     dip on the pad agrees within 10°; None: unchecked); ``obs_rate_hz`` rate of the block-mean
     observations; ``t_end_s`` [s after launch] ends the
     reconstruction early (default: touchdown, the first ``L`` row).  Returns the problem file.
+
+    The physics cross-checks of :mod:`workbench.problems.post2.rocket_checks` run before anything is
+    written; an ERROR among them raises :class:`~workbench.estimation.health.UnhealthyError` unless
+    ``allow_unhealthy`` (then they are kept in ``flight.json`` and join the run's health verdict).
+    The files are written into a temporary folder moved into place at the end.
     """
     # imported here: the command line builds its parser from this module and stays light
-    from workbench.problems.post2 import rocket
+    from workbench.estimation.health import ERROR, UnhealthyError, health_report
+    from workbench.problems.post2 import rocket, rocket_checks
 
     log = read_log(log_path)
     meta = read_metadata(metadata_path, flight or Path(log_path).name)
     out = Path(out_dir)
     name = name or Path(log_path).stem
+    if not obs_rate_hz > 0.0:
+        raise TelemetryError.single(log.path, f"--obs-rate-hz {obs_rate_hz:g}: the observation rate must be positive")
     t_launch = log.phase_start("M")
+    log.phase_start("C"), log.phase_start("F")  # the coast and the descent's start are needed
     t = log.t - t_launch  # seconds from launch (the first motor row)
     for g in log.gaps:
         if log.phase_start("M") <= g.t_a and (g.phase in ("M",) or g.t_b <= log.phase_start("C") + 0.5):
@@ -471,9 +536,24 @@ def import_flight(
                 column="timestamp_seconds",
                 row=g.row,
             )
-    fl = rocket.reconstruct_boost(
-        t, log.letters, log.f_B, log.w_B, log.mag_B, log.pressure, meta, declination_deg, inclination_deg
+    pad_field = (
+        float(np.median(np.linalg.norm(log.mag_B[log.letters == "S"], axis=1))) if np.any(log.letters == "S") else 0.0
     )
+    if not pad_field > MIN_FIELD_T:
+        raise TelemetryError.single(
+            log.path,
+            f"the magnetometer reads {pad_field * 1e6:.3g} µT on the pad (median |B| of the standby rows; the Earth's "
+            "field is 22–67 µT): a dead or missing magnetometer — the pad heading cannot be found",
+            column="magnetic_field_x_microteslas",
+        )
+    try:
+        fl = rocket.reconstruct_boost(
+            t, log.letters, log.f_B, log.w_B, log.mag_B, log.pressure, meta, declination_deg, inclination_deg
+        )
+    except ValueError as e:  # the pad window: too little standby data before the motor letter
+        raise TelemetryError.single(
+            log.path, str(e), column=_LETTER, row=int(np.argmax(log.letters == "M")) + 1
+        ) from None
     # the drogue opens at the ejection shock (the descent letter can lag it: flight 4, 3.5 s)
     t_apogee = rocket.detect_ejection(t, log.f_B, log.phase_start("C") - t_launch, log.phase_start("F") - t_launch)
     try:
@@ -483,10 +563,104 @@ def import_flight(
     t_end = min(t_land, t_end_s) if t_end_s is not None else t_land
     t_main = rocket.detect_main_deploy(t, log.pressure, log.f_B, fl.atmosphere, t_apogee, t_end)
     t0 = fl.t_start
+    if not (np.all(np.isfinite(fl.p_M)) and np.all(np.isfinite(fl.v_M))):
+        raise TelemetryError.single(
+            log.path, "the boost integrated from the IMU is not finite (a degenerate pad alignment?)", column=_LETTER
+        )
     if not t_end > t0 + 1.0:
-        raise ValueError(f"{log.path.name}: the reconstruction span {t0:.2f} .. {t_end:.2f} s is too short")
+        raise TelemetryError.single(
+            log.path, f"the reconstruction span {t0:.2f} .. {t_end:.2f} s after launch is too short", column=_LETTER
+        )
+    # the coast drag multiplier's prior from the first measured coast drag at the burnout state
+    r_b = float(np.linalg.norm(fl.p_M))
+    v_rel = float(np.linalg.norm(fl.v_M - np.cross([0.0, 0.0, EARTH.rotation_rate], fl.p_M)))
+    rho = float(fl.atmosphere.density(max(r_b - EARTH.reference_radius, 0.0)))
+    ca0 = rocket.initial_ca_multiplier(t, log.f_B, t0, v_rel, rho, meta)
+    ca0_raw = rocket.initial_ca_multiplier(t, log.f_B, t0, v_rel, rho, meta, clip=False)
+    health = rocket_checks.import_checks(
+        log,
+        meta,
+        fl,
+        t,
+        t_ej=t_apogee,
+        t_main=t_main,
+        ca0_unclipped=ca0_raw,
+        inclination_deg=inclination_deg,
+        obs_rate_hz=obs_rate_hz,
+    )
+    if not allow_unhealthy and any(c["status"] == ERROR for c in health["checks"]):
+        from workbench.estimation.health import Check
 
-    out.mkdir(parents=True, exist_ok=True)  # only now: a refused log writes nothing
+        raise UnhealthyError(f"import of {log.path}", health_report([Check(**c) for c in health["checks"]]))
+    # written into a temporary folder beside ``out``, moved into place at the end: a failure leaves nothing
+    final, out = out, _staging_dir(out)
+    try:
+        path = _write_import(
+            out,
+            log,
+            meta,
+            fl,
+            t,
+            t_launch,
+            (t0, t_end, t_apogee, t_main),
+            ca0,
+            health,
+            name,
+            declination_deg,
+            obs_rate_hz,
+        )
+    except BaseException:
+        shutil.rmtree(out, ignore_errors=True)
+        raise
+    _commit_dir(out, final)
+    return final / path.name
+
+
+def _staging_dir(out: Path) -> Path:
+    """A new empty folder ``.<out name>.<pid>.partial`` beside ``out`` to write the import into (named
+    so a reader sees it is partial); the folders an import killed outright (SIGKILL) left behind —
+    their process gone — are removed first."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    for old in out.parent.glob(f".{out.name}.*.partial"):
+        pid = old.name[len(out.name) + 2 : -len(".partial")]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(old, ignore_errors=True)
+    tmp = out.parent / f".{out.name}.{os.getpid()}.partial"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    return tmp
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (signal 0 probes without sending anything)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def _commit_dir(tmp: Path, out: Path) -> None:
+    """Move the finished import ``tmp`` to ``out``: a rename when ``out`` does not exist (or is an empty
+    folder), else each file replaced in place (the other files of an existing ``out`` are kept)."""
+    if out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
+    if not out.exists():
+        os.replace(tmp, out)
+        return
+    for f in tmp.iterdir():
+        os.replace(f, out / f.name)
+    tmp.rmdir()
+
+
+def _write_import(out, log, meta, fl, t, t_launch, times, ca0, health, name, declination_deg, obs_rate_hz) -> Path:
+    """Write the import's files into the folder ``out`` (:func:`import_flight` computed every input:
+    ``times`` = (t0, t_end, t_apogee, t_main) [s after launch]); returns the problem file."""
+    from workbench.problems.post2 import rocket
+
+    t0, t_end, t_apogee, t_main = times
     # observations: block means after burnout, never across a gap
     gaps_rel = tuple(Gap(g.t_a - t_launch, g.t_b - t_launch, g.dt, g.row, g.phase) for g in log.gaps)
     tp, pm, cnt = block_means(t, log.pressure[:, None], t0, t_end, obs_rate_hz, gaps_rel)
@@ -538,11 +712,6 @@ def import_flight(
     if t_main is not None:
         events.append((t_main, "main parachute (detected)"))
     write_events(out / "events.csv", sorted(events))
-    # the coast drag multiplier's prior from the first measured coast drag at the burnout state
-    r_b = float(np.linalg.norm(fl.p_M))
-    v_rel = float(np.linalg.norm(fl.v_M - np.cross([0.0, 0.0, EARTH.rotation_rate], fl.p_M)))
-    rho = float(fl.atmosphere.density(max(r_b - EARTH.reference_radius, 0.0)))
-    ca0 = rocket.initial_ca_multiplier(t, log.f_B, t0, v_rel, rho, meta)
     info = {
         "initial_ca_multiplier": ca0,
         "flight": meta.name,
@@ -561,6 +730,7 @@ def import_flight(
         "burnout": fl.burnout_info,
         "metadata": meta.__dict__,
         "observation_rate_hz": obs_rate_hz,
+        "health_checks": health,
     }
     (out / "flight.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
     path = out / f"{name}.toml"
@@ -596,6 +766,11 @@ def add_arguments(parser) -> None:
     parser.add_argument("--obs-rate-hz", type=float, default=10.0, help="rate of the block-mean observations")
     parser.add_argument("--name", default=None, help="problem name (default: the log's file stem)")
     parser.add_argument("--flight", default=None, help="the metadata entry (default: the log's file name)")
+    parser.add_argument(
+        "--allow-unhealthy",
+        action="store_true",
+        help="write the import even when a physics cross-check is ERROR (the run's verdict then carries it)",
+    )
 
 
 def run(args) -> Path:
@@ -609,4 +784,5 @@ def run(args) -> Path:
         obs_rate_hz=args.obs_rate_hz,
         name=args.name,
         flight=args.flight,
+        allow_unhealthy=args.allow_unhealthy,
     )
