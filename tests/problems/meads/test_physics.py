@@ -57,8 +57,8 @@ def clean(tmp_path_factory):
     )
 
 
-def _mutated(c, sensor: str, op: str, axes: tuple[int, ...]):
-    """The telemetry with one IMU column mistake, and its strapdown."""
+def _mutated(c, sensor: str, op: str, axes: tuple[int, ...], *, navigate: bool = True):
+    """The telemetry with one IMU column mistake, and its strapdown (None unless ``navigate``)."""
     f, w = c.tel.f_B.copy(), c.tel.w_B.copy()
     a = f if sensor == "acc" else w
     if op == "swap":
@@ -66,7 +66,7 @@ def _mutated(c, sensor: str, op: str, axes: tuple[int, ...]):
     else:
         a[:, axes[0]] *= -1.0
     tel = replace(c.tel, f_B=f, w_B=w)
-    return tel, md.navigate(tel, c.settings.vehicle)
+    return tel, md.navigate(tel, c.settings.vehicle) if navigate else None
 
 
 def _by_name(checks):
@@ -96,6 +96,7 @@ def test_clean_imu_agrees_with_the_pressures(clean):
             r"accelerometer axes y and z swapped.*'f_y \[.*'f_z \[",
         ),
         (("acc", "flip", (2,)), "physics.imu_vs_pressure_alpha", r"accelerometer axis z sign-flipped.*'f_z \["),
+        (("acc", "flip", (0,)), "physics.imu_vs_pressure_alpha", r"accelerometer axis x sign-flipped.*'f_x \["),
         (("gyro", "flip", (1,)), "physics.imu_vs_pressure_beta", r"gyro axis y sign-flipped.*'w_y \["),
         (("gyro", "swap", (0, 2)), "physics.imu_vs_pressure_alpha", r"gyro axes x and z swapped.*'w_x \[.*'w_z \["),
     ],
@@ -121,7 +122,7 @@ def test_imu_axis_mistake_is_an_error_naming_the_axis(clean, mutation, check, na
 )
 def test_accelerometer_force_direction_names_the_axes(clean, mutation, check, names):
     """The drag of a blunt capsule reads along −x_B and its normal force in the flow's plane."""
-    tel, _ = _mutated(clean, *mutation)
+    tel, _ = _mutated(clean, *mutation, navigate=False)
     c = _by_name(accel_direction_checks(tel, clean.air.fit, clean.above))[check]
     assert c.status == "ERROR", c
     assert re.search(names, c.message), c.message

@@ -146,11 +146,12 @@ def _strapdown_members(tel, f: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, n
     return t, V, Qs, P
 
 
-def diagnose_imu_axes(tel, fit, above: np.ndarray, wind_sigma_mps: float, sigma_i: np.ndarray) -> list[dict]:
+def diagnose_imu_axes(tel, fit, above: np.ndarray, wind_sigma_mps: float, Q: np.ndarray | None) -> list[dict]:
     """Each single IMU column mistake of :data:`IMU_CANDIDATES` undone in turn: the strapdown re-run
     (mean only) from the initial state and the median |z| of α and β against the pressures
-    (:func:`imu_vs_pressure_z`, σ of the IMU side ``sigma_i`` (n,) [rad] as in the original run);
-    a list of ``{"label", "median_abs_z": [α, β]}`` sorted best first."""
+    (:func:`imu_vs_pressure_z`; the IMU side's σ from the original run's navigation covariance ``Q``
+    (n, 6, 6) and the candidate's own speed, :func:`inertial_flow_angles`); a list of
+    ``{"label", "median_abs_z": [α, β]}`` sorted best first."""
     cands = list(IMU_CANDIDATES)
     fs, ws = zip(*(_apply(c, tel.f_B, tel.w_B) for c in cands), strict=True)
     t, V, Qs, P = _strapdown_members(tel, np.stack(fs), np.stack(ws))
@@ -165,8 +166,8 @@ def diagnose_imu_axes(tel, fit, above: np.ndarray, wind_sigma_mps: float, sigma_
             return np.stack([np.interp(tp, t, a[:, j]) for j in range(a.shape[1])], 1)
 
         with np.errstate(all="ignore"):
-            a_i, b_i, _ = inertial_flow_angles(quat_normalize(at(q)), at(P[i]), at(V[i]), None, wind_sigma_mps)
-            za, zb = imu_vs_pressure_z(fit, a_i, b_i, sigma_i, above)
+            a_i, b_i, s_i = inertial_flow_angles(quat_normalize(at(q)), at(P[i]), at(V[i]), Q, wind_sigma_mps)
+            za, zb = imu_vs_pressure_z(fit, a_i, b_i, s_i, above)
         mz = [_median_abs(za), _median_abs(zb)]
         if all(math.isfinite(x) for x in mz):
             out.append({"label": _candidate_label(tel, c), "median_abs_z": mz})
@@ -204,7 +205,7 @@ def imu_vs_pressure_checks(tel, nav, fit, above: np.ndarray, wind_sigma_mps: flo
             bad.append(name)
         checks.append(Check(cname, status, float(f"{mz:.6g}"), IMU_PRESSURE_ERROR_Z, msg, stat))
     if bad:
-        hint = _diagnosis(tel, fit, above, wind_sigma_mps, s_i, max(_median_abs(za), _median_abs(zb)), diagnose)
+        hint = _diagnosis(tel, fit, above, wind_sigma_mps, nav.Q, max(_median_abs(za), _median_abs(zb)), diagnose)
         checks = [
             Check(
                 c.name,
@@ -227,14 +228,14 @@ def _diff(fit, name: str, a_i: np.ndarray, b_i: np.ndarray, above: np.ndarray) -
     return d[above & np.isfinite(d)]
 
 
-def _diagnosis(tel, fit, above, wind_sigma_mps, s_i, worst: float, diagnose: bool) -> str:
+def _diagnosis(tel, fit, above, wind_sigma_mps, Q, worst: float, diagnose: bool) -> str:
     others = (
         f"the initial attitude (q_M_B in the initial state), the IMU's body axes (+x out of the nose) in "
         f"{tel.imu_file or 'the IMU file'}, or the ports' positions in the vehicle file"
     )
     if not diagnose:
         return "suspects: an IMU axis swapped or sign-flipped, " + others
-    ranked = diagnose_imu_axes(tel, fit, above, wind_sigma_mps, s_i)
+    ranked = diagnose_imu_axes(tel, fit, above, wind_sigma_mps, Q)
     if ranked:
         best = ranked[0]
         b = max(best["median_abs_z"])
