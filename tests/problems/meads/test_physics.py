@@ -61,7 +61,9 @@ def _mutated(c, sensor: str, op: str, axes: tuple[int, ...], *, navigate: bool =
     """The telemetry with one IMU column mistake, and its strapdown (None unless ``navigate``)."""
     f, w = c.tel.f_B.copy(), c.tel.w_B.copy()
     a = f if sensor == "acc" else w
-    if op == "swap":
+    if op == "scale":
+        a *= axes[0]
+    elif op == "swap":
         a[:, list(axes)] = a[:, list(axes[::-1])]
     else:
         a[:, axes[0]] *= -1.0
@@ -99,6 +101,7 @@ def test_clean_imu_agrees_with_the_pressures(clean):
         (("acc", "flip", (0,)), "physics.imu_vs_pressure_alpha", r"accelerometer axis x sign-flipped.*'f_x \["),
         (("gyro", "flip", (1,)), "physics.imu_vs_pressure_beta", r"gyro axis y sign-flipped.*'w_y \["),
         (("gyro", "swap", (0, 2)), "physics.imu_vs_pressure_alpha", r"gyro axes x and z swapped.*'w_x \[.*'w_z \["),
+        (("gyro", "scale", (np.pi / 180.0,)), "physics.imu_vs_pressure_alpha", r"rates in rad/s labelled as deg/s"),
     ],
 )
 def test_imu_axis_mistake_is_an_error_naming_the_axis(clean, mutation, check, names):

@@ -9,7 +9,8 @@ axis, a wrong initial attitude or a port map that does not match the vehicle mak
 many σ: :func:`imu_vs_pressure_checks` is an ERROR when the median |z| over the samples above the
 dynamic-pressure threshold exceeds :data:`IMU_PRESSURE_ERROR_Z` (half the flight disagreeing by
 more than 3σ: no honest σ does that), and names the likely sensor axis by re-running the strapdown
-with each single swap or sign flip of the IMU columns (:func:`diagnose_imu_axes`).
+with each single swap, sign flip or g / rad unit factor of the IMU columns undone
+(:func:`diagnose_imu_axes`).
 
 The accelerometer alone, in body axes, against the same flow angles (:func:`accel_direction_checks`):
 the aerodynamic force of a blunt, axisymmetric capsule points nearly along −x_B (its axial force
@@ -59,10 +60,20 @@ MIN_TOTAL_ALPHA_DEG, MIN_TRANSVERSE_FRACTION = 5.0, 0.02
 MIN_SAMPLES = 20
 _AXES = "xyz"
 
+#: standard gravity [m/s²] and degrees per radian: the unit factors an IMU column mislabelled
+#: between g and m/s² or rad/s and deg/s carries
+_G0, _DEG = 9.80665, 180.0 / math.pi
 #: the single IMU column mistakes tried by :func:`diagnose_imu_axes`: (sensor, "swap"/"flip", axes)
+#: and (sensor, "scale", factor that undoes it, what the file likely holds)
 IMU_CANDIDATES = tuple(
     [(s, "swap", a) for s in ("accelerometer", "gyro") for a in ((0, 1), (0, 2), (1, 2))]
     + [(s, "flip", (i,)) for s in ("accelerometer", "gyro") for i in range(3)]
+    + [
+        ("accelerometer", "scale", _G0, "specific force in g labelled as an acceleration unit"),
+        ("accelerometer", "scale", 1.0 / _G0, "specific force in m/s² labelled as g"),
+        ("gyro", "scale", _DEG, "body rates in rad/s labelled as deg/s"),
+        ("gyro", "scale", 1.0 / _DEG, "body rates in deg/s labelled as rad/s"),
+    ]
 )
 
 
@@ -105,9 +116,12 @@ def _median_abs(z: np.ndarray) -> float:
 
 
 def _candidate_label(tel, cand) -> str:
-    sensor, op, axes = cand
+    sensor, op, axes = cand[:3]
     pre = "f_" if sensor == "accelerometer" else "w_"
     units = tel.imu_units or {}
+    if op == "scale":
+        cols = ", ".join(f"'{pre}{a} [{units.get(pre + a, '?')}]'" for a in _AXES)
+        return f"{cand[3]} (columns {cols}, off by a factor {axes:.4g})"
     cols = [f"'{pre}{_AXES[a]} [{units.get(pre + _AXES[a], '?')}]'" for a in axes]
     if op == "swap":
         return f"{sensor} axes {_AXES[axes[0]]} and {_AXES[axes[1]]} swapped (columns {cols[0]} and {cols[1]})"
@@ -116,9 +130,11 @@ def _candidate_label(tel, cand) -> str:
 
 def _apply(cand, f_B: np.ndarray, w_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     f, w = f_B.copy(), w_B.copy()
-    sensor, op, axes = cand
+    sensor, op, axes = cand[:3]
     a = f if sensor == "accelerometer" else w
-    if op == "swap":
+    if op == "scale":
+        a *= axes
+    elif op == "swap":
         i, j = axes
         a[:, [i, j]] = a[:, [j, i]]
     else:
@@ -244,7 +260,7 @@ def _diagnosis(tel, fit, above, wind_sigma_mps, Q, worst: float, diagnose: bool)
                 f"likely the {best['label']} in {tel.imu_file or 'the IMU file'}: undoing it brings the median |z| of "
                 f"α, β to {best['median_abs_z'][0]:.3g}, {best['median_abs_z'][1]:.3g}"
             )
-    return "no single swap or sign flip of the IMU columns restores the agreement; suspects: " + others
+    return "no single swap, sign flip or unit factor of the IMU columns restores the agreement; suspects: " + others
 
 
 def accel_direction_checks(tel, fit, above: np.ndarray) -> list:

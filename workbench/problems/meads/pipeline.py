@@ -459,7 +459,8 @@ def plausibility(
             tel.pressure_file,
             f"implausible pressures: the dynamic pressure fitted to them is {ratio:.3g} x the one implied by the "
             f"IMU drag (m|f|/(C_D S), median over {int(sel.sum())} samples; allowed 1/{F:g}-{F:g}). A unit error? "
-            f"(kPa written as Pa gives 1e-3). Columns as read: {units}. Nothing is published.",
+            f"(kPa written as Pa gives 1e-3; an accelerometer in g written as m/s² gives ~9.8, see {tel.imu_file}). "
+            f"Columns as read: {units}. Nothing is published.",
             column=", ".join(tel.ports),
         )
     return ratio
