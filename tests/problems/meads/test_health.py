@@ -101,3 +101,24 @@ def test_newtonian_model_form_against_the_table(shift_deg, outside, status):
     assert names["model_form.alpha_newtonian_vs_table"]["status"] == status
     assert names["model_form.qbar_newtonian_vs_table"]["status"] == "OK"
     assert not any(n.startswith("model_form") for n in _by_name(meads_health(tel, nav, air, wind, est)))
+
+
+def test_failed_ports_are_notes_until_the_redundancy_is_gone():
+    """Each detected and excluded port failure is a note; ``data.failed_ports`` is a WARNING only
+    when fewer than MIN_PORTS_LEFT ports remain (no redundancy to catch the next failure)."""
+    from workbench.problems.meads.health import MIN_PORTS_LEFT, failed_ports_check
+
+    def fail(port, t):
+        return SimpleNamespace(port=port, t=t, how="stuck", message=f"{port} stuck")
+
+    assert failed_ports_check([fail("P5", 150.0)], M).status == "OK"
+    many = [fail(f"P{i}", 100.0 + i) for i in range(1, M - MIN_PORTS_LEFT + 2)]
+    c = failed_ports_check(many, M)
+    assert c.status == "WARNING" and f"{M - len(many)} left" in c.message
+    tel, nav, air, wind, est = _stages(np.random.default_rng(4))
+    air = SimpleNamespace(**{**air.__dict__, "failures": (fail("P5", 25.0),)})
+    tel = SimpleNamespace(**{**tel.__dict__, "degradations": ["pressures.csv, column 'P2 [Pa]', rows 3-4: dropout"]})
+    h = meads_health(tel, nav, air, wind, est)
+    assert h["verdict"] == "OK", h
+    assert h["notes"][0].startswith("port P5 failed at 25.0 s (stuck), detected and excluded")
+    assert h["notes"][1].startswith("telemetry dropout, handled: pressures.csv, column 'P2 [Pa]'")

@@ -80,7 +80,10 @@ def test_out_of_range_vehicle_value_names_the_bound(tmp_path):
 
 
 def test_initial_state_file_has_a_schema(tmp_path):
-    st = InitialState(1.5, np.ones(3), np.full(3, 2.0), np.array([0.0, 0.0, 0.0, 1.0]), 10.0, 0.1, 1e-3)
+    # a state an entry can have (telemetry.RADIUS_ENVELOPE_M, SPEED_ENVELOPE_MPS)
+    st = InitialState(
+        1.5, np.array([3.5e6, 1.0, 1.0]), np.full(3, 2000.0), np.array([0.0, 0.0, 0.0, 1.0]), 10.0, 0.1, 1e-3
+    )
     p = write_initial_state(tmp_path / "initial_state.toml", st)
     back = read_initial_state(p)
     assert back.t == 1.5 and np.array_equal(back.v_M, st.v_M) and back.sigma_att == pytest.approx(1e-3)

@@ -13,8 +13,14 @@ when the port σ are right, so it is judged like a normalised innovation squared
 * physical plausibility: q∞ against the IMU drag (the reader's gross unit test, here as a
   number), α and β inside the validity of the forebody pressure models, the air-data Mach against
   the inertial Mach, the density within ×5 of the default Mars model;
-* data: pressure-sample gaps across the peak dynamic pressure, failed ports and the input
-  readers' notes (WARNING: a degradation, not a wrong answer);
+* physics (:mod:`.physics`): the pressures' flow angles against the IMU strapdown's
+  (``physics.imu_vs_pressure_alpha|beta``, naming the likely IMU column mistake) and the
+  accelerometer's force direction against the capsule's axis and the flow's plane
+  (``physics.accel_axis_deg``, ``physics.accel_flow_plane_deg``);
+* data: pressure-sample gaps across the peak dynamic pressure (WARNING); a port failure detected and
+  excluded and a port dropout left out of its fits are handled, so each is a note of the report (not
+  an anomaly), with ``data.failed_ports`` a WARNING when fewer than :data:`MIN_PORTS_LEFT` ports
+  remain;
 * model form, when the estimator uses the Newtonian model (Eq. 1–4): the same pressures reduced
   with the estimator's own CFD table (``air.alt``, the reference model of the vehicle) give α and
   q∞ that differ by the Newtonian's model-form error (the noise is common to both fits and
@@ -46,10 +52,10 @@ from workbench.estimation.health import (
     health_report,
     interval_check,
     nis_check,
-    notes_check,
 )
+from workbench.problems.meads.physics import accel_direction_checks, imu_vs_pressure_checks
 
-__all__ = ["meads_health", "ekf_checks", "model_form_checks", "wls_chi2"]
+__all__ = ["meads_health", "ekf_checks", "failed_ports_check", "model_form_checks", "wls_chi2"]
 
 #: |α| [deg] beyond which the Newtonian / tabulated forebody models are outside their validity:
 #: the stagnation point leaves the 70° sphere-cone's nose cap region at about 20°, the models are
@@ -69,6 +75,9 @@ MIN_SAMPLES = 20
 #: the flight: nothing is published unless the user allows an unhealthy run)
 MODEL_FORM_MAX_OUTSIDE = 0.1
 MODEL_FORM_ERROR_OUTSIDE = 0.5
+#: fewer ports than this left after the failures is a WARNING (the Mach set solves 4 states: with 4
+#: ports left it has no redundancy to detect the next failure)
+MIN_PORTS_LEFT = 5
 
 
 def wls_chi2(residual: np.ndarray, sigma: np.ndarray, used: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -156,11 +165,13 @@ def model_form_checks(air, above: np.ndarray, est, passes=()) -> list[Check]:
     return checks
 
 
-def meads_health(tel, nav, air, wind, est, passes=()) -> dict:
+def meads_health(tel, nav, air, wind, est, passes=(), *, wind_sigma_mps: float = 30.0, diagnose: bool = True) -> dict:
     """``summary["health"]`` of a MEADS reconstruction: ``tel`` the telemetry (``MeadsTelemetry``),
     ``nav`` the ``Navigation``, ``air`` the ``AirDataStage``, ``wind`` the ``WindStage``, ``est``
     the ``EstimatorSettings`` (its ``min_qbar_pa`` [Pa] selects the samples judged, its
-    ``plausibility_factor`` the allowed q∞ ratio), ``passes`` the EKF passes (``EkfPass``), if any."""
+    ``plausibility_factor`` the allowed q∞ ratio), ``passes`` the EKF passes (``EkfPass``), if any;
+    ``wind_sigma_mps`` [m/s] the wind's prior 1σ in the IMU-vs-pressure comparison; ``diagnose``:
+    name the IMU column mistake when that comparison fails (re-runs the strapdown per candidate)."""
     fit = air.fit
     w = fit.wls
     above = np.nan_to_num(fit.qbar) >= est.min_qbar_pa
@@ -257,8 +268,37 @@ def meads_health(tel, nav, air, wind, est, passes=()) -> dict:
             tq = float(t[int(np.nanargmax(fit.qbar))])
             checks.append(gap_check("gaps.peak_qbar", gaps, {"peak q∞": (tq - 2.0, tq + 2.0)}, status=WARNING))
     checks += model_form_checks(air, above, est, passes)
+    if getattr(tel, "f_B", None) is not None and getattr(nav, "q_M_B", None) is not None:
+        checks += imu_vs_pressure_checks(tel, nav, fit, above, wind_sigma_mps, diagnose=diagnose)
+        checks += accel_direction_checks(tel, fit, above)
     if passes:
         checks += ekf_checks(passes, tel.t_p, above, tel.ports)
-    notes = list(tel.degradations) + [f.message for f in air.failures]
-    checks.append(notes_check("telemetry", notes))
-    return health_report(checks)
+    checks.append(failed_ports_check(air.failures, len(tel.ports) if hasattr(tel, "ports") else None))
+    notes = [
+        f"port {f.port} failed at {f.t:.1f} s ({f.how}), detected and excluded from there on: {f.message}"
+        for f in air.failures
+    ] + [f"telemetry dropout, handled: {d}" for d in tel.degradations]
+    return health_report(checks, notes=notes)
+
+
+def failed_ports_check(failures, n_ports: int | None) -> Check:
+    """``data.failed_ports``: the number of ports declared failed (each detected and excluded, a note
+    of the report); WARNING when fewer than :data:`MIN_PORTS_LEFT` of ``n_ports`` remain."""
+    k = len(failures)
+    names = ", ".join(f"{f.port} at {f.t:.1f} s ({f.how})" for f in failures) or "none"
+    if n_ports is not None and k and n_ports - k < MIN_PORTS_LEFT:
+        return Check(
+            "data.failed_ports",
+            WARNING,
+            k,
+            n_ports - MIN_PORTS_LEFT,
+            f"{k} of {n_ports} ports failed ({names}): {n_ports - k} left, fewer than {MIN_PORTS_LEFT} — the fit has "
+            "no redundancy left to detect the next failure",
+        )
+    return Check(
+        "data.failed_ports",
+        OK,
+        k,
+        None if n_ports is None else n_ports - MIN_PORTS_LEFT,
+        f"failed ports detected and excluded: {names}",
+    )

@@ -75,6 +75,7 @@ __all__ = [
     "reconstruct",
     "reduce_pressures",
     "score",
+    "headline_at_peak_qbar",
     "scorecard_markdown",
 ]
 
@@ -458,7 +459,8 @@ def plausibility(
             tel.pressure_file,
             f"implausible pressures: the dynamic pressure fitted to them is {ratio:.3g} x the one implied by the "
             f"IMU drag (m|f|/(C_D S), median over {int(sel.sum())} samples; allowed 1/{F:g}-{F:g}). A unit error? "
-            f"(kPa written as Pa gives 1e-3). Columns as read: {units}. Nothing is published.",
+            f"(kPa written as Pa gives 1e-3; an accelerometer in g written as m/s² gives ~9.8, see {tel.imu_file}). "
+            f"Columns as read: {units}. Nothing is published.",
             column=", ".join(tel.ports),
         )
     return ratio
@@ -529,13 +531,24 @@ def reconstruct(settings: MeadsSettings, telemetry: Mapping[str, Path]) -> Itera
     yield wind
     passes: list[EkfPass] = []
     if cfg.ekf.enabled:
-        for ps in run_passes(ekf_inputs(tel, vehicle, nav, lag, air, est, cfg.ekf), cfg.ekf):
+        it = run_passes(ekf_inputs(tel, vehicle, nav, lag, air, est, cfg.ekf), cfg.ekf)
+        while True:
+            try:
+                ps = next(it)
+            except StopIteration:
+                break
+            except (OverflowError, ZeroDivisionError, FloatingPointError) as err:
+                raise np.linalg.LinAlgError(
+                    f"EKF pass {len(passes) + 1}: the filter diverged ({type(err).__name__}: {err}) — its state left "
+                    f"the physical range; the pressures ({tel.pressure_file}), the IMU ({tel.imu_file}) and the "
+                    "initial state are inconsistent (a unit, axis or time-base error?)"
+                ) from err
             passes.append(ps)
             yield ps
     summary = _summary(settings.run.name, tel, nav, lag, air, wind, est)
     if passes:
         summary["ekf"] = _ekf_summary(passes, air, est)
-    summary["health"] = meads_health(tel, nav, air, wind, est, passes)
+    summary["health"] = meads_health(tel, nav, air, wind, est, passes, wind_sigma_mps=cfg.ekf.wind_sigma_mps)
     summary["reconstruction_wall_s"] = time.perf_counter() - t_start
     yield MeadsResult(PressureData(tel, vehicle), nav, lag, air, wind, summary, tuple(passes))
 
@@ -763,6 +776,47 @@ def score(result: MeadsResult, truth: dict) -> dict:
         out["injected_failure"] = {"port": ports[fp], "detected": bool(det), "detected_at_s": det[0].t if det else None}
     fpa = truth["fpa"]
     out["true_fpa_zero_crossings_s"] = [float(x) for x in truth["t"][1:][np.diff(np.sign(fpa)) != 0]]
+    out["headline"] = headline_at_peak_qbar(result, truth)
+    return out
+
+
+def headline_at_peak_qbar(result: MeadsResult, truth: dict) -> list[dict]:
+    """The run's headline against its truth: α, β [rad] and q∞ [Pa] of the final EKF pass (the
+    least squares when the filter is off) at the peak reconstructed q∞ (the ``peak_qbar`` key
+    moment), each ``{"name", "what", "error", "sigma", "unit"}`` (estimate − truth and the pass's
+    own 1σ there; :func:`workbench.estimation.calibration.truth_check` judges them)."""
+    air = result.air
+    if not np.isfinite(air.fit.qbar).any():
+        return []
+    k = int(np.nanargmax(air.fit.qbar))
+    t = float(air.t[k])
+    if result.ekf:
+        ps = result.ekf[-1]
+        src = f"EKF pass {ps.index}"
+
+        def get(name):
+            v, s = ps.output(name)
+            return float(v[k]), float(s[k])
+    else:
+        src = "least squares"
+        fit = air.fit
+
+        def get(name):
+            return float(getattr(fit, name)[k]), float(getattr(fit, f"sigma_{name}")[k])
+
+    out = []
+    for name, unit, what in (("alpha", "rad", "α"), ("beta", "rad", "β"), ("qbar", "Pa", "q∞")):
+        v, s = get(name)
+        tv = float(_truth_at(truth, np.array([t]), name)[0])
+        out.append(
+            {
+                "name": f"{name}_at_peak_qbar",
+                "what": f"{src} {what} at peak q∞ (t = {t:.2f} s)",
+                "error": v - tv,
+                "sigma": s,
+                "unit": unit,
+            }
+        )
     return out
 
 

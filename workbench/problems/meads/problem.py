@@ -108,7 +108,8 @@ class MeadsProblem(PipelineProblem):
         return key_moments(result)
 
     def headline(self, summary: dict) -> str:
-        """Failed ports and, with a truth, the max α/β/q∞ errors above 850 Pa."""
+        """Failed ports and, with a truth, the max α/β/q∞ errors above 850 Pa and the headline's
+        α/β/q∞ errors at peak q∞ over their 1σ (``summary["truth"]["headline"]``)."""
         fails = ", ".join(f"{f['port']} at {f['t_s']:.1f} s ({f['how']})" for f in summary["failed_ports"]) or "none"
         line = f"{summary['model']} model; failed ports: {fails}"
         tr = summary.get("truth", {}).get("final")
@@ -117,6 +118,10 @@ class MeadsProblem(PipelineProblem):
                 f"; above 850 Pa max |error| α {tr['alpha_deg']['max_abs']:.2f}° β {tr['beta_deg']['max_abs']:.2f}° "
                 f"q∞ {tr['qbar_pct']['max_abs']:.2f} %"
             )
+        hl = summary.get("truth", {}).get("headline") or []
+        if hl:
+            z = ", ".join(f"{h['name'].split('_')[0]} {h['error'] / h['sigma']:+.2f}σ" for h in hl if h["sigma"] > 0)
+            line += f"; at peak q∞ error/1σ {z}"
         return line
 
     @contextlib.contextmanager

@@ -13,14 +13,15 @@ Plots (``/plots/<quantity>``, bounded series with truth): ``alpha_deg``, ``beta_
 ρ̂ in kg/m³), ``wind_north_mps``, ``wind_east_mps``, ``lag_delay_ms``, ``lag_correction_Pa`` (the pneumatic-lag
 inversion: corrected − measured pressure of P1 and P4); per port measured vs
 modelled (``/plots/ports/<port>/measured|predicted``) and its residual ±3σ
-(``/residuals/pressure/<port>``); failed ports and singular wind intervals in ``/events``.
+(``/residuals/pressure/<port>``, only at the samples the port was used: a dropped or failed port's
+line ends there, never a flat zero); failed ports and singular wind intervals in ``/events``.
 
 The EKF passes (:mod:`.ekf`, smoothed): under each air-data plot, ``ekf_pass<i>`` (pass 2, or the
 only pass, with ±3σ; pass 1 as a line only when a pass 2 follows); the transducer scale factors
 [%] at ``/plots/scale_factors/pass<i>`` (pass 1: the forward filter's estimate converging, ±3σ;
 pass 2: the correction applied, constant) with the true ones at ``/plots/scale_factors/truth``
 when known; the forward pressure innovations per port with ±3σ (``√S_ii``) at
-``/residuals/pressure_ekf_pass<i>/<port>``.
+``/residuals/pressure_ekf_pass<i>/<port>`` (only where the port was processed).
 """
 
 from __future__ import annotations
@@ -243,9 +244,11 @@ class MeadsRecorder:
                 colors=(220, 90, 30),
             )
             r = st.residual_used[:, j]
-            rec.series_with_bounds(
-                layout.residual_path("pressure", p), t, np.nan_to_num(r), f.sigma_p[:, j], names=f"{p} residual [Pa]"
-            )
+            use = np.isfinite(r) & np.isfinite(f.sigma_p[:, j])
+            if use.any():
+                rec.series_with_bounds(
+                    layout.residual_path("pressure", p), t[use], r[use], f.sigma_p[use, j], names=f"{p} residual [Pa]"
+                )
         # 3D: ports coloured by the measured pressure and by the normalised residual
         pts = _port_points(self.vehicle, 0.0)
         pr = _port_points(self.vehicle, 0.15)
@@ -361,11 +364,14 @@ class MeadsRecorder:
         inn, sd = st.forward.innovations.get("pressure"), st.innovation_sigma()
         if inn is not None:
             for j, p in enumerate(ports):
+                use = np.isfinite(inn.y[:, j]) & np.isfinite(sd[:, j])
+                if not use.any():
+                    continue
                 rec.series_with_bounds(
                     layout.meads_ekf_innovation_path(st.index, p),
-                    inn.t,
-                    np.nan_to_num(inn.y[:, j]),
-                    np.nan_to_num(sd[:, j]),
+                    inn.t[use],
+                    inn.y[use, j],
+                    sd[use, j],
                     names=f"{p} EKF pass {st.index} innovation [Pa]",
                 )
 
