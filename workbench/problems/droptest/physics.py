@@ -334,10 +334,11 @@ def measured_impact(tel, threshold_g: float = 2.0, merge_s: float = 0.01) -> tup
 
 @dataclass(frozen=True)
 class ContactCompleteness:
-    """Whether the data cover the contact: ``complete`` False when the IMU file ends inside the
-    measured impact (``t_data_end`` [s], the last IMU tag on the filter's time line); ``max_stroke_defined``
-    False when, in addition, the lander still moves toward the ramp at the data end (the stroke had
-    not reached its maximum); ``reason`` one line naming the file and the time."""
+    """Whether the data cover the contact: ``complete`` False when the IMU file ends (or breaks)
+    inside the measured impact (``t_data_end`` [s], the last IMU tag on the filter's time line);
+    ``max_stroke_defined`` False when, in addition, the lander still moves toward the ramp at the
+    data end (the stroke had not reached its maximum) or the break comes before the max stroke;
+    ``reason`` one line naming the file and the time."""
 
     complete: bool
     max_stroke_defined: bool
@@ -345,11 +346,26 @@ class ContactCompleteness:
     reason: str
 
 
-def contact_completeness(tel, smo_t: np.ndarray, smo_v: np.ndarray, normal: np.ndarray) -> ContactCompleteness:
+def contact_completeness(
+    tel, smo_t: np.ndarray, smo_v: np.ndarray, normal: np.ndarray, t_max_stroke: float = np.inf
+) -> ContactCompleteness:
     """:class:`ContactCompleteness` of the telemetry ``tel`` against the smoothed CM velocity
-    ``smo_v`` (n, 3) [m/s, SPF] at ``smo_t`` (n,) [s] and the ramp's unit ``normal`` (3,)."""
+    ``smo_v`` (n, 3) [m/s, SPF] at ``smo_t`` (n,) [s] and the ramp's unit ``normal`` (3,): the IMU
+    file ending inside the measured impact, or an IMU gap across it (then the max stroke is
+    undefined too when the gap starts before ``t_max_stroke`` [s], the estimated max-stroke time)."""
     t_end = float(tel.imu.time[-1] - tel.group_delay_s)
     imp = measured_impact(tel)
+    if imp is not None:
+        d = tel.group_delay_s
+        pad = 2.0 * float(np.median(np.diff(tel.imu.time)))
+        for g in tel.imu.gaps:
+            a, b = g.start_s - d, g.end_s - d
+            if a < imp[1] + pad and b > imp[0] - pad:
+                reason = (
+                    f"the IMU data ({tel.imu.path}) break inside the impact: a {b - a:.3g} s gap {a:.4f}–{b:.4f} s "
+                    f"(row {g.row}) across the measured impact {imp[0]:.4f}–{imp[1]:.4f} s"
+                )
+                return ContactCompleteness(False, a > t_max_stroke, t_end, reason)
     if imp is None or not imp[2]:
         return ContactCompleteness(True, True, t_end, "")
     vn_end = float(smo_v[-1] @ normal)
@@ -440,6 +456,158 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
 # ---------------------------------------------------------------------------------------------
 
 
+#: ranging channels' innovations over this margin [s] around the measured impact enter the lag estimate
+LAG_WINDOW_S = 0.1
+
+
+def _slice_tel(tel, k0: int, k1: int, lag: float):
+    """The telemetry ``tel`` restricted to filter steps ``k0..k1-1`` with its IMU time line moved by
+    ``−lag`` [s] (a further lag taken off the IMU tags)."""
+    from dataclasses import replace
+
+    sl = slice(k0, k1)
+    return replace(
+        tel,
+        t=tel.t[sl] - lag,
+        f_B=tel.f_B[sl],
+        f_valid=tel.f_valid[sl],
+        w_B=tel.w_B[sl],
+        w_valid=tel.w_valid[sl],
+        hanging=tel.hanging[sl],
+        jerk=tel.jerk[sl],
+        counts=(tel.counts[0][sl], tel.counts[1][sl]),
+    )
+
+
+@dataclass(frozen=True)
+class LagEstimate:
+    """The IMU lag against the ranging stream: ``lag_s`` the further lag [s] to take off the IMU
+    tags beyond the declared ``time_shifts_s["imu"]`` (negative: the declared one is too large),
+    ``sigma_s`` its 1σ [s], ``trials`` ((gun, lag [s], 1σ [s], samples), ...) the per-gun estimates."""
+
+    lag_s: float
+    sigma_s: float
+    trials: tuple
+
+
+def estimate_lag(settings, tel, fwd) -> LagEstimate | None:
+    """The lag of the IMU time line against the radar guns' range rates over the impact, where the
+    motion changes fastest.  The filter is re-run from its own prior just before the measured impact
+    to just after it on the IMU alone (open loop: no ranging update can absorb a timing error), and
+    each gun's range-rate residual z − h(x) is regressed on [1, t, dh/dt] (an offset and a drift
+    from the prior's velocity error, and the lag: a state ``lag`` late reads h(t − lag) ≈
+    h − lag·dh/dt, so the coefficient of dh/dt is the lag).  The guns' estimates are combined
+    weighted by their variances (the declared range-rate noise).  None without radar guns, without
+    an impact, or with too few samples."""
+    if tel.ranging is None:
+        return None
+    imp = measured_impact(tel)
+    if imp is None:
+        return None
+    from dataclasses import replace
+
+    from workbench.problems.droptest import model as rl
+    from workbench.problems.droptest.pipeline import forward_pass
+    from workbench.problems.droptest.sensors import RangingSpec
+
+    spec = RangingSpec.from_settings(settings.ranging)
+    if not spec.guns:
+        return None
+    fp = fwd.forward
+    k0 = int(np.searchsorted(tel.t, imp[0] - LAG_WINDOW_S))
+    k1 = int(np.searchsorted(tel.t, imp[1] + LAG_WINDOW_S))
+    if k0 < 1 or k1 - k0 < 20:
+        return None
+    sub = replace(_slice_tel(tel, k0, k1, 0.0), ranging=None)
+    x = forward_pass(settings, sub, _Init(fp.x_prior[k0].copy(), fp.P_prior[k0].copy())).x
+    rt = tel.ranging
+    t_meas = rt.time - tel.time_shifts_s.get("ranging", 0.0)
+    inside = (t_meas >= sub.t[0]) & (t_meas <= sub.t[-1])
+    num = den = 0.0
+    trials = []
+    for name, G in spec.guns.items():
+        col = f"{name}.rate"
+        if col not in rt.channels:
+            continue
+        z = rt.channel(col)
+        m = inside & np.isfinite(z)
+        if m.sum() < 8:
+            continue
+        r_B = settings.lander.to_body(spec.reflectors_L[name])
+        tm = t_meas[m]
+        # the state at each measurement time: linear between the filter steps (sub-step offsets)
+        xs = np.stack([np.interp(tm, sub.t, x[:, i]) for i in range(x.shape[1])], axis=1)
+        h = np.array([rl.range_rate_model(xi, G, r_B)[0][0] for xi in xs])
+        dh = np.gradient(h, tm)
+        A = np.stack([np.ones_like(tm), tm - tm.mean(), dh], axis=1)
+        y = z[m] - h
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        cov = spec.rate_sigmas[name] ** 2 * np.linalg.inv(A.T @ A)
+        w = 1.0 / cov[2, 2]
+        num += w * coef[2]
+        den += w
+        trials.append((name, float(coef[2]), float(np.sqrt(cov[2, 2])), int(m.sum())))
+    if den == 0.0:
+        return None
+    return LagEstimate(float(num / den), float(1.0 / np.sqrt(den)), tuple(trials))
+
+
+@dataclass(frozen=True)
+class _Init:
+    """The start of a trial forward pass: state ``x0`` (N_X,) and covariance ``P0`` (N_E, N_E)."""
+
+    x0: np.ndarray
+    P0: np.ndarray
+
+
 def timing_checks(tel, fwd, smo, st, settings) -> tuple[list[Check], list[str]]:
-    """Placeholder: the declared time shifts against the residuals (no ranging: nothing to compare)."""
-    return [], []
+    """``timing.imu_vs_ranging``: the declared time shifts (``tel.time_shifts_s``: the IMU's from
+    ``[sensors.acquisition]`` filter / order / cutoff and latency_s, the ranging's from
+    ``[sensors.ranging]`` latency_s / acquisition_filter) against the lag :func:`estimate_lag` finds.
+    The IMU-driven trajectory at the impact moves by |v_n| × lag (v_n the CM speed into the ramp at
+    the first contact); ERROR when the lag is significant (> 3σ) and that shift exceeds 2σ of the
+    max stroke (the IMU and the ranging then disagree by more than the headline's uncertainty),
+    WARNING when only significant.  Returns ``(checks, notes)``; a run without ranging has nothing to
+    compare its IMU time line with (a note)."""
+    shifts = ", ".join(f"{k} {v * 1e3:.3f} ms" for k, v in tel.time_shifts_s.items())
+    if tel.ranging is None:
+        return [], []
+    est = estimate_lag(settings, tel, fwd)
+    if est is None:
+        return [], [f"timing: no IMU lag estimate (no impact inside the ranging record); time shifts applied: {shifts}"]
+    from workbench.problems.droptest import model as rl
+
+    lag, sig = est.lag_s, est.sigma_s
+    i0 = st.contact[0] if st.contact[0] >= 0 else int(st.max.index)
+    vn = abs(float(smo.x[i0, rl.SV] @ st.surface.normal))
+    move = vn * abs(lag)
+    s_ms = float(st.max.sigma)
+    z = abs(lag) / sig
+    aq = settings.acquisition
+    base = (
+        f"IMU time line against the ranging: best further lag {lag * 1e3:+.3f} ± {sig * 1e3:.3f} ms ({z:.1f}σ) beyond "
+        f"the declared shifts ({shifts}); it shifts the IMU-driven trajectory at the impact by ≈ {move * 1e3:.1f} mm "
+        f"(|v_n| {vn:.1f} m/s × lag) against the max-stroke 1σ {s_ms * 1e3:.1f} mm"
+    )
+    bound = [_g(-max(3.0 * sig, 2.0 * s_ms / max(vn, 1e-6))), _g(max(3.0 * sig, 2.0 * s_ms / max(vn, 1e-6)))]
+    keys = (
+        f"[sensors.acquisition] filter = {aq.filter!r} (order {aq.order}, {aq.cutoff_hz:g} Hz; 'zero_phase' has no "
+        f"delay) or latency_s = {aq.latency_s:g}, or [sensors.ranging] latency_s / acquisition_filter in "
+        f"{settings.path}"
+    )
+    if z > 3.0 and move > 2.0 * s_ms:
+        return [
+            Check(
+                "timing.imu_vs_ranging",
+                ERROR,
+                _g(lag),
+                bound,
+                f"{base}: the declared timing is wrong — {keys}",
+                {"kind": "two_sided"},
+            )
+        ], []
+    if z > 3.0:
+        return [
+            Check("timing.imu_vs_ranging", WARNING, _g(lag), bound, f"{base}: check {keys}", {"kind": "two_sided"})
+        ], []
+    return [Check("timing.imu_vs_ranging", OK, _g(lag), bound, base, {"kind": "two_sided"})], []
