@@ -213,3 +213,64 @@ def test_score_headline_inside_3_sigma(droptest_result, droptest_truth):
     for h in hl.values():
         assert abs(h["error"]) <= 3.0 * h["sigma"], h
     assert hl["max_stroke"]["error"] == pytest.approx(sc["max_stroke_error_m"])
+
+
+# ------------------------------------------------------------------ slow: timing, runner end to end
+
+
+def _user_scenario(settings_path: Path, paths: dict[str, Path], dest: Path) -> Path:
+    """The scenario file at ``settings_path`` rewritten as a user-data scenario on ``paths`` (no
+    ``[synthetic]`` table, the lander asset path absolute)."""
+    from workbench.io.assets import assets_dir
+
+    text = (
+        Path(settings_path).read_text(encoding="utf-8").replace('"../landers/', f'"{assets_dir().as_posix()}/landers/')
+    )
+    text = re.sub(r"\[synthetic\].*?(?=\n\[|\Z)", "", text, flags=re.S)
+    table = "[telemetry]\n" + "".join(f'{k} = "{Path(p).as_posix()}"\n' for k, p in paths.items())
+    out = dest / "scenario.toml"
+    out.write_text(text.replace("[vehicle]", table + "\n[vehicle]", 1), encoding="utf-8")
+    return out
+
+
+@pytest.mark.slow
+def test_dead_triad_through_the_runner_is_an_error_verdict_not_a_traceback(droptest_run, tmp_path):
+    from workbench.cli import EXIT_UNHEALTHY, main
+
+    paths = _copy(droptest_run, tmp_path / "tel")
+    _edit_csv(paths["imu"], _const("PXBP.x", "PXBP.y", "PXBP.z"))
+    scen = _user_scenario(droptest_run.settings.path, paths, tmp_path)
+    assert main(["run", str(scen), "--out", str(tmp_path / "out"), "-q"]) == EXIT_UNHEALTHY
+    # written anyway, the recording draws the run without the dead triad
+    assert main(["run", str(scen), "--out", str(tmp_path / "out2"), "-q", "--allow-unhealthy"]) == 0
+    assert (tmp_path / "out2" / "droptest.rrd").exists()
+
+
+@pytest.fixture(scope="module")
+def zero_phase_ranging(tmp_path_factory):
+    """``droptest_ranging`` telemetry whose IMU went through a zero-phase acquisition filter, and the
+    settings that declare it so (the shipped scenario declares the causal Butterworth)."""
+    from workbench.io.assets import assets_dir
+    from workbench.io.scenario import load_scenario
+    from workbench.problems.droptest.config import DropSettings
+    from workbench.problems.droptest.problem import DropTestProblem
+    from workbench.problems.droptest.synthetic import synthesize_droptest
+
+    shipped = DropSettings.from_scenario(load_scenario(assets_dir() / "scenarios" / "droptest_ranging.toml"))
+    zp = replace(shipped, acquisition=replace(shipped.acquisition, filter="zero_phase"))
+    d = tmp_path_factory.mktemp("zp_ranging")
+    synthesize_droptest(zp, d, seed=1)
+    return shipped, zp, DropTestProblem().telemetry_files(shipped, d)
+
+
+@pytest.mark.slow
+def test_timing_zero_phase_declared_causal_is_an_error_naming_the_key(zero_phase_ranging):
+    shipped, zp, paths = zero_phase_ranging
+    right = dt.run_droptest(zp, paths).summary
+    c = _checks(right["health"], "timing.")["timing.imu_vs_ranging"]
+    assert c["status"] == OK, c["message"]
+    wrong = dt.run_droptest(shipped, paths).summary
+    c = _checks(wrong["health"], "timing.")["timing.imu_vs_ranging"]
+    assert c["status"] == ERROR and "[sensors.acquisition] filter = 'butterworth'" in c["message"]
+    assert c["value"] == pytest.approx(-wrong["time_shifts_s"]["imu"], abs=3e-4)  # the lag it found: −0.83 ms
+    assert wrong["health"]["verdict"] == ERROR

@@ -31,11 +31,12 @@ from workbench.problems.droptest.physics import contact_geometry_check, hanging_
 __all__ = ["drop_health", "input_checks", "input_health"]
 
 
-def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None) -> list[Check]:
+def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None, settings=None) -> list[Check]:
     """The checks that need only the telemetry ``tel`` (``DropTelemetry``): no IMU gap across the
     impact (where the mean triad specific force exceeds 2 g after the release or bungee cut, and
     the extra ``windows`` {what: (t0, t1) [s]}), an impact present in the data at all, gaps after
-    release longer than 20 ms (WARNING), and the readers' warnings."""
+    release longer than 20 ms (WARNING), and the readers' warnings; with the run's ``settings``
+    (``DropSettings``) also the sensor axes against gravity while hanging (:func:`.physics.hanging_checks`)."""
     windows = dict(windows or {})
     imu = tel.imu
     start = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
@@ -44,7 +45,7 @@ def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None) -> 
     hard = np.flatnonzero((imu.time >= start) & (fmag > 2.0 * G0))
     gaps = [(g.start_s, g.end_s) for g in imu.gaps]
     late = [(a, b) for a, b in gaps if b > tel.events.get("release", -np.inf)]
-    checks: list[Check] = []
+    checks: list[Check] = [] if settings is None else hanging_checks(tel, settings)
     if hard.size:
         # padded by two samples: a gap just before the first or after the last > 2 g sample is across it
         pad = 2.0 * float(np.median(np.diff(imu.time)))
@@ -85,17 +86,18 @@ def input_health(settings, paths) -> dict:
     from workbench.problems.droptest.telemetry import load_drop_telemetry
 
     tel = load_drop_telemetry(settings, paths)
-    return health_report(input_checks(tel))
+    return health_report(input_checks(tel, settings=settings))
 
 
-def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completeness=None) -> dict:
+def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completeness=None, lag=None) -> dict:
     """The ``summary["health"]`` of a drop test from its telemetry ``tel`` (``DropTelemetry``), the
     forward and smoothed ``FilterStage`` and the ``StrokeStage`` ``st`` (lengths in m, times in s);
     ``cov_stats``: :func:`~workbench.estimation.health.covariance_stats` of ``smo.P`` if already known.
     With the run's ``settings`` (``DropSettings``) also the physics cross-checks of :mod:`.physics`
     (sensor axes against gravity while hanging, rig geometry against the first contact, timing);
     ``completeness`` (:class:`~.physics.ContactCompleteness`): data that end inside the contact
-    make its outputs undefined (``data.contact`` WARNING naming the file and the time)."""
+    make its outputs undefined (``data.contact`` WARNING naming the file and the time); ``lag``: the
+    IMU lag against the ranging (:func:`~.physics.estimate_lag`) for the timing check."""
     checks: list[Check] = []
     notes: list[str] = []
     if settings is not None:
@@ -115,7 +117,7 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
                     "sensor axis or scale moves the estimated trajectory as much",
                 )
             checks.append(geo)
-        tchecks, tnotes = timing_checks(tel, fwd, smo, st, settings)
+        tchecks, tnotes = timing_checks(tel, smo, st, settings, lag)
         checks += tchecks
         notes += tnotes
     complete = completeness is None or completeness.complete

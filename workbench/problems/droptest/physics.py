@@ -19,6 +19,7 @@ column or scenario key and the likely cause.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import permutations, product
 
@@ -33,6 +34,7 @@ __all__ = [
     "contact_completeness",
     "contact_geometry_check",
     "diagnose_axes",
+    "estimate_lag",
     "hanging_checks",
     "measured_impact",
     "timing_checks",
@@ -490,15 +492,16 @@ class LagEstimate:
     trials: tuple
 
 
-def estimate_lag(settings, tel, fwd) -> LagEstimate | None:
+def estimate_lag(settings, tel, fwd, forward: Callable) -> LagEstimate | None:
     """The lag of the IMU time line against the radar guns' range rates over the impact, where the
     motion changes fastest.  The filter is re-run from its own prior just before the measured impact
     to just after it on the IMU alone (open loop: no ranging update can absorb a timing error), and
     each gun's range-rate residual z − h(x) is regressed on [1, t, dh/dt] (an offset and a drift
     from the prior's velocity error, and the lag: a state ``lag`` late reads h(t − lag) ≈
     h − lag·dh/dt, so the coefficient of dh/dt is the lag).  The guns' estimates are combined
-    weighted by their variances (the declared range-rate noise).  None without radar guns, without
-    an impact, or with too few samples."""
+    weighted by their variances (the declared range-rate noise).  ``forward``: the forward pass
+    ``forward(settings, tel, init) -> FilterStage`` (:func:`.pipeline.forward_pass`).  None without
+    radar guns, without an impact, or with too few samples."""
     if tel.ranging is None:
         return None
     imp = measured_impact(tel)
@@ -507,7 +510,6 @@ def estimate_lag(settings, tel, fwd) -> LagEstimate | None:
     from dataclasses import replace
 
     from workbench.problems.droptest import model as rl
-    from workbench.problems.droptest.pipeline import forward_pass
     from workbench.problems.droptest.sensors import RangingSpec
 
     spec = RangingSpec.from_settings(settings.ranging)
@@ -519,7 +521,7 @@ def estimate_lag(settings, tel, fwd) -> LagEstimate | None:
     if k0 < 1 or k1 - k0 < 20:
         return None
     sub = replace(_slice_tel(tel, k0, k1, 0.0), ranging=None)
-    x = forward_pass(settings, sub, _Init(fp.x_prior[k0].copy(), fp.P_prior[k0].copy())).x
+    x = forward(settings, sub, _Init(fp.x_prior[k0].copy(), fp.P_prior[k0].copy())).x
     rt = tel.ranging
     t_meas = rt.time - tel.time_shifts_s.get("ranging", 0.0)
     inside = (t_meas >= sub.t[0]) & (t_meas <= sub.t[-1])
@@ -560,10 +562,10 @@ class _Init:
     P0: np.ndarray
 
 
-def timing_checks(tel, fwd, smo, st, settings) -> tuple[list[Check], list[str]]:
+def timing_checks(tel, smo, st, settings, est: LagEstimate | None) -> tuple[list[Check], list[str]]:
     """``timing.imu_vs_ranging``: the declared time shifts (``tel.time_shifts_s``: the IMU's from
     ``[sensors.acquisition]`` filter / order / cutoff and latency_s, the ranging's from
-    ``[sensors.ranging]`` latency_s / acquisition_filter) against the lag :func:`estimate_lag` finds.
+    ``[sensors.ranging]`` latency_s / acquisition_filter) against the lag ``est`` of :func:`estimate_lag`.
     The IMU-driven trajectory at the impact moves by |v_n| × lag (v_n the CM speed into the ramp at
     the first contact); ERROR when the lag is significant (> 3σ) and that shift exceeds 2σ of the
     max stroke (the IMU and the ranging then disagree by more than the headline's uncertainty),
@@ -572,7 +574,6 @@ def timing_checks(tel, fwd, smo, st, settings) -> tuple[list[Check], list[str]]:
     shifts = ", ".join(f"{k} {v * 1e3:.3f} ms" for k, v in tel.time_shifts_s.items())
     if tel.ranging is None:
         return [], []
-    est = estimate_lag(settings, tel, fwd)
     if est is None:
         return [], [f"timing: no IMU lag estimate (no impact inside the ranging record); time shifts applied: {shifts}"]
     from workbench.problems.droptest import model as rl

@@ -60,7 +60,7 @@ from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.config import DropSettings
 from workbench.problems.droptest.health import drop_health
 from workbench.problems.droptest.lander import LanderModel
-from workbench.problems.droptest.physics import contact_completeness
+from workbench.problems.droptest.physics import contact_completeness, estimate_lag
 from workbench.problems.droptest.sensors import RangingSpec
 from workbench.problems.droptest.stroke import (
     MaxStroke,
@@ -826,7 +826,16 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
         "innovations": innov,
         "covariance": {"min_eigenvalue": eig_min, "max_asymmetry": sym, "positive_definite": eig_min > 0},
         "degradations": [{"time_s": t, "level": lvl, "text": txt} for t, lvl, txt in tel.degradations],
-        "health": drop_health(tel, fwd, smo, st, cov_stats, settings=settings, completeness=cc),
+        "health": drop_health(
+            tel,
+            fwd,
+            smo,
+            st,
+            cov_stats,
+            settings=settings,
+            completeness=cc,
+            lag=estimate_lag(settings, tel, fwd, forward_pass),
+        ),
     }
     if not cc.complete:
         out["restitution"].update(
