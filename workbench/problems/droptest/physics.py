@@ -348,13 +348,29 @@ class ContactCompleteness:
     reason: str
 
 
+#: the data must go on this long [s] after the estimated contact ends for the contact to be complete
+#: (two of the 10 ms windows over which the contact detection bridges dips)
+CONTACT_TAIL_S = 0.02
+
+
 def contact_completeness(
-    tel, smo_t: np.ndarray, smo_v: np.ndarray, normal: np.ndarray, t_max_stroke: float = np.inf
+    tel,
+    smo_t: np.ndarray,
+    smo_v: np.ndarray,
+    normal: np.ndarray,
+    t_max_stroke: float = np.inf,
+    t_contact_end: float | None = None,
+    stroke_rise: float = np.inf,
 ) -> ContactCompleteness:
     """:class:`ContactCompleteness` of the telemetry ``tel`` against the smoothed CM velocity
-    ``smo_v`` (n, 3) [m/s, SPF] at ``smo_t`` (n,) [s] and the ramp's unit ``normal`` (3,): the IMU
-    file ending inside the measured impact, or an IMU gap across it (then the max stroke is
-    undefined too when the gap starts before ``t_max_stroke`` [s], the estimated max-stroke time)."""
+    ``smo_v`` (n, 3) [m/s, SPF] at ``smo_t`` (n,) [s] and the ramp's unit ``normal`` (3,): an IMU
+    gap across the measured impact (then the max stroke is undefined too when the gap starts before
+    ``t_max_stroke`` [s], the estimated max-stroke time), or the IMU file ending inside the contact:
+    less than :data:`CONTACT_TAIL_S` after ``t_contact_end`` [s] (the end of the contact the
+    restitution is defined over; None: none detected, then the measured impact still lasting at
+    the last sample).  A file ending inside the contact leaves the max stroke defined only when
+    the lander already moves away from the ramp and ``stroke_rise`` (the smoothed stroke at the data
+    end above its minimum, in units of its 1σ there) exceeds 1."""
     t_end = float(tel.imu.time[-1] - tel.group_delay_s)
     imp = measured_impact(tel)
     if imp is not None:
@@ -368,13 +384,17 @@ def contact_completeness(
                     f"(row {g.row}) across the measured impact {imp[0]:.4f}–{imp[1]:.4f} s"
                 )
                 return ContactCompleteness(False, a > t_max_stroke, t_end, reason)
-    if imp is None or not imp[2]:
+    if t_contact_end is not None:
+        ends_inside = t_end - t_contact_end < CONTACT_TAIL_S
+    else:
+        ends_inside = imp is not None and imp[2]
+    if imp is None or not ends_inside:
         return ContactCompleteness(True, True, t_end, "")
     vn_end = float(smo_v[-1] @ normal)
-    reached = vn_end > 0.0  # moving away from the ramp: the compression is over
+    reached = vn_end > 0.0 and stroke_rise > 1.0  # moving away, the stroke past its minimum
     reason = (
-        f"the IMU data ({tel.imu.path}) end at t = {t_end:.4f} s inside the impact (mean triad specific force "
-        f"still above 2 g since {imp[0]:.4f} s; a truncated file?)"
+        f"the IMU data ({tel.imu.path}) end at t = {t_end:.4f} s inside the contact (impact measured from "
+        f"{imp[0]:.4f} s, the estimated contact still on at the data end; a truncated file?)"
     )
     return ContactCompleteness(False, reached, t_end, reason)
 

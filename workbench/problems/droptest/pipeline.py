@@ -789,7 +789,15 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
     eig_min = float(np.min(cov_stats[2]))
     sym = float(np.max(cov_stats[0]))
     # data ending inside the contact: its outputs are undefined, never a number
-    cc = contact_completeness(tel, smo.t, smo.x[:, rl.SV], st.surface.normal, float(ms.time))
+    cc = contact_completeness(
+        tel,
+        smo.t,
+        smo.x[:, rl.SV],
+        st.surface.normal,
+        float(ms.time),
+        float(smo.t[st.contact[1]]) if st.contact[1] >= 0 else None,
+        float((st.smoothed.distance[-1] - ms.distance) / max(ms.sigma, 1e-9)),
+    )
     undefined = {} if cc.complete else {"undefined": cc.reason, "data_end_s": cc.t_data_end}
     out = {
         "scenario": settings.name,
