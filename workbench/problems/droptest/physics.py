@@ -516,10 +516,11 @@ def estimate_lag(settings, tel, fwd, forward: Callable) -> LagEstimate | None:
     """The lag of the IMU time line against the radar guns' range rates over the impact, where the
     motion changes fastest.  The filter is re-run from its own prior just before the measured impact
     to just after it on the IMU alone (open loop: no ranging update can absorb a timing error), and
-    each gun's range-rate residual z − h(x) is regressed on [1, t, dh/dt] (an offset and a drift
-    from the prior's velocity error, and the lag: a state ``lag`` late reads h(t − lag) ≈
-    h − lag·dh/dt, so the coefficient of dh/dt is the lag).  The guns' estimates are combined
-    weighted by their variances (the declared range-rate noise).  ``forward``: the forward pass
+    each gun's range-rate residual z − h(x) is regressed on [1, t, (Δv × u), dh/dt] (an offset and
+    a drift from the prior's velocity error, the tilt of the velocity change Δv by an attitude error,
+    u the line of sight, and the lag: a state ``lag`` late reads h(t − lag) ≈ h − lag·dh/dt, so the
+    coefficient of dh/dt is the lag).  The guns' estimates are combined weighted by their variances
+    (residual scatter, at least the declared range-rate noise).  ``forward``: the forward pass
     ``forward(settings, tel, init) -> FilterStage`` (:func:`.pipeline.forward_pass`).  None without
     radar guns, without an impact, or with too few samples."""
     if tel.ranging is None:
@@ -561,14 +562,21 @@ def estimate_lag(settings, tel, fwd, forward: Callable) -> LagEstimate | None:
         xs = np.stack([np.interp(tm, sub.t, x[:, i]) for i in range(x.shape[1])], axis=1)
         h = np.array([rl.range_rate_model(xi, G, r_B)[0][0] for xi in xs])
         dh = np.gradient(h, tm)
-        A = np.stack([np.ones_like(tm), tm - tm.mean(), dh], axis=1)
+        # nuisance: an attitude error δθ at the window start tilts the integrated velocity change Δv,
+        # δ(range rate) = u·(δθ × Δv) = δθ·(Δv × u): three columns, besides the offset and drift
+        u = xs[:, rl.SP] - G
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        tilt = np.cross(xs[:, rl.SV] - xs[0, rl.SV], u)
+        A = np.column_stack([np.ones_like(tm), tm - tm.mean(), tilt, dh])
         y = z[m] - h
         coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        cov = spec.rate_sigmas[name] ** 2 * np.linalg.inv(A.T @ A)
-        w = 1.0 / cov[2, 2]
-        num += w * coef[2]
+        dof = max(tm.size - A.shape[1], 1)
+        s2 = max(spec.rate_sigmas[name] ** 2, float(np.sum((y - A @ coef) ** 2)) / dof)  # declared or found
+        cov = s2 * np.linalg.inv(A.T @ A)
+        w = 1.0 / cov[-1, -1]
+        num += w * coef[-1]
         den += w
-        trials.append((name, float(coef[2]), float(np.sqrt(cov[2, 2])), int(m.sum())))
+        trials.append((name, float(coef[-1]), float(np.sqrt(cov[-1, -1])), int(m.sum())))
     if den == 0.0:
         return None
     return LagEstimate(float(num / den), float(1.0 / np.sqrt(den)), tuple(trials))
