@@ -34,8 +34,10 @@ __all__ = [
     "contact_completeness",
     "contact_geometry_check",
     "diagnose_axes",
+    "LagEstimate",
     "estimate_lag",
     "hanging_checks",
+    "lobe_clearance",
     "measured_impact",
     "timing_checks",
 ]
@@ -233,6 +235,8 @@ def hanging_checks(tel, settings) -> list[Check]:
                 if rev
                 else f"check [chamber] magnetic_field_spf in {settings.path} and the mag.* columns of {att.path}"
             )
+            if any(c.name == "units.hanging.3dm_up" and c.status == ERROR for c in checks):
+                why += " (the 3DM 'up' vector is wrong too: fix its columns first)"
             checks.append(
                 Check("units.hanging.3dm_dip", ERROR, _g(d), [-5.0, 5.0], f"{base}: {why}", {"kind": "two_sided"})
             )
