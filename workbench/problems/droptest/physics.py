@@ -422,12 +422,30 @@ def lobe_clearance(p: np.ndarray, q: np.ndarray, lander, surface) -> np.ndarray:
     return d.min(axis=1)
 
 
+def _lobe_clearance_sigma(x: np.ndarray, P: np.ndarray, lander, surface) -> float:
+    """1σ [m] of the closest lobe's clearance from the ramp for the state ``x`` (N_X,) and its error
+    covariance ``P`` (N_E, N_E), linearised: d = n·(p + R c_B) − r, so J = [nᵀ, −nᵀ R [c_B×]] on
+    the pose error [δp (SPF), δθ (body)]."""
+    from workbench.core.rotation import quat_rotate, quat_to_dcm, skew
+    from workbench.problems.droptest import model as rl
+
+    c_B = np.asarray(lander.lobe_centers_B, float)
+    q = np.repeat(x[rl.SQ][None], c_B.shape[0], axis=0)
+    d = surface.distance(x[rl.SP] + quat_rotate(q, c_B))[0]
+    j = int(np.argmin(d))
+    n = surface.distance((x[rl.SP] + quat_rotate(q[:1], c_B[j : j + 1]))[0])[1]
+    R = quat_to_dcm(x[rl.SQ])
+    J = np.concatenate([n, -n @ R @ skew(c_B[j])])
+    return float(np.sqrt(max(J @ rl.pose_covariance(P) @ J, 0.0)))
+
+
 def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     """``geometry.first_contact``: the airbag lobes of the declared geometry, placed by the smoothed
     pose ``smo`` (``FilterStage``) at the measured onset of the impact (:func:`measured_impact`),
     must just touch the ramp: clearance in [−δ₂g − 3σ, +3σ], δ₂g the penetration at which one lobe's
     gas overpressure alone carries 2 g (m·2g / (Δp·2π r), the declared pressures, mass and lobe
-    radius: the most a 2 g force can have compressed the bags), σ the stroke 1σ there.  Outside:
+    radius: the most a 2 g force can have compressed the bags), σ the clearance's 1σ from the pose
+    covariance there.  Outside:
     ERROR naming the keys that set the geometry (the clearance moves the stroke with it).  None
     when no impact is measured."""
     imp = measured_impact(tel)
@@ -440,7 +458,7 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     k = int(np.clip(np.searchsorted(smo.t, t_on), 0, smo.t.size - 1))
     clear = lobe_clearance(smo.x[:, rl.SP], smo.x[:, rl.SQ], lander, surface)
     c = float(clear[k])
-    sig = float(st.smoothed.sigma[k])
+    sig = _lobe_clearance_sigma(smo.x[k], smo.P[k], lander, surface)
     dp = max(float(getattr(lander, "pressure_pa", 0.0) - getattr(lander, "ambient_pressure_pa", 0.0)), 1.0)
     delta = lander.mass * 2.0 * G0 / (dp * 2.0 * np.pi * float(lander.lobe_radius))
     lo, hi = -delta - 3.0 * sig, 3.0 * sig
