@@ -274,3 +274,13 @@ def test_timing_zero_phase_declared_causal_is_an_error_naming_the_key(zero_phase
     assert c["status"] == ERROR and "[sensors.acquisition] filter = 'butterworth'" in c["message"]
     assert c["value"] == pytest.approx(-wrong["time_shifts_s"]["imu"], abs=3e-4)  # the lag it found: −0.83 ms
     assert wrong["health"]["verdict"] == ERROR
+
+
+def test_non_finite_filter_state_is_a_numerical_failure_naming_the_stage(droptest_run, droptest_result):
+    fwd = droptest_result.forward
+    x = fwd.x.copy()
+    x[1500:, 0] = np.nan
+    bad = replace(fwd, x=x)
+    with pytest.raises(np.linalg.LinAlgError, match=r"forward EKF pass: state or covariance not finite from step 1500"):
+        dt._finite_or_fail(bad, "forward EKF pass", droptest_run.settings)
+    dt._finite_or_fail(fwd, "forward EKF pass", droptest_run.settings)  # finite: nothing raised
