@@ -10,6 +10,8 @@ and every warning the telemetry readers reported.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from workbench.core.bodies import G0
@@ -24,15 +26,17 @@ from workbench.estimation.health import (
     nis_check,
     notes_check,
 )
+from workbench.problems.droptest.physics import contact_geometry_check, hanging_checks, timing_checks
 
 __all__ = ["drop_health", "input_checks", "input_health"]
 
 
-def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None) -> list[Check]:
+def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None, settings=None) -> list[Check]:
     """The checks that need only the telemetry ``tel`` (``DropTelemetry``): no IMU gap across the
     impact (where the mean triad specific force exceeds 2 g after the release or bungee cut, and
     the extra ``windows`` {what: (t0, t1) [s]}), an impact present in the data at all, gaps after
-    release longer than 20 ms (WARNING), and the readers' warnings."""
+    release longer than 20 ms (WARNING), and the readers' warnings; with the run's ``settings``
+    (``DropSettings``) also the sensor axes against gravity while hanging (:func:`.physics.hanging_checks`)."""
     windows = dict(windows or {})
     imu = tel.imu
     start = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
@@ -41,7 +45,7 @@ def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None) -> 
     hard = np.flatnonzero((imu.time >= start) & (fmag > 2.0 * G0))
     gaps = [(g.start_s, g.end_s) for g in imu.gaps]
     late = [(a, b) for a, b in gaps if b > tel.events.get("release", -np.inf)]
-    checks: list[Check] = []
+    checks: list[Check] = [] if settings is None else hanging_checks(tel, settings)
     if hard.size:
         # padded by two samples: a gap just before the first or after the last > 2 g sample is across it
         pad = 2.0 * float(np.median(np.diff(imu.time)))
@@ -82,14 +86,53 @@ def input_health(settings, paths) -> dict:
     from workbench.problems.droptest.telemetry import load_drop_telemetry
 
     tel = load_drop_telemetry(settings, paths)
-    return health_report(input_checks(tel))
+    return health_report(input_checks(tel, settings=settings))
 
 
-def drop_health(tel, fwd, smo, st, cov_stats=None) -> dict:
+def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completeness=None, lag=None) -> dict:
     """The ``summary["health"]`` of a drop test from its telemetry ``tel`` (``DropTelemetry``), the
     forward and smoothed ``FilterStage`` and the ``StrokeStage`` ``st`` (lengths in m, times in s);
-    ``cov_stats``: :func:`~workbench.estimation.health.covariance_stats` of ``smo.P`` if already known."""
+    ``cov_stats``: :func:`~workbench.estimation.health.covariance_stats` of ``smo.P`` if already known.
+    With the run's ``settings`` (``DropSettings``) also the physics cross-checks of :mod:`.physics`
+    (sensor axes against gravity while hanging, rig geometry against the first contact, timing);
+    ``completeness`` (:class:`~.physics.ContactCompleteness`): data that end inside the contact
+    make its outputs undefined (``data.contact`` WARNING naming the file and the time); ``lag``: the
+    IMU lag against the ranging (:func:`~.physics.estimate_lag`) for the timing check."""
     checks: list[Check] = []
+    notes: list[str] = []
+    if settings is not None:
+        checks += hanging_checks(tel, settings)
+        geo = contact_geometry_check(tel, smo, st, settings)
+        if geo is not None:
+            sensors = [c.name for c in checks if c.status == ERROR]
+            sensors += [
+                f"nis.{n}"
+                for n, ih in fwd.forward.innovations.items()
+                if ih.t.size and np.mean(ih.nis[np.isfinite(ih.nis)]) > 16.0
+            ]
+            if geo.status == ERROR and sensors:
+                geo = replace(
+                    geo,
+                    message=f"{geo.message}; or first the sensor errors ({', '.join(sensors)}): a wrong "
+                    "sensor axis or scale moves the estimated trajectory as much",
+                )
+            checks.append(geo)
+        tchecks, tnotes = timing_checks(tel, smo, st, settings, lag)
+        checks += tchecks
+        notes += tnotes
+    complete = completeness is None or completeness.complete
+    ms_defined = completeness is None or completeness.max_stroke_defined
+    if not complete:
+        what = "restitution and rebound" + ("" if ms_defined else ", max stroke")
+        checks.append(
+            Check(
+                "data.contact",
+                WARNING,
+                float(f"{completeness.t_data_end:.6g}"),
+                None,
+                f"{completeness.reason}: the contact's {what} are undefined (not reported)",
+            )
+        )
     for name, ih in fwd.forward.innovations.items():
         if ih.t.size:
             checks.append(nis_check(name, ih.nis, int(ih.y.shape[1])))
@@ -98,12 +141,15 @@ def drop_health(tel, fwd, smo, st, cov_stats=None) -> dict:
     lander = st.lander
     thickness = float(2.0 * lander.lobe_radius + lander.standoff)  # lander face to the outer bag surface
     d, s = float(st.max.distance), float(st.max.sigma)
-    checks.append(
-        interval_check("max_stroke.clearance", d, -3.0 * max(s, 0.0) - 0.02, thickness, "max-stroke clearance", "m")
-    )
-    checks.append(interval_check("max_stroke.sigma", s, 0.0, 0.5 * thickness, "max-stroke 1σ", "m"))
+    if ms_defined:
+        checks.append(
+            interval_check("max_stroke.clearance", d, -3.0 * max(s, 0.0) - 0.02, thickness, "max-stroke clearance", "m")
+        )
+        checks.append(interval_check("max_stroke.sigma", s, 0.0, 0.5 * thickness, "max-stroke 1σ", "m"))
     e, se = st.restitution
-    if np.isfinite(e):
+    if not complete:
+        pass
+    elif np.isfinite(e):
         checks.append(interval_check("restitution", float(e), 0.0, 1.0, "coefficient of restitution"))
         checks.append(interval_check("restitution.sigma", float(se), 0.0, 0.5, "restitution 1σ"))
     else:
@@ -114,4 +160,4 @@ def drop_health(tel, fwd, smo, st, cov_stats=None) -> dict:
     if i0 >= 0 and i1 >= 0:
         windows["detected airbag contact"] = (float(smo.t[i0]) - 0.01, float(smo.t[i1]) + 0.01)
     checks += input_checks(tel, windows)
-    return health_report(checks)
+    return health_report(checks, notes)

@@ -60,6 +60,7 @@ from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.config import DropSettings
 from workbench.problems.droptest.health import drop_health
 from workbench.problems.droptest.lander import LanderModel
+from workbench.problems.droptest.physics import contact_completeness, estimate_lag
 from workbench.problems.droptest.sensors import RangingSpec
 from workbench.problems.droptest.stroke import (
     MaxStroke,
@@ -662,16 +663,43 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
         fwd = forward_pass(settings, tel, init)
     except np.linalg.LinAlgError as err:
         raise np.linalg.LinAlgError(f"forward EKF pass: {err}{likely_keys(settings, err)}") from err
+    _finite_or_fail(fwd, "forward EKF pass", settings)
     yield fwd
     try:
         sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
     except np.linalg.LinAlgError as err:
         raise np.linalg.LinAlgError(f"RTS smoother: {err}{likely_keys(settings, err)}") from err
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
+    _finite_or_fail(smo, "RTS smoother", settings, fwd)
     yield smo
     st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))
     yield st
     yield DropResult(tel, init, fwd, smo, st, summarize(settings, tel, fwd, smo, st))
+
+
+def _finite_or_fail(stage: FilterStage, what: str, settings: DropSettings, fwd: FilterStage | None = None) -> None:
+    """Raise :class:`numpy.linalg.LinAlgError` (the runner's numerical failure, exit 4) when the
+    ``stage``'s state or covariance is not finite, naming the stage, the first bad step and time [s]
+    and the sensor whose innovations blew up first (the likely culprit: its file's columns)."""
+    bad = ~(np.all(np.isfinite(stage.x), axis=1) & np.all(np.isfinite(stage.P), axis=(1, 2)))
+    if not bad.any():
+        return
+    k = int(np.flatnonzero(bad)[0])
+    fp = (fwd or stage).forward
+    worst = ""
+    if fp is not None:
+        first = []
+        for name, ih in fp.innovations.items():
+            big = np.flatnonzero(~np.isfinite(ih.nis) | (ih.nis > 1e3))
+            if big.size:
+                first.append((float(ih.t[big[0]]), name))
+        if first:
+            t0, name = min(first)
+            worst = f"; the first sensor far off the filter (NIS > 1000) is {name!r} at t = {t0:.4f} s"
+    raise np.linalg.LinAlgError(
+        f"{what}: state or covariance not finite from step {k} (t = {stage.t[k]:.4f} s){worst}; "
+        f"check the sensor axes, units and the settings in {settings.path}{likely_keys(settings, Exception())}"
+    )
 
 
 #: error-state component -> the scenario setting that sets its prior σ or process noise
@@ -760,12 +788,24 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
     cov_stats = covariance_stats(smo.P)  # once: the summary's numbers and the health check
     eig_min = float(np.min(cov_stats[2]))
     sym = float(np.max(cov_stats[0]))
-    return {
+    # data ending inside the contact: its outputs are undefined, never a number
+    cc = contact_completeness(
+        tel,
+        smo.t,
+        smo.x[:, rl.SV],
+        st.surface.normal,
+        float(ms.time),
+        float(smo.t[st.contact[1]]) if st.contact[1] >= 0 else None,
+        float((st.smoothed.distance[-1] - ms.distance) / max(ms.sigma, 1e-9)),
+    )
+    undefined = {} if cc.complete else {"undefined": cc.reason, "data_end_s": cc.t_data_end}
+    out = {
         "scenario": settings.name,
         "mode": settings.filter.mode,
         "steps": int(tel.t.size),
         "filter_rate_hz": float(1.0 / np.median(np.diff(tel.t))),
         "group_delay_s": tel.group_delay_s,
+        "time_shifts_s": {k: float(v) for k, v in tel.time_shifts_s.items()},
         "events": tel.events,
         "max_stroke": {
             "time_s": float(ms.time),
@@ -794,8 +834,31 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
         "innovations": innov,
         "covariance": {"min_eigenvalue": eig_min, "max_asymmetry": sym, "positive_definite": eig_min > 0},
         "degradations": [{"time_s": t, "level": lvl, "text": txt} for t, lvl, txt in tel.degradations],
-        "health": drop_health(tel, fwd, smo, st, cov_stats),
+        "health": drop_health(
+            tel,
+            fwd,
+            smo,
+            st,
+            cov_stats,
+            settings=settings,
+            completeness=cc,
+            lag=estimate_lag(settings, tel, fwd, forward_pass),
+        ),
     }
+    if not cc.complete:
+        out["restitution"].update(
+            {"e": None, "sigma": None, "sigma_estimation": None, "sigma_definition": None, **undefined}
+        )
+        out["contact"]["end_s"] = None
+        if not cc.max_stroke_defined:
+            out["max_stroke"].update(
+                {
+                    k: None
+                    for k in ("time_s", "distance_m", "sigma_m", "sampled_sigma_m", "sampled_mean_m", "point_spf_m")
+                }
+            )
+            out["max_stroke"].update(undefined)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -895,6 +958,30 @@ def score(result: DropResult, truth: dict) -> dict:
         "restitution_error_touch_leave": float(e_est - e_true),
         "restitution_truth_definitions": dict(rd_true.values),
         "full_stroke_truth": bool(np.max(truth["body_penetration"]) > 0.0),
+        # the headline numbers against the truth (estimate − truth, the run's own 1σ), judged by the
+        # runner (``calibration.finish_health``: outside ±3σ is an ERROR)
+        "headline": [
+            {
+                "name": "max_stroke",
+                "what": "max stroke",
+                "error": float(ms.distance - d_true),
+                "sigma": float(ms.sigma),
+                "unit": "m",
+            },
+            *(
+                [
+                    {
+                        "name": "restitution",
+                        "what": "coefficient of restitution",
+                        "error": float(e_est - e_prim),
+                        "sigma": float(s_e),
+                        "unit": "",
+                    }
+                ]
+                if np.isfinite(e_est) and np.isfinite(e_prim) and np.isfinite(s_e) and s_e > 0.0
+                else []
+            ),
+        ],
     }
 
 
@@ -907,12 +994,24 @@ def scorecard_markdown(summary: dict) -> str:
         "",
         f"Filter: REDLand EKF ({summary['mode']} mode) + RTS smoother, {summary['steps']} steps at "
         f"{summary['filter_rate_hz']:.0f} Hz; acquisition-filter delay "
-        f"{summary['group_delay_s'] * 1e3:.2f} ms removed.",
+        f"{summary['group_delay_s'] * 1e3:.2f} ms removed"
+        + (
+            "; time shifts taken off each stream's tags: "
+            + ", ".join(f"{k} {v * 1e3:.3f} ms" for k, v in summary["time_shifts_s"].items())
+            if summary.get("time_shifts_s")
+            else ""
+        )
+        + ".",
         "",
         "| quantity | value |",
         "|---|---|",
-        f"| max stroke | **{ms['distance_m']:.3f} m ± {ms['sigma_m']:.3f} m (1σ)** at t = {ms['time_s']:.3f} s |",
-        f"| 1σ check by posterior sampling | {ms['sampled_sigma_m']:.3f} m |",
+        (
+            f"| max stroke | **{ms['distance_m']:.3f} m ± {ms['sigma_m']:.3f} m (1σ)** at t = {ms['time_s']:.3f} s |"
+            if sc.is_defined(ms["distance_m"])
+            else f"| max stroke | **undefined**: {ms.get('undefined', 'not determined')} |"
+        ),
+        "| 1σ check by posterior sampling | "
+        + (f"{ms['sampled_sigma_m']:.3f} m |" if sc.is_defined(ms["sampled_sigma_m"]) else "undefined |"),
         f"| closest vertex / faces | {ms['vertex']} / {ms['faces']} |",
         f"| full stroke | {'**YES**' if ms['full_stroke'] else 'no'}"
         f"{' (within 3σ: possible)' if ms['possible_full_stroke'] and not ms['full_stroke'] else ''} |",
@@ -921,6 +1020,8 @@ def scorecard_markdown(summary: dict) -> str:
             f"{e['e']:.3f} ± {e['sigma']:.3f} (1σ: estimation {sc.num(e.get('sigma_estimation'), digits=2)}, "
             f"definition {sc.num(e.get('sigma_definition'), digits=2)}, in quadrature) |"
             if sc.is_defined(e["e"])
+            else f"**undefined**: {e['undefined']} |"
+            if e.get("undefined")
             else f"{NO_REBOUND} |"
         ),
         f"| covariance | symmetric (max asym {summary['covariance']['max_asymmetry']:.1e}), "

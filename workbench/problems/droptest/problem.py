@@ -81,6 +81,11 @@ def key_moments(result: dt.DropResult) -> list[KeyMoment]:
         window = (float(t[i0]) - 0.15, end + 0.25)
     else:
         window = (float(ms.time) - 0.3, float(ms.time) + 0.3)
+    # the window holds every moment in it (a max stroke at the data end, after a diverged filter ...)
+    window = (min(window[0], float(ms.time) - 0.05), max(window[1], float(ms.time) + 0.05))
+    summ = result.summary or {}
+    if summ.get("restitution", {}).get("undefined"):
+        k_up = None  # the data end inside the contact: no rebound in the data
     if i0 >= 0:
         out.append(
             KeyMoment(
@@ -92,14 +97,15 @@ def key_moments(result: dt.DropResult) -> list[KeyMoment]:
             )
         )
     flag = " — FULL STROKE" if ms.full_stroke else " — full stroke within 3σ" if ms.possible_full_stroke else ""
-    out.append(
-        KeyMoment(
-            "max_stroke",
-            float(ms.time),
-            f"max stroke {ms.distance:.3f} ± {ms.sigma:.3f} m (1σ) at vertex {ms.vertex}{flag}",
-            window,
+    if summ.get("max_stroke", {}).get("distance_m", 0.0) is not None:
+        out.append(
+            KeyMoment(
+                "max_stroke",
+                float(ms.time),
+                f"max stroke {ms.distance:.3f} ± {ms.sigma:.3f} m (1σ) at vertex {ms.vertex}{flag}",
+                window,
+            )
         )
-    )
     if k_up is not None:
         e, se = st.restitution
         rest = f"restitution e = {e:.3f} ± {se:.3f} (1σ)" if np.isfinite(e) else "restitution not defined"
@@ -174,7 +180,13 @@ class DropTestProblem(PipelineProblem):
     def headline(self, summary: dict) -> str:
         """Max stroke ± 1σ and its time (and the true max stroke when scored)."""
         ms = summary["max_stroke"]
-        line = f"max stroke {ms['distance_m']:.3f} ± {ms['sigma_m']:.3f} m (1σ) at t = {ms['time_s']:.3f} s"
+        if ms.get("distance_m") is None:
+            line = f"max stroke undefined ({ms.get('undefined', 'not determined')})"
+        else:
+            line = f"max stroke {ms['distance_m']:.3f} ± {ms['sigma_m']:.3f} m (1σ) at t = {ms['time_s']:.3f} s"
+        e = summary.get("restitution", {})
+        if e.get("e") is None and e.get("undefined"):
+            line += "; restitution undefined (the data end inside the contact)"
         if "truth" in summary:
             line += f"; truth {summary['truth']['max_stroke_truth_m']:.3f} m"
         return line

@@ -337,6 +337,8 @@ class DropTestRecorder:
         tel = self.tel
         for j, name in enumerate(tel.triads):
             ok = tel.f_valid[:, j]
+            if not ok.any():  # a triad excluded from the reconstruction (dead): nothing to draw
+                continue
             pred = np.array([rl.triad_model(x, tel.lever_arms_B[j], j)[0] for x in fp.x_prior[ok]])
             r.scalars(
                 layout.droptest_triad_plot_path(name, layout.MEASURED_SERIES),

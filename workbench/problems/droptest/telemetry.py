@@ -149,7 +149,9 @@ def check_units_at_rest(
         g_meas = float(np.mean(np.linalg.norm(imu.stack(cols)[hang], axis=1)))
         ratio = g_meas / G0
         unit = imu.units[cols[0]]
-        if abs(np.log(ratio)) > np.log(1.3):
+        if not ratio > 0.0:  # all zeros: a dead triad (judged by the hanging checks and the dead-channel scan)
+            out.append((float(t_release), "WARN", f"{fname}: the hanging lander reads 0 g on triad {n}"))
+        elif abs(np.log(ratio)) > np.log(1.3):
             likely = likely_unit(ratio, unit)
             what = (
                 f"the hanging lander reads {g_meas / G0:.4g} g on triad {n} (expected 1 g at rest): "
@@ -167,7 +169,7 @@ def check_units_at_rest(
         spread = float(np.sqrt(np.mean(np.var(w, axis=0))))
         ratio = spread / np.radians(gyro_noise_dps)
         unit = imu.units[cols[0]]
-        likely = likely_unit(ratio, unit, rtol=0.3) if abs(np.log(ratio)) > np.log(3.0) else None
+        likely = likely_unit(ratio, unit, rtol=0.3) if ratio > 0.0 and abs(np.log(ratio)) > np.log(3.0) else None
         if likely:
             problems.append(
                 Problem(

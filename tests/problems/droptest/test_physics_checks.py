@@ -1,0 +1,286 @@
+"""Physics cross-checks of a drop test (issue 26): each fires on a mutated input and stays OK on the
+clean synthetic telemetry of the shipped ``droptest`` scenario (session fixture ``droptest_run``).
+
+Mutations are planted in a COPY of the run's telemetry (or of its scenario settings): sensor axes,
+signs and dead channels against gravity while hanging; the declared hanging position against the
+first contact; an IMU file ending inside the contact (outputs undefined, never a number); a
+diverged filter or a dead triad ending in a clear error instead of a traceback.  The timing check
+(an IMU acquisition filter declared causal when it was zero-phase, with ranging) is in the slow tier.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench.estimation.health import ERROR, OK, WARNING
+from workbench.problems.droptest import pipeline as dt
+from workbench.problems.droptest.physics import diagnose_axes, hanging_checks
+from workbench.problems.droptest.problem import key_moments
+from workbench.problems.droptest.telemetry import load_drop_telemetry
+
+Rows = list[list[str]]
+
+
+def _copy(run, dst: Path) -> dict[str, Path]:
+    dst.mkdir(parents=True, exist_ok=True)
+    for f in ("imu.csv", "3dm.csv", "events.csv", "setup.toml"):
+        shutil.copy(run.telemetry_dir / f, dst / f)
+    return run.telemetry_paths(dst)
+
+
+def _edit_csv(path: Path, fn: Callable[[list[str], np.ndarray], np.ndarray]) -> None:
+    """Rewrite a telemetry CSV through ``fn(header_names, values (n, k)) -> values``."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    h = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
+    names = [c.split(" [")[0] for c in lines[h].split(",")]
+    x = np.array([[float(v) for v in ln.split(",")] for ln in lines[h + 1 :] if ln])
+    x = fn(names, x)
+    body = [",".join(repr(float(v)) for v in row) for row in x]
+    path.write_text("\n".join([*lines[: h + 1], *body]) + "\n", encoding="utf-8")
+
+
+def _flip(*cols: str):
+    def fn(names, x):
+        for c in cols:
+            x[:, names.index(c)] *= -1.0
+        return x
+
+    return fn
+
+
+def _swap(a: str, b: str):
+    def fn(names, x):
+        i, j = names.index(a), names.index(b)
+        x[:, [i, j]] = x[:, [j, i]]
+        return x
+
+    return fn
+
+
+def _const(*cols: str, value: float = 0.0):
+    def fn(names, x):
+        for c in cols:
+            x[:, names.index(c)] = value
+        return x
+
+    return fn
+
+
+def _checks(health: dict, prefix: str) -> dict[str, dict]:
+    return {c["name"]: c for c in health["checks"] if c["name"].startswith(prefix)}
+
+
+@pytest.fixture(scope="module")
+def clean_tel(droptest_run):
+    return load_drop_telemetry(droptest_run.settings, droptest_run.telemetry_paths())
+
+
+def _hanging(run, tmp_path, file: str, fn) -> dict[str, object]:
+    paths = _copy(run, tmp_path)
+    _edit_csv(paths["imu" if file == "imu" else "attitude_3dm"], fn)
+    tel = load_drop_telemetry(run.settings, paths)
+    return {c.name: c for c in hanging_checks(tel, run.settings)}
+
+
+# ------------------------------------------------------------------ sensor axes against gravity
+
+
+def test_hanging_checks_ok_on_clean_run(droptest_run, clean_tel):
+    checks = hanging_checks(clean_tel, droptest_run.settings)
+    names = {c.name for c in checks}
+    assert {f"units.hanging.{n}" for n in clean_tel.triads} <= names
+    assert {"units.hanging.3dm_up", "units.hanging.3dm_dip", "units.hanging.gyro"} <= names
+    assert all(c.status == OK for c in checks), [(c.name, c.message) for c in checks if c.status != OK]
+
+
+def test_triad_axis_sign_flip_named(droptest_run, tmp_path):
+    c = _hanging(droptest_run, tmp_path, "imu", _flip("BP.y"))["units.hanging.BP"]
+    assert c.status == ERROR
+    assert "axis y looks sign-flipped" in c.message and "BP.y" in c.message and "imu.csv" in c.message
+
+
+def test_triad_axes_swapped_named(droptest_run, tmp_path):
+    c = _hanging(droptest_run, tmp_path, "imu", _swap("PYBP.y", "PYBP.z"))["units.hanging.PYBP"]
+    assert c.status == ERROR
+    assert "y and z swapped" in c.message
+
+
+def test_dead_triad_named_and_run_ends_in_error_verdict(droptest_run, tmp_path):
+    paths = _copy(droptest_run, tmp_path)
+    _edit_csv(paths["imu"], _const("PXBP.x", "PXBP.y", "PXBP.z"))
+    res = dt.run_droptest(droptest_run.settings, paths)
+    c = _checks(res.summary["health"], "units.hanging.PXBP")["units.hanging.PXBP"]
+    assert c["status"] == ERROR and "all zeros" in c["message"] and "PXBP.x" in c["message"]
+
+
+def test_3dm_up_reversed_and_vectors_swapped(droptest_run, tmp_path):
+    c = _hanging(droptest_run, tmp_path / "a", "3dm", _flip("up.x", "up.y", "up.z"))
+    assert c["units.hanging.3dm_up"].status == ERROR and "reversed" in c["units.hanging.3dm_up"].message
+    assert c["units.hanging.3dm_dip"].status == OK  # the dip is judged against the triads, not the bad 'up'
+
+    def swap_vectors(names, x):
+        i = [names.index(f"up.{a}") for a in "xyz"]
+        j = [names.index(f"mag.{a}") for a in "xyz"]
+        x[:, i + j] = x[:, j + i]
+        return x
+
+    c = _hanging(droptest_run, tmp_path / "b", "3dm", swap_vectors)
+    assert c["units.hanging.3dm_up"].status == ERROR and "swapped" in c["units.hanging.3dm_up"].message
+
+
+def test_reversed_magnetic_field_named(droptest_run, tmp_path):
+    c = _hanging(droptest_run, tmp_path, "3dm", _flip("mag.x", "mag.y", "mag.z"))["units.hanging.3dm_dip"]
+    assert c.status == ERROR and "reversed" in c.message and "magnetic_field_spf" in c.message
+
+
+def test_stuck_gyro_named(droptest_run, tmp_path):
+    c = _hanging(droptest_run, tmp_path, "imu", _const("gyro.x", "gyro.y", "gyro.z"))["units.hanging.gyro"]
+    assert c.status == ERROR and "stuck" in c.message and "gyro.x" in c.message
+
+
+def test_diagnose_axes_prefers_simplest_mistake():
+    up = np.array([0.0, 0.5, 0.866])
+    assert diagnose_axes(up * [1, -1, 1], up, 3.0) == "axis y looks sign-flipped"
+    assert diagnose_axes(up[[0, 2, 1]], up, 3.0) == "y and z swapped"
+    assert diagnose_axes(np.array([0.3, -0.2, 0.9]), up, 3.0) is None
+
+
+# ------------------------------------------------------------------ rig geometry and key moments
+
+
+def test_first_contact_geometry_ok_clean_error_hanging_moved(droptest_run, droptest_result, tmp_path):
+    geo = _checks(droptest_result.summary["health"], "geometry.")["geometry.first_contact"]
+    assert geo["status"] == OK, geo["message"]
+    paths = _copy(droptest_run, tmp_path)
+    text = paths["setup"].read_text(encoding="utf-8")
+
+    def up1(m):
+        v = [float(s) for s in m.group(1).split(",")]
+        v[2] += 1.0
+        return "position_m = [" + ", ".join(f"{a:.6f}" for a in v) + "]"
+
+    paths["setup"].write_text(re.sub(r"position_m = \[([^\]]*)\]", up1, text), encoding="utf-8")
+    res = dt.run_droptest(droptest_run.settings, paths)
+    geo = _checks(res.summary["health"], "geometry.")["geometry.first_contact"]
+    assert res.summary["health"]["verdict"] == ERROR
+    assert geo["status"] == ERROR and "[hanging] position_m" in geo["message"]
+
+
+def test_ramp_angle_in_radians_named(droptest_run, droptest_result):
+    ch = replace(droptest_run.settings.chamber, ramp_angle_deg=float(np.radians(60.0)))
+    settings = replace(droptest_run.settings, chamber=ch)
+    res = dt.run_droptest(settings, droptest_run.telemetry_paths())
+    geo = _checks(res.summary["health"], "geometry.")["geometry.first_contact"]
+    assert geo["status"] == ERROR and "looks like radians" in geo["message"]
+    key_moments(res)  # a max stroke at the data end lies inside its window: no internal error
+
+
+# ------------------------------------------------------------------ data ending inside the contact
+
+
+def test_imu_ending_inside_contact_makes_outputs_undefined(droptest_run, droptest_result, tmp_path):
+    clean = droptest_result.summary
+    assert clean["restitution"]["e"] is not None and "undefined" not in clean["restitution"]
+    t_cut = clean["contact"]["start_s"] + 0.1  # inside the compression, before the max stroke
+    paths = _copy(droptest_run, tmp_path)
+    _edit_csv(paths["imu"], lambda names, x: x[x[:, 0] <= t_cut])
+    res = dt.run_droptest(droptest_run.settings, paths)
+    s = res.summary
+    assert s["restitution"]["e"] is None and s["restitution"]["sigma"] is None
+    assert s["max_stroke"]["distance_m"] is None and "imu.csv" in s["max_stroke"]["undefined"]
+    c = _checks(s["health"], "data.contact")["data.contact"]
+    assert c["status"] == WARNING and "imu.csv" in c["message"] and "end at t =" in c["message"]
+    md = dt.scorecard_markdown(s)
+    assert "**undefined**" in md
+    names = [m.name for m in key_moments(res)]
+    assert "max_stroke" not in names and "rebound" not in names
+
+
+# ------------------------------------------------------------------ truth headline
+
+
+def test_score_headline_inside_3_sigma(droptest_result, droptest_truth):
+    sc = dt.score(droptest_result, droptest_truth)
+    hl = {h["name"]: h for h in sc["headline"]}
+    assert set(hl) == {"max_stroke", "restitution"}
+    for h in hl.values():
+        assert abs(h["error"]) <= 3.0 * h["sigma"], h
+    assert hl["max_stroke"]["error"] == pytest.approx(sc["max_stroke_error_m"])
+
+
+# ------------------------------------------------------------------ slow: timing, runner end to end
+
+
+def _user_scenario(settings_path: Path, paths: dict[str, Path], dest: Path) -> Path:
+    """The scenario file at ``settings_path`` rewritten as a user-data scenario on ``paths`` (no
+    ``[synthetic]`` table, the lander asset path absolute)."""
+    from workbench.io.assets import assets_dir
+
+    text = (
+        Path(settings_path).read_text(encoding="utf-8").replace('"../landers/', f'"{assets_dir().as_posix()}/landers/')
+    )
+    text = re.sub(r"\[synthetic\].*?(?=\n\[|\Z)", "", text, flags=re.S)
+    table = "[telemetry]\n" + "".join(f'{k} = "{Path(p).as_posix()}"\n' for k, p in paths.items())
+    out = dest / "scenario.toml"
+    out.write_text(text.replace("[vehicle]", table + "\n[vehicle]", 1), encoding="utf-8")
+    return out
+
+
+@pytest.mark.slow
+def test_dead_triad_through_the_runner_is_an_error_verdict_not_a_traceback(droptest_run, tmp_path):
+    from workbench.cli import EXIT_UNHEALTHY, main
+
+    paths = _copy(droptest_run, tmp_path / "tel")
+    _edit_csv(paths["imu"], _const("PXBP.x", "PXBP.y", "PXBP.z"))
+    scen = _user_scenario(droptest_run.settings.path, paths, tmp_path)
+    assert main(["run", str(scen), "--out", str(tmp_path / "out"), "-q"]) == EXIT_UNHEALTHY
+    # written anyway, the recording draws the run without the dead triad
+    assert main(["run", str(scen), "--out", str(tmp_path / "out2"), "-q", "--allow-unhealthy"]) == 0
+    assert (tmp_path / "out2" / "droptest.rrd").exists()
+
+
+@pytest.fixture(scope="module")
+def zero_phase_ranging(tmp_path_factory):
+    """``droptest_ranging`` telemetry whose IMU went through a zero-phase acquisition filter, and the
+    settings that declare it so (the shipped scenario declares the causal Butterworth)."""
+    from workbench.io.assets import assets_dir
+    from workbench.io.scenario import load_scenario
+    from workbench.problems.droptest.config import DropSettings
+    from workbench.problems.droptest.problem import DropTestProblem
+    from workbench.problems.droptest.synthetic import synthesize_droptest
+
+    shipped = DropSettings.from_scenario(load_scenario(assets_dir() / "scenarios" / "droptest_ranging.toml"))
+    zp = replace(shipped, acquisition=replace(shipped.acquisition, filter="zero_phase"))
+    d = tmp_path_factory.mktemp("zp_ranging")
+    synthesize_droptest(zp, d, seed=1)
+    return shipped, zp, DropTestProblem().telemetry_files(shipped, d)
+
+
+@pytest.mark.slow
+def test_timing_zero_phase_declared_causal_is_an_error_naming_the_key(zero_phase_ranging):
+    shipped, zp, paths = zero_phase_ranging
+    right = dt.run_droptest(zp, paths).summary
+    c = _checks(right["health"], "timing.")["timing.imu_vs_ranging"]
+    assert c["status"] == OK, c["message"]
+    wrong = dt.run_droptest(shipped, paths).summary
+    c = _checks(wrong["health"], "timing.")["timing.imu_vs_ranging"]
+    assert c["status"] == ERROR and "[sensors.acquisition] filter = 'butterworth'" in c["message"]
+    assert c["value"] == pytest.approx(-wrong["time_shifts_s"]["imu"], abs=3e-4)  # the lag it found: −0.83 ms
+    assert wrong["health"]["verdict"] == ERROR
+
+
+def test_non_finite_filter_state_is_a_numerical_failure_naming_the_stage(droptest_run, droptest_result):
+    fwd = droptest_result.forward
+    x = fwd.x.copy()
+    x[1500:, 0] = np.nan
+    bad = replace(fwd, x=x)
+    with pytest.raises(np.linalg.LinAlgError, match=r"forward EKF pass: state or covariance not finite from step 1500"):
+        dt._finite_or_fail(bad, "forward EKF pass", droptest_run.settings)
+    dt._finite_or_fail(fwd, "forward EKF pass", droptest_run.settings)  # finite: nothing raised
