@@ -295,9 +295,11 @@ def select_initial_state(
 
 def reconstruct(cfg: Post2Settings, telemetry, options):
     """The post2 stages with, when ``[monte_carlo] members`` (or ``options.members``) > 0, the
-    :class:`McSelection` stage first and the EKF started from its state and spread."""
+    :class:`McSelection` stage first (reported, a health note); the EKF starts from the delivered
+    state with the full ``[monte_carlo] covariance`` when one is given (:func:`start_from_delivered`)."""
     mc = cfg.monte_carlo
     n = options.members if getattr(options, "members", None) is not None else int(mc.members)
+    start = start_from_delivered(cfg) if mc.covariance is not None else cfg
     if n > 0:
         if mc.observation is None or mc.observation not in {o.name for o in cfg.observations}:
             raise ScenarioError(
@@ -308,13 +310,13 @@ def reconstruct(cfg: Post2Settings, telemetry, options):
         seed = int(mc.seed) + (int(options.seed) if getattr(options, "seed", None) is not None else 0)
         sel = select_initial_state(cfg, data.channels[mc.observation], n, seed, getattr(options, "scheduler", None))
         yield sel
-        for stage in pipeline.reconstruct(start_from_delivered(cfg), telemetry, options):
+        for stage in pipeline.reconstruct(start, telemetry, options):
             if isinstance(stage, pipeline.Post2Result):
                 stage.summary["mc_initial_state"] = sel.summary()
                 stage.summary["health"]["notes"].append(selection_note(sel))
             yield stage
         return
-    yield from pipeline.reconstruct(cfg, telemetry, options)
+    yield from pipeline.reconstruct(start, telemetry, options)
 
 
 def selection_note(sel: McSelection) -> str:
@@ -365,7 +367,9 @@ def start_from(cfg: Post2Settings, sel: McSelection) -> Post2Settings:
 def planted_table(result, truth: dict) -> list[dict]:
     """Planted vs recovered, one row per estimated parameter with a planted truth value: the final
     smoothed value and 3σ, the error, the tolerance (``[truth.tolerances]``, if any), and
-    ``inside_3sigma``, ``within_tolerance``, ``pass`` (both); values in the state's unit (deg for tilt)."""
+    ``inside_3sigma``, ``within_tolerance``, ``informed`` (final posterior σ below
+    :data:`~workbench.problems.post2.pipeline.INFORMED_RATIO` × the prior's, ``sigma_ratio``), ``pass``
+    (all three: a row the data did not inform never passes); values in the state's unit (deg for tilt)."""
     rows = []
     hist = result.history["smoothed"]
     for name in result.smap.blocks:
@@ -380,6 +384,9 @@ def planted_table(result, truth: dict) -> list[dict]:
         tol = truth.get(f"tol_{name}")
         inside = abs(err) <= 3.0 * float(s[i])
         within = None if tol is None else abs(err) <= float(np.atleast_1d(tol)[0])
+        st = result.summary["states"][name]
+        ratio = float(st["posterior_over_prior_sigma"][i])
+        informed = bool(st["informed_by_data"][i])
         rows.append(
             {
                 "parameter": name + ("_x" if d.size > 1 else ""),
@@ -391,24 +398,32 @@ def planted_table(result, truth: dict) -> list[dict]:
                 "tolerance": None if tol is None else float(np.atleast_1d(tol)[0] * k),
                 "inside_3sigma": bool(inside),
                 "within_tolerance": within,
-                "pass": bool(inside and (within is None or within)),
+                "sigma_ratio": ratio,
+                "informed": informed,
+                "pass": bool(inside and (within is None or within) and informed),
             }
         )
     return rows
 
 
 def planted_markdown(rows: list[dict]) -> str:
-    """The planted-vs-recovered table in Markdown with PASS/FAIL per row."""
-    md = "\n## Planted vs recovered\n\n| parameter | planted | recovered | error | 3σ | tolerance | verdict |\n"
-    md += "|---|---|---|---|---|---|---|\n"
+    """The planted-vs-recovered table in Markdown: per row PASS, FAIL (why) or "not informed by the
+    data" (posterior σ not below INFORMED_RATIO × the prior's: the row reports the prior)."""
+    md = "\n## Planted vs recovered\n\n| parameter | planted | recovered | error | 3σ | tolerance |"
+    md += " posterior/prior σ | verdict |\n|---|---|---|---|---|---|---|---|\n"
     for r in rows:
         tol = "—" if r["tolerance"] is None else f"{r['tolerance']:.4g}"
         why = [] if r["inside_3sigma"] else ["outside 3σ"]
         if r["within_tolerance"] is False:
             why.append("outside tolerance")
-        verdict = "PASS" if r["pass"] else "**FAIL** (" + ", ".join(why) + ")"
+        if why:
+            verdict = "**FAIL** (" + ", ".join(why) + ")"
+        elif not r["informed"]:
+            verdict = f"not informed by the data (posterior σ ≥ {pipeline.INFORMED_RATIO:g} × prior)"
+        else:
+            verdict = "PASS"
         md += (
             f"| {r['parameter']} [{r['unit']}] | {r['planted']:.5g} | {r['recovered']:.5g} | {r['error']:+.3g} |"
-            f" {r['three_sigma']:.3g} | {tol} | {verdict} |\n"
+            f" {r['three_sigma']:.3g} | {tol} | {r['sigma_ratio']:.2f} | {verdict} |\n"
         )
     return md

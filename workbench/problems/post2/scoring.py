@@ -124,6 +124,10 @@ def score(result, truth: dict) -> dict:
         rec["final_error_smoothed"] = (vs[-1] - tv).tolist()
         rec["final_error_over_3sigma_smoothed"] = ((vs[-1] - tv) / (3.0 * ss[-1])).tolist()
         rec["inside_3sigma_at_end"] = bool(np.all(np.abs(vf[-1] - tv) <= 3.0 * sf[-1]))
+        st = result.summary["states"][name]
+        if "informed_by_data" in st:  # posterior σ / prior σ (pipeline.INFORMED_RATIO)
+            rec["posterior_over_prior_sigma"] = st["posterior_over_prior_sigma"]
+            rec["informed_by_data"] = st["informed_by_data"]
         params[name] = rec
     out["parameters"] = params
     out["headline"] = headline(result, truth)
