@@ -175,3 +175,15 @@ def test_model_end_beyond_the_data_is_a_fact_not_a_warning(main_only, tmp_path):
     data = pipeline.read_observations(settings, cut)
     assert data.notes == ()
     assert len(data.facts) == 1 and "runs 140 s past the data" in data.facts[0], data.facts
+
+
+def test_the_huygens_ekf_starts_from_the_delivered_state_and_full_covariance():
+    cfg = Post2Settings.from_scenario(load_scenario(assets_dir() / "scenarios" / "post2_huygens.toml"))
+    est = pipeline.Estimator(huygens.start_from_delivered(cfg))
+    sm = est.smap
+    idx = np.r_[np.arange(sm.blocks["position"].se.start, sm.blocks["position"].se.stop),
+                np.arange(sm.blocks["velocity"].se.start, sm.blocks["velocity"].se.stop)]  # fmt: skip
+    np.testing.assert_allclose(est.P0[np.ix_(idx, idx)], huygens.delivered_covariance(cfg), rtol=1e-12)
+    np.testing.assert_allclose(sm.raw(est.x0, "position"), cfg.state("position").value)
+    others = np.setdiff1d(np.arange(sm.n_e), idx)
+    assert not np.any(est.P0[np.ix_(idx, others)])  # no correlation with the parameters
