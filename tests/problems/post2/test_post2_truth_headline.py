@@ -1,6 +1,6 @@
 """post2: the truth headline of a synthetic run (end position, estimated parameters) judged against the
 run's own 3σ, a parameter the data do not inform never PASS, an event time read from the data, and the
-model's end beyond the data as a fact (issue 26 / issue 29 items 1, 3, 4)."""
+model's end beyond the data one warning (not one per phased file) (issue 26 / issue 29 items 1, 3, 4, 5)."""
 
 from __future__ import annotations
 
@@ -162,7 +162,7 @@ def test_event_time_read_from_the_data_and_a_located_error_without_a_shock(tmp_p
         Post2Settings.from_scenario(sc)
 
 
-def test_model_end_beyond_the_data_is_a_fact_not_a_warning(main_only, tmp_path):
+def test_model_end_beyond_all_the_data_is_one_warning_a_channel_ending_early_none(main_only, tmp_path):
     settings, syn, _, _ = main_only
     data = pipeline.read_observations(settings, syn.telemetry)
     assert data.facts == () and data.notes == ()
@@ -173,8 +173,10 @@ def test_model_end_beyond_the_data_is_a_fact_not_a_warning(main_only, tmp_path):
         cut[name] = tmp_path / path.name
         cut[name].write_text("\n".join(keep) + "\n", encoding="utf-8")
     data = pipeline.read_observations(settings, cut)
-    assert data.notes == ()
-    assert len(data.facts) == 1 and "runs 140 s past the data" in data.facts[0], data.facts
+    assert data.facts == ()
+    assert len(data.notes) == 1 and "runs 140 s past the data" in data.notes[0], data.notes
+    data = pipeline.read_observations(settings, {**syn.telemetry, "accel": cut["accel"]})  # one channel only
+    assert data.notes == () and data.facts == ()
 
 
 def test_the_huygens_ekf_starts_from_the_delivered_state_and_full_covariance():

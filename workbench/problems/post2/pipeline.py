@@ -258,7 +258,7 @@ def read_observations(cfg: Post2Settings, telemetry) -> ObservationData:
         notes += [*tel.notes, *(f"{path}: gap {g.start_s:g}–{g.end_s:g} s (row {g.row})" for g in tel.gaps)]
         if spec.quantity == "gravity_magnitude" and z.size:
             _check_gravity_units(path, tel, d.components[0], cfg)
-    return ObservationData(out, tuple(notes), _end_fact(cfg, out, telemetry))
+    return ObservationData(out, (*notes, *_end_note(cfg, out, telemetry)))
 
 
 def detect_event_times(cfg: Post2Settings, telemetry) -> tuple[Post2Settings, tuple[str, ...]]:
@@ -311,11 +311,11 @@ def detect_event_times(cfg: Post2Settings, telemetry) -> tuple[Post2Settings, tu
     return replace(cfg, events=tuple(events)), tuple(facts)
 
 
-def _end_fact(cfg: Post2Settings, channels: dict[str, Channel], telemetry) -> tuple[str, ...]:
-    """A fact when the model runs past ALL the data: the last observation of every channel more than
-    three of its own sample steps [s] before ``[model] t_end_s`` (beyond it the reconstruction is a
-    prediction).  One channel ending early is the design of a phased problem file (each phase its
-    own file) and says nothing."""
+def _end_note(cfg: Post2Settings, channels: dict[str, Channel], telemetry) -> tuple[str, ...]:
+    """A reader's note (a WARNING) when the model runs past ALL the data: the last observation of
+    every channel more than three of its own sample steps [s] before ``[model] t_end_s`` (a file cut
+    short, or a span longer than the data: the end state is then a prediction).  One channel ending
+    early is the design of a phased problem file (each phase its own file) and says nothing."""
     last = [(float(ch.t[-1]), float(np.median(np.diff(ch.t))) if ch.t.size > 1 else 0.0, n)
             for n, ch in channels.items() if ch.t.size]  # fmt: skip
     if not last:
