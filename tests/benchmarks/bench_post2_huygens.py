@@ -3,7 +3,14 @@
 Run on demand from the repository root (not collected by pytest)::
 
     .venv/bin/python tests/benchmarks/bench_post2_huygens.py [--seeds 50] [--mc-members 10000]
-        [--loop-members 200] [--skip-nominal] [--json docs/results/bench_post2_huygens.json]
+        [--loop-members 200] [--skip-nominal] [--stream validation|tuning] [--entropy N]
+        [--json docs/results/bench_post2_huygens.json]
+
+Seeds: member i of a study draws its sensor noise, its initial state and (``--draw-parameters``) its
+parameters from ``np.random.SeedSequence(entropy, spawn_key=(k, i))`` with k = 1 for the tuning
+stream and k = 2 for the validation stream (disjoint by construction); tuning may use any member of
+the tuning stream, a number that claims consistency comes from the validation stream.  Both are
+recorded in the JSON.
 
 Measured:
 
@@ -13,9 +20,11 @@ Measured:
 * **nees** — over ``--seeds`` truths, each with its own sensor noise AND its own initial state drawn
   from the Table 4-2 covariance (the planted parameter deviations kept): the NEES of the estimated
   parameter vector (final smoothed, the parameters' full covariance block) against the χ² band of
-  its mean (95 %), per-parameter error/σ statistics and the fraction inside 3σ; the main chute's
-  deploy time the reconstruction uses is read from each run's accelerometer file (the first jump of
-  |a| after the entry pulse, :func:`deploy_time_from_telemetry`), as a user would read it.  The JSON
+  its mean (95 %), per-parameter error/σ statistics and the fraction inside 3σ; the NEES of the end
+  position (3) and end velocity (3) and the position NEES averaged over the grid, each with its
+  band; the main chute's deploy time is read by the reconstruction from each run's accelerometer
+  files (``[events.main_chute] detect_in``; :func:`deploy_time_from_telemetry`, the same reading,
+  is recorded beside it).  The JSON
   is rewritten after every run, so a cut-short study still reports the runs it completed.  With
   ``--draw-parameters NAME,...`` (or ``all``) those parameters of each truth are ALSO drawn from
   the estimator's prior (:func:`draw_parameters`): the NEES is χ²(d) only for truths distributed
@@ -53,6 +62,7 @@ from workbench.problems.post2.config import Post2Settings, unit_factor  # noqa: 
 from workbench.problems.post2.model import STATES, scurve, scurve_inverse, scurve_slope  # noqa: E402
 from workbench.problems.post2.pipeline import read_observations  # noqa: E402
 from workbench.problems.post2.problem import Post2Problem  # noqa: E402
+from workbench.problems.post2.scoring import trajectory_nees, truth_on_grid  # noqa: E402
 from workbench.problems.runner import run_scenario  # noqa: E402
 
 TOML = assets_dir() / "scenarios" / "post2_huygens.toml"
@@ -81,10 +91,10 @@ def draw_parameters(cfg, seed: int, names=PARAMS) -> dict:
     """One draw of the parameters ``names`` (of PARAMS) from the estimator's prior:
     ``{"truth.states.<name>": value}`` in the file's unit (deg for tilt); N(value, σ²) in the
     estimated coordinate, through the S-curve for a bounded state (the distribution the filter's
-    P0 describes); each parameter from its own stream (the same draw whatever else is drawn)."""
+    P0 describes); each parameter from its own stream ``[seed, i]`` (the same draw whatever else is drawn)."""
     out = {}
     for i, name in enumerate(PARAMS):
-        rng = np.random.default_rng([20_000 + seed, i])
+        rng = np.random.default_rng([seed, i])
         if name not in names:
             continue
         s = cfg.state(name)
@@ -97,6 +107,17 @@ def draw_parameters(cfg, seed: int, names=PARAMS) -> dict:
         v = v / unit_factor(STATES[name].unit)
         out[f"truth.states.{name}"] = v.tolist() if v.size > 1 else float(v[0])  # scalars as numbers
     return out
+
+
+STREAMS = {"tuning": 1, "validation": 2}
+
+
+def member_seeds(entropy: int, stream: str, i: int) -> dict:
+    """The integer seeds of member ``i`` of ``stream`` (``STREAMS``): ``noise`` (sensor noise and the
+    run's options), ``state`` (the truth's initial state), ``params`` (its drawn parameters), from
+    ``np.random.SeedSequence(entropy, spawn_key=(STREAMS[stream], i))``."""
+    a, b, c = np.random.SeedSequence(entropy, spawn_key=(STREAMS[stream], i)).generate_state(3)
+    return {"noise": int(a), "state": int(b), "params": int(c)}
 
 
 def _rows(summary: dict) -> list[dict]:
@@ -123,25 +144,26 @@ def bench_nominal(out: Path) -> dict:
     }
 
 
-def _one_seed(seed: int, out: Path, draw: tuple[str, ...] = ()) -> dict:
-    """A dispersed truth (initial state from the covariance, noise ``seed``; the parameters
-    ``draw`` from the estimator's prior, :func:`draw_parameters`) and its reconstruction."""
+def _one_seed(seeds: dict, out: Path, draw: tuple[str, ...] = ()) -> dict:
+    """A dispersed truth (initial state from the covariance, seed ``seeds["state"]``; sensor noise
+    ``seeds["noise"]``; the parameters ``draw`` from the estimator's prior, seed ``seeds["params"]``,
+    :func:`draw_parameters`) and its reconstruction."""
     prob = Post2Problem()
     sc0 = load_scenario(TOML)
     cfg = Post2Settings.from_scenario(sc0)
     mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
-    x_true = huygens.dispersed_members(mean, huygens.delivered_covariance(cfg), 2, seed=10_000 + seed)[1]
+    x_true = huygens.dispersed_members(mean, huygens.delivered_covariance(cfg), 2, seed=seeds["state"])[1]
     sc = sc0.with_overrides(
         {
             "truth.states.position": x_true[:3].tolist(),
             "truth.states.velocity": x_true[3:].tolist(),
-            **draw_parameters(cfg, seed, draw),
+            **draw_parameters(cfg, seeds["params"], draw),
         }
     )
+    seed = seeds["noise"]
     tel_dir = out / f"seed{seed}"
     syn = prob.synthesize(prob.settings(sc), tel_dir, seed)
-    t_dep = deploy_time_from_telemetry(tel_dir)
-    sc = sc.with_overrides({"events.main_chute.value": float(t_dep)})
+    t_dep = deploy_time_from_telemetry(tel_dir)  # the reconstruction reads it itself ([events] detect_in)
     truth = prob.load_truth(syn.truth)
     opts = RunOptions(seed=seed)
     res = None
@@ -162,10 +184,26 @@ def _one_seed(seed: int, out: Path, draw: tuple[str, ...] = ()) -> dict:
     P = res.P[-1][np.ix_(idx, idx)]
     err = np.asarray(err)
     nees = float(err @ np.linalg.solve(P, err))
+    traj = {}
+    tg = truth_on_grid(truth, res.t)
+    for name in ("position", "velocity"):
+        ii = np.arange(sm.blocks[name].se.start, sm.blocks[name].se.stop)
+        e = sm.raw(res.x[-1], name) - tg[name][-1]
+        Pe = res.P[-1][np.ix_(ii, ii)]
+        traj[name] = {
+            "end_nees": float(e @ np.linalg.solve(Pe, e)),
+            "end_error": e.tolist(),
+            "end_sigma": np.sqrt(np.diag(Pe)).tolist(),
+            "grid_mean_nees_smoothed": float(np.mean(trajectory_nees(res, truth, (name,))["smoothed"])),
+        }
     rows = huygens.planted_table(res, truth)
     return {
-        "seed": seed,
+        "seeds": seeds,
+        "start_error_m": float(np.linalg.norm(sm.raw(res.x[0], "position") - tg["position"][0])),
+        "mc_initial_state": res.summary.get("mc_initial_state"),
+        "trajectory": traj,
         "deploy_time_s": t_dep,
+        "deploy_time_reconstruction_s": next(e["t_s"] for e in res.summary["events"] if e["event"] == "main_chute"),
         "truth_event_time_s": float(truth["event_times"][0]),
         "nees": nees,
         "z": (err / np.sqrt(np.diag(P))).tolist(),
@@ -173,29 +211,67 @@ def _one_seed(seed: int, out: Path, draw: tuple[str, ...] = ()) -> dict:
     }
 
 
-def bench_nees(out: Path, seeds: int, json_path: Path, results: dict, argv, draw: tuple[str, ...] = ()) -> dict:
-    """NEES of the parameter vector over ``seeds`` dispersed truths (JSON rewritten after each)."""
+def _band(n: int, d: int) -> list[float]:
+    """Two-sided 95 % band of the mean of n χ²(d) values."""
+    return (chi2.ppf([0.025, 0.975], n * d) / n).tolist()
+
+
+def _verdict(mean: float, band: list[float]) -> str:
+    lo, hi = band
+    return "consistent" if lo <= mean <= hi else ("conservative" if mean < lo else "overconfident")
+
+
+def bench_nees(
+    out: Path, seeds: int, json_path: Path, results: dict, argv, draw: tuple[str, ...] = (),
+    stream: str = "validation", entropy: int = 0, first: int = 0,
+) -> dict:  # fmt: skip
+    """NEES of the parameter vector, the end position and the end velocity over ``seeds`` dispersed
+    truths (members ``first`` … of ``stream``; JSON rewritten after each)."""
     runs = []
     d = len(PARAMS)
     t_all = time.perf_counter()
-    for s in range(1, seeds + 1):
+    for i in range(first, first + seeds):
         t0 = time.perf_counter()
-        r = _one_seed(s, out, draw)
+        r = _one_seed(member_seeds(entropy, stream, i), out, draw)
+        r["member"] = i
         r["wall_s"] = time.perf_counter() - t0
         runs.append(r)
         n = len(runs)
         z = np.array([x["z"] for x in runs])
-        lo, hi = (chi2.ppf([0.025, 0.975], n * d) / n).tolist()
+        band = _band(n, d)
         mean = float(np.mean([x["nees"] for x in runs]))
+        traj = {}
+        for name in ("position", "velocity"):
+            m_end = float(np.mean([x["trajectory"][name]["end_nees"] for x in runs]))
+            m_grid = float(np.mean([x["trajectory"][name]["grid_mean_nees_smoothed"] for x in runs]))
+            tr = [x["trajectory"][name] for x in runs]
+            ze = np.array([np.divide(q["end_error"], q["end_sigma"]) for q in tr])
+            traj[name] = {
+                "end_mean_nees": m_end,
+                "end_band_95": _band(n, 3),
+                "end_verdict": _verdict(m_end, _band(n, 3)),
+                "end_per_axis_mean_z2": np.mean(ze**2, axis=0).tolist(),
+                "end_per_axis_inside_3sigma": np.mean(np.abs(ze) <= 3.0, axis=0).tolist(),
+                "grid_mean_nees_smoothed": m_grid,
+            }
         results["nees"] = {
+            "seed_stream": {
+                "stream": stream,
+                "spawn_key": [STREAMS[stream], "member"],
+                "entropy": entropy,
+                "members": [x["member"] for x in runs],
+                "rule": "SeedSequence(entropy, spawn_key=(1, i)) tuning, (2, i) validation",
+            },
             "runs_completed": n,
             "runs_requested": seeds,
             "dimension": d,
             "parameters": list(PARAMS),
             "parameters_drawn_from_prior": list(draw),
             "mean_nees": mean,
-            "band_95": [lo, hi],
-            "verdict": "consistent" if lo <= mean <= hi else ("conservative" if mean < lo else "overconfident"),
+            "band_95": band,
+            "verdict": _verdict(mean, band),
+            "trajectory": traj,
+            "start_error_m_mean": float(np.mean([x["start_error_m"] for x in runs])),
             "per_parameter_mean_z": dict(zip(PARAMS, np.mean(z, axis=0).tolist(), strict=True)),  # bias
             "per_parameter_mean_z2": dict(zip(PARAMS, np.mean(z**2, axis=0).tolist(), strict=True)),
             "per_parameter_inside_3sigma": dict(zip(PARAMS, np.mean(np.abs(z) <= 3.0, axis=0).tolist(), strict=True)),
@@ -204,8 +280,13 @@ def bench_nees(out: Path, seeds: int, json_path: Path, results: dict, argv, draw
             "runs": runs,
         }
         write_benchmark_json(json_path, __file__, results, argv)
+        tp, tv = traj["position"], traj["velocity"]
         print(
-            f"seed {s}: NEES {r['nees']:.2f} (mean {mean:.2f}, band {lo:.2f}..{hi:.2f}) {r['wall_s']:.0f} s", flush=True
+            f"{stream} member {i}: NEES params {r['nees']:.2f} (mean {mean:.2f}, band {band[0]:.2f}..{band[1]:.2f});"
+            f" end position {r['trajectory']['position']['end_nees']:.2f} (mean {tp['end_mean_nees']:.2f}),"
+            f" velocity {r['trajectory']['velocity']['end_nees']:.2f} (mean {tv['end_mean_nees']:.2f}),"
+            f" band(3) {tp['end_band_95'][0]:.2f}..{tp['end_band_95'][1]:.2f}; {r['wall_s']:.0f} s",
+            flush=True,
         )
     return results["nees"]
 
@@ -264,6 +345,9 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-nominal", action="store_true")
     ap.add_argument("--skip-mc", action="store_true")
     ap.add_argument("--draw-parameters", default="", help="NAME,... or 'all': NEES truths' parameters from the prior")
+    ap.add_argument("--stream", choices=tuple(STREAMS), default="validation", help="seed stream of the NEES truths")
+    ap.add_argument("--entropy", type=int, default=20261204, help="SeedSequence entropy of the NEES truths")
+    ap.add_argument("--first-member", type=int, default=0)
     ap.add_argument("--json", type=Path, default=ROOT / "docs" / "results" / "bench_post2_huygens.json")
     args = ap.parse_args(argv)
     argv = sys.argv[1:] if argv is None else argv
@@ -283,7 +367,7 @@ def main(argv=None) -> int:
             draw = PARAMS if args.draw_parameters == "all" else tuple(filter(None, args.draw_parameters.split(",")))
             if set(draw) - set(PARAMS):
                 ap.error(f"--draw-parameters: not among {PARAMS}: {sorted(set(draw) - set(PARAMS))}")
-            bench_nees(out, args.seeds, args.json, results, argv, draw)
+            bench_nees(out, args.seeds, args.json, results, argv, draw, args.stream, args.entropy, args.first_member)
     write_benchmark_json(args.json, __file__, results, argv)
     return 0
 

@@ -29,8 +29,18 @@ def test_huygens_nominal_recovers_every_planted_parameter(tmp_path):
             assert r["within_tolerance"], r
     assert rows["parachute_drag_multiplier"]["tolerance"] == pytest.approx(0.02)
     assert rows["tilt"]["tolerance"] == pytest.approx(1.0) and rows["tilt"]["planted"] == pytest.approx(10.0)
+    # the CA multipliers' posterior σ is (nearly) their prior's: reported "not informed by the data", never PASS
+    assert not rows["ca_multiplier_fm"]["informed"] and not rows["ca_multiplier_fm"]["pass"]
     mc = s["mc_initial_state"]
     assert mc["members"] == 2000 and mc["best_metric"] < mc["nominal_metric"]
+    assert not mc["used_as_start"]  # the EKF starts from the delivered state and covariance
+    # the truth headline: the end position (was 25 km off at z -17 / -21) inside its 3σ on every axis
+    end = {h["name"]: h for h in s["truth"]["headline"]}["end_position"]
+    assert max(abs(e / sd) for e, sd in zip(end["error"], end["sigma"], strict=True)) < 3.0, end
+    checks = {c["name"]: c for c in s["health"]["checks"]}
+    assert checks["truth.end_position"]["status"] == "OK"
+    assert not any(c["name"] == "observations" and c["status"] != "OK" for c in s["health"]["checks"])
+    assert any("main_chute at 268.600 s, read from accel_entry.csv" in n for n in s["health"]["notes"])
     rec = read_recording(tmp_path / "post2_huygens.rrd")
     assert "Planted vs recovered" in rec.text_document("/report")
     assert rec.row_count("/plots/mc_initial_state/metric", timeline="sample") > 1900

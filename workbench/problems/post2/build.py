@@ -8,6 +8,8 @@ perturbation and coefficient factors (``truth.py``).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from workbench.core.atmosphere import (
@@ -105,7 +107,13 @@ def vehicle(cfg: Post2Settings, ca_factor=1.0, cn_factor=1.0, cm_factor=1.0) -> 
 
 
 def events(cfg: Post2Settings, truth: bool = False) -> tuple[Event, ...]:
-    """The :class:`Event` list of ``[events.*]`` in file order (``truth``: with the truth's own triggers)."""
+    """The :class:`Event` list of ``[events.*]`` in file order (``truth``: with the truth's own triggers;
+    an event read from the data (``detect_in``) needs ``truth_when`` for a synthetic truth)."""
+    for e in cfg.events:
+        if truth and not e.truth_when and not math.isfinite(e.value):
+            raise ScenarioError(
+                cfg.run.path, f"events.{e.name}.truth_when", "read from the data: the truth needs its own trigger"
+            )
     return tuple(
         Event(
             e.name,

@@ -86,7 +86,15 @@ OBSERVATION_KEYS: dict[str, tuple[str, Any, str]] = {
 #: keys of an ``[events.<name>]`` table
 EVENT_KEYS: dict[str, tuple[str, Any, str]] = {
     "when": (_S, REQUIRED, "`time`, `mach_below`, `altitude_below` or `dynamic_pressure_above`"),
-    "value": (_F, REQUIRED, "time [s], Mach [-], altitude [m] or dynamic pressure [Pa]"),
+    "value": (_F, None, "time [s], Mach [-], altitude [m] or dynamic pressure [Pa] (required unless `detect_in`)"),
+    "detect_in": (
+        _L,
+        None,
+        '`when = "time"` read from the data instead of `value`: the observations (sensed acceleration) whose '
+        "raw files give it, the first rise of |a| by more than `detect_jump_m_s2` between consecutive samples "
+        "after the peak of |a| (a parachute's opening shock after the entry pulse), midpoint of the two samples",
+    ),
+    "detect_jump_m_s2": (_F, 1.0, "the rise of |a| between consecutive samples that `detect_in` looks for"),
     "mass_kg": (_F, None, "new mass"),
     "ref_area_m2": (_F, None, "new aerodynamic reference area"),
     "parachute": (_B, None, "true: the parachute opens; false: it is released"),
@@ -400,8 +408,10 @@ class ObservationSpec:
 
 @dataclass(frozen=True)
 class EventSpec:
-    """One event: ``name``, ``when`` condition, ``value`` (SI), new ``mass``/``ref_area``/``parachute``,
-    ``chute`` (``drogue``/``main``/``none``: which drag-area state acts from the event on)."""
+    """One event: ``name``, ``when`` condition, ``value`` (SI; nan until read from the data when
+    ``detect_in`` names the observations that give it, :func:`~workbench.problems.post2.pipeline.detect_event_times`
+    with the rise ``detect_jump`` [m/s²]), new ``mass``/``ref_area``/``parachute``, ``chute``
+    (``drogue``/``main``/``none``: which drag-area state acts from the event on)."""
 
     name: str
     when: str
@@ -412,6 +422,8 @@ class EventSpec:
     chute: str | None = None
     truth_when: str | None = None
     truth_value: float | None = None
+    detect_in: tuple[str, ...] | None = None
+    detect_jump: float = 1.0
 
 
 def _initial_correlation(file: Path, raw: dict, states: dict[str, int]) -> tuple[tuple[str, ...], np.ndarray] | None:
@@ -755,9 +767,22 @@ def _event(file: Path, name: str, raw: dict) -> EventSpec:
         raise ScenarioError(file, f"{pre}.chute", f"{t['chute']!r}: use one of {', '.join(CHUTES)}{hint}")
     if t["truth_when"] is not None and (t["truth_when"] not in EVENT_CONDITIONS or t["truth_value"] is None):
         raise ScenarioError(file, f"{pre}.truth_when", f"use one of {', '.join(EVENT_CONDITIONS)}, with truth_value")
+    detect = t["detect_in"]
+    if detect is not None:
+        if not detect or not all(isinstance(n, str) for n in detect):
+            raise ScenarioError(file, f"{pre}.detect_in", "expected a non-empty list of observation names")
+        if t["when"] != "time":
+            raise ScenarioError(file, f"{pre}.detect_in", 'only for when = "time"')
+        if t["value"] is not None:
+            raise ScenarioError(file, f"{pre}.value", "give either value or detect_in (the time read from the data)")
+        if not t["detect_jump_m_s2"] > 0.0:
+            raise ScenarioError(file, f"{pre}.detect_jump_m_s2", "must be > 0")
+    elif t["value"] is None:
+        raise ScenarioError(file, f"{pre}.value", f"missing (required in [{pre}] without detect_in)")
     return EventSpec(
-        name, t["when"], float(t["value"]), t["mass_kg"], t["ref_area_m2"], t["parachute"], t["chute"],
-        t["truth_when"], t["truth_value"],
+        name, t["when"], float("nan") if detect else float(t["value"]), t["mass_kg"], t["ref_area_m2"],
+        t["parachute"], t["chute"], t["truth_when"], t["truth_value"],
+        None if detect is None else tuple(detect), float(t["detect_jump_m_s2"]),
     )  # fmt: skip
 
 

@@ -18,9 +18,15 @@ the accelerometer."  Here (``[monte_carlo]`` of the problem file):
    smallest metric within ±1 s (0.1 s then 0.01 s steps); the member's acceleration at
    ``t_k + Δ_i`` is compared with sample k;
 4. metric_i = Σ_k |z_k − a_i(t_k + Δ_i)| over the samples up to ``end_s``; the ``keep`` smallest
-   are kept; the best member, moved along its own trajectory by Δ (so that its state belongs to
-   the telemetry's t_start), is the EKF's initial state, and the spread of the kept members
-   (each moved likewise) its initial 1σ.
+   are kept; the best member is moved along its own trajectory by Δ (so that its state belongs to
+   the telemetry's t_start) and the spread of the kept members (each moved likewise) reported.
+5. The EKF starts from the delivered state and its full covariance (:func:`start_from_delivered`),
+   not from the best member: the metric is the NOMINAL model's residual, so the model's own errors
+   (CA per regime, the atmosphere) move its minimum across the weakly observed directions, and the
+   kept members' spread is the width of that minimum, not the state's uncertainty; the EKF then
+   assimilates the same accelerometer samples again (counted twice).  The selection stays as the
+   thesis' cross-check of the delivered state, with the chosen member's Mahalanobis distance from
+   it (:meth:`McSelection.summary`).
 
 With ``--scheduler`` the members run in chunks on Dask (``workbench.estimation.montecarlo``); a
 per-member loop of the same maths (:func:`member_loop_metric`) is the benchmark's comparison.
@@ -28,6 +34,7 @@ per-member loop of the same maths (:func:`member_loop_metric`) is the benchmark'
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -51,6 +58,8 @@ __all__ = [
     "select_initial_state",
     "reconstruct",
     "start_from",
+    "start_from_delivered",
+    "selection_note",
     "planted_table",
 ]
 
@@ -62,7 +71,8 @@ class McSelection:
     alignment level); ``shift_s`` (N,) time alignment Δ [s]; ``kept`` (K,) member indices, best
     first; ``x0`` (6,) the chosen initial state (best member moved by its Δ) and ``sigma0`` (6,) the
     kept members' spread; ``nominal_metric`` of the delivered state itself; ``mean`` (6,) the
-    delivered state; ``wall_s`` [s] of the member propagation; ``scheduler`` description."""
+    delivered state; ``wall_s`` [s] of the member propagation; ``scheduler`` description;
+    ``mahalanobis`` √(d' C⁻¹ d) of d = x0 − mean in the delivered covariance C."""
 
     members: np.ndarray
     metric: np.ndarray
@@ -74,6 +84,7 @@ class McSelection:
     mean: np.ndarray
     wall_s: float
     scheduler: str
+    mahalanobis: float = float("nan")
 
     def summary(self) -> dict:
         """JSON-ready numbers of the selection (km, m/s, s)."""
@@ -87,6 +98,9 @@ class McSelection:
             "best_shift_s": float(self.shift_s[self.kept[0]]),
             "chosen_minus_delivered_position_km": (d[POSITION] / 1e3).tolist(),
             "chosen_minus_delivered_velocity_m_s": d[VELOCITY].tolist(),
+            "chosen_mahalanobis_from_delivered": float(self.mahalanobis),
+            "used_as_start": False,
+            "start": "the delivered state and its full covariance",
             "wall_s": float(self.wall_s),
             "scheduler": self.scheduler,
         }
@@ -274,14 +288,18 @@ def select_initial_state(
     floor = np.empty(sigma0.size)
     floor[POSITION], floor[VELOCITY] = 10.0, 0.01  # floors: 10 m, 1 cm/s
     sigma0 = np.maximum(sigma0, floor)
-    return McSelection(X, metric, shift, kept, moved[0], sigma0, float(metric[0]), mean, wall, desc)
+    d = moved[0] - mean
+    maha = float(np.sqrt(d @ np.linalg.solve(delivered_covariance(cfg), d)))
+    return McSelection(X, metric, shift, kept, moved[0], sigma0, float(metric[0]), mean, wall, desc, maha)
 
 
 def reconstruct(cfg: Post2Settings, telemetry, options):
     """The post2 stages with, when ``[monte_carlo] members`` (or ``options.members``) > 0, the
-    :class:`McSelection` stage first and the EKF started from its state and spread."""
+    :class:`McSelection` stage first (reported, a health note); the EKF starts from the delivered
+    state with the full ``[monte_carlo] covariance`` when one is given (:func:`start_from_delivered`)."""
     mc = cfg.monte_carlo
     n = options.members if getattr(options, "members", None) is not None else int(mc.members)
+    start = start_from_delivered(cfg) if mc.covariance is not None else cfg
     if n > 0:
         if mc.observation is None or mc.observation not in {o.name for o in cfg.observations}:
             raise ScenarioError(
@@ -292,12 +310,50 @@ def reconstruct(cfg: Post2Settings, telemetry, options):
         seed = int(mc.seed) + (int(options.seed) if getattr(options, "seed", None) is not None else 0)
         sel = select_initial_state(cfg, data.channels[mc.observation], n, seed, getattr(options, "scheduler", None))
         yield sel
-        for stage in pipeline.reconstruct(start_from(cfg, sel), telemetry, options):
+        for stage in pipeline.reconstruct(start, telemetry, options):
             if isinstance(stage, pipeline.Post2Result):
                 stage.summary["mc_initial_state"] = sel.summary()
+                stage.summary["health"]["notes"].append(selection_note(sel))
             yield stage
         return
-    yield from pipeline.reconstruct(cfg, telemetry, options)
+    yield from pipeline.reconstruct(start, telemetry, options)
+
+
+def selection_note(sel: McSelection) -> str:
+    """The health note of the selection stage: what it found and why the EKF does not start from it."""
+    s = sel.summary()
+    return (
+        f"Monte Carlo initial state: best of {s['members']} members metric {s['best_metric']:.4g} (delivered "
+        f"state {s['nominal_metric']:.4g}), {sel.mahalanobis:.2f} σ (Mahalanobis) from the delivered state; not "
+        "used as the EKF's start: its metric is the nominal model's residual (the model's CA and atmosphere "
+        "errors move its minimum) and its kept members' spread is not the state's uncertainty; the EKF starts "
+        "from the delivered state and covariance and assimilates the entry accelerometer once"
+    )
+
+
+def start_from_delivered(cfg: Post2Settings) -> Post2Settings:
+    """The settings with the EKF's initial position and velocity the delivered state (the states'
+    values) and their initial covariance the full delivered one (:func:`delivered_covariance`, SI):
+    1σ its diagonal's root, its correlations added to ``[initial_correlation]`` (block-diagonal with
+    any correlations the file already gives; position and velocity must not be among those)."""
+    C = delivered_covariance(cfg)
+    sd = np.sqrt(np.diag(C))
+    corr = C / np.outer(sd, sd)
+    out = cfg.with_state("position", sigma=sd[POSITION].copy()).with_state("velocity", sigma=sd[VELOCITY].copy())
+    names, mat = ("position", "velocity"), corr
+    if cfg.initial_correlation is not None:
+        old_names, old = cfg.initial_correlation
+        if set(old_names) & set(names):
+            raise ScenarioError(
+                cfg.run.path, "initial_correlation.states",
+                "position/velocity correlations come from [monte_carlo] covariance; do not list them here",
+            )  # fmt: skip
+        n0 = old.shape[0]
+        mat = np.eye(n0 + 6)
+        mat[:n0, :n0] = old
+        mat[n0:, n0:] = corr
+        names = (*old_names, *names)
+    return dataclasses.replace(out, initial_correlation=(tuple(names), mat))
 
 
 def start_from(cfg: Post2Settings, sel: McSelection) -> Post2Settings:
@@ -311,7 +367,9 @@ def start_from(cfg: Post2Settings, sel: McSelection) -> Post2Settings:
 def planted_table(result, truth: dict) -> list[dict]:
     """Planted vs recovered, one row per estimated parameter with a planted truth value: the final
     smoothed value and 3σ, the error, the tolerance (``[truth.tolerances]``, if any), and
-    ``inside_3sigma``, ``within_tolerance``, ``pass`` (both); values in the state's unit (deg for tilt)."""
+    ``inside_3sigma``, ``within_tolerance``, ``informed`` (final posterior σ below
+    :data:`~workbench.problems.post2.pipeline.INFORMED_RATIO` × the prior's, ``sigma_ratio``), ``pass``
+    (all three: a row the data did not inform never passes); values in the state's unit (deg for tilt)."""
     rows = []
     hist = result.history["smoothed"]
     for name in result.smap.blocks:
@@ -326,6 +384,9 @@ def planted_table(result, truth: dict) -> list[dict]:
         tol = truth.get(f"tol_{name}")
         inside = abs(err) <= 3.0 * float(s[i])
         within = None if tol is None else abs(err) <= float(np.atleast_1d(tol)[0])
+        st = result.summary["states"][name]
+        ratio = float(st["posterior_over_prior_sigma"][i])
+        informed = bool(st["informed_by_data"][i])
         rows.append(
             {
                 "parameter": name + ("_x" if d.size > 1 else ""),
@@ -337,24 +398,32 @@ def planted_table(result, truth: dict) -> list[dict]:
                 "tolerance": None if tol is None else float(np.atleast_1d(tol)[0] * k),
                 "inside_3sigma": bool(inside),
                 "within_tolerance": within,
-                "pass": bool(inside and (within is None or within)),
+                "sigma_ratio": ratio,
+                "informed": informed,
+                "pass": bool(inside and (within is None or within) and informed),
             }
         )
     return rows
 
 
 def planted_markdown(rows: list[dict]) -> str:
-    """The planted-vs-recovered table in Markdown with PASS/FAIL per row."""
-    md = "\n## Planted vs recovered\n\n| parameter | planted | recovered | error | 3σ | tolerance | verdict |\n"
-    md += "|---|---|---|---|---|---|---|\n"
+    """The planted-vs-recovered table in Markdown: per row PASS, FAIL (why) or "not informed by the
+    data" (posterior σ not below INFORMED_RATIO × the prior's: the row reports the prior)."""
+    md = "\n## Planted vs recovered\n\n| parameter | planted | recovered | error | 3σ | tolerance |"
+    md += " posterior/prior σ | verdict |\n|---|---|---|---|---|---|---|---|\n"
     for r in rows:
         tol = "—" if r["tolerance"] is None else f"{r['tolerance']:.4g}"
         why = [] if r["inside_3sigma"] else ["outside 3σ"]
         if r["within_tolerance"] is False:
             why.append("outside tolerance")
-        verdict = "PASS" if r["pass"] else "**FAIL** (" + ", ".join(why) + ")"
+        if why:
+            verdict = "**FAIL** (" + ", ".join(why) + ")"
+        elif not r["informed"]:
+            verdict = f"not informed by the data (posterior σ ≥ {pipeline.INFORMED_RATIO:g} × prior)"
+        else:
+            verdict = "PASS"
         md += (
             f"| {r['parameter']} [{r['unit']}] | {r['planted']:.5g} | {r['recovered']:.5g} | {r['error']:+.3g} |"
-            f" {r['three_sigma']:.3g} | {tol} | {verdict} |\n"
+            f" {r['three_sigma']:.3g} | {tol} | {r['sigma_ratio']:.2f} | {verdict} |\n"
         )
     return md

@@ -17,7 +17,7 @@ Stages (typed results, drawn by ``recording.py``, consumed by tests and benchmar
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +47,9 @@ from workbench.problems.post2.model import (
 )
 
 __all__ = [
+    "INFORMED_RATIO",
     "Channel",
+    "detect_event_times",
     "ObservationData",
     "ForwardStage",
     "Post2Result",
@@ -71,12 +73,19 @@ class Channel:
     R: np.ndarray
 
 
+#: a parameter whose final posterior 1σ is not below this fraction of its prior 1σ (in the estimated
+#: coordinate) is "not informed by the data": what it reports is its prior, whatever its error
+INFORMED_RATIO = 0.7
+
+
 @dataclass(frozen=True)
 class ObservationData:
-    """Stage 1: the observation channels by name."""
+    """Stage 1: the observation channels by name; ``notes``: the readers' warnings (anomalies of the
+    files); ``facts``: what a reviewer reads once and is no anomaly (the model running past the data)."""
 
     channels: dict[str, Channel]
     notes: tuple[str, ...] = ()
+    facts: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -247,12 +256,77 @@ def read_observations(cfg: Post2Settings, telemetry) -> ObservationData:
             t, z, z_raw, R = (a[:: spec.decimate] for a in (t, z, z_raw, R))
         out[spec.name] = Channel(spec, t, z, z_raw, R)
         notes += [*tel.notes, *(f"{path}: gap {g.start_s:g}–{g.end_s:g} s (row {g.row})" for g in tel.gaps)]
-        step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-        if t.size > 1 and cfg.t_end - t[-1] > 3.0 * step:
-            notes.append(f"{path}: the observations end at {t[-1]:g} s, {cfg.t_end - t[-1]:g} s before [model] t_end_s")
         if spec.quantity == "gravity_magnitude" and z.size:
             _check_gravity_units(path, tel, d.components[0], cfg)
-    return ObservationData(out, tuple(notes))
+    return ObservationData(out, (*notes, *_end_note(cfg, out, telemetry)))
+
+
+def detect_event_times(cfg: Post2Settings, telemetry) -> tuple[Post2Settings, tuple[str, ...]]:
+    """The settings with the time [s] of every event declared ``detect_in`` read from those
+    observations' raw files (sensed acceleration; |a| the norm of the file's components, the files'
+    samples merged in time): the first rise of |a| by more than ``detect_jump`` [m/s²] between
+    consecutive samples after the peak of |a|, at the two samples' midpoint — a parachute's opening
+    shock after the entry pulse, read as a user would read it.  Returns (settings, one fact per
+    event).  No such rise, or a name that is not an acceleration observation: a located error."""
+    events, facts = [], []
+    specs = {o.name: o for o in cfg.observations}
+    for e in cfg.events:
+        if not e.detect_in:
+            events.append(e)
+            continue
+        key = f"events.{e.name}.detect_in"
+        ts, mags = [], []
+        for name in e.detect_in:
+            spec = specs.get(name)
+            if spec is None or not spec.quantity.startswith("acceleration_"):
+                raise ScenarioError(cfg.run.path, key, f"{name!r} is not a declared sensed-acceleration observation")
+            d = OBSERVATIONS[spec.quantity]
+            kinds = {c: _kind(d.file_unit or d.unit) for c in d.components}
+            tel = read_telemetry(Path(telemetry[name]), required=kinds)
+            ts.append(np.asarray(tel.time, float))
+            mags.append(np.linalg.norm(np.atleast_2d(tel.stack(d.components)).reshape(len(tel.time), -1), axis=1))
+        t, a = np.concatenate(ts), np.concatenate(mags)
+        order = np.argsort(t, kind="stable")
+        t, a = t[order], a[order]
+        files = ", ".join(Path(telemetry[n]).name for n in e.detect_in)
+        k0 = int(np.argmax(a)) if a.size else 0
+        jump = np.flatnonzero(np.diff(a[k0:]) > e.detect_jump) if a.size else np.array([], int)
+        if not jump.size:
+            raise ScenarioError(
+                cfg.run.path, key,
+                f"{files}: no rise of |a| by more than {e.detect_jump:g} m/s² between samples after the peak "
+                f"of |a| (at {t[k0] if a.size else float('nan'):g} s): the event's time cannot be read from the data",
+            )  # fmt: skip
+        k = k0 + int(jump[0])
+        tk = 0.5 * (t[k] + t[k + 1])
+        if not cfg.t_start < tk < cfg.t_end:
+            raise ScenarioError(cfg.run.path, key, f"{files}: the time read, {tk:g} s, is outside [model]'s span")
+        events.append(replace(e, value=float(tk)))
+        facts.append(
+            f"event {e.name} at {tk:.3f} s, read from {files}: |a| rises {a[k + 1] - a[k]:.3g} m/s² between "
+            f"{t[k]:g} and {t[k + 1]:g} s"
+        )
+    if not facts:
+        return cfg, ()
+    return replace(cfg, events=tuple(events)), tuple(facts)
+
+
+def _end_note(cfg: Post2Settings, channels: dict[str, Channel], telemetry) -> tuple[str, ...]:
+    """A reader's note (a WARNING) when the model runs past ALL the data: the last observation of
+    every channel more than three of its own sample steps [s] before ``[model] t_end_s`` (a file cut
+    short, or a span longer than the data: the end state is then a prediction).  One channel ending
+    early is the design of a phased problem file (each phase its own file) and says nothing."""
+    last = [(float(ch.t[-1]), float(np.median(np.diff(ch.t))) if ch.t.size > 1 else 0.0, n)
+            for n, ch in channels.items() if ch.t.size]  # fmt: skip
+    if not last:
+        return ()
+    t_last, step, name = max(last)
+    if cfg.t_end - t_last <= 3.0 * step:
+        return ()
+    return (
+        f"the model runs {cfg.t_end - t_last:g} s past the data: the last observation ({Path(telemetry[name]).name}) "
+        f"is at {t_last:g} s, [model] t_end_s = {cfg.t_end:g} s; the states after it are predicted",
+    )
 
 
 def _complete_windows(file: Path, spec: ObservationSpec, path: Path, n: int) -> slice:
@@ -476,7 +550,8 @@ def post2_health(fp, P: np.ndarray, x: np.ndarray, notes=(), extra=(), facts=())
     """``summary["health"]`` (:mod:`workbench.estimation.health`): mean NIS of every observation
     against χ² bounds, the share of rejected samples (WARNING above 10 %), the final covariance
     history ``P`` (n, k, k) symmetric positive definite and the state history ``x`` (n, m) finite;
-    ``extra`` further checks and ``facts`` notes (an imported rocket flight's: ``rocket_checks``)."""
+    the readers' ``notes`` a WARNING, ``extra`` further checks (an imported rocket flight's:
+    ``rocket_checks``) and ``facts`` the report's notes (no anomaly)."""
     checks = []
     for name, ih in fp.innovations.items():
         if ih.t.size:
@@ -489,13 +564,15 @@ def post2_health(fp, P: np.ndarray, x: np.ndarray, notes=(), extra=(), facts=())
     bad = int(np.sum(~np.isfinite(x)))
     checks.append(interval_check("state.finite", bad, 0, 0, "non-finite state components"))
     checks.append(notes_check("observations", list(notes)))
-    return health_report([*checks, *extra], facts)
+    return health_report([*checks, *extra], notes=list(facts))
 
 
 def reconstruct(cfg: Post2Settings, telemetry, options=None):
     """Generator of the stages (see the module docstring) for a post2 run's settings and its telemetry
     files {name: csv, name + "_weights": csv}."""
+    cfg, detected = detect_event_times(cfg, telemetry)
     data = read_observations(cfg, telemetry)
+    data = replace(data, facts=(*detected, *data.facts))
     yield data
     est = Estimator(cfg)
     t = _grid(cfg, data.channels)
@@ -534,7 +611,17 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
             "final": (hist[name]["value"][-1] * k).tolist(),
             "final_sigma": (hist[name]["sigma"][-1] * k).tolist(),
         }
+        if not STATES[name].dynamic:  # in the estimated coordinate (a bounded state: before its S-curve)
+            i = np.arange(est.smap.blocks[name].se.start, est.smap.blocks[name].se.stop)
+            ratio = np.sqrt(np.diag(P[-1])[i] / np.diag(est.P0)[i])
+            states[name]["posterior_over_prior_sigma"] = ratio.tolist()
+            states[name]["informed_by_data"] = (ratio < INFORMED_RATIO).tolist()
     summary["states"] = states
+    uninformed = [
+        f"{n} (posterior/prior σ {max(s['posterior_over_prior_sigma']):.2f})"
+        for n, s in states.items()
+        if cfg.state(n).process == "constant" and not any(s.get("informed_by_data", [True]))
+    ]
     obs = {}
     for name, ih in fp.innovations.items():
         ok = ih.accepted
@@ -553,6 +640,12 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
         obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
     summary["observations"] = obs
     summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
-    extra, facts = rocket_checks.run_checks(cfg, hist)  # none unless an imported rocket flight
+    extra, rocket_facts = rocket_checks.run_checks(cfg, hist)  # none unless an imported rocket flight
+    facts = [*data.facts, *rocket_facts]
+    if uninformed:
+        facts.append(
+            f"not informed by the data (final posterior σ not below {INFORMED_RATIO:g} × the prior's): "
+            + ", ".join(uninformed)
+        )
     summary["health"] = post2_health(fp, P, x, data.notes, extra, facts)
     yield Post2Result(t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), histories, summary)

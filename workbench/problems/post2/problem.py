@@ -220,14 +220,24 @@ class Post2Problem:
     def headline(self, summary: dict) -> str:
         """The main number: position error at the end, or the first parameter's final error."""
         tr = summary.get("truth") or {}
+        zs = [(float(np.max(np.abs(np.divide(h["error"], h["sigma"])))), h["name"]) for h in tr.get("headline", [])]
+        worst = f"; truth headline max |z| {max(zs)[0]:.2f} ({max(zs)[1]})" if zs else ""
         if "position_error_m" in tr and "attitude" in summary["states"]:
             e = tr["position_error_m"]
             return (
                 f"position error {e['start']:.0f} m -> {e['after_15s_forward']:.0f} m after 15 s"
-                f" -> {e['end_forward']:.1f} m at the end"
+                f" -> {e['end_forward']:.1f} m at the end{worst}"
+            )
+        if "planted_vs_recovered" in tr and "position_error_m" in tr:
+            rows = tr["planted_vs_recovered"]
+            n_pass = sum(r["pass"] for r in rows)
+            n_un = sum(not r["informed"] for r in rows)
+            return (
+                f"end position error {tr['position_error_m']['end_smoothed'] / 1e3:.2f} km; planted parameters "
+                f"{n_pass}/{len(rows)} PASS, {n_un} not informed by the data{worst}"
             )
         for name, p in tr.get("parameters", {}).items():
-            return f"{name} error {p['final_error_forward']} (3σ {p['final_3sigma_forward']})"
+            return f"{name} error {p['final_error_forward']} (3σ {p['final_3sigma_forward']}){worst}"
         s = next(iter(summary["states"].items()))
         return f"{s[0]} final {s[1]['final']}"
 
@@ -284,13 +294,20 @@ def _planted_table(summary: dict) -> str:
     params = (summary.get("truth") or {}).get("parameters", {})
     if not params:
         return ""
-    md = "\n| parameter | planted | recovered | ±3σ | error / 3σ | inside 3σ |\n|---|---|---|---|---|---|\n"
+    md = "\n| parameter | planted | recovered | ±3σ | error / 3σ | inside 3σ | posterior/prior σ |\n"
+    md += "|---|---|---|---|---|---|---|\n"
     for name, p in params.items():
         st = summary["states"][name]
         for i, tv in enumerate(p["truth"]):
             z = p["final_error_over_3sigma_smoothed"][i]
+            inside = "yes" if abs(z) <= 1.0 else "**no**"
+            ratio = "—"
+            if "informed_by_data" in p:
+                ratio = f"{p['posterior_over_prior_sigma'][i]:.2f}"
+                if not p["informed_by_data"][i]:
+                    ratio += " (not informed by the data)"
             md += f"| {name}{'' if len(p['truth']) == 1 else f'[{i}]'} | {tv:.6g} | {st['final'][i]:.6g} |"
-            md += f" {3.0 * st['final_sigma'][i]:.3g} | {z:+.2f} | {'yes' if abs(z) <= 1.0 else '**no**'} |\n"
+            md += f" {3.0 * st['final_sigma'][i]:.3g} | {z:+.2f} | {inside} | {ratio} |\n"
     return md
 
 

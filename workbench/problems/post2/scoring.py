@@ -20,7 +20,7 @@ from workbench.problems.post2.model import STATES
 #: the trajectory blocks of the NEES (:func:`trajectory_nees`), in the error-state order of the state map
 TRAJECTORY = ("position", "velocity", "attitude", "body_rates")
 
-__all__ = ["truth_on_grid", "score", "TRAJECTORY", "trajectory_nees"]
+__all__ = ["truth_on_grid", "score", "headline", "TRAJECTORY", "trajectory_nees"]
 
 
 def truth_on_grid(truth: dict, t: np.ndarray) -> dict:
@@ -124,8 +124,50 @@ def score(result, truth: dict) -> dict:
         rec["final_error_smoothed"] = (vs[-1] - tv).tolist()
         rec["final_error_over_3sigma_smoothed"] = ((vs[-1] - tv) / (3.0 * ss[-1])).tolist()
         rec["inside_3sigma_at_end"] = bool(np.all(np.abs(vf[-1] - tv) <= 3.0 * sf[-1]))
+        st = result.summary["states"][name]
+        if "informed_by_data" in st:  # posterior σ / prior σ (pipeline.INFORMED_RATIO)
+            rec["posterior_over_prior_sigma"] = st["posterior_over_prior_sigma"]
+            rec["informed_by_data"] = st["informed_by_data"]
         params[name] = rec
     out["parameters"] = params
+    out["headline"] = headline(result, truth)
+    return out
+
+
+def headline(result, truth: dict) -> list[dict]:
+    """The run's headline numbers against the truth, each ``{"name", "what", "error", "sigma",
+    "unit"}`` (estimate − truth and the run's own 1σ, SI, final smoothed values): the end position
+    (3 components, planet-centred inertial, m) and every estimated parameter with a planted truth
+    (all its components; tilt in rad).  The runner judges each against ±3σ."""
+    smo = result.history["smoothed"]
+    out = []
+    if "position" in truth and "position" in smo:
+        tg = truth_on_grid(truth, result.t[-1:])
+        out.append(
+            {
+                "name": "end_position",
+                "what": "end position (smoothed, planet-centred inertial x/y/z)",
+                "error": (smo["position"]["value"][-1] - tg["position"][-1]).tolist(),
+                "sigma": smo["position"]["sigma"][-1].tolist(),
+                "unit": "m",
+            }
+        )
+    for name in result.smap.blocks:
+        key = f"param_{name}"
+        if STATES[name].dynamic or key not in truth:
+            continue
+        tv = np.atleast_1d(truth[key]).astype(float)
+        v, sd = smo[name]["value"][-1], smo[name]["sigma"][-1]
+        unit = {"deg": "rad", "deg/s": "rad/s"}.get(STATES[name].unit, STATES[name].unit)
+        out.append(
+            {
+                "name": f"param.{name}",
+                "what": f"estimated parameter {name} (smoothed, end)",
+                "error": (v - tv).tolist(),
+                "sigma": sd.tolist(),
+                "unit": unit,
+            }
+        )
     return out
 
 
