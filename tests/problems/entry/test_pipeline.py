@@ -486,3 +486,18 @@ def test_a_numerical_failure_in_a_stage_is_named_not_a_traceback(run, monkeypatc
     next(stages)
     with pytest.raises(np.linalg.LinAlgError, match=r"stage after EntryTelemetry \(ZeroDivisionError: float division"):
         next(stages)
+
+
+def test_radar_velocity_axis_swap_or_flip_is_named(full):
+    """The radar's terrain-relative velocity against the inertial-only prediction: the descent
+    axis (−Z_G, ~70 m/s) flipped or swapped with X is an ERROR naming the columns; clean is OK.
+    (Horizontal components of a few m/s are below what the inertial prediction can tell.)"""
+    from workbench.problems.entry.health import radar_velocity_axes_check
+
+    res = full[1].result
+    z, y = en._inertial_velocity_out(res.telemetry, res.imu, res.start)
+    assert radar_velocity_axes_check(z, y).status == "OK"
+    assert _checks(full[1].summary)["geometry.radar_velocity_axes"]["status"] == "OK"
+    for M in (np.diag([1.0, 1.0, -1.0]), np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])):
+        c = radar_velocity_axes_check(z @ M.T, y, "rda_out.csv")
+        assert c.status == "ERROR" and "swapped or sign-flipped" in c.message and "rda_out.csv" in c.message

@@ -568,6 +568,7 @@ def test_clean_files_pass_the_axis_and_timing_checks(synth):
         ("gnc", _scale(["time"], 1e3), "time", r"look like \[ms\], not \[s\]"),
         ("gnc_nav", _scale(["time"], 1e3), "time", r"look like \[ms\], not \[s\]"),
         ("rda_out", _scale(["time"], 1e3), "time", r"look like \[ms\], not \[s\]"),
+        ("events", _scale(["time"], 1e3), "time", r"the data end at .* look like \[ms\], not \[s\]"),
     ],
     ids=[
         "accel_swap_xy",
@@ -578,6 +579,7 @@ def test_clean_files_pass_the_axis_and_timing_checks(synth):
         "gnc_ms",
         "nav_ms",
         "rda_ms",
+        "events_ms",
     ],
 )
 def test_axis_swaps_sign_flips_and_time_units_are_located_errors(synth, tmp_path, file, edit, columns, expect):
@@ -588,12 +590,12 @@ def test_axis_swaps_sign_flips_and_time_units_are_located_errors(synth, tmp_path
     assert e.value.file == str(paths[file]) and columns in (e.value.column or "")
 
 
-def test_time_unit_without_rate_metadata_found_from_the_spans(synth, tmp_path):
+def test_time_unit_without_rate_metadata_found_from_where_the_files_end(synth, tmp_path):
     paths = _copy(synth, tmp_path)
     text = paths["gnc_nav"].read_text(encoding="utf-8")
     paths["gnc_nav"].write_text("\n".join(ln for ln in text.splitlines() if "rate_hz" not in ln) + "\n")
     _edit_csv(paths["gnc_nav"], _scale(["time"], 1e3))
-    with pytest.raises(TelemetryError, match=r"outside the GNC data.*look like \[ms\]") as e:
+    with pytest.raises(TelemetryError, match=r"the data end at .*1000× .*look like \[ms\]") as e:
         read_entry_telemetry(paths)
     assert e.value.file == str(paths["gnc_nav"])
 

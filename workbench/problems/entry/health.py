@@ -40,6 +40,8 @@ __all__ = [
     "input_health",
     "drag_axis_check",
     "radar_first_lock_check",
+    "radar_velocity_axes_check",
+    "RADAR_VELOCITY_MISMATCH",
     "gap_checks",
     "key_event_windows",
     "DRAG_AXIS_MIN_COS",
@@ -160,6 +162,49 @@ def radar_first_lock_check(innovations, file: str = "rda_out.csv") -> Check:
     return Check(name, OK, round(ratio, 6), [round(lo, 6), round(hi, 6)], what)
 
 
+#: Median disagreement, relative to the median speed, between the radar's terrain-relative velocity
+#: and its inertial-only prediction above which :func:`radar_velocity_axes_check` looks for a swap
+#: or flip.  The prediction from the smoother's start state (no radar update) drifts by tens of
+#: m/s by the radar phase (0.2-0.5 of the ~70 m/s descent speed); a flip of the descent axis is ~2.
+RADAR_VELOCITY_MISMATCH = 1.0
+
+
+def radar_velocity_axes_check(v_out_G: np.ndarray, v_pred_G: np.ndarray, file: str = "rda_out.csv") -> Check:
+    """The radar's terrain-relative velocity ``v_out_G`` (k, 3) [m/s, GNC frame] against its
+    prediction ``v_pred_G`` (k, 3) from the inertial trajectory alone (the smoother's start state
+    integrated through the IMU, no radar update) at the same valid samples.  Statistic: the median
+    |difference| over the median predicted speed.  ERROR when it exceeds
+    :data:`RADAR_VELOCITY_MISMATCH` and a swap or sign flip of the columns (a signed permutation)
+    fits better by a factor 1/0.6 or more: named in the message.  The descent axis (−Z_G, tens of
+    m/s) is what it can tell; horizontal components of a few m/s are below the prediction's drift."""
+    from workbench.problems.entry.telemetry import _signed_permutations
+
+    name = "geometry.radar_velocity_axes"
+    z, y = np.asarray(v_out_G, float), np.asarray(v_pred_G, float)
+    ok = np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(y), axis=1)
+    if ok.sum() < 5:
+        return Check(name, WARNING, None, None, "fewer than 5 valid velocity-out samples: radar axes not checked")
+    z, y = z[ok], y[ok]
+    scale = float(np.median(np.linalg.norm(y, axis=1)))
+    mis = float(np.median(np.linalg.norm(z - y, axis=1))) / scale
+    best, perm = min(
+        (float(np.median(np.linalg.norm(z @ M.T - y, axis=1))) / scale, nm) for M, nm in _signed_permutations("v_out_")
+    )
+    what = (
+        f"the radar velocity ({file}, v_out_*) against the inertial-only prediction: median difference {mis:.3g}× "
+        f"the median speed {scale:.3g} m/s"
+    )
+    if mis > RADAR_VELOCITY_MISMATCH and best < 0.6 * mis:
+        return Check(
+            name,
+            ERROR,
+            round(mis, 6),
+            RADAR_VELOCITY_MISMATCH,
+            f"{what}; read as {perm} they agree ({best:.2g}): a radar velocity axis swapped or sign-flipped",
+        )
+    return Check(name, OK, round(mis, 6), RADAR_VELOCITY_MISMATCH, what)
+
+
 def key_event_windows(tm, imu, filt) -> dict[str, tuple[float, float]]:
     """The key events of an entry and the windows [s] a data gap must not cross: the peak
     deceleration (the largest measured specific force before PDD, ± one sample), PDD and FSR
@@ -273,13 +318,36 @@ def entry_health(tm, imu, filt, atm, r_ground: float, extra=(), notes=()) -> dic
         worst = float(np.max(np.abs(np.log(ratio))))
         fac = float(np.exp(worst))
         c = interval_check("density.vs_default", fac, 1.0, 5.0, "worst density ratio to the default model (either way)")
+        cause = (
+            " — the drag measured against the drag expected with the vehicle's ballistic coefficient m/(C_A S): "
+            "a wrong mass, reference area or drag table, or an acceleration or radar unit?"
+        )
         if c.status == OK and fac > 2.0:
             c = Check(
-                c.name, WARNING, c.value, [1.0, 2.0], f"density departs from the default model by a factor {fac:.3g}"
+                c.name,
+                WARNING,
+                c.value,
+                [1.0, 2.0],
+                f"density departs from the default model by a factor {fac:.3g}" + cause,
             )
+        elif c.status == ERROR:
+            c = Check(c.name, c.status, c.value, c.bound, c.message + cause)
         checks.append(c)
     else:
         checks.append(Check("density.vs_default", WARNING, None, None, "no valid reconstructed density"))
+    conv = bool(getattr(atm, "converged", True))
+    checks.append(
+        Check(
+            "atmosphere.converged",
+            OK if conv else WARNING,
+            int(getattr(atm, "n_iterations", 0)),
+            None,
+            "the drag-coefficient iteration converged"
+            if conv
+            else "the drag-coefficient iteration did not converge: the density, pressure and temperature profiles "
+            "are those of the last pass (a Mach or angle of attack off the drag tables?)",
+        )
+    )
 
     windows = key_event_windows(tm, imu, filt)
     pdd_fsr = {ev: w for ev, w in windows.items() if ev in ("PDD", "FSR")}

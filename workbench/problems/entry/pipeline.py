@@ -42,17 +42,23 @@ from workbench.core.rotation import attitude_error, quat_normalize
 from workbench.core.timescales import julian_date_utc
 from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nees
 from workbench.estimation.health import ERROR, OK, WARNING, Check, health_markdown
-from workbench.estimation.strapdown import integrate
+from workbench.estimation.strapdown import integrate, integrate_members
 from workbench.io import scorecard as fmt
 from workbench.io.scenario import ScenarioError
 from workbench.io.telemetry import TelemetryError
 from workbench.io.units import UnitError
 from workbench.models.aerodynamics import EntryVehicle
+from workbench.models.radar import velocity_out_model
 from workbench.problems.entry.atmosphere import reconstruct_atmosphere
 from workbench.problems.entry.config import EntrySettings
 from workbench.problems.entry.dispersion import run_configured_dispersion
 from workbench.problems.entry.filter import RadarData, run_entry_smoother
-from workbench.problems.entry.health import drag_axis_check, entry_health, radar_first_lock_check
+from workbench.problems.entry.health import (
+    drag_axis_check,
+    entry_health,
+    radar_first_lock_check,
+    radar_velocity_axes_check,
+)
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import errors_sigmas
@@ -340,8 +346,22 @@ def _stages(cfg, vehicle, r_ground, paths, tm, nom, *, scheduler, members) -> It
         ),
     )
     lock = radar_first_lock_check(filt.innovations.get("slant_out"), str(paths["rda_out"]))
-    summary["health"] = entry_health(tm, imu, filt, atm, r_ground, extra=[drag, lock, acc])
+    vaxes = radar_velocity_axes_check(*_inertial_velocity_out(tm, imu, init), str(paths["rda_out"]))
+    summary["health"] = entry_health(tm, imu, filt, atm, r_ground, extra=[drag, lock, vaxes, acc])
     yield EntryResult(tm, imu, nomi, disp, filt, atm, winds, vehicle, dict(tm.events), summary, init)
+
+
+def _inertial_velocity_out(tm, imu, init) -> tuple[np.ndarray, np.ndarray]:
+    """The radar's valid velocity-out samples inside the IMU data (k, 3) [m/s, G] and their
+    prediction from the inertial trajectory alone (the smoother's start state ``init`` integrated
+    through ``imu`` without radar updates, ``models.radar.velocity_out_model``), (k, 3)."""
+    ok = np.asarray(tm.rda_valid, bool) & (tm.t_rda >= imu.t[0]) & (tm.t_rda <= imu.t[-1])
+    if ok.sum() < 5:
+        return np.empty((0, 3)), np.empty((0, 3))
+    tr = np.asarray(tm.t_rda, float)[ok]
+    r = integrate_members(imu, init.v0, init.q0, init.p0, at_t=tr, body=MARS)
+    y, _ = velocity_out_model(r["v_at"].reshape(-1, 3), r["q_at"].reshape(-1, 4), r["p_at"].reshape(-1, 3))
+    return np.asarray(tm.v_out_G, float)[ok], y
 
 
 # ----------------------------------------------------------------------------------------- summary
