@@ -27,7 +27,12 @@ Defect policy — nothing is silently integrated; every finding names file, colu
   are left out of the IMU grid (so a long run of them becomes a bridged gap);
 * repeated events: WARN, the first is used;
 * time gaps (blackouts) are NOTE lines and :class:`StreamGap` records (``gaps``): the health
-  verdict judges them against the key events (``entry.health.gap_checks``).
+  verdict judges them against the key events (``entry.health.gap_checks``);
+* units, timing and axes from physics are **errors** naming file, column and the likely unit or
+  column map: :func:`rate_problems` (time step against ``# rate_hz:``, where each file ends),
+  :func:`check_units` (magnitudes), :func:`axis_problems` (rate against the quaternions,
+  acceleration against the on-board velocity, vector by vector); the nominal initial state's
+  speed and altitude (:func:`read_nominal_state`).
 
 Frames: M = MMED inertial, G = GNC body; the TM JPL quaternion "MMED to GNC" becomes
 ``q_M_G = conj(quat_from_jpl(q_jpl))`` (numerically the raw components).
