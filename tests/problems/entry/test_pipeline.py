@@ -31,10 +31,15 @@ MEMBERS = 2000
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
+def full(tmp_path_factory):
     out = tmp_path_factory.mktemp("entry")
-    summary = run_scenario("schiaparelli", out, RunOptions(members=MEMBERS)).summary
-    return out, summary
+    return out, run_scenario("schiaparelli", out, RunOptions(members=MEMBERS))
+
+
+@pytest.fixture(scope="module")
+def run(full):
+    out, r = full
+    return out, r.summary
 
 
 @pytest.fixture(scope="module")
@@ -353,5 +358,146 @@ def test_key_moments_of_the_entry(run, rec):
     if summary["saturation_window_samples"]:
         assert "saturation" in t
     peak = next(m for m in km if m["name"] == "peak_deceleration")
-    assert " g₀ (" in peak["description"] and "h AGL" in peak["description"]
+    # seed 7: the true peak (84 s) lies inside the 33.7-90.9 s blackout, so it is undefined, and said so
+    assert "undefined" in peak["description"] and "33.70–90.90 s data gap" in peak["description"]
+    assert " g₀" not in peak["description"] and "h AGL" in peak["description"]
+    opening = next(m for m in km if m["name"] == "opening_load")
+    assert " g₀ (" in opening["description"]
     assert [m.to_dict() for m in read_key_moments(rec)] == km
+
+
+# ------------------------------------------------------------------ health: physics cross-checks
+
+
+def _checks(summary: dict) -> dict:
+    return {c["name"]: c for c in summary["health"]["checks"]}
+
+
+def test_shipped_run_health_has_no_non_statistic_warning(run):
+    """Every non-OK check of the shipped run is a filter statistic the truth-MC calibration judges
+    (radar NIS, stat kind nis with its dof); the blackouts away from the key events are notes, the
+    peak deceleration inside the blackout is said undefined; the new cross-checks are OK."""
+    _, s = run
+    c = _checks(s)
+    assert [n for n, x in c.items() if x["status"] != "OK" and not x.get("stat")] == []
+    for name, dof in (("nis.slant_out", 1), ("nis.velocity_out", 3), ("nis.slant_range", 4)):
+        assert c[name]["stat"] == {"kind": "nis", "dof": dof}
+    for name in (
+        "geometry.drag_axis",
+        "units.radar_first_lock",
+        "dispersion.accepted",
+        "gaps.PDD",
+        "gaps.FSR",
+        "gaps.radar_lock",
+        "gaps.peak_deceleration",
+        "telemetry",
+    ):
+        assert c[name]["status"] == "OK", c[name]
+    assert c["geometry.drag_axis"]["value"] > 0.99
+    assert 0.75 < c["units.radar_first_lock"]["value"] < 1.25
+    notes = s["health"]["notes"]
+    assert sum("telemetry gap away from the key events" in n for n in notes) == 6
+    assert any("peak deceleration lies inside the data gap" in n and "33.700–90.900" in n for n in notes)
+
+
+def test_headline_is_judged_against_the_truth(run):
+    """The headline's h AGL at the end: its error against the truth and its 1σ, inside 3σ (seed 7)."""
+    _, s = run
+    (h,) = s["truth"]["headline"]
+    assert h["name"] == "h_agl_end" and h["unit"] == "m"
+    assert h["sigma"] == pytest.approx(s["end"]["sigma_h_m"])
+    assert abs(h["error"]) < 3 * h["sigma"]
+    assert _checks(s)["truth.h_agl_end"]["status"] == "OK"
+
+
+def _flip_body_x(path):
+    """The GNC file's body frame turned 180° about X (rates w_y, w_z and the quaternions with it):
+    self-consistent, but +Z now points at the front shield."""
+    from workbench.core.rotation import quat_conjugate, quat_from_axis_angle, quat_from_jpl, quat_multiply, quat_to_jpl
+
+    lines = path.read_text(encoding="utf-8").splitlines()
+    h = next(i for i, ln in enumerate(lines) if not ln.startswith("#"))
+    hdr = [c.split(" [")[0] for c in lines[h].split(",")]
+    iq = [hdr.index(f"q{i}") for i in range(1, 5)]
+    iw = [hdr.index("w_y"), hdr.index("w_z")]
+    rx = quat_from_axis_angle(np.array([1.0, 0.0, 0.0]), np.pi)
+    out = lines[: h + 1]
+    for ln in lines[h + 1 :]:
+        r = ln.split(",")
+        for j in iw:
+            r[j] = repr(-float(r[j]))
+        q = quat_to_jpl(
+            quat_conjugate(quat_multiply(quat_conjugate(quat_from_jpl(np.array([float(r[i]) for i in iq]))), rx))
+        )
+        for i, x in zip(iq, q, strict=True):
+            r[i] = repr(float(x))
+        out.append(",".join(r))
+    path.write_text("\n".join(out) + "\n", encoding="utf-8")
+
+
+def test_body_frame_flipped_against_the_vehicle_is_a_located_error(run, tmp_path):
+    """The drag must lie along the vehicle's declared +Z_G: a GNC body frame turned 180° about X
+    (self-consistent rates and quaternions, so the unit and axis checks pass) stops at the drag-axis
+    check, an input error naming the GNC file and the axis the drag lies along (exit 3)."""
+    from workbench.io.telemetry import TelemetryError
+
+    out, _ = run
+    tel = tmp_path / "tel"
+    shutil.copytree(out / "schiaparelli" / "telemetry", tel)
+    _flip_body_x(tel / "gnc.csv")
+    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
+    settings = EntryProblem().settings(sc)
+    paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+    stages = en.reconstruct(settings, paths, members=100)
+    next(stages)  # the telemetry passes its own checks
+    with pytest.raises(TelemetryError, match=r"drag lies along −Z_G.*declares \+Z_G") as e:
+        next(stages)
+    assert e.value.file == str(tel / "gnc.csv")
+
+
+def test_radar_in_feet_or_km_fails_the_first_lock_check(full):
+    """The first slant-out is predicted from the inertial trajectory before any radar update, so a
+    radar unit mix-up scales only the measurement: feet (×3.28) and km (×0.001) are ERRORs naming the
+    unit; the clean run's ratio is OK."""
+    import dataclasses
+
+    from workbench.problems.entry.health import radar_first_lock_check
+
+    ih = full[1].result.filter.innovations["slant_out"]
+    assert radar_first_lock_check(ih).status == "OK"
+    for factor, unit in ((1 / 0.3048, "ft"), (1e-3, "km")):
+        c = radar_first_lock_check(dataclasses.replace(ih, z=ih.z * factor), "rda_out.csv")
+        assert c.status == "ERROR" and f"look like [{unit}], not [m]" in c.message, c.message
+
+
+def test_a_numerical_failure_in_a_stage_is_named_not_a_traceback(run, monkeypatch):
+    """Any remaining failure inside the stages (past the input checks) ends as a LinAlgError naming
+    the stage after the last one completed; the runner makes it a NumericalFailure (exit 4)."""
+    out, _ = run
+
+    def boom(*a, **k):
+        raise ZeroDivisionError("float division by zero")
+
+    monkeypatch.setattr(en, "preprocess", boom)
+    sc = load_scenario(assets_dir() / "scenarios" / "schiaparelli.toml")
+    tel = out / "schiaparelli" / "telemetry"
+    paths = {k: tel / f"{k}.{'toml' if k == 'initial_state' else 'csv'}" for k in STREAMS}
+    stages = en.reconstruct(EntryProblem().settings(sc), paths, members=100)
+    next(stages)
+    with pytest.raises(np.linalg.LinAlgError, match=r"stage after EntryTelemetry \(ZeroDivisionError: float division"):
+        next(stages)
+
+
+def test_radar_velocity_axis_swap_or_flip_is_named(full):
+    """The radar's terrain-relative velocity against the inertial-only prediction: the descent
+    axis (−Z_G, ~70 m/s) flipped or swapped with X is an ERROR naming the columns; clean is OK.
+    (Horizontal components of a few m/s are below what the inertial prediction can tell.)"""
+    from workbench.problems.entry.health import radar_velocity_axes_check
+
+    res = full[1].result
+    z, y = en._inertial_velocity_out(res.telemetry, res.imu, res.start)
+    assert radar_velocity_axes_check(z, y).status == "OK"
+    assert _checks(full[1].summary)["geometry.radar_velocity_axes"]["status"] == "OK"
+    for M in (np.diag([1.0, 1.0, -1.0]), np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])):
+        c = radar_velocity_axes_check(z @ M.T, y, "rda_out.csv")
+        assert c.status == "ERROR" and "swapped or sign-flipped" in c.message and "rda_out.csv" in c.message

@@ -168,10 +168,16 @@ def test_round_trip_within_file_precision(synth, tel, truth, spec):
     assert tel.rda_valid.all()
     assert tel.epoch_utc == "2016-10-19T14:42:22.132Z"
     assert "# epoch_utc: 2016-10-19T14:42:22.132Z" in paths["gnc"].read_text()
-    # the two zero-filled packets (INFO) and the blackouts, reported as gaps (one WARN per GNC gap)
+    # the two zero-filled packets (INFO); the blackouts are gaps (one per GNC gap), judged by the
+    # health verdict against the key events, not warnings of the reader
     assert [p.split(":")[0] for p in tel.problems if p.startswith("INFO")] == ["INFO", "INFO"]
-    warns = [p for p in tel.problems if not p.startswith("INFO")]
-    assert all(": gap " in p for p in warns) and sum("gnc.csv: gap" in p for p in warns) == len(GAPS)
+    assert [p for p in tel.problems if not p.startswith(("INFO", "NOTE"))] == []
+    assert sum(p.startswith("NOTE") and "gnc.csv: gap" in p for p in tel.problems) == len(GAPS)
+    gnc_gaps = [g for g in tel.gaps if g.file.endswith("gnc.csv")]
+    assert len(gnc_gaps) == len(GAPS)
+    assert all(
+        np.isclose(g.start_s, s) and np.isclose(g.end_s, s + d) for g, (s, d) in zip(gnc_gaps, GAPS, strict=True)
+    )
     # truth.npz: every truth array, the on-board nominal initial state and its error
     for f in fields(FakeTruth):
         if f.name not in ("events", "epoch_utc"):
@@ -501,3 +507,119 @@ def test_initial_state_file_is_read_through_its_schema(tmp_path):
     with pytest.raises(ScenarioError, match="did you mean 'velocity_kmps'") as ei:
         read_nominal_state(path)
     assert ei.value.key == "initial_state.velocity_kmp" and "initial-state file" in str(ei.value)
+
+
+# ------------------------------------------------------------------ unit, timing and axis sanity
+
+
+def _scale(names: list[str], factor: float):
+    def fn(h, rows):
+        for n in names:
+            j = next(i for i, c in enumerate(h) if c.split(" [")[0] == n)
+            for r in rows:
+                if r[j]:
+                    r[j] = repr(float(r[j]) * factor)
+        return h, rows
+
+    return fn
+
+
+def _swap(a: str, b: str):
+    def fn(h, rows):
+        i, j = (next(k for k, c in enumerate(h) if c.split(" [")[0] == n) for n in (a, b))
+        for r in rows:
+            r[i], r[j] = r[j], r[i]
+        return h, rows
+
+    return fn
+
+
+def _scalar_first(h, rows):
+    iq = [next(k for k, c in enumerate(h) if c.split(" [")[0] == f"q{i}") for i in range(1, 5)]
+    for r in rows:
+        v = [r[i] for i in iq]
+        for i, x in zip(iq, [v[3], v[0], v[1], v[2]], strict=True):
+            r[i] = x
+    return h, rows
+
+
+def test_clean_files_pass_the_axis_and_timing_checks(synth):
+    """The statistics of the clean synthetic files: the rate and acceleration agree with the
+    quaternions and the on-board velocity to far below the bound, the steps match rate_hz."""
+    from workbench.io.telemetry import read_telemetry
+    from workbench.problems.entry.telemetry import axis_problems, rate_problems
+
+    p = synth[0]
+    gnc = read_telemetry(p["gnc"], sparse=[f"a_{a}" for a in "xyz"])
+    nav = read_telemetry(p["gnc_nav"])
+    assert axis_problems(gnc, nav, p) == []
+    tels = {k: read_telemetry(p[k]) for k in ("gnc_nav", "rda_slant_range", "rda_out")}
+    assert rate_problems({"gnc": gnc, **tels}, p) == ([], [])
+
+
+@pytest.mark.parametrize(
+    ("file", "edit", "columns", "expect"),
+    [
+        ("gnc", _swap("a_x", "a_y"), "a_x", r"read as \(a_y, a_x, a_z\) they agree"),
+        ("gnc", _scale(["a_z"], -1.0), "a_x", r"read as \(a_x, a_y, -a_z\) they agree"),
+        ("gnc", _swap("w_x", "w_z"), "w_x", r"read as \(w_z, w_y, w_x\) they agree"),
+        ("gnc", _scale(["w_z"], -1.0), "w_x", r"read as \(w_x, w_y, -w_z\) they agree"),
+        ("gnc", _scalar_first, "w_x", "quaternion-convention"),
+        ("gnc", _scale(["time"], 1e3), "time", r"look like \[ms\], not \[s\]"),
+        ("gnc_nav", _scale(["time"], 1e3), "time", r"look like \[ms\], not \[s\]"),
+        ("rda_out", _scale(["time"], 1e3), "time", r"look like \[ms\], not \[s\]"),
+        ("events", _scale(["time"], 1e3), "time", r"the data end at .* look like \[ms\], not \[s\]"),
+    ],
+    ids=[
+        "accel_swap_xy",
+        "accel_flip_z",
+        "gyro_swap_xz",
+        "gyro_flip_z",
+        "quat_scalar_first",
+        "gnc_ms",
+        "nav_ms",
+        "rda_ms",
+        "events_ms",
+    ],
+)
+def test_axis_swaps_sign_flips_and_time_units_are_located_errors(synth, tmp_path, file, edit, columns, expect):
+    paths = _copy(synth, tmp_path)
+    _edit_csv(paths[file], edit)
+    with pytest.raises(TelemetryError, match=expect) as e:
+        read_entry_telemetry(paths)
+    assert e.value.file == str(paths[file]) and columns in (e.value.column or "")
+
+
+def test_time_unit_without_rate_metadata_found_from_where_the_files_end(synth, tmp_path):
+    paths = _copy(synth, tmp_path)
+    text = paths["gnc_nav"].read_text(encoding="utf-8")
+    paths["gnc_nav"].write_text("\n".join(ln for ln in text.splitlines() if "rate_hz" not in ln) + "\n")
+    _edit_csv(paths["gnc_nav"], _scale(["time"], 1e3))
+    with pytest.raises(TelemetryError, match=r"the data end at .*1000× .*look like \[ms\]") as e:
+        read_entry_telemetry(paths)
+    assert e.value.file == str(paths["gnc_nav"])
+
+
+@pytest.mark.parametrize(
+    ("key", "factor", "expect"),
+    [
+        ("velocity_kmps", 1e3, r"not an entry speed.*look like \[m/s\], not \[km/s\]"),
+        ("position_km", 1e3, r"look like \[m\], not \[km\]"),
+    ],
+)
+def test_initial_state_in_the_wrong_unit_is_a_located_error(synth, tmp_path, key, factor, expect):
+    import re
+
+    from workbench.io.scenario import ScenarioError
+
+    src = synth[0]["initial_state"].read_text(encoding="utf-8")
+    read_nominal_state(synth[0]["initial_state"])  # the clean file passes
+
+    def rep(m):
+        return m.group(1) + "[" + ", ".join(repr(float(x) * factor) for x in m.group(2).split(",")) + "]"
+
+    bad = tmp_path / "initial_state.toml"
+    bad.write_text(re.sub(rf"^({key} = )\[([^\]]*)\]", rep, src, flags=re.M), encoding="utf-8")
+    with pytest.raises(ScenarioError, match=expect) as e:
+        read_nominal_state(bad)
+    assert f"initial_state.{key}" in str(e.value)

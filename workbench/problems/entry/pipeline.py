@@ -41,16 +41,24 @@ from workbench.core.interpolation import interp_rows
 from workbench.core.rotation import attitude_error, quat_normalize
 from workbench.core.timescales import julian_date_utc
 from workbench.estimation.consistency import chi2_interval, is_symmetric_pd, nees
-from workbench.estimation.health import health_markdown
-from workbench.estimation.strapdown import integrate
+from workbench.estimation.health import ERROR, OK, WARNING, Check, health_markdown
+from workbench.estimation.strapdown import integrate, integrate_members
 from workbench.io import scorecard as fmt
 from workbench.io.scenario import ScenarioError
+from workbench.io.telemetry import TelemetryError
+from workbench.io.units import UnitError
 from workbench.models.aerodynamics import EntryVehicle
+from workbench.models.radar import velocity_out_model
 from workbench.problems.entry.atmosphere import reconstruct_atmosphere
 from workbench.problems.entry.config import EntrySettings
 from workbench.problems.entry.dispersion import run_configured_dispersion
 from workbench.problems.entry.filter import RadarData, run_entry_smoother
-from workbench.problems.entry.health import entry_health
+from workbench.problems.entry.health import (
+    drag_axis_check,
+    entry_health,
+    radar_first_lock_check,
+    radar_velocity_axes_check,
+)
 from workbench.problems.entry.initial import initial_for_smoother, reconstruction_P0
 from workbench.problems.entry.preprocess import preprocess
 from workbench.problems.entry.scoring import errors_sigmas
@@ -199,10 +207,34 @@ def reconstruct(
     r_ground = cfg.r_ground
     tm = read_entry_telemetry(paths, cfg.checks)
     check_event_span(tm, paths)
-    yield tm
-    imu = preprocess(tm, cfg.preprocess)
-    yield imu
     nom = read_nominal_state(paths["initial_state"])
+    yield tm
+    stages = _stages(cfg, vehicle, r_ground, paths, tm, nom, scheduler=scheduler, members=members)
+    last = "EntryTelemetry"
+    while True:
+        try:
+            stage = next(stages)
+        except StopIteration:
+            return
+        except (TelemetryError, ScenarioError, UnitError):
+            raise
+        except (ValueError, ArithmeticError, IndexError) as err:
+            raise np.linalg.LinAlgError(
+                f"the entry reconstruction failed in the stage after {last} ({type(err).__name__}: {err}); the inputs "
+                "passed the unit and axis checks: look at the health of the telemetry (gaps, saturation) and the "
+                "vehicle and scenario settings"
+            ) from err
+        last = type(stage).__name__
+        yield stage
+
+
+def _stages(cfg, vehicle, r_ground, paths, tm, nom, *, scheduler, members) -> Iterator[object]:
+    """The stages of :func:`reconstruct` after the telemetry (preprocessing to the result)."""
+    imu = preprocess(tm, cfg.preprocess)
+    drag = drag_axis_check(imu.t, imu.f_G, str(paths["gnc"]), f"the vehicle ({vehicle.name})")
+    if drag.status == ERROR:
+        raise TelemetryError.single(paths["gnc"], drag.message, column="q1..q4, w_x..w_z")
+    yield imu
     if abs(nom.t0 - float(imu.t[0])) > 0.05:
         raise ScenarioError(
             Path(paths["initial_state"]),
@@ -300,8 +332,36 @@ def reconstruct(
         "sigma_attitude_deg": float(np.degrees(np.sqrt(np.max(np.diag(init.P0)[DTH])))),
         "sigma_position_m": float(np.sqrt(np.max(np.diag(init.P0)[DP]))),
     }
-    summary["health"] = entry_health(tm, imu, filt, atm, r_ground)
+    n_acc = int(np.sum(disp.accepted))
+    acc = Check(
+        "dispersion.accepted",
+        OK if init.mode == cfg.reconstruction.initial else WARNING,
+        n_acc,
+        10,
+        f"{n_acc} of {int(disp.n)} dispersion members satisfy the acceptance rules"
+        + (
+            f" — {init.note}: the nominal state, the events or the rules disagree with the data"
+            if init.note and init.mode != cfg.reconstruction.initial
+            else ""
+        ),
+    )
+    lock = radar_first_lock_check(filt.innovations.get("slant_out"), str(paths["rda_out"]))
+    vaxes = radar_velocity_axes_check(*_inertial_velocity_out(tm, imu, init), str(paths["rda_out"]))
+    summary["health"] = entry_health(tm, imu, filt, atm, r_ground, extra=[drag, lock, vaxes, acc])
     yield EntryResult(tm, imu, nomi, disp, filt, atm, winds, vehicle, dict(tm.events), summary, init)
+
+
+def _inertial_velocity_out(tm, imu, init) -> tuple[np.ndarray, np.ndarray]:
+    """The radar's valid velocity-out samples inside the IMU data (k, 3) [m/s, G] and their
+    prediction from the inertial trajectory alone (the smoother's start state ``init`` integrated
+    through ``imu`` without radar updates, ``models.radar.velocity_out_model``), (k, 3)."""
+    ok = np.asarray(tm.rda_valid, bool) & (tm.t_rda >= imu.t[0]) & (tm.t_rda <= imu.t[-1])
+    if ok.sum() < 5:
+        return np.empty((0, 3)), np.empty((0, 3))
+    tr = np.asarray(tm.t_rda, float)[ok]
+    r = integrate_members(imu, init.v0, init.q0, init.p0, at_t=tr, body=MARS)
+    y, _ = velocity_out_model(r["v_at"].reshape(-1, 3), r["q_at"].reshape(-1, 4), r["p_at"].reshape(-1, 3))
+    return np.asarray(tm.v_out_G, float)[ok], y
 
 
 # ----------------------------------------------------------------------------------------- summary
@@ -427,7 +487,9 @@ def _truth_rows(truth: dict, key: str, t: np.ndarray) -> np.ndarray:
 
 
 def score(result: EntryResult, truth: dict) -> dict:
-    """Accuracy and consistency of a reconstruction against the synthetic truth (scoring only)."""
+    """Accuracy and consistency of a reconstruction against the synthetic truth (scoring only).
+    ``out["headline"]``: the headline's height above ground at the end of the data, its error
+    against the truth and its reported 1σ [m] (judged against ±3σ by the runner)."""
     sm = result.filter.smoothed
     t = sm.t
     pT = _truth_rows(truth, "p_M", t)
@@ -521,6 +583,17 @@ def score(result: EntryResult, truth: dict) -> dict:
         "max_position_m": float(np.max(np.linalg.norm(pN - nom.p_M, axis=1)[pre])),
         "max_attitude_deg": float(np.degrees(np.max(np.linalg.norm(attitude_error(nom.q_M_G, qN), axis=1)[pre]))),
     }
+    # the headline's number with its 1σ (problem.headline: h AGL at the end of the data), judged
+    # against the truth by the runner (calibration.finish_health: ERROR outside ±3σ)
+    out["headline"] = [
+        {
+            "name": "h_agl_end",
+            "what": f"height above ground at the end of the data ({float(t[-1]):.2f} s)",
+            "error": float(h_est[-1] - h_true[-1]),
+            "sigma": float(sd_h[-1]),
+            "unit": "m",
+        }
+    ]
     return out
 
 

@@ -79,6 +79,13 @@ def key_moments(result: en.EntryResult) -> list[KeyMoment]:
         k = int(np.flatnonzero(sel)[np.argmax(f[sel])])
         tk = float(t_imu[k])
         text = f"{what} {f[k] / G0:.2f} g₀ ({f[k]:.1f} m/s², measured specific force){agl(tk)}"
+        edge = [g for g in imu.gaps if np.isclose(g.t_a, tk) or np.isclose(g.t_b, tk)]
+        if edge:  # the largest sample borders a data gap: the peak may lie inside it, undefined
+            g = edge[0]
+            text = (
+                f"{what} undefined: the largest measured specific force ({f[k]:.1f} m/s² at {tk:.2f} s) borders the "
+                f"{g.t_a:.2f}–{g.t_b:.2f} s data gap, the peak may lie inside it{agl(tk)}"
+            )
         out.append(KeyMoment(name, tk, text, (tk - half, tk + half)))
     sat = np.flatnonzero(np.asarray(imu.saturated, bool))
     if sat.size:

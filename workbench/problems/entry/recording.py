@@ -512,7 +512,7 @@ class EntryRecorder:
         s.reset_time()
         # radar beams from the module to the ground along the smoothed attitude, while the radar is on
         on = t >= self.events.get("RDA_ON", np.inf)
-        if "slant_out" in fr.innovations:
+        if "slant_out" in fr.innovations and len(fr.innovations["slant_out"].t):
             on = t >= min(float(fr.innovations["slant_out"].t[0]), self.events.get("RDA_ON", np.inf))
         if on.any():
             C = quat_to_dcm(q_L[on])

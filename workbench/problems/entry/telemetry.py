@@ -25,7 +25,14 @@ Defect policy — nothing is silently integrated; every finding names file, colu
 * empty acceleration cells (the ``a_*`` columns are sparse: the real TM stops the acceleration
   before the rate) set ``a_valid`` False; outside a trailing block they are a WARN; those rows
   are left out of the IMU grid (so a long run of them becomes a bridged gap);
-* repeated events: WARN, the first is used.
+* repeated events: WARN, the first is used;
+* time gaps (blackouts) are NOTE lines and :class:`StreamGap` records (``gaps``): the health
+  verdict judges them against the key events (``entry.health.gap_checks``);
+* units, timing and axes from physics are **errors** naming file, column and the likely unit or
+  column map: :func:`rate_problems` (time step against ``# rate_hz:``, where each file ends),
+  :func:`check_units` (magnitudes), :func:`axis_problems` (rate against the quaternions,
+  acceleration against the on-board velocity, vector by vector); the nominal initial state's
+  speed and altitude (:func:`read_nominal_state`).
 
 Frames: M = MMED inertial, G = GNC body; the TM JPL quaternion "MMED to GNC" becomes
 ``q_M_G = conj(quat_from_jpl(q_jpl))`` (numerically the raw components).
@@ -35,13 +42,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from workbench.core.bodies import G0
-from workbench.core.rotation import quat_conjugate, quat_from_jpl, quat_normalize, quat_to_jpl
+from workbench.core.rotation import quat_conjugate, quat_from_jpl, quat_multiply, quat_normalize, quat_to_jpl
 from workbench.io.scenario import ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, load_file
 from workbench.io.telemetry import (
@@ -52,7 +59,7 @@ from workbench.io.telemetry import (
     read_events,
     read_telemetry,
 )
-from workbench.io.units import likely_unit
+from workbench.io.units import UNITS, canonical_unit, likely_unit
 from workbench.problems.entry.site import R_MOLA
 
 __all__ = [
@@ -61,6 +68,12 @@ __all__ = [
     "TelemetryChecks",
     "RadarTracks",
     "EntryTelemetry",
+    "StreamGap",
+    "rate_problems",
+    "axis_problems",
+    "AXIS_MISMATCH_MAX",
+    "ENTRY_SPEED_RANGE_MPS",
+    "ENTRY_ALTITUDE_RANGE_M",
     "NominalState",
     "telemetry_paths",
     "read_entry_telemetry",
@@ -128,7 +141,7 @@ class EntryTelemetry(RadarTracks):
     ``t_sr`` (k,), ``slant_ranges`` (k,4) [m], ``sr_valid`` (k,); ``t_rda`` (j,), ``slant_out``
     (j,) [m], ``v_out_G`` (j,3) [m/s], ``rda_valid`` (j,); ``events`` name → t; ``epoch_utc``
     (metadata); ``problems`` the WARN/INFO findings (located, see the module docstring);
-    ``files`` stream → path.
+    ``files`` stream → path; ``gaps`` the time gaps of every file (:class:`StreamGap`).
     """
 
     t_gnc: np.ndarray
@@ -143,6 +156,7 @@ class EntryTelemetry(RadarTracks):
     epoch_utc: str
     problems: list[str]
     files: dict[str, Path]
+    gaps: list[StreamGap] = field(default_factory=list)
 
 
 def telemetry_paths(files: Mapping[str, Path], scenario_file: Path) -> dict[str, Path]:
@@ -234,7 +248,58 @@ def read_nominal_state(path: Path) -> NominalState:
     if not np.isfinite(st["t0_s"]):
         raise ScenarioError(path, "initial_state.t0_s", "not finite")
     q_M_G = quat_conjugate(quat_from_jpl(quat_normalize(q_jpl)))
-    return NominalState(st["t0_s"], st["velocity_kmps"] * 1e3, st["position_km"] * 1e3, q_M_G, str(path))
+    v_M, p_M = st["velocity_kmps"] * 1e3, st["position_km"] * 1e3
+    _check_state_magnitudes(path, v_M, p_M)
+    return NominalState(st["t0_s"], v_M, p_M, q_M_G, str(path))
+
+
+#: Plausible inertial speed of a Mars entry state [m/s]: from orbit ~3.5 km/s, hyperbolic
+#: arrivals 5.5-7.5 km/s (Viking, Pathfinder, MER, MSL, Schiaparelli); 1-20 km/s leaves room.
+ENTRY_SPEED_RANGE_MPS = (1.0e3, 2.0e4)
+#: Plausible altitude of an entry state above the Mars reference sphere [m]: the state is given
+#: before or near the entry interface (~120 km); -20 km (below Hellas) to 5000 km leaves room.
+ENTRY_ALTITUDE_RANGE_M = (-2.0e4, 5.0e6)
+
+
+def _unit_that_fits(value: float, declared: str, plausible, typical: float) -> str | None:
+    """The unit of the kind of ``declared`` in which the number ``value`` (as written, in
+    ``declared``) becomes plausible (``plausible(si) -> bool``), the one nearest ``typical`` [SI]
+    in ratio when several do; None when none does."""
+    kind = UNITS[canonical_unit(declared)].kind
+    fits = [
+        (abs(np.log(value * u.factor / typical)), name)
+        for name, u in UNITS.items()
+        if u.kind == kind and name != canonical_unit(declared) and not u.offset and plausible(value * u.factor)
+    ]
+    return min(fits)[1] if fits else None
+
+
+def _check_state_magnitudes(path: Path, v_M: np.ndarray, p_M: np.ndarray) -> None:
+    """Unit sanity of the nominal initial state (SI, MMED): the speed |``v_M``| [m/s] inside
+    :data:`ENTRY_SPEED_RANGE_MPS` and the altitude |``p_M``| − R [m] inside
+    :data:`ENTRY_ALTITUDE_RANGE_M`; otherwise a :class:`ScenarioError` on ``path`` naming the key
+    and, when a unit-like factor explains it (:func:`~workbench.io.units.likely_unit`), the unit."""
+    speed = float(np.linalg.norm(v_M))
+    lo, hi = ENTRY_SPEED_RANGE_MPS
+    if not lo <= speed <= hi:
+        likely = _unit_that_fits(speed / 1e3, "km/s", lambda v: lo <= v <= hi, 6.0e3)
+        hint = f": the values look like [{likely}], not [km/s]" if likely else ": wrong unit or frame?"
+        raise ScenarioError(
+            path,
+            "initial_state.velocity_kmps",
+            f"speed {speed / 1e3:.6g} km/s is not an entry speed ({lo / 1e3:g}-{hi / 1e3:g} km/s){hint}",
+        )
+    r = float(np.linalg.norm(p_M))
+    lo, hi = ENTRY_ALTITUDE_RANGE_M
+    if not lo <= r - R_MOLA <= hi:
+        likely = _unit_that_fits(r / 1e3, "km", lambda x: lo <= x - R_MOLA <= hi, R_MOLA + 1.25e5)
+        hint = f": the values look like [{likely}], not [km]" if likely else ": wrong unit or frame?"
+        raise ScenarioError(
+            path,
+            "initial_state.position_km",
+            f"the position lies {r / 1e3:.6g} km from the centre of Mars, an altitude of {(r - R_MOLA) / 1e3:.6g} km "
+            f"above the {R_MOLA / 1e3:.0f} km sphere (an entry state: {lo / 1e3:g} to {hi / 1e3:g} km){hint}",
+        )
 
 
 def _note(level: str, file, column: str | None, row: int | None, reason: str) -> str:
@@ -291,11 +356,25 @@ def _early_end_notes(gnc, others: Mapping[str, np.ndarray], paths, events: Mappi
     return out
 
 
-def _gap_notes(tel) -> list[str]:
-    """WARN notes for the time gaps of a telemetry file (blackouts are expected, but reported)."""
-    return [
-        f"WARN: {tel.path}: gap {g.start_s:.3f}–{g.end_s:.3f} s ({g.duration_s:.3g} s, row {g.row})" for g in tel.gaps
-    ]
+def _gap_notes(tel) -> list[StreamGap]:
+    """The time gaps of a telemetry file as :class:`StreamGap` records (blackouts are expected;
+    the health verdict judges each against the key events, see ``entry.health``)."""
+    return [StreamGap(str(tel.path), g.start_s, g.end_s, g.row) for g in tel.gaps]
+
+
+@dataclass(frozen=True)
+class StreamGap:
+    """A time gap of one telemetry file: ``file``, the times of the samples before and after it
+    ``start_s``/``end_s`` [s from EIP], ``row`` the data row after it."""
+
+    file: str
+    start_s: float
+    end_s: float
+    row: int
+
+    def __str__(self) -> str:
+        d = self.end_s - self.start_s
+        return f"{self.file}: gap {self.start_s:.3f}–{self.end_s:.3f} s ({d:.3g} s, row {self.row})"
 
 
 def _unit_problem(file, tel, name: str, ratio: float, what: str) -> Problem | None:
@@ -350,6 +429,211 @@ def radar_unit_notes(nav, out, file) -> list[str]:
         tol=2.5,
     )
     return [f"WARN: {pr}"] if pr else []
+
+
+def _time_column(tel) -> str:
+    return f"{tel.time_name} [{tel.time_unit}]"
+
+
+def rate_problems(
+    tels: Mapping[str, object], paths: Mapping[str, os.PathLike], events: Mapping[str, float] | None = None
+) -> tuple[list[Problem], list[str]]:
+    """Time-unit sanity of the CSV streams ``tels`` (stream → :class:`~workbench.io.telemetry.Telemetry`):
+    the median time step of a file against the interval its ``# rate_hz:`` metadata declares, and
+    the time each file ends against the median end of all of them and of the ``events`` (name → t
+    [s]; every stream ends near the end of the flight).  Returns (errors: a step or an end off by a
+    unit-like factor, e.g. times in ms labelled s, naming the file, the time column and the likely
+    unit; WARN notes: a step off the declared rate by more than a factor 1.5 that no unit explains)."""
+    errors: list[Problem] = []
+    warns: list[str] = []
+    for k, tel in tels.items():
+        if tel.time.size < 3 or "rate_hz" not in tel.meta:
+            continue
+        try:
+            dt_decl = 1.0 / float(tel.meta["rate_hz"])
+        except (TypeError, ValueError, ZeroDivisionError):
+            continue
+        dt = float(np.median(np.diff(tel.time)))
+        ratio = dt / dt_decl
+        if not abs(np.log(ratio)) > np.log(1.5):
+            continue
+        what = (
+            f"the median time step {dt:.6g} s is {ratio:.4g}× the {dt_decl:.6g} s that '# rate_hz: "
+            f"{tel.meta['rate_hz']}' declares"
+        )
+        likely = likely_unit(ratio, tel.time_unit)
+        if likely:
+            errors.append(
+                Problem(
+                    str(paths[k]),
+                    _time_column(tel),
+                    None,
+                    None,
+                    f"{what}: the times look like [{likely}], not [{tel.time_unit}]",
+                )
+            )
+        else:
+            warns.append(f"WARN: {Problem(str(paths[k]), _time_column(tel), None, None, what + ': wrong rate_hz?')}")
+    if errors:
+        return errors, warns
+    # without rates: every stream ends at the end of the flight (the radar a few seconds before,
+    # the last event about then), in seconds from EIP; a file whose end is a unit-like factor off
+    # the median end of all of them has its times in another unit
+    ends = {k: float(tel.time[-1]) for k, tel in tels.items() if tel.time.size}
+    if events:
+        ends["events"] = float(max(events.values()))
+    med = float(np.median(list(ends.values()))) if ends else 0.0
+    if len(ends) < 3 or not med > 1.0:
+        return errors, warns
+    for k, end in ends.items():
+        if not end > 0:
+            continue
+        unit = tels[k].time_unit if k in tels else "s"
+        likely = likely_unit(end / med, unit)
+        if likely:
+            errors.append(
+                Problem(
+                    str(paths[k]),
+                    _time_column(tels[k]) if k in tels else "time",
+                    None,
+                    None,
+                    f"the data end at {end:.6g} s, {end / med:.4g}× the {med:.6g} s at which the other files and the "
+                    f"events end: the times look like [{likely}], not [{unit}]",
+                )
+            )
+    return errors, warns
+
+
+def _signed_permutations(prefix: str) -> list[tuple[np.ndarray, str]]:
+    """The 48 signed permutations ``M`` (3, 3) (identity first) with the column names they read,
+    e.g. ``"(a_y, -a_x, a_z)"`` for ``prefix`` ``"a_"``."""
+    import itertools
+
+    out = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            M = np.zeros((3, 3))
+            M[np.arange(3), perm] = signs
+            name = ", ".join(("-" if sg < 0 else "") + prefix + "xyz"[j] for j, sg in zip(perm, signs, strict=True))
+            out.append((M, f"({name})"))
+    out.sort(key=lambda x: not np.array_equal(x[0], np.eye(3)))
+    return out
+
+
+#: Largest median vector disagreement, relative to the median magnitude, of two measurements of
+#: one quantity on the same axes (body rate vs attitude quaternions, acceleration vs on-board
+#: velocity) for their axes to be accepted as the same.  An axis swap or a sign flip of a channel
+#: carrying the motion gives ≳ 0.3 (a 90° or 180° turn of that component); sample noise, the 10 Hz
+#: quaternion's own integration and the on-board navigation's 1 Hz sampling stay two orders below.
+AXIS_MISMATCH_MAX = 0.1
+
+
+def _axis_problem(meas: np.ndarray, ref: np.ndarray, file, columns: str, prefix: str, quantity: str, reference: str):
+    """A located :class:`Problem` when ``meas`` (n, 3) disagrees with ``ref`` (n, 3) (same frame
+    and units) by more than :data:`AXIS_MISMATCH_MAX` of the median |ref|, naming the signed
+    permutation of the columns that would fit best; None when they agree (or too few samples)."""
+    ok = np.all(np.isfinite(meas), axis=1) & np.all(np.isfinite(ref), axis=1)
+    if ok.sum() < 10:
+        return None
+    meas, ref = meas[ok], ref[ok]
+    scale = float(np.median(np.linalg.norm(ref, axis=1)))
+    if not scale > 0:
+        return None
+    mis = float(np.median(np.linalg.norm(meas - ref, axis=1))) / scale
+    if mis <= AXIS_MISMATCH_MAX:
+        return None
+    fits = [
+        (float(np.median(np.linalg.norm(meas @ M.T - ref, axis=1))) / scale, nm)
+        for M, nm in _signed_permutations(prefix)
+    ]
+    best, name = min(fits)
+    hint = (
+        f"read as {name} they agree ({best:.2g}): an axis swap or sign flip of the columns"
+        if best <= AXIS_MISMATCH_MAX
+        else "no swap or sign flip of the columns explains it: a frame or quaternion-convention mix-up?"
+    )
+    return Problem(
+        str(file),
+        columns,
+        None,
+        None,
+        f"{quantity} disagrees with {reference} (median difference {mis:.3g}× the median magnitude, "
+        f"bound {AXIS_MISMATCH_MAX:g}); {hint}",
+    )
+
+
+def axis_problems(gnc, nav, paths: Mapping[str, os.PathLike]) -> list[Problem]:
+    """Axis and sign sanity of the GNC file, vector by vector (frames as the file declares):
+
+    * the body rate ``w_*`` against the rotation between successive attitude quaternions
+      (``q1..q4``, JPL MMED→GNC), expressed in the body frame, on the steps at the nominal rate
+      outside saturation (a gyro axis swapped or sign-flipped, or a quaternion convention that is
+      not the declared one);
+    * the total acceleration ``a_*`` (MMED) averaged over each on-board navigation interval
+      against that interval's velocity change (``v_*`` of gnc_nav): an accelerometer axis swapped
+      or sign-flipped.
+    Each finding names the file, the columns and the signed permutation that would fit."""
+    out: list[Problem] = []
+    t = gnc.time
+    q = gnc.stack([f"q{i}" for i in range(1, 5)])
+    w = gnc.stack([f"w_{x}" for x in "xyz"])
+    if t.size > 12:
+        qn = q / np.linalg.norm(q, axis=1, keepdims=True)
+        q_M_G = quat_conjugate(quat_from_jpl(qn))
+        dq = quat_multiply(quat_conjugate(q_M_G[:-1]), q_M_G[1:])
+        dq = dq * np.where(dq[:, 3:4] < 0, -1.0, 1.0)
+        dt = np.diff(t)
+        ang = 2.0 * np.arctan2(np.linalg.norm(dq[:, :3], axis=1), dq[:, 3])
+        axis = dq[:, :3] / np.maximum(np.linalg.norm(dq[:, :3], axis=1, keepdims=True), 1e-300)
+        w_q = axis * (ang / dt)[:, None]
+        w_m = 0.5 * (w[1:] + w[:-1])
+        step = float(np.median(dt))
+        sat = np.zeros(t.size - 1, bool)
+        for name in ("w_x", "w_y", "w_z"):
+            m = np.asarray(gnc.saturated.get(name, np.zeros(t.size, bool)), bool)
+            sat |= m[1:] | m[:-1]
+        flat = np.abs(w_m).max(axis=1) >= 0.999 * np.nanmax(np.abs(w))  # a saturated full-scale plateau
+        keep = (dt <= 1.5 * step) & ~sat & ~flat & (ang / dt > np.radians(0.5))
+        pr = _axis_problem(
+            w_m[keep],
+            w_q[keep],
+            paths["gnc"],
+            f"{_header(gnc, 'w_x')}..{_header(gnc, 'w_z')}",
+            "w_",
+            "the body rate",
+            "the rotation of the attitude quaternions q1..q4 (JPL MMED→GNC)",
+        )
+        out += [pr] if pr else []
+    a = gnc.stack([f"a_{x}" for x in "xyz"])
+    ok_a = np.all(np.isfinite(a), axis=1)
+    tn = nav.time
+    v = nav.stack([f"v_{x}" for x in "xyz"])
+    if tn.size > 12 and ok_a.sum() > 12:
+        ta, aa = t[ok_a], a[ok_a]
+        dtn = np.diff(tn)
+        step = float(np.median(dtn))
+        cum = np.column_stack(
+            [np.concatenate([[0.0], np.cumsum(0.5 * (aa[1:, i] + aa[:-1, i]) * np.diff(ta))]) for i in range(3)]
+        )
+        dv_a = np.column_stack([np.interp(tn, ta, cum[:, i]) for i in range(3)])
+        mean_a = np.diff(dv_a, axis=0) / dtn[:, None]
+        dv_n = np.diff(v, axis=0) / dtn[:, None]
+        # intervals inside the acceleration data with no GNC gap: the 10 Hz samples cover them
+        gaps = [(g.start_s, g.end_s) for g in gnc.gaps]
+        covered = (tn[:-1] >= ta[0]) & (tn[1:] <= ta[-1]) & (dtn <= 1.5 * step)
+        for g0, g1 in gaps:
+            covered &= ~((tn[:-1] < g1) & (tn[1:] > g0))
+        pr = _axis_problem(
+            mean_a[covered],
+            dv_n[covered],
+            paths["gnc"],
+            f"{_header(gnc, 'a_x')}..{_header(gnc, 'a_z')}",
+            "a_",
+            "the total acceleration (MMED)",
+            f"the rate of change of the on-board velocity v_* ({paths['gnc_nav']})",
+        )
+        out += [pr] if pr else []
+    return out
 
 
 def check_units(gnc, nav, paths: Mapping[str, os.PathLike], events: Mapping[str, float]) -> None:
@@ -471,7 +755,8 @@ def read_entry_telemetry(
     lim = {f"a_{a}": (-100 * G0, 100 * G0) for a in "xyz"}  # physically possible: an entry peaks at ~10 g
     lim.update({f"w_{a}": (-np.radians(3000.0), np.radians(3000.0)) for a in "xyz"})
     gnc = read_telemetry(paths["gnc"], required=req, sparse=[f"a_{a}" for a in "xyz"], limits=lim)
-    problems += [f"WARN: {note}" for note in gnc.notes] + _gap_notes(gnc) + _flat_top_notes(gnc)
+    problems += [f"WARN: {note}" for note in gnc.notes] + _flat_top_notes(gnc)
+    gaps = _gap_notes(gnc)
     fname = str(paths["gnc"])
     q_raw = gnc.stack([f"q{i}" for i in range(1, 5)])
     norm = np.linalg.norm(q_raw, axis=1)
@@ -532,20 +817,22 @@ def read_entry_telemetry(
     lim = {f"p_{a}": (-5 * R_MOLA, 5 * R_MOLA) for a in "xyz"}  # within a few Mars radii
     lim.update({f"v_{a}": (-2e4, 2e4) for a in "xyz"})  # below 20 km/s (entries are 4-8 km/s)
     nav = read_telemetry(paths["gnc_nav"], required=req_nav, limits=lim)
-    problems += [f"WARN: {note}" for note in nav.notes] + _gap_notes(nav)
+    problems += [f"WARN: {note}" for note in nav.notes]
+    gaps += _gap_notes(nav)
 
     # ---- radar --------------------------------------------------------------------------------
     names = [f"B{i}" for i in range(4)]
-    tel = read_telemetry(
+    tel_sr = read_telemetry(
         paths["rda_slant_range"], required=dict.fromkeys(names, "length"), limits=dict.fromkeys(names, (0.0, 1e7))
     )
-    problems += [f"WARN: {note}" for note in tel.notes] + _gap_notes(tel)
-    t_sr, sr = tel.time.copy(), tel.stack(names)
+    problems += [f"WARN: {note}" for note in tel_sr.notes]
+    gaps += _gap_notes(tel_sr)
+    t_sr, sr = tel_sr.time.copy(), tel_sr.stack(names)
     zero = sr == 0.0
     sr_valid = ~zero.any(axis=1)
     f = str(paths["rda_slant_range"])
     for r in np.flatnonzero(~sr_valid):
-        cols = ",".join(_header(tel, names[j]) for j in np.flatnonzero(zero[r]))
+        cols = ",".join(_header(tel_sr, names[j]) for j in np.flatnonzero(zero[r]))
         if r < checks.zero_filled_packets and zero[r].all():
             problems.append(
                 _note("INFO", f, cols, int(r) + 1, "zero-filled slant-range packet (expected at RDA start): not used")
@@ -563,7 +850,8 @@ def read_entry_telemetry(
     vn = [f"v_out_{a}" for a in "xyz"]
     req_r = {"slant_out": "length", **dict.fromkeys(vn, "velocity")}
     tel = read_telemetry(paths["rda_out"], required=req_r, limits={"slant_out": (0.0, 1e7)})
-    problems += [f"WARN: {note}" for note in tel.notes] + _gap_notes(tel)
+    problems += [f"WARN: {note}" for note in tel.notes]
+    gaps += _gap_notes(tel)
     problems += radar_unit_notes(nav, tel, paths["rda_out"])
     t_rda, so, vo = tel.time.copy(), tel.channel("slant_out").copy(), tel.stack(vn)
     zero_so = so == 0.0
@@ -601,8 +889,18 @@ def read_entry_telemetry(
             continue
         events[name] = float(t_e)
 
+    rate_errors, rate_warns = rate_problems(
+        {"gnc": gnc, "gnc_nav": nav, "rda_slant_range": tel_sr, "rda_out": tel}, paths, events
+    )
+    if rate_errors:
+        raise TelemetryError(rate_errors)
+    problems += rate_warns
     check_units(gnc, nav, paths, events)
+    axis = axis_problems(gnc, nav, paths)
+    if axis:
+        raise TelemetryError(axis)
     problems += _early_end_notes(gnc, {"gnc_nav": nav.time, "rda_slant_range": t_sr, "rda_out": t_rda}, paths, events)
+    problems += [f"NOTE: {g}" for g in gaps]  # judged against the key events by the health verdict
     return EntryTelemetry(
         t_gnc=gnc.time.copy(),
         w_G=gnc.stack([f"w_{a}" for a in "xyz"]),
@@ -623,6 +921,7 @@ def read_entry_telemetry(
         epoch_utc=gnc.meta.get("epoch_utc", ""),
         problems=problems,
         files=dict(paths),
+        gaps=gaps,
     )
 
 
