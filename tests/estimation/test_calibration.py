@@ -10,6 +10,7 @@ import pytest
 from workbench.estimation.calibration import (
     Z_BAND,
     calibrate_checks,
+    family_z,
     finish_health,
     fit_band,
     nis_error_factor,
@@ -105,3 +106,13 @@ def test_seed_streams_are_disjoint_and_reproducible():
     assert not (t & v) and not (t & c) and not (v & c)
     assert seeds_of(CALIBRATION_STREAM, 5) == seeds_of(CALIBRATION_STREAM, 5)
     assert all(0 <= s < 2**31 for s in c)
+
+
+def test_family_z_bounds_the_chance_that_an_honest_run_leaves_any_band():
+    from scipy.stats import norm
+
+    assert family_z(1) == Z_BAND  # one band: never narrower than the two-sided 99.9 %
+    z = family_z(22)
+    assert 3.4 < z < 3.6
+    assert 22 * 2 * norm.sf(z) == pytest.approx(0.01, rel=1e-6)
+    assert fit_band([1.0, 2.0, 3.0], "nis", z)["z"] == pytest.approx(z, rel=1e-5)

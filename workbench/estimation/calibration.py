@@ -8,9 +8,10 @@ problem's truth Monte Carlo (truth simulator → telemetry files → full recons
 stream disjoint from the shipped scenarios' and from any tuning seeds):
 
 * :func:`fit_band` — the honest band of a statistic: a normal fit (of the logarithm for a positive
-  statistic) over the members, ± :data:`Z_BAND` standard deviations (two-sided 99.9 %), widened to
-  cover every member; the table also stores the members' percentiles, so each threshold is traced
-  to a stored number;
+  statistic) over the members, ± z standard deviations, widened to cover every member; z is chosen
+  for the whole table (:func:`family_z`) so that an honest run leaves *any* of the problem's k bands
+  with probability :data:`FAMILY_ALPHA` (Bonferroni), not each band; the table also stores the
+  members' percentiles, so each threshold is traced to a stored number;
 * :func:`calibrate_checks` — re-judge the checks of one run: inside the band OK, outside WARNING,
   a NIS above the band by the factor :func:`nis_error_factor` ERROR; an ERROR of the check's own
   (physics) logic is never softened; a filter conservative by design is said once, as a note;
@@ -35,9 +36,11 @@ from workbench.estimation.consistency import chi2_ppf
 from workbench.estimation.health import ERROR, OK, WARNING, Check
 
 __all__ = [
+    "FAMILY_ALPHA",
     "PERCENTILES",
     "Z_BAND",
     "calibrate_checks",
+    "family_z",
     "finish_health",
     "fit_band",
     "load_table",
@@ -49,23 +52,34 @@ __all__ = [
 #: 99.9 % interval, so a check of an honest run leaves its band about once in a thousand runs
 Z_BAND = 3.29
 
+#: probability that an honest run leaves at least one of its problem's calibrated bands (a WARNING)
+FAMILY_ALPHA = 0.01
+
 #: the percentiles of each statistic over the members stored beside its band [%]
 PERCENTILES = (0.5, 1.0, 50.0, 99.0, 99.5)
 
 
-def fit_band(values: Sequence[float], kind: str) -> dict:
+def family_z(k: int, alpha: float = FAMILY_ALPHA) -> float:
+    """Half-width of each of ``k`` bands in standard deviations [-] such that an honest run leaves at
+    least one of them with probability ≤ ``alpha`` (two-sided Bonferroni: Φ⁻¹(1 − α/2k)); never
+    below :data:`Z_BAND`."""
+    from scipy.stats import norm
+
+    return max(Z_BAND, float(norm.ppf(1.0 - alpha / (2.0 * max(int(k), 1)))))
+
+
+def fit_band(values: Sequence[float], kind: str, z: float = Z_BAND) -> dict:
     """The honest band of one statistic from its ``values`` over truth-MC members (n,) (units of the
-    statistic): ``{"n", "scale", "center", "spread", "band": [lo, hi], "percentiles", "min", "max"}``.
-    ``scale`` is ``"log"`` (fit of ln value) when every value is > 0 and ``kind`` is not
-    ``"two_sided"`` with signed values, else ``"linear"``; the band is center ± :data:`Z_BAND`·spread
-    (back-transformed), widened to contain every member."""
+    statistic): ``{"n", "scale", "center", "spread", "z", "band": [lo, hi], "percentiles", "min",
+    "max"}``. ``scale`` is ``"log"`` (fit of ln value) when every value is > 0, else ``"linear"``;
+    the band is center ± ``z``·spread (back-transformed), widened to contain every member."""
     v = np.asarray([x for x in values if x is not None and np.isfinite(x)], float)
     if v.size < 2:
         raise ValueError(f"a calibration band needs at least 2 finite members, got {v.size}")
     log = bool(np.all(v > 0.0))
     w = np.log(v) if log else v
     c, s = float(np.mean(w)), float(np.std(w, ddof=1))
-    lo, hi = c - Z_BAND * s, c + Z_BAND * s
+    lo, hi = c - z * s, c + z * s
     if log:
         lo, hi = float(np.exp(lo)), float(np.exp(hi))
     lo, hi = min(lo, float(v.min())), max(hi, float(v.max()))
@@ -74,6 +88,7 @@ def fit_band(values: Sequence[float], kind: str) -> dict:
         "scale": "log" if log else "linear",
         "center": _g(c),
         "spread": _g(s),
+        "z": _g(z),
         "band": [_g(lo), _g(hi)],
         "percentiles": {f"{p:g}": _g(np.percentile(v, p)) for p in PERCENTILES},
         "min": _g(v.min()),

@@ -4,7 +4,8 @@ Each member is one shipped synthetic scenario of the problem run end to end
 (:func:`workbench.problems.runner.evaluate`: truth simulator → telemetry files → reconstruction →
 summary, no recording) with a seed of the **calibration stream**; the statistic of every check that
 carries one (``Check.stat``) is collected over the members of all the problem's scenarios and its
-honest band fitted (:func:`workbench.estimation.calibration.fit_band`).  The table is written to
+honest band fitted (:func:`workbench.estimation.calibration.fit_band`, half-width
+:func:`~workbench.estimation.calibration.family_z` for the table's number of checks).  The table is written to
 ``workbench/problems/<kind>/health_calibration.json`` and judged against by every later run
 (:func:`workbench.problems.runner.judge_health`).
 
@@ -30,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.estimation.calibration import fit_band
+from workbench.estimation.calibration import FAMILY_ALPHA, family_z, fit_band
 from workbench.io import assets
 from workbench.io.scenario import resolve_scenario
 from workbench.problems import registry
@@ -110,17 +111,16 @@ def calibrate(kind: str, members: int, *, jobs: int = 2, scenarios: Sequence[Pat
             if c["stat"] and c["value"] is not None:
                 values[c["name"]].append(float(c["value"]))
                 stats[c["name"]] = c["stat"]
-    checks = {}
-    for name in sorted(values):
-        try:
-            checks[name] = {"stat": stats[name], **fit_band(values[name], stats[name].get("kind", ""))}
-        except ValueError:
-            continue
+    names = [n for n in sorted(values) if sum(np.isfinite(values[n])) >= 2]
+    z = family_z(len(names))
+    checks = {n: {"stat": stats[n], **fit_band(values[n], stats[n].get("kind", ""), z)} for n in names}
     return {
         "kind": kind,
         "source": f"{kind} truth Monte Carlo, calibration stream",
         "command": f"workbench calibrate {kind} --members {members} --write",
         "seed_stream": {"entropy": SEED_ENTROPY, "spawn_key": [CALIBRATION_STREAM]},
+        "family_alpha": FAMILY_ALPHA,
+        "z": round(z, 4),
         "members": len([r for r in rows if "checks" in r]),
         "seeds": seeds,
         "scenarios": [Path(p).stem for p in paths],
