@@ -282,5 +282,5 @@ def test_non_finite_filter_state_is_a_numerical_failure_naming_the_stage(droptes
     x[1500:, 0] = np.nan
     bad = replace(fwd, x=x)
     with pytest.raises(np.linalg.LinAlgError, match=r"forward EKF pass: state or covariance not finite from step 1500"):
-        dt._finite_or_fail(bad, "forward EKF pass", droptest_run.settings)
-    dt._finite_or_fail(fwd, "forward EKF pass", droptest_run.settings)  # finite: nothing raised
+        dt.finite_or_fail(bad, "forward EKF pass", droptest_run.settings)
+    dt.finite_or_fail(fwd, "forward EKF pass", droptest_run.settings)  # finite: nothing raised

@@ -495,7 +495,7 @@ def test_radar_velocity_axis_swap_or_flip_is_named(full):
     from workbench.problems.entry.health import radar_velocity_axes_check
 
     res = full[1].result
-    z, y = en._inertial_velocity_out(res.telemetry, res.imu, res.start)
+    z, y = en.inertial_velocity_out(res.telemetry, res.imu, res.start)
     assert radar_velocity_axes_check(z, y).status == "OK"
     assert _checks(full[1].summary)["geometry.radar_velocity_axes"]["status"] == "OK"
     for M in (np.diag([1.0, 1.0, -1.0]), np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])):

@@ -76,6 +76,7 @@ from workbench.problems.droptest.surface import Surface, ramp_surface
 from workbench.problems.droptest.telemetry import DropTelemetry, load_drop_telemetry
 
 __all__ = [
+    "finite_or_fail",
     "InitialState",
     "FilterStage",
     "StrokeStage",
@@ -663,21 +664,21 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
         fwd = forward_pass(settings, tel, init)
     except np.linalg.LinAlgError as err:
         raise np.linalg.LinAlgError(f"forward EKF pass: {err}{likely_keys(settings, err)}") from err
-    _finite_or_fail(fwd, "forward EKF pass", settings)
+    finite_or_fail(fwd, "forward EKF pass", settings)
     yield fwd
     try:
         sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
     except np.linalg.LinAlgError as err:
         raise np.linalg.LinAlgError(f"RTS smoother: {err}{likely_keys(settings, err)}") from err
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
-    _finite_or_fail(smo, "RTS smoother", settings, fwd)
+    finite_or_fail(smo, "RTS smoother", settings, fwd)
     yield smo
     st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))
     yield st
     yield DropResult(tel, init, fwd, smo, st, summarize(settings, tel, fwd, smo, st))
 
 
-def _finite_or_fail(stage: FilterStage, what: str, settings: DropSettings, fwd: FilterStage | None = None) -> None:
+def finite_or_fail(stage: FilterStage, what: str, settings: DropSettings, fwd: FilterStage | None = None) -> None:
     """Raise :class:`numpy.linalg.LinAlgError` (the runner's numerical failure, exit 4) when the
     ``stage``'s state or covariance is not finite, naming the stage, the first bad step and time [s]
     and the sensor whose innovations blew up first (the likely culprit: its file's columns)."""

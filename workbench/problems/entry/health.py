@@ -177,7 +177,7 @@ def radar_velocity_axes_check(v_out_G: np.ndarray, v_pred_G: np.ndarray, file: s
     :data:`RADAR_VELOCITY_MISMATCH` and a swap or sign flip of the columns (a signed permutation)
     fits better by a factor 1/0.6 or more: named in the message.  The descent axis (−Z_G, tens of
     m/s) is what it can tell; horizontal components of a few m/s are below the prediction's drift."""
-    from workbench.problems.entry.telemetry import _signed_permutations
+    from workbench.problems.entry.telemetry import signed_permutations
 
     name = "geometry.radar_velocity_axes"
     z, y = np.asarray(v_out_G, float), np.asarray(v_pred_G, float)
@@ -188,7 +188,7 @@ def radar_velocity_axes_check(v_out_G: np.ndarray, v_pred_G: np.ndarray, file: s
     scale = float(np.median(np.linalg.norm(y, axis=1)))
     mis = float(np.median(np.linalg.norm(z - y, axis=1))) / scale
     best, perm = min(
-        (float(np.median(np.linalg.norm(z @ M.T - y, axis=1))) / scale, nm) for M, nm in _signed_permutations("v_out_")
+        (float(np.median(np.linalg.norm(z @ M.T - y, axis=1))) / scale, nm) for M, nm in signed_permutations("v_out_")
     )
     what = (
         f"the radar velocity ({file}, v_out_*) against the inertial-only prediction: median difference {mis:.3g}× "

@@ -73,6 +73,7 @@ from workbench.problems.entry.telemetry import (
 from workbench.problems.entry.winds import estimate_winds
 
 __all__ = [
+    "inertial_velocity_out",
     "NominalIntegration",
     "EntryResult",
     "imu_error_process_noise",
@@ -346,12 +347,12 @@ def _stages(cfg, vehicle, r_ground, paths, tm, nom, *, scheduler, members) -> It
         ),
     )
     lock = radar_first_lock_check(filt.innovations.get("slant_out"), str(paths["rda_out"]))
-    vaxes = radar_velocity_axes_check(*_inertial_velocity_out(tm, imu, init), str(paths["rda_out"]))
+    vaxes = radar_velocity_axes_check(*inertial_velocity_out(tm, imu, init), str(paths["rda_out"]))
     summary["health"] = entry_health(tm, imu, filt, atm, r_ground, extra=[drag, lock, vaxes, acc])
     yield EntryResult(tm, imu, nomi, disp, filt, atm, winds, vehicle, dict(tm.events), summary, init)
 
 
-def _inertial_velocity_out(tm, imu, init) -> tuple[np.ndarray, np.ndarray]:
+def inertial_velocity_out(tm, imu, init) -> tuple[np.ndarray, np.ndarray]:
     """The radar's valid velocity-out samples inside the IMU data (k, 3) [m/s, G] and their
     prediction from the inertial trajectory alone (the smoother's start state ``init`` integrated
     through ``imu`` without radar updates, ``models.radar.velocity_out_model``), (k, 3)."""

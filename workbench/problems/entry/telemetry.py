@@ -63,6 +63,7 @@ from workbench.io.units import UNITS, canonical_unit, likely_unit
 from workbench.problems.entry.site import R_MOLA
 
 __all__ = [
+    "signed_permutations",
     "STREAMS",
     "CSV_STREAMS",
     "TelemetryChecks",
@@ -504,7 +505,7 @@ def rate_problems(
     return errors, warns
 
 
-def _signed_permutations(prefix: str) -> list[tuple[np.ndarray, str]]:
+def signed_permutations(prefix: str) -> list[tuple[np.ndarray, str]]:
     """The 48 signed permutations ``M`` (3, 3) (identity first) with the column names they read,
     e.g. ``"(a_y, -a_x, a_z)"`` for ``prefix`` ``"a_"``."""
     import itertools
@@ -544,7 +545,7 @@ def _axis_problem(meas: np.ndarray, ref: np.ndarray, file, columns: str, prefix:
         return None
     fits = [
         (float(np.median(np.linalg.norm(meas @ M.T - ref, axis=1))) / scale, nm)
-        for M, nm in _signed_permutations(prefix)
+        for M, nm in signed_permutations(prefix)
     ]
     best, name = min(fits)
     hint = (
