@@ -4,7 +4,10 @@ applied to the FILES of a user's data folder, run through the real pipeline, and
 same data unmutated.
 
     python tests/benchmarks/bench_fuzz.py [--label after] [--quick] [--problems droptest,rocket]
-                                          [--jobs 2] [--merge] [--input-level]
+                                          [--jobs 2] [--fresh] [--input-level | --seeds N]
+
+Writes ``docs/results/bench_fuzz_users.json`` (the other labels already there are kept unless
+``--fresh``: ``before`` is main before the issue-26 checks).
 
 Bases: ``workbench init <scenario>`` folders (droptest, droptest_ranging, schiaparelli, msl_meads,
 post2_j2, post2_huygens; seed 1) — a scenario TOML naming its telemetry folder, exactly what a user
@@ -24,6 +27,8 @@ Outcome of a mutation:
   (σ_c = sqrt(σ_clean² + σ_mut²)): ``SILENT`` (verdict OK), ``UNDERRATED`` (WARNING), ``FLAGGED``
   (ERROR); otherwise ``ACCURATE`` (``raised``: its verdict is worse than the clean run's, a false
   alarm that is counted), or ``UNDEFINED`` when a headline is reported undefined (None/NaN).
+  ``wrong_nothing_new`` counts the SILENT/UNDERRATED runs whose non-OK checks are all among the
+  clean run's (a WARNING that a good run also has tells the user nothing).
 
 Headlines: drop test max stroke and restitution; entry height above ground at the end of the data;
 MEADS the last EKF pass's α, β, q∞ at the clean run's peak q; post2 every estimated state at the end
@@ -407,7 +412,18 @@ def tables(rows: list[dict]) -> dict:
         c[r["outcome"]] += 1
         if r["outcome"] == "ACCURATE" and r.get("raised"):
             c["false_alarm"] = c.get("false_alarm", 0) + 1
+        if r["outcome"] in ("SILENT", "UNDERRATED") and not r.get("new_checks"):
+            c["wrong_nothing_new"] = c.get("wrong_nothing_new", 0) + 1
     return by
+
+
+def totals_by(rows: list[dict], key: str) -> dict:
+    """{problem or class: {outcome: n}} (``key`` "problem" or "class")."""
+    out: dict = {}
+    for r in rows:
+        c = out.setdefault(r[key], dict.fromkeys(OUTCOMES, 0))
+        c[r["outcome"]] += 1
+    return out
 
 
 def _print_table(rows: list[dict], wall: float) -> None:
@@ -490,9 +506,10 @@ def run(
         clean_recs = pool.map(clean_tasks)
         clean = {}
         for b, rec in zip(bases, clean_recs, strict=True):
-            if rec.get("ok"):
-                rec["headline"] = {k: v for k, v in rec["headline"].items()}
             clean[b] = rec
+            if rows_log is not None:
+                with open(rows_log, "a", encoding="utf-8") as f:
+                    f.write(json.dumps({"clean_base": b, **_clean_record(rec)}) + "\n")
             if verbose:
                 print(
                     f"clean {b}: {rec.get('verdict') or rec.get('message')} ({rec.get('wall_s', 0):.1f} s)", flush=True
@@ -526,11 +543,29 @@ def run(
     finally:
         pool.close()
     wall = time.perf_counter() - t0
-    clean_out = {
-        b: {k: rec.get(k) for k in ("ok", "verdict", "fired", "headline", "message", "wall_s")}
-        for b, rec in clean.items()
-    }
-    return rows, clean_out, wall
+    return rows, {b: _clean_record(rec) for b, rec in clean.items()}, wall
+
+
+def _clean_record(rec: dict) -> dict:
+    """The part of a clean run's record kept in the JSON."""
+    return {k: rec.get(k) for k in ("ok", "verdict", "fired", "headline", "extra", "message", "wall_s")}
+
+
+def combine(logs: list[Path]) -> tuple[list[dict], dict]:
+    """(rows, clean records) read back from ``--rows-log`` files (e.g. a run stopped early and the
+    runs that completed its problems); a later row of the same mutation replaces an earlier one."""
+    rows: dict[tuple, dict] = {}
+    clean: dict = {}
+    for p in logs:
+        for line in Path(p).read_text(encoding="utf-8").splitlines():
+            if not line.strip():
+                continue
+            r = json.loads(line)
+            if "clean_base" in r:
+                clean[r.pop("clean_base")] = r
+            else:
+                rows[(r["problem"], r["class"], r["what"])] = r
+    return list(rows.values()), clean
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -549,11 +584,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--timeout", type=float, default=600.0, help="per run [s]")
     ap.add_argument("--rows-log", default=None, help="append each outcome row to this JSON-lines file as it comes")
-    ap.add_argument("--merge", action="store_true", help="keep the other labels already in --out")
+    ap.add_argument("--fresh", action="store_true", help="drop the other labels already in --out")
     ap.add_argument(
         "--input-level", action="store_true", help="also the issue-12 input-level table (tests/support/fuzz.py)"
     )
-    ap.add_argument("--out", default=str(HERE.parents[1] / "docs" / "results" / "bench_fuzz.json"))
+    ap.add_argument("--seeds", type=int, default=0, help="seeds of the input-level table (implies --input-level)")
+    ap.add_argument(
+        "--combine", default="", help="comma-separated --rows-log files: write the JSON from them, run nothing"
+    )
+    ap.add_argument("--wall", type=float, default=None, help="with --combine: the wall time to record [s]")
+    ap.add_argument("--out", default=str(HERE.parents[1] / "docs" / "results" / "bench_fuzz_users.json"))
     args = ap.parse_args(argv)
     muts = fm.catalogue(args.seed, flights=flights_available())
     if args.problems:
@@ -564,27 +604,46 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         muts = fm.quick(muts, 2, args.seed)
     print(f"{len(muts)} mutations", flush=True)
-    with tempfile.TemporaryDirectory(prefix="bench_fuzz_") as tmp:
-        rows_log = Path(args.rows_log) if args.rows_log else None
-        rows, clean, wall = run(muts, Path(tmp), args.jobs, args.timeout, rows_log=rows_log)
-        legacy = _input_level(Path(tmp)) if args.input_level else None
-    _print_table(rows, wall)
+    if args.combine:
+        rows, clean = combine([Path(p) for p in args.combine.split(",")])
+        order = {m.key: i for i, m in enumerate(muts)}
+        rows = sorted(
+            (r for r in rows if f"{r['problem']}/{r['class']}/{r['what']}" in order),
+            key=lambda r: order[f"{r['problem']}/{r['class']}/{r['what']}"],
+        )
+        wall, legacy = args.wall, None
+    else:
+        with tempfile.TemporaryDirectory(prefix="bench_fuzz_") as tmp:
+            rows_log = Path(args.rows_log) if args.rows_log else None
+            rows, clean, wall = run(muts, Path(tmp), args.jobs, args.timeout, rows_log=rows_log)
+            seeds = args.seeds or (1 if args.input_level else 0)
+            legacy = _input_level(Path(tmp), seeds) if seeds else None
+    _print_table(rows, wall or 0.0)
     tot = Counter(r["outcome"] for r in rows)
     out = Path(args.out)
     data = {}
-    if args.merge and out.exists():
+    if not args.fresh and out.exists():
         old = json.loads(out.read_text(encoding="utf-8")).get("results", {})
         data = {k: v for k, v in old.items() if isinstance(v, dict) and "rows" in v}
     data[args.label] = {
         "code": args.label if args.code is None else args.code,
         "mutations": len(rows),
+        "catalogue": len(muts),
         "quick": args.quick,
         "seed": args.seed,
         "jobs": args.jobs,
         "wall_s": wall,
-        "totals": {o: tot.get(o, 0) for o in OUTCOMES}
-        | {"false_alarm": sum(r["outcome"] == "ACCURATE" and bool(r.get("raised")) for r in rows)},
+        "totals": {"runs": len(rows)}
+        | {o: tot.get(o, 0) for o in OUTCOMES}
+        | {
+            "false_alarm": sum(r["outcome"] == "ACCURATE" and bool(r.get("raised")) for r in rows),
+            "wrong_nothing_new": sum(
+                r["outcome"] in ("SILENT", "UNDERRATED") and not r.get("new_checks") for r in rows
+            ),
+        },
         "table": tables(rows),
+        "by_problem": totals_by(rows, "problem"),
+        "by_class": totals_by(rows, "class"),
         "clean": clean,
         "rows": rows,
     }
@@ -595,8 +654,8 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _input_level(work: Path) -> dict:
-    """The issue-12 input-level table (readers, validation and input health; one seed)."""
+def _input_level(work: Path, seeds: int = 1) -> dict:
+    """The issue-12 input-level table (readers, validation and input health) over ``seeds``."""
     import importlib.util
 
     import fuzz
@@ -619,8 +678,8 @@ def _input_level(work: Path) -> dict:
         fuzz.post2_target(mod.post2_files(work / "legacy" / "post2_clean"), work / "legacy"),
     ]
     t0 = time.perf_counter()
-    results = fuzz.run_all(targets, range(1), work / "legacy" / "cases")
-    return {"wall_s": time.perf_counter() - t0, "table": fuzz.table(results)}
+    results = fuzz.run_all(targets, range(seeds), work / "legacy" / "cases")
+    return {"seeds": seeds, "wall_s": time.perf_counter() - t0, "table": fuzz.table(results)}
 
 
 if __name__ == "__main__":
