@@ -15,7 +15,8 @@ edits — plus a drop with ranging whose IMU went through a zero-phase filter, a
 importer (``workbench import airbrakes``) on the committed excerpt of flight 1 and, when
 ``$EDL_FLIGHT_DATA`` holds them (``tests/support/flight_data.py``), the three full FIRM logs.  The
 mutations are ``tests/benchmarks/fuzz_mutations.py``.  Each mutated folder is run like the clean one
-(the scenario: read, validated, reconstructed, summarised, health judged as ``runner.evaluate`` does;
+(the scenario: read, validated, reconstructed, summarised with its key moments, health judged, as
+``workbench run`` does without writing the recording;
 the rocket: the importer CLI, then the problem file it wrote), in worker processes with a time limit.
 
 Outcome of a mutation:
@@ -196,15 +197,28 @@ def _apogee(folder: Path, result) -> tuple[list, list]:
 
 
 def _evaluate(scenario: Path):
-    """(summary, result) of a user scenario, as ``runner.evaluate`` makes it (health judged)."""
+    """(summary, result) of a user scenario as ``workbench run`` makes it, without the recording:
+    the stages (a numerical failure named with the scenario and the stage, as the runner does), the
+    summary with its key moments, the health judged (``runner.judge_health``)."""
+    import numpy as np
+
+    from workbench.io.moments import ordered
     from workbench.problems.base import RunOptions
-    from workbench.problems.runner import judge_health, prepare
+    from workbench.problems.runner import NumericalFailure, judge_health, prepare
 
     sc, problem, settings = prepare(scenario)
-    result = None
-    for stage in problem.reconstruct(settings, problem.telemetry_files(settings), RunOptions(seed=1)):
-        result = stage
+    result, last = None, "start"
+    try:
+        for stage in problem.reconstruct(settings, problem.telemetry_files(settings), RunOptions(seed=1)):
+            result, last = stage, type(stage).__name__
+    except NumericalFailure:
+        raise
+    except np.linalg.LinAlgError as err:
+        raise NumericalFailure(
+            f"{sc.path}: the {problem.title} reconstruction failed numerically in the stage after {last}: {err}"
+        ) from err
     summary = problem.summary(result)
+    summary["key_moments"] = [m.to_dict() for m in ordered(problem.key_moments(result) or [])]
     judge_health(problem, summary, calibrated=True)
     return summary, result
 
@@ -374,6 +388,8 @@ def score(m: fm.Mutation, clean: dict, rec: dict) -> dict:
             row["outcome"] = "TRACEBACK"
         return row
     row["verdict"] = rec["verdict"]
+    if rec.get("extra"):
+        row["extra"] = rec["extra"]  # e.g. the entry's end time: a shorter file ends elsewhere
     clean_fired = set(clean.get("fired", []))
     row["new_checks"] = [c for c in rec["fired"] if c not in clean_fired]
     z_max, undefined, zs = 0.0, [], {}
@@ -582,6 +598,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--classes", default="", help="comma-separated mutation classes")
     ap.add_argument("--seed", type=int, default=0, help="draws which columns/axes each mutation family takes")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--reverse", action="store_true", help="each problem's mutations in reverse order")
     ap.add_argument("--timeout", type=float, default=600.0, help="per run [s]")
     ap.add_argument("--rows-log", default=None, help="append each outcome row to this JSON-lines file as it comes")
     ap.add_argument("--fresh", action="store_true", help="drop the other labels already in --out")
@@ -603,6 +620,8 @@ def main(argv: list[str] | None = None) -> int:
         muts = [m for m in muts if m.cls in set(args.classes.split(","))]
     if args.quick:
         muts = fm.quick(muts, 2, args.seed)
+    if args.reverse:
+        muts = muts[::-1]
     print(f"{len(muts)} mutations", flush=True)
     if args.combine:
         rows, clean = combine([Path(p) for p in args.combine.split(",")])
