@@ -231,6 +231,22 @@ def toml_edit(rel: str, table: str, key: str, f: Callable) -> Callable[[Path], N
     return edit
 
 
+def declared_instead_of_detected(rel: str, table: str, value: float) -> Callable[[Path], None]:
+    """An event whose time the scenario reads from the data (``detect_in``) declared by hand as
+    ``value`` [s] instead (the ``detect_in`` line replaced by ``value = ...``), as a user who copied
+    a time from a plot does."""
+
+    def edit(folder: Path) -> None:
+        p = folder / rel
+        lines = p.read_text(encoding="utf-8").split("\n")
+        head = next(i for i, s in enumerate(lines) if s.strip() == f"[{table}]")
+        k = next(i for i in range(head + 1, len(lines)) if re.match(r"^\s*detect_in\s*=", lines[i]))
+        lines[k] = f"value = {float(value)!r}"
+        p.write_text("\n".join(lines), encoding="utf-8")
+
+    return edit
+
+
 def vec(f: Callable[[np.ndarray], np.ndarray]) -> Callable:
     """A TOML-value function applying ``f`` to a vector value (returns a list)."""
     return lambda v: [float(x) for x in f(np.asarray(v, float))]
@@ -965,8 +981,8 @@ def _huygens(rng: np.random.Generator) -> list[Mutation]:
     )
     m(
         "timing",
-        "main chute event 5 s late",
-        toml_edit(sc, "events.main_chute", "value", lambda v: v + 5.0),
+        "main chute event declared by hand 5 s late",
+        declared_instead_of_detected(sc, "events.main_chute", 268.6 + 5.0),
         sc,
         "value",
     )
