@@ -277,8 +277,9 @@ def test_parameter_ending_at_its_bound_is_an_error(tmp_path):
         (lambda ls: [ln for ln in ls if ln[:2] not in ("F,", "L,")], "state_letter", "no phase 'F'"),
         (lambda ls: _map(ls, MAG, lambda v: [0.0, 0.0, 0.0]), MAG[0], "dead or missing magnetometer"),
         (lambda ls: _map(ls, ACC, lambda v: [v[0], 0.0, v[2]]), ACC[0], "y +0"),
+        (lambda ls: _map(ls, GYRO, lambda v: [v[0], v[1] * 1000.0, v[2]]), GYRO[1], "gyro range"),
     ],
-    ids=["accel_m_s2", "accel_mg", "time_ms", "ends_in_coast", "magnetometer_zero", "accel_axis_dead"],
+    ids=["accel_m_s2", "accel_mg", "time_ms", "ends_in_coast", "magnetometer_zero", "accel_axis_dead", "rate_x1000"],
 )
 def test_former_tracebacks_are_located_input_errors(tmp_path, capsys, mutation, column, words):
     log = _log(tmp_path, mutation(_lines()))

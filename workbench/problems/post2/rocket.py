@@ -480,7 +480,10 @@ def initial_ca_multiplier(t, f_B, t0: float, v_rel: float, rho: float, meta, cli
     if not np.any(sel) or not v_rel > 1.0:
         return 1.0
     a = float(np.mean(np.linalg.norm(f_B[sel], axis=1)))
-    m = a * meta.mass / (meta.cd * meta.area * 0.5 * rho * v_rel**2)
+    den = meta.cd * meta.area * 0.5 * rho * v_rel**2
+    if not (np.isfinite(den) and den > 0.0):  # no air at the burnout state (an absurd trajectory)
+        return 1.0 if clip else float("nan")
+    m = a * meta.mass / den
     return float(np.clip(m, 0.3, 5.5)) if clip else float(m)
 
 

@@ -228,6 +228,7 @@ def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
     arr = {k: v[rows] for k, v in arr.items()}
     t = arr["t"]
     _check_units(fname, t, np.asarray(letters)[rows], np.column_stack([arr["ax"], arr["ay"], arr["az"]]), rows)
+    _check_rates(fname, np.column_stack([arr["wx"], arr["wy"], arr["wz"]]), rows)
     q = q[rows]
     qn = qn[rows]
     letters_a = np.asarray(letters)[rows]
@@ -255,6 +256,9 @@ MAX_MEDIAN_STEP_S = 1.0
 MIN_FIELD_T = 1e-6
 #: the standby specific force is 1 g: its median outside this band [g] is a unit error
 STANDBY_G_BAND = (0.8, 1.2)
+#: no MEMS gyro of a flight computer measures beyond ±4000 deg/s (the widest full scale sold): a rate
+#: above this [rad/s] is a unit or scale error, not a measurement
+MAX_RATE_RAD_S = float(np.radians(5000.0))
 
 
 def _check_units(fname: str, t: np.ndarray, letters: np.ndarray, f: np.ndarray, rows: np.ndarray) -> None:
@@ -290,6 +294,26 @@ def _check_units(fname: str, t: np.ndarray, letters: np.ndarray, f: np.ndarray, 
                 column="raw_acceleration_x_gs",
                 row=int(rows[standby[0]]) + 1,
             )
+
+
+def _check_rates(fname: str, w: np.ndarray, rows: np.ndarray) -> None:
+    """Refuse a log whose angular rates ``w`` (n, 3) [rad/s, as read under the deg/s column names]
+    exceed MAX_RATE_RAD_S anywhere: beyond any flight computer's gyro range, a column in other units
+    (mdeg/s) or scaled.  The message names the column, the first such row and the other columns'
+    largest rate for comparison; ``rows`` (n,) the 0-based data rows of ``w``."""
+    peak = np.max(np.abs(w), axis=0) if w.size else np.zeros(3)
+    for i in np.flatnonzero(peak > MAX_RATE_RAD_S):
+        col = f"raw_angular_rate_{'xyz'[i]}_deg_per_s"
+        k = int(np.flatnonzero(np.abs(w[:, i]) > MAX_RATE_RAD_S)[0])
+        others = ", ".join(f"{'xyz'[j]} {np.degrees(peak[j]):.4g}" for j in range(3) if j != i)
+        raise TelemetryError.single(
+            fname,
+            f"angular rate {np.degrees(w[k, i]):.6g} deg/s: beyond any flight computer's gyro range "
+            f"(±{np.degrees(MAX_RATE_RAD_S):.0f} deg/s); the largest of the other axes: {others} deg/s — the "
+            "column looks scaled or in other units (mdeg/s?)",
+            column=col,
+            row=int(rows[k]) + 1,
+        )
 
 
 def find_gaps(t: np.ndarray, letters: np.ndarray, gap_factor: float = 3.0) -> tuple[Gap, ...]:
