@@ -204,9 +204,12 @@ def _check_gravity_units(path: Path, tel, column: str, cfg: Post2Settings) -> No
     unit = tel.units[column]
     likely = likely_unit(ratio, unit) or likely_unit(ratio / 0.9, unit)
     why = f"the values look like [{likely}], not [{unit}]" if likely else "wrong unit or body?"
+    src = f"[environment] gm_m3_s2 = {float(gm):.6g} / reference_radius_m = {float(radius):.6g}² in {cfg.run.path}"
+    if g_surf < 0.1 or g_surf > 300.0:  # no body's surface gravity: the scenario's constants are the suspects
+        why = "that is no planet's or moon's surface gravity: GM in km³/s² or the radius in km?"
     raise TelemetryError.single(
         path,
-        f"median gravity {ratio:.4g}× the surface gravity {g_surf:.4g} m/s² of [environment]: {why}",
+        f"median gravity {ratio:.4g}× the surface gravity {g_surf:.4g} m/s² of {src}: {why}",
         column=f"{column} [{unit}]",
     )
 

@@ -257,6 +257,24 @@ def _mag_gyro_check(t, w_B, mag_B, bias, k0: int, t_end: float, log_name: str) -
     return _check("units.gyro", ERROR, ratio, MAG_GYRO_RATIO_MAX, msg)
 
 
+def _coordinate_mixup(meta, d_max: float) -> str:
+    """What likely went wrong when the landed coordinates lie more than ``d_max`` [m] from the launch
+    coordinates: the first of the usual mix-ups (latitude and longitude swapped, a sign dropped, on
+    either pair of ``metadata.json``; a sign cannot tell which pair) that brings them within ``d_max``;
+    else both pairs named."""
+    la, lo, La, Lo = meta.launch_lat_deg, meta.launch_lon_deg, meta.landed_lat_deg, meta.landed_lon_deg
+    fixes = (
+        ("launch_site.launch_coordinates: latitude and longitude swapped", (lo, la, La, Lo)),
+        ("flight_data.landed_coordinates: latitude and longitude swapped", (la, lo, Lo, La)),
+        ("the longitude's sign of launch_site.launch_coordinates or flight_data.landed_coordinates", (la, -lo, La, Lo)),
+        ("the latitude's sign of launch_site.launch_coordinates or flight_data.landed_coordinates", (-la, lo, La, Lo)),
+    )
+    for what, (a, b, c, e) in fixes:
+        if abs(a) <= 90.0 and abs(c) <= 90.0 and _great_circle_m(a, b, c, e) <= d_max:
+            return f"in the metadata, {what} looks wrong (corrected, the landing is within {d_max / 1000:.0f} km)"
+    return "launch_site.launch_coordinates or flight_data.landed_coordinates of the metadata are wrong"
+
+
 def site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Check]:
     """The launch coordinates against the landed ones, the dipole field against the measured field and
     the declared inclination (geometry.site, units.magnetometer, physics.magnetic_dip)."""
@@ -267,16 +285,7 @@ def site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Ch
     if d <= d_max:
         out.append(_check("geometry.landing_distance", OK, d, d_max, f"landed {d:.0f} m from the pad"))
     else:
-        d_sw = _great_circle_m(lon, lat, meta.landed_lat_deg, meta.landed_lon_deg)
-        d_sw2 = _great_circle_m(lat, lon, meta.landed_lon_deg, meta.landed_lat_deg)
-        why = "the launch or landed coordinates are wrong"
-        if d_sw <= d_max:
-            why = (
-                f"site latitude and longitude may be swapped (launch_coordinates: swapped, the pad is {d_sw:.0f} m "
-                "from the landing)"
-            )
-        elif d_sw2 <= d_max:
-            why = "the landed_coordinates' latitude and longitude may be swapped"
+        why = _coordinate_mixup(meta, d_max)
         msg = (
             f"the landing point is {d / 1000:.0f} km from the launch coordinates (at most {d_max / 1000:.0f} km): {why}"
         )
