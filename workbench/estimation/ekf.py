@@ -513,7 +513,10 @@ def _update(
     w, _ = _potrs(c, y, lower=1)
     nis = float(y @ w)
     if not math.isfinite(nis):
-        raise ValueError("non-finite innovation (check z, h(x) and R)")
+        raise np.linalg.LinAlgError(
+            "non-finite innovation (check z, h(x) and R): the state diverged, or this measurement's values "
+            "are not in the unit its file declares"
+        )
     Kt, _ = _potrs(c, PHt.T, lower=1)
     K = Kt.T
     if gain_projector is not None:

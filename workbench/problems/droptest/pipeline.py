@@ -460,8 +460,7 @@ def _forward_compiled(
                 if status == 1
                 else "non-finite innovation (check z, h(x) and R)"
             )
-            exc = np.linalg.LinAlgError if status == 1 else ValueError
-            raise exc(f"step {k_err} (t={t[k_err]} s), measurement {names[ch]!r}: {what}")
+            raise np.linalg.LinAlgError(f"step {k_err} (t={t[k_err]} s), measurement {names[ch]!r}: {what}")
         if k_b in ranging:
             meas = ranging[k_b]
             for i, m in enumerate(meas):

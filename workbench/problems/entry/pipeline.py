@@ -240,8 +240,8 @@ def _stages(cfg, vehicle, r_ground, paths, tm, nom, *, scheduler, members) -> It
         raise ScenarioError(
             Path(paths["initial_state"]),
             "initial_state.t0_s",
-            f"{nom.t0:.3f} s, but the IMU data start at {float(imu.t[0]):.3f} s: the state must be given at the first "
-            "sample with an acceleration",
+            f"{nom.t0:.3f} s, but the IMU data of {Path(paths['gnc']).name} start at {float(imu.t[0]):.3f} s: the "
+            "state must be given at the first sample with an acceleration (or that file's times are shifted)",
         )
     bridge_mode = cfg.reconstruction.bridge_mode
     P0 = reconstruction_P0(cfg.reconstruction)

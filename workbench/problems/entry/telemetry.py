@@ -944,5 +944,6 @@ def check_event_span(tm: EntryTelemetry, paths: Mapping[str, os.PathLike]) -> No
             raise ScenarioError(
                 Path(paths["events"]),
                 ev,
-                f"at {tm.events[ev]:.3f} s, outside the GNC data {tm.t_gnc[0]:.3f}–{tm.t_gnc[-1]:.3f} s",
+                f"at {tm.events[ev]:.3f} s, outside the GNC data {tm.t_gnc[0]:.3f}–{tm.t_gnc[-1]:.3f} s of "
+                f"{Path(paths['gnc']).name} (is that file cut short, or are the event times on another clock?)",
             )

@@ -224,7 +224,8 @@ def read_observations(cfg: Post2Settings, telemetry) -> ObservationData:
         path = Path(telemetry[spec.name])
         tel = read_telemetry(path, required={c: _kind(d.file_unit or d.unit) for c in d.components})
         t = np.asarray(tel.time, float)
-        outside = np.flatnonzero((t < cfg.t_start - 1e-9) | (t > cfg.t_end + 1e-9))
+        # to 1 µs: a time written to a CSV with six decimals may round past the span's end
+        outside = np.flatnonzero((t < cfg.t_start - 1e-6) | (t > cfg.t_end + 1e-6))
         if outside.size:
             raise ScenarioError(
                 cfg.run.path,
