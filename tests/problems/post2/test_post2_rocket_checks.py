@@ -158,14 +158,20 @@ def test_launch_latitude_and_longitude_swapped(tmp_path):
 
     c = _import(tmp_path, edit=lambda e: swap(e["launch_site"]["launch_coordinates"]))
     assert c["geometry.landing_distance"]["status"] == ERROR
-    assert "launch_coordinates: latitude and longitude swapped" in c["geometry.landing_distance"]["message"]
+    assert "launch_site.launch_coordinates (the declared inclination disagrees" in c["geometry.landing_distance"]["message"]
+
+    def landed(e):  # the landing's pair swapped: the launch site agrees with the declared inclination
+        swap(e["flight_data"]["landed_coordinates"])
+
+    msg = _import(tmp_path / "landed", edit=landed)["geometry.landing_distance"]["message"]
+    assert "flight_data.landed_coordinates (the launch site agrees" in msg and "swapped" in msg
 
     def west(e):  # the landing's longitude written without its sign (W as +)
         e["flight_data"]["landed_coordinates"]["longitude"] *= -1.0
 
     c = _import(tmp_path / "west", edit=west)
     msg = c["geometry.landing_distance"]["message"]
-    assert "the longitude's sign of launch_site.launch_coordinates or flight_data.landed_coordinates" in msg
+    assert "the longitude's sign of flight_data.landed_coordinates" in msg
 
     def both(e):  # the landing swapped too: the distance agrees, the declared inclination does not
         swap(e["launch_site"]["launch_coordinates"])

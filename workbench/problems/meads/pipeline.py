@@ -440,11 +440,17 @@ def fit_with_failures(
 
 
 def plausibility(
-    fit: AirDataFit, nav: Navigation, vehicle: FadsVehicle, est: EstimatorSettings, tel: MeadsTelemetry
+    fit: AirDataFit,
+    nav: Navigation,
+    vehicle: FadsVehicle,
+    est: EstimatorSettings,
+    tel: MeadsTelemetry,
+    vehicle_file: Path | None = None,
 ) -> float:
     """Median ratio of the pressures' q∞ to the IMU drag's ``m |f| / (C_D S)`` where the latter
     exceeds the objectives' threshold (or 100 Pa); raises a TelemetryError naming the pressure
-    file and its columns/units when outside ``[1/F, F]``."""
+    file and its columns/units, and the vehicle file's ``mass_kg``, ``ref_area_m2`` and
+    ``drag_coefficient`` (the other side of the ratio), when outside ``[1/F, F]``."""
     q_drag = vehicle.mass * nav.f_mag / (vehicle.drag_coefficient * vehicle.ref_area)
     sel = q_drag > est.min_qbar_pa
     if sel.sum() < 5:
@@ -460,7 +466,10 @@ def plausibility(
             f"implausible pressures: the dynamic pressure fitted to them is {ratio:.3g} x the one implied by the "
             f"IMU drag (m|f|/(C_D S), median over {int(sel.sum())} samples; allowed 1/{F:g}-{F:g}). A unit error? "
             f"(kPa written as Pa gives 1e-3; an accelerometer in g written as m/s² gives ~9.8, see {tel.imu_file}). "
-            f"Columns as read: {units}. Nothing is published.",
+            f"Columns as read: {units}. Or the drag side: mass_kg = {vehicle.mass:g}, ref_area_m2 = "
+            f"{vehicle.ref_area:g}, drag_coefficient = {vehicle.drag_coefficient:g} in "
+            f"{Path(vehicle_file).name if vehicle_file else 'the vehicle file'} (a mass in lb, an area in ft²?). "
+            "Nothing is published.",
             column=", ".join(tel.ports),
         )
     return ratio
@@ -521,7 +530,7 @@ def reconstruct(settings: MeadsSettings, telemetry: Mapping[str, Path]) -> Itera
     yield lag
     ports = list(tel.ports)
     first, fit, mask, failures, hi = fit_with_failures(tel.t_p, lag.p, vehicle, nav, est, ports, tel.pressure_file)
-    ratio = plausibility(first, nav, vehicle, est, tel)
+    ratio = plausibility(first, nav, vehicle, est, tel, cfg.vehicle_file)
     alt_model = "table" if est.model == "newtonian" else "newtonian"
     alt_est = replace(est, model=alt_model, fixed_r=0.0)
     alt, _ = reduce_pressures(tel.t_p, lag.p, vehicle, nav.mach_inertial, alt_est, mask=mask)

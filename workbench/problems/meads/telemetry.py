@@ -279,8 +279,9 @@ def check_time_spans(pressure_file: str, t_p: np.ndarray, imu_file: str, t_imu: 
         raise TelemetryError.single(
             bad,
             f"the time column spans {span:.6g} s against {other:.6g} s of the other stream "
+            f"{Path(imu_file if bad == pressure_file else pressure_file).name} "
             f"({'pressures' if bad == pressure_file else 'IMU'} {f:.4g}× longer){hint}; both streams must cover the "
-            "same flight on the same time base",
+            "same flight on the same time base (is one file cut short?)",
             column="time [s]",
         )
     inside = (t_p >= t_imu[0] - 1.0) & (t_p <= t_imu[-1] + 1.0)
