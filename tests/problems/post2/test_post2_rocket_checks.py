@@ -158,7 +158,8 @@ def test_launch_latitude_and_longitude_swapped(tmp_path):
 
     c = _import(tmp_path, edit=lambda e: swap(e["launch_site"]["launch_coordinates"]))
     assert c["geometry.landing_distance"]["status"] == ERROR
-    assert "launch_site.launch_coordinates (the declared inclination disagrees" in c["geometry.landing_distance"]["message"]
+    msg = c["geometry.landing_distance"]["message"]
+    assert "launch_site.launch_coordinates (the declared inclination disagrees" in msg
 
     def landed(e):  # the landing's pair swapped: the launch site agrees with the declared inclination
         swap(e["flight_data"]["landed_coordinates"])
