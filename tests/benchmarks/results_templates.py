@@ -404,6 +404,18 @@ README_BLOCKS["headline"] = f"""\
 - **Never silently wrong**: {{{{bench_fuzz:results.after.totals.runs}}}} mutated user inputs (drop test, entry and POST2 files):
   SILENT {{{{bench_fuzz:results.before.totals.SILENT}}}} → {{{{bench_fuzz:results.after.totals.SILENT}}}}, TRACEBACK
   {{{{bench_fuzz:results.before.totals.TRACEBACK}}}} → {{{{bench_fuzz:results.after.totals.TRACEBACK}}}}.
+  The mistakes users make ({{{{bench_fuzz_users:results.after.totals.runs}}}} edits of user folders: axis swaps, sign flips,
+  plausible units, geometry, truncation, timing, metadata; each run compared with the same data unmutated, "wrong" = off by
+  more than 3σ of the two runs' combined σ; `bench_fuzz.py --label after`), before → after the health checks of issue #26:
+  traceback {{{{bench_fuzz_users:results.before.totals.TRACEBACK}}}} → {{{{bench_fuzz_users:results.after.totals.TRACEBACK}}}},
+  wrong with verdict OK (SILENT) {{{{bench_fuzz_users:results.before.totals.SILENT}}}} → {{{{bench_fuzz_users:results.after.totals.SILENT}}}},
+  wrong with no more than the clean run's verdict (UNDERRATED) {{{{bench_fuzz_users:results.before.totals.UNDERRATED}}}} →
+  {{{{bench_fuzz_users:results.after.totals.UNDERRATED}}}}, an error that names no file, column or key
+  {{{{bench_fuzz_users:results.before.totals.UNCLEAR_ERROR}}}} → {{{{bench_fuzz_users:results.after.totals.UNCLEAR_ERROR}}}};
+  a clear input error {{{{bench_fuzz_users:results.after.totals.CLEAR_ERROR}}}}, wrong and flagged
+  {{{{bench_fuzz_users:results.after.totals.FLAGGED}}}}, still right {{{{bench_fuzz_users:results.after.totals.ACCURATE}}}},
+  outputs undefined {{{{bench_fuzz_users:results.after.totals.UNDEFINED}}}} ({{{{bench_fuzz_users:results.after.wall_s|mmss}}}} on 2 cores;
+  what is left: docs/RESULTS.md).
 - **Speed** (the main job of `commands.json`): `schiaparelli` {{{{{_S}:wall_time_s|mmss}}}}, of which the
   10 000-member dispersion {{{{{_S}:dispersion.wall_s|mmss}}}}; `droptest`
   {{{{summaries/droptest.summary:wall_time_s|mmss}}}}.

@@ -257,29 +257,34 @@ def _mag_gyro_check(t, w_B, mag_B, bias, k0: int, t_end: float, log_name: str) -
     return _check("units.gyro", ERROR, ratio, MAG_GYRO_RATIO_MAX, msg)
 
 
-def _coordinate_mixup(meta, d_max: float, launch_vouched: bool | None = None) -> str:
+def _coordinate_mixup(meta, d_max: float, inclination_deg: float | None = None) -> str:
     """What likely went wrong when the landed coordinates lie more than ``d_max`` [m] from the launch
     coordinates: the first of the usual mix-ups (latitude and longitude swapped, a sign dropped, on
     either pair of ``metadata.json``) that brings them within ``d_max``; else both pairs named.  The
-    distance alone cannot tell which pair is wrong (a swap of either pair looks the same); the
-    declared inclination can: ``launch_vouched`` True (it agrees with the dipole at the launch
-    coordinates) puts the mix-up on ``flight_data.landed_coordinates``, False on
-    ``launch_site.launch_coordinates``, None (no inclination declared) names both."""
+    distance alone cannot tell which pair is wrong (the mix-up on either pair looks the same); the
+    declared inclination [deg] can when the dipole's inclination at the launch coordinates and at the
+    corrected ones differ by more than :data:`DIP_TOLERANCE_DEG`: the pair whose reading agrees
+    with it is the right one.  Else both pairs are named."""
     la, lo, La, Lo = meta.launch_lat_deg, meta.launch_lon_deg, meta.landed_lat_deg, meta.landed_lon_deg
-    pair = {
-        True: "flight_data.landed_coordinates (the launch site agrees with the declared inclination)",
-        False: "launch_site.launch_coordinates (the declared inclination disagrees with the launch site)",
-        None: "launch_site.launch_coordinates or flight_data.landed_coordinates",
-    }[launch_vouched]
+    both = "launch_site.launch_coordinates or flight_data.landed_coordinates"
     fixes = (
-        (f"{pair}: latitude and longitude swapped", (lo, la, La, Lo)),
-        (f"the longitude's sign of {pair}", (la, -lo, La, Lo)),
-        (f"the latitude's sign of {pair}", (-la, lo, La, Lo)),
+        ("latitude and longitude swapped", (lo, la, La, Lo)),
+        ("the longitude's sign", (la, -lo, La, Lo)),
+        ("the latitude's sign", (-la, lo, La, Lo)),
     )
     for what, (a, b, c, e) in fixes:
         if abs(a) <= 90.0 and abs(c) <= 90.0 and _great_circle_m(a, b, c, e) <= d_max:
-            return f"in the metadata, {what} looks wrong (corrected, the landing is within {d_max / 1000:.0f} km)"
-    return "launch_site.launch_coordinates or flight_data.landed_coordinates of the metadata are wrong"
+            pair = both
+            if inclination_deg is not None:
+                as_declared = abs(inclination_deg - dipole_field(la, lo)[1]) <= DIP_TOLERANCE_DEG
+                as_fixed = abs(inclination_deg - dipole_field(a, b)[1]) <= DIP_TOLERANCE_DEG
+                if as_declared and not as_fixed:
+                    pair = "flight_data.landed_coordinates (the launch site agrees with the declared inclination)"
+                elif as_fixed and not as_declared:
+                    pair = "launch_site.launch_coordinates (the declared inclination agrees with the corrected site)"
+            km = d_max / 1000.0
+            return f"in the metadata, {what} of {pair} looks wrong (corrected, the landing is within {km:.0f} km)"
+    return f"{both} of the metadata are wrong"
 
 
 def site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Check]:
@@ -292,9 +297,7 @@ def site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Ch
     if d <= d_max:
         out.append(_check("geometry.landing_distance", OK, d, d_max, f"landed {d:.0f} m from the pad"))
     else:
-        _, inc_site = dipole_field(lat, lon)
-        vouched = None if inclination_deg is None else bool(abs(inclination_deg - inc_site) <= DIP_TOLERANCE_DEG)
-        why = _coordinate_mixup(meta, d_max, vouched)
+        why = _coordinate_mixup(meta, d_max, inclination_deg)
         msg = (
             f"the landing point is {d / 1000:.0f} km from the launch coordinates (at most {d_max / 1000:.0f} km): {why}"
         )
