@@ -266,6 +266,51 @@ Cartesian position after the radar fix (the |δp_h|²/2r curvature of a ~12 km h
 
 RESULTS_MD = RESULTS_MD + "\n" + _ENTRY + "\n" + _ENTRY_MC
 
+_FZ = "bench_fuzz_users"
+_FUZZ = f"""
+## The mistakes users make (issue #26: `bench_fuzz.py --label after`)
+
+`python tests/benchmarks/bench_fuzz.py --label after --jobs 2` ({{{{{_FZ}:results.after.wall_s|mmss}}}} on 2 cores): {{{{{_FZ}:results.after.totals.runs}}}}
+edits of user folders (`workbench init` output, the FIRM excerpt) in seven classes — axis swaps, sign flips,
+plausible units, geometry, truncation, timing, metadata — each run compared with the same data unmutated. A
+completed run is wrong when a headline moved by more than 3σ of the two runs' combined σ: SILENT with verdict OK,
+UNDERRATED when its verdict is no worse than the clean run's, FLAGGED with ERROR. Before: main before the health
+checks of issue #26 ({{{{{_FZ}:results.before.code}}}}); after: {{{{{_FZ}:results.after.code}}}}.
+
+| problem | clear error | error naming nothing | traceback | SILENT | UNDERRATED | flagged | still right | undefined |
+|---|---|---|---|---|---|---|---|---|
+| drop test (IMU) | {{{{{_FZ}:results.before.by_problem.droptest.CLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.droptest.CLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.droptest.UNCLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.droptest.UNCLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.droptest.TRACEBACK}}}} → {{{{{_FZ}:results.after.by_problem.droptest.TRACEBACK}}}} | {{{{{_FZ}:results.before.by_problem.droptest.SILENT}}}} → {{{{{_FZ}:results.after.by_problem.droptest.SILENT}}}} | {{{{{_FZ}:results.before.by_problem.droptest.UNDERRATED}}}} → {{{{{_FZ}:results.after.by_problem.droptest.UNDERRATED}}}} | {{{{{_FZ}:results.before.by_problem.droptest.FLAGGED}}}} → {{{{{_FZ}:results.after.by_problem.droptest.FLAGGED}}}} | {{{{{_FZ}:results.before.by_problem.droptest.ACCURATE}}}} → {{{{{_FZ}:results.after.by_problem.droptest.ACCURATE}}}} | {{{{{_FZ}:results.before.by_problem.droptest.UNDEFINED}}}} → {{{{{_FZ}:results.after.by_problem.droptest.UNDEFINED}}}} |
+| drop test with ranging | {{{{{_FZ}:results.before.by_problem.droptest_ranging.CLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.droptest_ranging.CLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.droptest_ranging.UNCLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.droptest_ranging.UNCLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.droptest_ranging.TRACEBACK}}}} → {{{{{_FZ}:results.after.by_problem.droptest_ranging.TRACEBACK}}}} | {{{{{_FZ}:results.before.by_problem.droptest_ranging.SILENT}}}} → {{{{{_FZ}:results.after.by_problem.droptest_ranging.SILENT}}}} | {{{{{_FZ}:results.before.by_problem.droptest_ranging.UNDERRATED}}}} → {{{{{_FZ}:results.after.by_problem.droptest_ranging.UNDERRATED}}}} | {{{{{_FZ}:results.before.by_problem.droptest_ranging.FLAGGED}}}} → {{{{{_FZ}:results.after.by_problem.droptest_ranging.FLAGGED}}}} | {{{{{_FZ}:results.before.by_problem.droptest_ranging.ACCURATE}}}} → {{{{{_FZ}:results.after.by_problem.droptest_ranging.ACCURATE}}}} | {{{{{_FZ}:results.before.by_problem.droptest_ranging.UNDEFINED}}}} → {{{{{_FZ}:results.after.by_problem.droptest_ranging.UNDEFINED}}}} |
+| entry (Schiaparelli-like) | {{{{{_FZ}:results.before.by_problem.entry.CLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.entry.CLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.entry.UNCLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.entry.UNCLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.entry.TRACEBACK}}}} → {{{{{_FZ}:results.after.by_problem.entry.TRACEBACK}}}} | {{{{{_FZ}:results.before.by_problem.entry.SILENT}}}} → {{{{{_FZ}:results.after.by_problem.entry.SILENT}}}} | {{{{{_FZ}:results.before.by_problem.entry.UNDERRATED}}}} → {{{{{_FZ}:results.after.by_problem.entry.UNDERRATED}}}} | {{{{{_FZ}:results.before.by_problem.entry.FLAGGED}}}} → {{{{{_FZ}:results.after.by_problem.entry.FLAGGED}}}} | {{{{{_FZ}:results.before.by_problem.entry.ACCURATE}}}} → {{{{{_FZ}:results.after.by_problem.entry.ACCURATE}}}} | {{{{{_FZ}:results.before.by_problem.entry.UNDEFINED}}}} → {{{{{_FZ}:results.after.by_problem.entry.UNDEFINED}}}} |
+| MEADS | {{{{{_FZ}:results.before.by_problem.meads.CLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.meads.CLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.meads.UNCLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.meads.UNCLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.meads.TRACEBACK}}}} → {{{{{_FZ}:results.after.by_problem.meads.TRACEBACK}}}} | {{{{{_FZ}:results.before.by_problem.meads.SILENT}}}} → {{{{{_FZ}:results.after.by_problem.meads.SILENT}}}} | {{{{{_FZ}:results.before.by_problem.meads.UNDERRATED}}}} → {{{{{_FZ}:results.after.by_problem.meads.UNDERRATED}}}} | {{{{{_FZ}:results.before.by_problem.meads.FLAGGED}}}} → {{{{{_FZ}:results.after.by_problem.meads.FLAGGED}}}} | {{{{{_FZ}:results.before.by_problem.meads.ACCURATE}}}} → {{{{{_FZ}:results.after.by_problem.meads.ACCURATE}}}} | {{{{{_FZ}:results.before.by_problem.meads.UNDEFINED}}}} → {{{{{_FZ}:results.after.by_problem.meads.UNDEFINED}}}} |
+| POST2 J2 | {{{{{_FZ}:results.before.by_problem.post2_j2.CLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.post2_j2.CLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.post2_j2.UNCLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.post2_j2.UNCLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.post2_j2.TRACEBACK}}}} → {{{{{_FZ}:results.after.by_problem.post2_j2.TRACEBACK}}}} | {{{{{_FZ}:results.before.by_problem.post2_j2.SILENT}}}} → {{{{{_FZ}:results.after.by_problem.post2_j2.SILENT}}}} | {{{{{_FZ}:results.before.by_problem.post2_j2.UNDERRATED}}}} → {{{{{_FZ}:results.after.by_problem.post2_j2.UNDERRATED}}}} | {{{{{_FZ}:results.before.by_problem.post2_j2.FLAGGED}}}} → {{{{{_FZ}:results.after.by_problem.post2_j2.FLAGGED}}}} | {{{{{_FZ}:results.before.by_problem.post2_j2.ACCURATE}}}} → {{{{{_FZ}:results.after.by_problem.post2_j2.ACCURATE}}}} | {{{{{_FZ}:results.before.by_problem.post2_j2.UNDEFINED}}}} → {{{{{_FZ}:results.after.by_problem.post2_j2.UNDEFINED}}}} |
+| POST2 Huygens | {{{{{_FZ}:results.before.by_problem.post2_huygens.CLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.post2_huygens.CLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.post2_huygens.UNCLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.post2_huygens.UNCLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.post2_huygens.TRACEBACK}}}} → {{{{{_FZ}:results.after.by_problem.post2_huygens.TRACEBACK}}}} | {{{{{_FZ}:results.before.by_problem.post2_huygens.SILENT}}}} → {{{{{_FZ}:results.after.by_problem.post2_huygens.SILENT}}}} | {{{{{_FZ}:results.before.by_problem.post2_huygens.UNDERRATED}}}} → {{{{{_FZ}:results.after.by_problem.post2_huygens.UNDERRATED}}}} | {{{{{_FZ}:results.before.by_problem.post2_huygens.FLAGGED}}}} → {{{{{_FZ}:results.after.by_problem.post2_huygens.FLAGGED}}}} | {{{{{_FZ}:results.before.by_problem.post2_huygens.ACCURATE}}}} → {{{{{_FZ}:results.after.by_problem.post2_huygens.ACCURATE}}}} | {{{{{_FZ}:results.before.by_problem.post2_huygens.UNDEFINED}}}} → {{{{{_FZ}:results.after.by_problem.post2_huygens.UNDEFINED}}}} |
+| rocket importer (FIRM excerpt) | {{{{{_FZ}:results.before.by_problem.rocket.CLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.rocket.CLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.rocket.UNCLEAR_ERROR}}}} → {{{{{_FZ}:results.after.by_problem.rocket.UNCLEAR_ERROR}}}} | {{{{{_FZ}:results.before.by_problem.rocket.TRACEBACK}}}} → {{{{{_FZ}:results.after.by_problem.rocket.TRACEBACK}}}} | {{{{{_FZ}:results.before.by_problem.rocket.SILENT}}}} → {{{{{_FZ}:results.after.by_problem.rocket.SILENT}}}} | {{{{{_FZ}:results.before.by_problem.rocket.UNDERRATED}}}} → {{{{{_FZ}:results.after.by_problem.rocket.UNDERRATED}}}} | {{{{{_FZ}:results.before.by_problem.rocket.FLAGGED}}}} → {{{{{_FZ}:results.after.by_problem.rocket.FLAGGED}}}} | {{{{{_FZ}:results.before.by_problem.rocket.ACCURATE}}}} → {{{{{_FZ}:results.after.by_problem.rocket.ACCURATE}}}} | {{{{{_FZ}:results.before.by_problem.rocket.UNDEFINED}}}} → {{{{{_FZ}:results.after.by_problem.rocket.UNDEFINED}}}} |
+| **total** | {{{{{_FZ}:results.before.totals.CLEAR_ERROR}}}} → {{{{{_FZ}:results.after.totals.CLEAR_ERROR}}}} | {{{{{_FZ}:results.before.totals.UNCLEAR_ERROR}}}} → {{{{{_FZ}:results.after.totals.UNCLEAR_ERROR}}}} | {{{{{_FZ}:results.before.totals.TRACEBACK}}}} → {{{{{_FZ}:results.after.totals.TRACEBACK}}}} | {{{{{_FZ}:results.before.totals.SILENT}}}} → {{{{{_FZ}:results.after.totals.SILENT}}}} | {{{{{_FZ}:results.before.totals.UNDERRATED}}}} → {{{{{_FZ}:results.after.totals.UNDERRATED}}}} | {{{{{_FZ}:results.before.totals.FLAGGED}}}} → {{{{{_FZ}:results.after.totals.FLAGGED}}}} | {{{{{_FZ}:results.before.totals.ACCURATE}}}} → {{{{{_FZ}:results.after.totals.ACCURATE}}}} | {{{{{_FZ}:results.before.totals.UNDEFINED}}}} → {{{{{_FZ}:results.after.totals.UNDEFINED}}}} |
+
+Reading: every traceback is gone (a non-finite innovation is a numerical failure naming the stage and the
+measurement, exit 4), and every error names the file and the column or key. What is left:
+
+* **SILENT — the declared lander geometry of a drop test** (`height_m` × 1.2, `cm_height_m` × 1.5). The max stroke
+  is the closest approach of the declared lander body to the ramp; a taller or differently balanced lander moves it
+  by many σ (with ranging, σ is millimetres). The one check that sees the declared geometry,
+  `geometry.first_contact` (the airbag lobes' clearance at the measured impact), does not move for `height_m` (the
+  lobes that touch first sit on the base petal, which that key does not change) and moves for `cm_height_m` but stays
+  inside its band: one band calibrated over drops with and without ranging, whose width is the IMU-only drops' pose
+  uncertainty. A band per sensor configuration would catch the ranging case; nothing measured constrains the body's
+  height above the lobes.
+* **UNDERRATED — the rocket importer**: the FIRM excerpt's clean run is WARNING (its barometer innovations,
+  `nis.baro`), so a swapped accelerometer or gyro axis, a negated magnetometer or a log cut at the ejection that
+  moves the apogee or the end state by 4–30σ fires no new check (`geometry.imu_axes` compares only the long axis).
+  The flight computer's own quaternion, differenced at the excerpt's logged rate, does not reproduce the gyro's body
+  rates (aliased), so it cannot serve as the reference for a full gyro-frame check.
+* **UNDERRATED — POST2 Huygens** (an initial velocity's components swapped, a drogue area × 4) and a drop-test IMU file
+  that ends before the max stroke: the verdict is WARNING (`nis.*`), not ERROR.
+* "still right" counts {{{{{_FZ}:results.after.totals.false_alarm}}}} runs whose verdict rose although the headline
+  did not move — most of them real mistakes (a mass in lb, a declared rate) that the outputs here do not depend on.
+"""
+RESULTS_MD = RESULTS_MD + "\n" + _FUZZ
+
 _K = "bench_droptest:results.configurations"
 README_BLOCKS["headline"] = f"""\
 - **Drop tests**, {{{{bench_droptest:results.n_drops}}}} different drops (contact speeds, attitude, bag pressure drawn
@@ -408,7 +453,9 @@ README_BLOCKS["headline"] = f"""\
   plausible units, geometry, truncation, timing, metadata; each run compared with the same data unmutated, "wrong" = off by
   more than 3σ of the two runs' combined σ; `bench_fuzz.py --label after`), before → after the health checks of issue #26:
   traceback {{{{bench_fuzz_users:results.before.totals.TRACEBACK}}}} → {{{{bench_fuzz_users:results.after.totals.TRACEBACK}}}},
-  wrong with verdict OK (SILENT) {{{{bench_fuzz_users:results.before.totals.SILENT}}}} → {{{{bench_fuzz_users:results.after.totals.SILENT}}}},
+  wrong with verdict OK (SILENT) {{{{bench_fuzz_users:results.before.totals.SILENT}}}} → {{{{bench_fuzz_users:results.after.totals.SILENT}}}}
+  (the three: a drop test's declared lander height or CM height — UNDERRATED before only because every clean drop test was
+  WARNING then, OK now),
   wrong with no more than the clean run's verdict (UNDERRATED) {{{{bench_fuzz_users:results.before.totals.UNDERRATED}}}} →
   {{{{bench_fuzz_users:results.after.totals.UNDERRATED}}}}, an error that names no file, column or key
   {{{{bench_fuzz_users:results.before.totals.UNCLEAR_ERROR}}}} → {{{{bench_fuzz_users:results.after.totals.UNCLEAR_ERROR}}}};
