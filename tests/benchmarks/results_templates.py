@@ -274,7 +274,7 @@ _FUZZ = f"""
 edits of user folders (`workbench init` output, the FIRM excerpt) in seven classes — axis swaps, sign flips,
 plausible units, geometry, truncation, timing, metadata — each run compared with the same data unmutated. A
 completed run is wrong when a headline moved by more than 3σ of the two runs' combined σ: SILENT with verdict OK,
-UNDERRATED when its verdict is no worse than the clean run's, FLAGGED with ERROR. Before: main before the health
+UNDERRATED with WARNING, FLAGGED with ERROR. Before: main before the health
 checks of issue #26 ({{{{{_FZ}:results.before.code}}}}); after: {{{{{_FZ}:results.after.code}}}}.
 
 | problem | clear error | error naming nothing | traceback | SILENT | UNDERRATED | flagged | still right | undefined |
@@ -456,7 +456,7 @@ README_BLOCKS["headline"] = f"""\
   wrong with verdict OK (SILENT) {{{{bench_fuzz_users:results.before.totals.SILENT}}}} → {{{{bench_fuzz_users:results.after.totals.SILENT}}}}
   (the three: a drop test's declared lander height or CM height — UNDERRATED before only because every clean drop test was
   WARNING then, OK now),
-  wrong with no more than the clean run's verdict (UNDERRATED) {{{{bench_fuzz_users:results.before.totals.UNDERRATED}}}} →
+  wrong with only a WARNING (UNDERRATED) {{{{bench_fuzz_users:results.before.totals.UNDERRATED}}}} →
   {{{{bench_fuzz_users:results.after.totals.UNDERRATED}}}}, an error that names no file, column or key
   {{{{bench_fuzz_users:results.before.totals.UNCLEAR_ERROR}}}} → {{{{bench_fuzz_users:results.after.totals.UNCLEAR_ERROR}}}};
   a clear input error {{{{bench_fuzz_users:results.after.totals.CLEAR_ERROR}}}}, wrong and flagged
