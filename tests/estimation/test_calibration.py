@@ -9,6 +9,7 @@ import pytest
 
 from workbench.estimation.calibration import (
     Z_BAND,
+    band_key,
     calibrate_checks,
     family_z,
     finish_health,
@@ -116,3 +117,36 @@ def test_family_z_bounds_the_chance_that_an_honest_run_leaves_any_band():
     assert 3.4 < z < 3.6
     assert 22 * 2 * norm.sf(z) == pytest.approx(0.01, rel=1e-6)
     assert fit_band([1.0, 2.0, 3.0], "nis", z)["z"] == pytest.approx(z, rel=1e-5)
+
+
+def test_a_pooled_check_is_judged_by_its_pools_band_not_by_its_name():
+    # seven exchangeable ports share one band: a value outside the band of its own name's (absent)
+    # entry but inside the pool's is OK, and the message names the pool
+    rng = np.random.default_rng(3)
+    table = _table("nis.pass1_port", np.exp(rng.normal(np.log(0.15), 0.06, 210)))
+    hi = table["checks"]["nis.pass1_port"]["band"][1]
+    stat = {"kind": "nis", "dof": 1, "pool": "nis.pass1_port"}
+    inside = Check("nis.pass1_P4", WARNING, 0.95 * hi, [0.5, 2.0], "P4", stat)
+    outside = Check("nis.pass1_P4", WARNING, 1.5 * hi, [0.5, 2.0], "P4", stat)
+    (a,), _ = calibrate_checks([asdict(inside)], table)
+    (b,), _ = calibrate_checks([asdict(outside)], table)
+    assert a["status"] == OK and "pool nis.pass1_port" in a["message"]
+    assert b["status"] == WARNING and "above" in b["message"]
+    assert band_key("nis.pass1_P4", stat) == "nis.pass1_port" and band_key("nis.x", {"kind": "nis"}) == "nis.x"
+
+
+def test_a_two_sided_statistic_far_beyond_its_band_is_an_error_with_the_checks_own_message():
+    rng = np.random.default_rng(4)
+    table = _table("geometry.first_contact.ranging", rng.normal(-0.07, 0.006, 30), kind="two_sided")
+    lo, hi = table["checks"]["geometry.first_contact.ranging"]["band"]
+    stat = {"kind": "two_sided", "pool": "geometry.first_contact.ranging"}
+    half = 0.5 * (hi - lo)
+
+    def judged(v):
+        c = Check("geometry.first_contact", OK, v, [-0.3, 0.01], "likely: the lander geometry", stat)
+        return calibrate_checks([asdict(c)], table)[0][0]
+
+    assert judged(0.5 * (lo + hi))["status"] == OK
+    assert judged(lo - 0.5 * half)["status"] == WARNING
+    far = judged(lo - 1.5 * half)
+    assert far["status"] == ERROR and "lander geometry" in far["message"] and "beyond" in far["message"]

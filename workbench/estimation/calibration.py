@@ -12,8 +12,15 @@ stream disjoint from the shipped scenarios' and from any tuning seeds):
   for the whole table (:func:`family_z`) so that an honest run leaves *any* of the problem's k bands
   with probability :data:`FAMILY_ALPHA` (Bonferroni), not each band; the table also stores the
   members' percentiles, so each threshold is traced to a stored number;
+* a check's ``stat`` may name a ``"pool"``: the band it is judged against, shared by the checks of one
+  kind whose honest values are exchangeable (the per-port NIS of seven pressure ports; a rare draw —
+  one port's 2.6σ transducer bias — then sits in the band of the other ports' members too, where a
+  band per port from 30 members misses it) or one band per sensor configuration (a drop test's
+  first-contact clearance with and without ranging: the pose σ differs 30-fold).  Without a pool the
+  band is the check's name;
 * :func:`calibrate_checks` — re-judge the checks of one run: inside the band OK, outside WARNING,
-  a NIS above the band by the factor :func:`nis_error_factor` ERROR; an ERROR of the check's own
+  a NIS above the band by the factor :func:`nis_error_factor` ERROR, a two-sided statistic beyond the
+  band by its half-width (twice as far from the band's middle as its edge) ERROR; an ERROR of the check's own
   (physics) logic is never softened; a filter conservative by design is said once, as a note;
 * :func:`truth_check` — a synthetic run judged against its truth: a headline quantity outside its
   reported 3σ is an ERROR.
@@ -39,6 +46,7 @@ __all__ = [
     "FAMILY_ALPHA",
     "PERCENTILES",
     "Z_BAND",
+    "band_key",
     "calibrate_checks",
     "family_z",
     "finish_health",
@@ -119,8 +127,9 @@ def calibrate_checks(checks: Sequence[Mapping], table: Mapping | None) -> tuple[
     :class:`~workbench.estimation.health.Check`) re-judged against the calibration ``table``, and the
     notes it adds.  A check with a ``stat`` and an entry in ``table["checks"]`` gets the band's
     status (see the module docstring); without an entry it keeps its own status and its message says
-    it is uncalibrated; other checks are unchanged.  A NIS whose honest median is below half its
-    dimension adds the note that the filter is conservative by design, with the factor."""
+    it is uncalibrated; other checks are unchanged.  The entry is ``stat["pool"]`` when the stat
+    names one, else the check's name.  A NIS whose honest median is below half its dimension adds
+    the note that the filter is conservative by design, with the factor."""
     entries = (table or {}).get("checks", {})
     source = (table or {}).get("source", "the truth Monte Carlo")
     out, notes = [], []
@@ -129,7 +138,7 @@ def calibrate_checks(checks: Sequence[Mapping], table: Mapping | None) -> tuple[
         if not stat:
             out.append(dict(c))
             continue
-        e = entries.get(c["name"])
+        e = entries.get(band_key(c["name"], stat))
         if e is None:
             out.append({**c, "message": c["message"] + " (threshold uncalibrated: no truth-MC band for this check)"})
             continue
@@ -140,12 +149,21 @@ def calibrate_checks(checks: Sequence[Mapping], table: Mapping | None) -> tuple[
     return out, notes
 
 
+def band_key(name: str, stat: Mapping | None) -> str:
+    """The calibration-table entry that judges the check ``name`` with ``stat``: its ``"pool"``
+    when it names one (a band shared by exchangeable checks, or one per sensor configuration), else
+    ``name``."""
+    return str((stat or {}).get("pool") or name)
+
+
 def _judge(c: Check, e: Mapping, source: str) -> tuple[dict, str | None]:
     """One calibrated check (a dict) and its note, from the check ``c`` and its table entry ``e``."""
     lo, hi = (float(b) for b in e["band"])
     n = int(e["n"])
     kind = c.stat.get("kind")
-    origin = f"honest band [{lo:.3g}, {hi:.3g}] over {n} truth-MC members ({source})"
+    pool = c.stat.get("pool")
+    what = f"{n} truth-MC values of the pool {pool}" if pool else f"{n} truth-MC members"
+    origin = f"honest band [{lo:.3g}, {hi:.3g}] over {what} ({source})"
     note = None
     if kind == "nis":
         dof = int(c.stat["dof"])
@@ -165,6 +183,15 @@ def _judge(c: Check, e: Mapping, source: str) -> tuple[dict, str | None]:
                 f"{c.name}: mean NIS {v:.3g} is {v / hi:.3g}× the top of its {origin}; the filter is inconsistent "
                 "with this sensor — a wrong unit, axis, noise level or timing of this stream?"
             )
+            return _dict(c, status=ERROR, bound=[lo, hi], message=msg), note
+    if kind == "two_sided" and not lo <= v <= hi:
+        # as far beyond the band as the band is wide from its middle (≈ 2z spreads of the honest
+        # members): no honest run gets there; the check's own message says what is likely wrong
+        log = e.get("scale") == "log" and v > 0.0 and lo > 0.0
+        f = np.log if log else (lambda x: x)
+        mid, half = 0.5 * (f(hi) + f(lo)), 0.5 * (f(hi) - f(lo))
+        if abs(f(v) - mid) > 2.0 * half:
+            msg = f"{c.name}: {v:.4g} lies beyond its {origin} by more than the band's half-width — " + c.message
             return _dict(c, status=ERROR, bound=[lo, hi], message=msg), note
     if lo <= v <= hi:
         return _dict(c, status=OK, bound=[lo, hi], message=f"{c.name}: {v:.4g} inside its {origin}"), note

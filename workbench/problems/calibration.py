@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.estimation.calibration import FAMILY_ALPHA, family_z, fit_band
+from workbench.estimation.calibration import FAMILY_ALPHA, band_key, family_z, fit_band
 from workbench.io import assets
 from workbench.io.scenario import resolve_scenario
 from workbench.problems import registry
@@ -106,13 +106,19 @@ def calibrate(kind: str, members: int, *, jobs: int = 2, scenarios: Sequence[Pat
         rows = [_member(w) for w in work]
     values: dict[str, list[float]] = defaultdict(list)
     stats: dict[str, dict] = {}
+    per_member = [0]
     for r in rows:
+        n_stat = 0
         for c in r.get("checks", []):
             if c["stat"] and c["value"] is not None:
-                values[c["name"]].append(float(c["value"]))
-                stats[c["name"]] = c["stat"]
+                key = band_key(c["name"], c["stat"])
+                values[key].append(float(c["value"]))
+                stats[key] = c["stat"]
+                n_stat += 1
+        per_member.append(n_stat)
     names = [n for n in sorted(values) if sum(np.isfinite(values[n])) >= 2]
-    z = family_z(len(names))
+    # Bonferroni over the checks one run is judged on (a pooled band judges several of them)
+    z = family_z(max(len(names), max(per_member)))
     checks = {n: {"stat": stats[n], **fit_band(values[n], stats[n].get("kind", ""), z)} for n in names}
     return {
         "kind": kind,

@@ -446,8 +446,9 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     gas overpressure alone carries 2 g (m·2g / (Δp·2π r), the declared pressures, mass and lobe
     radius: the most a 2 g force can have compressed the bags), σ the clearance's 1σ from the pose
     covariance there.  Outside:
-    ERROR naming the keys that set the geometry (the clearance moves the stroke with it).  None
-    when no impact is measured."""
+    ERROR naming the keys that set the geometry (the clearance moves the stroke with it).  The
+    truth-MC calibration re-judges the clearance in one band per sensor configuration (its stat's
+    ``pool``: ``geometry.first_contact.ranging`` / ``.imu_only``).  None when no impact is measured."""
     imp = measured_impact(tel)
     if imp is None:
         return None
@@ -470,9 +471,17 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
         f"(t = {t_on:.4f} s, mean triad |f| > 2 g); at most {delta:.3f} m pressed in at 2 g; the estimated lobes "
         f"touch the ramp at {t_touch}"
     )
-    stat = {"kind": "two_sided"}
+    # one honest band per sensor configuration: with ranging the pose at the impact is known ~30× better
+    config = "ranging" if getattr(tel, "ranging", None) is not None else "imu_only"
+    stat = {"kind": "two_sided", "pool": f"geometry.first_contact.{config}"}
     if lo <= c <= hi:
-        return Check("geometry.first_contact", OK, _g(c), [_g(lo), _g(hi)], base, stat)
+        # the keys that set the clearance: said here too, for the calibrated band's WARNING/ERROR
+        keys = (
+            f"the setup file's [hanging] position_m, the lander geometry in {settings.lander_file} (height_m, "
+            f"cm_height_m, lobe_diameter_m, standoff_m), [chamber] ramp_angle_deg / nail_depth_m in {settings.path}"
+        )
+        msg = f"{base}; a clearance outside the honest band moves the stroke with it — likely: {keys}"
+        return Check("geometry.first_contact", OK, _g(c), [_g(lo), _g(hi)], msg, stat)
     ang = float(settings.chamber.ramp_angle_deg)
     keys = []
     if ang < 0.5 * np.pi + 0.05:

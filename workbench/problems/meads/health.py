@@ -39,6 +39,8 @@ when the port σ are right, so it is judged like a normalised innovation squared
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
@@ -100,7 +102,8 @@ def wls_chi2(residual: np.ndarray, sigma: np.ndarray, used: np.ndarray, x: np.nd
 
 def ekf_checks(passes, t: np.ndarray, above: np.ndarray, ports) -> list[Check]:
     """Checks of the filter passes (``EkfPass``): per-port NIS above the threshold (``above`` (n,)
-    at the pressure times ``t``) and the smoothed covariance (module docstring)."""
+    at the pressure times ``t``; calibrated in one band per pass over all ports, the stat's
+    ``pool``) and the smoothed covariance (module docstring)."""
     checks: list[Check] = []
     for ps in passes:
         inn = ps.forward.innovations.get("pressure")
@@ -112,7 +115,9 @@ def ekf_checks(passes, t: np.ndarray, above: np.ndarray, ports) -> list[Check]:
             v = ps.nis_port[sel, j]
             v = v[np.isfinite(v)]
             if v.size >= MIN_SAMPLES:
-                checks.append(nis_check(f"pressure_ekf_pass{ps.index}_{port}", v, 1))
+                c = nis_check(f"pressure_ekf_pass{ps.index}_{port}", v, 1)
+                # the ports' honest NIS are exchangeable: one band per pass over every port's members
+                checks.append(replace(c, stat={**(c.stat or {}), "pool": f"nis.pressure_ekf_pass{ps.index}_port"}))
         P = ps.smoothed.P
         d = np.einsum("nii->ni", P)
         act = np.flatnonzero(np.all(d > 0.0, axis=0))
