@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from workbench.estimation.health import ERROR, OK, WARNING
+from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
 from workbench.problems.droptest.physics import diagnose_axes, hanging_checks
 from workbench.problems.droptest.problem import key_moments
@@ -201,6 +202,33 @@ def test_imu_ending_inside_contact_makes_outputs_undefined(droptest_run, droptes
     assert "**undefined**" in md
     names = [m.name for m in key_moments(res)]
     assert "max_stroke" not in names and "rebound" not in names
+
+
+def test_imu_ending_between_two_compressions_leaves_the_max_stroke_undefined(droptest_run, droptest_result, tmp_path):
+    # the lander bounces off one face and rolls onto another inside one contact: a file that ends
+    # while it moves away but the bags still carry > 2 g has not seen the closest approach
+    res0 = droptest_result
+    smo, st = res0.smoothed, res0.stroke
+    n = st.surface.normal
+    vn = smo.x[:, rl.SV] @ n
+    h = st.smoothed.distance
+    i0 = st.contact[0]
+    imu = res0.telemetry.imu
+    f = np.stack([imu.stack([f"{t}.{a}" for a in "xyz"]) for t in res0.telemetry.triads], axis=1)
+    fm = np.interp(smo.t, imu.time - res0.telemetry.group_delay_s, np.linalg.norm(f.mean(axis=1), axis=1))
+    # moving away (a first compression over), the stroke above its minimum so far, still > 3 g
+    ks = [
+        k
+        for k in range(i0 + 1, st.max.index)
+        if vn[k] > 0.05 and fm[k] > 3.0 * 9.80665 and h[k] > h[i0 : k + 1].min() + 3.0 * st.smoothed.sigma[k]
+    ]
+    if not ks:
+        pytest.skip("this drop has one compression only")
+    t_cut = float(smo.t[ks[len(ks) // 2]] + res0.telemetry.group_delay_s)
+    paths = _copy(droptest_run, tmp_path)
+    _edit_csv(paths["imu"], lambda names, x: x[x[:, 0] <= t_cut])
+    s = dt.run_droptest(droptest_run.settings, paths).summary
+    assert s["max_stroke"]["distance_m"] is None and "imu.csv" in s["max_stroke"]["undefined"]
 
 
 # ------------------------------------------------------------------ truth headline

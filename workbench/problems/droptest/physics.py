@@ -373,8 +373,9 @@ def contact_completeness(
     less than :data:`CONTACT_TAIL_S` after ``t_contact_end`` [s] (the end of the contact the
     restitution is defined over; None: none detected, then the measured impact still lasting at
     the last sample).  A file ending inside the contact leaves the max stroke defined only when
-    the lander already moves away from the ramp and ``stroke_rise`` (the smoothed stroke at the data
-    end above its minimum, in units of its 1σ there) exceeds 1."""
+    the lander already moves away from the ramp, ``stroke_rise`` (the smoothed stroke at the data
+    end above its minimum, in units of its 1σ there) exceeds 1 and the measured impact (> 2 g) is
+    over at the last sample."""
     t_end = float(tel.imu.time[-1] - tel.group_delay_s)
     imp = measured_impact(tel)
     if imp is not None:
@@ -395,7 +396,9 @@ def contact_completeness(
     if imp is None or not ends_inside:
         return ContactCompleteness(True, True, t_end, "")
     vn_end = float(smo_v[-1] @ normal)
-    reached = vn_end > 0.0 and stroke_rise > 1.0  # moving away, the stroke past its minimum
+    # moving away, the stroke past its minimum, and the bags unloading (the measured impact over): a
+    # lander still pressed at > 2 g at the data end can roll onto another face and compress again
+    reached = vn_end > 0.0 and stroke_rise > 1.0 and not imp[2]
     reason = (
         f"the IMU data ({tel.imu.path}) end at t = {t_end:.4f} s inside the contact (impact measured from "
         f"{imp[0]:.4f} s, the estimated contact still on at the data end; a truncated file?)"
