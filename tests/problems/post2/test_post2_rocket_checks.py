@@ -329,3 +329,14 @@ def test_import_is_atomic(tmp_path, monkeypatch):
     airbrakes.import_flight(LOG, META, tmp_path / "flight", declination_deg=-10.5)
     names = {p.name for p in (tmp_path / "flight").iterdir()}
     assert "notes.txt" in names and "flight.json" in names and len(list(tmp_path.iterdir())) == 1
+
+
+def test_gyro_magnetometer_check_tells_a_mirrored_gyro_from_a_poor_fit():
+    al = {"fit_rms_uT": 0.9, "field_uT": 51.0, "fit_accepted": True, "mirrored_gyro_fit_rms_uT": None}
+    assert rocket_checks.gyro_magnetometer_check({"magnetometer_alignment": al}, "f.csv").status == OK
+    bad = {**al, "fit_rms_uT": 7.8, "fit_accepted": False, "mirrored_gyro_fit_rms_uT": 0.94}
+    c = rocket_checks.gyro_magnetometer_check({"magnetometer_alignment": bad}, "f.csv")
+    assert c.status == ERROR and "mirror image" in c.message and "f.csv" in c.message
+    poor = {**bad, "mirrored_gyro_fit_rms_uT": 8.0}
+    assert rocket_checks.gyro_magnetometer_check({"magnetometer_alignment": poor}, "f.csv").status == WARNING
+    assert rocket_checks.gyro_magnetometer_check({"magnetometer_alignment": None}, "f.csv") is None

@@ -88,3 +88,36 @@ def test_flight_1_gyro_in_rad_per_s(tmp_path):
 
     c = _checks(_mutated(tmp_path, FLIGHTS[0], rad), tmp_path, allow_unhealthy=True)
     assert c["units.gyro"]["status"] == ERROR
+
+
+def _gyro_columns(fn):
+    """A line edit applying ``fn`` to the three gyro cells (strings) of every data row."""
+
+    def edit(lines):
+        head = lines[0].split(",")
+        idx = [head.index(f"raw_angular_rate_{c}_deg_per_s") for c in "xyz"]
+        out = [lines[0]]
+        for ln in lines[1:]:
+            cells = ln.split(",")
+            new = fn([cells[i] for i in idx])
+            for i, v in zip(idx, new, strict=True):
+                cells[i] = v
+            out.append(",".join(cells))
+        return out
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    "what, fn",
+    [
+        ("x<->y", lambda g: [g[1], g[0], g[2]]),
+        ("z negated", lambda g: [g[0], g[1], repr(-float(g[2]))]),
+    ],
+)
+def test_flight_1_gyro_axes_mirrored_against_the_magnetometer(tmp_path, what, fn):
+    # a swap or a single sign flip mirrors the gyro's frame: the field no longer turns with its rates
+    c = _checks(_mutated(tmp_path, FLIGHTS[0], _gyro_columns(fn)), tmp_path, allow_unhealthy=True)
+    gm = c["geometry.gyro_magnetometer"]
+    assert gm["status"] == ERROR, what
+    assert "mirror image" in gm["message"] and "raw_angular_rate_[xyz]_deg_per_s" in gm["message"]

@@ -270,6 +270,12 @@ def reconstruct_boost(
 
     dip = dip_of(m_pad)
     fit_ok = mag_fit is not None and mag_fit.rms <= MAG_FIT_RMS_FRACTION * float(np.linalg.norm(mag_fit.field_0))
+    mirror = None
+    if mag_fit is not None and not fit_ok:
+        # a gyro whose axes are a mirror image of the true ones (a swapped or sign-flipped column)
+        # turns the field the wrong way round: no rotation absorbs it, one mirrored axis does
+        w_mirror = (w_B - bias) * np.array([1.0, 1.0, -1.0])
+        mirror = magnetometer_alignment(t, w_mirror, mag_B, int(pad[-1]), t_ej - MAG_FIT_BEFORE_EJECTION_S)
     trusted = fit_ok and (inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG)
     sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
     P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_heading**2]) @ C_B_ENU.T
@@ -327,6 +333,8 @@ def reconstruct_boost(
             "samples": mag_fit.samples,
             "window_s": [float(t[pad[-1]]), t_ej - MAG_FIT_BEFORE_EJECTION_S],
             "fit_accepted": bool(fit_ok),
+            "field_uT": float(np.linalg.norm(mag_fit.field_0) * 1e6),
+            "mirrored_gyro_fit_rms_uT": None if mirror is None else mirror.rms * 1e6,
         },
         "ignition_t_s": t_ign,
     }

@@ -31,6 +31,7 @@ from workbench.io.schema import read_json
 
 __all__ = [
     "dipole_field",
+    "gyro_magnetometer_check",
     "import_checks",
     "run_checks",
     "undefined_outputs",
@@ -257,6 +258,44 @@ def _mag_gyro_check(t, w_B, mag_B, bias, k0: int, t_end: float, log_name: str) -
     return _check("units.gyro", ERROR, ratio, MAG_GYRO_RATIO_MAX, msg)
 
 
+#: a magnetometer fit (``pad_info["magnetometer_alignment"]``) is good when its residual RMS is at most
+#: this fraction of the field (the importer's MAG_FIT_RMS_FRACTION: 0.9–2.9 µT of ~50 µT on the FIRM flights)
+MAG_FIT_GOOD_FRACTION = 0.1
+
+
+def gyro_magnetometer_check(pad_info: dict, log_name: str) -> Check | None:
+    """geometry.gyro_magnetometer: the Earth's field, constant in an inertial frame, must turn in the
+    magnetometer's axes as the gyro's rates say (the importer's in-flight alignment: one rotation,
+    an offset, the field).  A fit that fails while the same fit with one gyro axis mirrored succeeds
+    is a gyro whose axes are a mirror image of the magnetometer's — a swapped or sign-flipped column
+    of the rates (a magnetometer column swap keeps the fit, the field's sign absorbing the mirror,
+    and shows as a wrong dip instead): ERROR.  A fit that fails either way: WARNING (soft iron, a
+    saturated gyro, a wrong field unit; the heading is then not trusted).  None when the log allowed
+    no fit (decimated, or shorter than 2 s of boost and coast)."""
+    al = pad_info.get("magnetometer_alignment")
+    if not al:
+        return None
+    rms, field = float(al["fit_rms_uT"]), float(al.get("field_uT") or pad_info.get("magnetic_field_uT") or 0.0)
+    lim = MAG_FIT_GOOD_FRACTION * field
+    base = f"the magnetometer's field follows the gyro's rates to {rms:.2g} µT rms ({field:.0f} µT field)"
+    if al.get("fit_accepted"):
+        return _check("geometry.gyro_magnetometer", OK, rms, lim, base)
+    mir = al.get("mirrored_gyro_fit_rms_uT")
+    if mir is not None and mir <= lim:
+        msg = (
+            f"{base}, beyond the {lim:.2g} µT a consistent pair reaches; with one gyro axis mirrored it follows to "
+            f"{mir:.2g} µT: the gyro's axes are a mirror image of the magnetometer's — a swapped or sign-flipped "
+            f"column of raw_angular_rate_[xyz]_deg_per_s of {log_name}"
+        )
+        return _check("geometry.gyro_magnetometer", ERROR, rms, lim, msg)
+    msg = (
+        f"{base}, beyond the {lim:.2g} µT a consistent pair reaches (mirrored: "
+        f"{'not tried' if mir is None else f'{mir:.2g} µT'}): soft iron, a saturated gyro or a field unit; "
+        "the magnetometer's heading is not trusted"
+    )
+    return _check("geometry.gyro_magnetometer", WARNING, rms, lim, msg)
+
+
 def _coordinate_mixup(meta, d_max: float, inclination_deg: float | None = None) -> str:
     """What likely went wrong when the landed coordinates lie more than ``d_max`` [m] from the launch
     coordinates: the first of the usual mix-ups (latitude and longitude swapped, a sign dropped, on
@@ -460,6 +499,9 @@ def import_checks(
     checks.append(pad_tilt_check(float(fl.pad_info["tilt_on_pad_deg"]), float(meta.rod_angle_deg)))
     k0 = int(np.searchsorted(t, fl.pad_info["ignition_t_s"] - 0.2))
     checks.append(_mag_gyro_check(t, log.w_B, log.mag_B, fl.gyro_bias, k0, t_ej - 0.5, name))
+    gm = gyro_magnetometer_check(fl.pad_info, name)
+    if gm is not None:
+        checks.append(gm)
     checks += site_checks(meta, fl.pad_info, inclination_deg, name)
     t_pad_end = fl.pad_info["ignition_t_s"] - 0.1
     pad = (t >= t_pad_end - 1.0) & (t < t_pad_end)
