@@ -270,16 +270,21 @@ def test_a_mass_in_lb_pins_the_drag_multiplier_at_its_bound_in_the_run(tmp_path)
 
 def test_parameter_ending_at_its_bound_is_an_error(tmp_path):
     (tmp_path / "flight.json").write_text(json.dumps({"health_checks": {"checks": []}}), encoding="utf-8")
-    spec = SimpleNamespace(name="ca_multiplier", bounds=(0.2, 6.0))
+    spec = SimpleNamespace(name="ca_multiplier", bounds=(0.2, 6.0), value=5.5, sigma=1.4)
     cfg = SimpleNamespace(run=SimpleNamespace(path=tmp_path / "f.toml"), states=(spec,))
     at = {"ca_multiplier": {"value": np.array([[3.0], [5.999]])}}
     checks, _ = rocket_checks.run_checks(cfg, at)
     assert checks[0].status == ERROR and "upper bound" in checks[0].message and "lb" in checks[0].message
     inside = {"ca_multiplier": {"value": np.array([[3.0], [2.0]])}}
     assert rocket_checks.run_checks(cfg, inside)[0][0].status == OK
-    # another post2 problem (no flight.json beside it): nothing added
+    # another post2 problem (no flight.json beside it): a bound may be a parametrisation, so an
+    # estimate at it is an error only far from its prior
     other = SimpleNamespace(run=SimpleNamespace(path=tmp_path / "x" / "f.toml"), states=(spec,))
-    assert rocket_checks.run_checks(other, at) == ([], [])
+    near, notes = rocket_checks.run_checks(other, at)
+    assert [c.status for c in near] == [OK] and notes == []
+    far = SimpleNamespace(**{**vars(spec), "value": 1.0, "sigma": 0.2})
+    (c,), _ = rocket_checks.run_checks(SimpleNamespace(run=other.run, states=(far,)), at)
+    assert c.status == ERROR and "prior σ" in c.message
 
 
 @pytest.mark.parametrize(

@@ -644,7 +644,7 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
         obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
     summary["observations"] = obs
     summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
-    extra, rocket_facts = rocket_checks.run_checks(cfg, hist)  # none unless an imported rocket flight
+    extra, rocket_facts = rocket_checks.run_checks(cfg, hist)  # bounds; an imported flight: its import checks
     facts = [*data.facts, *rocket_facts]
     if uninformed:
         facts.append(

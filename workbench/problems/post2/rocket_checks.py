@@ -31,6 +31,8 @@ from workbench.io.schema import read_json
 
 __all__ = [
     "dipole_field",
+    "BOUND_PRIOR_Z",
+    "bound_checks",
     "gyro_magnetometer_check",
     "import_checks",
     "run_checks",
@@ -102,6 +104,10 @@ BOUND_HINTS = {
     "(in lb? ×0.4536), rocket_Cd and rocket_cross_sectional_area_m2",
     "drogue_drag_area": "the descent rate fixes mass / drag area: check rocket_dry_mass_kg (in lb? ×0.4536)",
     "main_drag_area": "the descent rate fixes mass / drag area: check rocket_dry_mass_kg (in lb? ×0.4536)",
+    "drogue_drag_multiplier": "the drogue's drag is this multiple of its declared C_D·S: check the drogue's area "
+    "(a diameter given for a radius: ×4), its C_D and the masses in the vehicle file",
+    "parachute_drag_multiplier": "the main chute's drag is this multiple of its declared C_D·S: check its area "
+    "(a diameter given for a radius: ×4), its C_D and the masses in the vehicle file",
 }
 
 
@@ -539,18 +545,20 @@ def undefined_outputs(flight: dict) -> dict[str, str]:
     return {w: by.get(f"data.gap.{w}", "gap") for w in hc.get("undefined", [])}
 
 
-def run_checks(cfg, hist: dict) -> tuple[list[Check], list[str]]:
-    """(checks, notes) a run of an imported rocket flight adds to its health: the import's checks
-    (``flight.json`` beside the problem file; none for another post2 problem) and every estimated
-    scalar parameter with bounds whose smoothed final value sits at a bound (``hist`` the
-    smoothed state history {name: {"value": (n, k), ...}})."""
-    path = getattr(getattr(cfg, "run", None), "path", None)
-    if path is None or not (Path(path).parent / "flight.json").is_file():
-        return [], []
-    flight = read_json(Path(path).parent / "flight.json")  # written by the import (generated)
-    hc = flight.get("health_checks") or {}
-    checks = [Check(**c) for c in hc.get("checks", [])]
-    for spec in cfg.states:
+#: a bounded parameter at its bound is an ERROR only this many prior σ from its prior value: a bound
+#: that is a parametrisation (a tilt kept positive, honest near zero) is no verdict on the data
+BOUND_PRIOR_Z = 2.0
+
+
+def bound_checks(cfg, hist: dict, *, plausibility: bool = False) -> list[Check]:
+    """``physics.bound.<state>`` for every estimated scalar parameter with bounds (``cfg.states``;
+    ``hist`` the smoothed state history {name: {"value": (n, k), ...}}, SI): ERROR when its final
+    value sits at a bound (within 1 % of the range) more than :data:`BOUND_PRIOR_Z` prior σ from its
+    prior value, or at once with ``plausibility`` (the bounds are the limits of any plausible
+    vehicle, as an import writes them) — the model cannot explain the data inside the bounds, the
+    declared inputs it multiplies are likely wrong (:data:`BOUND_HINTS`); else OK."""
+    checks = []
+    for spec in getattr(cfg, "states", ()):
         b = getattr(spec, "bounds", None)
         if b is None or spec.name not in hist:
             continue
@@ -558,11 +566,29 @@ def run_checks(cfg, hist: dict) -> tuple[list[Check], list[str]]:
         v = float(hist[spec.name]["value"][-1, 0])
         tol = 0.01 * (hi - lo)
         at = "lower" if v <= lo + tol else ("upper" if v >= hi - tol else None)
+        prior, sig = float(np.ravel(spec.value)[0]), float(np.ravel(spec.sigma)[0])
+        z = abs(v - prior) / sig if sig > 0.0 else math.inf
         name = f"physics.bound.{spec.name}"
-        if at is None:
-            checks.append(_check(name, OK, v, [lo, hi], f"{spec.name} {v:.4g} inside its bounds [{lo:g}, {hi:g}]"))
+        if at is None or (z <= BOUND_PRIOR_Z and not plausibility):
+            where = f"at its {at} bound, {z:.1f} prior σ from its prior" if at else "inside its bounds"
+            checks.append(_check(name, OK, v, [lo, hi], f"{spec.name} {v:.4g} {where} [{lo:g}, {hi:g}]"))
         else:
             hint = BOUND_HINTS.get(spec.name, "the model cannot explain the data inside the bounds: check its inputs")
-            msg = f"{spec.name} ends at its {at} bound ({v:.4g} in [{lo:g}, {hi:g}]): not a result; {hint}"
+            msg = (
+                f"{spec.name} ends at its {at} bound ({v:.4g} in [{lo:g}, {hi:g}], {z:.1f} prior σ from its prior "
+                f"{prior:g}): not a result; {hint}"
+            )
             checks.append(_check(name, ERROR, v, [lo, hi], msg))
-    return checks, list(hc.get("notes", []))
+    return checks
+
+
+def run_checks(cfg, hist: dict) -> tuple[list[Check], list[str]]:
+    """(checks, notes) a POST2 run adds to its health: :func:`bound_checks` of its estimate and, for
+    an imported rocket flight, the import's checks (``flight.json`` beside the problem file)."""
+    path = getattr(getattr(cfg, "run", None), "path", None)
+    if path is None or not (Path(path).parent / "flight.json").is_file():
+        return bound_checks(cfg, hist), []
+    flight = read_json(Path(path).parent / "flight.json")  # written by the import (generated)
+    hc = flight.get("health_checks") or {}
+    checks = bound_checks(cfg, hist, plausibility=True)
+    return [Check(**c) for c in hc.get("checks", [])] + checks, list(hc.get("notes", []))
