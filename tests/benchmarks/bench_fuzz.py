@@ -31,9 +31,11 @@ Outcome of a mutation:
   ``wrong_nothing_new`` counts the SILENT/UNDERRATED runs whose non-OK checks are all among the
   clean run's (a WARNING that a good run also has tells the user nothing).
 
-Headlines: drop test max stroke and restitution; entry height above ground at the end of the data;
-MEADS the last EKF pass's α, β, q∞ at the clean run's peak q; post2 every estimated state at the end
-(position, velocity, parameters); rocket the apogee above the pad and every state at the end.
+Headlines (one of the end state, ``*_end``, only when both runs end within ``END_TIME_TOLERANCE_S``:
+a file cut short ends elsewhere): drop test max stroke and restitution; entry height above ground at
+the end of the data; MEADS the last EKF pass's α, β, q∞ at the clean run's peak q; post2 every
+estimated state at the end (position, velocity, parameters); rocket the apogee above the pad and every
+state at the end.
 """
 
 from __future__ import annotations
@@ -172,6 +174,7 @@ def _headline(problem_name: str, folder: Path, summary: dict, result, ref: dict)
         for j, n, f in ((0, "alpha_deg", 180 / math.pi), (1, "beta_deg", 180 / math.pi), (2, "qbar_pa", 1.0)):
             h[n] = ([float(y[k, j]) * f], [float(s[k, j]) * f]) if k >= 0 else ([None], [None])
     if problem_name.startswith(("post2", "rocket")):
+        extra["end_t_s"] = float(result.t[-1])
         for name, st in (summary.get("states") or {}).items():
             h[f"{name}_end"] = (list(st.get("final") or []), list(st.get("final_sigma") or []))
     if problem_name.startswith("rocket"):
@@ -364,6 +367,10 @@ class Pool:
                 w["proc"].kill()
 
 
+#: end-state headlines (``*_end``) are compared only when the two runs end within this [s] of each other
+END_TIME_TOLERANCE_S = 1.0
+
+
 # ----------------------------------------------------------------------------------- scoring
 def score(m: fm.Mutation, clean: dict, rec: dict) -> dict:
     """The outcome row of mutation ``m`` from its record ``rec`` and the clean run's ``clean``."""
@@ -393,7 +400,14 @@ def score(m: fm.Mutation, clean: dict, rec: dict) -> dict:
     clean_fired = set(clean.get("fired", []))
     row["new_checks"] = [c for c in rec["fired"] if c not in clean_fired]
     z_max, undefined, zs = 0.0, [], {}
+    # a file that ends elsewhere has its end state at another time: not the clean run's quantity
+    t0_end, t1_end = (clean.get("extra") or {}).get("end_t_s"), (rec.get("extra") or {}).get("end_t_s")
+    elsewhere = t0_end is not None and t1_end is not None and abs(t1_end - t0_end) > END_TIME_TOLERANCE_S
+    if elsewhere:
+        row["not_compared"] = [n for n in clean["headline"] if "_end" in n]
     for name, (v0, s0) in clean["headline"].items():
+        if elsewhere and "_end" in name:
+            continue
         v1, s1 = rec["headline"].get(name, ([None], [None]))
         if len(v1) != len(v0) or any(x is None for x in v1):
             undefined.append(name)

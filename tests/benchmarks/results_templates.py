@@ -291,21 +291,26 @@ checks of issue #26 ({{{{{_FZ}:results.before.code}}}}); after: {{{{{_FZ}:result
 Reading: every traceback is gone (a non-finite innovation is a numerical failure naming the stage and the
 measurement, exit 4), and every error names the file and the column or key. What is left:
 
-* **SILENT — the declared lander geometry of a drop test** (`height_m` × 1.2, `cm_height_m` × 1.5). The max stroke
-  is the closest approach of the declared lander body to the ramp; a taller or differently balanced lander moves it
-  by many σ (with ranging, σ is millimetres). The one check that sees the declared geometry,
-  `geometry.first_contact` (the airbag lobes' clearance at the measured impact), does not move for `height_m` (the
-  lobes that touch first sit on the base petal, which that key does not change) and moves for `cm_height_m` but stays
-  inside its band: one band calibrated over drops with and without ranging, whose width is the IMU-only drops' pose
-  uncertainty. A band per sensor configuration would catch the ranging case; nothing measured constrains the body's
-  height above the lobes.
-* **UNDERRATED — the rocket importer**: the FIRM excerpt's clean run is WARNING (its barometer innovations,
-  `nis.baro`), so a swapped accelerometer or gyro axis, a negated magnetometer or a log cut at the ejection that
-  moves the apogee or the end state by 4–30σ fires no new check (`geometry.imu_axes` compares only the long axis).
-  The flight computer's own quaternion, differenced at the excerpt's logged rate, does not reproduce the gyro's body
-  rates (aliased), so it cannot serve as the reference for a full gyro-frame check.
-* **UNDERRATED — POST2 Huygens** (an initial velocity's components swapped, a drogue area × 4) and a drop-test IMU file
-  that ends before the max stroke: the verdict is WARNING (`nis.*`), not ERROR.
+* **SILENT — the declared lander height of a drop test** (`height_m` × 1.2, with and without ranging). The max
+  stroke is the closest approach of the declared lander body to the ramp; a taller lander brings its apex closer by
+  many σ (with ranging, σ is millimetres). The one check that sees the declared geometry, `geometry.first_contact`
+  (the airbag lobes' clearance at the measured impact, judged in one band per sensor configuration), does not move:
+  the lobes that touch first sit on the base petal, which `height_m` does not change; the apex comes close only
+  later, inside one continuous contact. Nothing measured here constrains the body's height above the lobes; a
+  check of the contact's lever arm (the measured torque against the declared lobes in contact) could.
+  `cm_height_m` × 1.5 moves the first-contact clearance and is an ERROR with ranging.
+* **UNDERRATED — the rocket importer on the decimated excerpt**: the FIRM excerpt's clean run is WARNING (its
+  barometer innovations, `nis.baro`), and at its 8 Hz the field cannot be followed through the rocket's coning, so
+  `geometry.gyro_magnetometer` (the field must turn with the gyro's rates; a mirrored gyro axis is a swapped or
+  sign-flipped rate column) has no fit there. A swapped accelerometer or gyro axis, a negated magnetometer or a log
+  cut at the ejection moves the apogee or the end state by more than 3σ with no new check. On the full-rate flights
+  (`EDL_FLIGHT_DATA=… bench_fuzz.py --label flights`, the three FIRM logs): {{{{{_FZ}:results.flights.totals.runs}}}}
+  mutations, clear error {{{{{_FZ}:results.flights.totals.CLEAR_ERROR}}}}, SILENT
+  {{{{{_FZ}:results.flights.totals.SILENT}}}}, UNDERRATED {{{{{_FZ}:results.flights.totals.UNDERRATED}}}}, traceback
+  {{{{{_FZ}:results.flights.totals.TRACEBACK}}}}, still right {{{{{_FZ}:results.flights.totals.ACCURATE}}}}.
+* **UNDERRATED — POST2 Huygens**: an initial velocity's components swapped moves the end state by many σ with
+  WARNINGs on the accelerometer NIS only (the drag accelerations barely see the velocity's direction). A drogue area
+  × 4 pins its drag multiplier at its bound: ERROR (`physics.bound.*`, every POST2 run).
 * "still right" counts {{{{{_FZ}:results.after.totals.false_alarm}}}} runs whose verdict rose although the headline
   did not move — most of them real mistakes (a mass in lb, a declared rate) that the outputs here do not depend on.
 """
@@ -454,8 +459,8 @@ README_BLOCKS["headline"] = f"""\
   more than 3σ of the two runs' combined σ; `bench_fuzz.py --label after`), before → after the health checks of issue #26:
   traceback {{{{bench_fuzz_users:results.before.totals.TRACEBACK}}}} → {{{{bench_fuzz_users:results.after.totals.TRACEBACK}}}},
   wrong with verdict OK (SILENT) {{{{bench_fuzz_users:results.before.totals.SILENT}}}} → {{{{bench_fuzz_users:results.after.totals.SILENT}}}}
-  (the three: a drop test's declared lander height or CM height — UNDERRATED before only because every clean drop test was
-  WARNING then, OK now),
+  (a drop test's declared lander height — UNDERRATED before only because every clean drop test was WARNING then, OK
+  now),
   wrong with only a WARNING (UNDERRATED) {{{{bench_fuzz_users:results.before.totals.UNDERRATED}}}} →
   {{{{bench_fuzz_users:results.after.totals.UNDERRATED}}}}, an error that names no file, column or key
   {{{{bench_fuzz_users:results.before.totals.UNCLEAR_ERROR}}}} → {{{{bench_fuzz_users:results.after.totals.UNCLEAR_ERROR}}}};

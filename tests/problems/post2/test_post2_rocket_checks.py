@@ -345,3 +345,24 @@ def test_gyro_magnetometer_check_tells_a_mirrored_gyro_from_a_poor_fit():
     poor = {**bad, "mirrored_gyro_fit_rms_uT": 8.0}
     assert rocket_checks.gyro_magnetometer_check({"magnetometer_alignment": poor}, "f.csv").status == WARNING
     assert rocket_checks.gyro_magnetometer_check({"magnetometer_alignment": None}, "f.csv") is None
+
+
+def test_declared_motor_against_the_boost_names_a_mass_in_lb_and_a_wrong_motor(tmp_path, clean):
+    assert clean["physics.motor"]["status"] == OK and 0.7 < clean["physics.motor"]["value"] < 1.1
+
+    def lb(e):
+        e["rocket"]["rocket_dry_mass_kg"] *= 2.20462
+
+    c = _import(tmp_path / "lb", edit=lb)["physics.motor"]
+    assert c["status"] == ERROR and "rocket_dry_mass_kg" in c["message"] and "lb" in c["message"]
+
+    def k_motor(e):
+        e["rocket"]["motor"] = "K535W"
+
+    c = _import(tmp_path / "k", edit=k_motor)["physics.motor"]
+    assert c["status"] == ERROR and "K535W" in c["message"] and "class K" in c["message"]
+
+    def unknown(e):
+        e["rocket"]["motor"] = "homemade"
+
+    assert "physics.motor" not in _import(tmp_path / "u", edit=unknown)

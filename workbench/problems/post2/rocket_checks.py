@@ -21,6 +21,7 @@ truth simulator makes no raw flight-computer log, so every bound is the physics'
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +35,7 @@ __all__ = [
     "BOUND_PRIOR_Z",
     "bound_checks",
     "gyro_magnetometer_check",
+    "motor_check",
     "import_checks",
     "run_checks",
     "undefined_outputs",
@@ -302,6 +304,54 @@ def gyro_magnetometer_check(pad_info: dict, log_name: str) -> Check | None:
     return _check("geometry.gyro_magnetometer", WARNING, rms, lim, msg)
 
 
+#: a motor designation: impulse class letter (A–O), average thrust [N], the rest (delay, propellant)
+_MOTOR = re.compile(r"^\s*([A-Oa-o])\s*(\d+(?:\.\d+)?)")
+#: the boost's m_dry·|f| (dry mass: propellant and drag left out) against the designation: its total
+#: impulse inside the class's range widened to these factors of its ends, its mean over the motor
+#: phase within these factors of the designation's average thrust (measured on the three FIRM flights:
+#: 0.82–0.85 of the L1390's 3 950 N·s, 0.87–0.92 of its 1 390 N)
+MOTOR_IMPULSE_SLACK = (0.6, 1.25)
+MOTOR_THRUST_RATIO = (0.5, 1.5)
+
+
+def motor_check(t, f_B, letters, meta, log_name: str) -> Check | None:
+    """physics.motor: the declared motor against the measured boost. ``t`` (n,) [s], ``f_B`` (n, 3)
+    [m/s²], ``letters`` (n,) the log's phase letters (``M`` the motor phase), ``meta`` the
+    :class:`FlightMetadata` (``mass`` [kg], ``motor`` e.g. "L1390G-P": class L = 2 560–5 120 N·s,
+    1 390 N average).  m·|f| integrated over the motor phase is the impulse the declared dry mass
+    implies: a mass in lb doubles it, a ×10 mass moves it three classes, a wrong motor names a
+    class it does not reach.  None without a parseable designation or motor rows."""
+    m = _MOTOR.match(meta.motor or "")
+    k = np.flatnonzero(np.asarray(letters) == "M")
+    if m is None or k.size < 3:
+        return None
+    letter, f_avg = m.group(1).upper(), float(m.group(2))
+    hi = 2.5 * 2.0 ** (ord(letter) - ord("A"))
+    lo = hi / 2.0 if letter != "A" else 0.0
+    sl = slice(int(k[0]), int(k[-1]) + 1)
+    force = meta.mass * np.linalg.norm(f_B[sl], axis=1)
+    impulse = float(np.trapezoid(force, t[sl]))
+    dur = float(t[sl][-1] - t[sl][0])
+    mean = impulse / dur if dur > 0.0 else float("nan")
+    ratio = mean / f_avg if f_avg > 0.0 else float("nan")
+    a, b = MOTOR_IMPULSE_SLACK
+    r0, r1 = MOTOR_THRUST_RATIO
+    base = (
+        f"the declared motor {meta.motor} (class {letter}: {lo:.0f}–{hi:.0f} N·s, {f_avg:g} N average) against "
+        f"rocket_dry_mass_kg × |f| over the motor phase: {impulse:.0f} N·s, {mean:.0f} N average (ratio {ratio:.2f})"
+    )
+    if a * lo <= impulse <= b * hi and r0 <= ratio <= r1:
+        return _check("physics.motor", OK, ratio, [r0, r1], base)
+    k_mass = ratio if np.isfinite(ratio) else 1.0
+    why = (
+        f"rocket_dry_mass_kg = {meta.mass:g} looks {k_mass:.2g}× too large (in lb? ×0.4536; ×10?)"
+        if ratio > r1
+        else f"rocket_dry_mass_kg = {meta.mass:g} looks too small"
+    )
+    msg = f"{base}: {why}, or the motor is not {meta.motor} (the metadata of {log_name})"
+    return _check("physics.motor", ERROR, ratio, [r0, r1], msg)
+
+
 def _coordinate_mixup(meta, d_max: float, inclination_deg: float | None = None) -> str:
     """What likely went wrong when the landed coordinates lie more than ``d_max`` [m] from the launch
     coordinates: the first of the usual mix-ups (latitude and longitude swapped, a sign dropped, on
@@ -505,6 +555,9 @@ def import_checks(
     checks.append(pad_tilt_check(float(fl.pad_info["tilt_on_pad_deg"]), float(meta.rod_angle_deg)))
     k0 = int(np.searchsorted(t, fl.pad_info["ignition_t_s"] - 0.2))
     checks.append(_mag_gyro_check(t, log.w_B, log.mag_B, fl.gyro_bias, k0, t_ej - 0.5, name))
+    mc = motor_check(t, log.f_B, log.letters, meta, name)
+    if mc is not None:
+        checks.append(mc)
     gm = gyro_magnetometer_check(fl.pad_info, name)
     if gm is not None:
         checks.append(gm)

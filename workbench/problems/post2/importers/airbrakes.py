@@ -335,7 +335,7 @@ class FlightMetadata:
     site ``temperature`` [K], ``qnh`` [Pa] (the reported air pressure, read as reduced to sea level),
     ``wind_speed`` [m/s], ``wind_from_deg`` (direction the wind blows from, deg clockwise from north);
     ``launch_lat_deg``/``launch_lon_deg``, ``landed_lat_deg``/``landed_lon_deg``, ``apogee`` [m],
-    ``rod_angle_deg``, ``date`` (ISO string), ``description``."""
+    ``rod_angle_deg``, ``date`` (ISO string), ``description``, ``motor`` (designation or None)."""
 
     name: str
     mass: float
@@ -353,6 +353,7 @@ class FlightMetadata:
     rod_angle_deg: float
     date: str
     description: str
+    motor: str | None = None
 
 
 _COMPASS = {d: 22.5 * i for i, d in enumerate("N NNE NE ENE E ESE SE SSE S SSW SW WSW W WNW NW NNW".split())}
@@ -396,7 +397,12 @@ METADATA_SCHEMA = Schema(
                 Key("rocket_moment_of_inertia_kg_m2", _F, None, "kg m^2", "moment of inertia (not used)", gt=0.0),
                 Key("rocket_stab_margin_cal", _F, None, "cal", "static stability margin (not used)"),
                 Key("rocket_cl_a", _F, None, "1/rad", "lift-curve slope (not used)"),
-                Key("motor", _S, None, meaning="motor designation (not used)"),
+                Key(
+                    "motor",
+                    _S,
+                    None,
+                    meaning="motor designation (e.g. L1390G-P: its impulse class and average thrust check the mass)",
+                ),
             ),
         ),
         Table(
@@ -495,6 +501,7 @@ def read_metadata(path: str | os.PathLike, flight: str) -> FlightMetadata:
         site["launch_rod_angle"],
         m["date"],
         m["flight_description"],
+        rocket.get("motor"),
     )
 
 
