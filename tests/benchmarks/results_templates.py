@@ -467,7 +467,10 @@ README_BLOCKS["headline"] = f"""\
   a clear input error {{{{bench_fuzz_users:results.after.totals.CLEAR_ERROR}}}}, wrong and flagged
   {{{{bench_fuzz_users:results.after.totals.FLAGGED}}}}, still right {{{{bench_fuzz_users:results.after.totals.ACCURATE}}}},
   outputs undefined {{{{bench_fuzz_users:results.after.totals.UNDEFINED}}}} ({{{{bench_fuzz_users:results.after.wall_s|mmss}}}} on 2 cores;
-  what is left: docs/RESULTS.md).
+  what is left: docs/RESULTS.md). The same mistakes on the three full-rate FIRM flights
+  (`--label flights`): {{{{bench_fuzz_users:results.flights.totals.runs}}}} runs, SILENT
+  {{{{bench_fuzz_users:results.flights.totals.SILENT}}}}, UNDERRATED {{{{bench_fuzz_users:results.flights.totals.UNDERRATED}}}},
+  traceback {{{{bench_fuzz_users:results.flights.totals.TRACEBACK}}}}.
 - **Speed** (the main job of `commands.json`): `schiaparelli` {{{{{_S}:wall_time_s|mmss}}}}, of which the
   10 000-member dispersion {{{{{_S}:dispersion.wall_s|mmss}}}}; `droptest`
   {{{{summaries/droptest.summary:wall_time_s|mmss}}}}.
