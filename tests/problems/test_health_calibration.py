@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from workbench.estimation.calibration import load_table
+from workbench.estimation.calibration import band_key, load_table
 from workbench.io import assets
 from workbench.io.scenario import resolve_scenario
 from workbench.problems import registry
@@ -50,7 +50,8 @@ def test_shipped_scenario_verdict_is_ok_and_every_statistic_is_calibrated(summar
     table = load_table(calibration_path(registry.get(kind)))
     for c in health["checks"]:
         if c.get("stat"):
-            assert c["name"] in table["checks"], f"{summary.name}: {c['name']} has no calibrated band"
+            key = band_key(c["name"], c["stat"])
+            assert key in table["checks"], f"{summary.name}: {c['name']} has no calibrated band ({key})"
     assert health["calibration"] is not None
     not_ok = [f"{c['name']}: {c['message']}" for c in health["checks"] if c["status"] != "OK"]
     assert health["verdict"] == "OK", f"{summary.name}: " + "; ".join(not_ok)
