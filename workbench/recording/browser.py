@@ -26,21 +26,13 @@ How a recording is shown (one browser for all of them; one page per recording):
    (``has_panicked``), a load that never finishes. ``WARN`` entries and view warnings are kept as
    warnings. Console errors caused by the blocked requests to other hosts are not problems.
 
-The empty-3D-view judgement (:func:`judge_scene`) works on the pixels of a maximised 3D view, in
-:data:`SCENE_REGION` (below the top bar and the view's tab strip, above the time panel, whatever the
-recording's layout): the region's background is its most common colour, and a pixel is *content*
-where any channel differs from that background by more than ``DIFF_THRESHOLD`` (the faint ground
-grid stays below it). The view is empty when the content share is below ``MIN_CONTENT_FRACTION``
-(a 2-px line across the region is above it).
+The empty-3D-view judgement is :func:`judge_scene` (content pixels against the region's most common
+colour, in :data:`SCENE_REGION`).
 
-Needs: the ``playwright`` Python package (``pip install edl-workbench[browser]``), a Chromium
-(Debian ``chromium``; or ``WORKBENCH_CHROMIUM=/path/to/chrome``) and the ``rerun`` command line
-(installed with ``rerun-sdk``). :func:`unavailable_reason` says what is missing. The viewer renders
-with the software rasterizer (SwiftShader): 10-60 s per recording on two cores.
-
-The protobuf field numbers are those of Rerun 0.41's ``viewer_control.proto`` (an experimental API
-without compatibility guarantee; read from the descriptor embedded in the 0.41 ``rerun`` binary);
-the viewer's reported version is checked against them.
+Needs ``playwright`` (``[browser]`` extra), a Chromium (or ``WORKBENCH_CHROMIUM``) and the ``rerun``
+command line; :func:`unavailable_reason` says what is missing. The viewer renders
+with the software rasterizer (SwiftShader). The protobuf field numbers are Rerun 0.41's
+``viewer_control.proto`` (an experimental API); the viewer's reported version is checked against them.
 """
 
 from __future__ import annotations

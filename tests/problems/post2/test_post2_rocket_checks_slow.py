@@ -45,16 +45,26 @@ def _mutated(tmp_path, log: str, fn) -> object:
     return p
 
 
-def _flip(lines):
-    head = lines[0].split(",")
-    idx = [head.index(f"raw_acceleration_{c}_gs") for c in "xyz"]
-    out = [lines[0]]
-    for ln in lines[1:]:
-        cells = ln.split(",")
-        for i in idx:
-            cells[i] = repr(-float(cells[i]))
-        out.append(",".join(cells))
-    return out
+def _columns(pattern: str, fn):
+    """A line edit applying ``fn`` to the three cells (strings) of the columns ``pattern.format(c)``,
+    c in x, y, z, of every data row."""
+
+    def edit(lines):
+        head = lines[0].split(",")
+        idx = [head.index(pattern.format(c)) for c in "xyz"]
+        out = [lines[0]]
+        for ln in lines[1:]:
+            cells = ln.split(",")
+            for i, v in zip(idx, fn([cells[i] for i in idx]), strict=True):
+                cells[i] = v
+            out.append(",".join(cells))
+        return out
+
+    return edit
+
+
+GYRO = "raw_angular_rate_{}_deg_per_s"
+_flip = _columns("raw_acceleration_{}_gs", lambda v: [repr(-float(x)) for x in v])
 
 
 def _cut_coast(lines):
@@ -75,37 +85,9 @@ def test_flight_1_mutations(tmp_path):
 
 
 def test_flight_1_gyro_in_rad_per_s(tmp_path):
-    def rad(lines):
-        head = lines[0].split(",")
-        idx = [head.index(f"raw_angular_rate_{c}_deg_per_s") for c in "xyz"]
-        out = [lines[0]]
-        for ln in lines[1:]:
-            cells = ln.split(",")
-            for i in idx:
-                cells[i] = repr(math.radians(float(cells[i])))
-            out.append(",".join(cells))
-        return out
-
+    rad = _columns(GYRO, lambda v: [repr(math.radians(float(x))) for x in v])
     c = _checks(_mutated(tmp_path, FLIGHTS[0], rad), tmp_path, allow_unhealthy=True)
     assert c["units.gyro"]["status"] == ERROR
-
-
-def _gyro_columns(fn):
-    """A line edit applying ``fn`` to the three gyro cells (strings) of every data row."""
-
-    def edit(lines):
-        head = lines[0].split(",")
-        idx = [head.index(f"raw_angular_rate_{c}_deg_per_s") for c in "xyz"]
-        out = [lines[0]]
-        for ln in lines[1:]:
-            cells = ln.split(",")
-            new = fn([cells[i] for i in idx])
-            for i, v in zip(idx, new, strict=True):
-                cells[i] = v
-            out.append(",".join(cells))
-        return out
-
-    return edit
 
 
 @pytest.mark.parametrize(
@@ -117,7 +99,7 @@ def _gyro_columns(fn):
 )
 def test_flight_1_gyro_axes_mirrored_against_the_magnetometer(tmp_path, what, fn):
     # a swap or a single sign flip mirrors the gyro's frame: the field no longer turns with its rates
-    c = _checks(_mutated(tmp_path, FLIGHTS[0], _gyro_columns(fn)), tmp_path, allow_unhealthy=True)
+    c = _checks(_mutated(tmp_path, FLIGHTS[0], _columns(GYRO, fn)), tmp_path, allow_unhealthy=True)
     gm = c["geometry.gyro_magnetometer"]
     assert gm["status"] == ERROR, what
     assert "mirror image" in gm["message"] and "raw_angular_rate_[xyz]_deg_per_s" in gm["message"]

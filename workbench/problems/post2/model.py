@@ -10,8 +10,7 @@ file does not estimate keeps its nominal value from the environment and vehicle.
 
 Frames and conventions (SI inside):
 
-* ``p_I``, ``v_I`` [m, m/s]: planet-centred inertial, +Z the body's pole (the J2 model of
-  :mod:`workbench.core.gravity` holds in any frame whose +Z is the pole); precession neglected.
+* ``p_I``, ``v_I`` [m, m/s]: planet-centred inertial, +Z the pole (as J2 needs); no precession.
 * ``q_I_B`` scalar-last, rotates body vectors to inertial; body frame B: +X along the symmetry
   axis towards the heat shield (the air-relative velocity is along +X_B at zero angle of attack,
   as in the thesis' Ch. 3.2.2 "the vehicle body X-axis aligned with the velocity vector"),
@@ -21,8 +20,7 @@ Frames and conventions (SI inside):
   ``v_B = (u, v, w)``: α = atan2(w, u), β = asin(v / |v_B|); the bank angle σ about the
   air-relative velocity from a reference "wind" frame W0 whose x is v̂_rel and whose z points
   down (towards the planet, in the plane of r and v): ``R_I_B = R_I_W0 Rx(σ) Rz(−β) Ry(α)``.
-* The atmosphere co-rotates with the planet (rate ω about +Z): ``v_rel = v − ω × r``; altitude
-  is ``|r| − R_ref`` (spherical reference radius).
+* The atmosphere co-rotates (ω about +Z): ``v_rel = v − ω × r``; altitude ``|r| − R_ref`` (sphere).
 
 Aerodynamics (conventions of :mod:`workbench.models.aerodynamics`, mapped to B): axial force
 ``−CA q S X_B``, normal force ``−CN q S e⊥`` against the lateral air-relative velocity, moment
@@ -33,19 +31,13 @@ parachute adds ``−CD_p q S_p v̂_rel · multiplier`` (a drag element).  Rotati
 ``I ω̇ = M − ω × I ω``; kinematics ``q̇ = ½ q ⊗ (ω, 0)``.  ``dof = 3`` drops the attitude: the
 aero force is drag only (``−CA q S v̂_rel``).
 
-Estimated-state processes (thesis Ch. 3.1.1 Eq. 3.1 with the system noise Q): ``constant``
-(no noise), ``random_walk`` with a PSD (Q = PSD dt per component), ``markov`` (first-order
-Gauss-Markov about the initial value, time constant τ, stationary 1σ equal to the prior 1σ
-unless a PSD is given: Φ = e^(−dt/τ), Q = σ² (1 − Φ²)).  Bounded parameters go through the tanh
-S-curve of the thesis' Ch. 5 (Fig. 5-15): the estimated state s is unbounded and the model uses
-``c + h tanh((s − c)/h)`` with c, h the centre and half-width of [lo, hi].
+Estimated-state processes (thesis Ch. 3.1.1 Eq. 3.1): ``constant``, ``random_walk`` (Q = PSD dt) or
+``markov`` (Φ = e^(−dt/τ), Q = σ² (1 − Φ²), σ the prior 1σ unless a PSD is given); bounded parameters
+go through the tanh S-curve of Ch. 5 (Fig. 5-15): the model uses ``c + h tanh((s − c)/h)``.
 
-Speed (issue #14): ``derivative``, ``aero_force_moment`` and ``propagate`` run compiled numba
-kernels (:mod:`workbench.problems.post2.kernels`) that repeat the numpy reference's operations in
-the same order, so the numbers are the same to the bit on the shipped scenarios; the numpy code is
-kept (``derivative_reference``, ``aero_force_moment_reference``, and every path of a model with
-``use_kernel`` False: the environment variable ``WORKBENCH_POST2_KERNEL=0``, :data:`KERNEL_ENV`)
-and ``tests/problems/post2/test_post2_kernels.py`` compares the two.
+Speed: ``derivative``, ``aero_force_moment`` and ``propagate`` run the compiled kernels of
+:mod:`workbench.problems.post2.kernels`, bit-identical to the numpy reference kept beside them
+(``WORKBENCH_POST2_KERNEL=0``, :data:`KERNEL_ENV`, selects the reference).
 """
 
 from __future__ import annotations
