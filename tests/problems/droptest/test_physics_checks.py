@@ -22,6 +22,7 @@ import pytest
 from workbench.estimation.health import ERROR, OK, WARNING
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
+from workbench.problems.droptest.lander import load_lander
 from workbench.problems.droptest.physics import diagnose_axes, hanging_checks
 from workbench.problems.droptest.problem import key_moments
 from workbench.problems.droptest.telemetry import load_drop_telemetry
@@ -172,6 +173,44 @@ def test_first_contact_geometry_ok_clean_error_hanging_moved(droptest_run, dropt
     geo = _checks(res.summary["health"], "geometry.")["geometry.first_contact"]
     assert res.summary["health"]["verdict"] == ERROR
     assert geo["status"] == ERROR and "[hanging] position_m" in geo["message"]
+
+
+def test_full_stroke_ok_on_clean_run_and_a_taller_lander_is_a_warning_naming_height(
+    droptest_run, droptest_result, tmp_path
+):
+    """The declared apex 20 % higher moves the max stroke (the apex is the closest point) to ~0 while
+    the IMU shows only the bags' jerk: a full stroke the data contradict, WARNING naming height_m."""
+    full = _checks(droptest_result.summary["health"], "geometry.")["geometry.full_stroke"]
+    assert full["status"] == OK and "no full stroke" in full["message"], full["message"]
+    src = droptest_run.settings.lander_file
+    text = Path(src).read_text(encoding="utf-8")
+    taller = tmp_path / "lander.toml"
+    taller.write_text(re.sub(r"^height_m = 1\.2 ", "height_m = 1.44 ", text, flags=re.M), encoding="utf-8")
+    settings = replace(droptest_run.settings, lander=load_lander(taller), lander_file=taller)
+    res = dt.run_droptest(settings, droptest_run.telemetry_paths())
+    assert res.summary["max_stroke"]["distance_m"] < droptest_result.summary["max_stroke"]["distance_m"] - 0.15
+    full = _checks(res.summary["health"], "geometry.")["geometry.full_stroke"]
+    assert full["status"] == WARNING and "height_m" in full["message"], full["message"]
+
+
+def test_rigid_impact_while_the_geometry_keeps_the_lander_clear_is_an_error(droptest_run, droptest_result, tmp_path):
+    """A 3 ms, 100 g half-sine on every triad at the max-stroke time (the frame striking the ramp)
+    while the declared geometry keeps the lander 0.24 m clear: ERROR naming the geometry keys."""
+    paths = _copy(droptest_run, tmp_path)
+    t_ms = droptest_result.summary["max_stroke"]["time_s"] + droptest_result.telemetry.group_delay_s
+
+    def strike(names, x):
+        t = x[:, names.index("time")]
+        pulse = np.where(np.abs(t - t_ms) < 0.0015, 100.0 * np.cos(np.pi * (t - t_ms) / 0.003), 0.0)
+        for tri in droptest_run.settings.accelerometer.triads:
+            x[:, names.index(f"{tri}.z")] += pulse
+        return x
+
+    _edit_csv(paths["imu"], strike)
+    res = dt.run_droptest(droptest_run.settings, paths)
+    full = _checks(res.summary["health"], "geometry.")["geometry.full_stroke"]
+    assert full["status"] == ERROR and "height_m" in full["message"], full["message"]
+    assert full["value"] > full["bound"]
 
 
 def test_ramp_angle_in_radians_named(droptest_run, droptest_result):

@@ -26,7 +26,12 @@ from workbench.estimation.health import (
     nis_check,
     notes_check,
 )
-from workbench.problems.droptest.physics import contact_geometry_check, hanging_checks, timing_checks
+from workbench.problems.droptest.physics import (
+    contact_geometry_check,
+    full_stroke_check,
+    hanging_checks,
+    timing_checks,
+)
 
 __all__ = ["drop_health", "input_checks", "input_health"]
 
@@ -94,7 +99,8 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
     forward and smoothed ``FilterStage`` and the ``StrokeStage`` ``st`` (lengths in m, times in s);
     ``cov_stats``: :func:`~workbench.estimation.health.covariance_stats` of ``smo.P`` if already known.
     With the run's ``settings`` (``DropSettings``) also the physics cross-checks of :mod:`.physics`
-    (sensor axes against gravity while hanging, rig geometry against the first contact, timing);
+    (sensor axes against gravity while hanging, rig geometry against the first contact, the
+    full-stroke verdict against the IMU's rigid impact, timing);
     ``completeness`` (:class:`~.physics.ContactCompleteness`): data that end inside the contact
     make its outputs undefined (``data.contact`` WARNING naming the file and the time); ``lag``: the
     IMU lag against the ranging (:func:`~.physics.estimate_lag`) for the timing check."""
@@ -117,6 +123,10 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
                     "sensor axis or scale moves the estimated trajectory as much",
                 )
             checks.append(geo)
+        if completeness is None or completeness.max_stroke_defined:
+            full = full_stroke_check(tel, st, settings)
+            if full is not None:
+                checks.append(full)
         tchecks, tnotes = timing_checks(tel, smo, st, settings, lag)
         checks += tchecks
         notes += tnotes

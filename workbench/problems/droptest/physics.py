@@ -8,6 +8,8 @@
 * :func:`contact_geometry_check` — the declared rig geometry (hanging position, lander and airbag
   geometry, ramp) against the first-contact kinematics: where the estimated trajectory puts the
   airbag lobes at the measured onset of the impact (IMU |f| > 2 g), they must just touch the ramp;
+* :func:`full_stroke_check` — the stroke's full-stroke verdict (declared geometry) against the
+  IMU's rigid impact: a rigid frame striking the ramp shows as a jerk tens of times any bag's;
 * :func:`contact_completeness` — data that end (or break) inside the contact: the contact's outputs
   are then undefined;
 * :func:`timing_check` — the declared time shifts of the IMU against the ranging residuals: the lag
@@ -33,6 +35,9 @@ __all__ = [
     "ContactCompleteness",
     "contact_completeness",
     "contact_geometry_check",
+    "full_stroke_check",
+    "RIGID_JERK_G_PER_S",
+    "rigid_impact",
     "diagnose_axes",
     "LagEstimate",
     "estimate_lag",
@@ -505,6 +510,116 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
         f"as much; likely: {'; '.join(keys)}",
         stat,
     )
+
+
+# ---------------------------------------------------------------------------------------------
+# the geometry's full-stroke verdict against the IMU's rigid impact
+# ---------------------------------------------------------------------------------------------
+
+
+#: a mean-triad jerk above this [g/s] is the rigid lander striking the surface, not the bags: gas
+#: bags load over tens of ms, a rigid frame over a few ms (the two ranges over the truth Monte Carlo:
+#: docs/RESULTS.md, "Drop test: full stroke against the IMU")
+RIGID_JERK_G_PER_S = 10_000.0
+#: ... and above this many times the 99th percentile of the jerk while the lander hangs (noise floor)
+RIGID_JERK_NOISE_FACTOR = 10.0
+
+
+def _mean_triad_force(tel) -> tuple[np.ndarray, np.ndarray]:
+    """(time [s] on the IMU's own tags, mean specific force over the triads [m/s², body] (n, 3))
+    of the raw IMU samples of ``tel``."""
+    imu = tel.imu
+    f = np.stack([imu.stack([f"{n}.{a}" for a in "xyz"]) for n in tel.triads], axis=1)
+    return imu.time, np.mean(f, axis=1)
+
+
+def rigid_impact(tel) -> tuple[float, float, float, float] | None:
+    """The sharpest change of the measured specific force after the first impact starts: ``(jerk
+    [g/s], t [s] on the filter's time line, threshold [g/s], peak |f| [g] within 10 ms)`` — jerk
+    the largest |Δf̄|/Δt of the mean triad specific force f̄ between consecutive IMU samples (no
+    differences across gaps), threshold the larger of :data:`RIGID_JERK_G_PER_S` and
+    :data:`RIGID_JERK_NOISE_FACTOR` × the 99th percentile of the jerk while hanging (noise).
+    None without a measured impact."""
+    imp = measured_impact(tel)
+    if imp is None:
+        return None
+    t, f = _mean_triad_force(tel)
+    dt = np.diff(t)
+    ok = (dt > 0) & (dt <= 2.5 * float(np.median(dt))) & np.all(np.isfinite(f[1:] - f[:-1]), axis=1)
+    jerk = np.where(ok, np.linalg.norm(np.diff(f, axis=0), axis=1) / np.where(ok, dt, 1.0) / G0, 0.0)
+    d = tel.group_delay_s
+    after = t[1:] - d >= imp[0] - 0.005
+    if not after.any():
+        return None
+    hang = ok & _hang_mask(t[1:], tel.events.get("release", -np.inf))
+    floor = float(np.percentile(jerk[hang], 99)) if hang.sum() >= 20 else 0.0
+    thr = max(RIGID_JERK_G_PER_S, RIGID_JERK_NOISE_FACTOR * floor)
+    k = int(np.argmax(np.where(after, jerk, -1.0)))
+    near = np.abs(t - t[k + 1]) <= 0.01
+    peak = float(np.max(np.linalg.norm(f[near], axis=1))) / G0
+    return float(jerk[k]), float(t[k + 1] - d), thr, peak
+
+
+def full_stroke_check(tel, st, settings) -> Check | None:
+    """``geometry.full_stroke``: the stroke's full-stroke verdict (the declared lander geometry at
+    the estimated pose, ``st`` a ``StrokeStage`` with lengths in m) against the IMU's own evidence
+    of a rigid impact (:func:`rigid_impact`): a rigid frame striking the ramp shows as a jerk tens
+    of times any gas bag's.  ERROR when the IMU shows a rigid impact but the geometry keeps the
+    lander more than 3σ clear, or the geometry puts the lander through the surface (stroke ≤ 0)
+    without one; WARNING when the geometry makes a full stroke likely (stroke within 1σ of the
+    surface) and the IMU shows none.  The stroke rests on the declared geometry (``height_m``,
+    ``cm_height_m``, ...) that no sensor sees; this is the one place the data can contradict it.
+    None without a measured impact or a max stroke."""
+    ms = getattr(st, "max", None)
+    rig = rigid_impact(tel)
+    if ms is None or rig is None or not np.isfinite(ms.distance):
+        return None
+    jerk, t_j, thr, peak = rig
+    d, s = float(ms.distance), float(ms.sigma)
+    rigid = jerk > thr
+    imu_says = (
+        f"the IMU's sharpest jerk {jerk:.3g} g/s at t = {t_j:.4f} s (peak |f| {peak:.1f} g; a rigid impact "
+        f"> {thr:.3g} g/s)"
+    )
+    geo_says = f"the declared geometry's max stroke {d:+.3f} ± {s:.3f} m (1σ) at t = {ms.time:.4f} s"
+    keys = (
+        f"the lander geometry in {settings.lander_file} (height_m, cm_height_m, base_side_m or vertices_m) or the "
+        f"setup file's [hanging] position_m"
+    )
+    if rigid and d - 3.0 * s > 0.0:
+        return Check(
+            "geometry.full_stroke",
+            ERROR,
+            _g(jerk),
+            _g(thr),
+            f"{imu_says} is the rigid lander striking the surface, but {geo_says} keeps it clear by more than 3σ: "
+            f"the declared geometry places the lander's body too far inside its bags; likely: {keys}",
+        )
+    if not rigid and d <= 0.0:
+        return Check(
+            "geometry.full_stroke",
+            ERROR,
+            _g(jerk),
+            _g(thr),
+            f"{geo_says} puts the rigid lander through the surface (FULL STROKE), but {imu_says} shows no rigid "
+            f"impact: the declared geometry places the body too far out of its bags; likely: {keys}",
+        )
+    if not rigid and d <= s:
+        return Check(
+            "geometry.full_stroke",
+            WARNING,
+            _g(jerk),
+            _g(thr),
+            f"{geo_says} makes a full stroke likely, but {imu_says} shows no rigid impact: either the bags "
+            f"bottomed out without the frame touching or the stroke is off by as much; check {keys}",
+        )
+    if rigid:
+        verdict = f"full stroke corroborated: {imu_says}; {geo_says}"
+    elif d - 3.0 * s <= 0.0:
+        verdict = f"{geo_says} leaves a full stroke within 3σ; {imu_says} shows no rigid impact: no full stroke"
+    else:
+        verdict = f"no full stroke: {geo_says}; {imu_says} shows no rigid impact either"
+    return Check("geometry.full_stroke", OK, _g(jerk), _g(thr), verdict)
 
 
 # ---------------------------------------------------------------------------------------------
