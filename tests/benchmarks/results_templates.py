@@ -291,14 +291,17 @@ checks of issue #26 ({{{{{_FZ}:results.before.code}}}}); after: {{{{{_FZ}:result
 Reading: every traceback is gone (a non-finite innovation is a numerical failure naming the stage and the
 measurement, exit 4), and every error names the file and the column or key. What is left:
 
-* **SILENT — the declared lander height of a drop test** (`height_m` × 1.2, with and without ranging). The max
-  stroke is the closest approach of the declared lander body to the ramp; a taller lander brings its apex closer by
-  many σ (with ranging, σ is millimetres). The one check that sees the declared geometry, `geometry.first_contact`
-  (the airbag lobes' clearance at the measured impact, judged in one band per sensor configuration), does not move:
-  the lobes that touch first sit on the base petal, which `height_m` does not change; the apex comes close only
-  later, inside one continuous contact. Nothing measured here constrains the body's height above the lobes; a
-  check of the contact's lever arm (the measured torque against the declared lobes in contact) could.
-  `cm_height_m` × 1.5 moves the first-contact clearance and is an ERROR with ranging.
+* **SILENT — the declared lander height of a drop test with ranging** (`height_m` × 1.2). The max stroke is the
+  closest approach of the declared lander body to the ramp; a taller lander brings its apex (the closest point
+  once the lander has rolled) 0.23 m closer, 103σ with ranging's millimetre pose. No sensor sees the body's height
+  above its bags: the lobes barely move (the base petal's not at all, so `geometry.first_contact` does not), the
+  ranging fixes the pose, not the body inside the bags. The data can contradict the geometry only through a rigid
+  impact: `geometry.full_stroke` (below) makes the same mistake without ranging (stroke 0.005 ± 0.049 m, no rigid
+  impact in the IMU) a WARNING naming `height_m`, but with ranging the declared stroke (0.042 ± 0.002 m) is a
+  plausible near miss. Catching it would take a bag force model (force against compression), and on our
+  synthetic truth that would be the truth simulator's own bag model — a check that passes by construction here
+  and cannot be calibrated for real bags. `cm_height_m` × 1.5 moves the first-contact clearance: an ERROR with
+  ranging.
 * **UNDERRATED — the rocket importer on the decimated excerpt**: the FIRM excerpt's clean run is WARNING (its
   barometer innovations, `nis.baro`), and at its 8 Hz the field cannot be followed through the rocket's coning, so
   `geometry.gyro_magnetometer` (the field must turn with the gyro's rates; a mirrored gyro axis is a swapped or
@@ -478,8 +481,8 @@ README_BLOCKS["headline"] = f"""\
   more than 3σ of the two runs' combined σ; `bench_fuzz.py --label after`), before → after the health checks of issue #26:
   traceback {{{{bench_fuzz_users:results.before.totals.TRACEBACK}}}} → {{{{bench_fuzz_users:results.after.totals.TRACEBACK}}}},
   wrong with verdict OK (SILENT) {{{{bench_fuzz_users:results.before.totals.SILENT}}}} → {{{{bench_fuzz_users:results.after.totals.SILENT}}}}
-  (a drop test's declared lander height — UNDERRATED before only because every clean drop test was WARNING then, OK
-  now),
+  (a drop test's declared lander height with ranging, which no sensor sees — why in docs/RESULTS.md; without
+  ranging it is now a WARNING of `geometry.full_stroke`),
   wrong with only a WARNING (UNDERRATED) {{{{bench_fuzz_users:results.before.totals.UNDERRATED}}}} →
   {{{{bench_fuzz_users:results.after.totals.UNDERRATED}}}}, an error that names no file, column or key
   {{{{bench_fuzz_users:results.before.totals.UNCLEAR_ERROR}}}} → {{{{bench_fuzz_users:results.after.totals.UNCLEAR_ERROR}}}};
