@@ -1,5 +1,6 @@
-"""Every shipped recording, opened in Rerun's web viewer (headless Chromium), renders without a
-viewer error and with something in each of its 3D views (issue #13, item 7). Slow tier.
+"""Every shipped recording carries exactly one layout (issue #28), and opened by itself in Rerun's web
+viewer (headless Chromium) shows that layout — not a heuristic one — without a viewer error and with
+something in each of its 3D views (issue #13, item 7). Slow tier.
 
 The shipped scenarios are run once (``workbench run all``, in processes), then all recordings are
 opened one after another in one browser session (``workbench.recording.browser``; each 3D view is
@@ -14,19 +15,19 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
+import rerun as rr
 
 from workbench.recording import browser
+from workbench.recording.moments import embedded_blueprint_chunks
 
 pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def checks(tmp_path_factory):
-    reason = browser.unavailable_reason()
-    if reason:
-        pytest.skip(f"web viewer test needs {reason}")
+def recordings(tmp_path_factory) -> list[Path]:
     out = tmp_path_factory.mktemp("browser")
     proc = subprocess.run(
         [sys.executable, "-m", "workbench.cli", "run", "all", "--out", str(out / "recordings")],
@@ -34,8 +35,31 @@ def checks(tmp_path_factory):
         text=True,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
-    recordings = sorted((out / "recordings").glob("*.rrd"))
-    assert recordings, "workbench run all wrote no recordings"
+    recs = sorted((out / "recordings").glob("*.rrd"))
+    assert recs, "workbench run all wrote no recordings"
+    return recs
+
+
+def _view_ids(rrd: Path) -> set[str]:
+    """The view ids of the layout embedded in ``rrd`` (its ``/view/<id>`` blueprint entities)."""
+    paths = {str(c.entity_path) for c in embedded_blueprint_chunks(rrd)}
+    return {p.split("/")[2] for p in paths if p.startswith("/view/")}
+
+
+def test_every_shipped_recording_has_exactly_one_layout(recordings):
+    """One blueprint store (one activation) per recording: a second, earlier one would be what a
+    Viewer shows when the file is opened by itself."""
+    counts = {r.stem: len(rr.chunk.RrdReader(r).blueprints()) for r in recordings}
+    assert all(n == 1 for n in counts.values()), counts
+    assert all(_view_ids(r) for r in recordings)
+
+
+@pytest.fixture(scope="module")
+def checks(recordings, tmp_path_factory):
+    reason = browser.unavailable_reason()
+    if reason:
+        pytest.skip(f"web viewer test needs {reason}")
+    out = tmp_path_factory.mktemp("browser_shots")
     control = browser.write_empty_scene_recording(out / "control" / "empty_scene.rrd")
     t0 = time.monotonic()
     results = list(browser.check_recordings([*recordings, control], out / "shots", progress=print))
@@ -49,6 +73,9 @@ def test_every_shipped_recording_renders_without_errors_and_with_a_3d_scene(chec
     assert not bad, "\n".join(bad)
     for c in shipped.values():
         assert c.png is not None and c.png.stat().st_size > 10_000
+        # opened by itself, the viewer shows the recording's own layout, not one of its heuristics
+        shown = {vid for vid, _, _, _ in c.views}
+        assert shown == _view_ids(c.recording), f"{c.recording.stem}: the viewer shows another layout"
         n3d = sum(cls == "3D" for _, cls, _, _ in c.views)
         assert n3d >= 1 and len(c.scenes) == n3d == len(c.scene_pngs), c.summary()
 

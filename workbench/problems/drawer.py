@@ -22,9 +22,13 @@ class RunDrawer:
     ``rec``: the open :class:`~workbench.recording.writer.Recorder`; ``drawer``: the problem's stage
     recorder (anything with ``handle(stage)``); ``scorecard``: the problem's scorecard, summary dict ->
     markdown; ``layout``: optional ``(result, summary) -> blueprint or None``, the layout that needs
-    the final result.  That layout becomes the recording's default, not forced active, so that a
-    layout opened with the recording (``workbench open --at``, ``rerun REC.rrd LAYOUT.rbl``) wins
-    whichever the Viewer loads first; None leaves the layout of ``open_recording`` alone.
+    the final result; ``blueprint``: the layout sent when ``layout`` is absent or gives None.  A
+    recording with a ``layout`` is opened without one (``open_recording(blueprint=None)``) and gets
+    exactly one, at the end, as its default and active: a Viewer that opens the file has made its
+    own layout by then (from a default met earlier, else a heuristic one), and only an activation
+    replaces it.  A layout opened with the recording must therefore be loaded after it, as
+    ``workbench open --at`` (:func:`~workbench.recording.moments.seek_viewer`) and ``workbench
+    screenshot --blueprint`` do.
     """
 
     def __init__(
@@ -33,11 +37,13 @@ class RunDrawer:
         drawer,
         scorecard: Callable[[dict], str],
         layout: Callable[[object, dict], Any] | None = None,
+        blueprint: Any = None,
     ) -> None:
         self.rec = rec
         self.drawer = drawer
         self.scorecard = scorecard
         self.layout = layout
+        self.blueprint = blueprint
 
     def handle(self, stage: object) -> None:
         """Draw one stage with the problem's stage recorder (an unknown stage type is its ``TypeError``)."""
@@ -45,7 +51,7 @@ class RunDrawer:
 
     def finish(self, result: object, summary: dict) -> None:
         """After the last stage: the scorecard of ``summary``, its health verdict and key moments,
-        then the final layout (``layout(result, summary)``) when the problem has one."""
+        then the one layout of the recording: ``layout(result, summary)``, else ``blueprint``."""
         from workbench.recording.moments import log_key_moments
 
         self.rec.report(self.scorecard(summary))
@@ -53,5 +59,7 @@ class RunDrawer:
             self.rec.health(summary["health"])
         log_key_moments(self.rec, summary.get("key_moments", []))
         blueprint = None if self.layout is None else self.layout(result, summary)
+        if blueprint is None:
+            blueprint = self.blueprint
         if blueprint is not None:
-            self.rec.stream.send_blueprint(blueprint, make_active=False, make_default=True)
+            self.rec.stream.send_blueprint(blueprint, make_active=True, make_default=True)

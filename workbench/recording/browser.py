@@ -725,14 +725,22 @@ class WebViewer:
             )
 
     def _show(self, page, urls: list[str], at: str | float, result: ViewerCheck) -> bytes:
+        """Load ``urls[0]`` (the recording), then each further URL (a layout) once it has loaded —
+        the last layout activated wins, and a recording activates its own at its end — then seek
+        (``at``) and settle; returns the screenshot (PNG bytes)."""
         t0 = time.monotonic()
-        page.goto(viewer_url(self.base, urls), wait_until="load", timeout=self.load_timeout_s * 1000)
+        page.goto(viewer_url(self.base, urls[:1]), wait_until="load", timeout=self.load_timeout_s * 1000)
         page.wait_for_function("() => window._handle !== undefined", timeout=self.load_timeout_s * 1000)
         deadline = t0 + self.load_timeout_s
+        pending = list(urls[1:])
         while True:
             st = self._state(page)
             if st.recordings and not st.loading and st.timelines:
-                break
+                if not pending:
+                    break
+                page.evaluate("(u) => window._handle.add_receiver(u)", pending.pop(0))
+                time.sleep(1.0)
+                continue
             if page.evaluate(_JS_PANIC):
                 return page.screenshot()
             if time.monotonic() > deadline:

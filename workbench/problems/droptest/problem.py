@@ -193,20 +193,21 @@ class DropTestProblem(PipelineProblem):
 
     @contextlib.contextmanager
     def open_recording(self, path: Path, settings: DropSettings, truth: Any, properties: dict) -> Iterator[RunDrawer]:
-        """The drop-test recording (``recording.droptest_blueprint`` layout); when the run is done, the
-        layout that needs the result (camera at the impact, stroke zoom) becomes its default."""
+        """The drop-test recording; its one layout (``recording.droptest_blueprint``), sent when the run
+        is done, has the camera at the impact and the stroke zoom (the generic one only if no impact)."""
         from workbench.problems.droptest.recording import DropTestRecorder, droptest_blueprint, impact_view
         from workbench.recording.writer import open_recording
 
         residuals = residual_names(settings)
         triads = list(settings.accelerometer.triads)
         bp = droptest_blueprint(residuals, triads=triads)
-        with open_recording(path, settings.name, blueprint=bp, properties=properties) as rec:
+        with open_recording(path, settings.name, properties=properties) as rec:
             yield RunDrawer(
                 rec,
                 DropTestRecorder(rec, truth),
                 dt.scorecard_markdown,
                 layout=lambda result, summary: droptest_blueprint(residuals, impact_view(result), triads),
+                blueprint=bp,
             )
 
     def export_columns(self, result: dt.DropResult) -> ExportTable:

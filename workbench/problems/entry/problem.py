@@ -204,14 +204,14 @@ class EntryProblem(PipelineProblem):
 
     @contextlib.contextmanager
     def open_recording(self, path: Path, settings: EntrySettings, truth: Any, properties: dict) -> Iterator[RunDrawer]:
-        """The entry recording (``recording.entry_blueprint`` layout) drawn in the landing-site frame;
-        when the run is done, the layout with the AGL views fixed on the descent (known only then)
-        becomes its default."""
+        """The entry recording drawn in the landing-site frame; its one layout
+        (``recording.entry_blueprint``), sent when the run is done, has the AGL views fixed on the
+        descent (known only then; without a descent the generic layout)."""
         from workbench.core.bodies import MARS
         from workbench.problems.entry.recording import EntryRecorder, descent_window, entry_blueprint
         from workbench.recording.writer import open_recording
 
-        with open_recording(path, settings.run.name, blueprint=entry_blueprint(), properties=properties) as rec:
+        with open_recording(path, settings.run.name, properties=properties) as rec:
             drawer = EntryRecorder(
                 rec,
                 settings.require_vehicle(),
@@ -225,7 +225,7 @@ class EntryProblem(PipelineProblem):
                 window = descent_window(summary)
                 return None if window is None else entry_blueprint(descent=window)
 
-            yield RunDrawer(rec, drawer, en.scorecard_markdown, layout=layout)
+            yield RunDrawer(rec, drawer, en.scorecard_markdown, layout=layout, blueprint=entry_blueprint())
 
     def export_columns(self, result: en.EntryResult) -> ExportTable:
         """Smoothed position, velocity (MMED inertial), attitude q_M_G and their σ."""
