@@ -218,3 +218,42 @@ def test_init_schiaparelli_validates_with_its_telemetry(tmp_path):
     assert sc.kind == "entry" and not sc.is_synthetic
     assert (d / "schiaparelli.toml").is_file()
     assert all((d / "telemetry" / f).is_file() for f in ("gnc.csv", "rda_slant_range.csv", "events.csv"))
+
+
+def test_replay_text_draws_sigma_plus_minus_and_degree_not_a_placeholder():
+    """The HUD's σ, ± and ° are drawn with their own glyphs (cv2's Hershey fonts drew "?")."""
+    from workbench.recording import replay as rp
+
+    def ink(s: str) -> np.ndarray:
+        img = np.zeros((60, 200, 3), np.uint8)
+        rp.draw_text(img, s, (10, 45), 1.0)
+        return img.max(axis=2) > 60
+
+    q = ink("?")
+    for glyph in ("σ", "±", "°"):
+        g = ink(glyph)
+        assert g.sum() > 20 and np.sum(g != q) > 20, glyph
+
+
+def test_replay_title_names_the_scenario_and_captions_stay_left_of_the_inset(droptest_run):
+    from workbench.recording import replay as rp
+
+    data = read_recording(droptest_run.rrd)
+    title, subtitle = rp.replay_titles(data, "droptest")
+    assert title.startswith("droptest — MER airbag drop") and "seed" in subtitle and "UTC" in subtitle
+    ov = rp.Overlay(
+        title=title,
+        subtitle=subtitle,
+        events=[(0.0, "a very long event caption " * 8)],
+        hud=[],
+        t0=0.0,
+        t1=1.0,
+        track_2d=np.array([[1000.0, 540.0], [1100.0, 560.0]]),  # the inset's dot above the caption band
+        track_t=np.array([0.0, 1.0]),
+        caption_s=1.0,
+    )
+    img = np.zeros((rp.H, rp.W, 3), np.uint8)
+    rp.draw_overlay(img, ov, 0.5)
+    a, b, c, d = ov.inset
+    caption = (img[rp.H - 112 : rp.H - 74, :, 2] > 200) & (img[rp.H - 112 : rp.H - 74, :, 0] < 120)  # yellow text
+    assert caption.any() and not caption[:, a:].any()

@@ -234,7 +234,15 @@ def _run(
     else:
         telemetry = problem.telemetry_files(settings)
     rrd = out / f"{sc.name}.rrd"
-    properties = {"run": {"scenario": str(sc.path), "kind": sc.kind, "seed": seed}}
+    properties = {
+        "run": {
+            "scenario": str(sc.path),
+            "kind": sc.kind,
+            "seed": seed,
+            "synthetic": bool(sc.is_synthetic),
+            "description": sc.description,
+        }
+    }
     with problem.open_recording(rrd, settings, truth, properties) as drawer:
         result = None
         last = "start"

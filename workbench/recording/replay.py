@@ -14,7 +14,10 @@ plane). What is drawn is what the recording holds — nothing is recomputed:
 * a HUD of key numbers (time, and per problem e.g. stroke ± 1σ, altitude ± 1σ, speed), read from
   the bounded series under ``/plots``;
 * the ``/events`` log (INFO and WARN entries) as captions, and the playback slowed around them;
-* a time bar with the events and an inset of the whole track (side view) with the vehicle on it.
+* a time bar with the events and an inset of the whole track (side view) with the vehicle on it;
+* a title bar: the run's name and scenario description, then the kind, seed, recording date and
+  what is drawn (:func:`replay_titles`); text in DejaVu Sans (matplotlib's bundled font, through
+  Pillow: σ, ±, °, Δ), captions kept left of the inset.
 
 Frames are 1280×720 (``mp4v`` in an ``.mp4`` container through OpenCV's bundled FFmpeg). Frame
 times follow a time warp: a base rate (recording seconds per video second) chosen so the video
@@ -23,6 +26,7 @@ lasts ``duration_s``, slowed by ``slow`` within ``± window`` of every event.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import re
@@ -45,6 +49,10 @@ __all__ = [
     "Presentation",
     "ReplayError",
     "ReplayStats",
+    "Overlay",
+    "draw_overlay",
+    "draw_text",
+    "replay_titles",
     "frame_times",
     "render_mp4",
 ]
@@ -154,9 +162,10 @@ _ELLIPSE = (0, 165, 255)
 _TRACK = (180, 119, 31)
 _TRUTH = (200, 200, 200)
 _TEXT = (240, 240, 240)
-_FONT = cv2.FONT_HERSHEY_SIMPLEX
+#: text height [px] per unit of ``scale`` in :func:`draw_text` (cv2's Hershey scale, kept for the layout)
+_FONT_PX = 30.0
 _SHADES = 24  # shade levels of the flat shading
-_MAX_FACES = 4000  # larger meshes are simplified by vertex clustering for drawing
+_MAX_FACES = 10000  # larger meshes are simplified by vertex clustering for drawing
 _MAX_LINE_POINTS = 600
 _FILE_MESSAGE = re.compile(r"\.(csv|toml|npz|json)\b")  # static tracks are thinned to this many points
 
@@ -441,7 +450,7 @@ def _draw_mesh(img: np.ndarray, cam: _Camera, verts_w: np.ndarray, faces: np.nda
         return
     idx = np.nonzero(keep)[0]
     light_c = cam.R_cw @ light
-    shade = 0.35 + 0.65 * np.clip(-(n[idx] @ light_c), 0.0, 1.0)
+    shade = 0.45 + 0.55 * np.clip(-(n[idx] @ light_c), 0.0, 1.0)
     order = np.argsort(-centre[idx, 2])
     idx, shade = idx[order], shade[order]
     bgr = np.array([colour[2], colour[1], colour[0]], float)
@@ -622,8 +631,50 @@ def _background() -> np.ndarray:
     return np.repeat(col[:, None, :], W, axis=1).astype(np.uint8)
 
 
-def _text(img, s: str, org, scale=0.6, colour=_TEXT, thick=1):
-    cv2.putText(img, s, org, _FONT, scale, colour, thick, cv2.LINE_AA)
+@functools.lru_cache(maxsize=16)
+def _font(px: int, bold: bool):
+    """DejaVu Sans (matplotlib's bundled font: σ, ±, °, Greek, arrows) at ``px`` pixels, as a PIL font."""
+    from matplotlib import font_manager
+    from PIL import ImageFont
+
+    props = font_manager.FontProperties(family="DejaVu Sans", weight="bold" if bold else "normal")
+    return ImageFont.truetype(font_manager.findfont(props), px)
+
+
+@functools.lru_cache(maxsize=4096)
+def _text_size(s: str, scale: float = 0.6, thick: int = 1) -> tuple[int, int]:
+    """(width, height) [px] of ``s`` drawn by :func:`draw_text` with ``scale`` and ``thick``."""
+    font = _font(max(6, round(scale * _FONT_PX)), thick > 1)
+    x0, y0, x1, y1 = font.getbbox(s, anchor="ls")
+    return int(x1 - x0), int(y1 - y0)
+
+
+@functools.lru_cache(maxsize=1024)
+def _fit(s: str, width: int, scale: float = 0.6, thick: int = 1) -> str:
+    """``s`` cut (with "…") to fit ``width`` [px] at ``scale``."""
+    if _text_size(s, scale, thick)[0] <= width:
+        return s
+    while s and _text_size(s + "…", scale, thick)[0] > width:
+        s = s[:-1]
+    return s.rstrip() + "…"
+
+
+def draw_text(img, s: str, org, scale=0.6, colour=_TEXT, thick=1):
+    """Draw ``s`` on the BGR frame ``img`` with its baseline starting at ``org`` (x, y) [px], at
+    ``scale`` × 30 px, bold when ``thick`` > 1, in DejaVu Sans (any Unicode the font has: σ, ±, °),
+    anti-aliased; only the text's box is converted through PIL."""
+    from PIL import Image, ImageDraw
+
+    font = _font(max(6, round(scale * _FONT_PX)), thick > 1)
+    x, y = int(org[0]), int(org[1])
+    bx0, by0, bx1, by1 = font.getbbox(s, anchor="ls")
+    x0, y0 = max(0, x + bx0 - 2), max(0, y + by0 - 2)
+    x1, y1 = min(img.shape[1], x + bx1 + 2), min(img.shape[0], y + by1 + 2)
+    if x1 <= x0 or y1 <= y0:
+        return
+    roi = Image.fromarray(np.ascontiguousarray(img[y0:y1, x0:x1, ::-1]))
+    ImageDraw.Draw(roi).text((x - x0, y - y0), s, font=font, fill=tuple(int(c) for c in colour[::-1]), anchor="ls")
+    img[y0:y1, x0:x1] = np.asarray(roi)[:, :, ::-1]
 
 
 def _panel(img, x0, y0, x1, y1, alpha=0.55):
@@ -632,10 +683,15 @@ def _panel(img, x0, y0, x1, y1, alpha=0.55):
 
 
 @dataclass
-class _Overlay:
-    """Everything drawn on top of the 3D scene that does not depend on the camera."""
+class Overlay:
+    """Everything drawn on top of the 3D scene that does not depend on the camera (pixels of the
+    1280×720 frame, times [s]): ``title``/``subtitle`` (:func:`replay_titles`), ``events`` (t, text)
+    captioned for ``caption_s`` after t, the HUD's ``hud`` series, the time bar's ``t0``..``t1``,
+    the inset's ``track_2d`` (n, 2) at ``track_t`` (n,) in its box ``inset`` (x0, y0, x1, y1), and
+    per-frame ``extra`` values (``ellipsoid_3sigma_axes_m``: the 3σ ellipsoid's semi-axes [m])."""
 
     title: str
+    subtitle: str
     events: list[tuple[float, str]]
     hud: list[tuple[HudItem, _Series]]
     t0: float
@@ -647,11 +703,54 @@ class _Overlay:
     extra: dict = field(default_factory=dict)
 
 
-def _draw_overlay(img: np.ndarray, ov: _Overlay, t: float) -> None:
+#: what a replay shows, per problem kind (the subtitle's end)
+_SHOWN = {
+    "droptest": "smoothed lander and airbags, 3σ position ellipsoid, truth track thin",
+    "entry": "smoothed vehicle, 3σ position ellipsoid, truth track thin",
+}
+
+
+def replay_titles(data: RecordingData, kind: str | None) -> tuple[str, str]:
+    """(title, subtitle) of a replay: the run's name and scenario description; the kind, seed,
+    synthetic or user data, the recording's date (UTC) and what is drawn."""
+    props = data.properties()
+    run = props.get("run", {})
+    name = data.recording_name or data.path.stem
+    desc = str(run.get("description") or "").strip()
+    title = f"{name} — {desc}" if desc else name
+    parts = [f"{kind or run.get('kind') or 'run'} reconstruction"]
+    if run.get("seed") is not None and run.get("synthetic", True):
+        parts.append(f"synthetic, seed {run['seed']}")
+    start = props.get("RecordingInfo", {}).get("start_time")
+    if start is not None:
+        import datetime as _dt
+
+        when = _dt.datetime.fromtimestamp(int(start) / 1e9, _dt.UTC)
+        parts.append(f"recorded {when:%Y-%m-%d %H:%M} UTC")
+    parts.append(_SHOWN.get(kind or "", "smoothed vehicle and 3σ position ellipsoid"))
+    return title, " · ".join(parts)
+
+
+def _lengths(xs) -> str:
+    """Lengths [m], largest first, "a × b × c unit" in the unit of the largest (mm, m or km: the one
+    a reader takes in at a glance), three figures."""
+    xs = sorted((float(x) for x in xs), reverse=True)
+    scale, unit = (1e3, "mm") if xs[0] < 0.1 else (1.0, "m") if xs[0] < 1e3 else (1e-3, "km")
+    return " × ".join(f"{x * scale:.3g}" for x in xs) + f" {unit}"
+
+
+def draw_overlay(img: np.ndarray, ov: Overlay, t: float) -> None:
+    """The title bar, the HUD (top left), the latest event's caption (bottom, left of the inset),
+    the time bar with the events and the inset track, at time ``t`` [s]."""
+    a, b, c, d = ov.inset
+    # title bar: the run and what it is, then what is shown
+    _panel(img, 0, 0, W, 58, 0.6)
+    draw_text(img, _fit(ov.title, W - 40, 0.62, 2), (20, 26), 0.62, (120, 200, 255), 2)
+    draw_text(img, _fit(ov.subtitle, W - 40, 0.45), (20, 48), 0.45, (210, 210, 210))
     # HUD, top left
     lines = [f"t = {t:8.3f} s"]
-    for item, s in ov.hud:
-        va = _value_at(s, t)
+    for item, sr in ov.hud:
+        va = _value_at(sr, t)
         if va is None:
             continue
         v, sg = va[0] * item.scale, va[1]
@@ -659,22 +758,23 @@ def _draw_overlay(img: np.ndarray, ov: _Overlay, t: float) -> None:
         if sg is not None:
             txt += f" ± {sg * item.scale:{item.fmt}}"
         lines.append(txt + f" {item.unit}")
-    if ov.extra.get("ellipsoid_3sigma_m") is not None:
-        lines.append(f"3σ position ellipsoid {ov.extra['ellipsoid_3sigma_m']:.3g} m")
-    h = 34 + 30 * len(lines)
-    _panel(img, 10, 10, 470, 10 + h)
-    _text(img, ov.title, (22, 38), 0.65, (120, 200, 255), 2)
-    for i, s in enumerate(lines):
-        _text(img, s, (22, 70 + 30 * i), 0.7, _TEXT, 2 if i == 0 else 1)
-    # caption: the latest event within caption_s before t
-    recent = [(te, s) for te, s in ov.events if te <= t <= te + ov.caption_s]
+    axes = ov.extra.get("ellipsoid_3sigma_axes_m")
+    if axes is not None:
+        lines.append("3σ ellipsoid " + _lengths(axes))
+    y0 = 66
+    _panel(img, 10, y0, 470, y0 + 14 + 30 * len(lines))
+    for i, line in enumerate(lines):
+        draw_text(img, _fit(line, 440, 0.7, 2 if i == 0 else 1), (22, y0 + 34 + 30 * i), 0.7, _TEXT, 2 if i == 0 else 1)
+    # caption: the latest event within caption_s before t, centred left of the inset
+    recent = [(te, e) for te, e in ov.events if te <= t <= te + ov.caption_s]
     if recent:
-        te, s = recent[-1]
-        s = s if len(s) <= 90 else s[:87] + "…"
-        (tw, th), _ = cv2.getTextSize(s, _FONT, 0.9, 2)
-        x = max(10, (W - tw) // 2)
-        _panel(img, x - 14, H - 120, min(W - 1, x + tw + 14), H - 78, 0.6)
-        _text(img, s, (x, H - 89), 0.9, (80, 230, 255), 2)
+        _, cap = recent[-1]
+        room = a - 40
+        cap = _fit(cap, room - 28, 0.8, 2)
+        tw, _ = _text_size(cap, 0.8, 2)
+        x = 10 + max(0, (room - tw) // 2)
+        _panel(img, x - 14, H - 112, min(a - 10, x + tw + 14), H - 74, 0.6)
+        draw_text(img, cap, (x, H - 85), 0.8, (80, 230, 255), 2)
     # time bar with the events
     x0, x1, y = 20, W - 350, H - 30
     cv2.line(img, (x0, y), (x1, y), (200, 200, 200), 2, cv2.LINE_AA)
@@ -686,13 +786,12 @@ def _draw_overlay(img: np.ndarray, ov: _Overlay, t: float) -> None:
         cv2.line(img, (xt(te), y - 8), (xt(te), y + 8), (80, 230, 255), 2)
     cv2.circle(img, (xt(t), y), 7, (255, 255, 255), -1, cv2.LINE_AA)
     # inset: the whole track, side view, with the vehicle on it
-    a, b, c, d = ov.inset
     _panel(img, a, b, c, d, 0.6)
     pts = ov.track_2d.astype(np.int32)
     cv2.polylines(img, [pts], False, _TRACK, 1, cv2.LINE_AA)
     i = int(np.clip(np.searchsorted(ov.track_t, t), 0, len(pts) - 1))
     cv2.circle(img, tuple(int(x) for x in pts[i]), 5, (80, 230, 255), -1, cv2.LINE_AA)
-    _text(img, "track (side view)", (a + 8, b + 18), 0.45)
+    draw_text(img, "track (side view)", (a + 8, b + 18), 0.45)
 
 
 def _inset_track(p: np.ndarray, right: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
@@ -768,8 +867,10 @@ def render_mp4(
     full_p = np.array([scene.pose(layout.VEHICLE, t)[1] for t in full_t[:: max(1, len(full_t) // 2000)]])
     full_t = full_t[:: max(1, len(xv.t) // 2000)]
     right_dir = np.cross(-side, np.array([0.0, 0.0, 1.0]))
-    ov = _Overlay(
-        title=f"{data.recording_name or data.path.stem}  ({kind or 'run'})",
+    title, subtitle = replay_titles(data, kind)
+    ov = Overlay(
+        title=title,
+        subtitle=subtitle,
         events=events,
         hud=[(it, s) for it in pres.hud if (s := _hud_series(data, it)) is not None],
         t0=t0,
@@ -826,13 +927,13 @@ def render_mp4(
                 te, c, hs, q = ell
                 i = int(np.searchsorted(te, t, side="right")) - 1
                 pose = scene.pose(layout.UNCERTAINTY, t)
-                ov.extra["ellipsoid_3sigma_m"] = float(hs[i, 0].max()) if i >= 0 else None
+                ov.extra["ellipsoid_3sigma_axes_m"] = hs[i, 0] if i >= 0 else None
                 if i >= 0 and pose is not None and hs[i, 0].max() <= 1.5 * dist[n]:
                     Rw = pose[0] @ quat_to_dcm(q[i, 0])
                     centre = pose[0] @ c[i, 0] + pose[1]
                     for ring in _ellipse_rings(centre, Rw, hs[i, 0]):
                         _draw_polyline(img, cam, ring, _ELLIPSE, 2)
-            _draw_overlay(img, ov, float(t))
+            draw_overlay(img, ov, float(t))
             writer.write(img)
             if progress is not None and n % 100 == 0:
                 progress(f"replay: frame {n + 1}/{len(times)} (t = {t:.3f} s)")
