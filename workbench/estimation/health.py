@@ -26,6 +26,8 @@ put ``health_report(checks)`` into its summary under ``"health"``.
 
 from __future__ import annotations
 
+import os
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -35,6 +37,7 @@ import numpy as np
 from workbench.estimation.consistency import chi2_ppf
 
 __all__ = [
+    "short_paths",
     "OK",
     "WARNING",
     "ERROR",
@@ -308,6 +311,24 @@ def health_report(checks: Sequence[Check], notes: Sequence[str] = ()) -> dict:
     return {"verdict": verdict(checks), "checks": [asdict(c) for c in checks], "notes": list(notes)}
 
 
+_ABS_PATH = re.compile(r"(?<![\w.])/(?:[\w.+@-]+/)+[\w.+@-]+")
+
+
+def short_paths(text: str, cwd: str | None = None) -> str:
+    """``text`` with every absolute path shortened for reading on screen: relative to ``cwd``
+    (default the working directory) when below it, else its last two components after "…/"."""
+    base = os.path.abspath(cwd or os.getcwd())
+
+    def one(m: re.Match) -> str:
+        p = m.group(0)
+        if p == base or p.startswith(base + os.sep):
+            return os.path.relpath(p, base)
+        parts = p.split("/")
+        return "…/" + "/".join(parts[-2:]) if len(parts) > 3 else p
+
+    return _ABS_PATH.sub(one, text)
+
+
 def health_markdown(health: Mapping) -> str:
     """A markdown section for a scorecard: the verdict, every check that is not OK, the notes and
     where the statistic thresholds came from (the truth-Monte-Carlo calibration table, or χ² alone)."""
@@ -318,10 +339,10 @@ def health_markdown(health: Mapping) -> str:
     lines.append(f"verdict: **{v}** ({len(health.get('checks', []))} checks)")
     bad = [c for c in health.get("checks", []) if c["status"] != OK]
     if bad:
-        lines += ["", "| check | status | message |", "|---|---|---|"]
-        lines += [f"| {c['name']} | {c['status']} | {c['message'].replace('|', '/')} |" for c in bad]
+        # a list, not a table: a table cell does not wrap, and the messages are sentences
+        lines += [""] + [f"- **{c['name']}** {c['status']}: {short_paths(c['message'])}" for c in bad]
     if health.get("notes"):
-        lines += ["", "Notes:", ""] + [f"- {n}" for n in health["notes"]]
+        lines += ["", "Notes:", ""] + [f"- {short_paths(n)}" for n in health["notes"]]
     cal = health.get("calibration")
     if cal:
         lines += [

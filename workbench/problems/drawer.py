@@ -13,7 +13,37 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["RunDrawer"]
+__all__ = ["RunDrawer", "verdict_block"]
+
+
+def verdict_block(summary: dict) -> str:
+    """The first lines of a run's scorecard (markdown), where the eye lands: the health verdict
+    with every check that is not OK named, the headline (``summary["headline"]``), and for a
+    synthetic run how far each headline number lies from its truth (``truth.*`` checks: |error| in
+    units of the reported σ, ERROR beyond 3)."""
+    health = summary.get("health") or {}
+    lines = []
+    if health:
+        checks = health.get("checks", [])
+        bad = [c for c in checks if c["status"] != "OK"]
+        verdict = f"**Health: {health.get('verdict', '?')}** ({len(checks)} checks"
+        named = ", ".join(f"{c['name']} {c['status']}" for c in bad)
+        verdict += f"; not OK: {named})" if bad else ", all OK)"
+        lines.append(verdict + " — details in the Health tab")
+    if summary.get("headline"):
+        lines.append(f"**{summary['headline']}**")
+    truth = [c for c in health.get("checks", []) if c["name"].startswith("truth.")]
+    if truth:
+        lines.append(
+            "truth (synthetic run), |error| / σ: "
+            + ", ".join(
+                f"{c['name'][len('truth.') :]} {c['value']:.2f}{'' if c['status'] == 'OK' else ' ' + c['status']}"
+                for c in truth
+                if isinstance(c.get("value"), int | float)
+            )
+            + " (inside 3σ: below 3)"
+        )
+    return "".join(f"{ln}  \n" for ln in lines) + ("\n" if lines else "")
 
 
 class RunDrawer:
@@ -54,7 +84,7 @@ class RunDrawer:
         then the one layout of the recording: ``layout(result, summary)``, else ``blueprint``."""
         from workbench.recording.moments import log_key_moments
 
-        self.rec.report(self.scorecard(summary))
+        self.rec.report(verdict_block(summary) + self.scorecard(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
         log_key_moments(self.rec, summary.get("key_moments", []))

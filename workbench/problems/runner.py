@@ -280,6 +280,7 @@ def _run(
         summary["stage_times_s"] = rep.stage_times(since=n_times)  # this run's (a reporter may serve several)
         summary["wall_time_s"] = time.perf_counter() - t_start
         judge_health(problem, summary)
+        summary["headline"] = problem.headline(summary)
         health = summary.get("health")
         if health is not None and health["verdict"] == ERROR:
             if not opts.allow_unhealthy:

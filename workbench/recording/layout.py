@@ -73,6 +73,8 @@ EVENTS = "/events"
 #: Bookmarks of the run's key moments (TextLog, one row per moment; ``recording.moments``).
 KEY_MOMENTS = "/events/key_moments"
 REPORT = "/report"
+#: What each track and body of the 3D scene is (markdown TextDocument beside the 3D views).
+SCENE_KEY = "/report/scene_key"
 #: The health verdict of the reconstruction (markdown TextDocument, ``estimation.health``).
 HEALTH = "/report/health"
 

@@ -38,6 +38,21 @@ FWD = (255, 127, 14, 255)
 TRUTH = (44, 160, 44, 255)
 XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
 XYZW = XYZ + [(120, 120, 120, 255)]
+#: the lander at the max-stroke pose (body, bags): grey, so it cannot be taken for the estimate
+GHOST, GHOST_BAGS = (150, 150, 150, 110), (170, 170, 170, 25)
+#: the stroke segment's colour at the closest approach and at the largest stroke
+STROKE_NEAR, STROKE_FAR = (230, 0, 230, 255), (0, 200, 230, 255)
+
+#: what the 3D scene shows (``layout.SCENE_KEY``, beside the 3D views)
+SCENE_KEY_MD = (
+    "**3D key** — lander (light grey) and airbags (orange, translucent): smoothed estimate · "
+    "blue line: smoothed CM track · orange line: forward-pass track · magenta dots: accelerometer "
+    "triads · magenta → cyan segment: stroke (closest body point to the ramp; magenta = closest) · "
+    "grey ghost: lander at max stroke, with its stroke segment · purple line: roll line (CM path of a "
+    "perfectly inelastic impact) · blue wireframe: 3σ position ellipsoid (inside the body while "
+    "the pose is known to centimetres)"
+)
+SCENE_KEY_TRUTH_MD = " · green wireframe and line: truth body and CM track"
 
 
 #: key of the red/green/blue (x/y/z) colours, for view names (legends off: they covered the data)
@@ -88,6 +103,7 @@ def droptest_blueprint(
     quantities are split per axis, each with the impact window beside the whole drop so the ±3σ
     band is visible.
     ``impact`` (known only after the reconstruction): ``point`` (3,) [m, SPF] CM at max stroke,
+    ``closest`` (3,) [m, SPF] the body's closest point to the ramp then,
     ``normal`` (3,) ramp normal, ``t0``/``t1`` [s] window of the impact, ``stroke_lo``/``stroke_hi``
     [m] y-range of the zoomed stroke plot. Without it a generic layout is returned.
     ``triads``: accelerometer triad names (one measured-vs-predicted plot each).
@@ -98,15 +114,26 @@ def droptest_blueprint(
     if impact is not None:
         pt = np.asarray(impact["point"], float)
         n = np.asarray(impact["normal"], float)
-        # three-quarter view from the free side of the ramp: 8 m out along the normal, 7 m across
-        eye = pt + 8.0 * n + np.array([7.0, 0.0, 0.0])
-        scene_kw["eye_controls"] = rrb.EyeControls3D(position=eye, look_target=pt, eye_up=[0.0, 0.0, 1.0])
+        # three-quarter view from the free side of the ramp: 8 m out along the normal, 7 m across it
+        # on the side of the body's closest point (from the other side the body hides the stroke)
+        across = np.array([1.0, 0.0, 0.0]) - n[0] * n
+        across /= np.linalg.norm(across)
+        near = np.asarray(impact.get("closest", pt), float)
+        if (near - pt) @ across < 0.0:
+            across = -across
+        eye = pt + 8.0 * n + 7.0 * across
+        look = 0.5 * (near + pt)
+        scene_kw["eye_controls"] = rrb.EyeControls3D(position=eye, look_target=look, eye_up=[0.0, 0.0, 1.0])
         win = (float(impact["t0"]), float(impact["t1"]))
         stroke_kw = {"y_range": (impact["stroke_lo"], impact["stroke_hi"]), "window": win}
-    scenes = rrb.Tabs(
-        rrb.Spatial3DView(name="Impact", origin=layout.WORLD, **scene_kw),
-        rrb.Spatial3DView(name="Chamber", origin=layout.WORLD),
-        active_tab=0,
+    scenes = rrb.Vertical(
+        rrb.Tabs(
+            rrb.Spatial3DView(name="Impact", origin=layout.WORLD, **scene_kw),
+            rrb.Spatial3DView(name="Chamber", origin=layout.WORLD),
+            active_tab=0,
+        ),
+        rrb.TextDocumentView(name="3D key", origin=layout.SCENE_KEY, contents="$origin"),
+        row_shares=[5, 1],
     )
     stroke_key = "blue smoothed, grey ±1σ ±3σ, orange fwd, green truth"
     plots: list = [
@@ -206,6 +233,7 @@ def impact_view(result) -> dict:
     hi = float(max(1.0, h.distance[i0] + 0.2))
     return {
         "point": smo.x[int(st.max.index), rl.SP],
+        "closest": h.closest_point_I[int(st.max.index)],
         "normal": st.surface.normal,
         "t0": float(smo.t[i0]) - 0.15,
         "t1": float(smo.t[i1]) + 0.25,
@@ -529,22 +557,25 @@ class DropTestRecorder:
         if surf.n_rocks:
             r.mesh(layout.DROPTEST_ROCKS, rock_meshes(surf), color=(90, 80, 75, 255))
         r.mesh(layout.VEHICLE_BODY, lander.body, color=(200, 200, 210, 255))
-        r.mesh(layout.AIRBAGS, airbag_mesh(lander, subdivisions=2), color=(255, 200, 60, 45))
+        r.mesh(layout.AIRBAGS, airbag_mesh(lander, subdivisions=2), color=(255, 200, 60, 30))
         r.points(
             layout.DROPTEST_TRIADS,
             np.array([lander.instruments[n] for n in self.tel.triads]),
             colors=(255, 0, 255, 255),
             radii=0.03,
         )
-        # stroke segment: closest body point -> its foot on the ramp, coloured by distance
+        # stroke segment: closest body point -> its foot on the ramp, magenta near to cyan far (neither
+        # is a colour of the bags, the ramp or the tracks), thick enough to read through the lobes
         seg = np.stack([h.closest_point_I, h.surface_point_I], axis=1)[:, None]
-        frac = np.clip(h.distance / max(1e-3, float(np.max(h.distance[t >= 0]))), 0.0, 1.0)
-        cols = np.stack([255 * (1 - frac), 200 * frac, 40 * np.ones_like(frac), 255 * np.ones_like(frac)], 1)
-        r.line_strips_series(layout.STROKE, t, seg, colors=cols.astype(np.uint8)[:, None], radii=0.02, step=step)
+        frac = np.clip(h.distance / max(1e-3, float(np.max(h.distance[t >= 0]))), 0.0, 1.0)[:, None]
+        cols = (1.0 - frac) * np.array(STROKE_NEAR, float) + frac * np.array(STROKE_FAR, float)
+        r.line_strips_series(layout.STROKE, t, seg, colors=cols.astype(np.uint8)[:, None], radii=0.035, step=step)
+        r.report(SCENE_KEY_MD + ("" if self.truth is None else SCENE_KEY_TRUTH_MD), entity=layout.SCENE_KEY)
+        # the label 0.6 m off the closest point, along the ramp normal: on the point it hid the segment
         r.text_labels_series(
             layout.DROPTEST_STROKE_LABEL,
             t,
-            h.closest_point_I[:, None],
+            (h.closest_point_I + 0.6 * np.asarray(surf.normal, float))[:, None],
             [[f"stroke {d:.3f} ± {s:.3f} m (1σ)"] for d, s in zip(h.distance, h.sigma, strict=True)],
             step=step,
         )
@@ -619,15 +650,15 @@ class DropTestRecorder:
             translation=self._smoothed_x[k, rl.SP],
             quaternion_xyzw=self._smoothed_x[k, rl.SQ],
         )
-        r.mesh(layout.DROPTEST_MAX_STROKE_BODY, lander.body, color=(230, 60, 60, 200))
-        r.mesh(layout.DROPTEST_MAX_STROKE_AIRBAGS, airbag_mesh(lander, subdivisions=2), color=(255, 140, 60, 35))
+        r.mesh(layout.DROPTEST_MAX_STROKE_BODY, lander.body, color=GHOST)
+        r.mesh(layout.DROPTEST_MAX_STROKE_AIRBAGS, airbag_mesh(lander, subdivisions=2), color=GHOST_BAGS)
         r.line_strip(
             layout.DROPTEST_MAX_STROKE_SEGMENT,
             np.stack([h.closest_point_I[k], h.surface_point_I[k]]),
-            color=(255, 0, 0, 255),
-            radius=0.03,
+            color=STROKE_NEAR,
+            radius=0.045,
         )
-        r.points(layout.DROPTEST_MAX_STROKE_POINT, ms.point_I[None], colors=(255, 0, 0, 255), radii=0.05)
+        r.points(layout.DROPTEST_MAX_STROKE_POINT, ms.point_I[None], colors=STROKE_NEAR, radii=0.06)
         ev = [
             (
                 float(ms.time),
@@ -663,7 +694,8 @@ class DropTestRecorder:
         t = self.fwd.t
         tg = truth_on_grid(self.truth, t)
         r.poses(layout.TRUTH_VEHICLE, t, tg["p_I"], tg["q_I_B"], step=np.arange(t.size))
-        r.mesh(layout.DROPTEST_TRUTH_BODY, st.lander.body, color=(44, 160, 44, 110))
+        edges = np.asarray(st.lander.body.vertices, float)[np.asarray(st.lander.body.edges_unique)]
+        r.line_strip(layout.DROPTEST_TRUTH_BODY, edges, color=TRUTH, radius=0.008)  # wireframe
         r.line_strip(layout.DROPTEST_TRUTH_TRAJECTORY, self.truth["p_I"][::20], color=TRUTH, radius=0.008)
         d, _, _ = truth_stroke(self.truth, st.lander, st.surface)
         r.scalars(
