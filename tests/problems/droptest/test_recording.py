@@ -139,10 +139,12 @@ def test_events_and_report(rec, droptest_run):
     assert abs(hits[0][0] - ms["time_s"]) <= 1e-9
     assert f"{ms['distance_m']:.3f} m" in hits[0][1]
     contact = droptest_run.summary["contact"]
-    begins = [t for t, x, _ in log if "contact begins" in x]
-    rebound = [t for t, x, _ in log if x.startswith("rebound")]
-    assert begins and abs(begins[0] - contact["start_s"]) <= 1e-9
-    assert rebound and abs(rebound[0] - contact["end_s"]) <= 1e-9
+    # the contact's start and the rebound are key moments only (★ rows): no second, earlier "rebound"
+    km = {m["name"]: m["t_s"] for m in droptest_run.summary["key_moments"]}
+    assert abs(km["first_contact"] - contact["start_s"]) <= 1e-9
+    assert not [x for x in texts if x.startswith("rebound") or "contact begins" in x]
+    ends = [t for t, x, _ in log if x.startswith("first compression ends")]
+    assert ends and abs(ends[0] - contact["end_s"]) <= 1e-9 and ends[0] < km["rebound"]
     report = rec.text_document(layout.REPORT)
     assert "max stroke" in report
     assert f"{ms['distance_m']:.3f} m ± {ms['sigma_m']:.3f} m" in report
