@@ -12,6 +12,7 @@ screenshots stay in the test's temporary folder (``--basetemp`` to keep them som
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import time
@@ -85,3 +86,34 @@ def test_the_negative_control_is_judged_empty(checks):
     assert not control.errors, control.errors
     assert len(control.scenes) == 1 and all(j.empty for j in control.scenes.values()), control.summary()
     assert not control.ok
+
+
+def test_readme_images_script_runs_and_its_captions_match_the_committed_ones(tmp_path):
+    """``tests/benchmarks/make_images.py`` (the README's four pictures and their caption numbers)
+    runs from the current code; the verdicts and the drop test's headline it measures are the ones the
+    README's captions were rendered from (``docs/results/images.json``)."""
+    reason = browser.unavailable_reason()
+    if reason:
+        pytest.skip(f"web viewer test needs {reason}")
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "images"
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(root / "tests" / "benchmarks" / "make_images.py"),
+            "--out",
+            str(out),
+            "--json",
+            str(out / "images.json"),
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    fresh = json.loads((out / "images.json").read_text())["results"]["images"]
+    committed = json.loads((root / "docs" / "results" / "images.json").read_text())["results"]["images"]
+    assert set(fresh) == set(committed)
+    for name, img in fresh.items():
+        assert (out / f"{name}.png").stat().st_size > 50_000
+        assert img["viewer_ok"] and img["verdict"] == committed[name]["verdict"], name
+    assert fresh["droptest_max_stroke"]["headline"] == committed["droptest_max_stroke"]["headline"]

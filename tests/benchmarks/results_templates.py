@@ -266,6 +266,44 @@ Cartesian position after the radar fix (the |δp_h|²/2r curvature of a ~12 km h
 
 RESULTS_MD = RESULTS_MD + "\n" + _ENTRY + "\n" + _ENTRY_MC
 
+_IM = "images:results.images"
+README_BLOCKS["images"] = f"""\
+Each image is the recording's own layout opened at a key moment (`workbench open REC.rrd --at MOMENT`)
+and shot in Rerun's web viewer, all four by one script from the current code, the numbers below from
+the same runs (`python tests/benchmarks/make_images.py`, {{{{images:results.wall_s|mmss}}}}; CI's slow tier runs
+it into a temporary folder). By hand:
+
+```bash
+.venv/bin/workbench open recordings/droptest.rrd --at max_stroke --dry-run --rbl /tmp/max_stroke.rbl
+.venv/bin/workbench screenshot recordings/droptest.rrd --blueprint /tmp/max_stroke.rbl --at 1.655 \\
+    --size 1600x1000 --out shots/        # needs Debian's chromium and the [browser] extra
+```
+
+Drop test at max stroke (t = {{{{{_IM}.droptest_max_stroke.t_s|.3f}}}} s) — the lander in its bags on the ramp, the
+stroke with its σ bands, the BP triad's innovations with ±3σ, the scorecard. This run: health
+{{{{{_IM}.droptest_max_stroke.verdict}}}}, {{{{{_IM}.droptest_max_stroke.headline}}}}.
+
+![droptest at max stroke](docs/images/droptest_max_stroke.png)
+
+Schiaparelli-like entry at parachute deployment (t = {{{{{_IM}.schiaparelli_pdd.t_s|.2f}}}} s) — capsule under its
+canopy, the radar beams, altitude above ground from PDD − 5 s with ±3σ, the density profile against the default
+model. This run: health {{{{{_IM}.schiaparelli_pdd.verdict}}}}, {{{{{_IM}.schiaparelli_pdd.headline}}}}.
+
+![schiaparelli at PDD](docs/images/schiaparelli_pdd.png)
+
+Flush air data (MEADS) at peak dynamic pressure (t = {{{{{_IM}.msl_meads_peak_qbar.t_s|.2f}}}} s) — heat shield with its
+seven ports, α with ±3σ and the truth, a port's measured vs model pressure and its residual, the scorecard with
+its health verdict. This run: health {{{{{_IM}.msl_meads_peak_qbar.verdict}}}}, {{{{{_IM}.msl_meads_peak_qbar.headline}}}}.
+
+![msl_meads at peak q](docs/images/msl_meads_peak_qbar.png)
+
+POST2 Huygens-like descent at main-chute deployment (t = {{{{{_IM}.post2_huygens_main_chute.t_s|.2f}}}} s) — trajectory,
+position error with ±3σ, the entry accelerometer's residual, the report and the key-moment bookmark in the events.
+This run: health {{{{{_IM}.post2_huygens_main_chute.verdict}}}}, {{{{{_IM}.post2_huygens_main_chute.headline}}}}.
+
+![post2_huygens at main chute](docs/images/post2_huygens_main_chute.png)
+"""
+
 _FZ = "bench_fuzz_users"
 _FUZZ = f"""
 ## The mistakes users make (issue #26: `bench_fuzz.py --label after`)

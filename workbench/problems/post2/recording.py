@@ -218,8 +218,10 @@ class Post2Drawer:
                 s.log(layout.POST2_RISERS, rr.Clear(recursive=False))
 
     def finish(self, result: object, summary: dict) -> None:
-        """Write the scorecard, the health verdict and the key moments."""
-        self.rec.report(self.scorecard(summary))
+        """Write the scorecard (headed by the verdict block), the health verdict and the key moments."""
+        from workbench.problems.drawer import verdict_block
+
+        self.rec.report(verdict_block(summary) + self.scorecard(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
         log_key_moments(self.rec, summary.get("key_moments", []))
