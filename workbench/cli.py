@@ -530,7 +530,12 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("a", help="recording A (.rrd; its <name>.summary.json beside it is read too)")
     sp.add_argument("b", help="recording B (.rrd)")
     sp.add_argument("--out", default=None, help="write the comparison recording here (.rrd)")
-    sp.add_argument("--rows", type=int, default=40, help="at most this many changed numbers in the table")
+    sp.add_argument(
+        "--rows",
+        type=int,
+        default=12,
+        help="the largest this many changed numbers in the table (by |B − A| / σ where known)",
+    )
     sp.set_defaults(func=cmd_compare)
     sp = sub.add_parser("replay", help="presentation outputs of a run: --mp4 video (OpenCV) and/or --png summary")
     sp.add_argument("recording", help="a run recording (.rrd)")

@@ -90,7 +90,9 @@ def test_compare_two_seeds_differ(falling, capsys):
     assert np.max(np.abs(truth_diff)) > 1.0
     assert np.max(np.abs(d.diff[:, 0] - truth_diff) / d.sigma[:, 0]) < 5.0
     assert ("seed", 3, 4) in cmp.numbers
-    assert "| `seed` | 3 | 4 |" in text and "Key numbers" in text
+    # the seeds are named with the runs, and different seeds said to mean different truths
+    assert "seed 3" in text and "seed 4" in text and "Different truths" in text and "Key numbers" in text
+    assert "| `seed` |" not in text
 
 
 def test_compare_refuses_runs_of_different_kinds(falling, tmp_path, capsys):
@@ -257,3 +259,27 @@ def test_replay_title_names_the_scenario_and_captions_stay_left_of_the_inset(dro
     a, b, c, d = ov.inset
     caption = (img[rp.H - 112 : rp.H - 74, :, 2] > 200) & (img[rp.H - 112 : rp.H - 74, :, 0] < 120)  # yellow text
     assert caption.any() and not caption[:, a:].any()
+
+
+def test_compare_ranks_changes_by_sigma_and_drops_meaningless_percentages():
+    """A summary number with a σ beside it is ranked by |B − A| / combined σ, ahead of the numbers
+    without one; a vector component takes no sibling's σ; a sign change or a change larger than A
+    has no percentage."""
+    from workbench.recording.compare import Comparison, change_text, ranked_changes, sigma_of
+
+    flat = {"ms.distance_m": 0.2, "ms.sigma_m": 0.05, "ms.point_m[0]": 1.0}
+    assert sigma_of("ms.distance_m", flat) == 0.05 and sigma_of("ms.point_m[0]", flat) is None
+    cmp = Comparison(a=None, b=None, kind="x", names=("a", "b"))
+    cmp.summaries = (
+        {"ms": {"distance_m": 0.2, "sigma_m": 0.05, "point_m": [1.0]}, "big": 1.0},
+        {"ms": {"distance_m": 0.3, "sigma_m": 0.05, "point_m": [9.0]}, "big": 50.0},
+    )
+    cmp.numbers = [("big", 1.0, 50.0), ("ms.distance_m", 0.2, 0.3), ("ms.point_m[0]", 1.0, 9.0)]
+    ranked = ranked_changes(cmp)
+    assert ranked[0][0] == "ms.distance_m" and abs(ranked[0][3] - 0.1 / np.hypot(0.05, 0.05)) < 1e-12
+    assert [r[3] for r in ranked[1:]] == [None, None]
+    assert (
+        "%" not in change_text(0.001, 0.00398)
+        and "%" not in change_text(-1.0, 1.0)
+        and "(+50.0 %)" in change_text(2.0, 3.0)
+    )

@@ -44,13 +44,16 @@ __all__ = [
     "ComparisonError",
     "SeriesDiff",
     "changes_markdown",
+    "ranked_changes",
+    "change_text",
+    "sigma_of",
     "compare_runs",
     "flatten_summary",
     "write_comparison",
 ]
 
 #: summary keys that differ between any two runs and say nothing about the result
-IGNORED_KEYS = ("wall_time_s", "stage_times_s", "recording", "recording_bytes")
+IGNORED_KEYS = ("wall_time_s", "stage_times_s", "recording", "recording_bytes", "headline")
 _BOUND = re.compile(r"^plus_(\d+(?:\.\d+)?)sigma$")
 _A_COLOUR = (31, 119, 180, 255)
 _B_COLOUR = (255, 127, 14, 255)
@@ -327,23 +330,73 @@ def _fmt(x: Any) -> str:
     return s if len(s) <= 40 else s[:37] + "…"
 
 
-def _delta(x: Any, y: Any) -> str:
-    if (
-        isinstance(x, int | float)
-        and isinstance(y, int | float)
-        and not isinstance(x, bool)
-        and not isinstance(y, bool)
-    ):
+def _number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(float(x))
+
+
+def change_text(x: Any, y: Any) -> str:
+    """B − A, with the relative change only where it means something: both of one sign and the
+    change smaller than A itself (a near-zero coordinate's "+298 %" says nothing)."""
+    if _number(x) and _number(y):
         d = float(y) - float(x)
-        rel = f" ({100.0 * d / abs(x):+.1f} %)" if x not in (0, 0.0) and math.isfinite(d) else ""
+        rel = f" ({100.0 * d / abs(x):+.1f} %)" if x != 0 and x * y > 0 and abs(d) < abs(x) else ""
         return f"{d:+.4g}{rel}"
     return "changed"
 
 
-def changes_markdown(cmp: Comparison, max_rows: int = 40) -> str:
-    """The markdown report of what changed from A to B: the runs, the verdicts that flipped (and
-    how many held), the changed key numbers (first ``max_rows`` in summary order) and the series
-    differences with their largest |A − B| and |A − B| / combined σ."""
+#: sibling keys that hold a summary number's 1σ (``max_stroke.distance_m`` → ``max_stroke.sigma_m``)
+_SIGMA_SUFFIXES = ("sigma_m", "sigma", "sigma_deg", "sigma_mps", "sigma_pa")
+
+
+def sigma_of(key: str, flat: dict[str, Any]) -> float | None:
+    """The 1σ of the summary number ``key`` in the flattened summary ``flat``, when the summary
+    carries one beside it (``<key>_sigma``, ``<key>_sigma_<unit>``, or a sibling ``sigma*`` leaf
+    of a group with a single value); None otherwise."""
+    base, _, leaf = key.rpartition(".")
+    cands = [f"{key}_sigma"]
+    if "[" not in leaf:  # a vector component has no sibling σ of its own
+        stem = leaf.rsplit("_", 1)[0] if "_" in leaf else leaf
+        cands += [f"{base}.{stem}_sigma" if base else f"{stem}_sigma"]
+        cands += [f"{base}.{suf}" if base else suf for suf in _SIGMA_SUFFIXES]
+    for c in cands:
+        v = flat.get(c)
+        if c != key and _number(v) and float(v) > 0:
+            return float(v)
+    return None
+
+
+def ranked_changes(cmp: Comparison) -> list[tuple[str, Any, Any, float | None]]:
+    """The changed summary numbers ``(key, A, B, |B − A| / σ)``, largest first: by |B − A| over
+    the combined σ where the summaries give one (σ from :func:`sigma_of`), then the rest by their
+    relative change (None: no σ)."""
+    fa = flatten_summary(cmp.summaries[0] or {})
+    fb = flatten_summary(cmp.summaries[1] or {})
+    rows = []
+    for k, x, y in cmp.numbers:
+        if "sigma" in k.split(".")[-1] or k == "seed":
+            continue  # a σ moves with its value; the seeds are named above
+        sa, sb = sigma_of(k, fa), sigma_of(k, fb)
+        z = None
+        if _number(x) and _number(y) and sa is not None and sb is not None:
+            z = abs(float(y) - float(x)) / math.hypot(sa, sb)
+        rows.append((k, x, y, z))
+
+    def weight(r):
+        k, x, y, z = r
+        if z is not None:
+            return (0, -z)
+        if _number(x) and _number(y):
+            return (1, -abs(float(y) - float(x)) / max(abs(float(x)), abs(float(y)), 1e-300))
+        return (2, 0.0)
+
+    return sorted(rows, key=weight)
+
+
+def changes_markdown(cmp: Comparison, max_rows: int = 12) -> str:
+    """The markdown report of what changed from A to B: the runs (and whether their truths
+    differ), the verdicts that flipped (and how many held), the ``max_rows`` largest changes of the
+    key numbers (:func:`ranked_changes`) and the series differences with their largest |A − B| and
+    |A − B| / combined σ."""
     na, nb = cmp.names
     lines = [
         f"## Comparison of two `{cmp.kind}` runs",
@@ -352,6 +405,14 @@ def changes_markdown(cmp: Comparison, max_rows: int = 40) -> str:
         f"- **B**: `{cmp.b.path}` ({nb}, seed {cmp.b.properties().get('run', {}).get('seed', '?')})",
         "",
     ]
+    ra, rb = (d.properties().get("run", {}) for d in (cmp.a, cmp.b))
+    if ra.get("synthetic", True) and rb.get("synthetic", True) and ra.get("seed") != rb.get("seed"):
+        lines += [
+            f"**Different truths**: synthetic runs with seeds {ra.get('seed', '?')} and {rb.get('seed', '?')} fly "
+            "different truths with different sensor errors — A − B is not an error of either; each run's own "
+            "truth score is in its scorecard.",
+            "",
+        ]
     if cmp.summaries[0] is None or cmp.summaries[1] is None:
         lines += ["(no summary beside one of the recordings: key numbers not compared)", ""]
     else:
@@ -361,13 +422,16 @@ def changes_markdown(cmp: Comparison, max_rows: int = 40) -> str:
             lines += ["| verdict | A | B |", "|---|---|---|"]
             lines += [f"| `{k}` | {_fmt(x)} | {_fmt(y)} |" for k, x, y in flipped]
             lines.append("")
-        lines += [f"### Key numbers: {len(cmp.numbers)} changed", ""]
-        if cmp.numbers:
-            lines += ["| quantity | A | B | B − A |", "|---|---|---|---|"]
-            for k, x, y in cmp.numbers[:max_rows]:
-                lines.append(f"| `{k}` | {_fmt(x)} | {_fmt(y)} | {_delta(x, y)} |")
-            if len(cmp.numbers) > max_rows:
-                lines.append(f"| … {len(cmp.numbers) - max_rows} more | | | |")
+        ranked = ranked_changes(cmp)
+        lines += [f"### Key numbers: {len(ranked)} changed — the largest first (by |B − A| / σ where known)", ""]
+        if ranked:
+            lines += ["| quantity | A | B | B − A | abs(B − A) / σ |", "|---|---|---|---|---|"]
+            for k, x, y, z in ranked[:max_rows]:
+                lines.append(
+                    f"| `{k}` | {_fmt(x)} | {_fmt(y)} | {change_text(x, y)} | {'—' if z is None else f'{z:.2f}'} |"
+                )
+            if len(ranked) > max_rows:
+                lines.append(f"| … {len(ranked) - max_rows} smaller changes | | | | |")
             lines.append("")
     diffs = [*([cmp.position] if cmp.position is not None else []), *cmp.series]
     lines += [f"### Time histories: {len(diffs)} compared (A − B on A's time tags)", ""]
