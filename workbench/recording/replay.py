@@ -96,8 +96,9 @@ class Presentation:
     """How one problem is presented: HUD lines, camera ``distance`` in vehicle sizes (the half
     diagonal of the world box around the meshes under ``/world/vehicle`` shown at the time),
     camera ``elevation_deg``, the default video length ``duration_s`` [s], the event ``slow``
-    factor (< 1) and ``window_s`` [s of recording] around each event, and the ``plots`` of the
-    summary image [(title, root, y label, scale)]."""
+    factor (< 1) and ``window_s`` [s of recording] around each event, the ``plots`` of the
+    summary image [(title, root, y label, scale)] and ``zoom``: two key-moment names whose span the
+    first plot is zoomed on (the drop test's stroke from first contact to rebound)."""
 
     hud: tuple[HudItem, ...] = ()
     distance: float = 4.0
@@ -106,6 +107,7 @@ class Presentation:
     slow: float = 0.2
     window_s: float | None = None
     plots: tuple[tuple[str, str, str, float], ...] = ()
+    zoom: tuple[str, str] | None = None
 
 
 PRESENTATIONS: dict[str, Presentation] = {
@@ -121,8 +123,9 @@ PRESENTATIONS: dict[str, Presentation] = {
         duration_s=10.0,
         slow=0.25,
         window_s=0.06,
+        zoom=("first_contact", "rebound"),
         plots=(
-            ("stroke ± 3σ", layout.DROPTEST_PLOT_STROKE, "stroke [m]", 1.0),
+            ("stroke ± 3σ, the impact", layout.DROPTEST_PLOT_STROKE, "stroke [m]", 1.0),
             ("position", layout.DROPTEST_PLOT_POSITION, "position SPF [m]", 1.0),
             ("velocity", layout.DROPTEST_PLOT_VELOCITY, "velocity SPF [m/s]", 1.0),
             ("body acceleration", layout.DROPTEST_PLOT_ACCEL_BODY, "non-grav. accel. body [g]", 1.0),

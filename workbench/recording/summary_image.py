@@ -5,7 +5,8 @@ or the first six bounded series under ``/plots`` for a problem without a present
 back from the recording and drawn with matplotlib (Agg backend, no display needed) in a 2×3 grid:
 each estimate with its ±nσ band filled, the truth dashed when the recording has it, other leaves
 (forward pass, measured, ...) thin; the key events as dotted vertical lines; units on every
-y axis. The title carries the run name, kind and the first line of the scorecard's headline.
+y axis; the drop test's stroke zoomed on the impact (first contact to rebound). The title carries the
+run's name and scenario description, kind, seed and date, and the headline.
 The figure is 1800×1050 pixels.
 """
 
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import os
 import re
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -23,7 +25,7 @@ import numpy as np  # noqa: E402
 
 from workbench.recording import layout  # noqa: E402
 from workbench.recording.reader import RecordingData, read_recording  # noqa: E402
-from workbench.recording.replay import PRESENTATIONS  # noqa: E402
+from workbench.recording.replay import PRESENTATIONS, replay_titles  # noqa: E402
 
 __all__ = ["SIZE_PX", "render_png"]
 
@@ -117,6 +119,40 @@ def _plot_root(ax, data: RecordingData, root: str, ents: set[str]) -> int:
     return drawn
 
 
+def _zoom_window(data: RecordingData, names: tuple[str, str]) -> tuple[float, float] | None:
+    """The span [s] between two key moments of the recording, with 0.1 s before and 0.2 s after
+    (the drop test's impact); None when either is missing."""
+    from workbench.recording.moments import read_key_moments
+
+    try:
+        t = {m.name: m.t_s for m in read_key_moments(data)}
+    except Exception:  # noqa: BLE001 - a recording without moments: no zoom
+        return None
+    if names[0] not in t or names[1] not in t or not t[names[1]] > t[names[0]]:
+        return None
+    return t[names[0]] - 0.1, t[names[1]] + 0.2
+
+
+def _zoom(ax, t0: float, t1: float) -> None:
+    """Limit ``ax`` to [t0, t1] [s] and its y range to the lines drawn there."""
+    ys = []
+    for line in ax.get_lines():
+        x, y = (np.asarray(v, float) for v in line.get_data())
+        if x.size == y.size and x.size:
+            m = (x >= t0) & (x <= t1) & np.isfinite(y)
+            ys.append(y[m])
+    for coll in ax.collections:  # the ±nσ bands
+        for path in coll.get_paths():
+            v = path.vertices
+            m = (v[:, 0] >= t0) & (v[:, 0] <= t1) & np.isfinite(v[:, 1])
+            ys.append(v[m, 1])
+    y = np.concatenate(ys) if ys else np.array([])
+    ax.set_xlim(t0, t1)
+    if y.size:
+        pad = 0.05 * max(float(np.ptp(y)), 1e-9)
+        ax.set_ylim(float(y.min()) - pad, float(y.max()) + pad)
+
+
 def render_png(
     recording: str | os.PathLike[str] | RecordingData,
     out: str | os.PathLike[str],
@@ -153,8 +189,11 @@ def render_png(
     except KeyError:
         events = []
     fig, axes = plt.subplots(2, 3, figsize=(SIZE_PX[0] / _DPI, SIZE_PX[1] / _DPI), dpi=_DPI)
-    for ax, (title, root, ylabel) in zip(axes.flat, panels, strict=False):
+    zoom = _zoom_window(data, pres.zoom) if pres is not None and pres.zoom else None
+    for k, (ax, (title, root, ylabel)) in enumerate(zip(axes.flat, panels, strict=False)):
         n = _plot_root(ax, data, root, ents)
+        if k == 0 and zoom is not None and n:
+            _zoom(ax, *zoom)
         ax.set_title(title, fontsize=10)
         ax.set_ylabel(ylabel, fontsize=8)
         ax.set_xlabel("time [s]", fontsize=8)
@@ -181,16 +220,19 @@ def render_png(
     if not head:
         try:
             report = data.text_document(layout.REPORT)
-            head = next((ln.strip("# ").strip() for ln in report.splitlines() if ln.strip()), "")
+            lines = [ln.strip("# *").rstrip(" \\").strip() for ln in report.splitlines() if ln.strip()]
+            # the scorecard opens with the verdict block: "Health: …", then the headline
+            head = lines[1] if len(lines) > 1 and lines[0].startswith("Health:") else (lines[0] if lines else "")
         except KeyError:
             pass
+    title, subtitle = replay_titles(data, kind)
     names = ", ".join(" ".join(s.split(" (")[0].split()[:3]) for _, s in events[:10])
-    fig.suptitle(
-        f"{data.recording_name or data.path.stem} ({kind or 'run'}): {head}"[:170]
-        + (f"\ndotted lines: events ({names})" if names else ""),
-        fontsize=10,
-    )
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    text = [textwrap.shorten(title, 150, placeholder=" …"), textwrap.shorten(subtitle, 170, placeholder=" …")]
+    text += textwrap.wrap(head, 160, max_lines=2, placeholder=" …")
+    if names:
+        text.append(textwrap.shorten(f"dotted lines: events ({names})", 170, placeholder=" …"))
+    fig.suptitle("\n".join(text), fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 1.0 - 0.022 * len(text)))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=_DPI)
