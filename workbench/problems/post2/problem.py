@@ -162,8 +162,12 @@ class Post2Problem:
         md = f"# {summary['scenario']} scorecard (post2, {summary['dof']}-DOF)\n\n"
         md += "| state | final | 1σ | unit |\n|---|---|---|---|\n"
         for name, s in summary["states"].items():
-            fin = ", ".join(f"{v:.6g}" for v in s["final"])
-            sd = ", ".join(f"{v:.3g}" for v in s["final_sigma"])
+            # fixed point, to the σ's second significant figure (one format per row: "-2.46e+06,
+            # 647735" mixed notations)
+            sig = [float(v) for v in s["final_sigma"] if v is not None and float(v) > 0]
+            dec = int(min(9, max(0, 1 - np.floor(np.log10(min(sig)))))) if sig else 6
+            fin = ", ".join(f"{v:.{dec}f}" for v in s["final"])
+            sd = ", ".join(f"{v:.{dec}f}" if float(v) >= 10.0**-dec else f"{v:.2g}" for v in s["final_sigma"])
             md += f"| {name} | {fin} | {sd} | {s['unit']} |\n"
         md += (
             "\n| observation | samples | accepted | mean NIS (dim) | 99 % band | verdict | normalized residual RMS |\n"
