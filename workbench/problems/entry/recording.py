@@ -60,6 +60,15 @@ TRUTH = (44, 160, 44, 255)
 NOMINAL = (148, 103, 189, 255)
 ONBOARD = (214, 39, 40, 255)
 GREY = (150, 150, 150, 255)
+
+#: what the 3D scenes show (``layout.SCENE_KEY``, under the 3D views)
+SCENE_KEY_MD = (
+    "**3D key** — blue line: smoothed track, blue ellipsoid its 3σ; orange line: forward (filter) pass, orange "
+    "ellipsoid its 3σ; red: on-board navigation; purple: nominal trajectory; radar beams coloured by their "
+    "normalised residual, green ≤ 1σ → red ≥ 3σ (grey: no return); green / grey dots: dispersion members at PDD, "
+    "accepted / rejected (their tracks hidden: tick `/world/dispersion/tracks_*` in the blueprint panel)"
+)
+SCENE_KEY_TRUTH_MD = " · green line: truth track"
 RAW = (120, 160, 220, 255)
 ITER = (255, 200, 0, 255)
 TRUTH_EAST = (120, 200, 120, 255)
@@ -135,6 +144,12 @@ def entry_blueprint(
         rrb.Spatial3DView(
             name="Entry (site frame, km scale)",
             origin=layout.WORLD,
+            # the dispersion's sample tracks hidden by default (a clutter at this scale; the members
+            # at PDD stay): tick them in the blueprint panel
+            contents=[
+                layout.subtree(layout.WORLD),
+                *("- " + layout.entry_dispersion_tracks_path(s) for s in (layout.ACCEPTED, layout.REJECTED)),
+            ],
             eye_controls=rrb.EyeControls3D(
                 position=[-200e3, -330e3, 160e3], look_target=[-280e3, 0.0, 20e3], eye_up=[0.0, 0.0, 1.0]
             ),
@@ -219,7 +234,8 @@ def entry_blueprint(
         report_view("Scorecard", extra=[events_view()]),
         row_shares=[3, 2, 2],
     )
-    left = rrb.Vertical(scenes, profiles, row_shares=[3, 2])
+    key = rrb.TextDocumentView(name="3D key", origin=layout.SCENE_KEY, contents="$origin")
+    left = rrb.Vertical(scenes, key, profiles, row_shares=[13, 3, 8])
     return rrb.Blueprint(
         rrb.Horizontal(left, right, column_shares=[3, 2]),
         rrb.TimePanel(state="expanded", timeline=layout.TIME),
@@ -459,9 +475,10 @@ class EntryRecorder:
             color=(31, 119, 180, 140),
             step=np.arange(len(t)),
         )
-        rec.line_strip(layout.ESTIMATE_SMOOTHED, p_L, color=[EST], radius=-2.0)
+        rec.line_strip(layout.ESTIMATE_SMOOTHED, p_L, color=[EST], radius=-1.2)
         fw_L = self._L(fw.t, fw.p_M)
-        rec.line_strip(layout.ESTIMATE_FORWARD, fw_L, color=[FWD], radius=-1.5)
+        rec.line_strip(layout.ESTIMATE_FORWARD, fw_L, color=[FWD], radius=-0.9)
+        rec.report(SCENE_KEY_MD + ("" if self.truth is None else SCENE_KEY_TRUTH_MD), entity=layout.SCENE_KEY)
         # the forward (filter) pass's own 3σ: it grows through the blackout and collapses vertically at
         # the radar fix (the smoothed one above already knows the fix from the start)
         fwd_vehicle = layout.ENTRY_FORWARD_VEHICLE

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import rerun as rr
 import rerun.blueprint as rrb
 import trimesh
 
@@ -85,7 +86,18 @@ def meads_blueprint(ports: tuple[str, ...], ekf_passes: int) -> rrb.Blueprint:
         origin=layout.WORLD,
         eye_controls=rrb.EyeControls3D(position=[6.0, -6.0, 3.0], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 0.0, 1.0]),
     )
-    plots = rrb.Tabs(*[tab(n, plot_view(n, layout.plot_path(q), legend="RightTop")) for n, q in PLOTS], active_tab=0)
+    ekf_q = {q for q, _, _, _ in EKF_PLOTS}
+    key = "blue least squares, grey ±3σ, pale blue truth"
+    if ekf_passes:
+        key += ", magenta EKF pass " + str(ekf_passes) + (", purple earlier passes" if ekf_passes > 1 else "")
+
+    def quantity(n: str, q: str):
+        # the estimators' curves span the whole width: a legend there covered their right ends
+        if q in ekf_q:
+            return plot_view(f"{n} — {key}", layout.plot_path(q))
+        return plot_view(n, layout.plot_path(q), legend="RightTop")
+
+    plots = rrb.Tabs(*[tab(n, quantity(n, q)) for n, q in PLOTS], active_tab=0)
     port_tabs = []
     for p in ports:
         views = [
@@ -104,8 +116,9 @@ def meads_blueprint(ports: tuple[str, ...], ekf_passes: int) -> rrb.Blueprint:
         rrb.Horizontal(
             rrb.Vertical(
                 scene,
+                rrb.TextDocumentView(name="3D key", origin=layout.SCENE_KEY, contents="$origin"),
                 report_view("Scorecard", extra=[events_view()]),
-                row_shares=[3, 2],
+                row_shares=[12, 3, 8],
             ),
             rrb.Vertical(plots, rrb.Tabs(*port_tabs), row_shares=[1, 1]),
             column_shares=[2, 3],
@@ -138,6 +151,15 @@ def _port_points(vehicle: FadsVehicle, offset: float) -> np.ndarray:
     base = np.stack([x, r * np.sin(c), r * np.cos(c)], 1)
     normal = np.stack([np.cos(cone), np.sin(cone) * np.sin(c), np.sin(cone) * np.cos(c)], 1)
     return base + (0.03 + offset) * normal
+
+
+#: what the heat-shield scene shows (``layout.SCENE_KEY``, under it)
+SCENE_KEY_MD = (
+    "**3D key** — heat shield in the reconstructed attitude (local ENU). Large dots on the ports: measured "
+    "pressure over the largest port's, blue (low) → red (highest); small dots just off them: the fit's normalised "
+    "residual, green ≤ 1σ → yellow 3σ → red ≥ 6σ, grey where the port was not used (dropped or failed); labels: "
+    "port names; blue line: the air-relative velocity (the flow direction, α and β)"
+)
 
 
 def _ramp(u: np.ndarray) -> np.ndarray:
@@ -266,6 +288,14 @@ class MeadsRecorder:
             colors=_residual_colors(z[k], st.mask[k]),
             radii=0.05,
         )
+        # the port names beside the ports, and what the colours mean
+        lab = _port_points(self.vehicle, 0.3)
+        rec.stream.log(
+            layout.MEADS_PORT_LABELS,
+            rr.Points3D(lab, labels=list(self.vehicle.port_names), radii=[0.001], show_labels=True),
+            static=True,
+        )
+        rec.report(SCENE_KEY_MD, entity=layout.SCENE_KEY)
         rec.events([(fl.t, fl.message, "WARN") for fl in st.failures])
 
     def _wind(self, st: WindStage) -> None:
