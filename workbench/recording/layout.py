@@ -197,6 +197,7 @@ MEADS_TRUTH_MC = "/plots/truth_mc"
 MEADS_PLOT_SCALE_FACTORS = "/plots/scale_factors"
 # ------------------------------------------------------------------ post2 (problem-file reconstruction)
 POST2_FOREBODY = "/world/vehicle/body/forebody"
+POST2_VEHICLE_MARKER = "/world/vehicle/marker"
 POST2_BACK_SHELL = "/world/vehicle/body/backshell"
 POST2_PARACHUTE = "/world/vehicle/parachute"
 POST2_RISERS = "/world/vehicle/parachute_risers"

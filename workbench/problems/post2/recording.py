@@ -177,11 +177,13 @@ class Post2Drawer:
                     )
         self._phase_series(res)
         p = res.smap.raw(res.x, "position")
-        self.rec.line_strip(layout.join(layout.ESTIMATE_SMOOTHED, "track"), p, color=EST)
+        # tracks and the vehicle marker in screen units: at the trajectory's hundreds of km a line in
+        # metres is invisible, and so is the capsule
+        self.rec.line_strip(layout.join(layout.ESTIMATE_SMOOTHED, "track"), p, color=EST, radius=-1.2)
         pf = res.smap.raw(res.forward.x_post, "position")
-        self.rec.line_strip(layout.join(layout.ESTIMATE_FORWARD, "track"), pf, color=FWD)
+        self.rec.line_strip(layout.join(layout.ESTIMATE_FORWARD, "track"), pf, color=FWD, radius=-0.8)
         if self.truth is not None and "position" in self.truth:
-            self.rec.line_strip(layout.truth_path("track"), self.truth["position"], color=TRUTH)
+            self.rec.line_strip(layout.truth_path("track"), self.truth["position"], color=TRUTH, radius=-0.8)
         self._vehicle(res)
 
     def _vehicle(self, res: Post2Result) -> None:
@@ -193,6 +195,7 @@ class Post2Drawer:
         sel = np.unique(np.linspace(0, n - 1, min(n, 2000)).astype(int))
         t = res.t[sel]
         self.rec.poses(layout.VEHICLE, t, res.smap.raw(res.x[sel], "position"), res.body_attitude(sel))
+        self.rec.points(layout.POST2_VEHICLE_MARKER, np.zeros((1, 3)), colors=(230, 60, 30, 255), radii=-5.0)
         q_tilt = res.tilt_rotation(sel)
         if q_tilt is not None:  # body drawn tilted by the estimated tilt
             self.rec.poses(layout.VEHICLE_BODY, t, np.zeros((t.size, 3)), q_tilt)
@@ -278,7 +281,11 @@ def post2_blueprint(
         res.append(tab(n, views[0]) if len(views) == 1 else rrb.Grid(*views, name=f"{n} residuals"))
     scene_views = [rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD)]
     if vehicle:
-        scene_views.append(rrb.Spatial3DView(name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**"]))
+        scene_views.append(
+            rrb.Spatial3DView(
+                name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**", "- " + layout.POST2_VEHICLE_MARKER]
+            )
+        )
     scenes = rrb.Tabs(*scene_views, active_tab=0)
     right = [rrb.Tabs(*tabs, active_tab=0)]
     if res:
