@@ -36,8 +36,7 @@ Estimated-state processes (thesis Ch. 3.1.1 Eq. 3.1): ``constant``, ``random_wal
 go through the tanh S-curve of Ch. 5 (Fig. 5-15): the model uses ``c + h tanh((s − c)/h)``.
 
 Speed: ``derivative``, ``aero_force_moment`` and ``propagate`` run the compiled kernels of
-:mod:`workbench.problems.post2.kernels`, bit-identical to the numpy reference kept beside them
-(``WORKBENCH_POST2_KERNEL=0``, :data:`KERNEL_ENV`, selects the reference).
+:mod:`workbench.problems.post2.kernels`, bit-identical to the numpy reference (``WORKBENCH_POST2_KERNEL=0``).
 """
 
 from __future__ import annotations
