@@ -26,6 +26,7 @@ lasts ``duration_s``, slowed by ``slow`` within ``± window`` of every event.
 
 from __future__ import annotations
 
+import datetime as dt
 import functools
 import math
 import os
@@ -726,9 +727,7 @@ def replay_titles(data: RecordingData, kind: str | None) -> tuple[str, str]:
         parts.append(f"synthetic, seed {run['seed']}")
     start = props.get("RecordingInfo", {}).get("start_time")
     if start is not None:
-        import datetime as _dt
-
-        when = _dt.datetime.fromtimestamp(int(start) / 1e9, _dt.UTC)
+        when = dt.datetime.fromtimestamp(int(start) / 1e9, dt.UTC)
         parts.append(f"recorded {when:%Y-%m-%d %H:%M} UTC")
     parts.append(_SHOWN.get(kind or "", "smoothed vehicle and 3σ position ellipsoid"))
     return title, " · ".join(parts)

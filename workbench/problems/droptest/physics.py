@@ -43,6 +43,7 @@ __all__ = [
     "estimate_lag",
     "hanging_checks",
     "lobe_clearance",
+    "mean_triad_force",
     "measured_impact",
     "timing_checks",
 ]
@@ -319,6 +320,14 @@ def _g(x: float) -> float:
 # ---------------------------------------------------------------------------------------------
 
 
+def mean_triad_force(tel) -> tuple[np.ndarray, np.ndarray]:
+    """(time [s] on the IMU's own tags, mean specific force over the triads [m/s², body] (n, 3))
+    of the raw IMU samples of ``tel``."""
+    imu = tel.imu
+    f = np.stack([imu.stack([f"{n}.{a}" for a in "xyz"]) for n in tel.triads], axis=1)
+    return imu.time, np.mean(f, axis=1)
+
+
 def measured_impact(tel, threshold_g: float = 2.0, merge_s: float = 0.01) -> tuple[float, float, bool] | None:
     """The first measured impact after the release (or bungee cut): where the norm of the mean
     triad specific force of the raw IMU samples exceeds ``threshold_g`` [g], dips shorter than
@@ -327,8 +336,7 @@ def measured_impact(tel, threshold_g: float = 2.0, merge_s: float = 0.01) -> tup
     at the last sample (the file ends inside it); None when there is no such sample."""
     imu = tel.imu
     start = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
-    f = np.stack([imu.stack([f"{n}.{a}" for a in "xyz"]) for n in tel.triads], axis=1)
-    fm = np.linalg.norm(np.mean(f, axis=1), axis=1)
+    fm = np.linalg.norm(mean_triad_force(tel)[1], axis=1)
     hard = np.flatnonzero((imu.time >= start) & (fm > threshold_g * G0))
     if not hard.size:
         return None
@@ -525,14 +533,6 @@ RIGID_JERK_G_PER_S = 10_000.0
 RIGID_JERK_NOISE_FACTOR = 10.0
 
 
-def _mean_triad_force(tel) -> tuple[np.ndarray, np.ndarray]:
-    """(time [s] on the IMU's own tags, mean specific force over the triads [m/s², body] (n, 3))
-    of the raw IMU samples of ``tel``."""
-    imu = tel.imu
-    f = np.stack([imu.stack([f"{n}.{a}" for a in "xyz"]) for n in tel.triads], axis=1)
-    return imu.time, np.mean(f, axis=1)
-
-
 def rigid_impact(tel) -> tuple[float, float, float, float] | None:
     """The sharpest change of the measured specific force after the first impact starts: ``(jerk
     [g/s], t [s] on the filter's time line, threshold [g/s], peak |f| [g] within 10 ms)`` — jerk
@@ -543,7 +543,7 @@ def rigid_impact(tel) -> tuple[float, float, float, float] | None:
     imp = measured_impact(tel)
     if imp is None:
         return None
-    t, f = _mean_triad_force(tel)
+    t, f = mean_triad_force(tel)
     dt = np.diff(t)
     ok = (dt > 0) & (dt <= 2.5 * float(np.median(dt))) & np.all(np.isfinite(f[1:] - f[:-1]), axis=1)
     jerk = np.where(ok, np.linalg.norm(np.diff(f, axis=0), axis=1) / np.where(ok, dt, 1.0) / G0, 0.0)
