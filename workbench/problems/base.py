@@ -210,6 +210,9 @@ class Problem(Protocol):
     def headline(self, summary: dict) -> str:
         """One line with the run's main result, for the user.
 
+        A problem may also offer ``calibration_settings(settings, seed) -> Settings``, a health
+        calibration member's settings with its truth dispersed (:func:`workbench.problems.runner.evaluate`).
+
         A problem may also offer ``estimator(settings) -> str``, the size of its filter computed from
         the code (e.g. ``"EKF: 42 error states (43 full)"``); ``workbench list`` prints it after the
         scenario's description, so no state count is typed into a description."""

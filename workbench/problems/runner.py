@@ -328,9 +328,13 @@ def evaluate(scenario: str | os.PathLike | Scenario, work_dir: Path, seed: int, 
     """The summary of one run of ``scenario`` with ``seed`` — synthesized into ``work_dir`` when
     synthetic, reconstructed, summarised, scored against its truth and its health judged
     (:func:`judge_health`) — without a recording: a Monte Carlo member of the health calibration
-    (:mod:`workbench.problems.calibration`)."""
+    (:mod:`workbench.problems.calibration`).  A problem offering ``calibration_settings(settings,
+    seed)`` disperses its truth there as its truth Monte Carlo does (the bands then cover the
+    flights the filter meets, not one truth's sensor noise)."""
     sc, problem, settings = prepare(scenario)
     truth = None
+    if sc.is_synthetic and hasattr(problem, "calibration_settings"):
+        settings = problem.calibration_settings(settings, int(seed))
     if sc.is_synthetic:
         syn = problem.synthesize(settings, Path(work_dir) / "telemetry", int(seed))
         telemetry, truth = dict(syn.telemetry), problem.load_truth(syn.truth)

@@ -766,9 +766,10 @@ class WebViewer:
 
     def _seek(self, page, st: ViewerState, at: str | float) -> float | None:
         """Put the cursor on the ``time`` timeline (``at``, see :meth:`check`) and pause; returns the
-        time [s] or None when the recording has no ``time`` timeline."""
+        time [s] or None when the recording has no ``time`` timeline or ``at`` is ``"keep"`` and the
+        layout opened another timeline (a Monte Carlo's ``sample``: switching would empty its plots)."""
         tl = layout.TIME
-        if tl not in st.timelines:
+        if tl not in st.timelines or (at == "keep" and st.cursor_timeline not in (None, tl)):
             return None
         start, end = st.timelines[tl]
         if at == "end":

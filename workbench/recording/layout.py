@@ -194,6 +194,8 @@ MEADS_AIR_VELOCITY = "/world/vehicle/air_velocity"
 MEADS_PLOT_PORTS = "/plots/ports"
 MEADS_TRADE_STUDY = "/plots/trade_study"
 MEADS_TRUTH_MC = "/plots/truth_mc"
+#: post2 Monte Carlo against the truth (``workbench mc post2_huygens --truth-sim``)
+POST2_TRUTH_MC = "/plots/post2_truth_mc"
 MEADS_PLOT_SCALE_FACTORS = "/plots/scale_factors"
 # ------------------------------------------------------------------ post2 (problem-file reconstruction)
 POST2_FOREBODY = "/world/vehicle/body/forebody"
@@ -437,6 +439,7 @@ _FAMILIES = {
     "meads_port_plot_path": "/plots/ports/<port>/<series>",
     "meads_trade_path": "/plots/trade_study/<quantity>/<level>",
     "meads_truth_mc_path": "/plots/truth_mc/<quantity>/<series>",
+    "post2_truth_mc_path": "/plots/post2_truth_mc/<group>/<series>",
     "meads_ekf_plot_path": "/plots/<quantity>/ekf_pass<pass>",
     "meads_scale_factor_path": "/plots/scale_factors/<series>",
     "meads_ekf_innovation_path": "/residuals/pressure_ekf_pass<pass>/<port>",
@@ -457,6 +460,12 @@ def meads_truth_mc_path(quantity: str, series: str) -> str:
     """``/plots/truth_mc/<quantity>/<series>``: the full-error-model Monte Carlo's 3σ of ``quantity``
     (``<estimator>_mc``, ``<estimator>_reported``) or its ``objective``."""
     return join(MEADS_TRUTH_MC, quantity, series)
+
+
+def post2_truth_mc_path(group: str, series: str) -> str:
+    """``/plots/post2_truth_mc/<group>/<series>``: a series of the post2 Monte Carlo against the truth
+    (``grid_nees``, ``running_nees`` or ``z`` group)."""
+    return join(POST2_TRUTH_MC, group, series)
 
 
 def meads_ekf_plot_path(quantity: str, pass_index: int) -> str:

@@ -271,6 +271,13 @@ SCHEMA = Schema(
                 ),
                 Key("titan_node_temperatures_K", _L, None, "K", "truth atmosphere: temperatures at those nodes"),
                 Key("ca_mach_wave_amplitude", _F, 0.0, "1", "truth CA × (1 + a sin(2π log10(Mach) / 1.2))"),
+                Key(
+                    "monte_carlo_draw_from_prior",
+                    _L,
+                    [],
+                    meaning="`workbench mc --truth-sim`: these estimated parameters of each member's truth drawn "
+                    "from the estimator's prior (the others keep [truth.states])",
+                ),
             ),
         ),
         Table(
@@ -512,7 +519,8 @@ class FilterSettings:
 class TruthSettings:
     """``[truth]`` of a synthetic scenario (never read by the reconstruction): the DOP853 ``rtol``,
     the sampling ``output_step_s`` [s], the coefficient factors, the density wave (amplitude, λ [m]),
-    the truth's own Titan temperature nodes [m], [K] and CA(Mach) wave; ``states`` the
+    the truth's own Titan temperature nodes [m], [K] and CA(Mach) wave; the parameters the truth
+    Monte Carlo draws from the prior (:mod:`.truth_mc`); ``states`` the
     ``[truth.states]`` by name in SI (size,); ``tolerances`` the ``[truth.tolerances]`` in SI (size,)."""
 
     rtol: float
@@ -525,6 +533,7 @@ class TruthSettings:
     titan_node_altitudes_m: list | None
     titan_node_temperatures_K: list | None
     ca_mach_wave_amplitude: float
+    monte_carlo_draw_from_prior: tuple[str, ...]
     states: dict[str, np.ndarray]
     tolerances: dict[str, np.ndarray]
 
@@ -884,6 +893,7 @@ def _settings(scenario: Scenario) -> Post2Settings:
         file, data.get("initial_correlation", {}), {s.name: STATES[s.name].size for s in states}
     )
     tr = {k: v for k, v in data["truth"].items() if k not in ("states", "tolerances")}
+    tr["monte_carlo_draw_from_prior"] = _draw_names(file, tr["monte_carlo_draw_from_prior"], states, truth_states)
     tolerances = {n: _tolerance(file, n, v) for n, v in data["truth"].get("tolerances", {}).items()}
     mc = dict(data["monte_carlo"])
     mc["covariance"] = _covariance(file, mc["covariance"])
@@ -894,6 +904,19 @@ def _settings(scenario: Scenario) -> Post2Settings:
         FilterSettings(**data["filter"]), TruthSettings(**tr, states=truth_states, tolerances=tolerances),
         MonteCarloSettings(**mc),
     )  # fmt: skip
+
+
+def _draw_names(file, names, states, truth_states) -> tuple[str, ...]:
+    """``[truth] monte_carlo_draw_from_prior``: estimated parameters (not position/velocity/attitude/
+    rates) with a ``[truth.states]`` value, else a ScenarioError naming the key and the valid names."""
+    valid = [s.name for s in states if not STATES[s.name].dynamic and s.name in truth_states]
+    for n in names:
+        if n not in valid:
+            raise ScenarioError(
+                file, "truth.monte_carlo_draw_from_prior", f"{n!r} is not an estimated parameter with a truth value: "
+                f"use {', '.join(valid) or 'none (no parameter has a [truth.states] value)'}",
+            )  # fmt: skip
+    return tuple(names)
 
 
 def _resolved(run: RunInfo, rel: str | None) -> Path | None:

@@ -8,6 +8,7 @@ reconstruction (``pipeline.py``) reads only those files.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -15,15 +16,16 @@ import numpy as np
 from workbench.core.bodies import G0
 from workbench.estimation.health import health_markdown
 from workbench.io.moments import KeyMoment, slug
-from workbench.io.scenario import Scenario
+from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
 from workbench.problems.post2 import build, huygens
 from workbench.problems.post2.config import SCHEMA, Post2Settings
 from workbench.problems.post2.model import DESCENT_NOMINALS, OBSERVATIONS, STATES, aero_angles
 from workbench.problems.post2.recording import COMPONENTS, open_post2_recording
-from workbench.problems.post2.recording_mc import open_mc_recording
+from workbench.problems.post2.recording_mc import open_mc_recording, record_truth_mc
 from workbench.problems.post2.scoring import score
 from workbench.problems.post2.truth import sample_times, simulate_truth, write_observations
+from workbench.problems.post2.truth_mc import member_settings, run_truth_monte_carlo
 
 __all__ = ["Post2Problem", "key_moments"]
 
@@ -287,9 +289,48 @@ class Post2Problem:
                 cols[f"sigma_{name}.{c}"] = (h["sigma"][:, i], _si_unit(unit))
         return ExportTable(result.t, cols, "planet-centred inertial (+Z pole); attitude as α, β, bank")
 
-    def monte_carlo(self, settings, out_dir, options, progress) -> McOutcome:
-        """Not yet: the NEES study is in ``tests/benchmarks/bench_post2.py``."""
-        raise NotImplementedError("post2 has no Monte Carlo analysis yet (see tests/benchmarks/bench_post2.py)")
+    def calibration_settings(self, settings: Post2Settings, seed: int) -> Post2Settings:
+        """A health-calibration member's settings (:func:`workbench.problems.runner.evaluate`): with a
+        delivered ``[monte_carlo] covariance`` (the scenario's truth is one draw from it), the truth
+        dispersed as :mod:`.truth_mc` disperses it (initial state, the parameters of
+        ``[truth] monte_carlo_draw_from_prior``), seeded from ``seed``; otherwise unchanged."""
+        if settings.monte_carlo.covariance is None:
+            return settings
+        state, params = (int(v) for v in np.random.SeedSequence(int(seed), spawn_key=(1,)).generate_state(2))
+        return member_settings(
+            settings, {"state": state, "params": params}, settings.truth.monte_carlo_draw_from_prior
+        )  # fmt: skip
+
+    def monte_carlo(self, settings: Post2Settings, out_dir, options, progress) -> McOutcome:
+        """The Monte Carlo against the truth simulator (:mod:`.truth_mc`; the only post2 study, with or
+        without ``options.truth_sim``): ``options.n_runs`` members of the validation seed stream with
+        entropy ``options.first_seed``, on ``options.workers`` processes or ``options.scheduler``;
+        ``options.members`` the initial-state selection's members; writes ``<out>/<name>_truth_mc.rrd``
+        (:func:`.recording_mc.record_truth_mc`).  A scenario without ``[synthetic]`` is a ScenarioError."""
+        if not settings.run.synthetic:
+            raise ScenarioError(
+                settings.run.path,
+                "synthetic",
+                "the Monte Carlo against the truth needs a synthetic scenario ([synthetic])",
+            )
+        t0 = time.perf_counter()
+        n = int(options.n_runs)
+        where = options.scheduler or f"{options.workers} local worker(s)"
+        progress(f"Monte Carlo against the truth simulator: {n} members of the validation stream ({where}) ...")
+        res = run_truth_monte_carlo(
+            self, settings, n_runs=n, entropy=options.first_seed, workers=options.workers,
+            scheduler=options.scheduler, members=options.members,
+        )  # fmt: skip
+        summary = {**res.summary, "wall_time_s": time.perf_counter() - t0}
+        name = settings.run.name
+        rrd = record_truth_mc(Path(out_dir) / f"{name}_truth_mc.rrd", f"{name} Monte Carlo vs truth", res, summary)
+        tp = summary["trajectory"]["position"]
+        headline = (
+            f"truth Monte Carlo, {summary['runs_completed']} members: parameter NEES {summary['mean_nees']:.2f} "
+            f"({summary['verdict']}, band {summary['band_95'][0]:.2f}-{summary['band_95'][1]:.2f}); end position "
+            f"NEES {tp['end_mean_nees']:.2f} ({tp['end_verdict']}); wrote {rrd}"
+        )
+        return McOutcome(summary, Path(rrd), headline, res)
 
 
 def _planted_table(summary: dict) -> str:
