@@ -284,6 +284,7 @@ class Post2Problem:
                 geometry=geometry,
                 parachute_events={e.name: e.parachute for e in cfg.events if e.parachute is not None},
                 has_events=bool(cfg.events),
+                rocket_span=None if cfg.launch is None else (cfg.t_start, cfg.t_end),
             )
         )
 
