@@ -942,11 +942,16 @@ def _settings(scenario: Scenario) -> Post2Settings:
 
 
 def _launch(file: Path, la: dict) -> LaunchSite | None:
-    """``[launch]``: None without ``lat_deg``; then ``lon_deg`` is required."""
+    """``[launch]``: None without ``lat_deg`` (then any other key off its default is an error: it would
+    be ignored); ``lat_deg`` needs ``lon_deg``."""
     if not la or la.get("lat_deg") is None:
+        keys = next(t for t in SCHEMA.tables if t.name == "launch").keys
+        for k in keys:
+            if la and la.get(k.name) is not None and la.get(k.name) != k.default:
+                raise ScenarioError(file, f"launch.{k.name}", "is read only with launch.lat_deg (the pad)")
         return None
     if la.get("lon_deg") is None:
-        raise ScenarioError(file, "launch.lon_deg", "needed with launch.lat_deg")
+        raise ScenarioError(file, "launch.lat_deg", "needs launch.lon_deg too (the pad's longitude)")
     return LaunchSite(
         float(la["lat_deg"]), float(la["lon_deg"]), float(la["pad_altitude_m"]),
         la["burnout_s"], la["touchdown_s"], bool(la["heading_trusted"]),

@@ -63,7 +63,7 @@ def key_moments(result) -> list[KeyMoment]:
         out.append(
             moment("peak_acceleration", tk, f"peak sensed acceleration {a / G0:.2f} g₀ ({a:.1f} m/s², {name} measured)")
         )
-    block = result.summary.get("rocket")
+    block = (getattr(result, "summary", None) or {}).get("rocket")
     if block is not None:  # a rocket flight ([launch]): burnout, apogee, landing
         out += [moment(n, tk, text) for n, tk, text in rocket_results.moments(block)]
     out.append(moment("end", t1, "end of the reconstruction (last grid time)"))
