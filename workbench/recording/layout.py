@@ -204,6 +204,24 @@ POST2_BACK_SHELL = "/world/vehicle/body/backshell"
 POST2_PARACHUTE = "/world/vehicle/parachute"
 POST2_RISERS = "/world/vehicle/parachute_risers"
 POST2_PHASE = "/plots/phase"
+#: a rocket flight's track in the pad's frame (``[launch]``; ``problems/post2/rocket_results.py``)
+POST2_ROCKET = "/plots/rocket"
+POST2_ROCKET_ALTITUDE = "/plots/rocket/altitude_above_pad"
+POST2_ROCKET_VERTICAL_SPEED = "/plots/rocket/vertical_speed"
+POST2_ROCKET_SPEED = "/plots/rocket/speed"
+POST2_ROCKET_DOWNRANGE = "/plots/rocket/downrange"
+POST2_ROCKET_EAST = "/plots/rocket/east"
+POST2_ROCKET_NORTH = "/plots/rocket/north"
+POST2_ROCKET_UP = "/plots/rocket/up"
+#: the rocket's plots in the order a reviewer reads them (the summary image's panels)
+POST2_ROCKET_PLOTS = (
+    POST2_ROCKET_ALTITUDE,
+    POST2_ROCKET_VERTICAL_SPEED,
+    POST2_ROCKET_SPEED,
+    POST2_ROCKET_DOWNRANGE,
+    POST2_ROCKET_EAST,
+    POST2_ROCKET_NORTH,
+)
 
 # ------------------------------------------------------------------------- drop-test Monte Carlo
 MC_ROOT = "/plots/mc"
@@ -499,6 +517,7 @@ __all__ = [
     "TIMELINES",
     "VALIDATION_RMS_GROUPS",
     "COMPARE_RUNS",
+    "POST2_ROCKET_PLOTS",
     *[k for k, v in list(globals().items()) if k.isupper() and isinstance(v, str) and k != "APPLICATION_ID"],
     "join",
     "part",

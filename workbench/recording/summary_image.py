@@ -55,6 +55,17 @@ def _names(data: RecordingData, entity: str, k: int) -> list[str]:
     return [base] if k == 1 else [f"{base}[{i}]" for i in range(k)]
 
 
+#: y labels (with units) of the generic panels that have one
+_YLABEL = {
+    layout.POST2_ROCKET_ALTITUDE: "altitude above the pad [m]",
+    layout.POST2_ROCKET_VERTICAL_SPEED: "vertical speed, up + [m/s]",
+    layout.POST2_ROCKET_SPEED: "speed, planet-relative [m/s]",
+    layout.POST2_ROCKET_DOWNRANGE: "downrange from the pad [m]",
+    layout.POST2_ROCKET_EAST: "east of the pad [m]",
+    layout.POST2_ROCKET_NORTH: "north of the pad [m]",
+}
+
+
 def _plot_root(ax, data: RecordingData, root: str, ents: set[str]) -> int:
     """Draw every scalar series at or below ``root`` on ``ax``; returns how many were drawn."""
     below = sorted(e for e in ents if e == root or e.startswith(root + "/"))
@@ -179,7 +190,10 @@ def render_png(
                 r = e.rpartition("/")[0]
                 if r not in roots:
                     roots.append(r)
-        panels = [(r[len(layout.PLOTS) + 1 :], r, r.rsplit("/", 1)[-1]) for r in roots[:6]]
+        # a rocket flight's pad-frame plots first, in their reading order (altitude, speeds, position)
+        first = [r for r in layout.POST2_ROCKET_PLOTS if r in roots]
+        roots = first + [r for r in roots if r not in first]
+        panels = [(r[len(layout.PLOTS) + 1 :], r, _YLABEL.get(r, r.rsplit("/", 1)[-1])) for r in roots[:6]]
     try:
         events = [
             (float(te), s)

@@ -44,6 +44,7 @@ __all__ = [
     "FilterSettings",
     "TruthSettings",
     "MonteCarloSettings",
+    "LaunchSite",
     "Post2Settings",
 ]
 
@@ -234,6 +235,34 @@ SCHEMA = Schema(
                     "",
                     "correlation matrix (symmetric, unit diagonal, positive semi-definite) over the listed states' "
                     "components; the initial covariance block is diag(sigma) C diag(sigma)",
+                ),
+            ),
+        ),
+        Table(
+            "launch",
+            "a rocket flight's launch pad (written by `workbench import airbrakes`): with `lat_deg` set the run "
+            "reports rocket results (apogee, speeds, landing point, descent rates) in the pad's local frame; "
+            "times are s after launch and the inertial axes are the planet-fixed axes at t = 0",
+            (
+                Key(
+                    "lat_deg",
+                    _F,
+                    None,
+                    "deg",
+                    "pad latitude (geodetic, taken as spherical as the import does)",
+                    ge=-90.0,
+                    le=90.0,
+                ),
+                Key("lon_deg", _F, None, "deg", "pad longitude, east positive", ge=-180.0, le=360.0),
+                Key("pad_altitude_m", _F, 0.0, "m", "pad altitude above the reference sphere"),
+                Key("burnout_s", _F, None, "s", "motor burnout (the flight computer's first coast row)"),
+                Key("touchdown_s", _F, None, "s", "touchdown (first landed row); absent: the data end in flight"),
+                Key(
+                    "heading_trusted",
+                    _B,
+                    True,
+                    meaning="the pad heading came from an accepted magnetometer alignment (false: 60° 1σ, which the "
+                    "linearised landing ellipse cannot hold)",
                 ),
             ),
         ),
@@ -556,14 +585,29 @@ class MonteCarloSettings:
 
 
 @dataclass(frozen=True)
+class LaunchSite:
+    """``[launch]`` of a rocket flight: pad ``lat_deg``, ``lon_deg`` [deg] (edge units, as in the file),
+    ``pad_altitude_m`` [m] above the reference sphere, ``burnout_s`` and ``touchdown_s`` [s after launch,
+    None: unknown / not in the data], ``heading_trusted`` (the pad heading's source was accepted)."""
+
+    lat_deg: float
+    lon_deg: float
+    pad_altitude_m: float
+    burnout_s: float | None
+    touchdown_s: float | None
+    heading_trusted: bool
+
+
+@dataclass(frozen=True)
 class Post2Settings:
     """The frozen settings of one post2 run (SI), built once by :meth:`from_scenario`: ``run`` (the
     scenario file's :class:`~workbench.io.scenario.RunInfo`), ``dof``, reconstruction span ``t_start``,
     ``t_end`` [s], estimator ``step`` and ``grid`` [s]; ``states``, ``observations`` (telemetry paths
     resolved), ``events`` and ``schedules`` in file order; ``initial_correlation`` (states, C) or None;
     the ``environment`` and ``vehicle`` (asset loaded); the ``filter`` options; the synthetic
-    ``truth``; the ``monte_carlo`` selection.  Picklable (process pools, Dask); a study that varies
-    it uses :func:`dataclasses.replace`."""
+    ``truth``; the ``monte_carlo`` selection; ``launch`` a rocket flight's pad (None: not a
+    rocket).  Picklable (process pools, Dask); a study that varies it uses
+    :func:`dataclasses.replace`."""
 
     run: RunInfo
     dof: int
@@ -581,6 +625,7 @@ class Post2Settings:
     filter: FilterSettings
     truth: TruthSettings
     monte_carlo: MonteCarloSettings
+    launch: LaunchSite | None = None
 
     def state(self, name: str) -> StateSpec | None:
         """The :class:`StateSpec` called ``name`` or None."""
@@ -902,7 +947,24 @@ def _settings(scenario: Scenario) -> Post2Settings:
         tuple(states), tuple(obs), events, schedules, corr,
         _environment(file, run, data["environment"]), _vehicle(file, run, data["vehicle"]),
         FilterSettings(**data["filter"]), TruthSettings(**tr, states=truth_states, tolerances=tolerances),
-        MonteCarloSettings(**mc),
+        MonteCarloSettings(**mc), _launch(file, data.get("launch", {})),
+    )  # fmt: skip
+
+
+def _launch(file: Path, la: dict) -> LaunchSite | None:
+    """``[launch]``: None without ``lat_deg`` (then any other key off its default is an error: it would
+    be ignored); ``lat_deg`` needs ``lon_deg``."""
+    if not la or la.get("lat_deg") is None:
+        keys = next(t for t in SCHEMA.tables if t.name == "launch").keys
+        for k in keys:
+            if la and la.get(k.name) is not None and la.get(k.name) != k.default:
+                raise ScenarioError(file, f"launch.{k.name}", "is read only with launch.lat_deg (the pad)")
+        return None
+    if la.get("lon_deg") is None:
+        raise ScenarioError(file, "launch.lat_deg", "needs launch.lon_deg too (the pad's longitude)")
+    return LaunchSite(
+        float(la["lat_deg"]), float(la["lon_deg"]), float(la["pad_altitude_m"]),
+        la["burnout_s"], la["touchdown_s"], bool(la["heading_trusted"]),
     )  # fmt: skip
 
 

@@ -31,7 +31,7 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.io.scenario import ScenarioError
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.io.units import likely_unit
-from workbench.problems.post2 import build, rocket_checks
+from workbench.problems.post2 import build, rocket_checks, rocket_results
 from workbench.problems.post2 import schedules as sched
 from workbench.problems.post2.config import ObservationSpec, Post2Settings
 from workbench.problems.post2.model import (
@@ -111,7 +111,9 @@ class Post2Result:
     forward) state (n, n_x) and error covariance (n, n_e, n_e); ``forward`` pass; ``names`` of the
     state blocks; ``channels``; ``summary``; ``smap`` the state map; ``history`` per named quantity
     (physical values and 1σ, see :func:`state_history`) under ``"smoothed"``, ``"forward"`` and, with
-    ``[filter] compare_propagation``, ``"propagated"`` (:func:`propagation_only`, 1σ the prior's)."""
+    ``[filter] compare_propagation``, ``"propagated"`` (:func:`propagation_only`, 1σ the prior's);
+    ``rocket`` the smoothed track in the pad's frame of a flight with a ``[launch]`` pad
+    (:class:`~workbench.problems.post2.rocket_results.LocalTrack`; None otherwise)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -123,6 +125,7 @@ class Post2Result:
     events: tuple[tuple[float, str], ...]
     history: dict
     summary: dict
+    rocket: rocket_results.LocalTrack | None = None
 
     def phase_index(self) -> np.ndarray:
         """(n,) float: how many events had fired at each grid time (0 before the first, +1 at each)."""
@@ -644,6 +647,7 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
         obs[name]["nis_verdict"] = "consistent" if lo <= m <= hi else ("conservative" if m < lo else "overconfident")
     summary["observations"] = obs
     summary["events"] = [{"t_s": float(a), "event": b} for a, b in est.phase_log]
+    track = _rocket(cfg, est, t, x, P, summary)
     extra, rocket_facts = rocket_checks.run_checks(cfg, hist)  # bounds; an imported flight: its import checks
     facts = [*data.facts, *rocket_facts]
     if uninformed:
@@ -652,4 +656,20 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
             + ", ".join(uninformed)
         )
     summary["health"] = post2_health(fp, P, x, data.notes, extra, facts)
-    yield Post2Result(t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), histories, summary)
+    yield Post2Result(t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), histories, summary, track)
+
+
+def _rocket(cfg: Post2Settings, est: Estimator, t, x, P, summary: dict):
+    """A flight with a ``[launch]`` pad: its :class:`~workbench.problems.post2.rocket_results.LocalTrack`
+    from the smoothed (or forward) ``x``, ``P`` on the grid ``t``, and ``summary["rocket"]``; else None."""
+    if cfg.launch is None:
+        return None
+    sp, sv = est.smap.blocks["position"].se, est.smap.blocks["velocity"].se
+    p, v = est.smap.raw(x, "position"), est.smap.raw(x, "velocity")
+    env = est.model.env
+    track = rocket_results.local_track(cfg.launch, t, p, v, P[:, sp, sp], P[:, sv, sv], env.radius_ref, env.omega)
+    chutes = {e.name: e.chute for e in cfg.events if e.chute}
+    summary["rocket"] = rocket_results.summary_block(
+        cfg.launch, track, P[-1][sp, sp], est.phase_log, chutes, env.omega, p[-1]
+    )
+    return track

@@ -18,7 +18,7 @@ from workbench.estimation.health import health_markdown
 from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario, ScenarioError
 from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
-from workbench.problems.post2 import build, huygens
+from workbench.problems.post2 import build, huygens, rocket_results
 from workbench.problems.post2.config import SCHEMA, Post2Settings
 from workbench.problems.post2.model import DESCENT_NOMINALS, OBSERVATIONS, STATES, aero_angles
 from workbench.problems.post2.recording import COMPONENTS, open_post2_recording
@@ -38,8 +38,9 @@ def key_moments(result) -> list[KeyMoment]:
     of the grid, every event that fired (``[events]`` of the problem file: parachutes, separations,
     phase changes), and the peak of the measured sensed acceleration (largest |z| over the
     observations of ``acceleration_axial``/``_magnitude``/``_body``, in g₀ = 9.80665 m/s²) when the
-    problem file observes one. Each has a window of ± 1 % of the grid's span, at least ± 15 s (or
-    ± 5 % of a span shorter than 300 s), clipped to the grid."""
+    problem file observes one; a rocket flight's ``burnout``, ``apogee`` and ``landing``
+    (:func:`~workbench.problems.post2.rocket_results.moments`). Each has a window of ± 1 % of the
+    grid's span, at least ± 15 s (or ± 5 % of a span shorter than 300 s), clipped to the grid."""
     t = np.asarray(result.t, dtype=float)
     t0, t1 = float(t[0]), float(t[-1])
     half = max(0.01 * (t1 - t0), min(0.05 * (t1 - t0), 15.0))  # an 8000 s descent: ± 80 s
@@ -64,6 +65,9 @@ def key_moments(result) -> list[KeyMoment]:
         out.append(
             moment("peak_acceleration", tk, f"peak sensed acceleration {a / G0:.2f} g₀ ({a:.1f} m/s², {name} measured)")
         )
+    block = (getattr(result, "summary", None) or {}).get("rocket")
+    if block is not None:  # a rocket flight ([launch]): burnout, apogee, landing
+        out += [moment(n, tk, text) for n, tk, text in rocket_results.moments(block)]
     out.append(moment("end", t1, "end of the reconstruction (last grid time)"))
     names = [m.name for m in out]
     return [m for i, m in enumerate(out) if m.name not in names[:i]]  # an event fired twice: its first time
@@ -160,8 +164,11 @@ class Post2Problem:
         return out
 
     def scorecard(self, summary: dict) -> str:
-        """Markdown: final states ± 1σ, observation statistics and, when scored, the errors."""
+        """Markdown: a rocket flight's results (:func:`~.rocket_results.markdown`), final states ± 1σ,
+        observation statistics and, when scored, the errors."""
         md = f"# {summary['scenario']} scorecard (post2, {summary['dof']}-DOF)\n\n"
+        if "rocket" in summary:  # a rocket flight: its results first
+            md += rocket_results.markdown(summary["rocket"])
         md += "| state | final | 1σ | unit |\n|---|---|---|---|\n"
         for name, s in summary["states"].items():
             # fixed point, to the σ's second significant figure (one format per row: "-2.46e+06,
@@ -224,10 +231,14 @@ class Post2Problem:
         return md
 
     def headline(self, summary: dict) -> str:
-        """The main number: position error at the end, or the first parameter's final error."""
+        """The main number: a rocket flight's apogee, max speed and landing point
+        (:func:`~.rocket_results.headline`); else the position error at the end, or the first
+        parameter's final error."""
         tr = summary.get("truth") or {}
         zs = [(float(np.max(np.abs(np.divide(h["error"], h["sigma"])))), h["name"]) for h in tr.get("headline", [])]
         worst = f"; truth headline max |z| {max(zs)[0]:.2f} ({max(zs)[1]})" if zs else ""
+        if "rocket" in summary:
+            return rocket_results.headline(summary["rocket"]) + worst
         if "position_error_m" in tr and "attitude" in summary["states"]:
             e = tr["position_error_m"]
             return (
@@ -275,11 +286,15 @@ class Post2Problem:
                 geometry=geometry,
                 parachute_events={e.name: e.parachute for e in cfg.events if e.parachute is not None},
                 has_events=bool(cfg.events),
+                rocket_span=None if cfg.launch is None else (cfg.t_start, cfg.t_end),
             )
         )
 
     def export_columns(self, result) -> ExportTable:
-        """Every state block (smoothed, physical) and its 1σ, SI (angles in rad)."""
+        """Every state block (smoothed, physical) and its 1σ, SI (angles in rad); a rocket flight adds
+        its track in the pad's frame (:class:`~.rocket_results.LocalTrack`: altitude above the pad,
+        east, north, up, downrange [m], vertical speed, speed [m/s], lat, lon [written in deg]) with
+        their 1σ."""
         cols = {}
         for name, h in result.history["smoothed"].items():
             unit = STATES[name].unit
@@ -287,7 +302,25 @@ class Post2Problem:
             for i, c in enumerate(comps):
                 cols[f"{name}.{c}"] = (h["value"][:, i], _si_unit(unit))
                 cols[f"sigma_{name}.{c}"] = (h["sigma"][:, i], _si_unit(unit))
-        return ExportTable(result.t, cols, "planet-centred inertial (+Z pole); attitude as α, β, bank")
+        frame = "planet-centred inertial (+Z pole); attitude as α, β, bank"
+        tr = result.rocket
+        if tr is not None:  # a rocket flight: the pad's local frame too (lat/lon written in deg)
+            local = {
+                "altitude_above_pad": (tr.altitude, tr.sigma_altitude, "m"),
+                "east": (tr.enu[:, 0], tr.sigma_enu[:, 0], "m"),
+                "north": (tr.enu[:, 1], tr.sigma_enu[:, 1], "m"),
+                "up": (tr.enu[:, 2], tr.sigma_enu[:, 2], "m"),
+                "downrange": (tr.downrange, tr.sigma_downrange, "m"),
+                "vertical_speed": (tr.vertical_speed, tr.sigma_vertical_speed, "m/s"),
+                "speed": (tr.speed, tr.sigma_speed, "m/s"),
+                "lat": (tr.lat, tr.sigma_lat, "deg"),
+                "lon": (tr.lon, tr.sigma_lon, "deg"),
+            }
+            for name, (v, sd, unit) in local.items():
+                cols[name] = (v, unit)
+                cols[f"sigma_{name}"] = (sd, unit)
+            frame += "; rocket: the pad's east/north/up (m), altitude above the pad, planet-relative velocity"
+        return ExportTable(result.t, cols, frame)
 
     def calibration_settings(self, settings: Post2Settings, seed: int) -> Post2Settings:
         """A health-calibration member's settings (:func:`workbench.problems.runner.evaluate`): with a

@@ -1,6 +1,8 @@
 """The post2 recording: observations as read, residuals with ±3σ and the weight schedule, every
 estimated state with ±3σ converging (and the planted truth when synthetic), the phases, the vehicle
-in 3-D (capsule, parachute while open, tilt when a tilt state is estimated), the scorecard.
+in 3-D (capsule, parachute while open, tilt when a tilt state is estimated), the scorecard; a rocket
+flight (``[launch]``) also its track in the pad's frame (altitude above the pad, speeds, east/north/up),
+the views it opens on.
 
 States are read generically by name from the state map (``Post2Result.history``), so a state another
 module adds (per-regime multipliers, a drogue, a tilt, ...) is drawn without code here: scalar and
@@ -176,6 +178,8 @@ class Post2Drawer:
                         colors=[PROP],
                     )
         self._phase_series(res)
+        if res.rocket is not None:
+            self._rocket(res)
         p = res.smap.raw(res.x, "position")
         # tracks and the vehicle marker in screen units: at the trajectory's hundreds of km a line in
         # metres is invisible, and so is the capsule
@@ -185,6 +189,22 @@ class Post2Drawer:
         if self.truth is not None and "position" in self.truth:
             self.rec.line_strip(layout.truth_path("track"), self.truth["position"], color=TRUTH, radius=-0.8)
         self._vehicle(res)
+
+    def _rocket(self, res: Post2Result) -> None:
+        """A rocket flight's track in the pad's frame (:class:`~.rocket_results.LocalTrack`), each
+        series with ±3σ: altitude above the pad, vertical speed, speed, downrange, east, north, up."""
+        tr = res.rocket
+        series = (
+            (layout.POST2_ROCKET_ALTITUDE, tr.altitude, tr.sigma_altitude, "altitude above the pad [m]"),
+            (layout.POST2_ROCKET_VERTICAL_SPEED, tr.vertical_speed, tr.sigma_vertical_speed, "vertical speed [m/s]"),
+            (layout.POST2_ROCKET_SPEED, tr.speed, tr.sigma_speed, "speed (planet-relative) [m/s]"),
+            (layout.POST2_ROCKET_DOWNRANGE, tr.downrange, tr.sigma_downrange, "downrange from the pad [m]"),
+            (layout.POST2_ROCKET_EAST, tr.enu[:, 0], tr.sigma_enu[:, 0], "east of the pad [m]"),
+            (layout.POST2_ROCKET_NORTH, tr.enu[:, 1], tr.sigma_enu[:, 1], "north of the pad [m]"),
+            (layout.POST2_ROCKET_UP, tr.enu[:, 2], tr.sigma_enu[:, 2], "up from the pad (pad's axes) [m]"),
+        )
+        for root, v, sd, label in series:
+            self.rec.series_with_bounds(root, res.t, v, sd, names=label, color=[EST])
 
     def _vehicle(self, res: Post2Result) -> None:
         """The vehicle at its smoothed pose (decimated to ≤ 2000 rows), with tilt and parachute."""
@@ -241,6 +261,7 @@ def post2_blueprint(
     has_events: bool = False,
     observation_units: dict[str, str] | None = None,
     vehicle: bool = True,
+    rocket_span: tuple[float, float] | None = None,
 ):
     """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and, when ``vehicle`` (a
     vehicle is drawn: the problem file gives its diameter), "Vehicle" (origin `/world/vehicle`:
@@ -249,7 +270,12 @@ def post2_blueprint(
     as errors against the truth when it is known), the phases and the weight schedule, one residual
     tab per observation (a view per component: residual with ±3σ), the scorecard and the event log.
     Every plot's name states its unit (the display unit of the state; ``observation_units``
-    {observation: SI unit} for the residuals) and its colours (legends off: they covered the data)."""
+    {observation: SI unit} for the residuals) and its colours (legends off: they covered the data).
+
+    A rocket flight (``[launch]``; ``rocket_span`` (t0, t1) [s] its reconstructed span, the x range
+    of its views) opens on its results in the pad's frame instead: left, the tab "Rocket (pad frame)"
+    (altitude above the pad, with vertical speed and speed below) before the 3D tabs; right, "pad ENU
+    position" (east, north, up, downrange) before the state tabs."""
     sizes = sizes or {}
     rc = residual_components or {}
     ou = observation_units or {}
@@ -286,6 +312,28 @@ def post2_blueprint(
                 name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**", "- " + layout.POST2_VEHICLE_MARKER]
             )
         )
+    if rocket_span is not None:
+        band, w = "blue estimate, grey ±3σ", rocket_span
+        local = rrb.Vertical(
+            plot_view(f"altitude above the pad [m] — {band}", layout.POST2_ROCKET_ALTITUDE, window=w),
+            rrb.Horizontal(
+                plot_view(f"vertical speed, up + [m/s] — {band}", layout.POST2_ROCKET_VERTICAL_SPEED, window=w),
+                plot_view(f"speed, planet-relative [m/s] — {band}", layout.POST2_ROCKET_SPEED, window=w),
+            ),
+            name="Rocket (pad frame)",
+            row_shares=[3.0, 2.0],
+        )
+        scene_views.insert(0, local)
+        enu = [
+            plot_view(f"{what} [m] — {band}", root, window=w)
+            for what, root in (
+                ("east of the pad", layout.POST2_ROCKET_EAST),
+                ("north of the pad", layout.POST2_ROCKET_NORTH),
+                ("up, the pad's axes", layout.POST2_ROCKET_UP),
+                ("downrange from the pad", layout.POST2_ROCKET_DOWNRANGE),
+            )
+        ]
+        tabs.insert(0, rrb.Grid(*enu, grid_columns=2, name="pad ENU position [m]"))
     scenes = rrb.Tabs(*scene_views, active_tab=0)
     right = [rrb.Tabs(*tabs, active_tab=0)]
     if res:
@@ -319,6 +367,7 @@ def open_post2_recording(
     geometry=None,
     parachute_events=None,
     has_events: bool = False,
+    rocket_span: tuple[float, float] | None = None,
 ):
     """Open the recording (published atomically) and yield its :class:`Post2Drawer`.
 
@@ -326,7 +375,8 @@ def open_post2_recording(
     default layout (:func:`post2_blueprint`, with ``sizes`` {state: size}, ``residual_components``
     {observation: names}, ``observation_units`` {observation: SI unit}, the observations a weight
     ``schedules`` touches, ``has_events``);
-    ``geometry``, ``parachute_events``: see :class:`Post2Drawer`."""
+    ``geometry``, ``parachute_events``: see :class:`Post2Drawer`; ``rocket_span``: (t0, t1) [s]
+    of a flight with a ``[launch]`` pad (its pad-frame views first, on that span)."""
     bp = post2_blueprint(
         list(states),
         list(observations),
@@ -337,6 +387,7 @@ def open_post2_recording(
         schedules=list(schedules),
         has_events=has_events,
         vehicle=bool((geometry or {}).get("diameter_m")),  # as Post2Drawer._vehicle draws it
+        rocket_span=rocket_span,
     )
     with open_recording(path, name, blueprint=bp, properties=properties) as rec:
         yield Post2Drawer(rec, truth, scorecard, geometry, parachute_events)

@@ -55,6 +55,7 @@ from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import pipeline, rocket_checks
 from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.model import POSITION, VELOCITY
+from workbench.problems.post2.rocket_results import altitude_above_pad, enu_axes, horizontal_covariance, vertical_sigma
 
 __all__ = [
     "PAD_WINDOW_S",
@@ -184,19 +185,11 @@ def site_atmosphere(qnh_pa: float, site_temperature_K: float, standby_pressure_p
     return atm, h
 
 
-def _enu_axes(lat: float, lon: float) -> np.ndarray:
-    """C_M_ENU (3, 3): columns east, north, up at spherical latitude/longitude [rad] (M = Earth-fixed
-    axes at launch)."""
-    up = np.array([math.cos(lat) * math.cos(lon), math.cos(lat) * math.sin(lon), math.sin(lat)])
-    east = np.array([-math.sin(lon), math.cos(lon), 0.0])
-    return np.column_stack([east, np.cross(up, east), up])
-
-
 def pad_position(lat_deg: float, lon_deg: float, h_pad: float) -> np.ndarray:
     """Pad position (3,) [m] in M: the launch coordinates (geodetic latitude used as spherical) at
     ``h_pad`` above the Earth's mean sphere."""
     lat, lon = math.radians(lat_deg), math.radians(lon_deg)
-    return (EARTH.reference_radius + h_pad) * _enu_axes(lat, lon)[:, 2]
+    return (EARTH.reference_radius + h_pad) * enu_axes(lat, lon)[:, 2]
 
 
 def local_en(lat_deg, lon_deg, lat0_deg: float, lon0_deg: float) -> np.ndarray:
@@ -257,7 +250,7 @@ def reconstruct_boost(
     # TRIAD: up from the specific force, heading from the horizontal part of the field (any dip)
     q_enu_b = triad(f_pad, m_pad, np.array([0.0, 0.0, 1.0]), np.array([math.sin(dec), math.cos(dec), -1.5]))
     lat, lon = math.radians(meta.launch_lat_deg), math.radians(meta.launch_lon_deg)
-    C_M_ENU = _enu_axes(lat, lon)
+    C_M_ENU = enu_axes(lat, lon)
     q_m_b = quat_multiply(dcm_to_quat(C_M_ENU), q_enu_b)
     p0 = pad_position(meta.launch_lat_deg, meta.launch_lon_deg, h_pad)
     v0 = np.cross([0.0, 0.0, EARTH.rotation_rate], p0)
@@ -523,6 +516,8 @@ def problem_file(
     t_main,
     landing: bool = False,
     ca0: float = 1.0,
+    t_burnout: float | None = None,
+    t_touchdown: float | None = None,
 ) -> str:
     """Text of the post2 problem file of a flight's coast and descent (from ``t0`` to ``t_end`` [s
     after launch]): 3-DOF, Earth, the site's standard atmosphere, the rocket as a point mass with
@@ -530,7 +525,9 @@ def problem_file(
     position, velocity (from the boost), coast drag multiplier, barometer bias, drogue and main
     drag areas, wind (prior: the site's surface wind); observations pressure and |specific force|;
     with ``landing`` also the landed coordinates (``landing.csv``) — the variant that estimates the
-    winds under the parachutes (the IMU and the barometer do not see the horizontal drift)."""
+    winds under the parachutes (the IMU and the barometer do not see the horizontal drift).  Its
+    ``[launch]`` table (the pad, ``t_burnout`` and ``t_touchdown`` [s after launch, None: unknown])
+    makes the run report the rocket results (:mod:`workbench.problems.post2.rocket_results`)."""
     # the metadata's direction is where the wind comes from; the state is the air's velocity [east,
     # north] (where it goes: v_rel = v − ω×r − wind), hence the minus signs (checked on flights 3 and 4:
     # docs/tuning/post2.md, "the wind prior")
@@ -559,6 +556,18 @@ def problem_file(
         f"sea_level_temperature_K = {fl.atmosphere.sea_level_temperature:.3f}  # site temperature + 6.5 K/km x pad",
         f"# pad altitude {fl.h_pad:.1f} m above the mean sphere (the standby pressure in this atmosphere)",
         f"baro_scale_anchor_m = {fl.h_pad:.3f}  # a baro_scale state would stretch the baro altitude about the pad",
+        "",
+        "[launch]  # the pad: the run reports apogee, speeds, landing point and descent rates in its local frame",
+        f"lat_deg = {meta.launch_lat_deg:.10g}",
+        f"lon_deg = {meta.launch_lon_deg:.10g}",
+        f"pad_altitude_m = {fl.h_pad:.3f}",
+        f"heading_trusted = {'true' if fl.pad_info.get('magnetometer_heading_trusted', True) else 'false'}",
+    ]
+    if t_burnout is not None:
+        lines.append(f"burnout_s = {t_burnout:.4f}  # the first coast row")
+    if t_touchdown is not None:
+        lines.append(f"touchdown_s = {t_touchdown:.4f}  # the first landed row")
+    lines += [
         "",
         "[vehicle]",
         f"mass_kg = {meta.mass}  # metadata dry mass: the coast/descent mass",
@@ -709,14 +718,6 @@ def run_flight(settings: Post2Settings) -> tuple[object, dict]:
     return result, score_flight(result, flight, imu, ref)
 
 
-def _earth_fixed(p_M: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Earth-fixed position (n, 3) of inertial p_M (n, 3) at t (n,) [s after launch] (M = the
-    Earth-fixed axes at launch; rotation about +Z)."""
-    a = -EARTH.rotation_rate * np.asarray(t, float)
-    c, s = np.cos(a), np.sin(a)
-    return np.column_stack([c * p_M[:, 0] - s * p_M[:, 1], s * p_M[:, 0] + c * p_M[:, 1], p_M[:, 2]])
-
-
 def score_flight(result, flight: dict, imu, reference) -> dict:
     """Scores of a post2 :class:`~workbench.problems.post2.pipeline.Post2Result` of a flight against
     its references: apogee vs the metadata (m, %), landing point vs the landed coordinates (m, and
@@ -730,15 +731,13 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     t = result.t
     hist = result.history["smoothed"]
     p = hist["position"]["value"]
-    r = np.linalg.norm(p, axis=1)
-    h = r - EARTH.reference_radius - h_pad
+    h = altitude_above_pad(p, EARTH.reference_radius, h_pad)
     k = int(np.argmax(h))
     out: dict = {"flight": flight["flight"]}
-    # apogee: the altitude of the reconstructed apogee above the pad
-    Pk = result.P[k]
+    # apogee: the altitude of the reconstructed apogee above the pad (rocket_results: the run's summary
+    # reports the same number)
     sp = result.smap.blocks["position"].se
-    up = p[k] / r[k]
-    sig_h = float(np.sqrt(up @ Pk[sp, sp] @ up))
+    sig_h = float(vertical_sigma(p[k : k + 1], result.P[k : k + 1][:, sp, sp])[0])
     out["apogee"] = {
         "reconstructed_m": float(h[k]),
         "sigma_m": sig_h,
@@ -766,17 +765,10 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
         out["apogee"]["standard_day_barometer_altitude_m"] = h_read
         out["apogee"]["standard_day_barometer_error_m"] = h_read - meta["apogee"]
     # landing point
-    pe = _earth_fixed(p[-1:], t[-1:])[0]
-    lat = math.degrees(math.asin(pe[2] / np.linalg.norm(pe)))
-    lon = math.degrees(math.atan2(pe[1], pe[0]))
+    lat, lon, P_en = horizontal_covariance(p[-1], float(t[-1]), result.P[-1][sp, sp], EARTH.rotation_rate)
     lat0, lon0 = meta["launch_lat_deg"], meta["launch_lon_deg"]
     ours = local_en(lat, lon, lat0, lon0)
     truth = local_en(meta["landed_lat_deg"], meta["landed_lon_deg"], lat0, lon0)
-    C_M_ENU = _enu_axes(math.radians(lat), math.radians(lon))
-    a = -EARTH.rotation_rate * float(t[-1])
-    Rz = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
-    C_EN_I = (C_M_ENU.T @ Rz)[:2]
-    P_en = C_EN_I @ result.P[-1][sp, sp] @ C_EN_I.T
     err = ours - truth
     d2 = float(err @ np.linalg.solve(P_en, err))
     out["landing"] = {

@@ -765,7 +765,13 @@ def _write_import(out, log, meta, fl, t, t_launch, times, ca0, health, name, dec
     }
     (out / "flight.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
     path = out / f"{name}.toml"
-    path.write_text(rocket.problem_file(name, meta, fl, t0, t_end, t_apogee, t_main, ca0=ca0), encoding="utf-8")
+    # the pad's events for the rocket results: burnout (first coast row) and touchdown when the span reaches it
+    t_burnout = log.phase_start("C") - t_launch
+    t_touchdown = t_end if "L" in set(log.letters) and t_end >= log.phase_start("L") - t_launch - 1e-9 else None
+    marks = {"t_burnout": t_burnout, "t_touchdown": t_touchdown}
+    path.write_text(
+        rocket.problem_file(name, meta, fl, t0, t_end, t_apogee, t_main, ca0=ca0, **marks), encoding="utf-8"
+    )
     # the variant that also observes the landed coordinates (winds under the parachutes)
     p_land = rocket.landing_point_inertial(meta, fl.h_pad, t_end)
     write_telemetry(
@@ -774,7 +780,7 @@ def _write_import(out, log, meta, fl, t, t_launch, times, ca0, health, name, dec
         {c: (np.array([p_land[i]]), "m") for i, c in enumerate("xyz")},
         meta={"meaning": "metadata landed coordinates at touchdown, inertial frame M, pad elevation"},
     )
-    text = rocket.problem_file(f"{name}_landing", meta, fl, t0, t_end, t_apogee, t_main, landing=True, ca0=ca0)
+    text = rocket.problem_file(f"{name}_landing", meta, fl, t0, t_end, t_apogee, t_main, landing=True, ca0=ca0, **marks)
     (out / f"{name}_landing.toml").write_text(text, encoding="utf-8")
     return path
 
