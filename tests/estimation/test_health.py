@@ -14,6 +14,7 @@ from workbench.estimation.health import (
     UnhealthyError,
     covariance_check,
     covariance_stats,
+    exact_components,
     gap_check,
     health_markdown,
     health_report,
@@ -53,6 +54,22 @@ def test_covariance_check():
     S = P.copy()
     S[1, 1, 1] = np.nan
     assert covariance_check(S).status == ERROR
+
+
+def test_components_declared_exact_are_left_out_and_named():
+    """An error declared absent (σ = 0, no process noise) is an all-zero row and column at every step:
+    the check judges the other components and names it; a variance that collapses to zero later, or
+    an indefinite rest, is still an ERROR."""
+    P = np.tile(np.diag([1.0, 0.0, 4.0]), (5, 1, 1))
+    c = covariance_check(P, labels=["position", "gyro bias_dps", "velocity"])
+    assert c.status == OK and "known exactly" in c.message and "gyro bias_dps" in c.message
+    assert list(exact_components(P)) == [1]
+    late = np.tile(np.eye(3), (5, 1, 1))
+    late[3:, 1, 1] = 0.0  # zero only from step 3: not declared, collapsed
+    assert exact_components(late).size == 0 and covariance_check(late).status == ERROR
+    bad = P.copy()
+    bad[2, 0, 0] = -1.0
+    assert covariance_check(bad).status == ERROR
 
 
 def test_covariance_stats_chunked_equal_whole(monkeypatch):

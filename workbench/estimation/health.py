@@ -44,6 +44,7 @@ __all__ = [
     "Check",
     "UnhealthyError",
     "covariance_check",
+    "exact_components",
     "covariance_stats",
     "gap_check",
     "health_markdown",
@@ -170,20 +171,33 @@ def covariance_check(
     *,
     rtol: float = 1e-6,
     stats: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    labels: Sequence[str] | None = None,
 ) -> Check:
     """Covariance history ``P`` (n, k, k) (or one (k, k)): symmetric to ``rtol`` relative to its
     largest diagonal entry and positive definite at every step; ERROR otherwise (value: the smallest
     eigenvalue over the history). Where the smallest eigenvalue is ≤ 0 the correlation matrices of
     those steps decide (their eigenvalues do not depend on the states' units): all > 0 is OK (value:
     their smallest), within :data:`ROUNDOFF_CORRELATION_EIGENVALUE` of 0 a WARNING (semi-definite to
-    round-off), below that an ERROR.  ``stats``: :func:`covariance_stats` of ``P`` when the caller has
-    them already (not computed again)."""
+    round-off), below that an ERROR.  Components known exactly at every step (an all-zero row and
+    column, :func:`exact_components`: an error declared absent) are left out and named (by
+    ``labels``, one per component — e.g. the setting behind it — when given).  ``stats``:
+    :func:`covariance_stats` of ``P`` when the caller has them already (not computed again)."""
     P = np.asarray(P, float)
     if P.ndim == 2:
         P = P[None]
     if not np.all(np.isfinite(P)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(P), axis=(1, 2)))[0])
         return Check(name, ERROR, None, None, f"{name}: not finite (first at step {bad})")
+    exact = exact_components(P)
+    if exact.size and exact.size < P.shape[1]:  # errors declared absent (σ = 0): checked on the others
+        keep = np.setdiff1d(np.arange(P.shape[1]), exact)
+        c = covariance_check(P[:, keep][:, :, keep], name, rtol=rtol)
+        named = [str(int(i)) for i in exact] if labels is None else list(dict.fromkeys(labels[i] for i in exact))
+        note = (
+            f" ({exact.size} component(s) known exactly at every step — an error declared absent, σ = 0 and no "
+            f"process noise — carried with zero variance: {', '.join(named)})"
+        )
+        return Check(c.name, c.status, c.value, c.bound, c.message + note)
     _, asym_k, emin_k = covariance_stats(P) if stats is None else stats
     asym = float(np.max(asym_k))
     emin = float(np.min(emin_k))
@@ -224,6 +238,14 @@ ROUNDOFF_CORRELATION_EIGENVALUE = 1e-9
 diagonal, so eigenvalues are free of the states' units) has its smallest eigenvalue within this of
 zero is semi-definite to round-off (WARNING in :func:`covariance_check`); below −this it is
 indefinite (ERROR)."""
+
+
+def exact_components(P: np.ndarray) -> np.ndarray:
+    """Indices of the components of a covariance history ``P`` (n, k, k) whose row and column are
+    exactly zero at every step: errors declared absent (σ = 0, no process noise) that a filter
+    carries as known; no estimated component has an exactly zero row."""
+    zero = np.all(P == 0.0, axis=(0, 2)) & np.all(P == 0.0, axis=(0, 1))
+    return np.flatnonzero(zero)
 
 
 def _correlation_min_eigenvalue(P: np.ndarray) -> float:

@@ -311,9 +311,10 @@ def test_numerical_failure_names_the_scenario_keys(tmp_path):
     from workbench.problems.droptest.pipeline import likely_keys
 
     sc = DropSettings.from_scenario(_shipped_copy(tmp_path, ""))
-    err = CovarianceError("not positive definite", 5, (rl.EBG.start, rl.ES.start + 1))
+    err = CovarianceError("not positive definite", 5, (rl.EBG.start, rl.ES.start + 1, rl.ES.start))
     msg = likely_keys(sc, err)
-    assert "[sensors.gyro] bias_dps" in msg and "[sensors.gyro] scale / misalignment_deg" in msg
+    assert "[sensors.gyro] bias_dps" in msg and "[sensors.gyro] misalignment_deg" in msg  # off the diagonal of E
+    assert "[sensors.gyro] scale" in msg  # its diagonal
 
 
 @pytest.mark.slow
@@ -358,3 +359,27 @@ def test_bungee_table_only_as_the_mode_needs(tmp_path):
         read_setup(p, BUNGEE_KEYS)
     with pytest.raises(ScenarioError, match="bungee.rest_length_m"):
         read_setup(p)  # no mode given: a table that is there must be complete
+
+
+@pytest.mark.slow
+def test_errors_declared_absent_are_honoured_not_an_error(tmp_path):
+    """σ = 0 (an error declared absent, as FORMATS.md allows) for the gyro's bias, scale and
+    misalignment and the triads' bias: those error states are carried with zero variance; the
+    covariance check judges the rest and names the settings (it was an ERROR "not positive definite
+    (eigenvalue −1e-16)" naming no key)."""
+    from workbench.problems.base import RunOptions
+    from workbench.problems.runner import run_scenario
+
+    text = (ASSETS / "scenarios" / "droptest.toml").read_text().replace("../landers", str(ASSETS / "landers"))
+    for old in ("bias_dps = 0.05", "misalignment_deg = 0.05", "bias_g = 0.005"):
+        assert old in text, old
+        text = text.replace(old, old.split(" = ")[0] + " = 0.0")
+    p = tmp_path / "absent.toml"
+    p.write_text(text)
+    res = run_scenario(load_scenario(p), tmp_path / "out", RunOptions(seed=1))
+    health = res.summary["health"]
+    cov = next(c for c in health["checks"] if c["name"] == "covariance.smoothed")
+    assert cov["status"] == "OK", cov
+    for key in ("[sensors.gyro] bias_dps", "[sensors.gyro] misalignment_deg", "[sensors.accelerometer] bias_g"):
+        assert key in cov["message"], (key, cov["message"])
+    assert health["verdict"] != "ERROR", health

@@ -26,6 +26,7 @@ from workbench.estimation.health import (
     nis_check,
     notes_check,
 )
+from workbench.problems.droptest.model import error_state_key
 from workbench.problems.droptest.physics import (
     contact_geometry_check,
     full_stroke_check,
@@ -146,7 +147,8 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
     for name, ih in fwd.forward.innovations.items():
         if ih.t.size:
             checks.append(nis_check(name, ih.nis, int(ih.y.shape[1])))
-    checks.append(covariance_check(smo.P, "covariance.smoothed", stats=cov_stats))
+    labels = [error_state_key(c) for c in range(smo.P.shape[1])]
+    checks.append(covariance_check(smo.P, "covariance.smoothed", stats=cov_stats, labels=labels))
 
     lander = st.lander
     thickness = float(2.0 * lander.lobe_radius + lander.standoff)  # lander face to the outer bag surface

@@ -46,10 +46,36 @@ def sizes(n_triads: int) -> tuple[int, int]:
 
 QUAT_BLOCKS = ((9, 9),)
 
+#: error-state block -> the scenario setting that sets its prior σ or process noise
+ERROR_STATE_KEYS = (
+    (EP, "the setup file's [hanging] position_sigma_m"),
+    (EV, "[filter] velocity_sigma_mps / hang_zupt_sigma_mps"),
+    (EA, "[filter] accel_sigma_mps2 / q_accel"),
+    (ETH, "[sensors.attitude_3dm] gravity_sigma_deg / magnetic_sigma_deg"),
+    (EW, "[filter] rate_sigma_dps"),
+    (EAL, "[filter] angular_accel_sigma / q_angular"),
+    (ES, "[sensors.gyro] misalignment_deg"),
+    (EBG, "[sensors.gyro] bias_dps"),
+)
+
+
+def error_state_key(c: int) -> str:
+    """The scenario setting behind error-state component ``c`` (its prior σ or process noise): the
+    gyro error matrix's diagonal is ``[sensors.gyro] scale``, its other entries ``misalignment_deg``;
+    components from ``N_E`` on are the triads' ``[sensors.accelerometer] bias_g``."""
+    if c >= N_E:
+        return "[sensors.accelerometer] bias_g"
+    if c in GYRO_SCALE_E:
+        return "[sensors.gyro] scale"
+    return next(key for sl, key in ERROR_STATE_KEYS if sl.start <= c < sl.stop)
+
+
 __all__ = [
     "N_X",
     "N_E",
     "QUAT_BLOCKS",
+    "ERROR_STATE_KEYS",
+    "error_state_key",
     "bias_slices",
     "sizes",
     "BungeeModel",

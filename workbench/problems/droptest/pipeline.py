@@ -702,30 +702,15 @@ def finite_or_fail(stage: FilterStage, what: str, settings: DropSettings, fwd: F
     )
 
 
-#: error-state component -> the scenario setting that sets its prior σ or process noise
-_ERROR_STATE_KEYS = (
-    (rl.EP, "the setup file's [hanging] position_sigma_m"),
-    (rl.EV, "[filter] velocity_sigma_mps / hang_zupt_sigma_mps"),
-    (rl.EA, "[filter] accel_sigma_mps2 / q_accel"),
-    (rl.ETH, "[sensors.attitude_3dm] gravity_sigma_deg / magnetic_sigma_deg"),
-    (rl.EW, "[filter] rate_sigma_dps"),
-    (rl.EAL, "[filter] angular_accel_sigma / q_angular"),
-    (rl.ES, "[sensors.gyro] scale / misalignment_deg"),
-    (rl.EBG, "[sensors.gyro] bias_dps"),
-)
-
-
 def likely_keys(settings: DropSettings, err: Exception) -> str:
     """The scenario settings behind a numerical failure: those of the error-state components the
     error names (``CovarianceError.components``), and any σ set to 0 (an error declared absent)."""
     cfg = settings
     keys = []
     for c in getattr(err, "components", ()):
-        for sl, key in _ERROR_STATE_KEYS:
-            if sl.start <= c < sl.stop and key not in keys:
-                keys.append(key)
-        if c >= rl.N_E and "[sensors.accelerometer] bias_g" not in keys:
-            keys.append("[sensors.accelerometer] bias_g")
+        key = rl.error_state_key(int(c))
+        if key not in keys:
+            keys.append(key)
     zero = [
         name
         for name, v in (
