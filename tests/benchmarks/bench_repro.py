@@ -1,0 +1,252 @@
+"""Reproducibility of the shipped scenarios' summaries: a rerun, the thread and job counts, and the
+kernels another CPU would run (issue #29 item 7).
+
+Run on demand from the repository root (not collected by pytest)::
+
+    .venv/bin/python tests/benchmarks/bench_repro.py [--configs rerun blas_threads_2 ...]
+        [--scenarios all] [--keep DIR] [--json docs/results/bench_repro.json]
+
+Runs ``workbench run <scenarios>`` once in the reference configuration (the command line's own
+defaults: one BLAS thread, two scenarios at a time) and once per configuration of :data:`CONFIGS`,
+each in a fresh process with only that setting changed, and compares every number of every summary
+with the reference (``compare_summaries.relative_differences``: timings, sizes and paths skipped).
+The configurations that emulate another machine on this one: ``OPENBLAS_CORETYPE`` (the BLAS kernels
+OpenBLAS picks for another CPU), ``NPY_DISABLE_CPU_FEATURES`` (numpy's SIMD loops of a CPU without
+AVX-512) and ``NUMBA_CPU_NAME=generic`` (the compiled kernels without FMA or AVX).
+
+Per configuration and scenario: the count of numbers and of those that moved, the largest relative
+difference and the keys that moved most; the same for the summary numbers the README and
+docs/RESULTS.md cite (``{{summaries/<name>.summary:key}}`` in ``results_templates.py``) and for
+the synthetic telemetry's ``truth.npz`` (relative to each array's largest magnitude), which tells
+the truth simulators' share from the reconstruction's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_json import write_benchmark_json  # noqa: E402
+from compare_summaries import relative_differences  # noqa: E402
+
+#: What the reference runs with: the variables below are removed from its environment (the command
+#: line then sets one BLAS thread itself).
+CLEARED = (
+    "OPENBLAS_NUM_THREADS",
+    "OMP_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "NUMBA_NUM_THREADS",
+    "OPENBLAS_CORETYPE",
+    "NPY_DISABLE_CPU_FEATURES",
+    "NUMBA_CPU_NAME",
+    "WORKBENCH_POST2_KERNEL",
+)
+
+#: name -> (what varies, environment, extra ``workbench run`` arguments, emulates another machine)
+CONFIGS: dict[str, tuple[str, dict[str, str], list[str], bool]] = {
+    "rerun": ("nothing: the same command again", {}, [], False),
+    "jobs_1": ("scenarios one after another in one process (`--jobs 1`)", {}, ["--jobs", "1"], False),
+    "blas_threads_2": (
+        "2 BLAS / OpenMP threads (`OPENBLAS_NUM_THREADS=OMP_NUM_THREADS=MKL_NUM_THREADS=2`)",
+        {"OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "2", "MKL_NUM_THREADS": "2"},
+        [],
+        False,
+    ),
+    "openblas_haswell": (
+        "OpenBLAS kernels of an AVX2 CPU (`OPENBLAS_CORETYPE=Haswell`)",
+        {"OPENBLAS_CORETYPE": "Haswell"},
+        [],
+        True,
+    ),
+    "numpy_no_avx512": (
+        "numpy's SIMD loops without AVX-512 (`NPY_DISABLE_CPU_FEATURES`)",
+        {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"},
+        [],
+        True,
+    ),
+    "numba_generic": (
+        "numba kernels compiled for a generic x86-64 (`NUMBA_CPU_NAME=generic`: no FMA)",
+        {"NUMBA_CPU_NAME": "generic"},
+        [],
+        True,
+    ),
+}
+
+_CITED = re.compile(r"\{\{summaries/([A-Za-z0-9_]+)\.summary:([^|}]+)")
+
+
+def cited_keys() -> dict[str, set[str]]:
+    """{scenario: {key path as '/a/b[0]'}} of the summary numbers the README and RESULTS.md cite."""
+    import results_templates as rt  # noqa: PLC0415 (beside this file)
+
+    texts = [rt.RESULTS_MD, *(t for t in rt.README_BLOCKS.values() if isinstance(t, str))]
+    out: dict[str, set[str]] = {}
+    for text in texts:
+        for name, key in _CITED.findall(text):
+            path = "".join(f"[{p}]" if p.isdigit() else f"/{p}" for p in key.split("."))
+            out.setdefault(name, set()).add(path)
+    return out
+
+
+def run_all(out: Path, scenarios: list[str], env: dict[str, str], args: list[str]) -> float:
+    """``workbench run <scenarios> --out <out> -q`` in a fresh process with ``env`` on top of the
+    cleared environment; returns the wall time [s]."""
+    full = {k: v for k, v in os.environ.items() if k not in CLEARED}
+    full["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), full.get("PYTHONPATH", "")) if p)
+    full.update(env)
+    cmd = [sys.executable, "-m", "workbench.cli", "run", *scenarios, "--out", str(out), "-q", *args]
+    t0 = time.perf_counter()
+    r = subprocess.run(cmd, env=full, cwd=ROOT, capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-2000:]}")
+    return time.perf_counter() - t0
+
+
+def truth_difference(a: Path, b: Path) -> tuple[float, str]:
+    """Largest difference between two ``truth.npz`` files over their float arrays, relative to each
+    array's largest magnitude, and the array's name."""
+    worst, name = 0.0, ""
+    with np.load(a) as x, np.load(b) as y:
+        for k in x.files:
+            u, v = x[k], y[k]
+            if u.dtype.kind != "f" or u.shape != v.shape or u.size == 0:
+                if u.shape != v.shape:
+                    return float("inf"), k
+                continue
+            scale = float(np.nanmax(np.abs(u))) or 1.0
+            d = float(np.nanmax(np.abs(u - v))) / scale if np.isfinite(u).any() else 0.0
+            if d > worst:
+                worst, name = d, k
+    return worst, name
+
+
+def compare(ref: Path, new: Path, scenarios: list[str], cited: dict[str, set[str]], top: int = 3) -> dict:
+    """Per scenario: numbers, moved, max relative difference and the ``top`` keys that moved most,
+    the cited numbers' largest difference, and the truth telemetry's."""
+    out: dict = {}
+    for name in scenarios:
+        a = json.loads((ref / f"{name}.summary.json").read_text())
+        b = json.loads((new / f"{name}.summary.json").read_text())
+        rel = relative_differences(a, b)
+        moved = [r for r in rel if r[0] > 0]
+        mine = [r for r in rel if r[1] in cited.get(name, set())]
+        tr_a, tr_b = ref / name / "telemetry" / "truth.npz", new / name / "telemetry" / "truth.npz"
+        truth = truth_difference(tr_a, tr_b) if tr_a.is_file() and tr_b.is_file() else (0.0, "")
+        out[name] = {
+            "numbers": len(rel),
+            "moved": len(moved),
+            "max_rel": moved[0][0] if moved else 0.0,
+            "top": [{"key": k, "reference": x, "value": y, "rel": r} for r, k, x, y in moved[:top]],
+            "cited_numbers": len(mine),
+            "cited_max_rel": max((r[0] for r in mine), default=0.0),
+            "cited_top_key": max(mine, key=lambda r: r[0])[1] if mine else None,
+            "truth_max_rel": truth[0],
+            "truth_top_array": truth[1] or None,
+        }
+    return out
+
+
+def machine() -> dict:
+    """CPU, BLAS and library versions of this run."""
+    import numba  # noqa: PLC0415
+    import scipy  # noqa: PLC0415
+    from threadpoolctl import threadpool_info  # noqa: PLC0415
+
+    cpu = ""
+    try:
+        cpu = next(
+            ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines() if "model name" in ln
+        )
+    except (OSError, StopIteration):
+        cpu = platform.processor()
+    blas = [
+        {k: i.get(k) for k in ("internal_api", "architecture", "version", "threading_layer")}
+        for i in threadpool_info()
+        if i.get("user_api") == "blas"
+    ]
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "blas": blas,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "numba": numba.__version__,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--configs", nargs="*", default=list(CONFIGS), choices=list(CONFIGS))
+    ap.add_argument("--scenarios", nargs="*", default=["all"])
+    ap.add_argument("--keep", type=Path, default=None, help="keep the runs' output folders here")
+    ap.add_argument("--json", type=Path, default=None, help="write the results (docs/results/bench_repro.json)")
+    args = ap.parse_args(argv)
+    from workbench.io.assets import assets_dir  # noqa: PLC0415
+    from workbench.io.scenario import find_scenarios  # noqa: PLC0415
+
+    scenarios = sorted(find_scenarios(assets_dir())) if args.scenarios == ["all"] else list(args.scenarios)
+    cited = cited_keys()
+    with tempfile.TemporaryDirectory(prefix="bench-repro-") as tmp:
+        work = args.keep or Path(tmp)
+        wall = {"reference": run_all(work / "reference", scenarios, {}, [])}
+        results: dict = {"machine": machine(), "scenarios": scenarios, "configs": {}}
+        for name in args.configs:
+            what, env, extra, other_machine = CONFIGS[name]
+            wall[name] = run_all(work / name, scenarios, env, extra)
+            per = compare(work / "reference", work / name, scenarios, cited)
+            worst = max(per, key=lambda s: per[s]["max_rel"])
+            results["configs"][name] = {
+                "what": what,
+                "env": env,
+                "args": extra,
+                "other_machine": other_machine,
+                "max_rel": per[worst]["max_rel"],
+                "max_rel_scenario": worst,
+                "cited_max_rel": max(p["cited_max_rel"] for p in per.values()),
+                "truth_max_rel": max(p["truth_max_rel"] for p in per.values()),
+                "scenarios_moved": sorted(s for s in per if per[s]["moved"]),
+                "per_scenario": per,
+            }
+            moved = results["configs"][name]["scenarios_moved"]
+            print(f"{name:18s} max rel {per[worst]['max_rel']:.2e} ({worst}); moved: {moved}", flush=True)
+        other = [c for c in results["configs"].values() if c["other_machine"]]
+        results["other_machine"] = (
+            {
+                s: {
+                    "max_rel": max(c["per_scenario"][s]["max_rel"] for c in other),
+                    "cited_max_rel": max(c["per_scenario"][s]["cited_max_rel"] for c in other),
+                    "truth_max_rel": max(c["per_scenario"][s]["truth_max_rel"] for c in other),
+                    "top_key": max(other, key=lambda c: c["per_scenario"][s]["max_rel"])["per_scenario"][s]["top"][0][
+                        "key"
+                    ]
+                    if any(c["per_scenario"][s]["moved"] for c in other)
+                    else None,
+                }
+                for s in scenarios
+            }
+            if other
+            else {}
+        )
+        results["wall_s"] = wall
+    if args.json:
+        print(f"wrote {write_benchmark_json(args.json, __file__, results, argv)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
