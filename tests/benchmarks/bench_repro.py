@@ -95,6 +95,21 @@ CONFIGS: dict[str, tuple[str, dict[str, str], list[str], bool]] = {
     ),
 }
 
+#: summary numbers followed by name in every configuration (issue #29 item 7 names the MEADS EKF's β
+#: maximum; the README's MEADS EKF numbers come from the same run through bench_meads.py)
+WATCH = {
+    "msl_meads": (
+        "/truth/ekf_pass2/beta_deg/max_abs",
+        "/truth/ekf_pass2/alpha_deg/rms",
+        "/truth/ekf_pass2/qbar_pct/rms",
+    ),
+    "post2_huygens": (
+        "/truth/planted_vs_recovered[3]/recovered",
+        "/truth/position_error_m/end_smoothed",
+    ),
+    "schiaparelli": ("/truth/after_radar_fix/max_h_agl_error_m",),
+}
+
 _CITED = re.compile(r"\{\{summaries/([A-Za-z0-9_]+)\.summary:([^|}]+)")
 
 
@@ -178,6 +193,9 @@ def compare(ref: Path, new: Path, scenarios: list[str], cited: dict[str, set[str
             "cited_numbers": len(mine),
             "cited_max_rel": max((r[0] for r in mine), default=0.0),
             "cited_top_key": max(mine, key=lambda r: r[0])[1] if mine else None,
+            "watch": {
+                r[1]: {"reference": r[2], "value": r[3], "rel": r[0]} for r in rel if r[1] in WATCH.get(name, ())
+            },
             "truth_max_rel": truth[0],
             "truth_top_array": truth[1] or None,
         }
@@ -266,10 +284,26 @@ def markdown_of(results_dir: Path = ROOT / "docs" / "results") -> str:
             )
         lines += [
             "",
-            "The last column: one set of user telemetry per scenario (`workbench init <scenario>`, written once in "
-            "the reference configuration; no truth, so no errors in its summary) reconstructed with each "
+            "The last column: one set of user telemetry per scenario (`workbench init <scenario>`, written once "
+            "in the reference configuration; no truth, so no errors in its summary) reconstructed with each "
             "other-machine setting — what the reconstruction adds on its own.",
         ]
+        others = {n: c for n, c in r["configs"].items() if c["other_machine"]}
+        lines += [
+            "",
+            "Named numbers, the reference and each other-machine setting (relative difference):",
+            "",
+            "| scenario: key | reference | " + " | ".join(f"`{n}`" for n in others) + " |",
+            "|---|---|" + "---|" * len(others),
+        ]
+        for s in r["scenarios"]:
+            ref_watch = next(iter(others.values()))["per_scenario"][s].get("watch", {}) if others else {}
+            for key, w in ref_watch.items():
+                vals = []
+                for c in others.values():
+                    x = c["per_scenario"][s]["watch"][key]
+                    vals.append(f"{x['value']:.4g} ({_g(x['rel'])})")
+                lines.append(f"| `{s}`: `{key}` | {w['reference']:.4g} | " + " | ".join(vals) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -289,7 +323,19 @@ def readme_of(results_dir: Path = ROOT / "docs" / "results") -> str:
         "summary numbers quoted here move by up to "
     )
     text += ", ".join(f"{_g(cited[s])} (`{s}`)" for s in worst) or "0"
-    text += "; per scenario, and why, in docs/RESULTS.md (Reproducibility).\n"
+    meads = [
+        (x["rel"], k)
+        for c in r["configs"].values()
+        if c["other_machine"]
+        for k, x in c["per_scenario"].get("msl_meads", {}).get("watch", {}).items()
+    ]
+    if meads:
+        rel, key = max(meads)
+        text += (
+            f", and the MEADS EKF numbers (measured on the `msl_meads` run by `bench_meads.py`) by up to "
+            f"{_g(rel)} (`{key}`)"
+        )
+    text += "; every number, per scenario, and why: docs/RESULTS.md (Reproducibility).\n"
     return text
 
 

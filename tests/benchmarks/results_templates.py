@@ -574,6 +574,8 @@ Why, traced in the code:
   EKF's β error maximum (a maximum over time picks whichever sample the new data favour), the Huygens
   parameter errors — or where the truth itself moved (`msl_meads`, `post2_huygens`, the drop tests). The
   Huygens Monte Carlo initial-state selection keeps the same member on every configuration measured.
+  The MEADS EKF β error maximum that issue #29 saw on another machine is the `openblas_haswell` value of
+  the named numbers: that machine ran OpenBLAS's AVX2 kernels.
 * **Not fixed, and why:** making the truth bit-identical across CPUs would need a fixed-step integrator
   and our own reductions instead of BLAS and numpy's SIMD loops in every truth simulator, slower and
   changing every shipped number; a synthetic scenario's summary is reproducible on one machine, and its
