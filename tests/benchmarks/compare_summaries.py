@@ -64,6 +64,34 @@ def differences(a, b, where: str, base: str, new: str, rtol: float, out: list[st
         out.append(f"{where}: {a!r} -> {b!r}")
 
 
+def relative_differences(a, b, where: str = "") -> list[tuple[float, str, float, float]]:
+    """Every number two JSON values share, as ``(relative difference, key path, old, new)``, largest
+    first: ``|a − b| / max(|a|, |b|)`` (0 for two zeros or two NaNs, inf for a NaN against a number).
+    The keys :func:`differences` skips (timings, sizes, paths) are skipped here too; strings, and
+    keys or lists present on one side only, are left to :func:`differences`."""
+    out: list[tuple[float, str, float, float]] = []
+
+    def walk(x, y, at: str) -> None:
+        if isinstance(x, dict) and isinstance(y, dict):
+            for k in sorted(set(x) & set(y)):
+                if not any(s in k.lower() for s in SKIP):
+                    walk(x[k], y[k], f"{at}/{k}")
+        elif isinstance(x, list) and isinstance(y, list) and len(x) == len(y):
+            for i, (u, v) in enumerate(zip(x, y, strict=True)):
+                walk(u, v, f"{at}[{i}]")
+        elif isinstance(x, int | float) and isinstance(y, int | float) and not isinstance(x, bool):
+            if math.isnan(x) or math.isnan(y):
+                rel = 0.0 if math.isnan(x) and math.isnan(y) else math.inf
+            else:
+                scale = max(abs(x), abs(y))
+                rel = abs(x - y) / scale if scale else 0.0
+            out.append((rel, at, x, y))
+
+    walk(a, b, where)
+    out.sort(key=lambda r: -r[0])
+    return out
+
+
 def _written_in(summary: dict, folder: Path) -> str:
     """The output folder a summary was written in (the folder of its ``recording``; a summary copied
     elsewhere keeps the paths of where it was made), else ``folder``."""

@@ -146,13 +146,17 @@ def render_readme(readme: str, blocks: dict[str, str], results_dir: Path = RESUL
 
 def render_all(root: Path = ROOT) -> dict[Path, str]:
     """Return {path: text} for README.md and docs/RESULTS.md rendered from ``root/docs/results``."""
-    from results_templates import README_BLOCKS, RESULTS_MD  # noqa: PLC0415 (beside this file)
+    from results_templates import README_BLOCKS, RESULTS_MD, RESULTS_MD_SECTIONS  # noqa: PLC0415 (beside this file)
 
     results_dir = root / "docs" / "results"
     readme = (root / "README.md").read_text()
+    cache: dict = {}
+    results_md = fill(RESULTS_MD, results_dir, cache)
+    for section in RESULTS_MD_SECTIONS:  # sections built by a benchmark's own renderer, appended
+        results_md = results_md.rstrip("\n") + "\n\n" + fill(section, results_dir, cache)
     return {
         root / "README.md": render_readme(readme, README_BLOCKS, results_dir),
-        root / "docs" / "RESULTS.md": fill(RESULTS_MD, results_dir),
+        root / "docs" / "RESULTS.md": results_md,
     }
 
 
