@@ -456,7 +456,10 @@ README_BLOCKS["headline"] = f"""\
   {{{{bench_post2_huygens_validation:results.nees.trajectory.position.end_verdict}}}}), end-velocity NEES
   {{{{bench_post2_huygens_validation:results.nees.trajectory.velocity.end_mean_nees|.2f}}}} ({{{{bench_post2_huygens_validation:results.nees.trajectory.velocity.end_verdict}}}}),
   parameter NEES {{{{bench_post2_huygens_validation:results.nees.mean_nees|.2f}}}} (9 parameters, band
-  {{{{bench_post2_huygens_validation:results.nees.band_95.0|.2f}}}}–{{{{bench_post2_huygens_validation:results.nees.band_95.1|.2f}}}}: {{{{bench_post2_huygens_validation:results.nees.verdict}}}})
+  {{{{bench_post2_huygens_validation:results.nees.band_95.0|.2f}}}}–{{{{bench_post2_huygens_validation:results.nees.band_95.1|.2f}}}}: {{{{bench_post2_huygens_validation:results.nees.verdict}}}});
+  health verdict OK on {{{{bench_post2_huygens_validation:results.nees.member_health_counts.OK}}}} of them
+  (the health bands are calibrated on dispersed truths of the calibration stream; calibrated on the one shipped
+  truth's sensor noise they called members 0–5 all WARNING)
   (`bench_post2_huygens_validation.json`; the same study from the command line:
   `workbench mc post2_huygens --truth-sim --seeds 50 --first-seed 20261204`). Monte Carlo initial-state selection:
   {{{{bench_post2_huygens:results.mc_selection.members}}}} members vectorised in {{{{bench_post2_huygens:results.mc_selection.vectorised_wall_s|mmss}}}},

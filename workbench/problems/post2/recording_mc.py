@@ -220,7 +220,7 @@ def truth_mc_markdown(s: dict) -> str:
     ss = s["seed_stream"]
     n = s["runs_completed"]
     drawn = s["parameters_drawn_from_prior"]
-    health = list(s["member_health"].values())
+    counts = s["member_health_counts"]
     md = [
         f"# {s['scenario']}: Monte Carlo against the truth simulator",
         "",
@@ -255,7 +255,7 @@ def truth_mc_markdown(s: dict) -> str:
         + ", inside 3σ " + " / ".join(f"{100 * v:.0f} %" for v in tp["end_per_axis_inside_3sigma"]) + ".",
         "",
         f"Start position error (mean) {s['start_error_m_mean'] / 1e3:.2f} km. Members' health: "
-        + ", ".join(f"{v} {health.count(v)}" for v in sorted(set(health)))
+        + ", ".join(f"{v} {c}" for v, c in counts.items())
         + f". Executor: {s['executor']}; wall time {s['wall_s']:.0f} s, per member "
         f"median {s['member_wall_s']['median']:.1f} s.",
     ]  # fmt: skip

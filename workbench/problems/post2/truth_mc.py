@@ -320,6 +320,7 @@ def run_truth_monte_carlo(
         **aggregate(ok, params),
         "failed_members": [m["failed"] for m in members if m["failed"]],
         "member_health": {str(m["member"]): m["health"] for m in ok},
+        "member_health_counts": {v: sum(m["health"] == v for m in ok) for v in ("OK", "WARNING", "ERROR")},
         "member_health_not_ok": {str(m["member"]): m["health_not_ok"] for m in ok if m["health_not_ok"]},
         "member_wall_s": {"median": float(np.median(walls)), "max": float(np.max(walls))},
         "executor": run.executor,
