@@ -276,6 +276,16 @@ def test_each_member_draws_its_own_truth_and_sensors_whatever_the_executor(setti
     assert fixed.results[1][2]["sensor_seed_state"] == loop.results[1][2]["sensor_seed_state"]
 
 
+def test_health_calibration_members_fly_dispersed_truths(settings):
+    """The health bands are fitted over other flights, not one truth's sensor noise: each calibration
+    member's truth is dispersed (seeded), its sensors and injected failure are the scenario's."""
+    prob = MeadsProblem()
+    a, b = prob.calibration_settings(settings, 3), prob.calibration_settings(settings, 4)
+    assert a.truth != settings.truth and a.truth != b.truth
+    assert prob.calibration_settings(settings, 3).truth == a.truth  # a function of the seed
+    assert a.pressure == settings.pressure and a.vehicle == settings.vehicle  # failure port and sensors kept
+
+
 def test_truth_dispersion_draws_about_the_spec(settings):
     base = settings.truth
     zero = MeadsDispersionSigmas(**{f.name: 0.0 for f in dataclasses.fields(MeadsDispersionSigmas)})

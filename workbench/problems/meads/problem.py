@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Iterator, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -170,6 +171,16 @@ class MeadsProblem(PipelineProblem):
         sparse = tuple(k for k, (v, _) in cols.items() if not np.all(np.isfinite(v)))
         frame = "air data: body axes B; winds: local north/east (EKF: north/east/down)"
         return ExportTable(result.air.t, cols, frame, sparse=sparse)
+
+    def calibration_settings(self, settings: MeadsSettings, seed: int) -> MeadsSettings:
+        """A health-calibration member's settings (:func:`workbench.problems.runner.evaluate`): its
+        truth dispersed as the truth Monte Carlo disperses it (entry state, trim α, atmosphere,
+        winds, pressure model: :func:`~.truth.disperse_truth_spec`, generator
+        ``SeedSequence(seed, spawn_key=(1,))``); the scenario's sensors and injected failure kept."""
+        from workbench.problems.meads.truth import MeadsDispersionSigmas, disperse_truth_spec
+
+        rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(1,)))
+        return replace(settings, truth=disperse_truth_spec(settings.truth, rng, MeadsDispersionSigmas()))
 
     def monte_carlo(self, settings: MeadsSettings, out_dir: Path, options: McOptions, progress: Progress) -> McOutcome:
         """The paper's trade study (:mod:`.montecarlo`) with ``options.n_runs`` runs per error level
