@@ -387,9 +387,12 @@ def site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Ch
     the declared inclination (geometry.site, units.magnetometer, physics.magnetic_dip)."""
     out = []
     lat, lon = meta.launch_lat_deg, meta.launch_lon_deg
-    d = _great_circle_m(lat, lon, meta.landed_lat_deg, meta.landed_lon_deg)
-    d_max = max(LANDING_DISTANCE_MAX_M, 5.0 * meta.apogee)
-    if d <= d_max:
+    landed = meta.landed_lat_deg is not None and meta.landed_lon_deg is not None
+    d = _great_circle_m(lat, lon, meta.landed_lat_deg, meta.landed_lon_deg) if landed else 0.0
+    d_max = max(LANDING_DISTANCE_MAX_M, 5.0 * (meta.apogee or 0.0))
+    if not landed:
+        pass  # no landed coordinates (a column-mapped import without them): unchecked
+    elif d <= d_max:
         out.append(_check("geometry.landing_distance", OK, d, d_max, f"landed {d:.0f} m from the pad"))
     else:
         why = _coordinate_mixup(meta, d_max, inclination_deg)
@@ -452,14 +455,18 @@ def site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Ch
     return out
 
 
-def weather_checks(meta, board_pad_K: float) -> list[Check]:
+def weather_checks(meta, board_pad_K: float | None) -> list[Check]:
     """The metadata's site temperature against the board's own pad temperature (the board runs warmer
-    than the air) and the wind against the launch limit (physics.site_temperature, physics.wind)."""
+    than the air; None: no board temperature, unchecked) and the wind against the launch limit
+    (physics.site_temperature, physics.wind)."""
     out = []
-    t_c, b_c = meta.temperature - 273.15, board_pad_K - 273.15
-    excess = meta.temperature - board_pad_K
+    t_c = meta.temperature - 273.15
+    b_c = board_pad_K - 273.15 if board_pad_K is not None else math.nan
+    excess = meta.temperature - board_pad_K if board_pad_K is not None else math.nan
     msg = f"site air temperature {t_c:.1f} °C vs the flight computer's board on the pad {b_c:.1f} °C"
-    if excess <= BOARD_COOLER_MARGIN_K:
+    if board_pad_K is None:
+        pass  # no board temperature in the log: unchecked
+    elif excess <= BOARD_COOLER_MARGIN_K:
         out.append(_check("physics.site_temperature", OK, excess, BOARD_COOLER_MARGIN_K, msg))
     else:
         msg += (
@@ -551,10 +558,15 @@ def import_checks(
     t_coast = float(t[np.flatnonzero(log.letters == "C")[0]])
     checks = [_axes_check(t, log.f_B, log.w_B, fl.gyro_bias, t_coast, t_ej, name)]
     t_f = float(t[np.flatnonzero(log.letters == "F")[0]])
-    checks.append(accel_sign_check(t, log.f_B, log.w_B, log.ref_q, t_coast, min(t_ej, t_f) - 1.0, name))
-    checks.append(pad_tilt_check(float(fl.pad_info["tilt_on_pad_deg"]), float(meta.rod_angle_deg)))
+    # the checks that need what a log may lack (the flight computer's attitude, the magnetometer, the
+    # rod angle, the landed coordinates, the board temperature) are left out without it
+    if log.ref_q is not None:
+        checks.append(accel_sign_check(t, log.f_B, log.w_B, log.ref_q, t_coast, min(t_ej, t_f) - 1.0, name))
+    if meta.rod_angle_deg is not None:
+        checks.append(pad_tilt_check(float(fl.pad_info["tilt_on_pad_deg"]), float(meta.rod_angle_deg)))
     k0 = int(np.searchsorted(t, fl.pad_info["ignition_t_s"] - 0.2))
-    checks.append(_mag_gyro_check(t, log.w_B, log.mag_B, fl.gyro_bias, k0, t_ej - 0.5, name))
+    if log.mag_B is not None:
+        checks.append(_mag_gyro_check(t, log.w_B, log.mag_B, fl.gyro_bias, k0, t_ej - 0.5, name))
     mc = motor_check(t, log.f_B, log.letters, meta, name)
     if mc is not None:
         checks.append(mc)
@@ -564,7 +576,8 @@ def import_checks(
     checks += site_checks(meta, fl.pad_info, inclination_deg, name)
     t_pad_end = fl.pad_info["ignition_t_s"] - 0.1
     pad = (t >= t_pad_end - 1.0) & (t < t_pad_end)
-    checks += weather_checks(meta, float(np.mean(log.temperature[pad])))
+    board = float(np.mean(log.temperature[pad])) if log.temperature is not None else None
+    checks += weather_checks(meta, board)
     cd = coast_drag_coefficient(ca0_unclipped, meta.cd)
     lo, hi = ROCKET_CD_RANGE
     msg = (

@@ -107,21 +107,27 @@ class FlightLog:
     flights 1, 3, 4) —, ``ref_vz`` (n,)
     [m/s] up, ``ref_q`` (n, 4) its quaternion scalar-last (as logged, frame not documented);
     ``gaps`` the gaps (:func:`find_gaps`); ``repeated_rows`` how many rows repeated the previous
-    packet exactly (dropped); ``path`` the file."""
+    packet exactly (dropped); ``path`` the file.  A log of another flight computer
+    (:mod:`workbench.problems.post2.importers.mapped`) may lack ``mag_B``, ``temperature`` and the
+    reference (None); its ``letters`` are then the detected phases (``phase_column`` None), and
+    ``time_column`` / ``accel_columns`` name its own columns in messages."""
 
     path: Path
     t: np.ndarray
     letters: np.ndarray
     f_B: np.ndarray
     w_B: np.ndarray
-    mag_B: np.ndarray
+    mag_B: np.ndarray | None
     pressure: np.ndarray
-    temperature: np.ndarray
-    ref_h: np.ndarray
-    ref_vz: np.ndarray
-    ref_q: np.ndarray
+    temperature: np.ndarray | None
+    ref_h: np.ndarray | None
+    ref_vz: np.ndarray | None
+    ref_q: np.ndarray | None
     gaps: tuple[Gap, ...]
     repeated_rows: int = 0
+    phase_column: str | None = "state_letter"
+    time_column: str = "timestamp_seconds"
+    accel_columns: str = "raw_acceleration_[xyz]_gs"
 
     def phase_start(self, letter: str) -> float:
         """Log time [s] of the first row with phase ``letter``; a TelemetryError (a ValueError) naming
@@ -134,7 +140,7 @@ class FlightLog:
                 f"the log has no phase '{letter}' ({PHASES[letter]}); it ends in phase '{last}' "
                 f"({PHASES.get(str(last), '?')}) at {self.t[-1] if self.t.size else float('nan'):.3f} s: "
                 "a truncated log? the import needs the boost, the coast and the descent's start",
-                column=_LETTER,
+                column=self.phase_column or self.time_column,
                 row=int(self.t.size),
             )
         return float(self.t[k[0]])
@@ -335,7 +341,9 @@ class FlightMetadata:
     site ``temperature`` [K], ``qnh`` [Pa] (the reported air pressure, read as reduced to sea level),
     ``wind_speed`` [m/s], ``wind_from_deg`` (direction the wind blows from, deg clockwise from north);
     ``launch_lat_deg``/``launch_lon_deg``, ``landed_lat_deg``/``landed_lon_deg``, ``apogee`` [m],
-    ``rod_angle_deg``, ``date`` (ISO string), ``description``, ``motor`` (designation or None)."""
+    ``rod_angle_deg``, ``date`` (ISO string), ``description``, ``motor`` (designation or None).  The
+    scoring references (landed coordinates, apogee) and the rod angle may be None (unknown: a
+    column-mapped import without them; their checks and the ``_landing`` variant are then skipped)."""
 
     name: str
     mass: float
@@ -347,10 +355,10 @@ class FlightMetadata:
     wind_from_deg: float
     launch_lat_deg: float
     launch_lon_deg: float
-    landed_lat_deg: float
-    landed_lon_deg: float
-    apogee: float
-    rod_angle_deg: float
+    landed_lat_deg: float | None
+    landed_lon_deg: float | None
+    apogee: float | None
+    rod_angle_deg: float | None
     date: str
     description: str
     motor: str | None = None
@@ -546,14 +554,44 @@ def import_flight(
     ``allow_unhealthy`` (then they are kept in ``flight.json`` and join the run's health verdict).
     The files are written into a temporary folder moved into place at the end.
     """
+    log = read_log(log_path)
+    meta = read_metadata(metadata_path, flight or Path(log_path).name)
+    return import_log(
+        log,
+        meta,
+        out_dir,
+        name=name or Path(log_path).stem,
+        declination_deg=declination_deg,
+        inclination_deg=inclination_deg,
+        obs_rate_hz=obs_rate_hz,
+        t_end_s=t_end_s,
+        allow_unhealthy=allow_unhealthy,
+    )
+
+
+def import_log(
+    log: FlightLog,
+    meta: FlightMetadata,
+    out_dir: str | os.PathLike,
+    *,
+    name: str,
+    declination_deg: float = 0.0,
+    inclination_deg: float | None = None,
+    obs_rate_hz: float = 10.0,
+    t_end_s: float | None = None,
+    allow_unhealthy: bool = False,
+    heading_prior_deg: tuple[float | None, float] | None = None,
+) -> Path:
+    """The import of a flight log already read into SI (:func:`read_log`, or the column-mapped reader
+    :func:`workbench.problems.post2.importers.mapped.read_mapped`): the boost, the checks and the files
+    of :func:`import_flight` (whose arguments these are).  ``heading_prior_deg`` (bearing [deg] or None
+    for unknown, 1σ [deg]) is the pad heading of a log without a magnetometer (``log.mag_B`` None)."""
     # imported here: the command line builds its parser from this module and stays light
     from workbench.estimation.health import ERROR, UnhealthyError, health_report
     from workbench.problems.post2 import rocket, rocket_checks
 
-    log = read_log(log_path)
-    meta = read_metadata(metadata_path, flight or Path(log_path).name)
     out = Path(out_dir)
-    name = name or Path(log_path).stem
+    phase_col = log.phase_column or log.time_column
     if not obs_rate_hz > 0.0:
         raise TelemetryError.single(log.path, f"--obs-rate-hz {obs_rate_hz:g}: the observation rate must be positive")
     t_launch = log.phase_start("M")
@@ -564,13 +602,15 @@ def import_flight(
             raise TelemetryError.single(
                 log.path,
                 f"gap of {g.dt:.3f} s inside the boost: the IMU cannot be integrated across it",
-                column="timestamp_seconds",
+                column=log.time_column,
                 row=g.row,
             )
     pad_field = (
-        float(np.median(np.linalg.norm(log.mag_B[log.letters == "S"], axis=1))) if np.any(log.letters == "S") else 0.0
+        float(np.median(np.linalg.norm(log.mag_B[log.letters == "S"], axis=1)))
+        if log.mag_B is not None and np.any(log.letters == "S")
+        else 0.0
     )
-    if not pad_field > MIN_FIELD_T:
+    if log.mag_B is not None and not pad_field > MIN_FIELD_T:
         raise TelemetryError.single(
             log.path,
             f"the magnetometer reads {pad_field * 1e6:.3g} µT on the pad (median |B| of the standby rows; the Earth's "
@@ -579,11 +619,20 @@ def import_flight(
         )
     try:
         fl = rocket.reconstruct_boost(
-            t, log.letters, log.f_B, log.w_B, log.mag_B, log.pressure, meta, declination_deg, inclination_deg
+            t,
+            log.letters,
+            log.f_B,
+            log.w_B,
+            log.mag_B,
+            log.pressure,
+            meta,
+            declination_deg,
+            inclination_deg,
+            **({} if heading_prior_deg is None else {"heading_prior_deg": heading_prior_deg}),
         )
     except ValueError as e:  # the pad window: too little standby data before the motor letter
         raise TelemetryError.single(
-            log.path, str(e), column=_LETTER, row=int(np.argmax(log.letters == "M")) + 1
+            log.path, str(e), column=phase_col, row=int(np.argmax(log.letters == "M")) + 1
         ) from None
     # the drogue opens at the ejection shock (the descent letter can lag it: flight 4, 3.5 s)
     t_apogee = rocket.detect_ejection(t, log.f_B, log.phase_start("C") - t_launch, log.phase_start("F") - t_launch)
@@ -596,11 +645,11 @@ def import_flight(
     t0 = fl.t_start
     if not (np.all(np.isfinite(fl.p_M)) and np.all(np.isfinite(fl.v_M))):
         raise TelemetryError.single(
-            log.path, "the boost integrated from the IMU is not finite (a degenerate pad alignment?)", column=_LETTER
+            log.path, "the boost integrated from the IMU is not finite (a degenerate pad alignment?)", column=phase_col
         )
     if not t_end > t0 + 1.0:
         raise TelemetryError.single(
-            log.path, f"the reconstruction span {t0:.2f} .. {t_end:.2f} s after launch is too short", column=_LETTER
+            log.path, f"the reconstruction span {t0:.2f} .. {t_end:.2f} s after launch is too short", column=phase_col
         )
     # the coast drag multiplier's prior from the first measured coast drag at the burnout state
     r_b = float(np.linalg.norm(fl.p_M))
@@ -711,32 +760,37 @@ def _write_import(out, log, meta, fl, t, t_launch, times, ca0, health, name, dec
         out / "accel_weights.csv", ta, {"a": (1.0 / sig_a**2, "1")}, meta={"meaning": "W = 1/sigma^2 [s^4/m^2]"}
     )
     # the raw IMU and the flight computer's reference solution (for scoring and drawing, not observed)
+    imu_cols = {
+        **{f"f.{c}": (log.f_B[:, i], "g") for i, c in enumerate("xyz")},
+        **{f"w.{c}": (log.w_B[:, i], "deg/s") for i, c in enumerate("xyz")},
+    }
+    if log.mag_B is not None:
+        imu_cols |= {f"mag.{c}": (log.mag_B[:, i], "uT") for i, c in enumerate("xyz")}
+    imu_cols["pressure"] = (log.pressure, "Pa")
+    if log.temperature is not None:
+        imu_cols["board_temperature"] = (log.temperature, "degC")
     write_telemetry(
         out / "imu.csv",
         t,
-        {
-            **{f"f.{c}": (log.f_B[:, i], "g") for i, c in enumerate("xyz")},
-            **{f"w.{c}": (log.w_B[:, i], "deg/s") for i, c in enumerate("xyz")},
-            **{f"mag.{c}": (log.mag_B[:, i], "uT") for i, c in enumerate("xyz")},
-            "pressure": (log.pressure, "Pa"),
-            "board_temperature": (log.temperature, "degC"),
-        },
+        imu_cols,
         meta={"source": log.path.name, "frame": "IMU axes as logged", "time_zero": "first motor row"},
     )
-    write_telemetry(
-        out / "reference.csv",
-        t,
-        {
-            "h": (log.ref_h, "m"),
-            "vz": (log.ref_vz, "m/s"),
-            **{f"q{c}": (log.ref_q[:, i], "1") for i, c in enumerate("xyzw")},
-        },
-        meta={"source": log.path.name, "meaning": "the flight computer's own solution (reference, not observed)"},
-    )
+    if log.ref_h is not None and log.ref_vz is not None and log.ref_q is not None:
+        write_telemetry(
+            out / "reference.csv",
+            t,
+            {
+                "h": (log.ref_h, "m"),
+                "vz": (log.ref_vz, "m/s"),
+                **{f"q{c}": (log.ref_q[:, i], "1") for i, c in enumerate("xyzw")},
+            },
+            meta={"source": log.path.name, "meaning": "the flight computer's own solution (reference, not observed)"},
+        )
     events = [(float(t[0]), "log start")]
     letters = log.letters
+    how = "" if log.phase_column else ", detected"
     for k in np.flatnonzero(letters[1:] != letters[:-1]) + 1:
-        events.append((float(t[k]), f"phase {letters[k]} ({PHASES[letters[k]]})"))
+        events.append((float(t[k]), f"phase {letters[k]} ({PHASES[letters[k]]}{how})"))
     for g in gaps_rel:
         events.append((g.t_a, f"gap {g.dt:.3f} s before row {g.row}"))
     events.append((t_apogee, "drogue ejection (detected)"))
@@ -772,6 +826,8 @@ def _write_import(out, log, meta, fl, t, t_launch, times, ca0, health, name, dec
     path.write_text(
         rocket.problem_file(name, meta, fl, t0, t_end, t_apogee, t_main, ca0=ca0, **marks), encoding="utf-8"
     )
+    if meta.landed_lat_deg is None or meta.landed_lon_deg is None:
+        return path  # no landed coordinates: no variant that observes them
     # the variant that also observes the landed coordinates (winds under the parachutes)
     p_land = rocket.landing_point_inertial(meta, fl.h_pad, t_end)
     write_telemetry(
