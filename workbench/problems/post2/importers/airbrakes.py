@@ -38,6 +38,7 @@ from workbench.core.bodies import EARTH, G0
 from workbench.io.scenario import ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, read_json
 from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, write_events, write_telemetry
+from workbench.io.units import likely_unit
 
 __all__ = [
     "HELP",
@@ -55,6 +56,9 @@ __all__ = [
     "block_means",
     "read_metadata",
     "import_flight",
+    "import_log",
+    "check_units",
+    "check_rates",
 ]
 
 #: flight-phase letters of the FIRM log: standby, motor, coast, free fall / parachute, landed
@@ -233,8 +237,8 @@ def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
         raise TelemetryError(problems, total)
     arr = {k: v[rows] for k, v in arr.items()}
     t = arr["t"]
-    _check_units(fname, t, np.asarray(letters)[rows], np.column_stack([arr["ax"], arr["ay"], arr["az"]]), rows)
-    _check_rates(fname, np.column_stack([arr["wx"], arr["wy"], arr["wz"]]), rows)
+    check_units(fname, t, np.asarray(letters)[rows], np.column_stack([arr["ax"], arr["ay"], arr["az"]]), rows)
+    check_rates(fname, np.column_stack([arr["wx"], arr["wy"], arr["wz"]]), rows)
     q = q[rows]
     qn = qn[rows]
     letters_a = np.asarray(letters)[rows]
@@ -267,11 +271,22 @@ STANDBY_G_BAND = (0.8, 1.2)
 MAX_RATE_RAD_S = float(np.radians(5000.0))
 
 
-def _check_units(fname: str, t: np.ndarray, letters: np.ndarray, f: np.ndarray, rows: np.ndarray) -> None:
-    """Refuse a log whose time or accelerations are in other units than the column names say: the
-    median time step above MAX_MEDIAN_STEP_S (milliseconds), the standby rows' median |specific
-    force| outside STANDBY_G_BAND × 1 g (m/s², mg).  ``t`` (n,) [s], ``f`` (n, 3) [m/s²] of the kept
-    rows ``rows`` (n,) (0-based data rows, for the message)."""
+def check_units(
+    fname: str,
+    t: np.ndarray,
+    letters: np.ndarray,
+    f: np.ndarray,
+    rows: np.ndarray,
+    *,
+    time_column: str = "timestamp_seconds",
+    accel_column: str = "raw_acceleration_x_gs",
+    accel_unit: str = "g",
+) -> None:
+    """Refuse a log whose time or accelerations are in other units than declared (the column names
+    of a FIRM log; ``accel_unit`` of ``accel_column`` otherwise): the median time step above
+    MAX_MEDIAN_STEP_S (milliseconds), the standby rows' median |specific force| outside
+    STANDBY_G_BAND × 1 g (m/s², mg).  ``t`` (n,) [s], ``f`` (n, 3) [m/s²] of the kept rows ``rows``
+    (n,) (0-based data rows, for the message)."""
     if t.size >= 3:
         step = float(np.median(np.diff(t)))
         if step > MAX_MEDIAN_STEP_S:
@@ -279,14 +294,17 @@ def _check_units(fname: str, t: np.ndarray, letters: np.ndarray, f: np.ndarray, 
                 fname,
                 f"median time step {step:.4g} s ({1.0 / step:.3g} Hz): a flight log samples at 10 Hz or more — "
                 f"the time looks like milliseconds ({step / 1000.0:.4g} s if so); convert it to seconds",
-                column="timestamp_seconds",
+                column=time_column,
             )
     standby = np.flatnonzero(letters == "S")
     if standby.size >= 3:
         g = float(np.median(np.linalg.norm(f[standby], axis=1))) / G0
         lo, hi = STANDBY_G_BAND
         if not lo <= g <= hi:
-            if 0.8 * G0 <= g <= 1.2 * G0 or 800.0 <= g <= 1200.0:
+            other = likely_unit(g, accel_unit)
+            if accel_unit != "g" and other is not None:
+                why = f"the acceleration columns look like {other}, not {accel_unit}"
+            elif 0.8 * G0 <= g <= 1.2 * G0 or 800.0 <= g <= 1200.0:
                 why = f"the acceleration columns look like {'m/s²' if g < 100.0 else 'mg'}, not g"
             else:
                 axes = ", ".join(
@@ -297,19 +315,21 @@ def _check_units(fname: str, t: np.ndarray, letters: np.ndarray, f: np.ndarray, 
                 fname,
                 f"the standby rows' specific force is {g:.4g} g (median of |a| over {standby.size} rows, expected 1 g "
                 f"at rest): {why}",
-                column="raw_acceleration_x_gs",
+                column=accel_column,
                 row=int(rows[standby[0]]) + 1,
             )
 
 
-def _check_rates(fname: str, w: np.ndarray, rows: np.ndarray) -> None:
-    """Refuse a log whose angular rates ``w`` (n, 3) [rad/s, as read under the deg/s column names]
-    exceed MAX_RATE_RAD_S anywhere: beyond any flight computer's gyro range, a column in other units
-    (mdeg/s) or scaled.  The message names the column, the first such row and the other columns'
-    largest rate for comparison; ``rows`` (n,) the 0-based data rows of ``w``."""
+def check_rates(fname: str, w: np.ndarray, rows: np.ndarray, columns: tuple[str, ...] | None = None) -> None:
+    """Refuse a log whose angular rates ``w`` (n, 3) [rad/s, as read in their declared unit] exceed
+    MAX_RATE_RAD_S anywhere: beyond any flight computer's gyro range, a column in other units
+    (mdeg/s) or scaled.  The message names the column (``columns`` (3,), default the FIRM names),
+    the first such row and the other columns' largest rate for comparison; ``rows`` (n,) the 0-based
+    data rows of ``w``."""
+    columns = columns or tuple(f"raw_angular_rate_{c}_deg_per_s" for c in "xyz")
     peak = np.max(np.abs(w), axis=0) if w.size else np.zeros(3)
     for i in np.flatnonzero(peak > MAX_RATE_RAD_S):
-        col = f"raw_angular_rate_{'xyz'[i]}_deg_per_s"
+        col = columns[i]
         k = int(np.flatnonzero(np.abs(w[:, i]) > MAX_RATE_RAD_S)[0])
         others = ", ".join(f"{'xyz'[j]} {np.degrees(peak[j]):.4g}" for j in range(3) if j != i)
         raise TelemetryError.single(
@@ -581,11 +601,15 @@ def import_log(
     t_end_s: float | None = None,
     allow_unhealthy: bool = False,
     heading_prior_deg: tuple[float | None, float] | None = None,
+    main_s: float | None = None,
+    source: dict | None = None,
 ) -> Path:
     """The import of a flight log already read into SI (:func:`read_log`, or the column-mapped reader
     :func:`workbench.problems.post2.importers.mapped.read_mapped`): the boost, the checks and the files
     of :func:`import_flight` (whose arguments these are).  ``heading_prior_deg`` (bearing [deg] or None
-    for unknown, 1σ [deg]) is the pad heading of a log without a magnetometer (``log.mag_B`` None)."""
+    for unknown, 1σ [deg]) is the pad heading of a log without a magnetometer (``log.mag_B`` None);
+    ``main_s`` [s, log clock] the main parachute's opening instead of the detected one; ``source`` a
+    JSON-ready record of where the log came from (kept in ``flight.json``)."""
     # imported here: the command line builds its parser from this module and stays light
     from workbench.estimation.health import ERROR, UnhealthyError, health_report
     from workbench.problems.post2 import rocket, rocket_checks
@@ -641,7 +665,10 @@ def import_log(
     except ValueError:
         t_land = float(t[-1])
     t_end = min(t_land, t_end_s) if t_end_s is not None else t_land
-    t_main = rocket.detect_main_deploy(t, log.pressure, log.f_B, fl.atmosphere, t_apogee, t_end)
+    if main_s is None:
+        t_main = rocket.detect_main_deploy(t, log.pressure, log.f_B, fl.atmosphere, t_apogee, t_end)
+    else:
+        t_main = float(main_s) - t_launch
     t0 = fl.t_start
     if not (np.all(np.isfinite(fl.p_M)) and np.all(np.isfinite(fl.v_M))):
         raise TelemetryError.single(
@@ -688,6 +715,7 @@ def import_log(
             name,
             declination_deg,
             obs_rate_hz,
+            source,
         )
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
@@ -735,7 +763,9 @@ def _commit_dir(tmp: Path, out: Path) -> None:
     tmp.rmdir()
 
 
-def _write_import(out, log, meta, fl, t, t_launch, times, ca0, health, name, declination_deg, obs_rate_hz) -> Path:
+def _write_import(
+    out, log, meta, fl, t, t_launch, times, ca0, health, name, declination_deg, obs_rate_hz, source=None
+) -> Path:
     """Write the import's files into the folder ``out`` (:func:`import_flight` computed every input:
     ``times`` = (t0, t_end, t_apogee, t_main) [s after launch]); returns the problem file."""
     from workbench.problems.post2 import rocket
@@ -817,6 +847,8 @@ def _write_import(out, log, meta, fl, t, t_launch, times, ca0, health, name, dec
         "observation_rate_hz": obs_rate_hz,
         "health_checks": health,
     }
+    if source is not None:
+        info["source"] = source
     (out / "flight.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
     path = out / f"{name}.toml"
     # the pad's events for the rocket results: burnout (first coast row) and touchdown when the span reaches it
