@@ -598,7 +598,7 @@ def problem_file(
     if t_burnout is not None:
         lines.append(f"burnout_s = {t_burnout:.4f}  # the first coast row")
     if t_touchdown is not None:
-        lines.append(f"touchdown_s = {t_touchdown:.4f}  # the first landed row")
+        lines.append(f"touchdown_s = {t_touchdown:.9f}  # the first landed row (t_end_s: the digits of the span's end)")
     lines += [
         "",
         "[vehicle]",
