@@ -261,3 +261,13 @@ def test_a_phase_time_in_the_mapping_overrides_the_detection(tmp_path):
     fl = json.loads((toml.parent / "flight.json").read_text(encoding="utf-8"))
     assert fl["source"]["phases_source"]["burnout"] == "mapping"
     assert fl["t_start_s"] + fl["t_launch_log_s"] == pytest.approx(1211.8 + 0.3, abs=0.13)  # + the tail-off
+
+
+def test_an_unknown_phase_value_is_located(tmp_path):
+    mp = remap(tmp_path / "log", letters=True)
+    lines = (mp.parent / "imu.csv").read_text(encoding="utf-8").splitlines()
+    lines[12] = lines[12][: lines[12].rindex(",")] + ",X"
+    (mp.parent / "imu.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    with pytest.raises(TelemetryError) as e:
+        mapped.import_mapped(mp, tmp_path / "flight")
+    assert (e.value.column, e.value.row) == ("phase", 12) and "'X' is not a phase value" in str(e.value)

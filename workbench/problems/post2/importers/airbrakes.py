@@ -23,7 +23,6 @@ in ``workbench/io/FORMATS.md`` ("Rocket flight logs").  What the importer does:
 
 from __future__ import annotations
 
-import csv
 import difflib
 import json
 import math
@@ -35,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from workbench.core.bodies import EARTH, G0
+from workbench.io.columns import read_columns
 from workbench.io.scenario import ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, read_json
 from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, write_events, write_telemetry
@@ -154,94 +154,41 @@ def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
     """Read a FIRM log CSV (:data:`COLUMNS` + ``state_letter``; other columns ignored) into SI.
 
     Raises :class:`~workbench.io.telemetry.TelemetryError` locating every problem (file, column,
-    1-based data row and file line): a missing column, an empty/non-numeric/non-finite cell, a
-    wrong field count, a time not strictly after the previous row's (a row repeating the previous
-    row's time and every value is a packet logged twice: dropped and counted), a phase letter not in
-    :data:`PHASES`, a quaternion whose norm is not 1 ± 0.01.
+    1-based data row and file line; :func:`workbench.io.columns.read_columns`): a missing column, an
+    empty/non-numeric/non-finite cell, a wrong field count, a time not strictly after the previous
+    row's (a row repeating the previous row's time and every value is a packet logged twice: dropped
+    and counted), a phase letter not in :data:`PHASES`, a quaternion whose norm is not 1 ± 0.01.
     """
     path = Path(path)
     fname = str(path)
-    try:
-        fh = path.open(newline="", encoding="utf-8-sig")  # a byte-order mark is not part of the first name
-    except OSError as e:
-        raise TelemetryError.single(fname, f"cannot read: {e.strerror or e}") from None
-    problems: list[Problem] = []
-    total = 0
 
-    def add(column, row, reason):
-        nonlocal total
-        total += 1
-        if len(problems) < MAX_PROBLEMS:
-            problems.append(Problem(fname, column, row, None if row is None else row + 1, reason))
+    def letter_ok(_column, letter):
+        return None if letter in PHASES else f"{letter!r} is not a phase letter ({', '.join(PHASES)})"
 
-    with fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header is None:
-            raise TelemetryError.single(fname, "empty file (expected a header row of FIRM column names)")
-        header = [h.strip() for h in header]
-        missing = [c for c in (_LETTER, *COLUMNS) if c not in header]
-        if missing:
-            raise TelemetryError(
-                [Problem(fname, c, None, 1, "is missing (a FIRM log needs it)") for c in missing], len(missing)
-            )
-        idx = {c: header.index(c) for c in (_LETTER, *COLUMNS)}
-        width = len(header)
-        cols: dict[str, list[float]] = {c: [] for c in COLUMNS}
-        letters: list[str] = []
-        for r, cells in enumerate(reader, start=1):
-            if not cells or all(not c.strip() for c in cells):
-                add(None, r, "empty row")
-                continue
-            if len(cells) != width:
-                add(None, r, f"has {len(cells)} fields, the header has {width}")
-                continue
-            letter = cells[idx[_LETTER]].strip()
-            if letter not in PHASES:
-                add(_LETTER, r, f"{letter!r} is not a phase letter ({', '.join(PHASES)})")
-            letters.append(letter)
-            for c in COLUMNS:
-                s = cells[idx[c]].strip()
-                try:
-                    v = float(s)
-                except ValueError:
-                    v = math.nan
-                    add(c, r, f"{s!r} is not a number" if s else "empty cell")
-                else:
-                    if not math.isfinite(v):
-                        add(c, r, f"{s!r} is not a finite number")
-                cols[c].append(v)
-    n = len(letters)
-    if n == 0 and not problems:
-        raise TelemetryError.single(fname, "no data rows under the header")
-    arr = {COLUMNS[c][0]: np.asarray(v, float) * COLUMNS[c][1] + COLUMNS[c][2] for c, v in cols.items()}
+    cols = read_columns(
+        path, "timestamp_seconds", list(COLUMNS), (_LETTER,), needed_by="a FIRM log needs it", check_text=letter_ok
+    )
+    arr = {COLUMNS[c][0]: v * COLUMNS[c][1] + COLUMNS[c][2] for c, v in cols.values.items()}
+    rows = cols.rows
     t = arr["t"]
-    # a row repeating the previous row's time *and* every sensor value is the same packet logged
-    # twice (the logger re-reads the flight computer's last packet): dropped and counted
-    sensors = np.column_stack([arr[COLUMNS[c][0]] for c in COLUMNS])
-    repeat = np.zeros(t.size, dtype=bool)
-    repeat[1:] = np.all(sensors[1:] == sensors[:-1], axis=1)
-    rows = np.flatnonzero(~repeat)  # 0-based data rows kept
-    dt = np.diff(t[rows])
-    for i in np.flatnonzero(~(dt > 0)):
-        if np.isfinite(dt[i]):
-            r0, r1 = int(rows[i]), int(rows[i + 1])
-            what = "repeats (with other values)" if dt[i] == 0 else "goes backwards from"
-            add("timestamp_seconds", r1 + 1, f"time {t[r1]:.6f} s {what} the time {t[r0]:.6f} s of row {r0 + 1}")
     q = np.column_stack([arr["ref_qx"], arr["ref_qy"], arr["ref_qz"], arr["ref_qw"]])
     qn = np.linalg.norm(q, axis=1)
-    for i in np.flatnonzero(np.abs(qn - 1.0) > 0.01):
-        add("est_quaternion_w", int(i) + 1, f"quaternion norm {qn[i]:.4g} (expected 1)")
-    if problems:
-        problems.sort(key=lambda p: p.row or 0)
-        raise TelemetryError(problems, total)
-    arr = {k: v[rows] for k, v in arr.items()}
-    t = arr["t"]
-    check_units(fname, t, np.asarray(letters)[rows], np.column_stack([arr["ax"], arr["ay"], arr["az"]]), rows)
+    bad = np.flatnonzero(np.abs(qn - 1.0) > 0.01)
+    if bad.size:
+        probs = [
+            Problem(
+                fname,
+                "est_quaternion_w",
+                int(rows[i]) + 1,
+                int(rows[i]) + 2,
+                f"quaternion norm {qn[i]:.4g} (expected 1)",
+            )
+            for i in bad[:MAX_PROBLEMS]
+        ]
+        raise TelemetryError(probs, bad.size)
+    letters_a = cols.texts[_LETTER]
+    check_units(fname, t, letters_a, np.column_stack([arr["ax"], arr["ay"], arr["az"]]), rows)
     check_rates(fname, np.column_stack([arr["wx"], arr["wy"], arr["wz"]]), rows)
-    q = q[rows]
-    qn = qn[rows]
-    letters_a = np.asarray(letters)[rows]
     return FlightLog(
         path,
         t,
@@ -255,7 +202,7 @@ def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
         arr["ref_vz"],
         q / qn[:, None],
         find_gaps(t, letters_a, gap_factor),
-        int(np.sum(repeat)),
+        cols.repeated_rows,
     )
 
 

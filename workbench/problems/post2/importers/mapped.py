@@ -27,7 +27,6 @@ Without a magnetometer the pad heading is unknown: it is the prior ``[site] pad_
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 from dataclasses import dataclass
@@ -36,9 +35,10 @@ from pathlib import Path
 import numpy as np
 
 from workbench.core.bodies import G0
+from workbench.io.columns import read_columns
 from workbench.io.scenario import ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, load_file
-from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError
+from workbench.io.telemetry import TelemetryError
 from workbench.io.units import UnitError, canonical_unit, known_units, to_si, unit_kind
 from workbench.problems.post2.importers.airbrakes import (
     FlightLog,
@@ -405,91 +405,6 @@ def _signed(spec: str) -> tuple[float, str]:
     return 1.0, s
 
 
-def _read_file(path: Path, time_col: str, columns: list[str], text_columns: tuple[str, ...] = ()):
-    """Read the CSV ``path``: (time (n,) as written, {column: values (n,)}, {text column: (n,) str},
-    repeated rows dropped, kept 0-based data rows (n,)).  Rows repeating the previous row's time and
-    every value are dropped; every other problem is a located TelemetryError."""
-    fname = str(path)
-    try:
-        fh = path.open(newline="", encoding="utf-8-sig")
-    except OSError as e:
-        raise TelemetryError.single(fname, f"cannot read: {e.strerror or e}") from None
-    problems: list[Problem] = []
-    total = 0
-
-    def add(column, row, reason):
-        nonlocal total
-        total += 1
-        if len(problems) < MAX_PROBLEMS:
-            problems.append(Problem(fname, column, row, None if row is None else row + 1, reason))
-
-    numeric = list(dict.fromkeys([time_col, *columns]))
-    with fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header is None:
-            raise TelemetryError.single(fname, "empty file (expected a header row of column names)")
-        header = [h.strip() for h in header]
-        missing = [c for c in (*numeric, *text_columns) if c not in header]
-        if missing:
-            probs = [
-                Problem(fname, c, None, 1, f"is missing (the mapping names it; header: {', '.join(header)})")
-                for c in missing
-            ]
-            raise TelemetryError(probs, len(probs))
-        idx = {c: header.index(c) for c in (*numeric, *text_columns)}
-        width = len(header)
-        vals: dict[str, list[float]] = {c: [] for c in numeric}
-        texts: dict[str, list[str]] = {c: [] for c in text_columns}
-        for r, cells in enumerate(reader, start=1):
-            if not cells or all(not c.strip() for c in cells):
-                add(None, r, "empty row")
-                continue
-            if len(cells) != width:
-                add(None, r, f"has {len(cells)} fields, the header has {width}")
-                continue
-            for c in text_columns:
-                texts[c].append(cells[idx[c]].strip())
-            for c in numeric:
-                s = cells[idx[c]].strip()
-                try:
-                    v = float(s)
-                except ValueError:
-                    v = math.nan
-                    add(c, r, f"{s!r} is not a number" if s else "empty cell")
-                else:
-                    if not math.isfinite(v):
-                        add(c, r, f"{s!r} is not a finite number")
-                vals[c].append(v)
-    if problems:
-        raise TelemetryError(problems, total)
-    arr = {c: np.asarray(v, float) for c, v in vals.items()}
-    t = arr[time_col]
-    if t.size < 2:
-        raise TelemetryError.single(fname, "fewer than two data rows under the header", column=time_col)
-    stack = np.column_stack([arr[c] for c in numeric])
-    repeat = np.zeros(t.size, dtype=bool)
-    repeat[1:] = np.all(stack[1:] == stack[:-1], axis=1)
-    for c in text_columns:
-        tx = np.asarray(texts[c])
-        repeat[1:] &= tx[1:] == tx[:-1]
-    rows = np.flatnonzero(~repeat)
-    dt = np.diff(t[rows])
-    for i in np.flatnonzero(~(dt > 0)):
-        r0, r1 = int(rows[i]), int(rows[i + 1])
-        what = "repeats (with other values)" if dt[i] == 0 else "goes backwards from"
-        add(time_col, r1 + 1, f"time {t[r1]:.9g} {what} the time {t[r0]:.9g} of row {r0 + 1}: not monotonic")
-    if problems:
-        raise TelemetryError(problems, total)
-    return (
-        t[rows],
-        {c: v[rows] for c, v in arr.items()},
-        {c: np.asarray(v)[rows] for c, v in texts.items()},
-        int(np.sum(repeat)),
-        rows,
-    )
-
-
 def read_mapped(mp: Mapping):
     """Read the files of the mapping ``mp`` into SI on the accelerometer's time base.
 
@@ -517,6 +432,11 @@ def read_mapped(mp: Mapping):
         plan[table] = (fname, [(1.0, d[table]["column"])], unit)
         need[fname].append(d[table]["column"])
     phase_file, phase_col = d["phases"]["file"], d["phases"]["column"]
+    values = [d["phases"][k] for k in ("standby", "motor", "coast", "descent", "landed")]
+
+    def phase_ok(_column, v):
+        return None if v in values else f"{v!r} is not a phase value ({', '.join(values)}; [phases] in {mp.path.name})"
+
     files = {}
     for name, spec in mp.files.items():
         if not need[name] and name != phase_file:
@@ -534,9 +454,11 @@ def read_mapped(mp: Mapping):
                 line=1,
             ) from None
         texts = (phase_col,) if name == phase_file else ()
-        t_raw, cols, txt, repeated, rows = _read_file(spec["path"], spec["time"], need[name], texts)
-        t = to_si(t_raw, tu)[0] + spec["time_offset_s"]
-        files[name] = (t, cols, txt, repeated, rows)
+        c = read_columns(spec["path"], spec["time"], need[name], texts, check_text=phase_ok)
+        if c.rows.size < 2:
+            raise TelemetryError.single(spec["path"], "fewer than two data rows", column=spec["time"])
+        t = to_si(c.values[spec["time"]], tu)[0] + spec["time_offset_s"]
+        files[name] = (t, c.values, c.texts, c.repeated_rows, c.rows)
     master = d["accelerometer"]["file"]
     t_m = files[master][0]
     lo = max(f[0][0] for f in files.values())
