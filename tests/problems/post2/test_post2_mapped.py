@@ -271,3 +271,31 @@ def test_an_unknown_phase_value_is_located(tmp_path):
     with pytest.raises(TelemetryError) as e:
         mapped.import_mapped(mp, tmp_path / "flight")
     assert (e.value.column, e.value.row) == ("phase", 12) and "'X' is not a phase value" in str(e.value)
+
+
+def _toml_blocks(path: Path) -> list[str]:
+    text = path.read_text(encoding="utf-8")
+    return [b.split("```", 1)[0] for b in text.split("```toml\n")[1:]]
+
+
+def test_the_tutorial_mapping_imports_and_the_formats_example_validates(tmp_path):
+    """The documentation's mappings stay valid: the tutorial's imports the re-expressed excerpt (the
+    files it describes), FORMATS.md's example passes the schema and its cross-references."""
+    root = Path(__file__).resolve().parents[3]
+    (tut,) = _toml_blocks(root / "docs" / "TUTORIAL_FLIGHT.md")
+    mp = remap(tmp_path / "log", mag=False, edit=lambda _: tut)
+    toml = mapped.import_mapped(mp, tmp_path / "flight", allow_unhealthy=True)
+    assert toml.name == "my_flight.toml"
+    formats = root / "workbench" / "io" / "FORMATS.md"
+    examples = [b for b in _toml_blocks(formats) if "[accelerometer]" in b]
+    assert len(examples) == 1
+    (tmp_path / "example.toml").write_text(examples[0], encoding="utf-8")
+    m = mapped.read_mapping(tmp_path / "example.toml")
+    assert m.data["site"]["pad_heading_deg"] == 90.0 and set(m.files) == {"imu", "baro"}
+
+
+def test_accelerations_declared_in_the_wrong_unit_are_refused(tmp_path):
+    mp = remap(tmp_path / "log", edit=lambda t: t.replace('unit = "m/s^2"', 'unit = "g"'))
+    with pytest.raises(TelemetryError, match="look like m/s², not g") as e:
+        mapped.import_mapped(mp, tmp_path / "flight")
+    assert e.value.column == "acc_b" and e.value.file.endswith("imu.csv")

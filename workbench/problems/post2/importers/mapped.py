@@ -286,6 +286,8 @@ MAPPING_SCHEMA = Schema(
 #: the schemas of the files this importer reads (listed in FORMATS.md by the registry)
 file_schemas = (MAPPING_SCHEMA, FILE_SCHEMA)
 
+#: the log begins on the pad: its first UNIT_CHECK_S [s] check the accelerometer's unit (1 g at rest)
+UNIT_CHECK_S = 1.0
 #: liftoff: the first sample whose |specific force| exceeds LIFTOFF_G [g] and whose median over the
 #: next LIFTOFF_HOLD_S [s] does too
 LIFTOFF_G = 2.0
@@ -679,17 +681,17 @@ def import_mapped(
     mp = read_mapping(mapping)
     t, q, phase_values, info = read_mapped(mp)
     master = mp.files[mp.data["accelerometer"]["file"]]
-    phases = detect_phases(t, q["f_B"], q["pressure"], mp, phase_values, master["path"])
-    letters = _letters(t, phases)
     acc = [c for _, c in (_signed(mp.data["accelerometer"][f"body_{a}"]) for a in "xyz")]
     gyr = tuple(c for _, c in (_signed(mp.data["gyro"][f"body_{a}"]) for a in "xyz"))
     rows = np.arange(t.size)
     fname = str(master["path"])
-    check_units(
-        fname, t, letters, q["f_B"], rows, time_column=master["time"], accel_column=acc[0],
-        accel_unit=mp.data["accelerometer"]["unit"],
-    )  # fmt: skip
+    units = {"time_column": master["time"], "accel_column": acc[0], "accel_unit": mp.data["accelerometer"]["unit"]}
+    # the units first, on the log's first second (the rocket on the pad): the detection needs them
+    check_units(fname, t, np.where(t < t[0] + UNIT_CHECK_S, "S", "-"), q["f_B"], rows, **units)
     check_rates(fname, q["w_B"], rows, gyr)
+    phases = detect_phases(t, q["f_B"], q["pressure"], mp, phase_values, master["path"])
+    letters = _letters(t, phases)
+    check_units(fname, t, letters, q["f_B"], rows, **units)  # and on the whole standby
     gaps = list(find_gaps(t, letters))
     for g in info["gaps"]:
         if g["file"] != mp.data["accelerometer"]["file"]:
