@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from workbench.cli import main
+from workbench.estimation.health import UnhealthyError
 from workbench.io.scenario import ScenarioError
 from workbench.io.telemetry import TelemetryError
 from workbench.problems.post2.importers import mapped
@@ -179,9 +180,18 @@ def test_a_wrong_axis_sign_in_the_mapping_is_caught(tmp_path):
     """The axis map is applied: the accelerometer's x declared without its sign (the gyro's right)
     puts the boost's axis off the gyro's roll axis, which the import's cross-check refuses."""
     mp = remap(tmp_path / "log", edit=lambda t: t.replace('body_x = "-acc_b"', 'body_x = "acc_b"'))
-    with pytest.raises(Exception, match="geometry.imu_axes|axes disagree"):
+    with pytest.raises(UnhealthyError, match="geometry.imu_axes") as e:
         mapped.import_mapped(mp, tmp_path / "flight")
     assert not (tmp_path / "flight").exists()
+    # the message names the mapping's columns, not the FIRM log's
+    assert "acc_b, acc_a, acc_c ([accelerometer] of map.toml" in str(e.value) and "raw_acc" not in str(e.value)
+
+
+def test_a_mass_in_pounds_is_named_by_its_mapping_key(tmp_path):
+    mp = remap(tmp_path / "log", edit=lambda t: t.replace("dry_mass_kg = 16.848", "dry_mass_kg = 37.14"))
+    with pytest.raises(UnhealthyError) as e:
+        mapped.import_mapped(mp, tmp_path / "flight")
+    assert "[rocket] dry_mass_kg" in str(e.value) and "rocket_dry_mass_kg" not in str(e.value)
 
 
 def _refused(tmp_path, mp: Path, capsys) -> str:

@@ -20,6 +20,7 @@ truth simulator makes no raw flight-computer log, so every bound is the physics'
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from pathlib import Path
@@ -31,6 +32,8 @@ from workbench.estimation.health import ERROR, OK, WARNING, Check
 from workbench.io.schema import read_json
 
 __all__ = [
+    "INPUT_NAMES",
+    "rename",
     "dipole_field",
     "BOUND_PRIOR_Z",
     "bound_checks",
@@ -544,13 +547,24 @@ def _gap_checks(gaps_rel, windows: dict, log_name: str) -> tuple[list[Check], li
 
 
 def import_checks(
-    log, meta, fl, t, *, t_ej: float, t_main, ca0_unclipped: float, inclination_deg=None, obs_rate_hz: float = 10.0
+    log,
+    meta,
+    fl,
+    t,
+    *,
+    t_ej: float,
+    t_main,
+    ca0_unclipped: float,
+    inclination_deg=None,
+    obs_rate_hz: float = 10.0,
+    names: dict | None = None,
 ) -> dict:
     """All import-time checks of a flight: ``log`` the :class:`FlightLog`, ``meta`` its
     :class:`FlightMetadata`, ``fl`` the :class:`~workbench.problems.post2.rocket.BoostSolution`,
     ``t`` (n,) [s after launch], ``t_ej``/``t_main`` the detected openings [s],
     ``ca0_unclipped`` the measured coast drag multiplier before its clip, ``obs_rate_hz`` the rate
-    of the block-mean observations [Hz].
+    of the block-mean observations [Hz]; ``names`` the import's own names of :data:`INPUT_NAMES`
+    (:func:`rename`; None: the FIRM log's).
 
     Returns a JSON-ready dict {"checks": [Check as dict], "undefined": [key-window names],
     "notes": [str]}."""
@@ -593,7 +607,7 @@ def import_checks(
     gaps_rel = fl_gaps(log, t)
     gc, undefined, notes = _gap_checks(gaps_rel, key_windows(t_coast, t_ej, t_main), name)
     checks += gc
-    return {"checks": [c.__dict__ for c in checks], "undefined": undefined, "notes": notes}
+    return {"checks": [c.__dict__ for c in rename(checks, names)], "undefined": undefined, "notes": notes}
 
 
 def fl_gaps(log, t):
@@ -650,11 +664,46 @@ def bound_checks(cfg, hist: dict, *, plausibility: bool = False) -> list[Check]:
 
 def run_checks(cfg, hist: dict) -> tuple[list[Check], list[str]]:
     """(checks, notes) a POST2 run adds to its health: :func:`bound_checks` of its estimate and, for
-    an imported rocket flight, the import's checks (``flight.json`` beside the problem file)."""
+    an imported rocket flight, the import's checks (``flight.json`` beside the problem file), their
+    messages in the names of the import's inputs (``flight.json`` ``input_names``, :func:`rename`)."""
     path = getattr(getattr(cfg, "run", None), "path", None)
     if path is None or not (Path(path).parent / "flight.json").is_file():
         return bound_checks(cfg, hist), []
     flight = read_json(Path(path).parent / "flight.json")  # written by the import (generated)
     hc = flight.get("health_checks") or {}
-    checks = bound_checks(cfg, hist, plausibility=True)
+    checks = rename(bound_checks(cfg, hist, plausibility=True), flight.get("input_names"))
     return [Check(**c) for c in hc.get("checks", [])] + checks, list(hc.get("notes", []))
+
+
+#: the names of the inputs the checks' messages give (the FIRM log's columns, its metadata's keys, the
+#: import's options): an import from another layout maps each to its own (:func:`rename`)
+INPUT_NAMES = (
+    "raw_acceleration_[xyz]_gs",
+    "raw_angular_rate_[xyz]_deg_per_s",
+    "magnetic_field_[xyz]_microteslas",
+    "launch_site.launch_coordinates",
+    "flight_data.landed_coordinates",
+    "launch_site.air_temperature_celsius",
+    "launch_site.wind_speed_kmh",
+    "launch_rod_angle",
+    "rocket_dry_mass_kg",
+    "rocket_cross_sectional_area_m2",
+    "rocket_Cd",
+    "--inclination-deg",
+    "--obs-rate-hz",
+)
+
+
+def rename(checks: list[Check], names: dict | None) -> list[Check]:
+    """``checks`` with each name of :data:`INPUT_NAMES` in their messages replaced by ``names[name]``
+    (the import's own name of that input; None or absent: kept)."""
+    if not names:
+        return checks
+    out = []
+    for c in checks:
+        msg = c.message
+        for k in INPUT_NAMES:
+            if k in names:
+                msg = msg.replace(k, names[k])
+        out.append(dataclasses.replace(c, message=msg))
+    return out

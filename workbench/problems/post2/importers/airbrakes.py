@@ -550,13 +550,16 @@ def import_log(
     heading_prior_deg: tuple[float | None, float] | None = None,
     main_s: float | None = None,
     source: dict | None = None,
+    input_names: dict | None = None,
 ) -> Path:
     """The import of a flight log already read into SI (:func:`read_log`, or the column-mapped reader
     :func:`workbench.problems.post2.importers.mapped.read_mapped`): the boost, the checks and the files
     of :func:`import_flight` (whose arguments these are).  ``heading_prior_deg`` (bearing [deg] or None
     for unknown, 1σ [deg]) is the pad heading of a log without a magnetometer (``log.mag_B`` None);
     ``main_s`` [s, log clock] the main parachute's opening instead of the detected one; ``source`` a
-    JSON-ready record of where the log came from (kept in ``flight.json``)."""
+    JSON-ready record of where the log came from (kept in ``flight.json``); ``input_names`` {FIRM name:
+    this import's name} of the inputs the checks' messages name
+    (:data:`workbench.problems.post2.rocket_checks.INPUT_NAMES`; None: the FIRM log's)."""
     # imported here: the command line builds its parser from this module and stays light
     from workbench.estimation.health import ERROR, UnhealthyError, health_report
     from workbench.problems.post2 import rocket, rocket_checks
@@ -641,6 +644,7 @@ def import_log(
         ca0_unclipped=ca0_raw,
         inclination_deg=inclination_deg,
         obs_rate_hz=obs_rate_hz,
+        names=input_names,
     )
     if not allow_unhealthy and any(c["status"] == ERROR for c in health["checks"]):
         from workbench.estimation.health import Check
@@ -663,6 +667,7 @@ def import_log(
             declination_deg,
             obs_rate_hz,
             source,
+            input_names,
         )
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
@@ -711,7 +716,7 @@ def _commit_dir(tmp: Path, out: Path) -> None:
 
 
 def _write_import(
-    out, log, meta, fl, t, t_launch, times, ca0, health, name, declination_deg, obs_rate_hz, source=None
+    out, log, meta, fl, t, t_launch, times, ca0, health, name, declination_deg, obs_rate_hz, source=None, names=None
 ) -> Path:
     """Write the import's files into the folder ``out`` (:func:`import_flight` computed every input:
     ``times`` = (t0, t_end, t_apogee, t_main) [s after launch]); returns the problem file."""
@@ -796,6 +801,8 @@ def _write_import(
     }
     if source is not None:
         info["source"] = source
+    if names is not None:
+        info["input_names"] = names
     (out / "flight.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
     path = out / f"{name}.toml"
     # the pad's events for the rocket results: burnout (first coast row) and touchdown when the span reaches it

@@ -64,6 +64,7 @@ __all__ = [
     "read_mapped",
     "detect_phases",
     "import_mapped",
+    "input_names",
 ]
 
 _F, _S = "float", "str"
@@ -664,6 +665,33 @@ def _metadata(mp: Mapping, name: str, standby_pressure: float) -> FlightMetadata
     )
 
 
+def input_names(mp: Mapping) -> dict:
+    """{FIRM name: this mapping's name} of the inputs the physics cross-checks name
+    (:data:`workbench.problems.post2.rocket_checks.INPUT_NAMES`)."""
+    d, f = mp.data, mp.path.name
+
+    def triad(table):
+        if d[table]["file"] is None:
+            return f"[{table}] of {f}"
+        cols = ", ".join(d[table][f"body_{a}"] for a in "xyz")
+        return f"{cols} ([{table}] of {f}, unit {d[table]['unit']})"
+
+    return {
+        "raw_acceleration_[xyz]_gs": triad("accelerometer"),
+        "raw_angular_rate_[xyz]_deg_per_s": triad("gyro"),
+        "magnetic_field_[xyz]_microteslas": triad("magnetometer"),
+        "launch_site.launch_coordinates": f"[site] lat_deg, lon_deg of {f}",
+        "flight_data.landed_coordinates": f"[reference] landed_lat_deg, landed_lon_deg of {f}",
+        "launch_site.air_temperature_celsius": f"[site] temperature_degC of {f}",
+        "launch_site.wind_speed_kmh": f"[site] wind_speed_m_s of {f}",
+        "launch_rod_angle": "[site] launch_rod_angle_deg",
+        "rocket_dry_mass_kg": "[rocket] dry_mass_kg",
+        "rocket_cross_sectional_area_m2": "[rocket] ref_area_m2",
+        "rocket_Cd": "[rocket] cd",
+        "--inclination-deg": "[site] inclination_deg",
+    }
+
+
 def import_mapped(
     mapping: str | os.PathLike,
     out_dir: str | os.PathLike,
@@ -736,6 +764,7 @@ def import_mapped(
         heading_prior_deg=(site["pad_heading_deg"], site["pad_heading_sigma_deg"]),
         main_s=phases.main,
         source=info,
+        input_names=input_names(mp),
     )
 
 
