@@ -217,7 +217,7 @@ def reconstruct_boost(
 
     ``t`` (n,) [s from launch], ``letters`` (n,) phase letters, ``f_B`` (n, 3) [m/s²], ``w_B`` (n, 3)
     [rad/s], ``mag_B`` (n, 3) [T] or None (no magnetometer), ``pressure`` (n,) [Pa] as logged; ``meta``
-    the flight's :class:`~workbench.problems.post2.importers.airbrakes.FlightMetadata`;
+    the flight's :class:`~workbench.problems.post2.importers.flightlog.FlightMetadata`;
     ``declination_deg`` east positive; ``inclination_deg`` the site's magnetic dip (down positive) that
     the pad's measured dip is checked against (None: not checked, the heading trusted).
 

@@ -17,7 +17,7 @@ references; optionally the flight phases.  What it does:
    file are listed (a block mean never spans one, a gap in the boost is refused);
 2. :func:`detect_phases` — the flight phases, from a phase column when the mapping names one, else
    from the data by the rules of :data:`PHASE_RULES`; a time given in ``[phases]`` overrides either;
-3. :func:`workbench.problems.post2.importers.airbrakes.import_log` — the same pad alignment, boost,
+3. :func:`workbench.problems.post2.importers.flightlog.import_log` — the same pad alignment, boost,
    physics cross-checks and files as ``workbench import airbrakes`` (nothing is written on an error).
 
 Without a magnetometer the pad heading is unknown: it is the prior ``[site] pad_heading_deg`` ±
@@ -40,7 +40,7 @@ from workbench.io.scenario import ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, load_file
 from workbench.io.telemetry import TelemetryError
 from workbench.io.units import UnitError, canonical_unit, known_units, to_si, unit_kind
-from workbench.problems.post2.importers.airbrakes import (
+from workbench.problems.post2.importers.flightlog import (
     FlightLog,
     FlightMetadata,
     Gap,
