@@ -1,7 +1,8 @@
-"""A column mapping (``workbench import csv``) equal to the AirbrakesV2 FIRM layout that
-``workbench import airbrakes`` reads: the log's own columns and units, its phase letters (or none:
-the phases detected), with or without its magnetometer, and the site, rocket and references copied
-from the flight's ``metadata.json`` entry.  Shared by the slow test and the table script of the
+"""A column mapping file (``workbench import csv``) equal to the AirbrakesV2 FIRM layout that
+``workbench import airbrakes`` reads (its built-in mapping ``airbrakes.FIRM_LAYOUT`` written out): the
+log's own columns and units, its phase letters (or none: the phases detected), its flight computer's
+solution, with or without its magnetometer, and the site, rocket and references copied from the
+flight's ``metadata.json`` entry.  Shared by the slow test and the table script of the
 column-mapped importer on the real flights (:func:`run_variant`, :func:`compare`, :func:`table`)."""
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pathlib import Path
 from flight_data import SITE_MAGNETIC
 
 from workbench.cli import main as cli
+from workbench.problems.post2.importers.airbrakes import FIRM_LAYOUT
 
 #: the 16 compass points of the metadata's wind direction -> deg clockwise from north
 COMPASS = {d: 22.5 * i for i, d in enumerate("N NNE NE ENE E ESE SE SSE S SSW SW WSW W WNW NW NNW".split())}
@@ -62,35 +64,16 @@ def firm_mapping(
         f"landed_lat_deg = {fd['landed_coordinates']['latitude']}",
         f"landed_lon_deg = {fd['landed_coordinates']['longitude']}",
         "",
-        "[files.firm]",
-        f"path = {json.dumps(str(Path(log).resolve()))}",
-        'time = "timestamp_seconds"',
-        "",
-        "[accelerometer]",
-        'file = "firm"',
-        'unit = "g"',
-        *(f'body_{c} = "raw_acceleration_{c}_gs"' for c in "xyz"),
-        "",
-        "[gyro]",
-        'file = "firm"',
-        'unit = "deg/s"',
-        *(f'body_{c} = "raw_angular_rate_{c}_deg_per_s"' for c in "xyz"),
-        "",
-        "[barometer]",
-        'file = "firm"',
-        'column = "pressure_pascals"',
-        'unit = "Pa"',
-        "",
-        "[temperature]",
-        'file = "firm"',
-        'column = "temperature_celsius"',
-        'unit = "degC"',
     ]
-    if magnetometer:
-        lines += ["", "[magnetometer]", 'file = "firm"', 'unit = "uT"']
-        lines += [f'body_{c} = "magnetic_field_{c}_microteslas"' for c in "xyz"]
-    if phase_column:
-        lines += ["", "[phases]", 'file = "firm"', 'column = "state_letter"']
+    layout = {k: v for k, v in FIRM_LAYOUT.items() if k != "files"}
+    if not magnetometer:
+        del layout["magnetometer"]
+    if not phase_column:
+        del layout["phases"]
+    lines += ["", "[files.firm]", f"path = {json.dumps(str(Path(log).resolve()))}"]
+    lines += [f"{k} = {json.dumps(v)}" for k, v in FIRM_LAYOUT["files"]["firm"].items() if k != "path"]
+    for table, keys in layout.items():
+        lines += ["", f"[{table}]", *(f"{k} = {json.dumps(v)}" for k, v in keys.items())]
     dst = Path(dst)
     dst.mkdir(parents=True, exist_ok=True)
     path = dst / f"{Path(log).stem}.toml"

@@ -309,3 +309,24 @@ def test_accelerations_declared_in_the_wrong_unit_are_refused(tmp_path):
     with pytest.raises(TelemetryError, match="look like m/s², not g") as e:
         mapped.import_mapped(mp, tmp_path / "flight")
     assert e.value.column == "acc_b" and e.value.file.endswith("imu.csv")
+
+
+def test_the_firm_layout_through_import_csv_is_import_airbrakes(tmp_path):
+    """``import airbrakes`` reads its log through the generic reader with a built-in mapping
+    (``airbrakes.FIRM_LAYOUT``): that mapping written out as a file and imported with ``import csv``
+    gives the same problem file, to the digit, and the same telemetry."""
+    from firm_mapping import firm_mapping
+
+    from workbench.problems.post2.importers import airbrakes
+
+    a = airbrakes.import_flight(LOG, META, tmp_path / "a", declination_deg=-10.5, inclination_deg=64.0)
+    mp = firm_mapping(LOG, META, tmp_path / "map", declination_deg=-10.5, inclination_deg=64.0)
+    c = mapped.import_mapped(mp, tmp_path / "c")
+    assert c.name == a.name
+    # the flight's name: the metadata entry's ("<log>.csv") for airbrakes, the mapping's for csv
+    assert c.read_text(encoding="utf-8") == a.read_text(encoding="utf-8").replace(LOG.name, LOG.stem)
+    for f in ("pressure.csv", "accel.csv", "accel_weights.csv", "imu.csv", "reference.csv", "landing.csv"):
+        assert (c.parent / f).read_bytes() == (a.parent / f).read_bytes(), f
+    ja, jc = (json.loads((x.parent / "flight.json").read_text(encoding="utf-8")) for x in (a, c))
+    assert jc["pad"] == ja["pad"] and jc["burnout"] == ja["burnout"]
+    assert [x["status"] for x in jc["health_checks"]["checks"]] == [x["status"] for x in ja["health_checks"]["checks"]]

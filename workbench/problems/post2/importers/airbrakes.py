@@ -4,37 +4,35 @@ licence) into the workbench's telemetry files and a post2 problem file.
 The log (one CSV per flight, ~91 Hz, one row per packet) and its ``metadata.json`` are described
 in ``workbench/io/FORMATS.md`` ("Rocket flight logs").  What the importer does:
 
-1. :func:`read_log` — reads the CSV with every problem located by file, column and data row
-   (missing column, text or NaN in a number, backwards or repeated time, unknown phase letter),
-   converts to SI (g → m/s² with g0 = 9.80665, deg/s → rad/s, °C → K, µT → T) and keeps the
-   flight computer's own solution (altitude, vertical velocity, quaternion scalar-first → scalar-last)
-   apart as a *reference*, never as an observation;
+1. :func:`read_log` — the generic column-mapped reader of ``workbench import csv``
+   (:mod:`workbench.problems.post2.importers.mapped`) with the FIRM layout as its built-in mapping
+   (:data:`FIRM_LAYOUT`): every problem located by file, column and data row (missing column, text or
+   NaN in a number, backwards or repeated time, unknown phase letter), converted to SI (g → m/s² with
+   g0 = 9.80665, deg/s → rad/s, °C → K, µT → T), the flight computer's own solution (altitude,
+   vertical velocity, quaternion scalar-first → scalar-last) kept apart as a *reference*;
 2. :func:`find_gaps` — lists every step longer than ``gap_factor`` × the median step (reported in
    the import summary and in ``events.csv``; nothing is interpolated: an averaging block never
    spans a gap, and a gap inside the boost is refused because the IMU cannot be integrated across it);
 3. :func:`read_metadata` — the flight's entry of ``metadata.json`` (mass, Cd, area, site weather,
    launch/landed coordinates, apogee), validated against :data:`METADATA_SCHEMA` (an unknown,
    missing, mistyped or out-of-range field a located :class:`~workbench.io.scenario.ScenarioError`);
-4. :func:`import_flight` — the boost integrated from the IMU (:mod:`workbench.problems.post2.rocket`),
-   the coast/descent observation files (pressure, |specific force|, 10 Hz block means with
-   their weights vs time), the reference files and ``<flight>.toml``, a post2 problem file that
-   ``workbench run`` reconstructs.
+4. :func:`import_flight` — :func:`~workbench.problems.post2.importers.flightlog.import_log`, shared
+   with ``import csv``: the boost integrated from the IMU (:mod:`workbench.problems.post2.rocket`),
+   the coast/descent observation files (pressure, |specific force|, 10 Hz block means with their
+   weights vs time), the reference files and ``<flight>.toml``, a post2 problem file that
+   ``workbench run`` reconstructs.  What stays FIRM's own is its ``metadata.json`` (:func:`read_metadata`).
 """
 
 from __future__ import annotations
 
 import difflib
-import math
 import os
 from pathlib import Path
 
 import numpy as np
 
-from workbench.core.bodies import G0
-from workbench.io.columns import read_columns
 from workbench.io.scenario import ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, read_json
-from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError
 from workbench.problems.post2.importers.flightlog import (
     PHASES,
     FlightLog,
@@ -46,13 +44,15 @@ from workbench.problems.post2.importers.flightlog import (
     find_gaps,
     import_log,
 )
+from workbench.problems.post2.importers.mapped import Mapping, from_data, read_mapped
 
 __all__ = [
     "HELP",
     "add_arguments",
     "run",
     "PHASES",
-    "COLUMNS",
+    "FIRM_LAYOUT",
+    "firm_layout",
     "FlightLog",
     "Gap",
     "FlightMetadata",
@@ -68,83 +68,66 @@ __all__ = [
     "check_rates",
 ]
 
-#: required columns -> (array name, SI scale from the logged unit, offset added after scaling)
-COLUMNS: dict[str, tuple[str, float, float]] = {
-    "timestamp_seconds": ("t", 1.0, 0.0),
-    "temperature_celsius": ("temperature", 1.0, 273.15),
-    "pressure_pascals": ("pressure", 1.0, 0.0),
-    "raw_acceleration_x_gs": ("ax", G0, 0.0),
-    "raw_acceleration_y_gs": ("ay", G0, 0.0),
-    "raw_acceleration_z_gs": ("az", G0, 0.0),
-    "raw_angular_rate_x_deg_per_s": ("wx", math.pi / 180.0, 0.0),
-    "raw_angular_rate_y_deg_per_s": ("wy", math.pi / 180.0, 0.0),
-    "raw_angular_rate_z_deg_per_s": ("wz", math.pi / 180.0, 0.0),
-    "magnetic_field_x_microteslas": ("mx", 1e-6, 0.0),
-    "magnetic_field_y_microteslas": ("my", 1e-6, 0.0),
-    "magnetic_field_z_microteslas": ("mz", 1e-6, 0.0),
-    "est_position_z_meters": ("ref_h", 1.0, 0.0),
-    "est_velocity_z_meters_per_s": ("ref_vz", 1.0, 0.0),
-    "est_quaternion_w": ("ref_qw", 1.0, 0.0),
-    "est_quaternion_x": ("ref_qx", 1.0, 0.0),
-    "est_quaternion_y": ("ref_qy", 1.0, 0.0),
-    "est_quaternion_z": ("ref_qz", 1.0, 0.0),
+#: the FIRM log's layout as a column mapping of the generic reader
+#: (:mod:`workbench.problems.post2.importers.mapped`, ``workbench import csv``): one file, its own
+#: column names and units, its phase letters and its flight computer's solution
+FIRM_LAYOUT: dict = {
+    "files": {"firm": {"path": "", "time": "timestamp_seconds", "time_unit": "s"}},
+    "accelerometer": {"file": "firm", "unit": "g", **{f"body_{c}": f"raw_acceleration_{c}_gs" for c in "xyz"}},
+    "gyro": {"file": "firm", "unit": "deg/s", **{f"body_{c}": f"raw_angular_rate_{c}_deg_per_s" for c in "xyz"}},
+    "magnetometer": {"file": "firm", "unit": "uT", **{f"body_{c}": f"magnetic_field_{c}_microteslas" for c in "xyz"}},
+    "barometer": {"file": "firm", "column": "pressure_pascals", "unit": "Pa"},
+    "temperature": {"file": "firm", "column": "temperature_celsius", "unit": "degC"},
+    "phases": {"file": "firm", "column": "state_letter", **{v: k for k, v in PHASES.items()}},
+    "flight_computer": {
+        "file": "firm",
+        "altitude": "est_position_z_meters",
+        "vertical_speed": "est_velocity_z_meters_per_s",
+        **{f"quaternion_{c}": f"est_quaternion_{c}" for c in "wxyz"},
+    },
 }
-_LETTER = "state_letter"
+
+
+def firm_layout(path: str | os.PathLike) -> Mapping:
+    """The :data:`FIRM_LAYOUT` mapping of the log ``path`` (validated like a mapping file)."""
+    path = Path(path).resolve()
+    data = {**FIRM_LAYOUT, "files": {"firm": {**FIRM_LAYOUT["files"]["firm"], "path": str(path)}}}
+    return from_data(data, path, layout_only=True)
 
 
 def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
-    """Read a FIRM log CSV (:data:`COLUMNS` + ``state_letter``; other columns ignored) into SI.
+    """Read a FIRM log CSV into SI: the generic reader
+    (:func:`workbench.problems.post2.importers.mapped.read_mapped`) with the built-in mapping
+    :data:`FIRM_LAYOUT` (g → m/s² with g0 = 9.80665, deg/s → rad/s, °C → K, µT → T; the flight
+    computer's quaternion scalar-first → scalar-last, kept as a reference); other columns ignored.
 
     Raises :class:`~workbench.io.telemetry.TelemetryError` locating every problem (file, column,
     1-based data row and file line; :func:`workbench.io.columns.read_columns`): a missing column, an
     empty/non-numeric/non-finite cell, a wrong field count, a time not strictly after the previous
     row's (a row repeating the previous row's time and every value is a packet logged twice: dropped
-    and counted), a phase letter not in :data:`PHASES`, a quaternion whose norm is not 1 ± 0.01.
+    and counted), a phase letter not in :data:`PHASES`, a quaternion whose norm is not 1 ± 0.01, values
+    not in the columns' units (:func:`check_units`, :func:`check_rates`).
     """
     path = Path(path)
+    t, q, letters, info = read_mapped(firm_layout(path), needed_by="a FIRM log needs it")
     fname = str(path)
-
-    def letter_ok(_column, letter):
-        return None if letter in PHASES else f"{letter!r} is not a phase letter ({', '.join(PHASES)})"
-
-    cols = read_columns(
-        path, "timestamp_seconds", list(COLUMNS), (_LETTER,), needed_by="a FIRM log needs it", check_text=letter_ok
-    )
-    arr = {COLUMNS[c][0]: v * COLUMNS[c][1] + COLUMNS[c][2] for c, v in cols.values.items()}
-    rows = cols.rows
-    t = arr["t"]
-    q = np.column_stack([arr["ref_qx"], arr["ref_qy"], arr["ref_qz"], arr["ref_qw"]])
-    qn = np.linalg.norm(q, axis=1)
-    bad = np.flatnonzero(np.abs(qn - 1.0) > 0.01)
-    if bad.size:
-        probs = [
-            Problem(
-                fname,
-                "est_quaternion_w",
-                int(rows[i]) + 1,
-                int(rows[i]) + 2,
-                f"quaternion norm {qn[i]:.4g} (expected 1)",
-            )
-            for i in bad[:MAX_PROBLEMS]
-        ]
-        raise TelemetryError(probs, bad.size)
-    letters_a = cols.texts[_LETTER]
-    check_units(fname, t, letters_a, np.column_stack([arr["ax"], arr["ay"], arr["az"]]), rows)
-    check_rates(fname, np.column_stack([arr["wx"], arr["wy"], arr["wz"]]), rows)
+    rows = np.arange(t.size)
+    check_units(fname, t, letters, q["f_B"], rows)
+    check_rates(fname, q["w_B"], rows)
     return FlightLog(
         path,
         t,
-        letters_a,
-        np.column_stack([arr["ax"], arr["ay"], arr["az"]]),
-        np.column_stack([arr["wx"], arr["wy"], arr["wz"]]),
-        np.column_stack([arr["mx"], arr["my"], arr["mz"]]),
-        arr["pressure"],
-        arr["temperature"],
-        arr["ref_h"],
-        arr["ref_vz"],
-        q / qn[:, None],
-        find_gaps(t, letters_a, gap_factor),
-        cols.repeated_rows,
+        letters,
+        q["f_B"],
+        q["w_B"],
+        q["mag_B"],
+        q["pressure"],
+        q["temperature"],
+        q["ref_h"],
+        q["ref_vz"],
+        q["ref_q"],
+        find_gaps(t, letters, gap_factor),
+        info["files"]["firm"]["repeated_rows_dropped"],
     )
 
 

@@ -6,7 +6,9 @@ of CSV files at their own rates: each file's path, time column, time unit and of
 column holds each quantity (accelerometer and gyro triads, barometric pressure; optional
 magnetometer triad and temperature), its unit (:mod:`workbench.io.units`) and the map from the
 log's columns to the body axes (``body_x = "-accel_z"``); the site, the rocket, optional scoring
-references; optionally the flight phases.  What it does:
+references; optionally the flight phases and the flight computer's own solution (a reference, never
+observed).  The FIRM log of ``workbench import airbrakes`` is one such layout
+(``airbrakes.FIRM_LAYOUT``, read by :func:`from_data` without site and rocket).  What it does:
 
 1. :func:`read_mapped` — every file read with located errors (file, column, data row): a missing
    column, a cell that is not a finite number, a time not strictly after the previous row's (a row
@@ -37,8 +39,8 @@ import numpy as np
 from workbench.core.bodies import G0
 from workbench.io.columns import read_columns
 from workbench.io.scenario import ScenarioError
-from workbench.io.schema import REQUIRED, Key, Schema, Table, load_file
-from workbench.io.telemetry import TelemetryError
+from workbench.io.schema import REQUIRED, Key, Schema, Table, read_toml
+from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError
 from workbench.io.units import UnitError, canonical_unit, known_units, to_si, unit_kind
 from workbench.problems.post2.importers.flightlog import (
     FlightLog,
@@ -61,6 +63,7 @@ __all__ = [
     "Mapping",
     "PhaseTimes",
     "read_mapping",
+    "from_data",
     "read_mapped",
     "detect_phases",
     "import_mapped",
@@ -262,6 +265,21 @@ MAPPING_SCHEMA = Schema(
         _scalar("barometer", "static pressure", optional=False),
         _scalar("temperature", "the board's temperature (optional; checked against the site's)", optional=True),
         Table(
+            "flight_computer",
+            "the flight computer's own solution (optional): a reference for scoring and checks, never observed",
+            (
+                Key("file", _S, None, meaning="the `[files.<name>]` entry holding its columns"),
+                Key("altitude", _S, None, meaning="its altitude column"),
+                Key("altitude_unit", _S, "m", meaning="unit of the altitude (length)"),
+                Key("vertical_speed", _S, None, meaning="its vertical speed column (up positive)"),
+                Key("vertical_speed_unit", _S, "m/s", meaning="unit of the vertical speed"),
+                Key("quaternion_w", _S, None, meaning="its attitude quaternion, scalar part (norm 1 ± 0.01)"),
+                Key("quaternion_x", _S, None, meaning="... x part"),
+                Key("quaternion_y", _S, None, meaning="... y part"),
+                Key("quaternion_z", _S, None, meaning="... z part"),
+            ),
+        ),
+        Table(
             "phases",
             "flight phases: from a phase column, else detected (rules in FORMATS.md); a time here overrides",
             (
@@ -355,7 +373,23 @@ def read_mapping(path: str | os.PathLike) -> Mapping:
     and ``column`` together, ``pad_heading_deg`` only without a magnetometer.  ScenarioError naming
     the file and the key otherwise."""
     path = Path(path)
-    data = load_file(path, MAPPING_SCHEMA, optional=("magnetometer", "temperature"))
+    return from_data(read_toml(path), path)
+
+
+#: the tables a mapping of a log's layout alone (no site, no rocket: :func:`from_data` ``layout_only``) may omit
+LAYOUT_ONLY_OPTIONAL = ("site", "rocket", "magnetometer", "temperature")
+#: the columns of ``[flight_computer]``, all given or none
+FLIGHT_COMPUTER_COLUMNS = ("altitude", "vertical_speed", "quaternion_w", "quaternion_x", "quaternion_y", "quaternion_z")
+
+
+def from_data(data: dict, path: Path, *, layout_only: bool = False) -> Mapping:
+    """A :class:`Mapping` from the parsed document ``data`` of the mapping file ``path`` (validated and
+    cross-checked as :func:`read_mapping` says); ``layout_only``: a mapping of the files alone, without
+    ``[site]`` and ``[rocket]`` (a built-in layout, e.g. the FIRM log's: ``airbrakes.FIRM_LAYOUT``)."""
+    path = Path(path)
+    data = MAPPING_SCHEMA.validate(
+        data, path, optional=LAYOUT_ONLY_OPTIONAL if layout_only else ("magnetometer", "temperature")
+    )
     files = {}
     for name, entry in (data.get("files") or {}).items():
         f = FILE_SCHEMA.validate(entry, path, where=f"files.{name}")
@@ -363,27 +397,34 @@ def read_mapping(path: str | os.PathLike) -> Mapping:
         files[name] = f
     if not files:
         raise ScenarioError(path, "files", "no [files.<name>] table: name at least the file of the accelerometer")
-    for table in (*TRIADS, *SCALARS, "phases"):
+    for table in (*TRIADS, *SCALARS, "phases", "flight_computer"):
         ref = (data.get(table) or {}).get("file")
         if ref is not None and ref not in files:
             raise ScenarioError(path, f"{table}.file", f"{ref!r} is not a [files.<name>] entry ({', '.join(files)})")
+    fc = data["flight_computer"]
+    given = [k for k in FLIGHT_COMPUTER_COLUMNS if fc[k] is not None]
+    if (fc["file"] is None) != (not given) or (given and len(given) < len(FLIGHT_COMPUTER_COLUMNS)):
+        missing = [k for k in ("file", *FLIGHT_COMPUTER_COLUMNS) if fc[k] is None]
+        raise ScenarioError(
+            path, f"flight_computer.{missing[0]}", "give its file and every column of the solution, or none of them"
+        )
     site = data["site"]
-    if (site["qnh_hpa"] is None) == (site["pad_altitude_m"] is None):
+    if not layout_only and (site["qnh_hpa"] is None) == (site["pad_altitude_m"] is None):
         raise ScenarioError(path, "site.qnh_hpa", "give exactly one of site.qnh_hpa and site.pad_altitude_m")
     ph = data["phases"]
     if (ph["file"] is None) != (ph["column"] is None):
         raise ScenarioError(path, "phases.column", "a phase column needs both phases.file and phases.column")
-    if data["magnetometer"]["file"] is not None and site["pad_heading_deg"] is not None:
+    if data["magnetometer"]["file"] is not None and site.get("pad_heading_deg") is not None:
         raise ScenarioError(
             path, "site.pad_heading_deg", "is the heading prior of a log without a magnetometer; this one has one"
         )
     return Mapping(path, data, files)
 
 
-def _unit(mp: Mapping, table: str, data_file: Path, column: str, kind: str) -> str:
-    """The canonical unit of ``table`` checked against its quantity ``kind``; a TelemetryError naming
+def _unit(mp: Mapping, table: str, data_file: Path, column: str, kind: str, key: str = "unit") -> str:
+    """The canonical unit ``[table] key`` checked against its quantity ``kind``; a TelemetryError naming
     the data file, the column, the header line and the mapping's key if unknown or of another kind."""
-    u = mp.data[table]["unit"]
+    u = mp.data[table][key]
     try:
         cu = canonical_unit(u)
         ok = unit_kind(cu) == kind
@@ -392,7 +433,7 @@ def _unit(mp: Mapping, table: str, data_file: Path, column: str, kind: str) -> s
     if not ok:
         raise TelemetryError.single(
             data_file,
-            f"unit {u!r} ({mp.path.name}: {table}.unit) is not a known {kind.replace('_', ' ')} unit "
+            f"unit {u!r} ({mp.path.name}: {table}.{key}) is not a known {kind.replace('_', ' ')} unit "
             f"({', '.join(known_units(kind))})",
             column=column,
             line=1,
@@ -408,14 +449,16 @@ def _signed(spec: str) -> tuple[float, str]:
     return 1.0, s
 
 
-def read_mapped(mp: Mapping):
+def read_mapped(mp: Mapping, needed_by: str = "the mapping names it"):
     """Read the files of the mapping ``mp`` into SI on the accelerometer's time base.
 
     Returns ``(t, quantities, phase_values, info)``: ``t`` (n,) [s, common clock]; ``quantities``
-    {"f_B", "w_B", "mag_B": (n, 3) [m/s², rad/s, T]; "pressure", "temperature": (n,) [Pa, K]} (an
-    absent optional quantity is None); ``phase_values`` (n,) the phase column's values at each sample
-    (the last row at or before it) or None; ``info`` JSON-ready: per file its rows, repeated rows
-    dropped and gaps [s], the time-base samples dropped outside the common span, the columns used."""
+    {"f_B", "w_B", "mag_B": (n, 3) [m/s², rad/s, T]; "pressure", "temperature", "ref_h", "ref_vz": (n,)
+    [Pa, K, m, m/s]; "ref_q": (n, 4) scalar-last, normalised} (an absent optional quantity is None; the
+    ``ref_*`` the flight computer's solution); ``phase_values`` (n,) the phase column's values at each
+    sample (the last row at or before it) or None; ``info`` JSON-ready: per file its rows, repeated rows
+    dropped and gaps [s], the time-base samples dropped outside the common span, the columns used.
+    ``needed_by`` ends the message of a missing column."""
     d = mp.data
     need: dict[str, list[str]] = {n: [] for n in mp.files}
     plan = {}  # quantity -> (file, [(sign, column)], unit)
@@ -434,6 +477,14 @@ def read_mapped(mp: Mapping):
         unit = _unit(mp, table, mp.files[fname]["path"], d[table]["column"], kind)
         plan[table] = (fname, [(1.0, d[table]["column"])], unit)
         need[fname].append(d[table]["column"])
+    fc = d["flight_computer"]
+    if fc["file"] is not None:
+        fname, path_fc = fc["file"], mp.files[fc["file"]]["path"]
+        for key, kind in (("altitude", "length"), ("vertical_speed", "velocity")):
+            unit = _unit(mp, "flight_computer", path_fc, fc[key], kind, f"{key}_unit")
+            plan[f"ref_{key}"] = (fname, [(1.0, fc[key])], unit)
+        plan["ref_quaternion"] = (fname, [(1.0, fc[f"quaternion_{c}"]) for c in "xyzw"], "1")
+        need[fname] += [fc[k] for k in FLIGHT_COMPUTER_COLUMNS]
     phase_file, phase_col = d["phases"]["file"], d["phases"]["column"]
     values = [d["phases"][k] for k in ("standby", "motor", "coast", "descent", "landed")]
 
@@ -457,7 +508,9 @@ def read_mapped(mp: Mapping):
                 line=1,
             ) from None
         texts = (phase_col,) if name == phase_file else ()
-        c = read_columns(spec["path"], spec["time"], need[name], texts, check_text=phase_ok)
+        c = read_columns(spec["path"], spec["time"], need[name], texts, needed_by=needed_by, check_text=phase_ok)
+        if fc["file"] == name:
+            _check_quaternion(spec["path"], c, [fc[f"quaternion_{k}"] for k in "wxyz"])
         if c.rows.size < 2:
             raise TelemetryError.single(spec["path"], "fewer than two data rows", column=spec["time"])
         t = to_si(c.values[spec["time"]], tu)[0] + spec["time_offset_s"]
@@ -481,14 +534,16 @@ def read_mapped(mp: Mapping):
         return cols[column][keep] if name == master else np.interp(t, tf, cols[column])
 
     q: dict[str, np.ndarray | None] = {}
-    for table in (*TRIADS, *SCALARS):
+    for table in (*TRIADS, *SCALARS, "ref_altitude", "ref_vertical_speed", "ref_quaternion"):
         if table not in plan:
             q[table] = None
             continue
         fname, axes, unit = plan[table]
         v = np.column_stack([sgn * on_base(fname, col) for sgn, col in axes])
         v = to_si(v, unit)[0]
-        q[table] = v if table in TRIADS else v[:, 0]
+        q[table] = v if v.shape[1] > 1 else v[:, 0]
+    if q["ref_quaternion"] is not None:
+        q["ref_quaternion"] = q["ref_quaternion"] / np.linalg.norm(q["ref_quaternion"], axis=1)[:, None]
     phase_values = None
     if phase_file is not None:
         tf, txt = files[phase_file][0], files[phase_file][2][phase_col]
@@ -518,6 +573,9 @@ def read_mapped(mp: Mapping):
         "mag_B": q["magnetometer"],
         "pressure": q["barometer"],
         "temperature": q["temperature"],
+        "ref_h": q["ref_altitude"],
+        "ref_vz": q["ref_vertical_speed"],
+        "ref_q": q["ref_quaternion"],
     }
     # gaps of every file (the time base's and the others', located on the time base)
     gaps_s = []
@@ -529,6 +587,25 @@ def read_mapped(mp: Mapping):
                 gaps_s.append((float(f[0][i]), float(f[0][i + 1]), n, int(f[4][i + 1]) + 1))
     info["gaps"] = [{"t_a_s": a, "t_b_s": b, "file": n, "row": r} for a, b, n, r in gaps_s]
     return t, quantities, phase_values, info
+
+
+def _check_quaternion(path: Path, c, columns: list[str]) -> None:
+    """Refuse the flight computer's quaternion (``columns`` w, x, y, z of the file read as ``c``) where
+    its norm is not 1 ± 0.01: a located TelemetryError (file, the w column, data row)."""
+    qn = np.linalg.norm(np.column_stack([c.values[k] for k in columns]), axis=1)
+    bad = np.flatnonzero(np.abs(qn - 1.0) > 0.01)
+    if bad.size:
+        probs = [
+            Problem(
+                str(path),
+                columns[0],
+                int(c.rows[i]) + 1,
+                int(c.rows[i]) + 2,
+                f"quaternion norm {qn[i]:.4g} (expected 1)",
+            )
+            for i in bad[:MAX_PROBLEMS]
+        ]
+        raise TelemetryError(probs, int(bad.size))
 
 
 def _first(t: np.ndarray, mask: np.ndarray) -> float | None:
@@ -738,9 +815,9 @@ def import_mapped(
         q["mag_B"],
         q["pressure"],
         q["temperature"],
-        None,
-        None,
-        None,
+        q["ref_h"],
+        q["ref_vz"],
+        q["ref_q"],
         tuple(sorted(gaps, key=lambda g: g.t_a)),
         sum(f["repeated_rows_dropped"] for f in info["files"].values()),
         phase_column=mp.data["phases"]["column"],
