@@ -330,3 +330,23 @@ def test_the_firm_layout_through_import_csv_is_import_airbrakes(tmp_path):
     ja, jc = (json.loads((x.parent / "flight.json").read_text(encoding="utf-8")) for x in (a, c))
     assert jc["pad"] == ja["pad"] and jc["burnout"] == ja["burnout"]
     assert [x["status"] for x in jc["health_checks"]["checks"]] == [x["status"] for x in ja["health_checks"]["checks"]]
+
+
+def test_a_gap_in_the_barometer_file_is_reported_and_not_observed(tmp_path):
+    """The barometer's file loses 2 s of the coast: the gap is listed (its file, its row; the logger's
+    pause on the pad is another), and no pressure observation lies inside it (the interpolated values
+    there are not measurements)."""
+    mp = remap(tmp_path / "log")
+    lines = (mp.parent / "baro.csv").read_text(encoding="utf-8").splitlines()
+    t_launch = 1209.46567625
+    cut = [i for i, ln in enumerate(lines[1:], 1) if 6.0 < float(ln.split(",")[0]) - t_launch < 8.0]
+    assert len(cut) >= 6
+    (mp.parent / "baro.csv").write_text("\n".join(ln for i, ln in enumerate(lines) if i not in cut) + "\n")
+    toml = mapped.import_mapped(mp, tmp_path / "flight", allow_unhealthy=True)
+    fl = json.loads((toml.parent / "flight.json").read_text(encoding="utf-8"))
+    gaps = [g for g in fl["source"]["gaps"] if g["file"] == "baro" and g["t_a_s"] > t_launch]
+    assert len(gaps) == 1 and gaps[0]["row"] == cut[0]
+    a, b = gaps[0]["t_a_s"] - fl["t_launch_log_s"], gaps[0]["t_b_s"] - fl["t_launch_log_s"]
+    tp = [float(ln.split(",")[0]) for ln in (toml.parent / "pressure.csv").read_text().splitlines() if ln[:1].isdigit()]
+    assert tp and not [x for x in tp if a + 1e-6 < x < b - 1e-6]
+    assert any(g["dt_s"] == pytest.approx(b - a) for g in fl["gaps"])  # and in the import's gap list

@@ -73,7 +73,9 @@ class FlightLog:
     packet exactly (dropped); ``path`` the file.  A log of another flight computer
     (:mod:`workbench.problems.post2.importers.mapped`) may lack ``mag_B``, ``temperature`` and the
     reference (None); its ``letters`` are then the detected phases (``phase_column`` None), and
-    ``time_column`` / ``accel_columns`` name its own columns in messages."""
+    ``time_column`` / ``accel_columns`` name its own columns in messages; ``pressure_valid`` (n,) False
+    where the pressure was interpolated across a gap of the barometer's own file (None: all valid):
+    those samples are not observed."""
 
     path: Path
     t: np.ndarray
@@ -91,6 +93,7 @@ class FlightLog:
     phase_column: str | None = "state_letter"
     time_column: str = "timestamp_seconds"
     accel_columns: str = "raw_acceleration_[xyz]_gs"
+    pressure_valid: np.ndarray | None = None
 
     def phase_start(self, letter: str) -> float:
         """Log time [s] of the first row with phase ``letter``; a TelemetryError (a ValueError) naming
@@ -437,7 +440,8 @@ def _write_import(
     t0, t_end, t_apogee, t_main = times
     # observations: block means after burnout, never across a gap
     gaps_rel = tuple(Gap(g.t_a - t_launch, g.t_b - t_launch, g.dt, g.row, g.phase) for g in log.gaps)
-    tp, pm, cnt = block_means(t, log.pressure[:, None], t0, t_end, obs_rate_hz, gaps_rel)
+    pv = np.ones(t.size, dtype=bool) if log.pressure_valid is None else log.pressure_valid
+    tp, pm, cnt = block_means(t[pv], log.pressure[pv][:, None], t0, t_end, obs_rate_hz, gaps_rel)
     ta, am, _ = block_means(t, np.linalg.norm(log.f_B, axis=1)[:, None], t0, t_end, obs_rate_hz, gaps_rel)
     write_telemetry(
         out / "pressure.csv", tp, {"p": (pm[:, 0], "Pa")}, meta={"source": log.path.name, "samples_per_block": "varies"}

@@ -458,7 +458,8 @@ def read_mapped(mp: Mapping, needed_by: str = "the mapping names it"):
     ``ref_*`` the flight computer's solution); ``phase_values`` (n,) the phase column's values at each
     sample (the last row at or before it) or None; ``info`` JSON-ready: per file its rows, repeated rows
     dropped and gaps [s], the time-base samples dropped outside the common span, the columns used.
-    ``needed_by`` ends the message of a missing column."""
+    ``needed_by`` ends the message of a missing column.  ``quantities["pressure_valid"]`` (n,) is False
+    where the pressure was interpolated across a gap of the barometer's file (never observed)."""
     d = mp.data
     need: dict[str, list[str]] = {n: [] for n in mp.files}
     plan = {}  # quantity -> (file, [(sign, column)], unit)
@@ -586,6 +587,12 @@ def read_mapped(mp: Mapping, needed_by: str = "the mapping names it"):
             if f[0][i + 1] > t[0] and f[0][i] < t[-1]:
                 gaps_s.append((float(f[0][i]), float(f[0][i + 1]), n, int(f[4][i + 1]) + 1))
     info["gaps"] = [{"t_a_s": a, "t_b_s": b, "file": n, "row": r} for a, b, n, r in gaps_s]
+    # the pressure interpolated across a gap of the barometer's own file is not a measurement
+    valid = np.ones(t.size, dtype=bool)
+    for a, b, n, _ in gaps_s:
+        if n == d["barometer"]["file"] and n != master:
+            valid &= ~((t > a) & (t < b))
+    quantities["pressure_valid"] = valid
     return t, quantities, phase_values, info
 
 
@@ -823,6 +830,7 @@ def import_mapped(
         phase_column=mp.data["phases"]["column"],
         time_column=master["time"],
         accel_columns=", ".join(acc),
+        pressure_valid=q["pressure_valid"],
     )
     info["phases_s"] = {k: getattr(phases, k) for k in ("liftoff", "burnout", "apogee", "main", "landing")}
     info["phases_source"] = phases.source
