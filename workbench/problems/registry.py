@@ -43,6 +43,7 @@ BUILTIN: dict[str, str] = {
 #: ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> Path`` (the problem file written)
 IMPORTERS: dict[str, str] = {
     "airbrakes": "workbench.problems.post2.importers.airbrakes",
+    "csv": "workbench.problems.post2.importers.mapped",
 }
 
 _registered: dict[str, Problem] = {}

@@ -202,16 +202,29 @@ def local_en(lat_deg, lon_deg, lat0_deg: float, lon0_deg: float) -> np.ndarray:
 
 
 def reconstruct_boost(
-    t, letters, f_B, w_B, mag_B, pressure, meta, declination_deg: float, inclination_deg: float | None = None
+    t,
+    letters,
+    f_B,
+    w_B,
+    mag_B,
+    pressure,
+    meta,
+    declination_deg: float,
+    inclination_deg: float | None = None,
+    heading_prior_deg: tuple[float | None, float] = (None, math.degrees(HEADING_SIGMA_UNTRUSTED)),
 ) -> BoostSolution:
     """Pad alignment + strapdown through the boost (module docstring).
 
     ``t`` (n,) [s from launch], ``letters`` (n,) phase letters, ``f_B`` (n, 3) [m/s²], ``w_B`` (n, 3)
-    [rad/s], ``mag_B`` (n, 3) [T], ``pressure`` (n,) [Pa] as logged; ``meta`` the flight's
-    :class:`~workbench.problems.post2.importers.airbrakes.FlightMetadata`; ``declination_deg`` east
-    positive; ``inclination_deg`` the site's magnetic dip (down positive) that the pad's measured dip
-    is checked against (None: not checked, the heading trusted).  ValueError if there is less than
-    half a pad window of contiguous standby data."""
+    [rad/s], ``mag_B`` (n, 3) [T] or None (no magnetometer), ``pressure`` (n,) [Pa] as logged; ``meta``
+    the flight's :class:`~workbench.problems.post2.importers.flightlog.FlightMetadata`;
+    ``declination_deg`` east positive; ``inclination_deg`` the site's magnetic dip (down positive) that
+    the pad's measured dip is checked against (None: not checked, the heading trusted).
+
+    Without a magnetometer the pad heading is the prior ``heading_prior_deg`` = (bearing [deg clockwise
+    from true north] of the horizontal projection of the body x axis — of the y axis when x is within
+    30° of the vertical — or None: unknown, taken as 0; its 1σ [deg]) and is never trusted.
+    ValueError if there is less than half a pad window of contiguous standby data."""
     k_launch = int(np.flatnonzero(letters == "M")[0])
     # the motor letter comes after lift-off is detected: ignition is the first sample of the last
     # run of |f| > 1.5 g before it; the pad window ends IGNITION_GUARD_S before ignition
@@ -231,24 +244,74 @@ def reconstruct_boost(
     if pad.size < 5 or t[pad[-1]] - t[pad[0]] < 0.5 * PAD_WINDOW_S:
         raise ValueError("fewer than 0.5 s of contiguous standby data before launch: cannot align the IMU on the pad")
     f_pad = f_B[pad].mean(axis=0)
-    m_pad = mag_B[pad].mean(axis=0)
     bias = w_B[pad].mean(axis=0)
     p_standby = float(pressure[pad].mean())
     p_std = float(pressure[pad].std(ddof=1))
     atm, h_pad = site_atmosphere(meta.qnh, meta.temperature, p_standby)
-    dec = math.radians(declination_deg)
-    # the magnetometer's own axes are not the IMU's: align it in flight (gyro-consistent fit through
-    # boost and coast) and take the field at the pad attitude from that fit, not the pad samples
-    # (the steel launch rail distorts those)
+    down = -f_pad / np.linalg.norm(f_pad)
+
+    def dip_of(m):
+        return 90.0 - math.degrees(math.acos(np.clip(np.dot(down, m) / np.linalg.norm(m), -1.0, 1.0)))
+
     t_coast = float(t[np.flatnonzero(letters == "C")[0]])
-    k_f = np.flatnonzero(letters == "F")
-    t_ej = detect_ejection(t, f_B, t_coast, float(t[k_f[0]]) if k_f.size else float(t[-1]))
-    mag_fit = magnetometer_alignment(t, w_B - bias, mag_B, int(pad[-1]), t_ej - MAG_FIT_BEFORE_EJECTION_S)
-    m_pad_raw = m_pad
-    if mag_fit is not None:
-        m_pad = mag_fit.field_0
-    # TRIAD: up from the specific force, heading from the horizontal part of the field (any dip)
-    q_enu_b = triad(f_pad, m_pad, np.array([0.0, 0.0, 1.0]), np.array([math.sin(dec), math.cos(dec), -1.5]))
+    mag_info: dict = {"magnetometer_alignment": None, "magnetometer_dip_deg": None}
+    if mag_B is None:
+        # no magnetometer: the heading is the prior's (bearing of a horizontal body axis), never trusted
+        psi_deg, sig_deg = heading_prior_deg
+        axis_h = 0 if abs(float(down[0])) < math.cos(math.radians(30.0)) else 1
+        e_h = np.eye(3)[axis_h]
+        psi = math.radians(psi_deg or 0.0)
+        q_enu_b = triad(f_pad, e_h - np.dot(e_h, -down) * -down, [0.0, 0.0, 1.0], [math.sin(psi), math.cos(psi), 0.0])
+        trusted = False
+        sig_heading = math.radians(sig_deg)
+        mag_info |= {
+            "pad_heading_prior_deg": psi_deg,
+            "pad_heading_axis": "xyz"[axis_h],
+            "magnetometer": None,
+        }
+    else:
+        m_pad = mag_B[pad].mean(axis=0)
+        dec = math.radians(declination_deg)
+        # the magnetometer's own axes are not the IMU's: align it in flight (gyro-consistent fit through
+        # boost and coast) and take the field at the pad attitude from that fit, not the pad samples
+        # (the steel launch rail distorts those)
+        k_f = np.flatnonzero(letters == "F")
+        t_ej = detect_ejection(t, f_B, t_coast, float(t[k_f[0]]) if k_f.size else float(t[-1]))
+        mag_fit = magnetometer_alignment(t, w_B - bias, mag_B, int(pad[-1]), t_ej - MAG_FIT_BEFORE_EJECTION_S)
+        m_pad_raw = m_pad
+        if mag_fit is not None:
+            m_pad = mag_fit.field_0
+        # TRIAD: up from the specific force, heading from the horizontal part of the field (any dip)
+        q_enu_b = triad(f_pad, m_pad, np.array([0.0, 0.0, 1.0]), np.array([math.sin(dec), math.cos(dec), -1.5]))
+        dip = dip_of(m_pad)
+        fit_ok = mag_fit is not None and mag_fit.rms <= MAG_FIT_RMS_FRACTION * float(np.linalg.norm(mag_fit.field_0))
+        mirror = None
+        if mag_fit is not None and not fit_ok:
+            # a gyro whose axes are a mirror image of the true ones (a swapped or sign-flipped column)
+            # turns the field the wrong way round: no rotation absorbs it, one mirrored axis does
+            w_mirror = (w_B - bias) * np.array([1.0, 1.0, -1.0])
+            mirror = magnetometer_alignment(t, w_mirror, mag_B, int(pad[-1]), t_ej - MAG_FIT_BEFORE_EJECTION_S)
+        trusted = fit_ok and (inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG)
+        sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
+        mag_info = {
+            "magnetometer_dip_deg": dip,
+            "magnetometer_dip_raw_pad_deg": dip_of(m_pad_raw),
+            "magnetic_field_uT": float(np.linalg.norm(m_pad) * 1e6),
+            "magnetometer_alignment": None
+            if mag_fit is None
+            else {
+                "rotation_imu_to_magnetometer_rotvec_deg": np.degrees(
+                    quat_to_rotvec(dcm_to_quat(mag_fit.C_mag_imu))
+                ).tolist(),
+                "hard_iron_offset_uT": (mag_fit.offset * 1e6).tolist(),
+                "fit_rms_uT": mag_fit.rms * 1e6,
+                "samples": mag_fit.samples,
+                "window_s": [float(t[pad[-1]]), t_ej - MAG_FIT_BEFORE_EJECTION_S],
+                "fit_accepted": bool(fit_ok),
+                "field_uT": float(np.linalg.norm(mag_fit.field_0) * 1e6),
+                "mirrored_gyro_fit_rms_uT": None if mirror is None else mirror.rms * 1e6,
+            },
+        }
     lat, lon = math.radians(meta.launch_lat_deg), math.radians(meta.launch_lon_deg)
     C_M_ENU = enu_axes(lat, lon)
     q_m_b = quat_multiply(dcm_to_quat(C_M_ENU), q_enu_b)
@@ -256,21 +319,6 @@ def reconstruct_boost(
     v0 = np.cross([0.0, 0.0, EARTH.rotation_rate], p0)
     # attitude 1σ: tilt about east/north, heading about up -> body frame small angles
     C_B_ENU = quat_to_dcm(q_enu_b).T
-    down = -f_pad / np.linalg.norm(f_pad)
-
-    def dip_of(m):
-        return 90.0 - math.degrees(math.acos(np.clip(np.dot(down, m) / np.linalg.norm(m), -1.0, 1.0)))
-
-    dip = dip_of(m_pad)
-    fit_ok = mag_fit is not None and mag_fit.rms <= MAG_FIT_RMS_FRACTION * float(np.linalg.norm(mag_fit.field_0))
-    mirror = None
-    if mag_fit is not None and not fit_ok:
-        # a gyro whose axes are a mirror image of the true ones (a swapped or sign-flipped column)
-        # turns the field the wrong way round: no rotation absorbs it, one mirrored axis does
-        w_mirror = (w_B - bias) * np.array([1.0, 1.0, -1.0])
-        mirror = magnetometer_alignment(t, w_mirror, mag_B, int(pad[-1]), t_ej - MAG_FIT_BEFORE_EJECTION_S)
-    trusted = fit_ok and (inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG)
-    sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
     P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_heading**2]) @ C_B_ENU.T
     P0 = np.zeros((9, 9))
     P0[SD_VELOCITY, SD_VELOCITY] = np.eye(3) * 0.01**2
@@ -309,26 +357,10 @@ def reconstruct_boost(
         "rocket_axis_imu": axis.tolist(),
         "tilt_on_pad_deg": math.degrees(math.acos(np.clip(np.dot(axis, f_pad / np.linalg.norm(f_pad)), -1, 1))),
         "samples": int(pad.size),
-        "magnetometer_dip_deg": dip,
-        "magnetometer_dip_raw_pad_deg": dip_of(m_pad_raw),
+        **mag_info,
         "site_inclination_deg": inclination_deg,
         "magnetometer_heading_trusted": bool(trusted),
         "heading_sigma_deg": math.degrees(sig_heading),
-        "magnetic_field_uT": float(np.linalg.norm(m_pad) * 1e6),
-        "magnetometer_alignment": None
-        if mag_fit is None
-        else {
-            "rotation_imu_to_magnetometer_rotvec_deg": np.degrees(
-                quat_to_rotvec(dcm_to_quat(mag_fit.C_mag_imu))
-            ).tolist(),
-            "hard_iron_offset_uT": (mag_fit.offset * 1e6).tolist(),
-            "fit_rms_uT": mag_fit.rms * 1e6,
-            "samples": mag_fit.samples,
-            "window_s": [float(t[pad[-1]]), t_ej - MAG_FIT_BEFORE_EJECTION_S],
-            "fit_accepted": bool(fit_ok),
-            "field_uT": float(np.linalg.norm(mag_fit.field_0) * 1e6),
-            "mirrored_gyro_fit_rms_uT": None if mirror is None else mirror.rms * 1e6,
-        },
         "ignition_t_s": t_ign,
     }
     C_ENU_M = C_M_ENU.T
@@ -566,7 +598,7 @@ def problem_file(
     if t_burnout is not None:
         lines.append(f"burnout_s = {t_burnout:.4f}  # the first coast row")
     if t_touchdown is not None:
-        lines.append(f"touchdown_s = {t_touchdown:.4f}  # the first landed row")
+        lines.append(f"touchdown_s = {t_touchdown:.9f}  # the first landed row (t_end_s: the digits of the span's end)")
     lines += [
         "",
         "[vehicle]",

@@ -20,6 +20,7 @@ truth simulator makes no raw flight-computer log, so every bound is the physics'
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from pathlib import Path
@@ -31,6 +32,8 @@ from workbench.estimation.health import ERROR, OK, WARNING, Check
 from workbench.io.schema import read_json
 
 __all__ = [
+    "INPUT_NAMES",
+    "rename",
     "dipole_field",
     "BOUND_PRIOR_Z",
     "bound_checks",
@@ -387,9 +390,12 @@ def site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Ch
     the declared inclination (geometry.site, units.magnetometer, physics.magnetic_dip)."""
     out = []
     lat, lon = meta.launch_lat_deg, meta.launch_lon_deg
-    d = _great_circle_m(lat, lon, meta.landed_lat_deg, meta.landed_lon_deg)
-    d_max = max(LANDING_DISTANCE_MAX_M, 5.0 * meta.apogee)
-    if d <= d_max:
+    landed = meta.landed_lat_deg is not None and meta.landed_lon_deg is not None
+    d = _great_circle_m(lat, lon, meta.landed_lat_deg, meta.landed_lon_deg) if landed else 0.0
+    d_max = max(LANDING_DISTANCE_MAX_M, 5.0 * (meta.apogee or 0.0))
+    if not landed:
+        pass  # no landed coordinates (a column-mapped import without them): unchecked
+    elif d <= d_max:
         out.append(_check("geometry.landing_distance", OK, d, d_max, f"landed {d:.0f} m from the pad"))
     else:
         why = _coordinate_mixup(meta, d_max, inclination_deg)
@@ -452,14 +458,18 @@ def site_checks(meta, pad_info: dict, inclination_deg, log_name: str) -> list[Ch
     return out
 
 
-def weather_checks(meta, board_pad_K: float) -> list[Check]:
+def weather_checks(meta, board_pad_K: float | None) -> list[Check]:
     """The metadata's site temperature against the board's own pad temperature (the board runs warmer
-    than the air) and the wind against the launch limit (physics.site_temperature, physics.wind)."""
+    than the air; None: no board temperature, unchecked) and the wind against the launch limit
+    (physics.site_temperature, physics.wind)."""
     out = []
-    t_c, b_c = meta.temperature - 273.15, board_pad_K - 273.15
-    excess = meta.temperature - board_pad_K
+    t_c = meta.temperature - 273.15
+    b_c = board_pad_K - 273.15 if board_pad_K is not None else math.nan
+    excess = meta.temperature - board_pad_K if board_pad_K is not None else math.nan
     msg = f"site air temperature {t_c:.1f} °C vs the flight computer's board on the pad {b_c:.1f} °C"
-    if excess <= BOARD_COOLER_MARGIN_K:
+    if board_pad_K is None:
+        pass  # no board temperature in the log: unchecked
+    elif excess <= BOARD_COOLER_MARGIN_K:
         out.append(_check("physics.site_temperature", OK, excess, BOARD_COOLER_MARGIN_K, msg))
     else:
         msg += (
@@ -537,13 +547,24 @@ def _gap_checks(gaps_rel, windows: dict, log_name: str) -> tuple[list[Check], li
 
 
 def import_checks(
-    log, meta, fl, t, *, t_ej: float, t_main, ca0_unclipped: float, inclination_deg=None, obs_rate_hz: float = 10.0
+    log,
+    meta,
+    fl,
+    t,
+    *,
+    t_ej: float,
+    t_main,
+    ca0_unclipped: float,
+    inclination_deg=None,
+    obs_rate_hz: float = 10.0,
+    names: dict | None = None,
 ) -> dict:
     """All import-time checks of a flight: ``log`` the :class:`FlightLog`, ``meta`` its
     :class:`FlightMetadata`, ``fl`` the :class:`~workbench.problems.post2.rocket.BoostSolution`,
     ``t`` (n,) [s after launch], ``t_ej``/``t_main`` the detected openings [s],
     ``ca0_unclipped`` the measured coast drag multiplier before its clip, ``obs_rate_hz`` the rate
-    of the block-mean observations [Hz].
+    of the block-mean observations [Hz]; ``names`` the import's own names of :data:`INPUT_NAMES`
+    (:func:`rename`; None: the FIRM log's).
 
     Returns a JSON-ready dict {"checks": [Check as dict], "undefined": [key-window names],
     "notes": [str]}."""
@@ -551,10 +572,15 @@ def import_checks(
     t_coast = float(t[np.flatnonzero(log.letters == "C")[0]])
     checks = [_axes_check(t, log.f_B, log.w_B, fl.gyro_bias, t_coast, t_ej, name)]
     t_f = float(t[np.flatnonzero(log.letters == "F")[0]])
-    checks.append(accel_sign_check(t, log.f_B, log.w_B, log.ref_q, t_coast, min(t_ej, t_f) - 1.0, name))
-    checks.append(pad_tilt_check(float(fl.pad_info["tilt_on_pad_deg"]), float(meta.rod_angle_deg)))
+    # the checks that need what a log may lack (the flight computer's attitude, the magnetometer, the
+    # rod angle, the landed coordinates, the board temperature) are left out without it
+    if log.ref_q is not None:
+        checks.append(accel_sign_check(t, log.f_B, log.w_B, log.ref_q, t_coast, min(t_ej, t_f) - 1.0, name))
+    if meta.rod_angle_deg is not None:
+        checks.append(pad_tilt_check(float(fl.pad_info["tilt_on_pad_deg"]), float(meta.rod_angle_deg)))
     k0 = int(np.searchsorted(t, fl.pad_info["ignition_t_s"] - 0.2))
-    checks.append(_mag_gyro_check(t, log.w_B, log.mag_B, fl.gyro_bias, k0, t_ej - 0.5, name))
+    if log.mag_B is not None:
+        checks.append(_mag_gyro_check(t, log.w_B, log.mag_B, fl.gyro_bias, k0, t_ej - 0.5, name))
     mc = motor_check(t, log.f_B, log.letters, meta, name)
     if mc is not None:
         checks.append(mc)
@@ -564,7 +590,8 @@ def import_checks(
     checks += site_checks(meta, fl.pad_info, inclination_deg, name)
     t_pad_end = fl.pad_info["ignition_t_s"] - 0.1
     pad = (t >= t_pad_end - 1.0) & (t < t_pad_end)
-    checks += weather_checks(meta, float(np.mean(log.temperature[pad])))
+    board = float(np.mean(log.temperature[pad])) if log.temperature is not None else None
+    checks += weather_checks(meta, board)
     cd = coast_drag_coefficient(ca0_unclipped, meta.cd)
     lo, hi = ROCKET_CD_RANGE
     msg = (
@@ -580,7 +607,7 @@ def import_checks(
     gaps_rel = fl_gaps(log, t)
     gc, undefined, notes = _gap_checks(gaps_rel, key_windows(t_coast, t_ej, t_main), name)
     checks += gc
-    return {"checks": [c.__dict__ for c in checks], "undefined": undefined, "notes": notes}
+    return {"checks": [c.__dict__ for c in rename(checks, names)], "undefined": undefined, "notes": notes}
 
 
 def fl_gaps(log, t):
@@ -637,11 +664,46 @@ def bound_checks(cfg, hist: dict, *, plausibility: bool = False) -> list[Check]:
 
 def run_checks(cfg, hist: dict) -> tuple[list[Check], list[str]]:
     """(checks, notes) a POST2 run adds to its health: :func:`bound_checks` of its estimate and, for
-    an imported rocket flight, the import's checks (``flight.json`` beside the problem file)."""
+    an imported rocket flight, the import's checks (``flight.json`` beside the problem file), their
+    messages in the names of the import's inputs (``flight.json`` ``input_names``, :func:`rename`)."""
     path = getattr(getattr(cfg, "run", None), "path", None)
     if path is None or not (Path(path).parent / "flight.json").is_file():
         return bound_checks(cfg, hist), []
     flight = read_json(Path(path).parent / "flight.json")  # written by the import (generated)
     hc = flight.get("health_checks") or {}
-    checks = bound_checks(cfg, hist, plausibility=True)
+    checks = rename(bound_checks(cfg, hist, plausibility=True), flight.get("input_names"))
     return [Check(**c) for c in hc.get("checks", [])] + checks, list(hc.get("notes", []))
+
+
+#: the names of the inputs the checks' messages give (the FIRM log's columns, its metadata's keys, the
+#: import's options): an import from another layout maps each to its own (:func:`rename`)
+INPUT_NAMES = (
+    "raw_acceleration_[xyz]_gs",
+    "raw_angular_rate_[xyz]_deg_per_s",
+    "magnetic_field_[xyz]_microteslas",
+    "launch_site.launch_coordinates",
+    "flight_data.landed_coordinates",
+    "launch_site.air_temperature_celsius",
+    "launch_site.wind_speed_kmh",
+    "launch_rod_angle",
+    "rocket_dry_mass_kg",
+    "rocket_cross_sectional_area_m2",
+    "rocket_Cd",
+    "--inclination-deg",
+    "--obs-rate-hz",
+)
+
+
+def rename(checks: list[Check], names: dict | None) -> list[Check]:
+    """``checks`` with each name of :data:`INPUT_NAMES` in their messages replaced by ``names[name]``
+    (the import's own name of that input; None or absent: kept)."""
+    if not names:
+        return checks
+    out = []
+    for c in checks:
+        msg = c.message
+        for k in INPUT_NAMES:
+            if k in names:
+                msg = msg.replace(k, names[k])
+        out.append(dataclasses.replace(c, message=msg))
+    return out

@@ -4,47 +4,55 @@ licence) into the workbench's telemetry files and a post2 problem file.
 The log (one CSV per flight, ~91 Hz, one row per packet) and its ``metadata.json`` are described
 in ``workbench/io/FORMATS.md`` ("Rocket flight logs").  What the importer does:
 
-1. :func:`read_log` — reads the CSV with every problem located by file, column and data row
-   (missing column, text or NaN in a number, backwards or repeated time, unknown phase letter),
-   converts to SI (g → m/s² with g0 = 9.80665, deg/s → rad/s, °C → K, µT → T) and keeps the
-   flight computer's own solution (altitude, vertical velocity, quaternion scalar-first → scalar-last)
-   apart as a *reference*, never as an observation;
+1. :func:`read_log` — the generic column-mapped reader of ``workbench import csv``
+   (:mod:`workbench.problems.post2.importers.mapped`) with the FIRM layout as its built-in mapping
+   (:data:`FIRM_LAYOUT`): every problem located by file, column and data row (missing column, text or
+   NaN in a number, backwards or repeated time, unknown phase letter), converted to SI (g → m/s² with
+   g0 = 9.80665, deg/s → rad/s, °C → K, µT → T), the flight computer's own solution (altitude,
+   vertical velocity, quaternion scalar-first → scalar-last) kept apart as a *reference*;
 2. :func:`find_gaps` — lists every step longer than ``gap_factor`` × the median step (reported in
    the import summary and in ``events.csv``; nothing is interpolated: an averaging block never
    spans a gap, and a gap inside the boost is refused because the IMU cannot be integrated across it);
 3. :func:`read_metadata` — the flight's entry of ``metadata.json`` (mass, Cd, area, site weather,
    launch/landed coordinates, apogee), validated against :data:`METADATA_SCHEMA` (an unknown,
    missing, mistyped or out-of-range field a located :class:`~workbench.io.scenario.ScenarioError`);
-4. :func:`import_flight` — the boost integrated from the IMU (:mod:`workbench.problems.post2.rocket`),
-   the coast/descent observation files (pressure, |specific force|, 10 Hz block means with
-   their weights vs time), the reference files and ``<flight>.toml``, a post2 problem file that
-   ``workbench run`` reconstructs.
+4. :func:`import_flight` — :func:`~workbench.problems.post2.importers.flightlog.import_log`, shared
+   with ``import csv``: the boost integrated from the IMU (:mod:`workbench.problems.post2.rocket`),
+   the coast/descent observation files (pressure, |specific force|, 10 Hz block means with their
+   weights vs time), the reference files and ``<flight>.toml``, a post2 problem file that
+   ``workbench run`` reconstructs.  What stays FIRM's own is its ``metadata.json`` (:func:`read_metadata`).
 """
 
 from __future__ import annotations
 
-import csv
 import difflib
-import json
-import math
 import os
-import shutil
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from workbench.core.bodies import EARTH, G0
 from workbench.io.scenario import ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, read_json
-from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError, write_events, write_telemetry
+from workbench.problems.post2.importers.flightlog import (
+    PHASES,
+    FlightLog,
+    FlightMetadata,
+    Gap,
+    block_means,
+    check_rates,
+    check_units,
+    find_gaps,
+    import_log,
+)
+from workbench.problems.post2.importers.mapped import Mapping, from_data, read_mapped
 
 __all__ = [
     "HELP",
     "add_arguments",
     "run",
     "PHASES",
-    "COLUMNS",
+    "FIRM_LAYOUT",
+    "firm_layout",
     "FlightLog",
     "Gap",
     "FlightMetadata",
@@ -55,305 +63,72 @@ __all__ = [
     "block_means",
     "read_metadata",
     "import_flight",
+    "import_log",
+    "check_units",
+    "check_rates",
 ]
 
-#: flight-phase letters of the FIRM log: standby, motor, coast, free fall / parachute, landed
-PHASES = {"S": "standby", "M": "motor", "C": "coast", "F": "descent", "L": "landed"}
-
-#: required columns -> (array name, SI scale from the logged unit, offset added after scaling)
-COLUMNS: dict[str, tuple[str, float, float]] = {
-    "timestamp_seconds": ("t", 1.0, 0.0),
-    "temperature_celsius": ("temperature", 1.0, 273.15),
-    "pressure_pascals": ("pressure", 1.0, 0.0),
-    "raw_acceleration_x_gs": ("ax", G0, 0.0),
-    "raw_acceleration_y_gs": ("ay", G0, 0.0),
-    "raw_acceleration_z_gs": ("az", G0, 0.0),
-    "raw_angular_rate_x_deg_per_s": ("wx", math.pi / 180.0, 0.0),
-    "raw_angular_rate_y_deg_per_s": ("wy", math.pi / 180.0, 0.0),
-    "raw_angular_rate_z_deg_per_s": ("wz", math.pi / 180.0, 0.0),
-    "magnetic_field_x_microteslas": ("mx", 1e-6, 0.0),
-    "magnetic_field_y_microteslas": ("my", 1e-6, 0.0),
-    "magnetic_field_z_microteslas": ("mz", 1e-6, 0.0),
-    "est_position_z_meters": ("ref_h", 1.0, 0.0),
-    "est_velocity_z_meters_per_s": ("ref_vz", 1.0, 0.0),
-    "est_quaternion_w": ("ref_qw", 1.0, 0.0),
-    "est_quaternion_x": ("ref_qx", 1.0, 0.0),
-    "est_quaternion_y": ("ref_qy", 1.0, 0.0),
-    "est_quaternion_z": ("ref_qz", 1.0, 0.0),
+#: the FIRM log's layout as a column mapping of the generic reader
+#: (:mod:`workbench.problems.post2.importers.mapped`, ``workbench import csv``): one file, its own
+#: column names and units, its phase letters and its flight computer's solution
+FIRM_LAYOUT: dict = {
+    "files": {"firm": {"path": "", "time": "timestamp_seconds", "time_unit": "s"}},
+    "accelerometer": {"file": "firm", "unit": "g", **{f"body_{c}": f"raw_acceleration_{c}_gs" for c in "xyz"}},
+    "gyro": {"file": "firm", "unit": "deg/s", **{f"body_{c}": f"raw_angular_rate_{c}_deg_per_s" for c in "xyz"}},
+    "magnetometer": {"file": "firm", "unit": "uT", **{f"body_{c}": f"magnetic_field_{c}_microteslas" for c in "xyz"}},
+    "barometer": {"file": "firm", "column": "pressure_pascals", "unit": "Pa"},
+    "temperature": {"file": "firm", "column": "temperature_celsius", "unit": "degC"},
+    "phases": {"file": "firm", "column": "state_letter", **{v: k for k, v in PHASES.items()}},
+    "flight_computer": {
+        "file": "firm",
+        "altitude": "est_position_z_meters",
+        "vertical_speed": "est_velocity_z_meters_per_s",
+        **{f"quaternion_{c}": f"est_quaternion_{c}" for c in "wxyz"},
+    },
 }
-_LETTER = "state_letter"
 
 
-@dataclass(frozen=True)
-class Gap:
-    """A gap in the log: samples at ``t_a`` and ``t_b`` [s, log clock] ``dt = t_b − t_a`` apart,
-    ``row`` the 1-based data row after it, ``phase`` the phase letter of that row."""
-
-    t_a: float
-    t_b: float
-    dt: float
-    row: int
-    phase: str
-
-
-@dataclass(frozen=True, eq=False)
-class FlightLog:
-    """A FIRM log in SI: ``t`` (n,) [s, log clock]; ``letters`` (n,) phase letters; ``f_B`` (n, 3)
-    specific force [m/s²] and ``w_B`` (n, 3) body rate [rad/s] in the IMU's frame B; ``mag_B``
-    (n, 3) [T]; ``pressure`` (n,) [Pa]; ``temperature`` (n,) [K] (the board's, not the air's);
-    reference solution of the flight computer: ``ref_h`` (n,) [m] its altitude — a standard-day
-    pressure altitude (:func:`workbench.problems.post2.rocket.firm_altitude`) whose zero is its
-    initial pressure, not the pad at launch (it reads +0.0, +2.0, +7.6 m on the pad at launch on
-    flights 1, 3, 4) —, ``ref_vz`` (n,)
-    [m/s] up, ``ref_q`` (n, 4) its quaternion scalar-last (as logged, frame not documented);
-    ``gaps`` the gaps (:func:`find_gaps`); ``repeated_rows`` how many rows repeated the previous
-    packet exactly (dropped); ``path`` the file."""
-
-    path: Path
-    t: np.ndarray
-    letters: np.ndarray
-    f_B: np.ndarray
-    w_B: np.ndarray
-    mag_B: np.ndarray
-    pressure: np.ndarray
-    temperature: np.ndarray
-    ref_h: np.ndarray
-    ref_vz: np.ndarray
-    ref_q: np.ndarray
-    gaps: tuple[Gap, ...]
-    repeated_rows: int = 0
-
-    def phase_start(self, letter: str) -> float:
-        """Log time [s] of the first row with phase ``letter``; a TelemetryError (a ValueError) naming
-        the last row if the phase is absent."""
-        k = np.flatnonzero(self.letters == letter)
-        if k.size == 0:
-            last = self.letters[-1] if self.letters.size else "-"
-            raise TelemetryError.single(
-                self.path,
-                f"the log has no phase '{letter}' ({PHASES[letter]}); it ends in phase '{last}' "
-                f"({PHASES.get(str(last), '?')}) at {self.t[-1] if self.t.size else float('nan'):.3f} s: "
-                "a truncated log? the import needs the boost, the coast and the descent's start",
-                column=_LETTER,
-                row=int(self.t.size),
-            )
-        return float(self.t[k[0]])
+def firm_layout(path: str | os.PathLike) -> Mapping:
+    """The :data:`FIRM_LAYOUT` mapping of the log ``path`` (validated like a mapping file)."""
+    path = Path(path).resolve()
+    data = {**FIRM_LAYOUT, "files": {"firm": {**FIRM_LAYOUT["files"]["firm"], "path": str(path)}}}
+    return from_data(data, path, layout_only=True)
 
 
 def read_log(path: str | os.PathLike, gap_factor: float = 3.0) -> FlightLog:
-    """Read a FIRM log CSV (:data:`COLUMNS` + ``state_letter``; other columns ignored) into SI.
+    """Read a FIRM log CSV into SI: the generic reader
+    (:func:`workbench.problems.post2.importers.mapped.read_mapped`) with the built-in mapping
+    :data:`FIRM_LAYOUT` (g → m/s² with g0 = 9.80665, deg/s → rad/s, °C → K, µT → T; the flight
+    computer's quaternion scalar-first → scalar-last, kept as a reference); other columns ignored.
 
     Raises :class:`~workbench.io.telemetry.TelemetryError` locating every problem (file, column,
-    1-based data row and file line): a missing column, an empty/non-numeric/non-finite cell, a
-    wrong field count, a time not strictly after the previous row's (a row repeating the previous
-    row's time and every value is a packet logged twice: dropped and counted), a phase letter not in
-    :data:`PHASES`, a quaternion whose norm is not 1 ± 0.01.
+    1-based data row and file line; :func:`workbench.io.columns.read_columns`): a missing column, an
+    empty/non-numeric/non-finite cell, a wrong field count, a time not strictly after the previous
+    row's (a row repeating the previous row's time and every value is a packet logged twice: dropped
+    and counted), a phase letter not in :data:`PHASES`, a quaternion whose norm is not 1 ± 0.01, values
+    not in the columns' units (:func:`check_units`, :func:`check_rates`).
     """
     path = Path(path)
+    t, q, letters, info = read_mapped(firm_layout(path), needed_by="a FIRM log needs it")
     fname = str(path)
-    try:
-        fh = path.open(newline="", encoding="utf-8-sig")  # a byte-order mark is not part of the first name
-    except OSError as e:
-        raise TelemetryError.single(fname, f"cannot read: {e.strerror or e}") from None
-    problems: list[Problem] = []
-    total = 0
-
-    def add(column, row, reason):
-        nonlocal total
-        total += 1
-        if len(problems) < MAX_PROBLEMS:
-            problems.append(Problem(fname, column, row, None if row is None else row + 1, reason))
-
-    with fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if header is None:
-            raise TelemetryError.single(fname, "empty file (expected a header row of FIRM column names)")
-        header = [h.strip() for h in header]
-        missing = [c for c in (_LETTER, *COLUMNS) if c not in header]
-        if missing:
-            raise TelemetryError(
-                [Problem(fname, c, None, 1, "is missing (a FIRM log needs it)") for c in missing], len(missing)
-            )
-        idx = {c: header.index(c) for c in (_LETTER, *COLUMNS)}
-        width = len(header)
-        cols: dict[str, list[float]] = {c: [] for c in COLUMNS}
-        letters: list[str] = []
-        for r, cells in enumerate(reader, start=1):
-            if not cells or all(not c.strip() for c in cells):
-                add(None, r, "empty row")
-                continue
-            if len(cells) != width:
-                add(None, r, f"has {len(cells)} fields, the header has {width}")
-                continue
-            letter = cells[idx[_LETTER]].strip()
-            if letter not in PHASES:
-                add(_LETTER, r, f"{letter!r} is not a phase letter ({', '.join(PHASES)})")
-            letters.append(letter)
-            for c in COLUMNS:
-                s = cells[idx[c]].strip()
-                try:
-                    v = float(s)
-                except ValueError:
-                    v = math.nan
-                    add(c, r, f"{s!r} is not a number" if s else "empty cell")
-                else:
-                    if not math.isfinite(v):
-                        add(c, r, f"{s!r} is not a finite number")
-                cols[c].append(v)
-    n = len(letters)
-    if n == 0 and not problems:
-        raise TelemetryError.single(fname, "no data rows under the header")
-    arr = {COLUMNS[c][0]: np.asarray(v, float) * COLUMNS[c][1] + COLUMNS[c][2] for c, v in cols.items()}
-    t = arr["t"]
-    # a row repeating the previous row's time *and* every sensor value is the same packet logged
-    # twice (the logger re-reads the flight computer's last packet): dropped and counted
-    sensors = np.column_stack([arr[COLUMNS[c][0]] for c in COLUMNS])
-    repeat = np.zeros(t.size, dtype=bool)
-    repeat[1:] = np.all(sensors[1:] == sensors[:-1], axis=1)
-    rows = np.flatnonzero(~repeat)  # 0-based data rows kept
-    dt = np.diff(t[rows])
-    for i in np.flatnonzero(~(dt > 0)):
-        if np.isfinite(dt[i]):
-            r0, r1 = int(rows[i]), int(rows[i + 1])
-            what = "repeats (with other values)" if dt[i] == 0 else "goes backwards from"
-            add("timestamp_seconds", r1 + 1, f"time {t[r1]:.6f} s {what} the time {t[r0]:.6f} s of row {r0 + 1}")
-    q = np.column_stack([arr["ref_qx"], arr["ref_qy"], arr["ref_qz"], arr["ref_qw"]])
-    qn = np.linalg.norm(q, axis=1)
-    for i in np.flatnonzero(np.abs(qn - 1.0) > 0.01):
-        add("est_quaternion_w", int(i) + 1, f"quaternion norm {qn[i]:.4g} (expected 1)")
-    if problems:
-        problems.sort(key=lambda p: p.row or 0)
-        raise TelemetryError(problems, total)
-    arr = {k: v[rows] for k, v in arr.items()}
-    t = arr["t"]
-    _check_units(fname, t, np.asarray(letters)[rows], np.column_stack([arr["ax"], arr["ay"], arr["az"]]), rows)
-    _check_rates(fname, np.column_stack([arr["wx"], arr["wy"], arr["wz"]]), rows)
-    q = q[rows]
-    qn = qn[rows]
-    letters_a = np.asarray(letters)[rows]
+    rows = np.arange(t.size)
+    check_units(fname, t, letters, q["f_B"], rows)
+    check_rates(fname, q["w_B"], rows)
     return FlightLog(
         path,
         t,
-        letters_a,
-        np.column_stack([arr["ax"], arr["ay"], arr["az"]]),
-        np.column_stack([arr["wx"], arr["wy"], arr["wz"]]),
-        np.column_stack([arr["mx"], arr["my"], arr["mz"]]),
-        arr["pressure"],
-        arr["temperature"],
-        arr["ref_h"],
-        arr["ref_vz"],
-        q / qn[:, None],
-        find_gaps(t, letters_a, gap_factor),
-        int(np.sum(repeat)),
+        letters,
+        q["f_B"],
+        q["w_B"],
+        q["mag_B"],
+        q["pressure"],
+        q["temperature"],
+        q["ref_h"],
+        q["ref_vz"],
+        q["ref_q"],
+        find_gaps(t, letters, gap_factor),
+        info["files"]["firm"]["repeated_rows_dropped"],
     )
-
-
-#: a flight log samples faster than this step [s] (median): a slower one is in other units (ms)
-MAX_MEDIAN_STEP_S = 1.0
-#: a magnetometer reading less than this on the pad [T] is dead or missing (the Earth's surface field
-#: is 22–67 µT)
-MIN_FIELD_T = 1e-6
-#: the standby specific force is 1 g: its median outside this band [g] is a unit error
-STANDBY_G_BAND = (0.8, 1.2)
-#: no MEMS gyro of a flight computer measures beyond ±4000 deg/s (the widest full scale sold): a rate
-#: above this [rad/s] is a unit or scale error, not a measurement
-MAX_RATE_RAD_S = float(np.radians(5000.0))
-
-
-def _check_units(fname: str, t: np.ndarray, letters: np.ndarray, f: np.ndarray, rows: np.ndarray) -> None:
-    """Refuse a log whose time or accelerations are in other units than the column names say: the
-    median time step above MAX_MEDIAN_STEP_S (milliseconds), the standby rows' median |specific
-    force| outside STANDBY_G_BAND × 1 g (m/s², mg).  ``t`` (n,) [s], ``f`` (n, 3) [m/s²] of the kept
-    rows ``rows`` (n,) (0-based data rows, for the message)."""
-    if t.size >= 3:
-        step = float(np.median(np.diff(t)))
-        if step > MAX_MEDIAN_STEP_S:
-            raise TelemetryError.single(
-                fname,
-                f"median time step {step:.4g} s ({1.0 / step:.3g} Hz): a flight log samples at 10 Hz or more — "
-                f"the time looks like milliseconds ({step / 1000.0:.4g} s if so); convert it to seconds",
-                column="timestamp_seconds",
-            )
-    standby = np.flatnonzero(letters == "S")
-    if standby.size >= 3:
-        g = float(np.median(np.linalg.norm(f[standby], axis=1))) / G0
-        lo, hi = STANDBY_G_BAND
-        if not lo <= g <= hi:
-            if 0.8 * G0 <= g <= 1.2 * G0 or 800.0 <= g <= 1200.0:
-                why = f"the acceleration columns look like {'m/s²' if g < 100.0 else 'mg'}, not g"
-            else:
-                axes = ", ".join(
-                    f"{c} {v:+.3g}" for c, v in zip("xyz", np.median(f[standby], axis=0) / G0, strict=True)
-                )
-                why = f"per axis (median, g) {axes}: a dead, missing or mis-scaled axis?"
-            raise TelemetryError.single(
-                fname,
-                f"the standby rows' specific force is {g:.4g} g (median of |a| over {standby.size} rows, expected 1 g "
-                f"at rest): {why}",
-                column="raw_acceleration_x_gs",
-                row=int(rows[standby[0]]) + 1,
-            )
-
-
-def _check_rates(fname: str, w: np.ndarray, rows: np.ndarray) -> None:
-    """Refuse a log whose angular rates ``w`` (n, 3) [rad/s, as read under the deg/s column names]
-    exceed MAX_RATE_RAD_S anywhere: beyond any flight computer's gyro range, a column in other units
-    (mdeg/s) or scaled.  The message names the column, the first such row and the other columns'
-    largest rate for comparison; ``rows`` (n,) the 0-based data rows of ``w``."""
-    peak = np.max(np.abs(w), axis=0) if w.size else np.zeros(3)
-    for i in np.flatnonzero(peak > MAX_RATE_RAD_S):
-        col = f"raw_angular_rate_{'xyz'[i]}_deg_per_s"
-        k = int(np.flatnonzero(np.abs(w[:, i]) > MAX_RATE_RAD_S)[0])
-        others = ", ".join(f"{'xyz'[j]} {np.degrees(peak[j]):.4g}" for j in range(3) if j != i)
-        raise TelemetryError.single(
-            fname,
-            f"angular rate {np.degrees(w[k, i]):.6g} deg/s: beyond any flight computer's gyro range "
-            f"(±{np.degrees(MAX_RATE_RAD_S):.0f} deg/s); the largest of the other axes: {others} deg/s — the "
-            "column looks scaled or in other units (mdeg/s?)",
-            column=col,
-            row=int(rows[k]) + 1,
-        )
-
-
-def find_gaps(t: np.ndarray, letters: np.ndarray, gap_factor: float = 3.0) -> tuple[Gap, ...]:
-    """Steps of t (n,) [s] longer than ``gap_factor`` × the median step, as :class:`Gap` (row
-    1-based of the sample after the gap; ``phase`` its letter)."""
-    if t.size < 2:
-        return ()
-    dt = np.diff(t)
-    lim = gap_factor * float(np.median(dt))
-    return tuple(
-        Gap(float(t[i]), float(t[i + 1]), float(dt[i]), int(i) + 2, str(letters[i + 1]))
-        for i in np.flatnonzero(dt > lim)
-    )
-
-
-@dataclass(frozen=True)
-class FlightMetadata:
-    """The flight's ``metadata.json`` entry in SI: ``mass`` [kg], ``cd`` [-], ``area`` [m²];
-    site ``temperature`` [K], ``qnh`` [Pa] (the reported air pressure, read as reduced to sea level),
-    ``wind_speed`` [m/s], ``wind_from_deg`` (direction the wind blows from, deg clockwise from north);
-    ``launch_lat_deg``/``launch_lon_deg``, ``landed_lat_deg``/``landed_lon_deg``, ``apogee`` [m],
-    ``rod_angle_deg``, ``date`` (ISO string), ``description``, ``motor`` (designation or None)."""
-
-    name: str
-    mass: float
-    cd: float
-    area: float
-    temperature: float
-    qnh: float
-    wind_speed: float
-    wind_from_deg: float
-    launch_lat_deg: float
-    launch_lon_deg: float
-    landed_lat_deg: float
-    landed_lon_deg: float
-    apogee: float
-    rod_angle_deg: float
-    date: str
-    description: str
-    motor: str | None = None
 
 
 _COMPASS = {d: 22.5 * i for i, d in enumerate("N NNE NE ENE E ESE SE SSE S SSW SW WSW W WNW NW NNW".split())}
@@ -505,20 +280,6 @@ def read_metadata(path: str | os.PathLike, flight: str) -> FlightMetadata:
     )
 
 
-def block_means(t: np.ndarray, v: np.ndarray, t0: float, t1: float, rate_hz: float, gaps: tuple[Gap, ...]):
-    """Means of v (n, k) over consecutive blocks of 1/rate_hz seconds in [t0, t1]; a block never
-    spans a gap (the block is cut at the gap).  Returns (t_mean (m,), v_mean (m, k), count (m,))."""
-    sel = (t >= t0) & (t <= t1)
-    ts, vs = t[sel], v[sel]
-    edges = np.floor((ts - t0) * rate_hz).astype(int)
-    for g in gaps:  # a new block after every gap
-        edges = edges + 1000000 * (ts >= g.t_b)
-    _, start, count = np.unique(edges, return_index=True, return_counts=True)
-    tm = np.add.reduceat(ts, start) / count
-    vm = np.add.reduceat(vs, start, axis=0) / count[:, None]
-    return tm, vm, count
-
-
 def import_flight(
     log_path: str | os.PathLike,
     metadata_path: str | os.PathLike,
@@ -546,243 +307,19 @@ def import_flight(
     ``allow_unhealthy`` (then they are kept in ``flight.json`` and join the run's health verdict).
     The files are written into a temporary folder moved into place at the end.
     """
-    # imported here: the command line builds its parser from this module and stays light
-    from workbench.estimation.health import ERROR, UnhealthyError, health_report
-    from workbench.problems.post2 import rocket, rocket_checks
-
     log = read_log(log_path)
     meta = read_metadata(metadata_path, flight or Path(log_path).name)
-    out = Path(out_dir)
-    name = name or Path(log_path).stem
-    if not obs_rate_hz > 0.0:
-        raise TelemetryError.single(log.path, f"--obs-rate-hz {obs_rate_hz:g}: the observation rate must be positive")
-    t_launch = log.phase_start("M")
-    log.phase_start("C"), log.phase_start("F")  # the coast and the descent's start are needed
-    t = log.t - t_launch  # seconds from launch (the first motor row)
-    for g in log.gaps:
-        if log.phase_start("M") <= g.t_a and (g.phase in ("M",) or g.t_b <= log.phase_start("C") + 0.5):
-            raise TelemetryError.single(
-                log.path,
-                f"gap of {g.dt:.3f} s inside the boost: the IMU cannot be integrated across it",
-                column="timestamp_seconds",
-                row=g.row,
-            )
-    pad_field = (
-        float(np.median(np.linalg.norm(log.mag_B[log.letters == "S"], axis=1))) if np.any(log.letters == "S") else 0.0
-    )
-    if not pad_field > MIN_FIELD_T:
-        raise TelemetryError.single(
-            log.path,
-            f"the magnetometer reads {pad_field * 1e6:.3g} µT on the pad (median |B| of the standby rows; the Earth's "
-            "field is 22–67 µT): a dead or missing magnetometer — the pad heading cannot be found",
-            column="magnetic_field_x_microteslas",
-        )
-    try:
-        fl = rocket.reconstruct_boost(
-            t, log.letters, log.f_B, log.w_B, log.mag_B, log.pressure, meta, declination_deg, inclination_deg
-        )
-    except ValueError as e:  # the pad window: too little standby data before the motor letter
-        raise TelemetryError.single(
-            log.path, str(e), column=_LETTER, row=int(np.argmax(log.letters == "M")) + 1
-        ) from None
-    # the drogue opens at the ejection shock (the descent letter can lag it: flight 4, 3.5 s)
-    t_apogee = rocket.detect_ejection(t, log.f_B, log.phase_start("C") - t_launch, log.phase_start("F") - t_launch)
-    try:
-        t_land = log.phase_start("L") - t_launch
-    except ValueError:
-        t_land = float(t[-1])
-    t_end = min(t_land, t_end_s) if t_end_s is not None else t_land
-    t_main = rocket.detect_main_deploy(t, log.pressure, log.f_B, fl.atmosphere, t_apogee, t_end)
-    t0 = fl.t_start
-    if not (np.all(np.isfinite(fl.p_M)) and np.all(np.isfinite(fl.v_M))):
-        raise TelemetryError.single(
-            log.path, "the boost integrated from the IMU is not finite (a degenerate pad alignment?)", column=_LETTER
-        )
-    if not t_end > t0 + 1.0:
-        raise TelemetryError.single(
-            log.path, f"the reconstruction span {t0:.2f} .. {t_end:.2f} s after launch is too short", column=_LETTER
-        )
-    # the coast drag multiplier's prior from the first measured coast drag at the burnout state
-    r_b = float(np.linalg.norm(fl.p_M))
-    v_rel = float(np.linalg.norm(fl.v_M - np.cross([0.0, 0.0, EARTH.rotation_rate], fl.p_M)))
-    rho = float(fl.atmosphere.density(max(r_b - EARTH.reference_radius, 0.0)))
-    ca0 = rocket.initial_ca_multiplier(t, log.f_B, t0, v_rel, rho, meta)
-    ca0_raw = rocket.initial_ca_multiplier(t, log.f_B, t0, v_rel, rho, meta, clip=False)
-    health = rocket_checks.import_checks(
+    return import_log(
         log,
         meta,
-        fl,
-        t,
-        t_ej=t_apogee,
-        t_main=t_main,
-        ca0_unclipped=ca0_raw,
+        out_dir,
+        name=name or Path(log_path).stem,
+        declination_deg=declination_deg,
         inclination_deg=inclination_deg,
         obs_rate_hz=obs_rate_hz,
+        t_end_s=t_end_s,
+        allow_unhealthy=allow_unhealthy,
     )
-    if not allow_unhealthy and any(c["status"] == ERROR for c in health["checks"]):
-        from workbench.estimation.health import Check
-
-        raise UnhealthyError(f"import of {log.path}", health_report([Check(**c) for c in health["checks"]]))
-    # written into a temporary folder beside ``out``, moved into place at the end: a failure leaves nothing
-    final, out = out, _staging_dir(out)
-    try:
-        path = _write_import(
-            out,
-            log,
-            meta,
-            fl,
-            t,
-            t_launch,
-            (t0, t_end, t_apogee, t_main),
-            ca0,
-            health,
-            name,
-            declination_deg,
-            obs_rate_hz,
-        )
-    except BaseException:
-        shutil.rmtree(out, ignore_errors=True)
-        raise
-    _commit_dir(out, final)
-    return final / path.name
-
-
-def _staging_dir(out: Path) -> Path:
-    """A new empty folder ``.<out name>.<pid>.partial`` beside ``out`` to write the import into (named
-    so a reader sees it is partial); the folders an import killed outright (SIGKILL) left behind —
-    their process gone — are removed first."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    for old in out.parent.glob(f".{out.name}.*.partial"):
-        pid = old.name[len(out.name) + 2 : -len(".partial")]
-        if pid.isdigit() and not _alive(int(pid)):
-            shutil.rmtree(old, ignore_errors=True)
-    tmp = out.parent / f".{out.name}.{os.getpid()}.partial"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
-    return tmp
-
-
-def _alive(pid: int) -> bool:
-    """Whether a process ``pid`` exists (signal 0 probes without sending anything)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:
-        return True
-    return True
-
-
-def _commit_dir(tmp: Path, out: Path) -> None:
-    """Move the finished import ``tmp`` to ``out``: a rename when ``out`` does not exist (or is an empty
-    folder), else each file replaced in place (the other files of an existing ``out`` are kept)."""
-    if out.is_dir() and not any(out.iterdir()):
-        out.rmdir()
-    if not out.exists():
-        os.replace(tmp, out)
-        return
-    for f in tmp.iterdir():
-        os.replace(f, out / f.name)
-    tmp.rmdir()
-
-
-def _write_import(out, log, meta, fl, t, t_launch, times, ca0, health, name, declination_deg, obs_rate_hz) -> Path:
-    """Write the import's files into the folder ``out`` (:func:`import_flight` computed every input:
-    ``times`` = (t0, t_end, t_apogee, t_main) [s after launch]); returns the problem file."""
-    from workbench.problems.post2 import rocket
-
-    t0, t_end, t_apogee, t_main = times
-    # observations: block means after burnout, never across a gap
-    gaps_rel = tuple(Gap(g.t_a - t_launch, g.t_b - t_launch, g.dt, g.row, g.phase) for g in log.gaps)
-    tp, pm, cnt = block_means(t, log.pressure[:, None], t0, t_end, obs_rate_hz, gaps_rel)
-    ta, am, _ = block_means(t, np.linalg.norm(log.f_B, axis=1)[:, None], t0, t_end, obs_rate_hz, gaps_rel)
-    write_telemetry(
-        out / "pressure.csv", tp, {"p": (pm[:, 0], "Pa")}, meta={"source": log.path.name, "samples_per_block": "varies"}
-    )
-    sig_p = rocket.pressure_sigma(tp, log.phase_start("C") - t_launch, t_apogee, fl.pad_pressure_std, cnt, t_main)
-    write_telemetry(
-        out / "pressure_weights.csv", tp, {"p": (1.0 / sig_p**2, "1")}, meta={"meaning": "W = 1/sigma^2 [1/Pa^2]"}
-    )
-    write_telemetry(out / "accel.csv", ta, {"a": (am[:, 0], "m/s^2")}, meta={"source": log.path.name})
-    fn = np.linalg.norm(log.f_B, axis=1)
-    _, _, cnt_a = block_means(t, fn[:, None], t0, t_end, obs_rate_hz, gaps_rel)
-    sig_a = rocket.accel_sigma(ta, t_apogee, t_main, rocket.local_noise(ta, t, fn), cnt_a)
-    write_telemetry(
-        out / "accel_weights.csv", ta, {"a": (1.0 / sig_a**2, "1")}, meta={"meaning": "W = 1/sigma^2 [s^4/m^2]"}
-    )
-    # the raw IMU and the flight computer's reference solution (for scoring and drawing, not observed)
-    write_telemetry(
-        out / "imu.csv",
-        t,
-        {
-            **{f"f.{c}": (log.f_B[:, i], "g") for i, c in enumerate("xyz")},
-            **{f"w.{c}": (log.w_B[:, i], "deg/s") for i, c in enumerate("xyz")},
-            **{f"mag.{c}": (log.mag_B[:, i], "uT") for i, c in enumerate("xyz")},
-            "pressure": (log.pressure, "Pa"),
-            "board_temperature": (log.temperature, "degC"),
-        },
-        meta={"source": log.path.name, "frame": "IMU axes as logged", "time_zero": "first motor row"},
-    )
-    write_telemetry(
-        out / "reference.csv",
-        t,
-        {
-            "h": (log.ref_h, "m"),
-            "vz": (log.ref_vz, "m/s"),
-            **{f"q{c}": (log.ref_q[:, i], "1") for i, c in enumerate("xyzw")},
-        },
-        meta={"source": log.path.name, "meaning": "the flight computer's own solution (reference, not observed)"},
-    )
-    events = [(float(t[0]), "log start")]
-    letters = log.letters
-    for k in np.flatnonzero(letters[1:] != letters[:-1]) + 1:
-        events.append((float(t[k]), f"phase {letters[k]} ({PHASES[letters[k]]})"))
-    for g in gaps_rel:
-        events.append((g.t_a, f"gap {g.dt:.3f} s before row {g.row}"))
-    events.append((t_apogee, "drogue ejection (detected)"))
-    if t_main is not None:
-        events.append((t_main, "main parachute (detected)"))
-    write_events(out / "events.csv", sorted(events))
-    info = {
-        "initial_ca_multiplier": ca0,
-        "flight": meta.name,
-        "log": log.path.name,
-        "t_launch_log_s": t_launch,
-        "t_start_s": t0,
-        "t_apogee_letter_s": log.phase_start("F") - t_launch,
-        "t_ejection_s": t_apogee,
-        "t_main_s": t_main,
-        "t_end_s": t_end,
-        "rows": int(t.size),
-        "repeated_rows_dropped": log.repeated_rows,
-        "gaps": [{"t_a_s": g.t_a, "t_b_s": g.t_b, "dt_s": g.dt, "row": g.row, "phase": g.phase} for g in gaps_rel],
-        "declination_deg": declination_deg,
-        "pad": fl.pad_info,
-        "burnout": fl.burnout_info,
-        "metadata": meta.__dict__,
-        "observation_rate_hz": obs_rate_hz,
-        "health_checks": health,
-    }
-    (out / "flight.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
-    path = out / f"{name}.toml"
-    # the pad's events for the rocket results: burnout (first coast row) and touchdown when the span reaches it
-    t_burnout = log.phase_start("C") - t_launch
-    t_touchdown = t_end if "L" in set(log.letters) and t_end >= log.phase_start("L") - t_launch - 1e-9 else None
-    marks = {"t_burnout": t_burnout, "t_touchdown": t_touchdown}
-    path.write_text(
-        rocket.problem_file(name, meta, fl, t0, t_end, t_apogee, t_main, ca0=ca0, **marks), encoding="utf-8"
-    )
-    # the variant that also observes the landed coordinates (winds under the parachutes)
-    p_land = rocket.landing_point_inertial(meta, fl.h_pad, t_end)
-    write_telemetry(
-        out / "landing.csv",
-        np.array([t_end - 1e-3]),  # 1 ms before the touchdown letter: inside the span
-        {c: (np.array([p_land[i]]), "m") for i, c in enumerate("xyz")},
-        meta={"meaning": "metadata landed coordinates at touchdown, inertial frame M, pad elevation"},
-    )
-    text = rocket.problem_file(f"{name}_landing", meta, fl, t0, t_end, t_apogee, t_main, landing=True, ca0=ca0, **marks)
-    (out / f"{name}_landing.toml").write_text(text, encoding="utf-8")
-    return path
 
 
 HELP = "AirbrakesV2 FIRM flight log (CSV + metadata.json) -> telemetry + post2 problem file"
