@@ -93,12 +93,33 @@ def test_ellipse_axes_and_orientation():
     assert (a, b, o) == pytest.approx((15.0, 3.0, 30.0))
 
 
+def test_heading_ring_turns_the_air_path_about_the_wind_drift():
+    """Without a trusted heading the landing is a ring about the wind drift: radius |landing − drift|,
+    the whole ring at 60° 1σ (3σ = 180°), an arc at 10° 1σ; the reach is the chord plus the ellipse's 3σ."""
+    t = np.linspace(0.0, 10.0, 11)
+    wind = np.tile([2.0, 0.0], (11, 1))  # 20 m of drift east
+    P = np.diag([100.0, 100.0])
+    ring = rocket_results.heading_ring(np.array([20.0, 500.0]), P, t, wind, 60.0)
+    assert ring["centre_en_m"] == pytest.approx([20.0, 0.0]) and ring["radius_m"] == pytest.approx(500.0)
+    assert ring["whole_ring"] and ring["max_miss_3sigma_m"] == pytest.approx(1000.0 + 30.0)
+    arc = rocket_results.heading_ring(np.array([20.0, 500.0]), P, t, wind, 10.0)
+    assert not arc["whole_ring"] and arc["half_width_3sigma_deg"] == 30.0 and arc["bearing_deg"] == pytest.approx(0.0)
+    assert arc["max_miss_3sigma_m"] == pytest.approx(2 * 500 * math.sin(math.radians(15.0)) + 30.0)
+
+
 def test_headline_and_scorecard_lead_with_the_rocket(run):
     _, _, s = run
     a = s["rocket"]["apogee"]
     assert s["headline"].startswith(f"apogee {a['altitude_m']:.0f} ± {a['sigma_m']:.0f} m above the pad")
-    assert "max speed" in s["headline"] and "3σ ellipse" in s["headline"]
+    assert "max speed" in s["headline"]
     assert "last fix" in s["headline"] and "in flight" in s["headline"]  # not landed: not called a landing
+    la = s["rocket"]["landing"]
+    if la["heading_trusted"]:
+        assert "3σ ellipse" in s["headline"]
+    else:  # the excerpt's pad heading is untrusted: the heading ring, not the linearised ellipse
+        ring = la["heading_ring"]
+        assert "heading untrusted" in s["headline"] and f"{ring['max_miss_3sigma_m']:.0f} m" in s["headline"]
+        assert ring["radius_m"] > 0 and ring["max_miss_3sigma_m"] > 3 * la["ellipse_1sigma"]["semi_major_m"]
     md = Post2Problem().scorecard(s)
     assert md.index("## Rocket results") < md.index("| state | final |")
     assert f"{a['altitude_m']:.1f} ± {a['sigma_m']:.1f} m" in md

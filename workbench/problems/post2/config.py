@@ -258,6 +258,15 @@ SCHEMA = Schema(
                 Key("burnout_s", _F, None, "s", "motor burnout (the flight computer's first coast row)"),
                 Key("touchdown_s", _F, None, "s", "touchdown (first landed row); absent: the data end in flight"),
                 Key(
+                    "heading_sigma_deg",
+                    _F,
+                    60.0,
+                    "deg",
+                    "the pad heading's 1σ (read when `heading_trusted` is false: the landing's heading ring)",
+                    ge=0.0,
+                    le=180.0,
+                ),
+                Key(
                     "heading_trusted",
                     _B,
                     True,
@@ -588,7 +597,8 @@ class MonteCarloSettings:
 class LaunchSite:
     """``[launch]`` of a rocket flight: pad ``lat_deg``, ``lon_deg`` [deg] (edge units, as in the file),
     ``pad_altitude_m`` [m] above the reference sphere, ``burnout_s`` and ``touchdown_s`` [s after launch,
-    None: unknown / not in the data], ``heading_trusted`` (the pad heading's source was accepted)."""
+    None: unknown / not in the data], ``heading_trusted`` (the pad heading's source was accepted),
+    ``heading_sigma_deg`` [deg] the pad heading's 1σ."""
 
     lat_deg: float
     lon_deg: float
@@ -596,6 +606,7 @@ class LaunchSite:
     burnout_s: float | None
     touchdown_s: float | None
     heading_trusted: bool
+    heading_sigma_deg: float = 60.0
 
 
 @dataclass(frozen=True)
@@ -964,7 +975,7 @@ def _launch(file: Path, la: dict) -> LaunchSite | None:
         raise ScenarioError(file, "launch.lat_deg", "needs launch.lon_deg too (the pad's longitude)")
     return LaunchSite(
         float(la["lat_deg"]), float(la["lon_deg"]), float(la["pad_altitude_m"]),
-        la["burnout_s"], la["touchdown_s"], bool(la["heading_trusted"]),
+        la["burnout_s"], la["touchdown_s"], bool(la["heading_trusted"]), float(la["heading_sigma_deg"]),
     )  # fmt: skip
 
 

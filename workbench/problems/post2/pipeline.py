@@ -669,7 +669,8 @@ def _rocket(cfg: Post2Settings, est: Estimator, t, x, P, summary: dict):
     env = est.model.env
     track = rocket_results.local_track(cfg.launch, t, p, v, P[:, sp, sp], P[:, sv, sv], env.radius_ref, env.omega)
     chutes = {e.name: e.chute for e in cfg.events if e.chute}
+    wind = est.smap.raw(x, "wind") if "wind" in est.smap.blocks else None
     summary["rocket"] = rocket_results.summary_block(
-        cfg.launch, track, P[-1][sp, sp], est.phase_log, chutes, env.omega, p[-1]
+        cfg.launch, track, P[-1][sp, sp], est.phase_log, chutes, env.omega, p[-1], wind
     )
     return track

@@ -55,7 +55,15 @@ from workbench.io.telemetry import read_telemetry
 from workbench.problems.post2 import pipeline, rocket_checks
 from workbench.problems.post2.config import Post2Settings
 from workbench.problems.post2.model import POSITION, VELOCITY
-from workbench.problems.post2.rocket_results import altitude_above_pad, enu_axes, horizontal_covariance, vertical_sigma
+from workbench.problems.post2.rocket_results import (
+    LANDING_MIXTURE_SAMPLES,
+    LANDING_MIXTURE_SEED,
+    altitude_above_pad,
+    enu_axes,
+    horizontal_covariance,
+    landing_heading_mixture,
+    vertical_sigma,
+)
 
 __all__ = [
     "PAD_WINDOW_S",
@@ -594,6 +602,7 @@ def problem_file(
         f"lon_deg = {meta.launch_lon_deg:.10g}",
         f"pad_altitude_m = {fl.h_pad:.3f}",
         f"heading_trusted = {'true' if fl.pad_info.get('magnetometer_heading_trusted', True) else 'false'}",
+        f"heading_sigma_deg = {float(fl.pad_info.get('heading_sigma_deg', 0.0)):.4g}  # the pad heading's 1σ",
     ]
     if t_burnout is not None:
         lines.append(f"burnout_s = {t_burnout:.4f}  # the first coast row")
@@ -692,48 +701,6 @@ def problem_file(
             "",
         ]
     return "\n".join(lines)
-
-
-#: the landing's non-linear verdict: the heading grid spans ±LANDING_MIXTURE_SPAN_SIGMA σ with nodes
-#: at most half the smaller landing 1σ apart along the ring (at most LANDING_MIXTURE_MAX_NODES);
-#: draws and seed of its Monte Carlo level
-LANDING_MIXTURE_SPAN_SIGMA = 4.0
-LANDING_MIXTURE_MAX_NODES = 4001
-LANDING_MIXTURE_SAMPLES = 20000
-LANDING_MIXTURE_SEED = 9
-
-
-def landing_heading_mixture(landing_en, P_en, t, wind_en, sigma_heading: float):
-    """The landing point's distribution under a pad heading error of 1σ ``sigma_heading`` [rad],
-    pushed through exactly instead of linearised: (means (K, 2) [m], covariances (K, 2, 2) [m²],
-    weights (K,), wind drift (2,) [m]), a Gaussian mixture over a grid of heading errors (spacing
-    along the ring at most half the smaller 1σ of ``P_en``, so the ring stays continuous).
-
-    A heading error turns the whole air-relative path about the pad (the boost is integrated in a
-    frame turned by it, and the coast and descent follow from the boost), while the drift with the
-    wind does not turn: with ``landing_en`` (2,) [m east/north of the pad] the reconstructed landing
-    and ``wind_en`` (n, 2) [m/s] the smoothed wind at ``t`` (n,) [s] (None: no wind state), the wind
-    drift is D_w = ∫ w dt and the node ψ_k lands at D_w + R(ψ_k)(landing − D_w).  Each node's
-    covariance is the filter's ``P_en`` (2, 2): with a heading of tens of degrees a linearised filter
-    has collapsed the heading's share (the drag |f| "observes" the cross-track speed at second order:
-    flight 1 before its magnetometer alignment kept 240 m beside a 1 500 m ring), so it stands for
-    the error given the heading."""
-    landing_en = np.asarray(landing_en, float)
-    if wind_en is None:
-        d_w = np.zeros(2)
-    else:
-        w = np.asarray(wind_en, float)
-        d_w = np.sum(0.5 * (w[1:] + w[:-1]) * np.diff(np.asarray(t, float))[:, None], axis=0)
-    e, n = landing_en - d_w
-    span = LANDING_MIXTURE_SPAN_SIGMA * sigma_heading
-    sig_min = math.sqrt(float(np.min(np.linalg.eigvalsh(P_en))))
-    k = int(np.clip(math.ceil(2.0 * span * math.hypot(e, n) / (0.5 * sig_min)) + 1, 41, LANDING_MIXTURE_MAX_NODES))
-    psi = np.linspace(-span, span, k | 1)  # odd: a node at no heading error
-    wts = np.exp(-0.5 * (psi / sigma_heading) ** 2)
-    c, s = np.cos(psi), np.sin(psi)
-    means = d_w + np.column_stack([c * e + s * n, -s * e + c * n])  # a heading error ψ turns bearings by +ψ
-    covs = np.broadcast_to(np.asarray(P_en, float), (psi.size, 2, 2))
-    return means, covs, wts / wts.sum(), d_w
 
 
 def run_flight(settings: Post2Settings) -> tuple[object, dict]:

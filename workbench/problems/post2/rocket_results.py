@@ -44,6 +44,12 @@ __all__ = [
     "vertical_sigma",
     "horizontal_covariance",
     "ellipse",
+    "LANDING_MIXTURE_SPAN_SIGMA",
+    "LANDING_MIXTURE_MAX_NODES",
+    "LANDING_MIXTURE_SAMPLES",
+    "LANDING_MIXTURE_SEED",
+    "landing_heading_mixture",
+    "heading_ring",
     "local_track",
     "summary_block",
     "moments",
@@ -143,6 +149,71 @@ def ellipse(P_en: np.ndarray, k: float = 1.0) -> tuple[float, float, float]:
     return k * math.sqrt(max(w[1], 0.0)), k * math.sqrt(max(w[0], 0.0)), math.degrees(math.atan2(e, n)) % 180.0
 
 
+#: the landing's non-linear verdict: the heading grid spans ±LANDING_MIXTURE_SPAN_SIGMA σ with nodes
+#: at most half the smaller landing 1σ apart along the ring (at most LANDING_MIXTURE_MAX_NODES);
+#: draws and seed of its Monte Carlo level
+LANDING_MIXTURE_SPAN_SIGMA = 4.0
+LANDING_MIXTURE_MAX_NODES = 4001
+LANDING_MIXTURE_SAMPLES = 20000
+LANDING_MIXTURE_SEED = 9
+
+
+def landing_heading_mixture(landing_en, P_en, t, wind_en, sigma_heading: float):
+    """The landing point's distribution under a pad heading error of 1σ ``sigma_heading`` [rad],
+    pushed through exactly instead of linearised: (means (K, 2) [m], covariances (K, 2, 2) [m²],
+    weights (K,), wind drift (2,) [m]), a Gaussian mixture over a grid of heading errors (spacing
+    along the ring at most half the smaller 1σ of ``P_en``, so the ring stays continuous).
+
+    A heading error turns the whole air-relative path about the pad (the boost is integrated in a
+    frame turned by it, and the coast and descent follow from the boost), while the drift with the
+    wind does not turn: with ``landing_en`` (2,) [m east/north of the pad] the reconstructed landing
+    and ``wind_en`` (n, 2) [m/s] the smoothed wind at ``t`` (n,) [s] (None: no wind state), the wind
+    drift is D_w = ∫ w dt and the node ψ_k lands at D_w + R(ψ_k)(landing − D_w).  Each node's
+    covariance is the filter's ``P_en`` (2, 2): with a heading of tens of degrees a linearised filter
+    has collapsed the heading's share (the drag |f| "observes" the cross-track speed at second order:
+    flight 1 before its magnetometer alignment kept 240 m beside a 1 500 m ring), so it stands for
+    the error given the heading."""
+    landing_en = np.asarray(landing_en, float)
+    if wind_en is None:
+        d_w = np.zeros(2)
+    else:
+        w = np.asarray(wind_en, float)
+        d_w = np.sum(0.5 * (w[1:] + w[:-1]) * np.diff(np.asarray(t, float))[:, None], axis=0)
+    e, n = landing_en - d_w
+    span = LANDING_MIXTURE_SPAN_SIGMA * sigma_heading
+    sig_min = math.sqrt(float(np.min(np.linalg.eigvalsh(P_en))))
+    k = int(np.clip(math.ceil(2.0 * span * math.hypot(e, n) / (0.5 * sig_min)) + 1, 41, LANDING_MIXTURE_MAX_NODES))
+    psi = np.linspace(-span, span, k | 1)  # odd: a node at no heading error
+    wts = np.exp(-0.5 * (psi / sigma_heading) ** 2)
+    c, s = np.cos(psi), np.sin(psi)
+    means = d_w + np.column_stack([c * e + s * n, -s * e + c * n])  # a heading error ψ turns bearings by +ψ
+    covs = np.broadcast_to(np.asarray(P_en, float), (psi.size, 2, 2))
+    return means, covs, wts / wts.sum(), d_w
+
+
+def heading_ring(landing_en, P_en, t, wind_en, sigma_heading_deg: float) -> dict:
+    """Where a flight whose pad heading is untrusted can have landed (JSON-ready): the air-relative
+    path turned about the pad by the heading error (:func:`landing_heading_mixture`) puts the landing
+    on an arc of ``radius_m`` about the wind drift ``centre_en_m`` [m east/north of the pad], bearings
+    (from the centre, deg from north) ``bearing_deg`` ± 3σ of the heading (the whole ring when 3σ ≥
+    180°), each point with the filter's ``P_en`` (2, 2) [m²] about it; ``max_miss_3sigma_m`` the
+    farthest a 3σ landing lies from the reconstructed point (chord plus the ellipse's 3σ)."""
+    means, _covs, _w, d_w = landing_heading_mixture(landing_en, P_en, t, wind_en, math.radians(sigma_heading_deg))
+    r = np.asarray(landing_en, float) - d_w
+    radius = float(np.hypot(*r))
+    half = min(3.0 * float(sigma_heading_deg), 180.0)
+    chord = 2.0 * radius * math.sin(math.radians(half) / 2.0)
+    return {
+        "heading_sigma_deg": float(sigma_heading_deg),
+        "centre_en_m": d_w.tolist(),
+        "radius_m": radius,
+        "bearing_deg": float(math.degrees(math.atan2(r[0], r[1])) % 360.0),
+        "half_width_3sigma_deg": half,
+        "whole_ring": bool(half >= 180.0),
+        "max_miss_3sigma_m": chord + 3.0 * math.sqrt(float(np.max(np.linalg.eigvalsh(P_en)))),
+    }
+
+
 def local_track(site, t, p_M, v_M, P_pp, P_vv, radius: float, omega: float) -> LocalTrack:
     """The :class:`LocalTrack` of a smoothed trajectory: ``site`` the settings' ``[launch]``
     (:class:`~workbench.problems.post2.config.LaunchSite`), ``t`` (n,) [s after launch], inertial
@@ -192,11 +263,15 @@ def _phases(events, chutes: dict[str, str], t_end: float) -> list[tuple[str, flo
     return [(c, te, opens[i + 1][0] if i + 1 < len(opens) else t_end) for i, (te, c) in enumerate(opens)]
 
 
-def summary_block(site, track: LocalTrack, P_pp_last: np.ndarray, events, chutes, omega: float, p_last) -> dict:
+def summary_block(
+    site, track: LocalTrack, P_pp_last: np.ndarray, events, chutes, omega: float, p_last, wind_en=None
+) -> dict:
     """The ``summary["rocket"]`` block (module docstring): ``site`` the ``[launch]`` settings,
     ``track`` the :class:`LocalTrack`, ``P_pp_last`` (3, 3) [m²] and ``p_last`` (3,) [m] the inertial
     position covariance and position at the last grid time, ``events`` ((t [s], name), ...) fired,
-    ``chutes`` {event name: "drogue" | "main"}, ``omega`` [rad/s] the planet's rotation."""
+    ``chutes`` {event name: "drogue" | "main"}, ``omega`` [rad/s] the planet's rotation, ``wind_en``
+    (n, 2) [m/s] the smoothed wind on the grid (None: no wind state) — with an untrusted pad heading
+    the landing's region is the heading ring (:func:`heading_ring`), not the linearised ellipse."""
     tr = track
     t = tr.t
     k = int(np.argmax(tr.altitude))
@@ -251,9 +326,16 @@ def summary_block(site, track: LocalTrack, P_pp_last: np.ndarray, events, chutes
     if not touched:
         out["landing"]["note"] = "the data end before touchdown: the position at the end of the span"
     if not site.heading_trusted:
+        sig = site.heading_sigma_deg
+        ring = heading_ring(np.array([tr.enu[-1, 0], tr.enu[-1, 1]]), P_en, t, wind_en, sig)
+        half = ring["half_width_3sigma_deg"]
+        out["landing"]["heading_ring"] = ring
         out["landing"]["ellipse_note"] = (
-            "the pad heading is untrusted (60° 1σ): the linearised ellipse understates the cross-range "
-            "(rocket.landing_heading_mixture pushes the heading through exactly)"
+            f"the pad heading is untrusted ({sig:.0f}° 1σ): the linearised ellipse understates the cross-range; "
+            f"the landing lies on {'a ring' if ring['whole_ring'] else 'an arc'} of radius {ring['radius_m']:.0f} m "
+            f"about the wind drift ({ring['centre_en_m'][0]:.0f} m E, {ring['centre_en_m'][1]:.0f} m N of the pad)"
+            + ("" if ring["whole_ring"] else f", bearings {ring['bearing_deg']:.0f}° ± {half:.0f}° (3σ)")
+            + f", up to {ring['max_miss_3sigma_m']:.0f} m from the point reported (heading_ring)"
         )
     descent = {}
     for chute, t_a, t_b in _phases(events, chutes, float(t[-1])):
@@ -301,14 +383,21 @@ def format_lat_lon(lat_deg: float, lon_deg: float) -> str:
 
 
 def headline(block: dict) -> str:
-    """One line: apogee ± 1σ above the pad and its time; max speed; landing point with the 3σ ellipse."""
+    """One line: apogee ± 1σ above the pad and its time; max speed; landing point with the 3σ ellipse
+    (with an untrusted pad heading: the heading ring's 3σ reach instead)."""
     a, s, la = block["apogee"], block["max_speed"], block["landing"]
     e = la["ellipse_3sigma"]
     where = "landing" if la["touchdown"] else f"last fix (t = {la['t_s']:.1f} s, in flight)"
+    ring = la.get("heading_ring")
+    spread = (
+        f"3σ ellipse {e['semi_major_m']:.0f} × {e['semi_minor_m']:.0f} m"
+        if ring is None
+        else f"heading untrusted: within {ring['max_miss_3sigma_m']:.0f} m (3σ), on "
+        f"{'a ring' if ring['whole_ring'] else 'an arc'} of radius {ring['radius_m']:.0f} m about the wind drift"
+    )
     return (
         f"apogee {a['altitude_m']:.0f} ± {a['sigma_m']:.0f} m above the pad at {a['t_s']:.1f} s; "
-        f"max speed {s['speed_m_s']:.0f} m/s; {where} {format_lat_lon(la['lat_deg'], la['lon_deg'])} "
-        f"(3σ ellipse {e['semi_major_m']:.0f} × {e['semi_minor_m']:.0f} m)"
+        f"max speed {s['speed_m_s']:.0f} m/s; {where} {format_lat_lon(la['lat_deg'], la['lon_deg'])} ({spread})"
     )
 
 
