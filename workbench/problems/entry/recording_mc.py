@@ -142,8 +142,16 @@ def validation_blueprint() -> rrb.Blueprint:
                 plot_view("RMS attitude error [deg]", layout.VALIDATION_RMS_ATTITUDE, legend="RightTop"),
             ),
             rrb.Vertical(
-                plot_view("per run: time-averaged NEES [-]", layout.VALIDATION_RUNS_NEES, legend="RightTop"),
-                plot_view("per run: max altitude error after fix [m]", layout.VALIDATION_RUNS_H_AGL, legend="RightTop"),
+                plot_view(
+                    "per run: time-averaged NEES [-] (set the time panel's timeline to 'sample')",
+                    layout.VALIDATION_RUNS_NEES,
+                    legend="RightTop",
+                ),
+                plot_view(
+                    "per run: max altitude error after fix [m] (timeline 'sample')",
+                    layout.VALIDATION_RUNS_H_AGL,
+                    legend="RightTop",
+                ),
                 report_view("Scorecard", health=False),
             ),
             column_shares=[3, 2],
