@@ -38,6 +38,7 @@ from workbench.problems.post2.importers.flightlog import (
     FlightLog,
     FlightMetadata,
     Gap,
+    add_common_arguments,
     block_means,
     check_rates,
     check_units,
@@ -337,14 +338,9 @@ def add_arguments(parser) -> None:
         default=None,
         help="magnetic dip at the site (down +): the magnetometer heading is trusted only if the pad agrees",
     )
-    parser.add_argument("--obs-rate-hz", type=float, default=10.0, help="rate of the block-mean observations")
+    add_common_arguments(parser)
     parser.add_argument("--name", default=None, help="problem name (default: the log's file stem)")
     parser.add_argument("--flight", default=None, help="the metadata entry (default: the log's file name)")
-    parser.add_argument(
-        "--allow-unhealthy",
-        action="store_true",
-        help="write the import even when a physics cross-check is ERROR (the run's verdict then carries it)",
-    )
 
 
 def run(args) -> Path:

@@ -41,6 +41,7 @@ __all__ = [
     "find_gaps",
     "block_means",
     "import_log",
+    "add_common_arguments",
 ]
 
 #: flight-phase letters of the FIRM log: standby, motor, coast, free fall / parachute, landed
@@ -541,3 +542,14 @@ def _write_import(
     text = rocket.problem_file(f"{name}_landing", meta, fl, t0, t_end, t_apogee, t_main, landing=True, ca0=ca0, **marks)
     (out / f"{name}_landing.toml").write_text(text, encoding="utf-8")
     return path
+
+
+def add_common_arguments(parser) -> None:
+    """The options every flight-log import takes (an ``argparse`` parser): ``--obs-rate-hz`` [Hz] of
+    the block-mean observations and ``--allow-unhealthy``."""
+    parser.add_argument("--obs-rate-hz", type=float, default=10.0, help="rate of the block-mean observations")
+    parser.add_argument(
+        "--allow-unhealthy",
+        action="store_true",
+        help="write the import even when a physics cross-check is ERROR (the run's verdict then carries it)",
+    )

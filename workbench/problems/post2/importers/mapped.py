@@ -46,6 +46,7 @@ from workbench.problems.post2.importers.flightlog import (
     FlightLog,
     FlightMetadata,
     Gap,
+    add_common_arguments,
     check_rates,
     check_units,
     find_gaps,
@@ -860,14 +861,9 @@ def add_arguments(parser) -> None:
     """The ``workbench import csv`` options (an ``argparse`` parser)."""
     parser.add_argument("--mapping", required=True, help="the column mapping file (TOML; workbench/io/FORMATS.md)")
     parser.add_argument("--out", required=True, help="output folder (telemetry CSVs, flight.json, problem files)")
-    parser.add_argument("--obs-rate-hz", type=float, default=10.0, help="rate of the block-mean observations")
+    add_common_arguments(parser)
     parser.add_argument("--name", default=None, help="problem name (default: [flight] name or the mapping's stem)")
     parser.add_argument("--t-end-s", type=float, default=None, help="end the reconstruction this long after launch")
-    parser.add_argument(
-        "--allow-unhealthy",
-        action="store_true",
-        help="write the import even when a physics cross-check is ERROR (the run's verdict then carries it)",
-    )
 
 
 def run(args) -> Path:
