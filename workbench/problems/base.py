@@ -28,9 +28,10 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from workbench.io.moments import KeyMoment
-from workbench.io.scenario import RunInfo, Scenario
+from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 
 __all__ = [
+    "require_synthetic",
     "ExportTable",
     "KeyMoment",
     "McOptions",
@@ -231,3 +232,10 @@ class Problem(Protocol):
         """The problem's Monte Carlo / consistency analysis of the run ``settings``; writes its recording
         under ``out_dir``, reports its phases to ``progress`` and returns the summary.  Raises
         ``NotImplementedError`` if the scenario does not allow one (e.g. not synthetic)."""
+
+
+def require_synthetic(run: RunInfo, study: str = "the Monte Carlo against the truth") -> None:
+    """Raise a ``ScenarioError`` naming the scenario file and ``[synthetic]`` unless the run
+    ``run`` is synthetic: a study that needs the truth simulator (``study``) cannot run on user data."""
+    if not run.synthetic:
+        raise ScenarioError(run.path, "synthetic", f"{study} needs a synthetic scenario ([synthetic])")

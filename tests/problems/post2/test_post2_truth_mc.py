@@ -123,3 +123,11 @@ def test_one_member_end_to_end_recorded(cfg, tmp_path):
     t, v = rec.scalars("/plots/post2_truth_mc/grid_nees/position_mean")
     assert t.size == res.t.size and np.allclose(v[:, 0], res.grid_nees[0, :, 0])
     assert "Monte Carlo against the truth simulator" in rec.text_document()
+
+
+def test_user_data_has_no_truth_monte_carlo(cfg, tmp_path):
+    from workbench.problems.base import McOptions
+
+    user = replace(cfg, run=replace(cfg.run, synthetic=False))
+    with pytest.raises(ScenarioError, match=r"synthetic.*needs a synthetic scenario"):
+        Post2Problem().monte_carlo(user, tmp_path, McOptions(n_runs=1), print)

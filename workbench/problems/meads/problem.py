@@ -17,9 +17,17 @@ import numpy as np
 
 from workbench.io import progress as prog
 from workbench.io.moments import KeyMoment
-from workbench.io.scenario import Scenario, ScenarioError
+from workbench.io.scenario import Scenario
 from workbench.models.flush_airdata import FADS_PORT_SCHEMA, FADS_VEHICLE_SCHEMA
-from workbench.problems.base import ExportTable, McOptions, McOutcome, Progress, RunOptions, Synthesized
+from workbench.problems.base import (
+    ExportTable,
+    McOptions,
+    McOutcome,
+    Progress,
+    RunOptions,
+    Synthesized,
+    require_synthetic,
+)
 from workbench.problems.drawer import RunDrawer
 from workbench.problems.meads import pipeline as md
 from workbench.problems.meads.config import SCHEMA, MeadsSettings
@@ -230,12 +238,7 @@ class MeadsProblem(PipelineProblem):
         from workbench.problems.meads.truth_mc import run_full_monte_carlo
 
         name = settings.run.name
-        if not settings.run.synthetic:
-            raise ScenarioError(
-                settings.run.path,
-                "synthetic",
-                "the Monte Carlo against the truth needs a synthetic scenario ([synthetic])",
-            )
+        require_synthetic(settings.run)
         t0 = time.perf_counter()
         n = int(options.n_runs)
         where = options.scheduler or f"{options.workers} local worker(s)"

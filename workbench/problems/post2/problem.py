@@ -16,8 +16,8 @@ import numpy as np
 from workbench.core.bodies import G0
 from workbench.estimation.health import health_markdown
 from workbench.io.moments import KeyMoment, slug
-from workbench.io.scenario import Scenario, ScenarioError
-from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized
+from workbench.io.scenario import Scenario
+from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized, require_synthetic
 from workbench.problems.post2 import build, huygens, rocket_results
 from workbench.problems.post2.config import SCHEMA, Post2Settings
 from workbench.problems.post2.model import DESCENT_NOMINALS, OBSERVATIONS, STATES, aero_angles
@@ -340,12 +340,7 @@ class Post2Problem:
         entropy ``options.first_seed``, on ``options.workers`` processes or ``options.scheduler``;
         ``options.members`` the initial-state selection's members; writes ``<out>/<name>_truth_mc.rrd``
         (:func:`.recording_mc.record_truth_mc`).  A scenario without ``[synthetic]`` is a ScenarioError."""
-        if not settings.run.synthetic:
-            raise ScenarioError(
-                settings.run.path,
-                "synthetic",
-                "the Monte Carlo against the truth needs a synthetic scenario ([synthetic])",
-            )
+        require_synthetic(settings.run)
         t0 = time.perf_counter()
         n = int(options.n_runs)
         where = options.scheduler or f"{options.workers} local worker(s)"
