@@ -64,7 +64,7 @@ from workbench.problems.entry import dispersion as ds  # noqa: E402
 from workbench.problems.entry.site import R_GROUND  # noqa: E402
 
 
-def _scenario_input(seed: int):
+def scenario_input(seed: int):
     """(imu, nominal (v, q, p), events, truth (v, q, p) at t0, r_ground, description)."""
     from workbench.io.scenario import load_scenario
     from workbench.problems.entry.config import EntrySettings
@@ -138,7 +138,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
 
     if a.source == "scenario":
-        imu, nom, events, truth0, r_ground, desc = _scenario_input(1)
+        imu, nom, events, truth0, r_ground, desc = scenario_input(1)
     else:
         imu, nom, events, truth0, r_ground, desc = _fixture_input()
     kw = dict(events_t=events, seed=a.seed, r_ground=r_ground, bridge_mode="relative")
