@@ -90,6 +90,22 @@ def test_rock_field_layout():
     assert len(rock_meshes(s, subdivisions=0).vertices) == 49 * 12
 
 
+def test_surface_distance_in_blocks_equals_whole(monkeypatch):
+    """A long batch of points against a rock field is evaluated in blocks (bounded memory): the
+    same distances, gradients and features, bit for bit, as one evaluation."""
+    from workbench.problems.droptest import surface as sf
+
+    s = rock_field(ramp_surface(60.0, 0.3), np.random.default_rng(7), ((-3.0, 3.0), (-3.0, 3.0)), 1.0)
+    x = s.point + np.random.default_rng(3).normal(scale=2.0, size=(1201, 5, 3))
+    monkeypatch.setattr(sf, "ROCK_BLOCK_ELEMENTS", 49 * 100)  # 100 points a block: 61 blocks
+    blocks = s.distance(x)
+    monkeypatch.setattr(sf, "ROCK_BLOCK_ELEMENTS", 10**12)
+    whole = s.distance(x)
+    assert [a.shape for a in blocks] == [(1201, 5), (1201, 5, 3), (1201, 5)]
+    assert all(np.array_equal(a, b) for a, b in zip(blocks, whole, strict=True))
+    assert np.any(whole[2] >= 0)  # some points are nearest a rock
+
+
 # --------------------------------------------------------------------------- stroke distance
 
 

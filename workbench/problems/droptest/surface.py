@@ -29,6 +29,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import trimesh
 
+ROCK_BLOCK_ELEMENTS = 200_000
+"""Point-rock pairs :meth:`Surface.distance` evaluates at once (its (points, rocks, 3) work arrays
+stay under ~15 MB; a longer batch of points is done in blocks)."""
+
 __all__ = ["Surface", "ramp_surface", "rock_field", "ramp_mesh", "rock_meshes"]
 
 
@@ -104,6 +108,17 @@ class Surface:
             ``feature`` (...) int: -1 for the plane, i for rock i.  Ties go to the plane.
         """
         x = np.asarray(points, dtype=float)
+        block = max(1, ROCK_BLOCK_ELEMENTS // max(self.n_rocks, 1))
+        if self.n_rocks and x.ndim > 1 and x.size // 3 > block:
+            # point-by-rock arrays in blocks of points: the same numbers, bounded memory
+            flat = x.reshape(-1, 3)
+            parts = [self.distance(flat[i : i + block]) for i in range(0, flat.shape[0], block)]
+            lead = x.shape[:-1]
+            return (
+                np.concatenate([pt[0] for pt in parts]).reshape(lead),
+                np.concatenate([pt[1] for pt in parts]).reshape(x.shape),
+                np.concatenate([pt[2] for pt in parts]).reshape(lead),
+            )
         d = (x - self.point) @ self.normal
         grad = np.broadcast_to(self.normal, x.shape).copy()
         feature = np.full(d.shape, -1, dtype=int)
