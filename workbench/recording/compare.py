@@ -57,6 +57,7 @@ IGNORED_KEYS = ("wall_time_s", "stage_times_s", "recording", "recording_bytes", 
 _BOUND = re.compile(r"^plus_(\d+(?:\.\d+)?)sigma$")
 _A_COLOUR = (31, 119, 180, 255)
 _B_COLOUR = (255, 127, 14, 255)
+_AXIS_COLOURS = ((214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255))  # x red, y green, z blue (the 3D axes)
 
 
 class ComparisonError(ValueError):
@@ -528,7 +529,8 @@ def write_comparison(cmp: Comparison, out: str | os.PathLike[str], *, max_views:
     views = []
     for d in shown:
         root = layout.COMPARE_POSITION if d is cmp.position else layout.compare_diff_path(d.root)
-        views.append(rrb.TimeSeriesView(name=f"Δ {d.root}", origin=root))
+        name = "Δ position A − B [m], ±3σ combined" if d is cmp.position else f"Δ {d.root} A − B"
+        views.append(rrb.TimeSeriesView(name=name, origin=root))
     for d in shown:
         if d is cmp.position:
             continue
@@ -569,7 +571,9 @@ def write_comparison(cmp: Comparison, out: str | os.PathLike[str], *, max_views:
             for j, comp in enumerate(d.names):
                 sub = layout.compare_position_path(comp) if d is cmp.position else None
                 if sub is not None:
-                    rec.series_with_bounds(sub, d.t, d.diff[:, j], d.sigma[:, j], names=f"Δ{comp} [m]")
+                    rec.series_with_bounds(
+                        sub, d.t, d.diff[:, j], d.sigma[:, j], names=f"Δ{comp} [m]", color=_AXIS_COLOURS[j % 3]
+                    )
             if d is cmp.position:
                 rec.scalars(layout.COMPARE_POSITION_NORM, d.t, np.linalg.norm(d.diff, axis=1), names="|Δ position| [m]")
                 continue
