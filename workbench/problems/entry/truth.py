@@ -924,7 +924,7 @@ def _loop_compiled(model: _Model, spec: EntryTruthSpec, y: list, states, auxs, p
         trig_mode, trig_value = 2, float(spec.pdd_mach)
     sc, arrs = model.packed()
     while True:
-        tick(float(spec.t0 + k * dt_out - spec.t0))
+        tick(float(k * dt_out))
         if i_fsr is not None and k == i_fsr:  # front shield leaves: mass, inertia and aero table switch
             model.set_phase(2)
             sc, arrs = model.packed()
