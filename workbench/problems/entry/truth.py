@@ -627,18 +627,23 @@ class _Model:
         sc[tf.SC_CP_X0], sc[tf.SC_CP_INV] = self.cp_fac[0], self.cp_fac[1]
         sc[tf.SC_TWO] = 2.0
         tab, ch = self.tab, self.veh.parachute
-        arrs = (
-            self.atm_table,
-            np.ascontiguousarray(tab.mach, dtype=float),
-            np.ascontiguousarray(tab.log10_kn, dtype=float),
-            np.ascontiguousarray(tab.alpha, dtype=float),
-            np.ascontiguousarray(np.stack([tab.ca, tab.cn, tab.cm], axis=-1), dtype=float),
-            np.asarray(self.ca_fac[2], dtype=float),
-            np.asarray(self.cp_fac[2], dtype=float),
-            np.ascontiguousarray(ch.mach, dtype=float),
-            np.ascontiguousarray(ch.cd, dtype=float),
-            np.asarray(self.I, dtype=float),
-            np.asarray(self.Iinv, dtype=float),
+        # writable C-contiguous copies: one kernel signature whether the asset's read-only arrays
+        # or their unpickled (writable) copies in a worker process come in
+        arrs = tuple(
+            np.array(a, dtype=float, order="C")
+            for a in (
+                self.atm_table,
+                tab.mach,
+                tab.log10_kn,
+                tab.alpha,
+                np.stack([tab.ca, tab.cn, tab.cm], axis=-1),
+                self.ca_fac[2],
+                self.cp_fac[2],
+                ch.mach,
+                ch.cd,
+                self.I,
+                self.Iinv,
+            )
         )
         return sc, arrs
 
