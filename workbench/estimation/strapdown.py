@@ -46,6 +46,7 @@ from scipy.linalg import expm
 from workbench.core.bodies import Body
 from workbench.core.gravity import gravity_j2_xyz, gravity_point_mass_gradient, j2_factor
 from workbench.core.rotation import dcm_to_quat, quat_multiply, quat_normalize, quat_to_dcm, skew
+from workbench.estimation.strapdown_kernel import transition_step
 
 __all__ = [
     "GAP_SIGMA_DEFAULT",
@@ -501,6 +502,7 @@ def integrate(
     sample_dt: float | None = None,
     gravity_gradient: bool = True,
     body: Body,
+    fast: bool = False,
 ) -> StrapdownPass:
     """Strapdown integration with first-order covariance over a PreprocessedIMU (AMELIA Sect. 5).
 
@@ -513,7 +515,9 @@ def integrate(
     (``gap_sigma``).  ``q_state_psd`` (9,) optional state noise PSD η (Eq. A.15's R) [units²/s];
     ``sample_dt`` [s] the raw sampling interval that turns per-sample σ into spectral densities
     (default: the median sample interval); ``gravity_gradient`` include G(p) in A; ``body`` the
-    planet (gravity).
+    planet (gravity).  ``fast``: each ordinary step by the compiled
+    :func:`~workbench.estimation.strapdown_kernel.transition_step` (the same state, Φ and Qd to
+    rounding) instead of :func:`rk4_step` + :func:`covariance_step` (the reference path, default).
     """
     t, f, w, sf, sw = imu_columns(imu)
     n = t.size
@@ -536,6 +540,10 @@ def integrate(
     p = np.asarray(p0, dtype=float).copy()
     Pk = np.asarray(P0, dtype=float).copy()
     V[0], Q[0], X[0], P[0], Phi[0], Qd[0] = v, q, p, Pk, _I9, 0.0
+    if fast:
+        qpsd = np.zeros(9) if q_state_psd is None else np.ascontiguousarray(q_state_psd, dtype=float)
+        sw_mid, sf_mid = _rms(sw[:-1], sw[1:]), _rms(sf[:-1], sf[1:])
+        gm, j2k = float(body.gm), float(j2_factor(body))
     for k in range(n - 1):
         g = gaps.get(k)
         if g is not None:
@@ -544,6 +552,14 @@ def integrate(
             Pk = F @ Pk @ F.T + Qk
             Pk = 0.5 * (Pk + Pk.T)
             bridged[k + 1] = True
+        elif fast:
+            dt = float(t[k + 1] - t[k])
+            v, q, p, F, Qk = transition_step(
+                v, q, p, f[k], w[k], f[k + 1], w[k + 1], dt, sw_mid[k], sf_mid[k], sample_dt, qpsd,
+                bool(gravity_gradient), gm, j2k,
+            )  # fmt: skip
+            Pk = F @ Pk @ F.T + Qk
+            Pk = 0.5 * (Pk + Pk.T)
         else:
             dt = t[k + 1] - t[k]
             v1, q1, p1 = rk4_step(v, q, p, f[k], w[k], f[k + 1], w[k + 1], dt, body)

@@ -28,6 +28,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from workbench.core.bodies import MARS
+from workbench.core.gravity import j2_factor
 from workbench.core.rotation import quat_boxplus, quat_to_dcm
 from workbench.estimation.consistency import chi2_gate
 from workbench.estimation.ekf import (
@@ -48,6 +49,7 @@ from workbench.estimation.strapdown import (
     imu_columns,
     rk4_step,
 )
+from workbench.estimation.strapdown_kernel import transition_step
 from workbench.io import progress
 from workbench.models.radar import (
     PlaneFit,
@@ -483,6 +485,7 @@ def run_entry_smoother(
     *,
     sigmas: EntryFilterSigmas | Mapping[str, Any] | None = None,
     constrained: bool = True,
+    fast: bool = True,
 ) -> EntryFilterResult:
     """Forward EKF with radar updates + error-state RTS backward pass (docs/tuning/entry.md).
 
@@ -490,6 +493,9 @@ def run_entry_smoother(
     ``gaps``); ``radar``: :class:`RadarData`; initial state at ``imu.t[0]``: v0 (3,) [m/s], q0 (4,)
     ``q_M_G``, p0 (3,) [m], P0 (9, 9); ``sigmas``: :class:`EntryFilterSigmas` or a mapping;
     ``constrained``: AMELIA's projected update directions (False: plain EKF updates).
+    ``fast``: the IMU steps by the compiled strapdown kernel
+    (:func:`~workbench.estimation.strapdown_kernel.transition_step`); False: ``rk4_step`` and
+    ``covariance_step``, the reference path (the two agree to rounding).
     Raises ``ValueError`` naming the step if a covariance stops being positive definite.
     """
     wall0 = time.perf_counter()
@@ -531,7 +537,7 @@ def run_entry_smoother(
 
     def run_pass(lin: np.ndarray | None) -> ForwardPass:
         fw, rms = _forward(x0, np.asarray(P0, dtype=float), lin, t_aug, interval, imu_node, fa, wa, sw, sf,
-                           sample_dt, gaps, by_node, radar, sg, qpsd, gate, constrained)  # fmt: skip
+                           sample_dt, gaps, by_node, radar, sg, qpsd, gate, constrained, fast)  # fmt: skip
         if lin is None:
             rms0.update(rms)
         return fw
@@ -592,7 +598,25 @@ def run_entry_smoother(
 
 
 def _forward(
-    x0, P0, lin, t_aug, interval, imu_node, fa, wa, sw, sf, sample_dt, gaps, by_node, radar, sg, qpsd, gate, constrained
+    x0,
+    P0,
+    lin,
+    t_aug,
+    interval,
+    imu_node,
+    fa,
+    wa,
+    sw,
+    sf,
+    sample_dt,
+    gaps,
+    by_node,
+    radar,
+    sg,
+    qpsd,
+    gate,
+    constrained,
+    fast=True,
 ) -> tuple[ForwardPass, dict]:
     """EKF forward pass on the augmented grid (N nodes) by :func:`workbench.estimation.ekf.run_filter`:
     a :class:`~workbench.estimation.ekf.ForwardPass` (``F[a]``, ``Q[a]`` the error transition and
@@ -601,10 +625,16 @@ def _forward(
     ``lin`` None: the ordinary EKF (dynamics and measurements linearised at the running estimate).
     ``lin`` (N, 10) a linearisation trajectory (the previous iteration's smoothed states): the step
     is the affine model ``x⁻ = f(x̄) ⊞ Φ(x̄) (x ⊟ x̄)`` and a measurement
-    ``h(x) ≈ h(x̄) + H(x̄) (x ⊟ x̄)`` (iterated extended smoother, Gauss-Newton; Bell 1994)."""
+    ``h(x) ≈ h(x̄) + H(x̄) (x ⊟ x̄)`` (iterated extended smoother, Gauss-Newton; Bell 1994).
+    ``fast``: IMU steps by :func:`~workbench.estimation.strapdown_kernel.transition_step`."""
     n_upd = max(1, int(sg.update_iterations))
     node = {tt: a for a, tt in enumerate(t_aug.tolist())}
     rms: dict[int, RadarMeasurement] = {}
+    # per-interval input noise 1σ (the mean variance of the two samples) and the kernel's constants
+    sw_mid = np.sqrt(0.5 * (sw[:-1] ** 2 + sw[1:] ** 2))
+    sf_mid = np.sqrt(0.5 * (sf[:-1] ** 2 + sf[1:] ** 2))
+    qpsd_k = np.zeros(N_ERR) if qpsd is None else np.ascontiguousarray(qpsd, dtype=float)
+    gm, j2k, grad = float(MARS.gm), float(j2_factor(MARS)), bool(sg.gravity_gradient)
 
     def transition(x, t0, t1):
         a = node[t1]
@@ -615,6 +645,25 @@ def _forward(
             g = gaps[i]
             Fk, Qk = gap_transition(qb, pb, g, sg.bridge_mode, sg.gap_sigma, body=MARS)
             v1, q1, p1 = apply_gap(vb, qb, pb, g, sg.bridge_mode)
+        elif fast:
+            dt = float(t_aug[a] - t_aug[a - 1])
+            v1, q1, p1, Fk, Qk = transition_step(
+                vb,
+                qb,
+                pb,
+                fa[a - 1],
+                wa[a - 1],
+                fa[a],
+                wa[a],
+                dt,
+                sw_mid[i],
+                sf_mid[i],
+                sample_dt,
+                qpsd_k,
+                grad,
+                gm,
+                j2k,
+            )
         else:
             dt = t_aug[a] - t_aug[a - 1]
             v1, q1, p1 = rk4_step(vb, qb, pb, fa[a - 1], wa[a - 1], fa[a], wa[a], dt, MARS)
@@ -637,7 +686,7 @@ def _forward(
             dx = Fk @ _LAYOUT.boxminus(x, xb)
             q1 = quat_boxplus(q1, dx[DTH])
             v1, p1 = v1 + dx[DV], p1 + dx[DP]
-        return np.r_[v1, q1, p1], Fk, Qk
+        return np.concatenate((v1, q1, p1)), Fk, Qk
 
     def measurements_at(a, ta, x):
         out = []

@@ -156,7 +156,7 @@ def imu_error_process_noise(t: np.ndarray, f_G: np.ndarray, w_G: np.ndarray, lev
 
 # ----------------------------------------------------------------------------------------- stages
 def _nominal_integration(imu, nom: NominalState, tm, P0: np.ndarray, bridge_mode: str) -> NominalIntegration:
-    sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode, body=MARS)
+    sp = integrate(imu, nom.v_M, nom.q_M_G, nom.p_M, P0, bridge_mode=bridge_mode, body=MARS, fast=True)
     # validation against the on-board solution before PDD (afterwards the on-board attitude is wrong)
     t_pdd = tm.events.get("PDD", np.inf)
     m = (tm.t_nav >= sp.t[0]) & (tm.t_nav <= min(t_pdd, sp.t[-1]))

@@ -135,6 +135,9 @@ class EntryProblem(PipelineProblem):
     title = "entry"
     schema = SCHEMA
     file_schemas = (VEHICLE_SCHEMA, INITIAL_STATE_SCHEMA)
+    #: modules of the cached numba kernels (the truth simulator's model, the smoother's IMU step):
+    #: compiled in a child process on a checkout's first run (:mod:`workbench.problems.precompile`)
+    compiled_modules = ("workbench.problems.entry.truth_fast", "workbench.estimation.strapdown_kernel")
 
     def settings(self, scenario: Scenario) -> EntrySettings:
         """The run's frozen :class:`~workbench.problems.entry.config.EntrySettings` (validated once,

@@ -181,11 +181,19 @@ def _truth_arrays(truth) -> dict[str, np.ndarray]:
 
 
 def synthesize_from_truth(
-    truth, out_dir: str | Path, spec: EntryTelemetrySpec, seed: int, *, source: str | None = None
+    truth,
+    out_dir: str | Path,
+    spec: EntryTelemetrySpec,
+    seed: int,
+    *,
+    source: str | None = None,
+    compress: bool = True,
 ) -> dict[str, Path]:
     """Telemetry files + ``truth.npz`` from a given truth (an ``EntryTruth`` or look-alike).
 
     ``seed`` drives every random draw (nominal-state error, IMU errors and noise, radar noise).
+    ``compress``: write ``truth.npz`` compressed (False: stored, for files read back once and
+    deleted, e.g. a Monte Carlo member's; the arrays are the same).
     Returns ``{stream: path}`` plus ``"truth"`` and ``"initial_state"``.
     """
     out = Path(out_dir)
@@ -208,7 +216,7 @@ def synthesize_from_truth(
         arrays["radar_slant_out_true"] = tm.slant_out_true
         arrays["radar_slant_out_sphere"] = tm.slant_out_sphere
     truth_path = out / "truth.npz"
-    np.savez_compressed(
+    (np.savez_compressed if compress else np.savez)(
         truth_path,
         **arrays,
         nominal_t0=np.array(t0),

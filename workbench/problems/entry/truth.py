@@ -12,9 +12,11 @@ Frames: M = MMED inertial (Mars rotating about its +Z, the atmosphere co-rotatin
 in local NED, blowing *towards* the stated direction); gravity point mass + J2; altitude above the
 MOLA radius; body G with +Z towards the back shell, ``q_M_G`` body -> inertial. Time from EIP,
 starting at −15 s from AMELIA Table 2's state; events PDD (Mach or time), FSR, BSR (end). Fixed-step
-RK4 (``dt_entry``, ``dt_chute`` under the stiff riser), scalar Python per step on purpose (19
-states: a numpy call costs more than the arithmetic). The parachute's engineering choices are
-documented in :class:`EntryTruthSpec`; the full model description: docs/tuning/entry.md, "truth.py".
+RK4 (``dt_entry``, ``dt_chute`` under the stiff riser) of a scalar model (19 states: a numpy call
+costs more than the arithmetic), compiled by numba in :mod:`.truth_fast`; the Python model here is
+the reference path (``simulate_entry(..., fast=False)``), the same operations in the same order.
+The parachute's engineering choices are documented in :class:`EntryTruthSpec`; the full model
+description: docs/tuning/entry.md, "truth.py".
 References: Aboudan et al., Space Sci. Rev. 2018, Sects. 3–4, 9, Table 2, Figs. 2–4.
 """
 
@@ -40,6 +42,7 @@ from workbench.core.gravity import j2_factor
 from workbench.core.rotation import dcm_components, quat_multiply, quat_normalize, quat_to_dcm
 from workbench.io import progress
 from workbench.models.aerodynamics import EntryVehicle
+from workbench.problems.entry import truth_fast as tf
 from workbench.problems.entry.site import R_GROUND, draw_terrain_modes
 
 __all__ = [
@@ -562,6 +565,7 @@ class _Model:
         w = wind_profile_truth(h, spec)
         self.WN = w[:, 0].tolist()
         self.WE = w[:, 1].tolist()
+        self.atm_table = np.array([self.LR, self.A, self.LL, self.WN, self.WE], dtype=float)
         self.D = vehicle.diameter
         self.set_phase(0)
         # parachute
@@ -594,6 +598,54 @@ class _Model:
         I = np.asarray(veh.inertia_G, float) * (self.m / float(veh.mass_at(1)) if phase >= 2 else 1.0)
         self.I = I.tolist()
         self.Iinv = np.linalg.inv(I).tolist()
+
+    def packed(self) -> tuple[np.ndarray, tuple]:
+        """The model's current parameters as :mod:`.truth_fast` takes them: the scalar vector ``sc``
+        (``truth_fast.SC_*``) and the array tuple ``arrs`` (phase's aero table and inertia, the
+        atmosphere and wind tables, the deviation factors, the parachute CD); repack after
+        :meth:`set_phase` or a deployment (``t_pdd``, ``side_M``)."""
+        sc = np.zeros(tf.N_SC)
+        sp = self.spec
+        sc[tf.SC_GM], sc[tf.SC_J2K], sc[tf.SC_RREF], sc[tf.SC_OM] = self.gm, self.j2k, self.rref, self.om
+        sc[tf.SC_AERO_ON] = 1.0 if self.aero_on else 0.0
+        sc[tf.SC_H_LO], sc[tf.SC_INV_DH], sc[tf.SC_D] = self.h_lo, self.inv_dh, self.D
+        sc[tf.SC_S], sc[tf.SC_LREF], sc[tf.SC_CMQ], sc[tf.SC_M] = self.S, self.Lref, self.cmq, self.m
+        sc[tf.SC_CN_FAC], sc[tf.SC_CM_FAC], sc[tf.SC_ROLL] = self.cn_fac, self.cm_fac, sp.roll_moment_coeff
+        sc[tf.SC_M_P], sc[tf.SC_A0], sc[tf.SC_L0] = self.m_p, self.A0, self.L0
+        sc[tf.SC_K_R], sc[tf.SC_C_R] = self.k_r, self.c_r
+        sc[tf.SC_ATT : tf.SC_ATT + 3] = self.att
+        sc[tf.SC_T_PDD] = self.t_pdd
+        sc[tf.SC_SIDE : tf.SC_SIDE + 3] = self.side_M
+        sc[tf.SC_PHI_B], sc[tf.SC_AMP_B], sc[tf.SC_INFL] = self.phi_b, self.amp_b, sp.inflation_time_s
+        sc[tf.SC_B_DECAY], sc[tf.SC_B_PERIOD] = sp.breathing_decay_s, sp.breathing_period_s
+        sc[tf.SC_SF_START], sc[tf.SC_SF_END], sc[tf.SC_SF_COEFF] = (
+            sp.side_force_start_s,
+            sp.side_force_end_s,
+            sp.side_force_coeff,
+        )
+        sc[tf.SC_CA_X0], sc[tf.SC_CA_INV] = self.ca_fac[0], self.ca_fac[1]
+        sc[tf.SC_CP_X0], sc[tf.SC_CP_INV] = self.cp_fac[0], self.cp_fac[1]
+        sc[tf.SC_TWO] = 2.0
+        tab, ch = self.tab, self.veh.parachute
+        # writable C-contiguous copies: one kernel signature whether the asset's read-only arrays
+        # or their unpickled (writable) copies in a worker process come in
+        arrs = tuple(
+            np.array(a, dtype=float, order="C")
+            for a in (
+                self.atm_table,
+                tab.mach,
+                tab.log10_kn,
+                tab.alpha,
+                np.stack([tab.ca, tab.cn, tab.cm], axis=-1),
+                self.ca_fac[2],
+                self.cp_fac[2],
+                ch.mach,
+                ch.cd,
+                self.I,
+                self.Iinv,
+            )
+        )
+        return sc, arrs
 
     def atm(self, h):
         """(rho, sound speed, mean free path) at altitude h [m] (clamped) and the wind (N, E)."""
@@ -801,6 +853,121 @@ class _Model:
         return d
 
 
+def _pdd_event(model: _Model, spec: EntryTruthSpec, y: list, k: int, t: float, events: dict) -> tuple[int, int, list]:
+    """Deploy the parachute at output sample k, time t [s]: the events PDD/FSR/BSR on the output grid
+    (the PDD sample belongs to phase 1), the model in phase 1; returns (i_fsr, i_bsr, y with the canopy)."""
+    dt_out = spec.dt_out
+    events["PDD"] = round(t, 9)
+    i_fsr = k + int(round(spec.fsr_delay_s / dt_out))
+    i_bsr = i_fsr + int(round(spec.bsr_delay_s / dt_out))
+    events["FSR"] = round(spec.t0 + i_fsr * dt_out, 9)
+    events["BSR"] = round(spec.t0 + i_bsr * dt_out, 9)
+    model.set_phase(1)
+    model.t_pdd = t
+    return i_fsr, i_bsr, y + _deploy(model, y, spec)
+
+
+def _loop_reference(model: _Model, spec: EntryTruthSpec, y: list, states, auxs, phases, events: dict, tick) -> int:
+    """The output-sample loop of :func:`simulate_entry` on the scalar Python model (the reference
+    path): fills ``states`` (n_max, 19), ``auxs`` (n_max, 17), ``phases`` (n_max,) and ``events``
+    in place, calls ``tick(seconds simulated)`` per sample; returns the last sample's index."""
+    dt_out = spec.dt_out
+    n_entry = int(round(dt_out / spec.dt_entry))
+    n_chute = int(round(dt_out / spec.dt_chute))
+    h_ent, h_ch = dt_out / n_entry, dt_out / n_chute
+    n_max = states.shape[0]
+    k = 0
+    t = spec.t0
+    i_fsr = i_bsr = None
+    while True:
+        tick(float(t - spec.t0))
+        if i_fsr is not None and k == i_fsr:  # front shield leaves: mass, inertia and aero table switch
+            model.set_phase(2)
+        _, a = model.deriv(t, y, aux=True)
+        if model.phase == 0 and spec.aero_enabled:
+            trig = (t >= spec.pdd_time_s - 1e-9) if spec.pdd_time_s is not None else (a[3] < spec.pdd_mach and t > 0)
+            if trig:
+                i_fsr, i_bsr, y = _pdd_event(model, spec, y, k, t, events)
+                _, a = model.deriv(t, y, aux=True)
+        states[k, : len(y)] = y
+        auxs[k] = a
+        phases[k] = model.phase
+        if (i_bsr is not None and k >= i_bsr) or k == n_max - 1:
+            return k
+        if math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]) < R_GROUND:
+            raise RuntimeError(f"simulate_entry: the module hit the ground at t = {t:.2f} s")
+        if model.phase == 0:
+            for j in range(n_entry):
+                y = _rk4(model, t + j * h_ent, y, h_ent)
+        else:
+            for j in range(n_chute):
+                y = _rk4(model, t + j * h_ch, y, h_ch)
+        k += 1
+        t = spec.t0 + k * dt_out
+
+
+#: output samples per call of the compiled loop between progress updates
+_CHUNK = 2000
+
+
+def _loop_compiled(model: _Model, spec: EntryTruthSpec, y: list, states, auxs, phases, events: dict, tick) -> int:
+    """:func:`_loop_reference` on the compiled model (:func:`.truth_fast.run_segment`), the same
+    samples and events; Python handles only the events (PDD deployment, FSR phase switch)."""
+    dt_out = spec.dt_out
+    n_sub = {0: int(round(dt_out / spec.dt_entry)), 1: int(round(dt_out / spec.dt_chute))}
+    n_max = states.shape[0]
+    yy = np.zeros(19)
+    yy[: len(y)] = y
+    n = len(y)
+    k, k_last = 0, n_max - 1
+    i_fsr = None
+    if not spec.aero_enabled:
+        trig_mode, trig_value = 0, 0.0
+    elif spec.pdd_time_s is not None:
+        trig_mode, trig_value = 1, float(spec.pdd_time_s)
+    else:
+        trig_mode, trig_value = 2, float(spec.pdd_mach)
+    sc, arrs = model.packed()
+    while True:
+        tick(float(k * dt_out))
+        if i_fsr is not None and k == i_fsr:  # front shield leaves: mass, inertia and aero table switch
+            model.set_phase(2)
+            sc, arrs = model.packed()
+        k_end = min(i_fsr, k_last + 1) if model.phase == 1 and i_fsr is not None else k_last + 1
+        k0 = k
+        status, k = tf.run_segment(
+            k,
+            min(k_end, k + _CHUNK),
+            k_last,
+            spec.t0,
+            dt_out,
+            yy,
+            n,
+            n_sub[min(model.phase, 1)],
+            trig_mode if model.phase == 0 else 0,
+            trig_value,
+            R_GROUND,
+            states,
+            auxs,
+            sc,
+            arrs,
+        )
+        stored = k + 1 if status in (tf.STATUS_DONE, tf.STATUS_GROUND) else k  # samples k0 .. stored - 1
+        phases[k0:stored] = model.phase
+        if status == tf.STATUS_PDD:
+            i_fsr, i_bsr, y = _pdd_event(model, spec, yy[:n].tolist(), k, spec.t0 + k * dt_out, events)
+            if i_fsr <= k:  # as the reference: the phase switch is checked before the PDD sample only
+                i_fsr = None
+            n = len(y)
+            yy[:n] = y
+            k_last = min(i_bsr, n_max - 1)
+            sc, arrs = model.packed()
+        elif status == tf.STATUS_DONE:
+            return k
+        elif status == tf.STATUS_GROUND:
+            raise RuntimeError(f"simulate_entry: the module hit the ground at t = {spec.t0 + k * dt_out:.2f} s")
+
+
 def _rk4(model: _Model, t: float, y: list, dt: float) -> list:
     f = model.deriv
     k1 = f(t, y)
@@ -844,13 +1011,17 @@ def _initial_quaternion(spec: EntryTruthSpec) -> np.ndarray:
     return quat_normalize(q)
 
 
-def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.Generator) -> EntryTruth:
+def simulate_entry(
+    vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.Generator, *, fast: bool = True
+) -> EntryTruth:
     """Simulate the entry and parachute descent from ``spec.t0`` to BSR (or ``spec.t_end``).
 
     Args:
         vehicle: the :class:`EntryVehicle` (``load_vehicle("assets/vehicles/schiaparelli.toml")``).
         spec: :class:`EntryTruthSpec` (a scenario's: ``EntrySettings.synthetic.truth``).
         rng: ``np.random.Generator``; only the canopy breathing phase/amplitude jitter uses it.
+        fast: integrate with the compiled model (:mod:`.truth_fast`); False: the scalar Python
+            reference model (the same operations, ~100x slower).
 
     Returns:
         :class:`EntryTruth` on a uniform ``spec.dt_out`` grid from ``t0`` to the end event,
@@ -866,9 +1037,6 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
     y = [*p0.tolist(), *v0.tolist(), *q0.tolist(), *w0.tolist()]
 
     dt_out = spec.dt_out
-    n_entry = int(round(dt_out / spec.dt_entry))
-    n_chute = int(round(dt_out / spec.dt_chute))
-    h_ent, h_ch = dt_out / n_entry, dt_out / n_chute
     t_stop_cap = spec.t_end if spec.t_end is not None else 2000.0
     n_max = int(math.floor((t_stop_cap - spec.t0) / dt_out + 1e-9)) + 1
 
@@ -876,46 +1044,11 @@ def simulate_entry(vehicle: EntryVehicle, spec: EntryTruthSpec, rng: np.random.G
     auxs = np.zeros((n_max, 17))
     phases = np.zeros(n_max, dtype=int)
     events = {"EIP": 0.0, "PDD": math.nan, "FSR": math.nan, "BSR": math.nan}
-    k = 0
-    t = spec.t0
-    i_fsr = i_bsr = None
     with progress.current().counter(
         "entry truth simulation", total=None if spec.t_end is None else float(spec.t_end - spec.t0), unit="s simulated"
     ) as bar:
-        while True:
-            bar.set(float(t - spec.t0))
-            if i_fsr is not None and k == i_fsr:  # front shield leaves: mass, inertia and aero table switch
-                model.set_phase(2)
-            _, a = model.deriv(t, y, aux=True)
-            if model.phase == 0 and spec.aero_enabled:
-                trig = (
-                    (t >= spec.pdd_time_s - 1e-9) if spec.pdd_time_s is not None else (a[3] < spec.pdd_mach and t > 0)
-                )
-                if trig:  # events on the output grid; the PDD sample belongs to phase 1
-                    events["PDD"] = round(t, 9)
-                    i_fsr = k + int(round(spec.fsr_delay_s / dt_out))
-                    i_bsr = i_fsr + int(round(spec.bsr_delay_s / dt_out))
-                    events["FSR"] = round(spec.t0 + i_fsr * dt_out, 9)
-                    events["BSR"] = round(spec.t0 + i_bsr * dt_out, 9)
-                    model.set_phase(1)
-                    model.t_pdd = t
-                    y = y + _deploy(model, y, spec)
-                    _, a = model.deriv(t, y, aux=True)
-            states[k, : len(y)] = y
-            auxs[k] = a
-            phases[k] = model.phase
-            if (i_bsr is not None and k >= i_bsr) or k == n_max - 1:
-                break
-            if math.sqrt(y[0] * y[0] + y[1] * y[1] + y[2] * y[2]) < R_GROUND:
-                raise RuntimeError(f"simulate_entry: the module hit the ground at t = {t:.2f} s")
-            if model.phase == 0:
-                for j in range(n_entry):
-                    y = _rk4(model, t + j * h_ent, y, h_ent)
-            else:
-                for j in range(n_chute):
-                    y = _rk4(model, t + j * h_ch, y, h_ch)
-            k += 1
-            t = spec.t0 + k * dt_out
+        loop = _loop_compiled if fast else _loop_reference
+        k = loop(model, spec, y, states, auxs, phases, events, bar.set)
     n = k + 1
     states, auxs, phases = states[:n], auxs[:n], phases[:n]
     tgrid = np.round(spec.t0 + dt_out * np.arange(n), 9)

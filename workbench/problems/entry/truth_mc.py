@@ -194,7 +194,14 @@ def _run_member(job: _Job, k: int, ss: np.random.SeedSequence) -> TruthMcMember:
     with tempfile.TemporaryDirectory(prefix=f"entry_truth_mc_{k}_") as tmp:
         folder = Path(job.work_dir) / f"member_{k}" / "telemetry" if job.work_dir else Path(tmp) / "telemetry"
         paths = dict(
-            synthesize_from_truth(truth, folder, tspec, tm_seed, source=f"entry truth Monte Carlo, member {k}")
+            synthesize_from_truth(
+                truth,
+                folder,
+                tspec,
+                tm_seed,
+                source=f"entry truth Monte Carlo, member {k}",
+                compress=job.work_dir is not None,  # a temporary truth.npz is read back once
+            )
         )
         truth_file = paths.pop("truth")
         info["telemetry_files"] = {s: p.name for s, p in sorted(paths.items())}
