@@ -353,6 +353,12 @@ def markdown(res: dict) -> str:
     return "\n".join(lines)
 
 
+def markdown_of(results_dir: Path = RESULTS) -> str:
+    """The table of ``results_dir/bench_mc_speed.json`` with its reproducing command (README, RESULTS.md)."""
+    doc = json.loads((results_dir / "bench_mc_speed.json").read_text())
+    return f"{markdown(doc['results'])}\n\nReproduce: `{doc['command']}` ({doc['utc'][:10]}).\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--parts", default="mc,scale")

@@ -133,3 +133,26 @@ def test_a_forked_child_compiles_for_the_run_and_its_failure_is_reported(kernels
     monkeypatch.setattr(pc, "main", child_main)
     assert pc.precompile(sc, problem, 3, rep) is True
     assert cold_modules([mod]) == []
+
+
+def test_a_monte_carlo_precompiles_before_its_workers_start(monkeypatch, tmp_path):
+    """``workbench mc`` compiles a cold checkout's kernels once in a child before the study (its
+    workers then load them) — the same call as ``workbench run``."""
+    from workbench.problems import runner
+    from workbench.problems.base import McOptions
+
+    order = []
+    monkeypatch.setattr(runner, "precompile", lambda sc, problem, seed, rep: order.append(("precompile", seed)))
+
+    class Stop(Exception):
+        pass
+
+    def study(self, settings, out, options, rep):
+        order.append(("study", options.first_seed))
+        raise Stop
+
+    sc, problem, _ = runner.prepare("droptest")
+    monkeypatch.setattr(type(problem), "monte_carlo", study)
+    with pytest.raises(Stop):
+        runner.run_monte_carlo("droptest", tmp_path, McOptions(n_runs=1, first_seed=7), progress="none")
+    assert order == [("precompile", 7), ("study", 7)]

@@ -362,7 +362,9 @@ def run_monte_carlo(
     ``options.truth_sim``).  ``NotImplementedError`` if the problem
     has none for this scenario.  ``progress`` as in :func:`run_scenario`: the problem's study shows
     its members (and truth simulations, dispersions) as counters with an ETA on the active reporter;
-    the paths written are reported at the end."""
+    the paths written are reported at the end.  The problem's kernels are compiled first if the
+    checkout has none cached (:func:`~workbench.problems.precompile.precompile`), so the workers
+    load them instead of each compiling its own."""
     rep = prog.as_reporter(progress)
     sc, problem, settings = prepare(scenario)
     out = Path(out_dir)
@@ -370,6 +372,8 @@ def run_monte_carlo(
     prefix, rep.prefix = rep.prefix, f"[{sc.name}] "
     try:
         with prog.active(rep), output_folder(out):
+            # first study of a checkout: compile once in a child, not once in every worker
+            precompile(sc, problem, options.first_seed, rep)
             outcome = problem.monte_carlo(settings, out, options, rep)
             summary_path = write_summary(
                 out / f"{sc.name}{'_truth' if options.truth_sim else ''}.mc.json", outcome.summary
