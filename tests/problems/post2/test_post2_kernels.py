@@ -209,3 +209,19 @@ def test_mc_metric_kernel_matches_the_numpy_expression(m):
     out = np.empty(n_members)
     kernels.metric_total_kernel(a, tu, zu, sh, t0, h, hi, out)
     _assert_close(out, ref)
+
+
+def test_interp_port_is_np_interp_to_the_bit():
+    """kernels.interp_index + interp_at (one node search shared by the atmosphere's columns) give
+    np.interp's numbers exactly: inside, on the nodes, outside on both sides, NaN."""
+    from workbench.problems.post2 import kernels
+
+    rng = np.random.default_rng(3)
+    xp = np.cumsum(rng.uniform(0.1, 3.0, 60))
+    fps = [rng.normal(size=60), np.exp(rng.normal(size=60)), np.full(60, 2.5)]
+    fps[0][10:12] = np.inf  # the NaN fall-back branch of arr_interp
+    x = np.concatenate([rng.uniform(xp[0] - 5.0, xp[-1] + 5.0, 4000), xp, [xp[0], xp[-1], np.nan, -np.inf, np.inf]])
+    for fp in fps:
+        ref = np.interp(x, xp, fp)
+        got = np.array([kernels.interp_at(kernels.interp_index(v, xp), v, xp, fp) for v in x])
+        np.testing.assert_array_equal(got, ref)

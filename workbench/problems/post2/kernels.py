@@ -33,7 +33,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["PARAM_SLOTS", "CI", "CF", "dynamics_kernel", "air_speed_kernel"]
+__all__ = ["PARAM_SLOTS", "CI", "CF", "dynamics_kernel", "air_speed_kernel", "interp_index", "interp_at"]
 
 #: parameter slots of the kernel (name, size 1 each)
 PARAM_SLOTS = (
@@ -136,6 +136,47 @@ def _smoothstep(u):
     elif u > 1.0:
         u = 1.0
     return u * u * (3.0 - 2.0 * u)
+
+
+@njit(cache=True)
+def interp_index(x, xp):
+    """The node index of ``np.interp(x, xp, ·)`` for a scalar x and increasing nodes xp (n,): −1 below
+    xp[0], n above xp[n − 1], else the largest j with xp[j] ≤ x (n − 1 at the last node)."""
+    n = xp.size
+    if x < xp[0]:
+        return -1
+    if x > xp[n - 1]:
+        return n
+    lo, hi = 0, n  # first index with xp[i] > x, minus one
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if xp[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo - 1
+
+
+@njit(cache=True)
+def interp_at(j, x, xp, fp):
+    """``np.interp(x, xp, fp)`` for a scalar x with its node index j (:func:`interp_index`): the
+    branches and the arithmetic of numpy's (and numba's) ``arr_interp``, to the bit (NaN x: NaN)."""
+    n = xp.size
+    if math.isnan(x):
+        return x
+    if j == -1:
+        return fp[0]
+    if j >= n - 1:
+        return fp[n - 1]
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    res = slope * (x - xp[j]) + fp[j]
+    if math.isnan(res):
+        res = slope * (x - xp[j + 1]) + fp[j + 1]
+        if math.isnan(res) and fp[j] == fp[j + 1]:
+            res = fp[j]
+    return res
 
 
 @njit(cache=True)
@@ -288,7 +329,9 @@ def dynamics_kernel(
                 F1 = F1 + ((R10 * Fb0 + R12 * Fb2) + R11 * Fb1)
                 F2 = F2 + ((R20 * Fb0 + R22 * Fb2) + R21 * Fb1)
             if chute != 0:  # open canopy: 1 the drogue table, 2 the (main) parachute table
-                cd = np.interp(mach, chute_mach, chute_cd) * (pv[_DROGM] if chute == 1 else pv[_PARAM])
+                cd = interp_at(interp_index(mach, chute_mach), mach, chute_mach, chute_cd) * (
+                    pv[_DROGM] if chute == 1 else pv[_PARAM]
+                )
                 c = cd * qbar * cf[12] / Vs
                 F0, F1, F2 = F0 - c * vr0, F1 - c * vr1, F2 - c * vr2
             if area_chute != 0:  # drag-area state −CD·S q v̂_rel
@@ -358,10 +401,11 @@ def atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, want_kn, L, rho, a_s
                 above = 0.0
             p = 0.699e3 * math.exp(-0.00009 * hm) * math.exp(-above / ac[1])
             rho[r] = p / (ac[2] * T)
-        else:
-            T = np.interp(h, t_h, t_T)
-            p = math.exp(np.interp(h, t_h, t_lp))
-            rho[r] = math.exp(np.interp(h, t_h, t_lrho))
+        else:  # one node search for the three columns (np.interp's arithmetic, :func:`interp_at`)
+            j = interp_index(h, t_h)
+            T = interp_at(j, h, t_h, t_T)
+            p = math.exp(interp_at(j, h, t_h, t_lp))
+            rho[r] = math.exp(interp_at(j, h, t_h, t_lrho))
         a_snd[r] = math.sqrt(ac[3] * T)
         if want_kn:
             mu = ac[4] * (T / ac[5]) ** 1.5 * ac[6] / (T + ac[7])
