@@ -225,3 +225,18 @@ def test_interp_port_is_np_interp_to_the_bit():
         ref = np.interp(x, xp, fp)
         got = np.array([kernels.interp_at(kernels.interp_index(v, xp), v, xp, fp) for v in x])
         np.testing.assert_array_equal(got, ref)
+
+
+def test_axial_kernel_matches_the_numpy_axial_accelerometer(monkeypatch):
+    """The compiled 3-DOF axial accelerometer (kernels.axial_kernel) against the numpy reference on the
+    Huygens-like estimator and truth models in every phase (drogue: the tilt), batches and one state."""
+    rng = np.random.default_rng(11)
+    for model, x0 in _models("post2_huygens"):
+        for phase in _phases(model):
+            X = _batch(model, x0, 31, rng)
+            fast = model.observe(X, "acceleration_axial", phase)
+            np.testing.assert_array_equal(fast, model.axial_acceleration_3dof_reference(X, phase))
+            np.testing.assert_array_equal(model.observe(X[4], "acceleration_axial", phase), fast[4])
+            monkeypatch.setattr(model, "use_kernel", False)  # all numpy (the force too)
+            _assert_close(fast, model.observe(X, "acceleration_axial", phase))
+            monkeypatch.setattr(model, "use_kernel", True)

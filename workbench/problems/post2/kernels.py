@@ -33,7 +33,16 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["PARAM_SLOTS", "CI", "CF", "dynamics_kernel", "air_speed_kernel", "interp_index", "interp_at"]
+__all__ = [
+    "PARAM_SLOTS",
+    "CI",
+    "CF",
+    "dynamics_kernel",
+    "air_speed_kernel",
+    "interp_index",
+    "interp_at",
+    "axial_kernel",
+]
 
 #: parameter slots of the kernel (name, size 1 each)
 PARAM_SLOTS = (
@@ -212,6 +221,23 @@ def air_speed_kernel(X, PB, pmode, pidx, pnom, ci, cf, out):
         _params(r, X, PB, pmode, pidx, pnom, pv)
         vr0, vr1, vr2 = _vrel(r, X, pv, ci, cf)
         out[r] = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2)
+
+
+@njit(cache=True)
+def axial_kernel(X, F, PB, pmode, pidx, pnom, ci, cf, mass, cos_tilt, bias, out):
+    """Huygens-like 3-DOF axial accelerometer [m/s²] of each row of X (b, n_x) into ``out`` (b,):
+    ``(F · v̂_rel / mass) cos_tilt + bias`` with F (b, 3) the inertial aero force [N] of
+    :func:`dynamics_kernel`, ``cos_tilt`` and ``bias`` (b,) evaluated by the caller; the model's
+    numpy ``axial_acceleration_3dof`` with its sums' order (numpy reduces 3 columns left to right)."""
+    pv = np.empty(pnom.size)
+    for r in range(X.shape[0]):
+        _params(r, X, PB, pmode, pidx, pnom, pv)
+        vr0, vr1, vr2 = _vrel(r, X, pv, ci, cf)
+        n = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2)
+        if n < 1e-9:  # np.maximum(|v_rel|, 1e-9); NaN stays NaN
+            n = 1e-9
+        a = F[r, 0] * (vr0 / n) + F[r, 1] * (vr1 / n) + F[r, 2] * (vr2 / n)
+        out[r] = (a / mass) * cos_tilt[r] + bias[r]
 
 
 @njit(cache=True)

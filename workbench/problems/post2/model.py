@@ -749,6 +749,28 @@ class TrajectoryModel:
         )  # fmt: skip
         return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
 
+    def _axial_kernel(self, x: np.ndarray, phase: dict) -> np.ndarray:
+        """:meth:`axial_acceleration_3dof` by :func:`~workbench.problems.post2.kernels.axial_kernel`
+        (the force by :meth:`_kernel_eval`; cos(tilt) and the bias in numpy, as the reference)."""
+        plan = self._plan()
+        x = np.asarray(x, dtype=float)
+        X = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
+        if not X.flags.writeable:
+            X = X.copy()
+        _, F, _ = self._kernel_eval(X, phase, want_dx=False)
+        ci, cf, _, _ = self._phase_consts(plan, phase)
+        if phase["parachute"] and phase.get("chute") == "drogue":
+            cos_tilt = np.ascontiguousarray(np.cos(self.param(X, "tilt", 0.0)[..., 0]), dtype=float)
+        else:
+            cos_tilt = np.ones(X.shape[0])  # a · 1.0 is a: the reference's branch without the tilt
+        bias = np.ascontiguousarray(self.param(X, "accel_bias", np.zeros(3))[..., 0], dtype=float)
+        out = np.empty(X.shape[0])
+        kernels.axial_kernel(
+            X, F, self._bounded(plan, X), plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, float(phase["mass"]),
+            cos_tilt, bias, out,
+        )  # fmt: skip
+        return out.reshape(*x.shape[:-1], 1)
+
     # ------------------------------------------------------------------ physics pieces
     def gravity(self, x: np.ndarray) -> np.ndarray:
         """Point-mass + J2 gravity [m/s²] (..., 3) at the position of x, inertial frame (+Z pole)."""
@@ -896,6 +918,12 @@ class TrajectoryModel:
         """Huygens-like 3-DOF axial accelerometer [m/s²] (..., 1): the probe axis X_B is along the
         air-relative velocity (trimmed at zero α), tilted by ``tilt`` while the drogue is open, so the
         reading is ``(F · v̂_rel / m) cos(tilt) + accel_bias_x`` (negative under drag)."""
+        if self.use_kernel and self._plan() is not None:
+            return self._axial_kernel(x, phase)
+        return self.axial_acceleration_3dof_reference(x, phase)
+
+    def axial_acceleration_3dof_reference(self, x: np.ndarray, phase: dict) -> np.ndarray:
+        """Numpy reference of :meth:`axial_acceleration_3dof` (same arguments, units and shapes)."""
         F, _ = self.aero_force_moment(x, phase)
         vr = self.v_rel(x)
         vh = vr / np.maximum(np.linalg.norm(vr, axis=-1, keepdims=True), 1e-9)
