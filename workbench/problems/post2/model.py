@@ -261,6 +261,15 @@ def scurve(s, lo: float, hi: float):
     return c + h * np.tanh((np.asarray(s, dtype=float) - c) / h)
 
 
+def _scurve_columns(bounded) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x columns (k,), centres c (k,), half widths h (k,)) of bounded slots ((sx, (lo, hi)), ...):
+    :func:`scurve`'s c and h, for all k slots at once."""
+    cols = np.array([sx.start for sx, _ in bounded], dtype=np.int64)
+    c = np.array([0.5 * (lo + hi) for _, (lo, hi) in bounded])
+    h = np.array([0.5 * (hi - lo) for _, (lo, hi) in bounded])
+    return cols, c, h
+
+
 def scurve_inverse(p, lo: float, hi: float):
     """Estimated state ``s`` of a physical value ``p`` strictly inside (lo, hi) (inverse of :func:`scurve`)."""
     c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
@@ -685,14 +694,20 @@ class TrajectoryModel:
     @staticmethod
     def _bounded(plan: dict, X: np.ndarray) -> np.ndarray:
         """Physical values (S-curve, numpy as the reference) of the bounded parameter slots, (k, b)."""
-        PB = np.empty((len(plan["bounded"]), X.shape[0]))
-        for i, (sx, bounds) in enumerate(plan["bounded"]):
-            PB[i] = scurve(X[..., sx], *bounds)[..., 0]
-        return PB
+        bounded = plan["bounded"]
+        if len(bounded) < 2:  # none, or one S-curve
+            PB = np.empty((len(bounded), X.shape[0]))
+            for i, (sx, bounds) in enumerate(bounded):
+                PB[i] = scurve(X[..., sx], *bounds)[..., 0]
+            return PB
+        # every bounded slot in one array expression: scurve's arithmetic element by element
+        cols, c, h = plan.get("bounded_columns") or plan.setdefault("bounded_columns", _scurve_columns(bounded))
+        return np.ascontiguousarray((c + h * np.tanh((X[:, cols] - c) / h)).T)
 
-    def _kernel_eval(self, x: np.ndarray, phase: dict, want_dx: bool):
+    def _kernel_eval(self, x: np.ndarray, phase: dict, want_dx: bool, PB: np.ndarray | None = None):
         """(ẋ or None, F, M) of x (..., n_x) by :func:`~workbench.problems.post2.kernels.dynamics_kernel`;
-        the atmosphere and bounded parameters evaluated here in numpy, as the reference does."""
+        the atmosphere and bounded parameters evaluated here in numpy, as the reference does (``PB``:
+        the bounded parameters of x's rows from :meth:`_bounded`, if the caller has them)."""
         plan = self._plan()
         x = np.asarray(x, dtype=float)
         shape = x.shape[:-1]
@@ -705,7 +720,7 @@ class TrajectoryModel:
         atm = env.atmosphere
         dummy = plan["dummy"]
         rho = a_snd = kn = ca_extra = dummy
-        PB = self._bounded(plan, X)
+        PB = self._bounded(plan, X) if PB is None else PB
         F = np.empty((b, 3))
         M = np.empty((b, 3))
         dx = np.empty_like(X) if want_dx else np.empty((0, 0))
@@ -757,7 +772,8 @@ class TrajectoryModel:
         X = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
         if not X.flags.writeable:
             X = X.copy()
-        _, F, _ = self._kernel_eval(X, phase, want_dx=False)
+        PB = self._bounded(plan, X)
+        _, F, _ = self._kernel_eval(X, phase, want_dx=False, PB=PB)
         ci, cf, _, _ = self._phase_consts(plan, phase)
         if phase["parachute"] and phase.get("chute") == "drogue":
             cos_tilt = np.ascontiguousarray(np.cos(self.param(X, "tilt", 0.0)[..., 0]), dtype=float)
@@ -766,7 +782,7 @@ class TrajectoryModel:
         bias = np.ascontiguousarray(self.param(X, "accel_bias", np.zeros(3))[..., 0], dtype=float)
         out = np.empty(X.shape[0])
         kernels.axial_kernel(
-            X, F, self._bounded(plan, X), plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, float(phase["mass"]),
+            X, F, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, float(phase["mass"]),
             cos_tilt, bias, out,
         )  # fmt: skip
         return out.reshape(*x.shape[:-1], 1)
