@@ -240,3 +240,29 @@ def test_axial_kernel_matches_the_numpy_axial_accelerometer(monkeypatch):
             monkeypatch.setattr(model, "use_kernel", False)  # all numpy (the force too)
             _assert_close(fast, model.observe(X, "acceleration_axial", phase))
             monkeypatch.setattr(model, "use_kernel", True)
+
+
+def test_measurement_h_and_h_jacobian_share_one_batched_call(tmp_path):
+    """Estimator.measurement: h(x) is the first row of the batched Jacobian call and H(x) at the same x
+    reuses it; both equal the separate calls to the bit, for every observation of the Huygens case."""
+    from workbench.estimation.ekf import numeric_jacobian_batched
+    from workbench.problems.post2.pipeline import read_observations
+    from workbench.problems.post2.problem import Post2Problem
+
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_huygens.toml")
+    cfg = Post2Settings.from_scenario(sc)
+    syn = Post2Problem().synthesize(cfg, tmp_path, 3)
+    data = read_observations(cfg, syn.telemetry)
+    est = Estimator(cfg)
+    rng = np.random.default_rng(4)
+    for phase in _phases(est.model):
+        est.phase = phase
+        for ch in data.channels.values():
+            x = _batch(est.model, est.x0, 1, rng)[0]
+            m = est.measurement(ch, 0)
+            q = ch.spec.quantity
+            zp = m.h(x)
+            np.testing.assert_array_equal(zp, est.model.observe(x, q, phase))
+            ref = numeric_jacobian_batched(lambda X, q=q, p=phase: est.model.observe(X, q, p), x, est.layout, est.eps)
+            np.testing.assert_array_equal(m.H(x), ref[1])
+            np.testing.assert_array_equal(m.H(x.copy()), ref[1])  # another x: computed, not reused

@@ -497,10 +497,21 @@ class Estimator:
                 iterations=ch.spec.iterations,
             )  # fmt: skip
 
+        # the update asks h(x) and then H(x) at the same x: one batched model call gives both (its
+        # first row is h(x), the model evaluating every row alike)
+        memo: list = []
+
         def h(x, q=q, phase=phase):
-            return model.observe(np.asarray(x, float), q, phase)
+            x = np.asarray(x, float)
+            if x.ndim != 1:
+                return model.observe(x, q, phase)
+            y0, J = numeric_jacobian_batched(lambda X: model.observe(X, q, phase), x, self.layout, self.eps)
+            memo[:] = [x, J]
+            return y0
 
         def H(x, q=q, phase=phase):
+            if memo and memo[0] is x:
+                return memo[1]
             return numeric_jacobian_batched(lambda X: model.observe(X, q, phase), x, self.layout, self.eps)[1]
 
         return Measurement(
