@@ -316,7 +316,9 @@ class ForwardPass:
 
 
 def _eps_vector(eps: float | np.ndarray, n_e: int) -> np.ndarray:
-    e = np.broadcast_to(np.asarray(eps, dtype=float), (n_e,))
+    e = np.asarray(eps, dtype=float)
+    if e.shape != (n_e,):
+        e = np.broadcast_to(e, (n_e,))
     if np.any(e <= 0.0):
         raise ValueError("eps must be positive")
     return e
