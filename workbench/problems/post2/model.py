@@ -663,7 +663,7 @@ class TrajectoryModel:
             "grids": tuple(np.array(g, dtype=float) for g in (a.mach, a.log10_kn, a.alpha, a._stack))
             if a is not None
             else (dummy1, dummy1, dummy1, dummy4),
-            "dummy": dummy1, "phases": {},
+            "dummy": dummy1, "phases": {}, "scratch": {},
         }  # fmt: skip
         self._plan_cache = plan
         return plan
@@ -689,6 +689,16 @@ class TrajectoryModel:
         tm, tc = (np.array(table.mach), np.array(table.cd)) if table is not None else (plan["dummy"], plan["dummy"])
         got = (ci, cf, tm, tc)
         plan["phases"][key] = got
+        return got
+
+    @staticmethod
+    def _scratch(plan: dict, b: int) -> tuple[np.ndarray, ...]:
+        """full_derivative's scratch rows for a batch of b (altitude, ρ, a, Kn, CA(Mach) factor),
+        kept per b: the kernel writes every row of the first four before reading them, and the fifth
+        (ones) only when the plan has a CA(Mach) wave, then every row of it on each call."""
+        got = plan["scratch"].get(b)
+        if got is None:
+            got = plan["scratch"][b] = (np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b))
         return got
 
     @staticmethod
@@ -730,7 +740,7 @@ class TrajectoryModel:
                 X, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, plan["inertia"], plan["inertia_inv"],
                 gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"], *plan["atm_tables"], plan["waves"],
                 want_dx, dx, F, M,
-                np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b),
+                *self._scratch(plan, b),
             )  # fmt: skip
             return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
         if atm is not None:
