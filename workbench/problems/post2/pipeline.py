@@ -655,7 +655,7 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
     obs = {}
     for name, ih in fp.innovations.items():
         ok = ih.accepted
-        yn = np.array([np.linalg.solve(np.linalg.cholesky(S), y) for S, y in zip(ih.S, ih.y, strict=True)])
+        yn = np.linalg.solve(np.linalg.cholesky(ih.S), ih.y[..., None])[..., 0]  # L⁻¹ y, sample by sample
         obs[name] = {
             "samples": int(ih.t.size),
             "accepted": int(np.sum(ok)),
