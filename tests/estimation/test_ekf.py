@@ -628,3 +628,26 @@ def test_numeric_jacobian_batched_equals_the_per_column_functions():
     np.testing.assert_allclose(
         H, numeric_measurement_jacobian(lambda z: h(z)[0], x, layout, eps=eps), rtol=1e-9, atol=1e-12
     )
+
+
+def test_numeric_jacobian_batched_rows_are_the_boxplus_of_each_column():
+    """The batch handed to f is [x, x ⊞ ε e_0, …, x ⊞ −ε e_0, …] to the bit (one ⊞ call over the 2 n_e
+    perturbations gives each row's own numbers), with and without quaternion blocks."""
+    from workbench.estimation.ekf import ErrorStateLayout, numeric_jacobian_batched
+
+    rng = np.random.default_rng(2)
+    for layout in (ErrorStateLayout(9, ()), ErrorStateLayout(12, ((2, 2),))):
+        x = rng.normal(size=layout.n_x)
+        for ix, _ in layout.quat_blocks:
+            x[ix : ix + 4] /= np.linalg.norm(x[ix : ix + 4])
+        eps = 10.0 ** rng.uniform(-7, -2, layout.n_e)
+        seen = []
+
+        def f(X, seen=seen):
+            seen.append(X.copy())
+            return X[:, :2]
+
+        numeric_jacobian_batched(f, x, layout, eps)
+        D = np.diag(eps)
+        expect = np.vstack([x[None, :]] + [layout.boxplus(x, s * D[j]) for s in (1.0, -1.0) for j in range(layout.n_e)])
+        np.testing.assert_array_equal(seen[0], expect)

@@ -316,7 +316,9 @@ class ForwardPass:
 
 
 def _eps_vector(eps: float | np.ndarray, n_e: int) -> np.ndarray:
-    e = np.broadcast_to(np.asarray(eps, dtype=float), (n_e,))
+    e = np.asarray(eps, dtype=float)
+    if e.shape != (n_e,):
+        e = np.broadcast_to(e, (n_e,))
     if np.any(e <= 0.0):
         raise ValueError("eps must be positive")
     return e
@@ -406,13 +408,16 @@ def numeric_jacobian_batched(
     n_e = layout.n_e
     e = _eps_vector(eps, n_e)
     D = np.diag(e)
-    X = np.concatenate([x[None, :], layout.boxplus(x, D), layout.boxplus(x, -D)], axis=0)
+    X = np.empty((1 + 2 * n_e, x.shape[-1]))
+    X[0] = x
+    X[1:] = layout.boxplus(x, np.concatenate([D, -D], axis=0))  # row by row: x ⊞ ε e_j, then x ⊞ −ε e_j
     Y = np.asarray(f(X), dtype=float)
-    y0, Yp, Ym = Y[0], Y[1 : 1 + n_e], Y[1 + n_e :]
+    y0 = Y[0]
     if out_layout is None:
-        cols = Yp - Ym
+        cols = Y[1 : 1 + n_e] - Y[1 + n_e :]
     else:
-        cols = out_layout.boxminus(Yp, y0) - out_layout.boxminus(Ym, y0)
+        d = out_layout.boxminus(Y[1:], y0)
+        cols = d[:n_e] - d[n_e:]
     cols = cols / (2.0 * e)[:, None]
     return y0, np.ascontiguousarray(cols.T)
 

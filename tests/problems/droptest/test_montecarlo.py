@@ -91,3 +91,15 @@ def test_a_failing_member_is_reported_and_the_others_kept(tmp_path, monkeypatch)
     monkeypatch.setattr(mc, "run_seed", lambda *a: (_ for _ in ()).throw(OSError("disk full")))
     with pytest.raises(RuntimeError, match="all 2 members failed; first: seed 5: OSError: disk full"):
         monte_carlo(sc, [5, 7], tmp_path / "work2")
+
+
+def test_uncompressed_truth_of_a_member_holds_the_same_arrays(tmp_path):
+    """A Monte Carlo member writes its truth.npz uncompressed (compress_truth=False): the same arrays."""
+    from workbench.problems.droptest.synthetic import load_truth, synthesize_droptest
+
+    sc = DropTestProblem().settings(load_scenario(SCENARIOS / "droptest.toml"))
+    a = load_truth(synthesize_droptest(sc, tmp_path / "a", seed=5, disperse=True).truth_path)
+    b = load_truth(synthesize_droptest(sc, tmp_path / "b", seed=5, disperse=True, compress_truth=False).truth_path)
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)

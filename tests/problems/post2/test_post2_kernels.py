@@ -209,3 +209,60 @@ def test_mc_metric_kernel_matches_the_numpy_expression(m):
     out = np.empty(n_members)
     kernels.metric_total_kernel(a, tu, zu, sh, t0, h, hi, out)
     _assert_close(out, ref)
+
+
+def test_interp_port_is_np_interp_to_the_bit():
+    """kernels.interp_index + interp_at (one node search shared by the atmosphere's columns) give
+    np.interp's numbers exactly: inside, on the nodes, outside on both sides, NaN."""
+    from workbench.problems.post2 import kernels
+
+    rng = np.random.default_rng(3)
+    xp = np.cumsum(rng.uniform(0.1, 3.0, 60))
+    fps = [rng.normal(size=60), np.exp(rng.normal(size=60)), np.full(60, 2.5)]
+    fps[0][10:12] = np.inf  # the NaN fall-back branch of arr_interp
+    x = np.concatenate([rng.uniform(xp[0] - 5.0, xp[-1] + 5.0, 4000), xp, [xp[0], xp[-1], np.nan, -np.inf, np.inf]])
+    for fp in fps:
+        ref = np.interp(x, xp, fp)
+        got = np.array([kernels.interp_at(kernels.interp_index(v, xp), v, xp, fp) for v in x])
+        np.testing.assert_array_equal(got, ref)
+
+
+def test_axial_kernel_matches_the_numpy_axial_accelerometer(monkeypatch):
+    """The compiled 3-DOF axial accelerometer (kernels.axial_kernel) against the numpy reference on the
+    Huygens-like estimator and truth models in every phase (drogue: the tilt), batches and one state."""
+    rng = np.random.default_rng(11)
+    for model, x0 in _models("post2_huygens"):
+        for phase in _phases(model):
+            X = _batch(model, x0, 31, rng)
+            fast = model.observe(X, "acceleration_axial", phase)
+            np.testing.assert_array_equal(fast, model.axial_acceleration_3dof_reference(X, phase))
+            np.testing.assert_array_equal(model.observe(X[4], "acceleration_axial", phase), fast[4])
+            monkeypatch.setattr(model, "use_kernel", False)  # all numpy (the force too)
+            _assert_close(fast, model.observe(X, "acceleration_axial", phase))
+            monkeypatch.setattr(model, "use_kernel", True)
+
+
+def test_measurement_h_and_h_jacobian_share_one_batched_call(tmp_path):
+    """Estimator.measurement: h(x) is the first row of the batched Jacobian call and H(x) at the same x
+    reuses it; both equal the separate calls to the bit, for every observation of the Huygens case."""
+    from workbench.estimation.ekf import numeric_jacobian_batched
+    from workbench.problems.post2.pipeline import read_observations
+    from workbench.problems.post2.problem import Post2Problem
+
+    sc = load_scenario(assets_dir() / "scenarios" / "post2_huygens.toml")
+    cfg = Post2Settings.from_scenario(sc)
+    syn = Post2Problem().synthesize(cfg, tmp_path, 3)
+    data = read_observations(cfg, syn.telemetry)
+    est = Estimator(cfg)
+    rng = np.random.default_rng(4)
+    for phase in _phases(est.model):
+        est.phase = phase
+        for ch in data.channels.values():
+            x = _batch(est.model, est.x0, 1, rng)[0]
+            m = est.measurement(ch, 0)
+            q = ch.spec.quantity
+            zp = m.h(x)
+            np.testing.assert_array_equal(zp, est.model.observe(x, q, phase))
+            ref = numeric_jacobian_batched(lambda X, q=q, p=phase: est.model.observe(X, q, p), x, est.layout, est.eps)
+            np.testing.assert_array_equal(m.H(x), ref[1])
+            np.testing.assert_array_equal(m.H(x.copy()), ref[1])  # another x: computed, not reused

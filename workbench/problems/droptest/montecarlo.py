@@ -192,7 +192,7 @@ def run_seed(settings: DropSettings, seed: int, work_dir: str | Path) -> SeedRes
     work.mkdir(parents=True, exist_ok=True)
     sub = Path(tempfile.mkdtemp(prefix=f"seed{int(seed):06d}_", dir=work))
     try:
-        syn = synthesize_droptest(settings, sub, seed=int(seed), disperse=True)
+        syn = synthesize_droptest(settings, sub, seed=int(seed), disperse=True, compress_truth=False)
         truth = load_truth(syn.truth_path)
         t1 = time.perf_counter()
         res = run_droptest(settings, syn.telemetry, seed=int(seed))

@@ -310,7 +310,12 @@ def _imu_models(acc: Accelerometer, gyro: Gyro) -> tuple[ImuErrorModel, ImuError
 
 
 def synthesize_droptest(
-    settings: DropSettings, out_dir: str | Path, seed: int | None = None, disperse: bool = False
+    settings: DropSettings,
+    out_dir: str | Path,
+    seed: int | None = None,
+    disperse: bool = False,
+    *,
+    compress_truth: bool = True,
 ) -> SyntheticDrop:
     """Simulate a drop of the run with ``settings`` and write its telemetry files into ``out_dir``.
 
@@ -320,7 +325,8 @@ def synthesize_droptest(
     scenario run) the drop is the scenario's own fixed, documented drop; with ``disperse=True`` (the
     Monte Carlo) the drop itself is drawn by :func:`disperse_drop` from :func:`drop_rng` ``(seed)``,
     so every seed is a different drop.  The drawn parameters are saved in ``truth.npz``
-    (``drop_parameters``, ``drop_parameter_names``).
+    (``drop_parameters``, ``drop_parameter_names``); ``compress_truth=False`` writes it uncompressed
+    (the same arrays; a Monte Carlo member deletes it right after scoring).
     """
     cfg = settings
     out = Path(out_dir)
@@ -434,7 +440,7 @@ def synthesize_droptest(
         paths["ranging"] = _write_ranging(RangingSpec.from_settings(cfg.ranging), truth, out, rng, lander)
 
     truth_path = out / "truth.npz"
-    np.savez_compressed(
+    (np.savez_compressed if compress_truth else np.savez)(
         truth_path,
         t=truth.t,
         p_I=truth.p_I,

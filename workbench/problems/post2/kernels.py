@@ -33,7 +33,16 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["PARAM_SLOTS", "CI", "CF", "dynamics_kernel", "air_speed_kernel"]
+__all__ = [
+    "PARAM_SLOTS",
+    "CI",
+    "CF",
+    "dynamics_kernel",
+    "air_speed_kernel",
+    "interp_index",
+    "interp_at",
+    "axial_kernel",
+]
 
 #: parameter slots of the kernel (name, size 1 each)
 PARAM_SLOTS = (
@@ -139,6 +148,47 @@ def _smoothstep(u):
 
 
 @njit(cache=True)
+def interp_index(x, xp):
+    """The node index of ``np.interp(x, xp, ·)`` for a scalar x and increasing nodes xp (n,): −1 below
+    xp[0], n above xp[n − 1], else the largest j with xp[j] ≤ x (n − 1 at the last node)."""
+    n = xp.size
+    if x < xp[0]:
+        return -1
+    if x > xp[n - 1]:
+        return n
+    lo, hi = 0, n  # first index with xp[i] > x, minus one
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if xp[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo - 1
+
+
+@njit(cache=True)
+def interp_at(j, x, xp, fp):
+    """``np.interp(x, xp, fp)`` for a scalar x with its node index j (:func:`interp_index`): the
+    branches and the arithmetic of numpy's (and numba's) ``arr_interp``, to the bit (NaN x: NaN)."""
+    n = xp.size
+    if math.isnan(x):
+        return x
+    if j == -1:
+        return fp[0]
+    if j >= n - 1:
+        return fp[n - 1]
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    res = slope * (x - xp[j]) + fp[j]
+    if math.isnan(res):
+        res = slope * (x - xp[j + 1]) + fp[j + 1]
+        if math.isnan(res) and fp[j] == fp[j + 1]:
+            res = fp[j]
+    return res
+
+
+@njit(cache=True)
 def _vrel(r, X, pv, ci, cf):
     """Air-relative velocity v − ω × r − wind [m/s] of row r (the model's ``v_rel``)."""
     ip, iv = ci[9], ci[10]
@@ -171,6 +221,23 @@ def air_speed_kernel(X, PB, pmode, pidx, pnom, ci, cf, out):
         _params(r, X, PB, pmode, pidx, pnom, pv)
         vr0, vr1, vr2 = _vrel(r, X, pv, ci, cf)
         out[r] = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2)
+
+
+@njit(cache=True)
+def axial_kernel(X, F, PB, pmode, pidx, pnom, ci, cf, mass, cos_tilt, bias, out):
+    """Huygens-like 3-DOF axial accelerometer [m/s²] of each row of X (b, n_x) into ``out`` (b,):
+    ``(F · v̂_rel / mass) cos_tilt + bias`` with F (b, 3) the inertial aero force [N] of
+    :func:`dynamics_kernel`, ``cos_tilt`` and ``bias`` (b,) evaluated by the caller; the model's
+    numpy ``axial_acceleration_3dof`` with its sums' order (numpy reduces 3 columns left to right)."""
+    pv = np.empty(pnom.size)
+    for r in range(X.shape[0]):
+        _params(r, X, PB, pmode, pidx, pnom, pv)
+        vr0, vr1, vr2 = _vrel(r, X, pv, ci, cf)
+        n = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2)
+        if n < 1e-9:  # np.maximum(|v_rel|, 1e-9); NaN stays NaN
+            n = 1e-9
+        a = F[r, 0] * (vr0 / n) + F[r, 1] * (vr1 / n) + F[r, 2] * (vr2 / n)
+        out[r] = (a / mass) * cos_tilt[r] + bias[r]
 
 
 @njit(cache=True)
@@ -288,7 +355,9 @@ def dynamics_kernel(
                 F1 = F1 + ((R10 * Fb0 + R12 * Fb2) + R11 * Fb1)
                 F2 = F2 + ((R20 * Fb0 + R22 * Fb2) + R21 * Fb1)
             if chute != 0:  # open canopy: 1 the drogue table, 2 the (main) parachute table
-                cd = np.interp(mach, chute_mach, chute_cd) * (pv[_DROGM] if chute == 1 else pv[_PARAM])
+                cd = interp_at(interp_index(mach, chute_mach), mach, chute_mach, chute_cd) * (
+                    pv[_DROGM] if chute == 1 else pv[_PARAM]
+                )
                 c = cd * qbar * cf[12] / Vs
                 F0, F1, F2 = F0 - c * vr0, F1 - c * vr1, F2 - c * vr2
             if area_chute != 0:  # drag-area state −CD·S q v̂_rel
@@ -358,10 +427,11 @@ def atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, want_kn, L, rho, a_s
                 above = 0.0
             p = 0.699e3 * math.exp(-0.00009 * hm) * math.exp(-above / ac[1])
             rho[r] = p / (ac[2] * T)
-        else:
-            T = np.interp(h, t_h, t_T)
-            p = math.exp(np.interp(h, t_h, t_lp))
-            rho[r] = math.exp(np.interp(h, t_h, t_lrho))
+        else:  # one node search for the three columns (np.interp's arithmetic, :func:`interp_at`)
+            j = interp_index(h, t_h)
+            T = interp_at(j, h, t_h, t_T)
+            p = math.exp(interp_at(j, h, t_h, t_lp))
+            rho[r] = math.exp(interp_at(j, h, t_h, t_lrho))
         a_snd[r] = math.sqrt(ac[3] * T)
         if want_kn:
             mu = ac[4] * (T / ac[5]) ** 1.5 * ac[6] / (T + ac[7])

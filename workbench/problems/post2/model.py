@@ -261,6 +261,15 @@ def scurve(s, lo: float, hi: float):
     return c + h * np.tanh((np.asarray(s, dtype=float) - c) / h)
 
 
+def _scurve_columns(bounded) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x columns (k,), centres c (k,), half widths h (k,)) of bounded slots ((sx, (lo, hi)), ...):
+    :func:`scurve`'s c and h, for all k slots at once."""
+    cols = np.array([sx.start for sx, _ in bounded], dtype=np.int64)
+    c = np.array([0.5 * (lo + hi) for _, (lo, hi) in bounded])
+    h = np.array([0.5 * (hi - lo) for _, (lo, hi) in bounded])
+    return cols, c, h
+
+
 def scurve_inverse(p, lo: float, hi: float):
     """Estimated state ``s`` of a physical value ``p`` strictly inside (lo, hi) (inverse of :func:`scurve`)."""
     c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
@@ -654,7 +663,7 @@ class TrajectoryModel:
             "grids": tuple(np.array(g, dtype=float) for g in (a.mach, a.log10_kn, a.alpha, a._stack))
             if a is not None
             else (dummy1, dummy1, dummy1, dummy4),
-            "dummy": dummy1, "phases": {},
+            "dummy": dummy1, "phases": {}, "scratch": {},
         }  # fmt: skip
         self._plan_cache = plan
         return plan
@@ -683,16 +692,32 @@ class TrajectoryModel:
         return got
 
     @staticmethod
+    def _scratch(plan: dict, b: int) -> tuple[np.ndarray, ...]:
+        """full_derivative's scratch rows for a batch of b (altitude, ρ, a, Kn, CA(Mach) factor),
+        kept per b: the kernel writes every row of the first four before reading them, and the fifth
+        (ones) only when the plan has a CA(Mach) wave, then every row of it on each call."""
+        got = plan["scratch"].get(b)
+        if got is None:
+            got = plan["scratch"][b] = (np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b))
+        return got
+
+    @staticmethod
     def _bounded(plan: dict, X: np.ndarray) -> np.ndarray:
         """Physical values (S-curve, numpy as the reference) of the bounded parameter slots, (k, b)."""
-        PB = np.empty((len(plan["bounded"]), X.shape[0]))
-        for i, (sx, bounds) in enumerate(plan["bounded"]):
-            PB[i] = scurve(X[..., sx], *bounds)[..., 0]
-        return PB
+        bounded = plan["bounded"]
+        if len(bounded) < 2:  # none, or one S-curve
+            PB = np.empty((len(bounded), X.shape[0]))
+            for i, (sx, bounds) in enumerate(bounded):
+                PB[i] = scurve(X[..., sx], *bounds)[..., 0]
+            return PB
+        # every bounded slot in one array expression: scurve's arithmetic element by element
+        cols, c, h = plan.get("bounded_columns") or plan.setdefault("bounded_columns", _scurve_columns(bounded))
+        return np.ascontiguousarray((c + h * np.tanh((X[:, cols] - c) / h)).T)
 
-    def _kernel_eval(self, x: np.ndarray, phase: dict, want_dx: bool):
+    def _kernel_eval(self, x: np.ndarray, phase: dict, want_dx: bool, PB: np.ndarray | None = None):
         """(ẋ or None, F, M) of x (..., n_x) by :func:`~workbench.problems.post2.kernels.dynamics_kernel`;
-        the atmosphere and bounded parameters evaluated here in numpy, as the reference does."""
+        the atmosphere and bounded parameters evaluated here in numpy, as the reference does (``PB``:
+        the bounded parameters of x's rows from :meth:`_bounded`, if the caller has them)."""
         plan = self._plan()
         x = np.asarray(x, dtype=float)
         shape = x.shape[:-1]
@@ -705,7 +730,7 @@ class TrajectoryModel:
         atm = env.atmosphere
         dummy = plan["dummy"]
         rho = a_snd = kn = ca_extra = dummy
-        PB = self._bounded(plan, X)
+        PB = self._bounded(plan, X) if PB is None else PB
         F = np.empty((b, 3))
         M = np.empty((b, 3))
         dx = np.empty_like(X) if want_dx else np.empty((0, 0))
@@ -715,7 +740,7 @@ class TrajectoryModel:
                 X, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, plan["inertia"], plan["inertia_inv"],
                 gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"], *plan["atm_tables"], plan["waves"],
                 want_dx, dx, F, M,
-                np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b),
+                *self._scratch(plan, b),
             )  # fmt: skip
             return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
         if atm is not None:
@@ -748,6 +773,29 @@ class TrajectoryModel:
             gm_, gk, ga, tab, tm, tc, want_dx, dx, F, M,
         )  # fmt: skip
         return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
+
+    def _axial_kernel(self, x: np.ndarray, phase: dict) -> np.ndarray:
+        """:meth:`axial_acceleration_3dof` by :func:`~workbench.problems.post2.kernels.axial_kernel`
+        (the force by :meth:`_kernel_eval`; cos(tilt) and the bias in numpy, as the reference)."""
+        plan = self._plan()
+        x = np.asarray(x, dtype=float)
+        X = np.ascontiguousarray(x.reshape(-1, x.shape[-1]))
+        if not X.flags.writeable:
+            X = X.copy()
+        PB = self._bounded(plan, X)
+        _, F, _ = self._kernel_eval(X, phase, want_dx=False, PB=PB)
+        ci, cf, _, _ = self._phase_consts(plan, phase)
+        if phase["parachute"] and phase.get("chute") == "drogue":
+            cos_tilt = np.ascontiguousarray(np.cos(self.param(X, "tilt", 0.0)[..., 0]), dtype=float)
+        else:
+            cos_tilt = np.ones(X.shape[0])  # a · 1.0 is a: the reference's branch without the tilt
+        bias = np.ascontiguousarray(self.param(X, "accel_bias", np.zeros(3))[..., 0], dtype=float)
+        out = np.empty(X.shape[0])
+        kernels.axial_kernel(
+            X, F, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, float(phase["mass"]),
+            cos_tilt, bias, out,
+        )  # fmt: skip
+        return out.reshape(*x.shape[:-1], 1)
 
     # ------------------------------------------------------------------ physics pieces
     def gravity(self, x: np.ndarray) -> np.ndarray:
@@ -896,6 +944,12 @@ class TrajectoryModel:
         """Huygens-like 3-DOF axial accelerometer [m/s²] (..., 1): the probe axis X_B is along the
         air-relative velocity (trimmed at zero α), tilted by ``tilt`` while the drogue is open, so the
         reading is ``(F · v̂_rel / m) cos(tilt) + accel_bias_x`` (negative under drag)."""
+        if self.use_kernel and self._plan() is not None:
+            return self._axial_kernel(x, phase)
+        return self.axial_acceleration_3dof_reference(x, phase)
+
+    def axial_acceleration_3dof_reference(self, x: np.ndarray, phase: dict) -> np.ndarray:
+        """Numpy reference of :meth:`axial_acceleration_3dof` (same arguments, units and shapes)."""
         F, _ = self.aero_force_moment(x, phase)
         vr = self.v_rel(x)
         vh = vr / np.maximum(np.linalg.norm(vr, axis=-1, keepdims=True), 1e-9)

@@ -378,6 +378,7 @@ class Estimator:
         self.layout = ErrorStateLayout(self.smap.n_x, self.smap.quat_blocks)
         self.model = TrajectoryModel(self.smap, cfg.dof, build.environment(cfg), build.vehicle(cfg), build.events(cfg))
         self.x0, self.P0, self.eps, self.mean = self._initial()
+        self._q_cache: list[tuple] | None = None
         # events due at the start apply from it, before its observations (as in the truth simulator;
         # checked only at the first transition they came after the t_start samples, issue #9)
         self.phase = self.model.check_events(self.x0, cfg.t_start, self.model.initial_phase())
@@ -424,21 +425,32 @@ class Estimator:
         τ/2, the time-varying Gauss-Markov process; without h the state's ``sigma``)."""
         Q = np.zeros((self.smap.n_e, self.smap.n_e))
         phis = {}
-        for name, b in self.smap.blocks.items():
-            s = self.cfg.state(name)
-            i = np.arange(b.se.start, b.se.stop)
-            if t is not None and self.cfg.schedules:  # ---- schedules: late system noise
+        for name, i, s, scheduled, var0 in self._q_plan():
+            if scheduled and t is not None:  # ---- schedules: late system noise
                 Q[i, i] += sched.extra_psd(self.cfg.schedules, name, i.size, t, self.phase["fired"]) * dt
             if s.process == "random_walk":
                 Q[i, i] += s.psd * dt
             elif s.process == "markov":
                 phi = math.exp(-dt / s.tau)
-                var = np.where(s.psd > 0, 0.5 * s.psd * s.tau, s.sigma**2)
+                var = var0
                 if s.sigma_profile is not None and h is not None:
                     var = np.full(i.size, np.interp(h, *s.sigma_profile) ** 2)
                 Q[i, i] = var * (1.0 - phi * phi)
                 phis[name] = phi
         return Q, phis
+
+    def _q_plan(self) -> list[tuple]:
+        """Per state block of :meth:`q_matrix` (built once): (name, error indices, its StateSpec,
+        whether a ``[schedules]`` window targets it, the Markov stationary variance without a profile)."""
+        if self._q_cache is None:
+            targets = {sc.target_name for sc in self.cfg.schedules if sc.target == "state"}
+            plan = []
+            for name, b in self.smap.blocks.items():
+                s = self.cfg.state(name)
+                var0 = np.where(s.psd > 0, 0.5 * s.psd * s.tau, s.sigma**2) if s.process == "markov" else None
+                plan.append((name, np.arange(b.se.start, b.se.stop), s, name in targets, var0))
+            self._q_cache = plan
+        return self._q_cache
 
     def advance(self, x: np.ndarray, t0: float, t1: float, phase: dict, phis: dict) -> np.ndarray:
         """Propagate a batch x (b, n_x) from t0 to t1 [s] with the phase; Markov states decay."""
@@ -485,10 +497,21 @@ class Estimator:
                 iterations=ch.spec.iterations,
             )  # fmt: skip
 
+        # the update asks h(x) and then H(x) at the same x: one batched model call gives both (its
+        # first row is h(x), the model evaluating every row alike)
+        memo: list = []
+
         def h(x, q=q, phase=phase):
-            return model.observe(np.asarray(x, float), q, phase)
+            x = np.asarray(x, float)
+            if x.ndim != 1:
+                return model.observe(x, q, phase)
+            y0, J = numeric_jacobian_batched(lambda X: model.observe(X, q, phase), x, self.layout, self.eps)
+            memo[:] = [x, J]
+            return y0
 
         def H(x, q=q, phase=phase):
+            if memo and memo[0] is x:
+                return memo[1]
             return numeric_jacobian_batched(lambda X: model.observe(X, q, phase), x, self.layout, self.eps)[1]
 
         return Measurement(
@@ -632,7 +655,7 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
     obs = {}
     for name, ih in fp.innovations.items():
         ok = ih.accepted
-        yn = np.array([np.linalg.solve(np.linalg.cholesky(S), y) for S, y in zip(ih.S, ih.y, strict=True)])
+        yn = np.linalg.solve(np.linalg.cholesky(ih.S), ih.y[..., None])[..., 0]  # L⁻¹ y, sample by sample
         obs[name] = {
             "samples": int(ih.t.size),
             "accepted": int(np.sum(ok)),
