@@ -79,6 +79,7 @@ class Post2Problem:
     kind = "post2"
     title = "trajectory"
     schema = SCHEMA
+    compiled_modules = ("workbench.problems.post2.kernels",)
 
     def settings(self, scenario: Scenario) -> Post2Settings:
         """The run's frozen :class:`~workbench.problems.post2.config.Post2Settings` (validated, files
