@@ -572,7 +572,7 @@ def write_comparison(cmp: Comparison, out: str | os.PathLike[str], *, max_views:
                 sub = layout.compare_position_path(comp) if d is cmp.position else None
                 if sub is not None:
                     rec.series_with_bounds(
-                        sub, d.t, d.diff[:, j], d.sigma[:, j], names=f"Δ{comp} [m]", color=_AXIS_COLOURS[j % 3]
+                        sub, d.t, d.diff[:, j], d.sigma[:, j], names=f"Δ{comp} [m]", color=[_AXIS_COLOURS[j % 3]]
                     )
             if d is cmp.position:
                 rec.scalars(layout.COMPARE_POSITION_NORM, d.t, np.linalg.norm(d.diff, axis=1), names="|Δ position| [m]")
