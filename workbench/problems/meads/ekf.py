@@ -87,6 +87,9 @@ __all__ = [
 ]
 
 LAYOUT = ErrorStateLayout(N_X)
+#: state columns the air data (α, β, q∞, M, p∞, ρ∞, wind) read: the air velocity's and ln p∞, ln ρ∞
+N_AIR_COLS = ILR + 1
+_AIR_LAYOUT = ErrorStateLayout(N_AIR_COLS)
 OUTPUT_NAMES = ("alpha", "beta", "qbar", "mach", "p_inf", "rho", "wind_north", "wind_east", "wind_down")
 """Columns of :func:`air_outputs` [rad, rad, Pa, 1, Pa, kg/m³, m/s, m/s, m/s]."""
 
@@ -288,10 +291,13 @@ def make_pressure_model(inp: EkfInputs, *, compiled: bool = True):
 
 def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -> tuple[np.ndarray, np.ndarray]:
     """:data:`OUTPUT_NAMES` (n, 9) and their 1σ (n, 9) from states x (n, N_X), covariances P
-    (n, N_X, N_X) and the strapdown attitude q_M_B (n, 4) (first-order propagation).  Evaluated
-    :data:`OUTPUT_CHUNK` samples at a time (each sample's outputs depend on that sample only): the
-    perturbed-state stack of all samples at once would hold (n, 1 + 2 N_X, N_X) and its
-    intermediates (~150 MB on ``msl_meads``)."""
+    (n, N_X, N_X) and the strapdown attitude q_M_B (n, 4) (first-order propagation).  The outputs
+    read only the first :data:`N_AIR_COLS` states, so only those and their covariance block enter
+    (the Jacobian's other columns are exactly zero: the same sums without their zero terms).
+    Evaluated :data:`OUTPUT_CHUNK` samples at a time (each sample's outputs depend on that sample
+    only)."""
+    x = x[:, :N_AIR_COLS]
+    P = P[:, :N_AIR_COLS, :N_AIR_COLS]
     C_all = np.swapaxes(quat_to_dcm(q_M_B), 1, 2)[:, None]
     ys, ss = [], []
     for i in range(0, len(x), OUTPUT_CHUNK):
@@ -302,7 +308,7 @@ def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -
             w = X[..., IW]
             return np.stack([a, b, q, M, pi, rho, w[..., 0], w[..., 1], w[..., 2]], axis=-1)
 
-        y, s, _ = derived_with_sigma(g, x[i : i + OUTPUT_CHUNK], P[i : i + OUTPUT_CHUNK], LAYOUT, EPS)
+        y, s, _ = derived_with_sigma(g, x[i : i + OUTPUT_CHUNK], P[i : i + OUTPUT_CHUNK], _AIR_LAYOUT, EPS[:N_AIR_COLS])
         ys.append(y)
         ss.append(s)
     return np.concatenate(ys), np.concatenate(ss)
