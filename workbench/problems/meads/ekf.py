@@ -544,13 +544,31 @@ def run_pass(
         Pi = np.eye(N_X)
         Pi[ILAM, ILAM] = 0.0
 
+    keep = carried_states(st)
+    ix = np.ix_(keep, keep)
+    if not estimate_scale:
+        Pi = Pi[ix]
+
         def projector(_x):
             return Pi
 
+    layout = ErrorStateLayout(keep.size)
     x0, P0 = _initial(inp, st, scale0, Pl0, compiled)
-    h = make_pressure_model(inp, compiled=compiled)
+    x0, P0 = x0[keep], P0[ix]
+    h_full = make_pressure_model(inp, compiled=compiled)
     C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
-    transition = make_transition(inp, st, compiled=compiled)
+    transition_full = make_transition(inp, st, compiled=compiled)
+    if keep.size == N_X:
+        h, transition = h_full, transition_full
+    else:
+        # the filter runs on the carried states; the models see the full state, the others zero
+        def h(xr, C, use):
+            pz, H = h_full(_expand(xr, keep), C, use)
+            return pz, H[:, keep]
+
+        def transition(xr, t0, t1):
+            x1, F, Q = transition_full(_expand(xr, keep), t0, t1)
+            return x1[keep], F[ix], Q[ix]
 
     def measurements_at(k, tk, x):
         use = np.flatnonzero(inp.usable[k] & np.isfinite(p[k]))
@@ -575,7 +593,7 @@ def run_pass(
                 lambda xx: both(xx)[0],
                 H=lambda xx: both(xx)[1],
                 iterations=st.iterations,
-                step_tol=EPS,
+                step_tol=EPS[keep],
                 gain_projector=projector,
                 slots=use,
                 size=m,
@@ -583,8 +601,21 @@ def run_pass(
         ]
 
     with np.errstate(invalid="ignore"):
-        fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, LAYOUT, keep_q=keep_all)
-        sm = rts_smooth(fp, LAYOUT, consider=None if estimate_scale else np.arange(N_X)[ILAM])
+        fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, layout, keep_q=keep_all)
+        sm = rts_smooth(fp, layout, consider=None if estimate_scale else np.arange(keep.size)[ILAM])
+    sigma_post = np.sqrt(np.maximum(np.einsum("nii->ni", fp.P_post), 0.0))
+    if keep.size < N_X:  # back to the full state: the states not carried are exactly zero
+        sigma_post = _expand(sigma_post, keep)
+        covs = ("P_prior", "P_post", "F", "Q") if keep_all else ()
+        fp = replace(
+            fp,
+            x_prior=_expand(fp.x_prior, keep),
+            x_post=_expand(fp.x_post, keep),
+            **{k: _expand_cov(getattr(fp, k), keep) for k in covs},
+        )
+        sm = replace(sm, x=_expand(sm.x, keep), P=_expand_cov(sm.P, keep))
+        if keep_all:
+            sm = replace(sm, G=_expand_cov(sm.G, keep))
     out, sd = air_outputs(sm.x, sm.P, inp.q_M_B, inp.gamma)
     inn = fp.innovations.get("pressure")
     if inn is None:
@@ -598,7 +629,6 @@ def run_pass(
     # what the pass keeps: the smoother's inputs P_prior and F, its gains G and the forward
     # covariances are not read after it (recording, health and summary use x_post, its 1σ, the
     # innovations, the smoothed x and P); each is an (n, N_X, N_X) array (36 MB on msl_meads)
-    sigma_post = np.sqrt(np.maximum(np.einsum("nii->ni", fp.P_post), 0.0))
     if not keep_all:
         none = np.empty((0, N_X, N_X))
         fp = replace(fp, P_prior=none, P_post=none, F=none, Q=None)
@@ -619,6 +649,37 @@ def run_pass(
         time.perf_counter() - t0,
         sigma_post,
     )
+
+
+def carried_states(st: EkfSettings) -> np.ndarray:
+    """Indices (n_c,) into the full state (:data:`.state.STATE_NAMES`) of the states the filter
+    carries: all but the model-error rates :data:`.state.IBD` for the first-order process, where
+    they are identically zero with zero variance and no coupling (Φ, Q, P₀ and H zero on them),
+    so dropping them leaves every other number as it was."""
+    if st.model_error_order == 2:
+        return np.arange(N_X)
+    return np.delete(np.arange(N_X), np.arange(N_X)[IBD])
+
+
+def _expand(xr: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """States (..., n_c) of the carried states ``keep`` to the full (..., N_X), zero elsewhere."""
+    out = np.zeros((*xr.shape[:-1], N_X))
+    out[..., keep] = xr
+    return out
+
+
+def _expand_cov(A: np.ndarray | None, keep: np.ndarray) -> np.ndarray | None:
+    """Matrices (n, n_c, n_c) over the carried states ``keep`` to (n, N_X, N_X), zero elsewhere."""
+    if A is None:
+        return None
+    out = np.zeros((A.shape[0], N_X, N_X))
+    # block by block over the runs of consecutive indices (a fancy-index scatter is ~10x slower)
+    cut = np.flatnonzero(np.diff(keep) != 1) + 1
+    runs = [(int(r[0]), int(r[-1]) + 1, int(i)) for r, i in zip(np.split(keep, cut), np.r_[0, cut], strict=True)]
+    for a0, a1, i in runs:
+        for b0, b1, j in runs:
+            out[:, a0:a1, b0:b1] = A[:, i : i + a1 - a0, j : j + b1 - b0]
+    return out
 
 
 def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False, *, compiled: bool = True):
