@@ -45,7 +45,7 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
 from workbench.problems.meads.airdata import ned_frames, pressure_model
 from workbench.problems.meads.config import EkfSettings
-from workbench.problems.meads.kernel import flow_kernel, pressure_kernel
+from workbench.problems.meads.kernel import flow_kernel, measurement_kernel
 from workbench.problems.meads.state import (
     IB,
     IBD,
@@ -64,7 +64,6 @@ from workbench.problems.meads.state import (
     IW_EAST,
     IW_NORTH,
     N_PORTS,
-    N_U_COLS,
     N_X,
     STATE_NAMES,
 )
@@ -226,12 +225,16 @@ _NO_GRID = np.zeros(2)
 _NO_TABLE = np.zeros((2, 2, 2, 2))
 
 
-def make_pressure_model(inp: EkfInputs, *, compiled: bool = True):
-    """``h(x, C_B_M, use) -> (p (k,), H (k, N_X))``: the pressures of the ports ``use`` [Pa] and
-    their Jacobian.  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞) and λ, so
-    the surface-pressure model is differenced in z (11 evaluations) and chained with ∂z/∂x.
-    ``compiled``: run as the compiled :func:`.kernel.pressure_kernel`; False: the numpy reference
-    path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)."""
+def make_pressure_model(inp: EkfInputs, *, compiled: bool = True, keep: np.ndarray | None = None):
+    """``h(x, C_B_M, use) -> (p (k,), H (k, n_c))``: the pressures of the ports ``use`` [Pa] and
+    their Jacobian over the state x (n_c,) of the carried states ``keep`` (:func:`carried_states`;
+    None: all :data:`N_X`).  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞)
+    and λ, so the surface-pressure model is differenced in z (11 evaluations) and chained with
+    ∂z/∂x.  ``compiled``: run as the compiled :func:`.kernel.measurement_kernel`; False: the numpy
+    reference path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)."""
+    keep = np.arange(N_X) if keep is None else np.asarray(keep, dtype=int)
+    cols = np.searchsorted(keep, [ILAM.start, IC, IB.start, IBIAS.start, IMM, IMA.start])
+    eps_c = EPS[keep]
     h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
     D = np.diag(_EPS_Z)
     dz = np.concatenate([np.zeros((1, 5)), D, -D])
@@ -246,18 +249,19 @@ def make_pressure_model(inp: EkfInputs, *, compiled: bool = True):
 
     def h(x: np.ndarray, C_B_M: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if compiled:
-            u0, Ju12, p0, dp_dz = pressure_kernel(
-                x, C_B_M, EPS, _EPS_Z, use, inp.gamma, MARS.rotation_rate, table_model, *ports, *grids
+            return measurement_kernel(
+                x, C_B_M, eps_c, _EPS_Z, use, inp.gamma, MARS.rotation_rate, table_model, *ports, *grids, cols
             )
-            Ju = np.zeros((3, N_X))
-            Ju[:, :N_U_COLS] = Ju12
-        else:
-            u0, Ju = numeric_jacobian_batched(lambda X: _air_velocity(X, C_B_M), x, LAYOUT, EPS)
-            Z = np.r_[u0, x[ILP], x[ILR]][None, :] + dz
-            a, b, q, M, _, _ = _freestream(Z[:, :3], Z[:, 3], Z[:, 4], inp.gamma)
-            pz = h4(np.stack([q, a, b, M], axis=1))[:, use]  # (11, k)
-            p0 = pz[0]
-            dp_dz = ((pz[1:6] - pz[6:11]) / (2.0 * _EPS_Z)[:, None]).T  # (k, 5)
+        pz, H = h_full(x if keep.size == N_X else _expand(x, keep), C_B_M, use)
+        return pz, (H if keep.size == N_X else H[:, keep])
+
+    def h_full(x: np.ndarray, C_B_M: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        u0, Ju = numeric_jacobian_batched(lambda X: _air_velocity(X, C_B_M), x, LAYOUT, EPS)
+        Z = np.r_[u0, x[ILP], x[ILR]][None, :] + dz
+        a, b, q, M, _, _ = _freestream(Z[:, :3], Z[:, 3], Z[:, 4], inp.gamma)
+        pz = h4(np.stack([q, a, b, M], axis=1))[:, use]  # (11, k)
+        p0 = pz[0]
+        dp_dz = ((pz[1:6] - pz[6:11]) / (2.0 * _EPS_Z)[:, None]).T  # (k, 5)
         Jz = np.zeros((5, N_X))
         Jz[:3] = Ju
         Jz[3, ILP] = Jz[4, ILR] = 1.0
@@ -555,17 +559,13 @@ def run_pass(
     layout = ErrorStateLayout(keep.size)
     x0, P0 = _initial(inp, st, scale0, Pl0, compiled)
     x0, P0 = x0[keep], P0[ix]
-    h_full = make_pressure_model(inp, compiled=compiled)
+    h = make_pressure_model(inp, compiled=compiled, keep=keep)
     C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
     transition_full = make_transition(inp, st, compiled=compiled)
     if keep.size == N_X:
-        h, transition = h_full, transition_full
+        transition = transition_full
     else:
-        # the filter runs on the carried states; the models see the full state, the others zero
-        def h(xr, C, use):
-            pz, H = h_full(_expand(xr, keep), C, use)
-            return pz, H[:, keep]
-
+        # the filter runs on the carried states; the transition sees the full state, the others zero
         def transition(xr, t0, t1):
             x1, F, Q = transition_full(_expand(xr, keep), t0, t1)
             return x1[keep], F[ix], Q[ix]

@@ -30,7 +30,7 @@ from numba import njit
 
 from workbench.problems.meads.state import ILP, ILR, IP, ITH, IV, IW, N_U_COLS
 
-__all__ = ["pressure_kernel", "flow_kernel", "N_U_COLS"]
+__all__ = ["pressure_kernel", "measurement_kernel", "flow_kernel", "N_U_COLS"]
 
 # the state's first columns as compile-time integers (the compiled code indexes element by element)
 _P0, _V0, _TH0, _W0 = IP.start, IV.start, ITH.start, IW.start
@@ -201,6 +201,76 @@ def pressure_kernel(
         for i in range(k):
             dp_dz[i, j] = (pz[1 + j, i] - pz[6 + j, i]) / (2.0 * eps_z[j])
     return u0, Ju, p0, dp_dz
+
+
+@njit(cache=True, nogil=True)
+def measurement_kernel(
+    x,
+    C,
+    eps_x,
+    eps_z,
+    use,
+    gamma,
+    omega,
+    table_model,
+    port_cone,
+    port_clock,
+    port_s,
+    gm,
+    ga,
+    gc,
+    gs,
+    values,
+    cols,
+):  # pragma: no cover - compiled
+    """The filter's measurement: port pressures (k,) [Pa] and their Jacobian H (k, n_c) over the
+    carried state x (n_c,), :func:`pressure_kernel` chained with the model-error states as
+    ``ekf.make_pressure_model`` assembles them (its numpy path is the reference).
+
+    Arguments as :func:`pressure_kernel` (``eps_x`` over the carried state), and ``cols`` (6,) int:
+    the carried-state columns of the first scale factor, the model level, the first model error,
+    the first bias, the Mach error and the first flow-angle error (the position, velocity,
+    attitude, wind, ln p∞ and ln ρ∞ columns are the full state's)."""
+    u0, Ju, p0, dp_dz = pressure_kernel(
+        x, C, eps_x, eps_z, use, gamma, omega, table_model, port_cone, port_clock, port_s, gm, ga, gc, gs, values
+    )
+    i_lam, i_c, i_b, i_bias, i_mm, i_ma = cols[0], cols[1], cols[2], cols[3], cols[4], cols[5]
+    k = use.size
+    n = x.size
+    g_m = np.empty(k)
+    for i in range(k):
+        g_m[i] = dp_dz[i, 4] - dp_dz[i, 3] - p0[i] + 2.0 * math.exp(x[ILP])
+    V = math.sqrt(u0[0] * u0[0] + u0[1] * u0[1] + u0[2] * u0[2])
+    hy = math.hypot(u0[0], u0[2])
+    ca, sa = u0[0] / hy, u0[2] / hy
+    sb = u0[1] / V
+    cb = math.sqrt(max(1.0 - sb * sb, 0.0))
+    du0 = (V * (-sa * cb), V * 0.0, V * (ca * cb))  # ∂u/∂α
+    du1 = (V * (-ca * sb), V * cb, V * (-sa * sb))  # ∂u/∂β
+    lev = 1.0 + x[i_c]
+    pm = np.empty(k)
+    H = np.zeros((k, n))
+    for i in range(k):
+        ga_ = dp_dz[i, 0] * du0[0] + dp_dz[i, 1] * du0[1] + dp_dz[i, 2] * du0[2]
+        gb_ = dp_dz[i, 0] * du1[0] + dp_dz[i, 1] * du1[1] + dp_dz[i, 2] * du1[2]
+        pm_i = p0[i] + x[i_mm] * g_m[i] + (ga_ * x[i_ma] + gb_ * x[i_ma + 1])
+        port = use[i]
+        lam = 1.0 + x[i_lam + port]
+        mod = 1.0 + x[i_b + port]
+        f = lam * lev * mod
+        for j in range(N_U_COLS):
+            H[i, j] = f * (dp_dz[i, 0] * Ju[0, j] + dp_dz[i, 1] * Ju[1, j] + dp_dz[i, 2] * Ju[2, j])
+        H[i, ILP] = f * dp_dz[i, 3]
+        H[i, ILR] = f * dp_dz[i, 4]
+        H[i, i_lam + port] = pm_i * lev * mod
+        H[i, i_c] = pm_i * lam * mod
+        H[i, i_b + port] = pm_i * lam * lev
+        H[i, i_bias + port] = 1.0
+        H[i, i_mm] = g_m[i] * lam * lev * mod
+        H[i, i_ma] = ga_ * f
+        H[i, i_ma + 1] = gb_ * f
+        pm[i] = pm_i * lam * lev * mod + x[i_bias + port]
+    return pm, H
 
 
 @njit(cache=True, nogil=True)
