@@ -413,3 +413,35 @@ def test_first_order_filter_carries_no_rate_states(arc_model_error, monkeypatch)
         d[d == 0.0] = 1.0
         dP = np.abs(ps.smoothed.P - pf.smoothed.P) / (d[:, :, None] * d[:, None, :])
         assert dP.max() < 1e-6
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_compiled_transition_matches_the_numpy_reference(order):
+    """The compiled transition (:func:`.kernel.transition_kernel`) against the numpy path: the
+    same x1, F, Q to a few ulp over the full and the carried states, with every state perturbed
+    (model errors, vertical wind, flow-angle errors active)."""
+    inp, X = _arc(n=40)
+    st = replace(DEFAULTS.ekf, model_error_order=order, model_error_sigma=0.01, vertical_wind_length_km=2.0)
+    assert st.model_mach_sigma > 0.0 and st.model_angle_sigma_deg > 0.0 and st.attitude_velocity_coupling
+    rng = np.random.default_rng(11)
+    for keep in (None, ekf.carried_states(st)):
+        fast = ekf.make_transition(inp, st, keep=keep)
+        ref = ekf.make_transition(inp, st, compiled=False, keep=keep)
+        for k in range(1, inp.t.size, 7):
+            x = X[k - 1].copy()
+            x[ekf.IP] += rng.normal(0.0, 50.0, 3)
+            x[ekf.IV] += rng.normal(0.0, 1.0, 3)
+            x[ekf.ITH] = rng.normal(0.0, 1e-3, 3)
+            x[ekf.IW] += rng.normal(0.0, 5.0, 3)
+            x[ekf.IB] = rng.normal(0.0, 0.01, 7)
+            x[ekf.IBD] = rng.normal(0.0, 0.01, 7) if order == 2 else 0.0
+            x[ekf.IBIAS] = rng.normal(0.0, 2.0, 7)
+            x[ekf.IMM] = rng.normal(0.0, 0.01)
+            x[ekf.IMA] = rng.normal(0.0, 0.01, 2)
+            if keep is not None:
+                x = x[keep]
+            x1, F1, Q1 = fast(x, inp.t[k - 1], inp.t[k])
+            x0, F0, Q0 = ref(x, inp.t[k - 1], inp.t[k])
+            np.testing.assert_allclose(x1, x0, rtol=1e-14, atol=1e-15)
+            np.testing.assert_allclose(F1, F0, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(Q1, Q0, rtol=1e-12, atol=1e-30)

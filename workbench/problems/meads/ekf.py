@@ -45,7 +45,7 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
 from workbench.problems.meads.airdata import ned_frames, pressure_model
 from workbench.problems.meads.config import EkfSettings
-from workbench.problems.meads.kernel import flow_kernel, measurement_kernel
+from workbench.problems.meads.kernel import TRANSITION_PARAMS, flow_kernel, measurement_kernel, transition_kernel
 from workbench.problems.meads.state import (
     IB,
     IBD,
@@ -415,9 +415,11 @@ def _distance(f0: tuple[float, float, float], f1: tuple[float, float, float], st
     return float(abs(m1 - m0) / st.model_error_mach_length + d_angle)
 
 
-def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True):
-    """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring);
-    ``compiled``: the flight condition of a state by the compiled kernel (else numpy)."""
+def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True, keep: np.ndarray | None = None):
+    """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring) over
+    the state x (n_c,) of the carried states ``keep`` (:func:`carried_states`; None: all
+    :data:`N_X`).  ``compiled``: one call of the compiled :func:`.kernel.transition_kernel`; False:
+    the numpy reference path (``tests/problems/meads/test_kernel.py``)."""
     t = inp.t
     C_M_B = quat_to_dcm(inp.q_M_B)
     idx = {float(v): i for i, v in enumerate(t.tolist())}
@@ -429,6 +431,9 @@ def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True):
     # its velocity change less the gravity it integrated (point mass + J2, trapezoidal)
     g = gravity_j2(inp.p_M, MARS)
     dv_sf = np.diff(inp.v_M, axis=0) - 0.5 * (g[1:] + g[:-1]) * np.diff(t)[:, None]
+    keep = np.arange(N_X) if keep is None else np.asarray(keep, dtype=int)
+    if compiled:
+        return _compiled_transition(inp, st, keep, idx, C_M_B, dv_sf, markov)
 
     def transition(x, t0, t1):
         k = idx[t1]
@@ -506,6 +511,48 @@ def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True):
             Q[IMA, IMA] = s1**2 * (1.0 - phi**2) * np.eye(2)
         return x1, F, Q
 
+    if keep.size == N_X:
+        return transition
+    ix = np.ix_(keep, keep)
+
+    def carried(xr, t0, t1):
+        # the full state's transition, the states not carried zero
+        x1, F, Q = transition(_expand(xr, keep), t0, t1)
+        return x1[keep], F[ix], Q[ix]
+
+    return carried
+
+
+def _compiled_transition(inp, st, keep, idx, C_M_B, dv_sf, markov):
+    """:func:`make_transition`'s compiled path: the per-step matrices for all steps at once, then
+    one :func:`.kernel.transition_kernel` call a step."""
+    G = gravity_point_mass_gradient(inp.p_M[:-1], MARS.gm)
+    if st.attitude_velocity_coupling:
+        Fvt = -np.matmul(skew(dv_sf), C_M_B[:-1])
+    else:
+        Fvt = np.zeros((max(len(inp.t) - 1, 0), 3, 3))
+    Rb = np.matmul(np.swapaxes(C_M_B[1:], 1, 2), C_M_B[:-1])
+    C_B_M = np.ascontiguousarray(np.swapaxes(C_M_B, 1, 2))
+    p_M, v_M = np.ascontiguousarray(inp.p_M, dtype=float), np.ascontiguousarray(inp.v_M, dtype=float)
+    values = {
+        **{name: float(getattr(st, name)) for name in TRANSITION_PARAMS if hasattr(st, name)},
+        "model_angle_sigma_rad": math.radians(st.model_angle_sigma_deg),
+        "model_error_angle_rad": math.radians(st.model_error_angle_deg),
+        "markov": float(markov),
+    }
+    par = np.array([values[name] for name in TRANSITION_PARAMS])
+    second = bool(np.isin(np.arange(N_X)[IBD], keep).all())
+    cols = np.array(
+        [np.searchsorted(keep, IB.start), np.searchsorted(keep, IBD.start) if second else -1]
+        + [np.searchsorted(keep, IMM), np.searchsorted(keep, IMA.start)]
+    )
+    if st.model_error_order == 2 and not second:
+        raise ValueError("the second-order model error needs its rate states carried")
+    gm, omega, gamma = MARS.gm, MARS.rotation_rate, inp.gamma
+
+    def transition(x, t0, t1):
+        return transition_kernel(x, idx[t1], t1 - t0, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, cols)
+
     return transition
 
 
@@ -561,14 +608,7 @@ def run_pass(
     x0, P0 = x0[keep], P0[ix]
     h = make_pressure_model(inp, compiled=compiled, keep=keep)
     C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
-    transition_full = make_transition(inp, st, compiled=compiled)
-    if keep.size == N_X:
-        transition = transition_full
-    else:
-        # the filter runs on the carried states; the transition sees the full state, the others zero
-        def transition(xr, t0, t1):
-            x1, F, Q = transition_full(_expand(xr, keep), t0, t1)
-            return x1[keep], F[ix], Q[ix]
+    transition = make_transition(inp, st, compiled=compiled, keep=keep)
 
     def measurements_at(k, tk, x):
         use = np.flatnonzero(inp.usable[k] & np.isfinite(p[k]))

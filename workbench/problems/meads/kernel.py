@@ -28,9 +28,17 @@ import math
 import numpy as np
 from numba import njit
 
-from workbench.problems.meads.state import ILP, ILR, IP, ITH, IV, IW, N_U_COLS
+from workbench.problems.meads.state import ILP, ILR, IP, ITH, IV, IW, N_PORTS, N_U_COLS
 
-__all__ = ["pressure_kernel", "measurement_kernel", "flow_kernel", "N_U_COLS"]
+__all__ = ["pressure_kernel", "measurement_kernel", "flow_kernel", "transition_kernel", "TRANSITION_PARAMS", "N_U_COLS"]
+
+#: the order of the settings in :func:`transition_kernel`'s ``par`` array
+TRANSITION_PARAMS = (
+    "accel_psd", "attitude_psd", "wind_var_per_km", "vertical_wind_length_km", "vertical_wind_sigma_mps",
+    "wind_sigma_mps", "atmosphere_var_per_km", "model_error_sigma", "model_error_order", "model_mach_sigma",
+    "model_angle_sigma_rad", "model_angle_mach_low", "model_angle_mach_high", "model_angle_hypersonic_fraction",
+    "model_error_mach_length", "model_error_angle_rad", "markov",
+)  # fmt: skip
 
 # the state's first columns as compile-time integers (the compiled code indexes element by element)
 _P0, _V0, _TH0, _W0 = IP.start, IV.start, ITH.start, IW.start
@@ -284,3 +292,130 @@ def flow_kernel(x, C, omega, gamma):  # pragma: no cover - compiled
     a = math.atan2(u[2], u[0])
     b = math.asin(min(max(u[1] / V, -1.0), 1.0))
     return a, b, V / math.sqrt(gamma * math.exp(x[ILP]) / math.exp(x[ILR]))
+
+
+@njit(cache=True, nogil=True)
+def _angle_sigma(par, mach):  # pragma: no cover - compiled
+    """``ekf.angle_sigma``: the flow-angle error's 1σ [rad] at ``mach``."""
+    lo, hi = par[11], par[12]
+    w = min(max((mach - lo) / (hi - lo), 0.0), 1.0)
+    return par[10] * (1.0 + w * (par[13] - 1.0))
+
+
+@njit(cache=True, nogil=True)
+def transition_kernel(x, k, dt, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, cols):  # pragma: no cover
+    """One step k−1 → k of the MEADS EKF (``ekf.make_transition``'s numpy path is the reference):
+    ``(x1 (n_c,), F (n_c, n_c), Q (n_c, n_c))`` over the carried state x (n_c,).
+
+    ``dt`` [s]; the strapdown ``p_M``, ``v_M`` (n, 3) [m, m/s] and ``C_B_M`` (n, 3, 3); per step
+    (n − 1, 3, 3): the point-mass gravity gradient ``G`` [1/s²] at p_M[k−1], the specific-force tilt
+    ``Fvt`` and the body rotation ``Rb`` over the step; ``gm`` [m³/s²], ``omega`` [rad/s],
+    ``gamma``; ``par`` the settings in :data:`TRANSITION_PARAMS` order; ``cols`` (4,) int the
+    carried-state columns of the first model error b, its first rate b' (−1: first order), the Mach
+    error and the first flow-angle error (the other columns are the full state's)."""
+    n = x.size
+    km1 = k - 1
+    i_b, i_bd, i_mm, i_ma = cols[0], cols[1], cols[2], cols[3]
+    x1 = x.copy()
+    F = np.eye(n)
+    Q = np.zeros((n, n))
+    dp = np.empty(3)
+    dv = np.empty(3)
+    for i in range(3):
+        dp[i] = x[_P0 + i] - p_M[km1, i]
+        dv[i] = x[_V0 + i] - v_M[km1, i]
+    for i in range(3):
+        x1[_P0 + i] = p_M[k, i] + dp[i] + dv[i] * dt
+        gdp = G[km1, i, 0] * dp[0] + G[km1, i, 1] * dp[1] + G[km1, i, 2] * dp[2]
+        ft = Fvt[km1, i, 0] * x[_TH0] + Fvt[km1, i, 1] * x[_TH0 + 1] + Fvt[km1, i, 2] * x[_TH0 + 2]
+        x1[_V0 + i] = v_M[k, i] + dv[i] + gdp * dt + ft
+        x1[_TH0 + i] = Rb[km1, i, 0] * x[_TH0] + Rb[km1, i, 1] * x[_TH0 + 1] + Rb[km1, i, 2] * x[_TH0 + 2]
+    r0 = math.sqrt(x[_P0] * x[_P0] + x[_P0 + 1] * x[_P0 + 1] + x[_P0 + 2] * x[_P0 + 2])
+    r1 = math.sqrt(x1[_P0] * x1[_P0] + x1[_P0 + 1] * x1[_P0 + 1] + x1[_P0 + 2] * x1[_P0 + 2])
+    dh = r1 - r0
+    c = gm / r0**2 * math.exp(x[ILR] - x[ILP])
+    x1[ILP] = x[ILP] - c * dh
+    x1[ILR] = x[ILR] - c * dh
+    for i in range(3):
+        F[_P0 + i, _V0 + i] = dt
+        for j in range(3):
+            F[_V0 + i, _P0 + j] = G[km1, i, j] * dt
+            F[_V0 + i, _TH0 + j] = Fvt[km1, i, j]
+            F[_TH0 + i, _TH0 + j] = Rb[km1, i, j]
+    for row in (ILP, ILR):
+        for i in range(3):
+            u0 = x[_P0 + i] / r0
+            u1 = x1[_P0 + i] / r1
+            F[row, _P0 + i] = -c * (u1 - u0)
+            F[row, _V0 + i] = -c * (u1 * dt)
+        F[row, ILP] = F[row, ILP] + c * dh
+        F[row, ILR] = F[row, ILR] - c * dh
+    qa = par[0]
+    for i in range(3):
+        Q[_P0 + i, _P0 + i] = qa * dt**3 / 3.0
+        Q[_P0 + i, _V0 + i] = qa * dt**2 / 2.0
+        Q[_V0 + i, _P0 + i] = qa * dt**2 / 2.0
+        Q[_V0 + i, _V0 + i] = qa * dt
+        Q[_TH0 + i, _TH0 + i] = par[1] * dt
+    km = abs(dh) / 1e3
+    Q[_W0, _W0] = par[2] * km
+    Q[_W0 + 1, _W0 + 1] = par[2] * km
+    if par[3] > 0.0:
+        phi_w = math.exp(-km / par[3])
+        x1[_W0 + 2] = phi_w * x[_W0 + 2]
+        F[_W0 + 2, _W0 + 2] = phi_w
+        Q[_W0 + 2, _W0 + 2] = par[4] ** 2 * (1.0 - phi_w**2)
+    else:
+        Q[_W0 + 2, _W0 + 2] = par[2] * km * (par[4] / par[5]) ** 2
+    Q[ILP, ILP] = par[6] * km
+    Q[ILR, ILR] = par[6] * km
+    dist = 0.0
+    m0 = m1 = 0.0
+    if par[16] > 0.0:
+        a0, b0, m0 = flow_kernel(x, C_B_M[km1], omega, gamma)
+        a1, b1, m1 = flow_kernel(x1, C_B_M[k], omega, gamma)
+        d_angle = (abs(a1 - a0) + abs(b1 - b0)) / par[15]
+        dist = abs(m1 - m0) / par[14] + d_angle
+    if par[7] > 0.0:
+        e = math.exp(-dist)
+        s2 = par[7] ** 2
+        if par[8] == 2.0:
+            p00, p01, p10, p11 = e * (1.0 + dist), e * dist, e * -dist, e * (1.0 - dist)
+            s2d = s2
+        else:
+            p00, p01, p10, p11 = e, 0.0, 0.0, 0.0
+            s2d = 0.0
+        # Q = P∞ − Φ P∞ Φᵀ with P∞ = diag(s2, s2d)
+        q00 = s2 - (p00 * s2 * p00 + p01 * s2d * p01)
+        q01 = 0.0 - (p00 * s2 * p10 + p01 * s2d * p11)
+        q11 = s2d - (p10 * s2 * p10 + p11 * s2d * p11)
+        for i in range(N_PORTS):
+            b = x[i_b + i]
+            if i_bd >= 0:
+                bd = x[i_bd + i]
+                x1[i_b + i] = p00 * b + p01 * bd
+                x1[i_bd + i] = p10 * b + p11 * bd
+                F[i_b + i, i_bd + i] = p01
+                F[i_bd + i, i_b + i] = p10
+                F[i_bd + i, i_bd + i] = p11
+                Q[i_b + i, i_bd + i] = q01
+                Q[i_bd + i, i_b + i] = q01
+                Q[i_bd + i, i_bd + i] = q11
+            else:
+                x1[i_b + i] = p00 * b
+            F[i_b + i, i_b + i] = p00
+            Q[i_b + i, i_b + i] = q00
+    if par[9] > 0.0:
+        phi = math.exp(-dist)
+        x1[i_mm] = phi * x[i_mm]
+        F[i_mm, i_mm] = phi
+        Q[i_mm, i_mm] = par[9] ** 2 * (1.0 - phi**2)
+    if par[10] > 0.0:
+        s0, s1 = _angle_sigma(par, m0), _angle_sigma(par, m1)
+        phi = math.exp(-dist)
+        f = phi * s1 / s0 if s0 > 0.0 else 0.0
+        for i in range(2):
+            x1[i_ma + i] = f * x[i_ma + i]
+            F[i_ma + i, i_ma + i] = f
+            Q[i_ma + i, i_ma + i] = s1**2 * (1.0 - phi**2)
+    return x1, F, Q
