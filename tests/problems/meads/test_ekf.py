@@ -445,3 +445,34 @@ def test_compiled_transition_matches_the_numpy_reference(order):
             np.testing.assert_allclose(x1, x0, rtol=1e-14, atol=1e-15)
             np.testing.assert_allclose(F1, F0, rtol=1e-12, atol=1e-15)
             np.testing.assert_allclose(Q1, Q0, rtol=1e-12, atol=1e-30)
+
+
+def test_compiled_forward_pass_matches_the_reference(arc_model_error):
+    """The compiled forward pass (:func:`.kernel.forward_kernel`, both passes: scale factors
+    estimated, then held as consider parameters) against the reference path (``run_filter`` with
+    the numpy transition and pressure model): the same states, covariances and innovations, to the
+    last-place differences the iterated update's stop rule amplifies."""
+    inp, _, passes = arc_model_error
+    st = replace(
+        DEFAULTS.ekf, iterations=3, accel_psd=1e-8, attitude_psd=1e-14, wind_var_per_km=1e-4, atmosphere_var_per_km=1e-9
+    )
+    ref = list(ekf.run_passes(inp, st, keep_all=True, compiled=False))
+    for ps, pr in zip(passes, ref, strict=True):
+        fa, fr = ps.forward, pr.forward
+        for name in ("x_prior", "x_post", "F"):
+            np.testing.assert_allclose(getattr(fa, name), getattr(fr, name), rtol=1e-6, atol=1e-8, err_msg=name)
+        for name in ("P_prior", "P_post", "Q"):
+            A, B = getattr(fa, name), getattr(fr, name)
+            d = np.sqrt(np.abs(np.einsum("nii->ni", B)))
+            d[d == 0.0] = 1.0
+            assert np.max(np.abs(A - B) / (d[:, :, None] * d[:, None, :])) < 1e-6, name
+        ia, ir = fa.innovations["pressure"], fr.innovations["pressure"]
+        np.testing.assert_array_equal(ia.step, ir.step)
+        np.testing.assert_array_equal(ia.accepted, ir.accepted)
+        np.testing.assert_array_equal(np.isnan(ia.S), np.isnan(ir.S))
+        for name in ("z", "z_pred", "y", "nis"):
+            np.testing.assert_allclose(getattr(ia, name), getattr(ir, name), rtol=1e-6, atol=1e-6, err_msg=name)
+        d = np.sqrt(np.einsum("kii->ki", ir.S))  # S on the correlation scale: its cross terms cancel
+        assert np.nanmax(np.abs(ia.S - ir.S) / (d[:, :, None] * d[:, None, :])) < 1e-6
+        np.testing.assert_allclose(ps.outputs, pr.outputs, rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(ps.sigma, pr.sigma, rtol=1e-6)

@@ -36,6 +36,7 @@ from workbench.core.rotation import quat_to_dcm, skew
 from workbench.estimation.ekf import (
     ErrorStateLayout,
     ForwardPass,
+    InnovationHistory,
     Measurement,
     derived_with_sigma,
     numeric_jacobian_batched,
@@ -45,7 +46,13 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
 from workbench.problems.meads.airdata import ned_frames, pressure_model
 from workbench.problems.meads.config import EkfSettings
-from workbench.problems.meads.kernel import TRANSITION_PARAMS, flow_kernel, measurement_kernel, transition_kernel
+from workbench.problems.meads.kernel import (
+    TRANSITION_PARAMS,
+    flow_kernel,
+    forward_kernel,
+    measurement_kernel,
+    transition_kernel,
+)
 from workbench.problems.meads.state import (
     IB,
     IBD,
@@ -233,25 +240,16 @@ def make_pressure_model(inp: EkfInputs, *, compiled: bool = True, keep: np.ndarr
     ∂z/∂x.  ``compiled``: run as the compiled :func:`.kernel.measurement_kernel`; False: the numpy
     reference path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)."""
     keep = np.arange(N_X) if keep is None else np.asarray(keep, dtype=int)
-    cols = np.searchsorted(keep, [ILAM.start, IC, IB.start, IBIAS.start, IMM, IMA.start])
-    eps_c = EPS[keep]
     h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
     D = np.diag(_EPS_Z)
     dz = np.concatenate([np.zeros((1, 5)), D, -D])
     compiled = compiled and inp.model in ("newtonian", "table")
     if compiled:
-        veh, tab = inp.vehicle, inp.table
-        ports = (veh.cone(), veh.clock(), veh.radius() / veh.base_radius)
-        grids = (_NO_GRID,) * 4 + (_NO_TABLE,)
-        if tab is not None:
-            grids = (tab.mach, tab.alpha_t, tab.clock, tab.s, np.ascontiguousarray(tab.values, dtype=float))
-        table_model = inp.model == "table"
+        eps_c, eps_z, gamma, omega, table_model, *rest = _measurement_args(inp, keep)
 
     def h(x: np.ndarray, C_B_M: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if compiled:
-            return measurement_kernel(
-                x, C_B_M, eps_c, _EPS_Z, use, inp.gamma, MARS.rotation_rate, table_model, *ports, *grids, cols
-            )
+            return measurement_kernel(x, C_B_M, eps_c, eps_z, use, gamma, omega, table_model, *rest)
         pz, H = h_full(x if keep.size == N_X else _expand(x, keep), C_B_M, use)
         return pz, (H if keep.size == N_X else H[:, keep])
 
@@ -291,6 +289,19 @@ def make_pressure_model(inp: EkfInputs, *, compiled: bool = True, keep: np.ndarr
         return pm * lam * lev * mod + x[IBIAS][use], H
 
     return h
+
+
+def _measurement_args(inp: EkfInputs, keep: np.ndarray) -> tuple:
+    """The arguments of :func:`.kernel.measurement_kernel` after ``x, C, … use`` ("newtonian" and
+    "table" models): ``eps_x, eps_z, gamma, omega, table_model``, the ports, the table's grids
+    and the carried-state columns of the model-error blocks."""
+    veh, tab = inp.vehicle, inp.table
+    ports = (veh.cone(), veh.clock(), veh.radius() / veh.base_radius)
+    grids = (_NO_GRID,) * 4 + (_NO_TABLE,)
+    if tab is not None:
+        grids = (tab.mach, tab.alpha_t, tab.clock, tab.s, np.ascontiguousarray(tab.values, dtype=float))
+    cols = np.searchsorted(keep, [ILAM.start, IC, IB.start, IBIAS.start, IMM, IMA.start])
+    return (EPS[keep], _EPS_Z, inp.gamma, MARS.rotation_rate, inp.model == "table", *ports, *grids, cols)
 
 
 def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -421,19 +432,18 @@ def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True, k
     :data:`N_X`).  ``compiled``: one call of the compiled :func:`.kernel.transition_kernel`; False:
     the numpy reference path (``tests/problems/meads/test_kernel.py``)."""
     t = inp.t
-    C_M_B = quat_to_dcm(inp.q_M_B)
     idx = {float(v): i for i, v in enumerate(t.tolist())}
     I3 = np.eye(3)
-
+    C_M_B, dv_sf, markov = _strapdown_increments(inp, st)
     C_B_M = np.swapaxes(C_M_B, 1, 2)
-    markov = st.model_error_sigma > 0.0 or st.model_mach_sigma > 0.0 or st.model_angle_sigma_deg > 0.0
-    # the strapdown's specific-force velocity increments in M over each step (n - 1, 3) [m/s]:
-    # its velocity change less the gravity it integrated (point mass + J2, trapezoidal)
-    g = gravity_j2(inp.p_M, MARS)
-    dv_sf = np.diff(inp.v_M, axis=0) - 0.5 * (g[1:] + g[:-1]) * np.diff(t)[:, None]
     keep = np.arange(N_X) if keep is None else np.asarray(keep, dtype=int)
     if compiled:
-        return _compiled_transition(inp, st, keep, idx, C_M_B, dv_sf, markov)
+        args = _transition_args(inp, st, keep, C_M_B, dv_sf, markov)
+
+        def transition_compiled(x, t0, t1):
+            return transition_kernel(x, idx[t1], t1 - t0, *args)
+
+        return transition_compiled
 
     def transition(x, t0, t1):
         k = idx[t1]
@@ -523,9 +533,22 @@ def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True, k
     return carried
 
 
-def _compiled_transition(inp, st, keep, idx, C_M_B, dv_sf, markov):
-    """:func:`make_transition`'s compiled path: the per-step matrices for all steps at once, then
-    one :func:`.kernel.transition_kernel` call a step."""
+def _strapdown_increments(inp: EkfInputs, st: EkfSettings) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``(C_M_B (n, 3, 3), dv_sf (n − 1, 3) [m/s], markov)``: the strapdown attitude, its
+    specific-force velocity increments in M over each step (its velocity change less the gravity
+    it integrated: point mass + J2, trapezoidal) and whether a model-error state decorrelates
+    with the flight condition."""
+    C_M_B = quat_to_dcm(inp.q_M_B)
+    markov = st.model_error_sigma > 0.0 or st.model_mach_sigma > 0.0 or st.model_angle_sigma_deg > 0.0
+    g = gravity_j2(inp.p_M, MARS)
+    dv_sf = np.diff(inp.v_M, axis=0) - 0.5 * (g[1:] + g[:-1]) * np.diff(inp.t)[:, None]
+    return C_M_B, dv_sf, markov
+
+
+def _transition_args(inp, st, keep, C_M_B, dv_sf, markov) -> tuple:
+    """The arguments of :func:`.kernel.transition_kernel` after ``x, k, dt``: the strapdown, the
+    per-step matrices for all steps at once, the constants, the settings and the carried-state
+    columns of the model-error blocks."""
     G = gravity_point_mass_gradient(inp.p_M[:-1], MARS.gm)
     if st.attitude_velocity_coupling:
         Fvt = -np.matmul(skew(dv_sf), C_M_B[:-1])
@@ -548,12 +571,7 @@ def _compiled_transition(inp, st, keep, idx, C_M_B, dv_sf, markov):
     )
     if st.model_error_order == 2 and not second:
         raise ValueError("the second-order model error needs its rate states carried")
-    gm, omega, gamma = MARS.gm, MARS.rotation_rate, inp.gamma
-
-    def transition(x, t0, t1):
-        return transition_kernel(x, idx[t1], t1 - t0, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, cols)
-
-    return transition
+    return (p_M, v_M, G, Fvt, Rb, C_B_M, MARS.gm, MARS.rotation_rate, inp.gamma, par, cols)
 
 
 def run_pass(
@@ -641,7 +659,13 @@ def run_pass(
         ]
 
     with np.errstate(invalid="ignore"):
-        fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, layout, keep_q=keep_all)
+        if compiled and inp.model in ("newtonian", "table"):
+            consider = np.zeros(keep.size, bool)
+            if not estimate_scale:
+                consider[ILAM] = True
+            fp = _forward_compiled(inp, st, keep, x0, P0, p, sig, consider, keep_all)
+        else:
+            fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, layout, keep_q=keep_all)
         sm = rts_smooth(fp, layout, consider=None if estimate_scale else np.arange(keep.size)[ILAM])
     sigma_post = np.sqrt(np.maximum(np.einsum("nii->ni", fp.P_post), 0.0))
     if keep.size < N_X:  # back to the full state: the states not carried are exactly zero
@@ -689,6 +713,58 @@ def run_pass(
         time.perf_counter() - t0,
         sigma_post,
     )
+
+
+def _forward_compiled(inp, st, keep, x0, P0, p, sig, consider, keep_all) -> ForwardPass:
+    """The forward pass of :func:`run_pass` as one :func:`.kernel.forward_kernel` call (the
+    pressures ``p`` (n, m) [Pa] as the pass uses them, their 1σ ``sig``); the same
+    :class:`ForwardPass` as ``run_filter`` with :func:`make_transition` and
+    :func:`make_pressure_model` (the reference path, ``run_pass(compiled=False)``)."""
+    t = np.ascontiguousarray(inp.t, dtype=float)
+    n, m = p.shape
+    n_c = keep.size
+    usable = inp.usable & np.isfinite(p)
+    C_M_B, dv_sf, markov = _strapdown_increments(inp, st)
+    targs = _transition_args(inp, st, keep, C_M_B, dv_sf, markov)
+    margs = _measurement_args(inp, keep)
+    margs = margs[:2] + margs[4:]  # the kernel has gamma and omega from the transition's arguments
+    out = dict(
+        x_prior=np.empty((n, n_c)),
+        P_prior=np.empty((n, n_c, n_c)),
+        x_post=np.empty((n, n_c)),
+        P_post=np.empty((n, n_c, n_c)),
+        F=np.empty((n, n_c, n_c)),
+        Q=np.empty((n if keep_all else 1, n_c, n_c)),
+    )
+    zp, y, S = np.full((n, m), np.nan), np.full((n, m), np.nan), np.full((n, m, m), np.nan)
+    nis = np.full(n, np.nan)
+    status, k = forward_kernel(
+        np.ascontiguousarray(x0), np.ascontiguousarray(P0), t, *targs, *margs,
+        np.ascontiguousarray(np.where(usable, p, 0.0)), np.ascontiguousarray(np.where(usable, sig, 1.0) ** 2),
+        usable, int(st.iterations), EPS[keep], consider,
+        out["x_prior"], out["P_prior"], out["x_post"], out["P_post"], out["F"], out["Q"], bool(keep_all),
+        zp, y, S, nis,
+    )  # fmt: skip
+    if status:
+        what = {
+            1: "innovation covariance S is not positive definite",
+            2: "non-finite innovation (check z, h(x) and R): the state diverged",
+            3: "iterated update: H P Hᵀ + R not positive definite",
+        }[int(status)]
+        raise np.linalg.LinAlgError(f"step {k} (t={t[k]} s), measurement 'pressure': {what}")
+    steps = np.flatnonzero(usable.any(axis=1))
+    inn = InnovationHistory(
+        t=t[steps],
+        step=steps,
+        z=np.where(usable, p, np.nan)[steps],
+        z_pred=zp[steps],
+        y=y[steps],
+        S=S[steps],
+        nis=nis[steps],
+        accepted=np.ones(steps.size, bool),
+    )
+    return ForwardPass(t, innovations={"pressure": inn} if steps.size else {}, **{
+        **out, "Q": out["Q"] if keep_all else None})  # fmt: skip
 
 
 def carried_states(st: EkfSettings) -> np.ndarray:

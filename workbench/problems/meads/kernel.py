@@ -419,3 +419,198 @@ def transition_kernel(x, k, dt, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, p
             F[i_ma + i, i_ma + i] = f
             Q[i_ma + i, i_ma + i] = s1**2 * (1.0 - phi**2)
     return x1, F, Q
+
+
+@njit(cache=True, nogil=True)
+def _cho(S, L):  # pragma: no cover - compiled
+    """Lower Cholesky factor of S (m, m) into L; False when S is not positive definite."""
+    m = S.shape[0]
+    for j in range(m):
+        s = S[j, j]
+        for c in range(j):
+            s -= L[j, c] * L[j, c]
+        if not s > 0.0:
+            return False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, m):
+            v = S[i, j]
+            for c in range(j):
+                v -= L[i, c] * L[j, c]
+            L[i, j] = v / L[j, j]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _cho_solve(L, B):  # pragma: no cover - compiled
+    """X with L Lᵀ X = B for B (m, r) (a new array)."""
+    m, r = B.shape
+    X = B.copy()
+    for col in range(r):
+        for i in range(m):
+            s = X[i, col]
+            for c in range(i):
+                s -= L[i, c] * X[c, col]
+            X[i, col] = s / L[i, i]
+        for i in range(m - 1, -1, -1):
+            s = X[i, col]
+            for c in range(i + 1, m):
+                s -= L[c, i] * X[c, col]
+            X[i, col] = s / L[i, i]
+    return X
+
+
+@njit(cache=True, nogil=True)
+def forward_kernel(
+    x0, P0, t, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, tcols,
+    eps_x, eps_z, table_model, port_cone, port_clock, port_s, gm_, ga, gc, gs, values, mcols,
+    z_all, r_all, usable, iterations, step_tol, consider,
+    x_prior, P_prior, x_post, P_post, F_hist, Q_hist, keep_q, zp_out, y_out, S_out, nis_out,
+):  # pragma: no cover - compiled  # fmt: skip
+    """The MEADS forward EKF over the n pressure times in one compiled call: the same recursion as
+    ``estimation.ekf.run_filter`` with the iterated update of ``estimation.ekf.update`` (Joseph
+    form, gain projection, absolute step rule), :func:`transition_kernel` and
+    :func:`measurement_kernel` (their arguments ``p_M`` … ``tcols`` and ``eps_x`` … ``mcols``).
+
+    ``z_all``, ``r_all`` (n, m) the pressures [Pa] and their variances [Pa²]; ``usable`` (n, m)
+    bool; ``iterations``; ``step_tol`` (n_c,); ``consider`` (n_c,) bool the states whose gain is
+    projected to zero.  Fills ``x_prior``, ``x_post`` (n, n_c), ``P_prior``, ``P_post``,
+    ``F_hist`` (n, n_c, n_c), ``Q_hist`` (when ``keep_q``), and per step with a measurement
+    ``zp_out``, ``y_out`` (n, m), ``S_out`` (n, m, m) in the used ports (NaN-filled by the caller)
+    and ``nis_out`` (n,).  Returns ``(status, k)``: 0 done; 1 S not positive definite, 2 a
+    non-finite NIS, 3 an iterate's S not positive definite, at step k."""
+    n = t.size
+    n_c = x0.size
+    m_all = z_all.shape[1]
+    x = x0.copy()
+    P = P0.copy()
+    use_buf = np.empty(m_all, dtype=np.int64)
+    for k in range(n):
+        if k > 0:
+            x, F, Q = transition_kernel(
+                x, k, t[k] - t[k - 1], p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, tcols
+            )
+            A = (F @ P) @ F.T
+            A += Q
+            A = A + A.T
+            A *= 0.5
+            P = A
+            F_hist[k] = F
+            if keep_q:
+                Q_hist[k] = Q
+        else:
+            F_hist[0] = np.eye(n_c)
+            if keep_q:
+                Q_hist[0] = 0.0
+        x_prior[k] = x
+        P_prior[k] = P
+        m = 0
+        for j in range(m_all):
+            if usable[k, j]:
+                use_buf[m] = j
+                m += 1
+        if m > 0:
+            use = use_buf[:m].copy()
+            z = np.empty(m)
+            R = np.zeros((m, m))
+            for i in range(m):
+                z[i] = z_all[k, use[i]]
+                R[i, i] = r_all[k, use[i]]
+            C = C_B_M[k]
+            zp, H = measurement_kernel(
+                x,
+                C,
+                eps_x,
+                eps_z,
+                use,
+                gamma,
+                omega,
+                table_model,
+                port_cone,
+                port_clock,
+                port_s,
+                gm_,
+                ga,
+                gc,
+                gs,
+                values,
+                mcols,
+            )
+            y = z - zp
+            PHt = P @ H.T
+            S = H @ PHt + R
+            L = np.zeros((m, m))
+            if not _cho(S, L):
+                return 1, k
+            w = _cho_solve(L, y.reshape(m, 1))[:, 0]
+            nis = 0.0
+            for i in range(m):
+                nis += y[i] * w[i]
+            if not math.isfinite(nis):
+                return 2, k
+            K = _cho_solve(L, PHt.T.copy()).T.copy()
+            for i in range(n_c):
+                if consider[i]:
+                    K[i, :] = 0.0
+            dx = K @ y
+            x_new = x + dx
+            Hk = H
+            for _ in range(1, iterations):
+                x_i = x_new
+                zp_i, H_i = measurement_kernel(
+                    x_i,
+                    C,
+                    eps_x,
+                    eps_z,
+                    use,
+                    gamma,
+                    omega,
+                    table_model,
+                    port_cone,
+                    port_clock,
+                    port_s,
+                    gm_,
+                    ga,
+                    gc,
+                    gs,
+                    values,
+                    mcols,
+                )
+                finite = True
+                for i in range(m):
+                    if not math.isfinite(zp_i[i]):
+                        finite = False
+                if not finite:
+                    break
+                r_i = z - zp_i
+                PHt_i = P @ H_i.T
+                S_i = H_i @ PHt_i + R
+                if not _cho(S_i, L):
+                    return 3, k
+                K = _cho_solve(L, PHt_i.T.copy()).T.copy()
+                for i in range(n_c):
+                    if consider[i]:
+                        K[i, :] = 0.0
+                Hk, PHt = H_i, PHt_i
+                dx_new = K @ (r_i - Hk @ (x - x_i))
+                x_new = x + dx_new
+                done = True
+                for i in range(n_c):
+                    if not abs(dx_new[i] - dx[i]) < step_tol[i]:
+                        done = False
+                dx = dx_new
+                if done:
+                    break
+            M = P - K @ PHt.T
+            A = M - (M @ Hk.T - K @ R) @ K.T
+            A = A + A.T
+            A *= 0.5
+            x, P = x_new, A
+            for i in range(m):
+                zp_out[k, use[i]] = zp[i]
+                y_out[k, use[i]] = y[i]
+                for j in range(m):
+                    S_out[k, use[i], use[j]] = S[i, j]
+            nis_out[k] = nis
+        x_post[k] = x
+        P_post[k] = P
+    return 0, n
