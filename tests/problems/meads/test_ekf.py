@@ -449,9 +449,10 @@ def test_compiled_transition_matches_the_numpy_reference(order):
 
 def test_compiled_forward_pass_matches_the_reference(arc_model_error):
     """The compiled forward pass (:func:`.kernel.forward_kernel`, both passes: scale factors
-    estimated, then held as consider parameters) against the reference path (``run_filter`` with
-    the numpy transition and pressure model): the same states, covariances and innovations, to the
-    last-place differences the iterated update's stop rule amplifies."""
+    estimated, then held as consider parameters) and smoother against the reference path
+    (``run_filter`` with the numpy transition and pressure model, ``rts_smooth``): the same
+    states, covariances and innovations, to the last-place differences the iterated update's stop
+    rule amplifies."""
     inp, _, passes = arc_model_error
     st = replace(
         DEFAULTS.ekf, iterations=3, accel_psd=1e-8, attitude_psd=1e-14, wind_var_per_km=1e-4, atmosphere_var_per_km=1e-9
@@ -474,5 +475,12 @@ def test_compiled_forward_pass_matches_the_reference(arc_model_error):
             np.testing.assert_allclose(getattr(ia, name), getattr(ir, name), rtol=1e-6, atol=1e-6, err_msg=name)
         d = np.sqrt(np.einsum("kii->ki", ir.S))  # S on the correlation scale: its cross terms cancel
         assert np.nanmax(np.abs(ia.S - ir.S) / (d[:, :, None] * d[:, None, :])) < 1e-6
+        # and the compiled smoother (:func:`.kernel.rts_kernel`) against rts_smooth
+        np.testing.assert_allclose(ps.smoothed.x, pr.smoothed.x, rtol=1e-6, atol=1e-8)
+        d = np.sqrt(np.abs(np.einsum("nii->ni", pr.smoothed.P)))
+        d[d == 0.0] = 1.0
+        assert np.max(np.abs(ps.smoothed.P - pr.smoothed.P) / (d[:, :, None] * d[:, None, :])) < 1e-6
+        # the gains in σ units: G_ij σ_j / σ_i
+        assert np.max(np.abs(ps.smoothed.G - pr.smoothed.G) * d[:, None, :] / d[:, :, None]) < 1e-6
         np.testing.assert_allclose(ps.outputs, pr.outputs, rtol=1e-6, atol=1e-8)
         np.testing.assert_allclose(ps.sigma, pr.sigma, rtol=1e-6)

@@ -28,6 +28,7 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
@@ -51,6 +52,7 @@ from workbench.problems.meads.kernel import (
     flow_kernel,
     forward_kernel,
     measurement_kernel,
+    rts_kernel,
     transition_kernel,
 )
 from workbench.problems.meads.state import (
@@ -666,7 +668,10 @@ def run_pass(
             fp = _forward_compiled(inp, st, keep, x0, P0, p, sig, consider, keep_all)
         else:
             fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, layout, keep_q=keep_all)
-        sm = rts_smooth(fp, layout, consider=None if estimate_scale else np.arange(keep.size)[ILAM])
+        consider_idx = None if estimate_scale else np.arange(keep.size)[ILAM]
+        sm = _smooth_compiled(fp, consider_idx) if compiled else None
+        if sm is None:
+            sm = rts_smooth(fp, layout, consider=consider_idx)
     sigma_post = np.sqrt(np.maximum(np.einsum("nii->ni", fp.P_post), 0.0))
     if keep.size < N_X:  # back to the full state: the states not carried are exactly zero
         sigma_post = _expand(sigma_post, keep)
@@ -765,6 +770,29 @@ def _forward_compiled(inp, st, keep, x0, P0, p, sig, consider, keep_all) -> Forw
     )
     return ForwardPass(t, innovations={"pressure": inn} if steps.size else {}, **{
         **out, "Q": out["Q"] if keep_all else None})  # fmt: skip
+
+
+def _smooth_compiled(fp: ForwardPass, consider: np.ndarray | None) -> SmoothedPass | None:
+    """:func:`~workbench.estimation.smoother.rts_smooth` of the forward pass (additive states) by
+    the compiled :func:`.kernel.rts_kernel`; None where the reference must run instead: a predicted
+    variance not positive (its exactly-known components) or a covariance not positive definite
+    (the reference raises with the diagnosis)."""
+    n, n_c = fp.x_post.shape
+    dg = np.diagonal(fp.P_prior, axis1=1, axis2=2)
+    if n < 2 or not np.all(dg > 0.0):
+        return None
+    G = np.zeros((n, n_c, n_c))
+    np.matmul(fp.F[1:], fp.P_post[:-1], out=G[:-1])
+    mask = np.zeros(n_c, bool)
+    if consider is not None:
+        mask[consider] = True
+    xs, Ps = np.empty_like(fp.x_post), np.empty_like(fp.P_post)
+    with threadpool_limits(limits=1, user_api="blas"):
+        status, _ = rts_kernel(fp.x_prior, fp.P_prior, fp.x_post, fp.P_post, G, np.sqrt(dg), mask, xs, Ps)
+    if status:
+        return None
+    G[-1] = 0.0
+    return SmoothedPass(fp.t, xs, Ps, G)
 
 
 def carried_states(st: EkfSettings) -> np.ndarray:

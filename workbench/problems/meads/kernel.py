@@ -442,20 +442,26 @@ def _cho(S, L):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _cho_solve(L, B):  # pragma: no cover - compiled
-    """X with L Lᵀ X = B for B (m, r) (a new array)."""
+    """X with L Lᵀ X = B for B (m, r) (a new array); row operations, each element's sums in the
+    order of a column-by-column substitution."""
     m, r = B.shape
     X = B.copy()
-    for col in range(r):
-        for i in range(m):
-            s = X[i, col]
-            for c in range(i):
-                s -= L[i, c] * X[c, col]
-            X[i, col] = s / L[i, i]
-        for i in range(m - 1, -1, -1):
-            s = X[i, col]
-            for c in range(i + 1, m):
-                s -= L[c, i] * X[c, col]
-            X[i, col] = s / L[i, i]
+    for i in range(m):
+        for c in range(i):
+            f = L[i, c]
+            for j in range(r):
+                X[i, j] -= f * X[c, j]
+        d = L[i, i]
+        for j in range(r):
+            X[i, j] = X[i, j] / d
+    for i in range(m - 1, -1, -1):
+        for c in range(i + 1, m):
+            f = L[c, i]
+            for j in range(r):
+                X[i, j] -= f * X[c, j]
+        d = L[i, i]
+        for j in range(r):
+            X[i, j] = X[i, j] / d
     return X
 
 
@@ -614,3 +620,55 @@ def forward_kernel(
         x_post[k] = x
         P_post[k] = P
     return 0, n
+
+
+@njit(cache=True, nogil=True)
+def rts_kernel(x_prior, P_prior, x_post, P_post, G, dsq, consider, xs, Ps):  # pragma: no cover - compiled
+    """The backward recursion of ``estimation.smoother.rts_smooth`` (its reference) for additive
+    states whose predicted variances are all positive: gain on the Jacobi-scaled ``P_prior``
+    (``dsq`` (n, n_c) the square roots of its diagonal), ``consider`` (n_c,) bool constant consider
+    parameters (G's rows the selection of themselves).  ``G`` (n, n_c, n_c) holds
+    ``F[k+1] P_post[k]`` on entry and the gains on return; fills ``xs`` (n, n_c), ``Ps``.
+    Returns ``(status, k)``: 0 done; 1 a scaled ``P_prior[k+1]`` or 2 a smoothed covariance at
+    step k not positive definite (the caller reruns the reference for its diagnosis)."""
+    n, n_c = x_post.shape
+    xs[n - 1] = x_post[n - 1]
+    Ps[n - 1] = P_post[n - 1]
+    L = np.zeros((n_c, n_c))
+    if not _cho(Ps[n - 1], L):
+        return 2, n - 1
+    for k in range(n - 2, -1, -1):
+        Pp = P_prior[k + 1]
+        d = dsq[k + 1]
+        Sc = np.empty((n_c, n_c))
+        rhs = np.empty((n_c, n_c))
+        for i in range(n_c):
+            for j in range(n_c):
+                Sc[i, j] = Pp[i, j] / (d[i] * d[j])
+                rhs[i, j] = G[k, i, j] / d[i]
+        if not _cho(Sc, L):
+            return 1, k
+        Gt = _cho_solve(L, rhs)
+        for i in range(n_c):
+            for j in range(n_c):
+                Gt[i, j] = Gt[i, j] / d[i]
+        for c in range(n_c):
+            if consider[c]:
+                for i in range(n_c):
+                    Gt[i, c] = 0.0
+        for c in range(n_c):
+            if consider[c]:
+                Gt[c, c] = 1.0
+        Gk = Gt.T.copy()
+        dx = Gk @ (xs[k + 1] - x_prior[k + 1])
+        xs[k] = x_post[k] + dx
+        A = P_post[k] + (Gk @ (Ps[k + 1] - Pp)) @ Gt
+        A = 0.5 * (A + A.T)
+        for i in range(n_c):
+            if not A[i, i] > 0.0:
+                return 2, k
+        if not _cho(A, L):
+            return 2, k
+        Ps[k] = A
+        G[k] = Gk
+    return 0, 0
