@@ -144,7 +144,10 @@ class EkfPass:
     whether this pass estimated them;
     ``nis_port`` (k, 7) per-port normalised innovations squared ``y_i²/S_ii`` of the forward pass at
     the processed samples (NaN where unused); ``wall_s`` [s]; ``sigma_post`` (n, N_X) the forward
-    pass's 1σ of every state (error-state units)."""
+    pass's 1σ of every state (error-state units).  The states (``x_prior``, ``x_post``, smoothed
+    ``x``) and ``sigma_post`` are in the full layout (:data:`N_X`, zero where not carried); the
+    covariances, F, Q and gains over the carried states only (:func:`carried_states`, n_c): the
+    states not carried have none (zero variance, no coupling)."""
 
     index: int
     passes: int
@@ -308,7 +311,8 @@ def _measurement_args(inp: EkfInputs, keep: np.ndarray) -> tuple:
 
 def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -> tuple[np.ndarray, np.ndarray]:
     """:data:`OUTPUT_NAMES` (n, 9) and their 1σ (n, 9) from states x (n, N_X), covariances P
-    (n, N_X, N_X) and the strapdown attitude q_M_B (n, 4) (first-order propagation).  The outputs
+    (n, n_c, n_c) (all states or the carried ones: the first :data:`N_AIR_COLS` are the same) and
+    the strapdown attitude q_M_B (n, 4) (first-order propagation).  The outputs
     read only the first :data:`N_AIR_COLS` states, so only those and their covariance block enter
     (the Jacobian's other columns are exactly zero: the same sums without their zero terms).
     Evaluated :data:`OUTPUT_CHUNK` samples at a time (each sample's outputs depend on that sample
@@ -673,18 +677,10 @@ def run_pass(
         if sm is None:
             sm = rts_smooth(fp, layout, consider=consider_idx)
     sigma_post = np.sqrt(np.maximum(np.einsum("nii->ni", fp.P_post), 0.0))
-    if keep.size < N_X:  # back to the full state: the states not carried are exactly zero
+    if keep.size < N_X:  # the states back to the full layout: those not carried are exactly zero
         sigma_post = _expand(sigma_post, keep)
-        covs = ("P_prior", "P_post", "F", "Q") if keep_all else ()
-        fp = replace(
-            fp,
-            x_prior=_expand(fp.x_prior, keep),
-            x_post=_expand(fp.x_post, keep),
-            **{k: _expand_cov(getattr(fp, k), keep) for k in covs},
-        )
-        sm = replace(sm, x=_expand(sm.x, keep), P=_expand_cov(sm.P, keep))
-        if keep_all:
-            sm = replace(sm, G=_expand_cov(sm.G, keep))
+        fp = replace(fp, x_prior=_expand(fp.x_prior, keep), x_post=_expand(fp.x_post, keep))
+        sm = replace(sm, x=_expand(sm.x, keep))
     out, sd = air_outputs(sm.x, sm.P, inp.q_M_B, inp.gamma)
     inn = fp.innovations.get("pressure")
     if inn is None:
@@ -697,9 +693,9 @@ def run_pass(
     slam = np.sqrt(np.diag(Pl))
     # what the pass keeps: the smoother's inputs P_prior and F, its gains G and the forward
     # covariances are not read after it (recording, health and summary use x_post, its 1σ, the
-    # innovations, the smoothed x and P); each is an (n, N_X, N_X) array (36 MB on msl_meads)
+    # innovations, the smoothed x and P); each is an (n, n_c, n_c) array (28 MB on msl_meads)
     if not keep_all:
-        none = np.empty((0, N_X, N_X))
+        none = np.empty((0, keep.size, keep.size))
         fp = replace(fp, P_prior=none, P_post=none, F=none, Q=None)
         sm = replace(sm, G=none)
     return EkfPass(
@@ -809,20 +805,6 @@ def _expand(xr: np.ndarray, keep: np.ndarray) -> np.ndarray:
     """States (..., n_c) of the carried states ``keep`` to the full (..., N_X), zero elsewhere."""
     out = np.zeros((*xr.shape[:-1], N_X))
     out[..., keep] = xr
-    return out
-
-
-def _expand_cov(A: np.ndarray | None, keep: np.ndarray) -> np.ndarray | None:
-    """Matrices (n, n_c, n_c) over the carried states ``keep`` to (n, N_X, N_X), zero elsewhere."""
-    if A is None:
-        return None
-    out = np.zeros((A.shape[0], N_X, N_X))
-    # block by block over the runs of consecutive indices (a fancy-index scatter is ~10x slower)
-    cut = np.flatnonzero(np.diff(keep) != 1) + 1
-    runs = [(int(r[0]), int(r[-1]) + 1, int(i)) for r, i in zip(np.split(keep, cut), np.r_[0, cut], strict=True)]
-    for a0, a1, i in runs:
-        for b0, b1, j in runs:
-            out[:, a0:a1, b0:b1] = A[:, i : i + a1 - a0, j : j + b1 - b0]
     return out
 
 
