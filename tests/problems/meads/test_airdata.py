@@ -217,24 +217,3 @@ def test_bad_pressure_files_are_located(tmp_path):
     v[6:10, 3] = np.nan  # a dropout burst (empty cells): a logged degradation, not an error
     tel = read_meads_telemetry(_files(tmp_path, values=v), VEHICLE)
     assert len(tel.degradations) == 1 and "'P4 [Pa]', rows 7-10" in tel.degradations[0]
-
-
-@pytest.mark.parametrize("solution", ["mach", "fixed_r"])
-def test_compiled_table_fit_matches_the_scipy_reference(solution):
-    """The least squares' table model read by the compiled kernel (``kernel.table_cp_many``) is
-    scipy's interpolator to a few ulp: the pressures, and the fit they give, agree."""
-    x = _states(seed=4)
-    x[::5, 3] = 40.0  # beyond the table's Mach: clamped
-    table = build_estimator_table(VEHICLE)
-    p = pressure_model(VEHICLE, "table", "mach", G, table)(x)
-    np.testing.assert_allclose(pressure_model(VEHICLE, "table", "mach", G, table, compiled=True)(x), p, rtol=1e-13)
-    sig = sensor_sigma(p, VEHICLE, 0.01)
-    kw = dict(model="table", solution=solution, gamma=G, mach_guess=x[:, 3], fixed_r=0.0, iterations=12, table=table)
-    f1 = fit_air_data(p, sig, VEHICLE, **kw)
-    f0 = fit_air_data(p, sig, VEHICLE, compiled=False, **kw)
-    for name in ("qbar", "alpha", "beta"):
-        np.testing.assert_allclose(getattr(f1, name), getattr(f0, name), rtol=1e-9, atol=1e-12, err_msg=name)
-    # the 1σ come from the numeric Jacobian, whose differences amplify last-place changes (most
-    # where the table is clamped in Mach)
-    for name in ("sigma_alpha", "sigma_qbar"):
-        np.testing.assert_allclose(getattr(f1, name), getattr(f0, name), rtol=1e-6, err_msg=name)

@@ -35,7 +35,6 @@ from workbench.models.flush_airdata import (
     rm2_limit,
     total_angles,
 )
-from workbench.problems.meads.kernel import table_cp_many
 
 __all__ = [
     "STATE_NAMES",
@@ -132,35 +131,23 @@ def pressure_model(
     table: SurfacePressureTable | None = None,
     ratio: np.ndarray | None = None,
     mach_fixed: np.ndarray | None = None,
-    *,
-    compiled: bool = False,
 ):
     """The model ``h(x) -> p (n, m)`` [Pa] of Eq. 5 for the ports of ``vehicle``: ``"newtonian"``
     (Eq. 1 with Eq. 3) or ``"table"`` (``p∞ + q∞ Cp``, the table at the ports' relative clock and
-    radial position); ``ratio``/``mach_fixed`` (n,) for the fixed-R set.  ``compiled``: the table
-    read by the compiled :func:`.kernel.table_cp_many` instead of its scipy interpolator (the
-    reference; same numbers to a few ulp)."""
+    radial position); ``ratio``/``mach_fixed`` (n,) for the fixed-R set."""
     cone, clock = vehicle.cone(), vehicle.clock()
     s = vehicle.radius() / vehicle.base_radius
     if model == "table" and table is None:
         raise ValueError("the table model needs its SurfacePressureTable")
     if model == "table" and solution == "fixed_r" and mach_fixed is None:
         raise ValueError("the table model with a fixed R needs the Mach it is scheduled with (fixed_r = 0)")
-    if model == "table" and compiled:
-        grids = (table.mach, table.alpha_t, table.clock, table.s, np.ascontiguousarray(table.values, dtype=float))
 
     def h(x: np.ndarray) -> np.ndarray:
         q, a, b, M, pinf, pt, R = _freestream(x, solution, gamma, ratio, mach_fixed)
         if model == "newtonian":
             return newtonian_pressure(pt, R, incidence_cos(a, b, cone, clock))
         at, phw = total_angles(a, b)
-        if not compiled:
-            return pinf + q * table.cp(M, at, clock[None, :] - phw, s[None, :])
-        pts = np.broadcast_arrays(M, at, clock[None, :] - phw, s[None, :])
-        flat = [np.ascontiguousarray(v, dtype=float).ravel() for v in pts]
-        cp = np.empty(flat[0].size)
-        table_cp_many(*grids, *flat, cp)
-        return pinf + q * cp.reshape(pts[0].shape)
+        return pinf + q * table.cp(M, at, clock[None, :] - phw, s[None, :])
 
     return h
 
@@ -190,14 +177,12 @@ def fit_air_data(
     iterations: int,
     table: SurfacePressureTable | None = None,
     mask: np.ndarray | None = None,
-    compiled: bool = True,
 ) -> AirDataFit:
     """Fit every sample of ``p`` (n, m) [Pa] (1σ ``sigma_p`` (n, m)) with the solution set.
 
     ``mach_guess`` (n,): the initial Mach (inertial) — for ``"fixed_r"`` with ``fixed_r = 0`` it
     also schedules R (``fixed_r`` is not used by the other sets); ``iterations`` of Gauss–Newton
-    (the scenario's ``[estimator]`` values in a run); ``mask`` (n, m) usable ports; ``compiled``
-    the table model read by the compiled kernel (False: scipy's interpolator, the reference).  Initial
+    (the scenario's ``[estimator]`` values in a run); ``mask`` (n, m) usable ports.  Initial
     α = 18°, β = 0, p_t = the largest reading.  Derived quantities and their 1σ by first-order propagation of P.
     """
     n = p.shape[0]
@@ -217,7 +202,7 @@ def fit_air_data(
         R0 = pressure_ratio(Mg, gamma)
         q0 = 0.5 * gamma * pmax * R0 * Mg**2
         x0 = np.stack([q0, a0, np.zeros(n), Mg if solution == "mach" else 2.0 * q0 / (gamma * Mg**2)], 1)
-    h = pressure_model(vehicle, model, solution, gamma, table, ratio, mach_fixed, compiled=compiled)
+    h = pressure_model(vehicle, model, solution, gamma, table, ratio, mach_fixed)
     res = iterated_wls(
         h,
         x0,

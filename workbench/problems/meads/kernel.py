@@ -672,11 +672,3 @@ def rts_kernel(x_prior, P_prior, x_post, P_post, G, dsq, consider, xs, Ps):  # p
         Ps[k] = A
         G[k] = Gk
     return 0, 0
-
-
-@njit(cache=True, nogil=True)
-def table_cp_many(gm, ga, gc, gs, values, mach, alpha_t, clock_rel, s, out):  # pragma: no cover - compiled
-    """:meth:`SurfacePressureTable.cp` (its reference) at k points: ``mach``, ``alpha_t`` [rad],
-    ``clock_rel`` [rad], ``s`` (k,) on the table's grids and ``values``; writes Cp into ``out`` (k,)."""
-    for i in range(mach.size):
-        out[i] = _table_cp(gm, ga, gc, gs, values, mach[i], alpha_t[i], clock_rel[i], s[i])
