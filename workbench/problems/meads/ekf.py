@@ -19,6 +19,10 @@ Measurement (Eq. 33–35, iterated): ``p_i = (1 + λ_i)(1 + c)(1 + b_i) h_i(x; M
 only the channel's white noise and quantisation.  Pass 1 estimates the scale factors; pass 2
 divides the pressures by ``1 + λ̂`` and carries λ as Schmidt consider parameters (the data are not
 used twice).  The tuning and what each default changed, measured: ``docs/tuning/meads.md``.
+
+A pass runs compiled (:mod:`.kernel`; ``compiled=False``: the shared engine and numpy models, the
+reference), on the states it carries (:func:`carried_states`: not the model-error rates b' of the
+first-order process, identically zero).
 """
 
 from __future__ import annotations
