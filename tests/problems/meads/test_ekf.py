@@ -488,3 +488,20 @@ def test_compiled_forward_pass_matches_the_reference(arc_model_error):
         assert np.max(np.abs(ps.smoothed.G - pr.smoothed.G) * d[:, None, :] / d[:, :, None]) < 1e-6
         np.testing.assert_allclose(ps.outputs, pr.outputs, rtol=1e-6, atol=1e-8)
         np.testing.assert_allclose(ps.sigma, pr.sigma, rtol=1e-6)
+
+
+def test_compiled_pass_with_the_second_order_model_error():
+    """The compiled pass carries the rates b' of the second-order model error (all 46 states) and
+    agrees with the reference path there too."""
+    inp, _ = _arc()
+    st = replace(
+        DEFAULTS.ekf, iterations=3, accel_psd=1e-8, attitude_psd=1e-14, wind_var_per_km=1e-4,
+        atmosphere_var_per_km=1e-9, model_error_order=2, model_error_sigma=0.01,
+    )  # fmt: skip
+    fast = list(ekf.run_passes(inp, st))
+    ref = list(ekf.run_passes(inp, st, compiled=False))
+    for pa, pr in zip(fast, ref, strict=True):
+        assert pa.smoothed.P.shape[1:] == (ekf.N_X, ekf.N_X)
+        np.testing.assert_allclose(pa.outputs, pr.outputs, rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(pa.sigma, pr.sigma, rtol=1e-6)
+        np.testing.assert_allclose(pa.smoothed.x[:, ekf.IBD], pr.smoothed.x[:, ekf.IBD], atol=1e-9)
