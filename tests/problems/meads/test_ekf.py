@@ -386,3 +386,122 @@ def test_flow_angle_mach_range_must_be_ordered():
     sc = load_scenario(asset_path("scenarios", "msl_meads.toml"))
     with pytest.raises(ScenarioError, match="ekf.model_angle_mach_high"):
         MeadsProblem().settings(sc.with_overrides({"ekf.model_angle_mach_low": 10.0, "ekf.model_angle_mach_high": 5.0}))
+
+
+def test_first_order_filter_carries_no_rate_states(arc_model_error, monkeypatch):
+    """The first-order model error has no rate b': the filter carries 39 states, not 46, and its
+    numbers are those of the filter carrying the 7 identically-zero rates (the same sums without
+    their zero terms, summed by BLAS in another order: the iterated update's stop rule turns those
+    last-place differences into ~1e-8)."""
+    inp, _, passes = arc_model_error
+    st = replace(
+        DEFAULTS.ekf, iterations=3, accel_psd=1e-8, attitude_psd=1e-14, wind_var_per_km=1e-4, atmosphere_var_per_km=1e-9
+    )
+    assert st.model_error_order == 1 and ekf.carried_states(st).size == ekf.N_X - ekf.N_PORTS
+    assert ekf.carried_states(replace(st, model_error_order=2)).size == ekf.N_X
+    keep = ekf.carried_states(st)
+    ix = np.ix_(keep, keep)
+    monkeypatch.setattr(ekf, "carried_states", lambda _st: np.arange(ekf.N_X))
+    full = list(ekf.run_passes(inp, st, keep_all=True))
+    for ps, pf in zip(passes, full, strict=True):
+        assert ps.smoothed.x.shape == pf.smoothed.x.shape and np.all(ps.smoothed.x[:, ekf.IBD] == 0.0)
+        # the covariances are over the carried states; the full filter's are zero on the others
+        assert ps.smoothed.P.shape[1:] == ps.forward.F.shape[1:] == (keep.size, keep.size)
+        assert np.all(pf.smoothed.P[:, ekf.IBD] == 0.0)
+        np.testing.assert_allclose(ps.outputs, pf.outputs, rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(ps.sigma, pf.sigma, rtol=1e-6)
+        np.testing.assert_allclose(ps.smoothed.x, pf.smoothed.x, rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(ps.sigma_post, pf.sigma_post, rtol=1e-6, atol=1e-15)
+        # covariances on the correlation scale: cross terms near zero are differences of large ones
+        Pf = pf.smoothed.P[:, ix[0], ix[1]]
+        d = np.sqrt(np.einsum("nii->ni", Pf))
+        dP = np.abs(ps.smoothed.P - Pf) / (d[:, :, None] * d[:, None, :])
+        assert dP.max() < 1e-6
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_compiled_transition_matches_the_numpy_reference(order):
+    """The compiled transition (:func:`.kernel.transition_kernel`) against the numpy path: the
+    same x1, F, Q to a few ulp over the full and the carried states, with every state perturbed
+    (model errors, vertical wind, flow-angle errors active)."""
+    inp, X = _arc(n=40)
+    st = replace(DEFAULTS.ekf, model_error_order=order, model_error_sigma=0.01, vertical_wind_length_km=2.0)
+    assert st.model_mach_sigma > 0.0 and st.model_angle_sigma_deg > 0.0 and st.attitude_velocity_coupling
+    rng = np.random.default_rng(11)
+    for keep in (None, ekf.carried_states(st)):
+        fast = ekf.make_transition(inp, st, keep=keep)
+        ref = ekf.make_transition(inp, st, compiled=False, keep=keep)
+        for k in range(1, inp.t.size, 7):
+            x = X[k - 1].copy()
+            x[ekf.IP] += rng.normal(0.0, 50.0, 3)
+            x[ekf.IV] += rng.normal(0.0, 1.0, 3)
+            x[ekf.ITH] = rng.normal(0.0, 1e-3, 3)
+            x[ekf.IW] += rng.normal(0.0, 5.0, 3)
+            x[ekf.IB] = rng.normal(0.0, 0.01, 7)
+            x[ekf.IBD] = rng.normal(0.0, 0.01, 7) if order == 2 else 0.0
+            x[ekf.IBIAS] = rng.normal(0.0, 2.0, 7)
+            x[ekf.IMM] = rng.normal(0.0, 0.01)
+            x[ekf.IMA] = rng.normal(0.0, 0.01, 2)
+            if keep is not None:
+                x = x[keep]
+            x1, F1, Q1 = fast(x, inp.t[k - 1], inp.t[k])
+            x0, F0, Q0 = ref(x, inp.t[k - 1], inp.t[k])
+            np.testing.assert_allclose(x1, x0, rtol=1e-14, atol=1e-15)
+            np.testing.assert_allclose(F1, F0, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(Q1, Q0, rtol=1e-12, atol=1e-30)
+
+
+def test_compiled_forward_pass_matches_the_reference(arc_model_error):
+    """The compiled forward pass (:func:`.kernel.forward_kernel`, both passes: scale factors
+    estimated, then held as consider parameters) and smoother against the reference path
+    (``run_filter`` with the numpy transition and pressure model, ``rts_smooth``): the same
+    states, covariances and innovations, to the last-place differences the iterated update's stop
+    rule amplifies."""
+    inp, _, passes = arc_model_error
+    st = replace(
+        DEFAULTS.ekf, iterations=3, accel_psd=1e-8, attitude_psd=1e-14, wind_var_per_km=1e-4, atmosphere_var_per_km=1e-9
+    )
+    ref = list(ekf.run_passes(inp, st, keep_all=True, compiled=False))
+    for ps, pr in zip(passes, ref, strict=True):
+        fa, fr = ps.forward, pr.forward
+        for name in ("x_prior", "x_post", "F"):
+            np.testing.assert_allclose(getattr(fa, name), getattr(fr, name), rtol=1e-6, atol=1e-8, err_msg=name)
+        for name in ("P_prior", "P_post", "Q"):
+            A, B = getattr(fa, name), getattr(fr, name)
+            d = np.sqrt(np.abs(np.einsum("nii->ni", B)))
+            d[d == 0.0] = 1.0
+            assert np.max(np.abs(A - B) / (d[:, :, None] * d[:, None, :])) < 1e-6, name
+        ia, ir = fa.innovations["pressure"], fr.innovations["pressure"]
+        np.testing.assert_array_equal(ia.step, ir.step)
+        np.testing.assert_array_equal(ia.accepted, ir.accepted)
+        np.testing.assert_array_equal(np.isnan(ia.S), np.isnan(ir.S))
+        for name in ("z", "z_pred", "y", "nis"):
+            np.testing.assert_allclose(getattr(ia, name), getattr(ir, name), rtol=1e-6, atol=1e-6, err_msg=name)
+        d = np.sqrt(np.einsum("kii->ki", ir.S))  # S on the correlation scale: its cross terms cancel
+        assert np.nanmax(np.abs(ia.S - ir.S) / (d[:, :, None] * d[:, None, :])) < 1e-6
+        # and the compiled smoother (:func:`.kernel.rts_kernel`) against rts_smooth
+        np.testing.assert_allclose(ps.smoothed.x, pr.smoothed.x, rtol=1e-6, atol=1e-8)
+        d = np.sqrt(np.abs(np.einsum("nii->ni", pr.smoothed.P)))
+        d[d == 0.0] = 1.0
+        assert np.max(np.abs(ps.smoothed.P - pr.smoothed.P) / (d[:, :, None] * d[:, None, :])) < 1e-6
+        # the gains in σ units: G_ij σ_j / σ_i
+        assert np.max(np.abs(ps.smoothed.G - pr.smoothed.G) * d[:, None, :] / d[:, :, None]) < 1e-6
+        np.testing.assert_allclose(ps.outputs, pr.outputs, rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(ps.sigma, pr.sigma, rtol=1e-6)
+
+
+def test_compiled_pass_with_the_second_order_model_error():
+    """The compiled pass carries the rates b' of the second-order model error (all 46 states) and
+    agrees with the reference path there too."""
+    inp, _ = _arc()
+    st = replace(
+        DEFAULTS.ekf, iterations=3, accel_psd=1e-8, attitude_psd=1e-14, wind_var_per_km=1e-4,
+        atmosphere_var_per_km=1e-9, model_error_order=2, model_error_sigma=0.01,
+    )  # fmt: skip
+    fast = list(ekf.run_passes(inp, st))
+    ref = list(ekf.run_passes(inp, st, compiled=False))
+    for pa, pr in zip(fast, ref, strict=True):
+        assert pa.smoothed.P.shape[1:] == (ekf.N_X, ekf.N_X)
+        np.testing.assert_allclose(pa.outputs, pr.outputs, rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(pa.sigma, pr.sigma, rtol=1e-6)
+        np.testing.assert_allclose(pa.smoothed.x[:, ekf.IBD], pr.smoothed.x[:, ekf.IBD], atol=1e-9)

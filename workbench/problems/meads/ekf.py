@@ -19,6 +19,10 @@ Measurement (Eq. 33–35, iterated): ``p_i = (1 + λ_i)(1 + c)(1 + b_i) h_i(x; M
 only the channel's white noise and quantisation.  Pass 1 estimates the scale factors; pass 2
 divides the pressures by ``1 + λ̂`` and carries λ as Schmidt consider parameters (the data are not
 used twice).  The tuning and what each default changed, measured: ``docs/tuning/meads.md``.
+
+A pass runs compiled (:mod:`.kernel`; ``compiled=False``: the shared engine and numpy models, the
+reference), on the states it carries (:func:`carried_states`: not the model-error rates b' of the
+first-order process, identically zero).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from workbench.core.atmosphere import MarsEngineeringAtmosphere
 from workbench.core.bodies import MARS
@@ -36,6 +41,7 @@ from workbench.core.rotation import quat_to_dcm, skew
 from workbench.estimation.ekf import (
     ErrorStateLayout,
     ForwardPass,
+    InnovationHistory,
     Measurement,
     derived_with_sigma,
     numeric_jacobian_batched,
@@ -45,7 +51,14 @@ from workbench.estimation.smoother import SmoothedPass, rts_smooth
 from workbench.models.flush_airdata import FadsVehicle, SurfacePressureTable
 from workbench.problems.meads.airdata import ned_frames, pressure_model
 from workbench.problems.meads.config import EkfSettings
-from workbench.problems.meads.kernel import flow_kernel, pressure_kernel
+from workbench.problems.meads.kernel import (
+    TRANSITION_PARAMS,
+    flow_kernel,
+    forward_kernel,
+    measurement_kernel,
+    rts_kernel,
+    transition_kernel,
+)
 from workbench.problems.meads.state import (
     IB,
     IBD,
@@ -64,7 +77,6 @@ from workbench.problems.meads.state import (
     IW_EAST,
     IW_NORTH,
     N_PORTS,
-    N_U_COLS,
     N_X,
     STATE_NAMES,
 )
@@ -87,6 +99,9 @@ __all__ = [
 ]
 
 LAYOUT = ErrorStateLayout(N_X)
+#: state columns the air data (α, β, q∞, M, p∞, ρ∞, wind) read: the air velocity's and ln p∞, ln ρ∞
+N_AIR_COLS = ILR + 1
+_AIR_LAYOUT = ErrorStateLayout(N_AIR_COLS)
 OUTPUT_NAMES = ("alpha", "beta", "qbar", "mach", "p_inf", "rho", "wind_north", "wind_east", "wind_down")
 """Columns of :func:`air_outputs` [rad, rad, Pa, 1, Pa, kg/m³, m/s, m/s, m/s]."""
 
@@ -133,7 +148,10 @@ class EkfPass:
     whether this pass estimated them;
     ``nis_port`` (k, 7) per-port normalised innovations squared ``y_i²/S_ii`` of the forward pass at
     the processed samples (NaN where unused); ``wall_s`` [s]; ``sigma_post`` (n, N_X) the forward
-    pass's 1σ of every state (error-state units)."""
+    pass's 1σ of every state (error-state units).  The states (``x_prior``, ``x_post``, smoothed
+    ``x``) and ``sigma_post`` are in the full layout (:data:`N_X`, zero where not carried); the
+    covariances, F, Q and gains over the carried states only (:func:`carried_states`, n_c): the
+    states not carried have none (zero variance, no coupling)."""
 
     index: int
     passes: int
@@ -223,38 +241,34 @@ _NO_GRID = np.zeros(2)
 _NO_TABLE = np.zeros((2, 2, 2, 2))
 
 
-def make_pressure_model(inp: EkfInputs, *, compiled: bool = True):
-    """``h(x, C_B_M, use) -> (p (k,), H (k, N_X))``: the pressures of the ports ``use`` [Pa] and
-    their Jacobian.  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞) and λ, so
-    the surface-pressure model is differenced in z (11 evaluations) and chained with ∂z/∂x.
-    ``compiled``: run as the compiled :func:`.kernel.pressure_kernel`; False: the numpy reference
-    path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)."""
+def make_pressure_model(inp: EkfInputs, *, compiled: bool = True, keep: np.ndarray | None = None):
+    """``h(x, C_B_M, use) -> (p (k,), H (k, n_c))``: the pressures of the ports ``use`` [Pa] and
+    their Jacobian over the state x (n_c,) of the carried states ``keep`` (:func:`carried_states`;
+    None: all :data:`N_X`).  The model depends on the state only through z = (u_B, ln p∞, ln ρ∞)
+    and λ, so the surface-pressure model is differenced in z (11 evaluations) and chained with
+    ∂z/∂x.  ``compiled``: run as the compiled :func:`.kernel.measurement_kernel`; False: the numpy
+    reference path (same numbers to a few ulp, ``tests/problems/meads/test_kernel.py``)."""
+    keep = np.arange(N_X) if keep is None else np.asarray(keep, dtype=int)
     h4 = pressure_model(inp.vehicle, inp.model, "mach", inp.gamma, inp.table)
     D = np.diag(_EPS_Z)
     dz = np.concatenate([np.zeros((1, 5)), D, -D])
     compiled = compiled and inp.model in ("newtonian", "table")
     if compiled:
-        veh, tab = inp.vehicle, inp.table
-        ports = (veh.cone(), veh.clock(), veh.radius() / veh.base_radius)
-        grids = (_NO_GRID,) * 4 + (_NO_TABLE,)
-        if tab is not None:
-            grids = (tab.mach, tab.alpha_t, tab.clock, tab.s, np.ascontiguousarray(tab.values, dtype=float))
-        table_model = inp.model == "table"
+        eps_c, eps_z, gamma, omega, table_model, *rest = _measurement_args(inp, keep)
 
     def h(x: np.ndarray, C_B_M: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if compiled:
-            u0, Ju12, p0, dp_dz = pressure_kernel(
-                x, C_B_M, EPS, _EPS_Z, use, inp.gamma, MARS.rotation_rate, table_model, *ports, *grids
-            )
-            Ju = np.zeros((3, N_X))
-            Ju[:, :N_U_COLS] = Ju12
-        else:
-            u0, Ju = numeric_jacobian_batched(lambda X: _air_velocity(X, C_B_M), x, LAYOUT, EPS)
-            Z = np.r_[u0, x[ILP], x[ILR]][None, :] + dz
-            a, b, q, M, _, _ = _freestream(Z[:, :3], Z[:, 3], Z[:, 4], inp.gamma)
-            pz = h4(np.stack([q, a, b, M], axis=1))[:, use]  # (11, k)
-            p0 = pz[0]
-            dp_dz = ((pz[1:6] - pz[6:11]) / (2.0 * _EPS_Z)[:, None]).T  # (k, 5)
+            return measurement_kernel(x, C_B_M, eps_c, eps_z, use, gamma, omega, table_model, *rest)
+        pz, H = h_full(x if keep.size == N_X else _expand(x, keep), C_B_M, use)
+        return pz, (H if keep.size == N_X else H[:, keep])
+
+    def h_full(x: np.ndarray, C_B_M: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        u0, Ju = numeric_jacobian_batched(lambda X: _air_velocity(X, C_B_M), x, LAYOUT, EPS)
+        Z = np.r_[u0, x[ILP], x[ILR]][None, :] + dz
+        a, b, q, M, _, _ = _freestream(Z[:, :3], Z[:, 3], Z[:, 4], inp.gamma)
+        pz = h4(np.stack([q, a, b, M], axis=1))[:, use]  # (11, k)
+        p0 = pz[0]
+        dp_dz = ((pz[1:6] - pz[6:11]) / (2.0 * _EPS_Z)[:, None]).T  # (k, 5)
         Jz = np.zeros((5, N_X))
         Jz[:3] = Ju
         Jz[3, ILP] = Jz[4, ILR] = 1.0
@@ -286,12 +300,29 @@ def make_pressure_model(inp: EkfInputs, *, compiled: bool = True):
     return h
 
 
+def _measurement_args(inp: EkfInputs, keep: np.ndarray) -> tuple:
+    """The arguments of :func:`.kernel.measurement_kernel` after ``x, C, … use`` ("newtonian" and
+    "table" models): ``eps_x, eps_z, gamma, omega, table_model``, the ports, the table's grids
+    and the carried-state columns of the model-error blocks."""
+    veh, tab = inp.vehicle, inp.table
+    ports = (veh.cone(), veh.clock(), veh.radius() / veh.base_radius)
+    grids = (_NO_GRID,) * 4 + (_NO_TABLE,)
+    if tab is not None:
+        grids = (tab.mach, tab.alpha_t, tab.clock, tab.s, np.ascontiguousarray(tab.values, dtype=float))
+    cols = np.searchsorted(keep, [ILAM.start, IC, IB.start, IBIAS.start, IMM, IMA.start])
+    return (EPS[keep], _EPS_Z, inp.gamma, MARS.rotation_rate, inp.model == "table", *ports, *grids, cols)
+
+
 def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -> tuple[np.ndarray, np.ndarray]:
     """:data:`OUTPUT_NAMES` (n, 9) and their 1σ (n, 9) from states x (n, N_X), covariances P
-    (n, N_X, N_X) and the strapdown attitude q_M_B (n, 4) (first-order propagation).  Evaluated
-    :data:`OUTPUT_CHUNK` samples at a time (each sample's outputs depend on that sample only): the
-    perturbed-state stack of all samples at once would hold (n, 1 + 2 N_X, N_X) and its
-    intermediates (~150 MB on ``msl_meads``)."""
+    (n, n_c, n_c) (all states or the carried ones: the first :data:`N_AIR_COLS` are the same) and
+    the strapdown attitude q_M_B (n, 4) (first-order propagation).  The outputs
+    read only the first :data:`N_AIR_COLS` states, so only those and their covariance block enter
+    (the Jacobian's other columns are exactly zero: the same sums without their zero terms).
+    Evaluated :data:`OUTPUT_CHUNK` samples at a time (each sample's outputs depend on that sample
+    only)."""
+    x = x[:, :N_AIR_COLS]
+    P = P[:, :N_AIR_COLS, :N_AIR_COLS]
     C_all = np.swapaxes(quat_to_dcm(q_M_B), 1, 2)[:, None]
     ys, ss = [], []
     for i in range(0, len(x), OUTPUT_CHUNK):
@@ -302,7 +333,7 @@ def air_outputs(x: np.ndarray, P: np.ndarray, q_M_B: np.ndarray, gamma: float) -
             w = X[..., IW]
             return np.stack([a, b, q, M, pi, rho, w[..., 0], w[..., 1], w[..., 2]], axis=-1)
 
-        y, s, _ = derived_with_sigma(g, x[i : i + OUTPUT_CHUNK], P[i : i + OUTPUT_CHUNK], LAYOUT, EPS)
+        y, s, _ = derived_with_sigma(g, x[i : i + OUTPUT_CHUNK], P[i : i + OUTPUT_CHUNK], _AIR_LAYOUT, EPS[:N_AIR_COLS])
         ys.append(y)
         ss.append(s)
     return np.concatenate(ys), np.concatenate(ss)
@@ -405,20 +436,24 @@ def _distance(f0: tuple[float, float, float], f1: tuple[float, float, float], st
     return float(abs(m1 - m0) / st.model_error_mach_length + d_angle)
 
 
-def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True):
-    """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring);
-    ``compiled``: the flight condition of a state by the compiled kernel (else numpy)."""
+def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True, keep: np.ndarray | None = None):
+    """``transition(x, t0, t1) -> (x1, F, Q)`` on the pressure-time grid (module docstring) over
+    the state x (n_c,) of the carried states ``keep`` (:func:`carried_states`; None: all
+    :data:`N_X`).  ``compiled``: one call of the compiled :func:`.kernel.transition_kernel`; False:
+    the numpy reference path (``tests/problems/meads/test_kernel.py``)."""
     t = inp.t
-    C_M_B = quat_to_dcm(inp.q_M_B)
     idx = {float(v): i for i, v in enumerate(t.tolist())}
     I3 = np.eye(3)
-
+    C_M_B, dv_sf, markov = _strapdown_increments(inp, st)
     C_B_M = np.swapaxes(C_M_B, 1, 2)
-    markov = st.model_error_sigma > 0.0 or st.model_mach_sigma > 0.0 or st.model_angle_sigma_deg > 0.0
-    # the strapdown's specific-force velocity increments in M over each step (n - 1, 3) [m/s]:
-    # its velocity change less the gravity it integrated (point mass + J2, trapezoidal)
-    g = gravity_j2(inp.p_M, MARS)
-    dv_sf = np.diff(inp.v_M, axis=0) - 0.5 * (g[1:] + g[:-1]) * np.diff(t)[:, None]
+    keep = np.arange(N_X) if keep is None else np.asarray(keep, dtype=int)
+    if compiled:
+        args = _transition_args(inp, st, keep, C_M_B, dv_sf, markov)
+
+        def transition_compiled(x, t0, t1):
+            return transition_kernel(x, idx[t1], t1 - t0, *args)
+
+        return transition_compiled
 
     def transition(x, t0, t1):
         k = idx[t1]
@@ -496,7 +531,57 @@ def make_transition(inp: EkfInputs, st: EkfSettings, *, compiled: bool = True):
             Q[IMA, IMA] = s1**2 * (1.0 - phi**2) * np.eye(2)
         return x1, F, Q
 
-    return transition
+    if keep.size == N_X:
+        return transition
+    ix = np.ix_(keep, keep)
+
+    def carried(xr, t0, t1):
+        # the full state's transition, the states not carried zero
+        x1, F, Q = transition(_expand(xr, keep), t0, t1)
+        return x1[keep], F[ix], Q[ix]
+
+    return carried
+
+
+def _strapdown_increments(inp: EkfInputs, st: EkfSettings) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``(C_M_B (n, 3, 3), dv_sf (n − 1, 3) [m/s], markov)``: the strapdown attitude, its
+    specific-force velocity increments in M over each step (its velocity change less the gravity
+    it integrated: point mass + J2, trapezoidal) and whether a model-error state decorrelates
+    with the flight condition."""
+    C_M_B = quat_to_dcm(inp.q_M_B)
+    markov = st.model_error_sigma > 0.0 or st.model_mach_sigma > 0.0 or st.model_angle_sigma_deg > 0.0
+    g = gravity_j2(inp.p_M, MARS)
+    dv_sf = np.diff(inp.v_M, axis=0) - 0.5 * (g[1:] + g[:-1]) * np.diff(inp.t)[:, None]
+    return C_M_B, dv_sf, markov
+
+
+def _transition_args(inp, st, keep, C_M_B, dv_sf, markov) -> tuple:
+    """The arguments of :func:`.kernel.transition_kernel` after ``x, k, dt``: the strapdown, the
+    per-step matrices for all steps at once, the constants, the settings and the carried-state
+    columns of the model-error blocks."""
+    G = gravity_point_mass_gradient(inp.p_M[:-1], MARS.gm)
+    if st.attitude_velocity_coupling:
+        Fvt = -np.matmul(skew(dv_sf), C_M_B[:-1])
+    else:
+        Fvt = np.zeros((max(len(inp.t) - 1, 0), 3, 3))
+    Rb = np.matmul(np.swapaxes(C_M_B[1:], 1, 2), C_M_B[:-1])
+    C_B_M = np.ascontiguousarray(np.swapaxes(C_M_B, 1, 2))
+    p_M, v_M = np.ascontiguousarray(inp.p_M, dtype=float), np.ascontiguousarray(inp.v_M, dtype=float)
+    values = {
+        **{name: float(getattr(st, name)) for name in TRANSITION_PARAMS if hasattr(st, name)},
+        "model_angle_sigma_rad": math.radians(st.model_angle_sigma_deg),
+        "model_error_angle_rad": math.radians(st.model_error_angle_deg),
+        "markov": float(markov),
+    }
+    par = np.array([values[name] for name in TRANSITION_PARAMS])
+    second = bool(np.isin(np.arange(N_X)[IBD], keep).all())
+    cols = np.array(
+        [np.searchsorted(keep, IB.start), np.searchsorted(keep, IBD.start) if second else -1]
+        + [np.searchsorted(keep, IMM), np.searchsorted(keep, IMA.start)]
+    )
+    if st.model_error_order == 2 and not second:
+        raise ValueError("the second-order model error needs its rate states carried")
+    return (p_M, v_M, G, Fvt, Rb, C_B_M, MARS.gm, MARS.rotation_rate, inp.gamma, par, cols)
 
 
 def run_pass(
@@ -538,13 +623,20 @@ def run_pass(
         Pi = np.eye(N_X)
         Pi[ILAM, ILAM] = 0.0
 
+    keep = carried_states(st)
+    ix = np.ix_(keep, keep)
+    if not estimate_scale:
+        Pi = Pi[ix]
+
         def projector(_x):
             return Pi
 
+    layout = ErrorStateLayout(keep.size)
     x0, P0 = _initial(inp, st, scale0, Pl0, compiled)
-    h = make_pressure_model(inp, compiled=compiled)
+    x0, P0 = x0[keep], P0[ix]
+    h = make_pressure_model(inp, compiled=compiled, keep=keep)
     C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
-    transition = make_transition(inp, st, compiled=compiled)
+    transition = make_transition(inp, st, compiled=compiled, keep=keep)
 
     def measurements_at(k, tk, x):
         use = np.flatnonzero(inp.usable[k] & np.isfinite(p[k]))
@@ -569,7 +661,7 @@ def run_pass(
                 lambda xx: both(xx)[0],
                 H=lambda xx: both(xx)[1],
                 iterations=st.iterations,
-                step_tol=EPS,
+                step_tol=EPS[keep],
                 gain_projector=projector,
                 slots=use,
                 size=m,
@@ -577,8 +669,22 @@ def run_pass(
         ]
 
     with np.errstate(invalid="ignore"):
-        fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, LAYOUT, keep_q=keep_all)
-        sm = rts_smooth(fp, LAYOUT, consider=None if estimate_scale else np.arange(N_X)[ILAM])
+        if compiled and inp.model in ("newtonian", "table"):
+            consider = np.zeros(keep.size, bool)
+            if not estimate_scale:
+                consider[ILAM] = True
+            fp = _forward_compiled(inp, st, keep, x0, P0, p, sig, consider, keep_all)
+        else:
+            fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, layout, keep_q=keep_all)
+        consider_idx = None if estimate_scale else np.arange(keep.size)[ILAM]
+        sm = _smooth_compiled(fp, consider_idx) if compiled else None
+        if sm is None:
+            sm = rts_smooth(fp, layout, consider=consider_idx)
+    sigma_post = np.sqrt(np.maximum(np.einsum("nii->ni", fp.P_post), 0.0))
+    if keep.size < N_X:  # the states back to the full layout: those not carried are exactly zero
+        sigma_post = _expand(sigma_post, keep)
+        fp = replace(fp, x_prior=_expand(fp.x_prior, keep), x_post=_expand(fp.x_post, keep))
+        sm = replace(sm, x=_expand(sm.x, keep))
     out, sd = air_outputs(sm.x, sm.P, inp.q_M_B, inp.gamma)
     inn = fp.innovations.get("pressure")
     if inn is None:
@@ -591,10 +697,9 @@ def run_pass(
     slam = np.sqrt(np.diag(Pl))
     # what the pass keeps: the smoother's inputs P_prior and F, its gains G and the forward
     # covariances are not read after it (recording, health and summary use x_post, its 1σ, the
-    # innovations, the smoothed x and P); each is an (n, N_X, N_X) array (36 MB on msl_meads)
-    sigma_post = np.sqrt(np.maximum(np.einsum("nii->ni", fp.P_post), 0.0))
+    # innovations, the smoothed x and P); each is an (n, n_c, n_c) array (28 MB on msl_meads)
     if not keep_all:
-        none = np.empty((0, N_X, N_X))
+        none = np.empty((0, keep.size, keep.size))
         fp = replace(fp, P_prior=none, P_post=none, F=none, Q=None)
         sm = replace(sm, G=none)
     return EkfPass(
@@ -613,6 +718,98 @@ def run_pass(
         time.perf_counter() - t0,
         sigma_post,
     )
+
+
+def _forward_compiled(inp, st, keep, x0, P0, p, sig, consider, keep_all) -> ForwardPass:
+    """The forward pass of :func:`run_pass` as one :func:`.kernel.forward_kernel` call (the
+    pressures ``p`` (n, m) [Pa] as the pass uses them, their 1σ ``sig``); the same
+    :class:`ForwardPass` as ``run_filter`` with :func:`make_transition` and
+    :func:`make_pressure_model` (the reference path, ``run_pass(compiled=False)``)."""
+    t = np.ascontiguousarray(inp.t, dtype=float)
+    n, m = p.shape
+    n_c = keep.size
+    usable = inp.usable & np.isfinite(p)
+    C_M_B, dv_sf, markov = _strapdown_increments(inp, st)
+    targs = _transition_args(inp, st, keep, C_M_B, dv_sf, markov)
+    margs = _measurement_args(inp, keep)
+    margs = margs[:2] + margs[4:]  # the kernel has gamma and omega from the transition's arguments
+    out = dict(
+        x_prior=np.empty((n, n_c)),
+        P_prior=np.empty((n, n_c, n_c)),
+        x_post=np.empty((n, n_c)),
+        P_post=np.empty((n, n_c, n_c)),
+        F=np.empty((n, n_c, n_c)),
+        Q=np.empty((n if keep_all else 1, n_c, n_c)),
+    )
+    zp, y, S = np.full((n, m), np.nan), np.full((n, m), np.nan), np.full((n, m, m), np.nan)
+    nis = np.full(n, np.nan)
+    status, k = forward_kernel(
+        np.ascontiguousarray(x0), np.ascontiguousarray(P0), t, *targs, *margs,
+        np.ascontiguousarray(np.where(usable, p, 0.0)), np.ascontiguousarray(np.where(usable, sig, 1.0) ** 2),
+        usable, int(st.iterations), EPS[keep], consider,
+        out["x_prior"], out["P_prior"], out["x_post"], out["P_post"], out["F"], out["Q"], bool(keep_all),
+        zp, y, S, nis,
+    )  # fmt: skip
+    if status:
+        what = {
+            1: "innovation covariance S is not positive definite",
+            2: "non-finite innovation (check z, h(x) and R): the state diverged",
+            3: "iterated update: H P Hᵀ + R not positive definite",
+        }[int(status)]
+        raise np.linalg.LinAlgError(f"step {k} (t={t[k]} s), measurement 'pressure': {what}")
+    steps = np.flatnonzero(usable.any(axis=1))
+    inn = InnovationHistory(
+        t=t[steps],
+        step=steps,
+        z=np.where(usable, p, np.nan)[steps],
+        z_pred=zp[steps],
+        y=y[steps],
+        S=S[steps],
+        nis=nis[steps],
+        accepted=np.ones(steps.size, bool),
+    )
+    return ForwardPass(t, innovations={"pressure": inn} if steps.size else {}, **{
+        **out, "Q": out["Q"] if keep_all else None})  # fmt: skip
+
+
+def _smooth_compiled(fp: ForwardPass, consider: np.ndarray | None) -> SmoothedPass | None:
+    """:func:`~workbench.estimation.smoother.rts_smooth` of the forward pass (additive states) by
+    the compiled :func:`.kernel.rts_kernel`; None where the reference must run instead: a predicted
+    variance not positive (its exactly-known components) or a covariance not positive definite
+    (the reference raises with the diagnosis)."""
+    n, n_c = fp.x_post.shape
+    dg = np.diagonal(fp.P_prior, axis1=1, axis2=2)
+    if n < 2 or not np.all(dg > 0.0):
+        return None
+    G = np.zeros((n, n_c, n_c))
+    np.matmul(fp.F[1:], fp.P_post[:-1], out=G[:-1])
+    mask = np.zeros(n_c, bool)
+    if consider is not None:
+        mask[consider] = True
+    xs, Ps = np.empty_like(fp.x_post), np.empty_like(fp.P_post)
+    with threadpool_limits(limits=1, user_api="blas"):
+        status, _ = rts_kernel(fp.x_prior, fp.P_prior, fp.x_post, fp.P_post, G, np.sqrt(dg), mask, xs, Ps)
+    if status:
+        return None
+    G[-1] = 0.0
+    return SmoothedPass(fp.t, xs, Ps, G)
+
+
+def carried_states(st: EkfSettings) -> np.ndarray:
+    """Indices (n_c,) into the full state (:data:`.state.STATE_NAMES`) of the states the filter
+    carries: all but the model-error rates :data:`.state.IBD` for the first-order process, where
+    they are identically zero with zero variance and no coupling (Φ, Q, P₀ and H zero on them),
+    so dropping them leaves every other number as it was."""
+    if st.model_error_order == 2:
+        return np.arange(N_X)
+    return np.delete(np.arange(N_X), np.arange(N_X)[IBD])
+
+
+def _expand(xr: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """States (..., n_c) of the carried states ``keep`` to the full (..., N_X), zero elsewhere."""
+    out = np.zeros((*xr.shape[:-1], N_X))
+    out[..., keep] = xr
+    return out
 
 
 def run_passes(inp: EkfInputs, st: EkfSettings, keep_all: bool = False, *, compiled: bool = True):

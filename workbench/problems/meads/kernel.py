@@ -1,10 +1,12 @@
-"""Compiled (numba) measurement function of the MEADS EKF: port pressures and their state Jacobian.
+"""Compiled (numba) MEADS EKF: measurement, transition, forward pass and RTS smoother.
 
-:func:`workbench.problems.meads.ekf.make_pressure_model` is called ~11 000 times per run (two
-passes, iterated updates) on one state at a time. Its numpy version (the reference path,
-``compiled=False`` of :func:`.ekf.run_pass`) spends ~1 ms a call in the overhead of ~200 small
-array operations (scipy's ``RegularGridInterpolator`` alone 0.4 ms), not in arithmetic.
-:func:`pressure_kernel` does the same arithmetic in one compiled call, in the same order of operations:
+The filter's numpy path (``compiled=False`` of :func:`.ekf.run_pass`: ``estimation.ekf.run_filter``
+with :func:`.ekf.make_transition` and :func:`.ekf.make_pressure_model`, ``estimation.smoother.rts_smooth``)
+is the reference; it spends its time in the overhead of small array operations on one state at a
+time, not in arithmetic. :func:`forward_kernel` runs a whole pass in one call (its steps
+:func:`transition_kernel` and the iterated Joseph update with :func:`measurement_kernel`), and
+:func:`rts_kernel` the smoother's recursion. :func:`pressure_kernel`, the core of the measurement,
+does the numpy path's arithmetic in the same order of operations:
 
 1. the body-axis air velocity ``u = (I − [δθ×]) C_B_M (v_M + Ω ẑ × p_M − C_M_N w_N)`` at the state
    and its central-difference Jacobian over position, velocity, attitude error and wind with the
@@ -17,8 +19,9 @@ array operations (scipy's ``RegularGridInterpolator`` alone 0.4 ms), not in arit
    edge clamping of :meth:`models.flush_airdata.SurfacePressureTable.cp`;
 4. ``p0`` at z and ``∂p/∂z`` by central differences.
 
-The two paths agree to a few units in the last place (``tests/problems/meads/test_kernel.py``);
-libm's and numpy's transcendental functions and summation orders may round differently.
+The two paths agree to a few units in the last place (``tests/problems/meads/test_kernel.py``,
+``test_ekf.py``); libm's and numpy's transcendental functions and summation orders may round
+differently, and the iterated update's stop rule turns such differences into ~1e-9 of a pass.
 """
 
 from __future__ import annotations
@@ -28,9 +31,17 @@ import math
 import numpy as np
 from numba import njit
 
-from workbench.problems.meads.state import ILP, ILR, IP, ITH, IV, IW, N_U_COLS
+from workbench.problems.meads.state import ILP, ILR, IP, ITH, IV, IW, N_PORTS, N_U_COLS
 
-__all__ = ["pressure_kernel", "flow_kernel", "N_U_COLS"]
+__all__ = ["pressure_kernel", "measurement_kernel", "flow_kernel", "transition_kernel", "TRANSITION_PARAMS", "N_U_COLS"]
+
+#: the order of the settings in :func:`transition_kernel`'s ``par`` array
+TRANSITION_PARAMS = (
+    "accel_psd", "attitude_psd", "wind_var_per_km", "vertical_wind_length_km", "vertical_wind_sigma_mps",
+    "wind_sigma_mps", "atmosphere_var_per_km", "model_error_sigma", "model_error_order", "model_mach_sigma",
+    "model_angle_sigma_rad", "model_angle_mach_low", "model_angle_mach_high", "model_angle_hypersonic_fraction",
+    "model_error_mach_length", "model_error_angle_rad", "markov",
+)  # fmt: skip
 
 # the state's first columns as compile-time integers (the compiled code indexes element by element)
 _P0, _V0, _TH0, _W0 = IP.start, IV.start, ITH.start, IW.start
@@ -204,6 +215,76 @@ def pressure_kernel(
 
 
 @njit(cache=True, nogil=True)
+def measurement_kernel(
+    x,
+    C,
+    eps_x,
+    eps_z,
+    use,
+    gamma,
+    omega,
+    table_model,
+    port_cone,
+    port_clock,
+    port_s,
+    gm,
+    ga,
+    gc,
+    gs,
+    values,
+    cols,
+):  # pragma: no cover - compiled
+    """The filter's measurement: port pressures (k,) [Pa] and their Jacobian H (k, n_c) over the
+    carried state x (n_c,), :func:`pressure_kernel` chained with the model-error states as
+    ``ekf.make_pressure_model`` assembles them (its numpy path is the reference).
+
+    Arguments as :func:`pressure_kernel` (``eps_x`` over the carried state), and ``cols`` (6,) int:
+    the carried-state columns of the first scale factor, the model level, the first model error,
+    the first bias, the Mach error and the first flow-angle error (the position, velocity,
+    attitude, wind, ln p∞ and ln ρ∞ columns are the full state's)."""
+    u0, Ju, p0, dp_dz = pressure_kernel(
+        x, C, eps_x, eps_z, use, gamma, omega, table_model, port_cone, port_clock, port_s, gm, ga, gc, gs, values
+    )
+    i_lam, i_c, i_b, i_bias, i_mm, i_ma = cols[0], cols[1], cols[2], cols[3], cols[4], cols[5]
+    k = use.size
+    n = x.size
+    g_m = np.empty(k)
+    for i in range(k):
+        g_m[i] = dp_dz[i, 4] - dp_dz[i, 3] - p0[i] + 2.0 * math.exp(x[ILP])
+    V = math.sqrt(u0[0] * u0[0] + u0[1] * u0[1] + u0[2] * u0[2])
+    hy = math.hypot(u0[0], u0[2])
+    ca, sa = u0[0] / hy, u0[2] / hy
+    sb = u0[1] / V
+    cb = math.sqrt(max(1.0 - sb * sb, 0.0))
+    du0 = (V * (-sa * cb), V * 0.0, V * (ca * cb))  # ∂u/∂α
+    du1 = (V * (-ca * sb), V * cb, V * (-sa * sb))  # ∂u/∂β
+    lev = 1.0 + x[i_c]
+    pm = np.empty(k)
+    H = np.zeros((k, n))
+    for i in range(k):
+        ga_ = dp_dz[i, 0] * du0[0] + dp_dz[i, 1] * du0[1] + dp_dz[i, 2] * du0[2]
+        gb_ = dp_dz[i, 0] * du1[0] + dp_dz[i, 1] * du1[1] + dp_dz[i, 2] * du1[2]
+        pm_i = p0[i] + x[i_mm] * g_m[i] + (ga_ * x[i_ma] + gb_ * x[i_ma + 1])
+        port = use[i]
+        lam = 1.0 + x[i_lam + port]
+        mod = 1.0 + x[i_b + port]
+        f = lam * lev * mod
+        for j in range(N_U_COLS):
+            H[i, j] = f * (dp_dz[i, 0] * Ju[0, j] + dp_dz[i, 1] * Ju[1, j] + dp_dz[i, 2] * Ju[2, j])
+        H[i, ILP] = f * dp_dz[i, 3]
+        H[i, ILR] = f * dp_dz[i, 4]
+        H[i, i_lam + port] = pm_i * lev * mod
+        H[i, i_c] = pm_i * lam * mod
+        H[i, i_b + port] = pm_i * lam * lev
+        H[i, i_bias + port] = 1.0
+        H[i, i_mm] = g_m[i] * lam * lev * mod
+        H[i, i_ma] = ga_ * f
+        H[i, i_ma + 1] = gb_ * f
+        pm[i] = pm_i * lam * lev * mod + x[i_bias + port]
+    return pm, H
+
+
+@njit(cache=True, nogil=True)
 def flow_kernel(x, C, omega, gamma):  # pragma: no cover - compiled
     """(α [rad], β [rad], Mach) of one EKF state ``x`` (n_x,) with the strapdown C_B_M ``C`` (3, 3),
     the planet's rotation rate ``omega`` [rad/s] and ``gamma``: ``ekf.air_data_of_state`` for one
@@ -214,3 +295,383 @@ def flow_kernel(x, C, omega, gamma):  # pragma: no cover - compiled
     a = math.atan2(u[2], u[0])
     b = math.asin(min(max(u[1] / V, -1.0), 1.0))
     return a, b, V / math.sqrt(gamma * math.exp(x[ILP]) / math.exp(x[ILR]))
+
+
+@njit(cache=True, nogil=True)
+def _angle_sigma(par, mach):  # pragma: no cover - compiled
+    """``ekf.angle_sigma``: the flow-angle error's 1σ [rad] at ``mach``."""
+    lo, hi = par[11], par[12]
+    w = min(max((mach - lo) / (hi - lo), 0.0), 1.0)
+    return par[10] * (1.0 + w * (par[13] - 1.0))
+
+
+@njit(cache=True, nogil=True)
+def transition_kernel(x, k, dt, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, cols):  # pragma: no cover
+    """One step k−1 → k of the MEADS EKF (``ekf.make_transition``'s numpy path is the reference):
+    ``(x1 (n_c,), F (n_c, n_c), Q (n_c, n_c))`` over the carried state x (n_c,).
+
+    ``dt`` [s]; the strapdown ``p_M``, ``v_M`` (n, 3) [m, m/s] and ``C_B_M`` (n, 3, 3); per step
+    (n − 1, 3, 3): the point-mass gravity gradient ``G`` [1/s²] at p_M[k−1], the specific-force tilt
+    ``Fvt`` and the body rotation ``Rb`` over the step; ``gm`` [m³/s²], ``omega`` [rad/s],
+    ``gamma``; ``par`` the settings in :data:`TRANSITION_PARAMS` order; ``cols`` (4,) int the
+    carried-state columns of the first model error b, its first rate b' (−1: first order), the Mach
+    error and the first flow-angle error (the other columns are the full state's)."""
+    n = x.size
+    km1 = k - 1
+    i_b, i_bd, i_mm, i_ma = cols[0], cols[1], cols[2], cols[3]
+    x1 = x.copy()
+    F = np.eye(n)
+    Q = np.zeros((n, n))
+    dp = np.empty(3)
+    dv = np.empty(3)
+    for i in range(3):
+        dp[i] = x[_P0 + i] - p_M[km1, i]
+        dv[i] = x[_V0 + i] - v_M[km1, i]
+    for i in range(3):
+        x1[_P0 + i] = p_M[k, i] + dp[i] + dv[i] * dt
+        gdp = G[km1, i, 0] * dp[0] + G[km1, i, 1] * dp[1] + G[km1, i, 2] * dp[2]
+        ft = Fvt[km1, i, 0] * x[_TH0] + Fvt[km1, i, 1] * x[_TH0 + 1] + Fvt[km1, i, 2] * x[_TH0 + 2]
+        x1[_V0 + i] = v_M[k, i] + dv[i] + gdp * dt + ft
+        x1[_TH0 + i] = Rb[km1, i, 0] * x[_TH0] + Rb[km1, i, 1] * x[_TH0 + 1] + Rb[km1, i, 2] * x[_TH0 + 2]
+    r0 = math.sqrt(x[_P0] * x[_P0] + x[_P0 + 1] * x[_P0 + 1] + x[_P0 + 2] * x[_P0 + 2])
+    r1 = math.sqrt(x1[_P0] * x1[_P0] + x1[_P0 + 1] * x1[_P0 + 1] + x1[_P0 + 2] * x1[_P0 + 2])
+    dh = r1 - r0
+    c = gm / r0**2 * math.exp(x[ILR] - x[ILP])
+    x1[ILP] = x[ILP] - c * dh
+    x1[ILR] = x[ILR] - c * dh
+    for i in range(3):
+        F[_P0 + i, _V0 + i] = dt
+        for j in range(3):
+            F[_V0 + i, _P0 + j] = G[km1, i, j] * dt
+            F[_V0 + i, _TH0 + j] = Fvt[km1, i, j]
+            F[_TH0 + i, _TH0 + j] = Rb[km1, i, j]
+    for row in (ILP, ILR):
+        for i in range(3):
+            u0 = x[_P0 + i] / r0
+            u1 = x1[_P0 + i] / r1
+            F[row, _P0 + i] = -c * (u1 - u0)
+            F[row, _V0 + i] = -c * (u1 * dt)
+        F[row, ILP] = F[row, ILP] + c * dh
+        F[row, ILR] = F[row, ILR] - c * dh
+    qa = par[0]
+    for i in range(3):
+        Q[_P0 + i, _P0 + i] = qa * dt**3 / 3.0
+        Q[_P0 + i, _V0 + i] = qa * dt**2 / 2.0
+        Q[_V0 + i, _P0 + i] = qa * dt**2 / 2.0
+        Q[_V0 + i, _V0 + i] = qa * dt
+        Q[_TH0 + i, _TH0 + i] = par[1] * dt
+    km = abs(dh) / 1e3
+    Q[_W0, _W0] = par[2] * km
+    Q[_W0 + 1, _W0 + 1] = par[2] * km
+    if par[3] > 0.0:
+        phi_w = math.exp(-km / par[3])
+        x1[_W0 + 2] = phi_w * x[_W0 + 2]
+        F[_W0 + 2, _W0 + 2] = phi_w
+        Q[_W0 + 2, _W0 + 2] = par[4] ** 2 * (1.0 - phi_w**2)
+    else:
+        Q[_W0 + 2, _W0 + 2] = par[2] * km * (par[4] / par[5]) ** 2
+    Q[ILP, ILP] = par[6] * km
+    Q[ILR, ILR] = par[6] * km
+    dist = 0.0
+    m0 = m1 = 0.0
+    if par[16] > 0.0:
+        a0, b0, m0 = flow_kernel(x, C_B_M[km1], omega, gamma)
+        a1, b1, m1 = flow_kernel(x1, C_B_M[k], omega, gamma)
+        d_angle = (abs(a1 - a0) + abs(b1 - b0)) / par[15]
+        dist = abs(m1 - m0) / par[14] + d_angle
+    if par[7] > 0.0:
+        e = math.exp(-dist)
+        s2 = par[7] ** 2
+        if par[8] == 2.0:
+            p00, p01, p10, p11 = e * (1.0 + dist), e * dist, e * -dist, e * (1.0 - dist)
+            s2d = s2
+        else:
+            p00, p01, p10, p11 = e, 0.0, 0.0, 0.0
+            s2d = 0.0
+        # Q = P∞ − Φ P∞ Φᵀ with P∞ = diag(s2, s2d)
+        q00 = s2 - (p00 * s2 * p00 + p01 * s2d * p01)
+        q01 = 0.0 - (p00 * s2 * p10 + p01 * s2d * p11)
+        q11 = s2d - (p10 * s2 * p10 + p11 * s2d * p11)
+        for i in range(N_PORTS):
+            b = x[i_b + i]
+            if i_bd >= 0:
+                bd = x[i_bd + i]
+                x1[i_b + i] = p00 * b + p01 * bd
+                x1[i_bd + i] = p10 * b + p11 * bd
+                F[i_b + i, i_bd + i] = p01
+                F[i_bd + i, i_b + i] = p10
+                F[i_bd + i, i_bd + i] = p11
+                Q[i_b + i, i_bd + i] = q01
+                Q[i_bd + i, i_b + i] = q01
+                Q[i_bd + i, i_bd + i] = q11
+            else:
+                x1[i_b + i] = p00 * b
+            F[i_b + i, i_b + i] = p00
+            Q[i_b + i, i_b + i] = q00
+    if par[9] > 0.0:
+        phi = math.exp(-dist)
+        x1[i_mm] = phi * x[i_mm]
+        F[i_mm, i_mm] = phi
+        Q[i_mm, i_mm] = par[9] ** 2 * (1.0 - phi**2)
+    if par[10] > 0.0:
+        s0, s1 = _angle_sigma(par, m0), _angle_sigma(par, m1)
+        phi = math.exp(-dist)
+        f = phi * s1 / s0 if s0 > 0.0 else 0.0
+        for i in range(2):
+            x1[i_ma + i] = f * x[i_ma + i]
+            F[i_ma + i, i_ma + i] = f
+            Q[i_ma + i, i_ma + i] = s1**2 * (1.0 - phi**2)
+    return x1, F, Q
+
+
+@njit(cache=True, nogil=True)
+def _cho(S, L):  # pragma: no cover - compiled
+    """Lower Cholesky factor of S (m, m) into L; False when S is not positive definite."""
+    m = S.shape[0]
+    for j in range(m):
+        s = S[j, j]
+        for c in range(j):
+            s -= L[j, c] * L[j, c]
+        if not s > 0.0:
+            return False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, m):
+            v = S[i, j]
+            for c in range(j):
+                v -= L[i, c] * L[j, c]
+            L[i, j] = v / L[j, j]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _cho_solve(L, B):  # pragma: no cover - compiled
+    """X with L Lᵀ X = B for B (m, r) (a new array); row operations, each element's sums in the
+    order of a column-by-column substitution."""
+    m, r = B.shape
+    X = B.copy()
+    for i in range(m):
+        for c in range(i):
+            f = L[i, c]
+            for j in range(r):
+                X[i, j] -= f * X[c, j]
+        d = L[i, i]
+        for j in range(r):
+            X[i, j] = X[i, j] / d
+    for i in range(m - 1, -1, -1):
+        for c in range(i + 1, m):
+            f = L[c, i]
+            for j in range(r):
+                X[i, j] -= f * X[c, j]
+        d = L[i, i]
+        for j in range(r):
+            X[i, j] = X[i, j] / d
+    return X
+
+
+@njit(cache=True, nogil=True)
+def forward_kernel(
+    x0, P0, t, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, tcols,
+    eps_x, eps_z, table_model, port_cone, port_clock, port_s, gm_, ga, gc, gs, values, mcols,
+    z_all, r_all, usable, iterations, step_tol, consider,
+    x_prior, P_prior, x_post, P_post, F_hist, Q_hist, keep_q, zp_out, y_out, S_out, nis_out,
+):  # pragma: no cover - compiled  # fmt: skip
+    """The MEADS forward EKF over the n pressure times in one compiled call: the same recursion as
+    ``estimation.ekf.run_filter`` with the iterated update of ``estimation.ekf.update`` (Joseph
+    form, gain projection, absolute step rule), :func:`transition_kernel` and
+    :func:`measurement_kernel` (their arguments ``p_M`` … ``tcols`` and ``eps_x`` … ``mcols``).
+
+    ``z_all``, ``r_all`` (n, m) the pressures [Pa] and their variances [Pa²]; ``usable`` (n, m)
+    bool; ``iterations``; ``step_tol`` (n_c,); ``consider`` (n_c,) bool the states whose gain is
+    projected to zero.  Fills ``x_prior``, ``x_post`` (n, n_c), ``P_prior``, ``P_post``,
+    ``F_hist`` (n, n_c, n_c), ``Q_hist`` (when ``keep_q``), and per step with a measurement
+    ``zp_out``, ``y_out`` (n, m), ``S_out`` (n, m, m) in the used ports (NaN-filled by the caller)
+    and ``nis_out`` (n,).  Returns ``(status, k)``: 0 done; 1 S not positive definite, 2 a
+    non-finite NIS, 3 an iterate's S not positive definite, at step k."""
+    n = t.size
+    n_c = x0.size
+    m_all = z_all.shape[1]
+    x = x0.copy()
+    P = P0.copy()
+    use_buf = np.empty(m_all, dtype=np.int64)
+    for k in range(n):
+        if k > 0:
+            x, F, Q = transition_kernel(
+                x, k, t[k] - t[k - 1], p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, tcols
+            )
+            A = (F @ P) @ F.T
+            A += Q
+            A = A + A.T
+            A *= 0.5
+            P = A
+            F_hist[k] = F
+            if keep_q:
+                Q_hist[k] = Q
+        else:
+            F_hist[0] = np.eye(n_c)
+            if keep_q:
+                Q_hist[0] = 0.0
+        x_prior[k] = x
+        P_prior[k] = P
+        m = 0
+        for j in range(m_all):
+            if usable[k, j]:
+                use_buf[m] = j
+                m += 1
+        if m > 0:
+            use = use_buf[:m].copy()
+            z = np.empty(m)
+            R = np.zeros((m, m))
+            for i in range(m):
+                z[i] = z_all[k, use[i]]
+                R[i, i] = r_all[k, use[i]]
+            C = C_B_M[k]
+            zp, H = measurement_kernel(
+                x,
+                C,
+                eps_x,
+                eps_z,
+                use,
+                gamma,
+                omega,
+                table_model,
+                port_cone,
+                port_clock,
+                port_s,
+                gm_,
+                ga,
+                gc,
+                gs,
+                values,
+                mcols,
+            )
+            y = z - zp
+            PHt = P @ H.T
+            S = H @ PHt + R
+            L = np.zeros((m, m))
+            if not _cho(S, L):
+                return 1, k
+            w = _cho_solve(L, y.reshape(m, 1))[:, 0]
+            nis = 0.0
+            for i in range(m):
+                nis += y[i] * w[i]
+            if not math.isfinite(nis):
+                return 2, k
+            K = _cho_solve(L, PHt.T.copy()).T.copy()
+            for i in range(n_c):
+                if consider[i]:
+                    K[i, :] = 0.0
+            dx = K @ y
+            x_new = x + dx
+            Hk = H
+            for _ in range(1, iterations):
+                x_i = x_new
+                zp_i, H_i = measurement_kernel(
+                    x_i,
+                    C,
+                    eps_x,
+                    eps_z,
+                    use,
+                    gamma,
+                    omega,
+                    table_model,
+                    port_cone,
+                    port_clock,
+                    port_s,
+                    gm_,
+                    ga,
+                    gc,
+                    gs,
+                    values,
+                    mcols,
+                )
+                finite = True
+                for i in range(m):
+                    if not math.isfinite(zp_i[i]):
+                        finite = False
+                if not finite:
+                    break
+                r_i = z - zp_i
+                PHt_i = P @ H_i.T
+                S_i = H_i @ PHt_i + R
+                if not _cho(S_i, L):
+                    return 3, k
+                K = _cho_solve(L, PHt_i.T.copy()).T.copy()
+                for i in range(n_c):
+                    if consider[i]:
+                        K[i, :] = 0.0
+                Hk, PHt = H_i, PHt_i
+                dx_new = K @ (r_i - Hk @ (x - x_i))
+                x_new = x + dx_new
+                done = True
+                for i in range(n_c):
+                    if not abs(dx_new[i] - dx[i]) < step_tol[i]:
+                        done = False
+                dx = dx_new
+                if done:
+                    break
+            M = P - K @ PHt.T
+            A = M - (M @ Hk.T - K @ R) @ K.T
+            A = A + A.T
+            A *= 0.5
+            x, P = x_new, A
+            for i in range(m):
+                zp_out[k, use[i]] = zp[i]
+                y_out[k, use[i]] = y[i]
+                for j in range(m):
+                    S_out[k, use[i], use[j]] = S[i, j]
+            nis_out[k] = nis
+        x_post[k] = x
+        P_post[k] = P
+    return 0, n
+
+
+@njit(cache=True, nogil=True)
+def rts_kernel(x_prior, P_prior, x_post, P_post, G, dsq, consider, xs, Ps):  # pragma: no cover - compiled
+    """The backward recursion of ``estimation.smoother.rts_smooth`` (its reference) for additive
+    states whose predicted variances are all positive: gain on the Jacobi-scaled ``P_prior``
+    (``dsq`` (n, n_c) the square roots of its diagonal), ``consider`` (n_c,) bool constant consider
+    parameters (G's rows the selection of themselves).  ``G`` (n, n_c, n_c) holds
+    ``F[k+1] P_post[k]`` on entry and the gains on return; fills ``xs`` (n, n_c), ``Ps``.
+    Returns ``(status, k)``: 0 done; 1 a scaled ``P_prior[k+1]`` or 2 a smoothed covariance at
+    step k not positive definite (the caller reruns the reference for its diagnosis)."""
+    n, n_c = x_post.shape
+    xs[n - 1] = x_post[n - 1]
+    Ps[n - 1] = P_post[n - 1]
+    L = np.zeros((n_c, n_c))
+    if not _cho(Ps[n - 1], L):
+        return 2, n - 1
+    for k in range(n - 2, -1, -1):
+        Pp = P_prior[k + 1]
+        d = dsq[k + 1]
+        Sc = np.empty((n_c, n_c))
+        rhs = np.empty((n_c, n_c))
+        for i in range(n_c):
+            for j in range(n_c):
+                Sc[i, j] = Pp[i, j] / (d[i] * d[j])
+                rhs[i, j] = G[k, i, j] / d[i]
+        if not _cho(Sc, L):
+            return 1, k
+        Gt = _cho_solve(L, rhs)
+        for i in range(n_c):
+            for j in range(n_c):
+                Gt[i, j] = Gt[i, j] / d[i]
+        for c in range(n_c):
+            if consider[c]:
+                for i in range(n_c):
+                    Gt[i, c] = 0.0
+        for c in range(n_c):
+            if consider[c]:
+                Gt[c, c] = 1.0
+        Gk = Gt.T.copy()
+        dx = Gk @ (xs[k + 1] - x_prior[k + 1])
+        xs[k] = x_post[k] + dx
+        A = P_post[k] + (Gk @ (Ps[k + 1] - Pp)) @ Gt
+        A = 0.5 * (A + A.T)
+        for i in range(n_c):
+            if not A[i, i] > 0.0:
+                return 2, k
+        if not _cho(A, L):
+            return 2, k
+        Ps[k] = A
+        G[k] = Gk
+    return 0, 0
