@@ -207,7 +207,7 @@ def navigate(tel: MeadsTelemetry, vehicle: FadsVehicle) -> Navigation:
     imu = imu_arrays(SimpleNamespace(t=tel.t_imu[sel], f_G=tel.f_B[sel], w_G=tel.w_B[sel], sigma_f=3e-3, sigma_w=1e-4))
     P0 = np.diag(np.r_[np.full(3, init.sigma_v**2), np.full(3, init.sigma_att**2), np.full(3, init.sigma_p**2)])
     with threadpool_limits(limits=1):  # 9x9 expm per step: BLAS threads only cost here
-        sd = integrate(imu, init.v_M, init.q_M_B, init.p_M, P0, body=MARS)
+        sd = integrate(imu, init.v_M, init.q_M_B, init.p_M, P0, body=MARS, fast=True)
     t_p = tel.t_p
 
     def at(a):
