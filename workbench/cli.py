@@ -483,6 +483,13 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("scenario")
     sp.add_argument("--seeds", type=int, default=20, help="number of runs (default 20)")
     sp.add_argument("--first-seed", type=int, default=1)
+    sp.add_argument(
+        "--stream",
+        choices=("tuning", "validation", "calibration", "tests"),
+        default=None,
+        help="seed the members from this seed stream of the project (SeedSequence(20261204, spawn_key=(k,))) "
+        "instead of --first-seed: 'validation' for consistency numbers on truths no setting was tuned on",
+    )
     sp.add_argument("--workers", type=int, default=2, help="local worker processes without --scheduler")
     sp.add_argument("--scheduler", default=None, help="dask: 'local' (LocalCluster) or 'tcp://host:8786'")
     sp.add_argument(

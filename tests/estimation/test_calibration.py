@@ -150,3 +150,19 @@ def test_a_two_sided_statistic_far_beyond_its_band_is_an_error_with_the_checks_o
     assert judged(lo - 0.5 * half)["status"] == WARNING
     far = judged(lo - 1.5 * half)
     assert far["status"] == ERROR and "lander geometry" in far["message"] and "beyond" in far["message"]
+
+
+def test_monte_carlo_options_seed_from_a_named_stream():
+    """``workbench mc --stream validation``: the members' seeds are the validation stream's, the
+    same the benchmarks use, disjoint from the tuning stream's and from ``--first-seed``'s."""
+    from workbench.problems.base import McOptions
+
+    legacy = McOptions(n_runs=5, first_seed=1)
+    val = McOptions(n_runs=5, stream="validation")
+    tun = McOptions(n_runs=5, stream="tuning")
+    assert legacy.seeds == [1, 2, 3, 4, 5] and legacy.entropy == 1
+    assert val.seeds == seeds_of(VALIDATION_STREAM, 5) and val.entropy == val.seeds[0]
+    assert not set(val.seeds) & set(tun.seeds) and val.entropy != tun.entropy
+    assert val.seed_record()["stream"] == "validation" and legacy.seed_record()["stream"] is None
+    with pytest.raises(ValueError, match="unknown seed stream"):
+        McOptions(stream="holdout")

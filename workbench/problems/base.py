@@ -80,6 +80,22 @@ class RunOptions:
     allow_unhealthy: bool = False
 
 
+SEED_ENTROPY = 20261204
+"""The entropy of every seed stream of the project (``np.random.SeedSequence``)."""
+
+SEED_STREAMS = {"tuning": 1, "validation": 2, "calibration": 3, "tests": 4}
+"""Spawn keys of the seed streams: tuning may use any seed of stream 1; consistency claims come from
+stream 2, never used to choose a setting; the health bands from stream 3; the slow tests' truths from 4."""
+
+
+def stream_seeds(stream: str | int, n: int) -> list[int]:
+    """The first ``n`` integer seeds (< 2**31) of the seed stream ``stream`` (a name of
+    :data:`SEED_STREAMS` or its spawn key): ``SeedSequence(SEED_ENTROPY, spawn_key=(k,))``."""
+    k = SEED_STREAMS[stream] if isinstance(stream, str) else int(stream)
+    ss = np.random.SeedSequence(SEED_ENTROPY, spawn_key=(k,))
+    return [int(s) for s in ss.generate_state(int(n), dtype=np.uint32) % np.uint32(2**31 - 1)]
+
+
 @dataclass(frozen=True)
 class McOptions:
     """Options of a Monte Carlo run: ``n_runs`` runs seeded ``first_seed, first_seed + 1, ...``,
@@ -89,7 +105,11 @@ class McOptions:
     through the full pipeline from telemetry files (entry: ``problems/entry/truth_mc.py``; meads:
     ``problems/meads/truth_mc.py``, the full error model; the drop test's Monte Carlo already
     synthesizes every run and ignores it); ``refine_rounds``: refinement
-    rounds of the ensemble stage, if it has them (None: the study's default)."""
+    rounds of the ensemble stage, if it has them (None: the study's default).
+
+    ``stream``: a name of :data:`SEED_STREAMS` — the members' seeds come from that stream
+    (:attr:`seeds`, :attr:`entropy`) instead of ``first_seed``, so a consistency number measured on
+    the validation stream is on truths no setting was chosen on."""
 
     n_runs: int = 20
     first_seed: int = 1
@@ -98,11 +118,38 @@ class McOptions:
     members: int | None = None
     truth_sim: bool = False
     refine_rounds: int | None = None
+    stream: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.stream is not None and self.stream not in SEED_STREAMS:
+            raise ValueError(f"unknown seed stream {self.stream!r}: one of {', '.join(SEED_STREAMS)}")
 
     @property
     def seeds(self) -> list[int]:
-        """The run seeds, ``[first_seed, ..., first_seed + n_runs - 1]``."""
+        """The run seeds: ``[first_seed, ..., first_seed + n_runs - 1]``, or with a ``stream`` its
+        first ``n_runs`` seeds (:func:`stream_seeds`)."""
+        if self.stream is not None:
+            return stream_seeds(self.stream, self.n_runs)
         return list(range(self.first_seed, self.first_seed + self.n_runs))
+
+    @property
+    def entropy(self) -> int:
+        """The root seed of a study that spawns its members from one seed (member k:
+        ``SeedSequence(entropy, spawn_key=(k,))``): ``first_seed``, or with a ``stream`` that
+        stream's first seed."""
+        return stream_seeds(self.stream, 1)[0] if self.stream is not None else int(self.first_seed)
+
+    def seed_record(self) -> dict:
+        """How the members were seeded, for the study's JSON: the stream (None: ``first_seed``),
+        the first seed or entropy, the rule."""
+        return {
+            "stream": self.stream,
+            "first_seed": self.first_seed if self.stream is None else None,
+            "entropy": self.entropy,
+            "rule": "members seeded from first_seed (no named stream)"
+            if self.stream is None
+            else f"stream {self.stream!r}: SeedSequence({SEED_ENTROPY}, spawn_key=({SEED_STREAMS[self.stream]},))",
+        }
 
 
 @dataclass(frozen=True)

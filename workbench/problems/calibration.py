@@ -35,6 +35,7 @@ from workbench.estimation.calibration import FAMILY_ALPHA, band_key, family_z, f
 from workbench.io import assets
 from workbench.io.scenario import resolve_scenario
 from workbench.problems import registry
+from workbench.problems.base import SEED_ENTROPY, SEED_STREAMS, stream_seeds
 from workbench.problems.runner import calibration_path, evaluate
 
 __all__ = [
@@ -48,17 +49,16 @@ __all__ = [
     "shipped_scenarios",
 ]
 
-#: the entropy of every seed stream of the project (SeedSequence)
-SEED_ENTROPY = 20261204
-#: spawn keys of the streams: tuning may use any seed of stream 1; consistency claims come from stream 2;
-#: the health bands from stream 3
-TUNING_STREAM, VALIDATION_STREAM, CALIBRATION_STREAM = 1, 2, 3
+#: spawn keys of the streams (:data:`workbench.problems.base.SEED_STREAMS`): tuning may use any seed of
+#: stream 1; consistency claims come from stream 2; the health bands from stream 3
+TUNING_STREAM, VALIDATION_STREAM, CALIBRATION_STREAM = (
+    SEED_STREAMS[k] for k in ("tuning", "validation", "calibration")
+)
 
 
 def seeds_of(stream: int, n: int) -> list[int]:
     """The first ``n`` integer seeds (< 2**31) of the seed stream ``stream`` (see the module docstring)."""
-    ss = np.random.SeedSequence(SEED_ENTROPY, spawn_key=(int(stream),))
-    return [int(s) for s in ss.generate_state(int(n), dtype=np.uint32) % np.uint32(2**31 - 1)]
+    return stream_seeds(stream, n)
 
 
 def shipped_scenarios(kind: str) -> list[Path]:

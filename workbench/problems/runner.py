@@ -375,6 +375,7 @@ def run_monte_carlo(
             # first study of a checkout: compile once in a child, not once in every worker
             precompile(sc, problem, options.first_seed, rep)
             outcome = problem.monte_carlo(settings, out, options, rep)
+            outcome.summary.setdefault("seeds", options.seed_record())
             summary_path = write_summary(
                 out / f"{sc.name}{'_truth' if options.truth_sim else ''}.mc.json", outcome.summary
             )

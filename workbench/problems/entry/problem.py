@@ -290,7 +290,7 @@ class EntryProblem(PipelineProblem):
             inp.radar_times,
             ValidationSettings(
                 n_runs=options.n_runs,
-                seed=options.first_seed,
+                seed=options.entropy,
                 scheduler=options.scheduler,
                 workers=options.workers,
                 **inp.validation_kwargs(),
@@ -337,7 +337,7 @@ class EntryProblem(PipelineProblem):
         res = run_truth_monte_carlo(
             sc,
             n_runs=options.n_runs,
-            seed=options.first_seed,
+            seed=options.entropy,
             members=members,
             refine_rounds=options.refine_rounds,
             scheduler=options.scheduler,

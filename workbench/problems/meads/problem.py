@@ -217,7 +217,7 @@ class MeadsProblem(PipelineProblem):
             ts = run_trade_study(
                 sh,
                 runs,
-                options.first_seed,
+                options.entropy,
                 workers=options.workers,
                 scheduler=options.scheduler,
                 progress=lambda done, _tasks: bar.set(min(done * CHUNK, runs)),
@@ -236,7 +236,7 @@ class MeadsProblem(PipelineProblem):
         self, settings: MeadsSettings, out_dir: Path, options: McOptions, progress: Progress
     ) -> McOutcome:
         """``monte_carlo`` with ``truth_sim``: :func:`.truth_mc.run_full_monte_carlo` with
-        ``options.n_runs`` members seeded from ``options.first_seed``."""
+        ``options.n_runs`` members seeded from ``options.entropy`` (``first_seed`` or the named stream's)."""
         from workbench.problems.meads.recording_mc import record_truth_mc
         from workbench.problems.meads.truth_mc import run_full_monte_carlo
 
@@ -247,7 +247,7 @@ class MeadsProblem(PipelineProblem):
         where = options.scheduler or f"{options.workers} local worker(s)"
         progress(f"Monte Carlo against the truth simulator, full error model: {n} members ({where}) ...")
         res = run_full_monte_carlo(
-            settings, n_runs=n, seed=options.first_seed, workers=options.workers, scheduler=options.scheduler
+            settings, n_runs=n, seed=options.entropy, workers=options.workers, scheduler=options.scheduler
         )
         summary = {**res.summary, "wall_time_s": time.perf_counter() - t0}
         rrd = record_truth_mc(Path(out_dir) / f"{name}_truth_mc.rrd", f"{name} Monte Carlo vs truth", res, summary)

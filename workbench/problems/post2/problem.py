@@ -17,7 +17,14 @@ from workbench.core.bodies import G0
 from workbench.estimation.health import health_markdown
 from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario
-from workbench.problems.base import ExportTable, McOutcome, RunOptions, Synthesized, require_synthetic
+from workbench.problems.base import (
+    SEED_ENTROPY,
+    ExportTable,
+    McOutcome,
+    RunOptions,
+    Synthesized,
+    require_synthetic,
+)
 from workbench.problems.post2 import build, huygens, rocket_results
 from workbench.problems.post2.config import SCHEMA, Post2Settings
 from workbench.problems.post2.model import DESCENT_NOMINALS, OBSERVATIONS, STATES, aero_angles
@@ -337,17 +344,20 @@ class Post2Problem:
 
     def monte_carlo(self, settings: Post2Settings, out_dir, options, progress) -> McOutcome:
         """The Monte Carlo against the truth simulator (:mod:`.truth_mc`; the only post2 study, with or
-        without ``options.truth_sim``): ``options.n_runs`` members of the validation seed stream with
-        entropy ``options.first_seed``, on ``options.workers`` processes or ``options.scheduler``;
+        without ``options.truth_sim``): ``options.n_runs`` members of the seed stream ``options.stream``
+        (entropy :data:`~workbench.problems.base.SEED_ENTROPY`), or of the validation stream with entropy
+        ``options.first_seed`` when no stream is named, on ``options.workers`` processes or ``options.scheduler``;
         ``options.members`` the initial-state selection's members; writes ``<out>/<name>_truth_mc.rrd``
         (:func:`.recording_mc.record_truth_mc`).  A scenario without ``[synthetic]`` is a ScenarioError."""
         require_synthetic(settings.run)
         t0 = time.perf_counter()
         n = int(options.n_runs)
         where = options.scheduler or f"{options.workers} local worker(s)"
-        progress(f"Monte Carlo against the truth simulator: {n} members of the validation stream ({where}) ...")
+        stream = options.stream or "validation"
+        progress(f"Monte Carlo against the truth simulator: {n} members of the {stream} stream ({where}) ...")
         res = run_truth_monte_carlo(
-            self, settings, n_runs=n, entropy=options.first_seed, workers=options.workers,
+            self, settings, n_runs=n, workers=options.workers, stream=stream,
+            entropy=SEED_ENTROPY if options.stream else options.first_seed,
             scheduler=options.scheduler, members=options.members,
         )  # fmt: skip
         summary = {**res.summary, "wall_time_s": time.perf_counter() - t0}

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from workbench.io.telemetry import TelemetryError
-from workbench.problems.base import RunOptions
+from workbench.problems.base import SEED_STREAMS, RunOptions
 from workbench.problems.members import run_members
 from workbench.problems.post2 import huygens
 from workbench.problems.post2.config import Post2Settings
@@ -57,7 +57,7 @@ __all__ = [
 
 #: Seed streams: ``SeedSequence(entropy, spawn_key=(STREAMS[stream], member))``; ``tests`` is the
 #: slow tests' own (neither tuned on nor reported).
-STREAMS = {"tuning": 1, "validation": 2, "tests": 4}
+STREAMS = SEED_STREAMS
 _TRAJ = ("position", "velocity")
 
 
