@@ -147,8 +147,13 @@ def main(argv: list[str] | None = None) -> int:
             problems[sc] = {}
             for name, extra in STREAMS.items():
                 r = run_mc(sc, a.seeds, extra, Path(tmp) / f"{sc}_{extra[-1]}")
-                problems[sc][name] = {"members": r["summary"].get("n_runs", a.seeds), "wall_s": r["wall_s"],
-                                      "seeds": r["summary"].get("seeds"), "metrics": metrics(sc, r["summary"])}  # fmt: skip
+                s = r["summary"]
+                problems[sc][name] = {
+                    "members": s.get("n_runs", a.seeds),
+                    "wall_s": r["wall_s"],
+                    "seeds": s.get("seeds"),
+                    "metrics": metrics(sc, s),
+                }
                 print(f"[{sc}] {name}: {r['wall_s']:.0f} s", flush=True)
     p2 = post2_rows()
     if p2:
