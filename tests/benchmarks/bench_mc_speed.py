@@ -359,6 +359,11 @@ def markdown_of(results_dir: Path = RESULTS) -> str:
     return f"{markdown(doc['results'])}\n\nReproduce: `{doc['command']}` ({doc['utc'][:10]}).\n"
 
 
+def results_section_of(results_dir: Path = RESULTS) -> str:
+    """The "Monte Carlo speed" section of docs/RESULTS.md (the same table as the README's)."""
+    return "## Monte Carlo speed (issue #30)\n\n" + markdown_of(results_dir)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--parts", default="mc,scale")

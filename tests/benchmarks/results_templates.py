@@ -4,7 +4,8 @@ Placeholders ``{{source:key.path|format}}`` name a JSON file under ``docs/result
 Edit the words here, never the numbers in README.md or docs/RESULTS.md.
 """
 
-import bench_repro  # noqa: E402 (beside this file; make_results puts the folder on sys.path)
+import bench_mc_speed  # noqa: E402 (beside this file; make_results puts the folder on sys.path)
+import bench_repro  # noqa: E402
 import bench_speed  # noqa: E402
 
 README_BLOCKS: dict = {}
@@ -586,5 +587,9 @@ Why, traced in the code:
   bound across machines is the table above. A user's telemetry does not pass through a truth simulator.
 """
 
+# issue #30: each problem's truth Monte Carlo against the baseline commit, and the dispersion at 1e6 members on
+# every executor, one table built by bench_mc_speed's own renderer
+README_BLOCKS["mc_speed"] = bench_mc_speed.markdown_of
+
 #: sections appended to docs/RESULTS.md after RESULTS_MD (filled like it; a callable gets the results folder)
-RESULTS_MD_SECTIONS: tuple = (bench_repro.markdown_of, _REPRO_WHY)
+RESULTS_MD_SECTIONS: tuple = (bench_repro.markdown_of, _REPRO_WHY, bench_mc_speed.results_section_of)

@@ -58,6 +58,7 @@ _BOUND = re.compile(r"^plus_(\d+(?:\.\d+)?)sigma$")
 _A_COLOUR = (31, 119, 180, 255)
 _B_COLOUR = (255, 127, 14, 255)
 _AXIS_COLOURS = ((214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255))  # x red, y green, z blue (the 3D axes)
+_NORM_COLOUR = (20, 20, 20, 255)
 
 
 class ComparisonError(ValueError):
@@ -529,8 +530,11 @@ def write_comparison(cmp: Comparison, out: str | os.PathLike[str], *, max_views:
     views = []
     for d in shown:
         root = layout.COMPARE_POSITION if d is cmp.position else layout.compare_diff_path(d.root)
-        name = "Δ position A − B [m], ±3σ combined" if d is cmp.position else f"Δ {d.root} A − B"
-        views.append(rrb.TimeSeriesView(name=name, origin=root))
+        if d is cmp.position:  # the colours named in the title: a legend would cover the curves
+            name = "Δ position A − B [m]: x red, y green, z blue, |Δ| black; ±3σ combined grey"
+            views.append(rrb.TimeSeriesView(name=name, origin=root, plot_legend=rrb.PlotLegend(visible=False)))
+        else:
+            views.append(rrb.TimeSeriesView(name=f"Δ {d.root} A − B", origin=root))
     for d in shown:
         if d is cmp.position:
             continue
@@ -575,7 +579,13 @@ def write_comparison(cmp: Comparison, out: str | os.PathLike[str], *, max_views:
                         sub, d.t, d.diff[:, j], d.sigma[:, j], names=f"Δ{comp} [m]", color=[_AXIS_COLOURS[j % 3]]
                     )
             if d is cmp.position:
-                rec.scalars(layout.COMPARE_POSITION_NORM, d.t, np.linalg.norm(d.diff, axis=1), names="|Δ position| [m]")
+                rec.scalars(
+                    layout.COMPARE_POSITION_NORM,
+                    d.t,
+                    np.linalg.norm(d.diff, axis=1),
+                    names="|Δ position| [m]",
+                    colors=[_NORM_COLOUR],
+                )
                 continue
             rec.series_with_bounds(root, d.t, d.diff, d.sigma, names=names)
             rec.scalars(
