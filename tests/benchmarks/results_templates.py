@@ -7,6 +7,7 @@ Edit the words here, never the numbers in README.md or docs/RESULTS.md.
 import bench_mc_speed  # noqa: E402 (beside this file; make_results puts the folder on sys.path)
 import bench_repro  # noqa: E402
 import bench_speed  # noqa: E402
+import bench_streams  # noqa: E402
 
 README_BLOCKS: dict = {}
 
@@ -592,4 +593,9 @@ Why, traced in the code:
 README_BLOCKS["mc_speed"] = bench_mc_speed.markdown_of
 
 #: sections appended to docs/RESULTS.md after RESULTS_MD (filled like it; a callable gets the results folder)
-RESULTS_MD_SECTIONS: tuple = (bench_repro.markdown_of, _REPRO_WHY, bench_mc_speed.results_section_of)
+RESULTS_MD_SECTIONS: tuple = (
+    bench_repro.markdown_of,
+    _REPRO_WHY,
+    bench_mc_speed.results_section_of,
+    bench_streams.markdown_of,
+)
