@@ -266,3 +266,70 @@ def test_measurement_h_and_h_jacobian_share_one_batched_call(tmp_path):
             ref = numeric_jacobian_batched(lambda X, q=q, p=phase: est.model.observe(X, q, p), x, est.layout, est.eps)
             np.testing.assert_array_equal(m.H(x), ref[1])
             np.testing.assert_array_equal(m.H(x.copy()), ref[1])  # another x: computed, not reused
+
+
+def _search_reference(a, tu, zu, base, stages, t0, h, hi):
+    """The exhaustive numpy search of huygens._metric: every candidate's total, np.argmin per stage."""
+    rows = np.arange(a.shape[0])[:, None]
+
+    def total(sh):
+        u = np.clip((tu[None, :] + sh[:, None] - t0) / h, 0.0, hi)
+        k = np.floor(u).astype(int)
+        f = u - k
+        return np.sum(np.abs(zu[None, :] - (a[rows, k] * (1.0 - f) + a[rows, k + 1] * f)), axis=1)
+
+    for offs in stages:
+        m = np.stack([total(base + d) for d in offs], axis=1)
+        base = base + offs[np.argmin(m, axis=1)]
+    return total(base), base
+
+
+@pytest.mark.parametrize("m", [7, 300, 813])
+def test_mc_metric_search_kernel_is_the_exhaustive_search(m):
+    """kernels.metric_search_kernel (pruned, middle-out) chooses the same shifts and gives the same
+    totals, to the bit, as the exhaustive numpy search: smooth pulses, noise, ties (a flat row), a
+    row with NaN (its first NaN candidate wins, as np.argmin's) and pruning switched off."""
+    from workbench.problems.post2 import kernels
+
+    rng = np.random.default_rng(m)
+    n_members, n_grid, t0, h = 24, 300, 5.0, 1.0
+    tg = t0 + h * np.arange(n_grid)
+    centre = rng.uniform(120.0, 180.0, (n_members, 1))
+    a = -80.0 * np.exp(-0.5 * ((tg[None, :] - centre) / rng.uniform(8.0, 20.0, (n_members, 1))) ** 2)
+    a[3] = 1.0  # flat: every candidate ties, the first wins
+    a[5, 140:150] = np.nan
+    tu = np.sort(rng.uniform(t0, t0 + 260.0, m))
+    zu = -80.0 * np.exp(-0.5 * ((tu - 150.0) / 12.0) ** 2) + rng.normal(scale=0.3, size=m)
+    base = rng.normal(scale=5.0, size=n_members)
+    stages = [np.arange(-half, half + 0.5 * step, step) for half, step in ((1.0, 0.1), (0.1, 0.01))]
+    hi = n_grid - 1.000001
+    ref_m, ref_s = _search_reference(a, tu, zu, base, stages, t0, h, hi)
+    order = np.argsort(-np.abs(zu), kind="stable")
+    for prune in (np.all(np.isfinite(a), axis=1), np.zeros(n_members, bool)):
+        metric, shift = np.empty(n_members), np.empty(n_members)
+        kernels.metric_search_kernel(a, tu, zu, base, *stages, t0, h, hi, order, prune, metric, shift)
+        np.testing.assert_array_equal(shift, ref_s)
+        np.testing.assert_array_equal(metric, ref_m)
+
+
+def test_axial_on_grid_is_the_step_by_step_loop(monkeypatch):
+    """TrajectoryModel.axial_on_grid (propagation and axial accelerometer in one compiled call) gives
+    the loop of propagate + observe to the bit, and the all-numpy loop to 1e-12, on the Huygens-like
+    selection's entry model (dispersed members, an uneven grid start) and on the drogue phase."""
+    from workbench.problems.post2 import huygens
+
+    cfg = Post2Settings.from_scenario(load_scenario(assets_dir() / "scenarios" / "post2_huygens.toml"))
+    model = huygens.entry_model(cfg)
+    mean = np.concatenate([cfg.state("position").value, cfg.state("velocity").value])
+    X = huygens.dispersed_members(mean, huygens.delivered_covariance(cfg), 6, seed=4)
+    times = [0.3 + 0.7 * k for k in range(25)]
+    for phase in _phases(model):
+        fast = model.axial_on_grid(X, times, phase, 0.5)
+        np.testing.assert_array_equal(fast, model.axial_on_grid_reference(X, times, phase, 0.5))
+        monkeypatch.setattr(model, "use_kernel", False)
+        _assert_close(fast, model.axial_on_grid(X, times, phase, 0.5))
+        monkeypatch.setattr(model, "use_kernel", True)
+    a = huygens.propagate_axial_acceleration(model, X, 0.0, 10, 1.0)
+    np.testing.assert_array_equal(
+        a, model.axial_on_grid_reference(X, [float(k) for k in range(11)], _phases(model)[0], 1.0)
+    )

@@ -132,15 +132,10 @@ def propagate_axial_acceleration(
     model: TrajectoryModel, X: np.ndarray, t0: float, n_steps: int, h: float
 ) -> np.ndarray:
     """Axial acceleration [m/s²] (n, n_steps + 1) of members X (n, 6) [m, m/s, inertial] on the grid
-    t0 + h k [s] (RK4 of step h, the entry phase: no events)."""
-    phase = model.initial_phase()
-    out = np.empty((X.shape[0], n_steps + 1))
-    y = np.array(X, dtype=float)
-    out[:, 0] = model.observe(y, "acceleration_axial", phase)[:, 0]
-    for k in range(n_steps):
-        y = model.propagate(y, t0 + k * h, t0 + (k + 1) * h, phase, h)
-        out[:, k + 1] = model.observe(y, "acceleration_axial", phase)[:, 0]
-    return out
+    t0 + h k [s] (RK4 of step h, the entry phase: no events), by
+    :meth:`~workbench.problems.post2.model.TrajectoryModel.axial_on_grid`."""
+    times = [t0 + k * h for k in range(n_steps + 1)]  # the grid as the step-by-step loop has it
+    return model.axial_on_grid(np.asarray(X, dtype=float), times, model.initial_phase(), h)
 
 
 def _crossing(t: np.ndarray, a: np.ndarray, level: float) -> np.ndarray:
@@ -180,12 +175,7 @@ def _metric(a, t0, h, tz, z, level, end, use_kernel: bool):
     tu, zu = np.ascontiguousarray(tu, dtype=float), np.ascontiguousarray(zu, dtype=float)
     hi = a.shape[1] - 1.000001
 
-    def total(sh):
-        if use_kernel:  # compiled, same numbers (tests/problems/post2/test_post2_kernels.py)
-            out = np.empty(a.shape[0])
-            ac = np.ascontiguousarray(a, dtype=float)
-            kernels.metric_total_kernel(ac, tu, zu, np.ascontiguousarray(sh, dtype=float), t0, h, hi, out)
-            return out
+    def total(sh):  # the numpy reference of the kernels' totals
         u = np.clip((tu[None, :] + sh[:, None] - t0) / h, 0.0, hi)
         k = np.floor(u).astype(int)
         f = u - k
@@ -196,11 +186,18 @@ def _metric(a, t0, h, tz, z, level, end, use_kernel: bool):
     shift = np.where(np.isfinite(shift), shift, np.nan)
     ok = np.isfinite(shift)
     base = np.where(ok, shift, 0.0)
-    for half, step in ((1.0, 0.1), (0.1, 0.01)):
-        offs = np.arange(-half, half + 0.5 * step, step)
-        m = np.stack([total(base + d) for d in offs], axis=1)
-        base = base + offs[np.argmin(m, axis=1)]
-    metric = total(base)
+    stages = [np.arange(-half, half + 0.5 * step, step) for half, step in ((1.0, 0.1), (0.1, 0.01))]
+    if use_kernel:  # the same search in one compiled pass (tests/problems/post2/test_post2_kernels.py)
+        ac = np.ascontiguousarray(a, dtype=float)
+        order = np.argsort(-np.abs(zu), kind="stable")  # large residuals first: misfits stop early
+        prune = np.all(np.isfinite(ac), axis=1) & bool(np.all(np.isfinite(zu)))
+        start, metric, base = np.ascontiguousarray(base, dtype=float), np.empty(a.shape[0]), np.empty(a.shape[0])
+        kernels.metric_search_kernel(ac, tu, zu, start, *stages, t0, h, hi, order, prune, metric, base)
+    else:
+        for offs in stages:
+            m = np.stack([total(base + d) for d in offs], axis=1)
+            base = base + offs[np.argmin(m, axis=1)]
+        metric = total(base)
     return np.where(ok, metric, np.inf), np.where(ok, base, np.nan)
 
 

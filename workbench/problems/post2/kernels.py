@@ -24,6 +24,11 @@ Layout of the arguments (built by ``TrajectoryModel._fast_plan``):
   ``g_alpha`` and coefficients ``tab`` (n_mach, n_kn, n_alpha, 3) [CA, CN, Cm]; the parachute
   table ``chute_mach``, ``chute_cd`` of the open canopy (drogue or main);
 * outputs ``dx`` (b, n_x) (only if ``want_dx``), ``F`` (b, 3) inertial [N], ``M`` (b, 3) body [N m].
+
+The Huygens-like Monte Carlo selection has its own: the members' propagation with the axial
+accelerometer on the grid (:func:`propagate_axial_kernel`) and the alignment search of its metric
+(:func:`metric_search_kernel`); references ``TrajectoryModel.axial_on_grid_reference`` and the numpy
+branch of ``huygens._metric``.
 """
 
 from __future__ import annotations
@@ -42,6 +47,8 @@ __all__ = [
     "interp_index",
     "interp_at",
     "axial_kernel",
+    "propagate_axial_kernel",
+    "metric_search_kernel",
 ]
 
 #: parameter slots of the kernel (name, size 1 each)
@@ -527,6 +534,71 @@ def propagate_kernel(
     return y
 
 
+@njit(cache=True)
+def propagate_axial_kernel(
+    X0, nsub, dts, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
+    chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, mass, cos_tilt, bias, out,
+):  # fmt: skip
+    """3-DOF rows X0 (b, n_x) (no quaternion) through the grid steps k = 0 … n − 1 (``nsub[k]`` RK4 sub-steps of
+    ``dts[k]`` [s] each, :func:`propagate_kernel`'s arithmetic) with the axial accelerometer
+    (:func:`axial_kernel`, its ``mass``, ``cos_tilt``, ``bias`` (b,)) at every grid node into
+    ``out`` (b, n + 1) [m/s²]: the model's step-by-step ``propagate`` and ``observe`` in one call,
+    the force at a node being the first RK4 stage's (the same evaluation of the same state)."""
+    b, nx = X0.shape
+    y = X0.copy()
+    k1, k2, k3, k4 = np.empty((b, nx)), np.empty((b, nx)), np.empty((b, nx)), np.empty((b, nx))
+    tmp = np.empty((b, nx))
+    F, M = np.empty((b, 3)), np.empty((b, 3))
+    hc, rho, a_snd, kn, ones = np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b)
+    col = np.empty(b)
+    want_dx = b >= 0  # run-time bool (see propagate_kernel)
+    n = dts.size
+    for k in range(n + 1):
+        # the force at the node: full_derivative of y (the next step's first stage, or the last node)
+        full_derivative(
+            y, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
+            chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, want_dx, k1, F, M, hc, rho, a_snd, kn,
+            ones,
+        )  # fmt: skip
+        axial_kernel(y, F, PB, pmode, pidx, pnom, ci, cf, mass, cos_tilt, bias, col)
+        for r in range(b):
+            out[r, k] = col[r]
+        if k == n:
+            break
+        dt = dts[k]
+        half = 0.5 * dt
+        sixth = dt / 6.0
+        for sub in range(nsub[k]):
+            for stage in range(4):
+                if stage == 0:
+                    if sub == 0:
+                        continue  # k1 of the node's state: evaluated above
+                    src, dst = y, k1
+                elif stage == 1:
+                    for r in range(b):
+                        for c in range(nx):
+                            tmp[r, c] = y[r, c] + half * k1[r, c]
+                    src, dst = tmp, k2
+                elif stage == 2:
+                    for r in range(b):
+                        for c in range(nx):
+                            tmp[r, c] = y[r, c] + half * k2[r, c]
+                    src, dst = tmp, k3
+                else:
+                    for r in range(b):
+                        for c in range(nx):
+                            tmp[r, c] = y[r, c] + dt * k3[r, c]
+                    src, dst = tmp, k4
+                full_derivative(
+                    src, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
+                    chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, want_dx, dst, F, M, hc, rho,
+                    a_snd, kn, ones,
+                )  # fmt: skip
+            for r in range(b):
+                for c in range(nx):
+                    y[r, c] = y[r, c] + sixth * (k1[r, c] + 2.0 * k2[r, c] + 2.0 * k3[r, c] + k4[r, c])
+
+
 # ---------------------------------------------------------------------------------------------
 # Huygens-like Monte Carlo alignment metric (huygens._metric's ``total``)
 # ---------------------------------------------------------------------------------------------
@@ -614,3 +686,72 @@ def metric_total_kernel(a, tu, zu, sh, t0, h, hi, out):
             f = u - k
             row[j] = abs(zu[j] - (a[r, k] * (1.0 - f) + a[r, k + 1] * f))
         out[r] = _pairwise_sum(row, start, m)
+
+
+@njit(cache=True)
+def _metric_row_pruned(a, r, tu, zu, sh, t0, h, hi, order, row, bound):
+    """Row r's terms |zu_j − a_r(tu_j + sh)| into ``row`` (m,) and their pairwise sum (as
+    :func:`metric_total_kernel`), or +inf as soon as a running sum of the terms taken in ``order``
+    exceeds ``bound`` (the total then exceeds it as well: the terms are ≥ 0; ``bound`` carries the
+    caller's margin for rounding).  NaN terms never stop the sum."""
+    m = tu.size
+    part = 0.0
+    for q in range(m):
+        j = order[q]
+        u = (tu[j] + sh - t0) / h
+        if u < 0.0:
+            u = 0.0
+        elif u > hi:
+            u = hi
+        k = int(math.floor(u))
+        f = u - k
+        v = abs(zu[j] - (a[r, k] * (1.0 - f) + a[r, k + 1] * f))
+        row[j] = v
+        part += v
+        if (q & 15) == 15 and part > bound:
+            return math.inf
+    return _pairwise_sum(row, m - m, m)
+
+
+@njit(cache=True)
+def metric_search_kernel(a, tu, zu, base, offs_coarse, offs_fine, t0, h, hi, order, prune, metric, shift):
+    """The alignment search of ``huygens._metric`` per member r: ``shift[r]`` = base_r moved by the
+    offset of ``offs_coarse`` with the smallest total Σ_j |zu_j − a_r(tu_j + s)| (the first of equal
+    ones, as ``np.argmin``; the first NaN total wins, as there), then likewise by one of ``offs_fine``
+    (the candidates are tried from the middle outwards, the order not changing the one chosen);
+    ``metric[r]`` its total (the pairwise sum of :func:`metric_total_kernel`, to the bit).  A
+    candidate whose running sum (terms in ``order``, (m,) a permutation of the samples) exceeds the
+    best total so far by 1e-9 relative cannot be the smallest and is dropped before its end (only
+    where ``prune[r]``: a row and samples without NaN/inf, whose totals cannot turn NaN later); the
+    totals that are kept are the full ones, so shift and metric equal the exhaustive search's."""
+    m = tu.size
+    row = np.empty(m)
+    for r in range(a.shape[0]):
+        b = base[r]
+        for stage in range(2):
+            offs = offs_coarse if stage == 0 else offs_fine
+            nf = offs.size
+            best = math.inf
+            bi = -1
+            nan_at = nf
+            for q in range(nf):  # from the middle outwards: the smallest is usually near the start
+                c = nf // 2
+                i = c + (q + 1) // 2 if q % 2 == 1 else c - q // 2
+                if i < 0 or i >= nf:  # an even count: the last one left over
+                    i = nf - 1 if i < 0 else 0
+                bound = best * (1.0 + 1e-9) if prune[r] and best < math.inf else math.inf
+                v = _metric_row_pruned(a, r, tu, zu, b + offs[i], t0, h, hi, order, row, bound)
+                if math.isnan(v):  # np.argmin: the first NaN
+                    if i < nan_at:
+                        nan_at = i
+                elif bi < 0 or v < best or (v == best and i < bi):
+                    best = v
+                    bi = i
+            if nan_at < nf:
+                bi = nan_at
+                best = math.nan
+            elif bi < 0:
+                bi = 0
+            b = b + offs[bi]
+        shift[r] = b
+        metric[r] = best  # the chosen candidate's full total: the total at the final shift

@@ -1055,6 +1055,48 @@ class TrajectoryModel:
                 y[..., sq] = quat_normalize(y[..., sq])
         return y
 
+    def axial_on_grid(self, x: np.ndarray, times, phase: dict, max_step: float) -> np.ndarray:
+        """3-DOF axial accelerometer [m/s²] (b, n + 1) of the rows x (b, n_x) carried over the grid
+        ``times`` (n + 1,) [s] (no events): :meth:`propagate` from node k to k + 1 and
+        ``observe(·, "acceleration_axial")`` at every node, the same numbers as that loop (its
+        reference, :meth:`axial_on_grid_reference`) in one compiled call when the kernel applies."""
+        plan = self._plan() if self.use_kernel and self.dof == 3 else None
+        if plan is None or plan["atm_kind"] is None:
+            return self.axial_on_grid_reference(x, times, phase, max_step)
+        tl = [float(t) for t in times]
+        nsub = np.empty(len(tl) - 1, np.int64)
+        dts = np.empty(len(tl) - 1)
+        for k in range(len(tl) - 1):  # propagate's sub-steps, step by step
+            nsub[k] = max(1, int(math.ceil((tl[k + 1] - tl[k]) / max_step - 1e-9)))
+            dts[k] = (tl[k + 1] - tl[k]) / nsub[k]
+        X = np.array(np.asarray(x, dtype=float).reshape(-1, x.shape[-1]), dtype=float, order="C")
+        ci, cf, tm, tc = self._phase_consts(plan, phase)
+        gm_, gk, ga, tab = plan["grids"]
+        if phase["parachute"] and phase.get("chute") == "drogue":  # as _axial_kernel (parameters constant)
+            cos_tilt = np.ascontiguousarray(np.cos(self.param(X, "tilt", 0.0)[..., 0]), dtype=float)
+        else:
+            cos_tilt = np.ones(X.shape[0])
+        bias = np.ascontiguousarray(self.param(X, "accel_bias", np.zeros(3))[..., 0], dtype=float)
+        out = np.empty((X.shape[0], len(tl)))
+        kernels.propagate_axial_kernel(
+            X, nsub, dts, self._bounded(plan, X), plan["pmode"], plan["pidx"], plan["pnom"], ci, cf,
+            plan["inertia"], plan["inertia_inv"], gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"],
+            *plan["atm_tables"], plan["waves"], float(phase["mass"]), cos_tilt, bias, out,
+        )  # fmt: skip
+        return out
+
+    def axial_on_grid_reference(self, x: np.ndarray, times, phase: dict, max_step: float) -> np.ndarray:
+        """The loop of :meth:`axial_on_grid` (same arguments, units and shapes): one :meth:`propagate`
+        and one :meth:`observe` per grid step."""
+        tl = [float(t) for t in times]
+        y = np.array(x, dtype=float)
+        out = np.empty((y.shape[0], len(tl)))
+        out[:, 0] = self.observe(y, "acceleration_axial", phase)[:, 0]
+        for k in range(len(tl) - 1):
+            y = self.propagate(y, tl[k], tl[k + 1], phase, max_step)
+            out[:, k + 1] = self.observe(y, "acceleration_axial", phase)[:, 0]
+        return out
+
     # ------------------------------------------------------------------ observations
     def observe(self, x: np.ndarray, quantity: str, phase: dict) -> np.ndarray:
         """Model value of observation ``quantity`` (:data:`OBSERVATIONS`) at x (..., n_x), SI, (..., size)."""
