@@ -21,9 +21,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import median_filter
 
 from workbench.core.rotation import attitude_error, dcm_to_quat, quat_from_rotvec
+from workbench.core.smoothing import window_median_at
 from workbench.estimation.consistency import chi2_ppf
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
 from workbench.estimation.health import WARNING, covariance_check, health_report, interval_check, nis_check, notes_check
@@ -250,17 +250,20 @@ def read_observations(cfg: Post2Settings, telemetry) -> ObservationData:
             z = z_raw / norm[:, None]
             if spec.median_window > 1:
                 raise ScenarioError(cfg.run.path, f"observations.{spec.name}.median_window", "not for a quaternion")
-        if spec.median_window > 1:
-            z = median_filter(z_raw, size=(spec.median_window, 1), mode="nearest")
         if spec.sigma is not None:
             R = np.broadcast_to(np.diag(spec.sigma**2), (t.size, d.size, d.size)).copy()
         else:
             R = _weights_R(cfg.run.path, spec, t, Path(telemetry[spec.name + "_weights"]), path.name)
+        rows = np.arange(t.size)
         if spec.median_window > 1:  # only medians over a whole window (see _complete_windows)
-            keep = _complete_windows(cfg.run.path, spec, path, t.size)
-            t, z, z_raw, R = (a[keep] for a in (t, z, z_raw, R))
+            rows = rows[_complete_windows(cfg.run.path, spec, path, t.size)]
         if spec.decimate > 1:  # every n-th (pre-smoothed) sample
-            t, z, z_raw, R = (a[:: spec.decimate] for a in (t, z, z_raw, R))
+            rows = rows[:: spec.decimate]
+        if spec.median_window > 1:  # the sliding median, at the samples kept
+            z = window_median_at(z_raw, spec.median_window, rows)
+        else:
+            z = z[rows]
+        t, z_raw, R = (a[rows] for a in (t, z_raw, R))
         out[spec.name] = Channel(spec, t, z, z_raw, R)
         notes += [*tel.notes, *(f"{path}: gap {g.start_s:g}–{g.end_s:g} s (row {g.row})" for g in tel.gaps)]
         if spec.quantity == "gravity_magnitude" and z.size:
