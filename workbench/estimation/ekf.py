@@ -77,6 +77,7 @@ class ErrorStateLayout:
     quat_blocks: tuple[tuple[int, int], ...] = ()
     _add_runs: tuple[tuple[slice, slice], ...] = field(init=False, repr=False, compare=False)
     _eye: np.ndarray = field(init=False, repr=False, compare=False)
+    _plain: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         blocks = tuple((int(a), int(b)) for a, b in self.quat_blocks)
@@ -106,6 +107,7 @@ class ErrorStateLayout:
         object.__setattr__(self, "n_x", n_x)
         object.__setattr__(self, "quat_blocks", blocks)
         object.__setattr__(self, "_add_runs", tuple(runs))
+        object.__setattr__(self, "_plain", not blocks)  # all additive: ⊞ is +, ⊟ is −
         eye = np.eye(n_e)
         eye.flags.writeable = False
         object.__setattr__(self, "_eye", eye)
@@ -127,6 +129,8 @@ class ErrorStateLayout:
             raise ValueError(
                 f"boxplus: expected x (..., {self.n_x}) and dx (..., {self.n_e}), got {x.shape} and {dx.shape}"
             )
+        if self._plain:  # the additive entries' x + dx, broadcast (a new array)
+            return x + dx
         if x.ndim == 1 and dx.ndim == 1:
             out = x.copy()
             for xs, es in self._add_runs:
@@ -152,6 +156,8 @@ class ErrorStateLayout:
         x_ref = np.asarray(x_ref, dtype=float)
         if x.shape[-1] != self.n_x or x_ref.shape[-1] != self.n_x:
             raise ValueError(f"boxminus: expected (..., {self.n_x}) arrays, got {x.shape} and {x_ref.shape}")
+        if self._plain:
+            return x - x_ref
         if x.ndim == 1 and x_ref.ndim == 1:
             out = np.empty(self.n_e)
             for xs, es in self._add_runs:
@@ -319,7 +325,7 @@ def _eps_vector(eps: float | np.ndarray, n_e: int) -> np.ndarray:
     e = np.asarray(eps, dtype=float)
     if e.shape != (n_e,):
         e = np.broadcast_to(e, (n_e,))
-    if np.any(e <= 0.0):
+    if (e <= 0.0).any():
         raise ValueError("eps must be positive")
     return e
 

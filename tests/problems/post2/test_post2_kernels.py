@@ -333,3 +333,22 @@ def test_axial_on_grid_is_the_step_by_step_loop(monkeypatch):
     np.testing.assert_array_equal(
         a, model.axial_on_grid_reference(X, [float(k) for k in range(11)], _phases(model)[0], 1.0)
     )
+
+
+def test_interp_index_near_is_the_bisection():
+    """kernels.interp_index_near (a guess from even spacing, then neighbours) finds interp_index's node
+    on even, nearly even and uneven nodes, on the nodes, outside, NaN, and with no spacing given."""
+    from workbench.problems.post2 import kernels
+
+    rng = np.random.default_rng(8)
+    for xp in (
+        np.arange(0.0, 1.4e6 + 1.0, 2000.0),
+        np.cumsum(rng.uniform(1900.0, 2100.0, 300)),
+        np.cumsum(rng.uniform(0.1, 30.0, 200) ** 2),
+    ):
+        inv = (xp.size - 1) / (xp[-1] - xp[0])
+        x = np.concatenate([rng.uniform(xp[0] - 10.0, xp[-1] + 10.0, 3000), xp, [np.nan, -np.inf, np.inf]])
+        for v in x:
+            want = kernels.interp_index(v, xp)
+            assert kernels.interp_index_near(v, xp, inv) == want
+            assert kernels.interp_index_near(v, xp, 0.0) == want

@@ -45,6 +45,7 @@ __all__ = [
     "dynamics_kernel",
     "air_speed_kernel",
     "interp_index",
+    "interp_index_near",
     "interp_at",
     "axial_kernel",
     "propagate_axial_kernel",
@@ -174,6 +175,29 @@ def interp_index(x, xp):
 
 
 @njit(cache=True)
+def interp_index_near(x, xp, inv_step):
+    """:func:`interp_index` (the same index) found from the guess ``(x − xp[0]) · inv_step`` and a
+    few steps to the neighbouring nodes (a table of nearly even nodes), else by bisection."""
+    n = xp.size
+    if x < xp[0]:
+        return -1
+    if x > xp[n - 1]:
+        return n
+    g = (x - xp[0]) * inv_step
+    if not (g >= 0.0 and g < n):  # NaN, no spacing given, or off the table
+        return interp_index(x, xp)
+    j = int(g)
+    for _ in range(4):  # the answer: xp[j] <= x < xp[j + 1] (j = n − 1 at the last node)
+        if j + 1 < n and xp[j + 1] <= x:
+            j += 1
+        elif xp[j] > x:
+            j -= 1
+        else:
+            return j
+    return interp_index(x, xp)
+
+
+@njit(cache=True)
 def interp_at(j, x, xp, fp):
     """``np.interp(x, xp, fp)`` for a scalar x with its node index j (:func:`interp_index`): the
     branches and the arithmetic of numpy's (and numba's) ``arr_interp``, to the bit (NaN x: NaN)."""
@@ -262,6 +286,9 @@ def dynamics_kernel(
     gm, re2, S, mass = cf[1], cf[2], cf[4], cf[5]
     L, cmq = cf[6], cf[7]
     pv = np.empty(pnom.size)
+    l0, wl0 = 0, 0.0
+    if dof == 3 and has_aero:  # trimmed at zero angle of attack: the same node for every row
+        l0, wl0 = _locate(g_alpha, 0.0)
     for r in range(b):
         _params(r, X, PB, pmode, pidx, pnom, pv)
         px, py, pz = X[r, ip], X[r, ip + 1], X[r, ip + 2]
@@ -279,12 +306,14 @@ def dynamics_kernel(
             Vs = V if V > 1e-9 else 1e-9
             ca_m = pv[_CAM] * cf[8]
             kn_r = kn[r] if kn_matters else 1e-6
+            # log10 Kn once for the regime weight and the table (the same number where both use it)
+            lkn = math.log10(kn_r if kn_r > 1e-300 else 1e-300)
             if has_aero:
                 if regime:
                     m_fm = pv[_FM]
                     m_h = pv[_HYP]
                     m_s = pv[_SUP]
-                    w_fm = _smoothstep(math.log10(kn_r if kn_r > 1e-12 else 1e-12) + 2.0)
+                    w_fm = _smoothstep((lkn if kn_r > 1e-12 else math.log10(1e-12)) + 2.0)
                     w_h = _smoothstep((mach - 5.0) / 5.0)
                     ca_m = ca_m * (w_fm * m_fm + (1.0 - w_fm) * (w_h * m_h + (1.0 - w_h) * m_s))
                 else:
@@ -293,8 +322,8 @@ def dynamics_kernel(
             if dof == 3:
                 if has_aero:
                     i, wi = _locate(g_mach, mach)
-                    j, wj = _locate(g_lkn, math.log10(kn_r if kn_r > 1e-300 else 1e-300))
-                    l, wl = _locate(g_alpha, 0.0)
+                    j, wj = _locate(g_lkn, lkn)
+                    l, wl = l0, wl0
                     ca = 0.0
                     for di in range(2):
                         fi = wi if di == 1 else 1.0 - wi
@@ -327,7 +356,7 @@ def dynamics_kernel(
                 lat = math.sqrt(vb1 * vb1 + vb2 * vb2)
                 alpha_t = math.atan2(lat, vb0)
                 i, wi = _locate(g_mach, mach)
-                j, wj = _locate(g_lkn, math.log10(kn_r if kn_r > 1e-300 else 1e-300))
+                j, wj = _locate(g_lkn, lkn)
                 l, wl = _locate(g_alpha, alpha_t)
                 ca = 0.0
                 cn = 0.0
@@ -423,6 +452,9 @@ def atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, want_kn, L, rho, a_s
     """Density [kg/m³], speed of sound [m/s] and (if ``want_kn``) Knudsen number on length L [m] at
     altitudes ``hc`` (b,) [m] into ``rho``, ``a_snd``, ``kn`` (b,), same operations as the numpy
     classes (``kind``/``ac`` above; ``t_*`` the table's nodes, log ρ, log p, T)."""
+    inv_step = 0.0  # the table's nodes per metre if they were evenly spaced: the node search's first guess
+    if kind == 2 and t_h.size > 1 and t_h[t_h.size - 1] > t_h[0]:
+        inv_step = (t_h.size - 1) / (t_h[t_h.size - 1] - t_h[0])
     for r in range(hc.size):
         h = hc[r]
         if kind == 1:
@@ -435,7 +467,7 @@ def atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, want_kn, L, rho, a_s
             p = 0.699e3 * math.exp(-0.00009 * hm) * math.exp(-above / ac[1])
             rho[r] = p / (ac[2] * T)
         else:  # one node search for the three columns (np.interp's arithmetic, :func:`interp_at`)
-            j = interp_index(h, t_h)
+            j = interp_index_near(h, t_h, inv_step)
             T = interp_at(j, h, t_h, t_T)
             p = math.exp(interp_at(j, h, t_h, t_lp))
             rho[r] = math.exp(interp_at(j, h, t_h, t_lrho))

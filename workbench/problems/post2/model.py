@@ -663,7 +663,7 @@ class TrajectoryModel:
             "grids": tuple(np.array(g, dtype=float) for g in (a.mach, a.log10_kn, a.alpha, a._stack))
             if a is not None
             else (dummy1, dummy1, dummy1, dummy4),
-            "dummy": dummy1, "phases": {}, "scratch": {},
+            "dummy": dummy1, "phases": {}, "scratch": {}, "full_args": {}, "no_dx": np.empty((0, 0)),
         }  # fmt: skip
         self._plan_cache = plan
         return plan
@@ -689,6 +689,20 @@ class TrajectoryModel:
         tm, tc = (np.array(table.mach), np.array(table.cd)) if table is not None else (plan["dummy"], plan["dummy"])
         got = (ci, cf, tm, tc)
         plan["phases"][key] = got
+        return got
+
+    def _full_args(self, plan: dict, phase: dict) -> tuple:
+        """The arguments of :func:`~workbench.problems.post2.kernels.full_derivative` between the
+        bounded parameters and ``want_dx`` (plan and phase constants), one tuple per phase."""
+        key = (phase["mass"], phase["area"], bool(phase["parachute"]), phase.get("chute"))
+        got = plan["full_args"].get(key)
+        if got is None:
+            ci, cf, tm, tc = self._phase_consts(plan, phase)
+            gm_, gk, ga, tab = plan["grids"]
+            got = plan["full_args"][key] = (
+                plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, plan["inertia"], plan["inertia_inv"],
+                gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"], *plan["atm_tables"], plan["waves"],
+            )  # fmt: skip
         return got
 
     @staticmethod
@@ -725,6 +739,13 @@ class TrajectoryModel:
         if not X.flags.writeable:
             X = X.copy()
         b = X.shape[0]
+        if plan["atm_kind"] is not None:  # altitude, atmosphere and dynamics in one compiled call
+            PB = self._bounded(plan, X) if PB is None else PB
+            F = np.empty((b, 3))
+            M = np.empty((b, 3))
+            dx = np.empty_like(X) if want_dx else plan["no_dx"]
+            kernels.full_derivative(X, PB, *self._full_args(plan, phase), want_dx, dx, F, M, *self._scratch(plan, b))
+            return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
         ci, cf, tm, tc = self._phase_consts(plan, phase)
         env, veh = self.env, self.vehicle
         atm = env.atmosphere
@@ -735,14 +756,6 @@ class TrajectoryModel:
         M = np.empty((b, 3))
         dx = np.empty_like(X) if want_dx else np.empty((0, 0))
         gm_, gk, ga, tab = plan["grids"]
-        if plan["atm_kind"] is not None:  # altitude, atmosphere and dynamics in one compiled call
-            kernels.full_derivative(
-                X, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, plan["inertia"], plan["inertia_inv"],
-                gm_, gk, ga, tab, tm, tc, plan["atm_kind"], plan["ac"], *plan["atm_tables"], plan["waves"],
-                want_dx, dx, F, M,
-                *self._scratch(plan, b),
-            )  # fmt: skip
-            return (dx.reshape(x.shape) if want_dx else None), F.reshape(*shape, 3), M.reshape(*shape, 3)
         if atm is not None:
             hc = np.maximum(self.altitude(X), 0.0)
             want_kn = veh.aero is not None and self._kn_matters
