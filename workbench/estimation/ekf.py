@@ -78,6 +78,7 @@ class ErrorStateLayout:
     _add_runs: tuple[tuple[slice, slice], ...] = field(init=False, repr=False, compare=False)
     _eye: np.ndarray = field(init=False, repr=False, compare=False)
     _plain: bool = field(init=False, repr=False, compare=False)
+    _steps: dict = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         blocks = tuple((int(a), int(b)) for a, b in self.quat_blocks)
@@ -108,6 +109,7 @@ class ErrorStateLayout:
         object.__setattr__(self, "quat_blocks", blocks)
         object.__setattr__(self, "_add_runs", tuple(runs))
         object.__setattr__(self, "_plain", not blocks)  # all additive: ⊞ is +, ⊟ is −
+        object.__setattr__(self, "_steps", {})  # numeric_jacobian_batched's [diag(ε); −diag(ε)] per ε
         eye = np.eye(n_e)
         eye.flags.writeable = False
         object.__setattr__(self, "_eye", eye)
@@ -413,10 +415,17 @@ def numeric_jacobian_batched(
     x = np.asarray(x, dtype=float)
     n_e = layout.n_e
     e = _eps_vector(eps, n_e)
-    D = np.diag(e)
+    key = e.tobytes()
+    steps = layout._steps.get(key)
+    if steps is None:  # built once per ε (a filter passes the same one at every step)
+        if len(layout._steps) > 16:
+            layout._steps.clear()
+        D = np.diag(e)
+        steps = layout._steps[key] = np.concatenate([D, -D], axis=0)
+        steps.flags.writeable = False
     X = np.empty((1 + 2 * n_e, x.shape[-1]))
     X[0] = x
-    X[1:] = layout.boxplus(x, np.concatenate([D, -D], axis=0))  # row by row: x ⊞ ε e_j, then x ⊞ −ε e_j
+    X[1:] = layout.boxplus(x, steps)  # row by row: x ⊞ ε e_j, then x ⊞ −ε e_j
     Y = np.asarray(f(X), dtype=float)
     y0 = Y[0]
     if out_layout is None:

@@ -426,32 +426,35 @@ class Estimator:
         ``h`` [m]: the vehicle's altitude at the step's start, where a Markov state's stationary 1σ
         follows its ``sigma_profile`` (Q = σ(h)² (1 − Φ²): the variance relaxes towards σ(h)² with
         τ/2, the time-varying Gauss-Markov process; without h the state's ``sigma``)."""
-        Q = np.zeros((self.smap.n_e, self.smap.n_e))
+        qd = np.zeros(self.smap.n_e)  # Q is diagonal: its diagonal, block by block
         phis = {}
         for name, i, s, scheduled, var0 in self._q_plan():
             if scheduled and t is not None:  # ---- schedules: late system noise
-                Q[i, i] += sched.extra_psd(self.cfg.schedules, name, i.size, t, self.phase["fired"]) * dt
+                qd[i] += sched.extra_psd(self.cfg.schedules, name, i.stop - i.start, t, self.phase["fired"]) * dt
             if s.process == "random_walk":
-                Q[i, i] += s.psd * dt
+                qd[i] += s.psd * dt
             elif s.process == "markov":
                 phi = math.exp(-dt / s.tau)
                 var = var0
                 if s.sigma_profile is not None and h is not None:
-                    var = np.full(i.size, np.interp(h, *s.sigma_profile) ** 2)
-                Q[i, i] = var * (1.0 - phi * phi)
+                    var = np.full(i.stop - i.start, np.interp(h, *s.sigma_profile) ** 2)
+                qd[i] = var * (1.0 - phi * phi)
                 phis[name] = phi
-        return Q, phis
+        return np.diag(qd), phis
 
     def _q_plan(self) -> list[tuple]:
-        """Per state block of :meth:`q_matrix` (built once): (name, error indices, its StateSpec,
-        whether a ``[schedules]`` window targets it, the Markov stationary variance without a profile)."""
+        """Per state block of :meth:`q_matrix` that can add noise (built once): (name, error slice,
+        its StateSpec, whether a ``[schedules]`` window targets it, the Markov stationary variance
+        without a profile); a constant state no window targets adds none and is left out."""
         if self._q_cache is None:
             targets = {sc.target_name for sc in self.cfg.schedules if sc.target == "state"}
             plan = []
             for name, b in self.smap.blocks.items():
                 s = self.cfg.state(name)
+                if s.process not in ("random_walk", "markov") and name not in targets:
+                    continue
                 var0 = np.where(s.psd > 0, 0.5 * s.psd * s.tau, s.sigma**2) if s.process == "markov" else None
-                plan.append((name, np.arange(b.se.start, b.se.stop), s, name in targets, var0))
+                plan.append((name, slice(b.se.start, b.se.stop), s, name in targets, var0))
             self._q_cache = plan
         return self._q_cache
 
