@@ -460,14 +460,18 @@ class Recorder:
         names: str | Sequence[str] | None = None,
         step: Any = None,
         color: Any = None,
+        truth_style: tuple[Any, float] | None = None,
     ) -> None:
         """Estimate with ±nσ bounds (and truth) under ``root``, for one TimeSeriesView at ``root``.
 
         Logs ``root/value``, ``root/plus_{nsigma:g}sigma`` (value + nσ), ``root/minus_{nsigma:g}sigma``
         (value − nσ) and, if given, ``root/truth``. ``value``, ``sigma`` (1σ, same units, ≥ 0) and
         ``truth`` are (n,) or (n, k). Bounds are thin grey lines; truth is a thinner line in a lighter
-        tint of the estimate colour (Rerun 0.41 has no dashed style). ``names`` default to the last
-        part of ``root`` (``name[i]`` for k > 1); ``color`` is one colour or one per series.
+        tint of the estimate colour (Rerun 0.41 has no dashed style), or ``truth_style`` (colour, width
+        [UI points]) for all of them, e.g. a wide translucent band that stays visible under other
+        estimates drawn in the same view. ``names`` default to the last part of ``root``
+        (``name[i]`` for k > 1); ``color`` is one colour or one per series. A NaN value or σ is a gap
+        in the line and its bounds (Rerun breaks a line at NaN), never a zero.
         """
         v = np.asarray(value, dtype=np.float64)
         s = np.broadcast_to(np.asarray(sigma, dtype=np.float64), v.shape)
@@ -512,16 +516,20 @@ class Recorder:
             tr = np.asarray(truth, dtype=np.float64)
             if tr.shape != v.shape:
                 raise ValueError(f"series_with_bounds: truth shape {tr.shape} != value shape {v.shape}")
-            tint = cols.astype(np.float64)
-            tint[:, :3] = 0.45 * tint[:, :3] + 0.55 * 255.0
+            if truth_style is None:
+                tint = cols.astype(np.float64)
+                tint[:, :3] = 0.45 * tint[:, :3] + 0.55 * 255.0
+                truth_cols, truth_width = tint.astype(np.uint8), 1.0
+            else:
+                truth_cols, truth_width = [truth_style[0]] * k, float(truth_style[1])
             self.scalars(
                 f"{root}/{layout.TRUTH_SERIES}",
                 t,
                 tr,
                 step=step,
                 names=[f"{lab} truth" for lab in labels],
-                colors=tint.astype(np.uint8),
-                widths=1.0,
+                colors=truth_cols,
+                widths=truth_width,
             )
 
     def events(self, entries: Sequence[tuple[float, str, str]], entity: str = layout.EVENTS) -> None:
