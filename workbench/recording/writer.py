@@ -40,7 +40,15 @@ from workbench.estimation.health import health_markdown
 from workbench.io.results import OutputError
 from workbench.recording import layout
 
-__all__ = ["to_ns", "open_recording", "remove_stale_partials", "Recorder", "covariance_ellipsoids"]
+__all__ = [
+    "to_ns",
+    "open_recording",
+    "remove_stale_partials",
+    "Recorder",
+    "covariance_ellipsoids",
+    "PALETTE",
+    "PALETTE_NAMES",
+]
 
 _GREY = (150, 150, 150, 255)
 _PALETTE = (
@@ -54,6 +62,10 @@ _PALETTE = (
     (188, 189, 34, 255),
     (23, 190, 207, 255),
 )
+#: what a reader calls the colours of :data:`PALETTE` (for a view title naming them instead of a legend)
+PALETTE_NAMES = ("blue", "orange", "green", "red", "purple", "brown", "pink", "olive", "cyan")
+#: the colours series_with_bounds gives its k series when no colour is given
+PALETTE = _PALETTE
 _LEVELS = frozenset({"INFO", "WARN", "ERROR", "DEBUG", "TRACE", "CRITICAL"})
 
 

@@ -49,6 +49,7 @@ from workbench.problems.meads.telemetry import true_runs
 from workbench.recording import layout
 from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
+from workbench.recording.writer import PALETTE, PALETTE_NAMES
 
 __all__ = ["meads_blueprint", "MeadsRecorder", "heat_shield_mesh", "PLOTS"]
 
@@ -77,11 +78,12 @@ EKF_PLOTS = (
 )
 
 
-def meads_blueprint(ports: tuple[str, ...], ekf_passes: int) -> rrb.Blueprint:
+def meads_blueprint(ports: tuple[str, ...], ekf_passes: int, has_truth: bool = False) -> rrb.Blueprint:
     """Default layout: the heat shield (left top), air-data plots (right top, one tab per quantity),
     per-port pressure, residual and EKF-innovation tabs (right bottom, one per name of ``ports``, the
     vehicle's; the innovations of the last of ``ekf_passes``, none when 0), scorecard and events
-    (left bottom)."""
+    (left bottom). ``has_truth``: the density tab shows the error against the truth [%] (as drawn).
+    Views with many series name their colours in the title (a legend covered the curves)."""
     scene = rrb.Spatial3DView(
         name="Heat shield (reconstructed attitude, local ENU)",
         origin=layout.WORLD,
@@ -92,17 +94,33 @@ def meads_blueprint(ports: tuple[str, ...], ekf_passes: int) -> rrb.Blueprint:
     if ekf_passes:
         key += ", magenta EKF pass " + str(ekf_passes) + (", purple earlier passes" if ekf_passes > 1 else "")
 
+    last = f", magenta EKF pass {ekf_passes}" if ekf_passes else ""
+    colours = ", ".join(f"{p} {c}" for p, c in zip(ports, PALETTE_NAMES, strict=False))
+    titles = {
+        "density": (
+            f"ρ error vs truth [%] — blue least squares{last}, grey ±3σ, wide pale green truth (0)"
+            if has_truth
+            else f"density [kg/m³] — blue least squares{last}, grey ±3σ"
+        ),
+        "scale_factors": f"scale factors [%] — {colours}; thin grey ±3σ; pass 1 converging, later passes flat",
+    }
+
     def quantity(n: str, q: str):
         # the estimators' curves span the whole width: a legend there covered their right ends
         if q in ekf_q:
             return plot_view(f"{n} — {key}", layout.plot_path(q))
+        if q in titles:
+            return plot_view(titles[q], layout.plot_path(q))
         return plot_view(n, layout.plot_path(q), legend="RightTop")
 
-    plots = rrb.Tabs(*[tab(n, quantity(n, q)) for n, q in PLOTS], active_tab=0)
+    def tab_name(n: str, q: str) -> str:
+        return "ρ error [%]" if q == "density" and has_truth else n
+
+    plots = rrb.Tabs(*[tab(tab_name(n, q), quantity(n, q)) for n, q in PLOTS], active_tab=0)
     port_tabs = []
     for p in ports:
         views = [
-            plot_view(f"{p} [Pa]: measured vs model", layout.join(layout.MEADS_PLOT_PORTS, p), legend="RightTop"),
+            plot_view(f"{p} [Pa] — black dots measured, orange model", layout.join(layout.MEADS_PLOT_PORTS, p)),
             plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p)),
         ]
         if ekf_passes:
@@ -424,6 +442,8 @@ class MeadsRecorder:
                 t,
                 100 * np.broadcast_to(np.asarray(self.truth["sensor_scale"], float), (t.size, m)),
                 names=[f"{p} truth [%]" for p in ports],
+                colors=[PALETTE[j % len(PALETTE)] for j in range(m)],  # its port's colour, as named
+                widths=0.8,
             )
         inn, sd = st.forward.innovations.get("pressure"), st.innovation_sigma()
         if inn is not None:
