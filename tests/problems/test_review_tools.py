@@ -243,7 +243,7 @@ def test_replay_text_draws_sigma_plus_minus_and_degree_not_a_placeholder():
         assert g.sum() > 20 and np.sum(g != q) > 20, glyph
 
 
-def test_replay_title_names_the_scenario_and_captions_stay_left_of_the_inset(droptest_run):
+def test_replay_title_names_the_scenario_and_captions_stay_left_of_the_inset(droptest_run, tmp_path):
     from workbench.recording import replay as rp
 
     data = read_recording(droptest_run.rrd)
@@ -265,6 +265,22 @@ def test_replay_title_names_the_scenario_and_captions_stay_left_of_the_inset(dro
     a, b, c, d = ov.inset
     caption = (img[rp.H - 112 : rp.H - 74, :, 2] > 200) & (img[rp.H - 112 : rp.H - 74, :, 0] < 120)  # yellow text
     assert caption.any() and not caption[:, a:].any()
+    # a 1920×1080 frame gets the same picture, scaled: shrunk to 1280×720 it matches the 720p one
+    big = np.zeros((1080, 1920, 3), np.uint8)
+    rp.draw_overlay(big, ov, 0.5)
+    small = cv2.resize(big, (rp.W, rp.H), interpolation=cv2.INTER_AREA)
+    assert np.mean(np.abs(small.astype(float) - img.astype(float))) < 6.0
+    caption_big = (big[1080 - 168 : 1080 - 111, :, 2] > 200) & (big[1080 - 168 : 1080 - 111, :, 0] < 120)
+    assert caption_big.any() and not caption_big[:, int(1.5 * a) :].any()
+
+    mp4 = tmp_path / "hd.mp4"
+    st = rp.render_mp4(data, mp4, duration_s=0.4, fps=10, size=(1920, 1080))
+    cap = cv2.VideoCapture(str(mp4))
+    assert st.size == (1920, 1080) and int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)) == 1920
+    assert int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)) == 1080
+    cap.release()
+    with pytest.raises(ValueError, match="16:9"):
+        rp.render_mp4(data, tmp_path / "sq.mp4", duration_s=0.4, fps=10, size=(1000, 1000))
 
 
 def test_mesh_edges_are_the_unique_edges_of_the_triangles():
