@@ -473,6 +473,7 @@ class Recorder:
         step: Any = None,
         color: Any = None,
         truth_style: tuple[Any, float] | None = None,
+        gap_s: float | None = None,
     ) -> None:
         """Estimate with ±nσ bounds (and truth) under ``root``, for one TimeSeriesView at ``root``.
 
@@ -483,7 +484,10 @@ class Recorder:
         [UI points]) for all of them, e.g. a wide translucent band that stays visible under other
         estimates drawn in the same view. ``names`` default to the last part of ``root``
         (``name[i]`` for k > 1); ``color`` is one colour or one per series. A NaN value or σ is a gap
-        in the line and its bounds (Rerun breaks a line at NaN), never a zero.
+        in the line and its bounds (Rerun breaks a line at NaN), never a zero. ``gap_s`` [s]: where two
+        consecutive ``t`` are further apart (a data blackout the estimate was bridged across), a NaN
+        row at the midpoint breaks the estimate and its bounds (the truth is drawn through); with
+        ``t`` only, not ``step``.
         """
         v = np.asarray(value, dtype=np.float64)
         s = np.broadcast_to(np.asarray(sigma, dtype=np.float64), v.shape)
@@ -491,6 +495,8 @@ class Recorder:
             raise ValueError(f"series_with_bounds: value must be (n,) or (n, k), got {v.shape}")
         if np.any(s < 0):
             raise ValueError("series_with_bounds: sigma must be >= 0")
+        if gap_s is not None and step is None:
+            t, v, s, truth = _break_gaps(np.asarray(t, dtype=np.float64), gap_s, v, s, truth)
         k = 1 if v.ndim == 1 else v.shape[1]
         base = root.rstrip("/").rsplit("/", 1)[-1]
         labels = _series_names(names if names is not None else base, k)
@@ -740,6 +746,23 @@ class Recorder:
                 albedo_factor=_as_colors(color),
             ),
         )
+
+
+def _break_gaps(t: np.ndarray, gap_s: float, v: np.ndarray, s: np.ndarray, truth: Any):
+    """Insert a row at the midpoint of every step of ``t`` [s] longer than ``gap_s``: NaN in ``v`` and
+    ``s`` (a break in the line), the mean of its neighbours in ``truth`` (None stays None)."""
+    cut = np.flatnonzero(np.diff(t) > gap_s)
+    if not cut.size:
+        return t, v, s, truth
+    pos = cut + 1
+    t2 = np.insert(t, pos, 0.5 * (t[cut] + t[cut + 1]))
+    v2 = np.insert(v, pos, np.nan, axis=0)
+    s2 = np.insert(s, pos, np.nan, axis=0)
+    if truth is not None:
+        tr = np.asarray(truth, dtype=np.float64)
+        if tr.shape == v.shape:
+            truth = np.insert(tr, pos, 0.5 * (tr[cut] + tr[cut + 1]), axis=0)
+    return t2, v2, s2, truth
 
 
 def _tile(a: np.ndarray, count: int, item_ndim: int) -> np.ndarray:
