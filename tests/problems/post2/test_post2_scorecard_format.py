@@ -16,6 +16,7 @@ def _summary() -> dict:
         "states": {
             "tilt": {"unit": "deg", "final": [10.15], "final_sigma": [0.305]},
             "accel_bias": {"unit": "m/s^2", "final": [0.0029, 0.0, 0.0], "final_sigma": [0.0009, 1e-6, 1e-6]},
+            "radar_scale_factor": {"unit": "1", "final": [0.9319], "final_sigma": [0.0027]},
         },
         "observations": {},
         "truth": {
@@ -26,6 +27,13 @@ def _summary() -> dict:
                     "final_error_forward": [0.00258211143910339],
                     "final_3sigma_forward": [0.0159885085134442],
                     "final_error_over_3sigma_smoothed": [0.1615],
+                    "inside_3sigma_at_end": True,
+                },
+                "radar_scale_factor": {
+                    "truth": [0.93],
+                    "final_error_forward": [0.00185874302786870],
+                    "final_3sigma_forward": [0.00800712285332602],
+                    "final_error_over_3sigma_smoothed": [0.23],
                     "inside_3sigma_at_end": True,
                 },
                 "accel_bias": {
@@ -51,3 +59,4 @@ def test_truth_sections_in_display_units_without_raw_lists():
     assert "| end (forward) | +0.1479 (3σ 0.9161) |" in truth
     assert "0.00258211143910339" not in truth and "0.0872664625997" not in truth
     assert "**accel_bias** (truth 0.003, 0, 0 m/s^2)" in truth
+    assert "**radar_scale_factor** (truth 0.93):" in truth  # no unit "1" after a pure number

@@ -230,7 +230,7 @@ class Post2Problem:
                 unit = summary["states"].get(name, {}).get("unit", "")
                 k = _display_factor(unit)
                 md += (
-                    f"\n**{name}** (truth {_numbers(p['truth'], k)} {unit}):\n\n"
+                    f"\n**{name}** (truth {_numbers(p['truth'], k)}{'' if unit in ('', '1', '-') else ' ' + unit}):\n\n"
                     f"| after | error [{unit or '-'}] |\n|---|---|\n"
                 )
                 for n in (1, 4, 10):
