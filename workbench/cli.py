@@ -342,8 +342,18 @@ def cmd_replay(args: argparse.Namespace) -> int:
         from workbench.recording.replay import ReplayError, render_mp4
 
         try:
+            size = _replay_size(args.size)
+        except ValueError as err:
+            print(f"workbench replay: {err}", file=sys.stderr)
+            return EXIT_USAGE
+        try:
             st = render_mp4(
-                data, args.mp4, fps=args.fps, duration_s=args.duration, progress=None if args.quiet else _progress
+                data,
+                args.mp4,
+                fps=args.fps,
+                duration_s=args.duration,
+                progress=None if args.quiet else _progress,
+                size=size,
             )
         except ReplayError as err:
             print(f"workbench: {err}", file=sys.stderr)
@@ -353,6 +363,18 @@ def cmd_replay(args: argparse.Namespace) -> int:
             f"(t = {st.t0:.2f} .. {st.t1:.2f} s) in {st.render_s:.1f} s ({st.cpu_s:.1f} s CPU)"
         )
     return EXIT_OK
+
+
+def _replay_size(text: str) -> tuple[int, int]:
+    """``"1920x1080"`` -> (1920, 1080) [px]; ``ValueError`` unless WIDTHxHEIGHT of a 16:9 frame at
+    least 320 wide (the replay's overlay is laid out for 16:9)."""
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise ValueError(f"--size {text!r}: give WIDTHxHEIGHT, e.g. 1920x1080") from None
+    if w < 320 or abs(w * 9 - h * 16) > 16:
+        raise ValueError(f"--size {text!r}: give a 16:9 frame at least 320 wide, e.g. 1920x1080")
+    return w, h
 
 
 def cmd_screenshot(args: argparse.Namespace) -> int:
@@ -546,7 +568,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_compare)
     sp = sub.add_parser("replay", help="presentation outputs of a run: --mp4 video (OpenCV) and/or --png summary")
     sp.add_argument("recording", help="a run recording (.rrd)")
-    sp.add_argument("--mp4", default=None, help="write the 1280x720 presentation video here")
+    sp.add_argument("--mp4", default=None, help="write the presentation video here (1280x720 unless --size)")
+    sp.add_argument("--size", default="1280x720", help="video frame WIDTHxHEIGHT, 16:9 (1920x1080 for full HD)")
     sp.add_argument("--png", default=None, help="write the one-page summary image of the key plots here")
     sp.add_argument("--fps", type=float, default=25.0, help="video frame rate (default 25)")
     sp.add_argument("--duration", type=float, default=None, help="video length [s] (default: the problem's)")

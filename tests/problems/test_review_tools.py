@@ -144,6 +144,12 @@ def test_droptest_compare_with_itself_and_replay(droptest_run, tmp_path, capsys)
     assert layout.compare_run_path("a", "vehicle") in ents and layout.compare_run_path("b", "track") in ents
     assert layout.compare_position_path("x") + "/value" in ents and layout.SURFACE in ents
     assert any(e.startswith(layout.compare_run_path("b", "vehicle") + "/") for e in ents)  # meshes copied
+    # A's bodies are meshes, B's their wireframe: B drawn solid on top hid A at the same pose
+    crec = read_recording(c)
+    a_mesh = [e for e in ents if e.startswith(layout.compare_run_path("a", "vehicle") + "/") and crec.meshes(e)]
+    b_veh = [e for e in ents if e.startswith(layout.compare_run_path("b", "vehicle") + "/")]
+    assert a_mesh and not any(crec.meshes(e) for e in b_veh)
+    assert any("LineStrips3D:strips" in crec.components(e) for e in b_veh)
 
     mp4, png = tmp_path / "d.mp4", tmp_path / "d.png"
     assert main(["replay", str(a), "--mp4", str(mp4), "--png", str(png), "--duration", "2", "--quiet"]) == 0
@@ -237,7 +243,7 @@ def test_replay_text_draws_sigma_plus_minus_and_degree_not_a_placeholder():
         assert g.sum() > 20 and np.sum(g != q) > 20, glyph
 
 
-def test_replay_title_names_the_scenario_and_captions_stay_left_of_the_inset(droptest_run):
+def test_replay_title_names_the_scenario_and_captions_stay_left_of_the_inset(droptest_run, tmp_path):
     from workbench.recording import replay as rp
 
     data = read_recording(droptest_run.rrd)
@@ -259,6 +265,32 @@ def test_replay_title_names_the_scenario_and_captions_stay_left_of_the_inset(dro
     a, b, c, d = ov.inset
     caption = (img[rp.H - 112 : rp.H - 74, :, 2] > 200) & (img[rp.H - 112 : rp.H - 74, :, 0] < 120)  # yellow text
     assert caption.any() and not caption[:, a:].any()
+    # a 1920×1080 frame gets the same picture, scaled: shrunk to 1280×720 it matches the 720p one
+    big = np.zeros((1080, 1920, 3), np.uint8)
+    rp.draw_overlay(big, ov, 0.5)
+    small = cv2.resize(big, (rp.W, rp.H), interpolation=cv2.INTER_AREA)
+    assert np.mean(np.abs(small.astype(float) - img.astype(float))) < 6.0
+    caption_big = (big[1080 - 168 : 1080 - 111, :, 2] > 200) & (big[1080 - 168 : 1080 - 111, :, 0] < 120)
+    assert caption_big.any() and not caption_big[:, int(1.5 * a) :].any()
+
+    mp4 = tmp_path / "hd.mp4"
+    st = rp.render_mp4(data, mp4, duration_s=0.4, fps=10, size=(1920, 1080))
+    cap = cv2.VideoCapture(str(mp4))
+    assert st.size == (1920, 1080) and int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)) == 1920
+    assert int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)) == 1080
+    cap.release()
+    with pytest.raises(ValueError, match="16:9"):
+        rp.render_mp4(data, tmp_path / "sq.mp4", duration_s=0.4, fps=10, size=(1000, 1000))
+
+
+def test_mesh_edges_are_the_unique_edges_of_the_triangles():
+    from workbench.recording.compare import mesh_edges
+
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    f = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])  # a tetrahedron: 6 edges
+    e = mesh_edges(v, f)
+    assert e.shape == (6, 2, 3)
+    assert len({tuple(sorted(map(tuple, s))) for s in e}) == 6
 
 
 def test_compare_ranks_changes_by_sigma_and_drops_meaningless_percentages():

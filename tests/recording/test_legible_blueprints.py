@@ -127,3 +127,22 @@ def test_events_view_hides_the_entity_path_column():
     assert hidden == [1]  # TextLogColumnKind.EntityPath
     timelines = {c["timeline"]: c["visible"] for c in cols.timeline_columns.as_arrow_array().to_pylist()}
     assert timelines[layout.TIME] and not any(v for k, v in timelines.items() if k != layout.TIME)
+
+
+def test_meads_views_with_many_series_name_their_colours_instead_of_a_legend():
+    """The scale factors (7 ports × passes, ±3σ, truth), the density and the per-port pressures had a
+    legend over their curves; with a truth the density view shows the error against it [%]."""
+    from workbench.problems.meads.recording import meads_blueprint
+
+    ports = ("P1", "P2", "P3", "P4", "P5", "P6", "P7")
+    for truth in (True, False):
+        views = {str(v.origin): v for v in _time_series(meads_blueprint(ports, 2, truth))}
+        for origin in (
+            layout.plot_path("scale_factors"),
+            layout.plot_path("density"),
+            layout.join(layout.MEADS_PLOT_PORTS, "P1"),
+        ):
+            legend = views[origin].properties["PlotLegend"]
+            assert legend.visible.as_arrow_array().to_pylist() == [False], origin
+        assert "P7 pink" in str(views[layout.plot_path("scale_factors")].name)
+        assert ("[%]" in str(views[layout.plot_path("density")].name)) is truth

@@ -313,3 +313,24 @@ def test_blueprint_saves_and_verifies(tmp_path):
     assert ok, msg
     with pytest.raises(ValueError):
         standard_blueprint(time_window_s=0.0)
+
+
+def test_series_with_bounds_breaks_at_gaps_and_draws_the_truth_through(tmp_path):
+    """``gap_s``: a NaN row (a break in the viewer's line) at the middle of every longer time step in
+    the estimate and its bounds, the truth drawn through; ``truth_style`` colours and widths the truth."""
+    path = tmp_path / "gaps.rrd"
+    t = np.array([0.0, 0.1, 0.2, 5.0, 5.1])
+    v = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    truth = 10.0 * v
+    with open_recording(path, "gaps") as rec:
+        rec.series_with_bounds(
+            "/plots/g", t, v, np.full(5, 0.5), truth=truth, gap_s=1.0, truth_style=((0, 200, 0, 100), 4.0)
+        )
+    d = read_recording(path)
+    tv, vv = d.scalars("/plots/g/value")
+    _, hi = d.scalars("/plots/g/plus_3sigma")
+    _, tr = d.scalars("/plots/g/truth")
+    np.testing.assert_allclose(tv, [0.0, 0.1, 0.2, 2.6, 5.0, 5.1])
+    assert np.isnan(vv[3, 0]) and np.isnan(hi[3, 0]) and np.isfinite(np.delete(vv[:, 0], 3)).all()
+    np.testing.assert_allclose(tr[:, 0], [10.0, 20.0, 30.0, 35.0, 40.0, 50.0])
+    assert d.static_component("/plots/g/truth", "SeriesLines:widths") == [4.0]

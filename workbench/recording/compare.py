@@ -49,6 +49,7 @@ __all__ = [
     "sigma_of",
     "compare_runs",
     "flatten_summary",
+    "mesh_edges",
     "write_comparison",
 ]
 
@@ -456,8 +457,21 @@ def changes_markdown(cmp: Comparison, max_rows: int = 12) -> str:
 
 
 # --------------------------------------------------------------------------- comparison recording
-def _copy_vehicle(rec: Any, src: RecordingData, run: str, colour: tuple[int, int, int, int]) -> None:
-    """The run's vehicle (pose, body pose, meshes, 3σ ellipsoid) and track under ``/world/run_<run>``."""
+def mesh_edges(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The unique edges of a triangle mesh as segments (m, 2, 3) in the vertices' frame and unit:
+    ``verts`` (n, 3), ``faces`` (f, 3) vertex indices; for drawing a body as a wireframe."""
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    return np.asarray(verts, dtype=np.float64)[e]
+
+
+def _copy_vehicle(
+    rec: Any, src: RecordingData, run: str, colour: tuple[int, int, int, int], *, wireframe: bool = False
+) -> None:
+    """The run's vehicle (pose, body pose, meshes, 3σ ellipsoid) and track under ``/world/run_<run>``;
+    ``wireframe``: the meshes as their edges (B's, so that A's translucent bodies stay visible inside:
+    two translucent bodies at nearly one pose showed only the one drawn last)."""
     track = _vehicle_track(src)
     if track is None:
         return
@@ -478,12 +492,10 @@ def _copy_vehicle(rec: Any, src: RecordingData, run: str, colour: tuple[int, int
             te, pe, qe = src.transforms(e)
             rec.poses(sub, te, pe, qe)
         for tm, verts, faces, _ in src.meshes(e):
-            if tm is None:
-                rec.stream.log(
-                    sub,
-                    _mesh3d(verts, faces, colour),
-                    static=True,
-                )
+            if tm is None and wireframe:
+                rec.line_strip(sub, mesh_edges(verts, faces), color=colour, radius=-0.6)
+            elif tm is None:
+                rec.stream.log(sub, _mesh3d(verts, faces, colour), static=True)
     try:
         te, c, h, qe = src.ellipsoids(layout.UNCERTAINTY)
         rec.stream.send_columns(
@@ -511,7 +523,7 @@ def _mesh3d(verts: np.ndarray, faces: np.ndarray, colour: tuple[int, int, int, i
 def write_comparison(cmp: Comparison, out: str | os.PathLike[str], *, max_views: int = 16) -> Path:
     """Write the comparison recording to ``out`` (atomically) and return its path.
 
-    Scene: the surface of run A, both vehicles (A blue, B orange, translucent) and tracks under
+    Scene: the surface of run A, both vehicles (A blue translucent bodies, B an orange wireframe) and tracks under
     ``/world/run_a`` / ``/world/run_b``. Plots: ``/compare/position/<axis>`` and
     ``/compare/diff/<quantity>`` (A − B with ±3 combined σ), ``/compare/overlay/<quantity>/{a,b}``;
     text: the two scorecards ``/compare/report_a``, ``/compare/report_b`` and the table of changes
@@ -547,7 +559,7 @@ def write_comparison(cmp: Comparison, out: str | os.PathLike[str], *, max_views:
             rrb.TextDocumentView(name=f"B: {cmp.names[1]}", origin=layout.COMPARE_REPORT_B),
         ),
     ]
-    scene = rrb.Spatial3DView(name="A (blue) and B (orange)", origin=layout.WORLD)
+    scene = rrb.Spatial3DView(name="A blue bodies, B orange wireframe", origin=layout.WORLD)
     bp = rrb.Blueprint(
         rrb.Horizontal(scene, rrb.Vertical(*right, row_shares=[3, 1.5, 2]), column_shares=[2, 3]),
         rrb.TimePanel(state="expanded", timeline=layout.TIME),
@@ -568,7 +580,7 @@ def write_comparison(cmp: Comparison, out: str | os.PathLike[str], *, max_views:
                 c = ((col >> 24) & 255, (col >> 16) & 255, (col >> 8) & 255, 255)
                 rec.stream.log(layout.SURFACE, _mesh3d(verts, faces, c), static=True)
         _copy_vehicle(rec, cmp.a, "a", _A_COLOUR)
-        _copy_vehicle(rec, cmp.b, "b", _B_COLOUR)
+        _copy_vehicle(rec, cmp.b, "b", _B_COLOUR, wireframe=True)
         for d in diffs:
             root = layout.COMPARE_POSITION if d is cmp.position else layout.compare_diff_path(d.root)
             names = [f"{n} A − B" for n in d.names]

@@ -19,7 +19,8 @@ plane). What is drawn is what the recording holds — nothing is recomputed:
   what is drawn (:func:`replay_titles`); text in DejaVu Sans (matplotlib's bundled font, through
   Pillow: σ, ±, °, Δ), captions kept left of the inset.
 
-Frames are 1280×720 (``mp4v`` in an ``.mp4`` container through OpenCV's bundled FFmpeg). Frame
+Frames are 1280×720 by default, 1920×1080 with ``size`` (``workbench replay --size``; the overlay
+scales with the width) (``mp4v`` in an ``.mp4`` container through OpenCV's bundled FFmpeg). Frame
 times follow a time warp: a base rate (recording seconds per video second) chosen so the video
 lasts ``duration_s``, slowed by ``slow`` within ``± window`` of every event.
 """
@@ -392,16 +393,18 @@ class _Camera:
     R_cw: np.ndarray  # rows: right, down, forward (OpenCV camera axes) in world
     f: float
     near: float
+    size: tuple[int, int] = (W, H)  # frame (width, height) [px]
 
     def to_cam(self, pts: np.ndarray) -> np.ndarray:
         return (pts - self.eye) @ self.R_cw.T
 
     def project(self, pc: np.ndarray) -> np.ndarray:
         z = np.maximum(pc[..., 2], 1e-9)
-        return np.stack([W / 2 + self.f * pc[..., 0] / z, H / 2 + self.f * pc[..., 1] / z], axis=-1)
+        w, h = self.size
+        return np.stack([w / 2 + self.f * pc[..., 0] / z, h / 2 + self.f * pc[..., 1] / z], axis=-1)
 
 
-def _look_at(eye: np.ndarray, target: np.ndarray, near: float) -> _Camera:
+def _look_at(eye: np.ndarray, target: np.ndarray, near: float, size: tuple[int, int] = (W, H)) -> _Camera:
     fwd = target - eye
     fwd = fwd / np.linalg.norm(fwd)
     up = np.array([0.0, 0.0, 1.0])
@@ -410,8 +413,8 @@ def _look_at(eye: np.ndarray, target: np.ndarray, near: float) -> _Camera:
         right = np.array([1.0, 0.0, 0.0])
     right /= np.linalg.norm(right)
     down = np.cross(fwd, right)
-    f = 0.5 * W / math.tan(math.radians(_FOV_DEG) / 2)
-    return _Camera(eye, np.stack([right, down, fwd]), f, near)
+    f = 0.5 * size[0] / math.tan(math.radians(_FOV_DEG) / 2)
+    return _Camera(eye, np.stack([right, down, fwd]), f, near, size)
 
 
 def _clip_poly(poly: np.ndarray, near: float) -> np.ndarray:
@@ -461,11 +464,12 @@ def _draw_mesh(img: np.ndarray, cam: _Camera, verts_w: np.ndarray, faces: np.nda
     alpha = colour[3] / 255.0 if len(colour) > 3 else 1.0
     pts2 = cam.project(tri[idx])
     front = zmin[idx] >= cam.near
+    fw, fh = img.shape[1], img.shape[0]
     off_screen = front & (
         np.all(pts2[:, :, 0] < 0, axis=1)
-        | np.all(pts2[:, :, 0] > W, axis=1)
+        | np.all(pts2[:, :, 0] > fw, axis=1)
         | np.all(pts2[:, :, 1] < 0, axis=1)
-        | np.all(pts2[:, :, 1] > H, axis=1)
+        | np.all(pts2[:, :, 1] > fh, axis=1)
     )
     if off_screen.any():
         idx, shade, pts2, front = idx[~off_screen], shade[~off_screen], pts2[~off_screen], front[~off_screen]
@@ -475,15 +479,17 @@ def _draw_mesh(img: np.ndarray, cam: _Camera, verts_w: np.ndarray, faces: np.nda
     partial = ~front | (np.abs(pts2).max(axis=(1, 2)) > big)
     whole = ~partial
     lo = (
-        np.floor(np.clip(pts2[whole].reshape(-1, 2).min(axis=0), 0, [W - 1, H - 1])).astype(int)
+        np.floor(np.clip(pts2[whole].reshape(-1, 2).min(axis=0), 0, [fw - 1, fh - 1])).astype(int)
         if whole.any()
         else None
     )
     hi = (
-        np.ceil(np.clip(pts2[whole].reshape(-1, 2).max(axis=0), 0, [W - 1, H - 1])).astype(int) if whole.any() else None
+        np.ceil(np.clip(pts2[whole].reshape(-1, 2).max(axis=0), 0, [fw - 1, fh - 1])).astype(int)
+        if whole.any()
+        else None
     )
     if partial.any() or lo is None:
-        lo, hi = np.array([0, 0]), np.array([W - 1, H - 1])
+        lo, hi = np.array([0, 0]), np.array([fw - 1, fh - 1])
     target = img if alpha >= 0.99 else img[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1].copy()
     off = np.array([0, 0]) if target is img else lo
     # painter's order, one triangle at a time: OpenCV fills several polygons of one call with
@@ -629,10 +635,10 @@ def _smooth(x: np.ndarray, k: int) -> np.ndarray:
     return np.stack([np.convolve(padded[:, i], ker, mode="valid") for i in range(x.shape[1])], axis=1)
 
 
-def _background() -> np.ndarray:
-    w = np.linspace(0, 1, H, dtype=np.float32)[:, None]
+def _background(size: tuple[int, int] = (W, H)) -> np.ndarray:
+    w = np.linspace(0, 1, size[1], dtype=np.float32)[:, None]
     col = (1 - w) * _BG_TOP[None, :] + w * _BG_BOTTOM[None, :]
-    return np.repeat(col[:, None, :], W, axis=1).astype(np.uint8)
+    return np.repeat(col[:, None, :], size[0], axis=1).astype(np.uint8)
 
 
 @functools.lru_cache(maxsize=16)
@@ -689,7 +695,8 @@ def _panel(img, x0, y0, x1, y1, alpha=0.55):
 @dataclass
 class Overlay:
     """Everything drawn on top of the 3D scene that does not depend on the camera (pixels of the
-    1280×720 frame, times [s]): ``title``/``subtitle`` (:func:`replay_titles`), ``events`` (t, text)
+    1280×720 layout, scaled with the frame by :func:`draw_overlay`; times [s]): ``title``/``subtitle``
+    (:func:`replay_titles`), ``events`` (t, text)
     captioned for ``caption_s`` after t, the HUD's ``hud`` series, the time bar's ``t0``..``t1``,
     the inset's ``track_2d`` (n, 2) at ``track_t`` (n,) in its box ``inset`` (x0, y0, x1, y1), and
     per-frame ``extra`` values (``ellipsoid_3sigma_axes_m``: the 3σ ellipsoid's semi-axes [m])."""
@@ -743,12 +750,20 @@ def _lengths(xs) -> str:
 
 def draw_overlay(img: np.ndarray, ov: Overlay, t: float) -> None:
     """The title bar, the HUD (top left), the latest event's caption (bottom, left of the inset),
-    the time bar with the events and the inset track, at time ``t`` [s]."""
-    a, b, c, d = ov.inset
+    the time bar with the events and the inset track, at time ``t`` [s]. Laid out in the 1280×720
+    frame's pixels and scaled by the frame's width over 1280 (text, lines and boxes: a 1920×1080
+    frame is the same picture, sharper)."""
+    h, w = img.shape[:2]
+    k = w / W
+
+    def px(v: float) -> int:
+        return int(round(k * v))
+
+    a, b, c, d = (px(v) for v in ov.inset)
     # title bar: the run and what it is, then what is shown
-    _panel(img, 0, 0, W, 58, 0.6)
-    draw_text(img, _fit(ov.title, W - 40, 0.62, 2), (20, 26), 0.62, (120, 200, 255), 2)
-    draw_text(img, _fit(ov.subtitle, W - 40, 0.45), (20, 48), 0.45, (210, 210, 210))
+    _panel(img, 0, 0, w, px(58), 0.6)
+    draw_text(img, _fit(ov.title, w - px(40), 0.62 * k, 2), (px(20), px(26)), 0.62 * k, (120, 200, 255), 2)
+    draw_text(img, _fit(ov.subtitle, w - px(40), 0.45 * k), (px(20), px(48)), 0.45 * k, (210, 210, 210))
     # HUD, top left
     lines = [f"t = {t:8.3f} s"]
     for item, sr in ov.hud:
@@ -763,37 +778,38 @@ def draw_overlay(img: np.ndarray, ov: Overlay, t: float) -> None:
     axes = ov.extra.get("ellipsoid_3sigma_axes_m")
     if axes is not None:
         lines.append("3σ ellipsoid " + _lengths(axes))
-    y0 = 66
-    _panel(img, 10, y0, 470, y0 + 14 + 30 * len(lines))
+    y0 = px(66)
+    _panel(img, px(10), y0, px(470), y0 + px(14 + 30 * len(lines)))
     for i, line in enumerate(lines):
-        draw_text(img, _fit(line, 440, 0.7, 2 if i == 0 else 1), (22, y0 + 34 + 30 * i), 0.7, _TEXT, 2 if i == 0 else 1)
+        bold = 2 if i == 0 else 1
+        draw_text(img, _fit(line, px(440), 0.7 * k, bold), (px(22), y0 + px(34 + 30 * i)), 0.7 * k, _TEXT, bold)
     # caption: the latest event within caption_s before t, centred left of the inset
     recent = [(te, e) for te, e in ov.events if te <= t <= te + ov.caption_s]
     if recent:
         _, cap = recent[-1]
-        room = a - 40
-        cap = _fit(cap, room - 28, 0.8, 2)
-        tw, _ = _text_size(cap, 0.8, 2)
-        x = 10 + max(0, (room - tw) // 2)
-        _panel(img, x - 14, H - 112, min(a - 10, x + tw + 14), H - 74, 0.6)
-        draw_text(img, cap, (x, H - 85), 0.8, (80, 230, 255), 2)
+        room = a - px(40)
+        cap = _fit(cap, room - px(28), 0.8 * k, 2)
+        tw, _ = _text_size(cap, 0.8 * k, 2)
+        x = px(10) + max(0, (room - tw) // 2)
+        _panel(img, x - px(14), h - px(112), min(a - px(10), x + tw + px(14)), h - px(74), 0.6)
+        draw_text(img, cap, (x, h - px(85)), 0.8 * k, (80, 230, 255), 2)
     # time bar with the events
-    x0, x1, y = 20, W - 350, H - 30
-    cv2.line(img, (x0, y), (x1, y), (200, 200, 200), 2, cv2.LINE_AA)
+    x0, x1, y = px(20), w - px(350), h - px(30)
+    cv2.line(img, (x0, y), (x1, y), (200, 200, 200), max(1, px(2)), cv2.LINE_AA)
 
     def xt(tt):
         return int(x0 + (x1 - x0) * (tt - ov.t0) / (ov.t1 - ov.t0))
 
     for te, _ in ov.events:
-        cv2.line(img, (xt(te), y - 8), (xt(te), y + 8), (80, 230, 255), 2)
-    cv2.circle(img, (xt(t), y), 7, (255, 255, 255), -1, cv2.LINE_AA)
+        cv2.line(img, (xt(te), y - px(8)), (xt(te), y + px(8)), (80, 230, 255), max(1, px(2)))
+    cv2.circle(img, (xt(t), y), px(7), (255, 255, 255), -1, cv2.LINE_AA)
     # inset: the whole track, side view, with the vehicle on it
     _panel(img, a, b, c, d, 0.6)
-    pts = ov.track_2d.astype(np.int32)
-    cv2.polylines(img, [pts], False, _TRACK, 1, cv2.LINE_AA)
+    pts = np.round(k * ov.track_2d).astype(np.int32)
+    cv2.polylines(img, [pts], False, _TRACK, max(1, px(1)), cv2.LINE_AA)
     i = int(np.clip(np.searchsorted(ov.track_t, t), 0, len(pts) - 1))
-    cv2.circle(img, tuple(int(x) for x in pts[i]), 5, (80, 230, 255), -1, cv2.LINE_AA)
-    draw_text(img, "track (side view)", (a + 8, b + 18), 0.45)
+    cv2.circle(img, tuple(int(x) for x in pts[i]), px(5), (80, 230, 255), -1, cv2.LINE_AA)
+    draw_text(img, "track (side view)", (a + px(8), b + px(18)), 0.45 * k)
 
 
 def _inset_track(p: np.ndarray, right: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
@@ -819,8 +835,10 @@ def render_mp4(
     fps: float = 25.0,
     duration_s: float | None = None,
     progress: Callable[[str], None] | None = None,
+    size: tuple[int, int] = (W, H),
 ) -> ReplayStats:
-    """Render the presentation video of a run recording to ``out`` (``.mp4``, 1280×720, ``fps``).
+    """Render the presentation video of a run recording to ``out`` (``.mp4``, ``size`` (width,
+    height) [px], 16:9: 1280×720 by default, 1920×1080 for a full-HD presentation; ``fps``).
 
     ``kind``: the problem kind whose :class:`Presentation` to use (default: the recording's
     ``run`` property; unknown kinds get a generic one); ``duration_s``: video length [s] (default:
@@ -829,6 +847,10 @@ def render_mp4(
     and renamed when complete.
     """
     t_start, c_start = time.perf_counter(), time.process_time()
+    size = (int(size[0]), int(size[1]))
+    if size[0] < 320 or abs(size[0] * H - size[1] * W) > W:
+        raise ValueError(f"replay size {size[0]}x{size[1]}: give a 16:9 frame at least 320 wide (e.g. 1920x1080)")
+    widen = size[0] / W  # line widths scale with the frame; the overlay scales itself
     data = recording if isinstance(recording, RecordingData) else read_recording(recording)
     kind = kind or str(data.properties().get("run", {}).get("kind", ""))
     pres = PRESENTATIONS.get(kind, _DEFAULT)
@@ -890,22 +912,22 @@ def render_mp4(
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.stem + ".partial.mp4")
-    writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, (W, H))
+    writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, size)
     if not writer.isOpened():
         raise OSError(f"OpenCV cannot write an MP4 to {tmp} (no mp4v encoder?)")
-    bg = _background()
+    bg = _background(size)
     try:
         for n, t in enumerate(times):
             # aim a little below the box centre: the vehicle sits above the captions and the inset
             aim = target[n] - np.array([0.0, 0.0, 0.25 * dist[n] / pres.distance])
-            cam = _look_at(aim + dist[n] * offset_dir, aim, near=0.02 * dist[n])
+            cam = _look_at(aim + dist[n] * offset_dir, aim, near=0.02 * dist[n], size=size)
             img = bg.copy()
             for e, strips, colour, width in scene.static_lines:
                 pose = scene.pose(e, t)
                 if pose is None:
                     continue
                 for s in strips:
-                    _draw_polyline(img, cam, s @ pose[0].T + pose[1], colour, width)
+                    _draw_polyline(img, cam, s @ pose[0].T + pose[1], colour, max(1, round(widen * width)))
             # opaque meshes first (far entity first), translucent after
             items = []
             for m in scene.meshes:
@@ -924,7 +946,7 @@ def render_mp4(
                 if i < 0 or pose is None:
                     continue
                 for s in rows[i]:
-                    _draw_polyline(img, cam, s @ pose[0].T + pose[1], colour, 2)
+                    _draw_polyline(img, cam, s @ pose[0].T + pose[1], colour, max(1, round(2 * widen)))
             if ell is not None:
                 te, c, hs, q = ell
                 i = int(np.searchsorted(te, t, side="right")) - 1
@@ -934,7 +956,7 @@ def render_mp4(
                     Rw = pose[0] @ quat_to_dcm(q[i, 0])
                     centre = pose[0] @ c[i, 0] + pose[1]
                     for ring in _ellipse_rings(centre, Rw, hs[i, 0]):
-                        _draw_polyline(img, cam, ring, _ELLIPSE, 2)
+                        _draw_polyline(img, cam, ring, _ELLIPSE, max(1, round(2 * widen)))
             draw_overlay(img, ov, float(t))
             writer.write(img)
             if progress is not None and n % 100 == 0:
@@ -945,6 +967,4 @@ def render_mp4(
         raise
     writer.release()
     os.replace(tmp, out)
-    return ReplayStats(
-        out, len(times), fps, (W, H), t0, t1, time.perf_counter() - t_start, time.process_time() - c_start
-    )
+    return ReplayStats(out, len(times), fps, size, t0, t1, time.perf_counter() - t_start, time.process_time() - c_start)

@@ -40,7 +40,15 @@ from workbench.estimation.health import health_markdown
 from workbench.io.results import OutputError
 from workbench.recording import layout
 
-__all__ = ["to_ns", "open_recording", "remove_stale_partials", "Recorder", "covariance_ellipsoids"]
+__all__ = [
+    "to_ns",
+    "open_recording",
+    "remove_stale_partials",
+    "Recorder",
+    "covariance_ellipsoids",
+    "PALETTE",
+    "PALETTE_NAMES",
+]
 
 _GREY = (150, 150, 150, 255)
 _PALETTE = (
@@ -54,6 +62,10 @@ _PALETTE = (
     (188, 189, 34, 255),
     (23, 190, 207, 255),
 )
+#: what a reader calls the colours of :data:`PALETTE` (for a view title naming them instead of a legend)
+PALETTE_NAMES = ("blue", "orange", "green", "red", "purple", "brown", "pink", "olive", "cyan")
+#: the colours series_with_bounds gives its k series when no colour is given
+PALETTE = _PALETTE
 _LEVELS = frozenset({"INFO", "WARN", "ERROR", "DEBUG", "TRACE", "CRITICAL"})
 
 
@@ -460,14 +472,22 @@ class Recorder:
         names: str | Sequence[str] | None = None,
         step: Any = None,
         color: Any = None,
+        truth_style: tuple[Any, float] | None = None,
+        gap_s: float | None = None,
     ) -> None:
         """Estimate with ±nσ bounds (and truth) under ``root``, for one TimeSeriesView at ``root``.
 
         Logs ``root/value``, ``root/plus_{nsigma:g}sigma`` (value + nσ), ``root/minus_{nsigma:g}sigma``
         (value − nσ) and, if given, ``root/truth``. ``value``, ``sigma`` (1σ, same units, ≥ 0) and
         ``truth`` are (n,) or (n, k). Bounds are thin grey lines; truth is a thinner line in a lighter
-        tint of the estimate colour (Rerun 0.41 has no dashed style). ``names`` default to the last
-        part of ``root`` (``name[i]`` for k > 1); ``color`` is one colour or one per series.
+        tint of the estimate colour (Rerun 0.41 has no dashed style), or ``truth_style`` (colour, width
+        [UI points]) for all of them, e.g. a wide translucent band that stays visible under other
+        estimates drawn in the same view. ``names`` default to the last part of ``root``
+        (``name[i]`` for k > 1); ``color`` is one colour or one per series. A NaN value or σ is a gap
+        in the line and its bounds (Rerun breaks a line at NaN), never a zero. ``gap_s`` [s]: where two
+        consecutive ``t`` are further apart (a data blackout the estimate was bridged across), a NaN
+        row at the midpoint breaks the estimate and its bounds (the truth is drawn through); with
+        ``t`` only, not ``step``.
         """
         v = np.asarray(value, dtype=np.float64)
         s = np.broadcast_to(np.asarray(sigma, dtype=np.float64), v.shape)
@@ -475,6 +495,8 @@ class Recorder:
             raise ValueError(f"series_with_bounds: value must be (n,) or (n, k), got {v.shape}")
         if np.any(s < 0):
             raise ValueError("series_with_bounds: sigma must be >= 0")
+        if gap_s is not None and step is None:
+            t, v, s, truth = _break_gaps(np.asarray(t, dtype=np.float64), gap_s, v, s, truth)
         k = 1 if v.ndim == 1 else v.shape[1]
         base = root.rstrip("/").rsplit("/", 1)[-1]
         labels = _series_names(names if names is not None else base, k)
@@ -512,16 +534,20 @@ class Recorder:
             tr = np.asarray(truth, dtype=np.float64)
             if tr.shape != v.shape:
                 raise ValueError(f"series_with_bounds: truth shape {tr.shape} != value shape {v.shape}")
-            tint = cols.astype(np.float64)
-            tint[:, :3] = 0.45 * tint[:, :3] + 0.55 * 255.0
+            if truth_style is None:
+                tint = cols.astype(np.float64)
+                tint[:, :3] = 0.45 * tint[:, :3] + 0.55 * 255.0
+                truth_cols, truth_width = tint.astype(np.uint8), 1.0
+            else:
+                truth_cols, truth_width = [truth_style[0]] * k, float(truth_style[1])
             self.scalars(
                 f"{root}/{layout.TRUTH_SERIES}",
                 t,
                 tr,
                 step=step,
                 names=[f"{lab} truth" for lab in labels],
-                colors=tint.astype(np.uint8),
-                widths=1.0,
+                colors=truth_cols,
+                widths=truth_width,
             )
 
     def events(self, entries: Sequence[tuple[float, str, str]], entity: str = layout.EVENTS) -> None:
@@ -720,6 +746,23 @@ class Recorder:
                 albedo_factor=_as_colors(color),
             ),
         )
+
+
+def _break_gaps(t: np.ndarray, gap_s: float, v: np.ndarray, s: np.ndarray, truth: Any):
+    """Insert a row at the midpoint of every step of ``t`` [s] longer than ``gap_s``: NaN in ``v`` and
+    ``s`` (a break in the line), the mean of its neighbours in ``truth`` (None stays None)."""
+    cut = np.flatnonzero(np.diff(t) > gap_s)
+    if not cut.size:
+        return t, v, s, truth
+    pos = cut + 1
+    t2 = np.insert(t, pos, 0.5 * (t[cut] + t[cut + 1]))
+    v2 = np.insert(v, pos, np.nan, axis=0)
+    s2 = np.insert(s, pos, np.nan, axis=0)
+    if truth is not None:
+        tr = np.asarray(truth, dtype=np.float64)
+        if tr.shape == v.shape:
+            truth = np.insert(tr, pos, 0.5 * (tr[cut] + tr[cut + 1]), axis=0)
+    return t2, v2, s2, truth
 
 
 def _tile(a: np.ndarray, count: int, item_ndim: int) -> np.ndarray:

@@ -501,3 +501,18 @@ def test_radar_velocity_axis_swap_or_flip_is_named(full):
     for M in (np.diag([1.0, 1.0, -1.0]), np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])):
         c = radar_velocity_axes_check(z @ M.T, y, "rda_out.csv")
         assert c.status == "ERROR" and "swapped or sign-flipped" in c.message and "rda_out.csv" in c.message
+
+
+def test_plots_break_at_the_imu_blackouts_and_state_their_unit(rec, run):
+    """The estimate is bridged across an IMU blackout in one step: its plots break there (a NaN row,
+    no straight line through 57 s of no estimate); the strapdown altitude is in km, as its view says
+    (it drew metres); the least-squares winds break where not valid instead of joining the ends."""
+    for root in (layout.ENTRY_PLOT_ALTITUDE_AMR, layout.ENTRY_PLOT_TILT, layout.ENTRY_PLOT_STRAPDOWN_H_AMR):
+        t, v = rec.scalars(layout.join(root, layout.VALUE))
+        inside = (t > 40.0) & (t < 85.0)  # the long blackout
+        assert inside.any() and np.isnan(v[inside]).all(), root
+        assert np.isfinite(v[~inside]).mean() > 0.99, root
+    _, h = rec.scalars(layout.join(layout.ENTRY_PLOT_STRAPDOWN_H_AMR, layout.VALUE))
+    assert 0.0 < np.nanmax(h) < 200.0  # km
+    t, w = rec.scalars(layout.join(layout.entry_wind_plot_path("north"), layout.VALUE))
+    assert np.all(np.diff(t) < 1.0)  # no row left out across a gap: NaN there

@@ -147,3 +147,43 @@ def test_the_drawn_quantities_come_from_the_result(short_run):
     fs = ForwardStage(res.forward, res.events, {})
     for name, ih in res.forward.innovations.items():
         np.testing.assert_array_equal(fs.residual_sigma(name)[:, 0], np.sqrt(np.maximum(ih.S[:, 0, 0], 0.0)))
+
+
+def test_one_layout_with_the_trajectory_camera_on_the_track(short_run):
+    """The recording carries exactly one layout, sent at the end, whose Trajectory view has a camera
+    looking at the smoothed track's middle (the viewer's own fit left the track half off the pane)."""
+    import rerun as rr
+
+    from workbench.recording.moments import embedded_blueprint_chunks
+
+    r, rec = short_run
+    assert len(rr.chunk.RrdReader(r.recording).blueprints()) == 1
+    cells = {}
+    for c in embedded_blueprint_chunks(r.recording):
+        cells.setdefault(c.entity_path, []).append(c.to_record_batch())
+    eye = [b for e, bs in cells.items() if e.endswith("/EyeControls3D") for b in bs]
+    assert len(eye) == 1
+    target = np.asarray(eye[0].column("EyeControls3D:look_target").to_pylist()[0][0])
+    _, p = rec.translations(layout.VEHICLE)
+    mid = 0.5 * (p.min(axis=0) + p.max(axis=0))
+    assert np.linalg.norm(target - mid) < 0.05 * np.linalg.norm(p.max(axis=0) - p.min(axis=0)) + 1.0
+
+
+def test_trajectory_eye_frames_the_whole_track():
+    """Every point of a planet-scale track lies within 20° of the camera's line of sight, the camera's
+    up is the local vertical at the track, and degenerate tracks give no camera."""
+    from workbench.problems.post2.recording import trajectory_eye
+
+    s = np.linspace(0.0, 1.0, 200)
+    r = 2.575e6 + 1.2e6 * (1.0 - s)  # descending 1200 km over 40° of longitude
+    lon = np.radians(40.0) * s
+    track = np.column_stack([r * np.cos(lon), r * np.sin(lon), 0.1 * r])
+    eye = trajectory_eye(track)
+    pos = np.asarray(eye.position.as_arrow_array().to_pylist()[0])
+    tgt = np.asarray(eye.look_target.as_arrow_array().to_pylist()[0])
+    up = np.asarray(eye.eye_up.as_arrow_array().to_pylist()[0])
+    axis = (tgt - pos) / np.linalg.norm(tgt - pos)
+    rays = (track - pos) / np.linalg.norm(track - pos, axis=1, keepdims=True)
+    assert np.degrees(np.arccos(np.clip(rays @ axis, -1, 1))).max() < 20.0
+    np.testing.assert_allclose(up, tgt / np.linalg.norm(tgt), atol=1e-6)
+    assert trajectory_eye(track[:1]) is None and trajectory_eye(np.repeat(track[:1], 5, 0)) is None

@@ -402,8 +402,15 @@ class EntryRecorder:
         rec.line_strip(layout.ENTRY_NOMINAL_TRACK, p_L, color=[NOMINAL], radius=-1.2)
         h = np.linalg.norm(sp.p_M, axis=1) - R_MOLA
         sd = radial_sigma(sp.p_M, sp.P)
-        rec.series_with_bounds(
-            layout.ENTRY_PLOT_STRAPDOWN_H_AMR, sp.t, h, sd, names="h AMR (nominal strapdown)", color=[NOMINAL]
+        t = np.asarray(sp.t, float)
+        rec.series_with_bounds(  # in km, as its view says (it drew metres under a [km] title)
+            layout.ENTRY_PLOT_STRAPDOWN_H_AMR,
+            t,
+            h / 1e3,
+            sd / 1e3,
+            names="h AMR (nominal strapdown) [km]",
+            color=[NOMINAL],
+            gap_s=5.0 * float(np.median(np.diff(t))) if t.size > 2 else None,  # the blackouts bridged
         )
         if nom.onboard_t is not None:
             d = nom.diff_position_m
@@ -606,6 +613,8 @@ class EntryRecorder:
         rec, site = self.rec, self.site
         sm = fr.smoothed
         t = np.asarray(sm.t, float)
+        # an IMU blackout is bridged in one step: no estimate inside, so the plots break there
+        gap = 5.0 * float(np.median(np.diff(t))) if t.size > 2 else None
         r = np.linalg.norm(sm.p_M, axis=1)
         sd_r = sm.sigma_radial
         h_agl = r - self.r_ground
@@ -620,6 +629,7 @@ class EntryRecorder:
             truth=None if tr_r is None else (tr_r - self.r_ground)[m],
             names="h AGL",
             color=[EST],
+            gap_s=gap,
         )
         fw = fr.forward
         rf = np.linalg.norm(fw.p_M, axis=1)
@@ -639,6 +649,7 @@ class EntryRecorder:
             truth=None if tr_r is None else (tr_r - R_MOLA) / 1e3,
             names="h AMR [km]",
             color=[EST],
+            gap_s=gap,
         )
         # ground-relative velocity in NED (site axes), its 1σ
         omega = np.array([0.0, 0.0, self.body.rotation_rate])
@@ -653,7 +664,14 @@ class EntryRecorder:
             tv_M = self._truth_at(t, "v_M") - np.cross(omega, tr_p)
             tv = ned_from_enu(site.vectors(t, tv_M))
         rec.series_with_bounds(
-            layout.ENTRY_PLOT_VELOCITY_NED, t, v_N, sd_N, truth=tv, names=["v_N", "v_E", "v_D"], color=XYZ
+            layout.ENTRY_PLOT_VELOCITY_NED,
+            t,
+            v_N,
+            sd_N,
+            truth=tv,
+            names=["v_N", "v_E", "v_D"],
+            color=XYZ,
+            gap_s=gap,
         )
         # tilt: angle between +Z_G and local up
         up_M = sm.p_M / r[:, None]
@@ -674,6 +692,7 @@ class EntryRecorder:
             truth=tt,
             names="Z_G from local up [deg]",
             color=[EST],
+            gap_s=gap,
         )
         sd_p, sd_v = sm.sigma_position, sm.sigma_velocity
         rec.scalars(
@@ -692,7 +711,7 @@ class EntryRecorder:
         )
         if tr_p is not None:
             rec.series_with_bounds(
-                layout.ENTRY_PLOT_ERROR_ALTITUDE, t, r - tr_r, sd_r, names="h error [m]", color=[EST]
+                layout.ENTRY_PLOT_ERROR_ALTITUDE, t, r - tr_r, sd_r, names="h error [m]", color=[EST], gap_s=gap
             )
 
     def _residual_plots(self, fr) -> None:
@@ -892,16 +911,20 @@ class EntryRecorder:
             self._profile(layout.entry_wind_profile_path(name), v, hk, sc, col, 0.12)
             self._profile(layout.entry_wind_profile_path(name, plus1), v + s_, hk, sc, GREY, 0.05)
             self._profile(layout.entry_wind_profile_path(name, minus1), v - s_, hk, sc, GREY, 0.05)
+            # from the first to the last valid sample, NaN (a break) where not valid: rows left out
+            # were joined by a straight line across the gap
+            k = np.flatnonzero(ok)
+            span = slice(int(k[0]), int(k[-1]) + 1)
             self.rec.series_with_bounds(
                 layout.entry_wind_plot_path(name),
-                w.t[ok],
-                v[ok],
-                s_[ok],
+                w.t[span],
+                v[span],
+                np.where(ok, s_, np.nan)[span],
                 names=f"wind {name} [m/s]",
                 color=[col],
                 truth=None
                 if self.truth is None
-                else self._truth_at(w.t[ok], "wind_NE")[:, 0 if name == "north" else 1],
+                else self._truth_at(w.t[span], "wind_NE")[:, 0 if name == "north" else 1],
             )
         if self.truth is not None:
             tw = self._truth_at(w.t, "wind_NE")

@@ -143,7 +143,7 @@ class MeadsProblem(PipelineProblem):
         from workbench.recording.writer import open_recording
 
         ekf = settings.ekf
-        bp = meads_blueprint(settings.vehicle.port_names, ekf.passes if ekf.enabled else 0)
+        bp = meads_blueprint(settings.vehicle.port_names, ekf.passes if ekf.enabled else 0, truth is not None)
         with open_recording(path, settings.run.name, blueprint=bp, properties=properties) as rec:
             yield RunDrawer(rec, MeadsRecorder(rec, truth), md.scorecard_markdown)
 

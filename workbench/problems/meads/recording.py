@@ -13,8 +13,9 @@ Plots (``/plots/<quantity>``, bounded series with truth): ``alpha_deg``, ``beta_
 ρ̂ in kg/m³), ``wind_north_mps``, ``wind_east_mps``, ``lag_delay_ms``, ``lag_correction_Pa`` (the pneumatic-lag
 inversion: corrected − measured pressure of P1 and P4); per port measured vs
 modelled (``/plots/ports/<port>/measured|predicted``) and its residual ±3σ
-(``/residuals/pressure/<port>``, only at the samples the port was used: a dropped or failed port's
-line ends there, never a flat zero); failed ports and singular wind intervals in ``/events``.
+(``/residuals/pressure/<port>``, NaN where the port was not used: a dropped port's line breaks, a
+failed port's ends, never a flat zero); failed ports and singular wind intervals in ``/events``.
+The least-squares wind is NaN (a gap) where it is not published; truths are wide pale green bands.
 
 The EKF passes (:mod:`.ekf`, smoothed): under each air-data plot, ``ekf_pass<i>`` (pass 2, or the
 only pass, with ±3σ; pass 1 as a line only when a pass 2 follows); the transducer scale factors
@@ -48,6 +49,7 @@ from workbench.problems.meads.telemetry import true_runs
 from workbench.recording import layout
 from workbench.recording.blueprint import events_view, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
+from workbench.recording.writer import PALETTE, PALETTE_NAMES
 
 __all__ = ["meads_blueprint", "MeadsRecorder", "heat_shield_mesh", "PLOTS"]
 
@@ -76,32 +78,49 @@ EKF_PLOTS = (
 )
 
 
-def meads_blueprint(ports: tuple[str, ...], ekf_passes: int) -> rrb.Blueprint:
+def meads_blueprint(ports: tuple[str, ...], ekf_passes: int, has_truth: bool = False) -> rrb.Blueprint:
     """Default layout: the heat shield (left top), air-data plots (right top, one tab per quantity),
     per-port pressure, residual and EKF-innovation tabs (right bottom, one per name of ``ports``, the
     vehicle's; the innovations of the last of ``ekf_passes``, none when 0), scorecard and events
-    (left bottom)."""
+    (left bottom). ``has_truth``: the density tab shows the error against the truth [%] (as drawn).
+    Views with many series name their colours in the title (a legend covered the curves)."""
     scene = rrb.Spatial3DView(
         name="Heat shield (reconstructed attitude, local ENU)",
         origin=layout.WORLD,
         eye_controls=rrb.EyeControls3D(position=[6.0, -6.0, 3.0], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 0.0, 1.0]),
     )
     ekf_q = {q for q, _, _, _ in EKF_PLOTS}
-    key = "blue least squares, grey ±3σ, pale blue truth"
+    key = "blue least squares, grey ±3σ, wide pale green truth"
     if ekf_passes:
         key += ", magenta EKF pass " + str(ekf_passes) + (", purple earlier passes" if ekf_passes > 1 else "")
+
+    last = f", magenta EKF pass {ekf_passes}" if ekf_passes else ""
+    colours = ", ".join(f"{p} {c}" for p, c in zip(ports, PALETTE_NAMES, strict=False))
+    titles = {
+        "density": (
+            f"ρ error vs truth [%] — blue least squares{last}, grey ±3σ, wide pale green truth (0)"
+            if has_truth
+            else f"density [kg/m³] — blue least squares{last}, grey ±3σ"
+        ),
+        "scale_factors": f"scale factors [%] — {colours}; thin grey ±3σ; pass 1 converging, later passes flat",
+    }
 
     def quantity(n: str, q: str):
         # the estimators' curves span the whole width: a legend there covered their right ends
         if q in ekf_q:
             return plot_view(f"{n} — {key}", layout.plot_path(q))
+        if q in titles:
+            return plot_view(titles[q], layout.plot_path(q))
         return plot_view(n, layout.plot_path(q), legend="RightTop")
 
-    plots = rrb.Tabs(*[tab(n, quantity(n, q)) for n, q in PLOTS], active_tab=0)
+    def tab_name(n: str, q: str) -> str:
+        return "ρ error [%]" if q == "density" and has_truth else n
+
+    plots = rrb.Tabs(*[tab(tab_name(n, q), quantity(n, q)) for n, q in PLOTS], active_tab=0)
     port_tabs = []
     for p in ports:
         views = [
-            plot_view(f"{p} [Pa]: measured vs model", layout.join(layout.MEADS_PLOT_PORTS, p), legend="RightTop"),
+            plot_view(f"{p} [Pa] — black dots measured, orange model", layout.join(layout.MEADS_PLOT_PORTS, p)),
             plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p)),
         ]
         if ekf_passes:
@@ -153,6 +172,9 @@ def _port_points(vehicle: FadsVehicle, offset: float) -> np.ndarray:
     return base + (0.03 + offset) * normal
 
 
+#: the truth as a wide translucent band: a thin truth line vanished under the EKF pass drawn on it
+TRUTH_STYLE = ((40, 170, 40, 110), 5.0)
+
 #: what the heat-shield scene shows (``layout.SCENE_KEY``, under it)
 SCENE_KEY_MD = (
     "**3D key** — heat shield in the reconstructed attitude (local ENU). Large dots on the ports: measured "
@@ -168,6 +190,14 @@ def _ramp(u: np.ndarray) -> np.ndarray:
     return np.stack([255 * u, 60 + 80 * (1 - np.abs(2 * u - 1)), 255 * (1 - u), np.full_like(u, 255)], -1).astype(
         np.uint8
     )
+
+
+def _used_span(use: np.ndarray) -> slice:
+    """The rows from a port's first to its last used sample: a series drawn over them with NaN where
+    the port was not used breaks at an interior dropout (rows simply left out would join its ends
+    with a straight line) and ends where a failed port stopped (no trailing flat zero)."""
+    k = np.flatnonzero(use)
+    return slice(int(k[0]), int(k[-1]) + 1) if k.size else slice(0, 0)
 
 
 def _residual_colors(z: np.ndarray, used: np.ndarray) -> np.ndarray:
@@ -255,6 +285,7 @@ class MeadsRecorder:
                 to_unit(getattr(f, f"sigma_{name}")),
                 truth=self._truth(name, t, truth_scale),
                 names=label,
+                truth_style=TRUTH_STYLE,
             )
         z = f.normalized_residual
         for j, p in enumerate(self.vehicle.port_names):
@@ -268,8 +299,13 @@ class MeadsRecorder:
             r = st.residual_used[:, j]
             use = np.isfinite(r) & np.isfinite(f.sigma_p[:, j])
             if use.any():
+                k = _used_span(use)
                 rec.series_with_bounds(
-                    layout.residual_path("pressure", p), t[use], r[use], f.sigma_p[use, j], names=f"{p} residual [Pa]"
+                    layout.residual_path("pressure", p),
+                    t[k],
+                    np.where(use, r, np.nan)[k],
+                    np.where(use, f.sigma_p[:, j], np.nan)[k],
+                    names=f"{p} residual [Pa]",
                 )
         # 3D: ports coloured by the measured pressure and by the normalised residual
         pts = _port_points(self.vehicle, 0.0)
@@ -302,10 +338,22 @@ class MeadsRecorder:
         rec, nav = self.rec, self.nav
         t = nav.t_p
         rec.series_with_bounds(
-            layout.plot_path("mach"), t, st.mach, st.sigma_mach, truth=self._truth("mach", t), names="Mach"
+            layout.plot_path("mach"),
+            t,
+            st.mach,
+            st.sigma_mach,
+            truth=self._truth("mach", t),
+            names="Mach",
+            truth_style=TRUTH_STYLE,
         )
         rec.series_with_bounds(
-            layout.plot_path("p_inf_Pa"), t, st.p_inf, st.sigma_p_inf, truth=self._truth("p_inf", t), names="p∞ [Pa]"
+            layout.plot_path("p_inf_Pa"),
+            t,
+            st.p_inf,
+            st.sigma_p_inf,
+            truth=self._truth("p_inf", t),
+            names="p∞ [Pa]",
+            truth_style=TRUTH_STYLE,
         )
         rt = self._truth("rho", t)
         if rt is not None:
@@ -315,20 +363,24 @@ class MeadsRecorder:
                 *st.density_error_pct(rt),
                 truth=np.zeros_like(t),
                 names="ρ error [%]",
+                truth_style=TRUTH_STYLE,
             )
         else:
             rec.series_with_bounds(layout.plot_path("density"), t, st.density, st.sigma_density, names="ρ [kg/m³]")
         w = st.winds
-        sigma = np.nan_to_num(w.sigma_NE)
         for j, q in enumerate(("wind_north_mps", "wind_east_mps")):
-            sd = sigma[:, j]
+            # a gap (NaN) where the least squares publish no wind: a flat 0 with a zero-width band
+            # read as a perfectly known calm
+            v, sd = w.wind_NE[:, j], w.sigma_NE[:, j]
+            shown = np.isfinite(v) & np.isfinite(sd)
             rec.series_with_bounds(
                 layout.plot_path(q),
                 t,
-                np.nan_to_num(w.wind_NE[:, j]),
-                np.where(np.isfinite(w.wind_NE[:, j]), sd, 0.0),
+                np.where(shown, v, np.nan),
+                np.where(shown, sd, np.nan),
                 truth=self._truth("wind_NE", t, col=j),
-                names=f"{'north' if j == 0 else 'east'} [m/s] (0 where not published)",
+                names=f"{'north' if j == 0 else 'east'} [m/s] (a gap where not published)",
+                truth_style=TRUTH_STYLE,
             )
         # wind-relative velocity arrow in body axes, from the air-data angles
         d = self._fit.air_direction_B
@@ -390,6 +442,8 @@ class MeadsRecorder:
                 t,
                 100 * np.broadcast_to(np.asarray(self.truth["sensor_scale"], float), (t.size, m)),
                 names=[f"{p} truth [%]" for p in ports],
+                colors=[PALETTE[j % len(PALETTE)] for j in range(m)],  # its port's colour, as named
+                widths=0.8,
             )
         inn, sd = st.forward.innovations.get("pressure"), st.innovation_sigma()
         if inn is not None:
@@ -397,11 +451,12 @@ class MeadsRecorder:
                 use = np.isfinite(inn.y[:, j]) & np.isfinite(sd[:, j])
                 if not use.any():
                     continue
+                k = _used_span(use)
                 rec.series_with_bounds(
                     layout.meads_ekf_innovation_path(st.index, p),
-                    inn.t[use],
-                    inn.y[use, j],
-                    sd[use, j],
+                    inn.t[k],
+                    np.where(use, inn.y[:, j], np.nan)[k],
+                    np.where(use, sd[:, j], np.nan)[k],
                     names=f"{p} EKF pass {st.index} innovation [Pa]",
                 )
 

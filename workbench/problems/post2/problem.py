@@ -227,11 +227,19 @@ class Post2Problem:
                     md += f"| {shown} | {e['propagation_only']:.4g} | {e['forward']:.4g} | {e['smoothed']:.4g}"
                     md += f" | {c['unit']} |\n"
             for name, p in tr.get("parameters", {}).items():
-                md += f"\n**{name}** (truth {p['truth']}):\n\n| after | error |\n|---|---|\n"
+                unit = summary["states"].get(name, {}).get("unit", "")
+                k = _display_factor(unit)
+                md += (
+                    f"\n**{name}** (truth {_numbers(p['truth'], k)}{'' if unit in ('', '1', '-') else ' ' + unit}):\n\n"
+                    f"| after | error [{unit or '-'}] |\n|---|---|\n"
+                )
                 for n in (1, 4, 10):
                     if f"error_after_{n}_obs" in p:
-                        md += f"| {n} observation(s) | {p[f'error_after_{n}_obs']} |\n"
-                md += f"| end (forward) | {p['final_error_forward']} (3σ {p['final_3sigma_forward']}) |\n"
+                        md += f"| {n} observation(s) | {_numbers(p[f'error_after_{n}_obs'], k, signed=True)} |\n"
+                md += (
+                    f"| end (forward) | {_numbers(p['final_error_forward'], k, signed=True)}"
+                    f" (3σ {_numbers(p['final_3sigma_forward'], k)}) |\n"
+                )
                 flag = "inside" if p["inside_3sigma_at_end"] else "**OUTSIDE**"
                 md += f"\nfinal error {flag} its 3σ.\n"
         if "health" in summary:
@@ -390,9 +398,22 @@ def _planted_table(summary: dict) -> str:
                 ratio = f"{p['posterior_over_prior_sigma'][i]:.2f}"
                 if not p["informed_by_data"][i]:
                     ratio += " (not informed by the data)"
+            tv = tv * _display_factor(st["unit"])  # the truth is SI, the states' final values display units
             md += f"| {name}{'' if len(p['truth']) == 1 else f'[{i}]'} | {tv:.6g} | {st['final'][i]:.6g} |"
             md += f" {3.0 * st['final_sigma'][i]:.3g} | {z:+.2f} | {inside} | {ratio} |\n"
     return md
+
+
+def _display_factor(unit: str) -> float:
+    """SI -> the display ``unit`` of a state in the summary (deg and deg/s are shown, rad stored)."""
+    return 180.0 / np.pi if unit in ("deg", "deg/s") else 1.0
+
+
+def _numbers(values, factor: float = 1.0, *, signed: bool = False) -> str:
+    """A scalar or vector (SI) as comma-separated numbers in the display unit (× ``factor``), four
+    significant figures, ``+`` on positives when ``signed`` (errors), instead of a raw list."""
+    fmt = "{:+.4g}" if signed else "{:.4g}"
+    return ", ".join(fmt.format(float(v) * factor) for v in np.atleast_1d(np.asarray(values, dtype=float)))
 
 
 def _si_unit(unit: str) -> str:

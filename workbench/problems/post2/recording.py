@@ -33,7 +33,7 @@ from workbench.recording.meshes import mesh3d
 from workbench.recording.moments import log_key_moments
 from workbench.recording.writer import open_recording
 
-__all__ = ["Post2Drawer", "open_post2_recording", "post2_blueprint", "COMPONENTS", "vehicle_meshes"]
+__all__ = ["Post2Drawer", "open_post2_recording", "post2_blueprint", "trajectory_eye", "COMPONENTS", "vehicle_meshes"]
 
 #: component names of the state blocks in the plots
 COMPONENTS = {
@@ -87,16 +87,42 @@ def vehicle_meshes(diameter: float, parachute_diameter: float | None, riser: flo
     return out
 
 
+def trajectory_eye(track: np.ndarray) -> rrb.EyeControls3D | None:
+    """A camera that frames the whole ``track`` (n, 3) [m, planet-centred frame of ``/world``]: it looks
+    at the middle of the track's bounding box from the side of its overall direction, a little above
+    (up = the local vertical there), at 1.6 × the box's diagonal; None for an empty or one-point track.
+    The viewer's own fit of the planet-scale scene left the track half off the pane."""
+    p = np.asarray(track, dtype=float)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if p.shape[0] < 2:
+        return None
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    c, size = 0.5 * (lo + hi), float(np.linalg.norm(hi - lo))
+    if size <= 0.0:
+        return None
+    up = c / np.linalg.norm(c) if np.linalg.norm(c) > 0 else np.array([0.0, 0.0, 1.0])
+    along = p[-1] - p[0]
+    side = np.cross(along, up)
+    if np.linalg.norm(side) < 1e-9 * max(np.linalg.norm(along), 1.0):  # a vertical track: any horizontal
+        side = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    eye = c + size * (1.5 * side + 0.5 * up)
+    return rrb.EyeControls3D(position=eye, look_target=c, eye_up=up)
+
+
 class Post2Drawer:
     """Draws the post2 stages; ``truth`` (the loaded truth.npz dict) or None; ``geometry`` {"diameter_m",
     "parachute_diameter_m" (or None), "riser_m"} and ``parachute_events`` {event name: True opens /
-    False releases} for the 3-D vehicle."""
+    False releases} for the 3-D vehicle; ``layout`` an optional ``(eye) -> blueprint``, the one layout of
+    the recording, sent by :meth:`finish` with the trajectory camera fitted to the smoothed track."""
 
-    def __init__(self, rec, truth, scorecard, geometry=None, parachute_events=None):
+    def __init__(self, rec, truth, scorecard, geometry=None, parachute_events=None, layout=None):
         self.rec, self.truth, self.scorecard = rec, truth, scorecard
         self.geometry = geometry or {}
         self.parachute_events = dict(parachute_events or {})
         self.events: tuple[tuple[float, str], ...] = ()
+        self.layout = layout
+        self.track: np.ndarray | None = None
         self.handle = StageDispatch(
             {ObservationData: self._data, ForwardStage: self._forward, Post2Result: self._result}
         )
@@ -181,6 +207,7 @@ class Post2Drawer:
         if res.rocket is not None:
             self._rocket(res)
         p = res.smap.raw(res.x, "position")
+        self.track = np.asarray(p, dtype=float)
         # tracks and the vehicle marker in screen units: at the trajectory's hundreds of km a line in
         # metres is invisible, and so is the capsule
         self.rec.line_strip(layout.join(layout.ESTIMATE_SMOOTHED, "track"), p, color=EST, radius=-1.2)
@@ -241,13 +268,17 @@ class Post2Drawer:
                 s.log(layout.POST2_RISERS, rr.Clear(recursive=False))
 
     def finish(self, result: object, summary: dict) -> None:
-        """Write the scorecard (headed by the verdict block), the health verdict and the key moments."""
+        """Write the scorecard (headed by the verdict block), the health verdict and the key moments,
+        then the recording's one layout (default and active), its trajectory camera on the track."""
         from workbench.problems.drawer import verdict_block
 
         self.rec.report(verdict_block(summary) + self.scorecard(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
         log_key_moments(self.rec, summary.get("key_moments", []))
+        if self.layout is not None:
+            eye = None if self.track is None else trajectory_eye(self.track)
+            self.rec.stream.send_blueprint(self.layout(eye), make_active=True, make_default=True)
 
 
 def post2_blueprint(
@@ -262,6 +293,7 @@ def post2_blueprint(
     observation_units: dict[str, str] | None = None,
     vehicle: bool = True,
     rocket_span: tuple[float, float] | None = None,
+    trajectory_eye: rrb.EyeControls3D | None = None,
 ):
     """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and, when ``vehicle`` (a
     vehicle is drawn: the problem file gives its diameter), "Vehicle" (origin `/world/vehicle`:
@@ -275,7 +307,9 @@ def post2_blueprint(
     A rocket flight (``[launch]``; ``rocket_span`` (t0, t1) [s] its reconstructed span, the x range
     of its views) opens on its results in the pad's frame instead: left, the tab "Rocket (pad frame)"
     (altitude above the pad, with vertical speed and speed below) before the 3D tabs; right, "pad ENU
-    position" (east, north, up, downrange) before the state tabs."""
+    position" (east, north, up, downrange) before the state tabs. ``trajectory_eye``: the Trajectory
+    view's camera (:func:`trajectory_eye`; None: the viewer's own); its grid (at the planet's
+    centre, far from the track) is off."""
     sizes = sizes or {}
     rc = residual_components or {}
     ou = observation_units or {}
@@ -305,7 +339,9 @@ def post2_blueprint(
             continue
         views = [plot_view(f"{n}.{c} residual [{unit}] — blue, grey ±3σ", layout.residual_path(n, c)) for c in comps]
         res.append(tab(n, views[0]) if len(views) == 1 else rrb.Grid(*views, name=f"{n} residuals"))
-    scene_views = [rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD)]
+    scene_views = [
+        rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD, eye_controls=trajectory_eye, line_grid=False)
+    ]
     if vehicle:
         scene_views.append(
             rrb.Spatial3DView(
@@ -342,7 +378,8 @@ def post2_blueprint(
         report_view("Report"),
         events_view(),
     ]
-    shares = [3.0] + ([2.0] if res else []) + [1.5, 1.0]
+    # the events log tall enough for a few rows (at 1.0 it showed one)
+    shares = [2.5] + ([1.7] if res else []) + [1.6, 1.8]
     return rrb.Blueprint(
         rrb.Horizontal(scenes, rrb.Vertical(*right, row_shares=shares), column_shares=[2, 3]),
         rrb.TimePanel(state="expanded", timeline=layout.TIME),
@@ -376,18 +413,24 @@ def open_post2_recording(
     {observation: names}, ``observation_units`` {observation: SI unit}, the observations a weight
     ``schedules`` touches, ``has_events``);
     ``geometry``, ``parachute_events``: see :class:`Post2Drawer`; ``rocket_span``: (t0, t1) [s]
-    of a flight with a ``[launch]`` pad (its pad-frame views first, on that span)."""
-    bp = post2_blueprint(
-        list(states),
-        list(observations),
-        truth is not None,
-        sizes=sizes,
-        residual_components=residual_components,
-        observation_units=observation_units,
-        schedules=list(schedules),
-        has_events=has_events,
-        vehicle=bool((geometry or {}).get("diameter_m")),  # as Post2Drawer._vehicle draws it
-        rocket_span=rocket_span,
-    )
-    with open_recording(path, name, blueprint=bp, properties=properties) as rec:
-        yield Post2Drawer(rec, truth, scorecard, geometry, parachute_events)
+    of a flight with a ``[launch]`` pad (its pad-frame views first, on that span). The layout is sent
+    once, by :meth:`Post2Drawer.finish`."""
+
+    def blueprint(eye):
+        return post2_blueprint(
+            list(states),
+            list(observations),
+            truth is not None,
+            sizes=sizes,
+            residual_components=residual_components,
+            observation_units=observation_units,
+            schedules=list(schedules),
+            has_events=has_events,
+            vehicle=bool((geometry or {}).get("diameter_m")),  # as Post2Drawer._vehicle draws it
+            rocket_span=rocket_span,
+            trajectory_eye=eye,
+        )
+
+    # opened without a layout: the one layout, with the camera fitted to the track, comes at the end
+    with open_recording(path, name, properties=properties) as rec:
+        yield Post2Drawer(rec, truth, scorecard, geometry, parachute_events, layout=blueprint)

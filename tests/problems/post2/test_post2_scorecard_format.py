@@ -1,0 +1,62 @@
+"""The post2 scorecard's truth sections print numbers, not Python lists, and in one unit per row
+(the planted tilt is stored in radians, its recovered value shown in degrees)."""
+
+from __future__ import annotations
+
+import math
+
+from workbench.problems.post2.problem import Post2Problem
+
+
+def _summary() -> dict:
+    tilt = math.radians(10.0)
+    return {
+        "scenario": "fake",
+        "dof": 3,
+        "states": {
+            "tilt": {"unit": "deg", "final": [10.15], "final_sigma": [0.305]},
+            "accel_bias": {"unit": "m/s^2", "final": [0.0029, 0.0, 0.0], "final_sigma": [0.0009, 1e-6, 1e-6]},
+            "radar_scale_factor": {"unit": "1", "final": [0.9319], "final_sigma": [0.0027]},
+        },
+        "observations": {},
+        "truth": {
+            "parameters": {
+                "tilt": {
+                    "truth": [tilt],
+                    "error_after_1_obs": [-0.0872664625997],
+                    "final_error_forward": [0.00258211143910339],
+                    "final_3sigma_forward": [0.0159885085134442],
+                    "final_error_over_3sigma_smoothed": [0.1615],
+                    "inside_3sigma_at_end": True,
+                },
+                "radar_scale_factor": {
+                    "truth": [0.93],
+                    "final_error_forward": [0.00185874302786870],
+                    "final_3sigma_forward": [0.00800712285332602],
+                    "final_error_over_3sigma_smoothed": [0.23],
+                    "inside_3sigma_at_end": True,
+                },
+                "accel_bias": {
+                    "truth": [0.003, 0.0, 0.0],
+                    "final_error_forward": [-0.000102710674332668, 0.0, 0.0],
+                    "final_3sigma_forward": [0.00267351186593159, 3e-06, 3e-06],
+                    "final_error_over_3sigma_smoothed": [-0.04, 0.0, 0.0],
+                    "inside_3sigma_at_end": True,
+                },
+            }
+        },
+    }
+
+
+def test_truth_sections_in_display_units_without_raw_lists():
+    md = Post2Problem().scorecard(_summary())
+    truth = md[md.index("## Against the truth") :]
+    assert "[" not in truth.replace("[deg]", "").replace("[m/s^2]", "").replace("[0]", "").replace("[1]", "").replace(
+        "[2]", ""
+    )
+    assert "| tilt | 10 | 10.15 |" in truth  # planted in degrees beside the recovered degrees
+    assert "**tilt** (truth 10 deg)" in truth
+    assert "| end (forward) | +0.1479 (3σ 0.9161) |" in truth
+    assert "0.00258211143910339" not in truth and "0.0872664625997" not in truth
+    assert "**accel_bias** (truth 0.003, 0, 0 m/s^2)" in truth
+    assert "**radar_scale_factor** (truth 0.93):" in truth  # no unit "1" after a pure number
