@@ -506,6 +506,12 @@ def _as_vector(a: np.ndarray) -> np.ndarray:
     return a.reshape(1) if a.ndim == 0 else a
 
 
+_NON_FINITE = (
+    "non-finite innovation (check z, h(x) and R): the state diverged, or this measurement's values are not in "
+    "the unit its file declares"
+)
+
+
 def _update(
     x, P, z, h, R, layout, H, residual, gate_probability, iterations, eps,
     gain_projector=None, step_tol=None, gate_threshold=None,
@@ -525,6 +531,8 @@ def _update(
     R = np.asarray(R, dtype=float)
     if R.ndim < 2:
         R = R.reshape(1, 1)
+    if not np.all(np.isfinite(y)):  # before S: a NaN in S passes some LAPACKs' potrf, not others
+        raise np.linalg.LinAlgError(_NON_FINITE)
     PHt = P @ Hk.T
     S = Hk @ PHt + R
     c, info = _potrf(S, lower=1)
@@ -533,10 +541,7 @@ def _update(
     w, _ = _potrs(c, y, lower=1)
     nis = float(y @ w)
     if not math.isfinite(nis):
-        raise np.linalg.LinAlgError(
-            "non-finite innovation (check z, h(x) and R): the state diverged, or this measurement's values "
-            "are not in the unit its file declares"
-        )
+        raise np.linalg.LinAlgError(_NON_FINITE)
     Kt, _ = _potrs(c, PHt.T, lower=1)
     K = Kt.T
     if gain_projector is not None:

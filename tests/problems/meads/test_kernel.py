@@ -140,3 +140,24 @@ def test_flow_kernel_matches_the_numpy_air_data():
         a, b, _, M, _, _ = ekf.air_data_of_state(x, Cb, 1.335)
         got = flow_kernel(x, Cb, MARS.rotation_rate, 1.335)
         np.testing.assert_allclose(got, (a, b, M), rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("model", ["table", "newtonian"])
+def test_kernel_at_a_lost_atmosphere_is_not_finite_as_the_reference(model):
+    """A filter that lost the atmosphere (ln ρ∞ = −750: ρ∞ underflows to 0, so q∞ = 0 and M = 0)
+    predicts non-finite pressures on both paths: the compiled kernel follows IEEE arithmetic as
+    numpy does (no ZeroDivisionError), so the forward pass reports the same non-finite innovation
+    at the same step."""
+    X, C = _states(1)
+    x = X[0].copy()
+    x[ekf.ILR] = -750.0
+    inp = _inputs(model)
+    use = np.arange(7)
+    with np.errstate(all="ignore"):
+        p0, _ = ekf.make_pressure_model(inp, compiled=False)(x, C[0], use)
+    p1, _ = ekf.make_pressure_model(inp)(x, C[0], use)
+    assert not np.isfinite(p0).any()
+    np.testing.assert_array_equal(np.isfinite(p1), np.isfinite(p0))
+    # and what the pass says of such a state: the atmosphere, the temperature it implies, the biases
+    note = ekf.divergence_note(x, SimpleNamespace(bias_sigma_pa=3.5))
+    assert "ln ρ∞ = -750" in note and "K; Mars' atmosphere is ~100–300 K" in note and "σ of its prior" in note

@@ -219,3 +219,18 @@ def test_filter_divergence_is_a_numerical_failure_naming_the_stage(clean, monkey
     with pytest.raises(np.linalg.LinAlgError, match=r"EKF pass 1: the filter diverged.*pressures.csv"):
         for _ in md.reconstruct(clean.settings, clean.paths):
             pass
+
+
+def test_a_later_pass_diverging_does_not_blame_the_inputs(clean, monkeypatch):
+    """Pass 2 runs on the inputs pass 1 converged on: its divergence names the pass, the step and
+    the filter's state (the EKF's diagnosis), not the files."""
+
+    def second_fails(*_a, **_k):
+        yield SimpleNamespace(index=1)
+        raise np.linalg.LinAlgError("step 345 (t=43.125 s), measurement 'pressure': non-finite innovation")
+
+    monkeypatch.setattr(md, "run_passes", second_fails)
+    with pytest.raises(np.linalg.LinAlgError, match=r"EKF pass 2: the filter diverged.*step 345") as err:
+        for _ in md.reconstruct(clean.settings, clean.paths):
+            pass
+    assert "pass 1 converged on the same" in str(err.value) and "pressures.csv" not in str(err.value)

@@ -94,6 +94,7 @@ __all__ = [
     "make_transition",
     "make_pressure_model",
     "flight_distance",
+    "divergence_note",
     "markov_step",
     "markov_steady_var",
 ]
@@ -638,7 +639,10 @@ def run_pass(
     C_B_M = np.swapaxes(quat_to_dcm(inp.q_M_B), 1, 2)
     transition = make_transition(inp, st, compiled=compiled, keep=keep)
 
+    seen = {}
+
     def measurements_at(k, tk, x):
+        seen["x"] = x  # the prior of the step (the diagnosis of a failed update)
         use = np.flatnonzero(inp.usable[k] & np.isfinite(p[k]))
         if use.size == 0:
             return []
@@ -675,7 +679,10 @@ def run_pass(
                 consider[ILAM] = True
             fp = _forward_compiled(inp, st, keep, x0, P0, p, sig, consider, keep_all)
         else:
-            fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, layout, keep_q=keep_all)
+            try:
+                fp = run_filter(x0, P0, inp.t, transition, None, measurements_at, layout, keep_q=keep_all)
+            except np.linalg.LinAlgError as err:
+                raise np.linalg.LinAlgError(f"{err}; {divergence_note(_expand(seen['x'], keep), st)}") from err
         consider_idx = None if estimate_scale else np.arange(keep.size)[ILAM]
         sm = _smooth_compiled(fp, consider_idx) if compiled else None
         if sm is None:
@@ -753,10 +760,12 @@ def _forward_compiled(inp, st, keep, x0, P0, p, sig, consider, keep_all) -> Forw
     if status:
         what = {
             1: "innovation covariance S is not positive definite",
-            2: "non-finite innovation (check z, h(x) and R): the state diverged",
+            2: "non-finite innovation (check z, h(x) and R): the state diverged, or this measurement's values are "
+            "not in the unit its file declares",
             3: "iterated update: H P Hᵀ + R not positive definite",
         }[int(status)]
-        raise np.linalg.LinAlgError(f"step {k} (t={t[k]} s), measurement 'pressure': {what}")
+        note = divergence_note(_expand(out["x_prior"][k], keep), st)
+        raise np.linalg.LinAlgError(f"step {k} (t={t[k]} s), measurement 'pressure': {what}; {note}")
     steps = np.flatnonzero(usable.any(axis=1))
     inn = InnovationHistory(
         t=t[steps],
@@ -770,6 +779,25 @@ def _forward_compiled(inp, st, keep, x0, P0, p, sig, consider, keep_all) -> Forw
     )
     return ForwardPass(t, innovations={"pressure": inn} if steps.size else {}, **{
         **out, "Q": out["Q"] if keep_all else None})  # fmt: skip
+
+
+def divergence_note(x: np.ndarray, st: EkfSettings) -> str:
+    """What the state x (N_X,) of a failed update says about it: the atmosphere it carries (ln p∞,
+    ln ρ∞ and the temperature their ratio implies, p∞/ρ∞ = R T with the engineering atmosphere's
+    gas constant R) and the residual biases in σ of their prior.  A pressure model fed an
+    atmosphere far below the true density predicts ~0 Pa with a vanishing sensitivity to ln ρ∞, so
+    the biases take up the pressure instead: the filter lost the atmosphere (its own divergence,
+    not a unit error of the inputs, when both show it)."""
+    ln_t = float(x[ILP] - x[ILR]) - math.log(MarsEngineeringAtmosphere().gas_constant)
+    temp = f"{math.exp(ln_t):.3g} K" if ln_t < 700.0 else f"e^{ln_t:.0f} K"
+    text = (
+        f"the state's atmosphere: ln p∞ = {x[ILP]:.3g}, ln ρ∞ = {x[ILR]:.3g} (p∞/ρ∞ the R T of {temp}; "
+        "Mars' atmosphere is ~100–300 K)"
+    )
+    if st.bias_sigma_pa > 0.0:
+        b = np.abs(x[IBIAS]) / st.bias_sigma_pa
+        text += f", the largest residual bias {b.max():.3g}σ of its prior"
+    return text
 
 
 def _smooth_compiled(fp: ForwardPass, consider: np.ndarray | None) -> SmoothedPass | None:

@@ -546,12 +546,8 @@ def reconstruct(settings: MeadsSettings, telemetry: Mapping[str, Path]) -> Itera
                 ps = next(it)
             except StopIteration:
                 break
-            except (OverflowError, ZeroDivisionError, FloatingPointError) as err:
-                raise np.linalg.LinAlgError(
-                    f"EKF pass {len(passes) + 1}: the filter diverged ({type(err).__name__}: {err}) — its state left "
-                    f"the physical range; the pressures ({tel.pressure_file}), the IMU ({tel.imu_file}) and the "
-                    "initial state are inconsistent (a unit, axis or time-base error?)"
-                ) from err
+            except (OverflowError, ZeroDivisionError, FloatingPointError, np.linalg.LinAlgError) as err:
+                raise np.linalg.LinAlgError(_divergence_message(len(passes) + 1, err, tel)) from err
             passes.append(ps)
             yield ps
     summary = _summary(settings.run.name, tel, nav, lag, air, wind, est)
@@ -560,6 +556,22 @@ def reconstruct(settings: MeadsSettings, telemetry: Mapping[str, Path]) -> Itera
     summary["health"] = meads_health(tel, nav, air, wind, est, passes, wind_sigma_mps=cfg.ekf.wind_sigma_mps)
     summary["reconstruction_wall_s"] = time.perf_counter() - t_start
     yield MeadsResult(PressureData(tel, vehicle), nav, lag, air, wind, summary, tuple(passes))
+
+
+def _divergence_message(index: int, err: Exception, tel: MeadsTelemetry) -> str:
+    """The error of EKF pass ``index`` diverging with ``err``: pass 1 names the files (the
+    pressures, the IMU and the initial state may disagree: a unit, axis or time-base error); a
+    later pass ran on the same inputs after pass 1 converged on them, so they are not implicated."""
+    head = f"EKF pass {index}: the filter diverged ({type(err).__name__}: {err}) — its state left the physical range"
+    if index == 1:
+        return (
+            f"{head}; the pressures ({tel.pressure_file}), the IMU ({tel.imu_file}) and the initial state are "
+            "inconsistent (a unit, axis or time-base error?)"
+        )
+    return (
+        f"{head}; pass 1 converged on the same pressures, IMU and initial state, so they are not implicated: "
+        "a divergence of the filter itself (its state at the failed step above)"
+    )
 
 
 def ekf_inputs(
