@@ -515,9 +515,14 @@ def winds_and_density(fit: AirDataFit, nav: Navigation, est: EstimatorSettings, 
 # ------------------------------------------------------------------------------- pipeline
 
 
-def reconstruct(settings: MeadsSettings, telemetry: Mapping[str, Path]) -> Iterator[object]:
+def reconstruct(
+    settings: MeadsSettings, telemetry: Mapping[str, Path], *, other_model: bool = True
+) -> Iterator[object]:
     """Run the stages of the module docstring on the telemetry files (``{stream: path}``) with the
-    run's ``settings`` (its vehicle, estimator and filter); yields each stage."""
+    run's ``settings`` (its vehicle, estimator and filter); yields each stage.  ``other_model``
+    False: the other estimator model is fitted only when the health needs it (the table beside
+    a Newtonian estimator, :func:`~.health.model_form_checks`), else ``air.alt`` is None (a Monte
+    Carlo member, which scores neither)."""
     t_start = time.perf_counter()
     cfg = settings
     est = cfg.estimator
@@ -531,9 +536,11 @@ def reconstruct(settings: MeadsSettings, telemetry: Mapping[str, Path]) -> Itera
     ports = list(tel.ports)
     first, fit, mask, failures, hi = fit_with_failures(tel.t_p, lag.p, vehicle, nav, est, ports, tel.pressure_file)
     ratio = plausibility(first, nav, vehicle, est, tel, cfg.vehicle_file)
-    alt_model = "table" if est.model == "newtonian" else "newtonian"
-    alt_est = replace(est, model=alt_model, fixed_r=0.0)
-    alt, _ = reduce_pressures(tel.t_p, lag.p, vehicle, nav.mach_inertial, alt_est, mask=mask)
+    alt = None
+    if other_model or est.model == "newtonian":
+        alt_model = "table" if est.model == "newtonian" else "newtonian"
+        alt_est = replace(est, model=alt_model, fixed_r=0.0)
+        alt, _ = reduce_pressures(tel.t_p, lag.p, vehicle, nav.mach_inertial, alt_est, mask=mask)
     air = AirDataStage(tel.t_p, first, fit, mask, tuple(failures), alt, ratio, hi)
     yield air
     wind = winds_and_density(fit, nav, est, hi)
