@@ -13,9 +13,9 @@ switched off: the study is of the error model), the reconstruction as ``workbenc
 other model's fit, not scored), and the errors with their reported 1σ (:func:`error_histories`).
 Members fly different entries, so the statistics are per flight condition: :func:`aggregate_by_mach`
 bins every member-sample at its own true Mach (where its q∞ ≥ 850 Pa) and reduces each bin (bias,
-Monte Carlo 3σ, reported 3σ, their ratio, fraction inside; thin bins marked); :func:`summarize` tabulates them. Results are gathered by
-member index, so they do not depend on the executor. The full description: docs/tuning/meads.md,
-"truth_mc.py".
+Monte Carlo 3σ, reported 3σ, their ratio, fraction inside; thin bins marked); :func:`summarize`
+tabulates them. Results are gathered by member index, so they do not depend on the executor. The
+full description: docs/tuning/meads.md, "truth_mc.py".
 """
 
 from __future__ import annotations
