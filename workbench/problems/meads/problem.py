@@ -86,6 +86,7 @@ class MeadsProblem(PipelineProblem):
     compiled_modules = (
         "workbench.problems.meads.kernel",
         "workbench.problems.meads.truth_fast",
+        "workbench.models.flush_airdata_kernel",
         "workbench.estimation.strapdown_kernel",
     )
 
