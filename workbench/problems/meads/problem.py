@@ -88,6 +88,7 @@ class MeadsProblem(PipelineProblem):
         "workbench.problems.meads.truth_fast",
         "workbench.models.flush_airdata_kernel",
         "workbench.estimation.strapdown_kernel",
+        "workbench.estimation.propagation_kernel",
     )
 
     def settings(self, scenario: Scenario) -> MeadsSettings:
