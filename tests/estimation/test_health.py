@@ -96,6 +96,27 @@ def test_covariance_stats_chunked_equal_whole(monkeypatch):
         assert "step 1777" in covariance_check(P_sym).message
 
 
+def test_screened_covariance_check_equals_the_full_one():
+    """Without ``stats`` the check computes the eigenvalues only where they can decide it (a
+    Cholesky screen above the smallest of every 8th step): the same check as with every step's
+    eigenvalues — positive definite, one indefinite or semi-definite step off the sampled ones,
+    the minimum between samples, states of very different scales, correlation matrices."""
+    rng = np.random.default_rng(9)
+    A = rng.normal(size=(3001, 14, 14))
+    P = A @ np.swapaxes(A, 1, 2) + 1e-3 * np.eye(14)
+    cases = [P]
+    for step, d in ((1234, -1.0), (2001, -1e-13), (77, 1e-9)):
+        Q = P.copy()
+        Q[step] = np.diag(np.r_[np.ones(13), d])
+        cases.append(Q)
+    s = np.r_[np.full(7, 1e4), np.full(7, 1e-8)]
+    cases.append(P * s[None, :, None] * s[None, None, :])
+    d = 1.0 / np.sqrt(np.einsum("nii->ni", P))
+    cases.append(P * d[:, :, None] * d[:, None, :])
+    for Q in cases:
+        assert covariance_check(Q, "c") == covariance_check(Q, "c", stats=covariance_stats(Q))
+
+
 def test_interval_and_gap_checks():
     assert interval_check("e", 0.4, 0.0, 1.0, "restitution").status == OK
     c = interval_check("e", 1.64, 0.0, 1.0, "restitution")

@@ -31,6 +31,7 @@ from scipy.linalg import lapack
 
 from workbench.core.rotation import attitude_error, attitude_error_one, quat_boxplus, quat_boxplus_one, quat_normalize
 from workbench.estimation.consistency import chi2_gate
+from workbench.estimation.propagation_kernel import sandwich
 
 __all__ = [
     "ErrorStateLayout",
@@ -443,6 +444,8 @@ def derived_with_sigma(
     P: np.ndarray,
     layout: ErrorStateLayout,
     eps: float | np.ndarray = 1e-6,
+    *,
+    compiled: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Quantities derived from a history of states, with their covariance by first-order propagation.
 
@@ -451,7 +454,8 @@ def derived_with_sigma(
     belongs to ``x[i]``, so g may broadcast per-sample constants shaped (n, 1, ...)).  It is called
     once on the stack ``[x, x ⊞ ε e_j, x ⊞ −ε e_j]`` (r = 1 + 2 n_e); ``J`` (n, k, n_e) are the central
     differences.  Returns ``(g(x) (n, k), 1σ (n, k) = sqrt(diag(J P Jᵀ)), covariance (n, k, k))``.
-    ``eps`` scalar or (n_e,), error-state units.
+    ``eps`` scalar or (n_e,), error-state units.  ``compiled``: ``J P Jᵀ`` by
+    :func:`.propagation_kernel.sandwich`; False: by ``np.einsum``, the reference (the same sums).
     """
     x = np.asarray(x, dtype=float)
     P = np.asarray(P, dtype=float)
@@ -463,7 +467,11 @@ def derived_with_sigma(
     Y = np.asarray(g(X), dtype=float)
     y0, Yp, Ym = Y[:, 0], Y[:, 1 : 1 + n_e], Y[:, 1 + n_e :]
     J = np.swapaxes((Yp - Ym) / (2.0 * e)[None, :, None], 1, 2)
-    C = np.einsum("nkj,nji,nli->nkl", J, P, J)
+    if compiled:
+        C = np.empty((J.shape[0], J.shape[1], J.shape[1]))
+        sandwich(J, P, C)
+    else:
+        C = np.einsum("nkj,nji,nli->nkl", J, P, J)
     C = 0.5 * (C + np.swapaxes(C, 1, 2))
     return y0, np.sqrt(np.maximum(np.einsum("nkk->nk", C), 0.0)), C
 

@@ -165,6 +165,68 @@ def covariance_stats(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return asym_abs, asym_rel, emin
 
 
+#: every this many steps :func:`_smallest_eigenvalues_screened` computes the eigenvalues outright
+_SCREEN_STRIDE = 8
+
+
+def _relative_asymmetry(P: np.ndarray) -> np.ndarray:
+    """``max|P − Pᵀ|`` / the largest |diagonal entry| per step of ``P`` (n, k, k): the second
+    output of :func:`covariance_stats`, over the same chunks."""
+    n = P.shape[0]
+    out = np.empty(n)
+    for a in range(0, n, _CHUNK_STEPS):
+        Pc = P[a : a + _CHUNK_STEPS]
+        scale = np.maximum(np.max(np.abs(np.einsum("nii->ni", Pc)), axis=1), 1e-300)
+        out[a : a + _CHUNK_STEPS] = np.max(np.abs(Pc - np.swapaxes(Pc, 1, 2)), axis=(1, 2)) / scale
+    return out
+
+
+def _not_positive_definite(S: np.ndarray) -> np.ndarray:
+    """(m,) True where the Cholesky factorisation of the symmetric ``S`` (m, k, k) fails: one
+    batched factorisation, halved recursively around the failures (they are few)."""
+    try:
+        np.linalg.cholesky(S)
+        return np.zeros(S.shape[0], bool)
+    except np.linalg.LinAlgError:
+        if S.shape[0] == 1:
+            return np.ones(1, bool)
+    h = S.shape[0] // 2
+    return np.concatenate([_not_positive_definite(S[:h]), _not_positive_definite(S[h:])])
+
+
+def _smallest_eigenvalues_screened(P: np.ndarray) -> np.ndarray:
+    """Per step of ``P`` (n, k, k) the smallest eigenvalue of its symmetric part exactly as
+    :func:`covariance_stats` computes it wherever it can decide :func:`covariance_check` (the
+    minimum, its step, the steps ≤ 0), +inf at the other steps.  The eigenvalues of every
+    :data:`_SCREEN_STRIDE`-th step give a candidate minimum μ > 0; a step whose symmetric part
+    minus (μ + δ) I has a Cholesky factor has its smallest eigenvalue above μ (δ = 1e-10 k
+    max|diag| exceeds the factorisation's backward error), the others are computed outright.
+    Every step is computed when the screen cannot pay: small matrices (k < 10), μ ≤ 0, or δ ≥ μ
+    (states of very different scales: the smallest eigenvalue is at the round-off of the largest)."""
+    n, k = P.shape[0], P.shape[1]
+    if n <= _SCREEN_STRIDE or k < 10:
+        return covariance_stats(P)[2]
+    out = np.full(n, np.inf)
+    sample = np.arange(0, n, _SCREEN_STRIDE)
+    for a in range(0, sample.size, _CHUNK_STEPS):
+        Pc = P[sample[a : a + _CHUNK_STEPS]]
+        out[sample[a : a + _CHUNK_STEPS]] = np.min(np.linalg.eigvalsh(0.5 * (Pc + np.swapaxes(Pc, 1, 2))), axis=1)
+    mu = float(np.min(out[sample]))
+    delta = 1e-10 * k * float(np.max(np.abs(np.einsum("nii->ni", P))))
+    if not (mu > 0.0 and delta < mu):
+        return covariance_stats(P)[2]
+    tau = mu + delta
+    rest = np.setdiff1d(np.arange(n), sample)
+    for a in range(0, rest.size, _CHUNK_STEPS):
+        idx = rest[a : a + _CHUNK_STEPS]
+        Pc = P[idx]
+        S = 0.5 * (Pc + np.swapaxes(Pc, 1, 2))
+        low = _not_positive_definite(S - tau * np.eye(k))
+        if low.any():
+            out[idx[low]] = np.min(np.linalg.eigvalsh(S[low]), axis=1)
+    return out
+
+
 def covariance_check(
     P: np.ndarray,
     name: str = "covariance",
@@ -181,7 +243,8 @@ def covariance_check(
     round-off), below that an ERROR.  Components known exactly at every step (an all-zero row and
     column, :func:`exact_components`: an error declared absent) are left out and named (by
     ``labels``, one per component — e.g. the setting behind it — when given).  ``stats``:
-    :func:`covariance_stats` of ``P`` when the caller has them already (not computed again)."""
+    :func:`covariance_stats` of ``P`` when the caller has them already (not computed again); without
+    them the eigenvalues are computed only at the steps that can decide the check (the same check)."""
     P = np.asarray(P, float)
     if P.ndim == 2:
         P = P[None]
@@ -198,11 +261,17 @@ def covariance_check(
             f"process noise — carried with zero variance: {', '.join(named)})"
         )
         return Check(c.name, c.status, c.value, c.bound, c.message + note)
-    _, asym_k, emin_k = covariance_stats(P) if stats is None else stats
-    asym = float(np.max(asym_k))
+    if stats is None:
+        asym = float(np.max(_relative_asymmetry(P)))
+        if asym > rtol:
+            return Check(name, ERROR, _f(asym), rtol, f"{name}: not symmetric (relative asymmetry {asym:.2g})")
+        emin_k = _smallest_eigenvalues_screened(P)
+    else:
+        _, asym_k, emin_k = stats
+        asym = float(np.max(asym_k))
+        if asym > rtol:
+            return Check(name, ERROR, _f(asym), rtol, f"{name}: not symmetric (relative asymmetry {asym:.2g})")
     emin = float(np.min(emin_k))
-    if asym > rtol:
-        return Check(name, ERROR, _f(asym), rtol, f"{name}: not symmetric (relative asymmetry {asym:.2g})")
     if emin <= 0.0:
         step = int(np.argmin(emin_k))
         bad = np.flatnonzero(emin_k <= 0.0)

@@ -46,6 +46,7 @@ from scipy.interpolate import RegularGridInterpolator
 from workbench.core.atmosphere import MARS_GAMMA
 from workbench.io.scenario import ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, load_file
+from workbench.models.flush_airdata_kernel import multilinear4, out_of_grid
 
 __all__ = [
     "FlushPort",
@@ -392,8 +393,13 @@ class SurfacePressureTable:
     s: np.ndarray
     values: np.ndarray
 
-    def cp(self, mach: np.ndarray, alpha_t: np.ndarray, clock_rel: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Cp at the broadcast points (any common shape)."""
+    def cp(
+        self, mach: np.ndarray, alpha_t: np.ndarray, clock_rel: np.ndarray, s: np.ndarray, *, fast: bool = True
+    ) -> np.ndarray:
+        """Cp [-] at the broadcast points (any common shape): Mach [-], α_T [rad], clock relative to
+        the wind plane [rad, wrapped to 0..π], s = r/Rb [-], clamped to the grid.  ``fast``: the
+        compiled interpolation (:func:`.flush_airdata_kernel.multilinear4`, scipy's arithmetic);
+        False: scipy's ``RegularGridInterpolator``, the reference (bit-identical results)."""
         m, a, c, s = np.broadcast_arrays(
             np.asarray(mach, float), np.asarray(alpha_t, float), np.asarray(clock_rel, float), np.asarray(s, float)
         )
@@ -407,7 +413,21 @@ class SurfacePressureTable:
             ],
             axis=-1,
         )
-        return self._interpolator(pts.reshape(-1, 4)).reshape(m.shape)
+        flat = pts.reshape(-1, 4)
+        if not fast:
+            return self._interpolator(flat).reshape(m.shape)
+        grid = (self.mach, self.alpha_t, self.clock, self.s)
+        bad = out_of_grid(*grid, flat)
+        if bad >= 0:  # a NaN coordinate: as scipy's bounds check
+            raise ValueError(f"One of the requested xi is out of bounds in dimension {bad}")
+        out = np.empty(flat.shape[0])
+        multilinear4(*grid, self._values_c, flat, out)
+        return out.reshape(m.shape)
+
+    @cached_property
+    def _values_c(self) -> np.ndarray:
+        """``values`` as a C-contiguous float array (what the compiled interpolation indexes)."""
+        return np.ascontiguousarray(self.values, dtype=float)
 
     @cached_property
     def _interpolator(self) -> RegularGridInterpolator:

@@ -47,6 +47,7 @@ from workbench.estimation.strapdown import imu_arrays, integrate
 from workbench.io.telemetry import TelemetryError
 from workbench.models.flush_airdata import (
     FadsVehicle,
+    SurfacePressureTable,
     build_estimator_table,
     second_order_tube,
 )
@@ -333,11 +334,17 @@ def reduce_pressures(
     *,
     model: str | None = None,
     mask: np.ndarray | None = None,
+    table: SurfacePressureTable | None = None,
 ) -> tuple[AirDataFit, np.ndarray]:
     """One least-squares reduction with the settings' solution set (``"auto"``: fixed R above
-    ``switch_mach``, the Mach set below); returns the fit and the rows solved with fixed R."""
+    ``switch_mach``, the Mach set below); returns the fit and the rows solved with fixed R.
+    ``table``: the estimator's table (:func:`build_estimator_table` of ``vehicle``) for the table
+    model, built here when not given."""
     model = model or est.model
-    table = build_estimator_table(vehicle) if model == "table" else None
+    if model != "table":
+        table = None
+    elif table is None:
+        table = build_estimator_table(vehicle)
     sig = sensor_sigma(p, vehicle, est.model_error_frac)
     kw = dict(gamma=est.gamma, table=table, iterations=est.iterations, mask=mask)
     sol = est.solution
@@ -416,18 +423,26 @@ def _pad(a: np.ndarray, shape: tuple) -> np.ndarray:
 
 
 def fit_with_failures(
-    t: np.ndarray, p: np.ndarray, vehicle: FadsVehicle, nav: Navigation, est: EstimatorSettings, ports, file: str
+    t: np.ndarray,
+    p: np.ndarray,
+    vehicle: FadsVehicle,
+    nav: Navigation,
+    est: EstimatorSettings,
+    ports,
+    file: str,
+    table: SurfacePressureTable | None = None,
 ) -> tuple[AirDataFit, AirDataFit, np.ndarray, list[PortFailure], np.ndarray]:
     """Fit with every port (``first``), stuck detection, residual detection (at most two ports),
-    refits; returns (first, final, mask of the ports used, failures, fixed-R rows)."""
+    refits; returns (first, final, mask of the ports used, failures, fixed-R rows).  ``table`` as
+    in :func:`reduce_pressures`."""
     mask = np.isfinite(p)
-    first, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask.copy())
+    first, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask.copy(), table=table)
     failures = detect_stuck(t, p, ports, vehicle)
     for f in failures:
         mask[f.k :, ports.index(f.port)] = False
     fit = first
     if failures:
-        fit, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask)
+        fit, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask, table=table)
     for _ in range(2):
         live = mask & (np.nan_to_num(fit.qbar)[:, None] > 50.0)
         f = detect_residual_failure(fit, t, ports, live, est.failed_port_nsigma, est.failed_port_samples)
@@ -435,7 +450,7 @@ def fit_with_failures(
             break
         failures.append(f)
         mask[f.k :, ports.index(f.port)] = False
-        fit, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask)
+        fit, hi = reduce_pressures(t, p, vehicle, nav.mach_inertial, est, mask=mask, table=table)
     return first, fit, mask, failures, hi
 
 
@@ -515,9 +530,14 @@ def winds_and_density(fit: AirDataFit, nav: Navigation, est: EstimatorSettings, 
 # ------------------------------------------------------------------------------- pipeline
 
 
-def reconstruct(settings: MeadsSettings, telemetry: Mapping[str, Path]) -> Iterator[object]:
+def reconstruct(
+    settings: MeadsSettings, telemetry: Mapping[str, Path], *, other_model: bool = True
+) -> Iterator[object]:
     """Run the stages of the module docstring on the telemetry files (``{stream: path}``) with the
-    run's ``settings`` (its vehicle, estimator and filter); yields each stage."""
+    run's ``settings`` (its vehicle, estimator and filter); yields each stage.  ``other_model``
+    False: the other estimator model is fitted only when the health needs it (the table beside
+    a Newtonian estimator, :func:`~.health.model_form_checks`), else ``air.alt`` is None (a Monte
+    Carlo member, which scores neither)."""
     t_start = time.perf_counter()
     cfg = settings
     est = cfg.estimator
@@ -529,18 +549,24 @@ def reconstruct(settings: MeadsSettings, telemetry: Mapping[str, Path]) -> Itera
     lag = invert_lag(tel.t_p, tel.p, vehicle, est.gamma, est.lag_inversion)
     yield lag
     ports = list(tel.ports)
-    first, fit, mask, failures, hi = fit_with_failures(tel.t_p, lag.p, vehicle, nav, est, ports, tel.pressure_file)
+    alt_needed = other_model or est.model == "newtonian"
+    table = build_estimator_table(vehicle) if est.model == "table" or alt_needed else None  # built once
+    first, fit, mask, failures, hi = fit_with_failures(
+        tel.t_p, lag.p, vehicle, nav, est, ports, tel.pressure_file, table
+    )
     ratio = plausibility(first, nav, vehicle, est, tel, cfg.vehicle_file)
-    alt_model = "table" if est.model == "newtonian" else "newtonian"
-    alt_est = replace(est, model=alt_model, fixed_r=0.0)
-    alt, _ = reduce_pressures(tel.t_p, lag.p, vehicle, nav.mach_inertial, alt_est, mask=mask)
+    alt = None
+    if alt_needed:
+        alt_model = "table" if est.model == "newtonian" else "newtonian"
+        alt_est = replace(est, model=alt_model, fixed_r=0.0)
+        alt, _ = reduce_pressures(tel.t_p, lag.p, vehicle, nav.mach_inertial, alt_est, mask=mask, table=table)
     air = AirDataStage(tel.t_p, first, fit, mask, tuple(failures), alt, ratio, hi)
     yield air
     wind = winds_and_density(fit, nav, est, hi)
     yield wind
     passes: list[EkfPass] = []
     if cfg.ekf.enabled:
-        it = run_passes(ekf_inputs(tel, vehicle, nav, lag, air, est, cfg.ekf), cfg.ekf)
+        it = run_passes(ekf_inputs(tel, vehicle, nav, lag, air, est, cfg.ekf, table=table), cfg.ekf)
         while True:
             try:
                 ps = next(it)
@@ -582,9 +608,13 @@ def ekf_inputs(
     air: AirDataStage,
     est,
     ek=None,
+    *,
+    table: SurfacePressureTable | None = None,
 ) -> EkfInputs:
     """The filter's inputs: the strapdown at the pressure times, the lag-corrected pressures with
-    the least squares' σ (:func:`sensor_sigma`) and port mask (failed ports out), the model."""
+    the least squares' σ (:func:`sensor_sigma`) and port mask (failed ports out), the model (its
+    ``table`` for the table model: :func:`build_estimator_table` of ``vehicle``, built here when
+    not given)."""
     init = tel.initial
     return EkfInputs(
         t=nav.t_p,
@@ -601,7 +631,7 @@ def ekf_inputs(
         usable=air.mask & np.isfinite(lag.p),
         vehicle=vehicle,
         model=est.model,
-        table=build_estimator_table(vehicle) if est.model == "table" else None,
+        table=(table if table is not None else build_estimator_table(vehicle)) if est.model == "table" else None,
         gamma=est.gamma,
     )
 

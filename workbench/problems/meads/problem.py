@@ -83,7 +83,13 @@ class MeadsProblem(PipelineProblem):
     file_schemas = (FADS_VEHICLE_SCHEMA, FADS_PORT_SCHEMA, INITIAL_STATE_SCHEMA)
     #: the module of the cached numba kernels (the EKF's forward pass, smoother, measurement and
     #: transition): compiled in a child process on a checkout's first run (:mod:`workbench.problems.precompile`)
-    compiled_modules = ("workbench.problems.meads.kernel", "workbench.estimation.strapdown_kernel")
+    compiled_modules = (
+        "workbench.problems.meads.kernel",
+        "workbench.problems.meads.truth_fast",
+        "workbench.models.flush_airdata_kernel",
+        "workbench.estimation.strapdown_kernel",
+        "workbench.estimation.propagation_kernel",
+    )
 
     def settings(self, scenario: Scenario) -> MeadsSettings:
         """The run's frozen settings (:meth:`MeadsSettings.from_scenario`: validated, the vehicle

@@ -55,12 +55,15 @@ def synthesize_from_truth(
     out_dir: str | Path,
     seed: np.random.SeedSequence,
     source: str,
+    *,
+    compress: bool = True,
 ) -> dict[str, Path]:
     """The sensors of ``settings`` (``pressure``, ``imu``, ``navigation``, on ``settings.vehicle``)
     on a simulated ``truth`` (whose surface-pressure model is ``truth_spec``'s), written into
     ``out_dir`` as a user supplies them plus ``truth.npz``; the draws are ``seed.spawn(3)``
-    (pressures, IMU, navigation); ``source`` goes into the files' metadata.  Returns
-    {stream: path, "truth": path}."""
+    (pressures, IMU, navigation); ``source`` goes into the files' metadata; ``compress``: write
+    ``truth.npz`` compressed (False: stored, for a file read back once and deleted, e.g. a Monte
+    Carlo member's; the arrays are the same).  Returns {stream: path, "truth": path}."""
     cfg, vehicle = settings, settings.vehicle
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -86,7 +89,7 @@ def synthesize_from_truth(
     arrays = truth.arrays()
     arrays |= {f"sensor_{k}": np.asarray(v) for k, v in pm.__dict__.items()}
     arrays |= {f"imu_{k}": np.asarray(v) for k, v in drawn.items()}
-    np.savez_compressed(out / "truth.npz", **arrays)
+    (np.savez_compressed if compress else np.savez)(out / "truth.npz", **arrays)
     return {"pressures": pressures, "imu": imu, "initial_state": init, "truth": out / "truth.npz"}
 
 

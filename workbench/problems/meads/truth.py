@@ -30,7 +30,9 @@ This is the *truth*, not the estimator's model:
   Mach- and α-dependent shoulder expansion and (e) a small base-level pressure in the shadow.
   It is evaluated at each port's *true* (displaced) location.
 
-Units SI; times in seconds from the entry interface.
+The right-hand side of the trajectory is compiled (:mod:`.truth_fast`); :class:`TruthDynamics` is
+its Python reference (``simulate_entry(..., fast=False)``).  Units SI; times in seconds from the
+entry interface.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from workbench.core.bodies import MARS
 from workbench.core.gravity import gravity_j2
 from workbench.core.rotation import dcm_to_quat, quat_conjugate, quat_multiply, quat_positive, quat_to_rotvec
 from workbench.models.flush_airdata import FadsVehicle, rayleigh_pitot_cp
+from workbench.problems.meads import truth_fast as tf
 
 __all__ = [
     "MeadsTruthSpec",
@@ -54,6 +57,8 @@ __all__ = [
     "disperse_truth_spec",
     "true_atmosphere",
     "simulate_entry",
+    "TruthDynamics",
+    "entry_state",
     "cfd_like_pressure",
     "alpha_trim",
 ]
@@ -290,8 +295,11 @@ def _cd(mach: np.ndarray) -> np.ndarray:
     return 1.45 + 0.2 * np.tanh((np.asarray(mach, float) - 3.0) / 3.0)
 
 
-class _Dynamics:
-    """Translational dynamics of the truth (scalar state y = [p_M, v_M])."""
+class TruthDynamics:
+    """Translational dynamics of the truth (state y = [p_M (3) m, v_M (3) m/s] in M) for
+    ``vehicle`` and ``spec``: the true atmosphere and winds tabulated in altitude, the bank
+    profile; ``t_chute`` [s] the parachute's opening once known (None before).  :meth:`accel` is
+    the Python reference of the compiled :func:`.truth_fast.rhs` (:meth:`packed` its arguments)."""
 
     def __init__(self, vehicle: FadsVehicle, spec: MeadsTruthSpec):
         self.spec = spec
@@ -309,6 +317,8 @@ class _Dynamics:
         self.t_chute: float | None = None
 
     def air(self, t: float, p: np.ndarray, v: np.ndarray):
+        """(h [m], density [kg/m³], T [K], air-relative velocity (3) [m/s] in M, up (3)) at time t
+        [s], position p (3) [m] and inertial velocity v (3) [m/s] in M."""
         r = math.sqrt(p @ p)
         h = r - MARS.reference_radius
         rho = float(np.interp(h, self.h_tab, self.rho_tab))
@@ -321,6 +331,8 @@ class _Dynamics:
         return h, rho, T, v_air, up
 
     def lift_dir(self, t: float, e_v: np.ndarray, up: np.ndarray) -> np.ndarray:
+        """Unit lift direction (3) in M at time t [s]: ``up`` (3) made normal to the air-relative
+        direction ``e_v`` (3), rolled about it by the bank profile."""
         u = up - (up @ e_v) * e_v
         u = u / math.sqrt(u @ u)
         s = float(np.interp(t, self.bank_t, self.bank))
@@ -343,6 +355,23 @@ class _Dynamics:
             a_ng = a_ng - infl * q * self.spec.chute_cds_m2 / self.spec.mass_kg * e_v
         return gravity_j2(p, MARS) + a_ng, a_ng
 
+    def packed(self) -> tuple:
+        """``(sc, h_tab, rho_tab, T_tab, wh, wn, we, bank_t, bank)``: these dynamics as
+        :func:`.truth_fast.rhs` takes them (the parachute's time and whether it is open in ``sc``)."""
+        sc = np.zeros(tf.N_SC)
+        sc[tf.SC_GM] = MARS.gm
+        sc[tf.SC_J2K] = 1.5 * MARS.j2 * MARS.gm * MARS.equatorial_radius**2
+        sc[tf.SC_RREF] = MARS.reference_radius
+        sc[tf.SC_OMEGA] = self.omega[2]
+        sc[tf.SC_GAMMA], sc[tf.SC_R] = self.spec.gamma, self.R
+        sc[tf.SC_S], sc[tf.SC_MASS], sc[tf.SC_CDS] = self.S, self.spec.mass_kg, self.spec.chute_cds_m2
+        sc[tf.SC_ALPHA_HYPER], sc[tf.SC_ALPHA_LOW] = self.spec.alpha_hyper_deg, self.spec.alpha_low_deg
+        sc[tf.SC_T_CHUTE] = 0.0 if self.t_chute is None else self.t_chute
+        sc[tf.SC_CHUTE_ON] = 0.0 if self.t_chute is None else 1.0
+        c = np.ascontiguousarray
+        tabs = (self.h_tab, self.rho_tab, self.T_tab, self.wh, self.wtab[:, 0], self.wtab[:, 1], self.bank_t, self.bank)
+        return (sc, *(c(a, dtype=float) for a in tabs))
+
 
 def true_wind(h: np.ndarray, spec: MeadsTruthSpec) -> np.ndarray:
     """True horizontal wind (..., 2) [north, east] [m/s] (blowing towards) at altitude ``h`` [m]."""
@@ -351,7 +380,9 @@ def true_wind(h: np.ndarray, spec: MeadsTruthSpec) -> np.ndarray:
     )
 
 
-def _initial_state(spec: MeadsTruthSpec) -> tuple[np.ndarray, np.ndarray]:
+def entry_state(spec: MeadsTruthSpec) -> tuple[np.ndarray, np.ndarray]:
+    """(p_M (3) [m], v_M (3) [m/s]) in M at the entry interface (t = 0) of ``spec``: its altitude
+    and latitude at longitude 0, inertial speed, flight-path angle and heading."""
     lat = math.radians(spec.entry_latitude_deg)
     r = MARS.reference_radius + spec.entry_altitude_km * 1e3
     p = r * np.array([math.cos(lat), 0.0, math.sin(lat)])
@@ -361,21 +392,33 @@ def _initial_state(spec: MeadsTruthSpec) -> tuple[np.ndarray, np.ndarray]:
     return p, spec.entry_speed_kmps * 1e3 * d
 
 
-def simulate_entry(vehicle: FadsVehicle, spec: MeadsTruthSpec) -> MeadsTruth:
+def simulate_entry(vehicle: FadsVehicle, spec: MeadsTruthSpec, *, fast: bool = True) -> MeadsTruth:
     """Integrate the truth from the entry interface to heat-shield separation and build the
     attitude, rates, specific force and air data on a grid every ``spec.dt``.  Integration:
     adaptive Runge-Kutta (DOP853, rtol 1e-8, steps ≤ 1 s) with dense output, in two phases
     (before the parachute, ended by the Mach event; under it).  Deterministic (the sensor errors
-    are drawn elsewhere)."""
-    dyn = _Dynamics(vehicle, spec)
-    p0, v0 = _initial_state(spec)
+    are drawn elsewhere).  ``fast``: the right-hand side compiled (:mod:`.truth_fast`); False: the
+    Python reference (``TruthDynamics.accel``), the same model."""
+    dyn = TruthDynamics(vehicle, spec)
+    p0, v0 = entry_state(spec)
 
-    def rhs(t, y):
-        return np.concatenate([y[3:], dyn.accel(t, y[:3], y[3:])[0]])
+    packed = [dyn.packed()]  # refreshed when the parachute opens
+    if fast:
 
-    def mach_event(t, y):
-        h, rho, T, v_air, _ = dyn.air(t, y[:3], y[3:])
-        return math.sqrt(v_air @ v_air) / math.sqrt(spec.gamma * dyn.R * T) - spec.chute_mach
+        def rhs(t, y):
+            return tf.rhs(t, y, *packed[0])
+
+        def mach_event(t, y):
+            return tf.mach(t, y, *packed[0][:7]) - spec.chute_mach
+
+    else:
+
+        def rhs(t, y):
+            return np.concatenate([y[3:], dyn.accel(t, y[:3], y[3:])[0]])
+
+        def mach_event(t, y):
+            h, rho, T, v_air, _ = dyn.air(t, y[:3], y[3:])
+            return math.sqrt(v_air @ v_air) / math.sqrt(spec.gamma * dyn.R * T) - spec.chute_mach
 
     mach_event.terminal = True
     mach_event.direction = -1
@@ -385,6 +428,7 @@ def simulate_entry(vehicle: FadsVehicle, spec: MeadsTruthSpec) -> MeadsTruth:
         raise RuntimeError(f"the truth never slowed to Mach {spec.chute_mach} within {spec.max_time_s} s")
     t_chute = float(s1.t_events[0][0])
     dyn.t_chute = t_chute
+    packed[0] = dyn.packed()
     t_hss = t_chute + spec.hss_delay_s
     s2 = solve_ivp(rhs, (t_chute, t_hss), s1.y_events[0][0], **kw)
     t = np.round(np.arange(0.0, t_hss + 1e-9, spec.dt), 9)
@@ -394,7 +438,7 @@ def simulate_entry(vehicle: FadsVehicle, spec: MeadsTruthSpec) -> MeadsTruth:
     return _finish(dyn, spec, t, y[:, :3], y[:, 3:], t_chute, float(t[-1]))
 
 
-def _finish(dyn: _Dynamics, spec: MeadsTruthSpec, t, P, V, t_chute, t_hss) -> MeadsTruth:
+def _finish(dyn: TruthDynamics, spec: MeadsTruthSpec, t, P, V, t_chute, t_hss) -> MeadsTruth:
     n = t.size
     north, east, up = _ned(P)
     h = np.linalg.norm(P, axis=1) - MARS.reference_radius

@@ -9,13 +9,13 @@ trade study of Fig. 6).
 Member k (``SeedSequence(seed, spawn_key=(k,))``, a truth and a sensor stream, :func:`member_draws`):
 the dispersed ``[truth]`` spec simulated (:func:`~workbench.problems.meads.truth.simulate_entry`),
 telemetry files written with the scenario's ``[sensors.*]`` error chain (the injected port failure
-switched off: the study is of the error model), the reconstruction exactly as ``workbench run``, and
-the errors with their reported 1σ (:func:`error_histories`). Members fly different entries, so the
-statistics are per flight condition: :func:`aggregate_by_mach` bins every member-sample at its own
-true Mach (where its q∞ ≥ 850 Pa) and reduces each bin (bias, Monte Carlo 3σ, reported 3σ, their
-ratio, fraction inside; thin bins marked); :func:`summarize` tabulates them. Results are gathered by
-member index, so they do not depend on the executor. The full description: docs/tuning/meads.md,
-"truth_mc.py".
+switched off: the study is of the error model), the reconstruction as ``workbench run`` (less the
+other model's fit, not scored), and the errors with their reported 1σ (:func:`error_histories`).
+Members fly different entries, so the statistics are per flight condition: :func:`aggregate_by_mach`
+bins every member-sample at its own true Mach (where its q∞ ≥ 850 Pa) and reduces each bin (bias,
+Monte Carlo 3σ, reported 3σ, their ratio, fraction inside; thin bins marked); :func:`summarize`
+tabulates them. Results are gathered by member index, so they do not depend on the executor. The
+full description: docs/tuning/meads.md, "truth_mc.py".
 """
 
 from __future__ import annotations
@@ -247,14 +247,20 @@ def _run_member(job: McJob, k: int, ss: np.random.SeedSequence) -> MemberErrors:
     info["truth_s"] = time.perf_counter() - t0
     with tempfile.TemporaryDirectory(prefix=f"meads_truth_mc_{k}_") as tmp:
         paths = synthesize_from_truth(
-            sc, truth, spec, Path(tmp) / "telemetry", s_sensors, f"meads truth Monte Carlo, member {k}"
+            sc,
+            truth,
+            spec,
+            Path(tmp) / "telemetry",
+            s_sensors,
+            f"meads truth Monte Carlo, member {k}",
+            compress=False,  # a temporary truth.npz is read back once
         )
         truth_file = paths.pop("truth")
         t1 = time.perf_counter()
         result = None
         try:
             with np.errstate(all="ignore"):
-                for stage in md.reconstruct(sc, paths):
+                for stage in md.reconstruct(sc, paths, other_model=False):  # scored: fit, winds, EKF
                     result = stage
         except (ValueError, TelemetryError, ArithmeticError, np.linalg.LinAlgError) as err:
             return failed(f"member {k}: reconstruction: {err}")
