@@ -22,6 +22,13 @@ def member_task(shared, k, ss):
     return k, np.linalg.solve(a @ a.T + np.eye(shared["m"]), rng.standard_normal(shared["m"]))
 
 
+def last_slow_task(shared, k, ss):
+    """Member task: members ≥ 2 take ``shared`` seconds, members 0 and 1 none."""
+    if k >= 2:
+        time.sleep(shared)
+    return k
+
+
 def chunk_task(shared, start, stop, seeds):
     """Chunk task: the members' draws, one row per member."""
     assert len(seeds) == stop - start
@@ -151,3 +158,17 @@ def test_progress_counter_counts_pool_members_once_each_also_after_a_killed_work
         assert run.kind == "processes" and run.pool_restarts == restarts
         assert seen == list(range(1, 9))
         assert out.getvalue().startswith("Monte Carlo members: 8/8 members in ")
+
+
+def test_pool_progress_arrives_as_members_finish_not_at_the_end():
+    """A pool run reports each member when it finishes: the first two (instant) members are counted
+    while the slow ones still run — not all at once when the last one is done (the pool used to
+    wait for every future before counting any)."""
+    stamps = []
+    t0 = time.perf_counter()
+    run = run_monte_carlo(
+        last_slow_task, 4, shared=1.5, seed=0, workers=2, progress=lambda d, n: stamps.append(time.perf_counter() - t0)
+    )
+    wall = time.perf_counter() - t0
+    assert run.kind == "processes" and run.results == [0, 1, 2, 3] and len(stamps) == 4
+    assert stamps[0] < wall - 1.0, (stamps, wall)

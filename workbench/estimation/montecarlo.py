@@ -40,7 +40,7 @@ import tempfile
 import time
 import uuid
 from collections.abc import Callable
-from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any
@@ -173,7 +173,7 @@ def _run_pool(task, shared, ranges, chunked, seed, results, done, workers: int, 
             futs = {pool.submit(_worker_call, task, a, b, chunked, seed): a for a, b in todo}
             pending = set(futs)
             while pending:
-                finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for f in finished:
                     if f.exception() is None:
                         results[futs[f]] = f.result()
