@@ -388,6 +388,28 @@ def test_flow_angle_mach_range_must_be_ordered():
         MeadsProblem().settings(sc.with_overrides({"ekf.model_angle_mach_low": 10.0, "ekf.model_angle_mach_high": 5.0}))
 
 
+def test_temperature_prior_correlates_the_atmosphere_states(arc):
+    """The prior on ln T = ln p − ln ρ: the first prior covariance has var(ln p − ln ρ) =
+    temperature_sigma_ln² with ln p and ln ρ each keeping atmosphere_sigma_ln² (and 0: independent);
+    a temperature σ the two priors cannot give is a located error."""
+    from workbench.io.scenario import ScenarioError, load_scenario
+    from workbench.problems.meads.problem import MeadsProblem
+    from workbench.problems.meads.state import ILP, ILR
+
+    inp, _, passes = arc
+    st = DEFAULTS.ekf
+    assert st.temperature_sigma_ln > 0.0
+    P = passes[0].forward.P_prior[0]
+    s2 = st.atmosphere_sigma_ln**2
+    assert P[ILP, ILP] == pytest.approx(s2) and P[ILR, ILR] == pytest.approx(s2)
+    assert P[ILP, ILP] + P[ILR, ILR] - 2.0 * P[ILP, ILR] == pytest.approx(st.temperature_sigma_ln**2)
+    off = list(ekf.run_passes(inp, replace(st, temperature_sigma_ln=0.0, passes=1), keep_all=True))[0]
+    assert off.forward.P_prior[0][ILP, ILR] == 0.0
+    sc = load_scenario(asset_path("scenarios", "msl_meads.toml"))
+    with pytest.raises(ScenarioError, match="ekf.temperature_sigma_ln"):
+        MeadsProblem().settings(sc.with_overrides({"ekf.temperature_sigma_ln": 2.0}))
+
+
 def test_first_order_filter_carries_no_rate_states(arc_model_error, monkeypatch):
     """The first-order model error has no rate b': the filter carries 39 states, not 46, and its
     numbers are those of the filter carrying the 7 identically-zero rates (the same sums without

@@ -78,7 +78,10 @@ class EkfSettings:
     strapdown); ``attitude_psd`` [rad²/s] attitude random walk (gyro); ``wind_sigma_mps`` /
     ``vertical_wind_sigma_mps`` prior 1σ of the horizontal / vertical wind; ``wind_var_per_km``
     [(m/s)² per km of altitude travelled]; ``atmosphere_sigma_ln`` prior 1σ of ln p∞ and ln ρ∞ about
-    the engineering atmosphere; ``atmosphere_var_per_km`` [per km] random walk of ln p∞, ln ρ∞;
+    the engineering atmosphere; ``temperature_sigma_ln`` prior 1σ of ln T∞ = ln p∞ − ln ρ∞ − ln R
+    about the engineering atmosphere's (the two priors correlated so that their difference has it;
+    0: independent — early in entry, where q∞ is a fraction of a pascal, the pressures then leave the
+    temperature free and a filter can lose ρ∞ for good); ``atmosphere_var_per_km`` [per km] random walk of ln p∞, ln ρ∞;
     ``scale_factor_sigma`` prior 1σ of each transducer scale factor (of reading);
     ``model_level_sigma`` prior 1σ of the common level error of the pressure model (of reading,
     a constant state; 0: not modelled).
@@ -111,6 +114,7 @@ class EkfSettings:
     vertical_wind_length_km: float
     wind_var_per_km: float
     atmosphere_sigma_ln: float
+    temperature_sigma_ln: float
     atmosphere_var_per_km: float
     scale_factor_sigma: float
     model_level_sigma: float
@@ -209,6 +213,13 @@ class MeadsSettings:
                 scenario.path,
                 "estimator.solution",
                 "the fixed-R solution is a Newtonian variant: use model = 'newtonian'",
+            )
+        if not ek["temperature_sigma_ln"] < 2.0 * ek["atmosphere_sigma_ln"]:
+            raise ScenarioError(
+                scenario.path,
+                "ekf.temperature_sigma_ln",
+                f"{ek['temperature_sigma_ln']}: must be below 2 × atmosphere_sigma_ln ({ek['atmosphere_sigma_ln']}): "
+                "ln T = ln p − ln rho cannot vary more than its two terms allow",
             )
         if not ek["model_angle_mach_low"] < ek["model_angle_mach_high"]:
             raise ScenarioError(
@@ -413,8 +424,16 @@ SCHEMA = Schema(
                     "vertical wind: Gauss-Markov correlation length in altitude (0: a random walk like the horizontal)",
                     ge=0.0,
                 ),
-                Key("wind_var_per_km", "float", 30.0, "(m/s)^2/km", "wind random walk per km descended", ge=0.0),
+                Key("wind_var_per_km", "float", 90.0, "(m/s)^2/km", "wind random walk per km descended", ge=0.0),
                 Key("atmosphere_sigma_ln", "float", 1.0, "", "prior 1-sigma of ln p and ln rho", gt=0.0),
+                Key(
+                    "temperature_sigma_ln",
+                    "float",
+                    0.3,
+                    "",
+                    "prior 1-sigma of ln T = ln p - ln rho about the engineering atmosphere (0: independent)",
+                    ge=0.0,
+                ),
                 Key("atmosphere_var_per_km", "float", 1e-4, "1/km", "ln p, ln rho random walk", ge=0.0),
                 Key("scale_factor_sigma", "float", 0.01, "", "prior 1-sigma of each scale factor", gt=0.0),
                 Key("model_level_sigma", "float", 0.01, "", "prior 1-sigma, pressure model level", ge=0.0),

@@ -367,6 +367,8 @@ def _initial(inp: EkfInputs, st: EkfSettings, scale0: np.ndarray, scale_cov: np.
         np.full(2, angle_sigma(st, _flow(x0, quat_to_dcm(inp.q_M_B[0]).T, inp.gamma, compiled)[2]) ** 2),
     ]
     P0 = np.diag(d)
+    if st.temperature_sigma_ln > 0.0:  # var(ln p − ln rho) = 2 s² − 2 cov = temperature_sigma_ln²
+        P0[ILP, ILR] = P0[ILR, ILP] = st.atmosphere_sigma_ln**2 - 0.5 * st.temperature_sigma_ln**2
     P0[ILAM, ILAM] = scale_cov
     return x0, P0
 
