@@ -31,7 +31,6 @@ from scipy.linalg import lapack
 
 from workbench.core.rotation import attitude_error, attitude_error_one, quat_boxplus, quat_boxplus_one, quat_normalize
 from workbench.estimation.consistency import chi2_gate
-from workbench.estimation.propagation_kernel import sandwich
 
 __all__ = [
     "ErrorStateLayout",
@@ -468,6 +467,10 @@ def derived_with_sigma(
     y0, Yp, Ym = Y[:, 0], Y[:, 1 : 1 + n_e], Y[:, 1 + n_e :]
     J = np.swapaxes((Yp - Ym) / (2.0 * e)[None, :, None], 1, 2)
     if compiled:
+        # imported here: a cached numba kernel needs a writable cache folder when its module is
+        # imported, and every problem imports this module before it can say its output is unwritable
+        from workbench.estimation.propagation_kernel import sandwich
+
         C = np.empty((J.shape[0], J.shape[1], J.shape[1]))
         sandwich(J, P, C)
     else:
