@@ -60,3 +60,29 @@ def test_truth_sections_in_display_units_without_raw_lists():
     assert "0.00258211143910339" not in truth and "0.0872664625997" not in truth
     assert "**accel_bias** (truth 0.003, 0, 0 m/s^2)" in truth
     assert "**radar_scale_factor** (truth 0.93):" in truth  # no unit "1" after a pure number
+
+
+def test_committed_summaries_give_initial_errors_in_si():
+    """Every scored parameter's ``initial_error`` is the initial value (the summary's, in the problem
+    file's unit: deg for angles) minus the truth, in SI like the other errors — the Huygens tilt once
+    subtracted a truth in radians from an initial value in degrees (4.83 for a 5° − 10° start)."""
+    import json
+    from pathlib import Path
+
+    from workbench.problems.post2.model import STATES
+
+    root = Path(__file__).resolve().parents[3] / "docs" / "results" / "summaries"
+    seen = 0
+    for path in sorted(root.glob("post2_*.summary.json")):
+        s = json.loads(path.read_text(encoding="utf-8"))
+        for name, p in s.get("truth", {}).get("parameters", {}).items():
+            k = 180.0 / math.pi if STATES[name].unit in ("deg", "deg/s") else 1.0
+            want = [a / k - b for a, b in zip(s["states"][name]["initial"], p["truth"], strict=True)]
+            assert all(abs(a - b) <= 1e-12 * max(1.0, abs(b)) for a, b in zip(p["initial_error"], want, strict=True)), (
+                path.name,
+                name,
+                p["initial_error"],
+                want,
+            )
+            seen += k != 1.0
+    assert seen >= 1  # an angle parameter (the Huygens tilt) was checked

@@ -111,7 +111,9 @@ def score(result, truth: dict) -> dict:
         tv = np.atleast_1d(truth[key]).astype(float)
         vf, sf = fwd[name]["value"], fwd[name]["sigma"]
         vs, ss = smo[name]["value"], smo[name]["sigma"]
-        rec = {"truth": tv.tolist(), "initial_error": (result.summary["states"][name]["initial"] - tv).tolist()}
+        # the summary's initial value is in the problem file's unit (deg for angles), the truth in SI
+        x0 = np.asarray(result.summary["states"][name]["initial"], float) / _scale(name)
+        rec = {"truth": tv.tolist(), "initial_error": (x0 - tv).tolist()}
         if first is not None:
             steps = np.unique(first.step)
             for n in (1, 4, 10):
