@@ -86,3 +86,14 @@ def test_committed_summaries_give_initial_errors_in_si():
             )
             seen += k != 1.0
     assert seen >= 1  # an angle parameter (the Huygens tilt) was checked
+
+
+def test_a_parameter_headline_prints_numbers_in_the_display_unit():
+    """A run whose headline is a parameter's error (post2_j2) prints numbers, not Python lists, and
+    an angle in degrees."""
+    s = {
+        "states": {"tilt": {"unit": "deg", "final": [10.15]}},
+        "truth": {"parameters": {"tilt": {"final_error_forward": [0.0026], "final_3sigma_forward": [0.016]}}},
+    }
+    line = Post2Problem().headline(s)
+    assert "[" not in line and line.startswith("tilt error +0.149 (3σ 0.9167) deg"), line

@@ -270,9 +270,12 @@ class Post2Problem:
                 f"{n_pass}/{len(rows)} PASS, {n_un} not informed by the data{worst}"
             )
         for name, p in tr.get("parameters", {}).items():
-            return f"{name} error {p['final_error_forward']} (3σ {p['final_3sigma_forward']}){worst}"
+            k = 180.0 / np.pi if STATES[name].unit in ("deg", "deg/s") else 1.0
+            unit = STATES[name].unit if STATES[name].unit != "1" else ""
+            err, sig = _numbers(p["final_error_forward"], k, signed=True), _numbers(p["final_3sigma_forward"], k)
+            return f"{name} error {err} (3σ {sig}) {unit}".rstrip() + worst
         s = next(iter(summary["states"].items()))
-        return f"{s[0]} final {s[1]['final']}"
+        return f"{s[0]} final {_numbers(s[1]['final'])} {s[1].get('unit', '')}".rstrip()
 
     def open_recording(self, path: Path, settings: Post2Settings, truth, properties: dict):
         """The post2 recording (:mod:`.recording`)."""
