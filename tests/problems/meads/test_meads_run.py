@@ -114,12 +114,11 @@ def test_ekf_passes_of_the_shipped_run(run):
     # the IMU coupling pins the angles: α, β far better than the point-wise least squares
     for k in ("alpha_deg", "beta_deg"):
         assert p1[k]["rms"] < 0.5 * ls[k]["rms"] and p2[k]["rms"] < 0.5 * ls[k]["rms"], k
-    # winds where the least squares publish none (singular or too uncertain).  The bound was 10 m/s
-    # (9.3 measured) until the filter's vertical wind became a Gauss–Markov with the attitude–
-    # velocity coupling and the low-Mach flow-angle states (ekf.py): on this seed 13.4 m/s, inside
-    # its 3σ at every sample; over the truth Monte Carlo's 8 members (seed 1) the north wind's 3 RMS
-    # fell 56 → 50 m/s and its inside-3σ share rose 94 → 98.5 %, the vertical wind's 58 → 94 %
-    assert ls["wind_north_mps"]["n"] == 0 and p2["wind_north_mps"]["max_abs"] < 15.0
+    # winds where the least squares publish none (singular or too uncertain), inside their 3σ above
+    # (every sample on this seed).  The accuracy bound follows the tuning (history: docs/tuning/meads.md):
+    # 10 m/s, then 15 m/s with the Gauss–Markov vertical wind, then 20 m/s since the wind random walk
+    # was retuned on the tuning stream for an honest 3σ (its error grew with it)
+    assert ls["wind_north_mps"]["n"] == 0 and p2["wind_north_mps"]["max_abs"] < 20.0
     names = {c["name"]: c for c in s["health"]["checks"]}
     for i in (1, 2):
         assert names[f"covariance.ekf_pass{i}_smoothed_correlation"]["status"] == "OK"
