@@ -511,6 +511,48 @@ def full_derivative(
 
 
 @njit(cache=True)
+def _rk4_step(
+    y, dt, have_k1, k1, k2, k3, k4, tmp, F, M, hc, rho, a_snd, kn, ones, want_dx,
+    PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
+    chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves,
+):  # fmt: skip
+    """One classic RK4 step of ``dt`` [s] of the rows of ``y`` (b, n_x), in place, through
+    :func:`full_derivative` (its model arguments); ``have_k1``: ``k1`` already holds the derivative
+    at ``y``.  ``k1`` … ``k4``, ``tmp`` (b, n_x) and ``F`` … ``ones`` are the caller's scratch."""
+    b, nx = y.shape
+    half = 0.5 * dt
+    sixth = dt / 6.0
+    for stage in range(4):
+        if stage == 0:
+            if have_k1:
+                continue
+            src, dst = y, k1
+        elif stage == 1:
+            for r in range(b):
+                for c in range(nx):
+                    tmp[r, c] = y[r, c] + half * k1[r, c]
+            src, dst = tmp, k2
+        elif stage == 2:
+            for r in range(b):
+                for c in range(nx):
+                    tmp[r, c] = y[r, c] + half * k2[r, c]
+            src, dst = tmp, k3
+        else:
+            for r in range(b):
+                for c in range(nx):
+                    tmp[r, c] = y[r, c] + dt * k3[r, c]
+            src, dst = tmp, k4
+        full_derivative(
+            src, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
+            chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, want_dx, dst, F, M, hc, rho, a_snd, kn,
+            ones,
+        )  # fmt: skip
+    for r in range(b):
+        for c in range(nx):
+            y[r, c] = y[r, c] + sixth * (k1[r, c] + 2.0 * k2[r, c] + 2.0 * k3[r, c] + k4[r, c])
+
+
+@njit(cache=True)
 def propagate_kernel(
     X0, n, dt, iq, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
     chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves,
@@ -524,39 +566,18 @@ def propagate_kernel(
     tmp = np.empty((b, nx))
     F, M = np.empty((b, 3)), np.empty((b, 3))
     hc, rho, a_snd, kn, ones = np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.ones(b)
-    half = 0.5 * dt
-    sixth = dt / 6.0
-    # want_dx as a run-time bool, not the literal True: a literal argument makes numba compile
-    # separate Literal[bool] versions of full_derivative and dynamics_kernel beside the ones Python
-    # calls (~4 s of compiling on a fresh checkout)
+    # want_dx (and no_k1) run-time bools, not the literals True (False): a literal argument makes numba
+    # compile separate Literal[bool] versions of full_derivative and dynamics_kernel (and _rk4_step)
+    # beside the ones Python calls (~4 s of compiling on a fresh checkout)
     want_dx = b >= 0
+    no_k1 = b < 0
     for _ in range(n):
-        for stage in range(4):
-            if stage == 0:
-                src, dst = y, k1
-            elif stage == 1:
-                for r in range(b):
-                    for c in range(nx):
-                        tmp[r, c] = y[r, c] + half * k1[r, c]
-                src, dst = tmp, k2
-            elif stage == 2:
-                for r in range(b):
-                    for c in range(nx):
-                        tmp[r, c] = y[r, c] + half * k2[r, c]
-                src, dst = tmp, k3
-            else:
-                for r in range(b):
-                    for c in range(nx):
-                        tmp[r, c] = y[r, c] + dt * k3[r, c]
-                src, dst = tmp, k4
-            full_derivative(
-                src, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
-                chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, want_dx, dst, F, M, hc, rho, a_snd, kn,
-                ones,
-            )  # fmt: skip
+        _rk4_step(
+            y, dt, no_k1, k1, k2, k3, k4, tmp, F, M, hc, rho, a_snd, kn, ones, want_dx,
+            PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
+            chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves,
+        )  # fmt: skip
         for r in range(b):
-            for c in range(nx):
-                y[r, c] = y[r, c] + sixth * (k1[r, c] + 2.0 * k2[r, c] + 2.0 * k3[r, c] + k4[r, c])
             if iq >= 0:
                 q0, q1, q2, q3 = y[r, iq], y[r, iq + 1], y[r, iq + 2], y[r, iq + 3]
                 nq = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
@@ -598,37 +619,13 @@ def propagate_axial_kernel(
         if k == n:
             break
         dt = dts[k]
-        half = 0.5 * dt
-        sixth = dt / 6.0
         for sub in range(nsub[k]):
-            for stage in range(4):
-                if stage == 0:
-                    if sub == 0:
-                        continue  # k1 of the node's state: evaluated above
-                    src, dst = y, k1
-                elif stage == 1:
-                    for r in range(b):
-                        for c in range(nx):
-                            tmp[r, c] = y[r, c] + half * k1[r, c]
-                    src, dst = tmp, k2
-                elif stage == 2:
-                    for r in range(b):
-                        for c in range(nx):
-                            tmp[r, c] = y[r, c] + half * k2[r, c]
-                    src, dst = tmp, k3
-                else:
-                    for r in range(b):
-                        for c in range(nx):
-                            tmp[r, c] = y[r, c] + dt * k3[r, c]
-                    src, dst = tmp, k4
-                full_derivative(
-                    src, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
-                    chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, want_dx, dst, F, M, hc, rho,
-                    a_snd, kn, ones,
-                )  # fmt: skip
-            for r in range(b):
-                for c in range(nx):
-                    y[r, c] = y[r, c] + sixth * (k1[r, c] + 2.0 * k2[r, c] + 2.0 * k3[r, c] + k4[r, c])
+            # k1 of the node's state is the evaluation above (sub-step 0)
+            _rk4_step(
+                y, dt, sub == 0, k1, k2, k3, k4, tmp, F, M, hc, rho, a_snd, kn, ones, want_dx,
+                PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
+                chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves,
+            )  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------
