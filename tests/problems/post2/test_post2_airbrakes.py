@@ -488,3 +488,38 @@ def test_untrusted_heading_landing_verdict_is_the_nonlinear_one(excerpt_run):
     assert 0.0 <= nl["hdr_level"] <= 1.0 and nl["turning_drift_m"] > 100.0
     assert L["inside_3sigma"] == (nl["hdr_level"] <= 0.9973)
     assert L["mahalanobis_linearised"] == L["mahalanobis"]
+
+
+def test_site_temperature_is_a_consider_parameter_in_every_sigma(excerpt_run):
+    """Issue 27 item 3: the air column's temperature is an unknown the data cannot separate from the
+    trajectory (a warmer column is taller for the same pressures), so the import writes ``baro_scale``
+    as a Schmidt consider parameter (σ_T / T): never moved by an observation, its σ carried into the
+    trajectory's.  Against the same problem with the temperature taken as exact (σ ~ 0) the altitude
+    σ grows by about the scale's 1σ times the height above the pad."""
+    _, toml, result, _ = excerpt_run
+    sc = load_scenario(toml)
+    st = sc.data["states"]["baro_scale"]
+    meta = read_metadata(META, LOG.name)
+    assert st["process"] == "consider"
+    assert st["sigma"] == pytest.approx(rocket.TEMPERATURE_SIGMA_K / meta.temperature, rel=1e-5)
+    for hist in (result.history["smoothed"], result.history["forward"]):
+        np.testing.assert_array_equal(hist["baro_scale"]["value"], 1.0)  # never fitted
+        np.testing.assert_allclose(hist["baro_scale"]["sigma"], st["sigma"], rtol=1e-6)  # never informed
+    assert result.summary["states"]["baro_scale"]["consider"] is True
+    assert any("consider parameters" in n for n in result.summary["health"]["notes"])
+    r0, _ = rocket.run_flight(Post2Problem().settings(sc.with_overrides({"states.baro_scale.sigma": 1e-9})))
+    alt_sigma, alt_sigma0 = result.rocket.sigma_altitude, r0.rocket.sigma_altitude
+    h = result.rocket.altitude
+    k = int(np.argmax(h))
+    expected = math.hypot(alt_sigma0[k], st["sigma"] * h[k])
+    assert alt_sigma[k] > 1.5 * alt_sigma0[k]
+    assert alt_sigma[k] == pytest.approx(expected, rel=0.15)
+
+
+def test_a_consider_state_must_be_a_constant_parameter(excerpt_run):
+    _, toml, _, _ = excerpt_run
+    sc = load_scenario(toml)
+    with pytest.raises(ScenarioError, match="states.velocity.process"):
+        Post2Settings.from_scenario(sc.with_overrides({"states.velocity.process": "consider"}))
+    with pytest.raises(ScenarioError, match="states.baro_scale.psd"):
+        Post2Settings.from_scenario(sc.with_overrides({"states.baro_scale.psd": 1e-6}))

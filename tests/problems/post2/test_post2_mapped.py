@@ -18,7 +18,7 @@ import pytest
 
 from workbench.cli import main
 from workbench.estimation.health import UnhealthyError
-from workbench.io.scenario import ScenarioError
+from workbench.io.scenario import ScenarioError, load_scenario
 from workbench.io.telemetry import TelemetryError
 from workbench.problems.post2.importers import mapped
 
@@ -350,3 +350,17 @@ def test_a_gap_in_the_barometer_file_is_reported_and_not_observed(tmp_path):
     tp = [float(ln.split(",")[0]) for ln in (toml.parent / "pressure.csv").read_text().splitlines() if ln[:1].isdigit()]
     assert tp and not [x for x in tp if a + 1e-6 < x < b - 1e-6]
     assert any(g["dt_s"] == pytest.approx(b - a) for g in fl["gaps"])  # and in the import's gap list
+
+
+def test_site_temperature_sigma_becomes_the_barometer_scale_consider_parameter(tmp_path):
+    """``[site] temperature_sigma_K`` (issue 27 item 3): the import writes ``baro_scale`` as a consider
+    parameter of 1σ σ_T / T_site, so the run's σ carries the column temperature it does not know."""
+    mp = remap(
+        tmp_path / "log",
+        edit=lambda t: t.replace("wind_from_deg = 0.0", "wind_from_deg = 0.0\ntemperature_sigma_K = 8.0"),
+    )
+    assert main(["import", "csv", "--mapping", str(mp), "--out", str(tmp_path / "flight"), "--allow-unhealthy"]) == 0
+    st = load_scenario(tmp_path / "flight" / "remapped.toml").data["states"]["baro_scale"]
+    t_site = json.loads(META.read_text(encoding="utf-8"))[LOG.name]["launch_site"]["air_temperature_celsius"]
+    assert st["process"] == "consider"
+    assert st["sigma"] == pytest.approx(8.0 / (t_site + 273.15), rel=1e-5)

@@ -54,7 +54,13 @@ _F, _I, _S, _B, _L = "float", "int", "str", "bool", "list"
 STATE_KEYS: dict[str, tuple[str, Any, str]] = {
     "value": ("number_or_list", REQUIRED, "initial estimate, in the state's unit (attitude: [α, β, σ] deg)"),
     "sigma": ("number_or_list", REQUIRED, "initial 1σ, same unit"),
-    "process": (_S, "constant", "`constant`, `random_walk` (with `psd`) or `markov` (with `tau_s`)"),
+    "process": (
+        _S,
+        "constant",
+        "`constant`, `random_walk` (with `psd`), `markov` (with `tau_s`) or `consider`: a constant parameter "
+        "held at `value` whose `sigma` enters every other state's covariance but which no observation updates "
+        "(a Schmidt consider parameter: an unknown the data cannot separate, e.g. a site temperature)",
+    ),
     "psd": ("number_or_list", 0.0, "random-walk PSD [unit²/s], or the Markov driving PSD (0: from sigma)"),
     "tau_s": (_F, None, "first-order Markov time constant [s]"),
     "sigma_altitude_km": (
@@ -115,7 +121,7 @@ EVENT_KEYS: dict[str, tuple[str, Any, str]] = {
 }
 
 EVENT_CONDITIONS = ("time", "mach_below", "altitude_below", "dynamic_pressure_above")
-PROCESSES = ("constant", "random_walk", "markov")
+PROCESSES = ("constant", "random_walk", "markov", "consider")
 CHUTES = ("drogue", "main", "none")
 
 
@@ -713,11 +719,13 @@ def _state(file: Path, name: str, raw: dict, dof: int) -> StateSpec:
         raise ScenarioError(
             file, f"{pre}.process", f"{process!r}: use one of {', '.join(PROCESSES)}{_suggest(process, PROCESSES)}"
         )
-    if process == "markov" and d.dynamic:
+    if process in ("markov", "consider") and d.dynamic:
         raise ScenarioError(file, f"{pre}.process", f"'{name}' has model dynamics: use constant or random_walk")
     psd = _vec(file, f"{pre}.psd", t["psd"], d.size)
     if np.any(psd < 0):
         raise ScenarioError(file, f"{pre}.psd", "must be >= 0")
+    if process == "consider" and np.any(psd > 0):
+        raise ScenarioError(file, f"{pre}.psd", "a consider parameter is constant: psd must be 0")
     psd = psd * unit_factor(d.unit) ** 2  # unit²/s -> SI²/s
     tau = t["tau_s"]
     if process == "markov" and (tau is None or not tau > 0):

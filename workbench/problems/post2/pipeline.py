@@ -381,6 +381,15 @@ class Estimator:
         self.layout = ErrorStateLayout(self.smap.n_x, self.smap.quat_blocks)
         self.model = TrajectoryModel(self.smap, cfg.dof, build.environment(cfg), build.vehicle(cfg), build.events(cfg))
         self.x0, self.P0, self.eps, self.mean = self._initial()
+        self.consider = np.concatenate(
+            [np.arange(self.smap.n_e)[b.se] for n, b in self.smap.blocks.items() if cfg.state(n).process == "consider"]
+            or [np.zeros(0, int)]
+        )
+        self._projector = None
+        if self.consider.size:  # Schmidt: no gain on a consider parameter (Simon 2006, Sect. 7.5)
+            diag = np.ones(self.smap.n_e)
+            diag[self.consider] = 0.0
+            self._projector = np.diag(diag)
         self._q_cache: list[tuple] | None = None
         # events due at the start apply from it, before its observations (as in the truth simulator;
         # checked only at the first transition they came after the t_start samples, issue #9)
@@ -500,7 +509,7 @@ class Estimator:
 
             return Measurement(
                 ch.spec.name, np.zeros(3), R, hq, H=Hq, gate_probability=ch.spec.gate_probability,
-                iterations=ch.spec.iterations,
+                iterations=ch.spec.iterations, gain_projector=self.gain_projector,
             )  # fmt: skip
 
         # the update asks h(x) and then H(x) at the same x: one batched model call gives both (its
@@ -528,7 +537,16 @@ class Estimator:
             H=H,
             gate_probability=ch.spec.gate_probability,
             iterations=ch.spec.iterations,
+            gain_projector=self.gain_projector,
         )
+
+    @property
+    def gain_projector(self):
+        """The update's gain projector ``x -> Π`` (n_e, n_e): zero rows for the ``consider`` states
+        (Schmidt-Kalman: their σ enters the other states' covariance, no observation moves them); None
+        without consider states."""
+        proj = self._projector
+        return None if proj is None else (lambda x: proj)
 
 
 def _grid(cfg: Post2Settings, channels: dict[str, Channel]) -> np.ndarray:
@@ -626,7 +644,11 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
     touched = {s.target_name for s in cfg.schedules if s.target == "observation"}
     wf = {n: v for n, v in wf.items() if n in touched}
     yield ForwardStage(fp, tuple(est.phase_log), {n: ch.spec.quantity for n, ch in data.channels.items()}, wf)
-    sm = rts_smooth(fp, est.layout) if cfg.filter.smoother else None
+    sm = (
+        rts_smooth(fp, est.layout, consider=est.consider if est.consider.size else None)
+        if cfg.filter.smoother
+        else None
+    )
     x, P = (sm.x, sm.P) if sm is not None else (fp.x_post, fp.P_post)
     hist = state_history(est, t, x, P)
     fwd = state_history(est, t, fp.x_post, fp.P_post)
@@ -652,6 +674,8 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
             ratio = np.sqrt(np.diag(P[-1])[i] / np.diag(est.P0)[i])
             states[name]["posterior_over_prior_sigma"] = ratio.tolist()
             states[name]["informed_by_data"] = (ratio < INFORMED_RATIO).tolist()
+        if cfg.state(name).process == "consider":
+            states[name]["consider"] = True
     summary["states"] = states
     uninformed = [
         f"{n} (posterior/prior σ {max(s['posterior_over_prior_sigma']):.2f})"
@@ -679,6 +703,9 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
     track = _rocket(cfg, est, t, x, P, summary)
     extra, rocket_facts = rocket_checks.run_checks(cfg, hist)  # bounds; an imported flight: its import checks
     facts = [*data.facts, *rocket_facts]
+    considered = [f"{n} (1σ {s['final_sigma'][0]:.4g} {s['unit']})" for n, s in states.items() if s.get("consider")]
+    if considered:
+        facts.append("consider parameters, in every σ and never fitted: " + ", ".join(considered))
     if uninformed:
         facts.append(
             f"not informed by the data (final posterior σ not below {INFORMED_RATIO:g} × the prior's): "

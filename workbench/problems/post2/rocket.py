@@ -447,6 +447,12 @@ BURNOUT_TRANSIENT_S = 2.5
 #: prior 1σ of the in-flight barometer offset [Pa] (~2.5 m): the pad altitude is fitted to the
 #: standby pressure, so what is left is a drift in flight (board heating, port effects)
 BARO_BIAS_SIGMA = 30.0
+#: default 1σ [K] of the air column's mean temperature (pad to apogee) about the model's, the site's
+#: air temperature with the standard −6.5 K/km lapse: the lapse rate of the lowest 2 km ranges from
+#: dry-adiabatic (−9.8 K/km) to an inversion (±3 K on the column's mean at 1.5 km), humid air is up to
+#: 3 K warmer virtually, and a surface reading is good to ~1 K.  It becomes the ``baro_scale`` consider
+#: parameter's 1σ, σ_T / T (the hypsometric equation: a column 1 % warmer is 1 % taller).
+TEMPERATURE_SIGMA_K = 4.0
 # The flight computer's altitude is a standard-day pressure altitude (flight_computer_altimeter scores
 # it raw and like for like); the barometer states baro_scale and baro_q_coefficient were tried and are
 # not written into the problem files (measurements: docs/tuning/post2.md, "the flight computer's altitude").
@@ -595,7 +601,7 @@ def problem_file(
         f"sea_level_pressure_pa = {fl.atmosphere.sea_level_pressure:.2f}  # QNH (site_atmosphere)",
         f"sea_level_temperature_K = {fl.atmosphere.sea_level_temperature:.3f}  # site temperature + 6.5 K/km x pad",
         f"# pad altitude {fl.h_pad:.1f} m above the mean sphere (the standby pressure in this atmosphere)",
-        f"baro_scale_anchor_m = {fl.h_pad:.3f}  # a baro_scale state would stretch the baro altitude about the pad",
+        f"baro_scale_anchor_m = {fl.h_pad:.3f}  # the baro_scale state stretches the baro altitude about the pad",
         "",
         "[launch]  # the pad: the run reports apogee, speeds, landing point and descent rates in its local frame",
         f"lat_deg = {meta.launch_lat_deg:.10g}",
@@ -663,6 +669,14 @@ def problem_file(
         "[states.baro_bias]  # the pad altitude matches the standby pressure: only the in-flight offset",
         "value = 0.0",
         f"sigma = {BARO_BIAS_SIGMA}",
+        "",
+        "# the barometer's altitude scales with the air column's mean temperature, known only to",
+        f"# ±{meta.temperature_sigma:g} K (site temperature, lapse rate, humidity): a consider parameter, carried in",
+        "# every σ and never fitted (fitting it stretches the barometer to the IMU's altitude)",
+        "[states.baro_scale]",
+        "value = 1.0",
+        f"sigma = {meta.temperature_sigma / meta.temperature:.6f}  # σ_T / T_site",
+        'process = "consider"',
         "",
         "[states.drogue_drag_area]",
         "value = 0.5",

@@ -26,6 +26,7 @@ import numpy as np
 from workbench.core.bodies import EARTH, G0
 from workbench.io.telemetry import TelemetryError, write_events, write_telemetry
 from workbench.io.units import likely_unit
+from workbench.problems.post2.rocket import TEMPERATURE_SIGMA_K
 
 __all__ = [
     "PHASES",
@@ -215,7 +216,10 @@ class FlightMetadata:
     site ``temperature`` [K], ``qnh`` [Pa] (the reported air pressure, read as reduced to sea level),
     ``wind_speed`` [m/s], ``wind_from_deg`` (direction the wind blows from, deg clockwise from north);
     ``launch_lat_deg``/``launch_lon_deg``, ``landed_lat_deg``/``landed_lon_deg``, ``apogee`` [m],
-    ``rod_angle_deg``, ``date`` (ISO string), ``description``, ``motor`` (designation or None).  The
+    ``rod_angle_deg``, ``date`` (ISO string), ``description``, ``motor`` (designation or None),
+    ``temperature_sigma`` [K] (1σ of the air column's mean temperature about the site's with the
+    standard lapse: the ``baro_scale`` consider parameter; default
+    :data:`~workbench.problems.post2.rocket.TEMPERATURE_SIGMA_K`).  The
     scoring references (landed coordinates, apogee) and the rod angle may be None (unknown: a
     column-mapped import without them; their checks and the ``_landing`` variant are then skipped)."""
 
@@ -236,6 +240,7 @@ class FlightMetadata:
     date: str
     description: str
     motor: str | None = None
+    temperature_sigma: float = TEMPERATURE_SIGMA_K
 
 
 def block_means(t: np.ndarray, v: np.ndarray, t0: float, t1: float, rate_hz: float, gaps: tuple[Gap, ...]):

@@ -52,6 +52,7 @@ from workbench.problems.post2.importers.flightlog import (
     find_gaps,
     import_log,
 )
+from workbench.problems.post2.rocket import TEMPERATURE_SIGMA_K
 
 __all__ = [
     "HELP",
@@ -172,6 +173,17 @@ MAPPING_SCHEMA = Schema(
                     le=6000.0,
                 ),
                 Key("temperature_degC", _F, REQUIRED, "degC", "air temperature at the pad", ge=-60.0, le=60.0),
+                Key(
+                    "temperature_sigma_K",
+                    _F,
+                    TEMPERATURE_SIGMA_K,
+                    "K",
+                    "1σ of the air column's mean temperature (pad to apogee) about the pad's with the standard "
+                    "lapse (-6.5 K/km): the barometer's altitude scale, carried in every σ as the `baro_scale` "
+                    "consider parameter; the default allows for the lapse rate, humidity and the reading",
+                    gt=0.0,
+                    le=40.0,
+                ),
                 Key("wind_speed_m_s", _F, 0.0, "m/s", "surface wind speed (the wind state's prior)", ge=0.0, le=60.0),
                 Key(
                     "wind_from_deg",
@@ -747,6 +759,7 @@ def _metadata(mp: Mapping, name: str, standby_pressure: float) -> FlightMetadata
         d["flight"]["date"],
         d["flight"]["description"],
         r["motor"],
+        s["temperature_sigma_K"],
     )
 
 
