@@ -197,7 +197,7 @@ def _shipped_copy(tmp_path: Path, extra: str) -> object:
 def test_chamber_and_sigma_range_checks(tmp_path):
     text = (ASSETS / "scenarios" / "droptest.toml").read_text()
     for old, new, key in (
-        ("nail_depth_m = 0.3", "nail_depth_m = -0.2", "chamber.nail_depth_m"),
+        ("nail_depth_m = 0.3", "nail_depth_m = nan", "chamber.nail_depth_m"),
         ("ramp_angle_deg = 60.0", "ramp_angle_deg = 95.0", "chamber.ramp_angle_deg"),
         ("bias_dps = 0.05", "bias_dps = -0.05", "sensors.gyro.bias_dps"),
         ("filter_order = 4", "filter_order = 12", "sensors.acquisition.filter_order"),
@@ -383,3 +383,83 @@ def test_errors_declared_absent_are_honoured_not_an_error(tmp_path):
     for key in ("[sensors.gyro] bias_dps", "[sensors.gyro] misalignment_deg", "[sensors.accelerometer] bias_g"):
         assert key in cov["message"], (key, cov["message"])
     assert health["verdict"] != "ERROR", health
+
+
+def test_nail_anywhere_the_ramp_placed_by_its_own_plane(tmp_path):
+    """Issue 27 item 5: a nail in front of the ramp plane (negative ``nail_depth_m``) is valid, and
+    ``ramp_point_m`` (a point of the ramp surface) places the same plane; giving both is refused."""
+    from workbench.problems.droptest.surface import ramp_normal
+
+    text = (ASSETS / "scenarios" / "droptest.toml").read_text().replace("../landers", str(ASSETS / "landers"))
+    p = tmp_path / "s.toml"
+    p.write_text(text.replace("nail_depth_m = 0.3", "nail_depth_m = -0.41"))
+    assert DropSettings.from_scenario(load_scenario(p)).chamber.nail_depth_m == -0.41
+    n = ramp_normal(60.0)
+    t2 = np.cross(n, [1.0, 0.0, 0.0])  # up the slope, in the plane
+    point = -0.41 * n + 2.5 * t2 + [0.7, 0.0, 0.0]
+    p.write_text(text.replace("nail_depth_m = 0.3", f"ramp_point_m = {_vec(point)}"))
+    assert abs(DropSettings.from_scenario(load_scenario(p)).chamber.nail_depth_m - -0.41) < 1e-12
+    p.write_text(text.replace("nail_depth_m = 0.3", f"nail_depth_m = 0.3\nramp_point_m = {_vec(point)}"))
+    with pytest.raises(ScenarioError, match=r"chamber\.ramp_point_m.*not both"):
+        DropSettings.from_scenario(load_scenario(p))
+
+
+def test_nail_moved_in_front_of_the_ramp_reconstructs_the_same_stroke(tmp_path):
+    """The shipped drop's files as user data, then the same rig with the SPF origin (the nail) moved
+    to 0.41 m in front of the ramp plane: every SPF position of the setup file is re-expressed from
+    the new origin (``x' = x − 0.71 n``) and ``nail_depth_m = -0.41``; nothing else changes.  The
+    geometry is the same, so the max stroke, its σ and its time agree (to 0.01σ: only the setup
+    file's decimal rounding differs)."""
+    from workbench.problems.droptest.pipeline import run_droptest
+    from workbench.problems.droptest.surface import ramp_normal
+    from workbench.problems.droptest.synthetic import synthesize_droptest
+    from workbench.problems.droptest.telemetry import telemetry_paths
+
+    shipped = resolve_scenario("droptest", ASSETS)
+    causal = "sample_rate_hz = 2000.0\nfilter_cutoff_hz = 500.0\nfilter_order = 4"
+    syn_path = tmp_path / "syn.toml"
+    syn_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), causal, None))
+    syn = synthesize_droptest(DropSettings.from_scenario(load_scenario(syn_path)), tmp_path / "tel")
+    tel = {k: v for k, v in syn.telemetry.items() if k != "truth"}
+
+    def run(name: str, telemetry: dict[str, Path], chamber_edit: tuple[str, str] | None):
+        text = _scenario_text(shipped.path, LANDER.as_posix(), causal, telemetry)
+        if chamber_edit is not None:
+            assert chamber_edit[0] in text
+            text = text.replace(*chamber_edit)
+        path = tmp_path / f"{name}.toml"
+        path.write_text(text)
+        sc = load_scenario(path)
+        assert not sc.is_synthetic
+        st = DropSettings.from_scenario(sc)
+        return st, run_droptest(st, telemetry_paths(st), seed=1).stroke.max
+
+    _, ref = run("ref", tel, None)
+
+    shift = (0.3 + 0.41) * ramp_normal(60.0)  # the new origin, in the old SPF coordinates
+    with open(tel["setup"], "rb") as f:
+        setup = tomllib.load(f)
+    h, b = setup["hanging"], setup["bungee"]
+    moved_setup = tmp_path / "moved_setup.toml"
+    moved_setup.write_text(
+        "\n".join(
+            [
+                "[hanging]",
+                f"position_m = {_vec(np.asarray(h['position_m']) - shift)}",
+                f"position_sigma_m = {h['position_sigma_m']!r}",
+                "[bungee]",
+                f"anchor_m = {_vec(np.asarray(b['anchor_m']) - shift)}",
+                *(f"{k} = {_vec(b[k]) if isinstance(b[k], list) else repr(b[k])}" for k in b if k != "anchor_m"),
+            ]
+        )
+        + "\n"
+    )
+    st, moved = run("moved", {**tel, "setup": moved_setup}, ("nail_depth_m = 0.3", "nail_depth_m = -0.41"))
+    assert st.chamber.nail_depth_m == -0.41
+    print(
+        f"max stroke: nail 0.3 m below the ramp {ref.distance:.6f} ± {ref.sigma:.6f} m at {ref.time:.4f} s; "
+        f"0.41 m in front {moved.distance:.6f} ± {moved.sigma:.6f} m at {moved.time:.4f} s"
+    )
+    assert abs(moved.distance - ref.distance) < 0.01 * ref.sigma
+    assert abs(moved.sigma - ref.sigma) < 0.01 * ref.sigma
+    assert abs(moved.time - ref.time) < 1e-3

@@ -20,6 +20,7 @@ from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, from_table, scenario_table
 from workbench.problems.droptest.lander import LANDER_SCHEMA as _LANDER_SCHEMA
 from workbench.problems.droptest.lander import LanderModel, load_lander
+from workbench.problems.droptest.surface import ramp_normal
 
 __all__ = [
     "SCHEMA",
@@ -75,11 +76,22 @@ SCHEMA = Schema(
                     _F,
                     0.3,
                     "m",
-                    "the nail (SPF origin, where the bungee-cut hammer strikes) lies this far below the ramp "
-                    "surface, along its normal (a nail in front of the ramp, where the lander would hit it, is "
-                    "rejected)",
-                    ge=0.0,
-                    le=10.0,
+                    "where the ramp plane lies from the nail (the SPF origin, where the bungee-cut hammer "
+                    "strikes), along the ramp's free-side normal n = (0, −sin a, cos a): the plane passes "
+                    "through `nail_depth_m` · n. Signed, any value: positive = the nail below the ramp surface "
+                    "(REDLand: 0.3), negative = the nail in front of it, on the lander's side. The ramp is "
+                    "placed by its own plane, so a nail anywhere needs no other position moved; not together "
+                    "with `ramp_point_m`",
+                ),
+                Key(
+                    "ramp_point_m",
+                    _V,
+                    None,
+                    "m",
+                    "instead of `nail_depth_m`: any surveyed point on the ramp surface, in SPF; the ramp is "
+                    "the plane through it inclined at `ramp_angle_deg` (equivalent to `nail_depth_m` = n · "
+                    "point; the rock window's origin is the foot of the nail on that plane); absent: "
+                    "`nail_depth_m` places the ramp",
                 ),
                 Key(
                     "magnetic_field_spf",
@@ -370,8 +382,10 @@ class Rocks:
 
 @dataclass(frozen=True, eq=False)
 class Chamber:
-    """``[chamber]``: ``ramp_angle_deg`` [deg], ``nail_depth_m`` [m], ``magnetic_field_spf`` (3,)
-    read-only, not normalised; ``rocks`` the rock field, or None without ``[chamber.rocks]``."""
+    """``[chamber]``: ``ramp_angle_deg`` [deg]; ``nail_depth_m`` [m] the signed offset of the ramp
+    plane from the nail along its normal (the key's, or ``n · ramp_point_m`` when that is given);
+    ``magnetic_field_spf`` (3,) read-only, not normalised; ``rocks`` the rock field, or None without
+    ``[chamber.rocks]``."""
 
     ramp_angle_deg: float
     nail_depth_m: float
@@ -529,6 +543,12 @@ class DropSettings:
             raise ScenarioError(scenario.path, "scenario.kind", f"{scenario.kind!r} is not a droptest scenario")
         v = SCHEMA.validate(scenario.data, scenario.path)
         _check_cross_fields(v, scenario.path)
+        if scenario.has("chamber.ramp_point_m") and scenario.has("chamber.nail_depth_m"):
+            raise ScenarioError(
+                scenario.path,
+                "chamber.ramp_point_m",
+                "give either 'nail_depth_m' or 'ramp_point_m' (both place the ramp plane), not both",
+            )
         run = RunInfo.from_scenario(scenario)
         lander_file = run.resolve(v["vehicle"]["lander"]).absolute()
         if not lander_file.exists():
@@ -551,6 +571,9 @@ class DropSettings:
             chamber=from_table(
                 Chamber,
                 ch,
+                nail_depth_m=ch["nail_depth_m"]
+                if ch["ramp_point_m"] is None
+                else float(ramp_normal(ch["ramp_angle_deg"]) @ np.asarray(ch["ramp_point_m"], float)),
                 magnetic_field_spf=_frozen(ch["magnetic_field_spf"]),
                 rocks=from_table(
                     Rocks, rk, extent_m=((float(ext[0][0]), float(ext[0][1])), (float(ext[1][0]), float(ext[1][1])))
@@ -597,6 +620,10 @@ def _check_cross_fields(v: dict, path: Path) -> None:
     def bad(key: str, msg: str) -> None:
         raise ScenarioError(path, key, msg)
 
+    if not np.isfinite(v["chamber"]["nail_depth_m"]):
+        bad("chamber.nail_depth_m", "must be a finite number of metres")
+    if v["chamber"]["ramp_point_m"] is not None and not np.all(np.isfinite(v["chamber"]["ramp_point_m"])):
+        bad("chamber.ramp_point_m", "must be three finite numbers [m]")
     if not np.linalg.norm(v["chamber"]["magnetic_field_spf"]) > 0.0:
         bad("chamber.magnetic_field_spf", "a zero vector has no direction")
     rg = v["sensors"]["ranging"]

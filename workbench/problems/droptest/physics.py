@@ -494,7 +494,8 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
         # the keys that set the clearance: said here too, for the calibrated band's WARNING/ERROR
         keys = (
             f"the setup file's [hanging] position_m, the lander geometry in {settings.lander_file} (height_m, "
-            f"cm_height_m, lobe_diameter_m, standoff_m), [chamber] ramp_angle_deg / nail_depth_m in {settings.path}"
+            f"cm_height_m, lobe_diameter_m, standoff_m), [chamber] ramp_angle_deg / nail_depth_m (or ramp_point_m) "
+            f"in {settings.path}"
         )
         msg = f"{base}; a clearance outside the honest band moves the stroke with it — likely: {keys}"
         return Check("geometry.first_contact", OK, _g(c), [_g(lo), _g(hi)], msg, stat)
@@ -507,7 +508,7 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     keys += [
         f"the setup file's [hanging] position_m (off by ≈ {abs(shift):.3f} m along the ramp normal?)",
         f"the lander geometry in {settings.lander_file} (height_m, cm_height_m, lobe_diameter_m, standoff_m)",
-        f"[chamber] ramp_angle_deg / nail_depth_m in {settings.path}",
+        f"[chamber] ramp_angle_deg / nail_depth_m (or ramp_point_m) in {settings.path}",
     ]
     return Check(
         "geometry.first_contact",
