@@ -463,3 +463,60 @@ def test_nail_moved_in_front_of_the_ramp_reconstructs_the_same_stroke(tmp_path):
     assert abs(moved.distance - ref.distance) < 0.01 * ref.sigma
     assert abs(moved.sigma - ref.sigma) < 0.01 * ref.sigma
     assert abs(moved.time - ref.time) < 1e-3
+
+
+def _lander_without_simulator_keys(path: Path) -> Path:
+    """The shipped lander asset without the keys only the truth simulator reads."""
+    drop = (
+        "pressure_pa",
+        "gas_volume_m3",
+        "gamma",
+        "damping_pa_s_per_m",
+        "friction",
+        "ambient_pressure_pa",
+        "[chamber]",
+    )
+    lines = [ln for ln in LANDER.read_text().splitlines() if not ln.strip().startswith(drop)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_simulator_keys_required_by_a_synthetic_scenario_only(tmp_path):
+    from workbench.problems.droptest.lander import SIMULATOR_KEYS
+
+    lander = _lander_without_simulator_keys(tmp_path / "lander.toml")
+    m = load_lander(lander)
+    assert all(getattr(m, attr) is None for _, attr in SIMULATOR_KEYS)
+    text = (ASSETS / "scenarios" / "droptest.toml").read_text()
+    p = tmp_path / "s.toml"
+    p.write_text(text.replace("../landers/mer_drop_lander.toml", lander.as_posix()))
+    with pytest.raises(ScenarioError, match=r"lander\.toml.*airbags\.pressure_pa.*truth simulator"):
+        DropSettings.from_scenario(load_scenario(p))
+    p.write_text(p.read_text() + "bag_pressure_psi = 1.0\n")  # the pressure given: the next key is named
+    with pytest.raises(ScenarioError, match=r"airbags\.gas_volume_m3"):
+        DropSettings.from_scenario(load_scenario(p))
+
+
+def test_user_data_without_the_simulator_keys_runs(tmp_path):
+    """The shipped drop's files as user data with a lander asset that leaves out the bag pressure, gas
+    volume, γ, damping, friction and chamber pressure: it runs and gives the stroke of the full asset
+    (the estimator never reads them) and the same health verdict."""
+    from workbench.problems.base import RunOptions
+    from workbench.problems.droptest.synthetic import synthesize_droptest
+    from workbench.problems.runner import run_scenario
+
+    shipped = resolve_scenario("droptest", ASSETS)
+    causal = "sample_rate_hz = 2000.0\nfilter_cutoff_hz = 500.0\nfilter_order = 4"
+    syn_path = tmp_path / "syn.toml"
+    syn_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), causal, None))
+    syn = synthesize_droptest(DropSettings.from_scenario(load_scenario(syn_path)), tmp_path / "tel")
+    tel = {k: v for k, v in syn.telemetry.items() if k != "truth"}
+    bare = _lander_without_simulator_keys(tmp_path / "bare_lander.toml")
+    out = {}
+    for name, lander in (("full", LANDER), ("bare", bare)):
+        p = tmp_path / f"{name}.toml"
+        p.write_text(_scenario_text(shipped.path, lander.as_posix(), causal, tel))
+        out[name] = run_scenario(load_scenario(p), tmp_path / "out", RunOptions(seed=1)).summary
+    full, bare_sum = out["full"]["max_stroke"], out["bare"]["max_stroke"]
+    assert bare_sum["distance_m"] == full["distance_m"] and bare_sum["sigma_m"] == full["sigma_m"]
+    assert out["bare"]["health"]["verdict"] == out["full"]["health"]["verdict"] == "OK"

@@ -19,7 +19,7 @@ import numpy as np
 from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, from_table, scenario_table
 from workbench.problems.droptest.lander import LANDER_SCHEMA as _LANDER_SCHEMA
-from workbench.problems.droptest.lander import LanderModel, load_lander
+from workbench.problems.droptest.lander import LanderModel, load_lander, require_simulator_keys
 from workbench.problems.droptest.surface import ramp_normal
 
 __all__ = [
@@ -553,6 +553,9 @@ class DropSettings:
         lander_file = run.resolve(v["vehicle"]["lander"]).absolute()
         if not lander_file.exists():
             raise ScenarioError(scenario.path, "vehicle.lander", f"file not found: {lander_file}")
+        lander = load_lander(lander_file)
+        if run.synthetic:  # the truth simulator's keys: user data may leave them out
+            require_simulator_keys(lander, lander_file, except_pressure=v["synthetic"]["bag_pressure_psi"] is not None)
         ch, rk = v["chamber"], v["chamber"]["rocks"]
         acc, gyr = v["sensors"]["accelerometer"], v["sensors"]["gyro"]
         aq, a3, rg = v["sensors"]["acquisition"], v["sensors"]["attitude_3dm"], v["sensors"]["ranging"]
@@ -566,7 +569,7 @@ class DropSettings:
         return cls(
             run=run,
             lander_file=lander_file,
-            lander=load_lander(lander_file),
+            lander=lander,
             telemetry={k: (None if p is None else run.resolve(p).absolute()) for k, p in v["telemetry"].items()},
             chamber=from_table(
                 Chamber,
