@@ -520,3 +520,34 @@ def test_user_data_without_the_simulator_keys_runs(tmp_path):
     full, bare_sum = out["full"]["max_stroke"], out["bare"]["max_stroke"]
     assert bare_sum["distance_m"] == full["distance_m"] and bare_sum["sigma_m"] == full["sigma_m"]
     assert out["bare"]["health"]["verdict"] == out["full"]["health"]["verdict"] == "OK"
+
+
+def test_odometer_quantisation_written_and_its_variance_in_r(tmp_path):
+    """``odometer_quantisation_m``: the synthetic odometer reads whole count steps, and the filter's
+    odometer variance is σ² + q²/12 — declared, the quantised readings are consistent (mean NIS near
+    1); left out (q = 0, the default: the shipped numbers), the same file's NIS is well above it."""
+    from workbench.problems.droptest.pipeline import run_droptest
+    from workbench.problems.droptest.sensors import RangingSpec
+    from workbench.problems.droptest.synthetic import synthesize_droptest
+
+    text = (ASSETS / "scenarios" / "droptest_ranging.toml").read_text().replace("../landers", str(ASSETS / "landers"))
+    plain = tmp_path / "plain.toml"
+    plain.write_text(text)
+    q = 0.05
+    quant = tmp_path / "quant.toml"
+    quant.write_text(text.replace("[sensors.ranging]", f"[sensors.ranging]\nodometer_quantisation_m = {q}", 1))
+    st_plain = DropSettings.from_scenario(load_scenario(plain))
+    st_q = DropSettings.from_scenario(load_scenario(quant))
+    sig = st_q.ranging.odometer_sigma_m
+    assert RangingSpec.from_settings(st_plain.ranging).odometer_variance == sig**2  # default: unchanged
+    assert abs(RangingSpec.from_settings(st_q.ranging).odometer_variance - (sig**2 + q**2 / 12.0)) < 1e-15
+    syn = synthesize_droptest(st_q, tmp_path / "tel")
+    odo = read_telemetry(syn.telemetry["ranging"]).channel("odometer")
+    odo = odo[np.isfinite(odo)]
+    assert odo.size > 100 and np.allclose(odo / q, np.round(odo / q), atol=1e-6)
+    nis = {}
+    for name, st in (("declared", st_q), ("left_out", st_plain)):
+        nis[name] = run_droptest(st, syn.telemetry, seed=1).summary["innovations"]["odometer"]["mean_nis"]
+    print(f"odometer mean NIS, q = {q} m declared {nis['declared']:.3f}, left out {nis['left_out']:.3f}")
+    assert 0.5 < nis["declared"] < 1.5
+    assert nis["left_out"] > 2.0

@@ -40,6 +40,13 @@ __all__ = [
 
 _F, _I, _S, _B, _V, _L = "float", "int", "str", "bool", "vec3", "list"
 
+#: What an IMU noise key's σ is of (the simulator's ``sensors.apply_errors`` after
+#: ``sensors.acquisition_filter``; the filter's R in ``pipeline``).
+_AFTER_FILTER = (
+    "white noise of each recorded sample, 1σ, *after* the acquisition filter (the simulator adds it to the "
+    "filtered, sampled signal; the filter divides its variance by the samples averaged into each step)"
+)
+
 SCHEMA = Schema(
     "droptest",
     "REDLand airbag drop test",
@@ -124,7 +131,14 @@ SCHEMA = Schema(
                 Key(
                     "triads", _L, ["BP", "PYBP", "PXBP", "MXBP"], meaning="triad names (lever arms in the lander asset)"
                 ),
-                Key("noise_g", _F, 0.2, "g", "per-sample noise, 1σ (0: absent)", ge=0.0),
+                Key(
+                    "noise_g",
+                    _F,
+                    0.2,
+                    "g",
+                    _AFTER_FILTER + "; 0: absent",
+                    ge=0.0,
+                ),
                 Key("bias_g", _F, 0.005, "g", "residual bias after zeroing, 1σ per axis", ge=0.0),
                 Key("scale", _F, 0.002, "1", "scale-factor error, 1σ (filter: measurement noise ∝ the force)", ge=0.0),
                 Key(
@@ -142,7 +156,14 @@ SCHEMA = Schema(
             "sensors.gyro",
             "rate gyro",
             (
-                Key("noise_dps", _F, 0.4, "deg/s", "per-sample noise, 1σ", ge=0.0),
+                Key(
+                    "noise_dps",
+                    _F,
+                    0.4,
+                    "deg/s",
+                    _AFTER_FILTER,
+                    ge=0.0,
+                ),
                 Key("bias_dps", _F, 0.05, "deg/s", "bias, 1σ", ge=0.0),
                 Key("scale", _F, 0.01, "1", "scale-factor error, 1σ", ge=0.0),
                 Key("misalignment_deg", _F, 0.05, "deg", "axis misalignment, 1σ", ge=0.0),
@@ -217,7 +238,24 @@ SCHEMA = Schema(
                     gt=0.0,
                 ),
                 Key("odometer", _B, False, meaning="bungee-sheave odometer until the cut"),
-                Key("odometer_sigma_m", _F, 0.01, "m", "odometer noise, 1σ", ge=0.0),
+                Key(
+                    "odometer_sigma_m",
+                    _F,
+                    0.01,
+                    "m",
+                    "odometer noise of each recorded sample as written in the file, 1σ (after any filter the "
+                    "channel went through; white: each sample is one measurement)",
+                    ge=0.0,
+                ),
+                Key(
+                    "odometer_quantisation_m",
+                    _F,
+                    0.0,
+                    "m",
+                    "the odometer's count step: it reads a whole number of steps; the filter adds the rounding's "
+                    "variance q²/12 to `odometer_sigma_m`² (0: not quantised); the synthetic writer rounds to it",
+                    ge=0.0,
+                ),
                 Key(
                     "odometer_zero_m",
                     _F,
@@ -230,7 +268,7 @@ SCHEMA = Schema(
                     _F,
                     0.02,
                     "m",
-                    "radar-gun range noise, 1σ (every gun without its own)",
+                    "radar-gun range noise of each recorded sample, 1σ (every gun without its own)",
                     ge=0.0,
                 ),
                 Key("radar_rate_sigma_mps", _F, 0.05, "m/s", "radar-gun range-rate noise, 1σ (idem)", ge=0.0),
@@ -455,6 +493,7 @@ class Ranging:
     odometer: bool
     odometer_sigma_m: float
     odometer_zero_m: float
+    odometer_quantisation_m: float
     radar_range_sigma_m: float
     radar_rate_sigma_mps: float
     reflector_body_m: np.ndarray

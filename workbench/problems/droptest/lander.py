@@ -339,9 +339,12 @@ LANDER_SCHEMA = Schema(
                     "number_or_list",
                     None,
                     "m",
-                    "lobe inner surface to its face, > −lobe radius (negative = lobes wrap the lander); one "
-                    "number or one per face as `lobe_spacing_m` (required with the rack; with `lobe_centers_m` "
-                    "only reported, absent = 0)",
+                    "the gap from the lander face's plane to the nearest point of each lobe sphere of its rack, "
+                    "along the face's outward normal: the rack's centroid sits `lobe_diameter_m`/2 + "
+                    "`standoff_m` off the face centroid. Must be > −lobe radius; negative = the spheres cut the "
+                    "face plane (lobes wrapping the lander: the MER asset's −0.6 puts the centres 0.4 m off the "
+                    "face). One number or one per face as `lobe_spacing_m` (required with the rack; with "
+                    "`lobe_centers_m` only reported, absent = 0)",
                 ),
                 Key(
                     "lobe_centers_m",

@@ -533,7 +533,7 @@ def _ranging_measurements(spec: RangingSpec, tel: DropTelemetry, lander: LanderM
             raise ScenarioError(rt.path, None, "an odometer channel needs a [bungee] table in the setup file")
         anchor = np.asarray(b["anchor_m"], float)
         attach = lander.to_body(b["attach_body_m"])
-        s2 = np.array([[spec.odometer_sigma**2]])
+        s2 = np.array([[spec.odometer_variance]])  # noise + the rounding to its count step
         vals = rt.channel("odometer") + spec.odometer_zero  # the rope length
         for i in np.flatnonzero(near & np.isfinite(vals)):
             m = _Memo(_at_time(lambda x: rl.range_model(x, anchor, attach), float(off[i])))
