@@ -551,3 +551,41 @@ def test_odometer_quantisation_written_and_its_variance_in_r(tmp_path):
     print(f"odometer mean NIS, q = {q} m declared {nis['declared']:.3f}, left out {nis['left_out']:.3f}")
     assert 0.5 < nis["declared"] < 1.5
     assert nis["left_out"] > 2.0
+
+
+def test_every_time_shift_reported_with_its_cause(tmp_path, droptest_result):
+    """Each stream's shift in the summary and the scorecard, by cause (the acquisition filter's delay
+    and the declared latencies), not only the IMU's; a ranging stream through the acquisition filter
+    carries that filter's delay as well as its own latency."""
+    from workbench.problems.droptest.pipeline import scorecard_markdown
+    from workbench.problems.droptest.sensors import acquisition_group_delay
+    from workbench.problems.droptest.telemetry import time_shift_causes
+
+    s = droptest_result.summary
+    assert set(s["time_shifts"]) == {"imu", "attitude_3dm"}  # the shipped drop has no ranging
+    imu = s["time_shifts"]["imu"]
+    assert imu["total_s"] == s["time_shifts_s"]["imu"] == s["group_delay_s"] > 0.0
+    assert imu["causes"] == {
+        "acquisition-filter group delay ([sensors.acquisition]: causal Butterworth order 4, 500 Hz)": imu["total_s"],
+        "latency ([sensors.acquisition] latency_s)": 0.0,
+    }
+    card = scorecard_markdown(s)
+    assert f"| imu | {imu['total_s'] * 1e3:.3f} ms | acquisition-filter group delay" in card
+    assert "| attitude_3dm | 0.000 ms | latency ([sensors.attitude_3dm] latency_s): 0.000 ms |" in card
+    assert "| events | 0 (tags used as written)" in card
+
+    text = (ASSETS / "scenarios" / "droptest_ranging.toml").read_text().replace("../landers", str(ASSETS / "landers"))
+    text = text.replace("[sensors.ranging]", "[sensors.ranging]\nlatency_s = 0.003\nacquisition_filter = true", 1)
+    text = text.replace("[sensors.attitude_3dm]", "[sensors.attitude_3dm]\nlatency_s = 0.02", 1)
+    p = tmp_path / "r.toml"
+    p.write_text(text)
+    st = DropSettings.from_scenario(load_scenario(p))
+    causes = time_shift_causes(st, has_ranging=True)
+    delay = acquisition_group_delay(500.0, 4, "butterworth")
+    assert causes["attitude_3dm"] == {"latency ([sensors.attitude_3dm] latency_s)": 0.02}
+    assert causes["ranging"] == {
+        "latency ([sensors.ranging] latency_s)": 0.003,
+        "acquisition-filter group delay ([sensors.ranging] acquisition_filter = true, causal Butterworth order 4, "
+        "500 Hz)": delay,
+    }
+    assert "ranging" not in time_shift_causes(st, has_ranging=False)
