@@ -77,7 +77,16 @@ SCHEMA = Schema(
             "chamber",
             "the test chamber, SPF frame",
             (
-                Key("ramp_angle_deg", _F, 60.0, "deg", "ramp inclination from the horizontal", gt=0.0, lt=90.0),
+                Key(
+                    "ramp_angle_deg",
+                    _F,
+                    60.0,
+                    "deg",
+                    "ramp inclination from the horizontal",
+                    gt=0.0,
+                    lt=90.0,
+                    example=True,
+                ),
                 Key(
                     "nail_depth_m",
                     _F,
@@ -89,6 +98,7 @@ SCHEMA = Schema(
                     "(REDLand: 0.3), negative = the nail in front of it, on the lander's side. The ramp is "
                     "placed by its own plane, so a nail anywhere needs no other position moved; not together "
                     "with `ramp_point_m`",
+                    example=True,
                 ),
                 Key(
                     "ramp_point_m",
@@ -99,6 +109,7 @@ SCHEMA = Schema(
                     "the plane through it inclined at `ramp_angle_deg` (equivalent to `nail_depth_m` = n · "
                     "point; the rock window's origin is the foot of the nail on that plane); absent: "
                     "`nail_depth_m` places the ramp",
+                    example=True,
                 ),
                 Key(
                     "magnetic_field_spf",
@@ -106,6 +117,7 @@ SCHEMA = Schema(
                     REQUIRED,
                     "1",
                     "local magnetic field direction in SPF (3DM attitude); any non-zero length",
+                    example=True,
                 ),
             ),
         ),
@@ -129,7 +141,11 @@ SCHEMA = Schema(
             "accelerometer triads",
             (
                 Key(
-                    "triads", _L, ["BP", "PYBP", "PXBP", "MXBP"], meaning="triad names (lever arms in the lander asset)"
+                    "triads",
+                    _L,
+                    ["BP", "PYBP", "PXBP", "MXBP"],
+                    meaning="triad names (lever arms in the lander asset)",
+                    example=True,
                 ),
                 Key(
                     "noise_g",
@@ -174,7 +190,7 @@ SCHEMA = Schema(
             "sensors.acquisition",
             "data acquisition",
             (
-                Key("sample_rate_hz", _F, 2000.0, "Hz", "IMU sample rate (synthetic)", gt=0.0),
+                Key("sample_rate_hz", _F, 2000.0, "Hz", "IMU sample rate (synthetic)", gt=0.0, example=True),
                 Key(
                     "filter",
                     _S,
@@ -183,10 +199,19 @@ SCHEMA = Schema(
                     "low-frequency group delay is removed from the time tags), `zero_phase` (forward-backward, "
                     "no delay), `none`",
                     choices=("butterworth", "zero_phase", "none"),
+                    example=True,
                 ),
-                Key("filter_cutoff_hz", _F, 500.0, "Hz", "Butterworth cutoff, below half the sample rate"),
                 Key(
-                    "filter_order", _I, 4, meaning='Butterworth order (0: no filter, as `filter = "none"`)', ge=0, le=10
+                    "filter_cutoff_hz", _F, 500.0, "Hz", "Butterworth cutoff, below half the sample rate", example=True
+                ),
+                Key(
+                    "filter_order",
+                    _I,
+                    4,
+                    meaning='Butterworth order (0: no filter, as `filter = "none"`)',
+                    ge=0,
+                    le=10,
+                    example=True,
                 ),
                 Key(
                     "latency_s",
@@ -262,6 +287,7 @@ SCHEMA = Schema(
                     0.0,
                     "m",
                     "the odometer's zero: it reads the rope length (sheave to attachment) minus this",
+                    example=True,
                 ),
                 Key(
                     "radar_range_sigma_m",
@@ -279,6 +305,7 @@ SCHEMA = Schema(
                     "m",
                     "corner reflector in the lander frame (the asset's; its origin is the CM unless the asset "
                     "gives `cm_m`), for every gun without its own",
+                    example=True,
                 ),
                 Key(
                     "latency_s",
@@ -376,8 +403,8 @@ SETUP_SCHEMA = Schema(
             "hanging",
             "the surveyed hanging state (SPF)",
             (
-                Key("position_m", _V, REQUIRED, "m", "the CM in SPF while hanging"),
-                Key("position_sigma_m", _F, REQUIRED, "m", "its 1σ per axis", gt=0.0),
+                Key("position_m", _V, REQUIRED, "m", "the CM in SPF while hanging", example=True),
+                Key("position_sigma_m", _F, REQUIRED, "m", "its 1σ per axis", gt=0.0, example=True),
             ),
         ),
         Table(
@@ -385,20 +412,27 @@ SETUP_SCHEMA = Schema(
             'the bungee test plan: needed whole by `[filter] mode = "dynamic"`, only `anchor_m` and '
             "`attach_body_m` by the odometer; the kinematic filter ignores it",
             (
-                Key("anchor_m", _V, None, "m", "bungee anchor (the odometer's sheave) in SPF"),
-                Key("rest_length_m", _F, None, "m", "rest length", gt=0.0),
-                Key("coefficients", _L, None, "N/m^k", "per-bungee force polynomial in the stretch, k = 1.."),
-                Key("count", _F, None, "1", "number of bungees (continuous: the design's)", gt=0.0),
-                Key("attach_body_m", _V, None, "m", "rope attachment in the lander frame L"),
-                Key("mass_kg", _F, None, "kg", "lander mass of the test plan", gt=0.0),
+                Key("anchor_m", _V, None, "m", "bungee anchor (the odometer's sheave) in SPF", example=True),
+                Key("rest_length_m", _F, None, "m", "rest length", gt=0.0, example=True),
+                Key(
+                    "coefficients",
+                    _L,
+                    None,
+                    "N/m^k",
+                    "per-bungee force polynomial in the stretch, k = 1..",
+                    example=True,
+                ),
+                Key("count", _F, None, "1", "number of bungees (continuous: the design's)", gt=0.0, example=True),
+                Key("attach_body_m", _V, None, "m", "rope attachment in the lander frame L", example=True),
+                Key("mass_kg", _F, None, "kg", "lander mass of the test plan", gt=0.0, example=True),
             ),
         ),
         Table(
             "rocks",
             "a surveyed rock field (rigid spheres)",
             (
-                Key("centers_m", _L, REQUIRED, "m", "sphere centres, n × [x, y, z] in SPF"),
-                Key("radii_m", _L, REQUIRED, "m", "sphere radii (n)", gt=0.0),
+                Key("centers_m", _L, REQUIRED, "m", "sphere centres, n × [x, y, z] in SPF", example=True),
+                Key("radii_m", _L, REQUIRED, "m", "sphere radii (n)", gt=0.0, example=True),
             ),
         ),
     ),
