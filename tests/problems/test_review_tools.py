@@ -209,6 +209,54 @@ def test_init_post2_j2_runs_end_to_end(tmp_path, capsys):
     assert main(["init", "post2_j2", str(d)]) == 3  # refuses to overwrite
 
 
+def _marked(text: str) -> list[str]:
+    """The keys on the lines right after an EXAMPLE mark (each mark is followed by a key line)."""
+    from workbench.io.schema import EXAMPLE_MARK
+
+    lines = text.splitlines()
+    out = []
+    for i, ln in enumerate(lines):
+        if ln == EXAMPLE_MARK:
+            assert " = " in lines[i + 1] and not lines[i + 1].startswith("#"), lines[i + 1]
+            out.append(lines[i + 1].split(" = ")[0])
+    return out
+
+
+def test_init_droptest_marks_the_example_chambers_values(tmp_path):
+    """Issue 27 item 5: ``init droptest`` marks the values that are the example chamber's (its epoch,
+    ramp, nail, magnetic field, triads, acquisition filter; in the setup file the hanging position and
+    the bungee) as to be replaced, and no other; the README lists them; the files still parse."""
+    d = tmp_path / "rig"
+    assert main(["init", "droptest", str(d)]) == 0
+    text = (d / "scenario.toml").read_text(encoding="utf-8")
+    tomllib.loads(text)
+    assert _marked(text) == [
+        "epoch_utc",
+        "ramp_angle_deg",
+        "nail_depth_m",
+        "magnetic_field_spf",
+        "triads",
+        "sample_rate_hz",
+        "filter_cutoff_hz",
+        "filter_order",
+    ]
+    setup = (d / "telemetry" / "setup.toml").read_text(encoding="utf-8")
+    tomllib.loads(setup)
+    assert _marked(setup) == [
+        "position_m",
+        "position_sigma_m",
+        "anchor_m",
+        "rest_length_m",
+        "coefficients",
+        "count",
+        "attach_body_m",
+        "mass_kg",
+    ]
+    readme = (d / "README.md").read_text(encoding="utf-8")
+    for key in ("`scenario.toml`: `chamber.magnetic_field_spf`", "`telemetry/setup.toml`: `hanging.position_m`"):
+        assert key in readme
+
+
 @pytest.mark.slow
 def test_init_droptest_runs_end_to_end(tmp_path):
     d = tmp_path / "drop"

@@ -40,6 +40,7 @@ from workbench.io.scenario import ScenarioError, check_value, parse_file, read_t
 
 __all__ = [
     "REQUIRED",
+    "EXAMPLE_MARK",
     "KINDS",
     "Key",
     "Table",
@@ -63,6 +64,9 @@ class _Required:
 #: Default of a key that must be given.
 REQUIRED: Any = _Required()
 
+#: The comment ``workbench init`` writes above a shipped example's value of an ``example`` key.
+EXAMPLE_MARK = "# EXAMPLE — replace with your own value (this is the shipped example's)"
+
 #: Value kinds: those of :meth:`Scenario.get <workbench.io.scenario.Scenario.get>`, plus
 #: ``"number_or_vec3"`` (one number for all three axes, or a list of 3) and ``"number_or_list"``
 #: (one number for every item, or a list: e.g. one value per face); a number is returned as float.
@@ -75,7 +79,10 @@ class Key:
     file; "" when dimensionless or not a quantity), ``default`` (:data:`REQUIRED`, ``None`` for
     "absent", or the value), what it means, optional ``choices`` for string keys, and optional
     numeric bounds in the key's own unit: ``ge`` (≥), ``gt`` (>), ``le`` (≤), ``lt`` (<), applied
-    to a number and to every number of a vector or (nested) list; NaN is outside every bound."""
+    to a number and to every number of a vector or (nested) list; NaN is outside every bound.
+    ``example``: the value is a fact of one particular test or flight (its date, its site, its rig)
+    that has no default for another one: ``workbench init`` marks a shipped example's value of it
+    to be replaced (:data:`EXAMPLE_MARK`)."""
 
     name: str
     kind: str
@@ -87,6 +94,7 @@ class Key:
     gt: float | None = None
     le: float | None = None
     lt: float | None = None
+    example: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -165,7 +173,7 @@ def scenario_table(
         Key("description", "str", "", meaning="one line for listings"),
     )
     if epoch is not None:
-        keys += (Key("epoch_utc", "str", None, meaning=epoch),)
+        keys += (Key("epoch_utc", "str", None, meaning=epoch, example=True),)
     return Table("scenario", "what the run is", keys)
 
 

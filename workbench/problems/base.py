@@ -210,7 +210,8 @@ class Problem(Protocol):
     schema of its scenario tables, or None while it has none. A problem may also list
     ``file_schemas``, the :class:`~workbench.io.schema.Schema` of every other file kind it reads
     (assets, setup files, log metadata), for the generated documentation
-    (:func:`workbench.problems.registry.schemas`).
+    (:func:`workbench.problems.registry.schemas`), and ``telemetry_schemas`` {stream: schema} for
+    telemetry streams that are TOML files (``workbench init`` marks their example values).
     """
 
     kind: str

@@ -14,6 +14,11 @@
 * ``DIR/README.md`` — what to replace: each telemetry file with its scenario key, meaning and the
   first lines of the example (the columns and units), and the keys to review.
 
+The values that are facts of the example's own test or flight (schema keys declared ``example``:
+its epoch, its chamber, its rig) are marked ``# EXAMPLE — replace ...`` where the scenario sets them,
+and in the example TOML telemetry files a problem declares in ``telemetry_schemas`` (the drop
+setup file's hanging position and bungee); the README lists them.
+
 The scenario's telemetry keys are found by name: ``[telemetry] <stream>`` when the schema has
 that table, else ``[observations.<stream>] file`` (and ``weights`` for ``<stream>_weights``). The
 written scenario is checked before returning: it validates against the schema and the problem
@@ -34,12 +39,12 @@ import numpy as np
 
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import Scenario, ScenarioError, find_scenarios, load_scenario
-from workbench.io.schema import REQUIRED, Key, Schema
+from workbench.io.schema import EXAMPLE_MARK, REQUIRED, Key, Schema
 from workbench.problems import registry
 from workbench.problems.base import Problem
 from workbench.problems.runner import resolve
 
-__all__ = ["InitResult", "base_scenario", "init_scenario", "scenario_toml"]
+__all__ = ["InitResult", "base_scenario", "init_scenario", "mark_examples", "scenario_toml"]
 
 SYNTHETIC_TABLE = "synthetic"
 
@@ -140,7 +145,9 @@ def _get(data: dict, dotted: str) -> Any:
 def scenario_toml(schema: Schema, values: dict, header: str) -> str:
     """The scenario file text: ``header`` (comment lines), then every table of ``schema`` in
     declaration order with its meaning, every key documented (unit, kind, default, meaning) and
-    set to ``values`` (the nested scenario dict) where given, else commented out at its default.
+    set to ``values`` (the nested scenario dict) where given, else commented out at its default; a
+    given value of an ``example`` key (a fact of the example's test or flight) is marked
+    :data:`~workbench.io.schema.EXAMPLE_MARK`.
     Free-form tables write the entries ``values`` holds (sub-tables as ``[table.name]`` sections).
     Tables named ``synthetic`` (and below) are left out."""
     out = [*header.rstrip().splitlines(), ""]
@@ -162,6 +169,8 @@ def scenario_toml(schema: Schema, values: dict, header: str) -> str:
         for k in t.keys:
             out += ["#", *_comment(_key_doc(k))]
             if k.name in node and node[k.name] is not None:
+                if k.example:  # a fact of the example's test or flight: to be replaced
+                    out.append(EXAMPLE_MARK)
                 out.append(f"{k.name} = {_toml_value(node[k.name])}")
             elif k.default is REQUIRED:
                 out.append(f"{k.name} = ")  # left empty on purpose: TOML refuses it until filled in
@@ -184,6 +193,36 @@ def scenario_toml(schema: Schema, values: dict, header: str) -> str:
                 out += [f"{_bare(a)} = {_toml_value(b)}" for a, b in v.items()]
         out.append("")
     return "\n".join(out).rstrip() + "\n"
+
+
+def mark_examples(path: Path, schema: Schema) -> list[str]:
+    """Mark, in the TOML file ``path`` of ``schema`` (an example telemetry file such as the drop
+    setup file), every ``key = value`` line of an ``example`` key with :data:`EXAMPLE_MARK` on the
+    line above; rewrites the file, returns the dotted keys marked (in file order)."""
+    lines, out, marked, table = path.read_text(encoding="utf-8").splitlines(), [], [], ""
+    for ln in lines:
+        s = ln.strip()
+        if s.startswith("[") and not s.startswith("[["):
+            table = s.strip("[]").strip()
+        elif "=" in s and not s.startswith("#"):
+            t = schema.table(table)
+            k = t.key(s.split("=", 1)[0].strip()) if t is not None else None
+            if k is not None and k.example:
+                out.append(EXAMPLE_MARK)
+                marked.append(f"{table}.{k.name}" if table else k.name)
+        out.append(ln)
+    path.write_text("\n".join(out) + "\n", encoding="utf-8")
+    return marked
+
+
+def _example_keys(schema: Schema, data: dict) -> list[str]:
+    """The dotted ``example`` keys of ``schema`` that ``data`` (the nested scenario) sets."""
+    out = []
+    for t in schema.tables:
+        node = _get(data, t.name)
+        if isinstance(node, dict):
+            out += [f"{t.name}.{k.name}" for k in t.keys if k.example and node.get(k.name) is not None]
+    return out
 
 
 # ------------------------------------------------------------------------------ the command
@@ -272,6 +311,10 @@ def init_scenario(
         ]
     )
     text = scenario_toml(problem.schema, data, header)
+    examples = {"scenario.toml": _example_keys(problem.schema, data)}
+    for stream, schema in (getattr(problem, "telemetry_schemas", None) or {}).items():
+        if stream in telemetry:  # an example TOML telemetry file (the drop setup file): its site's values
+            examples[telemetry[stream].relative_to(out).as_posix()] = mark_examples(telemetry[stream], schema)
     path = out / "scenario.toml"
     path.write_text(text, encoding="utf-8")
     # the check: it loads, validates and names exactly the files written
@@ -283,7 +326,7 @@ def init_scenario(
     if found != want:
         raise ScenarioError(path, "telemetry", f"resolves {found}, expected the files written: {want}")
     readme = out / "README.md"
-    readme.write_text(_readme(problem, base, sc, telemetry, keys, copied, out), encoding="utf-8")
+    readme.write_text(_readme(problem, base, sc, telemetry, keys, copied, out, examples), encoding="utf-8")
     return InitResult(path, telemetry, readme, tuple(copied), base)
 
 
@@ -295,6 +338,7 @@ def _readme(
     keys: dict[str, str],
     copied: list[Path],
     out: Path,
+    examples: dict[str, list[str]],
 ) -> str:
     schema = problem.schema
     lines = [
@@ -326,6 +370,17 @@ def _readme(
         k = tt.key(stream) if tt is not None else None
         meaning = (k.meaning if k is not None else "see the problem's observations").replace("|", "\\|")
         lines.append(f"| `{stream}` | `{key}` | {meaning} | `{path.relative_to(out).as_posix()}` |")
+    marked = [(f, k) for f, ks in examples.items() for k in ks]
+    if marked:
+        lines += [
+            "",
+            "## Values of the example's test to replace",
+            "",
+            f"These hold the shipped example's facts (its date, site, rig), marked `{EXAMPLE_MARK}` where",
+            "they are set; no default fits another test:",
+            "",
+            *[f"- `{f}`: `{k}`" for f, k in marked],
+        ]
     lines += ["", "## The example files, first lines", ""]
     for stream, path in telemetry.items():
         lines += [f"`{path.relative_to(out).as_posix()}` ({stream}):", "", "```", *_head(path), "```", ""]

@@ -173,6 +173,12 @@ def test_first_contact_geometry_ok_clean_error_hanging_moved(droptest_run, dropt
     geo = _checks(res.summary["health"], "geometry.")["geometry.first_contact"]
     assert res.summary["health"]["verdict"] == ERROR
     assert geo["status"] == ERROR and "[hanging] position_m" in geo["message"]
+    # user data may leave the bag pressures out of the lander asset: the band allows a lobe radius
+    lander = replace(droptest_run.settings.lander, pressure_pa=None, ambient_pressure_pa=None)
+    res = dt.run_droptest(replace(droptest_run.settings, lander=lander), paths)
+    geo = _checks(res.summary["health"], "geometry.")["geometry.first_contact"]
+    assert geo["status"] == ERROR and "bag pressures not declared, up to a lobe radius (1.000 m)" in geo["message"]
+    assert geo["bound"][0] < -1.0
 
 
 def test_full_stroke_ok_on_clean_run_and_a_taller_lander_is_a_warning_naming_height(

@@ -197,7 +197,7 @@ def _shipped_copy(tmp_path: Path, extra: str) -> object:
 def test_chamber_and_sigma_range_checks(tmp_path):
     text = (ASSETS / "scenarios" / "droptest.toml").read_text()
     for old, new, key in (
-        ("nail_depth_m = 0.3", "nail_depth_m = -0.2", "chamber.nail_depth_m"),
+        ("nail_depth_m = 0.3", "nail_depth_m = nan", "chamber.nail_depth_m"),
         ("ramp_angle_deg = 60.0", "ramp_angle_deg = 95.0", "chamber.ramp_angle_deg"),
         ("bias_dps = 0.05", "bias_dps = -0.05", "sensors.gyro.bias_dps"),
         ("filter_order = 4", "filter_order = 12", "sensors.acquisition.filter_order"),
@@ -383,3 +383,209 @@ def test_errors_declared_absent_are_honoured_not_an_error(tmp_path):
     for key in ("[sensors.gyro] bias_dps", "[sensors.gyro] misalignment_deg", "[sensors.accelerometer] bias_g"):
         assert key in cov["message"], (key, cov["message"])
     assert health["verdict"] != "ERROR", health
+
+
+def test_nail_anywhere_the_ramp_placed_by_its_own_plane(tmp_path):
+    """Issue 27 item 5: a nail in front of the ramp plane (negative ``nail_depth_m``) is valid, and
+    ``ramp_point_m`` (a point of the ramp surface) places the same plane; giving both is refused."""
+    from workbench.problems.droptest.surface import ramp_normal
+
+    text = (ASSETS / "scenarios" / "droptest.toml").read_text().replace("../landers", str(ASSETS / "landers"))
+    p = tmp_path / "s.toml"
+    p.write_text(text.replace("nail_depth_m = 0.3", "nail_depth_m = -0.41"))
+    assert DropSettings.from_scenario(load_scenario(p)).chamber.nail_depth_m == -0.41
+    n = ramp_normal(60.0)
+    t2 = np.cross(n, [1.0, 0.0, 0.0])  # up the slope, in the plane
+    point = -0.41 * n + 2.5 * t2 + [0.7, 0.0, 0.0]
+    p.write_text(text.replace("nail_depth_m = 0.3", f"ramp_point_m = {_vec(point)}"))
+    assert abs(DropSettings.from_scenario(load_scenario(p)).chamber.nail_depth_m - -0.41) < 1e-12
+    p.write_text(text.replace("nail_depth_m = 0.3", f"nail_depth_m = 0.3\nramp_point_m = {_vec(point)}"))
+    with pytest.raises(ScenarioError, match=r"chamber\.ramp_point_m.*not both"):
+        DropSettings.from_scenario(load_scenario(p))
+
+
+def test_nail_moved_in_front_of_the_ramp_reconstructs_the_same_stroke(tmp_path):
+    """The shipped drop's files as user data, then the same rig with the SPF origin (the nail) moved
+    to 0.41 m in front of the ramp plane: every SPF position of the setup file is re-expressed from
+    the new origin (``x' = x − 0.71 n``) and ``nail_depth_m = -0.41``; nothing else changes.  The
+    geometry is the same, so the max stroke, its σ and its time agree (to 0.01σ: only the setup
+    file's decimal rounding differs)."""
+    from workbench.problems.droptest.pipeline import run_droptest
+    from workbench.problems.droptest.surface import ramp_normal
+    from workbench.problems.droptest.synthetic import synthesize_droptest
+    from workbench.problems.droptest.telemetry import telemetry_paths
+
+    shipped = resolve_scenario("droptest", ASSETS)
+    causal = "sample_rate_hz = 2000.0\nfilter_cutoff_hz = 500.0\nfilter_order = 4"
+    syn_path = tmp_path / "syn.toml"
+    syn_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), causal, None))
+    syn = synthesize_droptest(DropSettings.from_scenario(load_scenario(syn_path)), tmp_path / "tel")
+    tel = {k: v for k, v in syn.telemetry.items() if k != "truth"}
+
+    def run(name: str, telemetry: dict[str, Path], chamber_edit: tuple[str, str] | None):
+        text = _scenario_text(shipped.path, LANDER.as_posix(), causal, telemetry)
+        if chamber_edit is not None:
+            assert chamber_edit[0] in text
+            text = text.replace(*chamber_edit)
+        path = tmp_path / f"{name}.toml"
+        path.write_text(text)
+        sc = load_scenario(path)
+        assert not sc.is_synthetic
+        st = DropSettings.from_scenario(sc)
+        return st, run_droptest(st, telemetry_paths(st), seed=1).stroke.max
+
+    _, ref = run("ref", tel, None)
+
+    shift = (0.3 + 0.41) * ramp_normal(60.0)  # the new origin, in the old SPF coordinates
+    with open(tel["setup"], "rb") as f:
+        setup = tomllib.load(f)
+    h, b = setup["hanging"], setup["bungee"]
+    moved_setup = tmp_path / "moved_setup.toml"
+    moved_setup.write_text(
+        "\n".join(
+            [
+                "[hanging]",
+                f"position_m = {_vec(np.asarray(h['position_m']) - shift)}",
+                f"position_sigma_m = {h['position_sigma_m']!r}",
+                "[bungee]",
+                f"anchor_m = {_vec(np.asarray(b['anchor_m']) - shift)}",
+                *(f"{k} = {_vec(b[k]) if isinstance(b[k], list) else repr(b[k])}" for k in b if k != "anchor_m"),
+            ]
+        )
+        + "\n"
+    )
+    st, moved = run("moved", {**tel, "setup": moved_setup}, ("nail_depth_m = 0.3", "nail_depth_m = -0.41"))
+    assert st.chamber.nail_depth_m == -0.41
+    print(
+        f"max stroke: nail 0.3 m below the ramp {ref.distance:.6f} ± {ref.sigma:.6f} m at {ref.time:.4f} s; "
+        f"0.41 m in front {moved.distance:.6f} ± {moved.sigma:.6f} m at {moved.time:.4f} s"
+    )
+    assert abs(moved.distance - ref.distance) < 0.01 * ref.sigma
+    assert abs(moved.sigma - ref.sigma) < 0.01 * ref.sigma
+    assert abs(moved.time - ref.time) < 1e-3
+
+
+def _lander_without_simulator_keys(path: Path) -> Path:
+    """The shipped lander asset without the keys only the truth simulator reads."""
+    drop = (
+        "pressure_pa",
+        "gas_volume_m3",
+        "gamma",
+        "damping_pa_s_per_m",
+        "friction",
+        "ambient_pressure_pa",
+        "[chamber]",
+    )
+    lines = [ln for ln in LANDER.read_text().splitlines() if not ln.strip().startswith(drop)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_simulator_keys_required_by_a_synthetic_scenario_only(tmp_path):
+    from workbench.problems.droptest.lander import SIMULATOR_KEYS
+
+    lander = _lander_without_simulator_keys(tmp_path / "lander.toml")
+    m = load_lander(lander)
+    assert all(getattr(m, attr) is None for _, attr in SIMULATOR_KEYS)
+    text = (ASSETS / "scenarios" / "droptest.toml").read_text()
+    p = tmp_path / "s.toml"
+    p.write_text(text.replace("../landers/mer_drop_lander.toml", lander.as_posix()))
+    with pytest.raises(ScenarioError, match=r"lander\.toml.*airbags\.pressure_pa.*truth simulator"):
+        DropSettings.from_scenario(load_scenario(p))
+    p.write_text(p.read_text() + "bag_pressure_psi = 1.0\n")  # the pressure given: the next key is named
+    with pytest.raises(ScenarioError, match=r"airbags\.gas_volume_m3"):
+        DropSettings.from_scenario(load_scenario(p))
+
+
+def test_user_data_without_the_simulator_keys_runs(tmp_path):
+    """The shipped drop's files as user data with a lander asset that leaves out the bag pressure, gas
+    volume, γ, damping, friction and chamber pressure: it runs and gives the stroke of the full asset
+    (the estimator never reads them) and the same health verdict."""
+    from workbench.problems.base import RunOptions
+    from workbench.problems.droptest.synthetic import synthesize_droptest
+    from workbench.problems.runner import run_scenario
+
+    shipped = resolve_scenario("droptest", ASSETS)
+    causal = "sample_rate_hz = 2000.0\nfilter_cutoff_hz = 500.0\nfilter_order = 4"
+    syn_path = tmp_path / "syn.toml"
+    syn_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), causal, None))
+    syn = synthesize_droptest(DropSettings.from_scenario(load_scenario(syn_path)), tmp_path / "tel")
+    tel = {k: v for k, v in syn.telemetry.items() if k != "truth"}
+    bare = _lander_without_simulator_keys(tmp_path / "bare_lander.toml")
+    out = {}
+    for name, lander in (("full", LANDER), ("bare", bare)):
+        p = tmp_path / f"{name}.toml"
+        p.write_text(_scenario_text(shipped.path, lander.as_posix(), causal, tel))
+        out[name] = run_scenario(load_scenario(p), tmp_path / "out", RunOptions(seed=1)).summary
+    full, bare_sum = out["full"]["max_stroke"], out["bare"]["max_stroke"]
+    assert bare_sum["distance_m"] == full["distance_m"] and bare_sum["sigma_m"] == full["sigma_m"]
+    assert out["bare"]["health"]["verdict"] == out["full"]["health"]["verdict"] == "OK"
+
+
+def test_odometer_quantisation_written_and_its_variance_in_r(tmp_path):
+    """``odometer_quantisation_m``: the synthetic odometer reads whole count steps, and the filter's
+    odometer variance is σ² + q²/12 — declared, the quantised readings are consistent (mean NIS near
+    1); left out (q = 0, the default: the shipped numbers), the same file's NIS is well above it."""
+    from workbench.problems.droptest.pipeline import run_droptest
+    from workbench.problems.droptest.sensors import RangingSpec
+    from workbench.problems.droptest.synthetic import synthesize_droptest
+
+    text = (ASSETS / "scenarios" / "droptest_ranging.toml").read_text().replace("../landers", str(ASSETS / "landers"))
+    plain = tmp_path / "plain.toml"
+    plain.write_text(text)
+    q = 0.05
+    quant = tmp_path / "quant.toml"
+    quant.write_text(text.replace("[sensors.ranging]", f"[sensors.ranging]\nodometer_quantisation_m = {q}", 1))
+    st_plain = DropSettings.from_scenario(load_scenario(plain))
+    st_q = DropSettings.from_scenario(load_scenario(quant))
+    sig = st_q.ranging.odometer_sigma_m
+    assert RangingSpec.from_settings(st_plain.ranging).odometer_variance == sig**2  # default: unchanged
+    assert abs(RangingSpec.from_settings(st_q.ranging).odometer_variance - (sig**2 + q**2 / 12.0)) < 1e-15
+    syn = synthesize_droptest(st_q, tmp_path / "tel")
+    odo = read_telemetry(syn.telemetry["ranging"]).channel("odometer")
+    odo = odo[np.isfinite(odo)]
+    assert odo.size > 100 and np.allclose(odo / q, np.round(odo / q), atol=1e-6)
+    nis = {}
+    for name, st in (("declared", st_q), ("left_out", st_plain)):
+        nis[name] = run_droptest(st, syn.telemetry, seed=1).summary["innovations"]["odometer"]["mean_nis"]
+    print(f"odometer mean NIS, q = {q} m declared {nis['declared']:.3f}, left out {nis['left_out']:.3f}")
+    assert 0.5 < nis["declared"] < 1.5
+    assert nis["left_out"] > 2.0
+
+
+def test_every_time_shift_reported_with_its_cause(tmp_path, droptest_result):
+    """Each stream's shift in the summary and the scorecard, by cause (the acquisition filter's delay
+    and the declared latencies), not only the IMU's; a ranging stream through the acquisition filter
+    carries that filter's delay as well as its own latency."""
+    from workbench.problems.droptest.pipeline import scorecard_markdown
+    from workbench.problems.droptest.sensors import acquisition_group_delay
+    from workbench.problems.droptest.telemetry import time_shift_causes
+
+    s = droptest_result.summary
+    assert set(s["time_shifts"]) == {"imu", "attitude_3dm"}  # the shipped drop has no ranging
+    imu = s["time_shifts"]["imu"]
+    assert imu["total_s"] == s["time_shifts_s"]["imu"] == s["group_delay_s"] > 0.0
+    assert imu["causes"] == {
+        "acquisition-filter group delay ([sensors.acquisition]: causal Butterworth order 4, 500 Hz)": imu["total_s"],
+        "latency ([sensors.acquisition] latency_s)": 0.0,
+    }
+    card = scorecard_markdown(s)
+    assert f"| imu | {imu['total_s'] * 1e3:.3f} ms | acquisition-filter group delay" in card
+    assert "| attitude_3dm | 0.000 ms | latency ([sensors.attitude_3dm] latency_s): 0.000 ms |" in card
+    assert "| events | 0 (tags used as written)" in card
+
+    text = (ASSETS / "scenarios" / "droptest_ranging.toml").read_text().replace("../landers", str(ASSETS / "landers"))
+    text = text.replace("[sensors.ranging]", "[sensors.ranging]\nlatency_s = 0.003\nacquisition_filter = true", 1)
+    text = text.replace("[sensors.attitude_3dm]", "[sensors.attitude_3dm]\nlatency_s = 0.02", 1)
+    p = tmp_path / "r.toml"
+    p.write_text(text)
+    st = DropSettings.from_scenario(load_scenario(p))
+    causes = time_shift_causes(st, has_ranging=True)
+    delay = acquisition_group_delay(500.0, 4, "butterworth")
+    assert causes["attitude_3dm"] == {"latency ([sensors.attitude_3dm] latency_s)": 0.02}
+    assert causes["ranging"] == {
+        "latency ([sensors.ranging] latency_s)": 0.003,
+        "acquisition-filter group delay ([sensors.ranging] acquisition_filter = true, causal Butterworth order 4, "
+        "500 Hz)": delay,
+    }
+    assert "ranging" not in time_shift_causes(st, has_ranging=False)

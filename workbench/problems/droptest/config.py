@@ -19,7 +19,8 @@ import numpy as np
 from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 from workbench.io.schema import REQUIRED, Key, Schema, Table, from_table, scenario_table
 from workbench.problems.droptest.lander import LANDER_SCHEMA as _LANDER_SCHEMA
-from workbench.problems.droptest.lander import LanderModel, load_lander
+from workbench.problems.droptest.lander import LanderModel, load_lander, require_simulator_keys
+from workbench.problems.droptest.surface import ramp_normal
 
 __all__ = [
     "SCHEMA",
@@ -38,6 +39,13 @@ __all__ = [
 ]
 
 _F, _I, _S, _B, _V, _L = "float", "int", "str", "bool", "vec3", "list"
+
+#: What an IMU noise key's σ is of (the simulator's ``sensors.apply_errors`` after
+#: ``sensors.acquisition_filter``; the filter's R in ``pipeline``).
+_AFTER_FILTER = (
+    "white noise of each recorded sample, 1σ, *after* the acquisition filter (the simulator adds it to the "
+    "filtered, sampled signal; the filter divides its variance by the samples averaged into each step)"
+)
 
 SCHEMA = Schema(
     "droptest",
@@ -69,17 +77,39 @@ SCHEMA = Schema(
             "chamber",
             "the test chamber, SPF frame",
             (
-                Key("ramp_angle_deg", _F, 60.0, "deg", "ramp inclination from the horizontal", gt=0.0, lt=90.0),
+                Key(
+                    "ramp_angle_deg",
+                    _F,
+                    60.0,
+                    "deg",
+                    "ramp inclination from the horizontal",
+                    gt=0.0,
+                    lt=90.0,
+                    example=True,
+                ),
                 Key(
                     "nail_depth_m",
                     _F,
                     0.3,
                     "m",
-                    "the nail (SPF origin, where the bungee-cut hammer strikes) lies this far below the ramp "
-                    "surface, along its normal (a nail in front of the ramp, where the lander would hit it, is "
-                    "rejected)",
-                    ge=0.0,
-                    le=10.0,
+                    "where the ramp plane lies from the nail (the SPF origin, where the bungee-cut hammer "
+                    "strikes), along the ramp's free-side normal n = (0, −sin a, cos a): the plane passes "
+                    "through `nail_depth_m` · n. Signed, any value: positive = the nail below the ramp surface "
+                    "(REDLand: 0.3), negative = the nail in front of it, on the lander's side. The ramp is "
+                    "placed by its own plane, so a nail anywhere needs no other position moved; not together "
+                    "with `ramp_point_m`",
+                    example=True,
+                ),
+                Key(
+                    "ramp_point_m",
+                    _V,
+                    None,
+                    "m",
+                    "instead of `nail_depth_m`: any surveyed point on the ramp surface, in SPF; the ramp is "
+                    "the plane through it inclined at `ramp_angle_deg` (equivalent to `nail_depth_m` = n · "
+                    "point; the rock window's origin is the foot of the nail on that plane); absent: "
+                    "`nail_depth_m` places the ramp",
+                    example=True,
                 ),
                 Key(
                     "magnetic_field_spf",
@@ -87,6 +117,7 @@ SCHEMA = Schema(
                     REQUIRED,
                     "1",
                     "local magnetic field direction in SPF (3DM attitude); any non-zero length",
+                    example=True,
                 ),
             ),
         ),
@@ -110,9 +141,20 @@ SCHEMA = Schema(
             "accelerometer triads",
             (
                 Key(
-                    "triads", _L, ["BP", "PYBP", "PXBP", "MXBP"], meaning="triad names (lever arms in the lander asset)"
+                    "triads",
+                    _L,
+                    ["BP", "PYBP", "PXBP", "MXBP"],
+                    meaning="triad names (lever arms in the lander asset)",
+                    example=True,
                 ),
-                Key("noise_g", _F, 0.2, "g", "per-sample noise, 1σ (0: absent)", ge=0.0),
+                Key(
+                    "noise_g",
+                    _F,
+                    0.2,
+                    "g",
+                    _AFTER_FILTER + "; 0: absent",
+                    ge=0.0,
+                ),
                 Key("bias_g", _F, 0.005, "g", "residual bias after zeroing, 1σ per axis", ge=0.0),
                 Key("scale", _F, 0.002, "1", "scale-factor error, 1σ (filter: measurement noise ∝ the force)", ge=0.0),
                 Key(
@@ -130,7 +172,14 @@ SCHEMA = Schema(
             "sensors.gyro",
             "rate gyro",
             (
-                Key("noise_dps", _F, 0.4, "deg/s", "per-sample noise, 1σ", ge=0.0),
+                Key(
+                    "noise_dps",
+                    _F,
+                    0.4,
+                    "deg/s",
+                    _AFTER_FILTER,
+                    ge=0.0,
+                ),
                 Key("bias_dps", _F, 0.05, "deg/s", "bias, 1σ", ge=0.0),
                 Key("scale", _F, 0.01, "1", "scale-factor error, 1σ", ge=0.0),
                 Key("misalignment_deg", _F, 0.05, "deg", "axis misalignment, 1σ", ge=0.0),
@@ -141,7 +190,7 @@ SCHEMA = Schema(
             "sensors.acquisition",
             "data acquisition",
             (
-                Key("sample_rate_hz", _F, 2000.0, "Hz", "IMU sample rate (synthetic)", gt=0.0),
+                Key("sample_rate_hz", _F, 2000.0, "Hz", "IMU sample rate (synthetic)", gt=0.0, example=True),
                 Key(
                     "filter",
                     _S,
@@ -150,10 +199,19 @@ SCHEMA = Schema(
                     "low-frequency group delay is removed from the time tags), `zero_phase` (forward-backward, "
                     "no delay), `none`",
                     choices=("butterworth", "zero_phase", "none"),
+                    example=True,
                 ),
-                Key("filter_cutoff_hz", _F, 500.0, "Hz", "Butterworth cutoff, below half the sample rate"),
                 Key(
-                    "filter_order", _I, 4, meaning='Butterworth order (0: no filter, as `filter = "none"`)', ge=0, le=10
+                    "filter_cutoff_hz", _F, 500.0, "Hz", "Butterworth cutoff, below half the sample rate", example=True
+                ),
+                Key(
+                    "filter_order",
+                    _I,
+                    4,
+                    meaning='Butterworth order (0: no filter, as `filter = "none"`)',
+                    ge=0,
+                    le=10,
+                    example=True,
                 ),
                 Key(
                     "latency_s",
@@ -205,20 +263,38 @@ SCHEMA = Schema(
                     gt=0.0,
                 ),
                 Key("odometer", _B, False, meaning="bungee-sheave odometer until the cut"),
-                Key("odometer_sigma_m", _F, 0.01, "m", "odometer noise, 1σ", ge=0.0),
+                Key(
+                    "odometer_sigma_m",
+                    _F,
+                    0.01,
+                    "m",
+                    "odometer noise of each recorded sample as written in the file, 1σ (after any filter the "
+                    "channel went through; white: each sample is one measurement)",
+                    ge=0.0,
+                ),
+                Key(
+                    "odometer_quantisation_m",
+                    _F,
+                    0.0,
+                    "m",
+                    "the odometer's count step: it reads a whole number of steps; the filter adds the rounding's "
+                    "variance q²/12 to `odometer_sigma_m`² (0: not quantised); the synthetic writer rounds to it",
+                    ge=0.0,
+                ),
                 Key(
                     "odometer_zero_m",
                     _F,
                     0.0,
                     "m",
                     "the odometer's zero: it reads the rope length (sheave to attachment) minus this",
+                    example=True,
                 ),
                 Key(
                     "radar_range_sigma_m",
                     _F,
                     0.02,
                     "m",
-                    "radar-gun range noise, 1σ (every gun without its own)",
+                    "radar-gun range noise of each recorded sample, 1σ (every gun without its own)",
                     ge=0.0,
                 ),
                 Key("radar_rate_sigma_mps", _F, 0.05, "m/s", "radar-gun range-rate noise, 1σ (idem)", ge=0.0),
@@ -229,6 +305,7 @@ SCHEMA = Schema(
                     "m",
                     "corner reflector in the lander frame (the asset's; its origin is the CM unless the asset "
                     "gives `cm_m`), for every gun without its own",
+                    example=True,
                 ),
                 Key(
                     "latency_s",
@@ -326,8 +403,8 @@ SETUP_SCHEMA = Schema(
             "hanging",
             "the surveyed hanging state (SPF)",
             (
-                Key("position_m", _V, REQUIRED, "m", "the CM in SPF while hanging"),
-                Key("position_sigma_m", _F, REQUIRED, "m", "its 1σ per axis", gt=0.0),
+                Key("position_m", _V, REQUIRED, "m", "the CM in SPF while hanging", example=True),
+                Key("position_sigma_m", _F, REQUIRED, "m", "its 1σ per axis", gt=0.0, example=True),
             ),
         ),
         Table(
@@ -335,20 +412,27 @@ SETUP_SCHEMA = Schema(
             'the bungee test plan: needed whole by `[filter] mode = "dynamic"`, only `anchor_m` and '
             "`attach_body_m` by the odometer; the kinematic filter ignores it",
             (
-                Key("anchor_m", _V, None, "m", "bungee anchor (the odometer's sheave) in SPF"),
-                Key("rest_length_m", _F, None, "m", "rest length", gt=0.0),
-                Key("coefficients", _L, None, "N/m^k", "per-bungee force polynomial in the stretch, k = 1.."),
-                Key("count", _F, None, "1", "number of bungees (continuous: the design's)", gt=0.0),
-                Key("attach_body_m", _V, None, "m", "rope attachment in the lander frame L"),
-                Key("mass_kg", _F, None, "kg", "lander mass of the test plan", gt=0.0),
+                Key("anchor_m", _V, None, "m", "bungee anchor (the odometer's sheave) in SPF", example=True),
+                Key("rest_length_m", _F, None, "m", "rest length", gt=0.0, example=True),
+                Key(
+                    "coefficients",
+                    _L,
+                    None,
+                    "N/m^k",
+                    "per-bungee force polynomial in the stretch, k = 1..",
+                    example=True,
+                ),
+                Key("count", _F, None, "1", "number of bungees (continuous: the design's)", gt=0.0, example=True),
+                Key("attach_body_m", _V, None, "m", "rope attachment in the lander frame L", example=True),
+                Key("mass_kg", _F, None, "kg", "lander mass of the test plan", gt=0.0, example=True),
             ),
         ),
         Table(
             "rocks",
             "a surveyed rock field (rigid spheres)",
             (
-                Key("centers_m", _L, REQUIRED, "m", "sphere centres, n × [x, y, z] in SPF"),
-                Key("radii_m", _L, REQUIRED, "m", "sphere radii (n)", gt=0.0),
+                Key("centers_m", _L, REQUIRED, "m", "sphere centres, n × [x, y, z] in SPF", example=True),
+                Key("radii_m", _L, REQUIRED, "m", "sphere radii (n)", gt=0.0, example=True),
             ),
         ),
     ),
@@ -370,8 +454,10 @@ class Rocks:
 
 @dataclass(frozen=True, eq=False)
 class Chamber:
-    """``[chamber]``: ``ramp_angle_deg`` [deg], ``nail_depth_m`` [m], ``magnetic_field_spf`` (3,)
-    read-only, not normalised; ``rocks`` the rock field, or None without ``[chamber.rocks]``."""
+    """``[chamber]``: ``ramp_angle_deg`` [deg]; ``nail_depth_m`` [m] the signed offset of the ramp
+    plane from the nail along its normal (the key's, or ``n · ramp_point_m`` when that is given);
+    ``magnetic_field_spf`` (3,) read-only, not normalised; ``rocks`` the rock field, or None without
+    ``[chamber.rocks]``."""
 
     ramp_angle_deg: float
     nail_depth_m: float
@@ -441,6 +527,7 @@ class Ranging:
     odometer: bool
     odometer_sigma_m: float
     odometer_zero_m: float
+    odometer_quantisation_m: float
     radar_range_sigma_m: float
     radar_rate_sigma_mps: float
     reflector_body_m: np.ndarray
@@ -529,10 +616,19 @@ class DropSettings:
             raise ScenarioError(scenario.path, "scenario.kind", f"{scenario.kind!r} is not a droptest scenario")
         v = SCHEMA.validate(scenario.data, scenario.path)
         _check_cross_fields(v, scenario.path)
+        if scenario.has("chamber.ramp_point_m") and scenario.has("chamber.nail_depth_m"):
+            raise ScenarioError(
+                scenario.path,
+                "chamber.ramp_point_m",
+                "give either 'nail_depth_m' or 'ramp_point_m' (both place the ramp plane), not both",
+            )
         run = RunInfo.from_scenario(scenario)
         lander_file = run.resolve(v["vehicle"]["lander"]).absolute()
         if not lander_file.exists():
             raise ScenarioError(scenario.path, "vehicle.lander", f"file not found: {lander_file}")
+        lander = load_lander(lander_file)
+        if run.synthetic:  # the truth simulator's keys: user data may leave them out
+            require_simulator_keys(lander, lander_file, except_pressure=v["synthetic"]["bag_pressure_psi"] is not None)
         ch, rk = v["chamber"], v["chamber"]["rocks"]
         acc, gyr = v["sensors"]["accelerometer"], v["sensors"]["gyro"]
         aq, a3, rg = v["sensors"]["acquisition"], v["sensors"]["attitude_3dm"], v["sensors"]["ranging"]
@@ -546,11 +642,14 @@ class DropSettings:
         return cls(
             run=run,
             lander_file=lander_file,
-            lander=load_lander(lander_file),
+            lander=lander,
             telemetry={k: (None if p is None else run.resolve(p).absolute()) for k, p in v["telemetry"].items()},
             chamber=from_table(
                 Chamber,
                 ch,
+                nail_depth_m=ch["nail_depth_m"]
+                if ch["ramp_point_m"] is None
+                else float(ramp_normal(ch["ramp_angle_deg"]) @ np.asarray(ch["ramp_point_m"], float)),
                 magnetic_field_spf=_frozen(ch["magnetic_field_spf"]),
                 rocks=from_table(
                     Rocks, rk, extent_m=((float(ext[0][0]), float(ext[0][1])), (float(ext[1][0]), float(ext[1][1])))
@@ -597,6 +696,10 @@ def _check_cross_fields(v: dict, path: Path) -> None:
     def bad(key: str, msg: str) -> None:
         raise ScenarioError(path, key, msg)
 
+    if not np.isfinite(v["chamber"]["nail_depth_m"]):
+        bad("chamber.nail_depth_m", "must be a finite number of metres")
+    if v["chamber"]["ramp_point_m"] is not None and not np.all(np.isfinite(v["chamber"]["ramp_point_m"])):
+        bad("chamber.ramp_point_m", "must be three finite numbers [m]")
     if not np.linalg.norm(v["chamber"]["magnetic_field_spf"]) > 0.0:
         bad("chamber.magnetic_field_spf", "a zero vector has no direction")
     rg = v["sensors"]["ranging"]

@@ -41,7 +41,9 @@ __all__ = [
     "FACE_NAMES",
     "LANDER_SCHEMA",
     "LanderModel",
+    "SIMULATOR_KEYS",
     "load_lander",
+    "require_simulator_keys",
     "tetrahedron_body",
     "tetrahedron_from_vertices",
     "airbag_lobes",
@@ -72,6 +74,8 @@ class LanderModel:
         gamma: ratio of specific heats of the inflation gas [-].
         damping: fabric/venting damping, pressure-equivalent per m/s of penetration rate [Pa s/m].
         friction: Coulomb friction coefficient airbag/surface [-].
+        (These five and ``ambient_pressure_pa`` are read by the truth simulator only: None when the
+        asset leaves them out, as user data may; :data:`SIMULATOR_KEYS`.)
         standoff: gap between a lobe's inner surface and its lander face [m]; negative when the
             lobes wrap the lander (centre closer than one radius to the face), > -lobe_radius.
         ambient_pressure_pa: chamber (or atmosphere) pressure [Pa].
@@ -87,13 +91,13 @@ class LanderModel:
     lobe_centers_B: np.ndarray
     lobe_radius: float
     lobe_bag: np.ndarray
-    pressure_pa: float
-    gas_volume_m3: float
-    gamma: float
-    damping: float
-    friction: float
+    pressure_pa: float | None
+    gas_volume_m3: float | None
+    gamma: float | None
+    damping: float | None
+    friction: float | None
     standoff: float
-    ambient_pressure_pa: float
+    ambient_pressure_pa: float | None
     instruments: dict[str, np.ndarray] = field(default_factory=dict)
     cm_L: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
@@ -244,6 +248,20 @@ def airbag_mesh(model: LanderModel, subdivisions: int = 2) -> trimesh.Trimesh:
 
 # --------------------------------------------------------------------------- reading the asset
 
+#: What the meaning of a key only the truth simulator reads says (:data:`SIMULATOR_KEYS`).
+_SIM_ONLY = " (truth simulator only: required by a synthetic scenario, optional for user data)"
+
+#: The lander asset's keys only the truth simulator reads (the gas, the fabric, the chamber):
+#: :func:`require_simulator_keys` requires them for a synthetic scenario; user data may leave them out.
+SIMULATOR_KEYS = (
+    ("airbags.pressure_pa", "pressure_pa"),
+    ("airbags.gas_volume_m3", "gas_volume_m3"),
+    ("airbags.gamma", "gamma"),
+    ("airbags.damping_pa_s_per_m", "damping"),
+    ("airbags.friction", "friction"),
+    ("chamber.ambient_pressure_pa", "ambient_pressure_pa"),
+)
+
 #: The lander asset (``[vehicle] lander``, e.g. ``assets/landers/mer_drop_lander.toml``), read by
 #: :func:`load_lander` (listed with the drop test's other schemas in :mod:`.config`).  Cross-field
 #: rules stay there as code (the layout given one way or the other, ``cm_height_m < height_m``, the
@@ -321,9 +339,12 @@ LANDER_SCHEMA = Schema(
                     "number_or_list",
                     None,
                     "m",
-                    "lobe inner surface to its face, > −lobe radius (negative = lobes wrap the lander); one "
-                    "number or one per face as `lobe_spacing_m` (required with the rack; with `lobe_centers_m` "
-                    "only reported, absent = 0)",
+                    "the gap from the lander face's plane to the nearest point of each lobe sphere of its rack, "
+                    "along the face's outward normal: the rack's centroid sits `lobe_diameter_m`/2 + "
+                    "`standoff_m` off the face centroid. Must be > −lobe radius; negative = the spheres cut the "
+                    "face plane (lobes wrapping the lander: the MER asset's −0.6 puts the centres 0.4 m off the "
+                    "face). One number or one per face as `lobe_spacing_m` (required with the rack; with "
+                    "`lobe_centers_m` only reported, absent = 0)",
                 ),
                 Key(
                     "lobe_centers_m",
@@ -341,27 +362,37 @@ LANDER_SCHEMA = Schema(
                 Key(
                     "pressure_pa",
                     "float",
-                    REQUIRED,
+                    None,
                     "Pa",
-                    "initial absolute inflation pressure (truth simulator)",
+                    "initial absolute inflation pressure" + _SIM_ONLY + "; with user data, when given (with "
+                    "`[chamber] ambient_pressure_pa`), it sets how far the `geometry.first_contact` check lets "
+                    "the lobes press in at 2 g (absent: up to a lobe radius)",
                     gt=0.0,
                 ),
-                Key("gas_volume_m3", "float", REQUIRED, "m³", "shared gas volume of the vented bags", gt=0.0),
-                Key("gamma", "float", REQUIRED, "1", "ratio of specific heats of the inflation gas", gt=0.0),
+                Key("gas_volume_m3", "float", None, "m³", "shared gas volume of the vented bags" + _SIM_ONLY, gt=0.0),
+                Key("gamma", "float", None, "1", "ratio of specific heats of the inflation gas" + _SIM_ONLY, gt=0.0),
                 Key(
                     "damping_pa_s_per_m",
                     "float",
-                    REQUIRED,
+                    None,
                     "Pa s/m",
-                    "fabric/venting damping, pressure-equivalent per m/s of penetration rate",
+                    "fabric/venting damping, pressure-equivalent per m/s of penetration rate" + _SIM_ONLY,
                 ),
-                Key("friction", "float", REQUIRED, "1", "Coulomb friction coefficient airbag/ramp"),
+                Key("friction", "float", None, "1", "Coulomb friction coefficient airbag/ramp" + _SIM_ONLY),
             ),
         ),
         Table(
             "chamber",
             "the test chamber",
-            (Key("ambient_pressure_pa", "float", REQUIRED, "Pa", "chamber pressure (truth simulator)"),),
+            (
+                Key(
+                    "ambient_pressure_pa",
+                    "float",
+                    None,
+                    "Pa",
+                    "chamber pressure" + _SIM_ONLY + "; with user data as `[airbags] pressure_pa`",
+                ),
+            ),
         ),
         Table(
             "instruments",
@@ -373,6 +404,18 @@ LANDER_SCHEMA = Schema(
     noun="lander asset",
     intro="Keys of a drop-test lander asset (`[vehicle] lander`)",
 )
+
+
+def require_simulator_keys(model: LanderModel, path: Path, *, except_pressure: bool = False) -> None:
+    """:class:`ScenarioError` naming the lander asset ``path`` and the first key of
+    :data:`SIMULATOR_KEYS` that ``model`` lacks: the truth simulator needs them all (a synthetic
+    scenario); ``except_pressure``: the bag pressure comes from elsewhere (``[synthetic]
+    bag_pressure_psi``)."""
+    for key, attr in SIMULATOR_KEYS:
+        if getattr(model, attr) is None and not (except_pressure and attr == "pressure_pa"):
+            raise ScenarioError(
+                path, key, "missing: the truth simulator of a synthetic scenario needs it (user data may omit it)"
+            )
 
 
 def _per_face(v: float | list, key: str, path: Path) -> np.ndarray:

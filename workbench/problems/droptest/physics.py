@@ -460,7 +460,8 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     pose ``smo`` (``FilterStage``) at the measured onset of the impact (:func:`measured_impact`),
     must just touch the ramp: clearance in [−δ₂g − 3σ, +3σ], δ₂g the penetration at which one lobe's
     gas overpressure alone carries 2 g (m·2g / (Δp·2π r), the declared pressures, mass and lobe
-    radius: the most a 2 g force can have compressed the bags), σ the clearance's 1σ from the pose
+    radius: the most a 2 g force can have compressed the bags; the lobe radius when the asset
+    declares no bag pressures, as user data may), σ the clearance's 1σ from the pose
     covariance there.  Outside:
     ERROR naming the keys that set the geometry (the clearance moves the stroke with it).  The
     truth-MC calibration re-judges the clearance in one band per sensor configuration (its stat's
@@ -476,15 +477,21 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     clear = lobe_clearance(smo.x[:, rl.SP], smo.x[:, rl.SQ], lander, surface)
     c = float(clear[k])
     sig = _lobe_clearance_sigma(smo.x[k], smo.P[k], lander, surface)
-    dp = max(float(getattr(lander, "pressure_pa", 0.0) - getattr(lander, "ambient_pressure_pa", 0.0)), 1.0)
-    delta = lander.mass * 2.0 * G0 / (dp * 2.0 * np.pi * float(lander.lobe_radius))
+    if lander.pressure_pa is None or lander.ambient_pressure_pa is None:
+        # user data without the bag pressures: how far 2 g presses the lobes in is unknown
+        delta = float(lander.lobe_radius)
+        pressed = f"the bag pressures not declared, up to a lobe radius ({delta:.3f} m) pressed in"
+    else:
+        dp = max(float(lander.pressure_pa - lander.ambient_pressure_pa), 1.0)
+        delta = lander.mass * 2.0 * G0 / (dp * 2.0 * np.pi * float(lander.lobe_radius))
+        pressed = f"at most {delta:.3f} m pressed in at 2 g"
     lo, hi = -delta - 3.0 * sig, 3.0 * sig
     after = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
     touch = np.flatnonzero((clear <= 0.0) & (smo.t >= after))
     t_touch = f"{smo.t[touch[0]]:.4f} s" if touch.size else "never"
     base = (
         f"airbag lobes {c:+.3f} ± {sig:.3f} m (1σ) from the ramp at the measured onset of the impact "
-        f"(t = {t_on:.4f} s, mean triad |f| > 2 g); at most {delta:.3f} m pressed in at 2 g; the estimated lobes "
+        f"(t = {t_on:.4f} s, mean triad |f| > 2 g); {pressed}; the estimated lobes "
         f"touch the ramp at {t_touch}"
     )
     # one honest band per sensor configuration: with ranging the pose at the impact is known ~30× better
@@ -494,7 +501,8 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
         # the keys that set the clearance: said here too, for the calibrated band's WARNING/ERROR
         keys = (
             f"the setup file's [hanging] position_m, the lander geometry in {settings.lander_file} (height_m, "
-            f"cm_height_m, lobe_diameter_m, standoff_m), [chamber] ramp_angle_deg / nail_depth_m in {settings.path}"
+            f"cm_height_m, lobe_diameter_m, standoff_m), [chamber] ramp_angle_deg / nail_depth_m (or ramp_point_m) "
+            f"in {settings.path}"
         )
         msg = f"{base}; a clearance outside the honest band moves the stroke with it — likely: {keys}"
         return Check("geometry.first_contact", OK, _g(c), [_g(lo), _g(hi)], msg, stat)
@@ -507,7 +515,7 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     keys += [
         f"the setup file's [hanging] position_m (off by ≈ {abs(shift):.3f} m along the ramp normal?)",
         f"the lander geometry in {settings.lander_file} (height_m, cm_height_m, lobe_diameter_m, standoff_m)",
-        f"[chamber] ramp_angle_deg / nail_depth_m in {settings.path}",
+        f"[chamber] ramp_angle_deg / nail_depth_m (or ramp_point_m) in {settings.path}",
     ]
     return Check(
         "geometry.first_contact",

@@ -533,7 +533,7 @@ def _ranging_measurements(spec: RangingSpec, tel: DropTelemetry, lander: LanderM
             raise ScenarioError(rt.path, None, "an odometer channel needs a [bungee] table in the setup file")
         anchor = np.asarray(b["anchor_m"], float)
         attach = lander.to_body(b["attach_body_m"])
-        s2 = np.array([[spec.odometer_sigma**2]])
+        s2 = np.array([[spec.odometer_variance]])  # noise + the rounding to its count step
         vals = rt.channel("odometer") + spec.odometer_zero  # the rope length
         for i in np.flatnonzero(near & np.isfinite(vals)):
             m = _Memo(_at_time(lambda x: rl.range_model(x, anchor, attach), float(off[i])))
@@ -791,6 +791,11 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
         "filter_rate_hz": float(1.0 / np.median(np.diff(tel.t))),
         "group_delay_s": tel.group_delay_s,
         "time_shifts_s": {k: float(v) for k, v in tel.time_shifts_s.items()},
+        # every stream's shift with what it is made of (the events file's tags are used as written)
+        "time_shifts": {
+            stream: {"total_s": float(sum(causes.values())), "causes": {c: float(v) for c, v in causes.items()}}
+            for stream, causes in tel.time_shift_causes.items()
+        },
         "events": tel.events,
         "max_stroke": {
             "time_s": float(ms.time),
@@ -970,6 +975,22 @@ def score(result: DropResult, truth: dict) -> dict:
     }
 
 
+def time_shift_lines(summary: dict) -> list[str]:
+    """The scorecard's table of the time shifts taken off each stream's tags, with their causes
+    (``summary["time_shifts"]``; a summary without it: the totals of ``time_shifts_s``)."""
+    shifts = summary.get("time_shifts") or {
+        k: {"total_s": v, "causes": {}} for k, v in summary.get("time_shifts_s", {}).items()
+    }
+    if not shifts:
+        return []
+    lines = ["| stream | time shift taken off its tags | made of |", "|---|---|---|"]
+    for stream, sh in shifts.items():
+        parts = "; ".join(f"{c}: {v * 1e3:.3f} ms" for c, v in sh["causes"].items()) or "—"
+        lines.append(f"| {stream} | {sh['total_s'] * 1e3:.3f} ms | {parts} |")
+    lines += ["| events | 0 (tags used as written) | — |", ""]
+    return lines
+
+
 def scorecard_markdown(summary: dict) -> str:
     """The run's scorecard as markdown (for ``/report`` in the recording and for ``inspect``)."""
     ms = summary["max_stroke"]
@@ -978,16 +999,9 @@ def scorecard_markdown(summary: dict) -> str:
         f"# Drop test `{summary['scenario']}` — scorecard",
         "",
         f"Filter: REDLand EKF ({summary['mode']} mode) + RTS smoother, {summary['steps']} steps at "
-        f"{summary['filter_rate_hz']:.0f} Hz; acquisition-filter delay "
-        f"{summary['group_delay_s'] * 1e3:.2f} ms removed"
-        + (
-            "; time shifts taken off each stream's tags: "
-            + ", ".join(f"{k} {v * 1e3:.3f} ms" for k, v in summary["time_shifts_s"].items())
-            if summary.get("time_shifts_s")
-            else ""
-        )
-        + ".",
+        f"{summary['filter_rate_hz']:.0f} Hz.",
         "",
+        *time_shift_lines(summary),
         "| quantity | value |",
         "|---|---|",
         (

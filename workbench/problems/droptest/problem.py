@@ -131,6 +131,8 @@ class DropTestProblem(PipelineProblem):
     schema = SCHEMA
     #: the other input file kinds a drop test reads (FORMATS.md tables)
     file_schemas = (LANDER_SCHEMA, SETUP_SCHEMA)
+    #: telemetry streams that are TOML files of a schema (``workbench init`` marks their example values)
+    telemetry_schemas = {"setup": SETUP_SCHEMA}
     #: modules of the cached numba kernels (truth forces, filter recursion): compiled in a child
     #: process on a checkout's first run (:mod:`workbench.problems.precompile`)
     compiled_modules = ("workbench.problems.droptest.truth_fast", "workbench.problems.droptest.kernel")

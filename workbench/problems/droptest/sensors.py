@@ -143,7 +143,9 @@ class RangingSpec:
     ``rate_hz`` sampling rate of the ranging file.  Per gun (name -> value, every gun listed):
     ``reflectors_L`` its reflector in the lander frame L [m] (``reflector_B`` is the common one,
     also in L: the asset's ``cm_m`` turns it into the body frame), ``range_sigmas`` [m] and
-    ``rate_sigmas`` [m/s]; ``odometer_zero`` [m] the odometer reads the rope length minus this.
+    ``rate_sigmas`` [m/s]; ``odometer_zero`` [m] the odometer reads the rope length minus this;
+    ``odometer_quantisation`` [m] its count step (0: not quantised; the rounding adds q²/12 to its
+    variance, :attr:`odometer_variance`).
     """
 
     odometer: bool
@@ -157,6 +159,13 @@ class RangingSpec:
     range_sigmas: dict[str, float]
     rate_sigmas: dict[str, float]
     odometer_zero: float
+    odometer_quantisation: float = 0.0
+
+    @property
+    def odometer_variance(self) -> float:
+        """Variance [m²] of one odometer reading: its noise plus the rounding to its count step q,
+        uniform over one step (q²/12)."""
+        return self.odometer_sigma**2 + self.odometer_quantisation**2 / 12.0
 
     @classmethod
     def from_settings(cls, r: Ranging) -> RangingSpec:
@@ -174,4 +183,5 @@ class RangingSpec:
             range_sigmas=dict(r.range_sigma_m),
             rate_sigmas=dict(r.rate_sigma_mps),
             odometer_zero=r.odometer_zero_m,
+            odometer_quantisation=r.odometer_quantisation_m,
         )

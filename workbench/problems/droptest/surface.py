@@ -141,6 +141,13 @@ class Surface:
         return d, grad, feature
 
 
+def ramp_normal(angle_deg: float) -> np.ndarray:
+    """The ramp's free-side unit normal ``n = (0, −sin a, cos a)`` (3,) in SPF for an inclination of
+    ``angle_deg`` [deg] (the plane contains X and rises toward +Y)."""
+    a = np.deg2rad(float(angle_deg))
+    return np.array([0.0, -np.sin(a), np.cos(a)])
+
+
 def ramp_surface(
     angle_deg: float,
     nail_depth: float,
@@ -149,12 +156,12 @@ def ramp_surface(
     """The SPF ramp in the SPF chamber frame (origin at the trigger nail, Z up, Y toward the ramp).
 
     The plane contains the X direction and rises toward +Y at ``angle_deg`` [deg]; its free-side
-    unit normal is ``n = (0, -sin a, cos a)``.  The nail (the origin) is ``nail_depth`` [m] behind
-    (below) the ramp surface along n, so the plane passes through ``nail_depth * n``.
+    unit normal is ``n = (0, -sin a, cos a)`` (:func:`ramp_normal`).  The plane passes through
+    ``nail_depth * n`` [m]: the nail (the origin) is ``nail_depth`` behind (below) the ramp surface
+    along n when positive, in front of it when negative (any sign: the plane places the ramp).
     ``rocks`` is an optional ``(centers (r, 3) [m], radii (r,) [m])`` pair in the same frame.
     """
-    a = np.deg2rad(float(angle_deg))
-    n = np.array([0.0, -np.sin(a), np.cos(a)])
+    n = ramp_normal(angle_deg)
     if rocks is None:
         return Surface(point=float(nail_depth) * n, normal=n)
     centers, radii = rocks

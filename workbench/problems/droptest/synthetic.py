@@ -481,6 +481,8 @@ def _write_ranging(
         x_att = p + C @ truth.rig.attach_B
         rho = np.linalg.norm(truth.rig.anchor_I - x_att, axis=1) + rng.normal(0.0, spec.odometer_sigma, t.size)
         rho = rho - spec.odometer_zero  # the odometer counts from its own zero
+        if spec.odometer_quantisation > 0.0:  # a whole number of count steps
+            rho = spec.odometer_quantisation * np.round(rho / spec.odometer_quantisation)
         cut = truth.events.get("bungee_cut", np.inf)
         rho = np.where((t >= 0.0) & (t < cut), rho, np.nan)  # the sheave turns only while towing
         ch["odometer"] = (rho, "m")

@@ -23,7 +23,15 @@ from workbench.io.units import likely_unit
 from workbench.problems.droptest.config import SETUP_SCHEMA, DropSettings
 from workbench.problems.droptest.sensors import RangingSpec, acquisition_group_delay
 
-__all__ = ["STREAMS", "OPTIONAL_STREAMS", "DropTelemetry", "telemetry_paths", "read_setup", "load_drop_telemetry"]
+__all__ = [
+    "STREAMS",
+    "OPTIONAL_STREAMS",
+    "DropTelemetry",
+    "telemetry_paths",
+    "read_setup",
+    "load_drop_telemetry",
+    "time_shift_causes",
+]
 
 #: Telemetry streams of a drop-test scenario (``[telemetry]`` keys).
 STREAMS = ("imu", "attitude_3dm", "events", "setup", "ranging")
@@ -48,7 +56,8 @@ class DropTelemetry:
     the lag [s] taken off that stream's time tags: ``imu`` the acquisition filter's delay plus the
     IMU latency (= ``group_delay_s``, already applied to ``t``), ``attitude_3dm`` and ``ranging``
     their latencies (ranging plus the filter delay when it went through the acquisition filter),
-    applied where those streams are used.
+    applied where those streams are used; ``time_shift_causes`` stream -> {cause: seconds}, what each
+    of those totals is made of (:func:`time_shift_causes`; the events file's tags are used as written).
     """
 
     t: np.ndarray
@@ -70,6 +79,35 @@ class DropTelemetry:
     counts: tuple[np.ndarray, np.ndarray]
     rate_hz: float
     time_shifts_s: dict = field(default_factory=dict)
+    time_shift_causes: dict = field(default_factory=dict)
+
+
+def time_shift_causes(settings: DropSettings, has_ranging: bool) -> dict[str, dict[str, float]]:
+    """What the reconstruction takes off each stream's time tags, by cause: stream (``imu``,
+    ``attitude_3dm``, ``ranging`` when the run has ranging) -> {cause: lag [s]}, each cause named
+    with the scenario key that sets it (zeros listed too: a declared latency of 0 is a statement).
+    A stream's total lag is the sum of its causes (``DropTelemetry.time_shifts_s``)."""
+    aq = settings.acquisition
+    filter_delay = acquisition_group_delay(aq.cutoff_hz, aq.order, aq.filter)
+    what = {
+        "butterworth": f"causal Butterworth order {aq.order}, {aq.cutoff_hz:g} Hz",
+        "zero_phase": "zero-phase: none",
+        "none": "no filter",
+    }[aq.filter]
+    filt = "acquisition-filter group delay ({}{})"
+    out = {
+        "imu": {
+            filt.format("[sensors.acquisition]: ", what): filter_delay,
+            "latency ([sensors.acquisition] latency_s)": aq.latency_s,
+        },
+        "attitude_3dm": {"latency ([sensors.attitude_3dm] latency_s)": settings.attitude_3dm.latency_s},
+    }
+    if has_ranging:
+        rg = {"latency ([sensors.ranging] latency_s)": settings.ranging.latency_s}
+        if settings.ranging.acquisition_filter:
+            rg[filt.format("[sensors.ranging] acquisition_filter = true, ", what)] = filter_delay
+        out["ranging"] = rg
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -296,6 +334,7 @@ def load_drop_telemetry(settings: DropSettings, paths: dict[str, Path]) -> DropT
             "attitude_3dm": cfg.attitude_3dm.latency_s,
             "ranging": cfg.ranging.latency_s + (filter_delay if cfg.ranging.acquisition_filter else 0.0),
         },
+        time_shift_causes=time_shift_causes(settings, ranging is not None),
     )
 
 
