@@ -106,6 +106,19 @@ def structured_atmosphere() -> TabulatedAtmosphere:
     return TabulatedAtmosphere(h=h, rho=p / (R * T), p=p, T=T, extrapolate="clamp")
 
 
+def linear_temperature_atmosphere() -> TabulatedAtmosphere:
+    """Temperature falling 1 K/km from 215 K at 0 km (120 K floor above 95 km), hydrostatic, 0-140 km:
+    no kink at the default model's 50 km blend, so a gap across 70-30 km sees a linear profile."""
+    base = MarsEngineeringAtmosphere()
+    h = np.arange(0.0, 140.0e3 + 1, 50.0)
+    T = np.maximum(215.0 - 1.0e-3 * h, 120.0)
+    g = MARS.gm / (R_REF + h) ** 2
+    R = base.gas_constant
+    dlnp = -0.5 * (g[1:] / (R * T[1:]) + g[:-1] / (R * T[:-1])) * np.diff(h)
+    p = 0.72e3 * np.exp(np.concatenate([[0.0], np.cumsum(dlnp)]))
+    return TabulatedAtmosphere(h=h, rho=p / (R * T), p=p, T=T, extrapolate="clamp")
+
+
 def _alpha(t):
     return np.deg2rad(1.0 + 3.0 * np.abs(np.sin(2 * np.pi * t / 9.0)))
 
@@ -122,7 +135,12 @@ def _a_z(atm, p_M, v_M, phase, alpha):
 @lru_cache(maxsize=4)
 def simulate(kind: str = "structured", dt: float = 0.1):
     """Point-mass entry from 125 km; returns a dict of arrays (t, p_M, v_M, q_M_G, f_G, phase, atm)."""
-    atm = structured_atmosphere() if kind == "structured" else ExponentialAtmosphere(0.02, 11.0e3, 200.0)
+    if kind == "structured":
+        atm = structured_atmosphere()
+    elif kind == "linear":
+        atm = linear_temperature_atmosphere()
+    else:
+        atm = ExponentialAtmosphere(0.02, 11.0e3, 200.0)
     lat, lon = np.deg2rad(6.0), np.deg2rad(340.0)
     up = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
     east = np.cross([0.0, 0.0, 1.0], up)
@@ -272,6 +290,31 @@ def test_blackout_as_time_gap_on_the_strapdown_grid():
     assert errs["hydrostatic"] < 0.15
     assert errs["exponential"] < 0.35
     assert errs["hydrostatic"] < 0.7 * errs["exponential"]
+
+
+def _gap_error(sim, **kw) -> float:
+    """Max |relative density error| of the fill across the 70-30 km blackout (time gap)."""
+    keep = _blackout(sim)
+    sub = {k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in sim.items()}
+    fin = _run(sub, **kw).final
+    gap = fin.filled & (fin.h_amr > 29.0e3) & (fin.h_amr < 71.0e3)
+    return float(np.max(np.abs(fin.rho[gap] / sim["atm"].density(fin.h_amr[gap]) - 1.0)))
+
+
+def test_fill_temperature_shape_linear_vs_model():
+    """A temperature linear across the gap is recovered by the "linear" fill (offset + trend from the
+    two edges) and not by the "model" one, whose shape (the default model's isothermal extension
+    above 50 km) kinks inside the gap; on a truth built on the model's shape it is the reverse."""
+    lin = simulate("linear")
+    err_lin, err_model = (_gap_error(lin, fill_temperature_shape=s) for s in ("linear", "model"))
+    assert err_lin < 0.02
+    assert err_model > 3.0 * err_lin
+    structured = simulate()
+    assert _gap_error(structured, fill_temperature_shape="model") < _gap_error(
+        structured, fill_temperature_shape="linear"
+    )
+    with pytest.raises(ValueError, match="fill_temperature_shape 'cubic'"):
+        _run(lin, fill_temperature_shape="cubic")
 
 
 def test_real_vehicle_tables_if_available():

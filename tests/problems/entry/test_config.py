@@ -63,6 +63,7 @@ def test_schiaparelli_values():
     assert cfg.synthetic.seed == 7 == cfg.synthetic.truth_seed
     assert cfg.synthetic.truth.epoch_utc == cfg.epoch_utc == "2016-10-19T14:42:22.132Z"
     assert cfg.synthetic.telemetry.squint_deg == cfg.radar.squint_deg == 20.0
+    assert cfg.atmosphere.fill_method == "hydrostatic" and cfg.atmosphere.fill_temperature_shape == "linear"
 
 
 def test_defaults_are_those_of_the_code(tmp_path):
@@ -141,6 +142,7 @@ def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggest
         ("synthetic.nominal_error.dx0", [1.0, 2.0], "9 numbers"),
         ("truth.wind_layers", [["a", 1, 2, 3, 4]], "wind_layers"),
         ("vehicle.file", "nowhere.toml", "file not found"),
+        ("atmosphere.fill_temperature_shape", "cubic", "use one of model, linear"),
     ],
 )
 def test_bad_values_are_located_errors(key, value, match):

@@ -260,13 +260,10 @@ def test_cli_exit_code_for_unknown_scenario():
     assert main(["run", "no_such_scenario", "--out", "/tmp/none"]) == 3
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured 33.4 % (seed 7): across the 57 s blackout (≈ 70 → 30 km) the hydrostatic fill assumes the "
-    "default model's temperature shape, and the independent truth is up to ~27 K warmer at 40-60 km (its own "
-    "climate profile); the fill's reported 1σ covers it within 3σ (test above), the 20 % bound it does not",
-)
 def test_filled_blackout_density_within_20_percent(run):
+    """AMELIA's 20 % on the filled blackout, for the shipped seed (the fill's temperature: an offset and a
+    linear trend from the two edges, ``fill_temperature_shape = "linear"``; across dispersed truths it is
+    not always met: docs/RESULTS.md)."""
     _, s = run
     assert s["truth"]["atmosphere"]["entry_filled_blackout"]["density_max_abs_error_rel"] < 0.20
 

@@ -29,6 +29,7 @@ from workbench.problems.entry.state import DP, DV, N_ERR
 __all__ = [
     "MARS_MOLAR_MASS",
     "CA_FIRST_GUESS",
+    "FILL_TEMPERATURE_SHAPES",
     "EntryProfileSigmas",
     "AtmosphereSettings",
     "as_profile_sigmas",
@@ -49,6 +50,8 @@ __all__ = [
 
 MARS_MOLAR_MASS = 43.41e-3
 """Mean molar mass of the Martian atmosphere below 104 km [kg/mol] (AMELIA Sect. 9)."""
+FILL_TEMPERATURE_SHAPES = ("model", "linear")
+"""Temperature families of the hydrostatic blackout fill (:class:`AtmosphereSettings`)."""
 CA_FIRST_GUESS = 1.65
 """Entry axial coefficient of the first iteration (AMELIA Sect. 9: mean C_D from the deceleration
 peak to PDD over 500 Monte Carlo entries)."""
@@ -66,8 +69,8 @@ class EntryProfileSigmas:
         p_top_rel: relative 1σ of the top pressure taken from the default model [-] (engineering
             choice, 20 %: the paper's Table 7 models differ by tens of % at 100 km).
         fill_temperature_K: 1σ [K] of the true temperature's departure from the temperature the
-            fill assumes (the default model's shape plus a linear trend, or an isothermal layer
-            for the exponential fill), a Gaussian process in altitude (see :func:`fill_sigma`).
+            fill assumes (the default model's shape plus a linear trend, a linear trend alone,
+            or an isothermal layer for the exponential fill), a Gaussian process in altitude (see :func:`fill_sigma`).
             Physical argument, not a fit to any truth: Mars temperature profiles depart from a
             climatological shape by ~10 K through the middle atmosphere (the Mars Climate
             Database's climatology, warm, cold and dust scenarios differ by 10-20 K at 30-70 km,
@@ -513,7 +516,10 @@ class AtmosphereSettings:
     """Settings of :func:`reconstruct_atmosphere` (``[atmosphere]``; defaults AMELIA Sect. 9).
 
     ``molar_mass_g_per_mol`` [g/mol] of the ideal-gas temperature; ``fill_method``
-    "hydrostatic" or "exponential" (the paper) for two-sided gaps; ``tolerance`` convergence
+    "hydrostatic" or "exponential" (the paper) for two-sided gaps; ``fill_temperature_shape`` the
+    hydrostatic fill's temperature across a gap: "model" (the default model's temperature plus an
+    offset and a linear trend) or "linear" (an offset and a linear trend alone: only the two edge
+    constraints, no assumed structure in between); ``tolerance`` convergence
     threshold of the max relative change of ρ, p, T; ``max_iterations`` (≥ 1); ``sigmas`` the
     :class:`EntryProfileSigmas` of the 1σ; ``min_specific_force`` a_Z [m/s²] that defines the top
     of the profile; ``p_top`` pressure [Pa] there (None: the default model's); time gaps longer
@@ -525,6 +531,7 @@ class AtmosphereSettings:
 
     molar_mass_g_per_mol: float = MARS_MOLAR_MASS * 1e3
     fill_method: str = "hydrostatic"
+    fill_temperature_shape: str = "model"
     tolerance: float = 0.01
     max_iterations: int = 10
     sigmas: EntryProfileSigmas = EntryProfileSigmas()
@@ -593,6 +600,10 @@ def _checked_inputs(t, p_M, v_M, q_M_G, P, f_G, f_valid, phase, cfg: AtmosphereS
         raise ValueError("reconstruct_atmosphere: max_iterations must be >= 1")
     if cfg.fill_method not in ("hydrostatic", "exponential"):
         raise ValueError(f"reconstruct_atmosphere: fill_method {cfg.fill_method!r}; use 'hydrostatic' or 'exponential'")
+    if cfg.fill_temperature_shape not in FILL_TEMPERATURE_SHAPES:
+        raise ValueError(
+            f"reconstruct_atmosphere: fill_temperature_shape {cfg.fill_temperature_shape!r}; use 'model' or 'linear'"
+        )
     return (t, *(a for _, a, _ in arrays))
 
 
@@ -679,6 +690,8 @@ def _profile(g: _Grid, gas: _Gas, cs: np.ndarray, exclude: np.ndarray, cfg: Atmo
             hh = np.concatenate([[h1], h[a:b], [h2]])
             gg = g.g_r[a - 1 : b + 1]
             Tsh = gas.T_shape[a - 1 : b + 1]
+            if cfg.fill_temperature_shape == "linear":
+                Tsh = np.full(Tsh.shape, Tsh[0])  # offset + trend only
             fill = _hydrostatic_gap(hh, gg, Tsh, p1 / (np.exp(y1) * gas.R_gas), p1, y2, gas.R_gas)
             if fill is not None:
                 rho[a:b] = fill[1:-1]
@@ -820,10 +833,10 @@ def reconstruct_atmosphere(
     ``f_G`` (n, 3) specific force in G [m/s²] (only a_Z is used); ``f_valid`` (n,) bool; ``phase``
     (n,) 0 entry, 1 PDD..FSR, 2 FSR..BSR; ``vehicle`` the :class:`~workbench.models.aerodynamics.EntryVehicle`;
     ``default_atmosphere`` the model of iteration 1, of the top pressure, of the hydrostatic fill's
-    temperature shape and of the gas constants; ``settings`` the :class:`AtmosphereSettings`
-    (None: defaults); ``events`` optional {"PDD": t, "FSR": t} [s] (default: first sample of phase
-    1 / 2); ``wind_NE`` optional (n, 2) wind north/east [m/s] subtracted in v_r (None: zero wind,
-    as in the paper).  Returns an :class:`AtmosphereResult` on the profile grid.
+    temperature shape (``fill_temperature_shape="model"``) and of the gas constants; ``settings``
+    the :class:`AtmosphereSettings` (None: defaults); ``events`` optional {"PDD": t, "FSR": t} [s]
+    (default: first sample of phase 1 / 2); ``wind_NE`` optional (n, 2) wind north/east [m/s]
+    subtracted in v_r (None: zero wind, as in the paper).  Returns an :class:`AtmosphereResult` on the profile grid.
     """
     cfg = AtmosphereSettings() if settings is None else settings
     t, p_M, v_M, q_M_G, P, f_G, f_valid, phase = _checked_inputs(t, p_M, v_M, q_M_G, P, f_G, f_valid, phase, cfg)

@@ -27,7 +27,7 @@ from workbench.io.scenario import RunInfo, Scenario, ScenarioError
 from workbench.io.schema import Key, Schema, Table, from_table, scenario_table
 from workbench.models.aerodynamics import EntryVehicle, load_vehicle
 from workbench.models.radar import AZIMUTHS_DEG, SQUINT_DEG, beam_directions_G
-from workbench.problems.entry.atmosphere import AtmosphereSettings, EntryProfileSigmas
+from workbench.problems.entry.atmosphere import FILL_TEMPERATURE_SHAPES, AtmosphereSettings, EntryProfileSigmas
 from workbench.problems.entry.dispersion import AcceptanceRules, DispersionSigmas
 from workbench.problems.entry.filter import EntryFilterSigmas
 from workbench.problems.entry.preprocess import PreprocessConfig
@@ -334,6 +334,14 @@ SCHEMA = Schema(
                     _ATM.fill_method,
                     meaning="blackout fill",
                     choices=("hydrostatic", "exponential"),
+                ),
+                Key(
+                    "fill_temperature_shape",
+                    _S,
+                    _ATM.fill_temperature_shape,
+                    meaning="hydrostatic fill's temperature across a gap: the default model's shape + offset + trend, "
+                    "or offset + trend alone",
+                    choices=FILL_TEMPERATURE_SHAPES,
                 ),
                 Key("tolerance", _F, _ATM.tolerance, "1", "drag-coefficient iteration tolerance (relative)"),
                 Key("max_iterations", _I, _ATM.max_iterations, meaning="drag-coefficient iterations"),
@@ -702,6 +710,7 @@ def _atmosphere(atm: dict, accel_mps2: float) -> AtmosphereSettings:
         _ATM,
         molar_mass_g_per_mol=atm["molar_mass_g_per_mol"],
         fill_method=atm["fill_method"],
+        fill_temperature_shape=atm["fill_temperature_shape"],
         tolerance=atm["tolerance"],
         max_iterations=atm["max_iterations"],
         sigmas=EntryProfileSigmas(
