@@ -19,7 +19,7 @@ from workbench.io.scenario import ScenarioError, load_scenario
 from workbench.io.telemetry import TelemetryError, read_telemetry
 from workbench.problems.post2 import rocket
 from workbench.problems.post2.config import Post2Settings
-from workbench.problems.post2.importers import airbrakes
+from workbench.problems.post2.importers import airbrakes, flightlog
 from workbench.problems.post2.importers.airbrakes import find_gaps, read_log, read_metadata
 from workbench.problems.post2.pipeline import Estimator
 from workbench.problems.post2.problem import Post2Problem
@@ -501,7 +501,7 @@ def test_site_temperature_is_a_consider_parameter_in_every_sigma(excerpt_run):
     st = sc.data["states"]["baro_scale"]
     meta = read_metadata(META, LOG.name)
     assert st["process"] == "consider"
-    assert st["sigma"] == pytest.approx(rocket.TEMPERATURE_SIGMA_K / meta.temperature, rel=1e-5)
+    assert st["sigma"] == pytest.approx(flightlog.TEMPERATURE_SIGMA_K / meta.temperature, rel=1e-5)
     for hist in (result.history["smoothed"], result.history["forward"]):
         np.testing.assert_array_equal(hist["baro_scale"]["value"], 1.0)  # never fitted
         np.testing.assert_allclose(hist["baro_scale"]["sigma"], st["sigma"], rtol=1e-6)  # never informed

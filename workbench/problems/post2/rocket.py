@@ -447,12 +447,6 @@ BURNOUT_TRANSIENT_S = 2.5
 #: prior 1σ of the in-flight barometer offset [Pa] (~2.5 m): the pad altitude is fitted to the
 #: standby pressure, so what is left is a drift in flight (board heating, port effects)
 BARO_BIAS_SIGMA = 30.0
-#: default 1σ [K] of the air column's mean temperature (pad to apogee) about the model's, the site's
-#: air temperature with the standard −6.5 K/km lapse: the lapse rate of the lowest 2 km ranges from
-#: dry-adiabatic (−9.8 K/km) to an inversion (±3 K on the column's mean at 1.5 km), humid air is up to
-#: 3 K warmer virtually, and a surface reading is good to ~1 K.  It becomes the ``baro_scale`` consider
-#: parameter's 1σ, σ_T / T (the hypsometric equation: a column 1 % warmer is 1 % taller).
-TEMPERATURE_SIGMA_K = 4.0
 # The flight computer's altitude is a standard-day pressure altitude (flight_computer_altimeter scores
 # it raw and like for like); the barometer states baro_scale and baro_q_coefficient were tried and are
 # not written into the problem files (measurements: docs/tuning/post2.md, "the flight computer's altitude").

@@ -26,10 +26,10 @@ import numpy as np
 from workbench.core.bodies import EARTH, G0
 from workbench.io.telemetry import TelemetryError, write_events, write_telemetry
 from workbench.io.units import likely_unit
-from workbench.problems.post2.rocket import TEMPERATURE_SIGMA_K
 
 __all__ = [
     "PHASES",
+    "TEMPERATURE_SIGMA_K",
     "Gap",
     "FlightLog",
     "FlightMetadata",
@@ -210,6 +210,14 @@ def find_gaps(t: np.ndarray, letters: np.ndarray, gap_factor: float = 3.0) -> tu
     )
 
 
+#: default 1σ [K] of the air column's mean temperature (pad to apogee) about the model's, the site's
+#: air temperature with the standard −6.5 K/km lapse: the lapse rate of the lowest 2 km ranges from
+#: dry-adiabatic (−9.8 K/km) to an inversion (±3 K on the column's mean at 1.5 km), humid air is up to
+#: 3 K warmer virtually, and a surface reading is good to ~1 K.  It becomes the ``baro_scale`` consider
+#: parameter's 1σ, σ_T / T (the hypsometric equation: a column 1 % warmer is 1 % taller).
+TEMPERATURE_SIGMA_K = 4.0
+
+
 @dataclass(frozen=True)
 class FlightMetadata:
     """The flight's ``metadata.json`` entry in SI: ``mass`` [kg], ``cd`` [-], ``area`` [m²];
@@ -219,7 +227,7 @@ class FlightMetadata:
     ``rod_angle_deg``, ``date`` (ISO string), ``description``, ``motor`` (designation or None),
     ``temperature_sigma`` [K] (1σ of the air column's mean temperature about the site's with the
     standard lapse: the ``baro_scale`` consider parameter; default
-    :data:`~workbench.problems.post2.rocket.TEMPERATURE_SIGMA_K`).  The
+    :data:`TEMPERATURE_SIGMA_K`).  The
     scoring references (landed coordinates, apogee) and the rod angle may be None (unknown: a
     column-mapped import without them; their checks and the ``_landing`` variant are then skipped)."""
 

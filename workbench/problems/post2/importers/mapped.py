@@ -43,6 +43,7 @@ from workbench.io.schema import REQUIRED, Key, Schema, Table, read_toml
 from workbench.io.telemetry import MAX_PROBLEMS, Problem, TelemetryError
 from workbench.io.units import UnitError, canonical_unit, known_units, to_si, unit_kind
 from workbench.problems.post2.importers.flightlog import (
+    TEMPERATURE_SIGMA_K,
     FlightLog,
     FlightMetadata,
     Gap,
@@ -52,7 +53,6 @@ from workbench.problems.post2.importers.flightlog import (
     find_gaps,
     import_log,
 )
-from workbench.problems.post2.rocket import TEMPERATURE_SIGMA_K
 
 __all__ = [
     "HELP",
