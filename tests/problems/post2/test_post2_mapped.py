@@ -14,13 +14,17 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from workbench.cli import main
 from workbench.estimation.health import UnhealthyError
 from workbench.io.scenario import ScenarioError, load_scenario
 from workbench.io.telemetry import TelemetryError
+from workbench.problems.base import RunOptions
+from workbench.problems.post2 import rocket
 from workbench.problems.post2.importers import mapped
+from workbench.problems.post2.problem import Post2Problem
 
 DATA = Path(__file__).resolve().parent / "data" / "airbrakes_excerpt"
 LOG = DATA / "jackpot_launch_1_excerpt.csv"
@@ -364,3 +368,67 @@ def test_site_temperature_sigma_becomes_the_barometer_scale_consider_parameter(t
     t_site = json.loads(META.read_text(encoding="utf-8"))[LOG.name]["launch_site"]["air_temperature_celsius"]
     assert st["process"] == "consider"
     assert st["sigma"] == pytest.approx(8.0 / (t_site + 273.15), rel=1e-5)
+
+
+def _gnss_file(path: Path, t_log, enu, lat0: float, lon0: float, alt0: float) -> None:
+    """A GNSS CSV (time [s], lat/lon [deg], alt [m] in its own datum) of the positions ``enu`` (k, 3)
+    [m east/north/up of the pad's fix at (lat0, lon0, alt0)], the inverse of the importer's local
+    east/north on the mean sphere."""
+    from workbench.core.bodies import EARTH
+
+    r = EARTH.reference_radius
+    lat = lat0 + np.degrees(enu[:, 1] / r)
+    lon = lon0 + np.degrees(enu[:, 0] / (r * math.cos(math.radians(lat0))))
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["gps_time", "lat", "lon", "alt_ft"])
+        for row in zip(t_log, lat, lon, (alt0 + enu[:, 2]) / 0.3048, strict=True):
+            w.writerow([repr(float(v)) for v in row])
+
+
+def test_gnss_fixes_are_observed_relative_to_the_pad(tmp_path):
+    """Issue 27 item 1, GNSS: fixes made from the reconstruction without GNSS, moved 15 m east (inside
+    the boost's 1σ, 23 m) and carrying a constant 40 m north error (pad fixes included), pull the track
+    15 m east and the 40 m cancels; the landing's east σ shrinks from 130 m to < 10 m; every fix is
+    accepted at the default fix σ (10 m horizontal, 20 m vertical)."""
+    toml0, s0 = _import_and_run(tmp_path / "plain")
+    fl = json.loads((toml0.parent / "flight.json").read_text(encoding="utf-8"))
+    settings = Post2Problem().settings(load_scenario(toml0))
+    *_, r0 = Post2Problem().reconstruct(settings, Post2Problem().telemetry_files(settings), RunOptions())
+    tr = r0.rocket
+    t_fix = np.arange(tr.t[0] + 0.5, tr.t[-1], 1.0)
+    enu = np.column_stack([np.interp(t_fix, tr.t, tr.enu[:, i]) for i in range(3)]) + [15.0, 40.0, 0.0]
+    pad_t = -np.arange(6.0, 0.0, -1.0)  # six fixes in the seconds before liftoff
+    enu = np.vstack([np.tile([0.0, 40.0, 0.0], (pad_t.size, 1)), enu])
+    site = s0["rocket"]["pad"]
+    log = tmp_path / "log"
+    remap(log)
+    _gnss_file(log / "gps.csv", np.concatenate([pad_t, t_fix]) + fl["t_launch_log_s"], enu, 35.0, -76.0, 12.0)
+    gnss_map = '[files.gps]\npath = "gps.csv"\ntime = "gps_time"\n\n[gnss]\nfile = "gps"\nlatitude = "lat"\n'
+    gnss_map += 'longitude = "lon"\naltitude = "alt_ft"\naltitude_unit = "ft"\n'
+    mp = remap(log, edit=lambda t: t + "\n" + gnss_map)
+    assert main(["import", "csv", "--mapping", str(mp), "--out", str(tmp_path / "flight"), "--allow-unhealthy"]) == 0
+    toml = tmp_path / "flight" / "remapped.toml"
+    assert 'quantity = "position_pad_enu"' in toml.read_text(encoding="utf-8")
+    info = json.loads((tmp_path / "flight" / "flight.json").read_text(encoding="utf-8"))["gnss"]
+    assert info["on_pad"] == 6 and info["observed_in_span"] == t_fix.size
+    s = _run(toml, tmp_path / "rec")
+    a, b = s0["rocket"]["landing"], s["rocket"]["landing"]
+    moved = rocket.local_en(b["lat_deg"], b["lon_deg"], a["lat_deg"], a["lon_deg"])
+    assert abs(moved[0] - 15.0) < 3.0 * b["sigma_east_m"] and abs(moved[1]) < 3.0 * b["sigma_north_m"], moved
+    assert b["sigma_east_m"] < 10.0 and b["sigma_north_m"] < 10.0 and a["sigma_east_m"] > 100.0
+    assert s["observations"]["gnss"]["accepted"] == t_fix.size
+    assert s["observations"]["gnss"]["nis_verdict"] == "consistent"
+    assert site == s["rocket"]["pad"]
+
+
+def test_gnss_without_fixes_on_the_pad_is_a_located_error(tmp_path, capsys):
+    """The fixes are referenced to the pad's own fix: a GNSS file starting after liftoff cannot be."""
+    log = tmp_path / "log"
+    remap(log)
+    _gnss_file(log / "gps.csv", np.array([1300.0, 1301.0]), np.zeros((2, 3)), 35.0, -76.0, 12.0)
+    gnss_map = '[files.gps]\npath = "gps.csv"\ntime = "gps_time"\n\n[gnss]\nfile = "gps"\nlatitude = "lat"\n'
+    gnss_map += 'longitude = "lon"\naltitude = "alt_ft"\naltitude_unit = "ft"\n'
+    mp = remap(log, edit=lambda t: t + "\n" + gnss_map)
+    err = _refused(tmp_path, mp, capsys)
+    assert "gps.csv" in err and "gps_time" in err and "min_pad_fixes" in err

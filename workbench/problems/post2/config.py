@@ -938,6 +938,15 @@ def _settings(scenario: Scenario) -> Post2Settings:
         obs.append(replace(o, path=_resolved(run, o.file), weights_path=_resolved(run, o.weights)))
     if not obs:
         raise ScenarioError(file, "observations", "no observation declared")
+    launch = _launch(file, data.get("launch", {}))
+    for o in obs:
+        if o.quantity == "position_pad_enu" and (launch is None or scenario.is_synthetic):
+            raise ScenarioError(
+                file,
+                f"observations.{o.name}.quantity",
+                "position_pad_enu is relative to the [launch] pad (give launch.lat_deg/lon_deg/pad_altitude_m) "
+                "and is read from a file, not synthesized (no [synthetic])",
+            )
     events = tuple(_event(file, n, r) for n, r in data.get("events", {}).items())
     truth_states = {}
     for name, v in data.get("truth", {}).get("states", {}).items():
@@ -966,7 +975,7 @@ def _settings(scenario: Scenario) -> Post2Settings:
         tuple(states), tuple(obs), events, schedules, corr,
         _environment(file, run, data["environment"]), _vehicle(file, run, data["vehicle"]),
         FilterSettings(**data["filter"]), TruthSettings(**tr, states=truth_states, tolerances=tolerances),
-        MonteCarloSettings(**mc), _launch(file, data.get("launch", {})),
+        MonteCarloSettings(**mc), launch,
     )  # fmt: skip
 
 

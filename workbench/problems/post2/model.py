@@ -244,6 +244,14 @@ OBSERVATIONS: dict[str, ObservationDef] = {
     "position_inertial": ObservationDef(
         3, "m", ("x", "y", "z"), (3, 6), "inertial position p_I (e.g. a surveyed landing point at its time)"
     ),
+    "position_pad_enu": ObservationDef(
+        3,
+        "m",
+        ("e", "n", "u"),
+        (3, 6),
+        "position east/north/up of the `[launch]` pad in its planet-fixed axes at the sample's time (a GNSS fix "
+        "relative to the pad; needs `[launch]`; reconstruction only)",
+    ),
     # ---- Huygens-like descent (thesis [R3] Ch. 4.2.3): pressure over decades, temperature
     "log_pressure": ObservationDef(1, "1", ("ln_p",), (3, 6), "ln(static pressure / 1 Pa): σ is the relative error"),
     "temperature": ObservationDef(1, "K", ("T",), (3, 6), "static temperature of the model atmosphere"),
@@ -1163,4 +1171,6 @@ class TrajectoryModel:
                     ..., None
                 ]
             return (self.env.atmosphere.temperature(h) + self.param(x, "temperature_offset", 0.0)[..., 0])[..., None]
+        if quantity == "position_pad_enu":
+            raise ValueError("position_pad_enu depends on the sample's time: the estimator builds it (pad_frame)")
         raise KeyError(f"unknown observation quantity {quantity!r}")

@@ -497,6 +497,19 @@ class Estimator:
             f = sched.weight_factor(self.cfg.schedules, ch.spec.name, float(ch.t[i]), phase["fired"])
             self.weight_log.setdefault(ch.spec.name, []).append((float(ch.t[i]), f))
             R = R / f
+        if q == "position_pad_enu":  # linear in the position: h = C (p − p0) at the sample's time
+            C, p0 = rocket_results.pad_frame(self.cfg.launch, float(ch.t[i]), model.env.radius_ref, model.env.omega)
+            sp, se = self.smap.blocks["position"].sx, self.smap.blocks["position"].se
+            Hp = np.zeros((3, self.smap.n_e))
+            Hp[:, se] = C
+
+            def hp(x, C=C, p0=p0, sp=sp):
+                return (np.asarray(x, float)[..., sp] - p0) @ C.T
+
+            return Measurement(
+                ch.spec.name, ch.z[i], R, hp, H=Hp, gate_probability=ch.spec.gate_probability,
+                iterations=ch.spec.iterations, gain_projector=self.gain_projector,
+            )  # fmt: skip
         if q == "quaternion":  # z = 0, h = body small angle from the measured attitude to the state's
             q_meas = ch.z[i]
             sq = self.smap.blocks["attitude"].sx

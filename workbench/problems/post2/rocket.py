@@ -558,6 +558,7 @@ def problem_file(
     ca0: float = 1.0,
     t_burnout: float | None = None,
     t_touchdown: float | None = None,
+    gnss: bool = False,
 ) -> str:
     """Text of the post2 problem file of a flight's coast and descent (from ``t0`` to ``t_end`` [s
     after launch]): 3-DOF, Earth, the site's standard atmosphere, the rocket as a point mass with
@@ -567,7 +568,8 @@ def problem_file(
     with ``landing`` also the landed coordinates (``landing.csv``) — the variant that estimates the
     winds under the parachutes (the IMU and the barometer do not see the horizontal drift).  Its
     ``[launch]`` table (the pad, ``t_burnout`` and ``t_touchdown`` [s after launch, None: unknown])
-    makes the run report the rocket results (:mod:`workbench.problems.post2.rocket_results`)."""
+    makes the run report the rocket results (:mod:`workbench.problems.post2.rocket_results`).  ``gnss``:
+    also observe ``gnss.csv`` (fixes east/north/up of the pad, weights ``gnss_weights.csv``)."""
     # the metadata's direction is where the wind comes from; the state is the air's velocity [east,
     # north] (where it goes: v_rel = v − ω×r − wind), hence the minus signs (checked on flights 3 and 4:
     # docs/tuning/post2.md, "the wind prior")
@@ -700,6 +702,15 @@ def problem_file(
         "gate_probability = 0.9999",
         "",
     ]
+    if gnss:
+        lines += [
+            "[observations.gnss]  # GNSS fixes relative to the pad's own fix (the import's [gnss] mapping)",
+            'quantity = "position_pad_enu"',
+            'file = "gnss.csv"',
+            'weights = "gnss_weights.csv"',
+            "gate_probability = 0.9999",
+            "",
+        ]
     if landing:
         lines += [
             "[observations.landing]  # the landed coordinates at touchdown (metadata, within 1-2 m)",

@@ -39,6 +39,7 @@ __all__ = [
     "DESCENT_SETTLE_S",
     "LocalTrack",
     "enu_axes",
+    "pad_frame",
     "earth_fixed",
     "altitude_above_pad",
     "vertical_sigma",
@@ -106,6 +107,18 @@ def _rotation_to_fixed(t: np.ndarray, omega: float) -> np.ndarray:
     R = np.zeros((a.size, 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
     return R
+
+
+def pad_frame(launch, t: float, radius_ref: float, omega: float) -> tuple[np.ndarray, np.ndarray]:
+    """(C (3, 3), p0 (3,) [m]) of the ``[launch]`` pad at ``t`` [s after launch]: east/north/up of the
+    pad = C (p_I − p0) for an inertial position p_I [m] (C: inertial M to the pad's planet-fixed east,
+    north, up axes; p0: the pad in M at t, ``launch.pad_altitude_m`` above the sphere of ``radius_ref``
+    [m], the planet turned by ``omega`` [rad/s] t about +Z)."""
+    lat, lon = math.radians(launch.lat_deg), math.radians(launch.lon_deg)
+    C_M_ENU = enu_axes(lat, lon)
+    R_fix = _rotation_to_fixed(np.array([t]), omega)[0]  # M -> planet-fixed at t
+    p_pad = (radius_ref + launch.pad_altitude_m) * C_M_ENU[:, 2]
+    return C_M_ENU.T @ R_fix, R_fix.T @ p_pad
 
 
 def earth_fixed(p_M: np.ndarray, t: np.ndarray, omega: float = EARTH.rotation_rate) -> np.ndarray:

@@ -29,6 +29,7 @@ from workbench.io.units import likely_unit
 
 __all__ = [
     "PHASES",
+    "GnssFixes",
     "TEMPERATURE_SIGMA_K",
     "Gap",
     "FlightLog",
@@ -96,6 +97,7 @@ class FlightLog:
     time_column: str = "timestamp_seconds"
     accel_columns: str = "raw_acceleration_[xyz]_gs"
     pressure_valid: np.ndarray | None = None
+    gnss: GnssFixes | None = None
 
     def phase_start(self, letter: str) -> float:
         """Log time [s] of the first row with phase ``letter``; a TelemetryError (a ValueError) naming
@@ -216,6 +218,19 @@ def find_gaps(t: np.ndarray, letters: np.ndarray, gap_factor: float = 3.0) -> tu
 #: 3 K warmer virtually, and a surface reading is good to ~1 K.  It becomes the ``baro_scale`` consider
 #: parameter's 1σ, σ_T / T (the hypsometric equation: a column 1 % warmer is 1 % taller).
 TEMPERATURE_SIGMA_K = 4.0
+
+
+@dataclass(frozen=True)
+class GnssFixes:
+    """GNSS fixes relative to the pad: ``t`` (k,) [s, the log's clock], ``enu`` (k, 3) [m east, north,
+    up of the pad's own fix: the median of the fixes before liftoff], ``sigma_h`` / ``sigma_v`` (k,) [m]
+    horizontal (per axis) and vertical 1σ; ``info`` JSON-ready (the file, the pad fix, counts)."""
+
+    t: np.ndarray
+    enu: np.ndarray
+    sigma_h: np.ndarray
+    sigma_v: np.ndarray
+    info: dict
 
 
 @dataclass(frozen=True)
@@ -498,6 +513,7 @@ def _write_import(
             },
             meta={"source": log.path.name, "meaning": "the flight computer's own solution (reference, not observed)"},
         )
+    gnss_used = _write_gnss(out, log.gnss, t_launch, t0, t_end)
     events = [(float(t[0]), "log start")]
     letters = log.letters
     how = "" if log.phase_column else ", detected"
@@ -531,6 +547,8 @@ def _write_import(
     }
     if source is not None:
         info["source"] = source
+    if log.gnss is not None:
+        info["gnss"] = {**log.gnss.info, "observed_in_span": gnss_used}
     if names is not None:
         info["input_names"] = names
     (out / "flight.json").write_text(json.dumps(info, indent=2) + "\n", encoding="utf-8")
@@ -538,7 +556,7 @@ def _write_import(
     # the pad's events for the rocket results: burnout (first coast row) and touchdown when the span reaches it
     t_burnout = log.phase_start("C") - t_launch
     t_touchdown = t_end if "L" in set(log.letters) and t_end >= log.phase_start("L") - t_launch - 1e-9 else None
-    marks = {"t_burnout": t_burnout, "t_touchdown": t_touchdown}
+    marks = {"t_burnout": t_burnout, "t_touchdown": t_touchdown, "gnss": gnss_used > 0}
     path.write_text(
         rocket.problem_file(name, meta, fl, t0, t_end, t_apogee, t_main, ca0=ca0, **marks), encoding="utf-8"
     )
@@ -555,6 +573,32 @@ def _write_import(
     text = rocket.problem_file(f"{name}_landing", meta, fl, t0, t_end, t_apogee, t_main, landing=True, ca0=ca0, **marks)
     (out / f"{name}_landing.toml").write_text(text, encoding="utf-8")
     return path
+
+
+def _write_gnss(out: Path, fixes: GnssFixes | None, t_launch: float, t0: float, t_end: float) -> int:
+    """Write the GNSS fixes inside the reconstructed span [t0, t_end] [s after launch] as
+    ``gnss.csv`` (east/north/up of the pad [m]) and ``gnss_weights.csv`` (1/σ²); returns how many."""
+    if fixes is None:
+        return 0
+    tr = fixes.t - t_launch
+    k = (tr >= t0) & (tr <= t_end)
+    if not np.any(k):
+        return 0
+    e, n, u = fixes.enu[k].T
+    write_telemetry(
+        out / "gnss.csv",
+        tr[k],
+        {"e": (e, "m"), "n": (n, "m"), "u": (u, "m")},
+        meta={"source": fixes.info.get("file", ""), "meaning": "GNSS fix: east/north/up of the pad's own fix"},
+    )
+    wh, wv = 1.0 / fixes.sigma_h[k] ** 2, 1.0 / fixes.sigma_v[k] ** 2
+    write_telemetry(
+        out / "gnss_weights.csv",
+        tr[k],
+        {"e": (wh, "1"), "n": (wh, "1"), "u": (wv, "1")},
+        meta={"meaning": "W = 1/sigma^2 [1/m^2]"},
+    )
+    return int(np.sum(k))
 
 
 def add_common_arguments(parser) -> None:

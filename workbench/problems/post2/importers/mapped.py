@@ -6,8 +6,8 @@ of CSV files at their own rates: each file's path, time column, time unit and of
 column holds each quantity (accelerometer and gyro triads, barometric pressure; optional
 magnetometer triad and temperature), its unit (:mod:`workbench.io.units`) and the map from the
 log's columns to the body axes (``body_x = "-accel_z"``); the site, the rocket, optional scoring
-references; optionally the flight phases and the flight computer's own solution (a reference, never
-observed).  The FIRM log of ``workbench import airbrakes`` is one such layout
+references; optionally the flight phases, GNSS fixes (observed relative to the pad's own fix:
+:func:`read_gnss`) and the flight computer's own solution (a reference, never observed).  The FIRM log of ``workbench import airbrakes`` is one such layout
 (``airbrakes.FIRM_LAYOUT``, read by :func:`from_data` without site and rocket).  What it does:
 
 1. :func:`read_mapped` — every file read with located errors (file, column, data row): a missing
@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +47,7 @@ from workbench.problems.post2.importers.flightlog import (
     FlightLog,
     FlightMetadata,
     Gap,
+    GnssFixes,
     add_common_arguments,
     check_rates,
     check_units,
@@ -72,7 +73,7 @@ __all__ = [
     "input_names",
 ]
 
-_F, _S = "float", "str"
+_F, _S, _I = "float", "str", "int"
 
 #: the triads a mapping can name (table -> quantity kind of its unit)
 TRIADS = {"accelerometer": "acceleration", "gyro": "angular_rate", "magnetometer": "magnetic"}
@@ -277,6 +278,42 @@ MAPPING_SCHEMA = Schema(
         _triad("magnetometer", "magnetic field triad (optional: without it the pad heading is a prior)", optional=True),
         _scalar("barometer", "static pressure", optional=False),
         _scalar("temperature", "the board's temperature (optional; checked against the site's)", optional=True),
+        Table(
+            "gnss",
+            "GNSS fixes (optional): latitude/longitude/altitude observed relative to the pad (the fixes before "
+            "liftoff give the pad's own fix, so a constant GNSS offset cancels); fixes in the reconstructed span "
+            "are observations",
+            (
+                Key("file", _S, None, meaning="the `[files.<name>]` entry holding the fixes (read at their own times)"),
+                Key("latitude", _S, None, meaning="latitude column [deg]"),
+                Key("longitude", _S, None, meaning="longitude column [deg]"),
+                Key(
+                    "altitude", _S, None, meaning="altitude column (any datum: only differences from the pad are used)"
+                ),
+                Key("altitude_unit", _S, "m", meaning="unit of the altitude (length)"),
+                Key("sigma_h", _S, None, meaning="column of each fix's horizontal 1σ (absent: `sigma_h_m`)"),
+                Key("sigma_v", _S, None, meaning="column of each fix's vertical 1σ (absent: `sigma_v_m`)"),
+                Key("sigma_unit", _S, "m", meaning="unit of the σ columns (length)"),
+                Key(
+                    "sigma_h_m",
+                    _F,
+                    10.0,
+                    "m",
+                    "horizontal 1σ of a fix (per axis) without a σ column: the receiver's and the 3-DOF model's "
+                    "error over a second of flight together, not the receiver's alone",
+                    gt=0.0,
+                ),
+                Key("sigma_v_m", _F, 20.0, "m", "vertical 1σ of a fix without a σ column (as `sigma_h_m`)", gt=0.0),
+                Key(
+                    "min_pad_fixes",
+                    _I,
+                    3,
+                    "",
+                    "fixes needed on the pad before liftoff to reference the others to (fewer: an error)",
+                    ge=1,
+                ),
+            ),
+        ),
         Table(
             "flight_computer",
             "the flight computer's own solution (optional): a reference for scoring and checks, never observed",
@@ -609,6 +646,68 @@ def read_mapped(mp: Mapping, needed_by: str = "the mapping names it"):
     return t, quantities, phase_values, info
 
 
+def read_gnss(mp: Mapping, liftoff: float) -> GnssFixes | None:
+    """The mapping's ``[gnss]`` fixes (None without ``[gnss] file``) relative to the pad: the median of
+    the fixes before ``liftoff`` [s, common clock] is the pad's own fix (at least ``min_pad_fixes`` of
+    them, else a located error), and every fix becomes east/north/up of it [m] (local east/north on the
+    mean sphere; up the altitude difference, so the GNSS datum and a constant offset cancel)."""
+    from workbench.problems.post2.rocket import local_en  # the rocket module's kernels load lazily
+
+    g = mp.data["gnss"]
+    if g["file"] is None:
+        return None
+    missing = [k for k in ("latitude", "longitude", "altitude") if g[k] is None]
+    if missing:
+        raise ScenarioError(
+            mp.path, f"gnss.{missing[0]}", "a [gnss] file needs its latitude, longitude and altitude columns"
+        )
+    spec = mp.files[g["file"]]
+    cols = [g["latitude"], g["longitude"], g["altitude"]] + [g[k] for k in ("sigma_h", "sigma_v") if g[k] is not None]
+    c = read_columns(spec["path"], spec["time"], cols, needed_by=f"[gnss] of {mp.path.name}")
+    tu = canonical_unit(spec["time_unit"])
+    t = to_si(c.values[spec["time"]], tu)[0] + spec["time_offset_s"]
+    lat, lon = c.values[g["latitude"]], c.values[g["longitude"]]
+    alt = to_si(c.values[g["altitude"]], _unit(mp, "gnss", spec["path"], g["altitude"], "length", "altitude_unit"))[0]
+    for col, v, lim in ((g["latitude"], lat, 90.0), (g["longitude"], lon, 360.0)):
+        bad = np.flatnonzero(np.abs(v) > lim)
+        if bad.size:
+            raise TelemetryError.single(
+                spec["path"], f"{v[bad[0]]:g} is not an angle in degrees (|value| <= {lim:g})", column=col,
+                line=int(c.rows[bad[0]]) + 1,
+            )  # fmt: skip
+
+    def sigma(key, default):
+        if g[key] is None:
+            return np.full(t.size, default)
+        v = to_si(c.values[g[key]], _unit(mp, "gnss", spec["path"], g[key], "length", "sigma_unit"))[0]
+        bad = np.flatnonzero(~(v > 0))
+        if bad.size:
+            raise TelemetryError.single(
+                spec["path"], f"a 1σ must be > 0, got {v[bad[0]]:g}", column=g[key], line=int(c.rows[bad[0]]) + 1
+            )
+        return v
+
+    pad = t < liftoff
+    if int(np.sum(pad)) < g["min_pad_fixes"]:
+        raise TelemetryError.single(
+            spec["path"],
+            f"{int(np.sum(pad))} fixes before liftoff ({liftoff:.3f} s on the common clock); [gnss] min_pad_fixes = "
+            f"{g['min_pad_fixes']} are needed to reference the fixes to the pad",
+            column=spec["time"],
+        )
+    lat0, lon0, alt0 = (float(np.median(v[pad])) for v in (lat, lon, alt))
+    enu = np.column_stack([local_en(lat, lon, lat0, lon0), alt - alt0])
+    site = mp.data["site"]
+    info = {
+        "file": spec["path"].name,
+        "fixes": int(t.size),
+        "on_pad": int(np.sum(pad)),
+        "pad_fix_deg_m": [lat0, lon0, alt0],
+        "pad_fix_from_site_m": float(np.hypot(*local_en(lat0, lon0, site["lat_deg"], site["lon_deg"]))),
+    }
+    return GnssFixes(t, enu, sigma("sigma_h", g["sigma_h_m"]), sigma("sigma_v", g["sigma_v_m"]), info)
+
+
 def _check_quaternion(path: Path, c, columns: list[str]) -> None:
     """Refuse the flight computer's quaternion (``columns`` w, x, y, z of the file read as ``c``) where
     its norm is not 1 ± 0.01: a located TelemetryError (file, the w column, data row)."""
@@ -846,6 +945,9 @@ def import_mapped(
         accel_columns=", ".join(acc),
         pressure_valid=q["pressure_valid"],
     )
+    gnss = read_gnss(mp, phases.liftoff)
+    if gnss is not None:
+        log = replace(log, gnss=gnss)
     info["phases_s"] = {k: getattr(phases, k) for k in ("liftoff", "burnout", "apogee", "main", "landing")}
     info["phases_source"] = phases.source
     info["phase_rules"] = list(PHASE_RULES)
