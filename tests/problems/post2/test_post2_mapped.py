@@ -432,3 +432,26 @@ def test_gnss_without_fixes_on_the_pad_is_a_located_error(tmp_path, capsys):
     mp = remap(log, edit=lambda t: t + "\n" + gnss_map)
     err = _refused(tmp_path, mp, capsys)
     assert "gps.csv" in err and "gps_time" in err and "min_pad_fixes" in err
+
+
+def test_model_error_levels_are_overridable(tmp_path):
+    """Issue 27 item 3: the observations' model-error levels default to the FIRM flights' measured ones
+    and a mapping may set its own (``[model_error]``); the weights written follow them."""
+    from workbench.io.telemetry import read_telemetry
+    from workbench.problems.post2 import rocket as rk
+
+    def coast_sigma(folder: Path) -> np.ndarray:
+        w = read_telemetry(folder / "pressure_weights.csv")
+        fl = json.loads((folder / "flight.json").read_text(encoding="utf-8"))
+        coast = (w.time > fl["t_start_s"] + rk.BURNOUT_TRANSIENT_S + 0.5) & (w.time < fl["t_ejection_s"] - 0.5)
+        return 1.0 / np.sqrt(w.channel("p")[coast])
+
+    base = mapped.import_mapped(remap(tmp_path / "a"), tmp_path / "fa", allow_unhealthy=True).parent
+    edit = lambda t: t + "\n[model_error]\npressure_coast_pa = 40.0\n"  # noqa: E731
+    over = mapped.import_mapped(remap(tmp_path / "b", edit=edit), tmp_path / "fb", allow_unhealthy=True).parent
+    s0, s1 = coast_sigma(base), coast_sigma(over)
+    assert s0.size > 10 and np.all(s0 >= rk.PRESSURE_SIGMA_COAST)
+    assert np.all(s1 >= 40.0) and np.all(s1 < 0.5 * s0)
+    assert json.loads((over / "flight.json").read_text(encoding="utf-8"))["model_error_overrides"] == {
+        "pressure_coast_pa": 40.0
+    }

@@ -453,15 +453,22 @@ BARO_BIAS_SIGMA = 30.0
 
 
 def pressure_sigma(
-    t, t_coast: float, t_apogee: float, standby_std: float, count, t_main: float | None = None
+    t, t_coast: float, t_apogee: float, standby_std: float, count, t_main: float | None = None, levels=None
 ) -> np.ndarray:
     """1σ [Pa] (n,) of the block-mean pressures at t (n,) [s after launch]: the standby noise over
     √count plus the measured model-error levels above (coast letter at ``t_coast``, drogue ejection
-    at ``t_apogee``, main at ``t_main``; None: the drogue's level to the end)."""
+    at ``t_apogee``, main at ``t_main``; None: the drogue's level to the end).  ``levels`` {name:
+    value or None} overrides the coast/drogue/main levels (``pressure_coast_pa``, ``pressure_drogue_pa``,
+    ``pressure_main_pa``: a flight whose barometer or airframe differs from the FIRM flights')."""
+    lv = {k: v for k, v in (levels or {}).items() if v is not None}
     t = np.asarray(t, float)
-    floor = np.where(t < t_apogee, PRESSURE_SIGMA_COAST, PRESSURE_SIGMA_DROGUE)
+    floor = np.where(
+        t < t_apogee,
+        lv.get("pressure_coast_pa", PRESSURE_SIGMA_COAST),
+        lv.get("pressure_drogue_pa", PRESSURE_SIGMA_DROGUE),
+    )
     if t_main is not None:
-        floor = np.where(t >= t_main, PRESSURE_SIGMA_MAIN, floor)
+        floor = np.where(t >= t_main, lv.get("pressure_main_pa", PRESSURE_SIGMA_MAIN), floor)
     floor = np.where(t < t_coast + BURNOUT_TRANSIENT_S, PRESSURE_SIGMA_TRANSIENT, floor)
     floor = np.where((t >= t_apogee - 0.2) & (t <= t_apogee + 2.0), PRESSURE_SIGMA_TRANSIENT, floor)
     return np.sqrt(floor**2 + standby_std**2 / np.asarray(count, float))
@@ -494,15 +501,19 @@ def local_noise(t_blocks, t, v) -> np.ndarray:
     return out
 
 
-def accel_sigma(t, t_apogee: float, t_main: float | None, noise=None, count=None) -> np.ndarray:
+def accel_sigma(t, t_apogee: float, t_main: float | None, noise=None, count=None, levels=None) -> np.ndarray:
     """1σ [m/s²] (n,) of the block-mean |specific force| at t (n,) [s after launch]: the model-error
     levels above (drogue from ``t_apogee``, main from ``t_main``; the opening level within
     −0.2 .. +2 s of each opening) combined with the block's sample ``noise`` (n,) [m/s²] over
-    √``count`` (n,) (:func:`local_noise`; None: none)."""
+    √``count`` (n,) (:func:`local_noise`; None: none).  ``levels`` {name: value or None} overrides
+    the coast/drogue/main levels (``accel_coast_m_s2``, ``accel_drogue_m_s2``, ``accel_main_m_s2``)."""
+    lv = {k: v for k, v in (levels or {}).items() if v is not None}
     t = np.asarray(t, float)
-    s = np.where(t < t_apogee, ACCEL_SIGMA_COAST, ACCEL_SIGMA_DROGUE)
+    s = np.where(
+        t < t_apogee, lv.get("accel_coast_m_s2", ACCEL_SIGMA_COAST), lv.get("accel_drogue_m_s2", ACCEL_SIGMA_DROGUE)
+    )
     if t_main is not None:
-        s = np.where(t >= t_main, ACCEL_SIGMA_MAIN, s)
+        s = np.where(t >= t_main, lv.get("accel_main_m_s2", ACCEL_SIGMA_MAIN), s)
     for te in (t_apogee, t_main):
         if te is not None:
             s = np.where((t >= te - 0.2) & (t <= te + 2.0), ACCEL_SIGMA_OPENING, s)

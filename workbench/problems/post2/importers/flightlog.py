@@ -295,6 +295,7 @@ def import_log(
     main_s: float | None = None,
     source: dict | None = None,
     input_names: dict | None = None,
+    model_error: dict | None = None,
 ) -> Path:
     """The import of a flight log already read into SI (:func:`read_log`, or the column-mapped reader
     :func:`workbench.problems.post2.importers.mapped.read_mapped`): the boost, the checks and the files
@@ -303,7 +304,9 @@ def import_log(
     ``main_s`` [s, log clock] the main parachute's opening instead of the detected one; ``source`` a
     JSON-ready record of where the log came from (kept in ``flight.json``); ``input_names`` {FIRM name:
     this import's name} of the inputs the checks' messages name
-    (:data:`workbench.problems.post2.rocket_checks.INPUT_NAMES`; None: the FIRM log's)."""
+    (:data:`workbench.problems.post2.rocket_checks.INPUT_NAMES`; None: the FIRM log's); ``model_error``
+    {level name: value or None} the observations' model-error levels a user overrides (None: the FIRM
+    flights' measured levels)."""
     # imported here: the command line builds its parser from this module and stays light
     from workbench.estimation.health import ERROR, UnhealthyError, health_report
     from workbench.problems.post2 import rocket, rocket_checks
@@ -412,6 +415,7 @@ def import_log(
             obs_rate_hz,
             source,
             input_names,
+            model_error,
         )
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)
@@ -460,10 +464,12 @@ def _commit_dir(tmp: Path, out: Path) -> None:
 
 
 def _write_import(
-    out, log, meta, fl, t, t_launch, times, ca0, health, name, declination_deg, obs_rate_hz, source=None, names=None
-) -> Path:
+    out, log, meta, fl, t, t_launch, times, ca0, health, name, declination_deg, obs_rate_hz, source=None, names=None,
+    model_error=None,
+) -> Path:  # fmt: skip
     """Write the import's files into the folder ``out`` (:func:`import_flight` computed every input:
-    ``times`` = (t0, t_end, t_apogee, t_main) [s after launch]); returns the problem file."""
+    ``times`` = (t0, t_end, t_apogee, t_main) [s after launch]; ``model_error`` the levels overriding
+    :func:`~workbench.problems.post2.rocket.pressure_sigma`'s and ``accel_sigma``'s); returns the problem file."""
     from workbench.problems.post2 import rocket
 
     t0, t_end, t_apogee, t_main = times
@@ -475,14 +481,16 @@ def _write_import(
     write_telemetry(
         out / "pressure.csv", tp, {"p": (pm[:, 0], "Pa")}, meta={"source": log.path.name, "samples_per_block": "varies"}
     )
-    sig_p = rocket.pressure_sigma(tp, log.phase_start("C") - t_launch, t_apogee, fl.pad_pressure_std, cnt, t_main)
+    sig_p = rocket.pressure_sigma(
+        tp, log.phase_start("C") - t_launch, t_apogee, fl.pad_pressure_std, cnt, t_main, levels=model_error
+    )
     write_telemetry(
         out / "pressure_weights.csv", tp, {"p": (1.0 / sig_p**2, "1")}, meta={"meaning": "W = 1/sigma^2 [1/Pa^2]"}
     )
     write_telemetry(out / "accel.csv", ta, {"a": (am[:, 0], "m/s^2")}, meta={"source": log.path.name})
     fn = np.linalg.norm(log.f_B, axis=1)
     _, _, cnt_a = block_means(t, fn[:, None], t0, t_end, obs_rate_hz, gaps_rel)
-    sig_a = rocket.accel_sigma(ta, t_apogee, t_main, rocket.local_noise(ta, t, fn), cnt_a)
+    sig_a = rocket.accel_sigma(ta, t_apogee, t_main, rocket.local_noise(ta, t, fn), cnt_a, levels=model_error)
     write_telemetry(
         out / "accel_weights.csv", ta, {"a": (1.0 / sig_a**2, "1")}, meta={"meaning": "W = 1/sigma^2 [s^4/m^2]"}
     )
@@ -543,6 +551,7 @@ def _write_import(
         "burnout": fl.burnout_info,
         "metadata": meta.__dict__,
         "observation_rate_hz": obs_rate_hz,
+        "model_error_overrides": {k: v for k, v in (model_error or {}).items() if v is not None},
         "health_checks": health,
     }
     if source is not None:

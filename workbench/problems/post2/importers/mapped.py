@@ -7,8 +7,9 @@ column holds each quantity (accelerometer and gyro triads, barometric pressure; 
 magnetometer triad and temperature), its unit (:mod:`workbench.io.units`) and the map from the
 log's columns to the body axes (``body_x = "-accel_z"``); the site, the rocket, optional scoring
 references; optionally the flight phases, GNSS fixes (observed relative to the pad's own fix:
-:func:`read_gnss`) and the flight computer's own solution (a reference, never observed).  The FIRM log of ``workbench import airbrakes`` is one such layout
-(``airbrakes.FIRM_LAYOUT``, read by :func:`from_data` without site and rocket).  What it does:
+:func:`read_gnss`), the model-error levels of the observations, and the flight computer's own
+solution (a reference, never observed).  The FIRM log of ``workbench import airbrakes`` is one such
+layout (``airbrakes.FIRM_LAYOUT``, read by :func:`from_data` without site and rocket).  What it does:
 
 1. :func:`read_mapped` — every file read with located errors (file, column, data row): a missing
    column, a cell that is not a finite number, a time not strictly after the previous row's (a row
@@ -278,6 +279,20 @@ MAPPING_SCHEMA = Schema(
         _triad("magnetometer", "magnetic field triad (optional: without it the pad heading is a prior)", optional=True),
         _scalar("barometer", "static pressure", optional=False),
         _scalar("temperature", "the board's temperature (optional; checked against the site's)", optional=True),
+        Table(
+            "model_error",
+            "the observations' model-error 1σ per phase (optional; absent: the levels measured on the FIRM flights, "
+            "docs/tuning/post2.md): raise them when the run's NIS of `baro` / `accel` is far above 1, lower them "
+            "when far below",
+            tuple(
+                Key(f"{q}_{ph}_{u}", _F, None, unit, f"{what} under {txt}", gt=0.0)
+                for q, u, unit, what in (
+                    ("pressure", "pa", "Pa", "block-mean pressure"),
+                    ("accel", "m_s2", "m/s^2", "block-mean |specific force|"),
+                )
+                for ph, txt in (("coast", "the coast"), ("drogue", "the drogue"), ("main", "the main parachute"))
+            ),
+        ),
         Table(
             "gnss",
             "GNSS fixes (optional): latitude/longitude/altitude observed relative to the pad (the fixes before "
@@ -966,6 +981,7 @@ def import_mapped(
         main_s=phases.main,
         source=info,
         input_names=input_names(mp),
+        model_error=dict(mp.data["model_error"]),
     )
 
 
