@@ -370,6 +370,12 @@ def _kind(unit: str) -> str:
     }[unit]
 
 
+#: a ``consider`` state's 1σ in the filter pass, relative to its declared σ: held (nearly) at its value
+#: so the estimate is the one that takes it as known, its declared σ added afterwards by sensitivity
+#: (:func:`consider_covariance`); not zero, so that the smoother's predicted covariance stays invertible
+CONSIDER_PASS_SCALE = 1e-3
+
+
 class Estimator:
     """The EKF set-up of one run (from its :class:`Post2Settings`): state map, error-state layout, the
     model, x0, P0, eps, the process models.  ``transition(x, t0, t1) -> (x1, F, Q)`` advances the
@@ -411,6 +417,8 @@ class Estimator:
             if b.bounds is not None:
                 val = scurve_inverse(val, *b.bounds)
                 sd = sd / scurve_slope(val, *b.bounds)
+            if s.process == "consider":  # held at its value in the pass; its σ enters by sensitivity
+                sd = sd * CONSIDER_PASS_SCALE
             x0[b.sx] = val
             sig[b.se] = sd
             eps[b.se] = s.step
@@ -562,6 +570,33 @@ class Estimator:
         return None if proj is None else (lambda x: proj)
 
 
+def consider_covariance(cfg: Post2Settings, est: Estimator, t, index, channels, x, P, x_fwd, P_fwd):
+    """The smoothed and forward covariances (n, n_e, n_e) with each ``consider`` state's declared σ
+    added by sensitivity: the run again with that state's value moved by +1σ (a fresh
+    :class:`Estimator`, the same observations ``channels`` on the grid ``t`` (n,) [s] at ``index``
+    {step: [(channel, sample)]}), d = x_moved ⊟ x (n, n_e) the move of every state it causes (its own
+    entry is its σ), and P + d dᵀ (consider covariance analysis, Bierman 1977 Ch. VIII, to first order
+    in the finite difference).  ``x``/``P`` the smoothed (or forward) pass, ``x_fwd``/``P_fwd`` the
+    forward one; the estimate itself is the one that takes the consider states as known."""
+    P, P_fwd = P.copy(), P_fwd.copy()
+    for name in est.smap.blocks:
+        spec = cfg.state(name)
+        if spec.process != "consider":
+            continue
+        moved = Estimator(cfg.with_state(name, value=spec.value + spec.sigma))
+
+        def measurements_at(k, tk, xk, moved=moved):
+            return [moved.measurement(channels[nm], i) for nm, i in index.get(k, ())]
+
+        fp_m = run_filter(moved.x0, moved.P0, t, moved.transition, None, measurements_at, moved.layout, eps=moved.eps)
+        sm_m = rts_smooth(fp_m, moved.layout, consider=moved.consider) if cfg.filter.smoother else None
+        xm = sm_m.x if sm_m is not None else fp_m.x_post
+        for Pk, xs, xr in ((P, xm, x), (P_fwd, fp_m.x_post, x_fwd)):
+            d = est.layout.boxminus(xs, xr)
+            Pk += d[:, :, None] * d[:, None, :]
+    return P, P_fwd
+
+
 def _grid(cfg: Post2Settings, channels: dict[str, Channel]) -> np.ndarray:
     n = max(1, int(math.ceil((cfg.t_end - cfg.t_start) / cfg.grid - 1e-9)))
     base = np.linspace(cfg.t_start, cfg.t_end, n + 1)
@@ -657,14 +692,14 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
     touched = {s.target_name for s in cfg.schedules if s.target == "observation"}
     wf = {n: v for n, v in wf.items() if n in touched}
     yield ForwardStage(fp, tuple(est.phase_log), {n: ch.spec.quantity for n, ch in data.channels.items()}, wf)
-    sm = (
-        rts_smooth(fp, est.layout, consider=est.consider if est.consider.size else None)
-        if cfg.filter.smoother
-        else None
-    )
+    consider = est.consider if est.consider.size else None
+    sm = rts_smooth(fp, est.layout, consider=consider) if cfg.filter.smoother else None
     x, P = (sm.x, sm.P) if sm is not None else (fp.x_post, fp.P_post)
+    P_fwd = fp.P_post
+    if consider is not None:
+        P, P_fwd = consider_covariance(cfg, est, t, index, data.channels, x, P, fp.x_post, P_fwd)
     hist = state_history(est, t, x, P)
-    fwd = state_history(est, t, fp.x_post, fp.P_post)
+    fwd = state_history(est, t, fp.x_post, P_fwd)
     histories = {"smoothed": hist, "forward": fwd}
     if cfg.filter.compare_propagation:  # the no-observation reference (its P: the prior's)
         xp = propagation_only(cfg, t)
@@ -682,7 +717,7 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
             "final": (hist[name]["value"][-1] * k).tolist(),
             "final_sigma": (hist[name]["sigma"][-1] * k).tolist(),
         }
-        if not STATES[name].dynamic:  # in the estimated coordinate (a bounded state: before its S-curve)
+        if not STATES[name].dynamic and cfg.state(name).process != "consider":  # (bounded: before its S-curve)
             i = np.arange(est.smap.blocks[name].se.start, est.smap.blocks[name].se.stop)
             ratio = np.sqrt(np.diag(P[-1])[i] / np.diag(est.P0)[i])
             states[name]["posterior_over_prior_sigma"] = ratio.tolist()
