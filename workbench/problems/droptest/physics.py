@@ -365,6 +365,9 @@ class ContactCompleteness:
     reason: str
 
 
+#: the lander asset's keys that set the clearance, for either layout (MER or vertices) and either
+#: airbag description (rack or explicit lobes): named where the data contradict the geometry
+GEOMETRY_KEYS = "height_m, cm_height_m or vertices_m, cm_m; lobe_diameter_m, standoff_m or lobe_centers_m"
 #: the data must go on this long [s] after the estimated contact ends for the contact to be complete
 #: (two of the 10 ms windows over which the contact detection bridges dips)
 CONTACT_TAIL_S = 0.02
@@ -500,9 +503,8 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     if lo <= c <= hi:
         # the keys that set the clearance: said here too, for the calibrated band's WARNING/ERROR
         keys = (
-            f"the setup file's [hanging] position_m, the lander geometry in {settings.lander_file} (height_m, "
-            f"cm_height_m, lobe_diameter_m, standoff_m), [chamber] ramp_angle_deg / nail_depth_m (or ramp_point_m) "
-            f"in {settings.path}"
+            f"the setup file's [hanging] position_m, the lander geometry in {settings.lander_file} "
+            f"({GEOMETRY_KEYS}), [chamber] ramp_angle_deg / nail_depth_m (or ramp_point_m) in {settings.path}"
         )
         msg = f"{base}; a clearance outside the honest band moves the stroke with it — likely: {keys}"
         return Check("geometry.first_contact", OK, _g(c), [_g(lo), _g(hi)], msg, stat)
@@ -514,7 +516,7 @@ def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     shift = c - (hi if c > hi else lo)
     keys += [
         f"the setup file's [hanging] position_m (off by ≈ {abs(shift):.3f} m along the ramp normal?)",
-        f"the lander geometry in {settings.lander_file} (height_m, cm_height_m, lobe_diameter_m, standoff_m)",
+        f"the lander geometry in {settings.lander_file} ({GEOMETRY_KEYS})",
         f"[chamber] ramp_angle_deg / nail_depth_m (or ramp_point_m) in {settings.path}",
     ]
     return Check(
