@@ -58,8 +58,8 @@ STATE_KEYS: dict[str, tuple[str, Any, str]] = {
         _S,
         "constant",
         "`constant`, `random_walk` (with `psd`), `markov` (with `tau_s`) or `consider`: a constant parameter "
-        "held at `value` whose `sigma` enters every other state's covariance but which no observation updates "
-        "(a Schmidt consider parameter: an unknown the data cannot separate, e.g. a site temperature)",
+        "held at `value`, never fitted, whose `sigma` is added to every state's covariance by sensitivity (the "
+        "run again with it moved by 1σ): an unknown the data cannot separate, e.g. a site temperature",
     ),
     "psd": ("number_or_list", 0.0, "random-walk PSD [unit²/s], or the Markov driving PSD (0: from sigma)"),
     "tau_s": (_F, None, "first-order Markov time constant [s]"),
