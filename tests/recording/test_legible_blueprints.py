@@ -146,3 +146,57 @@ def test_meads_views_with_many_series_name_their_colours_instead_of_a_legend():
             assert legend.visible.as_arrow_array().to_pylist() == [False], origin
         assert "P7 pink" in str(views[layout.plot_path("scale_factors")].name)
         assert ("[%]" in str(views[layout.plot_path("density")].name)) is truth
+
+
+def test_post2_grid_titles_show_quantity_and_unit_whole():
+    """A grid cell (three across the right column of a 1400 px window) shows about 22 characters of
+    its title: the post2 grid views put the quantity and unit first and the colour key in the
+    scorecard, so the title up to its unit fits."""
+    from workbench.problems.post2.recording import PLOT_KEY_MD, post2_blueprint
+
+    bp = post2_blueprint(
+        ["position", "velocity", "attitude", "body_rates"],
+        ["acceleration"],
+        True,
+        residual_components={"acceleration": ("ax", "ay", "az")},
+        observation_units={"acceleration": "m/s^2"},
+    )
+    grids = [c for c in _containers(bp) if isinstance(c, rrb.Grid)]
+    assert len(grids) == 5
+    for g in grids:
+        for v in g.contents:
+            name = str(v.name)
+            assert name.index("]") + 1 <= 24, name
+    assert "±3σ" in PLOT_KEY_MD and "truth" in PLOT_KEY_MD
+
+
+def _containers(node):
+    if isinstance(node, rrb.Blueprint):
+        yield from _containers(node.root_container)
+    elif isinstance(node, rrb.Container):
+        yield node
+        for c in node.contents:
+            yield from _containers(c)
+
+
+def test_meads_port_pressure_gets_the_full_height_of_its_tab():
+    """Three views stacked in a port tab left each one y label: the pressure has its own column."""
+    from workbench.problems.meads.recording import meads_blueprint
+
+    bp = meads_blueprint(("P1", "P2"), 2)
+    ports = [c for c in _containers(bp) if str(c.name) in ("P1", "P2")]
+    assert len(ports) == 2
+    for c in ports:
+        assert isinstance(c, rrb.Horizontal)
+        left, right = c.contents
+        assert left.class_identifier == "TimeSeries" and "[Pa]" in str(left.name)
+        assert isinstance(right, rrb.Vertical) and len(right.contents) == 2
+
+
+def test_entry_profile_names_state_the_drawn_scale():
+    from workbench.problems.entry.recording import PROFILE_SCALE, entry_blueprint
+
+    names = [str(v.name) for v in _walk(entry_blueprint()) if v.class_identifier == "2D"]
+    for q in ("density", "pressure", "temperature", "wind"):
+        (n,) = [x for x in names if x.startswith(q)]
+        assert f"y = {PROFILE_SCALE[q]:g}·km" in n

@@ -72,6 +72,7 @@ def recorded(tmp_path_factory):
         rec.points("/world/landmarks", inp["track"][:5], colors=(1, 2, 3), radii=0.1)
         rec.mesh(layout.VEHICLE_BODY, trimesh.creation.box(extents=[0.4, 0.2, 0.1]), color=(80, 160, 255, 255))
         rec.text_labels_series("/world/labels", t, inp["pos"], ["vehicle"])
+        rec.arrows_series("/world/arrow", t, inp["xyz"], color=(20, 90, 200, 255), radius=-2.0, label="velocity")
         rec.events(inp["events"])
         rec.report(inp["report"])
     return path, inp
@@ -334,3 +335,13 @@ def test_series_with_bounds_breaks_at_gaps_and_draws_the_truth_through(tmp_path)
     assert np.isnan(vv[3, 0]) and np.isnan(hi[3, 0]) and np.isfinite(np.delete(vv[:, 0], 3)).all()
     np.testing.assert_allclose(tr[:, 0], [10.0, 20.0, 30.0, 35.0, 40.0, 50.0])
     assert d.static_component("/plots/g/truth", "SeriesLines:widths") == [4.0]
+
+
+def test_arrows_series_one_arrow_per_step_with_static_style(recorded, tmp_path):
+    path, inp = recorded
+    d = read_recording(path)
+    assert np.allclose(d.times("/world/arrow", "Arrows3D:vectors"), inp["t"])
+    assert d.static_component("/world/arrow", "Arrows3D:labels") == ["velocity"]
+    assert d.static_component("/world/arrow", "Arrows3D:radii") == [-2.0]
+    with open_recording(tmp_path / "bad.rrd", "bad") as rec, pytest.raises(ValueError, match="vectors"):
+        rec.arrows_series("/world/arrow", [0.0, 1.0], np.zeros((3, 3)))

@@ -203,6 +203,11 @@ POST2_VEHICLE_MARKER = "/world/vehicle/marker"
 POST2_BACK_SHELL = "/world/vehicle/body/backshell"
 POST2_PARACHUTE = "/world/vehicle/parachute"
 POST2_RISERS = "/world/vehicle/parachute_risers"
+#: the local horizontal plane under the vehicle (grid + north/east marks), rotated into the vehicle
+#: frame each step, so the Vehicle view (origin at the vehicle) shows the attitude against it
+POST2_HORIZON = "/world/vehicle/horizon"
+#: the planet-relative velocity direction at the vehicle (arrow, vehicle frame)
+POST2_VELOCITY_ARROW = "/world/vehicle/velocity"
 POST2_PHASE = "/plots/phase"
 #: a rocket flight's track in the pad's frame (``[launch]``; ``problems/post2/rocket_results.py``)
 POST2_ROCKET = "/plots/rocket"

@@ -585,9 +585,11 @@ class Recorder:
         *,
         nsigma: float = 3.0,
         color: Any = None,
+        line_radius: float | None = None,
         step: Any = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Per-step nσ covariance ellipsoids (transparent fill + wireframe).
+        """Per-step nσ covariance ellipsoids (transparent fill + wireframe; ``line_radius`` the
+        wireframe's [m], negative: screen points; None: the viewer's default).
 
         ``centers`` (n, 3) or (n, k, 3) [m] and ``covariances`` (n, 3, 3) or (n, k, 3, 3) [m²], both
         in the frame of ``entity``'s parent chain (log a world covariance under ``/world`` with the
@@ -615,6 +617,7 @@ class Recorder:
             rr.Ellipsoids3D.from_fields(
                 colors=_as_colors(color if color is not None else (255, 165, 0, 90)),
                 fill_mode=rr.components.FillMode.TransparentFillMajorWireframe,
+                line_radii=None if line_radius is None else [float(line_radius)],
             ),
         )
         return half_sizes, quats
@@ -662,6 +665,36 @@ class Recorder:
         self._send(entity, idx, rr.LineStrips3D.columns(**kwargs).partition(counts))
         if static_style:
             self._log_static(entity, rr.LineStrips3D.from_fields(**static_style))
+
+    def arrows_series(
+        self,
+        entity: str,
+        t: Any,
+        vectors: Any,
+        *,
+        color: Any = None,
+        radius: float | None = None,
+        label: str | None = None,
+        step: Any = None,
+    ) -> None:
+        """One arrow per step from the entity's origin: ``vectors`` (n, 3) [m, the entity's frame];
+        ``color``, ``radius`` [m] (negative: screen points) and ``label`` static, for every step."""
+        idx, n = self._index(t, step)
+        v = np.asarray(vectors, dtype=np.float64)
+        if v.shape != (n, 3):
+            raise ValueError(f"arrows_series: need vectors ({n}, 3), got {v.shape}")
+        self._send(entity, idx, rr.Arrows3D.columns(vectors=v))
+        style: dict[str, Any] = {}
+        if color is not None:
+            c = _as_colors(color)
+            style["colors"] = c.reshape(-1, c.shape[-1])[:1]
+        if radius is not None:
+            style["radii"] = [float(radius)]
+        if label is not None:
+            style["labels"] = [label]
+            style["show_labels"] = True
+        if style:
+            self._log_static(entity, rr.Arrows3D.from_fields(**style))
 
     def points(
         self,

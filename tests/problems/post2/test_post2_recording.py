@@ -118,7 +118,7 @@ def test_key_moments_peak_of_the_measured_sensed_acceleration():
 
 
 def _scene_views(bp):
-    tabs = bp.root_container.contents[0]
+    tabs = bp.root_container.contents[0].contents[0]  # left column: the 3D tabs above the event log
     return [v.name for v in tabs.contents]
 
 
@@ -187,3 +187,48 @@ def test_trajectory_eye_frames_the_whole_track():
     assert np.degrees(np.arccos(np.clip(rays @ axis, -1, 1))).max() < 20.0
     np.testing.assert_allclose(up, tgt / np.linalg.norm(tgt), atol=1e-6)
     assert trajectory_eye(track[:1]) is None and trajectory_eye(np.repeat(track[:1], 5, 0)) is None
+
+
+def test_vehicle_view_has_the_local_horizon_and_the_velocity_arrow(short_run):
+    """The horizon entity's rotation, composed with the vehicle's, puts its up axis along the local
+    vertical r̂ and its east axis horizontal; one velocity arrow per vehicle pose; the Vehicle view's own
+    grid (in the body frame) is off."""
+    from workbench.core.rotation import quat_to_dcm
+    from workbench.problems.post2.recording import post2_blueprint
+
+    r, rec = short_run
+    t, p, q_I_B = rec.transforms(layout.VEHICLE)
+    th, tr, q_B_L = rec.transforms(layout.POST2_HORIZON)
+    assert np.array_equal(t, th) and np.allclose(tr, 0.0)
+    C_I_L = quat_to_dcm(q_I_B) @ quat_to_dcm(q_B_L)
+    up = p / np.linalg.norm(p, axis=1, keepdims=True)
+    assert np.allclose(C_I_L[:, :, 2], up, atol=1e-5)
+    assert np.allclose(np.einsum("ni,ni->n", C_I_L[:, :, 0], up), 0.0, atol=1e-5)
+    assert np.allclose(C_I_L[:, 2, 0], 0.0, atol=1e-5)  # east has no polar component
+    assert rec.times(layout.POST2_VELOCITY_ARROW, "Arrows3D:vectors").size == t.size
+    grid = rec.static_component(layout.join(layout.POST2_HORIZON, layout.GRID), "LineStrips3D:strips")
+    assert len(grid) == 18 and len({round(pt[2], 9) for s in grid for pt in s}) == 1  # one plane below
+    vehicle = post2_blueprint(["position"], ["gravity"], True).root_container.contents[0].contents[0].contents[1]
+    assert vehicle.name == "Vehicle" and vehicle.properties["LineGrid3D"].visible.as_arrow_array().to_pylist() == [
+        False
+    ]
+
+
+def test_local_level_in_body_is_the_east_north_up_frame():
+    """q_B_L for random attitudes: C_I_B C_B_L has columns east (Ẑ × r̂), north, up (r̂)."""
+    from scipy.spatial.transform import Rotation
+
+    from workbench.core.rotation import quat_to_dcm
+    from workbench.problems.post2.recording import horizon_grid, local_level_in_body
+
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(20, 3)) * 2.5e6
+    q = Rotation.random(20, random_state=4).as_quat()
+    C = quat_to_dcm(q) @ quat_to_dcm(local_level_in_body(p, q))
+    up = p / np.linalg.norm(p, axis=1, keepdims=True)
+    east = np.cross([0.0, 0.0, 1.0], up)
+    east /= np.linalg.norm(east, axis=1, keepdims=True)
+    assert np.allclose(C[:, :, 2], up) and np.allclose(C[:, :, 0], east)
+    assert np.allclose(C[:, :, 1], np.cross(up, east))
+    lines = horizon_grid(10.0, 4.0, n=4)
+    assert len(lines) == 10 and all(np.allclose(ln[:, 2], -4.0) for ln in lines)

@@ -219,7 +219,9 @@ def droptest_blueprint(
         rrb.Tabs(*plots, active_tab=0),
         rrb.Tabs(*residuals, active_tab=0),
         report_view("Scorecard", extra=[events_view()]),
-        row_shares=[3, 2, 2],
+        # residuals tall enough for two or three y labels (the axis labels decades: at 2 of 7 a
+        # 1400 x 900 window showed only "0"); the scorecard keeps its verdict lines
+        row_shares=[3, 2.8, 1.7],
     )
     return rrb.Blueprint(
         rrb.Horizontal(scenes, right, column_shares=[3, 2]),

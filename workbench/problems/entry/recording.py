@@ -75,6 +75,16 @@ TRUTH_EAST = (120, 200, 120, 255)
 XYZ = [(214, 39, 40, 255), (44, 160, 44, 255), (31, 119, 180, 255)]
 BEAMS = ["B0", "B1", "B2", "B3"]
 
+#: line widths of the 3D scenes, in screen points (negative radii: the same at the descent's metres
+#: and the entry's hundreds of km): the tracks thin, so that the vehicle, its 3σ ellipsoid and the
+#: radar beams (wider) read in front of them; the smoothed track a little wider than the others
+TRACK_MAIN = -0.9
+TRACK_THIN = -0.6
+BEAM_WIDTH = -2.0
+#: the 3σ ellipsoids' wireframe: in the descent view the camera sits inside the horizontal 3σ
+#: (hundreds of metres), so its great circles cross the whole pane: hairlines
+ELLIPSOID_LINE = -0.4
+
 MAX_DISPERSION_TRACKS = 12
 """Tracks drawn per status (accepted / rejected) of the dispersion cloud; the points at PDD are all drawn."""
 BOUNDS_KEY = "blue estimate, grey ±3σ, pale truth"
@@ -111,8 +121,10 @@ _RESIDUALS = [
 ]
 #: dispersion event quantities (``dispersion.EVENT_NAMES``) with their unit, on the ``sample`` timeline
 DISPERSION_UNITS = {"mach_pdd": "-", "h_pdd": "m", "h_fsr": "m", "h_end": "m", "time_to_impact": "s"}
-PROFILE_SCALE = {"density": 0.5, "pressure": 0.5, "temperature": 1.0, "wind": 4.0}
-"""y = altitude_km × scale in each 2D profile view (so both axes have similar spans)."""
+PROFILE_SCALE = {"density": 0.3, "pressure": 0.3, "temperature": 1.0, "wind": 4.0}
+"""y = altitude_km × scale in each 2D profile view. A 2D view keeps the aspect of its content, and
+its pane is wide and low: density and pressure (±60 % against 0-110 km) are drawn flat, so that
+they fill the pane's width instead of a square in its middle."""
 
 
 def entry_blueprint(
@@ -156,11 +168,25 @@ def entry_blueprint(
         ),
         active_tab=scene_tab,
     )
+    sc = PROFILE_SCALE
+    # the ±60 % grid with its altitude labels left and its colour key right (the viewer fits the
+    # points, not their label text, and cut the key), 0-125 km at the density/pressure scale
+    pct_bounds = rrb.VisualBounds2D(x_range=[-85.0, 125.0], y_range=[-125.0 * sc["density"], 5.0])
     profiles = rrb.Tabs(
-        rrb.Spatial2DView(name="density Δ% vs default (y = 0.5·km)", origin=layout.ENTRY_PROFILE_DENSITY),
-        rrb.Spatial2DView(name="temperature K (y = km)", origin=layout.ENTRY_PROFILE_TEMPERATURE),
-        rrb.Spatial2DView(name="pressure Δ% vs default (y = 0.5·km)", origin=layout.ENTRY_PROFILE_PRESSURE),
-        rrb.Spatial2DView(name="wind m/s (y = 4·km)", origin=layout.ENTRY_PROFILE_WIND),
+        rrb.Spatial2DView(
+            name=f"density Δ% vs default (y = {sc['density']:g}·km)",
+            origin=layout.ENTRY_PROFILE_DENSITY,
+            visual_bounds=pct_bounds,
+        ),
+        rrb.Spatial2DView(
+            name=f"temperature K (y = {sc['temperature']:g}·km)", origin=layout.ENTRY_PROFILE_TEMPERATURE
+        ),
+        rrb.Spatial2DView(
+            name=f"pressure Δ% vs default (y = {sc['pressure']:g}·km)",
+            origin=layout.ENTRY_PROFILE_PRESSURE,
+            visual_bounds=pct_bounds,
+        ),
+        rrb.Spatial2DView(name=f"wind m/s (y = {sc['wind']:g}·km)", origin=layout.ENTRY_PROFILE_WIND),
         active_tab=profile_tab,
     )
     agl_key = "blue smoothed, grey ±3σ, pale truth, orange fwd, red ◆ plane fit"
@@ -232,10 +258,12 @@ def entry_blueprint(
         plots,
         residuals,
         report_view("Scorecard", extra=[events_view()]),
-        row_shares=[3, 2, 2],
+        # residuals tall enough for two or three y labels (the axis labels decades: at 2 of 7 the
+        # slant-out residual showed only "0")
+        row_shares=[3, 2.8, 1.7],
     )
     key = rrb.TextDocumentView(name="3D key", origin=layout.SCENE_KEY, contents="$origin")
-    left = rrb.Vertical(scenes, key, profiles, row_shares=[13, 3, 8])
+    left = rrb.Vertical(scenes, key, profiles, row_shares=[12, 3, 10])
     return rrb.Blueprint(
         rrb.Horizontal(left, right, column_shares=[3, 2]),
         rrb.TimePanel(state="expanded", timeline=layout.TIME),
@@ -335,7 +363,7 @@ class EntryRecorder:
             rec.scatter(layout.ENTRY_SENSOR_RDA_SLANT_RANGE, tm.t_sr, tm.slant_ranges, names=BEAMS, colors=XYZ + [GREY])
         # on-board navigation track (it goes wrong after the gyro saturation)
         p_L = self._L(tm.t_nav, tm.p_M_nav)
-        rec.line_strip(layout.ENTRY_ONBOARD_TRACK, p_L, color=[ONBOARD], radius=-1.5)
+        rec.line_strip(layout.ENTRY_ONBOARD_TRACK, p_L, color=[ONBOARD], radius=TRACK_THIN)
         ev = [
             (float(t), f"{k} (telemetry event)", "INFO") for k, t in sorted(self.events.items(), key=lambda kv: kv[1])
         ]
@@ -346,9 +374,9 @@ class EntryRecorder:
             step = max(1, int(round(0.1 / float(tt["t"][1] - tt["t"][0]))))
             ts = tt["t"][::step]
             p_T = self._L(ts, tt["p_M"][::step])
-            rec.line_strip(layout.ENTRY_TRUTH_TRACK, p_T, color=[TRUTH], radius=-1.5)
+            rec.line_strip(layout.ENTRY_TRUTH_TRACK, p_T, color=[TRUTH], radius=TRACK_THIN)
             g = self.site.ground_point_L(p_T)
-            rec.line_strip(layout.ENTRY_TRUTH_GROUND_TRACK, g + [0, 0, 30.0], color=[TRUTH], radius=-2.5)
+            rec.line_strip(layout.ENTRY_TRUTH_GROUND_TRACK, g + [0, 0, 30.0], color=[TRUTH], radius=TRACK_THIN)
             rec.poses(layout.TRUTH_VEHICLE, ts, p_T, self.site.attitudes(ts, tt["q_M_G"][::step]))
             rec.axes(layout.ENTRY_TRUTH_VEHICLE_AXES, 4.0)
             if tt.get("parachute_p_M") is not None:
@@ -399,7 +427,7 @@ class EntryRecorder:
         rec = self.rec
         sp = nom.strapdown
         p_L = self._L(sp.t, sp.p_M)
-        rec.line_strip(layout.ENTRY_NOMINAL_TRACK, p_L, color=[NOMINAL], radius=-1.2)
+        rec.line_strip(layout.ENTRY_NOMINAL_TRACK, p_L, color=[NOMINAL], radius=TRACK_THIN)
         h = np.linalg.norm(sp.p_M, axis=1) - R_MOLA
         sd = radial_sigma(sp.p_M, sp.P)
         t = np.asarray(sp.t, float)
@@ -479,12 +507,13 @@ class EntryRecorder:
             np.zeros((len(t), 3)),
             P_L,
             nsigma=3.0,
-            color=(31, 119, 180, 140),
+            color=(31, 119, 180, 70),
+            line_radius=ELLIPSOID_LINE,
             step=np.arange(len(t)),
         )
-        rec.line_strip(layout.ESTIMATE_SMOOTHED, p_L, color=[EST], radius=-1.2)
+        rec.line_strip(layout.ESTIMATE_SMOOTHED, p_L, color=[EST], radius=TRACK_MAIN)
         fw_L = self._L(fw.t, fw.p_M)
-        rec.line_strip(layout.ESTIMATE_FORWARD, fw_L, color=[FWD], radius=-0.9)
+        rec.line_strip(layout.ESTIMATE_FORWARD, fw_L, color=[FWD], radius=TRACK_THIN)
         rec.report(SCENE_KEY_MD + ("" if self.truth is None else SCENE_KEY_TRUTH_MD), entity=layout.SCENE_KEY)
         # the forward (filter) pass's own 3σ: it grows through the blackout and collapses vertically at
         # the radar fix (the smoothed one above already knows the fix from the start)
@@ -497,7 +526,8 @@ class EntryRecorder:
             np.zeros((len(fw.t), 3)),
             site.covariances(fw.t, fw.P[:, DP, DP]),
             nsigma=3.0,
-            color=(255, 127, 14, 110),
+            color=(255, 127, 14, 60),
+            line_radius=ELLIPSOID_LINE,
             step=steps_f,
         )
         sd_hf = fw.sigma_radial
@@ -509,7 +539,7 @@ class EntryRecorder:
             colors=[FWD],
         )
         g = site.ground_point_L(p_L)
-        rec.line_strip(layout.ENTRY_GROUND_TRACK, g + [0, 0, 20.0], color=[EST], radius=-2.5)
+        rec.line_strip(layout.ENTRY_GROUND_TRACK, g + [0, 0, 20.0], color=[EST], radius=TRACK_THIN)
         # front shield leaves at FSR; the parachute appears at PDD (temporal logs, not static)
         s = rec.stream
         if "PDD" in self.events:
@@ -548,7 +578,7 @@ class EntryRecorder:
                 strips = [np.stack([np.zeros(3), e]) for e in end]
                 cols = self._residual_colours(nsig[:, b])
                 rec.line_strips_series(
-                    layout.radar_beam_path(b), t[on], strips, colors=cols, radii=-1.5, step=np.flatnonzero(on)
+                    layout.radar_beam_path(b), t[on], strips, colors=cols, radii=BEAM_WIDTH, step=np.flatnonzero(on)
                 )
         # plots: altitude AGL, AMR, velocity, tilt with ±3σ and truth
         self._trajectory_plots(fr)

@@ -80,8 +80,9 @@ EKF_PLOTS = (
 
 def meads_blueprint(ports: tuple[str, ...], ekf_passes: int, has_truth: bool = False) -> rrb.Blueprint:
     """Default layout: the heat shield (left top), air-data plots (right top, one tab per quantity),
-    per-port pressure, residual and EKF-innovation tabs (right bottom, one per name of ``ports``, the
-    vehicle's; the innovations of the last of ``ekf_passes``, none when 0), scorecard and events
+    per-port tabs (right bottom, one per name of ``ports``, the vehicle's: the pressure left, its
+    residual and EKF innovation stacked right; the innovations of the last of ``ekf_passes``, none
+    when 0), scorecard and events
     (left bottom). ``has_truth``: the density tab shows the error against the truth [%] (as drawn).
     Views with many series name their colours in the title (a legend covered the curves)."""
     scene = rrb.Spatial3DView(
@@ -119,18 +120,18 @@ def meads_blueprint(ports: tuple[str, ...], ekf_passes: int, has_truth: bool = F
     plots = rrb.Tabs(*[tab(tab_name(n, q), quantity(n, q)) for n, q in PLOTS], active_tab=0)
     port_tabs = []
     for p in ports:
-        views = [
-            plot_view(f"{p} [Pa] — black dots measured, orange model", layout.join(layout.MEADS_PLOT_PORTS, p)),
-            plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p)),
-        ]
+        # the pressure at full height on the left, residual (and innovation) stacked on the right:
+        # three views stacked were each too low for more than one y label (the axis labels decades)
+        pressure = plot_view(f"{p} [Pa] — black dots measured, orange model", layout.join(layout.MEADS_PLOT_PORTS, p))
+        fits = [plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p))]
         if ekf_passes:
-            views.append(
+            fits.append(
                 plot_view(
                     f"{p} EKF pass {ekf_passes} innovation [Pa] — grey ±3σ",
                     layout.meads_ekf_innovation_path(ekf_passes, p),
                 )
             )
-        port_tabs.append(rrb.Vertical(*views, name=p))
+        port_tabs.append(rrb.Horizontal(pressure, rrb.Vertical(*fits), column_shares=[1, 1], name=p))
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
@@ -139,7 +140,9 @@ def meads_blueprint(ports: tuple[str, ...], ekf_passes: int, has_truth: bool = F
                 report_view("Scorecard", extra=[events_view()]),
                 row_shares=[12, 3, 8],
             ),
-            rrb.Vertical(plots, rrb.Tabs(*port_tabs), row_shares=[1, 1]),
+            # the port tabs taller than the plots above: their stacked residual and innovation views
+            # need the height for two or three y labels; the one view above keeps enough at 2 of 5
+            rrb.Vertical(plots, rrb.Tabs(*port_tabs), row_shares=[2, 3]),
             column_shares=[2, 3],
         ),
         rrb.TimePanel(state="expanded", timeline=layout.TIME),

@@ -132,12 +132,17 @@ class Post2Result:
         te = np.array([a for a, _ in self.events], dtype=float)
         return np.searchsorted(te, self.t, side="right").astype(float)
 
-    def body_attitude(self, rows: np.ndarray) -> np.ndarray:
+    def body_attitude(self, rows: np.ndarray, planet_rate_rad_s: float = 0.0) -> np.ndarray:
         """q_I_B (k, 4) scalar-last at the grid ``rows`` (k,) of the smoothed state: the attitude block
-        (6-DOF) or, 3-DOF, +X_B along the inertial velocity (zero angle of attack)."""
+        (6-DOF) or, 3-DOF, +X_B along the planet-relative velocity v − ω × r (ω = ``planet_rate_rad_s``
+        [rad/s] about +Z; zero angle of attack against the co-rotating atmosphere, wind neglected). For
+        drawing only: under a parachute the planet's rotation can dominate the inertial velocity."""
         if "attitude" in self.smap:
             return np.array(self.smap.raw(self.x[rows], "attitude"))
-        return _along_velocity(self.smap.raw(self.x[rows], "velocity"))
+        x = self.x[rows]
+        p, v = self.smap.raw(x, "position"), self.smap.raw(x, "velocity")
+        w = float(planet_rate_rad_s)
+        return _along_velocity(v - np.stack([-w * p[..., 1], w * p[..., 0], np.zeros_like(p[..., 0])], axis=-1))
 
     def tilt_rotation(self, rows: np.ndarray) -> np.ndarray | None:
         """q_B_tilted (k, 4) of an estimated tilt state (``tilt*``, rad: a scalar about Y_B or a

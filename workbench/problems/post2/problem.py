@@ -288,6 +288,7 @@ class Post2Problem:
                 "diameter_m": float(np.sqrt(4.0 * veh.area / np.pi)),
                 "parachute_diameter_m": d_chute,
                 "riser_m": 2.0 * d_chute if d_chute else 0.0,
+                "planet_rate_rad_s": float(build.environment(cfg).omega),
             }
         return open_mc_recording(
             open_post2_recording(

@@ -23,6 +23,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 import trimesh
 
+from workbench.core.rotation import dcm_to_quat, quat_to_dcm
 from workbench.problems.post2.model import OBSERVATIONS, STATES
 from workbench.problems.post2.pipeline import ForwardStage, ObservationData, Post2Result
 from workbench.problems.post2.scoring import truth_on_grid
@@ -33,7 +34,17 @@ from workbench.recording.meshes import mesh3d
 from workbench.recording.moments import log_key_moments
 from workbench.recording.writer import open_recording
 
-__all__ = ["Post2Drawer", "open_post2_recording", "post2_blueprint", "trajectory_eye", "COMPONENTS", "vehicle_meshes"]
+__all__ = [
+    "Post2Drawer",
+    "open_post2_recording",
+    "post2_blueprint",
+    "trajectory_eye",
+    "COMPONENTS",
+    "vehicle_meshes",
+    "local_level_in_body",
+    "horizon_grid",
+    "PLOT_KEY_MD",
+]
 
 #: component names of the state blocks in the plots
 COMPONENTS = {
@@ -47,6 +58,13 @@ COMPONENTS = {
 
 #: display unit of a state or observation unit (SI values are scaled by the factor for the plots)
 _DISPLAY = {"deg": ("deg", 180.0 / math.pi), "deg/s": ("deg/s", 180.0 / math.pi)}
+
+#: the colours of every plot, once for all views (their titles are only quantity and unit), in the
+#: scorecard under the verdict
+PLOT_KEY_MD = (
+    "*Plot key* — states: blue estimate, grey ±3σ, thin pale blue truth, purple propagation only; "
+    "residuals: blue, grey ±3σ  \n\n"
+)
 
 EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
@@ -110,9 +128,35 @@ def trajectory_eye(track: np.ndarray) -> rrb.EyeControls3D | None:
     return rrb.EyeControls3D(position=eye, look_target=c, eye_up=up)
 
 
+def local_level_in_body(p_I: np.ndarray, q_I_B: np.ndarray) -> np.ndarray:
+    """q_B_L (n, 4) scalar-last: the local level frame L (east, north, up at the position ``p_I``
+    (n, 3) [m, planet-centred inertial, +Z the pole]) seen from the body frame B of attitude
+    ``q_I_B`` (n, 4); a child entity of the vehicle with this rotation lies in the local horizontal.
+    East = unit(Ẑ × r̂), north = r̂ × east (undefined exactly at a pole)."""
+    p = np.asarray(p_I, dtype=float)
+    up = p / np.linalg.norm(p, axis=-1, keepdims=True)
+    east = np.stack([-up[:, 1], up[:, 0], np.zeros(len(up))], axis=-1)
+    east /= np.linalg.norm(east, axis=-1, keepdims=True)
+    north = np.cross(up, east)
+    C_I_L = np.stack([east, north, up], axis=-1)  # columns: L's axes in I
+    C_B_L = np.einsum("nji,njk->nik", quat_to_dcm(q_I_B), C_I_L)  # C_I_B^T C_I_L
+    return dcm_to_quat(C_B_L)
+
+
+def horizon_grid(extent: float, below: float, n: int = 8) -> list[np.ndarray]:
+    """Lines of a square grid in the local horizontal plane z = −``below`` [m] of frame L, ``extent``
+    [m] from the centre each way, ``n`` cells across: the horizon drawn under the vehicle."""
+    u = np.linspace(-extent, extent, n + 1)
+    z = -float(below)
+    lines = [np.array([[x, -extent, z], [x, extent, z]]) for x in u]
+    return lines + [np.array([[-extent, y, z], [extent, y, z]]) for y in u]
+
+
 class Post2Drawer:
     """Draws the post2 stages; ``truth`` (the loaded truth.npz dict) or None; ``geometry`` {"diameter_m",
-    "parachute_diameter_m" (or None), "riser_m"} and ``parachute_events`` {event name: True opens /
+    "parachute_diameter_m" (or None), "riser_m", "planet_rate_rad_s" (planet-relative velocity of the
+    velocity arrow and of the 3-DOF drawn attitude; 0 when missing)} and ``parachute_events`` {event
+    name: True opens /
     False releases} for the 3-D vehicle; ``layout`` an optional ``(eye) -> blueprint``, the one layout of
     the recording, sent by :meth:`finish` with the trajectory camera fitted to the smoothed track."""
 
@@ -241,12 +285,14 @@ class Post2Drawer:
         n = res.t.size
         sel = np.unique(np.linspace(0, n - 1, min(n, 2000)).astype(int))
         t = res.t[sel]
-        self.rec.poses(layout.VEHICLE, t, res.smap.raw(res.x[sel], "position"), res.body_attitude(sel))
+        rate = float(g.get("planet_rate_rad_s") or 0.0)
+        self.rec.poses(layout.VEHICLE, t, res.smap.raw(res.x[sel], "position"), res.body_attitude(sel, rate))
         self.rec.points(layout.POST2_VEHICLE_MARKER, np.zeros((1, 3)), colors=(230, 60, 30, 255), radii=-5.0)
         q_tilt = res.tilt_rotation(sel)
         if q_tilt is not None:  # body drawn tilted by the estimated tilt
             self.rec.poses(layout.VEHICLE_BODY, t, np.zeros((t.size, 3)), q_tilt)
         m = vehicle_meshes(g["diameter_m"], g.get("parachute_diameter_m"), g.get("riser_m", 0.0))
+        self._horizon(res, sel, m)
         self.rec.mesh(layout.POST2_FOREBODY, m["forebody"], color=(200, 120, 60, 255))
         self.rec.mesh(layout.POST2_BACK_SHELL, m["back_shell"], color=(220, 220, 225, 255))
         if "canopy" not in m:
@@ -267,12 +313,57 @@ class Post2Drawer:
                 s.log(layout.POST2_PARACHUTE, rr.Clear(recursive=False))
                 s.log(layout.POST2_RISERS, rr.Clear(recursive=False))
 
+    def _horizon(self, res: Post2Result, sel: np.ndarray, meshes: dict) -> None:
+        """The references that make the attitude readable in the Vehicle view (origin at the vehicle,
+        so its axes are the body's): the local horizontal as a grid under the vehicle with its north
+        and east edges labelled, and the planet-relative velocity v − ω × r (ω about +Z,
+        ``geometry["planet_rate_rad_s"]``) as an arrow of fixed length, both rotated into the body
+        frame at each of the grid rows ``sel``; sized on the vehicle and its parachute."""
+        g = self.geometry
+        d = float(g["diameter_m"])
+        reach = max(2.0 * d, float(g.get("riser_m") or 0.0) + 0.5 * float(g.get("parachute_diameter_m") or 0.0))
+        t = res.t[sel]
+        p = np.asarray(res.smap.raw(res.x[sel], "position"), dtype=float)
+        v = np.asarray(res.smap.raw(res.x[sel], "velocity"), dtype=float)
+        w = float(g.get("planet_rate_rad_s") or 0.0)
+        q_I_B = res.body_attitude(sel, w)
+        self.rec.poses(layout.POST2_HORIZON, t, np.zeros((t.size, 3)), local_level_in_body(p, q_I_B))
+        below = 0.6 * reach
+        self.rec.line_strip(
+            layout.join(layout.POST2_HORIZON, layout.GRID),
+            horizon_grid(reach, below),
+            color=(110, 140, 110, 150),
+            radius=-0.6,
+        )
+        self.rec.stream.log(
+            layout.join(layout.POST2_HORIZON, layout.LABELS),
+            rr.Points3D(
+                [[0.0, reach, -below], [reach, 0.0, -below]],
+                labels=["N (local horizontal)", "E"],
+                colors=[[70, 110, 70]],
+                radii=[-3.0],
+                show_labels=True,
+            ),
+            static=True,
+        )
+        v_rel = v - np.stack([-w * p[:, 1], w * p[:, 0], np.zeros(len(p))], axis=-1)
+        speed = np.linalg.norm(v_rel, axis=1, keepdims=True)
+        v_B = np.einsum("nji,nj->ni", quat_to_dcm(q_I_B), v_rel / np.where(speed > 0.0, speed, 1.0))
+        self.rec.arrows_series(
+            layout.POST2_VELOCITY_ARROW,
+            t,
+            1.5 * reach * v_B,  # long: its label (at the middle) clear of the capsule
+            color=(20, 90, 200, 255),
+            radius=-2.5,
+            label="velocity (planet-relative)",
+        )
+
     def finish(self, result: object, summary: dict) -> None:
         """Write the scorecard (headed by the verdict block), the health verdict and the key moments,
         then the recording's one layout (default and active), its trajectory camera on the track."""
         from workbench.problems.drawer import verdict_block
 
-        self.rec.report(verdict_block(summary) + self.scorecard(summary))
+        self.rec.report(verdict_block(summary) + PLOT_KEY_MD + self.scorecard(summary))
         if "health" in summary:
             self.rec.health(summary["health"])
         log_key_moments(self.rec, summary.get("key_moments", []))
@@ -296,13 +387,18 @@ def post2_blueprint(
     trajectory_eye: rrb.EyeControls3D | None = None,
 ):
     """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and, when ``vehicle`` (a
-    vehicle is drawn: the problem file gives its diameter), "Vehicle" (origin `/world/vehicle`:
+    vehicle is drawn: the problem file gives its diameter), "Vehicle" (origin the local level frame
+    at the vehicle, `/world/vehicle/horizon`, showing `/world/vehicle`:
     capsule, parachute, tilt; without a vehicle that view would be empty); right, one tab per
     estimated state with a grid of one view per component (value, ±3σ, truth; position and velocity
     as errors against the truth when it is known), the phases and the weight schedule, one residual
-    tab per observation (a view per component: residual with ±3σ), the scorecard and the event log.
-    Every plot's name states its unit (the display unit of the state; ``observation_units``
-    {observation: SI unit} for the residuals) and its colours (legends off: they covered the data).
+    tab per observation (a view per component: residual with ±3σ), the scorecard; the event log under
+    the 3D views.
+    Every plot's name states its quantity and unit (the display unit of the state;
+    ``observation_units`` {observation: SI unit} for the residuals) and nothing more, so that it
+    shows whole in a grid cell (three cells across the right column of a 1400 px window leave each
+    title about 22 characters); the colours are named once, in the scorecard's plot key
+    (:data:`PLOT_KEY_MD`; legends off: they covered the data).
 
     A rocket flight (``[launch]``; ``rocket_span`` (t0, t1) [s] its reconstructed span, the x range
     of its views) opens on its results in the pad's frame instead: left, the tab "Rocket (pad frame)"
@@ -313,13 +409,12 @@ def post2_blueprint(
     sizes = sizes or {}
     rc = residual_components or {}
     ou = observation_units or {}
-    key = "blue estimate, grey ±3σ, pale truth, purple propagation only"
     tabs = []
     for n in state_names:
         shown = f"{n}_error" if has_truth and n in ("position", "velocity") else n
         unit = _display(STATES[n].unit)[0] if n in STATES else "-"
         comps = _components(n, sizes.get(n, STATES[n].size if n in STATES else 1))
-        views = [plot_view(f"{shown}.{c} [{unit or '-'}] — {key}", layout.plot_path(f"{shown}/{c}")) for c in comps]
+        views = [plot_view(f"{shown}.{c} [{unit or '-'}]", layout.plot_path(f"{shown}/{c}")) for c in comps]
         tabs.append(tab(f"{shown} [{unit or '-'}]", views[0]) if len(views) == 1 else rrb.Grid(*views, name=shown))
     if has_events:
         tabs.append(tab("phases", plot_view("phase index [-]", layout.POST2_PHASE)))
@@ -335,17 +430,32 @@ def post2_blueprint(
         comps = rc.get(n)
         unit = _display(ou[n])[0] if n in ou else "as logged"
         if not comps:
-            res.append(tab(n, plot_view(f"{n} residual [{unit}] — blue, grey ±3σ", layout.residual_path(n))))
+            res.append(tab(n, plot_view(f"{n} [{unit}] residual", layout.residual_path(n))))
             continue
-        views = [plot_view(f"{n}.{c} residual [{unit}] — blue, grey ±3σ", layout.residual_path(n, c)) for c in comps]
+        # component and unit first: a grid cell shows ~22 characters, the tab names the observation
+        views = [plot_view(f"{c} [{unit}] — {n} residual", layout.residual_path(n, c)) for c in comps]
         res.append(tab(n, views[0]) if len(views) == 1 else rrb.Grid(*views, name=f"{n} residuals"))
+    # the horizon and the velocity arrow (metres, with labels) belong to the Vehicle view: at trajectory
+    # scale their labels sat on the vehicle marker
+    at_vehicle = [f"- {layout.POST2_HORIZON}/**", f"- {layout.POST2_VELOCITY_ARROW}"]
     scene_views = [
-        rrb.Spatial3DView(name="Trajectory", origin=layout.WORLD, eye_controls=trajectory_eye, line_grid=False)
+        rrb.Spatial3DView(
+            name="Trajectory",
+            origin=layout.WORLD,
+            contents=["+ $origin/**", *at_vehicle],
+            eye_controls=trajectory_eye,
+            line_grid=False,
+        )
     ]
     if vehicle:
         scene_views.append(
             rrb.Spatial3DView(
-                name="Vehicle", origin=layout.VEHICLE, contents=["+ $origin/**", "- " + layout.POST2_VEHICLE_MARKER]
+                name="Vehicle",
+                # the local level frame at the vehicle (east, north, up): the horizon grid lies flat,
+                # the viewer's up is the local vertical, and the body turns against them
+                origin=layout.POST2_HORIZON,
+                contents=[f"+ {layout.VEHICLE}/**", "- " + layout.POST2_VEHICLE_MARKER],
+                line_grid=False,  # the horizon grid (under the vehicle, north and east labelled) instead
             )
         )
     if rocket_span is not None:
@@ -374,14 +484,14 @@ def post2_blueprint(
     right = [rrb.Tabs(*tabs, active_tab=0)]
     if res:
         right.append(rrb.Tabs(*res, active_tab=0))
-    right += [
-        report_view("Report"),
-        events_view(),
-    ]
-    # the events log tall enough for a few rows (at 1.0 it showed one)
-    shares = [2.5] + ([1.7] if res else []) + [1.6, 1.8]
+    right.append(report_view("Report"))
+    # the state and residual views tall enough for two or three y labels (the axis labels decades: a
+    # residual view a fifth of the column high showed one in a 1400 x 900 window), so the event log
+    # sits under the 3D views, tall enough for a few rows (at a seventh of the column it showed one)
+    shares = [2.6] + ([2.4] if res else []) + [1.6]
+    left = rrb.Vertical(scenes, events_view(), row_shares=[3.0, 1.0])
     return rrb.Blueprint(
-        rrb.Horizontal(scenes, rrb.Vertical(*right, row_shares=shares), column_shares=[2, 3]),
+        rrb.Horizontal(left, rrb.Vertical(*right, row_shares=shares), column_shares=[2, 3]),
         rrb.TimePanel(state="expanded", timeline=layout.TIME),
         rrb.SelectionPanel(state="collapsed"),
     )
