@@ -64,6 +64,24 @@ def test_nis_above_band_warns_and_far_above_is_error_naming_the_sensor():
     assert e["status"] == ERROR and "zupt" in e["message"] and "unit" in e["message"]
 
 
+def test_nis_above_a_narrow_band_by_its_width_is_error_far_below_only_a_warning():
+    # a narrow honest band (±4 %, the Huygens entry accelerometer's): 2.5× its top is far outside every
+    # honest member though far below the χ² factor; its bottom / 2.5 is only conservative
+    honest = np.exp(np.random.default_rng(3).normal(np.log(0.43), 0.0115, 30))
+    table = _table("nis.accel_entry", honest, dof=1)
+    lo, hi = table["checks"]["nis.accel_entry"]["band"]
+    assert hi * hi / lo < 1.2 * hi < 2.5 * hi < hi * nis_error_factor(1)
+    inside_margin = asdict(nis_check("accel_entry", np.full(400, 0.99 * hi * hi / lo), 1))
+    far = asdict(nis_check("accel_entry", np.full(400, 2.5 * hi), 1))
+    low = asdict(nis_check("accel_entry", np.full(400, lo / 2.5), 1))
+    (m,), _ = calibrate_checks([inside_margin], table)
+    (e,), _ = calibrate_checks([far], table)
+    (w,), _ = calibrate_checks([low], table)
+    assert m["status"] == WARNING
+    assert e["status"] == ERROR and "initial state" in e["message"] and "band's width" in e["message"]
+    assert w["status"] == WARNING and "below" in w["message"]
+
+
 def test_physics_error_is_never_softened_and_uncalibrated_checks_say_so():
     table = _table("nis.zupt", [0.1, 0.12, 0.14])
     phys = Check("geometry.hanging", ERROR, 1.0, 0.1, "hanging position contradicts the data")

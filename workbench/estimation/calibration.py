@@ -19,8 +19,9 @@ stream disjoint from the shipped scenarios' and from any tuning seeds):
   first-contact clearance with and without ranging: the pose σ differs 30-fold).  Without a pool the
   band is the check's name;
 * :func:`calibrate_checks` — re-judge the checks of one run: inside the band OK, outside WARNING,
-  a NIS above the band by the factor :func:`nis_error_factor` ERROR, a two-sided statistic beyond the
-  band by its half-width (twice as far from the band's middle as its edge) ERROR; an ERROR of the check's own
+  a NIS above the band by the factor :func:`nis_error_factor` or by the band's width, and a
+  two-sided statistic beyond the band by its half-width (twice as far from the band's middle as its
+  edge) ERROR; an ERROR of the check's own
   (physics) logic is never softened; a filter conservative by design is said once, as a note;
 * :func:`truth_check` — a synthetic run judged against its truth: a headline quantity outside its
   reported 3σ is an ERROR.
@@ -44,6 +45,7 @@ from workbench.estimation.health import ERROR, OK, WARNING, Check
 
 __all__ = [
     "FAMILY_ALPHA",
+    "NIS_BEYOND_HALF_WIDTHS",
     "PERCENTILES",
     "Z_BAND",
     "band_key",
@@ -62,6 +64,10 @@ Z_BAND = 3.29
 
 #: probability that an honest run leaves at least one of its problem's calibrated bands (a WARNING)
 FAMILY_ALPHA = 0.01
+
+#: a mean NIS above its honest band by this many of the band's half-widths (its whole width: the top
+#: times top/bottom on the log scale) is an ERROR (:func:`calibrate_checks`)
+NIS_BEYOND_HALF_WIDTHS = 2.0
 
 #: the percentiles of each statistic over the members stored beside its band [%]
 PERCENTILES = (0.5, 1.0, 50.0, 99.0, 99.5)
@@ -178,21 +184,20 @@ def _judge(c: Check, e: Mapping, source: str) -> tuple[dict, str | None]:
     v = float(c.value)
     if kind == "nis":
         err = hi * nis_error_factor(int(c.stat["dof"]))
-        if v > err:
+        # too large a NIS only (a NIS far below its band is a filter more conservative than its honest
+        # runs: its σ too large, no wrong answer hidden behind a small σ); above the band by its whole
+        # width (≈ 4z honest spreads): a margin for real data that a truth simulator does not mimic
+        if v > err or (v > hi and _far_beyond(v, lo, hi, e, NIS_BEYOND_HALF_WIDTHS)):
             msg = (
-                f"{c.name}: mean NIS {v:.3g} is {v / hi:.3g}× the top of its {origin}; the filter is inconsistent "
-                "with this sensor — a wrong unit, axis, noise level or timing of this stream?"
+                f"{c.name}: mean NIS {v:.3g} is {v / hi:.3g}× the top of its {origin} (beyond it by more than the "
+                "band's width, or the χ² factor); the filter is inconsistent with this sensor — a wrong unit, "
+                "axis, noise level or timing of this stream, or an initial state or model that its data contradict?"
             )
             return _dict(c, status=ERROR, bound=[lo, hi], message=msg), note
-    if kind == "two_sided" and not lo <= v <= hi:
-        # as far beyond the band as the band is wide from its middle (≈ 2z spreads of the honest
-        # members): no honest run gets there; the check's own message says what is likely wrong
-        log = e.get("scale") == "log" and v > 0.0 and lo > 0.0
-        f = np.log if log else (lambda x: x)
-        mid, half = 0.5 * (f(hi) + f(lo)), 0.5 * (f(hi) - f(lo))
-        if abs(f(v) - mid) > 2.0 * half:
-            msg = f"{c.name}: {v:.4g} lies beyond its {origin} by more than the band's half-width — " + c.message
-            return _dict(c, status=ERROR, bound=[lo, hi], message=msg), note
+    if kind == "two_sided" and not lo <= v <= hi and _far_beyond(v, lo, hi, e):
+        # the check's own message says what is likely wrong
+        msg = f"{c.name}: {v:.4g} lies beyond its {origin} by more than the band's half-width — " + c.message
+        return _dict(c, status=ERROR, bound=[lo, hi], message=msg), note
     if lo <= v <= hi:
         return _dict(c, status=OK, bound=[lo, hi], message=f"{c.name}: {v:.4g} inside its {origin}"), note
     if kind == "upper" and v < lo:
@@ -200,6 +205,16 @@ def _judge(c: Check, e: Mapping, source: str) -> tuple[dict, str | None]:
     side = "above" if v > hi else "below"
     msg = f"{c.name}: {v:.4g} {side} its {origin} — " + c.message
     return _dict(c, status=WARNING, bound=[lo, hi], message=msg), note
+
+
+def _far_beyond(v: float, lo: float, hi: float, e: Mapping, half_widths: float = 1.0) -> bool:
+    """True when ``v`` lies beyond the band [``lo``, ``hi``] (table entry ``e``; on the log scale when
+    the band was fitted there) by more than ``half_widths`` × the band's half-width (1: twice as far
+    from its middle as its edge, ≈ 2z spreads of the honest members, where no honest run gets)."""
+    log = e.get("scale") == "log" and v > 0.0 and lo > 0.0
+    f = np.log if log else (lambda x: x)
+    mid, half = 0.5 * (f(hi) + f(lo)), 0.5 * (f(hi) - f(lo))
+    return bool(abs(f(v) - mid) > (1.0 + half_widths) * half)
 
 
 def _dict(c: Check, **changes: Any) -> dict:

@@ -85,6 +85,8 @@ def test_clean_excerpt_passes_every_import_check(clean):
         "geometry.imu_axes",
         "geometry.pad_tilt",
         "geometry.accel_sign",
+        "geometry.pitch_over",
+        "physics.strapdown_apogee",
         "units.gyro",
         "geometry.landing_distance",
         "units.magnetometer",
@@ -127,6 +129,63 @@ def test_all_accelerometer_signs_flipped_against_the_flight_computers_attitude(t
     assert clean["geometry.accel_sign"]["value"] > 0.5
     c = _import(tmp_path, _map(_lines(), ACC, lambda v: [-x for x in v]))["geometry.accel_sign"]
     assert c["status"] == ERROR and c["value"] < 0.0 and "look flipped" in c["message"]
+
+
+def test_gyro_axes_a_mirror_of_the_accelerometers_turn_the_nose_the_wrong_way(tmp_path, clean):
+    # two rate columns swapped keep the roll axis (imu_axes OK) and the decimated excerpt allows no
+    # magnetometer fit; the strapdown's nose stays up while its velocity pitches over
+    assert clean["geometry.pitch_over"]["value"] < rocket_checks.PITCH_OVER_BOUND_DEG
+    checks = _import(tmp_path, _map(_lines(), GYRO, lambda v: [v[1], v[0], v[2]]))
+    c = checks["geometry.pitch_over"]
+    assert checks["geometry.imu_axes"]["status"] == OK
+    assert c["status"] == ERROR and c["value"] > rocket_checks.PITCH_OVER_BOUND_DEG
+    assert "mirror images" in c["message"] and "raw_angular_rate_[xyz]_deg_per_s" in c["message"]
+
+
+def test_one_accelerometer_sign_flipped_overshoots_the_barometric_apogee(tmp_path, clean):
+    assert abs(clean["physics.strapdown_apogee"]["value"]) < rocket_checks.STRAPDOWN_APOGEE_BOUND
+    checks = _import(tmp_path, _map(_lines(), ACC, lambda v: [v[0], v[1], -v[2]]))
+    c = checks["physics.strapdown_apogee"]
+    assert c["status"] == ERROR and c["value"] > rocket_checks.STRAPDOWN_APOGEE_BOUND
+    assert "raw_acceleration_[xyz]_gs" in c["message"]
+
+
+def _sd(el_nose, el_v, h):
+    n = len(el_v)
+    return {
+        "t": np.linspace(0.0, 10.0, n),
+        "k": np.arange(n),
+        "el_nose": np.asarray(el_nose, float),
+        "el_v": np.asarray(el_v, float),
+        "speed": np.full(n, 200.0),
+        "h": np.asarray(h, float),
+    }
+
+
+def test_pitch_over_and_strapdown_apogee_checks_on_synthetic_histories():
+    el_v = np.linspace(70.0, 10.0, 20)
+    h = np.linspace(0.0, 1000.0, 20)
+    assert rocket_checks.pitch_over_check(_sd(el_v + 5.0, el_v, h), 0.0, "x.csv").status == OK
+    bad = rocket_checks.pitch_over_check(_sd(np.full(20, 70.0), el_v, h), 0.0, "x.csv")
+    assert bad.status == ERROR and bad.value == pytest.approx(60.0)
+    assert rocket_checks.pitch_over_check(None, 0.0, "x.csv").status == OK  # unchecked
+    atm = SimpleNamespace(pressure=lambda hh: 101325.0 * np.exp(-np.asarray(hh) / 8400.0))
+    p = 101325.0 * np.exp(-h / 8400.0)
+    ok = rocket_checks.strapdown_apogee_check(_sd(el_v, el_v, 1.05 * h), p, atm, 0.0, "x.csv")
+    assert ok.status == OK and ok.value == pytest.approx(0.05, abs=2e-3)
+    bad = rocket_checks.strapdown_apogee_check(_sd(el_v, el_v, 1.2 * h), p, atm, 0.0, "x.csv")
+    assert bad.status == ERROR and bad.value == pytest.approx(0.2, abs=2e-3)
+
+
+def test_local_noise_widens_its_window_on_a_sparse_log():
+    rng = np.random.default_rng(1)
+    t_dense = np.arange(0.0, 4.0, 0.01)
+    t_sparse = np.arange(0.0, 4.0, 0.25)  # 2 samples per ±0.25 s
+    for t in (t_dense, t_sparse):
+        v = 3.0 * t + rng.normal(0.0, 1.0, t.size)  # a trend plus unit noise
+        s = rocket.local_noise(np.array([1.0, 2.0, 3.0]), t, v)
+        assert np.all(s > 0.3) and np.all(s < 3.0)
+    assert np.all(rocket.local_noise(np.array([2.0]), np.array([0.0, 4.0]), np.array([1.0, 2.0])) == 0.0)
 
 
 def test_gyro_in_rad_per_s_labelled_deg_per_s(tmp_path):

@@ -483,21 +483,34 @@ ACCEL_SIGMA_MAIN = 3.0
 ACCEL_SIGMA_OPENING = 30.0
 #: half-width of the window of :func:`local_noise` [s]
 NOISE_WINDOW_S = 0.25
+#: ... widened up to this half-width [s] where it holds fewer than NOISE_MIN_SAMPLES samples (a sparse
+#: or thinned log: without it the block's own noise would count as zero and its σ be the model
+#: error's alone)
+NOISE_WINDOW_MAX_S = 1.0
+NOISE_MIN_SAMPLES = 4
 
 
 def local_noise(t_blocks, t, v) -> np.ndarray:
     """1σ sample noise (n,) of the samples v (m,) at t (m,) [s] around each block time t_blocks (n,):
     the RMS of the samples in ±NOISE_WINDOW_S about their straight-line fit (the flight's own trend
-    removed), 0 where fewer than 4 samples fall in the window."""
+    removed); where that window holds fewer than NOISE_MIN_SAMPLES samples, the NOISE_MIN_SAMPLES + 1
+    samples nearest the block within ±NOISE_WINDOW_MAX_S; 0 where even those are too few."""
     t_blocks = np.asarray(t_blocks, float)
     out = np.zeros(t_blocks.size)
     lo = np.searchsorted(t, t_blocks - NOISE_WINDOW_S)
     hi = np.searchsorted(t, t_blocks + NOISE_WINDOW_S, side="right")
+    lo_w = np.searchsorted(t, t_blocks - NOISE_WINDOW_MAX_S)
+    hi_w = np.searchsorted(t, t_blocks + NOISE_WINDOW_MAX_S, side="right")
     for k, (a, b) in enumerate(zip(lo, hi, strict=True)):
-        if b - a >= 4:
-            tt, vv = t[a:b] - t_blocks[k], v[a:b]
-            c = np.polyfit(tt, vv, 1)
-            out[k] = math.sqrt(float(np.sum((vv - np.polyval(c, tt)) ** 2)) / (b - a - 2))
+        if b - a < NOISE_MIN_SAMPLES:
+            near = np.arange(lo_w[k], hi_w[k])
+            near = near[np.argsort(np.abs(t[near] - t_blocks[k]), kind="stable")[: NOISE_MIN_SAMPLES + 1]]
+            if near.size < NOISE_MIN_SAMPLES:
+                continue
+            a, b = int(near.min()), int(near.max()) + 1
+        tt, vv = t[a:b] - t_blocks[k], v[a:b]
+        c = np.polyfit(tt, vv, 1)
+        out[k] = math.sqrt(float(np.sum((vv - np.polyval(c, tt)) ** 2)) / (b - a - 2))
     return out
 
 

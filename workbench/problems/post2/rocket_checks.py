@@ -27,8 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from workbench.core.bodies import EARTH
 from workbench.core.rotation import dcm_to_quat, quat_history_from_body_rates, quat_to_dcm, quat_to_rotvec
 from workbench.estimation.health import ERROR, OK, WARNING, Check
+from workbench.estimation.strapdown import ImuArrays, integrate_members
 from workbench.io.schema import read_json
 
 __all__ = [
@@ -51,6 +53,9 @@ __all__ = [
     "fl_gaps",
     "pad_tilt_check",
     "accel_sign_check",
+    "pitch_over_check",
+    "coast_strapdown",
+    "strapdown_apogee_check",
 ]
 
 #: IGRF-13 degree-1 Gauss coefficients at epoch 2020 [nT] (Alken et al. 2021, Table 2)
@@ -71,6 +76,24 @@ AXES_TOLERANCE_DEG = 15.0
 PAD_TILT_TOLERANCE_DEG = 5.0
 #: geometry.accel_sign needs this much mean roll [deg/s] in both solutions (measured −115 .. −228)
 ROLL_MIN_DEG_S = 20.0
+#: geometry.pitch_over: the nose (the boost's axis turned by the integrated gyro) and the velocity
+#: (the integrated specific force) differ in elevation by at most the angle between them, which for a
+#: stable rocket above PITCH_OVER_MIN_SPEED_M_S is its angle of attack plus the wind's tilt of the air
+#: velocity: the wind at the launch limit (WIND_MAX_M_S / 2 = 8.9 m/s) tilts it ≤ 8.5° at 60 m/s, a
+#: stable rocket's coast angle of attack stays within ~10° (the flights: docs/tuning/post2.md)
+PITCH_OVER_BOUND_DEG = 20.0
+PITCH_OVER_MIN_SPEED_M_S = 60.0
+#: ... compared up to this long before the drogue's ejection [s] (the ejection tumbles the body)
+PITCH_OVER_BEFORE_EJECTION_S = 0.5
+#: gyro full scale of the FIRM logs [rad/s] (rocket.GYRO_SATURATION): a saturated sample leaves it unchecked
+PITCH_OVER_GYRO_SATURATION = math.radians(1790.0)
+#: physics.strapdown_apogee: the strapdown's apogee above the pad agrees with the barometer's within
+#: this fraction; its 1σ sources: 1 % accelerometer scale (rocket.ACCEL_SCALE_SIGMA), 1° pad tilt
+#: (rocket.TILT_SIGMA: ≤ 4 % at a 55° burnout elevation), 4 K site temperature (1.4 % of the pressure
+#: altitude), 6.4 % summed (the flights: docs/tuning/post2.md)
+STRAPDOWN_APOGEE_BOUND = 0.10
+#: ... compared only when the barometric apogee is at least this high above the pad [m]
+STRAPDOWN_APOGEE_MIN_M = 100.0
 #: the magnetic field's turning over a short window cannot exceed the body's rotation (a vector
 #: turns at most by the rotation angle): Σθ_mag / Σθ_gyro above this means the gyro reads too small
 #: (hard iron, noise: ≤ 0.6 measured on the three flights and the excerpt); windows of this length [s]
@@ -132,8 +155,6 @@ def dipole_field(lat_deg: float, lon_deg: float) -> tuple[float, float]:
 
 def _great_circle_m(lat1, lon1, lat2, lon2) -> float:
     """Distance [m] on the mean sphere between two points [deg]."""
-    from workbench.core.bodies import EARTH
-
     p1, p2, dl = math.radians(lat1), math.radians(lat2), math.radians(lon2 - lon1)
     c = math.sin(p1) * math.sin(p2) + math.cos(p1) * math.cos(p2) * math.cos(dl)
     return EARTH.reference_radius * math.acos(max(-1.0, min(1.0, c)))
@@ -217,6 +238,98 @@ def accel_sign_check(t, f_B, w_B, ref_q, t_coast: float, t_end: float, log_name:
         f"raw_acceleration_[xyz]_gs of {log_name} look flipped"
     )
     return _check(name, ERROR, ratio, 0.0, msg)
+
+
+def coast_strapdown(t, f_B, w_B, fl, t_end: float) -> dict | None:
+    """The whole IMU integrated (strapdown, no covariance) from the pad to ``t_end`` [s after launch]:
+    ``fl`` the :class:`~workbench.problems.post2.rocket.BoostSolution` gives the pad attitude and
+    position, the gyro bias, the ignition time and the boost's axis in the IMU frame.  ``t`` (n,) [s
+    after launch], ``f_B``, ``w_B`` (n, 3) [m/s², rad/s] as logged.  Returns {"t", "k" (indices into
+    ``t``), "el_nose", "el_v" [deg] (elevations of the nose — the boost axis turned by the integrated
+    gyro — and of the Earth-relative velocity), "speed" [m/s], "h" [m above the pad]} (m,) each, or None
+    with fewer than 10 samples or a saturated gyro sample (the attitude would be wrong from there on)."""
+    k0 = max(int(np.searchsorted(t, float(fl.pad_info["ignition_t_s"]))) - 1, 0)
+    sel = np.arange(k0, int(np.searchsorted(t, t_end)))
+    if sel.size < 10 or np.any(np.abs(w_B[sel]) >= PITCH_OVER_GYRO_SATURATION):
+        return None
+    ones = np.ones((sel.size, 3))
+    imu = ImuArrays(t[sel], f_B[sel], w_B[sel] - fl.gyro_bias, ones, ones)
+    earth_rate = np.array([0.0, 0.0, EARTH.rotation_rate])
+    v0 = np.cross(earth_rate, fl.p_pad)
+    out = integrate_members(imu, v0[None], np.asarray(fl.q_M_B_pad)[None], np.asarray(fl.p_pad)[None], body=EARTH)
+    q, v, p = out["q"][:, 0], out["v"][:, 0], out["p"][:, 0]
+    v_rel = v - np.cross(earth_rate, p)
+    speed = np.linalg.norm(v_rel, axis=1)
+    r = np.linalg.norm(p, axis=1)
+    up = p / r[:, None]
+    nose = np.einsum("nij,j->ni", quat_to_dcm(q), fl.axis_B)
+    el_nose = np.degrees(np.arcsin(np.clip(np.einsum("ni,ni->n", nose, up), -1.0, 1.0)))
+    el_v = np.degrees(np.arcsin(np.clip(np.einsum("ni,ni->n", v_rel, up) / np.maximum(speed, 1e-9), -1.0, 1.0)))
+    h = r - EARTH.reference_radius - fl.h_pad
+    return {"t": t[sel], "k": sel, "el_nose": el_nose, "el_v": el_v, "speed": speed, "h": h}
+
+
+def pitch_over_check(sd: dict | None, t_coast: float, log_name: str) -> Check:
+    """geometry.pitch_over: a rocket flies nose first, so over the coast (from ``t_coast`` [s after
+    launch], above :data:`PITCH_OVER_MIN_SPEED_M_S`) the elevation of its nose follows the elevation of
+    its velocity as gravity turns it over (``sd`` the :func:`coast_strapdown`; None: unchecked).  An
+    accelerometer whose axes are a mirror image of the gyro's (a swapped or one sign-flipped column of
+    either) turns the nose the wrong way: the two elevations part by more than
+    :data:`PITCH_OVER_BOUND_DEG` → ERROR.  Elevations need no heading: the magnetometer plays no part."""
+    name = "geometry.pitch_over"
+    if sd is None:
+        return _check(name, OK, None, PITCH_OVER_BOUND_DEG, "too few coast samples or a saturated gyro: unchecked")
+    tt, el_nose, el_v = sd["t"], sd["el_nose"], sd["el_v"]
+    coast = np.flatnonzero((tt >= t_coast) & (sd["speed"] > PITCH_OVER_MIN_SPEED_M_S))
+    if coast.size < 5:
+        return _check(name, OK, None, PITCH_OVER_BOUND_DEG, "too few coast samples above the speed limit: unchecked")
+    d = el_nose[coast] - el_v[coast]
+    k = int(np.argmax(np.abs(d)))
+    i0, i1, kk = coast[0], coast[-1], coast[k]
+    msg = (
+        f"over the coast the nose's elevation went {el_nose[i0]:.0f}° → {el_nose[i1]:.0f}° and the velocity's "
+        f"{el_v[i0]:.0f}° → {el_v[i1]:.0f}° (strapdown of the IMU from the pad); they part by at most "
+        f"{abs(d[k]):.1f}° (at {tt[kk]:.1f} s; a stable rocket: within {PITCH_OVER_BOUND_DEG:g}°)"
+    )
+    if abs(d[k]) <= PITCH_OVER_BOUND_DEG:
+        return _check(name, OK, abs(d[k]), PITCH_OVER_BOUND_DEG, msg)
+    msg += (
+        ": the integrated gyro does not turn the accelerometer's nose the way the flight turned — the axes of "
+        f"raw_acceleration_[xyz]_gs and raw_angular_rate_[xyz]_deg_per_s of {log_name} look like mirror images "
+        "(two columns of one sensor swapped, or one column's sign flipped)"
+    )
+    return _check(name, ERROR, abs(d[k]), PITCH_OVER_BOUND_DEG, msg)
+
+
+def strapdown_apogee_check(sd: dict | None, pressure, atmosphere, h_pad: float, log_name: str) -> Check:
+    """physics.strapdown_apogee: the highest point of the strapdown (``sd``, :func:`coast_strapdown`;
+    None: unchecked) against the barometer's over the same samples (``pressure`` (n,) [Pa] as logged,
+    read as altitude in the site's ``atmosphere``, ``h_pad`` [m] its pad altitude): relative difference
+    above :data:`STRAPDOWN_APOGEE_BOUND` → ERROR (the IMU's axes, signs or units integrate another
+    flight than the one the air pressure saw)."""
+    name = "physics.strapdown_apogee"
+    if sd is None:
+        return _check(name, OK, None, STRAPDOWN_APOGEE_BOUND, "too few samples or a saturated gyro: unchecked")
+    hg = h_pad + np.arange(0.0, 30000.0, 1.0)
+    pg = np.asarray(atmosphere.pressure(hg), float)
+    h_baro = np.interp(-np.asarray(pressure, float)[sd["k"]], -pg, hg) - h_pad
+    kb, ks = int(np.argmax(h_baro)), int(np.argmax(sd["h"]))
+    hb, hs = float(h_baro[kb]), float(sd["h"][ks])
+    if hb < STRAPDOWN_APOGEE_MIN_M:
+        return _check(name, OK, None, STRAPDOWN_APOGEE_BOUND, f"barometric apogee {hb:.0f} m: too low to compare")
+    rel = (hs - hb) / hb
+    msg = (
+        f"the IMU's strapdown from the pad peaks {hs:.0f} m above it at {sd['t'][ks]:.1f} s, the barometer "
+        f"{hb:.0f} m at {sd['t'][kb]:.1f} s ({100 * rel:+.1f} %; at most ±{100 * STRAPDOWN_APOGEE_BOUND:g} %)"
+    )
+    if abs(rel) <= STRAPDOWN_APOGEE_BOUND:
+        return _check(name, OK, rel, STRAPDOWN_APOGEE_BOUND, msg)
+    msg += (
+        f": the accelerometer and gyro of {log_name} integrate another flight than the one the air pressure saw — "
+        "an axis of raw_acceleration_[xyz]_gs or raw_angular_rate_[xyz]_deg_per_s swapped or sign-flipped, or "
+        "a scale (units) wrong"
+    )
+    return _check(name, ERROR, rel, STRAPDOWN_APOGEE_BOUND, msg)
 
 
 def pad_tilt_check(tilt_deg: float, rod_deg: float) -> Check:
@@ -576,6 +689,9 @@ def import_checks(
     # rod angle, the landed coordinates, the board temperature) are left out without it
     if log.ref_q is not None:
         checks.append(accel_sign_check(t, log.f_B, log.w_B, log.ref_q, t_coast, min(t_ej, t_f) - 1.0, name))
+    sd = coast_strapdown(t, log.f_B, log.w_B, fl, t_ej - PITCH_OVER_BEFORE_EJECTION_S)
+    checks.append(pitch_over_check(sd, t_coast, name))
+    checks.append(strapdown_apogee_check(sd, log.pressure, fl.atmosphere, fl.h_pad, name))
     if meta.rod_angle_deg is not None:
         checks.append(pad_tilt_check(float(fl.pad_info["tilt_on_pad_deg"]), float(meta.rod_angle_deg)))
     k0 = int(np.searchsorted(t, fl.pad_info["ignition_t_s"] - 0.2))
