@@ -12,6 +12,7 @@ import pytest
 
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import load_scenario
+from workbench.problems.base import RunOptions
 from workbench.problems.runner import run_scenario
 from workbench.recording import layout
 from workbench.recording.reader import read_recording
@@ -28,7 +29,9 @@ def short_run(tmp_path_factory):
         }
     )
     out = tmp_path_factory.mktemp("post2_rec")
-    r = run_scenario(sc, out)
+    # the rates weighted x4 for 1.5 s (a schedule to draw) understate their R: mean NIS 1.33 against the
+    # shipped scenario's calibrated band 0.85-0.96, a health ERROR this drawing test writes through
+    r = run_scenario(sc, out, RunOptions(allow_unhealthy=True))
     return r, read_recording(r.recording)
 
 
