@@ -67,9 +67,7 @@ def _scores(cfg, tm, imu, filt, truth: dict, shape: str) -> dict:
     """The atmosphere from the smoothed trajectory with ``fill_temperature_shape=shape``, scored."""
     sm = filt.smoothed
     ev = dict(tm.events)
-    phase = np.zeros(sm.t.size, dtype=int)
-    phase[sm.t >= ev.get("PDD", np.inf)] = 1
-    phase[sm.t >= ev.get("FSR", np.inf)] = 2
+    phase = en.phase_index(sm.t, ev)
     atm = reconstruct_atmosphere(
         sm.t,
         sm.p_M,

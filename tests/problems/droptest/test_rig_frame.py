@@ -404,6 +404,19 @@ def test_nail_anywhere_the_ramp_placed_by_its_own_plane(tmp_path):
         DropSettings.from_scenario(load_scenario(p))
 
 
+def _shipped_drop_as_user_data(tmp_path: Path):
+    """(the shipped droptest scenario, its causal acquisition-filter keys, its synthesized telemetry
+    files without the truth): the shipped drop as a user's rig would hand it in."""
+    from workbench.problems.droptest.synthetic import synthesize_droptest
+
+    shipped = resolve_scenario("droptest", ASSETS)
+    causal = "sample_rate_hz = 2000.0\nfilter_cutoff_hz = 500.0\nfilter_order = 4"
+    syn_path = tmp_path / "syn.toml"
+    syn_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), causal, None))
+    syn = synthesize_droptest(DropSettings.from_scenario(load_scenario(syn_path)), tmp_path / "tel")
+    return shipped, causal, {k: v for k, v in syn.telemetry.items() if k != "truth"}
+
+
 def test_nail_moved_in_front_of_the_ramp_reconstructs_the_same_stroke(tmp_path):
     """The shipped drop's files as user data, then the same rig with the SPF origin (the nail) moved
     to 0.41 m in front of the ramp plane: every SPF position of the setup file is re-expressed from
@@ -412,15 +425,9 @@ def test_nail_moved_in_front_of_the_ramp_reconstructs_the_same_stroke(tmp_path):
     file's decimal rounding differs)."""
     from workbench.problems.droptest.pipeline import run_droptest
     from workbench.problems.droptest.surface import ramp_normal
-    from workbench.problems.droptest.synthetic import synthesize_droptest
     from workbench.problems.droptest.telemetry import telemetry_paths
 
-    shipped = resolve_scenario("droptest", ASSETS)
-    causal = "sample_rate_hz = 2000.0\nfilter_cutoff_hz = 500.0\nfilter_order = 4"
-    syn_path = tmp_path / "syn.toml"
-    syn_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), causal, None))
-    syn = synthesize_droptest(DropSettings.from_scenario(load_scenario(syn_path)), tmp_path / "tel")
-    tel = {k: v for k, v in syn.telemetry.items() if k != "truth"}
+    shipped, causal, tel = _shipped_drop_as_user_data(tmp_path)
 
     def run(name: str, telemetry: dict[str, Path], chamber_edit: tuple[str, str] | None):
         text = _scenario_text(shipped.path, LANDER.as_posix(), causal, telemetry)
@@ -502,15 +509,9 @@ def test_user_data_without_the_simulator_keys_runs(tmp_path):
     volume, γ, damping, friction and chamber pressure: it runs and gives the stroke of the full asset
     (the estimator never reads them) and the same health verdict."""
     from workbench.problems.base import RunOptions
-    from workbench.problems.droptest.synthetic import synthesize_droptest
     from workbench.problems.runner import run_scenario
 
-    shipped = resolve_scenario("droptest", ASSETS)
-    causal = "sample_rate_hz = 2000.0\nfilter_cutoff_hz = 500.0\nfilter_order = 4"
-    syn_path = tmp_path / "syn.toml"
-    syn_path.write_text(_scenario_text(shipped.path, LANDER.as_posix(), causal, None))
-    syn = synthesize_droptest(DropSettings.from_scenario(load_scenario(syn_path)), tmp_path / "tel")
-    tel = {k: v for k, v in syn.telemetry.items() if k != "truth"}
+    shipped, causal, tel = _shipped_drop_as_user_data(tmp_path)
     bare = _lander_without_simulator_keys(tmp_path / "bare_lander.toml")
     out = {}
     for name, lander in (("full", LANDER), ("bare", bare)):

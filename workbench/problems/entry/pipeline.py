@@ -74,6 +74,7 @@ from workbench.problems.entry.winds import estimate_winds
 
 __all__ = [
     "inertial_velocity_out",
+    "phase_index",
     "NominalIntegration",
     "EntryResult",
     "imu_error_process_noise",
@@ -181,7 +182,9 @@ def _nominal_integration(imu, nom: NominalState, tm, P0: np.ndarray, bridge_mode
     return NominalIntegration(sp, tn, dp, dv, dth, summ)
 
 
-def _phase(t: np.ndarray, events: dict) -> np.ndarray:
+def phase_index(t: np.ndarray, events: dict) -> np.ndarray:
+    """Flight phase (n,) int of the times ``t`` (n,) [s]: 0 before the parachute deployment (event
+    ``PDD``), 1 under the parachute, 2 after the front-shield release (``FSR``); ``events`` {name: t [s]}."""
     ph = np.zeros(t.shape, dtype=int)
     ph[t >= events.get("PDD", np.inf)] = 1
     ph[t >= events.get("FSR", np.inf)] = 2
@@ -280,7 +283,7 @@ def _stages(cfg, vehicle, r_ground, paths, tm, nom, *, scheduler, members) -> It
 
     # ---- atmosphere (Sect. 9) and winds (Sect. 10) along the smoothed trajectory
     sm = filt.smoothed
-    ph = _phase(sm.t, tm.events)
+    ph = phase_index(sm.t, tm.events)
     f_valid = np.ones(sm.t.size, dtype=bool)
     atm = reconstruct_atmosphere(
         sm.t,
