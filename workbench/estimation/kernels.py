@@ -20,7 +20,26 @@ import math
 
 from numba import njit
 
-__all__ = ["cho_solve", "joseph_update"]
+__all__ = ["cho_solve", "copy_matrix", "copy_vector", "joseph_update"]
+
+
+@njit(cache=True)
+def copy_vector(src, dst):
+    """Copy src (n,) into dst (n,) element by element (any unit; dst written).
+
+    A kernel's ``dst[k] = src`` with an array on the right compiles numba's shape-mismatch message
+    (string formatting) into every caller; this loop compiles to a copy and nothing else."""
+    for i in range(src.shape[0]):
+        dst[i] = src[i]
+
+
+@njit(cache=True)
+def copy_matrix(src, dst):
+    """Copy src (n, m) into dst (n, m) element by element (any unit; dst written); see
+    :func:`copy_vector` for why a loop and not a slice assignment."""
+    for i in range(src.shape[0]):
+        for j in range(src.shape[1]):
+            dst[i, j] = src[i, j]
 
 
 @njit(cache=True)

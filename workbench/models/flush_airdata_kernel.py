@@ -39,7 +39,16 @@ def out_of_grid(g0, g1, g2, g3, pts):  # pragma: no cover - compiled
 def _cell(grid, v):  # pragma: no cover - compiled
     """(i, t): the cell ``grid[i] ≤ v < grid[i + 1]`` (the last closed) and the fraction of v in it."""
     n = grid.shape[0]
-    i = np.searchsorted(grid, v, side="right") - 1
+    lo, hi = 0, n  # np.searchsorted(grid, v, side="right"), bisected: numba's compiles for seconds
+    if v != v:
+        lo = n
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if grid[mid] <= v:
+            lo = mid + 1
+        else:
+            hi = mid
+    i = lo - 1
     if i < 0:
         i = 0
     if i > n - 2:

@@ -29,7 +29,7 @@ import math
 import numpy as np
 from numba import njit
 
-from workbench.estimation.kernels import joseph_update
+from workbench.estimation.kernels import copy_matrix, joseph_update
 
 __all__ = [
     "NC",
@@ -466,7 +466,7 @@ def imu_steps(
                 for j in range(n_e):
                     Fk[i, j] = 1.0 if i == j else 0.0
                     Qk[i, j] = 0.0
-        _copy2(P, P_prior[k])
+        copy_matrix(P, P_prior[k])
         for i in range(n_x):
             x_prior[k, i] = x[i]
         for c in range(n_t + 2):
@@ -498,14 +498,7 @@ def imu_steps(
             inn_nis[k, c] = nis
             if st:
                 return st, k, c
-        _copy2(P, P_post[k])
+        copy_matrix(P, P_post[k])
         for i in range(n_x):
             x_post[k, i] = x[i]
     return 0, -1, -1
-
-
-@njit(cache=True)
-def _copy2(A, B):
-    for i in range(A.shape[0]):
-        for j in range(A.shape[1]):
-            B[i, j] = A[i, j]

@@ -312,7 +312,7 @@ def rhs(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, J, Jinv)
     evaluate(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, F, T, pen)
     m = sc[11]
     out = np.empty(13)
-    out[0:3] = y[3:6]
+    out[0], out[1], out[2] = y[3], y[4], y[5]
     out[3] = F[0] / m
     out[4] = F[1] / m
     out[5] = F[2] / m - G0_MPS2

@@ -31,6 +31,7 @@ import math
 import numpy as np
 from numba import njit
 
+from workbench.estimation.kernels import copy_matrix, copy_vector
 from workbench.problems.meads.state import ILP, ILR, IP, ITH, IV, IW, N_PORTS, N_U_COLS
 
 __all__ = ["pressure_kernel", "measurement_kernel", "flow_kernel", "transition_kernel", "TRANSITION_PARAMS", "N_U_COLS"]
@@ -91,7 +92,16 @@ def _pressure_ratio(m, g):  # pragma: no cover - compiled
 def _cell(grid, v):  # pragma: no cover - compiled
     """(i, t): the lower node and the fraction of ``v`` in cell i of ``grid`` (scipy's rule)."""
     n = grid.size
-    i = np.searchsorted(grid, v) - 1
+    lo, hi = 0, n  # np.searchsorted(grid, v) (side "left"), bisected: numba's compiles for seconds
+    if v != v:
+        lo = n
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if grid[mid] < v:
+            lo = mid + 1
+        else:
+            hi = mid
+    i = lo - 1
     if i < 0:
         i = 0
     if i > n - 2:
@@ -503,15 +513,17 @@ def forward_kernel(
             A = A + A.T
             A *= 0.5
             P = A
-            F_hist[k] = F
+            copy_matrix(F, F_hist[k])
             if keep_q:
-                Q_hist[k] = Q
+                copy_matrix(Q, Q_hist[k])
         else:
-            F_hist[0] = np.eye(n_c)
+            for i in range(n_c):
+                for j in range(n_c):
+                    F_hist[0, i, j] = 1.0 if i == j else 0.0
             if keep_q:
                 Q_hist[0] = 0.0
-        x_prior[k] = x
-        P_prior[k] = P
+        copy_vector(x, x_prior[k])
+        copy_matrix(P, P_prior[k])
         m = 0
         for j in range(m_all):
             if usable[k, j]:
@@ -623,8 +635,8 @@ def forward_kernel(
                 for j in range(m):
                     S_out[k, use[i], use[j]] = S[i, j]
             nis_out[k] = nis
-        x_post[k] = x
-        P_post[k] = P
+        copy_vector(x, x_post[k])
+        copy_matrix(P, P_post[k])
     return 0, n
 
 
@@ -638,8 +650,8 @@ def rts_kernel(x_prior, P_prior, x_post, P_post, G, dsq, consider, xs, Ps):  # p
     Returns ``(status, k)``: 0 done; 1 a scaled ``P_prior[k+1]`` or 2 a smoothed covariance at
     step k not positive definite (the caller reruns the reference for its diagnosis)."""
     n, n_c = x_post.shape
-    xs[n - 1] = x_post[n - 1]
-    Ps[n - 1] = P_post[n - 1]
+    copy_vector(x_post[n - 1], xs[n - 1])
+    copy_matrix(P_post[n - 1], Ps[n - 1])
     L = np.zeros((n_c, n_c))
     if not _cho(Ps[n - 1], L):
         return 2, n - 1
@@ -667,7 +679,7 @@ def rts_kernel(x_prior, P_prior, x_post, P_post, G, dsq, consider, xs, Ps):  # p
                 Gt[c, c] = 1.0
         Gk = Gt.T.copy()
         dx = Gk @ (xs[k + 1] - x_prior[k + 1])
-        xs[k] = x_post[k] + dx
+        copy_vector(x_post[k] + dx, xs[k])
         A = P_post[k] + (Gk @ (Ps[k + 1] - Pp)) @ Gt
         A = 0.5 * (A + A.T)
         for i in range(n_c):
@@ -675,6 +687,6 @@ def rts_kernel(x_prior, P_prior, x_post, P_post, G, dsq, consider, xs, Ps):  # p
                 return 2, k
         if not _cho(A, L):
             return 2, k
-        Ps[k] = A
-        G[k] = Gk
+        copy_matrix(A, Ps[k])
+        copy_matrix(Gk, G[k])
     return 0, 0

@@ -89,15 +89,45 @@ def _np_tanh_pow5(x, r):
 
 
 @njit(cache=True)
+def _interp(x, xp, fp):
+    """``np.interp(x, xp, fp)`` for a scalar x and increasing xp (n,), fp (n,), with numba's rule and
+    rounding: the cell by bisection, ``slope·(x − xp[j]) + fp[j]``, the ends held. Written out
+    because numba's generic ``np.interp`` takes seconds to compile on the first run."""
+    n = xp.shape[0]
+    if math.isnan(x):
+        return x
+    if n == 1 or x >= xp[n - 1]:
+        return fp[n - 1] if n > 1 else fp[0]
+    if x < xp[0]:
+        return fp[0]
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if xp[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    if xp[lo] == x:
+        return fp[lo]
+    slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
+    y = slope * (x - xp[lo]) + fp[lo]
+    if math.isnan(y):
+        y = slope * (x - xp[lo + 1]) + fp[lo + 1]
+        if math.isnan(y) and fp[lo] == fp[lo + 1]:
+            y = fp[lo]
+    return y
+
+
+@njit(cache=True)
 def _air(p0, p1, p2, v0, v1, v2, sc, h_tab, rho_tab, T_tab, wh, wn, we, out):
     """Air-relative velocity (3) [m/s] in M into ``out[0:3]``, up (3) into ``out[3:6]``; returns
     (altitude h [m], density [kg/m³], temperature [K]) at position p, inertial velocity v."""
     r = math.sqrt(_dot(p0, p1, p2, p0, p1, p2))
     h = r - sc[SC_RREF]
-    rho = np.interp(h, h_tab, rho_tab)
-    T = np.interp(h, h_tab, T_tab)
-    w_n = np.interp(h, wh, wn)
-    w_e = np.interp(h, wh, we)
+    rho = _interp(h, h_tab, rho_tab)
+    T = _interp(h, h_tab, T_tab)
+    w_n = _interp(h, wh, wn)
+    w_e = _interp(h, wh, we)
     rn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
     rxy = math.sqrt(p0 * p0 + p1 * p1)
     u0, u1, u2 = p0 / rn, p1 / rn, p2 / rn
@@ -150,7 +180,7 @@ def accel(t, y, sc, h_tab, rho_tab, T_tab, wh, wn, we, bank_t, bank, out):
         x0, x1, x2 = up0 - d * ev0, up1 - d * ev1, up2 - d * ev2
         un = math.sqrt(_dot(x0, x1, x2, x0, x1, x2))
         x0, x1, x2 = x0 / un, x1 / un, x2 / un
-        s = np.interp(t, bank_t, bank)
+        s = _interp(t, bank_t, bank)
         cs, ss = math.cos(s), math.sin(s)
         c0 = ev1 * x2 - ev2 * x1
         c1 = ev2 * x0 - ev0 * x2
