@@ -206,7 +206,7 @@ def test_full_stroke_ok_on_clean_run_and_a_taller_lander_is_a_warning_naming_hei
     assert full["status"] == WARNING and "height_m" in full["message"], full["message"]
     # the clean run's note says the stroke rests on the declared apex, and by how much it moves with it
     note = next(n for n in droptest_result.summary["health"]["notes"] if n.startswith("max stroke"))
-    assert "apex (vertex 3" in note and "no sensor sees" in note and "height_m" in note, note
+    assert "vertex 3, the apex" in note and "no sensor sees" in note and "height_m" in note, note
     per_m = float(re.search(r"by ([+-][0-9.]+) m per metre that vertex moves along body \+z", note).group(1))
     moved = res.summary["max_stroke"]["distance_m"] - droptest_result.summary["max_stroke"]["distance_m"]
     assert abs(moved - per_m * 0.24) < 0.01, (moved, per_m)
@@ -236,7 +236,7 @@ def test_max_stroke_note_gradient_moves_the_stroke_of_a_moved_vertex():
         SimpleNamespace(x=x), SimpleNamespace(max=ms, smoothed=hist, lander=lander), SimpleNamespace(lander_file="L")
     )
     assert ms.vertex == 3 and abs(ms.distance - 0.25) < 1e-9
-    assert "max stroke 0.250" in note and "apex (vertex 3, [0.000, 0.000, 0.800] m" in note, note
+    assert "max stroke 0.250" in note and "vertex 3, the apex ([0.000, 0.000, 0.800] m" in note, note
     per_m = float(re.search(r"by ([+-][0-9.]+) m per metre", note).group(1))
     assert per_m == -1.0
     raised = np.asarray(lander.body.vertices, float).copy()

@@ -657,13 +657,14 @@ def max_stroke_note(smo, st, settings) -> str | None:
     k = int(ms.index)
     g_B = quat_to_dcm(smo.x[k, rl.SQ]).T @ np.asarray(st.smoothed.jacobian[k, :3], float)
     v_B = np.asarray(st.lander.body.vertices[ms.vertex], float)
-    which = "apex" if ms.vertex == 3 else f"base vertex {ms.vertex}"
+    which = "vertex 3, the apex" if ms.vertex == 3 else f"vertex {ms.vertex}, a base vertex"
     return (
         f"max stroke {ms.distance:.3f} ± {ms.sigma:.3f} m (1σ): the distance of the declared body's {which} "
-        f"(vertex {ms.vertex}, [{v_B[0]:.3f}, {v_B[1]:.3f}, {v_B[2]:.3f}] m from the CM) from the surface — a point no "
-        f"sensor sees inside the bags, so the 1σ covers the estimated pose only and the stroke moves with the "
-        f"declared geometry: by {g_B[2]:+.2f} m per metre that vertex moves along body +z (∇ = [{g_B[0]:+.2f}, "
-        f"{g_B[1]:+.2f}, {g_B[2]:+.2f}] per metre along body x, y, z); the geometry: {settings.lander_file} "
+        f"([{v_B[0]:.3f}, {v_B[1]:.3f}, {v_B[2]:.3f}] m from the CM), from the surface — a point no sensor sees "
+        f"while the bags hold it off the surface, so the 1σ covers the estimated pose only and the stroke moves "
+        f"with the declared geometry: by {g_B[2]:+.2f} m per metre that vertex moves along body +z "
+        f"(∇ = [{g_B[0]:+.2f}, {g_B[1]:+.2f}, {g_B[2]:+.2f}] per metre along body x, y, z); the geometry: "
+        f"{settings.lander_file} "
         f"({VERTEX_KEYS})"
     )
 
