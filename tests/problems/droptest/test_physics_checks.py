@@ -3,8 +3,10 @@ clean synthetic telemetry of the shipped ``droptest`` scenario (session fixture 
 
 Mutations are planted in a COPY of the run's telemetry (or of its scenario settings): sensor axes,
 signs and dead channels against gravity while hanging; the declared hanging position against the
-first contact; an IMU file ending inside the contact (outputs undefined, never a number); a
-diverged filter or a dead triad ending in a clear error instead of a traceback.  The timing check
+first contact; the declared lander height against the IMU's rigid impact (and the note on the
+declared body vertex the max stroke rests on); an IMU file ending inside the contact (outputs
+undefined, never a number); a diverged filter or a dead triad ending in a clear error instead of a
+traceback.  The timing check
 (an IMU acquisition filter declared causal when it was zero-phase, with ranging) is in the slow tier.
 """
 
@@ -15,16 +17,21 @@ import shutil
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from workbench.core.rotation import dcm_to_quat
 from workbench.estimation.health import ERROR, OK, WARNING
+from workbench.io.assets import assets_dir
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
 from workbench.problems.droptest.lander import load_lander
-from workbench.problems.droptest.physics import diagnose_axes, hanging_checks
+from workbench.problems.droptest.physics import diagnose_axes, hanging_checks, max_stroke_note
 from workbench.problems.droptest.problem import key_moments
+from workbench.problems.droptest.stroke import max_stroke, stroke_history
+from workbench.problems.droptest.surface import ramp_surface
 from workbench.problems.droptest.telemetry import load_drop_telemetry
 
 Rows = list[list[str]]
@@ -197,6 +204,44 @@ def test_full_stroke_ok_on_clean_run_and_a_taller_lander_is_a_warning_naming_hei
     assert res.summary["max_stroke"]["distance_m"] < droptest_result.summary["max_stroke"]["distance_m"] - 0.15
     full = _checks(res.summary["health"], "geometry.")["geometry.full_stroke"]
     assert full["status"] == WARNING and "height_m" in full["message"], full["message"]
+    # the clean run's note says the stroke rests on the declared apex, and by how much it moves with it
+    note = next(n for n in droptest_result.summary["health"]["notes"] if n.startswith("max stroke"))
+    assert "vertex 3, the apex" in note and "no sensor sees" in note and "height_m" in note, note
+    per_m = float(re.search(r"by ([+-][0-9.]+) m per metre that vertex moves along body \+z", note).group(1))
+    moved = res.summary["max_stroke"]["distance_m"] - droptest_result.summary["max_stroke"]["distance_m"]
+    assert abs(moved - per_m * 0.24) < 0.01, (moved, per_m)
+
+
+def test_max_stroke_note_gradient_moves_the_stroke_of_a_moved_vertex():
+    """The note's gradient of the stroke with respect to the closest declared vertex (body frame)
+    predicts the stroke of the same pose with that vertex moved: apex pointing into the 60° ramp
+    0.25 m away, the apex raised 0.1 m along body +z -> stroke 0.15 m (gradient −1 along +z)."""
+    lander = load_lander(assets_dir() / "landers" / "mer_drop_lander.toml")
+    surface = ramp_surface(angle_deg=60.0, nail_depth=0.3)
+    n = surface.normal
+    z_I = -n  # body +z (toward the apex) into the ramp; body +x along SPF X, which lies in the ramp plane
+    x_I = np.array([1.0, 0.0, 0.0])
+    q = dcm_to_quat(np.column_stack([x_I, np.cross(z_I, x_I), z_I]))
+    apex = np.asarray(lander.body.vertices[3], float)
+    p = surface.point + (0.25 + apex[2]) * n
+
+    def stroke(verts):
+        h = stroke_history(verts, p[None], q[None], np.zeros((1, 6, 6)), surface, faces_B=np.asarray(lander.body.faces))
+        return h, max_stroke(np.zeros(1), h, lander.body)
+
+    hist, ms = stroke(np.asarray(lander.body.vertices, float))
+    x = np.zeros((1, rl.sizes(4)[0]))
+    x[0, rl.SQ] = q
+    note = max_stroke_note(
+        SimpleNamespace(x=x), SimpleNamespace(max=ms, smoothed=hist, lander=lander), SimpleNamespace(lander_file="L")
+    )
+    assert ms.vertex == 3 and abs(ms.distance - 0.25) < 1e-9
+    assert "max stroke 0.250" in note and "vertex 3, the apex ([0.000, 0.000, 0.800] m" in note, note
+    per_m = float(re.search(r"by ([+-][0-9.]+) m per metre", note).group(1))
+    assert per_m == -1.0
+    raised = np.asarray(lander.body.vertices, float).copy()
+    raised[3, 2] += 0.1
+    assert abs(stroke(raised)[1].distance - (0.25 + per_m * 0.1)) < 1e-9
 
 
 def test_rigid_impact_while_the_geometry_keeps_the_lander_clear_is_an_error(droptest_run, droptest_result, tmp_path):

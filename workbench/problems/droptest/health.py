@@ -5,7 +5,8 @@ smoothed covariance symmetric and positive definite; the max-stroke clearance wi
 geometry (0 … bag thickness = lobe diameter + standoff) and its 1σ below the bag thickness; the
 coefficient of restitution in [0, 1]; no IMU gap across the contact (the window the estimate
 detects and the one where the measured specific force exceeds 2 g after release or bungee cut);
-and every warning the telemetry readers reported.
+and every warning the telemetry readers reported.  With the run's settings also the physics
+cross-checks of :mod:`.physics` and a note on the declared body vertex the max stroke rests on.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from workbench.problems.droptest.physics import (
     contact_geometry_check,
     full_stroke_check,
     hanging_checks,
+    max_stroke_note,
     timing_checks,
 )
 
@@ -128,6 +130,9 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
             full = full_stroke_check(tel, st, settings)
             if full is not None:
                 checks.append(full)
+            note = max_stroke_note(smo, st, settings)
+            if note is not None:
+                notes.append(note)
         tchecks, tnotes = timing_checks(tel, smo, st, settings, lag)
         checks += tchecks
         notes += tnotes

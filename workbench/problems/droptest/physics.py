@@ -10,6 +10,8 @@
   airbag lobes at the measured onset of the impact (IMU |f| > 2 g), they must just touch the ramp;
 * :func:`full_stroke_check` — the stroke's full-stroke verdict (declared geometry) against the
   IMU's rigid impact: a rigid frame striking the ramp shows as a jerk tens of times any bag's;
+* :func:`max_stroke_note` — a note, not a check: the max stroke is the distance of a declared body
+  vertex no sensor sees, and how far it moves per metre that vertex moves;
 * :func:`contact_completeness` — data that end (or break) inside the contact: the contact's outputs
   are then undefined;
 * :func:`timing_check` — the declared time shifts of the IMU against the ranging residuals: the lag
@@ -43,9 +45,11 @@ __all__ = [
     "estimate_lag",
     "hanging_checks",
     "lobe_clearance",
+    "max_stroke_note",
     "mean_triad_force",
     "measured_impact",
     "timing_checks",
+    "VERTEX_KEYS",
 ]
 
 #: a hanging direction off its reference by more than this many of its own 1σ (and by more than
@@ -630,6 +634,39 @@ def full_stroke_check(tel, st, settings) -> Check | None:
     else:
         verdict = f"no full stroke: {geo_says}; {imu_says} shows no rigid impact either"
     return Check("geometry.full_stroke", OK, _g(jerk), _g(thr), verdict)
+
+
+#: the lander asset's keys that place the body's vertices (the max stroke's closest point)
+VERTEX_KEYS = "height_m, cm_height_m, base_side_m or vertices_m, cm_m"
+
+
+def max_stroke_note(smo, st, settings) -> str | None:
+    """The health note on what the max stroke rests on: the distance [m] of one vertex of the
+    declared body (``st.max.vertex``; 3 the apex, 0–2 the base) from the surface, a point no sensor
+    sees inside the bags, so its 1σ covers the estimated pose only.  With the stroke's gradient
+    with respect to that vertex's position in the body frame at the max stroke, ``∇ = Rᵀ ∂d/∂p``
+    (R = the smoothed attitude q_SPF_B of ``smo`` at ``st.max.index``, ``∂d/∂p`` the surface
+    gradient of ``st.smoothed.jacobian``): how far the stroke moves per metre the declared vertex
+    moves (body +z: ``height_m`` for the apex in the MER layout).  None without a finite max stroke."""
+    ms = getattr(st, "max", None)
+    if ms is None or not np.isfinite(ms.distance):
+        return None
+    from workbench.core.rotation import quat_to_dcm
+    from workbench.problems.droptest import model as rl
+
+    k = int(ms.index)
+    g_B = quat_to_dcm(smo.x[k, rl.SQ]).T @ np.asarray(st.smoothed.jacobian[k, :3], float)
+    v_B = np.asarray(st.lander.body.vertices[ms.vertex], float)
+    which = "vertex 3, the apex" if ms.vertex == 3 else f"vertex {ms.vertex}, a base vertex"
+    return (
+        f"max stroke {ms.distance:.3f} ± {ms.sigma:.3f} m (1σ): the distance of the declared body's {which} "
+        f"([{v_B[0]:.3f}, {v_B[1]:.3f}, {v_B[2]:.3f}] m from the CM), from the surface — a point no sensor sees "
+        f"while the bags hold it off the surface, so the 1σ covers the estimated pose only and the stroke moves "
+        f"with the declared geometry: by {g_B[2]:+.2f} m per metre that vertex moves along body +z "
+        f"(∇ = [{g_B[0]:+.2f}, {g_B[1]:+.2f}, {g_B[2]:+.2f}] per metre along body x, y, z); the geometry: "
+        f"{settings.lander_file} "
+        f"({VERTEX_KEYS})"
+    )
 
 
 # ---------------------------------------------------------------------------------------------
