@@ -200,3 +200,54 @@ def test_entry_profile_names_state_the_drawn_scale():
     for q in ("density", "pressure", "temperature", "wind"):
         (n,) = [x for x in names if x.startswith(q)]
         assert f"y = {PROFILE_SCALE[q]:g}·km" in n
+
+
+def _labelled_ticks(lo: float, hi: float, px: float) -> list[float]:
+    """The y labels a time-series view ``px`` high over [lo, hi] shows: the multiples of the smallest
+    power of ten whose ticks are ``LABEL_SPACING_PX`` apart (Rerun 0.41's plot)."""
+    from workbench.recording.blueprint import LABEL_SPACING_PX
+
+    step = 10.0 ** np.ceil(np.log10((hi - lo) * LABEL_SPACING_PX / px))
+    return [k * step for k in range(int(np.ceil(lo / step - 1e-9)), int(np.floor(hi / step + 1e-9)) + 1)]
+
+
+@pytest.mark.parametrize(
+    ("lo", "hi"),
+    [(-5202.0, 5202.0), (-75.3, 75.3), (-377.0, 377.0), (0.0, 0.532), (-3.74, 3.80), (3.0, 3.0), (-204.0, 119.0)],
+)
+@pytest.mark.parametrize("px", [130.0, 150.0, 400.0])
+def test_legible_range_holds_the_data_and_three_labelled_ticks(lo, hi, px):
+    from workbench.recording.blueprint import legible_range
+
+    a, b = legible_range(lo, hi, min_px=px)
+    assert a < lo and b > hi
+    for h in (px, 1.3 * px):  # at least min_px high: three labels or more
+        assert len(_labelled_ticks(a, b, h)) >= 3, (lo, hi, px, h, a, b)
+
+
+def test_legible_range_of_the_slant_out_residual_shows_its_3sigma_band():
+    """±5.2 km in a 150 px view: the viewer's fit labels only "0"; the range ±10.5 km labels
+    −10 000, 0, 10 000 with the ±3σ band inside, at half the height."""
+    from workbench.recording.blueprint import legible_range
+
+    assert _labelled_ticks(-5460.0, 5460.0, 150.0) == [0.0]
+    a, b = legible_range(-5202.0, 5202.0, min_px=150.0)
+    assert (a, b) == pytest.approx((-10500.0, 10500.0))
+    assert _labelled_ticks(a, b, 150.0) == [-10000.0, 0.0, 10000.0]
+    with pytest.raises(ValueError):
+        legible_range(1.0, 0.0)
+    with pytest.raises(ValueError):
+        legible_range(0.0, 1.0, min_px=50.0)
+
+
+def test_plot_view_span_opens_the_x_axis_and_keeps_the_data():
+    v = plot_view("a [m]", "/plots/a", span=(3.0, 4.5), y_range=(-1.0, 2.0))
+    assert v.properties["TimeAxis"].view_range.as_arrow_array().to_pylist() == [
+        {"start": 3_000_000_000, "end": 4_500_000_000}
+    ]
+    assert "VisibleTimeRanges" not in v.properties  # all data, only the axis opened on the span
+    assert v.properties["ScalarAxis"].range.as_arrow_array().to_pylist() == [[-1.0, 2.0]]
+    with pytest.raises(ValueError):
+        plot_view("a [m]", "/plots/a", span=(3.0, 4.5), window=(3.0, 4.0))
+    with pytest.raises(ValueError):
+        plot_view("a [m]", "/plots/a", span=(4.5, 3.0))

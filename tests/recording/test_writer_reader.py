@@ -72,6 +72,8 @@ def recorded(tmp_path_factory):
         rec.points("/world/landmarks", inp["track"][:5], colors=(1, 2, 3), radii=0.1)
         rec.mesh(layout.VEHICLE_BODY, trimesh.creation.box(extents=[0.4, 0.2, 0.1]), color=(80, 160, 255, 255))
         rec.text_labels_series("/world/labels", t, inp["pos"], ["vehicle"])
+        rec.text_labels_series("/world/labels_blue", t, inp["pos"], ["3σ"], color=(31, 119, 180, 255))
+        rec.ellipsoids("/world/wire", t, inp["centers"], inp["cov"], color=(31, 119, 180, 255), label="3σ", fill=False)
         rec.arrows_series("/world/arrow", t, inp["xyz"], color=(20, 90, 200, 255), radius=-2.0, label="velocity")
         rec.events(inp["events"])
         rec.report(inp["report"])
@@ -345,3 +347,19 @@ def test_arrows_series_one_arrow_per_step_with_static_style(recorded, tmp_path):
     assert d.static_component("/world/arrow", "Arrows3D:radii") == [-2.0]
     with open_recording(tmp_path / "bad.rrd", "bad") as rec, pytest.raises(ValueError, match="vectors"):
         rec.arrows_series("/world/arrow", [0.0, 1.0], np.zeros((3, 3)))
+
+
+def test_ellipsoid_label_wireframe_and_label_colour(recorded):
+    """An ellipsoid can carry its σ level as a label and be drawn as a wireframe only; a text label
+    can have its own colour (else the viewer's)."""
+    path, _ = recorded
+    d = read_recording(path)
+    assert d.static_component("/world/wire", "Ellipsoids3D:labels") == ["3σ"]
+    assert d.static_component("/world/wire", "Ellipsoids3D:show_labels") == [True]
+    wire, filled = (d.static_component(e, "Ellipsoids3D:fill_mode") for e in ("/world/wire", layout.UNCERTAINTY))
+    assert wire != filled
+    with pytest.raises(KeyError):
+        d.static_component(layout.UNCERTAINTY, "Ellipsoids3D:labels")
+    assert d.static_component("/world/labels_blue", "Points3D:colors") is not None
+    with pytest.raises(KeyError):
+        d.static_component("/world/labels", "Points3D:colors")

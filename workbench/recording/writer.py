@@ -586,10 +586,14 @@ class Recorder:
         nsigma: float = 3.0,
         color: Any = None,
         line_radius: float | None = None,
+        label: str | None = None,
+        fill: bool = True,
         step: Any = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Per-step nσ covariance ellipsoids (transparent fill + wireframe; ``line_radius`` the
-        wireframe's [m], negative: screen points; None: the viewer's default).
+        """Per-step nσ covariance ellipsoids (transparent fill + wireframe, or the wireframe only
+        when not ``fill``; ``line_radius`` the wireframe's [m], negative: screen points; None: the
+        viewer's default; ``label`` a text shown at each ellipsoid's centre, e.g. its σ level, in
+        ``color``, whose alpha is also the fill's).
 
         ``centers`` (n, 3) or (n, k, 3) [m] and ``covariances`` (n, 3, 3) or (n, k, 3, 3) [m²], both
         in the frame of ``entity``'s parent chain (log a world covariance under ``/world`` with the
@@ -616,8 +620,14 @@ class Recorder:
             entity,
             rr.Ellipsoids3D.from_fields(
                 colors=_as_colors(color if color is not None else (255, 165, 0, 90)),
-                fill_mode=rr.components.FillMode.TransparentFillMajorWireframe,
+                fill_mode=(
+                    rr.components.FillMode.TransparentFillMajorWireframe
+                    if fill
+                    else rr.components.FillMode.MajorWireframe
+                ),
                 line_radii=None if line_radius is None else [float(line_radius)],
+                labels=None if label is None else [label],
+                show_labels=None if label is None else True,
             ),
         )
         return half_sizes, quats
@@ -738,11 +748,17 @@ class Recorder:
         if static_style:
             self._log_static(entity, rr.Points3D.from_fields(**static_style))
 
-    def text_labels_series(self, entity: str, t: Any, positions: Any, labels: Any, *, step: Any = None) -> None:
+    def text_labels_series(
+        self, entity: str, t: Any, positions: Any, labels: Any, *, color: Any = None, step: Any = None
+    ) -> None:
         """Labelled points per step: positions (n, 3) or (n, k, 3) [m]; labels k strings (static) or (n, k).
 
-        The labels are drawn next to the points in the 3D view (``show_labels`` on).
+        The labels are drawn next to the points in the 3D view (``show_labels`` on), in ``color``
+        (one RGB(A), static; None: the viewer's choice).
         """
+        style: dict[str, Any] = {"show_labels": True}
+        if color is not None:
+            style["colors"] = _as_colors(color)
         idx, n = self._index(t, step)
         p = np.asarray(positions, dtype=np.float64)
         if p.ndim == 2:
@@ -757,10 +773,10 @@ class Recorder:
                 raise ValueError(f"text_labels_series: labels {lab.shape}, expected ({n}, {k})")
             cols = rr.Points3D.columns(positions=p.reshape(-1, 3), labels=lab.reshape(-1).tolist())
             self._send(entity, idx, cols.partition(counts))
-            self._log_static(entity, rr.Points3D.from_fields(show_labels=True))
+            self._log_static(entity, rr.Points3D.from_fields(**style))
         else:
             self._send(entity, idx, rr.Points3D.columns(positions=p.reshape(-1, 3)).partition(counts))
-            self._log_static(entity, rr.Points3D.from_fields(labels=lab.reshape(-1).tolist(), show_labels=True))
+            self._log_static(entity, rr.Points3D.from_fields(labels=lab.reshape(-1).tolist(), **style))
 
     def mesh(self, entity: str, mesh: Any, *, color: Any = (200, 200, 200, 255), static: bool = True) -> None:
         """A ``trimesh.Trimesh`` as a static ``Mesh3D`` (vertices [m] in ``entity``'s frame, vertex normals).
