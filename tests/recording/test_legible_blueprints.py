@@ -251,3 +251,39 @@ def test_plot_view_span_opens_the_x_axis_and_keeps_the_data():
         plot_view("a [m]", "/plots/a", span=(3.0, 4.5), window=(3.0, 4.0))
     with pytest.raises(ValueError):
         plot_view("a [m]", "/plots/a", span=(4.5, 3.0))
+
+
+def test_entry_descent_view_leaves_the_3sigma_ellipsoid_out_and_names_its_size():
+    """The smoothed 3σ ellipsoid is kilometres wide at the end of the descent: the Descent view's
+    camera (tens of metres from the vehicle) sits inside it. That view shows its size as text;
+    the Entry view draws it, without the text and without the dispersion cloud."""
+    from workbench.problems.entry.recording import DESCENT_EYE, entry_blueprint, sigma_label
+
+    views = {str(v.name): [str(c) for c in v.contents] for v in _walk(entry_blueprint()) if v.class_identifier == "3D"}
+    descent, entry = views["Descent (at the vehicle)"], views["Entry (site frame, km scale)"]
+    assert "- " + layout.UNCERTAINTY in descent and "- " + layout.ENTRY_UNCERTAINTY_LABEL not in descent
+    assert "- " + layout.ENTRY_UNCERTAINTY_LABEL in entry and "- " + layout.UNCERTAINTY not in entry
+    assert "- " + layout.subtree(layout.DISPERSION) in entry
+    assert float(np.linalg.norm(DESCENT_EYE)) < 123.0  # inside the shipped run's smallest 3σ half-axis
+    assert sigma_label(np.array([[123.4, 38223.0, 9935.0]])) == ["3σ ellipsoid ±38.2 km × ±9.94 km × ±123 m"]
+
+
+def test_entry_residual_views_get_a_labelled_range_holding_the_3sigma_band():
+    from types import SimpleNamespace
+
+    from workbench.problems.entry.recording import entry_blueprint, residual_ranges
+
+    n = 50
+    res = SimpleNamespace(
+        t=np.linspace(225.0, 262.0, n),
+        y=np.linspace(-204.0, 119.0, n)[:, None],
+        S=np.full((n, 1, 1), (5202.0 / 3.0) ** 2),
+    )
+    empty = SimpleNamespace(t=np.zeros(0), y=np.zeros((0, 3)), S=np.zeros((0, 3, 3)))
+    ranges = residual_ranges(SimpleNamespace(smoothed_residuals={"slant_out": res, "velocity_out": empty}))
+    assert set(ranges) == {"slant_out"}
+    a, b = ranges["slant_out"]
+    assert a < -5202.0 and b > 5202.0 and len(_labelled_ticks(a, b, 130.0)) >= 3
+    bp = entry_blueprint(descent=(175.0, 262.0), residual_y=ranges)
+    (view,) = [v for v in _time_series(bp) if str(v.origin) == layout.ENTRY_RESIDUAL_SLANT_OUT]
+    assert view.properties["ScalarAxis"].range.as_arrow_array().to_pylist() == [[a, b]]

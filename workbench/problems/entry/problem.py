@@ -211,7 +211,12 @@ class EntryProblem(PipelineProblem):
         (``recording.entry_blueprint``), sent when the run is done, has the AGL views fixed on the
         descent (known only then; without a descent the generic layout)."""
         from workbench.core.bodies import MARS
-        from workbench.problems.entry.recording import EntryRecorder, descent_window, entry_blueprint
+        from workbench.problems.entry.recording import (
+            EntryRecorder,
+            descent_window,
+            entry_blueprint,
+            residual_ranges,
+        )
         from workbench.recording.writer import open_recording
 
         with open_recording(path, settings.run.name, properties=properties) as rec:
@@ -226,7 +231,8 @@ class EntryProblem(PipelineProblem):
 
             def layout(result: object, summary: dict):
                 window = descent_window(summary)
-                return None if window is None else entry_blueprint(descent=window)
+                y = residual_ranges(result.filter)
+                return None if window is None else entry_blueprint(descent=window, residual_y=y)
 
             yield RunDrawer(rec, drawer, en.scorecard_markdown, layout=layout, blueprint=entry_blueprint())
 
