@@ -287,3 +287,26 @@ def test_entry_residual_views_get_a_labelled_range_holding_the_3sigma_band():
     bp = entry_blueprint(descent=(175.0, 262.0), residual_y=ranges)
     (view,) = [v for v in _time_series(bp) if str(v.origin) == layout.ENTRY_RESIDUAL_SLANT_OUT]
     assert view.properties["ScalarAxis"].range.as_arrow_array().to_pylist() == [[a, b]]
+
+
+def test_droptest_stroke_zoom_holds_the_max_stroke_band_with_labelled_ticks():
+    """The zoomed stroke view: from the ramp (0) to above the max stroke's +3σ, with 0.1 m ticks
+    labelled (0 to 1.2 m labelled only 0 and 1 in a 1400 x 900 window)."""
+    from types import SimpleNamespace
+
+    from workbench.problems.droptest import model as rl
+    from workbench.problems.droptest.recording import STROKE_VIEW_PX, impact_view
+
+    n = 20
+    x = np.zeros((n, rl.N_X))
+    st = SimpleNamespace(
+        contact=(5, 12),
+        max=SimpleNamespace(distance=0.236, sigma=0.049, index=9),
+        smoothed=SimpleNamespace(closest_point_I=np.zeros((n, 3))),
+        surface=SimpleNamespace(normal=np.array([0.0, 0.0, 1.0])),
+    )
+    view = impact_view(SimpleNamespace(stroke=st, smoothed=SimpleNamespace(x=x, t=np.linspace(1.0, 2.0, n))))
+    lo, hi = view["stroke_lo"], view["stroke_hi"]
+    assert lo < 0.0 and hi > 0.236 + 3 * 0.049 and hi < 1.0
+    ticks = _labelled_ticks(lo, hi, STROKE_VIEW_PX)
+    assert len(ticks) >= 5 and ticks[1] - ticks[0] == pytest.approx(0.1)

@@ -28,7 +28,7 @@ from workbench.problems.droptest.lander import airbag_mesh
 from workbench.problems.droptest.pipeline import DropResult, DropTelemetry, FilterStage, InitialState, StrokeStage
 from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
-from workbench.recording.blueprint import events_view, plot_view, report_view, tab
+from workbench.recording.blueprint import events_view, legible_range, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import Recorder
 
@@ -59,6 +59,8 @@ SCENE_KEY_TRUTH_MD = " · green wireframe and line: truth body and CM track"
 #: key of the red/green/blue (x/y/z) colours, for view names (legends off: they covered the data)
 XYZ_KEY = "RGB = xyz"
 BOUNDS_KEY = "±3σ grey, truth pale"
+#: the height [CSS px] the zoomed stroke view is given at least (1400 x 900 window: about 190)
+STROKE_VIEW_PX = 150.0
 
 #: bounded per-axis series under a plot root: (root, tab title, unit, axis leaf names). The leaf is the
 #: first word of each series name the recorder gives (``layout.join(root, leaf)``).
@@ -239,8 +241,13 @@ def impact_view(result) -> dict:
     if i0 < 0:
         i0 = i1 = int(st.max.index)
     h = st.smoothed
-    lo = float(min(0.0, st.max.distance - 3.5 * st.max.sigma)) - 0.05
-    hi = float(max(1.0, h.distance[i0] + 0.2))
+    # the max stroke with its ±3σ band and 0.1 m above, down to the ramp (0), widened to labelled
+    # ticks (a span a little above 1 m is labelled at 0 and 1 only in a short view)
+    lo, hi = legible_range(
+        min(0.0, st.max.distance - 3.5 * st.max.sigma),
+        st.max.distance + 4.0 * st.max.sigma + 0.1,
+        min_px=STROKE_VIEW_PX,
+    )
     return {
         "point": smo.x[int(st.max.index), rl.SP],
         "closest": h.closest_point_I[int(st.max.index)],
