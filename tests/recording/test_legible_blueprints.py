@@ -310,3 +310,34 @@ def test_droptest_stroke_zoom_holds_the_max_stroke_band_with_labelled_ticks():
     assert lo < 0.0 and hi > 0.236 + 3 * 0.049 and hi < 1.0
     ticks = _labelled_ticks(lo, hi, STROKE_VIEW_PX)
     assert len(ticks) >= 5 and ticks[1] - ticks[0] == pytest.approx(0.1)
+
+
+def test_post2_views_open_on_what_they_draw():
+    """A Huygens run lasts 2 h 13 min: the viewer opened its plots on a minute around the time
+    cursor. Each state view opens on the run, each residual view on its observation's span, with
+    a y range holding value ± 3σ (and truth) at labelled ticks."""
+    from workbench.problems.post2.recording import Post2Drawer, post2_blueprint
+
+    d = Post2Drawer(None, None, None)
+    t = np.linspace(0.0, 267.8, 30)
+    d.view_range(layout.residual_path("accel_entry", "ax"), t, np.full(30, 3.8), np.full(30, -3.7))
+    d.view_range(layout.residual_path("accel_entry", "ax"), t + 10.0, np.array([np.nan, 4.0]))
+    assert d.spans[layout.residual_path("accel_entry", "ax")] == (0.0, pytest.approx(277.8))
+    assert d.y_ranges[layout.residual_path("accel_entry", "ax")] == (-3.7, 4.0)
+    bp = post2_blueprint(
+        ["position"],
+        ["accel_entry"],
+        True,
+        residual_components={"accel_entry": ("ax",)},
+        observation_units={"accel_entry": "m/s^2"},
+        span=(0.0, 8000.0),
+        spans=d.spans,
+        y_ranges={layout.residual_path("accel_entry", "ax"): (-10.5, 10.5)},
+    )
+    axes = {
+        str(v.origin): v.properties["TimeAxis"].view_range.as_arrow_array().to_pylist()[0] for v in _time_series(bp)
+    }
+    assert axes[layout.plot_path("position_error/x")] == {"start": 0, "end": 8_000_000_000_000}
+    assert axes[layout.residual_path("accel_entry", "ax")]["end"] == round(277.8e9)
+    (res,) = [v for v in _time_series(bp) if str(v.origin) == layout.residual_path("accel_entry", "ax")]
+    assert res.properties["ScalarAxis"].range.as_arrow_array().to_pylist() == [[-10.5, 10.5]]
