@@ -30,7 +30,7 @@ from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
 from workbench.recording.blueprint import events_view, legible_range, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
-from workbench.recording.writer import Recorder
+from workbench.recording.writer import PALETTE, Recorder
 
 __all__ = ["DropTestRecorder", "droptest_blueprint", "impact_view"]
 
@@ -354,7 +354,7 @@ class DropTestRecorder:
         r.line_strip(layout.ESTIMATE_FORWARD, st.x[:, rl.SP], color=FWD, radius=0.01)
         fp = st.forward
         dofs: set[int] = set()
-        for name, ih in fp.innovations.items():
+        for k, (name, ih) in enumerate(fp.innovations.items()):
             m = ih.step  # grid steps of the samples
             if not m.size:
                 continue
@@ -383,7 +383,15 @@ class DropTestRecorder:
                         colors=[(150, 150, 150, 255)],
                         widths=0.8,
                     )
-            r.scalars(layout.droptest_nis_path(name), t[m], ih.nis, step=step[m], names=f"NIS {name}")
+            # one palette colour per sensor (the viewer's own, by path, gave gyro, PXBP and PYBP one magenta)
+            r.scalars(
+                layout.droptest_nis_path(name),
+                t[m],
+                ih.nis,
+                step=step[m],
+                names=f"NIS {name}",
+                colors=[PALETTE[k % len(PALETTE)]],
+            )
             dofs.add(int(ih.y.shape[1]))
         # the χ² 99 % bound of each innovation dimension: a NIS above it is a 1 % event per sample
         for dof in sorted(dofs):
