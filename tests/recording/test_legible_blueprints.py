@@ -264,6 +264,7 @@ def test_entry_descent_view_leaves_the_3sigma_ellipsoid_out_and_names_its_size()
     assert "- " + layout.UNCERTAINTY in descent and "- " + layout.ENTRY_UNCERTAINTY_LABEL not in descent
     assert "- " + layout.ENTRY_UNCERTAINTY_LABEL in entry and "- " + layout.UNCERTAINTY not in entry
     assert "- " + layout.subtree(layout.DISPERSION) in entry
+    assert "- " + layout.VEHICLE_MARKER in descent and "- " + layout.VEHICLE_MARKER not in entry
     assert float(np.linalg.norm(DESCENT_EYE)) < 123.0  # inside the shipped run's smallest 3σ half-axis
     assert sigma_label(np.array([[123.4, 38223.0, 9935.0]])) == ["3σ ellipsoid ±38.2 km × ±9.94 km × ±123 m"]
 

@@ -63,12 +63,12 @@ GREY = (150, 150, 150, 255)
 
 #: what the 3D scenes show (``layout.SCENE_KEY``, under the 3D views)
 SCENE_KEY_MD = (
-    "**3D key** — blue line: smoothed track, blue ellipsoid its 3σ; orange line: forward (filter) pass, orange "
-    "ellipsoid its 3σ (the ellipsoids in the Entry view; kilometres wide, they would enclose the Descent view's "
-    "camera, which names their semi-axes beside the vehicle instead); red: on-board navigation; purple: nominal "
-    "trajectory; radar beams coloured by their normalised residual, green ≤ 1σ → red ≥ 3σ (grey: no return); "
-    "dispersion cloud hidden (tick `/world/dispersion` in the blueprint panel: green / grey, members accepted / "
-    "rejected, tracks and positions at PDD)"
+    "**3D key** — black dot (Entry view): the vehicle; blue line: smoothed track, blue ellipsoid its 3σ; orange "
+    "line: forward (filter) pass, orange ellipsoid its 3σ (the ellipsoids in the Entry view; kilometres wide, "
+    "they would enclose the Descent view's camera, which names their semi-axes beside the vehicle instead); red: "
+    "on-board navigation; purple: nominal trajectory; radar beams coloured by their normalised residual, green "
+    "≤ 1σ → red ≥ 3σ (grey: no return); dispersion cloud hidden (tick `/world/dispersion` in the blueprint "
+    "panel: green / grey, members accepted / rejected, tracks and positions at PDD)"
 )
 SCENE_KEY_TRUTH_MD = " · green line: truth track"
 RAW = (120, 160, 220, 255)
@@ -172,6 +172,7 @@ def entry_blueprint(
                 "- " + layout.subtree(layout.DISPERSION),
                 "- " + layout.subtree(layout.ENTRY_FORWARD_VEHICLE),
                 "- " + layout.UNCERTAINTY,
+                "- " + layout.VEHICLE_MARKER,
             ],
             eye_controls=rrb.EyeControls3D(position=list(DESCENT_EYE), look_target=list(DESCENT_LOOK)),
         ),
@@ -549,6 +550,8 @@ class EntryRecorder:
         p_L = self._L(t, sm.p_M)
         q_L = site.attitudes(t, sm.q_M_G)
         rec.poses(layout.VEHICLE, t, p_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)), step=np.arange(len(t)))
+        # at the Entry view's hundreds of km the capsule is invisible: a dot of fixed screen size
+        rec.points(layout.VEHICLE_MARKER, np.zeros((1, 3)), colors=(20, 20, 20, 255), radii=-6.0)
         rec.poses(layout.VEHICLE_BODY, t, np.zeros((len(t), 3)), q_L, step=np.arange(len(t)))
         P_L = site.covariances(t, sm.P[:, DP, DP])
         half_sizes, _ = rec.ellipsoids(

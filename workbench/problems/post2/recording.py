@@ -323,7 +323,7 @@ class Post2Drawer:
         t = res.t[sel]
         rate = float(g.get("planet_rate_rad_s") or 0.0)
         self.rec.poses(layout.VEHICLE, t, res.smap.raw(res.x[sel], "position"), res.body_attitude(sel, rate))
-        self.rec.points(layout.POST2_VEHICLE_MARKER, np.zeros((1, 3)), colors=(230, 60, 30, 255), radii=-5.0)
+        self.rec.points(layout.VEHICLE_MARKER, np.zeros((1, 3)), colors=(230, 60, 30, 255), radii=-5.0)
         q_tilt = res.tilt_rotation(sel)
         if q_tilt is not None:  # body drawn tilted by the estimated tilt
             self.rec.poses(layout.VEHICLE_BODY, t, np.zeros((t.size, 3)), q_tilt)
@@ -505,7 +505,7 @@ def post2_blueprint(
                 # the local level frame at the vehicle (east, north, up): the horizon grid lies flat,
                 # the viewer's up is the local vertical, and the body turns against them
                 origin=layout.POST2_HORIZON,
-                contents=[f"+ {layout.VEHICLE}/**", "- " + layout.POST2_VEHICLE_MARKER],
+                contents=[f"+ {layout.VEHICLE}/**", "- " + layout.VEHICLE_MARKER],
                 line_grid=False,  # the horizon grid (under the vehicle, north and east labelled) instead
             )
         )
