@@ -342,3 +342,35 @@ def test_post2_views_open_on_what_they_draw():
     assert axes[layout.residual_path("accel_entry", "ax")]["end"] == round(277.8e9)
     (res,) = [v for v in _time_series(bp) if str(v.origin) == layout.residual_path("accel_entry", "ax")]
     assert res.properties["ScalarAxis"].range.as_arrow_array().to_pylist() == [[-10.5, 10.5]]
+
+
+def test_entry_plots_open_on_the_run_and_the_residuals_on_the_radar():
+    """The entry's time plots opened on about a minute around the time cursor (the end of a 277 s
+    run): each opens on the run, the residual and radar views on the radar's span."""
+    from types import SimpleNamespace
+
+    from workbench.problems.entry.recording import entry_blueprint, residual_spans, run_span
+
+    span = run_span({"event_table": [{"event": "First data", "t_s": -15.0}, {"event": "BSR", "t_s": 262.48}]})
+    assert span == (-15.0, 262.48) and run_span({"event_table": []}) is None
+    res = SimpleNamespace(t=np.linspace(225.5, 262.4, 5))
+    rs = residual_spans(SimpleNamespace(smoothed_residuals={"slant_out": res, "slant_range": SimpleNamespace(t=[1.0])}))
+    assert rs == {"slant_out": (225.5, 262.4)}
+    views = _time_series(entry_blueprint(descent=(175.0, 262.48), span=span, residual_span=rs))
+    axes = {
+        str(v.name): v.properties["TimeAxis"].view_range.as_arrow_array().to_pylist()[0]
+        for v in views
+        if "TimeAxis" in v.properties
+    }
+    amr = [a for n, a in axes.items() if n.startswith("altitude AMR")]
+    assert amr == [{"start": -15_000_000_000, "end": 262_480_000_000}]
+    radar_ns = pytest.approx({"start": 225_500_000_000, "end": 262_400_000_000}, abs=1)  # seconds -> ns
+    assert axes["slant-out residual [m] — blue, grey ±3σ"] == radar_ns
+    radar = [a for n, a in axes.items() if n.startswith("slant-out [m]")]
+    assert radar == [radar_ns]
+    # every time plot but the per-member dispersion views (timeline 'sample') opens on a known span
+    timed = [v for v in views if "per member" not in str(v.name)]
+    assert all("TimeAxis" in v.properties for v in timed)
+    # measured vs predicted radar: a tab each (stacked three in the residual row, each too short for a y label)
+    (radar_tabs,) = [c for c in _containers(entry_blueprint()) if str(c.name) == "radar meas vs pred"]
+    assert isinstance(radar_tabs, rrb.Tabs) and len(radar_tabs.contents) == 3

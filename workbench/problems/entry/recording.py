@@ -52,7 +52,15 @@ from workbench.recording.dispatch import StageDispatch
 from workbench.recording.meshes import mesh3d
 from workbench.recording.writer import Recorder
 
-__all__ = ["EntryRecorder", "descent_window", "entry_blueprint", "residual_ranges", "sigma_label"]
+__all__ = [
+    "EntryRecorder",
+    "descent_window",
+    "entry_blueprint",
+    "residual_ranges",
+    "residual_spans",
+    "run_span",
+    "sigma_label",
+]
 
 EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
@@ -150,6 +158,8 @@ def entry_blueprint(
     residual_tab: int = 0,
     descent: tuple[float, float] | None = None,
     residual_y: dict[str, tuple[float, float]] | None = None,
+    span: tuple[float, float] | None = None,
+    residual_span: dict[str, tuple[float, float]] | None = None,
 ) -> rrb.Blueprint:
     """Default layout: 3D (descent at the vehicle, whole entry), plots, residuals, profiles, report.
 
@@ -159,7 +169,10 @@ def entry_blueprint(
     AGL plot is empty before it) with the last 20 s zoomed beside, where ±3σ is legible. Every plot's
     name states its unit and colours (legends off: they covered the data). ``residual_y`` {radar
     channel: (lo, hi)} [m or m/s]: the residual views' y ranges (:func:`residual_ranges`; else the
-    viewer's own fit, which in a short view can label only "0").
+    viewer's own fit, which in a short view can label only "0"). ``span`` (t0, t1) [s]: the run
+    (:func:`run_span`), on which the time plots open their x axis, ``residual_span`` {radar channel:
+    (t0, t1)} [s] the residual and radar views' own (:func:`residual_spans`); without them the
+    viewer opens a plot on about a minute around the time cursor.
     The Descent view leaves out the 3σ ellipsoids (kilometres wide, they enclose its camera) and
     shows their size as text (``layout.ENTRY_UNCERTAINTY_LABEL``); the Entry view draws them.
     """
@@ -235,13 +248,14 @@ def entry_blueprint(
             column_shares=[3, 2],
             name="altitude AGL [m]",
         )
-    plot_tabs = [agl, *[tab(short, plot_view(n, o)) for short, n, o in _PLOTS]]
+    plot_tabs = [agl, *[tab(short, plot_view(n, o, span=span)) for short, n, o in _PLOTS]]
     plot_tabs.append(
         rrb.Horizontal(
             *[
                 plot_view(
                     f"wind {c} [m/s] — " + ("red" if c == "north" else "blue") + ", grey ±3σ, pale truth",
                     layout.entry_wind_plot_path(c),
+                    span=span,
                 )
                 for c in ("north", "east")
             ],
@@ -262,8 +276,11 @@ def entry_blueprint(
         )
     )
     plots = rrb.Tabs(*plot_tabs, active_tab=plot_tab)
-    ry = residual_y or {}
-    res_tabs = [tab(short, plot_view(n, o, y_range=ry.get(ch))) for ch, short, n, o in _RESIDUALS]
+    ry, rs = residual_y or {}, residual_span or {}
+    res_tabs = [
+        tab(short, plot_view(n, o, y_range=ry.get(ch), span=rs.get(ch, span))) for ch, short, n, o in _RESIDUALS
+    ]
+    radar_span = (min(a for a, _ in rs.values()), max(b for _, b in rs.values())) if rs else span
     radar = (  # channel, view name (unit and colours)
         ("slant_out", "slant-out [m] — grey measured, blue smoothed prediction"),
         ("velocity_out", "velocity-out [m/s] — grey measured, " + XYZ_KEY + " smoothed prediction"),
@@ -274,10 +291,12 @@ def entry_blueprint(
             name,
             layout.ENTRY_PLOT_RADAR,
             contents=[layout.entry_radar_plot_path(ch, s) for s in (layout.MEASURED_SERIES, layout.PREDICTED_SERIES)],
+            span=radar_span,
         )
         for ch, name in radar
     ]
-    res_tabs.append(rrb.Vertical(*radar_views, name="radar meas vs pred"))
+    # a tab each (stacked in the residual row, each view was too short for a y label)
+    res_tabs.append(rrb.Tabs(*radar_views, name="radar meas vs pred"))
     residuals = rrb.Tabs(*res_tabs, active_tab=residual_tab)
     right = rrb.Vertical(
         plots,
@@ -310,6 +329,23 @@ def residual_ranges(filter_result: EntryFilterResult, min_px: float = RESIDUAL_V
         if np.isfinite(b) and b > 0.0:
             out[ch] = legible_range(-b, b, min_px=min_px)
     return out
+
+
+def residual_spans(filter_result: EntryFilterResult) -> dict:
+    """{radar channel: (first, last)} [s] the time span of its smoothed residuals (the radar's)."""
+    out = {}
+    for ch, res in filter_result.smoothed_residuals.items():
+        t = np.asarray(res.t, dtype=float)
+        if t.size > 1 and t[-1] > t[0]:
+            out[ch] = (float(t[0]), float(t[-1]))
+    return out
+
+
+def run_span(summary: dict) -> tuple[float, float] | None:
+    """(first, last) [s] of a run summary's ``event_table`` ("First data" to the last event): the
+    span of its time plots."""
+    t = [float(r["t_s"]) for r in summary.get("event_table", [])]
+    return (min(t), max(t)) if len(t) > 1 and max(t) > min(t) else None
 
 
 def sigma_label(half_sizes: np.ndarray, nsigma: float = 3.0) -> list[str]:
