@@ -363,3 +363,28 @@ def test_ellipsoid_label_wireframe_and_label_colour(recorded):
     assert d.static_component("/world/labels_blue", "Points3D:colors") is not None
     with pytest.raises(KeyError):
         d.static_component("/world/labels", "Points3D:colors")
+
+
+def test_value_range_of_a_plot_origin(tmp_path):
+    """The recorder keeps what it drew against time per entity (per time bin): a layout sent after
+    the run sets a plot's y range from it, over a time window when given."""
+    t = np.arange(1000) * 0.5
+    noisy = np.where(t < 100.0, 60.0 * np.sin(t), 20.0 + np.sin(t))
+    with open_recording(tmp_path / "r.rrd", "ranges") as rec:
+        rec.series_with_bounds(layout.plot_path("alt"), t[:4], [1.0, 2.0, np.nan, 3.0], [0.1, 0.1, 0.1, 0.1])
+        rec.scatter(layout.plot_path("alt/meas"), t[:4], [0.5, 9.0, 1.0, 2.0], names="z", colors=(0, 0, 0))
+        rec.scalars(layout.plot_path("alt_b"), t[:4], [-50.0, 0.0, 0.0, 0.0])
+        rec.scalars(layout.plot_path("seq"), None, [7.0, 8.0], sequences={layout.SAMPLE: np.arange(2)})
+        rec.scalars(layout.plot_path("alpha"), t, noisy)
+        assert rec.value_range(layout.plot_path("alt")) == (0.5, 9.0)
+        assert rec.value_range(layout.plot_path("alt") + "/") == (0.5, 9.0)
+        assert rec.value_range(layout.plot_path("alt/value")) == (1.0, 3.0)
+        assert rec.value_range(layout.plot_path("alt_b")) == (-50.0, 0.0)
+        assert rec.value_range(layout.plot_path("seq")) is None
+        assert rec.value_range("/plots/nothing") is None
+        lo, hi = rec.value_range(layout.plot_path("alpha"))
+        assert lo < -59.0 and hi > 59.0
+        # the window leaves the noise out, to a bin (2 s here) of the edge
+        lo, hi = rec.value_range(layout.plot_path("alpha"), 102.0, 499.5)
+        assert 19.0 <= lo < 19.1 and 20.9 < hi <= 21.0
+        assert rec.value_range(layout.plot_path("alpha"), 600.0, 700.0) is None

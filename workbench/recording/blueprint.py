@@ -31,6 +31,8 @@ __all__ = [
     "tab",
     "has_unit",
     "legible_range",
+    "labelled_ticks",
+    "y_range_if_needed",
     "LABEL_SPACING_PX",
 ]
 
@@ -160,6 +162,24 @@ def legible_range(
         if (bb - aa) * label_px / min_px <= step * (1.0 + 1e-9):
             return aa, bb
         step *= 10.0
+
+
+def labelled_ticks(lo: float, hi: float, px: float, label_px: float = LABEL_SPACING_PX) -> list[float]:
+    """The y labels a time-series view ``px`` [CSS px] high over ``[lo, hi]`` shows (Rerun 0.41,
+    modelled): the multiples in it of the smallest power of ten whose ticks are ``label_px`` apart."""
+    if not hi > lo or px <= 0:
+        return []
+    step = 10.0 ** math.ceil(math.log10((hi - lo) * label_px / px))
+    return [k * step for k in range(math.ceil(lo / step - 1e-9), math.floor(hi / step + 1e-9) + 1)]
+
+
+def y_range_if_needed(lo: float, hi: float, px: float) -> tuple[float, float] | None:
+    """None when the viewer's own fit of ``[lo, hi]`` (the data's extent) labels three ticks or
+    more in a view ``px`` [CSS px] high (:func:`labelled_ticks`), else :func:`legible_range` for
+    that height: a y range is fixed only where the viewer's would show one or two labels."""
+    if len(labelled_ticks(lo, hi, px)) >= 3:
+        return None
+    return legible_range(lo, hi, min_px=px)
 
 
 def time_window(t0_s: float, t1_s: float) -> rrb.VisibleTimeRange:
