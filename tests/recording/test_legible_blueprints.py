@@ -374,3 +374,46 @@ def test_entry_plots_open_on_the_run_and_the_residuals_on_the_radar():
     # measured vs predicted radar: a tab each (stacked three in the residual row, each too short for a y label)
     (radar_tabs,) = [c for c in _containers(entry_blueprint()) if str(c.name) == "radar meas vs pred"]
     assert isinstance(radar_tabs, rrb.Tabs) and len(radar_tabs.contents) == 3
+
+
+def test_meads_plots_open_on_the_pressure_span():
+    """A 293 s MEADS run opened its plots on about a minute around the time cursor: the port views
+    open on the run, the air-data views on the span above the q∞ threshold."""
+    from workbench.problems.meads.recording import meads_blueprint
+
+    views = _time_series(meads_blueprint(("P1", "P2"), 2, True, span=(0.0, 292.625), air_span=(60.0, 280.0)))
+    assert views
+    for v in views:
+        rng = v.properties["TimeAxis"].view_range.as_arrow_array().to_pylist()[0]
+        port = str(v.name).startswith(("P1", "P2"))
+        want = {"start": 0, "end": 292_625_000_000} if port else {"start": 60_000_000_000, "end": 280_000_000_000}
+        assert rng == pytest.approx(want, abs=1), v.name
+    assert all("TimeAxis" not in v.properties for v in _time_series(meads_blueprint(("P1",), 0)))
+
+
+def test_y_range_only_where_the_viewer_labels_fewer_than_three_ticks():
+    from types import SimpleNamespace
+
+    from workbench.problems.meads.recording import AIR_DATA_VIEW_PX, PORT_FIT_VIEW_PX, meads_blueprint, view_y_ranges
+    from workbench.recording.blueprint import labelled_ticks, y_range_if_needed
+
+    assert labelled_ticks(12.0, 28.0, 180.0) == [20.0]  # α over the high-q∞ span: one label
+    assert y_range_if_needed(-55.0, 31.0, 180.0) is None  # ρ error: the viewer labels every 10 %
+    a, b = y_range_if_needed(12.0, 28.0, 180.0)
+    assert a < 12.0 and b > 28.0 and len(labelled_ticks(a, b, 180.0)) >= 3
+    res = layout.residual_path("pressure", "P1")
+    drawn = {layout.plot_path("alpha_deg"): (12.0, 28.0), layout.plot_path("density"): (-55.0, 31.0), res: (-90, 90)}
+    calls = {}
+
+    def value_range(origin, t0, t1):
+        calls[origin] = (t0, t1)
+        return drawn.get(origin)
+
+    ranges = view_y_ranges(SimpleNamespace(value_range=value_range), ("P1",), 2, (60.0, 280.0))
+    assert set(ranges) == {layout.plot_path("alpha_deg"), res}
+    assert calls[layout.plot_path("alpha_deg")] == (60.0, 280.0) and calls[res] == (None, None)
+    assert layout.meads_ekf_innovation_path(2, "P1") in calls
+    assert len(labelled_ticks(*ranges[layout.plot_path("alpha_deg")], AIR_DATA_VIEW_PX)) >= 3
+    assert len(labelled_ticks(*ranges[res], PORT_FIT_VIEW_PX)) >= 3
+    views = {str(v.origin): v for v in _time_series(meads_blueprint(("P1",), 2, True, y_ranges=ranges))}
+    assert views[res].properties["ScalarAxis"].range.as_arrow_array().to_pylist() == [list(ranges[res])]
