@@ -28,7 +28,7 @@ from workbench.problems.post2.model import OBSERVATIONS, STATES
 from workbench.problems.post2.pipeline import ForwardStage, ObservationData, Post2Result
 from workbench.problems.post2.scoring import truth_on_grid
 from workbench.recording import layout
-from workbench.recording.blueprint import events_view, legible_range, plot_view, report_view, tab
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab, y_range_if_needed
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.meshes import mesh3d
 from workbench.recording.moments import log_key_moments
@@ -70,8 +70,8 @@ EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
 TRUTH = (44, 160, 44, 255)
 PROP = (148, 103, 189, 255)
-#: the height [CSS px] a state or residual view is given at least (1400 x 900 window: about 160)
-VIEW_PX = 130.0
+#: the height [CSS px] of a state or residual view (a 1400 x 900 window: about 155 to 175)
+VIEW_PX = 150.0
 
 
 def _display(unit: str) -> tuple[str, float]:
@@ -179,8 +179,9 @@ class Post2Drawer:
 
     def view_range(self, origin: str, t: np.ndarray, *series: np.ndarray | None) -> None:
         """Note the x span (first, last ``t`` [s]) and a y range holding every finite value of
-        ``series`` (the view's unit, widened by ``blueprint.legible_range`` for three labelled
-        ticks in a view :data:`VIEW_PX` high) of the plot view at ``origin``; several notes of one
+        ``series`` (the view's unit; :meth:`finish` fixes it, widened, where the viewer's own fit
+        would label fewer than three ticks in a view :data:`VIEW_PX` high:
+        ``blueprint.y_range_if_needed``) of the plot view at ``origin``; several notes of one
         origin are merged."""
         t = np.asarray(t, dtype=float)
         t = t[np.isfinite(t)]
@@ -405,7 +406,9 @@ class Post2Drawer:
         log_key_moments(self.rec, summary.get("key_moments", []))
         if self.layout is not None:
             eye = None if self.track is None else trajectory_eye(self.track)
-            y_ranges = {o: legible_range(lo, hi, min_px=VIEW_PX) for o, (lo, hi) in self.y_ranges.items()}
+            y_ranges = {
+                o: y for o, (lo, hi) in self.y_ranges.items() if (y := y_range_if_needed(lo, hi, VIEW_PX)) is not None
+            }
             bp = self.layout(eye, span=self.span, spans=self.spans, y_ranges=y_ranges)
             self.rec.stream.send_blueprint(bp, make_active=True, make_default=True)
 
