@@ -417,3 +417,29 @@ def test_y_range_only_where_the_viewer_labels_fewer_than_three_ticks():
     assert len(labelled_ticks(*ranges[res], PORT_FIT_VIEW_PX)) >= 3
     views = {str(v.origin): v for v in _time_series(meads_blueprint(("P1",), 2, True, y_ranges=ranges))}
     assert views[res].properties["ScalarAxis"].range.as_arrow_array().to_pylist() == [list(ranges[res])]
+
+
+def test_droptest_bounded_axes_get_a_tab_each_and_labelled_y_ranges():
+    """Three axes stacked in the plot row were each too low for more than one y label: a tab per
+    axis (whole drop beside the impact zoom), y ranges fixed where the viewer would label fewer than
+    three ticks, over the impact window for the zoom."""
+    from types import SimpleNamespace
+
+    from workbench.problems.droptest.recording import BOUNDED_VIEW_PX, bounded_y_ranges, droptest_blueprint
+
+    x = layout.join(layout.DROPTEST_PLOT_POSITION, "x")
+    drawn = {(x, None, None): (-0.7, 1.9), (x, 1.5, 2.0): (-0.08, 0.09)}
+    rec = SimpleNamespace(value_range=lambda o, t0=None, t1=None: drawn.get((o, t0, t1)))
+    impact = {"point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0]), "t0": 1.5, "t1": 2.0}
+    whole, zoom = bounded_y_ranges(rec, impact | {"stroke_lo": 0.0, "stroke_hi": 1.0})
+    assert set(whole) == {x} and set(zoom) == {x}
+    for r in (whole[x], zoom[x]):
+        assert len(_labelled_ticks(*r, BOUNDED_VIEW_PX)) >= 3
+    bp = droptest_blueprint(["BP"], impact | {"stroke_lo": 0.0, "stroke_hi": 1.0}, ["BP"], whole, zoom)
+    (pos,) = [c for c in _containers(bp) if str(c.name) == "position [m]"]
+    assert isinstance(pos, rrb.Tabs) and [str(c.name) for c in pos.contents] == ["x", "y", "z"]
+    views = [v for v in _time_series(bp) if str(v.origin) == x]
+    ranges = sorted(v.properties["ScalarAxis"].range.as_arrow_array().to_pylist()[0] for v in views)
+    assert ranges == sorted([list(whole[x]), list(zoom[x])])
+    (gyro,) = [c for c in _containers(bp) if str(c.name) == "gyro scale [%]"]
+    assert isinstance(gyro, rrb.Horizontal) and len(gyro.contents) == 3
