@@ -190,8 +190,8 @@ def view_y_ranges(
 ) -> dict[str, tuple[float, float]]:
     """{view origin: (lo, hi)} for the views of :func:`meads_blueprint` whose data (what ``rec``,
     the run's :class:`~workbench.recording.writer.Recorder`, drew; the air-data views' over
-    ``air_span`` (t0, t1) [s]) the viewer would label at fewer than three ticks (α over the high-q∞
-    span: "20" only; a port's residual: "0" only): a legible range (``blueprint.y_range_if_needed``)."""
+    ``air_span`` (t0, t1) [s]) the viewer would label at fewer than three ticks (a span a little
+    above a power of ten is labelled at one tick): a legible range (``blueprint.y_range_if_needed``)."""
     views = [(layout.plot_path(q), air_span, AIR_DATA_VIEW_PX) for _, q in PLOTS]
     for p in ports:
         views.append((layout.residual_path("pressure", p), None, PORT_FIT_VIEW_PX))
