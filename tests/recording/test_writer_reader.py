@@ -72,6 +72,8 @@ def recorded(tmp_path_factory):
         rec.points("/world/landmarks", inp["track"][:5], colors=(1, 2, 3), radii=0.1)
         rec.mesh(layout.VEHICLE_BODY, trimesh.creation.box(extents=[0.4, 0.2, 0.1]), color=(80, 160, 255, 255))
         rec.text_labels_series("/world/labels", t, inp["pos"], ["vehicle"])
+        rec.text_labels_series("/world/labels_blue", t, inp["pos"], ["3σ"], color=(31, 119, 180, 255))
+        rec.ellipsoids("/world/wire", t, inp["centers"], inp["cov"], color=(31, 119, 180, 255), label="3σ", fill=False)
         rec.arrows_series("/world/arrow", t, inp["xyz"], color=(20, 90, 200, 255), radius=-2.0, label="velocity")
         rec.events(inp["events"])
         rec.report(inp["report"])
@@ -345,3 +347,44 @@ def test_arrows_series_one_arrow_per_step_with_static_style(recorded, tmp_path):
     assert d.static_component("/world/arrow", "Arrows3D:radii") == [-2.0]
     with open_recording(tmp_path / "bad.rrd", "bad") as rec, pytest.raises(ValueError, match="vectors"):
         rec.arrows_series("/world/arrow", [0.0, 1.0], np.zeros((3, 3)))
+
+
+def test_ellipsoid_label_wireframe_and_label_colour(recorded):
+    """An ellipsoid can carry its σ level as a label and be drawn as a wireframe only; a text label
+    can have its own colour (else the viewer's)."""
+    path, _ = recorded
+    d = read_recording(path)
+    assert d.static_component("/world/wire", "Ellipsoids3D:labels") == ["3σ"]
+    assert d.static_component("/world/wire", "Ellipsoids3D:show_labels") == [True]
+    wire, filled = (d.static_component(e, "Ellipsoids3D:fill_mode") for e in ("/world/wire", layout.UNCERTAINTY))
+    assert wire != filled
+    with pytest.raises(KeyError):
+        d.static_component(layout.UNCERTAINTY, "Ellipsoids3D:labels")
+    assert d.static_component("/world/labels_blue", "Points3D:colors") is not None
+    with pytest.raises(KeyError):
+        d.static_component("/world/labels", "Points3D:colors")
+
+
+def test_value_range_of_a_plot_origin(tmp_path):
+    """The recorder keeps what it drew against time per entity (per time bin): a layout sent after
+    the run sets a plot's y range from it, over a time window when given."""
+    t = np.arange(1000) * 0.5
+    noisy = np.where(t < 100.0, 60.0 * np.sin(t), 20.0 + np.sin(t))
+    with open_recording(tmp_path / "r.rrd", "ranges") as rec:
+        rec.series_with_bounds(layout.plot_path("alt"), t[:4], [1.0, 2.0, np.nan, 3.0], [0.1, 0.1, 0.1, 0.1])
+        rec.scatter(layout.plot_path("alt/meas"), t[:4], [0.5, 9.0, 1.0, 2.0], names="z", colors=(0, 0, 0))
+        rec.scalars(layout.plot_path("alt_b"), t[:4], [-50.0, 0.0, 0.0, 0.0])
+        rec.scalars(layout.plot_path("seq"), None, [7.0, 8.0], sequences={layout.SAMPLE: np.arange(2)})
+        rec.scalars(layout.plot_path("alpha"), t, noisy)
+        assert rec.value_range(layout.plot_path("alt")) == (0.5, 9.0)
+        assert rec.value_range(layout.plot_path("alt") + "/") == (0.5, 9.0)
+        assert rec.value_range(layout.plot_path("alt/value")) == (1.0, 3.0)
+        assert rec.value_range(layout.plot_path("alt_b")) == (-50.0, 0.0)
+        assert rec.value_range(layout.plot_path("seq")) is None
+        assert rec.value_range("/plots/nothing") is None
+        lo, hi = rec.value_range(layout.plot_path("alpha"))
+        assert lo < -59.0 and hi > 59.0
+        # the window leaves the noise out, to a bin (2 s here) of the edge
+        lo, hi = rec.value_range(layout.plot_path("alpha"), 102.0, 499.5)
+        assert 19.0 <= lo < 19.1 and 20.9 < hi <= 21.0
+        assert rec.value_range(layout.plot_path("alpha"), 600.0, 700.0) is None

@@ -10,6 +10,7 @@ nothing about any one problem. A blueprint applies to recordings with the same a
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from collections.abc import Sequence
@@ -29,7 +30,15 @@ __all__ = [
     "time_window",
     "tab",
     "has_unit",
+    "legible_range",
+    "labelled_ticks",
+    "y_range_if_needed",
+    "LABEL_SPACING_PX",
 ]
+
+LABEL_SPACING_PX = 20.0
+"""Closest spacing [CSS px] of two labelled y ticks of Rerun 0.41's time-series view: it labels the
+multiples of the smallest power of ten at least this far apart (ticks closer are drawn unlabelled)."""
 
 
 def standard_blueprint(
@@ -121,6 +130,58 @@ def has_unit(name: str) -> bool:
     return bool(_UNIT.search(name))
 
 
+def legible_range(
+    lo: float, hi: float, *, min_px: float = 120.0, label_px: float = LABEL_SPACING_PX, pad: float = 0.05
+) -> tuple[float, float]:
+    """A y range (a, b) [plotted unit] holding ``[lo, hi]`` on which a time-series view at least
+    ``min_px`` [CSS px] high labels three ticks or more.
+
+    The view labels multiples of one power of ten ``s`` only, the smallest whose ticks are
+    ``label_px`` apart: a short panel over a span a little above a power of ten (±5.2 km in 150 px)
+    labels only "0". The range is ``[lo, hi]`` widened by ``pad`` of its span on each side; if fewer
+    than three multiples of the ``s`` it gets at ``min_px`` lie in it, it is widened to the nearest
+    further multiples (with ``pad`` of ``s`` beyond them, so their labels are not cut)."""
+    lo, hi = float(lo), float(hi)
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi < lo:
+        raise ValueError(f"legible_range needs finite lo <= hi, got [{lo}, {hi}]")
+    if min_px <= 3.0 * label_px:
+        raise ValueError(f"min_px {min_px} too small for three labels {label_px} px apart")
+    span = hi - lo if hi > lo else max(abs(lo), 1.0) * 0.2
+    a, b = lo - pad * span, hi + pad * span
+    step = 10.0 ** math.ceil(math.log10((b - a) * label_px / min_px))
+    while True:
+        k0, k1 = math.ceil(a / step - 1e-9), math.floor(b / step + 1e-9)
+        aa, bb = a, b
+        while k1 - k0 + 1 < 3:
+            if aa - (k0 - 1) * step < (k1 + 1) * step - bb:
+                k0 -= 1
+                aa = min(aa, (k0 - pad) * step)
+            else:
+                k1 += 1
+                bb = max(bb, (k1 + pad) * step)
+        if (bb - aa) * label_px / min_px <= step * (1.0 + 1e-9):
+            return aa, bb
+        step *= 10.0
+
+
+def labelled_ticks(lo: float, hi: float, px: float, label_px: float = LABEL_SPACING_PX) -> list[float]:
+    """The y labels a time-series view ``px`` [CSS px] high over ``[lo, hi]`` shows (Rerun 0.41,
+    modelled): the multiples in it of the smallest power of ten whose ticks are ``label_px`` apart."""
+    if not hi > lo or px <= 0:
+        return []
+    step = 10.0 ** math.ceil(math.log10((hi - lo) * label_px / px))
+    return [k * step for k in range(math.ceil(lo / step - 1e-9), math.floor(hi / step + 1e-9) + 1)]
+
+
+def y_range_if_needed(lo: float, hi: float, px: float) -> tuple[float, float] | None:
+    """None when the viewer's own fit of ``[lo, hi]`` (the data's extent) labels three ticks or
+    more in a view ``px`` [CSS px] high (:func:`labelled_ticks`), else :func:`legible_range` for
+    that height: a y range is fixed only where the viewer's would show one or two labels."""
+    if len(labelled_ticks(lo, hi, px)) >= 3:
+        return None
+    return legible_range(lo, hi, min_px=px)
+
+
 def time_window(t0_s: float, t1_s: float) -> rrb.VisibleTimeRange:
     """The fixed window ``[t0_s, t1_s]`` [s] of the ``time`` timeline (a zoomed plot of an event)."""
     if not t1_s > t0_s:
@@ -141,6 +202,7 @@ def plot_view(
     time_range: Any = None,
     window: tuple[float, float] | None = None,
     x_range: tuple[int, int] | None = None,
+    span: tuple[float, float] | None = None,
     contents: Any = None,
 ) -> rrb.TimeSeriesView:
     """A time-series view whose name states the y unit, with a legend that does not cover the data.
@@ -154,8 +216,10 @@ def plot_view(
     ``VisibleTimeRange`` (the data shown, e.g. trailing the cursor); ``window`` (t0, t1) [s] a fixed
     zoom: only that data, and the x axis opened on it (the viewer otherwise opens the x axis on its
     own span); ``x_range`` (lo, hi) the x axis opened on that span of a *sequence* timeline (e.g.
-    ``minus_100_mach``; the viewer otherwise opens it around the time cursor); ``contents`` an
-    entity query other than ``$origin/**``.
+    ``minus_100_mach``; the viewer otherwise opens it around the time cursor); ``span`` (t0, t1)
+    [s] the x axis opened on that span of the ``time`` timeline, all data kept (a run of hours
+    otherwise opens on a minute around the cursor); ``contents`` an entity query other than
+    ``$origin/**``.
     """
     if not has_unit(name):
         raise ValueError(f"plot view {name!r} must state its unit in brackets, e.g. '[m]' or '[-]'")
@@ -176,9 +240,18 @@ def plot_view(
                 end=rrb.TimeRangeBoundary.absolute(seconds=float(window[1])),
             )
         )
+    if sum(v is not None for v in (window, x_range, span)) > 1:
+        raise ValueError("give one of window, x_range and span")
+    if span is not None:
+        if not span[1] > span[0]:
+            raise ValueError(f"span needs t1 > t0, got {span}")
+        kw["axis_x"] = rrb.TimeAxis(
+            view_range=rrb.TimeRange(
+                start=rrb.TimeRangeBoundary.absolute(seconds=float(span[0])),
+                end=rrb.TimeRangeBoundary.absolute(seconds=float(span[1])),
+            )
+        )
     if x_range is not None:
-        if window is not None:
-            raise ValueError("give window or x_range, not both")
         kw["axis_x"] = rrb.TimeAxis(
             view_range=rrb.TimeRange(
                 start=rrb.TimeRangeBoundary.absolute(seq=int(x_range[0])),

@@ -67,6 +67,8 @@ PALETTE_NAMES = ("blue", "orange", "green", "red", "purple", "brown", "pink", "o
 #: the colours series_with_bounds gives its k series when no colour is given
 PALETTE = _PALETTE
 _LEVELS = frozenset({"INFO", "WARN", "ERROR", "DEBUG", "TRACE", "CRITICAL"})
+#: time bins of the value extents a Recorder keeps per call that logs a series (Recorder.value_range)
+_RANGE_BINS = 256
 
 
 def to_ns(t_s: Any) -> np.ndarray:
@@ -293,6 +295,52 @@ class Recorder:
 
     def __init__(self, stream: rr.RecordingStream) -> None:
         self.stream = stream
+        self._extents: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = {}
+
+    def value_range(self, origin: str, t0: float | None = None, t1: float | None = None) -> tuple[float, float] | None:
+        """(min, max) of the finite values :meth:`scalars` and :meth:`scatter` (so also
+        :meth:`series_with_bounds`) logged against ``time`` at ``origin`` and below it, between
+        ``t0`` and ``t1`` [s] when given (to the resolution of :data:`_RANGE_BINS` time bins per
+        call: a bin that overlaps the window counts whole); None when there are none. A layout
+        sent after the run sets a plot's y range from it."""
+        root = origin.rstrip("/")
+        lo, hi = np.inf, -np.inf
+        for e, chunks in self._extents.items():
+            if e != root and not e.startswith(root + "/"):
+                continue
+            for b0, b1, vmin, vmax in chunks:
+                m = np.ones(b0.size, bool)
+                if t0 is not None:
+                    m &= b1 >= t0
+                if t1 is not None:
+                    m &= b0 <= t1
+                if m.any():
+                    lo, hi = min(lo, float(vmin[m].min())), max(hi, float(vmax[m].max()))
+        return (lo, hi) if lo <= hi else None
+
+    def _note_range(self, entity: str, t: Any, v: np.ndarray) -> None:
+        """Keep the extents of the finite ``v`` (n,) or (n, k) logged against ``t`` (n,) [s] of
+        ``entity``, per time bin (first and last time, min, max)."""
+        if t is None:
+            return
+        t = np.asarray(t, dtype=np.float64)
+        w = v.reshape(t.size, -1)
+        ok = np.isfinite(w)
+        vmin = np.where(ok, w, np.inf).min(axis=1)
+        vmax = np.where(ok, w, -np.inf).max(axis=1)
+        keep = ok.any(axis=1) & np.isfinite(t)
+        if not keep.any():
+            return
+        order = np.argsort(t[keep], kind="stable")
+        t, vmin, vmax = t[keep][order], vmin[keep][order], vmax[keep][order]
+        idx = np.unique(np.linspace(0, t.size, min(_RANGE_BINS, t.size) + 1).astype(int)[:-1])
+        chunk = (
+            t[idx],
+            np.maximum.reduceat(t, idx),
+            np.minimum.reduceat(vmin, idx),
+            np.maximum.reduceat(vmax, idx),
+        )
+        self._extents.setdefault(entity, []).append(chunk)
 
     # ------------------------------------------------------------------ helpers
     def _index(
@@ -415,6 +463,7 @@ class Recorder:
         self._check_rows(f"scalars {entity}", v, n)
         k = 1 if v.ndim == 1 else v.shape[1]
         self._send(entity, idx, rr.Scalars.columns(scalars=v))
+        self._note_range(entity, t, v)
         if names is not None or colors is not None or widths is not None:
             style: dict[str, Any] = {}
             if names is not None:
@@ -450,6 +499,7 @@ class Recorder:
         self._check_rows(f"scatter {entity}", v, n)
         k = 1 if v.ndim == 1 else v.shape[1]
         self._send(entity, idx, rr.Scalars.columns(scalars=v))
+        self._note_range(entity, t, v)
         self._log_static(
             entity,
             rr.SeriesPoints(
@@ -586,10 +636,14 @@ class Recorder:
         nsigma: float = 3.0,
         color: Any = None,
         line_radius: float | None = None,
+        label: str | None = None,
+        fill: bool = True,
         step: Any = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Per-step nσ covariance ellipsoids (transparent fill + wireframe; ``line_radius`` the
-        wireframe's [m], negative: screen points; None: the viewer's default).
+        """Per-step nσ covariance ellipsoids (transparent fill + wireframe, or the wireframe only
+        when not ``fill``; ``line_radius`` the wireframe's [m], negative: screen points; None: the
+        viewer's default; ``label`` a text shown at each ellipsoid's centre, e.g. its σ level, in
+        ``color``, whose alpha is also the fill's).
 
         ``centers`` (n, 3) or (n, k, 3) [m] and ``covariances`` (n, 3, 3) or (n, k, 3, 3) [m²], both
         in the frame of ``entity``'s parent chain (log a world covariance under ``/world`` with the
@@ -616,8 +670,14 @@ class Recorder:
             entity,
             rr.Ellipsoids3D.from_fields(
                 colors=_as_colors(color if color is not None else (255, 165, 0, 90)),
-                fill_mode=rr.components.FillMode.TransparentFillMajorWireframe,
+                fill_mode=(
+                    rr.components.FillMode.TransparentFillMajorWireframe
+                    if fill
+                    else rr.components.FillMode.MajorWireframe
+                ),
                 line_radii=None if line_radius is None else [float(line_radius)],
+                labels=None if label is None else [label],
+                show_labels=None if label is None else True,
             ),
         )
         return half_sizes, quats
@@ -738,11 +798,17 @@ class Recorder:
         if static_style:
             self._log_static(entity, rr.Points3D.from_fields(**static_style))
 
-    def text_labels_series(self, entity: str, t: Any, positions: Any, labels: Any, *, step: Any = None) -> None:
+    def text_labels_series(
+        self, entity: str, t: Any, positions: Any, labels: Any, *, color: Any = None, step: Any = None
+    ) -> None:
         """Labelled points per step: positions (n, 3) or (n, k, 3) [m]; labels k strings (static) or (n, k).
 
-        The labels are drawn next to the points in the 3D view (``show_labels`` on).
+        The labels are drawn next to the points in the 3D view (``show_labels`` on), in ``color``
+        (one RGB(A), static; None: the viewer's choice).
         """
+        style: dict[str, Any] = {"show_labels": True}
+        if color is not None:
+            style["colors"] = _as_colors(color)
         idx, n = self._index(t, step)
         p = np.asarray(positions, dtype=np.float64)
         if p.ndim == 2:
@@ -757,10 +823,10 @@ class Recorder:
                 raise ValueError(f"text_labels_series: labels {lab.shape}, expected ({n}, {k})")
             cols = rr.Points3D.columns(positions=p.reshape(-1, 3), labels=lab.reshape(-1).tolist())
             self._send(entity, idx, cols.partition(counts))
-            self._log_static(entity, rr.Points3D.from_fields(show_labels=True))
+            self._log_static(entity, rr.Points3D.from_fields(**style))
         else:
             self._send(entity, idx, rr.Points3D.columns(positions=p.reshape(-1, 3)).partition(counts))
-            self._log_static(entity, rr.Points3D.from_fields(labels=lab.reshape(-1).tolist(), show_labels=True))
+            self._log_static(entity, rr.Points3D.from_fields(labels=lab.reshape(-1).tolist(), **style))
 
     def mesh(self, entity: str, mesh: Any, *, color: Any = (200, 200, 200, 255), static: bool = True) -> None:
         """A ``trimesh.Trimesh`` as a static ``Mesh3D`` (vertices [m] in ``entity``'s frame, vertex normals).

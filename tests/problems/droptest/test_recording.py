@@ -129,6 +129,15 @@ def test_ellipsoids_are_3sigma_of_the_smoothed_position_covariance(rec, droptest
     np.testing.assert_allclose(logged, expected, rtol=float(np.finfo(np.float32).eps))
 
 
+def test_nis_series_have_one_colour_each(rec):
+    """The NIS view names its series in a legend: each sensor its own colour (the viewer's choice by
+    entity path gave gyro, PXBP and PYBP one magenta), the χ² bound grey."""
+    nis = [e for e in rec.entities() if e.startswith(layout.DROPTEST_PLOT_NIS + "/") and "chi2" not in e]
+    assert {layout.droptest_nis_path(n) for n in (*TRIADS, "gyro")} <= set(nis)
+    colours = [tuple(rec.static_component(e, "SeriesLines:colors")) for e in nis]
+    assert len(set(colours)) == len(nis)
+
+
 def test_events_and_report(rec, droptest_run):
     ms = droptest_run.summary["max_stroke"]
     log = rec.text_log(layout.EVENTS)

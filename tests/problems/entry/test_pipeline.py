@@ -113,6 +113,10 @@ def test_row_counts_are_consistent(rec, run):
     assert beams[0] > 300 and len(set(beams)) == 1
     # the same rows on the `step` timeline as on `time` (scrubbing by filter step shows everything)
     assert rec.row_count(layout.UNCERTAINTY, layout.STEP) == n
+    # the Descent view names the smoothed 3σ ellipsoid's semi-axes at every step (it leaves it out)
+    _, labels = rec.points(layout.ENTRY_UNCERTAINTY_LABEL)
+    assert len(labels) == n and layout.VEHICLE_MARKER in rec.entities()
+    assert rec.static_component(layout.UNCERTAINTY, "Ellipsoids3D:labels") == ["3σ smoothed"]
     assert [rec.row_count(layout.radar_beam_path(b), layout.STEP) for b in range(4)] == beams
     # one row per member on the `sample` timeline, split into accepted + rejected
     acc = rec.row_count("/plots/dispersion/h_pdd/accepted", layout.SAMPLE)

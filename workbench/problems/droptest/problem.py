@@ -196,21 +196,27 @@ class DropTestProblem(PipelineProblem):
     @contextlib.contextmanager
     def open_recording(self, path: Path, settings: DropSettings, truth: Any, properties: dict) -> Iterator[RunDrawer]:
         """The drop-test recording; its one layout (``recording.droptest_blueprint``), sent when the run
-        is done, has the camera at the impact and the stroke zoom (the generic one only if no impact)."""
-        from workbench.problems.droptest.recording import DropTestRecorder, droptest_blueprint, impact_view
+        is done, has the camera at the impact, the stroke zoom and the bounded quantities' y ranges
+        where the viewer's own would label fewer than three ticks (the generic one only if no impact)."""
+        from workbench.problems.droptest.recording import (
+            DropTestRecorder,
+            bounded_y_ranges,
+            droptest_blueprint,
+            impact_view,
+        )
         from workbench.recording.writer import open_recording
 
         residuals = residual_names(settings)
         triads = list(settings.accelerometer.triads)
         bp = droptest_blueprint(residuals, triads=triads)
         with open_recording(path, settings.name, properties=properties) as rec:
-            yield RunDrawer(
-                rec,
-                DropTestRecorder(rec, truth),
-                dt.scorecard_markdown,
-                layout=lambda result, summary: droptest_blueprint(residuals, impact_view(result), triads),
-                blueprint=bp,
-            )
+
+            def layout(result: object, summary: dict):
+                impact = impact_view(result)
+                whole, zoom = bounded_y_ranges(rec, impact)
+                return droptest_blueprint(residuals, impact, triads, y_ranges=whole, zoom_y_ranges=zoom)
+
+            yield RunDrawer(rec, DropTestRecorder(rec, truth), dt.scorecard_markdown, layout=layout, blueprint=bp)
 
     def export_columns(self, result: dt.DropResult) -> ExportTable:
         """Smoothed position, velocity, attitude (SPF chamber frame), their σ, and the stroke."""

@@ -28,11 +28,11 @@ from workbench.problems.droptest.lander import airbag_mesh
 from workbench.problems.droptest.pipeline import DropResult, DropTelemetry, FilterStage, InitialState, StrokeStage
 from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
-from workbench.recording.blueprint import events_view, plot_view, report_view, tab
+from workbench.recording.blueprint import events_view, legible_range, plot_view, report_view, tab, y_range_if_needed
 from workbench.recording.dispatch import StageDispatch
-from workbench.recording.writer import Recorder
+from workbench.recording.writer import PALETTE, Recorder
 
-__all__ = ["DropTestRecorder", "droptest_blueprint", "impact_view"]
+__all__ = ["DropTestRecorder", "bounded_y_ranges", "droptest_blueprint", "impact_view"]
 
 EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
@@ -59,6 +59,8 @@ SCENE_KEY_TRUTH_MD = " · green wireframe and line: truth body and CM track"
 #: key of the red/green/blue (x/y/z) colours, for view names (legends off: they covered the data)
 XYZ_KEY = "RGB = xyz"
 BOUNDS_KEY = "±3σ grey, truth pale"
+#: the height [CSS px] the zoomed stroke view is given at least (1400 x 900 window: about 190)
+STROKE_VIEW_PX = 150.0
 
 #: bounded per-axis series under a plot root: (root, tab title, unit, axis leaf names). The leaf is the
 #: first word of each series name the recorder gives (``layout.join(root, leaf)``).
@@ -93,7 +95,11 @@ def _residual_unit(name: str, triads) -> str:
 
 
 def droptest_blueprint(
-    residual_names: list[str], impact: dict | None = None, triads: tuple[str, ...] | list[str] = ()
+    residual_names: list[str],
+    impact: dict | None = None,
+    triads: tuple[str, ...] | list[str] = (),
+    y_ranges: dict[str, tuple[float, float]] | None = None,
+    zoom_y_ranges: dict[str, tuple[float, float]] | None = None,
 ) -> rrb.Blueprint:
     """Default layout for stroke inspection.
 
@@ -108,7 +114,13 @@ def droptest_blueprint(
     ``normal`` (3,) ramp normal, ``t0``/``t1`` [s] window of the impact, ``stroke_lo``/``stroke_hi``
     [m] y-range of the zoomed stroke plot. Without it a generic layout is returned.
     ``triads``: accelerometer triad names (one measured-vs-predicted plot each).
+    A bounded quantity's tab holds a tab per axis, the whole drop beside the impact zoom at full
+    height (three axes stacked, each view was too low for more than one y label); without a zoom
+    (the gyro scale factors) the axes stand side by side;
+    ``y_ranges`` / ``zoom_y_ranges`` {view origin: (lo, hi)} fix the y axes of the whole-drop /
+    impact views (:func:`bounded_y_ranges`).
     """
+    yr, zyr = y_ranges or {}, zoom_y_ranges or {}
     scene_kw = {}
     stroke_kw = {}
     win = None
@@ -143,16 +155,19 @@ def droptest_blueprint(
         tab("stroke 1σ [m]", plot_view("stroke 1σ [m] — blue smoothed, orange fwd", layout.DROPTEST_PLOT_STROKE_SIGMA)),
     ]
     for root, title, unit, leaves in _BOUNDED:
-        rows = []
+        axes = []
         for leaf in leaves:
             path = layout.join(root, leaf)
-            full = plot_view(f"{leaf} [{unit}] — {BOUNDS_KEY}", path)
+            full = plot_view(f"{leaf} [{unit}] — {BOUNDS_KEY}", path, y_range=yr.get(path))
             if win is None or root == layout.DROPTEST_PLOT_GYRO_SCALE:
-                rows.append(full)
+                axes.append(full)
             else:
-                zoom = plot_view(f"{leaf} at impact [{unit}]", path, window=win)
-                rows.append(rrb.Horizontal(full, zoom, column_shares=[3, 2]))
-        plots.append(tab(f"{title} [{unit}]", *rows))
+                zoom = plot_view(f"{leaf} at impact [{unit}]", path, window=win, y_range=zyr.get(path))
+                axes.append(rrb.Horizontal(full, zoom, column_shares=[3, 2], name=leaf))
+        if win is None or root == layout.DROPTEST_PLOT_GYRO_SCALE:
+            plots.append(rrb.Horizontal(*axes, name=f"{title} [{unit}]"))
+        else:
+            plots.append(rrb.Tabs(*axes, active_tab=0, name=f"{title} [{unit}]"))
     plots += [
         tab("accel SPF [g]", plot_view(f"accel SPF [g] — {XYZ_KEY}; thin truth", layout.DROPTEST_PLOT_ACCEL_SPF)),
         tab(
@@ -231,6 +246,30 @@ def droptest_blueprint(
     )
 
 
+#: the height [CSS px] of a bounded quantity's view (a 1400 x 900 window: about 220)
+BOUNDED_VIEW_PX = 200.0
+
+
+def bounded_y_ranges(rec, impact: dict | None) -> tuple[dict, dict]:
+    """The y ranges of the bounded quantities' views of :func:`droptest_blueprint` whose data (what
+    ``rec``, the run's :class:`~workbench.recording.writer.Recorder`, drew: the whole drop, and
+    between ``impact["t0"]`` and ``impact["t1"]`` [s] for the zoom) the viewer would label at fewer
+    than three ticks (``blueprint.y_range_if_needed``): ``({origin: (lo, hi)}, {origin: (lo, hi)})``
+    for the whole-drop and the impact views."""
+    whole, zoom = {}, {}
+    for root, _, _, leaves in _BOUNDED:
+        for leaf in leaves:
+            path = layout.join(root, leaf)
+            windows = [(whole, None, None)]
+            if impact is not None and root != layout.DROPTEST_PLOT_GYRO_SCALE:
+                windows.append((zoom, float(impact["t0"]), float(impact["t1"])))
+            for out, t0, t1 in windows:
+                r = rec.value_range(path, t0, t1)
+                if r is not None and r[1] > r[0] and (y := y_range_if_needed(r[0], r[1], BOUNDED_VIEW_PX)):
+                    out[path] = y
+    return whole, zoom
+
+
 def impact_view(result) -> dict:
     """Camera and zoom settings of :func:`droptest_blueprint` from a ``DropResult``."""
     st = result.stroke
@@ -239,8 +278,13 @@ def impact_view(result) -> dict:
     if i0 < 0:
         i0 = i1 = int(st.max.index)
     h = st.smoothed
-    lo = float(min(0.0, st.max.distance - 3.5 * st.max.sigma)) - 0.05
-    hi = float(max(1.0, h.distance[i0] + 0.2))
+    # the max stroke with its ±3σ band and 0.1 m above, down to the ramp (0), widened to labelled
+    # ticks (a span a little above 1 m is labelled at 0 and 1 only in a short view)
+    lo, hi = legible_range(
+        min(0.0, st.max.distance - 3.5 * st.max.sigma),
+        st.max.distance + 4.0 * st.max.sigma + 0.1,
+        min_px=STROKE_VIEW_PX,
+    )
     return {
         "point": smo.x[int(st.max.index), rl.SP],
         "closest": h.closest_point_I[int(st.max.index)],
@@ -347,7 +391,7 @@ class DropTestRecorder:
         r.line_strip(layout.ESTIMATE_FORWARD, st.x[:, rl.SP], color=FWD, radius=0.01)
         fp = st.forward
         dofs: set[int] = set()
-        for name, ih in fp.innovations.items():
+        for k, (name, ih) in enumerate(fp.innovations.items()):
             m = ih.step  # grid steps of the samples
             if not m.size:
                 continue
@@ -376,7 +420,15 @@ class DropTestRecorder:
                         colors=[(150, 150, 150, 255)],
                         widths=0.8,
                     )
-            r.scalars(layout.droptest_nis_path(name), t[m], ih.nis, step=step[m], names=f"NIS {name}")
+            # one palette colour per sensor (the viewer's own, by path, gave gyro, PXBP and PYBP one magenta)
+            r.scalars(
+                layout.droptest_nis_path(name),
+                t[m],
+                ih.nis,
+                step=step[m],
+                names=f"NIS {name}",
+                colors=[PALETTE[k % len(PALETTE)]],
+            )
             dofs.add(int(ih.y.shape[1]))
         # the χ² 99 % bound of each innovation dimension: a NIS above it is a 1 % event per sample
         for dof in sorted(dofs):

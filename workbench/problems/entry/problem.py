@@ -209,9 +209,17 @@ class EntryProblem(PipelineProblem):
     def open_recording(self, path: Path, settings: EntrySettings, truth: Any, properties: dict) -> Iterator[RunDrawer]:
         """The entry recording drawn in the landing-site frame; its one layout
         (``recording.entry_blueprint``), sent when the run is done, has the AGL views fixed on the
-        descent (known only then; without a descent the generic layout)."""
+        descent (known only then; without a descent the generic AGL view) and every time plot's axes
+        on what it draws (the run's span, the radar's span, the residuals' ±3σ)."""
         from workbench.core.bodies import MARS
-        from workbench.problems.entry.recording import EntryRecorder, descent_window, entry_blueprint
+        from workbench.problems.entry.recording import (
+            EntryRecorder,
+            descent_window,
+            entry_blueprint,
+            residual_ranges,
+            residual_spans,
+            run_span,
+        )
         from workbench.recording.writer import open_recording
 
         with open_recording(path, settings.run.name, properties=properties) as rec:
@@ -226,7 +234,12 @@ class EntryProblem(PipelineProblem):
 
             def layout(result: object, summary: dict):
                 window = descent_window(summary)
-                return None if window is None else entry_blueprint(descent=window)
+                return entry_blueprint(
+                    descent=window,
+                    residual_y=residual_ranges(result.filter),
+                    span=run_span(summary),
+                    residual_span=residual_spans(result.filter),
+                )
 
             yield RunDrawer(rec, drawer, en.scorecard_markdown, layout=layout, blueprint=entry_blueprint())
 

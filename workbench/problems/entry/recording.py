@@ -47,12 +47,20 @@ from workbench.problems.entry.state import DP, DV
 from workbench.problems.entry.telemetry import EntryTelemetry
 from workbench.problems.entry.winds import WindResult
 from workbench.recording import layout
-from workbench.recording.blueprint import events_view, plot_view, report_view, tab
+from workbench.recording.blueprint import events_view, legible_range, plot_view, report_view, tab
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.meshes import mesh3d
 from workbench.recording.writer import Recorder
 
-__all__ = ["EntryRecorder", "descent_window", "entry_blueprint"]
+__all__ = [
+    "EntryRecorder",
+    "descent_window",
+    "entry_blueprint",
+    "residual_ranges",
+    "residual_spans",
+    "run_span",
+    "sigma_label",
+]
 
 EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
@@ -63,10 +71,12 @@ GREY = (150, 150, 150, 255)
 
 #: what the 3D scenes show (``layout.SCENE_KEY``, under the 3D views)
 SCENE_KEY_MD = (
-    "**3D key** — blue line: smoothed track, blue ellipsoid its 3σ; orange line: forward (filter) pass, orange "
-    "ellipsoid its 3σ; red: on-board navigation; purple: nominal trajectory; radar beams coloured by their "
-    "normalised residual, green ≤ 1σ → red ≥ 3σ (grey: no return); green / grey dots: dispersion members at PDD, "
-    "accepted / rejected (their tracks hidden: tick `/world/dispersion/tracks_*` in the blueprint panel)"
+    "**3D key** — black dot (Entry view): the vehicle; blue line: smoothed track, blue ellipsoid its 3σ; orange "
+    "line: forward (filter) pass, orange ellipsoid its 3σ (the ellipsoids in the Entry view; kilometres wide, "
+    "they would enclose the Descent view's camera, which names their semi-axes beside the vehicle instead); red: "
+    "on-board navigation; purple: nominal trajectory; radar beams coloured by their normalised residual, green "
+    "≤ 1σ → red ≥ 3σ (grey: no return); dispersion cloud hidden (tick `/world/dispersion` in the blueprint "
+    "panel: green / grey, members accepted / rejected, tracks and positions at PDD)"
 )
 SCENE_KEY_TRUTH_MD = " · green line: truth track"
 RAW = (120, 160, 220, 255)
@@ -81,9 +91,17 @@ BEAMS = ["B0", "B1", "B2", "B3"]
 TRACK_MAIN = -0.9
 TRACK_THIN = -0.6
 BEAM_WIDTH = -2.0
-#: the 3σ ellipsoids' wireframe: in the descent view the camera sits inside the horizontal 3σ
-#: (hundreds of metres), so its great circles cross the whole pane: hairlines
-ELLIPSOID_LINE = -0.4
+#: the 3σ ellipsoids' wireframe, drawn in the Entry view only (at the Descent view's metres the
+#: camera sits inside them: there :data:`SIGMA_LABEL_OFFSET` names their size instead)
+ELLIPSOID_LINE = -1.0
+#: the Descent view's camera, in the site axes at the vehicle [m]
+DESCENT_EYE = (-30.0, -48.0, 14.0)
+DESCENT_LOOK = (0.0, 0.0, 8.0)
+#: where the smoothed 3σ ellipsoid's size is written in the Descent view [m, site axes from the
+#: vehicle]: right of the capsule and below it, seen from :data:`DESCENT_EYE`
+SIGMA_LABEL_OFFSET = (22.0, -14.0, -8.0)
+#: the height [CSS px] a residual view is given at least (1400 x 900 window: about 150)
+RESIDUAL_VIEW_PX = 130.0
 
 MAX_DISPERSION_TRACKS = 12
 """Tracks drawn per status (accepted / rejected) of the dispersion cloud; the points at PDD are all drawn."""
@@ -110,14 +128,20 @@ _PLOTS = [
     ("body rate [deg/s]", "body rate w_G [deg/s] — " + XYZ_KEY + "; rebuilt x", layout.ENTRY_PLOT_IMU_W),
     ("density (time) [%]", "density vs default [%] — blue reconstructed, green truth", layout.ENTRY_PLOT_ATMOSPHERE),
 ]
-_RESIDUALS = [
-    ("slant-out [m]", "slant-out residual [m] — blue, grey ±3σ", layout.ENTRY_RESIDUAL_SLANT_OUT),
+_RESIDUALS = [  # (channel, tab name, view name, origin)
+    ("slant_out", "slant-out [m]", "slant-out residual [m] — blue, grey ±3σ", layout.ENTRY_RESIDUAL_SLANT_OUT),
     (
+        "velocity_out",
         "velocity-out [m/s]",
         "velocity-out residual [m/s] — " + XYZ_KEY + ", grey ±3σ",
         layout.ENTRY_RESIDUAL_VELOCITY_OUT,
     ),
-    ("slant range [m]", "slant-range residual [m] — per beam, grey ±3σ", layout.ENTRY_RESIDUAL_SLANT_RANGE),
+    (
+        "slant_range",
+        "slant range [m]",
+        "slant-range residual [m] — per beam, grey ±3σ",
+        layout.ENTRY_RESIDUAL_SLANT_RANGE,
+    ),
 ]
 #: dispersion event quantities (``dispersion.EVENT_NAMES``) with their unit, on the ``sample`` timeline
 DISPERSION_UNITS = {"mach_pdd": "-", "h_pdd": "m", "h_fsr": "m", "h_end": "m", "time_to_impact": "s"}
@@ -133,6 +157,9 @@ def entry_blueprint(
     plot_tab: int = 0,
     residual_tab: int = 0,
     descent: tuple[float, float] | None = None,
+    residual_y: dict[str, tuple[float, float]] | None = None,
+    span: tuple[float, float] | None = None,
+    residual_span: dict[str, tuple[float, float]] | None = None,
 ) -> rrb.Blueprint:
     """Default layout: 3D (descent at the vehicle, whole entry), plots, residuals, profiles, report.
 
@@ -140,7 +167,14 @@ def entry_blueprint(
     presentation or a screenshot of another view. ``descent`` (t_start, t_end) [s]: the window of the
     altitude-AGL data (PDD − 5 s to the end, known after the run); the AGL views are fixed on it (the
     AGL plot is empty before it) with the last 20 s zoomed beside, where ±3σ is legible. Every plot's
-    name states its unit and colours (legends off: they covered the data).
+    name states its unit and colours (legends off: they covered the data). ``residual_y`` {radar
+    channel: (lo, hi)} [m or m/s]: the residual views' y ranges (:func:`residual_ranges`; else the
+    viewer's own fit, which in a short view can label only "0"). ``span`` (t0, t1) [s]: the run
+    (:func:`run_span`), on which the time plots open their x axis, ``residual_span`` {radar channel:
+    (t0, t1)} [s] the residual and radar views' own (:func:`residual_spans`); without them the
+    viewer opens a plot on about a minute around the time cursor.
+    The Descent view leaves out the 3σ ellipsoids (kilometres wide, they enclose its camera) and
+    shows their size as text (``layout.ENTRY_UNCERTAINTY_LABEL``); the Entry view draws them.
     """
     scenes = rrb.Tabs(
         rrb.Spatial3DView(
@@ -150,17 +184,20 @@ def entry_blueprint(
                 layout.subtree(layout.WORLD),
                 "- " + layout.subtree(layout.DISPERSION),
                 "- " + layout.subtree(layout.ENTRY_FORWARD_VEHICLE),
+                "- " + layout.UNCERTAINTY,
+                "- " + layout.VEHICLE_MARKER,
             ],
-            eye_controls=rrb.EyeControls3D(position=[-30.0, -48.0, 14.0], look_target=[0.0, 0.0, 8.0]),
+            eye_controls=rrb.EyeControls3D(position=list(DESCENT_EYE), look_target=list(DESCENT_LOOK)),
         ),
         rrb.Spatial3DView(
             name="Entry (site frame, km scale)",
             origin=layout.WORLD,
-            # the dispersion's sample tracks hidden by default (a clutter at this scale; the members
-            # at PDD stay): tick them in the blueprint panel
+            # the dispersion cloud (sample tracks, members at PDD) hidden by default: a clutter over
+            # the end of the track and its ellipsoids; tick it in the blueprint panel
             contents=[
                 layout.subtree(layout.WORLD),
-                *("- " + layout.entry_dispersion_tracks_path(s) for s in (layout.ACCEPTED, layout.REJECTED)),
+                "- " + layout.subtree(layout.DISPERSION),
+                "- " + layout.ENTRY_UNCERTAINTY_LABEL,
             ],
             eye_controls=rrb.EyeControls3D(
                 position=[-200e3, -330e3, 160e3], look_target=[-280e3, 0.0, 20e3], eye_up=[0.0, 0.0, 1.0]
@@ -211,13 +248,14 @@ def entry_blueprint(
             column_shares=[3, 2],
             name="altitude AGL [m]",
         )
-    plot_tabs = [agl, *[tab(short, plot_view(n, o)) for short, n, o in _PLOTS]]
+    plot_tabs = [agl, *[tab(short, plot_view(n, o, span=span)) for short, n, o in _PLOTS]]
     plot_tabs.append(
         rrb.Horizontal(
             *[
                 plot_view(
                     f"wind {c} [m/s] — " + ("red" if c == "north" else "blue") + ", grey ±3σ, pale truth",
                     layout.entry_wind_plot_path(c),
+                    span=span,
                 )
                 for c in ("north", "east")
             ],
@@ -238,7 +276,11 @@ def entry_blueprint(
         )
     )
     plots = rrb.Tabs(*plot_tabs, active_tab=plot_tab)
-    res_tabs = [tab(short, plot_view(n, o)) for short, n, o in _RESIDUALS]
+    ry, rs = residual_y or {}, residual_span or {}
+    res_tabs = [
+        tab(short, plot_view(n, o, y_range=ry.get(ch), span=rs.get(ch, span))) for ch, short, n, o in _RESIDUALS
+    ]
+    radar_span = (min(a for a, _ in rs.values()), max(b for _, b in rs.values())) if rs else span
     radar = (  # channel, view name (unit and colours)
         ("slant_out", "slant-out [m] — grey measured, blue smoothed prediction"),
         ("velocity_out", "velocity-out [m/s] — grey measured, " + XYZ_KEY + " smoothed prediction"),
@@ -249,10 +291,12 @@ def entry_blueprint(
             name,
             layout.ENTRY_PLOT_RADAR,
             contents=[layout.entry_radar_plot_path(ch, s) for s in (layout.MEASURED_SERIES, layout.PREDICTED_SERIES)],
+            span=radar_span,
         )
         for ch, name in radar
     ]
-    res_tabs.append(rrb.Vertical(*radar_views, name="radar meas vs pred"))
+    # a tab each (stacked in the residual row, each view was too short for a y label)
+    res_tabs.append(rrb.Tabs(*radar_views, name="radar meas vs pred"))
     residuals = rrb.Tabs(*res_tabs, active_tab=residual_tab)
     right = rrb.Vertical(
         plots,
@@ -270,6 +314,49 @@ def entry_blueprint(
         rrb.SelectionPanel(state="collapsed"),
         rrb.BlueprintPanel(state="collapsed"),
     )
+
+
+def residual_ranges(filter_result: EntryFilterResult, min_px: float = RESIDUAL_VIEW_PX) -> dict:
+    """{radar channel: (lo, hi)} the y range [m or m/s] of its residual view: symmetric about 0,
+    holding every smoothed residual and its ±3σ, widened (``blueprint.legible_range``) so that a
+    view ``min_px`` [CSS px] high labels three ticks or more."""
+    out = {}
+    for ch, res in filter_result.smoothed_residuals.items():
+        if not len(res.t):
+            continue
+        sd = np.sqrt(np.einsum("nii->ni", res.S))
+        b = float(np.nanmax(np.concatenate([np.abs(res.y).ravel(), 3.0 * sd.ravel()])))
+        if np.isfinite(b) and b > 0.0:
+            out[ch] = legible_range(-b, b, min_px=min_px)
+    return out
+
+
+def residual_spans(filter_result: EntryFilterResult) -> dict:
+    """{radar channel: (first, last)} [s] the time span of its smoothed residuals (the radar's)."""
+    out = {}
+    for ch, res in filter_result.smoothed_residuals.items():
+        t = np.asarray(res.t, dtype=float)
+        if t.size > 1 and t[-1] > t[0]:
+            out[ch] = (float(t[0]), float(t[-1]))
+    return out
+
+
+def run_span(summary: dict) -> tuple[float, float] | None:
+    """(first, last) [s] of a run summary's ``event_table`` ("First data" to the last event): the
+    span of its time plots."""
+    t = [float(r["t_s"]) for r in summary.get("event_table", [])]
+    return (min(t), max(t)) if len(t) > 1 and max(t) > min(t) else None
+
+
+def sigma_label(half_sizes: np.ndarray, nsigma: float = 3.0) -> list[str]:
+    """One text per step naming an ellipsoid's principal semi-axes, largest first: ``half_sizes``
+    (n, 3) [m] -> ``"3σ ellipsoid ±38.2 km × ±9.94 km × ±123 m"`` (m below 1 km, else km)."""
+
+    def fmt(x: float) -> str:
+        return f"±{x:.3g} m" if x < 1e3 else f"±{x / 1e3:.3g} km"
+
+    hs = -np.sort(-np.asarray(half_sizes, float).reshape(-1, 3), axis=1)
+    return [f"{nsigma:g}σ ellipsoid " + " × ".join(fmt(float(x)) for x in row) for row in hs]
 
 
 def descent_window(summary: dict) -> tuple[float, float] | None:
@@ -499,16 +586,29 @@ class EntryRecorder:
         p_L = self._L(t, sm.p_M)
         q_L = site.attitudes(t, sm.q_M_G)
         rec.poses(layout.VEHICLE, t, p_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)), step=np.arange(len(t)))
+        # at the Entry view's hundreds of km the capsule is invisible: a dot of fixed screen size
+        rec.points(layout.VEHICLE_MARKER, np.zeros((1, 3)), colors=(20, 20, 20, 255), radii=-6.0)
         rec.poses(layout.VEHICLE_BODY, t, np.zeros((len(t), 3)), q_L, step=np.arange(len(t)))
         P_L = site.covariances(t, sm.P[:, DP, DP])
-        rec.ellipsoids(
+        half_sizes, _ = rec.ellipsoids(
             layout.UNCERTAINTY,
             t,
             np.zeros((len(t), 3)),
             P_L,
             nsigma=3.0,
-            color=(31, 119, 180, 70),
+            color=EST,
             line_radius=ELLIPSOID_LINE,
+            label="3σ smoothed",
+            fill=False,
+            step=np.arange(len(t)),
+        )
+        # the Descent view (metres) leaves the ellipsoid out: its size as text beside the vehicle
+        rec.text_labels_series(
+            layout.ENTRY_UNCERTAINTY_LABEL,
+            t,
+            np.tile(SIGMA_LABEL_OFFSET, (len(t), 1)),
+            [[f"{lab} (smoothed; drawn in the Entry view)"] for lab in sigma_label(half_sizes)],
+            color=EST,
             step=np.arange(len(t)),
         )
         rec.line_strip(layout.ESTIMATE_SMOOTHED, p_L, color=[EST], radius=TRACK_MAIN)
@@ -526,8 +626,10 @@ class EntryRecorder:
             np.zeros((len(fw.t), 3)),
             site.covariances(fw.t, fw.P[:, DP, DP]),
             nsigma=3.0,
-            color=(255, 127, 14, 60),
+            color=FWD,
             line_radius=ELLIPSOID_LINE,
+            label="3σ forward",
+            fill=False,
             step=steps_f,
         )
         sd_hf = fw.sigma_radial

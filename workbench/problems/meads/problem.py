@@ -144,14 +144,41 @@ class MeadsProblem(PipelineProblem):
 
     @contextlib.contextmanager
     def open_recording(self, path: Path, settings: MeadsSettings, truth: Any, properties: dict) -> Iterator[RunDrawer]:
-        """The MEADS recording (``recording.meads_blueprint``)."""
-        from workbench.problems.meads.recording import MeadsRecorder, meads_blueprint
+        """The MEADS recording; its one layout (``recording.meads_blueprint``), sent when the run
+        is done, opens the port views on the pressure samples' span and the air-data views on the
+        span above the objectives' q∞ threshold (known only then), their y axes fixed where the
+        viewer's own fit would label fewer than three ticks (``recording.view_y_ranges``)."""
+        from workbench.problems.meads.recording import MeadsRecorder, meads_blueprint, view_y_ranges
         from workbench.recording.writer import open_recording
 
         ekf = settings.ekf
-        bp = meads_blueprint(settings.vehicle.port_names, ekf.passes if ekf.enabled else 0, truth is not None)
-        with open_recording(path, settings.run.name, blueprint=bp, properties=properties) as rec:
-            yield RunDrawer(rec, MeadsRecorder(rec, truth), md.scorecard_markdown)
+        ports, passes = settings.vehicle.port_names, ekf.passes if ekf.enabled else 0
+        with open_recording(path, settings.run.name, properties=properties) as rec:
+
+            def layout(result: md.MeadsResult, summary: dict):
+                t = np.asarray(result.air.t, dtype=float)
+                above = t[np.nan_to_num(result.air.fit.qbar) >= settings.estimator.min_qbar_pa]
+
+                def span(x):
+                    return (float(x[0]), float(x[-1])) if x.size > 1 and x[-1] > x[0] else None
+
+                air = span(above)
+                return meads_blueprint(
+                    ports,
+                    passes,
+                    truth is not None,
+                    span=span(t),
+                    air_span=air,
+                    y_ranges=view_y_ranges(rec, ports, passes, air),
+                )
+
+            yield RunDrawer(
+                rec,
+                MeadsRecorder(rec, truth),
+                md.scorecard_markdown,
+                layout=layout,
+                blueprint=meads_blueprint(ports, passes, truth is not None),
+            )
 
     def export_columns(self, result: md.MeadsResult) -> ExportTable:
         """Air data, density and winds with their 1σ at the pressure times (least squares, and the

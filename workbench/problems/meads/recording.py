@@ -47,11 +47,19 @@ from workbench.problems.meads.pipeline import (
 from workbench.problems.meads.synthetic import TruthArrays
 from workbench.problems.meads.telemetry import true_runs
 from workbench.recording import layout
-from workbench.recording.blueprint import events_view, plot_view, report_view, tab
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab, y_range_if_needed
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import PALETTE, PALETTE_NAMES
 
-__all__ = ["meads_blueprint", "MeadsRecorder", "heat_shield_mesh", "PLOTS"]
+__all__ = [
+    "meads_blueprint",
+    "MeadsRecorder",
+    "heat_shield_mesh",
+    "PLOTS",
+    "view_y_ranges",
+    "AIR_DATA_VIEW_PX",
+    "PORT_FIT_VIEW_PX",
+]
 
 PLOTS = (
     ("α [deg]", "alpha_deg"),
@@ -78,13 +86,27 @@ EKF_PLOTS = (
 )
 
 
-def meads_blueprint(ports: tuple[str, ...], ekf_passes: int, has_truth: bool = False) -> rrb.Blueprint:
+def meads_blueprint(
+    ports: tuple[str, ...],
+    ekf_passes: int,
+    has_truth: bool = False,
+    span: tuple[float, float] | None = None,
+    air_span: tuple[float, float] | None = None,
+    y_ranges: dict[str, tuple[float, float]] | None = None,
+) -> rrb.Blueprint:
     """Default layout: the heat shield (left top), air-data plots (right top, one tab per quantity),
     per-port tabs (right bottom, one per name of ``ports``, the vehicle's: the pressure left, its
     residual and EKF innovation stacked right; the innovations of the last of ``ekf_passes``, none
     when 0), scorecard and events
     (left bottom). ``has_truth``: the density tab shows the error against the truth [%] (as drawn).
-    Views with many series name their colours in the title (a legend covered the curves)."""
+    Views with many series name their colours in the title (a legend covered the curves). ``span``
+    (t0, t1) [s]: the pressure samples' span, on which the port views open their x axis, and
+    ``air_span`` the span where q∞ is above the objectives' threshold, on which the air-data views
+    open theirs (below it the least squares is noise of tens of degrees, and the viewer fits the y
+    axis to the x range shown); without them the viewer opens a run of minutes on about a minute
+    around the time cursor. ``y_ranges`` {view origin: (lo, hi)} fixes the y axis of those views
+    (:func:`view_y_ranges`)."""
+    yr = y_ranges or {}
     scene = rrb.Spatial3DView(
         name="Heat shield (reconstructed attitude, local ENU)",
         origin=layout.WORLD,
@@ -108,11 +130,12 @@ def meads_blueprint(ports: tuple[str, ...], ekf_passes: int, has_truth: bool = F
 
     def quantity(n: str, q: str):
         # the estimators' curves span the whole width: a legend there covered their right ends
+        kw = {"span": air_span or span, "y_range": yr.get(layout.plot_path(q))}
         if q in ekf_q:
-            return plot_view(f"{n} — {key}", layout.plot_path(q))
+            return plot_view(f"{n} — {key}", layout.plot_path(q), **kw)
         if q in titles:
-            return plot_view(titles[q], layout.plot_path(q))
-        return plot_view(n, layout.plot_path(q), legend="RightTop")
+            return plot_view(titles[q], layout.plot_path(q), **kw)
+        return plot_view(n, layout.plot_path(q), legend="RightTop", **kw)
 
     def tab_name(n: str, q: str) -> str:
         return "ρ error [%]" if q == "density" and has_truth else n
@@ -122,13 +145,18 @@ def meads_blueprint(ports: tuple[str, ...], ekf_passes: int, has_truth: bool = F
     for p in ports:
         # the pressure at full height on the left, residual (and innovation) stacked on the right:
         # three views stacked were each too low for more than one y label (the axis labels decades)
-        pressure = plot_view(f"{p} [Pa] — black dots measured, orange model", layout.join(layout.MEADS_PLOT_PORTS, p))
-        fits = [plot_view(f"{p} residual [Pa] — grey ±3σ", layout.residual_path("pressure", p))]
+        pressure = plot_view(
+            f"{p} [Pa] — black dots measured, orange model", layout.join(layout.MEADS_PLOT_PORTS, p), span=span
+        )
+        res = layout.residual_path("pressure", p)
+        fits = [plot_view(f"{p} residual [Pa] — grey ±3σ", res, span=span, y_range=yr.get(res))]
         if ekf_passes:
             fits.append(
                 plot_view(
                     f"{p} EKF pass {ekf_passes} innovation [Pa] — grey ±3σ",
                     layout.meads_ekf_innovation_path(ekf_passes, p),
+                    span=span,
+                    y_range=yr.get(layout.meads_ekf_innovation_path(ekf_passes, p)),
                 )
             )
         port_tabs.append(rrb.Horizontal(pressure, rrb.Vertical(*fits), column_shares=[1, 1], name=p))
@@ -149,6 +177,34 @@ def meads_blueprint(ports: tuple[str, ...], ekf_passes: int, has_truth: bool = F
         rrb.SelectionPanel(state="collapsed"),
         rrb.BlueprintPanel(state="collapsed"),
     )
+
+
+#: the heights [CSS px] of an air-data view and of a port's residual or innovation view (a 1400 x
+#: 900 window: about 180 and 130)
+AIR_DATA_VIEW_PX = 175.0
+PORT_FIT_VIEW_PX = 125.0
+
+
+def view_y_ranges(
+    rec, ports: tuple[str, ...], ekf_passes: int, air_span: tuple[float, float] | None
+) -> dict[str, tuple[float, float]]:
+    """{view origin: (lo, hi)} for the views of :func:`meads_blueprint` whose data (what ``rec``,
+    the run's :class:`~workbench.recording.writer.Recorder`, drew; the air-data views' over
+    ``air_span`` (t0, t1) [s]) the viewer would label at fewer than three ticks (a span a little
+    above a power of ten is labelled at one tick): a legible range (``blueprint.y_range_if_needed``)."""
+    views = [(layout.plot_path(q), air_span, AIR_DATA_VIEW_PX) for _, q in PLOTS]
+    for p in ports:
+        views.append((layout.residual_path("pressure", p), None, PORT_FIT_VIEW_PX))
+        if ekf_passes:
+            views.append((layout.meads_ekf_innovation_path(ekf_passes, p), None, PORT_FIT_VIEW_PX))
+    out = {}
+    for origin, window, px in views:
+        r = rec.value_range(origin, *(window or (None, None)))
+        if r is not None and r[1] > r[0]:
+            y = y_range_if_needed(r[0], r[1], px)
+            if y is not None:
+                out[origin] = y
+    return out
 
 
 def heat_shield_mesh(vehicle: FadsVehicle, n_r: int = 24, n_clock: int = 48) -> trimesh.Trimesh:

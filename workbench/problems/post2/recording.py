@@ -28,7 +28,7 @@ from workbench.problems.post2.model import OBSERVATIONS, STATES
 from workbench.problems.post2.pipeline import ForwardStage, ObservationData, Post2Result
 from workbench.problems.post2.scoring import truth_on_grid
 from workbench.recording import layout
-from workbench.recording.blueprint import events_view, plot_view, report_view, tab
+from workbench.recording.blueprint import events_view, plot_view, report_view, tab, y_range_if_needed
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.meshes import mesh3d
 from workbench.recording.moments import log_key_moments
@@ -70,6 +70,8 @@ EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
 TRUTH = (44, 160, 44, 255)
 PROP = (148, 103, 189, 255)
+#: the height [CSS px] of a state or residual view (a 1400 x 900 window: about 155 to 175)
+VIEW_PX = 150.0
 
 
 def _display(unit: str) -> tuple[str, float]:
@@ -157,8 +159,9 @@ class Post2Drawer:
     "parachute_diameter_m" (or None), "riser_m", "planet_rate_rad_s" (planet-relative velocity of the
     velocity arrow and of the 3-DOF drawn attitude; 0 when missing)} and ``parachute_events`` {event
     name: True opens /
-    False releases} for the 3-D vehicle; ``layout`` an optional ``(eye) -> blueprint``, the one layout of
-    the recording, sent by :meth:`finish` with the trajectory camera fitted to the smoothed track."""
+    False releases} for the 3-D vehicle; ``layout`` an optional ``(eye, span=, spans=, y_ranges=) ->
+    blueprint``, the one layout of the recording, sent by :meth:`finish` with the trajectory camera
+    fitted to the smoothed track and the plots' axes on what they draw (:meth:`view_range`)."""
 
     def __init__(self, rec, truth, scorecard, geometry=None, parachute_events=None, layout=None):
         self.rec, self.truth, self.scorecard = rec, truth, scorecard
@@ -167,9 +170,30 @@ class Post2Drawer:
         self.events: tuple[tuple[float, str], ...] = ()
         self.layout = layout
         self.track: np.ndarray | None = None
+        self.span: tuple[float, float] | None = None
+        self.spans: dict[str, tuple[float, float]] = {}
+        self.y_ranges: dict[str, tuple[float, float]] = {}
         self.handle = StageDispatch(
             {ObservationData: self._data, ForwardStage: self._forward, Post2Result: self._result}
         )
+
+    def view_range(self, origin: str, t: np.ndarray, *series: np.ndarray | None) -> None:
+        """Note the x span (first, last ``t`` [s]) and a y range holding every finite value of
+        ``series`` (the view's unit; :meth:`finish` fixes it, widened, where the viewer's own fit
+        would label fewer than three ticks in a view :data:`VIEW_PX` high:
+        ``blueprint.y_range_if_needed``) of the plot view at ``origin``; several notes of one
+        origin are merged."""
+        t = np.asarray(t, dtype=float)
+        t = t[np.isfinite(t)]
+        if t.size > 1 and t.max() > t.min():
+            a, b = self.spans.get(origin, (np.inf, -np.inf))
+            self.spans[origin] = (min(a, float(t.min())), max(b, float(t.max())))
+        vals = np.concatenate([np.ravel(np.asarray(x, dtype=float)) for x in series if x is not None] or [[]])
+        vals = vals[np.isfinite(vals)]
+        if vals.size:
+            a, b = self.y_ranges.get(origin, (np.inf, -np.inf))
+            lo, hi = min(a, float(vals.min())), max(b, float(vals.max()))
+            self.y_ranges[origin] = (lo, hi)
 
     def _data(self, stage: ObservationData) -> None:
         for name, ch in stage.channels.items():
@@ -191,7 +215,10 @@ class Post2Drawer:
             sd = stage.residual_sigma(name)
             for i, c in enumerate(d.residual_names):
                 path, label = layout.residual_path(name, c), f"{name}.{c} residual [{unit}]"
-                self.rec.series_with_bounds(path, ih.t, ih.y[:, i] * k, sd[:, i] * k, names=label)
+                y, b = ih.y[:, i] * k, 3.0 * sd[:, i] * k
+                self.rec.series_with_bounds(path, ih.t, y, sd[:, i] * k, names=label)
+                for origin in (path, layout.residual_path(name)):  # a component's view, or all in one
+                    self.view_range(origin, ih.t, y + b, y - b)
         for name, (t, f) in stage.weight_factors.items():  # the weight schedule as applied
             self.rec.scalars(
                 layout.plot_path(f"schedule/{name}_weight_factor"),
@@ -231,6 +258,14 @@ class Post2Drawer:
                 shown = f"{name}_error"
             for i, c in enumerate(comps):
                 root = layout.plot_path(f"{shown}/{c}")
+                self.view_range(
+                    root,
+                    res.t,
+                    v[:, i] + 3.0 * s[:, i],
+                    v[:, i] - 3.0 * s[:, i],
+                    None if truth is None else truth[:, i],
+                    None if pv is None else pv[:, i],
+                )
                 self.rec.series_with_bounds(
                     root,
                     res.t,
@@ -252,6 +287,8 @@ class Post2Drawer:
             self._rocket(res)
         p = res.smap.raw(res.x, "position")
         self.track = np.asarray(p, dtype=float)
+        if len(res.t) > 1 and res.t[-1] > res.t[0]:
+            self.span = (float(res.t[0]), float(res.t[-1]))
         # tracks and the vehicle marker in screen units: at the trajectory's hundreds of km a line in
         # metres is invisible, and so is the capsule
         self.rec.line_strip(layout.join(layout.ESTIMATE_SMOOTHED, "track"), p, color=EST, radius=-1.2)
@@ -287,7 +324,7 @@ class Post2Drawer:
         t = res.t[sel]
         rate = float(g.get("planet_rate_rad_s") or 0.0)
         self.rec.poses(layout.VEHICLE, t, res.smap.raw(res.x[sel], "position"), res.body_attitude(sel, rate))
-        self.rec.points(layout.POST2_VEHICLE_MARKER, np.zeros((1, 3)), colors=(230, 60, 30, 255), radii=-5.0)
+        self.rec.points(layout.VEHICLE_MARKER, np.zeros((1, 3)), colors=(230, 60, 30, 255), radii=-5.0)
         q_tilt = res.tilt_rotation(sel)
         if q_tilt is not None:  # body drawn tilted by the estimated tilt
             self.rec.poses(layout.VEHICLE_BODY, t, np.zeros((t.size, 3)), q_tilt)
@@ -369,7 +406,11 @@ class Post2Drawer:
         log_key_moments(self.rec, summary.get("key_moments", []))
         if self.layout is not None:
             eye = None if self.track is None else trajectory_eye(self.track)
-            self.rec.stream.send_blueprint(self.layout(eye), make_active=True, make_default=True)
+            y_ranges = {
+                o: y for o, (lo, hi) in self.y_ranges.items() if (y := y_range_if_needed(lo, hi, VIEW_PX)) is not None
+            }
+            bp = self.layout(eye, span=self.span, spans=self.spans, y_ranges=y_ranges)
+            self.rec.stream.send_blueprint(bp, make_active=True, make_default=True)
 
 
 def post2_blueprint(
@@ -385,6 +426,9 @@ def post2_blueprint(
     vehicle: bool = True,
     rocket_span: tuple[float, float] | None = None,
     trajectory_eye: rrb.EyeControls3D | None = None,
+    span: tuple[float, float] | None = None,
+    spans: dict[str, tuple[float, float]] | None = None,
+    y_ranges: dict[str, tuple[float, float]] | None = None,
 ):
     """The default layout: left, 3D tabs "Trajectory" (the tracks, `/world`) and, when ``vehicle`` (a
     vehicle is drawn: the problem file gives its diameter), "Vehicle" (origin the local level frame
@@ -405,7 +449,17 @@ def post2_blueprint(
     (altitude above the pad, with vertical speed and speed below) before the 3D tabs; right, "pad ENU
     position" (east, north, up, downrange) before the state tabs. ``trajectory_eye``: the Trajectory
     view's camera (:func:`trajectory_eye`; None: the viewer's own); its grid (at the planet's
-    centre, far from the track) is off."""
+    centre, far from the track) is off. ``span`` (t0, t1) [s]: the run's grid, on which the state,
+    phase, schedule and residual views open their x axis (else the viewer opens a run of hours on a
+    minute around the time cursor); ``spans`` {view origin: (t0, t1)} [s] a view's own span (an
+    observation's residuals: the phase it is measured in), ``y_ranges`` {view origin: (lo, hi)} a
+    view's y range (:meth:`Post2Drawer.view_range`; else the viewer's fit, which labels a short view
+    at one or two ticks)."""
+    spans, y_ranges = spans or {}, y_ranges or {}
+
+    def view(name: str, origin: str):
+        return plot_view(name, origin, span=spans.get(origin, span), y_range=y_ranges.get(origin))
+
     sizes = sizes or {}
     rc = residual_components or {}
     ou = observation_units or {}
@@ -414,15 +468,15 @@ def post2_blueprint(
         shown = f"{n}_error" if has_truth and n in ("position", "velocity") else n
         unit = _display(STATES[n].unit)[0] if n in STATES else "-"
         comps = _components(n, sizes.get(n, STATES[n].size if n in STATES else 1))
-        views = [plot_view(f"{shown}.{c} [{unit or '-'}]", layout.plot_path(f"{shown}/{c}")) for c in comps]
+        views = [view(f"{shown}.{c} [{unit or '-'}]", layout.plot_path(f"{shown}/{c}")) for c in comps]
         tabs.append(tab(f"{shown} [{unit or '-'}]", views[0]) if len(views) == 1 else rrb.Grid(*views, name=shown))
     if has_events:
-        tabs.append(tab("phases", plot_view("phase index [-]", layout.POST2_PHASE)))
+        tabs.append(tab("phases", plot_view("phase index [-]", layout.POST2_PHASE, span=span)))
     for n in schedules or []:
         tabs.append(
             tab(
                 f"{n} schedule",
-                plot_view(f"{n} weight factor [-]", layout.plot_path(f"schedule/{n}_weight_factor")),
+                plot_view(f"{n} weight factor [-]", layout.plot_path(f"schedule/{n}_weight_factor"), span=span),
             )
         )
     res = []
@@ -430,10 +484,10 @@ def post2_blueprint(
         comps = rc.get(n)
         unit = _display(ou[n])[0] if n in ou else "as logged"
         if not comps:
-            res.append(tab(n, plot_view(f"{n} [{unit}] residual", layout.residual_path(n))))
+            res.append(tab(n, view(f"{n} [{unit}] residual", layout.residual_path(n))))
             continue
         # component and unit first: a grid cell shows ~22 characters, the tab names the observation
-        views = [plot_view(f"{c} [{unit}] — {n} residual", layout.residual_path(n, c)) for c in comps]
+        views = [view(f"{c} [{unit}] — {n} residual", layout.residual_path(n, c)) for c in comps]
         res.append(tab(n, views[0]) if len(views) == 1 else rrb.Grid(*views, name=f"{n} residuals"))
     # the horizon and the velocity arrow (metres, with labels) belong to the Vehicle view: at trajectory
     # scale their labels sat on the vehicle marker
@@ -454,7 +508,7 @@ def post2_blueprint(
                 # the local level frame at the vehicle (east, north, up): the horizon grid lies flat,
                 # the viewer's up is the local vertical, and the body turns against them
                 origin=layout.POST2_HORIZON,
-                contents=[f"+ {layout.VEHICLE}/**", "- " + layout.POST2_VEHICLE_MARKER],
+                contents=[f"+ {layout.VEHICLE}/**", "- " + layout.VEHICLE_MARKER],
                 line_grid=False,  # the horizon grid (under the vehicle, north and east labelled) instead
             )
         )
@@ -526,7 +580,7 @@ def open_post2_recording(
     of a flight with a ``[launch]`` pad (its pad-frame views first, on that span). The layout is sent
     once, by :meth:`Post2Drawer.finish`."""
 
-    def blueprint(eye):
+    def blueprint(eye, **views):
         return post2_blueprint(
             list(states),
             list(observations),
@@ -539,6 +593,7 @@ def open_post2_recording(
             vehicle=bool((geometry or {}).get("diameter_m")),  # as Post2Drawer._vehicle draws it
             rocket_span=rocket_span,
             trajectory_eye=eye,
+            **views,
         )
 
     # opened without a layout: the one layout, with the camera fitted to the track, comes at the end
