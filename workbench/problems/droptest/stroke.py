@@ -472,8 +472,7 @@ def restitution_definitions(
             extremes (the threshold splits this impact in two) gives NaN.
         pad_s: the primary (extremes) window is the lowest threshold's interval widened by this [s]
             on both sides, but ending where the acceleration next exceeds the lowest threshold (a
-            second touch-down after the lander moves away, v_n ≥ 0, is a new contact; one while it
-            still approaches belongs to this impact and extends the window to its end).
+            second touch-down is a new contact).
         gravity: (3,) [m/s²] gravity in v_I's frame; when given, ``"touch_leave"`` extrapolates
             ``v_n`` from the lowest threshold's crossings to the instants the bags touch and leave:
             the bag force is taken to rise linearly from zero (rise time = the time between the
@@ -503,16 +502,7 @@ def restitution_definitions(
         i0, i1 = intervals[0]  # the lowest threshold's: the widest
         # window: from pad_s before the contact to pad_s after it, but not into a next contact
         lo = float(np.min(thresholds_g)) * G0
-        idx = np.arange(t.size)
-        nxt = np.flatnonzero((an > lo) & (idx > i1))
-        # a touch-down while the lander still approaches the surface (v_n < 0: the bags let go, the
-        # rigid frame strikes) is the same impact: the window goes on to the end of that contact
-        while nxt.size and vn[nxt[0]] < 0.0:
-            j1 = contact_interval(t, a_I, float(t[nxt[0] - 1]), lo, merge_s)[1]
-            if j1 <= i1:
-                break
-            i1 = j1
-            nxt = np.flatnonzero((an > lo) & (idx > i1))
+        nxt = np.flatnonzero((an > lo) & (np.arange(t.size) > i1))
         t_end = min(t[i1] + pad_s, t[nxt[0]] if nxt.size else np.inf)
         w = np.flatnonzero((t >= t[i0] - pad_s) & (t < t_end) & (t > after))
         kmin = int(w[np.argmin(vn[w])])
