@@ -131,3 +131,25 @@ def test_four_different_drops_are_reconstructed_inside_their_3sigma(tmp_path):
         if abs(r.restitution_error) > 3.0 * r.restitution_sigma
     ]
     assert not bad, "restitution outside 3σ: " + "; ".join(bad)
+
+
+def test_calibration_members_fly_the_monte_carlo_drop_of_their_seed(tmp_path):
+    """The health calibration's member ``seed`` (``calibration_settings``) flies the truth Monte
+    Carlo's drop ``seed`` (``disperse_drop`` on ``drop_rng(seed)``), not the scenario's own drop:
+    the bands cover honest drops across the envelope; the sensors and the survey are the scenario's."""
+    problem = DropTestProblem()
+    settings = _settings("droptest_fullstroke")
+    member = problem.calibration_settings(settings, 7)
+    drawn = disperse_drop(drop_config(settings.synthetic), drop_rng(7), settings.chamber.ramp_angle_deg)
+    got = drop_config(member.synthetic)
+    assert got.impact_normal_speed == drawn.impact_normal_speed
+    assert got.impact_parallel_speed == drawn.impact_parallel_speed
+    assert got.release_euler123_deg == drawn.release_euler123_deg
+    assert got.release_to_contact_s == drawn.release_to_contact_s
+    assert got.pressure_pa == pytest.approx(drawn.pressure_pa, rel=1e-12)  # the scenario's off-spec pressure
+    assert got != drop_config(settings.synthetic)
+    assert member.accelerometer is settings.accelerometer and member.synthetic.seed == settings.synthetic.seed
+    assert drop_config(problem.calibration_settings(settings, 7).synthetic) == got  # deterministic
+    syn = problem.synthesize(member, tmp_path, 7)
+    params = dict(zip(DROP_PARAMETER_NAMES, np.load(syn.truth)["drop_parameters"], strict=True))
+    assert params["impact_normal_target_mps"] == drawn.impact_normal_speed

@@ -188,6 +188,37 @@ def test_first_contact_geometry_ok_clean_error_hanging_moved(droptest_run, dropt
     assert geo["bound"][0] < -1.0
 
 
+def test_first_contact_is_judged_at_the_measured_first_touch(droptest_result, droptest_truth):
+    """The bags' first touch in the IMU (the last free-fall sample before the 2 g onset) is the
+    truth's first contact within a few samples, and the first-contact clearance is judged there: a
+    lobe just touching, whatever the impact (by the 2 g onset a vertex-first impact has three bags'
+    corner lobes pressed in tens of cm)."""
+    from workbench.problems.droptest.physics import measured_impact, measured_touch
+
+    tel = droptest_result.telemetry
+    onset = measured_impact(tel)[0]
+    touch = measured_touch(tel, onset)
+    assert touch is not None and touch < onset
+    assert abs(touch - droptest_truth["events"]["first_contact"]) < 0.003
+    geo = _checks(droptest_result.summary["health"], "geometry.")["geometry.first_contact"]
+    assert "measured first touch" in geo["message"] and "pressed in at 0.25 g" in geo["message"]
+
+
+def test_max_stroke_clearance_allows_the_structures_give_under_the_peak_load(droptest_result):
+    """A full stroke's vertex reaches into the ramp as far as the structure gives under the peak
+    load, m·|a|max/k with the asset's ``contact_stiffness_n_per_m``: the clearance's lower bound."""
+    from workbench.problems.droptest.physics import structural_give
+
+    res = droptest_result
+    depth, peak_g = structural_give(res.smoothed, res.telemetry, res.stroke.lander)
+    lander = res.stroke.lander
+    assert lander.contact_stiffness == 2.0e7  # the asset's default, the truth simulator's too
+    assert depth == pytest.approx(lander.mass * peak_g * 9.80665 / lander.contact_stiffness, rel=1e-9)
+    clear = _checks(res.summary["health"], "max_stroke.")["max_stroke.clearance"]
+    assert clear["bound"][0] == pytest.approx(-3.0 * res.stroke.max.sigma - depth, abs=1e-6)
+    assert "contact_stiffness_n_per_m" in clear["message"]
+
+
 def test_full_stroke_ok_on_clean_run_and_a_taller_lander_is_a_warning_naming_height(
     droptest_run, droptest_result, tmp_path
 ):

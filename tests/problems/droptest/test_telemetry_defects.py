@@ -346,6 +346,26 @@ def test_free_fall_check_accepts_a_short_fall_onto_a_soft_airbag():
     assert check_free_fall(_pendulum_drop(), {"bungee_cut": 1.336}, ["BP"], "events.csv") == []
 
 
+def test_free_fall_check_stops_at_the_first_touch_of_the_bags():
+    """A cut 16 ms before the bags touch, then a slow load (a vertex first: three bags' corner lobes)
+    from 0.3 to 1.9 g over 40 ms before the 2 g sample: free fall up to the touch, no warning; with
+    no sample below the touch threshold after the cut the lander never fell freely: a warning."""
+    from workbench.problems.droptest.telemetry import check_free_fall
+
+    t = np.arange(0.0, 2.0, 5e-4)
+    cut = 1.0
+    f = 0.55 + 0.4 * np.cos(2 * np.pi * t / 1.2)
+    touch = cut + 0.016
+    f[(t >= cut) & (t < touch)] = 0.05
+    rise = (t >= touch) & (t < touch + 0.04)
+    f[rise] = np.linspace(0.3, 1.9, rise.sum())
+    f[t >= touch + 0.04] = 8.0
+    assert check_free_fall(_Imu(t, f), {"bungee_cut": cut}, ["BP"], "events.csv") == []
+    f[(t >= cut) & (t < touch)] = 0.6
+    log = check_free_fall(_Imu(t, f), {"bungee_cut": cut}, ["BP"], "events.csv")
+    assert len(log) == 1 and "does not fall freely" in log[0][2]
+
+
 def test_free_fall_check_names_a_cut_time_in_the_wrong_unit():
     """A cut written 1000× too small (ms values divided twice) lands in the swing: not free fall,
     while 1000× it is — a located error naming the events file and the likely mix-up; a cut that

@@ -2,7 +2,8 @@
 
 Checks: mean NIS per sensor (every triad, gyro, ZUPT, ranging channels) against χ² bounds; the
 smoothed covariance symmetric and positive definite; the max-stroke clearance within the airbag
-geometry (0 … bag thickness = lobe diameter + standoff) and its 1σ below the bag thickness; the
+geometry (−3σ − the structure's give under the estimated peak load … bag thickness = lobe diameter +
+standoff) and its 1σ below the bag thickness; the
 coefficient of restitution in [0, 1]; no IMU gap across the contact (the window the estimate
 detects and the one where the measured specific force exceeds 2 g after release or bungee cut);
 and every warning the telemetry readers reported.  With the run's settings also the physics
@@ -33,6 +34,7 @@ from workbench.problems.droptest.physics import (
     full_stroke_check,
     hanging_checks,
     max_stroke_note,
+    structural_give,
     timing_checks,
 )
 
@@ -127,7 +129,7 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
                 )
             checks.append(geo)
         if completeness is None or completeness.max_stroke_defined:
-            full = full_stroke_check(tel, st, settings)
+            full = full_stroke_check(tel, st, settings, smo)
             if full is not None:
                 checks.append(full)
             note = max_stroke_note(smo, st, settings)
@@ -159,9 +161,20 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
     thickness = float(2.0 * lander.lobe_radius + lander.standoff)  # lander face to the outer bag surface
     d, s = float(st.max.distance), float(st.max.sigma)
     if ms_defined:
-        checks.append(
-            interval_check("max_stroke.clearance", d, -3.0 * max(s, 0.0) - 0.02, thickness, "max-stroke clearance", "m")
+        # a full stroke's vertex reaches into the ramp as far as the structure gives under the peak load
+        give = structural_give(smo, tel, lander)
+        depth = 0.0 if give is None else give[0]
+        clear = interval_check(
+            "max_stroke.clearance", d, -3.0 * max(s, 0.0) - depth, thickness, "max-stroke clearance", "m"
         )
+        if give is not None:
+            clear = replace(
+                clear,
+                message=f"{clear.message}; the lower bound is −3σ − m·|a|max/k, the depth a vertex reaches into "
+                f"the ramp under the estimated peak load {give[1]:.1f} g of the CM ({depth:.4f} m with [lander] "
+                f"contact_stiffness_n_per_m = {lander.contact_stiffness:.3g} N/m in the lander asset)",
+            )
+        checks.append(clear)
         checks.append(interval_check("max_stroke.sigma", s, 0.0, 0.5 * thickness, "max-stroke 1σ", "m"))
     e, se = st.restitution
     if not complete:

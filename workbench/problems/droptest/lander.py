@@ -82,6 +82,9 @@ class LanderModel:
         instruments: lever arms of the sensors from the CM in B, name -> (3,) [m].
         cm_L: the CM in the asset's lander frame L (3,) [m]; a vector ``x_L`` written in L is
             ``x_L − cm_L`` in B (same axes).
+        contact_stiffness: stiffness [N/m] of the rigid lander against the surface where a vertex
+            strikes it (structure and ramp compliance): the truth simulator's body contact, and how
+            deep a full stroke's vertex may reach under the measured peak load (health checks).
     """
 
     name: str
@@ -100,6 +103,7 @@ class LanderModel:
     ambient_pressure_pa: float | None
     instruments: dict[str, np.ndarray] = field(default_factory=dict)
     cm_L: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    contact_stiffness: float = 2.0e7
 
     def to_body(self, x_L) -> np.ndarray:
         """A point given in the lander frame L (3,) or (n, 3) [m] -> body frame B (from the CM) [m]."""
@@ -299,6 +303,17 @@ LANDER_SCHEMA = Schema(
                     "the centre of mass in L; required with `vertices_m`, must lie inside the body; absent: L's origin",
                 ),
                 Key(
+                    "contact_stiffness_n_per_m",
+                    "float",
+                    2.0e7,
+                    "N/m",
+                    "stiffness of the rigid lander against the ramp where a vertex strikes it in a full stroke "
+                    "(the structure's and the ramp's compliance; the default: an aluminium frame on the ramp "
+                    "[engineering]): the truth simulator's body contact, and the depth m·|f|max/k a full "
+                    "stroke's vertex may reach under the measured peak load in the `max_stroke.clearance` check",
+                    gt=0.0,
+                ),
+                Key(
                     "height_m",
                     "float",
                     None,
@@ -366,7 +381,7 @@ LANDER_SCHEMA = Schema(
                     "Pa",
                     "initial absolute inflation pressure" + _SIM_ONLY + "; with user data, when given (with "
                     "`[chamber] ambient_pressure_pa`), it sets how far the `geometry.first_contact` check lets "
-                    "the lobes press in at 2 g (absent: up to a lobe radius)",
+                    "the lobes press in at the measured first touch (absent: up to a lobe radius)",
                     gt=0.0,
                 ),
                 Key("gas_volume_m3", "float", None, "m³", "shared gas volume of the vented bags" + _SIM_ONLY, gt=0.0),
@@ -545,4 +560,5 @@ def load_lander(path: str | Path) -> LanderModel:
         ambient_pressure_pa=data["chamber"]["ambient_pressure_pa"],
         instruments=instruments,
         cm_L=cm_L,
+        contact_stiffness=float(lt["contact_stiffness_n_per_m"]),
     )

@@ -31,6 +31,7 @@ import numpy as np
 
 from workbench.core.bodies import G0
 from workbench.estimation.health import ERROR, OK, WARNING, Check
+from workbench.problems.droptest.telemetry import TOUCH_G
 
 __all__ = [
     "AXIS_ERROR_SIGMAS",
@@ -40,6 +41,7 @@ __all__ = [
     "full_stroke_check",
     "RIGID_JERK_G_PER_S",
     "rigid_impact",
+    "structural_give",
     "diagnose_axes",
     "LagEstimate",
     "estimate_lag",
@@ -48,6 +50,7 @@ __all__ = [
     "max_stroke_note",
     "mean_triad_force",
     "measured_impact",
+    "measured_touch",
     "timing_checks",
     "VERTEX_KEYS",
 ]
@@ -355,6 +358,25 @@ def measured_impact(tel, threshold_g: float = 2.0, merge_s: float = 0.01) -> tup
     return float(imu.time[i0] - d), float(imu.time[i1] - d), bool(at_end)
 
 
+def structural_give(smo, tel, lander) -> tuple[float, float] | None:
+    """How deep [m] a vertex of the rigid lander can reach into the surface under the peak load:
+    ``(m·|a|max / k, |a|max [g])``, ``|a|max`` the largest estimated non-gravitational acceleration
+    of the CM (the smoothed ``FilterStage`` ``smo``; the triads read it with their lever arms, which a
+    vertex strike's angular acceleration moves by tens of g) after the release (or bungee cut) of the
+    telemetry ``tel``, m the lander's mass, k its declared contact stiffness
+    (``[lander] contact_stiffness_n_per_m``: structure and ramp compliance).  None without a step
+    after the release."""
+    from workbench.problems.droptest import model as rl
+
+    start = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
+    a = np.linalg.norm(smo.x[smo.t >= start][:, rl.SA], axis=1)
+    a = a[np.isfinite(a)]
+    if not a.size:
+        return None
+    peak = float(a.max())
+    return float(lander.mass) * peak / float(lander.contact_stiffness), peak / G0
+
+
 @dataclass(frozen=True)
 class ContactCompleteness:
     """Whether the data cover the contact: ``complete`` False when the IMU file ends (or breaks)
@@ -462,44 +484,106 @@ def _lobe_clearance_sigma(x: np.ndarray, P: np.ndarray, lander, surface) -> floa
     return float(np.sqrt(max(J @ rl.pose_covariance(P) @ J, 0.0)))
 
 
+def measured_touch(tel, onset: float, threshold_g: float = TOUCH_G) -> float | None:
+    """The measured first touch of the bags before the impact whose 2 g onset is ``onset`` [s, on
+    the filter's time line] (:func:`measured_impact`): the last raw IMU sample before the onset, after
+    the release or bungee cut, where the mean triad specific force is at most ``threshold_g`` [g]
+    (the lander still in free fall), its time on the filter's time line (IMU tags less
+    ``tel.group_delay_s``).  Scanning back from the onset, noise spikes earlier in the fall do not
+    matter.  None when no such sample exists (the bungee still pulling at the contact, a gap)."""
+    t, f = mean_triad_force(tel)
+    d = tel.group_delay_s
+    start = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
+    fm = np.linalg.norm(f, axis=1) / G0
+    quiet = np.flatnonzero((t >= start) & (t - d < onset) & (fm <= threshold_g))
+    if not quiet.size:
+        return None
+    k = int(quiet[-1])
+    # the rise from the touch to the onset is one stretch of data (no gap across it)
+    on = int(np.searchsorted(t - d, onset))
+    if on - k > 1 and np.max(np.diff(t[k : on + 1])) > 2.5 * float(np.median(np.diff(t))):
+        return None
+    return float(t[k] - d)
+
+
+def _touch_radius(x: np.ndarray, lander, surface, within: float) -> tuple[float, str]:
+    """The effective radius [m] of the contact a lobe makes first, for the state ``x`` (N_X,): the
+    lobe radius R on the ramp plane, ``R r / (R + r)`` on a rock of radius r (its footprint grows
+    that much slower with the penetration, so a force presses it in that much further); the
+    smallest over the lobes whose clearance is at most ``within`` [m] (the closest, and those the
+    pose's uncertainty cannot tell from it), with a phrase naming the rock when it is one."""
+    from workbench.core.rotation import quat_rotate
+    from workbench.problems.droptest import model as rl
+
+    c_B = np.asarray(lander.lobe_centers_B, float)
+    R = float(lander.lobe_radius)
+    q = np.repeat(x[rl.SQ][None], c_B.shape[0], axis=0)
+    d, _, feature = surface.distance(x[rl.SP] + quat_rotate(q, c_B))
+    best, on = R, ""
+    for j in np.flatnonzero(d - R <= within):
+        f = int(feature[j])
+        if f >= 0:
+            r = float(surface.rock_radii[f])
+            r_e = R * r / (R + r)
+            if r_e < best:
+                best, on = r_e, f" (a lobe on rock {f}, radius {r:.2f} m: effective radius {r_e:.3f} m)"
+    return best, on
+
+
 def contact_geometry_check(tel, smo, st, settings) -> Check | None:
     """``geometry.first_contact``: the airbag lobes of the declared geometry, placed by the smoothed
-    pose ``smo`` (``FilterStage``) at the measured onset of the impact (:func:`measured_impact`),
-    must just touch the ramp: clearance in [−δ₂g − 3σ, +3σ], δ₂g the penetration at which one lobe's
-    gas overpressure alone carries 2 g (m·2g / (Δp·2π r), the declared pressures, mass and lobe
-    radius: the most a 2 g force can have compressed the bags; the lobe radius when the asset
-    declares no bag pressures, as user data may), σ the clearance's 1σ from the pose
-    covariance there.  Outside:
-    ERROR naming the keys that set the geometry (the clearance moves the stroke with it).  The
-    truth-MC calibration re-judges the clearance in one band per sensor configuration (its stat's
-    ``pool``: ``geometry.first_contact.ranging`` / ``.imu_only``).  None when no impact is measured."""
+    pose ``smo`` (``FilterStage``) at the measured first touch of the bags (:func:`measured_touch`:
+    the last free-fall sample, mean triad |f| ≤ :data:`TOUCH_G`, before the impact's 2 g onset of
+    :func:`measured_impact`), must just touch the ramp: clearance in [−δ − |v_n| Δt − 3σ,
+    +|v_n| Δt + 3σ], δ the penetration at which one lobe's gas overpressure alone carries the
+    threshold force (m·g_thr / (Δp·2π r), the declared pressures, mass and lobe radius r — on a rock
+    the contact's effective radius, :func:`_touch_radius`; the lobe
+    radius when the asset declares no bag pressures, as user data may), |v_n| Δt how far the lobes
+    move along the ramp normal in one IMU sample (the touch is known to a sample), σ the
+    clearance's 1σ from the pose covariance there.  At the first touch one lobe carries the force,
+    whatever the impact; by the 2 g onset several lobes may press in at once (a vertex first: three
+    bags' corner lobes) and their shared footprint makes the depth there depend on the attitude.
+    Without a free-fall sample before the onset (the bungee still pulling at the contact) the
+    clearance is judged at the 2 g onset with δ for 2 g.  Outside: ERROR naming the keys that set
+    the geometry (the clearance moves the stroke with it).  The truth-MC calibration re-judges the
+    clearance in one band per sensor configuration (its stat's ``pool``:
+    ``geometry.first_contact.ranging`` / ``.imu_only``).  None when no impact is measured."""
     imp = measured_impact(tel)
     if imp is None:
         return None
     from workbench.problems.droptest import model as rl
 
     lander, surface = st.lander, st.surface
-    t_on = imp[0]
+    t_touch = measured_touch(tel, imp[0])
+    g_thr = 2.0 if t_touch is None else TOUCH_G
+    t_on = imp[0] if t_touch is None else t_touch
     k = int(np.clip(np.searchsorted(smo.t, t_on), 0, smo.t.size - 1))
     clear = lobe_clearance(smo.x[:, rl.SP], smo.x[:, rl.SQ], lander, surface)
     c = float(clear[k])
     sig = _lobe_clearance_sigma(smo.x[k], smo.P[k], lander, surface)
+    step = abs(float(smo.x[k, rl.SV] @ surface.normal)) * float(np.median(np.diff(tel.imu.time)))
     if lander.pressure_pa is None or lander.ambient_pressure_pa is None:
-        # user data without the bag pressures: how far 2 g presses the lobes in is unknown
+        # user data without the bag pressures: how far the force presses the lobes in is unknown
         delta = float(lander.lobe_radius)
         pressed = f"the bag pressures not declared, up to a lobe radius ({delta:.3f} m) pressed in"
     else:
         dp = max(float(lander.pressure_pa - lander.ambient_pressure_pa), 1.0)
-        delta = lander.mass * 2.0 * G0 / (dp * 2.0 * np.pi * float(lander.lobe_radius))
-        pressed = f"at most {delta:.3f} m pressed in at 2 g"
-    lo, hi = -delta - 3.0 * sig, 3.0 * sig
+        r_e, on = _touch_radius(smo.x[k], lander, surface, c + 2.0 * (3.0 * sig + step))
+        delta = lander.mass * g_thr * G0 / (dp * 2.0 * np.pi * r_e)
+        pressed = f"at most {delta:.3f} m pressed in at {g_thr:g} g{on}"
+    lo, hi = -delta - step - 3.0 * sig, step + 3.0 * sig
     after = max(tel.events.get("release", -np.inf), tel.events.get("bungee_cut", -np.inf))
     touch = np.flatnonzero((clear <= 0.0) & (smo.t >= after))
-    t_touch = f"{smo.t[touch[0]]:.4f} s" if touch.size else "never"
+    t_touch_est = f"{smo.t[touch[0]]:.4f} s" if touch.size else "never"
+    when = (
+        f"the measured first touch (t = {t_on:.4f} s, the last mean triad |f| ≤ {TOUCH_G:g} g before the 2 g "
+        f"onset at {imp[0]:.4f} s)"
+        if t_touch is not None
+        else f"the measured onset of the impact (t = {t_on:.4f} s, mean triad |f| > 2 g; no free-fall sample before it)"
+    )
     base = (
-        f"airbag lobes {c:+.3f} ± {sig:.3f} m (1σ) from the ramp at the measured onset of the impact "
-        f"(t = {t_on:.4f} s, mean triad |f| > 2 g); {pressed}; the estimated lobes "
-        f"touch the ramp at {t_touch}"
+        f"airbag lobes {c:+.3f} ± {sig:.3f} m (1σ) from the ramp at {when}; {pressed}, ± {step:.3f} m in one IMU "
+        f"sample; the estimated lobes touch the ramp at {t_touch_est}"
     )
     # one honest band per sensor configuration: with ranging the pose at the impact is known ~30× better
     config = "ranging" if getattr(tel, "ranging", None) is not None else "imu_only"
@@ -574,14 +658,17 @@ def rigid_impact(tel) -> tuple[float, float, float, float] | None:
     return float(jerk[k]), float(t[k + 1] - d), thr, peak
 
 
-def full_stroke_check(tel, st, settings) -> Check | None:
+def full_stroke_check(tel, st, settings, smo=None) -> Check | None:
     """``geometry.full_stroke``: the stroke's full-stroke verdict (the declared lander geometry at
     the estimated pose, ``st`` a ``StrokeStage`` with lengths in m) against the IMU's own evidence
     of a rigid impact (:func:`rigid_impact`): a rigid frame striking the ramp shows as a jerk tens
     of times any gas bag's.  ERROR when the IMU shows a rigid impact but the geometry keeps the
-    lander more than 3σ clear, or the geometry puts the lander through the surface (stroke ≤ 0)
-    without one; WARNING when the geometry makes a full stroke likely (stroke within 1σ of the
-    surface) and the IMU shows none.  The stroke rests on the declared geometry (``height_m``,
+    lander more than 3σ clear, or the geometry puts the lander through the surface without one by
+    more than 3σ and the depth the structure gives under the estimated peak load
+    (:func:`structural_give` from the smoothed ``smo``, none without it: a vertex that grazes the
+    ramp loads it too gently for a rigid jerk, but cannot reach deeper); WARNING when the geometry
+    makes a full stroke likely (stroke within 1σ of the surface, or through it within that margin)
+    and the IMU shows none.  The stroke rests on the declared geometry (``height_m``,
     ``cm_height_m``, ...) that no sensor sees; this is the one place the data can contradict it.
     None without a measured impact or a max stroke."""
     ms = getattr(st, "max", None)
@@ -609,13 +696,16 @@ def full_stroke_check(tel, st, settings) -> Check | None:
             f"{imu_says} is the rigid lander striking the surface, but {geo_says} keeps it clear by more than 3σ: "
             f"the declared geometry places the lander's body too far inside its bags; likely: {keys}",
         )
-    if not rigid and d <= 0.0:
+    give = None if smo is None else structural_give(smo, tel, st.lander)
+    depth = 0.0 if give is None else give[0]
+    if not rigid and d + 3.0 * s < -depth:
         return Check(
             "geometry.full_stroke",
             ERROR,
             _g(jerk),
             _g(thr),
-            f"{geo_says} puts the rigid lander through the surface (FULL STROKE), but {imu_says} shows no rigid "
+            f"{geo_says} puts the rigid lander through the surface (FULL STROKE) by more than 3σ and the "
+            f"{depth:.4f} m the structure gives under the measured peak load, but {imu_says} shows no rigid "
             f"impact: the declared geometry places the body too far out of its bags; likely: {keys}",
         )
     if not rigid and d <= s:

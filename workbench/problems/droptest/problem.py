@@ -157,6 +157,15 @@ class DropTestProblem(PipelineProblem):
         syn = synthesize_droptest(settings, out_dir, seed=seed)
         return Synthesized(telemetry=dict(syn.telemetry), truth=syn.truth_path)
 
+    def calibration_settings(self, settings: DropSettings, seed: int) -> DropSettings:
+        """A health-calibration member's settings (:func:`workbench.problems.runner.evaluate`): the
+        scenario's drop replaced by the truth Monte Carlo's drop ``seed`` (``synthetic.disperse_drop``
+        within the REDLand envelope, generator ``SeedSequence(seed, spawn_key=(1,))``), so the bands
+        cover the honest drops a user flies, not one drop's sensor noise; sensors, rig and rocks kept."""
+        from workbench.problems.droptest.synthetic import dispersed_settings
+
+        return dispersed_settings(settings, int(seed))
+
     def load_truth(self, path: Path) -> dict[str, np.ndarray]:
         """The truth arrays of ``truth.npz`` (``synthetic.load_truth``)."""
         from workbench.problems.droptest.synthetic import load_truth

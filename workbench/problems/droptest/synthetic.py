@@ -56,6 +56,8 @@ __all__ = [
     "PSI",
     "surface_of",
     "truth_for",
+    "dispersed_drop",
+    "dispersed_settings",
     "dispersed_truth",
     "load_truth",
 ]
@@ -275,19 +277,48 @@ def truth_for(settings: DropSettings, drop: DropTestConfig | None = None) -> tup
     return _TRUTH_CACHE[key], lander, surf
 
 
-def dispersed_truth(settings: DropSettings, seed: int, attempts: int = 5) -> tuple[DropTruth, LanderModel, Surface]:
-    """Truth of Monte Carlo drop ``seed`` drawn by :func:`disperse_drop` (for the settings' own
-    ramp angle); a draw whose bungee design is infeasible (``design_release`` raises) is redrawn
-    from the same stream, at most ``attempts`` times."""
+def dispersed_drop(settings: DropSettings, seed: int, attempts: int = 5) -> DropTestConfig:
+    """The drop of Monte Carlo member ``seed``: drawn by :func:`disperse_drop` from :func:`drop_rng`
+    ``(seed)`` for the settings' own ramp angle; a draw whose bungee design is infeasible
+    (``design_release`` raises inside the truth simulation, which is therefore run here and cached
+    by :func:`truth_for`) is redrawn from the same stream, at most ``attempts`` times."""
     rng = drop_rng(seed)
     base = drop_config(settings.synthetic)
     err: ValueError | None = None
     for _ in range(attempts):
+        cfg = disperse_drop(base, rng, settings.chamber.ramp_angle_deg)
         try:
-            return truth_for(settings, disperse_drop(base, rng, settings.chamber.ramp_angle_deg))
+            truth_for(settings, cfg)
+            return cfg
         except ValueError as exc:  # the test engineer would pick another drop
             err = exc
     raise ValueError(f"{settings.path}: no feasible drop in {attempts} draws for seed {seed}: {err}")
+
+
+def dispersed_truth(settings: DropSettings, seed: int, attempts: int = 5) -> tuple[DropTruth, LanderModel, Surface]:
+    """Truth of Monte Carlo drop ``seed`` (:func:`dispersed_drop`) on the settings' lander and surface."""
+    return truth_for(settings, dispersed_drop(settings, seed, attempts))
+
+
+def dispersed_settings(settings: DropSettings, seed: int) -> DropSettings:
+    """The run's settings with its ``[synthetic]`` drop replaced by Monte Carlo drop ``seed``
+    (:func:`dispersed_drop`: impact speeds [m/s], release attitude [deg], bag pressure [psi],
+    release to contact [s], true bungee scale), so that a plain scenario run
+    (:func:`synthesize_droptest` without ``disperse``) flies it; sensors, rig, rocks and the survey
+    σ are the scenario's.  The health calibration's members (``calibration_settings``)."""
+    cfg = dispersed_drop(settings, seed)
+    syn = replace(
+        settings.synthetic,
+        impact_parallel_mps=cfg.impact_parallel_speed,
+        impact_normal_mps=cfg.impact_normal_speed,
+        release_euler123_deg=tuple(float(a) for a in cfg.release_euler123_deg),
+        release_to_contact_s=cfg.release_to_contact_s,
+        bungee_truth_scale=cfg.bungee_truth_scale,
+        bag_pressure_psi=None if cfg.pressure_pa is None else float(cfg.pressure_pa) / PSI,
+    )
+    out = replace(settings, synthetic=syn)
+    truth_for(out)  # the drop as the run will fly it (psi -> Pa may round by an ulp): simulated once, cached
+    return out
 
 
 def _imu_models(acc: Accelerometer, gyro: Gyro) -> tuple[ImuErrorModel, ImuErrorModel]:

@@ -25,6 +25,7 @@ from workbench.problems.droptest.sensors import RangingSpec, acquisition_group_d
 
 __all__ = [
     "STREAMS",
+    "TOUCH_G",
     "OPTIONAL_STREAMS",
     "DropTelemetry",
     "telemetry_paths",
@@ -224,17 +225,24 @@ def check_units_at_rest(
     return out
 
 
+#: the mean-triad specific force [g] below which the airbags have not yet touched the surface: the
+#: last sample at most this before an impact's first 2 g sample is the bags' first touch (the free
+#: fall's end); low enough that one lobe alone carries it, high enough to stand out of the noise of
+#: the mean of the triads only within the steep rise of a contact
+TOUCH_G = 0.25
+
+
 def check_free_fall(imu: Telemetry, events: dict[str, float], triads, fname: str) -> list[tuple[float, str, str]]:
     """The ``bungee_cut`` event against physics: right after the cut the lander falls freely, so
     the median specific force (norm of the mean of the ``triads``' accelerometers, m/s²) is below
-    0.5 g over the *early* window from the cut + 10 ms to the earlier of + 60 ms and halfway to
-    the first impact sample (mean triad specific force above 2 g).  Only the early part: the
-    airbag loads the lander gradually before the 2 g sample (a short dispersed drop of the Monte
-    Carlo, seed 198, fell freely for 55 ms and then rose through 0.5–1.6 g for 55 ms, which made the
-    median over the whole fall 0.6 g), and the bungee swing before the cut (0.05–0.95 g) is not
-    free fall over 50 ms.  If the window fails, and the cut time scaled by 1000 (a s ↔ ms mix-up
-    in the events file) would pass, a :class:`TelemetryError` naming the events file and the
-    likely unit; otherwise a WARN degradation.  Nothing is checked without a cut, an impact or
+    0.5 g over the *early* window from the cut + 10 ms to the earlier of + 60 ms and the bags'
+    first touch (the last sample at most :data:`TOUCH_G` before the first impact sample, mean triad
+    specific force above 2 g; none at all: not free fall).  Only up to the touch: the airbags load
+    the lander gradually before the 2 g sample (a vertex first, three bags' corner lobes, for tens
+    of ms), and the bungee swing before the cut (0.05–0.95 g) is not free fall over 50 ms.  If the
+    window fails, and the cut time scaled by 1000 (a s ↔ ms mix-up in the events file) would pass,
+    a :class:`TelemetryError` naming the events file and the likely unit; otherwise a WARN
+    degradation.  Nothing is checked without a cut, an impact or
     10 samples in the window.  ``imu.time`` [s]; returns degradations ``(t [s], level, text)``."""
     if "bungee_cut" not in events:
         return []
@@ -248,8 +256,14 @@ def check_free_fall(imu: Telemetry, events: dict[str, float], triads, fname: str
         if not hard.size:
             return None
         t0 = t_cut + 0.01
-        t1 = t0 + min(0.05, 0.5 * (imu.time[hard[0]] - t0))
-        m = (imu.time > t0) & (imu.time < t1)
+        if np.sum((imu.time > t0) & (imu.time < imu.time[hard[0]])) < 10:
+            return None
+        # the bags' first touch: the last sample at most TOUCH_G before the first impact sample
+        quiet = np.flatnonzero((imu.time > t_cut) & (imu.time < imu.time[hard[0]]) & (f <= TOUCH_G * G0))
+        if not quiet.size:
+            return False
+        t1 = min(t0 + 0.05, float(imu.time[quiet[-1]]))
+        m = (imu.time > t0) & (imu.time <= t1)
         return None if m.sum() < 10 else bool(np.median(f[m]) < 0.5 * G0)
 
     cut = events["bungee_cut"]

@@ -171,7 +171,7 @@ class ForceModel:
         self.gamma = lander.gamma
         self.damp = lander.damping
         self.mu = lander.friction
-        self.k_body = 2.0e7  # rigid-body penalty stiffness [N/m] (aluminium frame on the ramp)
+        self.k_body = float(lander.contact_stiffness)  # rigid-body penalty stiffness [N/m] (the asset's)
         self.c_body = 2.0e4  # [N s/m]
         self.cut = False
 
