@@ -23,6 +23,7 @@ column or scenario key and the likely cause.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import permutations, product
@@ -754,8 +755,7 @@ def max_stroke_note(smo, st, settings) -> str | None:
         f"while the bags hold it off the surface, so the 1σ covers the estimated pose only and the stroke moves "
         f"with the declared geometry: by {g_B[2]:+.2f} m per metre that vertex moves along body +z "
         f"(∇ = [{g_B[0]:+.2f}, {g_B[1]:+.2f}, {g_B[2]:+.2f}] per metre along body x, y, z); the geometry: "
-        f"{settings.lander_file} "
-        f"({VERTEX_KEYS})"
+        f"the lander file {os.path.basename(str(settings.lander_file))} ({VERTEX_KEYS})"
     )
 
 
