@@ -3,10 +3,11 @@ truth Monte Carlo draws (``disperse_drop``, the REDLand test envelope: impact sp
 pressure, timing, bungee) on the validation stream, reconstructed and judged with the stored
 calibration (:func:`workbench.problems.runner.judge_health`) — what a user's honest drop meets.
 
-The health calibration itself (``workbench calibrate droptest``) runs each scenario's own drop with
-other sensor seeds, so its bands cover one drop's sensor noise; this measures how its verdict fares
-over the envelope.  Per scenario: the verdict counts, and per check that is not OK the status counts
-and the range of its value.
+The health calibration (``workbench calibrate droptest``) draws its members' drops from the same
+envelope on the calibration stream; this benchmark holds out the validation stream and measures how the
+verdict fares there.  Per scenario: the verdict counts, the drops with an ERROR from a check that a
+user's own run has (all but the ``truth.*`` scoring checks), and per check that is not OK the status
+counts and the range of its value.
 
     python tests/benchmarks/bench_dispersed_health.py [--members 20] [--scenarios droptest,droptest_ranging]
 """
@@ -62,7 +63,10 @@ def main(argv: list[str] | None = None) -> int:
             for c, (status, value) in r["not_ok"].items():
                 checks[c].append((status, value))
         per[name] = {
-            "verdicts": dict(Counter(r["verdict"] for r in rows)),
+            "verdicts": {v: sum(r["verdict"] == v for r in rows) for v in ("OK", "WARNING", "ERROR")},
+            "error_checks_a_user_run_has": sum(
+                any(st == "ERROR" and not c.startswith("truth.") for c, (st, _) in r["not_ok"].items()) for r in rows
+            ),
             "not_ok": {
                 c: {
                     "status": dict(Counter(s for s, _ in v)),
@@ -75,7 +79,10 @@ def main(argv: list[str] | None = None) -> int:
             "rows": rows,
         }
         print(f"{name}: verdicts {per[name]['verdicts']}; not OK {per[name]['not_ok']}", flush=True)
-    results = {"members": a.members, "wall_s": round(time.perf_counter() - t0, 1), "scenarios": per}
+    totals = {v: sum(p["verdicts"][v] for p in per.values()) for v in ("OK", "WARNING", "ERROR")}
+    totals["drops"] = sum(totals.values())
+    totals["error_checks_a_user_run_has"] = sum(p["error_checks_a_user_run_has"] for p in per.values())
+    results = {"members": a.members, "wall_s": round(time.perf_counter() - t0, 1), "scenarios": per, "totals": totals}
     out = write_benchmark_json(a.out, __file__, results, argv)
     print(f"{results['wall_s']:.0f} s -> {out}")
     return 0
