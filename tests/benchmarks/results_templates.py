@@ -397,7 +397,8 @@ RESULTS_MD = RESULTS_MD + "\n" + _FULL_STROKE
 
 _DH = "bench_dispersed_health:results.scenarios"
 _DB = "before/bench_dispersed_health:results.scenarios"
-_DISPERSED = f"""
+_DISPERSED = (
+    """
 ## Drop test: the verdict on a user's other honest drops
 
 The drop-test health calibration used to rerun each scenario's own drop with new sensor noise, so its bands
@@ -408,24 +409,27 @@ calibration members fly the truth Monte Carlo's drops (`disperse_drop`, calibrat
 judged at the measured first touch of the bags, and the full-stroke checks allow the depth m·|a|max/k the
 structure gives (`[lander] contact_stiffness_n_per_m`). `python tests/benchmarks/bench_dispersed_health.py
 --members 20 --scenarios droptest,droptest_ranging,droptest_fullstroke,droptest_rocks`
-({{{{bench_dispersed_health:results.wall_s|mmss}}}} on 2 cores) runs {{{{bench_dispersed_health:results.members}}}}
+({{bench_dispersed_health:results.wall_s|mmss}} on 2 cores) runs {{bench_dispersed_health:results.members}}
 honest drops per scenario from the held-out validation stream through the stored calibration; before:
 `docs/results/before/bench_dispersed_health.json`, the same command on the per-scenario calibration.
 
 | scenario | OK before → now | WARNING before → now | ERROR before → now | ERROR from a check a user's run has, now |
 |---|---|---|---|---|
-""" + "".join(
-    f"| {n} | {{{{{_DB}.{n}.verdicts.OK}}}} → {{{{{_DH}.{n}.verdicts.OK}}}} "
-    f"| {{{{{_DB}.{n}.verdicts.WARNING}}}} → {{{{{_DH}.{n}.verdicts.WARNING}}}} "
-    f"| {{{{{_DB}.{n}.verdicts.ERROR}}}} → {{{{{_DH}.{n}.verdicts.ERROR}}}} "
-    f"| {{{{{_DH}.{n}.error_checks_a_user_run_has}}}} |\n"
-    for n in ("droptest", "droptest_ranging", "droptest_fullstroke", "droptest_rocks")
-) + f"""
+"""
+    + "".join(
+        f"| {n} | {{{{{_DB}.{n}.verdicts.OK}}}} → {{{{{_DH}.{n}.verdicts.OK}}}} "
+        f"| {{{{{_DB}.{n}.verdicts.WARNING}}}} → {{{{{_DH}.{n}.verdicts.WARNING}}}} "
+        f"| {{{{{_DB}.{n}.verdicts.ERROR}}}} → {{{{{_DH}.{n}.verdicts.ERROR}}}} "
+        f"| {{{{{_DH}.{n}.error_checks_a_user_run_has}}}} |\n"
+        for n in ("droptest", "droptest_ranging", "droptest_fullstroke", "droptest_rocks")
+    )
+    + """
 The ERRORs left are the synthetic run's own scoring (`truth.restitution`: the estimate against the truth), which a
 user's drop does not have; the WARNINGs are mostly "restitution not determined" on tumbling drops with several
 strikes, where the rebound is not one number. The fuzz suite's drop-test counts are unchanged by the
 recalibration (116 mutations, the same outcome for each).
 """
+)
 RESULTS_MD = RESULTS_MD + "\n" + _DISPERSED
 
 _K = "bench_droptest:results.configurations"
