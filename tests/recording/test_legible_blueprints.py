@@ -39,7 +39,7 @@ def _blueprints():
     from workbench.problems.post2.recording import post2_blueprint
 
     impact = {"eye": np.array([4.0, 0.0, 1.0]), "look": np.zeros(3), "up": np.array([0.0, 0.0, 1.0])}
-    impact |= {"t0": 1.5, "t1": 2.0}
+    impact |= {"t0": 1.5, "t1": 2.0, "span": (-0.5, 2.3)}
     impact |= {"stroke_lo": 0.0, "stroke_hi": 1.0}
     triads = ["BP", "PYBP"]
     residuals = [*triads, "gyro", "zupt", "odometer", "gun1.range", "gun1.rate"]
@@ -79,7 +79,7 @@ def test_droptest_bounded_plots_have_an_impact_zoom_beside_the_whole_drop():
     from workbench.problems.droptest.recording import droptest_blueprint
 
     impact = {"eye": np.array([4.0, 0.0, 1.0]), "look": np.zeros(3), "up": np.array([0.0, 0.0, 1.0])}
-    impact |= {"t0": 1.5, "t1": 2.0}
+    impact |= {"t0": 1.5, "t1": 2.0, "span": (-0.5, 2.3)}
     bp = droptest_blueprint(["BP", "gyro", "zupt"], impact | {"stroke_lo": 0.0, "stroke_hi": 1.0}, ["BP"])
     views = _time_series(bp)
     pos_x = [v for v in views if str(v.origin) == layout.join(layout.DROPTEST_PLOT_POSITION, "x")]
@@ -353,6 +353,26 @@ def test_droptest_impact_camera_reads_the_max_stroke_in_front_of_the_airbags():
     assert np.linalg.norm(off) > 0.3 and abs(off @ (f - c)) < 1e-9
 
 
+def test_droptest_nis_legend_stands_right_of_the_data():
+    """The NIS legend (one colour per sensor, seven rows) covered the right end of the spikes: the
+    view opens its x axis with room right of the data for it, the legend in that corner."""
+    from workbench.problems.droptest.recording import droptest_blueprint
+
+    impact = {"eye": np.array([4.0, 0.0, 1.0]), "look": np.zeros(3), "up": np.array([0.0, 0.0, 1.0])}
+    impact |= {"t0": 1.5, "t1": 2.0, "span": (-0.5, 2.3), "stroke_lo": 0.0, "stroke_hi": 1.0}
+    (nis,) = [
+        v for v in _time_series(droptest_blueprint(["BP"], impact, ["BP"])) if str(v.origin) == layout.DROPTEST_PLOT_NIS
+    ]
+    legend = nis.properties["PlotLegend"]
+    assert legend.visible.as_arrow_array().to_pylist() == [True]
+    corner = legend.corner.as_arrow_array().to_pylist()[0]
+    assert rrb.components.Corner2D(corner).name in ("RightTop", "RightBottom")
+    rng = nis.properties["TimeAxis"].view_range.as_arrow_array().to_pylist()[0]
+    start, end = rng["start"], rng["end"]
+    span_ns = 2.8e9
+    assert start == pytest.approx(-0.5e9) and end >= 2.3e9 + 0.3 * span_ns
+
+
 def test_droptest_stroke_zoom_holds_the_max_stroke_band_with_labelled_ticks():
     """The zoomed stroke view: from the ramp (0) to above the max stroke's +3σ, with 0.1 m ticks
     labelled (0 to 1.2 m labelled only 0 and 1 in a 1400 x 900 window)."""
@@ -486,7 +506,7 @@ def test_droptest_bounded_axes_get_a_tab_each_and_labelled_y_ranges():
     drawn = {(x, None, None): (-0.7, 1.9), (x, 1.5, 2.0): (-0.08, 0.09)}
     rec = SimpleNamespace(value_range=lambda o, t0=None, t1=None: drawn.get((o, t0, t1)))
     impact = {"eye": np.array([4.0, 0.0, 1.0]), "look": np.zeros(3), "up": np.array([0.0, 0.0, 1.0])}
-    impact |= {"t0": 1.5, "t1": 2.0}
+    impact |= {"t0": 1.5, "t1": 2.0, "span": (-0.5, 2.3)}
     whole, zoom = bounded_y_ranges(rec, impact | {"stroke_lo": 0.0, "stroke_hi": 1.0})
     assert set(whole) == {x} and set(zoom) == {x}
     for r in (whole[x], zoom[x]):

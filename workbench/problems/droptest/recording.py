@@ -77,6 +77,9 @@ SCENE_KEY_TRUTH_MD = " · green wireframe and line: truth body and CM track"
 #: key of the red/green/blue (x/y/z) colours, for view names (legends off: they covered the data)
 XYZ_KEY = "RGB = xyz"
 BOUNDS_KEY = "±3σ grey, truth pale"
+#: room right of the data in the NIS view for its legend, as a fraction of the run's span (the
+#: legend, up to about 120 px wide, in a plot about 510 px wide in a 1400 x 900 window)
+NIS_LEGEND_ROOM = 0.35
 #: the height [CSS px] the zoomed stroke view is given at least (1400 x 900 window: about 190)
 STROKE_VIEW_PX = 150.0
 
@@ -130,7 +133,9 @@ def droptest_blueprint(
     ``impact`` (known only after the reconstruction, :func:`impact_view`): ``eye``, ``look`` (3,)
     [m, SPF] the Impact view's camera position and look target and ``up`` (3,) its up axis,
     ``t0``/``t1`` [s] window of the impact, ``stroke_lo``/``stroke_hi`` [m] y-range of the zoomed
-    stroke plot. Without it a generic layout is returned.
+    stroke plot, ``span`` (t0, t1) [s] the filter grid's (the NIS view opens on it with
+    :data:`NIS_LEGEND_ROOM` of it added right of the data, where its legend stands). Without it a
+    generic layout is returned.
     ``triads``: accelerometer triad names (one measured-vs-predicted plot each).
     A bounded quantity's tab holds a tab per axis, the whole drop beside the impact zoom at full
     height (three axes stacked, each view was too low for more than one y label); without a zoom
@@ -215,6 +220,12 @@ def droptest_blueprint(
     else:
         key = "triads [g] — measured, black predicted"
         plots.append(tab("triads [g]", plot_view(key, layout.DROPTEST_PLOT_TRIADS, legend="LeftBottom")))
+    # the NIS legend names one colour per sensor; over the data it hid the right end of the spikes,
+    # so the x axis opens with room for it right of the data
+    nis_span = None
+    if impact is not None:
+        t0, t1 = (float(v) for v in impact["span"])
+        nis_span = (t0, t1 + NIS_LEGEND_ROOM * (t1 - t0))
     plots += [
         tab(
             "NIS [-]",
@@ -222,6 +233,7 @@ def droptest_blueprint(
                 "NIS [-] — one series per sensor, grey χ² 99 % bound per dimension",
                 layout.DROPTEST_PLOT_NIS,
                 legend="RightTop",
+                span=nis_span,
             ),
         ),
         tab(
@@ -340,8 +352,8 @@ def airbags_at(lander, x: np.ndarray) -> np.ndarray:
 
 def impact_view(result) -> dict:
     """Camera and zoom settings of :func:`droptest_blueprint` from a ``DropResult``: the Impact
-    view's ``eye`` and ``look`` (:func:`max_stroke_dimension`), the impact window ``t0``/``t1`` [s]
-    and the stroke zoom's ``stroke_lo``/``stroke_hi`` [m]."""
+    view's ``eye``, ``look`` and ``up`` (:func:`max_stroke_dimension`), the filter grid's ``span``
+    and the impact window ``t0``/``t1`` [s], the stroke zoom's ``stroke_lo``/``stroke_hi`` [m]."""
     st = result.stroke
     smo = result.smoothed
     i0, i1 = st.contact
@@ -363,6 +375,7 @@ def impact_view(result) -> dict:
         "eye": dim["eye"],
         "look": dim["look"],
         "up": dim["up"],
+        "span": (float(smo.t[0]), float(smo.t[-1])),
         "t0": float(smo.t[i0]) - 0.15,
         "t1": float(smo.t[i1]) + 0.25,
         "stroke_lo": lo,
