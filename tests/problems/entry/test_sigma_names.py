@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-import rerun.blueprint as rrb
 
-from workbench.problems.entry.recording import SIGMA_NAME_GAP_M, entry_blueprint, sigma_name_positions
-from workbench.recording import layout
+from workbench.problems.entry.recording import SIGMA_NAME_GAP_M, sigma_name_positions
 
 
 def test_the_two_ellipsoid_names_stand_apart_when_the_ellipsoids_coincide():
@@ -20,20 +18,3 @@ def test_the_two_ellipsoid_names_stand_apart_when_the_ellipsoids_coincide():
     np.testing.assert_allclose(up[:, 2], 3.0 * np.sqrt(P[:, 2, 2]) + SIGMA_NAME_GAP_M)
     np.testing.assert_allclose(down, -up)
     assert np.all(up[:, 2] - down[:, 2] >= 2 * SIGMA_NAME_GAP_M)  # about 40 px at the Entry view's scale
-
-
-def test_descent_view_leaves_out_the_ellipsoid_and_its_name():
-    """The Descent view (metres) leaves out the smoothed ellipsoid, kilometres wide, and its name 8 km
-    above it; the Entry view shows both."""
-    views = {}
-    stack = [entry_blueprint().root_container]
-    while stack:
-        node = stack.pop()
-        if isinstance(node, rrb.Container):
-            stack.extend(node.contents)
-        else:
-            views[str(node.name)] = node
-    (descent,) = [v for n, v in views.items() if n.startswith("Descent")]
-    (entry,) = [v for n, v in views.items() if n.startswith("Entry")]
-    assert "- " + layout.subtree(layout.UNCERTAINTY) in descent.contents
-    assert not {"- " + layout.UNCERTAINTY, "- " + layout.subtree(layout.UNCERTAINTY)} & set(entry.contents)
