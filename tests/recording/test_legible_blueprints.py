@@ -38,7 +38,8 @@ def _blueprints():
     from workbench.problems.meads.recording_mc import trade_blueprint, truth_mc_blueprint
     from workbench.problems.post2.recording import post2_blueprint
 
-    impact = {"point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0]), "t0": 1.5, "t1": 2.0}
+    impact = {"eye": np.array([4.0, 0.0, 1.0]), "look": np.zeros(3), "up": np.array([0.0, 0.0, 1.0])}
+    impact |= {"t0": 1.5, "t1": 2.0, "span": (-0.5, 2.3)}
     impact |= {"stroke_lo": 0.0, "stroke_hi": 1.0}
     triads = ["BP", "PYBP"]
     residuals = [*triads, "gyro", "zupt", "odometer", "gun1.range", "gun1.rate"]
@@ -77,7 +78,8 @@ def test_every_plot_names_its_unit_and_keeps_its_legend_off_the_data(name):
 def test_droptest_bounded_plots_have_an_impact_zoom_beside_the_whole_drop():
     from workbench.problems.droptest.recording import droptest_blueprint
 
-    impact = {"point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0]), "t0": 1.5, "t1": 2.0}
+    impact = {"eye": np.array([4.0, 0.0, 1.0]), "look": np.zeros(3), "up": np.array([0.0, 0.0, 1.0])}
+    impact |= {"t0": 1.5, "t1": 2.0, "span": (-0.5, 2.3)}
     bp = droptest_blueprint(["BP", "gyro", "zupt"], impact | {"stroke_lo": 0.0, "stroke_hi": 1.0}, ["BP"])
     views = _time_series(bp)
     pos_x = [v for v in views if str(v.origin) == layout.join(layout.DROPTEST_PLOT_POSITION, "x")]
@@ -261,8 +263,10 @@ def test_entry_descent_view_leaves_the_3sigma_ellipsoid_out_and_names_its_size()
 
     views = {str(v.name): [str(c) for c in v.contents] for v in _walk(entry_blueprint()) if v.class_identifier == "3D"}
     descent, entry = views["Descent (at the vehicle)"], views["Entry (site frame, km scale)"]
-    assert "- " + layout.UNCERTAINTY in descent and "- " + layout.ENTRY_UNCERTAINTY_LABEL not in descent
-    assert "- " + layout.ENTRY_UNCERTAINTY_LABEL in entry and "- " + layout.UNCERTAINTY not in entry
+    # the ellipsoid's subtree: the ellipsoid and its name 8 km above it (the Entry view's)
+    sub = layout.subtree(layout.UNCERTAINTY)
+    assert "- " + sub in descent and "- " + layout.ENTRY_UNCERTAINTY_LABEL not in descent
+    assert "- " + layout.ENTRY_UNCERTAINTY_LABEL in entry and not {"- " + layout.UNCERTAINTY, "- " + sub} & set(entry)
     assert "- " + layout.subtree(layout.DISPERSION) in entry
     assert "- " + layout.VEHICLE_MARKER in descent and "- " + layout.VEHICLE_MARKER not in entry
     assert float(np.linalg.norm(DESCENT_EYE)) < 123.0  # inside the shipped run's smallest 3σ half-axis
@@ -290,6 +294,87 @@ def test_entry_residual_views_get_a_labelled_range_holding_the_3sigma_band():
     assert view.properties["ScalarAxis"].range.as_arrow_array().to_pylist() == [[a, b]]
 
 
+def _impact_result(ns, rl, n: int = 20):
+    """A drop result at the max stroke (step 9): the shipped lander with its CM 1.2 m above a level
+    ramp (z = 0), level, its closest body point 0.236 m above the ramp."""
+    from workbench.io.assets import assets_dir
+    from workbench.problems.droptest.lander import load_lander
+
+    lander = load_lander(assets_dir() / "landers" / "mer_drop_lander.toml")
+    x = np.zeros((n, rl.N_X))
+    x[:, rl.SP] = [0.0, 0.0, 1.2]
+    x[:, 12] = 1.0  # q_I_B = identity (xyzw)
+    closest = np.tile([0.1, -0.2, 0.236], (n, 1))
+    st = ns(
+        contact=(5, 12),
+        max=ns(distance=0.236, sigma=0.049, index=9),
+        smoothed=ns(closest_point_I=closest, surface_point_I=closest * [1.0, 1.0, 0.0]),
+        surface=ns(normal=np.array([0.0, 0.0, 1.0])),
+        lander=lander,
+    )
+    return ns(stroke=st, smoothed=ns(x=x, t=np.linspace(1.0, 2.0, n)))
+
+
+def test_droptest_impact_camera_reads_the_max_stroke_in_front_of_the_airbags():
+    """The stroke segment ran inside the translucent lobes, seen almost end-on from 10 m (about 15 px):
+    the Impact camera looks at it across the ramp, with the ramp normal up on screen, and its copy
+    (the dimension line) lies on the camera's side of every lobe, as long as the segment."""
+    from types import SimpleNamespace
+
+    from workbench.problems.droptest import model as rl
+    from workbench.problems.droptest.recording import (
+        DIMENSION_CLEARANCE_M,
+        airbags_at,
+        impact_view,
+        max_stroke_dimension,
+    )
+
+    res = _impact_result(SimpleNamespace, rl)
+    view = impact_view(res)
+    c, f = res.stroke.smoothed.closest_point_I[9], res.stroke.smoothed.surface_point_I[9]
+    eye, look = view["eye"], view["look"]
+    # seen side-on and large: the segment subtends > 2.5° at the camera (10 m away at 41° off its
+    # axis it subtended 0.8°), and the camera's up is the ramp normal (the segment vertical on screen)
+    a, b = c - eye, f - eye
+    angle = np.degrees(np.arccos(a @ b / np.linalg.norm(a) / np.linalg.norm(b)))
+    assert angle > 2.5
+    np.testing.assert_allclose(view["up"], [0.0, 0.0, 1.0])
+    d = (look - eye) / np.linalg.norm(look - eye)
+    assert abs(d @ (f - c)) / np.linalg.norm(f - c) < 0.5  # not end-on
+    # the dimension line: parallel, as long, every lobe point behind it as seen from the eye
+    bags = airbags_at(res.stroke.lander, res.smoothed.x[9])
+    dim = max_stroke_dimension(c, f, [0.0, 0.0, 1.0], bags, res.smoothed.x[9, rl.SP])
+    np.testing.assert_allclose(dim["b"] - dim["a"], f - c, atol=1e-12)
+    np.testing.assert_allclose(dim["eye"], eye)
+    side = dim["side"]
+    assert np.max((bags - c) @ side) <= dim["offset"] - DIMENSION_CLEARANCE_M + 1e-9
+    assert (eye - dim["a"]) @ side > 0.0 and (eye - dim["b"]) @ side > 0.0
+    # the label beside the line, off it
+    mid = 0.5 * (dim["a"] + dim["b"])
+    off = dim["label"] - mid
+    assert np.linalg.norm(off) > 0.3 and abs(off @ (f - c)) < 1e-9
+
+
+def test_droptest_nis_legend_stands_right_of_the_data():
+    """The NIS legend (one colour per sensor, seven rows) covered the right end of the spikes: the
+    view opens its x axis with room right of the data for it, the legend in that corner."""
+    from workbench.problems.droptest.recording import droptest_blueprint
+
+    impact = {"eye": np.array([4.0, 0.0, 1.0]), "look": np.zeros(3), "up": np.array([0.0, 0.0, 1.0])}
+    impact |= {"t0": 1.5, "t1": 2.0, "span": (-0.5, 2.3), "stroke_lo": 0.0, "stroke_hi": 1.0}
+    (nis,) = [
+        v for v in _time_series(droptest_blueprint(["BP"], impact, ["BP"])) if str(v.origin) == layout.DROPTEST_PLOT_NIS
+    ]
+    legend = nis.properties["PlotLegend"]
+    assert legend.visible.as_arrow_array().to_pylist() == [True]
+    corner = legend.corner.as_arrow_array().to_pylist()[0]
+    assert rrb.components.Corner2D(corner).name in ("RightTop", "RightBottom")
+    rng = nis.properties["TimeAxis"].view_range.as_arrow_array().to_pylist()[0]
+    start, end = rng["start"], rng["end"]
+    span_ns = 2.8e9
+    assert start == pytest.approx(-0.5e9) and end >= 2.3e9 + 0.3 * span_ns
+
+
 def test_droptest_stroke_zoom_holds_the_max_stroke_band_with_labelled_ticks():
     """The zoomed stroke view: from the ramp (0) to above the max stroke's +3σ, with 0.1 m ticks
     labelled (0 to 1.2 m labelled only 0 and 1 in a 1400 x 900 window)."""
@@ -298,15 +383,7 @@ def test_droptest_stroke_zoom_holds_the_max_stroke_band_with_labelled_ticks():
     from workbench.problems.droptest import model as rl
     from workbench.problems.droptest.recording import STROKE_VIEW_PX, impact_view
 
-    n = 20
-    x = np.zeros((n, rl.N_X))
-    st = SimpleNamespace(
-        contact=(5, 12),
-        max=SimpleNamespace(distance=0.236, sigma=0.049, index=9),
-        smoothed=SimpleNamespace(closest_point_I=np.zeros((n, 3))),
-        surface=SimpleNamespace(normal=np.array([0.0, 0.0, 1.0])),
-    )
-    view = impact_view(SimpleNamespace(stroke=st, smoothed=SimpleNamespace(x=x, t=np.linspace(1.0, 2.0, n))))
+    view = impact_view(_impact_result(SimpleNamespace, rl))
     lo, hi = view["stroke_lo"], view["stroke_hi"]
     assert lo < 0.0 and hi > 0.236 + 3 * 0.049 and hi < 1.0
     ticks = _labelled_ticks(lo, hi, STROKE_VIEW_PX)
@@ -430,7 +507,8 @@ def test_droptest_bounded_axes_get_a_tab_each_and_labelled_y_ranges():
     x = layout.join(layout.DROPTEST_PLOT_POSITION, "x")
     drawn = {(x, None, None): (-0.7, 1.9), (x, 1.5, 2.0): (-0.08, 0.09)}
     rec = SimpleNamespace(value_range=lambda o, t0=None, t1=None: drawn.get((o, t0, t1)))
-    impact = {"point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0]), "t0": 1.5, "t1": 2.0}
+    impact = {"eye": np.array([4.0, 0.0, 1.0]), "look": np.zeros(3), "up": np.array([0.0, 0.0, 1.0])}
+    impact |= {"t0": 1.5, "t1": 2.0, "span": (-0.5, 2.3)}
     whole, zoom = bounded_y_ranges(rec, impact | {"stroke_lo": 0.0, "stroke_hi": 1.0})
     assert set(whole) == {x} and set(zoom) == {x}
     for r in (whole[x], zoom[x]):

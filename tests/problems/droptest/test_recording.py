@@ -80,6 +80,27 @@ def test_required_entities_present(rec):
     assert "Transform3D:quaternion" in rec.components(layout.VEHICLE)
 
 
+def test_max_stroke_drawn_in_front_of_the_airbags_in_cm(rec, droptest_run):
+    """The max-stroke segment hid inside the lobes: its copy (the dimension line) is as long and as
+    oriented as the segment, moved along the Impact camera's view beyond the lobes, with extension
+    lines to the real ends and a label in cm; it is drawn in screen points (thick at any zoom)."""
+    ms = droptest_run.summary["max_stroke"]
+    (seg,) = rec.static_component(layout.DROPTEST_MAX_STROKE_SEGMENT, "LineStrips3D:strips")
+    dim, ext_a, ext_b = (
+        np.asarray(s, float) for s in rec.static_component(layout.DROPTEST_MAX_STROKE_DIMENSION, "LineStrips3D:strips")
+    )
+    seg = np.asarray(seg, float)
+    np.testing.assert_allclose(dim[1] - dim[0], seg[1] - seg[0], atol=1e-5)
+    assert np.linalg.norm(seg[1] - seg[0]) == pytest.approx(ms["distance_m"], abs=1e-5)
+    np.testing.assert_allclose([ext_a[0], ext_b[0]], seg, atol=1e-6)
+    np.testing.assert_allclose([ext_a[1], ext_b[1]], dim, atol=1e-6)
+    assert np.linalg.norm(dim[0] - seg[0]) > 1.0  # outside lobes of 2 m
+    radii = np.asarray(rec.static_component(layout.DROPTEST_MAX_STROKE_DIMENSION, "LineStrips3D:radii"))
+    assert np.all(radii < 0.0) and radii[0] < radii[1]  # screen points, the bar thicker than its extensions
+    (label,) = rec.static_component(layout.DROPTEST_MAX_STROKE_DIMENSION_LABEL, "Points3D:labels")
+    assert label == f"max stroke {100 * ms['distance_m']:.1f} ± {100 * ms['sigma_m']:.1f} cm (1σ)"
+
+
 # ------------------------------------------------------------------------------ numbers
 
 

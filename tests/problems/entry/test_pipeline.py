@@ -116,7 +116,14 @@ def test_row_counts_are_consistent(rec, run):
     # the Descent view names the smoothed 3σ ellipsoid's semi-axes at every step (it leaves it out)
     _, labels = rec.points(layout.ENTRY_UNCERTAINTY_LABEL)
     assert len(labels) == n and layout.VEHICLE_MARKER in rec.entities()
-    assert rec.static_component(layout.UNCERTAINTY, "Ellipsoids3D:labels") == ["3σ smoothed"]
+    # the Entry view names the two 3σ ellipsoids above / below them, not at their common centre
+    assert "Ellipsoids3D:labels" not in rec.components(layout.UNCERTAINTY)
+    assert "Ellipsoids3D:labels" not in rec.components(layout.ENTRY_FORWARD_UNCERTAINTY)
+    assert rec.static_component(layout.ENTRY_UNCERTAINTY_SIGMA_LABEL, "Points3D:labels") == ["3σ smoothed"]
+    assert rec.static_component(layout.ENTRY_FORWARD_SIGMA_LABEL, "Points3D:labels") == ["3σ forward"]
+    _, above = rec.points(layout.ENTRY_UNCERTAINTY_SIGMA_LABEL)
+    _, below = rec.points(layout.ENTRY_FORWARD_SIGMA_LABEL)
+    assert len(above) == n and above[-1][0, 2] - below[-1][0, 2] >= 16e3
     assert [rec.row_count(layout.radar_beam_path(b), layout.STEP) for b in range(4)] == beams
     # one row per member on the `sample` timeline, split into accepted + rejected
     acc = rec.row_count("/plots/dispersion/h_pdd/accepted", layout.SAMPLE)

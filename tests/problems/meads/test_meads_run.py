@@ -169,6 +169,23 @@ def test_ekf_in_the_recording(run):
             assert np.isfinite(y).sum() > 2000
 
 
+def test_port_labels_in_the_recording(run):
+    """The port names move with the ports (timed rows, seven per row, one leader line each), on the
+    circle around the nose that keeps them apart on screen."""
+    from workbench.problems.meads.recording import LABEL_RING_M
+    from workbench.recording import layout
+    from workbench.recording.reader import read_recording
+
+    rec = read_recording(run.recording)
+    t, rows = rec.points(layout.MEADS_PORT_LABELS)
+    _, leaders = rec.line_strips(layout.MEADS_PORT_LEADERS)
+    assert t.size > 100 and len(leaders) == t.size
+    assert all(r.shape == (7, 3) for r in rows) and all(len(s) == 7 for s in leaders)
+    np.testing.assert_allclose(np.linalg.norm(np.concatenate(rows), axis=1), LABEL_RING_M, rtol=1e-5)
+    labels = rec.static_component(layout.MEADS_PORT_LABELS, "Points3D:labels")
+    assert list(labels) == list(run.result.data.telemetry.ports)
+
+
 def test_recording_draws_gaps_not_zeros(run):
     """Where a port was not used or the least squares publish no wind, the recording holds NaN (a
     gap in the viewer's line) or no row at all: never a value of exactly 0 with a zero-width band,

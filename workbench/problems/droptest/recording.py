@@ -18,6 +18,7 @@ the scorecard.
 from __future__ import annotations
 
 import numpy as np
+import rerun as rr
 import rerun.blueprint as rrb
 
 from workbench.core.bodies import G0
@@ -32,7 +33,14 @@ from workbench.recording.blueprint import events_view, legible_range, plot_view,
 from workbench.recording.dispatch import StageDispatch
 from workbench.recording.writer import PALETTE, Recorder
 
-__all__ = ["DropTestRecorder", "bounded_y_ranges", "droptest_blueprint", "impact_view"]
+__all__ = [
+    "DropTestRecorder",
+    "airbags_at",
+    "bounded_y_ranges",
+    "droptest_blueprint",
+    "impact_view",
+    "max_stroke_dimension",
+]
 
 EST = (31, 119, 180, 255)
 FWD = (255, 127, 14, 255)
@@ -43,15 +51,25 @@ XYZW = XYZ + [(120, 120, 120, 255)]
 GHOST, GHOST_BAGS = (150, 150, 150, 110), (170, 170, 170, 25)
 #: the stroke segment's colour at the closest approach and at the largest stroke
 STROKE_NEAR, STROKE_FAR = (230, 0, 230, 255), (0, 200, 230, 255)
+#: the stroke segments' line widths [screen points, as Rerun's negative radii]: the same at the
+#: Impact view's metres and the Chamber view's whole drop
+STROKE_WIDTH = -3.0
+#: the max stroke's dimension line (and its extension lines) [screen points]
+DIMENSION_WIDTH, EXTENSION_WIDTH = -5.0, -1.5
+#: the dimension line's clearance outside the airbag lobes [m]
+DIMENSION_CLEARANCE_M = 0.25
+#: the Impact view's camera: distance [m] beyond the dimension line, elevation [deg] above the ramp
+IMPACT_EYE_DISTANCE_M = 1.6
+IMPACT_EYE_ELEVATION_DEG = 12.0
 
 #: what the 3D scene shows (``layout.SCENE_KEY``, beside the 3D views)
 SCENE_KEY_MD = (
     "**3D key** — lander (light grey) and airbags (orange, translucent): smoothed estimate · "
     "blue line: smoothed CM track · orange line: forward-pass track · magenta dots: accelerometer "
     "triads · magenta → cyan segment: stroke (closest body point to the ramp; magenta = closest) · "
-    "grey ghost: lander at max stroke, with its stroke segment · purple line: roll line (CM path of a "
-    "perfectly inelastic impact) · blue wireframe: 3σ position ellipsoid (inside the body while "
-    "the pose is known to centimetres)"
+    "grey ghost: lander at max stroke; thick magenta bar: its stroke in cm, in front of the airbags · "
+    "purple line: roll line (CM path of a perfectly inelastic impact) · blue wireframe: 3σ position "
+    "ellipsoid (inside the body while the pose is known to centimetres)"
 )
 SCENE_KEY_TRUTH_MD = " · green wireframe and line: truth body and CM track"
 
@@ -59,6 +77,9 @@ SCENE_KEY_TRUTH_MD = " · green wireframe and line: truth body and CM track"
 #: key of the red/green/blue (x/y/z) colours, for view names (legends off: they covered the data)
 XYZ_KEY = "RGB = xyz"
 BOUNDS_KEY = "±3σ grey, truth pale"
+#: room right of the data in the NIS view for its legend, as a fraction of the run's span (the
+#: legend, up to about 120 px wide, in a plot about 510 px wide in a 1400 x 900 window)
+NIS_LEGEND_ROOM = 0.35
 #: the height [CSS px] the zoomed stroke view is given at least (1400 x 900 window: about 190)
 STROKE_VIEW_PX = 150.0
 
@@ -109,10 +130,12 @@ def droptest_blueprint(
     explains its colours in its name (legends off: they covered a third of the data); bounded
     quantities are split per axis, each with the impact window beside the whole drop so the ±3σ
     band is visible.
-    ``impact`` (known only after the reconstruction): ``point`` (3,) [m, SPF] CM at max stroke,
-    ``closest`` (3,) [m, SPF] the body's closest point to the ramp then,
-    ``normal`` (3,) ramp normal, ``t0``/``t1`` [s] window of the impact, ``stroke_lo``/``stroke_hi``
-    [m] y-range of the zoomed stroke plot. Without it a generic layout is returned.
+    ``impact`` (known only after the reconstruction, :func:`impact_view`): ``eye``, ``look`` (3,)
+    [m, SPF] the Impact view's camera position and look target and ``up`` (3,) its up axis,
+    ``t0``/``t1`` [s] window of the impact, ``stroke_lo``/``stroke_hi`` [m] y-range of the zoomed
+    stroke plot, ``span`` (t0, t1) [s] the filter grid's (the NIS view opens on it with
+    :data:`NIS_LEGEND_ROOM` of it added right of the data, where its legend stands). Without it a
+    generic layout is returned.
     ``triads``: accelerometer triad names (one measured-vs-predicted plot each).
     A bounded quantity's tab holds a tab per axis, the whole drop beside the impact zoom at full
     height (three axes stacked, each view was too low for more than one y label); without a zoom
@@ -125,18 +148,11 @@ def droptest_blueprint(
     stroke_kw = {}
     win = None
     if impact is not None:
-        pt = np.asarray(impact["point"], float)
-        n = np.asarray(impact["normal"], float)
-        # three-quarter view from the free side of the ramp: 8 m out along the normal, 7 m across it
-        # on the side of the body's closest point (from the other side the body hides the stroke)
-        across = np.array([1.0, 0.0, 0.0]) - n[0] * n
-        across /= np.linalg.norm(across)
-        near = np.asarray(impact.get("closest", pt), float)
-        if (near - pt) @ across < 0.0:
-            across = -across
-        eye = pt + 8.0 * n + 7.0 * across
-        look = 0.5 * (near + pt)
-        scene_kw["eye_controls"] = rrb.EyeControls3D(position=eye, look_target=look, eye_up=[0.0, 0.0, 1.0])
+        scene_kw["eye_controls"] = rrb.EyeControls3D(
+            position=np.asarray(impact["eye"], float),
+            look_target=np.asarray(impact["look"], float),
+            eye_up=np.asarray(impact["up"], float),
+        )
         win = (float(impact["t0"]), float(impact["t1"]))
         stroke_kw = {"y_range": (impact["stroke_lo"], impact["stroke_hi"]), "window": win}
     scenes = rrb.Vertical(
@@ -204,6 +220,12 @@ def droptest_blueprint(
     else:
         key = "triads [g] — measured, black predicted"
         plots.append(tab("triads [g]", plot_view(key, layout.DROPTEST_PLOT_TRIADS, legend="LeftBottom")))
+    # the NIS legend names one colour per sensor; over the data it hid the right end of the spikes,
+    # so the x axis opens with room for it right of the data
+    nis_span = None
+    if impact is not None:
+        t0, t1 = (float(v) for v in impact["span"])
+        nis_span = (t0, t1 + NIS_LEGEND_ROOM * (t1 - t0))
     plots += [
         tab(
             "NIS [-]",
@@ -211,6 +233,7 @@ def droptest_blueprint(
                 "NIS [-] — one series per sensor, grey χ² 99 % bound per dimension",
                 layout.DROPTEST_PLOT_NIS,
                 legend="RightTop",
+                span=nis_span,
             ),
         ),
         tab(
@@ -270,8 +293,67 @@ def bounded_y_ranges(rec, impact: dict | None) -> tuple[dict, dict]:
     return whole, zoom
 
 
+def max_stroke_dimension(
+    closest: np.ndarray, foot: np.ndarray, normal: np.ndarray, bags: np.ndarray, cm: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Where the max stroke is drawn in front of the airbags, and the Impact view's camera that reads it.
+
+    The stroke segment runs from the body's ``closest`` point to its ``foot`` on the ramp (both (3,)
+    [m, SPF]) inside the airbag lobes, whose translucent layers hid it. The camera looks at it across
+    the ramp (normal to the segment and to the chamber's x axis, from the side where the lobes end
+    sooner; the lander slides along the ramp, past the camera's side rather than through it),
+    :data:`IMPACT_EYE_ELEVATION_DEG` above the ramp (``normal`` (3,), towards the free side), with the
+    ramp normal ``up`` on screen, so the ramp reads as the ground and the stroke as a vertical bar.
+    Its copy, the dimension line ``a`` → ``b``, is moved towards the camera along the view direction
+    ``side`` (unit) by ``offset`` [m], to :data:`DIMENSION_CLEARANCE_M` beyond every point of ``bags``
+    ((k, 3) [m, SPF], the lobes at the max-stroke pose): on screen it covers the segment, in front of
+    the lobes; extension lines join its ends to the real ones. ``eye`` is
+    :data:`IMPACT_EYE_DISTANCE_M` beyond it, ``look`` halfway from the segment to the CM ``cm`` (3,)
+    [m, SPF]; ``label`` (3,) [m] beside the line's middle, on the side away from the CM.
+    """
+    c, f = np.asarray(closest, float), np.asarray(foot, float)
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    seg = f - c
+    u = seg / np.linalg.norm(seg) if np.linalg.norm(seg) > 1e-9 else -n
+    # across the ramp: the chamber's x axis made normal to the segment (the y axis if x is along it)
+    ref = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    across = ref - (ref @ u) * u
+    across /= np.linalg.norm(across)
+    e = np.radians(IMPACT_EYE_ELEVATION_DEG)
+    reach = np.asarray(bags, float).reshape(-1, 3) - c
+    views = [np.cos(e) * sgn * across + np.sin(e) * n for sgn in (1.0, -1.0)]
+    ends = [float(np.max(reach @ d)) for d in views]
+    k = int(np.argmin(ends))
+    d = views[k] / np.linalg.norm(views[k])
+    offset = max(ends[k], 0.0) + DIMENSION_CLEARANCE_M
+    a, b = c + offset * d, f + offset * d
+    mid = 0.5 * (c + f)
+    v = np.cross(u, d)
+    v /= np.linalg.norm(v)
+    v = v if v @ (np.asarray(cm, float) - c) <= 0.0 else -v
+    return {
+        "a": a,
+        "b": b,
+        "side": d,
+        "offset": np.float64(offset),
+        "label": 0.5 * (a + b) + 0.45 * v,
+        "eye": mid + (offset + IMPACT_EYE_DISTANCE_M) * d,
+        "look": mid + 0.5 * (np.asarray(cm, float) - mid),
+        "up": n,
+    }
+
+
+def airbags_at(lander, x: np.ndarray) -> np.ndarray:
+    """The airbag lobes' mesh vertices (k, 3) [m, SPF] of the ``lander`` model at the pose of the
+    filter state ``x`` (N_X,) (CM position [m, SPF] and attitude q_I_B, xyzw)."""
+    v = np.asarray(airbag_mesh(lander, subdivisions=1).vertices, float)
+    return x[rl.SP] + quat_rotate(x[rl.SQ], v)
+
+
 def impact_view(result) -> dict:
-    """Camera and zoom settings of :func:`droptest_blueprint` from a ``DropResult``."""
+    """Camera and zoom settings of :func:`droptest_blueprint` from a ``DropResult``: the Impact
+    view's ``eye``, ``look`` and ``up`` (:func:`max_stroke_dimension`), the filter grid's ``span``
+    and the impact window ``t0``/``t1`` [s], the stroke zoom's ``stroke_lo``/``stroke_hi`` [m]."""
     st = result.stroke
     smo = result.smoothed
     i0, i1 = st.contact
@@ -285,15 +367,27 @@ def impact_view(result) -> dict:
         st.max.distance + 4.0 * st.max.sigma + 0.1,
         min_px=STROKE_VIEW_PX,
     )
+    k = int(st.max.index)
+    dim = max_stroke_dimension(
+        h.closest_point_I[k], h.surface_point_I[k], st.surface.normal, airbags_at(st.lander, smo.x[k]), smo.x[k, rl.SP]
+    )
     return {
-        "point": smo.x[int(st.max.index), rl.SP],
-        "closest": h.closest_point_I[int(st.max.index)],
-        "normal": st.surface.normal,
+        "eye": dim["eye"],
+        "look": dim["look"],
+        "up": dim["up"],
+        "span": (float(smo.t[0]), float(smo.t[-1])),
         "t0": float(smo.t[i0]) - 0.15,
         "t1": float(smo.t[i1]) + 0.25,
         "stroke_lo": lo,
         "stroke_hi": hi,
     }
+
+
+def _stroke_text(d: float, s: float) -> str:
+    """The stroke label: ``d`` ± ``s`` [m] (1σ) in cm below 1 m (the impact), else in m."""
+    if abs(d) < 1.0:
+        return f"stroke {100 * d:.1f} ± {100 * s:.1f} cm (1σ)"
+    return f"stroke {d:.3f} ± {s:.3f} m (1σ)"
 
 
 def _wrap_pi(a: np.ndarray) -> np.ndarray:
@@ -651,14 +745,16 @@ class DropTestRecorder:
         seg = np.stack([h.closest_point_I, h.surface_point_I], axis=1)[:, None]
         frac = np.clip(h.distance / max(1e-3, float(np.max(h.distance[t >= 0]))), 0.0, 1.0)[:, None]
         cols = (1.0 - frac) * np.array(STROKE_NEAR, float) + frac * np.array(STROKE_FAR, float)
-        r.line_strips_series(layout.STROKE, t, seg, colors=cols.astype(np.uint8)[:, None], radii=0.035, step=step)
+        r.line_strips_series(
+            layout.STROKE, t, seg, colors=cols.astype(np.uint8)[:, None], radii=STROKE_WIDTH, step=step
+        )
         r.report(SCENE_KEY_MD + ("" if self.truth is None else SCENE_KEY_TRUTH_MD), entity=layout.SCENE_KEY)
         # the label 0.6 m off the closest point, along the ramp normal: on the point it hid the segment
         r.text_labels_series(
             layout.DROPTEST_STROKE_LABEL,
             t,
             (h.closest_point_I + 0.6 * np.asarray(surf.normal, float))[:, None],
-            [[f"stroke {d:.3f} ± {s:.3f} m (1σ)"] for d, s in zip(h.distance, h.sigma, strict=True)],
+            [[_stroke_text(d, s)] for d, s in zip(h.distance, h.sigma, strict=True)],
             step=step,
         )
         # stroke plot with ±1σ and ±3σ, forward pass and truth
@@ -738,9 +834,38 @@ class DropTestRecorder:
             layout.DROPTEST_MAX_STROKE_SEGMENT,
             np.stack([h.closest_point_I[k], h.surface_point_I[k]]),
             color=STROKE_NEAR,
-            radius=0.045,
+            radius=STROKE_WIDTH,
         )
         r.points(layout.DROPTEST_MAX_STROKE_POINT, ms.point_I[None], colors=STROKE_NEAR, radii=0.06)
+        # the same segment beside the airbags (inside them it was hidden), labelled in cm
+        dim = max_stroke_dimension(
+            h.closest_point_I[k],
+            h.surface_point_I[k],
+            surf.normal,
+            airbags_at(lander, self._smoothed_x[k]),
+            self._smoothed_x[k, rl.SP],
+        )
+        r.line_strip(
+            layout.DROPTEST_MAX_STROKE_DIMENSION,
+            [
+                np.stack([dim["a"], dim["b"]]),
+                np.stack([h.closest_point_I[k], dim["a"]]),
+                np.stack([h.surface_point_I[k], dim["b"]]),
+            ],
+            color=STROKE_NEAR,
+            radius=[DIMENSION_WIDTH, EXTENSION_WIDTH, EXTENSION_WIDTH],
+        )
+        r.stream.log(
+            layout.DROPTEST_MAX_STROKE_DIMENSION_LABEL,
+            rr.Points3D(
+                dim["label"][None],
+                labels=[f"max stroke {100 * ms.distance:.1f} ± {100 * ms.sigma:.1f} cm (1σ)"],
+                colors=[STROKE_NEAR],
+                radii=[0.001],
+                show_labels=True,
+            ),
+            static=True,
+        )
         ev = [
             (
                 float(ms.time),

@@ -60,6 +60,7 @@ __all__ = [
     "residual_spans",
     "run_span",
     "sigma_label",
+    "sigma_name_positions",
 ]
 
 EST = (31, 119, 180, 255)
@@ -94,6 +95,10 @@ BEAM_WIDTH = -2.0
 #: the 3σ ellipsoids' wireframe, drawn in the Entry view only (at the Descent view's metres the
 #: camera sits inside them: there :data:`SIGMA_LABEL_OFFSET` names their size instead)
 ELLIPSOID_LINE = -1.0
+#: the gap [m] between the Entry view's 3σ ellipsoids and their names, the smoothed one's above its
+#: top, the forward one's below its bottom (at the view's hundreds of km about 20 px): at their
+#: centres the two names stood on each other once the ellipsoids coincide, at the end of the run
+SIGMA_NAME_GAP_M = 8.0e3
 #: the Descent view's camera, in the site axes at the vehicle [m]
 DESCENT_EYE = (-30.0, -48.0, 14.0)
 DESCENT_LOOK = (0.0, 0.0, 8.0)
@@ -184,7 +189,7 @@ def entry_blueprint(
                 layout.subtree(layout.WORLD),
                 "- " + layout.subtree(layout.DISPERSION),
                 "- " + layout.subtree(layout.ENTRY_FORWARD_VEHICLE),
-                "- " + layout.UNCERTAINTY,
+                "- " + layout.subtree(layout.UNCERTAINTY),
                 "- " + layout.VEHICLE_MARKER,
             ],
             eye_controls=rrb.EyeControls3D(position=list(DESCENT_EYE), look_target=list(DESCENT_LOOK)),
@@ -357,6 +362,17 @@ def sigma_label(half_sizes: np.ndarray, nsigma: float = 3.0) -> list[str]:
 
     hs = -np.sort(-np.asarray(half_sizes, float).reshape(-1, 3), axis=1)
     return [f"{nsigma:g}σ ellipsoid " + " × ".join(fmt(float(x)) for x in row) for row in hs]
+
+
+def sigma_name_positions(P_L: np.ndarray, above: bool, nsigma: float = 3.0) -> np.ndarray:
+    """Where an ellipsoid's name is written at each step: (n, 3) [m, site axes from its centre],
+    :data:`SIGMA_NAME_GAP_M` above the top (``above``) or below the bottom of the ``nsigma``
+    ellipsoid of the position covariances ``P_L`` (n, 3, 3) [m², site axes]: the two ellipsoids'
+    names, one above and one below, stay apart however the ellipsoids overlap."""
+    h = nsigma * np.sqrt(np.clip(np.asarray(P_L, float)[:, 2, 2], 0.0, None)) + SIGMA_NAME_GAP_M
+    out = np.zeros((h.size, 3))
+    out[:, 2] = h if above else -h
+    return out
 
 
 def descent_window(summary: dict) -> tuple[float, float] | None:
@@ -598,8 +614,15 @@ class EntryRecorder:
             nsigma=3.0,
             color=EST,
             line_radius=ELLIPSOID_LINE,
-            label="3σ smoothed",
             fill=False,
+            step=np.arange(len(t)),
+        )
+        rec.text_labels_series(
+            layout.ENTRY_UNCERTAINTY_SIGMA_LABEL,
+            t,
+            sigma_name_positions(P_L, above=True),
+            ["3σ smoothed"],
+            color=EST,
             step=np.arange(len(t)),
         )
         # the Descent view (metres) leaves the ellipsoid out: its size as text beside the vehicle
@@ -620,16 +643,24 @@ class EntryRecorder:
         fwd_vehicle = layout.ENTRY_FORWARD_VEHICLE
         steps_f = np.arange(len(fw.t))
         rec.poses(fwd_vehicle, fw.t, fw_L, np.tile([0.0, 0.0, 0.0, 1.0], (len(fw.t), 1)), step=steps_f)
+        P_fw = site.covariances(fw.t, fw.P[:, DP, DP])
         rec.ellipsoids(
             layout.ENTRY_FORWARD_UNCERTAINTY,
             fw.t,
             np.zeros((len(fw.t), 3)),
-            site.covariances(fw.t, fw.P[:, DP, DP]),
+            P_fw,
             nsigma=3.0,
             color=FWD,
             line_radius=ELLIPSOID_LINE,
-            label="3σ forward",
             fill=False,
+            step=steps_f,
+        )
+        rec.text_labels_series(
+            layout.ENTRY_FORWARD_SIGMA_LABEL,
+            fw.t,
+            sigma_name_positions(P_fw, above=False),
+            ["3σ forward"],
+            color=FWD,
             step=steps_f,
         )
         sd_hf = fw.sigma_radial

@@ -30,10 +30,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import rerun as rr
 import rerun.blueprint as rrb
 import trimesh
+from scipy.optimize import linear_sum_assignment
 
+from workbench.core.rotation import quat_conjugate, quat_rotate
 from workbench.models.flush_airdata import FadsVehicle
 from workbench.problems.meads.ekf import EkfPass
 from workbench.problems.meads.pipeline import (
@@ -59,6 +60,10 @@ __all__ = [
     "view_y_ranges",
     "AIR_DATA_VIEW_PX",
     "PORT_FIT_VIEW_PX",
+    "port_label_points",
+    "LABEL_RING_M",
+    "SCENE_EYE",
+    "SCENE_LOOK",
 ]
 
 PLOTS = (
@@ -110,7 +115,7 @@ def meads_blueprint(
     scene = rrb.Spatial3DView(
         name="Heat shield (reconstructed attitude, local ENU)",
         origin=layout.WORLD,
-        eye_controls=rrb.EyeControls3D(position=[6.0, -6.0, 3.0], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 0.0, 1.0]),
+        eye_controls=rrb.EyeControls3D(position=list(SCENE_EYE), look_target=list(SCENE_LOOK), eye_up=[0.0, 0.0, 1.0]),
     )
     ekf_q = {q for q, _, _, _ in EKF_PLOTS}
     key = "blue least squares, grey ±3σ, wide pale green truth"
@@ -223,6 +228,67 @@ def heat_shield_mesh(vehicle: FadsVehicle, n_r: int = 24, n_clock: int = 48) -> 
     return trimesh.Trimesh(V, np.array(faces), process=False)
 
 
+#: the heat-shield view's camera [m, local ENU at the vehicle, the nose at the origin]
+SCENE_EYE = (6.0, -6.0, 3.0)
+SCENE_LOOK = (0.0, 0.0, 0.0)
+#: radius [m] of the port labels' ring around the nose, facing the camera (the shield's 2.25 m
+#: radius and 0.7 m depth seen from any side stay inside 2.4 m)
+LABEL_RING_M = 2.9
+
+
+def port_label_points(
+    ports_B: np.ndarray,
+    q_ENU_B: np.ndarray,
+    eye: tuple[float, float, float] = SCENE_EYE,
+    look: tuple[float, float, float] = SCENE_LOOK,
+    ring: float = LABEL_RING_M,
+) -> np.ndarray:
+    """Where each port's name is written at each attitude: (n, m, 3) [m, body axes B] for the ports
+    ``ports_B`` (m, 3) [m, B] at the attitudes ``q_ENU_B`` (n, 4) (body → local ENU, scalar last)
+    of a shield whose nose is at the ENU origin, seen from ``eye`` towards ``look`` [m, ENU].
+
+    Written 0.3 m in front of their ports, the names of the ports near the nose and on one clock ray
+    overlapped. Here, at each attitude, the m names take m slots 360°/m apart on a circle of radius
+    ``ring`` around the nose in the plane facing the camera (outside the shield's outline from any
+    side), each port the slot nearest the direction it is seen in from the nose (weighted by how far
+    from the nose it is seen; a port seen on the nose takes a slot left over), the circle turned to
+    fit them best, keeping the previous attitude's turn unless another fits clearly better (names
+    that jump about while scrubbing are hard to follow). From the camera no two names are closer
+    than the circle's chord, 2·ring·sin(π/m).
+    """
+    P = np.asarray(ports_B, float)
+    q = np.asarray(q_ENU_B, float)
+    m = P.shape[0]
+    fwd = np.asarray(look, float) - np.asarray(eye, float)
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    W = quat_rotate(q[:, None, :], P[None, :, :])  # (n, m, 3) ENU
+    u, v = W @ right, W @ up
+    seen, weight = np.arctan2(v, u), np.hypot(u, v)
+    shifts = np.linspace(0.0, 2 * math.pi / m, 12, endpoint=False)
+    base = 2 * math.pi * np.arange(m) / m
+    out = np.empty((q.shape[0], m, 3))
+    prev = None
+    for i in range(q.shape[0]):
+        fits = []
+        for sh in shifts:
+            cost = weight[i][:, None] * (1.0 - np.cos(base[None, :] + sh - seen[i][:, None]))
+            rows, cols = linear_sum_assignment(cost)
+            fits.append((float(cost[rows, cols].sum()), sh, cols[np.argsort(rows)]))
+        best = min(fits, key=lambda f: f[0])
+        if prev is not None:
+            cost = weight[i] * (1.0 - np.cos(base[prev[1]] + prev[0] - seen[i]))
+            if float(cost.sum()) <= best[0] + 0.25 * ring:
+                best = (float(cost.sum()), prev[0], prev[1])
+        prev = (best[1], best[2])
+        ang = base[best[2]] + best[1]
+        L = ring * (np.cos(ang)[:, None] * right + np.sin(ang)[:, None] * up)
+        out[i] = quat_rotate(quat_conjugate(q[i]), L)
+    return out
+
+
 def _port_points(vehicle: FadsVehicle, offset: float) -> np.ndarray:
     r, c, cone = vehicle.radius(), vehicle.clock(), vehicle.cone()
     x = -vehicle.surface_axial(r)
@@ -239,7 +305,7 @@ SCENE_KEY_MD = (
     "**3D key** — heat shield in the reconstructed attitude (local ENU). Large dots on the ports: measured "
     "pressure over the largest port's, blue (low) → red (highest); small dots just off them: the fit's normalised "
     "residual, green ≤ 1σ → yellow 3σ → red ≥ 6σ, grey where the port was not used (dropped or failed); labels: "
-    "port names; blue line: the air-relative velocity (the flow direction, α and β)"
+    "port names, a thin grey line to each port; blue line: the air-relative velocity (the flow direction, α and β)"
 )
 
 
@@ -383,13 +449,13 @@ class MeadsRecorder:
             colors=_residual_colors(z[k], st.mask[k]),
             radii=0.05,
         )
-        # the port names beside the ports, and what the colours mean
-        lab = _port_points(self.vehicle, 0.3)
-        rec.stream.log(
-            layout.MEADS_PORT_LABELS,
-            rr.Points3D(lab, labels=list(self.vehicle.port_names), radii=[0.001], show_labels=True),
-            static=True,
-        )
+        # the port names around the shield, apart as the camera sees them, a leader line to each port
+        nav = self.nav
+        if nav is not None and nav.t_p.size == t.size:
+            lab = port_label_points(pts, nav.q_ENU_B()[k])
+            rec.text_labels_series(layout.MEADS_PORT_LABELS, t[k], lab, list(self.vehicle.port_names))
+            leaders = np.stack([np.broadcast_to(pts, lab.shape), lab], 2)  # (n, m, 2, 3)
+            rec.line_strips_series(layout.MEADS_PORT_LEADERS, t[k], leaders, colors=(110, 110, 110), radii=-0.75)
         rec.report(SCENE_KEY_MD, entity=layout.SCENE_KEY)
         rec.events([(fl.t, fl.message, "WARN") for fl in st.failures])
 
