@@ -29,6 +29,8 @@ from llvmlite import ir
 from numba import njit, objmode, types
 from numba.extending import intrinsic
 
+from workbench.core.interp_kernel import interp_at, interp_index
+
 __all__ = [
     "N_SC",
     "SC_GM",
@@ -90,32 +92,8 @@ def _np_tanh_pow5(x, r):
 
 @njit(cache=True)
 def _interp(x, xp, fp):
-    """``np.interp(x, xp, fp)`` for a scalar x and increasing xp (n,), fp (n,), with numba's rule and
-    rounding: the cell by bisection, ``slope·(x − xp[j]) + fp[j]``, the ends held. Written out
-    because numba's generic ``np.interp`` takes seconds to compile on the first run."""
-    n = xp.shape[0]
-    if math.isnan(x):
-        return x
-    if n == 1 or x >= xp[n - 1]:
-        return fp[n - 1] if n > 1 else fp[0]
-    if x < xp[0]:
-        return fp[0]
-    lo, hi = 0, n - 1
-    while hi - lo > 1:
-        mid = (lo + hi) >> 1
-        if xp[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    if xp[lo] == x:
-        return fp[lo]
-    slope = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo])
-    y = slope * (x - xp[lo]) + fp[lo]
-    if math.isnan(y):
-        y = slope * (x - xp[lo + 1]) + fp[lo + 1]
-        if math.isnan(y) and fp[lo] == fp[lo + 1]:
-            y = fp[lo]
-    return y
+    """``np.interp(x, xp, fp)`` for a scalar x and increasing xp (n,), fp (n,), to the bit."""
+    return interp_at(interp_index(x, xp), x, xp, fp)
 
 
 @njit(cache=True)
