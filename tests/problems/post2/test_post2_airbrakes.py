@@ -307,6 +307,29 @@ def test_excerpt_reconstruction_is_healthy(excerpt_run):
     assert summary["health"]["verdict"] != "ERROR", summary["health"]
 
 
+def test_the_declared_cd_only_normalises_the_coast_drag_multiplier(excerpt_run, tmp_path):
+    """issue 26: a rocket_Cd declared 3× too large is a normalisation of the multiplier (its prior is
+    measured from the coast drag), not a different rocket: the coast drag coefficient (multiplier × Cd)
+    and every other state come out the same.  With the random walk's PSD in multiplier units (not
+    scaled by (0.393 / Cd)²) the velocity at the end of FIRM flight 1 moved 4.3σ."""
+    out, toml, result, _ = excerpt_run
+
+    def triple(entry):
+        entry["rocket"]["rocket_Cd"] = 3.0 * entry["rocket"]["rocket_Cd"]
+
+    meta = _metadata_with(tmp_path, triple)
+    args = ["import", "airbrakes", str(LOG), "--metadata", str(meta), "--out", str(tmp_path / "flight")]
+    assert main([*args, "--declination-deg", "-10.5", "--inclination-deg", "64"]) == 0
+    toml3 = tmp_path / "flight" / toml.name
+    assert "\ncd = 1.14" in toml3.read_text(encoding="utf-8")
+    r3, _ = rocket.run_flight(Post2Problem().settings(load_scenario(toml3)))
+    for name in ("position", "velocity", "ca_multiplier", "baro_bias", "drogue_drag_area", "wind"):
+        k = 3.0 if name == "ca_multiplier" else 1.0
+        v, v3 = result.history["smoothed"][name]["value"][-1], r3.history["smoothed"][name]["value"][-1] * k
+        s = result.history["smoothed"][name]["sigma"][-1]
+        assert np.all(np.abs(v3 - v) <= 0.05 * s), (name, v, v3, s)
+
+
 @pytest.mark.xfail(
     strict=True,
     reason="open (issue #9 case 5): like for like (the flight computer's standard-day altitude made geometric "

@@ -78,6 +78,7 @@ __all__ = [
     "accel_sigma",
     "local_noise",
     "initial_ca_multiplier",
+    "ca_scale",
     "problem_file",
     "local_en",
     "score_flight",
@@ -433,8 +434,24 @@ def detect_main_deploy(t, pressure, f_B, atm, t_apogee: float, t_end: float) -> 
 
 
 #: random-walk PSD of the coast drag multiplier [1/s] (air brakes, coning, pitch-over; measured:
-#: docs/tuning/post2.md)
+#: docs/tuning/post2.md) at the metadata Cd of the flights it was measured on, CD_MEASURED
 CA_PSD = 0.4
+#: the metadata's Cd [-] of the three FIRM flights, on which CA_PSD and the multiplier's prior floor,
+#: bounds and clip (CA_SIGMA_FLOOR, CA_BOUNDS, CA_CLIP) were set: the problem file scales them by
+#: CD_MEASURED / Cd (:func:`ca_scale`), so that the declared Cd only normalises the multiplier (the
+#: coast drag coefficient multiplier × Cd, and every number of the run, do not depend on it)
+CD_MEASURED = 0.393
+CA_SIGMA_FLOOR = 0.5
+CA_BOUNDS = (0.2, 6.0)
+CA_CLIP = (0.3, 5.5)
+
+
+def ca_scale(cd: float) -> float:
+    """The factor [-] by which the coast drag multiplier's levels (CA_PSD: by its square; CA_SIGMA_FLOOR,
+    CA_BOUNDS, CA_CLIP) measured at Cd = CD_MEASURED apply to a rocket whose metadata declares ``cd``
+    [-]: CD_MEASURED / cd (1 for a non-positive or non-finite cd, which the import refuses anyway)."""
+    return CD_MEASURED / cd if math.isfinite(cd) and cd > 0.0 else 1.0
+
 
 #: 1σ model-error levels of the block-mean pressure [Pa] per phase (coast, drogue, main; the burnout
 #: transient of BURNOUT_TRANSIENT_S [s] and the drogue's ejection: 3 kPa, i.e. not used): the RMS of
@@ -539,8 +556,9 @@ def initial_ca_multiplier(t, f_B, t0: float, v_rel: float, rho: float, meta, cli
     """The coast drag multiplier at ``t0`` [s] measured from the data: the mean |specific force| (``f_B``
     (n, 3) [m/s²] at ``t`` (n,) [s]) over the first 0.3 s after ``t0`` times the mass over the
     metadata's Cd S and the dynamic pressure ½ ``rho`` ``v_rel``² of the burnout state; clipped to
-    [0.3, 5.5] (flight 1, air brakes stuck open: 4.0; flights 3, 4: 1.4, 1.0) unless not ``clip`` (the
-    measurement itself, for :mod:`workbench.problems.post2.rocket_checks`)."""
+    CA_CLIP × :func:`ca_scale` (at Cd 0.393: [0.3, 5.5]; flight 1, air brakes stuck open: 4.0; flights 3,
+    4: 1.4, 1.0) unless not ``clip`` (the measurement itself, for
+    :mod:`workbench.problems.post2.rocket_checks`)."""
     sel = (t >= t0) & (t <= t0 + 0.3)
     if not np.any(sel) or not v_rel > 1.0:
         return 1.0
@@ -549,7 +567,8 @@ def initial_ca_multiplier(t, f_B, t0: float, v_rel: float, rho: float, meta, cli
     if not (np.isfinite(den) and den > 0.0):  # no air at the burnout state (an absurd trajectory)
         return 1.0 if clip else float("nan")
     m = a * meta.mass / den
-    return float(np.clip(m, 0.3, 5.5)) if clip else float(m)
+    k = ca_scale(meta.cd)
+    return float(np.clip(m, CA_CLIP[0] * k, CA_CLIP[1] * k)) if clip else float(m)
 
 
 def _fmt(v) -> str:
@@ -598,6 +617,7 @@ def problem_file(
     # north] (where it goes: v_rel = v − ω×r − wind), hence the minus signs (checked on flights 3 and 4:
     # docs/tuning/post2.md, "the wind prior")
     wf = math.radians(meta.wind_from_deg)
+    k_ca = ca_scale(meta.cd)
     w_en = (-meta.wind_speed * math.sin(wf), -meta.wind_speed * math.cos(wf))
     lines = [
         f"# post2 problem file of the flight {meta.name}, written by `workbench import airbrakes`.",
@@ -676,14 +696,15 @@ def problem_file(
         "",
         "[states.ca_multiplier]  # coast drag multiplier (air brakes, mass and Cd errors)",
         f"value = {ca0:.4f}  # measured: the first 0.3 s of coast drag at the burnout state",
-        f"sigma = {max(0.5, 0.25 * ca0):.4f}",
-        "bounds = [0.2, 6.0]",
+        f"sigma = {max(CA_SIGMA_FLOOR * k_ca, 0.25 * ca0):.4f}",
+        f"bounds = [{CA_BOUNDS[0] * k_ca:.6g}, {CA_BOUNDS[1] * k_ca:.6g}]",
         "",
-        "# the coast drag varies as fast as |f| m / (Cd S q) does along the flights (rocket.CA_PSD); under",
-        "# the parachutes the body's drag is not separable from the chute's: the multiplier is held",
+        "# the coast drag varies as fast as |f| m / (Cd S q) does along the flights (rocket.CA_PSD, scaled",
+        f"# by (0.393 / Cd)^2 = {k_ca**2:.6g}); under the parachutes the body's drag is not separable from the",
+        "# chute's: the multiplier is held",
         "[schedules.coast_drag]",
         'state = "ca_multiplier"',
-        f"psd = {CA_PSD}",
+        f"psd = {CA_PSD * k_ca**2:.6g}",
         'end_event = "drogue"',
         "",
         "[states.baro_bias]  # the pad altitude matches the standby pressure: only the in-flight offset",
