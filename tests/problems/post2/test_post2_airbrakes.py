@@ -307,6 +307,38 @@ def test_excerpt_reconstruction_is_healthy(excerpt_run):
     assert summary["health"]["verdict"] != "ERROR", summary["health"]
 
 
+def test_an_unaligned_magnetometer_whose_dip_is_not_the_sites_does_not_set_the_heading(excerpt_run, tmp_path):
+    """issue 26: the excerpt is decimated (no in-flight alignment) and its raw field dips -49 deg where
+    the site's dips +64: the magnetometer's axes are not the IMU's, so the heading is the prior's and a
+    magnetometer negated or with two axes swapped changes nothing (before: the boost's prior turned with
+    the raw field, the end position moved 31σ and 5σ under the same WARNING as the good run)."""
+    out, toml, _, _ = excerpt_run
+    fl = json.loads((toml.parent / "flight.json").read_text(encoding="utf-8"))
+    assert fl["pad"]["pad_heading_source"].startswith("prior (the unaligned magnetometer's dip -49 deg")
+    lines = _lines()
+    names = lines[0].split(",")
+    mag = [names.index(f"magnetic_field_{a}_microteslas") for a in "xyz"]
+
+    def edited(op):
+        rows = [lines[0]]
+        for line in lines[1:]:
+            c = line.split(",")
+            c[mag[0]], c[mag[1]], c[mag[2]] = op(c[mag[0]], c[mag[1]], c[mag[2]])
+            rows.append(",".join(c))
+        return rows
+
+    def neg(v):
+        return v[1:] if v.startswith("-") else "-" + v
+
+    for tag, op in (("negated", lambda x, y, z: (neg(x), neg(y), neg(z))), ("swapped", lambda x, y, z: (y, x, z))):
+        (tmp_path / tag).mkdir()
+        log = _write(tmp_path / tag, edited(op), LOG.name)
+        args = ["import", "airbrakes", str(log), "--metadata", str(META), "--out", str(tmp_path / tag / "flight")]
+        assert main([*args, "--declination-deg", "-10.5", "--inclination-deg", "64"]) == 0
+        text = (tmp_path / tag / "flight" / toml.name).read_text(encoding="utf-8")
+        assert text == toml.read_text(encoding="utf-8"), tag
+
+
 def test_the_declared_cd_only_normalises_the_coast_drag_multiplier(excerpt_run, tmp_path):
     """issue 26: a rocket_Cd declared 3× too large is a normalisation of the multiplier (its prior is
     measured from the coast drag), not a different rocket: the coast drag coefficient (multiplier × Cd)

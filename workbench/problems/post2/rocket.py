@@ -230,9 +230,11 @@ def reconstruct_boost(
     ``declination_deg`` east positive; ``inclination_deg`` the site's magnetic dip (down positive) that
     the pad's measured dip is checked against (None: not checked, the heading trusted).
 
-    Without a magnetometer the pad heading is the prior ``heading_prior_deg`` = (bearing [deg clockwise
-    from true north] of the horizontal projection of the body x axis — of the y axis when x is within
-    30° of the vertical — or None: unknown, taken as 0; its 1σ [deg]) and is never trusted.
+    Without a magnetometer, or with one that has no in-flight alignment and whose raw dip on the pad is
+    not the site's (``inclination_deg``, else the dipole's) within DIP_TOLERANCE_DEG — its axes are not
+    the IMU's —, the pad heading is the prior ``heading_prior_deg`` = (bearing [deg clockwise from true
+    north] of the horizontal projection of the body x axis — of the y axis when x is within 30° of the
+    vertical — or None: unknown, taken as 0; its 1σ [deg]) and is never trusted.
     ValueError if there is less than half a pad window of contiguous standby data."""
     k_launch = int(np.flatnonzero(letters == "M")[0])
     # the motor letter comes after lift-off is detected: ignition is the first sample of the last
@@ -264,20 +266,21 @@ def reconstruct_boost(
 
     t_coast = float(t[np.flatnonzero(letters == "C")[0]])
     mag_info: dict = {"magnetometer_alignment": None, "magnetometer_dip_deg": None}
-    if mag_B is None:
-        # no magnetometer: the heading is the prior's (bearing of a horizontal body axis), never trusted
-        psi_deg, sig_deg = heading_prior_deg
+
+    def prior_heading():
+        # the heading prior's: the bearing of a horizontal body axis, never trusted
+        psi_deg = heading_prior_deg[0]
         axis_h = 0 if abs(float(down[0])) < math.cos(math.radians(30.0)) else 1
         e_h = np.eye(3)[axis_h]
         psi = math.radians(psi_deg or 0.0)
-        q_enu_b = triad(f_pad, e_h - np.dot(e_h, -down) * -down, [0.0, 0.0, 1.0], [math.sin(psi), math.cos(psi), 0.0])
+        q = triad(f_pad, e_h - np.dot(e_h, -down) * -down, [0.0, 0.0, 1.0], [math.sin(psi), math.cos(psi), 0.0])
+        return q, {"pad_heading_prior_deg": psi_deg, "pad_heading_axis": "xyz"[axis_h]}
+
+    if mag_B is None:
+        q_enu_b, info_h = prior_heading()
         trusted = False
-        sig_heading = math.radians(sig_deg)
-        mag_info |= {
-            "pad_heading_prior_deg": psi_deg,
-            "pad_heading_axis": "xyz"[axis_h],
-            "magnetometer": None,
-        }
+        sig_heading = math.radians(heading_prior_deg[1])
+        mag_info |= info_h | {"magnetometer": None, "pad_heading_source": "prior (no magnetometer)"}
     else:
         m_pad = mag_B[pad].mean(axis=0)
         dec = math.radians(declination_deg)
@@ -290,9 +293,24 @@ def reconstruct_boost(
         m_pad_raw = m_pad
         if mag_fit is not None:
             m_pad = mag_fit.field_0
-        # TRIAD: up from the specific force, heading from the horizontal part of the field (any dip)
-        q_enu_b = triad(f_pad, m_pad, np.array([0.0, 0.0, 1.0]), np.array([math.sin(dec), math.cos(dec), -1.5]))
         dip = dip_of(m_pad)
+        inc_ref = inclination_deg
+        if inc_ref is None:
+            inc_ref = rocket_checks.dipole_field(meta.launch_lat_deg, meta.launch_lon_deg)[1]
+        info_h = {"pad_heading_source": "magnetometer, aligned in flight"}
+        if mag_fit is None and not abs(dip - inc_ref) <= DIP_TOLERANCE_DEG:
+            # no in-flight alignment and a raw dip that is not the site's: the magnetometer's axes are
+            # not the IMU's, so its raw field says nothing of the heading -- the prior's, as without one
+            q_enu_b, info_h = prior_heading()
+            info_h["pad_heading_source"] = (
+                f"prior (the unaligned magnetometer's dip {dip:.0f} deg is not the site's {inc_ref:.0f} deg: "
+                "its axes are not the IMU's)"
+            )
+        else:
+            # TRIAD: up from the specific force, heading from the horizontal part of the field (any dip)
+            q_enu_b = triad(f_pad, m_pad, np.array([0.0, 0.0, 1.0]), np.array([math.sin(dec), math.cos(dec), -1.5]))
+            if mag_fit is None:
+                info_h["pad_heading_source"] = "magnetometer, raw axes (its dip is the site's)"
         fit_ok = mag_fit is not None and mag_fit.rms <= MAG_FIT_RMS_FRACTION * float(np.linalg.norm(mag_fit.field_0))
         mirror = None
         if mag_fit is not None and not fit_ok:
@@ -302,7 +320,9 @@ def reconstruct_boost(
             mirror = magnetometer_alignment(t, w_mirror, mag_B, int(pad[-1]), t_ej - MAG_FIT_BEFORE_EJECTION_S)
         trusted = fit_ok and (inclination_deg is None or abs(dip - inclination_deg) <= DIP_TOLERANCE_DEG)
         sig_heading = HEADING_SIGMA if trusted else HEADING_SIGMA_UNTRUSTED
-        mag_info = {
+        if "pad_heading_prior_deg" in info_h:
+            sig_heading = math.radians(heading_prior_deg[1])
+        mag_info = info_h | {
             "magnetometer_dip_deg": dip,
             "magnetometer_dip_raw_pad_deg": dip_of(m_pad_raw),
             "magnetic_field_uT": float(np.linalg.norm(m_pad) * 1e6),
