@@ -35,7 +35,8 @@ Headlines (one of the end state, ``*_end``, only when both runs end within ``END
 a file cut short ends elsewhere): drop test max stroke and restitution; entry height above ground at
 the end of the data; MEADS the last EKF pass's α, β, q∞ at the clean run's peak q; post2 every
 estimated state at the end (position, velocity, parameters); rocket the apogee above the pad and every
-state at the end.
+state at the end, the coast drag multiplier as the coast drag coefficient it means (× the declared Cd, which
+only normalises it: a Cd declared wrong is a different multiplier for the same drag).
 """
 
 from __future__ import annotations
@@ -177,6 +178,11 @@ def _headline(problem_name: str, folder: Path, summary: dict, result, ref: dict)
         extra["end_t_s"] = float(result.t[-1])
         for name, st in (summary.get("states") or {}).items():
             h[f"{name}_end"] = (list(st.get("final") or []), list(st.get("final_sigma") or []))
+    if problem_name.startswith("rocket") and "ca_multiplier_end" in h:
+        # the multiplier is |f| m / (Cd S q) with the declared Cd: the physical result is its product
+        cd = json.loads((folder / "import" / "flight.json").read_text(encoding="utf-8"))["metadata"]["cd"]
+        v, s = h.pop("ca_multiplier_end")
+        h["coast_cd_end"] = ([None if x is None else x * cd for x in v], [None if x is None else x * cd for x in s])
     if problem_name.startswith("rocket"):
         h["apogee_m"] = _apogee(folder, result)
     return h, extra

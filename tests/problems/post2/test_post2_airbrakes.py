@@ -343,7 +343,7 @@ def test_the_declared_cd_only_normalises_the_coast_drag_multiplier(excerpt_run, 
     """issue 26: a rocket_Cd declared 3× too large is a normalisation of the multiplier (its prior is
     measured from the coast drag), not a different rocket: the coast drag coefficient (multiplier × Cd)
     and every other state come out the same.  With the random walk's PSD in multiplier units (not
-    scaled by (0.393 / Cd)²) the velocity at the end of FIRM flight 1 moved 4.3σ."""
+    scaled by (0.38 / Cd)²) the velocity at the end of FIRM flight 1 moved 4.3σ."""
     out, toml, result, _ = excerpt_run
 
     def triple(entry):
