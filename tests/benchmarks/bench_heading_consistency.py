@@ -14,6 +14,9 @@ excerpt imported as ``workbench import airbrakes`` does:
   after 0.5, 1 and 3 s and at its end: what the filter believes it knows about the heading;
 * the end position's 1σ along N_p [m] against |N_p| × the heading prior's σ: the part of the
   horizontal uncertainty that the heading alone should leave;
+* the update that lost the most: its posterior's conditional σ along the prior's N (what a linear
+  update keeps) and along the posterior's N (the next Jacobians' linearisation point), how far N
+  turned and the state moved;
 
 for the problem file as imported and with an exact heading mode (the prior's σ along N(x0)) added to
 its P0 — so that the loss, if any, is the filter's and not the import's linearised prior.
@@ -111,6 +114,26 @@ def measure(toml: Path, pad0: np.ndarray, sigma_heading: float, exact_mode: bool
         if k:
             prev = generator(sm, pad0, fw.x_post[k - 1], fw.t[k - 1])
             fn = max(fn, float(np.linalg.norm(fw.F[k] @ prev - n) / np.linalg.norm(n)))
+    # the update that lost the most: its P_post along the prior's N (what the update keeps) and along
+    # the posterior's (the next Jacobians' linearisation point), how far N turned and the state moved
+    worst = None
+    for k in range(len(fw.t)):
+        n0 = generator(sm, pad0, fw.x_prior[k], fw.t[k])
+        n1 = generator(sm, pad0, fw.x_post[k], fw.t[k])
+        before, kept, after = (
+            conditional_deg(P, n) for P, n in ((fw.P_prior[k], n0), (fw.P_post[k], n0), (fw.P_post[k], n1))
+        )
+        if worst is None or after / before < worst["post_along_new_N_deg"] / worst["prior_deg"]:
+            dx = fw.x_post[k] - fw.x_prior[k]
+            worst = {
+                "t_s": float(fw.t[k]),
+                "prior_deg": before,
+                "post_along_prior_N_deg": kept,
+                "post_along_new_N_deg": after,
+                "N_turned_rel": float(np.linalg.norm(n1 - n0) / np.linalg.norm(n0)),
+                "position_step_m": float(np.linalg.norm(dx[sm.blocks["position"].sx])),
+                "velocity_step_m_s": float(np.linalg.norm(dx[sm.blocks["velocity"].sx])),
+            }
     t0 = fw.t[0]
     cond = {}
     for label, dt in (("start", 0.0), ("0.5 s", 0.5), ("1 s", 1.0), ("3 s", 3.0), ("end", fw.t[-1] - t0)):
@@ -123,6 +146,7 @@ def measure(toml: Path, pad0: np.ndarray, sigma_heading: float, exact_mode: bool
         "max_abs_HN_per_rad": hn,
         "max_rel_FN_minus_N": fn,
         "conditional_heading_sigma_deg": cond,
+        "worst_update": worst,
         "end_sigma_along_heading_m": math.sqrt(float(e @ fw.P_post[-1][np.ix_(ip, ip)] @ e)),
         "end_heading_lever_m": float(np.linalg.norm(n_end)),
         "end_sigma_heading_alone_m": float(np.linalg.norm(n_end)) * sigma_heading,

@@ -372,11 +372,18 @@ measurement, exit 4), and every error names the file and the column or key. What
   the forward pass keeps {{{{bench_heading_consistency:results.exact_heading_mode.conditional_heading_sigma_deg.0.5 s|.1f}}}}°
   after 0.5 s: at the end the position's σ along the heading's lever is
   {{{{bench_heading_consistency:results.as_imported.end_sigma_along_heading_m|.0f}}}} m where the prior heading alone
-  gives {{{{bench_heading_consistency:results.as_imported.end_sigma_heading_alone_m|.0f}}}} m. Likely the EKF's
-  linearisation point turning with its estimate along a direction the data do not see (the inconsistency of
-  Huang, Mourikis and Roumeliotis, "Observability-based rules for designing consistent EKF SLAM estimators",
-  IJRR 29(5), 2010); not yet shown step by step. Open: a heading consider parameter or first-estimate
-  Jacobians, judged by this benchmark. Before this the excerpt's magnetometer negated or swapped and its accelerometer x↔y turned the heading with
+  gives {{{{bench_heading_consistency:results.as_imported.end_sigma_heading_alone_m|.0f}}}} m. Every update keeps
+  the conditional σ along the N of its own linearisation point (with the exact mode, the worst update at
+  t = {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.t_s|.2f}}}} s: {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.prior_deg|.1f}}}}° before,
+  {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.post_along_prior_N_deg|.1f}}}}° after), but
+  it moves the state ({{{{bench_heading_consistency:results.exact_heading_mode.worst_update.position_step_m|.0f}}}} m,
+  {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.velocity_step_m_s|.0f}}}} m/s), N turns with it
+  ({{{{bench_heading_consistency:results.exact_heading_mode.worst_update.N_turned_rel|.0%}}}}), and along the new N the
+  same covariance says {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.post_along_new_N_deg|.1f}}}}°:
+  the next Jacobians see the old mode as observable. That is the EKF inconsistency along an unobservable
+  direction of Huang, Mourikis and Roumeliotis, "Observability-based rules for designing consistent EKF SLAM
+  estimators", IJRR 29(5), 2010. Open: a heading consider parameter, or first-estimate / observability-
+  constrained Jacobians, judged by this benchmark. Before this the excerpt's magnetometer negated or swapped and its accelerometer x↔y turned the heading with
   the unaligned field and moved the end position 31σ, 5σ and 3.9σ: they change nothing now. On the full-rate
   flights (`EDL_FLIGHT_DATA=… bench_fuzz.py --label flights`, the three FIRM logs): {{{{{_FZ}:results.flights.totals.runs}}}}
   mutations, clear error {{{{{_FZ}:results.flights.totals.CLEAR_ERROR}}}}, SILENT
