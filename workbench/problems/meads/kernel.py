@@ -550,7 +550,7 @@ def forward_kernel(
         x_new = x
         dx = x
         K = np.zeros((n_c, m))
-        Hk = K.T.copy()
+        Hk = np.zeros((m, n_c))
         PHt = K
         for it in range(max(iterations, 1)):
             zp_i, H_i = measurement_kernel(
