@@ -156,3 +156,16 @@ def test_a_monte_carlo_precompiles_before_its_workers_start(monkeypatch, tmp_pat
     with pytest.raises(Stop):
         runner.run_monte_carlo("droptest", tmp_path, McOptions(n_runs=1, first_seed=7), progress="none")
     assert order == [("precompile", 7), ("study", 7)]
+
+
+@pytest.mark.parametrize(("env", "level"), [(None, 2), ("3", 3)])
+def test_importing_the_workbench_sets_numbas_level_unless_the_user_did(env, level):
+    """``import workbench`` sets ``NUMBA_OPT=2`` before any kernel compiles, and numba's config
+    reads it; a user's own ``NUMBA_OPT`` wins."""
+    code = "import workbench, numba.core.config as c; c.reload_config(); print(int(c.OPT))"
+    e = {k: v for k, v in os.environ.items() if k != "NUMBA_OPT"}
+    if env is not None:
+        e["NUMBA_OPT"] = env
+    e["PYTHONPATH"] = str(Path(__file__).resolve().parents[2])
+    out = subprocess.run([sys.executable, "-c", code], env=e, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == str(level)

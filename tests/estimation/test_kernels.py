@@ -1,5 +1,6 @@
 """The compiled Joseph-form update (``workbench.estimation.kernels``) against the reference path,
-:func:`workbench.estimation.ekf.update`: same innovation, S, NIS, increment and covariance."""
+:func:`workbench.estimation.ekf.update`: same innovation, S, NIS, increment and covariance; the
+shared loop helpers against the numpy expressions they replace in the kernels, bit for bit."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import numpy as np
 import pytest
 
 from workbench.estimation.ekf import ErrorStateLayout, update
-from workbench.estimation.kernels import joseph_update
+from workbench.estimation.kernels import add_into, cho_solve, joseph_update, symmetrise
 
 
 def _random_spd(rng, n):
@@ -50,3 +51,19 @@ def test_a_non_positive_definite_S_leaves_P_untouched():
     W, M, L, v = np.empty((9, n_e)), np.empty((n_e, n_e)), np.zeros((3, 3)), np.empty((4, n_e))
     nis, status = joseph_update(P, np.ones(3), np.zeros(3), Hc, cols, 3, R, y, S, W, M, L, v)
     assert status == 1 and not P.any()
+
+
+def test_the_loop_helpers_give_the_bits_of_the_numpy_expressions():
+    rng = np.random.default_rng(3)
+    A, B = rng.standard_normal((7, 7)), rng.standard_normal((7, 7))
+    S = A.copy()
+    symmetrise(S)
+    assert np.array_equal(S, 0.5 * (A + A.T)) and np.array_equal(S, S.T)
+    C = A.copy()
+    add_into(C, B)
+    assert np.array_equal(C, A + B)
+    P = _random_spd(rng, 4)
+    L = np.linalg.cholesky(P)
+    b, out = rng.standard_normal(4), np.empty(4)
+    cho_solve(L, b, out)
+    np.testing.assert_allclose(P @ out, b, rtol=0, atol=1e-12)

@@ -1,5 +1,10 @@
 """Compiled (numba) estimation kernels: the sequential Joseph-form measurement update that a
-problem's compiled filter recursion calls at every step (the drop test's ``droptest/kernel.py``).
+problem's compiled filter recursion calls at every step (the drop test's ``droptest/kernel.py``),
+and the small loops every compiled filter shares (:func:`copy_vector`, :func:`copy_matrix`,
+:func:`add_into`, :func:`symmetrise`, :func:`cho_solve`): an array expression in a kernel
+(``A + A.T``, ``x + dx``, ``B.T.copy()``) compiles a loop nest of its own, with numba's broadcasting
+and shape checks, in every kernel that writes it; a helper is compiled once per process and gives
+the same bits.
 
 :func:`joseph_update` is the same update as :func:`workbench.estimation.ekf.update` (one iteration,
 no gate) written for a small measurement with H non-zero in a few columns, allocating nothing:
@@ -20,7 +25,7 @@ import math
 
 from numba import njit
 
-__all__ = ["cho_solve", "copy_matrix", "copy_vector", "joseph_update"]
+__all__ = ["add_into", "cho_solve", "copy_matrix", "copy_vector", "joseph_update", "symmetrise"]
 
 
 @njit(cache=True)
@@ -40,6 +45,28 @@ def copy_matrix(src, dst):
     for i in range(src.shape[0]):
         for j in range(src.shape[1]):
             dst[i, j] = src[i, j]
+
+
+@njit(cache=True)
+def add_into(A, B):
+    """``A += B`` element by element for A, B (n, m) of one unit (A written): the loop a kernel's
+    ``A += B`` or ``A + B`` would compile as an array expression of its own."""
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            A[i, j] += B[i, j]
+
+
+@njit(cache=True)
+def symmetrise(A):
+    """``A ← ½(A + Aᵀ)`` in place for a square A (n, n) (any unit): each pair's mean, the diagonal
+    untouched; the same bits as numpy's ``0.5 * (A + A.T)``, without the array expression's loop
+    nest and temporary that every kernel writing it would compile on its own."""
+    n = A.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            u = 0.5 * (A[i, j] + A[j, i])
+            A[i, j] = u
+            A[j, i] = u
 
 
 @njit(cache=True)
@@ -137,9 +164,5 @@ def joseph_update(P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
         d0, d1, d2 = D[0, i], D[1, i], D[2, i]
         for j in range(n_e):
             P[i, j] = M[i, j] - (d0 * K0[j] + d1 * K1[j] + d2 * K2[j])
-    for i in range(n_e):
-        for j in range(i + 1, n_e):
-            u = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = u
-            P[j, i] = u
+    symmetrise(P)
     return nis, 0

@@ -21,6 +21,8 @@ import math
 import numpy as np
 from numba import njit
 
+from workbench.estimation.kernels import copy_matrix, symmetrise
+
 __all__ = ["expm_taylor", "transition_step"]
 
 
@@ -111,15 +113,25 @@ def expm_taylor(M):
     while norm > 0.5:
         norm *= 0.5
         s += 1
-    X = M * (0.5**s)
+    c = 0.5**s
+    X = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            X[i, j] = M[i, j] * c
     E = np.eye(n)
     T = np.eye(n)
+    E_new = np.empty((n, n))
     for k in range(1, 40):
-        T = (T @ X) / k
-        E_new = E + T
-        if np.all(E_new == E):
+        T = T @ X
+        same = True
+        for i in range(n):
+            for j in range(n):
+                T[i, j] = T[i, j] / k
+                E_new[i, j] = E[i, j] + T[i, j]
+                same = same and E_new[i, j] == E[i, j]
+        if same:
             break
-        E = E_new
+        copy_matrix(E_new, E)
     for _ in range(s):
         E = E @ E
     return E
@@ -138,11 +150,16 @@ def transition_step(v, q, p, f0, w0, f1, w1, dt, sw, sf, sample_dt, q_state_psd,
     v1, q1, p1 = _rk4(v, q, p, f0, w0, f1, w1, dt, gm, j2k)
     # normalised mean attitude, mean inputs
     dot = q[0] * q1[0] + q[1] * q1[1] + q[2] * q1[2] + q[3] * q1[3]
-    qm = q + q1 if dot >= 0.0 else q - q1
-    qm = qm / math.sqrt(qm[0] * qm[0] + qm[1] * qm[1] + qm[2] * qm[2] + qm[3] * qm[3])
-    f = 0.5 * (f0 + f1)
-    w = 0.5 * (w0 + w1)
-    x, y, z, ww = qm[0], qm[1], qm[2], qm[3]
+    qm = np.empty(4)
+    for i in range(4):
+        qm[i] = q[i] + q1[i] if dot >= 0.0 else q[i] - q1[i]
+    nq = math.sqrt(qm[0] * qm[0] + qm[1] * qm[1] + qm[2] * qm[2] + qm[3] * qm[3])
+    f = np.empty(3)
+    w = np.empty(3)
+    for i in range(3):
+        f[i] = 0.5 * (f0[i] + f1[i])
+        w[i] = 0.5 * (w0[i] + w1[i])
+    x, y, z, ww = qm[0] / nq, qm[1] / nq, qm[2] / nq, qm[3] / nq
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = ww * x, ww * y, ww * z
@@ -150,7 +167,10 @@ def transition_step(v, q, p, f0, w0, f1, w1, dt, sw, sf, sample_dt, q_state_psd,
     C[0, 0], C[0, 1], C[0, 2] = 1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)
     C[1, 0], C[1, 1], C[1, 2] = 2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)
     C[2, 0], C[2, 1], C[2, 2] = 2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)
-    Sf = np.array([[0.0, -f[2], f[1]], [f[2], 0.0, -f[0]], [-f[1], f[0], 0.0]])
+    Sf = np.empty((3, 3))
+    Sf[0, 0], Sf[0, 1], Sf[0, 2] = 0.0, -f[2], f[1]
+    Sf[1, 0], Sf[1, 1], Sf[1, 2] = f[2], 0.0, -f[0]
+    Sf[2, 0], Sf[2, 1], Sf[2, 2] = -f[1], f[0], 0.0
     A = np.zeros((9, 9))
     for i in range(3):
         for j in range(3):
@@ -161,14 +181,20 @@ def transition_step(v, q, p, f0, w0, f1, w1, dt, sw, sf, sample_dt, q_state_psd,
     for i in range(3):
         A[6 + i, i] = 1.0
     if gradient:
-        pm = 0.5 * (p + p1)
+        pm = np.empty(3)
+        for i in range(3):
+            pm[i] = 0.5 * (p[i] + p1[i])
         r2 = pm[0] * pm[0] + pm[1] * pm[1] + pm[2] * pm[2]
         k = gm / (r2 * math.sqrt(r2))
         c3 = 3.0 * k / r2
         for i in range(3):
             for j in range(3):
                 A[i, 6 + j] = c3 * (pm[i] * pm[j]) - (k if i == j else 0.0)
-    Phi = expm_taylor(A * dt)
+    Adt = np.empty((9, 9))
+    for i in range(9):
+        for j in range(9):
+            Adt[i, j] = A[i, j] * dt
+    Phi = expm_taylor(Adt)
     Qc = np.zeros((9, 9))
     for i in range(3):
         for j in range(3):
@@ -187,5 +213,5 @@ def transition_step(v, q, p, f0, w0, f1, w1, dt, sw, sf, sample_dt, q_state_psd,
     for i in range(9):
         for j in range(9):
             Qd[i, j] = Qc[i, j] * dt + (AQ[i, j] + AQ[j, i]) * h2 + AQA[i, j] * h3
-    Qd = 0.5 * (Qd + Qd.T)
+    symmetrise(Qd)
     return v1, q1, p1, Phi, Qd

@@ -31,7 +31,7 @@ import math
 import numpy as np
 from numba import njit
 
-from workbench.estimation.kernels import copy_matrix, copy_vector
+from workbench.estimation.kernels import add_into, cho_solve, copy_matrix, copy_vector, symmetrise
 from workbench.problems.meads.state import ILP, ILR, IP, ITH, IV, IW, N_PORTS, N_U_COLS
 
 __all__ = ["pressure_kernel", "measurement_kernel", "flow_kernel", "transition_kernel", "TRANSITION_PARAMS", "N_U_COLS"]
@@ -508,11 +508,9 @@ def forward_kernel(
             x, F, Q = transition_kernel(
                 x, k, t[k] - t[k - 1], p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, tcols
             )
-            A = (F @ P) @ F.T
-            A += Q
-            A = A + A.T
-            A *= 0.5
-            P = A
+            P = (F @ P) @ F.T
+            add_into(P, Q)
+            symmetrise(P)
             copy_matrix(F, F_hist[k])
             if keep_q:
                 copy_matrix(Q, Q_hist[k])
@@ -520,8 +518,8 @@ def forward_kernel(
             for i in range(n_c):
                 for j in range(n_c):
                     F_hist[0, i, j] = 1.0 if i == j else 0.0
-            if keep_q:
-                Q_hist[0] = 0.0
+                    if keep_q:
+                        Q_hist[0, i, j] = 0.0
         copy_vector(x, x_prior[k])
         copy_matrix(P, P_prior[k])
         m = 0
@@ -529,112 +527,108 @@ def forward_kernel(
             if usable[k, j]:
                 use_buf[m] = j
                 m += 1
-        if m > 0:
-            use = use_buf[:m].copy()
-            z = np.empty(m)
-            R = np.zeros((m, m))
+        if m == 0:
+            copy_vector(x, x_post[k])
+            copy_matrix(P, P_post[k])
+            continue
+        use = use_buf[:m].copy()
+        z = np.empty(m)
+        R = np.zeros((m, m))
+        for i in range(m):
+            z[i] = z_all[k, use[i]]
+            R[i, i] = r_all[k, use[i]]
+        C = C_B_M[k]
+        # the iterated update: iteration 0 linearises at the prior x (innovation y, S, NIS recorded
+        # from it), each further one at the previous iterate until the step changes less than step_tol
+        y = np.empty(m)
+        r = np.empty(m)
+        w = np.empty(m)
+        nis = 0.0
+        zp = y
+        S = R
+        x_i = x
+        x_new = x
+        dx = x
+        K = np.zeros((n_c, m))
+        Hk = np.zeros((m, n_c))
+        PHt = K
+        for it in range(max(iterations, 1)):
+            zp_i, H_i = measurement_kernel(
+                x_i, C, eps_x, eps_z, use, gamma, omega, table_model, port_cone, port_clock, port_s,
+                gm_, ga, gc, gs, values, mcols,
+            )  # fmt: skip
+            finite = True
             for i in range(m):
-                z[i] = z_all[k, use[i]]
-                R[i, i] = r_all[k, use[i]]
-            C = C_B_M[k]
-            zp, H = measurement_kernel(
-                x,
-                C,
-                eps_x,
-                eps_z,
-                use,
-                gamma,
-                omega,
-                table_model,
-                port_cone,
-                port_clock,
-                port_s,
-                gm_,
-                ga,
-                gc,
-                gs,
-                values,
-                mcols,
-            )
-            y = z - zp
-            for i in range(m):
-                if not math.isfinite(y[i]):  # before S, as the reference (a NaN in S is no "not PD")
-                    return 2, k
-            PHt = P @ H.T
-            S = H @ PHt + R
-            L = np.zeros((m, m))
-            if not _cho(S, L):
-                return 1, k
-            w = _cho_solve(L, y.reshape(m, 1))[:, 0]
-            nis = 0.0
-            for i in range(m):
-                nis += y[i] * w[i]
-            if not math.isfinite(nis):
+                r[i] = z[i] - zp_i[i]
+                if not math.isfinite(r[i]):
+                    finite = False
+            if it > 0 and not finite:
+                break
+            if it == 0 and not finite:  # before S, as the reference (a NaN in S is no "not PD")
                 return 2, k
-            K = _cho_solve(L, PHt.T.copy()).T.copy()
+            PHt_i = P @ H_i.T
+            S_i = H_i @ PHt_i
+            add_into(S_i, R)
+            L = np.zeros((m, m))
+            if not _cho(S_i, L):
+                return (1 if it == 0 else 3), k
+            if it == 0:
+                zp, S = zp_i, S_i
+                copy_vector(r, y)
+                cho_solve(L, y, w)
+                for i in range(m):
+                    nis += y[i] * w[i]
+                if not math.isfinite(nis):
+                    return 2, k
             for i in range(n_c):
                 if consider[i]:
-                    K[i, :] = 0.0
-            dx = K @ y
-            x_new = x + dx
-            Hk = H
-            for _ in range(1, iterations):
-                x_i = x_new
-                zp_i, H_i = measurement_kernel(
-                    x_i,
-                    C,
-                    eps_x,
-                    eps_z,
-                    use,
-                    gamma,
-                    omega,
-                    table_model,
-                    port_cone,
-                    port_clock,
-                    port_s,
-                    gm_,
-                    ga,
-                    gc,
-                    gs,
-                    values,
-                    mcols,
-                )
-                finite = True
-                for i in range(m):
-                    if not math.isfinite(zp_i[i]):
-                        finite = False
-                if not finite:
-                    break
-                r_i = z - zp_i
-                PHt_i = P @ H_i.T
-                S_i = H_i @ PHt_i + R
-                if not _cho(S_i, L):
-                    return 3, k
-                K = _cho_solve(L, PHt_i.T.copy()).T.copy()
+                    for a in range(m):
+                        K[i, a] = 0.0
+                else:
+                    cho_solve(L, PHt_i[i], K[i])
+            Hk, PHt = H_i, PHt_i
+            if it > 0:  # r_i − H (x − x_i)
+                e = np.empty(n_c)
                 for i in range(n_c):
-                    if consider[i]:
-                        K[i, :] = 0.0
-                Hk, PHt = H_i, PHt_i
-                dx_new = K @ (r_i - Hk @ (x - x_i))
-                x_new = x + dx_new
-                done = True
+                    e[i] = x[i] - x_i[i]
+                dr = Hk @ e
+                for i in range(m):
+                    r[i] -= dr[i]
+            dx_new = K @ r
+            x_new = np.empty(n_c)
+            for i in range(n_c):
+                x_new[i] = x[i] + dx_new[i]
+            done = it > 0
+            if it > 0:
                 for i in range(n_c):
                     if not abs(dx_new[i] - dx[i]) < step_tol[i]:
                         done = False
-                dx = dx_new
-                if done:
-                    break
-            M = P - K @ PHt.T
-            A = M - (M @ Hk.T - K @ R) @ K.T
-            A = A + A.T
-            A *= 0.5
-            x, P = x_new, A
-            for i in range(m):
-                zp_out[k, use[i]] = zp[i]
-                y_out[k, use[i]] = y[i]
-                for j in range(m):
-                    S_out[k, use[i], use[j]] = S[i, j]
-            nis_out[k] = nis
+            dx = dx_new
+            x_i = x_new
+            if done:
+                break
+        # Joseph form: M = P − K (P Hᵀ)ᵀ, P⁺ = M − (M Hᵀ − K R) Kᵀ, symmetrised
+        M = K @ PHt.T
+        for i in range(n_c):
+            for j in range(n_c):
+                M[i, j] = P[i, j] - M[i, j]
+        D = M @ Hk.T
+        KR = K @ R
+        for i in range(n_c):
+            for a in range(m):
+                D[i, a] = D[i, a] - KR[i, a]
+        P = D @ K.T
+        for i in range(n_c):
+            for j in range(n_c):
+                P[i, j] = M[i, j] - P[i, j]
+        symmetrise(P)
+        x = x_new
+        for i in range(m):
+            zp_out[k, use[i]] = zp[i]
+            y_out[k, use[i]] = y[i]
+            for j in range(m):
+                S_out[k, use[i], use[j]] = S[i, j]
+        nis_out[k] = nis
         copy_vector(x, x_post[k])
         copy_matrix(P, P_post[k])
     return 0, n
@@ -677,11 +671,19 @@ def rts_kernel(x_prior, P_prior, x_post, P_post, G, dsq, consider, xs, Ps):  # p
         for c in range(n_c):
             if consider[c]:
                 Gt[c, c] = 1.0
-        Gk = Gt.T.copy()
-        dx = Gk @ (xs[k + 1] - x_prior[k + 1])
-        copy_vector(x_post[k] + dx, xs[k])
-        A = P_post[k] + (Gk @ (Ps[k + 1] - Pp)) @ Gt
-        A = 0.5 * (A + A.T)
+        Gk = np.empty((n_c, n_c))
+        e = np.empty(n_c)
+        for i in range(n_c):
+            e[i] = xs[k + 1, i] - x_prior[k + 1, i]
+            for j in range(n_c):
+                Gk[i, j] = Gt[j, i]
+                rhs[i, j] = Ps[k + 1, i, j] - Pp[i, j]
+        dx = Gk @ e
+        for i in range(n_c):
+            xs[k, i] = x_post[k, i] + dx[i]
+        A = (Gk @ rhs) @ Gt
+        add_into(A, P_post[k])
+        symmetrise(A)
         for i in range(n_c):
             if not A[i, i] > 0.0:
                 return 2, k
