@@ -6,7 +6,7 @@ and again before each compilation (``numba.core.config.reload_config``), and eve
 imports this package first, so the level applies to the first compile in this process and in the
 processes it starts (the precompiling child, Monte Carlo workers). Level 2 compiles the kernels of
 a fresh checkout in less CPU than numba's default 3 with the same results to the bit; the
-measurements are in docs/ARCHITECTURE.md ("Compiled kernels").
+measurements are in docs/RESULTS.md ("The first run's compile").
 """
 
 import os

@@ -466,8 +466,21 @@ decides its wall time. `python tests/benchmarks/bench_compile.py` compiles each 
 with an empty cache (numba's compile events per kernel; `docs/results/before/bench_compile.json` the same command
 on the code before this change). The kernels no longer assign array slices from arrays (numba compiled its
 shape-mismatch message, string formatting included, into every caller) and the MEADS truth's `np.interp` and the
-table lookups' `np.searchsorted` are written out with the same rule and rounding; every shipped summary is
-identical.
+table lookups' `np.searchsorted` are written out with the same rule and rounding; the MEADS iterated update calls
+its measurement kernel from one site (iteration 0 is the first update), the filters' elementwise array
+expressions are loops or shared helpers of `estimation/kernels.py` (BLAS products kept: the results depend on
+their bits), and importing `workbench` sets numba's optimisation level to 2 (unless `NUMBA_OPT` is set); every
+shipped summary is identical.
+
+What level 2 costs at run time: `python tests/benchmarks/bench_numba_opt.py` (each level in its own child and
+cache, {{bench_numba_opt:results.reps}} interleaved rounds after a compile round, best in-process CPU of the
+synthesis and the reconstruction of six scenarios, against level 3 in the same run; {{bench_numba_opt:results.wall_s|mmss}}):
+level 2 ×{{bench_numba_opt:results.levels.2.ratio_total|.3f}} of level 3's {{bench_numba_opt:results.levels.3.total_cpu_s|.1f}} s
+(MEADS reconstruction ×{{bench_numba_opt:results.levels.2.ratio_reconstruction.msl_meads|.3f}}, drop test
+×{{bench_numba_opt:results.levels.2.ratio_reconstruction.droptest|.3f}}, schiaparelli
+×{{bench_numba_opt:results.levels.2.ratio_reconstruction.schiaparelli|.3f}}), level 1
+×{{bench_numba_opt:results.levels.1.ratio_total|.3f}} (MEADS reconstruction
+×{{bench_numba_opt:results.levels.1.ratio_reconstruction.msl_meads|.3f}}).
 
 | scenario | child CPU, before → now | kernels compiled | numba's own implementations | largest own compile now |
 |---|---|---|---|---|
