@@ -361,7 +361,7 @@ measurement, exit 4), and every error names the file and the column or key. What
   the static port, 190 Pa RMS against the pooled 120 Pa), and its heading is not known (at 8 Hz the field cannot
   be followed through the coning, so the magnetometer has no in-flight alignment, and its raw dip on the pad,
   −49°, is not the site's +64°: its axes are not the IMU's, and the heading is the prior's, ±60°). Halving the
-  coast's rows moves the end position 3.4σ: the horizontal position under an unknown heading, where the
+  coast's rows moves the end position by more than 3σ: the horizontal position under an unknown heading, where the
   linearised filter's σ is too small (the landing's heading ring, 1.2 km, is the honest region; the run reports
   it). `python tests/benchmarks/bench_heading_consistency.py` measures why: a rotation of the trajectory and the
   wind about the pad's vertical changes no observation and commutes with the transition (|H N| ≤
