@@ -18,8 +18,10 @@ excerpt imported as ``workbench import airbrakes`` does:
   update keeps) and along the posterior's N (the next Jacobians' linearisation point), how far N
   turned and the state moved;
 
-for the problem file as imported and with an exact heading mode (the prior's σ along N(x0)) added to
-its P0 — so that the loss, if any, is the filter's and not the import's linearised prior.
+for the problem file as imported (the run adds the untrusted heading to P0 as this exact turn, carries it
+with F and keeps it out of the pressure's and |f|'s Jacobians: ``pipeline.Estimator.heading_direction``)
+and with a second exact mode of the prior's σ added to P0 (before the run did so itself, this told the
+filter's loss from the import's linearised prior's).
 
     python tests/benchmarks/bench_heading_consistency.py [--out docs/results/bench_heading_consistency.json]
 """

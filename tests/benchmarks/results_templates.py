@@ -356,37 +356,34 @@ measurement, exit 4), and every error names the file and the column or key. What
   health now carries a note on what the max stroke rests on (a declared body vertex no sensor sees) and how far
   it moves per metre that vertex moves. `cm_height_m` × 1.5 moves the first-contact clearance: an ERROR with
   ranging.
-* **UNDERRATED — the rocket importer on the decimated excerpt, every other coast row removed**: the FIRM
-  excerpt's clean run is WARNING (its barometer innovations, `nis.baro`: flight 1's air brakes stuck open disturb
-  the static port, 190 Pa RMS against the pooled 120 Pa), and its heading is not known (at 8 Hz the field cannot
-  be followed through the coning, so the magnetometer has no in-flight alignment, and its raw dip on the pad,
-  −49°, is not the site's +64°: its axes are not the IMU's, and the heading is the prior's, ±60°). Halving the
-  coast's rows moves the end position by more than 3σ: the horizontal position under an unknown heading, where the
-  linearised filter's σ is too small (the landing's heading ring, 1.2 km, is the honest region; the run reports
-  it). `python tests/benchmarks/bench_heading_consistency.py` measures why: a rotation of the trajectory and the
-  wind about the pad's vertical changes no observation and commutes with the transition (|H N| ≤
-  {{{{bench_heading_consistency:results.as_imported.max_abs_HN_per_rad.accel|.1e}}}} m/s² per rad, |F N − N'|/|N| ≤
-  {{{{bench_heading_consistency:results.as_imported.max_rel_FN_minus_N|.0e}}}}), yet the imported prior's
-  conditional heading σ along it is {{{{bench_heading_consistency:results.as_imported.conditional_heading_sigma_deg.start|.2f}}}}°
-  (the boost's linearised covariance carries no clean heading mode) and, with an exact ±60° mode added to P0,
-  the forward pass keeps {{{{bench_heading_consistency:results.exact_heading_mode.conditional_heading_sigma_deg.0.5 s|.1f}}}}°
-  after 0.5 s: at the end the position's σ along the heading's lever is
-  {{{{bench_heading_consistency:results.as_imported.end_sigma_along_heading_m|.0f}}}} m where the prior heading alone
-  gives {{{{bench_heading_consistency:results.as_imported.end_sigma_heading_alone_m|.0f}}}} m. Every update keeps
-  the conditional σ along the N of its own linearisation point (with the exact mode, the worst update at
-  t = {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.t_s|.2f}}}} s: {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.prior_deg|.1f}}}}° before,
-  {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.post_along_prior_N_deg|.1f}}}}° after), but
-  it moves the state ({{{{bench_heading_consistency:results.exact_heading_mode.worst_update.position_step_m|.0f}}}} m,
-  {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.velocity_step_m_s|.0f}}}} m/s), N turns with it
-  ({{{{bench_heading_consistency:results.exact_heading_mode.worst_update.N_turned_rel|.0%}}}}), and along the new N the
-  same covariance says {{{{bench_heading_consistency:results.exact_heading_mode.worst_update.post_along_new_N_deg|.1f}}}}°:
-  the next Jacobians see the old mode as observable. That is the EKF inconsistency along an unobservable
+* **The rocket importer on the decimated excerpt: the unknown heading.** At 8 Hz the field cannot be followed
+  through the coning, so the magnetometer has no in-flight alignment, and its raw dip on the pad (−49°) is not the
+  site's (+64°): its axes are not the IMU's, the heading is the prior's, ±60°. Before this, the importer centred
+  that prior on the unaligned field (the magnetometer negated or swapped and the accelerometer x↔y moved the end
+  position 31σ, 5σ and 3.9σ: now nothing), and the EKF did not keep the heading unknown, so halving the coast's
+  rows moved the end position 3.4–5.1σ. `python tests/benchmarks/bench_heading_consistency.py` (before: b13d6bc):
+  a turn of the trajectory and the wind about the pad's vertical, N, changes no observation (|H N| ≤
+  {{{{before/bench_heading_consistency:results.as_imported.max_abs_HN_per_rad.accel|.1e}}}} m/s² per rad) and commutes with the transition (|F N − N'|/|N| ≤
+  {{{{before/bench_heading_consistency:results.as_imported.max_rel_FN_minus_N|.0e}}}}); yet the imported prior's conditional heading σ along N was
+  {{{{before/bench_heading_consistency:results.as_imported.conditional_heading_sigma_deg.start|.2f}}}}° (the boost's linearised covariance carried no clean
+  heading mode), and with an exact ±60° mode added the forward pass kept
+  {{{{before/bench_heading_consistency:results.exact_heading_mode.conditional_heading_sigma_deg.0.5 s|.1f}}}}° after 0.5 s: each update kept the σ along its
+  own linearisation point ({{{{before/bench_heading_consistency:results.exact_heading_mode.worst_update.prior_deg|.1f}}}}° →
+  {{{{before/bench_heading_consistency:results.exact_heading_mode.worst_update.post_along_prior_N_deg|.1f}}}}° at the worst) but moved the state
+  ({{{{before/bench_heading_consistency:results.exact_heading_mode.worst_update.position_step_m|.0f}}}} m, {{{{before/bench_heading_consistency:results.exact_heading_mode.worst_update.velocity_step_m_s|.0f}}}} m/s),
+  N turned with it ({{{{before/bench_heading_consistency:results.exact_heading_mode.worst_update.N_turned_rel|.0%}}}}) and along the new N the same covariance
+  said {{{{before/bench_heading_consistency:results.exact_heading_mode.worst_update.post_along_new_N_deg|.1f}}}}° — the EKF inconsistency along an unobservable
   direction of Huang, Mourikis and Roumeliotis, "Observability-based rules for designing consistent EKF SLAM
-  estimators", IJRR 29(5), 2010. Open: a heading consider parameter, or first-estimate / observability-
-  constrained Jacobians, judged by this benchmark. Before this the excerpt's magnetometer negated or swapped and its accelerometer x↔y turned the heading with
-  the unaligned field and moved the end position 31σ, 5σ and 3.9σ: they change nothing now. On the full-rate
-  flights (`EDL_FLIGHT_DATA=… bench_fuzz.py --label flights`, the three FIRM logs): {{{{{_FZ}:results.flights.totals.runs}}}}
-  mutations, clear error {{{{{_FZ}:results.flights.totals.CLEAR_ERROR}}}}, SILENT
+  estimators", IJRR 29(5), 2010. Now the import writes the boost's covariance without an untrusted heading, and
+  the run adds it as the exact turn (`[launch] heading_sigma_deg`), carries that direction with F and keeps it out
+  of the Jacobians of the pressure and |f| (the observability-constrained EKF of the same authors); GNSS and landed
+  coordinates still observe it. The end position's σ along the heading's lever:
+  {{{{before/bench_heading_consistency:results.as_imported.end_sigma_along_heading_m|.0f}}}} m → {{{{bench_heading_consistency:results.as_imported.end_sigma_along_heading_m|.0f}}}} m, where the
+  ±60° prior alone gives {{{{bench_heading_consistency:results.as_imported.end_sigma_heading_alone_m|.0f}}}} m; the landing's heading ring takes the
+  covariance given the heading. The excerpt's clean run stays WARNING (`nis.baro`: flight 1's air brakes stuck
+  open disturb the static port, 190 Pa RMS against the pooled 120 Pa). On the full-rate flights
+  (`EDL_FLIGHT_DATA=… bench_fuzz.py --label flights`, the three FIRM logs, headings aligned in flight):
+  {{{{{_FZ}:results.flights.totals.runs}}}} mutations, clear error {{{{{_FZ}:results.flights.totals.CLEAR_ERROR}}}}, SILENT
   {{{{{_FZ}:results.flights.totals.SILENT}}}}, UNDERRATED {{{{{_FZ}:results.flights.totals.UNDERRATED}}}}, traceback
   {{{{{_FZ}:results.flights.totals.TRACEBACK}}}}, still right {{{{{_FZ}:results.flights.totals.ACCURATE}}}} (a
   `rocket_Cd` × 3 ended flight 1's velocity 4.3σ away under a WARNING until the coast drag multiplier's random

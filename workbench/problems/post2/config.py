@@ -268,7 +268,9 @@ SCHEMA = Schema(
                     _F,
                     60.0,
                     "deg",
-                    "the pad heading's 1σ (read when `heading_trusted` is false: the landing's heading ring)",
+                    "the pad heading's 1σ (read when `heading_trusted` is false: the run adds it to P0 as a turn "
+                    "of the flight about the pad's vertical, which no pressure or |f| observation moves, and the "
+                    "landing's heading ring)",
                     ge=0.0,
                     le=180.0,
                 ),
@@ -276,8 +278,8 @@ SCHEMA = Schema(
                     "heading_trusted",
                     _B,
                     True,
-                    meaning="the pad heading came from an accepted magnetometer alignment (false: 60° 1σ, which the "
-                    "linearised landing ellipse cannot hold)",
+                    meaning="the pad heading came from an accepted magnetometer alignment (false: `heading_sigma_deg`, "
+                    "carried as an exact turn about the pad's vertical, the boost covariance written without it)",
                 ),
             ),
         ),

@@ -113,7 +113,9 @@ class Post2Result:
     (physical values and 1σ, see :func:`state_history`) under ``"smoothed"``, ``"forward"`` and, with
     ``[filter] compare_propagation``, ``"propagated"`` (:func:`propagation_only`, 1σ the prior's);
     ``rocket`` the smoothed track in the pad's frame of a flight with a ``[launch]`` pad
-    (:class:`~workbench.problems.post2.rocket_results.LocalTrack`; None otherwise)."""
+    (:class:`~workbench.problems.post2.rocket_results.LocalTrack`; None otherwise);
+    ``heading_direction`` (n_e,) the turn about the pad's vertical at the last grid time of a flight
+    whose pad heading is untrusted (:meth:`Estimator.pad_rotation`, carried by F; None otherwise)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -126,6 +128,7 @@ class Post2Result:
     history: dict
     summary: dict
     rocket: rocket_results.LocalTrack | None = None
+    heading_direction: np.ndarray | None = None
 
     def phase_index(self) -> np.ndarray:
         """(n,) float: how many events had fired at each grid time (0 before the first, +1 at each)."""
@@ -381,6 +384,10 @@ def _kind(unit: str) -> str:
 CONSIDER_PASS_SCALE = 1e-3
 
 
+#: observed quantities that a turn of the flight about the pad's vertical does not change
+HEADING_INVARIANT = ("pressure", "acceleration_magnitude")
+
+
 class Estimator:
     """The EKF set-up of one run (from its :class:`Post2Settings`): state map, error-state layout, the
     model, x0, P0, eps, the process models.  ``transition(x, t0, t1) -> (x1, F, Q)`` advances the
@@ -402,11 +409,40 @@ class Estimator:
             diag[self.consider] = 0.0
             self._projector = np.diag(diag)
         self._q_cache: list[tuple] | None = None
+        # an untrusted rocket heading ([launch] heading_trusted = false): the rotation about the pad's
+        # vertical, added to P0 with the heading's 1σ, carried by F and kept out of the Jacobians of the
+        # observations it cannot change (observability-constrained EKF: Huang, Mourikis and
+        # Roumeliotis 2010, "Observability-based rules for designing consistent EKF SLAM estimators")
+        self.heading_direction: np.ndarray | None = None
+        la = cfg.launch
+        if la is not None and not la.heading_trusted and {"position", "velocity"} <= set(self.smap.blocks):
+            n = self.pad_rotation(self.x0, cfg.t_start)
+            self.P0 = self.P0 + math.radians(la.heading_sigma_deg) ** 2 * np.outer(n, n)
+            self.heading_direction = n
         # events due at the start apply from it, before its observations (as in the truth simulator;
         # checked only at the first transition they came after the t_start samples, issue #9)
         self.phase = self.model.check_events(self.x0, cfg.t_start, self.model.initial_phase())
         self.phase_log: list[tuple[float, str]] = [(cfg.t_start, nm) for nm in self.phase["fired"]]
         self.weight_log: dict[str, list[tuple[float, float]]] = {}  # schedules: (t, factor) per channel
+
+    def pad_rotation(self, x: np.ndarray, t: float) -> np.ndarray:
+        """The error-state direction (n_e,) of turning the flight by 1 rad about the ``[launch]`` pad's
+        vertical at ``t`` [s after launch] from the state ``x``: position u × (p − p_pad), the
+        planet-relative velocity turned alike, the wind [east, north] turned alike; zero elsewhere.
+        Pressure, |specific force| and the dynamics are invariant under it (up to the Coriolis force)."""
+        C, p_pad = rocket_results.pad_frame(self.cfg.launch, t, self.model.env.radius_ref, self.model.env.omega)
+        u = C[2]
+        w_e = np.array([0.0, 0.0, self.model.env.omega])
+        b = self.smap.blocks
+        p, v = np.asarray(x, float)[b["position"].sx], np.asarray(x, float)[b["velocity"].sx]
+        n = np.zeros(self.smap.n_e)
+        dp = np.cross(u, p - p_pad)
+        n[b["position"].se] = dp
+        n[b["velocity"].se] = np.cross(u, v - np.cross(w_e, p)) + np.cross(w_e, dp)
+        if "wind" in b:
+            w = np.asarray(x, float)[b["wind"].sx]
+            n[b["wind"].se] = [-w[1], w[0]]
+        return n
 
     def _initial(self):
         sm, cfg = self.smap, self.cfg
@@ -498,6 +534,8 @@ class Estimator:
         x1, F = numeric_jacobian_batched(
             lambda X: self.advance(X, t0, t1, self.phase, phis), x, self.layout, self.eps, out_layout=self.layout
         )
+        if self.heading_direction is not None:
+            self.heading_direction = F @ self.heading_direction
         return x1, F, Q
 
     def measurement(self, ch: Channel, i: int) -> Measurement:
@@ -555,6 +593,9 @@ class Estimator:
                 return memo[1]
             return numeric_jacobian_batched(lambda X: model.observe(X, q, phase), x, self.layout, self.eps)[1]
 
+        if self.heading_direction is not None and q in HEADING_INVARIANT:
+            n = self.heading_direction
+            H = self._without(H, n)
         return Measurement(
             ch.spec.name,
             ch.z[i],
@@ -565,6 +606,17 @@ class Estimator:
             iterations=ch.spec.iterations,
             gain_projector=self.gain_projector,
         )
+
+    @staticmethod
+    def _without(H, n: np.ndarray):
+        """H(x) with the direction ``n`` (n_e,) projected out of its rows: J − (J n) nᵀ / (nᵀ n)."""
+        nn = float(n @ n)
+
+        def Hn(x):
+            J = np.asarray(H(x), float)
+            return J - np.outer(J @ n, n) / nn
+
+        return Hn
 
     @property
     def gain_projector(self):
@@ -765,7 +817,9 @@ def reconstruct(cfg: Post2Settings, telemetry, options=None):
             + ", ".join(uninformed)
         )
     summary["health"] = post2_health(fp, P, x, data.notes, extra, facts)
-    yield Post2Result(t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), histories, summary, track)
+    yield Post2Result(
+        t, x, P, fp, sm, est.smap, data.channels, tuple(est.phase_log), histories, summary, track, est.heading_direction
+    )
 
 
 def _rocket(cfg: Post2Settings, est: Estimator, t, x, P, summary: dict):
@@ -779,7 +833,11 @@ def _rocket(cfg: Post2Settings, est: Estimator, t, x, P, summary: dict):
     track = rocket_results.local_track(cfg.launch, t, p, v, P[:, sp, sp], P[:, sv, sv], env.radius_ref, env.omega)
     chutes = {e.name: e.chute for e in cfg.events if e.chute}
     wind = est.smap.raw(x, "wind") if "wind" in est.smap.blocks else None
+    given = None
+    if est.heading_direction is not None:
+        given = rocket_results.covariance_given_heading(P[-1], est.heading_direction)
     summary["rocket"] = rocket_results.summary_block(
-        cfg.launch, track, P[-1][sp, sp], est.phase_log, chutes, env.omega, p[-1], wind
-    )
+        cfg.launch, track, P[-1][sp, sp], est.phase_log, chutes, env.omega, p[-1], wind,
+        given_heading=None if given is None else (given[0][sp, sp], given[1]),
+    )  # fmt: skip
     return track

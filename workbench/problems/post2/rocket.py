@@ -59,6 +59,7 @@ from workbench.problems.post2.rocket_results import (
     LANDING_MIXTURE_SAMPLES,
     LANDING_MIXTURE_SEED,
     altitude_above_pad,
+    covariance_given_heading,
     enu_axes,
     horizontal_covariance,
     landing_heading_mixture,
@@ -348,7 +349,10 @@ def reconstruct_boost(
     v0 = np.cross([0.0, 0.0, EARTH.rotation_rate], p0)
     # attitude 1σ: tilt about east/north, heading about up -> body frame small angles
     C_B_ENU = quat_to_dcm(q_enu_b).T
-    P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_heading**2]) @ C_B_ENU.T
+    # an untrusted heading is left out: the run adds it as an exact rotation about the pad's vertical
+    # ([launch] heading_sigma_deg; pipeline.Estimator), which a linearised boost covariance does not carry
+    sig_boost_heading = sig_heading if trusted else 0.0
+    P_att = C_B_ENU @ np.diag([TILT_SIGMA**2, TILT_SIGMA**2, sig_boost_heading**2]) @ C_B_ENU.T
     P0 = np.zeros((9, 9))
     P0[SD_VELOCITY, SD_VELOCITY] = np.eye(3) * 0.01**2
     P0[SD_ATTITUDE, SD_ATTITUDE] = P_att
@@ -877,7 +881,11 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
     }
     if not out["landing"]["heading_trusted"]:  # the verdict from the heading pushed through, not linearised
         wind_en = hist["wind"]["value"] if "wind" in hist else None
-        nl = landing_heading_mixture(ours, P_en, t, wind_en, math.radians(flight["pad"]["heading_sigma_deg"]))
+        P_nodes, sig_psi = P_en, math.radians(flight["pad"]["heading_sigma_deg"])
+        if result.heading_direction is not None:  # P carries the heading: the nodes take P given it
+            G, sig_psi = covariance_given_heading(result.P[-1], result.heading_direction)
+            P_nodes = horizontal_covariance(p[-1], float(t[-1]), G[sp, sp], EARTH.rotation_rate)[2]
+        nl = landing_heading_mixture(ours, P_nodes, t, wind_en, sig_psi)
         rng = np.random.default_rng(LANDING_MIXTURE_SEED)
         level = mixture_hdr_level(truth, *nl[:3], rng, LANDING_MIXTURE_SAMPLES)
         out["landing"]["heading_nonlinear"] = {
@@ -885,7 +893,7 @@ def score_flight(result, flight: dict, imu, reference) -> dict:
             # the 2-D Mahalanobis distance a Gaussian would give at that level (χ²₂ quantile)
             "gaussian_equivalent_mahalanobis": math.sqrt(-2.0 * math.log(max(1.0 - level, 1e-12))),
             "inside_3sigma": bool(level <= 0.9973),
-            "heading_sigma_deg": flight["pad"]["heading_sigma_deg"],
+            "heading_sigma_deg": math.degrees(sig_psi),
             "turning_drift_m": float(np.linalg.norm(ours - nl[3])),
             "wind_drift_en_m": nl[3].tolist(),
         }

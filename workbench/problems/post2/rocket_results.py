@@ -51,6 +51,7 @@ __all__ = [
     "LANDING_MIXTURE_SEED",
     "landing_heading_mixture",
     "heading_ring",
+    "covariance_given_heading",
     "local_track",
     "summary_block",
     "moments",
@@ -171,6 +172,19 @@ LANDING_MIXTURE_SAMPLES = 20000
 LANDING_MIXTURE_SEED = 9
 
 
+def covariance_given_heading(P: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, float]:
+    """(P_given (n_e, n_e), σ_ψ [rad]) from an error covariance ``P`` (n_e, n_e) that carries the pad
+    heading as the turn ``n`` (n_e,) per radian: σ_ψ² = 1 / (nᵀ P⁻¹ n), the largest share of ``P`` along
+    ``n`` (what the data left of the heading), and P_given = P − σ_ψ² n nᵀ the covariance given the
+    heading (P Jacobi-scaled before its inverse)."""
+    d = np.sqrt(np.diag(P))
+    w, V = np.linalg.eigh(P / np.outer(d, d))
+    m = V.T @ (n / d)
+    var = 1.0 / float(np.sum(m**2 / np.maximum(w, 1e-300)))
+    G = P - var * np.outer(n, n)
+    return 0.5 * (G + G.T), math.sqrt(var)
+
+
 def landing_heading_mixture(landing_en, P_en, t, wind_en, sigma_heading: float):
     """The landing point's distribution under a pad heading error of 1σ ``sigma_heading`` [rad],
     pushed through exactly instead of linearised: (means (K, 2) [m], covariances (K, 2, 2) [m²],
@@ -182,10 +196,8 @@ def landing_heading_mixture(landing_en, P_en, t, wind_en, sigma_heading: float):
     wind does not turn: with ``landing_en`` (2,) [m east/north of the pad] the reconstructed landing
     and ``wind_en`` (n, 2) [m/s] the smoothed wind at ``t`` (n,) [s] (None: no wind state), the wind
     drift is D_w = ∫ w dt and the node ψ_k lands at D_w + R(ψ_k)(landing − D_w).  Each node's
-    covariance is the filter's ``P_en`` (2, 2): with a heading of tens of degrees a linearised filter
-    has collapsed the heading's share (the drag |f| "observes" the cross-track speed at second order:
-    flight 1 before its magnetometer alignment kept 240 m beside a 1 500 m ring), so it stands for
-    the error given the heading."""
+    covariance is ``P_en`` (2, 2), the error given the heading: the filter's own where it did not
+    carry the heading, else its covariance less the heading's share (:func:`covariance_given_heading`)."""
     landing_en = np.asarray(landing_en, float)
     if wind_en is None:
         d_w = np.zeros(2)
@@ -277,14 +289,17 @@ def _phases(events, chutes: dict[str, str], t_end: float) -> list[tuple[str, flo
 
 
 def summary_block(
-    site, track: LocalTrack, P_pp_last: np.ndarray, events, chutes, omega: float, p_last, wind_en=None
-) -> dict:
+    site, track: LocalTrack, P_pp_last: np.ndarray, events, chutes, omega: float, p_last, wind_en=None,
+    given_heading=None,
+) -> dict:  # fmt: skip
     """The ``summary["rocket"]`` block (module docstring): ``site`` the ``[launch]`` settings,
     ``track`` the :class:`LocalTrack`, ``P_pp_last`` (3, 3) [m²] and ``p_last`` (3,) [m] the inertial
     position covariance and position at the last grid time, ``events`` ((t [s], name), ...) fired,
     ``chutes`` {event name: "drogue" | "main"}, ``omega`` [rad/s] the planet's rotation, ``wind_en``
     (n, 2) [m/s] the smoothed wind on the grid (None: no wind state) — with an untrusted pad heading
-    the landing's region is the heading ring (:func:`heading_ring`), not the linearised ellipse."""
+    the landing's region is the heading ring (:func:`heading_ring`), not the linearised ellipse;
+    ``given_heading`` (P_pp (3, 3) [m²], σ_ψ [rad]) when ``P_pp_last`` carries the heading itself
+    (:func:`covariance_given_heading`): the ring's nodes then take P_pp and σ_ψ, not the declared σ."""
     tr = track
     t = tr.t
     k = int(np.argmax(tr.altitude))
@@ -339,12 +354,17 @@ def summary_block(
     if not touched:
         out["landing"]["note"] = "the data end before touchdown: the position at the end of the span"
     if not site.heading_trusted:
-        sig = site.heading_sigma_deg
-        ring = heading_ring(np.array([tr.enu[-1, 0], tr.enu[-1, 1]]), P_en, t, wind_en, sig)
+        sig, P_ring = site.heading_sigma_deg, P_en
+        if given_heading is not None:
+            P_ring = horizontal_covariance(p_last, float(t[-1]), given_heading[0], omega)[2]
+            sig = math.degrees(given_heading[1])
+        ring = heading_ring(np.array([tr.enu[-1, 0], tr.enu[-1, 1]]), P_ring, t, wind_en, sig)
         half = ring["half_width_3sigma_deg"]
         out["landing"]["heading_ring"] = ring
         out["landing"]["ellipse_note"] = (
-            f"the pad heading is untrusted ({sig:.0f}° 1σ): the linearised ellipse understates the cross-range; "
+            f"the pad heading is untrusted ({sig:.0f}° 1σ): the linearised ellipse "
+            + ("is the heading's first order" if given_heading is not None else "understates the cross-range")
+            + "; "
             f"the landing lies on {'a ring' if ring['whole_ring'] else 'an arc'} of radius {ring['radius_m']:.0f} m "
             f"about the wind drift ({ring['centre_en_m'][0]:.0f} m E, {ring['centre_en_m'][1]:.0f} m N of the pad)"
             + ("" if ring["whole_ring"] else f", bearings {ring['bearing_deg']:.0f}° ± {half:.0f}° (3σ)")
