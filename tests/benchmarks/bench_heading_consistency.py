@@ -43,7 +43,6 @@ sys.path.insert(0, str(HERE))
 from bench_json import write_benchmark_json  # noqa: E402
 
 from workbench.cli import main as cli  # noqa: E402
-from workbench.core.bodies import EARTH  # noqa: E402
 from workbench.estimation.ekf import numeric_jacobian_batched  # noqa: E402
 from workbench.io.scenario import load_scenario  # noqa: E402
 from workbench.problems.post2 import pipeline, rocket  # noqa: E402
@@ -53,29 +52,6 @@ from workbench.problems.post2.problem import Post2Problem  # noqa: E402
 DATA = HERE.parent / "problems" / "post2" / "data" / "airbrakes_excerpt"
 
 
-def _rz(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def generator(smap, pad0: np.ndarray, x: np.ndarray, t: float) -> np.ndarray:
-    """N(x) (n_e,): the error-state direction of a rotation by 1 rad about the pad's vertical at t [s
-    after launch] (the pad turned with the Earth), ``x`` the full state."""
-    R = _rz(EARTH.rotation_rate * t)
-    pad = R @ pad0
-    u = pad / np.linalg.norm(pad)
-    w_e = np.array([0.0, 0.0, EARTH.rotation_rate])
-    p, v = x[smap.blocks["position"].sx], x[smap.blocks["velocity"].sx]
-    n = np.zeros(smap.n_e)
-    dp = np.cross(u, p - pad)
-    n[smap.blocks["position"].se] = dp
-    n[smap.blocks["velocity"].se] = np.cross(u, v - np.cross(w_e, p)) + np.cross(w_e, dp)
-    if "wind" in smap.blocks:
-        w = x[smap.blocks["wind"].sx]
-        n[smap.blocks["wind"].se] = [-w[1], w[0]]
-    return n
-
-
 def conditional_deg(P: np.ndarray, n: np.ndarray) -> float:
     """1/√(nᵀ P⁻¹ n) [deg], P Jacobi-scaled before its inverse."""
     d = np.sqrt(np.diag(P))
@@ -83,13 +59,13 @@ def conditional_deg(P: np.ndarray, n: np.ndarray) -> float:
     return math.degrees(1.0 / math.sqrt(float(np.sum((V.T @ (n / d)) ** 2 / w))))
 
 
-def measure(toml: Path, pad0: np.ndarray, sigma_heading: float, exact_mode: bool) -> dict:
+def measure(toml: Path, sigma_heading: float, exact_mode: bool) -> dict:
     """One run of the excerpt's problem file (optionally with the exact heading mode in P0)."""
     original = pipeline.Estimator._initial
 
     def with_mode(self):
         x0, P0, eps, mean = original(self)
-        n = generator(self.smap, pad0, x0, self.cfg.t_start)
+        n = self.pad_rotation(x0, self.cfg.t_start)
         return x0, P0 + sigma_heading**2 * np.outer(n, n), eps, mean
 
     if exact_mode:
@@ -105,7 +81,7 @@ def measure(toml: Path, pad0: np.ndarray, sigma_heading: float, exact_mode: bool
     hn = {k: 0.0 for k in quantities}
     fn = 0.0
     for k in range(len(fw.t)):
-        n = generator(sm, pad0, fw.x_prior[k], fw.t[k])
+        n = est.pad_rotation(fw.x_prior[k], fw.t[k])
         for name, q in quantities.items():
 
             def h(X, q=q):
@@ -114,14 +90,14 @@ def measure(toml: Path, pad0: np.ndarray, sigma_heading: float, exact_mode: bool
             _, J = numeric_jacobian_batched(h, fw.x_prior[k], est.layout, est.eps)
             hn[name] = max(hn[name], float(np.max(np.abs(J @ n))))
         if k:
-            prev = generator(sm, pad0, fw.x_post[k - 1], fw.t[k - 1])
+            prev = est.pad_rotation(fw.x_post[k - 1], fw.t[k - 1])
             fn = max(fn, float(np.linalg.norm(fw.F[k] @ prev - n) / np.linalg.norm(n)))
     # the update that lost the most: its P_post along the prior's N (what the update keeps) and along
     # the posterior's (the next Jacobians' linearisation point), how far N turned and the state moved
     worst = None
     for k in range(len(fw.t)):
-        n0 = generator(sm, pad0, fw.x_prior[k], fw.t[k])
-        n1 = generator(sm, pad0, fw.x_post[k], fw.t[k])
+        n0 = est.pad_rotation(fw.x_prior[k], fw.t[k])
+        n1 = est.pad_rotation(fw.x_post[k], fw.t[k])
         before, kept, after = (
             conditional_deg(P, n) for P, n in ((fw.P_prior[k], n0), (fw.P_post[k], n0), (fw.P_post[k], n1))
         )
@@ -140,9 +116,9 @@ def measure(toml: Path, pad0: np.ndarray, sigma_heading: float, exact_mode: bool
     cond = {}
     for label, dt in (("start", 0.0), ("0.5 s", 0.5), ("1 s", 1.0), ("3 s", 3.0), ("end", fw.t[-1] - t0)):
         k = int(np.argmin(np.abs(fw.t - (t0 + dt))))
-        cond[label] = conditional_deg(fw.P_post[k], generator(sm, pad0, fw.x_post[k], fw.t[k]))
+        cond[label] = conditional_deg(fw.P_post[k], est.pad_rotation(fw.x_post[k], fw.t[k]))
     ip = np.arange(sm.n_e)[sm.blocks["position"].se]
-    n_end = generator(sm, pad0, fw.x_post[-1], fw.t[-1])[ip]
+    n_end = est.pad_rotation(fw.x_post[-1], fw.t[-1])[ip]
     e = n_end / np.linalg.norm(n_end)
     return {
         "max_abs_HN_per_rad": hn,
@@ -166,14 +142,12 @@ def main(argv: list[str] | None = None) -> int:
         assert cli([*imp, "--declination-deg", "-10.5", "--inclination-deg", "64"]) == 0
         toml = out / "jackpot_launch_1_excerpt.toml"
         fl = json.loads((out / "flight.json").read_text(encoding="utf-8"))
-        m = fl["metadata"]
-        pad0 = rocket.pad_position(m["launch_lat_deg"], m["launch_lon_deg"], fl["pad"]["pad_altitude_m"])
         sig = math.radians(fl["pad"]["heading_sigma_deg"])
         results = {
             "heading_prior_deg": fl["pad"]["heading_sigma_deg"],
             "pad_heading_source": fl["pad"]["pad_heading_source"],
-            "as_imported": measure(toml, pad0, sig, exact_mode=False),
-            "exact_heading_mode": measure(toml, pad0, sig, exact_mode=True),
+            "as_imported": measure(toml, sig, exact_mode=False),
+            "exact_heading_mode": measure(toml, sig, exact_mode=True),
         }
     print(json.dumps(results, indent=1))
     write_benchmark_json(args.out, __file__, results, argv)
