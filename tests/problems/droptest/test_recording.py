@@ -173,8 +173,12 @@ def test_events_and_report(rec, droptest_run):
     km = {m["name"]: m["t_s"] for m in droptest_run.summary["key_moments"]}
     assert abs(km["first_contact"] - contact["start_s"]) <= 1e-9
     assert not [x for x in texts if x.startswith("rebound") or "contact begins" in x]
-    ends = [t for t, x, _ in log if x.startswith("first compression ends")]
-    assert ends and abs(ends[0] - contact["end_s"]) <= 1e-9 and ends[0] < km["rebound"]
+    # the instant the restitution's leaving velocity is read: after the max stroke, one event
+    rest = droptest_run.summary["restitution"]
+    leaves = [(t, x) for t, x, _ in log if x.startswith("the lander leaves the ramp")]
+    assert len(leaves) == 1 and abs(leaves[0][0] - rest["times_s"][1]) <= 1e-9
+    assert rest["times_s"][0] < km["max_stroke"] < rest["times_s"][1]
+    assert f"e = {rest['e']:.3f}" in leaves[0][1]
     report = rec.text_document(layout.REPORT)
     assert "max stroke" in report
     assert f"{ms['distance_m']:.3f} m ± {ms['sigma_m']:.3f} m" in report

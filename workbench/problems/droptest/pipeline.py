@@ -92,11 +92,12 @@ NO_REBOUND = "not defined: no rebound"
 
 #: the restitution definition, as the summary and scorecard state it
 RESTITUTION_DEFINITION = (
-    "e = -max(v_n)/min(v_n), v_n the smoothed CM velocity along the ramp normal, its minimum (approaching) and "
-    "its maximum after it (leaving) over the first contact, i.e. where the bag normal force equals the normal "
-    "component of gravity; sigma = sqrt(sigma_estimation^2 + sigma_definition^2), sigma_definition = the largest "
-    "difference from v_n just outside the contact interval detected at 0.25, 0.5 or 1 g and from v_n extrapolated "
-    "to the instants the bags touch and leave"
+    "e = -max(v_n)/min(v_n), v_n the smoothed CM velocity along the ramp normal, its minimum before it first turns "
+    "positive (approaching) and its maximum after that up to the rebound's apex (leaving), over the whole impact: a "
+    "glancing first touch and a bag pushing again as the lander rolls off are parts of it, a touch-down after the "
+    "apex is not; both are where the bag normal force equals the normal component of gravity; sigma = "
+    "sqrt(sigma_estimation^2 + sigma_definition^2), sigma_definition = the largest difference from v_n just outside "
+    "the impact's samples above 0.25, 0.5 or 1 g and from v_n extrapolated to the instants the bags touch and leave"
 )
 
 
@@ -157,6 +158,7 @@ class StrokeStage:
     covariance, with the cross-covariance of the two epochs); ``restitution_sigma_definition``
     σ_def = the largest |difference| of the equivalent definitions of
     :func:`~.stroke.restitution_definitions` (``restitution_definitions``: name → e) from e;
+    ``restitution_index`` the step indices of its two velocities (approaching, leaving; -1: none);
     ``contact`` (i_start, i_end) filter indices of the airbag contact detected from the estimated
     non-gravitational acceleration; ``surface`` the ramp; ``lander`` the model.
     """
@@ -173,6 +175,7 @@ class StrokeStage:
     restitution_sigma_estimation: float = float("nan")
     restitution_sigma_definition: float = float("nan")
     restitution_definitions: dict = field(default_factory=dict)
+    restitution_index: tuple[int, int] = (-1, -1)
 
 
 @dataclass(frozen=True)
@@ -621,6 +624,7 @@ def stroke_stage(
         restitution_sigma_estimation=s_est,
         restitution_sigma_definition=s_def,
         restitution_definitions=dict(rd.values),
+        restitution_index=(int(rd.i_before), int(rd.i_after)),
     )
 
 
@@ -816,6 +820,7 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
             "sigma_definition": st.restitution_sigma_definition,
             "definitions": dict(st.restitution_definitions),
             "definition": RESTITUTION_DEFINITION,
+            "times_s": [float(smo.t[k]) for k in st.restitution_index] if min(st.restitution_index) >= 0 else None,
         },
         "contact": {
             "start_s": float(smo.t[st.contact[0]]) if st.contact[0] >= 0 else None,

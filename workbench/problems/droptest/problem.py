@@ -108,7 +108,12 @@ def key_moments(result: dt.DropResult) -> list[KeyMoment]:
         )
     if k_up is not None:
         e, se = st.restitution
-        rest = f"restitution e = {e:.3f} ± {se:.3f} (1σ)" if np.isfinite(e) else "restitution not defined"
+        kb, ka = st.restitution_index
+        rest = (
+            f"restitution e = {e:.3f} ± {se:.3f} (1σ; v_n approaching at {t[kb]:.3f} s, leaving at {t[ka]:.3f} s)"
+            if np.isfinite(e) and min(kb, ka) >= 0
+            else "restitution not defined"
+        )
         out.append(
             KeyMoment(
                 "rebound",

@@ -881,14 +881,17 @@ class DropTestRecorder:
                 "WARN" if ms.possible_full_stroke else "INFO",
             )
         ]
-        if i0 >= 0:
-            # the contact's start and the rebound are key moments (★ rows); this is the end of the
-            # first compression, over which the restitution is measured — not the rebound
+        kb, ka = st.restitution_index
+        if ka >= 0:
+            vn = self._smoothed_x[:, rl.SV] @ surf.normal
+            # the contact's start and the rebound are key moments (★ rows); this is the instant the
+            # restitution's leaving velocity is read: the lander's last push off the ramp
             ev.append(
                 (
-                    float(t[i1]),
-                    f"first compression ends (estimated |a_ng| < 1 g): restitution over it e = "
-                    f"{st.restitution[0]:.3f} ± {st.restitution[1]:.3f}",
+                    float(t[ka]),
+                    f"the lander leaves the ramp (largest v_n before the rebound's apex, {vn[ka]:+.2f} m/s; "
+                    f"approaching {vn[kb]:+.2f} m/s at t = {t[kb]:.3f} s): restitution "
+                    f"e = {st.restitution[0]:.3f} ± {st.restitution[1]:.3f}",
                     "INFO",
                 )
             )

@@ -10,8 +10,8 @@ minimum) and for rock spheres with ``faces_B`` (closest point on every triangle)
 1σ is ``sqrt(J P_pose Jᵀ)`` over the pose error ``[δp_I, δθ]`` (body-frame δθ,
 ``q_true = q_est ⊗ exp(δθ)``), checked by posterior sampling where two body points tie
 (:func:`sampled_stroke_sigma`). Restitution's primary definition is ``−max v_n / min v_n`` over the
-first contact; the spread of the equivalent readings is its definition σ
-(:func:`restitution_definitions`). The derivations: docs/tuning/droptest.md, "stroke.py".
+impact, from the first touch to the rebound's apex; the spread of the equivalent readings is its
+definition σ (:func:`restitution_definitions`). The derivations: docs/tuning/droptest.md, "stroke.py".
 
 Provides :class:`StrokeHistory`, :func:`stroke_history`, :func:`sampled_stroke_sigma`,
 :class:`MaxStroke`, :func:`max_stroke`, :func:`restitution`, :func:`contact_interval`,
@@ -467,23 +467,27 @@ def restitution_definitions(
             acceleration (any frame: only its norm is used); normal: (3,) ramp normal toward the
             free side (v_I's frame); after: [s] contact is searched after this time (the cut).
         thresholds_g: contact thresholds [g = 9.80665 m/s²]: ``"ends_<thr>g"`` is
-            ``−v_n(i1+1)/v_n(i0−1)`` around the interval of :func:`contact_interval` (dips shorter
-            than ``merge_s`` [s] bridged); an interval whose ends are not within ``pad_s`` of the
-            extremes (the threshold splits this impact in two) gives NaN.
-        pad_s: the primary (extremes) window is the lowest threshold's interval widened by this [s]
-            on both sides, but ending where the acceleration next exceeds the lowest threshold (a
-            second touch-down is a new contact).
+            ``−v_n(j1+1)/v_n(j0−1)``, j0 and j1 the first and last samples of the impact above the
+            threshold; a reading whose ends are not within ``pad_s`` of the extremes (the threshold
+            misses a glancing first touch or a last push) gives NaN.
+        merge_s: dips shorter than this [s] bridge the lowest threshold's first contact (the onset).
+        pad_s: the impact starts this long [s] before the lowest threshold's onset.
         gravity: (3,) [m/s²] gravity in v_I's frame; when given, ``"touch_leave"`` extrapolates
             ``v_n`` from the lowest threshold's crossings to the instants the bags touch and leave:
             the bag force is taken to rise linearly from zero (rise time = the time between the
             crossings of the two lowest thresholds), so over that time ``v_n`` changes by
             ``(a_thr/2 − g_n) Δt`` with ``g_n`` = −gravity·n.
 
-    Primary, ``"extremes"``: ``e = −max v_n / min v_n``, the minimum of ``v_n`` over the window and
-    the maximum after it.  These are the instants where the bag's normal force equals the normal
-    component of gravity; being stationary points of ``v_n``, they make ``e`` insensitive to the
-    timing of the contact detection.  A definition without a rebound (``v_n`` not negative before
-    and positive after) is NaN.
+    The impact is the rebound, not an interval of the load: it starts ``pad_s`` before the load
+    first exceeds the lowest threshold and lasts until ``v_n`` (positive once the lander leaves)
+    is back to zero at the rebound's apex, or the data end.  A dip of the load while the lander
+    still approaches (a glancing first touch, then the main strike) and a bag that pushes again
+    while it already leaves (the lander rolling onto the next face) are parts of it; a touch-down
+    after the apex is a new contact.  Primary, ``"extremes"``: ``e = −max v_n / min v_n``, the
+    minimum of ``v_n`` before it first turns positive and the maximum after that, up to the apex.
+    These are instants where the bag's normal force equals the normal component of gravity; being
+    stationary points of ``v_n``, they make ``e`` insensitive to the timing of contact detection.
+    Without a rebound (``v_n`` never positive after the onset) every definition is NaN.
     """
     t = np.asarray(t, dtype=float)
     a_I = np.asarray(a_I, dtype=float)
@@ -491,52 +495,51 @@ def restitution_definitions(
     n = n / np.linalg.norm(n)
     vn = np.asarray(v_I, dtype=float) @ n
     an = np.linalg.norm(a_I, axis=1)
+    idx = np.arange(t.size)
+    thr_sorted = sorted(thresholds_g)
     vals: dict[str, float] = {"extremes": np.nan}
-    intervals = []
-    for thr in sorted(thresholds_g):
-        i0, i1 = contact_interval(t, a_I, after, thr * G0, merge_s)
-        if i0 > 0 and i1 > i0:
-            intervals.append((i0, i1))
-    kmin = kmax = -1
-    if intervals:
-        i0, i1 = intervals[0]  # the lowest threshold's: the widest
-        # window: from pad_s before the contact to pad_s after it, but not into a next contact
-        lo = float(np.min(thresholds_g)) * G0
-        nxt = np.flatnonzero((an > lo) & (np.arange(t.size) > i1))
-        t_end = min(t[i1] + pad_s, t[nxt[0]] if nxt.size else np.inf)
-        w = np.flatnonzero((t >= t[i0] - pad_s) & (t < t_end) & (t > after))
-        kmin = int(w[np.argmin(vn[w])])
-        w2 = w[w >= kmin]
-        kmax = int(w2[np.argmax(vn[w2])])
-        if vn[kmin] < 0.0 < vn[kmax]:
-            vals["extremes"] = float(-vn[kmax] / vn[kmin])
-        else:
-            kmin = kmax = -1
     for thr in thresholds_g:
-        i0, i1 = contact_interval(t, a_I, after, thr * G0, merge_s)
-        e = np.nan
-        # an equivalent definition brackets the same impact: its ends within pad_s of the extremes
-        same = (
-            kmin >= 0
-            and i0 > 0
-            and abs(t[i0] - t[kmin]) <= pad_s
-            and abs(t[min(i1 + 1, t.size - 1)] - t[kmax]) <= pad_s
-        )
-        if same and i1 > i0:
-            a, b = i0 - 1, min(i1 + 1, t.size - 1)
-            if vn[a] < 0.0 < vn[b]:
-                e = float(-vn[b] / vn[a])
-        vals[f"ends_{thr:g}g"] = e
-    if gravity is not None and len(intervals) >= 2 and np.isfinite(vals["extremes"]):
+        vals[f"ends_{thr:g}g"] = np.nan
+    nan = RestitutionDefinitions(values=vals, i_before=-1, i_after=-1, spread=np.nan)
+    i0, _ = contact_interval(t, a_I, after, thr_sorted[0] * G0, merge_s)
+    if i0 <= 0:
+        return nan
+    rising = np.flatnonzero((idx > i0) & (vn > 0.0))
+    if not rising.size:
+        return nan
+    r = int(rising[0])
+    start = int(np.flatnonzero((t >= t[i0] - pad_s) & (t > after))[0])
+    kmin = start + int(np.argmin(vn[start:r]))
+    back = np.flatnonzero((idx > r) & (vn <= 0.0))
+    end = int(back[0]) if back.size else t.size
+    kmax = r + int(np.argmax(vn[r:end]))
+    vals["extremes"] = float(-vn[kmax] / vn[kmin])
+
+    def ends(thr: float) -> tuple[int, int] | None:
+        """First and last samples above ``thr`` [g] within the impact, when they bracket the extremes."""
+        above = np.flatnonzero((idx >= start) & (idx < end) & (t > after) & (an > thr * G0))
+        if not above.size or above[0] == 0 or above[-1] + 1 >= t.size:
+            return None
+        j0, j1 = int(above[0]), int(above[-1])
+        if abs(t[j0] - t[kmin]) > pad_s or abs(t[j1 + 1] - t[kmax]) > pad_s:
+            return None
+        return j0, j1
+
+    brackets = {thr: ends(thr) for thr in thresholds_g}
+    for thr, jj in brackets.items():
+        if jj is not None and vn[jj[0] - 1] < 0.0 < vn[jj[1] + 1]:
+            vals[f"ends_{thr:g}g"] = float(-vn[jj[1] + 1] / vn[jj[0] - 1])
+    lo2 = [brackets.get(thr) for thr in thr_sorted[:2]]
+    if gravity is not None and len(lo2) == 2 and all(jj is not None for jj in lo2):
         g_n = -float(np.asarray(gravity, dtype=float) @ n)  # > 0: gravity pulls toward the ramp
-        thr = sorted(thresholds_g)
-        a_lo = thr[0] * G0
-        (i0, i1), (j0, j1) = intervals[0], intervals[1]
-        dt_in = max(0.0, float(t[j0] - t[i0])) * thr[0] / (thr[1] - thr[0])
-        dt_out = max(0.0, float(t[i1] - t[j1])) * thr[0] / (thr[1] - thr[0])
-        v_touch = vn[max(i0 - 1, 0)] - (0.5 * a_lo - g_n) * dt_in
-        v_leave = vn[min(i1 + 1, t.size - 1)] + (0.5 * a_lo - g_n) * dt_out
+        a_lo = thr_sorted[0] * G0
+        (j0, j1), (k0, k1) = lo2
+        frac = thr_sorted[0] / (thr_sorted[1] - thr_sorted[0])
+        dt_in = max(0.0, float(t[k0] - t[j0])) * frac
+        dt_out = max(0.0, float(t[j1] - t[k1])) * frac
+        v_touch = vn[j0 - 1] - (0.5 * a_lo - g_n) * dt_in
+        v_leave = vn[j1 + 1] + (0.5 * a_lo - g_n) * dt_out
         vals["touch_leave"] = float(-v_leave / v_touch) if v_touch < 0.0 < v_leave else np.nan
     alt = np.array([v for k, v in vals.items() if k != "extremes" and np.isfinite(v)])
-    spread = float(np.max(np.abs(alt - vals["extremes"]))) if alt.size and np.isfinite(vals["extremes"]) else np.nan
+    spread = float(np.max(np.abs(alt - vals["extremes"]))) if alt.size else np.nan
     return RestitutionDefinitions(values=vals, i_before=kmin, i_after=kmax, spread=spread)
