@@ -628,6 +628,16 @@ def stroke_stage(
     )
 
 
+def contact_end(t: np.ndarray, st: StrokeStage) -> float | None:
+    """The end [s] of the contact the restitution is defined over, on the step times ``t`` (n,):
+    the later of the detected contact's end and the instant the restitution's leaving velocity is
+    read (a bag pushing again as the lander rolls off extends it); None without a detected contact."""
+    i1, ka = st.contact[1], st.restitution_index[1]
+    if i1 < 0 and ka < 0:
+        return None
+    return float(t[max(i1, ka)])
+
+
 def _subset(h: StrokeHistory, m: np.ndarray) -> StrokeHistory:
     return StrokeHistory(**{f: getattr(h, f)[m] for f in h.__dataclass_fields__})
 
@@ -784,7 +794,7 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
         smo.x[:, rl.SV],
         st.surface.normal,
         float(ms.time),
-        float(smo.t[st.contact[1]]) if st.contact[1] >= 0 else None,
+        contact_end(smo.t, st),
         float((st.smoothed.distance[-1] - ms.distance) / max(ms.sigma, 1e-9)),
     )
     undefined = {} if cc.complete else {"undefined": cc.reason, "data_end_s": cc.t_data_end}
