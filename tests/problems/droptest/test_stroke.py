@@ -402,3 +402,7 @@ def test_restitution_definitions_merge_a_glancing_first_touch():
     v4[:, 2] = np.minimum(v4[:, 2], -0.01)
     none = restitution_definitions(t4, v4, A4, n, after=0.0, gravity=grav)
     assert np.isnan(none.primary) and none.i_before == -1 and np.isnan(none.spread)
+    # a load while the lander already moves away from the floor (v_n > 0 throughout) is no impact
+    v5 = v4.copy()
+    v5[:, 2] = 1.0
+    assert np.isnan(restitution_definitions(t4, v5, A4, n, after=0.0, gravity=grav).primary)

@@ -510,6 +510,8 @@ def restitution_definitions(
     r = int(rising[0])
     start = int(np.flatnonzero((t >= t[i0] - pad_s) & (t > after))[0])
     kmin = start + int(np.argmin(vn[start:r]))
+    if not vn[kmin] < 0.0:
+        return nan  # not approaching the ramp at the onset: no impact to read
     back = np.flatnonzero((idx > r) & (vn <= 0.0))
     end = int(back[0]) if back.size else t.size
     kmax = r + int(np.argmax(vn[r:end]))
