@@ -852,7 +852,7 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
     }
     if not cc.complete:
         out["restitution"].update(
-            {"e": None, "sigma": None, "sigma_estimation": None, "sigma_definition": None, **undefined}
+            {"e": None, "sigma": None, "sigma_estimation": None, "sigma_definition": None, "times_s": None, **undefined}
         )
         out["contact"]["end_s"] = None
         if not cc.max_stroke_defined:
@@ -1032,7 +1032,12 @@ def scorecard_markdown(summary: dict) -> str:
         "| coefficient of restitution | "
         + (
             f"{e['e']:.3f} ± {e['sigma']:.3f} (1σ: estimation {sc.num(e.get('sigma_estimation'), digits=2)}, "
-            f"definition {sc.num(e.get('sigma_definition'), digits=2)}, in quadrature) |"
+            f"definition {sc.num(e.get('sigma_definition'), digits=2)}, in quadrature)"
+            + (
+                f"; v_n read at t = {e['times_s'][0]:.3f} s (approaching) and {e['times_s'][1]:.3f} s (leaving) |"
+                if e.get("times_s")
+                else " |"
+            )
             if sc.is_defined(e["e"])
             else f"**undefined**: {e['undefined']} |"
             if e.get("undefined")
