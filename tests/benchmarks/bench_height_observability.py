@@ -1,7 +1,7 @@
 """What in a drop test with ranging can see a wrong declared lander height (issue 26, the fuzz suite's
 last SILENT row: ``height_m`` × 1.2 in the lander asset of ``droptest_ranging``).
 
-Four measurements, each an idea for a check that would catch the mistake:
+Five measurements, each an idea for a check that would catch the mistake:
 
 1. **what moves**: the body points the declared ``height_m`` sets, against the points a sensor sees —
    the instruments' lever arms, the ranging reflector and the odometer's rope attachment (all written
@@ -12,7 +12,10 @@ Four measurements, each an idea for a check that would catch the mistake:
 3. **where the bag force acts**: the centre of pressure of the truth's own contact force and torque
    (m·a_ng, I·α + ω×Iω, exact, no estimation noise) against the convex hull of the footprint centres
    of the declared lobes that press into the ramp — with either declared geometry, how far outside;
-4. **honest near misses**: the truth max stroke of dispersed drops of the REDLand envelope (the drop
+4. **the bags' load**: the declared bags' quasi-static load (the gas law on the declared pressure,
+   volume and γ over the footprints of the declared lobes at the smoothed pose) against the measured
+   m·|f̄| over the impact, with either declared geometry;
+5. **honest near misses**: the truth max stroke of dispersed drops of the REDLand envelope (the drop
    Monte Carlo's ``disperse_drop``, validation stream) and the reconstruction of those that came
    within 10 cm without the frame touching — the signature of the taller lander's run on honest data.
 
@@ -107,6 +110,31 @@ def run_facts(res, summary: dict) -> dict:
     }
 
 
+def bag_load_ratio(res, lander) -> dict:
+    """The declared bags' quasi-static load against the measured one over the impact: the gas law on
+    the declared pressure, volume and γ (p0 (V0 / (V0 − V_caps))^γ − p_amb) over the spherical-cap
+    footprints of the declared lobes at the smoothed pose (no overlap correction), against m·|f̄| of
+    the mean triad (samples above 30 % of the peak): the median and 10–90th percentiles of their ratio."""
+    from workbench.problems.droptest.physics import mean_triad_force
+
+    smo, st, tel = res.smoothed, res.stroke, res.telemetry
+    c_B = np.asarray(lander.lobe_centers_B, float)
+    R = float(lander.lobe_radius)
+    n, m = smo.t.size, c_B.shape[0]
+    cI = np.repeat(smo.x[:, rl.SP], m, 0) + quat_rotate(np.repeat(smo.x[:, rl.SQ], m, 0), np.tile(c_B, (n, 1)))
+    pe = np.clip(R - st.surface.distance(cI)[0].reshape(n, m), 0.0, R)
+    caps = np.sum(np.pi * pe**2 * (3.0 * R - pe) / 3.0, axis=1)
+    gauge = lander.pressure_pa * (lander.gas_volume_m3 / (lander.gas_volume_m3 - caps)) ** lander.gamma
+    model = (gauge - lander.ambient_pressure_pa) * np.sum(np.pi * (2.0 * R * pe - pe**2), axis=1)
+    t, f = mean_triad_force(tel)
+    measured = np.interp(smo.t, t - tel.group_delay_s, lander.mass * np.linalg.norm(f, axis=1))
+    imp = measured_impact(tel)
+    inside = (smo.t >= imp[0]) & (smo.t <= imp[1])
+    use = inside & (measured > 0.3 * measured[inside].max())
+    r = model[use] / measured[use]
+    return {"median": float(np.median(r)), "p10_p90": [float(x) for x in np.percentile(r, [10, 90])]}
+
+
 def cop_outside_hull(truth: dict, lander, surface, step: int = 5) -> float:
     """Largest distance [m] of the truth's centre of pressure on the ramp from the convex hull of the
     footprint centres of ``lander``'s lobes that press into the ramp, over the samples with a contact
@@ -160,6 +188,7 @@ def main(argv: list[str] | None = None) -> int:
             summary = dict(res.summary, truth=score(res, truth))
             judge_health(problem, summary)
             runs[label] = run_facts(res, summary)
+            runs[label]["bag_load_over_measured"] = bag_load_ratio(res, s.lander)
         moves = what_moves(settings.lander, tall.lander, settings, res.telemetry.setup)
         surface = res.stroke.surface
         cop = {

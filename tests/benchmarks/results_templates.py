@@ -357,7 +357,14 @@ measurement, exit 4), and every error names the file and the column or key. What
   ({{{{bench_height_observability:results.runs.taller.max_stroke_m|.3f}}}} m) looks like the envelope's honest near
   misses ({{{{bench_height_observability:results.dispersed.within_0_10cm}}}} of
   {{{{bench_height_observability:results.dispersed.members}}}} dispersed drops end within 10 cm of full stroke). A
-  threshold that flags it flags them, unless it uses the truth simulator's own bag model. Every drop test's
+  threshold that flags it flags them, unless it uses the truth simulator's own bag model. Nor does a bag model of
+  our own see it: the declared bags' quasi-static load (the gas law on the declared pressure, volume and γ over
+  the declared lobes' footprints at the estimated pose) is a median
+  {{{{bench_height_observability:results.runs.shipped.bag_load_over_measured.median|.1f}}}}× the measured load over
+  the impact with the shipped geometry (10–90 %:
+  {{{{bench_height_observability:results.runs.shipped.bag_load_over_measured.p10_p90.0|.1f}}}}–{{{{bench_height_observability:results.runs.shipped.bag_load_over_measured.p10_p90.1|.1f}}}}×:
+  wrapped lobes of several bags share their footprints) and
+  {{{{bench_height_observability:results.runs.taller.bag_load_over_measured.median|.1f}}}}× with the taller one. Every drop test's
   health now carries a note on what the max stroke rests on (a declared body vertex no sensor sees) and how far
   it moves per metre that vertex moves. `cm_height_m` × 1.5 moves the first-contact clearance: an ERROR with
   ranging.
