@@ -37,6 +37,7 @@ from workbench.problems.droptest.physics import (
     structural_give,
     timing_checks,
 )
+from workbench.problems.droptest.stroke import contact_end
 
 __all__ = ["drop_health", "input_checks", "input_health"]
 
@@ -187,7 +188,8 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
 
     windows: dict[str, tuple[float, float]] = {}
     i0, i1 = st.contact
-    if i0 >= 0 and i1 >= 0:
-        windows["detected airbag contact"] = (float(smo.t[i0]) - 0.01, float(smo.t[i1]) + 0.01)
+    t_end = contact_end(smo.t, st.contact, st.restitution_index[1])
+    if i0 >= 0 and t_end is not None:
+        windows["detected airbag contact"] = (float(smo.t[i0]) - 0.01, t_end + 0.01)
     checks += input_checks(tel, windows)
     return health_report(checks, notes)

@@ -83,7 +83,7 @@ class SeedResult:
     ``restitution_sigma_estimation`` its estimation part alone [-]; ``restitution_truth`` [-] (same
     definition); ``restitution_error_touch_leave`` estimate − the truth at the instants the bags touch
     and leave (another definition) [-]; ``restitution_error_before`` the error as scored before the
-    definition was revised (estimate at the ends of the 1 g contact interval − truth at touch/leave) [-];
+    definition was revised (estimate just outside the first interval above 1 g − truth at touch/leave) [-];
     ``drop`` (len(DROP_PARAMETER_NAMES),) the drawn and solved drop parameters
     (:func:`~workbench.problems.droptest.synthetic.drop_parameters`);
     ``wall_time_s`` whole task; ``reconstruct_s`` the reconstruction alone.
@@ -177,6 +177,20 @@ class McResult:
     )  # fmt: skip
 
 
+def _first_1g_interval_restitution(res) -> float:
+    """The restitution as scored before the definition was revised [-]: ``−v_n(i1+1)/v_n(i0−1)``
+    around the first interval of the smoothed non-gravitational acceleration above 1 g (the
+    reconstruction's ``res.stroke.contact``); NaN without a bounce across it."""
+    from workbench.problems.droptest import model as rl
+
+    i0, i1 = res.stroke.contact
+    x, n = res.smoothed.x, res.stroke.surface.normal
+    if i0 <= 0 or i1 + 1 >= x.shape[0]:
+        return np.nan
+    b, a = float(x[i0 - 1, rl.SV] @ n), float(x[i1 + 1, rl.SV] @ n)
+    return -a / b if b < 0.0 < a else np.nan
+
+
 def run_seed(settings: DropSettings, seed: int, work_dir: str | Path) -> SeedResult:
     """One Monte Carlo task of the run with ``settings``: synthesize drop ``seed`` (a different drop per seed,
     ``synthesize_droptest(..., disperse=True)``) into a fresh subfolder of ``work_dir``,
@@ -239,9 +253,7 @@ def run_seed(settings: DropSettings, seed: int, work_dir: str | Path) -> SeedRes
         restitution_sigma_estimation=float(res.stroke.restitution_sigma_estimation),
         restitution_truth=float(sc["restitution_truth"]),
         restitution_error_touch_leave=float(sc["restitution_error_touch_leave"]),
-        restitution_error_before=float(
-            res.stroke.restitution_definitions.get("ends_1g", np.nan) - sc["restitution_truth_touch_leave"]
-        ),
+        restitution_error_before=float(_first_1g_interval_restitution(res) - sc["restitution_truth_touch_leave"]),
         drop=np.asarray(truth["drop_parameters"], float),
     )
 

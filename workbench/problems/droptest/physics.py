@@ -411,8 +411,9 @@ def contact_completeness(
 ) -> ContactCompleteness:
     """:class:`ContactCompleteness` of the telemetry ``tel`` against the smoothed CM velocity
     ``smo_v`` (n, 3) [m/s, SPF] at ``smo_t`` (n,) [s] and the ramp's unit ``normal`` (3,): an IMU
-    gap across the measured impact (then the max stroke is undefined too when the gap starts before
-    ``t_max_stroke`` [s], the estimated max-stroke time), or the IMU file ending inside the contact:
+    gap across the measured impact, up to ``t_contact_end`` when that is later (then the max
+    stroke is undefined too when the gap starts before ``t_max_stroke`` [s], the estimated
+    max-stroke time), or the IMU file ending inside the contact:
     less than :data:`CONTACT_TAIL_S` after ``t_contact_end`` [s] (the end of the contact the
     restitution is defined over; None: none detected, then the measured impact still lasting at
     the last sample).  A file ending inside the contact leaves the max stroke defined only when
@@ -424,12 +425,14 @@ def contact_completeness(
     if imp is not None:
         d = tel.group_delay_s
         pad = 2.0 * float(np.median(np.diff(tel.imu.time)))
+        # the impact as the restitution reads it lasts to the contact's end (a last push off)
+        imp_end = max(imp[1], t_contact_end) if t_contact_end is not None else imp[1]
         for g in tel.imu.gaps:
             a, b = g.start_s - d, g.end_s - d
-            if a < imp[1] + pad and b > imp[0] - pad:
+            if a < imp_end + pad and b > imp[0] - pad:
                 reason = (
                     f"the IMU data ({tel.imu.path}) break inside the impact: a {b - a:.3g} s gap {a:.4f}–{b:.4f} s "
-                    f"(row {g.row}) across the measured impact {imp[0]:.4f}–{imp[1]:.4f} s"
+                    f"(row {g.row}) across the measured impact {imp[0]:.4f}–{imp_end:.4f} s"
                 )
                 return ContactCompleteness(False, a > t_max_stroke, t_end, reason)
     if t_contact_end is not None:

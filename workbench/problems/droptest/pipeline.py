@@ -65,6 +65,7 @@ from workbench.problems.droptest.sensors import RangingSpec
 from workbench.problems.droptest.stroke import (
     MaxStroke,
     StrokeHistory,
+    contact_end,
     contact_interval,
     max_stroke,
     restitution,
@@ -93,11 +94,13 @@ NO_REBOUND = "not defined: no rebound"
 #: the restitution definition, as the summary and scorecard state it
 RESTITUTION_DEFINITION = (
     "e = -max(v_n)/min(v_n), v_n the smoothed CM velocity along the ramp normal, its minimum before it first turns "
-    "positive (approaching) and its maximum after that up to the rebound's apex (leaving), over the whole impact: a "
-    "glancing first touch and a bag pushing again as the lander rolls off are parts of it, a touch-down after the "
-    "apex is not; both are where the bag normal force equals the normal component of gravity; sigma = "
-    "sqrt(sigma_estimation^2 + sigma_definition^2), sigma_definition = the largest difference from v_n just outside "
-    "the impact's samples above 0.25, 0.5 or 1 g and from v_n extrapolated to the instants the bags touch and leave"
+    "positive (approaching) and its maximum after that up to the rebound's apex (v_n back at zero in free flight; "
+    "leaving), over the whole impact: a glancing first touch and a bag pushing again as the lander rolls off are "
+    "parts of it, a touch-down after the apex is not; both are where the bag normal force equals the normal "
+    "component of gravity; sigma = sqrt(sigma_estimation^2 + sigma_definition^2), sigma_definition = the largest "
+    "difference from e of the readings of v_n just outside the impact's samples above 0.25, 0.5 or 1 g and of v_n "
+    "extrapolated to the instants the bags touch and leave, a reading whose ends are not within 0.05 s of the "
+    "extremes left out"
 )
 
 
@@ -628,16 +631,6 @@ def stroke_stage(
     )
 
 
-def contact_end(t: np.ndarray, st: StrokeStage) -> float | None:
-    """The end [s] of the contact the restitution is defined over, on the step times ``t`` (n,):
-    the later of the detected contact's end and the instant the restitution's leaving velocity is
-    read (a bag pushing again as the lander rolls off extends it); None without a detected contact."""
-    i1, ka = st.contact[1], st.restitution_index[1]
-    if i1 < 0 and ka < 0:
-        return None
-    return float(t[max(i1, ka)])
-
-
 def _subset(h: StrokeHistory, m: np.ndarray) -> StrokeHistory:
     return StrokeHistory(**{f: getattr(h, f)[m] for f in h.__dataclass_fields__})
 
@@ -794,7 +787,7 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
         smo.x[:, rl.SV],
         st.surface.normal,
         float(ms.time),
-        contact_end(smo.t, st),
+        contact_end(smo.t, st.contact, st.restitution_index[1]),
         float((st.smoothed.distance[-1] - ms.distance) / max(ms.sigma, 1e-9)),
     )
     undefined = {} if cc.complete else {"undefined": cc.reason, "data_end_s": cc.t_data_end}
@@ -942,6 +935,8 @@ def score(result: DropResult, truth: dict) -> dict:
     rd_true = restitution_definitions(truth["t"], truth["v_I"], truth["a_ng_I"], n, after, gravity=GRAVITY)
     e_est, s_e = st.restitution
     e_prim = rd_true.primary
+    # a restitution the summary calls undefined (the data end or break inside the contact) is not judged
+    reported = (result.summary or {}).get("restitution", {}).get("e", e_est) is not None
     sig_p = np.sqrt(np.einsum("nii->ni", smo.P[:, rl.EP, rl.EP]))
     return {
         "max_stroke_truth_m": d_true,
@@ -983,7 +978,7 @@ def score(result: DropResult, truth: dict) -> dict:
                         "unit": "",
                     }
                 ]
-                if np.isfinite(e_est) and np.isfinite(e_prim) and np.isfinite(s_e) and s_e > 0.0
+                if np.isfinite(e_est) and np.isfinite(e_prim) and np.isfinite(s_e) and s_e > 0.0 and reported
                 else []
             ),
         ],

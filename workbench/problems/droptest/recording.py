@@ -377,7 +377,7 @@ def impact_view(result) -> dict:
         "up": dim["up"],
         "span": (float(smo.t[0]), float(smo.t[-1])),
         "t0": float(smo.t[i0]) - 0.15,
-        "t1": float(smo.t[i1]) + 0.25,
+        "t1": float(smo.t[max(i1, st.restitution_index[1])]) + 0.25,  # past the restitution's leaving instant
         "stroke_lo": lo,
         "stroke_hi": hi,
     }

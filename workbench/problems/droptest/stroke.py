@@ -44,6 +44,7 @@ __all__ = [
     "max_stroke",
     "restitution",
     "contact_interval",
+    "contact_end",
     "restitution_definitions",
     "RestitutionDefinitions",
     "RESTITUTION_THRESHOLDS_G",
@@ -428,6 +429,15 @@ def contact_interval(
     return i0, i1
 
 
+def contact_end(t: np.ndarray, contact: tuple[int, int], leaving: int) -> float | None:
+    """The end [s] of the contact the restitution is defined over, on the step times ``t`` (n,):
+    the later of the detected contact's last step ``contact[1]`` and the step ``leaving`` where the
+    restitution's leaving velocity is read (a bag pushing again as the lander rolls off extends
+    it); -1 for either: none.  None when neither exists."""
+    k = max(int(contact[1]), int(leaving))
+    return None if k < 0 else float(t[k])
+
+
 @dataclass(frozen=True)
 class RestitutionDefinitions:
     """The coefficient of restitution of one history by each equivalent definition.
@@ -456,7 +466,6 @@ def restitution_definitions(
     normal: np.ndarray,
     after: float,
     thresholds_g: tuple[float, ...] = RESTITUTION_THRESHOLDS_G,
-    merge_s: float = 0.01,
     pad_s: float = 0.05,
     gravity: np.ndarray | None = None,
 ) -> RestitutionDefinitions:
@@ -468,9 +477,9 @@ def restitution_definitions(
             free side (v_I's frame); after: [s] contact is searched after this time (the cut).
         thresholds_g: contact thresholds [g = 9.80665 m/s²]: ``"ends_<thr>g"`` is
             ``−v_n(j1+1)/v_n(j0−1)``, j0 and j1 the first and last samples of the impact above the
-            threshold; a reading whose ends are not within ``pad_s`` of the extremes (the threshold
-            misses a glancing first touch or a last push) gives NaN.
-        merge_s: dips shorter than this [s] bridge the lowest threshold's first contact (the onset).
+            threshold; a reading whose ends are not within ``pad_s`` of the extremes (a glancing first
+            touch or a last push above or below the threshold) is not a reading of the same instants
+            and gives NaN.
         pad_s: the impact starts this long [s] before the lowest threshold's onset.
         gravity: (3,) [m/s²] gravity in v_I's frame; when given, ``"touch_leave"`` extrapolates
             ``v_n`` from the lowest threshold's crossings to the instants the bags touch and leave:
@@ -480,14 +489,18 @@ def restitution_definitions(
 
     The impact is the rebound, not an interval of the load: it starts ``pad_s`` before the load
     first exceeds the lowest threshold and lasts until ``v_n`` (positive once the lander leaves)
-    is back to zero at the rebound's apex, or the data end.  A dip of the load while the lander
+    is back to zero in free flight (load below the lowest threshold) at the rebound's apex, or the
+    data end.  A dip of the load while the lander
     still approaches (a glancing first touch, then the main strike) and a bag that pushes again
     while it already leaves (the lander rolling onto the next face) are parts of it; a touch-down
     after the apex is a new contact.  Primary, ``"extremes"``: ``e = −max v_n / min v_n``, the
     minimum of ``v_n`` before it first turns positive and the maximum after that, up to the apex.
     These are instants where the bag's normal force equals the normal component of gravity; being
     stationary points of ``v_n``, they make ``e`` insensitive to the timing of contact detection.
-    Without a rebound (``v_n`` never positive after the onset) every definition is NaN.
+    Every definition is NaN without a rebound (``v_n`` never positive after the onset) and where an
+    extreme is not a stationary point: the minimum at the window's first sample (``v_n`` still
+    falling there: the ``after`` time inside the impact) or the maximum at the last sample with no
+    apex (``v_n`` still rising where the data end), or a non-finite ``v_n``.
     """
     t = np.asarray(t, dtype=float)
     a_I = np.asarray(a_I, dtype=float)
@@ -501,7 +514,7 @@ def restitution_definitions(
     for thr in thresholds_g:
         vals[f"ends_{thr:g}g"] = np.nan
     nan = RestitutionDefinitions(values=vals, i_before=-1, i_after=-1, spread=np.nan)
-    i0, _ = contact_interval(t, a_I, after, thr_sorted[0] * G0, merge_s)
+    i0, _ = contact_interval(t, a_I, after, thr_sorted[0] * G0)
     if i0 <= 0:
         return nan
     rising = np.flatnonzero((idx > i0) & (vn > 0.0))
@@ -510,12 +523,19 @@ def restitution_definitions(
     r = int(rising[0])
     start = int(np.flatnonzero((t >= t[i0] - pad_s) & (t > after))[0])
     kmin = start + int(np.argmin(vn[start:r]))
-    if not vn[kmin] < 0.0:
-        return nan  # not approaching the ramp at the onset: no impact to read
-    back = np.flatnonzero((idx > r) & (vn <= 0.0))
+    if not vn[kmin] < 0.0 or kmin == start:
+        return nan  # not approaching at the onset, or still falling where the window starts: no minimum
+    # the apex: v_n back at zero in free flight (a lander rocking onto the next face under load
+    # can dip to zero and push off again)
+    back = np.flatnonzero((idx > r) & (vn <= 0.0) & (an <= thr_sorted[0] * G0))
     end = int(back[0]) if back.size else t.size
     kmax = r + int(np.argmax(vn[r:end]))
-    vals["extremes"] = float(-vn[kmax] / vn[kmin])
+    if not back.size and kmax == t.size - 1:
+        return nan  # still rising where the data end: the leaving velocity is not in the data
+    e = float(-vn[kmax] / vn[kmin])
+    if not np.isfinite(e):
+        return nan
+    vals["extremes"] = e
 
     def ends(thr: float) -> tuple[int, int] | None:
         """First and last samples above ``thr`` [g] within the impact, when they bracket the extremes."""
