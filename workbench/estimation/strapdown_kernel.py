@@ -118,8 +118,11 @@ def expm_taylor(M):
     for i in range(n):
         for j in range(n):
             X[i, j] = M[i, j] * c
-    E = np.eye(n)
-    T = np.eye(n)
+    E = np.zeros((n, n))  # identities (numba's np.eye compiles its k and dtype handling too)
+    T = np.zeros((n, n))
+    for i in range(n):
+        E[i, i] = 1.0
+        T[i, i] = 1.0
     E_new = np.empty((n, n))
     for k in range(1, 40):
         T = T @ X

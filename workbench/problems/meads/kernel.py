@@ -330,7 +330,9 @@ def transition_kernel(x, k, dt, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, p
     km1 = k - 1
     i_b, i_bd, i_mm, i_ma = cols[0], cols[1], cols[2], cols[3]
     x1 = x.copy()
-    F = np.eye(n)
+    F = np.zeros((n, n))  # the identity (numba's np.eye compiles its k and dtype handling too)
+    for i in range(n):
+        F[i, i] = 1.0
     Q = np.zeros((n, n))
     dp = np.empty(3)
     dv = np.empty(3)
