@@ -1,11 +1,13 @@
-"""Compiled-kernel cache state (``workbench.core.jit``) and the precompiling child
-(``workbench.problems.precompile``): cold kernels are named, a call makes them warm, a module with
-one kernel never called is not cold, and the child runs only when a module is cold."""
+"""Compiled kernels (``workbench.core.jit``) and the precompiling child
+(``workbench.problems.precompile``): every kernel compiles with one set of options, cold kernels are
+named, a call makes them warm, a module with one kernel never called is not cold, the child runs
+only when a module is cold, and numba's registries load once before a fork."""
 
 from __future__ import annotations
 
 import importlib
 import io
+import math
 import os
 import subprocess
 import sys
@@ -15,7 +17,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from workbench.core.jit import cold_kernels, cold_modules
+from workbench.core.jit import KERNEL_OPTIONS, cold_kernels, cold_modules, njit
 from workbench.io.progress import Reporter
 from workbench.problems import precompile as pc
 
@@ -169,3 +171,101 @@ def test_importing_the_workbench_sets_numbas_level_unless_the_user_did(env, leve
     e["PYTHONPATH"] = str(Path(__file__).resolve().parents[2])
     out = subprocess.run([sys.executable, "-c", code], env=e, capture_output=True, text=True, check=True)
     assert out.stdout.strip() == str(level)
+
+
+def test_the_kernel_decorator_is_numbas_with_the_workbench_options():
+    """Bare or called, :func:`njit` gives a cached numba dispatcher with :data:`KERNEL_OPTIONS`;
+    options given add to them. A division by zero is IEEE's (``error_model="numpy"``)."""
+
+    def div(a, b):
+        return a / b
+
+    bare, called = njit(div), njit(nogil=True)(div)
+    expected = {k: v for k, v in KERNEL_OPTIONS.items() if k != "cache"}
+    assert {k: bare.targetoptions[k] for k in expected} == expected
+    assert called.targetoptions["nogil"] is True and called.targetoptions["error_model"] == "numpy"
+    assert type(bare._cache).__name__ == "FunctionCache"  # cache=True
+    uncached = njit(div, cache=False)  # compiled here without writing a cache beside this file
+    assert type(uncached._cache).__name__ == "NullCache"
+    assert uncached(1.0, 0.0) == math.inf and math.isnan(uncached(0.0, 0.0))
+
+
+def test_every_workbench_kernel_is_declared_with_the_workbench_decorator():
+    """numba compiles its own implementations once per set of options of the kernels typing them:
+    a kernel declared with ``numba.njit`` and other options would compile them again. Only the
+    ensemble's member kernel (its own options: it releases the GIL for threads, and the module
+    runs without numba) is declared with numba's decorator."""
+    root = Path(__file__).resolve().parents[2] / "workbench"
+    direct = []
+    for path in sorted(root.rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if "from numba import njit" in text or "numba.njit(" in text or "@jit" in text:
+            direct.append(path.relative_to(root).as_posix())
+    assert direct == ["core/jit.py", "estimation/ensemble.py"]
+
+
+def test_the_kernels_of_every_problem_have_the_workbench_options():
+    """The dispatchers of every built-in problem's compiled modules carry :data:`KERNEL_OPTIONS`."""
+    from workbench.problems import registry
+
+    expected = {k: v for k, v in KERNEL_OPTIONS.items() if k != "cache"}
+    names = sorted({m for kind in registry.kinds() for m in getattr(registry.get(kind), "compiled_modules", ())})
+    assert len(names) >= 5
+    seen = 0
+    for mod in registry.import_modules(tuple(names)):
+        for obj in vars(mod).values():
+            if hasattr(obj, "targetoptions") and getattr(obj.py_func, "__module__", None) == mod.__name__:
+                assert {k: obj.targetoptions.get(k) for k in expected} == expected, f"{mod.__name__}.{obj.__name__}"
+                assert "nogil" not in obj.targetoptions, f"{mod.__name__}.{obj.__name__}"
+                seen += 1
+    assert seen >= 40
+
+
+def test_numbas_registries_load_before_a_fork():
+    """:func:`load_compiler` loads what numba otherwise loads at each process's first compile or
+    cache load (its lowering registries, its runtime), so forked children inherit them; the
+    scheduler of ``run all`` and the precompiling child's parent call it before they fork."""
+    code = (
+        "import sys, workbench.core.jit as j\n"
+        "from numba.core.runtime.nrt import rtsys\n"
+        "before = ('numba.np.linalg' in sys.modules, rtsys._init)\n"
+        "j.load_compiler(); j.load_compiler()\n"
+        "print(before, ('numba.np.linalg' in sys.modules, rtsys._init))"
+    )
+    e = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2]))
+    out = subprocess.run([sys.executable, "-c", code], env=e, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "(False, False) (True, True)"
+
+
+def test_run_all_loads_numbas_registries_once_before_its_first_fork(monkeypatch, tmp_path):
+    """The scheduler of several scenarios imports :data:`PRELOAD` and calls :func:`load_compiler`
+    before it forks its first scenario process (not at all when it starts new interpreters)."""
+    from workbench.problems import scheduler
+
+    events = []
+
+    class FakeChild:
+        def __init__(self, argv, entry, pipe, fork):
+            events.append(("child", argv[0], fork))
+            self.fd, self.eof, self.returncode = None, True, 0
+
+        def poll(self):
+            return 0
+
+        def lines(self, final=False):
+            return []
+
+    monkeypatch.setattr(scheduler, "Child", FakeChild)
+    monkeypatch.setattr(scheduler, "load_compiler", lambda: events.append(("load_compiler",)))
+    monkeypatch.setattr(scheduler.registry, "import_modules", lambda names: events.append(("import", len(names))))
+    rep, _ = _rep()
+    for fork in (True, False):
+        events.clear()
+        monkeypatch.setenv("WORKBENCH_FORK", "1" if fork else "0")
+        code = scheduler.run_in_processes(
+            ["a", "b"], lambda n: [n], 2, tmp_path, rep, entry=lambda argv: 0, progress=lambda text: None
+        )
+        assert code == 0
+        forked = fork and pc.fork_enabled()
+        head = [("import", len(scheduler.PRELOAD)), ("load_compiler",)] if forked else []
+        assert events == [*head, ("child", "a", forked), ("child", "b", forked)]

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from workbench.core.jit import njit
 
 __all__ = ["interp_at", "interp_index", "interp_index_near"]
 
 
-@njit(cache=True)
+@njit
 def interp_index(x, xp):
     """The node index of ``np.interp(x, xp, ·)`` for a scalar x and increasing nodes xp (n,): −1 below
     xp[0], n above xp[n − 1], else the largest j with xp[j] ≤ x (n − 1 at the last node)."""
@@ -35,7 +35,7 @@ def interp_index(x, xp):
     return lo - 1
 
 
-@njit(cache=True)
+@njit
 def interp_index_near(x, xp, inv_step):
     """:func:`interp_index` (the same index) found from the guess ``(x − xp[0]) · inv_step`` and a
     few steps to the neighbouring nodes (a table of nearly even nodes), else by bisection."""
@@ -58,7 +58,7 @@ def interp_index_near(x, xp, inv_step):
     return interp_index(x, xp)
 
 
-@njit(cache=True)
+@njit
 def interp_at(j, x, xp, fp):
     """``np.interp(x, xp, fp)`` for a scalar x with its node index j (:func:`interp_index`): the
     branches and the arithmetic of numpy's (and numba's) ``arr_interp``, to the bit (NaN x: NaN)."""

@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from workbench.core.jit import njit
 
 __all__ = ["add_into", "cho_solve", "copy_matrix", "copy_vector", "joseph_update", "symmetrise"]
 
 
-@njit(cache=True)
+@njit
 def copy_vector(src, dst):
     """Copy src (n,) into dst (n,) element by element (any unit; dst written).
 
@@ -38,7 +38,7 @@ def copy_vector(src, dst):
         dst[i] = src[i]
 
 
-@njit(cache=True)
+@njit
 def copy_matrix(src, dst):
     """Copy src (n, m) into dst (n, m) element by element (any unit; dst written); see
     :func:`copy_vector` for why a loop and not a slice assignment."""
@@ -47,7 +47,7 @@ def copy_matrix(src, dst):
             dst[i, j] = src[i, j]
 
 
-@njit(cache=True)
+@njit
 def add_into(A, B):
     """``A += B`` element by element for A, B (n, m) of one unit (A written): the loop a kernel's
     ``A += B`` or ``A + B`` would compile as an array expression of its own."""
@@ -56,7 +56,7 @@ def add_into(A, B):
             A[i, j] += B[i, j]
 
 
-@njit(cache=True)
+@njit
 def symmetrise(A):
     """``A ← ½(A + Aᵀ)`` in place for a square A (n, n) (any unit): each pair's mean, the diagonal
     untouched; the same bits as numpy's ``0.5 * (A + A.T)``, without the array expression's loop
@@ -69,7 +69,7 @@ def symmetrise(A):
             A[j, i] = u
 
 
-@njit(cache=True)
+@njit
 def cho_solve(L, b, out):
     """Solve ``L Lᵀ out = b`` for a lower Cholesky factor L (m, m); b, out (m,) (out written)."""
     m = L.shape[0]
@@ -85,7 +85,7 @@ def cho_solve(L, b, out):
         out[i] = s / L[i, i]
 
 
-@njit(cache=True)
+@njit
 def joseph_update(P, z, zp, Hc, cols, nc, R, y, S, W, M, L, v):
     """Joseph-form update of the error covariance P (n_e, n_e), in place, by a measurement of size
     3 whose H is non-zero only in the error-state columns ``cols[:nc]`` (values ``Hc[:, :nc]``).

@@ -11,12 +11,13 @@ the two paths agree bit for bit (tests/estimation/test_propagation_kernel.py).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from workbench.core.jit import njit
 
 __all__ = ["sandwich"]
 
 
-@njit(cache=True)
+@njit
 def sandwich(J, P, out):  # pragma: no cover - compiled
     """``out[n] = J[n] P[n] J[n]ᵀ`` for J (n, k, m), P (n, m, m), out (n, k, k) (written), summed
     as ``np.einsum("nkj,nji,nli->nkl", J, P, J)`` sums."""

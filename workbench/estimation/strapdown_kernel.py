@@ -19,14 +19,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from workbench.core.jit import njit
 from workbench.estimation.kernels import copy_matrix, symmetrise
 
 __all__ = ["expm_taylor", "transition_step"]
 
 
-@njit(cache=True)
+@njit
 def _deriv(v, q, p, f, w, gm, j2k, dv, dq):
     """``strapdown._deriv_scalar``: dv (3,) [m/s²] and dq (4,) written; dp/dt is v."""
     x, y, z = p[0], p[1], p[2]
@@ -52,7 +52,7 @@ def _deriv(v, q, p, f, w, gm, j2k, dv, dq):
     dq[3] = 0.5 * -(qx * wa + qy * wb + qz * wc)
 
 
-@njit(cache=True)
+@njit
 def _rk4(v, q, p, f0, w0, f1, w1, dt, gm, j2k):
     """``strapdown._rk4_scalar``: (v1 (3,), q1 (4,), p1 (3,)) after one step of dt [s]."""
     fm = np.empty(3)
@@ -97,7 +97,7 @@ def _rk4(v, q, p, f0, w0, f1, w1, dt, gm, j2k):
     return v1, q1, p1
 
 
-@njit(cache=True)
+@njit
 def expm_taylor(M):
     """Matrix exponential of a small square matrix M (n, n): scaling to a 1-norm ≤ 0.5, the Taylor
     series summed until its terms no longer change the sum, then squaring (Moler & Van Loan,
@@ -118,8 +118,11 @@ def expm_taylor(M):
     for i in range(n):
         for j in range(n):
             X[i, j] = M[i, j] * c
-    E = np.eye(n)
-    T = np.eye(n)
+    E = np.zeros((n, n))  # identities (numba's np.eye compiles its k and dtype handling too)
+    T = np.zeros((n, n))
+    for i in range(n):
+        E[i, i] = 1.0
+        T[i, i] = 1.0
     E_new = np.empty((n, n))
     for k in range(1, 40):
         T = T @ X
@@ -137,7 +140,7 @@ def expm_taylor(M):
     return E
 
 
-@njit(cache=True)
+@njit
 def transition_step(v, q, p, f0, w0, f1, w1, dt, sw, sf, sample_dt, q_state_psd, gradient, gm, j2k):
     """One strapdown step and its covariance terms (module docstring).
 

@@ -14,12 +14,13 @@ agree bit for bit (tests/models/test_flush_airdata_kernel.py).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from workbench.core.jit import njit
 
 __all__ = ["out_of_grid", "multilinear4"]
 
 
-@njit(cache=True)
+@njit
 def out_of_grid(g0, g1, g2, g3, pts):  # pragma: no cover - compiled
     """The first axis (0..3) along which a point of ``pts`` (n, 4) is off its grid (``g0`` … ``g3``,
     ascending) or NaN, −1 when every point is on the grid (scipy's ``bounds_error`` test)."""
@@ -35,7 +36,7 @@ def out_of_grid(g0, g1, g2, g3, pts):  # pragma: no cover - compiled
     return -1 if first == 4 else first
 
 
-@njit(cache=True)
+@njit
 def _cell(grid, v):  # pragma: no cover - compiled
     """(i, t): the cell ``grid[i] ≤ v < grid[i + 1]`` (the last closed) and the fraction of v in it."""
     n = grid.shape[0]
@@ -56,7 +57,7 @@ def _cell(grid, v):  # pragma: no cover - compiled
     return i, (v - grid[i]) / (grid[i + 1] - grid[i])
 
 
-@njit(cache=True)
+@njit
 def multilinear4(g0, g1, g2, g3, values, pts, out):  # pragma: no cover - compiled
     """Linear interpolation of ``values`` (n0, n1, n2, n3) on the grid ``g0`` … ``g3`` (ascending)
     at the points ``pts`` (n, 4) (on the grid: :func:`out_of_grid`) into ``out`` (n,)."""

@@ -26,7 +26,7 @@ import tempfile
 from pathlib import Path
 
 from workbench.core.forking import fork_call, fork_enabled
-from workbench.core.jit import cold_kernels, cold_modules
+from workbench.core.jit import cold_kernels, cold_modules, load_compiler
 from workbench.io import progress as prog
 from workbench.io.scenario import Scenario
 from workbench.problems import registry
@@ -80,6 +80,7 @@ def _run_child(scenario: Scenario, seed: int) -> tuple[int, str]:
     if not fork_enabled():
         proc = subprocess.run(child_argv(scenario, seed), capture_output=True, text=True, errors="replace")
         return proc.returncode, proc.stderr or proc.stdout
+    load_compiler()  # the run needs it too, to load what the child compiles
     with tempfile.TemporaryFile() as log:
         pid = fork_call(lambda: main(argv), stdout_fd=log.fileno(), stderr_fd=log.fileno())
         try:

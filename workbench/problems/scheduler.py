@@ -4,7 +4,8 @@ process, ``jobs`` at a time, longest first.
 A process knows only its own scenario, so nothing is shared between them. On POSIX the processes
 are forked from the calling process after it imported the modules every scenario needs
 (:data:`PRELOAD`: each new interpreter would spend ~2 s of CPU importing numpy, scipy, numba,
-trimesh and rerun again); ``WORKBENCH_FORK=0`` (:func:`workbench.core.forking.fork_enabled`) starts
+trimesh and rerun again) and loaded numba's compiler registries
+(:func:`workbench.core.jit.load_compiler`); ``WORKBENCH_FORK=0`` (:func:`workbench.core.forking.fork_enabled`) starts
 new interpreters instead. No thread is started before a fork, and the children's pipes are read
 between polls. The command line builds each child's argument list and hands in its own entry point
 (``entry(argv)``), so this module knows nothing of argument parsing.
@@ -23,6 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from workbench.core.forking import fork_call, fork_enabled
+from workbench.core.jit import load_compiler
 from workbench.io import progress as prog
 from workbench.problems import registry
 
@@ -197,6 +199,7 @@ def run_in_processes(
     fork = fork_enabled()
     if fork:
         registry.import_modules(PRELOAD)
+        load_compiler()
     pending, running, codes = list(order), {}, {}
     sel = selectors.DefaultSelector()
 

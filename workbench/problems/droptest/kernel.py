@@ -27,8 +27,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from workbench.core.jit import njit
 from workbench.estimation.kernels import copy_matrix, joseph_update
 
 __all__ = [
@@ -48,7 +48,7 @@ __all__ = [
 NC = 18
 
 
-@njit(cache=True)
+@njit
 def _dcm(q, C):
     x, y, z, w = q[0], q[1], q[2], q[3]
     xx, yy, zz = x * x, y * y, z * z
@@ -65,7 +65,7 @@ def _dcm(q, C):
     C[2, 2] = 1 - 2 * (xx + yy)
 
 
-@njit(cache=True)
+@njit
 def _skew(v, S):
     S[0, 0] = 0.0
     S[0, 1] = -v[2]
@@ -78,20 +78,20 @@ def _skew(v, S):
     S[2, 2] = 0.0
 
 
-@njit(cache=True)
+@njit
 def _mm3(A, B, out):
     for i in range(3):
         for j in range(3):
             out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
 
 
-@njit(cache=True)
+@njit
 def _mv3(A, v, out):
     for i in range(3):
         out[i] = A[i, 0] * v[0] + A[i, 1] * v[1] + A[i, 2] * v[2]
 
 
-@njit(cache=True)
+@njit
 def propagate_kinematic(x, dt, g, xn, F, w3):
     """Kinematic :func:`workbench.problems.droptest.model.propagate` (no bungee) of x (n_x,) over
     dt [s] with gravity g (3,) [m/s², SPF], written into xn (n_x,) and the error transition F
@@ -176,7 +176,7 @@ def propagate_kinematic(x, dt, g, xn, F, w3):
             F[6 + i, 15 + j] = SJ[i, j] * h2
 
 
-@njit(cache=True)
+@njit
 def bungee_accel(p, q, bungee, coeffs, a, J, w):
     """:meth:`workbench.problems.droptest.model.BungeeModel.accel`: bungee acceleration a (3,)
     [m/s², SPF] at CM position p (3,) [m, SPF] and attitude q (4,), and ∂a/∂p J (3, 3) [1/s²];
@@ -209,7 +209,7 @@ def bungee_accel(p, q, bungee, coeffs, a, J, w):
             J[i, j] = kk * (-fp * uu - f * ((1.0 if i == j else 0.0) - uu) / L)
 
 
-@njit(cache=True)
+@njit
 def bungee_step(x, xn, F, dt, bungee, coeffs, bw):
     """The bungee part of ``model.propagate`` (dynamic mode, between release and cut): adds the
     change of bungee acceleration over the step, rotated to the new body frame, to xn[6:9] and its
@@ -235,7 +235,7 @@ def bungee_step(x, xn, F, dt, bungee, coeffs, bw):
             F[6 + i, 6 + j] += (A[i, 0] * C[0, j] + A[i, 1] * C[1, j] + A[i, 2] * C[2, j]) * h2
 
 
-@njit(cache=True)
+@njit
 def _bungee_jump(xn, bungee, coeffs, g, sign, bw):
     """Release (sign +1: a_B += C_B_I (a_bungee + g)) or cut (sign −1: a_B −= C_B_I a_bungee) at xn."""
     a, J, Cn, v = bw[0, 0], bw[1], bw[4], bw[0, 1]
@@ -257,7 +257,7 @@ def _bungee_jump(xn, bungee, coeffs, g, sign, bw):
     Cn[0, 0] = 0.0
 
 
-@njit(cache=True)
+@njit
 def process_noise_into(dt, qa, qw, C, Q, B3):
     """:func:`workbench.problems.droptest.model.process_noise` into Q (n_e, n_e): white jerk PSD
     qa [m²/s⁵] and angular jerk PSD qw [rad²/s⁵] over dt [s] (zero outside the (p, v, a) and
@@ -282,7 +282,7 @@ def process_noise_into(dt, qa, qw, C, Q, B3):
                         Q[3 * r + i, 3 * c + j] = qa * b[r, c] * (C[i, j] if c == 2 else C[j, i])
 
 
-@njit(cache=True)
+@njit
 def predict_covariance(P, F, Q, T):
     """``P ← ½(A + Aᵀ)``, ``A = F P Fᵀ + Q`` in place: P, F, Q (n_e, n_e) error-state units, F the
     identity outside its first NC × NC block (as from :func:`propagate_kinematic`); T (NC, n_e) scratch."""
@@ -313,7 +313,7 @@ def predict_covariance(P, F, Q, T):
             P[i, j] += Q[i, j]
 
 
-@njit(cache=True)
+@njit
 def boxplus_into(x, dx):
     """x ⊞ dx in place for the drop-test layout (one quaternion at x[9:13], error dx[9:12])."""
     for i in range(9):
@@ -333,7 +333,7 @@ def boxplus_into(x, dx):
     x[9], x[10], x[11], x[12] = rx / n, ry / n, rz / n, rw / n
 
 
-@njit(cache=True)
+@njit
 def triad_into(x, r, j, has_bias, zp, Hc, cols, w3):
     """:func:`workbench.problems.droptest.model.triad_model` of triad j at lever arm r (3,) [m, body]:
     predicted specific force zp (3,) [m/s², body] and the non-zero columns of H, Hc[:, :nc] over the
@@ -374,7 +374,7 @@ def triad_into(x, r, j, has_bias, zp, Hc, cols, w3):
     return 9
 
 
-@njit(cache=True)
+@njit
 def gyro_into(x, zp, Hc, cols):
     """:func:`workbench.problems.droptest.model.gyro_model`: predicted rate zp (3,) [rad/s, gyro axes]
     and the non-zero columns of H, Hc (3, 15) over the error-state indices cols (15,) = ω (3),
@@ -399,7 +399,7 @@ def gyro_into(x, zp, Hc, cols):
     return 15
 
 
-@njit(cache=True)
+@njit
 def imu_steps(
     k_a, k_b, x, P, t, g, q_accel, q_angular, lever, z_meas, valid, r_diag, r_zupt, bungee, coeffs,
     x_prior, x_post, P_prior, P_post, F_hist, Q_hist, inn_zp, inn_y, inn_S, inn_nis,

@@ -30,9 +30,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from workbench.core.bodies import G0
+from workbench.core.jit import njit
 
 __all__ = ["evaluate", "evaluate_many", "rhs", "fly"]
 
@@ -40,7 +40,7 @@ V_SLIP = 0.1  # friction regularisation speed [m/s]; the same constant as truth.
 G0_MPS2 = G0  # standard gravity [m/s²]; truth.GRAVITY_SPF = (0, 0, -G0)
 
 
-@njit(cache=True)
+@njit
 def _lens(d, r1, r2):
     """Overlap area [m²] of two coplanar disks of radii r1, r2 [m] whose centres are d [m] apart."""
     if d <= abs(r1 - r2):
@@ -56,7 +56,7 @@ def _lens(d, r1, r2):
     return 0.0
 
 
-@njit(cache=True)
+@njit
 def _poly(coeffs, s):
     """Per-bungee force [N] ``Σ_k coeffs[k] · s^(k+1)`` at stretch s [m] (as ``BungeeRig.force``)."""
     f = 0.0
@@ -65,7 +65,7 @@ def _poly(coeffs, s):
     return f
 
 
-@njit(cache=True)
+@njit
 def _membrane(pg, area, rc, nx, ny, nz, v, w_I, damp, mu, F, T_I):
     """Add the membrane force of one contact (area [m²], contact point rc (3) [m] rel. CM, unit
     normal (nx, ny, nz) away from the surface) to F [N] and its torque to T_I [N m]; returns its
@@ -92,7 +92,7 @@ def _membrane(pg, area, rc, nx, ny, nz, v, w_I, damp, mu, F, T_I):
     return fn
 
 
-@njit(cache=True)
+@njit
 def evaluate(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, F, T_B, pen):
     """Forces for one state ``y`` (13,); ``cut``: the bungee is cut.
 
@@ -303,7 +303,7 @@ def evaluate(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, F, 
     return fn_total, pg, bpen
 
 
-@njit(cache=True)
+@njit
 def rhs(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, J, Jinv):
     """State derivative (13,) of ``y`` (13,) — as ``ForceModel.rhs``: [v, a, q̇, ω̇] with a = F/m + g."""
     F = np.empty(3)
@@ -334,7 +334,7 @@ def rhs(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, J, Jinv)
     return out
 
 
-@njit(cache=True)
+@njit
 def evaluate_many(Y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc):
     """:func:`evaluate` over a history: Y (n, 13) states, cut (n,) bool.
 
@@ -354,7 +354,7 @@ def evaluate_many(Y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc
     return F, T, fn, pg, pen, bpen
 
 
-@njit(cache=True)
+@njit
 def fly(p0, anchor, rest, coeffs, count, m, n, point, h_c, cut_lead_s, dt, n_max):
     """Point-mass flight of the release design (``design_release``'s reference ``fly``).
 

@@ -27,7 +27,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from workbench.core.jit import njit
 
 __all__ = ["N_SC", "N_AUX", "STATUS_PDD", "STATUS_DONE", "STATUS_GROUND", "STATUS_SEGMENT", "deriv", "run_segment"]
 
@@ -49,7 +50,7 @@ N_AUX = 17
 STATUS_PDD, STATUS_DONE, STATUS_GROUND, STATUS_SEGMENT = 0, 1, 2, 3
 
 
-@njit(cache=True)
+@njit
 def _locate(grid, x):
     """(lower node index, weight clamped to [0, 1]) of x on an increasing grid (n ≥ 2): ``bisect_right`` − 1."""
     n = grid.shape[0]
@@ -71,7 +72,7 @@ def _locate(grid, x):
     return i, w
 
 
-@njit(cache=True)
+@njit
 def _factor(fac, x0, inv, mach):
     """``1 + δ(M)`` from its uniform ln-Mach table (``truth._lookup``)."""
     u = (math.log(mach) - x0) * inv if mach > 0.0 else 0.0
@@ -84,7 +85,7 @@ def _factor(fac, x0, inv, mach):
     return fac[i] + (u - i) * (fac[i + 1] - fac[i])
 
 
-@njit(cache=True)
+@njit
 def _gravity(x, y, z, gm, j2k):
     """Point mass + J2 (``truth._Model.gravity``): (g_x, g_y, g_z) [m/s²] and |r| [m]."""
     r2 = x * x + y * y + z * z
@@ -96,7 +97,7 @@ def _gravity(x, y, z, gm, j2k):
     return a * x - k * x * (1.0 - zz), a * y - k * y * (1.0 - zz), a * z - k * z * (3.0 - zz), r
 
 
-@njit(cache=True)
+@njit
 def _atm(h, sc, atm):
     """(ρ, sound speed, mean free path, wind north, wind east) at altitude h [m] (``truth._Model.atm``)."""
     x = (h - sc[SC_H_LO]) * sc[SC_INV_DH]
@@ -117,7 +118,7 @@ def _atm(h, sc, atm):
     )
 
 
-@njit(cache=True)
+@njit
 def _coefficients(gm, gk, ga, stack, mach, kn, alpha):
     """(CA, CN, Cm) of the table (``AeroTable.coefficients_scalar``'s interpolation and order)."""
     i, wi = _locate(gm, mach)
@@ -149,7 +150,7 @@ def _coefficients(gm, gk, ga, stack, mach, kn, alpha):
     return out0, out1, out2
 
 
-@njit(cache=True)
+@njit
 def _area(t, sc):
     """Canopy drag area [m²] at time t [s] (``truth._Model.area``)."""
     tau = t - sc[SC_T_PDD]
@@ -163,7 +164,7 @@ def _area(t, sc):
     return sc[SC_A0] * u * (1.0 + b)
 
 
-@njit(cache=True)
+@njit
 def _side_weight(t, sc):
     """Side-force fraction of the canopy drag at time t (``truth._Model.side_weight``)."""
     tau = t - sc[SC_T_PDD]
@@ -175,7 +176,7 @@ def _side_weight(t, sc):
     return sc[SC_SF_COEFF] * up * dn
 
 
-@njit(cache=True)
+@njit
 def deriv(t, s, n, out, aux, sc, arrs):
     """Time derivative of the state ``s`` (first ``n`` of (19,)) at t [s] into ``out`` (19,), and the
     auxiliary outputs (17,) into ``aux`` (f_G (3) [m/s²], Mach, Kn, total AoA [rad], q [Pa], h AMR
@@ -327,7 +328,7 @@ def deriv(t, s, n, out, aux, sc, arrs):
     aux[13], aux[14], aux[15], aux[16] = T, area, ca_f, cp_f
 
 
-@njit(cache=True)
+@njit
 def _rk4(t, y, n, dt, sc, arrs, k1, k2, k3, k4, tmp, aux):
     """One RK4 step of ``dt`` [s] of the first ``n`` entries of ``y`` in place, quaternion renormalised
     (``truth._rk4``)."""
@@ -355,7 +356,7 @@ def _rk4(t, y, n, dt, sc, arrs, k1, k2, k3, k4, tmp, aux):
     y[9] *= qn
 
 
-@njit(cache=True)
+@njit
 def run_segment(k, k_end, k_last, t0, dt_out, y, n, n_sub, trig_mode, trig_value, r_ground, states, auxs, sc, arrs):
     """Output samples ``k`` .. ``k_end − 1`` of the truth loop (``truth.simulate_entry``): at each, the
     auxiliary outputs at ``t = t0 + k dt_out``, the PDD check, the sample stored in ``states[k, :n]``

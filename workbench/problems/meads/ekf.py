@@ -416,7 +416,8 @@ def _flow(x: np.ndarray, C_B_M: np.ndarray, gamma: float, compiled: bool = True)
     """(α [rad], β [rad], Mach) of one state ``x`` (N_X,) with the strapdown C_B_M (3, 3); compiled
     (:func:`.kernel.flow_kernel`) or the numpy :func:`air_data_of_state`."""
     if compiled:
-        return flow_kernel(x, C_B_M, MARS.rotation_rate, gamma)
+        # C-ordered as the forward pass's C_B_M rows (a transposed DCM would compile a second signature)
+        return flow_kernel(x, np.ascontiguousarray(C_B_M), MARS.rotation_rate, gamma)
     a, b, _, m, _, _ = air_data_of_state(x, C_B_M, gamma)
     return float(a), float(b), float(m)
 

@@ -29,8 +29,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from workbench.core.jit import njit
 from workbench.estimation.kernels import add_into, cho_solve, copy_matrix, copy_vector, symmetrise
 from workbench.problems.meads.state import ILP, ILR, IP, ITH, IV, IW, N_PORTS, N_U_COLS
 
@@ -48,7 +48,7 @@ TRANSITION_PARAMS = (
 _P0, _V0, _TH0, _W0 = IP.start, IV.start, ITH.start, IW.start
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def _air_velocity(x, C, omega, out):  # pragma: no cover - compiled
     """Body-axis air velocity (3,) [m/s] of state x (n_x,) with the strapdown C_B_M (3, 3)."""
     px, py, pz = x[_P0], x[_P0 + 1], x[_P0 + 2]
@@ -76,7 +76,7 @@ def _air_velocity(x, C, omega, out):  # pragma: no cover - compiled
     out[2] = u2 - (t0 * u1 - t1 * u0)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def _pressure_ratio(m, g):  # pragma: no cover - compiled
     """R = p∞/p_t (Eq. 2) at Mach m: Rayleigh pitot above 1, isentropic below."""
     m2 = max(m * m, 1e-12)
@@ -88,7 +88,7 @@ def _pressure_ratio(m, g):  # pragma: no cover - compiled
     return (1.0 + 0.5 * (g - 1.0) * m2) ** (-g / (g - 1.0))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def _cell(grid, v):  # pragma: no cover - compiled
     """(i, t): the lower node and the fraction of ``v`` in cell i of ``grid`` (scipy's rule)."""
     n = grid.size
@@ -109,7 +109,7 @@ def _cell(grid, v):  # pragma: no cover - compiled
     return i, (v - grid[i]) / (grid[i + 1] - grid[i])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def _table_cp(gm, ga, gc, gs, values, m, a, c, s):  # pragma: no cover - compiled
     """Cp of :meth:`SurfacePressureTable.cp` at one point (clock wrapped to 0..π, edges clamped)."""
     c = abs(math.atan2(math.sin(c), math.cos(c)))
@@ -133,7 +133,7 @@ def _table_cp(gm, ga, gc, gs, values, m, a, c, s):  # pragma: no cover - compile
     return out
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def pressure_kernel(
     x,
     C,
@@ -224,7 +224,7 @@ def pressure_kernel(
     return u0, Ju, p0, dp_dz
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def measurement_kernel(
     x,
     C,
@@ -294,7 +294,7 @@ def measurement_kernel(
     return pm, H
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def flow_kernel(x, C, omega, gamma):  # pragma: no cover - compiled
     """(α [rad], β [rad], Mach) of one EKF state ``x`` (n_x,) with the strapdown C_B_M ``C`` (3, 3),
     the planet's rotation rate ``omega`` [rad/s] and ``gamma``: ``ekf.air_data_of_state`` for one
@@ -307,7 +307,7 @@ def flow_kernel(x, C, omega, gamma):  # pragma: no cover - compiled
     return a, b, V / math.sqrt(gamma * math.exp(x[ILP]) / math.exp(x[ILR]))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def _angle_sigma(par, mach):  # pragma: no cover - compiled
     """``ekf.angle_sigma``: the flow-angle error's 1σ [rad] at ``mach``."""
     lo, hi = par[11], par[12]
@@ -315,7 +315,7 @@ def _angle_sigma(par, mach):  # pragma: no cover - compiled
     return par[10] * (1.0 + w * (par[13] - 1.0))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def transition_kernel(x, k, dt, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, cols):  # pragma: no cover
     """One step k−1 → k of the MEADS EKF (``ekf.make_transition``'s numpy path is the reference):
     ``(x1 (n_c,), F (n_c, n_c), Q (n_c, n_c))`` over the carried state x (n_c,).
@@ -330,7 +330,9 @@ def transition_kernel(x, k, dt, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, p
     km1 = k - 1
     i_b, i_bd, i_mm, i_ma = cols[0], cols[1], cols[2], cols[3]
     x1 = x.copy()
-    F = np.eye(n)
+    F = np.zeros((n, n))  # the identity (numba's np.eye compiles its k and dtype handling too)
+    for i in range(n):
+        F[i, i] = 1.0
     Q = np.zeros((n, n))
     dp = np.empty(3)
     dv = np.empty(3)
@@ -434,7 +436,7 @@ def transition_kernel(x, k, dt, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, p
     return x1, F, Q
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def _cho(S, L):  # pragma: no cover - compiled
     """Lower Cholesky factor of S (m, m) into L; False when S is not positive definite."""
     m = S.shape[0]
@@ -453,7 +455,7 @@ def _cho(S, L):  # pragma: no cover - compiled
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def _cho_solve(L, B):  # pragma: no cover - compiled
     """X with L Lᵀ X = B for B (m, r) (a new array); row operations, each element's sums in the
     order of a column-by-column substitution."""
@@ -478,7 +480,7 @@ def _cho_solve(L, B):  # pragma: no cover - compiled
     return X
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def forward_kernel(
     x0, P0, t, p_M, v_M, G, Fvt, Rb, C_B_M, gm, omega, gamma, par, tcols,
     eps_x, eps_z, table_model, port_cone, port_clock, port_s, gm_, ga, gc, gs, values, mcols,
@@ -634,7 +636,7 @@ def forward_kernel(
     return 0, n
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit
 def rts_kernel(x_prior, P_prior, x_post, P_post, G, dsq, consider, xs, Ps):  # pragma: no cover - compiled
     """The backward recursion of ``estimation.smoother.rts_smooth`` (its reference) for additive
     states whose predicted variances are all positive: gain on the Jacobi-scaled ``P_prior``

@@ -368,9 +368,10 @@ class TruthDynamics:
         sc[tf.SC_ALPHA_HYPER], sc[tf.SC_ALPHA_LOW] = self.spec.alpha_hyper_deg, self.spec.alpha_low_deg
         sc[tf.SC_T_CHUTE] = 0.0 if self.t_chute is None else self.t_chute
         sc[tf.SC_CHUTE_ON] = 0.0 if self.t_chute is None else 1.0
-        c = np.ascontiguousarray
         tabs = (self.h_tab, self.rho_tab, self.T_tab, self.wh, self.wtab[:, 0], self.wtab[:, 1], self.bank_t, self.bank)
-        return (sc, *(c(a, dtype=float) for a in tabs))
+        # writable C-ordered copies: numba types a read-only table apart from a writable one, and
+        # would compile the interpolation a second time for it
+        return (sc, *(np.array(a, dtype=float, order="C") for a in tabs))
 
 
 def true_wind(h: np.ndarray, spec: MeadsTruthSpec) -> np.ndarray:

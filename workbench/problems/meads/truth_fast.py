@@ -26,10 +26,11 @@ import math
 
 import numpy as np
 from llvmlite import ir
-from numba import njit, objmode, types
+from numba import objmode, types
 from numba.extending import intrinsic
 
 from workbench.core.interp_kernel import interp_at, interp_index
+from workbench.core.jit import njit
 
 __all__ = [
     "N_SC",
@@ -74,13 +75,13 @@ def _fma(typingctx, a, b, c):
     return sig, codegen
 
 
-@njit(cache=True)
+@njit
 def _dot(a0, a1, a2, b0, b1, b2):
     """``a @ b`` of two 3-vectors rounded as the reference's ``@`` (BLAS ddot: a chain of fma)."""
     return _fma(a2, b2, _fma(a1, b1, a0 * b0))
 
 
-@njit(cache=True)
+@njit
 def _np_tanh_pow5(x, r):
     """``(np.tanh(x), r**5)`` evaluated by numpy itself, as the reference does (numpy's SIMD tanh
     and power round differently from libm's): one call back into the interpreter."""
@@ -90,13 +91,13 @@ def _np_tanh_pow5(x, r):
     return th, r5
 
 
-@njit(cache=True)
+@njit
 def _interp(x, xp, fp):
     """``np.interp(x, xp, fp)`` for a scalar x and increasing xp (n,), fp (n,), to the bit."""
     return interp_at(interp_index(x, xp), x, xp, fp)
 
 
-@njit(cache=True)
+@njit
 def _air(p0, p1, p2, v0, v1, v2, sc, h_tab, rho_tab, T_tab, wh, wn, we, out):
     """Air-relative velocity (3) [m/s] in M into ``out[0:3]``, up (3) into ``out[3:6]``; returns
     (altitude h [m], density [kg/m³], temperature [K]) at position p, inertial velocity v."""
@@ -121,7 +122,7 @@ def _air(p0, p1, p2, v0, v1, v2, sc, h_tab, rho_tab, T_tab, wh, wn, we, out):
     return h, rho, T
 
 
-@njit(cache=True)
+@njit
 def mach(t, y, sc, h_tab, rho_tab, T_tab, wh, wn, we):
     """Mach number [-] of the truth at time t [s], state y (6,) (the parachute event's quantity)."""
     buf = np.empty(6)
@@ -130,7 +131,7 @@ def mach(t, y, sc, h_tab, rho_tab, T_tab, wh, wn, we):
     return V / math.sqrt(sc[SC_GAMMA] * sc[SC_R] * T)
 
 
-@njit(cache=True)
+@njit
 def accel(t, y, sc, h_tab, rho_tab, T_tab, wh, wn, we, bank_t, bank, out):
     """Total acceleration [m/s²] in M at time t [s], state y (6,) into ``out`` (3,) (gravity + the
     aerodynamic/parachute acceleration: ``truth.TruthDynamics.accel``'s first output)."""
@@ -179,7 +180,7 @@ def accel(t, y, sc, h_tab, rho_tab, T_tab, wh, wn, we, bank_t, bank, out):
     out[2] = -gm * p2 / (rn * r2) - kj * p2 * (3.0 - 5.0 * z2_r2) + a2
 
 
-@njit(cache=True)
+@njit
 def rhs(t, y, sc, h_tab, rho_tab, T_tab, wh, wn, we, bank_t, bank):
     """State derivative (6,) = [v_M, total acceleration] of the truth at time t [s], state y (6,)."""
     dy = np.empty(6)

@@ -36,9 +36,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from workbench.core.interp_kernel import interp_at, interp_index, interp_index_near
+from workbench.core.jit import njit
 
 __all__ = [
     "PARAM_SLOTS",
@@ -111,7 +111,7 @@ CF = {
 }
 
 
-@njit(cache=True)
+@njit
 def _params(r, X, PB, pmode, pidx, pnom, pv):
     """The parameter slots of row r into ``pv`` (nominal, raw state or precomputed S-curve value)."""
     for k in range(pnom.size):
@@ -124,7 +124,7 @@ def _params(r, X, PB, pmode, pidx, pnom, pv):
             pv[k] = PB[pidx[k], r]
 
 
-@njit(cache=True)
+@njit
 def _locate(grid, x):
     """numpy's ``_locate`` of aerodynamics.py: lower node and clamped weight (searchsorted right)."""
     n = grid.size
@@ -148,7 +148,7 @@ def _locate(grid, x):
     return i, w
 
 
-@njit(cache=True)
+@njit
 def _smoothstep(u):
     if u < 0.0:
         u = 0.0
@@ -157,7 +157,7 @@ def _smoothstep(u):
     return u * u * (3.0 - 2.0 * u)
 
 
-@njit(cache=True)
+@njit
 def _vrel(r, X, pv, ci, cf):
     """Air-relative velocity v − ω × r − wind [m/s] of row r (the model's ``v_rel``)."""
     ip, iv = ci[9], ci[10]
@@ -182,7 +182,7 @@ def _vrel(r, X, pv, ci, cf):
     return vr0, vr1, vr2
 
 
-@njit(cache=True)
+@njit
 def air_speed_kernel(X, PB, pmode, pidx, pnom, ci, cf, out):
     """|v_rel| [m/s] of each row of X (b, n_x) into ``out`` (b,) (arguments as :func:`dynamics_kernel`)."""
     pv = np.empty(pnom.size)
@@ -192,7 +192,7 @@ def air_speed_kernel(X, PB, pmode, pidx, pnom, ci, cf, out):
         out[r] = math.sqrt(vr0 * vr0 + vr1 * vr1 + vr2 * vr2)
 
 
-@njit(cache=True)
+@njit
 def axial_kernel(X, F, PB, pmode, pidx, pnom, ci, cf, mass, cos_tilt, bias, out):
     """Huygens-like 3-DOF axial accelerometer [m/s²] of each row of X (b, n_x) into ``out`` (b,):
     ``(F · v̂_rel / mass) cos_tilt + bias`` with F (b, 3) the inertial aero force [N] of
@@ -209,7 +209,7 @@ def axial_kernel(X, F, PB, pmode, pidx, pnom, ci, cf, mass, cos_tilt, bias, out)
         out[r] = (a / mass) * cos_tilt[r] + bias[r]
 
 
-@njit(cache=True)
+@njit
 def dynamics_kernel(
     X, rho, a_snd, kn, ca_extra, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv,
     g_mach, g_lkn, g_alpha, tab, chute_mach, chute_cd, want_dx, dx, F, M,
@@ -385,7 +385,7 @@ def dynamics_kernel(
 ATM_MARS, ATM_TABLE = 1, 2
 
 
-@njit(cache=True)
+@njit
 def atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, want_kn, L, rho, a_snd, kn):
     """Density [kg/m³], speed of sound [m/s] and (if ``want_kn``) Knudsen number on length L [m] at
     altitudes ``hc`` (b,) [m] into ``rho``, ``a_snd``, ``kn`` (b,), same operations as the numpy
@@ -415,7 +415,7 @@ def atmosphere_kernel(kind, ac, t_h, t_lrho, t_lp, t_T, hc, want_kn, L, rho, a_s
             kn[r] = mu / p * math.sqrt(0.5 * np.pi * ac[8] * T) / L
 
 
-@njit(cache=True)
+@njit
 def full_derivative(
     X, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab, chute_mach, chute_cd,
     kind, ac, t_h, t_lrho, t_lp, t_T, waves, want_dx, dx, F, M, hc, rho, a_snd, kn, ones,
@@ -448,7 +448,7 @@ def full_derivative(
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit
 def _rk4_step(
     y, dt, have_k1, k1, k2, k3, k4, tmp, F, M, hc, rho, a_snd, kn, ones, want_dx,
     PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
@@ -490,7 +490,7 @@ def _rk4_step(
             y[r, c] = y[r, c] + sixth * (k1[r, c] + 2.0 * k2[r, c] + 2.0 * k3[r, c] + k4[r, c])
 
 
-@njit(cache=True)
+@njit
 def propagate_kernel(
     X0, n, dt, iq, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
     chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves,
@@ -525,7 +525,7 @@ def propagate_kernel(
     return y
 
 
-@njit(cache=True)
+@njit
 def propagate_axial_kernel(
     X0, nsub, dts, PB, pmode, pidx, pnom, ci, cf, inertia, inertia_inv, g_mach, g_lkn, g_alpha, tab,
     chute_mach, chute_cd, kind, ac, t_h, t_lrho, t_lp, t_T, waves, mass, cos_tilt, bias, out,
@@ -569,7 +569,7 @@ def propagate_axial_kernel(
 # ---------------------------------------------------------------------------------------------
 # Huygens-like Monte Carlo alignment metric (huygens._metric's ``total``)
 # ---------------------------------------------------------------------------------------------
-@njit(cache=True)
+@njit
 def _pairwise_block(a, lo, n):
     """numpy's pairwise-summation leaf (n ≤ 128): 8 running sums, combined in a tree, then the rest."""
     if n < 8:
@@ -598,7 +598,7 @@ def _pairwise_block(a, lo, n):
     return res
 
 
-@njit(cache=True)
+@njit
 def _pairwise_sum(a, lo, n):
     """numpy's pairwise summation of a[lo:lo + n] (float64 add.reduce over a contiguous axis), to the
     bit: blocks of ≤ 128 split in halves (multiples of 8), left + right.  No recursion (numba's cache
@@ -634,7 +634,7 @@ def _pairwise_sum(a, lo, n):
     return vals[0]
 
 
-@njit(cache=True)
+@njit
 def metric_total_kernel(a, tu, zu, sh, t0, h, hi, out):
     """Σ_j |zu_j − a_r(tu_j + sh_r)| per member r into ``out`` (N,): ``a`` (N, n) the members' axial
     acceleration on the grid t0 + h k [s], linear interpolation at u = clip((tu + sh − t0)/h, 0, hi);
@@ -655,7 +655,7 @@ def metric_total_kernel(a, tu, zu, sh, t0, h, hi, out):
         out[r] = _pairwise_sum(row, start, m)
 
 
-@njit(cache=True)
+@njit
 def _metric_row_pruned(a, r, tu, zu, sh, t0, h, hi, order, row, bound):
     """Row r's terms |zu_j − a_r(tu_j + sh)| into ``row`` (m,) and their pairwise sum (as
     :func:`metric_total_kernel`), or +inf as soon as a running sum of the terms taken in ``order``
@@ -680,7 +680,7 @@ def _metric_row_pruned(a, r, tu, zu, sh, t0, h, hi, order, row, bound):
     return _pairwise_sum(row, m - m, m)
 
 
-@njit(cache=True)
+@njit
 def metric_search_kernel(a, tu, zu, base, offs_coarse, offs_fine, t0, h, hi, order, prune, metric, shift):
     """The alignment search of ``huygens._metric`` per member r: ``shift[r]`` = base_r moved by the
     offset of ``offs_coarse`` with the smallest total Σ_j |zu_j − a_r(tu_j + s)| (the first of equal

@@ -807,10 +807,11 @@ class TrajectoryModel:
         _, F, _ = self._kernel_eval(X, phase, want_dx=False, PB=PB)
         ci, cf, _, _ = self._phase_consts(plan, phase)
         if phase["parachute"] and phase.get("chute") == "drogue":
-            cos_tilt = np.ascontiguousarray(np.cos(self.param(X, "tilt", 0.0)[..., 0]), dtype=float)
+            cos_tilt = np.array(np.cos(self.param(X, "tilt", 0.0)[..., 0]), dtype=float, order="C")
         else:
             cos_tilt = np.ones(X.shape[0])  # a · 1.0 is a: the reference's branch without the tilt
-        bias = np.ascontiguousarray(self.param(X, "accel_bias", np.zeros(3))[..., 0], dtype=float)
+        # a writable copy (the nominal bias is a read-only broadcast): one compiled signature
+        bias = np.array(self.param(X, "accel_bias", np.zeros(3))[..., 0], dtype=float, order="C")
         out = np.empty(X.shape[0])
         kernels.axial_kernel(
             X, F, PB, plan["pmode"], plan["pidx"], plan["pnom"], ci, cf, float(phase["mass"]),
@@ -1094,10 +1095,11 @@ class TrajectoryModel:
         ci, cf, tm, tc = self._phase_consts(plan, phase)
         gm_, gk, ga, tab = plan["grids"]
         if phase["parachute"] and phase.get("chute") == "drogue":  # as _axial_kernel (parameters constant)
-            cos_tilt = np.ascontiguousarray(np.cos(self.param(X, "tilt", 0.0)[..., 0]), dtype=float)
+            cos_tilt = np.array(np.cos(self.param(X, "tilt", 0.0)[..., 0]), dtype=float, order="C")
         else:
             cos_tilt = np.ones(X.shape[0])
-        bias = np.ascontiguousarray(self.param(X, "accel_bias", np.zeros(3))[..., 0], dtype=float)
+        # a writable copy (the nominal bias is a read-only broadcast): one compiled signature
+        bias = np.array(self.param(X, "accel_bias", np.zeros(3))[..., 0], dtype=float, order="C")
         out = np.empty((X.shape[0], len(tl)))
         kernels.propagate_axial_kernel(
             X, nsub, dts, self._bounded(plan, X), plan["pmode"], plan["pidx"], plan["pnom"], ci, cf,
