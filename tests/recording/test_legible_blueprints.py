@@ -307,6 +307,7 @@ def _impact_result(ns, rl, n: int = 20):
     closest = np.tile([0.1, -0.2, 0.236], (n, 1))
     st = ns(
         contact=(5, 12),
+        restitution_index=(4, 14),
         max=ns(distance=0.236, sigma=0.049, index=9),
         smoothed=ns(closest_point_I=closest, surface_point_I=closest * [1.0, 1.0, 0.0]),
         surface=ns(normal=np.array([0.0, 0.0, 1.0])),
