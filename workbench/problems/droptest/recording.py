@@ -27,6 +27,7 @@ from workbench.estimation.consistency import chi2_ppf
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.lander import airbag_mesh
 from workbench.problems.droptest.pipeline import DropResult, DropTelemetry, FilterStage, InitialState, StrokeStage
+from workbench.problems.droptest.stroke import contact_end
 from workbench.problems.droptest.surface import ramp_mesh, rock_meshes
 from workbench.recording import layout
 from workbench.recording.blueprint import events_view, legible_range, plot_view, report_view, tab, y_range_if_needed
@@ -377,7 +378,7 @@ def impact_view(result) -> dict:
         "up": dim["up"],
         "span": (float(smo.t[0]), float(smo.t[-1])),
         "t0": float(smo.t[i0]) - 0.15,
-        "t1": float(smo.t[max(i1, st.restitution_index[1])]) + 0.25,  # past the restitution's leaving instant
+        "t1": contact_end(smo.t, (i0, i1), st.restitution_index[1]) + 0.25,  # past the restitution's leaving
         "stroke_lo": lo,
         "stroke_hi": hi,
     }
