@@ -2,8 +2,8 @@
 
 The same force model as :meth:`workbench.problems.droptest.truth.ForceModel.evaluate` (the pure-numpy
 reference path, kept selectable with ``simulate_drop(..., fast=False)``), written as scalar loops
-so that numba compiles it: airbag lobes flattened on the ramp (shared gas volume, lens overlap of
-neighbouring footprints), membrane pressure + damping + regularised Coulomb friction, lobe-on-rock
+so that numba compiles it: airbag lobes flattened on the ramp (shared gas volume, each footprint's
+share of the footprints' union), membrane pressure + damping + regularised Coulomb friction, lobe-on-rock
 and body-on-rock contacts, the stiff body penalty on the ramp and the bungee while it is uncut.
 Also the state derivative for ``solve_ivp`` (:func:`rhs`), the force model over a whole sampled
 history (:func:`evaluate_many`) and the point-mass flight of the release design (:func:`fly`).
@@ -34,26 +34,115 @@ import numpy as np
 from workbench.core.bodies import G0
 from workbench.core.jit import njit
 
-__all__ = ["evaluate", "evaluate_many", "rhs", "fly"]
+__all__ = ["evaluate", "evaluate_many", "rhs", "fly", "footprint_areas"]
 
 V_SLIP = 0.1  # friction regularisation speed [m/s]; the same constant as truth.V_SLIP
 G0_MPS2 = G0  # standard gravity [m/s²]; truth.GRAVITY_SPF = (0, 0, -G0)
 
 
+FOOT_RAYS = 32  # rays of the angular quadrature of a footprint's share (:func:`footprint_areas`)
+
+
 @njit
-def _lens(d, r1, r2):
-    """Overlap area [m²] of two coplanar disks of radii r1, r2 [m] whose centres are d [m] apart."""
-    if d <= abs(r1 - r2):
-        rm = min(r1, r2)
-        return math.pi * rm * rm
-    if d < r1 + r2 and d > 0.0:
-        c1 = (d * d + r1 * r1 - r2 * r2) / (2.0 * d * max(r1, 1e-12))
-        c2 = (d * d + r2 * r2 - r1 * r1) / (2.0 * d * max(r2, 1e-12))
-        c1 = min(max(c1, -1.0), 1.0)
-        c2 = min(max(c2, -1.0), 1.0)
-        k = (-d + r1 + r2) * (d + r1 - r2) * (d - r1 + r2) * (d + r1 + r2)
-        return r1 * r1 * math.acos(c1) + r2 * r2 * math.acos(c2) - 0.5 * math.sqrt(max(k, 0.0))
-    return 0.0
+def _tangents(n):
+    """Unit vectors t1, t2 (3,) spanning the plane normal to the unit vector n (3,): t1 = n × e
+    normalised, e the x axis (the y axis when n is within ~26° of x), t2 = n × t1."""
+    if abs(n[0]) < 0.9:
+        e0, e1, e2 = 1.0, 0.0, 0.0
+    else:
+        e0, e1, e2 = 0.0, 1.0, 0.0
+    t1 = np.empty(3)
+    t1[0] = n[1] * e2 - n[2] * e1
+    t1[1] = n[2] * e0 - n[0] * e2
+    t1[2] = n[0] * e1 - n[1] * e0
+    s = math.sqrt(t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2])
+    t1 /= s
+    t2 = np.empty(3)
+    t2[0] = n[1] * t1[2] - n[2] * t1[1]
+    t2[1] = n[2] * t1[0] - n[0] * t1[2]
+    t2[2] = n[0] * t1[1] - n[1] * t1[0]
+    return t1, t2
+
+
+@njit
+def _insert(ev_r, ev_d, ne, r, d):
+    """Insert the crossing (radius r [m], change d of the cover count) into the first ne entries
+    of ev_r/ev_d, kept sorted by radius; returns the new count."""
+    q = ne
+    while q > 0 and ev_r[q - 1] > r:
+        ev_r[q] = ev_r[q - 1]
+        ev_d[q] = ev_d[q - 1]
+        q -= 1
+    ev_r[q] = r
+    ev_d[q] = d
+    return ne + 1
+
+
+@njit
+def footprint_areas(rc, a, n, out):
+    """Contact area [m²] of each flattened lobe: its share of the footprints' union.
+
+    rc (k, 3) footprint centres [m] (in one plane of unit normal n (3,)), a (k,) footprint radii
+    [m]; fills out (k,). Every point of the union is shared equally by the footprints that cover
+    it, so lobe i gets ∫_disk_i 1/m(x) dA with m the number of disks covering x: the areas sum to
+    the union's, never below zero, and for two disks this is the disk minus half the lens (the
+    half-lens rule, which over-subtracts where three or more overlap). Along each of
+    :data:`FOOT_RAYS` rays from the disk's centre m is piecewise constant between the crossings
+    of the other circles, so the radial integral is exact and only the angle is sampled (midpoint
+    rule, periodic); the area is continuous in the footprints' motion.
+    """
+    k = a.shape[0]
+    t1, t2 = _tangents(n)
+    ev_r = np.empty(2 * k)
+    ev_d = np.empty(2 * k)
+    near = np.empty(k, np.int64)
+    for i in range(k):
+        ai = a[i]
+        nn = 0
+        for j in range(k):
+            if j != i and a[j] > 0.0:
+                dx = rc[i, 0] - rc[j, 0]
+                dy = rc[i, 1] - rc[j, 1]
+                dz = rc[i, 2] - rc[j, 2]
+                if math.sqrt(dx * dx + dy * dy + dz * dz) < ai + a[j]:
+                    near[nn] = j
+                    nn += 1
+        if nn == 0 or ai <= 0.0:
+            out[i] = math.pi * ai * ai
+            continue
+        tot = 0.0
+        for ray in range(FOOT_RAYS):
+            th = (ray + 0.5) * 2.0 * math.pi / FOOT_RAYS
+            c = math.cos(th)
+            s = math.sin(th)
+            u0 = c * t1[0] + s * t2[0]
+            u1 = c * t1[1] + s * t2[1]
+            u2 = c * t1[2] + s * t2[2]
+            ne = 0
+            for jj in range(nn):
+                j = near[jj]
+                e0 = rc[i, 0] - rc[j, 0]
+                e1 = rc[i, 1] - rc[j, 1]
+                e2 = rc[i, 2] - rc[j, 2]
+                b = u0 * e0 + u1 * e1 + u2 * e2
+                disc = b * b - (e0 * e0 + e1 * e1 + e2 * e2) + a[j] * a[j]
+                if disc > 0.0:
+                    sq = math.sqrt(disc)
+                    r0 = max(-b - sq, 0.0)
+                    r1 = min(-b + sq, ai)
+                    if r1 > r0:
+                        ne = _insert(ev_r, ev_d, ne, r0, 1.0)
+                        ne = _insert(ev_r, ev_d, ne, r1, -1.0)
+            m = 1.0
+            r = 0.0
+            f = 0.0
+            for q in range(ne):
+                f += 0.5 * (ev_r[q] * ev_r[q] - r * r) / m
+                r = ev_r[q]
+                m += ev_d[q]
+            f += 0.5 * (ai * ai - r * r) / m
+            tot += f
+        out[i] = tot * 2.0 * math.pi / FOOT_RAYS
 
 
 @njit
@@ -170,16 +259,10 @@ def evaluate(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, F, 
                 rc[k, j] = r_I[i, j] - dc[i] * n[j]
             a2[k] = 2.0 * R * pe - pe * pe
             a[k] = math.sqrt(a2[k])
+        area = np.empty(nhit)
+        footprint_areas(rc, a, n, area)
         for k in range(nhit):
-            ov = 0.0
-            for m in range(nhit):
-                if m != k:
-                    dx = rc[k, 0] - rc[m, 0]
-                    dy = rc[k, 1] - rc[m, 1]
-                    dz = rc[k, 2] - rc[m, 2]
-                    ov += _lens(math.sqrt(dx * dx + dy * dy + dz * dz), a[k], a[m])
-            area = max(math.pi * a2[k] - 0.5 * ov, 0.0)
-            fn_total += _membrane(pg, area, rc[k], n[0], n[1], n[2], v, w_I, damp, mu, F, T_I)
+            fn_total += _membrane(pg, area[k], rc[k], n[0], n[1], n[2], v, w_I, damp, mu, F, T_I)
 
     # body vertices (rotated once, used for rocks and ramp)
     nv = verts_B.shape[0]
