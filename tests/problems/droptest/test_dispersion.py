@@ -64,7 +64,7 @@ def test_disperse_drop_draws_different_drops_inside_the_envelope():
 
 def test_an_off_spec_scenario_pressure_is_kept():
     base = _base("droptest_fullstroke")
-    assert disperse_drop(base, drop_rng(1), 60.0).pressure_pa == base.pressure_pa == pytest.approx(0.55 * PSI)
+    assert disperse_drop(base, drop_rng(1), 60.0).pressure_pa == base.pressure_pa == pytest.approx(0.05 * PSI)
 
 
 def test_contact_timing_follows_the_rigs_ramp_angle():
