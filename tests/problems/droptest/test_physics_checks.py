@@ -219,28 +219,37 @@ def test_max_stroke_clearance_allows_the_structures_give_under_the_peak_load(dro
     assert "contact_stiffness_n_per_m" in clear["message"]
 
 
-def test_full_stroke_ok_on_clean_run_and_a_taller_lander_is_a_warning_naming_height(
+def test_full_stroke_ok_on_clean_run_and_a_lander_in_feet_is_an_error_naming_the_geometry(
     droptest_run, droptest_result, tmp_path
 ):
-    """The declared apex 20 % higher moves the max stroke (the apex is the closest point) to ~0 while
-    the IMU shows only the bags' jerk: a full stroke the data contradict, WARNING naming height_m."""
+    """The body's dimensions declared in feet (height, base side and CM height × 3.281) move the
+    closest declared vertex (vertex 2, a base corner) 1.3 m into the ramp while the IMU shows only
+    the bags' jerk: a full stroke (by more than 3σ) the data contradict, ERROR naming the lander
+    file's geometry."""
     full = _checks(droptest_result.summary["health"], "geometry.")["geometry.full_stroke"]
     assert full["status"] == OK and "no full stroke" in full["message"], full["message"]
     src = droptest_run.settings.lander_file
     text = Path(src).read_text(encoding="utf-8")
-    taller = tmp_path / "lander.toml"
-    taller.write_text(re.sub(r"^height_m = 1\.2 ", "height_m = 1.44 ", text, flags=re.M), encoding="utf-8")
-    settings = replace(droptest_run.settings, lander=load_lander(taller), lander_file=taller)
+    feet = tmp_path / "lander.toml"
+    for key, metres in (("height_m", "1.2"), ("base_side_m", "1.6"), ("cm_height_m", "0.40")):
+        text = re.sub(rf"^{key} = {re.escape(metres)} ", f"{key} = {float(metres) * 3.281:.3f} ", text, flags=re.M)
+    feet.write_text(text, encoding="utf-8")
+    settings = replace(droptest_run.settings, lander=load_lander(feet), lander_file=feet)
     res = dt.run_droptest(settings, droptest_run.telemetry_paths())
-    assert res.summary["max_stroke"]["distance_m"] < droptest_result.summary["max_stroke"]["distance_m"] - 0.15
+    assert res.summary["max_stroke"]["distance_m"] < 0.0
     full = _checks(res.summary["health"], "geometry.")["geometry.full_stroke"]
-    assert full["status"] == WARNING and "height_m" in full["message"], full["message"]
-    # the clean run's note says the stroke rests on the declared apex, and by how much it moves with it
+    assert full["status"] == ERROR and "height_m" in full["message"] and "FULL STROKE" in full["message"], full[
+        "message"
+    ]
+    # the clean run's note says the stroke rests on a declared vertex no sensor sees, and its gradient
+    # predicts the stroke of that pose with the vertex moved (the same vertex stays the closest)
     note = next(n for n in droptest_result.summary["health"]["notes"] if n.startswith("max stroke"))
-    assert "vertex 3, the apex" in note and "no sensor sees" in note and "height_m" in note, note
-    per_m = float(re.search(r"by ([+-][0-9.]+) m per metre that vertex moves along body \+z", note).group(1))
+    assert "vertex 2, a base vertex" in note and "no sensor sees" in note and "height_m" in note, note
+    grad = np.array([float(g) for g in re.search(r"∇ = \[([^\]]+)\]", note).group(1).split(",")])
+    v_old = np.asarray(droptest_run.settings.lander.body.vertices[2], float)
+    v_new = np.asarray(settings.lander.body.vertices[2], float)
     moved = res.summary["max_stroke"]["distance_m"] - droptest_result.summary["max_stroke"]["distance_m"]
-    assert abs(moved - per_m * 0.24) < 0.01, (moved, per_m)
+    assert abs(moved - grad @ (v_new - v_old)) < 0.02 * abs(moved), (moved, grad @ (v_new - v_old))
 
 
 def test_max_stroke_note_gradient_moves_the_stroke_of_a_moved_vertex():

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from workbench.io.assets import assets_dir
 from workbench.io.scenario import resolve_scenario
-from workbench.problems.droptest.problem import DropTestProblem
 from workbench.problems.droptest import truth, truth_fast
+from workbench.problems.droptest.problem import DropTestProblem
 from workbench.problems.droptest.synthetic import truth_for
 
 N_RAMP = np.array([0.0, -np.sin(np.radians(60.0)), np.cos(np.radians(60.0))])  # the SPF ramp's normal
@@ -28,7 +27,7 @@ def _lens(d: float, r1: float, r2: float) -> float:
 
 def _in_plane(xy: np.ndarray) -> np.ndarray:
     """Points (k, 3) [m] of the ramp plane through 0.3 n from plane coordinates xy (k, 2) [m]."""
-    t1, t2 = truth_fast._tangents(N_RAMP)
+    t1, t2 = truth_fast.tangents(N_RAMP)
     return xy[:, :1] * t1 + xy[:, 1:] * t2 + 0.3 * N_RAMP
 
 
@@ -69,8 +68,7 @@ def test_footprint_areas_match_reference():
         a = rng.uniform(0.05, 1.0, k)
         out = np.empty(k)
         truth_fast.footprint_areas(_in_plane(xy), a, N_RAMP, out)
-        np.testing.assert_allclose(out, truth._footprint_areas(_in_plane(xy), a, N_RAMP), rtol=0, atol=1e-12)
-
+        np.testing.assert_allclose(out, truth.footprint_areas(_in_plane(xy), a, N_RAMP), rtol=0, atol=1e-12)
 
 
 def test_pressed_bags_always_push():

@@ -219,15 +219,15 @@ MISTAKES = {
         "telemetry/imu.csv",
         lambda t: re.sub(r"^(time.*)$", lambda m: m.group(1).replace("[rad/s]", "[deg/s]"), t, count=1, flags=re.M),
         3,
-        "the hanging gyro scatters 0.0177× its declared noise (sensors.gyro.noise_dps = 0.4): the values look like "
+        "the hanging gyro scatters 0.0174× its declared noise (sensors.gyro.noise_dps = 0.4): the values look like "
         "[rad/s], not [deg/s]",
     ),
     "swapped axis": (
         "telemetry/imu.csv",
         lambda t: t.replace("A2.y [m/s^2],A2.z [m/s^2]", "A2.z [m/s^2],A2.y [m/s^2]", 1),
         6,
-        "units.hanging.A2: triad A2 while hanging: specific force (+8.48, +0.02, -4.86) m/s², 0.997 g, 41.08° from "
-        "the other 3 triads (+8.51, -4.88, -0.04) = 69.4σ: y and z swapped",
+        "units.hanging.A2: triad A2 while hanging: specific force (+8.47, +0.01, -4.83) m/s², 0.994 g, 41.31° from "
+        "the other 3 triads (+8.46, -4.96, -0.05) = 69.8σ: y and z swapped",
     ),
     "nail": (
         "scenario.toml",
@@ -235,10 +235,10 @@ MISTAKES = {
             "ramp_point_m = [", "# ramp_point_m = [", 1
         ),
         6,
-        "geometry.first_contact: airbag lobes +0.463 ± 0.071 m (1σ) from the ramp at the measured first touch "
-        "(t = 1.3632 s, the last mean triad |f| ≤ 0.25 g before the 2 g onset at 1.3677 s); the bag pressures not "
+        "geometry.first_contact: airbag lobes +0.414 ± 0.073 m (1σ) from the ramp at the measured first touch "
+        "(t = 1.3627 s, the last mean triad |f| ≤ 0.25 g before the 2 g onset at 1.3672 s); the bag pressures not "
         "declared, up to a lobe radius (1.000 m) pressed in, ± 0.006 m in one IMU sample; the estimated lobes touch "
-        "the ramp at 1.4034 s: the declared geometry puts the bags clear of the ramp when the IMU feels the impact",
+        "the ramp at 1.3994 s: the declared geometry puts the bags clear of the ramp when the IMU feels the impact",
     ),
 }
 

@@ -259,7 +259,7 @@ class ForceModel:
             pe = pen_all[hit]
             rc = r_I[hit] - dc[hit, None] * n  # footprint centres rel. CM
             a2 = 2.0 * self.R * pe - pe * pe  # footprint radius² of each flattened lobe
-            area = _footprint_areas(rc, np.sqrt(a2), n)
+            area = footprint_areas(rc, np.sqrt(a2), n)
             f_l, fn_total = self._membrane(pg, area, rc, np.broadcast_to(n, rc.shape), v, w_I)
             F += f_l.sum(0)
             T_I += np.cross(rc, f_l).sum(0)
@@ -352,7 +352,7 @@ class ForceModel:
         return np.concatenate([v, a, qd, wd])
 
 
-def _footprint_areas(c: np.ndarray, a: np.ndarray, n: np.ndarray) -> np.ndarray:
+def footprint_areas(c: np.ndarray, a: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Contact area [m²] (k,) of each flattened lobe, footprint centres c (k,3) [m] in the plane of
     unit normal n (3,), radii a (k,) [m]: its share of the footprints' union.
 
@@ -366,7 +366,7 @@ def _footprint_areas(c: np.ndarray, a: np.ndarray, n: np.ndarray) -> np.ndarray:
     out = np.pi * a * a
     if k < 2:
         return out
-    t1, t2 = truth_fast._tangents(np.ascontiguousarray(n, float))
+    t1, t2 = truth_fast.tangents(np.ascontiguousarray(n, float))
     th = (np.arange(truth_fast.FOOT_RAYS) + 0.5) * 2.0 * np.pi / truth_fast.FOOT_RAYS
     U = np.cos(th)[:, None] * t1 + np.sin(th)[:, None] * t2  # (rays, 3)
     e = c[:, None, :] - c[None, :, :]  # (i, j, 3)

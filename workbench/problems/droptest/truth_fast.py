@@ -34,7 +34,7 @@ import numpy as np
 from workbench.core.bodies import G0
 from workbench.core.jit import njit
 
-__all__ = ["evaluate", "evaluate_many", "rhs", "fly", "footprint_areas"]
+__all__ = ["evaluate", "evaluate_many", "rhs", "fly", "footprint_areas", "tangents"]
 
 V_SLIP = 0.1  # friction regularisation speed [m/s]; the same constant as truth.V_SLIP
 G0_MPS2 = G0  # standard gravity [m/s²]; truth.GRAVITY_SPF = (0, 0, -G0)
@@ -44,7 +44,7 @@ FOOT_RAYS = 32  # rays of the angular quadrature of a footprint's share (:func:`
 
 
 @njit
-def _tangents(n):
+def tangents(n):
     """Unit vectors t1, t2 (3,) spanning the plane normal to the unit vector n (3,): t1 = n × e
     normalised, e the x axis (the y axis when n is within ~26° of x), t2 = n × t1."""
     if abs(n[0]) < 0.9:
@@ -92,7 +92,7 @@ def footprint_areas(rc, a, n, out):
     rule, periodic); the area is continuous in the footprints' motion.
     """
     k = a.shape[0]
-    t1, t2 = _tangents(n)
+    t1, t2 = tangents(n)
     ev_r = np.empty(2 * k)
     ev_d = np.empty(2 * k)
     near = np.empty(k, np.int64)
