@@ -442,3 +442,29 @@ def test_non_finite_filter_state_is_a_numerical_failure_naming_the_stage(droptes
     with pytest.raises(np.linalg.LinAlgError, match=r"forward EKF pass: state or covariance not finite from step 1500"):
         dt.finite_or_fail(bad, "forward EKF pass", droptest_run.settings)
     dt.finite_or_fail(fwd, "forward EKF pass", droptest_run.settings)  # finite: nothing raised
+
+
+def test_restitution_energy_bound():
+    """e may exceed 1 only by the energy of rotation (and motion along the surface) the lander brings:
+    10 m/s straight in, not spinning, leaving at the same height -> 1; spinning at ω -> √(1 + ωᵀJω/(m v²));
+    4 m/s along the surface too -> √(1 + 16/100); rising 0.2 m costs 2 g · 0.2 m of v²."""
+    from workbench.problems.droptest.health import restitution_energy_bound
+
+    lander = load_lander(assets_dir() / "landers" / "mer_drop_lander.toml")
+    n = np.array([0.0, 0.0, 1.0])
+
+    def bound(v0, w0, dz=0.0):
+        x = np.zeros((2, rl.N_X))
+        x[0, rl.SV], x[0, rl.SW] = v0, w0
+        x[1, rl.SP] = [0.0, 0.0, dz]
+        smo = SimpleNamespace(x=x)
+        st = SimpleNamespace(restitution_index=(0, 1), surface=SimpleNamespace(normal=n))
+        return restitution_energy_bound(smo, st, SimpleNamespace(lander=lander))
+
+    assert bound([0.0, 0.0, -10.0], [0.0, 0.0, 0.0]) == pytest.approx(1.0)
+    w = np.array([1.0, -2.0, 0.5])
+    spin = w @ lander.inertia_B @ w / lander.mass
+    assert bound([0.0, 0.0, -10.0], w) == pytest.approx(np.sqrt(1.0 + spin / 100.0))
+    assert bound([4.0, 0.0, -10.0], [0.0, 0.0, 0.0]) == pytest.approx(np.sqrt(1.16))
+    assert bound([0.0, 0.0, -10.0], [0.0, 0.0, 0.0], dz=0.2) == pytest.approx(np.sqrt(1.0 - 2 * 9.80665 * 0.2 / 100))
+    assert bound([0.0, 0.0, 10.0], [0.0, 0.0, 0.0]) is None  # not approaching: no bound

@@ -4,7 +4,8 @@ Checks: mean NIS per sensor (every triad, gyro, ZUPT, ranging channels) against 
 smoothed covariance symmetric and positive definite; the max-stroke clearance within the airbag
 geometry (−3σ − the structure's give under the estimated peak load … bag thickness = lobe diameter +
 standoff) and its 1σ below the bag thickness; the
-coefficient of restitution in [0, 1]; no IMU gap across the contact (the window the estimate
+coefficient of restitution between 0 and its energy bound (:func:`restitution_energy_bound`); no IMU
+gap across the contact (the window the estimate
 detects and the one where the measured specific force exceeds 2 g after release or bungee cut);
 and every warning the telemetry readers reported.  With the run's settings also the physics
 cross-checks of :mod:`.physics` and a note on the declared body vertex the max stroke rests on.
@@ -28,6 +29,7 @@ from workbench.estimation.health import (
     nis_check,
     notes_check,
 )
+from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.model import error_state_key
 from workbench.problems.droptest.physics import (
     contact_geometry_check,
@@ -181,7 +183,17 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
     if not complete:
         pass
     elif np.isfinite(e):
-        checks.append(interval_check("restitution", float(e), 0.0, 1.0, "coefficient of restitution"))
+        e_max = restitution_energy_bound(smo, st, settings)
+        hi = 1.0 if e_max is None else e_max + 3.0 * float(se)
+        rest = interval_check("restitution", float(e), 0.0, hi, "coefficient of restitution")
+        if e_max is not None:
+            rest = replace(
+                rest,
+                message=f"{rest.message}; the upper bound is the energy's: the whole kinetic energy (rotation "
+                f"included) at the approach turned into speed away from the surface, less gravity's work, "
+                f"e ≤ {e_max:.3f}, + 3σ",
+            )
+        checks.append(rest)
         checks.append(interval_check("restitution.sigma", float(se), 0.0, 0.5, "restitution 1σ"))
     else:
         checks.append(Check("restitution", WARNING, None, [0.0, 1.0], "coefficient of restitution not determined"))
@@ -193,3 +205,26 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
         windows["detected airbag contact"] = (float(smo.t[i0]) - 0.01, t_end + 0.01)
     checks += input_checks(tel, windows)
     return health_report(checks, notes)
+
+
+def restitution_energy_bound(smo, st, settings) -> float | None:
+    """Largest coefficient of restitution the energy allows [1]: e = −v_n,out / v_n,in of the CM can exceed 1
+    when a spinning or sliding lander turns rotation or motion along the surface into speed away from it,
+    but never beyond the whole kinetic energy at the approach, less gravity's work up to the leaving
+    instant: v_n,out² ≤ |v_in|² + ω_inᵀ J ω_in / m − 2 g (z_out − z_in).
+
+    ``smo``: the smoothed ``FilterStage`` (SPF, z up, body rates in B); ``st``: the ``StrokeStage`` (its
+    ``restitution_index`` and surface normal); ``settings``: ``DropSettings`` (mass [kg], inertia about the CM
+    [kg m², B]). None without settings or the two instants."""
+    ib, ia = st.restitution_index
+    if settings is None or ib < 0 or ia < 0:
+        return None
+    lander = settings.lander
+    x0, x1 = smo.x[ib], smo.x[ia]
+    v0, w0 = x0[rl.SV], x0[rl.SW]
+    vn0 = float(v0 @ np.asarray(st.surface.normal, float))
+    if not vn0 < 0.0:
+        return None
+    J = np.asarray(lander.inertia_B, float)
+    v1_sq = float(v0 @ v0 + w0 @ J @ w0 / lander.mass - 2.0 * G0 * (x1[rl.SP][2] - x0[rl.SP][2]))
+    return float(np.sqrt(max(v1_sq, 0.0)) / -vn0)

@@ -670,9 +670,10 @@ def full_stroke_check(tel, st, settings, smo=None) -> Check | None:
     lander more than 3σ clear, or the geometry puts the lander through the surface without one by
     more than 3σ and the depth the structure gives under the estimated peak load
     (:func:`structural_give` from the smoothed ``smo``, none without it: a vertex that grazes the
-    ramp loads it too gently for a rigid jerk, but cannot reach deeper); WARNING when the geometry
-    makes a full stroke likely (stroke within 1σ of the surface, or through it within that margin)
-    and the IMU shows none.  The stroke rests on the declared geometry (``height_m``,
+    ramp loads it too gently for a rigid jerk, but cannot reach deeper); WARNING when it puts the
+    lander through the surface by more than 2σ and that depth and the IMU shows no rigid impact (an
+    honest near miss, the truth's stroke ≥ 0, gets there with a probability ≤ 2.3 %).  The stroke
+    rests on the declared geometry (``height_m``,
     ``cm_height_m``, ...) that no sensor sees; this is the one place the data can contradict it.
     None without a measured impact or a max stroke."""
     ms = getattr(st, "max", None)
@@ -712,14 +713,15 @@ def full_stroke_check(tel, st, settings, smo=None) -> Check | None:
             f"{depth:.4f} m the structure gives under the measured peak load, but {imu_says} shows no rigid "
             f"impact: the declared geometry places the body too far out of its bags; likely: {keys}",
         )
-    if not rigid and d <= s:
+    if not rigid and d + 2.0 * s < -depth:
         return Check(
             "geometry.full_stroke",
             WARNING,
             _g(jerk),
             _g(thr),
-            f"{geo_says} makes a full stroke likely, but {imu_says} shows no rigid impact: either the bags "
-            f"bottomed out without the frame touching or the stroke is off by as much; check {keys}",
+            f"{geo_says} puts the rigid lander through the surface by more than 2σ and the {depth:.4f} m the "
+            f"structure gives, but {imu_says} shows no rigid impact: either the frame met the surface too gently "
+            f"for a rigid jerk or the stroke is off by as much; check {keys}",
         )
     if rigid:
         verdict = f"full stroke corroborated: {imu_says}; {geo_says}"
