@@ -420,7 +420,7 @@ def _droptest(problem: str, base: str, rng: np.random.Generator, ranging: bool) 
             "G1",
         )
     # truncation at key events
-    for t_end, why in ((1.45, "mid-contact"), (1.30, "before contact"), (1.60, "before max stroke")):
+    for t_end, why in ((1.45, "mid-contact"), (1.30, "before contact"), (1.52, "after max stroke, bags pressed")):
         m("truncation", f"IMU ends at {t_end} s ({why})", csv_edit(imu, end_at(t_end)), imu)
     m("truncation", "IMU rows 1.40-1.46 s removed (gap in contact)", csv_edit(imu, drop_between(1.40, 1.46)), imu)
     m("truncation", "3dm ends after 0.1 s of hanging", csv_edit(tdm, end_at(-0.4)), tdm)
