@@ -9,7 +9,7 @@ One home for the checks every problem composes (``problems/<p>/health.py`` or it
 * :func:`covariance_check` — covariance history symmetric and positive definite (the per-step
   numbers from :func:`covariance_stats`);
 * :func:`interval_check` — a physical quantity inside its plausible interval (stroke within the
-  bag geometry, restitution in [0, 1], altitude and speed inside the scenario's envelope, ...);
+  bag geometry, restitution up to its energy bound, altitude and speed inside the scenario's envelope, ...);
 * :func:`gap_check` — data gaps across the events that matter (contact, parachute deployment);
 * :func:`notes_check` — warnings the input readers reported.
 

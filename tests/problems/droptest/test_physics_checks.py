@@ -232,7 +232,8 @@ def test_full_stroke_ok_on_clean_run_and_a_lander_in_feet_is_an_error_naming_the
     text = Path(src).read_text(encoding="utf-8")
     feet = tmp_path / "lander.toml"
     for key, metres in (("height_m", "1.2"), ("base_side_m", "1.6"), ("cm_height_m", "0.40")):
-        text = re.sub(rf"^{key} = {re.escape(metres)} ", f"{key} = {float(metres) * 3.281:.3f} ", text, flags=re.M)
+        text, n = re.subn(rf"^{key} = {re.escape(metres)} ", f"{key} = {float(metres) * 3.281:.3f} ", text, flags=re.M)
+        assert n == 1, key
     feet.write_text(text, encoding="utf-8")
     settings = replace(droptest_run.settings, lander=load_lander(feet), lander_file=feet)
     res = dt.run_droptest(settings, droptest_run.telemetry_paths())
@@ -477,3 +478,15 @@ def test_restitution_energy_bound():
     assert bound([4.0, 0.0, -10.0], [0.0, 0.0, 0.0]) == pytest.approx(np.sqrt(1.16))
     assert bound([0.0, 0.0, -10.0], [0.0, 0.0, 0.0], dz=0.2) == pytest.approx(np.sqrt(1.0 - 2 * 9.80665 * 0.2 / 100))
     assert bound([0.0, 0.0, 10.0], [0.0, 0.0, 0.0]) is None  # not approaching: no bound
+
+
+@pytest.mark.parametrize(("d", "status"), [(-0.08, OK), (-0.12, WARNING), (-0.20, ERROR), (0.03, OK)])
+def test_full_stroke_without_rigid_jerk_warns_beyond_2_sigma(monkeypatch, d, status):
+    """No rigid jerk in the IMU, the declared geometry's stroke d ± 0.05 m (1σ), no structural give known:
+    through the surface by more than 3σ → ERROR, by more than 2σ → WARNING, a grazing miss within 2σ → OK."""
+    from workbench.problems.droptest import physics
+
+    monkeypatch.setattr(physics, "rigid_impact", lambda tel: (1500.0, 1.45, 10000.0, 20.0))
+    st = SimpleNamespace(max=SimpleNamespace(distance=d, sigma=0.05, time=1.45))
+    check = physics.full_stroke_check(None, st, SimpleNamespace(lander_file="lander.toml"), smo=None)
+    assert check.status == status, check.message

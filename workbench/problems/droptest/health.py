@@ -4,8 +4,8 @@ Checks: mean NIS per sensor (every triad, gyro, ZUPT, ranging channels) against 
 smoothed covariance symmetric and positive definite; the max-stroke clearance within the airbag
 geometry (−3σ − the structure's give under the estimated peak load … bag thickness = lobe diameter +
 standoff) and its 1σ below the bag thickness; the
-coefficient of restitution between 0 and its energy bound (:func:`restitution_energy_bound`); no IMU
-gap across the contact (the window the estimate
+coefficient of restitution between 0 and its energy bound + 3σ (:func:`restitution_energy_bound`;
+1 without the run's settings); no IMU gap across the contact (the window the estimate
 detects and the one where the measured specific force exceeds 2 g after release or bungee cut);
 and every warning the telemetry readers reported.  With the run's settings also the physics
 cross-checks of :mod:`.physics` and a note on the declared body vertex the max stroke rests on.
@@ -41,7 +41,7 @@ from workbench.problems.droptest.physics import (
 )
 from workbench.problems.droptest.stroke import contact_end
 
-__all__ = ["drop_health", "input_checks", "input_health"]
+__all__ = ["drop_health", "input_checks", "input_health", "restitution_energy_bound"]
 
 
 def input_checks(tel, windows: dict[str, tuple[float, float]] | None = None, settings=None) -> list[Check]:
@@ -184,7 +184,7 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
         pass
     elif np.isfinite(e):
         e_max = restitution_energy_bound(smo, st, settings)
-        hi = 1.0 if e_max is None else e_max + 3.0 * float(se)
+        hi = 1.0 if e_max is None else e_max + 3.0 * (float(se) if np.isfinite(se) else 0.0)
         rest = interval_check("restitution", float(e), 0.0, hi, "coefficient of restitution")
         if e_max is not None:
             rest = replace(
@@ -208,10 +208,11 @@ def drop_health(tel, fwd, smo, st, cov_stats=None, *, settings=None, completenes
 
 
 def restitution_energy_bound(smo, st, settings) -> float | None:
-    """Largest coefficient of restitution the energy allows [1]: e = −v_n,out / v_n,in of the CM can exceed 1
-    when a spinning or sliding lander turns rotation or motion along the surface into speed away from it,
-    but never beyond the whole kinetic energy at the approach, less gravity's work up to the leaving
-    instant: v_n,out² ≤ |v_in|² + ω_inᵀ J ω_in / m − 2 g (z_out − z_in).
+    """Largest coefficient of restitution the energy allows (dimensionless): e = −v_n,out / v_n,in of the
+    CM can exceed 1 when a spinning or sliding lander turns rotation or motion along the surface into
+    speed away from it, but never beyond the whole kinetic energy at the approach, less gravity's work
+    up to the leaving instant: v_n,out² ≤ |v_in|² + ω_inᵀ J ω_in / m − 2 g (z_out − z_in) (friction,
+    damping and venting only take energy away; the gas holds little at the approach instant).
 
     ``smo``: the smoothed ``FilterStage`` (SPF, z up, body rates in B); ``st``: the ``StrokeStage`` (its
     ``restitution_index`` and surface normal); ``settings``: ``DropSettings`` (mass [kg], inertia about the CM

@@ -85,8 +85,9 @@ def footprint_areas(rc, a, n, out):
     rc (k, 3) footprint centres [m] (in one plane of unit normal n (3,)), a (k,) footprint radii
     [m]; fills out (k,). Every point of the union is shared equally by the footprints that cover
     it, so lobe i gets ∫_disk_i 1/m(x) dA with m the number of disks covering x: the areas sum to
-    the union's, never below zero, and for two disks this is the disk minus half the lens (the
-    half-lens rule, which over-subtracts where three or more overlap). Along each of
+    the union's (to the quadrature's accuracy), never below zero, and for two disks this is the
+    disk minus half the lens (the half-lens rule, which over-subtracts where three or more
+    overlap). Along each of
     :data:`FOOT_RAYS` rays from the disk's centre m is piecewise constant between the crossings
     of the other circles, so the radial integral is exact and only the angle is sampled (midpoint
     rule, periodic); the area is continuous in the footprints' motion.
