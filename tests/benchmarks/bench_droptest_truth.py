@@ -108,17 +108,17 @@ def _nudged(cfg, lander, surf, eps: float) -> truth.DropTruth:
         truth.design_release = orig
 
 
-def _noise(sc) -> dict[str, float]:
-    """1σ per-sample sensor noise of the scenario, in the units of :func:`_diff`."""
+def _noise(st) -> dict[str, float]:
+    """1σ per-sample sensor noise of the run with settings ``st`` (``DropSettings``), in the units of :func:`_diff`."""
     g = 9.80665
     out = {
-        "accel_mps2": float(sc.get("sensors.accelerometer.noise_g")) * g,
-        "gyro_radps": float(np.radians(sc.get("sensors.gyro.noise_dps"))),
-        "survey_m": float(sc.get("synthetic.survey_sigma_m")),
+        "accel_mps2": float(st.accelerometer.noise_g) * g,
+        "gyro_radps": float(np.radians(st.gyro.noise_dps)),
+        "survey_m": float(st.synthetic.survey_sigma_m),
     }
-    if sc.has("sensors.ranging.radar_range_sigma_m"):
-        out["radar_range_m"] = float(sc.get("sensors.ranging.radar_range_sigma_m"))
-        out["radar_rate_mps"] = float(sc.get("sensors.ranging.radar_rate_sigma_mps"))
+    if st.ranging.enabled:
+        out["radar_range_m"] = float(st.ranging.radar_range_sigma_m)
+        out["radar_rate_mps"] = float(st.ranging.radar_rate_sigma_mps)
     return out
 
 
