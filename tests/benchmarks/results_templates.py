@@ -168,9 +168,9 @@ lens within 1.5 % of the disk, nine stacked disks summing to their union within 
 | `droptest_fullstroke`: truth max stroke, frame on the ramp | {{{{{_TB}.scenarios.droptest_fullstroke.max_stroke_m|.3f}}}} m, {{{{{_TB}.scenarios.droptest_fullstroke.frame_on_ramp_s|*1000:.1f}}}} ms (0.55 psi) | {{{{{_TC}.scenarios.droptest_fullstroke.max_stroke_m|.3f}}}} m, {{{{{_TC}.scenarios.droptest_fullstroke.frame_on_ramp_s|*1000:.1f}}}} ms (0.05 psi) |
 
 So the drops the estimator was judged against were partly an artefact: the lander rolled onto its apex and,
-in 8 of 20 nominal drops, struck the ramp with bags inflated to specification. With the bags pushing, the bags alone
+in {{{{{_TB}.summary.dispersed_frame_on_ramp}}}} of {{{{{_TB}.summary.members}}}} nominal drops, struck the ramp with bags inflated to specification. With the bags pushing, the bags alone
 stop the `droptest_fullstroke` drop (12 m/s normal) from 0.1 psi up, so that scenario now flies vented bags at
-0.05 psi. Every drop-test number in this file, the health bands (`workbench calibrate droptest --members 30
+0.05 psi. Every drop-test number in this file, the health bands (`workbench calibrate droptest --members 50
 --write`) and the shipped summaries are from the new truth.
 """
 RESULTS_MD = RESULTS_MD + "\n" + _TRUTH_CONTACT
