@@ -354,6 +354,9 @@ def test_imu_ending_between_two_compressions_leaves_the_max_stroke_undefined(dro
         if vn[k] > 0.05 and fm[k] > 3.0 * 9.80665 and h[k] > h[i0 : k + 1].min() + 3.0 * st.smoothed.sigma[k]
     ]
     if not ks:
+        # on the truth whose pressed bags always push, droptest's drop has one compression (as have 19 of
+        # bench_truth_contact.py's 20 validation drops and all of the first 60 tests-stream drops); a file
+        # ending mid-contact is the fuzz suite's "IMU ends at 1.45 s": max stroke and restitution undefined
         pytest.skip("this drop has one compression only")
     t_cut = float(smo.t[ks[len(ks) // 2]] + res0.telemetry.group_delay_s)
     paths = _copy(droptest_run, tmp_path)
