@@ -86,9 +86,9 @@ def main(argv: list[str] | None = None) -> int:
         "wall_s": round(wall, 1),
         "jerk_no_full_stroke": span([r for r in ok if not r["full_stroke_truth"]]),
         "jerk_full_stroke": span([r for r in ok if r["full_stroke_truth"]]),
-        # frame strikes too gentle for the rigid-jerk threshold: only the geometry can call them
+        # frame strikes too gentle for the run's own rigid-jerk threshold: only the geometry can call them
         "jerk_full_stroke_below_threshold": span(
-            [r for r in ok if r["full_stroke_truth"] and r["jerk_g_s"] <= RIGID_JERK_G_PER_S]
+            [r for r in ok if r["full_stroke_truth"] and r["jerk_g_s"] <= (r["threshold_g_s"] or RIGID_JERK_G_PER_S)]
         ),
         "status": dict(Counter(r["status"] for r in ok)),
         "not_ok": [r for r in ok if r["status"] != "OK"],
