@@ -8,9 +8,12 @@ from workbench.io.assets import assets_dir
 from workbench.io.scenario import resolve_scenario
 from workbench.problems.droptest import truth, truth_fast
 from workbench.problems.droptest.problem import DropTestProblem
+from workbench.problems.droptest.surface import ramp_surface
 from workbench.problems.droptest.synthetic import truth_for
 
-N_RAMP = np.array([0.0, -np.sin(np.radians(60.0)), np.cos(np.radians(60.0))])  # the SPF ramp's normal
+RAMP = ramp_surface(angle_deg=60.0, nail_depth=0.3)  # the SPF ramp
+N_RAMP = np.asarray(RAMP.normal, float)
+T1, T2 = (np.asarray(v, float) for v in RAMP.tangent_basis())
 
 
 def _lens(d: float, r1: float, r2: float) -> float:
@@ -27,8 +30,7 @@ def _lens(d: float, r1: float, r2: float) -> float:
 
 def _in_plane(xy: np.ndarray) -> np.ndarray:
     """Points (k, 3) [m] of the ramp plane through 0.3 n from plane coordinates xy (k, 2) [m]."""
-    t1, t2 = truth_fast.tangents(N_RAMP)
-    return xy[:, :1] * t1 + xy[:, 1:] * t2 + 0.3 * N_RAMP
+    return xy[:, :1] * T1 + xy[:, 1:] * T2 + 0.3 * N_RAMP
 
 
 def test_two_footprints_share_their_lens_equally():
@@ -38,7 +40,7 @@ def test_two_footprints_share_their_lens_equally():
         for r2 in (0.2, 0.6, 1.0):
             a = np.array([0.8, r2])
             out = np.empty(2)
-            truth_fast.footprint_areas(_in_plane(np.array([[0.0, 0.0], [d, 0.0]])), a, N_RAMP, out)
+            truth_fast.footprint_areas(_in_plane(np.array([[0.0, 0.0], [d, 0.0]])), a, T1, T2, out)
             exact = np.pi * a**2 - 0.5 * _lens(d, 0.8, r2)
             worst = max(worst, float(np.max(np.abs(out - exact) / (np.pi * a**2))))
     assert worst < 0.015
@@ -51,7 +53,7 @@ def test_stacked_footprints_share_their_union():
     xy = rng.normal(0.0, 0.15, (9, 2))
     a = rng.uniform(0.7, 1.0, 9)
     out = np.empty(9)
-    truth_fast.footprint_areas(_in_plane(xy), a, N_RAMP, out)
+    truth_fast.footprint_areas(_in_plane(xy), a, T1, T2, out)
     pts = rng.uniform(-1.6, 1.6, (400_000, 2))
     covered = (np.linalg.norm(pts[:, None, :] - xy[None], axis=-1) < a).any(1)
     union = covered.mean() * 3.2**2
@@ -67,8 +69,8 @@ def test_footprint_areas_match_reference():
         xy = rng.normal(0.0, 0.5, (k, 2))
         a = rng.uniform(0.05, 1.0, k)
         out = np.empty(k)
-        truth_fast.footprint_areas(_in_plane(xy), a, N_RAMP, out)
-        np.testing.assert_allclose(out, truth.footprint_areas(_in_plane(xy), a, N_RAMP), rtol=0, atol=1e-12)
+        truth_fast.footprint_areas(_in_plane(xy), a, T1, T2, out)
+        np.testing.assert_allclose(out, truth.footprint_areas(_in_plane(xy), a, T1, T2), rtol=0, atol=1e-12)
 
 
 def test_pressed_bags_always_push():

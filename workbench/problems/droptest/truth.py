@@ -162,6 +162,7 @@ class ForceModel:
         self.verts_B = np.asarray(lander.body.vertices, float)
         self.n = np.asarray(surface.normal, float)
         self.P0 = np.asarray(surface.point, float)
+        self.T = tuple(np.asarray(v, float) for v in surface.tangent_basis())  # in-plane unit vectors
         self.rock_c = np.asarray(surface.rock_centers, float).reshape(-1, 3)
         self.rock_r = np.asarray(surface.rock_radii, float).reshape(-1)
         self.rig = rig
@@ -185,7 +186,7 @@ class ForceModel:
         return (
             f(self.lobes_B),
             f(self.verts_B),
-            np.concatenate([self.n, self.P0]),
+            np.concatenate([self.n, self.P0, *self.T]),
             f(self.rock_c),
             f(self.rock_r),
             np.concatenate([np.asarray(self.rig.anchor_I, float), np.asarray(self.rig.attach_B, float)]),
@@ -259,7 +260,7 @@ class ForceModel:
             pe = pen_all[hit]
             rc = r_I[hit] - dc[hit, None] * n  # footprint centres rel. CM
             a2 = 2.0 * self.R * pe - pe * pe  # footprint radius² of each flattened lobe
-            area = footprint_areas(rc, np.sqrt(a2), n)
+            area = footprint_areas(rc, np.sqrt(a2), *self.T)
             f_l, fn_total = self._membrane(pg, area, rc, np.broadcast_to(n, rc.shape), v, w_I)
             F += f_l.sum(0)
             T_I += np.cross(rc, f_l).sum(0)
@@ -352,9 +353,9 @@ class ForceModel:
         return np.concatenate([v, a, qd, wd])
 
 
-def footprint_areas(c: np.ndarray, a: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Contact area [m²] (k,) of each flattened lobe, footprint centres c (k,3) [m] in the plane of
-    unit normal n (3,), radii a (k,) [m]: its share of the footprints' union.
+def footprint_areas(c: np.ndarray, a: np.ndarray, t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
+    """Contact area [m²] (k,) of each flattened lobe, footprint centres c (k,3) [m] in the plane spanned
+    by the unit vectors t1, t2 (3,), radii a (k,) [m]: its share of the footprints' union.
 
     Rack lobes overlap (centre spacing < diameter) and the racks of neighbouring faces press at
     nearly the same place, so their footprints overlap, often many deep; each point of the union
@@ -366,7 +367,6 @@ def footprint_areas(c: np.ndarray, a: np.ndarray, n: np.ndarray) -> np.ndarray:
     out = np.pi * a * a
     if k < 2:
         return out
-    t1, t2 = truth_fast.tangents(np.ascontiguousarray(n, float))
     th = (np.arange(truth_fast.FOOT_RAYS) + 0.5) * 2.0 * np.pi / truth_fast.FOOT_RAYS
     U = np.cos(th)[:, None] * t1 + np.sin(th)[:, None] * t2  # (rays, 3)
     e = c[:, None, :] - c[None, :, :]  # (i, j, 3)

@@ -11,13 +11,14 @@ history (:func:`evaluate_many`) and the point-mass flight of the release design 
 Frames and units as in :mod:`.truth`: SPF chamber frame (I), body frame B at the CM, SI units;
 the state is ``y = [p_I (3) m, v_I (3) m/s, q_I_B (4, scalar last), ω_B (3) rad/s]``.
 
-Parameters are passed as a few flat arrays (built by ``ForceModel.packed``): ``lobes_B`` (n_l, 3) [m],
-``verts_B`` (n_v, 3) [m], ``geo`` (6,) = ramp normal (3) and ramp point (3) [m, SPF], ``rock_c``
-(n_r, 3) [m, SPF], ``rock_r`` (n_r,) [m], ``rig`` (6,) = bungee anchor (3) [m, SPF] and attachment
-(3) [m, body], ``coeffs`` (k,) per-bungee polynomial [N/m^j], ``sc`` (12,) scalars, in order:
-lobe radius [m], bag pressure [Pa], ambient pressure [Pa], gas volume [m³], γ, damping
-[N s/m³], friction μ, body stiffness [N/m], body damping [N s/m], bungee rest length [m], bungee
-count, mass [kg]; ``J``, ``Jinv`` (3, 3) inertia about the CM [kg m², body] and its inverse.
+Parameters are passed as a few flat arrays (built by ``ForceModel.packed``): ``lobes_B`` (n_l, 3)
+[m], ``verts_B`` (n_v, 3) [m], ``geo`` (12,) = ramp normal (3), ramp point (3) [m, SPF] and its
+in-plane unit vectors (3 + 3, ``Surface.tangent_basis``), ``rock_c`` (n_r, 3) [m, SPF], ``rock_r``
+(n_r,) [m], ``rig`` (6,) = bungee anchor (3) [m, SPF] and attachment (3) [m, body], ``coeffs`` (k,)
+per-bungee polynomial [N/m^j], ``sc`` (12,) scalars, in order: lobe radius [m], bag pressure [Pa],
+ambient pressure [Pa], gas volume [m³], γ, damping [N s/m³], friction μ, body stiffness [N/m], body
+damping [N s/m], bungee rest length [m], bungee count, mass [kg]; ``J``, ``Jinv`` (3, 3) inertia
+about the CM [kg m², body] and its inverse.
 
 Agreement with the reference (tests/problems/droptest/test_truth_fast.py): the force model, the
 derivative and the release design agree to rounding; a whole drop agrees to the integrator's own
@@ -34,34 +35,13 @@ import numpy as np
 from workbench.core.bodies import G0
 from workbench.core.jit import njit
 
-__all__ = ["evaluate", "evaluate_many", "rhs", "fly", "footprint_areas", "tangents"]
+__all__ = ["evaluate", "evaluate_many", "rhs", "fly", "footprint_areas"]
 
 V_SLIP = 0.1  # friction regularisation speed [m/s]; the same constant as truth.V_SLIP
 G0_MPS2 = G0  # standard gravity [m/s²]; truth.GRAVITY_SPF = (0, 0, -G0)
 
 
 FOOT_RAYS = 32  # rays of the angular quadrature of a footprint's share (:func:`footprint_areas`)
-
-
-@njit
-def tangents(n):
-    """Unit vectors t1, t2 (3,) spanning the plane normal to the unit vector n (3,): t1 = n × e
-    normalised, e the x axis (the y axis when n is within ~26° of x), t2 = n × t1."""
-    if abs(n[0]) < 0.9:
-        e0, e1, e2 = 1.0, 0.0, 0.0
-    else:
-        e0, e1, e2 = 0.0, 1.0, 0.0
-    t1 = np.empty(3)
-    t1[0] = n[1] * e2 - n[2] * e1
-    t1[1] = n[2] * e0 - n[0] * e2
-    t1[2] = n[0] * e1 - n[1] * e0
-    s = math.sqrt(t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2])
-    t1 /= s
-    t2 = np.empty(3)
-    t2[0] = n[1] * t1[2] - n[2] * t1[1]
-    t2[1] = n[2] * t1[0] - n[0] * t1[2]
-    t2[2] = n[0] * t1[1] - n[1] * t1[0]
-    return t1, t2
 
 
 @njit
@@ -79,21 +59,20 @@ def _insert(ev_r, ev_d, ne, r, d):
 
 
 @njit
-def footprint_areas(rc, a, n, out):
+def footprint_areas(rc, a, t1, t2, out):
     """Contact area [m²] of each flattened lobe: its share of the footprints' union.
 
-    rc (k, 3) footprint centres [m] (in one plane of unit normal n (3,)), a (k,) footprint radii
-    [m]; fills out (k,). Every point of the union is shared equally by the footprints that cover
-    it, so lobe i gets ∫_disk_i 1/m(x) dA with m the number of disks covering x: the areas sum to
-    the union's (to the quadrature's accuracy), never below zero, and for two disks this is the
-    disk minus half the lens (the half-lens rule, which over-subtracts where three or more
-    overlap). Along each of
-    :data:`FOOT_RAYS` rays from the disk's centre m is piecewise constant between the crossings
-    of the other circles, so the radial integral is exact and only the angle is sampled (midpoint
-    rule, periodic); the area is continuous in the footprints' motion.
+    rc (k, 3) footprint centres [m] in one plane spanned by the unit vectors t1, t2 (3,) (the
+    surface's ``tangent_basis``), a (k,) footprint radii [m]; fills out (k,). Every point of the
+    union is shared equally by the footprints that cover it, so lobe i gets ∫_disk_i 1/m(x) dA with
+    m the number of disks covering x: the areas sum to the union's (to the quadrature's accuracy),
+    never below zero, and for two disks this is the disk minus half the lens (the half-lens rule,
+    which over-subtracts where three or more overlap). Along each of :data:`FOOT_RAYS` rays from the
+    disk's centre m is piecewise constant between the crossings of the other circles, so the radial
+    integral is exact and only the angle is sampled (midpoint rule, periodic); the area is
+    continuous in the footprints' motion.
     """
     k = a.shape[0]
-    t1, t2 = tangents(n)
     ev_r = np.empty(2 * k)
     ev_d = np.empty(2 * k)
     near = np.empty(k, np.int64)
@@ -261,7 +240,7 @@ def evaluate(y, cut, lobes_B, verts_B, geo, rock_c, rock_r, rig, coeffs, sc, F, 
             a2[k] = 2.0 * R * pe - pe * pe
             a[k] = math.sqrt(a2[k])
         area = np.empty(nhit)
-        footprint_areas(rc, a, n, area)
+        footprint_areas(rc, a, geo[6:9], geo[9:12], area)
         for k in range(nhit):
             fn_total += _membrane(pg, area[k], rc[k], n[0], n[1], n[2], v, w_I, damp, mu, F, T_I)
 
