@@ -426,15 +426,6 @@ def zero_phase_ranging(tmp_path_factory):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="open (issue #26): on the truth whose pressed bags always push (one smooth compression instead of the "
-    "half-lens truth's bounces) the IMU-against-ranging lag of this drop reads +0.42 ± 0.19 ms on the right "
-    "declaration and -0.40 ± 0.19 ms on the wrong one (0.83 ms apart, as it should be), but its scatter over "
-    "honest drops is 0.36 ms (the calibrated band [-1.34, +1.18] ms), so a 0.83 ms mis-declaration stays inside "
-    "it (OK); the restitution moves 2.5 sigma (its sigma 0.001 with ranging). A lag estimator with its honest "
-    "sigma at ~0.15 ms would make it an ERROR again",
-)
 def test_timing_zero_phase_declared_causal_is_an_error_naming_the_key(zero_phase_ranging):
     shipped, zp, paths = zero_phase_ranging
     right = dt.run_droptest(zp, paths).summary
@@ -445,6 +436,22 @@ def test_timing_zero_phase_declared_causal_is_an_error_naming_the_key(zero_phase
     assert c["status"] == ERROR and "[sensors.acquisition] filter = 'butterworth'" in c["message"]
     assert c["value"] == pytest.approx(-wrong["time_shifts_s"]["imu"], abs=3e-4)  # the lag it found: −0.83 ms
     assert wrong["health"]["verdict"] == ERROR
+    assert re.search(r"lag [+-][\d.]+ ± 0\.0[5-9]\d ms", c["message"]), c["message"]  # 1σ ≈ 0.07 ms, 3 guns jointly
+
+
+@pytest.mark.slow
+def test_timing_check_names_other_causes_when_the_residuals_are_not_a_time_shift(zero_phase_ranging):
+    """A radar gun surveyed with x and y swapped also moves the best lag (1.7 ms, 12σ), but the range
+    rates then do not fit a time shift (reduced χ² > 2): the message puts the geometry before the timing."""
+    _, zp, paths = zero_phase_ranging
+    guns = dict(zp.ranging.radar_guns)
+    guns["G1"] = guns["G1"][[1, 0, 2]]
+    bad = replace(zp, ranging=replace(zp.ranging, radar_guns=guns))
+    c = _checks(dt.run_droptest(bad, paths).summary["health"], "timing.")["timing.imu_vs_ranging"]
+    assert c["status"] == ERROR
+    assert "do not fit a time shift" in c["message"] and "radar gun position" in c["message"], c["message"]
+    chi2 = float(re.search(r"reduced χ² ([\d.]+)", c["message"]).group(1))
+    assert chi2 > 2.0
 
 
 def test_non_finite_filter_state_is_a_numerical_failure_naming_the_stage(droptest_run, droptest_result):
