@@ -9,7 +9,8 @@ lag over the impact, :func:`workbench.problems.droptest.physics.estimate_lag`):
    filter; reconstructed once declared so (right) and once with the shipped declaration, the causal
    4th-order 500 Hz Butterworth (wrong: its 0.83 ms group delay is taken off tags that have none).
    Per seed: the lag, its 1σ, z and the check's status (its own logic: ERROR when significant and the
-   shift exceeds 2σ of the max stroke), and the run's verdict.
+   shift exceeds 2σ of the max stroke), the margin |lag| / the bound's half-width, and the run's own
+   (uncalibrated) verdict.
 2. **honest drops**: M dispersed drops of the validation stream (the health calibration's members are
    another stream), each with its own truth: the lag's z = lag/σ (mean, rms, max |z|) and the check's
    calibrated status — how often an honest drop is flagged.
@@ -46,11 +47,19 @@ _LAG = re.compile(r"lag ([+-][\d.]+) ± ([\d.]+) ms")
 def _timing(summary: dict) -> dict:
     """The timing check of ``summary``: its status, lag and 1σ [ms] and the fit's reduced χ² (from its
     message; χ² only since the joint fit) and the run's verdict."""
-    c = next(c for c in summary["health"]["checks"] if c["name"] == CHECK)
+    found = [c for c in summary["health"]["checks"] if c["name"] == CHECK]
+    if not found:
+        raise SystemExit(f"{CHECK} missing from the run's health (notes: {summary['health'].get('notes')})")
+    c = found[0]
     m = _LAG.search(c["message"])
-    lag, sig = (float(m.group(1)), float(m.group(2))) if m else (float("nan"), float("nan"))
+    if m is None:
+        raise SystemExit(f"{CHECK}: no lag in its message {c['message']!r}")
+    lag, sig = float(m.group(1)), float(m.group(2))
     chi2 = re.search(r"reduced χ² ([\d.]+)", c["message"])  # in the message since the joint fit
-    out = {"status": c["status"], "lag_ms": lag, "sigma_ms": sig, "z": lag / sig}
+    # the ERROR needs |lag| beyond the bound's half-width (the larger of the significance and the
+    # 2σ-of-max-stroke shift): |lag| / half is the margin of the decision
+    half = 1e3 * float(max(abs(b) for b in c["bound"]))
+    out = {"status": c["status"], "lag_ms": lag, "sigma_ms": sig, "z": lag / sig, "bound_half_ms": half}
     return out | {"verdict": summary["health"]["verdict"]} | ({"chi2_red": float(chi2.group(1))} if chi2 else {})
 
 
@@ -140,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
         if any("chi2_red" in h for h in honest)
         else None,
         "honest_calibrated": {s: sum(h["calibrated_status"] == s for h in honest) for s in ("OK", "WARNING", "ERROR")},
-        "honest_own_error": sum(h["status"] == "ERROR" for h in honest),
+        "honest_own": {s: sum(h["status"] == s for h in honest) for s in ("OK", "WARNING", "ERROR")},
+        "wrong_margin_min": float(min(abs(m["wrong"]["lag_ms"]) / m["wrong"]["bound_half_ms"] for m in mistakes)),
         "wall_s": round(wall, 1),
     }
     print(

@@ -400,22 +400,27 @@ measurement, exit 4), and every error names the file and the column or key. What
   "zero-phase filter declared causal (butterworth)"). The lag estimate (`timing.imu_vs_ranging`) used to fit each radar gun's range-rate residuals over the impact alone, each
   with its own attitude error, and had a 1σ of {{{{before/bench_lag_detection:results.summary.sigma_ms_median|.2f}}}} ms: the test's drop (noise seed 1) read
   {{{{before/bench_lag_detection:results.mistakes.0.wrong.lag_ms|+.2f}}}} ms,
-  {{{{before/bench_lag_detection:results.mistakes.0.wrong.z|+.1f}}}}σ, and its verdict was OK. Now one least-squares fit takes every gun's residuals with the errors
+  {{{{before/bench_lag_detection:results.mistakes.0.wrong.z|+.1f}}}}σ, and the check was OK. Now one least-squares fit takes every gun's residuals with the errors
   they share (the prior's velocity and drift, one attitude error tilting the velocity change, an offset per gun;
   the lag from dh/dt's part orthogonal to them, `workbench/estimation/regression.py`): 1σ
   {{{{bench_lag_detection:results.summary.sigma_ms_median|.3f}}}} ms. `python tests/benchmarks/bench_lag_detection.py --seeds 12 --members 40`
   ({{{{bench_lag_detection:results.summary.wall_s|.0f}}}} s; before: the same script at 7474d92): the
   mis-declared drop with noise seeds 1–{{{{bench_lag_detection:results.summary.mistake_seeds}}}} is an ERROR naming the filter key on
   {{{{before/bench_lag_detection:results.summary.wrong_error}}}} → {{{{bench_lag_detection:results.summary.wrong_error}}}} of them (|z| ≥ {{{{before/bench_lag_detection:results.summary.wrong_z_min_abs|.1f}}}} →
-  {{{{bench_lag_detection:results.summary.wrong_z_min_abs|.1f}}}}; median lag {{{{bench_lag_detection:results.summary.wrong_lag_ms_median|+.3f}}}} ms), the same
+  {{{{bench_lag_detection:results.summary.wrong_z_min_abs|.1f}}}}; the smallest lag
+  {{{{before/bench_lag_detection:results.summary.wrong_margin_min|.2f}}}}× → {{{{bench_lag_detection:results.summary.wrong_margin_min|.2f}}}}× the ERROR bound's half-width,
+  which also asks for a shift of the trajectory beyond 2σ of the max stroke; median lag {{{{bench_lag_detection:results.summary.wrong_lag_ms_median|+.3f}}}} ms), the same
   telemetry declared right is OK on {{{{bench_lag_detection:results.summary.right_ok}}}}; on {{{{bench_lag_detection:results.summary.honest_members}}}} honest dispersed
   drops of the validation stream the lag's z has rms {{{{before/bench_lag_detection:results.summary.honest_z_rms|.2f}}}} →
   {{{{bench_lag_detection:results.summary.honest_z_rms|.2f}}}} (max |z| {{{{bench_lag_detection:results.summary.honest_z_max_abs|.1f}}}}; the open-loop IMU trajectory's
   own model error shows beside the smaller σ, so the check calls a lag significant beyond 4σ), the fit's reduced χ²
   {{{{bench_lag_detection:results.summary.honest_chi2_red_range.0|.2f}}}}–{{{{bench_lag_detection:results.summary.honest_chi2_red_range.1|.2f}}}}, and the calibrated
   check is OK on {{{{bench_lag_detection:results.summary.honest_calibrated.OK}}}} of them. When the residuals are not a time shift (reduced χ²
-  above 2, as with a radar gun surveyed with x and y swapped: `test_physics_checks.py`), the message names the
-  axes, units, lever arms and gun positions before the timing keys.
+  above 2, as with a radar gun surveyed, or an accelerometer's lever arm declared, with x and y swapped; the gun is
+  `test_physics_checks.py`'s case), the message names the axes, units, lever arms, gun positions and a gun's
+  declared noise before the timing keys. Other mutations of the fuzz suite's drop with ranging (accelerometer axis
+  swaps and a sign flip, both magnetic-field reversals, the hanging position in cm, the lever arm and the radar gun
+  swapped, the gyro noise in rad/s) now fire this check too, beside the checks that name their cause.
 * **The rocket importer on the decimated excerpt: the unknown heading.** At 8 Hz the field cannot be followed
   through the coning, so the magnetometer has no in-flight alignment, and its raw dip on the pad (−49°) is not the
   site's (+64°): its axes are not the IMU's, the heading is the prior's, ±60°. Before this, the importer centred

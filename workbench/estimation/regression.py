@@ -38,12 +38,11 @@ def partial_coefficient(N: np.ndarray, d: np.ndarray, y: np.ndarray) -> PartialF
     N = np.asarray(N, float).reshape(len(d), -1)
     d = np.asarray(d, float)
     y = np.asarray(y, float)
-    rank = int(np.linalg.matrix_rank(N)) if N.size else 0
     if N.size:
-        d_perp = d - N @ np.linalg.lstsq(N, d, rcond=None)[0]
-        y_perp = y - N @ np.linalg.lstsq(N, y, rcond=None)[0]
+        coef, _, rank, _ = np.linalg.lstsq(N, np.column_stack([d, y]), rcond=None)  # one SVD, one rank
+        d_perp, y_perp = (np.column_stack([d, y]) - N @ coef).T
     else:
-        d_perp, y_perp = d, y
+        rank, d_perp, y_perp = 0, d, y
     info = float(d_perp @ d_perp)
     dof = d.size - rank - 1
     if dof < 1 or not info > 1e-12 * float(d @ d):

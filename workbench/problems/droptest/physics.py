@@ -44,6 +44,8 @@ __all__ = [
     "rigid_impact",
     "structural_give",
     "diagnose_axes",
+    "LAG_FIT_CHI2",
+    "LAG_SIGNIFICANT_Z",
     "LagEstimate",
     "estimate_lag",
     "hanging_checks",
@@ -822,12 +824,14 @@ def estimate_lag(settings, tel, fwd, forward: Callable) -> LagEstimate | None:
     a drift δa (u·δv + u·δa t, u the line of sight), an attitude error δθ that tilts the velocity
     change Δv (δθ·(Δv × u)), a rate offset per gun, and the lag: a state ``lag`` late reads
     h(t − lag) ≈ h − lag·dh/dt, so the coefficient of dh/dt is the lag.  The guns share the nuisance
-    (fitting each gun alone with its own tilt cost a factor 2.5 in σ), and the lag and its variance
+    (fitting each gun alone with its own tilt cost a factor 2.4 in σ), and the lag and its variance
     come from dh/dt's part orthogonal to the nuisance columns
     (:func:`~workbench.estimation.regression.partial_coefficient`), so a rank-deficient nuisance
     (one gun: its line of sight barely turns) costs precision, not a singular matrix.  ``forward``: the
     forward pass ``forward(settings, tel, init) -> FilterStage`` (:func:`.pipeline.forward_pass`).
-    None without radar guns, without an impact, or with too few samples."""
+    Samples where the open-loop model is not finite are left out.  None without radar guns, without an impact,
+    without a gun with 8 finite range rates over it, or when the fit has no degree of freedom left
+    or dh/dt lies in the nuisance's span."""
     if tel.ranging is None:
         return None
     imp = measured_impact(tel)
@@ -855,6 +859,10 @@ def estimate_lag(settings, tel, fwd, forward: Callable) -> LagEstimate | None:
     used = []
     blocks = []  # per gun, whitened: shared nuisance (n, 9), dh/dt (n,), residual (n,); and 1/σ
     t_mid = 0.5 * (sub.t[0] + sub.t[-1])
+    if not inside.any():
+        return None
+    # one reference for every gun's velocity change (the attitude error δθ is shared)
+    v_ref = np.array([np.interp(t_meas[inside][0], sub.t, x[:, i]) for i in range(rl.SV.start, rl.SV.stop)])
     for name, G in spec.guns.items():
         col = f"{name}.rate"
         if col not in rt.channels:
@@ -868,13 +876,17 @@ def estimate_lag(settings, tel, fwd, forward: Callable) -> LagEstimate | None:
         # the state at each measurement time: linear between the filter steps (sub-step offsets)
         xs = np.stack([np.interp(tm, sub.t, x[:, i]) for i in range(x.shape[1])], axis=1)
         h = np.array([rl.range_rate_model(xi, G, r_B)[0][0] for xi in xs])
+        ok = np.isfinite(h)
+        if ok.sum() < 8:
+            continue
+        tm, xs, h, res = tm[ok], xs[ok], h[ok], z[m][ok] - h[ok]
         u = xs[:, rl.SP] - G
         u /= np.linalg.norm(u, axis=1, keepdims=True)
-        tilt = np.cross(xs[:, rl.SV] - xs[0, rl.SV], u)
-        w = 1.0 / spec.rate_sigmas[name]
+        tilt = np.cross(xs[:, rl.SV] - v_ref, u)
+        w = 1.0 / spec.rate_sigmas[name]  # > 0: a noise-free declaration fails the filter's own pass first
         shared = np.hstack([u, u * (tm - t_mid)[:, None], tilt]) * w
-        blocks.append((shared, np.gradient(h, tm) * w, (z[m] - h) * w, w))
-        used.append((name, int(m.sum())))
+        blocks.append((shared, np.gradient(h, tm) * w, res * w, w))
+        used.append((name, int(tm.size)))
     if not blocks:
         return None
     n_g = len(blocks)
@@ -910,15 +922,19 @@ def timing_checks(tel, smo, st, settings, est: LagEstimate | None) -> tuple[list
     The IMU-driven trajectory at the impact moves by |v_n| × lag (v_n the CM speed into the ramp at
     the first contact); ERROR when the lag is significant (> :data:`LAG_SIGNIFICANT_Z` σ) and that
     shift exceeds 2σ of the max stroke (the IMU and the ranging then disagree by more than the
-    headline's uncertainty), WARNING when only significant; when the fit's reduced χ² exceeds
-    :data:`LAG_FIT_CHI2` the message names the other causes (axes, units, lever arms, gun
-    positions) before the timing keys.  Returns ``(checks, notes)``; a run
-    without ranging has nothing to compare its IMU time line with (a note)."""
+    headline's uncertainty), WARNING when only significant; a significant lag whose fit has a reduced
+    χ² above :data:`LAG_FIT_CHI2` is not a time shift alone, and its message names the other causes
+    (axes, units, lever arms, gun positions, a gun's declared rate noise) before the timing keys.
+    Returns ``(checks, notes)``; a run without ranging has nothing to compare its IMU time line with
+    (a note)."""
     shifts = ", ".join(f"{k} {v * 1e3:.3f} ms" for k, v in tel.time_shifts_s.items())
     if tel.ranging is None:
         return [], []
     if est is None:
-        return [], [f"timing: no IMU lag estimate (no impact inside the ranging record); time shifts applied: {shifts}"]
+        return [], [
+            "timing: no IMU lag estimate (no impact inside the ranging record, too few finite range rates over it, "
+            f"or a degenerate fit); time shifts applied: {shifts}"
+        ]
     from workbench.problems.droptest import model as rl
 
     lag, sig = est.lag_s, est.sigma_s
@@ -945,7 +961,8 @@ def timing_checks(tel, smo, st, settings, est: LagEstimate | None) -> tuple[list
     if est.chi2_red > LAG_FIT_CHI2:  # the residuals are not a time shift plus the shared errors
         verdict = (
             f"the range rates do not fit a time shift (reduced χ² {est.chi2_red:.2f} > {LAG_FIT_CHI2:g}): the IMU "
-            "and the ranging disagree for another reason — a sensor axis, unit, lever arm or radar gun position "
+            "and the ranging disagree for another reason — a sensor axis, unit, lever arm, radar gun position or "
+            "a gun's declared rate noise "
             f"(see the other checks) more likely than the timing; if those are right, check {keys}"
         )
     else:
