@@ -144,13 +144,23 @@ def _numbers(v: Any) -> list[float]:
 @dataclass(frozen=True)
 class Table:
     """A TOML table (dotted ``name``, e.g. ``"sensors.imu"``) and its keys.  ``free``: the value
-    kind of free-form keys (e.g. named radar guns), ``None`` for a closed table."""
+    kind of free-form keys (e.g. named radar guns), ``None`` for a closed table; ``free_ge`` /
+    ``free_gt``: bounds (≥, >) of every number of a free-form key's value, as a :class:`Key`'s."""
 
     name: str
     meaning: str
     keys: tuple[Key, ...] = ()
     free: str | None = None
     free_meaning: str = ""
+    free_ge: float | None = None
+    free_gt: float | None = None
+
+    @property
+    def free_key(self) -> Key | None:
+        """The :class:`Key` every free-form key is checked as (its kind and bounds), or None."""
+        if self.free is None:
+            return None
+        return Key("*", self.free, None, ge=self.free_ge, gt=self.free_gt)
 
     def key(self, name: str) -> Key | None:
         """The :class:`Key` called ``name``, or None."""
@@ -287,7 +297,7 @@ class Schema:
                     raise ScenarioError(file, dotted, f"expected a table [{dotted}], got {type(v).__name__}")
                 self._walk(v, f"{prefix}.{name}" if prefix else name, file, out.setdefault(name, {}), where)
             elif table is not None and table.free is not None:
-                out[name] = _check(file, dotted, v, None, table.free)
+                out[name] = _check(file, dotted, v, table.free_key, table.free)
             else:
                 known = ([k.name for k in table.keys] if table is not None else []) + children
                 raise ScenarioError(
@@ -374,7 +384,7 @@ def render_markdown(schema: Schema) -> str:
     """The schema as markdown: one table per TOML table (key, type, unit, default, meaning)."""
     intro = schema.intro or f'Keys of a `kind = "{schema.name}"` scenario ({schema.title})'
     lines = [f"{intro}. Unknown keys are errors; a value outside its range is an error naming the bound.", ""]
-    bounded = any(k.bounds for t in schema.tables for k in t.keys)
+    bounded = any(k.bounds for t in schema.tables for k in (*t.keys, *([t.free_key] if t.free_key else [])))
     for t in schema.tables:
         lines += [f"`[{t.name}]` — {_cell(t.meaning)}" if t.name else f"top level — {_cell(t.meaning)}", ""]
         if bounded:
@@ -390,7 +400,7 @@ def render_markdown(schema: Schema) -> str:
             rng = f" {k.bounds} |" if bounded else ""
             lines.append(f"| `{k.name}` | {kind} | {_cell(k.unit)} | {_fmt_default(k)} |{rng} {_cell(meaning)} |")
         if t.free is not None:
-            rng = "  |" if bounded else ""
+            rng = f" {t.free_key.bounds} |" if bounded else ""
             lines.append(f"| *any name* | {t.free} |  | — |{rng} {_cell(t.free_meaning)} |")
         lines.append("")
     return "\n".join(lines).rstrip() + "\n"

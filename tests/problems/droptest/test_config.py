@@ -234,3 +234,67 @@ def test_schema_declares_every_table_of_the_shipped_scenarios():
         for top, v in data.items():
             assert top in tables or any(t.startswith(top + ".") for t in tables), top
             assert isinstance(v, dict)
+
+
+# ------------------------------------------------------------------ a 1σ the filter cannot use
+def _ranging_copy_with(tmp_path: Path, key: str, value: str, extra: str = "") -> Path:
+    """droptest_ranging copied with the line ``key = ...`` set to ``value`` (and ``extra`` appended)."""
+    src = SHIPPED["droptest_ranging"]
+    dst = tmp_path / "scenarios" / "my_drop.toml"
+    dst.parent.mkdir(parents=True)
+    shutil.copytree(src.parent.parent / "landers", tmp_path / "landers")
+    lines = src.read_text().splitlines()
+    hits = [i for i, line in enumerate(lines) if line.split("=")[0].strip() == key]
+    assert len(hits) == 1, key
+    lines[hits[0]] = f"{key} = {value}"
+    dst.write_text("\n".join(lines) + "\n" + extra)
+    return dst
+
+
+@pytest.mark.parametrize(
+    "table, key",
+    [
+        ("sensors.gyro", "noise_dps"),
+        ("sensors.attitude_3dm", "gravity_sigma_deg"),
+        ("sensors.attitude_3dm", "magnetic_sigma_deg"),
+        ("sensors.ranging", "radar_range_sigma_m"),
+        ("sensors.ranging", "radar_rate_sigma_mps"),
+        ("filter", "hang_zupt_sigma_mps"),
+        ("filter", "velocity_sigma_mps"),
+        ("synthetic", "survey_sigma_m"),
+    ],
+)
+@pytest.mark.parametrize("value", ["0.0", "-0.01"])
+def test_a_zero_or_negative_filter_sigma_is_a_located_error(tmp_path, table, key, value):
+    """A measurement's or the filter's 1σ of 0 declares a perfect measurement or model: before the
+    bound, the smoother stopped with a non-positive-definite covariance naming other keys (exit 4),
+    and a negative survey σ ended in numpy's traceback; now the scenario is refused, naming the key."""
+    path = _ranging_copy_with(tmp_path, key, value)
+    with pytest.raises(ScenarioError, match="out of range: must be > 0") as ei:
+        DropSettings.from_scenario(load_scenario(path))
+    assert ei.value.key == f"{table}.{key}" and Path(ei.value.file) == path
+
+
+def test_a_per_gun_zero_rate_sigma_is_a_located_error(tmp_path):
+    guns = DropTestProblem().settings(load_scenario(SHIPPED["droptest_ranging"])).ranging.radar_guns
+    gun = sorted(guns)[0]
+    path = _ranging_copy_with(
+        tmp_path, "radar_rate_sigma_mps", "0.05", f"[sensors.ranging.rate_sigma_mps]\n{gun} = 0.0\n"
+    )
+    with pytest.raises(ScenarioError, match="out of range: must be > 0") as ei:
+        DropSettings.from_scenario(load_scenario(path))
+    assert ei.value.key == f"sensors.ranging.rate_sigma_mps.{gun}"
+
+
+def test_a_perfect_odometer_is_refused_unless_it_is_quantised(tmp_path):
+    path = _ranging_copy_with(tmp_path, "odometer_sigma_m", "0.0")
+    with pytest.raises(ScenarioError, match="perfect odometer") as ei:
+        DropSettings.from_scenario(load_scenario(path))
+    assert ei.value.key == "sensors.ranging.odometer_sigma_m"
+    quantised = _ranging_copy_with(tmp_path / "q", "odometer_sigma_m", "0.0")
+    text = quantised.read_text().replace(
+        "odometer_sigma_m = 0.0", "odometer_sigma_m = 0.0\nodometer_quantisation_m = 0.002"
+    )
+    quantised.write_text(text)
+    s = DropSettings.from_scenario(load_scenario(quantised))
+    assert s.ranging.odometer_sigma_m == 0.0 and s.ranging.odometer_quantisation_m == 0.002

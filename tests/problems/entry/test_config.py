@@ -143,6 +143,11 @@ def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggest
         ("truth.wind_layers", [["a", 1, 2, 3, 4]], "wind_layers"),
         ("vehicle.file", "nowhere.toml", "file not found"),
         ("atmosphere.fill_temperature_shape", "cubic", "use one of model, linear"),
+        # a negative 1σ: before the bound, numpy's "scale < 0" traceback from the synthetic writer
+        ("sensors.imu.accel_noise_mps2", -0.001, "must be ≥ 0"),
+        ("sensors.imu.gyro_noise_dps", -0.01, "must be ≥ 0"),
+        ("sensors.radar.velocity_sigma_mps", -1.0, "must be ≥ 0"),
+        ("sensors.radar.range_sigma_frac", -0.005, "must be ≥ 0"),
     ],
 )
 def test_bad_values_are_located_errors(key, value, match):

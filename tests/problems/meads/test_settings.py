@@ -93,3 +93,14 @@ def test_initial_state_file_has_a_schema(tmp_path):
     p = write_initial_state(tmp_path / "b.toml", dataclasses.replace(st, sigma_v=-1.0))
     with pytest.raises(ScenarioError, match=r"state\.sigma_velocity_mps.*must be ≥ 0"):
         read_initial_state(p)
+
+
+@pytest.mark.parametrize(
+    "key", ["sensors.pressure.scale_sigma", "sensors.pressure.residual_bias_sigma_pa", "sensors.imu.accel_noise_mps2"]
+)
+def test_a_negative_sigma_of_the_error_model_names_the_bound(key):
+    """A 1σ of the synthetic error chain below 0 was taken (squared, or as numpy's scale); now refused."""
+    sc = load_scenario(asset_path("scenarios", "msl_meads.toml")).with_overrides({key: -0.5})
+    with pytest.raises(ScenarioError, match="out of range: must be ≥ 0") as e:
+        MeadsProblem().settings(sc)
+    assert e.value.key == key

@@ -104,3 +104,14 @@ def test_a_step_or_coefficient_out_of_range_names_the_bound(key, value):
     with pytest.raises(ScenarioError) as e:
         Post2Settings.from_scenario(sc)
     assert e.value.key == key and "out of range: must be > 0" in str(e.value)
+
+
+def test_a_negative_synthetic_noise_sigma_is_a_located_error(tmp_path):
+    """``noise_sigma`` below 0 ran (its sign lost in the draw); now refused naming the observation."""
+    text = (assets_dir() / "scenarios" / "post2_huygens.toml").read_text(encoding="utf-8")
+    assert "noise_sigma = 0.02" in text
+    p = tmp_path / "huygens.toml"
+    p.write_text(text.replace("noise_sigma = 0.02", "noise_sigma = -0.02", 1), encoding="utf-8")
+    with pytest.raises(ScenarioError, match="must be >= 0") as e:
+        Post2Settings.from_scenario(load_scenario(p))
+    assert str(e.value.key).startswith("observations") and str(e.value.key).endswith(".noise_sigma")

@@ -178,7 +178,7 @@ SCHEMA = Schema(
                     0.4,
                     "deg/s",
                     _AFTER_FILTER,
-                    ge=0.0,
+                    gt=0.0,
                 ),
                 Key("bias_dps", _F, 0.05, "deg/s", "bias, 1σ", ge=0.0),
                 Key("scale", _F, 0.01, "1", "scale-factor error, 1σ", ge=0.0),
@@ -235,7 +235,7 @@ SCHEMA = Schema(
                     "direction error of the measured gravity ('up') vector: 1σ of the tilt about each of the two "
                     "axes perpendicular to it (a per-run calibration error; 10 % of it as per-sample noise in "
                     "the simulator)",
-                    ge=0.0,
+                    gt=0.0,
                 ),
                 Key(
                     "magnetic_sigma_deg",
@@ -243,7 +243,7 @@ SCHEMA = Schema(
                     1.0,
                     "deg",
                     "direction error of the measured magnetic vector, per perpendicular axis as above",
-                    ge=0.0,
+                    gt=0.0,
                 ),
                 Key("rate_hz", _F, 100.0, "Hz", "sample rate (synthetic)", gt=0.0),
                 Key("latency_s", _F, 0.0, "s", "delay of the 3DM time tags behind the motion, removed from them"),
@@ -295,9 +295,9 @@ SCHEMA = Schema(
                     0.02,
                     "m",
                     "radar-gun range noise of each recorded sample, 1σ (every gun without its own)",
-                    ge=0.0,
+                    gt=0.0,
                 ),
-                Key("radar_rate_sigma_mps", _F, 0.05, "m/s", "radar-gun range-rate noise, 1σ (idem)", ge=0.0),
+                Key("radar_rate_sigma_mps", _F, 0.05, "m/s", "radar-gun range-rate noise, 1σ (idem)", gt=0.0),
                 Key(
                     "reflector_body_m",
                     _V,
@@ -340,12 +340,14 @@ SCHEMA = Schema(
             "per gun: range noise (default `radar_range_sigma_m`)",
             free="float",
             free_meaning="gun name = range noise, 1σ [m]",
+            free_gt=0.0,
         ),
         Table(
             "sensors.ranging.rate_sigma_mps",
             "per gun: range-rate noise (default `radar_rate_sigma_mps`)",
             free="float",
             free_meaning="gun name = range-rate noise, 1σ [m/s]",
+            free_gt=0.0,
         ),
         Table(
             "filter",
@@ -359,14 +361,14 @@ SCHEMA = Schema(
                     choices=("kinematic", "dynamic"),
                 ),
                 Key("rate_hz", _F, 1000.0, "Hz", "IMU samples are averaged down to this rate", gt=0.0),
-                Key("q_accel", _F, 5.0, "m²/s⁵", "white-jerk PSD floor"),
-                Key("q_angular", _F, 20.0, "rad²/s⁵", "white angular-jerk PSD floor"),
-                Key("adaptive_gain", _F, 4.0, "1", "Q raised by gain × (measured jerk)² × dt"),
-                Key("hang_zupt_sigma_mps", _F, 0.005, "m/s", "zero-velocity update while hanging, 1σ"),
-                Key("velocity_sigma_mps", _F, 0.01, "m/s", "initial velocity, 1σ"),
-                Key("accel_sigma_mps2", _F, 0.5, "m/s²", "initial acceleration, 1σ"),
-                Key("rate_sigma_dps", _F, 0.5, "deg/s", "initial body rate, 1σ"),
-                Key("angular_accel_sigma", _F, 2.0, "rad/s²", "initial angular acceleration, 1σ"),
+                Key("q_accel", _F, 5.0, "m²/s⁵", "white-jerk PSD floor", ge=0.0),
+                Key("q_angular", _F, 20.0, "rad²/s⁵", "white angular-jerk PSD floor", ge=0.0),
+                Key("adaptive_gain", _F, 4.0, "1", "Q raised by gain × (measured jerk)² × dt", ge=0.0),
+                Key("hang_zupt_sigma_mps", _F, 0.005, "m/s", "zero-velocity update while hanging, 1σ", gt=0.0),
+                Key("velocity_sigma_mps", _F, 0.01, "m/s", "initial velocity, 1σ", gt=0.0),
+                Key("accel_sigma_mps2", _F, 0.5, "m/s²", "initial acceleration, 1σ", gt=0.0),
+                Key("rate_sigma_dps", _F, 0.5, "deg/s", "initial body rate, 1σ", gt=0.0),
+                Key("angular_accel_sigma", _F, 2.0, "rad/s²", "initial angular acceleration, 1σ", gt=0.0),
             ),
         ),
         Table(
@@ -380,7 +382,7 @@ SCHEMA = Schema(
                 Key("release_to_contact_s", _F, 1.3, "s", "release to first contact"),
                 Key("pre_release_s", _F, 0.5, "s", "hanging data before the release"),
                 Key("bungee_truth_scale", _F, 1.03, "1", "true bungee stiffness / the test plan's"),
-                Key("survey_sigma_m", _F, 0.03, "m", "error of the surveyed hanging position, 1σ"),
+                Key("survey_sigma_m", _F, 0.03, "m", "error of the surveyed hanging position, 1σ", gt=0.0),
                 Key("bag_pressure_psi", _F, None, "psi", "airbag pressure; absent: the lander asset's"),
             ),
         ),
@@ -705,8 +707,14 @@ def _check_cross_fields(v: dict, path: Path) -> None:
     rg = v["sensors"]["ranging"]
     for table in ("range_sigma_m", "rate_sigma_mps"):
         for gun, x in rg.get(table, {}).items():
-            if not (x >= 0.0 and np.isfinite(x)):
-                bad(f"sensors.ranging.{table}.{gun}", f"{x}: a 1σ must be ≥ 0")
+            if not (x > 0.0 and np.isfinite(x)):
+                bad(f"sensors.ranging.{table}.{gun}", f"{x}: a measurement's 1σ must be finite and > 0")
+    if rg.get("odometer") and not rg["odometer_sigma_m"] ** 2 + rg["odometer_quantisation_m"] ** 2 / 12.0 > 0.0:
+        bad(
+            "sensors.ranging.odometer_sigma_m",
+            "0 with `odometer_quantisation_m` 0 declares a perfect odometer: the filter's measurement variance "
+            "σ² + q²/12 must be > 0",
+        )
     guns = set(rg.get("radar_guns", {}))
     for table in ("reflectors", "range_sigma_m", "rate_sigma_mps"):
         for gun in rg.get(table, {}):

@@ -146,7 +146,7 @@ def _truth_keys() -> tuple[Key, ...]:
         else:
             kind = _F
         unit, meaning = _TRUTH_MEANING[f.name]
-        keys.append(Key(f.name, kind, v, unit, meaning))
+        keys.append(Key(f.name, kind, v, unit, meaning, ge=0.0 if "sigma" in f.name else None))  # a 1σ is ≥ 0
     return tuple(keys)
 
 
@@ -220,13 +220,21 @@ SCHEMA = Schema(
                     _PRE.rebuild_from_accel,
                     meaning="saturated X/Y rate from the lateral acceleration",
                 ),
-                Key("sigma_rate_dps", _F, None, "deg/s", "per-sample rate 1σ; absent: `[reconstruction] rate_dps`"),
+                Key(
+                    "sigma_rate_dps",
+                    _F,
+                    None,
+                    "deg/s",
+                    "per-sample rate 1σ; absent: `[reconstruction] rate_dps`",
+                    ge=0.0,
+                ),
                 Key(
                     "sigma_accel_mps2",
                     _F,
                     None,
                     "m/s²",
                     "per-sample acceleration 1σ; absent: `[reconstruction] accel_mps2`",
+                    ge=0.0,
                 ),
                 Key(
                     "sigma_rate_saturated_dps",
@@ -234,6 +242,7 @@ SCHEMA = Schema(
                     None,
                     "deg/s",
                     "rebuilt saturated rate 1σ; absent: `[reconstruction] rate_pdd_dps`",
+                    ge=0.0,
                 ),
                 Key(
                     "sigma_rate_resampled_dps",
@@ -241,8 +250,16 @@ SCHEMA = Schema(
                     None,
                     "deg/s",
                     "resampled rate 1σ; absent: `[reconstruction] rate_pdd_dps`",
+                    ge=0.0,
                 ),
-                Key("sigma_accel_resampled_mps2", _F, _PRE.sigma_f_resampled, "m/s²", "resampled acceleration 1σ"),
+                Key(
+                    "sigma_accel_resampled_mps2",
+                    _F,
+                    _PRE.sigma_f_resampled,
+                    "m/s²",
+                    "resampled acceleration 1σ",
+                    ge=0.0,
+                ),
             ),
         ),
         Table(
@@ -298,14 +315,15 @@ SCHEMA = Schema(
             (
                 Key("squint_deg", _F, SQUINT_DEG, "deg", "squint of beams B1..B3 from -Z_G"),
                 Key("azimuths_deg", _V, list(AZIMUTHS_DEG), "deg", "azimuths of B1..B3 from +X_G towards +Y_G"),
-                Key("slant_range_sigma_m", _F, _FS.slant_range, "m", "slant-range measurement 1σ"),
-                Key("slant_out_sigma_m", _F, _FS.slant_out, "m", "slant-out measurement 1σ"),
+                Key("slant_range_sigma_m", _F, _FS.slant_range, "m", "slant-range measurement 1σ", gt=0.0),
+                Key("slant_out_sigma_m", _F, _FS.slant_out, "m", "slant-out measurement 1σ", gt=0.0),
                 Key(
                     "terrain_sigma_m",
                     _F,
                     0.0,
                     "m",
                     "terrain relief about the sphere, 1σ: added in quadrature to both range 1σ",
+                    ge=0.0,
                 ),
                 Key(
                     "terrain_correlation_s",
@@ -317,7 +335,7 @@ SCHEMA = Schema(
                     "slant-out sample is multiplied by this time × the sample rate (R inflation for "
                     "time-correlated errors)",
                 ),
-                Key("velocity_out_sigma_mps", _F, _FS.velocity_out, "m/s", "velocity-out measurement 1σ"),
+                Key("velocity_out_sigma_mps", _F, _FS.velocity_out, "m/s", "velocity-out measurement 1σ", gt=0.0),
                 Key("constrained", _B, True, meaning="AMELIA Sect. 8 constrained update directions"),
             ),
         ),
@@ -345,14 +363,15 @@ SCHEMA = Schema(
                 ),
                 Key("tolerance", _F, _ATM.tolerance, "1", "drag-coefficient iteration tolerance (relative)"),
                 Key("max_iterations", _I, _ATM.max_iterations, meaning="drag-coefficient iterations"),
-                Key("cd_sigma", _F, _ATM.sigmas.cd_rel, "1", "drag coefficients, relative 1σ"),
-                Key("wind_sigma_mps", _F, _ATM.sigmas.wind, "m/s", "wind uncertainty below 30 km, 1σ"),
+                Key("cd_sigma", _F, _ATM.sigmas.cd_rel, "1", "drag coefficients, relative 1σ", ge=0.0),
+                Key("wind_sigma_mps", _F, _ATM.sigmas.wind, "m/s", "wind uncertainty below 30 km, 1σ", ge=0.0),
                 Key(
                     "fill_temperature_sigma_K",
                     _F,
                     _ATM.sigmas.fill_temperature_K,
                     "K",
                     "blackout fill: true temperature minus the assumed one, 1σ (Gaussian process)",
+                    ge=0.0,
                 ),
                 Key(
                     "fill_correlation_km",
@@ -372,11 +391,11 @@ SCHEMA = Schema(
             "sensors.imu",
             "synthetic IMU",
             (
-                Key("accel_noise_mps2", _F, _TM.imu.accel_noise, "m/s²", "per on-board sample, 1σ"),
+                Key("accel_noise_mps2", _F, _TM.imu.accel_noise, "m/s²", "per on-board sample, 1σ", ge=0.0),
                 Key("accel_bias_mps2", _F, _TM.imu.accel_bias, "m/s²", "bias, 1σ"),
                 Key("accel_scale", _F, _TM.imu.accel_scale, "1", "scale-factor error, 1σ"),
                 Key("accel_misalignment_rad", _F, _TM.imu.accel_misalignment, "rad", "triad misalignment, 1σ per axis"),
-                Key("gyro_noise_dps", _F, _deg(_TM.imu.gyro_noise), "deg/s", "per on-board sample, 1σ"),
+                Key("gyro_noise_dps", _F, _deg(_TM.imu.gyro_noise), "deg/s", "per on-board sample, 1σ", ge=0.0),
                 Key("gyro_bias_dps", _F, _deg(_TM.imu.gyro_bias), "deg/s", "bias, 1σ"),
                 Key("gyro_scale", _F, _TM.imu.gyro_scale, "1", "scale-factor error, 1σ"),
                 Key("gyro_misalignment_rad", _F, _TM.imu.gyro_misalignment, "rad", "triad misalignment, 1σ per axis"),
@@ -397,9 +416,16 @@ SCHEMA = Schema(
             "sensors.radar",
             "synthetic radar altimeter (RDA); zero_filled_packets also sets the telemetry check",
             (
-                Key("range_sigma_m", _F, _TM.range_sigma, "m", "1σ = hypot(range_sigma_m, range_sigma_frac × range)"),
-                Key("range_sigma_frac", _F, _TM.range_sigma_frac, "1", "range-proportional part"),
-                Key("velocity_sigma_mps", _F, _TM.velocity_sigma, "m/s", "velocity-out noise, 1σ"),
+                Key(
+                    "range_sigma_m",
+                    _F,
+                    _TM.range_sigma,
+                    "m",
+                    "1σ = hypot(range_sigma_m, range_sigma_frac × range)",
+                    ge=0.0,
+                ),
+                Key("range_sigma_frac", _F, _TM.range_sigma_frac, "1", "range-proportional part", ge=0.0),
+                Key("velocity_sigma_mps", _F, _TM.velocity_sigma, "m/s", "velocity-out noise, 1σ", ge=0.0),
                 Key("rate_hz", _F, _TM.rda_rate_hz, "Hz", "RDA packet rate"),
                 Key("on_after_fsr_s", _F, _TM.rda_on_after_fsr_s, "s", "RDA switched on after FSR"),
                 Key("slant_range_period_s", _F, _TM.sr_period_s, "s", "slant-range packet period"),
@@ -431,9 +457,9 @@ SCHEMA = Schema(
             "synthetic.nominal_error",
             "error of the on-board nominal initial state",
             (
-                Key("velocity_sigma_mps", _F, _TM.nominal.velocity_sigma, "m/s", "velocity, 1σ"),
-                Key("attitude_sigma_deg", _F, _deg(_TM.nominal.attitude_sigma), "deg", "attitude, 1σ"),
-                Key("position_sigma_m", _F, _TM.nominal.position_sigma, "m", "position, 1σ"),
+                Key("velocity_sigma_mps", _F, _TM.nominal.velocity_sigma, "m/s", "velocity, 1σ", ge=0.0),
+                Key("attitude_sigma_deg", _F, _deg(_TM.nominal.attitude_sigma), "deg", "attitude, 1σ", ge=0.0),
+                Key("position_sigma_m", _F, _TM.nominal.position_sigma, "m", "position, 1σ", ge=0.0),
                 Key("dx0", _L, None, "m/s, deg, m", "a fixed error (9 numbers) instead of a draw"),
             ),
         ),

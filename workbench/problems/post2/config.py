@@ -799,6 +799,8 @@ def _observation(file: Path, name: str, raw: dict, dof: int) -> ObservationSpec:
     noise = (
         None if t["noise_sigma"] is None else _si(_vec(file, f"{pre}.noise_sigma", t["noise_sigma"], d.size), d.unit)
     )
+    if noise is not None and not np.all(noise >= 0):
+        raise ScenarioError(file, f"{pre}.noise_sigma", "must be >= 0 (a 1σ)")
     w = int(t["median_window"])
     if w < 0:
         raise ScenarioError(file, f"{pre}.median_window", "must be >= 0")
