@@ -579,8 +579,54 @@ level 2 ×{{bench_numba_opt:results.levels.2.ratio_total|.3f}} of level 3's {{be
 
 All four: {{before/bench_compile:results.cpu_s_total|.1f}} s → {{bench_compile:results.cpu_s_total|.1f}} s of CPU
 (the compile times are wall clock of one process and move with the machine's load; the kernel counts do not).
+
+Where that compile goes (the same run: the child times every llvmlite C call and numba's own passes): of
+{{bench_compile:results.compile_s_total|.1f}} s, LLVM takes {{bench_compile:results.llvm_s_total|.1f}} s. In
+msl_meads that is {{bench_compile:results.scenarios.msl_meads.llvm_s|.1f}} s
+(optimisation passes {{bench_compile:results.scenarios.msl_meads.llvm.optimise_s|.1f}} s, machine code
+{{bench_compile:results.scenarios.msl_meads.llvm.codegen_s|.1f}} s) of its
+{{bench_compile:results.scenarios.msl_meads.numba_passes_s|.1f}} s in numba's passes; the rest is numba's Python:
+lowering to LLVM IR {{bench_compile:results.scenarios.msl_meads.lowering_python_s|.1f}} s and type inference
+{{bench_compile:results.scenarios.msl_meads.passes_top.nopython_type_inference|.1f}} s. In the drop test LLVM is
+{{bench_compile:results.scenarios.droptest.llvm_s|.1f}} s and lowering's Python
+{{bench_compile:results.scenarios.droptest.lowering_python_s|.1f}} s. No single kernel dominates (the largest,
+`{{bench_compile:results.scenarios.droptest.top.0.kernel}}`, is {{bench_compile:results.scenarios.droptest.top.0.excl_s|.1f}} s),
+and LLVM's optimisation passes, the only part an option reaches, are a minority of the compile, which is why the
+optimisation level moves the first run by little.
 """
 RESULTS_MD = RESULTS_MD + "\n" + _COMPILE
+
+_SIGMAS = """
+## A declared 1σ of zero or below (issue #26)
+
+A 1σ of 0 declares a perfect measurement or model, and a negative one is a typo; both were accepted for most keys.
+`python tests/benchmarks/bench_declared_sigmas.py` sets every noise or 1σ key a shipped scenario gives (a line
+whose name holds `sigma` or `noise`, its number not 0) to 0 and to minus its value, one edit at a time, and runs
+each through `workbench run` ({{bench_declared_sigmas:results.edits}} edits;
+`docs/results/before/bench_declared_sigmas.json` is the same script on the workbench of
+{{before/bench_declared_sigmas:results.root_commit}}):
+
+| outcome | before | now |
+|---|---|---|
+| input error (exit 3) | {{before/bench_declared_sigmas:results.outcomes.input error}} | {{bench_declared_sigmas:results.outcomes.input error}} |
+| … naming the edited key | {{before/bench_declared_sigmas:results.input_errors_naming_the_key}} | {{bench_declared_sigmas:results.input_errors_naming_the_key}} |
+| numerical failure (exit 4) | {{before/bench_declared_sigmas:results.outcomes.numerical failure}} | {{bench_declared_sigmas:results.outcomes.numerical failure}} |
+| refused as unhealthy (exit 6) | {{before/bench_declared_sigmas:results.outcomes.unhealthy}} | {{bench_declared_sigmas:results.outcomes.unhealthy}} |
+| ran (exit 0, with its verdict) | {{before/bench_declared_sigmas:results.outcomes.ran}} | {{bench_declared_sigmas:results.outcomes.ran}} |
+| **traceback** | **{{before/bench_declared_sigmas:results.outcomes.traceback}}** | **{{bench_declared_sigmas:results.outcomes.traceback}}** |
+
+Before, a zero 1σ of a drop-test measurement (3DM gravity or magnetic direction, hanging ZUPT, radar range or
+range rate, odometer) or of the gyro's noise stopped the RTS smoother with a covariance that was not positive
+definite and a hint naming other keys, and a negative survey 1σ or entry IMU noise ended in numpy's
+`scale < 0` traceback; a zero survey 1σ was refused under the key of the setup file the workbench writes, not the
+scenario's. Now every 1σ is ≥ 0 in its schema, and the ones the filter divides by (a measurement's,
+the gyro's noise, the filter's initial and ZUPT 1σ, the survey's) are > 0; an odometer needs
+σ² + q²/12 > 0. What still runs with a 0 is a synthetic sensor written without noise while the filter keeps its
+own 1σ (the drop tests' `noise_g`, post2's `noise_sigma`, the entry IMU and radar: a WARNING where the NIS reads
+low, else OK), or a truth or dispersion without that error source; a zero terrain 1σ under a truth with terrain
+is refused as unhealthy.
+"""
+RESULTS_MD = RESULTS_MD + "\n" + _SIGMAS
 
 _K = "bench_droptest:results.configurations"
 README_BLOCKS["headline"] = f"""\
