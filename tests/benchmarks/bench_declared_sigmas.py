@@ -87,7 +87,7 @@ def run_one(e: dict, assets: Path, out: Path, env: dict, root: Path) -> dict:
             verdict = line.split("] health ", 1)[1].split(";")[0].split(" ")[0]
     last = (p.stderr.strip().splitlines() or [""])[-1]
     return {**e, "exit": p.returncode, "outcome": outcome, "verdict": verdict, "names_key": e["key"] in last,
-            "message": last.replace(str(assets), "ASSETS")[:400]}  # fmt: skip
+            "message": last.replace(str(assets), "ASSETS").replace(str(out), "OUT")[:400]}  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
                            capture_output=True, text=True)  # fmt: skip
     results = {
         "root_commit": _commit(root),
-        "workbench_imported_from": str(Path(probe.stdout.strip()).parent.parent),
+        "workbench_imported_from_root": Path(probe.stdout.strip()).resolve().parent.parent == root,
         "edits": len(rows),
         "outcomes": dict(counts),
         "input_errors_naming_the_key": sum(r["outcome"] == "input error" and r["names_key"] for r in rows),

@@ -603,8 +603,8 @@ A 1σ of 0 declares a perfect measurement or model, and a negative one is a typo
 `python tests/benchmarks/bench_declared_sigmas.py` sets every noise or 1σ key a shipped scenario gives (a line
 whose name holds `sigma` or `noise`, its number not 0) to 0 and to minus its value, one edit at a time, and runs
 each through `workbench run` ({{bench_declared_sigmas:results.edits}} edits;
-`docs/results/before/bench_declared_sigmas.json` is the same script on the workbench of
-{{before/bench_declared_sigmas:results.root_commit}}):
+`docs/results/before/bench_declared_sigmas.json` is the same script with `--root` a checkout of
+{{before/bench_declared_sigmas:results.root_commit}}, e.g. `git worktree add DIR {{before/bench_declared_sigmas:results.root_commit}}`):
 
 | outcome | before | now |
 |---|---|---|
