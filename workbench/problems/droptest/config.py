@@ -707,8 +707,8 @@ def _check_cross_fields(v: dict, path: Path) -> None:
     rg = v["sensors"]["ranging"]
     for table in ("range_sigma_m", "rate_sigma_mps"):
         for gun, x in rg.get(table, {}).items():
-            if not (x > 0.0 and np.isfinite(x)):
-                bad(f"sensors.ranging.{table}.{gun}", f"{x}: a measurement's 1σ must be finite and > 0")
+            if not np.isfinite(x):  # > 0 is the table's schema bound
+                bad(f"sensors.ranging.{table}.{gun}", f"{x}: a measurement's 1σ must be finite")
     if rg.get("odometer") and not rg["odometer_sigma_m"] ** 2 + rg["odometer_quantisation_m"] ** 2 / 12.0 > 0.0:
         bad(
             "sensors.ranging.odometer_sigma_m",
