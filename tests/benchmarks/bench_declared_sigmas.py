@@ -1,6 +1,7 @@
-"""Every declared 1σ a user can get wrong: each noise or 1σ key that a shipped scenario sets (a TOML
-line ``<name with "sigma" or "noise"> = <a number other than 0>``) set to 0 and to minus its value,
-one edit at a time, each run by ``workbench run`` in its own process, as a user would.
+"""Every declared 1σ a user can get wrong: each noise or 1σ key that a shipped scenario sets to a
+number other than 0 (a key named with "sigma" or "noise", or one whose schema meaning or table says
+1σ, e.g. the entry ``[reconstruction]`` table) set to 0 and to minus its value, one edit at a time,
+each run by ``workbench run`` in its own process, as a user would.
 
 A 1σ of 0 declares a perfect measurement or model; a negative one is a typo. The outcome of every
 edit is one of: ``input error`` (exit 3, the message names the file and key), ``numerical failure``
@@ -9,7 +10,7 @@ verdict) or ``traceback`` (an exception nobody caught). ``--root`` runs another 
 ``workbench`` (its folder first on ``PYTHONPATH``) on the same edits: the before of a change.
 
     python tests/benchmarks/bench_declared_sigmas.py [--jobs 2] [--scenarios droptest,schiaparelli]
-        [--root OTHER_CHECKOUT] [--out docs/results/bench_declared_sigmas.json]
+        [--keys rate_dps,...] [--root OTHER_CHECKOUT] [--out docs/results/bench_declared_sigmas.json]
 """
 
 from __future__ import annotations
@@ -31,8 +32,28 @@ sys.path.insert(0, str(HERE))
 
 from bench_json import write_benchmark_json  # noqa: E402
 
-#: a scenario line setting a noise or 1σ key to a number: (indent, key, " = ", number, rest of the line)
-_LINE = re.compile(r"^(\s*)([A-Za-z_0-9]*(?:sigma|noise)[A-Za-z_0-9]*)(\s*=\s*)([-+0-9.eE]+)(.*)$")
+#: a scenario line setting a key to a number: (indent, key, " = ", number, rest of the line)
+_LINE = re.compile(r"^(\s*)([A-Za-z_0-9]+)(\s*=\s*)([-+0-9.eE]+)(.*)$")
+#: a key named as a noise or 1σ
+_NAMED = re.compile(r"sigma|noise")
+#: a TOML table header ``[name]``
+_HEADER = re.compile(r"^\s*\[([^\[\]]+)\]")
+#: the scenario kind line
+_KIND = re.compile(r'^\s*kind\s*=\s*"([^"]+)"')
+
+
+def declared_1sigma() -> dict[str, set[tuple[str, str]]]:
+    """{scenario kind: {(table, key)}}: the keys of each scenario schema (this checkout's) whose
+    meaning or table says they are a 1σ, whatever their name."""
+    from workbench.problems import registry
+
+    out: dict[str, set[tuple[str, str]]] = {}
+    for sch in registry.schemas():
+        for t in sch.tables:
+            for k in t.keys:
+                if "1σ" in k.meaning or "1σ" in t.meaning:
+                    out.setdefault(sch.name, set()).add((t.name, k.name))
+    return out
 
 
 #: every outcome :func:`classify` gives (others are ``exit N``), each counted even when 0
@@ -41,14 +62,21 @@ OUTCOMES = ("input error", "numerical failure", "unhealthy", "ran", "traceback")
 
 def edits(scenarios: Path, names: list[str] | None) -> list[dict]:
     """Every (scenario, line, key, value) edit of the scenario TOMLs in ``scenarios``: 0 and the
-    negated value of each noise/1σ line whose number is not 0."""
+    negated value of each noise/1σ line (:data:`_NAMED`, :func:`declared_1sigma`) whose number is not 0."""
     out = []
+    declared = declared_1sigma()
     for path in sorted(scenarios.glob("*.toml")):
         if names and path.stem not in names:
             continue
+        table, kind = "", ""
         for i, line in enumerate(path.read_text(encoding="utf-8").splitlines()):
+            if h := _HEADER.match(line):
+                table = h.group(1).strip()
+                continue
+            if table == "scenario" and (k := _KIND.match(line)):
+                kind = k.group(1)
             m = _LINE.match(line)
-            if not m:
+            if not m or not (_NAMED.search(m.group(2)) or (table, m.group(2)) in declared.get(kind, set())):
                 continue
             try:
                 x = float(m.group(4))
@@ -94,6 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenarios", default="", help="comma-separated shipped scenario names (default: all)")
+    ap.add_argument("--keys", default="", help="comma-separated key names (default: every noise/1σ key)")
     ap.add_argument("--root", default=str(REPO), help="the checkout whose workbench runs the edits")
     ap.add_argument("--out", default=str(REPO / "docs" / "results" / "bench_declared_sigmas.json"))
     a = ap.parse_args(argv)
@@ -103,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
         assets = Path(tmp) / "assets"
         shutil.copytree(root / "assets", assets)
         todo = edits(assets / "scenarios", [s for s in a.scenarios.split(",") if s] or None)
+        if a.keys:
+            todo = [e for e in todo if e["key"] in a.keys.split(",")]
         print(f"{len(todo)} edits, {a.jobs} at a time, workbench of {root}", flush=True)
         with ThreadPoolExecutor(a.jobs) as ex:
             rows = list(ex.map(lambda e: run_one(e, assets, Path(tmp) / "out", env, root), todo))

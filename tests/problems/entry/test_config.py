@@ -148,6 +148,29 @@ def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggest
         ("sensors.imu.gyro_noise_dps", -0.01, "must be ≥ 0"),
         ("sensors.radar.velocity_sigma_mps", -1.0, "must be ≥ 0"),
         ("sensors.radar.range_sigma_frac", -0.005, "must be ≥ 0"),
+        # 1σ keys not named "sigma": the reconstruction's (the filter's process and initial noise;
+        # > 0 for the initial 1σ and the rate inside the saturation window, which the gyro does not
+        # measure), the IMU datasheet's, the dispersion's (> 0: a zero spread made the accepted
+        # members' covariance singular, a LinAlgError naming no key) and the synthetic IMU's (a
+        # negative one was numpy's "scale < 0" traceback)
+        ("reconstruction.rate_dps", -0.02, "must be ≥ 0"),
+        ("reconstruction.rate_pdd_dps", -0.5, "must be > 0"),
+        ("reconstruction.accel_mps2", -0.01, "must be ≥ 0"),
+        ("reconstruction.attitude_deg", 0.0, "must be > 0"),
+        ("reconstruction.velocity_mps", -10.0, "must be > 0"),
+        ("reconstruction.position_m", 0.0, "must be > 0"),
+        ("reconstruction.imu_gyro_bias_dps", -0.01, "must be ≥ 0"),
+        ("reconstruction.imu_accel_scale", -1e-4, "must be ≥ 0"),
+        ("reconstruction.imu_accel_misalignment_rad", -1e-3, "must be ≥ 0"),
+        ("dispersion.attitude_deg", 0.0, "must be > 0"),
+        ("dispersion.velocity_mps", -1.0, "must be > 0"),
+        ("dispersion.position_m", 0.0, "must be > 0"),
+        ("dispersion.members", 0, "must be > 0"),
+        ("sensors.imu.gyro_bias_dps", -0.01, "must be ≥ 0"),
+        ("sensors.imu.accel_scale", -1e-4, "must be ≥ 0"),
+        ("sensors.imu.gyro_misalignment_rad", -1e-3, "must be ≥ 0"),
+        ("atmosphere.tolerance", 0.0, "must be > 0"),
+        ("atmosphere.max_iterations", 0, "must be > 0"),
     ],
 )
 def test_bad_values_are_located_errors(key, value, match):

@@ -266,14 +266,19 @@ SCHEMA = Schema(
             "reconstruction",
             "AMELIA Table 3, reconstruction column (1σ)",
             (
-                Key("attitude_deg", _F, 1.0, "deg", "initial attitude"),
-                Key("velocity_mps", _F, 10.0, "m/s", "initial velocity"),
-                Key("position_m", _F, 2000.0, "m", "initial position"),
-                Key("rate_dps", _F, _deg(_PRE.sigma_w), "deg/s", "body rate, per sample"),
+                Key("attitude_deg", _F, 1.0, "deg", "initial attitude", gt=0.0),
+                Key("velocity_mps", _F, 10.0, "m/s", "initial velocity", gt=0.0),
+                Key("position_m", _F, 2000.0, "m", "initial position", gt=0.0),
+                Key("rate_dps", _F, _deg(_PRE.sigma_w), "deg/s", "body rate, per sample", ge=0.0),
                 Key(
-                    "rate_pdd_dps", _F, _deg(_PRE.sigma_w_saturated), "deg/s", "body rate inside the saturation window"
+                    "rate_pdd_dps",
+                    _F,
+                    _deg(_PRE.sigma_w_saturated),
+                    "deg/s",
+                    "body rate inside the saturation window",
+                    gt=0.0,
                 ),
-                Key("accel_mps2", _F, _PRE.sigma_f, "m/s²", "specific force, per sample"),
+                Key("accel_mps2", _F, _PRE.sigma_f, "m/s²", "specific force, per sample", ge=0.0),
                 Key(
                     "bridge_mode",
                     _S,
@@ -282,24 +287,38 @@ SCHEMA = Schema(
                     choices=("relative", "paper"),
                 ),
                 Key("initial", _S, "fused", meaning="the smoother's start", choices=("fused", "dispersion", "nominal")),
-                Key("imu_accel_bias_mps2", _F, 0.0, "m/s²", "IMU datasheet: accelerometer bias, 1σ (process noise)"),
-                Key("imu_accel_scale", _F, 0.0, "1", "IMU datasheet: accelerometer scale factor, 1σ"),
-                Key("imu_accel_misalignment_rad", _F, 0.0, "rad", "IMU datasheet: accelerometer misalignment, 1σ"),
-                Key("imu_gyro_bias_dps", _F, 0.0, "deg/s", "IMU datasheet: gyro bias, 1σ"),
-                Key("imu_gyro_scale", _F, 0.0, "1", "IMU datasheet: gyro scale factor, 1σ"),
-                Key("imu_gyro_misalignment_rad", _F, 0.0, "rad", "IMU datasheet: gyro misalignment, 1σ"),
+                Key(
+                    "imu_accel_bias_mps2",
+                    _F,
+                    0.0,
+                    "m/s²",
+                    "IMU datasheet: accelerometer bias, 1σ (process noise)",
+                    ge=0.0,
+                ),
+                Key("imu_accel_scale", _F, 0.0, "1", "IMU datasheet: accelerometer scale factor, 1σ", ge=0.0),
+                Key(
+                    "imu_accel_misalignment_rad",
+                    _F,
+                    0.0,
+                    "rad",
+                    "IMU datasheet: accelerometer misalignment, 1σ",
+                    ge=0.0,
+                ),
+                Key("imu_gyro_bias_dps", _F, 0.0, "deg/s", "IMU datasheet: gyro bias, 1σ", ge=0.0),
+                Key("imu_gyro_scale", _F, 0.0, "1", "IMU datasheet: gyro scale factor, 1σ", ge=0.0),
+                Key("imu_gyro_misalignment_rad", _F, 0.0, "rad", "IMU datasheet: gyro misalignment, 1σ", ge=0.0),
             ),
         ),
         Table(
             "dispersion",
             "AMELIA Sect. 6 dispersion analysis",
             (
-                Key("members", _I, 10000, meaning="trajectories per round"),
-                Key("chunk_size", _I, 1000, meaning="members per work unit"),
+                Key("members", _I, 10000, meaning="trajectories per round", gt=0),
+                Key("chunk_size", _I, 1000, meaning="members per work unit", gt=0),
                 Key("seed", _I, 2016, meaning="random seed"),
-                Key("attitude_deg", _F, _deg(_DS.attitude_rad), "deg", "initial attitude dispersion, 1σ"),
-                Key("velocity_mps", _F, _DS.velocity_m_s, "m/s", "initial velocity dispersion, 1σ"),
-                Key("position_m", _F, _DS.position_m, "m", "initial position dispersion, 1σ"),
+                Key("attitude_deg", _F, _deg(_DS.attitude_rad), "deg", "initial attitude dispersion, 1σ", gt=0.0),
+                Key("velocity_mps", _F, _DS.velocity_m_s, "m/s", "initial velocity dispersion, 1σ", gt=0.0),
+                Key("position_m", _F, _DS.position_m, "m", "initial position dispersion, 1σ", gt=0.0),
                 Key("cloud", _I, 300, meaning="members kept for the recording"),
                 Key("refine_rounds", _I, 0, meaning="extra rounds sampled about the previous elite"),
             ),
@@ -361,8 +380,8 @@ SCHEMA = Schema(
                     "or offset + trend alone",
                     choices=FILL_TEMPERATURE_SHAPES,
                 ),
-                Key("tolerance", _F, _ATM.tolerance, "1", "drag-coefficient iteration tolerance (relative)"),
-                Key("max_iterations", _I, _ATM.max_iterations, meaning="drag-coefficient iterations"),
+                Key("tolerance", _F, _ATM.tolerance, "1", "drag-coefficient iteration tolerance (relative)", gt=0.0),
+                Key("max_iterations", _I, _ATM.max_iterations, meaning="drag-coefficient iterations", gt=0),
                 Key("cd_sigma", _F, _ATM.sigmas.cd_rel, "1", "drag coefficients, relative 1σ", ge=0.0),
                 Key("wind_sigma_mps", _F, _ATM.sigmas.wind, "m/s", "wind uncertainty below 30 km, 1σ", ge=0.0),
                 Key(
@@ -392,13 +411,27 @@ SCHEMA = Schema(
             "synthetic IMU",
             (
                 Key("accel_noise_mps2", _F, _TM.imu.accel_noise, "m/s²", "per on-board sample, 1σ", ge=0.0),
-                Key("accel_bias_mps2", _F, _TM.imu.accel_bias, "m/s²", "bias, 1σ"),
-                Key("accel_scale", _F, _TM.imu.accel_scale, "1", "scale-factor error, 1σ"),
-                Key("accel_misalignment_rad", _F, _TM.imu.accel_misalignment, "rad", "triad misalignment, 1σ per axis"),
+                Key("accel_bias_mps2", _F, _TM.imu.accel_bias, "m/s²", "bias, 1σ", ge=0.0),
+                Key("accel_scale", _F, _TM.imu.accel_scale, "1", "scale-factor error, 1σ", ge=0.0),
+                Key(
+                    "accel_misalignment_rad",
+                    _F,
+                    _TM.imu.accel_misalignment,
+                    "rad",
+                    "triad misalignment, 1σ per axis",
+                    ge=0.0,
+                ),
                 Key("gyro_noise_dps", _F, _deg(_TM.imu.gyro_noise), "deg/s", "per on-board sample, 1σ", ge=0.0),
-                Key("gyro_bias_dps", _F, _deg(_TM.imu.gyro_bias), "deg/s", "bias, 1σ"),
-                Key("gyro_scale", _F, _TM.imu.gyro_scale, "1", "scale-factor error, 1σ"),
-                Key("gyro_misalignment_rad", _F, _TM.imu.gyro_misalignment, "rad", "triad misalignment, 1σ per axis"),
+                Key("gyro_bias_dps", _F, _deg(_TM.imu.gyro_bias), "deg/s", "bias, 1σ", ge=0.0),
+                Key("gyro_scale", _F, _TM.imu.gyro_scale, "1", "scale-factor error, 1σ", ge=0.0),
+                Key(
+                    "gyro_misalignment_rad",
+                    _F,
+                    _TM.imu.gyro_misalignment,
+                    "rad",
+                    "triad misalignment, 1σ per axis",
+                    ge=0.0,
+                ),
                 Key(
                     "gyro_full_scale_dps",
                     "number_or_vec3",
@@ -603,29 +636,15 @@ class EntrySettings:
 
     @classmethod
     def from_scenario(cls, scenario: Scenario) -> EntrySettings:
-        """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types, choices), check the
-        values (counts and sigmas > 0, rules ``[centre, half-width > 0]``, a parsable epoch, the
-        truth and sensor specs), load the vehicle asset once and build the settings; every error is
-        a :class:`ScenarioError` naming file and key."""
+        """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types, choices, the bounds of
+        every count and 1σ), check the rest (rules ``[centre, half-width > 0]``, a parsable epoch,
+        the truth and sensor specs), load the vehicle asset once and build the settings; every
+        error is a :class:`ScenarioError` naming file and key."""
         if scenario.kind != "entry":
             raise ScenarioError(scenario.path, "scenario.kind", f"{scenario.kind!r} is not an entry scenario")
         file = scenario.path
         v = SCHEMA.validate(scenario.data, file)
         run = RunInfo.from_scenario(scenario)
-        for table, key in (
-            ("dispersion", "members"),
-            ("dispersion", "chunk_size"),
-            ("reconstruction", "velocity_mps"),
-            ("reconstruction", "attitude_deg"),
-            ("reconstruction", "position_m"),
-            ("radar", "slant_range_sigma_m"),
-            ("radar", "slant_out_sigma_m"),
-            ("radar", "velocity_out_sigma_mps"),
-            ("atmosphere", "max_iterations"),
-            ("atmosphere", "tolerance"),
-        ):
-            if v[table][key] <= 0:
-                raise ScenarioError(file, f"{table}.{key}", "must be > 0")
         epoch = v["scenario"]["epoch_utc"]
         if epoch is not None:
             try:
