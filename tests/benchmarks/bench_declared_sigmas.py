@@ -36,8 +36,10 @@ from bench_json import write_benchmark_json  # noqa: E402
 _LINE = re.compile(r"^(\s*)([A-Za-z_0-9]+)(\s*=\s*)([-+0-9.eE]+)(.*)$")
 #: a key named as a noise or 1σ
 _NAMED = re.compile(r"sigma|noise")
-#: a TOML table header ``[name]``
-_HEADER = re.compile(r"^\s*\[([^\[\]]+)\]")
+#: a TOML table header ``[name]`` or ``[dotted.name]`` (not a line of a multi-line array)
+_HEADER = re.compile(r"^\s*\[\s*([A-Za-z_][A-Za-z0-9_.\-]*)\s*\]\s*(?:#.*)?$")
+#: a meaning that says 1σ, in either spelling
+_SAYS = re.compile(r"1σ|1-sigma")
 #: the scenario kind line
 _KIND = re.compile(r'^\s*kind\s*=\s*"([^"]+)"')
 
@@ -51,7 +53,7 @@ def declared_1sigma() -> dict[str, set[tuple[str, str]]]:
     for sch in registry.schemas():
         for t in sch.tables:
             for k in t.keys:
-                if "1σ" in k.meaning or "1σ" in t.meaning:
+                if _SAYS.search(k.meaning) or _SAYS.search(t.meaning):
                     out.setdefault(sch.name, set()).add((t.name, k.name))
     return out
 
@@ -85,8 +87,22 @@ def edits(scenarios: Path, names: list[str] | None) -> list[dict]:
             if x == 0.0:
                 continue
             for tag, value in (("zero", "0.0"), ("negative", "-" + m.group(4).lstrip("+-"))):
-                out.append({"scenario": path.stem, "line": i + 1, "key": m.group(2), "tag": tag, "value": value})
+                out.append(
+                    {
+                        "scenario": path.stem,
+                        "line": i + 1,
+                        "table": table,
+                        "key": m.group(2),
+                        "tag": tag,
+                        "value": value,
+                    }
+                )
     return out
+
+
+def _dotted(e: dict) -> str:
+    """The edited key as an error names it: ``table.key`` (``key`` at the top level)."""
+    return f"{e['table']}.{e['key']}" if e["table"] else e["key"]
 
 
 def classify(rc: int, stderr: str) -> str:
@@ -114,7 +130,7 @@ def run_one(e: dict, assets: Path, out: Path, env: dict, root: Path) -> dict:
         if "] health " in line:
             verdict = line.split("] health ", 1)[1].split(";")[0].split(" ")[0]
     last = (p.stderr.strip().splitlines() or [""])[-1]
-    return {**e, "exit": p.returncode, "outcome": outcome, "verdict": verdict, "names_key": e["key"] in last,
+    return {**e, "exit": p.returncode, "outcome": outcome, "verdict": verdict, "names_key": _dotted(e) in last,
             "message": last.replace(str(assets), "ASSETS").replace(str(out), "OUT")[:400]}  # fmt: skip
 
 
@@ -122,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--scenarios", default="", help="comma-separated shipped scenario names (default: all)")
-    ap.add_argument("--keys", default="", help="comma-separated key names (default: every noise/1σ key)")
+    ap.add_argument("--keys", default="", help="comma-separated key names or table.key (default: every noise/1σ key)")
     ap.add_argument("--root", default=str(REPO), help="the checkout whose workbench runs the edits")
     ap.add_argument("--out", default=str(REPO / "docs" / "results" / "bench_declared_sigmas.json"))
     a = ap.parse_args(argv)
@@ -133,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
         shutil.copytree(root / "assets", assets)
         todo = edits(assets / "scenarios", [s for s in a.scenarios.split(",") if s] or None)
         if a.keys:
-            todo = [e for e in todo if e["key"] in a.keys.split(",")]
+            keys = a.keys.split(",")
+            todo = [e for e in todo if e["key"] in keys or f"{e['table']}.{e['key']}" in keys]
         print(f"{len(todo)} edits, {a.jobs} at a time, workbench of {root}", flush=True)
         with ThreadPoolExecutor(a.jobs) as ex:
             rows = list(ex.map(lambda e: run_one(e, assets, Path(tmp) / "out", env, root), todo))

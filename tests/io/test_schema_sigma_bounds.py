@@ -15,6 +15,8 @@ import pytest
 from workbench.problems import registry
 
 _NAMED = re.compile(r"sigma|noise")
+#: a meaning that says 1σ, in either spelling
+_SAYS = re.compile(r"1σ|1-sigma")
 _NUMERIC = ("float", "int", "vec3", "list", "number_or_vec3", "number_or_list")
 
 
@@ -24,7 +26,7 @@ def _declared_1sigma():
     for sch in registry.schemas():
         for t in sch.tables:
             for k in t.keys:
-                if k.kind in _NUMERIC and (_NAMED.search(k.name) or "1σ" in k.meaning or "1σ" in t.meaning):
+                if k.kind in _NUMERIC and (_NAMED.search(k.name) or _SAYS.search(k.meaning) or _SAYS.search(t.meaning)):
                     out.append((sch, t, k))
     return out
 
@@ -34,6 +36,7 @@ def test_there_are_declared_sigmas_under_other_names():
     names = {(s.name, t.name, k.name) for s, t, k in _declared_1sigma()}
     assert ("entry", "reconstruction", "rate_dps") in names
     assert ("entry", "dispersion", "attitude_deg") in names
+    assert ("meads", "estimator", "model_error_frac") in names  # "1-sigma"
     assert len(names) > 50
 
 
@@ -50,7 +53,9 @@ def test_free_form_sigma_tables_are_bounded():
     seen = 0
     for sch in registry.schemas():
         for t in sch.tables:
-            if t.free in _NUMERIC and ("1σ" in t.free_meaning or "1σ" in t.meaning or _NAMED.search(t.name)):
+            if t.free in _NUMERIC and (
+                _SAYS.search(t.free_meaning) or _SAYS.search(t.meaning) or _NAMED.search(t.name)
+            ):
                 seen += 1
                 assert t.free_ge is not None or t.free_gt is not None, f"{sch.name} [{t.name}]"
                 assert min(b for b in (t.free_ge, t.free_gt) if b is not None) >= 0.0

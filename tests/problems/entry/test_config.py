@@ -155,6 +155,8 @@ def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggest
         # negative one was numpy's "scale < 0" traceback)
         ("reconstruction.rate_dps", -0.02, "must be ≥ 0"),
         ("reconstruction.rate_pdd_dps", -0.5, "must be > 0"),
+        ("preprocess.sigma_rate_saturated_dps", 0.0, "must be > 0"),
+        ("preprocess.sigma_rate_resampled_dps", 0.0, "must be > 0"),
         ("reconstruction.accel_mps2", -0.01, "must be ≥ 0"),
         ("reconstruction.attitude_deg", 0.0, "must be > 0"),
         ("reconstruction.velocity_mps", -10.0, "must be > 0"),

@@ -96,7 +96,16 @@ def test_initial_state_file_has_a_schema(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "key", ["sensors.pressure.scale_sigma", "sensors.pressure.residual_bias_sigma_pa", "sensors.imu.accel_noise_mps2"]
+    "key",
+    [
+        "sensors.pressure.scale_sigma",
+        "sensors.pressure.residual_bias_sigma_pa",
+        "sensors.imu.accel_noise_mps2",
+        # 1σ keys not named "sigma" (their meaning says "1-sigma")
+        "sensors.imu.accel_bias_mps2",
+        "sensors.imu.gyro_scale",
+        "estimator.model_error_frac",
+    ],
 )
 def test_a_negative_sigma_of_the_error_model_names_the_bound(key):
     """A 1σ of the synthetic error chain below 0 was taken (squared, or as numpy's scale); now refused."""

@@ -242,7 +242,7 @@ SCHEMA = Schema(
                     None,
                     "deg/s",
                     "rebuilt saturated rate 1σ; absent: `[reconstruction] rate_pdd_dps`",
-                    ge=0.0,
+                    gt=0.0,
                 ),
                 Key(
                     "sigma_rate_resampled_dps",
@@ -250,7 +250,7 @@ SCHEMA = Schema(
                     None,
                     "deg/s",
                     "resampled rate 1σ; absent: `[reconstruction] rate_pdd_dps`",
-                    ge=0.0,
+                    gt=0.0,
                 ),
                 Key(
                     "sigma_accel_resampled_mps2",
@@ -275,7 +275,7 @@ SCHEMA = Schema(
                     _F,
                     _deg(_PRE.sigma_w_saturated),
                     "deg/s",
-                    "body rate inside the saturation window",
+                    "body rate inside the saturation window and after PDD's resampling",
                     gt=0.0,
                 ),
                 Key("accel_mps2", _F, _PRE.sigma_f, "m/s²", "specific force, per sample", ge=0.0),
@@ -319,8 +319,8 @@ SCHEMA = Schema(
                 Key("attitude_deg", _F, _deg(_DS.attitude_rad), "deg", "initial attitude dispersion, 1σ", gt=0.0),
                 Key("velocity_mps", _F, _DS.velocity_m_s, "m/s", "initial velocity dispersion, 1σ", gt=0.0),
                 Key("position_m", _F, _DS.position_m, "m", "initial position dispersion, 1σ", gt=0.0),
-                Key("cloud", _I, 300, meaning="members kept for the recording"),
-                Key("refine_rounds", _I, 0, meaning="extra rounds sampled about the previous elite"),
+                Key("cloud", _I, 300, meaning="members kept for the recording", ge=0),
+                Key("refine_rounds", _I, 0, meaning="extra rounds sampled about the previous elite", ge=0),
             ),
         ),
         Table(
@@ -636,8 +636,8 @@ class EntrySettings:
 
     @classmethod
     def from_scenario(cls, scenario: Scenario) -> EntrySettings:
-        """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types, choices, the bounds of
-        every count and 1σ), check the rest (rules ``[centre, half-width > 0]``, a parsable epoch,
+        """Validate ``scenario`` against :data:`SCHEMA` (unknown keys, types, choices, the bounds it
+        declares: counts, every 1σ), check the rest (rules ``[centre, half-width > 0]``, a parsable epoch,
         the truth and sensor specs), load the vehicle asset once and build the settings; every
         error is a :class:`ScenarioError` naming file and key."""
         if scenario.kind != "entry":
