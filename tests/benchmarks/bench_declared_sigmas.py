@@ -154,8 +154,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{len(todo)} edits, {a.jobs} at a time, workbench of {root}", flush=True)
         with ThreadPoolExecutor(a.jobs) as ex:
             rows = list(ex.map(lambda e: run_one(e, assets, Path(tmp) / "out", env, root), todo))
-    counts = collections.Counter({k: 0 for k in OUTCOMES})
-    counts.update(r["outcome"] for r in rows)
+    counts = _outcomes(rows)
     by = collections.defaultdict(collections.Counter)
     for r in rows:
         by[f"{r['scenario']} {r['tag']}"][r["outcome"]] += 1
@@ -171,11 +170,28 @@ def main(argv: list[str] | None = None) -> int:
         "outcomes": dict(counts),
         "input_errors_naming_the_key": sum(r["outcome"] == "input error" and r["names_key"] for r in rows),
         "by_scenario": {k: dict(v) for k, v in sorted(by.items())},
+        # "named": keys named as a noise or 1σ; "declared": keys only their schema calls a 1σ
+        "by_selection": {
+            sel: {
+                "edits": len(sub),
+                "outcomes": dict(_outcomes(sub)),
+                "input_errors_naming_the_key": sum(r["outcome"] == "input error" and r["names_key"] for r in sub),
+            }
+            for sel in ("named", "declared")
+            for sub in [[r for r in rows if bool(_NAMED.search(r["key"])) == (sel == "named")]]
+        },  # fmt: skip
         "rows": rows,
     }
     path = write_benchmark_json(a.out, __file__, results, argv)
     print(f"{dict(counts)} -> {path}")
     return 0
+
+
+def _outcomes(rows: list[dict]) -> collections.Counter:
+    """Edits per outcome, every one of :data:`OUTCOMES` counted even when 0."""
+    counts = collections.Counter({k: 0 for k in OUTCOMES})
+    counts.update(r["outcome"] for r in rows)
+    return counts
 
 
 def _commit(root: Path) -> str:
