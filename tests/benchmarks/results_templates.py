@@ -600,9 +600,9 @@ _SIGMAS = """
 ## A declared 1σ of zero or below (issue #26)
 
 A 1σ of 0 declares a perfect measurement or model, and a negative one is a typo; both were accepted for most keys.
-`python tests/benchmarks/bench_declared_sigmas.py` sets every noise or 1σ key a shipped scenario gives (a line
-whose name holds `sigma` or `noise`, its number not 0) to 0 and to minus its value, one edit at a time, and runs
-each through `workbench run` ({{bench_declared_sigmas:results.edits}} edits;
+`python tests/benchmarks/bench_declared_sigmas.py` sets every noise or 1σ key a shipped scenario gives (a key
+whose name holds `sigma` or `noise`, or whose schema meaning or table says 1σ or 1-sigma, its number not 0) to 0
+and to minus its value, one edit at a time, and runs each through `workbench run` ({{bench_declared_sigmas:results.edits}} edits;
 `docs/results/before/bench_declared_sigmas.json` is the same script with `--root` a checkout of
 {{before/bench_declared_sigmas:results.root_commit}}, e.g. `git worktree add DIR {{before/bench_declared_sigmas:results.root_commit}}`):
 
@@ -623,8 +623,30 @@ scenario's. Now every 1σ is ≥ 0 in its schema, and the ones the filter divide
 the gyro's noise, the filter's initial and ZUPT 1σ, the survey's) are > 0; an odometer needs
 σ² + q²/12 > 0. What still runs with a 0 is a synthetic sensor written without noise while the filter keeps its
 own 1σ (the drop tests' `noise_g`, post2's `noise_sigma`, the entry IMU and radar: a WARNING where the NIS reads
-low, else OK), or a truth or dispersion without that error source; a zero terrain 1σ under a truth with terrain
+low, else OK), or a truth without that error source; a zero terrain 1σ under a truth with terrain
 is refused as unhealthy.
+
+The keys that declare a 1σ under another name (the entry `[reconstruction]` initial, rate and specific-force 1σ
+and IMU datasheet, its `[dispersion]` spreads and synthetic IMU bias, scale and misalignment; MEADS's model-form
+error) were unbounded until 14fea0e and 2b576dd. The edits of the keys only the schema calls a 1σ (the drop tests'
+IMU bias, scale and misalignment among them, bounded already), {{bench_declared_sigmas:results.by_selection.declared.edits}}
+of the above:
+
+| outcome | before | now |
+|---|---|---|
+| input error (exit 3) | {{before/bench_declared_sigmas:results.by_selection.declared.outcomes.input error}} | {{bench_declared_sigmas:results.by_selection.declared.outcomes.input error}} |
+| … naming the edited key | {{before/bench_declared_sigmas:results.by_selection.declared.input_errors_naming_the_key}} | {{bench_declared_sigmas:results.by_selection.declared.input_errors_naming_the_key}} |
+| numerical failure (exit 4) | {{before/bench_declared_sigmas:results.by_selection.declared.outcomes.numerical failure}} | {{bench_declared_sigmas:results.by_selection.declared.outcomes.numerical failure}} |
+| refused as unhealthy (exit 6) | {{before/bench_declared_sigmas:results.by_selection.declared.outcomes.unhealthy}} | {{bench_declared_sigmas:results.by_selection.declared.outcomes.unhealthy}} |
+| ran (exit 0, with its verdict) | {{before/bench_declared_sigmas:results.by_selection.declared.outcomes.ran}} | {{bench_declared_sigmas:results.by_selection.declared.outcomes.ran}} |
+| **traceback** | **{{before/bench_declared_sigmas:results.by_selection.declared.outcomes.traceback}}** | **{{bench_declared_sigmas:results.by_selection.declared.outcomes.traceback}}** |
+
+Before, a negative synthetic IMU 1σ ended in numpy's `scale < 0` traceback, a zero dispersion spread in a
+LinAlgError naming no key, and the other negative ones ran with their sign lost. Now a negative one, a zero
+initial 1σ or spread and a zero rate 1σ of the saturated gyro are input errors naming the key; the zeros that mean
+"no such error" run (a zero MEADS model-form error is refused as unhealthy: a tuning value that may be 0, kept
+≥ 0). `tests/io/test_schema_sigma_bounds.py` keeps every key whose name or meaning says 1σ bounded
+below.
 """
 RESULTS_MD = RESULTS_MD + "\n" + _SIGMAS
 
