@@ -173,6 +173,8 @@ def test_misspelt_key_is_a_located_error(tmp_path, old, new, key, table, suggest
         ("sensors.imu.gyro_misalignment_rad", -1e-3, "must be ≥ 0"),
         ("atmosphere.tolerance", 0.0, "must be > 0"),
         ("atmosphere.max_iterations", 0, "must be > 0"),
+        # 0 neighbours left every saturated gyro run clipped, noted as "at the edge of the data"
+        ("preprocess.rebuild_neighbours", 0, "must be > 0"),
     ],
 )
 def test_bad_values_are_located_errors(key, value, match):

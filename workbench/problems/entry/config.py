@@ -212,7 +212,11 @@ SCHEMA = Schema(
                     choices=("acceleration", "cubic"),
                 ),
                 Key(
-                    "rebuild_neighbours", _I, _PRE.rebuild_neighbours, meaning="neighbours per side of a cubic rebuild"
+                    "rebuild_neighbours",
+                    _I,
+                    _PRE.rebuild_neighbours,
+                    meaning="unsaturated neighbours per side that a saturated run's rebuild starts from",
+                    gt=0,
                 ),
                 Key(
                     "rebuild_from_accel",
