@@ -5,11 +5,12 @@ scipy, numba, trimesh and rerun again (~2 s of CPU each)."""
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import sys
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 
-__all__ = ["CAN_FORK", "FORK_ENV", "fork_call", "fork_enabled"]
+__all__ = ["CAN_FORK", "FORK_ENV", "fork_call", "fork_enabled", "gc_paused"]
 
 CAN_FORK = hasattr(os, "fork")
 """Whether this platform forks (False on Windows: callers start a new interpreter instead)."""
@@ -24,6 +25,21 @@ def fork_enabled() -> bool:
     return CAN_FORK and os.environ.get(FORK_ENV, "1").strip() != "0"
 
 
+@contextlib.contextmanager
+def gc_paused() -> Iterator[None]:
+    """Turn Python's cyclic garbage collector off inside the block (on again after it, if it was
+    on): for importing the modules a process forks its children with, whose objects all live as
+    long as the process, so the collections during the import would find nothing to free and only
+    cost CPU (each full collection walks every object allocated so far)."""
+    was_on = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was_on:
+            gc.enable()
+
+
 def fork_call(
     fn: Callable[[], int],
     *,
@@ -36,9 +52,17 @@ def fork_call(
     ``fn()`` and exit with the code it returns (1, with the traceback on stderr, if it raises: the
     child never returns into the caller). Returns the child's pid in the parent (reap it with
     ``os.waitpid``). Call it while no other thread of this process runs: a fork copies the locks
-    another thread holds, not the thread that would release them."""
+    another thread holds, not the thread that would release them.
+
+    Before the fork every object this process holds is moved to the collector's permanent
+    generation (``gc.freeze``, Python's own advice for a fork without exec): the child's full
+    collections then walk only the objects it allocates itself, not the imported modules (numba,
+    scipy, rerun) it inherits, and writing their collector fields does not copy the shared memory
+    pages. Those objects are no longer collected in either process; they live as long as the
+    process anyway."""
     sys.stdout.flush()
     sys.stderr.flush()
+    gc.freeze()
     pid = os.fork()
     if pid:
         return pid

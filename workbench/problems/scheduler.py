@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from workbench.core.forking import fork_call, fork_enabled
+from workbench.core.forking import fork_call, fork_enabled, gc_paused
 from workbench.core.jit import load_compiler
 from workbench.io import progress as prog
 from workbench.problems import registry
@@ -198,8 +198,9 @@ def run_in_processes(
     piped = rep.mode == "bars"
     fork = fork_enabled()
     if fork:
-        registry.import_modules(PRELOAD)
-        load_compiler()
+        with gc_paused():
+            registry.import_modules(PRELOAD)
+            load_compiler()
     pending, running, codes = list(order), {}, {}
     sel = selectors.DefaultSelector()
 
