@@ -593,6 +593,21 @@ lowering to LLVM IR {{bench_compile:results.scenarios.msl_meads.lowering_python_
 `{{bench_compile:results.scenarios.droptest.top.0.kernel}}`, is {{bench_compile:results.scenarios.droptest.top.0.excl_s|.1f}} s),
 and LLVM's optimisation passes, the only part an option reaches, are a minority of the compile, which is why the
 optimisation level moves the first run by little.
+
+The first run as a whole: `python tests/benchmarks/bench_first_run.py --baseline {{bench_first_run:results.baseline_commit}}`
+(`workbench run all` with numba's cache deleted, this checkout against the baseline checked out beside it,
+{{bench_first_run:results.rounds}} interleaved rounds, medians; every process's garbage collections timed with
+`gc.callbacks`). Before each fork the parent's heap is frozen (`gc.freeze`) and `run all` imports its preload with
+the collector paused, so a child's full collections no longer walk the inherited numba, scipy and rerun objects:
+the collector's CPU over all processes {{bench_first_run:results.median.baseline.gc_cpu_s|.1f}} s →
+{{bench_first_run:results.median.current.gc_cpu_s|.1f}} s (×{{bench_first_run:results.ratio_current_to_baseline.gc_cpu_s|.2f}}).
+The whole run's CPU, {{bench_first_run:results.median.baseline.cpu_s|.1f}} s → {{bench_first_run:results.median.current.cpu_s|.1f}} s
+(×{{bench_first_run:results.ratio_current_to_baseline.cpu_s|.3f}}), and wall time,
+{{bench_first_run:results.median.baseline.wall_s|.1f}} s → {{bench_first_run:results.median.current.wall_s|.1f}} s
+(×{{bench_first_run:results.ratio_current_to_baseline.wall_s|.3f}}), move by less than the machine's own drift between
+rounds; max RSS {{bench_first_run:results.median.baseline.max_rss_mb|.0f}} MB → {{bench_first_run:results.median.current.max_rss_mb|.0f}} MB;
+summaries identical: {{bench_first_run:results.summaries_identical}}. On 2 cores the first run's wall time is
+about its CPU over two, and the largest part of that CPU is the compile measured above.
 """
 RESULTS_MD = RESULTS_MD + "\n" + _COMPILE
 
