@@ -176,6 +176,11 @@ def main(argv: list[str] | None = None) -> int:
         "rounds": a.rounds,
         "runs": rows,
         "median": med,
+        # per round, current minus baseline (the two runs of a round are minutes apart, so the
+        # machine's drift between rounds falls out of the difference)
+        "paired_difference": {
+            k: [c[k] - b[k] for c, b in zip(rows["current"], rows["baseline"], strict=True)] for k in keys
+        },
         "ratio_current_to_baseline": ratio,
         "summaries_identical": cmp.returncode == 0,
         "summaries_compare": cmp.stdout.strip().splitlines(),

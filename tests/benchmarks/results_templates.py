@@ -604,8 +604,12 @@ the collector's CPU over all processes {{bench_first_run:results.median.baseline
 The whole run's CPU, {{bench_first_run:results.median.baseline.cpu_s|.1f}} s → {{bench_first_run:results.median.current.cpu_s|.1f}} s
 (×{{bench_first_run:results.ratio_current_to_baseline.cpu_s|.3f}}), and wall time,
 {{bench_first_run:results.median.baseline.wall_s|.1f}} s → {{bench_first_run:results.median.current.wall_s|.1f}} s
-(×{{bench_first_run:results.ratio_current_to_baseline.wall_s|.3f}}), move by less than the machine's own drift between
-rounds; max RSS {{bench_first_run:results.median.baseline.max_rss_mb|.0f}} MB → {{bench_first_run:results.median.current.max_rss_mb|.0f}} MB;
+(×{{bench_first_run:results.ratio_current_to_baseline.wall_s|.3f}}); within a round (the two runs minutes apart) the
+wall time changed by {{bench_first_run:results.paired_difference.wall_s|min:+.1f}} to
+{{bench_first_run:results.paired_difference.wall_s|max:+.1f}} s and the CPU by
+{{bench_first_run:results.paired_difference.cpu_s|min:+.1f}} to {{bench_first_run:results.paired_difference.cpu_s|max:+.1f}} s,
+while the machine's speed drifts by up to a fifth within minutes, so only the collector's CPU is a sharp measure
+of the change; max RSS {{bench_first_run:results.median.baseline.max_rss_mb|.0f}} MB → {{bench_first_run:results.median.current.max_rss_mb|.0f}} MB;
 summaries identical: {{bench_first_run:results.summaries_identical}}. On 2 cores the first run's wall time is
 about its CPU over two, and the largest part of that CPU is the compile measured above.
 """
