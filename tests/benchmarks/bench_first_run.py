@@ -5,10 +5,12 @@ For each round and each of the two checkouts (the order alternates from round to
 drift of the machine's speed falls on both) the compiled kernels cached beside the sources
 (``workbench/**/__pycache__/*.nbi|nbc``) are deleted and ``python -m workbench.cli run all --quiet``
 runs into a fresh folder, with ``PYTHONPATH`` the checkout (so its own ``workbench`` is imported).
-Measured per run: wall time, the CPU time (user + system) of every process of the run, its largest
-resident set (``ru_maxrss`` of the processes' tree), and the CPU time Python's cyclic garbage
-collector took in each process (a ``sitecustomize`` on ``PYTHONPATH`` times every collection with
-``gc.callbacks``; the same instrument in both checkouts). The last round's summaries of the two
+Measured per run: wall time, the CPU time (user + system) of every process of the run, the largest
+peak resident set of any one of its processes (``ru_maxrss`` of ``RUSAGE_CHILDREN``), and the CPU
+time Python's cyclic garbage collector took in each process (a ``sitecustomize`` on ``PYTHONPATH``
+times every collection with ``gc.callbacks`` and ``time.thread_time``, as a collection runs in the
+thread that started it; the same instrument in both checkouts). Both checkouts are byte-compiled
+(``compileall``) before the first round, so neither pays for it in a measured run. The last round's summaries of the two
 checkouts are compared number by number (``compare_summaries.py``, timings skipped).
 
 The baseline is checked out with ``git worktree`` into a temporary folder and removed at the end. The
@@ -46,9 +48,9 @@ import gc, os, time
 _t = {"gc_s": 0.0, "start": 0.0, "full": 0}
 def _cb(phase, info):
     if phase == "start":
-        _t["start"] = time.process_time()
+        _t["start"] = time.thread_time()
         return
-    _t["gc_s"] += time.process_time() - _t["start"]
+    _t["gc_s"] += time.thread_time() - _t["start"]
     _t["full"] += info["generation"] == 2
     with open(os.path.join(os.environ["BENCH_GC_DIR"], str(os.getpid())), "w") as f:
         f.write(f'{_t["gc_s"]} {_t["full"]}')
@@ -85,26 +87,28 @@ def _clear_cache(root: Path) -> int:
 
 def first_run(root: Path, out: Path, gc_dir: Path, site_dir: Path) -> dict:
     """One first run of ``workbench run all`` of the checkout ``root`` into ``out``: wall [s], CPU of
-    all its processes [s], max RSS [MB], garbage-collector CPU summed over its processes [s], full
-    collections, processes that collected."""
+    all its processes [s], the largest peak RSS of one process [MB], garbage-collector CPU summed
+    over its processes [s] and per process (largest first), full collections, processes that
+    collected."""
     _clear_cache(root)
     gc_dir.mkdir(parents=True)
     env = dict(os.environ, PYTHONPATH=f"{site_dir}{os.pathsep}{root}", BENCH_GC_DIR=str(gc_dir))
     env.pop("NUMBA_CACHE_DIR", None)
     run_all = ["-m", "workbench.cli", "run", "all", "--out", str(out), "--quiet"]
-    cmd = [sys.executable, "-c", _RUSAGE, sys.executable, *run_all]
+    cmd = [sys.executable, "-I", "-c", _RUSAGE, sys.executable, *run_all]  # -I: the wrapper is not instrumented
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     usage = json.loads(p.stdout.strip().splitlines()[-1])
     if usage["code"] != 0:
         raise SystemExit(f"workbench run all failed in {root} (exit {usage['code']}):\n{p.stderr[-2000:]}")
-    per_process = [f.read_text().split() for f in gc_dir.iterdir()]
+    per_process = sorted((f.read_text().split() for f in gc_dir.iterdir()), key=lambda g: -float(g[0]))
     return {
         "wall_s": wall,
         "cpu_s": usage["cpu_s"],
         "max_rss_mb": usage["max_rss_mb"],
         "gc_cpu_s": sum(float(g) for g, _ in per_process),
+        "gc_cpu_s_per_process": [float(g) for g, _ in per_process],
         "full_collections": sum(int(n) for _, n in per_process),
         "processes": len(per_process),
     }
@@ -135,6 +139,8 @@ def main(argv: list[str] | None = None) -> int:
         _git("worktree", "add", "--detach", str(base_root), base_commit)
         try:
             roots = {"baseline": base_root, "current": ROOT}
+            for root in roots.values():
+                subprocess.run([sys.executable, "-m", "compileall", "-q", str(root / "workbench")], check=True)
             for name, root in roots.items():
                 probe = subprocess.run(
                     [sys.executable, "-c", "import workbench; print(workbench.__file__)"],
@@ -162,7 +168,8 @@ def main(argv: list[str] | None = None) -> int:
                 capture_output=True, text=True,
             )  # fmt: skip
         finally:
-            _git("worktree", "remove", "--force", str(base_root))
+            subprocess.run(["git", "worktree", "remove", "--force", str(base_root)], cwd=ROOT, capture_output=True)
+            subprocess.run(["git", "worktree", "prune"], cwd=ROOT, capture_output=True)
     keys = ("wall_s", "cpu_s", "gc_cpu_s", "max_rss_mb")
     med = {n: {k: _median(rows[n], k) for k in keys} for n in rows}
     ratio = {k: med["current"][k] / med["baseline"][k] for k in keys}

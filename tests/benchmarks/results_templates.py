@@ -594,24 +594,25 @@ lowering to LLVM IR {{bench_compile:results.scenarios.msl_meads.lowering_python_
 and LLVM's optimisation passes, the only part an option reaches, are a minority of the compile, which is why the
 optimisation level moves the first run by little.
 
-The first run as a whole: `python tests/benchmarks/bench_first_run.py --baseline {{bench_first_run:results.baseline_commit}}`
-(`workbench run all` with numba's cache deleted, this checkout against the baseline checked out beside it,
+The first run as a whole: `{{bench_first_run:command}}` (`workbench run all` with numba's cache deleted, this
+checkout against the baseline commit {{bench_first_run:results.baseline_commit}} checked out into a temporary folder,
 {{bench_first_run:results.rounds}} interleaved rounds, medians; every process's garbage collections timed with
-`gc.callbacks`). Before each fork the parent's heap is frozen (`gc.freeze`) and `run all` imports its preload with
-the collector paused, so a child's full collections no longer walk the inherited numba, scipy and rerun objects:
-the collector's CPU over all processes {{bench_first_run:results.median.baseline.gc_cpu_s|.1f}} s →
-{{bench_first_run:results.median.current.gc_cpu_s|.1f}} s (×{{bench_first_run:results.ratio_current_to_baseline.gc_cpu_s|.2f}}).
-The whole run's CPU, {{bench_first_run:results.median.baseline.cpu_s|.1f}} s → {{bench_first_run:results.median.current.cpu_s|.1f}} s
-(×{{bench_first_run:results.ratio_current_to_baseline.cpu_s|.3f}}), and wall time,
+`gc.callbacks`). Two changes together: `run all` imports its preload with the collector paused, and every forked
+child (scenario processes, precompiling children) freezes the heap it inherited (`gc.freeze`), so its full
+collections no longer walk the imported numba, scipy and rerun objects. The collector's CPU over all processes:
+{{bench_first_run:results.median.baseline.gc_cpu_s|.1f}} s → {{bench_first_run:results.median.current.gc_cpu_s|.1f}} s
+(×{{bench_first_run:results.ratio_current_to_baseline.gc_cpu_s|.2f}}). The whole run's CPU went
+{{bench_first_run:results.median.baseline.cpu_s|.1f}} s → {{bench_first_run:results.median.current.cpu_s|.1f}} s
+(×{{bench_first_run:results.ratio_current_to_baseline.cpu_s|.3f}}) and its wall time
 {{bench_first_run:results.median.baseline.wall_s|.1f}} s → {{bench_first_run:results.median.current.wall_s|.1f}} s
 (×{{bench_first_run:results.ratio_current_to_baseline.wall_s|.3f}}); within a round (the two runs minutes apart) the
 wall time changed by {{bench_first_run:results.paired_difference.wall_s|min:+.1f}} to
 {{bench_first_run:results.paired_difference.wall_s|max:+.1f}} s and the CPU by
 {{bench_first_run:results.paired_difference.cpu_s|min:+.1f}} to {{bench_first_run:results.paired_difference.cpu_s|max:+.1f}} s,
-while the machine's speed drifts by up to a fifth within minutes, so only the collector's CPU is a sharp measure
-of the change; max RSS {{bench_first_run:results.median.baseline.max_rss_mb|.0f}} MB → {{bench_first_run:results.median.current.max_rss_mb|.0f}} MB;
-summaries identical: {{bench_first_run:results.summaries_identical}}. On 2 cores the first run's wall time is
-about its CPU over two, and the largest part of that CPU is the compile measured above.
+as much as the collector's saving or more, so only the collector's CPU is a sharp measure of the change. The
+largest peak RSS of one process: {{bench_first_run:results.median.baseline.max_rss_mb|.0f}} MB →
+{{bench_first_run:results.median.current.max_rss_mb|.0f}} MB; summaries identical:
+{{bench_first_run:results.summaries_identical|pass}}.
 """
 RESULTS_MD = RESULTS_MD + "\n" + _COMPILE
 

@@ -5,6 +5,7 @@ only when a module is cold, and numba's registries load once before a fork."""
 
 from __future__ import annotations
 
+import gc
 import importlib
 import io
 import math
@@ -257,7 +258,11 @@ def test_run_all_loads_numbas_registries_once_before_its_first_fork(monkeypatch,
 
     monkeypatch.setattr(scheduler, "Child", FakeChild)
     monkeypatch.setattr(scheduler, "load_compiler", lambda: events.append(("load_compiler",)))
-    monkeypatch.setattr(scheduler.registry, "import_modules", lambda names: events.append(("import", len(names))))
+    monkeypatch.setattr(
+        scheduler.registry,
+        "import_modules",
+        lambda names: events.append(("import", len(names), "gc off" if not gc.isenabled() else "gc on")),
+    )
     rep, _ = _rep()
     for fork in (True, False):
         events.clear()
@@ -267,5 +272,5 @@ def test_run_all_loads_numbas_registries_once_before_its_first_fork(monkeypatch,
         )
         assert code == 0
         forked = fork and pc.fork_enabled()
-        head = [("import", len(scheduler.PRELOAD)), ("load_compiler",)] if forked else []
+        head = [("import", len(scheduler.PRELOAD), "gc off"), ("load_compiler",)] if forked else []
         assert events == [*head, ("child", "a", forked), ("child", "b", forked)]

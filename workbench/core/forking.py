@@ -54,18 +54,18 @@ def fork_call(
     ``os.waitpid``). Call it while no other thread of this process runs: a fork copies the locks
     another thread holds, not the thread that would release them.
 
-    Before the fork every object this process holds is moved to the collector's permanent
-    generation (``gc.freeze``, Python's own advice for a fork without exec): the child's full
-    collections then walk only the objects it allocates itself, not the imported modules (numba,
-    scipy, rerun) it inherits, and writing their collector fields does not copy the shared memory
-    pages. Those objects are no longer collected in either process; they live as long as the
-    process anyway."""
+    The child first moves every object it inherited to the collector's permanent generation
+    (``gc.freeze``): its full collections then walk only the objects it allocates itself, not the
+    imported modules (numba, scipy, rerun) that make up most of the inherited heap, and do not write
+    into (so copy) the memory pages it shares with the caller. The inherited objects are never
+    collected in the child, which exits when ``fn`` returns; the caller's own collector is left as
+    it was."""
     sys.stdout.flush()
     sys.stderr.flush()
-    gc.freeze()
     pid = os.fork()
     if pid:
         return pid
+    gc.freeze()
     code = 1
     try:
         for fd in close_fds:
