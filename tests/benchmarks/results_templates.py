@@ -22,7 +22,9 @@ README_BLOCKS["test-time"] = """\
 (the fast tier, {{commands:fast_tier.passed}} tests in {{commands:fast_tier_s|mmss}} on 2 cores from a fresh clone, one
 pytest-xdist worker per core;
 the statistical / end-to-end tier is `.venv/bin/python -m pytest -q -m slow`, {{commands:slow_tier.passed}} tests in
-{{commands:slow_tier_s|mmss}}; `.ci/run` runs both):
+{{commands:slow_tier_s|mmss}}, {{commands:slow_tier.skipped}} skipped, among them the browser tests, which need Chromium
+and the `[browser]` extra and screenshot every shipped recording: several minutes more; `.ci/run` installs both
+when it can and runs both tiers):
 """
 
 RESULTS_MD = """\
