@@ -158,3 +158,19 @@ def test_covariance_check_tells_round_off_from_indefinite():
         assert c.status == status, (eps, c.message)
         if status == WARNING:  # (the OK case: the unscaled eigenvalue's sign is itself round-off)
             assert "round-off" in c.message and "2 step(s)" in c.message, c.message
+
+
+def test_finite_steps_is_per_step_and_does_not_depend_on_the_chunk(monkeypatch):
+    """:func:`finite_steps` (a long covariance history checked without an (n, k, k) boolean
+    temporary) flags exactly the steps holding a NaN or an inf, whatever the chunk size."""
+    import workbench.estimation.health as health
+
+    P = np.ones((700, 4, 4))
+    P[3, 1, 2] = np.nan
+    P[699, 0, 0] = -np.inf
+    x = np.zeros((700, 5))
+    x[256, 4] = np.inf
+    for chunk in (1, 255, 256, 10_000):
+        monkeypatch.setattr(health, "_CHUNK_STEPS", chunk)
+        assert np.flatnonzero(~health.finite_steps(P)).tolist() == [3, 699]
+        assert np.flatnonzero(~health.finite_steps(x)).tolist() == [256]

@@ -3,6 +3,8 @@ iterated (re-linearised) smoother as Gauss-Newton on a range-only tracking probl
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -355,3 +357,50 @@ def test_consider_parameter_smoother_covariance_is_exact():
     np.testing.assert_allclose(sm.P, exact, rtol=1e-9, atol=1e-12)
     # and the smoother did help the estimated state where the filter alone could not
     assert sm.P[0, 0, 0] < p0 + pc
+
+
+def _consider_pass():
+    """A random walk seen through a constant bias that is considered (projected gain), as below."""
+    rng = np.random.default_rng(5)
+    n, layout, H = 40, ErrorStateLayout(2), np.array([[1.0, 1.0]])
+    z = np.cumsum(rng.normal(0.0, 0.5, n)) + 0.8 + rng.normal(0.0, 0.7, n)
+
+    def meas(k, tk, x):
+        return [
+            Measurement(
+                "z", z[k : k + 1], np.array([[0.5]]), lambda s: H @ s, H=H, gain_projector=lambda s: np.diag([1.0, 0.0])
+            )
+        ]
+
+    def transition(x, t0, t1):
+        return x, np.eye(2), np.diag([0.3, 0.0])
+
+    return run_filter(np.zeros(2), np.diag([2.0, 0.8]), np.arange(n, dtype=float), transition, None, meas, layout)
+
+
+@pytest.mark.parametrize("case", ["linear time-varying", "consider parameter"])
+def test_overwrite_F_writes_the_gains_into_F_with_the_same_numbers(case):
+    """``overwrite_F=True`` (a long pass's memory: one n × n_e² history less) gives bit for bit the
+    default smoother's x, P and G, and fp.F's memory then holds G (the transitions are consumed)."""
+    if case == "consider parameter":
+        fp, consider = _consider_pass(), [1]
+    else:
+        fp, consider = _run(*_ltv_problem(2))[0], None
+    layout = ErrorStateLayout(fp.x_post.shape[1])
+    ref = rts_smooth(fp, layout, consider=consider)
+    F_before = fp.F.copy()
+    sp = rts_smooth(fp, layout, consider=consider, overwrite_F=True)
+    for a, b in ((sp.x, ref.x), (sp.P, ref.P), (sp.G, ref.G)):
+        np.testing.assert_array_equal(a, b)
+    assert sp.G is fp.F and not np.array_equal(fp.F, F_before)
+    np.testing.assert_array_equal(cross_covariance(sp, 1, 6), cross_covariance(ref, 1, 6))
+
+
+def test_overwrite_F_refuses_an_F_it_cannot_write():
+    Fs, us, Qs, meas, m0, P0 = _ltv_problem(0)
+    fp, _ = _run(Fs, us, Qs, meas, m0, P0)
+    ro = fp.F.copy()
+    ro.flags.writeable = False
+    for F in (ro, fp.F.astype(np.float32), fp.F[:-1]):
+        with pytest.raises(ValueError, match="overwrite_F"):
+            rts_smooth(replace(fp, F=F), ErrorStateLayout(m0.size), overwrite_F=True)

@@ -37,6 +37,7 @@ import numpy as np
 from workbench.estimation.consistency import chi2_ppf
 
 __all__ = [
+    "finite_steps",
     "short_paths",
     "OK",
     "WARNING",
@@ -145,7 +146,19 @@ def nis_check(sensor: str, nis: np.ndarray, dof: int, *, error_quantile: float =
 
 
 #: covariance steps examined at once by :func:`covariance_stats` (bounds its temporaries)
-_CHUNK_STEPS = 1024
+_CHUNK_STEPS = 256
+
+
+def finite_steps(A: np.ndarray) -> np.ndarray:
+    """(n,) bool: True where every entry of step k of a history ``A`` (n, ...) — a state (n, n_x) or
+    a covariance (n, k, k) — is finite. Computed over chunks of steps, so that a long covariance
+    history needs no (n, k, k) boolean temporary."""
+    A = np.asarray(A)
+    out = np.empty(A.shape[0], bool)
+    axes = tuple(range(1, A.ndim))
+    for a in range(0, A.shape[0], _CHUNK_STEPS):
+        out[a : a + _CHUNK_STEPS] = np.all(np.isfinite(A[a : a + _CHUNK_STEPS]), axis=axes)
+    return out
 
 
 def covariance_stats(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -248,8 +261,9 @@ def covariance_check(
     P = np.asarray(P, float)
     if P.ndim == 2:
         P = P[None]
-    if not np.all(np.isfinite(P)):
-        bad = int(np.flatnonzero(~np.all(np.isfinite(P), axis=(1, 2)))[0])
+    fin = finite_steps(P)
+    if not np.all(fin):
+        bad = int(np.flatnonzero(~fin)[0])
         return Check(name, ERROR, None, None, f"{name}: not finite (first at step {bad})")
     exact = exact_components(P)
     if exact.size and exact.size < P.shape[1]:  # errors declared absent (σ = 0): checked on the others

@@ -74,7 +74,9 @@ def cross_covariance(sp: SmoothedPass, a: int, b: int) -> np.ndarray:
     return M
 
 
-def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout, consider: np.ndarray | None = None) -> SmoothedPass:
+def rts_smooth(
+    fp: ForwardPass, layout: ErrorStateLayout, consider: np.ndarray | None = None, *, overwrite_F: bool = False
+) -> SmoothedPass:
     """Error-state RTS smoothing of a forward pass (formulas in the module docstring).
 
     ``fp``: output of :func:`~workbench.estimation.ekf.run_filter` (or any ForwardPass with
@@ -96,19 +98,32 @@ def rts_smooth(fp: ForwardPass, layout: ErrorStateLayout, consider: np.ndarray |
     (``G[c, :] = 0``, ``G[c, c] = I``): they keep their value and covariance (the difference
     ``x_s − x_prior`` is zero on them), and the cross-covariance of the other states with them
     gets the smoothing term ``G_x (P_s[k+1] − P_prior[k+1])[:, c]`` it needs.
+
+    ``overwrite_F`` (as scipy's ``overwrite_a``): the gains are written into ``fp.F``'s memory,
+    which then holds G, not the transitions, and is the returned ``G``. The recursion reads
+    ``F[k]`` before it writes ``G[k]`` in its place, so the numbers are the same; it saves one
+    (n, n_e, n_e) array, the largest share of a long, high-rate pass's memory. The caller must not
+    read ``fp.F`` afterwards (F must be a writable float64 array of G's shape).
     """
     n = fp.t.shape[0]
     n_e = layout.n_e
     xs = np.empty_like(fp.x_post)
     Ps = np.empty_like(fp.P_post)
-    G = np.zeros((n, n_e, n_e))
+    if overwrite_F:
+        G = fp.F
+        if G.shape != (n, n_e, n_e) or G.dtype != np.float64 or not G.flags.writeable:
+            raise ValueError(f"rts_smooth(overwrite_F=True): F must be a writable float64 ({n}, {n_e}, {n_e}) array")
+    else:
+        G = np.zeros((n, n_e, n_e))
     if n == 0:
         return SmoothedPass(fp.t, xs, Ps, G)
     # One BLAS thread: the recursion is a chain of n_e × n_e products and triangular solves, where
     # OpenBLAS's threaded dtrsm (inside dpotrs) spends ~30× the single-thread CPU time in
     # synchronisation (measured 2.6 ms vs 0.02 ms per 42 × 42 solve on 2 shared cores).
     with threadpool_limits(limits=1, user_api="blas"):
-        _rts_backward(fp, layout, xs, Ps, G, None if consider is None else np.asarray(consider, dtype=int))
+        _rts_backward(
+            fp, layout, xs, Ps, G, None if consider is None else np.asarray(consider, dtype=int), in_place=overwrite_F
+        )
     return SmoothedPass(fp.t, xs, Ps, G)
 
 
@@ -119,17 +134,27 @@ def _rts_backward(
     Ps: np.ndarray,
     G: np.ndarray,
     consider: np.ndarray | None = None,
+    in_place: bool = False,
 ) -> None:
-    """The backward recursion of :func:`rts_smooth`, filling xs (n, n_x), Ps and G (n, n_e, n_e)."""
+    """The backward recursion of :func:`rts_smooth`, filling xs (n, n_x), Ps and G (n, n_e, n_e).
+    ``in_place``: G is ``fp.F`` itself; each right-hand side ``F[k+1] P_post[k]`` is formed just
+    before ``G[k+1]`` replaces ``F[k+1]`` (the same product, matrix by matrix, as the batched one)."""
     n = fp.t.shape[0]
     xs[-1] = fp.x_post[-1]
     Ps[-1] = fp.P_post[-1]
     _check_pd(Ps[-1], n - 1, fp.t)
     if n < 2:
+        if in_place:
+            G[:] = 0.0
         return
-    # what does not depend on the recursion, for all steps at once: the right-hand sides
-    # F[k+1] P_post[k] (held in G until the gain replaces them) and the Jacobi scales of P_prior
-    np.matmul(fp.F[1:], fp.P_post[:-1], out=G[:-1])
+    # what does not depend on the recursion: the right-hand sides F[k+1] P_post[k] (for all steps at
+    # once, held in G until the gain replaces them; in place, one step ahead) and the Jacobi scales
+    rhs_next = None
+    if in_place:
+        rhs_next = fp.F[n - 1] @ fp.P_post[n - 2]
+        G[n - 1] = 0.0
+    else:
+        np.matmul(fp.F[1:], fp.P_post[:-1], out=G[:-1])
     dg = np.diagonal(fp.P_prior, axis1=1, axis2=2)
     all_pos = np.all(dg > 0.0, axis=1)
     with np.errstate(invalid="ignore"):  # a negative variance is reported by _active below
@@ -140,7 +165,10 @@ def _rts_backward(
         # D⁻¹ P_prior D⁻¹ (D = sqrt diag): (km)² next to (µrad)² variances stay factorisable
         d = dsq[k + 1]
         act = None if all_pos[k + 1] else _active(Pp, k + 1, fp.t)
-        rhs = G[k]
+        if in_place:  # F[k] is read (for step k − 1) before G[k] overwrites it below
+            rhs, rhs_next = rhs_next, (fp.F[k] @ fp.P_post[k - 1] if k > 0 else None)
+        else:
+            rhs = G[k]
         if act is None:
             c, info = lapack.dpotrf(Pp / np.outer(d, d), lower=1)
             if info != 0:

@@ -28,7 +28,7 @@ Wertz (1978) Sect. 12.2 for the algebraic attitude.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +52,7 @@ from workbench.estimation.ekf import (
     apply_measurements,
     run_filter,
 )
-from workbench.estimation.health import covariance_stats, health_markdown
+from workbench.estimation.health import covariance_stats, finite_steps, health_markdown
 from workbench.estimation.smoother import SmoothedPass, cross_covariance, rts_smooth
 from workbench.io import scorecard as sc
 from workbench.io.scenario import ScenarioError
@@ -672,10 +672,11 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
         raise np.linalg.LinAlgError(f"forward EKF pass: {err}{likely_keys(settings, err)}") from err
     finite_or_fail(fwd, "forward EKF pass", settings)
     yield fwd
-    try:
-        sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)))
+    try:  # the gains take the transitions' memory: one n × n_e² history less (a long log's memory)
+        sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)), overwrite_F=True)
     except np.linalg.LinAlgError as err:
         raise np.linalg.LinAlgError(f"RTS smoother: {err}{likely_keys(settings, err)}") from err
+    fwd = replace(fwd, forward=replace(fwd.forward, F=np.empty((0, *sp.G.shape[1:]))))  # F is G now: unreadable
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
     finite_or_fail(smo, "RTS smoother", settings, fwd)
     yield smo
@@ -688,7 +689,7 @@ def finite_or_fail(stage: FilterStage, what: str, settings: DropSettings, fwd: F
     """Raise :class:`numpy.linalg.LinAlgError` (the runner's numerical failure, exit 4) when the
     ``stage``'s state or covariance is not finite, naming the stage, the first bad step and time [s]
     and the sensor whose innovations blew up first (the likely culprit: its file's columns)."""
-    bad = ~(np.all(np.isfinite(stage.x), axis=1) & np.all(np.isfinite(stage.P), axis=(1, 2)))
+    bad = ~(finite_steps(stage.x) & finite_steps(stage.P))
     if not bad.any():
         return
     k = int(np.flatnonzero(bad)[0])
