@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
 import subprocess
 import sys
@@ -40,6 +39,7 @@ ROOT = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 
 from bench_json import write_benchmark_json  # noqa: E402
+from checkouts import RUSAGE, baseline_worktree, checkout_env, git  # noqa: E402
 
 #: the instrument: per process, the CPU time of every garbage collection (written after each one, as
 #: forked processes leave with os._exit and run no exit hook); counters restart in a forked child
@@ -62,18 +62,6 @@ if os.environ.get("BENCH_GC_DIR"):
     gc.callbacks.append(_cb)
 """
 
-#: runs the command line it is given and prints the rusage of its process tree as JSON
-_RUSAGE = (
-    "import json, resource, subprocess, sys\n"
-    "code = subprocess.run(sys.argv[1:]).returncode\n"
-    "u = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
-    "print(json.dumps({'code': code, 'cpu_s': u.ru_utime + u.ru_stime, 'max_rss_mb': u.ru_maxrss / 1024}))\n"
-)
-
-
-def _git(*args: str, cwd: Path = ROOT) -> str:
-    return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, check=True).stdout.strip()
-
 
 def _clear_cache(root: Path) -> int:
     """Delete numba's cached kernels under ``root/workbench``; the number of files deleted."""
@@ -92,10 +80,9 @@ def first_run(root: Path, out: Path, gc_dir: Path, site_dir: Path) -> dict:
     collected."""
     _clear_cache(root)
     gc_dir.mkdir(parents=True)
-    env = dict(os.environ, PYTHONPATH=f"{site_dir}{os.pathsep}{root}", BENCH_GC_DIR=str(gc_dir))
-    env.pop("NUMBA_CACHE_DIR", None)
+    env = checkout_env(root, PYTHONPATH=str(site_dir), BENCH_GC_DIR=str(gc_dir))
     run_all = ["-m", "workbench.cli", "run", "all", "--out", str(out), "--quiet"]
-    cmd = [sys.executable, "-I", "-c", _RUSAGE, sys.executable, *run_all]  # -I: the wrapper is not instrumented
+    cmd = [sys.executable, "-I", "-c", RUSAGE, sys.executable, *run_all]  # -I: the wrapper is not instrumented
     t0 = time.perf_counter()
     p = subprocess.run(cmd, cwd=root, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
@@ -124,31 +111,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--out", default=str(ROOT / "docs" / "results" / "bench_first_run.json"))
     a = ap.parse_args(argv)
-    base_commit = _git("rev-parse", "--short", a.baseline)
-    head = _git("rev-parse", "--short", "HEAD")
-    if _git("status", "--porcelain", "--untracked-files=no", "--", "workbench"):
-        print("note: this checkout's workbench/ has uncommitted changes; they are what runs as 'current'")
-    if subprocess.run(["git", "diff", "--quiet", base_commit, "--", "assets"], cwd=ROOT).returncode != 0:
-        raise SystemExit(f"assets/ differ between {base_commit} and this checkout: both runs would read this one's")
+    base_commit = git("rev-parse", "--short", a.baseline)
+    head = git("rev-parse", "--short", "HEAD")
     with tempfile.TemporaryDirectory(prefix="bench_first_run_") as tmp:
         tmp = Path(tmp)
         site = tmp / "site"
         site.mkdir()
         (site / "sitecustomize.py").write_text(_SITECUSTOMIZE)
-        base_root = tmp / "baseline"
-        _git("worktree", "add", "--detach", str(base_root), base_commit)
-        try:
-            roots = {"baseline": base_root, "current": ROOT}
-            for root in roots.values():
-                subprocess.run([sys.executable, "-m", "compileall", "-q", str(root / "workbench")], check=True)
-            for name, root in roots.items():
-                probe = subprocess.run(
-                    [sys.executable, "-c", "import workbench; print(workbench.__file__)"],
-                    cwd=root, env=dict(os.environ, PYTHONPATH=str(root)), capture_output=True, text=True,
-                )  # fmt: skip
-                if Path(probe.stdout.strip()).resolve().parent.parent != root.resolve():
-                    where = probe.stdout or probe.stderr
-                    raise SystemExit(f"the {name} run would not import its own workbench: {where}")
+        with baseline_worktree(base_commit, tmp) as roots:
             rows: dict[str, list[dict]] = {"baseline": [], "current": []}
             for r in range(a.rounds):
                 order = ("baseline", "current") if r % 2 == 0 else ("current", "baseline")
@@ -167,9 +137,6 @@ def main(argv: list[str] | None = None) -> int:
                  str(tmp / f"out_current_{last}"), "--rtol", "1e-9"],
                 capture_output=True, text=True,
             )  # fmt: skip
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(base_root)], cwd=ROOT, capture_output=True)
-            subprocess.run(["git", "worktree", "prune"], cwd=ROOT, capture_output=True)
     keys = ("wall_s", "cpu_s", "gc_cpu_s", "max_rss_mb")
     med = {n: {k: _median(rows[n], k) for k in keys} for n in rows}
     ratio = {k: med["current"][k] / med["baseline"][k] for k in keys}
