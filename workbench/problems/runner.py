@@ -256,11 +256,12 @@ def _run(
                     stage = next(stages)
                 except StopIteration:
                     break
+                result = stage  # now, not after drawing: the stage before is released while this one is drawn
                 rep.record(stage_label(stage, seen), time.perf_counter() - t0)
                 t0 = time.perf_counter()
                 drawer.handle(stage)
                 draw_s += time.perf_counter() - t0
-                result, last = stage, type(stage).__name__
+                last = type(stage).__name__
         except NumericalFailure:
             raise
         except np.linalg.LinAlgError as err:

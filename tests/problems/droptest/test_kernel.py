@@ -14,6 +14,7 @@ import pytest
 from workbench.core.rotation import quat_from_rotvec, quat_to_dcm
 from workbench.estimation.ekf import update
 from workbench.estimation.kernels import joseph_update
+from workbench.estimation.smoother import rts_smooth
 from workbench.problems.droptest import kernel as kn
 from workbench.problems.droptest import model as rl
 from workbench.problems.droptest import pipeline as dt
@@ -123,6 +124,17 @@ def test_engines_agree_on_the_drop(droptest_result, droptest_run):
     r = droptest_result
     fp = _engines_agree(droptest_run.settings, r.telemetry, r.initial)
     assert {"gyro", "zupt", *r.telemetry.triads} <= set(fp.innovations)
+
+
+def test_the_result_keeps_neither_transitions_nor_gains_and_smooths_bit_for_bit(droptest_result, droptest_run):
+    """The smoother writes its gains into the transitions' memory and the result keeps neither (a
+    long log's memory, see DropResult); its smoothed pass is bit for bit the forward pass smoothed
+    with both kept."""
+    r = droptest_result
+    assert r.forward.forward.F.shape[0] == 0 and r.smoothed.smoothed.G.shape[0] == 0
+    fp = dt.forward_pass(droptest_run.settings, r.telemetry, r.initial).forward
+    sp = rts_smooth(fp, dt.layout_for(len(r.telemetry.triads)))
+    assert np.array_equal(sp.x, r.smoothed.x) and np.array_equal(sp.P, r.smoothed.P)
 
 
 def test_engines_agree_in_dynamic_mode(droptest_result, droptest_run):

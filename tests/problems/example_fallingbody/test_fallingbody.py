@@ -90,3 +90,27 @@ def test_misspelt_key_is_refused_by_the_schema(problem, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "bad.toml" in err and "barometer" in err and "noise_pa_" in err and "did you mean 'noise_pa'" in err
     assert not (tmp_path / "out" / "fallingbody.rrd").exists()
+
+
+def test_runner_releases_each_stage_before_it_draws_the_next(problem, tmp_path, monkeypatch):
+    """The generic runner holds no earlier stage while it draws the next (a long log's stages are
+    hundreds of MB of covariance histories): once a stage is drawn, only the problem keeps it."""
+    import gc
+    import weakref
+
+    drawer = sys.modules["example_fallingbody"]._Drawer
+    seen: dict[str, object] = {}
+
+    def watched(name: str, orig):
+        def wrapped(self, stage):
+            gc.collect()
+            seen[f"alive when {name} draws"] = [k for k, ref in seen.items() if k.startswith("ref") and ref()]
+            seen[f"ref {name}"] = weakref.ref(stage)
+            orig(self, stage)
+
+        return wrapped
+
+    for name in ("_baro", "_forward", "_result"):
+        monkeypatch.setattr(drawer, name, watched(name, getattr(drawer, name)))
+    assert main(["run", str(SCENARIO), "--out", str(tmp_path), "--quiet"]) == 0
+    assert seen["alive when _forward draws"] == [] and seen["alive when _result draws"] == []

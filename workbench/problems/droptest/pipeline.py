@@ -183,7 +183,10 @@ class StrokeStage:
 
 @dataclass(frozen=True)
 class DropResult:
-    """Everything the reconstruction produced, and ``summary`` (JSON-ready numbers)."""
+    """Everything the reconstruction produced, and ``summary`` (JSON-ready numbers). Two histories
+    are not kept (a long log's memory): the forward pass's transitions ``forward.forward.F`` and the
+    smoother's gains ``smoothed.smoothed.G`` are empty (0, N_E, N_E) arrays; the gains served the
+    restitution's cross-covariance (:func:`stroke_stage`)."""
 
     telemetry: DropTelemetry
     initial: InitialState
@@ -678,9 +681,12 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
         raise np.linalg.LinAlgError(f"RTS smoother: {err}{likely_keys(settings, err)}") from err
     fwd = replace(fwd, forward=replace(fwd.forward, F=np.empty((0, *sp.G.shape[1:]))))  # F is G now: unreadable
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
+    del sp
     finite_or_fail(smo, "RTS smoother", settings, fwd)
     yield smo
     st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))
+    # the gains served the restitution's cross-covariance: the result keeps no G (memory, as F above)
+    smo = replace(smo, smoothed=replace(smo.smoothed, G=np.empty((0, *smo.smoothed.G.shape[1:]))))
     yield st
     yield DropResult(tel, init, fwd, smo, st, summarize(settings, tel, fwd, smo, st))
 

@@ -403,7 +403,8 @@ class DropTestRecorder:
         self.rec = rec
         self.truth = truth
         self.tel = None
-        self.fwd = None
+        self._fwd_t = None  # the forward pass's times and 1σ (n, N_E): what later stages draw of it
+        self._fwd_sd = None
         self._smoothed_x = None
         self.dispatch = StageDispatch(
             {
@@ -474,7 +475,7 @@ class DropTestRecorder:
 
     def _on_filter(self, st) -> None:
         if st.name == "forward":
-            self.fwd = st
+            self._fwd_t, self._fwd_sd = st.t, np.sqrt(np.einsum("nii->ni", st.P))  # not the stage: its histories
             self._forward(st)
         else:
             self._smoothed(st)
@@ -702,7 +703,7 @@ class DropTestRecorder:
             ("rate [deg/s]", rl.EW, np.degrees(1.0)),
             ("ang. accel [rad/s²]", rl.EAL, 1.0),
         ]
-        sdf = np.sqrt(np.einsum("nii->ni", self.fwd.P)) if self.fwd is not None else None
+        sdf = self._fwd_sd
         for label, sl, k in groups:
             key = label.split(" ")[0].replace(".", "")
             for series, sigma, tag, style in (
@@ -723,7 +724,7 @@ class DropTestRecorder:
     def _on_stroke(self, st) -> None:
         r = self.rec
         lander, surf = st.lander, st.surface
-        t = self.fwd.t
+        t = self._fwd_t
         step = np.arange(t.size)
         h = st.smoothed
         r.mesh(
@@ -904,7 +905,7 @@ class DropTestRecorder:
         from workbench.problems.droptest.pipeline import truth_on_grid, truth_stroke
 
         r = self.rec
-        t = self.fwd.t
+        t = self._fwd_t
         tg = truth_on_grid(self.truth, t)
         r.poses(layout.TRUTH_VEHICLE, t, tg["p_I"], tg["q_I_B"], step=np.arange(t.size))
         edges = np.asarray(st.lander.body.vertices, float)[np.asarray(st.lander.body.edges_unique)]
