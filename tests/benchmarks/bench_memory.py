@@ -12,10 +12,11 @@ The log-length series runs the shipped ``droptest`` scenario with the lander han
 its release (``[synthetic] pre_release_s``, each variant a copy of the scenario file in a temporary
 folder): the drop-test filter runs at 1 kHz over the whole log, and its covariance histories are
 n_e × n_e per step (n_e = 42 with four accelerometer triads), so its peak grows linearly with the
-number of filter steps; the slope [kB per step] is a least-squares line through the series.
+number of filter steps; the slope [KiB per step] is a least-squares line through the series. Memory
+is in MiB (``ru_maxrss`` / 1024), printed "MB" as /usr/bin/time's users read it.
 
-Both checkouts' summaries of the shipped scenarios are compared number by number
-(``compare_summaries.py``, timings skipped). The baseline is a ``git worktree`` (``checkouts.py``).
+Both checkouts' summaries of the shipped scenarios are compared number by number, exactly
+(``compare_summaries.py --rtol 0``, timings skipped). The baseline is a ``git worktree`` (``checkouts.py``).
 
     python tests/benchmarks/bench_memory.py --baseline COMMIT [--scenarios all]
         [--hang 0.5,5,10] [--out docs/results/bench_memory.json]
@@ -51,7 +52,10 @@ def run_one(root: Path, scenario: str, out: Path) -> dict:
     cmd = [sys.executable, "-I", "-c", RUSAGE, sys.executable, "-m", "workbench.cli", "run", scenario]
     cmd += ["--out", str(out)]
     p = subprocess.run([*cmd, "--quiet"], cwd=root, env=checkout_env(root), capture_output=True, text=True)
-    usage = json.loads(p.stdout.strip().splitlines()[-1])
+    lines = p.stdout.strip().splitlines()
+    if not lines:
+        raise SystemExit(f"the wrapper of workbench run {scenario} in {root} printed nothing:\n{p.stderr[-2000:]}")
+    usage = json.loads(lines[-1])
     if usage["code"] != 0:
         raise SystemExit(f"workbench run {scenario} failed in {root} (exit {usage['code']}):\n{p.stderr[-2000:]}")
     summary = json.loads((out / f"{Path(scenario).stem}.summary.json").read_text(encoding="utf-8"))
@@ -112,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"{name:8s} hang {h:5g} s, {r['steps']} steps: peak {r['max_rss_mb']:6.0f} MB", flush=True)
             cmp = subprocess.run(
                 [sys.executable, str(HERE / "compare_summaries.py"), str(tmp / "out_baseline"),
-                 str(tmp / "out_current"), "--rtol", "1e-9"],
+                 str(tmp / "out_current"), "--rtol", "0"],
                 capture_output=True, text=True,
             )  # fmt: skip
     fits = {}
@@ -120,9 +124,9 @@ def main(argv: list[str] | None = None) -> int:
         if len(pts) >= 2:
             steps = np.array([p["steps"] for p in pts], float)
             mb = np.array([p["max_rss_mb"] for p in pts], float)
-            slope, icpt = np.polyfit(steps, mb, 1)
-            at_budget = (BUDGET_MB - icpt) / slope
-            fits[name] = {"kb_per_step": slope * 1e3, "intercept_mb": icpt, "steps_at_budget": at_budget}
+            slope, icpt = np.polyfit(steps, mb, 1)  # MB per step, MB (ru_maxrss in KiB / 1024: MiB)
+            at_budget = (BUDGET_MB - icpt) / slope if slope > 0 else None
+            fits[name] = {"kib_per_step": slope * 1024, "intercept_mb": icpt, "steps_at_budget": at_budget}
     results = {
         "baseline_commit": base_commit,
         "current_commit": head,
@@ -144,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         b, c = rows["baseline"][sc]["max_rss_mb"], rows["current"][sc]["max_rss_mb"]
         print(f"{sc:22s} baseline {b:6.0f} MB, current {c:6.0f} MB, ratio {c / b:.3f}")
     for name, f in fits.items():
-        print(f"{name:8s} drop-test log: {f['kb_per_step']:.1f} kB per filter step + {f['intercept_mb']:.0f} MB")
+        print(f"{name:8s} drop-test log: {f['kib_per_step']:.1f} KiB per filter step + {f['intercept_mb']:.0f} MiB")
     print(cmp.stdout.strip().splitlines()[-1] if cmp.stdout.strip() else cmp.stderr.strip())
     path = write_benchmark_json(a.out, __file__, results, argv)
     print(f"-> {path}")

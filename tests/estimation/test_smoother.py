@@ -378,22 +378,48 @@ def _consider_pass():
     return run_filter(np.zeros(2), np.diag([2.0, 0.8]), np.arange(n, dtype=float), transition, None, meas, layout)
 
 
-@pytest.mark.parametrize("case", ["linear time-varying", "consider parameter"])
+def _known_component_pass():
+    """Position, velocity and a bias known exactly (σ = 0, no process noise): the smoother's
+    zero-variance branch."""
+    rng = np.random.default_rng(6)
+    F, H = np.array([[1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 1.0]])
+    z = np.cumsum(rng.normal(0.0, 0.3, 30)) + 0.7
+
+    def meas(k, tk, x):
+        return [Measurement("z", z[k : k + 1], np.array([[0.25]]), lambda s: H @ s, H)]
+
+    Q = np.diag([0.0, 0.05, 0.0])
+    return run_filter(
+        np.array([0.0, 0.0, 0.7]), np.diag([4.0, 1.0, 0.0]), np.arange(30.0), lambda x, t0, t1: (F @ x, F),
+        lambda x, t0, t1: Q, meas, ErrorStateLayout(3),
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "case", ["linear time-varying", "one step", "two steps", "consider parameter", "component known exactly"]
+)
 def test_overwrite_F_writes_the_gains_into_F_with_the_same_numbers(case):
     """``overwrite_F=True`` (a long pass's memory: one n × n_e² history less) gives bit for bit the
     default smoother's x, P and G, and fp.F's memory then holds G (the transitions are consumed)."""
+    consider = None
     if case == "consider parameter":
         fp, consider = _consider_pass(), [1]
+    elif case == "component known exactly":
+        fp = _known_component_pass()
+        assert np.all(fp.P_prior[:, 2, :] == 0.0)  # the branch under test
     else:
-        fp, consider = _run(*_ltv_problem(2))[0], None
+        n = {"one step": 1, "two steps": 2}.get(case, 25)
+        fp = _run(*_ltv_problem(2, n=n))[0]
     layout = ErrorStateLayout(fp.x_post.shape[1])
     ref = rts_smooth(fp, layout, consider=consider)
     F_before = fp.F.copy()
     sp = rts_smooth(fp, layout, consider=consider, overwrite_F=True)
     for a, b in ((sp.x, ref.x), (sp.P, ref.P), (sp.G, ref.G)):
         np.testing.assert_array_equal(a, b)
-    assert sp.G is fp.F and not np.array_equal(fp.F, F_before)
-    np.testing.assert_array_equal(cross_covariance(sp, 1, 6), cross_covariance(ref, 1, 6))
+    assert sp.G is fp.F and np.all(fp.F[-1] == 0.0)
+    if fp.t.size > 1:
+        assert not np.array_equal(fp.F[:-1], F_before[:-1])
+        np.testing.assert_array_equal(cross_covariance(sp, 0, fp.t.size - 1), cross_covariance(ref, 0, fp.t.size - 1))
 
 
 def test_overwrite_F_refuses_an_F_it_cannot_write():

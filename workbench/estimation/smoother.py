@@ -53,7 +53,8 @@ __all__ = ["CovarianceError", "SmoothedPass", "IteratedSmoothing", "cross_covari
 @dataclass(frozen=True)
 class SmoothedPass:
     """Smoothed (fixed-interval) estimates: ``t`` (n,) [s]; ``x`` (n, n_x); ``P`` (n, n_e, n_e)
-    smoothed-pass covariance (error state); ``G`` (n, n_e, n_e) smoother gains (``G[n-1] = 0``)."""
+    smoothed-pass covariance (error state); ``G`` (n, n_e, n_e) smoother gains (``G[n-1] = 0``), or
+    an empty (0, n_e, n_e) array where the caller dropped them after use (the drop test's result)."""
 
     t: np.ndarray
     x: np.ndarray
@@ -99,11 +100,12 @@ def rts_smooth(
     ``x_s − x_prior`` is zero on them), and the cross-covariance of the other states with them
     gets the smoothing term ``G_x (P_s[k+1] − P_prior[k+1])[:, c]`` it needs.
 
-    ``overwrite_F`` (as scipy's ``overwrite_a``): the gains are written into ``fp.F``'s memory,
-    which then holds G, not the transitions, and is the returned ``G``. The recursion reads
-    ``F[k]`` before it writes ``G[k]`` in its place, so the numbers are the same; it saves one
-    (n, n_e, n_e) array, the largest share of a long, high-rate pass's memory. The caller must not
-    read ``fp.F`` afterwards (F must be a writable float64 array of G's shape).
+    ``overwrite_F``: the gains are always written into ``fp.F``'s memory, which then holds G, not
+    the transitions, and is the returned ``G``. The recursion reads ``F[k]`` before it writes
+    ``G[k]`` in its place, so the numbers are the same; it saves one (n, n_e, n_e) array, the largest
+    share of a long, high-rate pass's memory. The caller must not read ``fp.F`` afterwards, also
+    when this raises (the steps after the failing one then already hold G); F must be a writable
+    float64 array of G's shape.
     """
     n = fp.t.shape[0]
     n_e = layout.n_e

@@ -132,9 +132,14 @@ def test_the_result_keeps_neither_transitions_nor_gains_and_smooths_bit_for_bit(
     with both kept."""
     r = droptest_result
     assert r.forward.forward.F.shape[0] == 0 and r.smoothed.smoothed.G.shape[0] == 0
-    fp = dt.forward_pass(droptest_run.settings, r.telemetry, r.initial).forward
-    sp = rts_smooth(fp, dt.layout_for(len(r.telemetry.triads)))
+    fwd = dt.forward_pass(droptest_run.settings, r.telemetry, r.initial)
+    sp = rts_smooth(fwd.forward, dt.layout_for(len(r.telemetry.triads)))
     assert np.array_equal(sp.x, r.smoothed.x) and np.array_equal(sp.P, r.smoothed.P)
+    # the gains' one use, the restitution's cross-covariance, before they were dropped
+    smo = dt.FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
+    rng = np.random.default_rng(droptest_run.summary["seed"])
+    st = dt.stroke_stage(fwd, smo, droptest_run.settings.lander, r.stroke.surface, r.telemetry.events, rng)
+    assert np.isfinite(st.restitution[1]) and st.restitution == r.stroke.restitution
 
 
 def test_engines_agree_in_dynamic_mode(droptest_result, droptest_run):

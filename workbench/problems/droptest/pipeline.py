@@ -130,9 +130,10 @@ class InitialState:
 @dataclass(frozen=True)
 class FilterStage:
     """One pass: ``name`` "forward" or "smoothed"; ``t`` (n,); ``x`` (n, N_X); ``P`` (n, N_E, N_E)
-    error covariance; ``forward`` the full :class:`ForwardPass` (priors, innovations) on the
-    forward stage; ``smoothed`` the :class:`SmoothedPass` on the smoothed stage; ``q_accel`` and
-    ``q_angular`` (n,) the process-noise PSDs used at each step."""
+    error covariance; ``forward`` the :class:`ForwardPass` (priors, innovations) on the forward
+    stage, whose transitions ``F`` the smoother consumes (:func:`reconstruct`); ``smoothed`` the
+    :class:`SmoothedPass` on the smoothed stage; ``q_accel`` and ``q_angular`` (n,) the
+    process-noise PSDs used at each step."""
 
     name: str
     t: np.ndarray
@@ -185,7 +186,7 @@ class StrokeStage:
 class DropResult:
     """Everything the reconstruction produced, and ``summary`` (JSON-ready numbers). Two histories
     are not kept (a long log's memory): the forward pass's transitions ``forward.forward.F`` and the
-    smoother's gains ``smoothed.smoothed.G`` are empty (0, N_E, N_E) arrays; the gains served the
+    smoother's gains ``smoothed.smoothed.G`` are empty (0, n_e, n_e) arrays; the gains served the
     restitution's cross-covariance (:func:`stroke_stage`)."""
 
     telemetry: DropTelemetry
@@ -654,7 +655,9 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
     last a :class:`DropResult`.
 
     ``paths`` maps imu, attitude_3dm, events, setup (and optionally ranging) to files.
-    ``seed`` drives only the posterior sampling of the stroke-σ check.
+    ``seed`` drives only the posterior sampling of the stroke-σ check. Memory: the smoother writes
+    its gains into the forward pass's transition history, so the forward stage's ``forward.F`` is
+    consumed once the smoothed stage follows (an observer reads a stage when it is yielded).
     """
     lander = settings.lander
     tel = load_drop_telemetry(settings, paths)

@@ -403,7 +403,7 @@ class DropTestRecorder:
         self.rec = rec
         self.truth = truth
         self.tel = None
-        self._fwd_t = None  # the forward pass's times and 1σ (n, N_E): what later stages draw of it
+        self._fwd_t = None  # the forward pass's times and 1σ (n, n_e): what later stages draw of it
         self._fwd_sd = None
         self._smoothed_x = None
         self.dispatch = StageDispatch(
