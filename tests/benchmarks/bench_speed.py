@@ -153,16 +153,18 @@ def rows(speed: dict, results_dir: Path = RESULTS) -> list[tuple[str, str, str, 
     mem = _load("bench_memory", results_dir)
     if mem:  # a scenario run by itself peaks above its forked process of run all (bench_memory.py)
         m = mem["results"]
-        big = m["largest_current"]
-        row = m["scenarios"][big]
+        sc = m["scenarios"]
+        big = max(sc, key=lambda n: sc[n]["current"]["max_rss_mb"])
+        big_b = max(sc, key=lambda n: sc[n]["baseline"]["max_rss_mb"])
+        now, then = sc[big]["current"]["max_rss_mb"], sc[big_b]["baseline"]["max_rss_mb"]
         out.append(
             (
                 "one scenario run by itself ≤ 600 MB peak RSS (the largest of the shipped ones)",
-                f"{row['current']['max_rss_mb']:.0f} MB (`{big}`)",
-                f"the same scenario at {m['baseline_commit']}",
-                f"{row['baseline']['max_rss_mb']:.0f} MB",
-                f"{row['ratio_max_rss']:.2f}×",
-                "met" if row["current"]["max_rss_mb"] <= 600 else "**not met**",
+                f"{now:.0f} MB (`{big}`)",
+                f"the largest at {m['baseline_commit']}",
+                f"{then:.0f} MB (`{big_b}`)",
+                f"{now / then:.2f}×",
+                "met" if now <= 600 else "**not met**",
             )
         )
         out.append(
