@@ -626,9 +626,10 @@ imports and a forked scenario does not count the library pages it inherited unti
 scenario run by itself, as a user runs their own data, peaks higher. `{{bench_memory:command}}` runs every
 shipped scenario in its own new interpreter (numba's cache warm), this checkout against
 {{bench_memory:results.baseline_commit}}, and the shipped `droptest` with a longer hang before release. The drop
-test's smoother now writes its gains into the memory of the forward pass's transitions (`rts_smooth(...,
-overwrite_F=True)`: the recursion reads `F[k]` before `G[k]` replaces it), the result keeps no gains once the
-restitution's cross-covariance is taken, the recorder keeps the forward pass's 1σ rather than the stage, the
+test's smoother now writes its gains and smoothed covariances into the memory of the forward pass's transitions
+and priors (`rts_smooth(..., overwrite_F=True, overwrite_prior=True)`: the recursion reads `F[k]` and `P_prior[k]`
+before `G[k]` and `P_s[k]` replace them; the IMU lag against the ranging is estimated from the priors first), the
+result keeps no gains once the restitution's cross-covariance is taken, the recorder keeps the forward pass's 1σ rather than the stage, the
 runner lets go of a stage before it draws the next, and the covariance checks examine 256 steps at a time without
 boolean copies of the whole history; numbers bit for bit, summaries identical:
 {{bench_memory:results.summaries_identical|pass}}.
@@ -656,9 +657,10 @@ with four accelerometer triads), so a log with a long hang before release grows 
 {{bench_memory:results.droptest_log_length.series.current.2.max_rss_mb|.0f}} MB now: {{bench_memory:results.droptest_log_length.fit.baseline.kib_per_step|.1f}} → {{bench_memory:results.droptest_log_length.fit.current.kib_per_step|.1f}}
 KiB per filter step (a least-squares line; MB here are MiB, `ru_maxrss` / 1024), so the 600 MB budget holds to about
 {{bench_memory:results.droptest_log_length.fit.current.steps_at_budget|.0f}} steps ({{bench_memory:results.droptest_log_length.fit.current.steps_at_budget|*0.001:.1f}} s of log at 1 kHz) where
-it held to {{bench_memory:results.droptest_log_length.fit.baseline.steps_at_budget|.0f}}. Four histories of n_e² per step remain at the peak,
-in the smoother (the forward pass's prior and posterior covariances, the gains, the smoothed covariance); a log
-of minutes needs a smoother that recomputes the forward pass in segments from checkpoints instead of keeping it.
+it held to {{bench_memory:results.droptest_log_length.fit.baseline.steps_at_budget|.0f}}. Three histories of n_e² per step remain at the peak,
+in the smoother (the forward pass's posterior covariances, the gains in the transitions' memory, the smoothed
+covariances in the priors'); a log of minutes needs a smoother that recomputes the forward pass in segments from
+checkpoints instead of keeping it.
 """
 RESULTS_MD = RESULTS_MD + "\n" + _MEMORY
 

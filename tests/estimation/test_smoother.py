@@ -395,12 +395,15 @@ def _known_component_pass():
     )  # fmt: skip
 
 
+@pytest.mark.parametrize("flags", [(True, False), (False, True), (True, True)], ids=["F", "prior", "both"])
 @pytest.mark.parametrize(
     "case", ["linear time-varying", "one step", "two steps", "consider parameter", "component known exactly"]
 )
-def test_overwrite_F_writes_the_gains_into_F_with_the_same_numbers(case):
-    """``overwrite_F=True`` (a long pass's memory: one n × n_e² history less) gives bit for bit the
-    default smoother's x, P and G, and fp.F's memory then holds G (the transitions are consumed)."""
+def test_overwrite_writes_gains_and_smoothed_covariances_in_place_with_the_same_numbers(case, flags):
+    """``overwrite_F`` / ``overwrite_prior`` (a long pass's memory: one n × n_e² history less each)
+    give bit for bit the default smoother's x, P and G, and fp.F's / fp.P_prior's memory then holds
+    G / P_s (the transitions and priors are consumed)."""
+    over_F, over_prior = flags
     consider = None
     if case == "consider parameter":
         fp, consider = _consider_pass(), [1]
@@ -412,17 +415,18 @@ def test_overwrite_F_writes_the_gains_into_F_with_the_same_numbers(case):
         fp = _run(*_ltv_problem(2, n=n))[0]
     layout = ErrorStateLayout(fp.x_post.shape[1])
     ref = rts_smooth(fp, layout, consider=consider)
-    F_before = fp.F.copy()
-    sp = rts_smooth(fp, layout, consider=consider, overwrite_F=True)
+    F_before, prior_before = fp.F.copy(), fp.P_prior.copy()
+    sp = rts_smooth(fp, layout, consider=consider, overwrite_F=over_F, overwrite_prior=over_prior)
     for a, b in ((sp.x, ref.x), (sp.P, ref.P), (sp.G, ref.G)):
         np.testing.assert_array_equal(a, b)
-    assert sp.G is fp.F and np.all(fp.F[-1] == 0.0)
+    assert (sp.G is fp.F) == over_F and (sp.P is fp.P_prior) == over_prior
+    assert np.array_equal(fp.F, F_before) != over_F
+    assert np.array_equal(fp.P_prior, prior_before) != over_prior
     if fp.t.size > 1:
-        assert not np.array_equal(fp.F[:-1], F_before[:-1])
         np.testing.assert_array_equal(cross_covariance(sp, 0, fp.t.size - 1), cross_covariance(ref, 0, fp.t.size - 1))
 
 
-def test_overwrite_F_refuses_an_F_it_cannot_write():
+def test_overwrite_refuses_an_array_it_cannot_write():
     Fs, us, Qs, meas, m0, P0 = _ltv_problem(0)
     fp, _ = _run(Fs, us, Qs, meas, m0, P0)
     ro = fp.F.copy()
@@ -430,3 +434,5 @@ def test_overwrite_F_refuses_an_F_it_cannot_write():
     for F in (ro, fp.F.astype(np.float32), fp.F[:-1]):
         with pytest.raises(ValueError, match="overwrite_F"):
             rts_smooth(replace(fp, F=F), ErrorStateLayout(m0.size), overwrite_F=True)
+        with pytest.raises(ValueError, match="overwrite_prior"):
+            rts_smooth(replace(fp, P_prior=F), ErrorStateLayout(m0.size), overwrite_prior=True)

@@ -76,7 +76,12 @@ def cross_covariance(sp: SmoothedPass, a: int, b: int) -> np.ndarray:
 
 
 def rts_smooth(
-    fp: ForwardPass, layout: ErrorStateLayout, consider: np.ndarray | None = None, *, overwrite_F: bool = False
+    fp: ForwardPass,
+    layout: ErrorStateLayout,
+    consider: np.ndarray | None = None,
+    *,
+    overwrite_F: bool = False,
+    overwrite_prior: bool = False,
 ) -> SmoothedPass:
     """Error-state RTS smoothing of a forward pass (formulas in the module docstring).
 
@@ -105,18 +110,21 @@ def rts_smooth(
     ``G[k]`` in its place, so the numbers are the same; it saves one (n, n_e, n_e) array, the largest
     share of a long, high-rate pass's memory. The caller must not read ``fp.F`` afterwards, also
     when this raises (the steps after the failing one then already hold G); F must be a writable
-    float64 array of G's shape.
+    float64 array of G's shape. ``overwrite_prior``: likewise the smoothed covariances are written
+    into ``fp.P_prior``'s memory (the returned ``P``); ``P_prior[k]`` is copied aside before
+    ``P_s[k]`` replaces it. Both together leave a pass three n × n_e² histories instead of five.
     """
     n = fp.t.shape[0]
     n_e = layout.n_e
     xs = np.empty_like(fp.x_post)
-    Ps = np.empty_like(fp.P_post)
-    if overwrite_F:
-        G = fp.F
-        if G.shape != (n, n_e, n_e) or G.dtype != np.float64 or not G.flags.writeable:
-            raise ValueError(f"rts_smooth(overwrite_F=True): F must be a writable float64 ({n}, {n_e}, {n_e}) array")
-    else:
-        G = np.zeros((n, n_e, n_e))
+    for flag, name, arg in ((overwrite_F, "F", "overwrite_F"), (overwrite_prior, "P_prior", "overwrite_prior")):
+        a = getattr(fp, name)
+        if flag and (a.shape != (n, n_e, n_e) or a.dtype != np.float64 or not a.flags.writeable):
+            raise ValueError(f"rts_smooth({arg}=True): {name} must be a writable float64 ({n}, {n_e}, {n_e}) array")
+    if overwrite_prior and fp.F is fp.P_prior:
+        raise ValueError("rts_smooth: F and P_prior are one array")
+    Ps = fp.P_prior if overwrite_prior else np.empty_like(fp.P_post)
+    G = fp.F if overwrite_F else np.zeros((n, n_e, n_e))
     if n == 0:
         return SmoothedPass(fp.t, xs, Ps, G)
     # One BLAS thread: the recursion is a chain of n_e × n_e products and triangular solves, where
@@ -124,7 +132,14 @@ def rts_smooth(
     # synchronisation (measured 2.6 ms vs 0.02 ms per 42 × 42 solve on 2 shared cores).
     with threadpool_limits(limits=1, user_api="blas"):
         _rts_backward(
-            fp, layout, xs, Ps, G, None if consider is None else np.asarray(consider, dtype=int), in_place=overwrite_F
+            fp,
+            layout,
+            xs,
+            Ps,
+            G,
+            None if consider is None else np.asarray(consider, dtype=int),
+            in_place=overwrite_F,
+            prior_in_place=overwrite_prior,
         )
     return SmoothedPass(fp.t, xs, Ps, G)
 
@@ -137,11 +152,20 @@ def _rts_backward(
     G: np.ndarray,
     consider: np.ndarray | None = None,
     in_place: bool = False,
+    prior_in_place: bool = False,
 ) -> None:
     """The backward recursion of :func:`rts_smooth`, filling xs (n, n_x), Ps and G (n, n_e, n_e).
     ``in_place``: G is ``fp.F`` itself; each right-hand side ``F[k+1] P_post[k]`` is formed just
-    before ``G[k+1]`` replaces ``F[k+1]`` (the same product, matrix by matrix, as the batched one)."""
+    before ``G[k+1]`` replaces ``F[k+1]`` (the same product, matrix by matrix, as the batched one).
+    ``prior_in_place``: Ps is ``fp.P_prior`` itself; ``P_prior[k]`` is carried one step (a copy)
+    before ``Ps[k]`` replaces it."""
     n = fp.t.shape[0]
+    # the Jacobi scales of P_prior, before any of it is replaced (new arrays, not views)
+    dg = np.diagonal(fp.P_prior, axis1=1, axis2=2)
+    all_pos = np.all(dg > 0.0, axis=1)
+    with np.errstate(invalid="ignore"):  # a negative variance is reported by _active below
+        dsq = np.sqrt(dg)
+    prior_next = fp.P_prior[n - 1].copy() if prior_in_place and n > 0 else None
     xs[-1] = fp.x_post[-1]
     Ps[-1] = fp.P_post[-1]
     _check_pd(Ps[-1], n - 1, fp.t)
@@ -150,19 +174,18 @@ def _rts_backward(
             G[:] = 0.0
         return
     # what does not depend on the recursion: the right-hand sides F[k+1] P_post[k] (for all steps at
-    # once, held in G until the gain replaces them; in place, one step ahead) and the Jacobi scales
+    # once, held in G until the gain replaces them; in place, one step ahead)
     rhs_next = None
     if in_place:
         rhs_next = fp.F[n - 1] @ fp.P_post[n - 2]
         G[n - 1] = 0.0
     else:
         np.matmul(fp.F[1:], fp.P_post[:-1], out=G[:-1])
-    dg = np.diagonal(fp.P_prior, axis1=1, axis2=2)
-    all_pos = np.all(dg > 0.0, axis=1)
-    with np.errstate(invalid="ignore"):  # a negative variance is reported by _active below
-        dsq = np.sqrt(dg)
     for k in range(n - 2, -1, -1):
-        Pp = fp.P_prior[k + 1]
+        if prior_in_place:  # P_prior[k] is read (for step k − 1) before Ps[k] overwrites it below
+            Pp, prior_next = prior_next, fp.P_prior[k].copy()
+        else:
+            Pp = fp.P_prior[k + 1]
         # Gᵀ = P_prior[k+1]⁻¹ F[k+1] P_post[k]   (P_post symmetric), solved on the Jacobi-scaled
         # D⁻¹ P_prior D⁻¹ (D = sqrt diag): (km)² next to (µrad)² variances stay factorisable
         d = dsq[k + 1]

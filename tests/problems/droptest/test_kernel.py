@@ -127,11 +127,12 @@ def test_engines_agree_on_the_drop(droptest_result, droptest_run):
 
 
 def test_the_result_keeps_neither_transitions_nor_gains_and_smooths_bit_for_bit(droptest_result, droptest_run):
-    """The smoother writes its gains into the transitions' memory and the result keeps neither (a
-    long log's memory, see DropResult); its smoothed pass is bit for bit the forward pass smoothed
-    with both kept."""
+    """The smoother writes its gains and smoothed covariances into the memory of the transitions
+    and the priors, and the result keeps none of the three (a long log's memory, see DropResult); its
+    smoothed pass is bit for bit the forward pass smoothed with all kept."""
     r = droptest_result
     assert r.forward.forward.F.shape[0] == 0 and r.smoothed.smoothed.G.shape[0] == 0
+    assert r.forward.forward.P_prior.shape[0] == 0
     fwd = dt.forward_pass(droptest_run.settings, r.telemetry, r.initial)
     sp = rts_smooth(fwd.forward, dt.layout_for(len(r.telemetry.triads)))
     assert np.array_equal(sp.x, r.smoothed.x) and np.array_equal(sp.P, r.smoothed.P)

@@ -131,9 +131,9 @@ class InitialState:
 class FilterStage:
     """One pass: ``name`` "forward" or "smoothed"; ``t`` (n,); ``x`` (n, N_X); ``P`` (n, N_E, N_E)
     error covariance; ``forward`` the :class:`ForwardPass` (priors, innovations) on the forward
-    stage, whose transitions ``F`` the smoother consumes (:func:`reconstruct`); ``smoothed`` the
-    :class:`SmoothedPass` on the smoothed stage; ``q_accel`` and ``q_angular`` (n,) the
-    process-noise PSDs used at each step."""
+    stage, whose transitions ``F`` and priors ``P_prior`` the smoother consumes
+    (:func:`reconstruct`); ``smoothed`` the :class:`SmoothedPass` on the smoothed stage;
+    ``q_accel`` and ``q_angular`` (n,) the process-noise PSDs used at each step."""
 
     name: str
     t: np.ndarray
@@ -184,10 +184,12 @@ class StrokeStage:
 
 @dataclass(frozen=True)
 class DropResult:
-    """Everything the reconstruction produced, and ``summary`` (JSON-ready numbers). Two histories
-    are not kept (a long log's memory): the forward pass's transitions ``forward.forward.F`` and the
-    smoother's gains ``smoothed.smoothed.G`` are empty (0, n_e, n_e) arrays; the gains served the
-    restitution's cross-covariance (:func:`stroke_stage`)."""
+    """Everything the reconstruction produced, and ``summary`` (JSON-ready numbers). Three
+    histories are not kept (a long log's memory): the forward pass's transitions
+    ``forward.forward.F`` and priors ``forward.forward.P_prior`` and the smoother's gains
+    ``smoothed.smoothed.G`` are empty (0, n_e, n_e) arrays; the gains served the restitution's
+    cross-covariance (:func:`stroke_stage`), the priors the IMU lag estimate
+    (:func:`~.physics.estimate_lag`)."""
 
     telemetry: DropTelemetry
     initial: InitialState
@@ -656,8 +658,9 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
 
     ``paths`` maps imu, attitude_3dm, events, setup (and optionally ranging) to files.
     ``seed`` drives only the posterior sampling of the stroke-σ check. Memory: the smoother writes
-    its gains into the forward pass's transition history, so the forward stage's ``forward.F`` is
-    consumed once the smoothed stage follows (an observer reads a stage when it is yielded).
+    its gains and smoothed covariances into the forward pass's transitions and priors, so the
+    forward stage's ``forward.F`` and ``forward.P_prior`` are consumed once the smoothed stage
+    follows (an observer reads a stage when it is yielded).
     """
     lander = settings.lander
     tel = load_drop_telemetry(settings, paths)
@@ -677,12 +680,14 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
     except np.linalg.LinAlgError as err:
         raise np.linalg.LinAlgError(f"forward EKF pass: {err}{likely_keys(settings, err)}") from err
     finite_or_fail(fwd, "forward EKF pass", settings)
+    lag = estimate_lag(settings, tel, fwd, forward_pass)  # from the forward priors, before the smoother takes them
     yield fwd
-    try:  # the gains take the transitions' memory: one n × n_e² history less (a long log's memory)
-        sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)), overwrite_F=True)
+    try:  # the gains and smoothed covariances take the memory of the transitions and the priors
+        sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)), overwrite_F=True, overwrite_prior=True)
     except np.linalg.LinAlgError as err:
         raise np.linalg.LinAlgError(f"RTS smoother: {err}{likely_keys(settings, err)}") from err
-    fwd = replace(fwd, forward=replace(fwd.forward, F=np.empty((0, *sp.G.shape[1:]))))  # F is G now: unreadable
+    gone = np.empty((0, *sp.G.shape[1:]))  # F is G and P_prior is P_s now: unreadable
+    fwd = replace(fwd, forward=replace(fwd.forward, F=gone, P_prior=gone))
     smo = FilterStage("smoothed", sp.t, sp.x, sp.P, smoothed=sp)
     del sp
     finite_or_fail(smo, "RTS smoother", settings, fwd)
@@ -691,7 +696,7 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
     # the gains served the restitution's cross-covariance: the result keeps no G (memory, as F above)
     smo = replace(smo, smoothed=replace(smo.smoothed, G=np.empty((0, *smo.smoothed.G.shape[1:]))))
     yield st
-    yield DropResult(tel, init, fwd, smo, st, summarize(settings, tel, fwd, smo, st))
+    yield DropResult(tel, init, fwd, smo, st, summarize(settings, tel, fwd, smo, st, lag))
 
 
 def finite_or_fail(stage: FilterStage, what: str, settings: DropSettings, fwd: FilterStage | None = None) -> None:
@@ -757,8 +762,12 @@ def run_droptest(settings: DropSettings, paths: dict[str, Path], seed: int = 0) 
     return result
 
 
-def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo: FilterStage, st: StrokeStage) -> dict:
-    """Key numbers of the reconstruction of a run with ``settings`` (SI units; no truth involved)."""
+def summarize(
+    settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo: FilterStage, st: StrokeStage, lag: object
+) -> dict:
+    """Key numbers of the reconstruction of a run with ``settings`` (SI units; no truth involved);
+    ``lag`` the IMU lag against the ranging (:func:`~.physics.estimate_lag` of the forward pass,
+    taken before the smoother consumed its priors; None without ranging guns)."""
     ms = st.max
     fp = fwd.forward
     innov = {}
@@ -850,7 +859,7 @@ def summarize(settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo:
             cov_stats,
             settings=settings,
             completeness=cc,
-            lag=estimate_lag(settings, tel, fwd, forward_pass),
+            lag=lag,
         ),
     }
     if not cc.complete:
