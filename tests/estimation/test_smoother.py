@@ -436,3 +436,5 @@ def test_overwrite_refuses_an_array_it_cannot_write():
             rts_smooth(replace(fp, F=F), ErrorStateLayout(m0.size), overwrite_F=True)
         with pytest.raises(ValueError, match="overwrite_prior"):
             rts_smooth(replace(fp, P_prior=F), ErrorStateLayout(m0.size), overwrite_prior=True)
+    with pytest.raises(ValueError, match="share memory"):  # a view of P_post would be read after it is written
+        rts_smooth(replace(fp, P_prior=fp.P_post[:]), ErrorStateLayout(m0.size), overwrite_prior=True)

@@ -121,8 +121,10 @@ def rts_smooth(
         a = getattr(fp, name)
         if flag and (a.shape != (n, n_e, n_e) or a.dtype != np.float64 or not a.flags.writeable):
             raise ValueError(f"rts_smooth({arg}=True): {name} must be a writable float64 ({n}, {n_e}, {n_e}) array")
-    if overwrite_prior and fp.F is fp.P_prior:
-        raise ValueError("rts_smooth: F and P_prior are one array")
+    written = [a for flag, a in ((overwrite_F, fp.F), (overwrite_prior, fp.P_prior)) if flag]
+    for a in written:  # an array written here must not be (a view of) another the recursion reads
+        if sum(np.may_share_memory(a, b) for b in (fp.F, fp.P_prior, fp.P_post)) > 1:
+            raise ValueError("rts_smooth(overwrite_...): F, P_prior and P_post must not share memory")
     Ps = fp.P_prior if overwrite_prior else np.empty_like(fp.P_post)
     G = fp.F if overwrite_F else np.zeros((n, n_e, n_e))
     if n == 0:

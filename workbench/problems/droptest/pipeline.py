@@ -680,7 +680,10 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
     except np.linalg.LinAlgError as err:
         raise np.linalg.LinAlgError(f"forward EKF pass: {err}{likely_keys(settings, err)}") from err
     finite_or_fail(fwd, "forward EKF pass", settings)
-    lag = estimate_lag(settings, tel, fwd, forward_pass)  # from the forward priors, before the smoother takes them
+    try:  # from the forward priors, before the smoother takes their memory
+        lag = estimate_lag(settings, tel, fwd, forward_pass)
+    except np.linalg.LinAlgError as err:
+        raise np.linalg.LinAlgError(f"IMU lag estimate (forward pass re-run over the impact): {err}") from err
     yield fwd
     try:  # the gains and smoothed covariances take the memory of the transitions and the priors
         sp = rts_smooth(fwd.forward, layout_for(len(tel.triads)), overwrite_F=True, overwrite_prior=True)
