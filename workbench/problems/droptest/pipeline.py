@@ -60,7 +60,7 @@ from workbench.problems.droptest import model as rl
 from workbench.problems.droptest.config import DropSettings
 from workbench.problems.droptest.health import drop_health
 from workbench.problems.droptest.lander import LanderModel
-from workbench.problems.droptest.physics import contact_completeness, estimate_lag
+from workbench.problems.droptest.physics import LagEstimate, contact_completeness, estimate_lag
 from workbench.problems.droptest.sensors import RangingSpec
 from workbench.problems.droptest.stroke import (
     MaxStroke,
@@ -697,7 +697,7 @@ def reconstruct(settings: DropSettings, paths: dict[str, Path], seed: int = 0) -
     yield smo
     st = stroke_stage(fwd, smo, lander, surface, tel.events, np.random.default_rng(seed))
     # the gains served the restitution's cross-covariance: the result keeps no G (memory, as F above)
-    smo = replace(smo, smoothed=replace(smo.smoothed, G=np.empty((0, *smo.smoothed.G.shape[1:]))))
+    smo = replace(smo, smoothed=replace(smo.smoothed, G=gone))
     yield st
     yield DropResult(tel, init, fwd, smo, st, summarize(settings, tel, fwd, smo, st, lag))
 
@@ -766,7 +766,12 @@ def run_droptest(settings: DropSettings, paths: dict[str, Path], seed: int = 0) 
 
 
 def summarize(
-    settings: DropSettings, tel: DropTelemetry, fwd: FilterStage, smo: FilterStage, st: StrokeStage, lag: object
+    settings: DropSettings,
+    tel: DropTelemetry,
+    fwd: FilterStage,
+    smo: FilterStage,
+    st: StrokeStage,
+    lag: LagEstimate | None,
 ) -> dict:
     """Key numbers of the reconstruction of a run with ``settings`` (SI units; no truth involved);
     ``lag`` the IMU lag against the ranging (:func:`~.physics.estimate_lag` of the forward pass,
