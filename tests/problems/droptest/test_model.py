@@ -158,3 +158,15 @@ def test_prediction_does_not_depend_on_the_body_axes(x):
         assert np.min(np.linalg.eigvalsh(Q)) > -1e-12 * np.max(np.abs(Q))
         out.append(F @ Ps @ F.T + Q)
     np.testing.assert_allclose(out[1], T @ out[0] @ T.T, atol=1e-12 * float(np.max(np.abs(out[0]))))
+
+
+@pytest.mark.parametrize("j", [None, 0, 3])
+def test_triad_specific_force_over_a_history_is_the_models_prediction(x, j):
+    """The batched prediction (the recording's measured-vs-predicted plot) equals triad_model's z row
+    by row, with and without the bias states, and takes one state as well as a history."""
+    rng = np.random.default_rng(11)
+    X = np.concatenate([x, rng.normal(0, 0.05, 12)]) + rng.normal(0, 0.3, (40, rl.N_X + 12))
+    r = np.array([0.32, -0.185, -0.34])
+    ref = np.array([rl.triad_model(s, r, j)[0] for s in X])
+    np.testing.assert_allclose(rl.triad_specific_force(X, r, j), ref, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(rl.triad_specific_force(X[5], r, j), ref[5], rtol=1e-13, atol=1e-13)

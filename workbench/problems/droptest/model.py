@@ -82,6 +82,7 @@ __all__ = [
     "propagate",
     "process_noise",
     "triad_model",
+    "triad_specific_force",
     "gyro_model",
     "range_model",
     "range_rate_model",
@@ -234,6 +235,19 @@ def triad_model(x: np.ndarray, r_B: np.ndarray, j: int | None = None) -> tuple[n
     H[:, EW] = -skew(wr) - Sw @ Sr
     H[:, EAL] = -Sr
     return z, H
+
+
+def triad_specific_force(x: np.ndarray, r_B: np.ndarray, j: int | None = None) -> np.ndarray:
+    """Predicted specific force (..., 3) [m/s², body] of triad ``j`` at lever arm ``r_B`` (3,) [m,
+    body] for states ``x`` (..., n_x): :func:`triad_model`'s prediction without its Jacobian, over a
+    whole history at once (the recording's measured-vs-predicted plot)."""
+    x = np.asarray(x, dtype=float)
+    r = np.asarray(r_B, dtype=float)
+    w = x[..., SW]
+    z = x[..., SA] + np.cross(x[..., SAL], r) + np.cross(w, np.cross(w, r))
+    if j is not None and x.shape[-1] >= N_X + 3 * (j + 1):
+        z = z + x[..., bias_slices(j)[0]]
+    return z
 
 
 def gyro_model(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -543,7 +543,7 @@ class DropTestRecorder:
             ok = tel.f_valid[:, j]
             if not ok.any():  # a triad excluded from the reconstruction (dead): nothing to draw
                 continue
-            pred = np.array([rl.triad_model(x, tel.lever_arms_B[j], j)[0] for x in fp.x_prior[ok]])
+            pred = rl.triad_specific_force(fp.x_prior[ok], tel.lever_arms_B[j], j)
             r.scalars(
                 layout.droptest_triad_plot_path(name, layout.MEASURED_SERIES),
                 t[ok],

@@ -163,15 +163,14 @@ class Post2Result:
 
 
 def _along_velocity(v: np.ndarray) -> np.ndarray:
-    """q_I_B (n, 4) with X_B along v (n, 3) (3-DOF drawing: zero angle of attack)."""
-    out = np.empty((v.shape[0], 4))
-    for i, vi in enumerate(v):
-        x = vi / max(np.linalg.norm(vi), 1e-12)
-        a = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        y = np.cross(a, x)
-        y /= np.linalg.norm(y)
-        out[i] = dcm_to_quat(np.column_stack([x, y, np.cross(x, y)]))
-    return out
+    """q_I_B (n, 4) with X_B along v (n, 3) (3-DOF drawing: zero angle of attack); Y_B along
+    ẑ × X_B, or x̂ × X_B where X_B is within 26° of ±Z."""
+    v = np.asarray(v, dtype=float)
+    x = v / np.maximum(np.linalg.norm(v, axis=-1), 1e-12)[:, None]
+    a = np.where((np.abs(x[:, 2]) < 0.9)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    y = np.cross(a, x)
+    y /= np.linalg.norm(y, axis=-1)[:, None]
+    return dcm_to_quat(np.stack([x, y, np.cross(x, y)], axis=-1))
 
 
 def _weights_R(file: Path, spec: ObservationSpec, t: np.ndarray, wpath: Path, obs_file: str) -> np.ndarray:
