@@ -87,13 +87,13 @@ def test_the_child_runs_only_for_a_cold_module_and_not_when_switched_off(kernels
     sc = SimpleNamespace(path=tmp_path / "x.toml")
     monkeypatch.setenv(pc.ENV_SWITCH, "0")
     rep, out = _rep()
-    assert pc.precompile(sc, problem, 3, rep) is False and calls == []
+    assert pc.precompile(sc, problem, 3, rep) is None and calls == []
     monkeypatch.delenv(pc.ENV_SWITCH)
-    assert pc.precompile(sc, problem, 3, rep) is True
+    assert pc.precompile(sc, problem, 3, rep) == pc.Compiled(None)
     assert calls == [[sys.executable, "-m", "workbench.problems.precompile", str(sc.path), "--seed", "3"]]
     assert "compiling 2 kernels in a child process" in out.getvalue()
-    assert pc.precompile(sc, problem, 3, rep) is False and len(calls) == 1  # warm now: no second child
-    assert pc.precompile(sc, SimpleNamespace(), 3, rep) is False  # a problem without compiled kernels
+    assert pc.precompile(sc, problem, 3, rep) is None and len(calls) == 1  # warm now: no second child
+    assert pc.precompile(sc, SimpleNamespace(), 3, rep) is None  # a problem without compiled kernels
 
 
 def test_a_failing_child_is_reported_and_the_run_goes_on(kernels, monkeypatch, tmp_path):
@@ -103,7 +103,7 @@ def test_a_failing_child_is_reported_and_the_run_goes_on(kernels, monkeypatch, t
     monkeypatch.setenv("WORKBENCH_FORK", "0")
     rep, out = _rep()
     sc, problem = SimpleNamespace(path=Path("s.toml")), SimpleNamespace(compiled_modules=(name,))
-    assert pc.precompile(sc, problem, 0, rep) is False
+    assert pc.precompile(sc, problem, 0, rep) is None
     assert "precompiling child exited 1 (ValueError: boom); compiling in this process" in out.getvalue()
     assert cold_modules([mod]) == [name]
 
@@ -124,7 +124,7 @@ def test_a_forked_child_compiles_for_the_run_and_its_failure_is_reported(kernels
 
     monkeypatch.setattr(pc, "main", failing)
     rep, out = _rep()
-    assert pc.precompile(sc, problem, 0, rep) is False
+    assert pc.precompile(sc, problem, 0, rep) is None
     assert "precompiling child exited 1 (ValueError: boom); compiling in this process" in out.getvalue()
     assert cold_modules([mod]) == [name]
 
@@ -134,7 +134,7 @@ def test_a_forked_child_compiles_for_the_run_and_its_failure_is_reported(kernels
         return 0
 
     monkeypatch.setattr(pc, "main", child_main)
-    assert pc.precompile(sc, problem, 3, rep) is True
+    assert pc.precompile(sc, problem, 3, rep) == pc.Compiled(None)
     assert cold_modules([mod]) == []
 
 
@@ -274,3 +274,64 @@ def test_run_all_loads_numbas_registries_once_before_its_first_fork(monkeypatch,
         forked = fork and pc.fork_enabled()
         head = [("import", len(scheduler.PRELOAD), "gc off"), ("load_compiler",)] if forked else []
         assert events == [*head, ("child", "a", forked), ("child", "b", forked)]
+
+
+def _probe_problem(module, tmp_path):
+    """A synthetic scenario file of a probe problem whose reconstruction calls the module's kernel,
+    and the problem (it synthesizes one CSV holding the seed, and a truth file)."""
+    from workbench.io.scenario import load_scenario
+    from workbench.problems.base import Synthesized
+
+    toml = tmp_path / "probe.toml"
+    toml.write_text('[scenario]\nname = "probe"\nkind = "probe"\n\n[synthetic]\nseed = 0\n', encoding="utf-8")
+
+    class Probe:
+        compiled_modules = (module.__name__,)
+
+        def settings(self, scenario):
+            return scenario
+
+        def synthesize(self, settings, out_dir, seed):
+            out_dir.mkdir(parents=True, exist_ok=True)
+            (out_dir / "imu.csv").write_text(f"seed {seed}\n", encoding="utf-8")
+            (out_dir / "truth.npz").write_bytes(b"truth")
+            return Synthesized(telemetry={"imu": out_dir / "imu.csv"}, truth=out_dir / "truth.npz")
+
+        def reconstruct(self, settings, telemetry, options):
+            module.used(1.0)  # compiles and caches the module's kernel
+            yield "stage"
+
+    return load_scenario(toml), Probe()
+
+
+def test_the_child_synthesizes_into_the_runs_telemetry_folder_for_the_run_to_read(kernels, monkeypatch, tmp_path):
+    """A synthetic run hands the (forked) child its telemetry folder: the child synthesizes there with
+    the run's seed and lists what it wrote, which the run reads instead of simulating its truth again."""
+    from workbench.problems.base import Synthesized
+
+    name, mod = kernels
+    if not pc.fork_enabled():
+        pytest.skip("no fork on this platform")
+    sc, probe = _probe_problem(mod, tmp_path)
+    monkeypatch.setattr(pc.registry, "get", lambda kind, where=None: probe)
+    tel = tmp_path / "out" / "probe" / "telemetry"
+    rep, _ = _rep()
+    got = pc.precompile(sc, probe, 7, rep, telemetry=tel)
+    assert got == pc.Compiled(Synthesized(telemetry={"imu": tel / "imu.csv"}, truth=tel / "truth.npz"))
+    assert (tel / "imu.csv").read_text(encoding="utf-8") == "seed 7\n"
+    assert cold_modules([mod]) == []
+
+
+def test_a_scenario_changed_from_its_file_is_not_synthesized_by_the_child(kernels, monkeypatch, tmp_path):
+    """The child reads the scenario file: a run's scenario with overrides (or a file edited since)
+    keeps its own synthesis; the child compiles into a temporary folder and lists nothing."""
+    name, mod = kernels
+    if not pc.fork_enabled():
+        pytest.skip("no fork on this platform")
+    sc, probe = _probe_problem(mod, tmp_path)
+    monkeypatch.setattr(pc.registry, "get", lambda kind, where=None: probe)
+    tel = tmp_path / "out" / "probe" / "telemetry"
+    rep, _ = _rep()
+    changed = sc.with_overrides({"scenario.description": "edited in memory"})
+    assert pc.precompile(changed, probe, 7, rep, telemetry=tel) == pc.Compiled(None)
+    assert not tel.exists() and cold_modules([mod]) == []

@@ -225,10 +225,14 @@ def _run(
     seed = int(sc.get("synthetic.seed", 0, kind="int") if opts.seed is None else opts.seed)
     truth = None
     n_times = len(rep.times)
-    precompile(sc, problem, seed, rep)  # first run of a checkout: compile in a child (its memory goes with it)
+    tel_dir = out / sc.name / "telemetry"
+    # first run of a checkout: compile in a child (its memory goes with it), which also synthesizes
+    compiled = precompile(sc, problem, seed, rep, telemetry=tel_dir if sc.is_synthetic else None)
     if sc.is_synthetic:
         with rep.stage(f"{problem.title} truth simulation + telemetry"):
-            syn = problem.synthesize(settings, out / sc.name / "telemetry", seed)
+            syn = compiled.synthesized if compiled is not None else None
+            if syn is None:
+                syn = problem.synthesize(settings, tel_dir, seed)
             telemetry = dict(syn.telemetry)
             truth = problem.load_truth(syn.truth)
     else:
