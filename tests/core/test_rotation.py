@@ -192,3 +192,19 @@ def test_single_quaternion_fast_paths_equal_the_vectorised_ones():
             np.testing.assert_allclose(attitude_error_one(q, q2), attitude_error(q, q2), rtol=0, atol=1e-12)
             if scale < 1.0:
                 np.testing.assert_allclose(attitude_error_one(q, q2), d, rtol=1e-9, atol=1e-15)
+
+
+def test_quat_x_along_points_x_along_the_vector():
+    """X_b along v (post2's 3-DOF drawing attitude), a right-handed orthonormal frame, Y_b horizontal (⊥ ẑ)
+    unless v is within 26° of ±Z (then ⊥ x̂), for every row of a batch and near-vertical rows."""
+    rng = np.random.default_rng(3)
+    v = np.concatenate([rng.normal(size=(200, 3)) * [1e3, 1e3, 3e3], [[0.0, 0.0, -5.0], [1e-3, 0.0, 7.0]]])
+    C = rot.quat_to_dcm(rot.quat_x_along(v))
+    u = v / np.linalg.norm(v, axis=1)[:, None]
+    np.testing.assert_allclose(C[:, :, 0], u, atol=1e-12)
+    np.testing.assert_allclose(np.swapaxes(C, 1, 2) @ C, np.broadcast_to(np.eye(3), C.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(C), 1.0, atol=1e-12)
+    steep = np.abs(u[:, 2]) >= 0.9
+    assert steep.any() and (~steep).any()
+    np.testing.assert_allclose(C[~steep, 2, 1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(C[steep, 0, 1], 0.0, atol=1e-12)

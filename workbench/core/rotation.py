@@ -55,6 +55,7 @@ __all__ = [
     "triad",
     "triad_covariance",
     "quat_positive",
+    "quat_x_along",
 ]
 
 
@@ -210,6 +211,18 @@ def dcm_to_quat(C: np.ndarray) -> np.ndarray:
     )
     q = quat_positive(quat_normalize(q))
     return q.reshape(*shape, 4)
+
+
+def quat_x_along(v: np.ndarray) -> np.ndarray:
+    """Unit quaternion ``q_a_b`` (n, 4) of a frame b whose +X points along ``v`` (n, 3) (any length
+    but zero), +Y along ẑ × X (horizontal), or x̂ × X where X is within 26° of ±ẑ, +Z completing it:
+    e.g. a 3-DOF trajectory drawn at zero angle of attack."""
+    v = np.asarray(v, dtype=float)
+    x = v / np.maximum(np.linalg.norm(v, axis=-1), 1e-12)[:, None]
+    a = np.where((np.abs(x[:, 2]) < 0.9)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    y = np.cross(a, x)
+    y /= np.linalg.norm(y, axis=-1)[:, None]
+    return dcm_to_quat(np.stack([x, y, np.cross(x, y)], axis=-1))
 
 
 def quat_from_rotvec(phi: np.ndarray) -> np.ndarray:

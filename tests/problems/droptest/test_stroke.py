@@ -451,25 +451,3 @@ def test_contact_end_is_the_later_of_the_contact_and_the_leaving_instant():
     assert contact_end(t, (2, 5), -1) == pytest.approx(0.5)
     assert contact_end(t, (-1, -1), 7) == pytest.approx(0.7)
     assert contact_end(t, (-1, -1), -1) is None
-
-
-def test_truth_stroke_is_kept_for_the_same_truth_and_recomputed_for_another():
-    """The recording and the score of one run share one truth-stroke computation (read-only
-    history); another truth dict (or lander, or surface) is computed afresh."""
-    from types import SimpleNamespace
-
-    from workbench.problems.droptest.pipeline import truth_stroke
-
-    lander = SimpleNamespace(body=BODY)
-    t = np.linspace(-0.2, 1.0, 13)
-    p = np.zeros((t.size, 3))
-    p[:, 2] = 2.0 - 1.5 * np.clip(t, 0.0, None)  # released at t = 0, lowest at the end (0.5 m)
-    truth = {"t": t, "p_I": p, "q_I_B": np.tile(quat_identity(), (t.size, 1))}
-    a = truth_stroke(truth, lander, FLAT)
-    assert a[1] == pytest.approx(0.5 - 0.4) and a[2] == pytest.approx(1.0)  # base 0.4 m below the CM
-    assert truth_stroke(truth, lander, FLAT) is a
-    assert not a[0].flags.writeable
-    raised = dict(truth, p_I=p + [0.0, 0.0, 0.25])
-    assert truth_stroke(raised, lander, FLAT)[1] == pytest.approx(0.35)
-    lifted = Surface(point=[0.0, 0.0, 0.1], normal=[0.0, 0.0, 1.0])
-    assert truth_stroke(raised, lander, lifted)[1] == pytest.approx(0.25)

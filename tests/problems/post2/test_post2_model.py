@@ -257,22 +257,3 @@ def test_aero_force_and_moment_ignore_the_quaternion_norm_at_small_alpha():
     np.testing.assert_allclose(M2, M, rtol=1e-9, atol=1e-12 * np.abs(M).max())
     np.testing.assert_allclose(F2, F, rtol=1e-12)
     np.testing.assert_allclose(m.sensed_acceleration_B(y, ph), m.sensed_acceleration_B(x, ph), rtol=1e-12)
-
-
-def test_along_velocity_points_x_body_along_the_velocity():
-    """3-DOF drawing attitude: X_B along v, a right-handed orthonormal frame, Y_B horizontal (⊥ ẑ)
-    unless v is within 26° of ±Z (then ⊥ x̂), for every row of a batch and near-vertical rows."""
-    from workbench.core.rotation import quat_to_dcm
-    from workbench.problems.post2.pipeline import _along_velocity
-
-    rng = np.random.default_rng(3)
-    v = np.concatenate([rng.normal(size=(200, 3)) * [1e3, 1e3, 3e3], [[0.0, 0.0, -5.0], [1e-3, 0.0, 7.0]]])
-    C = quat_to_dcm(_along_velocity(v))
-    u = v / np.linalg.norm(v, axis=1)[:, None]
-    np.testing.assert_allclose(C[:, :, 0], u, atol=1e-12)
-    np.testing.assert_allclose(np.swapaxes(C, 1, 2) @ C, np.broadcast_to(np.eye(3), C.shape), atol=1e-12)
-    np.testing.assert_allclose(np.linalg.det(C), 1.0, atol=1e-12)
-    steep = np.abs(u[:, 2]) >= 0.9
-    assert steep.any() and (~steep).any()
-    np.testing.assert_allclose(C[~steep, 2, 1], 0.0, atol=1e-12)
-    np.testing.assert_allclose(C[steep, 0, 1], 0.0, atol=1e-12)

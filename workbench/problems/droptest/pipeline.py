@@ -910,26 +910,8 @@ def truth_on_grid(truth: dict, t: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-#: the last :func:`truth_stroke`: ((truth, lander, surface), result); the run's recording and its score
-#: both ask for it (identity, not equality: the truth dict is not hashable, and held here, so its id is not reused)
-_LAST_TRUTH_STROKE: list = [None, None]
-
-
 def truth_stroke(truth: dict, lander: LanderModel, surface: Surface) -> tuple[np.ndarray, float, float]:
-    """Truth stroke history (n_truth,) [m], its minimum after release [m] and the time [s].
-
-    The last call's answer is kept (same truth dict, lander and surface objects, not modified in
-    between: a run's truth is read only): the recording draws the history and the score reads the
-    minimum of one run."""
-    key = _LAST_TRUTH_STROKE[0]
-    if key is not None and key[0] is truth and key[1] is lander and key[2] is surface:
-        return _LAST_TRUTH_STROKE[1]
-    out = _truth_stroke(truth, lander, surface)
-    _LAST_TRUTH_STROKE[:] = [(truth, lander, surface), out]
-    return out
-
-
-def _truth_stroke(truth: dict, lander: LanderModel, surface: Surface) -> tuple[np.ndarray, float, float]:
+    """Truth stroke history (n_truth,) [m], its minimum after release [m] and the time [s]."""
     zeros = np.zeros((truth["t"].size, 6, 6))
     h = stroke_history(
         np.asarray(lander.body.vertices, float),
@@ -941,9 +923,7 @@ def _truth_stroke(truth: dict, lander: LanderModel, surface: Surface) -> tuple[n
     )
     m = truth["t"] >= 0.0
     k = int(np.flatnonzero(m)[np.argmin(h.distance[m])])
-    d = h.distance
-    d.flags.writeable = False  # shared by the callers of the memo
-    return d, float(d[k]), float(truth["t"][k])
+    return h.distance, float(h.distance[k]), float(truth["t"][k])
 
 
 def score(result: DropResult, truth: dict) -> dict:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.core.rotation import attitude_error, dcm_to_quat, quat_from_rotvec
+from workbench.core.rotation import attitude_error, quat_from_rotvec, quat_x_along
 from workbench.core.smoothing import window_median_at
 from workbench.estimation.consistency import chi2_ppf
 from workbench.estimation.ekf import ErrorStateLayout, ForwardPass, Measurement, numeric_jacobian_batched, run_filter
@@ -145,7 +145,7 @@ class Post2Result:
         x = self.x[rows]
         p, v = self.smap.raw(x, "position"), self.smap.raw(x, "velocity")
         w = float(planet_rate_rad_s)
-        return _along_velocity(v - np.stack([-w * p[..., 1], w * p[..., 0], np.zeros_like(p[..., 0])], axis=-1))
+        return quat_x_along(v - np.stack([-w * p[..., 1], w * p[..., 0], np.zeros_like(p[..., 0])], axis=-1))
 
     def tilt_rotation(self, rows: np.ndarray) -> np.ndarray | None:
         """q_B_tilted (k, 4) of an estimated tilt state (``tilt*``, rad: a scalar about Y_B or a
@@ -160,17 +160,6 @@ class Post2Result:
         else:
             rv[:, : min(3, a.shape[1])] = a[:, :3]
         return quat_from_rotvec(rv)
-
-
-def _along_velocity(v: np.ndarray) -> np.ndarray:
-    """q_I_B (n, 4) with X_B along v (n, 3) (3-DOF drawing: zero angle of attack); Y_B along
-    ẑ × X_B, or x̂ × X_B where X_B is within 26° of ±Z."""
-    v = np.asarray(v, dtype=float)
-    x = v / np.maximum(np.linalg.norm(v, axis=-1), 1e-12)[:, None]
-    a = np.where((np.abs(x[:, 2]) < 0.9)[:, None], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
-    y = np.cross(a, x)
-    y /= np.linalg.norm(y, axis=-1)[:, None]
-    return dcm_to_quat(np.stack([x, y, np.cross(x, y)], axis=-1))
 
 
 def _weights_R(file: Path, spec: ObservationSpec, t: np.ndarray, wpath: Path, obs_file: str) -> np.ndarray:
