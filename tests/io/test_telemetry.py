@@ -348,3 +348,29 @@ def test_events_in_ms_and_errors(tmp_path):
     assert "time goes backwards: 0.2 after 0.5 at row 2" in str(info.value)
     with pytest.raises(ValueError, match="before"):
         write_events(tmp_path / "e.csv", [(1.0, "a"), (0.5, "b")])
+
+
+def test_atomic_npz_round_trips_and_leaves_nothing_behind_on_failure(tmp_path):
+    """truth.npz written atomically: every array back exactly (floats, strings, scalars), deflated
+    smaller than stored; an array it refuses (an object array: no pickles) leaves neither the file
+    nor a temp file, and an existing file under the name is kept as it was."""
+    rng = np.random.default_rng(0)
+    arrays = {
+        "t": np.linspace(0.0, 2.0, 4001),
+        "p_I": np.cumsum(rng.normal(size=(4001, 3)), axis=0),
+        "names": np.array(["release", "first_contact"]),
+        "seed": 7,
+    }
+    packed = tm.atomic_write_npz(tmp_path / "truth.npz", arrays)
+    stored = tm.atomic_write_npz(tmp_path / "stored.npz", arrays, compress=False)
+    for path in (packed, stored):
+        with np.load(path) as z:
+            assert sorted(z.files) == sorted(arrays)
+            for k, v in arrays.items():
+                np.testing.assert_array_equal(z[k], v)
+    assert packed.stat().st_size < 0.9 * stored.stat().st_size
+    before = packed.read_bytes()
+    with pytest.raises(ValueError):
+        tm.atomic_write_npz(packed, {"t": arrays["t"], "bad": np.array([{"a": 1}], dtype=object)})
+    assert packed.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stored.npz", "truth.npz"]

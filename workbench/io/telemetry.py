@@ -47,6 +47,7 @@ __all__ = [
     "Problem",
     "Telemetry",
     "TelemetryError",
+    "atomic_write_npz",
     "atomic_write_text",
     "read_events",
     "read_telemetry",
@@ -761,12 +762,39 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically: temp file in the same directory, then
     ``os.replace``.  An interrupted write never leaves a partial file under ``path``, and the
     temp file is removed on failure.  Creates missing parent directories.  Returns the path."""
-    path = Path(path)
+
+    def write(f) -> None:
+        f.write(text.encode("utf-8"))
+
+    return _atomic_write(Path(path), write)
+
+
+def atomic_write_npz(path: str | os.PathLike, arrays: Mapping[str, object], *, compress: bool = True) -> Path:
+    """Write ``arrays`` {name: array-like} as a ``.npz`` archive (what ``np.load`` reads), atomically
+    as :func:`atomic_write_text`. ``compress``: deflate at level 1 (``np.savez_compressed`` uses 6:
+    within 1 % of its size on the workbench's float histories at about 0.65 of its CPU); False:
+    stored, as ``np.savez``. Object arrays are refused (no pickles). Returns the path."""
+    import zipfile
+
+    method = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
+
+    def write(f) -> None:
+        with zipfile.ZipFile(f, "w", compression=method, compresslevel=1 if compress else None, allowZip64=True) as z:
+            for name, value in arrays.items():
+                with z.open(f"{name}.npy", "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
+
+    return _atomic_write(Path(path), write)
+
+
+def _atomic_write(path: Path, write) -> Path:
+    """``write(f)`` into a temp file (binary) beside ``path``, fsync, then ``os.replace`` onto it; the
+    temp file removed on any failure, an ``OSError`` without a file name given ``path``'s."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
+        with os.fdopen(fd, "wb") as f:
+            write(f)
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, 0o644)

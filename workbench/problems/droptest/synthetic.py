@@ -29,7 +29,7 @@ import numpy as np
 
 from workbench.core.bodies import G0
 from workbench.core.rotation import quat_conjugate, quat_rotate, quat_to_dcm
-from workbench.io.telemetry import atomic_write_text, write_events, write_telemetry
+from workbench.io.telemetry import atomic_write_npz, atomic_write_text, write_events, write_telemetry
 from workbench.problems.droptest.config import Accelerometer, Chamber, DropSettings, Gyro, Synthetic
 from workbench.problems.droptest.lander import LanderModel
 from workbench.problems.droptest.sensors import (
@@ -471,28 +471,31 @@ def synthesize_droptest(
         paths["ranging"] = _write_ranging(RangingSpec.from_settings(cfg.ranging), truth, out, rng, lander)
 
     truth_path = out / "truth.npz"
-    (np.savez_compressed if compress_truth else np.savez)(
+    atomic_write_npz(
         truth_path,
-        t=truth.t,
-        p_I=truth.p_I,
-        v_I=truth.v_I,
-        q_I_B=truth.q_I_B,
-        w_B=truth.w_B,
-        alpha_B=truth.alpha_B,
-        a_ng_I=truth.a_ng_I,
-        contact_force=truth.contact_force,
-        gauge_pressure=truth.gauge_pressure,
-        body_penetration=truth.body_penetration,
-        event_names=np.array(list(truth.events)),
-        event_times=np.array(list(truth.events.values())),
-        accel_bias=np.array([drawn[n]["bias"] for n in triads]),
-        gyro_bias=drawn["gyro"]["bias"],
-        gyro_scale=drawn["gyro"]["scale"],
-        gyro_error_matrix=drawn["gyro"]["matrix"],
-        seed=seed,
-        drop_parameters=drop_parameters(truth, lander, surf),
-        drop_parameter_names=np.array(DROP_PARAMETER_NAMES),
-        dispersed=disperse,
+        dict(
+            t=truth.t,
+            p_I=truth.p_I,
+            v_I=truth.v_I,
+            q_I_B=truth.q_I_B,
+            w_B=truth.w_B,
+            alpha_B=truth.alpha_B,
+            a_ng_I=truth.a_ng_I,
+            contact_force=truth.contact_force,
+            gauge_pressure=truth.gauge_pressure,
+            body_penetration=truth.body_penetration,
+            event_names=np.array(list(truth.events)),
+            event_times=np.array(list(truth.events.values())),
+            accel_bias=np.array([drawn[n]["bias"] for n in triads]),
+            gyro_bias=drawn["gyro"]["bias"],
+            gyro_scale=drawn["gyro"]["scale"],
+            gyro_error_matrix=drawn["gyro"]["matrix"],
+            seed=seed,
+            drop_parameters=drop_parameters(truth, lander, surf),
+            drop_parameter_names=np.array(DROP_PARAMETER_NAMES),
+            dispersed=disperse,
+        ),
+        compress=compress_truth,
     )
     return SyntheticDrop(telemetry=paths, truth_path=truth_path)
 

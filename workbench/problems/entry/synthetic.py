@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from workbench.io.telemetry import write_events, write_telemetry
+from workbench.io.telemetry import atomic_write_npz, write_events, write_telemetry
 from workbench.problems.entry.sensors import EntryTelemetrySpec, EntryTM, generate_entry_tm
 from workbench.problems.entry.telemetry import NominalState, write_nominal_state
 
@@ -216,24 +216,27 @@ def synthesize_from_truth(
         arrays["radar_slant_out_true"] = tm.slant_out_true
         arrays["radar_slant_out_sphere"] = tm.slant_out_sphere
     truth_path = out / "truth.npz"
-    (np.savez_compressed if compress else np.savez)(
+    atomic_write_npz(
         truth_path,
-        **arrays,
-        nominal_t0=np.array(t0),
-        nominal_v0=v0,
-        nominal_q0=q0,
-        nominal_p0=p0,
-        nominal_dx0=dx0,
-        onboard_t=tm.onboard.t,
-        onboard_v_M=tm.onboard.v_M,
-        onboard_q_M_G=tm.onboard.q_M_G,
-        onboard_p_M=tm.onboard.p_M,
-        onboard_w_G=tm.onboard.w_G,
-        onboard_f_G=tm.onboard.f_G,
-        **{f"imu_{k}": v for k, v in tm.imu_errors.items()},
-        gyro_full_scale=np.asarray(spec.imu.gyro_full_scale),
-        r_ground=np.array(spec.r_ground),
-        seed=np.array(int(seed)),
+        dict(
+            arrays,
+            nominal_t0=np.array(t0),
+            nominal_v0=v0,
+            nominal_q0=q0,
+            nominal_p0=p0,
+            nominal_dx0=dx0,
+            onboard_t=tm.onboard.t,
+            onboard_v_M=tm.onboard.v_M,
+            onboard_q_M_G=tm.onboard.q_M_G,
+            onboard_p_M=tm.onboard.p_M,
+            onboard_w_G=tm.onboard.w_G,
+            onboard_f_G=tm.onboard.f_G,
+            **{f"imu_{k}": v for k, v in tm.imu_errors.items()},
+            gyro_full_scale=np.asarray(spec.imu.gyro_full_scale),
+            r_ground=np.array(spec.r_ground),
+            seed=np.array(int(seed)),
+        ),
+        compress=compress,
     )
     paths["truth"] = truth_path
     paths["initial_state"] = write_nominal_state(

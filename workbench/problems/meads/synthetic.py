@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from workbench.io.telemetry import write_telemetry
+from workbench.io.telemetry import atomic_write_npz, write_telemetry
 from workbench.problems.meads.config import MeadsSettings
 from workbench.problems.meads.sensors import initial_navigation, measure_imu, measure_pressures
 from workbench.problems.meads.telemetry import IMU_COLUMNS, InitialState, write_initial_state
@@ -89,7 +89,7 @@ def synthesize_from_truth(
     arrays = truth.arrays()
     arrays |= {f"sensor_{k}": np.asarray(v) for k, v in pm.__dict__.items()}
     arrays |= {f"imu_{k}": np.asarray(v) for k, v in drawn.items()}
-    (np.savez_compressed if compress else np.savez)(out / "truth.npz", **arrays)
+    atomic_write_npz(out / "truth.npz", arrays, compress=compress)
     return {"pressures": pressures, "imu": imu, "initial_state": init, "truth": out / "truth.npz"}
 
 

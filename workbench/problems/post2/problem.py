@@ -17,6 +17,7 @@ from workbench.core.bodies import G0
 from workbench.estimation.health import health_markdown
 from workbench.io.moments import KeyMoment, slug
 from workbench.io.scenario import Scenario
+from workbench.io.telemetry import atomic_write_npz
 from workbench.problems.base import (
     SEED_ENTROPY,
     ExportTable,
@@ -144,7 +145,7 @@ class Post2Problem:
         arrays["event_times"] = np.array([t for t, _ in tr["events"]], dtype=float)
         for name, v in tf.tolerances.items():  # scorecard tolerances (SI)
             arrays[f"tol_{name}"] = v
-        np.savez(out / "truth.npz", **arrays)
+        atomic_write_npz(out / "truth.npz", arrays, compress=False)
         return Synthesized(files, out / "truth.npz")
 
     def load_truth(self, path: Path) -> dict:
