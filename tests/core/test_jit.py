@@ -119,22 +119,23 @@ def test_a_forked_child_compiles_for_the_run_and_its_failure_is_reported(kernels
     problem = SimpleNamespace(compiled_modules=(name,))
     sc = SimpleNamespace(path=tmp_path / "x.toml")
 
-    def failing(argv):
+    def failing(scenario, problem_, settings, seed, telemetry, manifest):
         raise ValueError("boom")
 
-    monkeypatch.setattr(pc, "main", failing)
+    monkeypatch.setattr(pc, "compile_by_running", failing)
     rep, out = _rep()
     assert pc.precompile(sc, problem, 0, rep) is None
     assert "precompiling child exited 1 (ValueError: boom); compiling in this process" in out.getvalue()
     assert cold_modules([mod]) == [name]
 
-    def child_main(argv):
-        assert os.getpid() != parent and argv == [str(sc.path), "--seed", "3"]
+    def child(scenario, problem_, settings, seed, telemetry, manifest):
+        assert os.getpid() != parent and (scenario, problem_, settings, seed) == (sc, problem, "S", 3)
+        assert telemetry is None and manifest is None  # no folder handed over
         mod.used(1.0)  # what the child's run does: compile and cache
         return 0
 
-    monkeypatch.setattr(pc, "main", child_main)
-    assert pc.precompile(sc, problem, 3, rep) == pc.Compiled(None)
+    monkeypatch.setattr(pc, "compile_by_running", child)
+    assert pc.precompile(sc, problem, 3, rep, settings="S") == pc.Compiled(None)
     assert cold_modules([mod]) == []
 
 
@@ -293,7 +294,7 @@ def _probe_problem(module, tmp_path):
 
         def synthesize(self, settings, out_dir, seed):
             out_dir.mkdir(parents=True, exist_ok=True)
-            (out_dir / "imu.csv").write_text(f"seed {seed}\n", encoding="utf-8")
+            (out_dir / "imu.csv").write_text(f"seed {seed} {settings.description}\n", encoding="utf-8")
             (out_dir / "truth.npz").write_bytes(b"truth")
             return Synthesized(telemetry={"imu": out_dir / "imu.csv"}, truth=out_dir / "truth.npz")
 
@@ -304,34 +305,77 @@ def _probe_problem(module, tmp_path):
     return load_scenario(toml), Probe()
 
 
-def test_the_child_synthesizes_into_the_runs_telemetry_folder_for_the_run_to_read(kernels, monkeypatch, tmp_path):
-    """A synthetic run hands the (forked) child its telemetry folder: the child synthesizes there with
-    the run's seed and lists what it wrote, which the run reads instead of simulating its truth again."""
+def test_the_forked_child_synthesizes_the_runs_own_scenario_for_the_run_to_read(kernels, tmp_path):
+    """A synthetic run hands the forked child its telemetry folder: the child synthesizes the run's
+    own scenario (overrides included: it is the run's object, not the file) with the run's seed into
+    a temporary folder, and what it wrote is moved into the run's folder and listed for the run."""
     from workbench.problems.base import Synthesized
 
     name, mod = kernels
     if not pc.fork_enabled():
         pytest.skip("no fork on this platform")
     sc, probe = _probe_problem(mod, tmp_path)
-    monkeypatch.setattr(pc.registry, "get", lambda kind, where=None: probe)
+    sc = sc.with_overrides({"scenario.description": "edited in memory"})
     tel = tmp_path / "out" / "probe" / "telemetry"
     rep, _ = _rep()
     got = pc.precompile(sc, probe, 7, rep, telemetry=tel)
     assert got == pc.Compiled(Synthesized(telemetry={"imu": tel / "imu.csv"}, truth=tel / "truth.npz"))
-    assert (tel / "imu.csv").read_text(encoding="utf-8") == "seed 7\n"
+    assert (tel / "imu.csv").read_text(encoding="utf-8") == "seed 7 edited in memory\n"
+    assert sorted(p.name for p in tel.iterdir()) == ["imu.csv", "truth.npz"]
     assert cold_modules([mod]) == []
 
 
-def test_a_scenario_changed_from_its_file_is_not_synthesized_by_the_child(kernels, monkeypatch, tmp_path):
-    """The child reads the scenario file: a run's scenario with overrides (or a file edited since)
-    keeps its own synthesis; the child compiles into a temporary folder and lists nothing."""
+def test_a_child_that_fails_after_synthesizing_leaves_the_runs_folder_untouched(kernels, tmp_path):
+    """The child writes into a temporary folder: a child that fails (or is killed) after its
+    synthesis moves nothing into the run's telemetry folder, and the run synthesizes itself."""
     name, mod = kernels
     if not pc.fork_enabled():
         pytest.skip("no fork on this platform")
     sc, probe = _probe_problem(mod, tmp_path)
-    monkeypatch.setattr(pc.registry, "get", lambda kind, where=None: probe)
+
+    def broken(settings, telemetry, options):
+        raise RuntimeError("reconstruction failed")
+        yield
+
+    probe.reconstruct = broken
+    tel = tmp_path / "out" / "probe" / "telemetry"
+    rep, out = _rep()
+    assert pc.precompile(sc, probe, 7, rep, telemetry=tel) is None
+    assert "RuntimeError: reconstruction failed" in out.getvalue() and not (tmp_path / "out").exists()
+    assert cold_modules([mod]) == [name]
+
+
+@pytest.mark.parametrize("overridden", [False, True])
+def test_without_fork_the_child_is_handed_the_folder_only_for_the_scenario_as_on_disk(
+    kernels, monkeypatch, tmp_path, overridden
+):
+    """Where there is no fork the child is a new interpreter that reads the scenario file: it gets
+    ``--telemetry``/``--manifest`` only when the file still reads as the run's scenario; what it
+    listed is moved into the run's folder."""
+    from workbench.problems.base import Synthesized
+
+    name, mod = kernels
+    sc, probe = _probe_problem(mod, tmp_path)
+    if overridden:
+        sc = sc.with_overrides({"scenario.description": "edited in memory"})
+    calls = []
+
+    def fake_run(argv, **kw):  # what ``python -m workbench.problems.precompile ARGV`` does
+        calls.append(argv)
+        args = argv[3:]
+        tel = Path(args[args.index("--telemetry") + 1]) if "--telemetry" in args else None
+        man = Path(args[args.index("--manifest") + 1]) if "--manifest" in args else None
+        pc.compile_by_running(sc, probe, None, int(args[2]), tel, man)
+        return subprocess.CompletedProcess(argv, 0, "", "")
+
+    monkeypatch.setattr(pc.subprocess, "run", fake_run)
+    monkeypatch.setenv("WORKBENCH_FORK", "0")
     tel = tmp_path / "out" / "probe" / "telemetry"
     rep, _ = _rep()
-    changed = sc.with_overrides({"scenario.description": "edited in memory"})
-    assert pc.precompile(changed, probe, 7, rep, telemetry=tel) == pc.Compiled(None)
-    assert not tel.exists() and cold_modules([mod]) == []
+    got = pc.precompile(sc, probe, 7, rep, telemetry=tel)
+    assert len(calls) == 1 and ("--telemetry" in calls[0]) == (not overridden)
+    if overridden:
+        assert got == pc.Compiled(None) and not tel.exists()
+    else:
+        assert got == pc.Compiled(Synthesized(telemetry={"imu": tel / "imu.csv"}, truth=tel / "truth.npz"))
+        assert (tel / "imu.csv").read_text(encoding="utf-8") == "seed 7 \n"

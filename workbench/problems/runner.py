@@ -227,7 +227,7 @@ def _run(
     n_times = len(rep.times)
     tel_dir = out / sc.name / "telemetry"
     # first run of a checkout: compile in a child (its memory goes with it), which also synthesizes
-    compiled = precompile(sc, problem, seed, rep, telemetry=tel_dir if sc.is_synthetic else None)
+    compiled = precompile(sc, problem, seed, rep, settings=settings, telemetry=tel_dir if sc.is_synthetic else None)
     if sc.is_synthetic:
         with rep.stage(f"{problem.title} truth simulation + telemetry"):
             syn = compiled.synthesized if compiled is not None else None

@@ -170,3 +170,5 @@ def test_triad_specific_force_over_a_history_is_the_models_prediction(x, j):
     ref = np.array([rl.triad_model(s, r, j)[0] for s in X])
     np.testing.assert_allclose(rl.triad_specific_force(X, r, j), ref, rtol=1e-13, atol=1e-13)
     np.testing.assert_allclose(rl.triad_specific_force(X[5], r, j), ref[5], rtol=1e-13, atol=1e-13)
+    core = X[:, : rl.N_X]  # no bias states: triad j's bias is not there to add
+    np.testing.assert_allclose(rl.triad_specific_force(core, r, j), rl.triad_specific_force(X, r, None), rtol=0, atol=0)

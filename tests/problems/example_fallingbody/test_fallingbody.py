@@ -114,3 +114,31 @@ def test_runner_releases_each_stage_before_it_draws_the_next(problem, tmp_path, 
         monkeypatch.setattr(drawer, name, watched(name, getattr(drawer, name)))
     assert main(["run", str(SCENARIO), "--out", str(tmp_path), "--quiet"]) == 0
     assert seen["alive when _forward draws"] == [] and seen["alive when _result draws"] == []
+
+
+def test_the_run_reads_the_telemetry_its_precompiling_child_synthesized(problem, run, tmp_path, monkeypatch):
+    """On a checkout's first run the precompiling child synthesizes for the run: the runner hands it
+    the run's settings, seed and telemetry folder and reads what it lists instead of synthesizing
+    again, with the same summary as a run that synthesized itself."""
+    from workbench.problems import runner
+    from workbench.problems.precompile import Compiled
+
+    handed = {}
+    synthesize = type(problem).synthesize
+
+    def child(sc, problem_, seed, rep, *, settings=None, telemetry=None):
+        handed.update(seed=seed, settings=settings, telemetry=telemetry)
+        return Compiled(synthesize(problem_, settings, telemetry, seed))
+
+    def no_second_synthesis(self, settings, out_dir, seed):
+        raise AssertionError("the run synthesized although its child had")
+
+    monkeypatch.setattr(runner, "precompile", child)
+    monkeypatch.setattr(type(problem), "synthesize", no_second_synthesis)
+    out = tmp_path / "out"
+    assert main(["run", str(SCENARIO), "--out", str(out), "--quiet"]) == 0
+    assert handed["seed"] == 3 and handed["telemetry"] == out / "fallingbody" / "telemetry"
+    assert handed["settings"] is not None
+    mine = json.loads((out / "fallingbody.summary.json").read_text(encoding="utf-8"))
+    _, theirs = run
+    assert mine["truth"] == theirs["truth"]

@@ -222,15 +222,13 @@ def triad_model(x: np.ndarray, r_B: np.ndarray, j: int | None = None) -> tuple[n
     ``f = a_B + α × r + ω × (ω × r) + b_j``: linear in a_B and independent of attitude (H_θ = 0);
     ``b_j`` is the triad's bias state when ``j`` is given and the state carries bias blocks.
     """
-    aB, w, al = x[SA], x[SW], x[SAL]
+    w = x[SW]
     Sw, Sr = skew(w), skew(r_B)
     wr = Sw @ r_B
-    z = aB - Sr @ al + Sw @ wr  # a_B + α × r + ω × (ω × r), with α × r = −[r×] α
+    z = triad_specific_force(x, r_B, j)
     H = np.zeros((3, x.size - 1))
     if j is not None and x.size >= N_X + 3 * (j + 1):
-        sx, se = bias_slices(j)
-        z = z + x[sx]
-        H[:, se] = np.eye(3)
+        H[:, bias_slices(j)[1]] = np.eye(3)
     H[:, EA] = np.eye(3)
     H[:, EW] = -skew(wr) - Sw @ Sr
     H[:, EAL] = -Sr
@@ -239,8 +237,8 @@ def triad_model(x: np.ndarray, r_B: np.ndarray, j: int | None = None) -> tuple[n
 
 def triad_specific_force(x: np.ndarray, r_B: np.ndarray, j: int | None = None) -> np.ndarray:
     """Predicted specific force (..., 3) [m/s², body] of triad ``j`` at lever arm ``r_B`` (3,) [m,
-    body] for states ``x`` (..., n_x): :func:`triad_model`'s prediction without its Jacobian, over a
-    whole history at once (the recording's measured-vs-predicted plot)."""
+    body] for states ``x`` (..., n_x), over a whole history at once (the recording's measured-vs-
+    predicted plot); :func:`triad_model` adds its Jacobian."""
     x = np.asarray(x, dtype=float)
     r = np.asarray(r_B, dtype=float)
     w = x[..., SW]
