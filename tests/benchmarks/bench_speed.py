@@ -137,6 +137,21 @@ def rows(speed: dict, results_dir: Path = RESULTS) -> list[tuple[str, str, str, 
                 + (f"; **first run {cold - 60:.0f} s over**" if warm and cold > 60 else ""),
             )
         )
+        first = _load("bench_first_run", results_dir)
+        if warm and first:  # issue #30: the first run of a fresh clone, which compiles every kernel
+            f = first["results"]
+            b, c = f["median"]["baseline"]["wall_s"], f["median"]["current"]["wall_s"]
+            out.append(
+                (
+                    "`workbench run all` ≤ 30 s on the first run of a fresh clone (compiling every kernel)",
+                    f"{cold:.1f} s",
+                    f"`bench_first_run` (cache deleted, instrumented), this code against {f['baseline_commit']}",
+                    f"{b:.1f} s → {c:.1f} s",
+                    f"{c / b:.3f}×",
+                    ("met" if cold <= 30 else "**not met**")
+                    + (f"; the A/B median {c:.1f} s is over (machine drift ±10 %)" if c > 30 else ""),
+                )
+            )
         rss_warm = cmd.get("run_all_warm_max_rss_mb")
         if rss is None:
             rss_text, rss_verdict = "not measured", "**not met**"
