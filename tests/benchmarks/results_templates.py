@@ -548,7 +548,27 @@ WARNING), one `nis.zupt` and one synthetic run's own scoring of its restitution 
 )
 RESULTS_MD = RESULTS_MD + "\n" + _DISPERSED
 
-_COMPILE = """
+
+def _first_run_ab(src: str, caveat: str) -> str:
+    """The numbers of one ``bench_first_run`` JSON ``src`` (CPU, wall, paired differences, peak RSS,
+    summaries), with ``caveat`` on how sharp the paired differences are."""
+    return (
+        f"{{{{{src}:results.median.baseline.cpu_s|.1f}}}} s → {{{{{src}:results.median.current.cpu_s|.1f}}}} s\n"
+        f"(×{{{{{src}:results.ratio_current_to_baseline.cpu_s|.3f}}}}) and its wall time\n"
+        f"{{{{{src}:results.median.baseline.wall_s|.1f}}}} s → {{{{{src}:results.median.current.wall_s|.1f}}}} s\n"
+        f"(×{{{{{src}:results.ratio_current_to_baseline.wall_s|.3f}}}}); within a round (the two runs minutes apart) the\n"
+        f"wall time changed by {{{{{src}:results.paired_difference.wall_s|min:+.1f}}}} to\n"
+        f"{{{{{src}:results.paired_difference.wall_s|max:+.1f}}}} s and the CPU by\n"
+        f"{{{{{src}:results.paired_difference.cpu_s|min:+.1f}}}} to {{{{{src}:results.paired_difference.cpu_s|max:+.1f}}}} s,\n"
+        f"{caveat} The\n"
+        f"largest peak RSS of one process: {{{{{src}:results.median.baseline.max_rss_mb|.0f}}}} MB →\n"
+        f"{{{{{src}:results.median.current.max_rss_mb|.0f}}}} MB; summaries identical:\n"
+        f"{{{{{src}:results.summaries_identical|pass}}}}.\n"
+    )
+
+
+_COMPILE = (
+    """
 ## The first run's compile (issue #30)
 
 The first run of a fresh checkout compiles every numba kernel before it caches them, and on 2 cores that CPU
@@ -604,19 +624,13 @@ child (scenario processes, precompiling children) freezes the heap it inherited 
 collections no longer walk the imported numba, scipy and rerun objects. The collector's CPU over all processes:
 {{bench_first_run_gc:results.median.baseline.gc_cpu_s|.1f}} s → {{bench_first_run_gc:results.median.current.gc_cpu_s|.1f}} s
 (×{{bench_first_run_gc:results.ratio_current_to_baseline.gc_cpu_s|.2f}}). The whole run's CPU went
-{{bench_first_run_gc:results.median.baseline.cpu_s|.1f}} s → {{bench_first_run_gc:results.median.current.cpu_s|.1f}} s
-(×{{bench_first_run_gc:results.ratio_current_to_baseline.cpu_s|.3f}}) and its wall time
-{{bench_first_run_gc:results.median.baseline.wall_s|.1f}} s → {{bench_first_run_gc:results.median.current.wall_s|.1f}} s
-(×{{bench_first_run_gc:results.ratio_current_to_baseline.wall_s|.3f}}); within a round (the two runs minutes apart) the
-wall time changed by {{bench_first_run_gc:results.paired_difference.wall_s|min:+.1f}} to
-{{bench_first_run_gc:results.paired_difference.wall_s|max:+.1f}} s and the CPU by
-{{bench_first_run_gc:results.paired_difference.cpu_s|min:+.1f}} to {{bench_first_run_gc:results.paired_difference.cpu_s|max:+.1f}} s,
-as much as the collector's saving or more, so only the collector's CPU is a sharp measure of the change. The
-largest peak RSS of one process: {{bench_first_run_gc:results.median.baseline.max_rss_mb|.0f}} MB →
-{{bench_first_run_gc:results.median.current.max_rss_mb|.0f}} MB; summaries identical:
-{{bench_first_run_gc:results.summaries_identical|pass}}.
-
-The first run as a whole, now (nothing done twice): `{{bench_first_run:command}}` (`workbench run all` with numba's cache deleted, this
+"""
+    + _first_run_ab(
+        "bench_first_run_gc",
+        "as much as the collector's saving or more, so only the collector's CPU is a sharp measure of the change.",
+    )
+    + "\n"
+    + """The first run as a whole, now (nothing done twice): `{{bench_first_run:command}}` (`workbench run all` with numba's cache deleted, this
 checkout against the baseline commit {{bench_first_run:results.baseline_commit}} checked out into a temporary folder,
 {{bench_first_run:results.rounds}} interleaved rounds, medians; every process's garbage collections timed with
 `gc.callbacks`). What the first run no longer does twice or per sample: the precompiling child of a synthetic
@@ -625,18 +639,9 @@ twice, once in the child and once in the run), the drop test's recording predict
 the whole history at once (one Python call per sample before) and post2's 3-DOF drawing attitude is vectorised, and
 `truth.npz` is deflated at level 1 (numpy's `savez_compressed` uses 6; the same arrays, within 1 % of the size). The
 whole run's CPU went
-{{bench_first_run:results.median.baseline.cpu_s|.1f}} s → {{bench_first_run:results.median.current.cpu_s|.1f}} s
-(×{{bench_first_run:results.ratio_current_to_baseline.cpu_s|.3f}}) and its wall time
-{{bench_first_run:results.median.baseline.wall_s|.1f}} s → {{bench_first_run:results.median.current.wall_s|.1f}} s
-(×{{bench_first_run:results.ratio_current_to_baseline.wall_s|.3f}}); within a round (the two runs minutes apart) the
-wall time changed by {{bench_first_run:results.paired_difference.wall_s|min:+.1f}} to
-{{bench_first_run:results.paired_difference.wall_s|max:+.1f}} s and the CPU by
-{{bench_first_run:results.paired_difference.cpu_s|min:+.1f}} to {{bench_first_run:results.paired_difference.cpu_s|max:+.1f}} s,
-the machine's own drift being about ±10 % within minutes. The
-largest peak RSS of one process: {{bench_first_run:results.median.baseline.max_rss_mb|.0f}} MB →
-{{bench_first_run:results.median.current.max_rss_mb|.0f}} MB; summaries identical:
-{{bench_first_run:results.summaries_identical|pass}}.
 """
+    + _first_run_ab("bench_first_run", "the machine's own drift being about ±10 % within minutes.")
+)
 RESULTS_MD = RESULTS_MD + "\n" + _COMPILE
 
 _MEMORY = """
